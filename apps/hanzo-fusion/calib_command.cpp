@@ -1,0 +1,73 @@
+// hanzo-fusion calib check FILE: loads a calibration file and prints its summary.
+
+#include <cmath>
+#include <memory>
+#include <numbers>
+#include <string>
+
+#include <fmt/format.h>
+
+#include "commands.hpp"
+#include "hanzo/fusion/calib/calibration.hpp"
+
+namespace hanzo::fusion::app {
+namespace {
+
+nlohmann::json to_json(const calib::Calibration& calibration) {
+  nlohmann::json sensors = nlohmann::json::array();
+  for (const calib::SensorCalibration& entry : calibration.sensors) {
+    const Eigen::Vector4d& q = entry.rotation_wxyz;
+    nlohmann::json item = {{"sensor", entry.sensor},
+                           {"rotation_wxyz", {q[0], q[1], q[2], q[3]}},
+                           {"rotation_angle_deg", entry.T_body_sensor().rotation().angle() * 180.0 / std::numbers::pi},
+                           {"translation", {entry.translation.x(), entry.translation.y(), entry.translation.z()}},
+                           {"time_offset_ns", entry.time_offset.nanoseconds()}};
+    if (entry.camera) {
+      const msgs::CameraIntrinsics& k = entry.camera->intrinsics;
+      item["intrinsics"] = {{"fx", k.fx}, {"fy", k.fy}, {"cx", k.cx}, {"cy", k.cy}, {"width", k.width}, {"height", k.height},
+                            {"distortion_model", msgs::to_string(entry.camera->distortion.type)},
+                            {"distortion_coeffs", entry.camera->distortion.coefficients}};
+    }
+    sensors.push_back(std::move(item));
+  }
+  return {{"sensors", sensors}};
+}
+
+std::string to_text(const std::string& path, const calib::Calibration& calibration) {
+  std::string text = fmt::format("{}: valid calibration, {} sensor(s)\n", path, calibration.sensors.size());
+  for (const calib::SensorCalibration& entry : calibration.sensors) {
+    const SE3 T_body_sensor = entry.T_body_sensor();
+    text += fmt::format("  {}: T_body_{} rotation {:.3f} deg about [{:.3f}], translation [{}] m, time offset {:.3f} ms\n",
+                        entry.sensor, entry.sensor, T_body_sensor.rotation().angle() * 180.0 / std::numbers::pi,
+                        fmt::join(T_body_sensor.rotation().log().normalized(), ", "), fmt::join(entry.translation, ", "),
+                        static_cast<double>(entry.time_offset.nanoseconds()) * 1e-6);
+    if (entry.camera) {
+      const msgs::CameraIntrinsics& k = entry.camera->intrinsics;
+      text += fmt::format("    camera: fx {} fy {} cx {} cy {}, distortion {} [{}]\n", k.fx, k.fy, k.cx, k.cy,
+                          msgs::to_string(entry.camera->distortion.type), fmt::join(entry.camera->distortion.coefficients, ", "));
+    }
+  }
+  return text;
+}
+
+}  // namespace
+
+void add_calib_command(CLI::App& app, const Output& output, Command& run) {
+  CLI::App* calib_command = app.add_subcommand("calib", "Sensor calibration files");
+  calib_command->require_subcommand(1);
+  CLI::App* check = calib_command->add_subcommand("check", "Load a calibration YAML and print its summary or its error");
+  auto path = std::make_shared<std::string>();
+  check->add_option("FILE", *path, "Calibration YAML")->required();
+  check->callback([&output, &run, path] {
+    run = [&output, path] {
+      Result<calib::Calibration> loaded = calib::load_calibration(*path);
+      nlohmann::json result = {{"file", *path}, {"kind", "calibration"}};
+      if (!loaded) return report_failure(output, result, loaded.error().message);
+      result["ok"] = true;
+      result["calibration"] = to_json(*loaded);
+      return report_success(output, result, to_text(*path, *loaded));
+    };
+  });
+}
+
+}  // namespace hanzo::fusion::app

@@ -1,0 +1,17 @@
+#pragma once
+// Subcommand registration: each adds its CLI11 subcommand and sets `run` when selected.
+
+#include <functional>
+
+#include <CLI/CLI.hpp>
+
+#include "output.hpp"
+
+namespace hanzo::fusion::app {
+
+using Command = std::function<int()>;
+
+void add_config_command(CLI::App& app, const Output& output, Command& run);
+void add_calib_command(CLI::App& app, const Output& output, Command& run);
+
+}  // namespace hanzo::fusion::app

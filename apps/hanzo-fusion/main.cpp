@@ -1,0 +1,40 @@
+// hanzo-fusion: the command-line face of the engine.
+
+#include <iostream>
+
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include "commands.hpp"
+#include "hanzo/fusion/core/logging.hpp"
+
+int main(int argc, char** argv) {
+  using namespace hanzo::fusion;
+  CLI::App app{"hanzo-fusion: sensor fusion and SLAM engine (HIP-0083)", "hanzo-fusion"};
+  app.set_version_flag("--version", std::string("hanzo-fusion ") + HANZO_FUSION_VERSION);
+  app.require_subcommand(1);
+  app.fallthrough();  // --json and --log-level also work after the subcommand
+
+  app::Output output;
+  std::string log_level = "warn";
+  app.add_flag("--json", output.json, "Print the result as exactly one JSON object on stdout");
+  app.add_option("--log-level", log_level, "Library log level on stderr: trace, debug, info, warn, error, off")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}));
+
+  app::Command run;
+  app::add_config_command(app, output, run);
+  app::add_calib_command(app, output, run);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& error) {
+    if (error.get_exit_code() == 0) return app.exit(error);  // --help, --version
+    std::cerr << "hanzo-fusion: " << error.what() << " (see hanzo-fusion --help)\n";
+    return 2;
+  }
+
+  auto logger = spdlog::stderr_color_mt("hanzo_fusion");
+  logger->set_level(spdlog::level::from_str(log_level));
+  set_logger(logger);
+  return run ? run() : 1;
+}

@@ -1,0 +1,35 @@
+#pragma once
+// Lossless conversion between the engine's message structs and the hanzo.fusion.v1 protobuf
+// messages. to_proto() never fails. from_proto() rejects what the struct cannot hold (a
+// timestamp above INT64_MAX, a covariance with other than 0 or 9/36 values, an unknown image
+// encoding or enum value, a missing required submessage) and then runs validate(), so a
+// message that came over the wire is checked once, here. Every valid message survives
+// struct -> proto -> struct bit for bit.
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
+#include "hanzo/fusion/v1/estimates.pb.h"
+#include "hanzo/fusion/v1/sensors.pb.h"
+
+namespace hanzo::fusion::msgs {
+
+v1::ImuMessage to_proto(const ImuMessage& message);
+v1::PointCloudMessage to_proto(const PointCloudMessage& message);
+v1::ImageMessage to_proto(const ImageMessage& message);
+v1::GnssMessage to_proto(const GnssMessage& message);
+v1::WheelOdometryMessage to_proto(const WheelOdometryMessage& message);
+v1::RadarMessage to_proto(const RadarMessage& message);
+v1::PoseEstimate to_proto(const PoseEstimate& message);
+v1::Keyframe to_proto(const Keyframe& message);
+
+Result<ImuMessage> from_proto(const v1::ImuMessage& message);
+Result<PointCloudMessage> from_proto(const v1::PointCloudMessage& message);
+Result<ImageMessage> from_proto(const v1::ImageMessage& message);
+Result<GnssMessage> from_proto(const v1::GnssMessage& message);
+Result<WheelOdometryMessage> from_proto(const v1::WheelOdometryMessage& message);
+Result<RadarMessage> from_proto(const v1::RadarMessage& message);
+Result<PoseEstimate> from_proto(const v1::PoseEstimate& message);
+Result<Keyframe> from_proto(const v1::Keyframe& message);
+
+}  // namespace hanzo::fusion::msgs

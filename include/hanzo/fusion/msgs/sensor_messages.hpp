@@ -1,0 +1,137 @@
+#pragma once
+// The engine's sensor messages: plain C++ mirrors of the hanzo.fusion.v1 protobuf schemas
+// (proto/hanzo/fusion/v1/sensors.proto) with Eigen types. Conventions of the spec: timestamps
+// int64 ns since the Unix epoch, SI units, body FLU, world ENU, quaternions (w, x, y, z).
+// Optional fields are std::optional: absence is explicit, never encoded as zeros.
+// Convert to and from protobuf with msgs/convert.hpp; check with validate() in
+// msgs/validate.hpp before trusting a message built outside the engine.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <variant>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "hanzo/fusion/core/geodesy.hpp"
+#include "hanzo/fusion/core/time.hpp"
+
+namespace hanzo::fusion::msgs {
+
+struct ImuMessage {
+  Timestamp timestamp;
+  std::string frame_id;
+  Eigen::Vector3d linear_acceleration = Eigen::Vector3d::Zero();  // m/s^2, IMU frame (specific force)
+  Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero();     // rad/s, IMU frame
+  std::optional<Eigen::Matrix3d> acceleration_covariance;         // (m/s^2)^2
+  std::optional<Eigen::Matrix3d> gyroscope_covariance;            // (rad/s)^2
+  /// R_world_imu reported by the IMU itself (world ENU), when it reports attitude.
+  std::optional<Eigen::Quaterniond> orientation;
+  /// Covariance of the orientation as a rotation-vector error, rad^2 (only with orientation).
+  std::optional<Eigen::Matrix3d> orientation_covariance;
+};
+
+struct PointCloudMessage {
+  Timestamp timestamp;
+  std::string frame_id;
+  std::vector<Eigen::Vector3f> points;   // meters, sensor frame; never empty
+  std::vector<float> intensities;        // empty, or one per point in [0, 1]
+  std::vector<uint32_t> ring_ids;        // empty, or one per point
+  std::vector<Timestamp> point_timestamps;  // empty, or one per point
+};
+
+struct CameraIntrinsics {
+  double fx = 0.0;  // pixels
+  double fy = 0.0;
+  double cx = 0.0;
+  double cy = 0.0;
+  uint32_t width = 0;   // pixels, 0 when unknown
+  uint32_t height = 0;
+};
+
+enum class DistortionType {
+  kNone,         // ideal pinhole: no coefficients
+  kRadtan,       // k1, k2, p1, p2 [, k3] (OpenCV plumb_bob)
+  kEquidistant,  // k1, k2, k3, k4 (Kannala-Brandt, OpenCV fisheye)
+};
+
+struct DistortionModel {
+  DistortionType type = DistortionType::kNone;
+  std::vector<double> coefficients;
+};
+
+/// Name used in files ("none", "radtan", "equidistant").
+std::string_view to_string(DistortionType type);
+std::optional<DistortionType> distortion_type_from_string(std::string_view name);
+
+enum class ImageEncoding { kRgb8, kBgr8, kMono8, kDepth16, kDepth32f };
+
+/// "rgb8", "bgr8", "mono8", "depth16", "depth32f".
+std::string_view to_string(ImageEncoding encoding);
+std::optional<ImageEncoding> image_encoding_from_string(std::string_view name);
+size_t bytes_per_pixel(ImageEncoding encoding);
+
+struct ImageMessage {
+  Timestamp timestamp;
+  std::string frame_id;
+  uint32_t width = 0;
+  uint32_t height = 0;
+  ImageEncoding encoding = ImageEncoding::kMono8;
+  std::vector<uint8_t> data;  // row-major, no padding: width * height * bytes_per_pixel(encoding)
+  std::optional<CameraIntrinsics> intrinsics;
+  std::optional<DistortionModel> distortion;
+};
+
+enum class GnssFixType { kNoFix, kFix2d, kFix3d, kRtkFloat, kRtkFixed };
+
+/// "NO_FIX", "FIX_2D", "FIX_3D", "RTK_FLOAT", "RTK_FIXED" as in the spec.
+std::string_view to_string(GnssFixType fix_type);
+
+struct GnssMessage {
+  Timestamp timestamp;
+  double latitude = 0.0;   // WGS84 degrees
+  double longitude = 0.0;  // WGS84 degrees
+  double altitude = 0.0;   // meters above the ellipsoid
+  GnssFixType fix_type = GnssFixType::kNoFix;
+  std::optional<Eigen::Matrix3d> position_covariance;  // m^2, ENU
+  uint32_t satellites_used = 0;
+  float hdop = 0.0F;
+
+  GeodeticPoint geodetic() const { return {latitude, longitude, altitude}; }
+};
+
+struct WheelOdometryMessage {
+  Timestamp timestamp;
+  std::string frame_id;
+  double left_distance = 0.0;     // meters, cumulative
+  double right_distance = 0.0;    // meters, cumulative
+  double wheel_separation = 0.0;  // meters, > 0
+  double wheel_radius = 0.0;      // meters, 0 when unknown
+};
+
+struct RadarTarget {
+  float range = 0.0F;            // meters, >= 0
+  float azimuth = 0.0F;          // radians, [-pi, pi]
+  float elevation = 0.0F;        // radians, [-pi/2, pi/2]
+  float radial_velocity = 0.0F;  // m/s, positive = moving away
+  float rcs = 0.0F;              // dBsm
+};
+
+struct RadarMessage {
+  Timestamp timestamp;
+  std::string frame_id;
+  std::vector<RadarTarget> targets;  // may be empty (nothing detected)
+};
+
+/// Any of the six sensor messages, as the Session and the sensor log carry them.
+using SensorMessage =
+    std::variant<ImuMessage, PointCloudMessage, ImageMessage, GnssMessage, WheelOdometryMessage, RadarMessage>;
+
+Timestamp timestamp_of(const SensorMessage& message);
+/// "imu", "point_cloud", "image", "gnss", "wheel_odometry", "radar".
+std::string_view modality_name(const SensorMessage& message);
+
+}  // namespace hanzo::fusion::msgs

@@ -1,0 +1,113 @@
+#include "hanzo/fusion/config/fusion_config.hpp"
+
+#include <array>
+#include <cmath>
+#include <set>
+#include <utility>
+
+#include <fmt/format.h>
+
+namespace hanzo::fusion::config {
+namespace {
+
+constexpr std::array<std::pair<FrontendType, std::string_view>, 3> kFrontendNames{
+    {{FrontendType::kEkf, "ekf"}, {FrontendType::kUkf, "ukf"}, {FrontendType::kParticle, "particle"}}};
+
+constexpr std::array<std::pair<SensorModality, std::string_view>, 6> kModalityNames{{{SensorModality::kImu, "imu"},
+                                                                                    {SensorModality::kLidar, "lidar"},
+                                                                                    {SensorModality::kCamera, "camera"},
+                                                                                    {SensorModality::kGnss, "gnss"},
+                                                                                    {SensorModality::kWheelOdometry, "wheel_odometry"},
+                                                                                    {SensorModality::kRadar, "radar"}}};
+
+// Name prefixes that imply a modality.
+constexpr std::array<std::pair<std::string_view, SensorModality>, 8> kModalityPrefixes{{{"imu", SensorModality::kImu},
+                                                                                       {"lidar", SensorModality::kLidar},
+                                                                                       {"camera", SensorModality::kCamera},
+                                                                                       {"gnss", SensorModality::kGnss},
+                                                                                       {"gps", SensorModality::kGnss},
+                                                                                       {"wheel", SensorModality::kWheelOdometry},
+                                                                                       {"odom", SensorModality::kWheelOdometry},
+                                                                                       {"radar", SensorModality::kRadar}}};
+
+template <typename Enum, size_t N>
+std::string_view name_of(const std::array<std::pair<Enum, std::string_view>, N>& table, Enum value) {
+  for (const auto& [entry, name] : table) {
+    if (entry == value) return name;
+  }
+  return "invalid";
+}
+
+template <typename Enum, size_t N>
+std::optional<Enum> value_of(const std::array<std::pair<Enum, std::string_view>, N>& table, std::string_view name) {
+  for (const auto& [entry, entry_name] : table) {
+    if (entry_name == name) return entry;
+  }
+  return std::nullopt;
+}
+
+Status non_negative(double value, std::string_view field) {
+  if (!std::isfinite(value) || value < 0.0) {
+    return Error{fmt::format("FusionConfig.{}: {} (expected a finite value >= 0)", field, value), std::string(field)};
+  }
+  return ok_status();
+}
+
+}  // namespace
+
+std::string_view to_string(FrontendType type) { return name_of(kFrontendNames, type); }
+std::optional<FrontendType> frontend_type_from_string(std::string_view name) { return value_of(kFrontendNames, name); }
+std::string_view to_string(SensorModality modality) { return name_of(kModalityNames, modality); }
+std::optional<SensorModality> sensor_modality_from_string(std::string_view name) { return value_of(kModalityNames, name); }
+
+std::optional<SensorModality> infer_modality(std::string_view sensor_name) {
+  for (const auto& [prefix, modality] : kModalityPrefixes) {
+    if (sensor_name.starts_with(prefix)) return modality;
+  }
+  return std::nullopt;
+}
+
+const SensorConfig* FusionConfig::find_sensor(std::string_view name) const {
+  for (const SensorConfig& sensor : sensors) {
+    if (sensor.name == name) return &sensor;
+  }
+  return nullptr;
+}
+
+Status validate(const FusionConfig& config) {
+  const FrontendConfig& frontend = config.frontend;
+  if (!std::isfinite(frontend.predict_rate_hz) || frontend.predict_rate_hz <= 0.0) {
+    return Error{fmt::format("FusionConfig.frontend.predict_rate_hz: {} (expected > 0 Hz)", frontend.predict_rate_hz),
+                 "frontend.predict_rate_hz"};
+  }
+  const CovarianceConfig& covariance = frontend.covariance;
+  for (int i = 0; i < 3; ++i) {
+    if (Status s = non_negative(covariance.initial_position[i], "frontend.covariance.initial_position"); !s) return s;
+    if (Status s = non_negative(covariance.initial_orientation[i], "frontend.covariance.initial_orientation"); !s) return s;
+    if (Status s = non_negative(covariance.initial_velocity[i], "frontend.covariance.initial_velocity"); !s) return s;
+  }
+  for (const auto& [value, field] : {std::pair<double, std::string_view>{covariance.process_noise_accel, "frontend.covariance.process_noise_accel"},
+                                     {covariance.process_noise_gyro, "frontend.covariance.process_noise_gyro"},
+                                     {covariance.accel_bias_random_walk, "frontend.covariance.accel_bias_random_walk"},
+                                     {covariance.gyro_bias_random_walk, "frontend.covariance.gyro_bias_random_walk"}}) {
+    if (Status s = non_negative(value, field); !s) return s;
+  }
+  std::set<std::string_view> names;
+  std::set<std::string_view> topics;
+  for (const SensorConfig& sensor : config.sensors) {
+    const std::string field = fmt::format("sensors.{}", sensor.name);
+    if (sensor.name.empty()) return Error{"FusionConfig.sensors: a sensor has an empty name", "sensors"};
+    if (!names.insert(sensor.name).second) return Error{fmt::format("FusionConfig.{}: duplicate sensor name", field), field};
+    if (sensor.topic.empty()) return Error{fmt::format("FusionConfig.{}.topic: empty", field), field + ".topic"};
+    if (!topics.insert(sensor.topic).second) {
+      return Error{fmt::format("FusionConfig.{}.topic: '{}' is used by another sensor", field, sensor.topic), field + ".topic"};
+    }
+    if (!std::isfinite(sensor.rate_hz) || sensor.rate_hz <= 0.0) {
+      return Error{fmt::format("FusionConfig.{}.rate: {} (expected > 0 Hz)", field, sensor.rate_hz), field + ".rate"};
+    }
+    if (sensor.body_frame.empty()) return Error{fmt::format("FusionConfig.{}.body_frame: empty", field), field + ".body_frame"};
+  }
+  return ok_status();
+}
+
+}  // namespace hanzo::fusion::config

@@ -1,0 +1,397 @@
+#include "hanzo/fusion/msgs/convert.hpp"
+
+#include <limits>
+
+#include <fmt/format.h>
+
+#include "hanzo/fusion/msgs/validate.hpp"
+
+namespace hanzo::fusion::msgs {
+namespace {
+
+// ---- to_proto helpers -------------------------------------------------------------------
+
+void write(const Eigen::Vector3d& vector, v1::Vector3* out) {
+  out->set_x(vector.x());
+  out->set_y(vector.y());
+  out->set_z(vector.z());
+}
+
+void write(const Eigen::Quaterniond& q, v1::Quaternion* out) {
+  out->set_w(q.w());
+  out->set_x(q.x());
+  out->set_y(q.y());
+  out->set_z(q.z());
+}
+
+template <int N, typename ProtoMatrix>
+void write(const Eigen::Matrix<double, N, N>& matrix, ProtoMatrix* out) {
+  out->mutable_data()->Reserve(N * N);
+  for (int row = 0; row < N; ++row) {
+    for (int col = 0; col < N; ++col) out->add_data(matrix(row, col));
+  }
+}
+
+void write(const Pose& pose, v1::Pose* out) {
+  write(pose.position, out->mutable_position());
+  write(pose.orientation, out->mutable_orientation());
+}
+
+uint64_t write_time(Timestamp time) { return static_cast<uint64_t>(time.nanoseconds()); }
+
+// ---- from_proto helpers -----------------------------------------------------------------
+
+class Reader {
+ public:
+  explicit Reader(std::string_view message_name) : message_name_(message_name) {}
+
+  Error fail(std::string_view field, std::string_view what) const {
+    return Error{fmt::format("{}.{}: {}", message_name_, field, what), std::string(field)};
+  }
+
+  Result<Timestamp> time(uint64_t nanoseconds, std::string_view field) const {
+    if (nanoseconds > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) {
+      return fail(field, fmt::format("{} ns is beyond the year 2262 (int64 nanoseconds)", nanoseconds));
+    }
+    return Timestamp::from_nanoseconds(static_cast<int64_t>(nanoseconds));
+  }
+
+  // A required vector submessage.
+  template <typename Message>
+  Result<Eigen::Vector3d> vector(bool present, const Message& value, std::string_view field) const {
+    if (!present) return fail(field, "missing");
+    return Eigen::Vector3d(value.x(), value.y(), value.z());
+  }
+
+  // Absent or empty -> nullopt; otherwise exactly N*N values.
+  template <int N, typename ProtoMatrix>
+  Result<std::optional<Eigen::Matrix<double, N, N>>> matrix(bool present, const ProtoMatrix& value,
+                                                            std::string_view field) const {
+    using Matrix = Eigen::Matrix<double, N, N>;
+    if (!present || value.data_size() == 0) return std::optional<Matrix>();
+    if (value.data_size() != N * N) {
+      return fail(field, fmt::format("{} values (expected {} for a {}x{} row-major matrix, or none)", value.data_size(),
+                                     N * N, N, N));
+    }
+    Matrix matrix;
+    for (int row = 0; row < N; ++row) {
+      for (int col = 0; col < N; ++col) matrix(row, col) = value.data(row * N + col);
+    }
+    return std::optional<Matrix>(matrix);
+  }
+
+  Result<Pose> pose(bool present, const v1::Pose& value, std::string_view field) const {
+    if (!present) return fail(field, "missing");
+    if (!value.has_position()) return fail(fmt::format("{}.position", field), "missing");
+    if (!value.has_orientation()) return fail(fmt::format("{}.orientation", field), "missing");
+    const v1::Quaternion& q = value.orientation();
+    return Pose{{value.position().x(), value.position().y(), value.position().z()}, Eigen::Quaterniond(q.w(), q.x(), q.y(), q.z())};
+  }
+
+ private:
+  std::string_view message_name_;
+};
+
+// Returns the message after validate(), or validate's error.
+template <typename Message>
+Result<Message> validated(Message message) {
+  if (Status status = validate(message); !status) return status.error();
+  return message;
+}
+
+}  // namespace
+
+// ---- IMU --------------------------------------------------------------------------------
+
+v1::ImuMessage to_proto(const ImuMessage& message) {
+  v1::ImuMessage out;
+  out.set_timestamp_ns(write_time(message.timestamp));
+  out.set_frame_id(message.frame_id);
+  write(message.linear_acceleration, out.mutable_linear_acceleration());
+  write(message.angular_velocity, out.mutable_angular_velocity());
+  if (message.acceleration_covariance) write(*message.acceleration_covariance, out.mutable_acceleration_covariance());
+  if (message.gyroscope_covariance) write(*message.gyroscope_covariance, out.mutable_gyroscope_covariance());
+  if (message.orientation) write(*message.orientation, out.mutable_orientation());
+  if (message.orientation_covariance) write(*message.orientation_covariance, out.mutable_orientation_covariance());
+  return out;
+}
+
+Result<ImuMessage> from_proto(const v1::ImuMessage& in) {
+  const Reader read("ImuMessage");
+  ImuMessage message;
+  HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
+  message.frame_id = in.frame_id();
+  HANZO_ASSIGN_OR_RETURN(message.linear_acceleration, read.vector(in.has_linear_acceleration(), in.linear_acceleration(), "linear_acceleration"));
+  HANZO_ASSIGN_OR_RETURN(message.angular_velocity, read.vector(in.has_angular_velocity(), in.angular_velocity(), "angular_velocity"));
+  HANZO_ASSIGN_OR_RETURN(message.acceleration_covariance,
+               read.matrix<3>(in.has_acceleration_covariance(), in.acceleration_covariance(), "acceleration_covariance"));
+  HANZO_ASSIGN_OR_RETURN(message.gyroscope_covariance, read.matrix<3>(in.has_gyroscope_covariance(), in.gyroscope_covariance(), "gyroscope_covariance"));
+  if (in.has_orientation()) {
+    const v1::Quaternion& q = in.orientation();
+    message.orientation = Eigen::Quaterniond(q.w(), q.x(), q.y(), q.z());
+  }
+  HANZO_ASSIGN_OR_RETURN(message.orientation_covariance,
+               read.matrix<3>(in.has_orientation_covariance(), in.orientation_covariance(), "orientation_covariance"));
+  return validated(std::move(message));
+}
+
+// ---- Point cloud ------------------------------------------------------------------------
+
+v1::PointCloudMessage to_proto(const PointCloudMessage& message) {
+  v1::PointCloudMessage out;
+  out.set_timestamp_ns(write_time(message.timestamp));
+  out.set_frame_id(message.frame_id);
+  out.mutable_points()->Reserve(static_cast<int>(message.points.size()));
+  for (const Eigen::Vector3f& point : message.points) {
+    v1::Point3* p = out.add_points();
+    p->set_x(point.x());
+    p->set_y(point.y());
+    p->set_z(point.z());
+  }
+  out.mutable_intensities()->Add(message.intensities.begin(), message.intensities.end());
+  out.mutable_ring_ids()->Add(message.ring_ids.begin(), message.ring_ids.end());
+  out.mutable_point_timestamps()->Reserve(static_cast<int>(message.point_timestamps.size()));
+  for (Timestamp time : message.point_timestamps) out.add_point_timestamps(write_time(time));
+  return out;
+}
+
+Result<PointCloudMessage> from_proto(const v1::PointCloudMessage& in) {
+  const Reader read("PointCloudMessage");
+  PointCloudMessage message;
+  HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
+  message.frame_id = in.frame_id();
+  message.points.reserve(in.points_size());
+  for (const v1::Point3& p : in.points()) message.points.emplace_back(p.x(), p.y(), p.z());
+  message.intensities.assign(in.intensities().begin(), in.intensities().end());
+  message.ring_ids.assign(in.ring_ids().begin(), in.ring_ids().end());
+  message.point_timestamps.reserve(in.point_timestamps_size());
+  for (int i = 0; i < in.point_timestamps_size(); ++i) {
+    Timestamp time;
+    HANZO_ASSIGN_OR_RETURN(time, read.time(in.point_timestamps(i), fmt::format("point_timestamps[{}]", i)));
+    message.point_timestamps.push_back(time);
+  }
+  return validated(std::move(message));
+}
+
+// ---- Image ------------------------------------------------------------------------------
+
+v1::ImageMessage to_proto(const ImageMessage& message) {
+  v1::ImageMessage out;
+  out.set_timestamp_ns(write_time(message.timestamp));
+  out.set_frame_id(message.frame_id);
+  out.set_width(message.width);
+  out.set_height(message.height);
+  out.set_encoding(std::string(to_string(message.encoding)));
+  out.set_data(message.data.data(), message.data.size());
+  if (message.intrinsics) {
+    v1::CameraIntrinsics* intrinsics = out.mutable_intrinsics();
+    intrinsics->set_fx(message.intrinsics->fx);
+    intrinsics->set_fy(message.intrinsics->fy);
+    intrinsics->set_cx(message.intrinsics->cx);
+    intrinsics->set_cy(message.intrinsics->cy);
+    intrinsics->set_width(message.intrinsics->width);
+    intrinsics->set_height(message.intrinsics->height);
+  }
+  if (message.distortion) {
+    v1::DistortionModel* distortion = out.mutable_distortion();
+    switch (message.distortion->type) {
+      case DistortionType::kNone: distortion->set_model(v1::DistortionModel::MODEL_NONE); break;
+      case DistortionType::kRadtan: distortion->set_model(v1::DistortionModel::MODEL_RADTAN); break;
+      case DistortionType::kEquidistant: distortion->set_model(v1::DistortionModel::MODEL_EQUIDISTANT); break;
+    }
+    distortion->mutable_coefficients()->Add(message.distortion->coefficients.begin(), message.distortion->coefficients.end());
+  }
+  return out;
+}
+
+Result<ImageMessage> from_proto(const v1::ImageMessage& in) {
+  const Reader read("ImageMessage");
+  ImageMessage message;
+  HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
+  message.frame_id = in.frame_id();
+  message.width = in.width();
+  message.height = in.height();
+  const std::optional<ImageEncoding> encoding = image_encoding_from_string(in.encoding());
+  if (!encoding) {
+    return read.fail("encoding", fmt::format("unknown encoding '{}' (expected rgb8, bgr8, mono8, depth16 or depth32f)", in.encoding()));
+  }
+  message.encoding = *encoding;
+  message.data.assign(in.data().begin(), in.data().end());
+  if (in.has_intrinsics()) {
+    const v1::CameraIntrinsics& intrinsics = in.intrinsics();
+    message.intrinsics = CameraIntrinsics{intrinsics.fx(), intrinsics.fy(), intrinsics.cx(), intrinsics.cy(), intrinsics.width(), intrinsics.height()};
+  }
+  if (in.has_distortion()) {
+    DistortionModel distortion;
+    switch (in.distortion().model()) {
+      case v1::DistortionModel::MODEL_NONE: distortion.type = DistortionType::kNone; break;
+      case v1::DistortionModel::MODEL_RADTAN: distortion.type = DistortionType::kRadtan; break;
+      case v1::DistortionModel::MODEL_EQUIDISTANT: distortion.type = DistortionType::kEquidistant; break;
+      default: return read.fail("distortion.model", fmt::format("unknown distortion model {}", static_cast<int>(in.distortion().model())));
+    }
+    distortion.coefficients.assign(in.distortion().coefficients().begin(), in.distortion().coefficients().end());
+    message.distortion = std::move(distortion);
+  }
+  return validated(std::move(message));
+}
+
+// ---- GNSS -------------------------------------------------------------------------------
+
+v1::GnssMessage to_proto(const GnssMessage& message) {
+  v1::GnssMessage out;
+  out.set_timestamp_ns(write_time(message.timestamp));
+  out.set_latitude(message.latitude);
+  out.set_longitude(message.longitude);
+  out.set_altitude(message.altitude);
+  out.set_fix_type(static_cast<v1::GnssFixType>(static_cast<int>(message.fix_type)));
+  if (message.position_covariance) write(*message.position_covariance, out.mutable_position_covariance());
+  out.set_satellites_used(message.satellites_used);
+  out.set_hdop(message.hdop);
+  return out;
+}
+
+Result<GnssMessage> from_proto(const v1::GnssMessage& in) {
+  const Reader read("GnssMessage");
+  GnssMessage message;
+  HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
+  message.latitude = in.latitude();
+  message.longitude = in.longitude();
+  message.altitude = in.altitude();
+  if (!v1::GnssFixType_IsValid(in.fix_type())) {
+    return read.fail("fix_type", fmt::format("unknown fix type {} (expected NO_FIX, FIX_2D, FIX_3D, RTK_FLOAT or RTK_FIXED)",
+                                             static_cast<int>(in.fix_type())));
+  }
+  message.fix_type = static_cast<GnssFixType>(static_cast<int>(in.fix_type()));
+  HANZO_ASSIGN_OR_RETURN(message.position_covariance, read.matrix<3>(in.has_position_covariance(), in.position_covariance(), "position_covariance"));
+  message.satellites_used = in.satellites_used();
+  message.hdop = in.hdop();
+  return validated(std::move(message));
+}
+
+// ---- Wheel odometry ---------------------------------------------------------------------
+
+v1::WheelOdometryMessage to_proto(const WheelOdometryMessage& message) {
+  v1::WheelOdometryMessage out;
+  out.set_timestamp_ns(write_time(message.timestamp));
+  out.set_frame_id(message.frame_id);
+  out.set_left_distance(message.left_distance);
+  out.set_right_distance(message.right_distance);
+  out.set_wheel_separation(message.wheel_separation);
+  out.set_wheel_radius(message.wheel_radius);
+  return out;
+}
+
+Result<WheelOdometryMessage> from_proto(const v1::WheelOdometryMessage& in) {
+  const Reader read("WheelOdometryMessage");
+  WheelOdometryMessage message;
+  HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
+  message.frame_id = in.frame_id();
+  message.left_distance = in.left_distance();
+  message.right_distance = in.right_distance();
+  message.wheel_separation = in.wheel_separation();
+  message.wheel_radius = in.wheel_radius();
+  return validated(std::move(message));
+}
+
+// ---- Radar ------------------------------------------------------------------------------
+
+v1::RadarMessage to_proto(const RadarMessage& message) {
+  v1::RadarMessage out;
+  out.set_timestamp_ns(write_time(message.timestamp));
+  out.set_frame_id(message.frame_id);
+  out.mutable_targets()->Reserve(static_cast<int>(message.targets.size()));
+  for (const RadarTarget& target : message.targets) {
+    v1::RadarTarget* t = out.add_targets();
+    t->set_range(target.range);
+    t->set_azimuth(target.azimuth);
+    t->set_elevation(target.elevation);
+    t->set_radial_velocity(target.radial_velocity);
+    t->set_rcs(target.rcs);
+  }
+  return out;
+}
+
+Result<RadarMessage> from_proto(const v1::RadarMessage& in) {
+  const Reader read("RadarMessage");
+  RadarMessage message;
+  HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
+  message.frame_id = in.frame_id();
+  message.targets.reserve(in.targets_size());
+  for (const v1::RadarTarget& t : in.targets()) {
+    message.targets.push_back({t.range(), t.azimuth(), t.elevation(), t.radial_velocity(), t.rcs()});
+  }
+  return validated(std::move(message));
+}
+
+// ---- Pose estimate and keyframe ---------------------------------------------------------
+
+v1::PoseEstimate to_proto(const PoseEstimate& message) {
+  v1::PoseEstimate out;
+  out.set_timestamp_ns(write_time(message.timestamp));
+  out.set_frame_id(message.frame_id);
+  out.set_child_frame_id(message.child_frame_id);
+  write(message.T_world_body.position, out.mutable_position());
+  write(message.T_world_body.orientation, out.mutable_orientation());
+  write(message.velocity, out.mutable_velocity());
+  if (message.pose_covariance) write(*message.pose_covariance, out.mutable_pose_covariance());
+  v1::PoseStatus* status = out.mutable_status();
+  status->set_state(static_cast<v1::TrackingState>(static_cast<int>(message.status.state)));
+  status->set_active_modalities(message.status.active_modalities);
+  for (const std::string& sensor : message.status.active_sensors) status->add_active_sensors(sensor);
+  return out;
+}
+
+Result<PoseEstimate> from_proto(const v1::PoseEstimate& in) {
+  const Reader read("PoseEstimate");
+  PoseEstimate message;
+  HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
+  message.frame_id = in.frame_id();
+  message.child_frame_id = in.child_frame_id();
+  HANZO_ASSIGN_OR_RETURN(message.T_world_body.position, read.vector(in.has_position(), in.position(), "position"));
+  if (!in.has_orientation()) return read.fail("orientation", "missing");
+  const v1::Quaternion& q = in.orientation();
+  message.T_world_body.orientation = Eigen::Quaterniond(q.w(), q.x(), q.y(), q.z());
+  HANZO_ASSIGN_OR_RETURN(message.velocity, read.vector(in.has_velocity(), in.velocity(), "velocity"));
+  HANZO_ASSIGN_OR_RETURN(message.pose_covariance, read.matrix<6>(in.has_pose_covariance(), in.pose_covariance(), "pose_covariance"));
+  if (!v1::TrackingState_IsValid(in.status().state())) {
+    return read.fail("status.state", fmt::format("unknown tracking state {}", static_cast<int>(in.status().state())));
+  }
+  message.status.state = static_cast<TrackingState>(static_cast<int>(in.status().state()));
+  message.status.active_modalities = in.status().active_modalities();
+  message.status.active_sensors.assign(in.status().active_sensors().begin(), in.status().active_sensors().end());
+  return validated(std::move(message));
+}
+
+v1::Keyframe to_proto(const Keyframe& message) {
+  v1::Keyframe out;
+  out.set_keyframe_id(message.keyframe_id);
+  out.set_timestamp_ns(write_time(message.timestamp));
+  write(message.T_world_body, out.mutable_pose());
+  write(message.velocity, out.mutable_velocity());
+  if (message.pose_covariance) write(*message.pose_covariance, out.mutable_pose_covariance());
+  out.set_previous_keyframe_id(message.previous_keyframe_id);
+  if (message.T_previous_current) write(*message.T_previous_current, out.mutable_relative_pose());
+  if (message.relative_covariance) write(*message.relative_covariance, out.mutable_relative_covariance());
+  return out;
+}
+
+Result<Keyframe> from_proto(const v1::Keyframe& in) {
+  const Reader read("Keyframe");
+  Keyframe message;
+  message.keyframe_id = in.keyframe_id();
+  HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
+  HANZO_ASSIGN_OR_RETURN(message.T_world_body, read.pose(in.has_pose(), in.pose(), "pose"));
+  HANZO_ASSIGN_OR_RETURN(message.velocity, read.vector(in.has_velocity(), in.velocity(), "velocity"));
+  HANZO_ASSIGN_OR_RETURN(message.pose_covariance, read.matrix<6>(in.has_pose_covariance(), in.pose_covariance(), "pose_covariance"));
+  message.previous_keyframe_id = in.previous_keyframe_id();
+  if (in.has_relative_pose()) {
+    Pose relative;
+    HANZO_ASSIGN_OR_RETURN(relative, read.pose(true, in.relative_pose(), "relative_pose"));
+    message.T_previous_current = relative;
+  }
+  HANZO_ASSIGN_OR_RETURN(message.relative_covariance,
+               read.matrix<6>(in.has_relative_covariance(), in.relative_covariance(), "relative_covariance"));
+  return validated(std::move(message));
+}
+
+}  // namespace hanzo::fusion::msgs

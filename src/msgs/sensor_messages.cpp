@@ -1,0 +1,85 @@
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
+
+#include <array>
+#include <utility>
+
+namespace hanzo::fusion::msgs {
+namespace {
+
+constexpr std::array<std::pair<DistortionType, std::string_view>, 3> kDistortionNames{{
+    {DistortionType::kNone, "none"}, {DistortionType::kRadtan, "radtan"}, {DistortionType::kEquidistant, "equidistant"}}};
+
+constexpr std::array<std::pair<ImageEncoding, std::string_view>, 5> kEncodingNames{{{ImageEncoding::kRgb8, "rgb8"},
+                                                                                    {ImageEncoding::kBgr8, "bgr8"},
+                                                                                    {ImageEncoding::kMono8, "mono8"},
+                                                                                    {ImageEncoding::kDepth16, "depth16"},
+                                                                                    {ImageEncoding::kDepth32f, "depth32f"}}};
+
+template <typename Enum, size_t N>
+std::string_view name_of(const std::array<std::pair<Enum, std::string_view>, N>& table, Enum value) {
+  for (const auto& [entry, name] : table) {
+    if (entry == value) return name;
+  }
+  return "invalid";
+}
+
+template <typename Enum, size_t N>
+std::optional<Enum> value_of(const std::array<std::pair<Enum, std::string_view>, N>& table, std::string_view name) {
+  for (const auto& [entry, entry_name] : table) {
+    if (entry_name == name) return entry;
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::string_view to_string(DistortionType type) { return name_of(kDistortionNames, type); }
+std::optional<DistortionType> distortion_type_from_string(std::string_view name) { return value_of(kDistortionNames, name); }
+
+std::string_view to_string(ImageEncoding encoding) { return name_of(kEncodingNames, encoding); }
+std::optional<ImageEncoding> image_encoding_from_string(std::string_view name) { return value_of(kEncodingNames, name); }
+
+size_t bytes_per_pixel(ImageEncoding encoding) {
+  switch (encoding) {
+    case ImageEncoding::kRgb8:
+    case ImageEncoding::kBgr8: return 3;
+    case ImageEncoding::kMono8: return 1;
+    case ImageEncoding::kDepth16: return 2;
+    case ImageEncoding::kDepth32f: return 4;
+  }
+  return 0;
+}
+
+std::string_view to_string(GnssFixType fix_type) {
+  switch (fix_type) {
+    case GnssFixType::kNoFix: return "NO_FIX";
+    case GnssFixType::kFix2d: return "FIX_2D";
+    case GnssFixType::kFix3d: return "FIX_3D";
+    case GnssFixType::kRtkFloat: return "RTK_FLOAT";
+    case GnssFixType::kRtkFixed: return "RTK_FIXED";
+  }
+  return "invalid";
+}
+
+std::string_view to_string(TrackingState state) {
+  switch (state) {
+    case TrackingState::kUnspecified: return "UNSPECIFIED";
+    case TrackingState::kInitializing: return "INITIALIZING";
+    case TrackingState::kTracking: return "TRACKING";
+    case TrackingState::kDegraded: return "DEGRADED";
+    case TrackingState::kLost: return "LOST";
+  }
+  return "invalid";
+}
+
+Timestamp timestamp_of(const SensorMessage& message) {
+  return std::visit([](const auto& m) { return m.timestamp; }, message);
+}
+
+std::string_view modality_name(const SensorMessage& message) {
+  constexpr std::array<std::string_view, 6> kNames{"imu", "point_cloud", "image", "gnss", "wheel_odometry", "radar"};
+  return kNames[message.index()];
+}
+
+}  // namespace hanzo::fusion::msgs
