@@ -3,6 +3,8 @@
 #include <cmath>
 #include <numbers>
 
+#include <Eigen/LU>
+
 namespace hanzo::fusion {
 namespace {
 

@@ -1,5 +1,6 @@
 #include "hanzo/fusion/core/yaml_value.hpp"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cerrno>
@@ -37,7 +38,7 @@ YamlValue::YamlValue(YAML::Node node, std::shared_ptr<const std::string> source,
 Result<YamlValue> YamlValue::load_string(const std::string& text, const std::string& source_name) {
   try {
     YAML::Node root = YAML::Load(text);
-    return YamlValue(root, std::make_shared<const std::string>(source_name), "", root.Mark().line + 1);
+    return YamlValue(root, std::make_shared<const std::string>(source_name), "", std::max(1, root.Mark().line + 1));
   } catch (const YAML::Exception& e) {
     return Error{fmt::format("{}:{}:{}: YAML syntax error: {}", source_name, e.mark.line + 1, e.mark.column + 1, e.msg)};
   }
@@ -57,26 +58,21 @@ bool YamlValue::present() const { return node_.IsDefined() && !node_.IsNull(); }
 bool YamlValue::is_map() const { return node_.IsMap(); }
 
 YamlValue YamlValue::operator[](std::string_view key) const {
-  std::string child_path = path_.empty() ? std::string(key) : fmt::format("{}.{}", path_, key);
-  if (node_.IsMap()) {
-    const YAML::Node& const_node = node_;
-    YAML::Node child = const_node[std::string(key)];
-    if (child.IsDefined()) {
-      const int line = child.Mark().line >= 0 ? child.Mark().line + 1 : line_;
-      return YamlValue(child, source_, std::move(child_path), line);
-    }
+  for (auto& [name, value] : entries()) {
+    if (name == key) return value;
   }
+  std::string child_path = path_.empty() ? std::string(key) : fmt::format("{}.{}", path_, key);
   return YamlValue(YAML::Node(YAML::NodeType::Undefined), source_, std::move(child_path), line_);
 }
 
+// Each entry's line is the line of its key, so errors about a nested block point at its name.
 std::vector<std::pair<std::string, YamlValue>> YamlValue::entries() const {
   std::vector<std::pair<std::string, YamlValue>> result;
   if (!node_.IsMap()) return result;
   for (const auto& entry : node_) {
     const std::string key = entry.first.Scalar();
     std::string child_path = path_.empty() ? key : fmt::format("{}.{}", path_, key);
-    const int line = entry.second.Mark().line >= 0 ? entry.second.Mark().line + 1 : entry.first.Mark().line + 1;
-    result.emplace_back(key, YamlValue(entry.second, source_, std::move(child_path), line));
+    result.emplace_back(key, YamlValue(entry.second, source_, std::move(child_path), entry.first.Mark().line + 1));
   }
   return result;
 }

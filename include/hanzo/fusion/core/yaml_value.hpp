@@ -37,7 +37,7 @@ class YamlValue {
 
   /// Key path from the document root, e.g. "fusion.frontend.type" ("" for the root).
   const std::string& path() const { return path_; }
-  /// 1-based line of this value, or of its parent map when absent.
+  /// 1-based line of this value's key, or of its parent's key when absent.
   int line() const { return line_; }
   const std::string& source_name() const { return *source_; }
 

@@ -1,0 +1,121 @@
+// Runs the real hanzo-fusion program: exit codes, text and --json output, one-line errors.
+
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <fmt/format.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+namespace {
+
+using ::testing::HasSubstr;
+
+struct CliRun {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+};
+
+CliRun run(const std::string& arguments) {
+  const std::filesystem::path err_path = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_test_{}.err", ::getpid());
+  const std::string command = fmt::format("{} {} 2>{}", HANZO_FUSION_CLI, arguments, err_path.string());
+  CliRun result;
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (!pipe) return result;
+  std::array<char, 4096> buffer{};
+  size_t n = 0;
+  while ((n = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0) result.out.append(buffer.data(), n);
+  const int status = ::pclose(pipe);
+  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream err(err_path);
+  result.err.assign(std::istreambuf_iterator<char>(err), {});
+  std::filesystem::remove(err_path);
+  return result;
+}
+
+std::string write_temp(const std::string& name, const std::string& text) {
+  const std::filesystem::path path = std::filesystem::temp_directory_path() / name;
+  std::ofstream(path) << text;
+  return path.string();
+}
+
+TEST(Cli, VersionAndHelp) {
+  const CliRun version = run("--version");
+  EXPECT_EQ(version.exit_code, 0);
+  EXPECT_THAT(version.out, HasSubstr("hanzo-fusion 0."));
+  const CliRun help = run("--help");
+  EXPECT_EQ(help.exit_code, 0);
+  EXPECT_THAT(help.out, HasSubstr("config"));
+  EXPECT_THAT(help.out, HasSubstr("calib"));
+}
+
+TEST(Cli, ConfigCheckPrintsSummary) {
+  const CliRun result = run("config check examples/fusion.yaml");
+  EXPECT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_THAT(result.out, HasSubstr("valid fusion configuration"));
+  EXPECT_THAT(result.out, HasSubstr("velodyne_vlp16"));
+  EXPECT_EQ(result.err, "");
+}
+
+TEST(Cli, ConfigCheckJsonIsOneObject) {
+  for (const char* arguments : {"--json config check examples/fusion.yaml", "config check examples/fusion.yaml --json"}) {
+    const CliRun result = run(arguments);
+    ASSERT_EQ(result.exit_code, 0) << result.err;
+    const nlohmann::json json = nlohmann::json::parse(result.out);  // throws (fails) unless exactly one JSON value
+    EXPECT_TRUE(json.is_object());
+    EXPECT_EQ(json["ok"], true);
+    EXPECT_EQ(json["config"]["frontend"]["type"], "ekf");
+    EXPECT_EQ(json["config"]["sensors"].size(), 6U);
+    EXPECT_EQ(json["config"]["sensors"][1]["rate_hz"], 10.0);
+  }
+}
+
+TEST(Cli, CalibCheckTextAndJson) {
+  const CliRun text = run("calib check examples/calibration.yaml");
+  EXPECT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_THAT(text.out, HasSubstr("3 sensor(s)"));
+  EXPECT_THAT(text.out, HasSubstr("equidistant"));
+  const CliRun json_run = run("calib check --json examples/calibration.yaml");
+  ASSERT_EQ(json_run.exit_code, 0);
+  const nlohmann::json json = nlohmann::json::parse(json_run.out);
+  EXPECT_EQ(json["calibration"]["sensors"][1]["sensor"], "lidar");
+  EXPECT_EQ(json["calibration"]["sensors"][1]["time_offset_ns"], -5000000);
+  EXPECT_NEAR(json["calibration"]["sensors"][1]["rotation_angle_deg"].get<double>(), 90.0, 0.1);
+  EXPECT_EQ(json["calibration"]["sensors"][2]["intrinsics"]["distortion_model"], "equidistant");
+}
+
+TEST(Cli, BadFileFailsWithOneLineReason) {
+  const std::string path = write_temp("hanzo_cli_bad_calibration.yaml", "calibration:\n  lidar_to_body:\n    rotation: [0.707, 0.0, 0.707]\n");
+  const CliRun text = run("calib check " + path);
+  EXPECT_EQ(text.exit_code, 1);
+  EXPECT_EQ(text.out, "");
+  EXPECT_EQ(text.err, "hanzo-fusion: " + path + ":3: calibration.lidar_to_body.rotation: expected 4 numbers (w, x, y, z), got 3\n");
+  const CliRun json_run = run("--json calib check " + path);
+  EXPECT_EQ(json_run.exit_code, 1);
+  const nlohmann::json json = nlohmann::json::parse(json_run.out);
+  EXPECT_EQ(json["ok"], false);
+  EXPECT_THAT(json["error"].get<std::string>(), HasSubstr("expected 4 numbers"));
+  EXPECT_EQ(std::count(json_run.err.begin(), json_run.err.end(), '\n'), 1);
+  std::filesystem::remove(path);
+}
+
+TEST(Cli, MissingFileAndUsageErrors) {
+  const CliRun missing = run("config check /nonexistent/fusion.yaml");
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_EQ(missing.err, "hanzo-fusion: /nonexistent/fusion.yaml: cannot open file\n");
+  const CliRun usage = run("config check");
+  EXPECT_NE(usage.exit_code, 0);
+  EXPECT_THAT(usage.err, HasSubstr("FILE"));
+  const CliRun unknown = run("frobnicate");
+  EXPECT_NE(unknown.exit_code, 0);
+  EXPECT_THAT(unknown.err, HasSubstr("hanzo-fusion:"));
+}
+
+}  // namespace

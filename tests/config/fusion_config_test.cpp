@@ -1,0 +1,118 @@
+#include "hanzo/fusion/config/fusion_config.hpp"
+
+#include <filesystem>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+namespace hanzo::fusion::config {
+namespace {
+
+using ::testing::HasSubstr;
+
+std::string error_of(const std::string& yaml) {
+  const Result<FusionConfig> config = parse_fusion_config(yaml, "fusion.yaml");
+  return config.ok() ? std::string("(loaded)") : config.error().message;
+}
+
+TEST(FusionConfig, SpecExampleLoadsUnchanged) {
+  const Result<FusionConfig> loaded = load_fusion_config("examples/fusion.yaml");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  const FusionConfig& config = *loaded;
+  EXPECT_EQ(config.frontend.type, FrontendType::kEkf);
+  EXPECT_EQ(config.frontend.predict_rate_hz, 200.0);
+  EXPECT_EQ(config.frontend.covariance.initial_orientation, Eigen::Vector3d(0.01, 0.01, 0.01));
+  EXPECT_EQ(config.frontend.covariance.gyro_bias_random_walk, 0.0001);
+  ASSERT_EQ(config.sensors.size(), 6U);
+  EXPECT_EQ(config.sensors[0].name, "imu");
+  EXPECT_EQ(config.sensors[0].modality, SensorModality::kImu);
+  const SensorConfig* lidar = config.find_sensor("lidar");
+  ASSERT_NE(lidar, nullptr);
+  EXPECT_EQ(lidar->topic, "/sensors/lidar");
+  EXPECT_EQ(lidar->rate_hz, 10.0);
+  EXPECT_EQ(lidar->body_frame, "lidar_link");
+  EXPECT_EQ(lidar->type, "velodyne_vlp16");
+  EXPECT_EQ(config.find_sensor("camera_right")->modality, SensorModality::kCamera);
+  EXPECT_EQ(config.find_sensor("camera_right")->type, "stereo_right");
+  EXPECT_EQ(config.find_sensor("wheels")->modality, SensorModality::kWheelOdometry);
+  EXPECT_EQ(config.find_sensor("gnss")->rate_hz, 5.0);
+  EXPECT_TRUE(validate(config).ok());
+}
+
+TEST(FusionConfig, DefaultsApplyWhereTheFileIsSilent) {
+  const Result<FusionConfig> loaded = parse_fusion_config("fusion:\n  sensors:\n    imu:\n      rate: 100\n", "fusion.yaml");
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(loaded->frontend.type, FrontendType::kEkf);
+  EXPECT_EQ(loaded->frontend.predict_rate_hz, 200.0);
+  EXPECT_EQ(loaded->frontend.covariance.process_noise_accel, 0.1);
+  EXPECT_EQ(loaded->sensors[0].topic, "/sensors/imu");
+  EXPECT_EQ(loaded->sensors[0].body_frame, "imu_link");
+  EXPECT_EQ(loaded->sensors[0].type, "");
+}
+
+TEST(FusionConfig, EachRuleGivesItsDocumentedError) {
+  EXPECT_EQ(error_of("fusion:\n  frontend:\n    type: kalman\n"),
+            "fusion.yaml:3: fusion.frontend.type: expected ekf, ukf or particle, got 'kalman'");
+  EXPECT_EQ(error_of("fusion:\n  frontend:\n    predict_rate: -5\n"),
+            "fusion.yaml:3: fusion.frontend.predict_rate: expected a positive rate in Hz, got -5");
+  EXPECT_EQ(error_of("fusion:\n  frontend:\n    covariance:\n      initial_position: [0.1, 0.1]\n"),
+            "fusion.yaml:4: fusion.frontend.covariance.initial_position: expected 3 numbers (x, y, z), got 2");
+  EXPECT_EQ(error_of("fusion:\n  frontend:\n    covariance:\n      process_noise_gyro: -0.01\n"),
+            "fusion.yaml:4: fusion.frontend.covariance.process_noise_gyro: expected a number >= 0, got -0.01");
+  EXPECT_EQ(error_of("fusion:\n  frontend:\n    covariance:\n      process_noise_accel: .nan\n"),
+            "fusion.yaml:4: fusion.frontend.covariance.process_noise_accel: expected a finite number, got '.nan'");
+  EXPECT_EQ(error_of("fusion:\n  frontend:\n    tpye: ekf\n"),
+            "fusion.yaml:3: fusion.frontend.tpye: unknown key (expected one of: type, predict_rate, covariance)");
+  EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      topic: /imu\n"),
+            "fusion.yaml:3: fusion.sensors.imu.rate: missing (expected the sensor's rate in Hz)");
+  EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      rate: fast\n"),
+            "fusion.yaml:4: fusion.sensors.imu.rate: expected a number, got 'fast'");
+  EXPECT_EQ(error_of("fusion:\n  sensors:\n    front:\n      rate: 10\n"),
+            "fusion.yaml:3: fusion.sensors.front: cannot tell the sensor's modality from its name; add 'modality: "
+            "imu|lidar|camera|gnss|wheel_odometry|radar'");
+  EXPECT_EQ(error_of("fusion:\n  sensors:\n    front:\n      rate: 10\n      modality: sonar\n"),
+            "fusion.yaml:5: fusion.sensors.front.modality: expected imu, lidar, camera, gnss, wheel_odometry or radar, got 'sonar'");
+  EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      rate: 10\n      topic: /a\n    gnss:\n      rate: 5\n      topic: /a\n"),
+            "fusion.yaml:8: fusion.sensors.gnss.topic: topic '/a' is already used by another sensor");
+  EXPECT_EQ(error_of("fusion:\n  sensors: [imu, gnss]\n"), "fusion.yaml:2: fusion.sensors: expected a map of keys, got a list of 2");
+  EXPECT_EQ(error_of("frontend:\n  type: ekf\n"), "fusion.yaml:1: frontend: unknown key (expected one of: fusion)");
+  EXPECT_EQ(error_of("other: 1\n").substr(0, 14), "fusion.yaml:1:");
+  EXPECT_EQ(error_of(""), "fusion.yaml:1: fusion: missing (the file must start with a 'fusion:' map)");
+  EXPECT_THAT(error_of("fusion:\n  frontend: [\n"), HasSubstr("YAML syntax error"));
+}
+
+TEST(FusionConfig, LoadSaveLoadIsLossless) {
+  FusionConfig config = load_fusion_config("examples/fusion.yaml").value();
+  config.frontend.type = FrontendType::kUkf;
+  config.frontend.covariance.process_noise_accel = 0.123456789012345;
+  config.sensors.push_back({"front_radar", SensorModality::kRadar, "/radar: front", 13.5, "radar link", "continental_ars408"});
+  config.sensors.push_back({"tracker", SensorModality::kGnss, "/gps", 1.0 / 3.0, "gps_link", ""});
+  const std::filesystem::path path = std::filesystem::temp_directory_path() / "hanzo_fusion_config_test.yaml";
+  ASSERT_TRUE(save_fusion_config(config, path.string()).ok());
+  const Result<FusionConfig> loaded = load_fusion_config(path.string());
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  EXPECT_EQ(to_yaml(*loaded), to_yaml(config));
+  EXPECT_EQ(loaded->frontend.type, FrontendType::kUkf);
+  EXPECT_EQ(loaded->frontend.covariance.process_noise_accel, 0.123456789012345);
+  ASSERT_EQ(loaded->sensors.size(), 8U);
+  EXPECT_EQ(loaded->sensors[6].topic, "/radar: front");
+  EXPECT_EQ(loaded->sensors[6].modality, SensorModality::kRadar);
+  EXPECT_EQ(loaded->sensors[7].modality, SensorModality::kGnss);
+  EXPECT_EQ(loaded->sensors[7].rate_hz, 1.0 / 3.0);
+  std::filesystem::remove(path);
+}
+
+TEST(FusionConfig, SaveRefusesAnInvalidConfigAndKeepsTheOldFile) {
+  const std::filesystem::path path = std::filesystem::temp_directory_path() / "hanzo_fusion_config_keep.yaml";
+  FusionConfig config = load_fusion_config("examples/fusion.yaml").value();
+  ASSERT_TRUE(save_fusion_config(config, path.string()).ok());
+  config.sensors[1].rate_hz = -1.0;
+  const Status status = save_fusion_config(config, path.string());
+  ASSERT_FALSE(status.ok());
+  EXPECT_EQ(status.error().field, "sensors.lidar.rate");
+  EXPECT_EQ(load_fusion_config(path.string()).value().sensors[1].rate_hz, 10.0);
+  std::filesystem::remove(path);
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::config

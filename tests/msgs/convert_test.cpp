@@ -1,0 +1,230 @@
+#include "hanzo/fusion/msgs/convert.hpp"
+
+#include <google/protobuf/util/message_differencer.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "msgs/test_messages.hpp"
+
+namespace hanzo::fusion::msgs {
+namespace {
+
+using ::testing::HasSubstr;
+using google::protobuf::util::MessageDifferencer;
+
+// Field-by-field equality of the structs (exact: conversion must be lossless).
+bool equal(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) { return a.coeffs() == b.coeffs(); }
+bool equal(const Pose& a, const Pose& b) { return a.position == b.position && equal(a.orientation, b.orientation); }
+
+void expect_equal(const ImuMessage& a, const ImuMessage& b) {
+  EXPECT_EQ(a.timestamp, b.timestamp);
+  EXPECT_EQ(a.frame_id, b.frame_id);
+  EXPECT_EQ(a.linear_acceleration, b.linear_acceleration);
+  EXPECT_EQ(a.angular_velocity, b.angular_velocity);
+  EXPECT_EQ(a.acceleration_covariance, b.acceleration_covariance);
+  EXPECT_EQ(a.gyroscope_covariance, b.gyroscope_covariance);
+  ASSERT_EQ(a.orientation.has_value(), b.orientation.has_value());
+  if (a.orientation) {
+    EXPECT_TRUE(equal(*a.orientation, *b.orientation));
+  }
+  EXPECT_EQ(a.orientation_covariance, b.orientation_covariance);
+}
+
+void expect_equal(const PointCloudMessage& a, const PointCloudMessage& b) {
+  EXPECT_EQ(a.timestamp, b.timestamp);
+  EXPECT_EQ(a.frame_id, b.frame_id);
+  EXPECT_EQ(a.points, b.points);
+  EXPECT_EQ(a.intensities, b.intensities);
+  EXPECT_EQ(a.ring_ids, b.ring_ids);
+  EXPECT_EQ(a.point_timestamps, b.point_timestamps);
+}
+
+void expect_equal(const ImageMessage& a, const ImageMessage& b) {
+  EXPECT_EQ(a.timestamp, b.timestamp);
+  EXPECT_EQ(a.frame_id, b.frame_id);
+  EXPECT_EQ(a.width, b.width);
+  EXPECT_EQ(a.height, b.height);
+  EXPECT_EQ(a.encoding, b.encoding);
+  EXPECT_EQ(a.data, b.data);
+  ASSERT_EQ(a.intrinsics.has_value(), b.intrinsics.has_value());
+  if (a.intrinsics) {
+    EXPECT_EQ(a.intrinsics->fx, b.intrinsics->fx);
+    EXPECT_EQ(a.intrinsics->fy, b.intrinsics->fy);
+    EXPECT_EQ(a.intrinsics->cx, b.intrinsics->cx);
+    EXPECT_EQ(a.intrinsics->cy, b.intrinsics->cy);
+    EXPECT_EQ(a.intrinsics->width, b.intrinsics->width);
+    EXPECT_EQ(a.intrinsics->height, b.intrinsics->height);
+  }
+  ASSERT_EQ(a.distortion.has_value(), b.distortion.has_value());
+  if (a.distortion) {
+    EXPECT_EQ(a.distortion->type, b.distortion->type);
+    EXPECT_EQ(a.distortion->coefficients, b.distortion->coefficients);
+  }
+}
+
+void expect_equal(const GnssMessage& a, const GnssMessage& b) {
+  EXPECT_EQ(a.timestamp, b.timestamp);
+  EXPECT_EQ(a.latitude, b.latitude);
+  EXPECT_EQ(a.longitude, b.longitude);
+  EXPECT_EQ(a.altitude, b.altitude);
+  EXPECT_EQ(a.fix_type, b.fix_type);
+  EXPECT_EQ(a.position_covariance, b.position_covariance);
+  EXPECT_EQ(a.satellites_used, b.satellites_used);
+  EXPECT_EQ(a.hdop, b.hdop);
+}
+
+void expect_equal(const WheelOdometryMessage& a, const WheelOdometryMessage& b) {
+  EXPECT_EQ(a.timestamp, b.timestamp);
+  EXPECT_EQ(a.frame_id, b.frame_id);
+  EXPECT_EQ(a.left_distance, b.left_distance);
+  EXPECT_EQ(a.right_distance, b.right_distance);
+  EXPECT_EQ(a.wheel_separation, b.wheel_separation);
+  EXPECT_EQ(a.wheel_radius, b.wheel_radius);
+}
+
+void expect_equal(const RadarMessage& a, const RadarMessage& b) {
+  EXPECT_EQ(a.timestamp, b.timestamp);
+  EXPECT_EQ(a.frame_id, b.frame_id);
+  ASSERT_EQ(a.targets.size(), b.targets.size());
+  for (size_t i = 0; i < a.targets.size(); ++i) {
+    EXPECT_EQ(a.targets[i].range, b.targets[i].range);
+    EXPECT_EQ(a.targets[i].azimuth, b.targets[i].azimuth);
+    EXPECT_EQ(a.targets[i].elevation, b.targets[i].elevation);
+    EXPECT_EQ(a.targets[i].radial_velocity, b.targets[i].radial_velocity);
+    EXPECT_EQ(a.targets[i].rcs, b.targets[i].rcs);
+  }
+}
+
+void expect_equal(const PoseEstimate& a, const PoseEstimate& b) {
+  EXPECT_EQ(a.timestamp, b.timestamp);
+  EXPECT_EQ(a.frame_id, b.frame_id);
+  EXPECT_EQ(a.child_frame_id, b.child_frame_id);
+  EXPECT_TRUE(equal(a.T_world_body, b.T_world_body));
+  EXPECT_EQ(a.velocity, b.velocity);
+  EXPECT_EQ(a.pose_covariance, b.pose_covariance);
+  EXPECT_EQ(a.status.state, b.status.state);
+  EXPECT_EQ(a.status.active_modalities, b.status.active_modalities);
+  EXPECT_EQ(a.status.active_sensors, b.status.active_sensors);
+}
+
+void expect_equal(const Keyframe& a, const Keyframe& b) {
+  EXPECT_EQ(a.keyframe_id, b.keyframe_id);
+  EXPECT_EQ(a.timestamp, b.timestamp);
+  EXPECT_TRUE(equal(a.T_world_body, b.T_world_body));
+  EXPECT_EQ(a.velocity, b.velocity);
+  EXPECT_EQ(a.pose_covariance, b.pose_covariance);
+  EXPECT_EQ(a.previous_keyframe_id, b.previous_keyframe_id);
+  ASSERT_EQ(a.T_previous_current.has_value(), b.T_previous_current.has_value());
+  if (a.T_previous_current) {
+    EXPECT_TRUE(equal(*a.T_previous_current, *b.T_previous_current));
+  }
+  EXPECT_EQ(a.relative_covariance, b.relative_covariance);
+}
+
+// struct -> proto -> bytes -> proto -> struct is exact, and proto -> struct -> proto gives the
+// same wire bytes.
+template <typename Message>
+void check_round_trip(const Message& message) {
+  const auto proto = to_proto(message);
+  std::string bytes;
+  ASSERT_TRUE(proto.SerializeToString(&bytes));
+  decltype(to_proto(message)) parsed;
+  ASSERT_TRUE(parsed.ParseFromString(bytes));
+  auto back = from_proto(parsed);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  expect_equal(message, back.value());
+  const auto again = to_proto(back.value());
+  EXPECT_TRUE(MessageDifferencer::Equals(proto, again));
+  EXPECT_EQ(again.SerializeAsString(), bytes);
+}
+
+TEST(Convert, ImuRoundTrip) {
+  check_round_trip(testing::imu());
+  ImuMessage without_optionals = testing::imu();
+  without_optionals.acceleration_covariance.reset();
+  without_optionals.gyroscope_covariance.reset();
+  without_optionals.orientation.reset();
+  without_optionals.orientation_covariance.reset();
+  check_round_trip(without_optionals);
+  // Absence stays explicit on the wire.
+  const v1::ImuMessage proto = to_proto(without_optionals);
+  EXPECT_FALSE(proto.has_orientation());
+  EXPECT_FALSE(proto.has_acceleration_covariance());
+}
+
+TEST(Convert, PointCloudRoundTrip) {
+  check_round_trip(testing::point_cloud());
+  PointCloudMessage bare = testing::point_cloud();
+  bare.intensities.clear();
+  bare.ring_ids.clear();
+  bare.point_timestamps.clear();
+  check_round_trip(bare);
+}
+
+TEST(Convert, ImageRoundTrip) {
+  check_round_trip(testing::image());
+  ImageMessage depth = testing::image();
+  depth.encoding = ImageEncoding::kDepth16;
+  depth.data.resize(8 * 4 * 2);
+  depth.intrinsics.reset();
+  depth.distortion.reset();
+  check_round_trip(depth);
+}
+
+TEST(Convert, GnssRoundTrip) { check_round_trip(testing::gnss()); }
+TEST(Convert, WheelOdometryRoundTrip) { check_round_trip(testing::wheel_odometry()); }
+TEST(Convert, RadarRoundTrip) {
+  check_round_trip(testing::radar());
+  RadarMessage empty = testing::radar();
+  empty.targets.clear();
+  check_round_trip(empty);
+}
+TEST(Convert, PoseEstimateRoundTrip) { check_round_trip(testing::pose_estimate()); }
+TEST(Convert, KeyframeRoundTrip) {
+  check_round_trip(testing::keyframe());
+  Keyframe first = testing::keyframe();
+  first.previous_keyframe_id = 0;
+  first.T_previous_current.reset();
+  first.relative_covariance.reset();
+  check_round_trip(first);
+}
+
+TEST(Convert, RejectsWhatTheStructCannotHold) {
+  v1::ImuMessage imu = to_proto(testing::imu());
+  imu.mutable_acceleration_covariance()->mutable_data()->RemoveLast();
+  auto result = from_proto(imu);
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().field, "acceleration_covariance");
+  EXPECT_THAT(result.error().message, HasSubstr("8 values (expected 9"));
+
+  imu = to_proto(testing::imu());
+  imu.clear_angular_velocity();
+  EXPECT_EQ(from_proto(imu).error().field, "angular_velocity");
+
+  imu = to_proto(testing::imu());
+  imu.set_timestamp_ns(uint64_t{1} << 63);
+  EXPECT_THAT(from_proto(imu).error().message, HasSubstr("beyond the year 2262"));
+
+  v1::ImageMessage image = to_proto(testing::image());
+  image.set_encoding("yuv422");
+  EXPECT_THAT(from_proto(image).error().message, HasSubstr("unknown encoding 'yuv422'"));
+
+  v1::GnssMessage gnss = to_proto(testing::gnss());
+  gnss.set_fix_type(static_cast<v1::GnssFixType>(42));
+  EXPECT_EQ(from_proto(gnss).error().field, "fix_type");
+
+  v1::PoseEstimate pose = to_proto(testing::pose_estimate());
+  pose.mutable_pose_covariance()->add_data(1.0);
+  EXPECT_EQ(from_proto(pose).error().field, "pose_covariance");
+}
+
+TEST(Convert, FromProtoValidates) {
+  v1::ImuMessage imu = to_proto(testing::imu());
+  imu.mutable_linear_acceleration()->set_y(std::numeric_limits<double>::quiet_NaN());
+  auto result = from_proto(imu);
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().field, "linear_acceleration.y");
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::msgs
