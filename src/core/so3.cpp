@@ -68,8 +68,8 @@ SO3 SO3::exp(const Tangent& phi, Jacobian* jacobian) {
     imaginary_factor = std::sin(0.5 * theta) / theta;
   }
   if (jacobian) *jacobian = right_jacobian(phi);
-  Eigen::Quaterniond q(real, imaginary_factor * phi.x(), imaginary_factor * phi.y(), imaginary_factor * phi.z());
-  return SO3(q.normalized());
+  // Unit norm to rounding in both branches (the series' error is O(theta^4) < 1e-20).
+  return SO3(Eigen::Quaterniond(real, imaginary_factor * phi.x(), imaginary_factor * phi.y(), imaginary_factor * phi.z()));
 }
 
 SO3::Tangent SO3::log(Jacobian* jacobian) const {
