@@ -7,13 +7,15 @@
 
 #include <fmt/format.h>
 
+#include "hanzo/fusion/core/enum_names.hpp"
+
 namespace hanzo::fusion::config {
 namespace {
 
-constexpr std::array<std::pair<FrontendType, std::string_view>, 3> kFrontendNames{
+constexpr EnumNames<FrontendType, 3> kFrontendNames{
     {{FrontendType::kEkf, "ekf"}, {FrontendType::kUkf, "ukf"}, {FrontendType::kParticle, "particle"}}};
 
-constexpr std::array<std::pair<SensorModality, std::string_view>, 6> kModalityNames{{{SensorModality::kImu, "imu"},
+constexpr EnumNames<SensorModality, 6> kModalityNames{{{SensorModality::kImu, "imu"},
                                                                                     {SensorModality::kLidar, "lidar"},
                                                                                     {SensorModality::kCamera, "camera"},
                                                                                     {SensorModality::kGnss, "gnss"},
@@ -30,22 +32,6 @@ constexpr std::array<std::pair<std::string_view, SensorModality>, 8> kModalityPr
                                                                                        {"odom", SensorModality::kWheelOdometry},
                                                                                        {"radar", SensorModality::kRadar}}};
 
-template <typename Enum, size_t N>
-std::string_view name_of(const std::array<std::pair<Enum, std::string_view>, N>& table, Enum value) {
-  for (const auto& [entry, name] : table) {
-    if (entry == value) return name;
-  }
-  return "invalid";
-}
-
-template <typename Enum, size_t N>
-std::optional<Enum> value_of(const std::array<std::pair<Enum, std::string_view>, N>& table, std::string_view name) {
-  for (const auto& [entry, entry_name] : table) {
-    if (entry_name == name) return entry;
-  }
-  return std::nullopt;
-}
-
 Status non_negative(double value, std::string_view field) {
   if (!std::isfinite(value) || value < 0.0) {
     return Error{fmt::format("FusionConfig.{}: {} (expected a finite value >= 0)", field, value), std::string(field)};
@@ -55,10 +41,10 @@ Status non_negative(double value, std::string_view field) {
 
 }  // namespace
 
-std::string_view to_string(FrontendType type) { return name_of(kFrontendNames, type); }
-std::optional<FrontendType> frontend_type_from_string(std::string_view name) { return value_of(kFrontendNames, name); }
-std::string_view to_string(SensorModality modality) { return name_of(kModalityNames, modality); }
-std::optional<SensorModality> sensor_modality_from_string(std::string_view name) { return value_of(kModalityNames, name); }
+std::string_view to_string(FrontendType type) { return enum_name(kFrontendNames, type); }
+std::optional<FrontendType> frontend_type_from_string(std::string_view name) { return enum_from_name(kFrontendNames, name); }
+std::string_view to_string(SensorModality modality) { return enum_name(kModalityNames, modality); }
+std::optional<SensorModality> sensor_modality_from_string(std::string_view name) { return enum_from_name(kModalityNames, name); }
 
 std::optional<SensorModality> infer_modality(std::string_view sensor_name) {
   for (const auto& [prefix, modality] : kModalityPrefixes) {

@@ -4,41 +4,27 @@
 #include <array>
 #include <utility>
 
+#include "hanzo/fusion/core/enum_names.hpp"
+
 namespace hanzo::fusion::msgs {
 namespace {
 
-constexpr std::array<std::pair<DistortionType, std::string_view>, 3> kDistortionNames{{
+constexpr EnumNames<DistortionType, 3> kDistortionNames{{
     {DistortionType::kNone, "none"}, {DistortionType::kRadtan, "radtan"}, {DistortionType::kEquidistant, "equidistant"}}};
 
-constexpr std::array<std::pair<ImageEncoding, std::string_view>, 5> kEncodingNames{{{ImageEncoding::kRgb8, "rgb8"},
+constexpr EnumNames<ImageEncoding, 5> kEncodingNames{{{ImageEncoding::kRgb8, "rgb8"},
                                                                                     {ImageEncoding::kBgr8, "bgr8"},
                                                                                     {ImageEncoding::kMono8, "mono8"},
                                                                                     {ImageEncoding::kDepth16, "depth16"},
                                                                                     {ImageEncoding::kDepth32f, "depth32f"}}};
 
-template <typename Enum, size_t N>
-std::string_view name_of(const std::array<std::pair<Enum, std::string_view>, N>& table, Enum value) {
-  for (const auto& [entry, name] : table) {
-    if (entry == value) return name;
-  }
-  return "invalid";
-}
-
-template <typename Enum, size_t N>
-std::optional<Enum> value_of(const std::array<std::pair<Enum, std::string_view>, N>& table, std::string_view name) {
-  for (const auto& [entry, entry_name] : table) {
-    if (entry_name == name) return entry;
-  }
-  return std::nullopt;
-}
-
 }  // namespace
 
-std::string_view to_string(DistortionType type) { return name_of(kDistortionNames, type); }
-std::optional<DistortionType> distortion_type_from_string(std::string_view name) { return value_of(kDistortionNames, name); }
+std::string_view to_string(DistortionType type) { return enum_name(kDistortionNames, type); }
+std::optional<DistortionType> distortion_type_from_string(std::string_view name) { return enum_from_name(kDistortionNames, name); }
 
-std::string_view to_string(ImageEncoding encoding) { return name_of(kEncodingNames, encoding); }
-std::optional<ImageEncoding> image_encoding_from_string(std::string_view name) { return value_of(kEncodingNames, name); }
+std::string_view to_string(ImageEncoding encoding) { return enum_name(kEncodingNames, encoding); }
+std::optional<ImageEncoding> image_encoding_from_string(std::string_view name) { return enum_from_name(kEncodingNames, name); }
 
 size_t bytes_per_pixel(ImageEncoding encoding) {
   switch (encoding) {
