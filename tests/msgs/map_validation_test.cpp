@@ -1,0 +1,152 @@
+#include "hanzo/fusion/msgs/map_validation.hpp"
+
+#include <limits>
+
+#include <google/protobuf/util/message_differencer.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+namespace hanzo::fusion::msgs {
+namespace {
+
+using ::testing::HasSubstr;
+
+v1::Point3 point(float x, float y, float z) {
+  v1::Point3 p;
+  p.set_x(x);
+  p.set_y(y);
+  p.set_z(z);
+  return p;
+}
+
+// A map with every layer and every metadata field set.
+v1::FusionMap full_map() {
+  v1::FusionMap map;
+  map.set_format_version(kFusionMapFormatVersion);
+  map.set_map_id("2f1c6a8e-7d3b-4c55-9a10-5e3a2b1f0c9d");
+  map.set_version(3);
+  map.set_parent_version(2);
+  map.set_created_ns(1'771'842'930'000'000'000);
+  map.set_frame_id("world");
+  map.mutable_datum()->set_latitude(47.378177);
+  map.mutable_datum()->set_longitude(8.540192);
+  map.mutable_datum()->set_altitude(408.0);
+  map.set_sensor_configuration("fusion:\n  sensors: {}\n");
+  v1::InputLog* log = map.mutable_provenance()->add_input_logs();
+  log->set_uri("logs/run1.mcap");
+  log->set_sha256(std::string(64, 'a'));
+  map.mutable_provenance()->set_algorithm("lidar_slam/gicp");
+  map.mutable_provenance()->set_software_version("0.1.0");
+  v1::PointLayer* points = map.mutable_points();
+  for (int i = 0; i < 10; ++i) {
+    *points->add_points() = point(0.1F * i, 1.0F, -0.5F);
+    points->add_position_std(0.02F);
+    points->add_labels(i % 2 == 0 ? v1::LABEL_FLOOR : v1::LABEL_WALL);
+    points->add_intensities(0.5F);
+  }
+  points->set_voxel_size(0.1);
+  v1::OccupancyGridLayer* grid = map.mutable_occupancy();
+  grid->set_resolution(0.05);
+  grid->set_size_x(4);
+  grid->set_size_y(3);
+  grid->set_size_z(1);
+  grid->mutable_origin()->mutable_orientation()->set_w(1.0);
+  for (int i = 0; i < 12; ++i) grid->add_occupancy(i % 3 == 0 ? 0.9F : 0.5F);
+  v1::TsdfLayer* tsdf = map.mutable_tsdf();
+  tsdf->set_voxel_size(0.05);
+  tsdf->set_truncation_distance(0.15);
+  tsdf->set_block_size(2);
+  v1::TsdfBlock* block = tsdf->add_blocks();
+  block->set_index_x(-1);
+  for (int i = 0; i < 8; ++i) {
+    block->add_distances(0.01F * i);
+    block->add_weights(1.0F);
+  }
+  v1::MeshLayer* mesh = map.mutable_mesh();
+  *mesh->add_vertices() = point(0, 0, 0);
+  *mesh->add_vertices() = point(1, 0, 0);
+  *mesh->add_vertices() = point(0, 1, 0);
+  for (uint32_t index : {0U, 1U, 2U}) mesh->add_triangle_indices(index);
+  return map;
+}
+
+void expect_rejected(const v1::FusionMap& map, const std::string& field, const std::string& text) {
+  const Status status = validate(map);
+  ASSERT_FALSE(status.ok()) << "expected rejection of " << field;
+  EXPECT_EQ(status.error().field, field) << status.error().message;
+  EXPECT_THAT(status.error().message, HasSubstr(text));
+}
+
+TEST(MapValidation, FullMapIsValidAndRoundTripsExactly) {
+  const v1::FusionMap map = full_map();
+  const Status status = validate(map);
+  ASSERT_TRUE(status.ok()) << status.error().message;
+  v1::FusionMap parsed;
+  ASSERT_TRUE(parsed.ParseFromString(map.SerializeAsString()));
+  EXPECT_TRUE(google::protobuf::util::MessageDifferencer::Equals(map, parsed));
+  EXPECT_TRUE(validate(parsed).ok());
+}
+
+TEST(MapValidation, UnknownFormatVersionIsRejected) {
+  v1::FusionMap map = full_map();
+  map.set_format_version(2);
+  expect_rejected(map, "format_version", "unrecognized format version 2 (this build reads version 1)");
+  map.set_format_version(0);  // a message that never set it
+  expect_rejected(map, "format_version", "unrecognized format version 0");
+}
+
+TEST(MapValidation, BadLayersAreRejectedNamingTheField) {
+  v1::FusionMap map = full_map();
+  map.clear_map_id();
+  expect_rejected(map, "map_id", "empty");
+  map = full_map();
+  map.mutable_datum()->set_latitude(95.0);
+  expect_rejected(map, "datum", "outside [-90, 90]");
+  map = full_map();
+  map.mutable_points()->mutable_points(3)->set_y(std::numeric_limits<float>::quiet_NaN());
+  expect_rejected(map, "points.points[3]", "non-finite");
+  map = full_map();
+  map.mutable_points()->mutable_labels()->RemoveLast();
+  expect_rejected(map, "points.labels", "9 values for 10 points");
+  map = full_map();
+  map.mutable_points()->set_labels(0, static_cast<v1::SemanticLabel>(99));
+  expect_rejected(map, "points.labels[0]", "unknown label 99");
+  map = full_map();
+  map.mutable_occupancy()->set_size_y(4);
+  expect_rejected(map, "occupancy.occupancy", "12 cells, but 4x4x1 needs 16");
+  map = full_map();
+  map.mutable_occupancy()->set_occupancy(5, 1.5F);
+  expect_rejected(map, "occupancy.occupancy[5]", "outside [0, 1]");
+  map = full_map();
+  map.mutable_occupancy()->set_resolution(0.0);
+  expect_rejected(map, "occupancy.resolution", "expected > 0");
+  map = full_map();
+  map.mutable_tsdf()->mutable_blocks(0)->mutable_weights()->RemoveLast();
+  expect_rejected(map, "tsdf.blocks[0]", "8 distances and 7 weights (expected 8 each)");
+  map = full_map();
+  map.mutable_tsdf()->mutable_blocks(0)->set_weights(2, -1.0F);
+  expect_rejected(map, "tsdf.blocks[0].weights[2]", "expected >= 0");
+  map = full_map();
+  map.mutable_mesh()->add_triangle_indices(0);
+  expect_rejected(map, "mesh.triangle_indices", "4 indices (expected three per triangle)");
+  map = full_map();
+  map.mutable_mesh()->set_triangle_indices(2, 3);
+  expect_rejected(map, "mesh.triangle_indices[2]", "index 3 past the 3 vertices");
+}
+
+TEST(MapValidation, MapUpdate) {
+  v1::MapUpdate update;
+  update.set_map_id("m");
+  update.set_version(4);
+  update.set_timestamp_ns(1'771'842'930'000'000'000);
+  *update.mutable_added_points() = full_map().points();
+  EXPECT_TRUE(validate(update).ok());
+  update.set_timestamp_ns(0);
+  EXPECT_EQ(validate(update).error().field, "timestamp_ns");
+  update.set_timestamp_ns(1);
+  update.mutable_added_points()->mutable_intensities()->Add(0.1F);
+  EXPECT_EQ(validate(update).error().field, "added_points.intensities");
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::msgs
