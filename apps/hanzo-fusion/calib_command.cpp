@@ -36,10 +36,13 @@ nlohmann::json to_json(const calib::Calibration& calibration) {
 std::string to_text(const std::string& path, const calib::Calibration& calibration) {
   std::string text = fmt::format("{}: valid calibration, {} sensor(s)\n", path, calibration.sensors.size());
   for (const calib::SensorCalibration& entry : calibration.sensors) {
-    const SE3 T_body_sensor = entry.T_body_sensor();
-    text += fmt::format("  {}: T_body_{} rotation {:.3f} deg about [{:.3f}], translation [{}] m, time offset {:.3f} ms\n",
-                        entry.sensor, entry.sensor, T_body_sensor.rotation().angle() * 180.0 / std::numbers::pi,
-                        fmt::join(T_body_sensor.rotation().log().normalized(), ", "), fmt::join(entry.translation, ", "),
+    const SO3 rotation = entry.T_body_sensor().rotation();
+    const std::string rotation_text =
+        rotation.angle() == 0.0 ? std::string("identity")
+                                : fmt::format("{:.3f} deg about [{:.3f}]", rotation.angle() * 180.0 / std::numbers::pi,
+                                              fmt::join(rotation.log().normalized(), ", "));
+    text += fmt::format("  {}: T_body_{} rotation {}, translation [{}] m, time offset {:.3f} ms\n", entry.sensor, entry.sensor,
+                        rotation_text, fmt::join(entry.translation, ", "),
                         static_cast<double>(entry.time_offset.nanoseconds()) * 1e-6);
     if (entry.camera) {
       const msgs::CameraIntrinsics& k = entry.camera->intrinsics;

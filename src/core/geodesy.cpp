@@ -1,6 +1,7 @@
 #include "hanzo/fusion/core/geodesy.hpp"
 
 #include <cmath>
+#include <numbers>
 
 #include <GeographicLib/Geocentric.hpp>
 #include <fmt/format.h>
@@ -45,8 +46,8 @@ Result<EnuFrame> EnuFrame::create(const GeodeticPoint& datum) {
   EnuFrame frame;
   frame.datum_ = datum;
   frame.origin_ecef_ = geodetic_to_ecef(datum);
-  const double lat = datum.latitude_deg * M_PI / 180.0;
-  const double lon = datum.longitude_deg * M_PI / 180.0;
+  const double lat = datum.latitude_deg * std::numbers::pi / 180.0;
+  const double lon = datum.longitude_deg * std::numbers::pi / 180.0;
   const double slat = std::sin(lat), clat = std::cos(lat), slon = std::sin(lon), clon = std::cos(lon);
   // Columns: the east, north and up unit vectors expressed in ECEF.
   frame.rotation_ecef_enu_ << -slon, -slat * clon, clat * clon,
