@@ -1,3 +1,4 @@
+#include "hanzo/fusion/msgs/map_convert.hpp"
 #include "hanzo/fusion/msgs/map_validation.hpp"
 
 #include <limits>
@@ -50,6 +51,7 @@ v1::FusionMap full_map() {
   grid->set_size_x(4);
   grid->set_size_y(3);
   grid->set_size_z(1);
+  grid->mutable_origin()->mutable_position()->set_x(-1.0);
   grid->mutable_origin()->mutable_orientation()->set_w(1.0);
   for (int i = 0; i < 12; ++i) grid->add_occupancy(i % 3 == 0 ? 0.9F : 0.5F);
   v1::TsdfLayer* tsdf = map.mutable_tsdf();
@@ -146,6 +148,66 @@ TEST(MapValidation, MapUpdate) {
   update.set_timestamp_ns(1);
   update.mutable_added_points()->mutable_intensities()->Add(0.1F);
   EXPECT_EQ(validate(update).error().field, "added_points.intensities");
+}
+
+TEST(MapConvert, FusionMapRoundTripsLosslessly) {
+  const v1::FusionMap wire = full_map();
+  const Result<FusionMap> map = from_proto(wire);
+  ASSERT_TRUE(map.ok()) << map.error().message;
+  EXPECT_EQ(map->map_id, wire.map_id());
+  EXPECT_EQ(map->created.nanoseconds(), 1'771'842'930'000'000'000);
+  ASSERT_TRUE(map->datum.has_value());
+  EXPECT_EQ(map->datum->latitude_deg, 47.378177);
+  ASSERT_TRUE(map->points && map->occupancy && map->tsdf && map->mesh);
+  EXPECT_EQ(map->points->points.size(), 10U);
+  EXPECT_EQ(map->points->labels[1], SemanticLabel::kWall);
+  EXPECT_EQ(map->occupancy->occupancy.size(), 12U);
+  EXPECT_EQ(map->tsdf->blocks[0].index, Eigen::Vector3i(-1, 0, 0));
+  EXPECT_EQ(map->mesh->triangle_indices, (std::vector<uint32_t>{0, 1, 2}));
+  EXPECT_EQ(map->provenance.input_logs[0].uri, "logs/run1.mcap");
+  // struct -> proto gives back the same message, byte for byte.
+  const v1::FusionMap again = to_proto(*map);
+  EXPECT_TRUE(google::protobuf::util::MessageDifferencer::Equals(wire, again));
+  EXPECT_EQ(again.SerializeAsString(), wire.SerializeAsString());
+}
+
+TEST(MapConvert, MapWithoutOptionalPartsKeepsThemAbsent) {
+  FusionMap map;
+  map.map_id = "empty";
+  map.created = Timestamp::from_nanoseconds(5);
+  const v1::FusionMap wire = to_proto(map);
+  EXPECT_FALSE(wire.has_datum());
+  EXPECT_FALSE(wire.has_points());
+  const Result<FusionMap> back = from_proto(wire);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_FALSE(back->datum.has_value());
+  EXPECT_FALSE(back->occupancy.has_value());
+  EXPECT_EQ(back->format_version, kFusionMapFormatVersion);
+}
+
+TEST(MapConvert, FromProtoRefusesAFutureFormatVersion) {
+  v1::FusionMap wire = full_map();
+  wire.set_format_version(kFusionMapFormatVersion + 1);
+  const Result<FusionMap> map = from_proto(wire);
+  ASSERT_FALSE(map.ok());
+  EXPECT_EQ(map.error().field, "format_version");
+}
+
+TEST(MapConvert, MapUpdateRoundTrip) {
+  MapUpdate update;
+  update.map_id = "m";
+  update.version = 9;
+  update.timestamp = Timestamp::from_nanoseconds(1'771'842'930'000'000'000);
+  update.added_points = PointLayer{{{1.0F, 2.0F, 3.0F}}, {0.01F}, {SemanticLabel::kObstacle}, {}, 0.1};
+  update.full_replacement = true;
+  const v1::MapUpdate wire = to_proto(update);
+  const Result<MapUpdate> back = from_proto(wire);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(back->version, 9U);
+  EXPECT_TRUE(back->full_replacement);
+  EXPECT_EQ(back->added_points->points, update.added_points->points);
+  EXPECT_EQ(back->added_points->labels, update.added_points->labels);
+  EXPECT_EQ(to_proto(*back).SerializeAsString(), wire.SerializeAsString());
 }
 
 }  // namespace

@@ -1,0 +1,97 @@
+#pragma once
+// FusionMap and MapUpdate as plain C++ structs mirroring proto/hanzo/fusion/v1/maps.proto:
+// the canonical map container's layers and metadata. The maps module builds its occupancy
+// grids, TSDFs and point maps on top of these; conversion to and from the wire is in
+// msgs/map_convert.hpp, checks in msgs/map_validation.hpp.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "hanzo/fusion/core/geodesy.hpp"
+#include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
+
+namespace hanzo::fusion::msgs {
+
+enum class SemanticLabel : uint8_t { kUnknown, kFloor, kWall, kObstacle, kTraversable };
+
+struct PointLayer {
+  std::vector<Eigen::Vector3f> points;  // world frame, meters
+  std::vector<float> position_std;      // 1-sigma per point (m); empty or one per point
+  std::vector<SemanticLabel> labels;    // empty or one per point
+  std::vector<float> intensities;       // empty or one per point
+  double voxel_size = 0.0;              // meters, 0 if not voxelized
+};
+
+struct OccupancyGridLayer {
+  double resolution = 0.05;  // meters per cell
+  uint32_t size_x = 0;
+  uint32_t size_y = 0;
+  uint32_t size_z = 1;       // 1 for a 2D grid
+  Pose origin;               // world pose of the corner of cell (0, 0, 0)
+  std::vector<float> occupancy;        // probability per cell, x fastest, then y, then z; 0.5 = unknown
+  std::vector<SemanticLabel> labels;   // empty or one per cell
+};
+
+struct TsdfBlock {
+  Eigen::Vector3i index = Eigen::Vector3i::Zero();  // block coordinates
+  std::vector<float> distances;                     // block_size^3, x fastest
+  std::vector<float> weights;                       // same size, >= 0
+};
+
+struct TsdfLayer {
+  double voxel_size = 0.05;
+  double truncation_distance = 0.15;
+  uint32_t block_size = 8;
+  std::vector<TsdfBlock> blocks;
+};
+
+struct MeshLayer {
+  std::vector<Eigen::Vector3f> vertices;
+  std::vector<uint32_t> triangle_indices;    // three per triangle
+  std::vector<SemanticLabel> vertex_labels;  // empty or one per vertex
+};
+
+struct InputLog {
+  std::string uri;
+  std::string sha256;  // hex digest
+};
+
+struct Provenance {
+  std::vector<InputLog> input_logs;
+  std::string algorithm;
+  std::string parameters;        // the configuration used, YAML text
+  std::string software_version;
+};
+
+struct FusionMap {
+  uint32_t format_version = 1;
+  std::string map_id;
+  uint64_t version = 0;
+  uint64_t parent_version = 0;  // 0 for none
+  Timestamp created;
+  std::string frame_id = "world";
+  std::optional<GeodeticPoint> datum;  // WGS84 of the ENU origin when known
+  std::string sensor_configuration;    // fusion configuration + calibration, YAML text
+  Provenance provenance;
+  std::optional<PointLayer> points;
+  std::optional<OccupancyGridLayer> occupancy;
+  std::optional<TsdfLayer> tsdf;
+  std::optional<MeshLayer> mesh;
+};
+
+struct MapUpdate {
+  std::string map_id;
+  uint64_t version = 0;
+  Timestamp timestamp;
+  std::optional<PointLayer> added_points;
+  std::optional<OccupancyGridLayer> occupancy_patch;
+  std::optional<MeshLayer> mesh;
+  bool full_replacement = false;
+};
+
+}  // namespace hanzo::fusion::msgs

@@ -1,0 +1,223 @@
+#include "hanzo/fusion/msgs/map_convert.hpp"
+
+#include <limits>
+
+#include <fmt/format.h>
+
+#include "hanzo/fusion/msgs/map_validation.hpp"
+
+namespace hanzo::fusion::msgs {
+namespace {
+
+// ---- to the wire ------------------------------------------------------------------------
+
+template <typename RepeatedPoints>
+void write_points(const std::vector<Eigen::Vector3f>& points, RepeatedPoints* out) {
+  out->Reserve(static_cast<int>(points.size()));
+  for (const Eigen::Vector3f& point : points) {
+    v1::Point3* p = out->Add();
+    p->set_x(point.x());
+    p->set_y(point.y());
+    p->set_z(point.z());
+  }
+}
+
+template <typename RepeatedLabels>
+void write_labels(const std::vector<SemanticLabel>& labels, RepeatedLabels* out) {
+  out->Reserve(static_cast<int>(labels.size()));
+  for (SemanticLabel label : labels) out->Add(static_cast<int>(label));
+}
+
+void write(const PointLayer& layer, v1::PointLayer* out) {
+  write_points(layer.points, out->mutable_points());
+  out->mutable_position_std()->Add(layer.position_std.begin(), layer.position_std.end());
+  write_labels(layer.labels, out->mutable_labels());
+  out->mutable_intensities()->Add(layer.intensities.begin(), layer.intensities.end());
+  out->set_voxel_size(layer.voxel_size);
+}
+
+void write(const Pose& pose, v1::Pose* out) {
+  out->mutable_position()->set_x(pose.position.x());
+  out->mutable_position()->set_y(pose.position.y());
+  out->mutable_position()->set_z(pose.position.z());
+  out->mutable_orientation()->set_w(pose.orientation.w());
+  out->mutable_orientation()->set_x(pose.orientation.x());
+  out->mutable_orientation()->set_y(pose.orientation.y());
+  out->mutable_orientation()->set_z(pose.orientation.z());
+}
+
+void write(const OccupancyGridLayer& layer, v1::OccupancyGridLayer* out) {
+  out->set_resolution(layer.resolution);
+  out->set_size_x(layer.size_x);
+  out->set_size_y(layer.size_y);
+  out->set_size_z(layer.size_z);
+  write(layer.origin, out->mutable_origin());
+  out->mutable_occupancy()->Add(layer.occupancy.begin(), layer.occupancy.end());
+  write_labels(layer.labels, out->mutable_labels());
+}
+
+void write(const TsdfLayer& layer, v1::TsdfLayer* out) {
+  out->set_voxel_size(layer.voxel_size);
+  out->set_truncation_distance(layer.truncation_distance);
+  out->set_block_size(layer.block_size);
+  for (const TsdfBlock& block : layer.blocks) {
+    v1::TsdfBlock* b = out->add_blocks();
+    b->set_index_x(block.index.x());
+    b->set_index_y(block.index.y());
+    b->set_index_z(block.index.z());
+    b->mutable_distances()->Add(block.distances.begin(), block.distances.end());
+    b->mutable_weights()->Add(block.weights.begin(), block.weights.end());
+  }
+}
+
+void write(const MeshLayer& layer, v1::MeshLayer* out) {
+  write_points(layer.vertices, out->mutable_vertices());
+  out->mutable_triangle_indices()->Add(layer.triangle_indices.begin(), layer.triangle_indices.end());
+  write_labels(layer.vertex_labels, out->mutable_vertex_labels());
+}
+
+// ---- from the wire (already validated) --------------------------------------------------
+
+template <typename RepeatedPoints>
+std::vector<Eigen::Vector3f> read_points(const RepeatedPoints& in) {
+  std::vector<Eigen::Vector3f> points;
+  points.reserve(in.size());
+  for (const v1::Point3& p : in) points.emplace_back(p.x(), p.y(), p.z());
+  return points;
+}
+
+template <typename RepeatedLabels>
+std::vector<SemanticLabel> read_labels(const RepeatedLabels& in) {
+  std::vector<SemanticLabel> labels;
+  labels.reserve(in.size());
+  for (int label : in) labels.push_back(static_cast<SemanticLabel>(label));
+  return labels;
+}
+
+PointLayer read(const v1::PointLayer& in) {
+  return {read_points(in.points()), {in.position_std().begin(), in.position_std().end()}, read_labels(in.labels()),
+          {in.intensities().begin(), in.intensities().end()}, in.voxel_size()};
+}
+
+OccupancyGridLayer read(const v1::OccupancyGridLayer& in) {
+  OccupancyGridLayer layer;
+  layer.resolution = in.resolution();
+  layer.size_x = in.size_x();
+  layer.size_y = in.size_y();
+  layer.size_z = in.size_z();
+  const v1::Pose& origin = in.origin();
+  layer.origin.position = {origin.position().x(), origin.position().y(), origin.position().z()};
+  layer.origin.orientation = in.origin().has_orientation()
+                                 ? Eigen::Quaterniond(origin.orientation().w(), origin.orientation().x(), origin.orientation().y(),
+                                                      origin.orientation().z())
+                                 : Eigen::Quaterniond::Identity();
+  layer.occupancy.assign(in.occupancy().begin(), in.occupancy().end());
+  layer.labels = read_labels(in.labels());
+  return layer;
+}
+
+TsdfLayer read(const v1::TsdfLayer& in) {
+  TsdfLayer layer;
+  layer.voxel_size = in.voxel_size();
+  layer.truncation_distance = in.truncation_distance();
+  layer.block_size = in.block_size();
+  layer.blocks.reserve(in.blocks_size());
+  for (const v1::TsdfBlock& b : in.blocks()) {
+    layer.blocks.push_back({Eigen::Vector3i(b.index_x(), b.index_y(), b.index_z()),
+                            {b.distances().begin(), b.distances().end()},
+                            {b.weights().begin(), b.weights().end()}});
+  }
+  return layer;
+}
+
+MeshLayer read(const v1::MeshLayer& in) {
+  return {read_points(in.vertices()), {in.triangle_indices().begin(), in.triangle_indices().end()}, read_labels(in.vertex_labels())};
+}
+
+Result<Timestamp> read_time(uint64_t nanoseconds, std::string_view message, std::string_view field) {
+  if (nanoseconds > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) {
+    return Error{fmt::format("{}.{}: {} ns is beyond the year 2262 (int64 nanoseconds)", message, field, nanoseconds), std::string(field)};
+  }
+  return Timestamp::from_nanoseconds(static_cast<int64_t>(nanoseconds));
+}
+
+}  // namespace
+
+v1::FusionMap to_proto(const FusionMap& map) {
+  v1::FusionMap out;
+  out.set_format_version(map.format_version);
+  out.set_map_id(map.map_id);
+  out.set_version(map.version);
+  out.set_parent_version(map.parent_version);
+  out.set_created_ns(static_cast<uint64_t>(map.created.nanoseconds()));
+  out.set_frame_id(map.frame_id);
+  if (map.datum) {
+    out.mutable_datum()->set_latitude(map.datum->latitude_deg);
+    out.mutable_datum()->set_longitude(map.datum->longitude_deg);
+    out.mutable_datum()->set_altitude(map.datum->altitude_m);
+  }
+  out.set_sensor_configuration(map.sensor_configuration);
+  v1::Provenance* provenance = out.mutable_provenance();
+  for (const InputLog& log : map.provenance.input_logs) {
+    v1::InputLog* entry = provenance->add_input_logs();
+    entry->set_uri(log.uri);
+    entry->set_sha256(log.sha256);
+  }
+  provenance->set_algorithm(map.provenance.algorithm);
+  provenance->set_parameters(map.provenance.parameters);
+  provenance->set_software_version(map.provenance.software_version);
+  if (map.points) write(*map.points, out.mutable_points());
+  if (map.occupancy) write(*map.occupancy, out.mutable_occupancy());
+  if (map.tsdf) write(*map.tsdf, out.mutable_tsdf());
+  if (map.mesh) write(*map.mesh, out.mutable_mesh());
+  return out;
+}
+
+v1::MapUpdate to_proto(const MapUpdate& update) {
+  v1::MapUpdate out;
+  out.set_map_id(update.map_id);
+  out.set_version(update.version);
+  out.set_timestamp_ns(static_cast<uint64_t>(update.timestamp.nanoseconds()));
+  if (update.added_points) write(*update.added_points, out.mutable_added_points());
+  if (update.occupancy_patch) write(*update.occupancy_patch, out.mutable_occupancy_patch());
+  if (update.mesh) write(*update.mesh, out.mutable_mesh());
+  out.set_full_replacement(update.full_replacement);
+  return out;
+}
+
+Result<FusionMap> from_proto(const v1::FusionMap& in) {
+  HANZO_RETURN_IF_ERROR(validate(in));
+  FusionMap map;
+  map.format_version = in.format_version();
+  map.map_id = in.map_id();
+  map.version = in.version();
+  map.parent_version = in.parent_version();
+  HANZO_ASSIGN_OR_RETURN(map.created, read_time(in.created_ns(), "FusionMap", "created_ns"));
+  map.frame_id = in.frame_id();
+  if (in.has_datum()) map.datum = GeodeticPoint{in.datum().latitude(), in.datum().longitude(), in.datum().altitude()};
+  map.sensor_configuration = in.sensor_configuration();
+  for (const v1::InputLog& log : in.provenance().input_logs()) map.provenance.input_logs.push_back({log.uri(), log.sha256()});
+  map.provenance.algorithm = in.provenance().algorithm();
+  map.provenance.parameters = in.provenance().parameters();
+  map.provenance.software_version = in.provenance().software_version();
+  if (in.has_points()) map.points = read(in.points());
+  if (in.has_occupancy()) map.occupancy = read(in.occupancy());
+  if (in.has_tsdf()) map.tsdf = read(in.tsdf());
+  if (in.has_mesh()) map.mesh = read(in.mesh());
+  return map;
+}
+
+Result<MapUpdate> from_proto(const v1::MapUpdate& in) {
+  HANZO_RETURN_IF_ERROR(validate(in));
+  MapUpdate update;
+  update.map_id = in.map_id();
+  update.version = in.version();
+  HANZO_ASSIGN_OR_RETURN(update.timestamp, read_time(in.timestamp_ns(), "MapUpdate", "timestamp_ns"));
+  if (in.has_added_points()) update.added_points = read(in.added_points());
+  if (in.has_occupancy_patch()) update.occupancy_patch = read(in.occupancy_patch());
+  if (in.has_mesh()) update.mesh = read(in.mesh());
+  update.full_replacement = in.full_replacement();
+  return update;
+}
+
+}  // namespace hanzo::fusion::msgs
