@@ -12,8 +12,8 @@
 //       intrinsics: {fx, fy, cx, cy, distortion_model: equidistant|radtan|none, distortion_coeffs: [...]}
 //
 // Each "<sensor>_to_body" entry is the transform T_body_sensor (maps sensor coordinates into
-// the body frame). Defaults: rotation identity, translation zero, time_offset_ns 0; an entry
-// must give at least one of them. A rotation whose norm differs from 1 by more than
+// the body frame). Defaults: rotation identity, translation zero, time_offset_ns 0 (so
+// `imu_to_body: {}` is the identity). A rotation whose norm differs from 1 by more than
 // msgs::kUnitQuaternionTolerance (1e-3) is rejected, never silently normalized; within the
 // tolerance (3-decimal values such as 0.707) it is kept as written and normalized when used.
 // Full reference: docs/calibration.md.
