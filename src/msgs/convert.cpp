@@ -1,28 +1,17 @@
 #include "hanzo/fusion/msgs/convert.hpp"
 
-#include <limits>
-
 #include <fmt/format.h>
 
 #include "hanzo/fusion/msgs/validate.hpp"
+#include "wire_helpers.hpp"
 
 namespace hanzo::fusion::msgs {
 namespace {
 
+using wire::write;
+using wire::write_time;
+
 // ---- to_proto helpers -------------------------------------------------------------------
-
-void write(const Eigen::Vector3d& vector, v1::Vector3* out) {
-  out->set_x(vector.x());
-  out->set_y(vector.y());
-  out->set_z(vector.z());
-}
-
-void write(const Eigen::Quaterniond& q, v1::Quaternion* out) {
-  out->set_w(q.w());
-  out->set_x(q.x());
-  out->set_y(q.y());
-  out->set_z(q.z());
-}
 
 template <int N, typename ProtoMatrix>
 void write(const Eigen::Matrix<double, N, N>& matrix, ProtoMatrix* out) {
@@ -31,13 +20,6 @@ void write(const Eigen::Matrix<double, N, N>& matrix, ProtoMatrix* out) {
     for (int col = 0; col < N; ++col) out->add_data(matrix(row, col));
   }
 }
-
-void write(const Pose& pose, v1::Pose* out) {
-  write(pose.position, out->mutable_position());
-  write(pose.orientation, out->mutable_orientation());
-}
-
-uint64_t write_time(Timestamp time) { return static_cast<uint64_t>(time.nanoseconds()); }
 
 // ---- from_proto helpers -----------------------------------------------------------------
 
@@ -50,10 +32,7 @@ class Reader {
   }
 
   Result<Timestamp> time(uint64_t nanoseconds, std::string_view field) const {
-    if (nanoseconds > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) {
-      return fail(field, fmt::format("{} ns is beyond the year 2262 (int64 nanoseconds)", nanoseconds));
-    }
-    return Timestamp::from_nanoseconds(static_cast<int64_t>(nanoseconds));
+    return wire::read_time(nanoseconds, message_name_, field);
   }
 
   // A required vector submessage.

@@ -1,13 +1,12 @@
 #include "hanzo/fusion/msgs/map_convert.hpp"
 
-#include <limits>
-
-#include <fmt/format.h>
-
 #include "hanzo/fusion/msgs/map_validation.hpp"
+#include "wire_helpers.hpp"
 
 namespace hanzo::fusion::msgs {
 namespace {
+
+using wire::write;
 
 // ---- to the wire ------------------------------------------------------------------------
 
@@ -34,16 +33,6 @@ void write(const PointLayer& layer, v1::PointLayer* out) {
   write_labels(layer.labels, out->mutable_labels());
   out->mutable_intensities()->Add(layer.intensities.begin(), layer.intensities.end());
   out->set_voxel_size(layer.voxel_size);
-}
-
-void write(const Pose& pose, v1::Pose* out) {
-  out->mutable_position()->set_x(pose.position.x());
-  out->mutable_position()->set_y(pose.position.y());
-  out->mutable_position()->set_z(pose.position.z());
-  out->mutable_orientation()->set_w(pose.orientation.w());
-  out->mutable_orientation()->set_x(pose.orientation.x());
-  out->mutable_orientation()->set_y(pose.orientation.y());
-  out->mutable_orientation()->set_z(pose.orientation.z());
 }
 
 void write(const OccupancyGridLayer& layer, v1::OccupancyGridLayer* out) {
@@ -134,13 +123,6 @@ MeshLayer read(const v1::MeshLayer& in) {
   return {read_points(in.vertices()), {in.triangle_indices().begin(), in.triangle_indices().end()}, read_labels(in.vertex_labels())};
 }
 
-Result<Timestamp> read_time(uint64_t nanoseconds, std::string_view message, std::string_view field) {
-  if (nanoseconds > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) {
-    return Error{fmt::format("{}.{}: {} ns is beyond the year 2262 (int64 nanoseconds)", message, field, nanoseconds), std::string(field)};
-  }
-  return Timestamp::from_nanoseconds(static_cast<int64_t>(nanoseconds));
-}
-
 }  // namespace
 
 v1::FusionMap to_proto(const FusionMap& map) {
@@ -149,7 +131,7 @@ v1::FusionMap to_proto(const FusionMap& map) {
   out.set_map_id(map.map_id);
   out.set_version(map.version);
   out.set_parent_version(map.parent_version);
-  out.set_created_ns(static_cast<uint64_t>(map.created.nanoseconds()));
+  out.set_created_ns(wire::write_time(map.created));
   out.set_frame_id(map.frame_id);
   if (map.datum) {
     out.mutable_datum()->set_latitude(map.datum->latitude_deg);
@@ -177,7 +159,7 @@ v1::MapUpdate to_proto(const MapUpdate& update) {
   v1::MapUpdate out;
   out.set_map_id(update.map_id);
   out.set_version(update.version);
-  out.set_timestamp_ns(static_cast<uint64_t>(update.timestamp.nanoseconds()));
+  out.set_timestamp_ns(wire::write_time(update.timestamp));
   if (update.added_points) write(*update.added_points, out.mutable_added_points());
   if (update.occupancy_patch) write(*update.occupancy_patch, out.mutable_occupancy_patch());
   if (update.mesh) write(*update.mesh, out.mutable_mesh());
@@ -192,7 +174,7 @@ Result<FusionMap> from_proto(const v1::FusionMap& in) {
   map.map_id = in.map_id();
   map.version = in.version();
   map.parent_version = in.parent_version();
-  HANZO_ASSIGN_OR_RETURN(map.created, read_time(in.created_ns(), "FusionMap", "created_ns"));
+  HANZO_ASSIGN_OR_RETURN(map.created, wire::read_time(in.created_ns(), "FusionMap", "created_ns"));
   map.frame_id = in.frame_id();
   if (in.has_datum()) map.datum = GeodeticPoint{in.datum().latitude(), in.datum().longitude(), in.datum().altitude()};
   map.sensor_configuration = in.sensor_configuration();
@@ -212,7 +194,7 @@ Result<MapUpdate> from_proto(const v1::MapUpdate& in) {
   MapUpdate update;
   update.map_id = in.map_id();
   update.version = in.version();
-  HANZO_ASSIGN_OR_RETURN(update.timestamp, read_time(in.timestamp_ns(), "MapUpdate", "timestamp_ns"));
+  HANZO_ASSIGN_OR_RETURN(update.timestamp, wire::read_time(in.timestamp_ns(), "MapUpdate", "timestamp_ns"));
   if (in.has_added_points()) update.added_points = read(in.added_points());
   if (in.has_occupancy_patch()) update.occupancy_patch = read(in.occupancy_patch());
   if (in.has_mesh()) update.mesh = read(in.mesh());
