@@ -97,7 +97,7 @@ Result<SensorCalibration> parse_entry(const std::string& key, const YamlValue& n
 
 Result<Calibration> parse(const YamlValue& root) {
   HANZO_RETURN_IF_ERROR(root.check_keys({"calibration"}));
-  const YamlValue body = root["calibration"];
+  const YamlValue body = root["calibration"].as_path_root();
   if (!body.present()) return body.error("missing (the file must start with a 'calibration:' map)");
   HANZO_RETURN_IF_ERROR(body.expect_map());
   Calibration calibration;

@@ -84,7 +84,7 @@ Result<SensorConfig> parse_sensor(const std::string& name, const YamlValue& node
 
 Result<FusionConfig> parse(const YamlValue& root) {
   HANZO_RETURN_IF_ERROR(root.check_keys({"fusion"}));
-  const YamlValue fusion = root["fusion"];
+  const YamlValue fusion = root["fusion"].as_path_root();
   if (!fusion.present()) return fusion.error("missing (the file must start with a 'fusion:' map)");
   HANZO_RETURN_IF_ERROR(fusion.check_keys({"frontend", "sensors"}));
   FusionConfig config;

@@ -57,12 +57,21 @@ bool YamlValue::present() const { return node_.IsDefined() && !node_.IsNull(); }
 
 bool YamlValue::is_map() const { return node_.IsMap(); }
 
+std::string YamlValue::child_path(std::string_view key) const {
+  return path_.empty() || is_path_root_ ? std::string(key) : fmt::format("{}.{}", path_, key);
+}
+
+YamlValue YamlValue::as_path_root() const {
+  YamlValue root = *this;
+  root.is_path_root_ = true;
+  return root;
+}
+
 YamlValue YamlValue::operator[](std::string_view key) const {
   for (auto& [name, value] : entries()) {
     if (name == key) return value;
   }
-  std::string child_path = path_.empty() ? std::string(key) : fmt::format("{}.{}", path_, key);
-  return YamlValue(YAML::Node(YAML::NodeType::Undefined), source_, std::move(child_path), line_);
+  return YamlValue(YAML::Node(YAML::NodeType::Undefined), source_, child_path(key), line_);
 }
 
 // Each entry's line is the line of its key, so errors about a nested block point at its name.
@@ -71,8 +80,7 @@ std::vector<std::pair<std::string, YamlValue>> YamlValue::entries() const {
   if (!node_.IsMap()) return result;
   for (const auto& entry : node_) {
     const std::string key = entry.first.Scalar();
-    std::string child_path = path_.empty() ? key : fmt::format("{}.{}", path_, key);
-    result.emplace_back(key, YamlValue(entry.second, source_, std::move(child_path), entry.first.Mark().line + 1));
+    result.emplace_back(key, YamlValue(entry.second, source_, child_path(key), entry.first.Mark().line + 1));
   }
   return result;
 }

@@ -96,7 +96,7 @@ TEST(Cli, BadFileFailsWithOneLineReason) {
   const CliRun text = run("calib check " + path);
   EXPECT_EQ(text.exit_code, 1);
   EXPECT_EQ(text.out, "");
-  EXPECT_EQ(text.err, "hanzo-fusion: " + path + ":3: calibration.lidar_to_body.rotation: expected 4 numbers (w, x, y, z), got 3\n");
+  EXPECT_EQ(text.err, "hanzo-fusion: " + path + ":3: lidar_to_body.rotation: expected 4 numbers (w, x, y, z), got 3\n");
   const CliRun json_run = run("--json calib check " + path);
   EXPECT_EQ(json_run.exit_code, 1);
   const nlohmann::json json = nlohmann::json::parse(json_run.out);

@@ -44,39 +44,39 @@ TEST(Calibration, SpecExampleLoadsUnchanged) {
 
 TEST(Calibration, EachRuleGivesItsDocumentedError) {
   EXPECT_EQ(error_of("calibration:\n  lidar_to_body:\n    rotation: [0.707, 0.0, 0.707]\n"),
-            "calibration.yaml:3: calibration.lidar_to_body.rotation: expected 4 numbers (w, x, y, z), got 3");
+            "calibration.yaml:3: lidar_to_body.rotation: expected 4 numbers (w, x, y, z), got 3");
   // Not a unit quaternion: rejected, not normalized.
   EXPECT_EQ(error_of("calibration:\n  lidar_to_body:\n    rotation: [0.7, 0.0, 0.7, 0.0]\n"),
-            "calibration.yaml:3: calibration.lidar_to_body.rotation: expected a unit quaternion (w, x, y, z), got norm 0.989949");
+            "calibration.yaml:3: lidar_to_body.rotation: expected a unit quaternion (w, x, y, z), got norm 0.989949");
   EXPECT_EQ(error_of("calibration:\n  lidar_to_body:\n    translation: [0.1, 0.0]\n"),
-            "calibration.yaml:3: calibration.lidar_to_body.translation: expected 3 numbers (x, y, z), got 2");
+            "calibration.yaml:3: lidar_to_body.translation: expected 3 numbers (x, y, z), got 2");
   EXPECT_EQ(error_of("calibration:\n  lidar_to_body:\n    time_offset_ns: -5.5e6\n"),
-            "calibration.yaml:3: calibration.lidar_to_body.time_offset_ns: expected an integer, got '-5.5e6'");
+            "calibration.yaml:3: lidar_to_body.time_offset_ns: expected an integer, got '-5.5e6'");
   EXPECT_EQ(error_of("calibration:\n  lidar:\n    rotation: [1, 0, 0, 0]\n"),
-            "calibration.yaml:2: calibration.lidar: expected an entry named <sensor>_to_body (for example lidar_to_body)");
+            "calibration.yaml:2: lidar: expected an entry named <sensor>_to_body (for example lidar_to_body)");
   EXPECT_EQ(error_of("calibration:\n  lidar_to_body:\n    rotaton: [1, 0, 0, 0]\n"),
-            "calibration.yaml:3: calibration.lidar_to_body.rotaton: unknown key (expected one of: rotation, translation, "
+            "calibration.yaml:3: lidar_to_body.rotaton: unknown key (expected one of: rotation, translation, "
             "time_offset_ns, intrinsics)");
   const std::string camera = "calibration:\n  camera_to_body:\n    intrinsics:\n      fx: 400\n      fy: 400\n      cx: 320\n      cy: 240\n";
   EXPECT_EQ(error_of(camera + "      distortion_model: fisheye\n      distortion_coeffs: [0, 0, 0, 0]\n"),
-            "calibration.yaml:8: calibration.camera_to_body.intrinsics.distortion_model: expected equidistant, radtan or none, got 'fisheye'");
+            "calibration.yaml:8: camera_to_body.intrinsics.distortion_model: expected equidistant, radtan or none, got 'fisheye'");
   EXPECT_EQ(error_of(camera + "      distortion_model: radtan\n      distortion_coeffs: [0.1, 0.2, 0.3]\n"),
-            "calibration.yaml:9: calibration.camera_to_body.intrinsics.distortion_coeffs: model radtan takes 4 or 5 coefficients "
+            "calibration.yaml:9: camera_to_body.intrinsics.distortion_coeffs: model radtan takes 4 or 5 coefficients "
             "(k1, k2, p1, p2[, k3]), got 3");
   EXPECT_EQ(error_of(camera + "      distortion_coeffs: [0.1, 0.2, 0.3, 0.4]\n"),
-            "calibration.yaml:3: calibration.camera_to_body.intrinsics.distortion_model: missing (distortion_coeffs needs a "
+            "calibration.yaml:3: camera_to_body.intrinsics.distortion_model: missing (distortion_coeffs needs a "
             "distortion_model: equidistant or radtan)");
   EXPECT_EQ(error_of("calibration:\n  camera_to_body:\n    intrinsics:\n      fx: 400\n      fy: 400\n      cx: 320\n"),
-            "calibration.yaml:3: calibration.camera_to_body.intrinsics.cy: missing (expected a number)");
+            "calibration.yaml:3: camera_to_body.intrinsics.cy: missing (expected a number)");
   EXPECT_EQ(error_of("calibration:\n  camera_to_body:\n    intrinsics:\n      fx: -400\n      fy: 400\n      cx: 320\n      cy: 240\n"),
-            "calibration.yaml:4: calibration.camera_to_body.intrinsics.fx: expected a positive focal length in pixels, got -400");
+            "calibration.yaml:4: camera_to_body.intrinsics.fx: expected a positive focal length in pixels, got -400");
   EXPECT_EQ(error_of("calibration:\n  camera_to_body:\n    intrinsics:\n      fx: 400\n      fy: 400\n      cx: 700\n      cy: 240\n"
                      "      width: 640\n      height: 480\n"),
-            "calibration.yaml:6: calibration.camera_to_body.intrinsics.cx: principal point 700 outside the image width 640");
+            "calibration.yaml:6: camera_to_body.intrinsics.cx: principal point 700 outside the image width 640");
   EXPECT_EQ(error_of("calibration:\n  imu_to_body:\n    translation: [.nan, 0, 0]\n"),
-            "calibration.yaml:3: calibration.imu_to_body.translation: item 0: expected a finite number, got '.nan'");
+            "calibration.yaml:3: imu_to_body.translation: item 0: expected a finite number, got '.nan'");
   EXPECT_EQ(error_of("calibration:\n  imu_to_body: 5\n"),
-            "calibration.yaml:2: calibration.imu_to_body: expected a map with rotation, translation, time_offset_ns (and intrinsics "
+            "calibration.yaml:2: imu_to_body: expected a map with rotation, translation, time_offset_ns (and intrinsics "
             "for cameras)");
   EXPECT_EQ(error_of("sensors: {}\n"), "calibration.yaml:1: sensors: unknown key (expected one of: calibration)");
   EXPECT_THAT(error_of("calibration:\n  imu_to_body: {rotation: [1, 0\n"), HasSubstr("YAML syntax error"));

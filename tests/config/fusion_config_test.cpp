@@ -52,29 +52,29 @@ TEST(FusionConfig, DefaultsApplyWhereTheFileIsSilent) {
 
 TEST(FusionConfig, EachRuleGivesItsDocumentedError) {
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    type: kalman\n"),
-            "fusion.yaml:3: fusion.frontend.type: expected ekf, ukf or particle, got 'kalman'");
+            "fusion.yaml:3: frontend.type: expected ekf, ukf or particle, got 'kalman'");
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    predict_rate: -5\n"),
-            "fusion.yaml:3: fusion.frontend.predict_rate: expected a positive rate in Hz, got -5");
+            "fusion.yaml:3: frontend.predict_rate: expected a positive rate in Hz, got -5");
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    covariance:\n      initial_position: [0.1, 0.1]\n"),
-            "fusion.yaml:4: fusion.frontend.covariance.initial_position: expected 3 numbers (x, y, z), got 2");
+            "fusion.yaml:4: frontend.covariance.initial_position: expected 3 numbers (x, y, z), got 2");
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    covariance:\n      process_noise_gyro: -0.01\n"),
-            "fusion.yaml:4: fusion.frontend.covariance.process_noise_gyro: expected a number >= 0, got -0.01");
+            "fusion.yaml:4: frontend.covariance.process_noise_gyro: expected a number >= 0, got -0.01");
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    covariance:\n      process_noise_accel: .nan\n"),
-            "fusion.yaml:4: fusion.frontend.covariance.process_noise_accel: expected a finite number, got '.nan'");
+            "fusion.yaml:4: frontend.covariance.process_noise_accel: expected a finite number, got '.nan'");
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    tpye: ekf\n"),
-            "fusion.yaml:3: fusion.frontend.tpye: unknown key (expected one of: type, predict_rate, covariance)");
+            "fusion.yaml:3: frontend.tpye: unknown key (expected one of: type, predict_rate, covariance)");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      topic: /imu\n"),
-            "fusion.yaml:3: fusion.sensors.imu.rate: missing (expected the sensor's rate in Hz)");
+            "fusion.yaml:3: sensors.imu.rate: missing (expected the sensor's rate in Hz)");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      rate: fast\n"),
-            "fusion.yaml:4: fusion.sensors.imu.rate: expected a number, got 'fast'");
+            "fusion.yaml:4: sensors.imu.rate: expected a number, got 'fast'");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    front:\n      rate: 10\n"),
-            "fusion.yaml:3: fusion.sensors.front: cannot tell the sensor's modality from its name; add 'modality: "
+            "fusion.yaml:3: sensors.front: cannot tell the sensor's modality from its name; add 'modality: "
             "imu|lidar|camera|gnss|wheel_odometry|radar'");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    front:\n      rate: 10\n      modality: sonar\n"),
-            "fusion.yaml:5: fusion.sensors.front.modality: expected imu, lidar, camera, gnss, wheel_odometry or radar, got 'sonar'");
+            "fusion.yaml:5: sensors.front.modality: expected imu, lidar, camera, gnss, wheel_odometry or radar, got 'sonar'");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      rate: 10\n      topic: /a\n    gnss:\n      rate: 5\n      topic: /a\n"),
-            "fusion.yaml:8: fusion.sensors.gnss.topic: topic '/a' is already used by another sensor");
-  EXPECT_EQ(error_of("fusion:\n  sensors: [imu, gnss]\n"), "fusion.yaml:2: fusion.sensors: expected a map of keys, got a list of 2");
+            "fusion.yaml:8: sensors.gnss.topic: topic '/a' is already used by another sensor");
+  EXPECT_EQ(error_of("fusion:\n  sensors: [imu, gnss]\n"), "fusion.yaml:2: sensors: expected a map of keys, got a list of 2");
   EXPECT_EQ(error_of("frontend:\n  type: ekf\n"), "fusion.yaml:1: frontend: unknown key (expected one of: fusion)");
   EXPECT_EQ(error_of("other: 1\n").substr(0, 14), "fusion.yaml:1:");
   EXPECT_EQ(error_of(""), "fusion.yaml:1: fusion: missing (the file must start with a 'fusion:' map)");

@@ -11,7 +11,7 @@
 //       lidar: {topic: ..., rate: 10, body_frame: lidar_link, type: velodyne_vlp16}
 //
 // The spec's example loads unchanged. Errors name the file, line and key path, e.g.
-// "fusion.yaml:12: fusion.sensors.gnss.rate: expected a positive number of Hz, got -5".
+// "fusion.yaml:12: sensors.gnss.rate: expected a positive rate in Hz, got -5".
 // Unknown keys are errors (they are usually typos). Full reference: docs/configuration.md.
 
 #include <optional>

@@ -35,8 +35,11 @@ class YamlValue {
   /// The entries of a map in file order (empty when not a map).
   std::vector<std::pair<std::string, YamlValue>> entries() const;
 
-  /// Key path from the document root, e.g. "fusion.frontend.type" ("" for the root).
+  /// Key path, e.g. "lidar_to_body.rotation" ("" for the root).
   const std::string& path() const { return path_; }
+  /// The same value, but its children's paths start afresh below it: for a file whose single
+  /// top-level key (`calibration:`) is its body, errors then read "lidar_to_body.rotation".
+  YamlValue as_path_root() const;
   /// 1-based line of this value's key, or of its parent's key when absent.
   int line() const { return line_; }
   const std::string& source_name() const { return *source_; }
@@ -61,9 +64,11 @@ class YamlValue {
 
  private:
   YamlValue(YAML::Node node, std::shared_ptr<const std::string> source, std::string path, int line);
+  std::string child_path(std::string_view key) const;
   YAML::Node node_;
   std::shared_ptr<const std::string> source_;
   std::string path_;
+  bool is_path_root_ = false;
   int line_ = 1;
 };
 
