@@ -36,14 +36,55 @@ double SE2::wrap_angle(double angle) {
   return wrapped;
 }
 
-SE2 SE2::exp(const Tangent& tangent) {
+SE2 SE2::exp(const Tangent& tangent, Jacobian* jacobian) {
+  if (jacobian) *jacobian = right_jacobian(tangent);
   return {tangent.z(), v_matrix(tangent.z()) * tangent.head<2>()};
 }
 
-SE2::Tangent SE2::log() const {
+SE2::Tangent SE2::log(Jacobian* jacobian) const {
   Tangent tangent;
   tangent << v_matrix(theta_).inverse() * translation_, theta_;
+  if (jacobian) *jacobian = right_jacobian_inverse(tangent);
   return tangent;
+}
+
+SE2::Jacobian SE2::right_jacobian(const Tangent& tangent) {
+  const double x = tangent.x();
+  const double y = tangent.y();
+  const double theta = tangent.z();
+  double a;  // sin(theta) / theta
+  double b;  // (1 - cos(theta)) / theta
+  double c;  // (theta - sin(theta)) / theta^2
+  double d;  // (1 - cos(theta)) / theta^2
+  if (std::abs(theta) < kSmallAngle) {
+    const double theta2 = theta * theta;
+    a = 1.0 - theta2 / 6.0;
+    b = 0.5 * theta;
+    c = theta / 6.0;
+    d = 0.5 - theta2 / 24.0;
+  } else {
+    const double s = std::sin(theta);
+    const double cosine = std::cos(theta);
+    a = s / theta;
+    b = (1.0 - cosine) / theta;
+    c = (theta - s) / (theta * theta);
+    d = (1.0 - cosine) / (theta * theta);
+  }
+  Jacobian jacobian;
+  jacobian << a, b, c * x - d * y,
+              -b, a, d * x + c * y,
+              0.0, 0.0, 1.0;
+  return jacobian;
+}
+
+SE2::Jacobian SE2::right_jacobian_inverse(const Tangent& tangent) {
+  // [[A, v], [0, 1]]^-1 = [[A^-1, -A^-1 v], [0, 1]].
+  const Jacobian jacobian = right_jacobian(tangent);
+  const Eigen::Matrix2d a_inverse = jacobian.topLeftCorner<2, 2>().inverse();
+  Jacobian inverse = Jacobian::Identity();
+  inverse.topLeftCorner<2, 2>() = a_inverse;
+  inverse.topRightCorner<2, 1>() = -a_inverse * jacobian.topRightCorner<2, 1>();
+  return inverse;
 }
 
 Eigen::Matrix2d SE2::rotation_matrix() const {

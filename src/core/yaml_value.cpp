@@ -5,9 +5,11 @@
 #include <cmath>
 #include <cerrno>
 #include <cstring>
-#include <filesystem>
 #include <fstream>
 #include <sstream>
+
+#include <fcntl.h>
+#include <unistd.h>
 
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
@@ -202,19 +204,29 @@ std::string scalar(const std::string& text) {
 }
 
 Status write_file_atomically(const std::string& path, const std::string& text) {
+  // Write and fsync a temporary file in the same folder, then rename it over the target:
+  // readers see the old file or the new one, never a partial one, even after a power loss.
   const std::string temporary = path + ".tmp";
-  {
-    std::ofstream file(temporary, std::ios::binary | std::ios::trunc);
-    if (!file) return Error{fmt::format("{}: cannot write ({})", temporary, std::strerror(errno))};
-    file << text;
-    file.flush();
-    if (!file) return Error{fmt::format("{}: write failed ({})", temporary, std::strerror(errno))};
+  const int fd = ::open(temporary.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return Error{fmt::format("{}: cannot write ({})", temporary, std::strerror(errno))};
+  size_t written = 0;
+  while (written < text.size()) {
+    const ssize_t n = ::write(fd, text.data() + written, text.size() - written);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    written += static_cast<size_t>(n);
   }
-  std::error_code error;
-  std::filesystem::rename(temporary, path, error);
-  if (error) {
-    std::filesystem::remove(temporary, error);
-    return Error{fmt::format("{}: cannot replace ({})", path, error.message())};
+  const bool complete = written == text.size() && ::fsync(fd) == 0;
+  const int saved_errno = errno;
+  ::close(fd);
+  if (!complete) {
+    ::unlink(temporary.c_str());
+    return Error{fmt::format("{}: write failed ({})", temporary, std::strerror(saved_errno))};
+  }
+  if (::rename(temporary.c_str(), path.c_str()) != 0) {
+    const int rename_errno = errno;
+    ::unlink(temporary.c_str());
+    return Error{fmt::format("{}: cannot replace ({})", path, std::strerror(rename_errno))};
   }
   return ok_status();
 }

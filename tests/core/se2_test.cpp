@@ -48,6 +48,23 @@ TEST(SE2, AdjointAndJacobiansMatchFiniteDifferences) {
   expect_near(j_other, numerical_jacobian<3, 3>([&](const Eigen::Vector3d& d) { return (z.inverse() * (x * y * SE2::exp(d))).log(); }), 1e-6);
 }
 
+TEST(SE2, LeftRightExpAndLogJacobiansMatchFiniteDifferences) {
+  for (const Eigen::Vector3d& tangent : {Eigen::Vector3d(1.0, -2.0, 0.0), Eigen::Vector3d(1.0, -2.0, 1e-7), Eigen::Vector3d(0.5, 0.3, -1.2),
+                                         Eigen::Vector3d(-3.0, 1.0, 2.5), Eigen::Vector3d(2.0, 2.0, -3.0)}) {
+    const SE2 x = SE2::exp(tangent);
+    expect_near(SE2::right_jacobian(tangent),
+                numerical_jacobian<3, 3>([&](const Eigen::Vector3d& d) { return (x.inverse() * SE2::exp(tangent + d)).log(); }), 1e-6);
+    expect_near(SE2::left_jacobian(tangent),
+                numerical_jacobian<3, 3>([&](const Eigen::Vector3d& d) { return (SE2::exp(tangent + d) * x.inverse()).log(); }), 1e-6);
+    SE2::Jacobian j_exp, j_log;
+    SE2::exp(tangent, &j_exp);
+    expect_near(j_exp, SE2::right_jacobian(tangent), 0.0);
+    x.log(&j_log);
+    expect_near(j_log, numerical_jacobian<3, 3>([&](const Eigen::Vector3d& d) { return (x * SE2::exp(d)).log(); }), 1e-6);
+    expect_near(SE2::left_jacobian_inverse(tangent) * SE2::left_jacobian(tangent), Eigen::Matrix3d::Identity(), 1e-12);
+  }
+}
+
 TEST(SE2, Interpolation) {
   const SE2 a(0.1, {0, 0});
   const SE2 b(1.1, {2, 1});

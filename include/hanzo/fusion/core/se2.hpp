@@ -19,9 +19,10 @@ class SE2 {
   SE2(double theta, const Eigen::Vector2d& translation);
   static SE2 identity() { return {}; }
 
-  static SE2 exp(const Tangent& tangent);
-  /// Returns (x, y, theta) with theta in (-pi, pi].
-  Tangent log() const;
+  /// jacobian receives Jr(tangent).
+  static SE2 exp(const Tangent& tangent, Jacobian* jacobian = nullptr);
+  /// Returns (x, y, theta) with theta in (-pi, pi]. jacobian receives Jr^-1(log(T)).
+  Tangent log(Jacobian* jacobian = nullptr) const;
 
   double angle() const { return theta_; }
   const Eigen::Vector2d& translation() const { return translation_; }
@@ -40,6 +41,13 @@ class SE2 {
   Jacobian adjoint() const;
   /// a * exp(t log(a^-1 b)).
   static SE2 interpolate(const SE2& a, const SE2& b, double t);
+
+  /// Right Jacobian, Sola eq. (163): exp(t + d) ~ exp(t) exp(Jr(t) d).
+  static Jacobian right_jacobian(const Tangent& tangent);
+  /// Left Jacobian Jl(t) = Jr(-t): exp(t + d) ~ exp(Jl(t) d) exp(t).
+  static Jacobian left_jacobian(const Tangent& tangent) { return right_jacobian(-tangent); }
+  static Jacobian right_jacobian_inverse(const Tangent& tangent);
+  static Jacobian left_jacobian_inverse(const Tangent& tangent) { return right_jacobian_inverse(-tangent); }
 
   /// Wraps an angle to (-pi, pi].
   static double wrap_angle(double angle);
