@@ -14,6 +14,8 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include "hanzo/fusion/core/files.hpp"
+
 namespace hanzo::fusion {
 namespace {
 
@@ -47,12 +49,9 @@ Result<YamlValue> YamlValue::load_string(const std::string& text, const std::str
 }
 
 Result<YamlValue> YamlValue::load_file(const std::string& path) {
-  std::ifstream file(path, std::ios::binary);
-  if (!file) return Error{fmt::format("{}: cannot open file", path)};
-  std::ostringstream text;
-  text << file.rdbuf();
-  if (file.bad()) return Error{fmt::format("{}: read error", path)};
-  return load_string(text.str(), path);
+  std::string text;
+  HANZO_ASSIGN_OR_RETURN(text, read_file(path));
+  return load_string(text, path);
 }
 
 bool YamlValue::present() const { return node_.IsDefined() && !node_.IsNull(); }

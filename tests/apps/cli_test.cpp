@@ -109,7 +109,7 @@ TEST(Cli, BadFileFailsWithOneLineReason) {
 TEST(Cli, MissingFileAndUsageErrors) {
   const CliRun missing = run("config check /nonexistent/fusion.yaml");
   EXPECT_EQ(missing.exit_code, 1);
-  EXPECT_EQ(missing.err, "hanzo-fusion: /nonexistent/fusion.yaml: cannot open file\n");
+  EXPECT_EQ(missing.err, "hanzo-fusion: /nonexistent/fusion.yaml: cannot open file (No such file or directory)\n");
   const CliRun usage = run("config check");
   EXPECT_NE(usage.exit_code, 0);
   EXPECT_THAT(usage.err, HasSubstr("FILE"));

@@ -66,6 +66,16 @@ using Status = Result<void>;
 
 inline Status ok_status() { return {}; }
 
+/// `result` with "context: " put before its error message (unchanged when ok), for callers
+/// that know where the failing input came from ("poses.txt:12").
+template <typename T>
+Result<T> with_context(Result<T> result, const std::string& context) {
+  if (result) return result;
+  Error error = result.error();
+  error.message = context + ": " + error.message;
+  return error;
+}
+
 }  // namespace hanzo::fusion
 
 /// Returns the error of `expression` (a Status or Result) from the enclosing function, which
@@ -87,7 +97,3 @@ inline Status ok_status() { return {}; }
     }                                              \
     target = std::move(hanzo_result_).value();     \
   } while (false)
-
-namespace hanzo::fusion {
-
-}  // namespace hanzo::fusion
