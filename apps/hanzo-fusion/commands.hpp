@@ -13,5 +13,6 @@ using Command = std::function<int()>;
 
 void add_config_command(CLI::App& app, const Output& output, Command& run);
 void add_calib_command(CLI::App& app, const Output& output, Command& run);
+void add_eval_command(CLI::App& app, const Output& output, Command& run);
 
 }  // namespace hanzo::fusion::app

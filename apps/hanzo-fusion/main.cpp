@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   app::Command run;
   app::add_config_command(app, output, run);
   app::add_calib_command(app, output, run);
+  app::add_eval_command(app, output, run);
 
   try {
     app.parse(argc, argv);

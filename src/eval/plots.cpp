@@ -102,16 +102,21 @@ std::string axes(const Axis& x, const Axis& y, const std::string& x_label, const
 
 std::string trajectory_top_view_svg(const io::Trajectory& reference, const io::Trajectory& estimate,
                                     const std::vector<double>& errors, const PlotLabels& labels) {
-  double min_x = INFINITY, max_x = -INFINITY, min_y = INFINITY, max_y = -INFINITY;
+  // The two axes along which the trajectories extend most form the view plane.
+  Eigen::Vector3d low = Eigen::Vector3d::Constant(INFINITY);
+  Eigen::Vector3d high = Eigen::Vector3d::Constant(-INFINITY);
   for (const io::Trajectory* trajectory : {&reference, &estimate}) {
     for (std::size_t i = 0; i < trajectory->size(); ++i) {
-      min_x = std::min(min_x, trajectory->position(i).x());
-      max_x = std::max(max_x, trajectory->position(i).x());
-      min_y = std::min(min_y, trajectory->position(i).y());
-      max_y = std::max(max_y, trajectory->position(i).y());
+      low = low.cwiseMin(trajectory->position(i));
+      high = high.cwiseMax(trajectory->position(i));
     }
   }
-  if (!std::isfinite(min_x)) min_x = max_x = min_y = max_y = 0.0;
+  if (!std::isfinite(low.x())) low = high = Eigen::Vector3d::Zero();
+  const Eigen::Vector3d extent = high - low;
+  int h = 0, v = 1;  // horizontal and vertical axis index
+  if (extent.z() > std::min(extent.x(), extent.y())) (extent.x() >= extent.y() ? v : h) = 2;
+  if (h > v) std::swap(h, v);
+  const double min_x = low[h], max_x = high[h], min_y = low[v], max_y = high[v];
   // Equal scale on both axes: widen the narrower data range to the plot's aspect ratio.
   const double plot_width = kWidth - kMarginLeft - kMarginRight;
   const double plot_height = kHeight - kMarginTop - kMarginBottom;
@@ -123,10 +128,11 @@ std::string trajectory_top_view_svg(const io::Trajectory& reference, const io::T
   const Axis y{centre_y - metres_per_pixel * plot_height / 2, centre_y + metres_per_pixel * plot_height / 2,
                kMarginTop + plot_height, kMarginTop};
 
-  std::string svg = header(labels.title) + axes(x, y, "x (m)", "y (m)");
+  const char* kAxisNames[] = {"x (m)", "y (m)", "z (m)"};
+  std::string svg = header(labels.title) + axes(x, y, kAxisNames[h], kAxisNames[v]);
   std::string reference_points;
   for (std::size_t i = 0; i < reference.size(); ++i) {
-    reference_points += fmt::format("{:.1f},{:.1f} ", x(reference.position(i).x()), y(reference.position(i).y()));
+    reference_points += fmt::format("{:.1f},{:.1f} ", x(reference.position(i)[h]), y(reference.position(i)[v]));
   }
   svg += fmt::format("<polyline points=\"{}\" fill=\"none\" stroke=\"#888\" stroke-width=\"1.5\" "
                      "stroke-dasharray=\"6 3\"/>\n", reference_points);
@@ -136,16 +142,16 @@ std::string trajectory_top_view_svg(const io::Trajectory& reference, const io::T
   for (std::size_t i = 1; i < estimate.size(); ++i) {
     const double error = i < errors.size() ? errors[i] : error_min;
     svg += fmt::format("<line x1=\"{:.1f}\" y1=\"{:.1f}\" x2=\"{:.1f}\" y2=\"{:.1f}\" stroke=\"{}\" stroke-width=\"2\"/>\n",
-                       x(estimate.position(i - 1).x()), y(estimate.position(i - 1).y()), x(estimate.position(i).x()),
-                       y(estimate.position(i).y()), error_colour((error - error_min) / (error_max - error_min)));
+                       x(estimate.position(i - 1)[h]), y(estimate.position(i - 1)[v]), x(estimate.position(i)[h]),
+                       y(estimate.position(i)[v]), error_colour((error - error_min) / (error_max - error_min)));
   }
   // Colour bar.
   const double bar_x = kWidth - kMarginRight + 25;
   constexpr int kBarSteps = 50;
   for (int k = 0; k < kBarSteps; ++k) {
-    const double h = plot_height / kBarSteps;
+    const double step_height = plot_height / kBarSteps;
     svg += fmt::format("<rect x=\"{}\" y=\"{:.1f}\" width=\"18\" height=\"{:.1f}\" fill=\"{}\"/>\n", bar_x,
-                       kMarginTop + plot_height - (k + 1) * h, h + 0.5, error_colour((k + 0.5) / kBarSteps));
+                       kMarginTop + plot_height - (k + 1) * step_height, step_height + 0.5, error_colour((k + 0.5) / kBarSteps));
   }
   svg += fmt::format("<text x=\"{0}\" y=\"{1}\">{2:.4g}</text><text x=\"{0}\" y=\"{3}\">{4:.4g}</text>\n", bar_x + 22,
                      kMarginTop + 10, error_max, kMarginTop + plot_height, error_min);
@@ -163,7 +169,7 @@ std::string error_over_time_svg(const std::vector<double>& times_s, const std::v
   const double error_max = errors.empty() ? 1.0 : *std::max_element(errors.begin(), errors.end());
   const Axis x{0.0, std::max(t1 - t0, 1e-9), kMarginLeft, kWidth - kMarginRight};
   const Axis y{0.0, std::max(error_max * 1.05, 1e-12), kHeight - kMarginBottom, kMarginTop};
-  std::string svg = header(labels.title) + axes(x, y, "time (s)", labels.error_label);
+  std::string svg = header(labels.title) + axes(x, y, labels.time_label, labels.error_label);
   std::string points;
   for (std::size_t i = 0; i < std::min(times_s.size(), errors.size()); ++i) {
     points += fmt::format("{:.1f},{:.1f} ", x(times_s[i] - t0), y(errors[i]));

@@ -118,4 +118,48 @@ TEST(Cli, MissingFileAndUsageErrors) {
   EXPECT_THAT(unknown.err, HasSubstr("hanzo-fusion:"));
 }
 
+const std::string kEvo = "../shared/data/trajectory_eval_evo/";
+
+TEST(Cli, EvalApeReproducesEvoAndWritesPlots) {
+  const std::filesystem::path plots = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_plots_{}", ::getpid());
+  const CliRun ape = run(fmt::format("eval ape {0}KITTI_00_gt.txt {0}KITTI_00_ORB.txt --format kitti --align se3 --plot {1} --json",
+                                     kEvo, plots.string()));
+  ASSERT_EQ(ape.exit_code, 0) << ape.err;
+  const nlohmann::json json = nlohmann::json::parse(ape.out);
+  EXPECT_NEAR(json["statistics"]["rmse"].get<double>(), 1.3034497145650266, 1.3e-6);
+  EXPECT_EQ(json["statistics"]["count"], 4541);
+  EXPECT_EQ(json["alignment"]["method"], "se3");
+  ASSERT_EQ(json["plots"].size(), 2u);
+  for (const auto& plot : json["plots"]) EXPECT_GT(std::filesystem::file_size(plot.get<std::string>()), 1000u);
+  std::filesystem::remove_all(plots);
+
+  const CliRun text = run(fmt::format("eval rpe {0}KITTI_00_gt.txt {0}KITTI_00_ORB.txt --format kitti -d 10 -u m", kEvo));
+  ASSERT_EQ(text.exit_code, 0);
+  EXPECT_THAT(text.out, HasSubstr("rmse\t0.226261"));
+  EXPECT_THAT(text.out, HasSubstr("pairs\t353"));
+}
+
+TEST(Cli, EvalKittiMetricOfOrbSlam2) {
+  // ORB-SLAM2 (Mur-Artal & Tardos 2017, Table 3) reports 0.70 % and 0.25 deg/100 m on KITTI 00.
+  const CliRun kitti = run(fmt::format("eval kitti {0}KITTI_00_gt.txt {0}KITTI_00_ORB.txt --format kitti --json", kEvo));
+  ASSERT_EQ(kitti.exit_code, 0) << kitti.err;
+  const nlohmann::json json = nlohmann::json::parse(kitti.out);
+  EXPECT_NEAR(json["translation_error_percent"].get<double>(), 0.70, 0.005);
+  EXPECT_NEAR(json["rotation_error_deg_per_100m"].get<double>(), 0.25, 0.005);
+}
+
+TEST(Cli, EvalRejectsBadInputWithOneLine) {
+  const CliRun mismatch = run(fmt::format("eval ape {0}KITTI_00_gt.txt {0}fr2_desk_ORB.txt --format kitti", kEvo));
+  EXPECT_EQ(mismatch.exit_code, 1);
+  EXPECT_THAT(mismatch.err, HasSubstr("expected 12 numbers for a kitti pose"));
+  EXPECT_EQ(std::count(mismatch.err.begin(), mismatch.err.end(), '\n'), 1);
+  const CliRun relation = run(fmt::format("eval ape {0}fr2_desk_ORB.txt {0}fr2_desk_ORB.txt -r speed", kEvo));
+  EXPECT_EQ(relation.exit_code, 1);
+  EXPECT_THAT(relation.err, HasSubstr("unknown pose relation 'speed'"));
+  const CliRun offset = run(fmt::format("eval ape {0}fr2_desk_ORB.txt {0}fr2_desk_ORB.txt --t-offset 100 --json", kEvo));
+  EXPECT_EQ(offset.exit_code, 1);
+  EXPECT_EQ(nlohmann::json::parse(offset.out)["ok"], false);
+  EXPECT_THAT(offset.err, HasSubstr("no matching timestamps"));
+}
+
 }  // namespace
