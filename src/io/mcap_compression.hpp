@@ -1,0 +1,19 @@
+#pragma once
+// Chunk compression for MCAP: zstd (single frame) and lz4 (LZ4 frame format), as the MCAP
+// specification names them.
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/io/mcap.hpp"
+
+namespace hanzo::fusion::io::mcap {
+
+Result<std::string> compress(Compression compression, int level, std::string_view input);
+/// `compression` as stored in the chunk ("", "lz4", "zstd"); the output must be exactly
+/// `uncompressed_size` bytes.
+Result<std::string> decompress(std::string_view compression, std::string_view input, uint64_t uncompressed_size);
+
+}  // namespace hanzo::fusion::io::mcap
