@@ -1,0 +1,89 @@
+#pragma once
+// The hanzo-fusion sensor log: an MCAP file whose messages are hanzo.fusion.v1 protobuf
+// messages (schema encoding "protobuf", the schema data a serialized FileDescriptorSet of the
+// message's .proto file and its imports, message encoding "protobuf"), one channel per topic.
+// Any MCAP tool with protobuf support (Foxglove, mcap CLI) can open it.
+//
+// Topics are free-form; the importers and the simulator use "/<sensor name>" (the name that
+// joins the fusion configuration and the calibration, e.g. "/imu", "/lidar_front"), and put
+// the sensor name and modality in the channel metadata ("sensor", "modality").
+//
+// A message's log time is its sensor timestamp (timestamp_ns): replaying a log in log-time
+// order replays the sensors in the order they measured.
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <variant>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/io/mcap.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
+
+namespace google::protobuf {
+class Descriptor;
+class Message;
+}  // namespace google::protobuf
+
+namespace hanzo::fusion::io {
+
+/// A serialized google.protobuf.FileDescriptorSet holding the file that defines `descriptor`
+/// and every file it imports (dependencies first), as MCAP's protobuf profile asks.
+std::string file_descriptor_set(const google::protobuf::Descriptor& descriptor);
+
+class SensorLogWriter {
+ public:
+  static Result<std::unique_ptr<SensorLogWriter>> open(const std::string& path, const mcap::McapWriterConfig& config = {});
+
+  /// Validates the message (msgs::validate) and appends it on `topic` at its timestamp. A
+  /// message that fails validation is not written; the error names topic and field.
+  /// `sensor_name` goes into the channel metadata when the topic is first used (default: the
+  /// topic without its leading '/').
+  Status write(const std::string& topic, const msgs::SensorMessage& message, const std::string& sensor_name = {});
+  Status write(const std::string& topic, const msgs::PoseEstimate& pose);
+  /// Any protobuf message at `log_time` (its schema is taken from its descriptor).
+  Status write_proto(const std::string& topic, const google::protobuf::Message& message, Timestamp log_time,
+                     const std::map<std::string, std::string>& channel_metadata = {});
+  Status add_metadata(const mcap::Metadata& metadata) { return mcap_->add_metadata(metadata); }
+  Status close() { return mcap_->close(); }
+  const mcap::Statistics& statistics() const { return mcap_->statistics(); }
+
+ private:
+  explicit SensorLogWriter(std::unique_ptr<mcap::McapWriter> writer) : mcap_(std::move(writer)) {}
+  std::unique_ptr<mcap::McapWriter> mcap_;
+  std::map<std::string, uint16_t> channel_by_topic_;
+  std::string serialize_buffer_;
+};
+
+/// One decoded log message: a sensor message or a pose estimate.
+struct LogEntry {
+  std::string topic;
+  Timestamp log_time;
+  std::variant<msgs::SensorMessage, msgs::PoseEstimate> message;
+};
+
+/// Reads a sensor log in log-time order, decoding the hanzo.fusion.v1 messages. Channels with
+/// other schemas (e.g. Foxglove visualization channels) are skipped and counted.
+class SensorLogReader {
+ public:
+  static Result<std::unique_ptr<SensorLogReader>> open(const std::string& path, const mcap::ReadOptions& options = {});
+
+  /// true and fills `entry`; false at the end. A message that does not decode or fails
+  /// validation returns an error naming topic and time; reading can continue with the next
+  /// call (a corrupted chunk, however, ends the iteration).
+  Result<bool> next(LogEntry& entry);
+
+  const mcap::McapReader& mcap() const { return *mcap_; }
+  uint64_t skipped_messages() const { return skipped_; }
+
+ private:
+  SensorLogReader() = default;
+  std::unique_ptr<mcap::McapReader> mcap_;
+  std::unique_ptr<mcap::MessageIterator> iterator_;
+  uint64_t skipped_ = 0;
+};
+
+}  // namespace hanzo::fusion::io

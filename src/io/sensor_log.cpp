@@ -1,0 +1,124 @@
+#include "hanzo/fusion/io/sensor_log.hpp"
+
+#include <set>
+
+#include <fmt/format.h>
+#include <google/protobuf/descriptor.h>
+#include <google/protobuf/descriptor.pb.h>
+
+#include "hanzo/fusion/msgs/convert.hpp"
+#include "hanzo/fusion/msgs/validate.hpp"
+#include "hanzo/fusion/v1/estimates.pb.h"
+#include "hanzo/fusion/v1/sensors.pb.h"
+
+namespace hanzo::fusion::io {
+namespace {
+
+void add_file_with_dependencies(const google::protobuf::FileDescriptor* file, std::set<std::string>& seen,
+                                google::protobuf::FileDescriptorSet& set) {
+  if (!seen.insert(file->name()).second) return;
+  for (int i = 0; i < file->dependency_count(); ++i) add_file_with_dependencies(file->dependency(i), seen, set);
+  file->CopyTo(set.add_file());
+}
+
+// Decodes a payload of the hanzo.fusion.v1 message `V1` into the engine struct (from_proto validates).
+template <typename V1>
+Result<LogEntry> decode(const mcap::MessageView& view) {
+  V1 proto;
+  if (!proto.ParseFromArray(view.data.data(), static_cast<int>(view.data.size()))) {
+    return Error(fmt::format("{} at {} ns: payload is not a valid {}", view.channel->topic, view.log_time,
+                             V1::descriptor()->full_name()));
+  }
+  auto message = msgs::from_proto(proto);
+  if (!message) return Error(fmt::format("{} at {} ns: {}", view.channel->topic, view.log_time, message.error().message));
+  LogEntry entry;
+  entry.topic = view.channel->topic;
+  entry.log_time = Timestamp::from_nanoseconds(static_cast<int64_t>(view.log_time));
+  entry.message = std::move(*message);
+  return entry;
+}
+
+}  // namespace
+
+std::string file_descriptor_set(const google::protobuf::Descriptor& descriptor) {
+  google::protobuf::FileDescriptorSet set;
+  std::set<std::string> seen;
+  add_file_with_dependencies(descriptor.file(), seen, set);
+  return set.SerializeAsString();
+}
+
+Result<std::unique_ptr<SensorLogWriter>> SensorLogWriter::open(const std::string& path, const mcap::McapWriterConfig& config) {
+  std::unique_ptr<mcap::McapWriter> writer;
+  HANZO_ASSIGN_OR_RETURN(writer, mcap::McapWriter::open(path, config));
+  HANZO_RETURN_IF_ERROR(writer->add_metadata({"hanzo-fusion", {{"log_format", "hanzo.fusion.v1 sensor log"}, {"log_format_version", "1"}}}));
+  return std::unique_ptr<SensorLogWriter>(new SensorLogWriter(std::move(writer)));
+}
+
+Status SensorLogWriter::write_proto(const std::string& topic, const google::protobuf::Message& message, Timestamp log_time,
+                                    const std::map<std::string, std::string>& channel_metadata) {
+  if (log_time.nanoseconds() < 0) return Error(fmt::format("{}: negative log time {} ns", topic, log_time.nanoseconds()));
+  auto channel = channel_by_topic_.find(topic);
+  if (channel == channel_by_topic_.end()) {
+    const google::protobuf::Descriptor& descriptor = *message.GetDescriptor();
+    uint16_t schema_id = 0;
+    HANZO_ASSIGN_OR_RETURN(schema_id, mcap_->add_schema(descriptor.full_name(), "protobuf", file_descriptor_set(descriptor)));
+    uint16_t channel_id = 0;
+    HANZO_ASSIGN_OR_RETURN(channel_id, mcap_->add_channel(schema_id, topic, "protobuf", channel_metadata));
+    channel = channel_by_topic_.emplace(topic, channel_id).first;
+  }
+  serialize_buffer_.clear();
+  if (!message.SerializeToString(&serialize_buffer_)) return Error(fmt::format("{}: cannot serialize the message", topic));
+  const auto time = static_cast<uint64_t>(log_time.nanoseconds());
+  return mcap_->write(channel->second, time, time, serialize_buffer_);
+}
+
+Status SensorLogWriter::write(const std::string& topic, const msgs::SensorMessage& message, const std::string& sensor_name) {
+  return std::visit(
+      [&](const auto& typed) -> Status {
+        if (Status valid = msgs::validate(typed); !valid) return Error(fmt::format("{}: {}", topic, valid.error().message), valid.error().field);
+        const std::map<std::string, std::string> metadata = {
+            {"sensor", sensor_name.empty() ? (topic.starts_with('/') ? topic.substr(1) : topic) : sensor_name},
+            {"modality", std::string(msgs::modality_name(message))}};
+        return write_proto(topic, msgs::to_proto(typed), typed.timestamp, metadata);
+      },
+      message);
+}
+
+Status SensorLogWriter::write(const std::string& topic, const msgs::PoseEstimate& pose) {
+  if (Status valid = msgs::validate(pose); !valid) return Error(fmt::format("{}: {}", topic, valid.error().message), valid.error().field);
+  return write_proto(topic, msgs::to_proto(pose), pose.timestamp, {{"modality", "pose_estimate"}});
+}
+
+Result<std::unique_ptr<SensorLogReader>> SensorLogReader::open(const std::string& path, const mcap::ReadOptions& options) {
+  std::unique_ptr<SensorLogReader> reader(new SensorLogReader());
+  HANZO_ASSIGN_OR_RETURN(reader->mcap_, mcap::McapReader::open(path));
+  reader->iterator_ = std::make_unique<mcap::MessageIterator>(reader->mcap_->messages(options));
+  return reader;
+}
+
+Result<bool> SensorLogReader::next(LogEntry& entry) {
+  mcap::MessageView view;
+  while (true) {
+    bool more = false;
+    HANZO_ASSIGN_OR_RETURN(more, iterator_->next(view));
+    if (!more) return false;
+    const std::string type = view.schema != nullptr && view.schema->encoding == "protobuf" ? view.schema->name : "";
+    Result<LogEntry> decoded = Error("");
+    if (type == v1::ImuMessage::descriptor()->full_name()) decoded = decode<v1::ImuMessage>(view);
+    else if (type == v1::PointCloudMessage::descriptor()->full_name()) decoded = decode<v1::PointCloudMessage>(view);
+    else if (type == v1::ImageMessage::descriptor()->full_name()) decoded = decode<v1::ImageMessage>(view);
+    else if (type == v1::GnssMessage::descriptor()->full_name()) decoded = decode<v1::GnssMessage>(view);
+    else if (type == v1::WheelOdometryMessage::descriptor()->full_name()) decoded = decode<v1::WheelOdometryMessage>(view);
+    else if (type == v1::RadarMessage::descriptor()->full_name()) decoded = decode<v1::RadarMessage>(view);
+    else if (type == v1::PoseEstimate::descriptor()->full_name()) decoded = decode<v1::PoseEstimate>(view);
+    else {
+      ++skipped_;
+      continue;
+    }
+    if (!decoded) return decoded.error();
+    entry = std::move(*decoded);
+    return true;
+  }
+}
+
+}  // namespace hanzo::fusion::io
