@@ -25,6 +25,8 @@ int main(int argc, char** argv) {
   app::add_config_command(app, output, run);
   app::add_calib_command(app, output, run);
   app::add_eval_command(app, output, run);
+  app::add_log_command(app, output, run);
+  app::add_import_command(app, output, run);
 
   try {
     app.parse(argc, argv);

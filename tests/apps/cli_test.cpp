@@ -163,3 +163,76 @@ TEST(Cli, EvalRejectsBadInputWithOneLine) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST(Cli, ImportCsvThenLogInfoAndExportRoundTrip) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_log_{}", ::getpid());
+  std::filesystem::create_directories(dir);
+  const std::string log = (dir / "sample.mcap").string();
+  const CliRun imported = run(fmt::format(
+      "import csv examples/data/imu.csv examples/data/gnss.csv examples/data/wheels.csv --topic wheels=/base/wheels --out {} --json", log));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+  EXPECT_EQ(nlohmann::json::parse(imported.out)["messages"], 3103);
+
+  const CliRun info = run(fmt::format("log info {} --verify --json", log));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  const nlohmann::json json = nlohmann::json::parse(info.out);
+  EXPECT_EQ(json["messages"], 3103);
+  EXPECT_NEAR(json["duration_s"].get<double>(), 20.0, 1e-9);
+  ASSERT_EQ(json["channels"].size(), 3u);
+  EXPECT_EQ(json["channels"][0]["topic"], "/base/wheels");
+  EXPECT_NEAR(json["channels"][0]["rate_hz"].get<double>(), 50.0, 1e-9);
+  EXPECT_EQ(json["channels"][2]["schema"], "hanzo.fusion.v1.ImuMessage");
+  EXPECT_NEAR(json["channels"][2]["max_gap_s"].get<double>(), 0.01, 1e-12);
+  EXPECT_EQ(json["verified"]["data_section_crc_checked"], true);
+
+  // Export reproduces the imported CSV exactly (shortest round-trip numbers on both sides).
+  for (const char* name : {"imu", "gnss"}) {
+    const std::string csv = (dir / (std::string(name) + ".csv")).string();
+    const CliRun exported = run(fmt::format("log export {} --topic /{} --out {}", log, name, csv));
+    ASSERT_EQ(exported.exit_code, 0) << exported.err;
+    std::ifstream original(fmt::format("examples/data/{}.csv", name));
+    std::ifstream again(csv);
+    std::string a, b;
+    std::size_t line = 0;
+    while (std::getline(original, a) && std::getline(again, b)) {
+      ++line;
+      if (std::string(name) == "gnss") {  // the sample writes 9 decimals and "10.000"; compare values
+        EXPECT_EQ(a.substr(0, 19), b.substr(0, 19)) << line;
+      } else {
+        ASSERT_EQ(a, b) << name << " line " << line;
+      }
+    }
+    EXPECT_EQ(line, std::string(name) == "imu" ? 2002u : 102u);
+  }
+  const CliRun missing_topic = run(fmt::format("log export {} --topic /lidar", log));
+  EXPECT_EQ(missing_topic.exit_code, 1);
+  EXPECT_THAT(missing_topic.err, HasSubstr("no topic '/lidar' (topics: /base/wheels, /gnss, /imu)"));
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Cli, ImportRejectsBadCsvAndLeavesNoLog) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_bad_{}", ::getpid());
+  std::filesystem::create_directories(dir);
+  const std::string csv = (dir / "imu.csv").string();
+  std::ofstream(csv) << "timestamp_ns,ax,ay,az,wx,wy,wz\n100,0,0,9.8,0,0,0\n100,0,0,9.8,0,0,0\n";
+  const std::string log = (dir / "out.mcap").string();
+  const CliRun duplicate = run(fmt::format("import csv {} --out {}", csv, log));
+  EXPECT_EQ(duplicate.exit_code, 1);
+  EXPECT_THAT(duplicate.err, HasSubstr("imu.csv:3: timestamp 100 ns is not after the previous line's 100 ns"));
+  EXPECT_FALSE(std::filesystem::exists(log));
+  std::ofstream(csv) << "timestamp_ns,ax,ay,az,wx,wy,wz\n100,0,0,nan,0,0,0\n";
+  const CliRun nan = run(fmt::format("import csv {} --out {}", csv, log));
+  EXPECT_EQ(nan.exit_code, 1);
+  EXPECT_THAT(nan.err, HasSubstr("imu.csv:2: "));
+  EXPECT_THAT(nan.err, HasSubstr("linear_acceleration.z"));
+  std::ofstream(csv) << "time,x\n1,2\n";
+  EXPECT_THAT(run(fmt::format("import csv {} --out {}", csv, log)).err, HasSubstr("unknown CSV header 'time,x'"));
+  const CliRun not_mcap = run(fmt::format("log info {}", csv));
+  EXPECT_EQ(not_mcap.exit_code, 1);
+  EXPECT_THAT(not_mcap.err, HasSubstr("not an MCAP file"));
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace

@@ -226,6 +226,8 @@ class McapReader {
   const Channel* channel_by_topic(const std::string& topic) const;
 
   MessageIterator messages(const ReadOptions& options = {}) const;
+  /// Raw bytes of the file at [offset, offset + length) (for index records; fails past the end).
+  Result<std::string> read_range(uint64_t offset, uint64_t length) const { return read_at(offset, length); }
   /// Reads every record from the start, checking every CRC (data section, chunks, summary) and
   /// that chunk message indexes point at messages. For `hanzo-fusion log info --verify` and tests.
   Result<VerifyReport> verify() const;
