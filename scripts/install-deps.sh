@@ -11,6 +11,8 @@ packages=(
   libeigen3-dev libgeographiclib-dev libyaml-cpp-dev libspdlog-dev libfmt-dev nlohmann-json3-dev
   # msgs: protobuf schemas and the gRPC service
   libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
+  # io: MCAP chunk compression and CRC-32
+  libzstd-dev liblz4-dev zlib1g-dev
   # apps
   libcli11-dev
   # tests and benchmarks
@@ -21,17 +23,29 @@ missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${db:Status-Status}' "$p" 2>/dev/null | grep -qx installed || missing+=("$p")
 done
-
-if [ ${#missing[@]} -eq 0 ]; then
-  echo "install-deps: all ${#packages[@]} packages present"
-  exit 0
-fi
+# Node.js runs the conformance tests against Foxglove's MCAP library; any installed node >= 18
+# will do (machines may carry a newer one than Debian's), so ask apt only when there is none.
+command -v node >/dev/null && command -v npm >/dev/null || missing+=(nodejs npm)
 
 sudo_cmd=()
-if [ "$(id -u)" -ne 0 ]; then
-  command -v sudo >/dev/null || { echo "install-deps: need root to install: ${missing[*]}" >&2; exit 1; }
-  sudo_cmd=(sudo)
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#packages[@]} packages present"
+else
+  if [ "$(id -u)" -ne 0 ]; then
+    command -v sudo >/dev/null || { echo "install-deps: need root to install: ${missing[*]}" >&2; exit 1; }
+    sudo_cmd=(sudo)
+  fi
+  echo "install-deps: installing ${missing[*]}"
+  "${sudo_cmd[@]}" apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
-echo "install-deps: installing ${missing[*]}"
-"${sudo_cmd[@]}" apt-get update -qq
-DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+
+# npm packages of the conformance tests, pinned by tests/conformance/package-lock.json; skipped
+# when node_modules already matches the lock file.
+conformance="$(dirname "$0")/../tests/conformance"
+stamp="$conformance/node_modules/.installed-lock"
+if ! cmp -s "$conformance/package-lock.json" "$stamp"; then
+  echo "install-deps: npm ci in tests/conformance"
+  (cd "$conformance" && npm ci --no-audit --no-fund --loglevel=error)
+  cp "$conformance/package-lock.json" "$stamp"
+fi

@@ -297,7 +297,10 @@ Status McapReader::read_summary(uint64_t summary_start, uint64_t footer_offset, 
         const auto inner = next_record(m);
         std::optional<Metadata> metadata;
         if (inner && inner->opcode == format::kMetadata) metadata = parse_metadata(inner->content);
-        if (!metadata) return Error(fmt::format("{}: metadata index at byte {} does not point at a Metadata record", path_, offset));
+        if (!metadata) {  // seen in files of other writers; the metadata is not needed to read messages
+          logger()->warn("{}: metadata index at byte {} does not point at a Metadata record; ignored", path_, offset);
+          break;
+        }
         metadata_.push_back(std::move(*metadata));
         break;
       }
