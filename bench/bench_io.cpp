@@ -1,0 +1,241 @@
+// Sensor-log (MCAP) throughput for a LiDAR-heavy log: 10 Hz scans of 120k points (with
+// intensity, ring and per-point time) plus a 200 Hz IMU, written and read with each chunk
+// compression, compared with `cat` of the same bytes (the disk/page-cache ceiling). Also reads
+// a multi-GB log and reports the peak memory of reading it.
+//
+// Counters: bytes_per_second (file bytes), items_per_second (messages), ratio (file / raw payload).
+
+#include <unistd.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <filesystem>
+#include <random>
+
+#include <benchmark/benchmark.h>
+#include <fmt/format.h>
+
+#include "hanzo/fusion/io/mcap.hpp"
+#include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/msgs/convert.hpp"
+#include "hanzo/fusion/v1/sensors.pb.h"
+
+namespace {
+
+using namespace hanzo::fusion;
+
+constexpr int kScans = 20;  // 2 s of a 10 Hz LiDAR
+constexpr std::size_t kPointsPerScan = 120'000;
+const Timestamp kStart = Timestamp::from_nanoseconds(1'700'000'000'000'000'000);
+
+// A spinning-LiDAR-like scan: 16 rings, ranges 2-60 m with a smooth structure, time across the sweep.
+msgs::PointCloudMessage make_scan(int index, std::mt19937& rng) {
+  std::normal_distribution<float> noise(0.0F, 0.02F);
+  msgs::PointCloudMessage scan;
+  scan.timestamp = kStart + Duration::from_milliseconds(100 * index);
+  scan.frame_id = "lidar";
+  scan.points.reserve(kPointsPerScan);
+  for (std::size_t i = 0; i < kPointsPerScan; ++i) {
+    const auto ring = static_cast<uint32_t>(i % 16);
+    const float azimuth = 2.0F * 3.14159265F * static_cast<float>(i / 16) / (kPointsPerScan / 16.0F);
+    const float elevation = (static_cast<float>(ring) - 7.5F) * 0.035F;
+    const float range = 10.0F + 8.0F * std::sin(3.0F * azimuth) + noise(rng);
+    scan.points.emplace_back(range * std::cos(elevation) * std::cos(azimuth), range * std::cos(elevation) * std::sin(azimuth),
+                             range * std::sin(elevation));
+    scan.intensities.push_back(0.5F + 0.4F * std::cos(azimuth * 7.0F));
+    scan.ring_ids.push_back(ring);
+    scan.point_timestamps.push_back(scan.timestamp + Duration::from_nanoseconds(static_cast<int64_t>(i) * 100'000'000 / kPointsPerScan));
+  }
+  return scan;
+}
+
+struct Workload {
+  std::vector<msgs::PointCloudMessage> scans;
+  std::vector<msgs::ImuMessage> imu;
+};
+
+const Workload& workload() {
+  static const Workload w = [] {
+    Workload out;
+    std::mt19937 rng(1);
+    for (int i = 0; i < kScans; ++i) out.scans.push_back(make_scan(i, rng));
+    for (int i = 0; i < kScans * 20; ++i) {
+      msgs::ImuMessage imu;
+      imu.timestamp = kStart + Duration::from_milliseconds(5 * i);
+      imu.linear_acceleration = {0.1, 0.0, 9.81};
+      imu.angular_velocity = {0.0, 0.0, 0.1};
+      out.imu.push_back(imu);
+    }
+    return out;
+  }();
+  return w;
+}
+
+std::string log_path(const std::string& name) {
+  return (std::filesystem::temp_directory_path() / fmt::format("hanzo_bench_io_{}.mcap", name)).string();
+}
+
+// Writes the workload in time order; returns the number of messages.
+std::size_t write_log(const std::string& path, io::mcap::Compression compression) {
+  io::mcap::McapWriterConfig config;
+  config.compression = compression;
+  auto writer = io::SensorLogWriter::open(path, config);
+  if (!writer) throw std::runtime_error(writer.error().message);
+  const Workload& w = workload();
+  std::size_t imu_index = 0;
+  for (const auto& scan : w.scans) {
+    while (imu_index < w.imu.size() && w.imu[imu_index].timestamp < scan.timestamp) {
+      (void)(*writer)->write("/imu", w.imu[imu_index++]);
+    }
+    (void)(*writer)->write("/lidar", scan);
+  }
+  while (imu_index < w.imu.size()) (void)(*writer)->write("/imu", w.imu[imu_index++]);
+  (void)(*writer)->close();
+  return w.scans.size() + w.imu.size();
+}
+
+io::mcap::Compression compression_of(int64_t index) { return static_cast<io::mcap::Compression>(index); }
+
+void BM_SensorLogWrite(benchmark::State& state) {
+  const auto compression = compression_of(state.range(0));
+  const std::string path = log_path(fmt::format("write_{}", state.range(0)));
+  workload();
+  std::size_t messages = 0;
+  for (auto _ : state) messages += write_log(path, compression);
+  const auto bytes = std::filesystem::file_size(path);
+  state.SetBytesProcessed(static_cast<int64_t>(bytes) * state.iterations());
+  state.SetItemsProcessed(static_cast<int64_t>(messages));
+  state.SetLabel(compression == io::mcap::Compression::kNone ? "none" : io::mcap::compression_name(compression));
+  state.counters["file_MB"] = static_cast<double>(bytes) / 1e6;
+  std::filesystem::remove(path);
+}
+
+// The container alone: pre-serialized payloads through McapWriter (chunking, compression, CRCs,
+// indexes); the difference to BM_SensorLogWrite is protobuf serialization.
+void BM_McapWriteSerialized(benchmark::State& state) {
+  const auto compression = compression_of(state.range(0));
+  const std::string path = log_path(fmt::format("raw_{}", state.range(0)));
+  std::vector<std::pair<uint64_t, std::string>> payloads;
+  for (const auto& scan : workload().scans) {
+    payloads.emplace_back(scan.timestamp.nanoseconds(), msgs::to_proto(scan).SerializeAsString());
+  }
+  for (auto _ : state) {
+    io::mcap::McapWriterConfig config;
+    config.compression = compression;
+    auto writer = io::mcap::McapWriter::open(path, config);
+    const uint16_t channel = *(*writer)->add_channel(0, "/lidar", "protobuf");
+    for (const auto& [time, payload] : payloads) (void)(*writer)->write(channel, time, time, payload);
+    (void)(*writer)->close();
+  }
+  const auto bytes = std::filesystem::file_size(path);
+  state.SetBytesProcessed(static_cast<int64_t>(bytes) * state.iterations());
+  state.SetItemsProcessed(static_cast<int64_t>(payloads.size()) * state.iterations());
+  state.SetLabel(compression == io::mcap::Compression::kNone ? "none" : io::mcap::compression_name(compression));
+  state.counters["file_MB"] = static_cast<double>(bytes) / 1e6;
+  std::filesystem::remove(path);
+}
+
+// Raw MCAP iteration (decompress + merge, no protobuf decoding).
+void BM_McapRead(benchmark::State& state) {
+  const auto compression = compression_of(state.range(0));
+  const std::string path = log_path(fmt::format("read_{}", state.range(0)));
+  write_log(path, compression);
+  std::size_t messages = 0;
+  for (auto _ : state) {
+    auto reader = io::mcap::McapReader::open(path);
+    io::mcap::MessageIterator it = (*reader)->messages();
+    io::mcap::MessageView view;
+    while (*it.next(view)) {
+      benchmark::DoNotOptimize(view.data.data());
+      ++messages;
+    }
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(std::filesystem::file_size(path)) * state.iterations());
+  state.SetItemsProcessed(static_cast<int64_t>(messages));
+  state.SetLabel(compression == io::mcap::Compression::kNone ? "none" : io::mcap::compression_name(compression));
+  std::filesystem::remove(path);
+}
+
+// Full decoding into engine messages (protobuf parse + validation).
+void BM_SensorLogReadDecoded(benchmark::State& state) {
+  const auto compression = compression_of(state.range(0));
+  const std::string path = log_path(fmt::format("decode_{}", state.range(0)));
+  write_log(path, compression);
+  std::size_t messages = 0;
+  for (auto _ : state) {
+    auto reader = io::SensorLogReader::open(path);
+    io::LogEntry entry;
+    while (*(*reader)->next(entry)) ++messages;
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(std::filesystem::file_size(path)) * state.iterations());
+  state.SetItemsProcessed(static_cast<int64_t>(messages));
+  state.SetLabel(compression == io::mcap::Compression::kNone ? "none" : io::mcap::compression_name(compression));
+  std::filesystem::remove(path);
+}
+
+// Peer: `cat` of the same (uncompressed) log into /dev/null.
+void BM_CatSameBytes(benchmark::State& state) {
+  const std::string path = log_path("cat");
+  write_log(path, io::mcap::Compression::kNone);
+  const std::string command = fmt::format("cat {} > /dev/null", path);
+  for (auto _ : state) {
+    if (std::system(command.c_str()) != 0) state.SkipWithError("cat failed");
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(std::filesystem::file_size(path)) * state.iterations());
+  state.SetLabel("cat");
+  std::filesystem::remove(path);
+}
+
+// Current resident memory (MB) from /proc/self/statm.
+double rss_mb() {
+  std::ifstream statm("/proc/self/statm");
+  long pages_total = 0, pages_resident = 0;
+  statm >> pages_total >> pages_resident;
+  return static_cast<double>(pages_resident) * static_cast<double>(::sysconf(_SC_PAGESIZE)) / 1e6;
+}
+
+// Reads a log of HANZO_BENCH_LARGE_LOG_GB (default 2) GB of scans and reports how much the
+// resident memory grew at most while reading it: it must stay near one chunk, not the file size.
+void BM_ReadMultiGigabyteLog(benchmark::State& state) {
+  const double gigabytes = std::getenv("HANZO_BENCH_LARGE_LOG_GB") ? std::atof(std::getenv("HANZO_BENCH_LARGE_LOG_GB")) : 2.0;
+  const std::string path = log_path("large");
+  {
+    io::mcap::McapWriterConfig config;
+    config.compression = io::mcap::Compression::kNone;
+    auto writer = io::mcap::McapWriter::open(path, config);
+    const uint16_t channel = *(*writer)->add_channel(0, "/lidar", "protobuf");
+    const std::string payload = msgs::to_proto(workload().scans[0]).SerializeAsString();
+    const auto count = static_cast<std::size_t>(gigabytes * 1e9 / static_cast<double>(payload.size()));
+    for (std::size_t i = 0; i < count; ++i) (void)(*writer)->write(channel, 1'000'000'000ULL + i * 100'000'000ULL, 0, payload);
+    (void)(*writer)->close();
+  }
+  const double rss_before = rss_mb();
+  double rss_peak = rss_before;
+  std::size_t messages = 0;
+  for (auto _ : state) {
+    auto reader = io::mcap::McapReader::open(path);
+    io::mcap::MessageIterator it = (*reader)->messages();
+    io::mcap::MessageView view;
+    while (*it.next(view)) {
+      if (++messages % 16 == 0) rss_peak = std::max(rss_peak, rss_mb());
+    }
+  }
+  state.counters["file_GB"] = static_cast<double>(std::filesystem::file_size(path)) / 1e9;
+  state.counters["rss_before_MB"] = rss_before;
+  state.counters["rss_peak_MB"] = rss_peak;
+  state.SetBytesProcessed(static_cast<int64_t>(std::filesystem::file_size(path)) * state.iterations());
+  state.SetItemsProcessed(static_cast<int64_t>(messages));
+  std::filesystem::remove(path);
+}
+
+}  // namespace
+
+// Wall-clock time everywhere (cat runs in a child process). The multi-GB read runs first, while
+// the process is still small, so its peak memory is easy to read.
+BENCHMARK(BM_ReadMultiGigabyteLog)->Unit(benchmark::kMillisecond)->Iterations(1)->UseRealTime();
+BENCHMARK(BM_SensorLogWrite)->DenseRange(0, 2)->Unit(benchmark::kMillisecond)->Iterations(3)->UseRealTime();
+BENCHMARK(BM_McapWriteSerialized)->DenseRange(0, 2)->Unit(benchmark::kMillisecond)->Iterations(3)->UseRealTime();
+BENCHMARK(BM_McapRead)->DenseRange(0, 2)->Unit(benchmark::kMillisecond)->Iterations(5)->UseRealTime();
+BENCHMARK(BM_SensorLogReadDecoded)->DenseRange(0, 2)->Unit(benchmark::kMillisecond)->Iterations(3)->UseRealTime();
+BENCHMARK(BM_CatSameBytes)->Unit(benchmark::kMillisecond)->Iterations(5)->UseRealTime();
+BENCHMARK_MAIN();
