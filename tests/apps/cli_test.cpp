@@ -118,7 +118,7 @@ TEST(Cli, MissingFileAndUsageErrors) {
   EXPECT_THAT(unknown.err, HasSubstr("hanzo-fusion:"));
 }
 
-const std::string kEvo = "../shared/data/trajectory_eval_evo/";
+const std::string kEvo = std::string(HANZO_DATA_DIR) + "/trajectory_eval_evo/";
 
 TEST(Cli, EvalApeReproducesEvoAndWritesPlots) {
   const std::filesystem::path plots = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_plots_{}", ::getpid());

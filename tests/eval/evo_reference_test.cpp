@@ -1,4 +1,4 @@
-// Reproduces evo's published results on its own test data (../shared/data/trajectory_eval_evo,
+// Reproduces evo's published results on its own test data (shared data trajectory_eval_evo,
 // see its SOURCE.md): every statistic to 1e-6 relative and every error of the array to the 10
 // significant digits it was stored with.
 
@@ -16,7 +16,7 @@
 namespace hanzo::fusion::eval {
 namespace {
 
-const std::string kData = "../shared/data/trajectory_eval_evo/";
+const std::string kData = std::string(HANZO_DATA_DIR) + "/trajectory_eval_evo/";
 
 io::Trajectory load(const std::string& name, io::TrajectoryFormat format) {
   auto trajectory = io::read_trajectory(kData + name, format);

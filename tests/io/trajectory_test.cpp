@@ -11,7 +11,7 @@ namespace {
 
 using ::testing::HasSubstr;
 
-const std::string kData = "../shared/data/trajectory_eval_evo/";
+const std::string kData = std::string(HANZO_DATA_DIR) + "/trajectory_eval_evo/";
 
 std::string temp_path(const std::string& name) {
   return (std::filesystem::temp_directory_path() / ("hanzo_trajectory_test_" + name)).string();
