@@ -11,8 +11,8 @@ packages=(
   libeigen3-dev libgeographiclib-dev libyaml-cpp-dev libspdlog-dev libfmt-dev nlohmann-json3-dev
   # msgs: protobuf schemas and the gRPC service
   libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
-  # io: MCAP chunk compression and CRC-32
-  libzstd-dev liblz4-dev zlib1g-dev
+  # io: MCAP/bag chunk compression and CRC-32
+  libzstd-dev liblz4-dev zlib1g-dev libbz2-dev
   # apps
   libcli11-dev
   # tests and benchmarks

@@ -236,3 +236,33 @@ TEST(Cli, ImportRejectsBadCsvAndLeavesNoLog) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST(Cli, ImportRosbagTest2) {
+  const std::string bag = std::string(HANZO_DATA_DIR) + "/robot_localization/test2.bag";
+  const std::string log = (std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_bag_{}.mcap", ::getpid())).string();
+  const CliRun without_separation = run(fmt::format("import rosbag {} --out {}", bag, log));
+  EXPECT_EQ(without_separation.exit_code, 1);
+  EXPECT_THAT(without_separation.err, HasSubstr("--wheel-separation"));
+  EXPECT_FALSE(std::filesystem::exists(log));
+  EXPECT_FALSE(std::filesystem::exists(log + ".partial"));
+
+  const CliRun imported = run(fmt::format(
+      "import rosbag {} --out {} --wheel-separation 0.37 --topic /imu/data=/imu --topic /jackal_velocity_controller/odom=/wheels --json",
+      bag, log));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+  const nlohmann::json json = nlohmann::json::parse(imported.out);
+  EXPECT_EQ(json["messages"], 6121);
+  EXPECT_EQ(json["bag"]["compressions"]["bz2"], json["bag"]["chunks"]);
+  const CliRun info = run(fmt::format("log info {} --json", log));
+  const nlohmann::json summary = nlohmann::json::parse(info.out);
+  EXPECT_EQ(summary["channels"][0]["topic"], "/imu");
+  EXPECT_EQ(summary["channels"][0]["messages"], 3061);
+  EXPECT_EQ(summary["channels"][1]["topic"], "/wheels");
+  EXPECT_EQ(summary["channels"][1]["messages"], 3060);
+  EXPECT_NEAR(summary["duration_s"].get<double>(), 61.2, 0.01);
+  std::filesystem::remove(log);
+}
+
+}  // namespace

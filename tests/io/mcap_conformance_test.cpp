@@ -4,8 +4,6 @@
 //    messages back, protobuf payloads decoded from the schema stored in the file);
 //  - files written there are read here (chunked and unchunked).
 
-#include <array>
-#include <cstdio>
 #include <filesystem>
 
 #include <fmt/format.h>
@@ -16,6 +14,7 @@
 
 #include "hanzo/fusion/io/mcap.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
+#include "io/node_runner.hpp"
 #include "msgs/test_messages.hpp"
 
 namespace hanzo::fusion::io {
@@ -25,22 +24,6 @@ namespace fixtures = msgs::testing;
 
 std::string temp_path(const std::string& name) {
   return (std::filesystem::temp_directory_path() / fmt::format("hanzo_conformance_{}_{}.mcap", name, ::getpid())).string();
-}
-
-// Runs a node script of tests/conformance and parses the one JSON object it prints.
-nlohmann::json run_node(const std::string& script, const std::string& arguments) {
-  const std::string command = fmt::format("{} tests/conformance/{} {} 2>&1", HANZO_NODE_EXECUTABLE, script, arguments);
-  FILE* pipe = ::popen(command.c_str(), "r");
-  std::string out;
-  std::array<char, 65536> buffer{};
-  for (std::size_t n; pipe && (n = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0;) out.append(buffer.data(), n);
-  const int status = pipe ? ::pclose(pipe) : -1;
-  if (status != 0) {
-    ADD_FAILURE() << command << " failed (" << status << "); is tests/conformance/node_modules installed "
-                  << "(scripts/install-deps.sh)?\n" << out;
-    return {};
-  }
-  return nlohmann::json::parse(out);
 }
 
 uint32_t crc_of(std::string_view data) {
@@ -81,7 +64,7 @@ TEST_P(WrittenHereReadThere, FoxgloveReadsEveryMessageAndChecksEveryCrc) {
                     {"crc32", crc_of(view.data)}, {"size", view.data.size()}});
   }
 
-  const nlohmann::json theirs = run_node("mcap_read.mjs", path);
+  const nlohmann::json theirs = test::run_node("mcap_read.mjs", path);
   ASSERT_FALSE(theirs.is_null());
   EXPECT_EQ(theirs["header"]["library"], "hanzo-fusion");
   EXPECT_EQ(theirs["statistics"]["messageCount"], "25");
@@ -109,7 +92,7 @@ class WrittenThereReadHere : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(WrittenThereReadHere, EveryMessageComesBackInTimeOrder) {
   const std::string path = temp_path("there_" + GetParam());
-  const nlohmann::json written = run_node("mcap_write.mjs", path + " " + GetParam());
+  const nlohmann::json written = test::run_node("mcap_write.mjs", path + " " + GetParam());
   ASSERT_FALSE(written.is_null());
   std::vector<nlohmann::json> expected = written["written"];
   std::stable_sort(expected.begin(), expected.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
