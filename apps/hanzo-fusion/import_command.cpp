@@ -1,6 +1,6 @@
 // hanzo-fusion import FORMAT SRC... --out LOG.mcap: converts recordings into a sensor log.
-// Formats so far: csv (IMU / GNSS / wheel odometry files) and rosbag (ROS1 bag v2.0); see
-// docs/sensor-logs.md.
+// Formats so far: csv (IMU / GNSS / wheel odometry files), rosbag (ROS1 bag v2.0) and carmen
+// (2D laser logs); see docs/sensor-logs.md.
 
 #include <algorithm>
 #include <filesystem>
@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 
 #include "commands.hpp"
+#include "hanzo/fusion/io/carmen_import.hpp"
 #include "hanzo/fusion/io/csv_import.hpp"
 #include "hanzo/fusion/io/rosbag_import.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
@@ -27,6 +28,7 @@ struct ImportOptions {
   std::vector<std::string> topic_overrides;  // "STEM=/topic" (csv) or "/ros/topic=/topic" (rosbag)
   double wheel_separation = 0.0;             // rosbag: nav_msgs/Odometry -> wheel odometry
   bool use_record_time = false;              // rosbag
+  std::string ground_truth;                  // carmen: scan poses as TUM
 };
 
 struct SourceMessages {
@@ -107,11 +109,44 @@ int run_rosbag_import(const Output& output, const ImportOptions& options) {
   return report_success(output, result, text);
 }
 
+int run_carmen_import(const Output& output, const ImportOptions& options) {
+  nlohmann::json result = {{"format", "carmen"}, {"sources", options.sources}, {"out", options.out}};
+  if (options.sources.size() != 1) return report_failure(output, result, "carmen import takes one log (SRC) at a time");
+  io::CarmenImportConfig config;
+  config.wheel_separation = options.wheel_separation;
+  io::CarmenImportReport report;
+  const int code = write_log(output, result, options, [&](io::SensorLogWriter& writer) -> Status {
+    HANZO_ASSIGN_OR_RETURN(report, io::import_carmen(options.sources[0], writer, config));
+    return writer.add_metadata({"import", {{"importer", "carmen"}, {"source", options.sources[0]}}});
+  });
+  if (code != 0) return code;
+  if (!options.ground_truth.empty()) {
+    if (Status written = io::write_trajectory(options.ground_truth, report.scan_poses, io::TrajectoryFormat::kTum); !written) {
+      return report_failure(output, result, written.error().message);
+    }
+    result["ground_truth"] = options.ground_truth;
+  }
+  result["ok"] = true;
+  result["scans"] = report.scans;
+  result["odometry"] = report.odometry;
+  result["rejected"] = report.rejected;
+  result["first_rejection"] = report.first_rejection;
+  result["skipped_lines"] = report.skipped_lines;
+  std::string text = fmt::format("{}: {} scans -> {}, {} odometry -> {}, {} other lines skipped\n", options.sources[0],
+                                 report.scans, config.laser_topic, report.odometry,
+                                 config.wheel_separation > 0 ? config.odometry_topic : "(left out: no --wheel-separation)",
+                                 report.skipped_lines);
+  if (report.rejected > 0) text += fmt::format("  {} rejected (first: {})\n", report.rejected, report.first_rejection);
+  if (!options.ground_truth.empty()) text += fmt::format("  scan poses written to {}\n", options.ground_truth);
+  return report_success(output, result, text);
+}
+
 int run_import(const Output& output, const ImportOptions& options) {
   if (options.format == "rosbag") return run_rosbag_import(output, options);
+  if (options.format == "carmen") return run_carmen_import(output, options);
   nlohmann::json result = {{"format", options.format}, {"sources", options.sources}, {"out", options.out}};
   if (options.format != "csv") {
-    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag)", options.format));
+    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, carmen)", options.format));
   }
   auto stems = topic_map(options.topic_overrides, "FILE_STEM=/topic");
   if (!stems) return report_failure(output, result, stems.error().message);
@@ -167,15 +202,16 @@ int run_import(const Output& output, const ImportOptions& options) {
 void add_import_command(CLI::App& app, const Output& output, Command& run) {
   auto options = std::make_shared<ImportOptions>();
   CLI::App* command = app.add_subcommand("import", "Convert recordings into a sensor log (MCAP)");
-  command->add_option("FORMAT", options->format, "Input format: csv or rosbag")->required();
+  command->add_option("FORMAT", options->format, "Input format: csv, rosbag or carmen")->required();
   command->add_option("SRC", options->sources, "Input files")->required();
   command->add_option("--out", options->out, "Sensor log to write (.mcap)")->required();
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
   command->add_option("--topic", options->topic_overrides,
                       "csv: FILE_STEM=/topic (default /FILE_STEM); rosbag: /ros/topic=/topic (only these are imported)");
   command->add_option("--wheel-separation", options->wheel_separation,
-                      "rosbag: wheel separation (m) to import nav_msgs/Odometry as differential-drive wheel odometry");
+                      "rosbag, carmen: wheel separation (m) to import odometry as differential-drive wheel odometry");
   command->add_flag("--use-record-time", options->use_record_time, "rosbag: bag record time instead of header.stamp");
+  command->add_option("--ground-truth", options->ground_truth, "carmen: write the scans' poses to this TUM file");
   command->callback([&output, &run, options] { run = [&output, options] { return run_import(output, *options); }; });
 }
 
