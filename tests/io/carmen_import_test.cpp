@@ -3,6 +3,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include <unistd.h>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -11,8 +13,9 @@ namespace {
 
 using ::testing::HasSubstr;
 
+// Per-process names: ctest runs the tests of this file in parallel processes.
 std::string temp(const std::string& name) {
-  return (std::filesystem::temp_directory_path() / ("hanzo_carmen_" + name)).string();
+  return (std::filesystem::temp_directory_path() / ("hanzo_carmen_" + std::to_string(::getpid()) + "_" + name)).string();
 }
 
 struct Imported {
@@ -113,7 +116,7 @@ TEST(CarmenImport, MalformedLinesNameFileAndLine) {
   EXPECT_THAT(import_file(path, 0.5).error().message, HasSubstr("bad.log:1: field 4 'x' is not a finite number"));
   std::ofstream(path) << "NEFF 3\n";
   EXPECT_THAT(import_file(path, 0.5).error().message, HasSubstr("no FLASER or ODOM lines"));
-  EXPECT_THAT(import_file(temp("missing.log"), 0.5).error().message, HasSubstr("cannot open file"));
+  EXPECT_THAT(import_file("/nonexistent/missing.log", 0.5).error().message, HasSubstr("cannot open file"));
   std::filesystem::remove(path);
 }
 

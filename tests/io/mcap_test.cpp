@@ -1,6 +1,9 @@
 #include "hanzo/fusion/io/mcap.hpp"
 
 #include <filesystem>
+#include <string>
+
+#include <unistd.h>
 #include <fstream>
 #include <random>
 
@@ -20,7 +23,7 @@ struct Written {
 };
 
 std::string temp_path(const std::string& name) {
-  return (std::filesystem::temp_directory_path() / ("hanzo_mcap_test_" + name + ".mcap")).string();
+  return (std::filesystem::temp_directory_path() / ("hanzo_mcap_test_" + std::to_string(::getpid()) + "_" + name + ".mcap")).string();
 }
 
 // Three channels at different rates, times jittered so channels interleave and a few messages

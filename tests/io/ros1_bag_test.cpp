@@ -4,6 +4,9 @@
 
 #include <cstring>
 #include <filesystem>
+#include <string>
+
+#include <unistd.h>
 #include <fstream>
 
 #include <gmock/gmock.h>
@@ -120,7 +123,7 @@ std::string bag_file(const std::string& body) {
 }
 
 std::string write_temp(const std::string& name, const std::string& bytes) {
-  const std::string path = (std::filesystem::temp_directory_path() / ("hanzo_ros1_" + name + ".bag")).string();
+  const std::string path = (std::filesystem::temp_directory_path() / ("hanzo_ros1_" + std::to_string(::getpid()) + "_" + name + ".bag")).string();
   std::ofstream(path, std::ios::binary) << bytes;
   return path;
 }
@@ -234,7 +237,7 @@ TEST(RosbagImport, AllTypesWithBadMessagesCountedNotFatal) {
                               message(0, 10, imu_data(10)) + message(0, 13, bad_imu) + message(1, 100, navsatfix_data(0)) +
                               message(2, 200, pointcloud_data()) + message(3, 300, image_data()) + message(4, 1, "tf");
   const std::string bag = write_temp("all_types", bag_file(chunk(records, "lz4")));
-  const std::string log = (std::filesystem::temp_directory_path() / "hanzo_ros1_all_types.mcap").string();
+  const std::string log = (std::filesystem::temp_directory_path() / ("hanzo_ros1_all_types_" + std::to_string(::getpid()) + ".mcap")).string();
   auto writer = SensorLogWriter::open(log);
   ASSERT_TRUE(writer.ok());
   auto report = import_rosbag(bag, **writer, {});

@@ -1,6 +1,9 @@
 #include "hanzo/fusion/io/sensor_log.hpp"
 
 #include <filesystem>
+#include <string>
+
+#include <unistd.h>
 
 #include <google/protobuf/descriptor.h>
 #include <google/protobuf/descriptor.pb.h>
@@ -19,7 +22,7 @@ using ::testing::HasSubstr;
 namespace fixtures = msgs::testing;
 
 std::string temp_path(const std::string& name) {
-  return (std::filesystem::temp_directory_path() / ("hanzo_sensor_log_test_" + name + ".mcap")).string();
+  return (std::filesystem::temp_directory_path() / ("hanzo_sensor_log_test_" + std::to_string(::getpid()) + "_" + name + ".mcap")).string();
 }
 
 template <typename T>

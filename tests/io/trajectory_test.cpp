@@ -2,6 +2,9 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <string>
+
+#include <unistd.h>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -14,7 +17,7 @@ using ::testing::HasSubstr;
 const std::string kData = std::string(HANZO_DATA_DIR) + "/trajectory_eval_evo/";
 
 std::string temp_path(const std::string& name) {
-  return (std::filesystem::temp_directory_path() / ("hanzo_trajectory_test_" + name)).string();
+  return (std::filesystem::temp_directory_path() / ("hanzo_trajectory_test_" + std::to_string(::getpid()) + "_" + name)).string();
 }
 
 TEST(ParseSeconds, PlainDecimalsAreExact) {
