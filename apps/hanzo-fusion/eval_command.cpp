@@ -114,6 +114,12 @@ Result<std::vector<std::string>> write_plots(const std::string& dir, const std::
   return std::vector<std::string>{top_view, over_time};
 }
 
+// Plot labels: the title on one line, the error axis named after the metric and its unit.
+eval::PlotLabels plot_labels(std::string title, const char* metric, eval::PoseRelation relation, bool has_times) {
+  std::replace(title.begin(), title.end(), '\n', ' ');
+  return {title, fmt::format("{} ({})", metric, eval::pose_relation_unit(relation)), has_times ? "time (s)" : "frame"};
+}
+
 std::vector<double> seconds_of(const io::Trajectory& trajectory) {
   std::vector<double> seconds;
   for (Timestamp t : trajectory.timestamps) seconds.push_back((t - trajectory.timestamps.front()).seconds());
@@ -147,12 +153,9 @@ int run_ape(const Output& output, const EvalOptions& options) {
   result["dropped_duplicate_timestamps"] = loaded->dropped_duplicates;
   std::string text = title + "\n\n" + statistics_text(ape->statistics);
   if (!options.plot_dir.empty()) {
-    std::string one_line_title = title;
-    std::replace(one_line_title.begin(), one_line_title.end(), '\n', ' ');
     auto plots = write_plots(options.plot_dir, "ape", ape->reference, ape->estimate_aligned, ape->errors,
                              seconds_of(ape->reference), ape->statistics,
-                             {one_line_title, fmt::format("APE ({})", eval::pose_relation_unit(config.relation)),
-                              loaded->has_times ? "time (s)" : "frame"});
+                             plot_labels(title, "APE", config.relation, loaded->has_times));
     if (!plots) return report_failure(output, result, plots.error().message);
     result["plots"] = *plots;
     text += fmt::format("plots: {}\n", fmt::join(*plots, ", "));
@@ -207,12 +210,8 @@ int run_rpe(const Output& output, const EvalOptions& options) {
     T.block<3, 3>(0, 0) = rpe->alignment.rotation;
     T.block<3, 1>(0, 3) = rpe->alignment.translation;
     estimate_aligned.transform(T, rpe->alignment.scale);
-    std::string one_line_title = title;
-    std::replace(one_line_title.begin(), one_line_title.end(), '\n', ' ');
     auto plots = write_plots(options.plot_dir, "rpe", reference, estimate_aligned.subset(ends), rpe->errors, times,
-                             rpe->statistics,
-                             {one_line_title, fmt::format("RPE ({})", eval::pose_relation_unit(config.relation)),
-                              loaded->has_times ? "time (s)" : "frame"});
+                             rpe->statistics, plot_labels(title, "RPE", config.relation, loaded->has_times));
     if (!plots) return report_failure(output, result, plots.error().message);
     result["plots"] = *plots;
     text += fmt::format("plots: {}\n", fmt::join(*plots, ", "));

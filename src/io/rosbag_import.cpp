@@ -1,6 +1,7 @@
 #include "hanzo/fusion/io/rosbag_import.hpp"
 
 #include <set>
+#include <type_traits>
 
 #include <fmt/format.h>
 
@@ -18,6 +19,18 @@ bool supported(const std::string& type) {
 std::string default_topic(const std::string& ros_topic) {
   const auto slash = ros_topic.find_last_of('/');
   return "/" + (slash == std::string::npos ? ros_topic : ros_topic.substr(slash + 1));
+}
+
+// The decoded message with its time replaced by stamp(time) (per-point times move along).
+template <typename Message, typename StampFunction>
+Result<msgs::SensorMessage> restamped(Result<Message> message, const StampFunction& stamp) {
+  if (!message) return message.error();
+  const Duration shift = stamp(message->timestamp) - message->timestamp;
+  message->timestamp += shift;
+  if constexpr (std::is_same_v<Message, msgs::PointCloudMessage>) {
+    for (Timestamp& t : message->point_timestamps) t += shift;
+  }
+  return msgs::SensorMessage(std::move(*message));
 }
 
 struct TopicState {
@@ -72,34 +85,17 @@ Result<RosbagImportReport> import_rosbag(const std::string& path, SensorLogWrite
     auto stamp = [&](Timestamp header_stamp) { return config.use_record_time || header_stamp.is_zero() ? record_time : header_stamp; };
     Result<msgs::SensorMessage> converted = Error("");
     if (type == "sensor_msgs/Imu") {
-      auto m = ros1::imu_from_ros(message.data);
-      if (m) m->timestamp = stamp(m->timestamp);
-      converted = m ? Result<msgs::SensorMessage>(std::move(*m)) : Result<msgs::SensorMessage>(m.error());
+      converted = restamped(ros1::imu_from_ros(message.data), stamp);
     } else if (type == "sensor_msgs/NavSatFix") {
-      auto m = ros1::gnss_from_ros(message.data);
-      if (m) m->timestamp = stamp(m->timestamp);
-      converted = m ? Result<msgs::SensorMessage>(std::move(*m)) : Result<msgs::SensorMessage>(m.error());
+      converted = restamped(ros1::gnss_from_ros(message.data), stamp);
     } else if (type == "sensor_msgs/PointCloud2") {
-      auto m = ros1::point_cloud_from_ros(message.data);
-      if (m) {
-        const Duration shift = stamp(m->timestamp) - m->timestamp;
-        m->timestamp += shift;
-        for (Timestamp& t : m->point_timestamps) t += shift;
-      }
-      converted = m ? Result<msgs::SensorMessage>(std::move(*m)) : Result<msgs::SensorMessage>(m.error());
+      converted = restamped(ros1::point_cloud_from_ros(message.data), stamp);
     } else if (type == "sensor_msgs/Image") {
-      auto m = ros1::image_from_ros(message.data);
-      if (m) m->timestamp = stamp(m->timestamp);
-      converted = m ? Result<msgs::SensorMessage>(std::move(*m)) : Result<msgs::SensorMessage>(m.error());
+      converted = restamped(ros1::image_from_ros(message.data), stamp);
     } else {  // nav_msgs/Odometry
       auto twist = ros1::odometry_twist_from_ros(message.data);
-      if (twist) {
-        twist->stamp = stamp(twist->stamp);
-        auto wheel = state.wheels->add(*twist);
-        converted = wheel ? Result<msgs::SensorMessage>(std::move(*wheel)) : Result<msgs::SensorMessage>(wheel.error());
-      } else {
-        converted = twist.error();
-      }
+      if (twist) twist->stamp = stamp(twist->stamp);
+      converted = twist ? restamped(state.wheels->add(*twist), [](Timestamp t) { return t; }) : Error(twist.error());
     }
     // A message that does not decode or validate is left out and counted; only a failure to
     // write the log ends the import.
