@@ -77,8 +77,9 @@ std::string log_path(const std::string& name) {
 
 // Writes the workload in time order; returns the number of messages.
 std::size_t write_log(const std::string& path, io::mcap::Compression compression) {
-  io::mcap::McapWriterConfig config;
-  config.compression = compression;
+  io::SensorLogWriterConfig config;
+  config.mcap.compression = compression;
+  config.foxglove_channels = false;  // the log itself; the mirror's cost is measured separately
   auto writer = io::SensorLogWriter::open(path, config);
   if (!writer) throw std::runtime_error(writer.error().message);
   const Workload& w = workload();

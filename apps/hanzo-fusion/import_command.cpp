@@ -25,6 +25,7 @@ struct ImportOptions {
   std::vector<std::string> sources;
   std::string out;
   std::string compression = "zstd";
+  bool no_foxglove = false;                  // leave out the Foxglove mirror channels
   std::vector<std::string> topic_overrides;  // "STEM=/topic" (csv) or "/ros/topic=/topic" (rosbag)
   double wheel_separation = 0.0;             // rosbag: nav_msgs/Odometry -> wheel odometry
   bool use_record_time = false;              // rosbag
@@ -54,8 +55,9 @@ int write_log(const Output& output, nlohmann::json& result, const ImportOptions&
               const std::function<Status(io::SensorLogWriter&)>& fill) {
   auto compression = io::mcap::compression_from_name(options.compression);
   if (!compression) return report_failure(output, result, compression.error().message);
-  io::mcap::McapWriterConfig config;
-  config.compression = *compression;
+  io::SensorLogWriterConfig config;
+  config.mcap.compression = *compression;
+  config.foxglove_channels = !options.no_foxglove;
   const std::string temporary = options.out + ".partial";
   auto writer = io::SensorLogWriter::open(temporary, config);
   if (!writer) return report_failure(output, result, writer.error().message);
@@ -206,6 +208,8 @@ void add_import_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("SRC", options->sources, "Input files")->required();
   command->add_option("--out", options->out, "Sensor log to write (.mcap)")->required();
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
+  command->add_flag("--no-foxglove", options->no_foxglove,
+                    "Leave out the Foxglove mirror channels (<topic>/foxglove for poses, clouds, fixes, images)");
   command->add_option("--topic", options->topic_overrides,
                       "csv: FILE_STEM=/topic (default /FILE_STEM); rosbag: /ros/topic=/topic (only these are imported)");
   command->add_option("--wheel-separation", options->wheel_separation,

@@ -6,6 +6,7 @@
 #include <google/protobuf/descriptor.h>
 #include <google/protobuf/descriptor.pb.h>
 
+#include "foxglove_convert.hpp"
 #include "hanzo/fusion/msgs/convert.hpp"
 #include "hanzo/fusion/msgs/validate.hpp"
 #include "hanzo/fusion/v1/estimates.pb.h"
@@ -47,11 +48,18 @@ std::string file_descriptor_set(const google::protobuf::Descriptor& descriptor) 
   return set.SerializeAsString();
 }
 
-Result<std::unique_ptr<SensorLogWriter>> SensorLogWriter::open(const std::string& path, const mcap::McapWriterConfig& config) {
+Result<std::unique_ptr<SensorLogWriter>> SensorLogWriter::open(const std::string& path) {
+  return open(path, SensorLogWriterConfig{});
+}
+
+Result<std::unique_ptr<SensorLogWriter>> SensorLogWriter::open(const std::string& path, const SensorLogWriterConfig& config) {
+  if (config.foxglove_channels && config.foxglove_topic_suffix.empty()) {
+    return Error("sensor log: foxglove_topic_suffix must not be empty (mirrors would share the topics they mirror)");
+  }
   std::unique_ptr<mcap::McapWriter> writer;
-  HANZO_ASSIGN_OR_RETURN(writer, mcap::McapWriter::open(path, config));
+  HANZO_ASSIGN_OR_RETURN(writer, mcap::McapWriter::open(path, config.mcap));
   HANZO_RETURN_IF_ERROR(writer->add_metadata({"hanzo-fusion", {{"log_format", "hanzo.fusion.v1 sensor log"}, {"log_format_version", "1"}}}));
-  return std::unique_ptr<SensorLogWriter>(new SensorLogWriter(std::move(writer)));
+  return std::unique_ptr<SensorLogWriter>(new SensorLogWriter(std::move(writer), config));
 }
 
 Status SensorLogWriter::write_proto(const std::string& topic, const google::protobuf::Message& message, Timestamp log_time,
@@ -76,17 +84,26 @@ Status SensorLogWriter::write(const std::string& topic, const msgs::SensorMessag
   return std::visit(
       [&](const auto& typed) -> Status {
         if (Status valid = msgs::validate(typed); !valid) return Error(fmt::format("{}: {}", topic, valid.error().message), valid.error().field);
-        const std::map<std::string, std::string> metadata = {
-            {"sensor", sensor_name.empty() ? (topic.starts_with('/') ? topic.substr(1) : topic) : sensor_name},
-            {"modality", std::string(msgs::modality_name(message))}};
-        return write_proto(topic, msgs::to_proto(typed), typed.timestamp, metadata);
+        const std::string sensor = sensor_name.empty() ? (topic.starts_with('/') ? topic.substr(1) : topic) : sensor_name;
+        const std::map<std::string, std::string> metadata = {{"sensor", sensor},
+                                                             {"modality", std::string(msgs::modality_name(message))}};
+        HANZO_RETURN_IF_ERROR(write_proto(topic, msgs::to_proto(typed), typed.timestamp, metadata));
+        if (!config_.foxglove_channels) return ok_status();
+        return write_mirror(topic, foxglove_mirror::to_foxglove(message, sensor).get(), typed.timestamp);
       },
       message);
 }
 
 Status SensorLogWriter::write(const std::string& topic, const msgs::PoseEstimate& pose) {
   if (Status valid = msgs::validate(pose); !valid) return Error(fmt::format("{}: {}", topic, valid.error().message), valid.error().field);
-  return write_proto(topic, msgs::to_proto(pose), pose.timestamp, {{"modality", "pose_estimate"}});
+  HANZO_RETURN_IF_ERROR(write_proto(topic, msgs::to_proto(pose), pose.timestamp, {{"modality", "pose_estimate"}}));
+  if (!config_.foxglove_channels) return ok_status();
+  return write_mirror(topic, foxglove_mirror::to_foxglove(pose).get(), pose.timestamp);
+}
+
+Status SensorLogWriter::write_mirror(const std::string& topic, const google::protobuf::Message* mirror, Timestamp time) {
+  if (mirror == nullptr) return ok_status();
+  return write_proto(topic + config_.foxglove_topic_suffix, *mirror, time, {{"mirror_of", topic}});
 }
 
 Result<std::unique_ptr<SensorLogReader>> SensorLogReader::open(const std::string& path, const mcap::ReadOptions& options) {

@@ -178,13 +178,14 @@ TEST(Cli, ImportCsvThenLogInfoAndExportRoundTrip) {
   const CliRun info = run(fmt::format("log info {} --verify --json", log));
   ASSERT_EQ(info.exit_code, 0) << info.err;
   const nlohmann::json json = nlohmann::json::parse(info.out);
-  EXPECT_EQ(json["messages"], 3103);
+  EXPECT_EQ(json["messages"], 3103 + 101);  // + the Foxglove mirror of the 101 GNSS fixes
   EXPECT_NEAR(json["duration_s"].get<double>(), 20.0, 1e-9);
-  ASSERT_EQ(json["channels"].size(), 3u);
+  ASSERT_EQ(json["channels"].size(), 4u);
+  EXPECT_EQ(json["channels"][2]["topic"], "/gnss/foxglove");
   EXPECT_EQ(json["channels"][0]["topic"], "/base/wheels");
   EXPECT_NEAR(json["channels"][0]["rate_hz"].get<double>(), 50.0, 1e-9);
-  EXPECT_EQ(json["channels"][2]["schema"], "hanzo.fusion.v1.ImuMessage");
-  EXPECT_NEAR(json["channels"][2]["max_gap_s"].get<double>(), 0.01, 1e-12);
+  EXPECT_EQ(json["channels"][3]["schema"], "hanzo.fusion.v1.ImuMessage");
+  EXPECT_NEAR(json["channels"][3]["max_gap_s"].get<double>(), 0.01, 1e-12);
   EXPECT_EQ(json["verified"]["data_section_crc_checked"], true);
 
   // Export reproduces the imported CSV exactly (shortest round-trip numbers on both sides).
@@ -208,7 +209,10 @@ TEST(Cli, ImportCsvThenLogInfoAndExportRoundTrip) {
   }
   const CliRun missing_topic = run(fmt::format("log export {} --topic /lidar", log));
   EXPECT_EQ(missing_topic.exit_code, 1);
-  EXPECT_THAT(missing_topic.err, HasSubstr("no topic '/lidar' (topics: /base/wheels, /gnss, /imu)"));
+  EXPECT_THAT(missing_topic.err, HasSubstr("no topic '/lidar' (topics: /base/wheels, /gnss, /gnss/foxglove, /imu)"));
+  const CliRun mirror = run(fmt::format("log export {} --topic /gnss/foxglove", log));
+  EXPECT_NE(mirror.exit_code, 0);
+  EXPECT_THAT(mirror.err, ::testing::HasSubstr("does not carry hanzo.fusion.v1 messages"));
   std::filesystem::remove_all(dir);
 }
 

@@ -34,9 +34,9 @@ class WrittenHereReadThere : public ::testing::TestWithParam<mcap::Compression> 
 
 TEST_P(WrittenHereReadThere, FoxgloveReadsEveryMessageAndChecksEveryCrc) {
   const std::string path = temp_path(std::string("here_") + mcap::compression_name(GetParam()));
-  mcap::McapWriterConfig config;
-  config.compression = GetParam();
-  config.chunk_size = 2048;  // several chunks
+  SensorLogWriterConfig config;
+  config.mcap.compression = GetParam();
+  config.mcap.chunk_size = 2048;  // several chunks
   {
     auto writer = SensorLogWriter::open(path, config);
     ASSERT_TRUE(writer.ok());
@@ -67,7 +67,7 @@ TEST_P(WrittenHereReadThere, FoxgloveReadsEveryMessageAndChecksEveryCrc) {
   const nlohmann::json theirs = test::run_node("mcap_read.mjs", path);
   ASSERT_FALSE(theirs.is_null());
   EXPECT_EQ(theirs["header"]["library"], "hanzo-fusion");
-  EXPECT_EQ(theirs["statistics"]["messageCount"], "25");
+  EXPECT_EQ(theirs["statistics"]["messageCount"], "30");  // 25 + Foxglove mirrors of 4 clouds and 1 fix
   EXPECT_EQ(theirs["chunkIndexes"].get<std::size_t>(), (*reader)->chunk_indexes().size());
   EXPECT_GT(theirs["chunkIndexes"].get<std::size_t>(), 1u);
   EXPECT_THAT(theirs["metadataIndexes"], ::testing::Contains("hanzo-fusion"));
@@ -82,6 +82,7 @@ TEST_P(WrittenHereReadThere, FoxgloveReadsEveryMessageAndChecksEveryCrc) {
   EXPECT_EQ(theirs["decoded"]["/imu"]["timestamp_ns"], std::to_string(fixtures::imu().timestamp.nanoseconds()));
   EXPECT_EQ(theirs["decoded"]["/gnss"]["latitude"], fixtures::gnss().latitude);
   EXPECT_EQ(theirs["decoded"]["/lidar"]["points"].size(), fixtures::point_cloud().points.size());
+  EXPECT_EQ(theirs["decoded"]["/lidar/foxglove"]["point_stride"], 24);
   std::filesystem::remove(path);
 }
 

@@ -51,7 +51,9 @@ TEST(SensorLog, EveryMessageTypeRoundTripsBitIdentical) {
   }
   auto reader = SensorLogReader::open(path);
   ASSERT_TRUE(reader.ok()) << reader.error().message;
-  EXPECT_EQ((*reader)->mcap().channels().size(), 7u);
+  // 7 topics + the Foxglove mirrors of /lidar, /camera, /gnss and /pose (skipped by this reader).
+  EXPECT_EQ((*reader)->mcap().channels().size(), 11u);
+  EXPECT_EQ((*reader)->mcap().channel_by_topic("/lidar/foxglove")->metadata.at("mirror_of"), "/lidar");
   EXPECT_EQ((*reader)->mcap().channel_by_topic("/lidar")->metadata.at("modality"), "point_cloud");
   EXPECT_EQ((*reader)->mcap().channel_by_topic("/lidar")->metadata.at("sensor"), "lidar");
   LogEntry entry;
@@ -74,6 +76,7 @@ TEST(SensorLog, EveryMessageTypeRoundTripsBitIdentical) {
     }, message);
   }
   EXPECT_EQ(i, written.size() + 1);
+  EXPECT_EQ((*reader)->skipped_messages(), 4u);
   std::filesystem::remove(path);
 }
 

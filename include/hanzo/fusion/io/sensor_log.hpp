@@ -10,6 +10,13 @@
 //
 // A message's log time is its sensor timestamp (timestamp_ns): replaying a log in log-time
 // order replays the sensors in the order they measured.
+//
+// Foxglove mirror channels: so that a log opens in Foxglove with nothing to convert, the
+// writer by default also writes every pose estimate, point cloud, GNSS fix and image on
+// "<topic>/foxglove" in Foxglove's own schema (foxglove.PoseInFrame, foxglove.PointCloud,
+// foxglove.LocationFix, foxglove.RawImage; channel metadata "mirror_of" = the topic). This
+// doubles the size of point-cloud and image data; SensorLogWriterConfig::foxglove_channels =
+// false leaves the mirrors out. Readers of hanzo.fusion.v1 messages skip them.
 
 #include <cstdint>
 #include <map>
@@ -34,12 +41,20 @@ namespace hanzo::fusion::io {
 /// and every file it imports (dependencies first), as MCAP's protobuf profile asks.
 std::string file_descriptor_set(const google::protobuf::Descriptor& descriptor);
 
+struct SensorLogWriterConfig {
+  mcap::McapWriterConfig mcap;                     ///< chunk size and compression
+  bool foxglove_channels = true;                   ///< also write the Foxglove mirror channels
+  std::string foxglove_topic_suffix = "/foxglove";  ///< mirror topic = topic + suffix
+};
+
 class SensorLogWriter {
  public:
-  static Result<std::unique_ptr<SensorLogWriter>> open(const std::string& path, const mcap::McapWriterConfig& config = {});
+  static Result<std::unique_ptr<SensorLogWriter>> open(const std::string& path, const SensorLogWriterConfig& config);
+  static Result<std::unique_ptr<SensorLogWriter>> open(const std::string& path);  ///< default configuration
 
-  /// Validates the message (msgs::validate) and appends it on `topic` at its timestamp. A
-  /// message that fails validation is not written; the error names topic and field.
+  /// Validates the message (msgs::validate) and appends it on `topic` at its timestamp (and its
+  /// Foxglove mirror, when configured). A message that fails validation is not written; the
+  /// error names topic and field.
   /// `sensor_name` goes into the channel metadata when the topic is first used (default: the
   /// topic without its leading '/').
   Status write(const std::string& topic, const msgs::SensorMessage& message, const std::string& sensor_name = {});
@@ -52,8 +67,12 @@ class SensorLogWriter {
   const mcap::Statistics& statistics() const { return mcap_->statistics(); }
 
  private:
-  explicit SensorLogWriter(std::unique_ptr<mcap::McapWriter> writer) : mcap_(std::move(writer)) {}
+  SensorLogWriter(std::unique_ptr<mcap::McapWriter> writer, SensorLogWriterConfig config)
+      : mcap_(std::move(writer)), config_(std::move(config)) {}
+  Status write_mirror(const std::string& topic, const google::protobuf::Message* mirror, Timestamp time);
+
   std::unique_ptr<mcap::McapWriter> mcap_;
+  SensorLogWriterConfig config_;
   std::map<std::string, uint16_t> channel_by_topic_;
   std::string serialize_buffer_;
 };
