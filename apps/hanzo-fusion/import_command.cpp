@@ -1,6 +1,6 @@
 // hanzo-fusion import FORMAT SRC... --out LOG.mcap: converts recordings into a sensor log.
-// Formats so far: csv (IMU / GNSS / wheel odometry files), rosbag (ROS1 bag v2.0) and carmen
-// (2D laser logs); see docs/sensor-logs.md.
+// Formats: csv (IMU / GNSS / wheel odometry files), rosbag (ROS1 bag v2.0), carmen (2D laser
+// logs), kitti (odometry sequences), euroc (ASL folders), tum-rgbd; see docs/sensor-logs.md.
 
 #include <algorithm>
 #include <filesystem>
@@ -14,8 +14,11 @@
 #include "commands.hpp"
 #include "hanzo/fusion/io/carmen_import.hpp"
 #include "hanzo/fusion/io/csv_import.hpp"
+#include "hanzo/fusion/io/euroc_import.hpp"
+#include "hanzo/fusion/io/kitti_import.hpp"
 #include "hanzo/fusion/io/rosbag_import.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/io/tum_rgbd_import.hpp"
 
 namespace hanzo::fusion::app {
 namespace {
@@ -29,7 +32,11 @@ struct ImportOptions {
   std::vector<std::string> topic_overrides;  // "STEM=/topic" (csv) or "/ros/topic=/topic" (rosbag)
   double wheel_separation = 0.0;             // rosbag: nav_msgs/Odometry -> wheel odometry
   bool use_record_time = false;              // rosbag
-  std::string ground_truth;                  // carmen: scan poses as TUM
+  std::string ground_truth;                  // carmen, kitti, euroc, tum-rgbd: reference trajectory as TUM
+  std::string calibration;                   // kitti, euroc, tum-rgbd: the sensors' calibration YAML
+  bool no_images = false;                    // kitti, euroc: leave the cameras out
+  std::string poses;                         // kitti: poses file
+  double time_origin = 1e9;                  // kitti: Unix time of times.txt's zero
 };
 
 struct SourceMessages {
@@ -143,12 +150,113 @@ int run_carmen_import(const Output& output, const ImportOptions& options) {
   return report_success(output, result, text);
 }
 
+// What a dataset importer (kitti, euroc, tum-rgbd) hands back besides the log.
+struct DatasetOutputs {
+  const io::Trajectory* ground_truth = nullptr;
+  const calib::Calibration* calibration = nullptr;
+};
+
+// Writes --ground-truth and --calibration; adds them to result and text.
+int write_dataset_outputs(const Output& output, nlohmann::json& result, std::string& text, const ImportOptions& options,
+                          const DatasetOutputs& outputs) {
+  if (!options.ground_truth.empty()) {
+    if (outputs.ground_truth->empty()) return report_failure(output, result, "--ground-truth: the dataset has no ground truth");
+    if (Status written = io::write_trajectory(options.ground_truth, *outputs.ground_truth, io::TrajectoryFormat::kTum); !written) {
+      return report_failure(output, result, written.error().message);
+    }
+    result["ground_truth"] = options.ground_truth;
+    text += fmt::format("  ground truth ({} poses) written to {}\n", outputs.ground_truth->size(), options.ground_truth);
+  }
+  if (!options.calibration.empty()) {
+    if (Status written = calib::save_calibration(*outputs.calibration, options.calibration); !written) {
+      return report_failure(output, result, written.error().message);
+    }
+    result["calibration"] = options.calibration;
+    text += fmt::format("  calibration ({} sensors) written to {}\n", outputs.calibration->sensors.size(), options.calibration);
+  }
+  result["ok"] = true;
+  return report_success(output, result, text);
+}
+
+int run_kitti_import(const Output& output, const ImportOptions& options) {
+  nlohmann::json result = {{"format", "kitti"}, {"sources", options.sources}, {"out", options.out}};
+  if (options.sources.size() != 1) return report_failure(output, result, "kitti import takes one sequence folder (SRC) at a time");
+  io::KittiImportConfig config;
+  config.import_images = !options.no_images;
+  config.poses_path = options.poses;
+  config.time_origin = options.time_origin;
+  io::KittiImportReport report;
+  const int code = write_log(output, result, options, [&](io::SensorLogWriter& writer) -> Status {
+    HANZO_ASSIGN_OR_RETURN(report, io::import_kitti(options.sources[0], writer, config));
+    return writer.add_metadata({"import", {{"importer", "kitti"}, {"source", options.sources[0]}}});
+  });
+  if (code != 0) return code;
+  result["frames"] = report.frames;
+  result["scans"] = report.scans;
+  result["images"] = report.images;
+  result["points"] = report.points;
+  result["poses"] = report.poses_path;
+  std::string text = fmt::format("{}: {} frames: {} scans ({} points) -> {}, {} images\n", options.sources[0], report.frames,
+                                 report.scans, report.points, config.lidar_topic, report.images);
+  if (!report.poses_path.empty()) text += fmt::format("  poses from {}\n", report.poses_path);
+  return write_dataset_outputs(output, result, text, options, {&report.ground_truth, &report.calibration});
+}
+
+int run_euroc_import(const Output& output, const ImportOptions& options) {
+  nlohmann::json result = {{"format", "euroc"}, {"sources", options.sources}, {"out", options.out}};
+  if (options.sources.size() != 1) return report_failure(output, result, "euroc import takes one dataset folder (SRC) at a time");
+  io::EurocImportConfig config;
+  config.import_images = !options.no_images;
+  io::EurocImportReport report;
+  const int code = write_log(output, result, options, [&](io::SensorLogWriter& writer) -> Status {
+    HANZO_ASSIGN_OR_RETURN(report, io::import_euroc(options.sources[0], writer, config));
+    return writer.add_metadata({"import", {{"importer", "euroc"}, {"source", options.sources[0]}}});
+  });
+  if (code != 0) return code;
+  std::string text = fmt::format("{}:\n", options.sources[0]);
+  nlohmann::json streams = nlohmann::json::array();
+  for (const io::EurocStreamReport& stream : report.streams) {
+    streams.push_back({{"topic", stream.topic}, {"messages", stream.messages}, {"rejected", stream.rejected},
+                       {"first_rejection", stream.first_rejection}});
+    text += fmt::format("  {}: {} messages", stream.topic, stream.messages);
+    text += stream.rejected == 0 ? "\n" : fmt::format(", {} rejected (first: {})\n", stream.rejected, stream.first_rejection);
+  }
+  result["topics"] = streams;
+  result["ground_truth_source"] = report.ground_truth_path;
+  return write_dataset_outputs(output, result, text, options, {&report.ground_truth, &report.calibration});
+}
+
+int run_tum_rgbd_import(const Output& output, const ImportOptions& options) {
+  nlohmann::json result = {{"format", "tum-rgbd"}, {"sources", options.sources}, {"out", options.out}};
+  if (options.sources.size() != 1) return report_failure(output, result, "tum-rgbd import takes one sequence folder (SRC) at a time");
+  io::TumRgbdImportConfig config;
+  io::TumRgbdImportReport report;
+  const int code = write_log(output, result, options, [&](io::SensorLogWriter& writer) -> Status {
+    HANZO_ASSIGN_OR_RETURN(report, io::import_tum_rgbd(options.sources[0], writer, config));
+    return writer.add_metadata({"import", {{"importer", "tum-rgbd"}, {"source", options.sources[0]}}});
+  });
+  if (code != 0) return code;
+  result["rgb_images"] = report.rgb_images;
+  result["depth_images"] = report.depth_images;
+  result["rejected"] = report.rejected;
+  result["first_rejection"] = report.first_rejection;
+  result["camera_model"] = report.camera_model;
+  std::string text = fmt::format("{}: {} colour images -> {}, {} depth images -> {}; intrinsics: {}\n", options.sources[0],
+                                 report.rgb_images, config.rgb_topic, report.depth_images, config.depth_topic,
+                                 report.camera_model.empty() ? "none (folder name names no freiburg Kinect)" : report.camera_model);
+  if (report.rejected > 0) text += fmt::format("  {} rejected (first: {})\n", report.rejected, report.first_rejection);
+  return write_dataset_outputs(output, result, text, options, {&report.ground_truth, &report.calibration});
+}
+
 int run_import(const Output& output, const ImportOptions& options) {
   if (options.format == "rosbag") return run_rosbag_import(output, options);
   if (options.format == "carmen") return run_carmen_import(output, options);
+  if (options.format == "kitti") return run_kitti_import(output, options);
+  if (options.format == "euroc") return run_euroc_import(output, options);
+  if (options.format == "tum-rgbd") return run_tum_rgbd_import(output, options);
   nlohmann::json result = {{"format", options.format}, {"sources", options.sources}, {"out", options.out}};
   if (options.format != "csv") {
-    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, carmen)", options.format));
+    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, carmen, kitti, euroc, tum-rgbd)", options.format));
   }
   auto stems = topic_map(options.topic_overrides, "FILE_STEM=/topic");
   if (!stems) return report_failure(output, result, stems.error().message);
@@ -204,8 +312,8 @@ int run_import(const Output& output, const ImportOptions& options) {
 void add_import_command(CLI::App& app, const Output& output, Command& run) {
   auto options = std::make_shared<ImportOptions>();
   CLI::App* command = app.add_subcommand("import", "Convert recordings into a sensor log (MCAP)");
-  command->add_option("FORMAT", options->format, "Input format: csv, rosbag or carmen")->required();
-  command->add_option("SRC", options->sources, "Input files")->required();
+  command->add_option("FORMAT", options->format, "Input format: csv, rosbag, carmen, kitti, euroc or tum-rgbd")->required();
+  command->add_option("SRC", options->sources, "Input files (kitti, euroc, tum-rgbd: the sequence folder)")->required();
   command->add_option("--out", options->out, "Sensor log to write (.mcap)")->required();
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
   command->add_flag("--no-foxglove", options->no_foxglove,
@@ -215,7 +323,12 @@ void add_import_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--wheel-separation", options->wheel_separation,
                       "rosbag, carmen: wheel separation (m) to import odometry as differential-drive wheel odometry");
   command->add_flag("--use-record-time", options->use_record_time, "rosbag: bag record time instead of header.stamp");
-  command->add_option("--ground-truth", options->ground_truth, "carmen: write the scans' poses to this TUM file");
+  command->add_option("--ground-truth", options->ground_truth,
+                      "carmen, kitti, euroc, tum-rgbd: write the reference trajectory (carmen: the scans' poses) as TUM");
+  command->add_option("--calibration", options->calibration, "kitti, euroc, tum-rgbd: write the sensors' calibration YAML");
+  command->add_flag("--no-images", options->no_images, "kitti, euroc: leave the camera images out");
+  command->add_option("--poses", options->poses, "kitti: poses file (default SEQUENCE/../../poses/NN.txt when present)");
+  command->add_option("--time-origin", options->time_origin, "kitti: Unix time (s) of times.txt's zero")->capture_default_str();
   command->callback([&output, &run, options] { run = [&output, options] { return run_import(output, *options); }; });
 }
 
