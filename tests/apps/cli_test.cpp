@@ -216,6 +216,43 @@ TEST(Cli, ImportCsvThenLogInfoAndExportRoundTrip) {
   std::filesystem::remove_all(dir);
 }
 
+TEST(Cli, ImportKittiWritesLogGroundTruthAndCalibration) {
+  const std::filesystem::path root = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_kitti_{}", ::getpid());
+  const std::filesystem::path sequence = root / "sequences" / "03";
+  std::filesystem::create_directories(sequence / "velodyne");
+  std::filesystem::create_directories(root / "poses");
+  std::ofstream(sequence / "times.txt") << "0.0\n0.1\n";
+  std::ofstream(sequence / "calib.txt") << "P0: 700 0 600 0 0 700 180 0 0 0 1 0\nTr: 0 -1 0 0 0 0 -1 0 1 0 0 0\n";
+  std::ofstream(root / "poses" / "03.txt") << "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1 1.5\n";
+  for (int i = 0; i < 2; ++i) {
+    const float point[4] = {5.0F, 0.0F, 0.0F, 0.5F};
+    std::ofstream(sequence / "velodyne" / fmt::format("{:06d}.bin", i), std::ios::binary).write(reinterpret_cast<const char*>(point), 16);
+  }
+  const std::string log = (root / "kitti.mcap").string();
+  const CliRun imported = run(fmt::format("import kitti {} --out {} --ground-truth {}/gt.tum --calibration {}/calib.yaml --json",
+                                          sequence.string(), log, root.string(), root.string()));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+  const nlohmann::json json = nlohmann::json::parse(imported.out);
+  EXPECT_EQ(json["scans"], 2);
+  EXPECT_EQ(json["points"], 2);
+  std::ifstream ground_truth(root / "gt.tum");
+  std::string line, last;
+  while (std::getline(ground_truth, line)) last = line;
+  // 1.5 m along the camera's z axis is 1.5 m forward (x) in the LiDAR frame.
+  EXPECT_EQ(last, "1000000000.1 1.5 0.0 0.0 0.0 0.0 0.0 1.0");
+  std::ifstream calibration(root / "calib.yaml");
+  const std::string yaml((std::istreambuf_iterator<char>(calibration)), std::istreambuf_iterator<char>());
+  EXPECT_THAT(yaml, HasSubstr("lidar_to_body"));
+  const CliRun info = run(fmt::format("log info {} --json", log));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_EQ(nlohmann::json::parse(info.out)["channels"].size(), 2u);  // /lidar and /lidar/foxglove
+
+  const CliRun missing = run(fmt::format("import kitti {} --out {}", (root / "nowhere").string(), log));
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_THAT(missing.err, HasSubstr("nowhere: not a directory (expected a KITTI sequence folder)"));
+  std::filesystem::remove_all(root);
+}
+
 TEST(Cli, ImportRejectsBadCsvAndLeavesNoLog) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_bad_{}", ::getpid());
   std::filesystem::create_directories(dir);
