@@ -44,14 +44,14 @@ Result<std::string> compress(Compression compression, int level, std::string_vie
 }
 
 Result<std::string> decompress(std::string_view compression, std::string_view input, uint64_t uncompressed_size) {
-  std::string output;
-  output.resize(uncompressed_size);
   if (compression.empty()) {
     if (input.size() != uncompressed_size) {
       return Error(fmt::format("uncompressed chunk holds {} bytes, its header says {}", input.size(), uncompressed_size));
     }
     return std::string(input);
   }
+  std::string output;
+  output.resize(uncompressed_size);
   if (compression == "zstd") {
     const std::size_t n = ZSTD_decompress(output.data(), output.size(), input.data(), input.size());
     if (ZSTD_isError(n)) return Error(fmt::format("zstd decompression failed: {}", ZSTD_getErrorName(n)));

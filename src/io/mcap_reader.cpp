@@ -85,17 +85,19 @@ std::optional<ChunkHeader> parse_chunk(std::string_view content) {
   return r.ok() ? std::optional<ChunkHeader>(chunk) : std::nullopt;
 }
 
+Status check_chunk_crc(const ChunkHeader& chunk, std::string_view records, uint64_t offset, bool validate_crc) {
+  if (!validate_crc || chunk.uncompressed_crc == 0) return ok_status();
+  const uint32_t crc = format::crc32_of(records);
+  if (crc == chunk.uncompressed_crc) return ok_status();
+  return Error(fmt::format("chunk at byte {}: CRC mismatch (stored {:#010x}, computed {:#010x}): the file is corrupted", offset,
+                           chunk.uncompressed_crc, crc));
+}
+
 // Decompresses a chunk record's content, checking its CRC; `offset` names it in errors.
 Result<std::string> chunk_records(const ChunkHeader& chunk, uint64_t offset, bool validate_crc) {
   auto records = decompress(chunk.compression, chunk.compressed, chunk.uncompressed_size);
   if (!records) return Error(fmt::format("chunk at byte {}: {}", offset, records.error().message));
-  if (validate_crc && chunk.uncompressed_crc != 0) {
-    const uint32_t crc = format::crc32_of(*records);
-    if (crc != chunk.uncompressed_crc) {
-      return Error(fmt::format("chunk at byte {}: CRC mismatch (stored {:#010x}, computed {:#010x}): the file is corrupted",
-                               offset, chunk.uncompressed_crc, crc));
-    }
-  }
+  HANZO_RETURN_IF_ERROR(check_chunk_crc(chunk, *records, offset, validate_crc));
   return records;
 }
 
@@ -442,7 +444,8 @@ const Channel* McapReader::channel_by_topic(const std::string& topic) const {
 
 struct MessageIterator::State {
   struct Loaded {
-    std::string records;
+    std::string storage;       // the bytes read (uncompressed chunk, bare block) or decompressed
+    std::string_view records;  // the records, inside storage
   };
   struct Pending {
     uint64_t log_time;
@@ -476,10 +479,25 @@ struct MessageIterator::State {
       std::optional<ChunkHeader> chunk;
       if (record && record->opcode == format::kChunk) chunk = parse_chunk(record->content);
       if (!chunk) return Error(fmt::format("{}: no valid Chunk record at byte {}", reader->path_, block.offset));
-      HANZO_ASSIGN_OR_RETURN(loaded->records,
-                             with_context(chunk_records(*chunk, block.offset, reader->config_.validate_crcs), reader->path_));
+      if (chunk->compression.empty()) {
+        // Uncompressed: the records are read in place, without a copy.
+        if (chunk->compressed.size() != chunk->uncompressed_size) {
+          return Error(fmt::format("{}: chunk at byte {}: uncompressed chunk holds {} bytes, its header says {}", reader->path_,
+                                   block.offset, chunk->compressed.size(), chunk->uncompressed_size));
+        }
+        HANZO_RETURN_IF_ERROR(with_context(check_chunk_crc(*chunk, chunk->compressed, block.offset, reader->config_.validate_crcs),
+                                           reader->path_));
+        const std::size_t begin = static_cast<std::size_t>(chunk->compressed.data() - bytes.data());
+        loaded->storage = std::move(bytes);
+        loaded->records = std::string_view(loaded->storage).substr(begin, chunk->uncompressed_size);
+      } else {
+        HANZO_ASSIGN_OR_RETURN(loaded->storage,
+                               with_context(chunk_records(*chunk, block.offset, reader->config_.validate_crcs), reader->path_));
+        loaded->records = loaded->storage;
+      }
     } else {
-      loaded->records = std::move(bytes);
+      loaded->storage = std::move(bytes);
+      loaded->records = loaded->storage;
     }
     ByteReader r(loaded->records);
     while (r.remaining() > 0) {
