@@ -97,32 +97,29 @@ std::size_t write_log(const std::string& path, io::mcap::Compression compression
 
 io::mcap::Compression compression_of(int64_t index) { return static_cast<io::mcap::Compression>(index); }
 
-void BM_SensorLogWrite(benchmark::State& state) {
-  const auto compression = compression_of(state.range(0));
-  const std::string path = log_path(fmt::format("write_{}", state.range(0)));
+// Writes the workload `state` times and reports file size and throughput.
+void measure_write(benchmark::State& state, io::mcap::Compression compression, bool foxglove_mirror, const std::string& label) {
+  const std::string path = log_path(fmt::format("write_{}_{}", static_cast<int>(compression), foxglove_mirror));
   workload();
   std::size_t messages = 0;
-  for (auto _ : state) messages += write_log(path, compression);
+  for (auto _ : state) messages += write_log(path, compression, foxglove_mirror);
   const auto bytes = std::filesystem::file_size(path);
   state.SetBytesProcessed(static_cast<int64_t>(bytes) * state.iterations());
   state.SetItemsProcessed(static_cast<int64_t>(messages));
-  state.SetLabel(compression == io::mcap::Compression::kNone ? "none" : io::mcap::compression_name(compression));
+  state.SetLabel(label);
   state.counters["file_MB"] = static_cast<double>(bytes) / 1e6;
   std::filesystem::remove(path);
 }
 
+void BM_SensorLogWrite(benchmark::State& state) {
+  const auto compression = compression_of(state.range(0));
+  measure_write(state, compression, false,
+                compression == io::mcap::Compression::kNone ? "none" : io::mcap::compression_name(compression));
+}
+
 // The default import setting: every scan also written as foxglove.PointCloud (zstd).
 void BM_SensorLogWriteFoxgloveMirror(benchmark::State& state) {
-  const std::string path = log_path("write_mirror");
-  workload();
-  std::size_t messages = 0;
-  for (auto _ : state) messages += write_log(path, io::mcap::Compression::kZstd, true);
-  const auto bytes = std::filesystem::file_size(path);
-  state.SetBytesProcessed(static_cast<int64_t>(bytes) * state.iterations());
-  state.SetItemsProcessed(static_cast<int64_t>(messages));
-  state.SetLabel("zstd + foxglove mirror");
-  state.counters["file_MB"] = static_cast<double>(bytes) / 1e6;
-  std::filesystem::remove(path);
+  measure_write(state, io::mcap::Compression::kZstd, true, "zstd + foxglove mirror");
 }
 
 // The container alone: pre-serialized payloads through McapWriter (chunking, compression, CRCs,
