@@ -96,6 +96,9 @@ std::size_t write_log(const std::string& path, io::mcap::Compression compression
 }
 
 io::mcap::Compression compression_of(int64_t index) { return static_cast<io::mcap::Compression>(index); }
+std::string compression_label(io::mcap::Compression compression) {
+  return compression == io::mcap::Compression::kNone ? "none" : io::mcap::compression_name(compression);
+}
 
 // Writes the workload `state` times and reports file size and throughput.
 void measure_write(benchmark::State& state, io::mcap::Compression compression, bool foxglove_mirror, const std::string& label) {
@@ -113,8 +116,7 @@ void measure_write(benchmark::State& state, io::mcap::Compression compression, b
 
 void BM_SensorLogWrite(benchmark::State& state) {
   const auto compression = compression_of(state.range(0));
-  measure_write(state, compression, false,
-                compression == io::mcap::Compression::kNone ? "none" : io::mcap::compression_name(compression));
+  measure_write(state, compression, false, compression_label(compression));
 }
 
 // The default import setting: every scan also written as foxglove.PointCloud (zstd).
@@ -142,7 +144,7 @@ void BM_McapWriteSerialized(benchmark::State& state) {
   const auto bytes = std::filesystem::file_size(path);
   state.SetBytesProcessed(static_cast<int64_t>(bytes) * state.iterations());
   state.SetItemsProcessed(static_cast<int64_t>(payloads.size()) * state.iterations());
-  state.SetLabel(compression == io::mcap::Compression::kNone ? "none" : io::mcap::compression_name(compression));
+  state.SetLabel(compression_label(compression));
   state.counters["file_MB"] = static_cast<double>(bytes) / 1e6;
   std::filesystem::remove(path);
 }
@@ -164,7 +166,7 @@ void BM_McapRead(benchmark::State& state) {
   }
   state.SetBytesProcessed(static_cast<int64_t>(std::filesystem::file_size(path)) * state.iterations());
   state.SetItemsProcessed(static_cast<int64_t>(messages));
-  state.SetLabel(compression == io::mcap::Compression::kNone ? "none" : io::mcap::compression_name(compression));
+  state.SetLabel(compression_label(compression));
   std::filesystem::remove(path);
 }
 
@@ -181,7 +183,7 @@ void BM_SensorLogReadDecoded(benchmark::State& state) {
   }
   state.SetBytesProcessed(static_cast<int64_t>(std::filesystem::file_size(path)) * state.iterations());
   state.SetItemsProcessed(static_cast<int64_t>(messages));
-  state.SetLabel(compression == io::mcap::Compression::kNone ? "none" : io::mcap::compression_name(compression));
+  state.SetLabel(compression_label(compression));
   std::filesystem::remove(path);
 }
 
