@@ -86,6 +86,18 @@ std::vector<std::pair<std::string, YamlValue>> YamlValue::entries() const {
   return result;
 }
 
+std::vector<YamlValue> YamlValue::elements() const {
+  std::vector<YamlValue> result;
+  if (!node_.IsSequence()) return result;
+  for (std::size_t i = 0; i < node_.size(); ++i) {
+    const YAML::Node item = node_[i];
+    result.push_back(YamlValue(item, source_, fmt::format("{}[{}]", path_, i), item.Mark().line >= 0 ? item.Mark().line + 1 : line_));
+  }
+  return result;
+}
+
+bool YamlValue::is_sequence() const { return node_.IsSequence(); }
+
 Error YamlValue::error(std::string_view what) const {
   return Error{fmt::format("{}:{}: {}: {}", *source_, line_, path_.empty() ? "(document)" : path_, what), path_};
 }

@@ -34,6 +34,9 @@ class YamlValue {
   YamlValue operator[](std::string_view key) const;
   /// The entries of a map in file order (empty when not a map).
   std::vector<std::pair<std::string, YamlValue>> entries() const;
+  /// The items of a sequence, their paths "key[0]", "key[1]", ... (empty when not a sequence).
+  std::vector<YamlValue> elements() const;
+  bool is_sequence() const;
 
   /// Key path, e.g. "lidar_to_body.rotation" ("" for the root).
   const std::string& path() const { return path_; }

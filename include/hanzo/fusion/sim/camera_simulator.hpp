@@ -1,0 +1,98 @@
+#pragma once
+// CameraSimulator: global-shutter camera images rendered by ray casting the textured World.
+//
+// Frames: the camera frame is the optical frame (x right, y down, z forward) at T_body_camera
+// on the body. Pixel (u, v) (OpenCV convention: integer coordinates are pixel centres) looks
+// along the ray that the camera's distortion model maps onto it: the inverse of
+// radtan (k1, k2, p1, p2[, k3]; OpenCV plumb_bob) or equidistant (k1..k4; OpenCV fisheye), so
+// projecting a world point with the message's intrinsics and distortion (e.g. cv::projectPoints)
+// lands where the renderer drew it.
+//
+// Shading: texture colour * (ambient + diffuse * max(0, n . sun_direction)), a vertical sky
+// gradient where a ray hits nothing, Gaussian pixel noise (std in 8-bit grey levels), then
+// quantized to mono8 (Rec. 709 luminance) or rgb8. supersampling s renders s x s rays per pixel
+// and averages them (anti-aliased edges for sub-pixel corner detection).
+//
+// Faults inside an episode's [start, end]:
+//   darkness      radiance * brightness (e.g. 0.05), pixel noise * noise_scale (gain noise)
+//   glare         a saturating bloom: + strength * exp(-d^2 / (2 radius^2)) around `center`
+//                 (pixels), as the sun in view does
+//   motion_blur   the exposure lasts exposure_time seconds centred on the stamp: the image is
+//                 the mean of blur_samples renders along the motion
+
+#include <cstdint>
+#include <optional>
+#include <random>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
+#include "hanzo/fusion/sim/spline_trajectory.hpp"
+#include "hanzo/fusion/sim/world.hpp"
+
+namespace hanzo::fusion::sim {
+
+enum class CameraFaultType { kDarkness, kGlare, kMotionBlur };
+std::string_view to_string(CameraFaultType type);  // "darkness", "glare", "motion_blur"
+std::optional<CameraFaultType> camera_fault_type_from_string(std::string_view name);
+
+struct CameraFaultEpisode {
+  CameraFaultType type = CameraFaultType::kDarkness;
+  Timestamp start;
+  Timestamp end;
+  double brightness = 0.05;                         ///< darkness: radiance gain, (0, 1]
+  double noise_scale = 3.0;                         ///< darkness: pixel noise multiplier
+  Eigen::Vector2d center{320.0, 120.0};             ///< glare: pixels
+  double radius = 120.0;                            ///< glare: pixels
+  double strength = 1.5;                            ///< glare: added radiance at the centre
+  double exposure_time = 0.04;                      ///< motion blur: seconds
+  int blur_samples = 6;                             ///< motion blur: renders averaged
+};
+
+struct CameraSimulatorConfig {
+  double rate_hz = 20.0;
+  msgs::CameraIntrinsics intrinsics{400.0, 400.0, 319.5, 239.5, 640, 480};
+  msgs::DistortionModel distortion;  ///< none, radtan or equidistant
+  msgs::ImageEncoding encoding = msgs::ImageEncoding::kMono8;  ///< mono8 or rgb8
+  SE3 T_body_camera;
+  int supersampling = 1;                                ///< rays per pixel along each axis, 1..4
+  double pixel_noise = 2.0;                             ///< grey levels (of 255), standard deviation
+  Eigen::Vector3d sun_direction{0.3, 0.2, 0.93};        ///< world, towards the sun (normalized when used)
+  double ambient = 0.45;
+  double diffuse = 0.55;
+  double max_distance = 200.0;                          ///< metres: farther surfaces are sky
+  std::vector<CameraFaultEpisode> faults;
+  std::string frame_id = "camera";
+  uint64_t seed = 6;
+};
+
+class CameraSimulator {
+ public:
+  /// Fails on intrinsics without a size, an unsupported encoding, or distortion coefficients
+  /// of the wrong count. world and trajectory must outlive the simulator.
+  static Result<CameraSimulator> create(CameraSimulatorConfig config, const World& world, const SplineTrajectory& trajectory);
+
+  /// The image exposed at `time`; call in increasing time order.
+  msgs::ImageMessage measure(Timestamp time);
+  /// The unit ray (camera frame) of image position (u, v) in pixels, after undistortion.
+  Eigen::Vector3d pixel_ray(double u, double v) const;
+
+ private:
+  CameraSimulator(CameraSimulatorConfig config, const World& world, const SplineTrajectory& trajectory);
+  /// Linear RGB radiance of every pixel (supersamples averaged) seen from the pose at time.
+  void render(Timestamp time, std::vector<Eigen::Vector3f>& radiance) const;
+
+  CameraSimulatorConfig config_;
+  const World* world_;
+  const SplineTrajectory* trajectory_;
+  std::vector<Eigen::Vector3f> rays_;  // unit, camera frame, (width * s) x (height * s), row-major
+  Eigen::Vector3d sun_direction_;
+  std::mt19937_64 random_;
+};
+
+}  // namespace hanzo::fusion::sim

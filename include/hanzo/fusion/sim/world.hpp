@@ -1,0 +1,110 @@
+#pragma once
+// World: the simulated scene every ray-casting sensor (LiDAR, camera, radar) looks at.
+//
+// Frames and units: world ENU, metres, radians; times are absolute Timestamps. The scene is
+// a ground plane z = ground_height plus static upright boxes (walls, shelves, buildings,
+// parked cars: rotated about the vertical only), vertical cylinders (pillars, trees, poles)
+// and boxes that walk along a path (people, carts). Each surface carries a Material: its
+// procedural texture (what cameras see), LiDAR reflectivity and radar cross section.
+//
+// Surface coordinates (u, v) in metres, which textures are functions of: ground (x, y);
+// box faces: the face's two in-plane box axes measured from the box's lower corner (x faces:
+// (y, z); y faces: (x, z); z faces: (x, y)); cylinder side: (arc length from the +x axis,
+// height above the base); cylinder top: (x, y) relative to the axis.
+//
+// Ray casting uses a bounding volume hierarchy over the static objects (median split, leaves
+// of up to 4 objects), so a cast costs O(log objects); moving boxes are tested one by one.
+// A World is immutable after construction and safe to cast from several threads.
+
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/sim/texture.hpp"
+
+namespace hanzo::fusion::sim {
+
+struct Material {
+  Texture texture;
+  double reflectivity = 0.5;         ///< LiDAR intensity of a face-on, white-textured surface, [0, 1]
+  double radar_cross_section = 0.0;  ///< dBsm of the object as one radar target
+};
+
+/// An upright box: centre, half extents along its own axes, yaw about the world z axis.
+struct Box {
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  Eigen::Vector3d half_size{0.5, 0.5, 0.5};  ///< metres, each > 0
+  double yaw = 0.0;                          ///< radians
+  Material material;
+};
+
+/// A vertical cylinder standing on base_center.
+struct Cylinder {
+  Eigen::Vector3d base_center = Eigen::Vector3d::Zero();
+  double radius = 0.1;  ///< metres, > 0
+  double height = 1.0;  ///< metres, > 0
+  Material material;
+};
+
+/// A box walking a polyline back and forth at constant speed, starting at path[0] at
+/// start_time (before it, it stands there). Its yaw follows the walking direction. The box's
+/// `center` is ignored; its centre is (path point, ground_height + half_size.z).
+struct MovingBox {
+  Box box;
+  std::vector<Eigen::Vector2d> path;  ///< >= 2 points, world x, y
+  double speed = 1.2;                 ///< m/s, > 0
+  Timestamp start_time;
+
+  /// Centre and velocity (world) at `time`, for a box standing on the ground at ground_height.
+  Eigen::Vector3d center_at(Timestamp time, double ground_height) const;
+  Eigen::Vector3d velocity_at(Timestamp time) const;
+  double yaw_at(Timestamp time) const;
+};
+
+struct WorldDescription {
+  bool has_ground = true;
+  double ground_height = 0.0;
+  Material ground;
+  std::vector<Box> boxes;
+  std::vector<Cylinder> cylinders;
+  std::vector<MovingBox> moving_boxes;
+};
+
+/// What a ray hit.
+struct RayHit {
+  double distance = 0.0;                             ///< along the (unit) ray direction, metres
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();   ///< world
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ(); ///< outward unit surface normal, world
+  Eigen::Vector2d surface_uv = Eigen::Vector2d::Zero();
+  const Material* material = nullptr;
+  /// -1 the ground, then boxes [0, B), cylinders [B, B + C), moving boxes [B + C, ...).
+  int object_id = -1;
+  Eigen::Vector3d object_velocity = Eigen::Vector3d::Zero();  ///< world m/s (moving boxes)
+};
+
+class World {
+ public:
+  explicit World(WorldDescription description);
+  ~World();
+  World(World&&) noexcept;
+  World& operator=(World&&) noexcept;
+
+  /// The nearest surface along origin + s * direction for s in (0, max_distance], seen at
+  /// `time` (which places the moving boxes). direction must be a unit vector. Surfaces are hit
+  /// from outside only: a ray starting inside a box does not see that box.
+  std::optional<RayHit> cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance,
+                             Timestamp time) const;
+
+  const WorldDescription& description() const { return description_; }
+  int object_count() const;
+
+ private:
+  struct Bvh;
+  WorldDescription description_;
+  std::unique_ptr<Bvh> bvh_;
+};
+
+}  // namespace hanzo::fusion::sim

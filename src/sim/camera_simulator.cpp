@@ -1,0 +1,207 @@
+#include "hanzo/fusion/sim/camera_simulator.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Dense>
+#include <fmt/format.h>
+
+#include "hanzo/fusion/core/enum_names.hpp"
+
+namespace hanzo::fusion::sim {
+namespace {
+
+constexpr EnumNames<CameraFaultType, 3> kFaultNames{{{CameraFaultType::kDarkness, "darkness"},
+                                                     {CameraFaultType::kGlare, "glare"},
+                                                     {CameraFaultType::kMotionBlur, "motion_blur"}}};
+
+// Inverse of the distortion model on normalized image coordinates (z = 1 plane) by Newton's
+// method from `guess` (a neighbouring pixel's solution converges in one or two steps):
+//   radtan (OpenCV plumb_bob): x_d = x r + 2 p1 x y + p2 (r2 + 2 x^2), y_d = y r + p1 (r2 + 2 y^2)
+//     + 2 p2 x y, r = 1 + k1 r2 + k2 r2^2 + k3 r2^3, solved in 2D with the analytic Jacobian;
+//   equidistant (OpenCV fisheye): theta_d = theta (1 + k1 theta^2 + ... + k4 theta^8) with
+//     theta = atan(|p|), |p_d| = theta_d, solved in 1D for theta.
+Eigen::Vector2d undistort(const msgs::DistortionModel& model, const Eigen::Vector2d& distorted, const Eigen::Vector2d& guess) {
+  const std::vector<double>& k = model.coefficients;
+  switch (model.type) {
+    case msgs::DistortionType::kNone: return distorted;
+    case msgs::DistortionType::kRadtan: {
+      const double k3 = k.size() > 4 ? k[4] : 0.0, p1 = k[2], p2 = k[3];
+      Eigen::Vector2d p = guess;
+      for (int iteration = 0; iteration < 20; ++iteration) {
+        const double x = p.x(), y = p.y(), r2 = x * x + y * y;
+        const double radial = 1.0 + r2 * (k[0] + r2 * (k[1] + r2 * k3));
+        const double radial_dr2 = k[0] + r2 * (2.0 * k[1] + 3.0 * r2 * k3);
+        const Eigen::Vector2d residual(x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - distorted.x(),
+                                       y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - distorted.y());
+        Eigen::Matrix2d jacobian;
+        jacobian << radial + 2.0 * x * x * radial_dr2 + 2.0 * p1 * y + 6.0 * p2 * x, 2.0 * x * y * radial_dr2 + 2.0 * p1 * x + 2.0 * p2 * y,
+            2.0 * x * y * radial_dr2 + 2.0 * p1 * x + 2.0 * p2 * y, radial + 2.0 * y * y * radial_dr2 + 6.0 * p1 * y + 2.0 * p2 * x;
+        const Eigen::Vector2d step = jacobian.inverse() * residual;
+        p -= step;
+        if (step.squaredNorm() < 1e-28) break;
+      }
+      return p;
+    }
+    case msgs::DistortionType::kEquidistant: {
+      const double theta_d = distorted.norm();
+      if (theta_d < 1e-15) return distorted;
+      double theta = std::atan(guess.norm());
+      for (int iteration = 0; iteration < 20; ++iteration) {
+        const double t2 = theta * theta;
+        const double value = theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3])))) - theta_d;
+        const double slope = 1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + t2 * 9.0 * k[3])));
+        const double step = value / slope;
+        theta -= step;
+        if (std::abs(step) < 1e-15) break;
+      }
+      return distorted * (std::tan(theta) / theta_d);
+    }
+  }
+  return distorted;
+}
+
+Eigen::Vector3f sky_color(const Eigen::Vector3d& direction_world) {
+  const float up = static_cast<float>(std::clamp(direction_world.z(), 0.0, 1.0));
+  return Eigen::Vector3f(0.78F, 0.82F, 0.86F) * (1.0F - up) + Eigen::Vector3f(0.35F, 0.5F, 0.8F) * up;
+}
+
+}  // namespace
+
+std::string_view to_string(CameraFaultType type) { return enum_name(kFaultNames, type); }
+std::optional<CameraFaultType> camera_fault_type_from_string(std::string_view name) { return enum_from_name(kFaultNames, name); }
+
+Result<CameraSimulator> CameraSimulator::create(CameraSimulatorConfig config, const World& world, const SplineTrajectory& trajectory) {
+  const msgs::CameraIntrinsics& k = config.intrinsics;
+  if (k.width == 0 || k.height == 0) return Error{"camera intrinsics: width and height are required", "intrinsics"};
+  if (!(k.fx > 0.0) || !(k.fy > 0.0)) return Error{fmt::format("camera intrinsics: fx, fy must be > 0, got {}, {}", k.fx, k.fy), "intrinsics"};
+  if (config.encoding != msgs::ImageEncoding::kMono8 && config.encoding != msgs::ImageEncoding::kRgb8) {
+    return Error{fmt::format("camera encoding: expected mono8 or rgb8, got {}", msgs::to_string(config.encoding)), "encoding"};
+  }
+  const std::size_t coefficients = config.distortion.coefficients.size();
+  const bool counts_ok = config.distortion.type == msgs::DistortionType::kNone      ? coefficients == 0
+                         : config.distortion.type == msgs::DistortionType::kRadtan ? (coefficients == 4 || coefficients == 5)
+                                                                                    : coefficients == 4;
+  if (!counts_ok) {
+    return Error{fmt::format("camera distortion {}: wrong number of coefficients ({})", msgs::to_string(config.distortion.type), coefficients),
+                 "distortion"};
+  }
+  if (config.supersampling < 1 || config.supersampling > 4) {
+    return Error{fmt::format("camera supersampling: expected 1..4, got {}", config.supersampling), "supersampling"};
+  }
+  return CameraSimulator(std::move(config), world, trajectory);
+}
+
+CameraSimulator::CameraSimulator(CameraSimulatorConfig config, const World& world, const SplineTrajectory& trajectory)
+    : config_(std::move(config)), world_(&world), trajectory_(&trajectory), sun_direction_(config_.sun_direction.normalized()),
+      random_(config_.seed) {
+  const int s = config_.supersampling;
+  const auto width = static_cast<int>(config_.intrinsics.width), height = static_cast<int>(config_.intrinsics.height);
+  const msgs::CameraIntrinsics& k = config_.intrinsics;
+  rays_.resize(static_cast<std::size_t>(width * s) * static_cast<std::size_t>(height * s));
+  for (int row = 0; row < height * s; ++row) {
+    Eigen::Vector2d previous = Eigen::Vector2d::Zero();
+    for (int column = 0; column < width * s; ++column) {
+      // Sub-sample centres spread evenly over the pixel [u - 0.5, u + 0.5].
+      const double u = (column + 0.5) / s - 0.5, v = (row + 0.5) / s - 0.5;
+      const Eigen::Vector2d distorted((u - k.cx) / k.fx, (v - k.cy) / k.fy);
+      previous = undistort(config_.distortion, distorted, column == 0 ? distorted : previous);
+      rays_[static_cast<std::size_t>(row) * width * s + column] = Eigen::Vector3d(previous.x(), previous.y(), 1.0).normalized().cast<float>();
+    }
+  }
+}
+
+Eigen::Vector3d CameraSimulator::pixel_ray(double u, double v) const {
+  const msgs::CameraIntrinsics& k = config_.intrinsics;
+  const Eigen::Vector2d distorted((u - k.cx) / k.fx, (v - k.cy) / k.fy);
+  const Eigen::Vector2d normalized = undistort(config_.distortion, distorted, distorted);
+  return Eigen::Vector3d(normalized.x(), normalized.y(), 1.0).normalized();
+}
+
+void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radiance) const {
+  const SE3 T_world_camera = trajectory_->sample(time).T_world_body * config_.T_body_camera;
+  const Eigen::Matrix3d R_world_camera = T_world_camera.rotation().matrix();
+  const Eigen::Vector3d& origin = T_world_camera.translation();
+  const int s = config_.supersampling;
+  const auto width = static_cast<int>(config_.intrinsics.width), height = static_cast<int>(config_.intrinsics.height);
+  const float weight = 1.0F / static_cast<float>(s * s);
+  radiance.assign(static_cast<std::size_t>(width) * height, Eigen::Vector3f::Zero());
+  for (int row = 0; row < height * s; ++row) {
+    for (int column = 0; column < width * s; ++column) {
+      const Eigen::Vector3d direction = R_world_camera * rays_[static_cast<std::size_t>(row) * width * s + column].cast<double>();
+      const std::optional<RayHit> hit = world_->cast(origin, direction, config_.max_distance, time);
+      Eigen::Vector3f color;
+      if (hit) {
+        const double light = config_.ambient + config_.diffuse * std::max(0.0, hit->normal.dot(sun_direction_));
+        color = hit->material->texture.color(hit->surface_uv.x(), hit->surface_uv.y()) * static_cast<float>(light);
+      } else {
+        color = sky_color(direction);
+      }
+      radiance[static_cast<std::size_t>(row / s) * width + column / s] += weight * color;
+    }
+  }
+}
+
+msgs::ImageMessage CameraSimulator::measure(Timestamp time) {
+  const auto width = static_cast<int>(config_.intrinsics.width), height = static_cast<int>(config_.intrinsics.height);
+  double brightness = 1.0, noise = config_.pixel_noise;
+  const CameraFaultEpisode* glare = nullptr;
+  const CameraFaultEpisode* blur = nullptr;
+  for (const CameraFaultEpisode& fault : config_.faults) {
+    if (time < fault.start || time > fault.end) continue;
+    switch (fault.type) {
+      case CameraFaultType::kDarkness:
+        brightness *= fault.brightness;
+        noise *= fault.noise_scale;
+        break;
+      case CameraFaultType::kGlare: glare = &fault; break;
+      case CameraFaultType::kMotionBlur: blur = &fault; break;
+    }
+  }
+
+  std::vector<Eigen::Vector3f> radiance;
+  if (blur != nullptr && blur->blur_samples > 1) {
+    std::vector<Eigen::Vector3f> sub_frame;
+    radiance.assign(static_cast<std::size_t>(width) * height, Eigen::Vector3f::Zero());
+    for (int i = 0; i < blur->blur_samples; ++i) {
+      const double offset = blur->exposure_time * (static_cast<double>(i) / (blur->blur_samples - 1) - 0.5);
+      render(time + Duration::from_seconds(offset), sub_frame);
+      for (std::size_t p = 0; p < radiance.size(); ++p) radiance[p] += sub_frame[p] / static_cast<float>(blur->blur_samples);
+    }
+  } else {
+    render(time, radiance);
+  }
+
+  msgs::ImageMessage image;
+  image.timestamp = time;
+  image.frame_id = config_.frame_id;
+  image.width = config_.intrinsics.width;
+  image.height = config_.intrinsics.height;
+  image.encoding = config_.encoding;
+  image.intrinsics = config_.intrinsics;
+  if (config_.distortion.type != msgs::DistortionType::kNone) image.distortion = config_.distortion;
+  const bool rgb = config_.encoding == msgs::ImageEncoding::kRgb8;
+  image.data.resize(radiance.size() * (rgb ? 3 : 1));
+  std::normal_distribution<float> normal(0.0F, 1.0F);
+  auto quantize = [&](float value) {
+    return static_cast<uint8_t>(std::clamp(std::lround(value * 255.0F + static_cast<float>(noise) * normal(random_)), 0L, 255L));
+  };
+  for (int row = 0; row < height; ++row) {
+    for (int column = 0; column < width; ++column) {
+      const std::size_t p = static_cast<std::size_t>(row) * width + column;
+      Eigen::Vector3f color = radiance[p] * static_cast<float>(brightness);
+      if (glare != nullptr) {
+        const double d2 = (Eigen::Vector2d(column, row) - glare->center).squaredNorm();
+        color.array() += static_cast<float>(glare->strength * std::exp(-d2 / (2.0 * glare->radius * glare->radius)));
+      }
+      if (rgb) {
+        for (int channel = 0; channel < 3; ++channel) image.data[3 * p + channel] = quantize(color[channel]);
+      } else {
+        image.data[p] = quantize(luminance(color));
+      }
+    }
+  }
+  return image;
+}
+
+}  // namespace hanzo::fusion::sim

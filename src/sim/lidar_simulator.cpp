@@ -1,0 +1,116 @@
+#include "hanzo/fusion/sim/lidar_simulator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "hanzo/fusion/core/enum_names.hpp"
+
+namespace hanzo::fusion::sim {
+namespace {
+
+constexpr EnumNames<LidarModel, 3> kLidarModelNames{{{LidarModel::kVelodyneVlp16, "velodyne_vlp16"},
+                                                     {LidarModel::kVelodyneHdl64, "velodyne_hdl64"},
+                                                     {LidarModel::kOusterOs1_64, "ouster_os1_64"}}};
+
+constexpr double kDegree = std::numbers::pi / 180.0;
+constexpr float kPhantomIntensity = 0.02F;
+
+}  // namespace
+
+std::string_view to_string(LidarModel model) { return enum_name(kLidarModelNames, model); }
+std::optional<LidarModel> lidar_model_from_string(std::string_view name) { return enum_from_name(kLidarModelNames, name); }
+
+LidarPattern LidarPattern::preset(LidarModel model) {
+  LidarPattern pattern;
+  switch (model) {
+    case LidarModel::kVelodyneVlp16:
+      for (int ring = 0; ring < 16; ++ring) pattern.elevations.push_back((-15.0 + 2.0 * ring) * kDegree);
+      pattern.columns = 1800;
+      pattern.min_range = 0.5;
+      pattern.max_range = 100.0;
+      break;
+    case LidarModel::kVelodyneHdl64:
+      for (int i = 31; i >= 0; --i) pattern.elevations.push_back((-8.83 - 0.5 * i) * kDegree);      // lower block
+      for (int i = 31; i >= 0; --i) pattern.elevations.push_back((2.0 - i / 3.0) * kDegree);        // upper block
+      pattern.columns = 2083;
+      pattern.min_range = 0.9;
+      pattern.max_range = 120.0;
+      break;
+    case LidarModel::kOusterOs1_64:
+      for (int ring = 0; ring < 64; ++ring) pattern.elevations.push_back((-22.5 + 45.0 * ring / 63.0) * kDegree);
+      pattern.columns = 1024;
+      pattern.min_range = 0.3;
+      pattern.max_range = 120.0;
+      break;
+  }
+  return pattern;
+}
+
+LidarSimulator::LidarSimulator(LidarSimulatorConfig config, const World& world, const SplineTrajectory& trajectory)
+    : config_(std::move(config)), world_(world), trajectory_(trajectory), random_(config_.seed) {
+  for (double elevation : config_.pattern.elevations) {
+    ring_directions_.emplace_back(std::cos(elevation), 0.0, std::sin(elevation));
+  }
+}
+
+const LidarWeatherEpisode* LidarSimulator::weather_at(Timestamp time) const {
+  for (const LidarWeatherEpisode& episode : config_.weather) {
+    if (time >= episode.start && time <= episode.end) return &episode;
+  }
+  return nullptr;
+}
+
+msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
+  const LidarPattern& pattern = config_.pattern;
+  const int rings = static_cast<int>(ring_directions_.size());
+  msgs::PointCloudMessage cloud;
+  cloud.timestamp = sweep_start;
+  cloud.frame_id = config_.frame_id;
+  const std::size_t capacity = static_cast<std::size_t>(pattern.columns) * static_cast<std::size_t>(rings);
+  cloud.points.reserve(capacity);
+  cloud.intensities.reserve(capacity);
+  cloud.ring_ids.reserve(capacity);
+  cloud.point_timestamps.reserve(capacity);
+
+  std::normal_distribution<double> normal(0.0, 1.0);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  const double period = 1.0 / config_.rate_hz;
+  const LidarWeatherEpisode* weather = weather_at(sweep_start);
+  const double max_range = weather != nullptr ? std::min(pattern.max_range, weather->visibility_range) : pattern.max_range;
+
+  for (int column = 0; column < pattern.columns; ++column) {
+    const Timestamp time = sweep_start + Duration::from_seconds(period * column / pattern.columns);
+    const SE3 T_world_lidar = trajectory_.sample(time).T_world_body * config_.T_body_lidar;
+    const double azimuth = std::numbers::pi - 2.0 * std::numbers::pi * column / pattern.columns;
+    const double cos_azimuth = std::cos(azimuth), sin_azimuth = std::sin(azimuth);
+    for (int ring = 0; ring < rings; ++ring) {
+      const Eigen::Vector3d& beam = ring_directions_[ring];
+      const Eigen::Vector3d direction_lidar(beam.x() * cos_azimuth, beam.x() * sin_azimuth, beam.z());
+      const Eigen::Vector3d direction_world = T_world_lidar.rotation() * direction_lidar;
+      double range = 0.0;
+      float intensity = 0.0F;
+      if (weather != nullptr && uniform(random_) < weather->phantom_probability) {
+        range = pattern.min_range + uniform(random_) * (weather->phantom_max_range - pattern.min_range);
+        intensity = kPhantomIntensity;
+      } else {
+        const std::optional<RayHit> hit = world_.cast(T_world_lidar.translation(), direction_world, max_range, time);
+        if (!hit) continue;
+        if (weather != nullptr && uniform(random_) < weather->dropout_probability) continue;
+        const RayHit& h = *hit;
+        range = h.distance + normal(random_) * config_.range_noise;
+        const double incidence = std::abs(h.normal.dot(direction_world));
+        const float shade = 0.5F + 0.5F * luminance(h.material->texture.color(h.surface_uv.x(), h.surface_uv.y()));
+        intensity = std::clamp(static_cast<float>(h.material->reflectivity * incidence) * shade, 0.0F, 1.0F);
+      }
+      if (range < pattern.min_range || range > pattern.max_range) continue;
+      cloud.points.push_back((direction_lidar * range).cast<float>());
+      cloud.intensities.push_back(intensity);
+      cloud.ring_ids.push_back(static_cast<uint32_t>(ring));
+      cloud.point_timestamps.push_back(time);
+    }
+  }
+  return cloud;
+}
+
+}  // namespace hanzo::fusion::sim
