@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 
 #include "commands.hpp"
+#include "log_writing.hpp"
 #include "hanzo/fusion/io/carmen_import.hpp"
 #include "hanzo/fusion/io/csv_import.hpp"
 #include "hanzo/fusion/io/euroc_import.hpp"
@@ -57,29 +58,7 @@ Result<std::map<std::string, std::string>> topic_map(const std::vector<std::stri
   return map;
 }
 
-// Opens LOG.partial, lets `fill` write it, and moves it into place only when complete.
-int write_log(const Output& output, nlohmann::json& result, const ImportOptions& options,
-              const std::function<Status(io::SensorLogWriter&)>& fill) {
-  auto compression = io::mcap::compression_from_name(options.compression);
-  if (!compression) return report_failure(output, result, compression.error().message);
-  io::SensorLogWriterConfig config;
-  config.mcap.compression = *compression;
-  config.foxglove_channels = !options.no_foxglove;
-  const std::string temporary = options.out + ".partial";
-  auto writer = io::SensorLogWriter::open(temporary, config);
-  if (!writer) return report_failure(output, result, writer.error().message);
-  Status status = fill(**writer);
-  if (status) status = (*writer)->close();
-  if (!status) {
-    (void)(*writer)->close();  // the partial file is removed anyway
-    std::filesystem::remove(temporary);
-    return report_failure(output, result, status.error().message);
-  }
-  std::error_code ec;
-  std::filesystem::rename(temporary, options.out, ec);
-  if (ec) return report_failure(output, result, fmt::format("{}: cannot move into place ({})", options.out, ec.message()));
-  return 0;
-}
+LogWriteOptions log_options(const ImportOptions& options) { return {options.out, options.compression, !options.no_foxglove}; }
 
 int run_rosbag_import(const Output& output, const ImportOptions& options) {
   nlohmann::json result = {{"format", "rosbag"}, {"sources", options.sources}, {"out", options.out}};
@@ -91,7 +70,7 @@ int run_rosbag_import(const Output& output, const ImportOptions& options) {
   if (options.wheel_separation > 0.0) config.wheel_separation = options.wheel_separation;
   config.use_record_time = options.use_record_time;
   io::RosbagImportReport report;
-  const int code = write_log(output, result, options, [&](io::SensorLogWriter& writer) -> Status {
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
     HANZO_ASSIGN_OR_RETURN(report, io::import_rosbag(options.sources[0], writer, config));
     return writer.add_metadata({"import", {{"importer", "rosbag"}, {"source", options.sources[0]}}});
   });
@@ -124,7 +103,7 @@ int run_carmen_import(const Output& output, const ImportOptions& options) {
   io::CarmenImportConfig config;
   config.wheel_separation = options.wheel_separation;
   io::CarmenImportReport report;
-  const int code = write_log(output, result, options, [&](io::SensorLogWriter& writer) -> Status {
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
     HANZO_ASSIGN_OR_RETURN(report, io::import_carmen(options.sources[0], writer, config));
     return writer.add_metadata({"import", {{"importer", "carmen"}, {"source", options.sources[0]}}});
   });
@@ -186,7 +165,7 @@ int run_kitti_import(const Output& output, const ImportOptions& options) {
   config.poses_path = options.poses;
   config.time_origin = options.time_origin;
   io::KittiImportReport report;
-  const int code = write_log(output, result, options, [&](io::SensorLogWriter& writer) -> Status {
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
     HANZO_ASSIGN_OR_RETURN(report, io::import_kitti(options.sources[0], writer, config));
     return writer.add_metadata({"import", {{"importer", "kitti"}, {"source", options.sources[0]}}});
   });
@@ -208,7 +187,7 @@ int run_euroc_import(const Output& output, const ImportOptions& options) {
   io::EurocImportConfig config;
   config.import_images = !options.no_images;
   io::EurocImportReport report;
-  const int code = write_log(output, result, options, [&](io::SensorLogWriter& writer) -> Status {
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
     HANZO_ASSIGN_OR_RETURN(report, io::import_euroc(options.sources[0], writer, config));
     return writer.add_metadata({"import", {{"importer", "euroc"}, {"source", options.sources[0]}}});
   });
@@ -231,7 +210,7 @@ int run_tum_rgbd_import(const Output& output, const ImportOptions& options) {
   if (options.sources.size() != 1) return report_failure(output, result, "tum-rgbd import takes one sequence folder (SRC) at a time");
   io::TumRgbdImportConfig config;
   io::TumRgbdImportReport report;
-  const int code = write_log(output, result, options, [&](io::SensorLogWriter& writer) -> Status {
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
     HANZO_ASSIGN_OR_RETURN(report, io::import_tum_rgbd(options.sources[0], writer, config));
     return writer.add_metadata({"import", {{"importer", "tum-rgbd"}, {"source", options.sources[0]}}});
   });
@@ -283,7 +262,7 @@ int run_import(const Output& output, const ImportOptions& options) {
   }
   std::stable_sort(order.begin(), order.end(), [](const Item& a, const Item& b) { return a.time < b.time; });
 
-  const int code = write_log(output, result, options, [&](io::SensorLogWriter& writer) -> Status {
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
     std::map<std::string, std::string> provenance = {{"importer", "csv"}};
     for (std::size_t s = 0; s < sources.size(); ++s) provenance[fmt::format("source_{}", s)] = options.sources[s];
     HANZO_RETURN_IF_ERROR(writer.add_metadata({"import", provenance}));

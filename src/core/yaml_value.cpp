@@ -125,6 +125,13 @@ Result<int64_t> YamlValue::as_int64() const {
   return value;
 }
 
+Result<bool> YamlValue::as_bool() const {
+  if (!present()) return error("missing (expected true or false)");
+  bool value = false;
+  if (!node_.IsScalar() || !YAML::convert<bool>::decode(node_, value)) return error(fmt::format("expected true or false, got {}", describe(node_)));
+  return value;
+}
+
 Result<std::string> YamlValue::as_string() const {
   if (!present()) return error("missing (expected a string)");
   if (!node_.IsScalar()) return error(fmt::format("expected a string, got {}", describe(node_)));

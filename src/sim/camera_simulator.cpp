@@ -125,11 +125,12 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
   const int s = config_.supersampling;
   const auto width = static_cast<int>(config_.intrinsics.width), height = static_cast<int>(config_.intrinsics.height);
   const float weight = 1.0F / static_cast<float>(s * s);
+  const WorldSnapshot snapshot = world_->at(time);
   radiance.assign(static_cast<std::size_t>(width) * height, Eigen::Vector3f::Zero());
   for (int row = 0; row < height * s; ++row) {
     for (int column = 0; column < width * s; ++column) {
       const Eigen::Vector3d direction = R_world_camera * rays_[static_cast<std::size_t>(row) * width * s + column].cast<double>();
-      const std::optional<RayHit> hit = world_->cast(origin, direction, config_.max_distance, time);
+      const std::optional<RayHit> hit = snapshot.cast(origin, direction, config_.max_distance);
       Eigen::Vector3f color;
       if (hit) {
         const double light = config_.ambient + config_.diffuse * std::max(0.0, hit->normal.dot(sun_direction_));

@@ -4,7 +4,6 @@
 
 namespace hanzo::fusion::sim {
 
-ImuSimulator::ImuSimulator(ImuSimulatorConfig config) : config_(std::move(config)), random_(config_.seed) {}
 
 void ImuSimulator::ideal_measurement(const SplineTrajectory& trajectory, Timestamp time, const ImuSimulatorConfig& config,
                                      Eigen::Vector3d& specific_force, Eigen::Vector3d& angular_rate) {
@@ -25,36 +24,46 @@ void ImuSimulator::ideal_measurement(const SplineTrajectory& trajectory, Timesta
   angular_rate = R_imu_body * omega;
 }
 
-std::vector<ImuSample> ImuSimulator::simulate(const SplineTrajectory& trajectory) {
+ImuSimulator::ImuSimulator(ImuSimulatorConfig config)
+    : config_(std::move(config)), random_(config_.seed), accel_bias_(config_.initial_accel_bias), gyro_bias_(config_.initial_gyro_bias) {}
+
+Eigen::Vector3d ImuSimulator::noise(double sigma) {
   std::normal_distribution<double> normal(0.0, 1.0);
-  auto noise = [&](double sigma) {
-    Eigen::Vector3d draw = Eigen::Vector3d::Zero();
-    for (int axis = 0; axis < 3; ++axis) draw[axis] = normal(random_) * sigma;  // drawn x, y, z in order
-    return draw;
-  };
+  Eigen::Vector3d draw = Eigen::Vector3d::Zero();
+  for (int axis = 0; axis < 3; ++axis) draw[axis] = normal(random_) * sigma;  // drawn x, y, z in order
+  return draw;
+}
+
+ImuSample ImuSimulator::measure(const SplineTrajectory& trajectory, Timestamp time) {
+  if (previous_time_ && time > *previous_time_) {
+    const double dt = (time - *previous_time_).seconds();
+    accel_bias_ += noise(config_.accel_bias_random_walk * std::sqrt(dt));
+    gyro_bias_ += noise(config_.gyro_bias_random_walk * std::sqrt(dt));
+  }
+  previous_time_ = time;
+  Eigen::Vector3d specific_force = Eigen::Vector3d::Zero(), angular_rate = Eigen::Vector3d::Zero();
+  ideal_measurement(trajectory, time, config_, specific_force, angular_rate);
+  ImuSample sample;
+  sample.accel_bias = accel_bias_;
+  sample.gyro_bias = gyro_bias_;
+  sample.message.timestamp = time;
+  sample.message.frame_id = config_.frame_id;
+  sample.message.linear_acceleration = specific_force + accel_bias_ + noise(config_.process_noise_accel);
+  sample.message.angular_velocity = angular_rate + gyro_bias_ + noise(config_.process_noise_gyro);
+  const double accel_variance = config_.process_noise_accel * config_.process_noise_accel;
+  const double gyro_variance = config_.process_noise_gyro * config_.process_noise_gyro;
+  if (accel_variance > 0) sample.message.acceleration_covariance = Eigen::Matrix3d::Identity() * accel_variance;
+  if (gyro_variance > 0) sample.message.gyroscope_covariance = Eigen::Matrix3d::Identity() * gyro_variance;
+  return sample;
+}
+
+std::vector<ImuSample> ImuSimulator::simulate(const SplineTrajectory& trajectory) {
   const double dt = 1.0 / config_.rate_hz;
   const auto count = static_cast<std::size_t>(std::floor((trajectory.end_time() - trajectory.start_time()).seconds() * config_.rate_hz)) + 1;
-  Eigen::Vector3d accel_bias = config_.initial_accel_bias, gyro_bias = config_.initial_gyro_bias;
-  const Eigen::Matrix3d accel_covariance = Eigen::Matrix3d::Identity() * config_.process_noise_accel * config_.process_noise_accel;
-  const Eigen::Matrix3d gyro_covariance = Eigen::Matrix3d::Identity() * config_.process_noise_gyro * config_.process_noise_gyro;
   std::vector<ImuSample> samples;
   samples.reserve(count);
   for (std::size_t k = 0; k < count; ++k) {
-    const Timestamp time = trajectory.start_time() + Duration::from_nanoseconds(std::llround(static_cast<double>(k) * dt * 1e9));
-    Eigen::Vector3d specific_force = Eigen::Vector3d::Zero(), angular_rate = Eigen::Vector3d::Zero();
-    ideal_measurement(trajectory, time, config_, specific_force, angular_rate);
-    ImuSample sample;
-    sample.accel_bias = accel_bias;
-    sample.gyro_bias = gyro_bias;
-    sample.message.timestamp = time;
-    sample.message.frame_id = config_.frame_id;
-    sample.message.linear_acceleration = specific_force + accel_bias + noise(config_.process_noise_accel);
-    sample.message.angular_velocity = angular_rate + gyro_bias + noise(config_.process_noise_gyro);
-    if (config_.process_noise_accel > 0) sample.message.acceleration_covariance = accel_covariance;
-    if (config_.process_noise_gyro > 0) sample.message.gyroscope_covariance = gyro_covariance;
-    samples.push_back(std::move(sample));
-    accel_bias += noise(config_.accel_bias_random_walk * std::sqrt(dt));
-    gyro_bias += noise(config_.gyro_bias_random_walk * std::sqrt(dt));
+    samples.push_back(measure(trajectory, trajectory.start_time() + Duration::from_nanoseconds(std::llround(static_cast<double>(k) * dt * 1e9))));
   }
   return samples;
 }

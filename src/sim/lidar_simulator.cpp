@@ -82,6 +82,7 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
   for (int column = 0; column < pattern.columns; ++column) {
     const Timestamp time = sweep_start + Duration::from_seconds(period * column / pattern.columns);
     const SE3 T_world_lidar = trajectory_.sample(time).T_world_body * config_.T_body_lidar;
+    const WorldSnapshot snapshot = world_.at(time);
     const double azimuth = std::numbers::pi - 2.0 * std::numbers::pi * column / pattern.columns;
     const double cos_azimuth = std::cos(azimuth), sin_azimuth = std::sin(azimuth);
     for (int ring = 0; ring < rings; ++ring) {
@@ -94,7 +95,7 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
         range = pattern.min_range + uniform(random_) * (weather->phantom_max_range - pattern.min_range);
         intensity = kPhantomIntensity;
       } else {
-        const std::optional<RayHit> hit = world_.cast(T_world_lidar.translation(), direction_world, max_range, time);
+        const std::optional<RayHit> hit = snapshot.cast(T_world_lidar.translation(), direction_world, max_range);
         if (!hit) continue;
         if (weather != nullptr && uniform(random_) < weather->dropout_probability) continue;
         const RayHit& h = *hit;

@@ -30,6 +30,7 @@ msgs::RadarMessage RadarSimulator::measure(Timestamp time) {
   const Eigen::Vector3d velocity_radar_world =
       body.velocity_world + R_world_body * body.angular_velocity_body.cross(config_.T_body_radar.translation());
 
+  const WorldSnapshot snapshot = world_.at(time);
   // Nearest hit per (object, azimuth cell).
   std::map<std::pair<int, int>, Detection> detections;
   const int columns = std::max(1, static_cast<int>(std::floor(config_.horizontal_fov / config_.azimuth_resolution)) + 1);
@@ -42,7 +43,7 @@ msgs::RadarMessage RadarSimulator::measure(Timestamp time) {
       const Eigen::Vector3d direction_radar(std::cos(elevation) * std::cos(azimuth), std::cos(elevation) * std::sin(azimuth),
                                             std::sin(elevation));
       const Eigen::Vector3d direction_world = T_world_radar.rotation() * direction_radar;
-      const std::optional<RayHit> hit = world_.cast(T_world_radar.translation(), direction_world, config_.max_range, time);
+      const std::optional<RayHit> hit = snapshot.cast(T_world_radar.translation(), direction_world, config_.max_range);
       if (!hit || hit->object_id < 0) continue;
       const auto cell = static_cast<int>(std::floor((azimuth + config_.horizontal_fov / 2.0) / config_.cluster_azimuth));
       auto [entry, inserted] = detections.try_emplace({hit->object_id, cell});

@@ -32,20 +32,20 @@ Aabb bounds_of(const Cylinder& cylinder) {
   return {cylinder.base_center - r, cylinder.base_center + r + Eigen::Vector3d(0.0, 0.0, cylinder.height)};
 }
 
-// Slab test: the ray's parameter interval inside the box, clipped to [0, max_distance].
+// Slab test: the ray's parameter interval inside the box, clipped to [0, max_distance]. A zero
+// direction component gives infinite slab distances (or NaN exactly on a face, which std::max /
+// std::min with the NaN second ignore).
 bool ray_hits_bounds(const Aabb& box, const Eigen::Vector3d& origin, const Eigen::Vector3d& inverse_direction,
                      double max_distance, double* entry) {
   double near = 0.0, far = max_distance;
   for (int axis = 0; axis < 3; ++axis) {
-    double t1 = (box.min[axis] - origin[axis]) * inverse_direction[axis];
-    double t2 = (box.max[axis] - origin[axis]) * inverse_direction[axis];
-    if (t1 > t2) std::swap(t1, t2);
-    near = std::max(near, std::isnan(t1) ? near : t1);
-    far = std::min(far, std::isnan(t2) ? far : t2);
-    if (near > far) return false;
+    const double t1 = (box.min[axis] - origin[axis]) * inverse_direction[axis];
+    const double t2 = (box.max[axis] - origin[axis]) * inverse_direction[axis];
+    near = std::max(near, std::min(t1, t2));
+    far = std::min(far, std::max(t1, t2));
   }
   *entry = near;
-  return true;
+  return near <= far;
 }
 
 // Ray against an upright box with yaw given as (cos, sin); fills hit when nearer than hit->distance.
@@ -182,28 +182,59 @@ struct World::Bvh {
   std::vector<Node> nodes;
   std::vector<Primitive> primitives;
 
+  // Surface area heuristic (MacDonald & Booth 1990): split where
+  // area(left) * count(left) + area(right) * count(right) is least over every centroid order
+  // along x, y and z; stop at one or two objects or when no split beats a leaf. Large objects
+  // (warehouse walls, building rows) then sit near the root instead of inflating every node.
   int build(int begin, int end) {
     Node node;
     for (int i = begin; i < end; ++i) node.bounds.extend(primitives[i].bounds);
     const int index = static_cast<int>(nodes.size());
     nodes.push_back(node);
-    if (end - begin <= 4) {
+    const int count = end - begin;
+    double best_cost = surface_area(node.bounds) * count;  // the cost of a leaf
+    int best_axis = -1, best_split = 0;
+    if (count > 2) {
+      std::vector<double> left_area(count);
+      for (int axis = 0; axis < 3; ++axis) {
+        std::sort(primitives.begin() + begin, primitives.begin() + end, [axis](const Primitive& a, const Primitive& b) {
+          return a.bounds.center()[axis] < b.bounds.center()[axis];
+        });
+        Aabb left;
+        for (int i = 0; i < count; ++i) {
+          left.extend(primitives[begin + i].bounds);
+          left_area[i] = surface_area(left);
+        }
+        Aabb right;
+        for (int i = count - 1; i > 0; --i) {  // split before element i
+          right.extend(primitives[begin + i].bounds);
+          const double cost = left_area[i - 1] * i + surface_area(right) * (count - i) + surface_area(node.bounds);
+          if (cost < best_cost) {
+            best_cost = cost;
+            best_axis = axis;
+            best_split = i;
+          }
+        }
+      }
+    }
+    if (best_axis < 0) {
       nodes[index].first = begin;
-      nodes[index].count = end - begin;
+      nodes[index].count = count;
       return index;
     }
-    Aabb centers;
-    for (int i = begin; i < end; ++i) centers.extend({primitives[i].bounds.center(), primitives[i].bounds.center()});
-    int axis = 0;
-    (centers.max - centers.min).maxCoeff(&axis);
-    const int middle = (begin + end) / 2;
-    std::nth_element(primitives.begin() + begin, primitives.begin() + middle, primitives.begin() + end,
-                     [axis](const Primitive& a, const Primitive& b) { return a.bounds.center()[axis] < b.bounds.center()[axis]; });
-    const int left = build(begin, middle);
-    const int right = build(middle, end);
+    std::sort(primitives.begin() + begin, primitives.begin() + end, [best_axis](const Primitive& a, const Primitive& b) {
+      return a.bounds.center()[best_axis] < b.bounds.center()[best_axis];
+    });
+    const int left = build(begin, begin + best_split);
+    const int right = build(begin + best_split, end);
     nodes[index].left = left;
     nodes[index].right = right;
     return index;
+  }
+
+  static double surface_area(const Aabb& box) {
+    const Eigen::Vector3d size = (box.max - box.min).cwiseMax(0.0);
+    return 2.0 * (size.x() * size.y() + size.y() * size.z() + size.z() * size.x());
   }
 };
 
@@ -227,72 +258,92 @@ int World::object_count() const {
   return static_cast<int>(description_.boxes.size() + description_.cylinders.size() + description_.moving_boxes.size());
 }
 
-std::optional<RayHit> World::cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance,
-                                  Timestamp time) const {
-  RayHit hit;
-  hit.distance = max_distance;
+bool World::cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit* hit) const {
   bool found = false;
   if (description_.has_ground && direction.z() < 0.0 && origin.z() > description_.ground_height) {
     const double t = (description_.ground_height - origin.z()) / direction.z();
-    if (t < hit.distance) {
-      hit.distance = t;
-      hit.normal = Eigen::Vector3d::UnitZ();
-      hit.material = &description_.ground;
-      const Eigen::Vector3d point = origin + t * direction;
-      hit.surface_uv = point.head<2>();
-      hit.object_id = -1;
+    if (t < hit->distance) {
+      hit->distance = t;
+      hit->normal = Eigen::Vector3d::UnitZ();
+      hit->material = &description_.ground;
+      hit->surface_uv = (origin + t * direction).head<2>();
+      hit->object_id = -1;
       found = true;
     }
   }
+  if (bvh_->nodes.empty()) return found;
   const int box_count = static_cast<int>(description_.boxes.size());
-  if (!bvh_->nodes.empty()) {
-    const Eigen::Vector3d inverse_direction = direction.cwiseInverse();
-    std::array<int, 64> stack{};
-    int depth = 0;
-    stack[depth++] = 0;
-    while (depth > 0) {
-      const Bvh::Node& node = bvh_->nodes[stack[--depth]];
-      double entry = 0.0;
-      if (!ray_hits_bounds(node.bounds, origin, inverse_direction, hit.distance, &entry)) continue;
-      if (node.count > 0) {
-        for (int i = node.first; i < node.first + node.count; ++i) {
-          const Bvh::Primitive& primitive = bvh_->primitives[i];
-          const bool hit_this =
-              primitive.object_id < box_count
-                  ? intersect_box(description_.boxes[primitive.object_id], primitive.cos_yaw, primitive.sin_yaw, origin,
-                                  direction, &hit)
-                  : intersect_cylinder(description_.cylinders[primitive.object_id - box_count], origin, direction, &hit);
-          if (hit_this) {
-            hit.object_id = primitive.object_id;
-            found = true;
-          }
+  const Eigen::Vector3d inverse_direction = direction.cwiseInverse();
+  std::array<int, 64> stack;  // not zeroed: only pushed entries are read
+  int depth = 0;
+  stack[depth++] = 0;
+  while (depth > 0) {
+    const Bvh::Node& node = bvh_->nodes[stack[--depth]];
+    double entry = 0.0;
+    if (!ray_hits_bounds(node.bounds, origin, inverse_direction, hit->distance, &entry)) continue;
+    if (node.count > 0) {
+      for (int i = node.first; i < node.first + node.count; ++i) {
+        const Bvh::Primitive& primitive = bvh_->primitives[i];
+        const bool hit_this =
+            primitive.object_id < box_count
+                ? intersect_box(description_.boxes[primitive.object_id], primitive.cos_yaw, primitive.sin_yaw, origin, direction, hit)
+                : intersect_cylinder(description_.cylinders[primitive.object_id - box_count], origin, direction, hit);
+        if (hit_this) {
+          hit->object_id = primitive.object_id;
+          found = true;
         }
-        continue;
       }
-      // Visit the nearer child first (pushed last) so the far one is often culled.
-      double left_entry = 0.0, right_entry = 0.0;
-      const bool left = ray_hits_bounds(bvh_->nodes[node.left].bounds, origin, inverse_direction, hit.distance, &left_entry);
-      const bool right = ray_hits_bounds(bvh_->nodes[node.right].bounds, origin, inverse_direction, hit.distance, &right_entry);
-      if (left && right) {
-        stack[depth++] = left_entry < right_entry ? node.right : node.left;
-        stack[depth++] = left_entry < right_entry ? node.left : node.right;
-      } else if (left) {
-        stack[depth++] = node.left;
-      } else if (right) {
-        stack[depth++] = node.right;
-      }
+      continue;
+    }
+    // Visit the nearer child first (pushed last) so the far one is often culled.
+    double left_entry = 0.0, right_entry = 0.0;
+    const bool left = ray_hits_bounds(bvh_->nodes[node.left].bounds, origin, inverse_direction, hit->distance, &left_entry);
+    const bool right = ray_hits_bounds(bvh_->nodes[node.right].bounds, origin, inverse_direction, hit->distance, &right_entry);
+    if (left && right) {
+      stack[depth++] = left_entry < right_entry ? node.right : node.left;
+      stack[depth++] = left_entry < right_entry ? node.left : node.right;
+    } else if (left) {
+      stack[depth++] = node.left;
+    } else if (right) {
+      stack[depth++] = node.right;
     }
   }
-  const int first_moving = box_count + static_cast<int>(description_.cylinders.size());
-  for (int i = 0; i < static_cast<int>(description_.moving_boxes.size()); ++i) {
-    const MovingBox& moving = description_.moving_boxes[i];
-    Box box = moving.box;
-    box.center = moving.center_at(time, description_.ground_height);
-    box.yaw = moving.yaw_at(time);
-    if (intersect_box(box, std::cos(box.yaw), std::sin(box.yaw), origin, direction, &hit)) {
-      hit.material = &moving.box.material;  // not the local copy's
-      hit.object_id = first_moving + i;
-      hit.object_velocity = moving.velocity_at(time);
+  return found;
+}
+
+WorldSnapshot World::at(Timestamp time) const {
+  WorldSnapshot snapshot;
+  snapshot.world_ = this;
+  for (const MovingBox& moving : description_.moving_boxes) {
+    WorldSnapshot::PlacedBox placed;
+    placed.box = moving.box;
+    placed.box.center = moving.center_at(time, description_.ground_height);
+    placed.box.yaw = moving.yaw_at(time);
+    placed.cos_yaw = std::cos(placed.box.yaw);
+    placed.sin_yaw = std::sin(placed.box.yaw);
+    placed.velocity = moving.velocity_at(time);
+    placed.material = &moving.box.material;
+    snapshot.moving_.push_back(placed);
+  }
+  return snapshot;
+}
+
+std::optional<RayHit> World::cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance,
+                                  Timestamp time) const {
+  return at(time).cast(origin, direction, max_distance);
+}
+
+std::optional<RayHit> WorldSnapshot::cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance) const {
+  RayHit hit;
+  hit.distance = max_distance;
+  bool found = world_->cast_static(origin, direction, &hit);
+  const int first_moving = world_->object_count() - static_cast<int>(moving_.size());
+  for (std::size_t i = 0; i < moving_.size(); ++i) {
+    const PlacedBox& placed = moving_[i];
+    if (intersect_box(placed.box, placed.cos_yaw, placed.sin_yaw, origin, direction, &hit)) {
+      hit.material = placed.material;
+      hit.object_id = first_moving + static_cast<int>(i);
+      hit.object_velocity = placed.velocity;
       found = true;
     }
   }

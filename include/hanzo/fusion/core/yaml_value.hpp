@@ -53,6 +53,8 @@ class YamlValue {
   Result<double> as_double() const;
   Result<int64_t> as_int64() const;
   Result<std::string> as_string() const;
+  /// true/false (also yes/no, on/off as YAML 1.1 spells them).
+  Result<bool> as_bool() const;
   /// A sequence of exactly count numbers; description names them in the error, e.g.
   /// "(w, x, y, z)" gives "expected 4 numbers (w, x, y, z), got 3".
   Result<std::vector<double>> as_doubles(size_t count, std::string_view description) const;

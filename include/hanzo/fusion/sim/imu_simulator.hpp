@@ -12,6 +12,7 @@
 // velocity over +-1 ms). Deterministic for a given seed.
 
 #include <cstdint>
+#include <optional>
 #include <random>
 #include <string>
 
@@ -51,12 +52,20 @@ class ImuSimulator {
   /// The noiseless measurement (specific force, angular rate in the IMU frame) at `time`.
   static void ideal_measurement(const SplineTrajectory& trajectory, Timestamp time, const ImuSimulatorConfig& config,
                                 Eigen::Vector3d& specific_force, Eigen::Vector3d& angular_rate);
+  /// The sample at `time`; call in increasing time order (the biases walk over the time
+  /// since the previous call).
+  ImuSample measure(const SplineTrajectory& trajectory, Timestamp time);
   /// Samples at rate_hz from the trajectory's start to its end, noise and biases drawn in order.
   std::vector<ImuSample> simulate(const SplineTrajectory& trajectory);
 
  private:
+  Eigen::Vector3d noise(double sigma);
+
   ImuSimulatorConfig config_;
   std::mt19937_64 random_;
+  Eigen::Vector3d accel_bias_;
+  Eigen::Vector3d gyro_bias_;
+  std::optional<Timestamp> previous_time_;
 };
 
 }  // namespace hanzo::fusion::sim

@@ -12,8 +12,8 @@
 // (y, z); y faces: (x, z); z faces: (x, y)); cylinder side: (arc length from the +x axis,
 // height above the base); cylinder top: (x, y) relative to the axis.
 //
-// Ray casting uses a bounding volume hierarchy over the static objects (median split, leaves
-// of up to 4 objects), so a cast costs O(log objects); moving boxes are tested one by one.
+// Ray casting uses a bounding volume hierarchy over the static objects (surface area
+// heuristic), so a cast costs O(log objects); moving boxes are tested one by one.
 // A World is immutable after construction and safe to cast from several threads.
 
 #include <memory>
@@ -85,6 +85,28 @@ struct RayHit {
   Eigen::Vector3d object_velocity = Eigen::Vector3d::Zero();  ///< world m/s (moving boxes)
 };
 
+class World;
+
+/// The world with its moving boxes placed at one instant: casting many rays at the same time
+/// (a camera frame, a LiDAR column) through one snapshot places the moving boxes only once.
+/// Valid while its World lives.
+class WorldSnapshot {
+ public:
+  /// As World::cast at the snapshot's time.
+  std::optional<RayHit> cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance) const;
+
+ private:
+  friend class World;
+  struct PlacedBox {
+    Box box;  // centre and yaw at the snapshot time
+    double cos_yaw = 1.0, sin_yaw = 0.0;
+    Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
+    const Material* material = nullptr;
+  };
+  const World* world_ = nullptr;
+  std::vector<PlacedBox> moving_;
+};
+
 class World {
  public:
   explicit World(WorldDescription description);
@@ -97,12 +119,18 @@ class World {
   /// from outside only: a ray starting inside a box does not see that box.
   std::optional<RayHit> cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance,
                              Timestamp time) const;
+  /// The moving boxes placed at `time`, for many casts at that instant.
+  WorldSnapshot at(Timestamp time) const;
 
   const WorldDescription& description() const { return description_; }
   int object_count() const;
 
  private:
+  friend class WorldSnapshot;
   struct Bvh;
+  /// The nearest static surface (ground, boxes, cylinders) nearer than hit->distance.
+  bool cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit* hit) const;
+
   WorldDescription description_;
   std::unique_ptr<Bvh> bvh_;
 };

@@ -1,0 +1,32 @@
+#include "log_writing.hpp"
+
+#include <filesystem>
+
+#include <fmt/format.h>
+
+namespace hanzo::fusion::app {
+
+int write_log(const Output& output, nlohmann::json& result, const LogWriteOptions& options,
+              const std::function<Status(io::SensorLogWriter&)>& fill) {
+  auto compression = io::mcap::compression_from_name(options.compression);
+  if (!compression) return report_failure(output, result, compression.error().message);
+  io::SensorLogWriterConfig config;
+  config.mcap.compression = *compression;
+  config.foxglove_channels = options.foxglove_channels;
+  const std::string temporary = options.path + ".partial";
+  auto writer = io::SensorLogWriter::open(temporary, config);
+  if (!writer) return report_failure(output, result, writer.error().message);
+  Status status = fill(**writer);
+  if (status) status = (*writer)->close();
+  if (!status) {
+    (void)(*writer)->close();  // the partial file is removed anyway
+    std::filesystem::remove(temporary);
+    return report_failure(output, result, status.error().message);
+  }
+  std::error_code ec;
+  std::filesystem::rename(temporary, options.path, ec);
+  if (ec) return report_failure(output, result, fmt::format("{}: cannot move into place ({})", options.path, ec.message()));
+  return 0;
+}
+
+}  // namespace hanzo::fusion::app

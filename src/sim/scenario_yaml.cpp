@@ -1,0 +1,646 @@
+// The scenario YAML loader (layout in scenario.hpp and docs/simulator.md).
+
+#include <cmath>
+#include <numbers>
+
+#include <fmt/format.h>
+
+#include "hanzo/fusion/core/files.hpp"
+#include "hanzo/fusion/core/yaml_value.hpp"
+#include "hanzo/fusion/sim/city_generator.hpp"
+#include "hanzo/fusion/sim/scenario.hpp"
+
+namespace hanzo::fusion::sim {
+namespace {
+
+constexpr double kDegree = std::numbers::pi / 180.0;
+
+// ---- scalar helpers: absent -> fallback; present -> checked -----------------------------------
+
+Result<double> number_or(const YamlValue& value, double fallback) {
+  if (!value.present()) return fallback;
+  return value.as_double();
+}
+
+Result<double> positive_or(const YamlValue& value, double fallback) {
+  double number = 0.0;
+  HANZO_ASSIGN_OR_RETURN(number, number_or(value, fallback));
+  if (!(number > 0.0)) return value.error(fmt::format("expected a positive number, got {}", number));
+  return number;
+}
+
+Result<double> non_negative_or(const YamlValue& value, double fallback) {
+  double number = 0.0;
+  HANZO_ASSIGN_OR_RETURN(number, number_or(value, fallback));
+  if (!(number >= 0.0)) return value.error(fmt::format("expected a number >= 0, got {}", number));
+  return number;
+}
+
+Result<double> probability_or(const YamlValue& value, double fallback) {
+  double number = 0.0;
+  HANZO_ASSIGN_OR_RETURN(number, number_or(value, fallback));
+  if (!(number >= 0.0 && number <= 1.0)) return value.error(fmt::format("expected a probability in [0, 1], got {}", number));
+  return number;
+}
+
+template <int N>
+Result<Eigen::Matrix<double, N, 1>> vector_or(const YamlValue& value, const Eigen::Matrix<double, N, 1>& fallback,
+                                              std::string_view description) {
+  if (!value.present()) return fallback;
+  std::vector<double> numbers;
+  HANZO_ASSIGN_OR_RETURN(numbers, value.as_doubles(N, description));
+  return Eigen::Matrix<double, N, 1>(numbers.data());
+}
+
+Result<Eigen::Vector3f> color_or(const YamlValue& value, const Eigen::Vector3f& fallback) {
+  Eigen::Vector3d color = Eigen::Vector3d::Zero();
+  HANZO_ASSIGN_OR_RETURN(color, vector_or<3>(value, fallback.cast<double>(), "(r, g, b)"));
+  if ((color.array() < 0.0).any() || (color.array() > 1.0).any()) return value.error("colour components must be in [0, 1]");
+  return Eigen::Vector3f(color.cast<float>());
+}
+
+Result<Timestamp> time_after_start(const YamlValue& value, Timestamp start) {
+  double seconds = 0.0;
+  HANZO_ASSIGN_OR_RETURN(seconds, value.as_double());
+  if (seconds < 0.0) return value.error(fmt::format("expected seconds after the start (>= 0), got {}", seconds));
+  return start + Duration::from_seconds(seconds);
+}
+
+Result<std::vector<Eigen::Vector3d>> points_3d(const YamlValue& value, bool allow_2d) {
+  if (!value.is_sequence()) return value.error("expected a list of points");
+  std::vector<Eigen::Vector3d> points;
+  for (const YamlValue& item : value.elements()) {
+    std::vector<double> numbers;
+    HANZO_ASSIGN_OR_RETURN(numbers, item.as_doubles());
+    if (numbers.size() == 3 || (allow_2d && numbers.size() == 2)) {
+      points.emplace_back(numbers[0], numbers[1], numbers.size() == 3 ? numbers[2] : 0.0);
+    } else {
+      return item.error(fmt::format("expected {} numbers, got {}", allow_2d ? "2 (x, y) or 3 (x, y, z)" : "3 (x, y, z)", numbers.size()));
+    }
+  }
+  return points;
+}
+
+// ---- world -------------------------------------------------------------------------------------
+
+Result<Texture> parse_texture(const YamlValue& value, Texture texture) {
+  if (!value.present()) return texture;
+  HANZO_RETURN_IF_ERROR(value.check_keys({"type", "color_a", "color_b", "scale", "seed"}));
+  if (value["type"].present()) {
+    std::string name;
+    HANZO_ASSIGN_OR_RETURN(name, value["type"].as_string());
+    const std::optional<TextureType> type = texture_type_from_string(name);
+    if (!type) return value["type"].error(fmt::format("unknown texture '{}' (expected uniform, checker, noise or poster)", name));
+    texture.type = *type;
+  }
+  HANZO_ASSIGN_OR_RETURN(texture.color_a, color_or(value["color_a"], texture.color_a));
+  HANZO_ASSIGN_OR_RETURN(texture.color_b, color_or(value["color_b"], texture.color_b));
+  HANZO_ASSIGN_OR_RETURN(texture.scale, positive_or(value["scale"], texture.scale));
+  double seed = 0.0;
+  HANZO_ASSIGN_OR_RETURN(seed, non_negative_or(value["seed"], texture.seed));
+  texture.seed = static_cast<uint32_t>(seed);
+  return texture;
+}
+
+// The material keys every object accepts.
+Status parse_material(const YamlValue& value, Material* material) {
+  HANZO_ASSIGN_OR_RETURN(material->texture, parse_texture(value["texture"], material->texture));
+  HANZO_ASSIGN_OR_RETURN(material->reflectivity, probability_or(value["reflectivity"], material->reflectivity));
+  HANZO_ASSIGN_OR_RETURN(material->radar_cross_section, number_or(value["radar_cross_section"], material->radar_cross_section));
+  return ok_status();
+}
+
+// Objects without a texture get a noise texture with their own pattern.
+Material default_material(uint32_t index) {
+  Material material;
+  material.texture.type = TextureType::kNoise;
+  material.texture.seed = index;
+  material.radar_cross_section = 10.0;
+  return material;
+}
+
+Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* world) {
+  HANZO_RETURN_IF_ERROR(value.check_keys({"ground", "boxes", "cylinders", "walls", "people", "city"}));
+  const YamlValue ground = value["ground"];
+  world->ground.texture.type = TextureType::kNoise;
+  world->ground.texture.scale = 1.0;
+  world->ground.reflectivity = 0.3;
+  if (ground.present()) {
+    HANZO_RETURN_IF_ERROR(ground.check_keys({"enabled", "height", "texture", "reflectivity", "radar_cross_section"}));
+    if (ground["enabled"].present()) HANZO_ASSIGN_OR_RETURN(world->has_ground, ground["enabled"].as_bool());
+    HANZO_ASSIGN_OR_RETURN(world->ground_height, number_or(ground["height"], 0.0));
+    HANZO_RETURN_IF_ERROR(parse_material(ground, &world->ground));
+  }
+  uint32_t object_index = 1;
+  for (const YamlValue& item : value["boxes"].elements()) {
+    HANZO_RETURN_IF_ERROR(item.check_keys({"center", "size", "yaw_deg", "texture", "reflectivity", "radar_cross_section"}));
+    Box box;
+    box.material = default_material(object_index++);
+    HANZO_ASSIGN_OR_RETURN(box.center, vector_or<3>(item["center"], Eigen::Vector3d::Zero(), "(x, y, z)"));
+    Eigen::Vector3d size = Eigen::Vector3d::Ones();
+    HANZO_ASSIGN_OR_RETURN(size, vector_or<3>(item["size"], size, "(x, y, z)"));
+    if ((size.array() <= 0.0).any()) return item["size"].error("sizes must be > 0");
+    box.half_size = size / 2.0;
+    double yaw = 0.0;
+    HANZO_ASSIGN_OR_RETURN(yaw, number_or(item["yaw_deg"], 0.0));
+    box.yaw = yaw * kDegree;
+    HANZO_RETURN_IF_ERROR(parse_material(item, &box.material));
+    world->boxes.push_back(box);
+  }
+  for (const YamlValue& item : value["walls"].elements()) {
+    HANZO_RETURN_IF_ERROR(item.check_keys({"from", "to", "height", "thickness", "texture", "reflectivity", "radar_cross_section"}));
+    Eigen::Vector2d from = Eigen::Vector2d::Zero(), to = Eigen::Vector2d::Zero();
+    HANZO_ASSIGN_OR_RETURN(from, vector_or<2>(item["from"], from, "(x, y)"));
+    HANZO_ASSIGN_OR_RETURN(to, vector_or<2>(item["to"], to, "(x, y)"));
+    if ((to - from).norm() < 1e-6) return item["to"].error("a wall needs two different end points");
+    double height = 3.0, thickness = 0.2;
+    HANZO_ASSIGN_OR_RETURN(height, positive_or(item["height"], height));
+    HANZO_ASSIGN_OR_RETURN(thickness, positive_or(item["thickness"], thickness));
+    Box wall;
+    wall.material = default_material(object_index++);
+    const Eigen::Vector2d middle = 0.5 * (from + to);
+    wall.center = {middle.x(), middle.y(), world->ground_height + height / 2.0};
+    wall.half_size = {0.5 * (to - from).norm(), thickness / 2.0, height / 2.0};
+    wall.yaw = std::atan2(to.y() - from.y(), to.x() - from.x());
+    HANZO_RETURN_IF_ERROR(parse_material(item, &wall.material));
+    world->boxes.push_back(wall);
+  }
+  for (const YamlValue& item : value["cylinders"].elements()) {
+    HANZO_RETURN_IF_ERROR(item.check_keys({"base", "radius", "height", "texture", "reflectivity", "radar_cross_section"}));
+    Cylinder cylinder;
+    cylinder.material = default_material(object_index++);
+    HANZO_ASSIGN_OR_RETURN(cylinder.base_center, vector_or<3>(item["base"], Eigen::Vector3d::Zero(), "(x, y, z)"));
+    HANZO_ASSIGN_OR_RETURN(cylinder.radius, positive_or(item["radius"], 0.2));
+    HANZO_ASSIGN_OR_RETURN(cylinder.height, positive_or(item["height"], 3.0));
+    HANZO_RETURN_IF_ERROR(parse_material(item, &cylinder.material));
+    world->cylinders.push_back(cylinder);
+  }
+  for (const YamlValue& item : value["people"].elements()) {
+    HANZO_RETURN_IF_ERROR(item.check_keys({"path", "speed", "start", "size", "texture", "reflectivity", "radar_cross_section"}));
+    MovingBox person;
+    person.box.material = default_material(object_index++);
+    person.box.material.radar_cross_section = 0.0;  // a person: about 1 m^2
+    std::vector<Eigen::Vector3d> path;
+    HANZO_ASSIGN_OR_RETURN(path, points_3d(item["path"], true));
+    if (path.size() < 2) return item["path"].error("a walking path needs at least 2 points");
+    for (const Eigen::Vector3d& point : path) person.path.push_back(point.head<2>());
+    HANZO_ASSIGN_OR_RETURN(person.speed, positive_or(item["speed"], 1.2));
+    person.start_time = start;
+    if (item["start"].present()) HANZO_ASSIGN_OR_RETURN(person.start_time, time_after_start(item["start"], start));
+    Eigen::Vector3d size(0.5, 0.4, 1.75);
+    HANZO_ASSIGN_OR_RETURN(size, vector_or<3>(item["size"], size, "(x, y, z)"));
+    if ((size.array() <= 0.0).any()) return item["size"].error("sizes must be > 0");
+    person.box.half_size = size / 2.0;
+    HANZO_RETURN_IF_ERROR(parse_material(item, &person.box.material));
+    world->moving_boxes.push_back(person);
+  }
+  const YamlValue city = value["city"];
+  if (city.present()) {
+    HANZO_RETURN_IF_ERROR(city.check_keys({"origin", "blocks", "block_size", "street_width", "building_height", "pole_spacing",
+                                           "parked_cars", "seed"}));
+    CityConfig config;
+    HANZO_ASSIGN_OR_RETURN(config.origin, vector_or<2>(city["origin"], config.origin, "(x, y)"));
+    Eigen::Vector2d blocks(config.blocks_x, config.blocks_y);
+    HANZO_ASSIGN_OR_RETURN(blocks, vector_or<2>(city["blocks"], blocks, "(x, y)"));
+    if (blocks.x() < 1 || blocks.y() < 1 || blocks.x() > 50 || blocks.y() > 50) return city["blocks"].error("expected 1..50 blocks per direction");
+    config.blocks_x = static_cast<int>(blocks.x());
+    config.blocks_y = static_cast<int>(blocks.y());
+    HANZO_ASSIGN_OR_RETURN(config.block_size, positive_or(city["block_size"], config.block_size));
+    HANZO_ASSIGN_OR_RETURN(config.street_width, positive_or(city["street_width"], config.street_width));
+    HANZO_ASSIGN_OR_RETURN(config.building_height, vector_or<2>(city["building_height"], config.building_height, "(min, max)"));
+    HANZO_ASSIGN_OR_RETURN(config.pole_spacing, non_negative_or(city["pole_spacing"], config.pole_spacing));
+    HANZO_ASSIGN_OR_RETURN(config.parked_car_probability, probability_or(city["parked_cars"], config.parked_car_probability));
+    double seed = 0.0;
+    HANZO_ASSIGN_OR_RETURN(seed, non_negative_or(city["seed"], config.seed));
+    config.seed = static_cast<uint32_t>(seed);
+    add_city(config, world);
+  }
+  return ok_status();
+}
+
+// ---- trajectory --------------------------------------------------------------------------------
+
+Status parse_ground_path(const YamlValue& value, GroundPathConfig* path) {
+  HANZO_ASSIGN_OR_RETURN(path->waypoints, points_3d(value["waypoints"], true));
+  if (value["closed"].present()) HANZO_ASSIGN_OR_RETURN(path->closed, value["closed"].as_bool());
+  double laps = path->laps;
+  HANZO_ASSIGN_OR_RETURN(laps, positive_or(value["laps"], laps));
+  path->laps = static_cast<int>(laps);
+  HANZO_ASSIGN_OR_RETURN(path->corner_radius, positive_or(value["corner_radius"], path->corner_radius));
+  HANZO_ASSIGN_OR_RETURN(path->max_speed, positive_or(value["max_speed"], path->max_speed));
+  HANZO_ASSIGN_OR_RETURN(path->max_acceleration, positive_or(value["max_acceleration"], path->max_acceleration));
+  HANZO_ASSIGN_OR_RETURN(path->max_lateral_acceleration, positive_or(value["max_lateral_acceleration"], path->max_lateral_acceleration));
+  HANZO_ASSIGN_OR_RETURN(path->still_start, non_negative_or(value["still_start"], path->still_start));
+  HANZO_ASSIGN_OR_RETURN(path->still_end, non_negative_or(value["still_end"], path->still_end));
+  HANZO_ASSIGN_OR_RETURN(path->knot_spacing, positive_or(value["knot_spacing"], path->knot_spacing));
+  return ok_status();
+}
+
+Status parse_trajectory(const YamlValue& value, Scenario* scenario) {
+  std::string type;
+  HANZO_ASSIGN_OR_RETURN(type, value["type"].as_string());
+  if (type == "ground_vehicle") {
+    scenario->trajectory_type = TrajectoryType::kGroundVehicle;
+    HANZO_RETURN_IF_ERROR(value.check_keys({"type", "waypoints", "closed", "laps", "corner_radius", "max_speed", "max_acceleration",
+                                            "max_lateral_acceleration", "still_start", "still_end", "knot_spacing"}));
+    return parse_ground_path(value, &scenario->ground_path);
+  }
+  if (type == "handheld") {
+    scenario->trajectory_type = TrajectoryType::kHandheld;
+    HANZO_RETURN_IF_ERROR(value.check_keys({"type", "waypoints", "closed", "laps", "corner_radius", "max_speed", "max_acceleration",
+                                            "max_lateral_acceleration", "still_start", "still_end", "knot_spacing", "bob_amplitude",
+                                            "step_frequency", "look_yaw_amplitude", "look_pitch_amplitude", "look_period"}));
+    HandheldTrajectoryConfig& handheld = scenario->handheld;
+    handheld.walk.max_speed = 1.2;
+    handheld.walk.corner_radius = 1.0;
+    HANZO_RETURN_IF_ERROR(parse_ground_path(value, &handheld.walk));
+    HANZO_ASSIGN_OR_RETURN(handheld.bob_amplitude, non_negative_or(value["bob_amplitude"], handheld.bob_amplitude));
+    HANZO_ASSIGN_OR_RETURN(handheld.step_frequency, non_negative_or(value["step_frequency"], handheld.step_frequency));
+    HANZO_ASSIGN_OR_RETURN(handheld.look_yaw_amplitude, non_negative_or(value["look_yaw_amplitude"], handheld.look_yaw_amplitude));
+    HANZO_ASSIGN_OR_RETURN(handheld.look_pitch_amplitude, non_negative_or(value["look_pitch_amplitude"], handheld.look_pitch_amplitude));
+    HANZO_ASSIGN_OR_RETURN(handheld.look_period, positive_or(value["look_period"], handheld.look_period));
+    return ok_status();
+  }
+  if (type == "drone") {
+    scenario->trajectory_type = TrajectoryType::kDrone;
+    HANZO_RETURN_IF_ERROR(value.check_keys({"type", "center", "size", "period", "duration", "still_start", "ramp_time",
+                                            "yaw_amplitude", "yaw_period", "knot_spacing"}));
+    DroneTrajectoryConfig& drone = scenario->drone;
+    HANZO_ASSIGN_OR_RETURN(drone.center, vector_or<3>(value["center"], drone.center, "(x, y, z)"));
+    HANZO_ASSIGN_OR_RETURN(drone.size, vector_or<3>(value["size"], drone.size, "(x, y, z)"));
+    HANZO_ASSIGN_OR_RETURN(drone.period, positive_or(value["period"], drone.period));
+    HANZO_ASSIGN_OR_RETURN(drone.duration, positive_or(value["duration"], drone.duration));
+    HANZO_ASSIGN_OR_RETURN(drone.still_start, non_negative_or(value["still_start"], drone.still_start));
+    HANZO_ASSIGN_OR_RETURN(drone.ramp_time, positive_or(value["ramp_time"], drone.ramp_time));
+    HANZO_ASSIGN_OR_RETURN(drone.yaw_amplitude, non_negative_or(value["yaw_amplitude"], drone.yaw_amplitude));
+    HANZO_ASSIGN_OR_RETURN(drone.yaw_period, positive_or(value["yaw_period"], drone.yaw_period));
+    HANZO_ASSIGN_OR_RETURN(drone.knot_spacing, positive_or(value["knot_spacing"], drone.knot_spacing));
+    return ok_status();
+  }
+  return value["type"].error(fmt::format("unknown trajectory type '{}' (expected ground_vehicle, drone or handheld)", type));
+}
+
+// ---- sensors -----------------------------------------------------------------------------------
+
+Result<SE3> parse_to_body(const YamlValue& value) {
+  if (!value.present()) return SE3();
+  HANZO_RETURN_IF_ERROR(value.check_keys({"translation", "rotation"}));
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+  Eigen::Vector4d rotation(1.0, 0.0, 0.0, 0.0);
+  HANZO_ASSIGN_OR_RETURN(translation, vector_or<3>(value["translation"], translation, "(x, y, z)"));
+  HANZO_ASSIGN_OR_RETURN(rotation, vector_or<4>(value["rotation"], rotation, "(w, x, y, z)"));
+  if (std::abs(rotation.norm() - 1.0) > 1e-3) return value["rotation"].error(fmt::format("not a unit quaternion (norm {})", rotation.norm()));
+  return SE3(SO3::from_wxyz(rotation.normalized()), translation);
+}
+
+Result<ImuSimulatorConfig> parse_imu(const YamlValue& value, double rate) {
+  HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "process_noise_accel", "process_noise_gyro",
+                                          "accel_bias_random_walk", "gyro_bias_random_walk", "initial_accel_bias",
+                                          "initial_gyro_bias", "gravity"}));
+  ImuSimulatorConfig config;
+  config.rate_hz = rate;
+  HANZO_ASSIGN_OR_RETURN(config.process_noise_accel, non_negative_or(value["process_noise_accel"], config.process_noise_accel));
+  HANZO_ASSIGN_OR_RETURN(config.process_noise_gyro, non_negative_or(value["process_noise_gyro"], config.process_noise_gyro));
+  HANZO_ASSIGN_OR_RETURN(config.accel_bias_random_walk, non_negative_or(value["accel_bias_random_walk"], config.accel_bias_random_walk));
+  HANZO_ASSIGN_OR_RETURN(config.gyro_bias_random_walk, non_negative_or(value["gyro_bias_random_walk"], config.gyro_bias_random_walk));
+  HANZO_ASSIGN_OR_RETURN(config.initial_accel_bias, vector_or<3>(value["initial_accel_bias"], config.initial_accel_bias, "(x, y, z)"));
+  HANZO_ASSIGN_OR_RETURN(config.initial_gyro_bias, vector_or<3>(value["initial_gyro_bias"], config.initial_gyro_bias, "(x, y, z)"));
+  HANZO_ASSIGN_OR_RETURN(config.gravity, positive_or(value["gravity"], config.gravity));
+  return config;
+}
+
+Result<LidarSimulatorConfig> parse_lidar(const YamlValue& value, double rate) {
+  HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "model", "range_noise", "max_range"}));
+  LidarSimulatorConfig config;
+  config.rate_hz = rate;
+  std::string model_name = "velodyne_vlp16";
+  if (value["model"].present()) HANZO_ASSIGN_OR_RETURN(model_name, value["model"].as_string());
+  const std::optional<LidarModel> model = lidar_model_from_string(model_name);
+  if (!model) return value["model"].error(fmt::format("unknown LiDAR '{}' (expected velodyne_vlp16, velodyne_hdl64 or ouster_os1_64)", model_name));
+  config.pattern = LidarPattern::preset(*model);
+  HANZO_ASSIGN_OR_RETURN(config.range_noise, non_negative_or(value["range_noise"], config.range_noise));
+  HANZO_ASSIGN_OR_RETURN(config.pattern.max_range, positive_or(value["max_range"], config.pattern.max_range));
+  return config;
+}
+
+Result<CameraSimulatorConfig> parse_camera(const YamlValue& value, double rate) {
+  HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "width", "height", "fx", "fy", "cx", "cy",
+                                          "distortion_model", "distortion_coeffs", "encoding", "supersampling", "pixel_noise"}));
+  CameraSimulatorConfig config;
+  config.rate_hz = rate;
+  double width = 640.0, height = 480.0;
+  HANZO_ASSIGN_OR_RETURN(width, positive_or(value["width"], width));
+  HANZO_ASSIGN_OR_RETURN(height, positive_or(value["height"], height));
+  config.intrinsics.width = static_cast<uint32_t>(width);
+  config.intrinsics.height = static_cast<uint32_t>(height);
+  HANZO_ASSIGN_OR_RETURN(config.intrinsics.fx, positive_or(value["fx"], width * 0.625));  // 77 deg horizontal field of view
+  HANZO_ASSIGN_OR_RETURN(config.intrinsics.fy, positive_or(value["fy"], config.intrinsics.fx));
+  HANZO_ASSIGN_OR_RETURN(config.intrinsics.cx, number_or(value["cx"], (width - 1.0) / 2.0));
+  HANZO_ASSIGN_OR_RETURN(config.intrinsics.cy, number_or(value["cy"], (height - 1.0) / 2.0));
+  if (value["distortion_model"].present()) {
+    std::string name;
+    HANZO_ASSIGN_OR_RETURN(name, value["distortion_model"].as_string());
+    const std::optional<msgs::DistortionType> type = msgs::distortion_type_from_string(name);
+    if (!type) return value["distortion_model"].error(fmt::format("unknown distortion '{}' (expected none, radtan or equidistant)", name));
+    config.distortion.type = *type;
+  }
+  if (value["distortion_coeffs"].present()) HANZO_ASSIGN_OR_RETURN(config.distortion.coefficients, value["distortion_coeffs"].as_doubles());
+  if (value["encoding"].present()) {
+    std::string name;
+    HANZO_ASSIGN_OR_RETURN(name, value["encoding"].as_string());
+    const std::optional<msgs::ImageEncoding> encoding = msgs::image_encoding_from_string(name);
+    if (!encoding || (*encoding != msgs::ImageEncoding::kMono8 && *encoding != msgs::ImageEncoding::kRgb8)) {
+      return value["encoding"].error(fmt::format("expected mono8 or rgb8, got '{}'", name));
+    }
+    config.encoding = *encoding;
+  }
+  double supersampling = config.supersampling;
+  HANZO_ASSIGN_OR_RETURN(supersampling, positive_or(value["supersampling"], supersampling));
+  config.supersampling = static_cast<int>(supersampling);
+  HANZO_ASSIGN_OR_RETURN(config.pixel_noise, non_negative_or(value["pixel_noise"], config.pixel_noise));
+  return config;
+}
+
+Result<msgs::GnssFixType> parse_fix_type(const YamlValue& value, msgs::GnssFixType fallback) {
+  if (!value.present()) return fallback;
+  std::string name;
+  HANZO_ASSIGN_OR_RETURN(name, value.as_string());
+  for (msgs::GnssFixType type : {msgs::GnssFixType::kNoFix, msgs::GnssFixType::kFix2d, msgs::GnssFixType::kFix3d,
+                                 msgs::GnssFixType::kRtkFloat, msgs::GnssFixType::kRtkFixed}) {
+    if (msgs::to_string(type) == name) return type;
+  }
+  return value.error(fmt::format("unknown fix type '{}' (expected NO_FIX, FIX_2D, FIX_3D, RTK_FLOAT or RTK_FIXED)", name));
+}
+
+Result<GnssSimulatorConfig> parse_gnss(const YamlValue& value, double rate, const GeodeticPoint& datum) {
+  HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "fix_type", "noise", "correlation_time", "satellites"}));
+  GnssSimulatorConfig config;
+  config.rate_hz = rate;
+  config.datum = datum;
+  HANZO_ASSIGN_OR_RETURN(config.fix_type, parse_fix_type(value["fix_type"], config.fix_type));
+  if (value["noise"].present()) {
+    Eigen::Vector2d noise = Eigen::Vector2d::Zero();
+    HANZO_ASSIGN_OR_RETURN(noise, vector_or<2>(value["noise"], noise, "(horizontal, vertical)"));
+    if ((noise.array() < 0.0).any()) return value["noise"].error("standard deviations must be >= 0");
+    config.noise = noise;
+  }
+  HANZO_ASSIGN_OR_RETURN(config.correlation_time, non_negative_or(value["correlation_time"], config.correlation_time));
+  double satellites = config.satellites;
+  HANZO_ASSIGN_OR_RETURN(satellites, non_negative_or(value["satellites"], satellites));
+  config.satellites = static_cast<uint32_t>(satellites);
+  return config;
+}
+
+Result<WheelOdometrySimulatorConfig> parse_wheels(const YamlValue& value, double rate) {
+  HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "wheel_separation", "wheel_radius", "distance_noise",
+                                          "scale_error"}));
+  WheelOdometrySimulatorConfig config;
+  config.rate_hz = rate;
+  HANZO_ASSIGN_OR_RETURN(config.wheel_separation, positive_or(value["wheel_separation"], config.wheel_separation));
+  HANZO_ASSIGN_OR_RETURN(config.wheel_radius, non_negative_or(value["wheel_radius"], config.wheel_radius));
+  HANZO_ASSIGN_OR_RETURN(config.distance_noise, non_negative_or(value["distance_noise"], config.distance_noise));
+  HANZO_ASSIGN_OR_RETURN(config.scale_error, vector_or<2>(value["scale_error"], config.scale_error, "(left, right)"));
+  return config;
+}
+
+Result<RadarSimulatorConfig> parse_radar(const YamlValue& value, double rate) {
+  HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "horizontal_fov_deg", "vertical_fov_deg", "max_range",
+                                          "range_noise", "velocity_noise", "clutter_rate"}));
+  RadarSimulatorConfig config;
+  config.rate_hz = rate;
+  double horizontal = config.horizontal_fov / kDegree, vertical = config.vertical_fov / kDegree;
+  HANZO_ASSIGN_OR_RETURN(horizontal, positive_or(value["horizontal_fov_deg"], horizontal));
+  HANZO_ASSIGN_OR_RETURN(vertical, positive_or(value["vertical_fov_deg"], vertical));
+  config.horizontal_fov = horizontal * kDegree;
+  config.vertical_fov = vertical * kDegree;
+  HANZO_ASSIGN_OR_RETURN(config.max_range, positive_or(value["max_range"], config.max_range));
+  HANZO_ASSIGN_OR_RETURN(config.range_noise, non_negative_or(value["range_noise"], config.range_noise));
+  HANZO_ASSIGN_OR_RETURN(config.velocity_noise, non_negative_or(value["velocity_noise"], config.velocity_noise));
+  HANZO_ASSIGN_OR_RETURN(config.clutter_rate, non_negative_or(value["clutter_rate"], config.clutter_rate));
+  return config;
+}
+
+double default_rate(config::SensorModality modality) {
+  switch (modality) {
+    case config::SensorModality::kImu: return 200.0;
+    case config::SensorModality::kLidar: return 10.0;
+    case config::SensorModality::kCamera: return 20.0;
+    case config::SensorModality::kGnss: return 5.0;
+    case config::SensorModality::kWheelOdometry: return 50.0;
+    case config::SensorModality::kRadar: return 20.0;
+  }
+  return 10.0;
+}
+
+Result<ScenarioSensor> parse_sensor(const std::string& name, const YamlValue& value, const Scenario& scenario) {
+  HANZO_RETURN_IF_ERROR(value.expect_map());
+  ScenarioSensor sensor;
+  sensor.name = name;
+  std::optional<config::SensorModality> modality = config::infer_modality(name);
+  if (value["modality"].present()) {
+    std::string modality_name;
+    HANZO_ASSIGN_OR_RETURN(modality_name, value["modality"].as_string());
+    modality = config::sensor_modality_from_string(modality_name);
+    if (!modality) return value["modality"].error(fmt::format("unknown modality '{}'", modality_name));
+  }
+  if (!modality) return value.error("cannot tell the sensor's modality from its name: add `modality: imu|lidar|camera|gnss|wheel_odometry|radar`");
+  sensor.modality = *modality;
+  sensor.topic = "/sensors/" + name;
+  if (value["topic"].present()) HANZO_ASSIGN_OR_RETURN(sensor.topic, value["topic"].as_string());
+  if (sensor.topic.empty() || sensor.topic[0] != '/') return value["topic"].error("a topic starts with '/'");
+  double rate = 0.0;
+  HANZO_ASSIGN_OR_RETURN(rate, positive_or(value["rate"], default_rate(sensor.modality)));
+  HANZO_ASSIGN_OR_RETURN(sensor.T_body_sensor, parse_to_body(value["to_body"]));
+  auto finish = [&](auto config) {
+    config.frame_id = name;
+    return config;
+  };
+  switch (sensor.modality) {
+    case config::SensorModality::kImu: {
+      ImuSimulatorConfig config;
+      HANZO_ASSIGN_OR_RETURN(config, parse_imu(value, rate));
+      config.T_body_imu = sensor.T_body_sensor;
+      sensor.simulator = finish(config);
+      break;
+    }
+    case config::SensorModality::kLidar: {
+      LidarSimulatorConfig config;
+      HANZO_ASSIGN_OR_RETURN(config, parse_lidar(value, rate));
+      config.T_body_lidar = sensor.T_body_sensor;
+      sensor.simulator = finish(config);
+      break;
+    }
+    case config::SensorModality::kCamera: {
+      CameraSimulatorConfig config;
+      HANZO_ASSIGN_OR_RETURN(config, parse_camera(value, rate));
+      config.T_body_camera = sensor.T_body_sensor;
+      sensor.simulator = finish(config);
+      break;
+    }
+    case config::SensorModality::kGnss: {
+      GnssSimulatorConfig config;
+      HANZO_ASSIGN_OR_RETURN(config, parse_gnss(value, rate, scenario.datum));
+      config.T_body_gnss = sensor.T_body_sensor;
+      sensor.simulator = config;
+      break;
+    }
+    case config::SensorModality::kWheelOdometry: {
+      WheelOdometrySimulatorConfig config;
+      HANZO_ASSIGN_OR_RETURN(config, parse_wheels(value, rate));
+      config.T_body_wheels = sensor.T_body_sensor;
+      sensor.simulator = finish(config);
+      break;
+    }
+    case config::SensorModality::kRadar: {
+      RadarSimulatorConfig config;
+      HANZO_ASSIGN_OR_RETURN(config, parse_radar(value, rate));
+      config.T_body_radar = sensor.T_body_sensor;
+      sensor.simulator = finish(config);
+      break;
+    }
+  }
+  return sensor;
+}
+
+// ---- faults ------------------------------------------------------------------------------------
+
+// The sensors a fault applies to: the named one (which must have the right modality), or every
+// sensor of that modality.
+Result<std::vector<ScenarioSensor*>> fault_targets(const YamlValue& fault, config::SensorModality modality, Scenario* scenario) {
+  std::vector<ScenarioSensor*> targets;
+  std::string name;
+  if (fault["sensor"].present()) HANZO_ASSIGN_OR_RETURN(name, fault["sensor"].as_string());
+  for (ScenarioSensor& sensor : scenario->sensors) {
+    if (sensor.modality == modality && (name.empty() || sensor.name == name)) targets.push_back(&sensor);
+  }
+  if (targets.empty()) {
+    return fault.error(name.empty() ? fmt::format("no {} sensor in the scenario for this fault", config::to_string(modality))
+                                    : fmt::format("no {} sensor named '{}'", config::to_string(modality), name));
+  }
+  return targets;
+}
+
+Status parse_fault(const YamlValue& fault, Scenario* scenario) {
+  std::string type;
+  HANZO_ASSIGN_OR_RETURN(type, fault["type"].as_string());
+  Timestamp start, end;
+  HANZO_ASSIGN_OR_RETURN(start, time_after_start(fault["start"], scenario->start_time));
+  HANZO_ASSIGN_OR_RETURN(end, time_after_start(fault["end"], scenario->start_time));
+  if (end <= start) return fault["end"].error("a fault must end after it starts");
+  std::vector<ScenarioSensor*> targets;
+  if (type == "rain" || type == "fog") {
+    HANZO_RETURN_IF_ERROR(fault.check_keys({"type", "sensor", "start", "end", "dropout_probability", "phantom_probability",
+                                            "phantom_max_range", "visibility_range"}));
+    const bool fog = type == "fog";
+    LidarWeatherEpisode episode{start, end, fog ? 0.05 : 0.1, fog ? 0.01 : 0.02, 3.0, fog ? 15.0 : 40.0};
+    HANZO_ASSIGN_OR_RETURN(episode.dropout_probability, probability_or(fault["dropout_probability"], episode.dropout_probability));
+    HANZO_ASSIGN_OR_RETURN(episode.phantom_probability, probability_or(fault["phantom_probability"], episode.phantom_probability));
+    HANZO_ASSIGN_OR_RETURN(episode.phantom_max_range, positive_or(fault["phantom_max_range"], episode.phantom_max_range));
+    HANZO_ASSIGN_OR_RETURN(episode.visibility_range, positive_or(fault["visibility_range"], episode.visibility_range));
+    HANZO_ASSIGN_OR_RETURN(targets, fault_targets(fault, config::SensorModality::kLidar, scenario));
+    for (ScenarioSensor* sensor : targets) std::get<LidarSimulatorConfig>(sensor->simulator).weather.push_back(episode);
+    return ok_status();
+  }
+  if (type == "gnss_outage" || type == "gnss_degraded") {
+    HANZO_RETURN_IF_ERROR(fault.check_keys({"type", "sensor", "start", "end", "fix_type", "noise_scale", "multipath_rate",
+                                            "multipath_magnitude", "multipath_duration", "satellites"}));
+    GnssEpisode episode;
+    episode.type = type == "gnss_outage" ? GnssEpisodeType::kOutage : GnssEpisodeType::kDegraded;
+    episode.start = start;
+    episode.end = end;
+    HANZO_ASSIGN_OR_RETURN(episode.fix_type, parse_fix_type(fault["fix_type"], episode.fix_type));
+    HANZO_ASSIGN_OR_RETURN(episode.noise_scale, positive_or(fault["noise_scale"], episode.noise_scale));
+    HANZO_ASSIGN_OR_RETURN(episode.multipath_rate_hz, non_negative_or(fault["multipath_rate"], episode.multipath_rate_hz));
+    HANZO_ASSIGN_OR_RETURN(episode.multipath_magnitude, non_negative_or(fault["multipath_magnitude"], episode.multipath_magnitude));
+    HANZO_ASSIGN_OR_RETURN(episode.multipath_duration, non_negative_or(fault["multipath_duration"], episode.multipath_duration));
+    double satellites = episode.satellites;
+    HANZO_ASSIGN_OR_RETURN(satellites, non_negative_or(fault["satellites"], satellites));
+    episode.satellites = static_cast<uint32_t>(satellites);
+    HANZO_ASSIGN_OR_RETURN(targets, fault_targets(fault, config::SensorModality::kGnss, scenario));
+    for (ScenarioSensor* sensor : targets) std::get<GnssSimulatorConfig>(sensor->simulator).episodes.push_back(episode);
+    return ok_status();
+  }
+  if (type == "wheel_slip") {
+    HANZO_RETURN_IF_ERROR(fault.check_keys({"type", "sensor", "start", "end", "left_scale", "right_scale"}));
+    WheelSlipEpisode slip{start, end, 1.3, 1.0};
+    HANZO_ASSIGN_OR_RETURN(slip.left_scale, non_negative_or(fault["left_scale"], slip.left_scale));
+    HANZO_ASSIGN_OR_RETURN(slip.right_scale, non_negative_or(fault["right_scale"], slip.right_scale));
+    HANZO_ASSIGN_OR_RETURN(targets, fault_targets(fault, config::SensorModality::kWheelOdometry, scenario));
+    for (ScenarioSensor* sensor : targets) std::get<WheelOdometrySimulatorConfig>(sensor->simulator).slips.push_back(slip);
+    return ok_status();
+  }
+  if (const std::optional<CameraFaultType> camera_fault = camera_fault_type_from_string(type)) {
+    HANZO_RETURN_IF_ERROR(fault.check_keys({"type", "sensor", "start", "end", "brightness", "noise_scale", "center", "radius",
+                                            "strength", "exposure_time", "blur_samples"}));
+    CameraFaultEpisode episode;
+    episode.type = *camera_fault;
+    episode.start = start;
+    episode.end = end;
+    HANZO_ASSIGN_OR_RETURN(episode.brightness, probability_or(fault["brightness"], episode.brightness));
+    HANZO_ASSIGN_OR_RETURN(episode.noise_scale, non_negative_or(fault["noise_scale"], episode.noise_scale));
+    HANZO_ASSIGN_OR_RETURN(episode.center, vector_or<2>(fault["center"], episode.center, "(u, v) pixels"));
+    HANZO_ASSIGN_OR_RETURN(episode.radius, positive_or(fault["radius"], episode.radius));
+    HANZO_ASSIGN_OR_RETURN(episode.strength, non_negative_or(fault["strength"], episode.strength));
+    HANZO_ASSIGN_OR_RETURN(episode.exposure_time, non_negative_or(fault["exposure_time"], episode.exposure_time));
+    double samples = episode.blur_samples;
+    HANZO_ASSIGN_OR_RETURN(samples, positive_or(fault["blur_samples"], samples));
+    episode.blur_samples = static_cast<int>(samples);
+    HANZO_ASSIGN_OR_RETURN(targets, fault_targets(fault, config::SensorModality::kCamera, scenario));
+    for (ScenarioSensor* sensor : targets) std::get<CameraSimulatorConfig>(sensor->simulator).faults.push_back(episode);
+    return ok_status();
+  }
+  return fault["type"].error(fmt::format("unknown fault '{}' (expected rain, fog, gnss_outage, gnss_degraded, wheel_slip, "
+                                         "darkness, glare or motion_blur)", type));
+}
+
+}  // namespace
+
+Result<Scenario> parse_scenario(const std::string& yaml_text, const std::string& source_name) {
+  Result<YamlValue> loaded = YamlValue::load_string(yaml_text, source_name);
+  if (!loaded) return loaded.error();
+  const YamlValue& document = *loaded;
+  HANZO_RETURN_IF_ERROR(document.check_keys({"scenario"}));
+  const YamlValue root = document["scenario"].as_path_root();
+  if (!root.is_map()) return document.error("expected a top-level `scenario:` map");
+  HANZO_RETURN_IF_ERROR(root.check_keys({"name", "seed", "start_time", "datum", "ground_truth_rate", "duration", "world",
+                                         "trajectory", "sensors", "faults"}));
+  Scenario scenario;
+  HANZO_ASSIGN_OR_RETURN(scenario.name, root["name"].as_string());
+  double seed = 1.0;
+  HANZO_ASSIGN_OR_RETURN(seed, non_negative_or(root["seed"], seed));
+  scenario.seed = static_cast<uint64_t>(seed);
+  double start_seconds = scenario.start_time.seconds();
+  HANZO_ASSIGN_OR_RETURN(start_seconds, positive_or(root["start_time"], start_seconds));
+  scenario.start_time = Timestamp::from_seconds(start_seconds);
+  const YamlValue datum = root["datum"];
+  if (datum.present()) {
+    HANZO_RETURN_IF_ERROR(datum.check_keys({"latitude", "longitude", "altitude"}));
+    HANZO_ASSIGN_OR_RETURN(scenario.datum.latitude_deg, datum["latitude"].as_double());
+    HANZO_ASSIGN_OR_RETURN(scenario.datum.longitude_deg, datum["longitude"].as_double());
+    HANZO_ASSIGN_OR_RETURN(scenario.datum.altitude_m, number_or(datum["altitude"], 0.0));
+    if (Status valid = validate(scenario.datum); !valid) return datum.error(valid.error().message);
+  }
+  HANZO_ASSIGN_OR_RETURN(scenario.ground_truth_rate_hz, positive_or(root["ground_truth_rate"], scenario.ground_truth_rate_hz));
+  if (root["duration"].present()) HANZO_ASSIGN_OR_RETURN(scenario.duration, positive_or(root["duration"], 0.0));
+  HANZO_RETURN_IF_ERROR(parse_world(root["world"], scenario.start_time, &scenario.world));
+  if (!root["trajectory"].present()) return root["trajectory"].error("missing (every scenario needs a trajectory)");
+  HANZO_RETURN_IF_ERROR(parse_trajectory(root["trajectory"], &scenario));
+  if (!root["sensors"].is_map() || root["sensors"].entries().empty()) return root["sensors"].error("expected a map of at least one sensor");
+  for (const auto& [name, value] : root["sensors"].entries()) {
+    ScenarioSensor sensor;
+    HANZO_ASSIGN_OR_RETURN(sensor, parse_sensor(name, value, scenario));
+    scenario.sensors.push_back(std::move(sensor));
+  }
+  set_seed(scenario, scenario.seed);
+  for (const YamlValue& fault : root["faults"].elements()) HANZO_RETURN_IF_ERROR(parse_fault(fault, &scenario));
+  if (root["faults"].present() && !root["faults"].is_sequence()) return root["faults"].error("expected a list of faults");
+  return scenario;
+}
+
+Result<Scenario> load_scenario(const std::string& path) {
+  std::string text;
+  HANZO_ASSIGN_OR_RETURN(text, read_file(path));
+  return parse_scenario(text, path);
+}
+
+}  // namespace hanzo::fusion::sim
