@@ -15,6 +15,8 @@ packages=(
   libzstd-dev liblz4-dev zlib1g-dev libbz2-dev
   # io: image files of the dataset importers (KITTI, EuRoC, TUM RGB-D)
   libopencv-dev
+  # sim: parallel ray casting
+  libtbb-dev
   # apps
   libcli11-dev
   # tests and benchmarks

@@ -29,6 +29,7 @@ struct SimOptions {
   std::string out;
   double duration = 0.0;  // 0: the scenario's
   int64_t seed = -1;      // -1: the scenario's
+  int threads = -1;       // -1: the scenario's
   std::string compression = "zstd";
   bool no_foxglove = false;
 };
@@ -62,6 +63,7 @@ int run_sim(const Output& output, const SimOptions& options) {
   if (!scenario) return report_failure(output, result, scenario.error().message);
   if (options.duration > 0.0) scenario->duration = options.duration;
   if (options.seed >= 0) sim::set_seed(*scenario, static_cast<uint64_t>(options.seed));
+  if (options.threads >= 0) scenario->num_threads = options.threads;
   Result<std::unique_ptr<sim::ScenarioSimulation>> simulation = sim::ScenarioSimulation::create(std::move(*scenario));
   if (!simulation) return report_failure(output, result, simulation.error().message);
   sim::ScenarioSimulation& run = **simulation;
@@ -138,6 +140,7 @@ void add_sim_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--out", options->out, "Output folder (created when missing)")->required();
   command->add_option("--duration", options->duration, "Seconds to simulate (default: the scenario's)");
   command->add_option("--seed", options->seed, "Override the scenario's seed");
+  command->add_option("--threads", options->threads, "Ray-casting threads for LiDARs and cameras (0: all cores; same output)");
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
   command->add_flag("--no-foxglove", options->no_foxglove, "Leave out the Foxglove mirror channels");
   command->callback([&output, &run, options] { run = [&output, options] { return run_sim(output, *options); }; });

@@ -5,6 +5,9 @@
 
 #include <Eigen/Dense>
 #include <fmt/format.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include "hanzo/fusion/core/enum_names.hpp"
 
@@ -127,19 +130,29 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
   const float weight = 1.0F / static_cast<float>(s * s);
   const WorldSnapshot snapshot = world_->at(time);
   radiance.assign(static_cast<std::size_t>(width) * height, Eigen::Vector3f::Zero());
-  for (int row = 0; row < height * s; ++row) {
-    for (int column = 0; column < width * s; ++column) {
-      const Eigen::Vector3d direction = R_world_camera * rays_[static_cast<std::size_t>(row) * width * s + column].cast<double>();
-      const std::optional<RayHit> hit = snapshot.cast(origin, direction, config_.max_distance);
-      Eigen::Vector3f color;
-      if (hit) {
-        const double light = config_.ambient + config_.diffuse * std::max(0.0, hit->normal.dot(sun_direction_));
-        color = hit->material->texture.color(hit->surface_uv.x(), hit->surface_uv.y()) * static_cast<float>(light);
-      } else {
-        color = sky_color(direction);
+  // Pixel rows are independent: render them on up to num_threads threads (same result).
+  auto render_rows = [&](const tbb::blocked_range<int>& pixel_rows) {
+    for (int row = pixel_rows.begin() * s; row < pixel_rows.end() * s; ++row) {
+      for (int column = 0; column < width * s; ++column) {
+        const Eigen::Vector3d direction = R_world_camera * rays_[static_cast<std::size_t>(row) * width * s + column].cast<double>();
+        const std::optional<RayHit> hit = snapshot.cast(origin, direction, config_.max_distance);
+        Eigen::Vector3f color;
+        if (hit) {
+          const double light = config_.ambient + config_.diffuse * std::max(0.0, hit->normal.dot(sun_direction_));
+          color = hit->material->texture.color(hit->surface_uv.x(), hit->surface_uv.y()) * static_cast<float>(light);
+        } else {
+          color = sky_color(direction);
+        }
+        radiance[static_cast<std::size_t>(row / s) * width + column / s] += weight * color;
       }
-      radiance[static_cast<std::size_t>(row / s) * width + column / s] += weight * color;
     }
+  };
+  const tbb::blocked_range<int> all_rows(0, height, 8);
+  if (config_.num_threads == 1) {
+    render_rows(all_rows);
+  } else {
+    tbb::task_arena arena(config_.num_threads <= 0 ? tbb::task_arena::automatic : config_.num_threads);
+    arena.execute([&] { tbb::parallel_for(all_rows, render_rows); });
   }
 }
 

@@ -4,6 +4,10 @@
 #include <cmath>
 #include <numbers>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include "hanzo/fusion/core/enum_names.hpp"
 
 namespace hanzo::fusion::sim {
@@ -79,37 +83,60 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
   const LidarWeatherEpisode* weather = weather_at(sweep_start);
   const double max_range = weather != nullptr ? std::min(pattern.max_range, weather->visibility_range) : pattern.max_range;
 
-  for (int column = 0; column < pattern.columns; ++column) {
-    const Timestamp time = sweep_start + Duration::from_seconds(period * column / pattern.columns);
-    const SE3 T_world_lidar = trajectory_.sample(time).T_world_body * config_.T_body_lidar;
-    const WorldSnapshot snapshot = world_.at(time);
-    const double azimuth = std::numbers::pi - 2.0 * std::numbers::pi * column / pattern.columns;
-    const double cos_azimuth = std::cos(azimuth), sin_azimuth = std::sin(azimuth);
-    for (int ring = 0; ring < rings; ++ring) {
-      const Eigen::Vector3d& beam = ring_directions_[ring];
-      const Eigen::Vector3d direction_lidar(beam.x() * cos_azimuth, beam.x() * sin_azimuth, beam.z());
-      const Eigen::Vector3d direction_world = T_world_lidar.rotation() * direction_lidar;
-      double range = 0.0;
-      float intensity = 0.0F;
-      if (weather != nullptr && uniform(random_) < weather->phantom_probability) {
-        range = pattern.min_range + uniform(random_) * (weather->phantom_max_range - pattern.min_range);
-        intensity = kPhantomIntensity;
-      } else {
+  // Phase 1 (columns in parallel, deterministic): the noiseless return of every ray.
+  struct Return {
+    double range = -1.0;  // < 0: nothing within max_range
+    float intensity = 0.0F;
+  };
+  std::vector<Return> returns(capacity);
+  std::vector<Timestamp> column_times(pattern.columns);
+  std::vector<Eigen::Vector3d> directions(capacity);  // sensor frame
+  auto cast_columns = [&](const tbb::blocked_range<int>& range) {
+    for (int column = range.begin(); column < range.end(); ++column) {
+      const Timestamp time = sweep_start + Duration::from_seconds(period * column / pattern.columns);
+      column_times[column] = time;
+      const SE3 T_world_lidar = trajectory_.sample(time).T_world_body * config_.T_body_lidar;
+      const WorldSnapshot snapshot = world_.at(time);
+      const double azimuth = std::numbers::pi - 2.0 * std::numbers::pi * column / pattern.columns;
+      const double cos_azimuth = std::cos(azimuth), sin_azimuth = std::sin(azimuth);
+      for (int ring = 0; ring < rings; ++ring) {
+        const std::size_t index = static_cast<std::size_t>(column) * rings + ring;
+        const Eigen::Vector3d& beam = ring_directions_[ring];
+        directions[index] = Eigen::Vector3d(beam.x() * cos_azimuth, beam.x() * sin_azimuth, beam.z());
+        const Eigen::Vector3d direction_world = T_world_lidar.rotation() * directions[index];
         const std::optional<RayHit> hit = snapshot.cast(T_world_lidar.translation(), direction_world, max_range);
         if (!hit) continue;
-        if (weather != nullptr && uniform(random_) < weather->dropout_probability) continue;
-        const RayHit& h = *hit;
-        range = h.distance + normal(random_) * config_.range_noise;
-        const double incidence = std::abs(h.normal.dot(direction_world));
-        const float shade = 0.5F + 0.5F * luminance(h.material->texture.color(h.surface_uv.x(), h.surface_uv.y()));
-        intensity = std::clamp(static_cast<float>(h.material->reflectivity * incidence) * shade, 0.0F, 1.0F);
+        const double incidence = std::abs(hit->normal.dot(direction_world));
+        const float shade = 0.5F + 0.5F * luminance(hit->material->texture.color(hit->surface_uv.x(), hit->surface_uv.y()));
+        returns[index] = {hit->distance, std::clamp(static_cast<float>(hit->material->reflectivity * incidence) * shade, 0.0F, 1.0F)};
       }
-      if (range < pattern.min_range || range > pattern.max_range) continue;
-      cloud.points.push_back((direction_lidar * range).cast<float>());
-      cloud.intensities.push_back(intensity);
-      cloud.ring_ids.push_back(static_cast<uint32_t>(ring));
-      cloud.point_timestamps.push_back(time);
     }
+  };
+  const tbb::blocked_range<int> all_columns(0, pattern.columns, 64);
+  if (config_.num_threads == 1) {
+    cast_columns(all_columns);
+  } else {
+    tbb::task_arena arena(config_.num_threads <= 0 ? tbb::task_arena::automatic : config_.num_threads);
+    arena.execute([&] { tbb::parallel_for(all_columns, cast_columns); });
+  }
+
+  // Phase 2 (in ray order, so the noise draws are reproducible): weather, noise, range limits.
+  for (std::size_t index = 0; index < capacity; ++index) {
+    double range = returns[index].range;
+    float intensity = returns[index].intensity;
+    if (weather != nullptr && uniform(random_) < weather->phantom_probability) {
+      range = pattern.min_range + uniform(random_) * (weather->phantom_max_range - pattern.min_range);
+      intensity = kPhantomIntensity;
+    } else {
+      if (range < 0.0) continue;
+      if (weather != nullptr && uniform(random_) < weather->dropout_probability) continue;
+      range += normal(random_) * config_.range_noise;
+    }
+    if (range < pattern.min_range || range > pattern.max_range) continue;
+    cloud.points.push_back((directions[index] * range).cast<float>());
+    cloud.intensities.push_back(intensity);
+    cloud.ring_ids.push_back(static_cast<uint32_t>(index % rings));
+    cloud.point_timestamps.push_back(column_times[index / rings]);
   }
   return cloud;
 }

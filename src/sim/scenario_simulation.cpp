@@ -47,7 +47,9 @@ Result<std::unique_ptr<ScenarioSimulation>> ScenarioSimulation::create(Scenario 
         return std::move(sample.message);
       };
     } else if (const auto* lidar = std::get_if<LidarSimulatorConfig>(&sensor.simulator)) {
-      auto simulator = std::make_shared<LidarSimulator>(*lidar, world, path);
+      LidarSimulatorConfig config = *lidar;
+      config.num_threads = simulation->scenario_.num_threads;
+      auto simulator = std::make_shared<LidarSimulator>(config, world, path);
       stream->last_start = simulation->end_time() - Duration::from_seconds(1.0 / lidar->rate_hz);
       stream->produce = [simulator](Timestamp time) -> std::optional<msgs::SensorMessage> {
         msgs::PointCloudMessage cloud = simulator->measure(time);
@@ -55,7 +57,9 @@ Result<std::unique_ptr<ScenarioSimulation>> ScenarioSimulation::create(Scenario 
         return cloud;
       };
     } else if (const auto* camera = std::get_if<CameraSimulatorConfig>(&sensor.simulator)) {
-      Result<CameraSimulator> created = CameraSimulator::create(*camera, world, path);
+      CameraSimulatorConfig config = *camera;
+      config.num_threads = simulation->scenario_.num_threads;
+      Result<CameraSimulator> created = CameraSimulator::create(config, world, path);
       if (!created) return with_context(Result<std::unique_ptr<ScenarioSimulation>>(created.error()), "sensors." + sensor.name);
       auto simulator = std::make_shared<CameraSimulator>(std::move(*created));
       stream->produce = [simulator](Timestamp time) -> std::optional<msgs::SensorMessage> { return simulator->measure(time); };

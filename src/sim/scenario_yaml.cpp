@@ -602,7 +602,7 @@ Result<Scenario> parse_scenario(const std::string& yaml_text, const std::string&
   HANZO_RETURN_IF_ERROR(document.check_keys({"scenario"}));
   const YamlValue root = document["scenario"].as_path_root();
   if (!root.is_map()) return document.error("expected a top-level `scenario:` map");
-  HANZO_RETURN_IF_ERROR(root.check_keys({"name", "seed", "start_time", "datum", "ground_truth_rate", "duration", "world",
+  HANZO_RETURN_IF_ERROR(root.check_keys({"name", "seed", "start_time", "datum", "ground_truth_rate", "threads", "duration", "world",
                                          "trajectory", "sensors", "faults"}));
   Scenario scenario;
   HANZO_ASSIGN_OR_RETURN(scenario.name, root["name"].as_string());
@@ -621,6 +621,9 @@ Result<Scenario> parse_scenario(const std::string& yaml_text, const std::string&
     if (Status valid = validate(scenario.datum); !valid) return datum.error(valid.error().message);
   }
   HANZO_ASSIGN_OR_RETURN(scenario.ground_truth_rate_hz, positive_or(root["ground_truth_rate"], scenario.ground_truth_rate_hz));
+  double threads = scenario.num_threads;
+  HANZO_ASSIGN_OR_RETURN(threads, non_negative_or(root["threads"], threads));
+  scenario.num_threads = static_cast<int>(threads);
   if (root["duration"].present()) HANZO_ASSIGN_OR_RETURN(scenario.duration, positive_or(root["duration"], 0.0));
   HANZO_RETURN_IF_ERROR(parse_world(root["world"], scenario.start_time, &scenario.world));
   if (!root["trajectory"].present()) return root["trajectory"].error("missing (every scenario needs a trajectory)");

@@ -2,10 +2,12 @@
 
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <string>
 
 #include <fmt/format.h>
@@ -304,6 +306,42 @@ TEST(Cli, ImportRosbagTest2) {
   EXPECT_EQ(summary["channels"][1]["messages"], 3060);
   EXPECT_NEAR(summary["duration_s"].get<double>(), 61.2, 0.01);
   std::filesystem::remove(log);
+}
+
+TEST(Cli, SimWritesLogGroundTruthCalibrationAndConfig) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_sim_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  const CliRun simulated = run(fmt::format("sim examples/scenarios/warehouse_robot.yaml --out {} --duration 1 --json", dir.string()));
+  ASSERT_EQ(simulated.exit_code, 0) << simulated.err;
+  const nlohmann::json json = nlohmann::json::parse(simulated.out);
+  EXPECT_EQ(json["name"], "warehouse_robot");
+  EXPECT_EQ(json["ground_truth_poses"], 201);
+  ASSERT_EQ(json["sensors"].size(), 4u);
+  EXPECT_EQ(json["sensors"][0]["messages"], 201);  // IMU at 200 Hz
+  EXPECT_EQ(json["sensors"][1]["messages"], 10);   // LiDAR sweeps that end by 1 s
+  EXPECT_EQ(json["sensors"][2]["messages"], 16);   // camera at 15 Hz
+
+  const CliRun info = run(fmt::format("log info {} --verify --json", (dir / "sensors.mcap").string()));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  const nlohmann::json log = nlohmann::json::parse(info.out);
+  std::set<std::string> topics;
+  for (const auto& channel : log["channels"]) topics.insert(channel["topic"].get<std::string>());
+  for (const char* topic : {"/sensors/imu", "/sensors/lidar", "/sensors/lidar/foxglove", "/sensors/camera_front", "/sensors/wheels"}) {
+    EXPECT_TRUE(topics.count(topic)) << topic;
+  }
+  EXPECT_EQ(run(fmt::format("calib check {}", (dir / "calibration.yaml").string())).exit_code, 0);
+  EXPECT_EQ(run(fmt::format("config check {}", (dir / "fusion.yaml").string())).exit_code, 0);
+  std::ifstream truth(dir / "ground_truth.tum");
+  std::size_t lines = 0;
+  for (std::string line; std::getline(truth, line);) lines += line.empty() || line[0] == '#' ? 0 : 1;
+  EXPECT_EQ(lines, 201u);
+  EXPECT_TRUE(std::filesystem::exists(dir / "imu_biases.csv"));
+
+  const CliRun bad = run(fmt::format("sim {} --out {}", write_temp("bad_scenario.yaml", "scenario: {name: x}\n"), dir.string()));
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_THAT(bad.err, HasSubstr("trajectory: missing"));
+  EXPECT_EQ(std::count(bad.err.begin(), bad.err.end(), '\n'), 1);
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

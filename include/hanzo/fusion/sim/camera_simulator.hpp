@@ -66,6 +66,7 @@ struct CameraSimulatorConfig {
   double ambient = 0.45;
   double diffuse = 0.55;
   double max_distance = 200.0;                          ///< metres: farther surfaces are sky
+  int num_threads = 1;                                  ///< rendering threads (TBB); 0: all cores
   std::vector<CameraFaultEpisode> faults;
   std::string frame_id = "camera";
   uint64_t seed = 6;

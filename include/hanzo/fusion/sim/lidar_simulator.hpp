@@ -69,6 +69,7 @@ struct LidarSimulatorConfig {
   SE3 T_body_lidar;
   std::string frame_id = "lidar";
   std::vector<LidarWeatherEpisode> weather;
+  int num_threads = 1;  ///< ray-casting threads (TBB); 0: all cores. The sweep is the same for any count.
   uint64_t seed = 2;
 };
 

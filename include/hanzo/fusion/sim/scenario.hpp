@@ -8,6 +8,7 @@
 //     start_time: 1700000000.0     # seconds since the Unix epoch of the first sample
 //     datum: {latitude: 47.3769, longitude: 8.5417, altitude: 408.0}   # WGS84 of world ENU origin
 //     ground_truth_rate: 200       # Hz of the TUM ground truth
+//     threads: 1                   # ray-casting threads (0: all cores); same output for any count
 //     world: {ground: ..., boxes: [...], cylinders: [...], walls: [...], people: [...], city: {...}}
 //     trajectory: {type: ground_vehicle | drone | handheld, ...}
 //     sensors:
@@ -64,6 +65,7 @@ struct Scenario {
   Timestamp start_time = Timestamp::from_nanoseconds(1'700'000'000'000'000'000);
   GeodeticPoint datum{47.3769, 8.5417, 408.0};
   double ground_truth_rate_hz = 200.0;
+  int num_threads = 1;  ///< ray-casting threads of LiDARs and cameras (0: all cores); output is the same for any count
   std::optional<double> duration;  ///< seconds simulated; default (and at most): the whole trajectory
   WorldDescription world;
   TrajectoryType trajectory_type = TrajectoryType::kGroundVehicle;

@@ -1,0 +1,150 @@
+// Scenarios: the shipped scenario files load, a run merges every sensor in time order with
+// valid messages at the configured rates, runs are reproducible, and bad files are rejected
+// with file, line and key.
+
+#include <cmath>
+#include <functional>
+#include <map>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "hanzo/fusion/msgs/validate.hpp"
+#include "hanzo/fusion/sim/scenario_simulation.hpp"
+
+namespace hanzo::fusion::sim {
+namespace {
+
+using ::testing::HasSubstr;
+
+TEST(Scenario, ShippedScenariosLoadWithTheirSensorsAndFaults) {
+  const Result<Scenario> warehouse = load_scenario("examples/scenarios/warehouse_robot.yaml");
+  ASSERT_TRUE(warehouse) << warehouse.error().message;
+  EXPECT_EQ(warehouse->sensors.size(), 4U);
+  EXPECT_EQ(warehouse->world.moving_boxes.size(), 3U);
+  const auto& wheels = std::get<WheelOdometrySimulatorConfig>(warehouse->sensors[3].simulator);
+  ASSERT_EQ(wheels.slips.size(), 1U);
+  EXPECT_EQ(wheels.slips[0].start, warehouse->start_time + Duration::from_seconds(25.0));
+
+  const Result<Scenario> urban = load_scenario("examples/scenarios/urban_vehicle.yaml");
+  ASSERT_TRUE(urban) << urban.error().message;
+  EXPECT_GT(urban->world.boxes.size(), 30U);  // the generated city
+  const auto& gnss = std::get<GnssSimulatorConfig>(urban->sensors[2].simulator);
+  EXPECT_EQ(gnss.episodes.size(), 2U);
+  EXPECT_EQ(std::get<LidarSimulatorConfig>(urban->sensors[1].simulator).weather.size(), 1U);
+
+  for (const char* name : {"drone", "ar_handheld"}) {
+    const Result<Scenario> scenario = load_scenario(std::string("examples/scenarios/") + name + ".yaml");
+    ASSERT_TRUE(scenario) << scenario.error().message;
+    EXPECT_TRUE(make_trajectory(*scenario)) << name;
+    EXPECT_TRUE(calib::validate(scenario_calibration(*scenario))) << name;
+    EXPECT_TRUE(config::validate(scenario_fusion_config(*scenario))) << name;
+  }
+}
+
+struct RecordedRun {
+  std::vector<std::string> sensors;
+  std::vector<msgs::SensorMessage> messages;
+};
+
+RecordedRun record(Scenario scenario, double seconds) {
+  scenario.duration = seconds;
+  auto simulation = ScenarioSimulation::create(std::move(scenario));
+  EXPECT_TRUE(simulation);
+  RecordedRun run;
+  const Status status = (*simulation)->run([&run](const ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
+    run.sensors.push_back(sensor.name);
+    run.messages.push_back(std::move(message));
+    return ok_status();
+  });
+  EXPECT_TRUE(status);
+  return run;
+}
+
+TEST(ScenarioSimulation, MergesAllSensorsInTimeOrderAtTheirRates) {
+  const Result<Scenario> urban = load_scenario("examples/scenarios/urban_vehicle.yaml");
+  ASSERT_TRUE(urban);
+  const RecordedRun run = record(*urban, 1.0);
+  std::map<std::string, int> counts;
+  for (std::size_t i = 0; i < run.messages.size(); ++i) {
+    ++counts[run.sensors[i]];
+    ASSERT_TRUE(std::visit([](const auto& m) { return msgs::validate(m); }, run.messages[i])) << run.sensors[i];
+    if (i > 0) {
+      ASSERT_LE(msgs::timestamp_of(run.messages[i - 1]), msgs::timestamp_of(run.messages[i])) << i;
+    }
+  }
+  EXPECT_EQ(counts["imu"], 201);     // 0 .. 1 s inclusive at 200 Hz
+  EXPECT_EQ(counts["wheels"], 51);
+  EXPECT_EQ(counts["gnss"], 6);
+  EXPECT_EQ(counts["radar"], 21);
+  EXPECT_EQ(counts["lidar"], 10);    // sweeps that finish by 1 s
+}
+
+TEST(ScenarioSimulation, SameSeedSameMessagesOtherSeedOtherNoise) {
+  Result<Scenario> scenario = load_scenario("examples/scenarios/warehouse_robot.yaml");
+  ASSERT_TRUE(scenario);
+  std::get<CameraSimulatorConfig>(scenario->sensors[2].simulator).intrinsics = {100.0, 100.0, 79.5, 59.5, 160, 120};
+  const RecordedRun first = record(*scenario, 0.5);
+  scenario->num_threads = 2;  // the thread count never changes the output
+  const RecordedRun second = record(*scenario, 0.5);
+  ASSERT_EQ(first.messages.size(), second.messages.size());
+  for (std::size_t i = 0; i < first.messages.size(); ++i) {
+    if (const auto* imu = std::get_if<msgs::ImuMessage>(&first.messages[i])) {
+      EXPECT_EQ(imu->linear_acceleration, std::get<msgs::ImuMessage>(second.messages[i]).linear_acceleration);
+    } else if (const auto* cloud = std::get_if<msgs::PointCloudMessage>(&first.messages[i])) {
+      EXPECT_EQ(cloud->points, std::get<msgs::PointCloudMessage>(second.messages[i]).points);
+    } else if (const auto* image = std::get_if<msgs::ImageMessage>(&first.messages[i])) {
+      EXPECT_EQ(image->data, std::get<msgs::ImageMessage>(second.messages[i]).data);
+    }
+  }
+  set_seed(*scenario, 99);
+  const RecordedRun reseeded = record(*scenario, 0.5);
+  EXPECT_NE(std::get<msgs::ImuMessage>(reseeded.messages[0]).linear_acceleration,
+            std::get<msgs::ImuMessage>(first.messages[0]).linear_acceleration);
+}
+
+const char* kMinimal = R"(scenario:
+  name: minimal
+  trajectory:
+    type: ground_vehicle
+    waypoints: [[0, 0], [10, 0]]
+  sensors:
+    imu: {rate: 100}
+)";
+
+std::string with(const std::string& line) { return std::string(kMinimal) + line; }
+
+TEST(Scenario, BadFilesFailNamingLineAndKey) {
+  ASSERT_TRUE(parse_scenario(kMinimal, "s.yaml"));
+  struct Case {
+    std::string text;
+    std::string expected;
+  };
+  const std::vector<Case> cases = {
+      {with("    lidar: {model: livox}\n"), "s.yaml:8: sensors.lidar.model: unknown LiDAR 'livox'"},
+      {with("    thermometer: {rate: 1}\n"), "sensors.thermometer: cannot tell the sensor's modality"},
+      {with("    imu2: {rate: -5}\n"), "sensors.imu2.rate: expected a positive number, got -5"},
+      {with("    gnss: {to_body: {rotation: [1, 1, 0, 0]}}\n"), "sensors.gnss.to_body.rotation: not a unit quaternion"},
+      {with("  faults:\n    - {type: rain, start: 1, end: 2}\n"), "faults[0]: no lidar sensor in the scenario"},
+      {with("  faults:\n    - {type: earthquake, start: 1, end: 2}\n"), "faults[0].type: unknown fault 'earthquake'"},
+      {with("  faults:\n    - {type: gnss_outage, start: 5, end: 2}\n"), "faults[0].end: a fault must end after it starts"},
+      {with("  colour: blue\n"), "unknown key"},
+      {std::string(kMinimal).replace(std::string(kMinimal).find("[[0, 0], [10, 0]]"), 17, "[[0, 0], [0, 0]]"),
+       "waypoints[1]: same x, y"},
+      {with("  world: {boxes: [{center: [1, 2, 3], size: [1, 0, 1]}]}\n"), "world.boxes[0].size: sizes must be > 0"},
+  };
+  for (const Case& c : cases) {
+    const Result<Scenario> scenario = parse_scenario(c.text, "s.yaml");
+    if (scenario) {
+      // Trajectory errors surface when the trajectory is built.
+      const Result<SplineTrajectory> trajectory = make_trajectory(*scenario);
+      ASSERT_FALSE(trajectory) << c.expected;
+      EXPECT_THAT(trajectory.error().message, HasSubstr(c.expected));
+      continue;
+    }
+    EXPECT_THAT(scenario.error().message, HasSubstr(c.expected));
+  }
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::sim
