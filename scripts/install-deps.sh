@@ -19,8 +19,8 @@ packages=(
   libtbb-dev
   # apps
   libcli11-dev
-  # tests and benchmarks
-  libgtest-dev libgmock-dev libbenchmark-dev
+  # tests and benchmarks (Embree: the ray-casting peer of the simulator benchmark)
+  libgtest-dev libgmock-dev libbenchmark-dev libembree-dev
 )
 
 missing=()

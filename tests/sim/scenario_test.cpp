@@ -78,6 +78,7 @@ TEST(ScenarioSimulation, MergesAllSensorsInTimeOrderAtTheirRates) {
   EXPECT_EQ(counts["gnss"], 6);
   EXPECT_EQ(counts["radar"], 21);
   EXPECT_EQ(counts["lidar"], 10);    // sweeps that finish by 1 s
+  EXPECT_EQ(counts["camera_front"], 11);
 }
 
 TEST(ScenarioSimulation, SameSeedSameMessagesOtherSeedOtherNoise) {
