@@ -59,9 +59,8 @@ const UrbanRays& urban_rays() {
           const Eigen::Vector3d direction =
               pose.rotation() * Eigen::Vector3d(std::cos(elevation) * std::cos(azimuth), std::cos(elevation) * std::sin(azimuth), std::sin(elevation));
           const Eigen::Vector3d& origin = pose.translation();
-          result.batch.rays.insert(result.batch.rays.end(), {static_cast<float>(origin.x()), static_cast<float>(origin.y()),
-                                                             static_cast<float>(origin.z()), static_cast<float>(direction.x()),
-                                                             static_cast<float>(direction.y()), static_cast<float>(direction.z())});
+          for (int axis = 0; axis < 3; ++axis) result.batch.rays.push_back(static_cast<float>(origin[axis]));
+          for (int axis = 0; axis < 3; ++axis) result.batch.rays.push_back(static_cast<float>(direction[axis]));
         }
       }
     }
@@ -105,10 +104,18 @@ std::unique_ptr<EmbreeScene> embree_scene(const sim::WorldDescription& descripti
   std::vector<float> vertices;
   std::vector<uint32_t> triangles;
   auto vertex = [&](const Eigen::Vector3d& p) {
-    vertices.insert(vertices.end(), {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())});
+    for (int axis = 0; axis < 3; ++axis) vertices.push_back(static_cast<float>(p[axis]));
     return static_cast<uint32_t>(vertices.size() / 3 - 1);
   };
-  auto quad = [&](uint32_t a, uint32_t b, uint32_t c, uint32_t d) { triangles.insert(triangles.end(), {a, b, c, a, c, d}); };
+  auto triangle = [&](uint32_t a, uint32_t b, uint32_t c) {
+    triangles.push_back(a);
+    triangles.push_back(b);
+    triangles.push_back(c);
+  };
+  auto quad = [&](uint32_t a, uint32_t b, uint32_t c, uint32_t d) {
+    triangle(a, b, c);
+    triangle(a, c, d);
+  };
   const double ground = description.ground_height;
   quad(vertex({-5000, -5000, ground}), vertex({5000, -5000, ground}), vertex({5000, 5000, ground}), vertex({-5000, 5000, ground}));
   for (const sim::Box& box : description.boxes) {
@@ -136,7 +143,7 @@ std::unique_ptr<EmbreeScene> embree_scene(const sim::WorldDescription& descripti
       if (k == 0) continue;
       const uint32_t previous = bottom - 2;  // the previous rim's bottom; its top is previous + 1
       quad(previous, bottom, bottom + 1, previous + 1);
-      triangles.insert(triangles.end(), {top_center, previous + 1, bottom + 1});
+      triangle(top_center, previous + 1, bottom + 1);
     }
   }
   auto result = std::make_unique<EmbreeScene>();

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # `make demo`: the main job on the sample data shipped in examples/: validate the fusion
 # configuration and calibration, turn the sample CSV recordings into a sensor log (MCAP), list
-# it, and score the sample estimate against its ground truth (APE/RPE with SVG plots). Later
+# it, simulate 8 s of the urban_vehicle scenario (all six sensors, with ground truth), and
+# score the sample estimate against its ground truth (APE/RPE with SVG plots). Later
 # issues make it replay the log through the engine. Writes only into build/demo/.
 set -euo pipefail
 build_dir=${1:-build}
@@ -21,6 +22,9 @@ echo "== hanzo-fusion import csv examples/data/{imu,gnss,wheels}.csv --out $out/
 echo
 echo "== hanzo-fusion log info $out/sample.mcap --verify"
 "$cli" log info "$out/sample.mcap" --verify
+echo
+echo "== hanzo-fusion sim examples/scenarios/urban_vehicle.yaml --out $out/urban --duration 8 --threads 0"
+"$cli" sim examples/scenarios/urban_vehicle.yaml --out "$out/urban" --duration 8 --threads 0
 echo
 echo "== hanzo-fusion eval ape examples/data/ground_truth.tum examples/data/estimate.tum --align sim3 --plot $out"
 "$cli" eval ape examples/data/ground_truth.tum examples/data/estimate.tum --align sim3 --plot "$out"

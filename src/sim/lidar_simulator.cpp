@@ -99,12 +99,13 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
       const WorldSnapshot snapshot = world_.at(time);
       const double azimuth = std::numbers::pi - 2.0 * std::numbers::pi * column / pattern.columns;
       const double cos_azimuth = std::cos(azimuth), sin_azimuth = std::sin(azimuth);
+      int object_hint = -1;  // neighbouring beams mostly see the same object
       for (int ring = 0; ring < rings; ++ring) {
         const std::size_t index = static_cast<std::size_t>(column) * rings + ring;
         const Eigen::Vector3d& beam = ring_directions_[ring];
         directions[index] = Eigen::Vector3d(beam.x() * cos_azimuth, beam.x() * sin_azimuth, beam.z());
         const Eigen::Vector3d direction_world = T_world_lidar.rotation() * directions[index];
-        const std::optional<RayHit> hit = snapshot.cast(T_world_lidar.translation(), direction_world, max_range);
+        const std::optional<RayHit> hit = snapshot.cast(T_world_lidar.translation(), direction_world, max_range, &object_hint);
         if (!hit) continue;
         const double incidence = std::abs(hit->normal.dot(direction_world));
         const float shade = 0.5F + 0.5F * luminance(hit->material->texture.color(hit->surface_uv.x(), hit->surface_uv.y()));

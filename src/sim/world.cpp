@@ -177,7 +177,6 @@ struct World::Bvh {
   struct Primitive {
     Aabb bounds;
     int object_id = 0;
-    double cos_yaw = 1.0, sin_yaw = 0.0;  // boxes
   };
   std::vector<Node> nodes;
   std::vector<Primitive> primitives;
@@ -242,10 +241,11 @@ World::World(WorldDescription description) : description_(std::move(description)
   const int box_count = static_cast<int>(description_.boxes.size());
   for (int i = 0; i < box_count; ++i) {
     const Box& box = description_.boxes[i];
-    bvh_->primitives.push_back({bounds_of(box), i, std::cos(box.yaw), std::sin(box.yaw)});
+    bvh_->primitives.push_back({bounds_of(box), i});
+    box_trig_.emplace_back(std::cos(box.yaw), std::sin(box.yaw));
   }
   for (int i = 0; i < static_cast<int>(description_.cylinders.size()); ++i) {
-    bvh_->primitives.push_back({bounds_of(description_.cylinders[i]), box_count + i, 1.0, 0.0});
+    bvh_->primitives.push_back({bounds_of(description_.cylinders[i]), box_count + i});
   }
   if (!bvh_->primitives.empty()) bvh_->build(0, static_cast<int>(bvh_->primitives.size()));
 }
@@ -258,7 +258,17 @@ int World::object_count() const {
   return static_cast<int>(description_.boxes.size() + description_.cylinders.size() + description_.moving_boxes.size());
 }
 
-bool World::cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit* hit) const {
+bool World::intersect_object(int object_id, const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit* hit) const {
+  const int box_count = static_cast<int>(description_.boxes.size());
+  const bool found = object_id < box_count
+                         ? intersect_box(description_.boxes[object_id], box_trig_[object_id].x(), box_trig_[object_id].y(), origin,
+                                         direction, hit)
+                         : intersect_cylinder(description_.cylinders[object_id - box_count], origin, direction, hit);
+  if (found) hit->object_id = object_id;
+  return found;
+}
+
+bool World::cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, int hint, RayHit* hit) const {
   bool found = false;
   if (description_.has_ground && direction.z() < 0.0 && origin.z() > description_.ground_height) {
     const double t = (description_.ground_height - origin.z()) / direction.z();
@@ -272,7 +282,7 @@ bool World::cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& di
     }
   }
   if (bvh_->nodes.empty()) return found;
-  const int box_count = static_cast<int>(description_.boxes.size());
+  if (hint >= 0 && hint < static_cast<int>(bvh_->primitives.size())) found = intersect_object(hint, origin, direction, hit) || found;
   const Eigen::Vector3d inverse_direction = direction.cwiseInverse();
   std::array<int, 64> stack;  // not zeroed: only pushed entries are read
   int depth = 0;
@@ -283,15 +293,8 @@ bool World::cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& di
     if (!ray_hits_bounds(node.bounds, origin, inverse_direction, hit->distance, &entry)) continue;
     if (node.count > 0) {
       for (int i = node.first; i < node.first + node.count; ++i) {
-        const Bvh::Primitive& primitive = bvh_->primitives[i];
-        const bool hit_this =
-            primitive.object_id < box_count
-                ? intersect_box(description_.boxes[primitive.object_id], primitive.cos_yaw, primitive.sin_yaw, origin, direction, hit)
-                : intersect_cylinder(description_.cylinders[primitive.object_id - box_count], origin, direction, hit);
-        if (hit_this) {
-          hit->object_id = primitive.object_id;
-          found = true;
-        }
+        const int object_id = bvh_->primitives[i].object_id;
+        if (object_id != hint) found = intersect_object(object_id, origin, direction, hit) || found;
       }
       continue;
     }
@@ -333,10 +336,11 @@ std::optional<RayHit> World::cast(const Eigen::Vector3d& origin, const Eigen::Ve
   return at(time).cast(origin, direction, max_distance);
 }
 
-std::optional<RayHit> WorldSnapshot::cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance) const {
+std::optional<RayHit> WorldSnapshot::cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance,
+                                          int* object_hint) const {
   RayHit hit;
   hit.distance = max_distance;
-  bool found = world_->cast_static(origin, direction, &hit);
+  bool found = world_->cast_static(origin, direction, object_hint != nullptr ? *object_hint : -1, &hit);
   const int first_moving = world_->object_count() - static_cast<int>(moving_.size());
   for (std::size_t i = 0; i < moving_.size(); ++i) {
     const PlacedBox& placed = moving_[i];
@@ -347,6 +351,7 @@ std::optional<RayHit> WorldSnapshot::cast(const Eigen::Vector3d& origin, const E
       found = true;
     }
   }
+  if (object_hint != nullptr) *object_hint = found ? hit.object_id : -1;
   if (!found) return std::nullopt;
   if (hit.object_id < first_moving) hit.object_velocity.setZero();
   hit.point = origin + hit.distance * direction;

@@ -91,7 +91,9 @@ class CameraSimulator {
   CameraSimulatorConfig config_;
   const World* world_;
   const SplineTrajectory* trajectory_;
+  static constexpr int kNormalTableBits = 16;
   std::vector<Eigen::Vector3f> rays_;  // unit, camera frame, (width * s) x (height * s), row-major
+  std::vector<float> normal_table_;    // standard normal draws for pixel noise
   Eigen::Vector3d sun_direction_;
   std::mt19937_64 random_;
 };

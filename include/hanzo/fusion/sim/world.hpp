@@ -92,8 +92,11 @@ class World;
 /// Valid while its World lives.
 class WorldSnapshot {
  public:
-  /// As World::cast at the snapshot's time.
-  std::optional<RayHit> cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance) const;
+  /// As World::cast at the snapshot's time. object_hint (optional, in/out): an object id to
+  /// test first, typically what the neighbouring ray hit; it only changes the speed (a near
+  /// first hit lets the BVH skip everything behind it), never the result. Receives the id hit.
+  std::optional<RayHit> cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance,
+                             int* object_hint = nullptr) const;
 
  private:
   friend class World;
@@ -129,9 +132,12 @@ class World {
   friend class WorldSnapshot;
   struct Bvh;
   /// The nearest static surface (ground, boxes, cylinders) nearer than hit->distance.
-  bool cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit* hit) const;
+  /// hint: a static object id to test first (or anything else to test none first).
+  bool cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, int hint, RayHit* hit) const;
+  bool intersect_object(int object_id, const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit* hit) const;
 
   WorldDescription description_;
+  std::vector<Eigen::Vector2d> box_trig_;  // (cos, sin) of each box's yaw
   std::unique_ptr<Bvh> bvh_;
 };
 
