@@ -71,6 +71,17 @@ const UrbanRays& urban_rays() {
 
 constexpr double kMaxRange = 120.0;
 
+// Runs cast(range) over [0, count) on this thread or on all threads (TBB).
+template <typename Cast>
+void for_all_rays(std::size_t count, bool all_threads, const Cast& cast) {
+  const tbb::blocked_range<std::size_t> all(0, count, 1024);
+  if (all_threads) {
+    tbb::parallel_for(all, cast);
+  } else {
+    cast(all);
+  }
+}
+
 std::vector<float> cast_hanzo(const UrbanRays& data, bool all_threads) {
   std::vector<float> hits(data.batch.count());
   const sim::WorldSnapshot snapshot = data.world->at(Timestamp{});
@@ -81,12 +92,7 @@ std::vector<float> cast_hanzo(const UrbanRays& data, bool all_threads) {
       hits[i] = hit ? static_cast<float>(hit->distance) : std::numeric_limits<float>::infinity();
     }
   };
-  const tbb::blocked_range<std::size_t> all(0, hits.size(), 1024);
-  if (all_threads) {
-    tbb::parallel_for(all, cast);
-  } else {
-    cast(all);
-  }
+  for_all_rays(hits.size(), all_threads, cast);
   return hits;
 }
 
@@ -185,12 +191,7 @@ std::vector<float> cast_embree(const EmbreeScene& scene, const RayBatch& batch, 
       hits[i] = ray.hit.geomID == RTC_INVALID_GEOMETRY_ID ? std::numeric_limits<float>::infinity() : ray.ray.tfar;
     }
   };
-  const tbb::blocked_range<std::size_t> all(0, hits.size(), 1024);
-  if (all_threads) {
-    tbb::parallel_for(all, cast);
-  } else {
-    cast(all);
-  }
+  for_all_rays(hits.size(), all_threads, cast);
   return hits;
 }
 

@@ -293,12 +293,14 @@ Result<SE3> parse_to_body(const YamlValue& value) {
   return SE3(SO3::from_wxyz(rotation.normalized()), translation);
 }
 
-Result<ImuSimulatorConfig> parse_imu(const YamlValue& value, double rate) {
+Result<SensorSimulatorConfig> parse_imu(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "process_noise_accel", "process_noise_gyro",
                                           "accel_bias_random_walk", "gyro_bias_random_walk", "initial_accel_bias",
                                           "initial_gyro_bias", "gravity"}));
   ImuSimulatorConfig config;
   config.rate_hz = rate;
+  config.T_body_imu = sensor.T_body_sensor;
+  config.frame_id = sensor.name;
   HANZO_ASSIGN_OR_RETURN(config.process_noise_accel, non_negative_or(value["process_noise_accel"], config.process_noise_accel));
   HANZO_ASSIGN_OR_RETURN(config.process_noise_gyro, non_negative_or(value["process_noise_gyro"], config.process_noise_gyro));
   HANZO_ASSIGN_OR_RETURN(config.accel_bias_random_walk, non_negative_or(value["accel_bias_random_walk"], config.accel_bias_random_walk));
@@ -306,13 +308,15 @@ Result<ImuSimulatorConfig> parse_imu(const YamlValue& value, double rate) {
   HANZO_ASSIGN_OR_RETURN(config.initial_accel_bias, vector_or<3>(value["initial_accel_bias"], config.initial_accel_bias, "(x, y, z)"));
   HANZO_ASSIGN_OR_RETURN(config.initial_gyro_bias, vector_or<3>(value["initial_gyro_bias"], config.initial_gyro_bias, "(x, y, z)"));
   HANZO_ASSIGN_OR_RETURN(config.gravity, positive_or(value["gravity"], config.gravity));
-  return config;
+  return SensorSimulatorConfig(config);
 }
 
-Result<LidarSimulatorConfig> parse_lidar(const YamlValue& value, double rate) {
+Result<SensorSimulatorConfig> parse_lidar(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "model", "range_noise", "max_range"}));
   LidarSimulatorConfig config;
   config.rate_hz = rate;
+  config.T_body_lidar = sensor.T_body_sensor;
+  config.frame_id = sensor.name;
   std::string model_name = "velodyne_vlp16";
   if (value["model"].present()) HANZO_ASSIGN_OR_RETURN(model_name, value["model"].as_string());
   const std::optional<LidarModel> model = lidar_model_from_string(model_name);
@@ -320,14 +324,16 @@ Result<LidarSimulatorConfig> parse_lidar(const YamlValue& value, double rate) {
   config.pattern = LidarPattern::preset(*model);
   HANZO_ASSIGN_OR_RETURN(config.range_noise, non_negative_or(value["range_noise"], config.range_noise));
   HANZO_ASSIGN_OR_RETURN(config.pattern.max_range, positive_or(value["max_range"], config.pattern.max_range));
-  return config;
+  return SensorSimulatorConfig(config);
 }
 
-Result<CameraSimulatorConfig> parse_camera(const YamlValue& value, double rate) {
+Result<SensorSimulatorConfig> parse_camera(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "width", "height", "fx", "fy", "cx", "cy",
                                           "distortion_model", "distortion_coeffs", "encoding", "supersampling", "pixel_noise"}));
   CameraSimulatorConfig config;
   config.rate_hz = rate;
+  config.T_body_camera = sensor.T_body_sensor;
+  config.frame_id = sensor.name;
   double width = 640.0, height = 480.0;
   HANZO_ASSIGN_OR_RETURN(width, positive_or(value["width"], width));
   HANZO_ASSIGN_OR_RETURN(height, positive_or(value["height"], height));
@@ -358,7 +364,7 @@ Result<CameraSimulatorConfig> parse_camera(const YamlValue& value, double rate) 
   HANZO_ASSIGN_OR_RETURN(supersampling, positive_or(value["supersampling"], supersampling));
   config.supersampling = static_cast<int>(supersampling);
   HANZO_ASSIGN_OR_RETURN(config.pixel_noise, non_negative_or(value["pixel_noise"], config.pixel_noise));
-  return config;
+  return SensorSimulatorConfig(config);
 }
 
 Result<msgs::GnssFixType> parse_fix_type(const YamlValue& value, msgs::GnssFixType fallback) {
@@ -372,10 +378,11 @@ Result<msgs::GnssFixType> parse_fix_type(const YamlValue& value, msgs::GnssFixTy
   return value.error(fmt::format("unknown fix type '{}' (expected NO_FIX, FIX_2D, FIX_3D, RTK_FLOAT or RTK_FIXED)", name));
 }
 
-Result<GnssSimulatorConfig> parse_gnss(const YamlValue& value, double rate, const GeodeticPoint& datum) {
+Result<SensorSimulatorConfig> parse_gnss(const YamlValue& value, double rate, const ScenarioSensor& sensor, const GeodeticPoint& datum) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "fix_type", "noise", "correlation_time", "satellites"}));
   GnssSimulatorConfig config;
   config.rate_hz = rate;
+  config.T_body_gnss = sensor.T_body_sensor;
   config.datum = datum;
   HANZO_ASSIGN_OR_RETURN(config.fix_type, parse_fix_type(value["fix_type"], config.fix_type));
   if (value["noise"].present()) {
@@ -388,26 +395,30 @@ Result<GnssSimulatorConfig> parse_gnss(const YamlValue& value, double rate, cons
   double satellites = config.satellites;
   HANZO_ASSIGN_OR_RETURN(satellites, non_negative_or(value["satellites"], satellites));
   config.satellites = static_cast<uint32_t>(satellites);
-  return config;
+  return SensorSimulatorConfig(config);
 }
 
-Result<WheelOdometrySimulatorConfig> parse_wheels(const YamlValue& value, double rate) {
+Result<SensorSimulatorConfig> parse_wheels(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "wheel_separation", "wheel_radius", "distance_noise",
                                           "scale_error"}));
   WheelOdometrySimulatorConfig config;
   config.rate_hz = rate;
+  config.T_body_wheels = sensor.T_body_sensor;
+  config.frame_id = sensor.name;
   HANZO_ASSIGN_OR_RETURN(config.wheel_separation, positive_or(value["wheel_separation"], config.wheel_separation));
   HANZO_ASSIGN_OR_RETURN(config.wheel_radius, non_negative_or(value["wheel_radius"], config.wheel_radius));
   HANZO_ASSIGN_OR_RETURN(config.distance_noise, non_negative_or(value["distance_noise"], config.distance_noise));
   HANZO_ASSIGN_OR_RETURN(config.scale_error, vector_or<2>(value["scale_error"], config.scale_error, "(left, right)"));
-  return config;
+  return SensorSimulatorConfig(config);
 }
 
-Result<RadarSimulatorConfig> parse_radar(const YamlValue& value, double rate) {
+Result<SensorSimulatorConfig> parse_radar(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "horizontal_fov_deg", "vertical_fov_deg", "max_range",
                                           "range_noise", "velocity_noise", "clutter_rate"}));
   RadarSimulatorConfig config;
   config.rate_hz = rate;
+  config.T_body_radar = sensor.T_body_sensor;
+  config.frame_id = sensor.name;
   double horizontal = config.horizontal_fov / kDegree, vertical = config.vertical_fov / kDegree;
   HANZO_ASSIGN_OR_RETURN(horizontal, positive_or(value["horizontal_fov_deg"], horizontal));
   HANZO_ASSIGN_OR_RETURN(vertical, positive_or(value["vertical_fov_deg"], vertical));
@@ -417,7 +428,7 @@ Result<RadarSimulatorConfig> parse_radar(const YamlValue& value, double rate) {
   HANZO_ASSIGN_OR_RETURN(config.range_noise, non_negative_or(value["range_noise"], config.range_noise));
   HANZO_ASSIGN_OR_RETURN(config.velocity_noise, non_negative_or(value["velocity_noise"], config.velocity_noise));
   HANZO_ASSIGN_OR_RETURN(config.clutter_rate, non_negative_or(value["clutter_rate"], config.clutter_rate));
-  return config;
+  return SensorSimulatorConfig(config);
 }
 
 double default_rate(config::SensorModality modality) {
@@ -451,54 +462,17 @@ Result<ScenarioSensor> parse_sensor(const std::string& name, const YamlValue& va
   double rate = 0.0;
   HANZO_ASSIGN_OR_RETURN(rate, positive_or(value["rate"], default_rate(sensor.modality)));
   HANZO_ASSIGN_OR_RETURN(sensor.T_body_sensor, parse_to_body(value["to_body"]));
-  auto finish = [&](auto config) {
-    config.frame_id = name;
-    return config;
-  };
+  Result<SensorSimulatorConfig> simulator = Error{"unknown modality"};
   switch (sensor.modality) {
-    case config::SensorModality::kImu: {
-      ImuSimulatorConfig config;
-      HANZO_ASSIGN_OR_RETURN(config, parse_imu(value, rate));
-      config.T_body_imu = sensor.T_body_sensor;
-      sensor.simulator = finish(config);
-      break;
-    }
-    case config::SensorModality::kLidar: {
-      LidarSimulatorConfig config;
-      HANZO_ASSIGN_OR_RETURN(config, parse_lidar(value, rate));
-      config.T_body_lidar = sensor.T_body_sensor;
-      sensor.simulator = finish(config);
-      break;
-    }
-    case config::SensorModality::kCamera: {
-      CameraSimulatorConfig config;
-      HANZO_ASSIGN_OR_RETURN(config, parse_camera(value, rate));
-      config.T_body_camera = sensor.T_body_sensor;
-      sensor.simulator = finish(config);
-      break;
-    }
-    case config::SensorModality::kGnss: {
-      GnssSimulatorConfig config;
-      HANZO_ASSIGN_OR_RETURN(config, parse_gnss(value, rate, scenario.datum));
-      config.T_body_gnss = sensor.T_body_sensor;
-      sensor.simulator = config;
-      break;
-    }
-    case config::SensorModality::kWheelOdometry: {
-      WheelOdometrySimulatorConfig config;
-      HANZO_ASSIGN_OR_RETURN(config, parse_wheels(value, rate));
-      config.T_body_wheels = sensor.T_body_sensor;
-      sensor.simulator = finish(config);
-      break;
-    }
-    case config::SensorModality::kRadar: {
-      RadarSimulatorConfig config;
-      HANZO_ASSIGN_OR_RETURN(config, parse_radar(value, rate));
-      config.T_body_radar = sensor.T_body_sensor;
-      sensor.simulator = finish(config);
-      break;
-    }
+    case config::SensorModality::kImu: simulator = parse_imu(value, rate, sensor); break;
+    case config::SensorModality::kLidar: simulator = parse_lidar(value, rate, sensor); break;
+    case config::SensorModality::kCamera: simulator = parse_camera(value, rate, sensor); break;
+    case config::SensorModality::kGnss: simulator = parse_gnss(value, rate, sensor, scenario.datum); break;
+    case config::SensorModality::kWheelOdometry: simulator = parse_wheels(value, rate, sensor); break;
+    case config::SensorModality::kRadar: simulator = parse_radar(value, rate, sensor); break;
   }
+  if (!simulator) return simulator.error();
+  sensor.simulator = std::move(*simulator);
   return sensor;
 }
 
