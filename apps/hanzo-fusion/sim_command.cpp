@@ -1,5 +1,6 @@
 // hanzo-fusion sim SCENARIO.yaml --out DIR: runs a simulation scenario and writes
-//   DIR/sensors.mcap        the sensor log (every sensor, Foxglove mirrors unless --no-foxglove)
+//   DIR/sensors.mcap        the sensor log (every sensor and /ground_truth poses; Foxglove mirrors
+//                           unless --no-foxglove)
 //   DIR/ground_truth.tum    the body trajectory at the scenario's ground_truth_rate
 //   DIR/imu_biases.csv      the first IMU's true biases per sample (when there is an IMU)
 //   DIR/calibration.yaml    the sensors' extrinsics and camera intrinsics (spec layout)
@@ -18,6 +19,7 @@
 #include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/core/yaml_value.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/sim/scenario_simulation.hpp"
 #include "log_writing.hpp"
 
@@ -73,20 +75,40 @@ int run_sim(const Output& output, const SimOptions& options) {
 
   const std::filesystem::path folder(options.out);
   const std::string log_path = (folder / "sensors.mcap").string();
+  const io::Trajectory truth = ground_truth(run);
   const int code = write_log(output, result, {log_path, options.compression, !options.no_foxglove}, [&](io::SensorLogWriter& writer) -> Status {
     HANZO_RETURN_IF_ERROR(writer.add_metadata({"hanzo.simulation", {{"scenario", run.scenario().name},
                                                                     {"seed", std::to_string(run.scenario().seed)},
                                                                     {"scenario_file", options.scenario}}}));
-    return run.run([&writer](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) {
+    // The ground truth goes into the log too (/ground_truth, with its Foxglove mirror), each
+    // pose before the first sensor message after it, so the log stays in time order.
+    std::size_t next_truth = 0;
+    auto write_truth_until = [&](Timestamp time) -> Status {
+      for (; next_truth < truth.size() && truth.timestamps[next_truth] <= time; ++next_truth) {
+        const Timestamp stamp = truth.timestamps[next_truth];
+        const sim::TrajectorySample sample = run.trajectory().sample(stamp);
+        msgs::PoseEstimate pose;
+        pose.timestamp = stamp;
+        pose.frame_id = "world";
+        pose.child_frame_id = "body";
+        pose.T_world_body = msgs::Pose::from_se3(sample.T_world_body);
+        pose.velocity = sample.velocity_world;
+        HANZO_RETURN_IF_ERROR(writer.write("/ground_truth", pose));
+      }
+      return ok_status();
+    };
+    const Status simulated = run.run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
+      HANZO_RETURN_IF_ERROR(write_truth_until(msgs::timestamp_of(message)));
       return writer.write(sensor.topic, message, sensor.name);
     });
+    if (!simulated) return simulated;
+    return write_truth_until(run.end_time());
   });
   if (code != 0) return code;
 
   const std::string truth_path = (folder / "ground_truth.tum").string();
   const std::string calibration_path = (folder / "calibration.yaml").string();
   const std::string config_path = (folder / "fusion.yaml").string();
-  const io::Trajectory truth = ground_truth(run);
   if (Status written = io::write_trajectory(truth_path, truth, io::TrajectoryFormat::kTum); !written) {
     return report_failure(output, result, written.error().message);
   }

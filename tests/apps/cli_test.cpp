@@ -326,7 +326,8 @@ TEST(Cli, SimWritesLogGroundTruthCalibrationAndConfig) {
   const nlohmann::json log = nlohmann::json::parse(info.out);
   std::set<std::string> topics;
   for (const auto& channel : log["channels"]) topics.insert(channel["topic"].get<std::string>());
-  for (const char* topic : {"/sensors/imu", "/sensors/lidar", "/sensors/lidar/foxglove", "/sensors/camera_front", "/sensors/wheels"}) {
+  for (const char* topic : {"/sensors/imu", "/sensors/lidar", "/sensors/lidar/foxglove", "/sensors/camera_front", "/sensors/wheels",
+                            "/ground_truth", "/ground_truth/foxglove"}) {
     EXPECT_TRUE(topics.count(topic)) << topic;
   }
   EXPECT_EQ(run(fmt::format("calib check {}", (dir / "calibration.yaml").string())).exit_code, 0);
