@@ -4,11 +4,12 @@
 //
 // Each sensor samples at its rate from the scenario start to its end (scenario_end_time);
 // a LiDAR sweep is stamped at its start and needs the whole sweep inside the trajectory.
-// Messages a sensor cannot produce are left out and counted (a LiDAR sweep or point cloud
-// that saw nothing); GNSS outages still produce NO_FIX messages as receivers do.
-// Deterministic: the same scenario (seed included) gives the same messages byte for byte.
-// The statistics say how much each sensor produced and how long its simulation took (on the
-// calling thread; the simulation is single-threaded).
+// Messages a sensor cannot produce are left out and counted (a LiDAR sweep that saw
+// nothing); GNSS outages still produce NO_FIX messages as receivers do.
+// Deterministic: the same scenario (seed included) gives the same messages byte for byte, for
+// any Scenario::num_threads (LiDARs and cameras cast their rays on that many threads; the
+// sensors themselves run one after another). The statistics say how much each sensor produced
+// and how long its simulation took.
 
 #include <functional>
 #include <memory>
@@ -27,7 +28,7 @@ struct SensorRunStatistics {
   std::size_t messages = 0;
   std::size_t skipped = 0;          ///< messages left out (nothing seen)
   std::size_t elements = 0;         ///< points (LiDAR), pixels (camera), targets (radar), else messages
-  double simulation_seconds = 0.0;  ///< CPU time spent simulating this sensor (wall clock, one thread)
+  double simulation_seconds = 0.0;  ///< wall-clock seconds spent simulating this sensor
 };
 
 /// The true IMU biases at one IMU sample.
