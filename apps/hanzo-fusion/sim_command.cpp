@@ -7,9 +7,11 @@
 //   DIR/fusion.yaml         a fusion configuration to run the log
 // See docs/simulator.md.
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <fmt/format.h>
@@ -29,9 +31,9 @@ namespace {
 struct SimOptions {
   std::string scenario;
   std::string out;
-  double duration = 0.0;  // 0: the scenario's
-  int64_t seed = -1;      // -1: the scenario's
-  int threads = -1;       // -1: the scenario's
+  std::optional<double> duration;  // absent: the scenario's
+  std::optional<int64_t> seed;
+  std::optional<int> threads;
   std::string compression = "zstd";
   bool no_foxglove = false;
 };
@@ -61,11 +63,15 @@ std::string bias_csv(const std::vector<sim::ImuBiasTruth>& biases) {
 
 int run_sim(const Output& output, const SimOptions& options) {
   nlohmann::json result = {{"scenario", options.scenario}, {"out", options.out}};
+  if (options.duration && !(*options.duration > 0.0 && std::isfinite(*options.duration))) {
+    return report_failure(output, result, fmt::format("--duration: expected seconds > 0, got {}", *options.duration));
+  }
+  if (options.seed && *options.seed < 0) return report_failure(output, result, fmt::format("--seed: expected >= 0, got {}", *options.seed));
   Result<sim::Scenario> scenario = sim::load_scenario(options.scenario);
   if (!scenario) return report_failure(output, result, scenario.error().message);
-  if (options.duration > 0.0) scenario->duration = options.duration;
-  if (options.seed >= 0) sim::set_seed(*scenario, static_cast<uint64_t>(options.seed));
-  if (options.threads >= 0) scenario->num_threads = options.threads;
+  if (options.duration) scenario->duration = *options.duration;
+  if (options.seed) sim::set_seed(*scenario, static_cast<uint64_t>(*options.seed));
+  if (options.threads) scenario->num_threads = *options.threads;
   Result<std::unique_ptr<sim::ScenarioSimulation>> simulation = sim::ScenarioSimulation::create(std::move(*scenario));
   if (!simulation) return report_failure(output, result, simulation.error().message);
   sim::ScenarioSimulation& run = **simulation;
@@ -161,8 +167,9 @@ void add_sim_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("SCENARIO", options->scenario, "Scenario YAML (see examples/scenarios/)")->required();
   command->add_option("--out", options->out, "Output folder (created when missing)")->required();
   command->add_option("--duration", options->duration, "Seconds to simulate (default: the scenario's)");
-  command->add_option("--seed", options->seed, "Override the scenario's seed");
-  command->add_option("--threads", options->threads, "Ray-casting threads for LiDARs and cameras (0: all cores; same output)");
+  command->add_option("--seed", options->seed, "Override the scenario's seed (>= 0)");
+  command->add_option("--threads", options->threads, "Ray-casting threads for LiDARs and cameras (0: all cores; same output)")
+      ->check(CLI::Range(0, 1024));
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
   command->add_flag("--no-foxglove", options->no_foxglove, "Leave out the Foxglove mirror channels");
   command->callback([&output, &run, options] { run = [&output, options] { return run_sim(output, *options); }; });

@@ -342,6 +342,9 @@ TEST(Cli, SimWritesLogGroundTruthCalibrationAndConfig) {
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_THAT(bad.err, HasSubstr("trajectory: missing"));
   EXPECT_EQ(std::count(bad.err.begin(), bad.err.end(), '\n'), 1);
+  const CliRun negative = run(fmt::format("sim examples/scenarios/drone.yaml --out {} --duration -3", dir.string()));
+  EXPECT_EQ(negative.exit_code, 1);
+  EXPECT_THAT(negative.err, HasSubstr("--duration: expected seconds > 0, got -3"));
   std::filesystem::remove_all(dir);
 }
 
