@@ -10,6 +10,7 @@ namespace hanzo::fusion::sim {
 namespace {
 
 constexpr double kPathStep = 0.02;  // metres between densified path points
+constexpr double kMaxTurn = 170.0 * std::numbers::pi / 180.0;  // radians at one corner
 
 struct PathPoint {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
@@ -79,6 +80,19 @@ Status check(const GroundPathConfig& config) {
     const Eigen::Vector3d& next = config.waypoints[(i + 1) % config.waypoints.size()];
     if ((i + 1 < config.waypoints.size() || config.closed) && xy(next - config.waypoints[i]).norm() < 1e-6) {
       return Error{fmt::format("waypoints[{}]: same x, y as the waypoint before it", (i + 1) % config.waypoints.size()), "waypoints"};
+    }
+  }
+  // A vehicle cannot reverse on the spot: every corner it drives through must turn less than
+  // kMaxTurn (interior corners; on a closed path every corner).
+  const std::size_t n = config.waypoints.size();
+  for (std::size_t j = config.closed ? 0 : 1; j < (config.closed ? n : n - 1); ++j) {
+    const Eigen::Vector2d in = xy(config.waypoints[j] - config.waypoints[(j + n - 1) % n]);
+    const Eigen::Vector2d out = xy(config.waypoints[(j + 1) % n] - config.waypoints[j]);
+    const double turn = std::abs(std::atan2(in.x() * out.y() - in.y() * out.x(), in.dot(out)));
+    if (turn > kMaxTurn) {
+      return Error{fmt::format("waypoints[{}]: turns {:.0f} deg, more than {:.0f}: add a waypoint to drive the turn", j,
+                               turn * 180.0 / std::numbers::pi, kMaxTurn * 180.0 / std::numbers::pi),
+                   "waypoints"};
     }
   }
   const std::pair<const char*, double> positive[] = {

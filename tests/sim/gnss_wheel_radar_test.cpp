@@ -57,6 +57,12 @@ TEST(GroundPath, RespectsSpeedAndAccelerationLimitsAndStartsAtRest) {
   EXPECT_LT(trajectory.sample(trajectory.end_time()).velocity_world.norm(), 1e-9);
   EXPECT_LT((trajectory.sample(trajectory.end_time()).T_world_body.translation() - Eigen::Vector3d::Zero()).norm(), 1e-6);
   EXPECT_FALSE(make_ground_trajectory(kStart, GroundPathConfig{}));  // no waypoints
+  GroundPathConfig u_turn = path;
+  u_turn.closed = false;
+  u_turn.waypoints = {{0.0, 0.0, 0.0}, {10.0, 0.0, 0.0}, {0.0, 0.1, 0.0}};
+  const Result<SplineTrajectory> reversing = make_ground_trajectory(kStart, u_turn);
+  ASSERT_FALSE(reversing);
+  EXPECT_NE(reversing.error().message.find("waypoints[1]: turns 179 deg"), std::string::npos) << reversing.error().message;
   path.waypoints[1] = path.waypoints[0];
   EXPECT_FALSE(make_ground_trajectory(kStart, path));
 }
