@@ -31,8 +31,10 @@ float value_noise(double u, double v, uint32_t seed) {
   const auto x = static_cast<int64_t>(fu), y = static_cast<int64_t>(fv);
   const auto su = static_cast<float>(u - fu), sv = static_cast<float>(v - fv);
   const float wu = su * su * (3.0F - 2.0F * su), wv = sv * sv * (3.0F - 2.0F * sv);
-  const float bottom = unit_hash(x, y, seed) + wu * (unit_hash(x + 1, y, seed) - unit_hash(x, y, seed));
-  const float top = unit_hash(x, y + 1, seed) + wu * (unit_hash(x + 1, y + 1, seed) - unit_hash(x, y + 1, seed));
+  const float corner_00 = unit_hash(x, y, seed), corner_10 = unit_hash(x + 1, y, seed);
+  const float corner_01 = unit_hash(x, y + 1, seed), corner_11 = unit_hash(x + 1, y + 1, seed);
+  const float bottom = corner_00 + wu * (corner_10 - corner_00);
+  const float top = corner_01 + wu * (corner_11 - corner_01);
   return bottom + wv * (top - bottom);
 }
 
