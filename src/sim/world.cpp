@@ -177,6 +177,7 @@ struct World::Bvh {
   struct Primitive {
     Aabb bounds;
     int object_id = 0;
+    double cos_yaw = 1.0, sin_yaw = 0.0;  // boxes: kept beside the bounds for the leaf loop
   };
   std::vector<Node> nodes;
   std::vector<Primitive> primitives;
@@ -241,7 +242,7 @@ World::World(WorldDescription description) : description_(std::move(description)
   const int box_count = static_cast<int>(description_.boxes.size());
   for (int i = 0; i < box_count; ++i) {
     const Box& box = description_.boxes[i];
-    bvh_->primitives.push_back({bounds_of(box), i});
+    bvh_->primitives.push_back({bounds_of(box), i, std::cos(box.yaw), std::sin(box.yaw)});
     box_trig_.emplace_back(std::cos(box.yaw), std::sin(box.yaw));
   }
   for (int i = 0; i < static_cast<int>(description_.cylinders.size()); ++i) {
@@ -283,6 +284,7 @@ bool World::cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& di
   }
   if (bvh_->nodes.empty()) return found;
   if (hint >= 0 && hint < static_cast<int>(bvh_->primitives.size())) found = intersect_object(hint, origin, direction, hit) || found;
+  const int box_count = static_cast<int>(description_.boxes.size());
   const Eigen::Vector3d inverse_direction = direction.cwiseInverse();
   std::array<int, 64> stack;  // not zeroed: only pushed entries are read
   int depth = 0;
@@ -293,8 +295,16 @@ bool World::cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& di
     if (!ray_hits_bounds(node.bounds, origin, inverse_direction, hit->distance, &entry)) continue;
     if (node.count > 0) {
       for (int i = node.first; i < node.first + node.count; ++i) {
-        const int object_id = bvh_->primitives[i].object_id;
-        if (object_id != hint) found = intersect_object(object_id, origin, direction, hit) || found;
+        const Bvh::Primitive& primitive = bvh_->primitives[i];
+        if (primitive.object_id == hint) continue;  // tested first
+        const bool hit_this =
+            primitive.object_id < box_count
+                ? intersect_box(description_.boxes[primitive.object_id], primitive.cos_yaw, primitive.sin_yaw, origin, direction, hit)
+                : intersect_cylinder(description_.cylinders[primitive.object_id - box_count], origin, direction, hit);
+        if (hit_this) {
+          hit->object_id = primitive.object_id;
+          found = true;
+        }
       }
       continue;
     }
