@@ -1,7 +1,10 @@
 #include "hanzo/fusion/sim/gnss_simulator.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
+
+#include <fmt/format.h>
 
 #include "hanzo/fusion/core/enum_names.hpp"
 
@@ -12,6 +15,7 @@ constexpr EnumNames<GnssEpisodeType, 2> kEpisodeNames{{{GnssEpisodeType::kOutage
                                                        {GnssEpisodeType::kDegraded, "degraded"}}};
 constexpr float kNominalHdop = 0.9F;
 constexpr float kNoFixHdop = 99.0F;
+constexpr double kSkyRayLength = 1000.0;  // metres: buildings farther away do not block
 
 }  // namespace
 
@@ -29,20 +33,56 @@ Eigen::Vector2d default_gnss_noise(msgs::GnssFixType fix_type) {
   return Eigen::Vector2d::Zero();
 }
 
-Result<GnssSimulator> GnssSimulator::create(GnssSimulatorConfig config, const SplineTrajectory& trajectory) {
+Result<GnssSimulator> GnssSimulator::create(GnssSimulatorConfig config, const SplineTrajectory& trajectory, const World* world) {
   Result<EnuFrame> enu = with_context(EnuFrame::create(config.datum), "gnss datum");
   if (!enu) return enu.error();
-  return GnssSimulator(std::move(config), trajectory, *enu);
+  if (config.sky_blockage && world == nullptr) return Error{"gnss sky_blockage: needs the world to cast satellite rays in", "sky_blockage"};
+  if (config.sky_blockage && config.constellation < 4) {
+    return Error{fmt::format("gnss constellation: expected at least 4 satellites, got {}", config.constellation), "constellation"};
+  }
+  return GnssSimulator(std::move(config), trajectory, world, *enu);
 }
 
-GnssSimulator::GnssSimulator(GnssSimulatorConfig config, const SplineTrajectory& trajectory, EnuFrame enu)
-    : config_(std::move(config)), trajectory_(&trajectory), enu_(enu), random_(config_.seed) {}
+GnssSimulator::GnssSimulator(GnssSimulatorConfig config, const SplineTrajectory& trajectory, const World* world, EnuFrame enu)
+    : config_(std::move(config)), trajectory_(&trajectory), world_(world), enu_(enu), random_(config_.seed) {
+  if (!config_.sky_blockage) return;
+  // Evenly spread azimuths, elevations between the mask and 85 deg (a separate stream, so the
+  // noise draws do not depend on whether sky blockage is on).
+  std::mt19937_64 sky_random(config_.seed ^ 0x5A7E111735ULL);
+  std::uniform_real_distribution<double> elevation(config_.elevation_mask, 85.0 * std::numbers::pi / 180.0);
+  for (int i = 0; i < config_.constellation; ++i) {
+    const double azimuth = 2.0 * std::numbers::pi * (i + 0.5) / config_.constellation;
+    const double e = elevation(sky_random);
+    satellites_.emplace_back(std::cos(e) * std::sin(azimuth), std::cos(e) * std::cos(azimuth), std::sin(e));  // ENU, azimuth from north
+  }
+  sky_episode_.type = GnssEpisodeType::kDegraded;
+  sky_episode_.fix_type = msgs::GnssFixType::kFix3d;
+  sky_episode_.multipath_magnitude = 10.0;
+  sky_episode_.multipath_duration = 2.0;
+}
 
-const GnssEpisode* GnssSimulator::episode_at(Timestamp time) const {
+int GnssSimulator::visible_satellites(Timestamp time) const {
+  if (!config_.sky_blockage) return config_.constellation;
+  const WorldSnapshot snapshot = world_->at(time);
+  const Eigen::Vector3d antenna = true_antenna_position(time);
+  int visible = 0;
+  for (const Eigen::Vector3d& direction : satellites_) visible += snapshot.cast(antenna, direction, kSkyRayLength) ? 0 : 1;
+  return visible;
+}
+
+const GnssEpisode* GnssSimulator::episode_at(Timestamp time) {
   for (const GnssEpisode& episode : config_.episodes) {
     if (time >= episode.start && time <= episode.end) return &episode;
   }
-  return nullptr;
+  if (!config_.sky_blockage) return nullptr;
+  const int visible = visible_satellites(time);
+  const int total = config_.constellation;
+  if (visible >= (total + 1) / 2) return nullptr;
+  sky_episode_.type = visible < 4 ? GnssEpisodeType::kOutage : GnssEpisodeType::kDegraded;
+  sky_episode_.noise_scale = std::sqrt(static_cast<double>(total) / std::max(visible, 1));
+  sky_episode_.multipath_rate_hz = 0.3 * static_cast<double>(total - visible) / total;
+  sky_episode_.satellites = static_cast<uint32_t>(visible);
+  return &sky_episode_;
 }
 
 Eigen::Vector3d GnssSimulator::true_antenna_position(Timestamp time) const {

@@ -64,7 +64,7 @@ Result<std::unique_ptr<ScenarioSimulation>> ScenarioSimulation::create(Scenario 
       auto simulator = std::make_shared<CameraSimulator>(std::move(*created));
       stream->produce = [simulator](Timestamp time) -> std::optional<msgs::SensorMessage> { return simulator->measure(time); };
     } else if (const auto* gnss = std::get_if<GnssSimulatorConfig>(&sensor.simulator)) {
-      Result<GnssSimulator> created = GnssSimulator::create(*gnss, path);
+      Result<GnssSimulator> created = GnssSimulator::create(*gnss, path, &world);
       if (!created) return with_context(Result<std::unique_ptr<ScenarioSimulation>>(created.error()), "sensors." + sensor.name);
       auto simulator = std::make_shared<GnssSimulator>(std::move(*created));
       stream->produce = [simulator](Timestamp time) -> std::optional<msgs::SensorMessage> { return simulator->measure(time); };

@@ -379,7 +379,8 @@ Result<msgs::GnssFixType> parse_fix_type(const YamlValue& value, msgs::GnssFixTy
 }
 
 Result<SensorSimulatorConfig> parse_gnss(const YamlValue& value, double rate, const ScenarioSensor& sensor, const GeodeticPoint& datum) {
-  HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "fix_type", "noise", "correlation_time", "satellites"}));
+  HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "fix_type", "noise", "correlation_time", "satellites",
+                                          "sky_blockage", "constellation", "elevation_mask_deg"}));
   GnssSimulatorConfig config;
   config.rate_hz = rate;
   config.T_body_gnss = sensor.T_body_sensor;
@@ -395,6 +396,15 @@ Result<SensorSimulatorConfig> parse_gnss(const YamlValue& value, double rate, co
   double satellites = config.satellites;
   HANZO_ASSIGN_OR_RETURN(satellites, non_negative_or(value["satellites"], satellites));
   config.satellites = static_cast<uint32_t>(satellites);
+  if (value["sky_blockage"].present()) HANZO_ASSIGN_OR_RETURN(config.sky_blockage, value["sky_blockage"].as_bool());
+  double constellation = config.constellation;
+  HANZO_ASSIGN_OR_RETURN(constellation, positive_or(value["constellation"], constellation));
+  if (constellation < 4) return value["constellation"].error(fmt::format("expected at least 4 satellites, got {}", constellation));
+  config.constellation = static_cast<int>(constellation);
+  double mask = config.elevation_mask / kDegree;
+  HANZO_ASSIGN_OR_RETURN(mask, non_negative_or(value["elevation_mask_deg"], mask));
+  if (mask >= 80.0) return value["elevation_mask_deg"].error(fmt::format("expected a mask below 80 deg, got {}", mask));
+  config.elevation_mask = mask * kDegree;
   return SensorSimulatorConfig(config);
 }
 

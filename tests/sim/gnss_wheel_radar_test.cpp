@@ -144,6 +144,58 @@ TEST(GnssSimulator, OutageReportsNoFixAndCanyonAddsMultipathJumps) {
   EXPECT_GT(jumps, 10);  // ~8 jumps of 3 s expected in 40 s: tens of affected fixes
 }
 
+TEST(GnssSimulator, BuildingsBlockSatellitesAndARoofLosesTheFix) {
+  // The antenna drives east along y = 0 at 5 m/s: open sky, then an 8 m wide street between
+  // two 30 m buildings (x 140..180), then through a 60 m underpass (x 200..260, deck 6-8 m up).
+  std::vector<SE3> poses;
+  for (int i = 0; i < 130; ++i) poses.emplace_back(SO3(), Eigen::Vector3d(5.0 * 0.5 * (i - 1), 0.0, 1.5));
+  const SplineTrajectory trajectory = *SplineTrajectory::create(kStart, Duration::from_milliseconds(500), poses);
+  WorldDescription description;
+  Box building;
+  building.half_size = {20.0, 10.0, 15.0};
+  building.center = {160.0, 14.0, 15.0};
+  description.boxes.push_back(building);
+  building.center = {160.0, -14.0, 15.0};
+  description.boxes.push_back(building);
+  Box deck;
+  deck.center = {230.0, 0.0, 7.0};
+  deck.half_size = {30.0, 20.0, 1.0};
+  description.boxes.push_back(deck);
+  const World world(description);
+
+  GnssSimulatorConfig config;
+  config.datum = {47.3769, 8.5417, 408.0};
+  config.fix_type = msgs::GnssFixType::kRtkFixed;
+  config.sky_blockage = true;
+  config.constellation = 12;
+  ASSERT_FALSE(GnssSimulator::create(config, trajectory));  // sky blockage needs the world
+  GnssSimulator gnss = *GnssSimulator::create(config, trajectory, &world);
+  auto time_at_x = [](double x) { return at(x / 5.0); };
+  EXPECT_EQ(gnss.visible_satellites(time_at_x(10.0)), 12);
+  const int canyon_visible = gnss.visible_satellites(time_at_x(160.0));
+  EXPECT_LT(canyon_visible, 6);  // 30 m walls 4 m away: only the sky along the street
+  EXPECT_LT(gnss.visible_satellites(time_at_x(230.0)), 4);
+
+  const msgs::GnssMessage open = gnss.measure(time_at_x(10.0));
+  EXPECT_EQ(open.fix_type, msgs::GnssFixType::kRtkFixed);
+  EXPECT_EQ(open.satellites_used, 14U);  // the configured count when nothing is blocked
+  const msgs::GnssMessage canyon = gnss.measure(time_at_x(160.0));
+  if (canyon_visible >= 4) {
+    EXPECT_EQ(canyon.fix_type, msgs::GnssFixType::kFix3d);
+    EXPECT_EQ(canyon.satellites_used, static_cast<uint32_t>(canyon_visible));
+    EXPECT_GT((*canyon.position_covariance)(0, 0), 1.5 * 1.5);  // FIX_3D noise, scaled up
+  } else {
+    EXPECT_EQ(canyon.fix_type, msgs::GnssFixType::kNoFix);
+  }
+  const msgs::GnssMessage underpass = gnss.measure(time_at_x(230.0));
+  EXPECT_EQ(underpass.fix_type, msgs::GnssFixType::kNoFix);
+  EXPECT_FALSE(underpass.position_covariance);
+  // Without sky blockage the same drive keeps its RTK fix everywhere.
+  config.sky_blockage = false;
+  GnssSimulator unblocked = *GnssSimulator::create(config, trajectory, &world);
+  EXPECT_EQ(unblocked.measure(time_at_x(230.0)).fix_type, msgs::GnssFixType::kRtkFixed);
+}
+
 TEST(WheelOdometrySimulator, NoiselessDistancesDeadReckonTheTrajectory) {
   const SplineTrajectory trajectory = loop_trajectory();
   WheelOdometrySimulatorConfig config;

@@ -19,6 +19,14 @@
 //            noise_scale, fewer satellites; multipath jumps arrive at multipath_rate_hz
 //            (Poisson), each an offset of multipath_magnitude metres in a random horizontal
 //            direction lasting multipath_duration seconds.
+//
+// Sky blockage (sky_blockage, with a World): `constellation` satellites at fixed directions
+// above the elevation mask (spread evenly in azimuth, elevations drawn from the seed; they
+// move too slowly to matter over minutes). At each fix the antenna casts a ray to each; the
+// World's buildings block them. With v of N visible: v < 4 gives NO_FIX (as an outage);
+// v < N/2 degrades the fix as an episode would: FIX_3D (RTK lost), noise * sqrt(N / v),
+// multipath jumps at 0.3 Hz * blocked fraction; satellites_used = v. Scripted episodes take
+// precedence.
 
 #include <cstdint>
 #include <optional>
@@ -32,6 +40,7 @@
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
 #include "hanzo/fusion/sim/spline_trajectory.hpp"
+#include "hanzo/fusion/sim/world.hpp"
 
 namespace hanzo::fusion::sim {
 
@@ -65,26 +74,37 @@ struct GnssSimulatorConfig {
   double correlation_time = 0.0;  ///< seconds, >= 0 (0: white)
   uint32_t satellites = 14;
   std::vector<GnssEpisode> episodes;
+  bool sky_blockage = false;      ///< needs a World at create()
+  int constellation = 12;         ///< satellites above the mask, >= 4
+  double elevation_mask = 0.1745; ///< radians (10 deg)
   uint64_t seed = 3;
 };
 
 class GnssSimulator {
  public:
-  /// Fails when the datum is not a valid WGS84 point.
-  static Result<GnssSimulator> create(GnssSimulatorConfig config, const SplineTrajectory& trajectory);
+  /// Fails when the datum is not a valid WGS84 point, or sky_blockage is set without a world
+  /// (which must then outlive the simulator).
+  static Result<GnssSimulator> create(GnssSimulatorConfig config, const SplineTrajectory& trajectory,
+                                      const World* world = nullptr);
 
   /// The fix at `time`; call in increasing time order.
   msgs::GnssMessage measure(Timestamp time);
   /// The true antenna position in world ENU at `time`.
   Eigen::Vector3d true_antenna_position(Timestamp time) const;
+  /// Satellites the antenna sees at `time` (the whole constellation without sky blockage).
+  int visible_satellites(Timestamp time) const;
   const EnuFrame& enu_frame() const { return enu_; }
 
  private:
-  GnssSimulator(GnssSimulatorConfig config, const SplineTrajectory& trajectory, EnuFrame enu);
-  const GnssEpisode* episode_at(Timestamp time) const;
+  GnssSimulator(GnssSimulatorConfig config, const SplineTrajectory& trajectory, const World* world, EnuFrame enu);
+  /// The scripted episode at `time`, else the one sky blockage implies (kept in sky_episode_).
+  const GnssEpisode* episode_at(Timestamp time);
 
   GnssSimulatorConfig config_;
   const SplineTrajectory* trajectory_;
+  const World* world_;
+  std::vector<Eigen::Vector3d> satellites_;  // unit directions, world ENU
+  GnssEpisode sky_episode_;
   EnuFrame enu_;
   std::mt19937_64 random_;
   Eigen::Vector3d error_ = Eigen::Vector3d::Zero();  // standardized Gauss-Markov state (unit variance)
