@@ -83,9 +83,14 @@ int run_sim(const Output& output, const SimOptions& options) {
   const std::string log_path = (folder / "sensors.mcap").string();
   const io::Trajectory truth = ground_truth(run);
   const int code = write_log(output, result, {log_path, options.compression, !options.no_foxglove}, [&](io::SensorLogWriter& writer) -> Status {
-    HANZO_RETURN_IF_ERROR(writer.add_metadata({"hanzo.simulation", {{"scenario", run.scenario().name},
-                                                                    {"seed", std::to_string(run.scenario().seed)},
-                                                                    {"scenario_file", options.scenario}}}));
+    const GeodeticPoint& datum = run.scenario().datum;
+    HANZO_RETURN_IF_ERROR(writer.add_metadata({"hanzo.simulation",
+                                               {{"scenario", run.scenario().name},
+                                                {"seed", std::to_string(run.scenario().seed)},
+                                                {"scenario_file", options.scenario},
+                                                {"datum_latitude", format_double(datum.latitude_deg)},
+                                                {"datum_longitude", format_double(datum.longitude_deg)},
+                                                {"datum_altitude", format_double(datum.altitude_m)}}}));
     // The ground truth goes into the log too (/ground_truth, with its Foxglove mirror), each
     // pose before the first sensor message after it, so the log stays in time order.
     std::size_t next_truth = 0;
@@ -152,6 +157,8 @@ int run_sim(const Output& output, const SimOptions& options) {
   result["name"] = run.scenario().name;
   result["seed"] = run.scenario().seed;
   result["duration_s"] = duration;
+  result["datum"] = {{"latitude", run.scenario().datum.latitude_deg}, {"longitude", run.scenario().datum.longitude_deg},
+                     {"altitude", run.scenario().datum.altitude_m}};
   result["sensors"] = sensors;
   result["simulation_seconds"] = total_seconds;
   result["ground_truth_poses"] = truth.size();
