@@ -1,6 +1,7 @@
 // The scenario YAML loader (layout in scenario.hpp and docs/simulator.md).
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include <fmt/format.h>
@@ -41,6 +42,20 @@ Result<double> probability_or(const YamlValue& value, double fallback) {
   HANZO_ASSIGN_OR_RETURN(number, number_or(value, fallback));
   if (!(number >= 0.0 && number <= 1.0)) return value.error(fmt::format("expected a probability in [0, 1], got {}", number));
   return number;
+}
+
+// A whole number in [minimum, maximum], or fallback when absent: counts, sizes and seeds
+// (640.5 pixels is an error, not 640).
+template <typename Integer>
+Result<Integer> count_or(const YamlValue& value, Integer fallback, int64_t minimum,
+                         int64_t maximum = std::numeric_limits<int32_t>::max()) {
+  if (!value.present()) return fallback;
+  int64_t number = 0;
+  HANZO_ASSIGN_OR_RETURN(number, value.as_int64());
+  if (number < minimum || number > maximum) {
+    return value.error(fmt::format("expected a whole number in {}..{}, got {}", minimum, maximum, number));
+  }
+  return static_cast<Integer>(number);
 }
 
 template <int N>
@@ -96,9 +111,7 @@ Result<Texture> parse_texture(const YamlValue& value, Texture texture) {
   HANZO_ASSIGN_OR_RETURN(texture.color_a, color_or(value["color_a"], texture.color_a));
   HANZO_ASSIGN_OR_RETURN(texture.color_b, color_or(value["color_b"], texture.color_b));
   HANZO_ASSIGN_OR_RETURN(texture.scale, positive_or(value["scale"], texture.scale));
-  double seed = 0.0;
-  HANZO_ASSIGN_OR_RETURN(seed, non_negative_or(value["seed"], texture.seed));
-  texture.seed = static_cast<uint32_t>(seed);
+  HANZO_ASSIGN_OR_RETURN(texture.seed, count_or(value["seed"], texture.seed, 0, std::numeric_limits<uint32_t>::max()));
   return texture;
 }
 
@@ -210,9 +223,7 @@ Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* wo
     HANZO_ASSIGN_OR_RETURN(config.building_height, vector_or<2>(city["building_height"], config.building_height, "(min, max)"));
     HANZO_ASSIGN_OR_RETURN(config.pole_spacing, non_negative_or(city["pole_spacing"], config.pole_spacing));
     HANZO_ASSIGN_OR_RETURN(config.parked_car_probability, probability_or(city["parked_cars"], config.parked_car_probability));
-    double seed = 0.0;
-    HANZO_ASSIGN_OR_RETURN(seed, non_negative_or(city["seed"], config.seed));
-    config.seed = static_cast<uint32_t>(seed);
+    HANZO_ASSIGN_OR_RETURN(config.seed, count_or(city["seed"], config.seed, 0, std::numeric_limits<uint32_t>::max()));
     add_city(config, world);
   }
   return ok_status();
@@ -223,9 +234,7 @@ Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* wo
 Status parse_ground_path(const YamlValue& value, GroundPathConfig* path) {
   HANZO_ASSIGN_OR_RETURN(path->waypoints, points_3d(value["waypoints"], true));
   if (value["closed"].present()) HANZO_ASSIGN_OR_RETURN(path->closed, value["closed"].as_bool());
-  double laps = path->laps;
-  HANZO_ASSIGN_OR_RETURN(laps, positive_or(value["laps"], laps));
-  path->laps = static_cast<int>(laps);
+  HANZO_ASSIGN_OR_RETURN(path->laps, count_or(value["laps"], path->laps, 1));
   HANZO_ASSIGN_OR_RETURN(path->corner_radius, positive_or(value["corner_radius"], path->corner_radius));
   HANZO_ASSIGN_OR_RETURN(path->max_speed, positive_or(value["max_speed"], path->max_speed));
   HANZO_ASSIGN_OR_RETURN(path->max_acceleration, positive_or(value["max_acceleration"], path->max_acceleration));
@@ -334,11 +343,9 @@ Result<SensorSimulatorConfig> parse_camera(const YamlValue& value, double rate, 
   config.rate_hz = rate;
   config.T_body_camera = sensor.T_body_sensor;
   config.frame_id = sensor.name;
-  double width = 640.0, height = 480.0;
-  HANZO_ASSIGN_OR_RETURN(width, positive_or(value["width"], width));
-  HANZO_ASSIGN_OR_RETURN(height, positive_or(value["height"], height));
-  config.intrinsics.width = static_cast<uint32_t>(width);
-  config.intrinsics.height = static_cast<uint32_t>(height);
+  HANZO_ASSIGN_OR_RETURN(config.intrinsics.width, count_or(value["width"], uint32_t{640}, 1, 16384));
+  HANZO_ASSIGN_OR_RETURN(config.intrinsics.height, count_or(value["height"], uint32_t{480}, 1, 16384));
+  const double width = config.intrinsics.width, height = config.intrinsics.height;
   HANZO_ASSIGN_OR_RETURN(config.intrinsics.fx, positive_or(value["fx"], width * 0.625));  // 77 deg horizontal field of view
   HANZO_ASSIGN_OR_RETURN(config.intrinsics.fy, positive_or(value["fy"], config.intrinsics.fx));
   HANZO_ASSIGN_OR_RETURN(config.intrinsics.cx, number_or(value["cx"], (width - 1.0) / 2.0));
@@ -360,9 +367,7 @@ Result<SensorSimulatorConfig> parse_camera(const YamlValue& value, double rate, 
     }
     config.encoding = *encoding;
   }
-  double supersampling = config.supersampling;
-  HANZO_ASSIGN_OR_RETURN(supersampling, positive_or(value["supersampling"], supersampling));
-  config.supersampling = static_cast<int>(supersampling);
+  HANZO_ASSIGN_OR_RETURN(config.supersampling, count_or(value["supersampling"], config.supersampling, 1, 4));
   HANZO_ASSIGN_OR_RETURN(config.pixel_noise, non_negative_or(value["pixel_noise"], config.pixel_noise));
   return SensorSimulatorConfig(config);
 }
@@ -393,14 +398,9 @@ Result<SensorSimulatorConfig> parse_gnss(const YamlValue& value, double rate, co
     config.noise = noise;
   }
   HANZO_ASSIGN_OR_RETURN(config.correlation_time, non_negative_or(value["correlation_time"], config.correlation_time));
-  double satellites = config.satellites;
-  HANZO_ASSIGN_OR_RETURN(satellites, non_negative_or(value["satellites"], satellites));
-  config.satellites = static_cast<uint32_t>(satellites);
+  HANZO_ASSIGN_OR_RETURN(config.satellites, count_or(value["satellites"], config.satellites, 0, 200));
   if (value["sky_blockage"].present()) HANZO_ASSIGN_OR_RETURN(config.sky_blockage, value["sky_blockage"].as_bool());
-  double constellation = config.constellation;
-  HANZO_ASSIGN_OR_RETURN(constellation, positive_or(value["constellation"], constellation));
-  if (constellation < 4) return value["constellation"].error(fmt::format("expected at least 4 satellites, got {}", constellation));
-  config.constellation = static_cast<int>(constellation);
+  HANZO_ASSIGN_OR_RETURN(config.constellation, count_or(value["constellation"], config.constellation, 4, 200));
   double mask = config.elevation_mask / kDegree;
   HANZO_ASSIGN_OR_RETURN(mask, non_negative_or(value["elevation_mask_deg"], mask));
   if (mask >= 80.0) return value["elevation_mask_deg"].error(fmt::format("expected a mask below 80 deg, got {}", mask));
@@ -537,9 +537,7 @@ Status parse_fault(const YamlValue& fault, Scenario* scenario) {
     HANZO_ASSIGN_OR_RETURN(episode.multipath_rate_hz, non_negative_or(fault["multipath_rate"], episode.multipath_rate_hz));
     HANZO_ASSIGN_OR_RETURN(episode.multipath_magnitude, non_negative_or(fault["multipath_magnitude"], episode.multipath_magnitude));
     HANZO_ASSIGN_OR_RETURN(episode.multipath_duration, non_negative_or(fault["multipath_duration"], episode.multipath_duration));
-    double satellites = episode.satellites;
-    HANZO_ASSIGN_OR_RETURN(satellites, non_negative_or(fault["satellites"], satellites));
-    episode.satellites = static_cast<uint32_t>(satellites);
+    HANZO_ASSIGN_OR_RETURN(episode.satellites, count_or(fault["satellites"], episode.satellites, 0, 200));
     HANZO_ASSIGN_OR_RETURN(targets, fault_targets(fault, config::SensorModality::kGnss, scenario));
     for (ScenarioSensor* sensor : targets) std::get<GnssSimulatorConfig>(sensor->simulator).episodes.push_back(episode);
     return ok_status();
@@ -566,9 +564,7 @@ Status parse_fault(const YamlValue& fault, Scenario* scenario) {
     HANZO_ASSIGN_OR_RETURN(episode.radius, positive_or(fault["radius"], episode.radius));
     HANZO_ASSIGN_OR_RETURN(episode.strength, non_negative_or(fault["strength"], episode.strength));
     HANZO_ASSIGN_OR_RETURN(episode.exposure_time, non_negative_or(fault["exposure_time"], episode.exposure_time));
-    double samples = episode.blur_samples;
-    HANZO_ASSIGN_OR_RETURN(samples, positive_or(fault["blur_samples"], samples));
-    episode.blur_samples = static_cast<int>(samples);
+    HANZO_ASSIGN_OR_RETURN(episode.blur_samples, count_or(fault["blur_samples"], episode.blur_samples, 1, 64));
     HANZO_ASSIGN_OR_RETURN(targets, fault_targets(fault, config::SensorModality::kCamera, scenario));
     for (ScenarioSensor* sensor : targets) std::get<CameraSimulatorConfig>(sensor->simulator).faults.push_back(episode);
     return ok_status();
@@ -590,9 +586,7 @@ Result<Scenario> parse_scenario(const std::string& yaml_text, const std::string&
                                          "trajectory", "sensors", "faults"}));
   Scenario scenario;
   HANZO_ASSIGN_OR_RETURN(scenario.name, root["name"].as_string());
-  double seed = 1.0;
-  HANZO_ASSIGN_OR_RETURN(seed, non_negative_or(root["seed"], seed));
-  scenario.seed = static_cast<uint64_t>(seed);
+  HANZO_ASSIGN_OR_RETURN(scenario.seed, count_or(root["seed"], scenario.seed, 0, std::numeric_limits<int64_t>::max()));
   double start_seconds = scenario.start_time.seconds();
   HANZO_ASSIGN_OR_RETURN(start_seconds, positive_or(root["start_time"], start_seconds));
   scenario.start_time = Timestamp::from_seconds(start_seconds);
@@ -605,9 +599,7 @@ Result<Scenario> parse_scenario(const std::string& yaml_text, const std::string&
     if (Status valid = validate(scenario.datum); !valid) return datum.error(valid.error().message);
   }
   HANZO_ASSIGN_OR_RETURN(scenario.ground_truth_rate_hz, positive_or(root["ground_truth_rate"], scenario.ground_truth_rate_hz));
-  double threads = scenario.num_threads;
-  HANZO_ASSIGN_OR_RETURN(threads, non_negative_or(root["threads"], threads));
-  scenario.num_threads = static_cast<int>(threads);
+  HANZO_ASSIGN_OR_RETURN(scenario.num_threads, count_or(root["threads"], scenario.num_threads, 0, 1024));
   if (root["duration"].present()) HANZO_ASSIGN_OR_RETURN(scenario.duration, positive_or(root["duration"], 0.0));
   HANZO_RETURN_IF_ERROR(parse_world(root["world"], scenario.start_time, &scenario.world));
   if (!root["trajectory"].present()) return root["trajectory"].error("missing (every scenario needs a trajectory)");

@@ -125,6 +125,8 @@ TEST(Scenario, BadFilesFailNamingLineAndKey) {
       {with("    lidar: {model: livox}\n"), "s.yaml:8: sensors.lidar.model: unknown LiDAR 'livox'"},
       {with("    thermometer: {rate: 1}\n"), "sensors.thermometer: cannot tell the sensor's modality"},
       {with("    imu2: {rate: -5}\n"), "sensors.imu2.rate: expected a positive number, got -5"},
+      {with("    camera: {width: 640.5}\n"), "sensors.camera.width: expected an integer, got '640.5'"},
+      {with("  seed: -2\n"), "seed: expected a whole number in 0.."},
       {with("    gnss: {to_body: {rotation: [1, 1, 0, 0]}}\n"), "sensors.gnss.to_body.rotation: not a unit quaternion"},
       {with("  faults:\n    - {type: rain, start: 1, end: 2}\n"), "faults[0]: no lidar sensor in the scenario"},
       {with("  faults:\n    - {type: earthquake, start: 1, end: 2}\n"), "faults[0].type: unknown fault 'earthquake'"},
