@@ -1,5 +1,6 @@
 #include "hanzo/fusion/config/fusion_config.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <set>
@@ -53,6 +54,11 @@ std::optional<SensorModality> infer_modality(std::string_view sensor_name) {
   return std::nullopt;
 }
 
+double SensorConfig::effective_timeout_s() const {
+  if (fusion.timeout_s > 0.0) return fusion.timeout_s;
+  return std::max(0.1, 5.0 / rate_hz);
+}
+
 const SensorConfig* FusionConfig::find_sensor(std::string_view name) const {
   for (const SensorConfig& sensor : sensors) {
     if (sensor.name == name) return &sensor;
@@ -78,6 +84,20 @@ Status validate(const FusionConfig& config) {
                                      {covariance.gyro_bias_random_walk, "frontend.covariance.gyro_bias_random_walk"}}) {
     if (Status s = non_negative(value, field); !s) return s;
   }
+  if (!(frontend.gate_probability > 0.0 && frontend.gate_probability <= 1.0)) {
+    return Error{fmt::format("FusionConfig.frontend.gate_probability: {} (expected a probability in (0, 1])", frontend.gate_probability),
+                 "frontend.gate_probability"};
+  }
+  if (Status s = non_negative(frontend.lag_window_s, "frontend.lag_window"); !s) return s;
+  for (const auto& [value, field] : {std::pair<double, std::string_view>{frontend.max_future_s, "frontend.max_future"},
+                                     {frontend.static_alignment_s, "frontend.static_alignment"}}) {
+    if (!std::isfinite(value) || value <= 0.0) {
+      return Error{fmt::format("FusionConfig.{}: {} (expected > 0 s)", field, value), std::string(field)};
+    }
+  }
+  if (frontend.datum) {
+    if (Status s = validate(*frontend.datum); !s) return Error{"FusionConfig.frontend.datum: " + s.error().message, "frontend.datum"};
+  }
   std::set<std::string_view> names;
   std::set<std::string_view> topics;
   for (const SensorConfig& sensor : config.sensors) {
@@ -92,6 +112,15 @@ Status validate(const FusionConfig& config) {
       return Error{fmt::format("FusionConfig.{}.rate: {} (expected > 0 Hz)", field, sensor.rate_hz), field + ".rate"};
     }
     if (sensor.body_frame.empty()) return Error{fmt::format("FusionConfig.{}.body_frame: empty", field), field + ".body_frame"};
+    const SensorFusionOptions& o = sensor.fusion;
+    if (Status s = non_negative(o.timeout_s, field + ".timeout"); !s) return s;
+    for (const auto& [value, key] : {std::pair<double, std::string_view>{o.orientation_noise, "orientation_noise"},
+                                     {o.speed_noise, "speed_noise"}, {o.yaw_rate_noise, "yaw_rate_noise"},
+                                     {o.lateral_speed_noise, "lateral_speed_noise"}, {o.velocity_noise, "velocity_noise"}}) {
+      if (!std::isfinite(value) || value <= 0.0) {
+        return Error{fmt::format("FusionConfig.{}.{}: {} (expected a standard deviation > 0)", field, key, value), field + "." + std::string(key)};
+      }
+    }
   }
   return ok_status();
 }

@@ -3,6 +3,9 @@
 #include <filesystem>
 #include <fstream>
 #include <set>
+#include <array>
+
+#include <fmt/ranges.h>
 
 #include <fmt/format.h>
 
@@ -37,10 +40,41 @@ Result<CovarianceConfig> parse_covariance(const YamlValue& node) {
   return covariance;
 }
 
+Result<double> positive_seconds(const YamlValue& value) {
+  Result<double> seconds = value.as_double();
+  if (!seconds) return seconds;
+  if (*seconds <= 0.0) return value.error(fmt::format("expected a positive duration in seconds, got {}", *seconds));
+  return seconds;
+}
+
+Result<bool> bool_or(const YamlValue& value, bool fallback) {
+  if (!value.present()) return fallback;
+  return value.as_bool();
+}
+
+// A noise standard deviation: finite and > 0 (a zero noise makes the update singular).
+Result<double> noise_or(const YamlValue& value, double fallback) {
+  double sigma = 0.0;
+  HANZO_ASSIGN_OR_RETURN(sigma, yaml::non_negative_or(value, fallback));
+  if (sigma <= 0.0) return value.error("expected a standard deviation > 0");
+  return sigma;
+}
+
+Result<GeodeticPoint> parse_datum(const YamlValue& node) {
+  HANZO_RETURN_IF_ERROR(node.check_keys({"latitude", "longitude", "altitude"}));
+  GeodeticPoint datum;
+  HANZO_ASSIGN_OR_RETURN(datum.latitude_deg, node["latitude"].as_double());
+  HANZO_ASSIGN_OR_RETURN(datum.longitude_deg, node["longitude"].as_double());
+  if (node["altitude"].present()) HANZO_ASSIGN_OR_RETURN(datum.altitude_m, node["altitude"].as_double());
+  if (Status valid = validate(datum); !valid) return node.error(valid.error().message);
+  return datum;
+}
+
 Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   FrontendConfig frontend;
   if (!node.present()) return frontend;
-  HANZO_RETURN_IF_ERROR(node.check_keys({"type", "predict_rate", "covariance"}));
+  HANZO_RETURN_IF_ERROR(node.check_keys({"type", "predict_rate", "covariance", "gate_probability", "lag_window", "max_future",
+                                         "static_alignment", "planar", "zero_velocity_updates", "datum"}));
   if (node["type"].present()) {
     Result<std::string> name = node["type"].as_string();
     if (!name) return name.error();
@@ -50,14 +84,88 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   }
   if (node["predict_rate"].present()) HANZO_ASSIGN_OR_RETURN(frontend.predict_rate_hz, positive_rate(node["predict_rate"]));
   HANZO_ASSIGN_OR_RETURN(frontend.covariance, parse_covariance(node["covariance"]));
+  if (const YamlValue gate = node["gate_probability"]; gate.present()) {
+    HANZO_ASSIGN_OR_RETURN(frontend.gate_probability, gate.as_double());
+    if (!(frontend.gate_probability > 0.0 && frontend.gate_probability <= 1.0)) {
+      return gate.error(fmt::format("expected a probability in (0, 1], got {}", frontend.gate_probability));
+    }
+  }
+  HANZO_ASSIGN_OR_RETURN(frontend.lag_window_s, yaml::non_negative_or(node["lag_window"], frontend.lag_window_s));
+  if (node["max_future"].present()) HANZO_ASSIGN_OR_RETURN(frontend.max_future_s, positive_seconds(node["max_future"]));
+  if (node["static_alignment"].present()) HANZO_ASSIGN_OR_RETURN(frontend.static_alignment_s, positive_seconds(node["static_alignment"]));
+  HANZO_ASSIGN_OR_RETURN(frontend.planar, bool_or(node["planar"], frontend.planar));
+  HANZO_ASSIGN_OR_RETURN(frontend.zero_velocity_updates, bool_or(node["zero_velocity_updates"], frontend.zero_velocity_updates));
+  if (node["datum"].present()) HANZO_ASSIGN_OR_RETURN(frontend.datum, parse_datum(node["datum"]));
   return frontend;
+}
+
+std::optional<msgs::GnssFixType> fix_type_from_string(std::string_view name) {
+  for (msgs::GnssFixType type : {msgs::GnssFixType::kNoFix, msgs::GnssFixType::kFix2d, msgs::GnssFixType::kFix3d,
+                                 msgs::GnssFixType::kRtkFloat, msgs::GnssFixType::kRtkFixed}) {
+    if (msgs::to_string(type) == name) return type;
+  }
+  return std::nullopt;
+}
+
+// The per-modality fusion keys; each is valid for one modality only.
+struct ModalityKey {
+  std::string_view key;
+  SensorModality modality;
+};
+constexpr std::array<ModalityKey, 10> kModalityKeys{{{"use_orientation", SensorModality::kImu},
+                                                     {"orientation_noise", SensorModality::kImu},
+                                                     {"speed_noise", SensorModality::kWheelOdometry},
+                                                     {"yaw_rate_noise", SensorModality::kWheelOdometry},
+                                                     {"lateral_speed_noise", SensorModality::kWheelOdometry},
+                                                     {"use_yaw_rate", SensorModality::kWheelOdometry},
+                                                     {"non_holonomic", SensorModality::kWheelOdometry},
+                                                     {"min_fix", SensorModality::kGnss},
+                                                     {"velocity_noise", SensorModality::kRadar},
+                                                     {"timeout", SensorModality::kImu}}};  // timeout: any modality
+
+Result<SensorFusionOptions> parse_fusion_options(const YamlValue& node, SensorModality modality) {
+  for (const ModalityKey& entry : kModalityKeys) {
+    if (entry.key != "timeout" && node[entry.key].present() && entry.modality != modality) {
+      return node[entry.key].error(fmt::format("applies to {} sensors only (this sensor is {})", to_string(entry.modality), to_string(modality)));
+    }
+  }
+  SensorFusionOptions options;
+  HANZO_ASSIGN_OR_RETURN(options.timeout_s, yaml::non_negative_or(node["timeout"], options.timeout_s));
+  if (const YamlValue angles = node["use_orientation"]; angles.present()) {
+    if (!angles.is_sequence()) return angles.error("expected a list of roll, pitch, yaw");
+    for (const YamlValue& element : angles.elements()) {
+      std::string angle;
+      HANZO_ASSIGN_OR_RETURN(angle, element.as_string());
+      if (angle == "roll") options.use_orientation[0] = true;
+      else if (angle == "pitch") options.use_orientation[1] = true;
+      else if (angle == "yaw") options.use_orientation[2] = true;
+      else return element.error(fmt::format("expected roll, pitch or yaw, got '{}'", angle));
+    }
+  }
+  HANZO_ASSIGN_OR_RETURN(options.orientation_noise, noise_or(node["orientation_noise"], options.orientation_noise));
+  HANZO_ASSIGN_OR_RETURN(options.speed_noise, noise_or(node["speed_noise"], options.speed_noise));
+  HANZO_ASSIGN_OR_RETURN(options.yaw_rate_noise, noise_or(node["yaw_rate_noise"], options.yaw_rate_noise));
+  HANZO_ASSIGN_OR_RETURN(options.lateral_speed_noise, noise_or(node["lateral_speed_noise"], options.lateral_speed_noise));
+  HANZO_ASSIGN_OR_RETURN(options.use_yaw_rate, bool_or(node["use_yaw_rate"], options.use_yaw_rate));
+  HANZO_ASSIGN_OR_RETURN(options.non_holonomic, bool_or(node["non_holonomic"], options.non_holonomic));
+  if (const YamlValue fix = node["min_fix"]; fix.present()) {
+    std::string text;
+    HANZO_ASSIGN_OR_RETURN(text, fix.as_string());
+    const std::optional<msgs::GnssFixType> type = fix_type_from_string(text);
+    if (!type || *type == msgs::GnssFixType::kNoFix) return fix.error(fmt::format("expected FIX_2D, FIX_3D, RTK_FLOAT or RTK_FIXED, got '{}'", text));
+    options.min_fix = *type;
+  }
+  HANZO_ASSIGN_OR_RETURN(options.velocity_noise, noise_or(node["velocity_noise"], options.velocity_noise));
+  return options;
 }
 
 Result<SensorConfig> parse_sensor(const std::string& name, const YamlValue& node) {
   SensorConfig sensor;
   sensor.name = name;
   if (!node.is_map()) return node.error("expected a map with topic, rate, body_frame (and optionally type, modality)");
-  HANZO_RETURN_IF_ERROR(node.check_keys({"topic", "rate", "body_frame", "type", "modality"}));
+  HANZO_RETURN_IF_ERROR(node.check_keys({"topic", "rate", "body_frame", "type", "modality", "timeout", "use_orientation",
+                                         "orientation_noise", "speed_noise", "yaw_rate_noise", "lateral_speed_noise",
+                                         "use_yaw_rate", "non_holonomic", "min_fix", "velocity_noise"}));
   const std::optional<SensorModality> inferred = infer_modality(name);
   if (node["modality"].present()) {
     Result<std::string> text = node["modality"].as_string();
@@ -79,6 +187,7 @@ Result<SensorConfig> parse_sensor(const std::string& name, const YamlValue& node
   if (node["body_frame"].present()) HANZO_ASSIGN_OR_RETURN(sensor.body_frame, node["body_frame"].as_string());
   if (sensor.body_frame.empty()) return node["body_frame"].error("expected a frame name, got an empty string");
   if (node["type"].present()) HANZO_ASSIGN_OR_RETURN(sensor.type, node["type"].as_string());
+  HANZO_ASSIGN_OR_RETURN(sensor.fusion, parse_fusion_options(node, sensor.modality));
   return sensor;
 }
 
@@ -102,6 +211,32 @@ Result<FusionConfig> parse(const YamlValue& root) {
     config.sensors.push_back(std::move(sensor).value());
   }
   return config;
+}
+
+// The options that differ from the defaults, as "      key: value" lines.
+std::string fusion_options_yaml(const SensorFusionOptions& o) {
+  const SensorFusionOptions d;
+  std::string out;
+  const auto number = [&out](std::string_view key, double value, double fallback) {
+    if (value != fallback) out += fmt::format("      {}: {}\n", key, format_double(value));
+  };
+  number("timeout", o.timeout_s, d.timeout_s);
+  if (o.use_orientation != d.use_orientation) {
+    std::vector<std::string> angles;
+    for (size_t i = 0; i < 3; ++i) {
+      if (o.use_orientation[i]) angles.emplace_back(std::array{"roll", "pitch", "yaw"}[i]);
+    }
+    out += fmt::format("      use_orientation: [{}]\n", fmt::join(angles, ", "));
+  }
+  number("orientation_noise", o.orientation_noise, d.orientation_noise);
+  number("speed_noise", o.speed_noise, d.speed_noise);
+  number("yaw_rate_noise", o.yaw_rate_noise, d.yaw_rate_noise);
+  number("lateral_speed_noise", o.lateral_speed_noise, d.lateral_speed_noise);
+  if (o.use_yaw_rate != d.use_yaw_rate) out += fmt::format("      use_yaw_rate: {}\n", o.use_yaw_rate);
+  if (o.non_holonomic != d.non_holonomic) out += fmt::format("      non_holonomic: {}\n", o.non_holonomic);
+  if (o.min_fix != d.min_fix) out += fmt::format("      min_fix: {}\n", msgs::to_string(o.min_fix));
+  number("velocity_noise", o.velocity_noise, d.velocity_noise);
+  return out;
 }
 
 }  // namespace
@@ -131,6 +266,20 @@ std::string to_yaml(const FusionConfig& config) {
   out += fmt::format("      process_noise_gyro: {}  # rad/s\n", format_double(c.process_noise_gyro));
   out += fmt::format("      accel_bias_random_walk: {}  # m/s^2/sqrt(Hz)\n", format_double(c.accel_bias_random_walk));
   out += fmt::format("      gyro_bias_random_walk: {}  # rad/s/sqrt(Hz)\n", format_double(c.gyro_bias_random_walk));
+  const FrontendConfig& f = config.frontend;
+  const FrontendConfig defaults;
+  if (f.gate_probability != defaults.gate_probability) out += fmt::format("    gate_probability: {}\n", format_double(f.gate_probability));
+  if (f.lag_window_s != defaults.lag_window_s) out += fmt::format("    lag_window: {}  # s\n", format_double(f.lag_window_s));
+  if (f.max_future_s != defaults.max_future_s) out += fmt::format("    max_future: {}  # s\n", format_double(f.max_future_s));
+  if (f.static_alignment_s != defaults.static_alignment_s) {
+    out += fmt::format("    static_alignment: {}  # s\n", format_double(f.static_alignment_s));
+  }
+  if (f.planar) out += "    planar: true\n";
+  if (!f.zero_velocity_updates) out += "    zero_velocity_updates: false\n";
+  if (f.datum) {
+    out += fmt::format("    datum: {{latitude: {}, longitude: {}, altitude: {}}}\n", format_double(f.datum->latitude_deg),
+                       format_double(f.datum->longitude_deg), format_double(f.datum->altitude_m));
+  }
   out += config.sensors.empty() ? "  sensors: {}\n" : "  sensors:\n";
   for (const SensorConfig& sensor : config.sensors) {
     out += fmt::format("    {}:\n", yaml::scalar(sensor.name));
@@ -139,6 +288,7 @@ std::string to_yaml(const FusionConfig& config) {
     out += fmt::format("      rate: {}  # Hz\n", format_double(sensor.rate_hz));
     out += fmt::format("      body_frame: {}\n", yaml::scalar(sensor.body_frame));
     if (!sensor.type.empty()) out += fmt::format("      type: {}\n", yaml::scalar(sensor.type));
+    out += fusion_options_yaml(sensor.fusion);
   }
   return out;
 }

@@ -62,7 +62,8 @@ TEST(FusionConfig, EachRuleGivesItsDocumentedError) {
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    covariance:\n      process_noise_accel: .nan\n"),
             "fusion.yaml:4: frontend.covariance.process_noise_accel: expected a finite number, got '.nan'");
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    tpye: ekf\n"),
-            "fusion.yaml:3: frontend.tpye: unknown key (expected one of: type, predict_rate, covariance)");
+            "fusion.yaml:3: frontend.tpye: unknown key (expected one of: type, predict_rate, covariance, gate_probability, lag_window, "
+            "max_future, static_alignment, planar, zero_velocity_updates, datum)");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      topic: /imu\n"),
             "fusion.yaml:3: sensors.imu.rate: missing (expected the sensor's rate in Hz)");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      rate: fast\n"),
@@ -85,16 +86,30 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   FusionConfig config = load_fusion_config("examples/fusion.yaml").value();
   config.frontend.type = FrontendType::kUkf;
   config.frontend.covariance.process_noise_accel = 0.123456789012345;
-  config.sensors.push_back({"front_radar", SensorModality::kRadar, "/radar: front", 13.5, "radar link", "continental_ars408"});
-  config.sensors.push_back({"tracker", SensorModality::kGnss, "/gps", 1.0 / 3.0, "gps_link", ""});
+  config.frontend.gate_probability = 0.99;
+  config.frontend.lag_window_s = 0.25;
+  config.frontend.planar = true;
+  config.frontend.datum = GeodeticPoint{48.1, 11.5, 520.25};
+  config.sensors.push_back({"front_radar", SensorModality::kRadar, "/radar: front", 13.5, "radar link", "continental_ars408",
+                            {.timeout_s = 0.3, .velocity_noise = 0.2}});
+  config.sensors.push_back({"tracker", SensorModality::kGnss, "/gps", 1.0 / 3.0, "gps_link", "",
+                            {.min_fix = msgs::GnssFixType::kRtkFloat}});
+  config.sensors.push_back({"imu2", SensorModality::kImu, "/imu2", 100.0, "imu2_link", "",
+                            {.use_orientation = {true, false, true}, .orientation_noise = 0.02}});
+  config.sensors.push_back({"wheels2", SensorModality::kWheelOdometry, "/wheels2", 50.0, "base_link", "",
+                            {.speed_noise = 0.1, .use_yaw_rate = false, .non_holonomic = false}});
   const std::filesystem::path path = std::filesystem::temp_directory_path() / "hanzo_fusion_config_test.yaml";
   ASSERT_TRUE(save_fusion_config(config, path.string()).ok());
   const Result<FusionConfig> loaded = load_fusion_config(path.string());
   ASSERT_TRUE(loaded.ok()) << loaded.error().message;
   EXPECT_EQ(to_yaml(*loaded), to_yaml(config));
   EXPECT_EQ(loaded->frontend.type, FrontendType::kUkf);
+  EXPECT_TRUE(loaded->frontend.planar);
+  EXPECT_EQ(loaded->find_sensor("tracker")->fusion.min_fix, msgs::GnssFixType::kRtkFloat);
+  EXPECT_EQ(loaded->find_sensor("imu2")->fusion.use_orientation, (std::array<bool, 3>{true, false, true}));
+  EXPECT_FALSE(loaded->find_sensor("wheels2")->fusion.use_yaw_rate);
   EXPECT_EQ(loaded->frontend.covariance.process_noise_accel, 0.123456789012345);
-  ASSERT_EQ(loaded->sensors.size(), 8U);
+  ASSERT_EQ(loaded->sensors.size(), 10U);
   EXPECT_EQ(loaded->sensors[6].topic, "/radar: front");
   EXPECT_EQ(loaded->sensors[6].modality, SensorModality::kRadar);
   EXPECT_EQ(loaded->sensors[7].modality, SensorModality::kGnss);
@@ -112,6 +127,25 @@ TEST(FusionConfig, SaveRefusesAnInvalidConfigAndKeepsTheOldFile) {
   EXPECT_EQ(status.error().field, "sensors.lidar.rate");
   EXPECT_EQ(load_fusion_config(path.string()).value().sensors[1].rate_hz, 10.0);
   std::filesystem::remove(path);
+}
+
+TEST(FusionConfig, FusionOptionsAreCheckedPerModality) {
+  const auto error_of = [](const std::string& sensor_yaml) {
+    const Result<FusionConfig> config =
+        parse_fusion_config("fusion:\n  sensors:\n" + sensor_yaml, "fusion.yaml");
+    return config.ok() ? std::string("ok") : config.error().message;
+  };
+  EXPECT_EQ(error_of("    imu: {rate: 100, use_orientation: [roll, yaw], timeout: 0.2}\n"), "ok");
+  EXPECT_EQ(error_of("    gnss: {rate: 5, use_orientation: [roll]}\n"),
+            "fusion.yaml:3: sensors.gnss.use_orientation: applies to imu sensors only (this sensor is gnss)");
+  EXPECT_EQ(error_of("    imu: {rate: 100, use_orientation: [heading]}\n"),
+            "fusion.yaml:3: sensors.imu.use_orientation[0]: expected roll, pitch or yaw, got 'heading'");
+  EXPECT_EQ(error_of("    wheels: {rate: 50, speed_noise: 0}\n"), "fusion.yaml:3: sensors.wheels.speed_noise: expected a standard deviation > 0");
+  EXPECT_EQ(error_of("    gnss: {rate: 5, min_fix: GOOD}\n"),
+            "fusion.yaml:3: sensors.gnss.min_fix: expected FIX_2D, FIX_3D, RTK_FLOAT or RTK_FIXED, got 'GOOD'");
+  const Result<FusionConfig> frontend = parse_fusion_config("fusion:\n  frontend:\n    gate_probability: 1.5\n", "fusion.yaml");
+  ASSERT_FALSE(frontend.ok());
+  EXPECT_EQ(frontend.error().message, "fusion.yaml:3: frontend.gate_probability: expected a probability in (0, 1], got 1.5");
 }
 
 }  // namespace

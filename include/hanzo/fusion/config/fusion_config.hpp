@@ -14,6 +14,7 @@
 // "fusion.yaml:12: sensors.gnss.rate: expected a positive rate in Hz, got -5".
 // Unknown keys are errors (they are usually typos). Full reference: docs/configuration.md.
 
+#include <array>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -21,7 +22,9 @@
 
 #include <Eigen/Core>
 
+#include "hanzo/fusion/core/geodesy.hpp"
 #include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
 
 namespace hanzo::fusion::config {
 
@@ -49,10 +52,47 @@ struct CovarianceConfig {
   double gyro_bias_random_walk = 0.0001;  // rad/s/sqrt(Hz)
 };
 
+/// hanzo-fusion's additions to the spec's frontend block (how the Session fuses; all optional).
 struct FrontendConfig {
   FrontendType type = FrontendType::kEkf;
   double predict_rate_hz = 200.0;  // > 0
   CovarianceConfig covariance;
+  /// Chi-square gate probability of every update, in (0, 1]; 1 turns gating off.
+  double gate_probability = 0.999;
+  /// s >= 0: a message older than the newest fused one by at most this is fused by rolling
+  /// back and re-propagating; older ones are rejected as too late. 0 rejects every late message.
+  double lag_window_s = 0.5;
+  /// s > 0: a message this far ahead of the newest accepted time is rejected as future-dated
+  /// unless the next message confirms the jump (a pause of the whole robot).
+  double max_future_s = 1.0;
+  /// s > 0: IMU data averaged for static alignment (gravity direction, gyro bias) at start.
+  double static_alignment_s = 1.0;
+  /// Ground robot on a flat floor: height and vertical speed held (robot_localization's two_d_mode).
+  bool planar = false;
+  /// Zero-velocity updates when the wheels stand still or the IMU shows no motion.
+  bool zero_velocity_updates = true;
+  /// WGS84 origin of the world ENU frame; when absent the first GNSS fix becomes the datum.
+  std::optional<GeodeticPoint> datum;
+};
+
+/// How a sensor's messages are fused (keys under the sensor; each applies to one modality).
+struct SensorFusionOptions {
+  /// s >= 0: silence longer than this reports the sensor as timed out; 0 means 5 periods
+  /// (5 / rate), at least 0.1 s.
+  double timeout_s = 0.0;
+  // imu
+  std::array<bool, 3> use_orientation{false, false, false};  // roll, pitch, yaw of the message's orientation
+  double orientation_noise = 0.01;  // rad, when the message has no orientation covariance
+  // wheel_odometry
+  double speed_noise = 0.05;          // m/s, forward speed
+  double yaw_rate_noise = 0.05;       // rad/s
+  double lateral_speed_noise = 0.05;  // m/s, non-holonomic constraint
+  bool use_yaw_rate = true;
+  bool non_holonomic = true;
+  // gnss
+  msgs::GnssFixType min_fix = msgs::GnssFixType::kFix3d;  // weaker fixes are rejected
+  // radar
+  double velocity_noise = 0.1;  // m/s, ego-velocity per axis
 };
 
 struct SensorConfig {
@@ -62,6 +102,10 @@ struct SensorConfig {
   double rate_hz = 0.0;    // required, > 0: nominal rate, used for timeouts and summaries
   std::string body_frame;  // default "<name>_link"
   std::string type;        // optional model, e.g. "velodyne_vlp16", "stereo_left"; "" when not given
+  SensorFusionOptions fusion;
+
+  /// The timeout in seconds (the default applied).
+  double effective_timeout_s() const;
 };
 
 struct FusionConfig {

@@ -1,0 +1,72 @@
+#pragma once
+// Filter: the interface the three frontend filters (EKF, UKF, particle filter) share, so
+// pipeline::Session drives any of them the same way:
+//
+//   reset(state, covariance)   start from a state and its error-state covariance
+//   predict(sample, dt)        propagate by dt seconds with the IMU sample held constant
+//   update(model)              fuse one measurement (chi-square gated)
+//   state(), covariance()      current estimate (mean) and its 18x18 error-state covariance
+//   clone()                    a deep copy: snapshots for rolling back to fuse late messages
+//
+// Every update is gated: the squared Mahalanobis distance of the innovation,
+// d^2 = r^T S^-1 r with S = H P H^T + R, is compared with the chi-square quantile of
+// FilterConfig::gate_probability for the measurement's dimension; a measurement beyond it is
+// rejected and the estimate does not change.
+
+#include <array>
+#include <memory>
+#include <string_view>
+
+#include "hanzo/fusion/estimate/imu_propagation.hpp"
+#include "hanzo/fusion/estimate/measurement_model.hpp"
+#include "hanzo/fusion/estimate/navigation_state.hpp"
+
+namespace hanzo::fusion::estimate {
+
+struct FilterConfig {
+  ImuMounting imu_mounting;
+  ImuNoise imu_noise;
+  /// Probability mass of the chi-square gate; 0.999 rejects a correct measurement 1 time in
+  /// 1000. 1.0 turns gating off. Must be in (0, 1].
+  double gate_probability = 0.999;
+};
+
+enum class UpdateStatus {
+  kApplied,           // the estimate moved
+  kRejectedByGate,    // d^2 beyond the gate; estimate unchanged
+  kNumericalFailure,  // S not positive definite, or the update produced non-finite numbers; unchanged
+};
+std::string_view to_string(UpdateStatus status);  // "applied", "gated", "numerical_failure"
+
+struct UpdateOutcome {
+  UpdateStatus status = UpdateStatus::kApplied;
+  double mahalanobis_squared = 0.0;  // d^2 (normalized innovation squared, NIS)
+  double gate = 0.0;                 // the threshold d^2 was compared with
+  MeasurementVector innovation;      // residual at the prior estimate
+};
+
+class Filter {
+ public:
+  virtual ~Filter() = default;
+  virtual std::string_view name() const = 0;  // "ekf", "ukf", "particle"
+  virtual void reset(const NavigationState& state, const ErrorCovariance& covariance) = 0;
+  /// dt >= 0 seconds; sample in the IMU's axes (biases are removed with the estimated biases).
+  virtual void predict(const ImuSample& sample, double dt) = 0;
+  virtual UpdateOutcome update(const MeasurementModel& model) = 0;
+  virtual NavigationState state() const = 0;
+  virtual ErrorCovariance covariance() const = 0;
+  virtual std::unique_ptr<Filter> clone() const = 0;
+};
+
+/// The chi-square gate for a measurement dimension (1..kMaxMeasurementDimension) at a
+/// probability; +infinity when probability is 1.
+class ChiSquareGate {
+ public:
+  explicit ChiSquareGate(double probability);
+  double threshold(int dimension) const { return thresholds_[static_cast<size_t>(dimension)]; }
+
+ private:
+  std::array<double, kMaxMeasurementDimension + 1> thresholds_{};
+};
+
+}  // namespace hanzo::fusion::estimate

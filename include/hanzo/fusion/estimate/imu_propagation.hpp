@@ -1,0 +1,89 @@
+#pragma once
+// IMU propagation: the process model every frontend filter shares. The IMU is the control
+// input; the state (navigation_state.hpp) is integrated from one IMU sample to the next with
+// the sample held constant over the interval (zero-order hold):
+//
+//   w = R_body_imu (w_m - bg)                          body angular velocity
+//   f = R_body_imu (f_m - ba) - w x (w x p_body_imu)   specific force at the body origin
+//   p' = p + v dt + 1/2 (R f + g) dt^2,   v' = v + (R f + g) dt,   R' = R Exp(w dt)
+//
+// The lever-arm term with the angular acceleration (dw/dt x p_body_imu) is left out: it needs
+// the derivative of a noisy gyro and is negligible for IMUs within ~0.3 m of the body origin.
+//
+// Error-state transition (right perturbation, navigation_state.hpp), first order in dt
+// (Sola, "Quaternion kinematics for the error-state Kalman filter" (2017), eq. 269-270 adapted
+// to a gravity state and a body-to-IMU rotation):
+//   dv'     = dv - R [f]x dt dtheta - R R_body_imu dt dba + dt dg
+//   dtheta' = Exp(w dt)^T dtheta - Jr(w dt) R_body_imu dt dbg
+//   dp'     = dp + dt dv + dt/2 (velocity terms above)
+//
+// Noise. The spec's process_noise_accel / _gyro are the standard deviations of ONE sample at
+// the IMU rate (as the simulator draws them), i.e. white noise of density sigma^2 * sample
+// interval; the bias random walks are densities in unit/sqrt(s). Per step of length dt:
+//   Q_v = sigma_a^2 T_s dt,  Q_theta = sigma_g^2 T_s dt,  Q_ba = rw_a^2 dt,  Q_bg = rw_g^2 dt,
+// so splitting an interval (a GNSS fix between two IMU samples) adds the same noise.
+
+#include <Eigen/Core>
+
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/estimate/navigation_state.hpp"
+
+namespace hanzo::fusion::estimate {
+
+/// One IMU reading in the IMU's own axes.
+struct ImuSample {
+  Timestamp timestamp;
+  Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero();     // rad/s
+  Eigen::Vector3d linear_acceleration = Eigen::Vector3d::Zero();  // m/s^2, specific force
+};
+
+/// Where the IMU sits on the body (calibration's "imu_to_body" = T_body_imu).
+struct ImuMounting {
+  SO3 R_body_imu;
+  Eigen::Vector3d p_body_imu = Eigen::Vector3d::Zero();  // m, IMU origin in the body frame
+
+  static ImuMounting from_transform(const SE3& T_body_imu) { return {T_body_imu.rotation(), T_body_imu.translation()}; }
+};
+
+/// Noise of the process model; the spec's configuration names and units.
+struct ImuNoise {
+  double process_noise_accel = 0.1;       // m/s^2, std of one accelerometer sample
+  double process_noise_gyro = 0.01;       // rad/s, std of one gyroscope sample
+  double accel_bias_random_walk = 0.001;  // m/s^2/sqrt(s)
+  double gyro_bias_random_walk = 0.0001;  // rad/s/sqrt(s)
+  double sample_interval = 0.005;         // s, 1 / IMU rate (turns per-sample stds into densities)
+};
+
+/// Bias-corrected angular velocity and specific force at the body origin, body axes.
+struct BodyMotion {
+  Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero();  // rad/s
+  Eigen::Vector3d specific_force = Eigen::Vector3d::Zero();    // m/s^2
+};
+
+BodyMotion body_motion(const NavigationState& state, const ImuSample& sample, const ImuMounting& mounting);
+
+/// The non-identity blocks of the error-state transition of one step (see the header comment).
+struct ImuTransition {
+  double dt = 0.0;
+  Eigen::Matrix3d velocity_by_orientation = Eigen::Matrix3d::Zero();     // -R [f]x dt
+  Eigen::Matrix3d velocity_by_accel_bias = Eigen::Matrix3d::Zero();      // -R R_body_imu dt
+  Eigen::Matrix3d orientation_by_orientation = Eigen::Matrix3d::Identity();  // Exp(w dt)^T
+  Eigen::Matrix3d orientation_by_gyro_bias = Eigen::Matrix3d::Zero();    // -Jr(w dt) R_body_imu dt
+};
+
+/// Integrates the nominal state over dt >= 0 seconds (timestamp advanced by dt) and fills the
+/// transition blocks when transition is given.
+NavigationState propagate_state(const NavigationState& state, const BodyMotion& motion, double dt,
+                                const ImuMounting& mounting, ImuTransition* transition);
+
+/// The full 18x18 transition matrix Phi built from the blocks (for tests and reference code).
+ErrorCovariance transition_matrix(const ImuTransition& transition);
+
+/// The discrete process noise Q of one step of length dt (see the header comment).
+ErrorCovariance process_noise(const ImuNoise& noise, double dt);
+
+/// covariance <- Phi covariance Phi^T + Q, exploiting the sparsity of Phi (about 5x fewer
+/// multiplications than the dense product). Result symmetric.
+void propagate_covariance(ErrorCovariance& covariance, const ImuTransition& transition, const ImuNoise& noise);
+
+}  // namespace hanzo::fusion::estimate

@@ -1,0 +1,67 @@
+#pragma once
+// NavigationState: the state the frontend filters estimate (spec, "State Representation"):
+//
+//   position        p  [m]      body origin in the world frame (ENU)
+//   orientation     R  (unit quaternion w, x, y, z)  R_world_body, body FLU
+//   velocity        v  [m/s]    body origin, world frame
+//   accel_bias      ba [m/s^2]  accelerometer bias, IMU axes
+//   gyro_bias       bg [rad/s]  gyroscope bias, IMU axes
+//   gravity         g  [m/s^2]  gravity vector in the world frame, about (0, 0, -9.81)
+//
+// The spec calls this "22-dimensional ... 21 degrees of freedom", but its own list sums to
+// 3 + 4 + 3 + 3 + 3 + 3 = 19 numbers, and with the unit-norm quaternion to 18 degrees of
+// freedom. We implement the list exactly as written (every listed component, nothing added),
+// so the error state has kErrorStateDimension = 18 entries, not 21: nothing in the spec names
+// the three extra entries the count implies, and inventing states would make the filter's
+// covariance disagree with the spec's state. (Recorded in docs/frontend.md.)
+//
+// Error state (on the manifold), order fixed by ErrorIndex:
+//   x_true = x (+) dx:  p + dp,  R Exp(dtheta)  (right perturbation, dtheta in the BODY frame,
+//   as PoseEstimate's covariance), v + dv, ba + dba, bg + dbg, g + dg.
+
+#include <Eigen/Core>
+
+#include "hanzo/fusion/core/so3.hpp"
+#include "hanzo/fusion/core/time.hpp"
+
+namespace hanzo::fusion::estimate {
+
+inline constexpr int kErrorStateDimension = 18;
+
+/// Offsets of each block (3 entries) in the error state and its covariance.
+enum ErrorIndex : int {
+  kPositionIndex = 0,
+  kOrientationIndex = 3,
+  kVelocityIndex = 6,
+  kAccelBiasIndex = 9,
+  kGyroBiasIndex = 12,
+  kGravityIndex = 15,
+};
+
+using ErrorVector = Eigen::Matrix<double, kErrorStateDimension, 1>;
+using ErrorCovariance = Eigen::Matrix<double, kErrorStateDimension, kErrorStateDimension>;
+
+/// Standard gravity (m/s^2), the default magnitude of the gravity state.
+inline constexpr double kStandardGravity = 9.80665;
+
+struct NavigationState {
+  Timestamp timestamp;
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();
+  SO3 R_world_body;
+  Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
+  Eigen::Vector3d accel_bias = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_bias = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gravity{0.0, 0.0, -kStandardGravity};
+
+  /// x (+) dx as defined above.
+  NavigationState plus(const ErrorVector& delta) const;
+  /// The dx with other.plus(dx) == *this (rotation part log(R_other^T R_this)).
+  ErrorVector minus(const NavigationState& other) const;
+  /// True when every number is finite.
+  bool all_finite() const;
+};
+
+/// Forces exact symmetry (averaging with the transpose); filters call it after every step.
+void symmetrize(ErrorCovariance& covariance);
+
+}  // namespace hanzo::fusion::estimate

@@ -1,0 +1,59 @@
+#include "hanzo/fusion/estimate/error_state_ekf.hpp"
+
+#include <Eigen/Cholesky>
+
+namespace hanzo::fusion::estimate {
+
+ErrorStateEkf::ErrorStateEkf(const FilterConfig& config) : config_(config), gate_(config.gate_probability) {}
+
+void ErrorStateEkf::reset(const NavigationState& state, const ErrorCovariance& covariance) {
+  state_ = state;
+  covariance_ = covariance;
+}
+
+void ErrorStateEkf::predict(const ImuSample& sample, double dt) {
+  if (dt <= 0.0) return;
+  ImuTransition transition;
+  state_ = propagate_state(state_, body_motion(state_, sample, config_.imu_mounting), dt, config_.imu_mounting, &transition);
+  propagate_covariance(covariance_, transition, config_.imu_noise);
+}
+
+UpdateOutcome ErrorStateEkf::update(const MeasurementModel& model) {
+  using GainMatrix = Eigen::Matrix<double, kErrorStateDimension, Eigen::Dynamic, 0, kErrorStateDimension, kMaxMeasurementDimension>;
+  UpdateOutcome outcome;
+  const int m = model.dimension();
+  MeasurementJacobian H;
+  outcome.innovation = model.residual(state_, &H);
+  outcome.gate = gate_.threshold(m);
+
+  const GainMatrix PHt = covariance_ * H.transpose();
+  const MeasurementCovariance S = H * PHt + model.covariance();
+  const Eigen::LLT<MeasurementCovariance> llt(S);
+  if (llt.info() != Eigen::Success || !outcome.innovation.allFinite()) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
+  outcome.mahalanobis_squared = outcome.innovation.dot(llt.solve(outcome.innovation));
+  if (!(outcome.mahalanobis_squared <= outcome.gate)) {
+    outcome.status = outcome.mahalanobis_squared > outcome.gate ? UpdateStatus::kRejectedByGate : UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
+  // K = P H^T S^-1, computed as (S^-1 H P)^T (S symmetric).
+  const GainMatrix K = llt.solve(PHt.transpose()).transpose();
+  const ErrorVector delta = K * outcome.innovation;
+  const NavigationState updated = state_.plus(delta);
+  if (!updated.all_finite()) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
+  state_ = updated;
+  covariance_ -= K * PHt.transpose();  // K S K^T = P H^T S^-1 H P = K (P H^T)^T
+  // Error reset: the orientation error is now measured from the corrected orientation.
+  const Eigen::Matrix3d G = Eigen::Matrix3d::Identity() - SO3::hat(0.5 * delta.segment<3>(kOrientationIndex));
+  covariance_.middleRows<3>(kOrientationIndex) = (G * covariance_.middleRows<3>(kOrientationIndex)).eval();
+  covariance_.middleCols<3>(kOrientationIndex) = (covariance_.middleCols<3>(kOrientationIndex) * G.transpose()).eval();
+  symmetrize(covariance_);
+  return outcome;
+}
+
+}  // namespace hanzo::fusion::estimate

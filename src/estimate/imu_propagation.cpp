@@ -1,0 +1,111 @@
+#include "hanzo/fusion/estimate/imu_propagation.hpp"
+
+namespace hanzo::fusion::estimate {
+
+BodyMotion body_motion(const NavigationState& state, const ImuSample& sample, const ImuMounting& mounting) {
+  BodyMotion motion;
+  motion.angular_velocity = mounting.R_body_imu * (sample.angular_velocity - state.gyro_bias);
+  const Eigen::Vector3d& w = motion.angular_velocity;
+  motion.specific_force =
+      mounting.R_body_imu * (sample.linear_acceleration - state.accel_bias) - w.cross(w.cross(mounting.p_body_imu));
+  return motion;
+}
+
+NavigationState propagate_state(const NavigationState& state, const BodyMotion& motion, double dt,
+                                const ImuMounting& mounting, ImuTransition* transition) {
+  const Eigen::Matrix3d R = state.R_world_body.matrix();
+  const Eigen::Vector3d acceleration = R * motion.specific_force + state.gravity;
+  const Eigen::Vector3d rotation_vector = motion.angular_velocity * dt;
+  SO3::Jacobian right_jacobian;
+  const SO3 delta_rotation = SO3::exp(rotation_vector, &right_jacobian);
+
+  NavigationState next = state;
+  next.timestamp = state.timestamp + Duration::from_seconds(dt);
+  next.position = state.position + state.velocity * dt + 0.5 * acceleration * dt * dt;
+  next.velocity = state.velocity + acceleration * dt;
+  next.R_world_body = state.R_world_body * delta_rotation;
+
+  if (transition != nullptr) {
+    const Eigen::Matrix3d R_body_imu = mounting.R_body_imu.matrix();
+    transition->dt = dt;
+    transition->velocity_by_orientation = -R * SO3::hat(motion.specific_force) * dt;
+    transition->velocity_by_accel_bias = -R * R_body_imu * dt;
+    transition->orientation_by_orientation = delta_rotation.matrix().transpose();
+    transition->orientation_by_gyro_bias = -right_jacobian * R_body_imu * dt;
+  }
+  return next;
+}
+
+ErrorCovariance transition_matrix(const ImuTransition& t) {
+  ErrorCovariance phi = ErrorCovariance::Identity();
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  phi.block<3, 3>(kPositionIndex, kOrientationIndex) = 0.5 * t.dt * t.velocity_by_orientation;
+  phi.block<3, 3>(kPositionIndex, kVelocityIndex) = t.dt * I;
+  phi.block<3, 3>(kPositionIndex, kAccelBiasIndex) = 0.5 * t.dt * t.velocity_by_accel_bias;
+  phi.block<3, 3>(kPositionIndex, kGravityIndex) = 0.5 * t.dt * t.dt * I;
+  phi.block<3, 3>(kOrientationIndex, kOrientationIndex) = t.orientation_by_orientation;
+  phi.block<3, 3>(kOrientationIndex, kGyroBiasIndex) = t.orientation_by_gyro_bias;
+  phi.block<3, 3>(kVelocityIndex, kOrientationIndex) = t.velocity_by_orientation;
+  phi.block<3, 3>(kVelocityIndex, kAccelBiasIndex) = t.velocity_by_accel_bias;
+  phi.block<3, 3>(kVelocityIndex, kGravityIndex) = t.dt * I;
+  return phi;
+}
+
+ErrorCovariance process_noise(const ImuNoise& noise, double dt) {
+  ErrorCovariance q = ErrorCovariance::Zero();
+  const double velocity_density = noise.process_noise_accel * noise.process_noise_accel * noise.sample_interval;
+  const double angle_density = noise.process_noise_gyro * noise.process_noise_gyro * noise.sample_interval;
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  // White acceleration noise integrated twice: the classic [dt^3/3, dt^2/2; dt^2/2, dt] blocks.
+  q.block<3, 3>(kPositionIndex, kPositionIndex) = velocity_density * dt * dt * dt / 3.0 * I;
+  q.block<3, 3>(kPositionIndex, kVelocityIndex) = velocity_density * dt * dt / 2.0 * I;
+  q.block<3, 3>(kVelocityIndex, kPositionIndex) = velocity_density * dt * dt / 2.0 * I;
+  q.block<3, 3>(kVelocityIndex, kVelocityIndex) = velocity_density * dt * I;
+  q.block<3, 3>(kOrientationIndex, kOrientationIndex) = angle_density * dt * I;
+  q.block<3, 3>(kAccelBiasIndex, kAccelBiasIndex) = noise.accel_bias_random_walk * noise.accel_bias_random_walk * dt * I;
+  q.block<3, 3>(kGyroBiasIndex, kGyroBiasIndex) = noise.gyro_bias_random_walk * noise.gyro_bias_random_walk * dt * I;
+  return q;
+}
+
+void propagate_covariance(ErrorCovariance& P, const ImuTransition& t, const ImuNoise& noise) {
+  using Rows = Eigen::Matrix<double, 3, kErrorStateDimension>;
+  using Columns = Eigen::Matrix<double, kErrorStateDimension, 3>;
+  const double dt = t.dt;
+  // A = Phi P: only the position, orientation and velocity rows change.
+  const Rows velocity_rows = P.middleRows<3>(kVelocityIndex) +
+                             t.velocity_by_orientation * P.middleRows<3>(kOrientationIndex) +
+                             t.velocity_by_accel_bias * P.middleRows<3>(kAccelBiasIndex) +
+                             dt * P.middleRows<3>(kGravityIndex);
+  const Rows orientation_rows = t.orientation_by_orientation * P.middleRows<3>(kOrientationIndex) +
+                                t.orientation_by_gyro_bias * P.middleRows<3>(kGyroBiasIndex);
+  // dp' = dp + dt/2 (dv + dv'): the position row is the mean of the old and new velocity rows.
+  P.middleRows<3>(kPositionIndex) += 0.5 * dt * (P.middleRows<3>(kVelocityIndex) + velocity_rows);
+  P.middleRows<3>(kVelocityIndex) = velocity_rows;
+  P.middleRows<3>(kOrientationIndex) = orientation_rows;
+  // Phi P Phi^T = A Phi^T: the same operations on the columns.
+  const Columns velocity_columns = P.middleCols<3>(kVelocityIndex) +
+                                   P.middleCols<3>(kOrientationIndex) * t.velocity_by_orientation.transpose() +
+                                   P.middleCols<3>(kAccelBiasIndex) * t.velocity_by_accel_bias.transpose() +
+                                   dt * P.middleCols<3>(kGravityIndex);
+  const Columns orientation_columns = P.middleCols<3>(kOrientationIndex) * t.orientation_by_orientation.transpose() +
+                                      P.middleCols<3>(kGyroBiasIndex) * t.orientation_by_gyro_bias.transpose();
+  P.middleCols<3>(kPositionIndex) += 0.5 * dt * (P.middleCols<3>(kVelocityIndex) + velocity_columns);
+  P.middleCols<3>(kVelocityIndex) = velocity_columns;
+  P.middleCols<3>(kOrientationIndex) = orientation_columns;
+
+  const double velocity_density = noise.process_noise_accel * noise.process_noise_accel * noise.sample_interval;
+  const double angle_density = noise.process_noise_gyro * noise.process_noise_gyro * noise.sample_interval;
+  const double accel_walk = noise.accel_bias_random_walk * noise.accel_bias_random_walk * dt;
+  const double gyro_walk = noise.gyro_bias_random_walk * noise.gyro_bias_random_walk * dt;
+  for (int axis = 0; axis < 3; ++axis) {
+    P(kPositionIndex + axis, kPositionIndex + axis) += velocity_density * dt * dt * dt / 3.0;
+    P(kPositionIndex + axis, kVelocityIndex + axis) += velocity_density * dt * dt / 2.0;
+    P(kVelocityIndex + axis, kPositionIndex + axis) += velocity_density * dt * dt / 2.0;
+    P(kVelocityIndex + axis, kVelocityIndex + axis) += velocity_density * dt;
+    P(kOrientationIndex + axis, kOrientationIndex + axis) += angle_density * dt;
+    P(kAccelBiasIndex + axis, kAccelBiasIndex + axis) += accel_walk;
+    P(kGyroBiasIndex + axis, kGyroBiasIndex + axis) += gyro_walk;
+  }
+}
+
+}  // namespace hanzo::fusion::estimate

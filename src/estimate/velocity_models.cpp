@@ -1,0 +1,90 @@
+#include "hanzo/fusion/estimate/velocity_models.hpp"
+
+namespace hanzo::fusion::estimate {
+namespace {
+
+using Jacobian3 = Eigen::Matrix<double, 3, kErrorStateDimension>;
+
+Eigen::Vector3d body_rate(const NavigationState& state, const GyroReading& gyro) {
+  return gyro.R_body_imu * (gyro.angular_velocity - state.gyro_bias);
+}
+
+// v_s(x) and its Jacobian (see velocity_models.hpp).
+Eigen::Vector3d sensor_velocity(const NavigationState& state, const SE3& T_body_sensor, const GyroReading& gyro,
+                                Jacobian3* jacobian) {
+  const Eigen::Matrix3d R_transpose = state.R_world_body.matrix().transpose();
+  const Eigen::Matrix3d R_sensor_body = T_body_sensor.rotation().matrix().transpose();
+  const Eigen::Vector3d velocity_body = R_transpose * state.velocity;
+  const Eigen::Vector3d& lever = T_body_sensor.translation();
+  if (jacobian != nullptr) {
+    jacobian->setZero();
+    jacobian->block<3, 3>(0, kOrientationIndex) = R_sensor_body * SO3::hat(velocity_body);
+    jacobian->block<3, 3>(0, kVelocityIndex) = R_sensor_body * R_transpose;
+    jacobian->block<3, 3>(0, kGyroBiasIndex) = R_sensor_body * SO3::hat(lever) * gyro.R_body_imu.matrix();
+  }
+  return R_sensor_body * (velocity_body + body_rate(state, gyro).cross(lever));
+}
+
+}  // namespace
+
+MeasurementVector SensorVelocityModel::residual(const NavigationState& state, MeasurementJacobian* jacobian) const {
+  Jacobian3 h;
+  const Eigen::Vector3d predicted = sensor_velocity(state, T_body_sensor_, gyro_, jacobian ? &h : nullptr);
+  if (jacobian != nullptr) *jacobian = h;
+  return measured_ - predicted;
+}
+
+MeasurementVector WheelOdometryModel::residual(const NavigationState& state, MeasurementJacobian* jacobian) const {
+  Jacobian3 h;
+  const Eigen::Vector3d velocity = sensor_velocity(state, T_body_wheel_, gyro_, jacobian ? &h : nullptr);
+  const int rows = dimension();
+  MeasurementVector r(rows);
+  if (jacobian != nullptr) jacobian->setZero(rows, kErrorStateDimension);
+  int row = 0;
+  const int velocity_rows = measurement_.non_holonomic ? 3 : 1;
+  for (int axis = 0; axis < velocity_rows; ++axis, ++row) {
+    r(row) = (axis == 0 ? measurement_.forward_speed : 0.0) - velocity(axis);
+    if (jacobian != nullptr) jacobian->row(row) = h.row(axis);
+  }
+  if (measurement_.use_yaw_rate) {
+    const Eigen::RowVector3d yaw_axis = T_body_wheel_.rotation().matrix().col(2).transpose();  // z of R_bw^T
+    r(row) = measurement_.yaw_rate - yaw_axis.dot(body_rate(state, gyro_));
+    if (jacobian != nullptr) jacobian->block<1, 3>(row, kGyroBiasIndex) = -yaw_axis * gyro_.R_body_imu.matrix();
+  }
+  return r;
+}
+
+MeasurementCovariance WheelOdometryModel::covariance() const {
+  MeasurementVector sigmas(dimension());
+  int row = 0;
+  sigmas(row++) = measurement_.forward_speed_sigma;
+  if (measurement_.non_holonomic) {
+    sigmas(row++) = measurement_.lateral_speed_sigma;
+    sigmas(row++) = measurement_.lateral_speed_sigma;
+  }
+  if (measurement_.use_yaw_rate) sigmas(row) = measurement_.yaw_rate_sigma;
+  return sigmas.array().square().matrix().asDiagonal();
+}
+
+MeasurementVector ZeroVelocityModel::residual(const NavigationState& state, MeasurementJacobian* jacobian) const {
+  MeasurementVector r(dimension());
+  r.head<3>() = -state.velocity;
+  if (jacobian != nullptr) {
+    jacobian->setZero(dimension(), kErrorStateDimension);
+    jacobian->block<3, 3>(0, kVelocityIndex).setIdentity();
+  }
+  if (with_angular_rate_) {
+    r.tail<3>() = -body_rate(state, gyro_);
+    if (jacobian != nullptr) jacobian->block<3, 3>(3, kGyroBiasIndex) = -gyro_.R_body_imu.matrix();
+  }
+  return r;
+}
+
+MeasurementCovariance ZeroVelocityModel::covariance() const {
+  MeasurementVector sigmas(dimension());
+  sigmas.head<3>().setConstant(velocity_sigma_);
+  if (with_angular_rate_) sigmas.tail<3>().setConstant(angular_rate_sigma_);
+  return sigmas.array().square().matrix().asDiagonal();
+}
+
+}  // namespace hanzo::fusion::estimate
