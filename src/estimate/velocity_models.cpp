@@ -41,10 +41,12 @@ MeasurementVector WheelOdometryModel::residual(const NavigationState& state, Mea
   MeasurementVector r(rows);
   if (jacobian != nullptr) jacobian->setZero(rows, kErrorStateDimension);
   int row = 0;
-  const int velocity_rows = measurement_.non_holonomic ? 3 : 1;
-  for (int axis = 0; axis < velocity_rows; ++axis, ++row) {
+  const bool used[3] = {true, measurement_.lateral_constraint, measurement_.vertical_constraint};
+  for (int axis = 0; axis < 3; ++axis) {
+    if (!used[axis]) continue;
     r(row) = (axis == 0 ? measurement_.forward_speed : 0.0) - velocity(axis);
     if (jacobian != nullptr) jacobian->row(row) = h.row(axis);
+    ++row;
   }
   if (measurement_.use_yaw_rate) {
     const Eigen::RowVector3d yaw_axis = T_body_wheel_.rotation().matrix().col(2).transpose();  // z of R_bw^T
@@ -58,10 +60,8 @@ MeasurementCovariance WheelOdometryModel::covariance() const {
   MeasurementVector sigmas(dimension());
   int row = 0;
   sigmas(row++) = measurement_.forward_speed_sigma;
-  if (measurement_.non_holonomic) {
-    sigmas(row++) = measurement_.lateral_speed_sigma;
-    sigmas(row++) = measurement_.lateral_speed_sigma;
-  }
+  if (measurement_.lateral_constraint) sigmas(row++) = measurement_.lateral_speed_sigma;
+  if (measurement_.vertical_constraint) sigmas(row++) = measurement_.lateral_speed_sigma;
   if (measurement_.use_yaw_rate) sigmas(row) = measurement_.yaw_rate_sigma;
   return sigmas.array().square().matrix().asDiagonal();
 }

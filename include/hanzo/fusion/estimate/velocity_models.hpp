@@ -43,8 +43,10 @@ class SensorVelocityModel final : public MeasurementModel {
 /// Differential-drive wheel odometry between two messages: forward speed
 /// v = (dL + dR) / (2 dt) and yaw rate w = (dR - dL) / (b dt) of the wheel frame (x forward,
 /// z up; calibration "<wheels>_to_body"). Residual entries, in this order:
-///   forward speed; lateral and vertical speed = 0 when non_holonomic (the non-holonomic
-///   constraint: a wheel does not slide sideways or leave the ground); yaw rate when use_yaw_rate
+///   forward speed; lateral speed = 0 when lateral_constraint and vertical speed = 0 when
+///   vertical_constraint (the non-holonomic constraint: a wheel does not slide sideways or leave
+///   the ground; planar mode drops the vertical one, which contradicts a level-height constraint
+///   while the IMU reports pitch); yaw rate when use_yaw_rate
 ///   (h = z-component of R_body_wheel^T w, which depends only on the gyro bias: skid-steered
 ///   bases report yaw rates far off the truth, so it is optional).
 struct WheelOdometryMeasurement {
@@ -52,8 +54,9 @@ struct WheelOdometryMeasurement {
   double yaw_rate = 0.0;       // rad/s
   double forward_speed_sigma = 0.05;  // m/s
   double yaw_rate_sigma = 0.05;       // rad/s
-  double lateral_speed_sigma = 0.05;  // m/s, non-holonomic constraint
-  bool non_holonomic = true;
+  double lateral_speed_sigma = 0.05;  // m/s, non-holonomic constraint (lateral and vertical)
+  bool lateral_constraint = true;
+  bool vertical_constraint = true;
   bool use_yaw_rate = true;
 };
 
@@ -63,7 +66,9 @@ class WheelOdometryModel final : public MeasurementModel {
       : measurement_(measurement), T_body_wheel_(T_body_wheel), gyro_(gyro) {}
 
   std::string_view name() const override { return "wheel_odometry"; }
-  int dimension() const override { return 1 + (measurement_.non_holonomic ? 2 : 0) + (measurement_.use_yaw_rate ? 1 : 0); }
+  int dimension() const override {
+    return 1 + (measurement_.lateral_constraint ? 1 : 0) + (measurement_.vertical_constraint ? 1 : 0) + (measurement_.use_yaw_rate ? 1 : 0);
+  }
   MeasurementVector residual(const NavigationState& state, MeasurementJacobian* jacobian) const override;
   MeasurementCovariance covariance() const override;
 

@@ -1,0 +1,132 @@
+#pragma once
+// pipeline::Session: one agent's real-time fusion (spec, "Fusion Pipeline Architecture").
+// Messages from any sensor go in with push(); pose estimates come out at the IMU rate.
+//
+//   auto session = Session::create(fusion_config, calibration).value();
+//   session->set_pose_callback([](const msgs::PoseEstimate& pose) { ... });
+//   for (...) { if (Status s = session->push("gnss", message); !s) log(s.error().message); }
+//
+// What push() does with a message (docs/frontend.md has the full story):
+//  1. Input checks, each a rejection with a reason that push() returns and summary() counts:
+//     unknown_sensor, wrong_type (a GNSS message for an IMU sensor), invalid (msgs::validate:
+//     NaN, bad covariance...), duplicate (same timestamp as the sensor's previous message),
+//     out_of_order (older than the sensor's previous message), future_dated (more than
+//     frontend.max_future ahead of the newest accepted time, unless the next message confirms
+//     the jump), too_late (older than the newest fused time by more than frontend.lag_window).
+//     The sensor's calibrated time offset is applied first (t_body = t_sensor + offset).
+//  2. Time ordering: measurements wait until the IMU has reached their time, then are fused in
+//     timestamp order. A message that arrives after the filter has passed its time (inside the
+//     lag window) is fused by restoring the stored estimate from before it and re-fusing what
+//     followed (no silent drop; counted as rolled_back).
+//  3. Fusion, each update chi-square gated (counted per sensor: fused, gated, ...).
+//     IMU: static alignment at start (roll, pitch, gyro bias), then propagation; spikes
+//     rejected; optional attitude (use_orientation). GNSS: fix-type policy, WGS84 -> ENU via
+//     the datum, lever arm. Wheels: forward speed (+ non-holonomic constraint, + yaw rate),
+//     zero-velocity update when the wheels stand still. Poses (LiDAR / visual localization):
+//     push_pose().
+//  4. Monitoring: a sensor silent for longer than its timeout is reported (counted, logged) and
+//     the filter keeps running on the rest. PoseEstimate.status counts the modalities that
+//     constrained the estimate within their timeouts (the IMU counts while it streams); the
+//     spec requires two for reliable localization: state TRACKING with >= 2, DEGRADED with
+//     fewer or with a sensor timed out, LOST without IMU data, INITIALIZING before alignment.
+//
+// Deterministic: the same messages in the same order give bit-identical output. Not
+// thread-safe: one thread pushes (the server serializes per session).
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/config/fusion_config.hpp"
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
+
+namespace hanzo::fusion::pipeline {
+
+/// Counters of one configured sensor.
+struct SensorStatistics {
+  std::string name;
+  config::SensorModality modality = config::SensorModality::kImu;
+  uint64_t received = 0;  // push() calls for this sensor
+  uint64_t fused = 0;     // messages whose update moved the estimate (IMU: propagated)
+  uint64_t rolled_back = 0;  // late messages fused by rolling back
+  /// Rejections by reason: the input checks above plus the fusion outcomes "gated",
+  /// "numerical_failure", "no_fix", "weak_fix", "spike", "gimbal_lock", "gap", "not_fused"
+  /// (a modality the frontend does not fuse directly, e.g. raw LiDAR scans without odometry).
+  std::map<std::string, uint64_t> rejected;
+  uint64_t timeouts = 0;     // times the sensor went silent for longer than its timeout
+  bool timed_out = false;    // silent now
+  Timestamp first_time;      // first and last accepted timestamps (body clock)
+  Timestamp last_time;
+  double nis_sum = 0.0;      // sum of normalized innovations squared of fused updates
+  uint64_t nis_count = 0;    // and their degrees of freedom (for the average NIS per dof)
+
+  uint64_t rejected_total() const;
+};
+
+struct SessionSummary {
+  std::vector<SensorStatistics> sensors;  // in configuration order
+  uint64_t poses = 0;                     // PoseEstimates emitted
+  uint64_t rollbacks = 0;                 // times the filter rolled back for a late message
+  uint64_t zero_velocity_updates = 0;
+  std::string filter;                     // "ekf", ...
+  msgs::TrackingState state = msgs::TrackingState::kInitializing;
+};
+
+/// One update, for diagnostics (innovation plots, consistency checks).
+struct InnovationRecord {
+  std::string sensor;
+  std::string_view model;  // "gnss_position", "wheel_odometry", ...
+  Timestamp timestamp;
+  std::vector<double> innovation;  // z (-) h(x) before the update
+  double mahalanobis_squared = 0.0;
+  bool applied = false;
+};
+
+class Session {
+ public:
+  using PoseCallback = std::function<void(const msgs::PoseEstimate&)>;
+  using InnovationCallback = std::function<void(const InnovationRecord&)>;
+
+  /// Fails when the configuration is invalid or has no IMU sensor (the frontend propagates
+  /// with the IMU), or when the filter type is not available.
+  static Result<std::unique_ptr<Session>> create(const config::FusionConfig& config, const calib::Calibration& calibration);
+  ~Session();
+  Session(const Session&) = delete;
+  Session& operator=(const Session&) = delete;
+
+  /// Fuses one message of the named sensor (the configuration's name). Returns an error whose
+  /// message starts with the rejection reason ("too_late: ...") when the message is rejected by
+  /// the input checks; the session is unchanged then. Fusion outcomes (gated...) are counted,
+  /// not returned as errors.
+  Status push(std::string_view sensor, const msgs::SensorMessage& message);
+  /// A pose measurement T_world_sensor of a lidar or camera sensor (LiDAR / visual
+  /// localization), covariance over (position world [m], rotation sensor frame [rad]).
+  Status push_pose(std::string_view sensor, Timestamp timestamp, const SE3& T_world_sensor,
+                   const Eigen::Matrix<double, 6, 6>& covariance);
+
+  /// The configured sensor that reads `topic`, or nullptr.
+  const config::SensorConfig* sensor_for_topic(std::string_view topic) const;
+  const config::FusionConfig& config() const;
+
+  /// Called for every PoseEstimate (one per IMU message once initialized), in time order.
+  void set_pose_callback(PoseCallback callback);
+  void set_innovation_callback(InnovationCallback callback);
+  /// The latest PoseEstimate, if any.
+  std::optional<msgs::PoseEstimate> latest_pose() const;
+  SessionSummary summary() const;
+
+ private:
+  struct Impl;
+  explicit Session(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace hanzo::fusion::pipeline

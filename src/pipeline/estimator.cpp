@@ -1,0 +1,319 @@
+#include "estimator.hpp"
+
+#include <cmath>
+
+#include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/estimate/attitude_models.hpp"
+#include "hanzo/fusion/estimate/error_state_ekf.hpp"
+#include "hanzo/fusion/estimate/position_models.hpp"
+#include "hanzo/fusion/estimate/static_alignment.hpp"
+#include "hanzo/fusion/estimate/velocity_models.hpp"
+
+namespace hanzo::fusion::pipeline {
+namespace {
+
+using config::SensorModality;
+using estimate::ErrorCovariance;
+using estimate::NavigationState;
+
+// Initial uncertainty of the states the spec's configuration does not cover.
+constexpr double kInitialAccelBiasSigma = 0.1;      // m/s^2
+constexpr double kInitialGyroBiasSigma = 0.01;      // rad/s, after static alignment
+constexpr double kUnalignedGyroBiasSigma = 0.05;    // rad/s, when not aligned (moving start)
+constexpr double kInitialGravitySigma = 0.02;       // m/s^2, vertical (magnitude)
+constexpr double kHorizontalGravitySigma = 1e-6;    // m/s^2: ENU's up is the gravity direction
+constexpr double kGravityMagnitudeSigma = 0.001;    // m/s^2, pseudo-measurement at 1 Hz
+constexpr double kPlanarHeightSigma = 0.005;        // m
+constexpr double kPlanarVerticalSpeedSigma = 0.01;  // m/s
+constexpr double kZeroVelocitySigma = 0.005;        // m/s
+constexpr double kZeroRateSigma = 0.002;            // rad/s
+constexpr double kWheelGap = 1.0;                   // s: longer gaps between wheel readings are not differenced
+
+// Default GNSS position noise per fix type when a message has no covariance (1 sigma, m).
+Eigen::Matrix3d default_gnss_covariance(msgs::GnssFixType fix) {
+  double horizontal = 2.5;
+  double vertical = 5.0;
+  switch (fix) {
+    case msgs::GnssFixType::kFix2d: horizontal = 5.0; vertical = 50.0; break;
+    case msgs::GnssFixType::kRtkFloat: horizontal = 0.5; vertical = 1.0; break;
+    case msgs::GnssFixType::kRtkFixed: horizontal = 0.02; vertical = 0.05; break;
+    default: break;
+  }
+  return Eigen::Vector3d(horizontal * horizontal, horizontal * horizontal, vertical * vertical).asDiagonal();
+}
+
+estimate::ImuSample imu_sample(Timestamp time, const msgs::ImuMessage& imu) {
+  return {time, imu.angular_velocity, imu.linear_acceleration};
+}
+
+std::unique_ptr<estimate::Filter> make_filter(const estimate::FilterConfig& config) {
+  return std::make_unique<estimate::ErrorStateEkf>(config);
+}
+
+}  // namespace
+
+bool fused_before(const Event& a, const Event& b) {
+  if (a.time != b.time) return a.time < b.time;
+  if (a.is_imu != b.is_imu) return a.is_imu;
+  return a.sequence < b.sequence;
+}
+
+Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup> sensors, size_t imu_sensor)
+    : frontend_(config.frontend),
+      sensors_(std::move(sensors)),
+      imu_sensor_(imu_sensor),
+      spike_filter_(estimate::ImuSpikeFilterConfig{}, estimate::ImuNoise{}) {
+  const config::CovarianceConfig& covariance = frontend_.covariance;
+  filter_config_.imu_mounting = estimate::ImuMounting::from_transform(sensors_[imu_sensor_].T_body_sensor);
+  filter_config_.imu_noise = {covariance.process_noise_accel, covariance.process_noise_gyro, covariance.accel_bias_random_walk,
+                              covariance.gyro_bias_random_walk, 1.0 / sensors_[imu_sensor_].config->rate_hz};
+  filter_config_.gate_probability = frontend_.gate_probability;
+  filter_ = make_filter(filter_config_);
+  spike_filter_ = estimate::ImuSpikeFilter(estimate::ImuSpikeFilterConfig{}, filter_config_.imu_noise);
+  previous_wheels_.resize(sensors_.size());
+  last_fused_.resize(sensors_.size());
+}
+
+Estimator::Estimator(const Estimator& other)
+    : frontend_(other.frontend_),
+      sensors_(other.sensors_),
+      imu_sensor_(other.imu_sensor_),
+      filter_config_(other.filter_config_),
+      filter_(other.filter_->clone()),
+      spike_filter_(other.spike_filter_),
+      initialized_(other.initialized_),
+      time_(other.time_),
+      last_imu_(other.last_imu_),
+      alignment_samples_(other.alignment_samples_),
+      previous_wheels_(other.previous_wheels_),
+      last_fused_(other.last_fused_),
+      enu_(other.enu_),
+      gravity_magnitude_(other.gravity_magnitude_),
+      planar_height_(other.planar_height_),
+      last_gravity_update_(other.last_gravity_update_) {}
+
+Estimator& Estimator::operator=(const Estimator& other) {
+  if (this != &other) *this = Estimator(other);
+  return *this;
+}
+
+Estimator::~Estimator() = default;
+
+Eigen::Vector3d Estimator::body_angular_velocity() const {
+  if (!last_imu_) return Eigen::Vector3d::Zero();
+  return filter_config_.imu_mounting.R_body_imu * (last_imu_->angular_velocity - filter_->state().gyro_bias);
+}
+
+EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
+  if (!initialized_ && !event.is_imu) return {false, "before_initialization"};
+  EventOutcome outcome;
+  if (const auto* pose = std::get_if<PoseMeasurement>(&event.payload)) {
+    outcome = process_pose(event, *pose, observer);
+  } else {
+    const auto& message = std::get<msgs::SensorMessage>(event.payload);
+    if (const auto* imu = std::get_if<msgs::ImuMessage>(&message)) {
+      outcome = process_imu(event, *imu, observer);
+    } else if (const auto* gnss = std::get_if<msgs::GnssMessage>(&message)) {
+      outcome = process_gnss(event, *gnss, observer);
+    } else if (const auto* wheels = std::get_if<msgs::WheelOdometryMessage>(&message)) {
+      outcome = process_wheels(event, *wheels, observer);
+    } else {
+      outcome = {false, "not_fused"};
+    }
+  }
+  if (initialized_ && event.time > time_) time_ = event.time;
+  return outcome;
+}
+
+void Estimator::predict_to(Timestamp t) {
+  if (t <= time_ || !last_imu_) return;
+  filter_->predict(*last_imu_, (t - time_).seconds());
+  time_ = t;
+}
+
+bool Estimator::update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer,
+                       std::string_view* reason) {
+  const estimate::UpdateOutcome outcome = filter_->update(model);
+  if (observer != nullptr) observer->on_update({event.sensor, model.name(), event.time, outcome});
+  if (outcome.status != estimate::UpdateStatus::kApplied) {
+    if (reason != nullptr) *reason = to_string(outcome.status);
+    return false;
+  }
+  last_fused_[event.sensor] = event.time;
+  return true;
+}
+
+void Estimator::initialize(const Event& event, const msgs::ImuMessage& imu) {
+  const config::SensorFusionOptions& options = sensors_[event.sensor].config->fusion;
+  const estimate::ImuMounting& mounting = filter_config_.imu_mounting;
+  const config::CovarianceConfig& covariance = frontend_.covariance;
+  NavigationState state;
+  double gyro_bias_sigma = kInitialGyroBiasSigma;
+
+  if (imu.orientation && options.use_orientation[0] && options.use_orientation[1]) {
+    // The IMU reports its attitude: start from it (heading too when selected).
+    const SO3 R_world_body =
+        SO3::from_quaternion_normalized(*imu.orientation) * mounting.R_body_imu.inverse();
+    const Eigen::Vector3d rpy = estimate::roll_pitch_yaw(R_world_body.matrix());
+    state.R_world_body = estimate::rotation_from_roll_pitch_yaw(rpy.x(), rpy.y(), options.use_orientation[2] ? rpy.z() : 0.0);
+    gyro_bias_sigma = kUnalignedGyroBiasSigma;
+  } else {
+    alignment_samples_.push_back(imu_sample(event.time, imu));
+    if ((event.time - alignment_samples_.front().timestamp).seconds() < frontend_.static_alignment_s) return;
+    Result<estimate::StaticAlignment> alignment = estimate::align_static(alignment_samples_, mounting, 0.0);
+    if (!alignment) {
+      // Moving start: the mean specific force is still the best guess of "up".
+      logger()->warn("initializing while moving ({}); roll and pitch from the mean specific force", alignment.error().message);
+      estimate::StaticAlignmentConfig permissive;
+      permissive.max_accel_std = std::numeric_limits<double>::infinity();
+      permissive.max_gyro_std = std::numeric_limits<double>::infinity();
+      alignment = estimate::align_static(alignment_samples_, mounting, 0.0, permissive);
+      gyro_bias_sigma = kUnalignedGyroBiasSigma;
+      if (!alignment) return;  // not even gravity visible yet: keep collecting
+      alignment->gyro_bias.setZero();
+    }
+    state.R_world_body = alignment->R_world_body;
+    state.gyro_bias = alignment->gyro_bias;
+    gravity_magnitude_ = alignment->gravity_magnitude;
+    alignment_samples_.clear();
+    alignment_samples_.shrink_to_fit();
+  }
+  state.gravity = Eigen::Vector3d(0.0, 0.0, -gravity_magnitude_);
+  state.timestamp = event.time;
+
+  ErrorCovariance P = ErrorCovariance::Zero();
+  const auto set_block = [&P](int index, const Eigen::Vector3d& sigmas) {
+    P.block<3, 3>(index, index) = sigmas.array().square().matrix().asDiagonal();
+  };
+  set_block(estimate::kPositionIndex, covariance.initial_position);
+  set_block(estimate::kOrientationIndex, covariance.initial_orientation);
+  set_block(estimate::kVelocityIndex, covariance.initial_velocity);
+  set_block(estimate::kAccelBiasIndex, Eigen::Vector3d::Constant(kInitialAccelBiasSigma));
+  set_block(estimate::kGyroBiasIndex, Eigen::Vector3d::Constant(gyro_bias_sigma));
+  set_block(estimate::kGravityIndex, Eigen::Vector3d(kHorizontalGravitySigma, kHorizontalGravitySigma, kInitialGravitySigma));
+  filter_->reset(state, P);
+  initialized_ = true;
+  time_ = event.time;
+  last_gravity_update_ = event.time;
+  planar_height_ = state.position.z();
+  logger()->info("frontend initialized at t = {:.3f} s (roll {:.2f}, pitch {:.2f} deg)", event.time.seconds(),
+                 estimate::roll_pitch_yaw(state.R_world_body.matrix()).x() * 180.0 / M_PI,
+                 estimate::roll_pitch_yaw(state.R_world_body.matrix()).y() * 180.0 / M_PI);
+}
+
+EventOutcome Estimator::process_imu(const Event& event, const msgs::ImuMessage& imu, UpdateObserver* observer) {
+  const estimate::ImuSample sample = imu_sample(event.time, imu);
+  if (!spike_filter_.accept(sample)) return {false, "spike"};
+  if (!initialized_) {
+    initialize(event, imu);
+    if (!initialized_) return {false, "aligning"};
+    last_imu_ = sample;
+    last_fused_[event.sensor] = event.time;
+    return {true, {}};
+  }
+  predict_to(event.time);
+  last_imu_ = sample;
+  last_fused_[event.sensor] = event.time;
+
+  const config::SensorFusionOptions& options = sensors_[event.sensor].config->fusion;
+  EventOutcome outcome{true, {}};
+  if (imu.orientation && (options.use_orientation[0] || options.use_orientation[1] || options.use_orientation[2])) {
+    const Eigen::Matrix3d covariance = imu.orientation_covariance.value_or(
+        Eigen::Matrix3d::Identity() * options.orientation_noise * options.orientation_noise);
+    const estimate::ImuAttitudeModel model(SO3::from_quaternion_normalized(*imu.orientation), covariance,
+                                           filter_config_.imu_mounting.R_body_imu, options.use_orientation);
+    if (!model.usable()) {
+      outcome.reason = "gimbal_lock";
+    } else {
+      update(event, model, observer, &outcome.reason);
+    }
+  }
+  apply_constraints(event);
+  return outcome;
+}
+
+void Estimator::apply_constraints(const Event& event) {
+  if (frontend_.planar) {
+    filter_->update(estimate::PlanarMotionModel(planar_height_, kPlanarHeightSigma, kPlanarVerticalSpeedSigma));
+  }
+  if ((event.time - last_gravity_update_).seconds() >= 1.0) {
+    filter_->update(estimate::GravityMagnitudeModel(gravity_magnitude_, kGravityMagnitudeSigma));
+    last_gravity_update_ = event.time;
+  }
+}
+
+EventOutcome Estimator::process_gnss(const Event& event, const msgs::GnssMessage& gnss, UpdateObserver* observer) {
+  const SensorSetup& sensor = sensors_[event.sensor];
+  if (gnss.fix_type == msgs::GnssFixType::kNoFix) return {false, "no_fix"};
+  if (gnss.fix_type < sensor.config->fusion.min_fix) return {false, "weak_fix"};
+  predict_to(event.time);
+  const NavigationState state = filter_->state();
+  const Eigen::Vector3d& lever = sensor.T_body_sensor.translation();
+  if (!enu_) {
+    if (frontend_.datum) {
+      enu_ = EnuFrame::create(*frontend_.datum).value();
+    } else {
+      // The first fix defines the world frame so that it lands where the estimate has the
+      // antenna now (the world origin is where the frontend started).
+      const EnuFrame at_fix = EnuFrame::create(gnss.geodetic()).value();
+      const Eigen::Vector3d antenna = state.position + state.R_world_body * lever;
+      enu_ = EnuFrame::create(at_fix.to_geodetic(-antenna)).value();
+      logger()->info("GNSS datum set from the first fix: lat {:.8f}, lon {:.8f}, alt {:.3f}", enu_->datum().latitude_deg,
+                     enu_->datum().longitude_deg, enu_->datum().altitude_m);
+    }
+  }
+  Eigen::Matrix3d covariance = gnss.position_covariance.value_or(default_gnss_covariance(gnss.fix_type));
+  if (!(covariance.diagonal().array() > 0.0).all()) covariance = default_gnss_covariance(gnss.fix_type);
+  const estimate::GnssPositionModel model(enu_->to_enu(gnss.geodetic()), covariance, lever);
+  EventOutcome outcome;
+  outcome.fused = update(event, model, observer, &outcome.reason);
+  return outcome;
+}
+
+EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdometryMessage& wheels, UpdateObserver* observer) {
+  std::optional<msgs::WheelOdometryMessage>& previous = previous_wheels_[event.sensor];
+  const std::optional<msgs::WheelOdometryMessage> before = previous;
+  previous = wheels;
+  previous->timestamp = event.time;  // body clock
+  if (!before) return {false, "reference"};
+  const double dt = (event.time - before->timestamp).seconds();
+  if (dt <= 0.0 || dt > kWheelGap) return {false, "gap"};
+  const double left = wheels.left_distance - before->left_distance;
+  const double right = wheels.right_distance - before->right_distance;
+  predict_to(event.time);
+
+  const SensorSetup& sensor = sensors_[event.sensor];
+  const config::SensorFusionOptions& options = sensor.config->fusion;
+  estimate::GyroReading gyro;
+  gyro.R_body_imu = filter_config_.imu_mounting.R_body_imu;
+  if (last_imu_) gyro.angular_velocity = last_imu_->angular_velocity;
+  EventOutcome outcome;
+  if (frontend_.zero_velocity_updates && left == 0.0 && right == 0.0) {
+    const estimate::ZeroVelocityModel model(kZeroVelocitySigma, kZeroRateSigma, true, gyro);
+    outcome.fused = update(event, model, observer, &outcome.reason);
+    outcome.zero_velocity_update = outcome.fused;
+    return outcome;
+  }
+  estimate::WheelOdometryMeasurement measurement;
+  measurement.forward_speed = 0.5 * (left + right) / dt;
+  measurement.yaw_rate = (right - left) / (wheels.wheel_separation * dt);
+  measurement.forward_speed_sigma = options.speed_noise;
+  measurement.yaw_rate_sigma = options.yaw_rate_noise;
+  measurement.lateral_speed_sigma = options.lateral_speed_noise;
+  measurement.lateral_constraint = options.non_holonomic;
+  measurement.vertical_constraint = options.non_holonomic && !frontend_.planar;
+  measurement.use_yaw_rate = options.use_yaw_rate;
+  const estimate::WheelOdometryModel model(measurement, sensor.T_body_sensor, gyro);
+  outcome.fused = update(event, model, observer, &outcome.reason);
+  return outcome;
+}
+
+EventOutcome Estimator::process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer) {
+  predict_to(event.time);
+  const estimate::PoseModel model(pose.T_world_sensor, pose.covariance, sensors_[event.sensor].T_body_sensor);
+  EventOutcome outcome;
+  outcome.fused = update(event, model, observer, &outcome.reason);
+  return outcome;
+}
+
+}  // namespace hanzo::fusion::pipeline

@@ -1,0 +1,120 @@
+#pragma once
+// Estimator: the part of a Session that turns time-ordered events into filter operations. It
+// holds everything fusion depends on (filter, last IMU sample, previous wheel reading, datum,
+// alignment buffer), and is copyable, so the Session can snapshot it after each event and roll
+// back for a late message. Private to the pipeline module.
+
+#include <memory>
+#include <optional>
+#include <string_view>
+#include <variant>
+#include <vector>
+
+#include "hanzo/fusion/config/fusion_config.hpp"
+#include "hanzo/fusion/core/geodesy.hpp"
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/estimate/filter.hpp"
+#include "hanzo/fusion/estimate/imu_spike_filter.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
+
+namespace hanzo::fusion::pipeline {
+
+struct PoseMeasurement {
+  SE3 T_world_sensor;
+  Eigen::Matrix<double, 6, 6> covariance;
+};
+
+/// A message ready for fusion: its sensor (index into FusionConfig::sensors), its body-clock
+/// time and an arrival sequence number (ties at equal times keep arrival order).
+struct Event {
+  Timestamp time;
+  size_t sensor = 0;
+  uint64_t sequence = 0;
+  bool is_imu = false;
+  std::variant<msgs::SensorMessage, PoseMeasurement> payload;
+};
+
+/// Strict order of fusion: time, then IMU before other sensors, then arrival.
+bool fused_before(const Event& a, const Event& b);
+
+/// What the Session needs to know about a sensor, fixed for the session's life.
+struct SensorSetup {
+  const config::SensorConfig* config = nullptr;
+  SE3 T_body_sensor;
+  Duration time_offset;
+};
+
+/// One measurement update's outcome, reported to the Session's observer.
+struct UpdateReport {
+  size_t sensor = 0;
+  std::string_view model;
+  Timestamp time;
+  estimate::UpdateOutcome outcome;
+};
+
+class UpdateObserver {
+ public:
+  virtual ~UpdateObserver() = default;
+  virtual void on_update(const UpdateReport& report) = 0;
+};
+
+/// The result of fusing one event: fused, or why not ("gated", "spike", ...).
+struct EventOutcome {
+  bool fused = false;
+  std::string_view reason;
+  bool zero_velocity_update = false;
+};
+
+class Estimator {
+ public:
+  Estimator(const config::FusionConfig& config, std::vector<SensorSetup> sensors, size_t imu_sensor);
+  Estimator(const Estimator& other);
+  Estimator& operator=(const Estimator& other);
+  Estimator(Estimator&&) noexcept = default;
+  Estimator& operator=(Estimator&&) noexcept = default;
+  ~Estimator();
+
+  /// Fuses one event; its time must not be before time(). observer may be null.
+  EventOutcome process(const Event& event, UpdateObserver* observer);
+
+  bool initialized() const { return initialized_; }
+  /// Time of the last fused event.
+  Timestamp time() const { return time_; }
+  const estimate::Filter& filter() const { return *filter_; }
+  /// Time of the last fused update of each sensor (IMU: last propagation), zero when never.
+  const std::vector<Timestamp>& last_fused() const { return last_fused_; }
+  /// The latest accepted IMU sample's body-frame angular velocity (bias removed).
+  Eigen::Vector3d body_angular_velocity() const;
+
+ private:
+  EventOutcome process_imu(const Event& event, const msgs::ImuMessage& imu, UpdateObserver* observer);
+  EventOutcome process_gnss(const Event& event, const msgs::GnssMessage& gnss, UpdateObserver* observer);
+  EventOutcome process_wheels(const Event& event, const msgs::WheelOdometryMessage& wheels, UpdateObserver* observer);
+  EventOutcome process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer);
+  void initialize(const Event& event, const msgs::ImuMessage& imu);
+  /// Propagates the filter to t with the last IMU sample held.
+  void predict_to(Timestamp t);
+  /// Runs one gated update and reports it; true when applied.
+  bool update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer, std::string_view* reason);
+  void apply_constraints(const Event& event);
+
+  config::FrontendConfig frontend_;
+  std::vector<SensorSetup> sensors_;
+  size_t imu_sensor_;
+  estimate::FilterConfig filter_config_;
+  std::unique_ptr<estimate::Filter> filter_;
+  estimate::ImuSpikeFilter spike_filter_;
+
+  bool initialized_ = false;
+  Timestamp time_;
+  std::optional<estimate::ImuSample> last_imu_;
+  std::vector<estimate::ImuSample> alignment_samples_;
+  std::vector<std::optional<msgs::WheelOdometryMessage>> previous_wheels_;
+  std::vector<Timestamp> last_fused_;
+  std::optional<EnuFrame> enu_;
+  double gravity_magnitude_ = estimate::kStandardGravity;
+  double planar_height_ = 0.0;
+  Timestamp last_gravity_update_;
+};
+
+}  // namespace hanzo::fusion::pipeline

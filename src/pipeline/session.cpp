@@ -1,0 +1,384 @@
+#include "hanzo/fusion/pipeline/session.hpp"
+
+#include <algorithm>
+#include <deque>
+#include <set>
+
+#include <fmt/format.h>
+
+#include "estimator.hpp"
+#include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/msgs/validate.hpp"
+
+namespace hanzo::fusion::pipeline {
+namespace {
+
+using config::SensorModality;
+
+SensorModality modality_of(const msgs::SensorMessage& message) {
+  switch (message.index()) {
+    case 0: return SensorModality::kImu;
+    case 1: return SensorModality::kLidar;
+    case 2: return SensorModality::kCamera;
+    case 3: return SensorModality::kGnss;
+    case 4: return SensorModality::kWheelOdometry;
+    default: return SensorModality::kRadar;
+  }
+}
+
+// Modalities whose raw messages the frontend fuses itself (the others arrive as poses from
+// their odometry modules through push_pose()).
+bool fused_directly(SensorModality modality) {
+  return modality == SensorModality::kImu || modality == SensorModality::kGnss || modality == SensorModality::kWheelOdometry;
+}
+
+Error rejection(std::string_view reason, const std::string& detail) { return Error(fmt::format("{}: {}", reason, detail)); }
+
+}  // namespace
+
+uint64_t SensorStatistics::rejected_total() const {
+  uint64_t total = 0;
+  for (const auto& [reason, count] : rejected) total += count;
+  return total;
+}
+
+struct Session::Impl final : UpdateObserver {
+  struct HistoryEntry {
+    Event event;
+    Estimator after;  // the estimator right after fusing event
+  };
+
+  // sensor_setups[i].config is set here to point into this Impl's own configuration.
+  Impl(config::FusionConfig fusion_config, std::vector<SensorSetup> sensor_setups, size_t imu)
+      : config(std::move(fusion_config)), setups(link(std::move(sensor_setups), config)), imu_sensor(imu),
+        estimator(config, setups, imu_sensor), history_base(estimator) {
+    for (const SensorSetup& setup : setups) {
+      SensorStatistics statistics;
+      statistics.name = setup.config->name;
+      statistics.modality = setup.config->modality;
+      sensors.push_back(std::move(statistics));
+    }
+    last_input.resize(setups.size());
+  }
+
+  static std::vector<SensorSetup> link(std::vector<SensorSetup> sensor_setups, const config::FusionConfig& fusion_config) {
+    for (size_t i = 0; i < sensor_setups.size(); ++i) sensor_setups[i].config = &fusion_config.sensors[i];
+    return sensor_setups;
+  }
+
+  void on_update(const UpdateReport& report) override {
+    if (replaying) return;
+    SensorStatistics& statistics = sensors[report.sensor];
+    const bool applied = report.outcome.status == estimate::UpdateStatus::kApplied;
+    if (applied) {
+      statistics.nis_sum += report.outcome.mahalanobis_squared;
+      statistics.nis_count += static_cast<uint64_t>(report.outcome.innovation.size());
+    }
+    if (innovation_callback) {
+      const auto& innovation = report.outcome.innovation;
+      innovation_callback({statistics.name, report.model, report.time,
+                           std::vector<double>(innovation.data(), innovation.data() + innovation.size()),
+                           report.outcome.mahalanobis_squared, applied});
+    }
+  }
+
+  Status accept(size_t sensor, Event event);
+  void fuse_in_order(Event event);
+  void fuse_late(Event event);
+  void count(const Event& event, const EventOutcome& outcome);
+  void release_pending();
+  void prune_history();
+  void emit_pose();
+  void update_timeouts();
+  msgs::PoseStatus pose_status() const;
+
+  config::FusionConfig config;
+  std::vector<SensorSetup> setups;
+  size_t imu_sensor;
+  Estimator estimator;
+  Estimator history_base;  // the estimator before the oldest history entry
+  std::deque<HistoryEntry> history;
+  std::vector<Event> pending;  // accepted, waiting for the IMU to reach their time (sorted)
+  std::vector<SensorStatistics> sensors;
+  std::vector<Timestamp> last_input;  // last accepted body-clock time per sensor
+  Timestamp first_input;
+  Timestamp newest;
+  std::optional<Timestamp> pending_jump;
+  uint64_t sequence = 0;
+  bool replaying = false;
+  uint64_t poses = 0;
+  uint64_t rollbacks = 0;
+  uint64_t zero_velocity_updates = 0;
+  std::optional<msgs::PoseEstimate> latest_pose;
+  PoseCallback pose_callback;
+  InnovationCallback innovation_callback;
+};
+
+Session::Session(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Session::~Session() = default;
+
+Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& config, const calib::Calibration& calibration) {
+  if (Status valid = config::validate(config); !valid) return valid.error();
+  if (Status valid = calib::validate(calibration); !valid) return valid.error();
+  if (config.frontend.type != config::FrontendType::kEkf) {
+    return Error(fmt::format("frontend.type {}: only the EKF frontend is available in this version", config::to_string(config.frontend.type)),
+                 "frontend.type");
+  }
+  std::vector<SensorSetup> setups;
+  std::optional<size_t> imu;
+  for (const config::SensorConfig& sensor : config.sensors) {
+    if (sensor.modality == SensorModality::kImu && !imu) imu = setups.size();
+    SensorSetup setup;
+    if (const calib::SensorCalibration* entry = calibration.find(sensor.name)) {
+      setup.T_body_sensor = entry->T_body_sensor();
+      setup.time_offset = entry->time_offset;
+    } else {
+      logger()->info("sensor '{}' has no '{}_to_body' calibration: identity mounting, no time offset", sensor.name, sensor.name);
+    }
+    setups.push_back(setup);
+  }
+  if (!imu) return Error("the configuration has no IMU sensor: the frontend propagates the state with the IMU", "sensors");
+  return std::unique_ptr<Session>(new Session(std::make_unique<Impl>(config, std::move(setups), *imu)));
+}
+
+const config::SensorConfig* Session::sensor_for_topic(std::string_view topic) const {
+  for (const config::SensorConfig& sensor : impl_->config.sensors) {
+    if (sensor.topic == topic) return &sensor;
+  }
+  return nullptr;
+}
+
+const config::FusionConfig& Session::config() const { return impl_->config; }
+void Session::set_pose_callback(PoseCallback callback) { impl_->pose_callback = std::move(callback); }
+void Session::set_innovation_callback(InnovationCallback callback) { impl_->innovation_callback = std::move(callback); }
+std::optional<msgs::PoseEstimate> Session::latest_pose() const { return impl_->latest_pose; }
+
+Status Session::push(std::string_view sensor_name, const msgs::SensorMessage& message) {
+  Impl& impl = *impl_;
+  const auto found = std::find_if(impl.config.sensors.begin(), impl.config.sensors.end(),
+                                   [&](const config::SensorConfig& sensor) { return sensor.name == sensor_name; });
+  if (found == impl.config.sensors.end()) {
+    return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
+  }
+  const size_t sensor = static_cast<size_t>(found - impl.config.sensors.begin());
+  SensorStatistics& statistics = impl.sensors[sensor];
+  ++statistics.received;
+  if (modality_of(message) != found->modality) {
+    ++statistics.rejected["wrong_type"];
+    return rejection("wrong_type", fmt::format("sensor '{}' is a {} sensor, the message is {}", sensor_name,
+                                               config::to_string(found->modality), msgs::modality_name(message)));
+  }
+  if (Status valid = msgs::validate(message); !valid) {
+    ++statistics.rejected["invalid"];
+    return rejection("invalid", fmt::format("{}: {}", sensor_name, valid.error().message));
+  }
+  Event event;
+  event.time = msgs::timestamp_of(message) + impl.setups[sensor].time_offset;
+  event.sensor = sensor;
+  event.is_imu = found->modality == SensorModality::kImu;
+  event.payload = message;
+  return impl.accept(sensor, std::move(event));
+}
+
+Status Session::push_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_world_sensor,
+                          const Eigen::Matrix<double, 6, 6>& covariance) {
+  Impl& impl = *impl_;
+  const auto found = std::find_if(impl.config.sensors.begin(), impl.config.sensors.end(),
+                                  [&](const config::SensorConfig& sensor) { return sensor.name == sensor_name; });
+  if (found == impl.config.sensors.end()) {
+    return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
+  }
+  const size_t sensor = static_cast<size_t>(found - impl.config.sensors.begin());
+  ++impl.sensors[sensor].received;
+  msgs::PoseEstimate as_message;  // validate() checks the pose and covariance the same way
+  as_message.timestamp = timestamp;
+  as_message.T_world_body = msgs::Pose::from_se3(T_world_sensor);
+  as_message.pose_covariance = covariance;
+  if (Status valid = msgs::validate(as_message); !valid || covariance.llt().info() != Eigen::Success) {
+    ++impl.sensors[sensor].rejected["invalid"];
+    return rejection("invalid", fmt::format("{}: pose measurement: {}", sensor_name,
+                                            valid ? "covariance is not positive definite" : valid.error().message));
+  }
+  Event event;
+  event.time = timestamp + impl.setups[sensor].time_offset;
+  event.sensor = sensor;
+  event.payload = PoseMeasurement{T_world_sensor, covariance};
+  return impl.accept(sensor, std::move(event));
+}
+
+Status Session::Impl::accept(size_t sensor, Event event) {
+  SensorStatistics& statistics = sensors[sensor];
+  const std::string& name = statistics.name;
+  const Timestamp previous = last_input[sensor];
+  if (!previous.is_zero() && event.time == previous) {
+    ++statistics.rejected["duplicate"];
+    return rejection("duplicate", fmt::format("{}: a message at {} ns was already received", name, event.time.nanoseconds()));
+  }
+  if (!previous.is_zero() && event.time < previous) {
+    ++statistics.rejected["out_of_order"];
+    return rejection("out_of_order", fmt::format("{}: message at {} ns is {:.6f} s older than the sensor's previous one", name,
+                                                 event.time.nanoseconds(), (previous - event.time).seconds()));
+  }
+  const double max_future = config.frontend.max_future_s;
+  if (!newest.is_zero() && (event.time - newest).seconds() > max_future) {
+    const bool confirmed = pending_jump && std::abs((event.time - *pending_jump).seconds()) <= max_future;
+    if (!confirmed) {
+      pending_jump = event.time;
+      ++statistics.rejected["future_dated"];
+      return rejection("future_dated", fmt::format("{}: message at {} ns is {:.3f} s ahead of the newest accepted time (limit {} s)", name,
+                                                   event.time.nanoseconds(), (event.time - newest).seconds(), max_future));
+    }
+    logger()->warn("time jumped forward by {:.3f} s (confirmed by two messages)", (event.time - newest).seconds());
+  }
+  pending_jump.reset();
+  const double lag = config.frontend.lag_window_s;
+  if (estimator.initialized() && (estimator.time() - event.time).seconds() > lag) {
+    ++statistics.rejected["too_late"];
+    return rejection("too_late", fmt::format("{}: message at {} ns is {:.3f} s older than the newest fused time (lag window {} s)", name,
+                                             event.time.nanoseconds(), (estimator.time() - event.time).seconds(), lag));
+  }
+
+  last_input[sensor] = event.time;
+  if (statistics.first_time.is_zero()) statistics.first_time = event.time;
+  statistics.last_time = event.time;
+  if (first_input.is_zero()) first_input = event.time;
+  newest = std::max(newest, event.time);
+  const bool is_pose = std::holds_alternative<PoseMeasurement>(event.payload);
+  if (!is_pose && !fused_directly(statistics.modality)) {
+    ++statistics.rejected["not_fused"];
+    return ok_status();
+  }
+  event.sequence = sequence++;
+  if (estimator.initialized() && event.time < estimator.time()) {
+    fuse_late(std::move(event));
+  } else {
+    pending.insert(std::upper_bound(pending.begin(), pending.end(), event, fused_before), std::move(event));
+  }
+  release_pending();
+  return ok_status();
+}
+
+void Session::Impl::release_pending() {
+  // Measurements wait for the IMU to reach their time; when the IMU is silent they go ahead.
+  const Timestamp imu_time = last_input[imu_sensor];
+  const bool imu_silent = imu_time.is_zero() || (newest - imu_time).seconds() > setups[imu_sensor].config->effective_timeout_s();
+  const Timestamp release = imu_silent ? newest : imu_time;
+  size_t released = 0;
+  while (released < pending.size() && pending[released].time <= release) ++released;
+  if (released == 0) return;
+  std::vector<Event> ready(std::make_move_iterator(pending.begin()), std::make_move_iterator(pending.begin() + static_cast<std::ptrdiff_t>(released)));
+  pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(released));
+  for (Event& event : ready) fuse_in_order(std::move(event));
+  prune_history();
+}
+
+void Session::Impl::count(const Event& event, const EventOutcome& outcome) {
+  SensorStatistics& statistics = sensors[event.sensor];
+  if (outcome.fused) {
+    ++statistics.fused;
+  } else {
+    ++statistics.rejected[std::string(outcome.reason)];
+  }
+  if (outcome.zero_velocity_update) ++zero_velocity_updates;
+}
+
+void Session::Impl::fuse_in_order(Event event) {
+  const EventOutcome outcome = estimator.process(event, this);
+  count(event, outcome);
+  if (config.frontend.lag_window_s > 0.0) history.push_back({event, estimator});
+  if (event.is_imu && estimator.initialized()) emit_pose();
+}
+
+void Session::Impl::fuse_late(Event event) {
+  // Restore the estimator from just before the late event, fuse it, then re-fuse what followed.
+  const auto position = std::upper_bound(history.begin(), history.end(), event,
+                                         [](const Event& e, const HistoryEntry& entry) { return fused_before(e, entry.event); });
+  const size_t index = static_cast<size_t>(position - history.begin());
+  estimator = index == 0 ? history_base : history[index - 1].after;
+  const EventOutcome outcome = estimator.process(event, this);
+  count(event, outcome);
+  ++sensors[event.sensor].rolled_back;
+  ++rollbacks;
+  history.insert(history.begin() + static_cast<std::ptrdiff_t>(index), HistoryEntry{event, estimator});
+  replaying = true;
+  for (size_t i = index + 1; i < history.size(); ++i) {
+    estimator.process(history[i].event, nullptr);
+    history[i].after = estimator;
+  }
+  replaying = false;
+}
+
+void Session::Impl::prune_history() {
+  const double lag = config.frontend.lag_window_s;
+  while (!history.empty() && (estimator.time() - history.front().event.time).seconds() > lag) {
+    history_base = std::move(history.front().after);
+    history.pop_front();
+  }
+}
+
+void Session::Impl::update_timeouts() {
+  for (size_t i = 0; i < sensors.size(); ++i) {
+    const Timestamp reference = last_input[i].is_zero() ? first_input : last_input[i];
+    const double timeout = setups[i].config->effective_timeout_s();
+    const bool silent = (newest - reference).seconds() > timeout;
+    if (silent && !sensors[i].timed_out) {
+      ++sensors[i].timeouts;
+      logger()->warn("sensor '{}' timed out: silent for more than {} s; fusing the other sensors", sensors[i].name, timeout);
+    }
+    sensors[i].timed_out = silent;
+  }
+}
+
+msgs::PoseStatus Session::Impl::pose_status() const {
+  msgs::PoseStatus status;
+  std::set<SensorModality> modalities;
+  bool any_timed_out = false;
+  for (size_t i = 0; i < sensors.size(); ++i) {
+    any_timed_out = any_timed_out || sensors[i].timed_out;
+    const Timestamp fused = estimator.last_fused()[i];
+    if (fused.is_zero() || (estimator.time() - fused).seconds() > setups[i].config->effective_timeout_s()) continue;
+    modalities.insert(sensors[i].modality);
+    status.active_sensors.push_back(sensors[i].name);
+  }
+  status.active_modalities = static_cast<uint32_t>(modalities.size());
+  if (!estimator.initialized()) {
+    status.state = msgs::TrackingState::kInitializing;
+  } else if (sensors[imu_sensor].timed_out) {
+    status.state = msgs::TrackingState::kLost;
+  } else if (any_timed_out || !status.localization_reliable()) {
+    status.state = msgs::TrackingState::kDegraded;
+  } else {
+    status.state = msgs::TrackingState::kTracking;
+  }
+  return status;
+}
+
+void Session::Impl::emit_pose() {
+  update_timeouts();
+  const estimate::NavigationState state = estimator.filter().state();
+  const estimate::ErrorCovariance covariance = estimator.filter().covariance();
+  msgs::PoseEstimate pose;
+  pose.timestamp = estimator.time();
+  pose.frame_id = "world";
+  pose.child_frame_id = "body";
+  pose.T_world_body = msgs::Pose::from_se3(SE3(state.R_world_body, state.position));
+  pose.velocity = state.velocity;
+  pose.pose_covariance = covariance.topLeftCorner<6, 6>();
+  pose.status = pose_status();
+  ++poses;
+  latest_pose = pose;
+  if (pose_callback) pose_callback(pose);
+}
+
+SessionSummary Session::summary() const {
+  SessionSummary summary;
+  summary.sensors = impl_->sensors;
+  summary.poses = impl_->poses;
+  summary.rollbacks = impl_->rollbacks;
+  summary.zero_velocity_updates = impl_->zero_velocity_updates;
+  summary.filter = std::string(impl_->estimator.filter().name());
+  summary.state = impl_->latest_pose ? impl_->latest_pose->status.state : msgs::TrackingState::kInitializing;
+  return summary;
+}
+
+}  // namespace hanzo::fusion::pipeline
