@@ -244,6 +244,7 @@ int run(const Output& output, const RunOptions& options) {
     progress.update(entry.log_time);
   }
   progress.finish();
+  (*session)->flush();
 
   const pipeline::SessionSummary summary = (*session)->summary();
   const double log_seconds = (last - first).seconds();

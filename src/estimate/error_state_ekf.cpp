@@ -1,5 +1,7 @@
 #include "hanzo/fusion/estimate/error_state_ekf.hpp"
 
+#include <cmath>
+
 #include <Eigen/Cholesky>
 
 namespace hanzo::fusion::estimate {
@@ -18,7 +20,7 @@ void ErrorStateEkf::predict(const ImuSample& sample, double dt) {
   propagate_covariance(covariance_, transition, config_.imu_noise);
 }
 
-UpdateOutcome ErrorStateEkf::update(const MeasurementModel& model) {
+UpdateOutcome ErrorStateEkf::update(const MeasurementModel& model, bool apply_gate) {
   using GainMatrix = Eigen::Matrix<double, kErrorStateDimension, Eigen::Dynamic, 0, kErrorStateDimension, kMaxMeasurementDimension>;
   UpdateOutcome outcome;
   const int m = model.dimension();
@@ -34,8 +36,12 @@ UpdateOutcome ErrorStateEkf::update(const MeasurementModel& model) {
     return outcome;
   }
   outcome.mahalanobis_squared = outcome.innovation.dot(llt.solve(outcome.innovation));
-  if (!(outcome.mahalanobis_squared <= outcome.gate)) {
-    outcome.status = outcome.mahalanobis_squared > outcome.gate ? UpdateStatus::kRejectedByGate : UpdateStatus::kNumericalFailure;
+  if (!std::isfinite(outcome.mahalanobis_squared)) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
+  if (apply_gate && outcome.mahalanobis_squared > outcome.gate) {
+    outcome.status = UpdateStatus::kRejectedByGate;
     return outcome;
   }
   // K = P H^T S^-1, computed as (S^-1 H P)^T (S symmetric).

@@ -28,6 +28,10 @@ constexpr double kPlanarVerticalSpeedSigma = 0.01;  // m/s
 constexpr double kZeroVelocitySigma = 0.005;        // m/s
 constexpr double kZeroRateSigma = 0.002;            // rad/s
 constexpr double kWheelGap = 1.0;                   // s: longer gaps between wheel readings are not differenced
+// s: a sensor whose every update has been gated for this long is fused without the gate: by
+// then the estimate (dead reckoning through a slip, a bad initialization) is the likelier
+// culprit, and gating it out forever would lock the filter out of its own aiding sensors.
+constexpr double kGateLockout = 2.0;
 
 // Default GNSS position noise per fix type when a message has no covariance (1 sigma, m).
 Eigen::Matrix3d default_gnss_covariance(msgs::GnssFixType fix) {
@@ -72,6 +76,7 @@ Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup
   spike_filter_ = estimate::ImuSpikeFilter(estimate::ImuSpikeFilterConfig{}, filter_config_.imu_noise);
   previous_wheels_.resize(sensors_.size());
   last_fused_.resize(sensors_.size());
+  gated_since_.resize(sensors_.size());
 }
 
 Estimator::Estimator(const Estimator& other)
@@ -87,6 +92,7 @@ Estimator::Estimator(const Estimator& other)
       alignment_samples_(other.alignment_samples_),
       previous_wheels_(other.previous_wheels_),
       last_fused_(other.last_fused_),
+      gated_since_(other.gated_since_),
       enu_(other.enu_),
       gravity_magnitude_(other.gravity_magnitude_),
       planar_height_(other.planar_height_),
@@ -133,12 +139,20 @@ void Estimator::predict_to(Timestamp t) {
 
 bool Estimator::update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer,
                        std::string_view* reason) {
-  const estimate::UpdateOutcome outcome = filter_->update(model);
+  Timestamp& gated_since = gated_since_[event.sensor];
+  const bool locked_out = !gated_since.is_zero() && (event.time - gated_since).seconds() > kGateLockout;
+  const estimate::UpdateOutcome outcome = filter_->update(model, !locked_out);
   if (observer != nullptr) observer->on_update({event.sensor, model.name(), event.time, outcome});
+  if (outcome.status == estimate::UpdateStatus::kRejectedByGate && gated_since.is_zero()) gated_since = event.time;
   if (outcome.status != estimate::UpdateStatus::kApplied) {
     if (reason != nullptr) *reason = to_string(outcome.status);
     return false;
   }
+  if (locked_out && outcome.mahalanobis_squared > outcome.gate) {
+    logger()->warn("sensor '{}' disagreed with the estimate for {:.1f} s: fused without the gate (d^2 = {:.1f})",
+                   sensors_[event.sensor].config->name, (event.time - gated_since).seconds(), outcome.mahalanobis_squared);
+  }
+  if (outcome.mahalanobis_squared <= outcome.gate) gated_since = Timestamp();
   last_fused_[event.sensor] = event.time;
   return true;
 }

@@ -111,6 +111,7 @@ class Estimator {
   std::vector<estimate::ImuSample> alignment_samples_;
   std::vector<std::optional<msgs::WheelOdometryMessage>> previous_wheels_;
   std::vector<Timestamp> last_fused_;
+  std::vector<Timestamp> gated_since_;  // per sensor: start of the current run of gated updates
   std::optional<EnuFrame> enu_;
   double gravity_magnitude_ = estimate::kStandardGravity;
   double planar_height_ = 0.0;

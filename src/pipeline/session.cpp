@@ -86,9 +86,12 @@ struct Session::Impl final : UpdateObserver {
   void fuse_in_order(Event event);
   void fuse_late(Event event);
   void count(const Event& event, const EventOutcome& outcome);
-  void release_pending();
+  /// Fuses the pending messages up to the IMU's time (all of them when flush_all).
+  void release_pending(bool flush_all = false);
   void prune_history();
-  void emit_pose();
+  /// Records the PoseEstimate at the estimator's time as latest_pose; calls the pose callback
+  /// when notify (not for poses recomputed while re-fusing after a late message).
+  void emit_pose(bool notify);
   void update_timeouts();
   msgs::PoseStatus pose_status() const;
 
@@ -258,11 +261,13 @@ Status Session::Impl::accept(size_t sensor, Event event) {
   return ok_status();
 }
 
-void Session::Impl::release_pending() {
+void Session::flush() { impl_->release_pending(true); }
+
+void Session::Impl::release_pending(bool flush_all) {
   // Measurements wait for the IMU to reach their time; when the IMU is silent they go ahead.
   const Timestamp imu_time = last_input[imu_sensor];
   const bool imu_silent = imu_time.is_zero() || (newest - imu_time).seconds() > setups[imu_sensor].config->effective_timeout_s();
-  const Timestamp release = imu_silent ? newest : imu_time;
+  const Timestamp release = imu_silent || flush_all ? newest : imu_time;
   size_t released = 0;
   while (released < pending.size() && pending[released].time <= release) ++released;
   if (released == 0) return;
@@ -286,7 +291,7 @@ void Session::Impl::fuse_in_order(Event event) {
   const EventOutcome outcome = estimator.process(event, this);
   count(event, outcome);
   if (config.frontend.lag_window_s > 0.0) history.push_back({event, estimator});
-  if (event.is_imu && estimator.initialized()) emit_pose();
+  if (event.is_imu && estimator.initialized()) emit_pose(true);
 }
 
 void Session::Impl::fuse_late(Event event) {
@@ -304,6 +309,7 @@ void Session::Impl::fuse_late(Event event) {
   for (size_t i = index + 1; i < history.size(); ++i) {
     estimator.process(history[i].event, nullptr);
     history[i].after = estimator;
+    if (history[i].event.is_imu && estimator.initialized()) emit_pose(false);
   }
   replaying = false;
 }
@@ -353,7 +359,7 @@ msgs::PoseStatus Session::Impl::pose_status() const {
   return status;
 }
 
-void Session::Impl::emit_pose() {
+void Session::Impl::emit_pose(bool notify) {
   update_timeouts();
   const estimate::NavigationState state = estimator.filter().state();
   const estimate::ErrorCovariance covariance = estimator.filter().covariance();
@@ -365,8 +371,9 @@ void Session::Impl::emit_pose() {
   pose.velocity = state.velocity;
   pose.pose_covariance = covariance.topLeftCorner<6, 6>();
   pose.status = pose_status();
-  ++poses;
   latest_pose = pose;
+  if (!notify) return;
+  ++poses;
   if (pose_callback) pose_callback(pose);
 }
 

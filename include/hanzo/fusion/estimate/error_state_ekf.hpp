@@ -17,7 +17,7 @@ class ErrorStateEkf final : public Filter {
   std::string_view name() const override { return "ekf"; }
   void reset(const NavigationState& state, const ErrorCovariance& covariance) override;
   void predict(const ImuSample& sample, double dt) override;
-  UpdateOutcome update(const MeasurementModel& model) override;
+  UpdateOutcome update(const MeasurementModel& model, bool apply_gate = true) override;
   NavigationState state() const override { return state_; }
   ErrorCovariance covariance() const override { return covariance_; }
   std::unique_ptr<Filter> clone() const override { return std::make_unique<ErrorStateEkf>(*this); }

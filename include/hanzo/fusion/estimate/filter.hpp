@@ -52,7 +52,9 @@ class Filter {
   virtual void reset(const NavigationState& state, const ErrorCovariance& covariance) = 0;
   /// dt >= 0 seconds; sample in the IMU's axes (biases are removed with the estimated biases).
   virtual void predict(const ImuSample& sample, double dt) = 0;
-  virtual UpdateOutcome update(const MeasurementModel& model) = 0;
+  /// apply_gate = false fuses the measurement whatever its d^2 (used to recover when a sensor
+  /// has disagreed with the estimate for so long that the estimate is the likelier culprit).
+  virtual UpdateOutcome update(const MeasurementModel& model, bool apply_gate = true) = 0;
   virtual NavigationState state() const = 0;
   virtual ErrorCovariance covariance() const = 0;
   virtual std::unique_ptr<Filter> clone() const = 0;

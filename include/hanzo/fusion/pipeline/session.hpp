@@ -112,6 +112,10 @@ class Session {
   Status push_pose(std::string_view sensor, Timestamp timestamp, const SE3& T_world_sensor,
                    const Eigen::Matrix<double, 6, 6>& covariance);
 
+  /// Fuses every message still waiting for the IMU to reach its time (call at the end of a
+  /// log or when the IMU stops for good); the filter is extrapolated with the last IMU sample.
+  void flush();
+
   /// The configured sensor that reads `topic`, or nullptr.
   const config::SensorConfig* sensor_for_topic(std::string_view topic) const;
   const config::FusionConfig& config() const;

@@ -1,0 +1,220 @@
+// pipeline::Session on synthetic data (a robot standing 2 s, then accelerating east to 1 m/s):
+// every input rejection with its reason, late messages fused by rollback exactly as if they had
+// come in order, deterministic replay, sensor timeouts and the modality status.
+
+#include <gtest/gtest.h>
+
+#include "hanzo/fusion/pipeline/session.hpp"
+
+namespace hanzo::fusion::pipeline {
+namespace {
+
+constexpr int64_t kStart = 1'700'000'000'000'000'000;
+const GeodeticPoint kDatum{48.0, 11.0, 500.0};
+
+Timestamp at(double seconds) { return Timestamp::from_nanoseconds(kStart + static_cast<int64_t>(seconds * 1e9)); }
+// m driven: still until 2 s, 0.5 m/s^2 until 4 s, then 1 m/s.
+double distance_at(double t) { return t < 2.0 ? 0.0 : t < 4.0 ? 0.25 * (t - 2.0) * (t - 2.0) : 1.0 + (t - 4.0); }
+double acceleration_at(double t) { return t >= 2.0 && t < 4.0 ? 0.5 : 0.0; }
+
+config::FusionConfig fusion_config() {
+  config::FusionConfig config;
+  config.frontend.datum = kDatum;
+  config.frontend.covariance.process_noise_accel = 0.05;
+  config.frontend.covariance.process_noise_gyro = 0.002;
+  config.sensors.push_back({"imu", config::SensorModality::kImu, "/imu", 100.0, "imu_link", "", {}});
+  config.sensors.push_back({"wheels", config::SensorModality::kWheelOdometry, "/wheels", 50.0, "base_link", "", {}});
+  config.sensors.push_back({"gnss", config::SensorModality::kGnss, "/gnss", 5.0, "gnss_link", "", {}});
+  config.sensors.push_back({"lidar", config::SensorModality::kLidar, "/lidar", 10.0, "lidar_link", "", {}});
+  return config;
+}
+
+msgs::ImuMessage imu_at(double t) {
+  msgs::ImuMessage imu;
+  imu.timestamp = at(t);
+  imu.linear_acceleration = Eigen::Vector3d(acceleration_at(t), 0.0, 9.80665);
+  return imu;
+}
+
+msgs::WheelOdometryMessage wheels_at(double t) {
+  msgs::WheelOdometryMessage wheels;
+  wheels.timestamp = at(t);
+  wheels.left_distance = wheels.right_distance = distance_at(t);
+  wheels.wheel_separation = 0.5;
+  return wheels;
+}
+
+msgs::GnssMessage gnss_at(double t, double east_offset = 0.0) {
+  const EnuFrame enu = EnuFrame::create(kDatum).value();
+  const GeodeticPoint point = enu.to_geodetic(Eigen::Vector3d(distance_at(t) + east_offset, 0.0, 0.0));
+  msgs::GnssMessage gnss;
+  gnss.timestamp = at(t);
+  gnss.latitude = point.latitude_deg;
+  gnss.longitude = point.longitude_deg;
+  gnss.altitude = point.altitude_m;
+  gnss.fix_type = msgs::GnssFixType::kFix3d;
+  gnss.position_covariance = Eigen::Matrix3d::Identity() * 0.25;
+  return gnss;
+}
+
+struct Message {
+  std::string sensor;
+  msgs::SensorMessage message;
+};
+
+// Every message of `seconds` of driving in time order (IMU 100 Hz, wheels 50 Hz, GNSS 5 Hz).
+std::vector<Message> drive(double seconds) {
+  std::vector<Message> messages;
+  for (int k = 1; k * 0.01 <= seconds + 1e-9; ++k) {
+    const double t = k * 0.01;
+    messages.push_back({"imu", imu_at(t)});
+    if (k % 2 == 0) messages.push_back({"wheels", wheels_at(t + 0.001)});
+    if (k % 20 == 0) messages.push_back({"gnss", gnss_at(t + 0.002)});
+  }
+  return messages;
+}
+
+std::unique_ptr<Session> make_session() {
+  auto session = Session::create(fusion_config(), calib::Calibration{});
+  EXPECT_TRUE(session.ok()) << session.error().message;
+  return std::move(session).value();
+}
+
+std::string reason_of(const Status& status) { return status ? "ok" : status.error().message.substr(0, status.error().message.find(':')); }
+
+TEST(Session, TracksTheDriveWithTwoModalities) {
+  auto session = make_session();
+  for (const Message& m : drive(10.0)) ASSERT_TRUE(session->push(m.sensor, m.message).ok());
+  const msgs::PoseEstimate pose = session->latest_pose().value();
+  EXPECT_NEAR(pose.T_world_body.position.x(), 7.0, 0.05);
+  EXPECT_NEAR(pose.T_world_body.position.y(), 0.0, 0.05);
+  EXPECT_NEAR(pose.velocity.x(), 1.0, 0.02);
+  EXPECT_EQ(pose.status.state, msgs::TrackingState::kDegraded);  // the lidar never reported
+  EXPECT_EQ(pose.status.active_modalities, 3U);                  // imu, wheels, gnss
+  EXPECT_TRUE(pose.status.localization_reliable());
+  SessionSummary summary = session->summary();
+  EXPECT_EQ(summary.sensors[2].fused, 44U);  // the last fix waits for the IMU to reach its time
+  session->flush();                          // end of the data: fuse what waits
+  summary = session->summary();
+  EXPECT_EQ(summary.poses, 1000U - 100U);  // one per IMU message after 1 s of alignment
+  EXPECT_GT(summary.zero_velocity_updates, 40U);  // standing still from 1 s to 2 s
+  EXPECT_EQ(summary.sensors[2].fused, 45U);        // the 5 fixes before alignment ended are not fused
+  EXPECT_EQ(summary.sensors[2].rejected.at("before_initialization"), 5U);
+}
+
+TEST(Session, RejectsBadInputWithAReasonAndKeepsRunning) {
+  auto session = make_session();
+  const std::vector<Message> messages = drive(3.0);
+  for (const Message& m : messages) ASSERT_TRUE(session->push(m.sensor, m.message).ok());
+  const msgs::PoseEstimate before = session->latest_pose().value();
+
+  EXPECT_EQ(reason_of(session->push("sonar", imu_at(3.5))), "unknown_sensor");
+  EXPECT_EQ(reason_of(session->push("imu", gnss_at(3.5))), "wrong_type");
+  msgs::ImuMessage nan = imu_at(3.5);
+  nan.angular_velocity.x() = std::nan("");
+  const Status invalid = session->push("imu", nan);
+  EXPECT_EQ(reason_of(invalid), "invalid");
+  EXPECT_NE(invalid.error().message.find("angular_velocity.x"), std::string::npos);
+  EXPECT_EQ(reason_of(session->push("imu", imu_at(3.0))), "duplicate");
+  EXPECT_EQ(reason_of(session->push("imu", imu_at(2.5))), "out_of_order");
+  EXPECT_EQ(reason_of(session->push("wheels", wheels_at(1000.0))), "future_dated");
+  EXPECT_EQ(reason_of(session->push("gnss", gnss_at(1.0))), "out_of_order");  // older than the previous fix
+  EXPECT_EQ(reason_of(session->push_pose("lidar", at(1.0), SE3(), msgs::Matrix6d::Identity())), "too_late");  // 2 s late, window 0.5 s
+  EXPECT_EQ(session->latest_pose()->T_world_body.position, before.T_world_body.position);
+
+  const SessionSummary summary = session->summary();
+  EXPECT_EQ(summary.sensors[0].rejected.at("invalid"), 1U);
+  EXPECT_EQ(summary.sensors[0].rejected.at("duplicate"), 1U);
+  EXPECT_EQ(summary.sensors[0].rejected.at("out_of_order"), 1U);
+  EXPECT_EQ(summary.sensors[1].rejected.at("future_dated"), 1U);
+  EXPECT_EQ(summary.sensors[2].rejected.at("out_of_order"), 1U);
+  EXPECT_EQ(summary.sensors[3].rejected.at("too_late"), 1U);
+  // The session keeps running.
+  ASSERT_TRUE(session->push("imu", imu_at(3.01)).ok());
+  EXPECT_EQ(session->latest_pose()->timestamp, at(3.01));
+}
+
+TEST(Session, AGnssJumpOf50MetersIsGatedAndTheEstimateDoesNotMove) {
+  auto session = make_session();
+  for (const Message& m : drive(5.0)) ASSERT_TRUE(session->push(m.sensor, m.message).ok());
+  ASSERT_TRUE(session->push("imu", imu_at(5.01)).ok());
+  const msgs::PoseEstimate before = session->latest_pose().value();
+  ASSERT_TRUE(session->push("gnss", gnss_at(5.005, 50.0)).ok());  // accepted input, rejected by the gate
+  ASSERT_TRUE(session->push("imu", imu_at(5.02)).ok());
+  const msgs::PoseEstimate after = session->latest_pose().value();
+  EXPECT_EQ(session->summary().sensors[2].rejected.at("gated"), 1U);
+  // Only the 10 ms of motion between the two poses: no pull towards the jump.
+  EXPECT_NEAR(after.T_world_body.position.x() - before.T_world_body.position.x(), 0.01, 0.002);
+}
+
+TEST(Session, LateMessagesInsideTheLagWindowGiveTheInOrderResult) {
+  std::vector<Message> in_order = drive(6.0);
+  // Delay every GNSS fix by 0.3 s of arrival (inside the 0.5 s lag window).
+  std::vector<Message> delayed;
+  std::vector<std::pair<double, Message>> held;
+  for (const Message& m : in_order) {
+    const double t = (msgs::timestamp_of(m.message) - at(0)).seconds();
+    while (!held.empty() && held.front().first <= t) {
+      delayed.push_back(held.front().second);
+      held.erase(held.begin());
+    }
+    if (m.sensor == "gnss") {
+      held.emplace_back(t + 0.3, m);
+    } else {
+      delayed.push_back(m);
+    }
+  }
+  for (const auto& [arrival, m] : held) delayed.push_back(m);
+  auto ordered_session = make_session();
+  auto delayed_session = make_session();
+  for (const Message& m : in_order) ASSERT_TRUE(ordered_session->push(m.sensor, m.message).ok());
+  for (const Message& m : delayed) ASSERT_TRUE(delayed_session->push(m.sensor, m.message).ok());
+  const msgs::PoseEstimate a = ordered_session->latest_pose().value();
+  const msgs::PoseEstimate b = delayed_session->latest_pose().value();
+  EXPECT_EQ(a.timestamp, b.timestamp);
+  EXPECT_NEAR((a.T_world_body.position - b.T_world_body.position).norm(), 0.0, 1e-9);
+  EXPECT_GT(delayed_session->summary().rollbacks, 20U);
+  EXPECT_EQ(delayed_session->summary().sensors[2].fused, ordered_session->summary().sensors[2].fused);
+}
+
+TEST(Session, ReplayIsDeterministicBitForBit) {
+  const std::vector<Message> messages = drive(4.0);
+  std::vector<msgs::PoseEstimate> first, second;
+  for (auto* poses : {&first, &second}) {
+    auto session = make_session();
+    session->set_pose_callback([poses](const msgs::PoseEstimate& pose) { poses->push_back(pose); });
+    for (const Message& m : messages) ASSERT_TRUE(session->push(m.sensor, m.message).ok());
+  }
+  ASSERT_EQ(first.size(), second.size());
+  for (size_t i = 0; i < first.size(); ++i) {
+    ASSERT_EQ(first[i].T_world_body.position, second[i].T_world_body.position);
+    ASSERT_EQ(*first[i].pose_covariance, *second[i].pose_covariance);
+  }
+}
+
+TEST(Session, ASilentSensorIsReportedAndTheFilterKeepsRunning) {
+  auto session = make_session();
+  for (const Message& m : drive(4.0)) ASSERT_TRUE(session->push(m.sensor, m.message).ok());
+  // GNSS and wheels go silent; only the IMU keeps coming for 2 s.
+  for (int k = 401; k <= 600; ++k) ASSERT_TRUE(session->push("imu", imu_at(k * 0.01)).ok());
+  const msgs::PoseEstimate pose = session->latest_pose().value();
+  EXPECT_EQ(pose.status.state, msgs::TrackingState::kDegraded);
+  EXPECT_EQ(pose.status.active_modalities, 1U);
+  EXPECT_FALSE(pose.status.localization_reliable());
+  const SessionSummary summary = session->summary();
+  EXPECT_TRUE(summary.sensors[1].timed_out);
+  EXPECT_EQ(summary.sensors[1].timeouts, 1U);
+  EXPECT_TRUE(summary.sensors[2].timed_out);
+  EXPECT_EQ(pose.timestamp, at(6.0));
+}
+
+TEST(Session, RefusesAConfigurationWithoutImu) {
+  config::FusionConfig config = fusion_config();
+  config.sensors.erase(config.sensors.begin());
+  const auto session = Session::create(config, {});
+  ASSERT_FALSE(session.ok());
+  EXPECT_NE(session.error().message.find("no IMU"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::pipeline
