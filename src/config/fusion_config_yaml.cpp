@@ -74,7 +74,7 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   FrontendConfig frontend;
   if (!node.present()) return frontend;
   HANZO_RETURN_IF_ERROR(node.check_keys({"type", "predict_rate", "covariance", "gate_probability", "lag_window", "max_future",
-                                         "static_alignment", "planar", "zero_velocity_updates", "datum"}));
+                                         "static_alignment", "planar", "zero_velocity_updates", "datum", "ukf", "particle_filter"}));
   if (node["type"].present()) {
     Result<std::string> name = node["type"].as_string();
     if (!name) return name.error();
@@ -96,6 +96,34 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   HANZO_ASSIGN_OR_RETURN(frontend.planar, bool_or(node["planar"], frontend.planar));
   HANZO_ASSIGN_OR_RETURN(frontend.zero_velocity_updates, bool_or(node["zero_velocity_updates"], frontend.zero_velocity_updates));
   if (node["datum"].present()) HANZO_ASSIGN_OR_RETURN(frontend.datum, parse_datum(node["datum"]));
+  if (const YamlValue ukf = node["ukf"]; ukf.present()) {
+    HANZO_RETURN_IF_ERROR(ukf.check_keys({"alpha", "beta", "kappa"}));
+    if (ukf["alpha"].present()) HANZO_ASSIGN_OR_RETURN(frontend.ukf.alpha, ukf["alpha"].as_double());
+    if (!(frontend.ukf.alpha > 0.0 && frontend.ukf.alpha <= 1.0)) return ukf["alpha"].error("expected a value in (0, 1]");
+    HANZO_ASSIGN_OR_RETURN(frontend.ukf.beta, yaml::non_negative_or(ukf["beta"], frontend.ukf.beta));
+    if (ukf["kappa"].present()) HANZO_ASSIGN_OR_RETURN(frontend.ukf.kappa, ukf["kappa"].as_double());
+    if (frontend.ukf.kappa <= -18.0) return ukf["kappa"].error("expected a value > -18 (18 + kappa must be positive)");
+  }
+  if (const YamlValue particles = node["particle_filter"]; particles.present()) {
+    HANZO_RETURN_IF_ERROR(particles.check_keys({"particles", "resample_threshold", "seed"}));
+    if (particles["particles"].present()) {
+      int64_t count = 0;
+      HANZO_ASSIGN_OR_RETURN(count, particles["particles"].as_int64());
+      if (count < 100 || count > 100000) return particles["particles"].error(fmt::format("expected 100 to 100000 particles, got {}", count));
+      frontend.particle_filter.particles = static_cast<int>(count);
+    }
+    if (particles["resample_threshold"].present()) {
+      HANZO_ASSIGN_OR_RETURN(frontend.particle_filter.resample_threshold, particles["resample_threshold"].as_double());
+      const double threshold = frontend.particle_filter.resample_threshold;
+      if (!(threshold > 0.0 && threshold <= 1.0)) return particles["resample_threshold"].error("expected a fraction in (0, 1]");
+    }
+    if (particles["seed"].present()) {
+      int64_t seed = 0;
+      HANZO_ASSIGN_OR_RETURN(seed, particles["seed"].as_int64());
+      if (seed < 0) return particles["seed"].error("expected a whole number >= 0");
+      frontend.particle_filter.seed = static_cast<uint64_t>(seed);
+    }
+  }
   return frontend;
 }
 
@@ -276,6 +304,16 @@ std::string to_yaml(const FusionConfig& config) {
   }
   if (f.planar) out += "    planar: true\n";
   if (!f.zero_velocity_updates) out += "    zero_velocity_updates: false\n";
+  if (f.ukf.alpha != defaults.ukf.alpha || f.ukf.beta != defaults.ukf.beta || f.ukf.kappa != defaults.ukf.kappa) {
+    out += fmt::format("    ukf: {{alpha: {}, beta: {}, kappa: {}}}\n", format_double(f.ukf.alpha), format_double(f.ukf.beta),
+                       format_double(f.ukf.kappa));
+  }
+  const ParticleFilterSettings& pf = f.particle_filter;
+  if (pf.particles != defaults.particle_filter.particles || pf.resample_threshold != defaults.particle_filter.resample_threshold ||
+      pf.seed != defaults.particle_filter.seed) {
+    out += fmt::format("    particle_filter: {{particles: {}, resample_threshold: {}, seed: {}}}\n", pf.particles,
+                       format_double(pf.resample_threshold), pf.seed);
+  }
   if (f.datum) {
     out += fmt::format("    datum: {{latitude: {}, longitude: {}, altitude: {}}}\n", format_double(f.datum->latitude_deg),
                        format_double(f.datum->longitude_deg), format_double(f.datum->altitude_m));

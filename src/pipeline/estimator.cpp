@@ -5,6 +5,8 @@
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/estimate/attitude_models.hpp"
 #include "hanzo/fusion/estimate/error_state_ekf.hpp"
+#include "hanzo/fusion/estimate/particle_filter.hpp"
+#include "hanzo/fusion/estimate/unscented_kalman_filter.hpp"
 #include "hanzo/fusion/estimate/position_models.hpp"
 #include "hanzo/fusion/estimate/static_alignment.hpp"
 #include "hanzo/fusion/estimate/velocity_models.hpp"
@@ -50,7 +52,17 @@ estimate::ImuSample imu_sample(Timestamp time, const msgs::ImuMessage& imu) {
   return {time, imu.angular_velocity, imu.linear_acceleration};
 }
 
-std::unique_ptr<estimate::Filter> make_filter(const estimate::FilterConfig& config) {
+std::unique_ptr<estimate::Filter> make_filter(const estimate::FilterConfig& config, const config::FrontendConfig& frontend) {
+  switch (frontend.type) {
+    case config::FrontendType::kUkf:
+      return std::make_unique<estimate::UnscentedKalmanFilter>(config, estimate::UkfConfig{frontend.ukf.alpha, frontend.ukf.beta, frontend.ukf.kappa});
+    case config::FrontendType::kParticle: {
+      const config::ParticleFilterSettings& settings = frontend.particle_filter;
+      return std::make_unique<estimate::ParticleFilter>(
+          config, estimate::ParticleFilterConfig{settings.particles, settings.resample_threshold, settings.seed});
+    }
+    case config::FrontendType::kEkf: break;
+  }
   return std::make_unique<estimate::ErrorStateEkf>(config);
 }
 
@@ -72,7 +84,7 @@ Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup
   filter_config_.imu_noise = {covariance.process_noise_accel, covariance.process_noise_gyro, covariance.accel_bias_random_walk,
                               covariance.gyro_bias_random_walk, 1.0 / sensors_[imu_sensor_].config->rate_hz};
   filter_config_.gate_probability = frontend_.gate_probability;
-  filter_ = make_filter(filter_config_);
+  filter_ = make_filter(filter_config_, frontend_);
   spike_filter_ = estimate::ImuSpikeFilter(estimate::ImuSpikeFilterConfig{}, filter_config_.imu_noise);
   previous_wheels_.resize(sensors_.size());
   last_fused_.resize(sensors_.size());

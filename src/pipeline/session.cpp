@@ -123,10 +123,6 @@ Session::~Session() = default;
 Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& config, const calib::Calibration& calibration) {
   if (Status valid = config::validate(config); !valid) return valid.error();
   if (Status valid = calib::validate(calibration); !valid) return valid.error();
-  if (config.frontend.type != config::FrontendType::kEkf) {
-    return Error(fmt::format("frontend.type {}: only the EKF frontend is available in this version", config::to_string(config.frontend.type)),
-                 "frontend.type");
-  }
   std::vector<SensorSetup> setups;
   std::optional<size_t> imu;
   for (const config::SensorConfig& sensor : config.sensors) {

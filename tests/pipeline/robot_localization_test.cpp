@@ -3,6 +3,8 @@
 // EKF with the same sensors (examples/robot_localization/bag2_ekf.yaml) must end within that
 // tolerance in x, y. With the planar option the height must stay within 5 cm of the start.
 
+#include <unistd.h>
+
 #include <filesystem>
 
 #include <gtest/gtest.h>
@@ -19,7 +21,9 @@ const std::string kBag = std::string(HANZO_DATA_DIR) + "/robot_localization/test
 // Imports the bag once into a sensor log (topics /imu and /wheels).
 std::string bag2_log() {
   static const std::string path = [] {
-    const std::string log = (std::filesystem::temp_directory_path() / "hanzo_bag2_test.mcap").string();
+    // One file per process: ctest runs the tests of this file in parallel processes.
+    const std::string log =
+        (std::filesystem::temp_directory_path() / ("hanzo_bag2_test_" + std::to_string(::getpid()) + ".mcap")).string();
     io::SensorLogWriterConfig writer_config;
     writer_config.foxglove_channels = false;
     auto writer = io::SensorLogWriter::open(log, writer_config).value();
@@ -66,6 +70,33 @@ TEST(RobotLocalizationBag2, EkfEndsWithinTheRegressionToleranceInXY) {
   EXPECT_LT(xy_error, 0.1383);
   EXPECT_EQ(run.summary.sensors[1].fused, 3059U);  // every odometry message but the first (the reference)
   EXPECT_EQ(run.poses.back().status.state, msgs::TrackingState::kTracking);
+}
+
+TEST(RobotLocalizationBag2, UkfEndsWithinTheRegressionToleranceInXY) {
+  config::FusionConfig config = bag2_config();
+  config.frontend.type = config::FrontendType::kUkf;
+  config.frontend.ukf = {0.001, 2.0, 0.0};  // robot_localization's UKF test: alpha 0.001, kappa 0, beta 2
+  const Replay run = replay(config);
+  const Eigen::Vector3d final_position = run.poses.back().T_world_body.position;
+  const double xy_error = std::hypot(final_position.x() - 1.0438, final_position.y() - 3.4940);
+  std::printf("bag2 UKF final position (%.4f, %.4f, %.4f) m, xy error %.4f m (tolerance 0.2351), z error %.4f m\n",
+              final_position.x(), final_position.y(), final_position.z(), xy_error, final_position.z() - 0.7260);
+  EXPECT_LT(xy_error, 0.2351);
+}
+
+TEST(RobotLocalizationBag2, ParticleFilterTracksTheSameSensorsDeterministically) {
+  config::FusionConfig config = bag2_config();
+  config.frontend.type = config::FrontendType::kParticle;
+  config.frontend.particle_filter.particles = 500;
+  config.frontend.particle_filter.seed = 42;
+  const Replay first = replay(config);
+  const Eigen::Vector3d final_position = first.poses.back().T_world_body.position;
+  const double xy_error = std::hypot(final_position.x() - 1.0206, final_position.y() - 3.4292);
+  std::printf("bag2 particle filter (500) final position (%.4f, %.4f, %.4f) m, xy error %.4f m from the EKF reference\n",
+              final_position.x(), final_position.y(), final_position.z(), xy_error);
+  EXPECT_LT(xy_error, 0.2351);
+  const Replay second = replay(config);
+  EXPECT_EQ(second.poses.back().T_world_body.position, final_position);  // same seed, same output
 }
 
 TEST(RobotLocalizationBag2, PlanarModeHoldsTheHeight) {

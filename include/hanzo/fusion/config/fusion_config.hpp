@@ -15,6 +15,7 @@
 // Unknown keys are errors (they are usually typos). Full reference: docs/configuration.md.
 
 #include <array>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -52,6 +53,20 @@ struct CovarianceConfig {
   double gyro_bias_random_walk = 0.0001;  // rad/s/sqrt(Hz)
 };
 
+/// frontend.ukf: sigma-point scaling (Wan & van der Merwe 2000).
+struct UkfSettings {
+  double alpha = 0.001;  // (0, 1]
+  double beta = 2.0;     // >= 0
+  double kappa = 0.0;    // 18 + kappa > 0
+};
+
+/// frontend.particle_filter.
+struct ParticleFilterSettings {
+  int particles = 1000;             // 100 .. 100000
+  double resample_threshold = 0.5;  // resample when the effective sample size < this * particles, (0, 1]
+  uint64_t seed = 1;                // random numbers: the same seed and input give the same output
+};
+
 /// hanzo-fusion's additions to the spec's frontend block (how the Session fuses; all optional).
 struct FrontendConfig {
   FrontendType type = FrontendType::kEkf;
@@ -73,6 +88,8 @@ struct FrontendConfig {
   bool zero_velocity_updates = true;
   /// WGS84 origin of the world ENU frame; when absent the first GNSS fix becomes the datum.
   std::optional<GeodeticPoint> datum;
+  UkfSettings ukf;
+  ParticleFilterSettings particle_filter;
 };
 
 /// How a sensor's messages are fused (keys under the sensor; each applies to one modality).

@@ -1,0 +1,157 @@
+#include "hanzo/fusion/estimate/particle_filter.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Cholesky>
+
+namespace hanzo::fusion::estimate {
+
+ParticleFilter::ParticleFilter(const FilterConfig& config, const ParticleFilterConfig& particles)
+    : config_(config), particle_config_(particles), gate_(config.gate_probability), random_(particles.seed) {
+  particle_config_.particles = std::max(1, particle_config_.particles);
+}
+
+Eigen::Vector3d ParticleFilter::normal3(double sigma) {
+  const double x = normal_(random_);
+  const double y = normal_(random_);
+  const double z = normal_(random_);
+  return sigma * Eigen::Vector3d(x, y, z);
+}
+
+void ParticleFilter::reset(const NavigationState& state, const ErrorCovariance& covariance) {
+  const size_t count = static_cast<size_t>(particle_config_.particles);
+  const Eigen::LLT<ErrorCovariance> llt(covariance + 1e-15 * ErrorCovariance::Identity());
+  const ErrorCovariance root = llt.matrixL();
+  particles_.assign(count, state);
+  weights_.assign(count, 1.0 / static_cast<double>(count));
+  for (size_t i = 1; i < count; ++i) {  // particle 0 stays at the given state
+    ErrorVector draw;
+    for (int k = 0; k < kErrorStateDimension; ++k) draw(k) = normal_(random_);
+    particles_[i] = state.plus(root * draw);
+  }
+}
+
+void ParticleFilter::predict(const ImuSample& sample, double dt) {
+  if (dt <= 0.0) return;
+  const ImuNoise& noise = config_.imu_noise;
+  // A sample held for dt with white noise of density sigma^2 T_s has std sigma sqrt(T_s / dt).
+  const double accel_sigma = noise.process_noise_accel * std::sqrt(noise.sample_interval / dt);
+  const double gyro_sigma = noise.process_noise_gyro * std::sqrt(noise.sample_interval / dt);
+  const double accel_walk = noise.accel_bias_random_walk * std::sqrt(dt);
+  const double gyro_walk = noise.gyro_bias_random_walk * std::sqrt(dt);
+  for (NavigationState& particle : particles_) {
+    ImuSample noisy = sample;
+    noisy.linear_acceleration += normal3(accel_sigma);
+    noisy.angular_velocity += normal3(gyro_sigma);
+    particle = propagate_state(particle, body_motion(particle, noisy, config_.imu_mounting), dt, config_.imu_mounting, nullptr);
+    particle.accel_bias += normal3(accel_walk);
+    particle.gyro_bias += normal3(gyro_walk);
+  }
+}
+
+UpdateOutcome ParticleFilter::update(const MeasurementModel& model, bool apply_gate) {
+  UpdateOutcome outcome;
+  const int m = model.dimension();
+  outcome.gate = gate_.threshold(m);
+  const size_t count = particles_.size();
+  std::vector<MeasurementVector> residuals(count);
+  MeasurementVector mean = MeasurementVector::Zero(m);
+  for (size_t i = 0; i < count; ++i) {
+    residuals[i] = model.residual(particles_[i], nullptr);
+    mean += weights_[i] * residuals[i];
+  }
+  const MeasurementCovariance noise = model.covariance();
+  MeasurementCovariance S = noise;
+  for (size_t i = 0; i < count; ++i) {
+    const MeasurementVector d = residuals[i] - mean;
+    S.noalias() += weights_[i] * d * d.transpose();
+  }
+  outcome.innovation = mean;
+  const Eigen::LLT<MeasurementCovariance> s_llt(S);
+  const Eigen::LLT<MeasurementCovariance> noise_llt(noise);
+  if (s_llt.info() != Eigen::Success || noise_llt.info() != Eigen::Success || !mean.allFinite()) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
+  outcome.mahalanobis_squared = mean.dot(s_llt.solve(mean));
+  if (!std::isfinite(outcome.mahalanobis_squared)) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
+  if (apply_gate && outcome.mahalanobis_squared > outcome.gate) {
+    outcome.status = UpdateStatus::kRejectedByGate;
+    return outcome;
+  }
+  // Log-weights, normalized with the log-sum-exp trick.
+  std::vector<double> log_weights(count);
+  double largest = -std::numeric_limits<double>::infinity();
+  for (size_t i = 0; i < count; ++i) {
+    log_weights[i] = std::log(weights_[i]) - 0.5 * residuals[i].dot(noise_llt.solve(residuals[i]));
+    largest = std::max(largest, log_weights[i]);
+  }
+  if (!std::isfinite(largest)) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
+  double total = 0.0;
+  for (size_t i = 0; i < count; ++i) total += (weights_[i] = std::exp(log_weights[i] - largest));
+  for (double& weight : weights_) weight /= total;
+  if (effective_sample_size() < particle_config_.resample_threshold * static_cast<double>(count)) resample();
+  return outcome;
+}
+
+double ParticleFilter::effective_sample_size() const {
+  double sum_squares = 0.0;
+  for (double weight : weights_) sum_squares += weight * weight;
+  return 1.0 / sum_squares;
+}
+
+void ParticleFilter::resample() {
+  // Systematic resampling: one uniform offset, N evenly spaced pointers into the CDF.
+  const size_t count = particles_.size();
+  const double step = 1.0 / static_cast<double>(count);
+  const double offset = std::uniform_real_distribution<double>(0.0, step)(random_);
+  std::vector<NavigationState> resampled;
+  resampled.reserve(count);
+  double cumulative = weights_[0];
+  size_t source = 0;
+  for (size_t i = 0; i < count; ++i) {
+    const double pointer = offset + static_cast<double>(i) * step;
+    while (pointer > cumulative && source + 1 < count) cumulative += weights_[++source];
+    resampled.push_back(particles_[source]);
+  }
+  particles_ = std::move(resampled);
+  weights_.assign(count, step);
+  ++resamplings_;
+}
+
+ErrorVector ParticleFilter::mean_delta(std::vector<ErrorVector>* deltas) const {
+  const size_t heaviest = static_cast<size_t>(std::max_element(weights_.begin(), weights_.end()) - weights_.begin());
+  ErrorVector mean = ErrorVector::Zero();
+  deltas->resize(particles_.size());
+  for (size_t i = 0; i < particles_.size(); ++i) {
+    (*deltas)[i] = particles_[i].minus(particles_[heaviest]);
+    mean += weights_[i] * (*deltas)[i];
+  }
+  return mean;
+}
+
+NavigationState ParticleFilter::state() const {
+  const size_t heaviest = static_cast<size_t>(std::max_element(weights_.begin(), weights_.end()) - weights_.begin());
+  std::vector<ErrorVector> deltas;
+  return particles_[heaviest].plus(mean_delta(&deltas));
+}
+
+ErrorCovariance ParticleFilter::covariance() const {
+  std::vector<ErrorVector> deltas;
+  const ErrorVector mean = mean_delta(&deltas);
+  ErrorCovariance covariance = ErrorCovariance::Zero();
+  for (size_t i = 0; i < deltas.size(); ++i) {
+    const ErrorVector d = deltas[i] - mean;
+    covariance.noalias() += weights_[i] * d * d.transpose();
+  }
+  return covariance;
+}
+
+}  // namespace hanzo::fusion::estimate

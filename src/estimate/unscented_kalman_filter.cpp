@@ -1,0 +1,116 @@
+#include "hanzo/fusion/estimate/unscented_kalman_filter.hpp"
+
+#include <array>
+#include <cmath>
+
+#include <Eigen/Cholesky>
+
+namespace hanzo::fusion::estimate {
+
+UnscentedKalmanFilter::UnscentedKalmanFilter(const FilterConfig& config, const UkfConfig& ukf)
+    : config_(config), gate_(config.gate_probability) {
+  constexpr double n = kErrorStateDimension;
+  lambda_ = ukf.alpha * ukf.alpha * (n + ukf.kappa) - n;
+  mean_weight_0_ = lambda_ / (n + lambda_);
+  covariance_weight_0_ = mean_weight_0_ + (1.0 - ukf.alpha * ukf.alpha + ukf.beta);
+  weight_ = 1.0 / (2.0 * (n + lambda_));
+}
+
+void UnscentedKalmanFilter::reset(const NavigationState& state, const ErrorCovariance& covariance) {
+  state_ = state;
+  covariance_ = covariance;
+}
+
+bool UnscentedKalmanFilter::sigma_offsets(Eigen::Matrix<double, kErrorStateDimension, kSigmaPoints>& offsets) const {
+  // Tiny jitter keeps the Cholesky factor defined for states with (near) zero variance, such as
+  // the horizontal gravity components.
+  const ErrorCovariance scaled = (kErrorStateDimension + lambda_) * (covariance_ + 1e-15 * ErrorCovariance::Identity());
+  const Eigen::LLT<ErrorCovariance> llt(scaled);
+  if (llt.info() != Eigen::Success) return false;
+  const ErrorCovariance root = llt.matrixL();
+  offsets.col(0).setZero();
+  offsets.middleCols<kErrorStateDimension>(1) = root;
+  offsets.middleCols<kErrorStateDimension>(1 + kErrorStateDimension) = -root;
+  return true;
+}
+
+void UnscentedKalmanFilter::predict(const ImuSample& sample, double dt) {
+  if (dt <= 0.0) return;
+  Eigen::Matrix<double, kErrorStateDimension, kSigmaPoints> offsets;
+  if (!sigma_offsets(offsets)) {
+    // Not positive definite (should not happen): propagate the mean alone, keep P plus Q.
+    state_ = propagate_state(state_, body_motion(state_, sample, config_.imu_mounting), dt, config_.imu_mounting, nullptr);
+    covariance_ += process_noise(config_.imu_noise, dt);
+    return;
+  }
+  std::array<NavigationState, kSigmaPoints> propagated;
+  for (int i = 0; i < kSigmaPoints; ++i) {
+    const NavigationState point = i == 0 ? state_ : state_.plus(offsets.col(i));
+    propagated[static_cast<size_t>(i)] =
+        propagate_state(point, body_motion(point, sample, config_.imu_mounting), dt, config_.imu_mounting, nullptr);
+  }
+  Eigen::Matrix<double, kErrorStateDimension, kSigmaPoints> deltas;
+  ErrorVector mean = ErrorVector::Zero();
+  for (int i = 0; i < kSigmaPoints; ++i) {
+    deltas.col(i) = propagated[static_cast<size_t>(i)].minus(propagated[0]);
+    mean += (i == 0 ? mean_weight_0_ : weight_) * deltas.col(i);
+  }
+  deltas.colwise() -= mean;
+  ErrorCovariance covariance = covariance_weight_0_ * deltas.col(0) * deltas.col(0).transpose();
+  covariance.noalias() += weight_ * deltas.rightCols<kSigmaPoints - 1>() * deltas.rightCols<kSigmaPoints - 1>().transpose();
+  state_ = propagated[0].plus(mean);
+  covariance_ = covariance + process_noise(config_.imu_noise, dt);
+  symmetrize(covariance_);
+}
+
+UpdateOutcome UnscentedKalmanFilter::update(const MeasurementModel& model, bool apply_gate) {
+  using ResidualMatrix = Eigen::Matrix<double, Eigen::Dynamic, kSigmaPoints, 0, kMaxMeasurementDimension, kSigmaPoints>;
+  using CrossCovariance = Eigen::Matrix<double, kErrorStateDimension, Eigen::Dynamic, 0, kErrorStateDimension, kMaxMeasurementDimension>;
+  UpdateOutcome outcome;
+  const int m = model.dimension();
+  outcome.gate = gate_.threshold(m);
+  Eigen::Matrix<double, kErrorStateDimension, kSigmaPoints> offsets;
+  if (!sigma_offsets(offsets)) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
+  ResidualMatrix residuals(m, kSigmaPoints);
+  MeasurementVector mean = MeasurementVector::Zero(m);
+  for (int i = 0; i < kSigmaPoints; ++i) {
+    residuals.col(i) = model.residual(i == 0 ? state_ : state_.plus(offsets.col(i)), nullptr);
+    mean += (i == 0 ? mean_weight_0_ : weight_) * residuals.col(i);
+  }
+  outcome.innovation = mean;
+  residuals.colwise() -= mean;
+  MeasurementCovariance S = covariance_weight_0_ * residuals.col(0) * residuals.col(0).transpose() + model.covariance();
+  S.noalias() += weight_ * residuals.rightCols<kSigmaPoints - 1>() * residuals.rightCols<kSigmaPoints - 1>().transpose();
+  // offsets.col(0) is zero, so only the other sigma points contribute to P_xz.
+  const CrossCovariance cross = -weight_ * offsets.rightCols<kSigmaPoints - 1>() * residuals.rightCols<kSigmaPoints - 1>().transpose();
+
+  const Eigen::LLT<MeasurementCovariance> llt(S);
+  if (llt.info() != Eigen::Success || !mean.allFinite()) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
+  outcome.mahalanobis_squared = mean.dot(llt.solve(mean));
+  if (!std::isfinite(outcome.mahalanobis_squared)) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
+  if (apply_gate && outcome.mahalanobis_squared > outcome.gate) {
+    outcome.status = UpdateStatus::kRejectedByGate;
+    return outcome;
+  }
+  const CrossCovariance K = llt.solve(cross.transpose()).transpose();
+  const NavigationState updated = state_.plus(K * mean);
+  if (!updated.all_finite()) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
+  state_ = updated;
+  covariance_ -= K * S * K.transpose();
+  symmetrize(covariance_);
+  return outcome;
+}
+
+}  // namespace hanzo::fusion::estimate
