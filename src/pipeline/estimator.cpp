@@ -106,6 +106,7 @@ Estimator::Estimator(const Estimator& other)
       last_fused_(other.last_fused_),
       gated_since_(other.gated_since_),
       enu_(other.enu_),
+      gnss_before_initialization_(other.gnss_before_initialization_),
       gravity_magnitude_(other.gravity_magnitude_),
       planar_height_(other.planar_height_),
       last_gravity_update_(other.last_gravity_update_) {}
@@ -123,7 +124,14 @@ Eigen::Vector3d Estimator::body_angular_velocity() const {
 }
 
 EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
-  if (!initialized_ && !event.is_imu) return {false, "before_initialization"};
+  if (!initialized_ && !event.is_imu) {
+    const auto* message = std::get_if<msgs::SensorMessage>(&event.payload);
+    const auto* gnss = message ? std::get_if<msgs::GnssMessage>(message) : nullptr;
+    if (gnss && frontend_.datum && gnss->fix_type >= sensors_[event.sensor].config->fusion.min_fix) {
+      gnss_before_initialization_.emplace(event.sensor, *gnss);
+    }
+    return {false, "before_initialization"};
+  }
   EventOutcome outcome;
   if (const auto* pose = std::get_if<PoseMeasurement>(&event.payload)) {
     outcome = process_pose(event, *pose, observer);
@@ -206,12 +214,22 @@ void Estimator::initialize(const Event& event, const msgs::ImuMessage& imu) {
   }
   state.gravity = Eigen::Vector3d(0.0, 0.0, -gravity_magnitude_);
   state.timestamp = event.time;
+  // With a configured datum the world frame is fixed: start at the latest GNSS fix.
+  Eigen::Matrix3d position_covariance = covariance.initial_position.array().square().matrix().asDiagonal();
+  if (gnss_before_initialization_) {
+    const auto& [gnss_sensor, fix] = *gnss_before_initialization_;
+    enu_ = EnuFrame::create(*frontend_.datum).value();
+    const Eigen::Vector3d antenna = enu_->to_enu(fix.geodetic());
+    state.position = antenna - state.R_world_body * sensors_[gnss_sensor].T_body_sensor.translation();
+    position_covariance = fix.position_covariance.value_or(default_gnss_covariance(fix.fix_type));
+    gnss_before_initialization_.reset();
+  }
 
   ErrorCovariance P = ErrorCovariance::Zero();
   const auto set_block = [&P](int index, const Eigen::Vector3d& sigmas) {
     P.block<3, 3>(index, index) = sigmas.array().square().matrix().asDiagonal();
   };
-  set_block(estimate::kPositionIndex, covariance.initial_position);
+  P.block<3, 3>(estimate::kPositionIndex, estimate::kPositionIndex) = position_covariance;
   set_block(estimate::kOrientationIndex, covariance.initial_orientation);
   set_block(estimate::kVelocityIndex, covariance.initial_velocity);
   set_block(estimate::kAccelBiasIndex, Eigen::Vector3d::Constant(kInitialAccelBiasSigma));
@@ -321,7 +339,17 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
     return outcome;
   }
   estimate::WheelOdometryMeasurement measurement;
-  measurement.forward_speed = 0.5 * (left + right) / dt;
+  // The differenced distances give the mean speed over the interval, i.e. the speed at its
+  // middle; the IMU's forward acceleration carries it to the end of the interval, where the
+  // measurement is fused (without this, accelerating vehicles see a lag of dt/2).
+  double forward_acceleration = 0.0;
+  if (last_imu_) {
+    const NavigationState state = filter_->state();
+    const estimate::BodyMotion motion = estimate::body_motion(state, *last_imu_, filter_config_.imu_mounting);
+    const Eigen::Vector3d acceleration_body = motion.specific_force + state.R_world_body.inverse() * state.gravity;
+    forward_acceleration = (sensor.T_body_sensor.rotation().inverse() * acceleration_body).x();
+  }
+  measurement.forward_speed = 0.5 * (left + right) / dt + 0.5 * dt * forward_acceleration;
   measurement.yaw_rate = (right - left) / (wheels.wheel_separation * dt);
   measurement.forward_speed_sigma = options.speed_noise;
   measurement.yaw_rate_sigma = options.yaw_rate_noise;

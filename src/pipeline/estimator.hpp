@@ -113,6 +113,9 @@ class Estimator {
   std::vector<Timestamp> last_fused_;
   std::vector<Timestamp> gated_since_;  // per sensor: start of the current run of gated updates
   std::optional<EnuFrame> enu_;
+  /// The latest usable GNSS fix seen before initialization (sensor index, fix): with a
+  /// configured datum it gives the initial position.
+  std::optional<std::pair<size_t, msgs::GnssMessage>> gnss_before_initialization_;
   double gravity_magnitude_ = estimate::kStandardGravity;
   double planar_height_ = 0.0;
   Timestamp last_gravity_update_;

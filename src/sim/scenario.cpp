@@ -67,6 +67,9 @@ config::FusionConfig scenario_fusion_config(const Scenario& scenario) {
         if (preset.elevations == lidar->pattern.elevations && preset.columns == lidar->pattern.columns) entry.type = to_string(model);
       }
     }
+    // The world frame of the simulation is ENU at the scenario's datum: GNSS fixes must be
+    // converted with the same datum to land in it.
+    if (sensor.modality == config::SensorModality::kGnss) fusion.frontend.datum = scenario.datum;
     fusion.sensors.push_back(std::move(entry));
   }
   return fusion;
