@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # `make demo`: the main job on the sample data shipped in examples/: validate the fusion
 # configuration and calibration, turn the sample CSV recordings into a sensor log (MCAP), list
-# it, simulate 8 s of the urban_vehicle scenario (all six sensors, with ground truth), and
-# score the sample estimate against its ground truth (APE/RPE with SVG plots). Later
-# issues make it replay the log through the engine. Writes only into build/demo/.
+# it, replay it through the fusion frontend (EKF) and score it against its ground truth,
+# simulate 8 s of the urban_vehicle scenario (all six sensors, with ground truth) and replay
+# that too, then score a sample estimate with evo's APE/RPE (SVG plots). Writes only into
+# build/demo/.
 set -euo pipefail
 build_dir=${1:-build}
 cd "$(dirname "$0")/.."
@@ -23,8 +24,15 @@ echo
 echo "== hanzo-fusion log info $out/sample.mcap --verify"
 "$cli" log info "$out/sample.mcap" --verify
 echo
+echo "== hanzo-fusion run --config examples/data/fusion.yaml --log $out/sample.mcap --out $out/run --gt examples/data/ground_truth.tum"
+"$cli" run --config examples/data/fusion.yaml --log "$out/sample.mcap" --out "$out/run" --gt examples/data/ground_truth.tum
+echo
 echo "== hanzo-fusion sim examples/scenarios/urban_vehicle.yaml --out $out/urban --duration 8 --threads 0"
 "$cli" sim examples/scenarios/urban_vehicle.yaml --out "$out/urban" --duration 8 --threads 0
+echo
+echo "== hanzo-fusion run --config $out/urban/fusion.yaml --calib $out/urban/calibration.yaml --log $out/urban/sensors.mcap --out $out/urban/run --gt $out/urban/ground_truth.tum"
+"$cli" run --config "$out/urban/fusion.yaml" --calib "$out/urban/calibration.yaml" --log "$out/urban/sensors.mcap" \
+  --out "$out/urban/run" --gt "$out/urban/ground_truth.tum"
 echo
 echo "== hanzo-fusion eval ape examples/data/ground_truth.tum examples/data/estimate.tum --align sim3 --plot $out"
 "$cli" eval ape examples/data/ground_truth.tum examples/data/estimate.tum --align sim3 --plot "$out"

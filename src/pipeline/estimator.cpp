@@ -22,6 +22,7 @@ using estimate::NavigationState;
 constexpr double kInitialAccelBiasSigma = 0.1;      // m/s^2
 constexpr double kInitialGyroBiasSigma = 0.01;      // rad/s, after static alignment
 constexpr double kUnalignedGyroBiasSigma = 0.05;    // rad/s, when not aligned (moving start)
+constexpr double kMovingStartVelocitySigma = 5.0;   // m/s: a moving start's speed comes from wheels / GNSS
 constexpr double kInitialGravitySigma = 0.02;       // m/s^2, vertical (magnitude)
 constexpr double kHorizontalGravitySigma = 1e-6;    // m/s^2: ENU's up is the gravity direction
 constexpr double kGravityMagnitudeSigma = 0.001;    // m/s^2, pseudo-measurement at 1 Hz
@@ -107,6 +108,7 @@ Estimator::Estimator(const Estimator& other)
       gated_since_(other.gated_since_),
       enu_(other.enu_),
       gnss_before_initialization_(other.gnss_before_initialization_),
+      wheels_moved_before_initialization_(other.wheels_moved_before_initialization_),
       gravity_magnitude_(other.gravity_magnitude_),
       planar_height_(other.planar_height_),
       last_gravity_update_(other.last_gravity_update_) {}
@@ -129,6 +131,14 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
     const auto* gnss = message ? std::get_if<msgs::GnssMessage>(message) : nullptr;
     if (gnss && frontend_.datum && gnss->fix_type >= sensors_[event.sensor].config->fusion.min_fix) {
       gnss_before_initialization_.emplace(event.sensor, *gnss);
+    }
+    if (const auto* wheels = message ? std::get_if<msgs::WheelOdometryMessage>(message) : nullptr) {
+      std::optional<msgs::WheelOdometryMessage>& previous = previous_wheels_[event.sensor];
+      if (previous && (wheels->left_distance != previous->left_distance || wheels->right_distance != previous->right_distance)) {
+        wheels_moved_before_initialization_ = true;
+      }
+      previous = *wheels;
+      previous->timestamp = event.time;
     }
     return {false, "before_initialization"};
   }
@@ -183,6 +193,7 @@ void Estimator::initialize(const Event& event, const msgs::ImuMessage& imu) {
   const config::CovarianceConfig& covariance = frontend_.covariance;
   NavigationState state;
   double gyro_bias_sigma = kInitialGyroBiasSigma;
+  Eigen::Vector3d velocity_sigma = covariance.initial_velocity;
 
   if (imu.orientation && options.use_orientation[0] && options.use_orientation[1]) {
     // The IMU reports its attitude: start from it (heading too when selected).
@@ -194,7 +205,9 @@ void Estimator::initialize(const Event& event, const msgs::ImuMessage& imu) {
   } else {
     alignment_samples_.push_back(imu_sample(event.time, imu));
     if ((event.time - alignment_samples_.front().timestamp).seconds() < frontend_.static_alignment_s) return;
-    Result<estimate::StaticAlignment> alignment = estimate::align_static(alignment_samples_, mounting, 0.0);
+    Result<estimate::StaticAlignment> alignment =
+        wheels_moved_before_initialization_ ? Result<estimate::StaticAlignment>(Error("the wheels turned"))
+                                            : estimate::align_static(alignment_samples_, mounting, 0.0);
     if (!alignment) {
       // Moving start: the mean specific force is still the best guess of "up".
       logger()->warn("initializing while moving ({}); roll and pitch from the mean specific force", alignment.error().message);
@@ -203,6 +216,7 @@ void Estimator::initialize(const Event& event, const msgs::ImuMessage& imu) {
       permissive.max_gyro_std = std::numeric_limits<double>::infinity();
       alignment = estimate::align_static(alignment_samples_, mounting, 0.0, permissive);
       gyro_bias_sigma = kUnalignedGyroBiasSigma;
+      velocity_sigma = velocity_sigma.cwiseMax(kMovingStartVelocitySigma);
       if (!alignment) return;  // not even gravity visible yet: keep collecting
       alignment->gyro_bias.setZero();
     }
@@ -231,7 +245,7 @@ void Estimator::initialize(const Event& event, const msgs::ImuMessage& imu) {
   };
   P.block<3, 3>(estimate::kPositionIndex, estimate::kPositionIndex) = position_covariance;
   set_block(estimate::kOrientationIndex, covariance.initial_orientation);
-  set_block(estimate::kVelocityIndex, covariance.initial_velocity);
+  set_block(estimate::kVelocityIndex, velocity_sigma);
   set_block(estimate::kAccelBiasIndex, Eigen::Vector3d::Constant(kInitialAccelBiasSigma));
   set_block(estimate::kGyroBiasIndex, Eigen::Vector3d::Constant(gyro_bias_sigma));
   set_block(estimate::kGravityIndex, Eigen::Vector3d(kHorizontalGravitySigma, kHorizontalGravitySigma, kInitialGravitySigma));

@@ -116,6 +116,9 @@ class Estimator {
   /// The latest usable GNSS fix seen before initialization (sensor index, fix): with a
   /// configured datum it gives the initial position.
   std::optional<std::pair<size_t, msgs::GnssMessage>> gnss_before_initialization_;
+  /// Wheel odometry showed motion during the alignment window (the IMU alone cannot tell a
+  /// steady turn at constant speed from standing still with a gyro bias).
+  bool wheels_moved_before_initialization_ = false;
   double gravity_magnitude_ = estimate::kStandardGravity;
   double planar_height_ = 0.0;
   Timestamp last_gravity_update_;

@@ -349,3 +349,35 @@ TEST(Cli, SimWritesLogGroundTruthCalibrationAndConfig) {
 }
 
 }  // namespace
+
+TEST(Cli, RunReplaysTheSampleAndScoresItAgainstGroundTruth) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_run_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string log = (dir / "sample.mcap").string();
+  ASSERT_EQ(run(fmt::format("import csv examples/data/imu.csv examples/data/gnss.csv examples/data/wheels.csv --out {}", log)).exit_code, 0);
+  const CliRun replay = run(fmt::format("run --config examples/data/fusion.yaml --log {} --out {} --gt examples/data/ground_truth.tum --json",
+                                        log, (dir / "run").string()));
+  ASSERT_EQ(replay.exit_code, 0) << replay.err;
+  const nlohmann::json json = nlohmann::json::parse(replay.out);
+  EXPECT_EQ(json["summary"]["filter"], "ekf");
+  EXPECT_EQ(json["summary"]["poses"], 1901);  // 100 Hz IMU after 1 s of alignment
+  EXPECT_EQ(json["summary"]["sensors"][1]["name"], "gnss");
+  EXPECT_EQ(json["summary"]["sensors"][1]["fused"], 96);
+  EXPECT_LT(json["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), 0.15);
+  EXPECT_LT(json["evaluation"]["rpe_1m_rmse_m"].get<double>(), 0.05);
+  for (const char* file : {"trajectory.tum", "poses.csv", "innovations.csv", "summary.json", "trajectory.svg", "covariance.svg"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir / "run" / file)) << file;
+  }
+  // Bad input: a configuration without an IMU, a missing log; one line on stderr, exit 1.
+  const std::string no_imu = write_temp("no_imu.yaml", "fusion:\n  sensors:\n    gnss: {rate: 5}\n");
+  const CliRun refused = run(fmt::format("run --config {} --log {} --out {}", no_imu, log, (dir / "bad").string()));
+  EXPECT_EQ(refused.exit_code, 1);
+  EXPECT_THAT(refused.err, HasSubstr("no IMU sensor"));
+  EXPECT_EQ(std::count(refused.err.begin(), refused.err.end(), '\n'), 1);
+  const CliRun missing = run(fmt::format("run --config examples/data/fusion.yaml --log {} --out {}", (dir / "none.mcap").string(),
+                                         (dir / "bad").string()));
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_THAT(missing.err, HasSubstr("none.mcap"));
+  std::filesystem::remove_all(dir);
+}
