@@ -8,6 +8,7 @@
 #include "hanzo/fusion/estimate/particle_filter.hpp"
 #include "hanzo/fusion/estimate/unscented_kalman_filter.hpp"
 #include "hanzo/fusion/estimate/position_models.hpp"
+#include "hanzo/fusion/estimate/radar_ego_velocity.hpp"
 #include "hanzo/fusion/estimate/static_alignment.hpp"
 #include "hanzo/fusion/estimate/velocity_models.hpp"
 
@@ -153,6 +154,8 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
       outcome = process_gnss(event, *gnss, observer);
     } else if (const auto* wheels = std::get_if<msgs::WheelOdometryMessage>(&message)) {
       outcome = process_wheels(event, *wheels, observer);
+    } else if (const auto* radar = std::get_if<msgs::RadarMessage>(&message)) {
+      outcome = process_radar(event, *radar, observer);
     } else {
       outcome = {false, "not_fused"};
     }
@@ -347,7 +350,9 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
   if (last_imu_) gyro.angular_velocity = last_imu_->angular_velocity;
   EventOutcome outcome;
   if (frontend_.zero_velocity_updates && left == 0.0 && right == 0.0) {
-    const estimate::ZeroVelocityModel model(kZeroVelocitySigma, kZeroRateSigma, true, gyro);
+    // The rate residual uses one gyro sample: its white noise adds to the constraint's.
+    const double rate_sigma = std::hypot(kZeroRateSigma, filter_config_.imu_noise.process_noise_gyro);
+    const estimate::ZeroVelocityModel model(kZeroVelocitySigma, rate_sigma, true, gyro);
     outcome.fused = update(event, model, observer, &outcome.reason);
     outcome.zero_velocity_update = outcome.fused;
     return outcome;
@@ -372,6 +377,24 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
   measurement.vertical_constraint = options.non_holonomic && !frontend_.planar;
   measurement.use_yaw_rate = options.use_yaw_rate;
   const estimate::WheelOdometryModel model(measurement, sensor.T_body_sensor, gyro);
+  outcome.fused = update(event, model, observer, &outcome.reason);
+  return outcome;
+}
+
+EventOutcome Estimator::process_radar(const Event& event, const msgs::RadarMessage& radar, UpdateObserver* observer) {
+  // Seeded by the scan's time: the same scan always gives the same estimate.
+  const Result<estimate::RadarEgoVelocity> ego =
+      estimate::estimate_radar_ego_velocity(radar.targets, {}, static_cast<uint64_t>(event.time.nanoseconds()));
+  if (!ego) return {false, "no_ego_velocity"};
+  predict_to(event.time);
+  const SensorSetup& sensor = sensors_[event.sensor];
+  estimate::GyroReading gyro;
+  gyro.R_body_imu = filter_config_.imu_mounting.R_body_imu;
+  if (last_imu_) gyro.angular_velocity = last_imu_->angular_velocity;
+  const double noise = sensor.config->fusion.velocity_noise;
+  const estimate::SensorVelocityModel model(ego->velocity_sensor, ego->covariance + noise * noise * Eigen::Matrix3d::Identity(),
+                                            sensor.T_body_sensor, gyro);
+  EventOutcome outcome;
   outcome.fused = update(event, model, observer, &outcome.reason);
   return outcome;
 }

@@ -90,6 +90,7 @@ class Estimator {
   EventOutcome process_imu(const Event& event, const msgs::ImuMessage& imu, UpdateObserver* observer);
   EventOutcome process_gnss(const Event& event, const msgs::GnssMessage& gnss, UpdateObserver* observer);
   EventOutcome process_wheels(const Event& event, const msgs::WheelOdometryMessage& wheels, UpdateObserver* observer);
+  EventOutcome process_radar(const Event& event, const msgs::RadarMessage& radar, UpdateObserver* observer);
   EventOutcome process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer);
   void initialize(const Event& event, const msgs::ImuMessage& imu);
   /// Propagates the filter to t with the last IMU sample held.

@@ -29,7 +29,8 @@ SensorModality modality_of(const msgs::SensorMessage& message) {
 // Modalities whose raw messages the frontend fuses itself (the others arrive as poses from
 // their odometry modules through push_pose()).
 bool fused_directly(SensorModality modality) {
-  return modality == SensorModality::kImu || modality == SensorModality::kGnss || modality == SensorModality::kWheelOdometry;
+  return modality == SensorModality::kImu || modality == SensorModality::kGnss || modality == SensorModality::kWheelOdometry ||
+         modality == SensorModality::kRadar;
 }
 
 Error rejection(std::string_view reason, const std::string& detail) { return Error(fmt::format("{}: {}", reason, detail)); }
