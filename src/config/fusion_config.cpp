@@ -90,7 +90,8 @@ Status validate(const FusionConfig& config) {
   }
   if (Status s = non_negative(frontend.lag_window_s, "frontend.lag_window"); !s) return s;
   for (const auto& [value, field] : {std::pair<double, std::string_view>{frontend.max_future_s, "frontend.max_future"},
-                                     {frontend.static_alignment_s, "frontend.static_alignment"}}) {
+                                     {frontend.static_alignment_s, "frontend.static_alignment"},
+                                     {frontend.keyframe_interval_s, "frontend.keyframe_interval"}}) {
     if (!std::isfinite(value) || value <= 0.0) {
       return Error{fmt::format("FusionConfig.{}: {} (expected > 0 s)", field, value), std::string(field)};
     }

@@ -74,7 +74,8 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   FrontendConfig frontend;
   if (!node.present()) return frontend;
   HANZO_RETURN_IF_ERROR(node.check_keys({"type", "predict_rate", "covariance", "gate_probability", "lag_window", "max_future",
-                                         "static_alignment", "planar", "zero_velocity_updates", "datum", "ukf", "particle_filter"}));
+                                         "static_alignment", "planar", "zero_velocity_updates", "datum", "ukf", "particle_filter",
+                                         "keyframe_interval"}));
   if (node["type"].present()) {
     Result<std::string> name = node["type"].as_string();
     if (!name) return name.error();
@@ -93,6 +94,7 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   HANZO_ASSIGN_OR_RETURN(frontend.lag_window_s, yaml::non_negative_or(node["lag_window"], frontend.lag_window_s));
   if (node["max_future"].present()) HANZO_ASSIGN_OR_RETURN(frontend.max_future_s, positive_seconds(node["max_future"]));
   if (node["static_alignment"].present()) HANZO_ASSIGN_OR_RETURN(frontend.static_alignment_s, positive_seconds(node["static_alignment"]));
+  if (node["keyframe_interval"].present()) HANZO_ASSIGN_OR_RETURN(frontend.keyframe_interval_s, positive_seconds(node["keyframe_interval"]));
   HANZO_ASSIGN_OR_RETURN(frontend.planar, bool_or(node["planar"], frontend.planar));
   HANZO_ASSIGN_OR_RETURN(frontend.zero_velocity_updates, bool_or(node["zero_velocity_updates"], frontend.zero_velocity_updates));
   if (node["datum"].present()) HANZO_ASSIGN_OR_RETURN(frontend.datum, parse_datum(node["datum"]));
@@ -301,6 +303,9 @@ std::string to_yaml(const FusionConfig& config) {
   if (f.max_future_s != defaults.max_future_s) out += fmt::format("    max_future: {}  # s\n", format_double(f.max_future_s));
   if (f.static_alignment_s != defaults.static_alignment_s) {
     out += fmt::format("    static_alignment: {}  # s\n", format_double(f.static_alignment_s));
+  }
+  if (f.keyframe_interval_s != defaults.keyframe_interval_s) {
+    out += fmt::format("    keyframe_interval: {}  # s\n", format_double(f.keyframe_interval_s));
   }
   if (f.planar) out += "    planar: true\n";
   if (!f.zero_velocity_updates) out += "    zero_velocity_updates: false\n";

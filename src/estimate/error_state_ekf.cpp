@@ -11,6 +11,19 @@ ErrorStateEkf::ErrorStateEkf(const FilterConfig& config) : config_(config), gate
 void ErrorStateEkf::reset(const NavigationState& state, const ErrorCovariance& covariance) {
   state_ = state;
   covariance_ = covariance;
+  clone_.reset();
+}
+
+void ErrorStateEkf::clone_pose() {
+  PoseClone clone;
+  clone.covariance = covariance_.topLeftCorner<6, 6>();
+  clone.cross = covariance_.topRows<6>();
+  clone_ = clone;
+}
+
+void ErrorStateEkf::apply_world_transform(const SE3& T_correction) {
+  transform_in_world(T_correction, state_, &covariance_);
+  clone_.reset();  // the clone's frame moved: the next keyframe starts afresh
 }
 
 void ErrorStateEkf::predict(const ImuSample& sample, double dt) {
@@ -18,6 +31,7 @@ void ErrorStateEkf::predict(const ImuSample& sample, double dt) {
   ImuTransition transition;
   state_ = propagate_state(state_, body_motion(state_, sample, config_.imu_mounting), dt, config_.imu_mounting, &transition);
   propagate_covariance(covariance_, transition, config_.imu_noise);
+  if (clone_) multiply_by_transition_transpose(clone_->cross, transition);
 }
 
 UpdateOutcome ErrorStateEkf::update(const MeasurementModel& model, bool apply_gate) {
@@ -54,10 +68,19 @@ UpdateOutcome ErrorStateEkf::update(const MeasurementModel& model, bool apply_ga
   }
   state_ = updated;
   covariance_ -= K * PHt.transpose();  // K S K^T = P H^T S^-1 H P = K (P H^T)^T
+  if (clone_) {
+    using CloneGain = Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, kMaxMeasurementDimension>;
+    const CloneGain CHt = clone_->cross * H.transpose();  // = Kc S
+    const CloneGain clone_gain = llt.solve(CHt.transpose()).transpose();
+    clone_->correction += clone_gain * outcome.innovation;
+    clone_->covariance -= clone_gain * CHt.transpose();
+    clone_->cross -= CHt * K.transpose();
+  }
   // Error reset: the orientation error is now measured from the corrected orientation.
   const Eigen::Matrix3d G = Eigen::Matrix3d::Identity() - SO3::hat(0.5 * delta.segment<3>(kOrientationIndex));
   covariance_.middleRows<3>(kOrientationIndex) = (G * covariance_.middleRows<3>(kOrientationIndex)).eval();
   covariance_.middleCols<3>(kOrientationIndex) = (covariance_.middleCols<3>(kOrientationIndex) * G.transpose()).eval();
+  if (clone_) clone_->cross.middleCols<3>(kOrientationIndex) = (clone_->cross.middleCols<3>(kOrientationIndex) * G.transpose()).eval();
   symmetrize(covariance_);
   return outcome;
 }

@@ -22,4 +22,18 @@ ChiSquareGate::ChiSquareGate(double probability) {
   }
 }
 
+void transform_in_world(const SE3& T_correction, NavigationState& state, ErrorCovariance* covariance) {
+  const Eigen::Matrix3d R = T_correction.rotation().matrix();
+  state.position = R * state.position + T_correction.translation();
+  state.R_world_body = T_correction.rotation() * state.R_world_body;
+  state.velocity = R * state.velocity;
+  if (covariance == nullptr) return;
+  // World-frame blocks (position, velocity) rotate; body-frame orientation errors, biases and
+  // gravity (kept in the world frame, whose vertical does not move) stay.
+  ErrorCovariance T = ErrorCovariance::Identity();
+  T.block<3, 3>(kPositionIndex, kPositionIndex) = R;
+  T.block<3, 3>(kVelocityIndex, kVelocityIndex) = R;
+  *covariance = T * *covariance * T.transpose();
+}
+
 }  // namespace hanzo::fusion::estimate

@@ -69,7 +69,6 @@ ErrorCovariance process_noise(const ImuNoise& noise, double dt) {
 
 void propagate_covariance(ErrorCovariance& P, const ImuTransition& t, const ImuNoise& noise) {
   using Rows = Eigen::Matrix<double, 3, kErrorStateDimension>;
-  using Columns = Eigen::Matrix<double, kErrorStateDimension, 3>;
   const double dt = t.dt;
   // A = Phi P: only the position, orientation and velocity rows change.
   const Rows velocity_rows = P.middleRows<3>(kVelocityIndex) +
@@ -83,15 +82,7 @@ void propagate_covariance(ErrorCovariance& P, const ImuTransition& t, const ImuN
   P.middleRows<3>(kVelocityIndex) = velocity_rows;
   P.middleRows<3>(kOrientationIndex) = orientation_rows;
   // Phi P Phi^T = A Phi^T: the same operations on the columns.
-  const Columns velocity_columns = P.middleCols<3>(kVelocityIndex) +
-                                   P.middleCols<3>(kOrientationIndex) * t.velocity_by_orientation.transpose() +
-                                   P.middleCols<3>(kAccelBiasIndex) * t.velocity_by_accel_bias.transpose() +
-                                   dt * P.middleCols<3>(kGravityIndex);
-  const Columns orientation_columns = P.middleCols<3>(kOrientationIndex) * t.orientation_by_orientation.transpose() +
-                                      P.middleCols<3>(kGyroBiasIndex) * t.orientation_by_gyro_bias.transpose();
-  P.middleCols<3>(kPositionIndex) += 0.5 * dt * (P.middleCols<3>(kVelocityIndex) + velocity_columns);
-  P.middleCols<3>(kVelocityIndex) = velocity_columns;
-  P.middleCols<3>(kOrientationIndex) = orientation_columns;
+  multiply_by_transition_transpose(P, t);
 
   const double velocity_density = noise.process_noise_accel * noise.process_noise_accel * noise.sample_interval;
   const double angle_density = noise.process_noise_gyro * noise.process_noise_gyro * noise.sample_interval;

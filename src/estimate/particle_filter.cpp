@@ -101,6 +101,10 @@ UpdateOutcome ParticleFilter::update(const MeasurementModel& model, bool apply_g
   return outcome;
 }
 
+void ParticleFilter::apply_world_transform(const SE3& T_correction) {
+  for (NavigationState& particle : particles_) transform_in_world(T_correction, particle, nullptr);
+}
+
 double ParticleFilter::effective_sample_size() const {
   double sum_squares = 0.0;
   for (double weight : weights_) sum_squares += weight * weight;

@@ -21,6 +21,8 @@ void UnscentedKalmanFilter::reset(const NavigationState& state, const ErrorCovar
   covariance_ = covariance;
 }
 
+void UnscentedKalmanFilter::apply_world_transform(const SE3& T_correction) { transform_in_world(T_correction, state_, &covariance_); }
+
 bool UnscentedKalmanFilter::sigma_offsets(Eigen::Matrix<double, kErrorStateDimension, kSigmaPoints>& offsets) const {
   // Tiny jitter keeps the Cholesky factor defined for states with (near) zero variance, such as
   // the horizontal gravity components.

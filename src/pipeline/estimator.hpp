@@ -15,6 +15,7 @@
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/estimate/filter.hpp"
 #include "hanzo/fusion/estimate/imu_spike_filter.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
 
 namespace hanzo::fusion::pipeline {
@@ -24,6 +25,11 @@ struct PoseMeasurement {
   Eigen::Matrix<double, 6, 6> covariance;
 };
 
+/// A correction from the backend: move the estimate by T_correction (world frame).
+struct WorldCorrection {
+  SE3 T_correction;
+};
+
 /// A message ready for fusion: its sensor (index into FusionConfig::sensors), its body-clock
 /// time and an arrival sequence number (ties at equal times keep arrival order).
 struct Event {
@@ -31,7 +37,7 @@ struct Event {
   size_t sensor = 0;
   uint64_t sequence = 0;
   bool is_imu = false;
-  std::variant<msgs::SensorMessage, PoseMeasurement> payload;
+  std::variant<msgs::SensorMessage, PoseMeasurement, WorldCorrection> payload;
 };
 
 /// Strict order of fusion: time, then IMU before other sensors, then arrival.
@@ -60,9 +66,12 @@ class UpdateObserver {
 
 /// The result of fusing one event: fused, or why not ("gated", "spike", ...).
 struct EventOutcome {
+  EventOutcome() = default;
+  EventOutcome(bool was_fused, std::string_view why) : fused(was_fused), reason(why) {}
   bool fused = false;
   std::string_view reason;
   bool zero_velocity_update = false;
+  std::optional<msgs::Keyframe> keyframe;  // emitted after this IMU event
 };
 
 class Estimator {
@@ -98,6 +107,8 @@ class Estimator {
   /// Runs one gated update and reports it; true when applied.
   bool update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer, std::string_view* reason);
   void apply_constraints(const Event& event);
+  /// A keyframe when keyframe_interval has passed since the previous one (IMU events only).
+  std::optional<msgs::Keyframe> maybe_keyframe(Timestamp time);
 
   config::FrontendConfig frontend_;
   std::vector<SensorSetup> sensors_;
@@ -121,6 +132,13 @@ class Estimator {
   /// steady turn at constant speed from standing still with a gyro bias).
   bool wheels_moved_before_initialization_ = false;
   double gravity_magnitude_ = estimate::kStandardGravity;
+  struct KeyframeAnchor {
+    uint64_t id = 0;
+    Timestamp time;
+    SE3 T_world_body;
+    Eigen::Matrix<double, 6, 6> covariance;
+  };
+  std::optional<KeyframeAnchor> last_keyframe_;
   double planar_height_ = 0.0;
   Timestamp last_gravity_update_;
 };

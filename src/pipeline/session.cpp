@@ -116,6 +116,10 @@ struct Session::Impl final : UpdateObserver {
   std::optional<msgs::PoseEstimate> latest_pose;
   PoseCallback pose_callback;
   InnovationCallback innovation_callback;
+  KeyframeCallback keyframe_callback;
+  std::map<uint64_t, SE3> keyframe_poses;  // emitted keyframes, for corrections
+  uint64_t keyframes = 0;
+  uint64_t corrections = 0;
 };
 
 Session::Session(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -151,6 +155,26 @@ const config::SensorConfig* Session::sensor_for_topic(std::string_view topic) co
 const config::FusionConfig& Session::config() const { return impl_->config; }
 void Session::set_pose_callback(PoseCallback callback) { impl_->pose_callback = std::move(callback); }
 void Session::set_innovation_callback(InnovationCallback callback) { impl_->innovation_callback = std::move(callback); }
+void Session::set_keyframe_callback(KeyframeCallback callback) { impl_->keyframe_callback = std::move(callback); }
+
+Status Session::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized) {
+  Impl& impl = *impl_;
+  const auto found = impl.keyframe_poses.find(keyframe_id);
+  if (found == impl.keyframe_poses.end()) {
+    return Error(fmt::format("unknown_keyframe: keyframe {} was not emitted by this session (or is too old)", keyframe_id));
+  }
+  if (!T_world_body_optimized.translation().allFinite() || !T_world_body_optimized.rotation().quaternion().coeffs().allFinite()) {
+    return Error("invalid: the optimized pose has non-finite values");
+  }
+  Event event;
+  event.time = impl.estimator.time();
+  event.sensor = impl.imu_sensor;
+  event.sequence = impl.sequence++;
+  event.payload = WorldCorrection{T_world_body_optimized * found->second.inverse()};
+  impl.fuse_in_order(std::move(event));
+  ++impl.corrections;
+  return ok_status();
+}
 std::optional<msgs::PoseEstimate> Session::latest_pose() const { return impl_->latest_pose; }
 
 Status Session::push(std::string_view sensor_name, const msgs::SensorMessage& message) {
@@ -289,6 +313,13 @@ void Session::Impl::fuse_in_order(Event event) {
   count(event, outcome);
   if (config.frontend.lag_window_s > 0.0) history.push_back({event, estimator});
   if (event.is_imu && estimator.initialized()) emit_pose(true);
+  if (outcome.keyframe) {
+    constexpr size_t kRememberedKeyframes = 100000;
+    keyframe_poses[outcome.keyframe->keyframe_id] = outcome.keyframe->T_world_body.to_se3();
+    if (keyframe_poses.size() > kRememberedKeyframes) keyframe_poses.erase(keyframe_poses.begin());
+    ++keyframes;
+    if (keyframe_callback) keyframe_callback(*outcome.keyframe);
+  }
 }
 
 void Session::Impl::fuse_late(Event event) {
@@ -380,6 +411,8 @@ SessionSummary Session::summary() const {
   summary.poses = impl_->poses;
   summary.rollbacks = impl_->rollbacks;
   summary.zero_velocity_updates = impl_->zero_velocity_updates;
+  summary.keyframes = impl_->keyframes;
+  summary.corrections = impl_->corrections;
   summary.filter = std::string(impl_->estimator.filter().name());
   summary.state = impl_->latest_pose ? impl_->latest_pose->status.state : msgs::TrackingState::kInitializing;
   return summary;

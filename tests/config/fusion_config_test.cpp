@@ -63,7 +63,7 @@ TEST(FusionConfig, EachRuleGivesItsDocumentedError) {
             "fusion.yaml:4: frontend.covariance.process_noise_accel: expected a finite number, got '.nan'");
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    tpye: ekf\n"),
             "fusion.yaml:3: frontend.tpye: unknown key (expected one of: type, predict_rate, covariance, gate_probability, lag_window, "
-            "max_future, static_alignment, planar, zero_velocity_updates, datum)");
+            "max_future, static_alignment, planar, zero_velocity_updates, datum, ukf, particle_filter, keyframe_interval)");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      topic: /imu\n"),
             "fusion.yaml:3: sensors.imu.rate: missing (expected the sensor's rate in Hz)");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      rate: fast\n"),
@@ -89,6 +89,9 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   config.frontend.gate_probability = 0.99;
   config.frontend.lag_window_s = 0.25;
   config.frontend.planar = true;
+  config.frontend.keyframe_interval_s = 0.5;
+  config.frontend.ukf = {0.5, 1.0, -2.0};
+  config.frontend.particle_filter = {2000, 0.25, 7};
   config.frontend.datum = GeodeticPoint{48.1, 11.5, 520.25};
   config.sensors.push_back({"front_radar", SensorModality::kRadar, "/radar: front", 13.5, "radar link", "continental_ars408",
                             {.timeout_s = 0.3, .velocity_noise = 0.2}});

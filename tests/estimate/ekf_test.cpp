@@ -82,3 +82,62 @@ TEST(ImuSpikeFilter, RejectsASpikeAndAcceptsAPersistentChange) {
 
 }  // namespace
 }  // namespace hanzo::fusion::estimate
+
+namespace hanzo::fusion::estimate {
+namespace {
+
+// The EKF's clone bookkeeping against an explicit augmented-state EKF (24 = 18 + 6 cloned pose
+// errors) run densely on the same predictions and updates.
+TEST(ErrorStateEkf, PoseCloneMatchesTheAugmentedStateFilter) {
+  using Augmented = Eigen::Matrix<double, 24, 24>;
+  FilterConfig config;
+  config.imu_noise.sample_interval = 0.01;
+  config.gate_probability = 1.0;
+  ErrorStateEkf ekf(config);
+  ekf.reset(NavigationState{}, initial_covariance());
+  const ImuSample turning{Timestamp::from_nanoseconds(1), Eigen::Vector3d(0.0, 0.05, 0.3), Eigen::Vector3d(0.5, 0.2, 9.8)};
+  for (int k = 0; k < 20; ++k) ekf.predict(turning, 0.01);
+  ekf.clone_pose();
+  Augmented P = Augmented::Zero();
+  P.topLeftCorner<18, 18>() = ekf.covariance();
+  P.topRightCorner<18, 6>() = ekf.covariance().leftCols<6>();
+  P.bottomLeftCorner<6, 18>() = ekf.covariance().topRows<6>();
+  P.bottomRightCorner<6, 6>() = ekf.covariance().topLeftCorner<6, 6>();
+  Eigen::Matrix<double, 24, 1> clone_delta = Eigen::Matrix<double, 24, 1>::Zero();
+  for (int step = 0; step < 5; ++step) {
+    for (int k = 0; k < 10; ++k) {
+      ImuTransition transition;
+      const NavigationState before = ekf.state();
+      propagate_state(before, body_motion(before, turning, config.imu_mounting), 0.01, config.imu_mounting, &transition);
+      Augmented phi = Augmented::Identity();
+      phi.topLeftCorner<18, 18>() = transition_matrix(transition);
+      Augmented q = Augmented::Zero();
+      q.topLeftCorner<18, 18>() = process_noise(config.imu_noise, 0.01);
+      P = phi * P * phi.transpose() + q;
+      ekf.predict(turning, 0.01);
+    }
+    const GnssPositionModel model(Eigen::Vector3d(0.3 * step, -0.2, 0.1), Eigen::Matrix3d::Identity() * 0.5, Eigen::Vector3d(0, 0, 1));
+    MeasurementJacobian H;
+    const MeasurementVector r = model.residual(ekf.state(), &H);
+    Eigen::Matrix<double, 3, 24> H_augmented = Eigen::Matrix<double, 3, 24>::Zero();
+    H_augmented.leftCols<18>() = H;
+    const Eigen::Matrix3d S = H_augmented * P * H_augmented.transpose() + model.covariance();
+    const Eigen::Matrix<double, 24, 3> K = P * H_augmented.transpose() * S.inverse();
+    const Eigen::Matrix<double, 24, 1> delta = K * r;
+    clone_delta.tail<6>() += delta.tail<6>();
+    P -= K * S * K.transpose();
+    Augmented G = Augmented::Identity();
+    G.block<3, 3>(kOrientationIndex, kOrientationIndex) -= SO3::hat(0.5 * delta.segment<3>(kOrientationIndex));
+    P = G * P * G.transpose();
+    ASSERT_EQ(ekf.update(model).status, UpdateStatus::kApplied);
+  }
+  const std::optional<PoseClone> clone = ekf.pose_clone();
+  ASSERT_TRUE(clone.has_value());
+  EXPECT_LT((clone->cross - P.bottomLeftCorner<6, 18>()).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((clone->covariance - P.bottomRightCorner<6, 6>()).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((clone->correction - clone_delta.tail<6>()).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((ekf.covariance() - P.topLeftCorner<18, 18>()).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::estimate

@@ -208,6 +208,44 @@ TEST(Session, ASilentSensorIsReportedAndTheFilterKeepsRunning) {
   EXPECT_EQ(pose.timestamp, at(6.0));
 }
 
+TEST(Session, EmitsKeyframesWithRelativeMotionAndTakesBackendCorrections) {
+  auto session = make_session();
+  std::vector<msgs::Keyframe> keyframes;
+  session->set_keyframe_callback([&keyframes](const msgs::Keyframe& keyframe) { keyframes.push_back(keyframe); });
+  // GNSS off: the absolute uncertainty grows, the keyframe-to-keyframe one must not.
+  for (const Message& m : drive(30.0)) {
+    if (m.sensor != "gnss") {
+      ASSERT_TRUE(session->push(m.sensor, m.message).ok());
+    }
+  }
+  ASSERT_EQ(keyframes.size(), 29U);  // 1 Hz from the end of alignment (1.01 s) to 30 s
+  for (size_t i = 1; i < keyframes.size(); ++i) {
+    const msgs::Keyframe& k = keyframes[i];
+    EXPECT_EQ(k.keyframe_id, i);
+    EXPECT_EQ(k.previous_keyframe_id, i - 1);
+    EXPECT_NEAR((k.timestamp - keyframes[i - 1].timestamp).seconds(), 1.0, 1e-9);
+    ASSERT_TRUE(k.T_previous_current && k.relative_covariance);
+    const SE3 expected = keyframes[i - 1].T_world_body.to_se3().inverse() * k.T_world_body.to_se3();
+    EXPECT_LT((k.T_previous_current->position - expected.translation()).norm(), 0.01);
+  }
+  const msgs::Keyframe& last = keyframes.back();
+  EXPECT_NEAR(last.T_previous_current->position.x(), 1.0, 0.02);  // 1 m/s for 1 s
+  const double relative_variance = last.relative_covariance->topLeftCorner<3, 3>().trace();
+  const double absolute_variance = last.pose_covariance->topLeftCorner<3, 3>().trace();
+  EXPECT_LT(relative_variance, 0.05 * absolute_variance);
+  EXPECT_GT(relative_variance, 0.0);
+  EXPECT_GT(last.relative_covariance->ldlt().vectorD().minCoeff(), -1e-12);  // positive semi-definite
+
+  // The backend says keyframe 20 is 1 m further north: the estimate moves with it.
+  const SE3 keyframe_pose = keyframes[20].T_world_body.to_se3();
+  const Eigen::Vector3d before = session->latest_pose()->T_world_body.position;
+  ASSERT_TRUE(session->apply_correction(20, SE3(keyframe_pose.rotation(), keyframe_pose.translation() + Eigen::Vector3d(0, 1, 0))).ok());
+  ASSERT_TRUE(session->push("imu", imu_at(30.01)).ok());
+  EXPECT_NEAR(session->latest_pose()->T_world_body.position.y() - before.y(), 1.0, 0.01);
+  EXPECT_EQ(session->summary().corrections, 1U);
+  EXPECT_EQ(reason_of(session->apply_correction(999, SE3())), "unknown_keyframe");
+}
+
 TEST(Session, RefusesAConfigurationWithoutImu) {
   config::FusionConfig config = fusion_config();
   config.sensors.erase(config.sensors.begin());

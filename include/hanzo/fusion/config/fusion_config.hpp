@@ -84,8 +84,11 @@ struct FrontendConfig {
   double static_alignment_s = 1.0;
   /// Ground robot on a flat floor: height and vertical speed held (robot_localization's two_d_mode).
   bool planar = false;
-  /// Zero-velocity updates when the wheels stand still or the IMU shows no motion.
+  /// Zero-velocity updates when the wheels stand still.
   bool zero_velocity_updates = true;
+  /// s > 0: a Keyframe (pose + relative motion and covariance since the previous one) for the
+  /// backend every this many seconds (spec default 1 Hz).
+  double keyframe_interval_s = 1.0;
   /// WGS84 origin of the world ENU frame; when absent the first GNSS fix becomes the datum.
   std::optional<GeodeticPoint> datum;
   UkfSettings ukf;

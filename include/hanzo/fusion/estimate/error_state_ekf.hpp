@@ -21,12 +21,20 @@ class ErrorStateEkf final : public Filter {
   NavigationState state() const override { return state_; }
   ErrorCovariance covariance() const override { return covariance_; }
   std::unique_ptr<Filter> clone() const override { return std::make_unique<ErrorStateEkf>(*this); }
+  void apply_world_transform(const SE3& T_correction) override;
+  /// The augmented-state EKF's clone blocks without carrying the clone in the state: with
+  /// C = Cov(clone, x) and Kc = C H^T S^-1: predict C <- C Phi^T; update correction += Kc r,
+  /// covariance -= Kc S Kc^T, C <- C - Kc S K^T; error reset C <- C G^T (the clone's own
+  /// reset is second order and left out).
+  void clone_pose() override;
+  std::optional<PoseClone> pose_clone() const override { return clone_; }
 
  private:
   FilterConfig config_;
   ChiSquareGate gate_;
   NavigationState state_;
   ErrorCovariance covariance_ = ErrorCovariance::Identity();
+  std::optional<PoseClone> clone_;
 };
 
 }  // namespace hanzo::fusion::estimate

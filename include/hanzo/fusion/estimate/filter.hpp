@@ -15,8 +15,10 @@
 
 #include <array>
 #include <memory>
+#include <optional>
 #include <string_view>
 
+#include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/estimate/imu_propagation.hpp"
 #include "hanzo/fusion/estimate/measurement_model.hpp"
 #include "hanzo/fusion/estimate/navigation_state.hpp"
@@ -45,6 +47,15 @@ struct UpdateOutcome {
   MeasurementVector innovation;      // residual at the prior estimate
 };
 
+/// A cloned pose (Filter::clone_pose()); errors ordered (position world, orientation body).
+struct PoseClone {
+  /// The smoothed clone is clone (+) correction: later measurements corrected it too.
+  Eigen::Matrix<double, 6, 1> correction = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
+  /// Cov(clone error, current error state).
+  Eigen::Matrix<double, 6, kErrorStateDimension> cross = Eigen::Matrix<double, 6, kErrorStateDimension>::Zero();
+};
+
 class Filter {
  public:
   virtual ~Filter() = default;
@@ -58,7 +69,23 @@ class Filter {
   virtual NavigationState state() const = 0;
   virtual ErrorCovariance covariance() const = 0;
   virtual std::unique_ptr<Filter> clone() const = 0;
+
+  /// Moves the estimate rigidly in the world frame: p <- R_c p + t_c, R <- R_c R, v <- R_c v
+  /// (a correction from the backend: T_c = T_optimized * T_estimated^-1 of a keyframe). The
+  /// covariance is rotated accordingly; its size does not change.
+  virtual void apply_world_transform(const SE3& T_correction) = 0;
+
+  /// Stochastic cloning for keyframes: remember the current pose (position, orientation) and
+  /// from now on track it as if it were part of the state: its correction by later updates,
+  /// its covariance and its cross-covariance with the current error state. Filters that cannot
+  /// (UKF, particle filter) return nullopt from pose_clone(); relative covariances then leave
+  /// the cross terms out.
+  virtual void clone_pose() {}
+  virtual std::optional<PoseClone> pose_clone() const { return std::nullopt; }
 };
+
+/// apply_world_transform() for a state and its covariance (shared by the filters).
+void transform_in_world(const SE3& T_correction, NavigationState& state, ErrorCovariance* covariance);
 
 /// The chi-square gate for a measurement dimension (1..kMaxMeasurementDimension) at a
 /// probability; +infinity when probability is 1.

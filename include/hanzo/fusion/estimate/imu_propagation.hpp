@@ -86,4 +86,20 @@ ErrorCovariance process_noise(const ImuNoise& noise, double dt);
 /// multiplications than the dense product). Result symmetric.
 void propagate_covariance(ErrorCovariance& covariance, const ImuTransition& transition, const ImuNoise& noise);
 
+/// M <- M Phi^T for any number of rows, with the same sparse column operations.
+template <int Rows>
+void multiply_by_transition_transpose(Eigen::Matrix<double, Rows, kErrorStateDimension>& M, const ImuTransition& t) {
+  using Columns = Eigen::Matrix<double, Rows, 3>;
+  const Columns velocity = M.template middleCols<3>(kVelocityIndex) +
+                           M.template middleCols<3>(kOrientationIndex) * t.velocity_by_orientation.transpose() +
+                           M.template middleCols<3>(kAccelBiasIndex) * t.velocity_by_accel_bias.transpose() +
+                           t.dt * M.template middleCols<3>(kGravityIndex);
+  const Columns orientation = M.template middleCols<3>(kOrientationIndex) * t.orientation_by_orientation.transpose() +
+                              M.template middleCols<3>(kGyroBiasIndex) * t.orientation_by_gyro_bias.transpose();
+  // dp' = dp + dt/2 (dv + dv').
+  M.template middleCols<3>(kPositionIndex) += 0.5 * t.dt * (M.template middleCols<3>(kVelocityIndex) + velocity);
+  M.template middleCols<3>(kVelocityIndex) = velocity;
+  M.template middleCols<3>(kOrientationIndex) = orientation;
+}
+
 }  // namespace hanzo::fusion::estimate

@@ -40,6 +40,7 @@ class ParticleFilter final : public Filter {
   NavigationState state() const override;
   ErrorCovariance covariance() const override;
   std::unique_ptr<Filter> clone() const override { return std::make_unique<ParticleFilter>(*this); }
+  void apply_world_transform(const SE3& T_correction) override;
 
   const std::vector<NavigationState>& particles() const { return particles_; }
   /// Normalized weights (sum 1).

@@ -35,6 +35,7 @@ class UnscentedKalmanFilter final : public Filter {
   NavigationState state() const override { return state_; }
   ErrorCovariance covariance() const override { return covariance_; }
   std::unique_ptr<Filter> clone() const override { return std::make_unique<UnscentedKalmanFilter>(*this); }
+  void apply_world_transform(const SE3& T_correction) override;
 
  private:
   static constexpr int kSigmaPoints = 2 * kErrorStateDimension + 1;

@@ -74,6 +74,8 @@ struct SensorStatistics {
 struct SessionSummary {
   std::vector<SensorStatistics> sensors;  // in configuration order
   uint64_t poses = 0;                     // PoseEstimates emitted
+  uint64_t keyframes = 0;
+  uint64_t corrections = 0;               // backend corrections applied
   uint64_t rollbacks = 0;                 // times the filter rolled back for a late message
   uint64_t zero_velocity_updates = 0;
   std::string filter;                     // "ekf", ...
@@ -94,6 +96,7 @@ class Session {
  public:
   using PoseCallback = std::function<void(const msgs::PoseEstimate&)>;
   using InnovationCallback = std::function<void(const InnovationRecord&)>;
+  using KeyframeCallback = std::function<void(const msgs::Keyframe&)>;
 
   /// Fails when the configuration is invalid or has no IMU sensor (the frontend propagates
   /// with the IMU), or when the filter type is not available.
@@ -123,6 +126,16 @@ class Session {
   /// Called for every PoseEstimate (one per IMU message once initialized), in time order.
   void set_pose_callback(PoseCallback callback);
   void set_innovation_callback(InnovationCallback callback);
+  /// Called for every Keyframe (frontend.keyframe_interval apart): the pose, its covariance, and
+  /// the relative motion since the previous keyframe with its covariance (from the EKF's pose
+  /// clone, cross-correlations included; the UKF and particle filter leave the cross terms out,
+  /// which overstates it).
+  void set_keyframe_callback(KeyframeCallback callback);
+
+  /// The backend's hook: keyframe `keyframe_id` is really at T_world_body_optimized. The
+  /// estimate is moved rigidly by T_optimized * T_keyframe^-1 (world frame), now. Fails for a
+  /// keyframe this session never emitted or no longer remembers (it keeps the last 100000).
+  Status apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized);
   /// The latest PoseEstimate, if any.
   std::optional<msgs::PoseEstimate> latest_pose() const;
   SessionSummary summary() const;
