@@ -3,6 +3,7 @@
 //   DIR/trajectory.tum    every PoseEstimate (IMU rate)
 //   DIR/poses.csv         the same with velocity, status and the 6x6 pose covariance
 //   DIR/innovations.csv   every measurement update: sensor, model, time, d^2, applied, innovation
+//   DIR/keyframes.csv     keyframes for the backend: pose, relative motion and its covariance
 //   DIR/summary.json      per-sensor counts, rates, rejections by reason, NIS, timing
 //   DIR/*.svg             trajectory (coloured by position sigma), covariance over time, NIS per sensor
 // With --gt it also computes APE without alignment (the world frames agree when the datum or
@@ -102,6 +103,33 @@ Status write_poses_csv(const std::string& path, const std::vector<msgs::PoseEsti
   return file ? ok_status() : Status(Error(fmt::format("{}: write failed", path)));
 }
 
+Status write_keyframes_csv(const std::string& path, const std::vector<msgs::Keyframe>& keyframes) {
+  std::ofstream file(path);
+  if (!file) return Error(fmt::format("{}: cannot write", path));
+  file << "keyframe_id,timestamp_ns,x,y,z,qw,qx,qy,qz,previous_id,rel_x,rel_y,rel_z,rel_qw,rel_qx,rel_qy,rel_qz";
+  for (int i = 0; i < 6; ++i) {
+    for (int j = i; j < 6; ++j) file << ",rel_cov_" << i << j;
+  }
+  file << "\n";
+  for (const msgs::Keyframe& k : keyframes) {
+    const auto& p = k.T_world_body.position;
+    const auto& q = k.T_world_body.orientation;
+    file << fmt::format("{},{},{},{},{},{},{},{},{}", k.keyframe_id, k.timestamp.nanoseconds(), p.x(), p.y(), p.z(), q.w(), q.x(), q.y(), q.z());
+    if (k.T_previous_current && k.relative_covariance) {
+      const auto& rp = k.T_previous_current->position;
+      const auto& rq = k.T_previous_current->orientation;
+      file << fmt::format(",{},{},{},{},{},{},{},{}", k.previous_keyframe_id, rp.x(), rp.y(), rp.z(), rq.w(), rq.x(), rq.y(), rq.z());
+      for (int i = 0; i < 6; ++i) {
+        for (int j = i; j < 6; ++j) file << "," << fmt::format("{}", (*k.relative_covariance)(i, j));
+      }
+    } else {
+      file << std::string(8 + 21, ',');
+    }
+    file << "\n";
+  }
+  return file ? ok_status() : Status(Error(fmt::format("{}: write failed", path)));
+}
+
 Status write_innovations_csv(const std::string& path, const std::vector<pipeline::InnovationRecord>& records) {
   std::ofstream file(path);
   if (!file) return Error(fmt::format("{}: cannot write", path));
@@ -127,7 +155,7 @@ nlohmann::json summary_json(const pipeline::SessionSummary& summary, double log_
                        {"timeouts", s.timeouts},
                        {"average_nis_per_dof", s.nis_count > 0 ? s.nis_sum / static_cast<double>(s.nis_count) : 0.0}});
   }
-  return {{"filter", summary.filter},   {"poses", summary.poses}, {"rollbacks", summary.rollbacks},
+  return {{"filter", summary.filter},   {"poses", summary.poses}, {"keyframes", summary.keyframes}, {"rollbacks", summary.rollbacks},
           {"zero_velocity_updates", summary.zero_velocity_updates}, {"final_state", msgs::to_string(summary.state)},
           {"log_duration_s", log_seconds}, {"sensors", sensors}};
 }
@@ -215,6 +243,8 @@ int run(const Output& output, const RunOptions& options) {
 
   std::vector<msgs::PoseEstimate> poses;
   std::vector<pipeline::InnovationRecord> innovations;
+  std::vector<msgs::Keyframe> keyframes;
+  (*session)->set_keyframe_callback([&keyframes](const msgs::Keyframe& keyframe) { keyframes.push_back(keyframe); });
   (*session)->set_pose_callback([&poses](const msgs::PoseEstimate& pose) { poses.push_back(pose); });
   (*session)->set_innovation_callback([&innovations](const pipeline::InnovationRecord& r) { innovations.push_back(r); });
 
@@ -259,6 +289,7 @@ int run(const Output& output, const RunOptions& options) {
   if (Status s = io::write_trajectory((out / "trajectory.tum").string(), trajectory, io::TrajectoryFormat::kTum); !s) return fail(s.error().message);
   if (Status s = write_poses_csv((out / "poses.csv").string(), poses); !s) return fail(s.error().message);
   if (Status s = write_innovations_csv((out / "innovations.csv").string(), innovations); !s) return fail(s.error().message);
+  if (Status s = write_keyframes_csv((out / "keyframes.csv").string(), keyframes); !s) return fail(s.error().message);
   auto plots = write_plots(options.out, poses, innovations);
   if (!plots) return fail(plots.error().message);
 
@@ -304,7 +335,8 @@ int run(const Output& output, const RunOptions& options) {
                         e["ape_rmse_m"].get<double>(), e["ape_max_m"].get<double>(), aligned, e["distance_m"].get<double>(),
                         e["rpe_1m_rmse_m"].get<double>());
   }
-  text += fmt::format("wrote {}/trajectory.tum, poses.csv, innovations.csv, summary.json and {} plots\n", options.out, plots->size());
+  text += fmt::format("wrote {}/trajectory.tum, poses.csv, innovations.csv, keyframes.csv ({}), summary.json and {} plots\n", options.out,
+                      keyframes.size(), plots->size());
   return report_success(output, result, text);
 }
 

@@ -366,7 +366,8 @@ TEST(Cli, RunReplaysTheSampleAndScoresItAgainstGroundTruth) {
   EXPECT_EQ(json["summary"]["sensors"][1]["fused"], 96);
   EXPECT_LT(json["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), 0.15);
   EXPECT_LT(json["evaluation"]["rpe_1m_rmse_m"].get<double>(), 0.05);
-  for (const char* file : {"trajectory.tum", "poses.csv", "innovations.csv", "summary.json", "trajectory.svg", "covariance.svg"}) {
+  EXPECT_EQ(json["summary"]["keyframes"], 19);  // 1 Hz after alignment
+  for (const char* file : {"trajectory.tum", "poses.csv", "innovations.csv", "keyframes.csv", "summary.json", "trajectory.svg", "covariance.svg"}) {
     EXPECT_TRUE(std::filesystem::exists(dir / "run" / file)) << file;
   }
   // Bad input: a configuration without an IMU, a missing log; one line on stderr, exit 1.
