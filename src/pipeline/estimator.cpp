@@ -122,9 +122,11 @@ Estimator& Estimator::operator=(const Estimator& other) {
 
 Estimator::~Estimator() = default;
 
-Eigen::Vector3d Estimator::body_angular_velocity() const {
-  if (!last_imu_) return Eigen::Vector3d::Zero();
-  return filter_config_.imu_mounting.R_body_imu * (last_imu_->angular_velocity - filter_->state().gyro_bias);
+estimate::GyroReading Estimator::gyro_reading() const {
+  estimate::GyroReading gyro;
+  gyro.R_body_imu = filter_config_.imu_mounting.R_body_imu;
+  if (last_imu_) gyro.angular_velocity = last_imu_->angular_velocity;
+  return gyro;
 }
 
 EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
@@ -147,6 +149,11 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
   EventOutcome outcome;
   if (const auto* pose = std::get_if<PoseMeasurement>(&event.payload)) {
     outcome = process_pose(event, *pose, observer);
+  } else if (const auto* velocity = std::get_if<VelocityMeasurement>(&event.payload)) {
+    predict_to(event.time);
+    const estimate::SensorVelocityModel model(velocity->velocity_sensor, velocity->covariance, sensors_[event.sensor].T_body_sensor,
+                                              gyro_reading());
+    outcome.fused = update(event, model, observer, &outcome.reason);
   } else if (const auto* correction = std::get_if<WorldCorrection>(&event.payload)) {
     predict_to(event.time);
     filter_->apply_world_transform(correction->T_correction);
@@ -401,9 +408,7 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
 
   const SensorSetup& sensor = sensors_[event.sensor];
   const config::SensorFusionOptions& options = sensor.config->fusion;
-  estimate::GyroReading gyro;
-  gyro.R_body_imu = filter_config_.imu_mounting.R_body_imu;
-  if (last_imu_) gyro.angular_velocity = last_imu_->angular_velocity;
+  const estimate::GyroReading gyro = gyro_reading();
   EventOutcome outcome;
   if (frontend_.zero_velocity_updates && left == 0.0 && right == 0.0) {
     // The rate residual uses one gyro sample: its white noise adds to the constraint's.
@@ -444,9 +449,7 @@ EventOutcome Estimator::process_radar(const Event& event, const msgs::RadarMessa
   if (!ego) return {false, "no_ego_velocity"};
   predict_to(event.time);
   const SensorSetup& sensor = sensors_[event.sensor];
-  estimate::GyroReading gyro;
-  gyro.R_body_imu = filter_config_.imu_mounting.R_body_imu;
-  if (last_imu_) gyro.angular_velocity = last_imu_->angular_velocity;
+  const estimate::GyroReading gyro = gyro_reading();
   const double noise = sensor.config->fusion.velocity_noise;
   const estimate::SensorVelocityModel model(ego->velocity_sensor, ego->covariance + noise * noise * Eigen::Matrix3d::Identity(),
                                             sensor.T_body_sensor, gyro);

@@ -15,6 +15,7 @@
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/estimate/filter.hpp"
 #include "hanzo/fusion/estimate/imu_spike_filter.hpp"
+#include "hanzo/fusion/estimate/velocity_models.hpp"
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
 
@@ -23,6 +24,12 @@ namespace hanzo::fusion::pipeline {
 struct PoseMeasurement {
   SE3 T_world_sensor;
   Eigen::Matrix<double, 6, 6> covariance;
+};
+
+/// A sensor's own velocity in its axes (from a relative pose of LiDAR / visual odometry).
+struct VelocityMeasurement {
+  Eigen::Vector3d velocity_sensor;
+  Eigen::Matrix3d covariance;
 };
 
 /// A correction from the backend: move the estimate by T_correction (world frame).
@@ -37,7 +44,7 @@ struct Event {
   size_t sensor = 0;
   uint64_t sequence = 0;
   bool is_imu = false;
-  std::variant<msgs::SensorMessage, PoseMeasurement, WorldCorrection> payload;
+  std::variant<msgs::SensorMessage, PoseMeasurement, VelocityMeasurement, WorldCorrection> payload;
 };
 
 /// Strict order of fusion: time, then IMU before other sensors, then arrival.
@@ -92,8 +99,6 @@ class Estimator {
   const estimate::Filter& filter() const { return *filter_; }
   /// Time of the last fused update of each sensor (IMU: last propagation), zero when never.
   const std::vector<Timestamp>& last_fused() const { return last_fused_; }
-  /// The latest accepted IMU sample's body-frame angular velocity (bias removed).
-  Eigen::Vector3d body_angular_velocity() const;
 
  private:
   EventOutcome process_imu(const Event& event, const msgs::ImuMessage& imu, UpdateObserver* observer);
@@ -102,6 +107,8 @@ class Estimator {
   EventOutcome process_radar(const Event& event, const msgs::RadarMessage& radar, UpdateObserver* observer);
   EventOutcome process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer);
   void initialize(const Event& event, const msgs::ImuMessage& imu);
+  /// The latest accepted gyro reading, for models that need the body rate.
+  estimate::GyroReading gyro_reading() const;
   /// Propagates the filter to t with the last IMU sample held.
   void predict_to(Timestamp t);
   /// Runs one gated update and reports it; true when applied.

@@ -83,6 +83,12 @@ struct Session::Impl final : UpdateObserver {
     }
   }
 
+  std::optional<size_t> sensor_index(std::string_view name) const {
+    for (size_t i = 0; i < config.sensors.size(); ++i) {
+      if (config.sensors[i].name == name) return i;
+    }
+    return std::nullopt;
+  }
   Status accept(size_t sensor, Event event);
   void fuse_in_order(Event event);
   void fuse_late(Event event);
@@ -179,12 +185,10 @@ std::optional<msgs::PoseEstimate> Session::latest_pose() const { return impl_->l
 
 Status Session::push(std::string_view sensor_name, const msgs::SensorMessage& message) {
   Impl& impl = *impl_;
-  const auto found = std::find_if(impl.config.sensors.begin(), impl.config.sensors.end(),
-                                   [&](const config::SensorConfig& sensor) { return sensor.name == sensor_name; });
-  if (found == impl.config.sensors.end()) {
-    return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
-  }
-  const size_t sensor = static_cast<size_t>(found - impl.config.sensors.begin());
+  const std::optional<size_t> index = impl.sensor_index(sensor_name);
+  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
+  const size_t sensor = *index;
+  const config::SensorConfig* found = &impl.config.sensors[sensor];
   SensorStatistics& statistics = impl.sensors[sensor];
   ++statistics.received;
   if (modality_of(message) != found->modality) {
@@ -207,12 +211,9 @@ Status Session::push(std::string_view sensor_name, const msgs::SensorMessage& me
 Status Session::push_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_world_sensor,
                           const Eigen::Matrix<double, 6, 6>& covariance) {
   Impl& impl = *impl_;
-  const auto found = std::find_if(impl.config.sensors.begin(), impl.config.sensors.end(),
-                                  [&](const config::SensorConfig& sensor) { return sensor.name == sensor_name; });
-  if (found == impl.config.sensors.end()) {
-    return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
-  }
-  const size_t sensor = static_cast<size_t>(found - impl.config.sensors.begin());
+  const std::optional<size_t> index = impl.sensor_index(sensor_name);
+  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
+  const size_t sensor = *index;
   ++impl.sensors[sensor].received;
   msgs::PoseEstimate as_message;  // validate() checks the pose and covariance the same way
   as_message.timestamp = timestamp;
@@ -227,6 +228,34 @@ Status Session::push_pose(std::string_view sensor_name, Timestamp timestamp, con
   event.time = timestamp + impl.setups[sensor].time_offset;
   event.sensor = sensor;
   event.payload = PoseMeasurement{T_world_sensor, covariance};
+  return impl.accept(sensor, std::move(event));
+}
+
+Status Session::push_relative_pose(std::string_view sensor_name, Timestamp from, Timestamp to, const SE3& T_from_to,
+                                   const Eigen::Matrix<double, 6, 6>& covariance) {
+  Impl& impl = *impl_;
+  const std::optional<size_t> index = impl.sensor_index(sensor_name);
+  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
+  const size_t sensor = *index;
+  ++impl.sensors[sensor].received;
+  const double dt = (to - from).seconds();
+  msgs::PoseEstimate as_message;  // validate() checks the pose and covariance
+  as_message.timestamp = to;
+  as_message.T_world_body = msgs::Pose::from_se3(T_from_to);
+  as_message.pose_covariance = covariance;
+  Status valid = msgs::validate(as_message);
+  if (valid && from.is_zero()) valid = Error("the start time is zero");
+  if (valid && !(dt > 0.0)) valid = Error(fmt::format("the interval must be positive, got {} s", dt));
+  if (valid && covariance.llt().info() != Eigen::Success) valid = Error("covariance is not positive definite");
+  if (!valid) {
+    ++impl.sensors[sensor].rejected["invalid"];
+    return rejection("invalid", fmt::format("{}: relative pose: {}", sensor_name, valid.error().message));
+  }
+  const Eigen::Matrix3d R_to_from = T_from_to.rotation().matrix().transpose();
+  Event event;
+  event.time = to + impl.setups[sensor].time_offset;
+  event.sensor = sensor;
+  event.payload = VelocityMeasurement{R_to_from * T_from_to.translation() / dt, covariance.topLeftCorner<3, 3>() / (dt * dt)};
   return impl.accept(sensor, std::move(event));
 }
 
@@ -267,7 +296,7 @@ Status Session::Impl::accept(size_t sensor, Event event) {
   statistics.last_time = event.time;
   if (first_input.is_zero()) first_input = event.time;
   newest = std::max(newest, event.time);
-  const bool is_pose = std::holds_alternative<PoseMeasurement>(event.payload);
+  const bool is_pose = !std::holds_alternative<msgs::SensorMessage>(event.payload);
   if (!is_pose && !fused_directly(statistics.modality)) {
     ++statistics.rejected["not_fused"];
     return ok_status();

@@ -246,6 +246,33 @@ TEST(Session, EmitsKeyframesWithRelativeMotionAndTakesBackendCorrections) {
   EXPECT_EQ(reason_of(session->apply_correction(999, SE3())), "unknown_keyframe");
 }
 
+TEST(Session, FusesLidarPosesAndRelativePoses) {
+  auto session = make_session();
+  msgs::Matrix6d covariance = msgs::Matrix6d::Identity() * 1e-4;
+  // IMU + LiDAR odometry only (relative poses at 10 Hz), then one absolute pose.
+  for (const Message& m : drive(12.0)) {
+    if (m.sensor == "imu") {
+      ASSERT_TRUE(session->push(m.sensor, m.message).ok());
+    }
+    const double t = (msgs::timestamp_of(m.message) - at(0)).seconds();
+    const int tick = static_cast<int>(std::lround(t * 100.0));
+    if (m.sensor == "imu" && tick % 10 == 5 && t > 0.1) {
+      const SE3 motion(SO3(), Eigen::Vector3d(distance_at(t) - distance_at(t - 0.1), 0.0, 0.0));
+      ASSERT_TRUE(session->push_relative_pose("lidar", at(t - 0.1), at(t), motion, covariance).ok());
+    }
+  }
+  EXPECT_NEAR(session->latest_pose()->T_world_body.position.x(), 9.0, 0.1);  // still 2 s, then 0.5 m/s^2 to 1 m/s
+  EXPECT_NEAR(session->latest_pose()->velocity.x(), 1.0, 0.02);
+  EXPECT_GT(session->summary().sensors[3].fused, 100U);
+
+  ASSERT_TRUE(session->push_pose("lidar", at(12.005), SE3(SO3(), Eigen::Vector3d(9.005, 0.5, 0.0)), covariance).ok());
+  ASSERT_TRUE(session->push("imu", imu_at(12.01)).ok());
+  EXPECT_NEAR(session->latest_pose()->T_world_body.position.y(), 0.5, 0.05);  // the absolute pose pulls it over
+
+  EXPECT_EQ(reason_of(session->push_relative_pose("lidar", at(13.0), at(13.0), SE3(), covariance)), "invalid");
+  EXPECT_EQ(reason_of(session->push_pose("lidar", at(12.5), SE3(), msgs::Matrix6d::Zero())), "invalid");
+}
+
 TEST(Session, RefusesAConfigurationWithoutImu) {
   config::FusionConfig config = fusion_config();
   config.sensors.erase(config.sensors.begin());

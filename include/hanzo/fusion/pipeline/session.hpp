@@ -119,6 +119,14 @@ class Session {
   /// log or when the IMU stops for good); the filter is extrapolated with the last IMU sample.
   void flush();
 
+  /// A relative-pose measurement of a lidar or camera sensor (LiDAR / visual odometry between
+  /// two scans or frames): T_from_to maps the sensor frame at `to` into the sensor frame at
+  /// `from`; covariance over its tangent (rho, phi), right perturbation. Fused at `to` as the
+  /// sensor's mean velocity over the interval, R^T t / (to - from) in the `to` frame
+  /// (robot_localization's differential mode); fails for to <= from.
+  Status push_relative_pose(std::string_view sensor, Timestamp from, Timestamp to, const SE3& T_from_to,
+                            const Eigen::Matrix<double, 6, 6>& covariance);
+
   /// The configured sensor that reads `topic`, or nullptr.
   const config::SensorConfig* sensor_for_topic(std::string_view topic) const;
   const config::FusionConfig& config() const;
