@@ -90,6 +90,13 @@ Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup
   spike_filter_ = estimate::ImuSpikeFilter(estimate::ImuSpikeFilterConfig{}, filter_config_.imu_noise);
   previous_wheels_.resize(sensors_.size());
   last_fused_.resize(sensors_.size());
+  const bool has_gnss = std::any_of(sensors_.begin(), sensors_.end(),
+                                    [](const SensorSetup& s) { return s.config->modality == SensorModality::kGnss; });
+  // The configured yaw uncertainty says whether the start heading is known: above ~30 degrees
+  // it is not, and GNSS fixes wait until the course over ground gives it.
+  constexpr double kUnknownYawSigma = 0.5;  // rad
+  heading_pending_ = has_gnss && !sensors_[imu_sensor_].config->fusion.use_orientation[2] &&
+                     frontend_.covariance.initial_orientation.z() > kUnknownYawSigma;
   gated_since_.resize(sensors_.size());
 }
 
@@ -110,6 +117,8 @@ Estimator::Estimator(const Estimator& other)
       enu_(other.enu_),
       gnss_before_initialization_(other.gnss_before_initialization_),
       wheels_moved_before_initialization_(other.wheels_moved_before_initialization_),
+      heading_pending_(other.heading_pending_),
+      course_start_(other.course_start_),
       gravity_magnitude_(other.gravity_magnitude_),
       last_keyframe_(other.last_keyframe_),
       planar_height_(other.planar_height_),
@@ -388,10 +397,53 @@ EventOutcome Estimator::process_gnss(const Event& event, const msgs::GnssMessage
   }
   Eigen::Matrix3d covariance = gnss.position_covariance.value_or(default_gnss_covariance(gnss.fix_type));
   if (!(covariance.diagonal().array() > 0.0).all()) covariance = default_gnss_covariance(gnss.fix_type);
-  const estimate::GnssPositionModel model(enu_->to_enu(gnss.geodetic()), covariance, lever);
+  const Eigen::Vector3d antenna_gnss = enu_->to_enu(gnss.geodetic());
+  if (heading_pending_ &&
+      !align_heading_to_course(antenna_gnss, state.position + state.R_world_body * lever, std::sqrt(std::max(covariance(0, 0), covariance(1, 1))))) {
+    return {false, "heading_unknown"};
+  }
+  const estimate::GnssPositionModel model(antenna_gnss, covariance, lever);
   EventOutcome outcome;
   outcome.fused = update(event, model, observer, &outcome.reason);
   return outcome;
+}
+
+bool Estimator::align_heading_to_course(const Eigen::Vector3d& antenna_gnss, const Eigen::Vector3d& antenna_estimate,
+                                        double horizontal_sigma) {
+  // Course over ground against the dead-reckoned track over the same stretch: their angle is the
+  // heading error. The stretch must be long enough for a course to better than ~0.6 degrees.
+  constexpr double kCourseSigma = 0.01;  // rad
+  constexpr double kMinimumStretch = 10.0;  // m
+  if (!course_start_) {
+    course_start_ = CourseStart{antenna_gnss, antenna_estimate};
+    return false;
+  }
+  const Eigen::Vector2d track_gnss = (antenna_gnss - course_start_->antenna_gnss).head<2>();
+  const Eigen::Vector2d track_estimate = (antenna_estimate - course_start_->antenna_estimate).head<2>();
+  const double needed = std::max(kMinimumStretch, std::sqrt(2.0) * horizontal_sigma / kCourseSigma);
+  if (track_gnss.norm() < needed || track_estimate.norm() < 0.5 * track_gnss.norm()) return false;
+  const double heading_error = std::atan2(track_estimate.x() * track_gnss.y() - track_estimate.y() * track_gnss.x(),
+                                          track_estimate.dot(track_gnss));
+  const double course_sigma = std::sqrt(2.0) * horizontal_sigma / track_gnss.norm();
+  if (std::abs(heading_error) > 2.0 * course_sigma) {
+    // Rotate the estimate about the stretch's start onto the GNSS track.
+    const SO3 rotation = SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), heading_error);
+    const SE3 correction(rotation, course_start_->antenna_gnss - rotation * course_start_->antenna_estimate);
+    filter_->apply_world_transform(correction);
+    if (last_keyframe_) last_keyframe_->T_world_body = correction * last_keyframe_->T_world_body;
+    logger()->info("heading aligned to the GNSS course over {:.1f} m: corrected by {:.1f} deg", track_gnss.norm(),
+                   heading_error * 180.0 / M_PI);
+  }
+  // The heading is now known to the course's accuracy (not to the configured prior).
+  ErrorCovariance P = filter_->covariance();
+  constexpr int yaw = estimate::kOrientationIndex + 2;
+  P.row(yaw).setZero();
+  P.col(yaw).setZero();
+  P(yaw, yaw) = 4.0 * course_sigma * course_sigma;
+  filter_->reset(filter_->state(), P);
+  heading_pending_ = false;
+  course_start_.reset();
+  return true;
 }
 
 EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdometryMessage& wheels, UpdateObserver* observer) {

@@ -104,6 +104,8 @@ class Estimator {
   EventOutcome process_imu(const Event& event, const msgs::ImuMessage& imu, UpdateObserver* observer);
   EventOutcome process_gnss(const Event& event, const msgs::GnssMessage& gnss, UpdateObserver* observer);
   EventOutcome process_wheels(const Event& event, const msgs::WheelOdometryMessage& wheels, UpdateObserver* observer);
+  /// Returns true once the heading is known (aligning it when the track is long enough).
+  bool align_heading_to_course(const Eigen::Vector3d& antenna_gnss, const Eigen::Vector3d& antenna_estimate, double horizontal_sigma);
   EventOutcome process_radar(const Event& event, const msgs::RadarMessage& radar, UpdateObserver* observer);
   EventOutcome process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer);
   void initialize(const Event& event, const msgs::ImuMessage& imu);
@@ -138,6 +140,14 @@ class Estimator {
   /// Wheel odometry showed motion during the alignment window (the IMU alone cannot tell a
   /// steady turn at constant speed from standing still with a gyro bias).
   bool wheels_moved_before_initialization_ = false;
+  /// GNSS without an IMU heading: the world heading is unknown until the GNSS track and the
+  /// dead-reckoned track over the same stretch can be compared (see align_heading_to_course).
+  bool heading_pending_ = false;
+  struct CourseStart {
+    Eigen::Vector3d antenna_gnss;      // ENU
+    Eigen::Vector3d antenna_estimate;  // world, dead-reckoned
+  };
+  std::optional<CourseStart> course_start_;
   double gravity_magnitude_ = estimate::kStandardGravity;
   struct KeyframeAnchor {
     uint64_t id = 0;

@@ -6,7 +6,9 @@
 //    the 95 % chi-square band, on a scenario whose noise is what the filter models (white GNSS
 //    noise, no wheel scale error).
 
+#include <algorithm>
 #include <cmath>
+#include <optional>
 #include <map>
 
 #include <gtest/gtest.h>
@@ -24,10 +26,10 @@ struct SimulatedRun {
   std::vector<msgs::PoseEstimate> poses;
 };
 
-SimulatedRun simulate_and_fuse(const sim::Scenario& scenario) {
+SimulatedRun simulate_and_fuse(const sim::Scenario& scenario, std::optional<config::FusionConfig> fusion_config = std::nullopt) {
   SimulatedRun run;
   run.simulation = sim::ScenarioSimulation::create(scenario).value();
-  auto session = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  auto session = Session::create(fusion_config.value_or(sim::scenario_fusion_config(scenario)), sim::scenario_calibration(scenario)).value();
   session->set_pose_callback([&run](const msgs::PoseEstimate& pose) { run.poses.push_back(pose); });
   const Status status = run.simulation->run([&session](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) {
     (void)session->push(sensor.name, message);  // rejections (NO_FIX during the outage) are counted
@@ -65,6 +67,24 @@ TEST(SimulatedScenarios, ThirtySecondsOfGnssOutageStayUnderOnePercentOfDistance)
               "horizontal RMSE over the whole run %.3f m\n", distance, worst, 100.0 * worst / distance, rmse);
   EXPECT_GT(distance, 250.0);
   EXPECT_LT(worst, 0.01 * distance);
+}
+
+TEST(SimulatedScenarios, UnknownStartHeadingIsTakenFromTheGnssCourse) {
+  // The same loop driven the other way round: the car starts facing north, the configuration
+  // says the heading is unknown (yaw sigma pi), the frontend starts at yaw 0 (east).
+  sim::Scenario scenario = sim::load_scenario("examples/scenarios/gnss_outage_vehicle.yaml").value();
+  std::reverse(scenario.ground_path.waypoints.begin() + 1, scenario.ground_path.waypoints.end());
+  scenario.duration = 39.0;  // before the outage
+  config::FusionConfig fusion = sim::scenario_fusion_config(scenario);
+  fusion.frontend.covariance.initial_orientation.z() = M_PI;
+  const SimulatedRun run = simulate_and_fuse(scenario, fusion);
+  const msgs::PoseEstimate& last = run.poses.back();
+  const sim::TrajectorySample truth = run.simulation->trajectory().sample(last.timestamp);
+  const double heading_error = (truth.T_world_body.rotation().inverse() * last.T_world_body.to_se3().rotation()).angle();
+  std::printf("unknown start heading: after 39 s horizontal error %.3f m, heading error %.2f deg\n",
+              horizontal_error(*run.simulation, last), heading_error * 180.0 / M_PI);
+  EXPECT_LT(horizontal_error(*run.simulation, last), 1.0);
+  EXPECT_LT(heading_error, 0.02);
 }
 
 TEST(SimulatedScenarios, EkfIsConsistentOverFiftyMonteCarloRuns) {
