@@ -182,7 +182,6 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
       outcome = {false, "not_fused"};
     }
   }
-  if (initialized_ && event.time > time_) time_ = event.time;
   return outcome;
 }
 

@@ -341,7 +341,7 @@ void Session::Impl::fuse_in_order(Event event) {
   const EventOutcome outcome = estimator.process(event, this);
   count(event, outcome);
   if (config.frontend.lag_window_s > 0.0) history.push_back({event, estimator});
-  if (event.is_imu && estimator.initialized()) emit_pose(true);
+  if (event.is_imu && outcome.fused && estimator.initialized()) emit_pose(true);
   if (outcome.keyframe) {
     constexpr size_t kRememberedKeyframes = 100000;
     keyframe_poses[outcome.keyframe->keyframe_id] = outcome.keyframe->T_world_body.to_se3();
@@ -364,9 +364,9 @@ void Session::Impl::fuse_late(Event event) {
   history.insert(history.begin() + static_cast<std::ptrdiff_t>(index), HistoryEntry{event, estimator});
   replaying = true;
   for (size_t i = index + 1; i < history.size(); ++i) {
-    estimator.process(history[i].event, nullptr);
+    const EventOutcome again = estimator.process(history[i].event, nullptr);
     history[i].after = estimator;
-    if (history[i].event.is_imu && estimator.initialized()) emit_pose(false);
+    if (history[i].event.is_imu && again.fused && estimator.initialized()) emit_pose(false);
   }
   replaying = false;
 }

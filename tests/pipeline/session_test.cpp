@@ -147,6 +147,29 @@ TEST(Session, AGnssJumpOf50MetersIsGatedAndTheEstimateDoesNotMove) {
   EXPECT_NEAR(after.T_world_body.position.x() - before.T_world_body.position.x(), 0.01, 0.002);
 }
 
+TEST(Session, AnImuSpikeIsRejectedAndTheEstimateDoesNotMove) {
+  std::vector<Message> clean = drive(5.0);
+  std::vector<Message> spiked;
+  for (const Message& m : clean) {
+    spiked.push_back(m);
+    if (m.sensor == "imu" && msgs::timestamp_of(m.message) == at(4.0)) {
+      msgs::ImuMessage spike = imu_at(4.005);
+      spike.linear_acceleration = Eigen::Vector3d(60.0, -40.0, 9.8);
+      spike.angular_velocity = Eigen::Vector3d(0.0, 0.0, 25.0);
+      spiked.push_back({"imu", spike});
+    }
+  }
+  auto clean_session = make_session();
+  auto spiked_session = make_session();
+  for (const Message& m : clean) ASSERT_TRUE(clean_session->push(m.sensor, m.message).ok());
+  for (const Message& m : spiked) ASSERT_TRUE(spiked_session->push(m.sensor, m.message).ok());
+  EXPECT_EQ(spiked_session->summary().sensors[0].rejected.at("spike"), 1U);
+  EXPECT_EQ(spiked_session->summary().poses, clean_session->summary().poses);  // no pose for the dropped sample
+  // The spike is dropped: the estimate is exactly the one without it.
+  EXPECT_EQ(spiked_session->latest_pose()->T_world_body.position, clean_session->latest_pose()->T_world_body.position);
+  EXPECT_EQ(spiked_session->latest_pose()->velocity, clean_session->latest_pose()->velocity);
+}
+
 TEST(Session, LateMessagesInsideTheLagWindowGiveTheInOrderResult) {
   std::vector<Message> in_order = drive(6.0);
   // Delay every GNSS fix by 0.3 s of arrival (inside the 0.5 s lag window).
