@@ -30,6 +30,9 @@ class ErrorStateEkf final : public Filter {
   std::optional<PoseClone> pose_clone() const override { return clone_; }
 
  private:
+  template <int M>
+  UpdateOutcome update_fixed(const MeasurementModel& model, bool apply_gate);
+
   FilterConfig config_;
   ChiSquareGate gate_;
   NavigationState state_;
