@@ -38,29 +38,58 @@ bool UnscentedKalmanFilter::sigma_offsets(Eigen::Matrix<double, kErrorStateDimen
 
 void UnscentedKalmanFilter::predict(const ImuSample& sample, double dt) {
   if (dt <= 0.0) return;
-  Eigen::Matrix<double, kErrorStateDimension, kSigmaPoints> offsets;
-  if (!sigma_offsets(offsets)) {
+  // The process model is linear in position, velocity and gravity (for a fixed orientation and
+  // biases). With those dimensions ordered last, the last 9 columns of the Cholesky factor only
+  // touch them, so their 18 sigma points propagate exactly by the linear map and only the
+  // other 18 + 1 go through propagate_state(): half the cost, the same result.
+  constexpr std::array<int, kErrorStateDimension> kOrder{3, 4, 5, 9, 10, 11, 12, 13, 14, 0, 1, 2, 6, 7, 8, 15, 16, 17};
+  constexpr int kNonlinear = 9;
+  ErrorCovariance permuted;
+  for (int i = 0; i < kErrorStateDimension; ++i) {
+    for (int j = 0; j < kErrorStateDimension; ++j) permuted(i, j) = covariance_(kOrder[static_cast<size_t>(i)], kOrder[static_cast<size_t>(j)]);
+  }
+  const Eigen::LLT<ErrorCovariance> llt((kErrorStateDimension + lambda_) * (permuted + 1e-15 * ErrorCovariance::Identity()));
+  if (llt.info() != Eigen::Success) {
     // Not positive definite (should not happen): propagate the mean alone, keep P plus Q.
     state_ = propagate_state(state_, body_motion(state_, sample, config_.imu_mounting), dt, config_.imu_mounting, nullptr);
     covariance_ += process_noise(config_.imu_noise, dt);
     return;
   }
-  std::array<NavigationState, kSigmaPoints> propagated;
-  for (int i = 0; i < kSigmaPoints; ++i) {
-    const NavigationState point = i == 0 ? state_ : state_.plus(offsets.col(i));
-    propagated[static_cast<size_t>(i)] =
-        propagate_state(point, body_motion(point, sample, config_.imu_mounting), dt, config_.imu_mounting, nullptr);
-  }
+  const ErrorCovariance root = llt.matrixL();
+  const auto offset = [&root, &kOrder](int column) {
+    ErrorVector o;
+    for (int i = 0; i < kErrorStateDimension; ++i) o(kOrder[static_cast<size_t>(i)]) = root(i, column);
+    return o;
+  };
+  const auto propagate = [&](const NavigationState& point) {
+    return propagate_state(point, body_motion(point, sample, config_.imu_mounting), dt, config_.imu_mounting, nullptr);
+  };
+  const NavigationState center = propagate(state_);
   Eigen::Matrix<double, kErrorStateDimension, kSigmaPoints> deltas;
-  ErrorVector mean = ErrorVector::Zero();
-  for (int i = 0; i < kSigmaPoints; ++i) {
-    deltas.col(i) = propagated[static_cast<size_t>(i)].minus(propagated[0]);
-    mean += (i == 0 ? mean_weight_0_ : weight_) * deltas.col(i);
+  deltas.col(0).setZero();
+  for (int column = 0; column < kErrorStateDimension; ++column) {
+    const ErrorVector o = offset(column);
+    for (int sign : {1, -1}) {
+      const int index = sign > 0 ? 1 + column : 1 + kErrorStateDimension + column;
+      if (column < kNonlinear) {
+        deltas.col(index) = propagate(state_.plus(sign * o)).minus(center);
+      } else {
+        ErrorVector d = ErrorVector::Zero();
+        const Eigen::Vector3d dp = sign * o.segment<3>(kPositionIndex);
+        const Eigen::Vector3d dv = sign * o.segment<3>(kVelocityIndex);
+        const Eigen::Vector3d dg = sign * o.segment<3>(kGravityIndex);
+        d.segment<3>(kPositionIndex) = dp + dt * dv + 0.5 * dt * dt * dg;
+        d.segment<3>(kVelocityIndex) = dv + dt * dg;
+        d.segment<3>(kGravityIndex) = dg;
+        deltas.col(index) = d;
+      }
+    }
   }
+  ErrorVector mean = weight_ * deltas.rightCols<kSigmaPoints - 1>().rowwise().sum();
   deltas.colwise() -= mean;
   ErrorCovariance covariance = covariance_weight_0_ * deltas.col(0) * deltas.col(0).transpose();
   covariance.noalias() += weight_ * deltas.rightCols<kSigmaPoints - 1>() * deltas.rightCols<kSigmaPoints - 1>().transpose();
-  state_ = propagated[0].plus(mean);
+  state_ = center.plus(mean);
   covariance_ = covariance + process_noise(config_.imu_noise, dt);
   symmetrize(covariance_);
 }

@@ -1,5 +1,6 @@
 // ErrorStateEkf: convergence on a static body, chi-square gating of a 50 m GNSS jump (the
-// estimate does not move), the IMU spike filter.
+// estimate does not move), the pose clone against the augmented-state filter; the IMU spike
+// filter; the UKF's analytic propagation of its linear sigma points.
 
 #include <random>
 
@@ -8,6 +9,7 @@
 #include "hanzo/fusion/estimate/error_state_ekf.hpp"
 #include "hanzo/fusion/estimate/imu_spike_filter.hpp"
 #include "hanzo/fusion/estimate/position_models.hpp"
+#include "hanzo/fusion/estimate/unscented_kalman_filter.hpp"
 
 namespace hanzo::fusion::estimate {
 namespace {
@@ -80,11 +82,6 @@ TEST(ImuSpikeFilter, RejectsASpikeAndAcceptsAPersistentChange) {
   EXPECT_LE(accepted_at, 9);
 }
 
-}  // namespace
-}  // namespace hanzo::fusion::estimate
-
-namespace hanzo::fusion::estimate {
-namespace {
 
 // The EKF's clone bookkeeping against an explicit augmented-state EKF (24 = 18 + 6 cloned pose
 // errors) run densely on the same predictions and updates.
@@ -137,6 +134,56 @@ TEST(ErrorStateEkf, PoseCloneMatchesTheAugmentedStateFilter) {
   EXPECT_LT((clone->covariance - P.bottomRightCorner<6, 6>()).cwiseAbs().maxCoeff(), 1e-9);
   EXPECT_LT((clone->correction - clone_delta.tail<6>()).cwiseAbs().maxCoeff(), 1e-9);
   EXPECT_LT((ekf.covariance() - P.topLeftCorner<18, 18>()).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+
+// The UKF propagates the sigma points of the linear dimensions (position, velocity, gravity)
+// analytically; the result must equal pushing all 37 sigma points through propagate_state().
+TEST(UnscentedKalmanFilter, PredictEqualsFullSigmaPointPropagation) {
+  FilterConfig config;
+  config.imu_mounting = {SO3::exp(Eigen::Vector3d(0.02, -0.01, 0.3)), Eigen::Vector3d(0.1, 0.05, 0.0)};
+  const UkfConfig ukf_config{0.5, 2.0, 0.0};
+  UnscentedKalmanFilter ukf(config, ukf_config);
+  NavigationState state;
+  state.velocity = Eigen::Vector3d(3.0, 1.0, 0.0);
+  state.R_world_body = SO3::exp(Eigen::Vector3d(0.1, -0.05, 1.2));
+  Eigen::Matrix<double, 18, 18> A = Eigen::Matrix<double, 18, 18>::Random() * 0.05;
+  const ErrorCovariance P = A * A.transpose() + initial_covariance();
+  ukf.reset(state, P);
+  const ImuSample sample{Timestamp::from_nanoseconds(1), Eigen::Vector3d(0.2, -0.1, 0.6), Eigen::Vector3d(1.0, 0.5, 9.7)};
+  const double dt = 0.01;
+  ukf.predict(sample, dt);
+
+  // Reference: the same sigma points (permuted Cholesky), all propagated.
+  constexpr std::array<int, 18> order{3, 4, 5, 9, 10, 11, 12, 13, 14, 0, 1, 2, 6, 7, 8, 15, 16, 17};
+  const double n = 18.0;
+  const double lambda = ukf_config.alpha * ukf_config.alpha * (n + ukf_config.kappa) - n;
+  ErrorCovariance permuted;
+  for (int i = 0; i < 18; ++i) {
+    for (int j = 0; j < 18; ++j) permuted(i, j) = P(order[static_cast<size_t>(i)], order[static_cast<size_t>(j)]);
+  }
+  const ErrorCovariance root = Eigen::LLT<ErrorCovariance>((n + lambda) * (permuted + 1e-15 * ErrorCovariance::Identity())).matrixL();
+  const auto propagate = [&](const NavigationState& x) {
+    return propagate_state(x, body_motion(x, sample, config.imu_mounting), dt, config.imu_mounting, nullptr);
+  };
+  const NavigationState center = propagate(state);
+  std::vector<ErrorVector> deltas{ErrorVector::Zero()};
+  for (int sign : {1, -1}) {
+    for (int column = 0; column < 18; ++column) {
+      ErrorVector o;
+      for (int i = 0; i < 18; ++i) o(order[static_cast<size_t>(i)]) = sign * root(i, column);
+      deltas.push_back(propagate(state.plus(o)).minus(center));
+    }
+  }
+  const double w = 1.0 / (2.0 * (n + lambda));
+  const double wc0 = lambda / (n + lambda) + (1.0 - ukf_config.alpha * ukf_config.alpha + ukf_config.beta);
+  ErrorVector mean = ErrorVector::Zero();
+  for (size_t i = 1; i < deltas.size(); ++i) mean += w * deltas[i];
+  ErrorCovariance expected = wc0 * mean * mean.transpose();
+  for (size_t i = 1; i < deltas.size(); ++i) expected += w * (deltas[i] - mean) * (deltas[i] - mean).transpose();
+  expected += process_noise(config.imu_noise, dt);
+  EXPECT_LT((ukf.covariance() - expected).cwiseAbs().maxCoeff(), 1e-10);
+  EXPECT_LT(ukf.state().minus(center.plus(mean)).norm(), 1e-10);
 }
 
 }  // namespace
