@@ -89,6 +89,7 @@ Status validate(const FusionConfig& config) {
                  "frontend.gate_probability"};
   }
   if (Status s = non_negative(frontend.lag_window_s, "frontend.lag_window"); !s) return s;
+  if (Status s = non_negative(frontend.gate_recovery_s, "frontend.gate_recovery"); !s) return s;
   for (const auto& [value, field] : {std::pair<double, std::string_view>{frontend.max_future_s, "frontend.max_future"},
                                      {frontend.static_alignment_s, "frontend.static_alignment"},
                                      {frontend.keyframe_interval_s, "frontend.keyframe_interval"}}) {

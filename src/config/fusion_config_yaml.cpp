@@ -75,7 +75,7 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   if (!node.present()) return frontend;
   HANZO_RETURN_IF_ERROR(node.check_keys({"type", "predict_rate", "covariance", "gate_probability", "lag_window", "max_future",
                                          "static_alignment", "planar", "zero_velocity_updates", "datum", "ukf", "particle_filter",
-                                         "keyframe_interval"}));
+                                         "keyframe_interval", "gate_recovery"}));
   if (node["type"].present()) {
     Result<std::string> name = node["type"].as_string();
     if (!name) return name.error();
@@ -92,6 +92,7 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
     }
   }
   HANZO_ASSIGN_OR_RETURN(frontend.lag_window_s, yaml::non_negative_or(node["lag_window"], frontend.lag_window_s));
+  HANZO_ASSIGN_OR_RETURN(frontend.gate_recovery_s, yaml::non_negative_or(node["gate_recovery"], frontend.gate_recovery_s));
   if (node["max_future"].present()) HANZO_ASSIGN_OR_RETURN(frontend.max_future_s, positive_seconds(node["max_future"]));
   if (node["static_alignment"].present()) HANZO_ASSIGN_OR_RETURN(frontend.static_alignment_s, positive_seconds(node["static_alignment"]));
   if (node["keyframe_interval"].present()) HANZO_ASSIGN_OR_RETURN(frontend.keyframe_interval_s, positive_seconds(node["keyframe_interval"]));
@@ -300,6 +301,7 @@ std::string to_yaml(const FusionConfig& config) {
   const FrontendConfig defaults;
   if (f.gate_probability != defaults.gate_probability) out += fmt::format("    gate_probability: {}\n", format_double(f.gate_probability));
   if (f.lag_window_s != defaults.lag_window_s) out += fmt::format("    lag_window: {}  # s\n", format_double(f.lag_window_s));
+  if (f.gate_recovery_s != defaults.gate_recovery_s) out += fmt::format("    gate_recovery: {}  # s\n", format_double(f.gate_recovery_s));
   if (f.max_future_s != defaults.max_future_s) out += fmt::format("    max_future: {}  # s\n", format_double(f.max_future_s));
   if (f.static_alignment_s != defaults.static_alignment_s) {
     out += fmt::format("    static_alignment: {}  # s\n", format_double(f.static_alignment_s));

@@ -41,7 +41,7 @@ MeasurementVector WheelOdometryModel::residual(const NavigationState& state, Mea
   MeasurementVector r(rows);
   if (jacobian != nullptr) jacobian->setZero(rows, kErrorStateDimension);
   int row = 0;
-  const bool used[3] = {true, measurement_.lateral_constraint, measurement_.vertical_constraint};
+  const bool used[3] = {measurement_.use_speed, measurement_.lateral_constraint, measurement_.vertical_constraint};
   for (int axis = 0; axis < 3; ++axis) {
     if (!used[axis]) continue;
     r(row) = (axis == 0 ? measurement_.forward_speed : 0.0) - velocity(axis);
@@ -59,7 +59,7 @@ MeasurementVector WheelOdometryModel::residual(const NavigationState& state, Mea
 MeasurementCovariance WheelOdometryModel::covariance() const {
   MeasurementVector sigmas(dimension());
   int row = 0;
-  sigmas(row++) = measurement_.forward_speed_sigma;
+  if (measurement_.use_speed) sigmas(row++) = measurement_.forward_speed_sigma;
   if (measurement_.lateral_constraint) sigmas(row++) = measurement_.lateral_speed_sigma;
   if (measurement_.vertical_constraint) sigmas(row++) = measurement_.lateral_speed_sigma;
   if (measurement_.use_yaw_rate) sigmas(row) = measurement_.yaw_rate_sigma;

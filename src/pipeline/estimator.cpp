@@ -32,10 +32,6 @@ constexpr double kPlanarVerticalSpeedSigma = 0.01;  // m/s
 constexpr double kZeroVelocitySigma = 0.005;        // m/s
 constexpr double kZeroRateSigma = 0.002;            // rad/s
 constexpr double kWheelGap = 1.0;                   // s: longer gaps between wheel readings are not differenced
-// s: a sensor whose every update has been gated for this long is fused without the gate: by
-// then the estimate (dead reckoning through a slip, a bad initialization) is the likelier
-// culprit, and gating it out forever would lock the filter out of its own aiding sensors.
-constexpr double kGateLockout = 2.0;
 
 // Default GNSS position noise per fix type when a message has no covariance (1 sigma, m).
 Eigen::Matrix3d default_gnss_covariance(msgs::GnssFixType fix) {
@@ -97,7 +93,7 @@ Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup
   constexpr double kUnknownYawSigma = 0.5;  // rad
   heading_pending_ = has_gnss && !sensors_[imu_sensor_].config->fusion.use_orientation[2] &&
                      frontend_.covariance.initial_orientation.z() > kUnknownYawSigma;
-  gated_since_.resize(sensors_.size());
+  gated_since_.resize(2 * sensors_.size());
 }
 
 Estimator::Estimator(const Estimator& other)
@@ -192,9 +188,13 @@ void Estimator::predict_to(Timestamp t) {
 }
 
 bool Estimator::update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer,
-                       std::string_view* reason) {
-  Timestamp& gated_since = gated_since_[event.sensor];
-  const bool locked_out = !gated_since.is_zero() && (event.time - gated_since).seconds() > kGateLockout;
+                       std::string_view* reason, int channel) {
+  Timestamp& gated_since = gated_since_[2 * event.sensor + static_cast<size_t>(channel)];
+  // A sensor whose every update has been gated for gate_recovery seconds is fused without the
+  // gate: by then the estimate (a bad start, a misconfigured noise) is the likelier culprit, and
+  // gating it out forever would lock the filter out of its own aiding sensors.
+  const double recovery = frontend_.gate_recovery_s;
+  const bool locked_out = recovery > 0.0 && !gated_since.is_zero() && (event.time - gated_since).seconds() > recovery;
   const estimate::UpdateOutcome outcome = filter_->update(model, !locked_out);
   if (observer != nullptr) observer->on_update({event.sensor, model.name(), event.time, outcome});
   if (outcome.status == estimate::UpdateStatus::kRejectedByGate && gated_since.is_zero()) gated_since = event.time;
@@ -487,9 +487,23 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
   measurement.lateral_speed_sigma = options.lateral_speed_noise;
   measurement.lateral_constraint = options.non_holonomic;
   measurement.vertical_constraint = options.non_holonomic && !frontend_.planar;
-  measurement.use_yaw_rate = options.use_yaw_rate;
-  const estimate::WheelOdometryModel model(measurement, sensor.T_body_sensor, gyro);
-  outcome.fused = update(event, model, observer, &outcome.reason);
+  // Speed (with the non-holonomic constraint) and yaw rate are gated separately: a slipping
+  // wheel shows first in the yaw rate, which the gyro contradicts, while the speed may still
+  // be good.
+  measurement.use_yaw_rate = false;
+  outcome.fused = update(event, estimate::WheelOdometryModel(measurement, sensor.T_body_sensor, gyro), observer, &outcome.reason);
+  if (options.use_yaw_rate) {
+    estimate::WheelOdometryMeasurement yaw = measurement;
+    yaw.use_speed = yaw.lateral_constraint = yaw.vertical_constraint = false;
+    yaw.use_yaw_rate = true;
+    std::string_view yaw_reason;
+    if (update(event, estimate::WheelOdometryModel(yaw, sensor.T_body_sensor, gyro), observer, &yaw_reason, 1)) {
+      outcome.fused = true;
+    } else if (outcome.fused) {
+      outcome.fused = false;
+      outcome.reason = yaw_reason;  // counted by its worst part
+    }
+  }
   return outcome;
 }
 

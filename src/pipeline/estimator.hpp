@@ -114,7 +114,10 @@ class Estimator {
   /// Propagates the filter to t with the last IMU sample held.
   void predict_to(Timestamp t);
   /// Runs one gated update and reports it; true when applied.
-  bool update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer, std::string_view* reason);
+  /// channel: which of the sensor's updates this is (0, or 1 for a wheel's separate yaw rate),
+  /// so that each is tracked for gate recovery on its own.
+  bool update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer, std::string_view* reason,
+              int channel = 0);
   void apply_constraints(const Event& event);
   /// A keyframe when keyframe_interval has passed since the previous one (IMU events only).
   std::optional<msgs::Keyframe> maybe_keyframe(Timestamp time);
@@ -132,7 +135,7 @@ class Estimator {
   std::vector<estimate::ImuSample> alignment_samples_;
   std::vector<std::optional<msgs::WheelOdometryMessage>> previous_wheels_;
   std::vector<Timestamp> last_fused_;
-  std::vector<Timestamp> gated_since_;  // per sensor: start of the current run of gated updates
+  std::vector<Timestamp> gated_since_;  // per sensor and channel: start of the current run of gated updates
   std::optional<EnuFrame> enu_;
   /// The latest usable GNSS fix seen before initialization (sensor index, fix): with a
   /// configured datum it gives the initial position.

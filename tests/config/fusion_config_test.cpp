@@ -63,7 +63,8 @@ TEST(FusionConfig, EachRuleGivesItsDocumentedError) {
             "fusion.yaml:4: frontend.covariance.process_noise_accel: expected a finite number, got '.nan'");
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    tpye: ekf\n"),
             "fusion.yaml:3: frontend.tpye: unknown key (expected one of: type, predict_rate, covariance, gate_probability, lag_window, "
-            "max_future, static_alignment, planar, zero_velocity_updates, datum, ukf, particle_filter, keyframe_interval)");
+            "max_future, static_alignment, planar, zero_velocity_updates, datum, ukf, particle_filter, keyframe_interval, "
+            "gate_recovery)");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      topic: /imu\n"),
             "fusion.yaml:3: sensors.imu.rate: missing (expected the sensor's rate in Hz)");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      rate: fast\n"),
@@ -90,6 +91,7 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   config.frontend.lag_window_s = 0.25;
   config.frontend.planar = true;
   config.frontend.keyframe_interval_s = 0.5;
+  config.frontend.gate_recovery_s = 0.0;
   config.frontend.ukf = {0.5, 1.0, -2.0};
   config.frontend.particle_filter = {2000, 0.25, 7};
   config.frontend.datum = GeodeticPoint{48.1, 11.5, 520.25};
@@ -100,7 +102,7 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   config.sensors.push_back({"imu2", SensorModality::kImu, "/imu2", 100.0, "imu2_link", "",
                             {.use_orientation = {true, false, true}, .orientation_noise = 0.02}});
   config.sensors.push_back({"wheels2", SensorModality::kWheelOdometry, "/wheels2", 50.0, "base_link", "",
-                            {.speed_noise = 0.1, .use_yaw_rate = false, .non_holonomic = false}});
+                            {.speed_noise = 0.1, .use_yaw_rate = true, .non_holonomic = false}});
   const std::filesystem::path path = std::filesystem::temp_directory_path() / "hanzo_fusion_config_test.yaml";
   ASSERT_TRUE(save_fusion_config(config, path.string()).ok());
   const Result<FusionConfig> loaded = load_fusion_config(path.string());
@@ -110,7 +112,7 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   EXPECT_TRUE(loaded->frontend.planar);
   EXPECT_EQ(loaded->find_sensor("tracker")->fusion.min_fix, msgs::GnssFixType::kRtkFloat);
   EXPECT_EQ(loaded->find_sensor("imu2")->fusion.use_orientation, (std::array<bool, 3>{true, false, true}));
-  EXPECT_FALSE(loaded->find_sensor("wheels2")->fusion.use_yaw_rate);
+  EXPECT_TRUE(loaded->find_sensor("wheels2")->fusion.use_yaw_rate);
   EXPECT_EQ(loaded->frontend.covariance.process_noise_accel, 0.123456789012345);
   ASSERT_EQ(loaded->sensors.size(), 10U);
   EXPECT_EQ(loaded->sensors[6].topic, "/radar: front");

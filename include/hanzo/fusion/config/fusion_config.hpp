@@ -74,6 +74,10 @@ struct FrontendConfig {
   CovarianceConfig covariance;
   /// Chi-square gate probability of every update, in (0, 1]; 1 turns gating off.
   double gate_probability = 0.999;
+  /// s >= 0: a sensor gated continuously for this long is fused without the gate once (the
+  /// estimate is then the likelier culprit); 0 never. Longer than the sensor faults it should
+  /// ride out (wheel slip, multipath episodes).
+  double gate_recovery_s = 10.0;
   /// s >= 0: a message older than the newest fused one by at most this is fused by rolling
   /// back and re-propagating; older ones are rejected as too late. 0 rejects every late message.
   double lag_window_s = 0.5;
@@ -107,7 +111,7 @@ struct SensorFusionOptions {
   double speed_noise = 0.05;          // m/s, forward speed
   double yaw_rate_noise = 0.05;       // rad/s
   double lateral_speed_noise = 0.05;  // m/s, non-holonomic constraint
-  bool use_yaw_rate = true;
+  bool use_yaw_rate = false;  // the gyro measures it better; wheel scale errors bias it
   bool non_holonomic = true;
   // gnss
   msgs::GnssFixType min_fix = msgs::GnssFixType::kFix3d;  // weaker fixes are rejected

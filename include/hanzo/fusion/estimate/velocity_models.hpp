@@ -43,7 +43,7 @@ class SensorVelocityModel final : public MeasurementModel {
 /// Differential-drive wheel odometry between two messages: forward speed
 /// v = (dL + dR) / (2 dt) and yaw rate w = (dR - dL) / (b dt) of the wheel frame (x forward,
 /// z up; calibration "<wheels>_to_body"). Residual entries, in this order:
-///   forward speed; lateral speed = 0 when lateral_constraint and vertical speed = 0 when
+///   forward speed (when use_speed); lateral speed = 0 when lateral_constraint and vertical speed = 0 when
 ///   vertical_constraint (the non-holonomic constraint: a wheel does not slide sideways or leave
 ///   the ground; planar mode drops the vertical one, which contradicts a level-height constraint
 ///   while the IMU reports pitch); yaw rate when use_yaw_rate
@@ -55,6 +55,7 @@ struct WheelOdometryMeasurement {
   double forward_speed_sigma = 0.05;  // m/s
   double yaw_rate_sigma = 0.05;       // rad/s
   double lateral_speed_sigma = 0.05;  // m/s, non-holonomic constraint (lateral and vertical)
+  bool use_speed = true;
   bool lateral_constraint = true;
   bool vertical_constraint = true;
   bool use_yaw_rate = true;
@@ -67,7 +68,8 @@ class WheelOdometryModel final : public MeasurementModel {
 
   std::string_view name() const override { return "wheel_odometry"; }
   int dimension() const override {
-    return 1 + (measurement_.lateral_constraint ? 1 : 0) + (measurement_.vertical_constraint ? 1 : 0) + (measurement_.use_yaw_rate ? 1 : 0);
+    return (measurement_.use_speed ? 1 : 0) + (measurement_.lateral_constraint ? 1 : 0) + (measurement_.vertical_constraint ? 1 : 0) +
+           (measurement_.use_yaw_rate ? 1 : 0);
   }
   MeasurementVector residual(const NavigationState& state, MeasurementJacobian* jacobian) const override;
   MeasurementCovariance covariance() const override;
