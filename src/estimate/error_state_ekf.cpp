@@ -60,19 +60,7 @@ UpdateOutcome ErrorStateEkf::update_fixed(const MeasurementModel& model, bool ap
   const GainMatrix PHt = covariance_ * H.transpose();
   const Square S = H * PHt + Square(model.covariance());
   const Eigen::LLT<Square> llt(S);
-  if (llt.info() != Eigen::Success || !r.allFinite()) {
-    outcome.status = UpdateStatus::kNumericalFailure;
-    return outcome;
-  }
-  outcome.mahalanobis_squared = r.dot(llt.solve(r));
-  if (!std::isfinite(outcome.mahalanobis_squared)) {
-    outcome.status = UpdateStatus::kNumericalFailure;
-    return outcome;
-  }
-  if (apply_gate && outcome.mahalanobis_squared > outcome.gate) {
-    outcome.status = UpdateStatus::kRejectedByGate;
-    return outcome;
-  }
+  if (!passes_gate(llt, r, apply_gate, outcome)) return outcome;
   // K = P H^T S^-1, computed as (S^-1 H P)^T (S symmetric).
   const GainMatrix K = llt.solve(PHt.transpose()).transpose();
   const ErrorVector delta = K * r;

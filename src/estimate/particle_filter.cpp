@@ -68,21 +68,12 @@ UpdateOutcome ParticleFilter::update(const MeasurementModel& model, bool apply_g
     S.noalias() += weights_[i] * d * d.transpose();
   }
   outcome.innovation = mean;
-  const Eigen::LLT<MeasurementCovariance> s_llt(S);
   const Eigen::LLT<MeasurementCovariance> noise_llt(noise);
-  if (s_llt.info() != Eigen::Success || noise_llt.info() != Eigen::Success || !mean.allFinite()) {
+  if (noise_llt.info() != Eigen::Success) {
     outcome.status = UpdateStatus::kNumericalFailure;
     return outcome;
   }
-  outcome.mahalanobis_squared = mean.dot(s_llt.solve(mean));
-  if (!std::isfinite(outcome.mahalanobis_squared)) {
-    outcome.status = UpdateStatus::kNumericalFailure;
-    return outcome;
-  }
-  if (apply_gate && outcome.mahalanobis_squared > outcome.gate) {
-    outcome.status = UpdateStatus::kRejectedByGate;
-    return outcome;
-  }
+  if (!passes_gate(Eigen::LLT<MeasurementCovariance>(S), mean, apply_gate, outcome)) return outcome;
   // Log-weights, normalized with the log-sum-exp trick.
   std::vector<double> log_weights(count);
   double largest = -std::numeric_limits<double>::infinity();

@@ -119,19 +119,7 @@ UpdateOutcome UnscentedKalmanFilter::update(const MeasurementModel& model, bool 
   const CrossCovariance cross = -weight_ * offsets.rightCols<kSigmaPoints - 1>() * residuals.rightCols<kSigmaPoints - 1>().transpose();
 
   const Eigen::LLT<MeasurementCovariance> llt(S);
-  if (llt.info() != Eigen::Success || !mean.allFinite()) {
-    outcome.status = UpdateStatus::kNumericalFailure;
-    return outcome;
-  }
-  outcome.mahalanobis_squared = mean.dot(llt.solve(mean));
-  if (!std::isfinite(outcome.mahalanobis_squared)) {
-    outcome.status = UpdateStatus::kNumericalFailure;
-    return outcome;
-  }
-  if (apply_gate && outcome.mahalanobis_squared > outcome.gate) {
-    outcome.status = UpdateStatus::kRejectedByGate;
-    return outcome;
-  }
+  if (!passes_gate(llt, mean, apply_gate, outcome)) return outcome;
   const CrossCovariance K = llt.solve(cross.transpose()).transpose();
   const NavigationState updated = state_.plus(K * mean);
   if (!updated.all_finite()) {

@@ -14,9 +14,12 @@
 // rejected and the estimate does not change.
 
 #include <array>
+#include <cmath>
 #include <memory>
 #include <optional>
 #include <string_view>
+
+#include <Eigen/Cholesky>
 
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/estimate/imu_propagation.hpp"
@@ -83,6 +86,28 @@ class Filter {
   virtual void clone_pose() {}
   virtual std::optional<PoseClone> pose_clone() const { return std::nullopt; }
 };
+
+/// The gate every filter applies: d^2 = r^T S^-1 r from S's Cholesky factorization. Sets
+/// outcome.mahalanobis_squared and, when the update must not be applied, outcome.status
+/// (numerical failure when S is not positive definite or a number is not finite, gated beyond
+/// outcome.gate when apply_gate). Returns true when the update may be applied.
+template <typename Cholesky, typename Vector>
+bool passes_gate(const Cholesky& s_cholesky, const Vector& innovation, bool apply_gate, UpdateOutcome& outcome) {
+  if (s_cholesky.info() != Eigen::Success || !innovation.allFinite()) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return false;
+  }
+  outcome.mahalanobis_squared = innovation.dot(s_cholesky.solve(innovation));
+  if (!std::isfinite(outcome.mahalanobis_squared)) {
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return false;
+  }
+  if (apply_gate && outcome.mahalanobis_squared > outcome.gate) {
+    outcome.status = UpdateStatus::kRejectedByGate;
+    return false;
+  }
+  return true;
+}
 
 /// apply_world_transform() for a state and its covariance (shared by the filters).
 void transform_in_world(const SE3& T_correction, NavigationState& state, ErrorCovariance* covariance);
