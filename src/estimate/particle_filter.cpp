@@ -25,6 +25,7 @@ void ParticleFilter::reset(const NavigationState& state, const ErrorCovariance& 
   const ErrorCovariance root = llt.matrixL();
   particles_.assign(count, state);
   weights_.assign(count, 1.0 / static_cast<double>(count));
+  clones_.clear();
   for (size_t i = 1; i < count; ++i) {  // particle 0 stays at the given state
     ErrorVector draw;
     for (int k = 0; k < kErrorStateDimension; ++k) draw(k) = normal_(random_);
@@ -94,6 +95,36 @@ UpdateOutcome ParticleFilter::update(const MeasurementModel& model, bool apply_g
 
 void ParticleFilter::apply_world_transform(const SE3& T_correction) {
   for (NavigationState& particle : particles_) transform_in_world(T_correction, particle, nullptr);
+  clones_.clear();  // the clone's frame moved: the next keyframe starts afresh
+}
+
+void ParticleFilter::clone_pose() {
+  const NavigationState mean = state();
+  clone_anchor_ = SE3(mean.R_world_body, mean.position);
+  clones_.resize(particles_.size());
+  for (size_t i = 0; i < particles_.size(); ++i) clones_[i] = SE3(particles_[i].R_world_body, particles_[i].position);
+}
+
+std::optional<PoseClone> ParticleFilter::pose_clone() const {
+  if (clones_.empty()) return std::nullopt;
+  using Vector6 = Eigen::Matrix<double, 6, 1>;
+  std::vector<ErrorVector> deltas;
+  const ErrorVector state_mean = mean_delta(&deltas);
+  std::vector<Vector6> clone_deltas(clones_.size());
+  Vector6 clone_mean = Vector6::Zero();
+  for (size_t i = 0; i < clones_.size(); ++i) {
+    clone_deltas[i].head<3>() = clones_[i].translation() - clone_anchor_.translation();
+    clone_deltas[i].tail<3>() = (clone_anchor_.rotation().inverse() * clones_[i].rotation()).log();
+    clone_mean += weights_[i] * clone_deltas[i];
+  }
+  PoseClone clone;
+  clone.correction = clone_mean;
+  for (size_t i = 0; i < clones_.size(); ++i) {
+    const Vector6 c = clone_deltas[i] - clone_mean;
+    clone.covariance.noalias() += weights_[i] * c * c.transpose();
+    clone.cross.noalias() += weights_[i] * c * (deltas[i] - state_mean).transpose();
+  }
+  return clone;
 }
 
 double ParticleFilter::effective_sample_size() const {
@@ -108,6 +139,7 @@ void ParticleFilter::resample() {
   const double step = 1.0 / static_cast<double>(count);
   const double offset = std::uniform_real_distribution<double>(0.0, step)(random_);
   std::vector<NavigationState> resampled;
+  std::vector<SE3> resampled_clones;
   resampled.reserve(count);
   double cumulative = weights_[0];
   size_t source = 0;
@@ -115,8 +147,10 @@ void ParticleFilter::resample() {
     const double pointer = offset + static_cast<double>(i) * step;
     while (pointer > cumulative && source + 1 < count) cumulative += weights_[++source];
     resampled.push_back(particles_[source]);
+    if (!clones_.empty()) resampled_clones.push_back(clones_[source]);
   }
   particles_ = std::move(resampled);
+  clones_ = std::move(resampled_clones);
   weights_.assign(count, step);
   ++resamplings_;
 }

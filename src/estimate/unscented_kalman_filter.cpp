@@ -19,9 +19,20 @@ UnscentedKalmanFilter::UnscentedKalmanFilter(const FilterConfig& config, const U
 void UnscentedKalmanFilter::reset(const NavigationState& state, const ErrorCovariance& covariance) {
   state_ = state;
   covariance_ = covariance;
+  clone_.reset();
 }
 
-void UnscentedKalmanFilter::apply_world_transform(const SE3& T_correction) { transform_in_world(T_correction, state_, &covariance_); }
+void UnscentedKalmanFilter::clone_pose() {
+  PoseClone clone;
+  clone.covariance = covariance_.topLeftCorner<6, 6>();
+  clone.cross = covariance_.topRows<6>();
+  clone_ = clone;
+}
+
+void UnscentedKalmanFilter::apply_world_transform(const SE3& T_correction) {
+  transform_in_world(T_correction, state_, &covariance_);
+  clone_.reset();  // the clone's frame moved: the next keyframe starts afresh
+}
 
 bool UnscentedKalmanFilter::sigma_offsets(Eigen::Matrix<double, kErrorStateDimension, kSigmaPoints>& offsets) const {
   // Tiny jitter keeps the Cholesky factor defined for states with (near) zero variance, such as
@@ -65,6 +76,11 @@ void UnscentedKalmanFilter::predict(const ImuSample& sample, double dt) {
     return propagate_state(point, body_motion(point, sample, config_.imu_mounting), dt, config_.imu_mounting, nullptr);
   };
   const NavigationState center = propagate(state_);
+  if (clone_) {
+    ImuTransition transition;
+    propagate_state(state_, body_motion(state_, sample, config_.imu_mounting), dt, config_.imu_mounting, &transition);
+    multiply_by_transition_transpose(clone_->cross, transition);
+  }
   Eigen::Matrix<double, kErrorStateDimension, kSigmaPoints> deltas;
   deltas.col(0).setZero();
   for (int column = 0; column < kErrorStateDimension; ++column) {
@@ -125,6 +141,16 @@ UpdateOutcome UnscentedKalmanFilter::update(const MeasurementModel& model, bool 
   if (!updated.all_finite()) {
     outcome.status = UpdateStatus::kNumericalFailure;
     return outcome;
+  }
+  if (clone_) {
+    using CloneGain = Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, kMaxMeasurementDimension>;
+    MeasurementJacobian H;
+    model.residual(state_, &H);
+    const CloneGain CHt = clone_->cross * H.transpose();  // Cov(clone, predicted measurement)
+    const CloneGain clone_gain = llt.solve(CHt.transpose()).transpose();
+    clone_->correction += clone_gain * mean;
+    clone_->covariance -= clone_gain * CHt.transpose();
+    clone_->cross -= CHt * K.transpose();
   }
   state_ = updated;
   covariance_ -= K * S * K.transpose();

@@ -269,6 +269,30 @@ TEST(Session, EmitsKeyframesWithRelativeMotionAndTakesBackendCorrections) {
   EXPECT_EQ(reason_of(session->apply_correction(999, SE3())), "unknown_keyframe");
 }
 
+TEST(Session, EveryFilterGivesKeyframesARelativeCovarianceWithCrossTerms) {
+  for (const config::FrontendType type : {config::FrontendType::kEkf, config::FrontendType::kUkf, config::FrontendType::kParticle}) {
+    config::FusionConfig config = fusion_config();
+    config.frontend.type = type;
+    config.frontend.particle_filter.particles = 500;
+    auto session = Session::create(config, calib::Calibration{}).value();
+    std::vector<msgs::Keyframe> keyframes;
+    session->set_keyframe_callback([&keyframes](const msgs::Keyframe& keyframe) { keyframes.push_back(keyframe); });
+    for (const Message& m : drive(15.0)) {
+      if (m.sensor != "gnss") {
+        ASSERT_TRUE(session->push(m.sensor, m.message).ok());
+      }
+    }
+    ASSERT_EQ(keyframes.size(), 14U) << config::to_string(type);
+    const msgs::Keyframe& last = keyframes.back();
+    const double relative_variance = last.relative_covariance->topLeftCorner<3, 3>().trace();
+    const double absolute_variance = last.pose_covariance->topLeftCorner<3, 3>().trace();
+    std::printf("%s: keyframe relative position variance %.3g m^2, absolute %.3g m^2\n", std::string(config::to_string(type)).c_str(),
+                relative_variance, absolute_variance);
+    EXPECT_LT(relative_variance, 0.25 * absolute_variance) << config::to_string(type);
+    EXPECT_NEAR(last.T_previous_current->position.x(), 1.0, 0.05) << config::to_string(type);
+  }
+}
+
 TEST(Session, FusesLidarPosesAndRelativePoses) {
   auto session = make_session();
   msgs::Matrix6d covariance = msgs::Matrix6d::Identity() * 1e-4;

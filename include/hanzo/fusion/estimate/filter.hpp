@@ -80,9 +80,9 @@ class Filter {
 
   /// Stochastic cloning for keyframes: remember the current pose (position, orientation) and
   /// from now on track it as if it were part of the state: its correction by later updates,
-  /// its covariance and its cross-covariance with the current error state. Filters that cannot
-  /// (UKF, particle filter) return nullopt from pose_clone(); relative covariances then leave
-  /// the cross terms out.
+  /// its covariance and its cross-covariance with the current error state. pose_clone() is
+  /// nullopt before the first clone_pose() and after apply_world_transform(); relative
+  /// covariances then leave the cross terms out.
   virtual void clone_pose() {}
   virtual std::optional<PoseClone> pose_clone() const { return std::nullopt; }
 };

@@ -41,6 +41,11 @@ class ParticleFilter final : public Filter {
   ErrorCovariance covariance() const override;
   std::unique_ptr<Filter> clone() const override { return std::make_unique<ParticleFilter>(*this); }
   void apply_world_transform(const SE3& T_correction) override;
+  /// Every particle keeps its own copy of its pose at the clone (carried through resampling);
+  /// pose_clone() gives their weighted statistics against the current particles: exact for the
+  /// cloud, no linearization.
+  void clone_pose() override;
+  std::optional<PoseClone> pose_clone() const override;
 
   const std::vector<NavigationState>& particles() const { return particles_; }
   /// Normalized weights (sum 1).
@@ -62,6 +67,8 @@ class ParticleFilter final : public Filter {
   std::vector<NavigationState> particles_;
   std::vector<double> weights_;
   uint64_t resamplings_ = 0;
+  std::vector<SE3> clones_;  // per particle: its pose at clone_pose(), empty when none
+  SE3 clone_anchor_;         // the cloud's mean pose at clone_pose()
 };
 
 }  // namespace hanzo::fusion::estimate

@@ -36,6 +36,11 @@ class UnscentedKalmanFilter final : public Filter {
   ErrorCovariance covariance() const override { return covariance_; }
   std::unique_ptr<Filter> clone() const override { return std::make_unique<UnscentedKalmanFilter>(*this); }
   void apply_world_transform(const SE3& T_correction) override;
+  /// The clone is tracked with the EKF's linear recursion (transition blocks of the mean on
+  /// predict, the models' Jacobians for the clone's gain on update): sigma points are not
+  /// augmented with it.
+  void clone_pose() override;
+  std::optional<PoseClone> pose_clone() const override { return clone_; }
 
  private:
   static constexpr int kSigmaPoints = 2 * kErrorStateDimension + 1;
@@ -50,6 +55,7 @@ class UnscentedKalmanFilter final : public Filter {
   double weight_ = 0.0;
   NavigationState state_;
   ErrorCovariance covariance_ = ErrorCovariance::Identity();
+  std::optional<PoseClone> clone_;
 };
 
 }  // namespace hanzo::fusion::estimate

@@ -135,9 +135,8 @@ class Session {
   void set_pose_callback(PoseCallback callback);
   void set_innovation_callback(InnovationCallback callback);
   /// Called for every Keyframe (frontend.keyframe_interval apart): the pose, its covariance, and
-  /// the relative motion since the previous keyframe with its covariance (from the EKF's pose
-  /// clone, cross-correlations included; the UKF and particle filter leave the cross terms out,
-  /// which overstates it).
+  /// the relative motion since the previous keyframe with its covariance (from the filter's pose
+  /// clone, cross-correlations included).
   void set_keyframe_callback(KeyframeCallback callback);
 
   /// The backend's hook: keyframe `keyframe_id` is really at T_world_body_optimized. The
