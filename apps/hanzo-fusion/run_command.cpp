@@ -39,14 +39,6 @@ struct RunOptions {
   std::string ground_truth;
 };
 
-struct PoseRow {
-  msgs::PoseEstimate pose;
-};
-
-struct InnovationRow {
-  pipeline::InnovationRecord record;
-};
-
 // A progress bar on stderr, only when stderr is a terminal.
 class ProgressBar {
  public:
