@@ -17,6 +17,8 @@ packages=(
   libopencv-dev
   # sim: parallel ray casting
   libtbb-dev
+  # graph: nonlinear least squares (with SuiteSparse)
+  libceres-dev
   # apps
   libcli11-dev
   # tests and benchmarks (Embree: the ray-casting peer of the simulator benchmark)

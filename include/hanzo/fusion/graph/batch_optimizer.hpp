@@ -1,0 +1,40 @@
+#pragma once
+// Batch optimization of a FactorGraph with Ceres (Levenberg-Marquardt or dogleg, sparse
+// Cholesky of the normal equations). Poses are Ceres parameter blocks with their own
+// manifolds (SE2: x, y, theta; SE3: translation + quaternion x, y, z, w) updated by
+// T <- T Exp(d), so the factors' tangent-space Jacobians are used as they are.
+
+#include <string>
+#include <vector>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/graph/factor_graph.hpp"
+
+namespace hanzo::fusion::graph {
+
+struct BatchOptimizerConfig {
+  enum class Method { kLevenbergMarquardt, kDogleg };
+  Method method = Method::kLevenbergMarquardt;
+  int max_iterations = 100;
+  double function_tolerance = 1e-12;   // relative cost decrease that ends the run
+  double gradient_tolerance = 1e-12;
+  double parameter_tolerance = 1e-12;
+  int num_threads = 1;
+  /// Variables held constant (the gauge: usually the first pose).
+  std::vector<Key> fixed;
+};
+
+struct OptimizationSummary {
+  double initial_chi2 = 0.0;  // sum of squared whitened residuals
+  double final_chi2 = 0.0;
+  int iterations = 0;
+  double seconds = 0.0;
+  bool converged = false;
+  std::string message;        // Ceres' termination message
+};
+
+/// Optimizes `values` in place. Fails when a factor's variable is missing from values or a
+/// fixed key is unknown.
+Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, const BatchOptimizerConfig& config = {});
+
+}  // namespace hanzo::fusion::graph

@@ -1,0 +1,28 @@
+#pragma once
+// FactorGraph: a list of factors; its cost at some values is 1/2 sum ||r_k||^2 over the
+// whitened residuals (chi2() returns the sum without the 1/2, as g2o reports it).
+
+#include <vector>
+
+#include "hanzo/fusion/graph/factor.hpp"
+
+namespace hanzo::fusion::graph {
+
+class FactorGraph {
+ public:
+  void add(FactorPointer factor) { factors_.push_back(std::move(factor)); }
+  template <typename FactorType, typename... Arguments>
+  void emplace(Arguments&&... arguments) {
+    factors_.push_back(std::make_shared<FactorType>(std::forward<Arguments>(arguments)...));
+  }
+  const std::vector<FactorPointer>& factors() const { return factors_; }
+  size_t size() const { return factors_.size(); }
+
+  /// sum ||r_k||^2; fails when a factor's variable is missing from values.
+  Result<double> chi2(const Values& values) const;
+
+ private:
+  std::vector<FactorPointer> factors_;
+};
+
+}  // namespace hanzo::fusion::graph

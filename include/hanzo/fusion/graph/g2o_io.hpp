@@ -1,0 +1,63 @@
+#pragma once
+// Pose graphs in g2o's text format (the format of the SE-Sync / g2o benchmark files):
+//   VERTEX_SE2 id x y theta
+//   EDGE_SE2 i j dx dy dtheta  I11 I12 I13 I22 I23 I33          (information upper triangle)
+//   VERTEX_SE3:QUAT id x y z qx qy qz qw
+//   EDGE_SE3:QUAT i j dx dy dz dqx dqy dqz dqw  + 21 information entries (upper triangle,
+//                                                 order x y z | quaternion x y z)
+// An edge measures pose j in frame i. Vertex id n becomes key X(n). Vertices without a VERTEX
+// line are initialized by chaining edges from known ones. `FIX id` lines mark fixed vertices.
+//
+// g2o's 3D information is over the quaternion's vector part, which is half the rotation
+// vector; the between factors here use the rotation vector, so their information is
+// diag(I, I/2) * info * diag(I, I/2) (what GTSAM does too).
+//
+// Errors name the file and line: unknown tags, wrong field counts, non-finite numbers,
+// quaternions off unit norm by more than 1e-3, information that is not positive definite,
+// 2D and 3D mixed, vertices no edge connects to a known one.
+
+#include <string>
+#include <vector>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/graph/factor_graph.hpp"
+
+namespace hanzo::fusion::graph {
+
+struct PoseGraphEdge {
+  Key from = 0;
+  Key to = 0;
+  Value measurement;               // SE2 or SE3: pose `to` in frame `from`
+  Eigen::MatrixXd information;     // as in the file (g2o's error coordinates)
+};
+
+struct PoseGraph {
+  int dimension = 2;               // 2 or 3
+  Values initial;                  // VERTEX lines, then chained edges for the missing ones
+  std::vector<Key> vertices;       // in file order (chained ones after)
+  std::vector<PoseGraphEdge> edges;
+  std::vector<Key> fixed;          // FIX lines; the first vertex when there are none
+
+  /// What the optimizer minimizes: g2o's (geodesic) between factors, or SE-Sync's objective
+  /// (chordal rotation distance), whose global optima the SE-Sync papers publish.
+  enum class Objective { kGeodesic, kChordal };
+  /// One between factor per edge: geodesic with noise from the information (converted for 3D,
+  /// see above), or chordal with SE-Sync's kappa and tau (se_sync_objective()).
+  Result<FactorGraph> factor_graph(Objective objective = Objective::kGeodesic) const;
+};
+
+Result<PoseGraph> read_g2o(const std::string& path);
+/// source_name stands in for the file name in error messages.
+Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_name);
+/// The graph's vertices at `values` and its edges, in g2o's format; numbers in shortest
+/// round-trip form, so reading the file back gives the same graph. Written atomically.
+Status write_g2o(const std::string& path, const PoseGraph& graph, const Values& values);
+
+/// g2o's chi2: sum e^T info e with g2o's errors (SE2: (x, y, wrapped theta) of Z^-1 Ti^-1 Tj;
+/// SE3: translation and quaternion vector part, w >= 0).
+Result<double> g2o_chi2(const PoseGraph& graph, const Values& values);
+/// SE-Sync's objective (Rosen et al. 2019): sum kappa ||R_j - R_i R~||_F^2 + tau ||t_j - t_i - R_i t~||^2
+/// with tau = d / trace(info_tt^-1), kappa = info_thetatheta (2D) or 3 / (2 trace(info_RR^-1)) (3D).
+Result<double> se_sync_objective(const PoseGraph& graph, const Values& values);
+
+}  // namespace hanzo::fusion::graph

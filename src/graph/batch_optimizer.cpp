@@ -1,0 +1,195 @@
+#include "hanzo/fusion/graph/batch_optimizer.hpp"
+
+#include <map>
+#include <memory>
+
+#include <ceres/ceres.h>
+#include <fmt/format.h>
+
+namespace hanzo::fusion::graph {
+namespace {
+
+// Parameter layouts: SE2 (x, y, theta); SE3 (tx, ty, tz, qx, qy, qz, qw); Vector3 (x, y, z).
+int ambient_size(const Value& value) { return std::holds_alternative<SE3>(value) ? 7 : 3; }
+int tangent_size(const Value& value) { return std::holds_alternative<SE3>(value) ? 6 : 3; }
+
+void to_parameters(const Value& value, double* p) {
+  if (const auto* se2 = std::get_if<SE2>(&value)) {
+    p[0] = se2->translation().x();
+    p[1] = se2->translation().y();
+    p[2] = se2->angle();
+  } else if (const auto* se3 = std::get_if<SE3>(&value)) {
+    Eigen::Map<Eigen::Vector3d>{p} = se3->translation();
+    const Eigen::Quaterniond& q = se3->rotation().quaternion();
+    p[3] = q.x();
+    p[4] = q.y();
+    p[5] = q.z();
+    p[6] = q.w();
+  } else {
+    Eigen::Map<Eigen::Vector3d>{p} = std::get<Eigen::Vector3d>(value);
+  }
+}
+
+SE2 se2_from(const double* p) { return SE2(p[2], Eigen::Vector2d(p[0], p[1])); }
+SE3 se3_from(const double* p) {
+  return SE3(SO3::from_quaternion_normalized(Eigen::Quaterniond(p[6], p[3], p[4], p[5])), Eigen::Vector3d(p[0], p[1], p[2]));
+}
+
+Value from_parameters(const Value& like, const double* p) {
+  if (std::holds_alternative<SE2>(like)) return se2_from(p);
+  if (std::holds_alternative<SE3>(like)) return se3_from(p);
+  return Eigen::Vector3d(p[0], p[1], p[2]);
+}
+
+// T (+) d = T Exp(d). The Plus Jacobian is reported as [I; 0]: the cost functions give their
+// tangent-space Jacobians in the first columns of the ambient ones, so Ceres' product
+// (ambient Jacobian x Plus Jacobian) is exactly the tangent-space Jacobian.
+class Se2Manifold final : public ceres::Manifold {
+ public:
+  int AmbientSize() const override { return 3; }
+  int TangentSize() const override { return 3; }
+  bool Plus(const double* x, const double* delta, double* x_plus_delta) const override {
+    to_parameters(se2_from(x) * SE2::exp(Eigen::Vector3d(delta[0], delta[1], delta[2])), x_plus_delta);
+    return true;
+  }
+  bool PlusJacobian(const double*, double* jacobian) const override {
+    Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>{jacobian}.setIdentity();
+    return true;
+  }
+  bool Minus(const double* y, const double* x, double* y_minus_x) const override {
+    Eigen::Map<Eigen::Vector3d>{y_minus_x} = (se2_from(x).inverse() * se2_from(y)).log();
+    return true;
+  }
+  bool MinusJacobian(const double*, double* jacobian) const override {
+    Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>{jacobian}.setIdentity();
+    return true;
+  }
+};
+
+class Se3Manifold final : public ceres::Manifold {
+ public:
+  int AmbientSize() const override { return 7; }
+  int TangentSize() const override { return 6; }
+  bool Plus(const double* x, const double* delta, double* x_plus_delta) const override {
+    SE3::Tangent d;
+    d << delta[0], delta[1], delta[2], delta[3], delta[4], delta[5];
+    to_parameters(se3_from(x) * SE3::exp(d), x_plus_delta);
+    return true;
+  }
+  bool PlusJacobian(const double*, double* jacobian) const override {
+    Eigen::Map<Eigen::Matrix<double, 7, 6, Eigen::RowMajor>> J(jacobian);
+    J.setZero();
+    J.topRows<6>().setIdentity();
+    return true;
+  }
+  bool Minus(const double* y, const double* x, double* y_minus_x) const override {
+    Eigen::Map<SE3::Tangent>{y_minus_x} = (se3_from(x).inverse() * se3_from(y)).log();
+    return true;
+  }
+  bool MinusJacobian(const double*, double* jacobian) const override {
+    Eigen::Map<Eigen::Matrix<double, 6, 7, Eigen::RowMajor>> J(jacobian);
+    J.setZero();
+    J.leftCols<6>().setIdentity();
+    return true;
+  }
+};
+
+// Evaluates one Factor on the parameter blocks of its variables.
+class FactorCost final : public ceres::CostFunction {
+ public:
+  FactorCost(FactorPointer factor, std::vector<Value> prototypes) : factor_(std::move(factor)), prototypes_(std::move(prototypes)) {
+    set_num_residuals(factor_->dimension());
+    for (const Value& value : prototypes_) mutable_parameter_block_sizes()->push_back(ambient_size(value));
+  }
+
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    Values local;
+    for (size_t i = 0; i < prototypes_.size(); ++i) local.insert(factor_->keys()[i], from_parameters(prototypes_[i], parameters[i]));
+    std::vector<Eigen::MatrixXd> tangent_jacobians;
+    const Result<Eigen::VectorXd> residual = factor_->evaluate(local, jacobians ? &tangent_jacobians : nullptr);
+    if (!residual || !residual->allFinite()) return false;
+    Eigen::Map<Eigen::VectorXd>{residuals, num_residuals()} = *residual;
+    if (jacobians == nullptr) return true;
+    for (size_t i = 0; i < prototypes_.size(); ++i) {
+      if (jacobians[i] == nullptr) continue;
+      const int ambient = ambient_size(prototypes_[i]);
+      Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> J(jacobians[i], num_residuals(), ambient);
+      J.setZero();
+      J.leftCols(tangent_size(prototypes_[i])) = tangent_jacobians[i];
+    }
+    return true;
+  }
+
+ private:
+  FactorPointer factor_;
+  std::vector<Value> prototypes_;
+};
+
+}  // namespace
+
+Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, const BatchOptimizerConfig& config) {
+  static const Se2Manifold se2_manifold;
+  static const Se3Manifold se3_manifold;
+  ceres::Problem::Options problem_options;
+  problem_options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
+
+  std::map<Key, std::vector<double>> blocks;
+  const auto block_of = [&](Key key) -> Result<double*> {
+    const auto found = blocks.find(key);
+    if (found != blocks.end()) return found->second.data();
+    if (!values.exists(key)) return Error(fmt::format("optimize: no initial value for {}", key_to_string(key)));
+    const Value& value = values.all().at(key);
+    std::vector<double>& storage = blocks[key];
+    storage.resize(static_cast<size_t>(ambient_size(value)));
+    to_parameters(value, storage.data());
+    ceres::Manifold* manifold = nullptr;
+    if (std::holds_alternative<SE2>(value)) manifold = const_cast<Se2Manifold*>(&se2_manifold);
+    if (std::holds_alternative<SE3>(value)) manifold = const_cast<Se3Manifold*>(&se3_manifold);
+    problem.AddParameterBlock(storage.data(), static_cast<int>(storage.size()), manifold);
+    return storage.data();
+  };
+
+  for (const FactorPointer& factor : graph.factors()) {
+    std::vector<double*> parameters;
+    std::vector<Value> prototypes;
+    for (Key key : factor->keys()) {
+      double* block = nullptr;
+      HANZO_ASSIGN_OR_RETURN(block, block_of(key));
+      parameters.push_back(block);
+      prototypes.push_back(values.all().at(key));
+    }
+    problem.AddResidualBlock(new FactorCost(factor, std::move(prototypes)), nullptr, parameters);
+  }
+  for (Key key : config.fixed) {
+    const auto found = blocks.find(key);
+    if (found == blocks.end()) return Error(fmt::format("optimize: the fixed variable {} is in no factor", key_to_string(key)));
+    problem.SetParameterBlockConstant(found->second.data());
+  }
+
+  ceres::Solver::Options options;
+  options.trust_region_strategy_type =
+      config.method == BatchOptimizerConfig::Method::kDogleg ? ceres::DOGLEG : ceres::LEVENBERG_MARQUARDT;
+  options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  options.max_num_iterations = config.max_iterations;
+  options.function_tolerance = config.function_tolerance;
+  options.gradient_tolerance = config.gradient_tolerance;
+  options.parameter_tolerance = config.parameter_tolerance;
+  options.num_threads = config.num_threads;
+  options.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(options, &problem, &summary);
+
+  for (const auto& [key, storage] : blocks) values.insert(key, from_parameters(values.all().at(key), storage.data()));
+  OptimizationSummary result;
+  result.initial_chi2 = 2.0 * summary.initial_cost;
+  result.final_chi2 = 2.0 * summary.final_cost;
+  result.iterations = static_cast<int>(summary.iterations.size()) - 1;
+  result.seconds = summary.total_time_in_seconds;
+  result.converged = summary.termination_type == ceres::CONVERGENCE;
+  result.message = summary.message;
+  if (summary.termination_type == ceres::FAILURE) return Error(fmt::format("optimize: {}", summary.message));
+  return result;
+}
+
+}  // namespace hanzo::fusion::graph

@@ -1,0 +1,293 @@
+#include "hanzo/fusion/graph/g2o_io.hpp"
+
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include <fmt/format.h>
+
+#include "hanzo/fusion/core/yaml_value.hpp"
+#include "hanzo/fusion/graph/pose_factors.hpp"
+
+namespace hanzo::fusion::graph {
+namespace {
+
+Eigen::MatrixXd from_upper_triangle(const std::vector<double>& entries, int size) {
+  Eigen::MatrixXd m(size, size);
+  size_t k = 0;
+  for (int i = 0; i < size; ++i) {
+    for (int j = i; j < size; ++j) m(i, j) = m(j, i) = entries[k++];
+  }
+  return m;
+}
+
+Result<SO3> unit_rotation(double qx, double qy, double qz, double qw) {
+  const Eigen::Quaterniond q(qw, qx, qy, qz);
+  if (std::abs(q.norm() - 1.0) > 1e-3) return Error(fmt::format("quaternion norm {} is not 1", q.norm()));
+  return SO3::from_quaternion_normalized(q);
+}
+
+Value compose(const Value& a, const Value& b) {
+  if (const auto* a2 = std::get_if<SE2>(&a)) return *a2 * std::get<SE2>(b);
+  return std::get<SE3>(a) * std::get<SE3>(b);
+}
+Value inverse(const Value& a) {
+  if (const auto* a2 = std::get_if<SE2>(&a)) return a2->inverse();
+  return std::get<SE3>(a).inverse();
+}
+
+}  // namespace
+
+Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_name) {
+  PoseGraph graph;
+  bool seen_2d = false, seen_3d = false;
+  std::istringstream lines(text);
+  std::string line;
+  int number = 0;
+  std::set<Key> known;
+  while (std::getline(lines, line)) {
+    ++number;
+    std::istringstream fields(line);
+    std::string tag;
+    if (!(fields >> tag) || tag[0] == '#') continue;
+    const auto fail = [&](const std::string& what) { return Error(fmt::format("{}:{}: {}: {}", source_name, number, tag, what)); };
+    std::vector<double> numbers;
+    std::string token;
+    while (fields >> token) {
+      char* end = nullptr;
+      const double value = std::strtod(token.c_str(), &end);
+      if (end == token.c_str() || *end != '\0') return fail(fmt::format("'{}' is not a number", token));
+      if (!std::isfinite(value)) return fail(fmt::format("non-finite value {}", token));
+      numbers.push_back(value);
+    }
+    const auto id_at = [&](size_t i) -> Result<Key> {
+      const double id = numbers[i];
+      if (id < 0 || id != std::floor(id) || id > 1e15) return fail(fmt::format("vertex id {} is not a whole number >= 0", id));
+      return X(static_cast<uint64_t>(id));
+    };
+    const auto expect = [&](size_t count) -> Status {
+      if (numbers.size() != count) return fail(fmt::format("expected {} numbers, got {}", count, numbers.size()));
+      return ok_status();
+    };
+    if (tag == "VERTEX_SE2" || tag == "VERTEX_SE3:QUAT") {
+      const bool is_3d = tag == "VERTEX_SE3:QUAT";
+      HANZO_RETURN_IF_ERROR(expect(is_3d ? 8 : 4));
+      Key key = 0;
+      HANZO_ASSIGN_OR_RETURN(key, id_at(0));
+      if (known.count(key)) return fail(fmt::format("vertex {} appears twice", symbol_index(key)));
+      if (is_3d) {
+        SO3 rotation;
+        HANZO_ASSIGN_OR_RETURN(rotation, with_context(unit_rotation(numbers[4], numbers[5], numbers[6], numbers[7]), fmt::format("{}:{}", source_name, number)));
+        graph.initial.insert(key, SE3(rotation, Eigen::Vector3d(numbers[1], numbers[2], numbers[3])));
+      } else {
+        graph.initial.insert(key, SE2(numbers[3], Eigen::Vector2d(numbers[1], numbers[2])));
+      }
+      (is_3d ? seen_3d : seen_2d) = true;
+      known.insert(key);
+      graph.vertices.push_back(key);
+    } else if (tag == "EDGE_SE2" || tag == "EDGE_SE3:QUAT") {
+      const bool is_3d = tag == "EDGE_SE3:QUAT";
+      HANZO_RETURN_IF_ERROR(expect(is_3d ? 30 : 11));
+      PoseGraphEdge edge;
+      HANZO_ASSIGN_OR_RETURN(edge.from, id_at(0));
+      HANZO_ASSIGN_OR_RETURN(edge.to, id_at(1));
+      if (edge.from == edge.to) return fail("an edge from a vertex to itself");
+      if (is_3d) {
+        SO3 rotation;
+        HANZO_ASSIGN_OR_RETURN(rotation, with_context(unit_rotation(numbers[5], numbers[6], numbers[7], numbers[8]), fmt::format("{}:{}", source_name, number)));
+        edge.measurement = SE3(rotation, Eigen::Vector3d(numbers[2], numbers[3], numbers[4]));
+        edge.information = from_upper_triangle(std::vector<double>(numbers.begin() + 9, numbers.end()), 6);
+      } else {
+        edge.measurement = SE2(numbers[4], Eigen::Vector2d(numbers[2], numbers[3]));
+        edge.information = from_upper_triangle(std::vector<double>(numbers.begin() + 5, numbers.end()), 3);
+      }
+      if (!GaussianNoise::from_information(edge.information)) return fail("the information matrix is not positive definite");
+      (is_3d ? seen_3d : seen_2d) = true;
+      graph.edges.push_back(std::move(edge));
+    } else if (tag == "FIX") {
+      for (size_t i = 0; i < numbers.size(); ++i) {
+        Key key = 0;
+        HANZO_ASSIGN_OR_RETURN(key, id_at(i));
+        graph.fixed.push_back(key);
+      }
+    } else {
+      return fail("unknown tag (expected VERTEX_SE2, EDGE_SE2, VERTEX_SE3:QUAT, EDGE_SE3:QUAT or FIX)");
+    }
+    if (seen_2d && seen_3d) return fail("2D and 3D elements in one file");
+  }
+  if (graph.edges.empty()) return Error(fmt::format("{}: no edges", source_name));
+  graph.dimension = seen_3d ? 3 : 2;
+
+  // Vertices without a VERTEX line: chain edges from known vertices (the first edge's start
+  // is the origin when nothing is known).
+  if (known.empty()) {
+    const Key start = graph.edges.front().from;
+    graph.initial.insert(start, graph.dimension == 3 ? Value(SE3()) : Value(SE2()));
+    known.insert(start);
+    graph.vertices.push_back(start);
+  }
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (const PoseGraphEdge& edge : graph.edges) {
+      const bool has_from = known.count(edge.from) != 0, has_to = known.count(edge.to) != 0;
+      if (has_from == has_to) continue;
+      const Key target = has_from ? edge.to : edge.from;
+      const Value value = has_from ? compose(graph.initial.all().at(edge.from), edge.measurement)
+                                   : compose(graph.initial.all().at(edge.to), inverse(edge.measurement));
+      graph.initial.insert(target, value);
+      known.insert(target);
+      graph.vertices.push_back(target);
+      changed = true;
+    }
+  }
+  for (const PoseGraphEdge& edge : graph.edges) {
+    for (Key key : {edge.from, edge.to}) {
+      if (!known.count(key)) return Error(fmt::format("{}: vertex {} is not connected to the rest of the graph", source_name, symbol_index(key)));
+    }
+  }
+  if (graph.fixed.empty()) graph.fixed.push_back(graph.vertices.front());
+  return graph;
+}
+
+Result<PoseGraph> read_g2o(const std::string& path) {
+  std::ifstream file(path);
+  if (!file) return Error(fmt::format("{}: cannot open file", path));
+  std::stringstream buffer;
+  buffer << file.rdbuf();
+  return parse_g2o(buffer.str(), path);
+}
+
+namespace {
+
+// SE-Sync's weights of an edge (se_sync_objective()).
+std::pair<double, double> kappa_tau(const PoseGraphEdge& edge, int d) {
+  const double tau = d / edge.information.topLeftCorner(d, d).inverse().trace();
+  const double kappa = d == 3 ? 3.0 / (2.0 * edge.information.bottomRightCorner(3, 3).inverse().trace()) : edge.information(2, 2);
+  return {kappa, tau};
+}
+
+}  // namespace
+
+Result<FactorGraph> PoseGraph::factor_graph(Objective objective) const {
+  FactorGraph graph;
+  for (const PoseGraphEdge& edge : edges) {
+    if (objective == Objective::kChordal) {
+      const auto [kappa, tau] = kappa_tau(edge, dimension);
+      if (dimension == 3) {
+        graph.emplace<ChordalBetweenFactor<SE3>>(edge.from, edge.to, std::get<SE3>(edge.measurement), kappa, tau);
+      } else {
+        graph.emplace<ChordalBetweenFactor<SE2>>(edge.from, edge.to, std::get<SE2>(edge.measurement), kappa, tau);
+      }
+      continue;
+    }
+    Eigen::MatrixXd information = edge.information;
+    if (dimension == 3) {
+      Eigen::MatrixXd J = Eigen::MatrixXd::Identity(6, 6);
+      J.bottomRightCorner(3, 3) *= 0.5;  // quaternion vector part = rotation vector / 2
+      information = J.transpose() * information * J;
+    }
+    GaussianNoise noise;
+    HANZO_ASSIGN_OR_RETURN(noise, GaussianNoise::from_information(information));
+    if (dimension == 3) {
+      graph.emplace<BetweenFactorSE3>(edge.from, edge.to, std::get<SE3>(edge.measurement), noise);
+    } else {
+      graph.emplace<BetweenFactorSE2>(edge.from, edge.to, std::get<SE2>(edge.measurement), noise);
+    }
+  }
+  return graph;
+}
+
+Status write_g2o(const std::string& path, const PoseGraph& graph, const Values& values) {
+  std::string out;
+  const auto number = [](double value) { return format_double(value); };
+  for (Key key : graph.vertices) {
+    if (graph.dimension == 3) {
+      SE3 pose;
+      HANZO_ASSIGN_OR_RETURN(pose, values.at<SE3>(key));
+      const Eigen::Quaterniond& q = pose.rotation().quaternion();
+      out += fmt::format("VERTEX_SE3:QUAT {} {} {} {} {} {} {} {}\n", symbol_index(key), number(pose.translation().x()),
+                         number(pose.translation().y()), number(pose.translation().z()), number(q.x()), number(q.y()), number(q.z()),
+                         number(q.w()));
+    } else {
+      SE2 pose;
+      HANZO_ASSIGN_OR_RETURN(pose, values.at<SE2>(key));
+      out += fmt::format("VERTEX_SE2 {} {} {} {}\n", symbol_index(key), number(pose.translation().x()), number(pose.translation().y()),
+                         number(pose.angle()));
+    }
+  }
+  for (const PoseGraphEdge& edge : graph.edges) {
+    std::string measurement;
+    if (const auto* se3 = std::get_if<SE3>(&edge.measurement)) {
+      const Eigen::Quaterniond& q = se3->rotation().quaternion();
+      measurement = fmt::format("EDGE_SE3:QUAT {} {} {} {} {} {} {} {} {}", symbol_index(edge.from), symbol_index(edge.to),
+                                number(se3->translation().x()), number(se3->translation().y()), number(se3->translation().z()),
+                                number(q.x()), number(q.y()), number(q.z()), number(q.w()));
+    } else {
+      const SE2& se2 = std::get<SE2>(edge.measurement);
+      measurement = fmt::format("EDGE_SE2 {} {} {} {} {}", symbol_index(edge.from), symbol_index(edge.to), number(se2.translation().x()),
+                                number(se2.translation().y()), number(se2.angle()));
+    }
+    out += measurement;
+    for (int i = 0; i < edge.information.rows(); ++i) {
+      for (int j = i; j < edge.information.cols(); ++j) out += fmt::format(" {}", number(edge.information(i, j)));
+    }
+    out += "\n";
+  }
+  for (Key key : graph.fixed) out += fmt::format("FIX {}\n", symbol_index(key));
+  return yaml::write_file_atomically(path, out);
+}
+
+Result<double> g2o_chi2(const PoseGraph& graph, const Values& values) {
+  double chi2 = 0.0;
+  for (const PoseGraphEdge& edge : graph.edges) {
+    Eigen::VectorXd error;
+    if (graph.dimension == 3) {
+      SE3 Ti, Tj;
+      HANZO_ASSIGN_OR_RETURN(Ti, values.at<SE3>(edge.from));
+      HANZO_ASSIGN_OR_RETURN(Tj, values.at<SE3>(edge.to));
+      const SE3 delta = std::get<SE3>(edge.measurement).inverse() * (Ti.inverse() * Tj);
+      Eigen::Quaterniond q = delta.rotation().quaternion();
+      if (q.w() < 0.0) q.coeffs() = -q.coeffs();
+      error.resize(6);
+      error << delta.translation(), q.x(), q.y(), q.z();
+    } else {
+      SE2 Ti, Tj;
+      HANZO_ASSIGN_OR_RETURN(Ti, values.at<SE2>(edge.from));
+      HANZO_ASSIGN_OR_RETURN(Tj, values.at<SE2>(edge.to));
+      const SE2 delta = std::get<SE2>(edge.measurement).inverse() * (Ti.inverse() * Tj);
+      error = Eigen::Vector3d(delta.translation().x(), delta.translation().y(), SE2::wrap_angle(delta.angle()));
+    }
+    chi2 += error.dot(edge.information * error);
+  }
+  return chi2;
+}
+
+Result<double> se_sync_objective(const PoseGraph& graph, const Values& values) {
+  double objective = 0.0;
+  const int d = graph.dimension;
+  for (const PoseGraphEdge& edge : graph.edges) {
+    Eigen::MatrixXd Ri, Rj, R_measured;
+    Eigen::VectorXd ti, tj, t_measured;
+    if (d == 3) {
+      SE3 Ti, Tj;
+      HANZO_ASSIGN_OR_RETURN(Ti, values.at<SE3>(edge.from));
+      HANZO_ASSIGN_OR_RETURN(Tj, values.at<SE3>(edge.to));
+      const SE3& Z = std::get<SE3>(edge.measurement);
+      Ri = Ti.rotation().matrix(), Rj = Tj.rotation().matrix(), R_measured = Z.rotation().matrix();
+      ti = Ti.translation(), tj = Tj.translation(), t_measured = Z.translation();
+    } else {
+      SE2 Ti, Tj;
+      HANZO_ASSIGN_OR_RETURN(Ti, values.at<SE2>(edge.from));
+      HANZO_ASSIGN_OR_RETURN(Tj, values.at<SE2>(edge.to));
+      const SE2& Z = std::get<SE2>(edge.measurement);
+      Ri = Ti.rotation_matrix(), Rj = Tj.rotation_matrix(), R_measured = Z.rotation_matrix();
+      ti = Ti.translation(), tj = Tj.translation(), t_measured = Z.translation();
+    }
+    const auto [kappa, tau] = kappa_tau(edge, d);
+    objective += kappa * (Rj - Ri * R_measured).squaredNorm() + tau * (tj - ti - Ri * t_measured).squaredNorm();
+  }
+  return objective;
+}
+
+}  // namespace hanzo::fusion::graph
