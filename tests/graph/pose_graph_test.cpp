@@ -104,6 +104,12 @@ TEST(BatchOptimizer, ReachesThePublishedOptimumOfIntel) {
   EXPECT_LT(geodesic.final_g2o_chi2, intel.final_g2o_chi2);
 }
 
+TEST(BatchOptimizer, ReachesThePublishedOptimumOfManhattanFromChainedOdometry) {
+  // manhattan.g2o has no VERTEX lines: the start is the chained odometry.
+  const Optimized manhattan = optimize_file("manhattan.g2o", PoseGraph::Objective::kChordal);
+  EXPECT_NEAR(manhattan.final_objective, 6431.42, 1e-3 * 6431.42);  // SE-Sync f* = 6.432e3
+}
+
 TEST(BatchOptimizer, ReachesThePublishedOptimumOfParkingGarage) {
   const Optimized garage = optimize_file("parking-garage.g2o", PoseGraph::Objective::kChordal);
   // We reach 1.26252, 0.11 % BELOW the published optimum (not reachable for the same cost), so
