@@ -385,8 +385,8 @@ TEST(Cli, RunReplaysTheSampleAndScoresItAgainstGroundTruth) {
 
 TEST(Cli, GraphOptimizeReachesSeSyncOptimumOnIntel) {
   const std::filesystem::path out = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_graph_{}.g2o", ::getpid());
-  const CliRun optimized = run(fmt::format("graph optimize ../shared/data/pose_graph/se_sync/intel.g2o --out {} --objective chordal --json",
-                                           out.string()));
+  const CliRun optimized = run(fmt::format("graph optimize {}/pose_graph/se_sync/intel.g2o --out {} --objective chordal --json",
+                                           HANZO_DATA_DIR, out.string()));
   ASSERT_EQ(optimized.exit_code, 0) << optimized.err;
   const nlohmann::json json = nlohmann::json::parse(optimized.out);
   EXPECT_EQ(json["poses"], 1728);
