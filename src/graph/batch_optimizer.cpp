@@ -125,6 +125,32 @@ class FactorCost final : public ceres::CostFunction {
   std::vector<Value> prototypes_;
 };
 
+// DCS as iteratively reweighted least squares (as g2o applies it): weight w = scale^2.
+class DcsLoss final : public ceres::LossFunction {
+ public:
+  explicit DcsLoss(double phi) : phi_(phi) {}
+  void Evaluate(double s, double rho[3]) const override {
+    const double scale = std::min(1.0, 2.0 * phi_ / (phi_ + s));
+    const double weight = scale * scale;
+    rho[0] = weight * s;
+    rho[1] = weight;
+    rho[2] = 0.0;
+  }
+
+ private:
+  double phi_;
+};
+
+ceres::LossFunction* loss_of(const RobustKernel& kernel) {
+  switch (kernel.type) {
+    case RobustKernel::Type::kHuber: return new ceres::HuberLoss(kernel.parameter);
+    case RobustKernel::Type::kCauchy: return new ceres::CauchyLoss(kernel.parameter);
+    case RobustKernel::Type::kDcs: return new DcsLoss(kernel.parameter);
+    case RobustKernel::Type::kNone: break;
+  }
+  return nullptr;
+}
+
 }  // namespace
 
 Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, const BatchOptimizerConfig& config) {
@@ -159,7 +185,7 @@ Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, c
       parameters.push_back(block);
       prototypes.push_back(values.all().at(key));
     }
-    problem.AddResidualBlock(new FactorCost(factor, std::move(prototypes)), nullptr, parameters);
+    problem.AddResidualBlock(new FactorCost(factor, std::move(prototypes)), loss_of(factor->robust_kernel()), parameters);
   }
   for (Key key : config.fixed) {
     const auto found = blocks.find(key);
@@ -182,7 +208,7 @@ Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, c
 
   for (const auto& [key, storage] : blocks) values.insert(key, from_parameters(values.all().at(key), storage.data()));
   OptimizationSummary result;
-  result.initial_chi2 = 2.0 * summary.initial_cost;
+  result.initial_chi2 = 2.0 * summary.initial_cost;  // robust: sum of rho(||r||^2)
   result.final_chi2 = 2.0 * summary.final_cost;
   result.iterations = static_cast<int>(summary.iterations.size()) - 1;
   result.seconds = summary.total_time_in_seconds;

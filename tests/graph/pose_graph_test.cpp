@@ -117,6 +117,52 @@ TEST(BatchOptimizer, ReachesThePublishedOptimumOfParkingGarage) {
   EXPECT_NEAR(garage.final_objective, 1.26391, 5e-3 * 1.26391);
 }
 
+// Ten false loop closures (identity between vertices far apart, as confident as the real
+// edges): without a robust kernel they bend the map by metres; DCS switches them off, Cauchy
+// nearly.
+TEST(RobustKernels, SwitchOffFalseLoopClosures) {
+  const PoseGraph graph = read_g2o(kData + "intel.g2o").value();
+  BatchOptimizerConfig config;
+  config.fixed = graph.fixed;
+  Values clean = graph.initial;
+  ASSERT_TRUE(optimize(graph.factor_graph().value(), clean, config).ok());
+
+  const auto with_outliers = [&](RobustKernel kernel) {
+    FactorGraph factors = graph.factor_graph().value();
+    const GaussianNoise noise = GaussianNoise::from_information(graph.edges.front().information).value();
+    for (uint64_t k = 0; k < 10; ++k) {
+      factors.emplace_robust<BetweenFactorSE2>(kernel, X(100 + 137 * k), X(900 + 61 * k), SE2(), noise);
+    }
+    Values values = graph.initial;
+    EXPECT_TRUE(optimize(factors, values, config).ok());
+    double worst = 0.0;
+    for (Key key : graph.vertices) {
+      worst = std::max(worst, (values.at<SE2>(key).value().translation() - clean.at<SE2>(key).value().translation()).norm());
+    }
+    return worst;
+  };
+  const double plain = with_outliers({});
+  const double dcs = with_outliers({RobustKernel::Type::kDcs, 1.0});
+  const double cauchy = with_outliers({RobustKernel::Type::kCauchy, 1.0});
+  std::printf("10 false loop closures on intel: largest pose shift %.3f m plain, %.4f m DCS, %.4f m Cauchy\n", plain, dcs, cauchy);
+  EXPECT_GT(plain, 1.0);
+  EXPECT_LT(dcs, 0.05);
+  EXPECT_LT(cauchy, 0.05 * plain);  // Cauchy keeps a little influence (0.3 m of 26 m)
+}
+
+TEST(RobustKernels, CostsFollowTheirDefinitions) {
+  BetweenFactorSE2 factor(X(0), X(1), SE2(), GaussianNoise::from_sigmas(Eigen::Vector3d::Ones()).value());
+  EXPECT_EQ(factor.robust_cost(9.0), 9.0);
+  factor.set_robust_kernel({RobustKernel::Type::kHuber, 1.0});
+  EXPECT_DOUBLE_EQ(factor.robust_cost(0.25), 0.25);
+  EXPECT_DOUBLE_EQ(factor.robust_cost(9.0), 2.0 * 3.0 - 1.0);
+  factor.set_robust_kernel({RobustKernel::Type::kCauchy, 2.0});
+  EXPECT_DOUBLE_EQ(factor.robust_cost(4.0), 4.0 * std::log(2.0));
+  factor.set_robust_kernel({RobustKernel::Type::kDcs, 1.0});
+  EXPECT_DOUBLE_EQ(factor.robust_cost(0.5), 0.5);
+  EXPECT_DOUBLE_EQ(factor.robust_cost(9.0), (2.0 / 10.0) * (2.0 / 10.0) * 9.0);
+}
+
 TEST(G2o, WriteReadRoundTripIsExact) {
   const PoseGraph graph = read_g2o(kData + "tinyGrid3D.g2o").value();
   const std::filesystem::path path = std::filesystem::temp_directory_path() / ("hanzo_g2o_" + std::to_string(::getpid()) + ".g2o");

@@ -25,7 +25,7 @@ struct BatchOptimizerConfig {
 };
 
 struct OptimizationSummary {
-  double initial_chi2 = 0.0;  // sum of squared whitened residuals
+  double initial_chi2 = 0.0;  // sum of squared whitened residuals (through the robust kernels)
   double final_chi2 = 0.0;
   int iterations = 0;
   double seconds = 0.0;

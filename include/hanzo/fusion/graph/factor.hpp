@@ -32,6 +32,16 @@ class GaussianNoise {
   Eigen::MatrixXd sqrt_information_;
 };
 
+/// A robust kernel on a factor's squared whitened residual s = ||r||^2 (loop closures that may
+/// be wrong). Huber and Cauchy with their usual parameter (in residual units, default 1);
+/// DCS, dynamic covariance scaling (Agarwal et al., ICRA 2013): the residual is scaled by
+/// min(1, 2 phi / (phi + s)), so a wrong loop closure switches itself off (parameter phi).
+struct RobustKernel {
+  enum class Type { kNone, kHuber, kCauchy, kDcs };
+  Type type = Type::kNone;
+  double parameter = 1.0;  // > 0
+};
+
 class Factor {
  public:
   explicit Factor(std::vector<Key> keys) : keys_(std::move(keys)) {}
@@ -44,8 +54,14 @@ class Factor {
   /// the wrong type.
   virtual Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const = 0;
 
+  void set_robust_kernel(const RobustKernel& kernel) { robust_kernel_ = kernel; }
+  const RobustKernel& robust_kernel() const { return robust_kernel_; }
+  /// The factor's cost contribution rho(||r||^2) (||r||^2 without a kernel).
+  double robust_cost(double squared_residual) const;
+
  private:
   std::vector<Key> keys_;
+  RobustKernel robust_kernel_;
 };
 
 using FactorPointer = std::shared_ptr<const Factor>;
