@@ -151,31 +151,35 @@ ceres::LossFunction* loss_of(const RobustKernel& kernel) {
   return nullptr;
 }
 
-}  // namespace
+// A Ceres problem holding a copy of the graph's variables as parameter blocks.
+struct CeresProblem {
+  CeresProblem() : problem(options()) {}
+  static ceres::Problem::Options options() {
+    ceres::Problem::Options problem_options;
+    problem_options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    return problem_options;
+  }
+  ceres::Problem problem;
+  std::map<Key, std::vector<double>> blocks;
+};
 
-Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, const BatchOptimizerConfig& config) {
+Status build_problem(const FactorGraph& graph, const Values& values, const std::vector<Key>& fixed, CeresProblem& built) {
   static const Se2Manifold se2_manifold;
   static const Se3Manifold se3_manifold;
-  ceres::Problem::Options problem_options;
-  problem_options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-  ceres::Problem problem(problem_options);
-
-  std::map<Key, std::vector<double>> blocks;
   const auto block_of = [&](Key key) -> Result<double*> {
-    const auto found = blocks.find(key);
-    if (found != blocks.end()) return found->second.data();
+    const auto found = built.blocks.find(key);
+    if (found != built.blocks.end()) return found->second.data();
     if (!values.exists(key)) return Error(fmt::format("optimize: no initial value for {}", key_to_string(key)));
     const Value& value = values.all().at(key);
-    std::vector<double>& storage = blocks[key];
+    std::vector<double>& storage = built.blocks[key];
     storage.resize(static_cast<size_t>(ambient_size(value)));
     to_parameters(value, storage.data());
     ceres::Manifold* manifold = nullptr;
     if (std::holds_alternative<SE2>(value)) manifold = const_cast<Se2Manifold*>(&se2_manifold);
     if (std::holds_alternative<SE3>(value)) manifold = const_cast<Se3Manifold*>(&se3_manifold);
-    problem.AddParameterBlock(storage.data(), static_cast<int>(storage.size()), manifold);
+    built.problem.AddParameterBlock(storage.data(), static_cast<int>(storage.size()), manifold);
     return storage.data();
   };
-
   for (const FactorPointer& factor : graph.factors()) {
     std::vector<double*> parameters;
     std::vector<Value> prototypes;
@@ -185,13 +189,23 @@ Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, c
       parameters.push_back(block);
       prototypes.push_back(values.all().at(key));
     }
-    problem.AddResidualBlock(new FactorCost(factor, std::move(prototypes)), loss_of(factor->robust_kernel()), parameters);
+    built.problem.AddResidualBlock(new FactorCost(factor, std::move(prototypes)), loss_of(factor->robust_kernel()), parameters);
   }
-  for (Key key : config.fixed) {
-    const auto found = blocks.find(key);
-    if (found == blocks.end()) return Error(fmt::format("optimize: the fixed variable {} is in no factor", key_to_string(key)));
-    problem.SetParameterBlockConstant(found->second.data());
+  for (Key key : fixed) {
+    const auto found = built.blocks.find(key);
+    if (found == built.blocks.end()) return Error(fmt::format("optimize: the fixed variable {} is in no factor", key_to_string(key)));
+    built.problem.SetParameterBlockConstant(found->second.data());
   }
+  return ok_status();
+}
+
+}  // namespace
+
+Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, const BatchOptimizerConfig& config) {
+  CeresProblem built;
+  HANZO_RETURN_IF_ERROR(build_problem(graph, values, config.fixed, built));
+  ceres::Problem& problem = built.problem;
+  std::map<Key, std::vector<double>>& blocks = built.blocks;
 
   ceres::Solver::Options options;
   options.trust_region_strategy_type =
@@ -215,6 +229,33 @@ Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, c
   result.converged = summary.termination_type == ceres::CONVERGENCE;
   result.message = summary.message;
   if (summary.termination_type == ceres::FAILURE) return Error(fmt::format("optimize: {}", summary.message));
+  return result;
+}
+
+Result<std::vector<Eigen::MatrixXd>> marginal_covariances(const FactorGraph& graph, const Values& values, const std::vector<Key>& keys,
+                                                          const BatchOptimizerConfig& config) {
+  CeresProblem built;
+  HANZO_RETURN_IF_ERROR(build_problem(graph, values, config.fixed, built));
+  std::vector<std::pair<const double*, const double*>> pairs;
+  for (Key key : keys) {
+    const auto found = built.blocks.find(key);
+    if (found == built.blocks.end()) return Error(fmt::format("marginal covariance: {} is in no factor", key_to_string(key)));
+    pairs.emplace_back(found->second.data(), found->second.data());
+  }
+  ceres::Covariance::Options options;
+  options.num_threads = config.num_threads;
+  ceres::Covariance covariance(options);
+  if (!covariance.Compute(pairs, &built.problem)) {
+    return Error("marginal covariance: the information matrix is rank deficient (fix a gauge variable, constrain every variable)");
+  }
+  std::vector<Eigen::MatrixXd> result;
+  for (Key key : keys) {
+    const double* block = built.blocks.at(key).data();
+    const int size = tangent_size(values.all().at(key));
+    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> matrix(size, size);
+    covariance.GetCovarianceBlockInTangentSpace(block, block, matrix.data());
+    result.emplace_back(matrix);
+  }
   return result;
 }
 

@@ -163,6 +163,33 @@ TEST(RobustKernels, CostsFollowTheirDefinitions) {
   EXPECT_DOUBLE_EQ(factor.robust_cost(9.0), (2.0 / 10.0) * (2.0 / 10.0) * 9.0);
 }
 
+// A prior on X0 (sigma 0.1) and one odometry edge to X1 (sigma 0.2) along the identity: X1's
+// marginal covariance is 0.1^2 + 0.2^2 per axis; rotated edges move it by the adjoint.
+TEST(MarginalCovariances, ChainAddsTheEdgeCovariance) {
+  FactorGraph graph;
+  graph.emplace<PriorFactorSE3>(X(0), SE3(), GaussianNoise::from_sigmas(Eigen::VectorXd::Constant(6, 0.1)).value());
+  graph.emplace<BetweenFactorSE3>(X(0), X(1), SE3(), GaussianNoise::from_sigmas(Eigen::VectorXd::Constant(6, 0.2)).value());
+  const SE3 turn(SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), 0.5), Eigen::Vector3d(1.0, 0.0, 0.0));
+  graph.emplace<BetweenFactorSE3>(X(1), X(2), turn, GaussianNoise::from_sigmas(Eigen::VectorXd::Constant(6, 0.2)).value());
+  Values values;
+  values.insert(X(0), SE3());
+  values.insert(X(1), SE3());
+  values.insert(X(2), turn);
+  const std::vector<Eigen::MatrixXd> covariances = marginal_covariances(graph, values, {X(0), X(1), X(2)}).value();
+  EXPECT_LT((covariances[0] - 0.01 * Eigen::MatrixXd::Identity(6, 6)).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((covariances[1] - 0.05 * Eigen::MatrixXd::Identity(6, 6)).cwiseAbs().maxCoeff(), 1e-9);
+  const SE3::Jacobian Ad = turn.inverse().adjoint();
+  const Eigen::MatrixXd expected = Ad * (0.05 * Eigen::MatrixXd::Identity(6, 6)) * Ad.transpose() + 0.04 * Eigen::MatrixXd::Identity(6, 6);
+  EXPECT_LT((covariances[2] - expected).cwiseAbs().maxCoeff(), 1e-9);
+
+  // Without the prior nothing fixes the gauge: refused with a reason.
+  FactorGraph unanchored;
+  unanchored.emplace<BetweenFactorSE3>(X(0), X(1), SE3(), GaussianNoise::from_sigmas(Eigen::VectorXd::Constant(6, 0.2)).value());
+  const auto refused = marginal_covariances(unanchored, values, {X(1)});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_THAT(refused.error().message, HasSubstr("rank deficient"));
+}
+
 TEST(G2o, WriteReadRoundTripIsExact) {
   const PoseGraph graph = read_g2o(kData + "tinyGrid3D.g2o").value();
   const std::filesystem::path path = std::filesystem::temp_directory_path() / ("hanzo_g2o_" + std::to_string(::getpid()) + ".g2o");

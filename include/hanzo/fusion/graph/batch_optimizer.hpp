@@ -37,4 +37,12 @@ struct OptimizationSummary {
 /// fixed key is unknown.
 Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, const BatchOptimizerConfig& config = {});
 
+/// Marginal covariances of `keys` at `values` (usually the optimum), each in its variable's
+/// tangent space (right perturbation; SE3: translation then rotation), from the Gauss-Newton
+/// information of the whole graph with config.fixed held constant (Ceres' Covariance,
+/// sparse). Fails when the information is rank deficient (no gauge fixed, unconstrained
+/// variables) or a key is unknown.
+Result<std::vector<Eigen::MatrixXd>> marginal_covariances(const FactorGraph& graph, const Values& values, const std::vector<Key>& keys,
+                                                          const BatchOptimizerConfig& config = {});
+
 }  // namespace hanzo::fusion::graph
