@@ -89,6 +89,8 @@ struct Session::Impl final : UpdateObserver {
     }
     return std::nullopt;
   }
+  Result<size_t> pose_input(std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
+                            const Eigen::Matrix<double, 6, 6>& covariance, const std::function<Status()>& extra);
   Status accept(size_t sensor, Event event);
   void fuse_in_order(Event event);
   void fuse_late(Event event);
@@ -208,22 +210,32 @@ Status Session::push(std::string_view sensor_name, const msgs::SensorMessage& me
   return impl.accept(sensor, std::move(event));
 }
 
+// The checks push_pose() and push_relative_pose() share: the sensor exists (counted as received),
+// the pose is valid and the covariance positive definite. `extra` adds checks of its own.
+Result<size_t> Session::Impl::pose_input(std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
+                                         const Eigen::Matrix<double, 6, 6>& covariance, const std::function<Status()>& extra) {
+  const std::optional<size_t> index = sensor_index(sensor_name);
+  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
+  ++sensors[*index].received;
+  msgs::PoseEstimate as_message;  // validate() checks the pose and covariance the same way
+  as_message.timestamp = timestamp;
+  as_message.T_world_body = msgs::Pose::from_se3(pose);
+  as_message.pose_covariance = covariance;
+  Status valid = msgs::validate(as_message);
+  if (valid && extra) valid = extra();
+  if (valid && covariance.llt().info() != Eigen::Success) valid = Error("covariance is not positive definite");
+  if (!valid) {
+    ++sensors[*index].rejected["invalid"];
+    return rejection("invalid", fmt::format("{}: {}: {}", sensor_name, what, valid.error().message));
+  }
+  return *index;
+}
+
 Status Session::push_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_world_sensor,
                           const Eigen::Matrix<double, 6, 6>& covariance) {
   Impl& impl = *impl_;
-  const std::optional<size_t> index = impl.sensor_index(sensor_name);
-  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
-  const size_t sensor = *index;
-  ++impl.sensors[sensor].received;
-  msgs::PoseEstimate as_message;  // validate() checks the pose and covariance the same way
-  as_message.timestamp = timestamp;
-  as_message.T_world_body = msgs::Pose::from_se3(T_world_sensor);
-  as_message.pose_covariance = covariance;
-  if (Status valid = msgs::validate(as_message); !valid || covariance.llt().info() != Eigen::Success) {
-    ++impl.sensors[sensor].rejected["invalid"];
-    return rejection("invalid", fmt::format("{}: pose measurement: {}", sensor_name,
-                                            valid ? "covariance is not positive definite" : valid.error().message));
-  }
+  size_t sensor = 0;
+  HANZO_ASSIGN_OR_RETURN(sensor, impl.pose_input(sensor_name, "pose measurement", timestamp, T_world_sensor, covariance, {}));
   Event event;
   event.time = timestamp + impl.setups[sensor].time_offset;
   event.sensor = sensor;
@@ -234,23 +246,14 @@ Status Session::push_pose(std::string_view sensor_name, Timestamp timestamp, con
 Status Session::push_relative_pose(std::string_view sensor_name, Timestamp from, Timestamp to, const SE3& T_from_to,
                                    const Eigen::Matrix<double, 6, 6>& covariance) {
   Impl& impl = *impl_;
-  const std::optional<size_t> index = impl.sensor_index(sensor_name);
-  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
-  const size_t sensor = *index;
-  ++impl.sensors[sensor].received;
   const double dt = (to - from).seconds();
-  msgs::PoseEstimate as_message;  // validate() checks the pose and covariance
-  as_message.timestamp = to;
-  as_message.T_world_body = msgs::Pose::from_se3(T_from_to);
-  as_message.pose_covariance = covariance;
-  Status valid = msgs::validate(as_message);
-  if (valid && from.is_zero()) valid = Error("the start time is zero");
-  if (valid && !(dt > 0.0)) valid = Error(fmt::format("the interval must be positive, got {} s", dt));
-  if (valid && covariance.llt().info() != Eigen::Success) valid = Error("covariance is not positive definite");
-  if (!valid) {
-    ++impl.sensors[sensor].rejected["invalid"];
-    return rejection("invalid", fmt::format("{}: relative pose: {}", sensor_name, valid.error().message));
-  }
+  const auto interval = [&]() -> Status {
+    if (from.is_zero()) return Error("the start time is zero");
+    if (!(dt > 0.0)) return Error(fmt::format("the interval must be positive, got {} s", dt));
+    return ok_status();
+  };
+  size_t sensor = 0;
+  HANZO_ASSIGN_OR_RETURN(sensor, impl.pose_input(sensor_name, "relative pose", to, T_from_to, covariance, interval));
   const Eigen::Matrix3d R_to_from = T_from_to.rotation().matrix().transpose();
   Event event;
   event.time = to + impl.setups[sensor].time_offset;
