@@ -19,6 +19,8 @@ packages=(
   libtbb-dev
   # graph: nonlinear least squares (with SuiteSparse)
   libceres-dev
+  # cloud: point-cloud files (PCL), kd-trees (nanoflann); Open3D is the benchmarks' peer
+  libpcl-dev libnanoflann-dev libopen3d-dev
   # apps
   libcli11-dev
   # tests and benchmarks (Embree: the ray-casting peer of the simulator benchmark)

@@ -1,0 +1,33 @@
+#pragma once
+// Local surface geometry from the k nearest neighbours of each point: the covariance of the
+// neighbourhood (GICP's per-point distribution) and the surface normal.
+//
+// Covariances are regularized as in Generalized-ICP (Segal, Haehnel, Thrun 2009, Sec. III-B,
+// "plane-to-plane"): the eigenvalues of the neighbourhood covariance are replaced by
+// (epsilon, 1, 1) in its eigenbasis, so every point is a small disc in the local plane with
+// unit extent (m^2) along it and epsilon across it. This makes the GICP cost independent of the
+// sampling density and keeps each 3x3 matrix invertible. Normals are the eigenvector of the
+// smallest eigenvalue, oriented toward the cloud's origin (the sensor for a scan).
+//
+// Points with fewer than 3 neighbours get an isotropic unit covariance and the normal toward
+// the origin (they constrain registration like points of ICP).
+
+#include "hanzo/fusion/cloud/kdtree.hpp"
+#include "hanzo/fusion/cloud/point_cloud.hpp"
+
+namespace hanzo::fusion::cloud {
+
+struct LocalGeometryConfig {
+  /// Neighbours per point, the point itself included (small_gicp uses 10, fast_gicp 20).
+  int num_neighbors = 10;
+  /// Variance across the local plane relative to the unit variance along it.
+  double plane_epsilon = 1e-3;
+  int num_threads = 1;
+};
+
+/// Fills cloud.covariances and cloud.normals. `tree` must index exactly cloud.positions.
+void estimate_local_geometry(PointCloud& cloud, const KdTree& tree, const LocalGeometryConfig& config = {});
+/// The same, building the tree itself.
+void estimate_local_geometry(PointCloud& cloud, const LocalGeometryConfig& config = {});
+
+}  // namespace hanzo::fusion::cloud

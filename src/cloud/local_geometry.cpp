@@ -1,0 +1,60 @@
+#include "hanzo/fusion/cloud/local_geometry.hpp"
+
+#include <algorithm>
+#include <cassert>
+
+#include <Eigen/Eigenvalues>
+
+#include "hanzo/fusion/cloud/parallel.hpp"
+
+namespace hanzo::fusion::cloud {
+namespace {
+
+Eigen::Vector3f toward_origin(const Eigen::Vector3f& normal, const Eigen::Vector3f& position) {
+  return normal.dot(position) > 0.0f ? Eigen::Vector3f(-normal) : normal;
+}
+
+}  // namespace
+
+void estimate_local_geometry(PointCloud& cloud, const KdTree& tree, const LocalGeometryConfig& config) {
+  assert(tree.size() == cloud.size());
+  assert(config.num_neighbors >= 1);
+  const size_t k = static_cast<size_t>(config.num_neighbors);
+  cloud.covariances.resize(cloud.size());
+  cloud.normals.resize(cloud.size());
+  const Eigen::Vector3d regularized_eigenvalues(config.plane_epsilon, 1.0, 1.0);
+  parallel_for(cloud.size(), config.num_threads, [&](size_t begin, size_t end) {
+    std::vector<uint32_t> indices(k);
+    std::vector<float> distances(k);
+    for (size_t i = begin; i < end; ++i) {
+      const Eigen::Vector3f& position = cloud.positions[i];
+      const size_t found = tree.knn(position, k, indices.data(), distances.data());
+      if (found < 3) {
+        cloud.covariances[i] = Eigen::Matrix3f::Identity();
+        const float range = position.norm();
+        cloud.normals[i] = range > 0.0f ? Eigen::Vector3f(-position / range) : Eigen::Vector3f::UnitZ();
+        continue;
+      }
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (size_t n = 0; n < found; ++n) mean += cloud.positions[indices[n]].cast<double>();
+      mean /= static_cast<double>(found);
+      Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+      for (size_t n = 0; n < found; ++n) {
+        const Eigen::Vector3d d = cloud.positions[indices[n]].cast<double>() - mean;
+        scatter.noalias() += d * d.transpose();
+      }
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+      solver.computeDirect(scatter / static_cast<double>(found));
+      const Eigen::Matrix3d& basis = solver.eigenvectors();  // columns sorted by increasing eigenvalue
+      cloud.covariances[i] = (basis * regularized_eigenvalues.asDiagonal() * basis.transpose()).cast<float>();
+      cloud.normals[i] = toward_origin(basis.col(0).cast<float>().normalized(), position);
+    }
+  });
+}
+
+void estimate_local_geometry(PointCloud& cloud, const LocalGeometryConfig& config) {
+  const KdTree tree(cloud.positions);
+  estimate_local_geometry(cloud, tree, config);
+}
+
+}  // namespace hanzo::fusion::cloud

@@ -1,0 +1,88 @@
+#include "hanzo/fusion/cloud/voxel_grid.hpp"
+
+#include <algorithm>
+#include <cassert>
+#include <utility>
+
+#include "hanzo/fusion/cloud/parallel.hpp"
+#include "hanzo/fusion/core/logging.hpp"
+
+namespace hanzo::fusion::cloud {
+namespace {
+
+constexpr int kKeyBits = 21;
+constexpr int64_t kKeyOffset = int64_t{1} << (kKeyBits - 1);
+constexpr uint64_t kKeyMask = (uint64_t{1} << kKeyBits) - 1;
+constexpr uint64_t kInvalidKey = ~uint64_t{0};
+
+}  // namespace
+
+bool pack_voxel_key(const Eigen::Vector3i& voxel, uint64_t* key) {
+  uint64_t packed = 0;
+  for (int axis = 0; axis < 3; ++axis) {
+    const int64_t shifted = int64_t{voxel[axis]} + kKeyOffset;
+    if (shifted < 0 || static_cast<uint64_t>(shifted) > kKeyMask) return false;
+    packed |= static_cast<uint64_t>(shifted) << (kKeyBits * axis);
+  }
+  *key = packed;
+  return true;
+}
+
+PointCloud voxel_downsample(const PointCloud& cloud, double voxel_size, int num_threads) {
+  assert(voxel_size > 0.0);
+  const float inverse_size = static_cast<float>(1.0 / voxel_size);
+  std::vector<std::pair<uint64_t, uint32_t>> keyed(cloud.size());
+  parallel_for(cloud.size(), num_threads, [&](size_t begin, size_t end) {
+    for (size_t i = begin; i < end; ++i) {
+      uint64_t key = kInvalidKey;
+      if (!pack_voxel_key(voxel_coordinates(cloud.positions[i], inverse_size), &key)) key = kInvalidKey;
+      keyed[i] = {key, static_cast<uint32_t>(i)};
+    }
+  });
+  std::sort(keyed.begin(), keyed.end());
+  while (!keyed.empty() && keyed.back().first == kInvalidKey) keyed.pop_back();
+  if (keyed.size() < cloud.size()) {
+    logger()->warn("voxel_downsample: dropped {} points outside the voxel key range", cloud.size() - keyed.size());
+  }
+
+  PointCloud out;
+  const auto reserve_like = [](const auto& from, auto& to, size_t count) {
+    if (!from.empty()) to.reserve(count);
+  };
+  const size_t estimated = keyed.size() / 4 + 1;
+  out.positions.reserve(estimated);
+  reserve_like(cloud.intensities, out.intensities, estimated);
+  reserve_like(cloud.rings, out.rings, estimated);
+  reserve_like(cloud.times, out.times, estimated);
+  reserve_like(cloud.normals, out.normals, estimated);
+  reserve_like(cloud.covariances, out.covariances, estimated);
+
+  for (size_t begin = 0; begin < keyed.size();) {
+    size_t end = begin + 1;
+    while (end < keyed.size() && keyed[end].first == keyed[begin].first) ++end;
+    const float weight = 1.0f / static_cast<float>(end - begin);
+    Eigen::Vector3d position_sum = Eigen::Vector3d::Zero();  // double: thousands of points per voxel in dense maps
+    for (size_t k = begin; k < end; ++k) position_sum += cloud.positions[keyed[k].second].cast<double>();
+    out.positions.push_back((position_sum / static_cast<double>(end - begin)).cast<float>());
+    const auto average = [&](const auto& from, auto& to) {
+      if (from.empty()) return;
+      auto sum = from[keyed[begin].second];
+      for (size_t k = begin + 1; k < end; ++k) sum += from[keyed[k].second];
+      to.push_back(sum * weight);
+    };
+    average(cloud.intensities, out.intensities);
+    average(cloud.times, out.times);
+    average(cloud.covariances, out.covariances);
+    if (cloud.has_normals()) {
+      Eigen::Vector3f sum = Eigen::Vector3f::Zero();
+      for (size_t k = begin; k < end; ++k) sum += cloud.normals[keyed[k].second];
+      const float norm = sum.norm();
+      out.normals.push_back(norm > 0.0f ? Eigen::Vector3f(sum / norm) : cloud.normals[keyed[begin].second]);
+    }
+    if (cloud.has_rings()) out.rings.push_back(cloud.rings[keyed[begin].second]);
+    begin = end;
+  }
+  return out;
+}
+
+}  // namespace hanzo::fusion::cloud

@@ -1,0 +1,176 @@
+#pragma once
+// Per-correspondence linearizations of the four registration methods (internal to lidar/).
+// Each cost's linearize(i, pose, accumulator) finds the correspondence of source point i at
+// the current pose and adds w J^T W J and w J^T W r to the normal equations, J = d r / d delta
+// for T <- T Exp(delta): d(R p + t)/d(rho, phi) = [R, -R hat(p)].
+
+#include <cmath>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "hanzo/fusion/cloud/kdtree.hpp"
+#include "hanzo/fusion/core/so3.hpp"
+#include "hanzo/fusion/lidar/registration.hpp"
+#include "ndt_grid.hpp"
+
+namespace hanzo::fusion::lidar {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+using Jacobian3x6 = Eigen::Matrix<double, 3, 6>;
+
+/// The normal equations and statistics of one linearization (or one chunk of it).
+struct NormalEquations {
+  Matrix6d hessian = Matrix6d::Zero();
+  Vector6d gradient = Vector6d::Zero();
+  double cost = 0.0;                 // sum of w r^T W r
+  double squared_distance_sum = 0.0; // sum of squared Euclidean correspondence distances, m^2
+  size_t correspondences = 0;
+
+  void add(const NormalEquations& other) {
+    hessian += other.hessian;
+    gradient += other.gradient;
+    cost += other.cost;
+    squared_distance_sum += other.squared_distance_sum;
+    correspondences += other.correspondences;
+  }
+};
+
+/// IRLS weight of a residual of norm `r` (Zhang 1997, "Parameter estimation techniques").
+inline double kernel_weight(RobustKernel kernel, double width, double r) {
+  switch (kernel) {
+    case RobustKernel::kNone: return 1.0;
+    case RobustKernel::kHuber: return r <= width ? 1.0 : width / r;
+    case RobustKernel::kCauchy: return 1.0 / (1.0 + (r / width) * (r / width));
+    case RobustKernel::kGemanMcClure: {
+      const double s = 1.0 + (r / width) * (r / width);
+      return 1.0 / (s * s);
+    }
+  }
+  return 1.0;
+}
+
+/// The pose as the linearizations use it.
+struct PoseBlocks {
+  explicit PoseBlocks(const SE3& T) : rotation(T.rotation().matrix()), translation(T.translation()) {}
+  Eigen::Matrix3d rotation;
+  Eigen::Vector3d translation;
+
+  Jacobian3x6 jacobian(const Eigen::Vector3d& source_point) const {
+    Jacobian3x6 J;
+    J.leftCols<3>() = rotation;
+    J.rightCols<3>() = -rotation * SO3::hat(source_point);
+    return J;
+  }
+};
+
+struct KernelSettings {
+  RobustKernel kernel;
+  double width;
+};
+
+template <int ResidualRows>
+inline void accumulate(const Eigen::Matrix<double, ResidualRows, 6>& J, const Eigen::Matrix<double, ResidualRows, ResidualRows>& W,
+                       const Eigen::Matrix<double, ResidualRows, 1>& r, const KernelSettings& kernel, NormalEquations& out) {
+  const Eigen::Matrix<double, 6, ResidualRows> JtW = J.transpose() * W;
+  const double squared = r.dot(W * r);
+  const double w = kernel_weight(kernel.kernel, kernel.width, std::sqrt(squared));
+  out.hessian.noalias() += w * JtW * J;
+  out.gradient.noalias() += w * JtW * r;
+  out.cost += w * squared;
+}
+
+struct PointToPointCost {
+  const std::vector<Eigen::Vector3d>& source;
+  const cloud::KdTree& tree;
+  float max_squared_distance;
+  KernelSettings kernel;
+
+  void linearize(size_t i, const PoseBlocks& pose, NormalEquations& out) const {
+    const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
+    uint32_t j = 0;
+    float squared_distance = 0.0f;
+    if (!tree.nearest(q.cast<float>(), max_squared_distance, &j, &squared_distance)) return;
+    const Eigen::Vector3d r = q - tree.points()[j].cast<double>();
+    accumulate<3>(pose.jacobian(source[i]), Eigen::Matrix3d::Identity(), r, kernel, out);
+    out.squared_distance_sum += squared_distance;
+    ++out.correspondences;
+  }
+};
+
+struct PointToPlaneCost {
+  const std::vector<Eigen::Vector3d>& source;
+  const cloud::KdTree& tree;
+  const std::vector<Eigen::Vector3f>& target_normals;
+  float max_squared_distance;
+  KernelSettings kernel;
+
+  void linearize(size_t i, const PoseBlocks& pose, NormalEquations& out) const {
+    const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
+    uint32_t j = 0;
+    float squared_distance = 0.0f;
+    if (!tree.nearest(q.cast<float>(), max_squared_distance, &j, &squared_distance)) return;
+    const Eigen::Vector3d normal = target_normals[j].cast<double>();
+    const Eigen::Matrix<double, 1, 1> r(normal.dot(q - tree.points()[j].cast<double>()));
+    const Eigen::Matrix<double, 1, 6> J = normal.transpose() * pose.jacobian(source[i]);
+    accumulate<1>(J, Eigen::Matrix<double, 1, 1>::Identity(), r, kernel, out);
+    out.squared_distance_sum += squared_distance;
+    ++out.correspondences;
+  }
+};
+
+struct GicpCost {
+  const std::vector<Eigen::Vector3d>& source;
+  const std::vector<Eigen::Matrix3d>& source_covariances;
+  const cloud::KdTree& tree;
+  const std::vector<Eigen::Matrix3d>& target_covariances;
+  float max_squared_distance;
+  KernelSettings kernel;
+
+  void linearize(size_t i, const PoseBlocks& pose, NormalEquations& out) const {
+    const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
+    uint32_t j = 0;
+    float squared_distance = 0.0f;
+    if (!tree.nearest(q.cast<float>(), max_squared_distance, &j, &squared_distance)) return;
+    // Segal et al. 2009, eq. (2): d^T (C_t + R C_s R^T)^-1 d with d = t - (R p + t_pose).
+    const Eigen::Matrix3d combined =
+        target_covariances[j] + pose.rotation * source_covariances[i] * pose.rotation.transpose();
+    const Eigen::Vector3d r = q - tree.points()[j].cast<double>();
+    accumulate<3>(pose.jacobian(source[i]), combined.inverse(), r, kernel, out);
+    out.squared_distance_sum += squared_distance;
+    ++out.correspondences;
+  }
+};
+
+struct NdtCost {
+  const std::vector<Eigen::Vector3d>& source;
+  const NdtGrid& grid;
+  NdtScoreConstants constants;
+  KernelSettings kernel;
+
+  void linearize(size_t i, const PoseBlocks& pose, NormalEquations& out) const {
+    const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
+    const Jacobian3x6 J = pose.jacobian(source[i]);
+    double nearest_squared = std::numeric_limits<double>::infinity();
+    grid.for_each_neighbor(q, [&](const NdtCell& cell) {
+      const Eigen::Vector3d x = q - cell.mean;
+      const double mahalanobis = x.dot(cell.inverse_covariance * x);
+      // Magnusson eq. 6.9: score -d1 exp(-d2/2 m); its gradient is w S^-1 x J with
+      // w = -d1 d2 exp(-d2/2 m) > 0, the gradient of (w/2) x^T S^-1 x at fixed w.
+      const double w = -constants.d1 * constants.d2 * std::exp(-0.5 * constants.d2 * mahalanobis) *
+                       kernel_weight(kernel.kernel, kernel.width, std::sqrt(mahalanobis));
+      const Eigen::Matrix<double, 6, 3> JtW = J.transpose() * cell.inverse_covariance;
+      out.hessian.noalias() += w * JtW * J;
+      out.gradient.noalias() += w * JtW * x;
+      out.cost += w * mahalanobis;
+      nearest_squared = std::min(nearest_squared, x.squaredNorm());
+    });
+    if (std::isfinite(nearest_squared)) {
+      out.squared_distance_sum += nearest_squared;
+      ++out.correspondences;
+    }
+  }
+};
+
+}  // namespace hanzo::fusion::lidar
