@@ -122,6 +122,9 @@ Status RegistrationConfig::validate() const {
     return Error(fmt::format("RegistrationConfig.{}: {} is not > 0", name, value), name);
   };
   HANZO_RETURN_IF_ERROR(positive(max_correspondence_distance, "max_correspondence_distance"));
+  for (double distance : coarse_correspondence_distances) {
+    HANZO_RETURN_IF_ERROR(positive(distance, "coarse_correspondence_distances"));
+  }
   HANZO_RETURN_IF_ERROR(positive(translation_tolerance, "translation_tolerance"));
   HANZO_RETURN_IF_ERROR(positive(rotation_tolerance, "rotation_tolerance"));
   HANZO_RETURN_IF_ERROR(positive(kernel_width, "kernel_width"));
@@ -188,25 +191,23 @@ Result<RegistrationTarget> RegistrationTarget::create(cloud::PointCloud cloud, c
   return RegistrationTarget(std::move(impl));
 }
 
-Result<RegistrationResult> align(const cloud::PointCloud& source, const RegistrationTarget& target,
-                                 const SE3& T_target_source_guess, const RegistrationConfig& config) {
-  HANZO_RETURN_IF_ERROR(config.validate());
-  HANZO_RETURN_IF_ERROR(check_cloud(source, "source"));
-  if (target.method() != config.method) {
-    return Error(fmt::format("registration: the target was prepared for {}, not {}", to_string(target.method()),
-                             to_string(config.method)));
-  }
+namespace {
+
+// One registration at config.max_correspondence_distance (inputs already checked).
+Result<RegistrationResult> align_once(const cloud::PointCloud& source, const RegistrationTarget& target,
+                                      const SE3& T_target_source_guess, const RegistrationConfig& config) {
   const RegistrationTarget::Impl& prepared = target.impl();
   std::vector<Eigen::Vector3d> positions(source.size());
   for (size_t i = 0; i < source.size(); ++i) positions[i] = source.positions[i].cast<double>();
   const float max_squared = static_cast<float>(config.max_correspondence_distance * config.max_correspondence_distance);
   const KernelSettings kernel{config.kernel, config.kernel_width};
+  std::vector<uint32_t> previous(source.size(), kNoCorrespondence);
   switch (config.method) {
     case RegistrationMethod::kPointToPoint:
-      return gauss_newton(PointToPointCost{positions, *prepared.tree, max_squared, kernel}, source.size(),
+      return gauss_newton(PointToPointCost{positions, *prepared.tree, max_squared, kernel, previous}, source.size(),
                           T_target_source_guess, config);
     case RegistrationMethod::kPointToPlane:
-      return gauss_newton(PointToPlaneCost{positions, *prepared.tree, prepared.cloud.normals, max_squared, kernel},
+      return gauss_newton(PointToPlaneCost{positions, *prepared.tree, prepared.cloud.normals, max_squared, kernel, previous},
                           source.size(), T_target_source_guess, config);
     case RegistrationMethod::kGicp: {
       std::vector<Eigen::Matrix3d> source_covariances;
@@ -220,7 +221,7 @@ Result<RegistrationResult> align(const cloud::PointCloud& source, const Registra
         cloud::estimate_local_geometry(with_geometry, geometry);
         source_covariances = to_double(with_geometry.covariances);
       }
-      return gauss_newton(GicpCost{positions, source_covariances, *prepared.tree, prepared.covariances, max_squared, kernel},
+      return gauss_newton(GicpCost{positions, source_covariances, *prepared.tree, prepared.covariances, max_squared, kernel, previous},
                           source.size(), T_target_source_guess, config);
     }
     case RegistrationMethod::kNdt: {
@@ -246,6 +247,33 @@ Result<RegistrationResult> align(const cloud::PointCloud& source, const Registra
     }
   }
   return Error("registration: unknown method");
+}
+
+}  // namespace
+
+Result<RegistrationResult> align(const cloud::PointCloud& source, const RegistrationTarget& target,
+                                 const SE3& T_target_source_guess, const RegistrationConfig& config) {
+  HANZO_RETURN_IF_ERROR(config.validate());
+  HANZO_RETURN_IF_ERROR(check_cloud(source, "source"));
+  if (target.method() != config.method) {
+    return Error(fmt::format("registration: the target was prepared for {}, not {}", to_string(target.method()),
+                             to_string(config.method)));
+  }
+  SE3 guess = T_target_source_guess;
+  int iterations = 0;
+  if (config.method != RegistrationMethod::kNdt) {
+    for (double distance : config.coarse_correspondence_distances) {
+      RegistrationConfig stage = config;
+      stage.max_correspondence_distance = distance;
+      auto coarse = align_once(source, target, guess, stage);
+      if (!coarse) return coarse.error();
+      guess = coarse->T_target_source;
+      iterations += coarse->iterations;
+    }
+  }
+  auto result = align_once(source, target, guess, config);
+  if (result) result->iterations += iterations;
+  return result;
 }
 
 Result<RegistrationResult> register_clouds(const cloud::PointCloud& source, const cloud::PointCloud& target,

@@ -5,6 +5,7 @@
 // for T <- T Exp(delta): d(R p + t)/d(rho, phi) = [R, -R hat(p)].
 
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include <Eigen/Core>
@@ -65,6 +66,25 @@ struct PoseBlocks {
   }
 };
 
+/// Nearest target point to q within the correspondence distance. `previous` holds each source
+/// point's last correspondence (kNoCorrespondence when none): its distance bounds the search
+/// from the start, so once the motion between iterations is small the kd-tree descent prunes
+/// almost every branch. The result is the same exact nearest neighbour.
+constexpr uint32_t kNoCorrespondence = std::numeric_limits<uint32_t>::max();
+inline bool find_correspondence(const cloud::KdTree& tree, const Eigen::Vector3d& q, float max_squared_distance,
+                                uint32_t& previous, uint32_t* index, float* squared_distance) {
+  const Eigen::Vector3f query = q.cast<float>();
+  float bound = max_squared_distance;
+  if (previous != kNoCorrespondence) {
+    // Slightly above the previous point's distance, so the search finds it again at worst.
+    bound = std::min(bound, (tree.points()[previous] - query).squaredNorm() * 1.0001f + 1e-12f);
+  }
+  const bool found = tree.nearest(query, bound, index, squared_distance) ||
+                     (bound < max_squared_distance && tree.nearest(query, max_squared_distance, index, squared_distance));
+  previous = found ? *index : kNoCorrespondence;
+  return found;
+}
+
 struct KernelSettings {
   RobustKernel kernel;
   double width;
@@ -86,12 +106,13 @@ struct PointToPointCost {
   const cloud::KdTree& tree;
   float max_squared_distance;
   KernelSettings kernel;
+  std::vector<uint32_t>& previous;  // one per source point, see find_correspondence
 
   void linearize(size_t i, const PoseBlocks& pose, NormalEquations& out) const {
     const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
     uint32_t j = 0;
     float squared_distance = 0.0f;
-    if (!tree.nearest(q.cast<float>(), max_squared_distance, &j, &squared_distance)) return;
+    if (!find_correspondence(tree, q, max_squared_distance, previous[i], &j, &squared_distance)) return;
     const Eigen::Vector3d r = q - tree.points()[j].cast<double>();
     accumulate<3>(pose.jacobian(source[i]), Eigen::Matrix3d::Identity(), r, kernel, out);
     out.squared_distance_sum += squared_distance;
@@ -105,12 +126,13 @@ struct PointToPlaneCost {
   const std::vector<Eigen::Vector3f>& target_normals;
   float max_squared_distance;
   KernelSettings kernel;
+  std::vector<uint32_t>& previous;  // one per source point, see find_correspondence
 
   void linearize(size_t i, const PoseBlocks& pose, NormalEquations& out) const {
     const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
     uint32_t j = 0;
     float squared_distance = 0.0f;
-    if (!tree.nearest(q.cast<float>(), max_squared_distance, &j, &squared_distance)) return;
+    if (!find_correspondence(tree, q, max_squared_distance, previous[i], &j, &squared_distance)) return;
     const Eigen::Vector3d normal = target_normals[j].cast<double>();
     const Eigen::Matrix<double, 1, 1> r(normal.dot(q - tree.points()[j].cast<double>()));
     const Eigen::Matrix<double, 1, 6> J = normal.transpose() * pose.jacobian(source[i]);
@@ -127,12 +149,13 @@ struct GicpCost {
   const std::vector<Eigen::Matrix3d>& target_covariances;
   float max_squared_distance;
   KernelSettings kernel;
+  std::vector<uint32_t>& previous;  // one per source point, see find_correspondence
 
   void linearize(size_t i, const PoseBlocks& pose, NormalEquations& out) const {
     const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
     uint32_t j = 0;
     float squared_distance = 0.0f;
-    if (!tree.nearest(q.cast<float>(), max_squared_distance, &j, &squared_distance)) return;
+    if (!find_correspondence(tree, q, max_squared_distance, previous[i], &j, &squared_distance)) return;
     // Segal et al. 2009, eq. (2): d^T (C_t + R C_s R^T)^-1 d with d = t - (R p + t_pose).
     const Eigen::Matrix3d combined =
         target_covariances[j] + pose.rotation * source_covariances[i] * pose.rotation.transpose();

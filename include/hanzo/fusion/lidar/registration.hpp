@@ -31,6 +31,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -63,6 +64,11 @@ struct NdtConfig {
 struct RegistrationConfig {
   RegistrationMethod method = RegistrationMethod::kGicp;
   double max_correspondence_distance = 1.0;  // m
+  /// Coarse-to-fine gating: registrations with these (larger) distances run first, each
+  /// starting from the previous estimate, before the final one with max_correspondence_distance.
+  /// A wide gate widens the basin of convergence, the final tight gate removes the bias of far
+  /// outliers (point-to-point ICP needs both). Empty by default. Not used by NDT.
+  std::vector<double> coarse_correspondence_distances;
   int max_iterations = 32;
   /// Converged when an iteration's step is below both tolerances.
   double translation_tolerance = 1e-4;       // m
