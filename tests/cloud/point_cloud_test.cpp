@@ -139,6 +139,25 @@ TEST(CloudIo, RejectsBadFiles) {
   result = read_cloud(short_pcd);
   ASSERT_FALSE(result.ok());
 
+  // Headers that announce far more data than the file holds (PCL 1.13 aborts on the first).
+  const std::string huge_ply = temp_path("huge.ply");
+  std::ofstream(huge_ply) << "ply\nformat binary_little_endian 1.0\nelement vertex 4000000000\nproperty float x\n"
+                             "property float y\nproperty float z\nend_header\n";
+  result = read_cloud(huge_ply);
+  ASSERT_FALSE(result.ok());
+  EXPECT_NE(result.error().message.find("vertex data holds 0 bytes"), std::string::npos) << result.error().message;
+  const std::string lying_pcd = temp_path("lying.pcd");
+  std::ofstream(lying_pcd) << "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1000\nHEIGHT 1\n"
+                              "POINTS 1000\nDATA binary\n0123456789ab";
+  result = read_cloud(lying_pcd);
+  ASSERT_FALSE(result.ok());
+  EXPECT_NE(result.error().message.find("binary data holds 12 bytes"), std::string::npos) << result.error().message;
+  const std::string no_xyz = temp_path("no_xyz.pcd");
+  std::ofstream(no_xyz) << "VERSION .7\nFIELDS a b\nSIZE 4 4\nTYPE F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2\n";
+  result = read_cloud(no_xyz);
+  ASSERT_FALSE(result.ok());
+  EXPECT_NE(result.error().message.find("no x, y, z"), std::string::npos) << result.error().message;
+
   // Writing an invalid cloud fails and leaves the previous file untouched.
   const std::string path = temp_path("kept.pcd");
   ASSERT_TRUE(write_cloud(path, sample_cloud()).ok());
