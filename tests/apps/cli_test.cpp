@@ -400,3 +400,44 @@ TEST(Cli, GraphOptimizeReachesSeSyncOptimumOnIntel) {
   EXPECT_THAT(bad.err, HasSubstr("bad.g2o:1: VERTEX_SE2: expected 4 numbers, got 3"));
   EXPECT_EQ(std::count(bad.err.begin(), bad.err.end(), '\n'), 1);
 }
+
+TEST(Cli, RegisterRecoversTheReferenceOfTheRealPair) {
+  const std::string dir = fmt::format("{}/lidar_small_gicp", HANZO_DATA_DIR);
+  for (const char* method : {"gicp", "ndt"}) {
+    const CliRun registered = run(fmt::format("register {}/source.ply {}/251370668.pcd --method {} --json", dir, dir, method));
+    ASSERT_EQ(registered.exit_code, 0) << registered.err;
+    const nlohmann::json json = nlohmann::json::parse(registered.out);
+    EXPECT_TRUE(json["converged"].get<bool>());
+    // small_gicp's reference translation (0.4889, 0.1212, -0.0253).
+    EXPECT_NEAR(json["translation"][0].get<double>(), 0.4889, 0.03) << method;
+    EXPECT_NEAR(json["translation"][1].get<double>(), 0.1212, 0.03) << method;
+    EXPECT_NEAR(json["translation"][2].get<double>(), -0.0253, 0.03) << method;
+    EXPECT_LT(json["rotation_deg"].get<double>(), 0.716 + 1.0);
+    EXPECT_GT(json["fitness"].get<double>(), 0.8);
+  }
+  const CliRun bad_method = run(fmt::format("register {0}/source.ply {0}/target.ply --method sift", dir));
+  EXPECT_EQ(bad_method.exit_code, 1);
+  EXPECT_THAT(bad_method.err, HasSubstr("--method: expected icp, icp-plane, gicp or ndt, got 'sift'"));
+  const CliRun far = run(fmt::format("register {0}/source.ply {0}/target.ply --init 100,0,0,0,0,0", dir));
+  EXPECT_EQ(far.exit_code, 1);
+  EXPECT_THAT(far.err, HasSubstr("initial guess"));
+  EXPECT_EQ(std::count(far.err.begin(), far.err.end(), '\n'), 1);
+}
+
+TEST(Cli, CloudFilterWritesEachStep) {
+  const auto out = std::filesystem::temp_directory_path() / "hanzo_cli_filtered.ply";
+  const CliRun filtered = run(fmt::format("cloud filter {}/lidar_small_gicp/source.ply --out {} --voxel 0.1 --sor 10,0.5 --ground --json",
+                                          HANZO_DATA_DIR, out.string()));
+  ASSERT_EQ(filtered.exit_code, 0) << filtered.err;
+  const nlohmann::json json = nlohmann::json::parse(filtered.out);
+  ASSERT_EQ(json["steps"].size(), 4u);
+  EXPECT_EQ(json["steps"][0]["points"], 69792);
+  EXPECT_TRUE(json["steps"][3]["found"].get<bool>());
+  EXPECT_GT(json["steps"][3]["plane"][2].get<double>(), 0.95);  // the floor is level in this scan
+  EXPECT_LT(json["points"].get<int>(), json["steps"][1]["points"].get<int>());
+  EXPECT_TRUE(std::filesystem::exists(out));
+  const CliRun bad = run(fmt::format("cloud filter {}/lidar_small_gicp/source.ply --out {} --sor 10", HANZO_DATA_DIR, out.string()));
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_THAT(bad.err, HasSubstr("--sor: expected K,R"));
+  std::filesystem::remove(out);
+}
