@@ -54,22 +54,6 @@ Result<size_t> parse_count(const std::string& token, const char* what) {
   return value;
 }
 
-// Stores `value` as `type` at `at` (ascii values into binary records).
-void store_as(ScalarType type, double value, uint8_t* at) {
-  const auto store = [at](auto sample) { std::memcpy(at, &sample, sizeof(sample)); };
-  switch (type) {
-    case ScalarType::kInt8: store(static_cast<int8_t>(value)); break;
-    case ScalarType::kUint8: store(static_cast<uint8_t>(value)); break;
-    case ScalarType::kInt16: store(static_cast<int16_t>(value)); break;
-    case ScalarType::kUint16: store(static_cast<uint16_t>(value)); break;
-    case ScalarType::kInt32: store(static_cast<int32_t>(value)); break;
-    case ScalarType::kUint32: store(static_cast<uint32_t>(value)); break;
-    case ScalarType::kInt64: store(static_cast<int64_t>(value)); break;
-    case ScalarType::kUint64: store(static_cast<uint64_t>(value)); break;
-    case ScalarType::kFloat32: store(static_cast<float>(value)); break;
-    case ScalarType::kFloat64: store(value); break;
-  }
-}
 
 }  // namespace
 
@@ -198,7 +182,7 @@ Result<RawCloud> parse_pcd(const std::string& bytes) {
         char* parsed_end = nullptr;
         const double value = std::strtod(tokens[token].c_str(), &parsed_end);
         if (*parsed_end != '\0') return Error(fmt::format("PCD ascii point {}: '{}' is not a number", read_points, tokens[token]));
-        store_as(types[f], value, record.data() + offsets[f] + c * fields[f].size);
+        store_scalar(types[f], value, record.data() + offsets[f] + c * fields[f].size);
       }
     }
     raw.bytes.insert(raw.bytes.end(), record.begin(), record.end());

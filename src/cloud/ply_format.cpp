@@ -50,19 +50,6 @@ const char* ply_type_name(ScalarType type) {
   }
 }
 
-void store_ascii(ScalarType type, double value, uint8_t* at) {
-  const auto store = [at](auto sample) { std::memcpy(at, &sample, sizeof(sample)); };
-  switch (type) {
-    case ScalarType::kInt8: store(static_cast<int8_t>(value)); break;
-    case ScalarType::kUint8: store(static_cast<uint8_t>(value)); break;
-    case ScalarType::kInt16: store(static_cast<int16_t>(value)); break;
-    case ScalarType::kUint16: store(static_cast<uint16_t>(value)); break;
-    case ScalarType::kInt32: store(static_cast<int32_t>(value)); break;
-    case ScalarType::kUint32: store(static_cast<uint32_t>(value)); break;
-    case ScalarType::kFloat64: store(value); break;
-    default: store(static_cast<float>(value)); break;
-  }
-}
 
 }  // namespace
 
@@ -165,7 +152,7 @@ Result<RawCloud> parse_ply(const std::string& bytes) {
     for (const RawField& field : raw.fields) {
       double value = 0.0;
       if (!(line >> value)) return Error(fmt::format("PLY ascii vertex {}: property '{}' is missing or not a number", i, field.name));
-      store_ascii(field.type, value, raw.bytes.data() + i * raw.record_size + field.offset);
+      store_scalar(field.type, value, raw.bytes.data() + i * raw.record_size + field.offset);
     }
   }
   return raw;

@@ -32,6 +32,22 @@ size_t scalar_size(ScalarType type) {
 
 bool is_integer(ScalarType type) { return type != ScalarType::kFloat32 && type != ScalarType::kFloat64; }
 
+void store_scalar(ScalarType type, double value, uint8_t* at) {
+  const auto store = [at](auto sample) { std::memcpy(at, &sample, sizeof(sample)); };
+  switch (type) {
+    case ScalarType::kInt8: store(static_cast<int8_t>(value)); break;
+    case ScalarType::kUint8: store(static_cast<uint8_t>(value)); break;
+    case ScalarType::kInt16: store(static_cast<int16_t>(value)); break;
+    case ScalarType::kUint16: store(static_cast<uint16_t>(value)); break;
+    case ScalarType::kInt32: store(static_cast<int32_t>(value)); break;
+    case ScalarType::kUint32: store(static_cast<uint32_t>(value)); break;
+    case ScalarType::kInt64: store(static_cast<int64_t>(value)); break;
+    case ScalarType::kUint64: store(static_cast<uint64_t>(value)); break;
+    case ScalarType::kFloat32: store(static_cast<float>(value)); break;
+    case ScalarType::kFloat64: store(value); break;
+  }
+}
+
 void RawCloud::add_field(std::string name, ScalarType type) {
   fields.push_back({std::move(name), type, record_size});
   record_size += scalar_size(type);

@@ -15,6 +15,8 @@ enum class ScalarType { kInt8, kUint8, kInt16, kUint16, kInt32, kUint32, kInt64,
 
 size_t scalar_size(ScalarType type);
 bool is_integer(ScalarType type);
+/// Writes `value` converted to `type` at `at` (text values into binary records).
+void store_scalar(ScalarType type, double value, uint8_t* at);
 
 struct RawField {
   std::string name;

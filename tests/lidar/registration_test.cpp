@@ -44,6 +44,12 @@ std::vector<SE3> perturbations(double magnitude, double angle_deg, int count, ui
   return out;
 }
 
+std::string method_test_name(const ::testing::TestParamInfo<RegistrationMethod>& info) {
+  std::string name(to_string(info.param));
+  std::replace(name.begin(), name.end(), '-', '_');
+  return name;
+}
+
 class RealPairTest : public ::testing::TestWithParam<RegistrationMethod> {
  protected:
   static void SetUpTestSuite() {
@@ -92,11 +98,7 @@ TEST_P(RealPairTest, RecoversTheReferenceFromIdentityAndPerturbations) {
 INSTANTIATE_TEST_SUITE_P(Methods, RealPairTest,
                          ::testing::Values(RegistrationMethod::kPointToPoint, RegistrationMethod::kPointToPlane,
                                            RegistrationMethod::kGicp, RegistrationMethod::kNdt),
-                         [](const auto& param_info) {
-                           std::string name(to_string(param_info.param));
-                           std::replace(name.begin(), name.end(), '-', '_');
-                           return name;
-                         });
+                         method_test_name);
 
 TEST(RealPair, PcdAndPlyFilesHoldTheSamePoints) {
   auto ply = cloud::read_cloud(kPairDir + "source.ply");
@@ -147,11 +149,7 @@ TEST_P(SimulatedPairTest, RecoversTheTrueMotion) {
 INSTANTIATE_TEST_SUITE_P(Methods, SimulatedPairTest,
                          ::testing::Values(RegistrationMethod::kPointToPoint, RegistrationMethod::kPointToPlane,
                                            RegistrationMethod::kGicp, RegistrationMethod::kNdt),
-                         [](const auto& param_info) {
-                           std::string name(to_string(param_info.param));
-                           std::replace(name.begin(), name.end(), '-', '_');
-                           return name;
-                         });
+                         method_test_name);
 
 TEST(Registration, RejectsBadInput) {
   cloud::PointCloud good;
