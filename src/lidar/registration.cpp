@@ -204,10 +204,10 @@ Result<RegistrationResult> align_once(const cloud::PointCloud& source, const Reg
   std::vector<uint32_t> previous(source.size(), kNoCorrespondence);
   switch (config.method) {
     case RegistrationMethod::kPointToPoint:
-      return gauss_newton(PointToPointCost{positions, *prepared.tree, max_squared, kernel, previous}, source.size(),
+      return gauss_newton(PointToPointCost{positions, {*prepared.tree, max_squared, previous}, kernel}, source.size(),
                           T_target_source_guess, config);
     case RegistrationMethod::kPointToPlane:
-      return gauss_newton(PointToPlaneCost{positions, *prepared.tree, prepared.cloud.normals, max_squared, kernel, previous},
+      return gauss_newton(PointToPlaneCost{positions, {*prepared.tree, max_squared, previous}, prepared.cloud.normals, kernel},
                           source.size(), T_target_source_guess, config);
     case RegistrationMethod::kGicp: {
       std::vector<Eigen::Matrix3d> source_covariances;
@@ -221,7 +221,7 @@ Result<RegistrationResult> align_once(const cloud::PointCloud& source, const Reg
         cloud::estimate_local_geometry(with_geometry, geometry);
         source_covariances = to_double(with_geometry.covariances);
       }
-      return gauss_newton(GicpCost{positions, source_covariances, *prepared.tree, prepared.covariances, max_squared, kernel, previous},
+      return gauss_newton(GicpCost{positions, source_covariances, {*prepared.tree, max_squared, previous}, prepared.covariances, kernel},
                           source.size(), T_target_source_guess, config);
     }
     case RegistrationMethod::kNdt: {

@@ -85,6 +85,23 @@ inline bool find_correspondence(const cloud::KdTree& tree, const Eigen::Vector3d
   return found;
 }
 
+/// The correspondence search shared by ICP, point-to-plane and GICP: finds source point i's
+/// target point and counts it in the statistics of `out`.
+struct NearestNeighborMatcher {
+  const cloud::KdTree& tree;
+  float max_squared_distance;
+  std::vector<uint32_t>& previous;  // one per source point, see find_correspondence
+
+  bool match(size_t i, const Eigen::Vector3d& q, uint32_t* j, NormalEquations& out) const {
+    float squared_distance = 0.0f;
+    if (!find_correspondence(tree, q, max_squared_distance, previous[i], j, &squared_distance)) return false;
+    out.squared_distance_sum += squared_distance;
+    ++out.correspondences;
+    return true;
+  }
+  Eigen::Vector3d target(uint32_t j) const { return tree.points()[j].cast<double>(); }
+};
+
 struct KernelSettings {
   RobustKernel kernel;
   double width;
@@ -103,66 +120,51 @@ inline void accumulate(const Eigen::Matrix<double, ResidualRows, 6>& J, const Ei
 
 struct PointToPointCost {
   const std::vector<Eigen::Vector3d>& source;
-  const cloud::KdTree& tree;
-  float max_squared_distance;
+  NearestNeighborMatcher matcher;
   KernelSettings kernel;
-  std::vector<uint32_t>& previous;  // one per source point, see find_correspondence
 
   void linearize(size_t i, const PoseBlocks& pose, NormalEquations& out) const {
     const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
     uint32_t j = 0;
-    float squared_distance = 0.0f;
-    if (!find_correspondence(tree, q, max_squared_distance, previous[i], &j, &squared_distance)) return;
-    const Eigen::Vector3d r = q - tree.points()[j].cast<double>();
+    if (!matcher.match(i, q, &j, out)) return;
+    const Eigen::Vector3d r = q - matcher.target(j);
     accumulate<3>(pose.jacobian(source[i]), Eigen::Matrix3d::Identity(), r, kernel, out);
-    out.squared_distance_sum += squared_distance;
-    ++out.correspondences;
   }
 };
 
 struct PointToPlaneCost {
   const std::vector<Eigen::Vector3d>& source;
-  const cloud::KdTree& tree;
+  NearestNeighborMatcher matcher;
   const std::vector<Eigen::Vector3f>& target_normals;
-  float max_squared_distance;
   KernelSettings kernel;
-  std::vector<uint32_t>& previous;  // one per source point, see find_correspondence
 
   void linearize(size_t i, const PoseBlocks& pose, NormalEquations& out) const {
     const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
     uint32_t j = 0;
-    float squared_distance = 0.0f;
-    if (!find_correspondence(tree, q, max_squared_distance, previous[i], &j, &squared_distance)) return;
+    if (!matcher.match(i, q, &j, out)) return;
     const Eigen::Vector3d normal = target_normals[j].cast<double>();
-    const Eigen::Matrix<double, 1, 1> r(normal.dot(q - tree.points()[j].cast<double>()));
+    const Eigen::Matrix<double, 1, 1> r(normal.dot(q - matcher.target(j)));
     const Eigen::Matrix<double, 1, 6> J = normal.transpose() * pose.jacobian(source[i]);
     accumulate<1>(J, Eigen::Matrix<double, 1, 1>::Identity(), r, kernel, out);
-    out.squared_distance_sum += squared_distance;
-    ++out.correspondences;
   }
 };
 
 struct GicpCost {
   const std::vector<Eigen::Vector3d>& source;
   const std::vector<Eigen::Matrix3d>& source_covariances;
-  const cloud::KdTree& tree;
+  NearestNeighborMatcher matcher;
   const std::vector<Eigen::Matrix3d>& target_covariances;
-  float max_squared_distance;
   KernelSettings kernel;
-  std::vector<uint32_t>& previous;  // one per source point, see find_correspondence
 
   void linearize(size_t i, const PoseBlocks& pose, NormalEquations& out) const {
     const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
     uint32_t j = 0;
-    float squared_distance = 0.0f;
-    if (!find_correspondence(tree, q, max_squared_distance, previous[i], &j, &squared_distance)) return;
+    if (!matcher.match(i, q, &j, out)) return;
     // Segal et al. 2009, eq. (2): d^T (C_t + R C_s R^T)^-1 d with d = t - (R p + t_pose).
     const Eigen::Matrix3d combined =
         target_covariances[j] + pose.rotation * source_covariances[i] * pose.rotation.transpose();
-    const Eigen::Vector3d r = q - tree.points()[j].cast<double>();
+    const Eigen::Vector3d r = q - matcher.target(j);
     accumulate<3>(pose.jacobian(source[i]), combined.inverse(), r, kernel, out);
-    out.squared_distance_sum += squared_distance;
-    ++out.correspondences;
   }
 };
 
