@@ -5,6 +5,9 @@
 #include <fstream>
 #include <sstream>
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <fmt/format.h>
 
 namespace hanzo::fusion {
@@ -16,6 +19,36 @@ Result<std::string> read_file(const std::string& path) {
   text << file.rdbuf();
   if (file.bad()) return Error(fmt::format("{}: read error ({})", path, std::strerror(errno)));
   return text.str();
+}
+
+Status write_file_durably(const std::string& path, std::string_view bytes) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return Error{fmt::format("{}: cannot write ({})", path, std::strerror(errno))};
+  size_t written = 0;
+  while (written < bytes.size()) {
+    const ssize_t n = ::write(fd, bytes.data() + written, bytes.size() - written);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    written += static_cast<size_t>(n);
+  }
+  const bool complete = written == bytes.size() && ::fsync(fd) == 0;
+  const int saved_errno = errno;
+  ::close(fd);
+  if (!complete) {
+    ::unlink(path.c_str());
+    return Error{fmt::format("{}: write failed ({})", path, std::strerror(saved_errno))};
+  }
+  return ok_status();
+}
+
+Status sync_directory(const std::string& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return Error{fmt::format("{}: cannot open folder ({})", path, std::strerror(errno))};
+  const bool synced = ::fsync(fd) == 0;
+  const int saved_errno = errno;
+  ::close(fd);
+  if (!synced) return Error{fmt::format("{}: cannot sync folder ({})", path, std::strerror(saved_errno))};
+  return ok_status();
 }
 
 }  // namespace hanzo::fusion

@@ -225,22 +225,7 @@ Status write_file_atomically(const std::string& path, const std::string& text) {
   // Write and fsync a temporary file in the same folder, then rename it over the target:
   // readers see the old file or the new one, never a partial one, even after a power loss.
   const std::string temporary = path + ".tmp";
-  const int fd = ::open(temporary.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) return Error{fmt::format("{}: cannot write ({})", temporary, std::strerror(errno))};
-  size_t written = 0;
-  while (written < text.size()) {
-    const ssize_t n = ::write(fd, text.data() + written, text.size() - written);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) break;
-    written += static_cast<size_t>(n);
-  }
-  const bool complete = written == text.size() && ::fsync(fd) == 0;
-  const int saved_errno = errno;
-  ::close(fd);
-  if (!complete) {
-    ::unlink(temporary.c_str());
-    return Error{fmt::format("{}: write failed ({})", temporary, std::strerror(saved_errno))};
-  }
+  HANZO_RETURN_IF_ERROR(write_file_durably(temporary, text));
   if (::rename(temporary.c_str(), path.c_str()) != 0) {
     const int rename_errno = errno;
     ::unlink(temporary.c_str());

@@ -1,7 +1,8 @@
 #pragma once
-// Whole-file reads with errors that name the path and the system's reason.
+// Whole-file reads and durable writes with errors that name the path and the system's reason.
 
 #include <string>
+#include <string_view>
 
 #include "hanzo/fusion/core/result.hpp"
 
@@ -9,5 +10,13 @@ namespace hanzo::fusion {
 
 /// The file's bytes. Fails with "PATH: cannot open file (No such file or directory)" and the like.
 Result<std::string> read_file(const std::string& path);
+
+/// Creates or truncates `path`, writes `bytes` and fsyncs the file. On failure the partial file
+/// is removed. Not atomic by itself: write a temporary name and rename or link it (see
+/// yaml::write_file_atomically), then sync_directory() the folder to make the name durable.
+Status write_file_durably(const std::string& path, std::string_view bytes);
+
+/// fsyncs a folder, so that names created or renamed in it survive a power loss.
+Status sync_directory(const std::string& path);
 
 }  // namespace hanzo::fusion

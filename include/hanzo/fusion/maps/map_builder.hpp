@@ -1,0 +1,80 @@
+#pragma once
+// Mapping with known poses: scans (LiDAR sweeps or planar laser scans, in their sensor frame)
+// and the sensor's world pose at each scan go in; the layers of a FusionMap come out. It is
+// what `hanzo-fusion map build` runs on a log and a trajectory, and what a SLAM pipeline feeds
+// with its keyframes.
+//
+// Layers (each optional):
+//  - 2D occupancy: returns whose height relative to the sensor is inside the height band are
+//    projected onto the world XY plane and ray cast from the sensor's XY position (a planar
+//    laser's returns all qualify; for a 3D LiDAR the band keeps obstacles and drops ground and
+//    ceiling).
+//  - 3D occupancy: every return ray cast in 3D.
+//  - Point map: every scan a keyframe (see point_map.hpp).
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "hanzo/fusion/cloud/point_cloud.hpp"
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/maps/occupancy_grid.hpp"
+#include "hanzo/fusion/maps/point_map.hpp"
+#include "hanzo/fusion/msgs/map_messages.hpp"
+
+namespace hanzo::fusion::maps {
+
+struct MapBuilderConfig {
+  bool occupancy_2d = true;
+  OccupancyConfig occupancy_2d_config;
+  /// Returns with min_height <= z_world - z_sensor <= max_height (m) enter the 2D grid.
+  double min_height = -0.3;
+  double max_height = 1.0;
+  bool occupancy_3d = false;
+  OccupancyConfig occupancy_3d_config{.resolution = 0.2};
+  bool points = true;
+  PointMapConfig point_map;
+
+  Status validate() const;
+};
+
+struct MapBuilderSummary {
+  uint64_t scans = 0;
+  uint64_t points = 0;        ///< returns integrated (before downsampling)
+  uint64_t points_in_2d_band = 0;
+};
+
+class MapBuilder {
+ public:
+  static Result<MapBuilder> create(const MapBuilderConfig& config);
+
+  /// Integrates one scan. Invalid clouds or poses are rejected, changing nothing.
+  Status insert(const SE3& T_world_sensor, const cloud::PointCloud& scan_in_sensor_frame);
+  /// Moves earlier scans (numbered 0, 1, ... in insertion order) in the point map after a
+  /// correction. Occupancy layers keep what was integrated (rebuild them from the corrected
+  /// poses when the correction is large).
+  Status correct_poses(const std::map<uint64_t, SE3>& T_world_sensor_by_scan);
+
+  /// Fills the map's layers (points, occupancy: the 3D grid when built, else the 2D one) and
+  /// leaves its metadata as given.
+  void write_layers(msgs::FusionMap& map) const;
+
+  const std::optional<OccupancyGrid2D>& occupancy_2d() const { return occupancy_2d_; }
+  const std::optional<OccupancyGrid3D>& occupancy_3d() const { return occupancy_3d_; }
+  const std::optional<PointMap>& point_map() const { return point_map_; }
+  const MapBuilderSummary& summary() const { return summary_; }
+  std::size_t memory_bytes() const;
+
+ private:
+  explicit MapBuilder(const MapBuilderConfig& config) : config_(config) {}
+
+  MapBuilderConfig config_;
+  std::optional<OccupancyGrid2D> occupancy_2d_;
+  std::optional<OccupancyGrid3D> occupancy_3d_;
+  std::optional<PointMap> point_map_;
+  MapBuilderSummary summary_;
+};
+
+}  // namespace hanzo::fusion::maps
