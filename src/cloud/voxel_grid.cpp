@@ -28,6 +28,12 @@ bool pack_voxel_key(const Eigen::Vector3i& voxel, uint64_t* key) {
   return true;
 }
 
+Eigen::Vector3i unpack_voxel_key(uint64_t key) {
+  Eigen::Vector3i voxel;
+  for (int axis = 0; axis < 3; ++axis) voxel[axis] = static_cast<int>(int64_t((key >> (kKeyBits * axis)) & kKeyMask) - kKeyOffset);
+  return voxel;
+}
+
 PointCloud voxel_downsample(const PointCloud& cloud, double voxel_size, int num_threads) {
   assert(voxel_size > 0.0);
   const float inverse_size = static_cast<float>(1.0 / voxel_size);

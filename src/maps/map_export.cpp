@@ -14,6 +14,7 @@
 #include "hanzo/fusion/core/yaml_value.hpp"
 #include "hanzo/fusion/msgs/map_convert.hpp"
 #include "hanzo/fusion/msgs/map_validation.hpp"
+#include "grid_image.hpp"
 
 namespace hanzo::fusion::maps {
 namespace {
@@ -33,26 +34,6 @@ Status validate_layer(const msgs::OccupancyGridLayer& layer) {
 double yaw_of(const Eigen::Quaterniond& orientation) {
   const Eigen::Quaterniond q = orientation.normalized();
   return std::atan2(2.0 * (q.w() * q.z() + q.x() * q.y()), 1.0 - 2.0 * (q.y() * q.y() + q.z() * q.z()));
-}
-
-/// The grid as an image: row 0 is the grid's last y row, so image up is world +y.
-cv::Mat to_image(const msgs::OccupancyGridLayer& flat, const std::function<uint8_t(float)>& pixel_of) {
-  cv::Mat image(static_cast<int>(flat.size_y), static_cast<int>(flat.size_x), CV_8UC1);
-  for (uint32_t y = 0; y < flat.size_y; ++y) {
-    uint8_t* row = image.ptr<uint8_t>(static_cast<int>(flat.size_y - 1 - y));
-    for (uint32_t x = 0; x < flat.size_x; ++x) row[x] = pixel_of(flat.occupancy[std::size_t{y} * flat.size_x + x]);
-  }
-  return image;
-}
-
-Status write_image(const std::string& path, const cv::Mat& image, const std::string& extension) {
-  std::vector<uchar> bytes;
-  try {
-    if (!cv::imencode(extension, image, bytes)) return Error{fmt::format("{}: cannot encode the image", path)};
-  } catch (const cv::Exception& error) {
-    return Error{fmt::format("{}: cannot encode the image ({})", path, error.what())};
-  }
-  return yaml::write_file_atomically(path, std::string(bytes.begin(), bytes.end()));
 }
 
 }  // namespace
@@ -82,7 +63,7 @@ Status write_ros_map(const std::string& yaml_path, const msgs::OccupancyGridLaye
   const std::filesystem::path image_path = std::filesystem::path(yaml_path).replace_extension(".pgm");
 
   std::string pgm = fmt::format("P5\n# hanzo-fusion occupancy grid, {} m/cell\n{} {}\n255\n", flat.resolution, flat.size_x, flat.size_y);
-  const cv::Mat image = to_image(flat, [&](float p) {
+  const cv::Mat image = grid_image(flat, [&](float p) {
     if (p == kUnknown) return kUnknownPixel;
     if (p > config.occupied_threshold) return kOccupiedPixel;
     if (p < config.free_threshold) return kFreePixel;
@@ -165,7 +146,7 @@ Status write_occupancy_png(const std::string& path, const msgs::OccupancyGridLay
   HANZO_RETURN_IF_ERROR(validate_layer(layer));
   if (layer.size_x == 0 || layer.size_y == 0) return Error{"occupancy PNG: the occupancy grid is empty", "occupancy"};
   const msgs::OccupancyGridLayer flat = flatten_occupancy(layer);
-  const cv::Mat image = to_image(flat, [](float p) {
+  const cv::Mat image = grid_image(flat, [](float p) {
     return p == kUnknown ? uint8_t{160} : static_cast<uint8_t>(std::lround(255.0 * (1.0 - p)));
   });
   return write_image(path, image, ".png");

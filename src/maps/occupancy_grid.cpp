@@ -55,6 +55,23 @@ Status OccupancyConfig::validate() const {
   return ok_status();
 }
 
+Result<Eigen::Vector3i> occupancy_layer_first_cell(const msgs::OccupancyGridLayer& layer) {
+  if (!layer.origin.orientation.isApprox(Eigen::Quaterniond::Identity(), 1e-9) &&
+      !layer.origin.orientation.isApprox(Eigen::Quaterniond(-1, 0, 0, 0), 1e-9)) {
+    return Error{"occupancy layer: rotated grid origins are not supported (the origin's orientation must be identity)",
+                 "occupancy.origin.orientation"};
+  }
+  const Eigen::Vector3d origin_cells = layer.origin.position / layer.resolution;
+  const Eigen::Vector3d rounded = origin_cells.array().round();
+  if (!origin_cells.allFinite() || (origin_cells - rounded).cwiseAbs().maxCoeff() > 1e-6 ||
+      (rounded.array().abs() >= kIndexLimit / 2).any()) {
+    return Error{fmt::format("occupancy layer: origin ({}, {}, {}) is not a whole number of cells from the world origin",
+                             layer.origin.position.x(), layer.origin.position.y(), layer.origin.position.z()),
+                 "occupancy.origin.position"};
+  }
+  return rounded.cast<int>().eval();
+}
+
 double probability_to_log_odds(double probability) { return std::log(probability / (1.0 - probability)); }
 double log_odds_to_probability(double log_odds) { return 1.0 / (1.0 + std::exp(-log_odds)); }
 
@@ -379,23 +396,12 @@ Result<OccupancyGrid<Dim>> OccupancyGrid<Dim>::from_layer(const msgs::OccupancyG
   if (Dim == 2 && layer.size_z != 1) {
     return Error{fmt::format("occupancy layer: size_z is {}, a 2D grid needs 1", layer.size_z), "occupancy.size_z"};
   }
-  if (!layer.origin.orientation.isApprox(Eigen::Quaterniond::Identity(), 1e-9) &&
-      !layer.origin.orientation.isApprox(Eigen::Quaterniond(-1, 0, 0, 0), 1e-9)) {
-    return Error{"occupancy layer: rotated grid origins are not supported (the origin's orientation must be identity)",
-                 "occupancy.origin.orientation"};
-  }
   config.resolution = layer.resolution;
   HANZO_RETURN_IF_ERROR(config.validate());
   OccupancyGrid grid(config);
-  // The origin must sit on a cell boundary of the world-aligned grid.
-  const Eigen::Vector3d origin_cells = layer.origin.position / layer.resolution;
-  const Eigen::Vector3d rounded = origin_cells.array().round();
-  if ((origin_cells - rounded).cwiseAbs().maxCoeff() > 1e-6 || (rounded.array().abs() >= kIndexLimit / 2).any()) {
-    return Error{fmt::format("occupancy layer: origin ({}, {}, {}) is not a whole number of cells from the world origin",
-                             layer.origin.position.x(), layer.origin.position.y(), layer.origin.position.z()),
-                 "occupancy.origin.position"};
-  }
-  const Index first = rounded.head<Dim>().template cast<int>();
+  Eigen::Vector3i first_cell;
+  HANZO_ASSIGN_OR_RETURN(first_cell, occupancy_layer_first_cell(layer));
+  const Index first = first_cell.head<Dim>();
   Index size;
   size[0] = static_cast<int>(layer.size_x);
   size[1] = static_cast<int>(layer.size_y);
@@ -412,7 +418,7 @@ Result<OccupancyGrid<Dim>> OccupancyGrid<Dim>::from_layer(const msgs::OccupancyG
       const Index block_index = Storage::block_of(cell);
       auto& block = grid.storage_->find_or_create(block_index);
       const int offset = Storage::offset_in_block(cell, block_index);
-      const double clamped = std::clamp(static_cast<double>(probability_value), 1e-6, 1.0 - 1e-6);
+      const double clamped = std::clamp(static_cast<double>(probability_value), config.probability_min, config.probability_max);
       block.log_odds[offset] = static_cast<float>(probability_to_log_odds(clamped));
       block.stamp[offset] = kImportedStamp;
     }

@@ -24,6 +24,8 @@ inline Eigen::Vector3i voxel_coordinates(const Eigen::Vector3f& position, float 
 
 /// The voxel's 63-bit key (21 bits per axis), or false when it lies outside the key range.
 bool pack_voxel_key(const Eigen::Vector3i& voxel, uint64_t* key);
+/// The voxel of a key made by pack_voxel_key.
+Eigen::Vector3i unpack_voxel_key(uint64_t key);
 
 /// Downsampled copy of `cloud`. voxel_size must be > 0 (m).
 PointCloud voxel_downsample(const PointCloud& cloud, double voxel_size, int num_threads = 1);

@@ -105,7 +105,8 @@ class OccupancyGrid {
   /// the world position of the corner of the first cell, no rotation. Empty grids give a
   /// 0-size layer.
   msgs::OccupancyGridLayer to_layer() const;
-  /// A grid holding the layer's probabilities (cells at exactly 0.5 are unknown). The layer
+  /// A grid holding the layer's probabilities, clamped to the configuration's bounds (cells at
+  /// exactly 0.5 are unknown). The layer
   /// must be axis-aligned (identity rotation), have size_z == 1 for Dim 2, and pass the
   /// FusionMap checks; config.resolution is replaced by the layer's.
   static Result<OccupancyGrid> from_layer(const msgs::OccupancyGridLayer& layer, OccupancyConfig config);
@@ -128,6 +129,11 @@ using OccupancyGrid3D = OccupancyGrid<3>;
 
 extern template class OccupancyGrid<2>;
 extern template class OccupancyGrid<3>;
+
+/// The world cell index of a layer's first cell (its origin divided by its resolution). Fails
+/// when the origin is rotated or not a whole number of cells from the world origin: such a
+/// grid does not line up with the world-aligned cells of OccupancyGrid.
+Result<Eigen::Vector3i> occupancy_layer_first_cell(const msgs::OccupancyGridLayer& layer);
 
 /// log(p / (1 - p)) and its inverse.
 double probability_to_log_odds(double probability);
