@@ -13,6 +13,8 @@ packages=(
   libprotobuf-dev protobuf-compiler libgrpc++-dev protobuf-compiler-grpc
   # io: MCAP/bag chunk compression and CRC-32
   libzstd-dev liblz4-dev zlib1g-dev libbz2-dev
+  # maps: SHA-256 of input files (provenance)
+  libssl-dev
   # io: image files of the dataset importers (KITTI, EuRoC, TUM RGB-D)
   libopencv-dev
   # sim: parallel ray casting

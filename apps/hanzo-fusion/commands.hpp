@@ -20,5 +20,6 @@ void add_sim_command(CLI::App& app, const Output& output, Command& run);
 void add_run_command(CLI::App& app, const Output& output, Command& run);
 void add_graph_command(CLI::App& app, const Output& output, Command& run);
 void add_cloud_commands(CLI::App& app, const Output& output, Command& run);
+void add_map_command(CLI::App& app, const Output& output, Command& run);
 
 }  // namespace hanzo::fusion::app

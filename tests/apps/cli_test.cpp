@@ -441,3 +441,71 @@ TEST(Cli, CloudFilterWritesEachStep) {
   EXPECT_THAT(bad.err, HasSubstr("--sor: expected K,R"));
   std::filesystem::remove(out);
 }
+
+TEST(Cli, MapBuildInfoExportStoreDiffRedact) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_map_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string log = (dir / "intel.mcap").string();
+  const std::string poses = (dir / "intel.tum").string();
+  const CliRun imported = run(fmt::format("import carmen {}/laser2d_carmen/intel-corrected.log.gz --out {} --ground-truth {} --no-foxglove",
+                                          HANZO_DATA_DIR, log, poses));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+
+  const std::string map = (dir / "intel.fmap").string();
+  const CliRun built = run(fmt::format("map build --log {} --trajectory {} --topic /laser --resolution 0.05 --points-voxel 0.05 "
+                                       "--map-id intel-lab --out {} --json", log, poses, map));
+  ASSERT_EQ(built.exit_code, 0) << built.err;
+  const nlohmann::json build_json = nlohmann::json::parse(built.out);
+  EXPECT_EQ(build_json["scans"], 906);
+  EXPECT_EQ(build_json["map_id"], "intel-lab");
+  EXPECT_GT(build_json["layers"]["occupancy"]["occupied_cells"].get<int>(), 10000);
+  EXPECT_EQ(build_json["inputs"].size(), 2u);
+  EXPECT_EQ(build_json["inputs"][0]["sha256"].get<std::string>().size(), 64u);
+
+  const CliRun info = run(fmt::format("map info {}", map));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_THAT(info.out, HasSubstr("map intel-lab version 1"));
+  EXPECT_THAT(info.out, HasSubstr("cells of 0.05 m"));
+
+  for (const std::string format : {"png", "pgm", "ply"}) {
+    const std::string out = (dir / ("intel_export." + std::string(format == "pgm" ? "yaml" : format))).string();
+    const CliRun exported = run(fmt::format("map export {} --format {} --out {} --json", map, format, out));
+    ASSERT_EQ(exported.exit_code, 0) << format << ": " << exported.err;
+    for (const auto& file : nlohmann::json::parse(exported.out)["files"]) EXPECT_TRUE(std::filesystem::exists(file.get<std::string>()));
+  }
+
+  // Versions: the built map, then a redacted copy saved as version 2.
+  const std::string store = (dir / "store").string();
+  ASSERT_EQ(run(fmt::format("map save {} --store {}", map, store)).exit_code, 0);
+  const std::string redacted = (dir / "redacted.fmap").string();
+  const CliRun redact = run(fmt::format("map redact {} --out {} --drop-labels --resolution 0.5 --json", map, redacted));
+  ASSERT_EQ(redact.exit_code, 0) << redact.err;
+  EXPECT_EQ(nlohmann::json::parse(redact.out)["layers"]["occupancy"]["resolution"], 0.5);
+  ASSERT_EQ(run(fmt::format("map save {} --store {}", redacted, store)).exit_code, 0);
+  const CliRun versions = run(fmt::format("map versions --store {} --json", store));
+  ASSERT_EQ(versions.exit_code, 0) << versions.err;
+  const nlohmann::json versions_json = nlohmann::json::parse(versions.out);
+  ASSERT_EQ(versions_json["maps"][0]["versions"].size(), 2u);
+  EXPECT_EQ(versions_json["maps"][0]["versions"][1]["parent_version"], 1);
+  const std::string first = (dir / "v1.fmap").string();
+  ASSERT_EQ(run(fmt::format("map checkout intel-lab --store {} --version 1 --out {}", store, first)).exit_code, 0);
+
+  // Same map against itself: no change; against the redacted one: resolutions differ.
+  const CliRun same = run(fmt::format("map diff {} {} --json", first, map));
+  ASSERT_EQ(same.exit_code, 0) << same.err;
+  EXPECT_EQ(nlohmann::json::parse(same.out)["occupancy"]["became_occupied"], 0);
+  const CliRun mismatch = run(fmt::format("map diff {} {}", map, redacted));
+  EXPECT_EQ(mismatch.exit_code, 1);
+  EXPECT_THAT(mismatch.err, HasSubstr("resolutions differ"));
+
+  // Bad input: a file that is not a map, an export the map cannot give.
+  const std::string junk = write_temp("hanzo_cli_junk.fmap", "not a map");
+  const CliRun bad = run(fmt::format("map info {}", junk));
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_THAT(bad.err, HasSubstr("not a FusionMap file"));
+  const CliRun no_points = run(fmt::format("map export {} --format pcd --out {}", redacted, (dir / "x.pcd").string()));
+  EXPECT_EQ(no_points.exit_code, 0) << no_points.err;  // the redacted map keeps a (coarser) point layer
+  std::filesystem::remove(junk);
+  std::filesystem::remove_all(dir);
+}
