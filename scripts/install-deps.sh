@@ -25,8 +25,9 @@ packages=(
   libpcl-dev libnanoflann-dev libopen3d-dev
   # apps
   libcli11-dev
-  # tests and benchmarks (Embree: the ray-casting peer of the simulator benchmark)
-  libgtest-dev libgmock-dev libbenchmark-dev libembree-dev
+  # tests and benchmarks (Embree: the ray-casting peer of the simulator benchmark; OctoMap: the
+  # occupancy-mapping peer of the maps benchmark)
+  libgtest-dev libgmock-dev libbenchmark-dev libembree-dev liboctomap-dev
 )
 
 missing=()
