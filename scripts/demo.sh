@@ -3,8 +3,8 @@
 # configuration and calibration, turn the sample CSV recordings into a sensor log (MCAP), list
 # it, replay it through the fusion frontend (EKF) and score it against its ground truth,
 # simulate 8 s of the urban_vehicle scenario (all six sensors, with ground truth) and replay
-# that too, then score a sample estimate with evo's APE/RPE (SVG plots). Writes only into
-# build/demo/.
+# that too, map its LiDAR sweeps with the true poses (FusionMap + PNG pictures), then score a
+# sample estimate with evo's APE/RPE (SVG plots). Writes only into build/demo/.
 set -euo pipefail
 build_dir=${1:-build}
 cd "$(dirname "$0")/.."
@@ -33,6 +33,14 @@ echo
 echo "== hanzo-fusion run --config $out/urban/fusion.yaml --calib $out/urban/calibration.yaml --log $out/urban/sensors.mcap --out $out/urban/run --gt $out/urban/ground_truth.tum"
 "$cli" run --config "$out/urban/fusion.yaml" --calib "$out/urban/calibration.yaml" --log "$out/urban/sensors.mcap" \
   --out "$out/urban/run" --gt "$out/urban/ground_truth.tum"
+echo
+echo "== hanzo-fusion map build --log $out/urban/sensors.mcap --trajectory $out/urban/ground_truth.tum --calib $out/urban/calibration.yaml --topic /sensors/lidar --resolution 0.2 --height-band -1.5,1.5 --points-voxel 0.2 --out $out/urban/map.fmap"
+"$cli" map build --log "$out/urban/sensors.mcap" --trajectory "$out/urban/ground_truth.tum" --calib "$out/urban/calibration.yaml" \
+  --topic /sensors/lidar --resolution 0.2 --height-band -1.5,1.5 --points-voxel 0.2 --map-id urban-demo --out "$out/urban/map.fmap"
+echo
+echo "== hanzo-fusion map export $out/urban/map.fmap --out $out/urban/map.png (and --layer points --out $out/urban/map_points.png)"
+"$cli" map export "$out/urban/map.fmap" --out "$out/urban/map.png"
+"$cli" map export "$out/urban/map.fmap" --layer points --out "$out/urban/map_points.png"
 echo
 echo "== hanzo-fusion eval ape examples/data/ground_truth.tum examples/data/estimate.tum --align sim3 --plot $out"
 "$cli" eval ape examples/data/ground_truth.tum examples/data/estimate.tum --align sim3 --plot "$out"

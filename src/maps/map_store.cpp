@@ -88,7 +88,10 @@ Result<MapVersionInfo> MapStore::save(msgs::FusionMap map) {
   std::vector<MapVersionInfo> existing;
   HANZO_ASSIGN_OR_RETURN(existing, versions(map.map_id));
   uint64_t version = existing.empty() ? 1 : existing.back().version + 1;
-  map.parent_version = map.version;
+  // The parent is the stored version this map was loaded as; a map that never came from the
+  // store (or from another store) starts a new lineage.
+  const bool derived = std::any_of(existing.begin(), existing.end(), [&](const MapVersionInfo& info) { return info.version == map.version; });
+  map.parent_version = derived ? map.version : 0;
   if (map.created.nanoseconds() == 0) map.created = now();
 
   const std::string temporary = fmt::format("{}/.{}-{}.tmp", folder, ::getpid(), generate_map_id());

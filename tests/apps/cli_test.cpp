@@ -487,6 +487,7 @@ TEST(Cli, MapBuildInfoExportStoreDiffRedact) {
   ASSERT_EQ(versions.exit_code, 0) << versions.err;
   const nlohmann::json versions_json = nlohmann::json::parse(versions.out);
   ASSERT_EQ(versions_json["maps"][0]["versions"].size(), 2u);
+  EXPECT_EQ(versions_json["maps"][0]["versions"][0]["parent_version"], 0);  // built, never stored before
   EXPECT_EQ(versions_json["maps"][0]["versions"][1]["parent_version"], 1);
   const std::string first = (dir / "v1.fmap").string();
   ASSERT_EQ(run(fmt::format("map checkout intel-lab --store {} --version 1 --out {}", store, first)).exit_code, 0);

@@ -44,8 +44,9 @@ class MapStore {
   static Result<MapStore> open(const std::string& root, const FusionMapFileConfig& file_config = {});
 
   /// Saves `map` as the next version of its map_id (a new UUID when empty) and returns what
-  /// was stored. The stored map gets version = latest + 1, parent_version = map.version (the
-  /// version it was loaded as; 0 for a new map) and, when map.created is 0, the current time.
+  /// was stored. The stored map gets version = latest + 1, parent_version = map.version when
+  /// that version is in the store (the version it was loaded as), else 0, and, when
+  /// map.created is 0, the current time.
   Result<MapVersionInfo> save(msgs::FusionMap map);
 
   /// Every map id in the store, sorted.
