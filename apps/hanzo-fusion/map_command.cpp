@@ -66,17 +66,36 @@ Status export_map(const MapOptions& options, nlohmann::json& result) {
     result["files"] = {yaml, std::filesystem::path(yaml).replace_extension(".pgm").string()};
     return ok_status();
   }
+  if (!options.layer.empty() && options.layer != "occupancy" && options.layer != "points" && options.layer != "mesh") {
+    return Error{fmt::format("--layer: expected occupancy, points or mesh, got '{}'", options.layer)};
+  }
   if (format == "png") {
-    const bool occupancy = options.layer.empty() ? map.occupancy.has_value() : options.layer == "occupancy";
-    if (occupancy) {
+    const std::string layer = !options.layer.empty() ? options.layer : map.occupancy ? "occupancy" : map.points ? "points" : "mesh";
+    if (layer == "occupancy") {
       HANZO_RETURN_IF_ERROR(need_occupancy());
       HANZO_RETURN_IF_ERROR(maps::write_occupancy_png(options.out, *map.occupancy));
-    } else {
+    } else if (layer == "points") {
       HANZO_RETURN_IF_ERROR(need_points());
       HANZO_RETURN_IF_ERROR(maps::write_points_png(options.out, *map.points, options.pixel_size));
+    } else {
+      if (!map.mesh) return Error{fmt::format("{}: the map has no mesh layer to picture", options.input)};
+      msgs::PointLayer vertices;
+      vertices.points = map.mesh->vertices;
+      HANZO_RETURN_IF_ERROR(maps::write_points_png(options.out, vertices, options.pixel_size));
     }
-    result["layer"] = occupancy ? "occupancy" : "points";
+    result["layer"] = layer;
     result["files"] = {options.out};
+    return ok_status();
+  }
+  const bool mesh_wanted = options.layer == "mesh" || format == "obj" || (format == "ply" && options.layer.empty() && !map.points && map.mesh);
+  if (mesh_wanted) {
+    if (!map.mesh) return Error{fmt::format("{}: the map has no mesh layer to export", options.input)};
+    if (format != "ply" && format != "obj") return Error{fmt::format("--format: meshes export as ply or obj, not {}", format)};
+    const std::string path = extension_of(options.out) == "." + format ? options.out : options.out + "." + format;
+    HANZO_RETURN_IF_ERROR(maps::write_mesh(path, *map.mesh));
+    result["layer"] = "mesh";
+    result["files"] = {path};
+    result["triangles"] = map.mesh->triangle_indices.size() / 3;
     return ok_status();
   }
   if (format == "pcd" || format == "ply" || format == "bin") {
@@ -87,7 +106,7 @@ Status export_map(const MapOptions& options, nlohmann::json& result) {
     result["points"] = map.points->points.size();
     return ok_status();
   }
-  return Error{fmt::format("--format: expected png, pgm, pcd, ply or bin, got '{}'", format)};
+  return Error{fmt::format("--format: expected png, pgm, pcd, ply, bin or obj, got '{}'", format)};
 }
 
 Result<msgs::FusionMap> import_map(const MapOptions& options) {
@@ -257,6 +276,7 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
   build_app->add_option("--height-band", build->height_band, "2D grid: returns between min,max m relative to the sensor")->delimiter(',');
   build_app->add_option("--points-voxel", build->points_voxel, "Point layer voxel size (m, 0: no point layer)")->capture_default_str();
   build_app->add_option("--max-range", build->max_range, "Returns farther than this only clear space (m, 0: no limit)");
+  build_app->add_option("--tsdf-voxel", build->tsdf_voxel, "TSDF voxel size (m) for a TSDF layer and its mesh (0: none)");
   build_app->add_option("--map-id", build->map_id, "Map id (default: a new UUID)");
   build_app->add_option("--frame", build->frame, "World frame name")->capture_default_str();
   build_app->add_option("--out", build->out, "Output FusionMap file (.fmap)")->required();
@@ -279,11 +299,11 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
     };
   });
 
-  CLI::App* export_app = map_app->add_subcommand("export", "Export a layer: png (picture), pgm (ROS map_server), pcd, ply, bin");
+  CLI::App* export_app = map_app->add_subcommand("export", "Export a layer: png (picture), pgm (ROS map_server), pcd/ply/bin (points), ply/obj (mesh)");
   export_app->add_option("MAP", options->input, "FusionMap file")->required();
   export_app->add_option("--out", options->out, "Output file (pgm: the YAML; the .pgm goes next to it)")->required();
-  export_app->add_option("--format", options->format, "png, pgm, pcd, ply or bin (default: from --out's extension)");
-  export_app->add_option("--layer", options->layer, "png: occupancy or points (default: occupancy when present)");
+  export_app->add_option("--format", options->format, "png, pgm, pcd, ply, bin or obj (default: from --out's extension)");
+  export_app->add_option("--layer", options->layer, "occupancy, points or mesh (png default: occupancy, then points; ply: points, then mesh)");
   export_app->add_option("--pixel-size", options->pixel_size, "png of points: meters per pixel (default: 1600 px wide)");
   export_app->callback([&output, &run, options] {
     run = [&output, options] {

@@ -24,6 +24,7 @@ struct MapBuildOptions {
   std::vector<double> height_band{-0.3, 1.0};  // m relative to the sensor
   double points_voxel = 0.1;                 // m, 0: no point layer
   double max_range = 0.0;                    // m, 0: no limit
+  double tsdf_voxel = 0.0;                   // m, 0: no TSDF / mesh
   std::string map_id;
   std::string frame = "world";
   std::string out;

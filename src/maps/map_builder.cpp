@@ -9,7 +9,7 @@
 namespace hanzo::fusion::maps {
 
 Status MapBuilderConfig::validate() const {
-  if (!occupancy_2d && !occupancy_3d && !points) return Error{"map builder: no layer selected", "layers"};
+  if (!occupancy_2d && !occupancy_3d && !points && !tsdf) return Error{"map builder: no layer selected", "layers"};
   if (occupancy_2d) {
     HANZO_RETURN_IF_ERROR(occupancy_2d_config.validate());
     if (!(std::isfinite(min_height) && std::isfinite(max_height) && min_height <= max_height)) {
@@ -18,6 +18,7 @@ Status MapBuilderConfig::validate() const {
   }
   if (occupancy_3d) HANZO_RETURN_IF_ERROR(occupancy_3d_config.validate());
   if (points) HANZO_RETURN_IF_ERROR(point_map.validate());
+  if (tsdf) HANZO_RETURN_IF_ERROR(tsdf_config.validate());
   return ok_status();
 }
 
@@ -27,6 +28,7 @@ Result<MapBuilder> MapBuilder::create(const MapBuilderConfig& config) {
   if (config.occupancy_2d) builder.occupancy_2d_.emplace(config.occupancy_2d_config);
   if (config.occupancy_3d) builder.occupancy_3d_.emplace(config.occupancy_3d_config);
   if (config.points) builder.point_map_.emplace(config.point_map);
+  if (config.tsdf) builder.tsdf_.emplace(config.tsdf_config);
   return builder;
 }
 
@@ -63,6 +65,7 @@ Status MapBuilder::insert(const SE3& T_world_sensor, const cloud::PointCloud& sc
   if (occupancy_2d_) HANZO_RETURN_IF_ERROR(occupancy_2d_->insert_scan(origin.head<2>(), planar));
   if (occupancy_3d_) HANZO_RETURN_IF_ERROR(occupancy_3d_->insert_scan(origin, world));
   if (point_map_) HANZO_RETURN_IF_ERROR(point_map_->add_keyframe(summary_.scans, T_world_sensor, scan_in_sensor_frame));
+  if (tsdf_) HANZO_RETURN_IF_ERROR(tsdf_->integrate_scan(origin, world));
   ++summary_.scans;
   summary_.points += world.size();
   summary_.points_in_2d_band += planar.size();
@@ -76,6 +79,10 @@ Status MapBuilder::correct_poses(const std::map<uint64_t, SE3>& T_world_sensor_b
 
 void MapBuilder::write_layers(msgs::FusionMap& map) const {
   if (point_map_) map.points = point_map_->to_layer();
+  if (tsdf_) {
+    map.tsdf = tsdf_->to_layer();
+    map.mesh = tsdf_->extract_mesh();
+  }
   if (occupancy_3d_) {
     map.occupancy = occupancy_3d_->to_layer();
   } else if (occupancy_2d_) {
@@ -85,7 +92,7 @@ void MapBuilder::write_layers(msgs::FusionMap& map) const {
 
 std::size_t MapBuilder::memory_bytes() const {
   return (occupancy_2d_ ? occupancy_2d_->memory_bytes() : 0) + (occupancy_3d_ ? occupancy_3d_->memory_bytes() : 0) +
-         (point_map_ ? point_map_->memory_bytes() : 0);
+         (point_map_ ? point_map_->memory_bytes() : 0) + (tsdf_ ? tsdf_->memory_bytes() : 0);
 }
 
 }  // namespace hanzo::fusion::maps

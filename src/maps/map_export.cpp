@@ -204,6 +204,40 @@ Status write_points_png(const std::string& path, const msgs::PointLayer& layer, 
   return write_image(path, colored, ".png");
 }
 
+Status write_mesh(const std::string& path, const msgs::MeshLayer& mesh) {
+  if (mesh.triangle_indices.size() % 3 != 0) return Error{"mesh: triangle index count is not a multiple of 3", "triangle_indices"};
+  for (uint32_t index : mesh.triangle_indices) {
+    if (index >= mesh.vertices.size()) return Error{fmt::format("mesh: triangle index {} past {} vertices", index, mesh.vertices.size()), "triangle_indices"};
+  }
+  std::string extension = std::filesystem::path(path).extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return std::tolower(c); });
+  const std::size_t triangles = mesh.triangle_indices.size() / 3;
+  std::string out;
+  if (extension == ".obj") {
+    out = fmt::format("# hanzo-fusion mesh: {} vertices, {} triangles\n", mesh.vertices.size(), triangles);
+    for (const Eigen::Vector3f& v : mesh.vertices) out += fmt::format("v {} {} {}\n", v.x(), v.y(), v.z());
+    for (std::size_t t = 0; t < triangles; ++t) {
+      out += fmt::format("f {} {} {}\n", mesh.triangle_indices[3 * t] + 1, mesh.triangle_indices[3 * t + 1] + 1, mesh.triangle_indices[3 * t + 2] + 1);
+    }
+  } else if (extension == ".ply") {
+    out = fmt::format("ply\nformat binary_little_endian 1.0\ncomment hanzo-fusion mesh\nelement vertex {}\nproperty float x\n"
+                      "property float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+                      mesh.vertices.size(), triangles);
+    out.reserve(out.size() + mesh.vertices.size() * 12 + triangles * 13);
+    for (const Eigen::Vector3f& v : mesh.vertices) out.append(reinterpret_cast<const char*>(v.data()), 3 * sizeof(float));
+    for (std::size_t t = 0; t < triangles; ++t) {
+      out.push_back(3);
+      for (std::size_t k = 0; k < 3; ++k) {
+        const int32_t index = static_cast<int32_t>(mesh.triangle_indices[3 * t + k]);
+        out.append(reinterpret_cast<const char*>(&index), sizeof(index));
+      }
+    }
+  } else {
+    return Error{fmt::format("{}: mesh files are .ply or .obj", path)};
+  }
+  return yaml::write_file_atomically(path, out);
+}
+
 cloud::PointCloud to_point_cloud(const msgs::PointLayer& layer) {
   cloud::PointCloud cloud;
   cloud.positions = layer.points;

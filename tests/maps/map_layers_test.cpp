@@ -2,6 +2,7 @@
 // under pose corrections, the builder's height band, and the exports (ROS map, PNG).
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -140,6 +141,8 @@ TEST(MapLayers, BuilderHeightBandKeepsObstaclesAndDropsTheGround) {
   config.occupancy_3d = true;
   config.min_height = -0.5;
   config.max_height = 0.5;
+  config.tsdf = true;
+  config.tsdf_config.voxel_size = 0.1;
   auto builder = MapBuilder::create(config);
   ASSERT_TRUE(builder.ok());
   cloud::PointCloud scan = plane_cloud(3.0);  // a wall 3 m ahead, z 0 .. 1 in the sensor frame
@@ -159,6 +162,10 @@ TEST(MapLayers, BuilderHeightBandKeepsObstaclesAndDropsTheGround) {
   ASSERT_TRUE(map.points.has_value());
   ASSERT_TRUE(map.occupancy.has_value());
   EXPECT_GT(map.occupancy->size_z, 1u);  // the 3D grid when both are built
+  ASSERT_TRUE(map.tsdf.has_value() && map.mesh.has_value());
+  std::size_t on_wall = 0;
+  for (const Eigen::Vector3f& vertex : map.mesh->vertices) on_wall += std::abs(vertex.x() - 3.05f) < 0.1f ? 1 : 0;
+  EXPECT_GT(on_wall, 100u);  // the wall 3 m ahead of the sensor at x = 0.05
 
   cloud::PointCloud far = scan;
   far.positions[0].x() = 1e9f;
@@ -223,6 +230,34 @@ TEST(MapLayers, PointsPictureIsTopDown) {
   EXPECT_NE(image.at<cv::Vec3b>(50, 50), cv::Vec3b(255, 255, 255));  // the row of points at y = 0
   EXPECT_FALSE(write_points_png(png, msgs::PointLayer{}));
   std::filesystem::remove(png);
+}
+
+TEST(MapLayers, MeshFilesHoldEveryVertexAndTriangle) {
+  msgs::MeshLayer mesh;
+  mesh.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  mesh.triangle_indices = {0, 1, 2, 0, 1, 3, 0, 2, 3, 1, 2, 3};
+  const std::string ply = testing_maps::temp_path("mesh.ply");
+  const std::string obj = testing_maps::temp_path("mesh.obj");
+  ASSERT_TRUE(write_mesh(ply, mesh));
+  ASSERT_TRUE(write_mesh(obj, mesh));
+  std::ifstream ply_file(ply, std::ios::binary);
+  const std::string ply_bytes((std::istreambuf_iterator<char>(ply_file)), std::istreambuf_iterator<char>());
+  const std::size_t header_end = ply_bytes.find("end_header\n") + 11;
+  EXPECT_THAT(ply_bytes.substr(0, header_end), HasSubstr("element vertex 4\n"));
+  EXPECT_THAT(ply_bytes.substr(0, header_end), HasSubstr("element face 4\n"));
+  EXPECT_EQ(ply_bytes.size(), header_end + 4 * 12 + 4 * 13);
+  float third_vertex_y = 0.0f;
+  std::memcpy(&third_vertex_y, ply_bytes.data() + header_end + 2 * 12 + 4, sizeof(float));
+  EXPECT_EQ(third_vertex_y, 1.0f);
+  std::ifstream obj_file(obj);
+  const std::string obj_text((std::istreambuf_iterator<char>(obj_file)), std::istreambuf_iterator<char>());
+  EXPECT_THAT(obj_text, HasSubstr("v 0 0 1\n"));
+  EXPECT_THAT(obj_text, HasSubstr("f 2 3 4\n"));  // 1-based
+  mesh.triangle_indices.push_back(9);
+  EXPECT_FALSE(write_mesh(ply, mesh));
+  EXPECT_THAT(write_mesh(testing_maps::temp_path("mesh.stl"), msgs::MeshLayer{}).error().message, HasSubstr(".ply or .obj"));
+  std::filesystem::remove(ply);
+  std::filesystem::remove(obj);
 }
 
 }  // namespace

@@ -11,6 +11,8 @@
 //    ceiling).
 //  - 3D occupancy: every return ray cast in 3D.
 //  - Point map: every scan a keyframe (see point_map.hpp).
+//  - TSDF: every return integrated along its ray (see tsdf.hpp); write_layers() adds its
+//    marching-cubes mesh.
 
 #include <cstddef>
 #include <cstdint>
@@ -22,6 +24,7 @@
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/maps/occupancy_grid.hpp"
 #include "hanzo/fusion/maps/point_map.hpp"
+#include "hanzo/fusion/maps/tsdf.hpp"
 #include "hanzo/fusion/msgs/map_messages.hpp"
 
 namespace hanzo::fusion::maps {
@@ -36,6 +39,8 @@ struct MapBuilderConfig {
   OccupancyConfig occupancy_3d_config{.resolution = 0.2};
   bool points = true;
   PointMapConfig point_map;
+  bool tsdf = false;
+  TsdfConfig tsdf_config;
 
   Status validate() const;
 };
@@ -57,13 +62,14 @@ class MapBuilder {
   /// poses when the correction is large).
   Status correct_poses(const std::map<uint64_t, SE3>& T_world_sensor_by_scan);
 
-  /// Fills the map's layers (points, occupancy: the 3D grid when built, else the 2D one) and
-  /// leaves its metadata as given.
+  /// Fills the map's layers (points; occupancy: the 3D grid when built, else the 2D one; TSDF
+  /// and its mesh) and leaves its metadata as given.
   void write_layers(msgs::FusionMap& map) const;
 
   const std::optional<OccupancyGrid2D>& occupancy_2d() const { return occupancy_2d_; }
   const std::optional<OccupancyGrid3D>& occupancy_3d() const { return occupancy_3d_; }
   const std::optional<PointMap>& point_map() const { return point_map_; }
+  const std::optional<TsdfVolume>& tsdf() const { return tsdf_; }
   const MapBuilderSummary& summary() const { return summary_; }
   std::size_t memory_bytes() const;
 
@@ -74,6 +80,7 @@ class MapBuilder {
   std::optional<OccupancyGrid2D> occupancy_2d_;
   std::optional<OccupancyGrid3D> occupancy_3d_;
   std::optional<PointMap> point_map_;
+  std::optional<TsdfVolume> tsdf_;
   MapBuilderSummary summary_;
 };
 

@@ -8,7 +8,7 @@
 //  - PNG pictures: the occupancy grid in grey levels (probability of occupancy: black
 //    occupied, white free, mid grey unknown; 3D grids are flattened, a column being as occupied
 //    as its most occupied cell), and a top-down view of a point layer coloured by height.
-//  - Point layers as PCD / PLY / KITTI .bin (cloud/cloud_io.hpp) and back.
+//  - Point layers as PCD / PLY / KITTI .bin (cloud/cloud_io.hpp) and back; meshes as PLY / OBJ.
 //
 // 3D occupancy grids export to PGM flattened like the PNG.
 
@@ -43,6 +43,11 @@ Status write_occupancy_png(const std::string& path, const msgs::OccupancyGridLay
 /// Top-down PNG of the points coloured by height (turbo colour map, low blue, high red) on
 /// white; `pixel_size` in meters (0: chosen so the longer side has about 1600 pixels).
 Status write_points_png(const std::string& path, const msgs::PointLayer& layer, double pixel_size = 0.0);
+
+/// Writes a mesh layer by extension: ".ply" (binary little-endian, vertices as float x y z,
+/// faces as uchar-counted int lists, readable by MeshLab, Open3D, Blender) or ".obj" (text).
+/// Atomic.
+Status write_mesh(const std::string& path, const msgs::MeshLayer& mesh);
 
 /// Point layer <-> point cloud (positions and intensities).
 cloud::PointCloud to_point_cloud(const msgs::PointLayer& layer);
