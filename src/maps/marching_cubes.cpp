@@ -45,8 +45,8 @@ msgs::MeshLayer marching_cubes(const TsdfStorage& storage) {
       if (block == nullptr) return false;
       const Eigen::Vector3i inside(local.x() % size, local.y() % size, local.z() % size);
       const std::size_t offset = static_cast<std::size_t>((inside.z() * size + inside.y()) * size + inside.x());
-      if (block->weights[offset] <= 0.0f) return false;
-      *distance = block->distances[offset];
+      if (block->weights[offset] == 0) return false;
+      *distance = storage.distance_of(block->distances[offset]);
       return true;
     };
 

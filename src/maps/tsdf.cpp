@@ -25,8 +25,11 @@ Status TsdfConfig::validate() const {
   if (block_size < 2 || block_size > 32) {
     return Error{fmt::format("tsdf.block_size: must be 2 to 32 voxels, got {}", block_size), "block_size"};
   }
-  if (!(std::isfinite(max_weight) && max_weight >= 1.0f)) {
-    return Error{fmt::format("tsdf.max_weight: must be >= 1, got {}", max_weight), "max_weight"};
+  if (!(std::isfinite(max_weight) && max_weight >= 1.0f && max_weight <= 65535.0f)) {
+    return Error{fmt::format("tsdf.max_weight: must be 1 to 65535, got {}", max_weight), "max_weight"};
+  }
+  if (depth_allocation_stride < 1) {
+    return Error{fmt::format("tsdf.depth_allocation_stride: must be >= 1, got {}", depth_allocation_stride), "depth_allocation_stride"};
   }
   if (!(std::isfinite(min_range) && min_range >= 0.0 && std::isfinite(max_range) && max_range >= 0.0)) {
     return Error{"tsdf: min_range and max_range must be >= 0 meters", "min_range"};
@@ -68,13 +71,13 @@ Status TsdfVolume::integrate_depth(const DepthImageView& depth, const msgs::Came
   const Eigen::Matrix3d R_world_camera = T_world_camera.rotation().matrix();
   const Eigen::Vector3d t_world_camera = T_world_camera.translation();
 
-  // 1. Blocks within the truncation band of every reading (three samples along the ray cover
-  //    the band: a block is wider than 2 x truncation for block_size >= 6 at 3 voxels of band;
-  //    smaller blocks get more samples).
+  // 1. Blocks within the truncation band of the readings of every stride-th pixel (samples
+  //    along the ray closer than a block cover the band).
   const int samples = std::max(3, static_cast<int>(std::ceil(2.0 * truncation / storage.block_edge)) + 2);
+  const int stride = config_.depth_allocation_stride;
   std::unordered_set<uint64_t> touched;
-  for (int v = 0; v < depth.height; ++v) {
-    for (int u = 0; u < depth.width; ++u) {
+  for (int v = 0; v < depth.height; v += stride) {
+    for (int u = 0; u < depth.width; u += stride) {
       const float z = depth.meters[static_cast<std::size_t>(v) * static_cast<std::size_t>(depth.width) + static_cast<std::size_t>(u)];
       if (!std::isfinite(z) || z <= 0.0f || !in_range(z, config_)) continue;
       const Eigen::Vector3d ray((u - intrinsics.cx) / intrinsics.fx, (v - intrinsics.cy) / intrinsics.fy, 1.0);
@@ -86,23 +89,33 @@ Status TsdfVolume::integrate_depth(const DepthImageView& depth, const msgs::Came
       }
     }
   }
-  // 2. Every voxel of those blocks projected into the image.
+  // 2. Every voxel of those blocks projected into the image; camera coordinates of the voxel
+  //    centres advance by one rotated voxel step per index.
   const Eigen::Matrix3d R_camera_world = R_world_camera.transpose();
+  const Eigen::Matrix3d voxel_steps = R_camera_world * config_.voxel_size;
+  const int size = storage.block_size;
   for (uint64_t key : touched) {
     TsdfStorage::Block& block = storage.find_or_create(key);
     const Eigen::Vector3i block_index = TsdfStorage::block_from_key(key);
-    for (int offset = 0; offset < storage.block_voxels; ++offset) {
-      const Eigen::Vector3d centre = storage.voxel_centre(block_index, offset);
-      const Eigen::Vector3d in_camera = R_camera_world * (centre - t_world_camera);
-      if (in_camera.z() <= 0.0) continue;
-      const int u = static_cast<int>(std::lround(intrinsics.fx * in_camera.x() / in_camera.z() + intrinsics.cx));
-      const int v = static_cast<int>(std::lround(intrinsics.fy * in_camera.y() / in_camera.z() + intrinsics.cy));
-      if (u < 0 || v < 0 || u >= depth.width || v >= depth.height) continue;
-      const float z = depth.meters[static_cast<std::size_t>(v) * static_cast<std::size_t>(depth.width) + static_cast<std::size_t>(u)];
-      if (!std::isfinite(z) || z <= 0.0f || !in_range(z, config_)) continue;
-      const double sdf = z - in_camera.z();
-      if (sdf < -truncation) continue;
-      storage.update(block, offset, static_cast<float>(std::min(sdf, truncation)));
+    const Eigen::Vector3d first_centre = storage.voxel_centre(block_index, 0);
+    const Eigen::Vector3d first_in_camera = R_camera_world * (first_centre - t_world_camera);
+    int offset = 0;
+    for (int z_index = 0; z_index < size; ++z_index) {
+      for (int y_index = 0; y_index < size; ++y_index) {
+        Eigen::Vector3d in_camera = first_in_camera + voxel_steps.col(2) * z_index + voxel_steps.col(1) * y_index;
+        for (int x_index = 0; x_index < size; ++x_index, ++offset, in_camera += voxel_steps.col(0)) {
+          if (in_camera.z() <= 0.0) continue;
+          const double inverse_z = 1.0 / in_camera.z();
+          const double u_exact = intrinsics.fx * in_camera.x() * inverse_z + intrinsics.cx + 0.5;
+          const double v_exact = intrinsics.fy * in_camera.y() * inverse_z + intrinsics.cy + 0.5;
+          if (u_exact < 0.0 || v_exact < 0.0 || u_exact >= depth.width || v_exact >= depth.height) continue;
+          const float z = depth.meters[static_cast<std::size_t>(v_exact) * static_cast<std::size_t>(depth.width) + static_cast<std::size_t>(u_exact)];
+          if (!std::isfinite(z) || z <= 0.0f || !in_range(z, config_)) continue;
+          const double sdf = z - in_camera.z();
+          if (sdf < -truncation) continue;
+          storage.update(block, offset, static_cast<float>(std::min(sdf, truncation)));
+        }
+      }
     }
   }
   return ok_status();
@@ -150,7 +163,11 @@ msgs::TsdfLayer TsdfVolume::to_layer() const {
   layer.block_size = static_cast<uint32_t>(config_.block_size);
   for (const uint64_t key : storage_->sorted_keys()) {
     const TsdfStorage::Block& block = *storage_->blocks.at(key);
-    layer.blocks.push_back({TsdfStorage::block_from_key(key), block.distances, block.weights});
+    msgs::TsdfBlock out{TsdfStorage::block_from_key(key), {}, {}};
+    out.distances.reserve(block.distances.size());
+    for (int16_t stored : block.distances) out.distances.push_back(storage_->distance_of(stored));
+    out.weights.assign(block.weights.begin(), block.weights.end());
+    layer.blocks.push_back(std::move(out));
   }
   return layer;
 }
@@ -173,8 +190,11 @@ Result<TsdfVolume> TsdfVolume::from_layer(const msgs::TsdfLayer& layer, TsdfConf
                    "tsdf.blocks.index"};
     }
     TsdfStorage::Block& block = volume.storage_->find_or_create(key);
-    block.distances = in.distances;
-    block.weights = in.weights;
+    const float truncation = static_cast<float>(config.truncation());
+    for (std::size_t i = 0; i < in.distances.size(); ++i) {
+      block.distances[i] = volume.storage_->stored_distance(std::clamp(in.distances[i], -truncation, truncation));
+      block.weights[i] = static_cast<uint16_t>(std::lround(std::min(in.weights[i], 65535.0f)));
+    }
   }
   return volume;
 }
@@ -182,7 +202,7 @@ Result<TsdfVolume> TsdfVolume::from_layer(const msgs::TsdfLayer& layer, TsdfConf
 std::size_t TsdfVolume::block_count() const { return storage_->blocks.size(); }
 
 std::size_t TsdfVolume::memory_bytes() const {
-  const std::size_t per_block = sizeof(TsdfStorage::Block) + 2 * sizeof(float) * static_cast<std::size_t>(storage_->block_voxels) +
+  const std::size_t per_block = sizeof(TsdfStorage::Block) + (sizeof(int16_t) + sizeof(uint16_t)) * static_cast<std::size_t>(storage_->block_voxels) +
                                 sizeof(uint64_t) + 3 * sizeof(void*);
   return storage_->blocks.size() * per_block + storage_->blocks.bucket_count() * sizeof(void*);
 }

@@ -17,18 +17,22 @@
 namespace hanzo::fusion::maps {
 
 struct TsdfStorage {
+  /// Voxels are stored in 4 bytes: the distance as a 16-bit fraction of the truncation
+  /// (steps of truncation / 32767, 5 micrometres at 0.15 m) and the weight as a 16-bit count.
   struct Block {
-    std::vector<float> distances;  // m, block_size^3, x fastest
-    std::vector<float> weights;    // 0: unobserved
+    std::vector<int16_t> distances;  // block_size^3, x fastest
+    std::vector<uint16_t> weights;   // 0: unobserved
   };
 
   explicit TsdfStorage(const TsdfConfig& config)
-      : voxel_size(config.voxel_size),
+      : distance_step(static_cast<float>(config.truncation() / 32767.0)),
+        voxel_size(config.voxel_size),
         block_size(config.block_size),
         block_voxels(config.block_size * config.block_size * config.block_size),
         block_edge(config.voxel_size * config.block_size),
         max_weight(config.max_weight) {}
 
+  float distance_step;  // meters per distance unit
   double voxel_size;
   int block_size;
   int block_voxels;
@@ -76,8 +80,8 @@ struct TsdfStorage {
     auto& slot = blocks[key];
     if (!slot) {
       slot = std::make_unique<Block>();
-      slot->distances.assign(static_cast<std::size_t>(block_voxels), 0.0f);
-      slot->weights.assign(static_cast<std::size_t>(block_voxels), 0.0f);
+      slot->distances.assign(static_cast<std::size_t>(block_voxels), 0);
+      slot->weights.assign(static_cast<std::size_t>(block_voxels), 0);
     }
     return *slot;
   }
@@ -90,15 +94,21 @@ struct TsdfStorage {
     const Eigen::Vector3i block = block_of_voxel(voxel_index);
     const auto found = blocks.find(block_key(block));
     if (found == blocks.end()) return {0.0f, 0.0f};
-    const int offset = offset_of(voxel_index, block);
-    return {found->second->distances[static_cast<std::size_t>(offset)], found->second->weights[static_cast<std::size_t>(offset)]};
+    const std::size_t offset = static_cast<std::size_t>(offset_of(voxel_index, block));
+    return {distance_of(found->second->distances[offset]), static_cast<float>(found->second->weights[offset])};
   }
-  /// Curless & Levoy's weighted running average with unit observation weight.
+  float distance_of(int16_t stored) const { return static_cast<float>(stored) * distance_step; }
+  int16_t stored_distance(float meters) const {
+    return static_cast<int16_t>(std::clamp(std::lround(meters / distance_step), -32767L, 32767L));
+  }
+  /// Curless & Levoy's weighted running average with unit observation weight; sdf is within
+  /// [-truncation, truncation].
   void update(Block& block, int offset, float sdf) const {
-    float& distance = block.distances[static_cast<std::size_t>(offset)];
-    float& weight = block.weights[static_cast<std::size_t>(offset)];
-    distance = (distance * weight + sdf) / (weight + 1.0f);
-    weight = std::min(weight + 1.0f, max_weight);
+    int16_t& distance = block.distances[static_cast<std::size_t>(offset)];
+    uint16_t& weight = block.weights[static_cast<std::size_t>(offset)];
+    const float w = static_cast<float>(weight);
+    distance = stored_distance((distance_of(distance) * w + sdf) / (w + 1.0f));
+    weight = static_cast<uint16_t>(std::min(w + 1.0f, max_weight));
   }
   std::vector<uint64_t> sorted_keys() const {
     std::vector<uint64_t> keys;

@@ -4,7 +4,8 @@
 // (the sensor's side), negative behind, truncated at +-truncation_distance, with a weight
 // (how many observations averaged into it; the per-voxel uncertainty proxy of the FusionMap).
 // Voxels live in sparse blocks (block_size^3 voxels) allocated only near observed surfaces, so
-// memory follows the surface area, not the volume.
+// memory follows the surface area, not the volume; a voxel takes 4 bytes (16-bit distance in
+// steps of truncation / 32767, 16-bit weight).
 //
 // Integration (Curless & Levoy 1996, eq. 1-2: weighted running average, weights capped):
 //  - depth images, projectively (KinectFusion, Newcombe et al. 2011, eq. 6-7, as Open3D's
@@ -38,8 +39,12 @@ struct TsdfConfig {
   double truncation_distance = 0.0;
   /// Voxels per block edge.
   int block_size = 8;
-  /// Cap of the per-voxel weight, so that a changed surface is relearned.
+  /// Cap of the per-voxel weight (whole observations, 1 to 65535), so that a changed surface
+  /// is relearned.
   float max_weight = 64.0f;
+  /// Depth images: blocks are allocated from every n-th pixel in each direction (Open3D's
+  /// depth_sampling_stride); voxels are then updated from every pixel.
+  int depth_allocation_stride = 4;
   /// Depth readings and ranges outside [min_range, max_range] (m) are ignored; 0: no limit.
   double min_range = 0.0;
   double max_range = 0.0;
