@@ -8,6 +8,8 @@
 
 #include <fmt/format.h>
 
+#include "floor_divide.hpp"
+
 #include "hanzo/fusion/msgs/map_convert.hpp"
 #include "hanzo/fusion/msgs/map_validation.hpp"
 
@@ -19,11 +21,6 @@ namespace {
 constexpr int kIndexLimit = 1 << 22;
 /// Stamp of cells read from a layer: observed, but by no scan (scans use 1 .. max - 1).
 constexpr uint32_t kImportedStamp = std::numeric_limits<uint32_t>::max();
-
-int floor_divide(int value, int divisor) {
-  const int quotient = value / divisor;
-  return (value % divisor != 0 && (value < 0) != (divisor < 0)) ? quotient - 1 : quotient;
-}
 
 }  // namespace
 

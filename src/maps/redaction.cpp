@@ -6,6 +6,8 @@
 
 #include <fmt/format.h>
 
+#include "floor_divide.hpp"
+
 #include "hanzo/fusion/cloud/voxel_grid.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
@@ -13,11 +15,6 @@
 
 namespace hanzo::fusion::maps {
 namespace {
-
-int floor_divide(int value, int divisor) {
-  const int quotient = value / divisor;
-  return (value % divisor != 0 && value < 0) ? quotient - 1 : quotient;
-}
 
 msgs::PointLayer coarsen_points(const msgs::PointLayer& layer, double resolution) {
   const cloud::PointCloud coarse = cloud::voxel_downsample(to_point_cloud(layer), resolution);

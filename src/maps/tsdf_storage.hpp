@@ -13,6 +13,7 @@
 #include <Eigen/Core>
 
 #include "hanzo/fusion/maps/tsdf.hpp"
+#include "floor_divide.hpp"
 
 namespace hanzo::fusion::maps {
 
@@ -40,10 +41,6 @@ struct TsdfStorage {
   float max_weight;
   std::unordered_map<uint64_t, std::unique_ptr<Block>> blocks;
 
-  static int floor_divide(int value, int divisor) {
-    const int quotient = value / divisor;
-    return (value % divisor != 0 && value < 0) ? quotient - 1 : quotient;
-  }
   /// 21 bits per axis, offset by 2^20.
   static uint64_t block_key(const Eigen::Vector3i& block) {
     uint64_t key = 0;
