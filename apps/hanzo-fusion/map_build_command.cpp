@@ -110,8 +110,7 @@ Result<nlohmann::json> build(const MapBuildOptions& options) {
   msgs::FusionMap map;
   map.map_id = options.map_id.empty() ? maps::generate_map_id() : options.map_id;
   map.version = 1;
-  map.created = Timestamp::from_nanoseconds(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+  map.created = Timestamp::wall_clock_now();
   map.frame_id = options.frame;
   map.provenance.algorithm = "maps/known_poses";
   map.provenance.parameters = options_yaml(options);

@@ -114,8 +114,7 @@ Result<msgs::FusionMap> import_map(const MapOptions& options) {
   map.map_id = options.map_id.empty() ? maps::generate_map_id() : options.map_id;
   HANZO_RETURN_IF_ERROR(maps::validate_map_id(map.map_id));
   map.version = 1;
-  map.created = Timestamp::from_nanoseconds(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
+  map.created = Timestamp::wall_clock_now();
   const std::string extension = extension_of(options.input);
   if (extension == ".yaml" || extension == ".yml") {
     HANZO_ASSIGN_OR_RETURN(map.occupancy, maps::read_ros_map(options.input));

@@ -1,5 +1,6 @@
 #include "hanzo/fusion/core/time.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <ctime>
 
@@ -9,6 +10,11 @@ namespace hanzo::fusion {
 
 Duration Duration::from_seconds(double seconds) {
   return Duration(static_cast<int64_t>(std::llround(seconds * 1e9)));
+}
+
+Timestamp Timestamp::wall_clock_now() {
+  return Timestamp(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
 }
 
 Timestamp Timestamp::from_seconds(double seconds_since_epoch) {

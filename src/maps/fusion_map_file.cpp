@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <vector>
@@ -293,7 +294,11 @@ Result<msgs::FusionMap> read_fusion_map_metadata(const std::string& path) {
   file.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
   bytes.resize(static_cast<std::size_t>(file.gcount()));
   if (bytes.size() == kFileHeaderBytes + kChunkHeaderBytes) {
-    const uint64_t stored_size = std::min(get<uint64_t>(bytes, kFileHeaderBytes + 16), kMaxChunkBytes);
+    // Never more than the file holds, whatever the header announces.
+    std::error_code size_error;
+    const uint64_t file_size = std::filesystem::file_size(path, size_error);
+    const uint64_t stored_size = std::min({get<uint64_t>(bytes, kFileHeaderBytes + 16), kMaxChunkBytes,
+                                           size_error ? uint64_t{0} : file_size - std::min<uint64_t>(file_size, bytes.size())});
     const std::size_t header_size = bytes.size();
     bytes.resize(header_size + stored_size);
     file.read(bytes.data() + header_size, static_cast<std::streamsize>(stored_size));

@@ -12,9 +12,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "hanzo/fusion/core/yaml_value.hpp"
-#include "hanzo/fusion/msgs/map_convert.hpp"
-#include "hanzo/fusion/msgs/map_validation.hpp"
 #include "grid_image.hpp"
+#include "layer_checks.hpp"
 
 namespace hanzo::fusion::maps {
 namespace {
@@ -23,13 +22,6 @@ constexpr float kUnknown = 0.5f;
 constexpr uint8_t kOccupiedPixel = 0;
 constexpr uint8_t kFreePixel = 254;
 constexpr uint8_t kUnknownPixel = 205;
-
-Status validate_layer(const msgs::OccupancyGridLayer& layer) {
-  msgs::FusionMap wrapper;
-  wrapper.map_id = "export";
-  wrapper.occupancy = layer;
-  return msgs::validate(msgs::to_proto(wrapper));
-}
 
 double yaw_of(const Eigen::Quaterniond& orientation) {
   const Eigen::Quaterniond q = orientation.normalized();

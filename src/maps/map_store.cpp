@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cerrno>
 #include <charconv>
-#include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <random>
@@ -32,17 +31,13 @@ std::optional<uint64_t> version_of(const std::string& file_name) {
   return version;
 }
 
-Timestamp now() {
-  return Timestamp::from_nanoseconds(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch()).count());
-}
 
 }  // namespace
 
 std::string generate_map_id() {
   std::random_device device;
   std::mt19937_64 generator((static_cast<uint64_t>(device()) << 32) ^ device() ^
-                            static_cast<uint64_t>(now().nanoseconds()));
+                            static_cast<uint64_t>(Timestamp::wall_clock_now().nanoseconds()));
   uint64_t high = generator();
   uint64_t low = generator();
   high = (high & ~uint64_t{0xf000}) | 0x4000;                  // version 4
@@ -92,7 +87,7 @@ Result<MapVersionInfo> MapStore::save(msgs::FusionMap map) {
   // store (or from another store) starts a new lineage.
   const bool derived = std::any_of(existing.begin(), existing.end(), [&](const MapVersionInfo& info) { return info.version == map.version; });
   map.parent_version = derived ? map.version : 0;
-  if (map.created.nanoseconds() == 0) map.created = now();
+  if (map.created.nanoseconds() == 0) map.created = Timestamp::wall_clock_now();
 
   const std::string temporary = fmt::format("{}/.{}-{}.tmp", folder, ::getpid(), generate_map_id());
   // Another writer may take a version between our listing and our link: try the next ones.

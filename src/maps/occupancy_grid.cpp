@@ -10,8 +10,7 @@
 
 #include "floor_divide.hpp"
 
-#include "hanzo/fusion/msgs/map_convert.hpp"
-#include "hanzo/fusion/msgs/map_validation.hpp"
+#include "layer_checks.hpp"
 
 namespace hanzo::fusion::maps {
 namespace {
@@ -386,10 +385,7 @@ msgs::OccupancyGridLayer OccupancyGrid<Dim>::to_layer() const {
 
 template <int Dim>
 Result<OccupancyGrid<Dim>> OccupancyGrid<Dim>::from_layer(const msgs::OccupancyGridLayer& layer, OccupancyConfig config) {
-  msgs::FusionMap wrapper;
-  wrapper.map_id = "layer";
-  wrapper.occupancy = layer;
-  HANZO_RETURN_IF_ERROR(msgs::validate(msgs::to_proto(wrapper)));
+  HANZO_RETURN_IF_ERROR(validate_layer(layer));
   if (Dim == 2 && layer.size_z != 1) {
     return Error{fmt::format("occupancy layer: size_z is {}, a 2D grid needs 1", layer.size_z), "occupancy.size_z"};
   }

@@ -8,8 +8,7 @@
 
 #include <fmt/format.h>
 
-#include "hanzo/fusion/msgs/map_convert.hpp"
-#include "hanzo/fusion/msgs/map_validation.hpp"
+#include "layer_checks.hpp"
 #include "tsdf_storage.hpp"
 
 namespace hanzo::fusion::maps {
@@ -173,10 +172,7 @@ msgs::TsdfLayer TsdfVolume::to_layer() const {
 }
 
 Result<TsdfVolume> TsdfVolume::from_layer(const msgs::TsdfLayer& layer, TsdfConfig config) {
-  msgs::FusionMap wrapper;
-  wrapper.map_id = "layer";
-  wrapper.tsdf = layer;
-  HANZO_RETURN_IF_ERROR(msgs::validate(msgs::to_proto(wrapper)));
+  HANZO_RETURN_IF_ERROR(validate_layer(layer));
   config.voxel_size = layer.voxel_size;
   config.truncation_distance = layer.truncation_distance;
   config.block_size = static_cast<int>(layer.block_size);

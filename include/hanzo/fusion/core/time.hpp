@@ -42,6 +42,8 @@ class Timestamp {
   /// Rounds to the nearest nanosecond (a double holds ~0.2 us resolution at today's epoch
   /// seconds, so prefer nanoseconds when reading files that have them).
   static Timestamp from_seconds(double seconds_since_epoch);
+  /// The system's wall clock (for creation times of files and maps, never for sensor data).
+  static Timestamp wall_clock_now();
 
   constexpr int64_t nanoseconds() const { return ns_; }
   constexpr double seconds() const { return static_cast<double>(ns_) * 1e-9; }
