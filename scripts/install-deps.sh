@@ -25,6 +25,9 @@ packages=(
   libpcl-dev libnanoflann-dev libopen3d-dev
   # apps
   libcli11-dev
+  # service: REST (cpp-httplib), storage (SQLite, PostgreSQL client + server for the tests), load
+  # generator of the REST benchmark
+  libcpp-httplib-dev libsqlite3-dev libpq-dev libpqxx-dev postgresql wrk
   # tests and benchmarks (Embree: the ray-casting peer of the simulator benchmark; OctoMap: the
   # occupancy-mapping peer of the maps benchmark)
   libgtest-dev libgmock-dev libbenchmark-dev libembree-dev liboctomap-dev

@@ -1,0 +1,122 @@
+#pragma once
+// SessionManager: the server's sessions, shared by the REST and gRPC front ends. It owns the
+// pipeline::Sessions, decides who may touch them (auth.hpp: organization-scoped permissions),
+// persists them (storage.hpp) and feeds subscribers and metrics.
+//
+//   - create_session: a FusionConfig and a Calibration (YAML text, or JSON which is YAML) become
+//     a pipeline::Session, stored with the caller's organization; sessions still active in the
+//     storage when the server starts are re-created (their filter starts afresh; the stored
+//     trajectory stays).
+//   - push: one sensor message into one session (serialized per session); rejections come back
+//     as kRejected with the session's reason ("out_of_order: ...") and the session is unchanged.
+//   - Every PoseEstimate goes to the latest pose, the pose subscribers (bounded, drop-oldest) and
+//     the storage queue, which a writer thread commits in batches (one transaction each,
+//     every storage_flush_interval). SessionInfo.stored_poses / stored_through say what is
+//     durable: those poses survive kill -9.
+//   - register_sensor: adds a sensor (configuration entry + calibration entry, validated by the
+//     same loaders as the files) before the session has received data; afterwards kConflict.
+//
+// Thread-safe.
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
+#include "hanzo/fusion/pipeline/session.hpp"
+#include "hanzo/fusion/service/api_error.hpp"
+#include "hanzo/fusion/service/auth.hpp"
+#include "hanzo/fusion/service/metrics.hpp"
+#include "hanzo/fusion/service/storage.hpp"
+#include "hanzo/fusion/service/subscription.hpp"
+
+namespace hanzo::fusion::service {
+
+struct SessionManagerConfig {
+  std::size_t max_sessions = 256;                   // active sessions in the server
+  std::size_t max_sessions_per_organization = 64;   // active sessions of one organization
+  std::chrono::milliseconds storage_flush_interval{20};  // how often queued poses are committed
+  std::size_t max_pending_poses = 2'000'000;        // storage queue bound; beyond it poses are dropped (counted)
+  std::size_t subscriber_queue_capacity = 1024;     // per subscriber, drop-oldest beyond it
+};
+
+struct CreateSessionRequest {
+  std::string name;              // free text for people; "" gives "session-<id prefix>"
+  std::string config_yaml;       // the spec's fusion configuration (`fusion:` document)
+  std::string calibration_yaml;  // the spec's calibration (`calibration:` document); "" for none
+};
+
+struct SensorRegistration {
+  std::string name;              // the sensor's name (also its calibration key "<name>_to_body")
+  std::string config_yaml;       // its entry under fusion.sensors (modality, topic, rate, ...)
+  std::string calibration_yaml;  // its entry in the calibration (rotation, translation, ...); "" for identity
+};
+
+struct SessionInfo {
+  std::string id;
+  std::string organization;
+  std::string name;
+  Timestamp created;
+  std::optional<Timestamp> ended;
+  pipeline::SessionSummary summary;          // counts per sensor, state
+  std::optional<msgs::PoseEstimate> latest_pose;
+  uint64_t stored_poses = 0;                 // poses committed to storage (durable)
+  std::optional<Timestamp> stored_through;   // timestamp of the newest committed pose
+  uint64_t pose_subscribers = 0;
+  std::string config_yaml;
+  std::string calibration_yaml;
+};
+
+struct TrajectoryPage {
+  std::vector<msgs::PoseEstimate> poses;     // oldest first
+  std::optional<Timestamp> next_after;       // pass as `after` for the next page; nullopt at the end
+};
+
+using PoseSubscription = Subscription<msgs::PoseEstimate>;
+
+class SessionManager {
+ public:
+  /// Re-creates the sessions the storage lists as active; fails when one cannot be (its stored
+  /// configuration no longer loads), naming it.
+  static Result<std::unique_ptr<SessionManager>> create(const SessionManagerConfig& config, std::unique_ptr<Storage> storage,
+                                                        std::shared_ptr<MetricsRegistry> metrics);
+  ~SessionManager();  // commits what is queued
+  SessionManager(const SessionManager&) = delete;
+  SessionManager& operator=(const SessionManager&) = delete;
+
+  ApiResult<SessionInfo> create_session(const Principal& caller, const CreateSessionRequest& request);
+  /// Active and ended sessions of the caller's organization.
+  ApiResult<std::vector<SessionInfo>> list_sessions(const Principal& caller);
+  ApiResult<SessionInfo> session_info(const Principal& caller, const std::string& session_id);
+  /// Stops the session: subscribers are closed, queued poses committed, the record marked ended
+  /// (its trajectory stays readable). Ending an ended session is kConflict.
+  ApiResult<SessionInfo> end_session(const Principal& caller, const std::string& session_id);
+  ApiResult<SessionInfo> register_sensor(const Principal& caller, const std::string& session_id,
+                                         const SensorRegistration& registration);
+
+  /// `sensor` is a configured sensor name; an empty name picks the session's only sensor of the
+  /// message's modality (kInvalidArgument when there are several or none).
+  ApiStatus push(const Principal& caller, const std::string& session_id, const std::string& sensor,
+                 const msgs::SensorMessage& message);
+  ApiResult<msgs::PoseEstimate> current_pose(const Principal& caller, const std::string& session_id);
+  /// Stored poses with timestamp > after, at most limit (1..100000).
+  ApiResult<TrajectoryPage> trajectory(const Principal& caller, const std::string& session_id, Timestamp after,
+                                       std::size_t limit);
+  ApiResult<std::shared_ptr<PoseSubscription>> subscribe_poses(const Principal& caller, const std::string& session_id);
+
+  /// Blocks until every pose queued so far is committed (or failed); for shutdown and tests.
+  Status flush_storage();
+  std::size_t active_sessions() const;
+  std::string_view storage_backend() const;
+
+ private:
+  struct Impl;
+  explicit SessionManager(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace hanzo::fusion::service

@@ -1,0 +1,94 @@
+#pragma once
+// Persistent state of the server: sessions (who created them, their configuration and
+// calibration), trajectories (every stored PoseEstimate as a timestamped row) and the map
+// versions sessions saved. Two backends with the same schema (docs/server.md lists it):
+//
+//   open_storage("sqlite:///var/lib/hanzo-fusion/fusion.db")   embedded default: SQLite in WAL
+//                                                              mode, synchronous=FULL
+//   open_storage("postgresql://user@host:5432/fusion")         scale-out: PostgreSQL (libpq URI);
+//                                                              a TimescaleDB hypertable when the
+//                                                              extension is available
+//
+// append_poses() is one transaction: when it returns ok every pose in it is durable (it
+// survives kill -9 of the server; with SQLite's synchronous=FULL also a power cut). Poses are
+// keyed by (session, timestamp): appending a pose that is already stored keeps the stored one
+// (a client that re-sends after a reconnect does not duplicate rows).
+//
+// Thread-safe: calls are serialized on one connection.
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
+
+namespace hanzo::fusion::service {
+
+struct SessionRecord {
+  std::string id;
+  std::string organization;
+  std::string name;
+  std::string config_yaml;       // the FusionConfig the session runs (sensors registered later included)
+  std::string calibration_yaml;  // its Calibration
+  Timestamp created;
+  std::optional<Timestamp> ended;  // set by end_session (DELETE); the trajectory stays queryable
+};
+
+struct StoredPose {
+  std::string session_id;
+  msgs::PoseEstimate estimate;  // timestamp, T_world_body, velocity, covariance, state, active modalities
+};
+
+/// How much of a session's trajectory is stored.
+struct TrajectoryExtent {
+  uint64_t count = 0;
+  std::optional<Timestamp> first;  // oldest and newest stored timestamps (none when empty)
+  std::optional<Timestamp> last;
+};
+
+struct MapVersionRecord {
+  std::string session_id;
+  std::string map_id;
+  uint64_t version = 0;
+  Timestamp created;
+};
+
+class Storage {
+ public:
+  virtual ~Storage() = default;
+  virtual std::string_view backend() const = 0;  // "sqlite" or "postgresql"
+
+  /// Fails when the id is taken.
+  virtual Status create_session(const SessionRecord& session) = 0;
+  /// Replaces the stored configuration and calibration (after a sensor was registered).
+  virtual Status update_session_setup(const std::string& id, const std::string& config_yaml,
+                                      const std::string& calibration_yaml) = 0;
+  virtual Status end_session(const std::string& id, Timestamp ended) = 0;
+  /// Every session, ended ones included, oldest first.
+  virtual Result<std::vector<SessionRecord>> sessions() = 0;
+
+  /// Stores the poses in one transaction (see above).
+  virtual Status append_poses(const std::vector<StoredPose>& poses) = 0;
+  /// Poses of a session with timestamp > after, oldest first, at most limit.
+  virtual Result<std::vector<msgs::PoseEstimate>> poses(const std::string& session_id, Timestamp after,
+                                                        std::size_t limit) = 0;
+  virtual Result<TrajectoryExtent> trajectory_extent(const std::string& session_id) = 0;
+
+  virtual Status record_map_version(const MapVersionRecord& record) = 0;
+  virtual Result<std::vector<MapVersionRecord>> map_versions(const std::string& session_id) = 0;
+};
+
+/// "sqlite://PATH" (PATH absolute after the two slashes, or relative), a plain file path (SQLite),
+/// or "postgresql://..." / "postgres://..." (any libpq connection URI). Creates the schema when
+/// missing; fails on a database whose schema version is newer than this program's.
+Result<std::unique_ptr<Storage>> open_storage(const std::string& url);
+
+/// The schema version this program writes (the `hanzo_schema` table holds the database's).
+inline constexpr int kStorageSchemaVersion = 1;
+
+}  // namespace hanzo::fusion::service

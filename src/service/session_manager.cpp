@@ -1,0 +1,496 @@
+#include "hanzo/fusion/service/session_manager.hpp"
+
+#include <algorithm>
+#include <map>
+#include <mutex>
+#include <random>
+#include <shared_mutex>
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/config/fusion_config.hpp"
+#include "hanzo/fusion/core/logging.hpp"
+#include "pose_recorder.hpp"
+
+namespace hanzo::fusion::service {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::string generate_session_id() {
+  static std::mutex mutex;
+  static std::random_device device;
+  static std::mt19937_64 generator(device() ^ (static_cast<uint64_t>(device()) << 32) ^
+                                   static_cast<uint64_t>(Clock::now().time_since_epoch().count()));
+  std::lock_guard lock(mutex);
+  return fmt::format("{:016x}{:016x}", generator(), generator());
+}
+
+config::SensorModality modality_of(const msgs::SensorMessage& message) {
+  switch (message.index()) {
+    case 0: return config::SensorModality::kImu;
+    case 1: return config::SensorModality::kLidar;
+    case 2: return config::SensorModality::kCamera;
+    case 3: return config::SensorModality::kGnss;
+    case 4: return config::SensorModality::kWheelOdometry;
+    default: return config::SensorModality::kRadar;
+  }
+}
+
+// The text of a YAML/JSON fragment as a node; the error names `what`.
+Result<YAML::Node> parse_fragment(const std::string& text, const std::string& what) {
+  try {
+    return YAML::Load(text);
+  } catch (const YAML::Exception& exception) {
+    return Error(fmt::format("{}: not valid YAML/JSON: {}", what, exception.what()), what);
+  }
+}
+
+std::string emit(const YAML::Node& node) {
+  YAML::Emitter out;
+  out << node;
+  return out.c_str();
+}
+
+// Rebuilt configuration and calibration with one more sensor, validated by the file loaders.
+Result<std::pair<config::FusionConfig, calib::Calibration>> with_sensor(const config::FusionConfig& configuration,
+                                                                      const calib::Calibration& calibration,
+                                                                      const SensorRegistration& registration) {
+  if (registration.name.empty()) return Error("sensor name is empty", "name");
+  YAML::Node config_node;
+  HANZO_ASSIGN_OR_RETURN(config_node, parse_fragment(config::to_yaml(configuration), "configuration"));
+  YAML::Node sensor_node;
+  HANZO_ASSIGN_OR_RETURN(sensor_node, parse_fragment(registration.config_yaml, "config"));
+  if (!sensor_node.IsMap()) return Error("config: expected the sensor's configuration entry (a map)", "config");
+  config_node["fusion"]["sensors"][registration.name] = sensor_node;
+  config::FusionConfig new_config;
+  HANZO_ASSIGN_OR_RETURN(new_config, with_context(config::parse_fusion_config(emit(config_node), "sensor registration"), "config"));
+
+  YAML::Node calibration_node;
+  HANZO_ASSIGN_OR_RETURN(calibration_node, parse_fragment(calib::to_yaml(calibration), "calibration"));
+  YAML::Node entry(YAML::NodeType::Map);
+  if (!registration.calibration_yaml.empty()) {
+    HANZO_ASSIGN_OR_RETURN(entry, parse_fragment(registration.calibration_yaml, "calibration"));
+    if (!entry.IsMap()) return Error("calibration: expected the sensor's calibration entry (a map)", "calibration");
+  }
+  calibration_node["calibration"][registration.name + "_to_body"] = entry;
+  calib::Calibration new_calibration;
+  HANZO_ASSIGN_OR_RETURN(new_calibration,
+                         with_context(calib::parse_calibration(emit(calibration_node), "sensor registration"), "calibration"));
+  return std::make_pair(std::move(new_config), std::move(new_calibration));
+}
+
+double position_covariance_trace(const msgs::PoseEstimate& pose) {
+  return pose.pose_covariance ? pose.pose_covariance->topLeftCorner<3, 3>().trace() : 0.0;
+}
+
+}  // namespace
+
+// One server session: the pipeline::Session and what the server keeps around it.
+struct ManagedSession {
+  SessionRecord record;
+  config::FusionConfig configuration;
+  calib::Calibration calibration;
+
+  std::mutex mutex;  // guards everything below
+  std::unique_ptr<pipeline::Session> session;  // null once ended
+  std::optional<msgs::PoseEstimate> latest_pose;
+  std::vector<std::shared_ptr<PoseSubscription>> pose_subscribers;
+  uint64_t messages_pushed = 0;
+  Clock::time_point push_started;
+
+  // Metric series of this session (removed with it).
+  Counter* poses = nullptr;
+  Histogram* pose_latency = nullptr;
+  Gauge* covariance_trace = nullptr;
+  Gauge* tracking_state = nullptr;
+};
+
+struct SessionManager::Impl {
+  SessionManagerConfig config;
+  std::unique_ptr<Storage> storage;
+  std::shared_ptr<MetricsRegistry> metrics;
+  std::unique_ptr<detail::PoseRecorder> recorder;
+  Gauge* active_sessions_gauge = nullptr;
+
+  mutable std::shared_mutex sessions_mutex;
+  std::map<std::string, std::shared_ptr<ManagedSession>> sessions;  // active and ended
+
+  // Creates the pipeline::Session of `managed` (configuration and calibration set) and wires
+  // its pose callback. Caller holds managed.mutex or owns `managed` exclusively.
+  Status start_pipeline(ManagedSession& managed) {
+    auto session = pipeline::Session::create(managed.configuration, managed.calibration);
+    if (!session) return session.error();
+    ManagedSession* raw = &managed;
+    session.value()->set_pose_callback([this, raw](const msgs::PoseEstimate& pose) { on_pose(*raw, pose); });
+    managed.session = std::move(session).value();
+    return ok_status();
+  }
+
+  void on_pose(ManagedSession& managed, const msgs::PoseEstimate& pose) {
+    managed.latest_pose = pose;
+    recorder->enqueue(managed.record.id, pose);
+    for (const auto& subscriber : managed.pose_subscribers) subscriber->publish(pose);
+    managed.poses->increment();
+    managed.pose_latency->observe(std::chrono::duration<double>(Clock::now() - managed.push_started).count());
+    managed.covariance_trace->set(position_covariance_trace(pose));
+    managed.tracking_state->set(static_cast<double>(pose.status.state));
+  }
+
+  void attach_metrics(ManagedSession& managed) {
+    const MetricLabels labels = {{"session", managed.record.id}};
+    managed.poses = &metrics->counter("hanzo_fusion_poses_total", "PoseEstimates emitted", labels);
+    managed.pose_latency = &metrics->histogram("hanzo_fusion_pose_latency_seconds",
+                                               "From receiving a message to the PoseEstimate it produced",
+                                               latency_buckets_seconds(), labels);
+    managed.covariance_trace = &metrics->gauge("hanzo_fusion_position_covariance_trace_m2",
+                                               "Trace of the latest position covariance", labels);
+    managed.tracking_state = &metrics->gauge("hanzo_fusion_tracking_state",
+                                             "Latest tracking state (1 initializing, 2 tracking, 3 degraded, 4 lost)", labels);
+  }
+
+  // Mirrors the sessions' own counters into the registry (runs at every scrape).
+  void collect_metrics() {
+    std::vector<std::shared_ptr<ManagedSession>> active;
+    {
+      std::shared_lock lock(sessions_mutex);
+      for (const auto& [id, managed] : sessions) active.push_back(managed);
+    }
+    std::size_t count = 0;
+    for (const auto& managed : active) {
+      std::lock_guard lock(managed->mutex);
+      if (!managed->session) continue;
+      ++count;
+      const pipeline::SessionSummary summary = managed->session->summary();
+      for (const pipeline::SensorStatistics& sensor : summary.sensors) {
+        const MetricLabels labels = {{"session", managed->record.id}, {"sensor", sensor.name}};
+        metrics->counter("hanzo_fusion_messages_received_total", "Messages received per sensor", labels)
+            .set_total(static_cast<double>(sensor.received));
+        metrics->counter("hanzo_fusion_messages_fused_total", "Messages fused per sensor", labels)
+            .set_total(static_cast<double>(sensor.fused));
+        metrics->gauge("hanzo_fusion_sensor_timed_out", "1 while the sensor is silent for longer than its timeout", labels)
+            .set(sensor.timed_out ? 1.0 : 0.0);
+        for (const auto& [reason, rejected] : sensor.rejected) {
+          MetricLabels with_reason = labels;
+          with_reason.emplace_back("reason", reason);
+          metrics->counter("hanzo_fusion_messages_rejected_total", "Messages rejected per sensor and reason", with_reason)
+              .set_total(static_cast<double>(rejected));
+        }
+      }
+      std::size_t depth = 0;
+      uint64_t dropped = 0;
+      for (const auto& subscriber : managed->pose_subscribers) {
+        depth = std::max(depth, subscriber->depth());
+        dropped += subscriber->dropped();
+      }
+      const MetricLabels labels = {{"session", managed->record.id}};
+      metrics->gauge("hanzo_fusion_subscriber_queue_depth", "Deepest pose subscriber queue", labels).set(static_cast<double>(depth));
+      metrics->counter("hanzo_fusion_subscriber_dropped_total", "Poses dropped for slow subscribers (oldest first)", labels)
+          .set_total(static_cast<double>(dropped));
+      metrics->counter("hanzo_fusion_keyframes_total", "Keyframes emitted", labels).set_total(static_cast<double>(summary.keyframes));
+    }
+    active_sessions_gauge->set(static_cast<double>(count));
+  }
+
+  ApiResult<std::shared_ptr<ManagedSession>> find(const Principal& caller, const std::string& id, Permission permission) {
+    if (const ApiStatus allowed = authorize(caller, permission); !allowed) return allowed.error();
+    std::shared_ptr<ManagedSession> managed;
+    {
+      std::shared_lock lock(sessions_mutex);
+      const auto found = sessions.find(id);
+      if (found != sessions.end()) managed = found->second;
+    }
+    if (!managed) return ApiError{ErrorCode::kNotFound, fmt::format("no session '{}'", id), "session_id"};
+    if (const ApiStatus allowed = authorize(caller, permission, managed->record.organization); !allowed) return allowed.error();
+    return managed;
+  }
+
+  // Caller holds managed.mutex.
+  SessionInfo info_locked(const ManagedSession& managed) const {
+    SessionInfo info;
+    info.id = managed.record.id;
+    info.organization = managed.record.organization;
+    info.name = managed.record.name;
+    info.created = managed.record.created;
+    info.ended = managed.record.ended;
+    if (managed.session) info.summary = managed.session->summary();
+    info.latest_pose = managed.latest_pose;
+    const detail::StorageProgress progress = recorder->progress(managed.record.id);
+    info.stored_poses = progress.stored;
+    info.stored_through = progress.stored_through;
+    info.pose_subscribers = managed.pose_subscribers.size();
+    info.config_yaml = managed.record.config_yaml;
+    info.calibration_yaml = managed.record.calibration_yaml;
+    return info;
+  }
+
+  std::size_t active_count_locked(const std::string& organization, bool organization_only) const {
+    std::size_t count = 0;
+    for (const auto& [id, managed] : sessions) {
+      if (managed->record.ended) continue;
+      if (!organization_only || managed->record.organization == organization) ++count;
+    }
+    return count;
+  }
+};
+
+SessionManager::SessionManager(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
+SessionManager::~SessionManager() {
+  if (const Status flushed = impl_->recorder->flush(); !flushed) {
+    logger()->error("storage: poses not committed at shutdown: {}", flushed.error().message);
+  }
+  std::unique_lock lock(impl_->sessions_mutex);
+  for (auto& [id, managed] : impl_->sessions) {
+    std::lock_guard session_lock(managed->mutex);
+    for (const auto& subscriber : managed->pose_subscribers) subscriber->close();
+  }
+}
+
+Result<std::unique_ptr<SessionManager>> SessionManager::create(const SessionManagerConfig& config, std::unique_ptr<Storage> storage,
+                                                               std::shared_ptr<MetricsRegistry> metrics) {
+  auto impl = std::make_unique<Impl>();
+  impl->config = config;
+  impl->storage = std::move(storage);
+  impl->metrics = metrics ? std::move(metrics) : std::make_shared<MetricsRegistry>();
+  impl->recorder = std::make_unique<detail::PoseRecorder>(*impl->storage, config.storage_flush_interval,
+                                                         config.max_pending_poses, *impl->metrics);
+  impl->active_sessions_gauge = &impl->metrics->gauge("hanzo_fusion_active_sessions", "Sessions running");
+
+  std::vector<SessionRecord> records;
+  HANZO_ASSIGN_OR_RETURN(records, impl->storage->sessions());
+  for (SessionRecord& record : records) {
+    auto managed = std::make_shared<ManagedSession>();
+    const std::string where = fmt::format("stored session '{}'", record.id);
+    TrajectoryExtent extent;
+    HANZO_ASSIGN_OR_RETURN(extent, impl->storage->trajectory_extent(record.id));
+    impl->recorder->restore(record.id, {extent.count, extent.last});
+    if (!record.ended) {
+      HANZO_ASSIGN_OR_RETURN(managed->configuration, with_context(config::parse_fusion_config(record.config_yaml, "config"), where));
+      HANZO_ASSIGN_OR_RETURN(managed->calibration,
+                             with_context(calib::parse_calibration(record.calibration_yaml, "calibration"), where));
+    }
+    managed->record = std::move(record);
+    if (!managed->record.ended) {
+      impl->attach_metrics(*managed);
+      HANZO_RETURN_IF_ERROR(with_context(impl->start_pipeline(*managed), where));
+    }
+    impl->sessions.emplace(managed->record.id, std::move(managed));
+  }
+  Impl* raw = impl.get();
+  impl->metrics->add_collector([raw] { raw->collect_metrics(); });
+  logger()->info("sessions: {} restored from {} storage ({} stored in all)", impl->active_count_locked("", false),
+                 impl->storage->backend(), impl->sessions.size());
+  return std::unique_ptr<SessionManager>(new SessionManager(std::move(impl)));
+}
+
+ApiResult<SessionInfo> SessionManager::create_session(const Principal& caller, const CreateSessionRequest& request) {
+  if (const ApiStatus allowed = authorize(caller, Permission::kSessionWrite); !allowed) return allowed.error();
+  auto managed = std::make_shared<ManagedSession>();
+  auto configuration = config::parse_fusion_config(request.config_yaml, "config");
+  if (!configuration) return ApiError::from(ErrorCode::kInvalidArgument, with_context(configuration, "config").error());
+  managed->configuration = std::move(configuration).value();
+  if (!request.calibration_yaml.empty()) {
+    auto calibration = calib::parse_calibration(request.calibration_yaml, "calibration");
+    if (!calibration) return ApiError::from(ErrorCode::kInvalidArgument, with_context(calibration, "calibration").error());
+    managed->calibration = std::move(calibration).value();
+  }
+  SessionRecord& record = managed->record;
+  record.id = generate_session_id();
+  record.organization = caller.organization;
+  record.name = request.name.empty() ? "session-" + record.id.substr(0, 8) : request.name;
+  record.config_yaml = config::to_yaml(managed->configuration);
+  record.calibration_yaml = calib::to_yaml(managed->calibration);
+  record.created = Timestamp::wall_clock_now();
+  if (const Status started = impl_->start_pipeline(*managed); !started) {
+    return ApiError{ErrorCode::kInvalidArgument, "config: " + started.error().message, "config"};
+  }
+
+  std::unique_lock lock(impl_->sessions_mutex);
+  if (impl_->active_count_locked("", false) >= impl_->config.max_sessions) {
+    return ApiError{ErrorCode::kResourceExhausted, fmt::format("the server runs its maximum of {} sessions", impl_->config.max_sessions), ""};
+  }
+  if (impl_->active_count_locked(caller.organization, true) >= impl_->config.max_sessions_per_organization) {
+    return ApiError{ErrorCode::kResourceExhausted,
+                    fmt::format("organization '{}' runs its maximum of {} sessions", caller.organization,
+                                impl_->config.max_sessions_per_organization), ""};
+  }
+  if (const Status stored = impl_->storage->create_session(record); !stored) {
+    return ApiError::from(ErrorCode::kInternal, stored.error());
+  }
+  impl_->attach_metrics(*managed);
+  impl_->sessions.emplace(record.id, managed);
+  lock.unlock();
+  logger()->info("session {} ('{}') created by {}", record.id, record.name, caller.name);
+  std::lock_guard session_lock(managed->mutex);
+  return impl_->info_locked(*managed);
+}
+
+ApiResult<std::vector<SessionInfo>> SessionManager::list_sessions(const Principal& caller) {
+  if (const ApiStatus allowed = authorize(caller, Permission::kSessionRead); !allowed) return allowed.error();
+  std::vector<std::shared_ptr<ManagedSession>> visible;
+  {
+    std::shared_lock lock(impl_->sessions_mutex);
+    for (const auto& [id, managed] : impl_->sessions) {
+      if (managed->record.organization == caller.organization) visible.push_back(managed);
+    }
+  }
+  std::sort(visible.begin(), visible.end(), [](const auto& a, const auto& b) { return a->record.created < b->record.created; });
+  std::vector<SessionInfo> infos;
+  for (const auto& managed : visible) {
+    std::lock_guard lock(managed->mutex);
+    infos.push_back(impl_->info_locked(*managed));
+  }
+  return infos;
+}
+
+ApiResult<SessionInfo> SessionManager::session_info(const Principal& caller, const std::string& session_id) {
+  auto managed = impl_->find(caller, session_id, Permission::kSessionRead);
+  if (!managed) return managed.error();
+  std::lock_guard lock(managed.value()->mutex);
+  return impl_->info_locked(*managed.value());
+}
+
+ApiResult<SessionInfo> SessionManager::end_session(const Principal& caller, const std::string& session_id) {
+  auto found = impl_->find(caller, session_id, Permission::kSessionWrite);
+  if (!found) return found.error();
+  ManagedSession& managed = *found.value();
+  std::unique_lock lock(managed.mutex);
+  if (managed.record.ended) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has already ended", session_id), ""};
+  managed.session->flush();
+  const Timestamp ended = Timestamp::wall_clock_now();
+  if (const Status stored = impl_->storage->end_session(session_id, ended); !stored) {
+    return ApiError::from(ErrorCode::kInternal, stored.error());
+  }
+  managed.record.ended = ended;
+  managed.session.reset();
+  for (const auto& subscriber : managed.pose_subscribers) subscriber->close();
+  managed.pose_subscribers.clear();
+  lock.unlock();
+  if (const Status flushed = impl_->recorder->flush(); !flushed) return ApiError::from(ErrorCode::kInternal, flushed.error());
+  impl_->metrics->remove_series("session", session_id);
+  logger()->info("session {} ended by {}", session_id, caller.name);
+  lock.lock();
+  return impl_->info_locked(managed);
+}
+
+ApiResult<SessionInfo> SessionManager::register_sensor(const Principal& caller, const std::string& session_id,
+                                                       const SensorRegistration& registration) {
+  auto found = impl_->find(caller, session_id, Permission::kSessionWrite);
+  if (!found) return found.error();
+  ManagedSession& managed = *found.value();
+  std::lock_guard lock(managed.mutex);
+  if (managed.record.ended) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
+  if (managed.configuration.find_sensor(registration.name) != nullptr) {
+    return ApiError{ErrorCode::kConflict, fmt::format("sensor '{}' is already registered", registration.name), "name"};
+  }
+  if (managed.messages_pushed > 0) {
+    return ApiError{ErrorCode::kConflict,
+                    fmt::format("session '{}' has received data; register sensors before streaming (or create a new session)",
+                                session_id), ""};
+  }
+  auto rebuilt = with_sensor(managed.configuration, managed.calibration, registration);
+  if (!rebuilt) return ApiError::from(ErrorCode::kInvalidArgument, rebuilt.error());
+  ManagedSession candidate;
+  candidate.configuration = rebuilt.value().first;
+  candidate.calibration = rebuilt.value().second;
+  if (auto check = pipeline::Session::create(candidate.configuration, candidate.calibration); !check) {
+    return ApiError{ErrorCode::kInvalidArgument, "config: " + check.error().message, "config"};
+  }
+  const std::string config_yaml = config::to_yaml(candidate.configuration);
+  const std::string calibration_yaml = calib::to_yaml(candidate.calibration);
+  if (const Status stored = impl_->storage->update_session_setup(session_id, config_yaml, calibration_yaml); !stored) {
+    return ApiError::from(ErrorCode::kInternal, stored.error());
+  }
+  managed.configuration = std::move(candidate.configuration);
+  managed.calibration = std::move(candidate.calibration);
+  managed.record.config_yaml = config_yaml;
+  managed.record.calibration_yaml = calibration_yaml;
+  if (const Status started = impl_->start_pipeline(managed); !started) return ApiError::from(ErrorCode::kInternal, started.error());
+  return impl_->info_locked(managed);
+}
+
+ApiStatus SessionManager::push(const Principal& caller, const std::string& session_id, const std::string& sensor,
+                               const msgs::SensorMessage& message) {
+  auto found = impl_->find(caller, session_id, Permission::kSessionWrite);
+  if (!found) return found.error();
+  ManagedSession& managed = *found.value();
+  std::lock_guard lock(managed.mutex);
+  if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
+  std::string sensor_name = sensor;
+  if (sensor_name.empty()) {
+    const config::SensorModality modality = modality_of(message);
+    for (const config::SensorConfig& candidate : managed.configuration.sensors) {
+      if (candidate.modality != modality) continue;
+      if (!sensor_name.empty()) {
+        return ApiError{ErrorCode::kInvalidArgument,
+                        fmt::format("session '{}' has several {} sensors; name one", session_id, config::to_string(modality)),
+                        "sensor"};
+      }
+      sensor_name = candidate.name;
+    }
+    if (sensor_name.empty()) {
+      return ApiError{ErrorCode::kInvalidArgument,
+                      fmt::format("session '{}' has no {} sensor", session_id, config::to_string(modality)), "sensor"};
+    }
+  }
+  managed.push_started = Clock::now();
+  ++managed.messages_pushed;
+  const Status pushed = managed.session->push(sensor_name, message);
+  if (!pushed) return ApiError::from(ErrorCode::kRejected, pushed.error());
+  return api_ok();
+}
+
+ApiResult<msgs::PoseEstimate> SessionManager::current_pose(const Principal& caller, const std::string& session_id) {
+  auto found = impl_->find(caller, session_id, Permission::kSessionRead);
+  if (!found) return found.error();
+  std::lock_guard lock(found.value()->mutex);
+  if (!found.value()->latest_pose) {
+    return ApiError{ErrorCode::kNotFound, fmt::format("session '{}' has no pose yet (it needs IMU data to initialize)", session_id), ""};
+  }
+  return *found.value()->latest_pose;
+}
+
+ApiResult<TrajectoryPage> SessionManager::trajectory(const Principal& caller, const std::string& session_id, Timestamp after,
+                                                     std::size_t limit) {
+  auto found = impl_->find(caller, session_id, Permission::kSessionRead);
+  if (!found) return found.error();
+  if (limit == 0 || limit > 100000) {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("limit {} is outside 1..100000", limit), "limit"};
+  }
+  auto poses = impl_->storage->poses(session_id, after, limit + 1);
+  if (!poses) return ApiError::from(ErrorCode::kInternal, poses.error());
+  TrajectoryPage page;
+  page.poses = std::move(poses).value();
+  if (page.poses.size() > limit) {
+    page.poses.resize(limit);
+    page.next_after = page.poses.back().timestamp;
+  }
+  return page;
+}
+
+ApiResult<std::shared_ptr<PoseSubscription>> SessionManager::subscribe_poses(const Principal& caller, const std::string& session_id) {
+  auto found = impl_->find(caller, session_id, Permission::kSessionRead);
+  if (!found) return found.error();
+  ManagedSession& managed = *found.value();
+  std::lock_guard lock(managed.mutex);
+  if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
+  // Subscriptions their subscriber gave up (closed) are dropped here.
+  std::erase_if(managed.pose_subscribers, [](const auto& subscriber) { return subscriber->closed(); });
+  auto subscription = std::make_shared<PoseSubscription>(impl_->config.subscriber_queue_capacity);
+  managed.pose_subscribers.push_back(subscription);
+  return subscription;
+}
+
+Status SessionManager::flush_storage() { return impl_->recorder->flush(); }
+
+std::size_t SessionManager::active_sessions() const {
+  std::shared_lock lock(impl_->sessions_mutex);
+  return impl_->active_count_locked("", false);
+}
+
+std::string_view SessionManager::storage_backend() const { return impl_->storage->backend(); }
+
+}  // namespace hanzo::fusion::service
