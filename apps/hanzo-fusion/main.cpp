@@ -32,6 +32,7 @@ int main(int argc, char** argv) {
   app::add_graph_command(app, output, run);
   app::add_cloud_commands(app, output, run);
   app::add_map_command(app, output, run);
+  app::add_serve_command(app, output, run);
 
   try {
     app.parse(argc, argv);

@@ -51,7 +51,7 @@ CREATE INDEX IF NOT EXISTS map_versions_by_session ON map_versions (session_id);
 
 constexpr const char* kInsertPose =
     "INSERT INTO trajectory_poses (session_id, timestamp_ns, time, x, y, z, qw, qx, qy, qz, vx, vy, vz, state, "
-    "active_sensors, covariance) VALUES ($1, $2, to_timestamp($2::double precision / 1e9), $3, $4, $5, $6, $7, $8, $9, "
+    "active_sensors, covariance) VALUES ($1, $2::bigint, to_timestamp(($2::bigint)::double precision / 1e9), $3, $4, $5, $6, $7, $8, $9, "
     "$10, $11, $12, $13, $14, $15) ON CONFLICT DO NOTHING";
 
 class PostgresqlStorage final : public Storage {

@@ -96,6 +96,7 @@ struct ManagedSession {
 
   std::mutex mutex;  // guards everything below
   std::unique_ptr<pipeline::Session> session;  // null once ended
+  pipeline::SessionSummary final_summary;      // the session's summary when it ended
   std::optional<msgs::PoseEstimate> latest_pose;
   std::vector<std::shared_ptr<PoseSubscription>> pose_subscribers;
   uint64_t messages_pushed = 0;
@@ -215,7 +216,7 @@ struct SessionManager::Impl {
     info.name = managed.record.name;
     info.created = managed.record.created;
     info.ended = managed.record.ended;
-    if (managed.session) info.summary = managed.session->summary();
+    info.summary = managed.session ? managed.session->summary() : managed.final_summary;
     info.latest_pose = managed.latest_pose;
     const detail::StorageProgress progress = recorder->progress(managed.record.id);
     info.stored_poses = progress.stored;
@@ -365,6 +366,7 @@ ApiResult<SessionInfo> SessionManager::end_session(const Principal& caller, cons
     return ApiError::from(ErrorCode::kInternal, stored.error());
   }
   managed.record.ended = ended;
+  managed.final_summary = managed.session->summary();
   managed.session.reset();
   for (const auto& subscriber : managed.pose_subscribers) subscriber->close();
   managed.pose_subscribers.clear();

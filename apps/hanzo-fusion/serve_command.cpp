@@ -1,0 +1,129 @@
+// hanzo-fusion serve: the server (REST on 8083; docs/server.md). Runs until SIGINT/SIGTERM,
+// then commits queued poses and exits 0. With --json it prints one JSON object on stdout once
+// it listens ({"rest_port": ..., ...}), so scripts and tests can use --port 0.
+
+#include <signal.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+
+#include <fmt/format.h>
+
+#include "commands.hpp"
+#include "hanzo/fusion/service/rest_server.hpp"
+#include "hanzo/fusion/service/session_manager.hpp"
+
+namespace hanzo::fusion::app {
+namespace {
+
+struct ServeOptions {
+  std::string bind = "0.0.0.0";
+  int port = 8083;
+  std::string data_dir = "hanzo-fusion-data";
+  std::string database;
+  std::string tokens_file;
+  bool insecure_no_auth = false;
+  std::string tls_certificate;
+  std::string tls_private_key;
+  double max_body_mb = 16.0;
+  std::size_t max_sessions = 256;
+  std::size_t threads = 8;
+};
+
+// The token store from --tokens, HANZO_FUSION_TOKENS_FILE or HANZO_FUSION_TOKENS; null with
+// --insecure-no-auth.
+Result<std::shared_ptr<const service::TokenStore>> load_tokens(const ServeOptions& options) {
+  const char* file_variable = std::getenv("HANZO_FUSION_TOKENS_FILE");
+  const char* inline_variable = std::getenv("HANZO_FUSION_TOKENS");
+  const std::string file = !options.tokens_file.empty() ? options.tokens_file : (file_variable ? file_variable : "");
+  if (options.insecure_no_auth) {
+    if (!file.empty() || inline_variable != nullptr) return Error("--insecure-no-auth and API tokens exclude each other");
+    return std::shared_ptr<const service::TokenStore>();
+  }
+  Result<service::TokenStore> store = Error("");
+  if (!file.empty()) store = service::TokenStore::load(file);
+  else if (inline_variable != nullptr) store = service::TokenStore::parse_inline(inline_variable);
+  else return Error("no API tokens: give --tokens FILE (or HANZO_FUSION_TOKENS_FILE / HANZO_FUSION_TOKENS), or --insecure-no-auth for local development");
+  if (!store) return store.error();
+  if (store->size() == 0) return Error("the token file lists no tokens");
+  return std::shared_ptr<const service::TokenStore>(std::make_shared<service::TokenStore>(std::move(store).value()));
+}
+
+int run_serve(const Output& output, const ServeOptions& options) {
+  // Signals are taken by sigwait below; block them before any thread starts.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  auto tokens = load_tokens(options);
+  if (!tokens) return report_failure(output, {}, tokens.error().message);
+  const std::string database =
+      !options.database.empty() ? options.database : "sqlite://" + (std::filesystem::path(options.data_dir) / "fusion.db").string();
+  auto storage = service::open_storage(database);
+  if (!storage) return report_failure(output, {}, storage.error().message);
+  auto metrics = std::make_shared<service::MetricsRegistry>();
+  service::SessionManagerConfig manager_config;
+  manager_config.max_sessions = options.max_sessions;
+  auto sessions = service::SessionManager::create(manager_config, std::move(storage).value(), metrics);
+  if (!sessions) return report_failure(output, {}, sessions.error().message);
+
+  service::RestServerConfig rest_config;
+  rest_config.bind_address = options.bind;
+  rest_config.port = options.port;
+  rest_config.tls_certificate = options.tls_certificate;
+  rest_config.tls_private_key = options.tls_private_key;
+  rest_config.max_body_bytes = static_cast<std::size_t>(options.max_body_mb * 1024 * 1024);
+  rest_config.threads = options.threads;
+  auto rest = service::RestServer::create(rest_config, *sessions.value(), tokens.value(), metrics);
+  if (!rest) return report_failure(output, {}, rest.error().message);
+  if (Status started = rest.value()->start(); !started) return report_failure(output, {}, started.error().message);
+
+  const bool auth = tokens.value() != nullptr;
+  if (!auth) std::cerr << "hanzo-fusion serve: WARNING: authentication is OFF (--insecure-no-auth); every request has every permission\n";
+  const std::string scheme = rest.value()->https() ? "https" : "http";
+  nlohmann::json ready = {{"rest_port", rest.value()->port()}, {"rest_url", fmt::format("{}://{}:{}", scheme, options.bind, rest.value()->port())},
+                          {"storage", std::string(sessions.value()->storage_backend())}, {"auth", auth},
+                          {"active_sessions", sessions.value()->active_sessions()}};
+  if (output.json) {
+    std::cout << ready.dump() << std::endl;
+  } else {
+    std::cerr << fmt::format("hanzo-fusion serve: REST on {} ({} storage, auth {}, {} sessions restored); Ctrl-C stops\n",
+                             ready["rest_url"].get<std::string>(), ready["storage"].get<std::string>(), auth ? "on" : "OFF",
+                             sessions.value()->active_sessions());
+  }
+
+  int signal_number = 0;
+  sigwait(&signals, &signal_number);
+  std::cerr << "hanzo-fusion serve: stopping (" << (signal_number == SIGINT ? "SIGINT" : "SIGTERM") << ")\n";
+  rest.value()->stop();
+  if (Status flushed = sessions.value()->flush_storage(); !flushed) {
+    std::cerr << "hanzo-fusion serve: " << flushed.error().message << "\n";
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace
+
+void add_serve_command(CLI::App& app, const Output& output, Command& run) {
+  auto options = std::make_shared<ServeOptions>();
+  CLI::App* command = app.add_subcommand("serve", "Run the server: REST API on --port (default 8083)");
+  command->add_option("--bind", options->bind, "Address to listen on")->capture_default_str();
+  command->add_option("--port", options->port, "REST port (0: any free port)")->capture_default_str()->check(CLI::Range(0, 65535));
+  command->add_option("--data-dir", options->data_dir, "Folder of the SQLite database")->capture_default_str();
+  command->add_option("--db", options->database, "Storage URL: sqlite://PATH or postgresql://USER@HOST:PORT/DB (default sqlite://DATA_DIR/fusion.db)");
+  command->add_option("--tokens", options->tokens_file, "API token file (YAML; docs/server.md)");
+  command->add_flag("--insecure-no-auth", options->insecure_no_auth, "Serve without authentication (local development only)");
+  command->add_option("--tls-cert", options->tls_certificate, "PEM certificate: serve HTTPS (with --tls-key)")->check(CLI::ExistingFile);
+  command->add_option("--tls-key", options->tls_private_key, "PEM private key of --tls-cert")->check(CLI::ExistingFile);
+  command->add_option("--max-body-mb", options->max_body_mb, "Largest request body accepted (MiB)")->capture_default_str()->check(CLI::Range(0.001, 4096.0));
+  command->add_option("--max-sessions", options->max_sessions, "Most sessions running at once")->capture_default_str()->check(CLI::Range(1, 100000));
+  command->add_option("--threads", options->threads, "REST request workers")->capture_default_str()->check(CLI::Range(1, 1024));
+  command->callback([&run, &output, options] { run = [&output, options] { return run_serve(output, *options); }; });
+}
+
+}  // namespace hanzo::fusion::app

@@ -1,0 +1,172 @@
+#include "json_codec.hpp"
+
+#include <fmt/format.h>
+
+namespace hanzo::fusion::service::detail {
+namespace {
+
+using nlohmann::json;
+
+json vector_json(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
+
+// A body as a JSON object, or the error that names what is wrong with it.
+ApiResult<json> parse_object(const std::string& body) {
+  if (body.empty()) return ApiError{ErrorCode::kInvalidArgument, "the request body is empty (expected a JSON object)", "body"};
+  json document;
+  try {
+    document = json::parse(body);
+  } catch (const json::parse_error& error) {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("malformed JSON at byte {}: {}", error.byte, error.what()), "body"};
+  }
+  if (!document.is_object()) return ApiError{ErrorCode::kInvalidArgument, "expected a JSON object", "body"};
+  return document;
+}
+
+ApiStatus check_keys(const json& object, std::initializer_list<std::string_view> allowed) {
+  for (const auto& [key, value] : object.items()) {
+    if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) {
+      std::string names;
+      for (std::string_view name : allowed) names += (names.empty() ? "" : ", ") + std::string(name);
+      return ApiError{ErrorCode::kInvalidArgument, fmt::format("unknown field '{}' (known: {})", key, names), key};
+    }
+  }
+  return api_ok();
+}
+
+ApiResult<std::string> optional_string(const json& object, const std::string& key) {
+  if (!object.contains(key) || object[key].is_null()) return std::string();
+  if (!object[key].is_string()) {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: expected a string, got {}", key, object[key].type_name()), key};
+  }
+  return object[key].get<std::string>();
+}
+
+// A YAML document given as text, or as a JSON object (JSON is YAML), under `root_key` (added
+// when the object omits it).
+ApiResult<std::string> yaml_document(const json& object, const std::string& key, const std::string& root_key) {
+  if (!object.contains(key) || object[key].is_null()) return std::string();
+  const json& value = object[key];
+  if (value.is_string()) return value.get<std::string>();
+  if (!value.is_object()) {
+    return ApiError{ErrorCode::kInvalidArgument,
+                    fmt::format("{}: expected YAML text or a JSON object, got {}", key, value.type_name()), key};
+  }
+  if (root_key.empty() || value.contains(root_key)) return value.dump();
+  return json{{root_key, value}}.dump();
+}
+
+}  // namespace
+
+json pose_to_json(const msgs::PoseEstimate& pose) {
+  const Eigen::Quaterniond& q = pose.T_world_body.orientation;
+  json result = {
+      {"timestamp_ns", pose.timestamp.nanoseconds()},
+      {"frame_id", pose.frame_id},
+      {"child_frame_id", pose.child_frame_id},
+      {"position", vector_json(pose.T_world_body.position)},
+      {"orientation_wxyz", json::array({q.w(), q.x(), q.y(), q.z()})},
+      {"velocity", vector_json(pose.velocity)},
+      {"state", msgs::to_string(pose.status.state)},
+      {"active_modalities", pose.status.active_modalities},
+      {"active_sensors", pose.status.active_sensors},
+      {"covariance", nullptr},
+  };
+  if (pose.pose_covariance) {
+    json covariance = json::array();
+    for (int row = 0; row < 6; ++row) {
+      for (int column = 0; column < 6; ++column) covariance.push_back((*pose.pose_covariance)(row, column));
+    }
+    result["covariance"] = std::move(covariance);
+  }
+  return result;
+}
+
+json session_to_json(const SessionInfo& info) {
+  json sensors = json::array();
+  for (const pipeline::SensorStatistics& sensor : info.summary.sensors) {
+    sensors.push_back({{"name", sensor.name},
+                       {"modality", config::to_string(sensor.modality)},
+                       {"received", sensor.received},
+                       {"fused", sensor.fused},
+                       {"rejected", sensor.rejected},
+                       {"timeouts", sensor.timeouts},
+                       {"timed_out", sensor.timed_out}});
+  }
+  return {
+      {"id", info.id},
+      {"name", info.name},
+      {"organization", info.organization},
+      {"status", info.ended ? "ended" : "active"},
+      {"created_ns", info.created.nanoseconds()},
+      {"ended_ns", info.ended ? json(info.ended->nanoseconds()) : json(nullptr)},
+      {"tracking_state", msgs::to_string(info.latest_pose ? info.latest_pose->status.state : info.summary.state)},
+      {"filter", info.summary.filter},
+      {"sensors", std::move(sensors)},
+      {"poses", info.summary.poses},
+      {"keyframes", info.summary.keyframes},
+      {"stored_poses", info.stored_poses},
+      {"stored_through_ns", info.stored_through ? json(info.stored_through->nanoseconds()) : json(nullptr)},
+      {"pose_subscribers", info.pose_subscribers},
+      {"latest_pose", info.latest_pose ? pose_to_json(*info.latest_pose) : json(nullptr)},
+      {"config", info.config_yaml},
+      {"calibration", info.calibration_yaml},
+  };
+}
+
+json error_to_json(const ApiError& error) {
+  return {{"error", {{"code", to_string(error.code)}, {"message", error.message}, {"field", error.field}}}};
+}
+
+ApiResult<CreateSessionRequest> parse_create_session(const std::string& body) {
+  auto document = parse_object(body);
+  if (!document) return document.error();
+  const json& object = document.value();
+  if (auto keys = check_keys(object, {"name", "config", "calibration"}); !keys) return keys.error();
+  CreateSessionRequest request;
+  auto name = optional_string(object, "name");
+  if (!name) return name.error();
+  request.name = name.value();
+  if (!object.contains("config")) return ApiError{ErrorCode::kInvalidArgument, "config is missing (the fusion configuration)", "config"};
+  auto configuration = yaml_document(object, "config", "fusion");
+  if (!configuration) return configuration.error();
+  request.config_yaml = configuration.value();
+  auto calibration = yaml_document(object, "calibration", "calibration");
+  if (!calibration) return calibration.error();
+  request.calibration_yaml = calibration.value();
+  return request;
+}
+
+ApiResult<SensorRegistration> parse_sensor_registration(const std::string& body) {
+  auto document = parse_object(body);
+  if (!document) return document.error();
+  const json& object = document.value();
+  if (auto keys = check_keys(object, {"name", "config", "calibration"}); !keys) return keys.error();
+  SensorRegistration registration;
+  auto name = optional_string(object, "name");
+  if (!name) return name.error();
+  if (name.value().empty()) return ApiError{ErrorCode::kInvalidArgument, "name is missing (the sensor's name)", "name"};
+  registration.name = name.value();
+  if (!object.contains("config")) {
+    return ApiError{ErrorCode::kInvalidArgument, "config is missing (the sensor's configuration entry)", "config"};
+  }
+  auto configuration = yaml_document(object, "config", "");
+  if (!configuration) return configuration.error();
+  registration.config_yaml = configuration.value();
+  auto calibration = yaml_document(object, "calibration", "");
+  if (!calibration) return calibration.error();
+  registration.calibration_yaml = calibration.value();
+  return registration;
+}
+
+std::string poses_to_tum(const std::vector<msgs::PoseEstimate>& poses) {
+  std::string text;
+  for (const msgs::PoseEstimate& pose : poses) {
+    const Eigen::Vector3d& p = pose.T_world_body.position;
+    const Eigen::Quaterniond& q = pose.T_world_body.orientation;
+    text += fmt::format("{}.{:09d} {} {} {} {} {} {} {}\n", pose.timestamp.nanoseconds() / 1'000'000'000,
+                        pose.timestamp.nanoseconds() % 1'000'000'000, p.x(), p.y(), p.z(), q.x(), q.y(), q.z(), q.w());
+  }
+  return text;
+}
+
+}  // namespace hanzo::fusion::service::detail

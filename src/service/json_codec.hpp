@@ -1,0 +1,24 @@
+#pragma once
+// JSON shapes of the REST API (docs/server.md shows examples; docs/openapi.json is normative).
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "hanzo/fusion/service/api_error.hpp"
+#include "hanzo/fusion/service/session_manager.hpp"
+
+namespace hanzo::fusion::service::detail {
+
+nlohmann::json pose_to_json(const msgs::PoseEstimate& pose);
+nlohmann::json session_to_json(const SessionInfo& info);
+nlohmann::json error_to_json(const ApiError& error);
+
+/// The body of POST /v1/sessions: {"name": "...", "config": TEXT|OBJECT, "calibration": TEXT|OBJECT}.
+ApiResult<CreateSessionRequest> parse_create_session(const std::string& body);
+/// The body of POST /v1/sessions/{id}/sensors: {"name": "...", "config": TEXT|OBJECT, "calibration": TEXT|OBJECT}.
+ApiResult<SensorRegistration> parse_sensor_registration(const std::string& body);
+
+/// "tx ty tz qx qy qz qw" lines with the timestamp in seconds (TUM format).
+std::string poses_to_tum(const std::vector<msgs::PoseEstimate>& poses);
+
+}  // namespace hanzo::fusion::service::detail

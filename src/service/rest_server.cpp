@@ -1,0 +1,284 @@
+#include "hanzo/fusion/service/rest_server.hpp"
+
+#include <charconv>
+#include <chrono>
+#include <filesystem>
+#include <thread>
+
+#include <fmt/format.h>
+#include <httplib.h>
+
+#include "hanzo/fusion/core/logging.hpp"
+#include "json_codec.hpp"
+
+namespace hanzo::fusion::service {
+namespace {
+
+using nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+constexpr const char* kJson = "application/json";
+constexpr const char* kSessionPattern = "([0-9a-zA-Z_-]{1,64})";
+
+void send_json(httplib::Response& response, int status, const json& body) {
+  response.status = status;
+  response.set_content(body.dump(), kJson);
+}
+
+void send_error(httplib::Response& response, const ApiError& error) {
+  send_json(response, http_status(error.code), detail::error_to_json(error));
+}
+
+// A query parameter as a non-negative integer within [minimum, maximum].
+ApiResult<int64_t> integer_parameter(const httplib::Request& request, const std::string& name, int64_t fallback, int64_t minimum,
+                                     int64_t maximum) {
+  if (!request.has_param(name.c_str())) return fallback;
+  const std::string text = request.get_param_value(name.c_str());
+  int64_t value = 0;
+  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (error != std::errc() || end != text.data() + text.size()) {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: expected an integer, got '{}'", name, text), name};
+  }
+  if (value < minimum || value > maximum) {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: {} is outside {}..{}", name, value, minimum, maximum), name};
+  }
+  return value;
+}
+
+}  // namespace
+
+struct RestServer::Impl {
+  RestServerConfig config;
+  SessionManager* sessions = nullptr;
+  std::shared_ptr<const TokenStore> tokens;
+  std::shared_ptr<MetricsRegistry> metrics;
+  std::unique_ptr<httplib::Server> server;
+  std::thread thread;
+  int bound_port = 0;
+
+  // The caller of a request, or the 401 to answer.
+  ApiResult<Principal> authenticate(const httplib::Request& request) const {
+    if (!tokens) return Principal::local_development();
+    const std::string header = request.get_header_value("Authorization");
+    if (header.empty()) {
+      return ApiError{ErrorCode::kUnauthenticated, "missing API token (send 'Authorization: Bearer TOKEN')", "Authorization"};
+    }
+    const std::optional<std::string_view> token = bearer_token(header);
+    if (!token) return ApiError{ErrorCode::kUnauthenticated, "the Authorization header is not 'Bearer TOKEN'", "Authorization"};
+    std::optional<Principal> principal = tokens->authenticate(*token);
+    if (!principal) return ApiError{ErrorCode::kUnauthenticated, "unknown API token", "Authorization"};
+    return std::move(*principal);
+  }
+
+  using Handler = std::function<void(const httplib::Request&, httplib::Response&, const Principal&)>;
+  using PublicHandler = std::function<void(const httplib::Request&, httplib::Response&)>;
+
+  // Wraps a handler with request metrics (by route, not by URL: session ids stay out of labels).
+  httplib::Server::Handler measured(const std::string& method, const std::string& route, PublicHandler handler) {
+    Histogram& latency = metrics->histogram("hanzo_fusion_http_request_seconds", "REST request latency by route",
+                                            latency_buckets_seconds(), {{"method", method}, {"route", route}});
+    return [this, method, route, handler = std::move(handler), &latency](const httplib::Request& request,
+                                                                        httplib::Response& response) {
+      const auto started = Clock::now();
+      handler(request, response);
+      if (response.status == -1) response.status = 200;  // httplib's default, made explicit for the count
+      latency.observe(std::chrono::duration<double>(Clock::now() - started).count());
+      metrics->counter("hanzo_fusion_http_requests_total", "REST requests by route and status",
+                       {{"method", method}, {"route", route}, {"status", std::to_string(response.status)}})
+          .increment();
+    };
+  }
+
+  httplib::Server::Handler authenticated(const std::string& method, const std::string& route, Handler handler) {
+    return measured(method, route, [this, handler = std::move(handler)](const httplib::Request& request, httplib::Response& response) {
+      auto principal = authenticate(request);
+      if (!principal) return send_error(response, principal.error());
+      handler(request, response, principal.value());
+    });
+  }
+
+  void add_routes() {
+    httplib::Server& s = *server;
+    const std::string session = std::string("/v1/sessions/") + kSessionPattern;
+
+    s.Get("/v1/health", measured("GET", "/v1/health", [this](const httplib::Request&, httplib::Response& response) {
+      send_json(response, 200, {{"status", "ok"}, {"active_sessions", sessions->active_sessions()},
+                                {"storage", sessions->storage_backend()}, {"auth", tokens != nullptr}});
+    }));
+    s.Get("/v1/openapi.json", measured("GET", "/v1/openapi.json", [](const httplib::Request&, httplib::Response& response) {
+      response.set_content(std::string(openapi_document()), kJson);
+    }));
+    s.Get("/v1/metrics", authenticated("GET", "/v1/metrics", [this](const httplib::Request&, httplib::Response& response,
+                                                                    const Principal& caller) {
+      if (auto allowed = authorize(caller, Permission::kAdmin); !allowed) return send_error(response, allowed.error());
+      response.set_content(metrics->render(), "text/plain; version=0.0.4; charset=utf-8");
+    }));
+
+    s.Post("/v1/sessions", authenticated("POST", "/v1/sessions", [this](const httplib::Request& request, httplib::Response& response,
+                                                                      const Principal& caller) {
+      auto parsed = detail::parse_create_session(request.body);
+      if (!parsed) return send_error(response, parsed.error());
+      auto created = sessions->create_session(caller, parsed.value());
+      if (!created) return send_error(response, created.error());
+      response.set_header("Location", "/v1/sessions/" + created->id);
+      send_json(response, 201, detail::session_to_json(created.value()));
+    }));
+    s.Get("/v1/sessions", authenticated("GET", "/v1/sessions", [this](const httplib::Request&, httplib::Response& response,
+                                                                    const Principal& caller) {
+      auto listed = sessions->list_sessions(caller);
+      if (!listed) return send_error(response, listed.error());
+      json items = json::array();
+      for (const SessionInfo& info : listed.value()) items.push_back(detail::session_to_json(info));
+      send_json(response, 200, {{"sessions", std::move(items)}});
+    }));
+    s.Get(session, authenticated("GET", "/v1/sessions/{id}", [this](const httplib::Request& request, httplib::Response& response,
+                                                                  const Principal& caller) {
+      auto info = sessions->session_info(caller, request.matches[1]);
+      if (!info) return send_error(response, info.error());
+      send_json(response, 200, detail::session_to_json(info.value()));
+    }));
+    s.Delete(session, authenticated("DELETE", "/v1/sessions/{id}", [this](const httplib::Request& request,
+                                                                       httplib::Response& response, const Principal& caller) {
+      auto ended = sessions->end_session(caller, request.matches[1]);
+      if (!ended) return send_error(response, ended.error());
+      send_json(response, 200, detail::session_to_json(ended.value()));
+    }));
+    s.Post(session + "/sensors", authenticated("POST", "/v1/sessions/{id}/sensors", [this](const httplib::Request& request,
+                                                                                        httplib::Response& response,
+                                                                                        const Principal& caller) {
+      auto parsed = detail::parse_sensor_registration(request.body);
+      if (!parsed) return send_error(response, parsed.error());
+      auto info = sessions->register_sensor(caller, request.matches[1], parsed.value());
+      if (!info) return send_error(response, info.error());
+      send_json(response, 201, detail::session_to_json(info.value()));
+    }));
+    s.Get(session + "/pose", authenticated("GET", "/v1/sessions/{id}/pose", [this](const httplib::Request& request,
+                                                                                httplib::Response& response,
+                                                                                const Principal& caller) {
+      auto pose = sessions->current_pose(caller, request.matches[1]);
+      if (!pose) return send_error(response, pose.error());
+      send_json(response, 200, detail::pose_to_json(pose.value()));
+    }));
+    s.Get(session + "/trajectory", authenticated("GET", "/v1/sessions/{id}/trajectory", [this](const httplib::Request& request,
+                                                                                            httplib::Response& response,
+                                                                                            const Principal& caller) {
+      const std::string format = request.has_param("format") ? request.get_param_value("format") : "json";
+      if (format != "json" && format != "tum") {
+        return send_error(response, {ErrorCode::kInvalidArgument, fmt::format("format '{}': use json or tum", format), "format"});
+      }
+      auto after = integer_parameter(request, "after", std::numeric_limits<int64_t>::min(), std::numeric_limits<int64_t>::min(),
+                                     std::numeric_limits<int64_t>::max());
+      if (!after) return send_error(response, after.error());
+      auto limit = integer_parameter(request, "limit", 10000, 1, 100000);
+      if (!limit) return send_error(response, limit.error());
+      auto page = sessions->trajectory(caller, request.matches[1], Timestamp::from_nanoseconds(after.value()),
+                                       static_cast<std::size_t>(limit.value()));
+      if (!page) return send_error(response, page.error());
+      const std::optional<Timestamp>& next = page->next_after;
+      if (format == "tum") {
+        if (next) response.set_header("X-Next-After", std::to_string(next->nanoseconds()));
+        response.set_content(detail::poses_to_tum(page->poses), "text/plain; charset=utf-8");
+        return;
+      }
+      json poses = json::array();
+      for (const msgs::PoseEstimate& pose : page->poses) poses.push_back(detail::pose_to_json(pose));
+      send_json(response, 200, {{"poses", std::move(poses)}, {"next_after", next ? json(next->nanoseconds()) : json(nullptr)}});
+    }));
+
+    // Errors httplib answers itself (no route, body too large) get the same JSON shape.
+    s.set_error_handler([](const httplib::Request& request, httplib::Response& response) {
+      if (!response.body.empty()) return;
+      ErrorCode code = ErrorCode::kNotFound;
+      std::string message = fmt::format("no route {} {}", request.method, request.path);
+      if (response.status == 413) {
+        code = ErrorCode::kPayloadTooLarge;
+        message = "the request body is larger than the server accepts";
+      } else if (response.status == 400) {
+        code = ErrorCode::kInvalidArgument;
+        message = "malformed request";
+      } else if (response.status != 404) {
+        code = ErrorCode::kInternal;
+        message = fmt::format("HTTP {}", response.status);
+      }
+      const int status = response.status;
+      send_json(response, status, detail::error_to_json({code, message, ""}));
+    });
+    s.set_exception_handler([](const httplib::Request& request, httplib::Response& response, std::exception_ptr exception) {
+      std::string what = "unknown exception";
+      try {
+        std::rethrow_exception(exception);
+      } catch (const std::exception& error) {
+        what = error.what();
+      } catch (...) {
+      }
+      logger()->error("REST {} {}: {}", request.method, request.path, what);
+      send_error(response, {ErrorCode::kInternal, "internal error: " + what, ""});
+    });
+  }
+};
+
+RestServer::RestServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
+RestServer::~RestServer() { stop(); }
+
+Result<std::unique_ptr<RestServer>> RestServer::create(const RestServerConfig& config, SessionManager& sessions,
+                                                       std::shared_ptr<const TokenStore> tokens,
+                                                       std::shared_ptr<MetricsRegistry> metrics) {
+  auto impl = std::make_unique<Impl>();
+  impl->config = config;
+  impl->sessions = &sessions;
+  impl->tokens = std::move(tokens);
+  impl->metrics = metrics ? std::move(metrics) : std::make_shared<MetricsRegistry>();
+  const bool tls = !config.tls_certificate.empty() || !config.tls_private_key.empty();
+  if (tls) {
+    if (config.tls_certificate.empty() || config.tls_private_key.empty()) {
+      return Error("HTTPS needs both a certificate and a private key file");
+    }
+    for (const std::string& path : {config.tls_certificate, config.tls_private_key}) {
+      if (!std::filesystem::is_regular_file(path)) return Error(fmt::format("{}: no such file", path));
+    }
+    auto server = std::make_unique<httplib::SSLServer>(config.tls_certificate.c_str(), config.tls_private_key.c_str());
+    if (!server->is_valid()) {
+      return Error(fmt::format("{} / {}: cannot load the TLS certificate and key (PEM expected, key must match)",
+                               config.tls_certificate, config.tls_private_key));
+    }
+    impl->server = std::move(server);
+  } else {
+    impl->server = std::make_unique<httplib::Server>();
+  }
+  const std::size_t threads = std::max<std::size_t>(1, config.threads);
+  impl->server->new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
+  impl->server->set_payload_max_length(config.max_body_bytes);
+  impl->server->set_read_timeout(30, 0);
+  impl->server->set_write_timeout(30, 0);
+  impl->add_routes();
+  return std::unique_ptr<RestServer>(new RestServer(std::move(impl)));
+}
+
+Status RestServer::start() {
+  Impl& impl = *impl_;
+  if (impl.config.port == 0) {
+    impl.bound_port = impl.server->bind_to_any_port(impl.config.bind_address.c_str());
+    if (impl.bound_port <= 0) return Error(fmt::format("cannot bind {}:<any>", impl.config.bind_address));
+  } else {
+    if (!impl.server->bind_to_port(impl.config.bind_address.c_str(), impl.config.port)) {
+      return Error(fmt::format("cannot bind {}:{} (in use, or no permission)", impl.config.bind_address, impl.config.port));
+    }
+    impl.bound_port = impl.config.port;
+  }
+  impl.thread = std::thread([&impl] { impl.server->listen_after_bind(); });
+  logger()->info("REST API on {}://{}:{}", https() ? "https" : "http", impl.config.bind_address, impl.bound_port);
+  return ok_status();
+}
+
+int RestServer::port() const { return impl_->bound_port; }
+
+bool RestServer::https() const { return !impl_->config.tls_certificate.empty(); }
+
+void RestServer::stop() {
+  if (!impl_ || !impl_->server) return;
+  impl_->server->stop();
+  if (impl_->thread.joinable()) impl_->thread.join();
+}
+
+}  // namespace hanzo::fusion::service

@@ -1,0 +1,324 @@
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include "hanzo/fusion/service/rest_server.hpp"
+#include "service_fixtures.hpp"
+
+// Last: httplib pulls in <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
+#include <httplib.h>
+
+namespace hanzo::fusion::service {
+namespace {
+
+using ::testing::HasSubstr;
+using nlohmann::json;
+
+constexpr const char* kRobotToken = "acme-robot-secret-0001";
+constexpr const char* kViewerToken = "acme-viewer-secret-0002";
+constexpr const char* kAdminToken = "acme-admin-secret-00003";
+constexpr const char* kGlobexToken = "globex-robot-secret-0004";
+// Sensor data arrives over gRPC; these tests push through the SessionManager as that front end does.
+const Principal kStreamer{"robot", "acme", static_cast<uint32_t>(Permission::kSessionWrite) | static_cast<uint32_t>(Permission::kSessionRead)};
+
+class RestServerTest : public ::testing::Test {
+ protected:
+  void SetUp() override { start({}); }
+
+  void start(RestServerConfig config) {
+    rest_.reset();
+    manager_.reset();
+    dir_ = testing::scratch_dir();
+    auto storage = open_storage("sqlite://" + (dir_ / "fusion.db").string());
+    ASSERT_TRUE(storage.ok());
+    metrics_ = std::make_shared<MetricsRegistry>();
+    auto manager = SessionManager::create({}, std::move(storage).value(), metrics_);
+    ASSERT_TRUE(manager.ok());
+    manager_ = std::move(manager).value();
+    auto tokens = TokenStore::parse(testing::kTokensYaml, "tokens.yaml");
+    ASSERT_TRUE(tokens.ok());
+    config.bind_address = "127.0.0.1";
+    config.port = 0;
+    if (config.max_body_bytes == RestServerConfig{}.max_body_bytes) config.max_body_bytes = 256 * 1024;
+    auto rest = RestServer::create(config, *manager_, std::make_shared<TokenStore>(std::move(tokens).value()), metrics_);
+    ASSERT_TRUE(rest.ok()) << rest.error().message;
+    rest_ = std::move(rest).value();
+    ASSERT_TRUE(rest_->start().ok());
+  }
+
+  httplib::Client client() const {
+    httplib::Client http("127.0.0.1", rest_->port());
+    http.set_read_timeout(30, 0);
+    return http;
+  }
+  static httplib::Headers bearer(const std::string& token) { return {{"Authorization", "Bearer " + token}}; }
+
+  // POST /v1/sessions with the sample configuration; returns the session id.
+  std::string create_session(const std::string& token = kRobotToken) {
+    const json body = {{"name", "sample"}, {"config", testing::read_text("examples/data/fusion.yaml")}};
+    auto response = client().Post("/v1/sessions", bearer(token), body.dump(), "application/json");
+    EXPECT_TRUE(response);
+    if (!response) return {};
+    EXPECT_EQ(response->status, 201) << response->body;
+    return json::parse(response->body).value("id", "");
+  }
+
+  static json error_of(const httplib::Result& response) {
+    EXPECT_TRUE(response);
+    if (!response) return {};
+    const json body = json::parse(response->body);
+    EXPECT_TRUE(body.contains("error")) << response->body;
+    EXPECT_TRUE(body["error"].contains("code") && body["error"].contains("message") && body["error"].contains("field"));
+    return body["error"];
+  }
+
+  std::filesystem::path dir_;
+  std::shared_ptr<MetricsRegistry> metrics_;
+  std::unique_ptr<SessionManager> manager_;
+  std::unique_ptr<RestServer> rest_;
+};
+
+TEST_F(RestServerTest, SessionLifecycle) {
+  const std::string id = create_session();
+  ASSERT_FALSE(id.empty());
+  auto http = client();
+  auto got = http.Get(("/v1/sessions/" + id).c_str(), bearer(kViewerToken));
+  ASSERT_TRUE(got);
+  ASSERT_EQ(got->status, 200);
+  const json session = json::parse(got->body);
+  EXPECT_EQ(session["name"], "sample");
+  EXPECT_EQ(session["organization"], "acme");
+  EXPECT_EQ(session["status"], "active");
+  EXPECT_EQ(session["sensors"].size(), 3u);
+  EXPECT_TRUE(session["latest_pose"].is_null());
+
+  auto listed = http.Get("/v1/sessions", bearer(kViewerToken));
+  ASSERT_EQ(listed->status, 200);
+  EXPECT_EQ(json::parse(listed->body)["sessions"].size(), 1u);
+  EXPECT_EQ(json::parse(http.Get("/v1/sessions", bearer(kGlobexToken))->body)["sessions"].size(), 0u);
+
+  // Register a sensor (JSON objects as configuration and calibration).
+  const json sensor = {{"name", "radar"}, {"config", {{"rate", 10}}}, {"calibration", {{"translation", {1.0, 0.0, 0.2}}}}};
+  auto registered = http.Post(("/v1/sessions/" + id + "/sensors").c_str(), bearer(kRobotToken), sensor.dump(), "application/json");
+  ASSERT_EQ(registered->status, 201) << registered->body;
+  EXPECT_EQ(json::parse(registered->body)["sensors"].size(), 4u);
+  auto again = http.Post(("/v1/sessions/" + id + "/sensors").c_str(), bearer(kRobotToken), sensor.dump(), "application/json");
+  EXPECT_EQ(again->status, 409);
+  EXPECT_EQ(error_of(again)["code"], "conflict");
+
+  // Stream the sample recording (through the manager, as the gRPC front end does), then read.
+  for (const testing::TimedMessage& message : testing::sample_recording()) {
+    ASSERT_TRUE(manager_->push(kStreamer, id, message.sensor, message.message).ok());
+  }
+  ASSERT_TRUE(manager_->flush_storage().ok());
+  auto pose = http.Get(("/v1/sessions/" + id + "/pose").c_str(), bearer(kViewerToken));
+  ASSERT_EQ(pose->status, 200);
+  const json pose_json = json::parse(pose->body);
+  const msgs::PoseEstimate latest = manager_->current_pose(kStreamer, id).value();
+  EXPECT_EQ(pose_json["timestamp_ns"], latest.timestamp.nanoseconds());
+  EXPECT_EQ(pose_json["position"][0].get<double>(), latest.T_world_body.position.x());
+  EXPECT_EQ(pose_json["covariance"].size(), 36u);
+  EXPECT_EQ(pose_json["state"], msgs::to_string(latest.status.state));
+
+  // Trajectory, paged by 700.
+  std::size_t total = 0;
+  std::string after;
+  int pages = 0;
+  while (true) {
+    const std::string path = "/v1/sessions/" + id + "/trajectory?limit=700" + (after.empty() ? "" : "&after=" + after);
+    auto page = http.Get(path.c_str(), bearer(kViewerToken));
+    ASSERT_EQ(page->status, 200) << page->body;
+    const json body = json::parse(page->body);
+    total += body["poses"].size();
+    ++pages;
+    if (body["next_after"].is_null()) break;
+    after = std::to_string(body["next_after"].get<int64_t>());
+  }
+  const json info = json::parse(http.Get(("/v1/sessions/" + id).c_str(), bearer(kViewerToken))->body);
+  EXPECT_EQ(total, info["stored_poses"].get<std::size_t>());
+  EXPECT_EQ(pages, static_cast<int>((total + 699) / 700));
+  EXPECT_GT(total, 1800u);
+  auto tum = http.Get(("/v1/sessions/" + id + "/trajectory?format=tum&limit=100").c_str(), bearer(kViewerToken));
+  ASSERT_EQ(tum->status, 200);
+  EXPECT_EQ(std::count(tum->body.begin(), tum->body.end(), '\n'), 100);
+  EXPECT_TRUE(tum->has_header("X-Next-After"));
+
+  auto deleted = http.Delete(("/v1/sessions/" + id).c_str(), bearer(kRobotToken));
+  ASSERT_EQ(deleted->status, 200);
+  EXPECT_EQ(json::parse(deleted->body)["status"], "ended");
+  EXPECT_EQ(http.Delete(("/v1/sessions/" + id).c_str(), bearer(kRobotToken))->status, 409);
+  EXPECT_EQ(http.Get(("/v1/sessions/" + id + "/trajectory?limit=5").c_str(), bearer(kViewerToken))->status, 200);
+}
+
+TEST_F(RestServerTest, AuthMatrixForEveryEndpoint) {
+  const std::string id = create_session();
+  struct Endpoint {
+    std::string method;
+    std::string path;
+    std::string body;
+    const char* allowed_token;    // a token that may call it
+    const char* forbidden_token;  // a token of the same organization that lacks the permission
+    bool organization_scoped;
+  };
+  const std::string session = "/v1/sessions/" + id;
+  const std::string config = json({{"config", testing::read_text("examples/data/fusion.yaml")}}).dump();
+  const std::vector<Endpoint> endpoints = {
+      {"POST", "/v1/sessions", config, kRobotToken, kViewerToken, false},
+      {"GET", "/v1/sessions", "", kViewerToken, nullptr, false},
+      {"GET", session, "", kViewerToken, nullptr, true},
+      {"POST", session + "/sensors", R"({"name": "wheels2", "config": {"rate": 50}})", kRobotToken, kViewerToken, true},
+      {"GET", session + "/pose", "", kViewerToken, nullptr, true},
+      {"GET", session + "/trajectory", "", kViewerToken, nullptr, true},
+      {"GET", "/v1/metrics", "", kAdminToken, kRobotToken, false},
+      {"DELETE", session, "", kRobotToken, kViewerToken, true},
+  };
+  auto http = client();
+  auto call = [&](const Endpoint& endpoint, const httplib::Headers& headers) {
+    if (endpoint.method == "GET") return http.Get(endpoint.path.c_str(), headers);
+    if (endpoint.method == "DELETE") return http.Delete(endpoint.path.c_str(), headers);
+    return http.Post(endpoint.path.c_str(), headers, endpoint.body, "application/json");
+  };
+  for (const Endpoint& endpoint : endpoints) {
+    SCOPED_TRACE(endpoint.method + " " + endpoint.path);
+    auto missing = call(endpoint, {});
+    EXPECT_EQ(missing->status, 401);
+    EXPECT_EQ(error_of(missing)["code"], "unauthenticated");
+    EXPECT_EQ(call(endpoint, bearer("not-a-token-of-this-server"))->status, 401);
+    EXPECT_EQ(call(endpoint, {{"Authorization", "Basic abc"}})->status, 401);
+    if (endpoint.forbidden_token != nullptr) {
+      auto forbidden = call(endpoint, bearer(endpoint.forbidden_token));
+      EXPECT_EQ(forbidden->status, 403);
+      EXPECT_EQ(error_of(forbidden)["code"], "permission_denied");
+    }
+    if (endpoint.organization_scoped) {
+      auto other = call(endpoint, bearer(kGlobexToken));
+      EXPECT_EQ(other->status, 403);
+      EXPECT_THAT(error_of(other)["message"].get<std::string>(), HasSubstr("another organization"));
+    }
+    auto allowed = call(endpoint, bearer(endpoint.allowed_token));
+    EXPECT_NE(allowed->status, 401);
+    EXPECT_NE(allowed->status, 403) << allowed->body;
+  }
+  // The session survived all of it (and only the last call ended it).
+  const json info = json::parse(http.Get(session.c_str(), bearer(kViewerToken))->body);
+  EXPECT_EQ(info["status"], "ended");
+  EXPECT_EQ(info["sensors"].size(), 4u);
+}
+
+TEST_F(RestServerTest, BadRequestsGetTheDocumentedErrors) {
+  const std::string id = create_session();
+  auto http = client();
+  auto post = [&](const std::string& path, const std::string& body) {
+    return http.Post(path.c_str(), bearer(kRobotToken), body, "application/json");
+  };
+  auto malformed = post("/v1/sessions", "{\"config\": ");
+  EXPECT_EQ(malformed->status, 400);
+  EXPECT_EQ(error_of(malformed)["field"], "body");
+  EXPECT_THAT(error_of(malformed)["message"].get<std::string>(), HasSubstr("malformed JSON"));
+  EXPECT_EQ(error_of(post("/v1/sessions", "[1, 2]"))["message"], "expected a JSON object");
+  EXPECT_EQ(error_of(post("/v1/sessions", ""))["field"], "body");
+  auto wrong_type = post("/v1/sessions", R"({"config": 5})");
+  EXPECT_EQ(wrong_type->status, 400);
+  EXPECT_EQ(error_of(wrong_type)["field"], "config");
+  EXPECT_EQ(error_of(post("/v1/sessions", R"({"name": 7, "config": "x"})"))["field"], "name");
+  EXPECT_EQ(error_of(post("/v1/sessions", R"({"config": "fusion: {}", "colour": 1})"))["field"], "colour");
+  EXPECT_EQ(error_of(post("/v1/sessions", R"({"name": "no config"})"))["field"], "config");
+  auto invalid_config = post("/v1/sessions", R"({"config": {"sensors": {"imu": {"rate": "fast"}}}})");
+  EXPECT_EQ(invalid_config->status, 400);
+  EXPECT_THAT(error_of(invalid_config)["message"].get<std::string>(), HasSubstr("rate"));
+  auto nan_calibration = post("/v1/sessions", json({{"config", {{"sensors", {{"imu", {{"rate", 100}}}}}}},
+                                                    {"calibration", "calibration:\n  imu_to_body: {translation: [.nan, 0, 0]}\n"}}).dump());
+  EXPECT_EQ(nan_calibration->status, 400);
+
+  // Oversized body: refused with 413 in the same JSON shape.
+  auto oversized = post("/v1/sessions", std::string(300 * 1024, ' ') + "{}");
+  EXPECT_EQ(oversized->status, 413);
+  EXPECT_EQ(error_of(oversized)["code"], "payload_too_large");
+
+  auto unknown = http.Get("/v1/sessions/ffffffffffffffff", bearer(kViewerToken));
+  EXPECT_EQ(unknown->status, 404);
+  EXPECT_EQ(error_of(unknown)["field"], "session_id");
+  auto no_route = http.Get("/v1/nothing-here", bearer(kViewerToken));
+  EXPECT_EQ(no_route->status, 404);
+  EXPECT_THAT(error_of(no_route)["message"].get<std::string>(), HasSubstr("no route"));
+  EXPECT_EQ(http.Get(("/v1/sessions/" + id + "/pose").c_str(), bearer(kViewerToken))->status, 404);  // no data yet
+  EXPECT_EQ(error_of(http.Get(("/v1/sessions/" + id + "/trajectory?limit=0").c_str(), bearer(kViewerToken)))["field"], "limit");
+  EXPECT_EQ(error_of(http.Get(("/v1/sessions/" + id + "/trajectory?limit=x").c_str(), bearer(kViewerToken)))["field"], "limit");
+  EXPECT_EQ(error_of(http.Get(("/v1/sessions/" + id + "/trajectory?after=1e9").c_str(), bearer(kViewerToken)))["field"], "after");
+  EXPECT_EQ(error_of(http.Get(("/v1/sessions/" + id + "/trajectory?format=csv").c_str(), bearer(kViewerToken)))["field"], "format");
+  EXPECT_EQ(error_of(post("/v1/sessions/" + id + "/sensors", R"({"config": {"rate": 5}})"))["field"], "name");
+
+  // Still intact and serving.
+  auto session = http.Get(("/v1/sessions/" + id).c_str(), bearer(kViewerToken));
+  EXPECT_EQ(session->status, 200);
+  EXPECT_EQ(json::parse(session->body)["sensors"].size(), 3u);
+}
+
+TEST_F(RestServerTest, HealthOpenApiAndMetrics) {
+  auto http = client();
+  auto health = http.Get("/v1/health");
+  ASSERT_EQ(health->status, 200);
+  EXPECT_EQ(json::parse(health->body)["storage"], "sqlite");
+  EXPECT_EQ(json::parse(health->body)["auth"], true);
+
+  auto openapi = http.Get("/v1/openapi.json");
+  ASSERT_EQ(openapi->status, 200);
+  EXPECT_EQ(openapi->body, testing::read_text(std::string(HANZO_SOURCE_DIR) + "/docs/openapi.json"));
+  const std::string id = create_session();
+  auto metrics = http.Get("/v1/metrics", bearer(kAdminToken));
+  ASSERT_EQ(metrics->status, 200);
+  EXPECT_THAT(metrics->get_header_value("Content-Type"), HasSubstr("text/plain; version=0.0.4"));
+  EXPECT_THAT(metrics->body, HasSubstr("hanzo_fusion_http_requests_total{method=\"GET\",route=\"/v1/health\",status=\"200\"} 1.0"));
+  EXPECT_THAT(metrics->body, HasSubstr("hanzo_fusion_active_sessions 1.0"));
+  EXPECT_THAT(metrics->body, HasSubstr("hanzo_fusion_messages_received_total{session=\"" + id + "\",sensor=\"imu\"} 0.0"));
+
+  // Every documented operation is routed (answers something other than "no route").
+  const json document = json::parse(openapi->body);
+  auto http_admin = client();
+  for (const auto& [path_template, operations] : document["paths"].items()) {
+    std::string path = path_template;
+    if (const auto brace = path.find("{id}"); brace != std::string::npos) path.replace(brace, 4, id);
+    for (const auto& [method, operation] : operations.items()) {
+      if (method == "parameters") continue;
+      httplib::Result response = method == "get"    ? http_admin.Get(path.c_str(), bearer(kAdminToken))
+                                 : method == "post" ? http_admin.Post(path.c_str(), bearer(kAdminToken), "{}", "application/json")
+                                                    : http_admin.Delete(path.c_str(), bearer(kAdminToken));
+      ASSERT_TRUE(response) << method << " " << path;
+      EXPECT_THAT(response->body, ::testing::Not(HasSubstr("no route"))) << method << " " << path;
+    }
+  }
+
+}
+
+TEST_F(RestServerTest, ServesHttpsWithTheGivenCertificate) {
+  const auto certificates = testing::scratch_dir("_tls");
+  const std::string certificate = (certificates / "server.crt").string();
+  const std::string key = (certificates / "server.key").string();
+  const std::string command = "openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=127.0.0.1 -keyout " + key +
+                              " -out " + certificate + " >/dev/null 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0);
+  RestServerConfig config;
+  config.tls_certificate = certificate;
+  config.tls_private_key = key;
+  start(config);
+  ASSERT_TRUE(rest_->https());
+  httplib::SSLClient https("127.0.0.1", rest_->port());
+  https.set_ca_cert_path(certificate.c_str());
+  https.enable_server_certificate_verification(true);
+  auto health = https.Get("/v1/health");
+  ASSERT_TRUE(health) << httplib::to_string(health.error());
+  EXPECT_EQ(health->status, 200);
+  EXPECT_FALSE(client().Get("/v1/health")) << "plain HTTP is not served on the HTTPS port";
+
+  // Key and certificate that do not load are refused at creation.
+  config.tls_private_key = certificate;
+  auto storage = open_storage("sqlite://" + (certificates / "other.db").string());
+  auto manager = SessionManager::create({}, std::move(storage).value(), nullptr);
+  EXPECT_FALSE(RestServer::create(config, *manager.value(), nullptr, nullptr).ok());
+  config.tls_private_key.clear();
+  EXPECT_THAT(RestServer::create(config, *manager.value(), nullptr, nullptr).error().message, HasSubstr("both"));
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::service
