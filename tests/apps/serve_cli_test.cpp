@@ -1,0 +1,165 @@
+// `hanzo-fusion serve` as a process: refuses to start without tokens, says when auth is off,
+// serves REST, stops cleanly on SIGTERM and keeps its sessions across restarts and kill -9.
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <thread>
+
+#include <fmt/format.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+extern char** environ;
+
+namespace {
+
+using ::testing::HasSubstr;
+using nlohmann::json;
+
+std::string read_file(const std::filesystem::path& path) {
+  std::ifstream file(path);
+  return {std::istreambuf_iterator<char>(file), {}};
+}
+
+// A running `hanzo-fusion serve --json ...`; stdout and stderr go to files in `dir`.
+class Server {
+ public:
+  Server(const std::filesystem::path& dir, const std::string& arguments) : dir_(dir) {
+    const std::string command = fmt::format("exec {} serve --bind 127.0.0.1 --port 0 --json {} >{} 2>{}", HANZO_FUSION_CLI,
+                                            arguments, (dir / "out.txt").string(), (dir / "err.txt").string());
+    std::filesystem::remove(dir / "out.txt");  // never read a previous server's port
+    const char* argv[] = {"/bin/sh", "-c", command.c_str(), nullptr};
+    if (posix_spawn(&pid_, "/bin/sh", nullptr, nullptr, const_cast<char**>(argv), environ) != 0) pid_ = -1;
+    for (int i = 0; i < 300 && port_ == 0 && running(); ++i) {
+      const std::string out = read_file(dir / "out.txt");
+      if (out.find('\n') != std::string::npos) {
+        const json ready = json::parse(out);
+        if (ready.contains("rest_port")) port_ = ready["rest_port"].get<int>();
+        break;
+      } std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  }
+  ~Server() { stop(SIGKILL); }
+
+  bool running() {
+    if (pid_ <= 0) return false;
+    int status = 0;
+    if (waitpid(pid_, &status, WNOHANG) == 0) return true;
+    exit_status_ = status;
+    pid_ = -1;
+    return false;
+  }
+  int port() const { return port_; }
+  /// Waits for the process to exit by itself; its exit status.
+  int wait() {
+    if (pid_ > 0) {
+      waitpid(pid_, &exit_status_, 0);
+      pid_ = -1;
+    }
+    return exit_status_;
+  }
+  std::string err() const { return read_file(dir_ / "err.txt"); }
+  /// Sends `signal` and waits; the exit status.
+  int stop(int signal) {
+    if (pid_ > 0) {
+      kill(pid_, signal);
+      waitpid(pid_, &exit_status_, 0);
+      pid_ = -1;
+    }
+    return exit_status_;
+  }
+  /// curl `path` on the server with extra curl options: {status, body}.
+  std::pair<int, std::string> request(const std::string& path, const std::string& curl_options = "") const {
+    const std::string command = fmt::format("curl -s -w '\\n%{{http_code}}' {} 'http://127.0.0.1:{}{}'", curl_options, port_, path);
+    std::string output;
+    FILE* pipe = popen(command.c_str(), "r");
+    std::array<char, 4096> buffer{};
+    std::size_t n = 0;
+    while ((n = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0) output.append(buffer.data(), n);
+    pclose(pipe);
+    const std::size_t newline = output.rfind('\n');
+    if (newline == std::string::npos) return {0, output};
+    return {std::atoi(output.c_str() + newline + 1), output.substr(0, newline)};
+  }
+
+ private:
+  std::filesystem::path dir_;
+  pid_t pid_ = -1;
+  int port_ = 0;
+  int exit_status_ = -1;
+};
+
+constexpr const char* kTokens = R"(tokens:
+  - name: robot
+    organization: acme
+    permissions: [fusion:session:write, fusion:session:read, fusion:admin]
+    token: "acme-robot-secret-0001"
+)";
+constexpr const char* kAuthorization = "-H 'Authorization: Bearer acme-robot-secret-0001'";
+
+TEST(ServeCli, RefusesToStartWithoutTokensAndSaysWhenAuthIsOff) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "hanzo_cli_serve_refuse";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  Server refused(dir, fmt::format("--data-dir {}", (dir / "data").string()));
+  EXPECT_EQ(refused.port(), 0);
+  const int exit_status = refused.wait();
+  EXPECT_TRUE(WIFEXITED(exit_status) && WEXITSTATUS(exit_status) == 1);
+  const std::string reason = refused.err();
+  EXPECT_THAT(reason, HasSubstr("--insecure-no-auth"));
+  EXPECT_EQ(std::count(reason.begin(), reason.end(), '\n'), 1);
+
+  Server open(dir, fmt::format("--data-dir {} --insecure-no-auth", (dir / "data").string()));
+  ASSERT_GT(open.port(), 0) << open.err();
+  EXPECT_THAT(open.err(), HasSubstr("authentication is OFF"));
+  EXPECT_EQ(open.request("/v1/sessions").first, 200);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(ServeCli, SessionsSurviveSigtermAndKillNine) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "hanzo_cli_serve_restart";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "tokens.yaml") << kTokens;
+  const std::string arguments = fmt::format("--data-dir {} --tokens {}", (dir / "data").string(), (dir / "tokens.yaml").string());
+  std::string id;
+  std::ofstream(dir / "create.json") << json({{"name", "survivor"}, {"config", read_file("examples/data/fusion.yaml")}}).dump();
+  {
+    Server server(dir, arguments);
+    ASSERT_GT(server.port(), 0) << server.err();
+    EXPECT_EQ(server.request("/v1/health").first, 200);
+    EXPECT_EQ(server.request("/v1/sessions").first, 401);
+    const auto [status, body] =
+        server.request("/v1/sessions", fmt::format("{} -X POST --data-binary @{}", kAuthorization, (dir / "create.json").string()));
+    ASSERT_EQ(status, 201) << body;
+    id = json::parse(body)["id"];
+    const int exit_status = server.stop(SIGTERM);
+    EXPECT_TRUE(WIFEXITED(exit_status) && WEXITSTATUS(exit_status) == 0) << server.err();
+  }
+  {
+    Server server(dir, arguments);
+    ASSERT_GT(server.port(), 0) << server.err();
+    const auto [status, body] = server.request("/v1/sessions/" + id, kAuthorization);
+    ASSERT_EQ(status, 200) << body;
+    EXPECT_EQ(json::parse(body)["name"], "survivor");
+    EXPECT_EQ(json::parse(body)["status"], "active");
+    server.stop(SIGKILL);
+  }
+  Server server(dir, arguments);
+  ASSERT_GT(server.port(), 0) << server.err();
+  const auto [status, body] = server.request("/v1/sessions", kAuthorization);
+  ASSERT_EQ(status, 200);
+  EXPECT_EQ(json::parse(body)["sessions"].size(), 1u);
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
