@@ -83,7 +83,7 @@ std::vector<uint64_t> Histogram::cumulative_counts() const {
 }
 
 std::vector<double> latency_buckets_seconds() {
-  return {5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 2.5e-2, 5e-2, 0.1, 0.25, 0.5, 1.0, 2.5, 10.0};
+  return {5e-6, 1e-5, 2.5e-5, 5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 2.5e-2, 5e-2, 0.1, 0.25, 0.5, 1.0, 2.5, 10.0};
 }
 
 MetricsRegistry::Series& MetricsRegistry::series(std::string_view name, std::string_view help, Type type,

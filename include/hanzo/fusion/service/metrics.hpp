@@ -66,7 +66,7 @@ class Histogram {
   std::atomic<uint64_t> count_{0};
 };
 
-/// Latency buckets in seconds, 50 us to 10 s.
+/// Latency buckets in seconds, 5 us to 10 s.
 std::vector<double> latency_buckets_seconds();
 
 class MetricsRegistry {

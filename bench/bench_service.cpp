@@ -1,0 +1,216 @@
+// The server's costs, measured in one run:
+//  - StorageAppend: committing PoseEstimates to SQLite (WAL, synchronous=FULL) and to PostgreSQL
+//    15 on loopback (a throwaway server started by scripts/test-postgres.sh), in transactions of
+//    1, 100 and 1000 poses. Counter: poses per second (the pose recorder commits every 20 ms,
+//    so 20 sessions x 200 Hz = 80 poses per commit).
+//  - SessionPush: the sample recording (examples/data: IMU 100 Hz, GNSS, wheels) pushed through
+//    the SessionManager with every pose stored, the work the server does per message. Counters:
+//    messages per second, pose latency p50 / p99 (message in -> PoseEstimate out).
+//  - RestGetPose: GET /v1/sessions/{id}/pose with auth, by wrk (2 threads, 16 connections, 5 s)
+//    against an in-process RestServer. Counters: requests per second, mean latency.
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <regex>
+
+#include <benchmark/benchmark.h>
+#include <fmt/format.h>
+
+#include "hanzo/fusion/io/csv_import.hpp"
+#include "hanzo/fusion/service/rest_server.hpp"
+#include "hanzo/fusion/service/session_manager.hpp"
+
+namespace {
+
+using namespace hanzo::fusion;
+using namespace hanzo::fusion::service;
+
+const Principal kRobot{"bench", "bench", static_cast<uint32_t>(Permission::kAdmin)};
+
+std::string read_text(const std::string& path) {
+  std::ifstream file(path);
+  return {std::istreambuf_iterator<char>(file), {}};
+}
+
+std::string run_command(const std::string& command) {
+  std::string output;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (pipe == nullptr) return output;
+  std::array<char, 4096> buffer{};
+  std::size_t n = 0;
+  while ((n = std::fread(buffer.data(), 1, buffer.size(), pipe)) > 0) output.append(buffer.data(), n);
+  pclose(pipe);
+  return output;
+}
+
+// A PostgreSQL server for the whole run (stopped at exit).
+struct PostgresServer {
+  std::string dir = fmt::format("/tmp/hanzo-fusion-bench-postgres-{}", getpid());
+  std::string url;
+  PostgresServer() {
+    run_command(fmt::format("{}/scripts/test-postgres.sh start {} >&2", HANZO_SOURCE_DIR, dir));
+    url = read_text(dir + "/url");
+    while (!url.empty() && url.back() == '\n') url.pop_back();
+  }
+  ~PostgresServer() { run_command(fmt::format("{}/scripts/test-postgres.sh stop {}", HANZO_SOURCE_DIR, dir)); }
+};
+
+const std::string& postgres_url() {
+  static PostgresServer server;
+  return server.url;
+}
+
+std::string scratch(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_bench_service_{}_{}", name, getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir.string();
+}
+
+msgs::PoseEstimate make_pose(int64_t ns) {
+  msgs::PoseEstimate pose;
+  pose.timestamp = Timestamp::from_nanoseconds(ns);
+  pose.T_world_body.position = {ns * 1e-9, 0.5, 0.1};
+  pose.status.state = msgs::TrackingState::kTracking;
+  pose.status.active_sensors = {"imu", "gnss"};
+  pose.pose_covariance = msgs::Matrix6d::Identity() * 0.01;
+  return pose;
+}
+
+void StorageAppend(benchmark::State& state, bool postgres) {
+  const std::size_t batch_size = static_cast<std::size_t>(state.range(0));
+  const std::string url = postgres ? postgres_url() : "sqlite://" + scratch("sqlite") + "/fusion.db";
+  auto storage = open_storage(url);
+  if (!storage) {
+    state.SkipWithError(storage.error().message.c_str());
+    return;
+  }
+  const std::string session = fmt::format("bench-{}-{}", batch_size, std::random_device{}());
+  int64_t t = 1;
+  uint64_t poses = 0;
+  for (auto _ : state) {
+    std::vector<StoredPose> batch;
+    for (std::size_t i = 0; i < batch_size; ++i) batch.push_back({session, make_pose(t++ * 1'000'000)});
+    if (!storage.value()->append_poses(batch)) state.SkipWithError("append failed");
+    poses += batch_size;
+  }
+  state.counters["poses_per_s"] = benchmark::Counter(static_cast<double>(poses), benchmark::Counter::kIsRate);
+}
+
+struct TimedMessage {
+  std::string sensor;
+  msgs::SensorMessage message;
+};
+
+const std::vector<TimedMessage>& sample() {
+  static const std::vector<TimedMessage> messages = [] {
+    std::vector<TimedMessage> all;
+    for (const char* sensor : {"imu", "gnss", "wheels"}) {
+      auto read = io::read_sensor_csv(std::string(HANZO_SOURCE_DIR) + "/examples/data/" + sensor + ".csv");
+      for (msgs::SensorMessage& message : read.value()) all.push_back({sensor, std::move(message)});
+    }
+    std::stable_sort(all.begin(), all.end(), [](const auto& a, const auto& b) {
+      return msgs::timestamp_of(a.message) < msgs::timestamp_of(b.message);
+    });
+    return all;
+  }();
+  return messages;
+}
+
+std::unique_ptr<SessionManager> make_manager(const std::string& url, std::shared_ptr<MetricsRegistry> metrics) {
+  auto manager = SessionManager::create({}, open_storage(url).value(), std::move(metrics));
+  return std::move(manager).value();
+}
+
+// The p-quantile (0..1) of a Prometheus histogram's buckets (upper bound of the bucket holding it).
+double histogram_quantile(const std::string& text, const std::string& name, double quantile) {
+  std::vector<std::pair<double, double>> buckets;  // le, cumulative count
+  const std::regex line(name + R"re(_bucket\{[^}]*le="([^"]+)"\} ([0-9.e+]+))re");
+  for (std::sregex_iterator it(text.begin(), text.end(), line), end; it != end; ++it) {
+    const std::string le = (*it)[1];
+    buckets.emplace_back(le == "+Inf" ? std::numeric_limits<double>::infinity() : std::stod(le), std::stod((*it)[2]));
+  }
+  if (buckets.empty() || buckets.back().second == 0) return 0.0;
+  const double target = quantile * buckets.back().second;
+  for (const auto& [le, count] : buckets) {
+    if (count >= target) return le;
+  }
+  return buckets.back().first;
+}
+
+void SessionPush(benchmark::State& state, bool postgres) {
+  const std::vector<TimedMessage>& messages = sample();
+  const std::string config = read_text(std::string(HANZO_SOURCE_DIR) + "/examples/data/fusion.yaml");
+  auto metrics = std::make_shared<MetricsRegistry>();
+  auto manager = make_manager(postgres ? postgres_url() : "sqlite://" + scratch("push") + "/fusion.db", metrics);
+  uint64_t pushed = 0;
+  for (auto _ : state) {
+    const std::string id = manager->create_session(kRobot, {"bench", config, ""}).value().id;
+    for (const TimedMessage& message : messages) {
+      (void)manager->push(kRobot, id, message.sensor, message.message);
+      ++pushed;
+    }
+    state.PauseTiming();
+    (void)manager->flush_storage();
+    (void)manager->end_session(kRobot, id);
+    state.ResumeTiming();
+  }
+  (void)manager->flush_storage();
+  state.counters["messages_per_s"] = benchmark::Counter(static_cast<double>(pushed), benchmark::Counter::kIsRate);
+  // Latency histograms of ended sessions are removed; measure one more live session.
+  const std::string id = manager->create_session(kRobot, {"bench", config, ""}).value().id;
+  for (const TimedMessage& message : messages) (void)manager->push(kRobot, id, message.sensor, message.message);
+  const std::string text = metrics->render();
+  state.counters["pose_latency_p50_us"] = 1e6 * histogram_quantile(text, "hanzo_fusion_pose_latency_seconds", 0.5);
+  state.counters["pose_latency_p99_us"] = 1e6 * histogram_quantile(text, "hanzo_fusion_pose_latency_seconds", 0.99);
+}
+
+void RestGetPose(benchmark::State& state) {
+  if (run_command("command -v wrk").empty()) {
+    state.SkipWithError("wrk is not installed");
+    return;
+  }
+  auto metrics = std::make_shared<MetricsRegistry>();
+  auto manager = make_manager("sqlite://" + scratch("rest") + "/fusion.db", metrics);
+  const std::string id =
+      manager->create_session(kRobot, {"bench", read_text(std::string(HANZO_SOURCE_DIR) + "/examples/data/fusion.yaml"), ""}).value().id;
+  for (const TimedMessage& message : sample()) (void)manager->push(kRobot, id, message.sensor, message.message);
+  const std::string token = "bench-token-0123456789";
+  auto tokens = std::make_shared<TokenStore>(TokenStore::parse_inline(token + "=bench:fusion:session:read").value());
+  RestServerConfig config;
+  config.bind_address = "127.0.0.1";
+  config.port = 0;
+  auto rest = RestServer::create(config, *manager, tokens, metrics).value();
+  (void)rest->start();
+  double requests_per_s = 0.0;
+  double latency_ms = 0.0;
+  for (auto _ : state) {
+    const std::string output = run_command(fmt::format("wrk -t2 -c16 -d5s -H 'Authorization: Bearer {}' http://127.0.0.1:{}/v1/sessions/{}/pose",
+                                                       token, rest->port(), id));
+    std::smatch match;
+    if (std::regex_search(output, match, std::regex(R"(Requests/sec:\s+([0-9.]+))"))) requests_per_s = std::stod(match[1]);
+    if (std::regex_search(output, match, std::regex(R"(Latency\s+([0-9.]+)(us|ms|s))"))) {
+      latency_ms = std::stod(match[1]) * (match[2] == "us" ? 1e-3 : match[2] == "s" ? 1e3 : 1.0);
+    }
+  }
+  state.counters["requests_per_s"] = requests_per_s;
+  state.counters["mean_latency_ms"] = latency_ms;
+}
+
+BENCHMARK_CAPTURE(StorageAppend, sqlite, false)->Arg(1)->Arg(100)->Arg(1000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(StorageAppend, postgresql, true)->Arg(1)->Arg(100)->Arg(1000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(SessionPush, sqlite, false)->Unit(benchmark::kMillisecond)->Iterations(3);
+BENCHMARK_CAPTURE(SessionPush, postgresql, true)->Unit(benchmark::kMillisecond)->Iterations(3);
+BENCHMARK(RestGetPose)->Unit(benchmark::kSecond)->Iterations(1);
+
+}  // namespace
+
+BENCHMARK_MAIN();
