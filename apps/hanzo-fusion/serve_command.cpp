@@ -1,6 +1,6 @@
-// hanzo-fusion serve: the server (REST on 8083; docs/server.md). Runs until SIGINT/SIGTERM,
+// hanzo-fusion serve: the server (REST on 8083, gRPC on 8084; docs/server.md). Runs until SIGINT/SIGTERM,
 // then commits queued poses and exits 0. With --json it prints one JSON object on stdout once
-// it listens ({"rest_port": ..., ...}), so scripts and tests can use --port 0.
+// it listens ({"rest_port": ..., "grpc_port": ...}), so scripts and tests can use port 0.
 
 #include <signal.h>
 
@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 
 #include "commands.hpp"
+#include "hanzo/fusion/service/grpc_server.hpp"
 #include "hanzo/fusion/service/rest_server.hpp"
 #include "hanzo/fusion/service/session_manager.hpp"
 
@@ -21,6 +22,7 @@ namespace {
 struct ServeOptions {
   std::string bind = "0.0.0.0";
   int port = 8083;
+  int grpc_port = 8084;
   std::string data_dir = "hanzo-fusion-data";
   std::string database;
   std::string tokens_file;
@@ -82,17 +84,27 @@ int run_serve(const Output& output, const ServeOptions& options) {
   if (!rest) return report_failure(output, {}, rest.error().message);
   if (Status started = rest.value()->start(); !started) return report_failure(output, {}, started.error().message);
 
+  service::GrpcServerConfig grpc_config;
+  grpc_config.bind_address = options.bind;
+  grpc_config.port = options.grpc_port;
+  grpc_config.tls_certificate = options.tls_certificate;
+  grpc_config.tls_private_key = options.tls_private_key;
+  auto grpc = service::GrpcServer::create(grpc_config, *sessions.value(), tokens.value(), metrics);
+  if (!grpc) return report_failure(output, {}, grpc.error().message);
+  if (Status started = grpc.value()->start(); !started) return report_failure(output, {}, started.error().message);
+
   const bool auth = tokens.value() != nullptr;
   if (!auth) std::cerr << "hanzo-fusion serve: WARNING: authentication is OFF (--insecure-no-auth); every request has every permission\n";
   const std::string scheme = rest.value()->https() ? "https" : "http";
-  nlohmann::json ready = {{"rest_port", rest.value()->port()}, {"rest_url", fmt::format("{}://{}:{}", scheme, options.bind, rest.value()->port())},
+  nlohmann::json ready = {{"rest_port", rest.value()->port()}, {"grpc_port", grpc.value()->port()}, {"rest_url", fmt::format("{}://{}:{}", scheme, options.bind, rest.value()->port())},
                           {"storage", std::string(sessions.value()->storage_backend())}, {"auth", auth},
                           {"active_sessions", sessions.value()->active_sessions()}};
   if (output.json) {
     std::cout << ready.dump() << std::endl;
   } else {
-    std::cerr << fmt::format("hanzo-fusion serve: REST on {} ({} storage, auth {}, {} sessions restored); Ctrl-C stops\n",
-                             ready["rest_url"].get<std::string>(), ready["storage"].get<std::string>(), auth ? "on" : "OFF",
+    std::cerr << fmt::format("hanzo-fusion serve: REST on {}, gRPC on {}:{} ({} storage, auth {}, {} sessions restored); Ctrl-C stops\n",
+                             ready["rest_url"].get<std::string>(), options.bind, grpc.value()->port(),
+                             ready["storage"].get<std::string>(), auth ? "on" : "OFF",
                              sessions.value()->active_sessions());
   }
 
@@ -100,6 +112,7 @@ int run_serve(const Output& output, const ServeOptions& options) {
   sigwait(&signals, &signal_number);
   std::cerr << "hanzo-fusion serve: stopping (" << (signal_number == SIGINT ? "SIGINT" : "SIGTERM") << ")\n";
   rest.value()->stop();
+  grpc.value()->stop();
   if (Status flushed = sessions.value()->flush_storage(); !flushed) {
     std::cerr << "hanzo-fusion serve: " << flushed.error().message << "\n";
     return 1;
@@ -111,9 +124,10 @@ int run_serve(const Output& output, const ServeOptions& options) {
 
 void add_serve_command(CLI::App& app, const Output& output, Command& run) {
   auto options = std::make_shared<ServeOptions>();
-  CLI::App* command = app.add_subcommand("serve", "Run the server: REST API on --port (default 8083)");
+  CLI::App* command = app.add_subcommand("serve", "Run the server: REST API on --port (8083), gRPC streaming on --grpc-port (8084)");
   command->add_option("--bind", options->bind, "Address to listen on")->capture_default_str();
   command->add_option("--port", options->port, "REST port (0: any free port)")->capture_default_str()->check(CLI::Range(0, 65535));
+  command->add_option("--grpc-port", options->grpc_port, "gRPC streaming port (0: any free port)")->capture_default_str()->check(CLI::Range(0, 65535));
   command->add_option("--data-dir", options->data_dir, "Folder of the SQLite database")->capture_default_str();
   command->add_option("--db", options->database, "Storage URL: sqlite://PATH or postgresql://USER@HOST:PORT/DB (default sqlite://DATA_DIR/fusion.db)");
   command->add_option("--tokens", options->tokens_file, "API token file (YAML; docs/server.md)");

@@ -34,7 +34,7 @@ std::string read_file(const std::filesystem::path& path) {
 class Server {
  public:
   Server(const std::filesystem::path& dir, const std::string& arguments) : dir_(dir) {
-    const std::string command = fmt::format("exec {} serve --bind 127.0.0.1 --port 0 --json {} >{} 2>{}", HANZO_FUSION_CLI,
+    const std::string command = fmt::format("exec {} serve --bind 127.0.0.1 --port 0 --grpc-port 0 --json {} >{} 2>{}", HANZO_FUSION_CLI,
                                             arguments, (dir / "out.txt").string(), (dir / "err.txt").string());
     std::filesystem::remove(dir / "out.txt");  // never read a previous server's port
     const char* argv[] = {"/bin/sh", "-c", command.c_str(), nullptr};

@@ -1,0 +1,62 @@
+#pragma once
+// The gRPC streaming API on port 8084 (proto/hanzo/fusion/v1/service.proto, FusionService).
+//
+// Calls carry metadata:
+//   authorization: Bearer TOKEN        (as REST; UNAUTHENTICATED / PERMISSION_DENIED)
+//   x-session-id: ID                   (Stream* calls: the session the messages go to)
+//   x-sensor: NAME                     (optional: the configured sensor; default the session's
+//                                       only sensor of the stream's modality)
+//
+// Stream{Imu,PointCloud,Image,Gnss,Radar,WheelOdometry}: every message read is pushed into the
+// session; the session's PoseEstimates are written back after each message (all of them since
+// the previous write, from a bounded drop-oldest queue). A message that does not decode or that
+// the session rejects is counted (hanzo_fusion_stream_rejected_total{reason}) and skipped: the
+// stream goes on. The stream ends with FAILED_PRECONDITION when the session ends, and with the
+// error's status when the session is unknown or not the caller's.
+// SubscribePose(SessionId): the session's PoseEstimates until the client cancels or the session
+// ends; a slow subscriber loses the oldest (counted), never blocks fusion.
+// SubscribeMap, SubscribeKeyframes, GetMap, LoadMap answer UNIMPLEMENTED in this version.
+//
+// TLS when tls_certificate and tls_private_key (PEM) are given.
+
+#include <memory>
+#include <string>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/service/auth.hpp"
+#include "hanzo/fusion/service/metrics.hpp"
+#include "hanzo/fusion/service/session_manager.hpp"
+
+namespace hanzo::fusion::service {
+
+struct GrpcServerConfig {
+  std::string bind_address = "0.0.0.0";
+  int port = 8084;                        // 0 picks a free port
+  std::string tls_certificate;
+  std::string tls_private_key;
+  int max_message_bytes = 64 << 20;       // a LiDAR scan of ~1.5M points
+};
+
+class GrpcServer {
+ public:
+  /// `tokens` null turns authentication off (every call is Principal::local_development()).
+  static Result<std::unique_ptr<GrpcServer>> create(const GrpcServerConfig& config, SessionManager& sessions,
+                                                    std::shared_ptr<const TokenStore> tokens,
+                                                    std::shared_ptr<MetricsRegistry> metrics);
+  ~GrpcServer();
+  GrpcServer(const GrpcServer&) = delete;
+  GrpcServer& operator=(const GrpcServer&) = delete;
+
+  /// Binds and serves on gRPC's threads; fails naming the address when it cannot bind.
+  Status start();
+  int port() const;
+  /// Ends every call (subscriptions close) and stops.
+  void stop();
+
+ private:
+  struct Impl;
+  explicit GrpcServer(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace hanzo::fusion::service

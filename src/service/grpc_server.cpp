@@ -1,0 +1,230 @@
+#include "hanzo/fusion/service/grpc_server.hpp"
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+
+#include <fmt/format.h>
+#include <grpcpp/grpcpp.h>
+
+#include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/msgs/convert.hpp"
+#include "hanzo/fusion/v1/service.grpc.pb.h"
+
+namespace hanzo::fusion::service {
+namespace {
+
+grpc::StatusCode grpc_code(ErrorCode code) {
+  switch (code) {
+    case ErrorCode::kInvalidArgument: return grpc::StatusCode::INVALID_ARGUMENT;
+    case ErrorCode::kUnauthenticated: return grpc::StatusCode::UNAUTHENTICATED;
+    case ErrorCode::kPermissionDenied: return grpc::StatusCode::PERMISSION_DENIED;
+    case ErrorCode::kNotFound: return grpc::StatusCode::NOT_FOUND;
+    case ErrorCode::kConflict: return grpc::StatusCode::FAILED_PRECONDITION;
+    case ErrorCode::kPayloadTooLarge: return grpc::StatusCode::RESOURCE_EXHAUSTED;
+    case ErrorCode::kRejected: return grpc::StatusCode::FAILED_PRECONDITION;
+    case ErrorCode::kResourceExhausted: return grpc::StatusCode::RESOURCE_EXHAUSTED;
+    case ErrorCode::kInternal: return grpc::StatusCode::INTERNAL;
+    case ErrorCode::kUnavailable: return grpc::StatusCode::UNAVAILABLE;
+  }
+  return grpc::StatusCode::INTERNAL;
+}
+
+grpc::Status to_grpc(const ApiError& error) {
+  return {grpc_code(error.code), error.message, std::string(to_string(error.code)) + (error.field.empty() ? "" : ":" + error.field)};
+}
+
+std::string metadata(const grpc::ServerContext& context, const std::string& key) {
+  const auto& entries = context.client_metadata();
+  const auto found = entries.find(key);
+  return found == entries.end() ? std::string() : std::string(found->second.data(), found->second.size());
+}
+
+Result<std::string> read_pem(const std::string& path) {
+  std::ifstream file(path);
+  if (!file) return Error(fmt::format("{}: cannot read", path));
+  return std::string(std::istreambuf_iterator<char>(file), {});
+}
+
+class FusionServiceImpl final : public v1::FusionService::Service {
+ public:
+  FusionServiceImpl(SessionManager& sessions, std::shared_ptr<const TokenStore> tokens, MetricsRegistry& metrics)
+      : sessions_(sessions), tokens_(std::move(tokens)), metrics_(metrics) {}
+
+  void stop() { stopping_ = true; }
+
+  grpc::Status StreamImu(grpc::ServerContext* context, grpc::ServerReaderWriter<v1::PoseEstimate, v1::ImuMessage>* stream) override {
+    return serve_stream(*context, *stream, "imu");
+  }
+  grpc::Status StreamPointCloud(grpc::ServerContext* context,
+                                grpc::ServerReaderWriter<v1::PoseEstimate, v1::PointCloudMessage>* stream) override {
+    return serve_stream(*context, *stream, "point_cloud");
+  }
+  grpc::Status StreamImage(grpc::ServerContext* context, grpc::ServerReaderWriter<v1::PoseEstimate, v1::ImageMessage>* stream) override {
+    return serve_stream(*context, *stream, "image");
+  }
+  grpc::Status StreamGnss(grpc::ServerContext* context, grpc::ServerReaderWriter<v1::PoseEstimate, v1::GnssMessage>* stream) override {
+    return serve_stream(*context, *stream, "gnss");
+  }
+  grpc::Status StreamRadar(grpc::ServerContext* context, grpc::ServerReaderWriter<v1::PoseEstimate, v1::RadarMessage>* stream) override {
+    return serve_stream(*context, *stream, "radar");
+  }
+  grpc::Status StreamWheelOdometry(grpc::ServerContext* context,
+                                   grpc::ServerReaderWriter<v1::PoseEstimate, v1::WheelOdometryMessage>* stream) override {
+    return serve_stream(*context, *stream, "wheel_odometry");
+  }
+
+  grpc::Status SubscribePose(grpc::ServerContext* context, const v1::SessionId* request,
+                             grpc::ServerWriter<v1::PoseEstimate>* writer) override {
+    auto principal = authenticate(*context);
+    if (!principal) return to_grpc(principal.error());
+    auto subscription = sessions_.subscribe_poses(principal.value(), request->id());
+    if (!subscription) return to_grpc(subscription.error());
+    PoseSubscription& queue = *subscription.value();
+    while (!context->IsCancelled() && !stopping_) {
+      std::optional<msgs::PoseEstimate> pose = queue.pop(std::chrono::milliseconds(100));
+      if (!pose) {
+        if (queue.closed()) return {grpc::StatusCode::FAILED_PRECONDITION, "the session ended"};
+        continue;
+      }
+      if (!writer->Write(msgs::to_proto(*pose))) break;  // the client went away
+    }
+    queue.close();
+    return grpc::Status::OK;
+  }
+
+ private:
+  ApiResult<Principal> authenticate(const grpc::ServerContext& context) const {
+    if (!tokens_) return Principal::local_development();
+    const std::string header = metadata(context, "authorization");
+    if (header.empty()) return ApiError{ErrorCode::kUnauthenticated, "missing API token (metadata 'authorization: Bearer TOKEN')", "authorization"};
+    const std::optional<std::string_view> token = bearer_token(header);
+    if (!token) return ApiError{ErrorCode::kUnauthenticated, "the authorization metadata is not 'Bearer TOKEN'", "authorization"};
+    std::optional<Principal> principal = tokens_->authenticate(*token);
+    if (!principal) return ApiError{ErrorCode::kUnauthenticated, "unknown API token", "authorization"};
+    return std::move(*principal);
+  }
+
+  template <typename ProtoMessage>
+  grpc::Status serve_stream(grpc::ServerContext& context, grpc::ServerReaderWriter<v1::PoseEstimate, ProtoMessage>& stream,
+                            const std::string& modality) {
+    auto principal = authenticate(context);
+    if (!principal) return to_grpc(principal.error());
+    const std::string session_id = metadata(context, "x-session-id");
+    if (session_id.empty()) return {grpc::StatusCode::INVALID_ARGUMENT, "metadata 'x-session-id' is missing"};
+    const std::string sensor = metadata(context, "x-sensor");
+    // Checks access before the first message arrives, and collects the session's poses.
+    auto subscription = sessions_.subscribe_poses(principal.value(), session_id);
+    if (!subscription) return to_grpc(subscription.error());
+    PoseSubscription& poses = *subscription.value();
+    Counter& received = metrics_.counter("hanzo_fusion_stream_messages_total", "Messages read from gRPC streams", {{"modality", modality}});
+    ProtoMessage in;
+    grpc::Status outcome = grpc::Status::OK;
+    while (!stopping_ && stream.Read(&in)) {
+      received.increment();
+      auto message = msgs::from_proto(in);
+      if (!message) {
+        reject("decode", modality, message.error().message);
+        continue;
+      }
+      const ApiStatus pushed = sessions_.push(principal.value(), session_id, sensor, msgs::SensorMessage(std::move(message).value()));
+      if (!pushed) {
+        if (pushed.error().code != ErrorCode::kRejected && pushed.error().code != ErrorCode::kInvalidArgument) {
+          outcome = to_grpc(pushed.error());
+          break;
+        }
+        reject(pushed.error().code == ErrorCode::kRejected ? "session" : "sensor", modality, pushed.error().message);
+      }
+      bool client_gone = false;
+      while (std::optional<msgs::PoseEstimate> pose = poses.pop(std::chrono::milliseconds(0))) {
+        if (!stream.Write(msgs::to_proto(*pose))) {
+          client_gone = true;
+          break;
+        }
+      }
+      if (client_gone) break;
+    }
+    poses.close();
+    return outcome;
+  }
+
+  void reject(const std::string& reason, const std::string& modality, const std::string& message) {
+    metrics_.counter("hanzo_fusion_stream_rejected_total", "Stream messages skipped, by reason",
+                     {{"modality", modality}, {"reason", reason}})
+        .increment();
+    logger()->debug("gRPC {} stream: skipped a message: {}", modality, message);
+  }
+
+  SessionManager& sessions_;
+  std::shared_ptr<const TokenStore> tokens_;
+  MetricsRegistry& metrics_;
+  std::atomic<bool> stopping_{false};
+};
+
+}  // namespace
+
+struct GrpcServer::Impl {
+  GrpcServerConfig config;
+  std::shared_ptr<MetricsRegistry> metrics;
+  std::shared_ptr<grpc::ServerCredentials> credentials;
+  std::unique_ptr<FusionServiceImpl> service;
+  std::unique_ptr<grpc::Server> server;
+  int bound_port = 0;
+};
+
+GrpcServer::GrpcServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
+GrpcServer::~GrpcServer() { stop(); }
+
+Result<std::unique_ptr<GrpcServer>> GrpcServer::create(const GrpcServerConfig& config, SessionManager& sessions,
+                                                       std::shared_ptr<const TokenStore> tokens,
+                                                       std::shared_ptr<MetricsRegistry> metrics) {
+  auto impl = std::make_unique<Impl>();
+  impl->config = config;
+  impl->metrics = metrics ? std::move(metrics) : std::make_shared<MetricsRegistry>();
+  if (!config.tls_certificate.empty() || !config.tls_private_key.empty()) {
+    if (config.tls_certificate.empty() || config.tls_private_key.empty()) {
+      return Error("gRPC TLS needs both a certificate and a private key file");
+    }
+    grpc::SslServerCredentialsOptions::PemKeyCertPair pair;
+    HANZO_ASSIGN_OR_RETURN(pair.cert_chain, read_pem(config.tls_certificate));
+    HANZO_ASSIGN_OR_RETURN(pair.private_key, read_pem(config.tls_private_key));
+    grpc::SslServerCredentialsOptions options;
+    options.pem_key_cert_pairs.push_back(pair);
+    impl->credentials = grpc::SslServerCredentials(options);
+  } else {
+    impl->credentials = grpc::InsecureServerCredentials();
+  }
+  impl->service = std::make_unique<FusionServiceImpl>(sessions, std::move(tokens), *impl->metrics);
+  return std::unique_ptr<GrpcServer>(new GrpcServer(std::move(impl)));
+}
+
+Status GrpcServer::start() {
+  Impl& impl = *impl_;
+  grpc::ServerBuilder builder;
+  const std::string address = fmt::format("{}:{}", impl.config.bind_address, impl.config.port);
+  builder.AddListeningPort(address, impl.credentials, &impl.bound_port);
+  builder.SetMaxReceiveMessageSize(impl.config.max_message_bytes);
+  builder.SetMaxSendMessageSize(impl.config.max_message_bytes);
+  builder.RegisterService(impl.service.get());
+  impl.server = builder.BuildAndStart();
+  if (!impl.server || impl.bound_port == 0) {
+    impl.server.reset();
+    return Error(fmt::format("cannot serve gRPC on {} (in use, no permission, or bad TLS files)", address));
+  }
+  logger()->info("gRPC API on {}:{}", impl.config.bind_address, impl.bound_port);
+  return ok_status();
+}
+
+int GrpcServer::port() const { return impl_->bound_port; }
+
+void GrpcServer::stop() {
+  if (!impl_ || !impl_->server) return;
+  impl_->service->stop();
+  impl_->server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
+  impl_->server->Wait();
+  impl_->server.reset();
+}
+
+}  // namespace hanzo::fusion::service
