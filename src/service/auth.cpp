@@ -211,6 +211,19 @@ std::optional<std::string_view> bearer_token(std::string_view authorization_head
   return token;
 }
 
+ApiResult<Principal> authenticate_bearer(const TokenStore* tokens, std::string_view authorization_header,
+                                         const std::string& field_name) {
+  if (tokens == nullptr) return Principal::local_development();
+  if (authorization_header.empty()) {
+    return ApiError{ErrorCode::kUnauthenticated, fmt::format("missing API token (send '{}: Bearer TOKEN')", field_name), field_name};
+  }
+  const std::optional<std::string_view> token = bearer_token(authorization_header);
+  if (!token) return ApiError{ErrorCode::kUnauthenticated, fmt::format("{} is not 'Bearer TOKEN'", field_name), field_name};
+  std::optional<Principal> principal = tokens->authenticate(*token);
+  if (!principal) return ApiError{ErrorCode::kUnauthenticated, "unknown API token", field_name};
+  return std::move(*principal);
+}
+
 ApiStatus authorize(const std::optional<Principal>& principal, Permission permission, std::string_view resource_organization) {
   if (!principal) {
     return ApiError{ErrorCode::kUnauthenticated, "missing or unknown API token (send 'Authorization: Bearer TOKEN')", ""};

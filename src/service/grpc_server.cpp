@@ -96,14 +96,7 @@ class FusionServiceImpl final : public v1::FusionService::Service {
 
  private:
   ApiResult<Principal> authenticate(const grpc::ServerContext& context) const {
-    if (!tokens_) return Principal::local_development();
-    const std::string header = metadata(context, "authorization");
-    if (header.empty()) return ApiError{ErrorCode::kUnauthenticated, "missing API token (metadata 'authorization: Bearer TOKEN')", "authorization"};
-    const std::optional<std::string_view> token = bearer_token(header);
-    if (!token) return ApiError{ErrorCode::kUnauthenticated, "the authorization metadata is not 'Bearer TOKEN'", "authorization"};
-    std::optional<Principal> principal = tokens_->authenticate(*token);
-    if (!principal) return ApiError{ErrorCode::kUnauthenticated, "unknown API token", "authorization"};
-    return std::move(*principal);
+    return authenticate_bearer(tokens_.get(), metadata(context, "authorization"), "authorization");
   }
 
   template <typename ProtoMessage>

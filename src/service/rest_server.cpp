@@ -58,16 +58,7 @@ struct RestServer::Impl {
 
   // The caller of a request, or the 401 to answer.
   ApiResult<Principal> authenticate(const httplib::Request& request) const {
-    if (!tokens) return Principal::local_development();
-    const std::string header = request.get_header_value("Authorization");
-    if (header.empty()) {
-      return ApiError{ErrorCode::kUnauthenticated, "missing API token (send 'Authorization: Bearer TOKEN')", "Authorization"};
-    }
-    const std::optional<std::string_view> token = bearer_token(header);
-    if (!token) return ApiError{ErrorCode::kUnauthenticated, "the Authorization header is not 'Bearer TOKEN'", "Authorization"};
-    std::optional<Principal> principal = tokens->authenticate(*token);
-    if (!principal) return ApiError{ErrorCode::kUnauthenticated, "unknown API token", "Authorization"};
-    return std::move(*principal);
+    return authenticate_bearer(tokens.get(), request.get_header_value("Authorization"), "Authorization");
   }
 
   using Handler = std::function<void(const httplib::Request&, httplib::Response&, const Principal&)>;

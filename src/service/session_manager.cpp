@@ -119,15 +119,14 @@ struct SessionManager::Impl {
   mutable std::shared_mutex sessions_mutex;
   std::map<std::string, std::shared_ptr<ManagedSession>> sessions;  // active and ended
 
-  // Creates the pipeline::Session of `managed` (configuration and calibration set) and wires
-  // its pose callback. Caller holds managed.mutex or owns `managed` exclusively.
-  Status start_pipeline(ManagedSession& managed) {
-    auto session = pipeline::Session::create(managed.configuration, managed.calibration);
+  // A pipeline::Session for `managed` with its pose callback wired (not yet installed).
+  Result<std::unique_ptr<pipeline::Session>> make_pipeline(ManagedSession& managed, const config::FusionConfig& configuration,
+                                                           const calib::Calibration& calibration) {
+    auto session = pipeline::Session::create(configuration, calibration);
     if (!session) return session.error();
     ManagedSession* raw = &managed;
     session.value()->set_pose_callback([this, raw](const msgs::PoseEstimate& pose) { on_pose(*raw, pose); });
-    managed.session = std::move(session).value();
-    return ok_status();
+    return session;
   }
 
   void on_pose(ManagedSession& managed, const msgs::PoseEstimate& pose) {
@@ -276,7 +275,8 @@ Result<std::unique_ptr<SessionManager>> SessionManager::create(const SessionMana
     managed->record = std::move(record);
     if (!managed->record.ended) {
       impl->attach_metrics(*managed);
-      HANZO_RETURN_IF_ERROR(with_context(impl->start_pipeline(*managed), where));
+      HANZO_ASSIGN_OR_RETURN(managed->session,
+                             with_context(impl->make_pipeline(*managed, managed->configuration, managed->calibration), where));
     }
     impl->sessions.emplace(managed->record.id, std::move(managed));
   }
@@ -305,9 +305,9 @@ ApiResult<SessionInfo> SessionManager::create_session(const Principal& caller, c
   record.config_yaml = config::to_yaml(managed->configuration);
   record.calibration_yaml = calib::to_yaml(managed->calibration);
   record.created = Timestamp::wall_clock_now();
-  if (const Status started = impl_->start_pipeline(*managed); !started) {
-    return ApiError{ErrorCode::kInvalidArgument, "config: " + started.error().message, "config"};
-  }
+  auto pipeline = impl_->make_pipeline(*managed, managed->configuration, managed->calibration);
+  if (!pipeline) return ApiError{ErrorCode::kInvalidArgument, "config: " + pipeline.error().message, "config"};
+  managed->session = std::move(pipeline).value();
 
   std::unique_lock lock(impl_->sessions_mutex);
   if (impl_->active_count_locked("", false) >= impl_->config.max_sessions) {
@@ -395,22 +395,19 @@ ApiResult<SessionInfo> SessionManager::register_sensor(const Principal& caller, 
   }
   auto rebuilt = with_sensor(managed.configuration, managed.calibration, registration);
   if (!rebuilt) return ApiError::from(ErrorCode::kInvalidArgument, rebuilt.error());
-  ManagedSession candidate;
-  candidate.configuration = rebuilt.value().first;
-  candidate.calibration = rebuilt.value().second;
-  if (auto check = pipeline::Session::create(candidate.configuration, candidate.calibration); !check) {
-    return ApiError{ErrorCode::kInvalidArgument, "config: " + check.error().message, "config"};
-  }
-  const std::string config_yaml = config::to_yaml(candidate.configuration);
-  const std::string calibration_yaml = calib::to_yaml(candidate.calibration);
+  auto& [configuration, calibration] = rebuilt.value();
+  auto pipeline = impl_->make_pipeline(managed, configuration, calibration);
+  if (!pipeline) return ApiError{ErrorCode::kInvalidArgument, "config: " + pipeline.error().message, "config"};
+  const std::string config_yaml = config::to_yaml(configuration);
+  const std::string calibration_yaml = calib::to_yaml(calibration);
   if (const Status stored = impl_->storage->update_session_setup(session_id, config_yaml, calibration_yaml); !stored) {
     return ApiError::from(ErrorCode::kInternal, stored.error());
   }
-  managed.configuration = std::move(candidate.configuration);
-  managed.calibration = std::move(candidate.calibration);
+  managed.configuration = std::move(configuration);
+  managed.calibration = std::move(calibration);
   managed.record.config_yaml = config_yaml;
   managed.record.calibration_yaml = calibration_yaml;
-  if (const Status started = impl_->start_pipeline(managed); !started) return ApiError::from(ErrorCode::kInternal, started.error());
+  managed.session = std::move(pipeline).value();
   return impl_->info_locked(managed);
 }
 

@@ -81,6 +81,12 @@ std::string sha256_hex(std::string_view text);
 /// The token of an "Authorization: Bearer TOKEN" header value; nullopt when it is not one.
 std::optional<std::string_view> bearer_token(std::string_view authorization_header);
 
+/// The caller behind an "Authorization" header value (REST header or gRPC metadata): `tokens`
+/// null (auth off) gives Principal::local_development(); a missing, non-Bearer or unknown token
+/// is kUnauthenticated with field `field_name`.
+ApiResult<Principal> authenticate_bearer(const TokenStore* tokens, std::string_view authorization_header,
+                                         const std::string& field_name);
+
 /// Decides a request: kUnauthenticated without a principal, kPermissionDenied when it lacks
 /// `permission` or the resource belongs to another organization (`resource_organization`
 /// empty: not organization-scoped, e.g. creating a session).
