@@ -10,6 +10,7 @@
 //    within 5 cm (misses agreeing too; the prisms differ from true cylinders by millimetres).
 // 2. Generating 60 s of the urban_vehicle scenario with all its sensors on one core, the
 //    simulation time of each sensor as a counter (seconds), messages written nowhere.
+// 3. Rendering alone: frames/s of the urban front camera.
 
 #include <cmath>
 #include <cstring>
@@ -231,6 +232,38 @@ void BM_RayCastEmbree(benchmark::State& state) {
   state.SetLabel(all_threads ? "all threads" : "1 thread");
 }
 BENCHMARK(BM_RayCastEmbree)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Rendering alone: 20 frames of urban_vehicle's front camera (640x480 rgb8, radtan) spread over
+// its loop, one thread and all threads; items_per_second = frames/s.
+void BM_CameraFrames(benchmark::State& state) {
+  Result<sim::Scenario> scenario = sim::load_scenario(kUrban);
+  if (!scenario) {
+    state.SkipWithError(scenario.error().message.c_str());
+    return;
+  }
+  const sim::World world(scenario->world);
+  const sim::SplineTrajectory trajectory = *sim::make_trajectory(*scenario);
+  sim::CameraSimulatorConfig config;
+  for (const sim::ScenarioSensor& sensor : scenario->sensors) {
+    if (const auto* camera = std::get_if<sim::CameraSimulatorConfig>(&sensor.simulator)) config = *camera;
+  }
+  config.num_threads = static_cast<int>(state.range(0));
+  Result<sim::CameraSimulator> camera = sim::CameraSimulator::create(config, world, trajectory);
+  if (!camera) {
+    state.SkipWithError(camera.error().message.c_str());
+    return;
+  }
+  constexpr int kFrames = 20;
+  for (auto _ : state) {
+    for (int frame = 0; frame < kFrames; ++frame) {
+      msgs::ImageMessage image = camera->measure(scenario->start_time + Duration::from_seconds(4.0 + 3.0 * frame));
+      benchmark::DoNotOptimize(image.data.data());
+    }
+  }
+  state.SetItemsProcessed(static_cast<int64_t>(state.iterations()) * kFrames);
+  state.SetLabel(state.range(0) == 1 ? "1 thread" : "all threads");
+}
+BENCHMARK(BM_CameraFrames)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // 60 s of urban_vehicle, every sensor, one core; per-sensor simulation seconds as counters.
 void BM_UrbanScenario60s(benchmark::State& state) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <Eigen/Dense>
 #include <fmt/format.h>
@@ -115,6 +116,31 @@ CameraSimulator::CameraSimulator(CameraSimulatorConfig config, const World& worl
       rays_[static_cast<std::size_t>(row) * width * s + column] = Eigen::Vector3d(previous.x(), previous.y(), 1.0).normalized().cast<float>();
     }
   }
+  // Each tile's pyramid: the range of x / z and y / z over its rays (as cast), widened by a
+  // hair so rounding in the world-frame rotation never puts one of its rays outside.
+  const int tiles_across = (width + kTilePixels - 1) / kTilePixels, tiles_down = (height + kTilePixels - 1) / kTilePixels;
+  tiles_.resize(static_cast<std::size_t>(tiles_across) * tiles_down);
+  for (int tile_row = 0; tile_row < tiles_down; ++tile_row) {
+    for (int tile_column = 0; tile_column < tiles_across; ++tile_column) {
+      double x_min = std::numeric_limits<double>::infinity(), y_min = x_min, x_max = -x_min, y_max = -x_min, z_min = x_min;
+      for (int row = tile_row * kTilePixels * s; row < std::min(height, (tile_row + 1) * kTilePixels) * s; ++row) {
+        for (int column = tile_column * kTilePixels * s; column < std::min(width, (tile_column + 1) * kTilePixels) * s; ++column) {
+          const Eigen::Vector3d ray = rays_[static_cast<std::size_t>(row) * width * s + column].cast<double>();
+          z_min = std::min(z_min, ray.z());
+          x_min = std::min(x_min, ray.x() / ray.z());
+          x_max = std::max(x_max, ray.x() / ray.z());
+          y_min = std::min(y_min, ray.y() / ray.z());
+          y_max = std::max(y_max, ray.y() / ray.z());
+        }
+      }
+      TilePyramid& tile = tiles_[static_cast<std::size_t>(tile_row) * tiles_across + tile_column];
+      tile.valid = z_min > 1e-3;  // fisheye rays at or beyond 90 degrees: no pyramid, plain casts
+      constexpr double kSlack = 1e-9;
+      tile.inward_normals = {Eigen::Vector3d(-1.0, 0.0, x_max + kSlack), Eigen::Vector3d(1.0, 0.0, -(x_min - kSlack)),
+                             Eigen::Vector3d(0.0, -1.0, y_max + kSlack), Eigen::Vector3d(0.0, 1.0, -(y_min - kSlack)),
+                             Eigen::Vector3d::UnitZ()};
+    }
+  }
 }
 
 Eigen::Vector3d CameraSimulator::pixel_ray(double u, double v) const {
@@ -133,30 +159,48 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
   const float weight = 1.0F / static_cast<float>(s * s);
   const WorldSnapshot snapshot = world_->at(time);
   radiance.assign(static_cast<std::size_t>(width) * height, Eigen::Vector3f::Zero());
-  // Pixel rows are independent: render them on up to num_threads threads (same result).
-  auto render_rows = [&](const tbb::blocked_range<int>& pixel_rows) {
-    for (int row = pixel_rows.begin() * s; row < pixel_rows.end() * s; ++row) {
-      int object_hint = -1;  // neighbouring pixels mostly see the same object
-      for (int column = 0; column < width * s; ++column) {
-        const Eigen::Vector3d direction = R_world_camera * rays_[static_cast<std::size_t>(row) * width * s + column].cast<double>();
-        const std::optional<RayHit> hit = snapshot.cast(origin, direction, config_.max_distance, &object_hint);
-        Eigen::Vector3f color;
-        if (hit) {
-          const double light = config_.ambient + config_.diffuse * std::max(0.0, hit->normal.dot(sun_direction_));
-          color = hit->material->texture.color(hit->surface_uv.x(), hit->surface_uv.y()) * static_cast<float>(light);
-        } else {
-          color = sky_color(direction);
+  const int tiles_across = (width + kTilePixels - 1) / kTilePixels, tiles_down = (height + kTilePixels - 1) / kTilePixels;
+  // Rows of tiles are independent: render them on up to num_threads threads (same result).
+  // Inside a tile every ray goes through the tile's RayGroup (the same hit as a plain cast).
+  auto render_tile_rows = [&](const tbb::blocked_range<int>& tile_rows) {
+    RayGroup group;
+    TextureSampleCache texture_cache;
+    std::array<Eigen::Vector3d, 5> inward_normals_world;
+    for (int tile_row = tile_rows.begin(); tile_row < tile_rows.end(); ++tile_row) {
+      for (int tile_column = 0; tile_column < tiles_across; ++tile_column) {
+        const TilePyramid& tile = tiles_[static_cast<std::size_t>(tile_row) * tiles_across + tile_column];
+        if (tile.valid) {
+          for (std::size_t i = 0; i < inward_normals_world.size(); ++i) inward_normals_world[i] = R_world_camera * tile.inward_normals[i];
+          snapshot.group(origin, inward_normals_world, config_.max_distance, &group);
         }
-        radiance[static_cast<std::size_t>(row / s) * width + column / s] += weight * color;
+        const int column_end = std::min(width, (tile_column + 1) * kTilePixels) * s;
+        for (int row = tile_row * kTilePixels * s; row < std::min(height, (tile_row + 1) * kTilePixels) * s; ++row) {
+          int object_hint = -1;  // neighbouring pixels mostly see the same object
+          const Eigen::Vector3f* ray = &rays_[static_cast<std::size_t>(row) * width * s];
+          Eigen::Vector3f* pixel_row = &radiance[static_cast<std::size_t>(row / s) * width];
+          for (int column = tile_column * kTilePixels * s; column < column_end; ++column) {
+            const Eigen::Vector3d direction = R_world_camera * ray[column].cast<double>();
+            const std::optional<RayHit> hit =
+                tile.valid ? snapshot.cast(group, direction, &object_hint) : snapshot.cast(origin, direction, config_.max_distance, &object_hint);
+            Eigen::Vector3f color;
+            if (hit) {
+              const double light = config_.ambient + config_.diffuse * std::max(0.0, hit->normal.dot(sun_direction_));
+              color = hit->material->texture.color(hit->surface_uv.x(), hit->surface_uv.y(), &texture_cache) * static_cast<float>(light);
+            } else {
+              color = sky_color(direction);
+            }
+            pixel_row[s == 1 ? column : column / s] += weight * color;
+          }
+        }
       }
     }
   };
-  const tbb::blocked_range<int> all_rows(0, height, 8);
+  const tbb::blocked_range<int> all_tile_rows(0, tiles_down, 1);
   if (config_.num_threads == 1) {
-    render_rows(all_rows);
+    render_tile_rows(all_tile_rows);
   } else {
     tbb::task_arena arena(config_.num_threads <= 0 ? tbb::task_arena::automatic : config_.num_threads);
-    arena.execute([&] { tbb::parallel_for(all_rows, render_rows); });
+    arena.execute([&] { tbb::parallel_for(all_tile_rows, render_tile_rows); });
   }
 }
 

@@ -48,6 +48,21 @@ bool ray_hits_bounds(const Aabb& box, const Eigen::Vector3d& origin, const Eigen
   return near <= far;
 }
 
+// Whether the box lies wholly on the negative side of the plane through origin with the given
+// normal (its corner furthest along the normal is behind the plane).
+bool outside_plane(const Aabb& box, const Eigen::Vector3d& origin, const Eigen::Vector3d& normal) {
+  double furthest = 0.0;
+  for (int axis = 0; axis < 3; ++axis) {
+    furthest += normal[axis] * ((normal[axis] > 0.0 ? box.max[axis] : box.min[axis]) - origin[axis]);
+  }
+  return furthest < 0.0;
+}
+
+// Euclidean distance from a point to the box (0 inside): no surface in the box is nearer.
+double distance_to(const Aabb& box, const Eigen::Vector3d& point) {
+  return (box.min - point).cwiseMax(point - box.max).cwiseMax(0.0).norm();
+}
+
 // Ray against an upright box with yaw given as (cos, sin); fills hit when nearer than hit->distance.
 bool intersect_box(const Box& box, double cos_yaw, double sin_yaw, const Eigen::Vector3d& origin,
                    const Eigen::Vector3d& direction, RayHit* hit) {
@@ -269,19 +284,20 @@ bool World::intersect_object(int object_id, const Eigen::Vector3d& origin, const
   return found;
 }
 
+bool World::cast_ground(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit* hit) const {
+  if (!description_.has_ground || direction.z() >= 0.0 || origin.z() <= description_.ground_height) return false;
+  const double t = (description_.ground_height - origin.z()) / direction.z();
+  if (t >= hit->distance) return false;
+  hit->distance = t;
+  hit->normal = Eigen::Vector3d::UnitZ();
+  hit->material = &description_.ground;
+  hit->surface_uv = (origin + t * direction).head<2>();
+  hit->object_id = -1;
+  return true;
+}
+
 bool World::cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, int hint, RayHit* hit) const {
-  bool found = false;
-  if (description_.has_ground && direction.z() < 0.0 && origin.z() > description_.ground_height) {
-    const double t = (description_.ground_height - origin.z()) / direction.z();
-    if (t < hit->distance) {
-      hit->distance = t;
-      hit->normal = Eigen::Vector3d::UnitZ();
-      hit->material = &description_.ground;
-      hit->surface_uv = (origin + t * direction).head<2>();
-      hit->object_id = -1;
-      found = true;
-    }
-  }
+  bool found = cast_ground(origin, direction, hit);
   if (bvh_->nodes.empty()) return found;
   if (hint >= 0 && hint < static_cast<int>(bvh_->primitives.size())) found = intersect_object(hint, origin, direction, hit) || found;
   const int box_count = static_cast<int>(description_.boxes.size());
@@ -338,6 +354,7 @@ WorldSnapshot World::at(Timestamp time) const {
     placed.material = &moving.box.material;
     snapshot.moving_.push_back(placed);
   }
+  snapshot.first_moving_ = object_count() - static_cast<int>(description_.moving_boxes.size());
   return snapshot;
 }
 
@@ -346,26 +363,86 @@ std::optional<RayHit> World::cast(const Eigen::Vector3d& origin, const Eigen::Ve
   return at(time).cast(origin, direction, max_distance);
 }
 
+bool WorldSnapshot::intersect(int object_id, const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit* hit) const {
+  if (object_id < first_moving_) return world_->intersect_object(object_id, origin, direction, hit);
+  const PlacedBox& placed = moving_[static_cast<std::size_t>(object_id - first_moving_)];
+  if (!intersect_box(placed.box, placed.cos_yaw, placed.sin_yaw, origin, direction, hit)) return false;
+  hit->material = placed.material;
+  hit->object_id = object_id;
+  hit->object_velocity = placed.velocity;
+  return true;
+}
+
+std::optional<RayHit> WorldSnapshot::finish(bool found, const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit hit,
+                                            int* object_hint) const {
+  if (object_hint != nullptr) *object_hint = found ? hit.object_id : -1;
+  if (!found) return std::nullopt;
+  if (hit.object_id < first_moving_) hit.object_velocity.setZero();
+  hit.point = origin + hit.distance * direction;
+  return hit;
+}
+
 std::optional<RayHit> WorldSnapshot::cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance,
                                           int* object_hint) const {
   RayHit hit;
   hit.distance = max_distance;
   bool found = world_->cast_static(origin, direction, object_hint != nullptr ? *object_hint : -1, &hit);
-  const int first_moving = world_->object_count() - static_cast<int>(moving_.size());
-  for (std::size_t i = 0; i < moving_.size(); ++i) {
-    const PlacedBox& placed = moving_[i];
-    if (intersect_box(placed.box, placed.cos_yaw, placed.sin_yaw, origin, direction, &hit)) {
-      hit.material = placed.material;
-      hit.object_id = first_moving + static_cast<int>(i);
-      hit.object_velocity = placed.velocity;
-      found = true;
+  for (int i = 0; i < static_cast<int>(moving_.size()); ++i) found = intersect(first_moving_ + i, origin, direction, &hit) || found;
+  return finish(found, origin, direction, hit, object_hint);
+}
+
+void WorldSnapshot::group(const Eigen::Vector3d& origin, std::span<const Eigen::Vector3d> inward_normals, double max_distance,
+                          RayGroup* group) const {
+  group->origin_ = origin;
+  group->max_distance_ = max_distance;
+  group->candidates_.clear();
+  // Hits are strictly nearer than max_distance, so bounds at or beyond it hold nothing to hit.
+  auto visible = [&](const Aabb& bounds, double* distance) {
+    for (const Eigen::Vector3d& normal : inward_normals) {
+      if (outside_plane(bounds, origin, normal)) return false;
+    }
+    *distance = distance_to(bounds, origin);
+    return *distance < max_distance;
+  };
+  const World::Bvh& bvh = *world_->bvh_;
+  double distance = 0.0;
+  if (!bvh.nodes.empty()) {
+    std::array<int, 64> stack;  // not zeroed: only pushed entries are read
+    int depth = 0;
+    stack[depth++] = 0;
+    while (depth > 0) {
+      const World::Bvh::Node& node = bvh.nodes[stack[--depth]];
+      if (!visible(node.bounds, &distance)) continue;
+      if (node.count == 0) {
+        stack[depth++] = node.left;
+        stack[depth++] = node.right;
+        continue;
+      }
+      for (int i = node.first; i < node.first + node.count; ++i) {
+        if (visible(bvh.primitives[i].bounds, &distance)) group->candidates_.push_back({distance, bvh.primitives[i].object_id});
+      }
     }
   }
-  if (object_hint != nullptr) *object_hint = found ? hit.object_id : -1;
-  if (!found) return std::nullopt;
-  if (hit.object_id < first_moving) hit.object_velocity.setZero();
-  hit.point = origin + hit.distance * direction;
-  return hit;
+  for (int i = 0; i < static_cast<int>(moving_.size()); ++i) {
+    if (visible(bounds_of(moving_[i].box), &distance)) group->candidates_.push_back({distance, first_moving_ + i});
+  }
+  std::sort(group->candidates_.begin(), group->candidates_.end(), [](const RayGroup::Candidate& a, const RayGroup::Candidate& b) {
+    return a.bound_distance < b.bound_distance || (a.bound_distance == b.bound_distance && a.object_id < b.object_id);
+  });
+}
+
+std::optional<RayHit> WorldSnapshot::cast(const RayGroup& group, const Eigen::Vector3d& direction, int* object_hint) const {
+  const Eigen::Vector3d& origin = group.origin_;
+  RayHit hit;
+  hit.distance = group.max_distance_;
+  bool found = world_->cast_ground(origin, direction, &hit);
+  const int hint = object_hint != nullptr ? *object_hint : -1;
+  if (hint >= 0 && hint < world_->object_count()) found = intersect(hint, origin, direction, &hit) || found;
+  for (const RayGroup::Candidate& candidate : group.candidates_) {
+    if (candidate.bound_distance >= hit.distance) break;  // this and every later object lie beyond the hit
+    if (candidate.object_id != hint) found = intersect(candidate.object_id, origin, direction, &hit) || found;
+  }
+  return finish(found, origin, direction, hit, object_hint);
 }
 
 }  // namespace hanzo::fusion::sim

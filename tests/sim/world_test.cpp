@@ -1,9 +1,11 @@
 // The simulated world: ray casts against analytic distances for every primitive, the BVH
 // against a brute-force cast, moving boxes, and the procedural textures.
 
+#include <array>
 #include <cmath>
 #include <random>
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
 #include "hanzo/fusion/sim/world.hpp"
@@ -136,6 +138,67 @@ TEST(World, BoundingVolumeHierarchyMatchesBruteForce) {
   EXPECT_GT(hits, 1000);
 }
 
+// Rays cast through a RayGroup (a camera tile's pyramid) hit exactly what plain casts hit:
+// static boxes and cylinders, moving boxes and the ground, from origins among the objects.
+TEST(World, RayGroupCastsEqualPlainCasts) {
+  std::mt19937_64 random(11);
+  std::uniform_real_distribution<double> uniform(-40.0, 40.0), size(0.2, 3.0), angle(-M_PI, M_PI), unit(-1.0, 1.0);
+  WorldDescription description;
+  for (int i = 0; i < 200; ++i) {
+    Box box;
+    box.center = {uniform(random), uniform(random), size(random)};
+    box.half_size = {size(random), size(random), size(random)};
+    box.yaw = angle(random);
+    description.boxes.push_back(box);
+    Cylinder cylinder;
+    cylinder.base_center = {uniform(random), uniform(random), 0.0};
+    cylinder.radius = 0.2 * size(random);
+    cylinder.height = 2.0 * size(random);
+    description.cylinders.push_back(cylinder);
+  }
+  for (int i = 0; i < 20; ++i) {
+    MovingBox person;
+    person.box.half_size = {0.3, 0.3, 0.9};
+    person.path = {{uniform(random), uniform(random)}, {uniform(random), uniform(random)}};
+    person.start_time = kStart;
+    description.moving_boxes.push_back(person);
+  }
+  const World world(description);
+  const WorldSnapshot snapshot = world.at(kStart + Duration::from_seconds(3.0));
+  RayGroup group;
+  int hits = 0, compared = 0;
+  for (int cone = 0; cone < 300; ++cone) {
+    // A random camera pose and a random tile: directions with x / z, y / z in a small box.
+    const Eigen::Vector3d origin(uniform(random), uniform(random), 0.5 + 0.05 * (uniform(random) + 40.0));
+    const Eigen::Matrix3d rotation = (Eigen::AngleAxisd(angle(random), Eigen::Vector3d::UnitZ()) *
+                                      Eigen::AngleAxisd(0.5 * angle(random), Eigen::Vector3d::UnitX()))
+                                         .toRotationMatrix();
+    const double x_min = unit(random), y_min = unit(random), width = 0.05, height = 0.08;
+    const std::array<Eigen::Vector3d, 5> inward = {rotation * Eigen::Vector3d(-1.0, 0.0, x_min + width), rotation * Eigen::Vector3d(1.0, 0.0, -x_min),
+                                                   rotation * Eigen::Vector3d(0.0, -1.0, y_min + height), rotation * Eigen::Vector3d(0.0, 1.0, -y_min),
+                                                   rotation * Eigen::Vector3d::UnitZ()};
+    snapshot.group(origin, inward, 60.0, &group);
+    EXPECT_LT(group.size(), description.boxes.size() + description.cylinders.size());  // culled
+    int hint = -1;
+    for (int ray = 0; ray < 30; ++ray) {
+      const double fx = x_min + width * (ray % 6) / 5.0, fy = y_min + height * (ray / 6) / 4.0;  // corners included
+      const Eigen::Vector3d direction = rotation * Eigen::Vector3d(fx, fy, 1.0).normalized();
+      const auto plain = snapshot.cast(origin, direction, 60.0);
+      const auto grouped = snapshot.cast(group, direction, &hint);
+      ASSERT_EQ(plain.has_value(), grouped.has_value()) << cone << " " << ray;
+      ++compared;
+      if (!plain) continue;
+      ++hits;
+      EXPECT_EQ(plain->object_id, grouped->object_id) << cone << " " << ray;
+      EXPECT_EQ(plain->distance, grouped->distance);
+      EXPECT_EQ(plain->normal, grouped->normal);
+      EXPECT_EQ(plain->surface_uv, grouped->surface_uv);
+      EXPECT_EQ(plain->object_velocity, grouped->object_velocity);
+    }
+  }
+  EXPECT_GT(hits, compared / 4);
+}
+
 TEST(World, MovingBoxWalksItsPathBackAndForth) {
   WorldDescription description = empty_world();
   MovingBox person;
@@ -172,10 +235,12 @@ TEST(Texture, CheckerCornersAndDeterministicPatterns) {
     texture.type = type;
     texture.seed = 9;
     float minimum = 1.0F, maximum = 0.0F;
+    TextureSampleCache cache;
     for (int i = 0; i < 400; ++i) {
       const double u = 0.037 * i, v = 0.011 * i;
       const Eigen::Vector3f color = texture.color(u, v);
       EXPECT_EQ(color, texture.color(u, v));
+      EXPECT_EQ(color, texture.color(u, v, &cache));  // the cache changes the speed only
       EXPECT_TRUE((color.array() >= 0.0F).all() && (color.array() <= 1.0F).all());
       minimum = std::min(minimum, luminance(color));
       maximum = std::max(maximum, luminance(color));

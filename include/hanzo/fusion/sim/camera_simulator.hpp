@@ -20,6 +20,7 @@
 //   motion_blur   the exposure lasts exposure_time seconds centred on the stamp: the image is
 //                 the mean of blur_samples renders along the motion
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <random>
@@ -92,7 +93,15 @@ class CameraSimulator {
   const World* world_;
   const SplineTrajectory* trajectory_;
   static constexpr int kNormalTableBits = 16;
+  static constexpr int kTilePixels = 16;  // image tiles of 16 x 16 pixels share one RayGroup
+  /// The pyramid (camera frame, inward side normals through the centre, the last one the
+  /// forward half space) enclosing the rays of one tile; none when a ray looks sideways or back.
+  struct TilePyramid {
+    bool valid = false;
+    std::array<Eigen::Vector3d, 5> inward_normals;
+  };
   std::vector<Eigen::Vector3f> rays_;  // unit, camera frame, (width * s) x (height * s), row-major
+  std::vector<TilePyramid> tiles_;     // row-major, ceil(width / kTilePixels) per row
   std::vector<float> normal_table_;    // standard normal draws for pixel noise
   Eigen::Vector3d sun_direction_;
   std::mt19937_64 random_;

@@ -14,6 +14,7 @@
 //
 // Deterministic: the same (type, colours, scale, seed) gives the same pattern everywhere.
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <string_view>
@@ -26,6 +27,23 @@ enum class TextureType { kUniform, kChecker, kNoise, kPoster };
 std::string_view to_string(TextureType type);  // "uniform", "checker", "noise", "poster"
 std::optional<TextureType> texture_type_from_string(std::string_view name);
 
+/// The lattice corners of the noise cells sampled last (one per octave), so that neighbouring
+/// samples (the pixels along an image row) skip recomputing them. Optional: colours are the
+/// same with or without one. One per thread.
+class TextureSampleCache {
+ public:
+  struct Cell {  // one octave's last lattice cell
+    bool valid = false;
+    int64_t x = 0, y = 0;
+    uint32_t seed = 0;
+    std::array<float, 4> corners{};  // values at (x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)
+  };
+
+ private:
+  friend struct Texture;
+  std::array<Cell, 3> octaves_;
+};
+
 struct Texture {
   TextureType type = TextureType::kUniform;
   Eigen::Vector3f color_a{0.6F, 0.6F, 0.6F};
@@ -33,7 +51,7 @@ struct Texture {
   double scale = 0.5;  ///< metres: checker square, noise feature, poster tile; > 0
   uint32_t seed = 0;   ///< pattern of noise and poster textures
 
-  Eigen::Vector3f color(double u, double v) const;
+  Eigen::Vector3f color(double u, double v, TextureSampleCache* cache = nullptr) const;
 };
 
 /// Rec. 709 luminance of a linear RGB colour.

@@ -13,11 +13,15 @@
 // height above the base); cylinder top: (x, y) relative to the axis.
 //
 // Ray casting uses a bounding volume hierarchy over the static objects (surface area
-// heuristic), so a cast costs O(log objects); moving boxes are tested one by one.
+// heuristic), so a cast costs O(log objects); moving boxes are tested one by one. Many
+// coherent rays from one origin (a camera image tile) are cheaper through a RayGroup: the
+// objects inside their cone are collected once, and each ray then tests only those, nearest
+// first, until the next one cannot be nearer than its hit.
 // A World is immutable after construction and safe to cast from several threads.
 
 #include <memory>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include <Eigen/Core>
@@ -87,6 +91,24 @@ struct RayHit {
 
 class World;
 
+/// The objects that rays from one origin with directions inside one convex cone can hit, each
+/// with the distance from the origin to its bounds, nearest first (WorldSnapshot::group).
+/// Reuse one group for many cones to keep its storage.
+class RayGroup {
+ public:
+  std::size_t size() const { return candidates_.size(); }
+
+ private:
+  friend class WorldSnapshot;
+  struct Candidate {
+    double bound_distance = 0.0;  // metres from the origin to the object's bounding box
+    int object_id = 0;            // as RayHit::object_id
+  };
+  Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
+  double max_distance_ = 0.0;
+  std::vector<Candidate> candidates_;
+};
+
 /// The world with its moving boxes placed at one instant: casting many rays at the same time
 /// (a camera frame, a LiDAR column) through one snapshot places the moving boxes only once.
 /// Valid while its World lives.
@@ -98,8 +120,25 @@ class WorldSnapshot {
   std::optional<RayHit> cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_distance,
                              int* object_hint = nullptr) const;
 
+  /// Collects into `group` the objects that a ray from `origin` with a unit direction d
+  /// satisfying n.dot(d) >= 0 for every n of inward_normals (world-frame normals of planes
+  /// through the origin: the sides of a pyramid enclosing the rays) can hit within
+  /// max_distance. Conservative: an object is dropped only when its bounding box lies wholly
+  /// outside one plane or beyond max_distance. The ground is not a candidate (always tested).
+  void group(const Eigen::Vector3d& origin, std::span<const Eigen::Vector3d> inward_normals, double max_distance,
+             RayGroup* group) const;
+  /// As cast(group origin, direction, group max_distance, object_hint), exactly, for a
+  /// direction inside the group's cone; a direction outside it may miss objects.
+  std::optional<RayHit> cast(const RayGroup& group, const Eigen::Vector3d& direction, int* object_hint = nullptr) const;
+
  private:
   friend class World;
+  /// Fills hit with object_id's surface when nearer than hit->distance (static or moving).
+  bool intersect(int object_id, const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit* hit) const;
+  /// Point and velocity of a found hit.
+  std::optional<RayHit> finish(bool found, const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit hit,
+                               int* object_hint) const;
+
   struct PlacedBox {
     Box box;  // centre and yaw at the snapshot time
     double cos_yaw = 1.0, sin_yaw = 0.0;
@@ -108,6 +147,7 @@ class WorldSnapshot {
   };
   const World* world_ = nullptr;
   std::vector<PlacedBox> moving_;
+  int first_moving_ = 0;  // object id of moving_[0]
 };
 
 class World {
@@ -131,6 +171,8 @@ class World {
  private:
   friend class WorldSnapshot;
   struct Bvh;
+  /// The ground when nearer than hit->distance.
+  bool cast_ground(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit* hit) const;
   /// The nearest static surface (ground, boxes, cylinders) nearer than hit->distance.
   /// hint: a static object id to test first (or anything else to test none first).
   bool cast_static(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, int hint, RayHit* hit) const;
