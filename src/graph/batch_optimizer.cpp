@@ -9,9 +9,12 @@
 namespace hanzo::fusion::graph {
 namespace {
 
-// Parameter layouts: SE2 (x, y, theta); SE3 (tx, ty, tz, qx, qy, qz, qw); Vector3 (x, y, z).
-int ambient_size(const Value& value) { return std::holds_alternative<SE3>(value) ? 7 : 3; }
-int tangent_size(const Value& value) { return std::holds_alternative<SE3>(value) ? 6 : 3; }
+// Parameter layouts: SE2 (x, y, theta); SE3 (tx, ty, tz, qx, qy, qz, qw); Vector3 (x, y, z);
+// ImuBias (accelerometer xyz, gyroscope xyz).
+int ambient_size(const Value& value) {
+  return std::holds_alternative<SE3>(value) ? 7 : std::holds_alternative<ImuBias>(value) ? 6 : 3;
+}
+int tangent_size(const Value& value) { return std::holds_alternative<SE3>(value) || std::holds_alternative<ImuBias>(value) ? 6 : 3; }
 
 void to_parameters(const Value& value, double* p) {
   if (const auto* se2 = std::get_if<SE2>(&value)) {
@@ -25,6 +28,8 @@ void to_parameters(const Value& value, double* p) {
     p[4] = q.y();
     p[5] = q.z();
     p[6] = q.w();
+  } else if (const auto* bias = std::get_if<ImuBias>(&value)) {
+    Eigen::Map<Eigen::Matrix<double, 6, 1>>{p} = bias->vector();
   } else {
     Eigen::Map<Eigen::Vector3d>{p} = std::get<Eigen::Vector3d>(value);
   }
@@ -38,6 +43,7 @@ SE3 se3_from(const double* p) {
 Value from_parameters(const Value& like, const double* p) {
   if (std::holds_alternative<SE2>(like)) return se2_from(p);
   if (std::holds_alternative<SE3>(like)) return se3_from(p);
+  if (std::holds_alternative<ImuBias>(like)) return ImuBias::from_vector(Eigen::Map<const Eigen::Matrix<double, 6, 1>>{p});
   return Eigen::Vector3d(p[0], p[1], p[2]);
 }
 

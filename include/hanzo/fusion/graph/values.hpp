@@ -11,7 +11,22 @@
 
 namespace hanzo::fusion::graph {
 
-using Value = std::variant<SE2, SE3, Eigen::Vector3d>;
+/// IMU biases (B(i) keys), IMU axes: accelerometer m/s^2, gyroscope rad/s. Euclidean; tangent
+/// order (accelerometer, gyroscope), as GTSAM's imuBias::ConstantBias.
+struct ImuBias {
+  Eigen::Vector3d accelerometer = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyroscope = Eigen::Vector3d::Zero();
+
+  Eigen::Matrix<double, 6, 1> vector() const {
+    Eigen::Matrix<double, 6, 1> stacked;
+    stacked << accelerometer, gyroscope;
+    return stacked;
+  }
+  static ImuBias from_vector(const Eigen::Matrix<double, 6, 1>& stacked) { return {stacked.head<3>(), stacked.tail<3>()}; }
+};
+
+/// Poses (SE2, SE3), points and velocities (Vector3, Euclidean), IMU biases.
+using Value = std::variant<SE2, SE3, Eigen::Vector3d, ImuBias>;
 
 class Values {
  public:

@@ -1,0 +1,95 @@
+#pragma once
+// Factors of visual/LiDAR-inertial graphs: the IMU preintegration factor between two
+// keyframes, the bias random walk between their biases, and the navigation factors that anchor
+// them (GPS position with lever arm, velocity and bias priors).
+//
+// Variables: X(i) = T_world_imu (SE3, tangent (translation, rotation), right perturbation:
+// p + R d_rho, R Exp(d_phi)), V(i) world velocity m/s, B(i) ImuBias. All residuals are
+// whitened by their noise; Jacobians are analytic and checked numerically in the tests.
+//
+// ImuFactor (Forster et al. 2017, eq. 45), keys X(i), V(i), X(j), V(j), B(i), with the
+// preintegrated deltas corrected for b_i (imu_preintegration.hpp), residual order
+// (rotation, velocity, position) as the preintegration's covariance:
+//   r_R = Log(dR(b_i)^T R_i^T R_j)
+//   r_v = R_i^T (v_j - v_i - g T) - dv(b_i)
+//   r_p = R_i^T (p_j - p_i - v_i T - 1/2 g T^2) - dp(b_i)
+// Jacobians (appendix B), Jr^-1 = Jr^-1(r_R):
+//   r_R: phi_i -Jr^-1 R_j^T R_i, phi_j Jr^-1, bg -Jr^-1 Exp(r_R)^T Jr(dR/dbg dbg) dR/dbg
+//   r_v: phi_i [R_i^T (v_j - v_i - g T)]x, v_i -R_i^T, v_j R_i^T, ba -dv/dba, bg -dv/dbg
+//   r_p: rho_i -I, phi_i [R_i^T (p_j - p_i - v_i T - 1/2 g T^2)]x, rho_j R_i^T R_j,
+//        v_i -R_i^T T, ba -dp/dba, bg -dp/dbg
+
+#include <memory>
+
+#include "hanzo/fusion/graph/factor.hpp"
+#include "hanzo/fusion/graph/imu_preintegration.hpp"
+
+namespace hanzo::fusion::graph {
+
+class ImuFactor final : public Factor {
+ public:
+  /// Fails when the preintegration holds no sample or its covariance is not positive definite
+  /// (zero IMU noise).
+  static Result<std::shared_ptr<ImuFactor>> create(Key pose_i, Key velocity_i, Key pose_j, Key velocity_j, Key bias_i,
+                                                   ImuPreintegration preintegration);
+  int dimension() const override { return 9; }
+  Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
+  const ImuPreintegration& preintegration() const { return preintegration_; }
+
+ private:
+  ImuFactor(std::vector<Key> keys, ImuPreintegration preintegration, GaussianNoise noise)
+      : Factor(std::move(keys)), preintegration_(std::move(preintegration)), noise_(std::move(noise)) {}
+  ImuPreintegration preintegration_;
+  GaussianNoise noise_;
+};
+
+/// Biases drift as random walks between keyframes i and j, dt seconds apart:
+/// r = b_j - b_i with standard deviations random_walk * sqrt(dt) (the spec's
+/// accel_bias_random_walk m/s^2/sqrt(s) and gyro_bias_random_walk rad/s/sqrt(s)).
+class ImuBiasRandomWalkFactor final : public Factor {
+ public:
+  /// Fails unless dt and both random walks are finite and > 0.
+  static Result<std::shared_ptr<ImuBiasRandomWalkFactor>> create(Key bias_i, Key bias_j, double dt, double accel_bias_random_walk,
+                                                                 double gyro_bias_random_walk);
+  int dimension() const override { return 6; }
+  Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
+
+ private:
+  ImuBiasRandomWalkFactor(Key bias_i, Key bias_j, Eigen::Matrix<double, 6, 1> inverse_sigmas)
+      : Factor({bias_i, bias_j}), inverse_sigmas_(std::move(inverse_sigmas)) {}
+  Eigen::Matrix<double, 6, 1> inverse_sigmas_;
+};
+
+/// A GNSS antenna position in the world frame (ENU metres, geodesy.hpp converts fixes) for the
+/// pose X(i) whose frame holds the antenna at lever_arm: r = p + R lever_arm - z; noise 3x3
+/// (the fix's covariance). Jacobians: rho R, phi -R [lever_arm]x.
+class GpsFactor final : public Factor {
+ public:
+  GpsFactor(Key pose, const Eigen::Vector3d& position_world, const Eigen::Vector3d& lever_arm, GaussianNoise noise)
+      : Factor({pose}), position_world_(position_world), lever_arm_(lever_arm), noise_(std::move(noise)) {}
+  int dimension() const override { return 3; }
+  Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
+
+ private:
+  Eigen::Vector3d position_world_;
+  Eigen::Vector3d lever_arm_;
+  GaussianNoise noise_;
+};
+
+/// Prior on a Euclidean variable (a velocity Vector3d or an ImuBias): r = x - prior.
+template <typename Vector>
+class EuclideanPriorFactor final : public Factor {
+ public:
+  EuclideanPriorFactor(Key key, const Vector& prior, GaussianNoise noise) : Factor({key}), prior_(prior), noise_(std::move(noise)) {}
+  int dimension() const override { return noise_.dimension(); }
+  Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
+
+ private:
+  Vector prior_;
+  GaussianNoise noise_;
+};
+
+using PriorFactorVector3 = EuclideanPriorFactor<Eigen::Vector3d>;
+using PriorFactorImuBias = EuclideanPriorFactor<ImuBias>;
+
+}  // namespace hanzo::fusion::graph
