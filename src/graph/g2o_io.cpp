@@ -158,22 +158,17 @@ Result<PoseGraph> read_g2o(const std::string& path) {
   return parse_g2o(buffer.str(), path);
 }
 
-namespace {
-
-// SE-Sync's weights of an edge (se_sync_objective()).
-std::pair<double, double> kappa_tau(const PoseGraphEdge& edge, int d) {
+SeSyncWeights se_sync_weights(const PoseGraphEdge& edge, int d) {
   const double tau = d / edge.information.topLeftCorner(d, d).inverse().trace();
   const double kappa = d == 3 ? 3.0 / (2.0 * edge.information.bottomRightCorner(3, 3).inverse().trace()) : edge.information(2, 2);
   return {kappa, tau};
 }
 
-}  // namespace
-
 Result<FactorGraph> PoseGraph::factor_graph(Objective objective) const {
   FactorGraph graph;
   for (const PoseGraphEdge& edge : edges) {
     if (objective == Objective::kChordal) {
-      const auto [kappa, tau] = kappa_tau(edge, dimension);
+      const auto [kappa, tau] = se_sync_weights(edge, dimension);
       if (dimension == 3) {
         graph.emplace<ChordalBetweenFactor<SE3>>(edge.from, edge.to, std::get<SE3>(edge.measurement), kappa, tau);
       } else {
@@ -284,7 +279,7 @@ Result<double> se_sync_objective(const PoseGraph& graph, const Values& values) {
       Ri = Ti.rotation_matrix(), Rj = Tj.rotation_matrix(), R_measured = Z.rotation_matrix();
       ti = Ti.translation(), tj = Tj.translation(), t_measured = Z.translation();
     }
-    const auto [kappa, tau] = kappa_tau(edge, d);
+    const auto [kappa, tau] = se_sync_weights(edge, d);
     objective += kappa * (Rj - Ri * R_measured).squaredNorm() + tau * (tj - ti - Ri * t_measured).squaredNorm();
   }
   return objective;

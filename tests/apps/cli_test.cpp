@@ -385,12 +385,13 @@ TEST(Cli, RunReplaysTheSampleAndScoresItAgainstGroundTruth) {
 
 TEST(Cli, GraphOptimizeReachesSeSyncOptimumOnIntel) {
   const std::filesystem::path out = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_graph_{}.g2o", ::getpid());
-  const CliRun optimized = run(fmt::format("graph optimize {}/pose_graph/se_sync/intel.g2o --out {} --objective chordal --json",
-                                           HANZO_DATA_DIR, out.string()));
+  const CliRun optimized = run(fmt::format(
+      "graph optimize {}/pose_graph/se_sync/intel.g2o --out {} --objective chordal --initialize chordal --json", HANZO_DATA_DIR, out.string()));
   ASSERT_EQ(optimized.exit_code, 0) << optimized.err;
   const nlohmann::json json = nlohmann::json::parse(optimized.out);
   EXPECT_EQ(json["poses"], 1728);
   EXPECT_EQ(json["edges"], 2512);
+  EXPECT_EQ(json["initialize"], "chordal");
   EXPECT_NEAR(json["se_sync_objective"]["final"].get<double>(), 52.3482, 0.05);
   EXPECT_GT(json["g2o_chi2"]["initial"].get<double>(), json["g2o_chi2"]["final"].get<double>());
   EXPECT_TRUE(std::filesystem::exists(out));
@@ -399,6 +400,10 @@ TEST(Cli, GraphOptimizeReachesSeSyncOptimumOnIntel) {
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_THAT(bad.err, HasSubstr("bad.g2o:1: VERTEX_SE2: expected 4 numbers, got 3"));
   EXPECT_EQ(std::count(bad.err.begin(), bad.err.end(), '\n'), 1);
+  const CliRun bad_initialize =
+      run(fmt::format("graph optimize {}/pose_graph/se_sync/intel.g2o --out {} --initialize guess", HANZO_DATA_DIR, out.string()));
+  EXPECT_EQ(bad_initialize.exit_code, 1);
+  EXPECT_THAT(bad_initialize.err, HasSubstr("--initialize: expected file or chordal, got 'guess'"));
 }
 
 TEST(Cli, RegisterRecoversTheReferenceOfTheRealPair) {

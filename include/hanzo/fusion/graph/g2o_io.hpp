@@ -56,6 +56,14 @@ Status write_g2o(const std::string& path, const PoseGraph& graph, const Values& 
 /// g2o's chi2: sum e^T info e with g2o's errors (SE2: (x, y, wrapped theta) of Z^-1 Ti^-1 Tj;
 /// SE3: translation and quaternion vector part, w >= 0).
 Result<double> g2o_chi2(const PoseGraph& graph, const Values& values);
+/// SE-Sync's weights of one edge: tau = d / trace(info_tt^-1), kappa = info_thetatheta (2D) or
+/// 3 / (2 trace(info_RR^-1)) (3D); d the graph's dimension.
+struct SeSyncWeights {
+  double kappa = 0.0;  ///< rotation
+  double tau = 0.0;    ///< translation
+};
+SeSyncWeights se_sync_weights(const PoseGraphEdge& edge, int dimension);
+
 /// SE-Sync's objective (Rosen et al. 2019): sum kappa ||R_j - R_i R~||_F^2 + tau ||t_j - t_i - R_i t~||^2
 /// with tau = d / trace(info_tt^-1), kappa = info_thetatheta (2D) or 3 / (2 trace(info_RR^-1)) (3D).
 Result<double> se_sync_objective(const PoseGraph& graph, const Values& values);
