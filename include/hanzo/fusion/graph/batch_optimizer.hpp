@@ -16,7 +16,7 @@ struct BatchOptimizerConfig {
   enum class Method { kLevenbergMarquardt, kDogleg };
   Method method = Method::kLevenbergMarquardt;
   int max_iterations = 100;
-  double function_tolerance = 1e-12;   // relative cost decrease that ends the run
+  double function_tolerance = 1e-8;   // relative cost decrease that ends the run
   double gradient_tolerance = 1e-12;
   double parameter_tolerance = 1e-12;
   int num_threads = 1;
