@@ -193,6 +193,36 @@ Result<FactorGraph> PoseGraph::factor_graph(Objective objective) const {
   return graph;
 }
 
+Result<std::vector<GraphUpdate>> PoseGraph::incremental_updates(Objective objective) const {
+  FactorGraph all;
+  HANZO_ASSIGN_OR_RETURN(all, factor_graph(objective));
+  if (vertices.empty()) return std::vector<GraphUpdate>{};
+  const Key first = fixed.empty() ? vertices.front() : fixed.front();
+  Values known;
+  known.insert(first, initial.exists(first) ? initial.all().at(first) : (dimension == 3 ? Value(SE3()) : Value(SE2())));
+  std::vector<GraphUpdate> updates(1);
+  updates.back().values.insert(first, known.all().at(first));
+  for (size_t e = 0; e < edges.size(); ++e) {
+    const PoseGraphEdge& edge = edges[e];
+    const bool from_known = known.exists(edge.from), to_known = known.exists(edge.to);
+    if (!from_known && !to_known) {
+      return Error(fmt::format("incremental updates: edge {} - {} (number {}) joins two vertices no earlier edge reached",
+                               key_to_string(edge.from), key_to_string(edge.to), e + 1));
+    }
+    if (!from_known || !to_known) {
+      // A new vertex: odometry from its known neighbour; a new update unless this one is empty.
+      const Key new_key = from_known ? edge.to : edge.from;
+      const Value value = from_known ? compose(known.all().at(edge.from), edge.measurement)
+                                     : compose(known.all().at(edge.to), inverse(edge.measurement));
+      known.insert(new_key, value);
+      if (updates.back().factors.size() > 0) updates.emplace_back();
+      updates.back().values.insert(new_key, value);
+    }
+    updates.back().factors.add(all.factors()[e]);
+  }
+  return updates;
+}
+
 Status write_g2o(const std::string& path, const PoseGraph& graph, const Values& values) {
   std::string out;
   const auto number = [](double value) { return format_double(value); };

@@ -34,4 +34,11 @@ class FactorGraph {
   std::vector<FactorPointer> factors_;
 };
 
+/// New factors and the initial values of the variables they introduce: one step of a growing
+/// graph (IncrementalSmoother::update).
+struct GraphUpdate {
+  FactorGraph factors;
+  Values values;
+};
+
 }  // namespace hanzo::fusion::graph

@@ -1,0 +1,97 @@
+// IncrementalSmoother: exact graphs stay exact update by update, a real data set added pose by
+// pose in file order ends at the batch optimum, bad updates change nothing.
+
+#include <chrono>
+#include <random>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "hanzo/fusion/graph/g2o_io.hpp"
+#include "hanzo/fusion/graph/incremental_smoother.hpp"
+#include "hanzo/fusion/graph/pose_factors.hpp"
+
+namespace hanzo::fusion::graph {
+namespace {
+
+using ::testing::HasSubstr;
+
+const std::string kData = std::string(HANZO_DATA_DIR) + "/pose_graph/se_sync/";
+
+// Exact odometry and loop closures between random 3D poses: every local update (no background
+// batch) keeps every pose exact, so a loop closure never pulls anything off.
+TEST(IncrementalSmoother, ExactGraphStaysExactWithLocalUpdatesOnly) {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> n(0.0, 1.0);
+  std::vector<SE3> truth;
+  for (int i = 0; i < 60; ++i) {
+    SE3::Tangent xi;
+    for (int k = 0; k < 6; ++k) xi(k) = (k < 3 ? 3.0 : 0.5) * n(rng);
+    truth.push_back(SE3::exp(xi));
+  }
+  const GaussianNoise noise = GaussianNoise::from_sigmas(Eigen::VectorXd::Constant(6, 0.1)).value();
+  IncrementalSmootherConfig config;
+  config.background_batch = false;
+  config.batch.fixed = {X(0)};
+  IncrementalSmoother smoother(config);
+  for (int i = 0; i < 60; ++i) {
+    GraphUpdate update;
+    update.values.insert(X(i), i == 0 ? truth[0] : SE3(truth[i].rotation() * SO3::exp({0.1, -0.1, 0.2}), truth[i].translation() + Eigen::Vector3d(0.3, 0.0, -0.2)));
+    if (i > 0) update.factors.emplace<BetweenFactorSE3>(X(i - 1), X(i), truth[i - 1].inverse() * truth[i], noise);
+    if (i >= 10 && i % 5 == 0) update.factors.emplace<BetweenFactorSE3>(X(i - 10), X(i), truth[i - 10].inverse() * truth[i], noise);
+    const IncrementalUpdateSummary summary = smoother.update(update.factors, update.values).value();
+    EXPECT_LE(summary.optimized_variables, 12 + 3);  // bounded by the window, not the graph
+    for (int k = 0; k <= i; ++k) {
+      EXPECT_LT((truth[k].inverse() * smoother.estimate().at<SE3>(X(k)).value()).log().norm(), 1e-6) << i << " " << k;
+    }
+  }
+}
+
+// intel added pose by pose in file order, new poses started from odometry. The file lists the
+// odometry first and its loop closures at the end (they arrive in the last update), so
+// every update but the last re-optimizes a small window; after wait_for_batch() the estimate
+// is the optimum.
+TEST(IncrementalSmoother, IntelPoseByPoseEndsAtTheOptimum) {
+  const PoseGraph graph = read_g2o(kData + "intel.g2o").value();
+  const std::vector<GraphUpdate> updates = graph.incremental_updates(PoseGraph::Objective::kChordal).value();
+  EXPECT_EQ(updates.size(), 1727u);  // the first vertex comes with the first edge
+  IncrementalSmootherConfig config;
+  config.batch.fixed = graph.fixed;
+  IncrementalSmoother smoother(config);
+  int max_optimized = 0;
+  for (size_t u = 0; u < updates.size(); ++u) {
+    const IncrementalUpdateSummary summary = smoother.update(updates[u].factors, updates[u].values).value();
+    if (u + 1 < updates.size()) max_optimized = std::max(max_optimized, summary.optimized_variables);
+  }
+  EXPECT_EQ(updates.back().factors.size(), 786u);  // the last odometry edge and 785 loop closures
+  EXPECT_EQ(smoother.graph().size(), graph.edges.size());
+  const double latest = se_sync_objective(graph, smoother.estimate()).value();
+  ASSERT_TRUE(smoother.wait_for_batch().ok());
+  const double final_objective = se_sync_objective(graph, smoother.estimate()).value();
+  std::printf("intel incremental: latest %.4f, after wait %.4f, %d batches merged, at most %d variables an update before the loop closures\n", latest,
+              final_objective, smoother.batches_merged(), max_optimized);
+  EXPECT_NEAR(final_objective, 52.3482, 0.01 * 52.3482);
+  EXPECT_LT(max_optimized, 20);
+}
+
+TEST(IncrementalSmoother, RejectsBadUpdatesAndKeepsTheGraph) {
+  IncrementalSmoother smoother;
+  const GaussianNoise noise = GaussianNoise::from_sigmas(Eigen::Vector3d::Constant(0.1)).value();
+  GraphUpdate first;
+  first.values.insert(X(0), SE2());
+  first.values.insert(X(1), SE2(0.1, {1.0, 0.0}));
+  first.factors.emplace<BetweenFactorSE2>(X(0), X(1), SE2(0.0, {1.0, 0.0}), noise);
+  ASSERT_TRUE(smoother.update(first.factors, first.values).ok());
+  Values duplicate;
+  duplicate.insert(X(1), SE2());
+  EXPECT_THAT(smoother.update(FactorGraph{}, duplicate).error().message, HasSubstr("x1 already exists"));
+  FactorGraph dangling;
+  dangling.emplace<BetweenFactorSE2>(X(1), X(7), SE2(), noise);
+  EXPECT_THAT(smoother.update(dangling, Values{}).error().message, HasSubstr("x7"));
+  EXPECT_EQ(smoother.graph().size(), 1u);
+  EXPECT_EQ(smoother.estimate().size(), 2u);
+  EXPECT_TRUE(smoother.wait_for_batch().ok());
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::graph
