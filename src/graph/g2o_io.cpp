@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <set>
 #include <sstream>
 
@@ -197,28 +198,29 @@ Result<std::vector<GraphUpdate>> PoseGraph::incremental_updates(Objective object
   FactorGraph all;
   HANZO_ASSIGN_OR_RETURN(all, factor_graph(objective));
   if (vertices.empty()) return std::vector<GraphUpdate>{};
+  // Vertices in the order edges first reach them, each starting at odometry from its neighbour.
   const Key first = fixed.empty() ? vertices.front() : fixed.front();
-  Values known;
-  known.insert(first, initial.exists(first) ? initial.all().at(first) : (dimension == 3 ? Value(SE3()) : Value(SE2())));
+  std::map<Key, size_t> update_of;
   std::vector<GraphUpdate> updates(1);
-  updates.back().values.insert(first, known.all().at(first));
+  updates[0].values.insert(first, initial.exists(first) ? initial.all().at(first) : (dimension == 3 ? Value(SE3()) : Value(SE2())));
+  update_of[first] = 0;
+  const auto value_of = [&](Key key) { return updates[update_of.at(key)].values.all().at(key); };
   for (size_t e = 0; e < edges.size(); ++e) {
     const PoseGraphEdge& edge = edges[e];
-    const bool from_known = known.exists(edge.from), to_known = known.exists(edge.to);
+    const bool from_known = update_of.count(edge.from) != 0, to_known = update_of.count(edge.to) != 0;
     if (!from_known && !to_known) {
       return Error(fmt::format("incremental updates: edge {} - {} (number {}) joins two vertices no earlier edge reached",
                                key_to_string(edge.from), key_to_string(edge.to), e + 1));
     }
-    if (!from_known || !to_known) {
-      // A new vertex: odometry from its known neighbour; a new update unless this one is empty.
-      const Key new_key = from_known ? edge.to : edge.from;
-      const Value value = from_known ? compose(known.all().at(edge.from), edge.measurement)
-                                     : compose(known.all().at(edge.to), inverse(edge.measurement));
-      known.insert(new_key, value);
-      if (updates.back().factors.size() > 0) updates.emplace_back();
-      updates.back().values.insert(new_key, value);
-    }
-    updates.back().factors.add(all.factors()[e]);
+    if (from_known && to_known) continue;
+    const Key new_key = from_known ? edge.to : edge.from;
+    const Value value = from_known ? compose(value_of(edge.from), edge.measurement) : compose(value_of(edge.to), inverse(edge.measurement));
+    update_of[new_key] = updates.size();
+    updates.emplace_back().values.insert(new_key, value);
+  }
+  // Each edge joins the update of whichever of its vertices arrives later (file order within).
+  for (size_t e = 0; e < edges.size(); ++e) {
+    updates[std::max(update_of.at(edges[e].from), update_of.at(edges[e].to))].factors.add(all.factors()[e]);
   }
   return updates;
 }

@@ -48,7 +48,9 @@ void IncrementalSmoother::start_batch() {
   batch_ = std::make_unique<Batch>();
   batch_->variable_count = insertion_order_.size();
   factors_in_last_batch_ = graph_.size();
-  batch_->result = std::async(std::launch::async, [graph = graph_, values = estimate_, config = config_.batch]() mutable -> Result<Values> {
+  BatchOptimizerConfig background = config_.batch;
+  background.max_iterations = config_.background_max_iterations;
+  batch_->result = std::async(std::launch::async, [graph = graph_, values = estimate_, config = background]() mutable -> Result<Values> {
     Result<OptimizationSummary> summary = optimize(graph, values, config);
     if (!summary) return summary.error();
     return values;

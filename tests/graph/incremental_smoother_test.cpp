@@ -47,31 +47,29 @@ TEST(IncrementalSmoother, ExactGraphStaysExactWithLocalUpdatesOnly) {
   }
 }
 
-// intel added pose by pose in file order, new poses started from odometry. The file lists the
-// odometry first and its loop closures at the end (they arrive in the last update), so
-// every update but the last re-optimizes a small window; after wait_for_batch() the estimate
-// is the optimum.
+// intel added pose by pose, each pose with its odometry and its loop closures back to earlier
+// poses, new poses started from odometry: every update re-optimizes a small part; after
+// wait_for_batch() the estimate is the optimum.
 TEST(IncrementalSmoother, IntelPoseByPoseEndsAtTheOptimum) {
   const PoseGraph graph = read_g2o(kData + "intel.g2o").value();
   const std::vector<GraphUpdate> updates = graph.incremental_updates(PoseGraph::Objective::kChordal).value();
-  EXPECT_EQ(updates.size(), 1727u);  // the first vertex comes with the first edge
+  EXPECT_EQ(updates.size(), 1728u);
   IncrementalSmootherConfig config;
   config.batch.fixed = graph.fixed;
   IncrementalSmoother smoother(config);
   int max_optimized = 0;
-  for (size_t u = 0; u < updates.size(); ++u) {
-    const IncrementalUpdateSummary summary = smoother.update(updates[u].factors, updates[u].values).value();
-    if (u + 1 < updates.size()) max_optimized = std::max(max_optimized, summary.optimized_variables);
+  for (const GraphUpdate& update : updates) {
+    const IncrementalUpdateSummary summary = smoother.update(update.factors, update.values).value();
+    max_optimized = std::max(max_optimized, summary.optimized_variables);
   }
-  EXPECT_EQ(updates.back().factors.size(), 786u);  // the last odometry edge and 785 loop closures
   EXPECT_EQ(smoother.graph().size(), graph.edges.size());
   const double latest = se_sync_objective(graph, smoother.estimate()).value();
   ASSERT_TRUE(smoother.wait_for_batch().ok());
   const double final_objective = se_sync_objective(graph, smoother.estimate()).value();
-  std::printf("intel incremental: latest %.4f, after wait %.4f, %d batches merged, at most %d variables an update before the loop closures\n", latest,
+  std::printf("intel incremental: latest %.4f, after wait %.4f, %d batches merged, at most %d variables an update\n", latest,
               final_objective, smoother.batches_merged(), max_optimized);
   EXPECT_NEAR(final_objective, 52.3482, 0.01 * 52.3482);
-  EXPECT_LT(max_optimized, 20);
+  EXPECT_LT(max_optimized, 60);
 }
 
 TEST(IncrementalSmoother, RejectsBadUpdatesAndKeepsTheGraph) {

@@ -44,11 +44,12 @@ struct PoseGraph {
   /// One between factor per edge: geodesic with noise from the information (converted for 3D,
   /// see above), or chordal with SE-Sync's kappa and tau (se_sync_objective()).
   Result<FactorGraph> factor_graph(Objective objective = Objective::kGeodesic) const;
-  /// The graph as it grows, pose by pose, for an incremental smoother: edges in file order,
-  /// one update per vertex that an edge introduces (with the edges that follow among known
-  /// vertices). A new vertex starts at its neighbour composed with the edge (odometry), not at
-  /// its VERTEX line; the first vertex (or the first fixed one) starts at its VERTEX value.
-  /// Fails when an edge joins two vertices that no earlier edge reached.
+  /// The graph as it grows, pose by pose, for an incremental smoother: vertices in the order
+  /// the edges (file order) first reach them, one update each, holding the vertex and every
+  /// edge whose later vertex it is (odometry and loop closures back to earlier poses). A new
+  /// vertex starts at its neighbour composed with the edge (odometry), not at its VERTEX line;
+  /// the first vertex (or the first fixed one) starts at its VERTEX value, in an update of its
+  /// own. Fails when an edge joins two vertices that no earlier edge reached.
   Result<std::vector<GraphUpdate>> incremental_updates(Objective objective = Objective::kGeodesic) const;
 };
 

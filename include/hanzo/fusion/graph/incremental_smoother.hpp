@@ -33,11 +33,15 @@
 namespace hanzo::fusion::graph {
 
 struct IncrementalSmootherConfig {
-  int recent_variables = 12;      ///< always re-optimized: the newest variables (a window of poses)
+  int recent_variables = 20;      ///< always re-optimized: the newest variables (a window of poses)
   int neighbour_hops = 1;         ///< factor hops around the new factors' variables, >= 0
   int local_max_iterations = 6;   ///< Levenberg-Marquardt iterations of one update
   bool background_batch = true;   ///< full re-optimization on a snapshot in a worker thread
-  /// The gauge (variables held fixed everywhere) and the settings of the full batch.
+  /// Iterations of one background batch: few, so that batches (warm-started from the latest
+  /// estimate) follow each other often and the estimate is never far behind the graph.
+  int background_max_iterations = 3;
+  /// The gauge (variables held fixed everywhere) and the settings of the full batch
+  /// (wait_for_batch() runs it to convergence).
   BatchOptimizerConfig batch;
 };
 
