@@ -1,8 +1,9 @@
 // hanzo-fusion graph optimize IN.g2o --out OUT.g2o [--objective geodesic|chordal]
-//   [--initialize file|chordal] [--plot DIR]:
+//   [--initialize file|chordal] [--incremental] [--plot DIR]:
 // batch optimization of a pose graph; prints g2o's chi2 and SE-Sync's objective before and after,
 // iterations and time.
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 
@@ -13,6 +14,7 @@
 #include "hanzo/fusion/graph/batch_optimizer.hpp"
 #include "hanzo/fusion/graph/chordal_initialization.hpp"
 #include "hanzo/fusion/graph/g2o_io.hpp"
+#include "hanzo/fusion/graph/incremental_smoother.hpp"
 
 namespace hanzo::fusion::app {
 namespace {
@@ -24,7 +26,49 @@ struct GraphOptions {
   std::string initialize = "file";
   std::string plot_dir;
   int max_iterations = 100;
+  bool incremental = false;
 };
+
+// The graph fed pose by pose to an IncrementalSmoother; fills `values` with the estimate after
+// wait_for_batch() and `result` with the update latencies and both costs.
+Status optimize_incrementally(const graph::PoseGraph& pose_graph, graph::PoseGraph::Objective objective, int max_iterations,
+                              graph::Values& values, graph::OptimizationSummary& summary, nlohmann::json& result, std::string& text) {
+  std::vector<graph::GraphUpdate> updates;
+  HANZO_ASSIGN_OR_RETURN(updates, pose_graph.incremental_updates(objective));
+  graph::IncrementalSmootherConfig config;
+  config.batch.fixed = pose_graph.fixed;
+  config.batch.max_iterations = max_iterations;
+  graph::IncrementalSmoother smoother(config);
+  std::vector<double> milliseconds;
+  const auto start = std::chrono::steady_clock::now();
+  for (const graph::GraphUpdate& update : updates) {
+    const auto update_start = std::chrono::steady_clock::now();
+    if (auto updated = smoother.update(update.factors, update.values); !updated) return updated.error();
+    milliseconds.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - update_start).count());
+  }
+  const double update_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double latest_objective = graph::se_sync_objective(pose_graph, smoother.estimate()).value();
+  const auto batch_start = std::chrono::steady_clock::now();
+  auto final_batch = smoother.wait_for_batch();
+  if (!final_batch) return final_batch.error();
+  summary = *final_batch;
+  const double batch_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - batch_start).count();
+  values = smoother.estimate();
+  std::sort(milliseconds.begin(), milliseconds.end());
+  const auto percentile = [&](double p) {
+    return milliseconds.empty() ? 0.0 : milliseconds[static_cast<size_t>(p * static_cast<double>(milliseconds.size() - 1))];
+  };
+  result["incremental"] = {{"updates", milliseconds.size()},
+                           {"update_seconds", update_seconds},
+                           {"update_ms", {{"p50", percentile(0.5)}, {"p99", percentile(0.99)}, {"max", percentile(1.0)}}},
+                           {"latest_se_sync_objective", latest_objective},
+                           {"batches_merged", smoother.batches_merged()},
+                           {"final_batch_seconds", batch_seconds}};
+  text += fmt::format("  incremental: {} updates in {:.2f} s (p50 {:.2f} ms, p99 {:.2f} ms, max {:.2f} ms); latest estimate {:.6g};\n"
+                      "  final batch {:.2f} s\n",
+                      milliseconds.size(), update_seconds, percentile(0.5), percentile(0.99), percentile(1.0), latest_objective, batch_seconds);
+  return ok_status();
+}
 
 // The graph's poses in vertex order as a trajectory (times are the vertex order), for plots.
 io::Trajectory as_trajectory(const graph::PoseGraph& pose_graph, const graph::Values& values) {
@@ -72,8 +116,18 @@ int run_optimize(const Output& output, const GraphOptions& options) {
   graph::BatchOptimizerConfig config;
   config.fixed = pose_graph->fixed;
   config.max_iterations = options.max_iterations;
-  auto summary = graph::optimize(*factors, values, config);
-  if (!summary) return fail(summary.error().message);
+  std::string incremental_text;
+  graph::OptimizationSummary summary;
+  if (options.incremental) {
+    if (options.initialize != "file") return fail("--incremental: new poses start from odometry; --initialize does not apply");
+    if (Status done = optimize_incrementally(*pose_graph, objective, options.max_iterations, values, summary, result, incremental_text); !done) {
+      return fail(done.error().message);
+    }
+  } else {
+    auto solved = graph::optimize(*factors, values, config);
+    if (!solved) return fail(solved.error().message);
+    summary = *solved;
+  }
   const double final_chi2 = graph::g2o_chi2(*pose_graph, values).value();
   const double final_objective = graph::se_sync_objective(*pose_graph, values).value();
   if (Status written = graph::write_g2o(options.out, *pose_graph, values); !written) return fail(written.error().message);
@@ -87,15 +141,15 @@ int run_optimize(const Output& output, const GraphOptions& options) {
   result["se_sync_objective"] = {{"initial", initial_objective}, {"final", final_objective}};
   result["initialize"] = options.initialize;
   result["initialization_seconds"] = initialization_seconds;
-  result["iterations"] = summary->iterations;
-  result["seconds"] = summary->seconds;
-  result["converged"] = summary->converged;
+  result["iterations"] = summary.iterations;
+  result["seconds"] = summary.seconds;
+  result["converged"] = summary.converged;
   std::string text = fmt::format(
       "{}: {}D, {} poses, {} edges, {} objective\n  g2o chi2:           {:.6g} -> {:.6g}\n  SE-Sync objective:  {:.6g} -> {:.6g}\n"
-      "  initialization: {} ({:.3f} s); {} iterations in {:.3f} s ({})\nwrote {}\n",
+      "{}  initialization: {} ({:.3f} s); {} iterations in {:.3f} s ({})\nwrote {}\n",
       options.input, pose_graph->dimension, pose_graph->vertices.size(), pose_graph->edges.size(), options.objective, initial_chi2,
-      final_chi2, initial_objective, final_objective, options.initialize, initialization_seconds, summary->iterations, summary->seconds,
-      summary->converged ? "converged" : summary->message, options.out);
+      final_chi2, initial_objective, final_objective, incremental_text, options.initialize, initialization_seconds, summary.iterations, summary.seconds,
+      summary.converged ? "converged" : summary.message, options.out);
   if (!options.plot_dir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(options.plot_dir, ec);
@@ -130,6 +184,8 @@ void add_graph_command(CLI::App& app, const Output& output, Command& run) {
   optimize->add_option("--initialize", options->initialize,
                        "file (the VERTEX lines, chained odometry for missing ones) or chordal (rotation relaxation)")
       ->capture_default_str();
+  optimize->add_flag("--incremental", options->incremental,
+                     "Feed the graph pose by pose to the incremental smoother (odometry starts) and report update latencies");
   optimize->add_option("--max-iterations", options->max_iterations, "Levenberg-Marquardt iterations")->capture_default_str();
   optimize->add_option("--plot", options->plot_dir, "Write an SVG of the graph before and after into this folder");
   optimize->callback([&output, &run, options] { run = [&output, options] { return run_optimize(output, *options); }; });

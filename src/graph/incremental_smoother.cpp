@@ -171,7 +171,11 @@ Result<OptimizationSummary> IncrementalSmoother::wait_for_batch() {
     batch_.reset();
   }
   OptimizationSummary summary;
-  if (graph_.size() == factors_in_last_batch_) return summary;
+  if (graph_.size() == factors_in_last_batch_) {
+    summary.converged = true;
+    summary.message = "nothing to do: the last batch covered the whole graph";
+    return summary;
+  }
   factors_in_last_batch_ = graph_.size();
   Result<OptimizationSummary> solved = optimize(graph_, estimate_, config_.batch);
   if (!solved) return Error(fmt::format("incremental smoother: final batch: {}", solved.error().message));

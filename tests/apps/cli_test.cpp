@@ -406,6 +406,21 @@ TEST(Cli, GraphOptimizeReachesSeSyncOptimumOnIntel) {
   EXPECT_THAT(bad_initialize.err, HasSubstr("--initialize: expected file or chordal, got 'guess'"));
 }
 
+TEST(Cli, GraphOptimizeIncrementallyEndsAtTheOptimum) {
+  const std::filesystem::path out = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_incremental_{}.g2o", ::getpid());
+  const std::string input = fmt::format("{}/pose_graph/se_sync/intel.g2o", HANZO_DATA_DIR);
+  const CliRun optimized = run(fmt::format("graph optimize {} --out {} --objective chordal --incremental --json", input, out.string()));
+  ASSERT_EQ(optimized.exit_code, 0) << optimized.err;
+  const nlohmann::json json = nlohmann::json::parse(optimized.out);
+  EXPECT_EQ(json["incremental"]["updates"], 1728);
+  EXPECT_GT(json["incremental"]["update_ms"]["p99"].get<double>(), 0.0);
+  EXPECT_NEAR(json["se_sync_objective"]["final"].get<double>(), 52.3482, 0.05);
+  std::filesystem::remove(out);
+  const CliRun refused = run(fmt::format("graph optimize {} --out {} --incremental --initialize chordal", input, out.string()));
+  EXPECT_EQ(refused.exit_code, 1);
+  EXPECT_THAT(refused.err, HasSubstr("--incremental"));
+}
+
 TEST(Cli, RegisterRecoversTheReferenceOfTheRealPair) {
   const std::string dir = fmt::format("{}/lidar_small_gicp", HANZO_DATA_DIR);
   for (const char* method : {"gicp", "ndt"}) {
