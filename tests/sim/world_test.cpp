@@ -88,11 +88,12 @@ TEST(World, CylinderSideAndTop) {
   EXPECT_NEAR(offset->distance, 5.0 - std::sqrt(0.09), 1e-12);
 }
 
-TEST(World, BoundingVolumeHierarchyMatchesBruteForce) {
-  std::mt19937_64 random(7);
-  std::uniform_real_distribution<double> uniform(-50.0, 50.0), size(0.2, 3.0), angle(-M_PI, M_PI);
+// `count` random rotated boxes and thin cylinders within +-extent metres of the origin (drawn in
+// this order from `random`), over the default ground.
+WorldDescription random_objects(std::mt19937_64& random, int count, double extent, double radius_scale) {
+  std::uniform_real_distribution<double> uniform(-extent, extent), size(0.2, 3.0), angle(-M_PI, M_PI);
   WorldDescription description;
-  for (int i = 0; i < 300; ++i) {
+  for (int i = 0; i < count; ++i) {
     Box box;
     box.center = {uniform(random), uniform(random), size(random)};
     box.half_size = {size(random), size(random), size(random)};
@@ -100,10 +101,17 @@ TEST(World, BoundingVolumeHierarchyMatchesBruteForce) {
     description.boxes.push_back(box);
     Cylinder cylinder;
     cylinder.base_center = {uniform(random), uniform(random), 0.0};
-    cylinder.radius = 0.1 * size(random);
+    cylinder.radius = radius_scale * size(random);
     cylinder.height = 2.0 * size(random);
     description.cylinders.push_back(cylinder);
   }
+  return description;
+}
+
+TEST(World, BoundingVolumeHierarchyMatchesBruteForce) {
+  std::mt19937_64 random(7);
+  std::uniform_real_distribution<double> uniform(-50.0, 50.0);
+  const WorldDescription description = random_objects(random, 300, 50.0, 0.1);
   const World world(description);
   std::vector<World> singles;
   for (const Box& box : description.boxes) {
@@ -142,20 +150,8 @@ TEST(World, BoundingVolumeHierarchyMatchesBruteForce) {
 // static boxes and cylinders, moving boxes and the ground, from origins among the objects.
 TEST(World, RayGroupCastsEqualPlainCasts) {
   std::mt19937_64 random(11);
-  std::uniform_real_distribution<double> uniform(-40.0, 40.0), size(0.2, 3.0), angle(-M_PI, M_PI), unit(-1.0, 1.0);
-  WorldDescription description;
-  for (int i = 0; i < 200; ++i) {
-    Box box;
-    box.center = {uniform(random), uniform(random), size(random)};
-    box.half_size = {size(random), size(random), size(random)};
-    box.yaw = angle(random);
-    description.boxes.push_back(box);
-    Cylinder cylinder;
-    cylinder.base_center = {uniform(random), uniform(random), 0.0};
-    cylinder.radius = 0.2 * size(random);
-    cylinder.height = 2.0 * size(random);
-    description.cylinders.push_back(cylinder);
-  }
+  std::uniform_real_distribution<double> uniform(-40.0, 40.0), angle(-M_PI, M_PI), unit(-1.0, 1.0);
+  WorldDescription description = random_objects(random, 200, 40.0, 0.2);
   for (int i = 0; i < 20; ++i) {
     MovingBox person;
     person.box.half_size = {0.3, 0.3, 0.9};
