@@ -130,12 +130,17 @@ int run_optimize(const Output& output, const GraphOptions& options) {
   }
   const double final_chi2 = graph::g2o_chi2(*pose_graph, values).value();
   const double final_objective = graph::se_sync_objective(*pose_graph, values).value();
-  if (Status written = graph::write_g2o(options.out, *pose_graph, values); !written) return fail(written.error().message);
+  const bool toro_out = std::filesystem::path(options.out).extension() == ".graph";
+  if (Status written = toro_out ? graph::write_toro(options.out, *pose_graph, values) : graph::write_g2o(options.out, *pose_graph, values);
+      !written) {
+    return fail(written.error().message);
+  }
 
   result["ok"] = true;
   result["dimension"] = pose_graph->dimension;
   result["poses"] = pose_graph->vertices.size();
   result["edges"] = pose_graph->edges.size();
+  result["skipped_equivalences"] = pose_graph->skipped_equivalences;
   result["objective"] = options.objective;
   result["g2o_chi2"] = {{"initial", initial_chi2}, {"final", final_chi2}};
   result["se_sync_objective"] = {{"initial", initial_objective}, {"final", final_objective}};
@@ -178,8 +183,8 @@ void add_graph_command(CLI::App& app, const Output& output, Command& run) {
   graph->require_subcommand(1);
   auto options = std::make_shared<GraphOptions>();
   CLI::App* optimize = graph->add_subcommand("optimize", "Optimize a g2o pose graph (2D or 3D)");
-  optimize->add_option("IN", options->input, "g2o file (VERTEX_SE2/EDGE_SE2 or VERTEX_SE3:QUAT/EDGE_SE3:QUAT)")->required();
-  optimize->add_option("--out", options->out, "Optimized g2o file to write")->required();
+  optimize->add_option("IN", options->input, "g2o file (VERTEX_SE2/EDGE_SE2 or VERTEX_SE3:QUAT/EDGE_SE3:QUAT) or TORO file (VERTEX2/EDGE2, VERTEX3/EDGE3)")->required();
+  optimize->add_option("--out", options->out, "Optimized pose graph to write: TORO when it ends in .graph, g2o otherwise")->required();
   optimize->add_option("--objective", options->objective, "geodesic (g2o's errors) or chordal (SE-Sync's objective)")->capture_default_str();
   optimize->add_option("--initialize", options->initialize,
                        "file (the VERTEX lines, chained odometry for missing ones) or chordal (rotation relaxation)")

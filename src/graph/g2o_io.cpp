@@ -1,5 +1,6 @@
 #include "hanzo/fusion/graph/g2o_io.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -27,6 +28,29 @@ Result<SO3> unit_rotation(double qx, double qy, double qz, double qw) {
   const Eigen::Quaterniond q(qw, qx, qy, qz);
   if (std::abs(q.norm() - 1.0) > 1e-3) return Error(fmt::format("quaternion norm {} is not 1", q.norm()));
   return SO3::from_quaternion_normalized(q);
+}
+
+// TORO's 3D rotations: R = Rz(yaw) Ry(pitch) Rx(roll), and back (pitch in [-pi/2, pi/2]).
+SO3 from_roll_pitch_yaw(double roll, double pitch, double yaw) {
+  return SO3::exp(Eigen::Vector3d(0.0, 0.0, yaw)) * SO3::exp(Eigen::Vector3d(0.0, pitch, 0.0)) * SO3::exp(Eigen::Vector3d(roll, 0.0, 0.0));
+}
+Eigen::Vector3d roll_pitch_yaw(const SO3& rotation) {
+  const Eigen::Matrix3d R = rotation.matrix();
+  return {std::atan2(R(2, 1), R(2, 2)), std::asin(std::clamp(-R(2, 0), -1.0, 1.0)), std::atan2(R(1, 0), R(0, 0))};
+}
+
+// TORO's 3D information is over (translation, roll, pitch, yaw), which to first order is the
+// rotation vector, twice g2o's quaternion vector part: g2o information = D toro D, D = diag(1, 1, 1, 2, 2, 2).
+Eigen::MatrixXd toro_to_g2o_scaling() {
+  Eigen::MatrixXd D = Eigen::MatrixXd::Identity(6, 6);
+  D.bottomRightCorner(3, 3) *= 2.0;
+  return D;
+}
+// TORO's 2D information order (xx, xy, yy, tt, xt, yt) as a matrix over (x, y, theta).
+Eigen::MatrixXd toro_2d_information(const double* i) {
+  Eigen::Matrix3d m;
+  m << i[0], i[1], i[4], i[1], i[2], i[5], i[4], i[5], i[3];
+  return m;
 }
 
 Value compose(const Value& a, const Value& b) {
@@ -106,6 +130,41 @@ Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_n
       if (!GaussianNoise::from_information(edge.information)) return fail("the information matrix is not positive definite");
       (is_3d ? seen_3d : seen_2d) = true;
       graph.edges.push_back(std::move(edge));
+    } else if (tag == "VERTEX2" || tag == "VERTEX3") {  // TORO
+      const bool is_3d = tag == "VERTEX3";
+      HANZO_RETURN_IF_ERROR(expect(is_3d ? 7 : 4));
+      Key key = 0;
+      HANZO_ASSIGN_OR_RETURN(key, id_at(0));
+      if (known.count(key)) return fail(fmt::format("vertex {} appears twice", symbol_index(key)));
+      if (is_3d) {
+        graph.initial.insert(key, SE3(from_roll_pitch_yaw(numbers[4], numbers[5], numbers[6]), Eigen::Vector3d(numbers[1], numbers[2], numbers[3])));
+      } else {
+        graph.initial.insert(key, SE2(numbers[3], Eigen::Vector2d(numbers[1], numbers[2])));
+      }
+      (is_3d ? seen_3d : seen_2d) = true;
+      known.insert(key);
+      graph.vertices.push_back(key);
+    } else if (tag == "EDGE2" || tag == "EDGE3") {  // TORO
+      const bool is_3d = tag == "EDGE3";
+      HANZO_RETURN_IF_ERROR(expect(is_3d ? 29 : 11));
+      PoseGraphEdge edge;
+      HANZO_ASSIGN_OR_RETURN(edge.from, id_at(0));
+      HANZO_ASSIGN_OR_RETURN(edge.to, id_at(1));
+      if (edge.from == edge.to) return fail("an edge from a vertex to itself");
+      if (is_3d) {
+        edge.measurement = SE3(from_roll_pitch_yaw(numbers[5], numbers[6], numbers[7]), Eigen::Vector3d(numbers[2], numbers[3], numbers[4]));
+        const Eigen::MatrixXd D = toro_to_g2o_scaling();
+        edge.information = D * from_upper_triangle(std::vector<double>(numbers.begin() + 8, numbers.end()), 6) * D;
+      } else {
+        edge.measurement = SE2(numbers[4], Eigen::Vector2d(numbers[2], numbers[3]));
+        edge.information = toro_2d_information(numbers.data() + 5);
+      }
+      if (!GaussianNoise::from_information(edge.information)) return fail("the information matrix is not positive definite");
+      (is_3d ? seen_3d : seen_2d) = true;
+      graph.edges.push_back(std::move(edge));
+    } else if (tag == "EQUIV") {  // TORO vertex equivalences: not supported, skipped
+      HANZO_RETURN_IF_ERROR(expect(2));
+      ++graph.skipped_equivalences;
     } else if (tag == "FIX") {
       for (size_t i = 0; i < numbers.size(); ++i) {
         Key key = 0;
@@ -113,7 +172,7 @@ Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_n
         graph.fixed.push_back(key);
       }
     } else {
-      return fail("unknown tag (expected VERTEX_SE2, EDGE_SE2, VERTEX_SE3:QUAT, EDGE_SE3:QUAT or FIX)");
+      return fail("unknown tag (expected VERTEX_SE2, EDGE_SE2, VERTEX_SE3:QUAT, EDGE_SE3:QUAT, FIX, or TORO's VERTEX2, EDGE2, VERTEX3, EDGE3, EQUIV)");
     }
     if (seen_2d && seen_3d) return fail("2D and 3D elements in one file");
   }
@@ -262,6 +321,45 @@ Status write_g2o(const std::string& path, const PoseGraph& graph, const Values& 
     out += "\n";
   }
   for (Key key : graph.fixed) out += fmt::format("FIX {}\n", symbol_index(key));
+  return yaml::write_file_atomically(path, out);
+}
+
+Status write_toro(const std::string& path, const PoseGraph& graph, const Values& values) {
+  std::string out;
+  const auto number = [](double value) { return format_double(value); };
+  for (Key key : graph.vertices) {
+    if (graph.dimension == 3) {
+      SE3 pose;
+      HANZO_ASSIGN_OR_RETURN(pose, values.at<SE3>(key));
+      const Eigen::Vector3d rpy = roll_pitch_yaw(pose.rotation());
+      out += fmt::format("VERTEX3 {} {} {} {} {} {} {}\n", symbol_index(key), number(pose.translation().x()), number(pose.translation().y()),
+                         number(pose.translation().z()), number(rpy.x()), number(rpy.y()), number(rpy.z()));
+    } else {
+      SE2 pose;
+      HANZO_ASSIGN_OR_RETURN(pose, values.at<SE2>(key));
+      out += fmt::format("VERTEX2 {} {} {} {}\n", symbol_index(key), number(pose.translation().x()), number(pose.translation().y()),
+                         number(pose.angle()));
+    }
+  }
+  for (const PoseGraphEdge& edge : graph.edges) {
+    if (const auto* se3 = std::get_if<SE3>(&edge.measurement)) {
+      const Eigen::Vector3d rpy = roll_pitch_yaw(se3->rotation());
+      out += fmt::format("EDGE3 {} {} {} {} {} {} {} {}", symbol_index(edge.from), symbol_index(edge.to), number(se3->translation().x()),
+                         number(se3->translation().y()), number(se3->translation().z()), number(rpy.x()), number(rpy.y()), number(rpy.z()));
+      const Eigen::MatrixXd D_inverse = toro_to_g2o_scaling().inverse();
+      const Eigen::MatrixXd toro = D_inverse * edge.information * D_inverse;
+      for (int i = 0; i < 6; ++i) {
+        for (int j = i; j < 6; ++j) out += fmt::format(" {}", number(toro(i, j)));
+      }
+    } else {
+      const SE2& se2 = std::get<SE2>(edge.measurement);
+      const Eigen::MatrixXd& I = edge.information;
+      out += fmt::format("EDGE2 {} {} {} {} {} {} {} {} {} {} {}", symbol_index(edge.from), symbol_index(edge.to), number(se2.translation().x()),
+                         number(se2.translation().y()), number(se2.angle()), number(I(0, 0)), number(I(0, 1)), number(I(1, 1)),
+                         number(I(2, 2)), number(I(0, 2)), number(I(1, 2)));
+    }
+    out += "\n";
+  }
   return yaml::write_file_atomically(path, out);
 }
 

@@ -254,6 +254,66 @@ TEST(G2o, WriteReadRoundTripIsExact) {
   std::filesystem::remove(path);
 }
 
+// A pose as a homogeneous matrix (3x3 in 2D, 4x4 in 3D).
+Eigen::MatrixXd matrix_of(const Value& pose) {
+  if (const auto* se3 = std::get_if<SE3>(&pose)) return se3->matrix();
+  const SE2& se2 = std::get<SE2>(pose);
+  Eigen::Matrix3d matrix = Eigen::Matrix3d::Identity();
+  matrix.topLeftCorner<2, 2>() = se2.rotation_matrix();
+  matrix.block<2, 1>(0, 2) = se2.translation();
+  return matrix;
+}
+
+// TORO files (GTSAM's examples): w100.graph as GTSAM's testDataset reads it (100 poses, 300
+// edges, its 40 EQUIV lines skipped, the first edge 1 -> 0), a write/read round trip in both
+// dimensions, and sphere2500 in TORO's EDGE3 format optimized close to its noise-free poses.
+TEST(Toro, ReadsGtsamsFilesAndRoundTrips) {
+  const std::string gtsam = std::string(HANZO_DATA_DIR) + "/pose_graph/gtsam/";
+  const PoseGraph w100 = read_g2o(gtsam + "w100.graph").value();
+  EXPECT_EQ(w100.dimension, 2);
+  EXPECT_EQ(w100.vertices.size(), 100u);
+  EXPECT_EQ(w100.edges.size(), 300u);
+  EXPECT_EQ(w100.skipped_equivalences, 40);
+  EXPECT_EQ(w100.edges[0].from, X(1));
+  EXPECT_EQ(w100.edges[0].to, X(0));
+  const SE2 first = std::get<SE2>(w100.edges[0].measurement);
+  EXPECT_NEAR(first.translation().x(), -0.99879, 1e-12);
+  EXPECT_NEAR(first.translation().y(), 0.0417574, 1e-12);
+  EXPECT_NEAR(first.angle(), -0.00818381, 1e-12);
+
+  const PoseGraph sphere = read_g2o(gtsam + "sphere2500.txt").value();
+  EXPECT_EQ(sphere.dimension, 3);
+  EXPECT_EQ(sphere.edges.size(), 4949u);
+  for (const PoseGraph* graph : {&w100, &sphere}) {
+    const std::filesystem::path path = std::filesystem::temp_directory_path() / ("hanzo_toro_" + std::to_string(::getpid()) + ".graph");
+    ASSERT_TRUE(write_toro(path.string(), *graph, graph->initial).ok());
+    const PoseGraph back = read_g2o(path.string()).value();
+    std::filesystem::remove(path);
+    ASSERT_EQ(back.edges.size(), graph->edges.size());
+    for (size_t e = 0; e < graph->edges.size(); ++e) {
+      EXPECT_LT((back.edges[e].information - graph->edges[e].information).cwiseAbs().maxCoeff(), 1e-9);
+      EXPECT_LT((matrix_of(back.edges[e].measurement) - matrix_of(graph->edges[e].measurement)).cwiseAbs().maxCoeff(), 1e-12);
+    }
+    EXPECT_NEAR(g2o_chi2(back, back.initial).value(), g2o_chi2(*graph, graph->initial).value(), 1e-6 * g2o_chi2(*graph, graph->initial).value());
+  }
+
+  // Noise-free poses: chain the i -> i+1 edges of the ground-truth file.
+  const PoseGraph truth = read_g2o(gtsam + "sphere2500_groundtruth.txt").value();
+  Values optimized = chordal_initialization(sphere).value();
+  BatchOptimizerConfig config;
+  config.fixed = sphere.fixed;
+  ASSERT_TRUE(optimize(sphere.factor_graph().value(), optimized, config).ok());
+  double squared = 0.0, squared_start = 0.0;
+  for (int i = 0; i < 2500; ++i) {
+    const Eigen::Vector3d truth_position = truth.initial.at<SE3>(X(i)).value().translation();
+    squared += (optimized.at<SE3>(X(i)).value().translation() - truth_position).squaredNorm();
+    squared_start += (sphere.initial.at<SE3>(X(i)).value().translation() - truth_position).squaredNorm();
+  }
+  const double rmse = std::sqrt(squared / 2500), rmse_start = std::sqrt(squared_start / 2500);
+  std::printf("sphere2500 (TORO): position RMSE to the noise-free poses %.3f m (odometry %.3f m)\n", rmse, rmse_start);
+  EXPECT_LT(rmse, 0.1 * rmse_start);
+}
+
 TEST(G2o, RejectsBadInputNamingTheLine) {
   const auto error_of = [](const std::string& text) {
     const Result<PoseGraph> graph = parse_g2o(text, "bad.g2o");

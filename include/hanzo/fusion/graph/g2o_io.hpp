@@ -1,10 +1,20 @@
 #pragma once
-// Pose graphs in g2o's text format (the format of the SE-Sync / g2o benchmark files):
+// Pose graphs in g2o's text format (the format of the SE-Sync / g2o benchmark files), and in
+// TORO's (`.graph`, the older format of the same benchmarks; GTSAM reads both):
 //   VERTEX_SE2 id x y theta
 //   EDGE_SE2 i j dx dy dtheta  I11 I12 I13 I22 I23 I33          (information upper triangle)
 //   VERTEX_SE3:QUAT id x y z qx qy qz qw
 //   EDGE_SE3:QUAT i j dx dy dz dqx dqy dqz dqw  + 21 information entries (upper triangle,
 //                                                 order x y z | quaternion x y z)
+// TORO records (read by the same parser, written by write_toro()):
+//   VERTEX2 id x y theta
+//   EDGE2 i j dx dy dtheta  Ixx Ixy Iyy Itt Ixt Iyt
+//   VERTEX3 id x y z roll pitch yaw                   R = Rz(yaw) Ry(pitch) Rx(roll)
+//   EDGE3 i j dx dy dz roll pitch yaw  + 21 information entries (upper triangle, order
+//                                        x y z roll pitch yaw)
+//   EQUIV i j                          vertex equivalences: not supported, skipped and counted
+// TORO's 3D information (roll, pitch, yaw ~ the rotation vector) is stored converted to g2o's
+// convention (below), so both formats give the same factors.
 // An edge measures pose j in frame i. Vertex id n becomes key X(n). Vertices without a VERTEX
 // line are initialized by chaining edges from known ones. `FIX id` lines mark fixed vertices.
 //
@@ -37,6 +47,7 @@ struct PoseGraph {
   std::vector<Key> vertices;       // in file order (chained ones after)
   std::vector<PoseGraphEdge> edges;
   std::vector<Key> fixed;          // FIX lines; the first vertex when there are none
+  int skipped_equivalences = 0;    // TORO EQUIV lines (not supported)
 
   /// What the optimizer minimizes: g2o's (geodesic) between factors, or SE-Sync's objective
   /// (chordal rotation distance), whose global optima the SE-Sync papers publish.
@@ -59,6 +70,9 @@ Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_n
 /// The graph's vertices at `values` and its edges, in g2o's format; numbers in shortest
 /// round-trip form, so reading the file back gives the same graph. Written atomically.
 Status write_g2o(const std::string& path, const PoseGraph& graph, const Values& values);
+
+/// The same in TORO's format (VERTEX2/EDGE2 or VERTEX3/EDGE3; FIX lines are not part of it).
+Status write_toro(const std::string& path, const PoseGraph& graph, const Values& values);
 
 /// g2o's chi2: sum e^T info e with g2o's errors (SE2: (x, y, wrapped theta) of Z^-1 Ti^-1 Tj;
 /// SE3: translation and quaternion vector part, w >= 0).
