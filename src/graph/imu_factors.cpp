@@ -110,6 +110,36 @@ Result<Eigen::VectorXd> GpsFactor::evaluate(const Values& values, std::vector<Ei
   return Eigen::VectorXd(U * r);
 }
 
+Result<Eigen::VectorXd> GravityFactor::evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const {
+  SE3 T;
+  HANZO_ASSIGN_OR_RETURN(T, values.at<SE3>(keys()[0]));
+  const Eigen::Vector3d predicted = T.rotation().inverse() * (-gravity_world_);
+  const Eigen::MatrixXd& U = noise_.sqrt_information();
+  if (jacobians != nullptr) {
+    Eigen::Matrix<double, 3, 6> J = Eigen::Matrix<double, 3, 6>::Zero();
+    J.rightCols<3>() = SO3::hat(predicted);
+    *jacobians = {U * J};
+  }
+  return Eigen::VectorXd(U * (predicted - specific_force_));
+}
+
+Result<Eigen::VectorXd> GravityPriorFactor::evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const {
+  Eigen::Vector3d G;
+  HANZO_ASSIGN_OR_RETURN(G, values.at<Eigen::Vector3d>(keys()[0]));
+  const double norm = G.norm();
+  if (!(norm > 0.0)) return Error(fmt::format("gravity prior on {}: the gravity vector is zero", key_to_string(keys()[0])));
+  const Eigen::Vector3d n = G / norm;
+  Eigen::Vector4d r;
+  r << (norm - magnitude_) / magnitude_sigma_, (n - direction_) / direction_sigma_;
+  if (jacobians != nullptr) {
+    Eigen::Matrix<double, 4, 3> J;
+    J.row(0) = n.transpose() / magnitude_sigma_;
+    J.bottomRows<3>() = (Eigen::Matrix3d::Identity() - n * n.transpose()) / (norm * direction_sigma_);
+    *jacobians = {J};
+  }
+  return Eigen::VectorXd(r);
+}
+
 template <typename Vector>
 Result<Eigen::VectorXd> EuclideanPriorFactor<Vector>::evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const {
   Vector value;

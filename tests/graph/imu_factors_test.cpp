@@ -241,6 +241,11 @@ TEST(ImuFactors, JacobiansMatchNumericalDifferentiation) {
     expect_jacobians_match(gps, values);
     expect_jacobians_match(velocity_prior, values);
     expect_jacobians_match(bias_prior, values);
+    const GravityFactor gravity(X(0), jitter(1.0) + Eigen::Vector3d(0.0, 0.0, 9.8), GaussianNoise::from_sigmas(Eigen::Vector3d::Constant(0.05)).value());
+    expect_jacobians_match(gravity, values);
+    Values with_gravity = values;
+    with_gravity.insert(L(0), Eigen::Vector3d(jitter(1.0) + Eigen::Vector3d(0.0, 0.0, -9.8)));
+    expect_jacobians_match(GravityPriorFactor(L(0), 9.81, {0.0, 0.1, -1.0}, 0.05, 0.02), with_gravity);
   }
   // At the truth with the true (estimate) bias the IMU residual is tiny against its noise.
   Values truth;
@@ -253,6 +258,31 @@ TEST(ImuFactors, JacobiansMatchNumericalDifferentiation) {
   truth.insert(B(0), estimate);
   const auto noiseless_truth = preintegrate_truth(trajectory, 4.0, 4.5, 0.001, estimate, estimate);
   EXPECT_LT(ImuFactor::create(X(0), V(0), X(1), V(1), B(0), noiseless_truth).value()->evaluate(truth, nullptr).value().norm(), 0.5);
+}
+
+// A static IMU tilted by roll 0.2, pitch -0.1: gravity factors alone recover roll and pitch and
+// leave yaw where it started (unobservable); a gravity vector prior pulls a free vector to 9.81
+// along its direction. A zero gravity vector is refused.
+TEST(ImuFactors, GravityFactorsFixTiltNotYaw) {
+  const SO3 R_world_imu = SO3::exp({0.0, 0.0, 0.7}) * SO3::exp({0.0, -0.1, 0.0}) * SO3::exp({0.2, 0.0, 0.0});
+  const Eigen::Vector3d gravity(0.0, 0.0, -9.80665);
+  const Eigen::Vector3d at_rest = R_world_imu.inverse() * (-gravity);
+  FactorGraph graph;
+  graph.emplace<GravityFactor>(X(0), at_rest, GaussianNoise::from_sigmas(Eigen::Vector3d::Constant(0.02)).value(), gravity);
+  graph.emplace<PriorFactorSE3>(X(0), SE3(SO3::exp({0.0, 0.0, 0.3}), Eigen::Vector3d::Zero()),
+                                GaussianNoise::from_sigmas((Eigen::VectorXd(6) << 0.1, 0.1, 0.1, 10.0, 10.0, 10.0).finished()).value());
+  graph.emplace<GravityPriorFactor>(L(0), 9.81, Eigen::Vector3d(0.0, 0.0, -1.0), 0.01, 0.01);
+  Values values;
+  values.insert(X(0), SE3(SO3::exp({0.0, 0.0, 0.3}), Eigen::Vector3d::Zero()));  // level, yaw 0.3
+  values.insert(L(0), Eigen::Vector3d(1.0, -2.0, -5.0));
+  ASSERT_TRUE(optimize(graph, values).ok());
+  const SO3 estimate = values.at<SE3>(X(0)).value().rotation();
+  EXPECT_LT((estimate.inverse() * Eigen::Vector3d(gravity) - R_world_imu.inverse() * gravity).norm(), 1e-6);  // tilt exact
+  EXPECT_LT(std::abs(std::atan2(estimate.matrix()(1, 0), estimate.matrix()(0, 0)) - 0.3), 0.05);        // yaw kept
+  EXPECT_LT((values.at<Eigen::Vector3d>(L(0)).value() - Eigen::Vector3d(0.0, 0.0, -9.81)).norm(), 1e-4);
+  Values zero;
+  zero.insert(L(0), Eigen::Vector3d::Zero());
+  EXPECT_THAT(GravityPriorFactor(L(0), 9.81, {0.0, 0.0, -1.0}, 0.01, 0.01).evaluate(zero, nullptr).error().message, HasSubstr("zero"));
 }
 
 // Keyframes every 0.5 s along 28 s of a figure eight: IMU factors from a noisy 200 Hz IMU with

@@ -1,7 +1,8 @@
 #pragma once
 // Factors of visual/LiDAR-inertial graphs: the IMU preintegration factor between two
 // keyframes, the bias random walk between their biases, and the navigation factors that anchor
-// them (GPS position with lever arm, velocity and bias priors).
+// them (GPS position with lever arm, gravity: attitude from a static accelerometer and a prior
+// on a gravity vector, velocity and bias priors).
 //
 // Variables: X(i) = T_world_imu (SE3, tangent (translation, rotation), right perturbation:
 // p + R d_rho, R Exp(d_phi)), V(i) world velocity m/s, B(i) ImuBias. All residuals are
@@ -74,6 +75,45 @@ class GpsFactor final : public Factor {
   Eigen::Vector3d position_world_;
   Eigen::Vector3d lever_arm_;
   GaussianNoise noise_;
+};
+
+/// Attitude from a static accelerometer (the IMU at rest measures the specific force of
+/// gravity alone): r = R^T (-g_world) - f_measured on the pose X(i) = T_world_imu, noise 3x3.
+/// It fixes roll and pitch (the direction of gravity in the IMU frame), never yaw. Jacobian:
+/// phi [R^T (-g_world)]x, rho 0.
+class GravityFactor final : public Factor {
+ public:
+  GravityFactor(Key pose, const Eigen::Vector3d& specific_force, GaussianNoise noise,
+                const Eigen::Vector3d& gravity_world = Eigen::Vector3d(0.0, 0.0, -9.80665))
+      : Factor({pose}), specific_force_(specific_force), gravity_world_(gravity_world), noise_(std::move(noise)) {}
+  int dimension() const override { return 3; }
+  Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
+
+ private:
+  Eigen::Vector3d specific_force_;
+  Eigen::Vector3d gravity_world_;
+  GaussianNoise noise_;
+};
+
+/// Prior on a gravity vector variable G (world frame m/s^2, for a world frame not aligned with
+/// gravity, e.g. a visual-inertial map): its magnitude and its direction, 4 residuals
+///   r = ((|G| - magnitude) / magnitude_sigma, (G / |G| - direction) / direction_sigma).
+/// Jacobian: d|G|/dG = n^T, d(G/|G|)/dG = (I - n n^T) / |G| with n = G / |G|. Fails to
+/// evaluate at G = 0.
+class GravityPriorFactor final : public Factor {
+ public:
+  /// direction: unit vector (normalized here); sigmas > 0.
+  GravityPriorFactor(Key gravity, double magnitude, const Eigen::Vector3d& direction, double magnitude_sigma, double direction_sigma)
+      : Factor({gravity}), magnitude_(magnitude), direction_(direction.normalized()), magnitude_sigma_(magnitude_sigma),
+        direction_sigma_(direction_sigma) {}
+  int dimension() const override { return 4; }
+  Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
+
+ private:
+  double magnitude_;
+  Eigen::Vector3d direction_;
+  double magnitude_sigma_;
+  double direction_sigma_;
 };
 
 /// Prior on a Euclidean variable (a velocity Vector3d or an ImuBias): r = x - prior.
