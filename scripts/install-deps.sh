@@ -25,6 +25,8 @@ packages=(
   libpcl-dev libnanoflann-dev libopen3d-dev
   # apps
   libcli11-dev
+  # Python bindings (pybind11) and their tests (pytest, numpy), on Debian's /usr/bin/python3
+  pybind11-dev python3-dev python3-numpy python3-pytest
   # service: REST (cpp-httplib), storage (SQLite, PostgreSQL client + server for the tests), load
   # generator of the REST benchmark
   libcpp-httplib-dev libsqlite3-dev libpq-dev libpqxx-dev postgresql openssl curl wrk

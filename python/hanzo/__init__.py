@@ -1,0 +1,1 @@
+"""hanzo-fusion: sensor fusion and SLAM (namespace package root)."""
