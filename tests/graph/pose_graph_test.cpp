@@ -325,7 +325,7 @@ TEST(G2o, RejectsBadInputNamingTheLine) {
   EXPECT_EQ(error_of(vertices + "EDGE_SE2 0 1 nan 0 0 1 0 0 1 0 1\n"), "bad.g2o:3: EDGE_SE2: non-finite value nan");
   EXPECT_EQ(error_of(vertices + "EDGE_SE2 0 1 1 0 0 -1 0 0 1 0 1\n"), "bad.g2o:3: EDGE_SE2: the information matrix is not positive definite");
   EXPECT_EQ(error_of(vertices + "EDGE_SE4 0 1\n"),
-            "bad.g2o:3: EDGE_SE4: unknown tag (expected VERTEX_SE2, EDGE_SE2, VERTEX_SE3:QUAT, EDGE_SE3:QUAT or FIX)");
+            "bad.g2o:3: EDGE_SE4: unknown tag (expected VERTEX_SE2, EDGE_SE2, VERTEX_SE3:QUAT, EDGE_SE3:QUAT, FIX, or TORO's VERTEX2, EDGE2, VERTEX3, EDGE3, EQUIV)");
   EXPECT_THAT(error_of("VERTEX_SE3:QUAT 0 0 0 0 0 0 0 2\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n"), HasSubstr("quaternion norm 2 is not 1"));
   EXPECT_EQ(error_of(vertices + "VERTEX_SE2 7 0 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 5 6 1 0 0 1 0 0 1 0 1\n"),
             "bad.g2o: vertex 5 is not connected to the rest of the graph");
