@@ -1,0 +1,97 @@
+#pragma once
+// KeyframeGraph: the Session's backend. Keyframes from the frontend become pose nodes X(id)
+// joined by between factors (the frontend's relative motion and its covariance); GNSS fixes
+// attach GPS factors to the keyframe at their time; loop closures (LiDAR, visual, or manual
+// through the API) add between factors with a DCS kernel, so a wrong one switches itself off.
+// process() runs one IncrementalSmoother update (graph/incremental_smoother.hpp) and moves the
+// session onto the optimized latest keyframe (Session::apply_correction), closing the loop
+// between frontend and backend.
+//
+// Frames: X(id) = T_world_body of keyframe id; factors' covariances over the SE3 tangent
+// (rho, phi), right perturbation; GNSS positions in the world (ENU) frame, lever arm in the
+// body frame. The first keyframe gets a prior with the frontend's covariance (converted from
+// (position world, orientation body) to the tangent), which anchors the graph.
+//
+// Use from one thread: attach() queues keyframes from the session's callback; call process()
+// after Session::push returns (never inside a callback).
+
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <optional>
+#include <vector>
+
+#include "hanzo/fusion/graph/incremental_smoother.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
+#include "hanzo/fusion/pipeline/session.hpp"
+
+namespace hanzo::fusion::pipeline {
+
+struct KeyframeGraphConfig {
+  graph::IncrementalSmootherConfig smoother;
+  double loop_closure_dcs_phi = 1000;     ///< DCS parameter of loop closures (graph/factor.hpp)
+  double gps_max_time_offset_s = 0.1;    ///< a fix this close to a keyframe attaches to it
+};
+
+struct KeyframeGraphUpdate {
+  int keyframes_added = 0;
+  int factors_added = 0;
+  int fixes_dropped = 0;            ///< GNSS fixes no keyframe came near
+  bool corrected_session = false;   ///< apply_correction was called
+  double correction_translation_m = 0.0;  ///< how far the correction moved the latest keyframe
+};
+
+class KeyframeGraph {
+ public:
+  explicit KeyframeGraph(KeyframeGraphConfig config = {});
+
+  /// Queues the session's keyframes (replaces its keyframe callback). The graph must outlive
+  /// the session's pushes.
+  void attach(Session& session);
+
+  /// Queues a keyframe: X(id) at its pose, a between factor from its previous keyframe (which
+  /// must be known), or a prior for the first one. Fails on an unknown previous keyframe, a
+  /// repeated id or covariances that are not positive definite.
+  Status add_keyframe(const msgs::Keyframe& keyframe);
+  /// A GNSS position (world ENU m, covariance m^2) at `time`, through the antenna's lever arm
+  /// (body frame). Queued until process() finds the keyframe within gps_max_time_offset_s
+  /// (it may be emitted after the fix); dropped, and counted, when none comes. Fails on
+  /// non-finite values or a covariance that is not positive definite.
+  Status add_gps(Timestamp time, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,
+                 const Eigen::Vector3d& lever_arm = Eigen::Vector3d::Zero());
+  /// A loop closure: keyframe `to` seen from keyframe `from` (T_from_to), covariance over its
+  /// tangent. Both keyframes must be known.
+  Status add_loop_closure(uint64_t from, uint64_t to, const SE3& T_from_to, const Eigen::Matrix<double, 6, 6>& covariance);
+
+  /// Adds what is queued and re-optimizes; with a session, corrects it onto the optimized
+  /// latest keyframe.
+  Result<KeyframeGraphUpdate> process(Session* session = nullptr);
+
+  /// The optimized pose of a keyframe added by process().
+  std::optional<SE3> optimized_pose(uint64_t keyframe_id) const;
+  /// The frontend's pose of a keyframe (as emitted) and its time.
+  std::optional<SE3> frontend_pose(uint64_t keyframe_id) const;
+  std::optional<Timestamp> keyframe_time(uint64_t keyframe_id) const;
+  /// Ids of the keyframes added so far, in order.
+  std::vector<uint64_t> keyframe_ids() const;
+  graph::IncrementalSmoother& smoother() { return smoother_; }
+
+ private:
+  KeyframeGraphConfig config_;
+  graph::IncrementalSmoother smoother_;
+  std::deque<msgs::Keyframe> queued_keyframes_;
+  graph::GraphUpdate pending_;
+  std::map<uint64_t, SE3> frontend_poses_;   // every keyframe added
+  std::map<uint64_t, Timestamp> keyframe_times_;
+  std::map<int64_t, uint64_t> keyframe_at_;  // timestamp ns -> keyframe id
+  std::optional<uint64_t> latest_keyframe_;
+  struct Fix {
+    Timestamp time;
+    Eigen::Vector3d position_world;
+    Eigen::Vector3d lever_arm;
+    graph::GaussianNoise noise;
+  };
+  std::deque<Fix> pending_fixes_;
+};
+
+}  // namespace hanzo::fusion::pipeline

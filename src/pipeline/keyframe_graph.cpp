@@ -1,0 +1,148 @@
+#include "hanzo/fusion/pipeline/keyframe_graph.hpp"
+
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "hanzo/fusion/graph/imu_factors.hpp"
+#include "hanzo/fusion/graph/pose_factors.hpp"
+
+namespace hanzo::fusion::pipeline {
+namespace {
+
+Result<graph::GaussianNoise> noise_of(const Eigen::MatrixXd& covariance, const std::string& what) {
+  Result<graph::GaussianNoise> noise = graph::GaussianNoise::from_covariance(covariance);
+  if (!noise) return Error(fmt::format("{}: {}", what, noise.error().message));
+  return noise;
+}
+
+}  // namespace
+
+KeyframeGraph::KeyframeGraph(KeyframeGraphConfig config) : config_(std::move(config)), smoother_(config_.smoother) {}
+
+void KeyframeGraph::attach(Session& session) {
+  session.set_keyframe_callback([this](const msgs::Keyframe& keyframe) { queued_keyframes_.push_back(keyframe); });
+}
+
+Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe) {
+  const uint64_t id = keyframe.keyframe_id;
+  if (frontend_poses_.count(id) != 0) return Error(fmt::format("keyframe {}: already added", id));
+  const SE3 T_world_body = keyframe.T_world_body.to_se3();
+  if (keyframe.T_previous_current && keyframe.relative_covariance) {
+    if (frontend_poses_.count(keyframe.previous_keyframe_id) == 0) {
+      return Error(fmt::format("keyframe {}: its previous keyframe {} is unknown", id, keyframe.previous_keyframe_id));
+    }
+    graph::GaussianNoise noise;
+    HANZO_ASSIGN_OR_RETURN(noise, noise_of(*keyframe.relative_covariance, fmt::format("keyframe {} relative covariance", id)));
+    pending_.factors.emplace<graph::BetweenFactorSE3>(graph::X(keyframe.previous_keyframe_id), graph::X(id),
+                                                      keyframe.T_previous_current->to_se3(), noise);
+  } else {
+    if (!keyframe.pose_covariance) return Error(fmt::format("keyframe {}: the first keyframe needs a pose covariance", id));
+    // (position world, orientation body) -> tangent (rho = R^T dp, phi).
+    Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Identity();
+    J.topLeftCorner<3, 3>() = T_world_body.rotation().matrix().transpose();
+    graph::GaussianNoise noise;
+    HANZO_ASSIGN_OR_RETURN(noise, noise_of(J * *keyframe.pose_covariance * J.transpose(), fmt::format("keyframe {} pose covariance", id)));
+    pending_.factors.emplace<graph::PriorFactorSE3>(graph::X(id), T_world_body, noise);
+  }
+  pending_.values.insert(graph::X(id), T_world_body);
+  frontend_poses_[id] = T_world_body;
+  keyframe_at_[keyframe.timestamp.nanoseconds()] = id;
+  keyframe_times_[id] = keyframe.timestamp;
+  latest_keyframe_ = id;
+  return ok_status();
+}
+
+Status KeyframeGraph::add_gps(Timestamp time, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,
+                              const Eigen::Vector3d& lever_arm) {
+  if (!position_world.allFinite() || !lever_arm.allFinite()) return Error("gps: non-finite position or lever arm");
+  graph::GaussianNoise noise;
+  HANZO_ASSIGN_OR_RETURN(noise, noise_of(covariance, "gps covariance"));
+  pending_fixes_.push_back({time, position_world, lever_arm, noise});
+  return ok_status();
+}
+
+Status KeyframeGraph::add_loop_closure(uint64_t from, uint64_t to, const SE3& T_from_to, const Eigen::Matrix<double, 6, 6>& covariance) {
+  for (uint64_t id : {from, to}) {
+    if (frontend_poses_.count(id) == 0) return Error(fmt::format("loop closure {} - {}: keyframe {} is unknown", from, to, id));
+  }
+  if (from == to) return Error(fmt::format("loop closure {} - {}: a keyframe with itself", from, to));
+  graph::GaussianNoise noise;
+  HANZO_ASSIGN_OR_RETURN(noise, noise_of(covariance, fmt::format("loop closure {} - {} covariance", from, to)));
+  pending_.factors.emplace_robust<graph::BetweenFactorSE3>(graph::RobustKernel{graph::RobustKernel::Type::kDcs, config_.loop_closure_dcs_phi},
+                                                           graph::X(from), graph::X(to), T_from_to, noise);
+  return ok_status();
+}
+
+Result<KeyframeGraphUpdate> KeyframeGraph::process(Session* session) {
+  KeyframeGraphUpdate update;
+  while (!queued_keyframes_.empty()) {
+    const msgs::Keyframe keyframe = queued_keyframes_.front();
+    queued_keyframes_.pop_front();
+    HANZO_RETURN_IF_ERROR(add_keyframe(keyframe));
+    ++update.keyframes_added;
+  }
+  // GNSS fixes onto the keyframe nearest in time, once one is close enough.
+  const auto max_offset = static_cast<int64_t>(config_.gps_max_time_offset_s * 1e9);
+  const int64_t latest_time = keyframe_at_.empty() ? INT64_MIN : keyframe_at_.rbegin()->first;
+  for (auto fix = pending_fixes_.begin(); fix != pending_fixes_.end();) {
+    const int64_t time = fix->time.nanoseconds();
+    std::optional<uint64_t> nearest;
+    int64_t best = max_offset + 1;
+    for (auto it = keyframe_at_.lower_bound(time - max_offset); it != keyframe_at_.end() && it->first <= time + max_offset; ++it) {
+      if (std::llabs(it->first - time) < best) {
+        best = std::llabs(it->first - time);
+        nearest = it->second;
+      }
+    }
+    if (nearest) {
+      pending_.factors.emplace<graph::GpsFactor>(graph::X(*nearest), fix->position_world, fix->lever_arm, fix->noise);
+      fix = pending_fixes_.erase(fix);
+    } else if (time + max_offset < latest_time) {
+      ++update.fixes_dropped;
+      fix = pending_fixes_.erase(fix);
+    } else {
+      ++fix;
+    }
+  }
+  update.factors_added = static_cast<int>(pending_.factors.size());
+  if (pending_.factors.size() == 0 && pending_.values.size() == 0) return update;
+  if (Result<graph::IncrementalUpdateSummary> updated = smoother_.update(pending_.factors, pending_.values); !updated) {
+    return Error(fmt::format("keyframe graph: {}", updated.error().message));
+  }
+  pending_ = graph::GraphUpdate{};
+  if (session != nullptr && latest_keyframe_) {
+    const SE3 optimized = smoother_.estimate().at<SE3>(graph::X(*latest_keyframe_)).value();
+    update.correction_translation_m = (optimized.translation() - frontend_poses_.at(*latest_keyframe_).translation()).norm();
+    HANZO_RETURN_IF_ERROR(session->apply_correction(*latest_keyframe_, optimized));
+    update.corrected_session = true;
+  }
+  return update;
+}
+
+std::optional<SE3> KeyframeGraph::optimized_pose(uint64_t keyframe_id) const {
+  const Result<SE3> pose = smoother_.estimate().at<SE3>(graph::X(keyframe_id));
+  return pose ? std::optional<SE3>(*pose) : std::nullopt;
+}
+
+std::optional<SE3> KeyframeGraph::frontend_pose(uint64_t keyframe_id) const {
+  const auto found = frontend_poses_.find(keyframe_id);
+  return found != frontend_poses_.end() ? std::optional<SE3>(found->second) : std::nullopt;
+}
+
+}  // namespace hanzo::fusion::pipeline
+
+namespace hanzo::fusion::pipeline {
+
+std::optional<Timestamp> KeyframeGraph::keyframe_time(uint64_t keyframe_id) const {
+  const auto found = keyframe_times_.find(keyframe_id);
+  return found != keyframe_times_.end() ? std::optional<Timestamp>(found->second) : std::nullopt;
+}
+
+std::vector<uint64_t> KeyframeGraph::keyframe_ids() const {
+  std::vector<uint64_t> ids;
+  for (const auto& [id, pose] : frontend_poses_) ids.push_back(id);
+  return ids;
+}
+
+}  // namespace hanzo::fusion::pipeline

@@ -1,0 +1,155 @@
+// The backend behind the Session: keyframes become pose nodes, loop closures bend the
+// trajectory back onto the truth, corrections flow back into the frontend; GNSS fixes attach
+// to keyframes; bad input changes nothing.
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "hanzo/fusion/pipeline/keyframe_graph.hpp"
+#include "hanzo/fusion/sim/scenario.hpp"
+#include "hanzo/fusion/sim/scenario_simulation.hpp"
+
+namespace hanzo::fusion::pipeline {
+namespace {
+
+using ::testing::HasSubstr;
+
+// warehouse_robot with its IMU and wheels only (two laps of the aisles; the left wheel slips
+// 25-33 s): the frontend dead-reckons and drifts.
+sim::Scenario dead_reckoning_warehouse() {
+  sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_robot.yaml").value();
+  std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& sensor) {
+    return sensor.modality != config::SensorModality::kImu && sensor.modality != config::SensorModality::kWheelOdometry;
+  });
+  return scenario;
+}
+
+// Position RMSE after moving the estimate so that its first pose lies on the truth (without
+// GNSS the frontend's world frame starts at an arbitrary heading: drift is what counts).
+double position_rmse(const std::vector<std::pair<SE3, SE3>>& estimate_and_truth) {
+  const SE3 alignment = estimate_and_truth.front().second * estimate_and_truth.front().first.inverse();
+  double squared = 0.0;
+  for (const auto& [estimate, truth] : estimate_and_truth) squared += ((alignment * estimate).translation() - truth.translation()).squaredNorm();
+  return std::sqrt(squared / static_cast<double>(estimate_and_truth.size()));
+}
+
+// Loop closures as a place recognizer would report them on the second lap: for a keyframe
+// within 0.8 m of one at least 40 keyframes older, the true relative pose with 2 cm / 0.2 deg
+// noise; plus one wrong closure (5 m off) that the DCS kernel must ignore.
+TEST(KeyframeGraph, LoopClosuresCorrectTheDeadReckonedTrajectoryAndTheFrontend) {
+  const sim::Scenario scenario = dead_reckoning_warehouse();
+  auto simulation = sim::ScenarioSimulation::create(scenario).value();
+  const sim::SplineTrajectory& trajectory = simulation->trajectory();
+  auto session = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  auto frontend_only = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  std::vector<msgs::Keyframe> frontend_only_keyframes;
+  frontend_only->set_keyframe_callback([&](const msgs::Keyframe& keyframe) { frontend_only_keyframes.push_back(keyframe); });
+
+  KeyframeGraph backend;
+  backend.attach(*session);
+  std::mt19937_64 random(4);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  Eigen::Matrix<double, 6, 6> closure_covariance = Eigen::Matrix<double, 6, 6>::Identity();
+  closure_covariance.topLeftCorner<3, 3>() *= 0.02 * 0.02;
+  closure_covariance.bottomRightCorner<3, 3>() *= 0.0035 * 0.0035;
+  int closures = 0, corrections = 0;
+  bool wrong_closure_added = false;
+  size_t known_keyframes = 0;
+  const Status status = simulation->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) {
+    (void)frontend_only->push(sensor.name, message);
+    (void)session->push(sensor.name, message);
+    const KeyframeGraphUpdate update = backend.process(session.get()).value();
+    if (update.corrected_session) ++corrections;
+    const std::vector<uint64_t> ids = backend.keyframe_ids();
+    for (; known_keyframes < ids.size(); ++known_keyframes) {
+      const uint64_t id = ids[known_keyframes];
+      const SE3 truth = trajectory.sample(*backend.keyframe_time(id)).T_world_body;
+      for (uint64_t older = 0; older + 40 < id; ++older) {
+        const SE3 older_truth = trajectory.sample(*backend.keyframe_time(older)).T_world_body;
+        if ((older_truth.translation() - truth.translation()).norm() > 0.8) continue;
+        SE3::Tangent noise;
+        for (int k = 0; k < 6; ++k) noise(k) = normal(random) * (k < 3 ? 0.02 : 0.0035);
+        EXPECT_TRUE(backend.add_loop_closure(older, id, older_truth.inverse() * truth * SE3::exp(noise), closure_covariance).ok());
+        ++closures;
+        if (!wrong_closure_added) {
+          EXPECT_TRUE(backend.add_loop_closure(older / 2, id, SE3(SO3(), Eigen::Vector3d(5.0, 0.0, 0.0)), closure_covariance).ok());
+          wrong_closure_added = true;
+        }
+        break;
+      }
+    }
+    return ok_status();
+  });
+  ASSERT_TRUE(status.ok());
+  session->flush();
+  frontend_only->flush();
+  ASSERT_TRUE(backend.process(session.get()).ok());
+  ASSERT_TRUE(backend.smoother().wait_for_batch().ok());
+
+  std::vector<std::pair<SE3, SE3>> optimized, dead_reckoned;
+  for (uint64_t id : backend.keyframe_ids()) {
+    optimized.emplace_back(*backend.optimized_pose(id), trajectory.sample(*backend.keyframe_time(id)).T_world_body);
+  }
+  for (const msgs::Keyframe& keyframe : frontend_only_keyframes) {
+    dead_reckoned.emplace_back(keyframe.T_world_body.to_se3(), trajectory.sample(keyframe.timestamp).T_world_body);
+  }
+  const double optimized_rmse = position_rmse(optimized), dead_reckoned_rmse = position_rmse(dead_reckoned);
+  // The live frontend estimate at the end, with and without the backend's corrections, aligned
+  // like the keyframes (by the first keyframe).
+  const auto final_error = [&](const Session& fused, const SE3& first_keyframe, Timestamp first_time) {
+    const SE3 alignment = trajectory.sample(first_time).T_world_body * first_keyframe.inverse();
+    const msgs::PoseEstimate pose = *fused.latest_pose();
+    return ((alignment * pose.T_world_body.to_se3()).translation() - trajectory.sample(pose.timestamp).T_world_body.translation()).norm();
+  };
+  const double final_with_backend = final_error(*session, *backend.frontend_pose(0), *backend.keyframe_time(0));
+  const double final_dead_reckoned =
+      final_error(*frontend_only, frontend_only_keyframes.front().T_world_body.to_se3(), frontend_only_keyframes.front().timestamp);
+  std::printf("warehouse, IMU + wheels, %zu keyframes, %d loop closures: keyframe position RMSE %.3f m dead reckoning, %.3f m "
+              "with the backend; final frontend error %.3f m -> %.3f m (%d corrections)\n",
+              optimized.size(), closures, dead_reckoned_rmse, optimized_rmse, final_dead_reckoned, final_with_backend, corrections);
+  EXPECT_GT(closures, 20);
+  EXPECT_GT(optimized.size(), 100u);
+  EXPECT_LT(optimized_rmse, 0.4 * dead_reckoned_rmse);
+  EXPECT_LT(final_with_backend, 0.5 * final_dead_reckoned);
+  EXPECT_GT(corrections, 100);
+}
+
+TEST(KeyframeGraph, GnssFixesAttachToKeyframesAndBadInputIsRefused) {
+  KeyframeGraph backend;
+  msgs::Keyframe first;
+  first.keyframe_id = 0;
+  first.timestamp = Timestamp::from_nanoseconds(1'000'000'000);
+  first.pose_covariance = msgs::Matrix6d::Identity();
+  ASSERT_TRUE(backend.add_keyframe(first).ok());
+  msgs::Keyframe second = first;
+  second.keyframe_id = 1;
+  second.timestamp = Timestamp::from_nanoseconds(2'000'000'000);
+  second.previous_keyframe_id = 0;
+  second.T_previous_current = msgs::Pose::from_se3(SE3(SO3(), Eigen::Vector3d(1.0, 0.0, 0.0)));
+  second.relative_covariance = 0.01 * msgs::Matrix6d::Identity();
+  ASSERT_TRUE(backend.add_keyframe(second).ok());
+  // A fix 20 ms after keyframe 1 says it is at x = 3 (very confident): it pulls keyframe 1 there.
+  ASSERT_TRUE(backend.add_gps(Timestamp::from_nanoseconds(2'020'000'000), {3.0, 0.0, 0.0}, 1e-6 * Eigen::Matrix3d::Identity()).ok());
+  // A fix far from every keyframe is dropped once later keyframes show none will come.
+  ASSERT_TRUE(backend.add_gps(Timestamp::from_nanoseconds(1'500'000'000), {9.0, 9.0, 9.0}, Eigen::Matrix3d::Identity()).ok());
+  const KeyframeGraphUpdate update = backend.process().value();
+  EXPECT_EQ(update.fixes_dropped, 1);
+  EXPECT_NEAR(backend.optimized_pose(1)->translation().x(), 3.0, 1e-3);
+
+  EXPECT_THAT(backend.add_keyframe(second).error().message, HasSubstr("already added"));
+  msgs::Keyframe orphan = second;
+  orphan.keyframe_id = 5;
+  orphan.previous_keyframe_id = 4;
+  EXPECT_THAT(backend.add_keyframe(orphan).error().message, HasSubstr("previous keyframe 4 is unknown"));
+  EXPECT_THAT(backend.add_loop_closure(0, 9, SE3(), msgs::Matrix6d::Identity()).error().message, HasSubstr("keyframe 9 is unknown"));
+  EXPECT_THAT(backend.add_loop_closure(0, 1, SE3(), -msgs::Matrix6d::Identity()).error().message, HasSubstr("covariance"));
+  EXPECT_FALSE(backend.add_gps(first.timestamp, Eigen::Vector3d::Constant(std::nan("")), Eigen::Matrix3d::Identity()).ok());
+  EXPECT_EQ(backend.keyframe_ids().size(), 2u);
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::pipeline
