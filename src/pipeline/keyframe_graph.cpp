@@ -71,6 +71,7 @@ Status KeyframeGraph::add_loop_closure(uint64_t from, uint64_t to, const SE3& T_
   HANZO_ASSIGN_OR_RETURN(noise, noise_of(covariance, fmt::format("loop closure {} - {} covariance", from, to)));
   pending_.factors.emplace_robust<graph::BetweenFactorSE3>(graph::RobustKernel{graph::RobustKernel::Type::kDcs, config_.loop_closure_dcs_phi},
                                                            graph::X(from), graph::X(to), T_from_to, noise);
+  loop_closure_pending_ = true;
   return ok_status();
 }
 
@@ -111,6 +112,12 @@ Result<KeyframeGraphUpdate> KeyframeGraph::process(Session* session) {
     return Error(fmt::format("keyframe graph: {}", updated.error().message));
   }
   pending_ = graph::GraphUpdate{};
+  if (config_.batch_on_loop_closure && loop_closure_pending_) {
+    if (Result<graph::OptimizationSummary> batch = smoother_.wait_for_batch(); !batch) {
+      return Error(fmt::format("keyframe graph: {}", batch.error().message));
+    }
+  }
+  loop_closure_pending_ = false;
   if (session != nullptr && latest_keyframe_) {
     const SE3 optimized = smoother_.estimate().at<SE3>(graph::X(*latest_keyframe_)).value();
     update.correction_translation_m = (optimized.translation() - frontend_poses_.at(*latest_keyframe_).translation()).norm();

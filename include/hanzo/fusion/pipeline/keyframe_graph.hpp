@@ -31,6 +31,10 @@ struct KeyframeGraphConfig {
   graph::IncrementalSmootherConfig smoother;
   double loop_closure_dcs_phi = 1000;     ///< DCS parameter of loop closures (graph/factor.hpp)
   double gps_max_time_offset_s = 0.1;    ///< a fix this close to a keyframe attaches to it
+  /// Run a full batch (synchronously, in process()) whenever loop closures were added. With
+  /// smoother.background_batch = false this makes the backend deterministic (offline runs,
+  /// tests); in real time it blocks process() for the length of a batch.
+  bool batch_on_loop_closure = false;
 };
 
 struct KeyframeGraphUpdate {
@@ -85,6 +89,7 @@ class KeyframeGraph {
   std::map<uint64_t, Timestamp> keyframe_times_;
   std::map<int64_t, uint64_t> keyframe_at_;  // timestamp ns -> keyframe id
   std::optional<uint64_t> latest_keyframe_;
+  bool loop_closure_pending_ = false;
   struct Fix {
     Timestamp time;
     Eigen::Vector3d position_world;
