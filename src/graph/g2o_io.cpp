@@ -284,83 +284,79 @@ Result<std::vector<GraphUpdate>> PoseGraph::incremental_updates(Objective object
   return updates;
 }
 
-Status write_g2o(const std::string& path, const PoseGraph& graph, const Values& values) {
-  std::string out;
+namespace {
+
+enum class TextFormat { kG2o, kToro };
+
+// The numbers of a pose: x y theta (2D); x y z and qx qy qz qw (g2o) or roll pitch yaw (TORO).
+std::string pose_fields(const Value& pose, TextFormat format) {
   const auto number = [](double value) { return format_double(value); };
+  if (const auto* se2 = std::get_if<SE2>(&pose)) {
+    return fmt::format("{} {} {}", number(se2->translation().x()), number(se2->translation().y()), number(se2->angle()));
+  }
+  const SE3& se3 = std::get<SE3>(pose);
+  const Eigen::Vector3d& t = se3.translation();
+  if (format == TextFormat::kToro) {
+    const Eigen::Vector3d rpy = roll_pitch_yaw(se3.rotation());
+    return fmt::format("{} {} {} {} {} {}", number(t.x()), number(t.y()), number(t.z()), number(rpy.x()), number(rpy.y()), number(rpy.z()));
+  }
+  const Eigen::Quaterniond& q = se3.rotation().quaternion();
+  return fmt::format("{} {} {} {} {} {} {}", number(t.x()), number(t.y()), number(t.z()), number(q.x()), number(q.y()), number(q.z()),
+                     number(q.w()));
+}
+
+// An edge's information in the file's layout: g2o's upper triangle as stored; TORO's 2D order
+// (xx xy yy tt xt yt) and 3D roll-pitch-yaw scaling.
+std::string information_fields(const Eigen::MatrixXd& information, TextFormat format) {
+  std::string out;
+  const auto add = [&out](double value) { out += fmt::format(" {}", format_double(value)); };
+  if (format == TextFormat::kToro && information.rows() == 3) {
+    for (const auto& [i, j] : {std::pair{0, 0}, {0, 1}, {1, 1}, {2, 2}, {0, 2}, {1, 2}}) add(information(i, j));
+    return out;
+  }
+  Eigen::MatrixXd matrix = information;
+  if (format == TextFormat::kToro) {
+    const Eigen::MatrixXd D_inverse = toro_to_g2o_scaling().inverse();
+    matrix = D_inverse * information * D_inverse;
+  }
+  for (int i = 0; i < matrix.rows(); ++i) {
+    for (int j = i; j < matrix.cols(); ++j) add(matrix(i, j));
+  }
+  return out;
+}
+
+Status write_pose_graph(const std::string& path, const PoseGraph& graph, const Values& values, TextFormat format) {
+  const bool toro = format == TextFormat::kToro, spatial = graph.dimension == 3;
+  const char* vertex_tag = toro ? (spatial ? "VERTEX3" : "VERTEX2") : (spatial ? "VERTEX_SE3:QUAT" : "VERTEX_SE2");
+  const char* edge_tag = toro ? (spatial ? "EDGE3" : "EDGE2") : (spatial ? "EDGE_SE3:QUAT" : "EDGE_SE2");
+  std::string out;
   for (Key key : graph.vertices) {
-    if (graph.dimension == 3) {
-      SE3 pose;
+    Value pose;
+    if (spatial) {
       HANZO_ASSIGN_OR_RETURN(pose, values.at<SE3>(key));
-      const Eigen::Quaterniond& q = pose.rotation().quaternion();
-      out += fmt::format("VERTEX_SE3:QUAT {} {} {} {} {} {} {} {}\n", symbol_index(key), number(pose.translation().x()),
-                         number(pose.translation().y()), number(pose.translation().z()), number(q.x()), number(q.y()), number(q.z()),
-                         number(q.w()));
     } else {
-      SE2 pose;
       HANZO_ASSIGN_OR_RETURN(pose, values.at<SE2>(key));
-      out += fmt::format("VERTEX_SE2 {} {} {} {}\n", symbol_index(key), number(pose.translation().x()), number(pose.translation().y()),
-                         number(pose.angle()));
     }
+    out += fmt::format("{} {} {}\n", vertex_tag, symbol_index(key), pose_fields(pose, format));
   }
   for (const PoseGraphEdge& edge : graph.edges) {
-    std::string measurement;
-    if (const auto* se3 = std::get_if<SE3>(&edge.measurement)) {
-      const Eigen::Quaterniond& q = se3->rotation().quaternion();
-      measurement = fmt::format("EDGE_SE3:QUAT {} {} {} {} {} {} {} {} {}", symbol_index(edge.from), symbol_index(edge.to),
-                                number(se3->translation().x()), number(se3->translation().y()), number(se3->translation().z()),
-                                number(q.x()), number(q.y()), number(q.z()), number(q.w()));
-    } else {
-      const SE2& se2 = std::get<SE2>(edge.measurement);
-      measurement = fmt::format("EDGE_SE2 {} {} {} {} {}", symbol_index(edge.from), symbol_index(edge.to), number(se2.translation().x()),
-                                number(se2.translation().y()), number(se2.angle()));
-    }
-    out += measurement;
-    for (int i = 0; i < edge.information.rows(); ++i) {
-      for (int j = i; j < edge.information.cols(); ++j) out += fmt::format(" {}", number(edge.information(i, j)));
-    }
-    out += "\n";
+    out += fmt::format("{} {} {} {}{}\n", edge_tag, symbol_index(edge.from), symbol_index(edge.to), pose_fields(edge.measurement, format),
+                       information_fields(edge.information, format));
   }
-  for (Key key : graph.fixed) out += fmt::format("FIX {}\n", symbol_index(key));
+  if (!toro) {
+    for (Key key : graph.fixed) out += fmt::format("FIX {}\n", symbol_index(key));
+  }
   return yaml::write_file_atomically(path, out);
 }
 
+}  // namespace
+
+Status write_g2o(const std::string& path, const PoseGraph& graph, const Values& values) {
+  return write_pose_graph(path, graph, values, TextFormat::kG2o);
+}
+
 Status write_toro(const std::string& path, const PoseGraph& graph, const Values& values) {
-  std::string out;
-  const auto number = [](double value) { return format_double(value); };
-  for (Key key : graph.vertices) {
-    if (graph.dimension == 3) {
-      SE3 pose;
-      HANZO_ASSIGN_OR_RETURN(pose, values.at<SE3>(key));
-      const Eigen::Vector3d rpy = roll_pitch_yaw(pose.rotation());
-      out += fmt::format("VERTEX3 {} {} {} {} {} {} {}\n", symbol_index(key), number(pose.translation().x()), number(pose.translation().y()),
-                         number(pose.translation().z()), number(rpy.x()), number(rpy.y()), number(rpy.z()));
-    } else {
-      SE2 pose;
-      HANZO_ASSIGN_OR_RETURN(pose, values.at<SE2>(key));
-      out += fmt::format("VERTEX2 {} {} {} {}\n", symbol_index(key), number(pose.translation().x()), number(pose.translation().y()),
-                         number(pose.angle()));
-    }
-  }
-  for (const PoseGraphEdge& edge : graph.edges) {
-    if (const auto* se3 = std::get_if<SE3>(&edge.measurement)) {
-      const Eigen::Vector3d rpy = roll_pitch_yaw(se3->rotation());
-      out += fmt::format("EDGE3 {} {} {} {} {} {} {} {}", symbol_index(edge.from), symbol_index(edge.to), number(se3->translation().x()),
-                         number(se3->translation().y()), number(se3->translation().z()), number(rpy.x()), number(rpy.y()), number(rpy.z()));
-      const Eigen::MatrixXd D_inverse = toro_to_g2o_scaling().inverse();
-      const Eigen::MatrixXd toro = D_inverse * edge.information * D_inverse;
-      for (int i = 0; i < 6; ++i) {
-        for (int j = i; j < 6; ++j) out += fmt::format(" {}", number(toro(i, j)));
-      }
-    } else {
-      const SE2& se2 = std::get<SE2>(edge.measurement);
-      const Eigen::MatrixXd& I = edge.information;
-      out += fmt::format("EDGE2 {} {} {} {} {} {} {} {} {} {} {}", symbol_index(edge.from), symbol_index(edge.to), number(se2.translation().x()),
-                         number(se2.translation().y()), number(se2.angle()), number(I(0, 0)), number(I(0, 1)), number(I(1, 1)),
-                         number(I(2, 2)), number(I(0, 2)), number(I(1, 2)));
-    }
-    out += "\n";
-  }
-  return yaml::write_file_atomically(path, out);
+  return write_pose_graph(path, graph, values, TextFormat::kToro);
 }
 
 Result<double> g2o_chi2(const PoseGraph& graph, const Values& values) {
