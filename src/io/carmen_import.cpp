@@ -29,19 +29,13 @@ Result<std::string> read_maybe_gzip(const std::string& path) {
 
 double wrap_angle(double angle) { return std::remainder(angle, 2.0 * M_PI); }
 
-struct Pending {
-  Timestamp time;
-  msgs::SensorMessage message;
-  std::string topic;
-};
-
 }  // namespace
 
-Result<CarmenImportReport> import_carmen(const std::string& path, SensorLogWriter& writer, const CarmenImportConfig& config) {
+Result<CarmenLog> read_carmen(const std::string& path, const CarmenImportConfig& config) {
   std::string text;
   HANZO_ASSIGN_OR_RETURN(text, read_maybe_gzip(path));
-  CarmenImportReport report;
-  std::vector<Pending> pending;
+  CarmenLog log;
+  CarmenImportReport& report = log.report;
   std::optional<Timestamp> last_scan_time, last_odom_time;
   std::optional<Eigen::Vector3d> last_odom_pose;
   double left = 0.0, right = 0.0;
@@ -99,7 +93,7 @@ Result<CarmenImportReport> import_carmen(const std::string& path, SensorLogWrite
       pose(1, 3) = y;
       report.scan_poses.timestamps.push_back(time);
       report.scan_poses.poses.push_back(pose);
-      pending.push_back({time, std::move(scan), config.laser_topic});
+      log.scans.push_back(std::move(scan));
       ++report.scans;
     } else if (fields[0] == "ODOM") {
       if (config.wheel_separation <= 0.0) {
@@ -140,22 +134,37 @@ Result<CarmenImportReport> import_carmen(const std::string& path, SensorLogWrite
       wheel.left_distance = left;
       wheel.right_distance = right;
       wheel.wheel_separation = config.wheel_separation;
-      pending.push_back({time, std::move(wheel), config.odometry_topic});
+      log.odometry.push_back(std::move(wheel));
       ++report.odometry;
     } else {
       ++report.skipped_lines;
     }
   }
   if (report.scans == 0 && report.odometry == 0) return Error(fmt::format("{}: no FLASER or ODOM lines", path));
-  std::stable_sort(pending.begin(), pending.end(), [](const Pending& a, const Pending& b) { return a.time < b.time; });
-  for (const Pending& item : pending) {
+  return log;
+}
+
+Result<CarmenImportReport> import_carmen(const std::string& path, SensorLogWriter& writer, const CarmenImportConfig& config) {
+  CarmenLog log;
+  HANZO_ASSIGN_OR_RETURN(log, read_carmen(path, config));
+  CarmenImportReport& report = log.report;
+  // Both lists are in time order: merge them (scans first at equal times).
+  auto write = [&](const std::string& topic, const auto& message) -> Status {
     // An invalid message (e.g. at time zero) is counted and left out; write errors end the import.
-    const Status valid = std::visit([](const auto& m) { return msgs::validate(m); }, item.message);
+    const Status valid = msgs::validate(message);
     if (!valid) {
       if (report.rejected++ == 0) report.first_rejection = fmt::format("{}: {}", path, valid.error().message);
-      continue;
+      return {};
     }
-    HANZO_RETURN_IF_ERROR(writer.write(item.topic, item.message, item.topic.substr(item.topic.starts_with('/') ? 1 : 0)));
+    return writer.write(topic, msgs::SensorMessage(message), topic.substr(topic.starts_with('/') ? 1 : 0));
+  };
+  size_t scan = 0, odometry = 0;
+  while (scan < log.scans.size() || odometry < log.odometry.size()) {
+    if (odometry == log.odometry.size() || (scan < log.scans.size() && log.scans[scan].timestamp <= log.odometry[odometry].timestamp)) {
+      HANZO_RETURN_IF_ERROR(write(config.laser_topic, log.scans[scan++]));
+    } else {
+      HANZO_RETURN_IF_ERROR(write(config.odometry_topic, log.odometry[odometry++]));
+    }
   }
   return report;
 }

@@ -20,6 +20,7 @@
 
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 
 namespace hanzo::fusion::io {
@@ -39,6 +40,16 @@ struct CarmenImportReport {
   std::string first_rejection;
   Trajectory scan_poses;            ///< T_world_laser of every scan (z = 0)
 };
+
+/// A CARMEN log in memory: scans and odometry, each in time order.
+struct CarmenLog {
+  CarmenImportReport report;
+  std::vector<msgs::PointCloudMessage> scans;          ///< planar, z = 0, frame "laser"
+  std::vector<msgs::WheelOdometryMessage> odometry;    ///< only with config.wheel_separation > 0
+};
+
+/// Reads `path` (plain or .gz). A malformed line fails, naming file and line.
+Result<CarmenLog> read_carmen(const std::string& path, const CarmenImportConfig& config);
 
 /// Reads `path` (plain or .gz) and writes its scans (and odometry) to `writer` in time order.
 /// A malformed line fails the import, naming file and line.
