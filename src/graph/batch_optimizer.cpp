@@ -1,10 +1,14 @@
 #include "hanzo/fusion/graph/batch_optimizer.hpp"
 
+#include <algorithm>
 #include <map>
 #include <memory>
+#include <type_traits>
 
 #include <ceres/ceres.h>
 #include <fmt/format.h>
+
+#include "hanzo/fusion/graph/pose_factors.hpp"
 
 namespace hanzo::fusion::graph {
 namespace {
@@ -131,6 +135,66 @@ class FactorCost final : public ceres::CostFunction {
   std::vector<Value> prototypes_;
 };
 
+// The fast path for pose-pair factors (most of a pose graph): fixed sizes, no Values lookup.
+template <typename FactorType, typename Pose, int kAmbient>
+class PosePairCost final : public ceres::SizedCostFunction<FactorType::Residual::RowsAtCompileTime, kAmbient, kAmbient> {
+ public:
+  static constexpr int kResiduals = FactorType::Residual::RowsAtCompileTime;
+  static constexpr int kTangent = Pose::Tangent::RowsAtCompileTime;
+  explicit PosePairCost(std::shared_ptr<const FactorType> factor) : factor_(std::move(factor)) {}
+
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    const Pose Ti = pose_from(parameters[0]), Tj = pose_from(parameters[1]);
+    typename FactorType::PoseJacobian jacobian_i, jacobian_j;
+    const bool want_i = jacobians != nullptr && jacobians[0] != nullptr, want_j = jacobians != nullptr && jacobians[1] != nullptr;
+    const typename FactorType::Residual r = factor_->whitened_error(Ti, Tj, want_i ? &jacobian_i : nullptr, want_j ? &jacobian_j : nullptr);
+    if (!r.allFinite()) return false;
+    Eigen::Map<typename FactorType::Residual>{residuals} = r;
+    using AmbientJacobian = Eigen::Matrix<double, kResiduals, kAmbient, Eigen::RowMajor>;
+    if (want_i) {
+      Eigen::Map<AmbientJacobian> J(jacobians[0]);
+      J.setZero();
+      J.template leftCols<kTangent>() = jacobian_i;
+    }
+    if (want_j) {
+      Eigen::Map<AmbientJacobian> J(jacobians[1]);
+      J.setZero();
+      J.template leftCols<kTangent>() = jacobian_j;
+    }
+    return true;
+  }
+
+ private:
+  static Pose pose_from(const double* p) {
+    if constexpr (std::is_same_v<Pose, SE2>) {
+      return se2_from(p);
+    } else {
+      return se3_from(p);
+    }
+  }
+  std::shared_ptr<const FactorType> factor_;
+};
+
+// The fast path's cost for `factor` when it is a pose-pair factor of Pose on two variables of
+// that type (a factor on variables of another type keeps the generic path, whose evaluate()
+// refuses them by name).
+template <template <typename> class FactorTemplate, typename Pose, int kAmbient>
+ceres::CostFunction* pose_pair_cost(const FactorPointer& factor, const std::vector<Value>& prototypes) {
+  auto typed = std::dynamic_pointer_cast<const FactorTemplate<Pose>>(factor);
+  if (!typed || typed->dimension() != FactorTemplate<Pose>::Residual::RowsAtCompileTime) return nullptr;
+  if (!std::all_of(prototypes.begin(), prototypes.end(), [](const Value& value) { return std::holds_alternative<Pose>(value); })) return nullptr;
+  return new PosePairCost<FactorTemplate<Pose>, Pose, kAmbient>(typed);
+}
+
+ceres::CostFunction* cost_of(const FactorPointer& factor, std::vector<Value> prototypes) {
+  for (ceres::CostFunction* fast : {pose_pair_cost<BetweenFactor, SE2, 3>(factor, prototypes), pose_pair_cost<BetweenFactor, SE3, 7>(factor, prototypes),
+                                    pose_pair_cost<ChordalBetweenFactor, SE2, 3>(factor, prototypes),
+                                    pose_pair_cost<ChordalBetweenFactor, SE3, 7>(factor, prototypes)}) {
+    if (fast != nullptr) return fast;
+  }
+  return new FactorCost(factor, std::move(prototypes));
+}
+
 // DCS as iteratively reweighted least squares (as g2o applies it): weight w = scale^2.
 class DcsLoss final : public ceres::LossFunction {
  public:
@@ -195,7 +259,7 @@ Status build_problem(const FactorGraph& graph, const Values& values, const std::
       parameters.push_back(block);
       prototypes.push_back(values.all().at(key));
     }
-    built.problem.AddResidualBlock(new FactorCost(factor, std::move(prototypes)), loss_of(factor->robust_kernel()), parameters);
+    built.problem.AddResidualBlock(cost_of(factor, std::move(prototypes)), loss_of(factor->robust_kernel()), parameters);
   }
   for (Key key : fixed) {
     const auto found = built.blocks.find(key);

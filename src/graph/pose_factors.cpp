@@ -1,8 +1,10 @@
 #include "hanzo/fusion/graph/pose_factors.hpp"
 
+#include <array>
 #include <type_traits>
 
 #include <Eigen/Cholesky>
+#include <fmt/format.h>
 
 namespace hanzo::fusion::graph {
 
@@ -36,20 +38,31 @@ Result<GaussianNoise> GaussianNoise::from_sigmas(const Eigen::VectorXd& sigmas) 
 }
 
 template <typename Pose>
+typename Pose::Tangent BetweenFactor<Pose>::whitened_error(const Pose& Ti, const Pose& Tj, typename Pose::Jacobian* jacobian_i,
+                                                           typename Pose::Jacobian* jacobian_j) const {
+  const Pose error = measured_inverse_ * (Ti.inverse() * Tj);
+  const typename Pose::Tangent r = error.log();
+  const typename Pose::Jacobian U = noise_.sqrt_information();
+  if (jacobian_i != nullptr || jacobian_j != nullptr) {
+    const typename Pose::Jacobian U_Jr_inverse = U * Pose::right_jacobian_inverse(r);
+    if (jacobian_i != nullptr) *jacobian_i = -U_Jr_inverse * (Tj.inverse() * Ti).adjoint();
+    if (jacobian_j != nullptr) *jacobian_j = U_Jr_inverse;
+  }
+  return U * r;
+}
+
+template <typename Pose>
 Result<Eigen::VectorXd> BetweenFactor<Pose>::evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const {
   Pose Ti, Tj;
   HANZO_ASSIGN_OR_RETURN(Ti, values.at<Pose>(keys()[0]));
   HANZO_ASSIGN_OR_RETURN(Tj, values.at<Pose>(keys()[1]));
-  const Pose error = measured_inverse_ * (Ti.inverse() * Tj);
-  const typename Pose::Tangent r = error.log();
-  const Eigen::MatrixXd& U = noise_.sqrt_information();
-  if (jacobians != nullptr) {
-    const typename Pose::Jacobian Jr_inverse = Pose::right_jacobian_inverse(r);
-    jacobians->resize(2);
-    (*jacobians)[0] = -U * Jr_inverse * (Tj.inverse() * Ti).adjoint();
-    (*jacobians)[1] = U * Jr_inverse;
+  if (noise_.dimension() != Pose::Tangent::RowsAtCompileTime) {
+    return Error(fmt::format("between factor: noise dimension {} != pose tangent dimension {}", noise_.dimension(), Pose::Tangent::RowsAtCompileTime));
   }
-  return Eigen::VectorXd(U * r);
+  typename Pose::Jacobian jacobian_i, jacobian_j;
+  const typename Pose::Tangent r = whitened_error(Ti, Tj, jacobians ? &jacobian_i : nullptr, jacobians ? &jacobian_j : nullptr);
+  if (jacobians != nullptr) *jacobians = {jacobian_i, jacobian_j};
+  return Eigen::VectorXd(r);
 }
 
 template <typename Pose>
@@ -67,29 +80,48 @@ Result<Eigen::VectorXd> PriorFactor<Pose>::evaluate(const Values& values, std::v
 
 namespace {
 
-// Rotation, translation and the so(d) generators of a pose, as dynamic matrices.
-struct PoseParts {
-  Eigen::MatrixXd R;
-  Eigen::VectorXd t;
-  std::vector<Eigen::MatrixXd> generators;  // d(R Exp(phi))/d phi_k = R G_k
-};
-PoseParts parts(const SE2& pose) {
-  Eigen::Matrix2d G;
-  G << 0, -1, 1, 0;
-  return {pose.rotation_matrix(), pose.translation(), {G}};
+Eigen::Matrix2d rotation_of(const SE2& pose) { return pose.rotation_matrix(); }
+Eigen::Matrix3d rotation_of(const SE3& pose) { return pose.rotation().matrix(); }
+
+// The so(d) generators G_k: d(R Exp(phi))/d phi_k = R G_k.
+std::array<Eigen::Matrix2d, 1> generators(const SE2&) { return {(Eigen::Matrix2d() << 0, -1, 1, 0).finished()}; }
+std::array<Eigen::Matrix3d, 3> generators(const SE3&) {
+  return {SO3::hat(Eigen::Vector3d::UnitX()), SO3::hat(Eigen::Vector3d::UnitY()), SO3::hat(Eigen::Vector3d::UnitZ())};
 }
-PoseParts parts(const SE3& pose) {
-  return {pose.rotation().matrix(), pose.translation(),
-          {SO3::hat(Eigen::Vector3d::UnitX()), SO3::hat(Eigen::Vector3d::UnitY()), SO3::hat(Eigen::Vector3d::UnitZ())}};
+
+template <typename Matrix>
+auto vectorized(const Matrix& m) {
+  return Eigen::Map<const Eigen::Matrix<double, Matrix::SizeAtCompileTime, 1>>(m.data());
 }
-Eigen::VectorXd vectorized(const Eigen::MatrixXd& m) { return Eigen::Map<const Eigen::VectorXd>(m.data(), m.size()); }
 
 }  // namespace
 
 template <typename Pose>
-int ChordalBetweenFactor<Pose>::dimension() const {
-  const int d = std::is_same_v<Pose, SE2> ? 2 : 3;
-  return d * d + d;
+typename ChordalBetweenFactor<Pose>::Residual ChordalBetweenFactor<Pose>::whitened_error(const Pose& Ti, const Pose& Tj, PoseJacobian* jacobian_i,
+                                                                                       PoseJacobian* jacobian_j) const {
+  constexpr int d = kSpace;
+  using Rotation = Eigen::Matrix<double, d, d>;
+  const Rotation Ri = rotation_of(Ti), Rj = rotation_of(Tj), Rz = rotation_of(measured_);
+  Residual r;
+  r.template head<d * d>() = sqrt_kappa_ * vectorized(Rotation(Rj - Ri * Rz));
+  r.template tail<d>() = sqrt_tau_ * (Tj.translation() - Ti.translation() - Ri * measured_.translation());
+  if (jacobian_i != nullptr || jacobian_j != nullptr) {
+    // Tangent order: translation (d), then rotation (d == 2: 1, d == 3: 3); T Exp(rho, phi)
+    // moves t by R rho and R by R [phi].
+    PoseJacobian Ji = PoseJacobian::Zero(), Jj = PoseJacobian::Zero();
+    Ji.template bottomLeftCorner<d, d>() = -sqrt_tau_ * Ri;
+    Jj.template bottomLeftCorner<d, d>() = sqrt_tau_ * Rj;
+    const auto G = generators(measured_);
+    for (size_t k = 0; k < G.size(); ++k) {
+      const int column = d + static_cast<int>(k);
+      Ji.template block<d * d, 1>(0, column) = -sqrt_kappa_ * vectorized(Rotation(Ri * G[k] * Rz));
+      Ji.template block<d, 1>(d * d, column) = -sqrt_tau_ * Ri * G[k] * measured_.translation();
+      Jj.template block<d * d, 1>(0, column) = sqrt_kappa_ * vectorized(Rotation(Rj * G[k]));
+    }
+    if (jacobian_i != nullptr) *jacobian_i = Ji;
+    if (jacobian_j != nullptr) *jacobian_j = Jj;
+  }
+  return r;
 }
 
 template <typename Pose>
@@ -97,27 +129,10 @@ Result<Eigen::VectorXd> ChordalBetweenFactor<Pose>::evaluate(const Values& value
   Pose Ti, Tj;
   HANZO_ASSIGN_OR_RETURN(Ti, values.at<Pose>(keys()[0]));
   HANZO_ASSIGN_OR_RETURN(Tj, values.at<Pose>(keys()[1]));
-  const PoseParts i = parts(Ti), j = parts(Tj), z = parts(measured_);
-  const int d = static_cast<int>(i.t.size());
-  Eigen::VectorXd r(d * d + d);
-  r.head(d * d) = sqrt_kappa_ * vectorized(j.R - i.R * z.R);
-  r.tail(d) = sqrt_tau_ * (j.t - i.t - i.R * z.t);
-  if (jacobians != nullptr) {
-    // Tangent order: translation (d), then rotation (d == 2: 1, d == 3: 3); T Exp(rho, phi)
-    // moves t by R rho and R by R [phi].
-    const int rotations = static_cast<int>(i.generators.size());
-    Eigen::MatrixXd Ji = Eigen::MatrixXd::Zero(d * d + d, d + rotations), Jj = Ji;
-    Ji.bottomLeftCorner(d, d) = -sqrt_tau_ * i.R;
-    Jj.bottomLeftCorner(d, d) = sqrt_tau_ * j.R;
-    for (int k = 0; k < rotations; ++k) {
-      const Eigen::MatrixXd& G = i.generators[static_cast<size_t>(k)];
-      Ji.block(0, d + k, d * d, 1) = -sqrt_kappa_ * vectorized(i.R * G * z.R);
-      Ji.block(d * d, d + k, d, 1) = -sqrt_tau_ * i.R * G * z.t;
-      Jj.block(0, d + k, d * d, 1) = sqrt_kappa_ * vectorized(j.R * G);
-    }
-    *jacobians = {Ji, Jj};
-  }
-  return r;
+  PoseJacobian jacobian_i, jacobian_j;
+  const Residual r = whitened_error(Ti, Tj, jacobians ? &jacobian_i : nullptr, jacobians ? &jacobian_j : nullptr);
+  if (jacobians != nullptr) *jacobians = {jacobian_i, jacobian_j};
+  return Eigen::VectorXd(r);
 }
 
 template class ChordalBetweenFactor<SE2>;

@@ -148,6 +148,26 @@ TEST(CorrelativeScanMatcher, FindsAPoseFarOutsideIcpsReachThenIcpRefinesIt) {
   EXPECT_LT(rotation, 0.05);
 }
 
+TEST(CorrelativeScanMatcher, BranchAndBoundFindsTheExhaustiveOptimum) {
+  const std::vector<Segment> walls = room();
+  CorrelativeScanMatcherConfig exhaustive;
+  exhaustive.branch_and_bound = false;
+  exhaustive.linear_window = 0.6;
+  exhaustive.angular_window = 0.1;
+  CorrelativeScanMatcherConfig bounded = exhaustive;
+  bounded.branch_and_bound = true;
+  for (int trial = 0; trial < 6; ++trial) {
+    const SE2 T_world_target(0.2 * trial, {3.0 + 0.7 * trial, 3.0 + 0.3 * trial}), T_world_source(0.2 * trial + 0.05, {3.4 + 0.7 * trial, 3.2 + 0.3 * trial});
+    const PlanarPoints target = cast_scan(walls, T_world_target), source = cast_scan(walls, T_world_source);
+    const SE2 guess = T_world_target.inverse() * T_world_source * SE2(0.04 * (trial - 3), {0.1 * trial - 0.3, 0.25 - 0.1 * trial});
+    const CorrelativeScanMatch all = correlative_scan_match(source, target, guess, exhaustive).value();
+    const CorrelativeScanMatch fast = correlative_scan_match(source, target, guess, bounded).value();
+    EXPECT_NEAR(fast.score, all.score, 1e-6) << "trial " << trial;
+    EXPECT_LT((all.T_target_source.inverse() * fast.T_target_source).log().norm(), 1e-9) << "trial " << trial;
+    EXPECT_LT(fast.poses_evaluated * 4, all.poses_evaluated) << "trial " << trial;
+  }
+}
+
 // Consecutive scans of the Intel lab (0.55 m and 18 deg apart on average), matched from the
 // relative pose of the log's corrected poses moved by 0.1 m / 3 deg, land back on it. The
 // corrected poses are themselves a SLAM result, so the bound is a few centimetres.

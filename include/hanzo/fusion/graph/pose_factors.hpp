@@ -7,6 +7,7 @@
 // Z is "pose j in frame i" as g2o's EDGE_SE2 / EDGE_SE3:QUAT store it.
 
 #include <cmath>
+#include <type_traits>
 
 #include "hanzo/fusion/graph/factor.hpp"
 
@@ -21,6 +22,13 @@ class BetweenFactor final : public Factor {
   Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
   Pose measured() const { return measured_inverse_.inverse(); }
   const GaussianNoise& noise() const { return noise_; }
+
+  using Residual = typename Pose::Tangent;
+  using PoseJacobian = typename Pose::Jacobian;
+  /// The whitened residual at poses (Ti, Tj) and, when asked, its Jacobians: evaluate()'s work
+  /// without the Values lookup and in fixed-size types (the batch optimizer's fast path).
+  /// Requires dimension() == the tangent dimension.
+  Residual whitened_error(const Pose& Ti, const Pose& Tj, PoseJacobian* jacobian_i, PoseJacobian* jacobian_j) const;
 
  private:
   Pose measured_inverse_;
@@ -47,8 +55,14 @@ class ChordalBetweenFactor final : public Factor {
  public:
   ChordalBetweenFactor(Key i, Key j, const Pose& measured, double kappa, double tau)
       : Factor({i, j}), measured_(measured), sqrt_kappa_(std::sqrt(kappa)), sqrt_tau_(std::sqrt(tau)) {}
-  int dimension() const override;
+  static constexpr int kSpace = std::is_same_v<Pose, SE2> ? 2 : 3;  ///< d
+  int dimension() const override { return kSpace * kSpace + kSpace; }
   Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
+
+  using Residual = Eigen::Matrix<double, kSpace * kSpace + kSpace, 1>;
+  using PoseJacobian = Eigen::Matrix<double, kSpace * kSpace + kSpace, Pose::Tangent::RowsAtCompileTime>;
+  /// evaluate()'s work on poses, in fixed-size types (the batch optimizer's fast path).
+  Residual whitened_error(const Pose& Ti, const Pose& Tj, PoseJacobian* jacobian_i, PoseJacobian* jacobian_j) const;
 
  private:
   Pose measured_;

@@ -5,7 +5,9 @@
 // likelihood grid, L(cell) = max over target points of exp(-d^2 / (2 sigma^2)) (Olson's
 // eq. 5-6 with a Gaussian sensor model); a pose scores the mean of L over the source points.
 // Rotations are searched in angular_step increments; for each rotation, translations in steps
-// of one cell are integer index offsets, so a pose costs one grid lookup per point.
+// of one cell are integer index offsets, so a pose costs one grid lookup per point. A
+// two-level branch and bound (Olson's sec. III-C) bounds blocks of translations with a grid of
+// block maxima and scores only the blocks whose bound beats the best pose found.
 //
 // Use it where ICP's basin of convergence is too small: loop closures after drift, recovery
 // when scan-to-map matching fails. Refine its result with point-to-line ICP (planar_icp.hpp):
@@ -25,6 +27,9 @@ struct CorrelativeScanMatcherConfig {
   double resolution = 0.05;     ///< m, grid cell and translation step
   double angular_step = 0.0087; ///< rad (0.5 deg); Olson picks it so the farthest point moves about a cell
   double sigma = 0.1;           ///< m, standard deviation of the likelihood blur
+  /// Branch and bound over blocks of 4 x 4 translations (the same result as the exhaustive
+  /// search, in a fraction of the lookups); false: score every pose.
+  bool branch_and_bound = true;
 
   Status validate() const;
 };
@@ -34,7 +39,7 @@ struct CorrelativeScanMatch {
   /// Mean likelihood of the source points at the best pose, in [0, 1]: 1 when every point lies
   /// on a target point.
   double score = 0.0;
-  size_t poses_evaluated = 0;
+  size_t poses_evaluated = 0;  ///< bounds and poses scored
 };
 
 /// The best pose within the window around `T_target_source_guess`.
