@@ -263,19 +263,4 @@ io::Trajectory PlanarLaserSlam::trajectory() const {
   return trajectory;
 }
 
-std::vector<Timestamp> PlanarLaserSlam::keyframe_times() const {
-  std::vector<Timestamp> times;
-  for (const Keyframe& keyframe : keyframes_) times.push_back(keyframe.time);
-  return times;
-}
-
-lidar::PlanarPoints PlanarLaserSlam::map_points() const {
-  lidar::PlanarPoints points;
-  for (size_t k = 0; k < keyframes_.size(); ++k) {
-    const SE2 pose = keyframe_pose(k);
-    for (const Eigen::Vector2d& p : keyframes_[k].points_laser) points.push_back(pose * p);
-  }
-  return points;
-}
-
 }  // namespace hanzo::fusion::pipeline

@@ -421,6 +421,34 @@ TEST(Cli, GraphOptimizeIncrementallyEndsAtTheOptimum) {
   EXPECT_THAT(refused.err, HasSubstr("--incremental"));
 }
 
+TEST(Cli, Slam2dMatchesScansAndWritesTrajectoryMapAndPlot) {
+  const std::filesystem::path folder = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_slam2d_{}", ::getpid());
+  std::filesystem::create_directories(folder);
+  const std::string log = fmt::format("{}/laser2d_carmen/intel-corrected.log.gz", HANZO_DATA_DIR);
+  // Scan-to-map odometry only (the loop-closing run is tests/pipeline/planar_laser_slam_test.cpp).
+  const CliRun slam = run(fmt::format("slam2d {} --scale-error 0.05 --heading-drift 2 --no-loop-closure --trajectory {}/slam.tum --map {}/map.yaml --plot {} --json",
+                                      log, folder.string(), folder.string(), folder.string()));
+  ASSERT_EQ(slam.exit_code, 0) << slam.err;
+  const nlohmann::json json = nlohmann::json::parse(slam.out);
+  EXPECT_EQ(json["scans"], 906);
+  EXPECT_EQ(json["loop_closures"], 0);
+  EXPECT_GT(json["ape_rmse_m"]["odometry"].get<double>(), 5.0);
+  EXPECT_LT(json["ape_rmse_m"]["slam"].get<double>(), 1.0);
+  EXPECT_GT(json["scan_ms"]["p99"].get<double>(), 0.0);
+  for (const char* file : {"slam.tum", "map.yaml", "map.pgm", "slam2d_trajectory.svg"}) EXPECT_TRUE(std::filesystem::exists(folder / file)) << file;
+
+  const CliRun missing = run(fmt::format("slam2d {}/none.log", folder.string()));
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_THAT(missing.err, HasSubstr("none.log: cannot open file"));
+  const CliRun bad_scale = run(fmt::format("slam2d {} --scale-error -2", log));
+  EXPECT_EQ(bad_scale.exit_code, 1);
+  EXPECT_THAT(bad_scale.err, HasSubstr("--scale-error"));
+  const CliRun no_scans = run(fmt::format("slam2d {}", write_temp("odometry_only.log", "ODOM 0 0 0 0 0 0 1.0 host 1.0\n")));
+  EXPECT_EQ(no_scans.exit_code, 1);
+  EXPECT_EQ(std::count(no_scans.err.begin(), no_scans.err.end(), '\n'), 1);
+  std::filesystem::remove_all(folder);
+}
+
 TEST(Cli, RegisterRecoversTheReferenceOfTheRealPair) {
   const std::string dir = fmt::format("{}/lidar_small_gicp", HANZO_DATA_DIR);
   for (const char* method : {"gicp", "ndt"}) {

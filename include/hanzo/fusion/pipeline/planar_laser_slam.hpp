@@ -123,10 +123,12 @@ class PlanarLaserSlam {
 
   /// T_map_laser of every scan added, through its keyframe's current estimate.
   io::Trajectory trajectory() const;
-  /// Time of keyframe X(k)'s scan, for every k.
-  std::vector<Timestamp> keyframe_times() const;
-  /// The keyframes' scans in the map frame.
-  lidar::PlanarPoints map_points() const;
+  /// Keyframe X(k), k < keyframe_count(): its scan's time, current pose estimate T_map_laser
+  /// and points (laser frame). Map builders ray-cast these (maps/occupancy_grid.hpp).
+  size_t keyframe_count() const { return keyframes_.size(); }
+  Timestamp keyframe_time(size_t k) const { return keyframes_.at(k).time; }
+  SE2 keyframe_pose(size_t k) const;
+  const lidar::PlanarPoints& keyframe_points(size_t k) const { return keyframes_.at(k).points_laser; }
   const PlanarLaserSlamSummary& summary() const { return summary_; }
   const graph::FactorGraph& graph() const { return graph_; }
   const graph::Values& values() const { return values_; }
@@ -143,7 +145,6 @@ class PlanarLaserSlam {
     SE2 T_keyframe_laser;
   };
 
-  SE2 keyframe_pose(size_t index) const;
   Result<lidar::PlanarTarget> local_map_target() const;
   struct Match {
     SE2 T_map_laser;
