@@ -124,6 +124,7 @@ int run_slam2d(const Output& output, const Slam2dOptions& options) {
   if (refused > 0) result["first_refusal"] = first_refusal;
   result["keyframes"] = summary.keyframes;
   result["unmatched_scans"] = summary.unmatched_scans;
+  result["degenerate_scans"] = summary.degenerate_scans;
   result["recovered_matches"] = summary.recovered_matches;
   result["loop_candidates"] = summary.loop_candidates;
   result["loop_closures"] = summary.loop_closures;
@@ -137,10 +138,11 @@ int run_slam2d(const Output& output, const Slam2dOptions& options) {
                        {"optimization", summary.optimization_seconds}};
   result["scan_ms"] = {{"p50", percentile(0.5)}, {"p99", percentile(0.99)}, {"max", percentile(1.0)}};
   std::string text = fmt::format(
-      "{}: {} scans ({} refused), {} keyframes, {} loop closures of {} candidates, {} scans unmatched\n"
+      "{}: {} scans ({} refused), {} keyframes, {} loop closures of {} candidates, {} scans unmatched, {} degenerate\n"
       "  APE RMSE against the logged poses: odometry {:.3f} m -> SLAM {:.3f} m (max {:.3f} m)\n"
       "  {:.2f} s: scan matching {:.2f} s, loop closure {:.2f} s, optimization {:.2f} s ({} runs); per scan p50 {:.2f} ms, p99 {:.2f} ms, max {:.2f} ms\n",
       options.log, summary.scans, refused, summary.keyframes, summary.loop_closures, summary.loop_candidates, summary.unmatched_scans,
+      summary.degenerate_scans,
       odometry_ape->statistics.rmse, slam_ape->statistics.rmse, slam_ape->statistics.max, seconds, summary.scan_matching_seconds,
       summary.loop_closure_seconds, summary.optimization_seconds, summary.optimizations, percentile(0.5), percentile(0.99), percentile(1.0));
 

@@ -43,6 +43,7 @@ Status PlanarIcpConfig::validate() const {
   if (!(huber_width > 0)) return Error(fmt::format("huber_width: {} <= 0", huber_width));
   if (normal_neighbours < 3) return Error(fmt::format("normal_neighbours: {} < 3", normal_neighbours));
   if (!(normal_radius > 0)) return Error(fmt::format("normal_radius: {} <= 0", normal_radius));
+  if (!(point_cluster_radius > 0)) return Error(fmt::format("point_cluster_radius: {} <= 0", point_cluster_radius));
   if (!(point_sigma > 0)) return Error(fmt::format("point_sigma: {} <= 0", point_sigma));
   if (!(guess_translation_sigma >= 0) || !(guess_rotation_sigma >= 0)) return Error("guess_translation_sigma / guess_rotation_sigma must be >= 0");
   if (!(max_line_eigenvalue_ratio > 0 && max_line_eigenvalue_ratio < 1)) {
@@ -84,9 +85,13 @@ Result<PlanarTarget> PlanarTarget::create(PlanarPoints points, const PlanarIcpCo
   std::vector<uint32_t> indices(k);
   std::vector<float> squared_distances(k);
   const double radius_squared = config.normal_radius * config.normal_radius;
+  const double cluster_radius_squared = config.point_cluster_radius * config.point_cluster_radius;
+  std::vector<bool> keep(points.size(), false);
   size_t line_like = 0;
   for (size_t i = 0; i < points.size(); ++i) {
     const size_t found = impl->tree.knn(lift(points[i]), k, indices.data(), squared_distances.data());
+    // A dense cluster (a corner, a pole, clutter) is matched point-to-point when it is no line.
+    keep[i] = found >= 4 && squared_distances[3] <= cluster_radius_squared;
     Eigen::Vector2d mean = Eigen::Vector2d::Zero();
     size_t used = 0;
     for (size_t n = 0; n < found && squared_distances[n] <= radius_squared; ++n, ++used) mean += points[indices[n]];
@@ -100,10 +105,25 @@ Result<PlanarTarget> PlanarTarget::create(PlanarPoints points, const PlanarIcpCo
     const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> solver(covariance);
     if (!(solver.eigenvalues()(0) <= config.max_line_eigenvalue_ratio * solver.eigenvalues()(1))) continue;
     impl->normals[i] = solver.eigenvectors().col(0).normalized();
+    keep[i] = true;
     ++line_like;
   }
   if (line_like == 0) return Error(fmt::format("planar ICP: none of the {} target points has a line-like neighbourhood", points.size()));
-  impl->points = std::move(points);
+  // Sparse points that fit no line (far walls seen at a grazing angle) are dropped: matched
+  // point-to-point they would hold a moving sensor back, as the scanner samples them at the
+  // same angles from every pose.
+  PlanarPoints kept;
+  std::vector<Eigen::Vector2d> kept_normals;
+  std::vector<Eigen::Vector3f> kept_lifted;
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (!keep[i]) continue;
+    kept.push_back(points[i]);
+    kept_normals.push_back(impl->normals[i]);
+    kept_lifted.push_back(lift(points[i]));
+  }
+  impl->points = std::move(kept);
+  impl->normals = std::move(kept_normals);
+  impl->tree = cloud::KdTree(std::move(kept_lifted));
   return PlanarTarget(std::move(impl));
 }
 
@@ -144,6 +164,16 @@ PlanarEquations linearize(const PlanarPoints& source, const PlanarTarget& target
 }
 
 }  // namespace
+
+double translation_constraint_ratio(const Eigen::Matrix3d& information, Eigen::Vector2d* weak_direction) {
+  if (!(information(2, 2) > 0)) return 0.0;
+  const Eigen::Matrix2d marginal =
+      information.topLeftCorner<2, 2>() - information.topRightCorner<2, 1>() * information.bottomLeftCorner<1, 2>() / information(2, 2);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> solver(marginal);
+  if (weak_direction != nullptr) *weak_direction = solver.eigenvectors().col(0);
+  if (!(solver.eigenvalues()(1) > 0)) return 0.0;
+  return std::max(0.0, solver.eigenvalues()(0)) / solver.eigenvalues()(1);
+}
 
 Result<PlanarIcpResult> align_planar(const PlanarPoints& source, const PlanarTarget& target, const SE2& T_target_source_guess,
                                      const PlanarIcpConfig& config) {

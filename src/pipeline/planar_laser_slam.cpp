@@ -65,7 +65,7 @@ Result<lidar::PlanarTarget> PlanarLaserSlam::local_map_target() const {
   return lidar::PlanarTarget::create(std::move(points), config_.scan_matching);
 }
 
-PlanarLaserSlam::Match PlanarLaserSlam::match_scan(const lidar::PlanarPoints& points, const SE2& guess) {
+PlanarLaserSlam::Match PlanarLaserSlam::match_scan(const lidar::PlanarPoints& points, const SE2& guess, double travelled) {
   Match match;
   match.T_map_laser = guess;
   if (!local_map_) {
@@ -82,12 +82,24 @@ PlanarLaserSlam::Match PlanarLaserSlam::match_scan(const lidar::PlanarPoints& po
     match.covariance = match_covariance(result->information, sigma_floor(config_.min_translation_sigma, config_.min_rotation_sigma));
     match.matched = true;
     match.fitness = result->fitness;
+    match.constraint_ratio = lidar::translation_constraint_ratio(result->information);
     return true;
   };
-  if (accept(lidar::align_planar(points, *local_map_, guess, config_.scan_matching))) return match;
-  auto searched = lidar::correlative_scan_match(points, local_map_->points(), guess, config_.recovery_search);
-  if (searched && accept(lidar::align_planar(points, *local_map_, searched->T_target_source, config_.scan_matching))) {
-    ++summary_.recovered_matches;
+  bool accepted = accept(lidar::align_planar(points, *local_map_, guess, config_.scan_matching));
+  if (!accepted) {
+    auto searched = lidar::correlative_scan_match(points, local_map_->points(), guess, config_.recovery_search);
+    accepted = searched && accept(lidar::align_planar(points, *local_map_, searched->T_target_source, config_.scan_matching));
+    if (accepted) ++summary_.recovered_matches;
+  }
+  if (accepted && match.constraint_ratio < config_.degeneracy_ratio) {
+    // A corridor: hold the free direction at the odometry prediction.
+    lidar::PlanarIcpConfig with_prior = config_.scan_matching;
+    with_prior.guess_translation_sigma = config_.min_translation_sigma + config_.odometry_translation_sigma_per_meter * travelled;
+    with_prior.guess_rotation_sigma = config_.min_rotation_sigma + config_.odometry_rotation_sigma_per_meter * travelled;
+    if (accept(lidar::align_planar(points, *local_map_, guess, with_prior))) {
+      match.degenerate = true;
+      ++summary_.degenerate_scans;
+    }
   }
   return match;
 }
@@ -208,7 +220,7 @@ Result<PlanarScanEstimate> PlanarLaserSlam::add_scan(Timestamp time, const lidar
   const SE2 increment = T_odom_last_.inverse() * T_odom_laser;
   const double path_length = path_length_ + increment.translation().norm();
   const auto match_start = Clock::now();
-  const Match match = match_scan(points_laser, T_map_last_ * increment);
+  const Match match = match_scan(points_laser, T_map_last_ * increment, increment.translation().norm());
   summary_.scan_matching_seconds += seconds_since(match_start);
   if (!match.matched) ++summary_.unmatched_scans;
 
@@ -234,6 +246,7 @@ Result<PlanarScanEstimate> PlanarLaserSlam::add_scan(Timestamp time, const lidar
   estimate.keyframe = new_keyframe;
   estimate.keyframe_index = keyframe;
   estimate.scan_matched = match.matched;
+  estimate.degenerate = match.degenerate;
   estimate.fitness = match.fitness;
   return estimate;
 }

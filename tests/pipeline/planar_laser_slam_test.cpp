@@ -12,6 +12,7 @@
 #include "hanzo/fusion/io/carmen_import.hpp"
 #include "hanzo/fusion/pipeline/planar_laser_slam.hpp"
 #include "hanzo/fusion/sim/planar_odometry_error.hpp"
+#include "support/planar_world.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
@@ -60,6 +61,48 @@ TEST(PlanarLaserSlam, IntelLogWithCorruptedOdometryReturnsToTheCorrectedPoses) {
   EXPECT_GT(odometry_rmse, 5.0);
   EXPECT_LT(slam_rmse, 0.2);
   EXPECT_GT(summary.loop_closures, 50U);
+}
+
+// A 40 m drive down a corridor (8 m range) with odometry 3 % too long: bare walls fix heading
+// and the across position but not the position along the axis. The SLAM flags those scans
+// degenerate and follows odometry along the axis instead of letting ICP slide or stick; door
+// recesses every 6 m fix the axis.
+TEST(PlanarLaserSlam, CorridorIsFlaggedDegenerateAndOdometryHoldsTheAxis) {
+  for (const bool doors : {false, true}) {
+    const std::vector<test_support::Segment> walls = test_support::corridor(doors, 60.0);
+    std::vector<SE2> truth;
+    for (int i = 0; i <= 100; ++i) truth.emplace_back(0.02 * std::sin(0.1 * i), Eigen::Vector2d(-40.0 + 0.4 * i, 0.3 * std::sin(0.05 * i)));
+    const std::vector<SE2> odometry = sim::corrupt_planar_odometry(truth, {.scale_error = 0.03, .heading_drift_per_meter = 0.5 * M_PI / 180.0});
+    PlanarLaserSlamConfig config;
+    config.loop_closure = false;
+    PlanarLaserSlam slam(config);
+    double worst_across = 0.0, worst_heading = 0.0;
+    SE2 last;
+    for (size_t i = 0; i < truth.size(); ++i) {
+      const PlanarScanEstimate estimate = slam.add_scan(Timestamp::from_seconds(1.0 + 0.1 * static_cast<double>(i)),
+                                                        test_support::cast_scan(walls, truth[i], 8.0), odometry[i]).value();
+      const SE2 error = truth[i].inverse() * estimate.T_map_laser;
+      worst_across = std::max(worst_across, std::abs(estimate.T_map_laser.translation().y() - truth[i].translation().y()));
+      worst_heading = std::max(worst_heading, std::abs(error.angle()));
+      last = estimate.T_map_laser;
+    }
+    const PlanarLaserSlamSummary& summary = slam.summary();
+    const double along_error = last.translation().x() - truth.back().translation().x();
+    const double odometry_along_error = odometry.back().translation().x() - truth.back().translation().x();
+    std::printf("corridor %s: %zu of %zu scans degenerate; along-axis error %.3f m (odometry %.3f m), across %.3f m, heading %.2f deg\n",
+                doors ? "with doors" : "bare", summary.degenerate_scans, summary.scans, along_error, odometry_along_error, worst_across,
+                worst_heading * 180.0 / M_PI);
+    EXPECT_LT(worst_across, 0.05);
+    EXPECT_LT(worst_heading, 0.5 * M_PI / 180.0);
+    if (doors) {
+      EXPECT_LT(summary.degenerate_scans, summary.scans / 2);
+      EXPECT_LT(std::abs(along_error), 0.3);  // the recesses fix the axis (odometry alone: 1.2 m)
+    } else {
+      EXPECT_GT(summary.degenerate_scans, summary.scans * 9 / 10);
+      // Along the axis the estimate follows odometry's scale (3 % of 40 m), not a slide.
+      EXPECT_NEAR(along_error, 0.03 * 40.0, 0.1);
+    }
+  }
 }
 
 TEST(PlanarLaserSlam, BadScansAreRefusedAndChangeNothing) {

@@ -7,9 +7,10 @@
 // T <- T Exp(delta), delta = (x, y, theta) as in core/se2.hpp; correspondences re-searched every
 // iteration; Huber weights; coarse-to-fine correspondence gates as in lidar/registration.hpp.
 //
-// Target points whose neighbourhood is not line-like (clutter, corners, isolated returns) have
-// no normal; a source point matched to one of them gets the point-to-point residual q - t
-// instead. Those are what fix the pose along a corridor, whose walls leave it free. A planar target is prepared once (kd-tree, normals)
+// Target points whose neighbourhood is not line-like but dense (clutter, corners, door frames)
+// have no normal; a source point matched to one of them gets the point-to-point residual q - t
+// instead. Those are what fix the pose along a corridor, whose walls leave it free. Sparse
+// points that fit no line are dropped from the target. A planar target is prepared once (kd-tree, normals)
 // and matched against any number of sources.
 //
 // Failure cases (an Error naming which): an empty or non-finite cloud, a target without any
@@ -38,10 +39,13 @@ struct PlanarIcpConfig {
   double rotation_tolerance = 1e-4;                           ///< rad
   double huber_width = 0.05;                                  ///< m of point-to-line distance
   int normal_neighbours = 8;                                  ///< k nearest target points for a line fit (>= 3)
-  double normal_radius = 2.0;                                 ///< m; neighbours farther away are not used (sparse far walls still need a line)
+  double normal_radius = 2.0;                                 ///< m; neighbours farther away are not used (sparse far walls still get a line)
   /// A neighbourhood is line-like when its smaller covariance eigenvalue is below this
   /// fraction of the larger one.
   double max_line_eigenvalue_ratio = 0.1;
+  /// A target point that fits no line is kept (matched point-to-point) only when its 4 nearest
+  /// neighbours lie within this radius (m): corners, poles, clutter; sparse ones are dropped.
+  double point_cluster_radius = 0.3;
   /// Standard deviation of a point-to-line residual (m): weighs the points against the prior.
   double point_sigma = 0.05;
   /// A prior on the initial guess (from odometry or an IMU): cost e^T S^-1 e with
@@ -79,6 +83,7 @@ class PlanarTarget {
   PlanarTarget(PlanarTarget&&) noexcept;
   PlanarTarget& operator=(PlanarTarget&&) noexcept;
 
+  /// The target points kept (line-like or in dense clusters).
   const PlanarPoints& points() const;
   /// Unit normal of each point, zero where the neighbourhood is not line-like.
   const std::vector<Eigen::Vector2d>& normals() const;
@@ -90,6 +95,13 @@ class PlanarTarget {
   explicit PlanarTarget(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
+
+/// How well a match's information constrains the translation in its weakest direction: the
+/// smaller / larger eigenvalue of the translation's marginal information (the Schur
+/// complement of the rotation), in [0, 1]. Near 0 in a corridor (the walls leave the axis
+/// free); `weak_direction` (optional) receives the unit direction (target frame is the
+/// estimate's body frame: the tangent's x, y). 0 for an information without translation.
+double translation_constraint_ratio(const Eigen::Matrix3d& information, Eigen::Vector2d* weak_direction = nullptr);
 
 /// Aligns `source` to `target` from `T_target_source_guess`.
 Result<PlanarIcpResult> align_planar(const PlanarPoints& source, const PlanarTarget& target, const SE2& T_target_source_guess,

@@ -46,13 +46,19 @@ struct PlanarLaserSlamConfig {
                                                       .angular_step = 0.0175, .sigma = 0.1};
   int min_scan_points = 20;                ///< fewer points: the scan is refused
   double min_scan_matching_fitness = 0.5;  ///< below it a match is retried with the recovery search, then dropped
+  /// Degenerate geometry (a corridor): when the match's translation_constraint_ratio
+  /// (lidar/planar_icp.hpp) is below this, the scan is matched again with a prior on the
+  /// odometry prediction (sigmas below), so the free direction follows odometry and the
+  /// keyframe factor carries odometry's uncertainty along it. Counted in degenerate_scans.
+  double degeneracy_ratio = 0.02;
   double keyframe_distance = 0.3;          ///< m travelled since the last keyframe
   double keyframe_rotation = 0.26;         ///< rad (15 deg) turned since the last keyframe
   int local_map_keyframes = 20;            ///< the newest keyframes form the scan-to-map target
   /// Added to the scan matcher's (optimistic) covariance of a keyframe's relative pose.
   double min_translation_sigma = 0.02;     ///< m
   double min_rotation_sigma = 0.005;       ///< rad
-  /// Odometry-only keyframes (matching failed): sigma = these x the distance / angle moved + the minimums.
+  /// Odometry's uncertainty (for unmatched and degenerate scans): sigma = these x the distance
+  /// moved + the minimums.
   double odometry_translation_sigma_per_meter = 0.1;
   double odometry_rotation_sigma_per_meter = 0.05;  ///< rad per m
 
@@ -90,6 +96,7 @@ struct PlanarScanEstimate {
   bool keyframe = false;          ///< the scan became keyframe X(keyframe_index)
   size_t keyframe_index = 0;      ///< the keyframe the scan belongs to
   bool scan_matched = false;      ///< false: placed by odometry alone
+  bool degenerate = false;        ///< the scene left a direction free; odometry held it
   double fitness = 0.0;           ///< of the scan-to-map match
   int loop_closures_added = 0;
 };
@@ -99,6 +106,7 @@ struct PlanarLaserSlamSummary {
   size_t keyframes = 0;
   size_t recovered_matches = 0;       ///< scans matched only after the recovery search
   size_t unmatched_scans = 0;         ///< placed by odometry alone
+  size_t degenerate_scans = 0;        ///< matched with the odometry prior along a free direction
   size_t loop_candidates = 0;         ///< candidate pairs searched
   size_t loop_closures = 0;           ///< verified and added
   size_t optimizations = 0;
@@ -150,9 +158,11 @@ class PlanarLaserSlam {
     SE2 T_map_laser;
     Eigen::Matrix3d covariance = Eigen::Matrix3d::Identity();
     bool matched = false;
+    bool degenerate = false;
     double fitness = 0.0;
+    double constraint_ratio = 1.0;
   };
-  Match match_scan(const lidar::PlanarPoints& points, const SE2& guess);
+  Match match_scan(const lidar::PlanarPoints& points, const SE2& guess, double travelled);
   Status add_keyframe(Timestamp time, const lidar::PlanarPoints& points, const Match& match, double path_length);
   int close_loops();
   Status optimize(int max_iterations);
