@@ -7,7 +7,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
-.PHONY: all deps configure build test demo bench install clean
+.PHONY: all deps configure build test demo bench fuzz install clean
 
 all: build
 
@@ -29,6 +29,10 @@ demo: build
 
 bench: build
 	@bash scripts/bench.sh $(BUILD_DIR)
+
+# libFuzzer (clang + AddressSanitizer) on the JSON and protobuf decoders, FUZZ_SECONDS each.
+fuzz: deps
+	@bash scripts/fuzz.sh $(BUILD_DIR)-fuzz
 
 install: build
 	cmake --install $(BUILD_DIR) $(if $(PREFIX),--prefix $(PREFIX),)

@@ -33,6 +33,8 @@ packages=(
   # tests and benchmarks (Embree: the ray-casting peer of the simulator benchmark; OctoMap: the
   # occupancy-mapping peer of the maps benchmark)
   libgtest-dev libgmock-dev libbenchmark-dev libembree-dev liboctomap-dev
+  # make fuzz: clang with libFuzzer and AddressSanitizer
+  clang libclang-rt-14-dev
 )
 
 missing=()
