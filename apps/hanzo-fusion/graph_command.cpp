@@ -79,8 +79,7 @@ io::Trajectory as_trajectory(const graph::PoseGraph& pose_graph, const graph::Va
     if (const auto se3 = values.at<SE3>(key)) {
       pose = se3->matrix();
     } else if (const auto se2 = values.at<SE2>(key)) {
-      pose.topLeftCorner<2, 2>() = se2->rotation_matrix();
-      pose.block<2, 1>(0, 3) = se2->translation();
+      pose = io::pose_matrix(*se2);
     }
     trajectory.timestamps.push_back(Timestamp::from_nanoseconds(index++));
     trajectory.poses.push_back(pose);

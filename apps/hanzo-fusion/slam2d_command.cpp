@@ -37,19 +37,6 @@ struct Slam2dOptions {
   std::string plot_dir;
 };
 
-SE2 planar(const io::PoseMatrix& pose) { return SE2(std::atan2(pose(1, 0), pose(0, 0)), pose.block<2, 1>(0, 3)); }
-
-io::Trajectory as_trajectory(const std::vector<Timestamp>& times, const std::vector<SE2>& poses) {
-  io::Trajectory trajectory;
-  for (size_t i = 0; i < poses.size(); ++i) {
-    io::PoseMatrix matrix = io::PoseMatrix::Identity();
-    matrix.block<2, 2>(0, 0) = poses[i].rotation_matrix();
-    matrix.block<2, 1>(0, 3) = poses[i].translation();
-    trajectory.timestamps.push_back(times[i]);
-    trajectory.poses.push_back(matrix);
-  }
-  return trajectory;
-}
 
 // Ray-casts every keyframe scan from its optimized pose.
 Result<msgs::OccupancyGridLayer> occupancy_map(const pipeline::PlanarLaserSlam& slam, double resolution) {
@@ -76,7 +63,7 @@ int run_slam2d(const Output& output, const Slam2dOptions& options) {
   if (log->scans.empty()) return fail(fmt::format("{}: no FLASER scans", options.log));
   const io::Trajectory& logged = log->report.scan_poses;
   std::vector<SE2> logged_poses;
-  for (const io::PoseMatrix& pose : logged.poses) logged_poses.push_back(planar(pose));
+  for (const io::PoseMatrix& pose : logged.poses) logged_poses.push_back(io::planar_pose(pose));
   const std::vector<SE2> odometry =
       sim::corrupt_planar_odometry(logged_poses, {.scale_error = options.scale_error, .heading_drift_per_meter = options.heading_drift_deg_per_m * M_PI / 180.0});
 
@@ -101,13 +88,12 @@ int run_slam2d(const Output& output, const Slam2dOptions& options) {
   const io::Trajectory estimate = slam.trajectory();
   // Compare on the scans the SLAM kept (refused ones have no pose).
   io::Trajectory reference, odometry_trajectory;
-  const io::Trajectory all_odometry = as_trajectory(logged.timestamps, odometry);
   for (size_t i = 0, e = 0; i < logged.size() && e < estimate.size(); ++i) {
     if (logged.timestamps[i] != estimate.timestamps[e]) continue;
     reference.timestamps.push_back(logged.timestamps[i]);
     reference.poses.push_back(logged.poses[i]);
     odometry_trajectory.timestamps.push_back(logged.timestamps[i]);
-    odometry_trajectory.poses.push_back(all_odometry.poses[i]);
+    odometry_trajectory.poses.push_back(io::pose_matrix(odometry[i]));
     ++e;
   }
   const eval::ApeConfig ape_config{.relation = eval::PoseRelation::kTranslation, .alignment = eval::Alignment::kSE3};

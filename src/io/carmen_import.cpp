@@ -87,12 +87,8 @@ Result<CarmenLog> read_carmen(const std::string& path, const CarmenImportConfig&
         continue;
       }
       last_scan_time = time;
-      PoseMatrix pose = PoseMatrix::Identity();
-      pose.block<3, 3>(0, 0) = Eigen::AngleAxisd(theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-      pose(0, 3) = x;
-      pose(1, 3) = y;
       report.scan_poses.timestamps.push_back(time);
-      report.scan_poses.poses.push_back(pose);
+      report.scan_poses.poses.push_back(pose_matrix(SE2(theta, {x, y})));
       log.scans.push_back(std::move(scan));
       ++report.scans;
     } else if (fields[0] == "ODOM") {

@@ -16,6 +16,15 @@
 
 namespace hanzo::fusion::io {
 
+PoseMatrix pose_matrix(const SE2& pose) {
+  PoseMatrix matrix = PoseMatrix::Identity();
+  matrix.block<2, 2>(0, 0) = pose.rotation_matrix();
+  matrix.block<2, 1>(0, 3) = pose.translation();
+  return matrix;
+}
+
+SE2 planar_pose(const PoseMatrix& pose) { return SE2(std::atan2(pose(1, 0), pose(0, 0)), pose.block<2, 1>(0, 3)); }
+
 double Trajectory::path_length() const {
   double length = 0.0;
   for (std::size_t i = 1; i < size(); ++i) length += (position(i) - position(i - 1)).norm();

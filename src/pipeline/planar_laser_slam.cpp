@@ -266,12 +266,8 @@ Status PlanarLaserSlam::finish() {
 io::Trajectory PlanarLaserSlam::trajectory() const {
   io::Trajectory trajectory;
   for (const ScanRecord& scan : scans_) {
-    const SE2 pose = keyframe_pose(scan.keyframe) * scan.T_keyframe_laser;
-    io::PoseMatrix matrix = io::PoseMatrix::Identity();
-    matrix.block<2, 2>(0, 0) = pose.rotation_matrix();
-    matrix.block<2, 1>(0, 3) = pose.translation();
     trajectory.timestamps.push_back(scan.time);
-    trajectory.poses.push_back(matrix);
+    trajectory.poses.push_back(io::pose_matrix(keyframe_pose(scan.keyframe) * scan.T_keyframe_laser));
   }
   return trajectory;
 }

@@ -138,10 +138,7 @@ TEST(PlanarIcp, ConsecutiveIntelScansMatchTheCorrectedPoses) {
     for (const Eigen::Vector3f& p : log.scans[i].points) points.emplace_back(p.x(), p.y());
     return points;
   };
-  auto pose_of = [&](size_t i) {
-    const io::PoseMatrix& pose = log.report.scan_poses.poses[i];
-    return SE2(std::atan2(pose(1, 0), pose(0, 0)), pose.block<2, 1>(0, 3));
-  };
+  auto pose_of = [&](size_t i) { return io::planar_pose(log.report.scan_poses.poses[i]); };
   std::vector<double> translation_errors, rotation_errors;
   for (size_t i = 0; i + 1 < log.scans.size(); i += 10) {
     const SE2 truth = pose_of(i).inverse() * pose_of(i + 1);

@@ -19,16 +19,11 @@ namespace {
 
 using ::testing::HasSubstr;
 
-SE2 planar(const io::PoseMatrix& pose) { return SE2(std::atan2(pose(1, 0), pose(0, 0)), pose.block<2, 1>(0, 3)); }
-
 io::Trajectory as_trajectory(const std::vector<Timestamp>& times, const std::vector<SE2>& poses) {
   io::Trajectory trajectory;
   for (size_t i = 0; i < poses.size(); ++i) {
-    io::PoseMatrix matrix = io::PoseMatrix::Identity();
-    matrix.block<2, 2>(0, 0) = poses[i].rotation_matrix();
-    matrix.block<2, 1>(0, 3) = poses[i].translation();
     trajectory.timestamps.push_back(times[i]);
-    trajectory.poses.push_back(matrix);
+    trajectory.poses.push_back(io::pose_matrix(poses[i]));
   }
   return trajectory;
 }
@@ -43,7 +38,7 @@ TEST(PlanarLaserSlam, IntelLogWithCorruptedOdometryReturnsToTheCorrectedPoses) {
   const io::CarmenLog log = io::read_carmen(std::string(HANZO_DATA_DIR) + "/laser2d_carmen/intel-corrected.log.gz", {}).value();
   const io::Trajectory& reference = log.report.scan_poses;
   std::vector<SE2> truth;
-  for (const io::PoseMatrix& pose : reference.poses) truth.push_back(planar(pose));
+  for (const io::PoseMatrix& pose : reference.poses) truth.push_back(io::planar_pose(pose));
   const std::vector<SE2> odometry = sim::corrupt_planar_odometry(truth, {.scale_error = 0.05, .heading_drift_per_meter = 2.0 * M_PI / 180.0});
 
   PlanarLaserSlam slam;
@@ -114,7 +109,7 @@ TEST(PlanarLaserSlam, BadScansAreRefusedAndChangeNothing) {
     for (const Eigen::Vector3f& p : log.scans[i].points) points.emplace_back(p.x(), p.y());
     return points;
   };
-  auto pose = [&](size_t i) { return planar(log.report.scan_poses.poses[i + 150]); };
+  auto pose = [&](size_t i) { return io::planar_pose(log.report.scan_poses.poses[i + 150]); };
   auto scan = [&](size_t i) { return log.scans[i + 150]; };
   PlanarLaserSlam slam;
   ASSERT_TRUE(slam.add_scan(scan(0), pose(0)));

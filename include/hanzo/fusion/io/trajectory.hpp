@@ -25,6 +25,7 @@
 #include <Eigen/Core>
 
 #include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/se2.hpp"
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/core/time.hpp"
 
@@ -34,6 +35,11 @@ namespace hanzo::fusion::io {
 /// into the trajectory's world frame. R is what the file gave (quaternions are converted
 /// with Eigen's toRotationMatrix() after normalization; KITTI matrices are taken verbatim).
 using PoseMatrix = Eigen::Matrix4d;
+
+/// A planar pose (rotation about z, z = 0) as a pose matrix, and a pose matrix's planar part
+/// (x, y and the yaw of R) as an SE2.
+PoseMatrix pose_matrix(const SE2& pose);
+SE2 planar_pose(const PoseMatrix& pose);
 
 struct Trajectory {
   std::vector<Timestamp> timestamps;  ///< same length as poses, strictly increasing
