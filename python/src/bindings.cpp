@@ -208,6 +208,8 @@ class PyFactorGraph {
 
 }  // namespace
 
+void bind_laser_slam(py::module_& module);  // laser_slam_bindings.cpp
+
 PYBIND11_MODULE(_fusion, module) {
   module.doc() = "hanzo-fusion: factor graphs for sensor fusion and SLAM";
 
@@ -292,4 +294,6 @@ PYBIND11_MODULE(_fusion, module) {
       .def("insert", &PyFactorGraph::insert, "An initial value (optional: optimize() chains between factors)", py::arg("key"), py::arg("value"))
       .def("optimize", &PyFactorGraph::optimize, "Batch Levenberg-Marquardt", py::arg("max_iterations") = 100)
       .def("__len__", &PyFactorGraph::size);
+
+  bind_laser_slam(module);
 }

@@ -5,9 +5,12 @@
 
 from hanzo.fusion._fusion import (  # noqa: F401
     B,
+    CarmenLog,
     FactorGraph,
     L,
     OptimizeResult,
+    PlanarLaserSlam,
+    PlanarScanEstimate,
     Point3,
     Pose2,
     Pose3,
@@ -15,4 +18,5 @@ from hanzo.fusion._fusion import (  # noqa: F401
     X,
     geodetic_to_enu,
     key_to_string,
+    read_carmen,
 )
