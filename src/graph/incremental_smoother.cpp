@@ -1,5 +1,7 @@
 #include "hanzo/fusion/graph/incremental_smoother.hpp"
 
+#include <optional>
+
 #include <algorithm>
 #include <chrono>
 #include <set>
@@ -93,8 +95,10 @@ Result<IncrementalUpdateSummary> IncrementalSmoother::update(const FactorGraph& 
     }
   }
   IncrementalUpdateSummary summary;
+  std::optional<std::size_t> merged_snapshot_size;
   if (batch_ && batch_->result.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
     merge(*batch_);
+    merged_snapshot_size = batch_->variable_count;
     batch_.reset();
     summary.batch_merged = true;
   }
@@ -126,9 +130,16 @@ Result<IncrementalUpdateSummary> IncrementalSmoother::update(const FactorGraph& 
     }
     frontier = std::move(next);
   }
-  const auto recent = static_cast<std::size_t>(std::max(0, config_.recent_variables));
-  for (std::size_t i = insertion_order_.size() > recent ? insertion_order_.size() - recent : 0; i < insertion_order_.size(); ++i) {
-    affected.insert(insertion_order_[i]);
+  auto add_newest = [&](std::size_t count) {
+    for (std::size_t i = insertion_order_.size() > count ? insertion_order_.size() - count : 0; i < insertion_order_.size(); ++i) {
+      affected.insert(insertion_order_[i]);
+    }
+  };
+  add_newest(static_cast<std::size_t>(std::max(0, config_.recent_variables)));
+  // After a merge, the variables added while the batch ran were only moved rigidly: refit them
+  // (up to merge_refit_variables of them) to the batch's solution of the older ones.
+  if (merged_snapshot_size) {
+    add_newest(std::min(insertion_order_.size() - *merged_snapshot_size, static_cast<std::size_t>(std::max(0, config_.merge_refit_variables))));
   }
 
   // The local problem: every factor touching an affected variable; the other variables of

@@ -40,6 +40,10 @@ struct IncrementalSmootherConfig {
   /// Iterations of one background batch: few, so that batches (warm-started from the latest
   /// estimate) follow each other often and the estimate is never far behind the graph.
   int background_max_iterations = 3;
+  /// The update that merges a finished batch also re-optimizes the variables added while that
+  /// batch ran (they were only moved rigidly with the snapshot's last pose), the newest ones
+  /// first, at most this many: they then fit the batch's solution of the older variables.
+  int merge_refit_variables = 1000;
   /// The gauge (variables held fixed everywhere) and the settings of the full batch
   /// (wait_for_batch() runs it to convergence).
   BatchOptimizerConfig batch;
