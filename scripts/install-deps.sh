@@ -23,6 +23,8 @@ packages=(
   libceres-dev
   # cloud: point-cloud files (PCL), kd-trees (nanoflann); Open3D is the benchmarks' peer
   libpcl-dev libnanoflann-dev libopen3d-dev
+  # cloud: the voxel hash map (Abseil flat_hash_map)
+  libabsl-dev
   # apps
   libcli11-dev
   # Python bindings (pybind11) and their tests (pytest, numpy), on Debian's /usr/bin/python3

@@ -23,5 +23,6 @@ void add_cloud_commands(CLI::App& app, const Output& output, Command& run);
 void add_map_command(CLI::App& app, const Output& output, Command& run);
 void add_serve_command(CLI::App& app, const Output& output, Command& run);
 void add_slam2d_command(CLI::App& app, const Output& output, Command& run);
+void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& run);
 
 }  // namespace hanzo::fusion::app

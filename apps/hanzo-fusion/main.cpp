@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   app::add_run_command(app, output, run);
   app::add_graph_command(app, output, run);
   app::add_slam2d_command(app, output, run);
+  app::add_lidar_odometry_command(app, output, run);
   app::add_cloud_commands(app, output, run);
   app::add_map_command(app, output, run);
   app::add_serve_command(app, output, run);

@@ -1,0 +1,202 @@
+// hanzo-fusion lidar-odometry LOG [--topic T] [--ground-truth GT.tum --calibration CALIB.yaml]
+//   [--voxel M] [--max-range M] [--no-deskew] [--max-scans N] [--trajectory OUT.tum] [--plot DIR]:
+// LiDAR-only odometry (lidar/lidar_odometry.hpp) over the point clouds of a sensor log. With a
+// ground truth (T_world_body, TUM) the odometry starts at the true first pose and the body
+// trajectory T_world_lidar T_body_lidar^-1 is scored: KITTI drift (% and deg/100 m, when the
+// path is longer than 100 m), APE RMSE without alignment, final position error. Reports per-scan
+// latency, degenerate scans and the local map's size.
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+
+#include <fmt/format.h>
+
+#include "commands.hpp"
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/cloud/point_cloud.hpp"
+#include "hanzo/fusion/eval/association.hpp"
+#include "hanzo/fusion/eval/kitti_odometry.hpp"
+#include "hanzo/fusion/eval/plots.hpp"
+#include "hanzo/fusion/eval/pose_error.hpp"
+#include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/io/trajectory.hpp"
+#include "hanzo/fusion/lidar/lidar_odometry.hpp"
+
+namespace hanzo::fusion::app {
+namespace {
+
+struct LidarOdometryOptions {
+  std::string log;
+  std::string topic;
+  std::string ground_truth;
+  std::string calibration;
+  double voxel = 1.0;
+  double source_voxel = 0.5;
+  double max_range = 100.0;
+  bool no_deskew = false;
+  std::size_t max_scans = 0;
+  std::string trajectory_out;
+  std::string plot_dir;
+};
+
+// The scored part of the report (ground truth given).
+Status score(const io::Trajectory& estimate, const io::Trajectory& ground_truth, const LidarOdometryOptions& options,
+             nlohmann::json& result, std::string& text) {
+  eval::AssociatedTrajectories pairs;
+  HANZO_ASSIGN_OR_RETURN(pairs, eval::associate(ground_truth, estimate));
+  eval::ApeResult ape;
+  HANZO_ASSIGN_OR_RETURN(ape, eval::compute_ape(pairs.reference, pairs.estimate, {}));
+  const double path = pairs.reference.path_length();
+  const double final_error = (pairs.reference.position(pairs.reference.size() - 1) -
+                              pairs.estimate.position(pairs.estimate.size() - 1)).norm();
+  result["path_m"] = path;
+  result["ape_rmse_m"] = ape.statistics.rmse;
+  result["ape_max_m"] = ape.statistics.max;
+  result["final_position_error_m"] = final_error;
+  text += fmt::format("  against the ground truth over {:.1f} m: APE RMSE {:.3f} m (max {:.3f} m), final position error {:.3f} m ({:.2f} % of the path)\n",
+                      path, ape.statistics.rmse, ape.statistics.max, final_error, 100.0 * final_error / std::max(path, 1e-9));
+  if (auto kitti = eval::compute_kitti_odometry_error(pairs.reference, pairs.estimate); kitti) {
+    result["kitti"] = {{"translation_percent", kitti->translation_error_percent},
+                       {"rotation_deg_per_100m", kitti->rotation_error_deg_per_100m},
+                       {"segments", static_cast<std::size_t>(kitti->segments)}};
+    text += fmt::format("  KITTI drift: {:.2f} %, {:.3f} deg/100 m ({} segments)\n", kitti->translation_error_percent,
+                        kitti->rotation_error_deg_per_100m, kitti->segments);
+  }
+  if (!options.plot_dir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(options.plot_dir, ec);
+    if (ec) return Error(fmt::format("{}: cannot create plot folder ({})", options.plot_dir, ec.message()));
+    const std::string path_svg = (std::filesystem::path(options.plot_dir) / "lidar_odometry_trajectory.svg").string();
+    HANZO_RETURN_IF_ERROR(eval::write_svg(path_svg, eval::trajectory_top_view_svg(pairs.reference, ape.estimate_aligned, ape.errors,
+                                                                                  {"LiDAR odometry (coloured by error) over the ground truth (grey)", "error (m)"})));
+    result["plots"] = {path_svg};
+    text += fmt::format("plot: {}\n", path_svg);
+  }
+  return ok_status();
+}
+
+int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options) {
+  nlohmann::json result = {{"log", options.log}};
+  const auto fail = [&](const std::string& reason) { return report_failure(output, result, reason); };
+  lidar::LidarOdometryConfig config;
+  config.map.voxel_size = options.voxel;
+  config.source_voxel_size = options.source_voxel;
+  config.registration.max_neighbour_distance = options.voxel;
+  config.max_range = options.max_range;
+  config.deskew = !options.no_deskew;
+  if (Status valid = config.validate(); !valid) return fail(valid.error().message);
+
+  SE3 T_body_lidar;
+  std::optional<io::Trajectory> ground_truth;
+  if (!options.ground_truth.empty()) {
+    auto read = io::read_trajectory(options.ground_truth, io::TrajectoryFormat::kTum);
+    if (!read) return fail(read.error().message);
+    ground_truth = std::move(*read);
+  }
+  auto reader = io::SensorLogReader::open(options.log);
+  if (!reader) return fail(reader.error().message);
+
+  std::string topic = options.topic;
+  std::unique_ptr<lidar::LidarOdometry> odometry;
+  io::Trajectory estimate;
+  std::vector<double> milliseconds;
+  std::size_t refused = 0, degenerate = 0, max_map_points = 0, max_map_bytes = 0;
+  std::string first_refusal;
+  io::LogEntry entry;
+  while (options.max_scans == 0 || milliseconds.size() + refused < options.max_scans) {
+    auto more = (*reader)->next(entry);
+    if (!more) return fail(more.error().message);
+    if (!*more) break;
+    const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
+    const auto* scan = message ? std::get_if<msgs::PointCloudMessage>(message) : nullptr;
+    if (scan == nullptr || (!topic.empty() && entry.topic != topic)) continue;
+    if (!odometry) {
+      topic = entry.topic;
+      SE3 initial_pose;
+      if (!options.calibration.empty()) {
+        auto calibration = calib::load_calibration(options.calibration);
+        if (!calibration) return fail(calibration.error().message);
+        const calib::SensorCalibration* sensor = calibration->find(scan->frame_id);
+        if (sensor == nullptr) return fail(fmt::format("{}: no calibration for frame '{}'", options.calibration, scan->frame_id));
+        T_body_lidar = sensor->T_body_sensor();
+      }
+      if (ground_truth) {
+        io::Trajectory first;
+        first.timestamps.push_back(scan->timestamp);
+        first.poses.push_back(Eigen::Matrix4d::Identity());
+        auto pair = eval::associate(*ground_truth, first);
+        if (!pair) return fail(fmt::format("ground truth at the first scan: {}", pair.error().message));
+        initial_pose = pair->reference.pose_se3(0) * T_body_lidar;
+      }
+      odometry = std::make_unique<lidar::LidarOdometry>(config, initial_pose);
+    }
+    auto cloud = cloud::from_message(*scan);
+    const auto start = std::chrono::steady_clock::now();
+    auto added = cloud ? odometry->add_scan(scan->timestamp, *cloud) : Result<lidar::LidarOdometryEstimate>(cloud.error());
+    if (!added) {
+      if (refused++ == 0) first_refusal = fmt::format("scan at {:.3f} s: {}", scan->timestamp.seconds(), added.error().message);
+      continue;
+    }
+    milliseconds.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+    degenerate += added->degenerate ? 1 : 0;
+    max_map_points = std::max(max_map_points, added->map_points);
+    max_map_bytes = std::max(max_map_bytes, odometry->local_map().memory_bytes());
+    estimate.timestamps.push_back(added->time);
+    estimate.poses.push_back((added->T_world_lidar * T_body_lidar.inverse()).matrix());
+  }
+  if (!odometry) return fail(fmt::format("{}: no point clouds{}", options.log, topic.empty() ? "" : " on " + topic));
+  if (milliseconds.empty()) return fail(fmt::format("every scan was refused; first: {}", first_refusal));
+
+  std::vector<double> sorted = milliseconds;
+  std::sort(sorted.begin(), sorted.end());
+  const auto percentile = [&](double p) { return sorted[static_cast<std::size_t>(p * static_cast<double>(sorted.size() - 1))]; };
+  double total_ms = 0.0;
+  for (double ms : milliseconds) total_ms += ms;
+  result["ok"] = true;
+  result["topic"] = topic;
+  result["scans"] = milliseconds.size();
+  result["refused_scans"] = refused;
+  if (refused > 0) result["first_refusal"] = first_refusal;
+  result["degenerate_scans"] = degenerate;
+  result["scan_ms"] = {{"mean", total_ms / static_cast<double>(milliseconds.size())}, {"p50", percentile(0.5)}, {"p99", percentile(0.99)}, {"max", percentile(1.0)}};
+  result["local_map"] = {{"max_points", max_map_points}, {"max_bytes", max_map_bytes}};
+  std::string text = fmt::format(
+      "{} ({}): {} scans ({} refused), {} degenerate; per scan mean {:.1f} ms, p50 {:.1f}, p99 {:.1f}, max {:.1f} ms; "
+      "local map up to {} points, {:.1f} MB\n",
+      options.log, topic, milliseconds.size(), refused, degenerate, total_ms / static_cast<double>(milliseconds.size()),
+      percentile(0.5), percentile(0.99), percentile(1.0), max_map_points, static_cast<double>(max_map_bytes) / 1e6);
+  if (ground_truth) {
+    if (Status scored = score(estimate, *ground_truth, options, result, text); !scored) return fail(scored.error().message);
+  }
+  if (!options.trajectory_out.empty()) {
+    if (Status written = io::write_trajectory(options.trajectory_out, estimate, io::TrajectoryFormat::kTum); !written) {
+      return fail(written.error().message);
+    }
+    result["trajectory"] = options.trajectory_out;
+    text += fmt::format("wrote {}\n", options.trajectory_out);
+  }
+  return report_success(output, result, text);
+}
+
+}  // namespace
+
+void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& run) {
+  auto options = std::make_shared<LidarOdometryOptions>();
+  CLI::App* command = app.add_subcommand("lidar-odometry", "LiDAR odometry over a sensor log's point clouds (scan to local map)");
+  command->add_option("LOG", options->log, "Sensor log (MCAP, e.g. from hanzo-fusion sim or import)")->required();
+  command->add_option("--topic", options->topic, "Point-cloud topic (default: the first one)");
+  command->add_option("--ground-truth", options->ground_truth, "Ground truth T_world_body (TUM): start there and score the result");
+  command->add_option("--calibration", options->calibration, "Calibration YAML with <frame_id>_to_body of the LiDAR (default: identity)");
+  command->add_option("--voxel", options->voxel, "Local map voxel size and neighbour radius, m")->capture_default_str();
+  command->add_option("--source-voxel", options->source_voxel, "Registration points downsampled to this, m (0.5 outdoor, 0.25 indoor)")->capture_default_str();
+  command->add_option("--max-range", options->max_range, "Ignore returns farther than this, m")->capture_default_str();
+  command->add_flag("--no-deskew", options->no_deskew, "Use the points as measured (no motion compensation)");
+  command->add_option("--max-scans", options->max_scans, "Stop after this many scans (0: all)");
+  command->add_option("--trajectory", options->trajectory_out, "Write the body trajectory (TUM)");
+  command->add_option("--plot", options->plot_dir, "Write an SVG of the trajectory against the ground truth into this folder");
+  command->callback([&output, &run, options] { run = [&output, options] { return run_lidar_odometry(output, *options); }; });
+}
+
+}  // namespace hanzo::fusion::app

@@ -1,0 +1,38 @@
+#pragma once
+// Surface normals of a spinning-LiDAR scan from its range-image structure: each point's
+// neighbours are the points within column_window columns on its own ring and the rings
+// directly above and below (not its k nearest points in space, which for a 16- or 32-beam
+// sensor mostly lie on the same ring: a line, whose plane is undetermined). Neighbours farther
+// than min(max_neighbour_distance, max_relative_distance x range) are left out (depth
+// discontinuities). The point gets the normal of the plane through them when they include
+// another ring (two points or more), number at least min_neighbours and are planar (smallest covariance eigenvalue
+// below plane_ratio x the middle one); otherwise a zero normal.
+//
+// The range image: row = ring, column = azimuth bin of atan2(y, x) in the sensor frame
+// (azimuth_bins columns; 0: the largest point count of any ring, about the firings per
+// revolution). Normals are unit vectors pointing toward the sensor origin, in the cloud's frame.
+// Needs ring indices: a cloud without rings gets zero normals everywhere.
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "hanzo/fusion/cloud/point_cloud.hpp"
+
+namespace hanzo::fusion::cloud {
+
+struct ScanNormalConfig {
+  int azimuth_bins = 0;                ///< >= 0
+  /// Columns on each side; 0: about one ring spacing (the median elevation step between
+  /// adjacent rings, in azimuth bins), sampled at up to 4 columns per side.
+  int column_window = 0;
+  double max_neighbour_distance = 2.0; ///< m
+  double max_relative_distance = 0.5;  ///< of the point's range
+  int min_neighbours = 4;              ///< >= 3
+  double plane_ratio = 0.1;
+};
+
+/// One normal per point of `scan` (zero where none); see above.
+std::vector<Eigen::Vector3f> estimate_scan_normals(const PointCloud& scan, const ScanNormalConfig& config = {});
+
+}  // namespace hanzo::fusion::cloud

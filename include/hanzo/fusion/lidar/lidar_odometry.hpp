@@ -1,0 +1,129 @@
+#pragma once
+// LidarOdometry: scan-to-local-map LiDAR odometry for spinning LiDARs (the pipeline of
+// KISS-ICP, Vizzo et al. 2023, with surface-aware residuals and a degeneracy prior).
+//
+// Per scan (points in the sensor frame, per-point times from the scan timestamp):
+//  1. Prediction of T_world_lidar at the scan time: the caller's (an IMU-propagated filter
+//     in LiDAR-inertial mode) or the constant-velocity model (the last motion repeated).
+//  2. Deskewing: each point is moved into the sensor frame at the middle of the sweep with
+//     the constant twist between the previous pose and the prediction (needs point times;
+//     scans without them are used as they are). Poses refer to the middle of the sweep: a
+//     velocity error then warps the sweep symmetrically instead of shifting it, which would
+//     feed back through the constant-velocity model.
+//  3. Range crop and voxel downsampling: map points at the map's point spacing, registration
+//     points at source_voxel_size (KISS's double downsampling).
+//  4. Registration against the cloud::VoxelHashMap by Gauss-Newton on SE3 (right
+//     perturbation). Each point is matched to the best of the surfaces of its voxel and the six
+//     face neighbours: a planar voxel gives a point-to-plane residual, a line voxel close to
+//     vertical (poles, trunks, corners) a point-to-line residual. Other shapes give none:
+//     lines that are not vertical are mostly one ring's arc over the ground or a facade (a
+//     point-to-line residual on them pulls a moving sensor back toward where that ring was),
+//     volumes (foliage) have no stable surface. Geman-McClure weights. A weak prior on the
+//     prediction is worth less than one matched point where the geometry
+//     constrains the pose and keeps the prediction along directions it does not (a bare
+//     corridor or street along its axis: degeneracy, Zhang et al., ICRA 2016).
+//  5. Degeneracy: the eigenvalues of the translation block of the registration information
+//     (Schur complement of the rotation); constraint_ratio = smallest / largest. Below
+//     degeneracy_ratio the scan is flagged degenerate (the estimate then follows the
+//     prediction along the weak direction, and its covariance says so).
+//  6. The deskewed map points enter the local map at the estimated pose; voxels beyond
+//     map.max_distance are dropped.
+//
+// Frames: world = the odometry frame (the first scan's sensor pose unless initial_pose is
+// given); T_world_lidar maps sensor-frame points at the scan time into it. Units m, s, rad.
+// Failure cases (returned Errors, state unchanged): time not after the previous scan, an
+// invalid cloud, fewer than min_points after cropping, a non-finite prediction, too few
+// matched points (< min_correspondences: no overlap with the map, e.g. after a teleport).
+
+#include <cstddef>
+#include <optional>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "hanzo/fusion/cloud/point_cloud.hpp"
+#include "hanzo/fusion/cloud/scan_normals.hpp"
+#include "hanzo/fusion/cloud/voxel_hash_map.hpp"
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/lidar/surface_registration.hpp"
+
+namespace hanzo::fusion::lidar {
+
+struct LidarOdometryConfig {
+  double min_range = 1.0;              ///< m: closer returns (the vehicle itself) are dropped
+  double max_range = 100.0;            ///< m
+  bool deskew = true;
+  cloud::ScanNormalConfig normals;     ///< surface normals from the scan's rings (needs ring ids)
+  /// The local map: 1 m voxels (also the neighbour search cells), up to 20 points each,
+  /// 0.22 m apart; 100 m around the sensor.
+  cloud::VoxelHashMapConfig map{.voxel_size = 1.0, .max_points_per_voxel = 20, .min_point_spacing = -1.0, .max_distance = 100.0};
+  double source_voxel_size = 0.5;      ///< m: registration points (spec: 0.5 outdoor; 0.25 indoor)
+  /// Scan-to-map registration (surface_registration.hpp): surfaces from the 20 nearest map
+  /// points within 1 m, gate 0.5 m, Geman-McClure 0.1 m, prior 1 m / 0.1 rad on the
+  /// prediction, vertical lines within 0.35 rad of z (the world frame's z must be up:
+  /// initial_pose levels it).
+  SurfaceRegistrationConfig registration{.neighbours = 20};
+  double degeneracy_ratio = 0.02;      ///< constraint_ratio below: degenerate
+  std::size_t min_points = 100;        ///< points after cropping
+
+  /// Ok, or an Error naming the first invalid field.
+  Status validate() const;
+};
+
+/// The outcome of one scan.
+struct LidarOdometryEstimate {
+  /// The middle of the sweep (scan time + half the largest point time; the scan time when
+  /// points carry no times): the estimate refers to it.
+  Timestamp time;
+  SE3 T_world_lidar;                   ///< at `time`
+  SE3 T_previous_current;              ///< motion since the previous scan (identity for the first)
+  /// Covariance of T_world_lidar's registration in its tangent (x, y, z, rx, ry, rz), right
+  /// perturbation: the inverse registration information scaled by the residual variance,
+  /// without the prior (large along degenerate directions).
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();
+  double constraint_ratio = 0.0;       ///< smallest / largest translation information eigenvalue
+  bool degenerate = false;
+  bool first_scan = false;             ///< the scan that started the map (no registration)
+  int iterations = 0;
+  bool converged = false;
+  std::size_t source_points = 0;       ///< registration points
+  std::size_t correspondences = 0;
+  std::size_t plane_correspondences = 0;
+  std::size_t line_correspondences = 0;
+  double inlier_rmse = 0.0;            ///< m, RMS of matched residuals
+  std::size_t map_points = 0;          ///< after adding this scan
+};
+
+class LidarOdometry {
+ public:
+  explicit LidarOdometry(LidarOdometryConfig config = {}, const SE3& initial_pose = SE3());
+
+  /// One scan (sensor frame; `times` relative to `time` when present). See the header
+  /// comment for the steps and failure cases.
+  Result<LidarOdometryEstimate> add_scan(Timestamp time, const cloud::PointCloud& scan,
+                                         const std::optional<SE3>& predicted_T_world_lidar = std::nullopt);
+
+  /// The latest T_world_lidar (initial_pose before the first scan).
+  const SE3& pose() const { return pose_; }
+  const cloud::VoxelHashMap& local_map() const { return map_; }
+  const LidarOdometryConfig& config() const { return config_; }
+  std::size_t scans() const { return scans_; }
+  std::size_t degenerate_scans() const { return degenerate_scans_; }
+  /// The last scan's deskewed map points in the sensor frame (empty before the first scan).
+  const std::vector<Eigen::Vector3f>& last_scan_points() const { return last_scan_points_; }
+
+ private:
+  LidarOdometryConfig config_;
+  cloud::VoxelHashMap map_;
+  SE3 pose_;
+  SE3 last_motion_;  ///< T_previous_current of the last scan
+  std::optional<Timestamp> last_time_;
+  double last_interval_ = 0.0;  ///< s between the last two scans
+  std::size_t scans_ = 0;
+  std::size_t degenerate_scans_ = 0;
+  std::vector<Eigen::Vector3f> last_scan_points_;
+};
+
+}  // namespace hanzo::fusion::lidar

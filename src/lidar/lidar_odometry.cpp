@@ -1,0 +1,173 @@
+#include "hanzo/fusion/lidar/lidar_odometry.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Eigenvalues>
+#include <fmt/format.h>
+
+#include "hanzo/fusion/cloud/scan_normals.hpp"
+#include "hanzo/fusion/cloud/voxel_grid.hpp"
+#include "hanzo/fusion/core/logging.hpp"
+
+namespace hanzo::fusion::lidar {
+namespace {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+// The scan with positions (and normals) moved from the sensor frame at their own time into the
+// sensor frame at `reference_time` (s after the scan time), for a sensor moving with constant
+// body twist `twist_per_second` (rho, phi per s).
+void deskew(cloud::PointCloud& scan, const SE3::Tangent& twist_per_second, float reference_time) {
+  if (!scan.has_times() || twist_per_second.isZero()) return;
+  // Sweeps are sorted by time in blocks (columns): reuse the transform while the time repeats.
+  float cached_time = std::numeric_limits<float>::quiet_NaN();
+  Eigen::Matrix3f rotation = Eigen::Matrix3f::Identity();
+  Eigen::Vector3f translation = Eigen::Vector3f::Zero();
+  for (std::size_t i = 0; i < scan.size(); ++i) {
+    if (scan.times[i] != cached_time) {
+      cached_time = scan.times[i];
+      const SE3 motion = SE3::exp(twist_per_second * static_cast<double>(cached_time - reference_time));
+      rotation = motion.rotation().matrix().cast<float>();
+      translation = motion.translation().cast<float>();
+    }
+    scan.positions[i] = rotation * scan.positions[i] + translation;
+    if (scan.has_normals()) scan.normals[i] = rotation * scan.normals[i];
+  }
+}
+
+std::vector<Eigen::Vector3f> transformed(const std::vector<Eigen::Vector3f>& points, const SE3& T) {
+  const Eigen::Matrix3f rotation = T.rotation().matrix().cast<float>();
+  const Eigen::Vector3f translation = T.translation().cast<float>();
+  std::vector<Eigen::Vector3f> out(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) out[i] = rotation * points[i] + translation;
+  return out;
+}
+
+// Inverse of an information matrix that may be singular along degenerate directions: those
+// get a variance of 1e9 times the best-constrained one (the registration says nothing there).
+Matrix6d covariance_from(const Matrix6d& information) {
+  const Eigen::SelfAdjointEigenSolver<Matrix6d> solver(0.5 * (information + information.transpose()));
+  const double largest = std::max(solver.eigenvalues().maxCoeff(), 1e-300);
+  const Eigen::Matrix<double, 6, 1> variances = solver.eigenvalues().cwiseMax(largest * 1e-9).cwiseInverse();
+  return solver.eigenvectors() * variances.asDiagonal() * solver.eigenvectors().transpose();
+}
+
+}  // namespace
+
+Status LidarOdometryConfig::validate() const {
+  if (!(min_range >= 0)) return Error(fmt::format("min_range: {} < 0", min_range));
+  if (!(max_range > min_range)) return Error(fmt::format("max_range: {} <= min_range {}", max_range, min_range));
+  if (!(map.voxel_size > 0)) return Error(fmt::format("map.voxel_size: {} <= 0", map.voxel_size));
+  if (map.max_points_per_voxel < 1) return Error(fmt::format("map.max_points_per_voxel: {} < 1", map.max_points_per_voxel));
+  if (!(map.max_distance > 0)) return Error(fmt::format("map.max_distance: {} <= 0", map.max_distance));
+  if (!(source_voxel_size > 0)) return Error(fmt::format("source_voxel_size: {} <= 0", source_voxel_size));
+  if (!(degeneracy_ratio >= 0 && degeneracy_ratio < 1)) {
+    return Error(fmt::format("degeneracy_ratio: {} outside [0, 1)", degeneracy_ratio));
+  }
+  if (min_points < 6) return Error(fmt::format("min_points: {} < 6", min_points));
+  return with_context(registration.validate(), "registration");
+}
+
+LidarOdometry::LidarOdometry(LidarOdometryConfig config, const SE3& initial_pose)
+    : config_(std::move(config)), map_(config_.map), pose_(initial_pose) {}
+
+Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const cloud::PointCloud& scan,
+                                                      const std::optional<SE3>& predicted_T_world_lidar) {
+  HANZO_RETURN_IF_ERROR(with_context(config_.validate(), "lidar odometry config"));
+  if (last_time_ && time <= *last_time_) {
+    return Error(fmt::format("lidar odometry: scan time {:.6f} is not after the previous scan's {:.6f}", time.seconds(),
+                             last_time_->seconds()));
+  }
+  HANZO_RETURN_IF_ERROR(with_context(scan.validate(), "lidar odometry scan"));
+  if (predicted_T_world_lidar && !predicted_T_world_lidar->matrix().allFinite()) {
+    return Error("lidar odometry: the predicted pose is not finite");
+  }
+
+  // 1. Prediction and the twist that deskews the sweep.
+  SE3 prediction = pose_;
+  SE3::Tangent twist_per_second = SE3::Tangent::Zero();
+  if (last_time_) {
+    const double interval = (time - *last_time_).seconds();  // sweeps of equal length: also between middles
+    if (predicted_T_world_lidar) {
+      prediction = *predicted_T_world_lidar;
+    } else if (last_interval_ > 0) {
+      prediction = pose_ * SE3::exp(last_motion_.log() * (interval / last_interval_));
+    }
+    twist_per_second = (pose_.inverse() * prediction).log() / interval;
+  } else if (predicted_T_world_lidar) {
+    prediction = *predicted_T_world_lidar;
+  }
+
+  // 2-3. Normals from the range image, deskew, crop, downsample.
+  cloud::PointCloud points;
+  points.positions = scan.positions;
+  points.times = scan.times;
+  points.normals = cloud::estimate_scan_normals(scan, config_.normals);
+  // The estimate refers to the middle of the sweep: a velocity error then warps the sweep
+  // symmetrically about the estimated pose instead of shifting it (referred to the sweep start,
+  // the error feeds back through the constant-velocity model and grows).
+  const float middle = scan.has_times() ? 0.5F * *std::max_element(scan.times.begin(), scan.times.end()) : 0.0F;
+  const Timestamp pose_time = time + Duration::from_seconds(static_cast<double>(middle));
+  if (config_.deskew) deskew(points, twist_per_second, middle);
+  points.times.clear();
+  points = cloud::crop_range(points, config_.min_range, config_.max_range);
+  if (points.size() < config_.min_points) {
+    return Error(fmt::format("lidar odometry: {} points within {}-{} m (need {})", points.size(), config_.min_range,
+                             config_.max_range, config_.min_points));
+  }
+  const double spacing = config_.map.min_point_spacing < 0
+                             ? config_.map.voxel_size / std::sqrt(static_cast<double>(config_.map.max_points_per_voxel))
+                             : std::max(config_.map.min_point_spacing, 0.01);
+  cloud::PointCloud map_points = cloud::voxel_downsample(points, spacing);
+  const std::vector<Eigen::Vector3f> source = cloud::voxel_downsample(points, config_.source_voxel_size).positions;
+
+  LidarOdometryEstimate estimate;
+  estimate.time = pose_time;
+  estimate.source_points = source.size();
+  SE3 T_world_lidar = prediction;
+  if (map_.empty()) {
+    estimate.first_scan = true;
+    estimate.converged = true;
+  } else {
+    // 4. Registration.
+    auto registered = align_to_surfaces(source, map_, prediction, prediction, config_.registration);
+    if (!registered) return Error(fmt::format("lidar odometry at {:.6f} s: {}", time.seconds(), registered.error().message));
+    T_world_lidar = registered->T_map_source;
+    estimate.iterations = registered->iterations;
+    estimate.converged = registered->converged;
+    estimate.correspondences = registered->correspondences;
+    estimate.plane_correspondences = registered->plane_correspondences;
+    estimate.line_correspondences = registered->line_correspondences;
+    estimate.inlier_rmse = registered->inlier_rmse;
+    estimate.covariance = covariance_from(registered->information);
+    // 5. Degeneracy.
+    estimate.constraint_ratio = translation_constraint_ratio(registered->information);
+    estimate.degenerate = estimate.constraint_ratio < config_.degeneracy_ratio;
+    if (estimate.degenerate) {
+      ++degenerate_scans_;
+      logger()->debug("lidar odometry: degenerate scan at {:.6f} s (constraint ratio {:.4f})", time.seconds(),
+                      estimate.constraint_ratio);
+    }
+  }
+
+  // 6. Map update and state.
+  const Eigen::Matrix3f rotation = T_world_lidar.rotation().matrix().cast<float>();
+  for (Eigen::Vector3f& normal : map_points.normals) normal = rotation * normal;
+  map_.add(transformed(map_points.positions, T_world_lidar), map_points.normals, T_world_lidar.translation());
+  estimate.T_world_lidar = T_world_lidar;
+  estimate.T_previous_current = last_time_ ? pose_.inverse() * T_world_lidar : SE3();
+  estimate.map_points = map_.point_count();
+  if (last_time_) {
+    last_motion_ = estimate.T_previous_current;
+    last_interval_ = (time - *last_time_).seconds();
+  }
+  pose_ = T_world_lidar;
+  last_time_ = time;
+  last_scan_points_ = std::move(map_points.positions);
+  ++scans_;
+  return estimate;
+}
+
+}  // namespace hanzo::fusion::lidar

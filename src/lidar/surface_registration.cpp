@@ -1,0 +1,250 @@
+#include "hanzo/fusion/lidar/surface_registration.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <fmt/format.h>
+
+#include "hanzo/fusion/cloud/parallel.hpp"
+#include "hanzo/fusion/core/so3.hpp"
+
+namespace hanzo::fusion::lidar {
+namespace {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+
+struct SurfaceEquations {
+  Matrix6d hessian = Matrix6d::Zero();   // sum w J^T J (residuals in units of kernel_width)
+  Vector6d gradient = Vector6d::Zero();  // sum w J^T r
+  double cost = 0.0;                     // sum w r^T r
+  double squared_residual_sum = 0.0;     // m^2
+  std::size_t planes = 0;
+  std::size_t lines = 0;
+
+  void add(const SurfaceEquations& other) {
+    hessian += other.hessian;
+    gradient += other.gradient;
+    cost += other.cost;
+    squared_residual_sum += other.squared_residual_sum;
+    planes += other.planes;
+    lines += other.lines;
+  }
+  std::size_t correspondences() const { return planes + lines; }
+};
+
+// The surface near one source point, fitted from its map neighbours.
+enum class Shape : uint8_t { kNone, kPlane, kLine };
+struct LocalSurface {
+  Shape shape = Shape::kNone;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  Eigen::Vector3d direction = Eigen::Vector3d::Zero();  // plane: unit normal; line: unit direction
+};
+
+LocalSurface fit_surface(const std::vector<cloud::MapPoint>& neighbours, const SurfaceRegistrationConfig& config,
+                         double min_vertical_cosine) {
+  LocalSurface surface;
+  if (neighbours.size() < config.min_neighbours) return surface;
+  // The nearest point's measured normal, averaged with the neighbours that agree with it.
+  const Eigen::Vector3f& nearest_normal = neighbours.front().normal;
+  if (!nearest_normal.isZero()) {
+    Eigen::Vector3d normal_sum = Eigen::Vector3d::Zero();
+    Eigen::Vector3d position_sum = Eigen::Vector3d::Zero();
+    std::size_t agreeing = 0;
+    for (const cloud::MapPoint& point : neighbours) {
+      if (point.normal.dot(nearest_normal) < config.normal_agreement) continue;
+      normal_sum += point.normal.cast<double>();
+      position_sum += point.position.cast<double>();
+      ++agreeing;
+    }
+    if (agreeing >= config.min_neighbours / 2 + 1) {
+      surface.shape = Shape::kPlane;
+      surface.direction = normal_sum.normalized();
+      surface.mean = position_sum / static_cast<double>(agreeing);
+      return surface;
+    }
+  }
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const cloud::MapPoint& point : neighbours) mean += point.position.cast<double>();
+  mean /= static_cast<double>(neighbours.size());
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  for (const cloud::MapPoint& point : neighbours) {
+    const Eigen::Vector3d d = point.position.cast<double>() - mean;
+    covariance.noalias() += d * d.transpose();
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+  solver.computeDirect(covariance / static_cast<double>(neighbours.size()));
+  const Eigen::Vector3d eigenvalues = solver.eigenvalues().cwiseMax(0.0);
+  surface.mean = mean;
+  if (eigenvalues(1) < config.line_ratio * eigenvalues(2)) {
+    surface.direction = solver.eigenvectors().col(2).normalized();
+    if (std::abs(surface.direction.z()) >= min_vertical_cosine) surface.shape = Shape::kLine;
+  } else if (eigenvalues(0) < config.plane_ratio * eigenvalues(1)) {
+    surface.direction = solver.eigenvectors().col(0).normalized();
+    surface.shape = Shape::kPlane;
+  }
+  return surface;
+}
+
+// Fits the surface of every source point at pose T (parallel; one result per point).
+void associate(const std::vector<Eigen::Vector3f>& source, const cloud::VoxelHashMap& map, const SE3& T,
+               const SurfaceRegistrationConfig& config, std::vector<LocalSurface>& surfaces) {
+  surfaces.assign(source.size(), LocalSurface{});
+  const Eigen::Matrix3f rotation = T.rotation().matrix().cast<float>();
+  const Eigen::Vector3f translation = T.translation().cast<float>();
+  const double min_vertical_cosine = std::cos(config.vertical_line_angle);
+  const float max_distance = static_cast<float>(config.max_neighbour_distance);
+  cloud::parallel_for(source.size(), config.num_threads, [&](std::size_t begin, std::size_t end) {
+    std::vector<cloud::MapPoint> neighbours;
+    for (std::size_t i = begin; i < end; ++i) {
+      map.nearest_k(rotation * source[i] + translation, config.neighbours, max_distance, &neighbours);
+      surfaces[i] = fit_surface(neighbours, config, min_vertical_cosine);
+    }
+  });
+}
+
+SurfaceEquations linearize(const std::vector<Eigen::Vector3f>& source, const std::vector<LocalSurface>& surfaces,
+                           const SE3& T, const SurfaceRegistrationConfig& config) {
+  const Eigen::Matrix3d rotation = T.rotation().matrix();
+  const Eigen::Vector3d translation = T.translation();
+  const double inverse_width = 1.0 / config.kernel_width;
+  std::vector<SurfaceEquations> partial(cloud::chunk_count(source.size(), config.num_threads));
+  cloud::parallel_chunks(source.size(), config.num_threads, [&](std::size_t chunk, std::size_t begin, std::size_t end) {
+    SurfaceEquations local;
+    for (std::size_t i = begin; i < end; ++i) {
+      const LocalSurface& surface = surfaces[i];
+      if (surface.shape == Shape::kNone) continue;
+      const Eigen::Vector3d p = source[i].cast<double>();
+      const Eigen::Vector3d offset = rotation * p + translation - surface.mean;
+      const Eigen::Vector3d& direction = surface.direction;
+      const bool plane = surface.shape == Shape::kPlane;
+      const Eigen::Matrix3d projection = plane ? Eigen::Matrix3d(direction * direction.transpose())
+                                               : Eigen::Matrix3d(Eigen::Matrix3d::Identity() - direction * direction.transpose());
+      const Eigen::Vector3d residual = projection * offset;  // m: the offset's part normal to the surface
+      const double distance = residual.norm();
+      if (distance > config.max_correspondence_distance) continue;
+      // d q / d delta = [R, -R hat(p)]; the projection is fixed.
+      Eigen::Matrix<double, 3, 6> J;
+      J.leftCols<3>() = projection * rotation;
+      J.rightCols<3>() = -projection * rotation * SO3::hat(p);
+      const double scaled = distance * inverse_width;
+      const double s = 1.0 + scaled * scaled;
+      const double weight = inverse_width * inverse_width / (s * s);  // Geman-McClure, residuals in units of the width
+      local.hessian.noalias() += weight * J.transpose() * J;
+      local.gradient.noalias() += weight * J.transpose() * residual;
+      local.cost += weight * distance * distance;
+      local.squared_residual_sum += distance * distance;
+      ++(plane ? local.planes : local.lines);
+    }
+    partial[chunk] = local;
+  });
+  SurfaceEquations total;
+  for (const SurfaceEquations& chunk : partial) total.add(chunk);
+  return total;
+}
+
+}  // namespace
+
+Status SurfaceRegistrationConfig::validate() const {
+  if (max_iterations < 1) return Error(fmt::format("max_iterations: {} < 1", max_iterations));
+  if (!(translation_tolerance > 0)) return Error(fmt::format("translation_tolerance: {} <= 0", translation_tolerance));
+  if (!(rotation_tolerance > 0)) return Error(fmt::format("rotation_tolerance: {} <= 0", rotation_tolerance));
+  if (!(max_correspondence_distance > 0)) {
+    return Error(fmt::format("max_correspondence_distance: {} <= 0", max_correspondence_distance));
+  }
+  if (!(kernel_width > 0)) return Error(fmt::format("kernel_width: {} <= 0", kernel_width));
+  if (!std::isfinite(prior_translation_sigma)) return Error("prior_translation_sigma: not finite");
+  if (!std::isfinite(prior_rotation_sigma)) return Error("prior_rotation_sigma: not finite");
+  if (!(vertical_line_angle >= 0 && vertical_line_angle <= M_PI / 2)) {
+    return Error(fmt::format("vertical_line_angle: {} outside [0, pi/2]", vertical_line_angle));
+  }
+  if (neighbours < 3) return Error(fmt::format("neighbours: {} < 3", neighbours));
+  if (min_neighbours < 3 || min_neighbours > neighbours) {
+    return Error(fmt::format("min_neighbours: {} outside [3, neighbours = {}]", min_neighbours, neighbours));
+  }
+  if (!(max_neighbour_distance > 0)) return Error(fmt::format("max_neighbour_distance: {} <= 0", max_neighbour_distance));
+  if (!(line_ratio > 0 && line_ratio < 1)) return Error(fmt::format("line_ratio: {} outside (0, 1)", line_ratio));
+  if (!(plane_ratio > 0 && plane_ratio < 1)) return Error(fmt::format("plane_ratio: {} outside (0, 1)", plane_ratio));
+  if (!(reassociation_translation >= 0)) return Error(fmt::format("reassociation_translation: {} < 0", reassociation_translation));
+  if (!(reassociation_rotation >= 0)) return Error(fmt::format("reassociation_rotation: {} < 0", reassociation_rotation));
+  if (min_correspondences < 6) return Error(fmt::format("min_correspondences: {} < 6", min_correspondences));
+  return ok_status();
+}
+
+double translation_constraint_ratio(const Eigen::Matrix<double, 6, 6>& information) {
+  const Eigen::LDLT<Eigen::Matrix3d> rotation_block(information.bottomRightCorner<3, 3>());
+  if (rotation_block.info() != Eigen::Success || !(rotation_block.vectorD().minCoeff() > 0)) return 0.0;
+  const Eigen::Matrix3d marginal = information.topLeftCorner<3, 3>() -
+                                   information.topRightCorner<3, 3>() * rotation_block.solve(information.bottomLeftCorner<3, 3>());
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(0.5 * (marginal + marginal.transpose()), Eigen::EigenvaluesOnly);
+  const Eigen::Vector3d eigenvalues = solver.eigenvalues();
+  if (!(eigenvalues(2) > 0)) return 0.0;
+  return std::max(0.0, eigenvalues(0)) / eigenvalues(2);
+}
+
+Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vector3f>& source,
+                                                    const cloud::VoxelHashMap& map, const SE3& guess,
+                                                    const SE3& T_prior, const SurfaceRegistrationConfig& config) {
+  HANZO_RETURN_IF_ERROR(with_context(config.validate(), "surface registration"));
+  if (source.empty()) return Error("surface registration: the source has no points");
+  // The residuals' weights are 1 / kernel_width^2 (times the kernel), the prior's 1 / sigma^2.
+  Vector6d prior_information = Vector6d::Zero();
+  if (config.prior_translation_sigma > 0) {
+    prior_information.head<3>().setConstant(1.0 / (config.prior_translation_sigma * config.prior_translation_sigma));
+  }
+  if (config.prior_rotation_sigma > 0) {
+    prior_information.tail<3>().setConstant(1.0 / (config.prior_rotation_sigma * config.prior_rotation_sigma));
+  }
+  const SE3 T_prior_inverse = T_prior.inverse();
+  SurfaceRegistrationResult result;
+  result.T_map_source = guess;
+  SurfaceEquations equations;
+  std::vector<LocalSurface> surfaces;
+  SE3 associated_at;
+  for (int iteration = 1; iteration <= config.max_iterations; ++iteration) {
+    const SE3::Tangent moved = (associated_at.inverse() * result.T_map_source).log();
+    if (iteration == 1 || moved.head<3>().norm() > config.reassociation_translation ||
+        moved.tail<3>().norm() > config.reassociation_rotation) {
+      associate(source, map, result.T_map_source, config, surfaces);
+      associated_at = result.T_map_source;
+      ++result.associations;
+    }
+    equations = linearize(source, surfaces, result.T_map_source, config);
+    if (equations.correspondences() < config.min_correspondences) {
+      return Error(fmt::format("surface registration: {} of {} points matched a map surface within {} m {}(need {}); "
+                               "the map does not overlap the scan at this pose",
+                               equations.correspondences(), source.size(), config.max_correspondence_distance,
+                               iteration == 1 ? "at the guess " : fmt::format("after {} iterations ", iteration - 1),
+                               config.min_correspondences));
+    }
+    // Prior residual e = Log(T_prior^-1 T); d e / d delta ~ identity near the prior.
+    const Vector6d prior_error = (T_prior_inverse * result.T_map_source).log();
+    Matrix6d hessian = equations.hessian;
+    hessian.diagonal() += prior_information;
+    hessian.diagonal().array() += 1e-9 * std::max(1.0, equations.hessian.diagonal().maxCoeff());
+    const Vector6d gradient = equations.gradient + prior_information.cwiseProduct(prior_error);
+    const Vector6d delta = hessian.ldlt().solve(-gradient);
+    if (!delta.allFinite()) {
+      return Error(fmt::format("surface registration: the normal equations are singular at iteration {}", iteration));
+    }
+    result.T_map_source = result.T_map_source * SE3::exp(delta);
+    result.iterations = iteration;
+    if (delta.head<3>().norm() < config.translation_tolerance && delta.tail<3>().norm() < config.rotation_tolerance) {
+      result.converged = true;
+      break;
+    }
+  }
+  result.correspondences = equations.correspondences();
+  result.plane_correspondences = equations.planes;
+  result.line_correspondences = equations.lines;
+  result.inlier_rmse = std::sqrt(equations.squared_residual_sum / static_cast<double>(equations.correspondences()));
+  const double dof = std::max(1.0, static_cast<double>(equations.correspondences()) - 6.0);
+  // information = (sum rho' J^T J) / sigma^2, sigma^2 = (sum rho' r^2) / dof the a-posteriori
+  // residual variance; the kernel width cancels.
+  result.information = equations.hessian / std::max(equations.cost / dof, 1e-12);
+  return result;
+}
+
+}  // namespace hanzo::fusion::lidar
