@@ -102,7 +102,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   std::unique_ptr<lidar::LidarOdometry> odometry;
   io::Trajectory estimate;
   std::vector<double> milliseconds;
-  std::size_t refused = 0, degenerate = 0, max_map_points = 0, max_map_bytes = 0;
+  std::size_t refused = 0, degenerate = 0, max_map_points = 0, max_map_bytes = 0, iterations = 0, associations = 0;
   std::string first_refusal;
   io::LogEntry entry;
   while (options.max_scans == 0 || milliseconds.size() + refused < options.max_scans) {
@@ -123,8 +123,13 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
         T_body_lidar = sensor->T_body_sensor();
       }
       if (ground_truth) {
+        // Estimates refer to the middle of each sweep.
+        Timestamp middle = scan->timestamp;
+        if (!scan->point_timestamps.empty()) {
+          middle = scan->timestamp + Duration::from_nanoseconds((scan->point_timestamps.back() - scan->timestamp).nanoseconds() / 2);
+        }
         io::Trajectory first;
-        first.timestamps.push_back(scan->timestamp);
+        first.timestamps.push_back(middle);
         first.poses.push_back(Eigen::Matrix4d::Identity());
         auto pair = eval::associate(*ground_truth, first);
         if (!pair) return fail(fmt::format("ground truth at the first scan: {}", pair.error().message));
@@ -141,6 +146,8 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
     }
     milliseconds.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
     degenerate += added->degenerate ? 1 : 0;
+    iterations += static_cast<std::size_t>(added->iterations);
+    associations += static_cast<std::size_t>(added->associations);
     max_map_points = std::max(max_map_points, added->map_points);
     max_map_bytes = std::max(max_map_bytes, odometry->local_map().memory_bytes());
     estimate.timestamps.push_back(added->time);
@@ -160,12 +167,16 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   result["refused_scans"] = refused;
   if (refused > 0) result["first_refusal"] = first_refusal;
   result["degenerate_scans"] = degenerate;
+  const double scans = static_cast<double>(milliseconds.size());
+  result["mean_iterations"] = static_cast<double>(iterations) / scans;
+  result["mean_associations"] = static_cast<double>(associations) / scans;
   result["scan_ms"] = {{"mean", total_ms / static_cast<double>(milliseconds.size())}, {"p50", percentile(0.5)}, {"p99", percentile(0.99)}, {"max", percentile(1.0)}};
   result["local_map"] = {{"max_points", max_map_points}, {"max_bytes", max_map_bytes}};
   std::string text = fmt::format(
-      "{} ({}): {} scans ({} refused), {} degenerate; per scan mean {:.1f} ms, p50 {:.1f}, p99 {:.1f}, max {:.1f} ms; "
-      "local map up to {} points, {:.1f} MB\n",
-      options.log, topic, milliseconds.size(), refused, degenerate, total_ms / static_cast<double>(milliseconds.size()),
+      "{} ({}): {} scans ({} refused), {} degenerate, {:.1f} iterations and {:.1f} surface fits per scan; per scan mean "
+      "{:.1f} ms, p50 {:.1f}, p99 {:.1f}, max {:.1f} ms; local map up to {} points, {:.1f} MB\n",
+      options.log, topic, milliseconds.size(), refused, degenerate, static_cast<double>(iterations) / scans,
+      static_cast<double>(associations) / scans, total_ms / scans,
       percentile(0.5), percentile(0.99), percentile(1.0), max_map_points, static_cast<double>(max_map_bytes) / 1e6);
   if (ground_truth) {
     if (Status scored = score(estimate, *ground_truth, options, result, text); !scored) return fail(scored.error().message);

@@ -10,7 +10,14 @@
 namespace hanzo::fusion::cloud {
 
 std::vector<Eigen::Vector3f> estimate_scan_normals(const PointCloud& scan, const ScanNormalConfig& config) {
-  std::vector<Eigen::Vector3f> normals(scan.size(), Eigen::Vector3f::Zero());
+  std::vector<uint32_t> all(scan.size());
+  for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<uint32_t>(i);
+  return estimate_scan_normals(scan, all, config);
+}
+
+std::vector<Eigen::Vector3f> estimate_scan_normals(const PointCloud& scan, const std::vector<uint32_t>& indices,
+                                                   const ScanNormalConfig& config) {
+  std::vector<Eigen::Vector3f> normals(indices.size(), Eigen::Vector3f::Zero());
   if (!scan.has_rings() || scan.empty()) return normals;
   const int rings = static_cast<int>(*std::max_element(scan.rings.begin(), scan.rings.end())) + 1;
   int columns = config.azimuth_bins;
@@ -57,7 +64,8 @@ std::vector<Eigen::Vector3f> estimate_scan_normals(const PointCloud& scan, const
   }
 
   std::vector<Eigen::Vector3d> neighbourhood;
-  for (std::size_t i = 0; i < scan.size(); ++i) {
+  for (std::size_t n = 0; n < indices.size(); ++n) {
+    const std::size_t i = indices[n];
     const Eigen::Vector3f& p = scan.positions[i];
     const float range = p.norm();
     const float max_distance = std::min(static_cast<float>(config.max_neighbour_distance),
@@ -87,7 +95,7 @@ std::vector<Eigen::Vector3f> estimate_scan_normals(const PointCloud& scan, const
     if (!(eigenvalues(0) < config.plane_ratio * eigenvalues(1))) continue;
     Eigen::Vector3f normal = solver.eigenvectors().col(0).cast<float>().normalized();
     if (normal.dot(p) > 0.0F) normal = -normal;
-    normals[i] = normal;
+    normals[n] = normal;
   }
   return normals;
 }

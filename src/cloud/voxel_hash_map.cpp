@@ -8,6 +8,23 @@
 #include "hanzo/fusion/cloud/voxel_grid.hpp"
 
 namespace hanzo::fusion::cloud {
+namespace {
+
+// The 27 voxels around a query, its own first, then faces, edges and corners (nearest first,
+// so the k-nearest bound shrinks early and prunes the rest).
+const std::vector<Eigen::Vector3i> kNeighbourOffsets = [] {
+  std::vector<Eigen::Vector3i> offsets;
+  for (int dx = -1; dx <= 1; ++dx) {
+    for (int dy = -1; dy <= 1; ++dy) {
+      for (int dz = -1; dz <= 1; ++dz) offsets.emplace_back(dx, dy, dz);
+    }
+  }
+  std::stable_sort(offsets.begin(), offsets.end(),
+                   [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) { return a.cwiseAbs().sum() < b.cwiseAbs().sum(); });
+  return offsets;
+}();
+
+}  // namespace
 
 VoxelHashMap::VoxelHashMap(VoxelHashMapConfig config)
     : config_(config), inverse_voxel_size_(static_cast<float>(1.0 / config.voxel_size)) {
@@ -99,21 +116,27 @@ void VoxelHashMap::nearest_k(const Eigen::Vector3f& query, std::size_t k, float 
   best.clear();
   float bound = max_distance * max_distance;
   const Eigen::Vector3i center = coordinates(query);
-  for (int dx = -1; dx <= 1; ++dx) {
-    for (int dy = -1; dy <= 1; ++dy) {
-      for (int dz = -1; dz <= 1; ++dz) {
-        const std::vector<MapPoint>* voxel = find(center + Eigen::Vector3i(dx, dy, dz));
-        if (voxel == nullptr) continue;
-        for (const MapPoint& candidate : *voxel) {
-          const float d = (candidate.position - query).squaredNorm();
-          if (d >= bound) continue;
-          auto position = std::upper_bound(best.begin(), best.end(), d,
-                                           [](float value, const auto& entry) { return value < entry.first; });
-          best.insert(position, {d, candidate});
-          if (best.size() > k) best.pop_back();
-          if (best.size() == k) bound = best.back().first;
-        }
-      }
+  // Offset of the query inside its voxel, to skip neighbour voxels farther than the bound.
+  const float voxel_size = static_cast<float>(config_.voxel_size);
+  const Eigen::Vector3f low = query - center.cast<float>() * voxel_size;  // in [0, voxel_size)
+  const Eigen::Vector3f high = Eigen::Vector3f::Constant(voxel_size) - low;
+  for (const Eigen::Vector3i& offset : kNeighbourOffsets) {
+    float box_squared = 0.0F;
+    for (int axis = 0; axis < 3; ++axis) {
+      const float gap = offset[axis] < 0 ? low[axis] : (offset[axis] > 0 ? high[axis] : 0.0F);
+      box_squared += gap * gap;
+    }
+    if (box_squared >= bound) continue;
+    const std::vector<MapPoint>* voxel = find(center + offset);
+    if (voxel == nullptr) continue;
+    for (const MapPoint& candidate : *voxel) {
+      const float d = (candidate.position - query).squaredNorm();
+      if (d >= bound) continue;
+      auto position = std::upper_bound(best.begin(), best.end(), d,
+                                       [](float value, const auto& entry) { return value < entry.first; });
+      best.insert(position, {d, candidate});
+      if (best.size() > k) best.pop_back();
+      if (best.size() == k) bound = best.back().first;
     }
   }
   for (const auto& entry : best) neighbours->push_back(entry.second);

@@ -5,6 +5,7 @@
 #include <limits>
 
 #include <Eigen/Eigenvalues>
+#include <absl/container/flat_hash_set.h>
 #include <fmt/format.h>
 
 #include "hanzo/fusion/cloud/scan_normals.hpp"
@@ -35,6 +36,21 @@ void deskew(cloud::PointCloud& scan, const SE3::Tangent& twist_per_second, float
     scan.positions[i] = rotation * scan.positions[i] + translation;
     if (scan.has_normals()) scan.normals[i] = rotation * scan.normals[i];
   }
+}
+
+// The first point of each voxel of edge voxel_size, in input order (an O(n) downsampling that
+// keeps measured points, so their per-point attributes stay valid).
+std::vector<uint32_t> voxel_representatives(const std::vector<Eigen::Vector3f>& points, const std::vector<uint32_t>& candidates,
+                                            double voxel_size) {
+  const float inverse = static_cast<float>(1.0 / voxel_size);
+  absl::flat_hash_set<uint64_t> occupied;
+  occupied.reserve(candidates.size() / 4);
+  std::vector<uint32_t> kept;
+  for (const uint32_t i : candidates) {
+    uint64_t key = 0;
+    if (cloud::pack_voxel_key(cloud::voxel_coordinates(points[i], inverse), &key) && occupied.insert(key).second) kept.push_back(i);
+  }
+  return kept;
 }
 
 std::vector<Eigen::Vector3f> transformed(const std::vector<Eigen::Vector3f>& points, const SE3& T) {
@@ -100,28 +116,44 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
     prediction = *predicted_T_world_lidar;
   }
 
-  // 2-3. Normals from the range image, deskew, crop, downsample.
-  cloud::PointCloud points;
-  points.positions = scan.positions;
-  points.times = scan.times;
-  points.normals = cloud::estimate_scan_normals(scan, config_.normals);
-  // The estimate refers to the middle of the sweep: a velocity error then warps the sweep
-  // symmetrically about the estimated pose instead of shifting it (referred to the sweep start,
-  // the error feeds back through the constant-velocity model and grows).
-  const float middle = scan.has_times() ? 0.5F * *std::max_element(scan.times.begin(), scan.times.end()) : 0.0F;
-  const Timestamp pose_time = time + Duration::from_seconds(static_cast<double>(middle));
-  if (config_.deskew) deskew(points, twist_per_second, middle);
-  points.times.clear();
-  points = cloud::crop_range(points, config_.min_range, config_.max_range);
-  if (points.size() < config_.min_points) {
-    return Error(fmt::format("lidar odometry: {} points within {}-{} m (need {})", points.size(), config_.min_range,
+  // 2-3. Crop, keep one measured point per map spacing, their normals from the range image,
+  // deskew; registration points are those downsampled again.
+  std::vector<uint32_t> in_range;
+  in_range.reserve(scan.size());
+  const float min_squared = static_cast<float>(config_.min_range * config_.min_range);
+  const float max_squared = static_cast<float>(config_.max_range * config_.max_range);
+  for (std::size_t i = 0; i < scan.size(); ++i) {
+    const float squared = scan.positions[i].squaredNorm();
+    if (squared >= min_squared && squared <= max_squared) in_range.push_back(static_cast<uint32_t>(i));
+  }
+  if (in_range.size() < config_.min_points) {
+    return Error(fmt::format("lidar odometry: {} points within {}-{} m (need {})", in_range.size(), config_.min_range,
                              config_.max_range, config_.min_points));
   }
   const double spacing = config_.map.min_point_spacing < 0
                              ? config_.map.voxel_size / std::sqrt(static_cast<double>(config_.map.max_points_per_voxel))
                              : std::max(config_.map.min_point_spacing, 0.01);
-  cloud::PointCloud map_points = cloud::voxel_downsample(points, spacing);
-  const std::vector<Eigen::Vector3f> source = cloud::voxel_downsample(points, config_.source_voxel_size).positions;
+  const std::vector<uint32_t> kept = voxel_representatives(scan.positions, in_range, spacing);
+  cloud::PointCloud map_points;
+  map_points.positions.reserve(kept.size());
+  for (const uint32_t i : kept) {
+    map_points.positions.push_back(scan.positions[i]);
+    if (scan.has_times()) map_points.times.push_back(scan.times[i]);
+  }
+  map_points.normals = cloud::estimate_scan_normals(scan, kept, config_.normals);
+  // The estimate refers to the middle of the sweep: a velocity error then warps the sweep
+  // symmetrically about the estimated pose instead of shifting it (referred to the sweep start,
+  // the error feeds back through the constant-velocity model and grows).
+  const float middle = scan.has_times() ? 0.5F * *std::max_element(scan.times.begin(), scan.times.end()) : 0.0F;
+  const Timestamp pose_time = time + Duration::from_seconds(static_cast<double>(middle));
+  if (config_.deskew) deskew(map_points, twist_per_second, middle);
+  map_points.times.clear();
+  std::vector<uint32_t> all(map_points.size());
+  for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<uint32_t>(i);
+  std::vector<Eigen::Vector3f> source;
+  for (const uint32_t i : voxel_representatives(map_points.positions, all, config_.source_voxel_size)) {
+    source.push_back(map_points.positions[i]);
+  }
 
   LidarOdometryEstimate estimate;
   estimate.time = pose_time;
@@ -136,6 +168,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
     if (!registered) return Error(fmt::format("lidar odometry at {:.6f} s: {}", time.seconds(), registered.error().message));
     T_world_lidar = registered->T_map_source;
     estimate.iterations = registered->iterations;
+    estimate.associations = registered->associations;
     estimate.converged = registered->converged;
     estimate.correspondences = registered->correspondences;
     estimate.plane_correspondences = registered->plane_correspondences;

@@ -13,6 +13,7 @@
 // revolution). Normals are unit vectors pointing toward the sensor origin, in the cloud's frame.
 // Needs ring indices: a cloud without rings gets zero normals everywhere.
 
+#include <cstdint>
 #include <vector>
 
 #include <Eigen/Core>
@@ -34,5 +35,9 @@ struct ScanNormalConfig {
 
 /// One normal per point of `scan` (zero where none); see above.
 std::vector<Eigen::Vector3f> estimate_scan_normals(const PointCloud& scan, const ScanNormalConfig& config = {});
+/// The normals of the points `indices` only (one per index, same order), the neighbours still
+/// taken from the whole scan: for callers that keep a subset (a downsampled map).
+std::vector<Eigen::Vector3f> estimate_scan_normals(const PointCloud& scan, const std::vector<uint32_t>& indices,
+                                                   const ScanNormalConfig& config = {});
 
 }  // namespace hanzo::fusion::cloud

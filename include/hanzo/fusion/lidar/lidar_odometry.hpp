@@ -64,7 +64,7 @@ struct LidarOdometryConfig {
   /// points within 1 m, gate 0.5 m, Geman-McClure 0.1 m, prior 1 m / 0.1 rad on the
   /// prediction, vertical lines within 0.35 rad of z (the world frame's z must be up:
   /// initial_pose levels it).
-  SurfaceRegistrationConfig registration{.neighbours = 20};
+  SurfaceRegistrationConfig registration{.neighbours = 10};
   double degeneracy_ratio = 0.02;      ///< constraint_ratio below: degenerate
   std::size_t min_points = 100;        ///< points after cropping
 
@@ -87,6 +87,7 @@ struct LidarOdometryEstimate {
   bool degenerate = false;
   bool first_scan = false;             ///< the scan that started the map (no registration)
   int iterations = 0;
+  int associations = 0;                ///< surface fits during registration
   bool converged = false;
   std::size_t source_points = 0;       ///< registration points
   std::size_t correspondences = 0;
