@@ -33,7 +33,8 @@ struct LidarOdometryOptions {
   std::string ground_truth;
   std::string calibration;
   double voxel = 1.0;
-  double source_voxel = 0.5;
+  double source_voxel = 1.0;
+  int threads = 1;
   double max_range = 100.0;
   bool no_deskew = false;
   std::size_t max_scans = 0;
@@ -83,6 +84,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   lidar::LidarOdometryConfig config;
   config.map.voxel_size = options.voxel;
   config.source_voxel_size = options.source_voxel;
+  config.registration.num_threads = options.threads;
   config.registration.max_neighbour_distance = options.voxel;
   config.max_range = options.max_range;
   config.deskew = !options.no_deskew;
@@ -103,6 +105,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   io::Trajectory estimate;
   std::vector<double> milliseconds;
   std::size_t refused = 0, degenerate = 0, max_map_points = 0, max_map_bytes = 0, iterations = 0, associations = 0;
+  double stage_seconds[3] = {0.0, 0.0, 0.0};
   std::string first_refusal;
   io::LogEntry entry;
   while (options.max_scans == 0 || milliseconds.size() + refused < options.max_scans) {
@@ -147,6 +150,9 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
     milliseconds.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
     degenerate += added->degenerate ? 1 : 0;
     iterations += static_cast<std::size_t>(added->iterations);
+    stage_seconds[0] += added->preprocess_seconds;
+    stage_seconds[1] += added->registration_seconds;
+    stage_seconds[2] += added->map_update_seconds;
     associations += static_cast<std::size_t>(added->associations);
     max_map_points = std::max(max_map_points, added->map_points);
     max_map_bytes = std::max(max_map_bytes, odometry->local_map().memory_bytes());
@@ -171,12 +177,17 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   result["mean_iterations"] = static_cast<double>(iterations) / scans;
   result["mean_associations"] = static_cast<double>(associations) / scans;
   result["scan_ms"] = {{"mean", total_ms / static_cast<double>(milliseconds.size())}, {"p50", percentile(0.5)}, {"p99", percentile(0.99)}, {"max", percentile(1.0)}};
+  result["stage_ms"] = {{"preprocess", 1e3 * stage_seconds[0] / scans},
+                        {"registration", 1e3 * stage_seconds[1] / scans},
+                        {"map_update", 1e3 * stage_seconds[2] / scans}};
   result["local_map"] = {{"max_points", max_map_points}, {"max_bytes", max_map_bytes}};
   std::string text = fmt::format(
       "{} ({}): {} scans ({} refused), {} degenerate, {:.1f} iterations and {:.1f} surface fits per scan; per scan mean "
-      "{:.1f} ms, p50 {:.1f}, p99 {:.1f}, max {:.1f} ms; local map up to {} points, {:.1f} MB\n",
+      "{:.1f} ms (preprocess {:.1f}, registration {:.1f}, map update {:.1f}), p50 {:.1f}, p99 {:.1f}, max {:.1f} ms; "
+      "local map up to {} points, {:.1f} MB\n",
       options.log, topic, milliseconds.size(), refused, degenerate, static_cast<double>(iterations) / scans,
-      static_cast<double>(associations) / scans, total_ms / scans,
+      static_cast<double>(associations) / scans, total_ms / scans, 1e3 * stage_seconds[0] / scans,
+      1e3 * stage_seconds[1] / scans, 1e3 * stage_seconds[2] / scans,
       percentile(0.5), percentile(0.99), percentile(1.0), max_map_points, static_cast<double>(max_map_bytes) / 1e6);
   if (ground_truth) {
     if (Status scored = score(estimate, *ground_truth, options, result, text); !scored) return fail(scored.error().message);
@@ -201,7 +212,8 @@ void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& ru
   command->add_option("--ground-truth", options->ground_truth, "Ground truth T_world_body (TUM): start there and score the result");
   command->add_option("--calibration", options->calibration, "Calibration YAML with <frame_id>_to_body of the LiDAR (default: identity)");
   command->add_option("--voxel", options->voxel, "Local map voxel size and neighbour radius, m")->capture_default_str();
-  command->add_option("--source-voxel", options->source_voxel, "Registration points downsampled to this, m (0.5 outdoor, 0.25 indoor)")->capture_default_str();
+  command->add_option("--source-voxel", options->source_voxel, "Registration points downsampled to this, m (1.0 outdoor, 0.25 indoor)")->capture_default_str();
+  command->add_option("--threads", options->threads, "Registration threads (0: all cores)")->capture_default_str();
   command->add_option("--max-range", options->max_range, "Ignore returns farther than this, m")->capture_default_str();
   command->add_flag("--no-deskew", options->no_deskew, "Use the points as measured (no motion compensation)");
   command->add_option("--max-scans", options->max_scans, "Stop after this many scans (0: all)");

@@ -43,6 +43,11 @@ void VoxelHashMap::clear() {
 void VoxelHashMap::add(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& normals,
                        const Eigen::Vector3d& sensor_origin) {
   assert(normals.empty() || normals.size() == points.size());
+  add(points, sensor_origin, [&normals](std::size_t i) { return normals.empty() ? Eigen::Vector3f::Zero().eval() : normals[i]; });
+}
+
+void VoxelHashMap::add(const std::vector<Eigen::Vector3f>& points, const Eigen::Vector3d& sensor_origin,
+                       const std::function<Eigen::Vector3f(std::size_t)>& normal_of) {
   const size_t max_points = static_cast<size_t>(config_.max_points_per_voxel);
   for (size_t i = 0; i < points.size(); ++i) {
     const Eigen::Vector3f& point = points[i];
@@ -62,8 +67,8 @@ void VoxelHashMap::add(const std::vector<Eigen::Vector3f>& points, const std::ve
     }
     if (crowded) continue;
     if (voxel.empty()) voxel.reserve(max_points);
-    const bool has_normal = !normals.empty() && normals[i].allFinite();
-    voxel.push_back({point, has_normal ? normals[i] : Eigen::Vector3f::Zero()});
+    const Eigen::Vector3f normal = normal_of(i);
+    voxel.push_back({point, normal.allFinite() ? normal : Eigen::Vector3f::Zero()});
     ++point_count_;
   }
 

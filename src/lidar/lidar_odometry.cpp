@@ -1,6 +1,7 @@
 #include "hanzo/fusion/lidar/lidar_odometry.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 
@@ -17,7 +18,7 @@ namespace {
 
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
-// The scan with positions (and normals) moved from the sensor frame at their own time into the
+// The scan's positions moved from the sensor frame at their own time into the
 // sensor frame at `reference_time` (s after the scan time), for a sensor moving with constant
 // body twist `twist_per_second` (rho, phi per s).
 void deskew(cloud::PointCloud& scan, const SE3::Tangent& twist_per_second, float reference_time) {
@@ -34,7 +35,6 @@ void deskew(cloud::PointCloud& scan, const SE3::Tangent& twist_per_second, float
       translation = motion.translation().cast<float>();
     }
     scan.positions[i] = rotation * scan.positions[i] + translation;
-    if (scan.has_normals()) scan.normals[i] = rotation * scan.normals[i];
   }
 }
 
@@ -116,6 +116,8 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
     prediction = *predicted_T_world_lidar;
   }
 
+  using Clock = std::chrono::steady_clock;
+  const auto started = Clock::now();
   // 2-3. Crop, keep one measured point per map spacing, their normals from the range image,
   // deskew; registration points are those downsampled again.
   std::vector<uint32_t> in_range;
@@ -140,7 +142,6 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
     map_points.positions.push_back(scan.positions[i]);
     if (scan.has_times()) map_points.times.push_back(scan.times[i]);
   }
-  map_points.normals = cloud::estimate_scan_normals(scan, kept, config_.normals);
   // The estimate refers to the middle of the sweep: a velocity error then warps the sweep
   // symmetrically about the estimated pose instead of shifting it (referred to the sweep start,
   // the error feeds back through the constant-velocity model and grows).
@@ -156,6 +157,8 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   }
 
   LidarOdometryEstimate estimate;
+  const auto registration_started = Clock::now();
+  estimate.preprocess_seconds = std::chrono::duration<double>(registration_started - started).count();
   estimate.time = pose_time;
   estimate.source_points = source.size();
   SE3 T_world_lidar = prediction;
@@ -185,10 +188,14 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
     }
   }
 
-  // 6. Map update and state.
+  const auto map_started = Clock::now();
+  estimate.registration_seconds = std::chrono::duration<double>(map_started - registration_started).count();
+  // 6. Map update (normals only for the points the map keeps; the few degrees a normal turns
+  // during the sweep are not deskewed) and state.
+  const cloud::ScanNormalEstimator normals(scan, config_.normals);
   const Eigen::Matrix3f rotation = T_world_lidar.rotation().matrix().cast<float>();
-  for (Eigen::Vector3f& normal : map_points.normals) normal = rotation * normal;
-  map_.add(transformed(map_points.positions, T_world_lidar), map_points.normals, T_world_lidar.translation());
+  map_.add(transformed(map_points.positions, T_world_lidar), T_world_lidar.translation(),
+           [&](std::size_t i) { return Eigen::Vector3f(rotation * normals.normal(kept[i])); });
   estimate.T_world_lidar = T_world_lidar;
   estimate.T_previous_current = last_time_ ? pose_.inverse() * T_world_lidar : SE3();
   estimate.map_points = map_.point_count();
@@ -200,6 +207,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   last_time_ = time;
   last_scan_points_ = std::move(map_points.positions);
   ++scans_;
+  estimate.map_update_seconds = std::chrono::duration<double>(Clock::now() - map_started).count();
   return estimate;
 }
 

@@ -33,6 +33,25 @@ struct ScanNormalConfig {
   double plane_ratio = 0.1;
 };
 
+/// The range image of one scan, answering normal queries for any of its points (for callers
+/// that need normals of a few points only, e.g. those a map accepts). Holds a reference to the
+/// scan: it must outlive the object.
+class ScanNormalEstimator {
+ public:
+  ScanNormalEstimator(const PointCloud& scan, const ScanNormalConfig& config = {});
+  /// The unit normal of point `index` (facing the sensor), or zero; see above.
+  Eigen::Vector3f normal(std::size_t index) const;
+
+ private:
+  const PointCloud& scan_;
+  ScanNormalConfig config_;
+  int rings_ = 0;
+  int columns_ = 0;
+  int window_ = 1;
+  std::vector<uint32_t> image_;   // ring-major, kEmpty where no point
+  std::vector<int> column_of_;
+};
+
 /// One normal per point of `scan` (zero where none); see above.
 std::vector<Eigen::Vector3f> estimate_scan_normals(const PointCloud& scan, const ScanNormalConfig& config = {});
 /// The normals of the points `indices` only (one per index, same order), the neighbours still

@@ -15,6 +15,7 @@
 // Not thread-safe for writers; concurrent const queries are safe.
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -46,6 +47,10 @@ class VoxelHashMap {
   /// points are skipped.
   void add(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& normals,
            const Eigen::Vector3d& sensor_origin);
+  /// The same, asking normal_of(i) for the normal of points[i] only when the point is kept
+  /// (normals can be costly and most points of a scan fall into full voxels).
+  void add(const std::vector<Eigen::Vector3f>& points, const Eigen::Vector3d& sensor_origin,
+           const std::function<Eigen::Vector3f(std::size_t)>& normal_of);
   void clear();
 
   /// The points of the voxel at `coordinates`, or nullptr when it is empty.

@@ -59,7 +59,7 @@ struct LidarOdometryConfig {
   /// The local map: 1 m voxels (also the neighbour search cells), up to 20 points each,
   /// 0.22 m apart; 100 m around the sensor.
   cloud::VoxelHashMapConfig map{.voxel_size = 1.0, .max_points_per_voxel = 20, .min_point_spacing = -1.0, .max_distance = 100.0};
-  double source_voxel_size = 0.5;      ///< m: registration points (spec: 0.5 outdoor; 0.25 indoor)
+  double source_voxel_size = 1.0;      ///< m: registration points (1.0 outdoor; 0.25 indoor)
   /// Scan-to-map registration (surface_registration.hpp): surfaces from the 20 nearest map
   /// points within 1 m, gate 0.5 m, Geman-McClure 0.1 m, prior 1 m / 0.1 rad on the
   /// prediction, vertical lines within 0.35 rad of z (the world frame's z must be up:
@@ -95,6 +95,11 @@ struct LidarOdometryEstimate {
   std::size_t line_correspondences = 0;
   double inlier_rmse = 0.0;            ///< m, RMS of matched residuals
   std::size_t map_points = 0;          ///< after adding this scan
+  /// Wall-clock seconds of the stages: crop + downsampling + normals + deskew, registration,
+  /// map update.
+  double preprocess_seconds = 0.0;
+  double registration_seconds = 0.0;
+  double map_update_seconds = 0.0;
 };
 
 class LidarOdometry {
