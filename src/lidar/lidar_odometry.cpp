@@ -90,15 +90,15 @@ LidarOdometry::LidarOdometry(LidarOdometryConfig config, const SE3& initial_pose
     : config_(std::move(config)), map_(config_.map), pose_(initial_pose) {}
 
 Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const cloud::PointCloud& scan,
-                                                      const std::optional<SE3>& predicted_T_world_lidar) {
+                                                      const std::optional<SE3>& predicted_motion) {
   HANZO_RETURN_IF_ERROR(with_context(config_.validate(), "lidar odometry config"));
   if (last_time_ && time <= *last_time_) {
     return Error(fmt::format("lidar odometry: scan time {:.6f} is not after the previous scan's {:.6f}", time.seconds(),
                              last_time_->seconds()));
   }
   HANZO_RETURN_IF_ERROR(with_context(scan.validate(), "lidar odometry scan"));
-  if (predicted_T_world_lidar && !predicted_T_world_lidar->matrix().allFinite()) {
-    return Error("lidar odometry: the predicted pose is not finite");
+  if (predicted_motion && !predicted_motion->matrix().allFinite()) {
+    return Error("lidar odometry: the predicted motion is not finite");
   }
 
   // 1. Prediction and the twist that deskews the sweep.
@@ -106,14 +106,12 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   SE3::Tangent twist_per_second = SE3::Tangent::Zero();
   if (last_time_) {
     const double interval = (time - *last_time_).seconds();  // sweeps of equal length: also between middles
-    if (predicted_T_world_lidar) {
-      prediction = *predicted_T_world_lidar;
+    if (predicted_motion) {
+      prediction = pose_ * *predicted_motion;
     } else if (last_interval_ > 0) {
       prediction = pose_ * SE3::exp(last_motion_.log() * (interval / last_interval_));
     }
     twist_per_second = (pose_.inverse() * prediction).log() / interval;
-  } else if (predicted_T_world_lidar) {
-    prediction = *predicted_T_world_lidar;
   }
 
   using Clock = std::chrono::steady_clock;

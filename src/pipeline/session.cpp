@@ -185,6 +185,23 @@ Status Session::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_o
 }
 std::optional<msgs::PoseEstimate> Session::latest_pose() const { return impl_->latest_pose; }
 
+std::optional<SE3> Session::pose_at(Timestamp time) const {
+  const auto pose_of = [](const Estimator& estimator) {
+    const estimate::NavigationState state = estimator.filter().state();
+    return SE3(state.R_world_body, state.position);
+  };
+  const std::deque<Impl::HistoryEntry>& history = impl_->history;
+  // history is in fusion order, so its times do not decrease; the first entry at or after `time`.
+  const auto after = std::lower_bound(history.begin(), history.end(), time,
+                                      [](const Impl::HistoryEntry& entry, Timestamp t) { return entry.event.time < t; });
+  if (after == history.end() || after == history.begin() || !after->after.initialized()) return std::nullopt;
+  const auto before = std::prev(after);
+  if (!before->after.initialized()) return std::nullopt;
+  const double span = (after->event.time - before->event.time).seconds();
+  const double fraction = span > 0.0 ? (time - before->event.time).seconds() / span : 1.0;
+  return SE3::interpolate(pose_of(before->after), pose_of(after->after), fraction);
+}
+
 Status Session::push(std::string_view sensor_name, const msgs::SensorMessage& message) {
   Impl& impl = *impl_;
   const std::optional<size_t> index = impl.sensor_index(sensor_name);

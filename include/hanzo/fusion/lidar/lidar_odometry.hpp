@@ -3,8 +3,11 @@
 // KISS-ICP, Vizzo et al. 2023, with surface-aware residuals and a degeneracy prior).
 //
 // Per scan (points in the sensor frame, per-point times from the scan timestamp):
-//  1. Prediction of T_world_lidar at the scan time: the caller's (an IMU-propagated filter
-//     in LiDAR-inertial mode) or the constant-velocity model (the last motion repeated).
+//  1. Prediction of T_world_lidar: the last pose times the motion since the previous scan,
+//     the caller's (T_previous_current between the sweep middles, from an IMU-propagated
+//     filter in LiDAR-inertial mode) or the constant-velocity model's (the last motion
+//     repeated). A motion, not an absolute pose: the odometry's frame then never has to agree
+//     with the caller's.
 //  2. Deskewing: each point is moved into the sensor frame at the middle of the sweep with
 //     the constant twist between the previous pose and the prediction (needs point times;
 //     scans without them are used as they are). Poses refer to the middle of the sweep: a
@@ -32,7 +35,7 @@
 // Frames: world = the odometry frame (the first scan's sensor pose unless initial_pose is
 // given); T_world_lidar maps sensor-frame points at the scan time into it. Units m, s, rad.
 // Failure cases (returned Errors, state unchanged): time not after the previous scan, an
-// invalid cloud, fewer than min_points after cropping, a non-finite prediction, too few
+// invalid cloud, fewer than min_points after cropping, a non-finite predicted motion, too few
 // matched points (< min_correspondences: no overlap with the map, e.g. after a teleport).
 
 #include <cstddef>
@@ -106,10 +109,11 @@ class LidarOdometry {
  public:
   explicit LidarOdometry(LidarOdometryConfig config = {}, const SE3& initial_pose = SE3());
 
-  /// One scan (sensor frame; `times` relative to `time` when present). See the header
-  /// comment for the steps and failure cases.
+  /// One scan (sensor frame; `times` relative to `time` when present). predicted_motion:
+  /// T_previous_current of the sensor between the previous and this sweep's middles (ignored
+  /// for the first scan). See the header comment for the steps and failure cases.
   Result<LidarOdometryEstimate> add_scan(Timestamp time, const cloud::PointCloud& scan,
-                                         const std::optional<SE3>& predicted_T_world_lidar = std::nullopt);
+                                         const std::optional<SE3>& predicted_motion = std::nullopt);
 
   /// The latest T_world_lidar (initial_pose before the first scan).
   const SE3& pose() const { return pose_; }

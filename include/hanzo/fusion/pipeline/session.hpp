@@ -145,6 +145,11 @@ class Session {
   Status apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized);
   /// The latest PoseEstimate, if any.
   std::optional<msgs::PoseEstimate> latest_pose() const;
+  /// T_world_body at a past time within the lag window (body clock), interpolated between the
+  /// fused estimates around it: the prediction an odometry module (LiDAR, visual) starts from.
+  /// None before initialization, for times older than the kept history or newer than the
+  /// last fused event.
+  std::optional<SE3> pose_at(Timestamp time) const;
   SessionSummary summary() const;
 
  private:

@@ -1,0 +1,75 @@
+#pragma once
+// LidarInertialOdometry: LiDAR odometry (lidar/lidar_odometry.hpp) coupled to a Session's
+// IMU-driven filter (loosely coupled, as LIO-SAM's front end): per scan,
+//  1. the prediction is the motion of the Session's pose (Session::pose_at, the
+//     IMU-propagated filter, times T_body_lidar) between the previous and this sweep's
+//     middles; it also deskews the sweep, so the IMU's motion is used, not a
+//     constant-velocity guess;
+//  2. the scan is registered to the local map from that prediction (LidarOdometry);
+//  3. the result goes back into the filter as a pose measurement of the LiDAR sensor
+//     (Session::push_pose) with the registration covariance, floored at
+//     position_sigma_floor / rotation_sigma_floor (the registration's own covariance treats
+//     thousands of points as independent and is far too small). Along degenerate directions
+//     (a corridor's axis) the covariance is large, so the filter keeps its IMU (and wheel)
+//     estimate there.
+// The odometry's world frame is the Session's: the first scan starts at the Session's pose.
+// A scan that arrives before the Session is initialized or outside its history (older than
+// the lag window, newer than the last fused IMU sample) is refused with an Error that says so;
+// nothing changes then. Corrections applied to the Session afterwards (Session::apply_correction)
+// are not applied to the local map.
+
+#include <cstddef>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/lidar/lidar_odometry.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
+#include "hanzo/fusion/pipeline/session.hpp"
+
+namespace hanzo::fusion::pipeline {
+
+struct LidarInertialOdometryConfig {
+  lidar::LidarOdometryConfig odometry;
+  /// Added to the registration covariance. 2 cm / 0.002 rad made the filter so confident that
+  /// the IMU's model error in turns got LiDAR updates gated and the filter diverged (urban
+  /// scenario: 57 of 390 gated, 0.30 % drift); 5 cm / 0.005 rad fuse them all (0.09 %).
+  double position_sigma_floor = 0.05;   ///< m
+  double rotation_sigma_floor = 0.005;  ///< rad
+};
+
+struct LidarInertialOdometryStatistics {
+  std::size_t scans = 0;       ///< registered
+  std::size_t refused = 0;     ///< refused scans (Session not ready, bad scan, registration failure)
+  std::size_t fused = 0;       ///< pose measurements the Session accepted
+  std::size_t degenerate = 0;  ///< registered scans flagged degenerate
+};
+
+class LidarInertialOdometry {
+ public:
+  /// `session` must outlive this object; `lidar_sensor` names the Session's LiDAR sensor and
+  /// T_body_lidar is its calibration.
+  LidarInertialOdometry(Session& session, std::string lidar_sensor, const SE3& T_body_lidar,
+                        LidarInertialOdometryConfig config = {});
+
+  /// Registers one sweep (sensor clock = body clock, as the Session's calibration has it) and
+  /// fuses the result. Push the IMU messages up to the end of the sweep into the Session first.
+  Result<lidar::LidarOdometryEstimate> process(const msgs::PointCloudMessage& scan);
+
+  const LidarInertialOdometryStatistics& statistics() const { return statistics_; }
+  /// The odometry (its local map, latest pose); nullptr before the first scan.
+  const lidar::LidarOdometry* odometry() const { return odometry_.get(); }
+
+ private:
+  Session& session_;
+  std::string lidar_sensor_;
+  SE3 T_body_lidar_;
+  LidarInertialOdometryConfig config_;
+  std::unique_ptr<lidar::LidarOdometry> odometry_;
+  std::optional<SE3> last_filter_pose_;  ///< the filter's T_world_lidar at the last registered sweep
+  LidarInertialOdometryStatistics statistics_;
+};
+
+}  // namespace hanzo::fusion::pipeline
