@@ -1,14 +1,18 @@
-// hanzo-fusion lidar-odometry LOG [--topic T] [--ground-truth GT.tum --calibration CALIB.yaml]
-//   [--voxel M] [--max-range M] [--no-deskew] [--max-scans N] [--trajectory OUT.tum] [--plot DIR]:
-// LiDAR-only odometry (lidar/lidar_odometry.hpp) over the point clouds of a sensor log. With a
-// ground truth (T_world_body, TUM) the odometry starts at the true first pose and the body
-// trajectory T_world_lidar T_body_lidar^-1 is scored: KITTI drift (% and deg/100 m, when the
-// path is longer than 100 m), APE RMSE without alignment, final position error. Reports per-scan
-// latency, degenerate scans and the local map's size.
+// hanzo-fusion lidar-odometry LOG [--topic T] [--ground-truth GT.tum] [--calibration CALIB.yaml]
+//   [--fusion-config FUSION.yaml] [--voxel M] [--source-voxel M] [--threads N] [--max-range M]
+//   [--no-deskew] [--max-scans N] [--trajectory OUT.tum] [--plot DIR]:
+// LiDAR odometry (lidar/lidar_odometry.hpp) over the point clouds of a sensor log; with
+// --fusion-config, LiDAR-inertial (pipeline/lidar_inertial_odometry.hpp: a Session fuses the
+// log's IMU and the registered poses; the reported trajectory is the Session's). With a ground
+// truth (T_world_body, TUM) the body trajectory is scored: KITTI drift (% and deg/100 m, when
+// the path is longer than 100 m), APE RMSE and final position error (LiDAR only: from the true
+// first pose, no alignment; LiDAR-inertial: after a rigid alignment, the Session's frame being
+// its own). Reports per-scan latency by stage, degenerate scans and the local map's size.
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <deque>
 #include <filesystem>
 
 #include <fmt/format.h>
@@ -23,6 +27,8 @@
 #include "hanzo/fusion/io/sensor_log.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/lidar/lidar_odometry.hpp"
+#include "hanzo/fusion/pipeline/lidar_inertial_odometry.hpp"
+#include "hanzo/fusion/config/fusion_config.hpp"
 
 namespace hanzo::fusion::app {
 namespace {
@@ -32,6 +38,7 @@ struct LidarOdometryOptions {
   std::string topic;
   std::string ground_truth;
   std::string calibration;
+  std::string fusion_config;
   double voxel = 1.0;
   double source_voxel = 1.0;
   int threads = 1;
@@ -43,15 +50,18 @@ struct LidarOdometryOptions {
 };
 
 // The scored part of the report (ground truth given).
+// `aligned`: the estimate's world frame is its own (LiDAR-inertial: the Session's), so APE and
+// the final error are taken after a rigid alignment; the KITTI drift needs none.
 Status score(const io::Trajectory& estimate, const io::Trajectory& ground_truth, const LidarOdometryOptions& options,
-             nlohmann::json& result, std::string& text) {
+             bool aligned, nlohmann::json& result, std::string& text) {
   eval::AssociatedTrajectories pairs;
   HANZO_ASSIGN_OR_RETURN(pairs, eval::associate(ground_truth, estimate));
   eval::ApeResult ape;
-  HANZO_ASSIGN_OR_RETURN(ape, eval::compute_ape(pairs.reference, pairs.estimate, {}));
+  HANZO_ASSIGN_OR_RETURN(ape, eval::compute_ape(pairs.reference, pairs.estimate,
+                                                {.alignment = aligned ? eval::Alignment::kSE3 : eval::Alignment::kNone}));
   const double path = pairs.reference.path_length();
-  const double final_error = (pairs.reference.position(pairs.reference.size() - 1) -
-                              pairs.estimate.position(pairs.estimate.size() - 1)).norm();
+  const double final_error = (ape.reference.position(ape.reference.size() - 1) -
+                              ape.estimate_aligned.position(ape.estimate_aligned.size() - 1)).norm();
   result["path_m"] = path;
   result["ape_rmse_m"] = ape.statistics.rmse;
   result["ape_max_m"] = ape.statistics.max;
@@ -101,65 +111,128 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   if (!reader) return fail(reader.error().message);
 
   std::string topic = options.topic;
-  std::unique_ptr<lidar::LidarOdometry> odometry;
+  std::unique_ptr<lidar::LidarOdometry> odometry;              // LiDAR only
+  std::unique_ptr<pipeline::Session> session;                  // LiDAR-inertial
+  std::unique_ptr<pipeline::LidarInertialOdometry> inertial;
+  std::string lidar_sensor;
+  std::deque<msgs::PointCloudMessage> waiting;  // sweeps waiting for the IMU to pass their end
   io::Trajectory estimate;
   std::vector<double> milliseconds;
   std::size_t refused = 0, degenerate = 0, max_map_points = 0, max_map_bytes = 0, iterations = 0, associations = 0;
   double stage_seconds[3] = {0.0, 0.0, 0.0};
   std::string first_refusal;
+
+  // The first sweep fixes the topic, the LiDAR's calibration and the starting pose.
+  const auto start_with = [&](const msgs::PointCloudMessage& scan, const std::string& scan_topic) -> Status {
+    topic = scan_topic;
+    std::optional<calib::Calibration> calibration;
+    if (!options.calibration.empty()) {
+      auto loaded = calib::load_calibration(options.calibration);
+      if (!loaded) return loaded.error();
+      calibration = std::move(*loaded);
+    }
+    if (!options.fusion_config.empty()) {
+      if (!calibration) return Error("--fusion-config needs --calibration");
+      auto fusion = config::load_fusion_config(options.fusion_config);
+      if (!fusion) return fusion.error();
+      auto created = pipeline::Session::create(*fusion, *calibration);
+      if (!created) return created.error();
+      session = std::move(*created);
+      const config::SensorConfig* sensor = session->sensor_for_topic(topic);
+      if (sensor == nullptr) return Error(fmt::format("{}: no sensor reads {}", options.fusion_config, topic));
+      lidar_sensor = sensor->name;
+      if (const calib::SensorCalibration* entry = calibration->find(lidar_sensor)) T_body_lidar = entry->T_body_sensor();
+      inertial = std::make_unique<pipeline::LidarInertialOdometry>(*session, lidar_sensor, T_body_lidar,
+                                                                   pipeline::LidarInertialOdometryConfig{.odometry = config});
+      return ok_status();
+    }
+    if (calibration) {
+      const calib::SensorCalibration* sensor = calibration->find(scan.frame_id);
+      if (sensor == nullptr) return Error(fmt::format("{}: no calibration for frame '{}'", options.calibration, scan.frame_id));
+      T_body_lidar = sensor->T_body_sensor();
+    }
+    SE3 initial_pose;
+    if (ground_truth) {
+      // Estimates refer to the middle of each sweep.
+      Timestamp middle = scan.timestamp;
+      if (!scan.point_timestamps.empty()) {
+        middle = scan.timestamp + Duration::from_nanoseconds((scan.point_timestamps.back() - scan.timestamp).nanoseconds() / 2);
+      }
+      io::Trajectory first;
+      first.timestamps.push_back(middle);
+      first.poses.push_back(Eigen::Matrix4d::Identity());
+      auto pair = eval::associate(*ground_truth, first);
+      if (!pair) return Error(fmt::format("ground truth at the first scan: {}", pair.error().message));
+      initial_pose = pair->reference.pose_se3(0) * T_body_lidar;
+    }
+    odometry = std::make_unique<lidar::LidarOdometry>(config, initial_pose);
+    return ok_status();
+  };
+
+  const auto register_scan = [&](const msgs::PointCloudMessage& scan) {
+    const auto start = std::chrono::steady_clock::now();
+    Result<lidar::LidarOdometryEstimate> added = Error("");
+    if (inertial) {
+      added = inertial->process(scan);
+    } else if (auto cloud = cloud::from_message(scan); cloud) {
+      added = odometry->add_scan(scan.timestamp, *cloud);
+    } else {
+      added = cloud.error();
+    }
+    if (!added) {
+      if (refused++ == 0) first_refusal = fmt::format("scan at {:.3f} s: {}", scan.timestamp.seconds(), added.error().message);
+      return;
+    }
+    milliseconds.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+    degenerate += added->degenerate ? 1 : 0;
+    iterations += static_cast<std::size_t>(added->iterations);
+    associations += static_cast<std::size_t>(added->associations);
+    stage_seconds[0] += added->preprocess_seconds;
+    stage_seconds[1] += added->registration_seconds;
+    stage_seconds[2] += added->map_update_seconds;
+    const lidar::LidarOdometry& used = inertial ? *inertial->odometry() : *odometry;
+    max_map_points = std::max(max_map_points, added->map_points);
+    max_map_bytes = std::max(max_map_bytes, used.local_map().memory_bytes());
+    estimate.timestamps.push_back(added->time);
+    if (session) {
+      // The fused estimate: the Session's pose at the sweep's middle.
+      estimate.poses.push_back(session->pose_at(added->time).value_or(added->T_world_lidar * T_body_lidar.inverse()).matrix());
+    } else {
+      estimate.poses.push_back((added->T_world_lidar * T_body_lidar.inverse()).matrix());
+    }
+  };
+
   io::LogEntry entry;
   while (options.max_scans == 0 || milliseconds.size() + refused < options.max_scans) {
     auto more = (*reader)->next(entry);
     if (!more) return fail(more.error().message);
     if (!*more) break;
     const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
-    const auto* scan = message ? std::get_if<msgs::PointCloudMessage>(message) : nullptr;
-    if (scan == nullptr || (!topic.empty() && entry.topic != topic)) continue;
-    if (!odometry) {
-      topic = entry.topic;
-      SE3 initial_pose;
-      if (!options.calibration.empty()) {
-        auto calibration = calib::load_calibration(options.calibration);
-        if (!calibration) return fail(calibration.error().message);
-        const calib::SensorCalibration* sensor = calibration->find(scan->frame_id);
-        if (sensor == nullptr) return fail(fmt::format("{}: no calibration for frame '{}'", options.calibration, scan->frame_id));
-        T_body_lidar = sensor->T_body_sensor();
-      }
-      if (ground_truth) {
-        // Estimates refer to the middle of each sweep.
-        Timestamp middle = scan->timestamp;
-        if (!scan->point_timestamps.empty()) {
-          middle = scan->timestamp + Duration::from_nanoseconds((scan->point_timestamps.back() - scan->timestamp).nanoseconds() / 2);
+    if (message == nullptr) continue;
+    if (session && std::holds_alternative<msgs::ImuMessage>(*message)) {
+      if (const config::SensorConfig* sensor = session->sensor_for_topic(entry.topic)) {
+        (void)session->push(sensor->name, *message);  // rejections are counted by the session
+        const Timestamp imu_time = msgs::timestamp_of(*message);
+        while (!waiting.empty() && imu_time >= (waiting.front().point_timestamps.empty() ? waiting.front().timestamp
+                                                                                          : waiting.front().point_timestamps.back())) {
+          register_scan(waiting.front());
+          waiting.pop_front();
         }
-        io::Trajectory first;
-        first.timestamps.push_back(middle);
-        first.poses.push_back(Eigen::Matrix4d::Identity());
-        auto pair = eval::associate(*ground_truth, first);
-        if (!pair) return fail(fmt::format("ground truth at the first scan: {}", pair.error().message));
-        initial_pose = pair->reference.pose_se3(0) * T_body_lidar;
       }
-      odometry = std::make_unique<lidar::LidarOdometry>(config, initial_pose);
-    }
-    auto cloud = cloud::from_message(*scan);
-    const auto start = std::chrono::steady_clock::now();
-    auto added = cloud ? odometry->add_scan(scan->timestamp, *cloud) : Result<lidar::LidarOdometryEstimate>(cloud.error());
-    if (!added) {
-      if (refused++ == 0) first_refusal = fmt::format("scan at {:.3f} s: {}", scan->timestamp.seconds(), added.error().message);
       continue;
     }
-    milliseconds.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
-    degenerate += added->degenerate ? 1 : 0;
-    iterations += static_cast<std::size_t>(added->iterations);
-    stage_seconds[0] += added->preprocess_seconds;
-    stage_seconds[1] += added->registration_seconds;
-    stage_seconds[2] += added->map_update_seconds;
-    associations += static_cast<std::size_t>(added->associations);
-    max_map_points = std::max(max_map_points, added->map_points);
-    max_map_bytes = std::max(max_map_bytes, odometry->local_map().memory_bytes());
-    estimate.timestamps.push_back(added->time);
-    estimate.poses.push_back((added->T_world_lidar * T_body_lidar.inverse()).matrix());
+    const auto* scan = std::get_if<msgs::PointCloudMessage>(message);
+    if (scan == nullptr || (!topic.empty() && entry.topic != topic)) continue;
+    if (!odometry && !inertial) {
+      if (Status started = start_with(*scan, entry.topic); !started) return fail(started.error().message);
+    }
+    if (session) {
+      waiting.push_back(*scan);
+    } else {
+      register_scan(*scan);
+    }
   }
-  if (!odometry) return fail(fmt::format("{}: no point clouds{}", options.log, topic.empty() ? "" : " on " + topic));
+  if (!odometry && !inertial) return fail(fmt::format("{}: no point clouds{}", options.log, topic.empty() ? "" : " on " + topic));
   if (milliseconds.empty()) return fail(fmt::format("every scan was refused; first: {}", first_refusal));
 
   std::vector<double> sorted = milliseconds;
@@ -169,6 +242,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   for (double ms : milliseconds) total_ms += ms;
   result["ok"] = true;
   result["topic"] = topic;
+  result["mode"] = session ? "lidar-inertial" : "lidar";
   result["scans"] = milliseconds.size();
   result["refused_scans"] = refused;
   if (refused > 0) result["first_refusal"] = first_refusal;
@@ -190,7 +264,9 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
       1e3 * stage_seconds[1] / scans, 1e3 * stage_seconds[2] / scans,
       percentile(0.5), percentile(0.99), percentile(1.0), max_map_points, static_cast<double>(max_map_bytes) / 1e6);
   if (ground_truth) {
-    if (Status scored = score(estimate, *ground_truth, options, result, text); !scored) return fail(scored.error().message);
+    if (Status scored = score(estimate, *ground_truth, options, session != nullptr, result, text); !scored) {
+      return fail(scored.error().message);
+    }
   }
   if (!options.trajectory_out.empty()) {
     if (Status written = io::write_trajectory(options.trajectory_out, estimate, io::TrajectoryFormat::kTum); !written) {
@@ -211,6 +287,9 @@ void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& ru
   command->add_option("--topic", options->topic, "Point-cloud topic (default: the first one)");
   command->add_option("--ground-truth", options->ground_truth, "Ground truth T_world_body (TUM): start there and score the result");
   command->add_option("--calibration", options->calibration, "Calibration YAML with <frame_id>_to_body of the LiDAR (default: identity)");
+  command->add_option("--fusion-config", options->fusion_config,
+                      "LiDAR-inertial: run a Session with this fusion configuration (needs --calibration) on the log's IMU")
+      ->check(CLI::ExistingFile);
   command->add_option("--voxel", options->voxel, "Local map voxel size and neighbour radius, m")->capture_default_str();
   command->add_option("--source-voxel", options->source_voxel, "Registration points downsampled to this, m (1.0 outdoor, 0.25 indoor)")->capture_default_str();
   command->add_option("--threads", options->threads, "Registration threads (0: all cores)")->capture_default_str();
