@@ -210,7 +210,7 @@ void BM_ScanToMapPeer(benchmark::State& state, bool pcl, bench::PeerMethod metho
 
 }  // namespace
 
-BENCHMARK_CAPTURE(BM_Odometry, warehouse_vlp16, std::string("warehouse_robot"), 60.0, std::nullopt, 0.25)
+BENCHMARK_CAPTURE(BM_Odometry, warehouse_vlp16, std::string("warehouse_robot"), 100.0, std::nullopt, 0.25)
     ->Name("hanzo/lidar_odometry/warehouse_vlp16")->Unit(benchmark::kSecond)->Iterations(1);
 BENCHMARK_CAPTURE(BM_Odometry, urban_os1_64, std::string("urban_vehicle"), 60.0, std::nullopt, 1.0)
     ->Name("hanzo/lidar_odometry/urban_os1_64")->Unit(benchmark::kSecond)->Iterations(1);

@@ -29,10 +29,10 @@ const std::vector<Eigen::Vector3i> kNeighbourOffsets = [] {
 VoxelHashMap::VoxelHashMap(VoxelHashMapConfig config)
     : config_(config), inverse_voxel_size_(static_cast<float>(1.0 / config.voxel_size)) {
   assert(config.voxel_size > 0.0 && config.max_points_per_voxel >= 1 && config.max_distance > 0.0);
-  const double spacing = config.min_point_spacing < 0.0
-                             ? config.voxel_size / std::sqrt(static_cast<double>(config.max_points_per_voxel))
-                             : config.min_point_spacing;
-  min_spacing_squared_ = static_cast<float>(spacing * spacing);
+  point_spacing_ = config.min_point_spacing < 0.0
+                       ? config.voxel_size / std::sqrt(static_cast<double>(config.max_points_per_voxel))
+                       : config.min_point_spacing;
+  min_spacing_squared_ = static_cast<float>(point_spacing_ * point_spacing_);
 }
 
 void VoxelHashMap::clear() {

@@ -130,10 +130,8 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
     return Error(fmt::format("lidar odometry: {} points within {}-{} m (need {})", in_range.size(), config_.min_range,
                              config_.max_range, config_.min_points));
   }
-  const double spacing = config_.map.min_point_spacing < 0
-                             ? config_.map.voxel_size / std::sqrt(static_cast<double>(config_.map.max_points_per_voxel))
-                             : std::max(config_.map.min_point_spacing, 0.01);
-  const std::vector<uint32_t> kept = voxel_representatives(scan.positions, in_range, spacing);
+  // Points closer than the map's spacing would be refused by it anyway (1 cm at least).
+  const std::vector<uint32_t> kept = voxel_representatives(scan.positions, in_range, std::max(map_.point_spacing(), 0.01));
   cloud::PointCloud map_points;
   map_points.positions.reserve(kept.size());
   for (const uint32_t i : kept) {

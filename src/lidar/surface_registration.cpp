@@ -106,12 +106,12 @@ void associate(const std::vector<Eigen::Vector3f>& source, const cloud::VoxelHas
 }
 
 SurfaceEquations linearize(const std::vector<Eigen::Vector3f>& source, const std::vector<LocalSurface>& surfaces,
-                           const SE3& T, const SurfaceRegistrationConfig& config) {
+                           const SE3& T, double kernel_width, double gate, int num_threads) {
   const Eigen::Matrix3d rotation = T.rotation().matrix();
   const Eigen::Vector3d translation = T.translation();
-  const double inverse_width = 1.0 / config.kernel_width;
-  std::vector<SurfaceEquations> partial(cloud::chunk_count(source.size(), config.num_threads));
-  cloud::parallel_chunks(source.size(), config.num_threads, [&](std::size_t chunk, std::size_t begin, std::size_t end) {
+  const double inverse_width = 1.0 / kernel_width;
+  std::vector<SurfaceEquations> partial(cloud::chunk_count(source.size(), num_threads));
+  cloud::parallel_chunks(source.size(), num_threads, [&](std::size_t chunk, std::size_t begin, std::size_t end) {
     SurfaceEquations local;
     for (std::size_t i = begin; i < end; ++i) {
       const LocalSurface& surface = surfaces[i];
@@ -124,7 +124,7 @@ SurfaceEquations linearize(const std::vector<Eigen::Vector3f>& source, const std
                                                : Eigen::Matrix3d(Eigen::Matrix3d::Identity() - direction * direction.transpose());
       const Eigen::Vector3d residual = projection * offset;  // m: the offset's part normal to the surface
       const double distance = residual.norm();
-      if (distance > config.max_correspondence_distance) continue;
+      if (distance > gate) continue;
       // d q / d delta = [R, -R hat(p)]; the projection is fixed.
       Eigen::Matrix<double, 3, 6> J;
       J.leftCols<3>() = projection * rotation;
@@ -155,6 +155,7 @@ Status SurfaceRegistrationConfig::validate() const {
     return Error(fmt::format("max_correspondence_distance: {} <= 0", max_correspondence_distance));
   }
   if (!(kernel_width > 0)) return Error(fmt::format("kernel_width: {} <= 0", kernel_width));
+  if (!(initial_kernel_width >= 0)) return Error(fmt::format("initial_kernel_width: {} < 0", initial_kernel_width));
   if (!std::isfinite(prior_translation_sigma)) return Error("prior_translation_sigma: not finite");
   if (!std::isfinite(prior_rotation_sigma)) return Error("prior_rotation_sigma: not finite");
   if (!(vertical_line_angle >= 0 && vertical_line_angle <= M_PI / 2)) {
@@ -211,7 +212,13 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
       associated_at = result.T_map_source;
       ++result.associations;
     }
-    equations = linearize(source, surfaces, result.T_map_source, config);
+    // Coarse to fine: the kernel starts wide (a poor prediction, e.g. the constant-velocity
+    // model at the start of a turn, still finds its correspondences) and halves every iteration
+    // down to kernel_width; the gate follows at three widths.
+    const double width = std::max(config.kernel_width, config.initial_kernel_width * std::pow(0.5, iteration - 1));
+    const bool finest = width <= config.kernel_width;
+    equations = linearize(source, surfaces, result.T_map_source, width, std::max(config.max_correspondence_distance, 3.0 * width),
+                          config.num_threads);
     if (equations.correspondences() < config.min_correspondences) {
       return Error(fmt::format("surface registration: {} of {} points matched a map surface within {} m {}(need {}); "
                                "the map does not overlap the scan at this pose",
@@ -231,7 +238,7 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
     }
     result.T_map_source = result.T_map_source * SE3::exp(delta);
     result.iterations = iteration;
-    if (delta.head<3>().norm() < config.translation_tolerance && delta.tail<3>().norm() < config.rotation_tolerance) {
+    if (finest && delta.head<3>().norm() < config.translation_tolerance && delta.tail<3>().norm() < config.rotation_tolerance) {
       result.converged = true;
       break;
     }

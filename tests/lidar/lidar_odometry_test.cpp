@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include <gtest/gtest.h>
 
@@ -116,9 +117,11 @@ struct OdometryRun {
   double path_m = 0.0;
 };
 
-OdometryRun run_scenario(const std::string& path, double duration_s, LidarOdometryConfig config) {
+OdometryRun run_scenario(const std::string& path, double duration_s, LidarOdometryConfig config,
+                         std::optional<sim::LidarModel> model = std::nullopt) {
   sim::Scenario scenario = sim::load_scenario(path).value();
   std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& s) { return s.modality != config::SensorModality::kLidar; });
+  if (model) std::get<sim::LidarSimulatorConfig>(scenario.sensors.front().simulator).pattern = sim::LidarPattern::preset(*model);
   scenario.duration = duration_s;
   scenario.num_threads = 0;
   auto simulation = sim::ScenarioSimulation::create(scenario).value();
@@ -182,6 +185,18 @@ TEST(LidarOdometry, UrbanVehicleOs1ThroughRainDriftsUnderHalfAPercent) {
   ASSERT_TRUE(kitti.ok()) << kitti.error().message;
   EXPECT_LT(kitti->translation_error_percent, 0.5);
   EXPECT_LT(kitti->rotation_error_deg_per_100m, 0.5);
+  EXPECT_LT(final_error(run), 0.005 * run.path_m);
+}
+
+TEST(LidarOdometry, UrbanVehicleHdl64KeepsTrackIntoTheFirstTurn) {
+  // 130k points per sweep, -24..+2 deg: few high facade points. At the start of the first turn
+  // (16 s) the constant-velocity prediction is 2-3 deg off in yaw; with a fixed 0.1 m kernel
+  // this sensor lost track there (15 % drift), the coarse-to-fine kernel keeps it.
+  LidarOdometryConfig config;
+  const OdometryRun run = run_scenario("examples/scenarios/urban_vehicle.yaml", 22.0, config, sim::LidarModel::kVelodyneHdl64);
+  ASSERT_GT(run.scans, 200U);
+  EXPECT_GT(run.path_m, 140.0);
+  EXPECT_LT(rmse(run), 0.1);
   EXPECT_LT(final_error(run), 0.005 * run.path_m);
 }
 

@@ -75,10 +75,13 @@ class VoxelHashMap {
   /// Heap bytes held: hash table slots plus point storage (capacity).
   std::size_t memory_bytes() const;
   const VoxelHashMapConfig& config() const { return config_; }
+  /// The minimum distance between points of a voxel in effect (m; see min_point_spacing).
+  double point_spacing() const { return point_spacing_; }
 
  private:
   VoxelHashMapConfig config_;
   float inverse_voxel_size_;
+  double point_spacing_;
   float min_spacing_squared_;
   absl::flat_hash_map<uint64_t, std::vector<MapPoint>> voxels_;
   std::size_t point_count_ = 0;

@@ -17,9 +17,11 @@
 // - otherwise (volumes: foliage, clutter) no residual.
 // Surfaces are fitted again when the estimate has moved more than reassociation_translation
 // or reassociation_rotation since the last fit (a plane stays valid under small motion), so a
-// well-predicted scan is usually associated once or twice. Residuals beyond
-// max_correspondence_distance are ignored; the rest are weighted by Geman-McClure with width
-// kernel_width. The prior (T_prior, sigmas) adds
+// well-predicted scan is usually associated once or twice. Residuals are weighted by
+// Geman-McClure; its width starts at initial_kernel_width and halves every iteration down to
+// kernel_width (coarse to fine: a poor prediction, such as the constant-velocity model at the
+// start of a turn, still converges), residuals beyond max(max_correspondence_distance, three
+// widths) are ignored. The prior (T_prior, sigmas) adds
 // Log(T_prior^-1 T)^T P Log(T_prior^-1 T) with P = diag(1/sigma_t^2 x3, 1/sigma_r^2 x3), the
 // residuals having unit variance kernel_width^2.
 //
@@ -43,6 +45,9 @@ struct SurfaceRegistrationConfig {
   double rotation_tolerance = 1e-4;     ///< rad
   double max_correspondence_distance = 0.5;  ///< m
   double kernel_width = 0.1;            ///< m
+  /// m: the first iteration's kernel width, halved every iteration down to kernel_width (the
+  /// gate is max(max_correspondence_distance, 3 widths)); converged only at kernel_width.
+  double initial_kernel_width = 0.5;
   double prior_translation_sigma = 1.0; ///< m; <= 0: no prior
   double prior_rotation_sigma = 0.1;    ///< rad; <= 0: no prior
   std::size_t neighbours = 8;           ///< map points per surface fit (>= 3)
