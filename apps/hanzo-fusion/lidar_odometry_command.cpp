@@ -28,6 +28,7 @@
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/lidar/lidar_odometry.hpp"
 #include "hanzo/fusion/pipeline/lidar_inertial_odometry.hpp"
+#include "hanzo/fusion/pipeline/lidar_slam.hpp"
 #include "hanzo/fusion/config/fusion_config.hpp"
 
 namespace hanzo::fusion::app {
@@ -44,6 +45,7 @@ struct LidarOdometryOptions {
   int threads = 1;
   double max_range = 100.0;
   bool no_deskew = false;
+  bool loop_closure = false;
   std::size_t max_scans = 0;
   std::string trajectory_out;
   std::string plot_dir;
@@ -112,6 +114,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
 
   std::string topic = options.topic;
   std::unique_ptr<lidar::LidarOdometry> odometry;              // LiDAR only
+  std::unique_ptr<pipeline::LidarSlam> slam;                   // LiDAR only, --loop-closure
   std::unique_ptr<pipeline::Session> session;                  // LiDAR-inertial
   std::unique_ptr<pipeline::LidarInertialOdometry> inertial;
   std::string lidar_sensor;
@@ -165,7 +168,13 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
       if (!pair) return Error(fmt::format("ground truth at the first scan: {}", pair.error().message));
       initial_pose = pair->reference.pose_se3(0) * T_body_lidar;
     }
-    odometry = std::make_unique<lidar::LidarOdometry>(config, initial_pose);
+    if (options.loop_closure) {
+      pipeline::LidarSlamConfig slam_config;
+      slam_config.odometry = config;
+      slam = std::make_unique<pipeline::LidarSlam>(slam_config, initial_pose);
+    } else {
+      odometry = std::make_unique<lidar::LidarOdometry>(config, initial_pose);
+    }
     return ok_status();
   };
 
@@ -175,7 +184,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
     if (inertial) {
       added = inertial->process(scan);
     } else if (auto cloud = cloud::from_message(scan); cloud) {
-      added = odometry->add_scan(scan.timestamp, *cloud);
+      added = slam ? slam->add_scan(scan.timestamp, *cloud) : odometry->add_scan(scan.timestamp, *cloud);
     } else {
       added = cloud.error();
     }
@@ -190,7 +199,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
     stage_seconds[0] += added->preprocess_seconds;
     stage_seconds[1] += added->registration_seconds;
     stage_seconds[2] += added->map_update_seconds;
-    const lidar::LidarOdometry& used = inertial ? *inertial->odometry() : *odometry;
+    const lidar::LidarOdometry& used = inertial ? *inertial->odometry() : (slam ? slam->odometry() : *odometry);
     max_map_points = std::max(max_map_points, added->map_points);
     max_map_bytes = std::max(max_map_bytes, used.local_map().memory_bytes());
     estimate.timestamps.push_back(added->time);
@@ -223,7 +232,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
     }
     const auto* scan = std::get_if<msgs::PointCloudMessage>(message);
     if (scan == nullptr || (!topic.empty() && entry.topic != topic)) continue;
-    if (!odometry && !inertial) {
+    if (!odometry && !inertial && !slam) {
       if (Status started = start_with(*scan, entry.topic); !started) return fail(started.error().message);
     }
     if (session) {
@@ -232,7 +241,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
       register_scan(*scan);
     }
   }
-  if (!odometry && !inertial) return fail(fmt::format("{}: no point clouds{}", options.log, topic.empty() ? "" : " on " + topic));
+  if (!odometry && !inertial && !slam) return fail(fmt::format("{}: no point clouds{}", options.log, topic.empty() ? "" : " on " + topic));
   if (milliseconds.empty()) return fail(fmt::format("every scan was refused; first: {}", first_refusal));
 
   std::vector<double> sorted = milliseconds;
@@ -263,9 +272,35 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
       static_cast<double>(associations) / scans, total_ms / scans, 1e3 * stage_seconds[0] / scans,
       1e3 * stage_seconds[1] / scans, 1e3 * stage_seconds[2] / scans,
       percentile(0.5), percentile(0.99), percentile(1.0), max_map_points, static_cast<double>(max_map_bytes) / 1e6);
+  if (slam) {
+    const pipeline::LidarSlamSummary& summary = slam->summary();
+    result["loop_closure"] = {{"keyframes", summary.keyframes}, {"candidates", summary.loop_candidates},
+                              {"closures", summary.loop_closures}, {"optimizations", summary.optimizations},
+                              {"loop_closure_seconds", summary.loop_closure_seconds},
+                              {"optimization_seconds", summary.optimization_seconds}};
+    text += fmt::format("  loop closure: {} keyframes, {} of {} candidates verified, {} optimizations ({:.2f} s verifying, {:.2f} s optimizing)\n",
+                        summary.keyframes, summary.loop_closures, summary.loop_candidates, summary.optimizations,
+                        summary.loop_closure_seconds, summary.optimization_seconds);
+  }
   if (ground_truth) {
-    if (Status scored = score(estimate, *ground_truth, options, session != nullptr, result, text); !scored) {
+    nlohmann::json odometry_result;
+    std::string odometry_text = slam ? "  odometry (before loop closure):\n" : "";
+    if (Status scored = score(estimate, *ground_truth, options, session != nullptr, odometry_result, odometry_text); !scored) {
       return fail(scored.error().message);
+    }
+    text += odometry_text;
+    if (slam) {
+      // Every sweep through the optimized keyframe graph.
+      io::Trajectory corrected = slam->trajectory();
+      for (Eigen::Matrix4d& pose : corrected.poses) pose = pose * T_body_lidar.inverse().matrix();
+      nlohmann::json slam_result;
+      text += "  after loop closure:\n";
+      if (Status scored = score(corrected, *ground_truth, options, false, slam_result, text); !scored) return fail(scored.error().message);
+      result["odometry"] = odometry_result;
+      result["slam"] = slam_result;
+      estimate = std::move(corrected);
+    } else {
+      result.update(odometry_result);
     }
   }
   if (!options.trajectory_out.empty()) {
@@ -295,6 +330,8 @@ void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& ru
   command->add_option("--threads", options->threads, "Registration threads (0: all cores)")->capture_default_str();
   command->add_option("--max-range", options->max_range, "Ignore returns farther than this, m")->capture_default_str();
   command->add_flag("--no-deskew", options->no_deskew, "Use the points as measured (no motion compensation)");
+  command->add_flag("--loop-closure", options->loop_closure,
+                    "LiDAR SLAM: keyframe pose graph with Scan Context loop closure (LiDAR only); scores before and after");
   command->add_option("--max-scans", options->max_scans, "Stop after this many scans (0: all)");
   command->add_option("--trajectory", options->trajectory_out, "Write the body trajectory (TUM)");
   command->add_option("--plot", options->plot_dir, "Write an SVG of the trajectory against the ground truth into this folder");
