@@ -121,6 +121,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   std::deque<msgs::PointCloudMessage> waiting;  // sweeps waiting for the IMU to pass their end
   io::Trajectory estimate;
   std::vector<double> milliseconds;
+  std::size_t weather = 0, phantoms = 0;
   std::size_t refused = 0, degenerate = 0, max_map_points = 0, max_map_bytes = 0, iterations = 0, associations = 0;
   double stage_seconds[3] = {0.0, 0.0, 0.0};
   std::string first_refusal;
@@ -194,6 +195,8 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
     }
     milliseconds.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
     degenerate += added->degenerate ? 1 : 0;
+    weather += added->weather_degraded ? 1 : 0;
+    phantoms += added->phantom_points;
     iterations += static_cast<std::size_t>(added->iterations);
     associations += static_cast<std::size_t>(added->associations);
     stage_seconds[0] += added->preprocess_seconds;
@@ -256,6 +259,8 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   result["refused_scans"] = refused;
   if (refused > 0) result["first_refusal"] = first_refusal;
   result["degenerate_scans"] = degenerate;
+  result["weather_degraded_scans"] = weather;
+  result["phantom_points"] = phantoms;
   const double scans = static_cast<double>(milliseconds.size());
   result["mean_iterations"] = static_cast<double>(iterations) / scans;
   result["mean_associations"] = static_cast<double>(associations) / scans;
@@ -265,10 +270,10 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
                         {"map_update", 1e3 * stage_seconds[2] / scans}};
   result["local_map"] = {{"max_points", max_map_points}, {"max_bytes", max_map_bytes}};
   std::string text = fmt::format(
-      "{} ({}): {} scans ({} refused), {} degenerate, {:.1f} iterations and {:.1f} surface fits per scan; per scan mean "
+      "{} ({}): {} scans ({} refused), {} degenerate, {} weather-degraded ({} phantom returns dropped), {:.1f} iterations and {:.1f} surface fits per scan; per scan mean "
       "{:.1f} ms (preprocess {:.1f}, registration {:.1f}, map update {:.1f}), p50 {:.1f}, p99 {:.1f}, max {:.1f} ms; "
       "local map up to {} points, {:.1f} MB\n",
-      options.log, topic, milliseconds.size(), refused, degenerate, static_cast<double>(iterations) / scans,
+      options.log, topic, milliseconds.size(), refused, degenerate, weather, phantoms, static_cast<double>(iterations) / scans,
       static_cast<double>(associations) / scans, total_ms / scans, 1e3 * stage_seconds[0] / scans,
       1e3 * stage_seconds[1] / scans, 1e3 * stage_seconds[2] / scans,
       percentile(0.5), percentile(0.99), percentile(1.0), max_map_points, static_cast<double>(max_map_bytes) / 1e6);

@@ -96,6 +96,23 @@ Eigen::Vector3f ScanNormalEstimator::normal(std::size_t i) const {
   return normal.dot(p) > 0.0F ? Eigen::Vector3f(-normal) : normal;
 }
 
+bool ScanNormalEstimator::isolated(std::size_t i, float max_gap) const {
+  if (image_.empty()) return false;
+  const Eigen::Vector3f& p = scan_.positions[i];
+  const int ring = scan_.rings[i];
+  const float max_squared = max_gap * max_gap;
+  for (int r = std::max(0, ring - 1); r <= std::min(rings_ - 1, ring + 1); ++r) {
+    const int reach = r == ring ? 2 : 1;
+    for (int dc = -reach; dc <= reach; ++dc) {
+      const int column = (column_of_[i] + dc + columns_) % columns_;
+      const uint32_t j = image_[static_cast<std::size_t>(r) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(column)];
+      if (j == kEmpty || j == i) continue;
+      if ((scan_.positions[j] - p).squaredNorm() <= max_squared) return false;
+    }
+  }
+  return true;
+}
+
 std::vector<Eigen::Vector3f> estimate_scan_normals(const PointCloud& scan, const ScanNormalConfig& config) {
   std::vector<uint32_t> all(scan.size());
   for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<uint32_t>(i);

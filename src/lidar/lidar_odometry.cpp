@@ -83,6 +83,12 @@ Status LidarOdometryConfig::validate() const {
     return Error(fmt::format("degeneracy_ratio: {} outside [0, 1)", degeneracy_ratio));
   }
   if (min_points < 6) return Error(fmt::format("min_points: {} < 6", min_points));
+  if (!(phantom_max_range >= 0)) return Error(fmt::format("phantom_max_range: {} < 0", phantom_max_range));
+  if (!(phantom_max_gap > 0)) return Error(fmt::format("phantom_max_gap: {} <= 0", phantom_max_gap));
+  if (!(weather_phantom_fraction >= 0)) return Error(fmt::format("weather_phantom_fraction: {} < 0", weather_phantom_fraction));
+  if (!(weather_return_ratio >= 0 && weather_return_ratio <= 1)) {
+    return Error(fmt::format("weather_return_ratio: {} outside [0, 1]", weather_return_ratio));
+  }
   return with_context(registration.validate(), "registration");
 }
 
@@ -118,13 +124,21 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   const auto started = Clock::now();
   // 2-3. Crop, keep one measured point per map spacing, their normals from the range image,
   // deskew; registration points are those downsampled again.
+  const cloud::ScanNormalEstimator range_image(scan, config_.normals);
   std::vector<uint32_t> in_range;
   in_range.reserve(scan.size());
   const float min_squared = static_cast<float>(config_.min_range * config_.min_range);
   const float max_squared = static_cast<float>(config_.max_range * config_.max_range);
+  const float phantom_squared = static_cast<float>(config_.phantom_max_range * config_.phantom_max_range);
+  std::size_t phantoms = 0;
   for (std::size_t i = 0; i < scan.size(); ++i) {
     const float squared = scan.positions[i].squaredNorm();
-    if (squared >= min_squared && squared <= max_squared) in_range.push_back(static_cast<uint32_t>(i));
+    if (squared < min_squared || squared > max_squared) continue;
+    if (squared < phantom_squared && range_image.isolated(i, static_cast<float>(config_.phantom_max_gap))) {
+      ++phantoms;
+      continue;
+    }
+    in_range.push_back(static_cast<uint32_t>(i));
   }
   if (in_range.size() < config_.min_points) {
     return Error(fmt::format("lidar odometry: {} points within {}-{} m (need {})", in_range.size(), config_.min_range,
@@ -153,6 +167,11 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   }
 
   LidarOdometryEstimate estimate;
+  estimate.phantom_points = phantoms;
+  const double returns = static_cast<double>(in_range.size() + phantoms);
+  estimate.return_ratio = average_returns_ > 0.0 ? returns / average_returns_ : 1.0;
+  estimate.weather_degraded = static_cast<double>(phantoms) > config_.weather_phantom_fraction * returns ||
+                              estimate.return_ratio < config_.weather_return_ratio;
   const auto registration_started = Clock::now();
   estimate.preprocess_seconds = std::chrono::duration<double>(registration_started - started).count();
   estimate.time = pose_time;
@@ -188,10 +207,14 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   estimate.registration_seconds = std::chrono::duration<double>(map_started - registration_started).count();
   // 6. Map update (normals only for the points the map keeps; the few degrees a normal turns
   // during the sweep are not deskewed) and state.
-  const cloud::ScanNormalEstimator normals(scan, config_.normals);
   const Eigen::Matrix3f rotation = T_world_lidar.rotation().matrix().cast<float>();
   map_.add(transformed(map_points.positions, T_world_lidar), T_world_lidar.translation(),
-           [&](std::size_t i) { return Eigen::Vector3f(rotation * normals.normal(kept[i])); });
+           [&](std::size_t i) { return Eigen::Vector3f(rotation * range_image.normal(kept[i])); });
+  if (estimate.weather_degraded) {
+    ++weather_degraded_scans_;
+  } else {
+    average_returns_ = average_returns_ > 0.0 ? 0.9 * average_returns_ + 0.1 * returns : returns;
+  }
   estimate.T_world_lidar = T_world_lidar;
   estimate.T_previous_current = last_time_ ? pose_.inverse() * T_world_lidar : SE3();
   estimate.map_points = map_.point_count();

@@ -37,6 +37,7 @@ Result<lidar::LidarOdometryEstimate> LidarInertialOdometry::process(const msgs::
   last_filter_pose_ = T_world_lidar;
   ++statistics_.scans;
   statistics_.degenerate += estimate->degenerate ? 1 : 0;
+  statistics_.weather_degraded += estimate->weather_degraded ? 1 : 0;
 
   // Covariance over (position in the world, rotation in the sensor frame): the tangent's
   // translation rho is in the sensor frame (right perturbation), so position = R rho.
@@ -46,6 +47,7 @@ Result<lidar::LidarOdometryEstimate> LidarInertialOdometry::process(const msgs::
   covariance = 0.5 * (covariance + covariance.transpose());
   covariance.diagonal().head<3>().array() += config_.position_sigma_floor * config_.position_sigma_floor;
   covariance.diagonal().tail<3>().array() += config_.rotation_sigma_floor * config_.rotation_sigma_floor;
+  if (estimate->weather_degraded) covariance *= config_.weather_covariance_scale;
   if (Status fused = session_.push_pose(lidar_sensor_, estimate->time, estimate->T_world_lidar, covariance); fused) {
     ++statistics_.fused;
   } else {

@@ -114,6 +114,9 @@ struct OdometryRun {
   io::Trajectory estimate;
   std::size_t scans = 0;
   std::size_t degenerate = 0;
+  std::size_t weather_in_rain = 0;     // sweeps flagged weather_degraded inside the rain episode
+  std::size_t weather_outside = 0;     // and outside it
+  std::size_t phantoms_outside = 0;    // lone near returns dropped outside it
   double path_m = 0.0;
 };
 
@@ -126,6 +129,7 @@ OdometryRun run_scenario(const std::string& path, double duration_s, LidarOdomet
   scenario.num_threads = 0;
   auto simulation = sim::ScenarioSimulation::create(scenario).value();
   const SE3 T_body_lidar = scenario.sensors.front().T_body_sensor;
+  const std::vector<sim::LidarWeatherEpisode>& weather = std::get<sim::LidarSimulatorConfig>(scenario.sensors.front().simulator).weather;
   const sim::SplineTrajectory& trajectory = simulation->trajectory();
   std::unique_ptr<LidarOdometry> odometry;
   OdometryRun run;
@@ -142,6 +146,11 @@ OdometryRun run_scenario(const std::string& path, double duration_s, LidarOdomet
     if (!estimate) return estimate.error();
     ++run.scans;
     run.degenerate += estimate->degenerate ? 1 : 0;
+    const bool raining = std::any_of(weather.begin(), weather.end(), [&](const sim::LidarWeatherEpisode& e) {
+      return sweep.timestamp + Duration::from_seconds(0.1) >= e.start && sweep.timestamp <= e.end;
+    });
+    (raining ? run.weather_in_rain : run.weather_outside) += estimate->weather_degraded ? 1 : 0;
+    if (!raining) run.phantoms_outside += estimate->phantom_points;
     run.truth.timestamps.push_back(estimate->time);
     run.truth.poses.push_back(trajectory.sample(estimate->time).T_world_body.matrix());
     run.estimate.timestamps.push_back(estimate->time);
@@ -186,6 +195,10 @@ TEST(LidarOdometry, UrbanVehicleOs1ThroughRainDriftsUnderHalfAPercent) {
   EXPECT_LT(kitti->translation_error_percent, 0.5);
   EXPECT_LT(kitti->rotation_error_deg_per_100m, 0.5);
   EXPECT_LT(final_error(run), 0.005 * run.path_m);
+  // The rain (8 s = 80 sweeps) is flagged, clear weather is not.
+  EXPECT_GT(run.weather_in_rain, 70U);
+  EXPECT_LE(run.weather_outside, 3U);
+  EXPECT_LT(run.phantoms_outside, 50U * run.scans);
 }
 
 TEST(LidarOdometry, UrbanVehicleHdl64KeepsTrackIntoTheFirstTurn) {

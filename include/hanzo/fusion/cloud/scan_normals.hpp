@@ -41,6 +41,11 @@ class ScanNormalEstimator {
   ScanNormalEstimator(const PointCloud& scan, const ScanNormalConfig& config = {});
   /// The unit normal of point `index` (facing the sensor), or zero; see above.
   Eigen::Vector3f normal(std::size_t index) const;
+  /// True when no point on the same ring within two columns or on the adjacent rings within
+  /// one column lies within max_gap (m) of point `index`: a lone return, such as a rain drop or
+  /// fog in front of a sensor whose neighbouring rays see a wall metres behind. False for a
+  /// cloud without rings (nothing to tell).
+  bool isolated(std::size_t index, float max_gap) const;
 
  private:
   const PointCloud& scan_;

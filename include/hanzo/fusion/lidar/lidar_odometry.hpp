@@ -13,7 +13,8 @@
 //     scans without them are used as they are). Poses refer to the middle of the sweep: a
 //     velocity error then warps the sweep symmetrically instead of shifting it, which would
 //     feed back through the constant-velocity model.
-//  3. Range crop and voxel downsampling: map points at the map's point spacing, registration
+//  3. Range crop, lone near returns (rain drops, fog) dropped and the sweep flagged
+//     weather_degraded when they or missing returns are many, voxel downsampling: map points at the map's point spacing, registration
 //     points at source_voxel_size (KISS's double downsampling).
 //  4. Registration against the cloud::VoxelHashMap by Gauss-Newton on SE3 (right
 //     perturbation). Each point is matched to the best of the surfaces of its voxel and the six
@@ -69,6 +70,15 @@ struct LidarOdometryConfig {
   /// initial_pose levels it).
   SurfaceRegistrationConfig registration{.neighbours = 10};
   double degeneracy_ratio = 0.02;      ///< constraint_ratio below: degenerate
+  /// Rain, fog, dust: returns closer than phantom_max_range with no neighbour in the range image
+  /// within phantom_max_gap are dropped (drops in the air; they would enter the map otherwise).
+  /// The sweep is flagged weather_degraded when such phantoms exceed weather_phantom_fraction of
+  /// its returns or its returns fall below weather_return_ratio of the running average
+  /// (dropouts, short visibility).
+  double phantom_max_range = 3.0;      ///< m
+  double phantom_max_gap = 0.3;        ///< m
+  double weather_phantom_fraction = 0.005;
+  double weather_return_ratio = 0.8;
   std::size_t min_points = 100;        ///< points after cropping
 
   /// Ok, or an Error naming the first invalid field.
@@ -98,6 +108,9 @@ struct LidarOdometryEstimate {
   std::size_t line_correspondences = 0;
   double inlier_rmse = 0.0;            ///< m, RMS of matched residuals
   std::size_t map_points = 0;          ///< after adding this scan
+  std::size_t phantom_points = 0;      ///< lone near returns dropped (see the config)
+  double return_ratio = 1.0;           ///< returns in range / the running average
+  bool weather_degraded = false;
   /// Wall-clock seconds of the stages: crop + downsampling + normals + deskew, registration,
   /// map update.
   double preprocess_seconds = 0.0;
@@ -121,6 +134,7 @@ class LidarOdometry {
   const LidarOdometryConfig& config() const { return config_; }
   std::size_t scans() const { return scans_; }
   std::size_t degenerate_scans() const { return degenerate_scans_; }
+  std::size_t weather_degraded_scans() const { return weather_degraded_scans_; }
   /// The last scan's deskewed map points in the sensor frame (empty before the first scan).
   const std::vector<Eigen::Vector3f>& last_scan_points() const { return last_scan_points_; }
 
@@ -133,6 +147,8 @@ class LidarOdometry {
   double last_interval_ = 0.0;  ///< s between the last two scans
   std::size_t scans_ = 0;
   std::size_t degenerate_scans_ = 0;
+  std::size_t weather_degraded_scans_ = 0;
+  double average_returns_ = 0.0;  ///< running average of the returns in range of clear sweeps
   std::vector<Eigen::Vector3f> last_scan_points_;
 };
 

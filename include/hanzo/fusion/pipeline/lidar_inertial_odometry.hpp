@@ -38,6 +38,9 @@ struct LidarInertialOdometryConfig {
   /// scenario: 57 of 390 gated, 0.30 % drift); 5 cm / 0.005 rad fuse them all (0.09 %).
   double position_sigma_floor = 0.05;   ///< m
   double rotation_sigma_floor = 0.005;  ///< rad
+  /// A sweep flagged weather_degraded (rain, fog: LidarOdometryConfig) is fused with its
+  /// covariance times this (sigmas x2 by default).
+  double weather_covariance_scale = 4.0;
 };
 
 struct LidarInertialOdometryStatistics {
@@ -45,6 +48,7 @@ struct LidarInertialOdometryStatistics {
   std::size_t refused = 0;     ///< refused scans (Session not ready, bad scan, registration failure)
   std::size_t fused = 0;       ///< pose measurements the Session accepted
   std::size_t degenerate = 0;  ///< registered scans flagged degenerate
+  std::size_t weather_degraded = 0;  ///< registered scans flagged weather_degraded (fused with less weight)
 };
 
 class LidarInertialOdometry {
