@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -151,20 +152,11 @@ const std::vector<ScanToMapProblem>& scan_to_map_problems() {
   return problems;
 }
 
-void report_errors(benchmark::State& state, const std::vector<double>& cm, const std::vector<double>& deg, double seconds, std::size_t count) {
-  std::vector<double> sorted_cm = cm, sorted_deg = deg;
-  std::sort(sorted_cm.begin(), sorted_cm.end());
-  std::sort(sorted_deg.begin(), sorted_deg.end());
-  state.counters["problems"] = static_cast<double>(count);
-  state.counters["ms_per_sweep"] = 1e3 * seconds / static_cast<double>(count);
-  state.counters["median_cm"] = sorted_cm[sorted_cm.size() / 2];
-  state.counters["max_cm"] = sorted_cm.back();
-  state.counters["median_deg"] = sorted_deg[sorted_deg.size() / 2];
-}
-
 double rotation_deg(const SE3& a, const SE3& b) { return (a.rotation().inverse() * b.rotation()).log().norm() * 180.0 / M_PI; }
 
-void BM_ScanToMapOurs(benchmark::State& state) {
+// Runs `solve` (problem -> T_map_source, or an error) over every problem; reports time per sweep
+// and the errors against the truth.
+void run_scan_to_map(benchmark::State& state, const std::function<Result<SE3>(const ScanToMapProblem&)>& solve) {
   const auto& problems = scan_to_map_problems();
   std::vector<double> cm, deg;
   double seconds = 0.0;
@@ -173,39 +165,41 @@ void BM_ScanToMapOurs(benchmark::State& state) {
     deg.clear();
     const auto start = std::chrono::steady_clock::now();
     for (const ScanToMapProblem& problem : problems) {
-      auto result = lidar::align_to_surfaces(problem.source.positions, problem.map, problem.prediction, problem.prediction);
-      if (!result) {
-        state.SkipWithError(result.error().message.c_str());
+      const Result<SE3> estimate = solve(problem);
+      if (!estimate) {
+        state.SkipWithError(estimate.error().message.c_str());
         return;
       }
-      cm.push_back(100.0 * (result->T_map_source.translation() - problem.truth.translation()).norm());
-      deg.push_back(rotation_deg(result->T_map_source, problem.truth));
+      cm.push_back(100.0 * (estimate->translation() - problem.truth.translation()).norm());
+      deg.push_back(rotation_deg(*estimate, problem.truth));
     }
     seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
-  report_errors(state, cm, deg, seconds, problems.size());
+  std::sort(cm.begin(), cm.end());
+  std::sort(deg.begin(), deg.end());
+  state.counters["problems"] = static_cast<double>(problems.size());
+  state.counters["ms_per_sweep"] = 1e3 * seconds / static_cast<double>(problems.size());
+  state.counters["median_cm"] = cm[cm.size() / 2];
+  state.counters["max_cm"] = cm.back();
+  state.counters["median_deg"] = deg[deg.size() / 2];
+}
+
+void BM_ScanToMapOurs(benchmark::State& state) {
+  run_scan_to_map(state, [](const ScanToMapProblem& problem) -> Result<SE3> {
+    auto result = lidar::align_to_surfaces(problem.source.positions, problem.map, problem.prediction, problem.prediction);
+    if (!result) return result.error();
+    return result->T_map_source;
+  });
 }
 
 void BM_ScanToMapPeer(benchmark::State& state, bool pcl, bench::PeerMethod method) {
-  const auto& problems = scan_to_map_problems();
-  std::vector<double> cm, deg;
-  double seconds = 0.0;
-  for (auto _ : state) {
-    cm.clear();
-    deg.clear();
-    const auto start = std::chrono::steady_clock::now();
-    for (const ScanToMapProblem& problem : problems) {
-      // The peers take the source in the map frame at the prediction and return the correction.
-      cloud::PointCloud source = transformed(problem.source, problem.prediction);
-      const bench::PeerResult result = pcl ? bench::pcl_register(method, source, problem.map_points, 1.0, 1.0)
-                                           : bench::open3d_register(method, source, problem.map_points, 1.0);
-      const SE3 estimate = result.T_target_source * problem.prediction;
-      cm.push_back(100.0 * (estimate.translation() - problem.truth.translation()).norm());
-      deg.push_back(rotation_deg(estimate, problem.truth));
-    }
-    seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  }
-  report_errors(state, cm, deg, seconds, problems.size());
+  run_scan_to_map(state, [&](const ScanToMapProblem& problem) -> Result<SE3> {
+    // The peers take the source in the map frame at the prediction and return the correction.
+    const cloud::PointCloud source = transformed(problem.source, problem.prediction);
+    const bench::PeerResult result = pcl ? bench::pcl_register(method, source, problem.map_points, 1.0, 1.0)
+                                         : bench::open3d_register(method, source, problem.map_points, 1.0);
+    return result.T_target_source * problem.prediction;
+  });
 }
 
 }  // namespace
