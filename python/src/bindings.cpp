@@ -209,6 +209,7 @@ class PyFactorGraph {
 }  // namespace
 
 void bind_laser_slam(py::module_& module);  // laser_slam_bindings.cpp
+void bind_lidar_odometry(py::module_& module);  // lidar_odometry_bindings.cpp
 
 PYBIND11_MODULE(_fusion, module) {
   module.doc() = "hanzo-fusion: factor graphs for sensor fusion and SLAM";
@@ -296,4 +297,5 @@ PYBIND11_MODULE(_fusion, module) {
       .def("__len__", &PyFactorGraph::size);
 
   bind_laser_slam(module);
+  bind_lidar_odometry(module);
 }

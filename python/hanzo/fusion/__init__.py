@@ -8,6 +8,8 @@ from hanzo.fusion._fusion import (  # noqa: F401
     CarmenLog,
     FactorGraph,
     L,
+    LidarOdometry,
+    LidarOdometryEstimate,
     OptimizeResult,
     PlanarLaserSlam,
     PlanarScanEstimate,
