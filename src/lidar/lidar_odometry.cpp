@@ -53,14 +53,6 @@ std::vector<uint32_t> voxel_representatives(const std::vector<Eigen::Vector3f>& 
   return kept;
 }
 
-std::vector<Eigen::Vector3f> transformed(const std::vector<Eigen::Vector3f>& points, const SE3& T) {
-  const Eigen::Matrix3f rotation = T.rotation().matrix().cast<float>();
-  const Eigen::Vector3f translation = T.translation().cast<float>();
-  std::vector<Eigen::Vector3f> out(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) out[i] = rotation * points[i] + translation;
-  return out;
-}
-
 // Inverse of an information matrix that may be singular along degenerate directions: those
 // get a variance of 1e9 times the best-constrained one (the registration says nothing there).
 Matrix6d covariance_from(const Matrix6d& information) {
@@ -208,7 +200,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // 6. Map update (normals only for the points the map keeps; the few degrees a normal turns
   // during the sweep are not deskewed) and state.
   const Eigen::Matrix3f rotation = T_world_lidar.rotation().matrix().cast<float>();
-  map_.add(transformed(map_points.positions, T_world_lidar), T_world_lidar.translation(),
+  map_.add(cloud::transformed(map_points, T_world_lidar).positions, T_world_lidar.translation(),
            [&](std::size_t i) { return Eigen::Vector3f(rotation * range_image.normal(kept[i])); });
   if (estimate.weather_degraded) {
     ++weather_degraded_scans_;

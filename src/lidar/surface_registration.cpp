@@ -9,30 +9,24 @@
 
 #include "hanzo/fusion/cloud/parallel.hpp"
 #include "hanzo/fusion/core/so3.hpp"
+#include "registration_costs.hpp"
 
 namespace hanzo::fusion::lidar {
 namespace {
 
-using Matrix6d = Eigen::Matrix<double, 6, 6>;
-using Vector6d = Eigen::Matrix<double, 6, 1>;
 
+// The normal equations (registration_costs.hpp; hessian = sum rho' J^T J with weights
+// 1 / width^2, cost = sum rho' r^2 / width^2, squared_distance_sum in m^2) and how many of the
+// correspondences were point-to-line (the rest point-to-plane).
 struct SurfaceEquations {
-  Matrix6d hessian = Matrix6d::Zero();   // sum w J^T J (residuals in units of kernel_width)
-  Vector6d gradient = Vector6d::Zero();  // sum w J^T r
-  double cost = 0.0;                     // sum w r^T r
-  double squared_residual_sum = 0.0;     // m^2
-  std::size_t planes = 0;
+  NormalEquations normal;
   std::size_t lines = 0;
 
   void add(const SurfaceEquations& other) {
-    hessian += other.hessian;
-    gradient += other.gradient;
-    cost += other.cost;
-    squared_residual_sum += other.squared_residual_sum;
-    planes += other.planes;
+    normal.add(other.normal);
     lines += other.lines;
   }
-  std::size_t correspondences() const { return planes + lines; }
+  std::size_t correspondences() const { return normal.correspondences; }
 };
 
 // The surface near one source point, fitted from its map neighbours.
@@ -132,11 +126,12 @@ SurfaceEquations linearize(const std::vector<Eigen::Vector3f>& source, const std
       const double scaled = distance * inverse_width;
       const double s = 1.0 + scaled * scaled;
       const double weight = inverse_width * inverse_width / (s * s);  // Geman-McClure, residuals in units of the width
-      local.hessian.noalias() += weight * J.transpose() * J;
-      local.gradient.noalias() += weight * J.transpose() * residual;
-      local.cost += weight * distance * distance;
-      local.squared_residual_sum += distance * distance;
-      ++(plane ? local.planes : local.lines);
+      local.normal.hessian.noalias() += weight * J.transpose() * J;
+      local.normal.gradient.noalias() += weight * J.transpose() * residual;
+      local.normal.cost += weight * distance * distance;
+      local.normal.squared_distance_sum += distance * distance;
+      ++local.normal.correspondences;
+      if (!plane) ++local.lines;
     }
     partial[chunk] = local;
   });
@@ -228,10 +223,10 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
     }
     // Prior residual e = Log(T_prior^-1 T); d e / d delta ~ identity near the prior.
     const Vector6d prior_error = (T_prior_inverse * result.T_map_source).log();
-    Matrix6d hessian = equations.hessian;
+    Matrix6d hessian = equations.normal.hessian;
     hessian.diagonal() += prior_information;
-    hessian.diagonal().array() += 1e-9 * std::max(1.0, equations.hessian.diagonal().maxCoeff());
-    const Vector6d gradient = equations.gradient + prior_information.cwiseProduct(prior_error);
+    hessian.diagonal().array() += 1e-9 * std::max(1.0, equations.normal.hessian.diagonal().maxCoeff());
+    const Vector6d gradient = equations.normal.gradient + prior_information.cwiseProduct(prior_error);
     const Vector6d delta = hessian.ldlt().solve(-gradient);
     if (!delta.allFinite()) {
       return Error(fmt::format("surface registration: the normal equations are singular at iteration {}", iteration));
@@ -244,13 +239,13 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
     }
   }
   result.correspondences = equations.correspondences();
-  result.plane_correspondences = equations.planes;
+  result.plane_correspondences = equations.correspondences() - equations.lines;
   result.line_correspondences = equations.lines;
-  result.inlier_rmse = std::sqrt(equations.squared_residual_sum / static_cast<double>(equations.correspondences()));
+  result.inlier_rmse = std::sqrt(equations.normal.squared_distance_sum / static_cast<double>(equations.correspondences()));
   const double dof = std::max(1.0, static_cast<double>(equations.correspondences()) - 6.0);
   // information = (sum rho' J^T J) / sigma^2, sigma^2 = (sum rho' r^2) / dof the a-posteriori
   // residual variance; the kernel width cancels.
-  result.information = equations.hessian / std::max(equations.cost / dof, 1e-12);
+  result.information = equations.normal.hessian / std::max(equations.normal.cost / dof, 1e-12);
   return result;
 }
 

@@ -127,11 +127,9 @@ Result<SE3> LidarSlam::verify(std::size_t candidate, std::size_t newest, const S
   const std::size_t last = std::min(newest - 1, candidate + half);
   for (std::size_t j = first; j <= last; ++j) {
     const SE3 T = T_candidate_inverse * keyframe_pose(j);
-    const Eigen::Matrix3f rotation = T.rotation().matrix().cast<float>();
-    const Eigen::Vector3f translation = T.translation().cast<float>();
-    std::vector<Eigen::Vector3f> points;
-    points.reserve(keyframes_[j].points.size());
-    for (const Eigen::Vector3f& p : keyframes_[j].points) points.push_back(rotation * p + translation);
+    cloud::PointCloud keyframe;
+    keyframe.positions = keyframes_[j].points;
+    const std::vector<Eigen::Vector3f> points = cloud::transformed(keyframe, T).positions;
     coarse.add(points, {}, T.translation());
     fine.add(points, {}, T.translation());
   }
