@@ -101,7 +101,8 @@ Estimator::Estimator(const Estimator& other)
       gravity_magnitude_(other.gravity_magnitude_),
       last_keyframe_(other.last_keyframe_),
       planar_height_(other.planar_height_),
-      last_gravity_update_(other.last_gravity_update_) {}
+      last_gravity_update_(other.last_gravity_update_),
+      world_correction_(other.world_correction_) {}
 
 Estimator& Estimator::operator=(const Estimator& other) {
   if (this != &other) *this = Estimator(other);
@@ -145,6 +146,7 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
   } else if (const auto* correction = std::get_if<WorldCorrection>(&event.payload)) {
     predict_to(event.time);
     filter_->apply_world_transform(correction->T_correction);
+    world_correction_ = correction->T_correction * world_correction_;
     if (last_keyframe_) last_keyframe_->T_world_body = correction->T_correction * last_keyframe_->T_world_body;
     outcome = {true, {}};
   } else {

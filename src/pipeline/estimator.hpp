@@ -99,6 +99,9 @@ class Estimator {
   const estimate::Filter& filter() const { return *filter_; }
   /// Time of the last fused update of each sensor (IMU: last propagation), zero when never.
   const std::vector<Timestamp>& last_fused() const { return last_fused_; }
+  /// The product of the backend corrections fused so far (world frame, newest on the left):
+  /// a pose estimated before them is T * that pose in today's world.
+  const SE3& world_correction() const { return world_correction_; }
 
  private:
   EventOutcome process_imu(const Event& event, const msgs::ImuMessage& imu, UpdateObserver* observer);
@@ -161,6 +164,7 @@ class Estimator {
   std::optional<KeyframeAnchor> last_keyframe_;
   double planar_height_ = 0.0;
   Timestamp last_gravity_update_;
+  SE3 world_correction_;
 };
 
 }  // namespace hanzo::fusion::pipeline

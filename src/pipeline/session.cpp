@@ -125,7 +125,9 @@ struct Session::Impl final : UpdateObserver {
   PoseCallback pose_callback;
   InnovationCallback innovation_callback;
   KeyframeCallback keyframe_callback;
-  std::map<uint64_t, SE3> keyframe_poses;  // emitted keyframes, for corrections
+  // Emitted keyframes, for corrections: the pose before any correction (C^-1 x emitted pose,
+  // C the world correction when it was emitted), so that today's belief is C_now x this.
+  std::map<uint64_t, SE3> keyframe_poses;
   uint64_t keyframes = 0;
   uint64_t corrections = 0;
 };
@@ -178,17 +180,21 @@ Status Session::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_o
   event.time = impl.estimator.time();
   event.sensor = impl.imu_sensor;
   event.sequence = impl.sequence++;
-  event.payload = WorldCorrection{T_world_body_optimized * found->second.inverse()};
+  // The session's current belief of the keyframe includes the corrections applied since.
+  event.payload = WorldCorrection{T_world_body_optimized * (impl.estimator.world_correction() * found->second).inverse()};
   impl.fuse_in_order(std::move(event));
   ++impl.corrections;
   return ok_status();
 }
 std::optional<msgs::PoseEstimate> Session::latest_pose() const { return impl_->latest_pose; }
+SE3 Session::world_correction() const { return impl_->estimator.world_correction(); }
 
 std::optional<SE3> Session::pose_at(Timestamp time) const {
-  const auto pose_of = [](const Estimator& estimator) {
+  // In today's world: corrections fused after the entry move it too.
+  const SE3& correction_now = impl_->estimator.world_correction();
+  const auto pose_of = [&correction_now](const Estimator& estimator) {
     const estimate::NavigationState state = estimator.filter().state();
-    return SE3(state.R_world_body, state.position);
+    return correction_now * estimator.world_correction().inverse() * SE3(state.R_world_body, state.position);
   };
   const std::deque<Impl::HistoryEntry>& history = impl_->history;
   // history is in fusion order, so its times do not decrease; the first entry at or after `time`.
@@ -364,7 +370,7 @@ void Session::Impl::fuse_in_order(Event event) {
   if (event.is_imu && outcome.fused && estimator.initialized()) emit_pose(true);
   if (outcome.keyframe) {
     constexpr size_t kRememberedKeyframes = 100000;
-    keyframe_poses[outcome.keyframe->keyframe_id] = outcome.keyframe->T_world_body.to_se3();
+    keyframe_poses[outcome.keyframe->keyframe_id] = estimator.world_correction().inverse() * outcome.keyframe->T_world_body.to_se3();
     if (keyframe_poses.size() > kRememberedKeyframes) keyframe_poses.erase(keyframe_poses.begin());
     ++keyframes;
     if (keyframe_callback) keyframe_callback(*outcome.keyframe);

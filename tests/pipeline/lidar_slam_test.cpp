@@ -24,7 +24,7 @@ TEST(LidarSlam, UrbanLapClosesTheLoopAndRejectsLookAlikeStreets) {
   config.odometry.deskew = false;  // about 0.5 % drift: something to close
   // Every Scan Context match goes to verification: the city's look-alike streets must be
   // rejected by registration alone.
-  config.loop_min_search_radius = 1e6;
+  config.loop.min_search_radius = 1e6;
   std::unique_ptr<LidarSlam> slam;
   io::Trajectory odometry;
   const Status status = simulation->run([&](const sim::ScenarioSensor&, msgs::SensorMessage&& message) -> Status {

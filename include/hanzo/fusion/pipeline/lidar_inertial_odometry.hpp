@@ -15,8 +15,9 @@
 // The odometry's world frame is the Session's: the first scan starts at the Session's pose.
 // A scan that arrives before the Session is initialized or outside its history (older than
 // the lag window, newer than the last fused IMU sample) is refused with an Error that says so;
-// nothing changes then. Corrections applied to the Session afterwards (Session::apply_correction)
-// are not applied to the local map.
+// nothing changes then. Corrections applied to the Session (Session::apply_correction, by a
+// backend after a loop closure) move the odometry's frame with the Session's world: the local
+// map stays as it is (it is local) and the pose measurements follow the corrected world.
 
 #include <cstddef>
 #include <memory>
@@ -65,6 +66,9 @@ class LidarInertialOdometry {
   const LidarInertialOdometryStatistics& statistics() const { return statistics_; }
   /// The odometry (its local map, latest pose); nullptr before the first scan.
   const lidar::LidarOdometry* odometry() const { return odometry_.get(); }
+  /// The odometry's frame in the session's world (identity until a backend correction): the
+  /// session-world pose of an estimate is T_world_odometry() * estimate.T_world_lidar.
+  const SE3& T_world_odometry() const { return T_world_odometry_; }
 
  private:
   Session& session_;
@@ -73,6 +77,8 @@ class LidarInertialOdometry {
   LidarInertialOdometryConfig config_;
   std::unique_ptr<lidar::LidarOdometry> odometry_;
   std::optional<SE3> last_filter_pose_;  ///< the filter's T_world_lidar at the last registered sweep
+  SE3 T_world_odometry_;                 ///< the odometry's frame in the session's (corrected) world
+  SE3 correction_at_last_scan_;          ///< Session::world_correction() then
   LidarInertialOdometryStatistics statistics_;
 };
 

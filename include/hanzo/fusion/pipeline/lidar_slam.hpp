@@ -6,15 +6,9 @@
 // keyframe_angle radians of odometry motion a keyframe is made: node X(k) with the odometry's
 // pose, a between factor to X(k-1) with sigmas that grow with the distance, its deskewed points
 // (sensor frame) and its Scan Context descriptor (Kim & Kim 2018). Loop closure:
-//  1. the descriptor database (lidar/scan_context.hpp; ring key then full distance, the newest
-//     scan_context.exclude_recent keyframes excluded) proposes keyframe c; c must lie at least
-//     loop_min_travel metres of path back and, by the graph, within the search radius;
-//  2. geometric verification: the keyframe's points are registered to a submap of keyframes
-//     c - loop_submap_keyframes .. c + loop_submap_keyframes in c's frame
-//     (lidar/surface_registration.hpp), first from the graph's current relative pose, then from
-//     the descriptor's yaw alone; accepted when it converges with an inlier RMSE up to
-//     loop_max_rmse, at least loop_min_inlier_fraction of the points matched and a
-//     non-degenerate translation;
+//  1-2. lidar::LoopClosureDetector (lidar/loop_closure.hpp) proposes a candidate keyframe c by
+//     Scan Context within the search radius of the graph's estimate and verifies it by
+//     registering the new keyframe to the submap around c;
 //  3. a between factor X(c) -> X(k) with loop sigmas under a DCS kernel (Agarwal et al. 2013;
 //     phi loop_dcs_phi), then batch Levenberg-Marquardt over the keyframe graph (X(0) fixed).
 // trajectory() gives every sweep's pose corrected by its keyframe's optimized pose. The local
@@ -33,7 +27,7 @@
 #include "hanzo/fusion/graph/values.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/lidar/lidar_odometry.hpp"
-#include "hanzo/fusion/lidar/scan_context.hpp"
+#include "hanzo/fusion/lidar/loop_closure.hpp"
 
 namespace hanzo::fusion::pipeline {
 
@@ -47,16 +41,7 @@ struct LidarSlamConfig {
   double min_rotation_sigma = 0.002;                 ///< rad
   double rotation_sigma_per_meter = 0.0005;          ///< rad/m
   bool loop_closure = true;
-  lidar::ScanContextConfig scan_context;
-  double loop_min_travel = 50.0;   ///< m of path between the two keyframes
-  /// A candidate must lie within min + per_meter x (path between them) of the newest keyframe
-  /// by the graph's estimate (the drift it can have): the procedural city's streets look alike
-  /// to Scan Context, which proposed 60 places 100-250 m away on the simulated drive.
-  double loop_min_search_radius = 10.0;    ///< m
-  double loop_search_radius_per_meter = 0.05;
-  int loop_submap_keyframes = 5;   ///< keyframes on each side of the candidate
-  double loop_max_rmse = 0.1;      ///< m
-  double loop_min_inlier_fraction = 0.5;
+  lidar::LoopClosureConfig loop;   ///< candidates and verification (lidar/loop_closure.hpp)
   double loop_translation_sigma = 0.05;  ///< m
   double loop_rotation_sigma = 0.005;    ///< rad
   /// DCS phi: large, because a correct closure after a long loop is far off the drifted graph
@@ -91,15 +76,13 @@ class LidarSlam {
   std::size_t keyframe_count() const { return keyframes_.size(); }
   SE3 keyframe_pose(std::size_t k) const;
   /// The keyframe's deskewed points in its sensor frame.
-  const std::vector<Eigen::Vector3f>& keyframe_points(std::size_t k) const { return keyframes_.at(k).points; }
+  const std::vector<Eigen::Vector3f>& keyframe_points(std::size_t k) const { return loop_closures_.points(k); }
   const LidarSlamSummary& summary() const { return summary_; }
   const lidar::LidarOdometry& odometry() const { return odometry_; }
 
  private:
   struct Keyframe {
     SE3 T_odometry;  ///< the odometry's pose when it was made
-    std::vector<Eigen::Vector3f> points;
-    double path = 0.0;  ///< m travelled by then
   };
   struct SweepRecord {
     Timestamp time;
@@ -110,11 +93,10 @@ class LidarSlam {
   Status add_keyframe(const lidar::LidarOdometryEstimate& estimate);
   /// Tries to close a loop from the newest keyframe; true when a factor was added.
   bool close_loop();
-  Result<SE3> verify(std::size_t candidate, std::size_t newest, const SE3& guess) const;
 
   LidarSlamConfig config_;
   lidar::LidarOdometry odometry_;
-  lidar::ScanContextDatabase scan_contexts_;
+  lidar::LoopClosureDetector loop_closures_;
   graph::FactorGraph graph_;
   graph::Values values_;
   std::vector<Keyframe> keyframes_;

@@ -142,11 +142,18 @@ class Session {
   /// The backend's hook: keyframe `keyframe_id` is really at T_world_body_optimized. The
   /// estimate is moved rigidly by T_optimized * T_keyframe^-1 (world frame), now. Fails for a
   /// keyframe this session never emitted or no longer remembers (it keeps the last 100000).
+  /// Corrections compose: the keyframe's pose is taken as the session believes it now (the
+  /// emitted pose moved by the corrections applied since), so correcting the same keyframe
+  /// twice to the same pose moves the estimate once.
   Status apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized);
+  /// The product of the corrections fused so far (world frame, newest on the left): a pose
+  /// that was T_world_body before them is world_correction() * T_world_body now.
+  SE3 world_correction() const;
   /// The latest PoseEstimate, if any.
   std::optional<msgs::PoseEstimate> latest_pose() const;
   /// T_world_body at a past time within the lag window (body clock), interpolated between the
-  /// fused estimates around it: the prediction an odometry module (LiDAR, visual) starts from.
+  /// fused estimates around it, in today's world (corrections applied since included): the
+  /// prediction an odometry module (LiDAR, visual) starts from.
   /// None before initialization, for times older than the kept history or newer than the
   /// last fused event.
   std::optional<SE3> pose_at(Timestamp time) const;

@@ -1,0 +1,339 @@
+#include "hanzo/fusion/pipeline/mapping_session.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "hanzo/fusion/cloud/point_cloud.hpp"
+#include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/msgs/validate.hpp"
+
+namespace hanzo::fusion::pipeline {
+namespace {
+
+Timestamp sweep_end(const msgs::PointCloudMessage& scan) {
+  if (scan.point_timestamps.empty()) return scan.timestamp;
+  return *std::max_element(scan.point_timestamps.begin(), scan.point_timestamps.end());
+}
+
+Error rejection(std::string_view reason, const std::string& detail) { return Error(fmt::format("{}: {}", reason, detail)); }
+
+// A map keyframe moved this much in the graph is moved in the map.
+constexpr double kMapMoveTranslation = 0.01;  // m
+constexpr double kMapMoveRotation = 0.001;    // rad
+
+}  // namespace
+
+maps::MapBuilderConfig MappingSessionConfig::default_map() {
+  maps::MapBuilderConfig map;
+  map.occupancy_2d_config.resolution = 0.1;
+  map.point_map.voxel_size = 0.2;
+  map.point_map.keyframe_voxel_size = 0.1;
+  return map;
+}
+
+Status MappingSessionConfig::validate() const {
+  HANZO_RETURN_IF_ERROR(with_context(lidar_odometry.odometry.validate(), "lidar_odometry"));
+  HANZO_RETURN_IF_ERROR(with_context(loop.validate(), "loop"));
+  HANZO_RETURN_IF_ERROR(with_context(map.validate(), "map"));
+  if (!(loop_translation_sigma > 0) || !(loop_rotation_sigma > 0)) return Error("loop_translation_sigma, loop_rotation_sigma: must be > 0");
+  if (!(map_keyframe_distance >= 0) || !(map_keyframe_angle >= 0)) return Error("map_keyframe_distance, map_keyframe_angle: must be >= 0");
+  if (max_waiting_scans == 0) return Error("max_waiting_scans: must be > 0");
+  return ok_status();
+}
+
+Result<std::unique_ptr<MappingSession>> MappingSession::create(const config::FusionConfig& config, const calib::Calibration& calibration,
+                                                               MappingSessionConfig mapping) {
+  HANZO_RETURN_IF_ERROR(with_context(mapping.validate(), "mapping config"));
+  std::unique_ptr<Session> session;
+  HANZO_ASSIGN_OR_RETURN(session, Session::create(config, calibration));
+  std::string lidar_sensor;
+  SE3 T_body_lidar;
+  for (const config::SensorConfig& sensor : config.sensors) {
+    if (sensor.modality != config::SensorModality::kLidar) continue;
+    lidar_sensor = sensor.name;
+    if (const calib::SensorCalibration* entry = calibration.find(sensor.name)) T_body_lidar = entry->T_body_sensor();
+    break;
+  }
+  mapping.backend.batch_on_loop_closure = true;
+  return std::unique_ptr<MappingSession>(new MappingSession(std::move(session), std::move(mapping), std::move(lidar_sensor), T_body_lidar));
+}
+
+MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionConfig config, std::string lidar_sensor,
+                               const SE3& T_body_lidar)
+    : session_(std::move(session)),
+      config_(std::move(config)),
+      lidar_sensor_(std::move(lidar_sensor)),
+      T_body_lidar_(T_body_lidar),
+      graph_(config_.backend),
+      loop_closures_(config_.loop, config_.lidar_odometry.odometry),
+      map_builder_(maps::MapBuilder::create(config_.map).value()) {
+  if (!lidar_sensor_.empty()) odometry_.emplace(*session_, lidar_sensor_, T_body_lidar_, config_.lidar_odometry);
+  lidar_statistics_.name = lidar_sensor_;
+  lidar_statistics_.modality = config::SensorModality::kLidar;
+  session_->set_keyframe_callback([this](const msgs::Keyframe& keyframe) {
+    if (Status added = graph_.add_keyframe(keyframe); !added) {
+      logger()->warn("mapping session: keyframe {} not added to the graph: {}", keyframe.keyframe_id, added.error().message);
+      return;
+    }
+    latest_keyframe_ = keyframe;
+    ++summary_.graph_keyframes;
+    if (keyframe_callback_) keyframe_callback_(keyframe);
+  });
+}
+
+MappingSession::~MappingSession() = default;
+
+Status MappingSession::push(std::string_view sensor, const msgs::SensorMessage& message) {
+  if (odometry_ && sensor == lidar_sensor_) {
+    if (const auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(*scan);
+  }
+  const Status pushed = session_->push(sensor, message);
+  register_ready_scans();
+  update_backend();
+  return pushed;
+}
+
+void MappingSession::flush() {
+  session_->flush();
+  register_ready_scans();
+  update_backend();
+}
+
+Status MappingSession::push_scan(const msgs::PointCloudMessage& scan) {
+  ++lidar_statistics_.received;
+  ++summary_.scans_received;
+  auto refuse = [this](std::string_view reason, const std::string& detail) -> Status {
+    ++lidar_statistics_.rejected[std::string(reason)];
+    return rejection(reason, detail);
+  };
+  if (Status valid = msgs::validate(scan); !valid) return refuse("invalid", valid.error().message);
+  if (last_scan_time_ && scan.timestamp == *last_scan_time_) {
+    return refuse("duplicate", fmt::format("sweep at {:.6f} s repeats the previous sweep's time", scan.timestamp.seconds()));
+  }
+  if (last_scan_time_ && scan.timestamp < *last_scan_time_) {
+    return refuse("out_of_order", fmt::format("sweep at {:.6f} s is older than the previous sweep ({:.6f} s)", scan.timestamp.seconds(),
+                                              last_scan_time_->seconds()));
+  }
+  last_scan_time_ = scan.timestamp;
+  if (!lidar_statistics_.first_time.nanoseconds()) lidar_statistics_.first_time = scan.timestamp;
+  lidar_statistics_.last_time = scan.timestamp;
+  waiting_scans_.push_back(scan);
+  while (waiting_scans_.size() > config_.max_waiting_scans) {
+    waiting_scans_.pop_front();
+    count_refused("imu_behind");
+  }
+  register_ready_scans();
+  update_backend();
+  return ok_status();
+}
+
+void MappingSession::count_refused(const std::string& reason) {
+  ++lidar_statistics_.rejected[reason];
+  ++summary_.scans_refused;
+}
+
+void MappingSession::register_ready_scans() {
+  while (!waiting_scans_.empty()) {
+    const std::optional<msgs::PoseEstimate> latest = session_->latest_pose();
+    if (!latest || latest->timestamp < sweep_end(waiting_scans_.front())) return;
+    const msgs::PointCloudMessage scan = std::move(waiting_scans_.front());
+    waiting_scans_.pop_front();
+    const auto started = std::chrono::steady_clock::now();
+    Result<lidar::LidarOdometryEstimate> estimate = odometry_->process(scan);
+    summary_.last_registration_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count();
+    if (!estimate) {
+      logger()->debug("mapping session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), estimate.error().message);
+      count_refused("not_registered");
+      continue;
+    }
+    on_registered(*estimate);
+  }
+}
+
+void MappingSession::on_registered(const lidar::LidarOdometryEstimate& estimate) {
+  ++lidar_statistics_.fused;
+  ++summary_.scans_registered;
+  summary_.degenerate_scans += estimate.degenerate ? 1 : 0;
+  summary_.weather_degraded_scans += estimate.weather_degraded ? 1 : 0;
+  const SE3 T_world_lidar = odometry_->T_world_odometry() * estimate.T_world_lidar;
+  if (last_lidar_pose_) path_ += (last_lidar_pose_->inverse() * T_world_lidar).translation().norm();
+  last_lidar_pose_ = T_world_lidar;
+  // A map keyframe: the first sweep after a new Session keyframe, once the LiDAR moved enough.
+  if (!latest_keyframe_ || (last_anchor_ && *last_anchor_ == latest_keyframe_->keyframe_id)) return;
+  if (!map_keyframes_.empty()) {
+    const SE3 since = map_keyframes_.back().T_world_lidar.inverse() * T_world_lidar;
+    if (since.translation().norm() < config_.map_keyframe_distance && since.rotation().log().norm() < config_.map_keyframe_angle) return;
+  }
+  add_map_keyframe(latest_keyframe_->keyframe_id, T_world_lidar, odometry_->odometry()->last_scan_points());
+}
+
+void MappingSession::add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points) {
+  // The anchor's pose in today's world (the Session's history), for the relative pose.
+  const std::optional<Timestamp> anchor_time = graph_.keyframe_time(anchor);
+  const std::optional<SE3> T_world_anchor = anchor_time ? session_->pose_at(*anchor_time) : std::nullopt;
+  if (!T_world_anchor) return;
+  cloud::PointCloud cloud;
+  cloud.positions = points;
+  if (Status inserted = map_builder_.insert(T_world_lidar, cloud); !inserted) {
+    logger()->warn("mapping session: map keyframe not inserted: {}", inserted.error().message);
+    return;
+  }
+  if (Result<std::size_t> added = loop_closures_.add_keyframe(points, path_); !added) {
+    logger()->warn("mapping session: map keyframe not added to loop closure: {}", added.error().message);
+  }
+  last_anchor_ = anchor;
+  map_keyframe_of_[anchor] = map_keyframes_.size();
+  map_keyframes_.push_back({anchor, T_world_anchor->inverse() * T_world_lidar, T_world_lidar});
+  ++summary_.map_keyframes;
+  ++summary_.map_version;
+  if (map_update_callback_) {
+    msgs::MapUpdate update;
+    update.version = summary_.map_version;
+    update.timestamp = latest_keyframe_ ? latest_keyframe_->timestamp : Timestamp();
+    msgs::PointLayer layer;
+    layer.points = cloud::transformed(cloud, T_world_lidar).positions;
+    update.added_points = std::move(layer);
+    map_update_callback_(update);
+  }
+  if (!config_.loop_closure || loop_closures_.size() != map_keyframes_.size()) return;
+  update_backend();  // the anchor into the graph before its pose is looked up
+  const std::optional<lidar::LoopClosure> loop = loop_closures_.detect([this](std::size_t k) { return map_keyframe_pose(k); });
+  summary_.loop_candidates = loop_closures_.candidates();
+  if (!loop) return;
+  const MapKeyframe& from = map_keyframes_[loop->from];
+  const MapKeyframe& to = map_keyframes_[loop->to];
+  const SE3 T_anchors = from.T_anchor_lidar * loop->T_from_to * to.T_anchor_lidar.inverse();
+  if (Status added = add_loop_factor(from.anchor, to.anchor, T_anchors, std::nullopt); !added) {
+    logger()->warn("mapping session: loop closure not added: {}", added.error().message);
+    return;
+  }
+  ++summary_.loop_closures;
+  logger()->info("mapping session: loop closed between keyframes {} and {} (inlier RMSE {:.3f} m)", from.anchor, to.anchor,
+                 loop->inlier_rmse);
+  update_backend();
+}
+
+SE3 MappingSession::map_keyframe_pose(std::size_t k) const {
+  const MapKeyframe& keyframe = map_keyframes_.at(k);
+  const std::optional<SE3> anchor = graph_.optimized_pose(keyframe.anchor);
+  return anchor ? *anchor * keyframe.T_anchor_lidar : keyframe.T_world_lidar;
+}
+
+Status MappingSession::add_loop_factor(uint64_t from, uint64_t to, const SE3& T_from_to,
+                                       const std::optional<Eigen::Matrix<double, 6, 6>>& covariance) {
+  Eigen::Matrix<double, 6, 6> loop_covariance = Eigen::Matrix<double, 6, 6>::Zero();
+  loop_covariance.diagonal() << Eigen::Vector3d::Constant(config_.loop_translation_sigma * config_.loop_translation_sigma),
+      Eigen::Vector3d::Constant(config_.loop_rotation_sigma * config_.loop_rotation_sigma);
+  return graph_.add_loop_closure(from, to, T_from_to, covariance.value_or(loop_covariance));
+}
+
+void MappingSession::update_backend() {
+  Result<KeyframeGraphUpdate> update = graph_.process(session_.get());
+  if (!update) {
+    logger()->warn("mapping session: backend update failed: {}", update.error().message);
+    return;
+  }
+  if (update->factors_added == 0) return;
+  summary_.last_correction_m = update->correction_translation_m;
+  // Map keyframes whose keyframe moved follow it.
+  std::map<uint64_t, SE3> moved;
+  for (std::size_t k = 0; k < map_keyframes_.size(); ++k) {
+    const SE3 T_world_lidar = map_keyframe_pose(k);
+    const SE3 change = map_keyframes_[k].T_world_lidar.inverse() * T_world_lidar;
+    if (change.translation().norm() < kMapMoveTranslation && change.rotation().log().norm() < kMapMoveRotation) continue;
+    moved[k] = T_world_lidar;
+    map_keyframes_[k].T_world_lidar = T_world_lidar;
+  }
+  if (moved.empty()) return;
+  if (Status corrected = map_builder_.correct_poses(moved); !corrected) {
+    logger()->warn("mapping session: map not corrected: {}", corrected.error().message);
+    return;
+  }
+  ++summary_.map_version;
+  if (map_update_callback_) {
+    msgs::MapUpdate update_message;
+    update_message.version = summary_.map_version;
+    update_message.timestamp = latest_keyframe_ ? latest_keyframe_->timestamp : Timestamp();
+    update_message.full_replacement = true;
+    if (map_builder_.point_map()) {
+      msgs::FusionMap map;
+      map_builder_.write_layers(map);
+      update_message.added_points = std::move(map.points);
+    }
+    map_update_callback_(update_message);
+  }
+}
+
+Result<LoopClosureOutcome> MappingSession::close_loop(const LoopClosureRequest& request) {
+  if (request.from_keyframe.has_value() != request.to_keyframe.has_value()) {
+    return Error("invalid: give both from_keyframe and to_keyframe, or neither");
+  }
+  if (request.T_from_to && !request.from_keyframe) return Error("invalid: a relative pose needs from_keyframe and to_keyframe");
+  if (request.T_from_to && !request.T_from_to->matrix().allFinite()) return Error("invalid: the relative pose is not finite");
+  update_backend();
+  LoopClosureOutcome outcome;
+  if (request.T_from_to) {
+    outcome.from_keyframe = *request.from_keyframe;
+    outcome.to_keyframe = *request.to_keyframe;
+    outcome.T_from_to = *request.T_from_to;
+  } else {
+    std::optional<lidar::LoopClosure> loop;
+    const auto pose = [this](std::size_t k) { return map_keyframe_pose(k); };
+    if (request.from_keyframe) {
+      const auto from = map_keyframe_of_.find(*request.from_keyframe);
+      const auto to = map_keyframe_of_.find(*request.to_keyframe);
+      if (from == map_keyframe_of_.end() || to == map_keyframe_of_.end()) {
+        return Error(fmt::format("not_found: keyframe {} has no scan (map keyframes: {})",
+                                 from == map_keyframe_of_.end() ? *request.from_keyframe : *request.to_keyframe, map_keyframes_.size()));
+      }
+      lidar::LoopClosure verified;
+      HANZO_ASSIGN_OR_RETURN(verified, loop_closures_.verify(from->second, to->second, pose(from->second).inverse() * pose(to->second), pose));
+      loop = verified;
+    } else {
+      loop = loop_closures_.detect(pose);
+      summary_.loop_candidates = loop_closures_.candidates();
+      if (!loop) return Error("not_found: no verified loop closure for the newest map keyframe");
+    }
+    const MapKeyframe& from = map_keyframes_[loop->from];
+    const MapKeyframe& to = map_keyframes_[loop->to];
+    outcome.from_keyframe = from.anchor;
+    outcome.to_keyframe = to.anchor;
+    outcome.T_from_to = from.T_anchor_lidar * loop->T_from_to * to.T_anchor_lidar.inverse();
+    outcome.registered = true;
+    outcome.inlier_rmse = loop->inlier_rmse;
+    outcome.inlier_fraction = loop->inlier_fraction;
+  }
+  HANZO_RETURN_IF_ERROR(add_loop_factor(outcome.from_keyframe, outcome.to_keyframe, outcome.T_from_to, request.covariance));
+  ++summary_.manual_loop_closures;
+  update_backend();
+  outcome.correction_m = summary_.last_correction_m;
+  return outcome;
+}
+
+msgs::FusionMap MappingSession::map() const {
+  msgs::FusionMap map;
+  map.version = summary_.map_version;
+  map_builder_.write_layers(map);
+  return map;
+}
+
+SessionSummary MappingSession::summary() const {
+  SessionSummary summary = session_->summary();
+  for (SensorStatistics& sensor : summary.sensors) {
+    if (odometry_ && sensor.name == lidar_sensor_) sensor = lidar_statistics_;
+  }
+  return summary;
+}
+
+MappingSummary MappingSession::mapping_summary() const {
+  MappingSummary summary = summary_;
+  summary.map_memory_bytes = map_builder_.memory_bytes();
+  return summary;
+}
+
+std::optional<SE3> MappingSession::keyframe_pose(uint64_t keyframe_id) const { return graph_.optimized_pose(keyframe_id); }
+
+}  // namespace hanzo::fusion::pipeline
