@@ -73,16 +73,21 @@ Result<PointCloud> read_cloud(const std::string& path, bool drop_non_finite) {
   return with_context(parse(format, bytes, drop_non_finite), path);
 }
 
+Result<std::string> encode_cloud(const PointCloud& cloud, std::string_view format) {
+  if (auto status = cloud.validate(); !status) return status.error();
+  if (format == "pcd") return format_pcd(to_raw_cloud(cloud));
+  if (format == "ply") return format_ply(to_raw_cloud(cloud));
+  if (format == "bin") return kitti_bytes(cloud);
+  return Error(fmt::format("unknown point cloud format '{}' (pcd, ply or bin)", format));
+}
+
 Status write_cloud(const std::string& path, const PointCloud& cloud) {
   Format format = Format::kPcd;
   HANZO_ASSIGN_OR_RETURN(format, format_of(path));
-  if (auto status = cloud.validate(); !status) return Error(fmt::format("{}: {}", path, status.error().message));
-  switch (format) {
-    case Format::kKittiBin: return yaml::write_file_atomically(path, kitti_bytes(cloud));
-    case Format::kPcd: return yaml::write_file_atomically(path, format_pcd(to_raw_cloud(cloud)));
-    case Format::kPly: return yaml::write_file_atomically(path, format_ply(to_raw_cloud(cloud)));
-  }
-  return Error(fmt::format("{}: unknown format", path));
+  static constexpr const char* kNames[] = {"pcd", "ply", "bin"};
+  std::string bytes;
+  HANZO_ASSIGN_OR_RETURN(bytes, with_context(encode_cloud(cloud, kNames[static_cast<int>(format)]), path));
+  return yaml::write_file_atomically(path, bytes);
 }
 
 }  // namespace hanzo::fusion::cloud

@@ -274,6 +274,9 @@ Result<LoopClosureOutcome> MappingSession::close_loop(const LoopClosureRequest& 
   if (request.T_from_to && !request.from_keyframe) return Error("invalid: a relative pose needs from_keyframe and to_keyframe");
   if (request.T_from_to && !request.T_from_to->matrix().allFinite()) return Error("invalid: the relative pose is not finite");
   update_backend();
+  for (const std::optional<uint64_t>& id : {request.from_keyframe, request.to_keyframe}) {
+    if (id && !graph_.keyframe_time(*id)) return Error(fmt::format("not_found: keyframe {} is unknown", *id));
+  }
   LoopClosureOutcome outcome;
   if (request.T_from_to) {
     outcome.from_keyframe = *request.from_keyframe;

@@ -10,6 +10,7 @@
 
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/msgs/convert.hpp"
+#include "hanzo/fusion/msgs/map_convert.hpp"
 #include "hanzo/fusion/v1/service.grpc.pb.h"
 
 namespace hanzo::fusion::service {
@@ -77,26 +78,58 @@ class FusionServiceImpl final : public v1::FusionService::Service {
 
   grpc::Status SubscribePose(grpc::ServerContext* context, const v1::SessionId* request,
                              grpc::ServerWriter<v1::PoseEstimate>* writer) override {
+    return serve_subscription(*context, *writer, [&](const Principal& caller) { return sessions_.subscribe_poses(caller, request->id()); });
+  }
+  grpc::Status SubscribeKeyframes(grpc::ServerContext* context, const v1::SessionId* request,
+                                  grpc::ServerWriter<v1::Keyframe>* writer) override {
+    return serve_subscription(*context, *writer, [&](const Principal& caller) { return sessions_.subscribe_keyframes(caller, request->id()); });
+  }
+  grpc::Status SubscribeMap(grpc::ServerContext* context, const v1::SessionId* request,
+                            grpc::ServerWriter<v1::MapUpdate>* writer) override {
+    return serve_subscription(*context, *writer, [&](const Principal& caller) { return sessions_.subscribe_map(caller, request->id()); });
+  }
+
+  grpc::Status GetMap(grpc::ServerContext* context, const v1::MapRequest* request, v1::FusionMap* response) override {
     auto principal = authenticate(*context);
     if (!principal) return to_grpc(principal.error());
-    auto subscription = sessions_.subscribe_poses(principal.value(), request->id());
-    if (!subscription) return to_grpc(subscription.error());
-    PoseSubscription& queue = *subscription.value();
-    while (!context->IsCancelled() && !stopping_) {
-      std::optional<msgs::PoseEstimate> pose = queue.pop(std::chrono::milliseconds(100));
-      if (!pose) {
-        if (queue.closed()) return {grpc::StatusCode::FAILED_PRECONDITION, "the session ended"};
-        continue;
-      }
-      if (!writer->Write(msgs::to_proto(*pose))) break;  // the client went away
+    if (request->session_id().empty()) return {grpc::StatusCode::INVALID_ARGUMENT, "session_id is missing"};
+    if (!request->map_id().empty() && request->map_id() != request->session_id()) {
+      return {grpc::StatusCode::NOT_FOUND, fmt::format("map '{}': only a session's own map (map_id empty or the session id) is served", request->map_id())};
     }
-    queue.close();
+    auto map = sessions_.map(principal.value(), request->session_id());
+    if (!map) return to_grpc(map.error());
+    if (request->version() != 0 && request->version() != map->version) {
+      return {grpc::StatusCode::NOT_FOUND,
+              fmt::format("map version {}: only the latest ({}) is kept for a live session", request->version(), map->version)};
+    }
+    *response = msgs::to_proto(map.value());
     return grpc::Status::OK;
   }
 
  private:
   ApiResult<Principal> authenticate(const grpc::ServerContext& context) const {
     return authenticate_bearer(tokens_.get(), metadata(context, "authorization"), "authorization");
+  }
+
+  // Writes what a subscription of the caller's (made by `subscribe`) receives until the client
+  // goes away, the server stops or the session ends (FAILED_PRECONDITION).
+  template <typename ProtoMessage, typename Subscribe>
+  grpc::Status serve_subscription(grpc::ServerContext& context, grpc::ServerWriter<ProtoMessage>& writer, Subscribe subscribe) {
+    auto principal = authenticate(context);
+    if (!principal) return to_grpc(principal.error());
+    auto subscription = subscribe(principal.value());
+    if (!subscription) return to_grpc(subscription.error());
+    auto& queue = *subscription.value();
+    while (!context.IsCancelled() && !stopping_) {
+      auto value = queue.pop(std::chrono::milliseconds(100));
+      if (!value) {
+        if (queue.closed()) return {grpc::StatusCode::FAILED_PRECONDITION, "the session ended"};
+        continue;
+      }
+      if (!writer.Write(msgs::to_proto(*value))) break;  // the client went away
+    }
+    queue.close();
+    return grpc::Status::OK;
   }
 
   template <typename ProtoMessage>

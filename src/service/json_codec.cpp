@@ -1,5 +1,8 @@
 #include "json_codec.hpp"
 
+#include <cmath>
+
+#include <Eigen/Cholesky>
 #include <fmt/format.h>
 
 namespace hanzo::fusion::service::detail {
@@ -108,9 +111,110 @@ json session_to_json(const SessionInfo& info) {
       {"stored_through_ns", info.stored_through ? json(info.stored_through->nanoseconds()) : json(nullptr)},
       {"pose_subscribers", info.pose_subscribers},
       {"latest_pose", info.latest_pose ? pose_to_json(*info.latest_pose) : json(nullptr)},
+      {"mapping", mapping_to_json(info.mapping)},
       {"config", info.config_yaml},
       {"calibration", info.calibration_yaml},
   };
+}
+
+json mapping_to_json(const pipeline::MappingSummary& mapping) {
+  return {
+      {"scans_received", mapping.scans_received},
+      {"scans_registered", mapping.scans_registered},
+      {"scans_refused", mapping.scans_refused},
+      {"degenerate_scans", mapping.degenerate_scans},
+      {"weather_degraded_scans", mapping.weather_degraded_scans},
+      {"graph_keyframes", mapping.graph_keyframes},
+      {"map_keyframes", mapping.map_keyframes},
+      {"loop_candidates", mapping.loop_candidates},
+      {"loop_closures", mapping.loop_closures},
+      {"manual_loop_closures", mapping.manual_loop_closures},
+      {"map_version", mapping.map_version},
+      {"map_memory_bytes", mapping.map_memory_bytes},
+      {"last_registration_ms", mapping.last_registration_ms},
+      {"last_correction_m", mapping.last_correction_m},
+  };
+}
+
+json map_to_json(const msgs::FusionMap& map) {
+  json layers = json::object();
+  if (map.points) layers["points"] = {{"count", map.points->points.size()}, {"voxel_size", map.points->voxel_size}};
+  if (map.occupancy) {
+    layers["occupancy"] = {{"size", {map.occupancy->size_x, map.occupancy->size_y, map.occupancy->size_z}},
+                           {"resolution", map.occupancy->resolution}};
+  }
+  if (map.tsdf) layers["tsdf"] = {{"blocks", map.tsdf->blocks.size()}};
+  if (map.mesh) layers["mesh"] = {{"vertices", map.mesh->vertices.size()}};
+  return {{"map_id", map.map_id}, {"version", map.version}, {"created_ns", map.created.nanoseconds()},
+          {"frame_id", map.frame_id}, {"format_version", map.format_version}, {"layers", std::move(layers)}};
+}
+
+json loop_closure_to_json(const pipeline::LoopClosureOutcome& outcome) {
+  const Eigen::Quaterniond q = outcome.T_from_to.rotation().quaternion();
+  return {{"from_keyframe", outcome.from_keyframe},
+          {"to_keyframe", outcome.to_keyframe},
+          {"relative_pose", {{"position", vector_json(outcome.T_from_to.translation())}, {"orientation_wxyz", json::array({q.w(), q.x(), q.y(), q.z()})}}},
+          {"registered", outcome.registered},
+          {"inlier_rmse_m", outcome.inlier_rmse},
+          {"inlier_fraction", outcome.inlier_fraction},
+          {"correction_m", outcome.correction_m}};
+}
+
+ApiResult<pipeline::LoopClosureRequest> parse_loop_closure(const std::string& body) {
+  pipeline::LoopClosureRequest request;
+  if (body.empty()) return request;  // search for the newest keyframe
+  auto document = parse_object(body);
+  if (!document) return document.error();
+  const json& object = document.value();
+  if (auto keys = check_keys(object, {"from_keyframe", "to_keyframe", "relative_pose", "covariance"}); !keys) return keys.error();
+  for (const char* key : {"from_keyframe", "to_keyframe"}) {
+    if (!object.contains(key) || object[key].is_null()) continue;
+    if (!object[key].is_number_unsigned()) {
+      return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: expected a keyframe id (a non-negative integer)", key), key};
+    }
+    (std::string_view(key) == "from_keyframe" ? request.from_keyframe : request.to_keyframe) = object[key].get<uint64_t>();
+  }
+  // An array of `count` finite numbers.
+  const auto numbers = [](const json& value, std::size_t count, const std::string& field) -> ApiResult<std::vector<double>> {
+    if (!value.is_array() || value.size() != count) {
+      return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: expected an array of {} numbers", field, count), field};
+    }
+    std::vector<double> out;
+    for (const json& element : value) {
+      if (!element.is_number() || !std::isfinite(element.get<double>())) {
+        return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: expected finite numbers", field), field};
+      }
+      out.push_back(element.get<double>());
+    }
+    return out;
+  };
+  if (object.contains("relative_pose") && !object["relative_pose"].is_null()) {
+    const json& pose = object["relative_pose"];
+    if (!pose.is_object()) return ApiError{ErrorCode::kInvalidArgument, "relative_pose: expected {position, orientation_wxyz}", "relative_pose"};
+    if (auto keys = check_keys(pose, {"position", "orientation_wxyz"}); !keys) return keys.error();
+    auto position = numbers(pose.value("position", json()), 3, "relative_pose.position");
+    if (!position) return position.error();
+    auto orientation = numbers(pose.value("orientation_wxyz", json::array({1, 0, 0, 0})), 4, "relative_pose.orientation_wxyz");
+    if (!orientation) return orientation.error();
+    const std::vector<double>& w_x_y_z = orientation.value();
+    const std::vector<double>& xyz = position.value();
+    Eigen::Quaterniond q(w_x_y_z[0], w_x_y_z[1], w_x_y_z[2], w_x_y_z[3]);
+    if (std::abs(q.norm() - 1.0) > 1e-3) {
+      return ApiError{ErrorCode::kInvalidArgument, fmt::format("relative_pose.orientation_wxyz: norm {} is not 1", q.norm()),
+                      "relative_pose.orientation_wxyz"};
+    }
+    request.T_from_to = SE3(SO3(q.normalized()), Eigen::Vector3d(xyz[0], xyz[1], xyz[2]));
+  }
+  if (object.contains("covariance") && !object["covariance"].is_null()) {
+    auto values = numbers(object["covariance"], 36, "covariance");
+    if (!values) return values.error();
+    const Eigen::Matrix<double, 6, 6> covariance = Eigen::Map<const Eigen::Matrix<double, 6, 6, Eigen::RowMajor>>(values.value().data());
+    if (!covariance.isApprox(covariance.transpose(), 1e-9) || covariance.llt().info() != Eigen::Success) {
+      return ApiError{ErrorCode::kInvalidArgument, "covariance: not symmetric positive definite", "covariance"};
+    }
+    request.covariance = covariance;
+  }
+  return request;
 }
 
 json error_to_json(const ApiError& error) {

@@ -12,11 +12,21 @@ namespace hanzo::fusion::service::detail {
 nlohmann::json pose_to_json(const msgs::PoseEstimate& pose);
 nlohmann::json session_to_json(const SessionInfo& info);
 nlohmann::json error_to_json(const ApiError& error);
+nlohmann::json mapping_to_json(const pipeline::MappingSummary& mapping);
+/// A map's metadata and layer sizes (GET /v1/sessions/{id}/map?format=json).
+nlohmann::json map_to_json(const msgs::FusionMap& map);
+nlohmann::json loop_closure_to_json(const pipeline::LoopClosureOutcome& outcome);
 
 /// The body of POST /v1/sessions: {"name": "...", "config": TEXT|OBJECT, "calibration": TEXT|OBJECT}.
 ApiResult<CreateSessionRequest> parse_create_session(const std::string& body);
 /// The body of POST /v1/sessions/{id}/sensors: {"name": "...", "config": TEXT|OBJECT, "calibration": TEXT|OBJECT}.
 ApiResult<SensorRegistration> parse_sensor_registration(const std::string& body);
+
+/// The body of POST /v1/sessions/{id}/loop-closure: empty or {} (search for the newest map
+/// keyframe), {"from_keyframe": N, "to_keyframe": M} (register them), plus
+/// "relative_pose": {"position": [x, y, z], "orientation_wxyz": [w, x, y, z]} (add as given) and
+/// optionally "covariance": 36 numbers, row-major, over (rho, phi).
+ApiResult<pipeline::LoopClosureRequest> parse_loop_closure(const std::string& body);
 
 /// "tx ty tz qx qy qz qw" lines with the timestamp in seconds (TUM format).
 std::string poses_to_tum(const std::vector<msgs::PoseEstimate>& poses);

@@ -8,7 +8,10 @@
 #include <fmt/format.h>
 #include <httplib.h>
 
+#include "hanzo/fusion/cloud/cloud_io.hpp"
 #include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/maps/fusion_map_file.hpp"
+#include "hanzo/fusion/maps/map_export.hpp"
 #include "json_codec.hpp"
 
 namespace hanzo::fusion::service {
@@ -174,6 +177,36 @@ struct RestServer::Impl {
       json poses = json::array();
       for (const msgs::PoseEstimate& pose : page->poses) poses.push_back(detail::pose_to_json(pose));
       send_json(response, 200, {{"poses", std::move(poses)}, {"next_after", next ? json(next->nanoseconds()) : json(nullptr)}});
+    }));
+    s.Get(session + "/map", authenticated("GET", "/v1/sessions/{id}/map", [this](const httplib::Request& request,
+                                                                              httplib::Response& response, const Principal& caller) {
+      const std::string format = request.has_param("format") ? request.get_param_value("format") : "fmap";
+      if (format != "fmap" && format != "pcd" && format != "ply" && format != "json") {
+        return send_error(response, {ErrorCode::kInvalidArgument, fmt::format("format '{}': use fmap, pcd, ply or json", format), "format"});
+      }
+      auto map = sessions->map(caller, request.matches[1]);
+      if (!map) return send_error(response, map.error());
+      if (format == "json") return send_json(response, 200, detail::map_to_json(map.value()));
+      Result<std::string> bytes = Error("");
+      if (format == "fmap") {
+        bytes = maps::serialize_fusion_map(map.value());
+      } else if (!map->points) {
+        return send_error(response, {ErrorCode::kNotFound, "the map has no point layer yet", "format"});
+      } else {
+        bytes = cloud::encode_cloud(maps::to_point_cloud(*map->points), format);
+      }
+      if (!bytes) return send_error(response, ApiError::from(ErrorCode::kInternal, bytes.error()));
+      response.set_header("Content-Disposition", fmt::format("attachment; filename=\"{}-v{}.{}\"", map->map_id, map->version, format));
+      response.set_content(std::move(bytes).value(), "application/octet-stream");
+    }));
+    s.Post(session + "/loop-closure", authenticated("POST", "/v1/sessions/{id}/loop-closure", [this](const httplib::Request& request,
+                                                                                              httplib::Response& response,
+                                                                                              const Principal& caller) {
+      auto parsed = detail::parse_loop_closure(request.body);
+      if (!parsed) return send_error(response, parsed.error());
+      auto outcome = sessions->close_loop(caller, request.matches[1], parsed.value());
+      if (!outcome) return send_error(response, outcome.error());
+      send_json(response, 200, detail::loop_closure_to_json(outcome.value()));
     }));
 
     // Errors httplib answers itself (no route, body too large) get the same JSON shape.

@@ -82,6 +82,15 @@ Result<std::pair<config::FusionConfig, calib::Calibration>> with_sensor(const co
   return std::make_pair(std::move(new_config), std::move(new_calibration));
 }
 
+// Adds a subscription of `capacity` to `subscribers`, dropping those their subscriber closed.
+template <typename T>
+std::shared_ptr<Subscription<T>> add_subscription(std::vector<std::shared_ptr<Subscription<T>>>& subscribers, std::size_t capacity) {
+  std::erase_if(subscribers, [](const auto& subscriber) { return subscriber->closed(); });
+  auto subscription = std::make_shared<Subscription<T>>(capacity);
+  subscribers.push_back(subscription);
+  return subscription;
+}
+
 double position_covariance_trace(const msgs::PoseEstimate& pose) {
   return pose.pose_covariance ? pose.pose_covariance->topLeftCorner<3, 3>().trace() : 0.0;
 }
@@ -95,10 +104,14 @@ struct ManagedSession {
   calib::Calibration calibration;
 
   std::mutex mutex;  // guards everything below
-  std::unique_ptr<pipeline::Session> session;  // null once ended
+  std::unique_ptr<pipeline::MappingSession> session;  // null once ended
   pipeline::SessionSummary final_summary;      // the session's summary when it ended
+  pipeline::MappingSummary final_mapping;
+  std::optional<msgs::FusionMap> final_map;    // the session's map when it ended (if it had one)
   std::optional<msgs::PoseEstimate> latest_pose;
   std::vector<std::shared_ptr<PoseSubscription>> pose_subscribers;
+  std::vector<std::shared_ptr<KeyframeSubscription>> keyframe_subscribers;
+  std::vector<std::shared_ptr<MapSubscription>> map_subscribers;
   uint64_t messages_pushed = 0;
   Clock::time_point push_started;
 
@@ -119,14 +132,43 @@ struct SessionManager::Impl {
   mutable std::shared_mutex sessions_mutex;
   std::map<std::string, std::shared_ptr<ManagedSession>> sessions;  // active and ended
 
-  // A pipeline::Session for `managed` with its pose callback wired (not yet installed).
-  Result<std::unique_ptr<pipeline::Session>> make_pipeline(ManagedSession& managed, const config::FusionConfig& configuration,
-                                                           const calib::Calibration& calibration) {
-    auto session = pipeline::Session::create(configuration, calibration);
+  // A pipeline::MappingSession for `managed` with its callbacks wired (not yet installed).
+  Result<std::unique_ptr<pipeline::MappingSession>> make_pipeline(ManagedSession& managed, const config::FusionConfig& configuration,
+                                                                  const calib::Calibration& calibration) {
+    auto session = pipeline::MappingSession::create(configuration, calibration);
     if (!session) return session.error();
     ManagedSession* raw = &managed;
     session.value()->set_pose_callback([this, raw](const msgs::PoseEstimate& pose) { on_pose(*raw, pose); });
+    session.value()->set_keyframe_callback([raw](const msgs::Keyframe& keyframe) {
+      for (const auto& subscriber : raw->keyframe_subscribers) subscriber->publish(keyframe);
+    });
+    session.value()->set_map_update_callback([raw](const msgs::MapUpdate& update) {
+      msgs::MapUpdate with_id = update;
+      with_id.map_id = raw->record.id;
+      for (const auto& subscriber : raw->map_subscribers) subscriber->publish(with_id);
+    });
     return session;
+  }
+
+  // The session's map with its metadata; caller holds managed.mutex.
+  std::optional<msgs::FusionMap> map_locked(const ManagedSession& managed) const {
+    if (!managed.session) return managed.final_map;
+    if (managed.session->mapping_summary().map_keyframes == 0) return std::nullopt;
+    msgs::FusionMap map = managed.session->map();
+    map.map_id = managed.record.id;
+    map.created = managed.latest_pose ? managed.latest_pose->timestamp : managed.record.created;
+    map.sensor_configuration = managed.record.config_yaml + "\n" + managed.record.calibration_yaml;
+    return map;
+  }
+
+  // Closes and forgets the subscriptions of an ending session; caller holds managed.mutex.
+  static void close_subscribers(ManagedSession& managed) {
+    for (const auto& subscriber : managed.pose_subscribers) subscriber->close();
+    for (const auto& subscriber : managed.keyframe_subscribers) subscriber->close();
+    for (const auto& subscriber : managed.map_subscribers) subscriber->close();
+    managed.pose_subscribers.clear();
+    managed.keyframe_subscribers.clear();
+    managed.map_subscribers.clear();
   }
 
   void on_pose(ManagedSession& managed, const msgs::PoseEstimate& pose) {
@@ -190,6 +232,22 @@ struct SessionManager::Impl {
       metrics->counter("hanzo_fusion_subscriber_dropped_total", "Poses dropped for slow subscribers (oldest first)", labels)
           .set_total(static_cast<double>(dropped));
       metrics->counter("hanzo_fusion_keyframes_total", "Keyframes emitted", labels).set_total(static_cast<double>(summary.keyframes));
+      const pipeline::MappingSummary mapping = managed->session->mapping_summary();
+      metrics->counter("hanzo_fusion_lidar_scans_registered_total", "LiDAR sweeps registered to the local map", labels)
+          .set_total(static_cast<double>(mapping.scans_registered));
+      metrics->counter("hanzo_fusion_lidar_degenerate_scans_total", "Sweeps whose geometry leaves a direction unconstrained (corridors)", labels)
+          .set_total(static_cast<double>(mapping.degenerate_scans));
+      metrics->counter("hanzo_fusion_lidar_weather_degraded_scans_total", "Sweeps flagged for rain, fog or dust (fused with less weight)", labels)
+          .set_total(static_cast<double>(mapping.weather_degraded_scans));
+      metrics->gauge("hanzo_fusion_lidar_registration_seconds", "Time of the latest sweep registration", labels)
+          .set(mapping.last_registration_ms / 1000.0);
+      metrics->counter("hanzo_fusion_loop_closures_total", "Loop closures added (detected and manual)", labels)
+          .set_total(static_cast<double>(mapping.loop_closures + mapping.manual_loop_closures));
+      metrics->gauge("hanzo_fusion_backend_correction_m", "How far the backend's latest update moved the latest keyframe", labels)
+          .set(mapping.last_correction_m);
+      metrics->gauge("hanzo_fusion_map_keyframes", "Keyframes in the map", labels).set(static_cast<double>(mapping.map_keyframes));
+      metrics->gauge("hanzo_fusion_map_memory_bytes", "Memory held by the map's layers", labels)
+          .set(static_cast<double>(mapping.map_memory_bytes));
     }
     active_sessions_gauge->set(static_cast<double>(count));
   }
@@ -216,6 +274,7 @@ struct SessionManager::Impl {
     info.created = managed.record.created;
     info.ended = managed.record.ended;
     info.summary = managed.session ? managed.session->summary() : managed.final_summary;
+    info.mapping = managed.session ? managed.session->mapping_summary() : managed.final_mapping;
     info.latest_pose = managed.latest_pose;
     const detail::StorageProgress progress = recorder->progress(managed.record.id);
     info.stored_poses = progress.stored;
@@ -245,7 +304,7 @@ SessionManager::~SessionManager() {
   std::unique_lock lock(impl_->sessions_mutex);
   for (auto& [id, managed] : impl_->sessions) {
     std::lock_guard session_lock(managed->mutex);
-    for (const auto& subscriber : managed->pose_subscribers) subscriber->close();
+    Impl::close_subscribers(*managed);
   }
 }
 
@@ -367,9 +426,10 @@ ApiResult<SessionInfo> SessionManager::end_session(const Principal& caller, cons
   }
   managed.record.ended = ended;
   managed.final_summary = managed.session->summary();
+  managed.final_mapping = managed.session->mapping_summary();
+  managed.final_map = impl_->map_locked(managed);
   managed.session.reset();
-  for (const auto& subscriber : managed.pose_subscribers) subscriber->close();
-  managed.pose_subscribers.clear();
+  Impl::close_subscribers(managed);
   lock.unlock();
   if (const Status flushed = impl_->recorder->flush(); !flushed) return ApiError::from(ErrorCode::kInternal, flushed.error());
   impl_->metrics->remove_series("session", session_id);
@@ -476,11 +536,54 @@ ApiResult<std::shared_ptr<PoseSubscription>> SessionManager::subscribe_poses(con
   ManagedSession& managed = *found.value();
   std::lock_guard lock(managed.mutex);
   if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
-  // Subscriptions their subscriber gave up (closed) are dropped here.
-  std::erase_if(managed.pose_subscribers, [](const auto& subscriber) { return subscriber->closed(); });
-  auto subscription = std::make_shared<PoseSubscription>(impl_->config.subscriber_queue_capacity);
-  managed.pose_subscribers.push_back(subscription);
-  return subscription;
+  return add_subscription(managed.pose_subscribers, impl_->config.subscriber_queue_capacity);
+}
+
+ApiResult<std::shared_ptr<KeyframeSubscription>> SessionManager::subscribe_keyframes(const Principal& caller, const std::string& session_id) {
+  auto found = impl_->find(caller, session_id, Permission::kSessionRead);
+  if (!found) return found.error();
+  ManagedSession& managed = *found.value();
+  std::lock_guard lock(managed.mutex);
+  if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
+  return add_subscription(managed.keyframe_subscribers, impl_->config.subscriber_queue_capacity);
+}
+
+ApiResult<std::shared_ptr<MapSubscription>> SessionManager::subscribe_map(const Principal& caller, const std::string& session_id) {
+  auto found = impl_->find(caller, session_id, Permission::kMapRead);
+  if (!found) return found.error();
+  ManagedSession& managed = *found.value();
+  std::lock_guard lock(managed.mutex);
+  if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
+  // Map updates are large (a full replacement holds the whole point map): a short queue.
+  return add_subscription(managed.map_subscribers, std::max<std::size_t>(1, impl_->config.subscriber_queue_capacity / 64));
+}
+
+ApiResult<msgs::FusionMap> SessionManager::map(const Principal& caller, const std::string& session_id) {
+  auto found = impl_->find(caller, session_id, Permission::kMapRead);
+  if (!found) return found.error();
+  std::lock_guard lock(found.value()->mutex);
+  std::optional<msgs::FusionMap> map = impl_->map_locked(*found.value());
+  if (!map) {
+    return ApiError{ErrorCode::kNotFound,
+                    fmt::format("session '{}' has no map yet (it maps with a 3D LiDAR sensor once the IMU has initialized)", session_id), ""};
+  }
+  return std::move(*map);
+}
+
+ApiResult<pipeline::LoopClosureOutcome> SessionManager::close_loop(const Principal& caller, const std::string& session_id,
+                                                                   const pipeline::LoopClosureRequest& request) {
+  auto found = impl_->find(caller, session_id, Permission::kSessionWrite);
+  if (!found) return found.error();
+  ManagedSession& managed = *found.value();
+  std::lock_guard lock(managed.mutex);
+  if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
+  Result<pipeline::LoopClosureOutcome> outcome = managed.session->close_loop(request);
+  if (!outcome) {
+    const std::string& message = outcome.error().message;
+    const ErrorCode code = message.rfind("not_found", 0) == 0 ? ErrorCode::kNotFound : ErrorCode::kInvalidArgument;
+    return ApiError::from(code, outcome.error());
+  }
+  return std::move(outcome).value();
 }
 
 Status SessionManager::flush_storage() { return impl_->recorder->flush(); }

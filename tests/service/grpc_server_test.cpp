@@ -156,11 +156,22 @@ TEST_F(GrpcServerTest, AuthErrorsMapToGrpcStatus) {
   EXPECT_FALSE(reader->Read(&pose));
   EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::PERMISSION_DENIED);
 
-  grpc::ClientContext map_context;
-  prepare(map_context, "acme-robot-secret-0001", "");
-  v1::MapRequest request;
-  v1::FusionMap map;
-  EXPECT_EQ(stub_->GetMap(&map_context, request, &map).error_code(), grpc::StatusCode::UNIMPLEMENTED);
+  // Map RPCs: another organization's session, a request without a session.
+  for (const char* token : {"globex-robot-secret-0004", "acme-robot-secret-0001"}) {
+    grpc::ClientContext map_context;
+    prepare(map_context, token, "");
+    v1::MapRequest request;
+    if (std::string(token).starts_with("globex")) request.set_session_id(session_id_);
+    v1::FusionMap map;
+    EXPECT_EQ(stub_->GetMap(&map_context, request, &map).error_code(),
+              request.session_id().empty() ? grpc::StatusCode::INVALID_ARGUMENT : grpc::StatusCode::PERMISSION_DENIED);
+  }
+  grpc::ClientContext keyframes_context;
+  prepare(keyframes_context, "globex-robot-secret-0004", "");
+  v1::Keyframe keyframe;
+  auto keyframes = stub_->SubscribeKeyframes(&keyframes_context, session);
+  EXPECT_FALSE(keyframes->Read(&keyframe));
+  EXPECT_EQ(keyframes->Finish().error_code(), grpc::StatusCode::PERMISSION_DENIED);
 }
 
 }  // namespace

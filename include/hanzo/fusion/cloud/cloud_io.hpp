@@ -13,6 +13,7 @@
 // has (intensity, ring, time in s), plus normal_x/y/z when the cloud has normals.
 
 #include <string>
+#include <string_view>
 
 #include "hanzo/fusion/cloud/point_cloud.hpp"
 
@@ -26,5 +27,9 @@ Result<PointCloud> read_cloud(const std::string& path, bool drop_non_finite = tr
 /// Writes `cloud` as PCD or PLY (binary) or KITTI .bin, atomically (a temporary file renamed
 /// into place). Fails on an unknown extension, an invalid cloud or an unwritable path.
 Status write_cloud(const std::string& path, const PointCloud& cloud);
+
+/// The bytes write_cloud writes, for `format` "pcd", "ply" or "bin" (a server response).
+/// Fails on an unknown format or an invalid cloud.
+Result<std::string> encode_cloud(const PointCloud& cloud, std::string_view format);
 
 }  // namespace hanzo::fusion::cloud

@@ -13,6 +13,9 @@
 //     the storage queue, which a writer thread commits in batches (one transaction each,
 //     every storage_flush_interval). SessionInfo.stored_poses / stored_through say what is
 //     durable: those poses survive kill -9.
+//   - Each session is a pipeline::MappingSession: with a 3D LiDAR it also registers sweeps, keeps
+//     a keyframe graph, builds a map and closes loops; map(), close_loop(), subscribe_map() and
+//     subscribe_keyframes() serve them (an ended session keeps its final map in memory).
 //   - register_sensor: adds a sensor (configuration entry + calibration entry, validated by the
 //     same loaders as the files) before the session has received data; afterwards kConflict.
 //
@@ -27,7 +30,8 @@
 
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
-#include "hanzo/fusion/pipeline/session.hpp"
+#include "hanzo/fusion/msgs/map_messages.hpp"
+#include "hanzo/fusion/pipeline/mapping_session.hpp"
 #include "hanzo/fusion/service/api_error.hpp"
 #include "hanzo/fusion/service/auth.hpp"
 #include "hanzo/fusion/service/metrics.hpp"
@@ -63,6 +67,7 @@ struct SessionInfo {
   Timestamp created;
   std::optional<Timestamp> ended;
   pipeline::SessionSummary summary;          // counts per sensor, state
+  pipeline::MappingSummary mapping;          // LiDAR registration, keyframes, loop closures, map
   std::optional<msgs::PoseEstimate> latest_pose;
   uint64_t stored_poses = 0;                 // poses committed to storage (durable)
   std::optional<Timestamp> stored_through;   // timestamp of the newest committed pose
@@ -77,6 +82,8 @@ struct TrajectoryPage {
 };
 
 using PoseSubscription = Subscription<msgs::PoseEstimate>;
+using KeyframeSubscription = Subscription<msgs::Keyframe>;
+using MapSubscription = Subscription<msgs::MapUpdate>;
 
 class SessionManager {
  public:
@@ -107,6 +114,18 @@ class SessionManager {
   ApiResult<TrajectoryPage> trajectory(const Principal& caller, const std::string& session_id, Timestamp after,
                                        std::size_t limit);
   ApiResult<std::shared_ptr<PoseSubscription>> subscribe_poses(const Principal& caller, const std::string& session_id);
+  /// Every keyframe the session emits from now on (session:read).
+  ApiResult<std::shared_ptr<KeyframeSubscription>> subscribe_keyframes(const Principal& caller, const std::string& session_id);
+  /// Map updates from now on (map:read): new keyframe points, full replacements after loop
+  /// closures (MappingSession::set_map_update_callback). map_id is the session id.
+  ApiResult<std::shared_ptr<MapSubscription>> subscribe_map(const Principal& caller, const std::string& session_id);
+  /// The session's map (map:read): map_id = session id, version, created, the session's
+  /// configuration and calibration, layers. kNotFound while it has no layer yet.
+  ApiResult<msgs::FusionMap> map(const Principal& caller, const std::string& session_id);
+  /// A manual loop closure (session:write); kInvalidArgument for a bad request, kNotFound for
+  /// unknown keyframes or no verified loop, kConflict for an ended session.
+  ApiResult<pipeline::LoopClosureOutcome> close_loop(const Principal& caller, const std::string& session_id,
+                                                     const pipeline::LoopClosureRequest& request);
 
   /// Blocks until every pose queued so far is committed (or failed); for shutdown and tests.
   Status flush_storage();

@@ -1,0 +1,282 @@
+// The map and loop-closure side of the server: a session streaming IMU + OS1-64 sweeps of the
+// simulated urban_vehicle drive builds a map; REST serves it (?format=fmap|pcd|ply|json) and
+// takes manual loop closures; gRPC serves GetMap, SubscribeMap and SubscribeKeyframes. Bad
+// requests and missing permissions get the documented errors and leave the session intact.
+
+#include <thread>
+
+#include <gmock/gmock.h>
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/cloud/cloud_io.hpp"
+#include "hanzo/fusion/config/fusion_config.hpp"
+#include "hanzo/fusion/maps/fusion_map_file.hpp"
+#include "hanzo/fusion/msgs/map_convert.hpp"
+#include "hanzo/fusion/service/grpc_server.hpp"
+#include "hanzo/fusion/service/rest_server.hpp"
+#include "hanzo/fusion/sim/scenario.hpp"
+#include "hanzo/fusion/sim/scenario_simulation.hpp"
+#include "hanzo/fusion/v1/service.grpc.pb.h"
+#include "service_fixtures.hpp"
+// Last: httplib pulls in <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
+#include <httplib.h>
+
+namespace hanzo::fusion::service {
+namespace {
+
+using ::testing::HasSubstr;
+using nlohmann::json;
+
+constexpr const char* kRobotToken = "acme-robot-secret-0001";    // session read/write, map read
+constexpr const char* kViewerToken = "acme-viewer-secret-0002";  // session read only
+constexpr const char* kGlobexToken = "globex-robot-secret-0004";
+const Principal kStreamer{"robot", "acme", static_cast<uint32_t>(Permission::kSessionWrite) | static_cast<uint32_t>(Permission::kSessionRead)};
+
+struct Recording {
+  std::string config_yaml;
+  std::string calibration_yaml;
+  std::vector<testing::TimedMessage> messages;
+};
+
+// 12 s of the urban drive: IMU 200 Hz + LiDAR 10 Hz (3 s standing, then driving).
+const Recording& urban_recording() {
+  static const Recording recording = [] {
+    sim::Scenario scenario = sim::load_scenario("examples/scenarios/urban_vehicle.yaml").value();
+    std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& s) {
+      return s.modality != config::SensorModality::kLidar && s.modality != config::SensorModality::kImu;
+    });
+    scenario.duration = 12.0;
+    scenario.num_threads = 0;
+    Recording out;
+    out.config_yaml = config::to_yaml(sim::scenario_fusion_config(scenario));
+    out.calibration_yaml = calib::to_yaml(sim::scenario_calibration(scenario));
+    auto simulation = sim::ScenarioSimulation::create(scenario).value();
+    EXPECT_TRUE(simulation
+                    ->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
+                      out.messages.push_back({sensor.name, std::move(message)});
+                      return ok_status();
+                    })
+                    .ok());
+    return out;
+  }();
+  return recording;
+}
+
+class MappingEndpointsTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    auto storage = open_storage("sqlite://" + (testing::scratch_dir() / "fusion.db").string());
+    ASSERT_TRUE(storage.ok());
+    metrics_ = std::make_shared<MetricsRegistry>();
+    manager_ = std::move(SessionManager::create({}, std::move(storage).value(), metrics_)).value();
+    auto tokens = TokenStore::parse(testing::kTokensYaml, "tokens.yaml");
+    ASSERT_TRUE(tokens.ok());
+    auto shared_tokens = std::make_shared<TokenStore>(std::move(tokens).value());
+    RestServerConfig rest_config;
+    rest_config.bind_address = "127.0.0.1";
+    rest_config.port = 0;
+    rest_ = std::move(RestServer::create(rest_config, *manager_, shared_tokens, metrics_)).value();
+    ASSERT_TRUE(rest_->start().ok());
+    GrpcServerConfig grpc_config;
+    grpc_config.bind_address = "127.0.0.1";
+    grpc_config.port = 0;
+    grpc_ = std::move(GrpcServer::create(grpc_config, *manager_, shared_tokens, metrics_)).value();
+    ASSERT_TRUE(grpc_->start().ok());
+    grpc::ChannelArguments arguments;
+    arguments.SetMaxReceiveMessageSize(256 << 20);  // maps are larger than gRPC's 4 MB default
+    stub_ = v1::FusionService::NewStub(grpc::CreateCustomChannel("127.0.0.1:" + std::to_string(grpc_->port()),
+                                                                 grpc::InsecureChannelCredentials(), arguments));
+    const Recording& recording = urban_recording();
+    session_id_ = manager_->create_session(kStreamer, {"urban", recording.config_yaml, recording.calibration_yaml}).value().id;
+  }
+
+  void stream_recording() {
+    for (const testing::TimedMessage& message : urban_recording().messages) {
+      ASSERT_TRUE(manager_->push(kStreamer, session_id_, message.sensor, message.message).ok());
+    }
+  }
+  httplib::Client client() const {
+    httplib::Client http("127.0.0.1", rest_->port());
+    http.set_read_timeout(60, 0);
+    return http;
+  }
+  static httplib::Headers bearer(const std::string& token) { return {{"Authorization", "Bearer " + token}}; }
+  static json error_of(const httplib::Result& response) {
+    EXPECT_TRUE(response);
+    if (!response) return {};
+    const json body = json::parse(response->body);
+    EXPECT_TRUE(body.contains("error")) << response->body;
+    return body.value("error", json::object());
+  }
+  static void prepare(grpc::ClientContext& context, const std::string& token) {
+    if (!token.empty()) context.AddMetadata("authorization", "Bearer " + token);
+  }
+
+  std::shared_ptr<MetricsRegistry> metrics_;
+  std::unique_ptr<SessionManager> manager_;
+  std::unique_ptr<RestServer> rest_;
+  std::unique_ptr<GrpcServer> grpc_;
+  std::unique_ptr<v1::FusionService::Stub> stub_;
+  std::string session_id_;
+};
+
+TEST_F(MappingEndpointsTest, RestServesTheMapInEveryFormatAndTakesLoopClosures) {
+  const std::string path = "/v1/sessions/" + session_id_;
+  // No map before the LiDAR has mapped anything.
+  auto empty = client().Get(path + "/map?format=json", bearer(kRobotToken));
+  ASSERT_TRUE(empty);
+  EXPECT_EQ(empty->status, 404) << empty->body;
+  stream_recording();
+
+  const SessionInfo info = manager_->session_info(kStreamer, session_id_).value();
+  EXPECT_GT(info.mapping.scans_registered, 60U);
+  EXPECT_GT(info.mapping.map_keyframes, 3U);
+  auto state = client().Get(path, bearer(kViewerToken));
+  ASSERT_TRUE(state && state->status == 200);
+  EXPECT_EQ(json::parse(state->body)["mapping"]["map_keyframes"], info.mapping.map_keyframes);
+
+  auto summary = client().Get(path + "/map?format=json", bearer(kRobotToken));
+  ASSERT_TRUE(summary);
+  ASSERT_EQ(summary->status, 200) << summary->body;
+  const json map_json = json::parse(summary->body);
+  EXPECT_EQ(map_json["map_id"], session_id_);
+  const std::size_t points = map_json["layers"]["points"]["count"];
+  EXPECT_GT(points, 1000U);
+  EXPECT_TRUE(map_json["layers"].contains("occupancy"));
+
+  // The default: the FusionMap file, which parses back to the same map.
+  auto fmap = client().Get(path + "/map", bearer(kRobotToken));
+  ASSERT_TRUE(fmap && fmap->status == 200);
+  auto parsed = maps::parse_fusion_map(fmap->body);
+  ASSERT_TRUE(parsed.ok()) << parsed.error().message;
+  EXPECT_EQ(parsed->map_id, session_id_);
+  ASSERT_TRUE(parsed->points.has_value());
+  EXPECT_EQ(parsed->points->points.size(), points);
+  EXPECT_THAT(parsed->sensor_configuration, HasSubstr("fusion:"));
+  for (const char* format : {"pcd", "ply"}) {
+    auto cloud_response = client().Get(path + "/map?format=" + format, bearer(kRobotToken));
+    ASSERT_TRUE(cloud_response && cloud_response->status == 200);
+    EXPECT_THAT(cloud_response->get_header_value("Content-Disposition"), HasSubstr(std::string(".") + format));
+    const std::filesystem::path file = testing::scratch_dir(format) / (std::string("map.") + format);
+    std::ofstream(file, std::ios::binary) << cloud_response->body;
+    auto cloud = cloud::read_cloud(file.string());
+    ASSERT_TRUE(cloud.ok()) << cloud.error().message;
+    EXPECT_EQ(cloud->size(), points);
+  }
+  EXPECT_EQ(error_of(client().Get(path + "/map?format=las", bearer(kRobotToken)))["field"], "format");
+  // Permissions: map:read is needed, and the session's organization.
+  auto viewer = client().Get(path + "/map", bearer(kViewerToken));
+  ASSERT_TRUE(viewer);
+  EXPECT_EQ(viewer->status, 403);
+  auto globex = client().Get(path + "/map", bearer(kGlobexToken));
+  ASSERT_TRUE(globex);
+  EXPECT_EQ(globex->status, 403);
+  auto anonymous = client().Get(path + "/map");
+  ASSERT_TRUE(anonymous);
+  EXPECT_EQ(anonymous->status, 401);
+  auto unknown = client().Get("/v1/sessions/no-such-session/map", bearer(kRobotToken));
+  ASSERT_TRUE(unknown);
+  EXPECT_EQ(unknown->status, 404);
+
+  // Loop closures: bad requests are refused with the field at fault.
+  const auto post = [&](const std::string& body, const std::string& token = kRobotToken) {
+    return client().Post(path + "/loop-closure", bearer(token), body, "application/json");
+  };
+  EXPECT_EQ(error_of(post("{not json"))["field"], "body");
+  EXPECT_EQ(error_of(post(R"({"from_keyframe": -1, "to_keyframe": 2})"))["field"], "from_keyframe");
+  EXPECT_EQ(error_of(post(R"({"from_keyframe": 1, "to_keyframe": 2, "relative_pose": {"position": [1, 2]}})"))["field"],
+            "relative_pose.position");
+  EXPECT_EQ(error_of(post(R"({"from_keyframe": 1, "to_keyframe": 2, "relative_pose": {"position": [1, 2, 3], "orientation_wxyz": [2, 0, 0, 0]}})"))["field"],
+            "relative_pose.orientation_wxyz");
+  EXPECT_EQ(error_of(post(R"({"from_keyframe": 1, "to_keyframe": 2, "covariance": [1, 2]})"))["field"], "covariance");
+  EXPECT_EQ(error_of(post(R"({"from_keyframe": 1, "colour": "red"})"))["field"], "colour");
+  auto half = post(R"({"from_keyframe": 1})");
+  ASSERT_TRUE(half);
+  EXPECT_EQ(half->status, 400) << half->body;
+  auto missing = post(R"({"from_keyframe": 999999, "to_keyframe": 2, "relative_pose": {"position": [0, 0, 0]}})");
+  ASSERT_TRUE(missing);
+  EXPECT_EQ(missing->status, 404) << missing->body;
+  EXPECT_THAT(missing->body, HasSubstr("999999"));
+  auto read_only = post("{}", kViewerToken);
+  ASSERT_TRUE(read_only);
+  EXPECT_EQ(read_only->status, 403);
+  EXPECT_EQ(manager_->session_info(kStreamer, session_id_).value().mapping.manual_loop_closures, 0U);
+
+  // A closure given with a relative pose and a loose covariance is taken.
+  const SessionInfo after_errors = manager_->session_info(kStreamer, session_id_).value();
+  auto closed = post(R"({"from_keyframe": 3, "to_keyframe": 4, "relative_pose": {"position": [0, 0, 0]}, "covariance": [)"
+                     "1,0,0,0,0,0, 0,1,0,0,0,0, 0,0,1,0,0,0, 0,0,0,1,0,0, 0,0,0,0,1,0, 0,0,0,0,0,1]}");
+  ASSERT_TRUE(closed);
+  ASSERT_EQ(closed->status, 200) << closed->body;
+  const json outcome = json::parse(closed->body);
+  EXPECT_EQ(outcome["from_keyframe"], 3);
+  EXPECT_EQ(outcome["registered"], false);
+  EXPECT_EQ(manager_->session_info(kStreamer, session_id_).value().mapping.manual_loop_closures, 1U);
+  EXPECT_EQ(after_errors.summary.poses, manager_->session_info(kStreamer, session_id_).value().summary.poses);
+}
+
+TEST_F(MappingEndpointsTest, GrpcServesTheMapAndStreamsKeyframesAndMapUpdates) {
+  grpc::ClientContext keyframe_context, map_context;
+  prepare(keyframe_context, kViewerToken);
+  prepare(map_context, kRobotToken);
+  v1::SessionId session;
+  session.set_id(session_id_);
+  auto keyframes = stub_->SubscribeKeyframes(&keyframe_context, session);
+  auto updates = stub_->SubscribeMap(&map_context, session);
+  std::vector<v1::Keyframe> received_keyframes;
+  std::vector<v1::MapUpdate> received_updates;
+  std::thread keyframe_reader([&] {
+    v1::Keyframe keyframe;
+    while (keyframes->Read(&keyframe)) received_keyframes.push_back(keyframe);
+  });
+  std::thread update_reader([&] {
+    v1::MapUpdate update;
+    while (updates->Read(&update)) received_updates.push_back(update);
+  });
+  // The subscriptions are registered asynchronously, once the calls reach the server.
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  stream_recording();
+  const SessionInfo info = manager_->session_info(kStreamer, session_id_).value();
+  ASSERT_TRUE(manager_->end_session(kStreamer, session_id_).ok());  // closes the subscriptions
+  keyframe_reader.join();
+  update_reader.join();
+  EXPECT_EQ(received_keyframes.size(), info.summary.keyframes);
+  ASSERT_FALSE(received_updates.empty());
+  EXPECT_GE(received_updates.size(), info.mapping.map_keyframes);  // plus replacements after corrections
+  EXPECT_EQ(received_updates.front().map_id(), session_id_);
+  EXPECT_GT(received_updates.front().added_points().points_size(), 100);
+
+  // GetMap: the ended session's final map.
+  grpc::ClientContext get_context;
+  prepare(get_context, kRobotToken);
+  v1::MapRequest request;
+  request.set_session_id(session_id_);
+  v1::FusionMap map;
+  const grpc::Status got = stub_->GetMap(&get_context, request, &map);
+  ASSERT_TRUE(got.ok()) << got.error_message();
+  auto decoded = msgs::from_proto(map);
+  ASSERT_TRUE(decoded.ok()) << decoded.error().message;
+  ASSERT_TRUE(decoded->points.has_value());
+  EXPECT_GT(decoded->points->points.size(), 1000U);
+  EXPECT_EQ(decoded->version, info.mapping.map_version);
+  // Errors: a version that is not kept, a map that is not the session's, no token, no map:read.
+  const auto get_map = [&](const std::string& token, uint64_t version, const std::string& map_id) {
+    grpc::ClientContext context;
+    prepare(context, token);
+    v1::MapRequest bad = request;
+    bad.set_version(version);
+    bad.set_map_id(map_id);
+    v1::FusionMap ignored;
+    return stub_->GetMap(&context, bad, &ignored).error_code();
+  };
+  EXPECT_EQ(get_map(kRobotToken, info.mapping.map_version + 7, ""), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(get_map(kRobotToken, 0, "another-map"), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(get_map("", 0, ""), grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(get_map(kViewerToken, 0, ""), grpc::StatusCode::PERMISSION_DENIED);
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::service
