@@ -22,6 +22,7 @@ void add_graph_command(CLI::App& app, const Output& output, Command& run);
 void add_cloud_commands(CLI::App& app, const Output& output, Command& run);
 void add_map_command(CLI::App& app, const Output& output, Command& run);
 void add_serve_command(CLI::App& app, const Output& output, Command& run);
+void add_stream_command(CLI::App& app, const Output& output, Command& run);
 void add_slam2d_command(CLI::App& app, const Output& output, Command& run);
 void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& run);
 

@@ -35,6 +35,7 @@ int main(int argc, char** argv) {
   app::add_cloud_commands(app, output, run);
   app::add_map_command(app, output, run);
   app::add_serve_command(app, output, run);
+  app::add_stream_command(app, output, run);
 
   try {
     app.parse(argc, argv);

@@ -292,9 +292,13 @@ Result<LoopClosureOutcome> MappingSession::close_loop(const LoopClosureRequest& 
         return Error(fmt::format("not_found: keyframe {} has no scan (map keyframes: {})",
                                  from == map_keyframe_of_.end() ? *request.from_keyframe : *request.to_keyframe, map_keyframes_.size()));
       }
-      lidar::LoopClosure verified;
-      HANZO_ASSIGN_OR_RETURN(verified, loop_closures_.verify(from->second, to->second, pose(from->second).inverse() * pose(to->second), pose));
-      loop = verified;
+      Result<lidar::LoopClosure> verified =
+          loop_closures_.verify(from->second, to->second, pose(from->second).inverse() * pose(to->second), pose);
+      if (!verified) {
+        return Error(fmt::format("not_verified: keyframes {} -> {} (map keyframes {} -> {}): {}", *request.from_keyframe,
+                                 *request.to_keyframe, from->second, to->second, verified.error().message));
+      }
+      loop = *verified;
     } else {
       loop = loop_closures_.detect(pose);
       summary_.loop_candidates = loop_closures_.candidates();

@@ -580,7 +580,9 @@ ApiResult<pipeline::LoopClosureOutcome> SessionManager::close_loop(const Princip
   Result<pipeline::LoopClosureOutcome> outcome = managed.session->close_loop(request);
   if (!outcome) {
     const std::string& message = outcome.error().message;
-    const ErrorCode code = message.rfind("not_found", 0) == 0 ? ErrorCode::kNotFound : ErrorCode::kInvalidArgument;
+    const ErrorCode code = message.starts_with("not_found")      ? ErrorCode::kNotFound
+                           : message.starts_with("not_verified") ? ErrorCode::kRejected
+                                                                 : ErrorCode::kInvalidArgument;
     return ApiError::from(code, outcome.error());
   }
   return std::move(outcome).value();

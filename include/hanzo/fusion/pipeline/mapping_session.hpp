@@ -132,6 +132,9 @@ class MappingSession {
   Status push(std::string_view sensor, const msgs::SensorMessage& message);
   /// Fuses what waits (Session::flush) and registers the sweeps the IMU has passed.
   void flush();
+  /// Errors start with the reason: "invalid: ..." (a bad request), "not_found: ..." (unknown
+  /// keyframe, keyframe without a scan, no loop found by the search), "not_verified: ..." (the
+  /// registration refused the loop: RMSE, overlap, degeneracy). Nothing changes then.
   Result<LoopClosureOutcome> close_loop(const LoopClosureRequest& request);
 
   /// The map's layers (points, occupancy) with version = map_version; other metadata empty.

@@ -123,7 +123,8 @@ class SessionManager {
   /// configuration and calibration, layers. kNotFound while it has no layer yet.
   ApiResult<msgs::FusionMap> map(const Principal& caller, const std::string& session_id);
   /// A manual loop closure (session:write); kInvalidArgument for a bad request, kNotFound for
-  /// unknown keyframes or no verified loop, kConflict for an ended session.
+  /// unknown keyframes (or keyframes without scans) and a search that found no loop, kRejected
+  /// when the registration did not verify the loop, kConflict for an ended session.
   ApiResult<pipeline::LoopClosureOutcome> close_loop(const Principal& caller, const std::string& session_id,
                                                      const pipeline::LoopClosureRequest& request);
 

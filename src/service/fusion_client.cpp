@@ -1,0 +1,255 @@
+#include "hanzo/fusion/service/fusion_client.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+#include <thread>
+#include <vector>
+
+#include <fmt/format.h>
+#include <grpcpp/grpcpp.h>
+#include <nlohmann/json.hpp>
+
+#include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/msgs/convert.hpp"
+#include "hanzo/fusion/v1/service.grpc.pb.h"
+// Last: httplib pulls in <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
+#include <httplib.h>
+
+namespace hanzo::fusion::service {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using nlohmann::json;
+
+// The server's error of a REST answer: "HTTP 404 not_found: no session 'x'".
+Error http_error(const httplib::Result& response, const std::string& what) {
+  if (!response) return Error(fmt::format("{}: {}", what, httplib::to_string(response.error())));
+  std::string message = response->body;
+  try {
+    const json body = json::parse(response->body);
+    message = fmt::format("{}: {}", body["error"].value("code", ""), body["error"].value("message", ""));
+  } catch (const std::exception&) {
+  }
+  return Error(fmt::format("{}: HTTP {} {}", what, response->status, message));
+}
+
+// One gRPC sensor stream (one sensor of the session): writes messages, reads the poses the
+// server sends back on a thread of its own.
+class SensorStream {
+ public:
+  virtual ~SensorStream() = default;
+  /// False when the stream broke (the server ended it).
+  virtual bool write(const msgs::SensorMessage& message) = 0;
+  /// Half-closes, waits for the server's status.
+  virtual grpc::Status finish() = 0;
+};
+
+struct PoseProgress {
+  std::atomic<int64_t> newest_ns{INT64_MIN};
+  std::atomic<uint64_t> received{0};
+  std::mutex mutex;
+  std::optional<msgs::PoseEstimate> latest;
+
+  void record(const v1::PoseEstimate& proto) {
+    received.fetch_add(1);
+    auto pose = msgs::from_proto(proto);
+    if (!pose) return;
+    const int64_t time = pose->timestamp.nanoseconds();
+    int64_t seen = newest_ns.load();
+    while (time > seen && !newest_ns.compare_exchange_weak(seen, time)) {
+    }
+    std::lock_guard lock(mutex);
+    if (!latest || latest->timestamp < pose->timestamp) latest = std::move(pose).value();
+  }
+};
+
+template <typename Message, typename RequestProto>
+class TypedSensorStream final : public SensorStream {
+ public:
+  template <typename Open>
+  TypedSensorStream(Open open, const std::string& token, const std::string& session_id, const std::string& sensor, PoseProgress& progress) {
+    if (!token.empty()) context_.AddMetadata("authorization", "Bearer " + token);
+    context_.AddMetadata("x-session-id", session_id);
+    context_.AddMetadata("x-sensor", sensor);
+    stream_ = open(&context_);
+    reader_ = std::thread([this, &progress] {
+      v1::PoseEstimate pose;
+      while (stream_->Read(&pose)) progress.record(pose);
+    });
+  }
+  ~TypedSensorStream() override {
+    if (reader_.joinable()) {
+      context_.TryCancel();
+      reader_.join();
+    }
+  }
+  bool write(const msgs::SensorMessage& message) override {
+    const auto* typed = std::get_if<Message>(&message);
+    return typed != nullptr && stream_->Write(msgs::to_proto(*typed));
+  }
+  grpc::Status finish() override {
+    stream_->WritesDone();
+    reader_.join();
+    return stream_->Finish();
+  }
+
+ private:
+  grpc::ClientContext context_;
+  std::unique_ptr<grpc::ClientReaderWriter<RequestProto, v1::PoseEstimate>> stream_;
+  std::thread reader_;
+};
+
+}  // namespace
+
+struct FusionClient::Impl {
+  FusionClientConfig config;
+  std::unique_ptr<httplib::Client> http;
+  std::unique_ptr<v1::FusionService::Stub> stub;
+
+  httplib::Headers headers() const {
+    if (config.token.empty()) return {};
+    return {{"Authorization", "Bearer " + config.token}};
+  }
+
+  std::unique_ptr<SensorStream> open_stream(const msgs::SensorMessage& kind, const std::string& session_id, const std::string& sensor,
+                                            PoseProgress& progress) {
+    v1::FusionService::Stub& s = *stub;
+    const std::string& token = config.token;
+    switch (kind.index()) {
+      case 0: return std::make_unique<TypedSensorStream<msgs::ImuMessage, v1::ImuMessage>>([&](grpc::ClientContext* c) { return s.StreamImu(c); }, token, session_id, sensor, progress);
+      case 1: return std::make_unique<TypedSensorStream<msgs::PointCloudMessage, v1::PointCloudMessage>>([&](grpc::ClientContext* c) { return s.StreamPointCloud(c); }, token, session_id, sensor, progress);
+      case 2: return std::make_unique<TypedSensorStream<msgs::ImageMessage, v1::ImageMessage>>([&](grpc::ClientContext* c) { return s.StreamImage(c); }, token, session_id, sensor, progress);
+      case 3: return std::make_unique<TypedSensorStream<msgs::GnssMessage, v1::GnssMessage>>([&](grpc::ClientContext* c) { return s.StreamGnss(c); }, token, session_id, sensor, progress);
+      case 4: return std::make_unique<TypedSensorStream<msgs::WheelOdometryMessage, v1::WheelOdometryMessage>>([&](grpc::ClientContext* c) { return s.StreamWheelOdometry(c); }, token, session_id, sensor, progress);
+      default: return std::make_unique<TypedSensorStream<msgs::RadarMessage, v1::RadarMessage>>([&](grpc::ClientContext* c) { return s.StreamRadar(c); }, token, session_id, sensor, progress);
+    }
+  }
+};
+
+FusionClient::FusionClient(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+FusionClient::~FusionClient() = default;
+
+Result<std::unique_ptr<FusionClient>> FusionClient::create(const FusionClientConfig& config) {
+  if (!config.rest_url.starts_with("http://") && !config.rest_url.starts_with("https://")) {
+    return Error(fmt::format("REST URL '{}': expected http://HOST:PORT or https://HOST:PORT", config.rest_url));
+  }
+  if (config.grpc_address.empty()) return Error("gRPC address is empty (expected HOST:PORT)");
+  auto impl = std::make_unique<Impl>();
+  impl->config = config;
+  impl->http = std::make_unique<httplib::Client>(config.rest_url);
+  impl->http->set_read_timeout(60, 0);
+  std::shared_ptr<grpc::ChannelCredentials> credentials = grpc::InsecureChannelCredentials();
+  if (!config.tls_ca_file.empty()) {
+    std::ifstream file(config.tls_ca_file);
+    if (!file) return Error(fmt::format("{}: cannot read the CA certificate", config.tls_ca_file));
+    std::stringstream pem;
+    pem << file.rdbuf();
+    grpc::SslCredentialsOptions options;
+    options.pem_root_certs = pem.str();
+    credentials = grpc::SslCredentials(options);
+    impl->http->set_ca_cert_path(config.tls_ca_file.c_str());
+  }
+  impl->stub = v1::FusionService::NewStub(grpc::CreateChannel(config.grpc_address, credentials));
+  return std::unique_ptr<FusionClient>(new FusionClient(std::move(impl)));
+}
+
+Result<std::string> FusionClient::create_session(const std::string& name, const std::string& config_yaml,
+                                                 const std::string& calibration_yaml) {
+  json body = {{"name", name}, {"config", config_yaml}};
+  if (!calibration_yaml.empty()) body["calibration"] = calibration_yaml;
+  const httplib::Result response = impl_->http->Post("/v1/sessions", impl_->headers(), body.dump(), "application/json");
+  if (!response || response->status != 201) return http_error(response, "create session");
+  try {
+    return json::parse(response->body).at("id").get<std::string>();
+  } catch (const std::exception& error) {
+    return Error(fmt::format("create session: unexpected answer: {}", error.what()));
+  }
+}
+
+Result<std::string> FusionClient::get(const std::string& path) {
+  const httplib::Result response = impl_->http->Get(path, impl_->headers());
+  if (!response || response->status / 100 != 2) return http_error(response, "GET " + path);
+  return response->body;
+}
+
+Status FusionClient::end_session(const std::string& session_id) {
+  const httplib::Result response = impl_->http->Delete("/v1/sessions/" + session_id, impl_->headers());
+  if (!response || response->status != 200) return http_error(response, "end session");
+  return ok_status();
+}
+
+Result<StreamSummary> FusionClient::stream_log(const std::string& log_path, const std::string& session_id, const StreamOptions& options) {
+  if (!(options.rate >= 0) || !(options.max_lead_s > 0) || !(options.stall_timeout_s > 0)) {
+    return Error("stream: rate must be >= 0, max_lead_s and stall_timeout_s > 0");
+  }
+  std::unique_ptr<io::SensorLogReader> reader;
+  HANZO_ASSIGN_OR_RETURN(reader, io::SensorLogReader::open(log_path));
+  PoseProgress progress;
+  std::map<std::string, std::unique_ptr<SensorStream>> streams;  // by sensor
+  StreamSummary summary;
+  std::optional<Timestamp> first_time;
+  const auto started = Clock::now();
+  io::LogEntry entry;
+  Status outcome = ok_status();
+  while (true) {
+    Result<bool> more = reader->next(entry);
+    if (!more) {
+      outcome = with_context(Status(more.error()), log_path);
+      break;
+    }
+    if (!*more) break;
+    const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
+    const auto mapped = options.sensor_by_topic.find(entry.topic);
+    if (message == nullptr || (mapped == options.sensor_by_topic.end() && options.skip_unknown_topics)) {
+      ++summary.skipped_by_topic[entry.topic];
+      continue;
+    }
+    const std::string sensor = mapped != options.sensor_by_topic.end()          ? mapped->second
+                               : entry.topic.starts_with("/")                   ? entry.topic.substr(1)
+                                                                                : entry.topic;
+    const Timestamp time = entry.log_time;
+    if (!first_time) first_time = time;
+    summary.log_seconds = (time - *first_time).seconds();
+    // Pacing: the log's clock scaled by rate, or the server's progress.
+    if (options.rate > 0) {
+      std::this_thread::sleep_until(started + std::chrono::duration_cast<Clock::duration>(
+                                                  std::chrono::duration<double>(summary.log_seconds / options.rate)));
+    } else {
+      const auto waiting_since = Clock::now();
+      const int64_t allowed_ahead = static_cast<int64_t>(options.max_lead_s * 1e9);
+      while (progress.newest_ns.load() != INT64_MIN && time.nanoseconds() - progress.newest_ns.load() > allowed_ahead) {
+        if (std::chrono::duration<double>(Clock::now() - waiting_since).count() > options.stall_timeout_s) {
+          return Error(fmt::format("stream: the server sent no pose past {:.3f} s for {} s (is the session still fusing?)",
+                                   progress.newest_ns.load() * 1e-9, options.stall_timeout_s));
+        }
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
+      }
+    }
+    auto& stream = streams[sensor];
+    if (!stream) stream = impl_->open_stream(*message, session_id, sensor, progress);
+    if (!stream->write(*message)) {
+      // The server ended the stream: its status says why (unknown session, permission, ...).
+      const grpc::Status status = stream->finish();
+      streams.erase(sensor);
+      return Error(fmt::format("stream {} ({}): {}", sensor, entry.topic,
+                               status.ok() ? "the server closed the stream" : status.error_message()));
+    }
+    ++summary.messages_sent;
+    ++summary.sent_by_sensor[sensor];
+  }
+  for (auto& [sensor, stream] : streams) {
+    const grpc::Status status = stream->finish();
+    if (!status.ok() && outcome) outcome = Error(fmt::format("stream {}: {}", sensor, status.error_message()));
+  }
+  if (!outcome) return outcome.error();
+  summary.wall_seconds = std::chrono::duration<double>(Clock::now() - started).count();
+  summary.poses_received = progress.received.load();
+  summary.latest_pose = progress.latest;
+  return summary;
+}
+
+}  // namespace hanzo::fusion::service
