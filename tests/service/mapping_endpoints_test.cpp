@@ -15,6 +15,8 @@
 #include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/msgs/map_convert.hpp"
+#include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/service/fusion_client.hpp"
 #include "hanzo/fusion/service/grpc_server.hpp"
 #include "hanzo/fusion/service/rest_server.hpp"
 #include "hanzo/fusion/sim/scenario.hpp"
@@ -276,6 +278,65 @@ TEST_F(MappingEndpointsTest, GrpcServesTheMapAndStreamsKeyframesAndMapUpdates) {
   EXPECT_EQ(get_map(kRobotToken, 0, "another-map"), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(get_map("", 0, ""), grpc::StatusCode::UNAUTHENTICATED);
   EXPECT_EQ(get_map(kViewerToken, 0, ""), grpc::StatusCode::PERMISSION_DENIED);
+}
+
+TEST_F(MappingEndpointsTest, FusionClientStreamsALogIntoANewSessionAndReportsServerErrors) {
+  // The recording as a sensor log, with a pose-estimate topic the client must skip.
+  const std::string log = (testing::scratch_dir() / "urban.mcap").string();
+  {
+    io::SensorLogWriterConfig writer_config;
+    writer_config.foxglove_channels = false;
+    auto writer = io::SensorLogWriter::open(log, writer_config).value();
+    for (const testing::TimedMessage& message : urban_recording().messages) {
+      ASSERT_TRUE(writer->write("/" + message.sensor, message.message).ok());
+    }
+    msgs::PoseEstimate estimate;
+    estimate.timestamp = msgs::timestamp_of(urban_recording().messages.back().message);
+    ASSERT_TRUE(writer->write("/estimate", estimate).ok());
+    ASSERT_TRUE(writer->close().ok());
+  }
+  FusionClientConfig config;
+  config.rest_url = "http://127.0.0.1:" + std::to_string(rest_->port());
+  config.grpc_address = "127.0.0.1:" + std::to_string(grpc_->port());
+  config.token = kRobotToken;
+  auto client = FusionClient::create(config).value();
+  const Recording& recording = urban_recording();
+  auto session_id = client->create_session("streamed", recording.config_yaml, recording.calibration_yaml);
+  ASSERT_TRUE(session_id.ok()) << session_id.error().message;
+  StreamOptions options;
+  options.rate = 0.0;  // as fast as the server fuses
+  auto streamed = client->stream_log(log, session_id.value(), options);
+  ASSERT_TRUE(streamed.ok()) << streamed.error().message;
+  EXPECT_EQ(streamed->messages_sent, recording.messages.size());
+  EXPECT_EQ(streamed->skipped_by_topic.at("/estimate"), 1U);
+  EXPECT_GT(streamed->poses_received, 1000U);
+  ASSERT_TRUE(streamed->latest_pose.has_value());
+  // Every message reached the session, none too late for it, and the LiDAR mapped.
+  const Principal owner{"robot", "acme", static_cast<uint32_t>(Permission::kSessionRead)};
+  const SessionInfo info = manager_->session_info(owner, session_id.value()).value();
+  for (const pipeline::SensorStatistics& sensor : info.summary.sensors) {
+    EXPECT_EQ(sensor.received, streamed->sent_by_sensor.at(sensor.name)) << sensor.name;
+    EXPECT_EQ(sensor.rejected.count("too_late"), 0U) << sensor.name;
+  }
+  EXPECT_GT(info.mapping.scans_registered, 60U);
+  EXPECT_THAT(client->get("/v1/sessions/" + session_id.value()).value(), HasSubstr("\"map_keyframes\""));
+  ASSERT_TRUE(client->end_session(session_id.value()).ok());
+
+  // Errors name what the server said.
+  auto ended = client->stream_log(log, session_id.value(), options);
+  ASSERT_FALSE(ended.ok());
+  EXPECT_THAT(ended.error().message, HasSubstr("ended"));
+  auto unknown = client->stream_log(log, "no-such-session", options);
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_THAT(unknown.error().message, HasSubstr("no-such-session"));
+  config.token = "wrong-token-0000000000";
+  auto intruder = FusionClient::create(config).value();
+  auto refused = intruder->create_session("x", recording.config_yaml, "");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_THAT(refused.error().message, HasSubstr("401"));
+  EXPECT_FALSE(client->stream_log(log + ".missing", session_id.value(), options).ok());
+  config.rest_url = "ftp://127.0.0.1";
+  EXPECT_FALSE(FusionClient::create(config).ok());
 }
 
 }  // namespace
