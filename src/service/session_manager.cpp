@@ -279,7 +279,8 @@ struct SessionManager::Impl {
     const detail::StorageProgress progress = recorder->progress(managed.record.id);
     info.stored_poses = progress.stored;
     info.stored_through = progress.stored_through;
-    info.pose_subscribers = managed.pose_subscribers.size();
+    info.pose_subscribers = static_cast<uint64_t>(
+        std::count_if(managed.pose_subscribers.begin(), managed.pose_subscribers.end(), [](const auto& s) { return !s->closed(); }));
     info.config_yaml = managed.record.config_yaml;
     info.calibration_yaml = managed.record.calibration_yaml;
     return info;
