@@ -37,6 +37,8 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev libembree-dev liboctomap-dev
   # make fuzz: clang with libFuzzer and AddressSanitizer
   clang libclang-rt-14-dev
+  # the web viewer's end-to-end test (playwright-core drives Debian's chromium headless)
+  chromium
 )
 
 missing=()
@@ -60,12 +62,15 @@ else
   DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
 
-# npm packages of the conformance tests, pinned by tests/conformance/package-lock.json; skipped
-# when node_modules already matches the lock file.
-conformance="$(dirname "$0")/../tests/conformance"
-stamp="$conformance/node_modules/.installed-lock"
-if ! cmp -s "$conformance/package-lock.json" "$stamp"; then
-  echo "install-deps: npm ci in tests/conformance"
-  (cd "$conformance" && npm ci --no-audit --no-fund --loglevel=error)
-  cp "$conformance/package-lock.json" "$stamp"
-fi
+# npm packages, pinned by their package-lock.json: the conformance tests' (Foxglove's MCAP
+# library...) and the web viewer's (three.js, esbuild, playwright-core); skipped when
+# node_modules already matches the lock file.
+for folder in tests/conformance web; do
+  dir="$(dirname "$0")/../$folder"
+  stamp="$dir/node_modules/.installed-lock"
+  if ! cmp -s "$dir/package-lock.json" "$stamp"; then
+    echo "install-deps: npm ci in $folder"
+    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
+    cp "$dir/package-lock.json" "$stamp"
+  fi
+done

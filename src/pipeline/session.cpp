@@ -94,6 +94,8 @@ struct Session::Impl final : UpdateObserver {
   Status accept(size_t sensor, Event event);
   void fuse_in_order(Event event);
   void fuse_late(Event event);
+  /// Emits a keyframe unless one with its id (or a later one) was emitted already.
+  void emit_keyframe(const msgs::Keyframe& keyframe);
   void count(const Event& event, const EventOutcome& outcome);
   /// Fuses the pending messages up to the IMU's time (all of them when flush_all).
   void release_pending(bool flush_all = false);
@@ -368,13 +370,17 @@ void Session::Impl::fuse_in_order(Event event) {
   count(event, outcome);
   if (config.frontend.lag_window_s > 0.0) history.push_back({event, estimator});
   if (event.is_imu && outcome.fused && estimator.initialized()) emit_pose(true);
-  if (outcome.keyframe) {
-    constexpr size_t kRememberedKeyframes = 100000;
-    keyframe_poses[outcome.keyframe->keyframe_id] = estimator.world_correction().inverse() * outcome.keyframe->T_world_body.to_se3();
-    if (keyframe_poses.size() > kRememberedKeyframes) keyframe_poses.erase(keyframe_poses.begin());
-    ++keyframes;
-    if (keyframe_callback) keyframe_callback(*outcome.keyframe);
-  }
+  if (outcome.keyframe) emit_keyframe(*outcome.keyframe);
+}
+
+void Session::Impl::emit_keyframe(const msgs::Keyframe& keyframe) {
+  // A rollback re-creates keyframes already emitted (same ids): the first emission stands.
+  if (!keyframe_poses.empty() && keyframe.keyframe_id <= keyframe_poses.rbegin()->first) return;
+  constexpr size_t kRememberedKeyframes = 100000;
+  keyframe_poses[keyframe.keyframe_id] = estimator.world_correction().inverse() * keyframe.T_world_body.to_se3();
+  if (keyframe_poses.size() > kRememberedKeyframes) keyframe_poses.erase(keyframe_poses.begin());
+  ++keyframes;
+  if (keyframe_callback) keyframe_callback(keyframe);
 }
 
 void Session::Impl::fuse_late(Event event) {
@@ -385,6 +391,9 @@ void Session::Impl::fuse_late(Event event) {
   estimator = index == 0 ? history_base : history[index - 1].after;
   const EventOutcome outcome = estimator.process(event, this);
   count(event, outcome);
+  // A late IMU message (the IMU stream fell behind the others) can make a keyframe, and so can
+  // the IMU messages re-fused after it: those not emitted yet are emitted now.
+  if (outcome.keyframe) emit_keyframe(*outcome.keyframe);
   ++sensors[event.sensor].rolled_back;
   ++rollbacks;
   history.insert(history.begin() + static_cast<std::ptrdiff_t>(index), HistoryEntry{event, estimator});
@@ -393,6 +402,7 @@ void Session::Impl::fuse_late(Event event) {
     const EventOutcome again = estimator.process(history[i].event, nullptr);
     history[i].after = estimator;
     if (history[i].event.is_imu && again.fused && estimator.initialized()) emit_pose(false);
+    if (again.keyframe) emit_keyframe(*again.keyframe);
   }
   replaying = false;
 }

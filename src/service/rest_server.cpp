@@ -13,6 +13,7 @@
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
 #include "json_codec.hpp"
+#include "web_assets.hpp"
 
 namespace hanzo::fusion::service {
 namespace {
@@ -99,6 +100,13 @@ struct RestServer::Impl {
       send_json(response, 200, {{"status", "ok"}, {"active_sessions", sessions->active_sessions()},
                                 {"storage", sessions->storage_backend()}, {"auth", tokens != nullptr}});
     }));
+    // The web viewer: static files, public (the page asks for a token to call the API).
+    for (const detail::WebAsset& asset : detail::web_assets()) {
+      s.Get(std::string(asset.path), measured("GET", std::string(asset.path), [&asset](const httplib::Request&, httplib::Response& response) {
+        response.set_header("Cache-Control", "no-cache");
+        response.set_content(asset.body.data(), asset.body.size(), std::string(asset.content_type));
+      }));
+    }
     s.Get("/v1/openapi.json", measured("GET", "/v1/openapi.json", [](const httplib::Request&, httplib::Response& response) {
       response.set_content(std::string(openapi_document()), kJson);
     }));

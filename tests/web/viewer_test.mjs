@@ -1,0 +1,115 @@
+// End-to-end test of the web viewer (ctest web.viewer): a server with tokens, a simulated
+// warehouse drive (IMU + VLP-16 + wheels) streamed into a session with `hanzo-fusion stream`,
+// and Debian's chromium (driven by playwright-core) loading GET / while the log streams. The
+// page must list the session, show its live pose, trajectory, map points and sensor table;
+// without a token it must say so. The screenshot is kept: TEST_ARTIFACTS/viewer.png.
+//
+//   node tests/web/viewer_test.mjs --binary build/apps/hanzo-fusion --out build/test-artifacts
+import { spawn, execFileSync } from 'node:child_process';
+import { createRequire } from 'node:module';
+import fs from 'node:fs';
+import path from 'node:path';
+import readline from 'node:readline';
+
+const argument = (name, fallback) => {
+  const index = process.argv.indexOf(name);
+  return index > 0 ? process.argv[index + 1] : fallback;
+};
+const binary = path.resolve(argument('--binary', 'build/apps/hanzo-fusion'));
+const out = path.resolve(argument('--out', 'build/test-artifacts'));
+const chromiumPath = argument('--chromium', '/usr/bin/chromium');
+const require = createRequire(new URL('../../web/package.json', import.meta.url));
+const { chromium } = require('playwright-core');
+
+const scratch = path.join(out, 'viewer-e2e');
+fs.rmSync(scratch, { recursive: true, force: true });
+fs.mkdirSync(scratch, { recursive: true });
+const children = [];
+const fail = (message) => {
+  console.error(`web.viewer: FAILED: ${message}`);
+  for (const child of children) child.kill('SIGKILL');
+  process.exit(1);
+};
+const check = (condition, message) => { if (!condition) fail(message); };
+
+// 1. The log: the warehouse scenario without its camera (the viewer shows LiDAR maps).
+const scenario = fs.readFileSync('examples/scenarios/warehouse_robot.yaml', 'utf8').split('\n');
+const trimmed = [];
+let inCamera = false;
+for (const line of scenario) {
+  if (/^    camera_front:/.test(line)) { inCamera = true; continue; }
+  if (inCamera && /^    \S/.test(line)) inCamera = false;
+  if (inCamera && /^  \S/.test(line)) inCamera = false;
+  if (!inCamera) trimmed.push(line);
+}
+fs.writeFileSync(path.join(scratch, 'warehouse.yaml'), trimmed.join('\n'));
+execFileSync(binary, ['sim', path.join(scratch, 'warehouse.yaml'), '--out', path.join(scratch, 'sim'), '--duration', '14', '--no-foxglove'],
+             { stdio: ['ignore', 'ignore', 'inherit'] });
+
+// 2. The server, on free ports.
+const token = 'viewer-test-token-0123456789';
+fs.writeFileSync(path.join(scratch, 'tokens.yaml'), `tokens:
+  - name: viewer-test
+    organization: acme
+    permissions: [fusion:session:write, fusion:session:read, fusion:map:read]
+    token: "${token}"
+`);
+const server = spawn(binary, ['serve', '--tokens', path.join(scratch, 'tokens.yaml'), '--port', '0', '--grpc-port', '0', '--bind', '127.0.0.1',
+                              '--data-dir', path.join(scratch, 'data'), '--json'], { stdio: ['ignore', 'pipe', 'inherit'] });
+children.push(server);
+const ready = await new Promise((resolve) => {
+  const timer = setTimeout(() => resolve(null), 20000);
+  readline.createInterface({ input: server.stdout }).once('line', (line) => { clearTimeout(timer); resolve(JSON.parse(line)); });
+});
+check(ready, 'the server did not start');
+const base = `http://127.0.0.1:${ready.rest_port}`;
+
+const browser = await chromium.launch({ executablePath: chromiumPath, args: ['--no-sandbox', '--enable-unsafe-swiftshader', '--use-angle=swiftshader'] });
+const page = await browser.newPage({ viewport: { width: 1280, height: 800 } });
+const pageErrors = [];
+page.on('pageerror', (error) => pageErrors.push(error.message));
+
+// 3. Without a token the page loads and asks for one.
+await page.goto(`${base}/`);
+await page.waitForFunction(() => document.getElementById('status').textContent === 'enter an API token', null, { timeout: 15000 })
+  .catch(() => fail('without a token the page does not ask for one'));
+
+// 4. A session streaming the log (1.5x real time) while the page watches it.
+const simDir = path.join(scratch, 'sim');
+const stream = spawn(binary, ['stream', path.join(simDir, 'sensors.mcap'), '--server', `127.0.0.1:${ready.grpc_port}`, '--rest', base,
+                              '--config', path.join(simDir, 'fusion.yaml'), '--calib', path.join(simDir, 'calibration.yaml'),
+                              '--token', token, '--rate', '1.5', '--name', 'warehouse patrol', '--json'],
+                     { stdio: ['ignore', 'pipe', 'inherit'] });
+children.push(stream);
+let streamOutput = '';
+stream.stdout.on('data', (chunk) => { streamOutput += chunk; });
+const streamed = new Promise((resolve) => stream.on('exit', resolve));
+
+await page.goto(`${base}/?token=${token}`);
+await page.waitForFunction(() => {
+  const s = window.viewerState;
+  return s && s.sessions.length === 1 && s.poses > 5 && s.trajectoryPoints > 100 && s.mapPoints > 1000;
+}, null, { timeout: 90000, polling: 500 }).catch(async () => {
+  fail(`the page did not show the streaming session: ${JSON.stringify(await page.evaluate(() => window.viewerState))}`);
+});
+const live = await page.evaluate(() => ({ ...window.viewerState }));
+const sessionText = await page.textContent('#sessions');
+check(sessionText.includes('warehouse patrol'), `the session list shows '${sessionText}'`);
+const sensorRows = await page.$$eval('#sensors tbody tr', (rows) => rows.map((row) => row.firstChild.textContent));
+check(['imu', 'lidar', 'wheels'].every((name) => sensorRows.includes(name)), `sensor table: ${sensorRows}`);
+fs.mkdirSync(out, { recursive: true });
+await page.screenshot({ path: path.join(out, 'viewer.png') });
+
+// 5. The stream finishes; the page keeps up.
+const code = await streamed;
+check(code === 0, `hanzo-fusion stream exited ${code}`);
+const summary = JSON.parse(streamOutput);
+await page.waitForFunction((stored) => window.viewerState.trajectoryPoints >= stored, summary.session.stored_poses, { timeout: 15000 })
+  .catch(() => fail('the trajectory did not catch up with the stored poses'));
+check(pageErrors.length === 0, `page errors: ${pageErrors.join('; ')}`);
+check(fs.statSync(path.join(out, 'viewer.png')).size > 10000, 'the screenshot is empty');
+await browser.close();
+server.kill('SIGTERM');
+await new Promise((resolve) => server.on('exit', resolve));
+console.log(`web.viewer: ok: while streaming ${live.poses} live poses, ${live.trajectoryPoints} trajectory poses, ${live.mapPoints} map points shown; ` +
+            `${summary.messages_sent} messages streamed; screenshot ${path.join(out, 'viewer.png')}`);

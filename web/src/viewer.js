@@ -1,0 +1,286 @@
+// The server's web viewer (GET /): the organization's sessions, the selected session's live pose,
+// trajectory, map points and sensor health, in 3D. Talks to the REST API of the server that
+// serves it (docs/server.md) with the token given in the page (kept in localStorage) or the
+// URL (?token=...&session=...). Polls: sessions every second, the pose 5 times a second, new
+// trajectory poses every second, the map when its version changes.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+
+const state = {
+  token: new URLSearchParams(location.search).get('token') || localStorage.getItem('hanzo-fusion-token') || '',
+  selected: new URLSearchParams(location.search).get('session') || null,
+  sessions: [],
+  poses: 0,               // poses received for the selected session
+  trajectoryPoints: 0,
+  trajectoryAfter: null,  // next_after of the trajectory paging
+  mapVersion: -1,
+  mapPoints: 0,
+  errors: 0,
+  lastError: '',
+};
+window.viewerState = state;  // read by the end-to-end test
+
+const $ = (id) => document.getElementById(id);
+
+function setStatus(text, kind = 'ok') {
+  $('status').textContent = text;
+  $('status').dataset.state = kind;
+}
+
+async function api(path, { binary = false } = {}) {
+  const headers = state.token ? { Authorization: `Bearer ${state.token}` } : {};
+  const response = await fetch(path, { headers });
+  if (!response.ok) {
+    let message = `HTTP ${response.status}`;
+    try { message = (await response.json()).error.message; } catch (_) { /* not JSON */ }
+    const error = new Error(message);
+    error.status = response.status;
+    throw error;
+  }
+  return binary ? response.arrayBuffer() : response.json();
+}
+
+// --- 3D scene (world frame: x east, y north, z up) ---
+const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+renderer.setPixelRatio(window.devicePixelRatio);
+$('view').appendChild(renderer.domElement);
+const scene = new THREE.Scene();
+scene.background = new THREE.Color(0x101418);
+const camera = new THREE.PerspectiveCamera(60, 1, 0.1, 5000);
+camera.up.set(0, 0, 1);
+camera.position.set(-20, -20, 25);
+const controls = new OrbitControls(camera, renderer.domElement);
+controls.target.set(0, 0, 0);
+scene.add(new THREE.AmbientLight(0xffffff, 1.0));
+const grid = new THREE.GridHelper(200, 100, 0x30363d, 0x1f252c);
+grid.rotation.x = Math.PI / 2;
+scene.add(grid);
+
+const robot = new THREE.AxesHelper(2.0);
+robot.visible = false;
+scene.add(robot);
+
+const maxTrajectory = 200000;
+const trajectoryPositions = new Float32Array(maxTrajectory * 3);
+const trajectoryGeometry = new THREE.BufferGeometry();
+trajectoryGeometry.setAttribute('position', new THREE.BufferAttribute(trajectoryPositions, 3));
+trajectoryGeometry.setDrawRange(0, 0);
+scene.add(new THREE.Line(trajectoryGeometry, new THREE.LineBasicMaterial({ color: 0xffa657 })));
+
+const mapGeometry = new THREE.BufferGeometry();
+const map = new THREE.Points(mapGeometry, new THREE.PointsMaterial({ size: 0.08, vertexColors: true }));
+scene.add(map);
+
+function resize() {
+  const { clientWidth: width, clientHeight: height } = $('view');
+  renderer.setSize(width, height);
+  camera.aspect = width / Math.max(1, height);
+  camera.updateProjectionMatrix();
+}
+window.addEventListener('resize', resize);
+resize();
+(function animate() {
+  requestAnimationFrame(animate);
+  controls.update();
+  renderer.render(scene, camera);
+})();
+
+// --- PCD (binary, as GET /map?format=pcd writes it) ---
+function parsePcd(buffer) {
+  const bytes = new Uint8Array(buffer);
+  const marker = 'DATA binary\n';
+  let header = '';
+  let offset = 0;
+  while (offset < bytes.length && !header.endsWith(marker)) header += String.fromCharCode(bytes[offset++]);
+  if (!header.endsWith(marker)) throw new Error('map: not a binary PCD');
+  const field = (name) => (header.match(new RegExp(`^${name} (.*)$`, 'm')) || [, ''])[1].trim().split(/\s+/);
+  const names = field('FIELDS');
+  const sizes = field('SIZE').map(Number);
+  const counts = field('COUNT').map(Number);
+  const points = Number(field('POINTS')[0]);
+  const offsets = {};
+  let stride = 0;
+  names.forEach((name, i) => { offsets[name] = stride; stride += sizes[i] * (counts[i] || 1); });
+  const view = new DataView(buffer, offset);
+  const positions = new Float32Array(points * 3);
+  for (let i = 0; i < points; ++i) {
+    for (let axis = 0; axis < 3; ++axis) positions[3 * i + axis] = view.getFloat32(i * stride + offsets['xyz'[axis]], true);
+  }
+  return positions;
+}
+
+function showMap(positions) {
+  let low = Infinity, high = -Infinity;
+  for (let i = 2; i < positions.length; i += 3) { low = Math.min(low, positions[i]); high = Math.max(high, positions[i]); }
+  const colors = new Float32Array(positions.length);
+  const color = new THREE.Color();
+  for (let i = 0; i < positions.length / 3; ++i) {
+    const t = high > low ? (positions[3 * i + 2] - low) / (high - low) : 0.5;
+    color.setHSL(0.66 * (1 - t), 0.8, 0.55);
+    colors.set([color.r, color.g, color.b], 3 * i);
+  }
+  mapGeometry.setAttribute('position', new THREE.BufferAttribute(positions, 3));
+  mapGeometry.setAttribute('color', new THREE.BufferAttribute(colors, 3));
+  mapGeometry.computeBoundingSphere();
+  state.mapPoints = positions.length / 3;
+}
+
+function resetSessionView() {
+  state.poses = 0;
+  state.trajectoryPoints = 0;
+  state.trajectoryAfter = null;
+  state.mapVersion = -1;
+  state.mapPoints = 0;
+  trajectoryGeometry.setDrawRange(0, 0);
+  mapGeometry.deleteAttribute('position');
+  mapGeometry.deleteAttribute('color');
+  robot.visible = false;
+}
+
+// --- side panel ---
+function row(cells, tag = 'td') {
+  const tr = document.createElement('tr');
+  for (const cell of cells) {
+    const element = document.createElement(tag);
+    element.textContent = cell;
+    tr.appendChild(element);
+  }
+  return tr;
+}
+
+function renderSessions() {
+  const list = $('sessions');
+  list.replaceChildren();
+  for (const session of state.sessions) {
+    const item = document.createElement('li');
+    item.dataset.id = session.id;
+    item.textContent = session.name;
+    const badge = document.createElement('span');
+    badge.className = `state ${session.tracking_state}`;
+    badge.textContent = session.status === 'ended' ? 'ENDED' : session.tracking_state;
+    item.appendChild(badge);
+    if (session.id === state.selected) item.classList.add('selected');
+    item.addEventListener('click', () => { state.selected = session.id; resetSessionView(); renderSessions(); refreshSession(); });
+    list.appendChild(item);
+  }
+}
+
+function renderDetails(session) {
+  $('details').hidden = false;
+  $('session-name').textContent = `${session.name} (${session.status})`;
+  const body = $('sensors').querySelector('tbody');
+  body.replaceChildren();
+  for (const sensor of session.sensors) {
+    const rejected = Object.values(sensor.rejected || {}).reduce((a, b) => a + b, 0);
+    const tr = row([sensor.name, sensor.received, sensor.fused, rejected, sensor.timed_out ? 'silent' : '']);
+    tr.title = Object.entries(sensor.rejected || {}).map(([reason, count]) => `${reason}: ${count}`).join('\n');
+    if (sensor.timed_out) tr.classList.add('timed-out');
+    body.appendChild(tr);
+  }
+  const mapping = session.mapping || {};
+  $('mapping').replaceChildren(
+    row(['sweeps registered', `${mapping.scans_registered ?? 0} / ${mapping.scans_received ?? 0}`]),
+    row(['degenerate / weather', `${mapping.degenerate_scans ?? 0} / ${mapping.weather_degraded_scans ?? 0}`]),
+    row(['map keyframes', mapping.map_keyframes ?? 0]),
+    row(['loop closures', (mapping.loop_closures ?? 0) + (mapping.manual_loop_closures ?? 0)]),
+    row(['map points', state.mapPoints]),
+  );
+}
+
+function renderPose(pose) {
+  const [x, y, z] = pose.position;
+  const [w, qx, qy, qz] = pose.orientation_wxyz;
+  robot.position.set(x, y, z);
+  robot.quaternion.set(qx, qy, qz, w);
+  robot.visible = true;
+  if ($('follow').checked) {
+    const shift = new THREE.Vector3(x, y, z).sub(controls.target);
+    controls.target.add(shift);
+    camera.position.add(shift);
+  }
+  const speed = Math.hypot(...pose.velocity);
+  $('pose').replaceChildren(
+    row(['state', `${pose.state} (${pose.active_sensors.join(', ')})`]),
+    row(['position', pose.position.map((v) => v.toFixed(2)).join(', ')]),
+    row(['speed', `${speed.toFixed(2)} m/s`]),
+  );
+}
+
+// --- polling ---
+async function refreshSessions() {
+  const { sessions } = await api('/v1/sessions');
+  state.sessions = sessions;
+  if (!state.selected && sessions.length) state.selected = sessions[sessions.length - 1].id;
+  renderSessions();
+}
+
+async function refreshPose() {
+  if (!state.selected) return;
+  try {
+    renderPose(await api(`/v1/sessions/${state.selected}/pose`));
+    ++state.poses;
+  } catch (error) {
+    if (error.status !== 404) throw error;  // no pose yet
+  }
+}
+
+async function refreshTrajectory() {
+  if (!state.selected) return;
+  const after = state.trajectoryAfter === null ? '' : `&after=${state.trajectoryAfter}`;
+  const page = await api(`/v1/sessions/${state.selected}/trajectory?limit=10000${after}`);
+  for (const pose of page.poses) {
+    if (state.trajectoryPoints >= maxTrajectory) break;
+    trajectoryPositions.set(pose.position, 3 * state.trajectoryPoints++);
+    state.trajectoryAfter = pose.timestamp_ns;
+  }
+  trajectoryGeometry.attributes.position.needsUpdate = true;
+  trajectoryGeometry.setDrawRange(0, state.trajectoryPoints);
+  trajectoryGeometry.computeBoundingSphere();
+}
+
+async function refreshSession() {
+  if (!state.selected) return;
+  const session = await api(`/v1/sessions/${state.selected}`);
+  const version = session.mapping ? session.mapping.map_version : 0;
+  if (version > 0 && version !== state.mapVersion) {
+    try {
+      showMap(parsePcd(await api(`/v1/sessions/${state.selected}/map?format=pcd`, { binary: true })));
+      state.mapVersion = version;
+    } catch (error) {
+      if (error.status !== 404 && error.status !== 403) throw error;  // no map, or no map:read
+    }
+  }
+  renderDetails(session);
+}
+
+function every(milliseconds, task) {
+  let running = false;
+  const tick = async () => {
+    if (running) return;
+    running = true;
+    try {
+      await task();
+      if (state.sessions.length) setStatus(`${state.sessions.length} session(s); ${state.trajectoryPoints} poses, ${state.mapPoints} map points`);
+      else setStatus('no sessions yet');
+    } catch (error) {
+      ++state.errors;
+      state.lastError = error.message;
+      setStatus(error.status === 401 ? 'enter an API token' : error.message, 'error');
+    } finally {
+      running = false;
+    }
+  };
+  tick();
+  setInterval(tick, milliseconds);
+}
+
+$('token').value = state.token;
+$('token-form').addEventListener('submit', (event) => {
+  event.preventDefault();
+  state.token = $('token').value.trim();
+  localStorage.setItem('hanzo-fusion-token', state.token);
+});
+every(1000, refreshSessions);
+every(200, refreshPose);
+every(1000, refreshTrajectory);
+every(1000, refreshSession);
