@@ -1,0 +1,139 @@
+"""hanzo.fusion.client against a real server: `hanzo-fusion serve` with tokens on free ports, a
+simulated warehouse drive (IMU + VLP-16 + wheels) streamed into a session the client created."""
+
+import json
+import os
+import pathlib
+import subprocess
+
+import numpy as np
+import pytest
+
+from hanzo.fusion.client import FusionClient, FusionError, parse_pcd
+
+REPO = pathlib.Path(__file__).resolve().parents[2]
+BINARY = os.environ.get("HANZO_FUSION_BIN", str(REPO / "build" / "apps" / "hanzo-fusion"))
+TOKEN = "python-client-token-0123456789"
+VIEWER_TOKEN = "python-viewer-token-0123456789"
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    scratch = tmp_path_factory.mktemp("client")
+    # The warehouse scenario without its camera, 10 s.
+    lines, in_camera = [], False
+    for line in (REPO / "examples/scenarios/warehouse_robot.yaml").read_text().splitlines():
+        if line.startswith("    camera_front:"):
+            in_camera = True
+            continue
+        if in_camera and line.strip() and len(line) - len(line.lstrip()) <= 4:
+            in_camera = False  # the next sensor, or the next section
+        if not in_camera:
+            lines.append(line)
+    (scratch / "warehouse.yaml").write_text("\n".join(lines))
+    subprocess.run([BINARY, "sim", str(scratch / "warehouse.yaml"), "--out", str(scratch / "sim"), "--duration", "10", "--no-foxglove"],
+                   check=True, stdout=subprocess.DEVNULL)
+    (scratch / "tokens.yaml").write_text(f"""tokens:
+  - name: robot
+    organization: acme
+    permissions: [fusion:session:write, fusion:session:read, fusion:map:read]
+    token: "{TOKEN}"
+  - name: viewer
+    organization: acme
+    permissions: [fusion:session:read]
+    token: "{VIEWER_TOKEN}"
+""")
+    process = subprocess.Popen([BINARY, "serve", "--tokens", str(scratch / "tokens.yaml"), "--port", "0", "--grpc-port", "0",
+                                "--bind", "127.0.0.1", "--data-dir", str(scratch / "data"), "--json"],
+                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    ready = json.loads(process.stdout.readline())
+    yield {"rest": f"http://127.0.0.1:{ready['rest_port']}", "grpc": f"127.0.0.1:{ready['grpc_port']}", "sim": scratch / "sim"}
+    process.terminate()
+    process.wait(timeout=30)
+
+
+def test_session_lifecycle_trajectory_and_map(server):
+    client = FusionClient(server["rest"], token=TOKEN)
+    assert client.health()["status"] == "ok"
+    sim = server["sim"]
+    session = client.create_session((sim / "fusion.yaml").read_text(), (sim / "calibration.yaml").read_text(), name="warehouse")
+    assert session["status"] == "active" and session["name"] == "warehouse"
+    with pytest.raises(FusionError) as no_pose:
+        client.pose(session["id"])
+    assert no_pose.value.status == 404
+
+    streamed = subprocess.run([BINARY, "stream", str(sim / "sensors.mcap"), "--server", server["grpc"], "--rest", server["rest"],
+                               "--session", session["id"], "--config", str(sim / "fusion.yaml"), "--token", TOKEN, "--rate", "max",
+                               "--json"], check=True, capture_output=True, text=True)
+    assert json.loads(streamed.stdout)["messages_sent"] > 2000
+
+    state = client.session(session["id"])
+    assert state["tracking_state"] == "TRACKING"
+    assert state["mapping"]["scans_registered"] > 50
+    assert [s["id"] for s in client.sessions()] == [session["id"]]
+    pose = client.pose(session["id"])
+    assert len(pose["position"]) == 3 and len(pose["covariance"]) == 36
+    # Paged: 500 poses a page, every stored pose once, in time order.
+    poses = client.trajectory(session["id"], page_size=500)
+    assert len(poses) == state["stored_poses"] > 1000
+    times = [p["timestamp_ns"] for p in poses]
+    assert times == sorted(times) and len(set(times)) == len(times)
+
+    summary = client.map(session["id"], "json")
+    points = client.map_points(session["id"])
+    assert points.shape == (summary["layers"]["points"]["count"], 3) and points.shape[0] > 1000
+    assert np.isfinite(points).all()
+    assert client.map(session["id"]).startswith(b"HZFMAP\r\n")
+    assert client.map(session["id"], "ply").startswith(b"ply\n")
+
+    ended = client.end_session(session["id"])
+    assert ended["status"] == "ended"
+    assert client.map_points(session["id"]).shape == points.shape  # the final map stays
+
+
+def test_errors_carry_status_code_and_field(server):
+    client = FusionClient(server["rest"], token=TOKEN)
+    sim = server["sim"]
+    session = client.create_session((sim / "fusion.yaml").read_text(), (sim / "calibration.yaml").read_text())
+    with pytest.raises(FusionError) as bad_config:
+        client.create_session({"sensors": {"imu": {"rate": "fast"}}})
+    assert bad_config.value.status == 400 and bad_config.value.field == "sensors.imu.rate"
+    with pytest.raises(FusionError) as no_map:
+        client.map(session["id"], "json")
+    assert no_map.value.status == 404
+    with pytest.raises(FusionError) as bad_format:
+        client.map(session["id"], "las")
+    assert bad_format.value.field == "format"
+    with pytest.raises(FusionError) as half:
+        client.loop_closure(session["id"], from_keyframe=1)
+    assert half.value.status == 400
+    with pytest.raises(FusionError) as unknown_keyframe:
+        client.loop_closure(session["id"], from_keyframe=1, to_keyframe=2, position=[0, 0, 0])
+    assert unknown_keyframe.value.status == 404
+    with pytest.raises(FusionError) as not_positive:
+        client.loop_closure(session["id"], from_keyframe=1, to_keyframe=2, position=[0, 0, 0], covariance=-np.eye(6))
+    assert not_positive.value.field == "covariance"
+    viewer = FusionClient(server["rest"], token=VIEWER_TOKEN)
+    assert viewer.session(session["id"])["id"] == session["id"]
+    with pytest.raises(FusionError) as read_only:
+        viewer.map(session["id"])
+    assert read_only.value.status == 403
+    with pytest.raises(FusionError) as unauthenticated:
+        FusionClient(server["rest"], token="not-a-token-000000000").sessions()
+    assert unauthenticated.value.status == 401 and unauthenticated.value.code == "unauthenticated"
+    with pytest.raises(FusionError) as unreachable:
+        FusionClient("http://127.0.0.1:1", timeout=2).health()
+    assert unreachable.value.status == 0
+    with pytest.raises(ValueError):
+        FusionClient("ftp://example.org")
+
+
+def test_parse_pcd_reads_what_the_server_writes_and_refuses_garbage():
+    header = b"# .PCD v0.7\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 2\nHEIGHT 1\n" \
+             b"VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA binary\n"
+    values = np.array([[1, 2, 3, 0.5], [4, 5, 6, 0.25]], dtype="<f4")
+    np.testing.assert_array_equal(parse_pcd(header + values.tobytes()), values[:, :3])
+    with pytest.raises(ValueError):
+        parse_pcd(b"not a point cloud")
+    with pytest.raises(ValueError):
+        parse_pcd(header + values.tobytes()[:10])
