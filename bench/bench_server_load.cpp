@@ -1,0 +1,269 @@
+// Server load test (issue: "20 concurrent sessions each streaming IMU at 200 Hz plus LiDAR at
+// 10 Hz (about 30k points per scan) for 60 s"): an in-process server (SessionManager + gRPC on
+// loopback, SQLite storage), N client sessions each replaying the simulated warehouse drive
+// (IMU 200 Hz + VLP-16, ~28k points per sweep) in real time over StreamImu / StreamPointCloud.
+//
+//   build/bench/bench_server_load [--sessions 20] [--seconds 60] [--no-lidar] [--json]
+//
+// Reports: messages sent, received by the sessions, rejected by reason (lost), LiDAR sweeps
+// registered; pose latency = from writing an IMU message to reading back the PoseEstimate of its
+// timestamp on the same stream (client side, loopback both ways) p50 / p99 / max; the server's
+// own push->pose histogram; CPU (process: server and clients) and peak memory.
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <fmt/format.h>
+#include <grpcpp/grpcpp.h>
+#include <nlohmann/json.hpp>
+
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/config/fusion_config.hpp"
+#include "hanzo/fusion/msgs/convert.hpp"
+#include "hanzo/fusion/service/grpc_server.hpp"
+#include "hanzo/fusion/service/session_manager.hpp"
+#include "hanzo/fusion/service/storage.hpp"
+#include "hanzo/fusion/sim/scenario.hpp"
+#include "hanzo/fusion/sim/scenario_simulation.hpp"
+#include "hanzo/fusion/v1/service.grpc.pb.h"
+
+namespace hf = hanzo::fusion;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+struct Recording {
+  std::string config_yaml, calibration_yaml;
+  std::vector<std::pair<std::string, hf::msgs::SensorMessage>> messages;  // sensor, message; time order
+  std::size_t points_per_sweep = 0;
+};
+
+Recording simulate(double seconds, bool lidar) {
+  hf::sim::Scenario scenario = hf::sim::load_scenario(std::string(HANZO_SOURCE_DIR) + "/examples/scenarios/warehouse_robot.yaml").value();
+  std::erase_if(scenario.sensors, [lidar](const hf::sim::ScenarioSensor& s) {
+    return s.modality != hf::config::SensorModality::kImu && !(lidar && s.modality == hf::config::SensorModality::kLidar);
+  });
+  scenario.duration = seconds;
+  Recording out;
+  out.config_yaml = hf::config::to_yaml(hf::sim::scenario_fusion_config(scenario));
+  out.calibration_yaml = hf::calib::to_yaml(hf::sim::scenario_calibration(scenario));
+  auto simulation = hf::sim::ScenarioSimulation::create(scenario).value();
+  std::size_t sweeps = 0, points = 0;
+  (void)simulation->run([&](const hf::sim::ScenarioSensor& sensor, hf::msgs::SensorMessage&& message) -> hf::Status {
+    if (const auto* sweep = std::get_if<hf::msgs::PointCloudMessage>(&message)) {
+      ++sweeps;
+      points += sweep->points.size();
+    }
+    out.messages.emplace_back(sensor.name, std::move(message));
+    return hf::ok_status();
+  });
+  out.points_per_sweep = sweeps ? points / sweeps : 0;
+  return out;
+}
+
+double percentile(std::vector<double> values, double p) {
+  if (values.empty()) return 0.0;
+  std::sort(values.begin(), values.end());
+  return values[std::min(values.size() - 1, static_cast<std::size_t>(p * static_cast<double>(values.size())))];
+}
+
+struct ClientResult {
+  uint64_t sent_imu = 0, sent_lidar = 0, poses = 0, late_writes = 0;
+  std::vector<double> latencies_s;
+};
+
+// Replays the recording in real time into one session over two streams.
+ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& session_id, const Recording& recording) {
+  ClientResult result;
+  struct Stream {
+    grpc::ClientContext context;
+    std::thread reader;
+  };
+  Stream imu_stream, lidar_stream;
+  for (Stream* s : {&imu_stream, &lidar_stream}) s->context.AddMetadata("x-session-id", session_id);
+  auto imu = stub.StreamImu(&imu_stream.context);
+  auto lidar = stub.StreamPointCloud(&lidar_stream.context);
+  std::mutex mutex;
+  std::map<int64_t, Clock::time_point> sent_at;  // IMU timestamp -> write time
+  std::atomic<uint64_t> poses{0};
+  imu_stream.reader = std::thread([&] {
+    hf::v1::PoseEstimate pose;
+    while (imu->Read(&pose)) {
+      const auto now = Clock::now();
+      ++poses;
+      std::lock_guard lock(mutex);
+      const auto found = sent_at.find(static_cast<int64_t>(pose.timestamp_ns()));
+      if (found == sent_at.end()) continue;
+      result.latencies_s.push_back(std::chrono::duration<double>(now - found->second).count());
+      sent_at.erase(sent_at.begin(), std::next(found));
+    }
+  });
+  lidar_stream.reader = std::thread([&] {
+    hf::v1::PoseEstimate pose;
+    while (lidar->Read(&pose)) ++poses;
+  });
+  const auto started = Clock::now();
+  const hf::Timestamp first = hf::msgs::timestamp_of(recording.messages.front().second);
+  for (const auto& [sensor, message] : recording.messages) {
+    const hf::Timestamp time = hf::msgs::timestamp_of(message);
+    const auto due = started + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>((time - first).seconds()));
+    if (Clock::now() > due + std::chrono::milliseconds(20)) ++result.late_writes;
+    std::this_thread::sleep_until(due);
+    if (const auto* imu_message = std::get_if<hf::msgs::ImuMessage>(&message)) {
+      {
+        std::lock_guard lock(mutex);
+        sent_at[time.nanoseconds()] = Clock::now();
+      }
+      if (imu->Write(hf::msgs::to_proto(*imu_message))) ++result.sent_imu;
+    } else if (const auto* sweep = std::get_if<hf::msgs::PointCloudMessage>(&message)) {
+      if (lidar->Write(hf::msgs::to_proto(*sweep))) ++result.sent_lidar;
+    }
+  }
+  imu->WritesDone();
+  lidar->WritesDone();
+  imu_stream.reader.join();
+  lidar_stream.reader.join();
+  (void)imu->Finish();
+  (void)lidar->Finish();
+  result.poses = poses.load();
+  return result;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int sessions = 20;
+  double seconds = 60.0;
+  bool lidar = true, json_output = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string argument = argv[i];
+    if (argument == "--sessions" && i + 1 < argc) sessions = std::stoi(argv[++i]);
+    else if (argument == "--seconds" && i + 1 < argc) seconds = std::stod(argv[++i]);
+    else if (argument == "--no-lidar") lidar = false;
+    else if (argument == "--json") json_output = true;
+    else {
+      std::fprintf(stderr, "usage: bench_server_load [--sessions N] [--seconds S] [--no-lidar] [--json]\n");
+      return 2;
+    }
+  }
+  std::fprintf(stderr, "simulating %.0f s of the warehouse drive...\n", seconds);
+  const Recording recording = simulate(seconds, lidar);
+
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "hanzo_bench_server_load";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  auto metrics = std::make_shared<hf::service::MetricsRegistry>();
+  auto manager = hf::service::SessionManager::create({}, hf::service::open_storage("sqlite://" + (dir / "fusion.db").string()).value(),
+                                                     metrics).value();
+  hf::service::GrpcServerConfig grpc_config;
+  grpc_config.bind_address = "127.0.0.1";
+  grpc_config.port = 0;
+  auto server = hf::service::GrpcServer::create(grpc_config, *manager, nullptr, metrics).value();
+  if (auto started = server->start(); !started) {
+    std::fprintf(stderr, "%s\n", started.error().message.c_str());
+    return 1;
+  }
+  const hf::service::Principal local{"bench", "local", 0xffffffffu};
+  std::vector<std::string> ids;
+  for (int s = 0; s < sessions; ++s) {
+    ids.push_back(manager->create_session(local, {fmt::format("load-{}", s), recording.config_yaml, recording.calibration_yaml}).value().id);
+  }
+  auto stub = hf::v1::FusionService::NewStub(grpc::CreateChannel("127.0.0.1:" + std::to_string(server->port()), grpc::InsecureChannelCredentials()));
+
+  std::fprintf(stderr, "%d sessions streaming for %.0f s...\n", sessions, seconds);
+  rusage usage_before{};
+  getrusage(RUSAGE_SELF, &usage_before);
+  const auto started = Clock::now();
+  std::vector<ClientResult> results(static_cast<std::size_t>(sessions));
+  std::vector<std::thread> clients;
+  for (int s = 0; s < sessions; ++s) {
+    clients.emplace_back([&, s] { results[static_cast<std::size_t>(s)] = run_client(*stub, ids[static_cast<std::size_t>(s)], recording); });
+  }
+  for (std::thread& client : clients) client.join();
+  const double wall = std::chrono::duration<double>(Clock::now() - started).count();
+  rusage usage_after{};
+  getrusage(RUSAGE_SELF, &usage_after);
+  const auto cpu_seconds = [](const rusage& u) {
+    return static_cast<double>(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * static_cast<double>(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+  };
+  (void)manager->flush_storage();
+
+  uint64_t sent = 0, received = 0, sent_lidar = 0, registered = 0, poses_back = 0, late_writes = 0, stored = 0;
+  std::map<std::string, uint64_t> rejected;
+  std::vector<double> latencies;
+  for (int s = 0; s < sessions; ++s) {
+    const ClientResult& r = results[static_cast<std::size_t>(s)];
+    sent += r.sent_imu + r.sent_lidar;
+    sent_lidar += r.sent_lidar;
+    poses_back += r.poses;
+    late_writes += r.late_writes;
+    latencies.insert(latencies.end(), r.latencies_s.begin(), r.latencies_s.end());
+    const hf::service::SessionInfo info = manager->session_info(local, ids[static_cast<std::size_t>(s)]).value();
+    for (const hf::pipeline::SensorStatistics& sensor : info.summary.sensors) {
+      received += sensor.received;
+      for (const auto& [reason, count] : sensor.rejected) rejected[sensor.name + ":" + reason] += count;
+    }
+    registered += info.mapping.scans_registered;
+    stored += info.stored_poses;
+  }
+  double server_p50 = 0, server_p99 = 0;
+  {
+    // The server's push -> pose histogram, all sessions together (bucket upper bounds).
+    std::vector<uint64_t> total;
+    const hf::service::Histogram* any = nullptr;
+    for (const std::string& id : ids) {
+      hf::service::Histogram& h = metrics->histogram("hanzo_fusion_pose_latency_seconds", "", hf::service::latency_buckets_seconds(), {{"session", id}});
+      any = &h;
+      const auto counts = h.cumulative_counts();
+      if (total.empty()) total.assign(counts.size(), 0);
+      for (std::size_t i = 0; i < counts.size(); ++i) total[i] += counts[i];
+    }
+    const auto quantile = [&](double p) {  // upper bound of the bucket holding quantile p
+      const double target = p * static_cast<double>(total.back());
+      for (std::size_t i = 0; i < any->bounds().size(); ++i) {
+        if (static_cast<double>(total[i]) >= target) return any->bounds()[i];
+      }
+      return any->bounds().back();
+    };
+    server_p50 = quantile(0.5);
+    server_p99 = quantile(0.99);
+  }
+  const double cpu = cpu_seconds(usage_after) - cpu_seconds(usage_before);
+  // The IMU's static alignment (the first second) takes its messages without fusing them.
+  uint64_t rejected_total = 0, aligning = 0;
+  for (const auto& [reason, count] : rejected) (reason.ends_with(":aligning") ? aligning : rejected_total) += count;
+
+  nlohmann::json result = {
+      {"sessions", sessions}, {"seconds", seconds}, {"lidar", lidar}, {"points_per_sweep", recording.points_per_sweep},
+      {"messages_sent", sent}, {"messages_received", received}, {"messages_lost_in_transport", sent - received},
+      {"messages_rejected", rejected}, {"lidar_sweeps_sent", sent_lidar}, {"lidar_sweeps_registered", registered},
+      {"poses_back", poses_back}, {"poses_stored", stored}, {"client_writes_late_20ms", late_writes},
+      {"pose_latency_p50_ms", 1e3 * percentile(latencies, 0.5)}, {"pose_latency_p99_ms", 1e3 * percentile(latencies, 0.99)},
+      {"pose_latency_max_ms", 1e3 * percentile(latencies, 1.0)}, {"server_push_to_pose_p50_ms", 1e3 * server_p50},
+      {"server_push_to_pose_p99_ms", 1e3 * server_p99}, {"cpu_cores_used", cpu / wall}, {"wall_seconds", wall},
+      {"peak_rss_mb", static_cast<double>(usage_after.ru_maxrss) / 1024.0}};
+  if (json_output) {
+    std::printf("%s\n", result.dump().c_str());
+  } else {
+    std::printf("| sessions | streams | messages sent | received | lost | rejected (+ aligning) | LiDAR registered | pose latency p50 / p99 / max | server push->pose p50 / p99 | CPU (cores) | peak RSS |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
+    std::printf("| %d | IMU 200 Hz%s | %lu | %lu | %lu | %lu (+ %lu) | %lu / %lu | %.2f / %.1f / %.0f ms | <= %.3f / <= %.3f ms | %.2f of 2 | %.0f MB |\n", sessions,
+                lidar ? fmt::format(" + LiDAR 10 Hz ({}k pts)", recording.points_per_sweep / 1000).c_str() : "",
+                static_cast<unsigned long>(sent), static_cast<unsigned long>(received), static_cast<unsigned long>(sent - received),
+                static_cast<unsigned long>(rejected_total), static_cast<unsigned long>(aligning), static_cast<unsigned long>(registered), static_cast<unsigned long>(sent_lidar),
+                1e3 * percentile(latencies, 0.5), 1e3 * percentile(latencies, 0.99), 1e3 * percentile(latencies, 1.0), 1e3 * server_p50,
+                1e3 * server_p99, cpu / wall, static_cast<double>(usage_after.ru_maxrss) / 1024.0);
+    for (const auto& [reason, count] : rejected) std::printf("  rejected %s: %lu\n", reason.c_str(), static_cast<unsigned long>(count));
+  }
+  server->stop();
+  return 0;
+}
