@@ -15,6 +15,9 @@
 
 #include "hanzo/fusion/core/geodesy.hpp"
 #include "hanzo/fusion/graph/batch_optimizer.hpp"
+#include "hanzo/fusion/graph/chordal_initialization.hpp"
+#include "hanzo/fusion/graph/g2o_io.hpp"
+#include "hanzo/fusion/graph/incremental_smoother.hpp"
 #include "hanzo/fusion/graph/imu_factors.hpp"
 #include "hanzo/fusion/graph/pose_factors.hpp"
 
@@ -74,6 +77,17 @@ struct OptimizeResult {
   graph::OptimizationSummary summary;
   std::shared_ptr<const graph::FactorGraph> graph;
   std::vector<graph::Key> fixed;
+  std::shared_ptr<const graph::PoseGraph> source;  // the g2o / TORO file, when read from one
+
+  const graph::PoseGraph& file() const {
+    if (!source) throw py::value_error("this graph was not read from a g2o / TORO file");
+    return *source;
+  }
+  double g2o_chi2() const { return value_or_raise(graph::g2o_chi2(file(), values)); }
+  double se_sync_objective() const { return value_or_raise(graph::se_sync_objective(file(), values)); }
+  void write_g2o(const std::string& path) const {
+    if (Status written = graph::write_g2o(path, file(), values); !written) throw py::value_error(written.error().message);
+  }
 
   py::object at(graph::Key key) const {
     const auto found = values.all().find(key);
@@ -92,6 +106,25 @@ struct OptimizeResult {
 // anchors the gauge when no prior does (see optimize()).
 class PyFactorGraph {
  public:
+  /// A g2o / TORO file: its between factors, initial guesses and fixed vertices. objective
+  /// "geodesic": g2o's factors; "chordal": SE-Sync's objective (its published optima).
+  static PyFactorGraph from_file(const std::string& path, const std::string& objective) {
+    if (objective != "geodesic" && objective != "chordal") {
+      throw py::value_error(fmt::format("objective '{}': use 'geodesic' or 'chordal'", objective));
+    }
+    PyFactorGraph result;
+    auto source = std::make_shared<graph::PoseGraph>(value_or_raise(graph::read_g2o(path)));
+    *result.graph_ = value_or_raise(source->factor_graph(objective == "chordal" ? graph::PoseGraph::Objective::kChordal
+                                                                                : graph::PoseGraph::Objective::kGeodesic));
+    result.initial_ = source->initial;
+    result.fixed_ = source->fixed;
+    result.source_ = std::move(source);
+    return result;
+  }
+  /// The factors and the initial values inserted so far (for IncrementalSmoother.update).
+  const graph::FactorGraph& factors() const { return *graph_; }
+  const graph::Values& initial_values() const { return initial_; }
+
   void add_between_factor(graph::Key key_from, graph::Key key_to, const py::object& measurement, const Eigen::MatrixXd& noise) {
     if (py::isinstance<SE3>(measurement)) {
       graph_->emplace<graph::BetweenFactorSE3>(key_from, key_to, measurement.cast<SE3>(), noise_from(noise, 6, "between factor noise"));
@@ -121,7 +154,23 @@ class PyFactorGraph {
   void insert(graph::Key key, const py::object& value) { initial_.insert(key, from_python(value)); }
   std::size_t size() const { return graph_->size(); }
 
-  OptimizeResult optimize(int max_iterations) const {
+  OptimizeResult optimize(int max_iterations, const std::string& initialization) const {
+    if (initialization != "initial" && initialization != "chordal") {
+      throw py::value_error(fmt::format("initialization '{}': use 'initial' or 'chordal'", initialization));
+    }
+    if (source_) {  // a file: its vertices and FIX lines
+      graph::BatchOptimizerConfig config;
+      config.fixed = fixed_;
+      config.max_iterations = max_iterations;
+      OptimizeResult result;
+      result.values = initialization == "chordal" ? value_or_raise(graph::chordal_initialization(*source_)) : initial_;
+      result.summary = value_or_raise(graph::optimize(*graph_, result.values, config));
+      result.graph = graph_;
+      result.fixed = fixed_;
+      result.source = source_;
+      return result;
+    }
+    if (initialization == "chordal") throw py::value_error("chordal initialization needs a graph read from a g2o / TORO file");
     graph::Values values = initial_;
     for (bool changed = true; changed;) {  // chain between factors from known poses
       changed = false;
@@ -204,6 +253,40 @@ class PyFactorGraph {
   std::vector<Chain> chains_;
   std::map<graph::Key, Eigen::Vector3d> gps_;
   bool anchored_by_prior_ = false;
+  std::vector<graph::Key> fixed_;                  // a file's fixed vertices
+  std::shared_ptr<const graph::PoseGraph> source_;  // the file it was read from
+};
+
+// graph::IncrementalSmoother for Python: updates are FactorGraphs holding the new factors and
+// the initial values of the new variables (insert()).
+class PyIncrementalSmoother {
+ public:
+  PyIncrementalSmoother(int recent_variables, bool background_batch) {
+    graph::IncrementalSmootherConfig config;
+    config.recent_variables = recent_variables;
+    config.background_batch = background_batch;
+    smoother_ = std::make_unique<graph::IncrementalSmoother>(config);
+  }
+  py::dict update(const PyFactorGraph& new_factors) {
+    const graph::IncrementalUpdateSummary summary = value_or_raise(smoother_->update(new_factors.factors(), new_factors.initial_values()));
+    py::dict result;
+    result["optimized_variables"] = summary.optimized_variables;
+    result["local_chi2_before"] = summary.local_chi2_before;
+    result["local_chi2_after"] = summary.local_chi2_after;
+    result["batch_merged"] = summary.batch_merged;
+    return result;
+  }
+  py::object at(graph::Key key) const {
+    const auto found = smoother_->estimate().all().find(key);
+    if (found == smoother_->estimate().all().end()) throw py::key_error(fmt::format("no value for {}", graph::key_to_string(key)));
+    return to_python(found->second);
+  }
+  /// Runs the full batch to convergence; returns its final cost.
+  double wait_for_batch() { return value_or_raise(smoother_->wait_for_batch()).final_chi2; }
+  std::size_t size() const { return smoother_->estimate().size(); }
+
+ private:
+  std::unique_ptr<graph::IncrementalSmoother> smoother_;
 };
 
 }  // namespace
@@ -279,6 +362,10 @@ PYBIND11_MODULE(_fusion, module) {
       .def_property_readonly("final_error", [](const OptimizeResult& r) { return r.summary.final_chi2; })
       .def_property_readonly("iterations", [](const OptimizeResult& r) { return r.summary.iterations; })
       .def_property_readonly("converged", [](const OptimizeResult& r) { return r.summary.converged; })
+      .def("g2o_chi2", &OptimizeResult::g2o_chi2, "g2o's chi2 of the result (graphs read from a file)")
+      .def("se_sync_objective", &OptimizeResult::se_sync_objective,
+           "SE-Sync's objective of the result, comparable with its published optima (graphs read from a file)")
+      .def("write_g2o", &OptimizeResult::write_g2o, "Writes the file's graph with the optimized vertices", py::arg("path"))
       .def("keys", [](const OptimizeResult& r) {
         std::vector<graph::Key> keys;
         for (const auto& [key, value] : r.values.all()) keys.push_back(key);
@@ -293,8 +380,23 @@ PYBIND11_MODULE(_fusion, module) {
       .def("add_gps_factor", &PyFactorGraph::add_gps_factor, "A GNSS position in the local ENU frame (metres; see geodetic_to_enu)",
            py::arg("key"), py::arg("measurement"), py::arg("noise"), py::arg("lever_arm") = Eigen::Vector3d::Zero())
       .def("insert", &PyFactorGraph::insert, "An initial value (optional: optimize() chains between factors)", py::arg("key"), py::arg("value"))
-      .def("optimize", &PyFactorGraph::optimize, "Batch Levenberg-Marquardt", py::arg("max_iterations") = 100)
+      .def("optimize", &PyFactorGraph::optimize,
+           "Batch Levenberg-Marquardt from the initial values ('initial') or, for a graph read from a file, from the chordal "
+           "relaxation of its rotations ('chordal')",
+           py::arg("max_iterations") = 100, py::arg("initialization") = "initial")
       .def("__len__", &PyFactorGraph::size);
+  module.def("read_g2o", &PyFactorGraph::from_file,
+             "A pose graph from a g2o (VERTEX_SE2 / EDGE_SE2, VERTEX_SE3:QUAT / EDGE_SE3:QUAT, FIX) or TORO .graph file; "
+             "objective 'geodesic' (g2o's between factors) or 'chordal' (SE-Sync's objective, whose optima it publishes)",
+             py::arg("path"), py::arg("objective") = "geodesic");
+  py::class_<PyIncrementalSmoother>(module, "IncrementalSmoother",
+                                    "Keyframe-rate smoothing: each update() adds factors and new variables and re-optimizes around them")
+      .def(py::init<int, bool>(), py::arg("recent_variables") = 20, py::arg("background_batch") = true)
+      .def("update", &PyIncrementalSmoother::update,
+           "Adds a FactorGraph's factors and the initial values inserted into it (new variables only)", py::arg("new_factors"))
+      .def("at", &PyIncrementalSmoother::at, "The current estimate of a key", py::arg("key"))
+      .def("wait_for_batch", &PyIncrementalSmoother::wait_for_batch, "Runs the full batch to convergence; returns its chi2")
+      .def("__len__", &PyIncrementalSmoother::size);
 
   bind_laser_slam(module);
   bind_lidar_odometry(module);

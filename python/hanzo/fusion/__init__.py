@@ -7,6 +7,7 @@ from hanzo.fusion._fusion import (  # noqa: F401
     B,
     CarmenLog,
     FactorGraph,
+    IncrementalSmoother,
     L,
     LidarOdometry,
     LidarOdometryEstimate,
@@ -21,4 +22,5 @@ from hanzo.fusion._fusion import (  # noqa: F401
     geodetic_to_enu,
     key_to_string,
     read_carmen,
+    read_g2o,
 )
