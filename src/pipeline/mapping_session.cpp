@@ -71,8 +71,6 @@ MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionC
       loop_closures_(config_.loop, config_.lidar_odometry.odometry),
       map_builder_(maps::MapBuilder::create(config_.map).value()) {
   if (!lidar_sensor_.empty()) odometry_.emplace(*session_, lidar_sensor_, T_body_lidar_, config_.lidar_odometry);
-  lidar_statistics_.name = lidar_sensor_;
-  lidar_statistics_.modality = config::SensorModality::kLidar;
   session_->set_keyframe_callback([this](const msgs::Keyframe& keyframe) {
     if (Status added = graph_.add_keyframe(keyframe); !added) {
       logger()->warn("mapping session: keyframe {} not added to the graph: {}", keyframe.keyframe_id, added.error().message);
@@ -330,7 +328,14 @@ msgs::FusionMap MappingSession::map() const {
 SessionSummary MappingSession::summary() const {
   SessionSummary summary = session_->summary();
   for (SensorStatistics& sensor : summary.sensors) {
-    if (odometry_ && sensor.name == lidar_sensor_) sensor = lidar_statistics_;
+    if (!odometry_ || sensor.name != lidar_sensor_) continue;
+    // Sweeps come here, not through Session::push: our counts; the Session's timeout and
+    // consistency monitoring of the fused poses stay.
+    sensor.received = lidar_statistics_.received;
+    sensor.fused = lidar_statistics_.fused;
+    sensor.rejected = lidar_statistics_.rejected;
+    sensor.first_time = lidar_statistics_.first_time;
+    sensor.last_time = lidar_statistics_.last_time;
   }
   return summary;
 }
