@@ -1,6 +1,7 @@
 #include "hanzo/fusion/pipeline/lidar_inertial_odometry.hpp"
 
 #include <algorithm>
+#include <chrono>
 
 #include <fmt/format.h>
 
@@ -13,55 +14,85 @@ LidarInertialOdometry::LidarInertialOdometry(Session& session, std::string lidar
     : session_(session), lidar_sensor_(std::move(lidar_sensor)), T_body_lidar_(T_body_lidar), config_(std::move(config)) {}
 
 Result<lidar::LidarOdometryEstimate> LidarInertialOdometry::process(const msgs::PointCloudMessage& scan) {
+  PreparedScan prepared;
+  HANZO_ASSIGN_OR_RETURN(prepared, prepare(scan));
+  RegisteredScan registered;
+  HANZO_ASSIGN_OR_RETURN(registered, fuse(register_scan(prepared)));
+  return std::move(registered.estimate);
+}
+
+Result<LidarInertialOdometry::PreparedScan> LidarInertialOdometry::prepare(const msgs::PointCloudMessage& scan) {
   auto refuse = [this](const std::string& reason) -> Error {
     ++statistics_.refused;
     return Error(fmt::format("lidar-inertial odometry ({}): {}", lidar_sensor_, reason));
   };
-  auto cloud = cloud::from_message(scan);
+  PreparedScan prepared;
+  prepared.time = scan.timestamp;
+  Result<cloud::PointCloud> cloud = cloud::from_message(scan);
   if (!cloud) return refuse(cloud.error().message);
-  const double middle = cloud->has_times() ? 0.5 * static_cast<double>(*std::max_element(cloud->times.begin(), cloud->times.end())) : 0.0;
+  prepared.cloud = std::move(cloud).value();
+  const std::vector<float>& times = prepared.cloud.times;
+  const double middle = prepared.cloud.has_times() ? 0.5 * static_cast<double>(*std::max_element(times.begin(), times.end())) : 0.0;
   const Timestamp middle_time = scan.timestamp + Duration::from_seconds(middle);
   const std::optional<SE3> T_world_body = session_.pose_at(middle_time);
   if (!T_world_body) {
     return refuse(fmt::format("no filter pose at {:.6f} s (the session is not initialized, or the IMU has not reached the "
                               "sweep yet, or the sweep is older than the lag window)", middle_time.seconds()));
   }
-  const SE3 T_world_lidar = *T_world_body * T_body_lidar_;
+  prepared.T_world_lidar_filter = *T_world_body * T_body_lidar_;
+  prepared.world_correction = session_.world_correction();
+  return prepared;
+}
+
+Result<LidarInertialOdometry::RegisteredScan> LidarInertialOdometry::register_scan(const PreparedScan& scan) {
+  const auto started = std::chrono::steady_clock::now();
+  const SE3& T_world_lidar = scan.T_world_lidar_filter;
   // Backend corrections since the previous sweep moved the session's world: follow them.
-  const SE3 correction = session_.world_correction();
-  if (!odometry_) correction_at_last_scan_ = correction;  // the odometry starts in today's world
-  const SE3 correction_since = correction * correction_at_last_scan_.inverse();
+  if (!odometry_) correction_at_last_scan_ = scan.world_correction;  // the odometry starts in today's world
+  const SE3 correction_since = scan.world_correction * correction_at_last_scan_.inverse();
   if (last_filter_pose_) last_filter_pose_ = correction_since * *last_filter_pose_;
   T_world_odometry_ = correction_since * T_world_odometry_;
-  correction_at_last_scan_ = correction;
+  correction_at_last_scan_ = scan.world_correction;
   if (!odometry_) odometry_ = std::make_unique<lidar::LidarOdometry>(config_.odometry, T_world_lidar);
   // The filter's motion since the previous sweep (not its absolute pose: where the filter and
   // the odometry disagree, e.g. after a gated update, the motion is still right).
   std::optional<SE3> motion;
   if (last_filter_pose_) motion = last_filter_pose_->inverse() * T_world_lidar;
-  auto estimate = odometry_->add_scan(scan.timestamp, *cloud, motion);
-  if (!estimate) return refuse(estimate.error().message);
+  RegisteredScan registered;
+  HANZO_ASSIGN_OR_RETURN(registered.estimate,
+                         with_context(odometry_->add_scan(scan.time, scan.cloud, motion), "lidar-inertial odometry (" + lidar_sensor_ + ")"));
   last_filter_pose_ = T_world_lidar;
-  ++statistics_.scans;
-  statistics_.degenerate += estimate->degenerate ? 1 : 0;
-  statistics_.weather_degraded += estimate->weather_degraded ? 1 : 0;
-
+  registered.T_world_lidar = T_world_odometry_ * registered.estimate.T_world_lidar;
   // Covariance over (position in the world, rotation in the sensor frame): the tangent's
   // translation rho is in the sensor frame (right perturbation), so position = R rho.
   Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Identity();
-  J.topLeftCorner<3, 3>() = (T_world_odometry_ * estimate->T_world_lidar).rotation().matrix();
-  Eigen::Matrix<double, 6, 6> covariance = J * estimate->covariance * J.transpose();
+  J.topLeftCorner<3, 3>() = registered.T_world_lidar.rotation().matrix();
+  Eigen::Matrix<double, 6, 6> covariance = J * registered.estimate.covariance * J.transpose();
   covariance = 0.5 * (covariance + covariance.transpose());
   covariance.diagonal().head<3>().array() += config_.position_sigma_floor * config_.position_sigma_floor;
   covariance.diagonal().tail<3>().array() += config_.rotation_sigma_floor * config_.rotation_sigma_floor;
-  if (estimate->weather_degraded) covariance *= config_.weather_covariance_scale;
-  if (Status fused = session_.push_pose(lidar_sensor_, estimate->time, T_world_odometry_ * estimate->T_world_lidar, covariance); fused) {
-    ++statistics_.fused;
-  } else {
+  if (registered.estimate.weather_degraded) covariance *= config_.weather_covariance_scale;
+  registered.covariance = covariance;
+  registered.points = odometry_->last_scan_points();
+  registered.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return registered;
+}
+
+Result<LidarInertialOdometry::RegisteredScan> LidarInertialOdometry::fuse(Result<RegisteredScan> registered) {
+  if (!registered) {
+    ++statistics_.refused;
+    return registered.error();
+  }
+  const lidar::LidarOdometryEstimate& estimate = registered->estimate;
+  ++statistics_.scans;
+  statistics_.degenerate += estimate.degenerate ? 1 : 0;
+  statistics_.weather_degraded += estimate.weather_degraded ? 1 : 0;
+  if (Status fused = session_.push_pose(lidar_sensor_, estimate.time, registered->T_world_lidar, registered->covariance); !fused) {
     return Error(fmt::format("lidar-inertial odometry ({}): registered, but the session refused the pose: {}", lidar_sensor_,
                              fused.error().message));
   }
-  return estimate;
+  ++statistics_.fused;
+  return registered;
 }
 
 }  // namespace hanzo::fusion::pipeline

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <chrono>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -25,6 +28,68 @@ constexpr double kMapMoveTranslation = 0.01;  // m
 constexpr double kMapMoveRotation = 0.001;    // rad
 
 }  // namespace
+
+// Registers prepared sweeps on a thread of its own, in order; at most `capacity` wait (submit()
+// blocks beyond: a replay faster than registration slows down instead of losing sweeps).
+class MappingSession::RegistrationWorker {
+ public:
+  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity)
+      : odometry_(odometry), capacity_(capacity), thread_([this] { run(); }) {}
+  ~RegistrationWorker() {
+    {
+      std::lock_guard lock(mutex_);
+      stopping_ = true;
+    }
+    changed_.notify_all();
+    thread_.join();
+  }
+  void submit(LidarInertialOdometry::PreparedScan scan) {
+    std::unique_lock lock(mutex_);
+    changed_.wait(lock, [&] { return jobs_.size() < capacity_; });
+    jobs_.push_back(std::move(scan));
+    changed_.notify_all();
+  }
+  /// The registrations finished so far, in order.
+  std::vector<Result<LidarInertialOdometry::RegisteredScan>> take_done() {
+    std::lock_guard lock(mutex_);
+    std::vector<Result<LidarInertialOdometry::RegisteredScan>> done(std::make_move_iterator(done_.begin()), std::make_move_iterator(done_.end()));
+    done_.clear();
+    return done;
+  }
+  void wait_idle() {
+    std::unique_lock lock(mutex_);
+    changed_.wait(lock, [&] { return jobs_.empty() && !busy_; });
+  }
+
+ private:
+  void run() {
+    std::unique_lock lock(mutex_);
+    while (true) {
+      changed_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
+      if (stopping_) return;
+      LidarInertialOdometry::PreparedScan scan = std::move(jobs_.front());
+      jobs_.pop_front();
+      busy_ = true;
+      changed_.notify_all();  // a slot is free
+      lock.unlock();
+      Result<LidarInertialOdometry::RegisteredScan> registered = odometry_.register_scan(scan);
+      lock.lock();
+      done_.push_back(std::move(registered));
+      busy_ = false;
+      changed_.notify_all();
+    }
+  }
+
+  LidarInertialOdometry& odometry_;
+  std::size_t capacity_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  std::deque<LidarInertialOdometry::PreparedScan> jobs_;
+  std::deque<Result<LidarInertialOdometry::RegisteredScan>> done_;
+  bool busy_ = false;
+  bool stopping_ = false;
+  std::thread thread_;  // last: starts once the members above exist
+};
 
 maps::MapBuilderConfig MappingSessionConfig::default_map() {
   maps::MapBuilderConfig map;
@@ -70,7 +135,13 @@ MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionC
       graph_(config_.backend),
       loop_closures_(config_.loop, config_.lidar_odometry.odometry),
       map_builder_(maps::MapBuilder::create(config_.map).value()) {
-  if (!lidar_sensor_.empty()) odometry_.emplace(*session_, lidar_sensor_, T_body_lidar_, config_.lidar_odometry);
+  if (!lidar_sensor_.empty()) {
+    odometry_.emplace(*session_, lidar_sensor_, T_body_lidar_, config_.lidar_odometry);
+    // Two sweeps in the worker's queue: the IMU may then run ~0.3 s ahead of the sweep being
+    // registered, inside the default 0.5 s lag window its late pose must land in.
+    constexpr std::size_t kWorkerQueue = 2;
+    if (config_.asynchronous_registration) worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue);
+  }
   session_->set_keyframe_callback([this](const msgs::Keyframe& keyframe) {
     if (Status added = graph_.add_keyframe(keyframe); !added) {
       logger()->warn("mapping session: keyframe {} not added to the graph: {}", keyframe.keyframe_id, added.error().message);
@@ -82,7 +153,7 @@ MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionC
   });
 }
 
-MappingSession::~MappingSession() = default;
+MappingSession::~MappingSession() { worker_.reset(); }  // before the odometry it registers with
 
 Status MappingSession::push(std::string_view sensor, const msgs::SensorMessage& message) {
   if (odometry_ && sensor == lidar_sensor_) {
@@ -97,6 +168,8 @@ Status MappingSession::push(std::string_view sensor, const msgs::SensorMessage& 
 void MappingSession::flush() {
   session_->flush();
   register_ready_scans();
+  if (worker_) worker_->wait_idle();
+  take_registered();
   update_backend();
 }
 
@@ -134,29 +207,44 @@ void MappingSession::count_refused(const std::string& reason) {
 }
 
 void MappingSession::register_ready_scans() {
+  take_registered();
   while (!waiting_scans_.empty()) {
     const std::optional<msgs::PoseEstimate> latest = session_->latest_pose();
-    if (!latest || latest->timestamp < sweep_end(waiting_scans_.front())) return;
+    if (!latest || latest->timestamp < sweep_end(waiting_scans_.front())) break;
     const msgs::PointCloudMessage scan = std::move(waiting_scans_.front());
     waiting_scans_.pop_front();
-    const auto started = std::chrono::steady_clock::now();
-    Result<lidar::LidarOdometryEstimate> estimate = odometry_->process(scan);
-    summary_.last_registration_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - started).count();
-    if (!estimate) {
-      logger()->debug("mapping session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), estimate.error().message);
+    Result<LidarInertialOdometry::PreparedScan> prepared = odometry_->prepare(scan);
+    if (!prepared) {
+      logger()->debug("mapping session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
       count_refused("not_registered");
-      continue;
+    } else if (worker_) {
+      worker_->submit(std::move(prepared).value());
+    } else {
+      on_registered(odometry_->register_scan(*prepared));
     }
-    on_registered(*estimate);
   }
+  take_registered();
 }
 
-void MappingSession::on_registered(const lidar::LidarOdometryEstimate& estimate) {
+void MappingSession::take_registered() {
+  if (!worker_) return;
+  for (Result<LidarInertialOdometry::RegisteredScan>& registered : worker_->take_done()) on_registered(std::move(registered));
+}
+
+void MappingSession::on_registered(Result<LidarInertialOdometry::RegisteredScan> result) {
+  Result<LidarInertialOdometry::RegisteredScan> fused = odometry_->fuse(std::move(result));
+  if (!fused) {
+    logger()->debug("mapping session: sweep not fused: {}", fused.error().message);
+    count_refused("not_registered");
+    return;
+  }
+  const LidarInertialOdometry::RegisteredScan& registered = *fused;
+  summary_.last_registration_ms = 1e3 * registered.seconds;
   ++lidar_statistics_.fused;
   ++summary_.scans_registered;
-  summary_.degenerate_scans += estimate.degenerate ? 1 : 0;
-  summary_.weather_degraded_scans += estimate.weather_degraded ? 1 : 0;
-  const SE3 T_world_lidar = odometry_->T_world_odometry() * estimate.T_world_lidar;
+  summary_.degenerate_scans += registered.estimate.degenerate ? 1 : 0;
+  summary_.weather_degraded_scans += registered.estimate.weather_degraded ? 1 : 0;
+  const SE3& T_world_lidar = registered.T_world_lidar;
   if (last_lidar_pose_) path_ += (last_lidar_pose_->inverse() * T_world_lidar).translation().norm();
   last_lidar_pose_ = T_world_lidar;
   // A map keyframe: the first sweep after a new Session keyframe, once the LiDAR moved enough.
@@ -165,7 +253,7 @@ void MappingSession::on_registered(const lidar::LidarOdometryEstimate& estimate)
     const SE3 since = map_keyframes_.back().T_world_lidar.inverse() * T_world_lidar;
     if (since.translation().norm() < config_.map_keyframe_distance && since.rotation().log().norm() < config_.map_keyframe_angle) return;
   }
-  add_map_keyframe(latest_keyframe_->keyframe_id, T_world_lidar, odometry_->odometry()->last_scan_points());
+  add_map_keyframe(latest_keyframe_->keyframe_id, T_world_lidar, registered.points);
 }
 
 void MappingSession::add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points) {

@@ -135,7 +135,9 @@ struct SessionManager::Impl {
   // A pipeline::MappingSession for `managed` with its callbacks wired (not yet installed).
   Result<std::unique_ptr<pipeline::MappingSession>> make_pipeline(ManagedSession& managed, const config::FusionConfig& configuration,
                                                                   const calib::Calibration& calibration) {
-    auto session = pipeline::MappingSession::create(configuration, calibration);
+    pipeline::MappingSessionConfig mapping;
+    mapping.asynchronous_registration = true;  // the IMU's poses never wait for a LiDAR registration
+    auto session = pipeline::MappingSession::create(configuration, calibration, mapping);
     if (!session) return session.error();
     ManagedSession* raw = &managed;
     session.value()->set_pose_callback([this, raw](const msgs::PoseEstimate& pose) { on_pose(*raw, pose); });

@@ -157,5 +157,34 @@ TEST(MappingSession, RefusesBadSweepsWithAReasonAndKeepsMapping) {
   EXPECT_GT(mapping->mapping_summary().map_keyframes, 2U);
 }
 
+TEST(MappingSession, AsynchronousRegistrationFusesTheSweepsLateAndKeepsTheTrack) {
+  // The server's mode: sweeps registered on the session's worker thread, fused when the next
+  // message comes (in the past, by rolling back). Pushed as fast as possible here: push() waits
+  // when two sweeps queue up, so none is lost.
+  const sim::Scenario scenario = imu_and_lidar(25.0);
+  auto simulation = sim::ScenarioSimulation::create(scenario).value();
+  MappingSessionConfig config;
+  config.asynchronous_registration = true;
+  auto mapping = MappingSession::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario), config).value();
+  const sim::SplineTrajectory& trajectory = simulation->trajectory();
+  std::optional<msgs::PoseEstimate> first, latest;
+  mapping->set_pose_callback([&](const msgs::PoseEstimate& pose) {
+    if (!first && (pose.timestamp - trajectory.start_time()).seconds() > 2.0) first = pose;
+    if (!latest || latest->timestamp <= pose.timestamp) latest = pose;
+  });
+  const Status status = simulation->run(
+      [&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status { return mapping->push(sensor.name, message); });
+  ASSERT_TRUE(status.ok()) << status.error().message;
+  mapping->flush();
+  const MappingSummary summary = mapping->mapping_summary();
+  EXPECT_EQ(summary.scans_received, 250U);
+  EXPECT_GT(summary.scans_registered, 225U);  // all but those before the IMU's alignment
+  EXPECT_GT(summary.map_keyframes, 15U);
+  ASSERT_TRUE(first && latest);
+  EXPECT_LT(start_to_end_error(first->T_world_body.to_se3(), latest->T_world_body.to_se3(), trajectory.sample(first->timestamp).T_world_body,
+                               trajectory.sample(latest->timestamp).T_world_body),
+            0.2);
+}
+
 }  // namespace
 }  // namespace hanzo::fusion::pipeline

@@ -24,6 +24,7 @@
 #include <optional>
 #include <string>
 
+#include "hanzo/fusion/cloud/point_cloud.hpp"
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/lidar/lidar_odometry.hpp"
@@ -61,14 +62,38 @@ class LidarInertialOdometry {
 
   /// Registers one sweep (sensor clock = body clock, as the Session's calibration has it) and
   /// fuses the result. Push the IMU messages up to the end of the sweep into the Session first.
+  /// = fuse(register_scan(prepare(scan))).
   Result<lidar::LidarOdometryEstimate> process(const msgs::PointCloudMessage& scan);
 
+  /// The three steps of process(), for callers that register on another thread (the server:
+  /// the IMU's poses then never wait for a registration). prepare() and fuse() use the Session
+  /// (call them where the Session is used); register_scan() touches only the odometry (one call
+  /// at a time, in the order of prepare(); no Session access), so it may run elsewhere. fuse()
+  /// of a sweep registered late pushes a pose in the past: the Session fuses it by rolling
+  /// back, if it is still within its lag window.
+  struct PreparedScan {
+    Timestamp time;                 ///< the sweep's timestamp (its start)
+    cloud::PointCloud cloud;
+    SE3 T_world_lidar_filter;       ///< the filter's pose at the middle of the sweep
+    SE3 world_correction;           ///< Session::world_correction() then
+  };
+  struct RegisteredScan {
+    lidar::LidarOdometryEstimate estimate;  ///< in the odometry's frame
+    SE3 T_world_lidar;                      ///< in the session's world
+    Eigen::Matrix<double, 6, 6> covariance; ///< of the pose measurement (floors, weather included)
+    std::vector<Eigen::Vector3f> points;    ///< the deskewed sweep (sensor frame), for maps
+    double seconds = 0.0;                   ///< time the registration took
+  };
+  Result<PreparedScan> prepare(const msgs::PointCloudMessage& scan);
+  Result<RegisteredScan> register_scan(const PreparedScan& scan);
+  /// Counts the outcome and fuses a registered sweep; returns it, or the error (registration
+  /// failure, or the Session refusing the pose).
+  Result<RegisteredScan> fuse(Result<RegisteredScan> registered);
+
   const LidarInertialOdometryStatistics& statistics() const { return statistics_; }
-  /// The odometry (its local map, latest pose); nullptr before the first scan.
+  /// The odometry (its local map, latest pose); nullptr before the first scan. Not while
+  /// register_scan() runs on another thread.
   const lidar::LidarOdometry* odometry() const { return odometry_.get(); }
-  /// The odometry's frame in the session's world (identity until a backend correction): the
-  /// session-world pose of an estimate is T_world_odometry() * estimate.T_world_lidar.
-  const SE3& T_world_odometry() const { return T_world_odometry_; }
 
  private:
   Session& session_;
@@ -76,6 +101,7 @@ class LidarInertialOdometry {
   SE3 T_body_lidar_;
   LidarInertialOdometryConfig config_;
   std::unique_ptr<lidar::LidarOdometry> odometry_;
+  // register_scan()'s state:
   std::optional<SE3> last_filter_pose_;  ///< the filter's T_world_lidar at the last registered sweep
   SE3 T_world_odometry_;                 ///< the odometry's frame in the session's (corrected) world
   SE3 correction_at_last_scan_;          ///< Session::world_correction() then

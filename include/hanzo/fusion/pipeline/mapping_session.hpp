@@ -68,6 +68,12 @@ struct MappingSessionConfig {
   /// Map layers. Default: 0.2 m points (keyframes kept at 0.1 m) and a 0.1 m 2D occupancy grid.
   maps::MapBuilderConfig map = default_map();
   std::size_t max_waiting_scans = 5;     ///< sweeps waiting for the IMU; beyond, the oldest is dropped
+  /// Register sweeps on a thread of the session's own (the server's setting): the IMU's poses
+  /// never wait for a registration, the result is fused when the next message arrives, as a
+  /// measurement in the past (the Session rolls back; it must come within frontend.lag_window_s).
+  /// At most two sweeps wait for the worker; push() waits beyond. Off: sweeps
+  /// are registered inside push(), deterministically (replays, tests).
+  bool asynchronous_registration = false;
   Status validate() const;
   static maps::MapBuilderConfig default_map();
 };
@@ -163,8 +169,11 @@ class MappingSession {
   };
   MappingSession(std::unique_ptr<Session> session, MappingSessionConfig config, std::string lidar_sensor, const SE3& T_body_lidar);
   Status push_scan(const msgs::PointCloudMessage& scan);
+  class RegistrationWorker;
   void register_ready_scans();
-  void on_registered(const lidar::LidarOdometryEstimate& estimate);
+  /// Fuses what the worker registered (asynchronous_registration).
+  void take_registered();
+  void on_registered(Result<LidarInertialOdometry::RegisteredScan> registered);
   void add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points);
   /// T_world_lidar of map keyframe k by the graph's current estimate.
   SE3 map_keyframe_pose(std::size_t k) const;
@@ -179,6 +188,7 @@ class MappingSession {
   SE3 T_body_lidar_;
   KeyframeGraph graph_;
   std::optional<LidarInertialOdometry> odometry_;
+  std::unique_ptr<RegistrationWorker> worker_;  ///< asynchronous_registration
   lidar::LoopClosureDetector loop_closures_;
   maps::MapBuilder map_builder_;
   std::deque<msgs::PointCloudMessage> waiting_scans_;
