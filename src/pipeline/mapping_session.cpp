@@ -1,5 +1,9 @@
 #include "hanzo/fusion/pipeline/mapping_session.hpp"
 
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -29,12 +33,12 @@ constexpr double kMapMoveRotation = 0.001;    // rad
 
 }  // namespace
 
-// Registers prepared sweeps on a thread of its own, in order; at most `capacity` wait (submit()
-// blocks beyond: a replay faster than registration slows down instead of losing sweeps).
+// Registers prepared sweeps on a thread of its own, in order; at most `capacity` wait (beyond,
+// submit() drops the oldest waiting sweep when drop_when_busy, else blocks).
 class MappingSession::RegistrationWorker {
  public:
-  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity)
-      : odometry_(odometry), capacity_(capacity), thread_([this] { run(); }) {}
+  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity, bool drop_when_busy, int niceness)
+      : odometry_(odometry), capacity_(capacity), drop_when_busy_(drop_when_busy), niceness_(niceness), thread_([this] { run(); }) {}
   ~RegistrationWorker() {
     {
       std::lock_guard lock(mutex_);
@@ -43,11 +47,18 @@ class MappingSession::RegistrationWorker {
     changed_.notify_all();
     thread_.join();
   }
-  void submit(LidarInertialOdometry::PreparedScan scan) {
+  /// Returns how many waiting sweeps were dropped to make room (0 or 1).
+  std::size_t submit(LidarInertialOdometry::PreparedScan scan) {
     std::unique_lock lock(mutex_);
-    changed_.wait(lock, [&] { return jobs_.size() < capacity_; });
+    std::size_t dropped = 0;
+    if (drop_when_busy_) {
+      for (; jobs_.size() >= capacity_; ++dropped) jobs_.pop_front();
+    } else {
+      changed_.wait(lock, [&] { return jobs_.size() < capacity_; });
+    }
     jobs_.push_back(std::move(scan));
     changed_.notify_all();
+    return dropped;
   }
   /// The registrations finished so far, in order.
   std::vector<Result<LidarInertialOdometry::RegisteredScan>> take_done() {
@@ -63,6 +74,10 @@ class MappingSession::RegistrationWorker {
 
  private:
   void run() {
+    // Linux: setpriority on a thread id sets that thread's nice value only.
+    if (niceness_ != 0 && setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), niceness_) != 0) {
+      logger()->warn("mapping session: cannot set the registration thread's nice value to {}", niceness_);
+    }
     std::unique_lock lock(mutex_);
     while (true) {
       changed_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
@@ -82,6 +97,8 @@ class MappingSession::RegistrationWorker {
 
   LidarInertialOdometry& odometry_;
   std::size_t capacity_;
+  bool drop_when_busy_;
+  int niceness_;
   std::mutex mutex_;
   std::condition_variable changed_;
   std::deque<LidarInertialOdometry::PreparedScan> jobs_;
@@ -106,6 +123,7 @@ Status MappingSessionConfig::validate() const {
   if (!(loop_translation_sigma > 0) || !(loop_rotation_sigma > 0)) return Error("loop_translation_sigma, loop_rotation_sigma: must be > 0");
   if (!(map_keyframe_distance >= 0) || !(map_keyframe_angle >= 0)) return Error("map_keyframe_distance, map_keyframe_angle: must be >= 0");
   if (max_waiting_scans == 0) return Error("max_waiting_scans: must be > 0");
+  if (registration_niceness < 0 || registration_niceness > 19) return Error("registration_niceness: must be in 0..19");
   return ok_status();
 }
 
@@ -140,7 +158,9 @@ MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionC
     // Two sweeps in the worker's queue: the IMU may then run ~0.3 s ahead of the sweep being
     // registered, inside the default 0.5 s lag window its late pose must land in.
     constexpr std::size_t kWorkerQueue = 2;
-    if (config_.asynchronous_registration) worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue);
+    if (config_.asynchronous_registration) {
+      worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue, config_.drop_sweeps_when_busy, config_.registration_niceness);
+    }
   }
   session_->set_keyframe_callback([this](const msgs::Keyframe& keyframe) {
     if (Status added = graph_.add_keyframe(keyframe); !added) {
@@ -218,7 +238,7 @@ void MappingSession::register_ready_scans() {
       logger()->debug("mapping session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
       count_refused("not_registered");
     } else if (worker_) {
-      worker_->submit(std::move(prepared).value());
+      for (std::size_t dropped = worker_->submit(std::move(prepared).value()); dropped > 0; --dropped) count_refused("registration_busy");
     } else {
       on_registered(odometry_->register_scan(*prepared));
     }

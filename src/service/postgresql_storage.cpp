@@ -47,6 +47,13 @@ CREATE TABLE IF NOT EXISTS map_versions (
   PRIMARY KEY (map_id, version)
 );
 CREATE INDEX IF NOT EXISTS map_versions_by_session ON map_versions (session_id);
+CREATE TABLE IF NOT EXISTS maps (
+  map_id TEXT PRIMARY KEY,
+  organization TEXT NOT NULL,
+  name TEXT NOT NULL,
+  session_id TEXT NOT NULL,
+  created_ns BIGINT NOT NULL
+);
 )sql";
 
 constexpr const char* kInsertPose =
@@ -73,6 +80,8 @@ class PostgresqlStorage final : public Storage {
         schema_error_ = fmt::format("{}: database schema version {} is newer than this program's ({}); upgrade hanzo-fusion",
                                     where_, version[0][0].as<int>(), kStorageSchemaVersion);
         return;
+      } else if (version[0][0].as<int>() < kStorageSchemaVersion) {  // the schema above added what is new
+        work.exec(fmt::format("UPDATE hanzo_schema SET version = {}", kStorageSchemaVersion));
       }
       work.commit();
       make_hypertable_when_available();
@@ -204,6 +213,27 @@ class PostgresqlStorage final : public Storage {
       if (!row[2].is_null()) extent.last = Timestamp::from_nanoseconds(row[2].as<int64_t>());
     }));
     return extent;
+  }
+
+  Status create_map(const MapRecord& map) override {
+    return run(fmt::format("store map '{}'", map.map_id), [&] {
+      pqxx::work work(*connection_);
+      work.exec_params0("INSERT INTO maps (map_id, organization, name, session_id, created_ns) VALUES ($1, $2, $3, $4, $5)",
+                        map.map_id, map.organization, map.name, map.session_id, map.created.nanoseconds());
+      work.commit();
+    });
+  }
+
+  Result<std::vector<MapRecord>> maps() override {
+    std::vector<MapRecord> records;
+    HANZO_RETURN_IF_ERROR(run("list maps", [&] {
+      pqxx::read_transaction work(*connection_);
+      for (const pqxx::row& row : work.exec("SELECT map_id, organization, name, session_id, created_ns FROM maps ORDER BY created_ns, map_id")) {
+        records.push_back({row[0].as<std::string>(), row[1].as<std::string>(), row[2].as<std::string>(), row[3].as<std::string>(),
+                           Timestamp::from_nanoseconds(row[4].as<int64_t>())});
+      }
+    }));
+    return records;
   }
 
   Status record_map_version(const MapVersionRecord& record) override {

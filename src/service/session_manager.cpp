@@ -136,7 +136,11 @@ struct SessionManager::Impl {
   Result<std::unique_ptr<pipeline::MappingSession>> make_pipeline(ManagedSession& managed, const config::FusionConfig& configuration,
                                                                   const calib::Calibration& calibration) {
     pipeline::MappingSessionConfig mapping;
-    mapping.asynchronous_registration = true;  // the IMU's poses never wait for a LiDAR registration
+    // The IMU's poses never wait for a LiDAR registration; an overloaded server registers the
+    // sweeps it can (the others are refused "registration_busy") and keeps the poses at sensor rate.
+    mapping.asynchronous_registration = true;
+    mapping.drop_sweeps_when_busy = true;
+    mapping.registration_niceness = 10;
     auto session = pipeline::MappingSession::create(configuration, calibration, mapping);
     if (!session) return session.error();
     ManagedSession* raw = &managed;

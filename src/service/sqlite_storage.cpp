@@ -43,6 +43,13 @@ CREATE TABLE IF NOT EXISTS map_versions (
   PRIMARY KEY (map_id, version)
 );
 CREATE INDEX IF NOT EXISTS map_versions_by_session ON map_versions (session_id);
+CREATE TABLE IF NOT EXISTS maps (
+  map_id TEXT PRIMARY KEY,
+  organization TEXT NOT NULL,
+  name TEXT NOT NULL,
+  session_id TEXT NOT NULL,
+  created_ns INTEGER NOT NULL
+);
 )sql";
 
 // A prepared statement, finalized on destruction.
@@ -119,6 +126,9 @@ class SqliteStorage final : public Storage {
       if (stored > kStorageSchemaVersion) {
         return Error(fmt::format("{}: database schema version {} is newer than this program's ({}); upgrade hanzo-fusion",
                                  path_, stored, kStorageSchemaVersion));
+      }
+      if (stored < kStorageSchemaVersion) {  // the schema above added what is new
+        return execute(fmt::format("UPDATE hanzo_schema SET version = {}", kStorageSchemaVersion));
       }
       return ok_status();
     }
@@ -238,6 +248,27 @@ class SqliteStorage final : public Storage {
     if (!query.is_null(1)) extent.first = Timestamp::from_nanoseconds(query.integer(1));
     if (!query.is_null(2)) extent.last = Timestamp::from_nanoseconds(query.integer(2));
     return extent;
+  }
+
+  Status create_map(const MapRecord& map) override {
+    std::lock_guard lock(mutex_);
+    Statement insert(database_, "INSERT INTO maps (map_id, organization, name, session_id, created_ns) VALUES (?, ?, ?, ?, ?)");
+    insert.bind(1, map.map_id).bind(2, map.organization).bind(3, map.name).bind(4, map.session_id);
+    insert.bind(5, map.created.nanoseconds());
+    if (insert.step() != SQLITE_DONE) return failure(fmt::format("store map '{}'", map.map_id));
+    return ok_status();
+  }
+
+  Result<std::vector<MapRecord>> maps() override {
+    std::lock_guard lock(mutex_);
+    Statement query(database_, "SELECT map_id, organization, name, session_id, created_ns FROM maps ORDER BY created_ns, map_id");
+    std::vector<MapRecord> records;
+    int code = SQLITE_ERROR;
+    while ((code = query.step()) == SQLITE_ROW) {
+      records.push_back({query.text(0), query.text(1), query.text(2), query.text(3), Timestamp::from_nanoseconds(query.integer(4))});
+    }
+    if (code != SQLITE_DONE) return failure("list maps");
+    return records;
   }
 
   Status record_map_version(const MapVersionRecord& record) override {

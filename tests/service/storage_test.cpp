@@ -122,6 +122,9 @@ TEST_P(StorageTest, SessionsAndTrajectoriesRoundTripExactly) {
   ASSERT_TRUE(storage->record_map_version({"s1", "map-a", 1, Timestamp::from_nanoseconds(5)}).ok());
   ASSERT_TRUE(storage->record_map_version({"s1", "map-a", 2, Timestamp::from_nanoseconds(6)}).ok());
   EXPECT_FALSE(storage->record_map_version({"s1", "map-a", 2, Timestamp::from_nanoseconds(7)}).ok());
+  ASSERT_TRUE(storage->create_map({"map-a", "acme", "warehouse", "s1", Timestamp::from_nanoseconds(5)}).ok());
+  ASSERT_TRUE(storage->create_map({"plan-b", "other", "uploaded", "", Timestamp::from_nanoseconds(9)}).ok());
+  EXPECT_FALSE(storage->create_map({"map-a", "other", "taken", "", Timestamp::from_nanoseconds(10)}).ok());  // id taken
 
   // Everything is there after reopening.
   storage.reset();
@@ -139,7 +142,43 @@ TEST_P(StorageTest, SessionsAndTrajectoriesRoundTripExactly) {
   ASSERT_TRUE(maps.ok());
   ASSERT_EQ(maps->size(), 2u);
   EXPECT_EQ(maps->back().version, 2u);
+  const auto map_records = storage->maps();
+  ASSERT_TRUE(map_records.ok()) << map_records.error().message;
+  ASSERT_EQ(map_records->size(), 2u);
+  EXPECT_EQ(map_records->front().map_id, "map-a");
+  EXPECT_EQ(map_records->front().organization, "acme");
+  EXPECT_EQ(map_records->front().name, "warehouse");
+  EXPECT_EQ(map_records->front().session_id, "s1");
+  EXPECT_EQ(map_records->back().session_id, "");
+  EXPECT_EQ(map_records->back().created, Timestamp::from_nanoseconds(9));
   EXPECT_EQ(storage->trajectory_extent("s1")->count, 250u);
+}
+
+// A database of schema version 1 (no maps table) is upgraded in place, keeping its sessions.
+TEST_P(StorageTest, UpgradesAVersionOneDatabase) {
+  {
+    auto storage = open();
+    ASSERT_TRUE(storage);
+    ASSERT_TRUE(storage->create_session({"s1", "acme", "old", "fusion: {}\n", "", Timestamp::from_nanoseconds(1), std::nullopt}).ok());
+  }
+  const char* downgrade = "DROP TABLE maps; UPDATE hanzo_schema SET version = 1";
+  if (GetParam() == "sqlite") {
+    const std::string path = url().substr(std::string("sqlite://").size());
+    sqlite3* database = nullptr;
+    ASSERT_EQ(sqlite3_open(path.c_str(), &database), SQLITE_OK);
+    ASSERT_EQ(sqlite3_exec(database, downgrade, nullptr, nullptr, nullptr), SQLITE_OK);
+    sqlite3_close(database);
+  } else {
+    pqxx::connection connection(url());
+    pqxx::work work(connection);
+    work.exec(downgrade);
+    work.commit();
+  }
+  auto storage = open();
+  ASSERT_TRUE(storage);
+  EXPECT_EQ(storage->sessions()->size(), 1u);
+  ASSERT_TRUE(storage->create_map({"m", "acme", "new", "", Timestamp::from_nanoseconds(2)}).ok());
+  EXPECT_EQ(storage->maps()->size(), 1u);
 }
 
 TEST_P(StorageTest, RefusesADatabaseOfANewerSchema) {

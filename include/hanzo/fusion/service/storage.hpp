@@ -1,7 +1,8 @@
 #pragma once
 // Persistent state of the server: sessions (who created them, their configuration and
-// calibration), trajectories (every stored PoseEstimate as a timestamped row) and the map
-// versions sessions saved. Two backends with the same schema (docs/server.md lists it):
+// calibration), trajectories (every stored PoseEstimate as a timestamped row) and maps (their
+// owner and the versions saved; the map files themselves live in a maps::MapStore). Two
+// backends with the same schema (docs/server.md lists it):
 //
 //   open_storage("sqlite:///var/lib/hanzo-fusion/fusion.db")   embedded default: SQLite in WAL
 //                                                              mode, synchronous=FULL
@@ -51,6 +52,15 @@ struct TrajectoryExtent {
   std::optional<Timestamp> last;
 };
 
+/// A stored map and who owns it: maps are scoped to the organization that saved or loaded them.
+struct MapRecord {
+  std::string map_id;
+  std::string organization;
+  std::string name;
+  std::string session_id;  // the session whose map it is; "" for a map loaded by a client (LoadMap)
+  Timestamp created;
+};
+
 struct MapVersionRecord {
   std::string session_id;
   std::string map_id;
@@ -79,7 +89,12 @@ class Storage {
                                                         std::size_t limit) = 0;
   virtual Result<TrajectoryExtent> trajectory_extent(const std::string& session_id) = 0;
 
+  /// Fails when the map id is taken.
+  virtual Status create_map(const MapRecord& map) = 0;
+  /// Every stored map, oldest first.
+  virtual Result<std::vector<MapRecord>> maps() = 0;
   virtual Status record_map_version(const MapVersionRecord& record) = 0;
+  /// The versions a session saved, oldest first.
   virtual Result<std::vector<MapVersionRecord>> map_versions(const std::string& session_id) = 0;
 };
 
@@ -89,6 +104,8 @@ class Storage {
 Result<std::unique_ptr<Storage>> open_storage(const std::string& url);
 
 /// The schema version this program writes (the `hanzo_schema` table holds the database's).
-inline constexpr int kStorageSchemaVersion = 1;
+/// 1: sessions, trajectory_poses, map_versions; 2: + maps (a version-1 database is upgraded
+/// in place: the new table is added).
+inline constexpr int kStorageSchemaVersion = 2;
 
 }  // namespace hanzo::fusion::service

@@ -1,0 +1,107 @@
+#include "hanzo/fusion/service/map_catalog.hpp"
+
+#include <algorithm>
+
+#include <fmt/format.h>
+
+#include "hanzo/fusion/core/logging.hpp"
+
+namespace hanzo::fusion::service {
+
+Result<std::unique_ptr<MapCatalog>> MapCatalog::open(const std::string& root, Storage& storage) {
+  maps::MapStore store = Error("");
+  HANZO_ASSIGN_OR_RETURN(store, maps::MapStore::open(root));
+  std::vector<MapRecord> records;
+  HANZO_ASSIGN_OR_RETURN(records, storage.maps());
+  std::unique_ptr<MapCatalog> catalog(new MapCatalog(std::move(store), storage));
+  for (MapRecord& record : records) catalog->owners_.emplace(record.map_id, std::move(record));
+  logger()->info("maps: {} stored maps in {}", catalog->owners_.size(), root);
+  return catalog;
+}
+
+ApiResult<MapRecord> MapCatalog::owned_locked(const std::string& organization, const std::string& map_id) const {
+  const auto found = owners_.find(map_id);
+  if (found == owners_.end()) return ApiError{ErrorCode::kNotFound, fmt::format("no map '{}'", map_id), "map_id"};
+  if (found->second.organization != organization) {
+    return ApiError{ErrorCode::kPermissionDenied, fmt::format("map '{}' belongs to another organization", map_id), "map_id"};
+  }
+  return found->second;
+}
+
+ApiResult<maps::MapVersionInfo> MapCatalog::save(const std::string& organization, const std::string& session_id, const std::string& name,
+                                                 msgs::FusionMap map) {
+  if (map.map_id.empty()) map.map_id = maps::generate_map_id();
+  if (const Status valid = maps::validate_map_id(map.map_id); !valid) {
+    return ApiError{ErrorCode::kInvalidArgument, "map_id: " + valid.error().message, "map_id"};
+  }
+  {
+    std::lock_guard lock(mutex_);
+    if (!owners_.contains(map.map_id)) {
+      const MapRecord record{map.map_id, organization, name.empty() ? map.map_id : name, session_id, Timestamp::wall_clock_now()};
+      if (const Status stored = storage_.create_map(record); !stored) return ApiError::from(ErrorCode::kInternal, stored.error());
+      owners_.emplace(record.map_id, record);
+    } else if (auto owned = owned_locked(organization, map.map_id); !owned) {
+      return owned.error();
+    }
+  }
+  // The file is written outside the lock: MapStore takes the next free version itself.
+  Result<maps::MapVersionInfo> saved = store_.save(std::move(map));
+  if (!saved) return ApiError::from(ErrorCode::kInternal, saved.error());
+  if (const Status recorded = storage_.record_map_version({session_id, saved->map_id, saved->version, saved->created}); !recorded) {
+    // The version is stored (its file is the source of truth); only the index row is missing.
+    logger()->warn("maps: version {} of map {} stored, but not recorded in the database: {}", saved->version, saved->map_id,
+                   recorded.error().message);
+  }
+  return std::move(saved).value();
+}
+
+ApiResult<msgs::FusionMap> MapCatalog::load(const std::string& organization, const std::string& map_id,
+                                            std::optional<uint64_t> version) const {
+  {
+    std::lock_guard lock(mutex_);
+    if (auto owned = owned_locked(organization, map_id); !owned) return owned.error();
+  }
+  Result<msgs::FusionMap> map = store_.load(map_id, version);
+  if (!map) {
+    return ApiError{ErrorCode::kNotFound,
+                    version ? fmt::format("map '{}' has no version {}", map_id, *version) : fmt::format("map '{}' has no stored version", map_id),
+                    "version"};
+  }
+  return std::move(map).value();
+}
+
+ApiResult<StoredMap> MapCatalog::find(const std::string& organization, const std::string& map_id) const {
+  StoredMap stored;
+  {
+    std::lock_guard lock(mutex_);
+    auto owned = owned_locked(organization, map_id);
+    if (!owned) return owned.error();
+    stored.record = std::move(owned).value();
+  }
+  Result<std::vector<maps::MapVersionInfo>> versions = store_.versions(map_id);
+  if (versions) stored.versions = std::move(versions).value();  // none yet when the first save failed
+  return stored;
+}
+
+ApiResult<std::vector<StoredMap>> MapCatalog::list(const std::string& organization) const {
+  std::vector<std::string> ids;
+  {
+    std::lock_guard lock(mutex_);
+    std::vector<const MapRecord*> records;
+    for (const auto& [id, record] : owners_) {
+      if (record.organization == organization) records.push_back(&record);
+    }
+    std::sort(records.begin(), records.end(), [](const MapRecord* a, const MapRecord* b) {
+      return a->created != b->created ? a->created < b->created : a->map_id < b->map_id;
+    });
+    for (const MapRecord* record : records) ids.push_back(record->map_id);
+  }
+  std::vector<StoredMap> maps;
+  for (const std::string& id : ids) {
+    auto stored = find(organization, id);
+    if (stored) maps.push_back(std::move(stored).value());
+  }
+  return maps;
+}
+
+}  // namespace hanzo::fusion::service
