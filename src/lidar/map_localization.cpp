@@ -1,6 +1,7 @@
 #include "hanzo/fusion/lidar/map_localization.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -280,6 +281,7 @@ std::optional<double> MapLocalizer::ground_height(double x, double y) const {
 
 Result<MapLocalization> MapLocalizer::localize(const std::vector<Eigen::Vector3f>& points, const SO3& R_up_sensor,
                                                const MapLocalizationQuery& query) const {
+  const auto started = std::chrono::steady_clock::now();
   if (!R_up_sensor.quaternion().coeffs().allFinite()) return Error("map localization: the sensor orientation is not finite");
   if (query.T_map_sensor_guess && !query.T_map_sensor_guess->matrix().allFinite()) return Error("map localization: the guess is not finite");
   if (query.T_map_sensor_guess && (!(query.linear_window >= 0) || !(query.angular_window >= 0))) {
@@ -444,6 +446,7 @@ Result<MapLocalization> MapLocalizer::localize(const std::vector<Eigen::Vector3f
   result.global = !query.T_map_sensor_guess;
   result.nodes_evaluated = search.evaluated();
   result.headings = static_cast<std::size_t>(headings);
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return result;
 }
 

@@ -150,7 +150,7 @@ MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionC
       config_(std::move(config)),
       lidar_sensor_(std::move(lidar_sensor)),
       T_body_lidar_(T_body_lidar),
-      graph_(config_.backend),
+      graph_(std::make_unique<KeyframeGraph>(config_.backend)),
       loop_closures_(config_.loop, config_.lidar_odometry.odometry),
       map_builder_(maps::MapBuilder::create(config_.map).value()) {
   if (!lidar_sensor_.empty()) {
@@ -162,14 +162,20 @@ MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionC
       worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue, config_.drop_sweeps_when_busy, config_.registration_niceness);
     }
   }
-  session_->set_keyframe_callback([this](const msgs::Keyframe& keyframe) {
-    if (Status added = graph_.add_keyframe(keyframe); !added) {
+  session_->set_keyframe_callback([this](const msgs::Keyframe& emitted) {
+    msgs::Keyframe keyframe = emitted;
+    if (restart_graph_) {  // the first keyframe of a new graph: anchored by its own covariance
+      keyframe.T_previous_current.reset();
+      keyframe.relative_covariance.reset();
+      restart_graph_ = false;
+    }
+    if (Status added = graph_->add_keyframe(keyframe); !added) {
       logger()->warn("mapping session: keyframe {} not added to the graph: {}", keyframe.keyframe_id, added.error().message);
       return;
     }
-    latest_keyframe_ = keyframe;
+    latest_keyframe_ = emitted;
     ++summary_.graph_keyframes;
-    if (keyframe_callback_) keyframe_callback_(keyframe);
+    if (keyframe_callback_) keyframe_callback_(emitted);
   });
 }
 
@@ -278,7 +284,7 @@ void MappingSession::on_registered(Result<LidarInertialOdometry::RegisteredScan>
 
 void MappingSession::add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points) {
   // The anchor's pose in today's world (the Session's history), for the relative pose.
-  const std::optional<Timestamp> anchor_time = graph_.keyframe_time(anchor);
+  const std::optional<Timestamp> anchor_time = graph_->keyframe_time(anchor);
   const std::optional<SE3> T_world_anchor = anchor_time ? session_->pose_at(*anchor_time) : std::nullopt;
   if (!T_world_anchor) return;
   cloud::PointCloud cloud;
@@ -324,7 +330,7 @@ void MappingSession::add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar,
 
 SE3 MappingSession::map_keyframe_pose(std::size_t k) const {
   const MapKeyframe& keyframe = map_keyframes_.at(k);
-  const std::optional<SE3> anchor = graph_.optimized_pose(keyframe.anchor);
+  const std::optional<SE3> anchor = graph_->optimized_pose(keyframe.anchor);
   return anchor ? *anchor * keyframe.T_anchor_lidar : keyframe.T_world_lidar;
 }
 
@@ -333,11 +339,11 @@ Status MappingSession::add_loop_factor(uint64_t from, uint64_t to, const SE3& T_
   Eigen::Matrix<double, 6, 6> loop_covariance = Eigen::Matrix<double, 6, 6>::Zero();
   loop_covariance.diagonal() << Eigen::Vector3d::Constant(config_.loop_translation_sigma * config_.loop_translation_sigma),
       Eigen::Vector3d::Constant(config_.loop_rotation_sigma * config_.loop_rotation_sigma);
-  return graph_.add_loop_closure(from, to, T_from_to, covariance.value_or(loop_covariance));
+  return graph_->add_loop_closure(from, to, T_from_to, covariance.value_or(loop_covariance));
 }
 
 void MappingSession::update_backend() {
-  Result<KeyframeGraphUpdate> update = graph_.process(session_.get());
+  Result<KeyframeGraphUpdate> update = graph_->process(session_.get());
   if (!update) {
     logger()->warn("mapping session: backend update failed: {}", update.error().message);
     return;
@@ -353,6 +359,10 @@ void MappingSession::update_backend() {
     moved[k] = T_world_lidar;
     map_keyframes_[k].T_world_lidar = T_world_lidar;
   }
+  move_map_keyframes(moved);
+}
+
+void MappingSession::move_map_keyframes(const std::map<uint64_t, SE3>& moved) {
   if (moved.empty()) return;
   if (Status corrected = map_builder_.correct_poses(moved); !corrected) {
     logger()->warn("mapping session: map not corrected: {}", corrected.error().message);
@@ -381,7 +391,7 @@ Result<LoopClosureOutcome> MappingSession::close_loop(const LoopClosureRequest& 
   if (request.T_from_to && !request.T_from_to->matrix().allFinite()) return Error("invalid: the relative pose is not finite");
   update_backend();
   for (const std::optional<uint64_t>& id : {request.from_keyframe, request.to_keyframe}) {
-    if (id && !graph_.keyframe_time(*id)) return Error(fmt::format("not_found: keyframe {} is unknown", *id));
+    if (id && !graph_->keyframe_time(*id)) return Error(fmt::format("not_found: keyframe {} is unknown", *id));
   }
   LoopClosureOutcome outcome;
   if (request.T_from_to) {
@@ -426,6 +436,63 @@ Result<LoopClosureOutcome> MappingSession::close_loop(const LoopClosureRequest& 
   return outcome;
 }
 
+Result<RelocalizationOutcome> MappingSession::relocalize(const lidar::MapLocalizer& map, const RelocalizationRequest& request) {
+  if (request.T_map_body_guess && !request.T_map_body_guess->matrix().allFinite()) return Error("invalid: the guess is not finite");
+  if (!(request.linear_window >= 0) || !(request.angular_window >= 0)) {
+    return Error("invalid: linear_window and angular_window must be finite and >= 0");
+  }
+  update_backend();
+  if (map_keyframes_.empty() || !latest_keyframe_) {
+    return Error("not_ready: no LiDAR sweep has been mapped yet (the session relocalizes its newest map keyframe)");
+  }
+  // The newest map keyframe's sweep with up to two before it, in its frame.
+  const std::size_t newest = map_keyframes_.size() - 1;
+  const SE3 T_world_newest = map_keyframe_pose(newest);
+  std::vector<Eigen::Vector3f> sweep;
+  for (std::size_t k = newest >= 2 ? newest - 2 : 0; k <= newest; ++k) {
+    cloud::PointCloud keyframe;
+    keyframe.positions = loop_closures_.points(k);
+    const std::vector<Eigen::Vector3f> points = cloud::transformed(keyframe, T_world_newest.inverse() * map_keyframe_pose(k)).positions;
+    sweep.insert(sweep.end(), points.begin(), points.end());
+  }
+  lidar::MapLocalizationQuery query;
+  if (request.T_map_body_guess) {
+    // The guess is for the body now; the sweep is older: carry it back by the session's motion.
+    const std::optional<msgs::PoseEstimate> now = session_->latest_pose();
+    if (!now) return Error("not_ready: the session has no pose yet");
+    query.T_map_sensor_guess = *request.T_map_body_guess * now->T_world_body.to_se3().inverse() * T_world_newest;
+    query.linear_window = request.linear_window;
+    query.angular_window = request.angular_window;
+  }
+  Result<lidar::MapLocalization> localized = map.localize(sweep, T_world_newest.rotation(), query);
+  if (!localized) return Error("not_found: " + localized.error().message);
+
+  RelocalizationOutcome outcome;
+  outcome.localization = *localized;
+  outcome.T_map_lidar = localized->T_map_sensor;
+  outcome.T_map_world = localized->T_map_sensor * T_world_newest.inverse();
+  outcome.keyframe_id = latest_keyframe_->keyframe_id;
+  // The session's belief of its newest keyframe, moved onto the map (Session::apply_correction
+  // composes with the corrections applied before).
+  const SE3 belief = session_->world_correction() * latest_keyframe_->T_world_body.to_se3();
+  HANZO_RETURN_IF_ERROR(with_context(session_->apply_correction(outcome.keyframe_id, outcome.T_map_world * belief), "invalid"));
+  // The graph holds the old world: a fresh one starts at the next keyframe; the map moves rigidly
+  // and its keyframes stay there (their anchors are not in the new graph).
+  std::map<uint64_t, SE3> moved;
+  for (std::size_t k = 0; k < map_keyframes_.size(); ++k) {
+    map_keyframes_[k].T_world_lidar = outcome.T_map_world * map_keyframe_pose(k);
+    moved[k] = map_keyframes_[k].T_world_lidar;
+  }
+  graph_ = std::make_unique<KeyframeGraph>(config_.backend);
+  restart_graph_ = true;
+  move_map_keyframes(moved);
+  ++summary_.relocalizations;
+  summary_.last_correction_m = ((outcome.T_map_world * belief).translation() - belief.translation()).norm();
+  logger()->info("mapping session: relocalized in the map (moved {:.2f} m; 2D score {:.2f}, RMSE {:.3f} m)", summary_.last_correction_m,
+                 localized->score, localized->inlier_rmse);
+  return outcome;
+}
+
 msgs::FusionMap MappingSession::map() const {
   msgs::FusionMap map;
   map.version = summary_.map_version;
@@ -454,6 +521,6 @@ MappingSummary MappingSession::mapping_summary() const {
   return summary;
 }
 
-std::optional<SE3> MappingSession::keyframe_pose(uint64_t keyframe_id) const { return graph_.optimized_pose(keyframe_id); }
+std::optional<SE3> MappingSession::keyframe_pose(uint64_t keyframe_id) const { return graph_->optimized_pose(keyframe_id); }
 
 }  // namespace hanzo::fusion::pipeline

@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include "hanzo/fusion/cloud/voxel_hash_map.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
 #include "hanzo/fusion/pipeline/mapping_session.hpp"
 #include "hanzo/fusion/sim/scenario.hpp"
 #include "hanzo/fusion/sim/scenario_simulation.hpp"
@@ -184,6 +186,92 @@ TEST(MappingSession, AsynchronousRegistrationFusesTheSweepsLateAndKeepsTheTrack)
   EXPECT_LT(start_to_end_error(first->T_world_body.to_se3(), latest->T_world_body.to_se3(), trajectory.sample(first->timestamp).T_world_body,
                                trajectory.sample(latest->timestamp).T_world_body),
             0.2);
+}
+
+// Relocalization: session A maps 20 s of the warehouse; its map, moved by a known transform,
+// is the "known map". Session B sees the same first 12 s (so its world is A's), relocalizes
+// against the moved map without a guess, and must come out exactly that transform away, then
+// track on in the map's frame; a second relocalization with a guess changes (almost) nothing.
+TEST(MappingSession, RelocalizesInAKnownMapAndTracksInItsFrame) {
+  sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_robot.yaml").value();
+  std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& s) {
+    return s.modality != config::SensorModality::kLidar && s.modality != config::SensorModality::kImu;
+  });
+  scenario.duration = 20.0;
+  scenario.num_threads = 0;
+  auto simulation = sim::ScenarioSimulation::create(scenario).value();
+  const auto fusion_config = sim::scenario_fusion_config(scenario);
+  const auto calibration = sim::scenario_calibration(scenario);
+  auto mapper = MappingSession::create(fusion_config, calibration).value();
+  auto relocalized = MappingSession::create(fusion_config, calibration).value();
+  std::optional<msgs::PoseEstimate> latest;
+  relocalized->set_pose_callback([&](const msgs::PoseEstimate& pose) { latest = pose; });
+  const Timestamp split = simulation->trajectory().start_time() + Duration::from_seconds(12.0);
+  std::vector<std::pair<std::string, msgs::SensorMessage>> later;
+  const Status status = simulation->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
+    HANZO_RETURN_IF_ERROR(mapper->push(sensor.name, message));
+    if (msgs::timestamp_of(message) < split) return relocalized->push(sensor.name, message);
+    later.emplace_back(sensor.name, std::move(message));
+    return ok_status();
+  });
+  ASSERT_TRUE(status.ok()) << status.error().message;
+  mapper->flush();
+  relocalized->flush();
+
+  // Nothing to relocalize before a sweep was mapped; bad requests change nothing.
+  auto fresh = MappingSession::create(fusion_config, calibration).value();
+  const SE3 T_known_world(SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), 1.9), Eigen::Vector3d(31.0, -12.0, 0.4));
+  std::vector<Eigen::Vector3f> known_points = mapper->map().points->points;
+  for (Eigen::Vector3f& point : known_points) point = (T_known_world * point.cast<double>()).cast<float>();
+  auto localizer = lidar::MapLocalizer::create(known_points, {}, MappingSessionConfig().lidar_odometry.odometry);
+  ASSERT_TRUE(localizer.ok()) << localizer.error().message;
+  EXPECT_TRUE(fresh->relocalize(*localizer, {}).error().message.starts_with("not_ready"));
+  RelocalizationRequest bad;
+  bad.T_map_body_guess = SE3(SO3(), Eigen::Vector3d(std::nan(""), 0, 0));
+  EXPECT_TRUE(relocalized->relocalize(*localizer, bad).error().message.starts_with("invalid"));
+  EXPECT_EQ(relocalized->mapping_summary().relocalizations, 0U);
+
+  const SE3 before = latest->T_world_body.to_se3();
+  auto outcome = relocalized->relocalize(*localizer, {});
+  ASSERT_TRUE(outcome.ok()) << outcome.error().message;
+  EXPECT_TRUE(outcome->localization.global);
+  const SE3 error = T_known_world.inverse() * outcome->T_map_world;
+  EXPECT_LT(error.translation().norm(), 0.1) << error.translation().transpose();
+  EXPECT_LT(error.rotation().log().norm(), 0.01);
+  std::printf("relocalized: %.3f m / %.3f deg off the known transform; 2D score %.2f, RMSE %.3f m, %zu nodes over %zu headings, %.0f ms\n", error.translation().norm(),
+              error.rotation().log().norm() * 180 / M_PI, outcome->localization.score, outcome->localization.inlier_rmse,
+              outcome->localization.nodes_evaluated, outcome->localization.headings, 1e3 * outcome->localization.seconds);
+  EXPECT_EQ(relocalized->mapping_summary().relocalizations, 1U);
+
+  // Tracking on in the map's frame: where the mapper (in the old world) is, moved by the transform.
+  for (auto& [sensor, message] : later) ASSERT_TRUE(relocalized->push(sensor, message).ok());
+  relocalized->flush();
+  ASSERT_TRUE(latest);
+  EXPECT_GT((latest->T_world_body.position - before.translation()).norm(), 10.0);  // now in the map's frame
+  const SE3 mapper_now = mapper->session().latest_pose()->T_world_body.to_se3();
+  EXPECT_LT((latest->T_world_body.position - (T_known_world * mapper_now).translation()).norm(), 0.2);
+  EXPECT_GT(relocalized->mapping_summary().scans_registered, 150U);
+  EXPECT_GT(relocalized->mapping_summary().graph_keyframes, relocalized->mapping_summary().relocalizations);
+  // Its map is in the map's frame too: its newest points lie on the known map.
+  cloud::VoxelHashMap known_map({.voxel_size = 1.0, .max_points_per_voxel = 1000, .min_point_spacing = -1.0, .max_distance = 1e9});
+  known_map.add(known_points, {}, Eigen::Vector3d::Zero());
+  std::size_t on_known = 0;
+  const std::vector<Eigen::Vector3f> own_points = relocalized->map().points->points;
+  for (const Eigen::Vector3f& point : own_points) {
+    Eigen::Vector3f nearest;
+    float squared_distance = 0.0f;
+    if (known_map.nearest(point, &nearest, &squared_distance) && squared_distance < 0.3f * 0.3f) ++on_known;
+  }
+  EXPECT_GT(static_cast<double>(on_known), 0.9 * static_cast<double>(own_points.size()));
+
+  // Again, with a guess 1 m / 10 deg off: already in the map's frame, so (almost) no change.
+  RelocalizationRequest guessed;
+  guessed.T_map_body_guess = latest->T_world_body.to_se3() * SE3(SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), 0.17), Eigen::Vector3d(1.0, 0, 0));
+  auto again = relocalized->relocalize(*localizer, guessed);
+  ASSERT_TRUE(again.ok()) << again.error().message;
+  EXPECT_FALSE(again->localization.global);
+  EXPECT_LT(again->T_map_world.translation().norm(), 0.1);
+  EXPECT_LT(again->T_map_world.rotation().log().norm(), 0.01);
 }
 
 }  // namespace

@@ -80,6 +80,7 @@ struct MapLocalization {
   bool global = false;             ///< searched the whole map (no guess)
   std::size_t nodes_evaluated = 0; ///< branch and bound nodes scored
   std::size_t headings = 0;        ///< headings searched
+  double seconds = 0.0;            ///< time of localize()
 };
 
 class MapLocalizer {

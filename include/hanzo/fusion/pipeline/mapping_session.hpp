@@ -46,6 +46,7 @@
 #include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/lidar/loop_closure.hpp"
+#include "hanzo/fusion/lidar/map_localization.hpp"
 #include "hanzo/fusion/maps/map_builder.hpp"
 #include "hanzo/fusion/msgs/map_messages.hpp"
 #include "hanzo/fusion/pipeline/keyframe_graph.hpp"
@@ -111,6 +112,21 @@ struct LoopClosureOutcome {
   double correction_m = 0.0;      ///< how far the latest keyframe moved
 };
 
+/// Relocalization against a known map (lidar::MapLocalizer over its point layer): where the
+/// session is in the map's frame. Without a guess the whole map is searched.
+struct RelocalizationRequest {
+  std::optional<SE3> T_map_body_guess;  ///< the body's pose in the map now (e.g. from an operator)
+  double linear_window = 5.0;           ///< m, searched +- around the guess
+  double angular_window = 0.5;          ///< rad, +- around the guess's heading
+};
+
+struct RelocalizationOutcome {
+  SE3 T_map_world;               ///< how the session's world frame was moved onto the map's
+  SE3 T_map_lidar;               ///< the localized sweep (the newest map keyframe's)
+  uint64_t keyframe_id = 0;      ///< the Session keyframe the correction was applied at
+  lidar::MapLocalization localization;
+};
+
 struct MappingSummary {
   uint64_t scans_received = 0;
   uint64_t scans_registered = 0;
@@ -126,6 +142,7 @@ struct MappingSummary {
   std::size_t map_memory_bytes = 0;
   double last_registration_ms = 0.0;
   double last_correction_m = 0.0; ///< the backend's last correction of the latest keyframe
+  uint64_t relocalizations = 0;   ///< successful relocalize() calls
 };
 
 class MappingSession {
@@ -151,6 +168,16 @@ class MappingSession {
   /// keyframe, keyframe without a scan, no loop found by the search), "not_verified: ..." (the
   /// registration refused the loop: RMSE, overlap, degeneracy). Nothing changes then.
   Result<LoopClosureOutcome> close_loop(const LoopClosureRequest& request);
+  /// Localizes the newest map keyframe's sweep (with the two before it) in `map` and moves the
+  /// session's world onto the map's frame: poses, keyframes and this session's map come in
+  /// the map's frame from then on (a jump of T_map_world, in one Session correction). The
+  /// keyframe graph restarts at the next keyframe (anchored there with the filter's
+  /// covariance); older map keyframes stay where the relocalization put them and loops to
+  /// them are no longer closed. Errors start with the reason: "invalid: ..." (a non-finite
+  /// guess or window), "not_ready: ..." (no map keyframe or Session keyframe yet),
+  /// "not_found: ..." (the localizer found no pose that verifies; its reason follows).
+  /// Nothing changes then.
+  Result<RelocalizationOutcome> relocalize(const lidar::MapLocalizer& map, const RelocalizationRequest& request);
 
   /// The map's layers (points, occupancy) with version = map_version; other metadata empty.
   msgs::FusionMap map() const;
@@ -189,13 +216,16 @@ class MappingSession {
   Status add_loop_factor(uint64_t from, uint64_t to, const SE3& T_from_to, const std::optional<Eigen::Matrix<double, 6, 6>>& covariance);
   /// Runs the backend; moves the map keyframes whose keyframe moved.
   void update_backend();
+  /// Moves map keyframes (index -> T_world_lidar) in the map and publishes the corrected map.
+  void move_map_keyframes(const std::map<uint64_t, SE3>& moved);
   void count_refused(const std::string& reason);
 
   std::unique_ptr<Session> session_;
   MappingSessionConfig config_;
   std::string lidar_sensor_;
   SE3 T_body_lidar_;
-  KeyframeGraph graph_;
+  std::unique_ptr<KeyframeGraph> graph_;  ///< replaced by a fresh one at a relocalization
+  bool restart_graph_ = false;  ///< the next keyframe starts the graph (after a relocalization)
   std::optional<LidarInertialOdometry> odometry_;
   std::unique_ptr<RegistrationWorker> worker_;  ///< asynchronous_registration
   lidar::LoopClosureDetector loop_closures_;
