@@ -32,6 +32,7 @@ struct ServeOptions {
   double max_body_mb = 16.0;
   std::size_t max_sessions = 256;
   std::size_t threads = 8;
+  int map_save_interval_s = 30;
 };
 
 // The token store from --tokens, HANZO_FUSION_TOKENS_FILE or HANZO_FUSION_TOKENS; null with
@@ -70,6 +71,8 @@ int run_serve(const Output& output, const ServeOptions& options) {
   auto metrics = std::make_shared<service::MetricsRegistry>();
   service::SessionManagerConfig manager_config;
   manager_config.max_sessions = options.max_sessions;
+  manager_config.map_directory = (std::filesystem::path(options.data_dir) / "maps").string();
+  manager_config.map_save_interval = std::chrono::seconds(options.map_save_interval_s);
   auto sessions = service::SessionManager::create(manager_config, std::move(storage).value(), metrics);
   if (!sessions) return report_failure(output, {}, sessions.error().message);
 
@@ -128,7 +131,10 @@ void add_serve_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--bind", options->bind, "Address to listen on")->capture_default_str();
   command->add_option("--port", options->port, "REST port (0: any free port)")->capture_default_str()->check(CLI::Range(0, 65535));
   command->add_option("--grpc-port", options->grpc_port, "gRPC streaming port (0: any free port)")->capture_default_str()->check(CLI::Range(0, 65535));
-  command->add_option("--data-dir", options->data_dir, "Folder of the SQLite database")->capture_default_str();
+  command->add_option("--data-dir", options->data_dir, "Folder of the SQLite database and of the stored maps (DATA_DIR/maps)")->capture_default_str();
+  command->add_option("--map-save-interval", options->map_save_interval_s,
+                      "Seconds between saves of a changed session map as a new version (0: only when the session ends)")
+      ->capture_default_str()->check(CLI::Range(0, 86400));
   command->add_option("--db", options->database, "Storage URL: sqlite://PATH or postgresql://USER@HOST:PORT/DB (default sqlite://DATA_DIR/fusion.db)");
   command->add_option("--tokens", options->tokens_file, "API token file (YAML; docs/server.md)");
   command->add_flag("--insecure-no-auth", options->insecure_no_auth, "Serve without authentication (local development only)");

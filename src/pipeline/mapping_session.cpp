@@ -33,12 +33,12 @@ constexpr double kMapMoveRotation = 0.001;    // rad
 
 }  // namespace
 
-// Registers prepared sweeps on a thread of its own, in order; at most `capacity` wait (beyond,
-// submit() drops the oldest waiting sweep when drop_when_busy, else blocks).
+// Registers prepared sweeps on a thread of its own, in order; at most `capacity` wait (submit()
+// blocks beyond: a replay faster than registration slows down instead of losing sweeps).
 class MappingSession::RegistrationWorker {
  public:
-  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity, bool drop_when_busy, int niceness)
-      : odometry_(odometry), capacity_(capacity), drop_when_busy_(drop_when_busy), niceness_(niceness), thread_([this] { run(); }) {}
+  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity, int niceness)
+      : odometry_(odometry), capacity_(capacity), niceness_(niceness), thread_([this] { run(); }) {}
   ~RegistrationWorker() {
     {
       std::lock_guard lock(mutex_);
@@ -47,18 +47,11 @@ class MappingSession::RegistrationWorker {
     changed_.notify_all();
     thread_.join();
   }
-  /// Returns how many waiting sweeps were dropped to make room (0 or 1).
-  std::size_t submit(LidarInertialOdometry::PreparedScan scan) {
+  void submit(LidarInertialOdometry::PreparedScan scan) {
     std::unique_lock lock(mutex_);
-    std::size_t dropped = 0;
-    if (drop_when_busy_) {
-      for (; jobs_.size() >= capacity_; ++dropped) jobs_.pop_front();
-    } else {
-      changed_.wait(lock, [&] { return jobs_.size() < capacity_; });
-    }
+    changed_.wait(lock, [&] { return jobs_.size() < capacity_; });
     jobs_.push_back(std::move(scan));
     changed_.notify_all();
-    return dropped;
   }
   /// The registrations finished so far, in order.
   std::vector<Result<LidarInertialOdometry::RegisteredScan>> take_done() {
@@ -97,7 +90,6 @@ class MappingSession::RegistrationWorker {
 
   LidarInertialOdometry& odometry_;
   std::size_t capacity_;
-  bool drop_when_busy_;
   int niceness_;
   std::mutex mutex_;
   std::condition_variable changed_;
@@ -159,7 +151,7 @@ MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionC
     // registered, inside the default 0.5 s lag window its late pose must land in.
     constexpr std::size_t kWorkerQueue = 2;
     if (config_.asynchronous_registration) {
-      worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue, config_.drop_sweeps_when_busy, config_.registration_niceness);
+      worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue, config_.registration_niceness);
     }
   }
   session_->set_keyframe_callback([this](const msgs::Keyframe& emitted) {
@@ -244,7 +236,7 @@ void MappingSession::register_ready_scans() {
       logger()->debug("mapping session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
       count_refused("not_registered");
     } else if (worker_) {
-      for (std::size_t dropped = worker_->submit(std::move(prepared).value()); dropped > 0; --dropped) count_refused("registration_busy");
+      worker_->submit(std::move(prepared).value());
     } else {
       on_registered(odometry_->register_scan(*prepared));
     }

@@ -186,6 +186,8 @@ Status Session::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_o
   event.payload = WorldCorrection{T_world_body_optimized * (impl.estimator.world_correction() * found->second).inverse()};
   impl.fuse_in_order(std::move(event));
   ++impl.corrections;
+  // latest_pose() answers in the corrected world at once; the next IMU sample emits it.
+  if (impl.estimator.initialized()) impl.emit_pose(false);
   return ok_status();
 }
 std::optional<msgs::PoseEstimate> Session::latest_pose() const { return impl_->latest_pose; }

@@ -89,20 +89,35 @@ class FusionServiceImpl final : public v1::FusionService::Service {
     return serve_subscription(*context, *writer, [&](const Principal& caller) { return sessions_.subscribe_map(caller, request->id()); });
   }
 
+  // A session's map (session_id; map_id empty or the session id; version 0 = the live map) or
+  // a stored version of any map of the caller's organization (map_id; version 0 = the latest).
   grpc::Status GetMap(grpc::ServerContext* context, const v1::MapRequest* request, v1::FusionMap* response) override {
     auto principal = authenticate(*context);
     if (!principal) return to_grpc(principal.error());
-    if (request->session_id().empty()) return {grpc::StatusCode::INVALID_ARGUMENT, "session_id is missing"};
-    if (!request->map_id().empty() && request->map_id() != request->session_id()) {
-      return {grpc::StatusCode::NOT_FOUND, fmt::format("map '{}': only a session's own map (map_id empty or the session id) is served", request->map_id())};
+    if (request->session_id().empty() && request->map_id().empty()) return {grpc::StatusCode::INVALID_ARGUMENT, "give session_id or map_id"};
+    const std::string& map_id = request->map_id().empty() ? request->session_id() : request->map_id();
+    ApiResult<msgs::FusionMap> map = ApiError{};
+    if (request->version() == 0 && map_id == request->session_id()) {
+      map = sessions_.map(principal.value(), request->session_id());
+    } else {
+      map = sessions_.stored_map(principal.value(), map_id,
+                                 request->version() == 0 ? std::nullopt : std::optional<uint64_t>(request->version()));
     }
-    auto map = sessions_.map(principal.value(), request->session_id());
     if (!map) return to_grpc(map.error());
-    if (request->version() != 0 && request->version() != map->version) {
-      return {grpc::StatusCode::NOT_FOUND,
-              fmt::format("map version {}: only the latest ({}) is kept for a live session", request->version(), map->version)};
-    }
     *response = msgs::to_proto(map.value());
+    return grpc::Status::OK;
+  }
+
+  // Stores the map as the next version of its map_id (a new id when empty).
+  grpc::Status LoadMap(grpc::ServerContext* context, const v1::FusionMap* request, v1::LoadMapResponse* response) override {
+    auto principal = authenticate(*context);
+    if (!principal) return to_grpc(principal.error());
+    Result<msgs::FusionMap> map = msgs::from_proto(*request);
+    if (!map) return {grpc::StatusCode::INVALID_ARGUMENT, map.error().message};
+    auto saved = sessions_.load_map(principal.value(), std::move(map).value());
+    if (!saved) return to_grpc(saved.error());
+    response->set_map_id(saved->map_id);
+    response->set_version(saved->version);
     return grpc::Status::OK;
   }
 

@@ -36,6 +36,52 @@ ApiStatus check_keys(const json& object, std::initializer_list<std::string_view>
   return api_ok();
 }
 
+// An array of `count` finite numbers.
+ApiResult<std::vector<double>> numbers(const json& value, std::size_t count, const std::string& field) {
+  if (!value.is_array() || value.size() != count) {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: expected an array of {} numbers", field, count), field};
+  }
+  std::vector<double> out;
+  for (const json& element : value) {
+    if (!element.is_number() || !std::isfinite(element.get<double>())) {
+      return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: expected finite numbers", field), field};
+    }
+    out.push_back(element.get<double>());
+  }
+  return out;
+}
+
+// {"position": [x, y, z], "orientation_wxyz": [w, x, y, z]} (orientation optional: identity).
+ApiResult<SE3> parse_pose(const json& pose, const std::string& field) {
+  if (!pose.is_object()) return ApiError{ErrorCode::kInvalidArgument, field + ": expected {position, orientation_wxyz}", field};
+  if (auto keys = check_keys(pose, {"position", "orientation_wxyz"}); !keys) return keys.error();
+  auto position = numbers(pose.value("position", json()), 3, field + ".position");
+  if (!position) return position.error();
+  auto orientation = numbers(pose.value("orientation_wxyz", json::array({1, 0, 0, 0})), 4, field + ".orientation_wxyz");
+  if (!orientation) return orientation.error();
+  const std::vector<double>& w_x_y_z = orientation.value();
+  const std::vector<double>& xyz = position.value();
+  Eigen::Quaterniond q(w_x_y_z[0], w_x_y_z[1], w_x_y_z[2], w_x_y_z[3]);
+  if (std::abs(q.norm() - 1.0) > 1e-3) {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}.orientation_wxyz: norm {} is not 1", field, q.norm()), field + ".orientation_wxyz"};
+  }
+  return SE3(SO3(q.normalized()), Eigen::Vector3d(xyz[0], xyz[1], xyz[2]));
+}
+
+json pose_json(const SE3& pose) {
+  const Eigen::Quaterniond q = pose.rotation().quaternion();
+  return {{"position", vector_json(pose.translation())}, {"orientation_wxyz", json::array({q.w(), q.x(), q.y(), q.z()})}};
+}
+
+// A non-negative finite number (or the default when absent).
+ApiResult<double> optional_non_negative(const json& object, const std::string& key, double fallback) {
+  if (!object.contains(key) || object[key].is_null()) return fallback;
+  if (!object[key].is_number() || !std::isfinite(object[key].get<double>()) || object[key].get<double>() < 0) {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: expected a finite number >= 0", key), key};
+  }
+  return object[key].get<double>();
+}
+
 ApiResult<std::string> optional_string(const json& object, const std::string& key) {
   if (!object.contains(key) || object[key].is_null()) return std::string();
   if (!object[key].is_string()) {
@@ -150,10 +196,9 @@ json map_to_json(const msgs::FusionMap& map) {
 }
 
 json loop_closure_to_json(const pipeline::LoopClosureOutcome& outcome) {
-  const Eigen::Quaterniond q = outcome.T_from_to.rotation().quaternion();
   return {{"from_keyframe", outcome.from_keyframe},
           {"to_keyframe", outcome.to_keyframe},
-          {"relative_pose", {{"position", vector_json(outcome.T_from_to.translation())}, {"orientation_wxyz", json::array({q.w(), q.x(), q.y(), q.z()})}}},
+          {"relative_pose", pose_json(outcome.T_from_to)},
           {"registered", outcome.registered},
           {"inlier_rmse_m", outcome.inlier_rmse},
           {"inlier_fraction", outcome.inlier_fraction},
@@ -174,36 +219,10 @@ ApiResult<pipeline::LoopClosureRequest> parse_loop_closure(const std::string& bo
     }
     (std::string_view(key) == "from_keyframe" ? request.from_keyframe : request.to_keyframe) = object[key].get<uint64_t>();
   }
-  // An array of `count` finite numbers.
-  const auto numbers = [](const json& value, std::size_t count, const std::string& field) -> ApiResult<std::vector<double>> {
-    if (!value.is_array() || value.size() != count) {
-      return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: expected an array of {} numbers", field, count), field};
-    }
-    std::vector<double> out;
-    for (const json& element : value) {
-      if (!element.is_number() || !std::isfinite(element.get<double>())) {
-        return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: expected finite numbers", field), field};
-      }
-      out.push_back(element.get<double>());
-    }
-    return out;
-  };
   if (object.contains("relative_pose") && !object["relative_pose"].is_null()) {
-    const json& pose = object["relative_pose"];
-    if (!pose.is_object()) return ApiError{ErrorCode::kInvalidArgument, "relative_pose: expected {position, orientation_wxyz}", "relative_pose"};
-    if (auto keys = check_keys(pose, {"position", "orientation_wxyz"}); !keys) return keys.error();
-    auto position = numbers(pose.value("position", json()), 3, "relative_pose.position");
-    if (!position) return position.error();
-    auto orientation = numbers(pose.value("orientation_wxyz", json::array({1, 0, 0, 0})), 4, "relative_pose.orientation_wxyz");
-    if (!orientation) return orientation.error();
-    const std::vector<double>& w_x_y_z = orientation.value();
-    const std::vector<double>& xyz = position.value();
-    Eigen::Quaterniond q(w_x_y_z[0], w_x_y_z[1], w_x_y_z[2], w_x_y_z[3]);
-    if (std::abs(q.norm() - 1.0) > 1e-3) {
-      return ApiError{ErrorCode::kInvalidArgument, fmt::format("relative_pose.orientation_wxyz: norm {} is not 1", q.norm()),
-                      "relative_pose.orientation_wxyz"};
-    }
-    request.T_from_to = SE3(SO3(q.normalized()), Eigen::Vector3d(xyz[0], xyz[1], xyz[2]));
+    auto pose = parse_pose(object["relative_pose"], "relative_pose");
+    if (!pose) return pose.error();
+    request.T_from_to = pose.value();
   }
   if (object.contains("covariance") && !object["covariance"].is_null()) {
     auto values = numbers(object["covariance"], 36, "covariance");
@@ -215,6 +234,65 @@ ApiResult<pipeline::LoopClosureRequest> parse_loop_closure(const std::string& bo
     request.covariance = covariance;
   }
   return request;
+}
+
+json relocalization_to_json(const std::string& map_id, uint64_t version, const pipeline::RelocalizationOutcome& outcome) {
+  const lidar::MapLocalization& found = outcome.localization;
+  return {{"map_id", map_id},
+          {"version", version},
+          {"T_map_world", pose_json(outcome.T_map_world)},
+          {"T_map_lidar", pose_json(outcome.T_map_lidar)},
+          {"keyframe_id", outcome.keyframe_id},
+          {"global_search", found.global},
+          {"score", found.score},
+          {"inlier_rmse_m", found.inlier_rmse},
+          {"inlier_fraction", found.inlier_fraction},
+          {"seen_through_fraction", found.seen_through_fraction},
+          {"seconds", found.seconds}};
+}
+
+ApiResult<RelocalizeRequest> parse_relocalize(const std::string& body) {
+  auto document = parse_object(body);
+  if (!document) return document.error();
+  const json& object = document.value();
+  if (auto keys = check_keys(object, {"map_id", "version", "initial_pose", "linear_window_m", "angular_window_rad"}); !keys) return keys.error();
+  RelocalizeRequest request;
+  auto map_id = optional_string(object, "map_id");
+  if (!map_id) return map_id.error();
+  if (map_id->empty()) return ApiError{ErrorCode::kInvalidArgument, "map_id: missing (the stored map to relocalize against)", "map_id"};
+  request.map_id = std::move(map_id).value();
+  if (object.contains("version") && !object["version"].is_null()) {
+    if (!object["version"].is_number_unsigned() || object["version"].get<uint64_t>() == 0) {
+      return ApiError{ErrorCode::kInvalidArgument, "version: expected a stored version (an integer >= 1)", "version"};
+    }
+    request.version = object["version"].get<uint64_t>();
+  }
+  if (object.contains("initial_pose") && !object["initial_pose"].is_null()) {
+    auto pose = parse_pose(object["initial_pose"], "initial_pose");
+    if (!pose) return pose.error();
+    request.relocalization.T_map_body_guess = pose.value();
+  }
+  auto linear = optional_non_negative(object, "linear_window_m", request.relocalization.linear_window);
+  if (!linear) return linear.error();
+  auto angular = optional_non_negative(object, "angular_window_rad", request.relocalization.angular_window);
+  if (!angular) return angular.error();
+  request.relocalization.linear_window = linear.value();
+  request.relocalization.angular_window = angular.value();
+  return request;
+}
+
+json stored_map_to_json(const StoredMap& map) {
+  json versions = json::array();
+  for (const maps::MapVersionInfo& version : map.versions) {
+    versions.push_back({{"version", version.version}, {"parent_version", version.parent_version},
+                        {"created_ns", version.created.nanoseconds()}, {"bytes", version.file_bytes}});
+  }
+  return {{"map_id", map.record.map_id},
+          {"name", map.record.name},
+          {"session_id", map.record.session_id.empty() ? json(nullptr) : json(map.record.session_id)},
+          {"created_ns", map.record.created.nanoseconds()},
+          {"latest_version", map.versions.empty() ? json(nullptr) : json(map.versions.back().version)},
+          {"versions", std::move(versions)}};
 }
 
 json error_to_json(const ApiError& error) {

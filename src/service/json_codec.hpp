@@ -16,6 +16,9 @@ nlohmann::json mapping_to_json(const pipeline::MappingSummary& mapping);
 /// A map's metadata and layer sizes (GET /v1/sessions/{id}/map?format=json).
 nlohmann::json map_to_json(const msgs::FusionMap& map);
 nlohmann::json loop_closure_to_json(const pipeline::LoopClosureOutcome& outcome);
+nlohmann::json relocalization_to_json(const std::string& map_id, uint64_t version, const pipeline::RelocalizationOutcome& outcome);
+/// A stored map with its versions (GET /v1/maps, /v1/maps/{id}?format=json).
+nlohmann::json stored_map_to_json(const StoredMap& map);
 
 /// The body of POST /v1/sessions: {"name": "...", "config": TEXT|OBJECT, "calibration": TEXT|OBJECT}.
 ApiResult<CreateSessionRequest> parse_create_session(const std::string& body);
@@ -27,6 +30,11 @@ ApiResult<SensorRegistration> parse_sensor_registration(const std::string& body)
 /// "relative_pose": {"position": [x, y, z], "orientation_wxyz": [w, x, y, z]} (add as given) and
 /// optionally "covariance": 36 numbers, row-major, over (rho, phi).
 ApiResult<pipeline::LoopClosureRequest> parse_loop_closure(const std::string& body);
+
+/// The body of POST /v1/sessions/{id}/relocalize: {"map_id": "...", "version": N (latest when
+/// absent), "initial_pose": {"position": [...], "orientation_wxyz": [...]} (the body's pose in
+/// the map; absent: search the whole map), "linear_window_m": 5, "angular_window_rad": 0.5}.
+ApiResult<RelocalizeRequest> parse_relocalize(const std::string& body);
 
 /// "tx ty tz qx qy qz qw" lines with the timestamp in seconds (TUM format).
 std::string poses_to_tum(const std::vector<msgs::PoseEstimate>& poses);

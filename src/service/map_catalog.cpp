@@ -9,11 +9,11 @@
 namespace hanzo::fusion::service {
 
 Result<std::unique_ptr<MapCatalog>> MapCatalog::open(const std::string& root, Storage& storage) {
-  maps::MapStore store = Error("");
-  HANZO_ASSIGN_OR_RETURN(store, maps::MapStore::open(root));
+  Result<maps::MapStore> store = maps::MapStore::open(root);
+  if (!store) return store.error();
   std::vector<MapRecord> records;
   HANZO_ASSIGN_OR_RETURN(records, storage.maps());
-  std::unique_ptr<MapCatalog> catalog(new MapCatalog(std::move(store), storage));
+  std::unique_ptr<MapCatalog> catalog(new MapCatalog(std::move(store).value(), storage));
   for (MapRecord& record : records) catalog->owners_.emplace(record.map_id, std::move(record));
   logger()->info("maps: {} stored maps in {}", catalog->owners_.size(), root);
   return catalog;

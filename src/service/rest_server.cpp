@@ -3,6 +3,7 @@
 #include <charconv>
 #include <chrono>
 #include <filesystem>
+#include <limits>
 #include <thread>
 
 #include <fmt/format.h>
@@ -47,6 +48,30 @@ ApiResult<int64_t> integer_parameter(const httplib::Request& request, const std:
     return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: {} is outside {}..{}", name, value, minimum, maximum), name};
   }
   return value;
+}
+
+// `?format=`: fmap (default), pcd, ply or json; kInvalidArgument otherwise.
+ApiResult<std::string> map_format(const httplib::Request& request) {
+  const std::string format = request.has_param("format") ? request.get_param_value("format") : "fmap";
+  if (format != "fmap" && format != "pcd" && format != "ply" && format != "json") {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("format '{}': use fmap, pcd, ply or json", format), "format"};
+  }
+  return format;
+}
+
+// A map as a FusionMap file, or its point layer as binary PCD / PLY.
+void send_map_file(httplib::Response& response, const msgs::FusionMap& map, const std::string& format) {
+  Result<std::string> bytes = Error("");
+  if (format == "fmap") {
+    bytes = maps::serialize_fusion_map(map);
+  } else if (!map.points) {
+    return send_error(response, {ErrorCode::kNotFound, "the map has no point layer", "format"});
+  } else {
+    bytes = cloud::encode_cloud(maps::to_point_cloud(*map.points), format);
+  }
+  if (!bytes) return send_error(response, ApiError::from(ErrorCode::kInternal, bytes.error()));
+  response.set_header("Content-Disposition", fmt::format("attachment; filename=\"{}-v{}.{}\"", map.map_id, map.version, format));
+  response.set_content(std::move(bytes).value(), "application/octet-stream");
 }
 
 }  // namespace
@@ -188,24 +213,12 @@ struct RestServer::Impl {
     }));
     s.Get(session + "/map", authenticated("GET", "/v1/sessions/{id}/map", [this](const httplib::Request& request,
                                                                               httplib::Response& response, const Principal& caller) {
-      const std::string format = request.has_param("format") ? request.get_param_value("format") : "fmap";
-      if (format != "fmap" && format != "pcd" && format != "ply" && format != "json") {
-        return send_error(response, {ErrorCode::kInvalidArgument, fmt::format("format '{}': use fmap, pcd, ply or json", format), "format"});
-      }
+      auto format = map_format(request);
+      if (!format) return send_error(response, format.error());
       auto map = sessions->map(caller, request.matches[1]);
       if (!map) return send_error(response, map.error());
-      if (format == "json") return send_json(response, 200, detail::map_to_json(map.value()));
-      Result<std::string> bytes = Error("");
-      if (format == "fmap") {
-        bytes = maps::serialize_fusion_map(map.value());
-      } else if (!map->points) {
-        return send_error(response, {ErrorCode::kNotFound, "the map has no point layer yet", "format"});
-      } else {
-        bytes = cloud::encode_cloud(maps::to_point_cloud(*map->points), format);
-      }
-      if (!bytes) return send_error(response, ApiError::from(ErrorCode::kInternal, bytes.error()));
-      response.set_header("Content-Disposition", fmt::format("attachment; filename=\"{}-v{}.{}\"", map->map_id, map->version, format));
-      response.set_content(std::move(bytes).value(), "application/octet-stream");
+      if (format.value() == "json") return send_json(response, 200, detail::map_to_json(map.value()));
+      send_map_file(response, map.value(), format.value());
     }));
     s.Post(session + "/loop-closure", authenticated("POST", "/v1/sessions/{id}/loop-closure", [this](const httplib::Request& request,
                                                                                               httplib::Response& response,
@@ -215,6 +228,51 @@ struct RestServer::Impl {
       auto outcome = sessions->close_loop(caller, request.matches[1], parsed.value());
       if (!outcome) return send_error(response, outcome.error());
       send_json(response, 200, detail::loop_closure_to_json(outcome.value()));
+    }));
+
+    s.Post(session + "/relocalize", authenticated("POST", "/v1/sessions/{id}/relocalize", [this](const httplib::Request& request,
+                                                                                          httplib::Response& response,
+                                                                                          const Principal& caller) {
+      auto parsed = detail::parse_relocalize(request.body);
+      if (!parsed) return send_error(response, parsed.error());
+      auto result = sessions->relocalize(caller, request.matches[1], parsed.value());
+      if (!result) return send_error(response, result.error());
+      send_json(response, 200, detail::relocalization_to_json(result->map_id, result->version, result->outcome));
+    }));
+
+    // Stored maps.
+    s.Get("/v1/maps", authenticated("GET", "/v1/maps", [this](const httplib::Request&, httplib::Response& response, const Principal& caller) {
+      auto listed = sessions->list_maps(caller);
+      if (!listed) return send_error(response, listed.error());
+      json items = json::array();
+      for (const StoredMap& map : listed.value()) items.push_back(detail::stored_map_to_json(map));
+      send_json(response, 200, {{"maps", std::move(items)}});
+    }));
+    s.Post("/v1/maps", authenticated("POST", "/v1/maps", [this](const httplib::Request& request, httplib::Response& response,
+                                                                const Principal& caller) {
+      Result<msgs::FusionMap> map = maps::parse_fusion_map(request.body, "request body");
+      if (!map) return send_error(response, {ErrorCode::kInvalidArgument, map.error().message, "body"});
+      const std::string name = request.has_param("name") ? request.get_param_value("name") : "";
+      auto saved = sessions->load_map(caller, std::move(map).value(), name);
+      if (!saved) return send_error(response, saved.error());
+      send_json(response, 201, {{"map_id", saved->map_id}, {"version", saved->version}, {"parent_version", saved->parent_version},
+                                {"bytes", saved->file_bytes}});
+    }));
+    s.Get("/v1/maps/([A-Za-z0-9._-]{1,128})", authenticated("GET", "/v1/maps/{id}", [this](const httplib::Request& request,
+                                                                                          httplib::Response& response, const Principal& caller) {
+      auto format = map_format(request);
+      if (!format) return send_error(response, format.error());
+      auto version = integer_parameter(request, "version", 0, 0, std::numeric_limits<int64_t>::max());
+      if (!version) return send_error(response, version.error());
+      const std::optional<uint64_t> wanted = version.value() > 0 ? std::optional<uint64_t>(static_cast<uint64_t>(version.value())) : std::nullopt;
+      if (format.value() == "json") {
+        auto info = sessions->stored_map_info(caller, request.matches[1]);
+        if (!info) return send_error(response, info.error());
+        return send_json(response, 200, detail::stored_map_to_json(info.value()));
+      }
+      auto map = sessions->stored_map(caller, request.matches[1], wanted);
+      if (!map) return send_error(response, map.error());
+      send_map_file(response, map.value(), format.value());
     }));
 
     // Errors httplib answers itself (no route, body too large) get the same JSON shape.

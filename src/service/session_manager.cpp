@@ -1,10 +1,13 @@
 #include "hanzo/fusion/service/session_manager.hpp"
 
 #include <algorithm>
+#include <condition_variable>
+#include <list>
 #include <map>
 #include <mutex>
 #include <random>
 #include <shared_mutex>
+#include <thread>
 
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
@@ -114,6 +117,8 @@ struct ManagedSession {
   std::vector<std::shared_ptr<MapSubscription>> map_subscribers;
   uint64_t messages_pushed = 0;
   Clock::time_point push_started;
+  uint64_t saved_map_version = 0;   // the live map_version last saved to the map catalog
+  uint64_t stored_map_version = 0;  // the catalog's version of that save (parent of the next)
 
   // Metric series of this session (removed with it).
   Counter* poses = nullptr;
@@ -132,14 +137,98 @@ struct SessionManager::Impl {
   mutable std::shared_mutex sessions_mutex;
   std::map<std::string, std::shared_ptr<ManagedSession>> sessions;  // active and ended
 
+  std::unique_ptr<MapCatalog> catalog;  // null without a map directory
+  std::mutex save_mutex;                // one map save at a time; taken before a session's mutex
+  std::mutex saver_mutex;
+  std::condition_variable saver_wake;
+  bool saver_stopping = false;
+  std::thread map_saver;                // saves changed session maps every map_save_interval
+  std::mutex localizers_mutex;
+  std::list<std::pair<std::string, std::shared_ptr<const lidar::MapLocalizer>>> localizers;  // "id@version", newest first
+
+  ApiStatus catalog_available() const {
+    if (catalog) return api_ok();
+    return ApiError{ErrorCode::kUnavailable, "this server stores no maps (it runs without a map directory)", ""};
+  }
+
+  // Saves the session's map when it changed since the last save. Caller holds save_mutex and
+  // `session_lock` (on managed.mutex); with release_while_writing the file is written without
+  // the session's lock (the session keeps running meanwhile).
+  ApiStatus save_map(ManagedSession& managed, std::unique_lock<std::mutex>& session_lock, bool release_while_writing) {
+    if (!catalog || !managed.session) return api_ok();
+    const pipeline::MappingSummary summary = managed.session->mapping_summary();
+    if (summary.map_keyframes == 0 || summary.map_version == managed.saved_map_version) return api_ok();
+    std::optional<msgs::FusionMap> map = map_locked(managed);
+    if (!map) return api_ok();
+    map->version = managed.stored_map_version;  // the parent of the new version
+    const std::string organization = managed.record.organization, id = managed.record.id, name = managed.record.name;
+    if (release_while_writing) session_lock.unlock();
+    ApiResult<maps::MapVersionInfo> saved = catalog->save(organization, id, name, std::move(*map));
+    if (release_while_writing) session_lock.lock();
+    if (!saved) return saved.error();
+    managed.saved_map_version = summary.map_version;
+    managed.stored_map_version = saved->version;
+    return api_ok();
+  }
+
+  void run_map_saver() {
+    std::unique_lock lock(saver_mutex);
+    while (!saver_wake.wait_for(lock, config.map_save_interval, [this] { return saver_stopping; })) {
+      lock.unlock();
+      if (const Status saved = save_all_maps(); !saved) logger()->warn("maps: {}", saved.error().message);
+      lock.lock();
+    }
+  }
+
+  Status save_all_maps() {
+    std::vector<std::shared_ptr<ManagedSession>> active;
+    {
+      std::shared_lock lock(sessions_mutex);
+      for (const auto& [id, managed] : sessions) active.push_back(managed);
+    }
+    std::string failures;
+    for (const auto& managed : active) {
+      std::lock_guard save_lock(save_mutex);
+      std::unique_lock session_lock(managed->mutex);
+      if (const ApiStatus saved = save_map(*managed, session_lock, true); !saved) {
+        failures += fmt::format("{}map of session {} not saved: {}", failures.empty() ? "" : "; ", managed->record.id, saved.error().message);
+      }
+    }
+    if (!failures.empty()) return Error(failures);
+    return ok_status();
+  }
+
+  // A prepared localizer of a stored map version (kept for the next requests).
+  ApiResult<std::shared_ptr<const lidar::MapLocalizer>> localizer(const std::string& organization, const std::string& map_id, uint64_t version) {
+    const std::string key = fmt::format("{}@{}", map_id, version);
+    {
+      std::lock_guard lock(localizers_mutex);
+      for (auto it = localizers.begin(); it != localizers.end(); ++it) {
+        if (it->first != key) continue;
+        localizers.splice(localizers.begin(), localizers, it);
+        return localizers.front().second;
+      }
+    }
+    ApiResult<msgs::FusionMap> map = catalog->load(organization, map_id, version);
+    if (!map) return map.error();
+    if (!map->points || map->points->points.empty()) {
+      return ApiError{ErrorCode::kInvalidArgument, fmt::format("map '{}' version {} has no point layer to localize in", map_id, version), "map_id"};
+    }
+    auto created = lidar::MapLocalizer::create(std::move(map->points->points), {}, pipeline::MappingSessionConfig().lidar_odometry.odometry);
+    if (!created) return ApiError::from(ErrorCode::kInvalidArgument, created.error());
+    auto prepared = std::make_shared<const lidar::MapLocalizer>(std::move(created).value());
+    std::lock_guard lock(localizers_mutex);
+    localizers.emplace_front(key, prepared);
+    while (localizers.size() > std::max<std::size_t>(1, config.cached_localizers)) localizers.pop_back();
+    return prepared;
+  }
+
   // A pipeline::MappingSession for `managed` with its callbacks wired (not yet installed).
   Result<std::unique_ptr<pipeline::MappingSession>> make_pipeline(ManagedSession& managed, const config::FusionConfig& configuration,
                                                                   const calib::Calibration& calibration) {
     pipeline::MappingSessionConfig mapping;
-    // The IMU's poses never wait for a LiDAR registration; an overloaded server registers the
-    // sweeps it can (the others are refused "registration_busy") and keeps the poses at sensor rate.
+    // The IMU's poses never wait for a LiDAR registration, which runs at a lower priority.
     mapping.asynchronous_registration = true;
-    mapping.drop_sweeps_when_busy = true;
     mapping.registration_niceness = 10;
     auto session = pipeline::MappingSession::create(configuration, calibration, mapping);
     if (!session) return session.error();
@@ -305,6 +394,15 @@ struct SessionManager::Impl {
 SessionManager::SessionManager(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 
 SessionManager::~SessionManager() {
+  if (impl_->map_saver.joinable()) {
+    {
+      std::lock_guard lock(impl_->saver_mutex);
+      impl_->saver_stopping = true;
+    }
+    impl_->saver_wake.notify_all();
+    impl_->map_saver.join();
+  }
+  if (const Status saved = impl_->save_all_maps(); !saved) logger()->error("maps: at shutdown: {}", saved.error().message);
   if (const Status flushed = impl_->recorder->flush(); !flushed) {
     logger()->error("storage: poses not committed at shutdown: {}", flushed.error().message);
   }
@@ -325,6 +423,9 @@ Result<std::unique_ptr<SessionManager>> SessionManager::create(const SessionMana
                                                          config.max_pending_poses, *impl->metrics);
   impl->active_sessions_gauge = &impl->metrics->gauge("hanzo_fusion_active_sessions", "Sessions running");
 
+  if (!config.map_directory.empty()) {
+    HANZO_ASSIGN_OR_RETURN(impl->catalog, MapCatalog::open(config.map_directory, *impl->storage));
+  }
   std::vector<SessionRecord> records;
   HANZO_ASSIGN_OR_RETURN(records, impl->storage->sessions());
   for (SessionRecord& record : records) {
@@ -339,6 +440,11 @@ Result<std::unique_ptr<SessionManager>> SessionManager::create(const SessionMana
                              with_context(calib::parse_calibration(record.calibration_yaml, "calibration"), where));
     }
     managed->record = std::move(record);
+    if (impl->catalog) {  // the next save of its map continues the stored versions
+      if (auto stored = impl->catalog->find(managed->record.organization, managed->record.id); stored && !stored->versions.empty()) {
+        managed->stored_map_version = stored->versions.back().version;
+      }
+    }
     if (!managed->record.ended) {
       impl->attach_metrics(*managed);
       HANZO_ASSIGN_OR_RETURN(managed->session,
@@ -348,6 +454,7 @@ Result<std::unique_ptr<SessionManager>> SessionManager::create(const SessionMana
   }
   Impl* raw = impl.get();
   impl->metrics->add_collector([raw] { raw->collect_metrics(); });
+  if (impl->catalog && config.map_save_interval.count() > 0) impl->map_saver = std::thread([raw] { raw->run_map_saver(); });
   logger()->info("sessions: {} restored from {} storage ({} stored in all)", impl->active_count_locked("", false),
                  impl->storage->backend(), impl->sessions.size());
   return std::unique_ptr<SessionManager>(new SessionManager(std::move(impl)));
@@ -424,9 +531,13 @@ ApiResult<SessionInfo> SessionManager::end_session(const Principal& caller, cons
   auto found = impl_->find(caller, session_id, Permission::kSessionWrite);
   if (!found) return found.error();
   ManagedSession& managed = *found.value();
+  std::unique_lock save_lock(impl_->save_mutex);
   std::unique_lock lock(managed.mutex);
   if (managed.record.ended) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has already ended", session_id), ""};
   managed.session->flush();
+  // The final map is stored (kept in memory only when the server stores no maps).
+  if (const ApiStatus saved = impl_->save_map(managed, lock, false); !saved) return saved.error();
+  save_lock.unlock();
   const Timestamp ended = Timestamp::wall_clock_now();
   if (const Status stored = impl_->storage->end_session(session_id, ended); !stored) {
     return ApiError::from(ErrorCode::kInternal, stored.error());
@@ -434,7 +545,7 @@ ApiResult<SessionInfo> SessionManager::end_session(const Principal& caller, cons
   managed.record.ended = ended;
   managed.final_summary = managed.session->summary();
   managed.final_mapping = managed.session->mapping_summary();
-  managed.final_map = impl_->map_locked(managed);
+  if (!impl_->catalog) managed.final_map = impl_->map_locked(managed);
   managed.session.reset();
   Impl::close_subscribers(managed);
   lock.unlock();
@@ -568,13 +679,17 @@ ApiResult<std::shared_ptr<MapSubscription>> SessionManager::subscribe_map(const 
 ApiResult<msgs::FusionMap> SessionManager::map(const Principal& caller, const std::string& session_id) {
   auto found = impl_->find(caller, session_id, Permission::kMapRead);
   if (!found) return found.error();
-  std::lock_guard lock(found.value()->mutex);
-  std::optional<msgs::FusionMap> map = impl_->map_locked(*found.value());
-  if (!map) {
-    return ApiError{ErrorCode::kNotFound,
-                    fmt::format("session '{}' has no map yet (it maps with a 3D LiDAR sensor once the IMU has initialized)", session_id), ""};
+  std::optional<msgs::FusionMap> map;
+  {
+    std::lock_guard lock(found.value()->mutex);
+    map = impl_->map_locked(*found.value());
   }
-  return std::move(*map);
+  if (map) return std::move(*map);
+  if (impl_->catalog) {  // restored after a restart, or ended: the newest stored version
+    if (auto stored = impl_->catalog->load(found.value()->record.organization, session_id); stored) return std::move(stored).value();
+  }
+  return ApiError{ErrorCode::kNotFound,
+                  fmt::format("session '{}' has no map yet (it maps with a 3D LiDAR sensor once the IMU has initialized)", session_id), ""};
 }
 
 ApiResult<pipeline::LoopClosureOutcome> SessionManager::close_loop(const Principal& caller, const std::string& session_id,
@@ -594,6 +709,68 @@ ApiResult<pipeline::LoopClosureOutcome> SessionManager::close_loop(const Princip
   }
   return std::move(outcome).value();
 }
+
+ApiResult<maps::MapVersionInfo> SessionManager::load_map(const Principal& caller, msgs::FusionMap map, const std::string& name) {
+  if (const ApiStatus allowed = authorize(caller, Permission::kMapWrite); !allowed) return allowed.error();
+  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  ApiResult<maps::MapVersionInfo> saved = impl_->catalog->save(caller.organization, "", name, std::move(map));
+  if (saved) logger()->info("map {} version {} loaded by {}", saved->map_id, saved->version, caller.name);
+  return saved;
+}
+
+ApiResult<std::vector<StoredMap>> SessionManager::list_maps(const Principal& caller) {
+  if (const ApiStatus allowed = authorize(caller, Permission::kMapRead); !allowed) return allowed.error();
+  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  return impl_->catalog->list(caller.organization);
+}
+
+ApiResult<StoredMap> SessionManager::stored_map_info(const Principal& caller, const std::string& map_id) {
+  if (const ApiStatus allowed = authorize(caller, Permission::kMapRead); !allowed) return allowed.error();
+  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  return impl_->catalog->find(caller.organization, map_id);
+}
+
+ApiResult<msgs::FusionMap> SessionManager::stored_map(const Principal& caller, const std::string& map_id, std::optional<uint64_t> version) {
+  if (const ApiStatus allowed = authorize(caller, Permission::kMapRead); !allowed) return allowed.error();
+  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  return impl_->catalog->load(caller.organization, map_id, version);
+}
+
+ApiResult<RelocalizeResult> SessionManager::relocalize(const Principal& caller, const std::string& session_id, const RelocalizeRequest& request) {
+  auto found = impl_->find(caller, session_id, Permission::kSessionWrite);
+  if (!found) return found.error();
+  if (const ApiStatus allowed = authorize(caller, Permission::kMapRead); !allowed) return allowed.error();
+  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  RelocalizeResult result;
+  result.map_id = request.map_id;
+  if (request.version) {
+    result.version = *request.version;
+  } else {
+    auto stored = impl_->catalog->find(caller.organization, request.map_id);
+    if (!stored) return stored.error();
+    if (stored->versions.empty()) return ApiError{ErrorCode::kNotFound, fmt::format("map '{}' has no stored version", request.map_id), "map_id"};
+    result.version = stored->versions.back().version;
+  }
+  auto localizer = impl_->localizer(caller.organization, request.map_id, result.version);
+  if (!localizer) return localizer.error();
+  ManagedSession& managed = *found.value();
+  std::lock_guard lock(managed.mutex);
+  if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
+  Result<pipeline::RelocalizationOutcome> outcome = managed.session->relocalize(*localizer.value(), request.relocalization);
+  if (!outcome) {
+    const std::string& message = outcome.error().message;
+    const ErrorCode code = message.starts_with("not_ready")   ? ErrorCode::kConflict
+                           : message.starts_with("not_found") ? ErrorCode::kRejected
+                                                              : ErrorCode::kInvalidArgument;
+    return ApiError::from(code, outcome.error());
+  }
+  result.outcome = std::move(outcome).value();
+  managed.latest_pose = managed.session->session().latest_pose();  // already in the map's frame
+  logger()->info("session {} relocalized in map {} version {} by {}", session_id, result.map_id, result.version, caller.name);
+  return result;
+}
+
+Status SessionManager::save_session_maps() { return impl_->save_all_maps(); }
 
 Status SessionManager::flush_storage() { return impl_->recorder->flush(); }
 

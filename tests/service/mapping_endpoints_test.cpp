@@ -35,6 +35,8 @@ using nlohmann::json;
 constexpr const char* kRobotToken = "acme-robot-secret-0001";    // session read/write, map read
 constexpr const char* kViewerToken = "acme-viewer-secret-0002";  // session read only
 constexpr const char* kGlobexToken = "globex-robot-secret-0004";
+constexpr const char* kAdminToken = "acme-admin-secret-00003";         // everything in acme (map:write too)
+constexpr const char* kGlobexAdminToken = "globex-admin-secret-0005";
 const Principal kStreamer{"robot", "acme", static_cast<uint32_t>(Permission::kSessionWrite) | static_cast<uint32_t>(Permission::kSessionRead)};
 
 struct Recording {
@@ -70,10 +72,14 @@ const Recording& urban_recording() {
 class MappingEndpointsTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    auto storage = open_storage("sqlite://" + (testing::scratch_dir() / "fusion.db").string());
+    dir_ = testing::scratch_dir("-server");
+    auto storage = open_storage("sqlite://" + (dir_ / "fusion.db").string());
     ASSERT_TRUE(storage.ok());
     metrics_ = std::make_shared<MetricsRegistry>();
-    manager_ = std::move(SessionManager::create({}, std::move(storage).value(), metrics_)).value();
+    SessionManagerConfig manager_config;
+    manager_config.map_directory = (dir_ / "maps").string();
+    manager_config.map_save_interval = std::chrono::seconds(0);  // saved when asked (and at the end)
+    manager_ = std::move(SessionManager::create(manager_config, std::move(storage).value(), metrics_)).value();
     auto tokens = TokenStore::parse(testing::kTokensYaml, "tokens.yaml");
     ASSERT_TRUE(tokens.ok());
     auto shared_tokens = std::make_shared<TokenStore>(std::move(tokens).value());
@@ -117,6 +123,7 @@ class MappingEndpointsTest : public ::testing::Test {
     if (!token.empty()) context.AddMetadata("authorization", "Bearer " + token);
   }
 
+  std::filesystem::path dir_;  // the server's data: fusion.db, maps/
   std::shared_ptr<MetricsRegistry> metrics_;
   std::unique_ptr<SessionManager> manager_;
   std::unique_ptr<RestServer> rest_;
@@ -263,7 +270,8 @@ TEST_F(MappingEndpointsTest, GrpcServesTheMapAndStreamsKeyframesAndMapUpdates) {
   ASSERT_TRUE(decoded.ok()) << decoded.error().message;
   ASSERT_TRUE(decoded->points.has_value());
   EXPECT_GT(decoded->points->points.size(), 1000U);
-  EXPECT_EQ(decoded->version, info.mapping.map_version);
+  EXPECT_EQ(decoded->version, 1U);  // the ended session's final map, read from the map store
+  EXPECT_EQ(decoded->map_id, session_id_);
   // Errors: a version that is not kept, a map that is not the session's, no token, no map:read.
   const auto get_map = [&](const std::string& token, uint64_t version, const std::string& map_id) {
     grpc::ClientContext context;
@@ -278,6 +286,153 @@ TEST_F(MappingEndpointsTest, GrpcServesTheMapAndStreamsKeyframesAndMapUpdates) {
   EXPECT_EQ(get_map(kRobotToken, 0, "another-map"), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(get_map("", 0, ""), grpc::StatusCode::UNAUTHENTICATED);
   EXPECT_EQ(get_map(kViewerToken, 0, ""), grpc::StatusCode::PERMISSION_DENIED);
+}
+
+// Stored maps: the session's map is saved as versions; a client loads a map (REST and gRPC),
+// reads its versions back in every format, and relocalizes a second session in it.
+TEST_F(MappingEndpointsTest, StoresMapVersionsLoadsMapsAndRelocalizesASessionInThem) {
+  const auto get = [&](const std::string& path, const std::string& token) { return client().Get(path, bearer(token)); };
+  auto none = get("/v1/maps", kRobotToken);
+  ASSERT_TRUE(none && none->status == 200) << (none ? none->body : "");
+  EXPECT_TRUE(json::parse(none->body)["maps"].empty());
+  stream_recording();
+  ASSERT_TRUE(manager_->save_session_maps().ok());
+  ASSERT_TRUE(manager_->save_session_maps().ok());  // unchanged: no new version
+  auto listed = get("/v1/maps", kRobotToken);
+  ASSERT_TRUE(listed && listed->status == 200);
+  json maps_json = json::parse(listed->body)["maps"];
+  ASSERT_EQ(maps_json.size(), 1U) << listed->body;
+  EXPECT_EQ(maps_json[0]["map_id"], session_id_);
+  EXPECT_EQ(maps_json[0]["session_id"], session_id_);
+  EXPECT_EQ(maps_json[0]["versions"].size(), 1U);
+
+  // A known map: the session's map moved 40 m and turned 2 rad, loaded by a client.
+  const Principal admin{"admin", "acme", static_cast<uint32_t>(Permission::kAdmin)};
+  auto session_map = manager_->map(admin, session_id_);
+  ASSERT_TRUE(session_map.ok()) << session_map.error().message;
+  msgs::FusionMap known = std::move(session_map).value();
+  const SE3 T_known_world(SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), 2.0), Eigen::Vector3d(40.0, 25.0, -1.0));
+  for (Eigen::Vector3f& point : known.points->points) point = (T_known_world * point.cast<double>()).cast<float>();
+  known.occupancy.reset();
+  known.map_id = "street-survey";
+  known.version = 0;
+  auto serialized = maps::serialize_fusion_map(known);
+  ASSERT_TRUE(serialized.ok()) << serialized.error().message;
+  const std::string known_file = std::move(serialized).value();
+  const auto post_map = [&](const std::string& body, const std::string& token) {
+    return client().Post("/v1/maps?name=street", bearer(token), body, "application/octet-stream");
+  };
+  auto refused = post_map(known_file, kRobotToken);  // map:read only
+  ASSERT_TRUE(refused);
+  EXPECT_EQ(refused->status, 403);
+  EXPECT_EQ(error_of(post_map("not a map", kAdminToken))["field"], "body");
+  auto loaded = post_map(known_file, kAdminToken);
+  ASSERT_TRUE(loaded);
+  ASSERT_EQ(loaded->status, 201) << loaded->body;
+  const std::string known_id = json::parse(loaded->body)["map_id"];
+  EXPECT_EQ(known_id, "street-survey");
+  EXPECT_EQ(json::parse(loaded->body)["version"], 1);
+  // A second version of it over gRPC (LoadMap), the first one as its parent.
+  {
+    grpc::ClientContext context;
+    prepare(context, kAdminToken);
+    known.map_id = known_id;
+    known.version = 1;
+    v1::LoadMapResponse response;
+    const grpc::Status status = stub_->LoadMap(&context, msgs::to_proto(known), &response);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    EXPECT_EQ(response.map_id(), known_id);
+    EXPECT_EQ(response.version(), 2U);
+    grpc::ClientContext other;
+    prepare(other, kGlobexAdminToken);
+    EXPECT_EQ(stub_->LoadMap(&other, msgs::to_proto(known), &response).error_code(), grpc::StatusCode::PERMISSION_DENIED);
+    grpc::ClientContext invalid;
+    prepare(invalid, kAdminToken);
+    v1::FusionMap broken = msgs::to_proto(known);
+    broken.set_format_version(99);
+    EXPECT_EQ(stub_->LoadMap(&invalid, broken, &response).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  }
+  auto versions = get("/v1/maps/" + known_id + "?format=json", kRobotToken);
+  ASSERT_TRUE(versions && versions->status == 200) << (versions ? versions->body : "");
+  const json versions_json = json::parse(versions->body);
+  EXPECT_EQ(versions_json["name"], "street");
+  EXPECT_TRUE(versions_json["session_id"].is_null());
+  ASSERT_EQ(versions_json["versions"].size(), 2U);
+  EXPECT_EQ(versions_json["versions"][1]["parent_version"], 1);
+  auto first = get("/v1/maps/" + known_id + "?version=1", kRobotToken);
+  ASSERT_TRUE(first && first->status == 200);
+  auto parsed = maps::parse_fusion_map(first->body);
+  ASSERT_TRUE(parsed.ok()) << parsed.error().message;
+  EXPECT_EQ(parsed->points->points.size(), known.points->points.size());
+  EXPECT_EQ(parsed->points->points.front(), known.points->points.front());
+  auto pcd = get("/v1/maps/" + known_id + "?format=pcd", kRobotToken);
+  ASSERT_TRUE(pcd && pcd->status == 200);
+  EXPECT_EQ(get("/v1/maps/" + known_id + "?version=9", kRobotToken)->status, 404);
+  EXPECT_EQ(get("/v1/maps/" + known_id + "?version=x", kRobotToken)->status, 400);
+  EXPECT_EQ(get("/v1/maps/no-such-map", kRobotToken)->status, 404);
+  EXPECT_EQ(get("/v1/maps/" + known_id, kGlobexAdminToken)->status, 403);  // another organization's
+  EXPECT_EQ(get("/v1/maps/" + known_id, kViewerToken)->status, 403);      // no map:read
+  EXPECT_EQ(get("/v1/maps/" + known_id, "")->status, 401);
+  {
+    grpc::ClientContext context;
+    prepare(context, kRobotToken);
+    v1::MapRequest request;
+    request.set_map_id(known_id);
+    request.set_version(1);
+    v1::FusionMap map;
+    const grpc::Status status = stub_->GetMap(&context, request, &map);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    EXPECT_EQ(map.version(), 1U);
+  }
+
+  // Relocalization: a second session on the same drive, localized in the known map.
+  const Recording& recording = urban_recording();
+  const std::string second = manager_->create_session(kStreamer, {"second", recording.config_yaml, recording.calibration_yaml}).value().id;
+  const auto relocalize = [&](const std::string& session, const std::string& body, const std::string& token = kRobotToken) {
+    return client().Post("/v1/sessions/" + session + "/relocalize", bearer(token), body, "application/json");
+  };
+  auto early = relocalize(second, R"({"map_id": ")" + known_id + "\"}");
+  ASSERT_TRUE(early);
+  EXPECT_EQ(early->status, 409) << early->body;  // nothing mapped yet
+  for (const testing::TimedMessage& message : recording.messages) ASSERT_TRUE(manager_->push(kStreamer, second, message.sensor, message.message).ok());
+  EXPECT_EQ(error_of(relocalize(second, "{}"))["field"], "map_id");
+  EXPECT_EQ(error_of(relocalize(second, R"({"map_id": "x", "linear_window_m": -1})"))["field"], "linear_window_m");
+  EXPECT_EQ(error_of(relocalize(second, R"({"map_id": "x", "initial_pose": {"position": [1, 2]}})"))["field"], "initial_pose.position");
+  EXPECT_EQ(relocalize(second, R"({"map_id": "no-such-map"})")->status, 404);
+  EXPECT_EQ(relocalize(second, R"({"map_id": ")" + known_id + "\"}", kViewerToken)->status, 403);
+  EXPECT_EQ(manager_->session_info(kStreamer, second).value().mapping.relocalizations, 0U);
+  auto relocalized = relocalize(second, R"({"map_id": ")" + known_id + R"(", "version": 1})");
+  ASSERT_TRUE(relocalized);
+  ASSERT_EQ(relocalized->status, 200) << relocalized->body;
+  const json outcome = json::parse(relocalized->body);
+  EXPECT_EQ(outcome["version"], 1);
+  EXPECT_EQ(outcome["global_search"], true);
+  const std::vector<double> position = outcome["T_map_world"]["position"];
+  EXPECT_LT((Eigen::Vector3d(position[0], position[1], position[2]) - T_known_world.translation()).norm(), 0.2) << relocalized->body;
+  EXPECT_EQ(manager_->session_info(kStreamer, second).value().mapping.relocalizations, 1U);
+  // Its poses are in the known map's frame now.
+  const msgs::PoseEstimate first_pose = manager_->current_pose(kStreamer, session_id_).value();
+  const msgs::PoseEstimate second_pose = manager_->current_pose(kStreamer, second).value();
+  EXPECT_LT((second_pose.T_world_body.position - T_known_world * first_pose.T_world_body.position).norm(), 0.3);
+
+  // After a restart the ended session's map and the loaded map are read back from the store.
+  ASSERT_TRUE(manager_->end_session(kStreamer, session_id_).ok());
+  rest_.reset();
+  grpc_.reset();
+  manager_.reset();
+  auto storage = open_storage("sqlite://" + (dir_ / "fusion.db").string());
+  ASSERT_TRUE(storage.ok());
+  SessionManagerConfig config;
+  config.map_directory = (dir_ / "maps").string();
+  auto restarted = SessionManager::create(config, std::move(storage).value(), metrics_);
+  ASSERT_TRUE(restarted.ok()) << restarted.error().message;
+  auto final_map = restarted.value()->map(admin, session_id_);
+  ASSERT_TRUE(final_map.ok()) << final_map.error().message;
+  EXPECT_EQ(final_map->points->points.size(), known.points->points.size());
+  auto all = restarted.value()->list_maps(admin);
+  ASSERT_TRUE(all.ok());
+  EXPECT_EQ(all->size(), 3U);  // both sessions' maps and the loaded one
+  EXPECT_EQ(restarted.value()->stored_map(admin, known_id).value().version, 2U);
 }
 
 TEST_F(MappingEndpointsTest, FusionClientStreamsALogIntoANewSessionAndReportsServerErrors) {

@@ -80,6 +80,10 @@ inline constexpr const char* kTokensYaml = R"(tokens:
     organization: globex
     permissions: [fusion:session:write, fusion:session:read]
     token: "globex-robot-secret-0004"
+  - name: globex-admin
+    organization: globex
+    permissions: [fusion:admin]
+    token: "globex-admin-secret-0005"
 )";
 
 }  // namespace hanzo::fusion::testing

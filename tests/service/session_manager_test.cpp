@@ -216,7 +216,9 @@ TEST(SessionManager, PosesAcknowledgedAsStoredSurviveKillNine) {
   ASSERT_GE(child, 0);
   if (child == 0) {
     close(pipe_fds[0]);
-    auto manager = open_manager(dir, {.storage_flush_interval = std::chrono::milliseconds(5)});
+    SessionManagerConfig config;
+    config.storage_flush_interval = std::chrono::milliseconds(5);
+    auto manager = open_manager(dir, config);
     if (!manager) _exit(3);
     const std::string id = create_sample_session(*manager).id;
     const std::vector<testing::TimedMessage> recording = testing::sample_recording();
@@ -256,7 +258,9 @@ TEST(SessionManager, PosesAcknowledgedAsStoredSurviveKillNine) {
 }
 
 TEST(SessionManager, SlowSubscribersLoseTheOldestPosesNeverBlockFusion) {
-  auto manager = open_manager(testing::scratch_dir(), {.subscriber_queue_capacity = 16});
+  SessionManagerConfig config;
+  config.subscriber_queue_capacity = 16;
+  auto manager = open_manager(testing::scratch_dir(), config);
   ASSERT_TRUE(manager);
   const SessionInfo session = create_sample_session(*manager);
   auto subscription = manager->subscribe_poses(kViewer, session.id);

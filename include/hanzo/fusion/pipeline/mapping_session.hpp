@@ -72,15 +72,10 @@ struct MappingSessionConfig {
   /// Register sweeps on a thread of the session's own (the server's setting): the IMU's poses
   /// never wait for a registration, the result is fused when the next message arrives, as a
   /// measurement in the past (the Session rolls back; it must come within frontend.lag_window_s).
-  /// At most two sweeps wait for the worker (see drop_sweeps_when_busy). Off: sweeps are
-  /// registered inside push(), deterministically (replays, tests).
+  /// At most two sweeps wait for the worker; push() waits beyond (a sender faster than
+  /// registration is slowed down instead of losing sweeps). Off: sweeps are registered inside
+  /// push(), deterministically (replays, tests).
   bool asynchronous_registration = false;
-  /// With asynchronous_registration, when two sweeps already wait for the worker: true drops
-  /// the older waiting sweep (counted as refused "registration_busy"; the odometry predicts over
-  /// the gap), so an overloaded machine keeps the IMU's poses at sensor rate and registers
-  /// what it can (the server's setting); false makes push() wait for the worker (a replay
-  /// faster than registration slows down instead of losing sweeps).
-  bool drop_sweeps_when_busy = false;
   /// With asynchronous_registration: the worker thread's nice value (Linux, 0..19; higher =
   /// lower priority), so registrations take the CPU the IMU path leaves. 0 keeps the caller's.
   int registration_niceness = 0;

@@ -16,6 +16,12 @@
 //   - Each session is a pipeline::MappingSession: with a 3D LiDAR it also registers sweeps, keeps
 //     a keyframe graph, builds a map and closes loops; map(), close_loop(), subscribe_map() and
 //     subscribe_keyframes() serve them (an ended session keeps its final map in memory).
+//   - Maps (with SessionManagerConfig::map_directory, a MapCatalog): each session's map is saved
+//     as a new version of the map whose id is the session id every map_save_interval while it
+//     changes and when the session ends (so maps survive restarts, and an ended session's map is
+//     read back from the store); clients load maps (load_map: gRPC LoadMap, POST /v1/maps) and
+//     read any stored version; relocalize() localizes a session in a stored map
+//     (pipeline::MappingSession::relocalize) and moves it into that map's frame.
 //   - register_sensor: adds a sensor (configuration entry + calibration entry, validated by the
 //     same loaders as the files) before the session has received data; afterwards kConflict.
 //
@@ -34,6 +40,7 @@
 #include "hanzo/fusion/pipeline/mapping_session.hpp"
 #include "hanzo/fusion/service/api_error.hpp"
 #include "hanzo/fusion/service/auth.hpp"
+#include "hanzo/fusion/service/map_catalog.hpp"
 #include "hanzo/fusion/service/metrics.hpp"
 #include "hanzo/fusion/service/storage.hpp"
 #include "hanzo/fusion/service/subscription.hpp"
@@ -46,6 +53,24 @@ struct SessionManagerConfig {
   std::chrono::milliseconds storage_flush_interval{20};  // how often queued poses are committed
   std::size_t max_pending_poses = 2'000'000;        // storage queue bound; beyond it poses are dropped (counted)
   std::size_t subscriber_queue_capacity = 1024;     // per subscriber, drop-oldest beyond it
+  /// Folder of the stored maps (a maps::MapStore; the server uses DATA_DIR/maps). Empty: maps
+  /// are not stored (load_map, stored maps and relocalize answer kUnavailable).
+  std::string map_directory;
+  /// How often a changed session map is saved as a new version (0: only when the session ends).
+  std::chrono::seconds map_save_interval{30};
+  std::size_t cached_localizers = 4;                // prepared maps kept for relocalize()
+};
+
+struct RelocalizeRequest {
+  std::string map_id;                   // a stored map of the caller's organization
+  std::optional<uint64_t> version;      // the latest when empty
+  pipeline::RelocalizationRequest relocalization;
+};
+
+struct RelocalizeResult {
+  std::string map_id;
+  uint64_t version = 0;                 // the stored version localized in
+  pipeline::RelocalizationOutcome outcome;
 };
 
 struct CreateSessionRequest {
@@ -120,13 +145,32 @@ class SessionManager {
   /// closures (MappingSession::set_map_update_callback). map_id is the session id.
   ApiResult<std::shared_ptr<MapSubscription>> subscribe_map(const Principal& caller, const std::string& session_id);
   /// The session's map (map:read): map_id = session id, version, created, the session's
-  /// configuration and calibration, layers. kNotFound while it has no layer yet.
+  /// configuration and calibration, layers. While the live map has no layer yet (a session
+  /// restored after a restart, an ended one) the newest stored version; kNotFound if none.
   ApiResult<msgs::FusionMap> map(const Principal& caller, const std::string& session_id);
   /// A manual loop closure (session:write); kInvalidArgument for a bad request, kNotFound for
   /// unknown keyframes (or keyframes without scans) and a search that found no loop, kRejected
   /// when the registration did not verify the loop, kConflict for an ended session.
   ApiResult<pipeline::LoopClosureOutcome> close_loop(const Principal& caller, const std::string& session_id,
                                                      const pipeline::LoopClosureRequest& request);
+
+  /// Stores a client's map (map:write) as the next version of its map_id (a new UUID when
+  /// empty); kPermissionDenied for another organization's map id. `map` must pass
+  /// msgs::validate (the front ends decode it with the validating readers).
+  ApiResult<maps::MapVersionInfo> load_map(const Principal& caller, msgs::FusionMap map, const std::string& name = "");
+  /// Stored maps of the caller's organization (map:read), sessions' maps included.
+  ApiResult<std::vector<StoredMap>> list_maps(const Principal& caller);
+  ApiResult<StoredMap> stored_map_info(const Principal& caller, const std::string& map_id);
+  /// A stored version of a map (map:read); the latest when `version` is empty.
+  ApiResult<msgs::FusionMap> stored_map(const Principal& caller, const std::string& map_id, std::optional<uint64_t> version = std::nullopt);
+  /// Relocalizes a session in a stored map (session:write and map:read). kNotFound: unknown
+  /// session, map or version; kInvalidArgument: a bad request or a map without a point layer;
+  /// kConflict: an ended session, or one that has no mapped sweep yet; kRejected: no pose in
+  /// the map verified (the reason says why). Nothing changes on an error.
+  ApiResult<RelocalizeResult> relocalize(const Principal& caller, const std::string& session_id, const RelocalizeRequest& request);
+  /// Saves the maps of the sessions whose map changed since their last save (the saver thread
+  /// calls it every map_save_interval; tests call it directly).
+  Status save_session_maps();
 
   /// Blocks until every pose queued so far is committed (or failed); for shutdown and tests.
   Status flush_storage();
