@@ -36,7 +36,7 @@ def server(tmp_path_factory):
     (scratch / "tokens.yaml").write_text(f"""tokens:
   - name: robot
     organization: acme
-    permissions: [fusion:session:write, fusion:session:read, fusion:map:read]
+    permissions: [fusion:session:write, fusion:session:read, fusion:map:read, fusion:map:write]
     token: "{TOKEN}"
   - name: viewer
     organization: acme
@@ -68,7 +68,7 @@ def test_session_lifecycle_trajectory_and_map(server):
     assert json.loads(streamed.stdout)["messages_sent"] > 2000
 
     state = client.session(session["id"])
-    assert state["tracking_state"] == "TRACKING"
+    assert state["tracking_state"] == "TRACKING", [(s["name"], s["timed_out"], s["received"], s["fused"], s["rejected"]) for s in state["sensors"]]
     assert state["mapping"]["scans_registered"] > 50
     assert [s["id"] for s in client.sessions()] == [session["id"]]
     pose = client.pose(session["id"])
@@ -89,6 +89,41 @@ def test_session_lifecycle_trajectory_and_map(server):
     ended = client.end_session(session["id"])
     assert ended["status"] == "ended"
     assert client.map_points(session["id"]).shape == points.shape  # the final map stays
+
+
+def test_stored_maps_and_relocalization(server):
+    client = FusionClient(server["rest"], token=TOKEN)
+    sim = server["sim"]
+    stream = [BINARY, "stream", str(sim / "sensors.mcap"), "--server", server["grpc"], "--rest", server["rest"],
+              "--config", str(sim / "fusion.yaml"), "--calib", str(sim / "calibration.yaml"), "--token", TOKEN, "--rate", "max",
+              "--json"]
+    first = json.loads(subprocess.run(stream + ["--end"], check=True, capture_output=True, text=True).stdout)["session_id"]
+    stored = {m["map_id"]: m for m in client.maps()}
+    assert first in stored and stored[first]["session_id"] == first and stored[first]["latest_version"] >= 1
+
+    # The first session's map, loaded again under a new id.
+    fusion_map = client.stored_map(first)
+    assert fusion_map.startswith(b"HZFMAP\r\n")
+    with pytest.raises(FusionError) as bad:
+        client.load_map(b"not a map")
+    assert bad.value.status == 400 and bad.value.field == "body"
+    with pytest.raises(FusionError) as read_only:
+        FusionClient(server["rest"], token=VIEWER_TOKEN).load_map(fusion_map)
+    assert read_only.value.status == 403
+    versions = client.stored_map(first, format="json")["versions"]
+    assert parse_pcd(client.stored_map(first, versions[-1]["version"], "pcd")).shape[1] == 3
+
+    # A second drive relocalizes in the first one's map: the same world, so (almost) no move.
+    second = json.loads(subprocess.run(stream, check=True, capture_output=True, text=True).stdout)["session_id"]
+    with pytest.raises(FusionError) as unknown:
+        client.relocalize(second, "no-such-map")
+    assert unknown.value.status == 404
+    outcome = client.relocalize(second, first)
+    assert outcome["global_search"] and outcome["inlier_rmse_m"] < 0.1
+    assert np.linalg.norm(outcome["T_map_world"]["position"]) < 0.3
+    guessed = client.relocalize(second, first, position=client.pose(second)["position"], linear_window_m=2.0)
+    assert not guessed["global_search"]
+    assert client.session(second)["mapping"]["relocalizations"] == 2
 
 
 def test_errors_carry_status_code_and_field(server):

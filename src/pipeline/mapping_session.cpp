@@ -1,9 +1,5 @@
 #include "hanzo/fusion/pipeline/mapping_session.hpp"
 
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -37,8 +33,8 @@ constexpr double kMapMoveRotation = 0.001;    // rad
 // blocks beyond: a replay faster than registration slows down instead of losing sweeps).
 class MappingSession::RegistrationWorker {
  public:
-  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity, int niceness)
-      : odometry_(odometry), capacity_(capacity), niceness_(niceness), thread_([this] { run(); }) {}
+  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity)
+      : odometry_(odometry), capacity_(capacity), thread_([this] { run(); }) {}
   ~RegistrationWorker() {
     {
       std::lock_guard lock(mutex_);
@@ -67,10 +63,6 @@ class MappingSession::RegistrationWorker {
 
  private:
   void run() {
-    // Linux: setpriority on a thread id sets that thread's nice value only.
-    if (niceness_ != 0 && setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), niceness_) != 0) {
-      logger()->warn("mapping session: cannot set the registration thread's nice value to {}", niceness_);
-    }
     std::unique_lock lock(mutex_);
     while (true) {
       changed_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
@@ -90,7 +82,6 @@ class MappingSession::RegistrationWorker {
 
   LidarInertialOdometry& odometry_;
   std::size_t capacity_;
-  int niceness_;
   std::mutex mutex_;
   std::condition_variable changed_;
   std::deque<LidarInertialOdometry::PreparedScan> jobs_;
@@ -115,7 +106,6 @@ Status MappingSessionConfig::validate() const {
   if (!(loop_translation_sigma > 0) || !(loop_rotation_sigma > 0)) return Error("loop_translation_sigma, loop_rotation_sigma: must be > 0");
   if (!(map_keyframe_distance >= 0) || !(map_keyframe_angle >= 0)) return Error("map_keyframe_distance, map_keyframe_angle: must be >= 0");
   if (max_waiting_scans == 0) return Error("max_waiting_scans: must be > 0");
-  if (registration_niceness < 0 || registration_niceness > 19) return Error("registration_niceness: must be in 0..19");
   return ok_status();
 }
 
@@ -151,7 +141,7 @@ MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionC
     // registered, inside the default 0.5 s lag window its late pose must land in.
     constexpr std::size_t kWorkerQueue = 2;
     if (config_.asynchronous_registration) {
-      worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue, config_.registration_niceness);
+      worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue);
     }
   }
   session_->set_keyframe_callback([this](const msgs::Keyframe& emitted) {

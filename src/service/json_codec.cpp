@@ -175,6 +175,7 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"loop_candidates", mapping.loop_candidates},
       {"loop_closures", mapping.loop_closures},
       {"manual_loop_closures", mapping.manual_loop_closures},
+      {"relocalizations", mapping.relocalizations},
       {"map_version", mapping.map_version},
       {"map_memory_bytes", mapping.map_memory_bytes},
       {"last_registration_ms", mapping.last_registration_ms},

@@ -227,9 +227,7 @@ struct SessionManager::Impl {
   Result<std::unique_ptr<pipeline::MappingSession>> make_pipeline(ManagedSession& managed, const config::FusionConfig& configuration,
                                                                   const calib::Calibration& calibration) {
     pipeline::MappingSessionConfig mapping;
-    // The IMU's poses never wait for a LiDAR registration, which runs at a lower priority.
-    mapping.asynchronous_registration = true;
-    mapping.registration_niceness = 10;
+    mapping.asynchronous_registration = true;  // the IMU's poses never wait for a LiDAR registration
     auto session = pipeline::MappingSession::create(configuration, calibration, mapping);
     if (!session) return session.error();
     ManagedSession* raw = &managed;

@@ -68,7 +68,10 @@ class FusionClient:
     def _request(self, method, path, body=None, raw=False):
         headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
         data = None
-        if body is not None:
+        if isinstance(body, (bytes, bytearray)):
+            data = bytes(body)
+            headers["Content-Type"] = "application/octet-stream"
+        elif body is not None:
             data = json.dumps(body).encode()
             headers["Content-Type"] = "application/json"
         request = urllib.request.Request(self.url + path, data=data, method=method, headers=headers)
@@ -160,6 +163,43 @@ class FusionClient:
         if covariance is not None:
             body["covariance"] = [float(v) for v in np.asarray(covariance, dtype=float).reshape(36)]
         return self._request("POST", f"/v1/sessions/{_quote(session_id)}/loop-closure", body)
+
+    # --- stored maps ---
+    def maps(self):
+        """Stored maps of the organization (sessions' maps and loaded ones), each with its versions."""
+        return self._request("GET", "/v1/maps")["maps"]
+
+    def load_map(self, fusion_map, name=""):
+        """Stores a FusionMap file (bytes) as the next version of its map_id; returns
+        {"map_id", "version", "parent_version", "bytes"}. Needs fusion:map:write."""
+        query = f"?name={_quote(name)}" if name else ""
+        return self._request("POST", f"/v1/maps{query}", bytes(fusion_map))
+
+    def stored_map(self, map_id, version=None, format="fmap"):
+        """A stored version (the latest when None): FusionMap / PCD / PLY bytes; json: the versions."""
+        query = {"format": format}
+        if version is not None:
+            query["version"] = int(version)
+        payload, _ = self._request("GET", f"/v1/maps/{_quote(map_id)}?{urllib.parse.urlencode(query)}", raw=True)
+        return json.loads(payload) if format == "json" else payload
+
+    def relocalize(self, session_id, map_id, version=None, position=None, orientation_wxyz=None, linear_window_m=None,
+                   angular_window_rad=None):
+        """Localizes the session in a stored map and moves it into the map's frame. Without
+        position the whole map is searched; with it (the body's pose in the map) only the windows
+        around it. Returns the outcome (T_map_world, score, inlier_rmse_m, ...)."""
+        body = {"map_id": map_id}
+        if version is not None:
+            body["version"] = int(version)
+        if position is not None:
+            body["initial_pose"] = {"position": [float(v) for v in position]}
+            if orientation_wxyz is not None:
+                body["initial_pose"]["orientation_wxyz"] = [float(v) for v in orientation_wxyz]
+        if linear_window_m is not None:
+            body["linear_window_m"] = float(linear_window_m)
+        if angular_window_rad is not None:
+            body["angular_window_rad"] = float(angular_window_rad)
+        return self._request("POST", f"/v1/sessions/{_quote(session_id)}/relocalize", body)
 
 
 def _quote(text):

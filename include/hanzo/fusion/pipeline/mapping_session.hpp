@@ -76,9 +76,6 @@ struct MappingSessionConfig {
   /// registration is slowed down instead of losing sweeps). Off: sweeps are registered inside
   /// push(), deterministically (replays, tests).
   bool asynchronous_registration = false;
-  /// With asynchronous_registration: the worker thread's nice value (Linux, 0..19; higher =
-  /// lower priority), so registrations take the CPU the IMU path leaves. 0 keeps the caller's.
-  int registration_niceness = 0;
   Status validate() const;
   static maps::MapBuilderConfig default_map();
 };
