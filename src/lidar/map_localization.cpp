@@ -106,20 +106,32 @@ struct SearchNode {
   float bound = 0.0f;
 };
 
-// Depth-first branch and bound (Hess et al. 2016, Algorithm 3).
+// Depth-first branch and bound (Hess et al. 2016, Algorithm 3), keeping the best `count`
+// full-resolution poses that are distinct places and score at least rival_ratio x the best: a
+// pose within `separation_cells` and `separation_headings` of a kept one replaces it only when
+// it scores higher. Nodes are pruned against threshold(), so the kept poses are the exhaustive
+// search's best distinct ones. Repetitive places (aisles of racks)
+// give several; the caller verifies them in order.
 class BranchAndBound {
  public:
   BranchAndBound(const MaxGridStack& grids, const std::vector<std::vector<Eigen::Vector2i>>& offsets, Eigen::Vector2i max_cell,
-                 float min_score)
-      : grids_(grids), offsets_(offsets), max_cell_(std::move(max_cell)), best_score_(min_score) {}
+                 float min_score, float rival_ratio, std::size_t count, int separation_cells, int separation_headings, int headings)
+      : grids_(grids),
+        offsets_(offsets),
+        max_cell_(std::move(max_cell)),
+        min_score_(min_score),
+        rival_ratio_(rival_ratio),
+        count_(count),
+        separation_cells_(separation_cells),
+        separation_headings_(separation_headings),
+        headings_(headings) {}
 
   void search(std::vector<SearchNode> nodes, int level) {
     std::sort(nodes.begin(), nodes.end(), [](const SearchNode& a, const SearchNode& b) { return a.bound > b.bound; });
     for (const SearchNode& node : nodes) {
-      if (node.bound <= best_score_) break;  // sorted: no later node can beat the best either
+      if (node.bound <= threshold()) break;  // sorted: no later node can beat the kept ones either
       if (level == 0) {
-        best_ = node;
-        best_score_ = node.bound;
+        keep(node);
         continue;
       }
       const int half = 1 << (level - 1);
@@ -136,25 +148,63 @@ class BranchAndBound {
     }
   }
   std::size_t& evaluated() { return evaluated_; }
-  const std::optional<SearchNode>& best() const { return best_; }
+  /// Best first.
+  std::vector<SearchNode> best() const {
+    std::vector<SearchNode> sorted = kept_;
+    std::sort(sorted.begin(), sorted.end(), [](const SearchNode& a, const SearchNode& b) { return a.bound > b.bound; });
+    return sorted;
+  }
 
  private:
+  // Nodes at or below it cannot enter the kept set: below min_score, below rival_ratio x the
+  // best kept score (not a rival in 2D), or below the lowest kept score once the set is full.
+  float threshold() const {
+    if (kept_.empty()) return min_score_;
+    const auto [lowest, highest] = std::minmax_element(kept_.begin(), kept_.end(),
+                                                       [](const SearchNode& a, const SearchNode& b) { return a.bound < b.bound; });
+    float bound = std::max(min_score_, rival_ratio_ * highest->bound);
+    if (kept_.size() >= count_) bound = std::max(bound, lowest->bound);
+    return bound;
+  }
+  bool near(const SearchNode& a, const SearchNode& b) const {
+    const int heading_gap = std::abs(a.heading - b.heading);
+    return std::max(std::abs(a.x - b.x), std::abs(a.y - b.y)) <= separation_cells_ &&
+           std::min(heading_gap, headings_ - heading_gap) <= separation_headings_;
+  }
+  void keep(const SearchNode& node) {
+    for (SearchNode& kept : kept_) {
+      if (!near(kept, node)) continue;
+      if (node.bound > kept.bound) kept = node;
+      return;
+    }
+    if (kept_.size() < count_) {
+      kept_.push_back(node);
+      return;
+    }
+    *std::min_element(kept_.begin(), kept_.end(), [](const SearchNode& a, const SearchNode& b) { return a.bound < b.bound; }) = node;
+  }
+
   const MaxGridStack& grids_;
   const std::vector<std::vector<Eigen::Vector2i>>& offsets_;
   Eigen::Vector2i max_cell_;
-  float best_score_;
-  std::optional<SearchNode> best_;
+  float min_score_;
+  float rival_ratio_;
+  std::size_t count_;
+  int separation_cells_, separation_headings_, headings_;
+  std::vector<SearchNode> kept_;
   std::size_t evaluated_ = 0;
 };
 
 // Free-space consistency of a localization: map points near the sensor that the sweep saw
 // through (a return in their direction, farther than them by more than a margin) contradict
 // the pose; points with a nearer return are occluded, points with no return tell nothing
-// (rings are sparse). Directions are binned 1 deg in azimuth x 2.5 deg in elevation; a bin
-// keeps its nearest return. Returns (consistent, seen through) counts.
+// (rings are sparse). Directions are binned 1 deg in azimuth x 0.5 deg in elevation (a bin
+// about one beam high, so the return and the map point are compared along nearly the same
+// ray); a bin keeps its nearest return. The map points are those above the ground (the floor
+// at grazing angles spans metres of range within a bin). Returns (consistent, seen through).
 std::pair<std::size_t, std::size_t> free_space_check(const std::vector<Eigen::Vector3f>& sweep, const std::vector<Eigen::Vector3f>& map_points,
                                                      const SE3& T_map_sensor, double max_range) {
-  constexpr int kAzimuthBins = 360, kElevationBins = 72;
+  constexpr int kAzimuthBins = 360, kElevationBins = 360;
   const auto bin_of = [](const Eigen::Vector3d& p) {
     const double azimuth = std::atan2(p.y(), p.x()), elevation = std::atan2(p.z(), p.head<2>().norm());
     const int a = std::clamp(static_cast<int>((azimuth + std::numbers::pi) / (2.0 * std::numbers::pi) * kAzimuthBins), 0, kAzimuthBins - 1);
@@ -198,7 +248,8 @@ Status MapLocalizerConfig::validate() const {
     return Error("ground_cell, query_max_range, query_point_spacing: must be > 0");
   }
   if (branch_and_bound_depth < 0 || branch_and_bound_depth > 12) return Error("branch_and_bound_depth: must be in 0..12");
-  if (max_grid_cells == 0) return Error("max_grid_cells: must be > 0");
+  if (max_grid_cells == 0 || candidates == 0) return Error("max_grid_cells, candidates: must be > 0");
+  if (!(candidate_score_ratio > 0 && candidate_score_ratio <= 1)) return Error("candidate_score_ratio: must be in (0, 1]");
   if (!(min_score >= 0 && min_score <= 1)) return Error("min_score: must be in [0, 1]");
   if (!(max_seen_through_fraction >= 0 && max_seen_through_fraction <= 1)) return Error("max_seen_through_fraction: must be in [0, 1]");
   if (!(max_rmse > 0) || !(min_inlier_fraction >= 0 && min_inlier_fraction <= 1)) {
@@ -235,6 +286,7 @@ Result<MapLocalizer> MapLocalizer::create(std::vector<Eigen::Vector3f> map_point
   for (const Eigen::Vector3f& point : map_points) {
     const double above = point.z() - *localizer.ground_height(point.x(), point.y());
     if (above >= config.slice_min_height && above <= config.slice_max_height) localizer.slice_.push_back(point.head<2>());
+    if (above >= config.slice_min_height) localizer.structure_.push_back(point);
   }
   localizer.slice_ = thin_2d(localizer.slice_, config.grid_resolution / 2.0);
   if (localizer.slice_.size() < config.min_slice_points) {
@@ -377,7 +429,12 @@ Result<MapLocalization> MapLocalizer::localize(const std::vector<Eigen::Vector3f
     }
   }
   const Eigen::Vector2i first_cell = grids.cell(grid_min), last_cell = grids.cell(grid_max);
-  BranchAndBound search(grids, offsets, last_cell, static_cast<float>(config_.min_score));
+  // Distinct places: 1 m or 10 deg apart.
+  const int separation_cells = std::max(1, static_cast<int>(std::lround(1.0 / resolution)));
+  const int separation_headings = std::max(1, static_cast<int>(std::lround(0.17 / step)));
+  BranchAndBound search(grids, offsets, last_cell, static_cast<float>(config_.min_score), static_cast<float>(config_.candidate_score_ratio),
+                        config_.candidates, separation_cells,
+                        separation_headings, query.T_map_sensor_guess ? std::numeric_limits<int>::max() / 2 : headings);
   std::vector<SearchNode> top;
   const int top_step = 1 << depth;
   for (int index = 0; index < headings; ++index) {
@@ -389,23 +446,67 @@ Result<MapLocalization> MapLocalizer::localize(const std::vector<Eigen::Vector3f
   }
   search.evaluated() += top.size();
   search.search(std::move(top), depth);
-  if (!search.best()) {
+  const std::vector<SearchNode> candidates = search.best();
+  if (candidates.empty()) {
     return Error(fmt::format("map localization: no pose scores {} in 2D ({} headings, {} nodes searched)", config_.min_score, headings,
                              search.evaluated()));
   }
-  const SearchNode best = *search.best();
-  const Eigen::Vector2d position = grids.center({best.x, best.y});
-  const std::optional<double> ground = ground_height(position.x(), position.y());
-  const double z = ground ? *ground + sensor_height
-                          : (query.T_map_sensor_guess ? query.T_map_sensor_guess->translation().z() : sensor_height);
-  const SE3 T_map_level(yaw_rotation(heading_of(best.heading)), Eigen::Vector3d(position.x(), position.y(), z));
-  const SE3 from_2d = T_map_level * SE3(R_level_sensor, Eigen::Vector3d::Zero());
 
-  // 3D: coarse then fine surface registration, then the verification.
+  // 3D, every candidate. The answer is the verified pose that fits best (lowest RMSE); another
+  // distinct place (> 1 m away) that verifies with a comparable fit (RMSE <= 2 x the best's +
+  // 2 cm) makes the sweep ambiguous (the same view from several places: repeated aisles), and
+  // it is refused rather than guessed.
   cloud::PointCloud sweep;
   sweep.positions = points;
   std::erase_if(sweep.positions, [](const Eigen::Vector3f& point) { return !point.allFinite(); });
   const std::vector<Eigen::Vector3f> source = cloud::voxel_downsample(sweep, odometry_.source_voxel_size).positions;
+  std::string first_failure;
+  std::vector<MapLocalization> verified_poses;
+  for (std::size_t rank = 0; rank < candidates.size(); ++rank) {
+    const SearchNode& candidate = candidates[rank];
+    const Eigen::Vector2d position = grids.center({candidate.x, candidate.y});
+    const std::optional<double> ground = ground_height(position.x(), position.y());
+    const double z = ground ? *ground + sensor_height
+                            : (query.T_map_sensor_guess ? query.T_map_sensor_guess->translation().z() : sensor_height);
+    const SE3 T_map_level(yaw_rotation(heading_of(candidate.heading)), Eigen::Vector3d(position.x(), position.y(), z));
+    Result<MapLocalization> verified = verify(sweep.positions, source, T_map_level * SE3(R_level_sensor, Eigen::Vector3d::Zero()));
+    if (!verified) {
+      if (first_failure.empty()) {
+        first_failure = fmt::format("the best (score {:.2f} at {:.1f}, {:.1f} m, {:.0f} deg): {}", candidate.bound, position.x(), position.y(),
+                                    heading_of(candidate.heading) * 180.0 / std::numbers::pi, verified.error().message);
+      }
+      continue;
+    }
+    verified->score = candidate.bound;
+    verified->candidate_rank = rank;
+    verified_poses.push_back(std::move(verified).value());
+  }
+  if (verified_poses.empty()) {
+    return Error(fmt::format("map localization: none of the {} best distinct 2D poses verified in 3D; {}", candidates.size(), first_failure));
+  }
+  const MapLocalization& best = *std::min_element(verified_poses.begin(), verified_poses.end(),
+                                                  [](const MapLocalization& a, const MapLocalization& b) { return a.inlier_rmse < b.inlier_rmse; });
+  std::vector<Eigen::Vector3d> rivals;  // distinct places fitting comparably, the best's included
+  for (const MapLocalization& pose : verified_poses) {
+    const Eigen::Vector3d place = pose.T_map_sensor.translation();
+    if (pose.inlier_rmse > 2.0 * best.inlier_rmse + 0.02) continue;
+    if (std::none_of(rivals.begin(), rivals.end(), [&](const Eigen::Vector3d& p) { return (p - place).norm() < 1.0; })) rivals.push_back(place);
+  }
+  if (rivals.size() > 1) {
+    std::string where;
+    for (const Eigen::Vector3d& place : rivals) where += fmt::format("{}({:.1f}, {:.1f})", where.empty() ? "" : ", ", place.x(), place.y());
+    return Error(fmt::format("map localization: ambiguous: the sweep fits {} places of the map alike: {} m; give a guess", rivals.size(), where));
+  }
+  MapLocalization answer = best;
+  answer.global = !query.T_map_sensor_guess;
+  answer.nodes_evaluated = search.evaluated();
+  answer.headings = static_cast<std::size_t>(headings);
+  answer.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return answer;
+}
+
+Result<MapLocalization> MapLocalizer::verify(const std::vector<Eigen::Vector3f>& sweep, const std::vector<Eigen::Vector3f>& source,
+                                             const SE3& guess) const {
   SurfaceRegistrationConfig registration = odometry_.registration;
   registration.prior_translation_sigma = 2.0;  // the 2D pose is a cell and a heading step off; its height more
   registration.prior_rotation_sigma = 0.2;
@@ -416,37 +517,26 @@ Result<MapLocalization> MapLocalizer::localize(const std::vector<Eigen::Vector3f
   coarse_registration.kernel_width = 0.3;
   coarse_registration.max_correspondence_distance = 1.0;
   SurfaceRegistrationResult pulled_in, refined;
-  HANZO_ASSIGN_OR_RETURN(pulled_in, with_context(align_to_surfaces(source, *coarse_, from_2d, from_2d, coarse_registration), "map localization"));
-  HANZO_ASSIGN_OR_RETURN(refined, with_context(align_to_surfaces(source, *fine_, pulled_in.T_map_source, pulled_in.T_map_source, registration),
-                                               "map localization"));
+  HANZO_ASSIGN_OR_RETURN(pulled_in, align_to_surfaces(source, *coarse_, guess, guess, coarse_registration));
+  HANZO_ASSIGN_OR_RETURN(refined, align_to_surfaces(source, *fine_, pulled_in.T_map_source, pulled_in.T_map_source, registration));
   const double inliers = static_cast<double>(refined.correspondences) / static_cast<double>(source.size());
   if (!refined.converged || refined.inlier_rmse > config_.max_rmse || inliers < config_.min_inlier_fraction ||
       translation_constraint_ratio(refined.information) < odometry_.degeneracy_ratio) {
-    return Error(fmt::format("map localization: the best 2D pose (score {:.2f} at {:.1f}, {:.1f} m, {:.0f} deg) did not verify in 3D: "
-                             "converged {}, inlier RMSE {:.3f} m (max {}), {:.0f} % matched (min {:.0f} %)",
-                             best.bound, position.x(), position.y(), heading_of(best.heading) * 180.0 / std::numbers::pi, refined.converged,
+    return Error(fmt::format("registration: converged {}, inlier RMSE {:.3f} m (max {}), {:.0f} % matched (min {:.0f} %)", refined.converged,
                              refined.inlier_rmse, config_.max_rmse, 100.0 * inliers, 100.0 * config_.min_inlier_fraction));
   }
-  const auto [consistent, seen_through] = free_space_check(points, points_, refined.T_map_source, config_.query_max_range);
+  const auto [consistent, seen_through] = free_space_check(sweep, structure_, refined.T_map_source, config_.query_max_range);
   const double seen_through_fraction =
       consistent + seen_through > 0 ? static_cast<double>(seen_through) / static_cast<double>(consistent + seen_through) : 1.0;
   if (seen_through_fraction > config_.max_seen_through_fraction) {
-    return Error(fmt::format("map localization: the best pose ({:.1f}, {:.1f} m, {:.0f} deg) contradicts the sweep: it saw through {:.0f} % "
-                             "of the map points in its view (max {:.0f} %)",
-                             refined.T_map_source.translation().x(), refined.T_map_source.translation().y(),
-                             yaw_of(refined.T_map_source.rotation()) * 180.0 / std::numbers::pi, 100.0 * seen_through_fraction,
-                             100.0 * config_.max_seen_through_fraction));
+    return Error(fmt::format("free space: the sweep saw through {:.0f} % of the map points in its view (max {:.0f} %)",
+                             100.0 * seen_through_fraction, 100.0 * config_.max_seen_through_fraction));
   }
   MapLocalization result;
-  result.seen_through_fraction = seen_through_fraction;
   result.T_map_sensor = refined.T_map_source;
-  result.score = best.bound;
   result.inlier_rmse = refined.inlier_rmse;
   result.inlier_fraction = inliers;
-  result.global = !query.T_map_sensor_guess;
-  result.nodes_evaluated = search.evaluated();
-  result.headings = static_cast<std::size_t>(headings);
-  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  result.seen_through_fraction = seen_through_fraction;
   return result;
 }
 

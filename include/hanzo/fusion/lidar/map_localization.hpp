@@ -13,21 +13,26 @@
 //     and scores the mean of the level-k max-grid, an upper bound of all of them; nodes whose
 //     bound cannot beat the best full-resolution score found are pruned. The result is the
 //     exhaustive search's optimum.
-//  2. 3D refinement and verification: point-to-surface registration of the sweep against the
-//     map (surface_registration.hpp) at two resolutions from the 2D pose (height from the map's
+//  2. 3D refinement and verification of each of the best `candidates` distinct 2D poses:
+//     point-to-surface registration of the sweep against the map (surface_registration.hpp)
+//     at two resolutions from the 2D pose (height from the map's
 //     ground + the sensor's height above its ground); accepted when it converges with an inlier
 //     RMSE <= max_rmse, >= min_inlier_fraction of the points matched, a non-degenerate
 //     geometry, and free space that agrees: the sweep must not see through more than
 //     max_seen_through_fraction of the map points in its view (a subset of the map, such as one
 //     wall corner, registers well almost anywhere; what lies in front of its returns tells).
+//     The answer is the verified pose with the lowest RMSE; another distinct place (> 1 m away)
+//     that verifies with a comparable fit (RMSE <= 2 x the best's + 2 cm) is an ambiguity (the
+//     same view from several places, e.g. repeated aisles): refused with the places named,
+//     never guessed.
 //
 // Frames: the map is gravity-aligned (z up), as the maps of Sessions are; points of the query
 // are in the sensor frame, R_up_sensor is the sensor's orientation in any z-up frame (its roll
 // and pitch are used, its yaw is not). Units: meters, radians.
 //
 // Failure cases (an Error naming which): too few map or sweep points in the slice, a searched
-// area over max_grid_cells, non-finite input, no pose scoring min_score in 2D, or a 3D
-// refinement that does not verify (its numbers in the message).
+// area over max_grid_cells, non-finite input, no pose scoring min_score in 2D, no candidate
+// that verifies in 3D (the best one's numbers in the message), or an ambiguity.
 
 #include <optional>
 #include <vector>
@@ -54,7 +59,13 @@ struct MapLocalizerConfig {
   std::size_t max_grid_cells = 6'000'000;  ///< cells of the searched grid (memory: depth + 1 floats each)
   double min_score = 0.4;              ///< mean likelihood of the 2D match, in [0, 1]
   double max_rmse = 0.15;              ///< m, 3D inlier RMSE accepted
-  double min_inlier_fraction = 0.5;    ///< of the sweep's registration points matched in 3D
+  double min_inlier_fraction = 0.3;    ///< of the sweep's registration points matched in 3D
+  /// The best distinct 2D poses (1 m or 10 deg apart) verified in 3D: repetitive places (aisles
+  /// of racks) score alike in 2D; the 3D checks tell them apart, or the answer is "ambiguous".
+  std::size_t candidates = 5;
+  /// Only 2D poses scoring at least this fraction of the best are candidates (rivals); lower
+  /// ones are pruned, which keeps the search fast on large outdoor maps.
+  double candidate_score_ratio = 0.75;
   std::size_t min_slice_points = 50;   ///< in the map's and in the sweep's slice
   /// Free-space check: of the map points within query_max_range that the sweep has a return
   /// near or beyond (same direction), at most this fraction may lie in front of the return
@@ -77,6 +88,7 @@ struct MapLocalization {
   double inlier_rmse = 0.0;        ///< m, 3D refinement
   double inlier_fraction = 0.0;    ///< of the registration points
   double seen_through_fraction = 0.0;  ///< free-space check (MapLocalizerConfig)
+  std::size_t candidate_rank = 0;  ///< which of the best 2D poses verified (0: the best)
   bool global = false;             ///< searched the whole map (no guess)
   std::size_t nodes_evaluated = 0; ///< branch and bound nodes scored
   std::size_t headings = 0;        ///< headings searched
@@ -100,11 +112,16 @@ class MapLocalizer {
   MapLocalizer(MapLocalizerConfig config, LidarOdometryConfig odometry) : config_(config), odometry_(std::move(odometry)) {}
   /// Height of the map's ground under (x, y): the lowest point of the nearest non-empty column.
   std::optional<double> ground_height(double x, double y) const;
+  /// 3D refinement and checks of one candidate pose (`sweep`: all points, `source`: the
+  /// registration points, both in the sensor frame).
+  Result<MapLocalization> verify(const std::vector<Eigen::Vector3f>& sweep, const std::vector<Eigen::Vector3f>& source,
+                                 const SE3& guess) const;
 
   MapLocalizerConfig config_;
   LidarOdometryConfig odometry_;
   std::vector<Eigen::Vector3f> points_;
   std::vector<Eigen::Vector2f> slice_;  ///< map points in the height slice, (x, y)
+  std::vector<Eigen::Vector3f> structure_;  ///< map points above the ground (free-space check)
   Eigen::Vector2d min_corner_ = Eigen::Vector2d::Zero(), max_corner_ = Eigen::Vector2d::Zero();  ///< of the slice
   // Ground columns.
   Eigen::Vector2d ground_origin_ = Eigen::Vector2d::Zero();
