@@ -6,7 +6,8 @@
 //  - SessionPush: the sample recording (examples/data: IMU 100 Hz, GNSS, wheels) pushed through
 //    the SessionManager with every pose stored, the work the server does per message. Counters:
 //    messages per second, pose latency p50 / p99 (message in -> PoseEstimate out).
-//  - RestGetPose: GET /v1/sessions/{id}/pose with auth, by wrk (2 threads, 16 connections, 5 s)
+//  - RestGet: GET requests with auth by wrk (2 threads, 16 connections, 5 s): the pose, the session,
+//    a trajectory page, the stored maps, a stored map's versions and the map itself
 //    against an in-process RestServer. Counters: requests per second, mean latency.
 
 #include <sys/wait.h>
@@ -125,8 +126,11 @@ const std::vector<TimedMessage>& sample() {
   return messages;
 }
 
-std::unique_ptr<SessionManager> make_manager(const std::string& url, std::shared_ptr<MetricsRegistry> metrics) {
-  auto manager = SessionManager::create({}, open_storage(url).value(), std::move(metrics));
+std::unique_ptr<SessionManager> make_manager(const std::string& url, std::shared_ptr<MetricsRegistry> metrics,
+                                             const std::string& map_directory = "") {
+  SessionManagerConfig config;
+  config.map_directory = map_directory;
+  auto manager = SessionManager::create(config, open_storage(url).value(), std::move(metrics));
   return std::move(manager).value();
 }
 
@@ -173,43 +177,60 @@ void SessionPush(benchmark::State& state, bool postgres) {
   state.counters["pose_latency_p99_us"] = 1e6 * histogram_quantile(text, "hanzo_fusion_pose_latency_seconds", 0.99);
 }
 
-void RestGetPose(benchmark::State& state) {
+// GET requests by wrk (2 threads, 16 connections, 5 s) with auth; range(0) picks the route:
+// 0 the latest pose, 1 the session, 2 a page of 100 stored poses, 3 the stored maps, 4 a stored
+// map's versions (json), 5 the stored map itself (a FusionMap of 20k points).
+void RestGet(benchmark::State& state) {
   if (run_command("command -v wrk").empty()) {
     state.SkipWithError("wrk is not installed");
     return;
   }
   auto metrics = std::make_shared<MetricsRegistry>();
-  auto manager = make_manager("sqlite://" + scratch("rest") + "/fusion.db", metrics);
+  const std::string dir = scratch("rest");
+  auto manager = make_manager("sqlite://" + dir + "/fusion.db", metrics, dir + "/maps");
   const std::string id =
       manager->create_session(kRobot, {"bench", read_text(std::string(HANZO_SOURCE_DIR) + "/examples/data/fusion.yaml"), ""}).value().id;
   for (const TimedMessage& message : sample()) (void)manager->push(kRobot, id, message.sensor, message.message);
+  (void)manager->flush_storage();
+  msgs::FusionMap map;
+  map.map_id = "bench-map";
+  map.points.emplace();
+  for (int i = 0; i < 20000; ++i) map.points->points.emplace_back(0.1f * static_cast<float>(i % 200), 0.1f * static_cast<float>(i / 200), 0.0f);
+  (void)manager->load_map(kRobot, map);
   const std::string token = "bench-token-0123456789";
-  auto tokens = std::make_shared<TokenStore>(TokenStore::parse_inline(token + "=bench:fusion:session:read").value());
+  auto tokens = std::make_shared<TokenStore>(TokenStore::parse_inline(token + "=bench:fusion:session:read,fusion:map:read").value());
   RestServerConfig config;
   config.bind_address = "127.0.0.1";
   config.port = 0;
   auto rest = RestServer::create(config, *manager, tokens, metrics).value();
   (void)rest->start();
+  const std::vector<std::string> paths = {"/v1/sessions/" + id + "/pose", "/v1/sessions/" + id, "/v1/sessions/" + id + "/trajectory?limit=100",
+                                          "/v1/maps", "/v1/maps/bench-map?format=json", "/v1/maps/bench-map"};
+  const std::string& path = paths.at(static_cast<std::size_t>(state.range(0)));
   double requests_per_s = 0.0;
   double latency_ms = 0.0;
   for (auto _ : state) {
-    const std::string output = run_command(fmt::format("wrk -t2 -c16 -d5s -H 'Authorization: Bearer {}' http://127.0.0.1:{}/v1/sessions/{}/pose",
-                                                       token, rest->port(), id));
+    const std::string output =
+        run_command(fmt::format("wrk -t2 -c16 -d5s -H 'Authorization: Bearer {}' 'http://127.0.0.1:{}{}'", token, rest->port(), path));
     std::smatch match;
     if (std::regex_search(output, match, std::regex(R"(Requests/sec:\s+([0-9.]+))"))) requests_per_s = std::stod(match[1]);
     if (std::regex_search(output, match, std::regex(R"(Latency\s+([0-9.]+)(us|ms|s))"))) {
       latency_ms = std::stod(match[1]) * (match[2] == "us" ? 1e-3 : match[2] == "s" ? 1e3 : 1.0);
     }
+    if (output.find("Non-2xx") != std::string::npos) state.SkipWithError(("non-2xx answers from " + path).c_str());
   }
   state.counters["requests_per_s"] = requests_per_s;
   state.counters["mean_latency_ms"] = latency_ms;
+  const std::vector<std::string> names = {"pose", "session", "trajectory page of 100", "stored maps", "map versions (json)",
+                                          "map file (20k points)"};
+  state.SetLabel(names.at(static_cast<std::size_t>(state.range(0))));
 }
 
 BENCHMARK_CAPTURE(StorageAppend, sqlite, false)->Arg(1)->Arg(100)->Arg(1000)->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(StorageAppend, postgresql, true)->Arg(1)->Arg(100)->Arg(1000)->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(SessionPush, sqlite, false)->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK_CAPTURE(SessionPush, postgresql, true)->Unit(benchmark::kMillisecond)->Iterations(3);
-BENCHMARK(RestGetPose)->Unit(benchmark::kSecond)->Iterations(1);
+BENCHMARK(RestGet)->DenseRange(0, 5)->Unit(benchmark::kSecond)->Iterations(1);
 
 }  // namespace
 

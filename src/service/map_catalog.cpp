@@ -4,6 +4,7 @@
 
 #include <fmt/format.h>
 
+#include "hanzo/fusion/core/files.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 
 namespace hanzo::fusion::service {
@@ -68,6 +69,23 @@ ApiResult<msgs::FusionMap> MapCatalog::load(const std::string& organization, con
                     "version"};
   }
   return std::move(map).value();
+}
+
+ApiResult<std::pair<uint64_t, std::string>> MapCatalog::file(const std::string& organization, const std::string& map_id,
+                                                             std::optional<uint64_t> version) const {
+  auto stored = find(organization, map_id);
+  if (!stored) return stored.error();
+  const auto& versions = stored->versions;
+  const auto found = version ? std::find_if(versions.begin(), versions.end(), [&](const maps::MapVersionInfo& v) { return v.version == *version; })
+                             : (versions.empty() ? versions.end() : std::prev(versions.end()));
+  if (found == versions.end()) {
+    return ApiError{ErrorCode::kNotFound,
+                    version ? fmt::format("map '{}' has no version {}", map_id, *version) : fmt::format("map '{}' has no stored version", map_id),
+                    "version"};
+  }
+  Result<std::string> bytes = read_file(found->path);
+  if (!bytes) return ApiError::from(ErrorCode::kInternal, bytes.error());
+  return std::make_pair(found->version, std::move(bytes).value());
 }
 
 ApiResult<StoredMap> MapCatalog::find(const std::string& organization, const std::string& map_id) const {

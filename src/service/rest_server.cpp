@@ -270,6 +270,13 @@ struct RestServer::Impl {
         if (!info) return send_error(response, info.error());
         return send_json(response, 200, detail::stored_map_to_json(info.value()));
       }
+      if (format.value() == "fmap") {  // the stored file as it is
+        auto file = sessions->stored_map_file(caller, request.matches[1], wanted);
+        if (!file) return send_error(response, file.error());
+        response.set_header("Content-Disposition", fmt::format("attachment; filename=\"{}-v{}.fmap\"", std::string(request.matches[1]), file->first));
+        response.set_content(std::move(file->second), "application/octet-stream");
+        return;
+      }
       auto map = sessions->stored_map(caller, request.matches[1], wanted);
       if (!map) return send_error(response, map.error());
       send_map_file(response, map.value(), format.value());

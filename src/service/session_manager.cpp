@@ -734,6 +734,13 @@ ApiResult<msgs::FusionMap> SessionManager::stored_map(const Principal& caller, c
   return impl_->catalog->load(caller.organization, map_id, version);
 }
 
+ApiResult<std::pair<uint64_t, std::string>> SessionManager::stored_map_file(const Principal& caller, const std::string& map_id,
+                                                                           std::optional<uint64_t> version) {
+  if (const ApiStatus allowed = authorize(caller, Permission::kMapRead); !allowed) return allowed.error();
+  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  return impl_->catalog->file(caller.organization, map_id, version);
+}
+
 ApiResult<RelocalizeResult> SessionManager::relocalize(const Principal& caller, const std::string& session_id, const RelocalizeRequest& request) {
   auto found = impl_->find(caller, session_id, Permission::kSessionWrite);
   if (!found) return found.error();

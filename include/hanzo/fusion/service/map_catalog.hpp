@@ -47,6 +47,10 @@ class MapCatalog {
   /// A stored version (the latest when `version` is empty) of a map of `organization`.
   ApiResult<msgs::FusionMap> load(const std::string& organization, const std::string& map_id,
                                   std::optional<uint64_t> version = std::nullopt) const;
+  /// The FusionMap file of a stored version, as stored (the latest when `version` is empty):
+  /// served without decoding it. Also returns the version.
+  ApiResult<std::pair<uint64_t, std::string>> file(const std::string& organization, const std::string& map_id,
+                                                   std::optional<uint64_t> version = std::nullopt) const;
   /// The maps of `organization`, oldest first, each with its versions.
   ApiResult<std::vector<StoredMap>> list(const std::string& organization) const;
   ApiResult<StoredMap> find(const std::string& organization, const std::string& map_id) const;

@@ -161,6 +161,9 @@ class SessionManager {
   /// Stored maps of the caller's organization (map:read), sessions' maps included.
   ApiResult<std::vector<StoredMap>> list_maps(const Principal& caller);
   ApiResult<StoredMap> stored_map_info(const Principal& caller, const std::string& map_id);
+  /// The FusionMap file of a stored version (map:read), as stored, with its version.
+  ApiResult<std::pair<uint64_t, std::string>> stored_map_file(const Principal& caller, const std::string& map_id,
+                                                              std::optional<uint64_t> version = std::nullopt);
   /// A stored version of a map (map:read); the latest when `version` is empty.
   ApiResult<msgs::FusionMap> stored_map(const Principal& caller, const std::string& map_id, std::optional<uint64_t> version = std::nullopt);
   /// Relocalizes a session in a stored map (session:write and map:read). kNotFound: unknown
