@@ -248,7 +248,8 @@ Status MapLocalizerConfig::validate() const {
     return Error("ground_cell, query_max_range, query_point_spacing: must be > 0");
   }
   if (branch_and_bound_depth < 0 || branch_and_bound_depth > 12) return Error("branch_and_bound_depth: must be in 0..12");
-  if (max_grid_cells == 0 || candidates == 0) return Error("max_grid_cells, candidates: must be > 0");
+  if (max_grid_cells == 0 || candidates == 0 || search_cells == 0) return Error("max_grid_cells, candidates, search_cells: must be > 0");
+  if (!(max_grid_resolution >= grid_resolution)) return Error("max_grid_resolution: must be >= grid_resolution");
   if (!(candidate_score_ratio > 0 && candidate_score_ratio <= 1)) return Error("candidate_score_ratio: must be in (0, 1]");
   if (!(min_score >= 0 && min_score <= 1)) return Error("min_score: must be in [0, 1]");
   if (!(max_seen_through_fraction >= 0 && max_seen_through_fraction <= 1)) return Error("max_seen_through_fraction: must be in [0, 1]");
@@ -381,7 +382,6 @@ Result<MapLocalization> MapLocalizer::localize(const std::vector<Eigen::Vector3f
   }
 
   // The searched area: the map's slice, or the guess's window (its grid only as large as needed).
-  const double resolution = config_.grid_resolution;
   Eigen::Vector2d area_min = min_corner_, area_max = max_corner_;
   double heading_center = 0.0, heading_window = std::numbers::pi;
   if (query.T_map_sensor_guess) {
@@ -398,6 +398,12 @@ Result<MapLocalization> MapLocalizer::localize(const std::vector<Eigen::Vector3f
   if ((grid_min.array() > grid_max.array()).any() || (map_min.array() > map_max.array()).any()) {
     return Error("map localization: the guess is farther from the map than the sweep reaches");
   }
+  // Large searched areas at a coarser grid (the 3D refinement pulls a pose in from a metre off):
+  // the cost grows with the cells searched x the headings.
+  const double searched_area = (grid_max - grid_min).cwiseMax(Eigen::Vector2d::Constant(config_.grid_resolution)).prod();
+  const double resolution =
+      std::clamp(std::sqrt(searched_area / static_cast<double>(config_.search_cells)), config_.grid_resolution, config_.max_grid_resolution);
+  const double sigma = config_.likelihood_sigma * resolution / config_.grid_resolution;
   const double cells = ((map_max - map_min) / resolution + Eigen::Vector2d::Constant((1 << config_.branch_and_bound_depth) + 10)).prod();
   if (!(cells <= static_cast<double>(config_.max_grid_cells))) {
     return Error(fmt::format("map localization: searching {:.0f} x {:.0f} m at {} m needs {:.1f} M cells (max_grid_cells {:.1f} M): "
@@ -410,7 +416,7 @@ Result<MapLocalization> MapLocalizer::localize(const std::vector<Eigen::Vector3f
     if ((p.array() >= map_min.array()).all() && (p.array() <= map_max.array()).all()) target.push_back(point);
   }
   const int depth = config_.branch_and_bound_depth;
-  const MaxGridStack grids(target, map_min, map_max, resolution, config_.likelihood_sigma, depth);
+  const MaxGridStack grids(target, map_min, map_max, resolution, sigma, depth);
 
   // Headings: a step moves the farthest point by about one cell (Hess et al. eq. 7).
   const double step = std::acos(std::clamp(1.0 - resolution * resolution / (2.0 * farthest * farthest), -1.0, 1.0));

@@ -81,6 +81,17 @@ TEST_F(MapLocalization, FindsAScanAnywhereInTheMapWithoutAGuess) {
   EXPECT_LT(found->nodes_evaluated, found->headings * 100u);
 }
 
+TEST_F(MapLocalization, SearchesLargeAreasOnACoarserGridAndStillRefinesToCentimetres) {
+  MapLocalizerConfig coarse;
+  coarse.search_cells = 1000;  // the yard (about 40 x 30 m) at 0.5 m cells instead of 0.2 m
+  auto localizer = MapLocalizer::create(yard_map(*world_), coarse, indoor_odometry());
+  ASSERT_TRUE(localizer.ok()) << localizer.error().message;
+  const SE3 truth = sensor_pose(4.5, 3.2, -2.3);
+  auto found = localizer->localize(scan(*world_, truth, 0.01, 11).positions, truth.rotation());
+  ASSERT_TRUE(found.ok()) << found.error().message;
+  expect_near_pose(found->T_map_sensor, truth, 0.05, 0.01);
+}
+
 TEST_F(MapLocalization, RefinesAGuessInsideItsWindow) {
   const SE3 truth = sensor_pose(-8.0, 2.0, 0.7);
   const cloud::PointCloud query = scan(*world_, truth, 0.01, 7);

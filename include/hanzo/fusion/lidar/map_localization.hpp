@@ -48,7 +48,12 @@ namespace hanzo::fusion::lidar {
 
 struct MapLocalizerConfig {
   double grid_resolution = 0.2;        ///< m, cell of the 2D likelihood grid and translation step
-  double likelihood_sigma = 0.2;       ///< m, blur of the map slice
+  double likelihood_sigma = 0.2;       ///< m, blur of the map slice (scaled with the cell)
+  /// A searched area of more than this many cells is searched at a coarser cell (up to
+  /// max_grid_resolution): the search costs cells x headings, and the 3D refinement pulls a
+  /// pose in from a metre off. 1 M cells = 200 x 200 m at 0.2 m.
+  std::size_t search_cells = 1'000'000;
+  double max_grid_resolution = 0.5;    ///< m
   double slice_min_height = 0.3;       ///< m above the local ground
   double slice_max_height = 3.0;       ///< m above the local ground
   double ground_cell = 2.0;            ///< m, columns of the map's ground height (lowest point)
