@@ -21,6 +21,8 @@ void add_run_command(CLI::App& app, const Output& output, Command& run);
 void add_graph_command(CLI::App& app, const Output& output, Command& run);
 void add_cloud_commands(CLI::App& app, const Output& output, Command& run);
 void add_map_command(CLI::App& app, const Output& output, Command& run);
+/// `map localize` (map_localize_command.cpp), added by add_map_command.
+void add_map_localize_command(CLI::App& map_app, const Output& output, Command& run);
 void add_serve_command(CLI::App& app, const Output& output, Command& run);
 void add_stream_command(CLI::App& app, const Output& output, Command& run);
 void add_slam2d_command(CLI::App& app, const Output& output, Command& run);

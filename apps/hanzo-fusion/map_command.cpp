@@ -259,7 +259,7 @@ std::string describe_map_text(const nlohmann::json& description) {
 }
 
 void add_map_command(CLI::App& app, const Output& output, Command& run) {
-  CLI::App* map_app = app.add_subcommand("map", "FusionMap files: build, inspect, export, compare, redact, version");
+  CLI::App* map_app = app.add_subcommand("map", "FusionMap files: build, inspect, export, compare, redact, version, localize a scan");
   map_app->require_subcommand(1);
 
   auto build = std::make_shared<MapBuildOptions>();
@@ -458,6 +458,7 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
       });
     };
   });
+  add_map_localize_command(*map_app, output, run);
 }
 
 }  // namespace hanzo::fusion::app

@@ -490,6 +490,33 @@ TEST(Cli, CloudFilterWritesEachStep) {
   std::filesystem::remove(out);
 }
 
+// `map localize` on small_gicp's real outdoor pair: the target scan as the map, the source scan
+// found within 10 cm / 1 deg of the reference transform around a guess 0.5 m / 5 deg off.
+TEST(Cli, MapLocalizeFindsTheRealScanInTheOtherScansMap) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_localize_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string pair = std::string(HANZO_DATA_DIR) + "/lidar_small_gicp";
+  const std::string map = (dir / "target.fmap").string();
+  const CliRun imported = run(fmt::format("map import {}/target.ply --out {} --voxel 0.2", pair, map));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+  const CliRun found = run(fmt::format("map localize {} {}/source.ply --guess 1.0 0 0 5 --window 3 --json", map, pair));
+  ASSERT_EQ(found.exit_code, 0) << found.err;
+  const nlohmann::json result = nlohmann::json::parse(found.out);
+  // Reference (T_target_source.txt): translation 0.489 0.121 -0.025, yaw -0.70 deg.
+  EXPECT_NEAR(result["position"][0].get<double>(), 0.489, 0.1);
+  EXPECT_NEAR(result["position"][1].get<double>(), 0.121, 0.1);
+  EXPECT_NEAR(result["yaw_deg"].get<double>(), -0.70, 1.0);
+  EXPECT_EQ(result["global_search"], false);
+  // A map without a point layer, and a missing scan, are refused with the reason.
+  const CliRun no_points = run(fmt::format("map localize {} {}/source.ply", (dir / "missing.fmap").string(), pair));
+  EXPECT_NE(no_points.exit_code, 0);
+  EXPECT_THAT(no_points.err, HasSubstr("missing.fmap"));
+  const CliRun no_scan = run(fmt::format("map localize {} {}/no-such-scan.ply", map, pair));
+  EXPECT_NE(no_scan.exit_code, 0);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, MapBuildInfoExportStoreDiffRedact) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_map_{}", ::getpid());
   std::filesystem::remove_all(dir);
