@@ -146,7 +146,9 @@ struct SessionManager::Impl {
   std::mutex localizers_mutex;
   std::list<std::pair<std::string, std::shared_ptr<const lidar::MapLocalizer>>> localizers;  // "id@version", newest first
 
-  ApiStatus catalog_available() const {
+  // The caller holds `permission` and the server stores maps.
+  ApiStatus may_use_maps(const Principal& caller, Permission permission) const {
+    if (const ApiStatus allowed = authorize(caller, permission); !allowed) return allowed;
     if (catalog) return api_ok();
     return ApiError{ErrorCode::kUnavailable, "this server stores no maps (it runs without a map directory)", ""};
   }
@@ -709,43 +711,37 @@ ApiResult<pipeline::LoopClosureOutcome> SessionManager::close_loop(const Princip
 }
 
 ApiResult<maps::MapVersionInfo> SessionManager::load_map(const Principal& caller, msgs::FusionMap map, const std::string& name) {
-  if (const ApiStatus allowed = authorize(caller, Permission::kMapWrite); !allowed) return allowed.error();
-  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  if (const ApiStatus allowed = impl_->may_use_maps(caller, Permission::kMapWrite); !allowed) return allowed.error();
   ApiResult<maps::MapVersionInfo> saved = impl_->catalog->save(caller.organization, "", name, std::move(map));
   if (saved) logger()->info("map {} version {} loaded by {}", saved->map_id, saved->version, caller.name);
   return saved;
 }
 
 ApiResult<std::vector<StoredMap>> SessionManager::list_maps(const Principal& caller) {
-  if (const ApiStatus allowed = authorize(caller, Permission::kMapRead); !allowed) return allowed.error();
-  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  if (const ApiStatus allowed = impl_->may_use_maps(caller, Permission::kMapRead); !allowed) return allowed.error();
   return impl_->catalog->list(caller.organization);
 }
 
 ApiResult<StoredMap> SessionManager::stored_map_info(const Principal& caller, const std::string& map_id) {
-  if (const ApiStatus allowed = authorize(caller, Permission::kMapRead); !allowed) return allowed.error();
-  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  if (const ApiStatus allowed = impl_->may_use_maps(caller, Permission::kMapRead); !allowed) return allowed.error();
   return impl_->catalog->find(caller.organization, map_id);
 }
 
 ApiResult<msgs::FusionMap> SessionManager::stored_map(const Principal& caller, const std::string& map_id, std::optional<uint64_t> version) {
-  if (const ApiStatus allowed = authorize(caller, Permission::kMapRead); !allowed) return allowed.error();
-  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  if (const ApiStatus allowed = impl_->may_use_maps(caller, Permission::kMapRead); !allowed) return allowed.error();
   return impl_->catalog->load(caller.organization, map_id, version);
 }
 
 ApiResult<std::pair<uint64_t, std::string>> SessionManager::stored_map_file(const Principal& caller, const std::string& map_id,
                                                                            std::optional<uint64_t> version) {
-  if (const ApiStatus allowed = authorize(caller, Permission::kMapRead); !allowed) return allowed.error();
-  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  if (const ApiStatus allowed = impl_->may_use_maps(caller, Permission::kMapRead); !allowed) return allowed.error();
   return impl_->catalog->file(caller.organization, map_id, version);
 }
 
 ApiResult<RelocalizeResult> SessionManager::relocalize(const Principal& caller, const std::string& session_id, const RelocalizeRequest& request) {
   auto found = impl_->find(caller, session_id, Permission::kSessionWrite);
   if (!found) return found.error();
-  if (const ApiStatus allowed = authorize(caller, Permission::kMapRead); !allowed) return allowed.error();
-  if (const ApiStatus available = impl_->catalog_available(); !available) return available.error();
+  if (const ApiStatus allowed = impl_->may_use_maps(caller, Permission::kMapRead); !allowed) return allowed.error();
   RelocalizeResult result;
   result.map_id = request.map_id;
   if (request.version) {
