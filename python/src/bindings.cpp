@@ -391,7 +391,7 @@ PYBIND11_MODULE(_fusion, module) {
              py::arg("path"), py::arg("objective") = "geodesic");
   py::class_<PyIncrementalSmoother>(module, "IncrementalSmoother",
                                     "Keyframe-rate smoothing: each update() adds factors and new variables and re-optimizes around them")
-      .def(py::init<int, bool>(), py::arg("recent_variables") = 20, py::arg("background_batch") = true)
+      .def(py::init<int, bool>(), py::arg("recent_variables") = 50, py::arg("background_batch") = true)
       .def("update", &PyIncrementalSmoother::update,
            "Adds a FactorGraph's factors and the initial values inserted into it (new variables only)", py::arg("new_factors"))
       .def("at", &PyIncrementalSmoother::at, "The current estimate of a key", py::arg("key"))

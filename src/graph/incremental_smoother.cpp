@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <set>
 
 #include <fmt/format.h>
@@ -37,6 +38,7 @@ struct Correction {
 
 struct IncrementalSmoother::Batch {
   std::size_t variable_count = 0;  // insertion_order_ prefix the snapshot holds
+  std::size_t factor_count = 0;    // graph_.factors() prefix the snapshot holds
   std::future<Result<Values>> result;
 };
 
@@ -50,6 +52,7 @@ void IncrementalSmoother::start_batch() {
   batch_ = std::make_unique<Batch>();
   batch_->variable_count = insertion_order_.size();
   factors_in_last_batch_ = graph_.size();
+  batch_->factor_count = graph_.size();
   BatchOptimizerConfig background = config_.batch;
   background.max_iterations = config_.background_max_iterations;
   batch_->result = std::async(std::launch::async, [graph = graph_, values = estimate_, config = background]() mutable -> Result<Values> {
@@ -95,10 +98,10 @@ Result<IncrementalUpdateSummary> IncrementalSmoother::update(const FactorGraph& 
     }
   }
   IncrementalUpdateSummary summary;
-  std::optional<std::size_t> merged_snapshot_size;
+  std::optional<std::size_t> merged_factor_count;  // graph size of the merged snapshot
   if (batch_ && batch_->result.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
     merge(*batch_);
-    merged_snapshot_size = batch_->variable_count;
+    merged_factor_count = batch_->factor_count;
     batch_.reset();
     summary.batch_merged = true;
   }
@@ -118,13 +121,24 @@ Result<IncrementalUpdateSummary> IncrementalSmoother::update(const FactorGraph& 
     }
     graph_.add(factor);
   }
+  // After a merge, the variables added while the batch ran were only moved rigidly, and the
+  // older variables of the factors added meanwhile (loop closures) lost their local moves to
+  // the batch's solution: the factors added since the snapshot count as new (the newest first)
+  // until merge_refit_variables variables are affected, where the neighbourhoods stop growing.
+  std::size_t limit = std::numeric_limits<std::size_t>::max();
+  if (merged_factor_count) {
+    limit = std::max(affected.size(), static_cast<std::size_t>(std::max(0, config_.merge_refit_variables)));
+    for (std::size_t index = graph_.size(); index-- > *merged_factor_count && affected.size() < limit;) {
+      affected.insert(graph_.factors()[index]->keys().begin(), graph_.factors()[index]->keys().end());
+    }
+  }
   std::set<Key> frontier = affected;
-  for (int hop = 0; hop < config_.neighbour_hops; ++hop) {
+  for (int hop = 0; hop < config_.neighbour_hops && affected.size() < limit; ++hop) {
     std::set<Key> next;
     for (Key key : frontier) {
       for (std::size_t index : factors_of_[key]) {
         for (Key neighbour : graph_.factors()[index]->keys()) {
-          if (affected.insert(neighbour).second) next.insert(neighbour);
+          if (affected.size() < limit && affected.insert(neighbour).second) next.insert(neighbour);
         }
       }
     }
@@ -136,12 +150,6 @@ Result<IncrementalUpdateSummary> IncrementalSmoother::update(const FactorGraph& 
     }
   };
   add_newest(static_cast<std::size_t>(std::max(0, config_.recent_variables)));
-  // After a merge, the variables added while the batch ran were only moved rigidly: refit them
-  // (up to merge_refit_variables of them) to the batch's solution of the older ones.
-  if (merged_snapshot_size) {
-    add_newest(std::min(insertion_order_.size() - *merged_snapshot_size, static_cast<std::size_t>(std::max(0, config_.merge_refit_variables))));
-  }
-
   // The local problem: every factor touching an affected variable; the other variables of
   // those factors (and the gauge) held constant.
   std::set<std::size_t> local_indices;

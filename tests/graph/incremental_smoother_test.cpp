@@ -48,8 +48,10 @@ TEST(IncrementalSmoother, ExactGraphStaysExactWithLocalUpdatesOnly) {
 }
 
 // intel added pose by pose, each pose with its odometry and its loop closures back to earlier
-// poses, new poses started from odometry: every update re-optimizes a small part; after
-// wait_for_batch() the estimate is the optimum.
+// poses, new poses started from odometry: every update re-optimizes a small part, the latest
+// estimate after the last update is within 1 % of the optimum (issue 6; measured +0.1 to
+// +0.3 %, with or without another process on the cores), and after wait_for_batch() it is the
+// optimum.
 TEST(IncrementalSmoother, IntelPoseByPoseEndsAtTheOptimum) {
   const PoseGraph graph = read_g2o(kData + "intel.g2o").value();
   const std::vector<GraphUpdate> updates = graph.incremental_updates(PoseGraph::Objective::kChordal).value();
@@ -69,8 +71,9 @@ TEST(IncrementalSmoother, IntelPoseByPoseEndsAtTheOptimum) {
   const double final_objective = se_sync_objective(graph, smoother.estimate()).value();
   std::printf("intel incremental: latest %.4f, after wait %.4f, %d batches merged, at most %d variables an update (%d when merging)\n",
               latest, final_objective, smoother.batches_merged(), max_optimized, max_optimized_merging);
-  EXPECT_NEAR(final_objective, 52.3482, 0.01 * 52.3482);
-  EXPECT_LT(max_optimized, 60);
+  EXPECT_LT(latest, 1.01 * 52.3482);
+  EXPECT_NEAR(final_objective, 52.3482, 1e-3 * 52.3482);
+  EXPECT_LT(max_optimized, 150);  // the window and the new factors' neighbourhoods, not the 1728 poses
   // A merging update also refits the variables added while the batch ran, at most merge_refit_variables.
   EXPECT_LT(max_optimized_merging, config.merge_refit_variables + 60);
 }
