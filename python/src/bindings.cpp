@@ -20,6 +20,7 @@
 #include "hanzo/fusion/graph/incremental_smoother.hpp"
 #include "hanzo/fusion/graph/imu_factors.hpp"
 #include "hanzo/fusion/graph/pose_factors.hpp"
+#include "hanzo/fusion/graph/projection_factors.hpp"
 
 namespace py = pybind11;
 using namespace hanzo::fusion;
@@ -68,8 +69,15 @@ graph::Value from_python(const py::object& object) {
   if (py::isinstance<SE3>(object)) return object.cast<SE3>();
   if (py::isinstance<SE2>(object)) return object.cast<SE2>();
   const Eigen::VectorXd vector = object.cast<Eigen::VectorXd>();
+  if (!vector.allFinite()) throw py::value_error("a value must be finite");
   if (vector.size() == 3) return Eigen::Vector3d(vector);
-  throw py::value_error("a value must be a Pose3, a Pose2 or a 3-vector");
+  if (vector.size() == 6) {
+    graph::ImuBias bias;
+    bias.accelerometer = vector.head<3>();
+    bias.gyroscope = vector.tail<3>();
+    return bias;
+  }
+  throw py::value_error("a value must be a Pose3, a Pose2, a 3-vector (velocity, point) or a 6-vector (IMU bias: accelerometer, gyroscope)");
 }
 
 struct OptimizeResult {
@@ -141,10 +149,45 @@ class PyFactorGraph {
     } else if (py::isinstance<SE2>(prior)) {
       graph_->emplace<graph::PriorFactorSE2>(key, prior.cast<SE2>(), noise_from(noise, 3, "prior noise"));
     } else {
-      throw py::value_error("add_prior_factor: the prior must be a Pose3 or a Pose2");
+      const graph::Value value = from_python(prior);  // a velocity / point or an IMU bias
+      if (const auto* vector = std::get_if<Eigen::Vector3d>(&value)) {
+        graph_->emplace<graph::PriorFactorVector3>(key, *vector, noise_from(noise, 3, "prior noise"));
+      } else if (const auto* bias = std::get_if<graph::ImuBias>(&value)) {
+        graph_->emplace<graph::PriorFactorImuBias>(key, *bias, noise_from(noise, 6, "prior noise"));
+      } else {
+        throw py::value_error("add_prior_factor: the prior must be a Pose3, a Pose2, a 3-vector or a 6-vector (IMU bias)");
+      }
+      if (!initial_.exists(key)) initial_.insert(key, value);
+      return;
     }
     anchored_by_prior_ = true;
     if (!initial_.exists(key)) initial_.insert(key, from_python(prior));
+  }
+  void add_imu_factor(graph::Key pose_i, graph::Key velocity_i, graph::Key pose_j, graph::Key velocity_j, graph::Key bias_i,
+                      const graph::ImuPreintegration& preintegration) {
+    graph_->add(value_or_raise(graph::ImuFactor::create(pose_i, velocity_i, pose_j, velocity_j, bias_i, preintegration)));
+  }
+  void add_bias_random_walk_factor(graph::Key bias_i, graph::Key bias_j, double dt, double accel_bias_random_walk, double gyro_bias_random_walk) {
+    graph_->add(value_or_raise(graph::ImuBiasRandomWalkFactor::create(bias_i, bias_j, dt, accel_bias_random_walk, gyro_bias_random_walk)));
+  }
+  void add_gravity_factor(graph::Key pose, const Eigen::Vector3d& specific_force, const Eigen::MatrixXd& noise, const Eigen::Vector3d& gravity) {
+    if (!specific_force.allFinite() || !gravity.allFinite()) throw py::value_error("add_gravity_factor: non-finite specific force or gravity");
+    graph_->emplace<graph::GravityFactor>(pose, specific_force, noise_from(noise, 3, "gravity factor noise"), gravity);
+  }
+  void add_projection_factor(graph::Key pose, graph::Key landmark, const Eigen::Vector2d& pixel, const PinholeCamera& camera,
+                             const SE3& T_body_camera, const Eigen::MatrixXd& noise) {
+    if (!pixel.allFinite()) throw py::value_error("add_projection_factor: non-finite pixel");
+    graph_->emplace<graph::ProjectionFactor>(pose, landmark, pixel, camera, T_body_camera, noise_from(noise, 2, "projection noise"));
+  }
+  void add_stereo_factor(graph::Key pose, graph::Key landmark, const Eigen::Vector3d& measured, const PinholeCamera& camera,
+                         double baseline, const SE3& T_body_camera, const Eigen::MatrixXd& noise) {
+    if (!measured.allFinite()) throw py::value_error("add_stereo_factor: non-finite measurement");
+    if (camera.distortion != PinholeCamera::Distortion::kNone) {
+      throw py::value_error("add_stereo_factor: a stereo pair must be rectified (the camera's distortion must be 'none')");
+    }
+    if (!(std::isfinite(baseline) && baseline > 0.0)) throw py::value_error(fmt::format("add_stereo_factor: baseline {} m is not > 0", baseline));
+    graph_->emplace<graph::StereoProjectionFactor>(pose, landmark, measured, camera, baseline, T_body_camera,
+                                                   noise_from(noise, 3, "stereo noise"));
   }
   void add_gps_factor(graph::Key key, const Eigen::Vector3d& measurement, const Eigen::MatrixXd& noise, const Eigen::Vector3d& lever_arm) {
     if (!measurement.allFinite() || !lever_arm.allFinite()) throw py::value_error("add_gps_factor: non-finite measurement or lever arm");
@@ -293,6 +336,7 @@ class PyIncrementalSmoother {
 
 void bind_laser_slam(py::module_& module);  // laser_slam_bindings.cpp
 void bind_lidar_odometry(py::module_& module);  // lidar_odometry_bindings.cpp
+void bind_sensor_models(py::module_& module);   // sensor_model_bindings.cpp
 
 PYBIND11_MODULE(_fusion, module) {
   module.doc() = "hanzo-fusion: factor graphs for sensor fusion and SLAM";
@@ -302,6 +346,7 @@ PYBIND11_MODULE(_fusion, module) {
   module.def("B", &graph::B, "IMU bias key B(i)", py::arg("i"));
   module.def("L", &graph::L, "Landmark key L(j)", py::arg("j"));
   module.def("key_to_string", &graph::key_to_string, py::arg("key"));
+  bind_sensor_models(module);  // before FactorGraph, whose signatures name its classes
   module.def(
       "Point3", [](double x, double y, double z) { return Eigen::Vector3d(x, y, z); }, "A 3D point as a numpy array", py::arg("x"),
       py::arg("y"), py::arg("z"));
@@ -379,6 +424,22 @@ PYBIND11_MODULE(_fusion, module) {
       .def("add_prior_factor", &PyFactorGraph::add_prior_factor, py::arg("key"), py::arg("prior"), py::arg("noise"))
       .def("add_gps_factor", &PyFactorGraph::add_gps_factor, "A GNSS position in the local ENU frame (metres; see geodetic_to_enu)",
            py::arg("key"), py::arg("measurement"), py::arg("noise"), py::arg("lever_arm") = Eigen::Vector3d::Zero())
+      .def("add_imu_factor", &PyFactorGraph::add_imu_factor,
+           "IMU preintegration between keyframes i and j (poses T_world_imu, world velocities, the bias at i)", py::arg("pose_i"),
+           py::arg("velocity_i"), py::arg("pose_j"), py::arg("velocity_j"), py::arg("bias_i"), py::arg("preintegration"))
+      .def("add_bias_random_walk_factor", &PyFactorGraph::add_bias_random_walk_factor,
+           "IMU biases drifting as random walks (m/s^2/sqrt(s), rad/s/sqrt(s)) over dt seconds", py::arg("bias_i"), py::arg("bias_j"),
+           py::arg("dt"), py::arg("accel_bias_random_walk"), py::arg("gyro_bias_random_walk"))
+      .def("add_gravity_factor", &PyFactorGraph::add_gravity_factor,
+           "Roll and pitch of a pose T_world_imu from a static accelerometer's specific force (m/s^2)", py::arg("key"),
+           py::arg("specific_force"), py::arg("noise"), py::arg("gravity") = Eigen::Vector3d(0.0, 0.0, -9.80665))
+      .def("add_projection_factor", &PyFactorGraph::add_projection_factor,
+           "The pixel of landmark L(j) (a world point) seen by a camera mounted at T_body_camera on pose X(i)", py::arg("pose"),
+           py::arg("landmark"), py::arg("pixel"), py::arg("camera"), py::arg("T_body_camera"), py::arg("noise"))
+      .def("add_stereo_factor", &PyFactorGraph::add_stereo_factor,
+           "(u_left, u_right, v) of a landmark in a rectified stereo pair, the right camera baseline metres along the left's x",
+           py::arg("pose"), py::arg("landmark"), py::arg("measured"), py::arg("camera"), py::arg("baseline"), py::arg("T_body_camera"),
+           py::arg("noise"))
       .def("insert", &PyFactorGraph::insert, "An initial value (optional: optimize() chains between factors)", py::arg("key"), py::arg("value"))
       .def("optimize", &PyFactorGraph::optimize,
            "Batch Levenberg-Marquardt from the initial values ('initial') or, for a graph read from a file, from the chordal "
