@@ -18,6 +18,7 @@
 #include "hanzo/fusion/estimate/velocity_models.hpp"
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
+#include "hanzo/fusion/pipeline/session.hpp"
 
 namespace hanzo::fusion::pipeline {
 
@@ -79,6 +80,7 @@ struct EventOutcome {
   std::string_view reason;
   bool zero_velocity_update = false;
   std::optional<msgs::Keyframe> keyframe;  // emitted after this IMU event
+  std::optional<FusedGnssFix> gnss_fix;    // a fused GNSS event's fix (sensor name left empty)
 };
 
 class Estimator {

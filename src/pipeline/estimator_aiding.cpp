@@ -52,6 +52,11 @@ EventOutcome Estimator::process_gnss(const Event& event, const msgs::GnssMessage
   const estimate::GnssPositionModel model(antenna_gnss, covariance, lever);
   EventOutcome outcome;
   outcome.fused = update(event, model, observer, &outcome.reason);
+  if (outcome.fused) {
+    const NavigationState after = filter_->state();
+    outcome.gnss_fix = FusedGnssFix{"", event.time, antenna_gnss, covariance, lever, SE3(after.R_world_body, after.position),
+                                    world_correction_};
+  }
   return outcome;
 }
 

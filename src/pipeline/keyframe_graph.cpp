@@ -62,6 +62,17 @@ Status KeyframeGraph::add_gps(Timestamp time, const Eigen::Vector3d& position_wo
   return ok_status();
 }
 
+Status KeyframeGraph::add_gps_at_keyframe(uint64_t keyframe_id, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,
+                                          const Eigen::Vector3d& lever_arm) {
+  if (frontend_poses_.count(keyframe_id) == 0) return Error(fmt::format("gps: keyframe {} is unknown", keyframe_id));
+  if (!position_world.allFinite() || !lever_arm.allFinite()) return Error("gps: non-finite position or lever arm");
+  graph::GaussianNoise noise;
+  HANZO_ASSIGN_OR_RETURN(noise, noise_of(covariance, "gps covariance"));
+  pending_.factors.emplace_robust<graph::GpsFactor>(graph::RobustKernel{graph::RobustKernel::Type::kCauchy, config_.gps_cauchy_scale},
+                                                    graph::X(keyframe_id), position_world, lever_arm, noise);
+  return ok_status();
+}
+
 Status KeyframeGraph::add_loop_closure(uint64_t from, uint64_t to, const SE3& T_from_to, const Eigen::Matrix<double, 6, 6>& covariance) {
   for (uint64_t id : {from, to}) {
     if (frontend_poses_.count(id) == 0) return Error(fmt::format("loop closure {} - {}: keyframe {} is unknown", from, to, id));
@@ -117,8 +128,9 @@ Result<KeyframeGraphUpdate> KeyframeGraph::process(Session* session) {
       return Error(fmt::format("keyframe graph: {}", batch.error().message));
     }
   }
+  const bool loop_closed = loop_closure_pending_;
   loop_closure_pending_ = false;
-  if (session != nullptr && latest_keyframe_) {
+  if (session != nullptr && latest_keyframe_ && (loop_closed || !config_.correct_on_loop_closures_only)) {
     const SE3 optimized = smoother_.estimate().at<SE3>(graph::X(*latest_keyframe_)).value();
     update.correction_translation_m = (optimized.translation() - frontend_poses_.at(*latest_keyframe_).translation()).norm();
     HANZO_RETURN_IF_ERROR(session->apply_correction(*latest_keyframe_, optimized));

@@ -123,6 +123,10 @@ Result<std::unique_ptr<MappingSession>> MappingSession::create(const config::Fus
     break;
   }
   mapping.backend.batch_on_loop_closure = true;
+  // GPS factors hold fixes the filter fused: the graph corrects the filter at loop closures only.
+  const bool has_gnss = std::any_of(config.sensors.begin(), config.sensors.end(),
+                                    [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kGnss; });
+  if (mapping.gnss_factors && has_gnss) mapping.backend.correct_on_loop_closures_only = true;
   return std::unique_ptr<MappingSession>(new MappingSession(std::move(session), std::move(mapping), std::move(lidar_sensor), T_body_lidar));
 }
 
@@ -156,9 +160,23 @@ MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionC
       return;
     }
     latest_keyframe_ = emitted;
+    latest_keyframe_uncorrected_ = session_->world_correction().inverse() * emitted.T_world_body.to_se3();
     ++summary_.graph_keyframes;
     if (keyframe_callback_) keyframe_callback_(emitted);
   });
+  session_->set_gnss_callback([this](const FusedGnssFix& fix) { add_gnss_factor(fix); });
+}
+
+void MappingSession::add_gnss_factor(const FusedGnssFix& fix) {
+  if (!config_.gnss_factors || !latest_keyframe_ || restart_graph_ || summary_.relocalizations > 0) return;
+  // Both poses before the Session's corrections, where their relative motion is the filter's.
+  const SE3 T_keyframe_fix = latest_keyframe_uncorrected_.inverse() * (fix.world_correction.inverse() * fix.T_world_body);
+  const Status added = graph_->add_gps_at_keyframe(latest_keyframe_->keyframe_id, fix.antenna_world, fix.covariance, T_keyframe_fix * fix.lever_arm);
+  if (!added) {
+    logger()->debug("mapping session: GNSS fix at {:.3f} s not added to the graph: {}", fix.timestamp.seconds(), added.error().message);
+    return;
+  }
+  ++summary_.gnss_factors;
 }
 
 MappingSession::~MappingSession() { worker_.reset(); }  // before the odometry it registers with

@@ -96,6 +96,9 @@ struct Session::Impl final : UpdateObserver {
   void fuse_late(Event event);
   /// Emits a keyframe unless one with its id (or a later one) was emitted already.
   void emit_keyframe(const msgs::Keyframe& keyframe);
+  /// Reports a fused GNSS fix (first fusions only: fuse_in_order and a late event itself; a
+  /// replay after a rollback re-fuses fixes already reported).
+  void report_gnss(const Event& event, const EventOutcome& outcome);
   void count(const Event& event, const EventOutcome& outcome);
   /// Fuses the pending messages up to the IMU's time (all of them when flush_all).
   void release_pending(bool flush_all = false);
@@ -127,6 +130,7 @@ struct Session::Impl final : UpdateObserver {
   PoseCallback pose_callback;
   InnovationCallback innovation_callback;
   KeyframeCallback keyframe_callback;
+  GnssCallback gnss_callback;
   // Emitted keyframes, for corrections: the pose before any correction (C^-1 x emitted pose,
   // C the world correction when it was emitted), so that today's belief is C_now x this.
   std::map<uint64_t, SE3> keyframe_poses;
@@ -168,6 +172,7 @@ const config::FusionConfig& Session::config() const { return impl_->config; }
 void Session::set_pose_callback(PoseCallback callback) { impl_->pose_callback = std::move(callback); }
 void Session::set_innovation_callback(InnovationCallback callback) { impl_->innovation_callback = std::move(callback); }
 void Session::set_keyframe_callback(KeyframeCallback callback) { impl_->keyframe_callback = std::move(callback); }
+void Session::set_gnss_callback(GnssCallback callback) { impl_->gnss_callback = std::move(callback); }
 
 Status Session::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized) {
   Impl& impl = *impl_;
@@ -373,6 +378,14 @@ void Session::Impl::fuse_in_order(Event event) {
   if (config.frontend.lag_window_s > 0.0) history.push_back({event, estimator});
   if (event.is_imu && outcome.fused && estimator.initialized()) emit_pose(true);
   if (outcome.keyframe) emit_keyframe(*outcome.keyframe);
+  report_gnss(event, outcome);
+}
+
+void Session::Impl::report_gnss(const Event& event, const EventOutcome& outcome) {
+  if (!outcome.gnss_fix || !gnss_callback) return;
+  FusedGnssFix fix = *outcome.gnss_fix;
+  fix.sensor = sensors[event.sensor].name;
+  gnss_callback(fix);
 }
 
 void Session::Impl::emit_keyframe(const msgs::Keyframe& keyframe) {
@@ -396,6 +409,7 @@ void Session::Impl::fuse_late(Event event) {
   // A late IMU message (the IMU stream fell behind the others) can make a keyframe, and so can
   // the IMU messages re-fused after it: those not emitted yet are emitted now.
   if (outcome.keyframe) emit_keyframe(*outcome.keyframe);
+  report_gnss(event, outcome);
   ++sensors[event.sensor].rolled_back;
   ++rollbacks;
   history.insert(history.begin() + static_cast<std::ptrdiff_t>(index), HistoryEntry{event, estimator});

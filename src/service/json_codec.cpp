@@ -176,6 +176,7 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"loop_closures", mapping.loop_closures},
       {"manual_loop_closures", mapping.manual_loop_closures},
       {"relocalizations", mapping.relocalizations},
+      {"gnss_factors", mapping.gnss_factors},
       {"map_version", mapping.map_version},
       {"map_memory_bytes", mapping.map_memory_bytes},
       {"last_registration_ms", mapping.last_registration_ms},

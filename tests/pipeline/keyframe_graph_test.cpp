@@ -152,6 +152,18 @@ TEST(KeyframeGraph, GnssFixesAttachToKeyframesAndBadInputIsRefused) {
   EXPECT_THAT(backend.add_loop_closure(0, 1, SE3(), -msgs::Matrix6d::Identity()).error().message, HasSubstr("covariance"));
   EXPECT_FALSE(backend.add_gps(first.timestamp, Eigen::Vector3d::Constant(std::nan("")), Eigen::Matrix3d::Identity()).ok());
   EXPECT_EQ(backend.keyframe_ids().size(), 2u);
+
+  // A fix (sigma 1 cm) of an antenna 2 m ahead of keyframe 0 (the lever arm carried through the
+  // motion since the keyframe) at x = 4.05: keyframe 0, at 2.0 by the odometry (sigma 0.1 m)
+  // from keyframe 1, moves to 2.05 (weighted: 2.0495).
+  ASSERT_TRUE(backend.add_gps_at_keyframe(0, {4.05, 0.0, 0.0}, 1e-4 * Eigen::Matrix3d::Identity(), {2.0, 0.0, 0.0}).ok());
+  ASSERT_TRUE(backend.process().ok());
+  ASSERT_TRUE(backend.smoother().wait_for_batch().ok());
+  EXPECT_NEAR(backend.optimized_pose(0)->translation().x(), 2.0495, 2e-3);
+  EXPECT_THAT(backend.add_gps_at_keyframe(7, {0.0, 0.0, 0.0}, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero()).error().message,
+              HasSubstr("keyframe 7 is unknown"));
+  EXPECT_THAT(backend.add_gps_at_keyframe(0, {0.0, 0.0, 0.0}, -Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero()).error().message,
+              HasSubstr("covariance"));
 }
 
 }  // namespace

@@ -5,7 +5,8 @@
 // through the API) add between factors with a DCS kernel, so a wrong one switches itself off.
 // process() runs one IncrementalSmoother update (graph/incremental_smoother.hpp) and moves the
 // session onto the optimized latest keyframe (Session::apply_correction), closing the loop
-// between frontend and backend.
+// between frontend and backend (after every update, or only after loop closures:
+// correct_on_loop_closures_only).
 //
 // Frames: X(id) = T_world_body of keyframe id; factors' covariances over the SE3 tangent
 // (rho, phi), right perturbation; GNSS positions in the world (ENU) frame, lever arm in the
@@ -31,10 +32,21 @@ struct KeyframeGraphConfig {
   graph::IncrementalSmootherConfig smoother;
   double loop_closure_dcs_phi = 1000;     ///< DCS parameter of loop closures (graph/factor.hpp)
   double gps_max_time_offset_s = 0.1;    ///< a fix this close to a keyframe attaches to it
+  /// Cauchy kernel of the GPS factors of add_gps_at_keyframe (whitened residual units): fixes
+  /// off by multipath far beyond their covariance lose their pull.
+  double gps_cauchy_scale = 2.0;
   /// Run a full batch (synchronously, in process()) whenever loop closures were added. With
   /// smoother.background_batch = false this makes the backend deterministic (offline runs,
   /// tests); in real time it blocks process() for the length of a batch.
   bool batch_on_loop_closure = false;
+  /// Correct the session only after updates that add loop closures (information the filter
+  /// does not have). For graphs that also hold measurements the filter fused (GPS factors):
+  /// moving the filter onto a smoothed estimate of its own measurements counts them twice;
+  /// measured on the simulated urban drive (IMU + GNSS + wheels, multipath and an outage),
+  /// correcting after every update drove the session 9.8 m RMSE off the truth (0.66 m
+  /// without the graph's corrections), while the graph's keyframes with GPS factors were
+  /// better than the filter's (0.44 m).
+  bool correct_on_loop_closures_only = false;
 };
 
 struct KeyframeGraphUpdate {
@@ -63,6 +75,12 @@ class KeyframeGraph {
   /// non-finite values or a covariance that is not positive definite.
   Status add_gps(Timestamp time, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,
                  const Eigen::Vector3d& lever_arm = Eigen::Vector3d::Zero());
+  /// A GNSS position (world ENU m, covariance m^2) of an antenna at `lever_arm` in the body
+  /// frame of keyframe `keyframe_id` (the fix's lever arm carried through the body's motion
+  /// from the keyframe to the fix: any time offset between them compensated). Fails for a
+  /// keyframe not added yet, non-finite values or a covariance that is not positive definite.
+  Status add_gps_at_keyframe(uint64_t keyframe_id, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,
+                             const Eigen::Vector3d& lever_arm);
   /// A loop closure: keyframe `to` seen from keyframe `from` (T_from_to), covariance over its
   /// tangent. Both keyframes must be known.
   Status add_loop_closure(uint64_t from, uint64_t to, const SE3& T_from_to, const Eigen::Matrix<double, 6, 6>& covariance);

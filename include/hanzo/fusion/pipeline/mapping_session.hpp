@@ -27,9 +27,15 @@
 //    is moved in the map (the point map exactly; occupancy keeps what was integrated).
 //  - Manual loop closures (the server's POST /v1/sessions/{id}/loop-closure): close_loop().
 //
+//  - GNSS fixes the filter fused (Session::set_gnss_callback) become GPS factors on the newest
+//    Session keyframe (gnss_factors), their lever arm carried through the body's motion from
+//    the keyframe to the fix, so that the graph's corrections agree with GNSS instead of
+//    pulling against it (and GNSS bounds the drift of poses a loop closure moves).
+//
 // Frames: world = the Session's world (ENU when a GNSS datum is known). Units m, s, rad.
 // Limits: one 3D LiDAR per session; its clock is the body clock (calibrated time offsets of
-// LiDARs are not applied); GNSS fixes are fused by the filter but not added to the graph.
+// LiDARs are not applied); after a relocalization (world = the map's frame) GNSS fixes are no
+// longer added to the graph.
 // Not thread-safe: one thread at a time (the server serializes per session).
 #include <cstddef>
 #include <cstdint>
@@ -61,6 +67,8 @@ struct MappingSessionConfig {
   /// map and the Session at once).
   KeyframeGraphConfig backend;
   bool loop_closure = true;
+  /// GNSS fixes the filter fused become GPS factors of the keyframe graph.
+  bool gnss_factors = true;
   lidar::LoopClosureConfig loop;
   double loop_translation_sigma = 0.05;  ///< m, loop closure factors (detected and manual)
   double loop_rotation_sigma = 0.005;    ///< rad
@@ -135,6 +143,7 @@ struct MappingSummary {
   double last_registration_ms = 0.0;
   double last_correction_m = 0.0; ///< the backend's last correction of the latest keyframe
   uint64_t relocalizations = 0;   ///< successful relocalize() calls
+  uint64_t gnss_factors = 0;      ///< GNSS fixes added to the keyframe graph
 };
 
 class MappingSession {
@@ -211,6 +220,8 @@ class MappingSession {
   /// Moves map keyframes (index -> T_world_lidar) in the map and publishes the corrected map.
   void move_map_keyframes(const std::map<uint64_t, SE3>& moved);
   void count_refused(const std::string& reason);
+  /// A fused GNSS fix as a GPS factor on the newest keyframe (gnss_factors).
+  void add_gnss_factor(const FusedGnssFix& fix);
 
   std::unique_ptr<Session> session_;
   MappingSessionConfig config_;
@@ -225,6 +236,7 @@ class MappingSession {
   std::deque<msgs::PointCloudMessage> waiting_scans_;
   std::optional<Timestamp> last_scan_time_;
   std::optional<msgs::Keyframe> latest_keyframe_;   ///< the newest Session keyframe
+  SE3 latest_keyframe_uncorrected_;                 ///< its pose before the Session's corrections
   std::vector<MapKeyframe> map_keyframes_;
   std::map<uint64_t, std::size_t> map_keyframe_of_;  ///< Session keyframe id -> map keyframe
   std::optional<uint64_t> last_anchor_;

@@ -92,11 +92,26 @@ struct InnovationRecord {
   bool applied = false;
 };
 
+/// A GNSS fix the filter fused (past the fix-type policy and the chi-square gate), in the
+/// world frame: for the backend's GPS factors.
+struct FusedGnssFix {
+  std::string sensor;
+  Timestamp timestamp;                  ///< body clock
+  Eigen::Vector3d antenna_world;        ///< ENU of the session's datum, m
+  Eigen::Matrix3d covariance;           ///< m^2, ENU
+  Eigen::Vector3d lever_arm;            ///< the antenna in the body frame (calibration), m
+  /// The fused pose at the fix, in the world as the session had it then (corrections applied
+  /// later move it by world_correction(): relate it to other poses through their corrections).
+  SE3 T_world_body;
+  SE3 world_correction;                 ///< Session::world_correction() of that world
+};
+
 class Session {
  public:
   using PoseCallback = std::function<void(const msgs::PoseEstimate&)>;
   using InnovationCallback = std::function<void(const InnovationRecord&)>;
   using KeyframeCallback = std::function<void(const msgs::Keyframe&)>;
+  using GnssCallback = std::function<void(const FusedGnssFix&)>;
 
   /// Fails when the configuration is invalid or has no IMU sensor (the frontend propagates
   /// with the IMU), or when the filter type is not available.
@@ -138,6 +153,9 @@ class Session {
   /// the relative motion since the previous keyframe with its covariance (from the filter's pose
   /// clone, cross-correlations included).
   void set_keyframe_callback(KeyframeCallback callback);
+  /// Called once for every GNSS fix the filter fused (a fix re-fused by a rollback is not
+  /// reported again), after the pose it corrected.
+  void set_gnss_callback(GnssCallback callback);
 
   /// The backend's hook: keyframe `keyframe_id` is really at T_world_body_optimized. The
   /// estimate is moved rigidly by T_optimized * T_keyframe^-1 (world frame), now. Fails for a
