@@ -12,7 +12,7 @@ using ::testing::HasSubstr;
 TEST(TokenStore, FileMapsTokensToOrganizationAndPermissions) {
   auto store = TokenStore::parse(testing::kTokensYaml, "tokens.yaml");
   ASSERT_TRUE(store.ok()) << store.error().message;
-  EXPECT_EQ(store->size(), 5u);
+  EXPECT_EQ(store->size(), 6u);
   const auto robot = store->authenticate("acme-robot-secret-0001");
   ASSERT_TRUE(robot.has_value());
   EXPECT_EQ(robot->name, "acme-robot");

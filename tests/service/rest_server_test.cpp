@@ -1,7 +1,12 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <set>
+
 #include <nlohmann/json.hpp>
+
+#include "hanzo/fusion/maps/fusion_map_file.hpp"
 
 #include "hanzo/fusion/service/rest_server.hpp"
 #include "service_fixtures.hpp"
@@ -19,6 +24,8 @@ constexpr const char* kRobotToken = "acme-robot-secret-0001";
 constexpr const char* kViewerToken = "acme-viewer-secret-0002";
 constexpr const char* kAdminToken = "acme-admin-secret-00003";
 constexpr const char* kGlobexToken = "globex-robot-secret-0004";
+constexpr const char* kGlobexAdminToken = "globex-admin-secret-0005";
+constexpr const char* kMapperToken = "acme-mapper-secret-00006";
 // Sensor data arrives over gRPC; these tests push through the SessionManager as that front end does.
 const Principal kStreamer{"robot", "acme", static_cast<uint32_t>(Permission::kSessionWrite) | static_cast<uint32_t>(Permission::kSessionRead)};
 
@@ -33,7 +40,9 @@ class RestServerTest : public ::testing::Test {
     auto storage = open_storage("sqlite://" + (dir_ / "fusion.db").string());
     ASSERT_TRUE(storage.ok());
     metrics_ = std::make_shared<MetricsRegistry>();
-    auto manager = SessionManager::create({}, std::move(storage).value(), metrics_);
+    SessionManagerConfig manager_config;
+    manager_config.map_directory = (dir_ / "maps").string();
+    auto manager = SessionManager::create(manager_config, std::move(storage).value(), metrics_);
     ASSERT_TRUE(manager.ok());
     manager_ = std::move(manager).value();
     auto tokens = TokenStore::parse(testing::kTokensYaml, "tokens.yaml");
@@ -151,59 +160,103 @@ TEST_F(RestServerTest, SessionLifecycle) {
   EXPECT_EQ(http.Get(("/v1/sessions/" + id + "/trajectory?limit=5").c_str(), bearer(kViewerToken))->status, 200);
 }
 
-TEST_F(RestServerTest, AuthMatrixForEveryEndpoint) {
-  const std::string id = create_session();
-  struct Endpoint {
-    std::string method;
-    std::string path;
-    std::string body;
-    const char* allowed_token;    // a token that may call it
-    const char* forbidden_token;  // a token of the same organization that lacks the permission
-    bool organization_scoped;
+// The auth matrix of every operation of the OpenAPI document (docs/openapi.json, what the
+// server serves), generated from it: each secured operation's x-required-permissions decides
+// which of the fixture's tokens may call it. No token, an unknown token or another scheme: 401;
+// a token of the organization lacking a required permission: 403; another organization's token
+// (an admin's) on a session or map of this one: 403; a token with the permissions: neither.
+TEST_F(RestServerTest, AuthMatrixOfEveryOperationInTheOpenApiDocument) {
+  const std::string session_id = create_session();
+  msgs::FusionMap map;
+  map.map_id = "auth-matrix";
+  map.points = msgs::PointLayer{};
+  map.points->points = {Eigen::Vector3f(1.0F, 2.0F, 0.5F), Eigen::Vector3f(2.0F, 1.0F, 0.5F)};
+  const std::string map_file = maps::serialize_fusion_map(map).value();
+  auto loaded = client().Post("/v1/maps?name=auth", bearer(kMapperToken), map_file, "application/octet-stream");
+  ASSERT_TRUE(loaded);
+  ASSERT_EQ(loaded->status, 201) << loaded->body;
+  const std::string map_id = json::parse(loaded->body).at("map_id");
+
+  // The acme tokens' permissions (service_fixtures.hpp); fusion:admin grants every permission.
+  const std::vector<std::pair<const char*, std::set<std::string>>> acme_tokens = {
+      {kRobotToken, {"fusion:session:write", "fusion:session:read", "fusion:map:read"}},
+      {kViewerToken, {"fusion:session:read"}},
+      {kMapperToken, {"fusion:map:read", "fusion:map:write"}},
+      {kAdminToken, {"fusion:admin"}}};
+  const auto holds = [](const std::set<std::string>& permissions, const std::string& needed) {
+    return permissions.count(needed) != 0 || permissions.count("fusion:admin") != 0;
   };
-  const std::string session = "/v1/sessions/" + id;
-  const std::string config = json({{"config", testing::read_text("examples/data/fusion.yaml")}}).dump();
-  const std::vector<Endpoint> endpoints = {
-      {"POST", "/v1/sessions", config, kRobotToken, kViewerToken, false},
-      {"GET", "/v1/sessions", "", kViewerToken, nullptr, false},
-      {"GET", session, "", kViewerToken, nullptr, true},
-      {"POST", session + "/sensors", R"({"name": "wheels2", "config": {"rate": 50}})", kRobotToken, kViewerToken, true},
-      {"GET", session + "/pose", "", kViewerToken, nullptr, true},
-      {"GET", session + "/trajectory", "", kViewerToken, nullptr, true},
-      {"GET", "/v1/metrics", "", kAdminToken, kRobotToken, false},
-      {"DELETE", session, "", kRobotToken, kViewerToken, true},
+  struct Operation {
+    std::string method, path_template, path, body, content_type;
+    std::vector<std::string> permissions;
   };
+  std::vector<Operation> operations;
+  const json document = json::parse(testing::read_text("docs/openapi.json"));
+  for (const auto& [path_template, item] : document.at("paths").items()) {
+    for (const auto& [method, operation] : item.items()) {
+      if (method == "parameters") continue;
+      if (operation.contains("security") && operation["security"].empty()) continue;  // health, the document
+      ASSERT_TRUE(operation.contains("x-required-permissions")) << method << " " << path_template;
+      Operation entry{method, path_template, path_template, "", "application/json", operation["x-required-permissions"]};
+      const std::string id = path_template.rfind("/v1/maps/", 0) == 0 ? map_id : session_id;
+      if (const auto at = entry.path.find("{id}"); at != std::string::npos) entry.path.replace(at, 4, id);
+      if (path_template == "/v1/sessions") entry.body = json({{"config", testing::read_text("examples/data/fusion.yaml")}}).dump();
+      if (path_template == "/v1/sessions/{id}/sensors") entry.body = R"({"name": "wheels2", "config": {"rate": 50}})";
+      if (path_template == "/v1/sessions/{id}/loop-closure") entry.body = "{}";
+      if (path_template == "/v1/sessions/{id}/relocalize") entry.body = json({{"map_id", map_id}}).dump();
+      if (path_template == "/v1/maps") {
+        entry.path += "?name=again";
+        entry.body = map_file;
+        entry.content_type = "application/octet-stream";
+      }
+      operations.push_back(std::move(entry));
+    }
+  }
+  EXPECT_GE(operations.size(), 14U);
+  // Ending the session last: everything else still finds it active.
+  std::stable_partition(operations.begin(), operations.end(), [](const Operation& op) { return op.method != "delete"; });
+
   auto http = client();
-  auto call = [&](const Endpoint& endpoint, const httplib::Headers& headers) {
-    if (endpoint.method == "GET") return http.Get(endpoint.path.c_str(), headers);
-    if (endpoint.method == "DELETE") return http.Delete(endpoint.path.c_str(), headers);
-    return http.Post(endpoint.path.c_str(), headers, endpoint.body, "application/json");
+  auto call = [&](const Operation& op, const httplib::Headers& headers) {
+    if (op.method == "get") return http.Get(op.path.c_str(), headers);
+    if (op.method == "delete") return http.Delete(op.path.c_str(), headers);
+    return http.Post(op.path.c_str(), headers, op.body, op.content_type.c_str());
   };
-  for (const Endpoint& endpoint : endpoints) {
-    SCOPED_TRACE(endpoint.method + " " + endpoint.path);
-    auto missing = call(endpoint, {});
+  for (const Operation& op : operations) {
+    SCOPED_TRACE(op.method + " " + op.path_template);
+    auto missing = call(op, {});
+    ASSERT_TRUE(missing);
     EXPECT_EQ(missing->status, 401);
     EXPECT_EQ(error_of(missing)["code"], "unauthenticated");
-    EXPECT_EQ(call(endpoint, bearer("not-a-token-of-this-server"))->status, 401);
-    EXPECT_EQ(call(endpoint, {{"Authorization", "Basic abc"}})->status, 401);
-    if (endpoint.forbidden_token != nullptr) {
-      auto forbidden = call(endpoint, bearer(endpoint.forbidden_token));
-      EXPECT_EQ(forbidden->status, 403);
+    EXPECT_EQ(call(op, bearer("not-a-token-of-this-server"))->status, 401);
+    EXPECT_EQ(call(op, {{"Authorization", "Basic abc"}})->status, 401);
+    const char* allowed = nullptr;
+    for (const auto& [token, permissions] : acme_tokens) {
+      const bool may = std::all_of(op.permissions.begin(), op.permissions.end(), [&](const std::string& p) { return holds(permissions, p); });
+      if (may) {
+        if (allowed == nullptr) allowed = token;  // the least privileged: the admin comes last
+        continue;
+      }
+      auto forbidden = call(op, bearer(token));
+      EXPECT_EQ(forbidden->status, 403) << token << ": " << forbidden->body;
       EXPECT_EQ(error_of(forbidden)["code"], "permission_denied");
     }
-    if (endpoint.organization_scoped) {
-      auto other = call(endpoint, bearer(kGlobexToken));
-      EXPECT_EQ(other->status, 403);
+    if (op.path_template.find("{id}") != std::string::npos) {
+      auto other = call(op, bearer(kGlobexAdminToken));
+      EXPECT_EQ(other->status, 403) << other->body;
       EXPECT_THAT(error_of(other)["message"].get<std::string>(), HasSubstr("another organization"));
     }
-    auto allowed = call(endpoint, bearer(endpoint.allowed_token));
-    EXPECT_NE(allowed->status, 401);
-    EXPECT_NE(allowed->status, 403) << allowed->body;
+    ASSERT_NE(allowed, nullptr);
+    auto permitted = call(op, bearer(allowed));
+    ASSERT_TRUE(permitted);
+    EXPECT_NE(permitted->status, 401);
+    EXPECT_NE(permitted->status, 403) << allowed << ": " << permitted->body;
   }
-  // The session survived all of it (and only the last call ended it).
-  const json info = json::parse(http.Get(session.c_str(), bearer(kViewerToken))->body);
+  // The session survived all of it (and only the last call ended it); the map too.
+  const json info = json::parse(http.Get(("/v1/sessions/" + session_id).c_str(), bearer(kViewerToken))->body);
   EXPECT_EQ(info["status"], "ended");
   EXPECT_EQ(info["sensors"].size(), 4u);
+  EXPECT_EQ(http.Get(("/v1/maps/" + map_id + "?format=json").c_str(), bearer(kRobotToken))->status, 200);
 }
 
 TEST_F(RestServerTest, BadRequestsGetTheDocumentedErrors) {

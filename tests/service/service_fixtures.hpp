@@ -84,6 +84,10 @@ inline constexpr const char* kTokensYaml = R"(tokens:
     organization: globex
     permissions: [fusion:admin]
     token: "globex-admin-secret-0005"
+  - name: acme-mapper
+    organization: acme
+    permissions: [fusion:map:read, fusion:map:write]
+    token: "acme-mapper-secret-00006"
 )";
 
 }  // namespace hanzo::fusion::testing
