@@ -495,7 +495,9 @@ SessionSummary Session::summary() const {
   summary.keyframes = impl_->keyframes;
   summary.corrections = impl_->corrections;
   summary.filter = std::string(impl_->estimator.filter().name());
-  summary.state = impl_->latest_pose ? impl_->latest_pose->status.state : msgs::TrackingState::kInitializing;
+  // Now, not as of the latest pose: a sensor heard from again after that pose no longer counts
+  // as timed out (the pose's own status stays as it was emitted).
+  summary.state = impl_->latest_pose ? impl_->pose_status().state : msgs::TrackingState::kInitializing;
   return summary;
 }
 

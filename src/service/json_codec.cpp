@@ -148,7 +148,9 @@ json session_to_json(const SessionInfo& info) {
       {"status", info.ended ? "ended" : "active"},
       {"created_ns", info.created.nanoseconds()},
       {"ended_ns", info.ended ? json(info.ended->nanoseconds()) : json(nullptr)},
-      {"tracking_state", msgs::to_string(info.latest_pose ? info.latest_pose->status.state : info.summary.state)},
+      // The live state; for a session restored after a restart that has not emitted a pose
+      // yet, its last stored pose's.
+      {"tracking_state", msgs::to_string(info.summary.poses == 0 && info.latest_pose ? info.latest_pose->status.state : info.summary.state)},
       {"filter", info.summary.filter},
       {"sensors", std::move(sensors)},
       {"poses", info.summary.poses},

@@ -79,6 +79,8 @@ struct SessionSummary {
   uint64_t rollbacks = 0;                 // times the filter rolled back for a late message
   uint64_t zero_velocity_updates = 0;
   std::string filter;                     // "ekf", ...
+  /// The tracking state now (the rules of PoseEstimate.status with the sensors' current
+  /// timeouts), which a later message can change without a new pose.
   msgs::TrackingState state = msgs::TrackingState::kInitializing;
 };
 
