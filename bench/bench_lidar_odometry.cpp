@@ -15,6 +15,7 @@
 #include <cmath>
 #include <functional>
 #include <map>
+#include <numeric>
 #include <string>
 #include <vector>
 
@@ -71,16 +72,19 @@ Timestamp middle_of(const Sweep& sweep) {
 }
 
 void BM_Odometry(benchmark::State& state, const std::string& scenario, double seconds, std::optional<sim::LidarModel> model,
-                 double source_voxel) {
+                 double source_voxel, int threads) {
   const SimulatedDrive& data = drive(scenario, seconds, model);
   lidar::LidarOdometryConfig config;
   config.source_voxel_size = source_voxel;
+  config.num_threads = threads;
   std::vector<double> milliseconds;
+  double preprocess_seconds = 0.0, registration_seconds = 0.0, map_update_seconds = 0.0;
   io::Trajectory truth, estimate;
   std::size_t map_bytes = 0, points = 0;
   for (auto _ : state) {
     lidar::LidarOdometry odometry(config, data.truth(middle_of(data.sweeps.front())));
     milliseconds.clear();
+    preprocess_seconds = registration_seconds = map_update_seconds = 0.0;
     truth = {};
     estimate = {};
     for (const Sweep& sweep : data.sweeps) {
@@ -91,6 +95,9 @@ void BM_Odometry(benchmark::State& state, const std::string& scenario, double se
         state.SkipWithError(result.error().message.c_str());
         return;
       }
+      preprocess_seconds += result->preprocess_seconds;
+      registration_seconds += result->registration_seconds;
+      map_update_seconds += result->map_update_seconds;
       truth.timestamps.push_back(result->time);
       truth.poses.push_back(data.truth(result->time).matrix());
       estimate.timestamps.push_back(result->time);
@@ -107,6 +114,11 @@ void BM_Odometry(benchmark::State& state, const std::string& scenario, double se
   state.counters["p50_ms"] = percentile(0.5);
   state.counters["p99_ms"] = percentile(0.99);
   state.counters["max_ms"] = percentile(1.0);
+  const double sweeps = static_cast<double>(milliseconds.size());
+  state.counters["mean_ms"] = std::accumulate(milliseconds.begin(), milliseconds.end(), 0.0) / sweeps;
+  state.counters["prep_ms"] = 1e3 * preprocess_seconds / sweeps;
+  state.counters["register_ms"] = 1e3 * registration_seconds / sweeps;
+  state.counters["map_ms"] = 1e3 * map_update_seconds / sweeps;
   state.counters["drift_percent"] = kitti ? kitti->translation_error_percent : -1.0;
   state.counters["drift_deg_100m"] = kitti ? kitti->rotation_error_deg_per_100m : -1.0;
   state.counters["path_m"] = truth.path_length();
@@ -204,12 +216,15 @@ void BM_ScanToMapPeer(benchmark::State& state, bool pcl, bench::PeerMethod metho
 
 }  // namespace
 
-BENCHMARK_CAPTURE(BM_Odometry, warehouse_vlp16, std::string("warehouse_robot"), 100.0, std::nullopt, 0.25)
+// One thread (the first target) and two (the machine's cores).
+BENCHMARK_CAPTURE(BM_Odometry, warehouse_vlp16, std::string("warehouse_robot"), 100.0, std::nullopt, 0.25, 1)
     ->Name("hanzo/lidar_odometry/warehouse_vlp16")->Unit(benchmark::kSecond)->Iterations(1);
-BENCHMARK_CAPTURE(BM_Odometry, urban_os1_64, std::string("urban_vehicle"), 60.0, std::nullopt, 1.0)
+BENCHMARK_CAPTURE(BM_Odometry, urban_os1_64, std::string("urban_vehicle"), 60.0, std::nullopt, 1.0, 1)
     ->Name("hanzo/lidar_odometry/urban_os1_64")->Unit(benchmark::kSecond)->Iterations(1);
-BENCHMARK_CAPTURE(BM_Odometry, urban_hdl64, std::string("urban_vehicle"), 30.0, std::optional(sim::LidarModel::kVelodyneHdl64), 1.0)
+BENCHMARK_CAPTURE(BM_Odometry, urban_hdl64, std::string("urban_vehicle"), 30.0, std::optional(sim::LidarModel::kVelodyneHdl64), 1.0, 1)
     ->Name("hanzo/lidar_odometry/urban_hdl64")->Unit(benchmark::kSecond)->Iterations(1);
+BENCHMARK_CAPTURE(BM_Odometry, urban_hdl64_2threads, std::string("urban_vehicle"), 30.0, std::optional(sim::LidarModel::kVelodyneHdl64), 1.0, 2)
+    ->Name("hanzo/lidar_odometry/urban_hdl64/2_threads")->Unit(benchmark::kSecond)->Iterations(1);
 BENCHMARK(BM_ScanToMapOurs)->Name("hanzo/scan_to_map/urban")->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK_CAPTURE(BM_ScanToMapPeer, pcl_gicp, true, bench::PeerMethod::kGicp)->Name("pcl/gicp/scan_to_map/urban")->Unit(benchmark::kMillisecond)->Iterations(1);
 BENCHMARK_CAPTURE(BM_ScanToMapPeer, pcl_icp_plane, true, bench::PeerMethod::kIcpPlane)->Name("pcl/icp_plane/scan_to_map/urban")->Unit(benchmark::kMillisecond)->Iterations(1);

@@ -96,7 +96,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   lidar::LidarOdometryConfig config;
   config.map.voxel_size = options.voxel;
   config.source_voxel_size = options.source_voxel;
-  config.registration.num_threads = options.threads;
+  config.num_threads = options.threads;
   config.registration.max_neighbour_distance = options.voxel;
   config.max_range = options.max_range;
   config.deskew = !options.no_deskew;

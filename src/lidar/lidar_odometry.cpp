@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <limits>
 
 #include <Eigen/Eigenvalues>
 #include <absl/container/flat_hash_set.h>
@@ -17,26 +16,6 @@ namespace hanzo::fusion::lidar {
 namespace {
 
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
-
-// The scan's positions moved from the sensor frame at their own time into the
-// sensor frame at `reference_time` (s after the scan time), for a sensor moving with constant
-// body twist `twist_per_second` (rho, phi per s).
-void deskew(cloud::PointCloud& scan, const SE3::Tangent& twist_per_second, float reference_time) {
-  if (!scan.has_times() || twist_per_second.isZero()) return;
-  // Sweeps are sorted by time in blocks (columns): reuse the transform while the time repeats.
-  float cached_time = std::numeric_limits<float>::quiet_NaN();
-  Eigen::Matrix3f rotation = Eigen::Matrix3f::Identity();
-  Eigen::Vector3f translation = Eigen::Vector3f::Zero();
-  for (std::size_t i = 0; i < scan.size(); ++i) {
-    if (scan.times[i] != cached_time) {
-      cached_time = scan.times[i];
-      const SE3 motion = SE3::exp(twist_per_second * static_cast<double>(cached_time - reference_time));
-      rotation = motion.rotation().matrix().cast<float>();
-      translation = motion.translation().cast<float>();
-    }
-    scan.positions[i] = rotation * scan.positions[i] + translation;
-  }
-}
 
 // The first point of each voxel of edge voxel_size, in input order (an O(n) downsampling that
 // keeps measured points, so their per-point attributes stay valid).
@@ -88,7 +67,8 @@ LidarOdometry::LidarOdometry(LidarOdometryConfig config, const SE3& initial_pose
     : config_(std::move(config)), map_(config_.map), pose_(initial_pose) {}
 
 Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const cloud::PointCloud& scan,
-                                                      const std::optional<SE3>& predicted_motion) {
+                                                      const std::optional<SE3>& predicted_motion,
+                                                      const std::optional<SweepMotion>& sweep_motion) {
   HANZO_RETURN_IF_ERROR(with_context(config_.validate(), "lidar odometry config"));
   if (last_time_ && time <= *last_time_) {
     return Error(fmt::format("lidar odometry: scan time {:.6f} is not after the previous scan's {:.6f}", time.seconds(),
@@ -149,7 +129,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // the error feeds back through the constant-velocity model and grows).
   const float middle = scan.has_times() ? 0.5F * *std::max_element(scan.times.begin(), scan.times.end()) : 0.0F;
   const Timestamp pose_time = time + Duration::from_seconds(static_cast<double>(middle));
-  if (config_.deskew) deskew(map_points, twist_per_second, middle);
+  if (config_.deskew) deskew(map_points, sweep_motion ? *sweep_motion : SweepMotion::constant_twist(twist_per_second, middle));
   map_points.times.clear();
   std::vector<uint32_t> all(map_points.size());
   for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<uint32_t>(i);
@@ -174,7 +154,9 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
     estimate.converged = true;
   } else {
     // 4. Registration.
-    auto registered = align_to_surfaces(source, map_, prediction, prediction, config_.registration);
+    SurfaceRegistrationConfig registration = config_.registration;
+    registration.num_threads = config_.num_threads;
+    auto registered = align_to_surfaces(source, map_, prediction, prediction, registration);
     if (!registered) return Error(fmt::format("lidar odometry at {:.6f} s: {}", time.seconds(), registered.error().message));
     T_world_lidar = registered->T_map_source;
     estimate.iterations = registered->iterations;

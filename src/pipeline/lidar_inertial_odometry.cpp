@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 
 #include <fmt/format.h>
 
@@ -41,7 +42,33 @@ Result<LidarInertialOdometry::PreparedScan> LidarInertialOdometry::prepare(const
   }
   prepared.T_world_lidar_filter = *T_world_body * T_body_lidar_;
   prepared.world_correction = session_.world_correction();
+  if (config_.imu_deskew && prepared.cloud.has_times()) {
+    prepared.sweep_motion = sample_sweep_motion(scan.timestamp, 2.0 * middle, prepared.T_world_lidar_filter);
+    if (prepared.sweep_motion) ++statistics_.imu_deskewed;
+  }
   return prepared;
+}
+
+std::optional<lidar::SweepMotion> LidarInertialOdometry::sample_sweep_motion(Timestamp scan_time, double sweep_length,
+                                                                              const SE3& T_world_lidar_middle) const {
+  if (!(config_.deskew_sample_interval > 0) || !(sweep_length > 0)) return std::nullopt;
+  const SE3 T_middle_world = T_world_lidar_middle.inverse();
+  const auto samples = static_cast<std::size_t>(std::ceil(sweep_length / config_.deskew_sample_interval));
+  std::vector<double> times;
+  std::vector<SE3> poses;
+  times.reserve(samples + 1);
+  poses.reserve(samples + 1);
+  for (std::size_t i = 0; i <= samples; ++i) {
+    const double t = std::min(static_cast<double>(i) * config_.deskew_sample_interval, sweep_length);
+    if (!times.empty() && t <= times.back()) break;
+    const std::optional<SE3> T_world_body = session_.pose_at(scan_time + Duration::from_seconds(t));
+    if (!T_world_body) return std::nullopt;  // the filter does not cover the sweep: constant twist
+    times.push_back(t);
+    poses.push_back(T_middle_world * *T_world_body * T_body_lidar_);
+  }
+  Result<lidar::SweepMotion> motion = lidar::SweepMotion::from_samples(std::move(times), poses);
+  if (!motion) return std::nullopt;
+  return std::move(motion).value();
 }
 
 Result<LidarInertialOdometry::RegisteredScan> LidarInertialOdometry::register_scan(const PreparedScan& scan) {
@@ -60,7 +87,7 @@ Result<LidarInertialOdometry::RegisteredScan> LidarInertialOdometry::register_sc
   if (last_filter_pose_) motion = last_filter_pose_->inverse() * T_world_lidar;
   RegisteredScan registered;
   HANZO_ASSIGN_OR_RETURN(registered.estimate,
-                         with_context(odometry_->add_scan(scan.time, scan.cloud, motion), "lidar-inertial odometry (" + lidar_sensor_ + ")"));
+                         with_context(odometry_->add_scan(scan.time, scan.cloud, motion, scan.sweep_motion), "lidar-inertial odometry (" + lidar_sensor_ + ")"));
   last_filter_pose_ = T_world_lidar;
   registered.T_world_lidar = T_world_odometry_ * registered.estimate.T_world_lidar;
   // Covariance over (position in the world, rotation in the sensor frame): the tangent's

@@ -98,6 +98,36 @@ TEST(LidarInertialOdometry, UrbanVehicleImuPlusOs1DriftsUnderHalfAPercent) {
   EXPECT_LT(run.worst_velocity_error, 0.3);
 }
 
+TEST(LidarInertialOdometry, HandheldSwingsAreDeskewedWithTheImu) {
+  // A handheld VLP-16 swung +-0.9 rad every 2.5 s while walking the warehouse: the turn rate
+  // changes by up to 0.6 rad/s within a sweep. Deskewed with the filter's poses vs with the
+  // constant twist of the predicted motion.
+  LidarInertialOdometryConfig config;
+  config.odometry.source_voxel_size = 0.25;  // indoors
+  const FusedRun imu = run_lidar_inertial("examples/scenarios/handheld_lidar.yaml", 40.0, config);
+  config.imu_deskew = false;
+  const FusedRun constant = run_lidar_inertial("examples/scenarios/handheld_lidar.yaml", 40.0, config);
+  ASSERT_GT(imu.truth.path_length(), 30.0);
+  EXPECT_GT(imu.statistics.fused, 340U);
+  EXPECT_GE(imu.statistics.imu_deskewed + 1, imu.statistics.scans);  // the first sweep may start before the filter
+
+  EXPECT_EQ(constant.statistics.imu_deskewed, 0U);
+  // KITTI's metric on indoor segment lengths (10-40 m).
+  const eval::KittiOdometryConfig segments{.segment_lengths_m = {10, 20, 30, 40}};
+  auto with_imu = eval::compute_kitti_odometry_error(imu.truth, imu.estimate, segments);
+  auto with_constant = eval::compute_kitti_odometry_error(constant.truth, constant.estimate, segments);
+  ASSERT_TRUE(with_imu.ok()) << with_imu.error().message;
+  ASSERT_TRUE(with_constant.ok()) << with_constant.error().message;
+  // Measured: IMU 0.40 %, 1.9 deg/100 m, mean velocity error 0.031 m/s; constant twist 0.51 %,
+  // 2.1 deg/100 m, 0.042 m/s (without deskewing at all the filter diverges: 39 m APE).
+  EXPECT_LT(with_imu->translation_error_percent, 0.45);
+  EXPECT_LT(with_imu->translation_error_percent, 0.9 * with_constant->translation_error_percent);
+  EXPECT_LT(with_imu->rotation_error_deg_per_100m, with_constant->rotation_error_deg_per_100m);
+  const auto mean_velocity_error = [](const FusedRun& run) { return run.velocity_error_sum / static_cast<double>(run.velocity_samples); };
+  EXPECT_LT(mean_velocity_error(imu), 0.85 * mean_velocity_error(constant));
+  EXPECT_LT(imu.worst_velocity_error, 0.2);
+}
+
 TEST(LidarInertialOdometry, RefusesSweepsTheSessionCannotPlace) {
   sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_robot.yaml").value();
   auto session = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();

@@ -33,10 +33,19 @@ TEST(Scenario, ShippedScenariosLoadWithTheirSensorsAndFaults) {
   EXPECT_EQ(gnss.episodes.size(), 2U);
   EXPECT_EQ(std::get<LidarSimulatorConfig>(urban->sensors[1].simulator).weather.size(), 1U);
 
-  for (const char* name : {"drone", "ar_handheld"}) {
+  for (const char* name : {"drone", "ar_handheld", "handheld_lidar"}) {
     const Result<Scenario> scenario = load_scenario(std::string("examples/scenarios/") + name + ".yaml");
     ASSERT_TRUE(scenario) << scenario.error().message;
-    EXPECT_TRUE(make_trajectory(*scenario)) << name;
+    const Result<SplineTrajectory> trajectory = make_trajectory(*scenario);
+    ASSERT_TRUE(trajectory) << name;
+    // Every scenario starts still (a filter's static alignment): a handheld device too, though
+    // its holder looks around once walking.
+    const Timestamp start = trajectory->start_time();
+    for (double t = 0.1; t < 1.5; t += 0.1) {
+      const TrajectorySample sample = trajectory->sample(start + Duration::from_seconds(t));
+      EXPECT_LT(sample.angular_velocity_body.norm(), 1e-6) << name << " at " << t << " s";
+      EXPECT_LT(sample.velocity_world.norm(), 1e-6) << name << " at " << t << " s";
+    }
     EXPECT_TRUE(calib::validate(scenario_calibration(*scenario))) << name;
     EXPECT_TRUE(config::validate(scenario_fusion_config(*scenario))) << name;
   }

@@ -8,9 +8,11 @@
 //     filter in LiDAR-inertial mode) or the constant-velocity model's (the last motion
 //     repeated). A motion, not an absolute pose: the odometry's frame then never has to agree
 //     with the caller's.
-//  2. Deskewing: each point is moved into the sensor frame at the middle of the sweep with
-//     the constant twist between the previous pose and the prediction (needs point times;
-//     scans without them are used as they are). Poses refer to the middle of the sweep: a
+//  2. Deskewing: each point is moved into the sensor frame at the middle of the sweep
+//     (sweep_motion.hpp; needs point times, scans without them are used as they are): with the
+//     caller's sampled motion during the sweep (LiDAR-inertial: the IMU-propagated filter's
+//     poses every IMU period), else with the constant twist between the previous pose and the
+//     prediction. Poses refer to the middle of the sweep: a
 //     velocity error then warps the sweep symmetrically instead of shifting it, which would
 //     feed back through the constant-velocity model.
 //  3. Range crop, lone near returns (rain drops, fog) dropped and the sweep flagged
@@ -52,6 +54,7 @@
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/core/time.hpp"
 #include "hanzo/fusion/lidar/surface_registration.hpp"
+#include "hanzo/fusion/lidar/sweep_motion.hpp"
 
 namespace hanzo::fusion::lidar {
 
@@ -80,6 +83,9 @@ struct LidarOdometryConfig {
   double weather_phantom_fraction = 0.005;
   double weather_return_ratio = 0.8;
   std::size_t min_points = 100;        ///< points after cropping
+  /// Threads for the registration (its registration.num_threads is replaced by this); 1: the
+  /// calling thread only, <= 0: every core.
+  int num_threads = 1;
 
   /// Ok, or an Error naming the first invalid field.
   Status validate() const;
@@ -124,9 +130,12 @@ class LidarOdometry {
 
   /// One scan (sensor frame; `times` relative to `time` when present). predicted_motion:
   /// T_previous_current of the sensor between the previous and this sweep's middles (ignored
-  /// for the first scan). See the header comment for the steps and failure cases.
+  /// for the first scan). sweep_motion: the sensor's motion during the sweep with the middle of
+  /// the sweep as reference (times from `time`), used to deskew instead of the constant twist.
+  /// See the header comment for the steps and failure cases.
   Result<LidarOdometryEstimate> add_scan(Timestamp time, const cloud::PointCloud& scan,
-                                         const std::optional<SE3>& predicted_motion = std::nullopt);
+                                         const std::optional<SE3>& predicted_motion = std::nullopt,
+                                         const std::optional<SweepMotion>& sweep_motion = std::nullopt);
 
   /// The latest T_world_lidar (initial_pose before the first scan).
   const SE3& pose() const { return pose_; }

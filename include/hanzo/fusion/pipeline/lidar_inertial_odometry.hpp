@@ -3,8 +3,9 @@
 // IMU-driven filter (loosely coupled, as LIO-SAM's front end): per scan,
 //  1. the prediction is the motion of the Session's pose (Session::pose_at, the
 //     IMU-propagated filter, times T_body_lidar) between the previous and this sweep's
-//     middles; it also deskews the sweep, so the IMU's motion is used, not a
-//     constant-velocity guess;
+//     middles. The sweep is deskewed with the filter's poses sampled every
+//     deskew_sample_interval during the sweep (the IMU's motion, accelerations and changing
+//     turn rates included), not with a constant-velocity guess;
 //  2. the scan is registered to the local map from that prediction (LidarOdometry);
 //  3. the result goes back into the filter as a pose measurement of the LiDAR sensor
 //     (Session::push_pose) with the registration covariance, floored at
@@ -43,6 +44,11 @@ struct LidarInertialOdometryConfig {
   /// A sweep flagged weather_degraded (rain, fog: LidarOdometryConfig) is fused with its
   /// covariance times this (sigmas x2 by default).
   double weather_covariance_scale = 4.0;
+  /// Deskew with the filter's poses during the sweep (false: the constant twist of the
+  /// predicted motion, as LiDAR-only odometry). The filter's poses are its estimates at those
+  /// times, so an update fused inside a sweep (a GNSS fix) shows as a small step there.
+  bool imu_deskew = true;
+  double deskew_sample_interval = 0.005;  ///< s between the filter poses sampled (an IMU period at 200 Hz)
 };
 
 struct LidarInertialOdometryStatistics {
@@ -51,6 +57,7 @@ struct LidarInertialOdometryStatistics {
   std::size_t fused = 0;       ///< pose measurements the Session accepted
   std::size_t degenerate = 0;  ///< registered scans flagged degenerate
   std::size_t weather_degraded = 0;  ///< registered scans flagged weather_degraded (fused with less weight)
+  std::size_t imu_deskewed = 0;      ///< prepared sweeps deskewed with the filter's poses (the others: constant twist)
 };
 
 class LidarInertialOdometry {
@@ -76,6 +83,9 @@ class LidarInertialOdometry {
     cloud::PointCloud cloud;
     SE3 T_world_lidar_filter;       ///< the filter's pose at the middle of the sweep
     SE3 world_correction;           ///< Session::world_correction() then
+    /// T_middle_lidar during the sweep from the filter (imu_deskew; none for sweeps without
+    /// point times or when the filter lacks a pose inside the sweep).
+    std::optional<lidar::SweepMotion> sweep_motion;
   };
   struct RegisteredScan {
     lidar::LidarOdometryEstimate estimate;  ///< in the odometry's frame
@@ -96,6 +106,11 @@ class LidarInertialOdometry {
   const lidar::LidarOdometry* odometry() const { return odometry_.get(); }
 
  private:
+  /// T_middle_lidar every deskew_sample_interval over [0, sweep_length] s after scan_time from
+  /// Session::pose_at; none when the filter lacks a pose there.
+  std::optional<lidar::SweepMotion> sample_sweep_motion(Timestamp scan_time, double sweep_length,
+                                                        const SE3& T_world_lidar_middle) const;
+
   Session& session_;
   std::string lidar_sensor_;
   SE3 T_body_lidar_;

@@ -6,7 +6,9 @@
 //   bob(t)   = s(t) * bob_amplitude * sin(2 pi step_frequency t)        (s = speed / max_speed)
 //   yaw(t)   = look_yaw_amplitude * sin(2 pi t / look_period)
 //   pitch(t) = look_pitch_amplitude * sin(2 pi t / (0.7 look_period))
-// and the walk's z is the device height (e.g. 1.4 m). The result is a SplineTrajectory with
+// and the walk's z is the device height (e.g. 1.4 m). yaw and pitch are scaled by a ramp that is
+// 0 while the walk stands still (still_start, still_end: the person holds the device still for
+// a filter's static alignment) and rises to 1 over the first second after (smoothstep). The result is a SplineTrajectory with
 // the walk's knot spacing.
 
 #include "hanzo/fusion/core/result.hpp"
