@@ -3,6 +3,8 @@
 //   - whole odometry per sweep (deskew, downsampling, registration, map update) on a VLP-16
 //     (warehouse_robot, ~28k points), an OS1-64 (urban_vehicle, ~59k) and an HDL-64E on the
 //     same city drive (~110k): ms per sweep, KITTI drift against the ground truth, local map size.
+//   - memory over 10 km: the urban loop driven 13 times with the OS1-64, streamed; local map
+//     size along the way, peak resident memory, drift over the distance.
 //   - the scan-to-map step alone, against PCL's GICP / point-to-plane ICP / NDT and Open3D's
 //     point-to-plane ICP on the same problem: every 10th urban sweep (deskewed, 1 m source
 //     points) onto the local map our odometry had at that sweep (its points within 60 m), from
@@ -13,6 +15,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <numeric>
@@ -125,6 +128,70 @@ void BM_Odometry(benchmark::State& state, const std::string& scenario, double se
   state.counters["map_MB"] = static_cast<double>(map_bytes) / 1e6;
 }
 
+// Memory over a long drive: the urban loop driven 13 times (10 km) with the OS1-64, sweeps
+// streamed from the simulator into the odometry (none kept): the local map's size along the way
+// (it holds the voxels within map.max_distance = 100 m of the sensor, so it should plateau),
+// the process's peak resident memory, the drift over the whole distance.
+double resident_megabytes(const char* field) {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind(field, 0) == 0) return std::stod(line.substr(std::string(field).size())) / 1024.0;  // kB
+  }
+  return -1.0;
+}
+
+void BM_LongDrive(benchmark::State& state) {
+  sim::Scenario scenario = sim::load_scenario(std::string(HANZO_SOURCE_DIR) + "/examples/scenarios/urban_vehicle.yaml").value();
+  std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& s) { return s.modality != config::SensorModality::kLidar; });
+  std::get<sim::LidarSimulatorConfig>(scenario.sensors.front().simulator).weather.clear();
+  scenario.ground_path.laps = static_cast<int>(state.range(0));
+  scenario.num_threads = 0;
+  const SE3 T_body_lidar = scenario.sensors.front().T_body_sensor;
+  std::vector<double> map_megabytes;
+  std::size_t largest_map_points = 0;
+  double milliseconds = 0.0;
+  io::Trajectory truth, estimate;
+  for (auto _ : state) {
+    auto simulation = sim::ScenarioSimulation::create(scenario).value();
+    const sim::SplineTrajectory& trajectory = simulation->trajectory();
+    std::optional<lidar::LidarOdometry> odometry;
+    const Status status = simulation->run([&](const sim::ScenarioSensor&, msgs::SensorMessage&& message) -> Status {
+      const auto& sweep = std::get<msgs::PointCloudMessage>(message);
+      cloud::PointCloud cloud = cloud::from_message(sweep).value();
+      const Timestamp middle = sweep.timestamp + Duration::from_seconds(0.5 * static_cast<double>(cloud.times.back()));
+      if (!odometry) odometry.emplace(lidar::LidarOdometryConfig{}, trajectory.sample(middle).T_world_body * T_body_lidar);
+      const auto start = std::chrono::steady_clock::now();
+      lidar::LidarOdometryEstimate result;
+      HANZO_ASSIGN_OR_RETURN(result, odometry->add_scan(sweep.timestamp, cloud));
+      milliseconds += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+      map_megabytes.push_back(static_cast<double>(odometry->local_map().memory_bytes()) / 1e6);
+      largest_map_points = std::max(largest_map_points, odometry->local_map().point_count());
+      truth.timestamps.push_back(result.time);
+      truth.poses.push_back((trajectory.sample(result.time).T_world_body * T_body_lidar).matrix());
+      estimate.timestamps.push_back(result.time);
+      estimate.poses.push_back(result.T_world_lidar.matrix());
+      return ok_status();
+    });
+    if (!status) {
+      state.SkipWithError(status.error().message.c_str());
+      return;
+    }
+  }
+  auto kitti = eval::compute_kitti_odometry_error(truth, estimate);
+  const std::size_t tenth = map_megabytes.size() / 10;
+  state.counters["path_km"] = truth.path_length() / 1e3;
+  state.counters["sweeps"] = static_cast<double>(map_megabytes.size());
+  state.counters["mean_ms"] = milliseconds / static_cast<double>(map_megabytes.size());
+  state.counters["map_MB_at_10pct"] = map_megabytes[tenth];
+  state.counters["map_MB_max"] = *std::max_element(map_megabytes.begin(), map_megabytes.end());
+  state.counters["map_MB_end"] = map_megabytes.back();
+  state.counters["map_points_max"] = static_cast<double>(largest_map_points);
+  state.counters["peak_rss_MB"] = resident_megabytes("VmHWM:");
+  state.counters["drift_percent"] = kitti ? kitti->translation_error_percent : -1.0;
+  state.counters["drift_deg_100m"] = kitti ? kitti->rotation_error_deg_per_100m : -1.0;
+}
+
 // The scan-to-map problems of the urban drive: map points within 60 m, the deskewed sweep
 // (1 m source points), the prediction, the truth. Captured from a run of our odometry.
 struct ScanToMapProblem {
@@ -225,6 +292,7 @@ BENCHMARK_CAPTURE(BM_Odometry, urban_hdl64, std::string("urban_vehicle"), 30.0, 
     ->Name("hanzo/lidar_odometry/urban_hdl64")->Unit(benchmark::kSecond)->Iterations(1);
 BENCHMARK_CAPTURE(BM_Odometry, urban_hdl64_2threads, std::string("urban_vehicle"), 30.0, std::optional(sim::LidarModel::kVelodyneHdl64), 1.0, 2)
     ->Name("hanzo/lidar_odometry/urban_hdl64/2_threads")->Unit(benchmark::kSecond)->Iterations(1);
+BENCHMARK(BM_LongDrive)->Arg(13)->Name("hanzo/lidar_odometry/urban_os1_64_10km")->Unit(benchmark::kSecond)->Iterations(1);
 BENCHMARK(BM_ScanToMapOurs)->Name("hanzo/scan_to_map/urban")->Unit(benchmark::kMillisecond)->Iterations(3);
 BENCHMARK_CAPTURE(BM_ScanToMapPeer, pcl_gicp, true, bench::PeerMethod::kGicp)->Name("pcl/gicp/scan_to_map/urban")->Unit(benchmark::kMillisecond)->Iterations(1);
 BENCHMARK_CAPTURE(BM_ScanToMapPeer, pcl_icp_plane, true, bench::PeerMethod::kIcpPlane)->Name("pcl/icp_plane/scan_to_map/urban")->Unit(benchmark::kMillisecond)->Iterations(1);

@@ -11,6 +11,21 @@ namespace hanzo::fusion::cloud {
 
 namespace {
 constexpr uint32_t kEmpty = std::numeric_limits<uint32_t>::max();
+
+// atan2(y, x) in float to about 1e-5 rad (a minimax polynomial of atan on [0, 1], folded into the
+// octants): a range-image column is 1e-3 rad or wider, and libm's atan2 in double was an
+// eighth of a 130k-point sweep's odometry time.
+float fast_atan2(float y, float x) {
+  const float ax = std::abs(x), ay = std::abs(y);
+  const float largest = std::max(ax, ay);
+  if (largest == 0.0F) return 0.0F;
+  const float a = std::min(ax, ay) / largest;
+  const float s = a * a;
+  float angle = ((-0.0464964749F * s + 0.15931422F) * s - 0.327622764F) * s * a + a;
+  if (ay > ax) angle = 1.57079637F - angle;
+  if (x < 0.0F) angle = 3.14159274F - angle;
+  return y < 0.0F ? -angle : angle;
+}
 }  // namespace
 
 ScanNormalEstimator::ScanNormalEstimator(const PointCloud& scan, const ScanNormalConfig& config)
@@ -50,8 +65,10 @@ ScanNormalEstimator::ScanNormalEstimator(const PointCloud& scan, const ScanNorma
   column_of_.resize(scan.size());
   for (std::size_t i = 0; i < scan.size(); ++i) {
     const Eigen::Vector3f& p = scan.positions[i];
-    const double azimuth = (std::atan2(static_cast<double>(p.y()), static_cast<double>(p.x())) + M_PI) / (2.0 * M_PI);
-    const int column = std::clamp(static_cast<int>(azimuth * columns_), 0, columns_ - 1);
+    const float azimuth = (fast_atan2(p.y(), p.x()) + static_cast<float>(M_PI)) * static_cast<float>(0.5 / M_PI);
+    // The nearest column centre: sensors fire at evenly spaced azimuths, which then fall on
+    // the centres, far from the edges where fast_atan2's error could move them across.
+    const int column = static_cast<int>(std::lround(azimuth * static_cast<float>(columns_))) % columns_;
     column_of_[i] = column;
     uint32_t& cell = image_[static_cast<std::size_t>(scan.rings[i]) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(column)];
     if (cell == kEmpty) cell = static_cast<uint32_t>(i);

@@ -87,7 +87,11 @@ TEST(SurfaceRegistration, BareCorridorIsDegenerateAndKeepsThePriorAlongItsAxis) 
   EXPECT_NEAR(result->T_map_source.translation().y(), truth.translation().y(), 0.02);
   EXPECT_NEAR(result->T_map_source.translation().z(), truth.translation().z(), 0.02);
   EXPECT_LT(rotation_error_deg(result->T_map_source, truth), 0.1);
-  EXPECT_NEAR(result->T_map_source.translation().x(), guess.translation().x(), 0.05);
+  // (within 0.1 m of the prior, the truth being 0.4 m away: the 1 cm range noise tilts the
+  // estimated wall normals a little along the axis, which adds a weak, noisy constraint there;
+  // measured 6-9 cm depending on which points share a range-image column)
+  EXPECT_NEAR(result->T_map_source.translation().x(), guess.translation().x(), 0.1);
+  EXPECT_GT(std::abs(result->T_map_source.translation().x() - truth.translation().x()), 0.3);
 }
 
 TEST(SurfaceRegistration, RefusesBadInput) {
