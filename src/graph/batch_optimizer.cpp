@@ -1,6 +1,7 @@
 #include "hanzo/fusion/graph/batch_optimizer.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <memory>
 #include <type_traits>
@@ -272,6 +273,9 @@ Status build_problem(const FactorGraph& graph, const Values& values, const std::
 }  // namespace
 
 Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, const BatchOptimizerConfig& config) {
+  if (!(config.initial_trust_region_radius > 0) || !std::isfinite(config.initial_trust_region_radius)) {
+    return Error(fmt::format("batch optimizer: initial_trust_region_radius {} is not a positive number", config.initial_trust_region_radius));
+  }
   CeresProblem built;
   HANZO_RETURN_IF_ERROR(build_problem(graph, values, config.fixed, built));
   ceres::Problem& problem = built.problem;
@@ -282,6 +286,7 @@ Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, c
       config.method == BatchOptimizerConfig::Method::kDogleg ? ceres::DOGLEG : ceres::LEVENBERG_MARQUARDT;
   options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
   options.max_num_iterations = config.max_iterations;
+  options.initial_trust_region_radius = config.initial_trust_region_radius;
   options.function_tolerance = config.function_tolerance;
   options.gradient_tolerance = config.gradient_tolerance;
   options.parameter_tolerance = config.parameter_tolerance;

@@ -20,6 +20,13 @@ struct BatchOptimizerConfig {
   /// graphs within 1e-5 of their optimum at half the iterations of 1e-8 (sphere2500 from the
   /// chordal initialization: 16 instead of 30).
   double function_tolerance = 1e-6;
+  /// Levenberg-Marquardt's first trust region radius (the inverse of its first damping).
+  /// 1e8 starts close to Gauss-Newton, which suits pose graphs that start from odometry or a
+  /// chordal initialization: measured against Ceres' default 1e4, parking-garage 22 -> 17
+  /// iterations, sphere2500 (chordal start) 16 -> 13, city10000 (chordal) 10 -> 4, same optima.
+  /// A step that fails shrinks the radius fast (halved, then quartered, ...), so a poor start
+  /// costs a few rejected steps.
+  double initial_trust_region_radius = 1e8;
   double gradient_tolerance = 1e-12;
   double parameter_tolerance = 1e-12;
   int num_threads = 1;
