@@ -48,7 +48,7 @@ struct LidarInertialOdometryConfig {
   /// predicted motion, as LiDAR-only odometry). The filter's poses are its estimates at those
   /// times, so an update fused inside a sweep (a GNSS fix) shows as a small step there.
   bool imu_deskew = true;
-  double deskew_sample_interval = 0.005;  ///< s between the filter poses sampled (an IMU period at 200 Hz)
+  double deskew_sample_interval = 0.005;  ///< s between the filter poses sampled (an IMU period at 200 Hz); <= 0: constant twist
 };
 
 struct LidarInertialOdometryStatistics {
