@@ -93,34 +93,36 @@ struct Pair {
 template <typename Sample, typename Value>
 Status check_series(const std::vector<Sample>& samples, const char* name, Value value) {
   for (std::size_t i = 0; i < samples.size(); ++i) {
-    if (!value(samples[i]).allFinite()) return Error(fmt::format("{}[{}]: non-finite value", name, i));
+    if (!value(samples[i]).allFinite()) return Error(fmt::format("{}[{}]: non-finite value", name, i), fmt::format("{}[{}]", name, i));
     if (i > 0 && samples[i].time <= samples[i - 1].time) {
       return Error(fmt::format("{}[{}]: timestamp {} s does not increase (previous {} s)", name, i,
-                               samples[i].time.seconds(), samples[i - 1].time.seconds()));
+                               samples[i].time.seconds(), samples[i - 1].time.seconds()),
+                   fmt::format("{}[{}]", name, i));
     }
   }
   return {};
 }
 
 Status check_input(const MotionCalibrationInput& input, const MotionCalibrationConfig& config) {
-  if (input.sensor.empty()) return Error("sensor: the sensor's name is empty");
-  if (!(config.pair_interval > 0.0) || !std::isfinite(config.pair_interval)) return Error("pair_interval: must be positive");
-  if (!(config.min_pair_rotation >= 0.0) || config.min_pair_rotation >= M_PI) return Error("min_pair_rotation: must be in [0, pi)");
-  if (config.min_pairs < 3) return Error("min_pairs: at least 3 pairs are needed for a rotation");
+  if (input.sensor.empty()) return Error("sensor: the sensor's name is empty", "sensor");
+  if (!(config.pair_interval > 0.0) || !std::isfinite(config.pair_interval)) return Error("pair_interval: must be positive", "pair_interval");
+  if (!(config.min_pair_rotation >= 0.0) || config.min_pair_rotation >= M_PI) return Error("min_pair_rotation: must be in [0, pi)", "min_pair_rotation");
+  if (config.min_pairs < 3) return Error("min_pairs: at least 3 pairs are needed for a rotation", "min_pairs");
   if (config.estimate_time_offset && (!(config.max_time_offset > 0.0) || !std::isfinite(config.max_time_offset))) {
-    return Error("max_time_offset: must be positive");
+    return Error("max_time_offset: must be positive", "max_time_offset");
   }
   if (config.estimate_time_offset && (!(config.time_offset_step > 0.0) || config.time_offset_step > config.max_time_offset)) {
-    return Error("time_offset_step: must be positive and at most max_time_offset");
+    return Error("time_offset_step: must be positive and at most max_time_offset", "time_offset_step");
   }
-  if (!(config.outlier_factor > 1.0)) return Error("outlier_factor: must be above 1");
-  if (!config.prior_translation.allFinite()) return Error("prior_translation: non-finite value");
+  if (!(config.outlier_factor > 1.0)) return Error("outlier_factor: must be above 1", "outlier_factor");
+  if (!config.prior_translation.allFinite()) return Error("prior_translation: non-finite value", "prior_translation");
   if (input.body_poses.empty() == input.body_gyro.empty()) {
-    return Error("give the body's motion as body poses or as gyroscope samples (exactly one of them)");
+    return Error("give the body's motion as body poses or as gyroscope samples (exactly one of them)", "body_poses");
   }
-  if (input.sensor_poses.size() < 2) return Error(fmt::format("sensor_poses: {} poses, at least 2 needed", input.sensor_poses.size()));
+  if (input.sensor_poses.size() < 2) return Error(fmt::format("sensor_poses: {} poses, at least 2 needed", input.sensor_poses.size()), "sensor_poses");
   const std::size_t body_count = std::max(input.body_poses.size(), input.body_gyro.size());
-  if (body_count < 2) return Error(fmt::format("{}: 1 sample, at least 2 needed", input.body_poses.empty() ? "gyro" : "body_poses"));
+  const char* body_name = input.body_poses.empty() ? "gyro" : "body_poses";
+  if (body_count < 2) return Error(fmt::format("{}: 1 sample, at least 2 needed", body_name), body_name);
   const auto pose_values = [](const StampedPose& sample) {
     Eigen::Matrix<double, 7, 1> values;
     values << sample.pose.translation(), sample.pose.rotation().quaternion().coeffs();

@@ -4,6 +4,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "hanzo/fusion/calib/motion_calibration.hpp"
 #include "hanzo/fusion/service/api_error.hpp"
 #include "hanzo/fusion/service/session_manager.hpp"
 
@@ -35,6 +36,18 @@ ApiResult<pipeline::LoopClosureRequest> parse_loop_closure(const std::string& bo
 /// absent), "initial_pose": {"position": [...], "orientation_wxyz": [...]} (the body's pose in
 /// the map; absent: search the whole map), "linear_window_m": 5, "angular_window_rad": 0.5}.
 ApiResult<RelocalizeRequest> parse_relocalize(const std::string& body);
+
+struct CalibrateRequest {
+  calib::MotionCalibrationInput input;
+  calib::MotionCalibrationConfig config;
+};
+
+/// The body of POST /v1/calibrate (calibration_codec.cpp): {"sensor": "lidar", "sensor_poses":
+/// [[t, x, y, z, qx, qy, qz, qw], ...] (TUM rows, seconds), and "body_poses" (TUM rows) or "gyro"
+/// ([t, wx, wy, wz] rows, rad/s), optionally "pair_interval", "max_time_offset" (s),
+/// "estimate_time_offset", "estimate_gyro_bias" (booleans), "initial_time_offset_ns",
+/// "prior_translation" ([x, y, z] m)}.
+ApiResult<CalibrateRequest> parse_calibrate(const std::string& body);
 
 /// "tx ty tz qx qy qz qw" lines with the timestamp in seconds (TUM format).
 std::string poses_to_tum(const std::vector<msgs::PoseEstimate>& poses);

@@ -13,6 +13,7 @@
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
+#include "hanzo/fusion/service/motion_calibration_json.hpp"
 #include "json_codec.hpp"
 #include "web_assets.hpp"
 
@@ -240,6 +241,21 @@ struct RestServer::Impl {
       send_json(response, 200, detail::relocalization_to_json(result->map_id, result->version, result->outcome));
     }));
 
+    // Motion calibration (docs/calibration.md): CPU work for the caller, nothing stored.
+    s.Post("/v1/calibrate", authenticated("POST", "/v1/calibrate", [](const httplib::Request& request, httplib::Response& response,
+                                                                    const Principal& caller) {
+      if (auto allowed = authorize(caller, Permission::kSessionWrite); !allowed) return send_error(response, allowed.error());
+      auto parsed = detail::parse_calibrate(request.body);
+      if (!parsed) return send_error(response, parsed.error());
+      auto calibrated = calib::calibrate_from_motion(parsed->input, parsed->config);
+      // Bad values name their field (400); motion that cannot calibrate does not (422).
+      if (!calibrated) {
+        return send_error(response, ApiError::from(calibrated.error().field.empty() ? ErrorCode::kRejected : ErrorCode::kInvalidArgument,
+                                                   calibrated.error()));
+      }
+      send_json(response, 200, motion_calibration_to_json(calibrated.value()));
+    }));
+
     // Stored maps.
     s.Get("/v1/maps", authenticated("GET", "/v1/maps", [this](const httplib::Request&, httplib::Response& response, const Principal& caller) {
       auto listed = sessions->list_maps(caller);
@@ -365,6 +381,9 @@ Status RestServer::start() {
     impl.bound_port = impl.config.port;
   }
   impl.thread = std::thread([&impl] { impl.server->listen_after_bind(); });
+  // httplib's stop() does nothing until the listener runs: a server stopped right after start
+  // would otherwise accept forever and its destructor never return.
+  while (!impl.server->is_running()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   logger()->info("REST API on {}://{}:{}", https() ? "https" : "http", impl.config.bind_address, impl.bound_port);
   return ok_status();
 }

@@ -10,6 +10,7 @@
 
 #include "hanzo/fusion/service/rest_server.hpp"
 #include "service_fixtures.hpp"
+#include "support/calibration_motion.hpp"
 
 // Last: httplib pulls in <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
 #include <httplib.h>
@@ -204,6 +205,7 @@ TEST_F(RestServerTest, AuthMatrixOfEveryOperationInTheOpenApiDocument) {
       if (path_template == "/v1/sessions/{id}/sensors") entry.body = R"({"name": "wheels2", "config": {"rate": 50}})";
       if (path_template == "/v1/sessions/{id}/loop-closure") entry.body = "{}";
       if (path_template == "/v1/sessions/{id}/relocalize") entry.body = json({{"map_id", map_id}}).dump();
+      if (path_template == "/v1/calibrate") entry.body = "{}";
       if (path_template == "/v1/maps") {
         entry.path += "?name=again";
         entry.body = map_file;
@@ -306,6 +308,89 @@ TEST_F(RestServerTest, BadRequestsGetTheDocumentedErrors) {
   auto session = http.Get(("/v1/sessions/" + id).c_str(), bearer(kViewerToken));
   EXPECT_EQ(session->status, 200);
   EXPECT_EQ(json::parse(session->body)["sensors"].size(), 3u);
+}
+
+// POST /v1/calibrate: hand-eye calibration of a sensor's odometry against body poses and
+// against the gyroscope (exact truth: test_support::CalibrationScenario), and its errors.
+TEST_F(RestServerTest, CalibrateRecoversExtrinsicsAndTimeOffset) {
+  RestServerConfig config;
+  config.max_body_bytes = 8u << 20;
+  start(config);
+  auto http = client();
+  auto post = [&](const json& body) { return http.Post("/v1/calibrate", bearer(kRobotToken), body.dump(), "application/json"); };
+  const auto tum_rows = [](const std::vector<calib::StampedPose>& poses) {
+    json rows = json::array();
+    for (const calib::StampedPose& stamped : poses) {
+      const Eigen::Vector3d& p = stamped.pose.translation();
+      const Eigen::Quaterniond& q = stamped.pose.rotation().quaternion();
+      rows.push_back({stamped.time.seconds(), p.x(), p.y(), p.z(), q.x(), q.y(), q.z(), q.w()});
+    }
+    return rows;
+  };
+  test_support::CalibrationScenario scenario;
+  const json sensor_poses = tum_rows(scenario.sensor_poses());
+  const json body_poses = tum_rows(scenario.body_poses(50.0));
+  const auto rotation_error_deg = [&](const json& result) {
+    const std::vector<double> q = result.at("rotation_wxyz");
+    const SO3 estimate(Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized());
+    return (scenario.T_body_sensor.rotation().inverse() * estimate).angle() / test_support::kDegToRad;
+  };
+
+  auto with_poses = post({{"sensor", "lidar"}, {"sensor_poses", sensor_poses}, {"body_poses", body_poses}});
+  ASSERT_EQ(with_poses->status, 200) << with_poses->body;
+  const json result = json::parse(with_poses->body);
+  EXPECT_LT(rotation_error_deg(result), 0.05);
+  const std::vector<double> translation = result.at("translation");
+  EXPECT_LT((Eigen::Vector3d(translation[0], translation[1], translation[2]) - scenario.T_body_sensor.translation()).norm(), 0.005);
+  EXPECT_NEAR(result.at("time_offset_ns").get<double>() * 1e-9, scenario.time_offset, 0.001);
+  EXPECT_TRUE(result.at("translation_estimated").get<bool>());
+  EXPECT_TRUE(result.at("unobservable_translation_axis").is_null());
+  // The YAML entry loads as a calibration file.
+  const Result<calib::Calibration> entry = calib::parse_calibration(result.at("calibration_yaml").get<std::string>(), "response");
+  ASSERT_TRUE(entry.ok()) << entry.error().message;
+  ASSERT_NE(entry->find("lidar"), nullptr);
+  EXPECT_EQ(entry->find("lidar")->time_offset.nanoseconds(), result.at("time_offset_ns").get<int64_t>());
+
+  json gyro = json::array();
+  for (const calib::GyroSample& sample : scenario.gyro()) {
+    gyro.push_back({sample.time.seconds(), sample.angular_velocity.x(), sample.angular_velocity.y(), sample.angular_velocity.z()});
+  }
+  auto with_gyro = post({{"sensor", "camera_left"}, {"sensor_poses", sensor_poses}, {"gyro", gyro}, {"max_time_offset", 0.1}});
+  ASSERT_EQ(with_gyro->status, 200) << with_gyro->body;
+  const json gyro_result = json::parse(with_gyro->body);
+  EXPECT_LT(rotation_error_deg(gyro_result), 0.1);
+  EXPECT_NEAR(gyro_result.at("time_offset_ns").get<double>() * 1e-9, scenario.time_offset, 0.001);
+  EXPECT_FALSE(gyro_result.at("translation_estimated").get<bool>());
+  EXPECT_NEAR(gyro_result.at("gyro_bias")[1].get<double>(), scenario.gyro_bias.y(), 0.001);
+
+  // Bad requests name their field (400); motion that cannot calibrate is refused (422).
+  const auto error_field = [&](const json& body) {
+    auto response = post(body);
+    EXPECT_EQ(response->status, 400) << response->body;
+    return error_of(response)["field"].get<std::string>();
+  };
+  EXPECT_EQ(error_field({{"sensor", "lidar"}, {"sensor_poses", sensor_poses}}), "body_poses");
+  EXPECT_EQ(error_field({{"sensor_poses", sensor_poses}, {"body_poses", body_poses}}), "sensor");
+  json short_row = sensor_poses;
+  short_row[3] = {1.0, 2.0};
+  EXPECT_EQ(error_field({{"sensor", "lidar"}, {"sensor_poses", short_row}, {"body_poses", body_poses}}), "sensor_poses[3]");
+  json repeated = sensor_poses;
+  repeated[12][0] = repeated[11][0];
+  EXPECT_EQ(error_field({{"sensor", "lidar"}, {"sensor_poses", repeated}, {"body_poses", body_poses}}), "sensor_poses[12]");
+  json not_unit = body_poses;
+  not_unit[5][7] = 2.0;
+  EXPECT_EQ(error_field({{"sensor", "lidar"}, {"sensor_poses", sensor_poses}, {"body_poses", not_unit}}), "body_poses[5]");
+  EXPECT_EQ(error_field({{"sensor", "lidar"}, {"sensor_poses", sensor_poses}, {"body_poses", body_poses}, {"pair_interval", -1}}),
+            "pair_interval");
+  EXPECT_EQ(error_field({{"sensor", "lidar"}, {"sensor_poses", sensor_poses}, {"body_poses", body_poses}, {"colour", 1}}), "colour");
+
+  test_support::CalibrationScenario turning_only;
+  turning_only.body.roll_pitch = 0.0;
+  auto one_axis = post({{"sensor", "lidar"}, {"sensor_poses", tum_rows(turning_only.sensor_poses())},
+                        {"body_poses", tum_rows(turning_only.body_poses(50.0))}});
+  EXPECT_EQ(one_axis->status, 422) << one_axis->body;
+  EXPECT_THAT(error_of(one_axis)["message"].get<std::string>(), HasSubstr("one axis"));
+  EXPECT_EQ(http.Post("/v1/calibrate", bearer(kViewerToken), "{}", "application/json")->status, 403);  // session:read only
 }
 
 TEST_F(RestServerTest, HealthOpenApiAndMetrics) {

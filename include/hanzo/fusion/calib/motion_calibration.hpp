@@ -34,7 +34,8 @@
 // body frame (rad/s), i.e. the IMU defines the body. Poses must be metric (monocular visual
 // odometry's unknown scale breaks step 4).
 //
-// Failure cases (errors naming the cause): empty or single-pose inputs, non-finite values,
+// Failure cases (errors naming the cause; those about the input or the configuration also
+// carry its field, e.g. "sensor_poses[12]", those about the motion none): empty or single-pose inputs, non-finite values,
 // timestamps that do not increase, both or neither of body poses / gyroscope, body and sensor
 // time ranges that do not overlap by at least min_pairs pairs (with the offset margin), fewer
 // than `min_pairs` pairs that turn, rotation about one axis only (R_X is then unobservable
