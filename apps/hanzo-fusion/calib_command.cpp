@@ -1,4 +1,5 @@
-// hanzo-fusion calib check FILE: loads a calibration file and prints its summary.
+// hanzo-fusion calib check FILE: loads a calibration file and prints its summary (calib motion:
+// calib_motion_command.cpp).
 
 #include <cmath>
 #include <memory>
@@ -56,8 +57,9 @@ std::string to_text(const std::string& path, const calib::Calibration& calibrati
 }  // namespace
 
 void add_calib_command(CLI::App& app, const Output& output, Command& run) {
-  CLI::App* calib_command = app.add_subcommand("calib", "Sensor calibration files");
+  CLI::App* calib_command = app.add_subcommand("calib", "Sensor calibration files and procedures");
   calib_command->require_subcommand(1);
+  add_calib_motion_command(*calib_command, output, run);
   CLI::App* check = calib_command->add_subcommand("check", "Load a calibration YAML and print its summary or its error");
   auto path = std::make_shared<std::string>();
   check->add_option("FILE", *path, "Calibration YAML")->required();

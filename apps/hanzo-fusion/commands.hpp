@@ -13,6 +13,8 @@ using Command = std::function<int()>;
 
 void add_config_command(CLI::App& app, const Output& output, Command& run);
 void add_calib_command(CLI::App& app, const Output& output, Command& run);
+/// `calib motion` (calib_motion_command.cpp), added by add_calib_command.
+void add_calib_motion_command(CLI::App& calib_app, const Output& output, Command& run);
 void add_eval_command(CLI::App& app, const Output& output, Command& run);
 void add_log_command(CLI::App& app, const Output& output, Command& run);
 void add_import_command(CLI::App& app, const Output& output, Command& run);
