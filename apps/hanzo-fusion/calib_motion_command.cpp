@@ -3,6 +3,7 @@
 // sensor log; prints T_body_sensor and the time offset, and with --out writes the sensor's entry
 // into a calibration YAML (created, or the entry replaced, the others kept).
 
+#include <algorithm>
 #include <filesystem>
 #include <memory>
 #include <numbers>

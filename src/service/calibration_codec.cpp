@@ -1,4 +1,5 @@
 // POST /v1/calibrate: its request body and the JSON of a motion calibration's result.
+#include <algorithm>
 #include <cmath>
 
 #include <fmt/format.h>

@@ -155,7 +155,9 @@ class FusionServiceImpl final : public v1::FusionService::Service {
     const std::string session_id = metadata(context, "x-session-id");
     if (session_id.empty()) return {grpc::StatusCode::INVALID_ARGUMENT, "metadata 'x-session-id' is missing"};
     const std::string sensor = metadata(context, "x-sensor");
-    // Checks access before the first message arrives, and collects the session's poses.
+    // Checks access before the first message arrives (writing needs session:write, the poses
+    // answered need session:read), and collects the session's poses.
+    if (const ApiStatus allowed = authorize(principal.value(), Permission::kSessionWrite); !allowed) return to_grpc(allowed.error());
     auto subscription = sessions_.subscribe_poses(principal.value(), session_id);
     if (!subscription) return to_grpc(subscription.error());
     PoseSubscription& poses = *subscription.value();

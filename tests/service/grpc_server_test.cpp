@@ -1,3 +1,6 @@
+#include <functional>
+#include <map>
+#include <set>
 #include <thread>
 
 #include <gmock/gmock.h>
@@ -5,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "hanzo/fusion/msgs/convert.hpp"
+#include "hanzo/fusion/msgs/map_convert.hpp"
 #include "hanzo/fusion/service/grpc_server.hpp"
 #include "hanzo/fusion/v1/service.grpc.pb.h"
 #include "service_fixtures.hpp"
@@ -22,7 +26,9 @@ class GrpcServerTest : public ::testing::Test {
     auto storage = open_storage("sqlite://" + (testing::scratch_dir() / "fusion.db").string());
     ASSERT_TRUE(storage.ok());
     metrics_ = std::make_shared<MetricsRegistry>();
-    manager_ = std::move(SessionManager::create({}, std::move(storage).value(), metrics_)).value();
+    SessionManagerConfig manager_config;
+    manager_config.map_directory = (testing::scratch_dir() / "maps").string();
+    manager_ = std::move(SessionManager::create(manager_config, std::move(storage).value(), metrics_)).value();
     auto tokens = TokenStore::parse(testing::kTokensYaml, "tokens.yaml");
     ASSERT_TRUE(tokens.ok());
     GrpcServerConfig config;
@@ -172,6 +178,106 @@ TEST_F(GrpcServerTest, AuthErrorsMapToGrpcStatus) {
   auto keyframes = stub_->SubscribeKeyframes(&keyframes_context, session);
   EXPECT_FALSE(keyframes->Read(&keyframe));
   EXPECT_EQ(keyframes->Finish().error_code(), grpc::StatusCode::PERMISSION_DENIED);
+}
+
+template <typename Request, typename Response>
+grpc::Status close_stream(std::unique_ptr<grpc::ClientReaderWriter<Request, Response>> stream) {
+  stream->WritesDone();
+  Response response;
+  while (stream->Read(&response)) {
+  }
+  return stream->Finish();
+}
+
+template <typename Response>
+grpc::Status drain(std::unique_ptr<grpc::ClientReader<Response>> reader) {
+  Response response;
+  while (reader->Read(&response)) {
+  }
+  return reader->Finish();
+}
+
+// The auth matrix of every RPC of FusionService, enumerated from its descriptor (a new RPC fails
+// here until it is listed with its permissions): no token or an unknown one: UNAUTHENTICATED; an
+// acme token lacking the permission: PERMISSION_DENIED; another organization's admin on acme's
+// session or map: PERMISSION_DENIED (sensor streams need session:write to write and
+// session:read for the poses they answer); a token with the permission: neither (subscriptions run
+// into their deadline, streams end, GetMap may find no map yet).
+TEST_F(GrpcServerTest, AuthMatrixOfEveryRpc) {
+  msgs::FusionMap stored;
+  stored.map_id = "grpc-auth";
+  stored.points = msgs::PointLayer{};
+  stored.points->points = {Eigen::Vector3f(1.0F, 2.0F, 0.5F), Eigen::Vector3f(2.0F, 1.0F, 0.5F)};
+  const Principal mapper{"mapper", "acme", static_cast<uint32_t>(Permission::kMapWrite) | static_cast<uint32_t>(Permission::kMapRead)};
+  ASSERT_TRUE(manager_->load_map(mapper, stored, "auth").ok());
+  const v1::FusionMap stored_proto = msgs::to_proto(stored);
+
+  using Call = std::function<grpc::Status(grpc::ClientContext&)>;
+  v1::SessionId session;
+  session.set_id(session_id_);
+  v1::MapRequest session_map;
+  session_map.set_session_id(session_id_);
+  struct Rpc {
+    std::vector<std::string> permissions;
+    Call call;
+  };
+  const std::map<std::string, Rpc> rpcs = {
+      {"StreamImu", {{"fusion:session:write", "fusion:session:read"}, [&](grpc::ClientContext& c) { return close_stream(stub_->StreamImu(&c)); }}},
+      {"StreamPointCloud", {{"fusion:session:write", "fusion:session:read"}, [&](grpc::ClientContext& c) { return close_stream(stub_->StreamPointCloud(&c)); }}},
+      {"StreamImage", {{"fusion:session:write", "fusion:session:read"}, [&](grpc::ClientContext& c) { return close_stream(stub_->StreamImage(&c)); }}},
+      {"StreamGnss", {{"fusion:session:write", "fusion:session:read"}, [&](grpc::ClientContext& c) { return close_stream(stub_->StreamGnss(&c)); }}},
+      {"StreamRadar", {{"fusion:session:write", "fusion:session:read"}, [&](grpc::ClientContext& c) { return close_stream(stub_->StreamRadar(&c)); }}},
+      {"StreamWheelOdometry", {{"fusion:session:write", "fusion:session:read"}, [&](grpc::ClientContext& c) { return close_stream(stub_->StreamWheelOdometry(&c)); }}},
+      {"SubscribePose", {{"fusion:session:read"}, [&](grpc::ClientContext& c) { return drain(stub_->SubscribePose(&c, session)); }}},
+      {"SubscribeKeyframes", {{"fusion:session:read"}, [&](grpc::ClientContext& c) { return drain(stub_->SubscribeKeyframes(&c, session)); }}},
+      {"SubscribeMap", {{"fusion:map:read"}, [&](grpc::ClientContext& c) { return drain(stub_->SubscribeMap(&c, session)); }}},
+      {"GetMap", {{"fusion:map:read"}, [&](grpc::ClientContext& c) {
+                    v1::FusionMap map;
+                    return stub_->GetMap(&c, session_map, &map);
+                  }}},
+      {"LoadMap", {{"fusion:map:write"}, [&](grpc::ClientContext& c) {
+                     v1::LoadMapResponse response;
+                     return stub_->LoadMap(&c, stored_proto, &response);
+                   }}},
+  };
+  const google::protobuf::ServiceDescriptor* service =
+      google::protobuf::DescriptorPool::generated_pool()->FindServiceByName(v1::FusionService::service_full_name());
+  ASSERT_NE(service, nullptr);
+  ASSERT_EQ(static_cast<std::size_t>(service->method_count()), rpcs.size());
+
+  // The acme tokens of service_fixtures.hpp and their permissions (fusion:admin grants all).
+  const std::vector<std::pair<const char*, std::set<std::string>>> acme_tokens = {
+      {"acme-robot-secret-0001", {"fusion:session:write", "fusion:session:read", "fusion:map:read"}},
+      {"acme-viewer-secret-0002", {"fusion:session:read"}},
+      {"acme-mapper-secret-00006", {"fusion:map:read", "fusion:map:write"}},
+      {"acme-admin-secret-00003", {"fusion:admin"}}};
+  const auto call = [&](const Rpc& rpc, const std::string& token) {
+    grpc::ClientContext context;
+    prepare(context, token, session_id_);
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(300));
+    return rpc.call(context).error_code();
+  };
+  for (int i = 0; i < service->method_count(); ++i) {
+    const std::string name = service->method(i)->name();
+    SCOPED_TRACE(name);
+    ASSERT_EQ(rpcs.count(name), 1U) << "list the new RPC with its permission";
+    const Rpc& rpc = rpcs.at(name);
+    EXPECT_EQ(call(rpc, ""), grpc::StatusCode::UNAUTHENTICATED);
+    EXPECT_EQ(call(rpc, "not-a-token-of-this-server"), grpc::StatusCode::UNAUTHENTICATED);
+    EXPECT_EQ(call(rpc, "globex-admin-secret-0005"), grpc::StatusCode::PERMISSION_DENIED);
+    for (const auto& [token, permissions] : acme_tokens) {
+      const bool may = std::all_of(rpc.permissions.begin(), rpc.permissions.end(), [&](const std::string& needed) {
+        return permissions.count(needed) != 0 || permissions.count("fusion:admin") != 0;
+      });
+      const grpc::StatusCode code = call(rpc, token);
+      if (may) {
+        EXPECT_NE(code, grpc::StatusCode::UNAUTHENTICATED) << token;
+        EXPECT_NE(code, grpc::StatusCode::PERMISSION_DENIED) << token;
+      } else {
+        EXPECT_EQ(code, grpc::StatusCode::PERMISSION_DENIED) << token;
+      }
+    }
+  }
 }
 
 }  // namespace
