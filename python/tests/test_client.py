@@ -5,6 +5,7 @@ import json
 import os
 import pathlib
 import subprocess
+import time
 
 import numpy as np
 import pytest
@@ -73,9 +74,17 @@ def test_session_lifecycle_trajectory_and_map(server):
     assert [s["id"] for s in client.sessions()] == [session["id"]]
     pose = client.pose(session["id"])
     assert len(pose["position"]) == 3 and len(pose["covariance"]) == 36
-    # Paged: 500 poses a page, every stored pose once, in time order.
+    # Poses are committed in the background (and queued sweeps may still finish): wait until the
+    # stored count settles, then read it paged, 500 poses a page, every stored pose once, in time order.
+    stored = -1
+    for _ in range(100):
+        count = client.session(session["id"])["stored_poses"]
+        if count == stored:
+            break
+        stored = count
+        time.sleep(0.2)
     poses = client.trajectory(session["id"], page_size=500)
-    assert len(poses) == state["stored_poses"] > 1000
+    assert len(poses) == stored > 1000
     times = [p["timestamp_ns"] for p in poses]
     assert times == sorted(times) and len(set(times)) == len(times)
 
