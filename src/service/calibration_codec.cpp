@@ -79,20 +79,13 @@ ApiResult<std::vector<calib::StampedPose>> pose_rows(const json& object, const s
 }  // namespace
 
 ApiResult<CalibrateRequest> parse_calibrate(const std::string& body) {
-  json object;
-  try {
-    object = body.empty() ? json() : json::parse(body);
-  } catch (const json::parse_error& error) {
-    return ApiError{ErrorCode::kInvalidArgument, fmt::format("malformed JSON at byte {}: {}", error.byte, error.what()), "body"};
-  }
-  if (!object.is_object()) return ApiError{ErrorCode::kInvalidArgument, "expected a JSON object", "body"};
-  static const std::vector<std::string> known = {"sensor", "sensor_poses", "body_poses", "gyro", "pair_interval",
-                                                 "max_time_offset", "estimate_time_offset", "initial_time_offset_ns",
-                                                 "estimate_gyro_bias", "prior_translation"};
-  for (const auto& [key, value] : object.items()) {
-    if (std::find(known.begin(), known.end(), key) == known.end()) {
-      return invalid(key, fmt::format("unknown field (known: {})", fmt::join(known, ", ")));
-    }
+  auto document = parse_object(body);
+  if (!document) return document.error();
+  const json& object = document.value();
+  if (auto keys = check_keys(object, {"sensor", "sensor_poses", "body_poses", "gyro", "pair_interval", "max_time_offset",
+                                      "estimate_time_offset", "initial_time_offset_ns", "estimate_gyro_bias", "prior_translation"});
+      !keys) {
+    return keys.error();
   }
   CalibrateRequest request;
   calib::MotionCalibrationInput& input = request.input;

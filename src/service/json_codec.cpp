@@ -12,30 +12,6 @@ using nlohmann::json;
 
 json vector_json(const Eigen::Vector3d& v) { return json::array({v.x(), v.y(), v.z()}); }
 
-// A body as a JSON object, or the error that names what is wrong with it.
-ApiResult<json> parse_object(const std::string& body) {
-  if (body.empty()) return ApiError{ErrorCode::kInvalidArgument, "the request body is empty (expected a JSON object)", "body"};
-  json document;
-  try {
-    document = json::parse(body);
-  } catch (const json::parse_error& error) {
-    return ApiError{ErrorCode::kInvalidArgument, fmt::format("malformed JSON at byte {}: {}", error.byte, error.what()), "body"};
-  }
-  if (!document.is_object()) return ApiError{ErrorCode::kInvalidArgument, "expected a JSON object", "body"};
-  return document;
-}
-
-ApiStatus check_keys(const json& object, std::initializer_list<std::string_view> allowed) {
-  for (const auto& [key, value] : object.items()) {
-    if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) {
-      std::string names;
-      for (std::string_view name : allowed) names += (names.empty() ? "" : ", ") + std::string(name);
-      return ApiError{ErrorCode::kInvalidArgument, fmt::format("unknown field '{}' (known: {})", key, names), key};
-    }
-  }
-  return api_ok();
-}
-
 // An array of `count` finite numbers.
 ApiResult<std::vector<double>> numbers(const json& value, std::size_t count, const std::string& field) {
   if (!value.is_array() || value.size() != count) {
@@ -105,6 +81,29 @@ ApiResult<std::string> yaml_document(const json& object, const std::string& key,
 }
 
 }  // namespace
+
+ApiResult<json> parse_object(const std::string& body) {
+  if (body.empty()) return ApiError{ErrorCode::kInvalidArgument, "the request body is empty (expected a JSON object)", "body"};
+  json document;
+  try {
+    document = json::parse(body);
+  } catch (const json::parse_error& error) {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("malformed JSON at byte {}: {}", error.byte, error.what()), "body"};
+  }
+  if (!document.is_object()) return ApiError{ErrorCode::kInvalidArgument, "expected a JSON object", "body"};
+  return document;
+}
+
+ApiStatus check_keys(const json& object, std::initializer_list<std::string_view> allowed) {
+  for (const auto& [key, value] : object.items()) {
+    if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) {
+      std::string names;
+      for (std::string_view name : allowed) names += (names.empty() ? "" : ", ") + std::string(name);
+      return ApiError{ErrorCode::kInvalidArgument, fmt::format("unknown field '{}' (known: {})", key, names), key};
+    }
+  }
+  return api_ok();
+}
 
 json pose_to_json(const msgs::PoseEstimate& pose) {
   const Eigen::Quaterniond& q = pose.T_world_body.orientation;

@@ -1,6 +1,8 @@
 #pragma once
 // JSON shapes of the REST API (docs/server.md shows examples; docs/openapi.json is normative).
+#include <initializer_list>
 #include <string>
+#include <string_view>
 
 #include <nlohmann/json.hpp>
 
@@ -9,6 +11,11 @@
 #include "hanzo/fusion/service/session_manager.hpp"
 
 namespace hanzo::fusion::service::detail {
+
+/// A request body as a JSON object, or the 400 that names what is wrong with it (field "body").
+ApiResult<nlohmann::json> parse_object(const std::string& body);
+/// 400 naming the first key of `object` that is not in `allowed`.
+ApiStatus check_keys(const nlohmann::json& object, std::initializer_list<std::string_view> allowed);
 
 nlohmann::json pose_to_json(const msgs::PoseEstimate& pose);
 nlohmann::json session_to_json(const SessionInfo& info);
