@@ -1,23 +1,32 @@
 // Server load test (issue: "20 concurrent sessions each streaming IMU at 200 Hz plus LiDAR at
-// 10 Hz (about 30k points per scan) for 60 s"): an in-process server (SessionManager + gRPC on
-// loopback, SQLite storage), N client sessions each replaying the simulated warehouse drive
-// (IMU 200 Hz + VLP-16, ~28k points per sweep) in real time over StreamImu / StreamPointCloud.
+// 10 Hz (about 30k points per scan) for 60 s"): a server (SessionManager + gRPC on loopback,
+// SQLite storage) in this process, and N client sessions in a forked client process, each
+// replaying the simulated warehouse drive (IMU 200 Hz + VLP-16, ~28k points per sweep) in real
+// time over StreamImu / StreamPointCloud. Both processes share this machine's cores.
 //
-//   build/bench/bench_server_load [--sessions 20] [--seconds 60] [--no-lidar] [--json]
+//   build/bench/bench_server_load [--sessions 20] [--seconds 60] [--no-lidar] [--point3] [--json]
+//
+// Sweeps go as packed_points (what FusionClient sends); --point3 sends the spec's Point3 list.
 //
 // Reports: messages sent, received by the sessions, rejected by reason (lost), LiDAR sweeps
 // registered; pose latency = from writing an IMU message to reading back the PoseEstimate of its
 // timestamp on the same stream (client side, loopback both ways) p50 / p99 / max; the server's
-// own push->pose histogram; CPU (process: server and clients) and peak memory.
+// own push->pose histogram; the server process's CPU and memory (peak, and resident at the end),
+// and the client process's CPU.
 #include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <mutex>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -41,21 +50,22 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-struct Recording {
-  std::string config_yaml, calibration_yaml;
-  std::vector<std::pair<std::string, hf::msgs::SensorMessage>> messages;  // sensor, message; time order
-  std::size_t points_per_sweep = 0;
-};
-
-Recording simulate(double seconds, bool lidar) {
+hf::sim::Scenario load_scenario(double seconds, bool lidar) {
   hf::sim::Scenario scenario = hf::sim::load_scenario(std::string(HANZO_SOURCE_DIR) + "/examples/scenarios/warehouse_robot.yaml").value();
   std::erase_if(scenario.sensors, [lidar](const hf::sim::ScenarioSensor& s) {
     return s.modality != hf::config::SensorModality::kImu && !(lidar && s.modality == hf::config::SensorModality::kLidar);
   });
   scenario.duration = seconds;
+  return scenario;
+}
+
+struct Recording {
+  std::vector<std::pair<std::string, hf::msgs::SensorMessage>> messages;  // sensor, message; time order
+  std::size_t points_per_sweep = 0;
+};
+
+Recording simulate(const hf::sim::Scenario& scenario) {
   Recording out;
-  out.config_yaml = hf::config::to_yaml(hf::sim::scenario_fusion_config(scenario));
-  out.calibration_yaml = hf::calib::to_yaml(hf::sim::scenario_calibration(scenario));
   auto simulation = hf::sim::ScenarioSimulation::create(scenario).value();
   std::size_t sweeps = 0, points = 0;
   (void)simulation->run([&](const hf::sim::ScenarioSensor& sensor, hf::msgs::SensorMessage&& message) -> hf::Status {
@@ -70,6 +80,25 @@ Recording simulate(double seconds, bool lidar) {
   return out;
 }
 
+double cpu_seconds(const rusage& u) {
+  return static_cast<double>(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * static_cast<double>(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
+double cpu_seconds_now() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return cpu_seconds(usage);
+}
+
+double resident_mb() {  // current RSS of this process
+  long pages = 0, resident = 0;
+  if (FILE* statm = std::fopen("/proc/self/statm", "r")) {
+    if (std::fscanf(statm, "%ld %ld", &pages, &resident) != 2) resident = 0;
+    std::fclose(statm);
+  }
+  return static_cast<double>(resident) * static_cast<double>(sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
+}
+
 double percentile(std::vector<double> values, double p) {
   if (values.empty()) return 0.0;
   std::sort(values.begin(), values.end());
@@ -82,7 +111,8 @@ struct ClientResult {
 };
 
 // Replays the recording in real time into one session over two streams.
-ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& session_id, const Recording& recording) {
+ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& session_id, const Recording& recording,
+                        hf::msgs::PointEncoding point_encoding) {
   ClientResult result;
   struct Stream {
     grpc::ClientContext context;
@@ -111,6 +141,7 @@ ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& se
     hf::v1::PoseEstimate pose;
     while (lidar->Read(&pose)) ++poses;
   });
+  hf::v1::PointCloudMessage sweep_proto;
   const auto started = Clock::now();
   const hf::Timestamp first = hf::msgs::timestamp_of(recording.messages.front().second);
   for (const auto& [sensor, message] : recording.messages) {
@@ -125,7 +156,8 @@ ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& se
       }
       if (imu->Write(hf::msgs::to_proto(*imu_message))) ++result.sent_imu;
     } else if (const auto* sweep = std::get_if<hf::msgs::PointCloudMessage>(&message)) {
-      if (lidar->Write(hf::msgs::to_proto(*sweep))) ++result.sent_lidar;
+      hf::msgs::to_proto(*sweep, &sweep_proto, point_encoding);  // reuses the storage, as FusionClient does
+      if (lidar->Write(sweep_proto)) ++result.sent_lidar;
     }
   }
   imu->WritesDone();
@@ -138,27 +170,91 @@ ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& se
   return result;
 }
 
+// The client process: simulates the drive, waits for "PORT ID..." on `commands`, streams every
+// session at once, and writes its summary (one JSON object) to `report`.
+int run_clients(int commands, int report, const hf::sim::Scenario& scenario, int sessions, hf::msgs::PointEncoding point_encoding) {
+  const Recording recording = simulate(scenario);
+  std::string line;
+  char c = 0;
+  while (read(commands, &c, 1) == 1 && c != '\n') line += c;
+  std::istringstream words(line);
+  int port = 0;
+  words >> port;
+  std::vector<std::string> ids(static_cast<std::size_t>(sessions));
+  for (std::string& id : ids) words >> id;
+  if (!port || ids.back().empty()) return 1;
+  auto stub = hf::v1::FusionService::NewStub(grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials()));
+  const double cpu_before = cpu_seconds_now();
+  const auto started = Clock::now();
+  std::vector<ClientResult> results(static_cast<std::size_t>(sessions));
+  std::vector<std::thread> clients;
+  for (std::size_t s = 0; s < ids.size(); ++s) clients.emplace_back([&, s] { results[s] = run_client(*stub, ids[s], recording, point_encoding); });
+  for (std::thread& client : clients) client.join();
+  const double wall = std::chrono::duration<double>(Clock::now() - started).count();
+  uint64_t sent = 0, sent_lidar = 0, poses_back = 0, late_writes = 0;
+  std::vector<double> latencies;
+  for (const ClientResult& r : results) {
+    sent += r.sent_imu + r.sent_lidar;
+    sent_lidar += r.sent_lidar;
+    poses_back += r.poses;
+    late_writes += r.late_writes;
+    latencies.insert(latencies.end(), r.latencies_s.begin(), r.latencies_s.end());
+  }
+  const nlohmann::json summary = {{"points_per_sweep", recording.points_per_sweep}, {"messages_sent", sent}, {"lidar_sweeps_sent", sent_lidar},
+                                  {"poses_back", poses_back}, {"client_writes_late_20ms", late_writes},
+                                  {"pose_latency_p50_ms", 1e3 * percentile(latencies, 0.5)}, {"pose_latency_p99_ms", 1e3 * percentile(latencies, 0.99)},
+                                  {"pose_latency_max_ms", 1e3 * percentile(latencies, 1.0)}, {"wall_seconds", wall},
+                                  {"client_cpu_cores_used", (cpu_seconds_now() - cpu_before) / wall}};
+  const std::string text = summary.dump();
+  return write(report, text.data(), text.size()) == static_cast<ssize_t>(text.size()) ? 0 : 1;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   int sessions = 20;
   double seconds = 60.0;
   bool lidar = true, json_output = false;
+  hf::msgs::PointEncoding point_encoding = hf::msgs::PointEncoding::kPacked;
   for (int i = 1; i < argc; ++i) {
     const std::string argument = argv[i];
     if (argument == "--sessions" && i + 1 < argc) sessions = std::stoi(argv[++i]);
     else if (argument == "--seconds" && i + 1 < argc) seconds = std::stod(argv[++i]);
     else if (argument == "--no-lidar") lidar = false;
     else if (argument == "--json") json_output = true;
+    else if (argument == "--point3") point_encoding = hf::msgs::PointEncoding::kPoint3;
     else {
-      std::fprintf(stderr, "usage: bench_server_load [--sessions N] [--seconds S] [--no-lidar] [--json]\n");
+      std::fprintf(stderr, "usage: bench_server_load [--sessions N] [--seconds S] [--no-lidar] [--point3] [--json]\n");
       return 2;
     }
   }
-  std::fprintf(stderr, "simulating %.0f s of the warehouse drive...\n", seconds);
-  const Recording recording = simulate(seconds, lidar);
+  if (sessions < 1) {
+    std::fprintf(stderr, "--sessions must be at least 1\n");
+    return 2;
+  }
+  const hf::sim::Scenario scenario = load_scenario(seconds, lidar);
+  // Fork before any thread exists: the clients get a process of their own, so that the
+  // server's CPU and memory are this process's.
+  int to_client[2], from_client[2];
+  if (pipe(to_client) != 0 || pipe(from_client) != 0) {
+    std::perror("pipe");
+    return 1;
+  }
+  const pid_t client = fork();
+  if (client < 0) {
+    std::perror("fork");
+    return 1;
+  }
+  if (client == 0) {
+    close(to_client[1]);
+    close(from_client[0]);
+    std::fprintf(stderr, "simulating %.0f s of the warehouse drive...\n", seconds);
+    _exit(run_clients(to_client[0], from_client[1], scenario, sessions, point_encoding));
+  }
+  close(to_client[0]);
+  close(from_client[1]);
 
-  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "hanzo_bench_server_load";
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_bench_server_load_{}", getpid());
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   auto metrics = std::make_shared<hf::service::MetricsRegistry>();
@@ -170,44 +266,44 @@ int main(int argc, char** argv) {
   auto server = hf::service::GrpcServer::create(grpc_config, *manager, nullptr, metrics).value();
   if (auto started = server->start(); !started) {
     std::fprintf(stderr, "%s\n", started.error().message.c_str());
+    kill(client, SIGKILL);
     return 1;
   }
+  const std::string config_yaml = hf::config::to_yaml(hf::sim::scenario_fusion_config(scenario));
+  const std::string calibration_yaml = hf::calib::to_yaml(hf::sim::scenario_calibration(scenario));
   const hf::service::Principal local{"bench", "local", 0xffffffffu};
   std::vector<std::string> ids;
+  std::string command = std::to_string(server->port());
   for (int s = 0; s < sessions; ++s) {
-    ids.push_back(manager->create_session(local, {fmt::format("load-{}", s), recording.config_yaml, recording.calibration_yaml}).value().id);
+    ids.push_back(manager->create_session(local, {fmt::format("load-{}", s), config_yaml, calibration_yaml}).value().id);
+    command += " " + ids.back();
   }
-  auto stub = hf::v1::FusionService::NewStub(grpc::CreateChannel("127.0.0.1:" + std::to_string(server->port()), grpc::InsecureChannelCredentials()));
-
-  std::fprintf(stderr, "%d sessions streaming for %.0f s...\n", sessions, seconds);
-  rusage usage_before{};
-  getrusage(RUSAGE_SELF, &usage_before);
-  const auto started = Clock::now();
-  std::vector<ClientResult> results(static_cast<std::size_t>(sessions));
-  std::vector<std::thread> clients;
-  for (int s = 0; s < sessions; ++s) {
-    clients.emplace_back([&, s] { results[static_cast<std::size_t>(s)] = run_client(*stub, ids[static_cast<std::size_t>(s)], recording); });
+  command += "\n";
+  const double rss_idle = resident_mb();
+  const double cpu_before = cpu_seconds_now();
+  if (write(to_client[1], command.data(), command.size()) != static_cast<ssize_t>(command.size())) {
+    std::perror("write to the client process");
+    kill(client, SIGKILL);
+    return 1;
   }
-  for (std::thread& client : clients) client.join();
-  const double wall = std::chrono::duration<double>(Clock::now() - started).count();
-  rusage usage_after{};
-  getrusage(RUSAGE_SELF, &usage_after);
-  const auto cpu_seconds = [](const rusage& u) {
-    return static_cast<double>(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * static_cast<double>(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
-  };
+  std::string report;
+  char buffer[4096];
+  for (ssize_t n; (n = read(from_client[0], buffer, sizeof(buffer))) > 0;) report.append(buffer, static_cast<std::size_t>(n));
+  int client_status = 0;
+  waitpid(client, &client_status, 0);
+  const double server_cpu = cpu_seconds_now() - cpu_before;
+  const nlohmann::json clients = nlohmann::json::parse(report, nullptr, false);
+  if (!WIFEXITED(client_status) || WEXITSTATUS(client_status) != 0 || clients.is_discarded()) {
+    std::fprintf(stderr, "the client process failed\n");
+    return 1;
+  }
+  std::fprintf(stderr, "%d sessions streamed for %.0f s\n", sessions, seconds);
   (void)manager->flush_storage();
 
-  uint64_t sent = 0, received = 0, sent_lidar = 0, registered = 0, poses_back = 0, late_writes = 0, stored = 0;
+  uint64_t received = 0, registered = 0, stored = 0;
   std::map<std::string, uint64_t> rejected;
-  std::vector<double> latencies;
-  for (int s = 0; s < sessions; ++s) {
-    const ClientResult& r = results[static_cast<std::size_t>(s)];
-    sent += r.sent_imu + r.sent_lidar;
-    sent_lidar += r.sent_lidar;
-    poses_back += r.poses;
-    late_writes += r.late_writes;
-    latencies.insert(latencies.end(), r.latencies_s.begin(), r.latencies_s.end());
-    const hf::service::SessionInfo info = manager->session_info(local, ids[static_cast<std::size_t>(s)]).value();
+  for (const std::string& id : ids) {
+    const hf::service::SessionInfo info = manager->session_info(local, id).value();
     for (const hf::pipeline::SensorStatistics& sensor : info.summary.sensors) {
       received += sensor.received;
       for (const auto& [reason, count] : sensor.rejected) rejected[sensor.name + ":" + reason] += count;
@@ -237,33 +333,39 @@ int main(int argc, char** argv) {
     server_p50 = quantile(0.5);
     server_p99 = quantile(0.99);
   }
-  const double cpu = cpu_seconds(usage_after) - cpu_seconds(usage_before);
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  const double wall = clients["wall_seconds"].get<double>();
+  const uint64_t sent = clients["messages_sent"].get<uint64_t>();
   // The IMU's static alignment (the first second) takes its messages without fusing them.
   uint64_t rejected_total = 0, aligning = 0;
   for (const auto& [reason, count] : rejected) (reason.ends_with(":aligning") ? aligning : rejected_total) += count;
 
-  nlohmann::json result = {
-      {"sessions", sessions}, {"seconds", seconds}, {"lidar", lidar}, {"points_per_sweep", recording.points_per_sweep},
-      {"messages_sent", sent}, {"messages_received", received}, {"messages_lost_in_transport", sent - received},
-      {"messages_rejected", rejected}, {"lidar_sweeps_sent", sent_lidar}, {"lidar_sweeps_registered", registered},
-      {"poses_back", poses_back}, {"poses_stored", stored}, {"client_writes_late_20ms", late_writes},
-      {"pose_latency_p50_ms", 1e3 * percentile(latencies, 0.5)}, {"pose_latency_p99_ms", 1e3 * percentile(latencies, 0.99)},
-      {"pose_latency_max_ms", 1e3 * percentile(latencies, 1.0)}, {"server_push_to_pose_p50_ms", 1e3 * server_p50},
-      {"server_push_to_pose_p99_ms", 1e3 * server_p99}, {"cpu_cores_used", cpu / wall}, {"wall_seconds", wall},
-      {"peak_rss_mb", static_cast<double>(usage_after.ru_maxrss) / 1024.0}};
+  nlohmann::json result = clients;
+  result.update({{"sessions", sessions}, {"seconds", seconds}, {"lidar", lidar},
+                 {"point_encoding", point_encoding == hf::msgs::PointEncoding::kPacked ? "packed_points" : "points"}, {"messages_received", received},
+                 {"messages_lost_in_transport", sent - received}, {"messages_rejected", rejected},
+                 {"lidar_sweeps_registered", registered}, {"poses_stored", stored}, {"server_push_to_pose_p50_ms", 1e3 * server_p50},
+                 {"server_push_to_pose_p99_ms", 1e3 * server_p99}, {"server_cpu_cores_used", server_cpu / wall},
+                 {"server_peak_rss_mb", static_cast<double>(usage.ru_maxrss) / 1024.0}, {"server_idle_rss_mb", rss_idle},
+                 {"server_rss_at_end_mb", resident_mb()}});
   if (json_output) {
     std::printf("%s\n", result.dump().c_str());
   } else {
-    std::printf("| sessions | streams | messages sent | received | lost | rejected (+ aligning) | LiDAR registered | pose latency p50 / p99 / max | server push->pose p50 / p99 | CPU (cores) | peak RSS |\n");
-    std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
-    std::printf("| %d | IMU 200 Hz%s | %lu | %lu | %lu | %lu (+ %lu) | %lu / %lu | %.2f / %.1f / %.0f ms | <= %.3f / <= %.3f ms | %.2f of 2 | %.0f MB |\n", sessions,
-                lidar ? fmt::format(" + LiDAR 10 Hz ({}k pts)", recording.points_per_sweep / 1000).c_str() : "",
+    std::printf("| sessions | streams | messages sent | received | lost | rejected (+ aligning) | LiDAR registered | pose latency p50 / p99 / max | server push->pose p50 / p99 | server CPU | clients' CPU | server memory idle / peak / end |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    std::printf("| %d | IMU 200 Hz%s | %lu | %lu | %lu | %lu (+ %lu) | %lu / %lu | %.2f / %.1f / %.0f ms | <= %.3f / <= %.3f ms | %.2f cores | %.2f cores | %.0f / %.0f / %.0f MB |\n",
+                sessions, lidar ? fmt::format(" + LiDAR 10 Hz ({}k pts, {})", clients["points_per_sweep"].get<std::size_t>() / 1000,
+                                    point_encoding == hf::msgs::PointEncoding::kPacked ? "packed" : "Point3").c_str() : "",
                 static_cast<unsigned long>(sent), static_cast<unsigned long>(received), static_cast<unsigned long>(sent - received),
-                static_cast<unsigned long>(rejected_total), static_cast<unsigned long>(aligning), static_cast<unsigned long>(registered), static_cast<unsigned long>(sent_lidar),
-                1e3 * percentile(latencies, 0.5), 1e3 * percentile(latencies, 0.99), 1e3 * percentile(latencies, 1.0), 1e3 * server_p50,
-                1e3 * server_p99, cpu / wall, static_cast<double>(usage_after.ru_maxrss) / 1024.0);
+                static_cast<unsigned long>(rejected_total), static_cast<unsigned long>(aligning), static_cast<unsigned long>(registered),
+                static_cast<unsigned long>(clients["lidar_sweeps_sent"].get<uint64_t>()), clients["pose_latency_p50_ms"].get<double>(),
+                clients["pose_latency_p99_ms"].get<double>(), clients["pose_latency_max_ms"].get<double>(), 1e3 * server_p50, 1e3 * server_p99,
+                server_cpu / wall, clients["client_cpu_cores_used"].get<double>(), rss_idle, static_cast<double>(usage.ru_maxrss) / 1024.0,
+                resident_mb());
     for (const auto& [reason, count] : rejected) std::printf("  rejected %s: %lu\n", reason.c_str(), static_cast<unsigned long>(count));
   }
   server->stop();
+  std::filesystem::remove_all(dir);
   return 0;
 }

@@ -1,5 +1,8 @@
 #include "hanzo/fusion/msgs/convert.hpp"
 
+#include <algorithm>
+#include <limits>
+
 #include <fmt/format.h>
 
 #include "hanzo/fusion/msgs/validate.hpp"
@@ -118,20 +121,31 @@ Result<ImuMessage> from_proto(const v1::ImuMessage& in) {
 
 v1::PointCloudMessage to_proto(const PointCloudMessage& message) {
   v1::PointCloudMessage out;
-  out.set_timestamp_ns(write_time(message.timestamp));
-  out.set_frame_id(message.frame_id);
-  out.mutable_points()->Reserve(static_cast<int>(message.points.size()));
-  for (const Eigen::Vector3f& point : message.points) {
-    v1::Point3* p = out.add_points();
-    p->set_x(point.x());
-    p->set_y(point.y());
-    p->set_z(point.z());
-  }
-  out.mutable_intensities()->Add(message.intensities.begin(), message.intensities.end());
-  out.mutable_ring_ids()->Add(message.ring_ids.begin(), message.ring_ids.end());
-  out.mutable_point_timestamps()->Reserve(static_cast<int>(message.point_timestamps.size()));
-  for (Timestamp time : message.point_timestamps) out.add_point_timestamps(write_time(time));
+  to_proto(message, &out);
   return out;
+}
+
+void to_proto(const PointCloudMessage& message, v1::PointCloudMessage* out, PointEncoding encoding) {
+  out->Clear();  // keeps the cleared Point3 objects for add_points() to reuse
+  out->set_timestamp_ns(write_time(message.timestamp));
+  out->set_frame_id(message.frame_id);
+  if (encoding == PointEncoding::kPacked) {
+    out->mutable_packed_points()->Resize(static_cast<int>(3 * message.points.size()), 0.0f);
+    float* packed = out->mutable_packed_points()->mutable_data();
+    for (const Eigen::Vector3f& point : message.points) packed = std::copy_n(point.data(), 3, packed);
+  } else {
+    out->mutable_points()->Reserve(static_cast<int>(message.points.size()));
+    for (const Eigen::Vector3f& point : message.points) {
+      v1::Point3* p = out->add_points();
+      p->set_x(point.x());
+      p->set_y(point.y());
+      p->set_z(point.z());
+    }
+  }
+  out->mutable_intensities()->Add(message.intensities.begin(), message.intensities.end());
+  out->mutable_ring_ids()->Add(message.ring_ids.begin(), message.ring_ids.end());
+  out->mutable_point_timestamps()->Reserve(static_cast<int>(message.point_timestamps.size()));
+  for (Timestamp time : message.point_timestamps) out->add_point_timestamps(write_time(time));
 }
 
 Result<PointCloudMessage> from_proto(const v1::PointCloudMessage& in) {
@@ -139,15 +153,23 @@ Result<PointCloudMessage> from_proto(const v1::PointCloudMessage& in) {
   PointCloudMessage message;
   HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
   message.frame_id = in.frame_id();
-  message.points.reserve(in.points_size());
+  if (in.points_size() > 0 && in.packed_points_size() > 0) return read.fail("packed_points", "set points or packed_points, not both");
+  if (in.packed_points_size() % 3 != 0) {
+    return read.fail("packed_points", fmt::format("{} values is not x, y, z triplets", in.packed_points_size()));
+  }
+  message.points.reserve(static_cast<std::size_t>(in.points_size() + in.packed_points_size() / 3));
   for (const v1::Point3& p : in.points()) message.points.emplace_back(p.x(), p.y(), p.z());
+  const float* packed = in.packed_points().data();
+  for (int i = 0; i < in.packed_points_size(); i += 3) message.points.emplace_back(packed[i], packed[i + 1], packed[i + 2]);
   message.intensities.assign(in.intensities().begin(), in.intensities().end());
   message.ring_ids.assign(in.ring_ids().begin(), in.ring_ids().end());
   message.point_timestamps.reserve(in.point_timestamps_size());
   for (int i = 0; i < in.point_timestamps_size(); ++i) {
-    Timestamp time;
-    HANZO_ASSIGN_OR_RETURN(time, read.time(in.point_timestamps(i), fmt::format("point_timestamps[{}]", i)));
-    message.point_timestamps.push_back(time);
+    const uint64_t nanoseconds = in.point_timestamps(i);
+    if (nanoseconds > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) {  // named only when wrong (hot path)
+      return read.time(nanoseconds, fmt::format("point_timestamps[{}]", i)).error();
+    }
+    message.point_timestamps.push_back(Timestamp::from_nanoseconds(static_cast<int64_t>(nanoseconds)));
   }
   return validated(std::move(message));
 }

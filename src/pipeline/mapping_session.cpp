@@ -217,10 +217,11 @@ Status MappingSession::push_scan(const msgs::PointCloudMessage& scan) {
   last_scan_time_ = scan.timestamp;
   if (!lidar_statistics_.first_time.nanoseconds()) lidar_statistics_.first_time = scan.timestamp;
   lidar_statistics_.last_time = scan.timestamp;
-  waiting_scans_.push_back(scan);
+  waiting_scans_.push_back({scan, sweep_end(scan)});
   while (waiting_scans_.size() > config_.max_waiting_scans) {
     waiting_scans_.pop_front();
-    count_refused("imu_behind");
+    // Before the first pose the IMU is still aligning (its messages are refused the same way).
+    count_refused(session_->latest_pose() ? "imu_behind" : "aligning");
   }
   register_ready_scans();
   update_backend();
@@ -236,13 +237,15 @@ void MappingSession::register_ready_scans() {
   take_registered();
   while (!waiting_scans_.empty()) {
     const std::optional<msgs::PoseEstimate> latest = session_->latest_pose();
-    if (!latest || latest->timestamp < sweep_end(waiting_scans_.front())) break;
-    const msgs::PointCloudMessage scan = std::move(waiting_scans_.front());
+    if (latest && !first_pose_time_) first_pose_time_ = latest->timestamp;
+    if (!latest || latest->timestamp < waiting_scans_.front().end) break;
+    const msgs::PointCloudMessage scan = std::move(waiting_scans_.front().scan);
     waiting_scans_.pop_front();
     Result<LidarInertialOdometry::PreparedScan> prepared = odometry_->prepare(scan);
     if (!prepared) {
       logger()->debug("mapping session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
-      count_refused("not_registered");
+      // A sweep that began before the first pose has no motion to start from (the IMU aligned).
+      count_refused(scan.timestamp < *first_pose_time_ ? "aligning" : "not_registered");
     } else if (worker_) {
       worker_->submit(std::move(prepared).value());
     } else {

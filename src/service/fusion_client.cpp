@@ -7,6 +7,7 @@
 #include <mutex>
 #include <sstream>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include <fmt/format.h>
@@ -89,7 +90,13 @@ class TypedSensorStream final : public SensorStream {
   }
   bool write(const msgs::SensorMessage& message) override {
     const auto* typed = std::get_if<Message>(&message);
-    return typed != nullptr && stream_->Write(msgs::to_proto(*typed));
+    if (typed == nullptr) return false;
+    if constexpr (std::is_same_v<Message, msgs::PointCloudMessage>) {
+      msgs::to_proto(*typed, &sweep_, msgs::PointEncoding::kPacked);  // reuses the previous sweep's storage
+      return stream_->Write(sweep_);
+    } else {
+      return stream_->Write(msgs::to_proto(*typed));
+    }
   }
   grpc::Status finish() override {
     stream_->WritesDone();
@@ -101,6 +108,7 @@ class TypedSensorStream final : public SensorStream {
   grpc::ClientContext context_;
   std::unique_ptr<grpc::ClientReaderWriter<RequestProto, v1::PoseEstimate>> stream_;
   std::thread reader_;
+  v1::PointCloudMessage sweep_;  // point cloud streams: the message written, reused
 };
 
 }  // namespace

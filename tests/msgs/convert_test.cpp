@@ -161,6 +161,57 @@ TEST(Convert, PointCloudRoundTrip) {
   check_round_trip(bare);
 }
 
+TEST(Convert, PackedPointsCarryTheSameSweepAsPoint3AndReuseTheMessage) {
+  const PointCloudMessage sweep = testing::point_cloud();
+  v1::PointCloudMessage packed;
+  to_proto(sweep, &packed, PointEncoding::kPacked);
+  EXPECT_EQ(packed.points_size(), 0);
+  ASSERT_EQ(packed.packed_points_size(), static_cast<int>(3 * sweep.points.size()));
+  std::string bytes;
+  ASSERT_TRUE(packed.SerializeToString(&bytes));
+  v1::PointCloudMessage parsed;
+  ASSERT_TRUE(parsed.ParseFromString(bytes));
+  auto back = from_proto(parsed);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  expect_equal(sweep, back.value());
+  EXPECT_LT(bytes.size(), to_proto(sweep).SerializeAsString().size());
+
+  // Writing another sweep into the same message replaces everything (either encoding).
+  PointCloudMessage shorter = sweep;
+  shorter.points.resize(1);
+  shorter.intensities.resize(1);
+  shorter.ring_ids.resize(1);
+  shorter.point_timestamps.resize(1);
+  to_proto(shorter, &packed, PointEncoding::kPoint3);
+  EXPECT_EQ(packed.packed_points_size(), 0);
+  expect_equal(shorter, from_proto(packed).value());
+  to_proto(sweep, &packed, PointEncoding::kPacked);
+  EXPECT_EQ(packed.points_size(), 0);
+  expect_equal(sweep, from_proto(packed).value());
+}
+
+TEST(Convert, PackedPointsMustBeTripletsAndNotMixedWithPoint3) {
+  v1::PointCloudMessage packed;
+  to_proto(testing::point_cloud(), &packed, PointEncoding::kPacked);
+  v1::PointCloudMessage ragged = packed;
+  ragged.mutable_packed_points()->RemoveLast();
+  auto result = from_proto(ragged);
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().field, "packed_points");
+  EXPECT_THAT(result.error().message, HasSubstr("not x, y, z triplets"));
+
+  v1::PointCloudMessage both = packed;
+  both.add_points()->set_x(1.0f);
+  result = from_proto(both);
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().field, "packed_points");
+  EXPECT_THAT(result.error().message, HasSubstr("not both"));
+
+  v1::PointCloudMessage not_finite = packed;
+  not_finite.set_packed_points(4, std::numeric_limits<float>::quiet_NaN());
+  EXPECT_FALSE(from_proto(not_finite).ok());  // validated as any sweep
+}
+
 TEST(Convert, ImageRoundTrip) {
   check_round_trip(testing::image());
   ImageMessage depth = testing::image();

@@ -41,6 +41,12 @@ TEST(Schema, SensorMessagesHaveTheSpecsFieldNumbers) {
   expect_fields(v1::RadarMessage::descriptor(), {{"timestamp_ns", 1}, {"frame_id", 2}, {"targets", 3}});
   expect_fields(v1::RadarTarget::descriptor(), {{"range", 1}, {"azimuth", 2}, {"elevation", 3}, {"radial_velocity", 4}, {"rcs", 5}});
   EXPECT_EQ(v1::ImuMessage::descriptor()->file()->package(), "hanzo.fusion.v1");
+  // The packed point extension (not in the spec) is a packed float field.
+  const FieldDescriptor* packed = v1::PointCloudMessage::descriptor()->FindFieldByName("packed_points");
+  ASSERT_NE(packed, nullptr);
+  EXPECT_EQ(packed->number(), 7);
+  EXPECT_TRUE(packed->is_packed());
+  EXPECT_EQ(packed->type(), FieldDescriptor::TYPE_FLOAT);
   // The IMU orientation extension has explicit presence.
   EXPECT_TRUE(v1::ImuMessage::descriptor()->FindFieldByName("orientation")->has_presence());
 }

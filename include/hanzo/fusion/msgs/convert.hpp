@@ -16,6 +16,13 @@ namespace hanzo::fusion::msgs {
 
 v1::ImuMessage to_proto(const ImuMessage& message);
 v1::PointCloudMessage to_proto(const PointCloudMessage& message);
+/// How a sweep's points go on the wire: the spec's `points` (a Point3 message per point), or
+/// `packed_points` (x, y, z floats in one packed field; an order of magnitude cheaper to encode
+/// and decode). from_proto reads either.
+enum class PointEncoding { kPoint3, kPacked };
+/// Overwrites *out with the sweep, reusing its storage: a stream writing sweeps at sensor rate
+/// keeps one message instead of allocating ~30k points per sweep.
+void to_proto(const PointCloudMessage& message, v1::PointCloudMessage* out, PointEncoding encoding = PointEncoding::kPoint3);
 v1::ImageMessage to_proto(const ImageMessage& message);
 v1::GnssMessage to_proto(const GnssMessage& message);
 v1::WheelOdometryMessage to_proto(const WheelOdometryMessage& message);

@@ -11,7 +11,8 @@
 //    (msgs::validate, time after the sensor's previous sweep) and wait until the Session's IMU
 //    has passed the sweep's end; then LidarInertialOdometry registers the sweep against its
 //    local map from the filter's motion and fuses the pose into the Session. When more than
-//    max_waiting_scans wait (the IMU stopped), the oldest is dropped ("imu_behind").
+//    max_waiting_scans wait (the IMU stopped), the oldest is dropped ("imu_behind"; "aligning"
+//    before the Session's first pose).
 //  - Everything else goes to Session::push (same checks, same errors).
 //  - Keyframes of the Session (frontend.keyframe_interval) become nodes of a KeyframeGraph
 //    (between factors from the filter's relative motion); after each push the graph is updated
@@ -233,7 +234,12 @@ class MappingSession {
   std::unique_ptr<RegistrationWorker> worker_;  ///< asynchronous_registration
   lidar::LoopClosureDetector loop_closures_;
   maps::MapBuilder map_builder_;
-  std::deque<msgs::PointCloudMessage> waiting_scans_;
+  struct WaitingScan {
+    msgs::PointCloudMessage scan;
+    Timestamp end;  ///< the latest point time (computed once: checked on every IMU message)
+  };
+  std::deque<WaitingScan> waiting_scans_;
+  std::optional<Timestamp> first_pose_time_;  ///< the Session's first pose seen
   std::optional<Timestamp> last_scan_time_;
   std::optional<msgs::Keyframe> latest_keyframe_;   ///< the newest Session keyframe
   SE3 latest_keyframe_uncorrected_;                 ///< its pose before the Session's corrections
