@@ -33,6 +33,7 @@ struct ServeOptions {
   std::size_t max_sessions = 256;
   std::size_t threads = 8;
   int map_save_interval_s = 30;
+  std::size_t map_keep_versions = 20;
 };
 
 // The token store from --tokens, HANZO_FUSION_TOKENS_FILE or HANZO_FUSION_TOKENS; null with
@@ -73,6 +74,7 @@ int run_serve(const Output& output, const ServeOptions& options) {
   manager_config.max_sessions = options.max_sessions;
   manager_config.map_directory = (std::filesystem::path(options.data_dir) / "maps").string();
   manager_config.map_save_interval = std::chrono::seconds(options.map_save_interval_s);
+  manager_config.map_keep_versions = options.map_keep_versions;
   auto sessions = service::SessionManager::create(manager_config, std::move(storage).value(), metrics);
   if (!sessions) return report_failure(output, {}, sessions.error().message);
 
@@ -135,6 +137,9 @@ void add_serve_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--map-save-interval", options->map_save_interval_s,
                       "Seconds between saves of a changed session map as a new version (0: only when the session ends)")
       ->capture_default_str()->check(CLI::Range(0, 86400));
+  command->add_option("--map-keep-versions", options->map_keep_versions,
+                      "Newest versions kept of each session's map; older autosaves are deleted (0: keep all; loaded maps are never pruned)")
+      ->capture_default_str();
   command->add_option("--db", options->database, "Storage URL: sqlite://PATH or postgresql://USER@HOST:PORT/DB (default sqlite://DATA_DIR/fusion.db)");
   command->add_option("--tokens", options->tokens_file, "API token file (YAML; docs/server.md)");
   command->add_flag("--insecure-no-auth", options->insecure_no_auth, "Serve without authentication (local development only)");

@@ -154,7 +154,9 @@ Result<msgs::FusionMap> MapStore::load(const std::string& map_id, std::optional<
   if (!version) return read_fusion_map(all.back().path);
   const auto found = std::find_if(all.begin(), all.end(), [&](const MapVersionInfo& info) { return info.version == *version; });
   if (found == all.end()) {
-    return Error{fmt::format("map {}: no version {} (versions 1 to {})", map_id, *version, all.back().version), "version"};
+    return Error{fmt::format("map {}: no version {} (stored: {} versions, {} to {})", map_id, *version, all.size(), all.front().version,
+                             all.back().version),
+                 "version"};
   }
   return read_fusion_map(found->path);
 }
@@ -170,6 +172,39 @@ Result<msgs::FusionMap> MapStore::load_at(const std::string& map_id, Timestamp t
     return Error{fmt::format("map {}: no version was created at or before {} s", map_id, time.seconds()), "time"};
   }
   return read_fusion_map(chosen->path);
+}
+
+
+Status MapStore::remove_version(const std::string& map_id, uint64_t version) {
+  std::vector<MapVersionInfo> all;
+  HANZO_ASSIGN_OR_RETURN(all, versions(map_id));
+  const auto found = std::find_if(all.begin(), all.end(), [&](const MapVersionInfo& info) { return info.version == version; });
+  if (found == all.end()) return Error{fmt::format("map {}: no version {}", map_id, version), "version"};
+  if (version == all.back().version) {
+    return Error{fmt::format("map {}: version {} is the newest; delete the map, or save a newer version first", map_id, version), "version"};
+  }
+  if (::unlink(found->path.c_str()) != 0) return Error{fmt::format("{}: cannot delete ({})", found->path, std::strerror(errno))};
+  HANZO_RETURN_IF_ERROR(sync_directory(fmt::format("{}/{}", root_, map_id)));
+  logger()->info("map store: deleted {} version {}", map_id, version);
+  return ok_status();
+}
+
+Status MapStore::remove_map(const std::string& map_id) {
+  HANZO_RETURN_IF_ERROR(validate_map_id(map_id));
+  const std::string folder = fmt::format("{}/{}", root_, map_id);
+  if (!fs::is_directory(folder)) return Error{fmt::format("map {}: not in the store {}", map_id, root_), "map_id"};
+  // Oldest first: a failure part way leaves the newest versions, which load() serves.
+  std::vector<MapVersionInfo> all;
+  HANZO_ASSIGN_OR_RETURN(all, versions(map_id));
+  for (const MapVersionInfo& info : all) {
+    if (::unlink(info.path.c_str()) != 0) return Error{fmt::format("{}: cannot delete ({})", info.path, std::strerror(errno))};
+  }
+  std::error_code error;
+  fs::remove_all(folder, error);  // what is left: temporary files of interrupted saves
+  if (error) return Error{fmt::format("{}: cannot delete ({})", folder, error.message())};
+  HANZO_RETURN_IF_ERROR(sync_directory(root_));
+  logger()->info("map store: deleted {} ({} versions)", map_id, all.size());
+  return ok_status();
 }
 
 }  // namespace hanzo::fusion::maps

@@ -1,9 +1,14 @@
 #include "hanzo/fusion/pipeline/mapping_session.hpp"
 
+#include <sys/resource.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <cstring>
 #include <mutex>
 #include <thread>
 
@@ -29,12 +34,20 @@ constexpr double kMapMoveRotation = 0.001;    // rad
 
 }  // namespace
 
-// Registers prepared sweeps on a thread of its own, in order; at most `capacity` wait (submit()
-// blocks beyond: a replay faster than registration slows down instead of losing sweeps).
+// Registers prepared sweeps on a thread of its own, in order; at most `capacity` wait: beyond,
+// submit() blocks (a replay faster than registration slows down instead of losing sweeps), up
+// to `max_wait` when given; then it drops the oldest waiting sweep (a live stream must not wait
+// long).
 class MappingSession::RegistrationWorker {
  public:
-  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity)
-      : odometry_(odometry), capacity_(capacity), thread_([this] { run(); }) {}
+  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity, int niceness)
+      : odometry_(odometry), capacity_(capacity), thread_([this, niceness] {
+          // Per thread on Linux (the thread id is a process id for setpriority).
+          if (niceness != 0 && setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), niceness) != 0) {
+            logger()->warn("mapping session: registration thread niceness {} not set: {}", niceness, std::strerror(errno));
+          }
+          run();
+        }) {}
   ~RegistrationWorker() {
     {
       std::lock_guard lock(mutex_);
@@ -43,11 +56,19 @@ class MappingSession::RegistrationWorker {
     changed_.notify_all();
     thread_.join();
   }
-  void submit(LidarInertialOdometry::PreparedScan scan) {
+  /// Returns the number of waiting sweeps dropped to make room.
+  std::size_t submit(LidarInertialOdometry::PreparedScan scan, std::optional<std::chrono::nanoseconds> max_wait) {
     std::unique_lock lock(mutex_);
-    changed_.wait(lock, [&] { return jobs_.size() < capacity_; });
+    const auto has_room = [&] { return jobs_.size() < capacity_; };
+    std::size_t dropped = 0;
+    if (!max_wait) {
+      changed_.wait(lock, has_room);
+    } else if (!changed_.wait_for(lock, *max_wait, has_room)) {
+      for (; jobs_.size() >= capacity_; ++dropped) jobs_.pop_front();
+    }
     jobs_.push_back(std::move(scan));
     changed_.notify_all();
+    return dropped;
   }
   /// The registrations finished so far, in order.
   std::vector<Result<LidarInertialOdometry::RegisteredScan>> take_done() {
@@ -106,6 +127,12 @@ Status MappingSessionConfig::validate() const {
   if (!(loop_translation_sigma > 0) || !(loop_rotation_sigma > 0)) return Error("loop_translation_sigma, loop_rotation_sigma: must be > 0");
   if (!(map_keyframe_distance >= 0) || !(map_keyframe_angle >= 0)) return Error("map_keyframe_distance, map_keyframe_angle: must be >= 0");
   if (max_waiting_scans == 0) return Error("max_waiting_scans: must be > 0");
+  if (max_registration_wait_s && !(*max_registration_wait_s >= 0.0 && *max_registration_wait_s <= 60.0)) {
+    return Error(fmt::format("max_registration_wait_s: {} is not in 0..60 s", *max_registration_wait_s));
+  }
+  if (registration_thread_niceness < 0 || registration_thread_niceness > 19) {
+    return Error(fmt::format("registration_thread_niceness: {} is not in 0..19", registration_thread_niceness));
+  }
   return ok_status();
 }
 
@@ -145,7 +172,7 @@ MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionC
     // registered, inside the default 0.5 s lag window its late pose must land in.
     constexpr std::size_t kWorkerQueue = 2;
     if (config_.asynchronous_registration) {
-      worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue);
+      worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue, config_.registration_thread_niceness);
     }
   }
   session_->set_keyframe_callback([this](const msgs::Keyframe& emitted) {
@@ -247,7 +274,12 @@ void MappingSession::register_ready_scans() {
       // A sweep that began before the first pose has no motion to start from (the IMU aligned).
       count_refused(scan.timestamp < *first_pose_time_ ? "aligning" : "not_registered");
     } else if (worker_) {
-      worker_->submit(std::move(prepared).value());
+      const std::optional<std::chrono::nanoseconds> max_wait =
+          config_.max_registration_wait_s
+              ? std::optional(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(*config_.max_registration_wait_s)))
+              : std::nullopt;
+      const std::size_t dropped = worker_->submit(std::move(prepared).value(), max_wait);
+      for (std::size_t i = 0; i < dropped; ++i) count_refused("registration_behind");
     } else {
       on_registered(odometry_->register_scan(*prepared));
     }

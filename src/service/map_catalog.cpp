@@ -46,6 +46,11 @@ ApiResult<maps::MapVersionInfo> MapCatalog::save(const std::string& organization
     }
   }
   // The file is written outside the lock: MapStore takes the next free version itself.
+  std::shared_lock files(files_mutex_);
+  {
+    std::lock_guard lock(mutex_);  // deleted while we waited for the files
+    if (!owners_.contains(map.map_id)) return ApiError{ErrorCode::kConflict, fmt::format("map '{}' was deleted meanwhile", map.map_id), "map_id"};
+  }
   Result<maps::MapVersionInfo> saved = store_.save(std::move(map));
   if (!saved) return ApiError::from(ErrorCode::kInternal, saved.error());
   if (const Status recorded = storage_.record_map_version({session_id, saved->map_id, saved->version, saved->created}); !recorded) {
@@ -120,6 +125,54 @@ ApiResult<std::vector<StoredMap>> MapCatalog::list(const std::string& organizati
     if (stored) maps.push_back(std::move(stored).value());
   }
   return maps;
+}
+
+ApiResult<std::size_t> MapCatalog::remove(const std::string& organization, const std::string& map_id, std::optional<uint64_t> version) {
+  auto stored = find(organization, map_id);
+  if (!stored) return stored.error();
+  if (version) {
+    const auto& versions = stored->versions;
+    if (std::none_of(versions.begin(), versions.end(), [&](const maps::MapVersionInfo& v) { return v.version == *version; })) {
+      return ApiError{ErrorCode::kNotFound, fmt::format("map '{}' has no version {}", map_id, *version), "version"};
+    }
+    if (*version == versions.back().version) {
+      return ApiError{ErrorCode::kConflict,
+                      fmt::format("version {} is the newest of map '{}': delete the map, or save a newer version first", *version, map_id),
+                      "version"};
+    }
+    std::shared_lock files(files_mutex_);
+    if (const Status removed = store_.remove_version(map_id, *version); !removed) return ApiError::from(ErrorCode::kInternal, removed.error());
+    if (const Status forgotten = storage_.delete_map_version(map_id, *version); !forgotten) {
+      logger()->warn("maps: version {} of map {} deleted, but still in the database: {}", *version, map_id, forgotten.error().message);
+    }
+    return std::size_t{1};
+  }
+  std::unique_lock files(files_mutex_);
+  if (!stored->versions.empty()) {
+    if (const Status removed = store_.remove_map(map_id); !removed) return ApiError::from(ErrorCode::kInternal, removed.error());
+  }
+  if (const Status forgotten = storage_.delete_map(map_id); !forgotten) return ApiError::from(ErrorCode::kInternal, forgotten.error());
+  std::lock_guard lock(mutex_);
+  owners_.erase(map_id);
+  logger()->info("maps: map {} deleted", map_id);
+  return stored->versions.size();
+}
+
+Result<std::size_t> MapCatalog::prune(const std::string& map_id, std::size_t keep) {
+  if (keep == 0) return Error("prune: keep must be at least 1");
+  std::shared_lock files(files_mutex_);
+  std::vector<maps::MapVersionInfo> versions;
+  HANZO_ASSIGN_OR_RETURN(versions, store_.versions(map_id));
+  std::size_t removed = 0;
+  for (std::size_t i = 0; i + keep < versions.size(); ++i) {
+    HANZO_RETURN_IF_ERROR(store_.remove_version(map_id, versions[i].version));
+    if (const Status forgotten = storage_.delete_map_version(map_id, versions[i].version); !forgotten) {
+      logger()->warn("maps: version {} of map {} deleted, but still in the database: {}", versions[i].version, map_id,
+                     forgotten.error().message);
+    }
+    ++removed;
+  }
+  return removed;
 }
 
 }  // namespace hanzo::fusion::service

@@ -258,6 +258,23 @@ class PostgresqlStorage final : public Storage {
     return records;
   }
 
+  Status delete_map_version(const std::string& map_id, uint64_t version) override {
+    return run(fmt::format("forget map {} version {}", map_id, version), [&] {
+      pqxx::work work(*connection_);
+      work.exec_params0("DELETE FROM map_versions WHERE map_id = $1 AND version = $2", map_id, static_cast<int64_t>(version));
+      work.commit();
+    });
+  }
+
+  Status delete_map(const std::string& map_id) override {
+    return run(fmt::format("forget map {}", map_id), [&] {
+      pqxx::work work(*connection_);
+      work.exec_params0("DELETE FROM map_versions WHERE map_id = $1", map_id);
+      work.exec_params0("DELETE FROM maps WHERE map_id = $1", map_id);
+      work.commit();
+    });
+  }
+
  private:
   // Runs `body` under the connection's lock; a database exception becomes an error naming
   // `what` (and the connection is re-opened on the next call when it was lost).

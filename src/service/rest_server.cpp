@@ -298,6 +298,19 @@ struct RestServer::Impl {
       send_map_file(response, map.value(), format.value());
     }));
 
+    s.Delete("/v1/maps/([A-Za-z0-9._-]{1,128})", authenticated("DELETE", "/v1/maps/{id}", [this](const httplib::Request& request,
+                                                                                                httplib::Response& response,
+                                                                                                const Principal& caller) {
+      auto version = integer_parameter(request, "version", 0, 1, std::numeric_limits<int64_t>::max());
+      if (!version) return send_error(response, version.error());
+      const std::optional<uint64_t> wanted = version.value() > 0 ? std::optional<uint64_t>(static_cast<uint64_t>(version.value())) : std::nullopt;
+      auto deleted = sessions->delete_map(caller, request.matches[1], wanted);
+      if (!deleted) return send_error(response, deleted.error());
+      json answer = {{"map_id", std::string(request.matches[1])}, {"versions_deleted", deleted.value()}};
+      if (wanted) answer["version"] = *wanted;
+      send_json(response, 200, answer);
+    }));
+
     // Errors httplib answers itself (no route, body too large) get the same JSON shape.
     s.set_error_handler([](const httplib::Request& request, httplib::Response& response) {
       if (!response.body.empty()) return;

@@ -115,6 +115,7 @@ struct ManagedSession {
   std::vector<std::shared_ptr<PoseSubscription>> pose_subscribers;
   std::vector<std::shared_ptr<KeyframeSubscription>> keyframe_subscribers;
   std::vector<std::shared_ptr<MapSubscription>> map_subscribers;
+  bool map_updates_installed = false;  // the session's map update callback (only while subscribed)
   uint64_t messages_pushed = 0;
   Clock::time_point push_started;
   uint64_t saved_map_version = 0;   // the live map_version last saved to the map catalog
@@ -170,6 +171,11 @@ struct SessionManager::Impl {
     if (!saved) return saved.error();
     managed.saved_map_version = summary.map_version;
     managed.stored_map_version = saved->version;
+    if (config.map_keep_versions > 0) {
+      if (Result<std::size_t> pruned = catalog->prune(id, config.map_keep_versions); !pruned) {
+        logger()->warn("maps: old versions of {} not pruned: {}", id, pruned.error().message);
+      }
+    }
     return api_ok();
   }
 
@@ -225,11 +231,14 @@ struct SessionManager::Impl {
     return prepared;
   }
 
-  // A pipeline::MappingSession for `managed` with its callbacks wired (not yet installed).
+  // A pipeline::MappingSession for `managed` with its callbacks wired (not yet installed; map
+  // updates: sync_map_updates).
   Result<std::unique_ptr<pipeline::MappingSession>> make_pipeline(ManagedSession& managed, const config::FusionConfig& configuration,
                                                                   const calib::Calibration& calibration) {
     pipeline::MappingSessionConfig mapping;
     mapping.asynchronous_registration = true;  // the IMU's poses never wait for a LiDAR registration
+    mapping.max_registration_wait_s = 0.05;  // then a live session drops a sweep rather than hold its IMU back
+    mapping.registration_thread_niceness = 10;  // poses first when the cores are saturated
     auto session = pipeline::MappingSession::create(configuration, calibration, mapping);
     if (!session) return session.error();
     ManagedSession* raw = &managed;
@@ -237,12 +246,27 @@ struct SessionManager::Impl {
     session.value()->set_keyframe_callback([raw](const msgs::Keyframe& keyframe) {
       for (const auto& subscriber : raw->keyframe_subscribers) subscriber->publish(keyframe);
     });
-    session.value()->set_map_update_callback([raw](const msgs::MapUpdate& update) {
-      msgs::MapUpdate with_id = update;
-      with_id.map_id = raw->record.id;
-      for (const auto& subscriber : raw->map_subscribers) subscriber->publish(with_id);
-    });
     return session;
+  }
+
+  // Map updates are built only while someone subscribes to them: after a backend correction a
+  // full replacement rebuilds the whole point map, which with 20 sessions on two cores cost a
+  // sweep in ten. Installs or removes the session's callback; caller holds managed.mutex.
+  static void sync_map_updates(ManagedSession& managed) {
+    std::erase_if(managed.map_subscribers, [](const auto& subscriber) { return subscriber->closed(); });
+    const bool wanted = !managed.map_subscribers.empty() && managed.session;
+    if (wanted == managed.map_updates_installed) return;
+    if (wanted) {
+      ManagedSession* raw = &managed;
+      managed.session->set_map_update_callback([raw](const msgs::MapUpdate& update) {
+        msgs::MapUpdate with_id = update;
+        with_id.map_id = raw->record.id;
+        for (const auto& subscriber : raw->map_subscribers) subscriber->publish(with_id);
+      });
+    } else if (managed.session) {
+      managed.session->set_map_update_callback(nullptr);
+    }
+    managed.map_updates_installed = wanted;
   }
 
   // The session's map with its metadata; caller holds managed.mutex.
@@ -586,6 +610,8 @@ ApiResult<SessionInfo> SessionManager::register_sensor(const Principal& caller, 
   managed.record.config_yaml = config_yaml;
   managed.record.calibration_yaml = calibration_yaml;
   managed.session = std::move(pipeline).value();
+  managed.map_updates_installed = false;
+  Impl::sync_map_updates(managed);  // subscribers of the previous pipeline keep their updates
   return impl_->info_locked(managed);
 }
 
@@ -613,6 +639,7 @@ ApiStatus SessionManager::push(const Principal& caller, const std::string& sessi
                       fmt::format("session '{}' has no {} sensor", session_id, config::to_string(modality)), "sensor"};
     }
   }
+  if (managed.map_updates_installed) Impl::sync_map_updates(managed);  // drops it when the last subscriber left
   managed.push_started = Clock::now();
   ++managed.messages_pushed;
   const Status pushed = managed.session->push(sensor_name, message);
@@ -673,7 +700,9 @@ ApiResult<std::shared_ptr<MapSubscription>> SessionManager::subscribe_map(const 
   std::lock_guard lock(managed.mutex);
   if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
   // Map updates are large (a full replacement holds the whole point map): a short queue.
-  return add_subscription(managed.map_subscribers, std::max<std::size_t>(1, impl_->config.subscriber_queue_capacity / 64));
+  auto subscription = add_subscription(managed.map_subscribers, std::max<std::size_t>(1, impl_->config.subscriber_queue_capacity / 64));
+  Impl::sync_map_updates(managed);
+  return subscription;
 }
 
 ApiResult<msgs::FusionMap> SessionManager::map(const Principal& caller, const std::string& session_id) {
@@ -715,6 +744,26 @@ ApiResult<maps::MapVersionInfo> SessionManager::load_map(const Principal& caller
   ApiResult<maps::MapVersionInfo> saved = impl_->catalog->save(caller.organization, "", name, std::move(map));
   if (saved) logger()->info("map {} version {} loaded by {}", saved->map_id, saved->version, caller.name);
   return saved;
+}
+
+ApiResult<std::size_t> SessionManager::delete_map(const Principal& caller, const std::string& map_id, std::optional<uint64_t> version) {
+  if (const ApiStatus allowed = impl_->may_use_maps(caller, Permission::kMapWrite); !allowed) return allowed.error();
+  if (!version) {
+    std::shared_ptr<ManagedSession> live;
+    {
+      std::shared_lock lock(impl_->sessions_mutex);
+      if (const auto found = impl_->sessions.find(map_id); found != impl_->sessions.end()) live = found->second;
+    }
+    if (live && live->record.organization == caller.organization) {
+      std::lock_guard lock(live->mutex);
+      if (live->session) {
+        return ApiError{ErrorCode::kConflict, fmt::format("map '{}' is the map of a running session: end the session first", map_id), "map_id"};
+      }
+    }
+  }
+  ApiResult<std::size_t> deleted = impl_->catalog->remove(caller.organization, map_id, version);
+  if (deleted) logger()->info("map {}{} deleted by {}", map_id, version ? fmt::format(" version {}", *version) : "", caller.name);
+  return deleted;
 }
 
 ApiResult<std::vector<StoredMap>> SessionManager::list_maps(const Principal& caller) {

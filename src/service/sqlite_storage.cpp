@@ -295,6 +295,29 @@ class SqliteStorage final : public Storage {
     return records;
   }
 
+  Status delete_map_version(const std::string& map_id, uint64_t version) override {
+    std::lock_guard lock(mutex_);
+    Statement erase(database_, "DELETE FROM map_versions WHERE map_id = ? AND version = ?");
+    erase.bind(1, map_id).bind(2, static_cast<int64_t>(version));
+    if (erase.step() != SQLITE_DONE) return failure(fmt::format("forget map {} version {}", map_id, version));
+    return ok_status();
+  }
+
+  Status delete_map(const std::string& map_id) override {
+    std::lock_guard lock(mutex_);
+    HANZO_RETURN_IF_ERROR(execute("BEGIN IMMEDIATE"));
+    for (const char* sql : {"DELETE FROM map_versions WHERE map_id = ?", "DELETE FROM maps WHERE map_id = ?"}) {
+      Statement erase(database_, sql);
+      erase.bind(1, map_id);
+      if (erase.step() != SQLITE_DONE) {
+        Status failed = failure(fmt::format("forget map {}", map_id));
+        (void)execute("ROLLBACK");
+        return failed;
+      }
+    }
+    return execute("COMMIT");
+  }
+
  private:
   Status execute(const std::string& sql) {
     char* message = nullptr;

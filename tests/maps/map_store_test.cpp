@@ -75,6 +75,41 @@ TEST_F(MapStoreTest, EachSaveIsANewVersionAndEveryVersionLoads) {
   EXPECT_THAT(store_->load("unknown-map").error().message, HasSubstr("not in the store"));
 }
 
+TEST_F(MapStoreTest, DeletedVersionsAreGoneAndTheirNumbersNeverComeBack) {
+  for (float value : {1.0f, 2.0f, 3.0f}) ASSERT_TRUE(store_->save(small_map("warehouse", value)).ok());
+  ASSERT_TRUE(store_->remove_version("warehouse", 1).ok());
+  EXPECT_THAT(store_->load("warehouse", 1).error().message, HasSubstr("no version 1 (stored: 2 versions, 2 to 3)"));
+  EXPECT_EQ(store_->load("warehouse", 2)->points->points.front().x(), 2.0f);
+
+  // The newest cannot go alone (the next save would take its number again); unknown ones fail.
+  auto newest = store_->remove_version("warehouse", 3);
+  ASSERT_FALSE(newest.ok());
+  EXPECT_EQ(newest.error().field, "version");
+  EXPECT_THAT(newest.error().message, HasSubstr("version 3 is the newest"));
+  EXPECT_THAT(store_->remove_version("warehouse", 1).error().message, HasSubstr("no version 1"));
+  EXPECT_THAT(store_->remove_version("../escape", 1).error().message, HasSubstr("map_id"));
+  EXPECT_EQ(store_->save(small_map("warehouse", 4.0f))->version, 4u);
+  ASSERT_TRUE(store_->remove_version("warehouse", 3).ok());
+  auto versions = store_->versions("warehouse");
+  ASSERT_EQ(versions->size(), 2u);
+  EXPECT_EQ((*versions)[0].version, 2u);
+  EXPECT_EQ((*versions)[1].version, 4u);
+}
+
+TEST_F(MapStoreTest, ADeletedMapLeavesNothingBehindAndOtherMapsAlone) {
+  for (float value : {1.0f, 2.0f}) ASSERT_TRUE(store_->save(small_map("warehouse", value)).ok());
+  ASSERT_TRUE(store_->save(small_map("yard", 5.0f)).ok());
+  std::ofstream(root_ + "/warehouse/.123-interrupted.tmp") << "partial";  // a save killed midway
+  ASSERT_TRUE(store_->remove_map("warehouse").ok());
+  EXPECT_FALSE(std::filesystem::exists(root_ + "/warehouse"));
+  EXPECT_EQ(*store_->map_ids(), std::vector<std::string>{"yard"});
+  EXPECT_THAT(store_->load("warehouse").error().message, HasSubstr("not in the store"));
+  EXPECT_THAT(store_->remove_map("warehouse").error().message, HasSubstr("not in the store"));
+  EXPECT_EQ(store_->load("yard")->points->points.front().x(), 5.0f);
+  // The id can be used again: a new map, from version 1.
+  EXPECT_EQ(store_->save(small_map("warehouse", 7.0f))->version, 1u);
+}
+
 TEST_F(MapStoreTest, LoadAtATimeGivesTheVersionOfThatTime) {
   msgs::FusionMap map = small_map("site", 1.0f);
   map.created = Timestamp::from_nanoseconds(1'000);

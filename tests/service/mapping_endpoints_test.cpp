@@ -37,6 +37,7 @@ constexpr const char* kViewerToken = "acme-viewer-secret-0002";  // session read
 constexpr const char* kGlobexToken = "globex-robot-secret-0004";
 constexpr const char* kAdminToken = "acme-admin-secret-00003";         // everything in acme (map:write too)
 constexpr const char* kGlobexAdminToken = "globex-admin-secret-0005";
+constexpr const char* kMapperToken = "acme-mapper-secret-00006";       // map read/write only
 const Principal kStreamer{"robot", "acme", static_cast<uint32_t>(Permission::kSessionWrite) | static_cast<uint32_t>(Permission::kSessionRead)};
 
 struct Recording {
@@ -79,6 +80,7 @@ class MappingEndpointsTest : public ::testing::Test {
     SessionManagerConfig manager_config;
     manager_config.map_directory = (dir_ / "maps").string();
     manager_config.map_save_interval = std::chrono::seconds(0);  // saved when asked (and at the end)
+    manager_config.map_keep_versions = 2;
     manager_ = std::move(SessionManager::create(manager_config, std::move(storage).value(), metrics_)).value();
     auto tokens = TokenStore::parse(testing::kTokensYaml, "tokens.yaml");
     ASSERT_TRUE(tokens.ok());
@@ -433,6 +435,74 @@ TEST_F(MappingEndpointsTest, StoresMapVersionsLoadsMapsAndRelocalizesASessionInT
   ASSERT_TRUE(all.ok());
   EXPECT_EQ(all->size(), 3U);  // both sessions' maps and the loaded one
   EXPECT_EQ(restarted.value()->stored_map(admin, known_id).value().version, 2U);
+}
+
+TEST_F(MappingEndpointsTest, OldAutosavesArePrunedAndMapsOrVersionsCanBeDeleted) {
+  // Three saves of the session's map while it grows; retention keeps the newest two.
+  const auto& messages = urban_recording().messages;
+  for (std::size_t part = 1; part <= 3; ++part) {
+    for (std::size_t i = (part - 1) * messages.size() / 3; i < part * messages.size() / 3; ++i) {
+      ASSERT_TRUE(manager_->push(kStreamer, session_id_, messages[i].sensor, messages[i].message).ok());
+    }
+    ASSERT_TRUE(manager_->save_session_maps().ok());
+  }
+  const Principal admin{"admin", "acme", static_cast<uint32_t>(Permission::kAdmin)};
+  auto stored = manager_->stored_map_info(admin, session_id_);
+  ASSERT_TRUE(stored.ok()) << stored.error().message;
+  ASSERT_EQ(stored->versions.size(), 2U);
+  EXPECT_EQ(stored->versions[0].version, 2U);
+  EXPECT_EQ(stored->versions[1].version, 3U);
+
+  const auto remove = [&](const std::string& path, const std::string& token) { return client().Delete("/v1/maps/" + path, bearer(token)); };
+  EXPECT_EQ(remove(session_id_, kAdminToken)->status, 409);  // the map of a running session
+  EXPECT_THAT(error_of(remove(session_id_, kAdminToken))["message"].get<std::string>(), HasSubstr("end the session first"));
+  EXPECT_EQ(remove(session_id_ + "?version=3", kAdminToken)->status, 409);  // the newest
+  EXPECT_EQ(remove(session_id_ + "?version=1", kAdminToken)->status, 404);  // pruned already
+  EXPECT_EQ(error_of(remove(session_id_ + "?version=0", kAdminToken))["field"], "version");
+  EXPECT_EQ(remove(session_id_ + "?version=2", kRobotToken)->status, 403);  // map:read only
+  auto version_deleted = remove(session_id_ + "?version=2", kMapperToken);
+  ASSERT_TRUE(version_deleted);
+  ASSERT_EQ(version_deleted->status, 200) << version_deleted->body;
+  EXPECT_EQ(json::parse(version_deleted->body)["versions_deleted"], 1);
+  EXPECT_EQ(client().Get("/v1/maps/" + session_id_ + "?version=2", bearer(kRobotToken))->status, 404);
+  EXPECT_EQ(client().Get("/v1/maps/" + session_id_ + "?version=3", bearer(kRobotToken))->status, 200);
+
+  // A loaded map with two versions goes at once; another organization cannot touch it.
+  msgs::FusionMap yard;
+  yard.map_id = "yard";
+  yard.points = msgs::PointLayer{};
+  yard.points->points = {Eigen::Vector3f(1.0F, 2.0F, 0.5F)};
+  const std::string yard_file = maps::serialize_fusion_map(yard).value();
+  for (int i = 0; i < 2; ++i) {
+    ASSERT_EQ(client().Post("/v1/maps", bearer(kMapperToken), yard_file, "application/octet-stream")->status, 201);
+  }
+  EXPECT_EQ(remove("yard", kGlobexAdminToken)->status, 403);
+  auto map_deleted = remove("yard", kMapperToken);
+  ASSERT_TRUE(map_deleted);
+  ASSERT_EQ(map_deleted->status, 200) << map_deleted->body;
+  EXPECT_EQ(json::parse(map_deleted->body)["versions_deleted"], 2);
+  EXPECT_EQ(client().Get("/v1/maps/yard?format=json", bearer(kRobotToken))->status, 404);
+  EXPECT_EQ(remove("yard", kMapperToken)->status, 404);
+  EXPECT_EQ(client().Post("/v1/maps", bearer(kMapperToken), yard_file, "application/octet-stream")->status, 201);  // the id again
+
+  // Once the session ended its map can go too; the deletion survives a restart.
+  ASSERT_TRUE(manager_->end_session(kStreamer, session_id_).ok());
+  auto ended_deleted = remove(session_id_, kAdminToken);
+  ASSERT_TRUE(ended_deleted);
+  ASSERT_EQ(ended_deleted->status, 200) << ended_deleted->body;
+  EXPECT_EQ(client().Get("/v1/maps/" + session_id_ + "?format=json", bearer(kRobotToken))->status, 404);
+  rest_.reset();
+  grpc_.reset();
+  manager_.reset();
+  SessionManagerConfig config;
+  config.map_directory = (dir_ / "maps").string();
+  auto restarted = SessionManager::create(config, open_storage("sqlite://" + (dir_ / "fusion.db").string()).value(), metrics_);
+  ASSERT_TRUE(restarted.ok()) << restarted.error().message;
+  auto left = restarted.value()->list_maps(admin);
+  ASSERT_TRUE(left.ok());
+  ASSERT_EQ(left->size(), 1U);
+  EXPECT_EQ(left->front().record.map_id, "yard");
+  EXPECT_EQ(left->front().versions.size(), 1U);
 }
 
 TEST_F(MappingEndpointsTest, FusionClientStreamsALogIntoANewSessionAndReportsServerErrors) {

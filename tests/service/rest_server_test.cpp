@@ -215,7 +215,7 @@ TEST_F(RestServerTest, AuthMatrixOfEveryOperationInTheOpenApiDocument) {
     }
   }
   EXPECT_GE(operations.size(), 14U);
-  // Ending the session last: everything else still finds it active.
+  // Deleting last (the session, then the map): everything else still finds them.
   std::stable_partition(operations.begin(), operations.end(), [](const Operation& op) { return op.method != "delete"; });
 
   auto http = client();
@@ -254,11 +254,11 @@ TEST_F(RestServerTest, AuthMatrixOfEveryOperationInTheOpenApiDocument) {
     EXPECT_NE(permitted->status, 401);
     EXPECT_NE(permitted->status, 403) << allowed << ": " << permitted->body;
   }
-  // The session survived all of it (and only the last call ended it); the map too.
+  // The session survived all of it (and only its DELETE ended it); the map went with its DELETE.
   const json info = json::parse(http.Get(("/v1/sessions/" + session_id).c_str(), bearer(kViewerToken))->body);
   EXPECT_EQ(info["status"], "ended");
   EXPECT_EQ(info["sensors"].size(), 4u);
-  EXPECT_EQ(http.Get(("/v1/maps/" + map_id + "?format=json").c_str(), bearer(kRobotToken))->status, 200);
+  EXPECT_EQ(http.Get(("/v1/maps/" + map_id + "?format=json").c_str(), bearer(kRobotToken))->status, 404);
 }
 
 TEST_F(RestServerTest, BadRequestsGetTheDocumentedErrors) {

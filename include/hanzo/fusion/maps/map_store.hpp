@@ -7,7 +7,8 @@
 // temporary file, fsyncs it and links it under its final name with link(2), which fails if
 // another writer took that version first (save() then takes the next one). A crash or kill
 // during a save leaves at most a stray hidden ".<pid>-<uuid>.tmp" file, which readers ignore;
-// every version that save() reported stays readable.
+// every version that save() reported stays readable until remove_version() / remove_map()
+// deletes it (retention, or a client's request).
 //
 // map ids are 1..128 characters of [A-Za-z0-9._-], not starting with '.', so that an id can
 // never name a path outside the store.
@@ -57,6 +58,14 @@ class MapStore {
   Result<msgs::FusionMap> load(const std::string& map_id, std::optional<uint64_t> version = std::nullopt) const;
   /// The newest version created at or before `time`.
   Result<msgs::FusionMap> load_at(const std::string& map_id, Timestamp time) const;
+
+  /// Deletes one stored version of a map. The newest version cannot be deleted alone (save()
+  /// numbers after the newest file, so its number would be given again): delete the map.
+  /// Fails naming the map and version (unknown version, newest version, file system error).
+  Status remove_version(const std::string& map_id, uint64_t version);
+  /// Deletes a map: every version and its folder. A failure part way leaves the versions not
+  /// yet deleted readable (delete again).
+  Status remove_map(const std::string& map_id);
 
   const std::string& root() const { return root_; }
 

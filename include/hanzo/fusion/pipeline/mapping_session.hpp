@@ -82,9 +82,20 @@ struct MappingSessionConfig {
   /// never wait for a registration, the result is fused when the next message arrives, as a
   /// measurement in the past (the Session rolls back; it must come within frontend.lag_window_s).
   /// At most two sweeps wait for the worker; push() waits beyond (a sender faster than
-  /// registration is slowed down instead of losing sweeps). Off: sweeps are registered inside
+  /// registration is slowed down instead of losing sweeps), at most max_registration_wait_s.
+  /// Off: sweeps are registered inside
   /// push(), deterministically (replays, tests).
   bool asynchronous_registration = false;
+  /// With asynchronous_registration: how long push() waits for the worker when two sweeps
+  /// already wait (s); after it the oldest waiting sweep is dropped ("registration_behind").
+  /// Empty: wait as long as it takes (replays). A live server bounds it (0.05): a push() that
+  /// waited held back every IMU pose behind it, and the next sweeps then waited for those poses;
+  /// a replay faster than real time still only slows down (a registration takes less).
+  std::optional<double> max_registration_wait_s;
+  /// With asynchronous_registration: the worker thread's nice value (0..19; Linux schedules
+  /// threads by it). Above 0, when the cores are saturated the threads that fuse the IMU and
+  /// answer poses run first and registration takes what is left (the server uses 10).
+  int registration_thread_niceness = 0;
   Status validate() const;
   static maps::MapBuilderConfig default_map();
 };

@@ -17,6 +17,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <shared_mutex>
 #include <string>
 #include <vector>
 
@@ -55,6 +56,16 @@ class MapCatalog {
   ApiResult<std::vector<StoredMap>> list(const std::string& organization) const;
   ApiResult<StoredMap> find(const std::string& organization, const std::string& map_id) const;
 
+  /// Deletes a map of `organization` with every version (and its rows), or only `version`.
+  /// kNotFound: unknown map or version; kConflict: `version` is the map's newest (version
+  /// numbers are never given twice; delete the map instead); kInternal: a file system or
+  /// database failure (what was deleted before it stays deleted). Returns the number of
+  /// versions deleted.
+  ApiResult<std::size_t> remove(const std::string& organization, const std::string& map_id, std::optional<uint64_t> version);
+  /// Retention: deletes all but the newest `keep` (>= 1) versions of `map_id`; returns how many
+  /// it deleted.
+  Result<std::size_t> prune(const std::string& map_id, std::size_t keep);
+
  private:
   MapCatalog(maps::MapStore store, Storage& storage) : store_(std::move(store)), storage_(storage) {}
   // The owner record of `map_id` when `organization` may use it; caller holds mutex_.
@@ -64,6 +75,9 @@ class MapCatalog {
   Storage& storage_;
   mutable std::mutex mutex_;
   std::map<std::string, MapRecord> owners_;  // map_id -> owner
+  // Saves write files under a shared lock, a map's deletion holds it exclusively (a save never
+  // recreates a map that is being deleted).
+  std::shared_mutex files_mutex_;
 };
 
 }  // namespace hanzo::fusion::service

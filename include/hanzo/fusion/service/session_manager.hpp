@@ -58,6 +58,10 @@ struct SessionManagerConfig {
   std::string map_directory;
   /// How often a changed session map is saved as a new version (0: only when the session ends).
   std::chrono::seconds map_save_interval{30};
+  /// Retention: the newest versions kept of each session's map (older ones are deleted after
+  /// each save; 0 keeps all). Maps clients load are never pruned. A session saving every 30 s
+  /// for a day would otherwise keep 2880 versions.
+  std::size_t map_keep_versions = 20;
   std::size_t cached_localizers = 4;                // prepared maps kept for relocalize()
 };
 
@@ -158,6 +162,10 @@ class SessionManager {
   /// empty); kPermissionDenied for another organization's map id. `map` must pass
   /// msgs::validate (the front ends decode it with the validating readers).
   ApiResult<maps::MapVersionInfo> load_map(const Principal& caller, msgs::FusionMap map, const std::string& name = "");
+  /// Deletes a stored map with every version, or one `version` of it (map:write); returns the
+  /// number of versions deleted. kConflict: the map of a running session (end it first), or
+  /// `version` is the map's newest; kNotFound: unknown map or version.
+  ApiResult<std::size_t> delete_map(const Principal& caller, const std::string& map_id, std::optional<uint64_t> version = std::nullopt);
   /// Stored maps of the caller's organization (map:read), sessions' maps included.
   ApiResult<std::vector<StoredMap>> list_maps(const Principal& caller);
   ApiResult<StoredMap> stored_map_info(const Principal& caller, const std::string& map_id);

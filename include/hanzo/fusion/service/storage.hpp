@@ -96,6 +96,10 @@ class Storage {
   virtual Status record_map_version(const MapVersionRecord& record) = 0;
   /// The versions a session saved, oldest first.
   virtual Result<std::vector<MapVersionRecord>> map_versions(const std::string& session_id) = 0;
+  /// Forgets a deleted version (no error when it was not recorded).
+  virtual Status delete_map_version(const std::string& map_id, uint64_t version) = 0;
+  /// Forgets a deleted map: its owner row and every version row, in one transaction.
+  virtual Status delete_map(const std::string& map_id) = 0;
 };
 
 /// "sqlite://PATH" (PATH absolute after the two slashes, or relative), a plain file path (SQLite),
