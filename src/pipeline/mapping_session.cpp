@@ -1,14 +1,9 @@
 #include "hanzo/fusion/pipeline/mapping_session.hpp"
 
-#include <sys/resource.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
-#include <cstring>
 #include <mutex>
 #include <thread>
 
@@ -40,14 +35,8 @@ constexpr double kMapMoveRotation = 0.001;    // rad
 // long).
 class MappingSession::RegistrationWorker {
  public:
-  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity, int niceness)
-      : odometry_(odometry), capacity_(capacity), thread_([this, niceness] {
-          // Per thread on Linux (the thread id is a process id for setpriority).
-          if (niceness != 0 && setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), niceness) != 0) {
-            logger()->warn("mapping session: registration thread niceness {} not set: {}", niceness, std::strerror(errno));
-          }
-          run();
-        }) {}
+  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity)
+      : odometry_(odometry), capacity_(capacity), thread_([this] { run(); }) {}
   ~RegistrationWorker() {
     {
       std::lock_guard lock(mutex_);
@@ -130,9 +119,6 @@ Status MappingSessionConfig::validate() const {
   if (max_registration_wait_s && !(*max_registration_wait_s >= 0.0 && *max_registration_wait_s <= 60.0)) {
     return Error(fmt::format("max_registration_wait_s: {} is not in 0..60 s", *max_registration_wait_s));
   }
-  if (registration_thread_niceness < 0 || registration_thread_niceness > 19) {
-    return Error(fmt::format("registration_thread_niceness: {} is not in 0..19", registration_thread_niceness));
-  }
   return ok_status();
 }
 
@@ -172,7 +158,7 @@ MappingSession::MappingSession(std::unique_ptr<Session> session, MappingSessionC
     // registered, inside the default 0.5 s lag window its late pose must land in.
     constexpr std::size_t kWorkerQueue = 2;
     if (config_.asynchronous_registration) {
-      worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue, config_.registration_thread_niceness);
+      worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue);
     }
   }
   session_->set_keyframe_callback([this](const msgs::Keyframe& emitted) {
@@ -208,7 +194,16 @@ void MappingSession::add_gnss_factor(const FusedGnssFix& fix) {
 
 MappingSession::~MappingSession() { worker_.reset(); }  // before the odometry it registers with
 
+std::optional<std::chrono::nanoseconds> MappingSession::registration_wait_limit(Timestamp now_in_data) const {
+  if (!config_.max_registration_wait_s || !first_push_) return std::nullopt;
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - first_push_->first).count();
+  const double data = (now_in_data - first_push_->second).seconds();
+  if (data > 1.5 * wall + 1.0) return std::nullopt;  // a replay faster than real time: it may wait
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(*config_.max_registration_wait_s));
+}
+
 Status MappingSession::push(std::string_view sensor, const msgs::SensorMessage& message) {
+  if (!first_push_) first_push_.emplace(std::chrono::steady_clock::now(), msgs::timestamp_of(message));
   if (odometry_ && sensor == lidar_sensor_) {
     if (const auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(*scan);
   }
@@ -274,11 +269,7 @@ void MappingSession::register_ready_scans() {
       // A sweep that began before the first pose has no motion to start from (the IMU aligned).
       count_refused(scan.timestamp < *first_pose_time_ ? "aligning" : "not_registered");
     } else if (worker_) {
-      const std::optional<std::chrono::nanoseconds> max_wait =
-          config_.max_registration_wait_s
-              ? std::optional(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(*config_.max_registration_wait_s)))
-              : std::nullopt;
-      const std::size_t dropped = worker_->submit(std::move(prepared).value(), max_wait);
+      const std::size_t dropped = worker_->submit(std::move(prepared).value(), registration_wait_limit(latest->timestamp));
       for (std::size_t i = 0; i < dropped; ++i) count_refused("registration_behind");
     } else {
       on_registered(odometry_->register_scan(*prepared));

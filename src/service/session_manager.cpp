@@ -237,8 +237,7 @@ struct SessionManager::Impl {
                                                                   const calib::Calibration& calibration) {
     pipeline::MappingSessionConfig mapping;
     mapping.asynchronous_registration = true;  // the IMU's poses never wait for a LiDAR registration
-    mapping.max_registration_wait_s = 0.05;  // then a live session drops a sweep rather than hold its IMU back
-    mapping.registration_thread_niceness = 10;  // poses first when the cores are saturated
+    mapping.max_registration_wait_s = 0.0;  // live: a sweep the worker cannot take at once drops the oldest waiting
     auto session = pipeline::MappingSession::create(configuration, calibration, mapping);
     if (!session) return session.error();
     ManagedSession* raw = &managed;

@@ -38,6 +38,7 @@
 // LiDARs are not applied); after a relocalization (world = the map's frame) GNSS fixes are no
 // longer added to the graph.
 // Not thread-safe: one thread at a time (the server serializes per session).
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
@@ -47,6 +48,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "hanzo/fusion/calib/calibration.hpp"
@@ -88,14 +90,11 @@ struct MappingSessionConfig {
   bool asynchronous_registration = false;
   /// With asynchronous_registration: how long push() waits for the worker when two sweeps
   /// already wait (s); after it the oldest waiting sweep is dropped ("registration_behind").
-  /// Empty: wait as long as it takes (replays). A live server bounds it (0.05): a push() that
-  /// waited held back every IMU pose behind it, and the next sweeps then waited for those poses;
-  /// a replay faster than real time still only slows down (a registration takes less).
+  /// Empty: wait as long as it takes. The server sets 0: a push() that waited held back every
+  /// IMU pose behind it, and the next sweeps then waited for those poses. Data pushed
+  /// faster than real time (its time more than 1.5x ahead of the wall clock since the first
+  /// message, plus 1 s) always waits: a replay only slows down.
   std::optional<double> max_registration_wait_s;
-  /// With asynchronous_registration: the worker thread's nice value (0..19; Linux schedules
-  /// threads by it). Above 0, when the cores are saturated the threads that fuse the IMU and
-  /// answer poses run first and registration takes what is left (the server uses 10).
-  int registration_thread_niceness = 0;
   Status validate() const;
   static maps::MapBuilderConfig default_map();
 };
@@ -251,6 +250,10 @@ class MappingSession {
   };
   std::deque<WaitingScan> waiting_scans_;
   std::optional<Timestamp> first_pose_time_;  ///< the Session's first pose seen
+  /// The first push: wall clock and message time (is the data live or replayed faster?).
+  std::optional<std::pair<std::chrono::steady_clock::time_point, Timestamp>> first_push_;
+  /// How long a sweep may wait for the worker now (max_registration_wait_s, unless replayed fast).
+  std::optional<std::chrono::nanoseconds> registration_wait_limit(Timestamp now_in_data) const;
   std::optional<Timestamp> last_scan_time_;
   std::optional<msgs::Keyframe> latest_keyframe_;   ///< the newest Session keyframe
   SE3 latest_keyframe_uncorrected_;                 ///< its pose before the Session's corrections
