@@ -1,7 +1,9 @@
 // hanzo-fusion calib check FILE: loads a calibration file and prints its summary (calib motion:
-// calib_motion_command.cpp).
+// calib_motion_command.cpp; calib camera: calib_camera_command.cpp).
 
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <memory>
 #include <numbers>
 #include <string>
@@ -56,10 +58,29 @@ std::string to_text(const std::string& path, const calib::Calibration& calibrati
 
 }  // namespace
 
+Status update_calibration_entry(const std::string& path, const std::string& sensor,
+                                const std::function<void(calib::SensorCalibration&)>& change) {
+  calib::Calibration calibration;
+  if (std::filesystem::exists(path)) {
+    Result<calib::Calibration> existing = calib::load_calibration(path);
+    if (!existing) return existing.error();
+    calibration = std::move(existing).value();
+  }
+  auto found = std::find_if(calibration.sensors.begin(), calibration.sensors.end(),
+                            [&](const calib::SensorCalibration& entry) { return entry.sensor == sensor; });
+  if (found == calibration.sensors.end()) {
+    calibration.sensors.push_back(calib::SensorCalibration::from_transform(sensor, SE3()));
+    found = std::prev(calibration.sensors.end());
+  }
+  change(*found);
+  return calib::save_calibration(calibration, path);
+}
+
 void add_calib_command(CLI::App& app, const Output& output, Command& run) {
   CLI::App* calib_command = app.add_subcommand("calib", "Sensor calibration files and procedures");
   calib_command->require_subcommand(1);
   add_calib_motion_command(*calib_command, output, run);
+  add_calib_camera_command(*calib_command, output, run);
   CLI::App* check = calib_command->add_subcommand("check", "Load a calibration YAML and print its summary or its error");
   auto path = std::make_shared<std::string>();
   check->add_option("FILE", *path, "Calibration YAML")->required();

@@ -65,26 +65,6 @@ Result<std::vector<calib::GyroSample>> read_gyro(const std::string& path, std::s
   return samples;
 }
 
-// Writes the entry into `path`: replaces the sensor's entry of an existing file, else appends; a new file otherwise.
-Status write_entry(const std::string& path, const calib::SensorCalibration& entry) {
-  calib::Calibration calibration;
-  if (std::filesystem::exists(path)) {
-    Result<calib::Calibration> existing = calib::load_calibration(path);
-    if (!existing) return existing.error();
-    calibration = std::move(existing).value();
-  }
-  auto found = std::find_if(calibration.sensors.begin(), calibration.sensors.end(),
-                            [&](const calib::SensorCalibration& sensor) { return sensor.sensor == entry.sensor; });
-  if (found == calibration.sensors.end()) {
-    calibration.sensors.push_back(entry);
-  } else {
-    std::optional<calib::CameraCalibration> camera = found->camera;  // intrinsics are not this procedure's
-    *found = entry;
-    found->camera = std::move(camera);
-  }
-  return calib::save_calibration(calibration, path);
-}
-
 std::string to_text(const calib::MotionCalibrationSummary& summary, const std::string& out) {
   const calib::SensorCalibration& result = summary.calibration;
   const SO3 rotation = result.T_body_sensor().rotation();
@@ -159,7 +139,13 @@ void add_calib_motion_command(CLI::App& calib_app, const Output& output, Command
       auto summary = calib::calibrate_from_motion(input, config);
       if (!summary) return report_failure(output, result, summary.error().message);
       if (!options->out.empty()) {
-        if (Status written = write_entry(options->out, summary->calibration); !written) {
+        const calib::SensorCalibration& calibrated = summary->calibration;
+        const Status written = update_calibration_entry(options->out, calibrated.sensor, [&](calib::SensorCalibration& entry) {
+          std::optional<calib::CameraCalibration> camera = entry.camera;  // intrinsics are not this procedure's
+          entry = calibrated;
+          entry.camera = std::move(camera);
+        });
+        if (!written) {
           return report_failure(output, result, written.error().message);
         }
       }

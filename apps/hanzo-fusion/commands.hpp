@@ -2,9 +2,12 @@
 // Subcommand registration: each adds its CLI11 subcommand and sets `run` when selected.
 
 #include <functional>
+#include <string>
 
 #include <CLI/CLI.hpp>
 
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/core/result.hpp"
 #include "output.hpp"
 
 namespace hanzo::fusion::app {
@@ -13,8 +16,14 @@ using Command = std::function<int()>;
 
 void add_config_command(CLI::App& app, const Output& output, Command& run);
 void add_calib_command(CLI::App& app, const Output& output, Command& run);
-/// `calib motion` (calib_motion_command.cpp), added by add_calib_command.
+/// `calib motion` (calib_motion_command.cpp) and `calib camera` (calib_camera_command.cpp),
+/// added by add_calib_command.
 void add_calib_motion_command(CLI::App& calib_app, const Output& output, Command& run);
+void add_calib_camera_command(CLI::App& calib_app, const Output& output, Command& run);
+/// Changes the entry of `sensor` in the calibration YAML `path` (an entry at the body origin is
+/// added when missing, the file created when missing); the other entries are kept.
+Status update_calibration_entry(const std::string& path, const std::string& sensor,
+                                const std::function<void(calib::SensorCalibration&)>& change);
 void add_eval_command(CLI::App& app, const Output& output, Command& run);
 void add_log_command(CLI::App& app, const Output& output, Command& run);
 void add_import_command(CLI::App& app, const Output& output, Command& run);

@@ -643,4 +643,38 @@ TEST(Cli, CalibMotionRecoversTheLidarMountOfTheCalibrationWalk) {
   std::filesystem::remove_all(dir);
 }
 
+TEST(Cli, CalibCameraRecoversTheLensOfTheCheckerboardScenario) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_calib_camera_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  const std::string d = dir.string();
+  ASSERT_EQ(run(fmt::format("sim examples/scenarios/camera_checkerboard.yaml --out {}", d)).exit_code, 0);
+  // The scenario's calibration.yaml holds the true lens: calibrate into a file with the mount only.
+  const CliRun calibrated = run(fmt::format("calib camera {}/sensors.mcap --board 8x6 --square 0.08 --out {}/result.yaml --json", d, d));
+  ASSERT_EQ(calibrated.exit_code, 0) << calibrated.err;
+  const nlohmann::json result = nlohmann::json::parse(calibrated.out);
+  EXPECT_EQ(result["views_found"], 60);  // the whole board in every image
+  EXPECT_LT(result["rms_px"].get<double>(), 0.25);  // measured 0.146
+  // Measured: fx -0.44, fy -0.46, cx -0.55, cy -0.19 px; k1 -0.28332 (truth -0.28341).
+  EXPECT_NEAR(result["intrinsics"]["fx"].get<double>(), 458.654, 1.5);
+  EXPECT_NEAR(result["intrinsics"]["fy"].get<double>(), 457.296, 1.5);
+  EXPECT_NEAR(result["intrinsics"]["cx"].get<double>(), 367.215, 1.5);
+  EXPECT_NEAR(result["intrinsics"]["cy"].get<double>(), 248.375, 1.5);
+  EXPECT_NEAR(result["distortion_coeffs"][0].get<double>(), -0.28340811, 0.005);
+  const CliRun check = run(fmt::format("calib check {}/result.yaml --json", d));
+  ASSERT_EQ(check.exit_code, 0) << check.err;
+  const nlohmann::json sensors = nlohmann::json::parse(check.out)["calibration"]["sensors"];
+  ASSERT_EQ(sensors.size(), 1u);
+  EXPECT_EQ(sensors[0]["sensor"], "camera");
+  EXPECT_NEAR(sensors[0]["intrinsics"]["fx"].get<double>(), result["intrinsics"]["fx"].get<double>(), 1e-9);
+
+  // (A board of other dimensions is refused by calib's own test: the search takes seconds per image.)
+  const CliRun no_images = run(fmt::format("calib camera {}/sensors.mcap --topic /nothing", d));
+  EXPECT_EQ(no_images.exit_code, 1);
+  EXPECT_THAT(no_images.err, HasSubstr("no images on /nothing"));
+  EXPECT_EQ(std::count(no_images.err.begin(), no_images.err.end(), '\n'), 1);
+  EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --board nine", d)).err, HasSubstr("COLUMNSxROWS"));
+  EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --model pinhole", d)).err, HasSubstr("radtan or equidistant"));
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace
