@@ -13,7 +13,7 @@
 
 #include "commands.hpp"
 #include "hanzo/fusion/calib/camera_calibration.hpp"
-#include "hanzo/fusion/io/sensor_log.hpp"
+#include "log_messages.hpp"
 
 namespace hanzo::fusion::app {
 namespace {
@@ -29,26 +29,6 @@ struct CameraOptions {
   std::size_t max_views = calib::CameraCalibrationConfig{}.max_views;
   std::string out;
 };
-
-// The images of the log's topic (the first image topic when none is named).
-Result<std::vector<msgs::ImageMessage>> read_images(const std::string& path, std::string topic) {
-  auto reader = io::SensorLogReader::open(path);
-  if (!reader) return reader.error();
-  std::vector<msgs::ImageMessage> images;
-  io::LogEntry entry;
-  while (true) {
-    Result<bool> more = (*reader)->next(entry);
-    if (!more) return more.error();
-    if (!*more) break;
-    const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
-    const auto* image = message ? std::get_if<msgs::ImageMessage>(message) : nullptr;
-    if (image == nullptr) continue;
-    if (topic.empty()) topic = entry.topic;
-    if (entry.topic == topic) images.push_back(*image);
-  }
-  if (images.empty()) return Error(fmt::format("{}: no images{}", path, topic.empty() ? "" : " on " + topic));
-  return images;
-}
 
 Result<calib::CheckerboardTarget> parse_board(const std::string& text, double square) {
   std::smatch match;
@@ -114,7 +94,7 @@ void add_calib_camera_command(CLI::App& calib_app, const Output& output, Command
       config.model = *model;
       config.estimate_k3 = options->k3;
       config.max_views = options->max_views;
-      auto images = read_images(options->log, options->topic);
+      auto images = read_log_messages<msgs::ImageMessage>(options->log, options->topic, "images");
       if (!images) return report_failure(output, result, images.error().message);
       auto calibrated = calib::calibrate_camera(*images, config);
       if (!calibrated) return report_failure(output, result, calibrated.error().message);

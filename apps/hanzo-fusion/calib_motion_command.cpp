@@ -4,9 +4,9 @@
 // into a calibration YAML (created, or the entry replaced, the others kept).
 
 #include <algorithm>
-#include <filesystem>
 #include <memory>
 #include <numbers>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -14,9 +14,9 @@
 
 #include "commands.hpp"
 #include "hanzo/fusion/calib/motion_calibration.hpp"
-#include "hanzo/fusion/io/sensor_log.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/service/motion_calibration_json.hpp"
+#include "log_messages.hpp"
 
 namespace hanzo::fusion::app {
 namespace {
@@ -46,22 +46,11 @@ Result<std::vector<calib::StampedPose>> read_poses(const std::string& path, cons
 }
 
 // The gyroscope of the log's IMU topic (the first IMU topic when none is named).
-Result<std::vector<calib::GyroSample>> read_gyro(const std::string& path, std::string topic) {
-  auto reader = io::SensorLogReader::open(path);
-  if (!reader) return reader.error();
+Result<std::vector<calib::GyroSample>> read_gyro(const std::string& path, const std::string& topic) {
+  auto imu = read_log_messages<msgs::ImuMessage>(path, topic, "IMU messages");
+  if (!imu) return imu.error();
   std::vector<calib::GyroSample> samples;
-  io::LogEntry entry;
-  while (true) {
-    Result<bool> more = (*reader)->next(entry);
-    if (!more) return more.error();
-    if (!*more) break;
-    const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
-    const auto* imu = message ? std::get_if<msgs::ImuMessage>(message) : nullptr;
-    if (imu == nullptr) continue;
-    if (topic.empty()) topic = entry.topic;
-    if (entry.topic == topic) samples.push_back({imu->timestamp, imu->angular_velocity});
-  }
-  if (samples.empty()) return Error(fmt::format("{}: no IMU messages{}", path, topic.empty() ? "" : " on " + topic));
+  for (const msgs::ImuMessage& message : *imu) samples.push_back({message.timestamp, message.angular_velocity});
   return samples;
 }
 
