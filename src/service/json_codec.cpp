@@ -1,6 +1,8 @@
 #include "json_codec.hpp"
 
 #include <cmath>
+#include <initializer_list>
+#include <iterator>
 
 #include <Eigen/Cholesky>
 #include <fmt/format.h>
@@ -352,6 +354,72 @@ std::string poses_to_tum(const std::vector<msgs::PoseEstimate>& poses) {
                         pose.timestamp.nanoseconds() % 1'000'000'000, p.x(), p.y(), p.z(), q.x(), q.y(), q.z(), q.w());
   }
   return text;
+}
+
+std::string trajectory_page_to_json(const std::vector<msgs::PoseEstimate>& poses, std::optional<Timestamp> next_after) {
+  fmt::memory_buffer out;
+  const auto number = [&out](double value) {
+    if (std::isfinite(value)) {
+      fmt::format_to(std::back_inserter(out), "{}", value);
+    } else {
+      fmt::format_to(std::back_inserter(out), "null");  // as nlohmann::json writes them
+    }
+  };
+  const auto numbers = [&](std::initializer_list<double> values) {
+    out.push_back('[');
+    bool first = true;
+    for (double value : values) {
+      if (!first) out.push_back(',');
+      first = false;
+      number(value);
+    }
+    out.push_back(']');
+  };
+  const auto text = [&out](const std::string& value) { fmt::format_to(std::back_inserter(out), "{}", json(value).dump()); };
+  fmt::format_to(std::back_inserter(out), "{{\"next_after\":");
+  if (next_after) {
+    fmt::format_to(std::back_inserter(out), "{}", next_after->nanoseconds());
+  } else {
+    fmt::format_to(std::back_inserter(out), "null");
+  }
+  fmt::format_to(std::back_inserter(out), ",\"poses\":[");
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    const msgs::PoseEstimate& pose = poses[i];
+    const Eigen::Vector3d& p = pose.T_world_body.position;
+    const Eigen::Quaterniond& q = pose.T_world_body.orientation;
+    if (i > 0) out.push_back(',');
+    fmt::format_to(std::back_inserter(out), "{{\"active_modalities\":{},\"active_sensors\":[", pose.status.active_modalities);
+    for (std::size_t s = 0; s < pose.status.active_sensors.size(); ++s) {
+      if (s > 0) out.push_back(',');
+      text(pose.status.active_sensors[s]);
+    }
+    fmt::format_to(std::back_inserter(out), "],\"child_frame_id\":");
+    text(pose.child_frame_id);
+    fmt::format_to(std::back_inserter(out), ",\"covariance\":");
+    if (pose.pose_covariance) {
+      out.push_back('[');
+      for (int k = 0; k < 36; ++k) {
+        if (k > 0) out.push_back(',');
+        number((*pose.pose_covariance)(k / 6, k % 6));
+      }
+      out.push_back(']');
+    } else {
+      fmt::format_to(std::back_inserter(out), "null");
+    }
+    fmt::format_to(std::back_inserter(out), ",\"frame_id\":");
+    text(pose.frame_id);
+    fmt::format_to(std::back_inserter(out), ",\"orientation_wxyz\":");
+    numbers({q.w(), q.x(), q.y(), q.z()});
+    fmt::format_to(std::back_inserter(out), ",\"position\":");
+    numbers({p.x(), p.y(), p.z()});
+    fmt::format_to(std::back_inserter(out), ",\"state\":");
+    text(std::string(msgs::to_string(pose.status.state)));
+    fmt::format_to(std::back_inserter(out), ",\"timestamp_ns\":{},\"velocity\":", pose.timestamp.nanoseconds());
+    numbers({pose.velocity.x(), pose.velocity.y(), pose.velocity.z()});
+    out.push_back('}');
+  }
+  fmt::format_to(std::back_inserter(out), "]}}");
+  return fmt::to_string(out);
 }
 
 }  // namespace hanzo::fusion::service::detail

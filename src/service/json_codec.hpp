@@ -1,6 +1,7 @@
 #pragma once
 // JSON shapes of the REST API (docs/server.md shows examples; docs/openapi.json is normative).
 #include <initializer_list>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -58,5 +59,8 @@ ApiResult<CalibrateRequest> parse_calibrate(const std::string& body);
 
 /// "tx ty tz qx qy qz qw" lines with the timestamp in seconds (TUM format).
 std::string poses_to_tum(const std::vector<msgs::PoseEstimate>& poses);
+/// `{"poses": [pose_to_json of each], "next_after": ns or null}` as text, written directly
+/// (a page of 100 poses with covariances is ~95 KB: building it as a json value took 5x longer).
+std::string trajectory_page_to_json(const std::vector<msgs::PoseEstimate>& poses, std::optional<Timestamp> next_after);
 
 }  // namespace hanzo::fusion::service::detail

@@ -208,9 +208,8 @@ struct RestServer::Impl {
         response.set_content(detail::poses_to_tum(page->poses), "text/plain; charset=utf-8");
         return;
       }
-      json poses = json::array();
-      for (const msgs::PoseEstimate& pose : page->poses) poses.push_back(detail::pose_to_json(pose));
-      send_json(response, 200, {{"poses", std::move(poses)}, {"next_after", next ? json(next->nanoseconds()) : json(nullptr)}});
+      response.status = 200;
+      response.set_content(detail::trajectory_page_to_json(page->poses, next), kJson);
     }));
     s.Get(session + "/map", authenticated("GET", "/v1/sessions/{id}/map", [this](const httplib::Request& request,
                                                                               httplib::Response& response, const Principal& caller) {

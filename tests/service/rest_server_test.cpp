@@ -149,6 +149,24 @@ TEST_F(RestServerTest, SessionLifecycle) {
   EXPECT_EQ(total, info["stored_poses"].get<std::size_t>());
   EXPECT_EQ(pages, static_cast<int>((total + 699) / 700));
   EXPECT_GT(total, 1800u);
+  // A page's poses (written as text directly) carry the fields of GET /pose, numbers exact.
+  const json first_page = json::parse(http.Get(("/v1/sessions/" + id + "/trajectory?limit=3").c_str(), bearer(kViewerToken))->body);
+  const std::vector<msgs::PoseEstimate> stored = manager_->trajectory(kStreamer, id, Timestamp::from_nanoseconds(0), 3).value().poses;
+  ASSERT_EQ(first_page["poses"].size(), 3u);
+  for (std::size_t i = 0; i < 3; ++i) {
+    const json& paged = first_page["poses"][i];
+    for (const auto& [key, value] : pose_json.items()) EXPECT_TRUE(paged.contains(key)) << key;
+    EXPECT_EQ(paged.size(), pose_json.size());
+    EXPECT_EQ(paged["timestamp_ns"], stored[i].timestamp.nanoseconds());
+    EXPECT_EQ(paged["position"][2].get<double>(), stored[i].T_world_body.position.z());
+    EXPECT_EQ(paged["orientation_wxyz"][0].get<double>(), stored[i].T_world_body.orientation.w());
+    EXPECT_EQ(paged["velocity"][1].get<double>(), stored[i].velocity.y());
+    ASSERT_TRUE(stored[i].pose_covariance.has_value());
+    EXPECT_EQ(paged["covariance"][7].get<double>(), (*stored[i].pose_covariance)(1, 1));
+    EXPECT_EQ(paged["state"], msgs::to_string(stored[i].status.state));
+    EXPECT_EQ(paged["active_sensors"].size(), stored[i].status.active_sensors.size());
+  }
+  EXPECT_EQ(first_page["next_after"], stored[2].timestamp.nanoseconds());
   auto tum = http.Get(("/v1/sessions/" + id + "/trajectory?format=tum&limit=100").c_str(), bearer(kViewerToken));
   ASSERT_EQ(tum->status, 200);
   EXPECT_EQ(std::count(tum->body.begin(), tum->body.end(), '\n'), 100);
