@@ -23,11 +23,12 @@ const Principal kOwner{"robot", "acme", static_cast<uint32_t>(Permission::kSessi
 class GrpcServerTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    auto storage = open_storage("sqlite://" + (testing::scratch_dir() / "fusion.db").string());
+    const std::filesystem::path dir = testing::scratch_dir();  // once: each call empties it
+    auto storage = open_storage("sqlite://" + (dir / "fusion.db").string());
     ASSERT_TRUE(storage.ok());
     metrics_ = std::make_shared<MetricsRegistry>();
     SessionManagerConfig manager_config;
-    manager_config.map_directory = (testing::scratch_dir() / "maps").string();
+    manager_config.map_directory = (dir / "maps").string();
     manager_ = std::move(SessionManager::create(manager_config, std::move(storage).value(), metrics_)).value();
     auto tokens = TokenStore::parse(testing::kTokensYaml, "tokens.yaml");
     ASSERT_TRUE(tokens.ok());

@@ -10,6 +10,8 @@
 #include <utility>
 #include <vector>
 
+#include <unistd.h>
+
 #include <gtest/gtest.h>
 
 #include "hanzo/fusion/io/csv_import.hpp"
@@ -24,10 +26,11 @@ inline std::string read_text(const std::string& path) {
   return text.str();
 }
 
-/// An empty folder under the system's temporary folder, named after the running test.
+/// An empty folder under the system's temporary folder, named after the running test and this
+/// process (two checkouts testing at once never share one).
 inline std::filesystem::path scratch_dir(const std::string& suffix = "") {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  std::string name = std::string("hanzo_service_") + info->test_suite_name() + "_" + info->name() + suffix;
+  std::string name = std::string("hanzo_service_") + info->test_suite_name() + "_" + info->name() + suffix + "_" + std::to_string(::getpid());
   std::replace(name.begin(), name.end(), '/', '_');
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / name;
   std::filesystem::remove_all(dir);
