@@ -2,7 +2,8 @@
 // 10 Hz (about 30k points per scan) for 60 s"): a server (SessionManager + gRPC on loopback,
 // SQLite storage) in this process, and N client sessions in a forked client process, each
 // replaying the simulated warehouse drive (IMU 200 Hz + VLP-16, ~28k points per sweep) in real
-// time over StreamImu / StreamPointCloud. Both processes share this machine's cores.
+// time over StreamImu / StreamPointCloud, stamped with this machine's clock (live data). Both
+// processes share this machine's cores.
 //
 //   build/bench/bench_server_load [--sessions 20] [--seconds 60] [--no-lidar] [--point3] [--json]
 //
@@ -144,19 +145,26 @@ ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& se
   hf::v1::PointCloudMessage sweep_proto;
   const auto started = Clock::now();
   const hf::Timestamp first = hf::msgs::timestamp_of(recording.messages.front().second);
+  // Live data: stamped by this machine's clock, as a robot's synchronized sensors are (the
+  // server sheds load only for live data; recorded data waits).
+  const uint64_t restamp = static_cast<uint64_t>((hf::Timestamp::wall_clock_now() - first).nanoseconds());
   for (const auto& [sensor, message] : recording.messages) {
     const hf::Timestamp time = hf::msgs::timestamp_of(message);
     const auto due = started + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>((time - first).seconds()));
     if (Clock::now() > due + std::chrono::milliseconds(20)) ++result.late_writes;
     std::this_thread::sleep_until(due);
     if (const auto* imu_message = std::get_if<hf::msgs::ImuMessage>(&message)) {
+      hf::v1::ImuMessage imu_proto = hf::msgs::to_proto(*imu_message);
+      imu_proto.set_timestamp_ns(imu_proto.timestamp_ns() + restamp);
       {
         std::lock_guard lock(mutex);
-        sent_at[time.nanoseconds()] = Clock::now();
+        sent_at[static_cast<int64_t>(imu_proto.timestamp_ns())] = Clock::now();
       }
-      if (imu->Write(hf::msgs::to_proto(*imu_message))) ++result.sent_imu;
+      if (imu->Write(imu_proto)) ++result.sent_imu;
     } else if (const auto* sweep = std::get_if<hf::msgs::PointCloudMessage>(&message)) {
       hf::msgs::to_proto(*sweep, &sweep_proto, point_encoding);  // reuses the storage, as FusionClient does
+      sweep_proto.set_timestamp_ns(sweep_proto.timestamp_ns() + restamp);
+      for (uint64_t& point_time : *sweep_proto.mutable_point_timestamps()) point_time += restamp;
       if (lidar->Write(sweep_proto)) ++result.sent_lidar;
     }
   }

@@ -116,6 +116,7 @@ Status MappingSessionConfig::validate() const {
   if (!(loop_translation_sigma > 0) || !(loop_rotation_sigma > 0)) return Error("loop_translation_sigma, loop_rotation_sigma: must be > 0");
   if (!(map_keyframe_distance >= 0) || !(map_keyframe_angle >= 0)) return Error("map_keyframe_distance, map_keyframe_angle: must be >= 0");
   if (max_waiting_scans == 0) return Error("max_waiting_scans: must be > 0");
+  if (!(live_window_s > 0)) return Error(fmt::format("live_window_s: {} is not > 0", live_window_s));
   if (max_registration_wait_s && !(*max_registration_wait_s >= 0.0 && *max_registration_wait_s <= 60.0)) {
     return Error(fmt::format("max_registration_wait_s: {} is not in 0..60 s", *max_registration_wait_s));
   }
@@ -195,15 +196,12 @@ void MappingSession::add_gnss_factor(const FusedGnssFix& fix) {
 MappingSession::~MappingSession() { worker_.reset(); }  // before the odometry it registers with
 
 std::optional<std::chrono::nanoseconds> MappingSession::registration_wait_limit(Timestamp now_in_data) const {
-  if (!config_.max_registration_wait_s || !first_push_) return std::nullopt;
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - first_push_->first).count();
-  const double data = (now_in_data - first_push_->second).seconds();
-  if (data > 1.5 * wall + 1.0) return std::nullopt;  // a replay faster than real time: it may wait
+  if (!config_.max_registration_wait_s) return std::nullopt;
+  if (std::abs((Timestamp::wall_clock_now() - now_in_data).seconds()) > config_.live_window_s) return std::nullopt;  // recorded data
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(*config_.max_registration_wait_s));
 }
 
 Status MappingSession::push(std::string_view sensor, const msgs::SensorMessage& message) {
-  if (!first_push_) first_push_.emplace(std::chrono::steady_clock::now(), msgs::timestamp_of(message));
   if (odometry_ && sensor == lidar_sensor_) {
     if (const auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(*scan);
   }

@@ -233,8 +233,8 @@ TEST(MappingSession, RefusesBadSweepsWithAReasonAndKeepsMapping) {
 TEST(MappingSession, AsynchronousRegistrationFusesTheSweepsLateAndKeepsTheTrack) {
   // The server's mode: sweeps registered on the session's worker thread, fused when the next
   // message comes (in the past, by rolling back). Pushed as fast as possible here: push() waits
-  // when two sweeps queue up, so none is lost, even with the server's zero wait limit (a replay
-  // faster than real time always waits; only live data sheds sweeps).
+  // when two sweeps queue up, so none is lost, even with the server's zero wait limit (recorded
+  // data always waits; only live data, stamped near this machine's clock, sheds sweeps).
   const sim::Scenario scenario = imu_and_lidar(25.0);
   auto simulation = sim::ScenarioSimulation::create(scenario).value();
   MappingSessionConfig config;

@@ -48,7 +48,6 @@
 #include <optional>
 #include <string>
 #include <string_view>
-#include <utility>
 #include <vector>
 
 #include "hanzo/fusion/calib/calibration.hpp"
@@ -91,10 +90,11 @@ struct MappingSessionConfig {
   /// With asynchronous_registration: how long push() waits for the worker when two sweeps
   /// already wait (s); after it the oldest waiting sweep is dropped ("registration_behind").
   /// Empty: wait as long as it takes. The server sets 0: a push() that waited held back every
-  /// IMU pose behind it, and the next sweeps then waited for those poses. Data pushed
-  /// faster than real time (its time more than 1.5x ahead of the wall clock since the first
-  /// message, plus 1 s) always waits: a replay only slows down.
+  /// IMU pose behind it, and the next sweeps then waited for those poses. Applies to live data
+  /// only: message times within live_window_s of this machine's clock (sensors stamped by a
+  /// synchronized clock); recorded data replayed at any speed always waits (loses no sweep).
   std::optional<double> max_registration_wait_s;
+  double live_window_s = 10.0;
   Status validate() const;
   static maps::MapBuilderConfig default_map();
 };
@@ -250,9 +250,7 @@ class MappingSession {
   };
   std::deque<WaitingScan> waiting_scans_;
   std::optional<Timestamp> first_pose_time_;  ///< the Session's first pose seen
-  /// The first push: wall clock and message time (is the data live or replayed faster?).
-  std::optional<std::pair<std::chrono::steady_clock::time_point, Timestamp>> first_push_;
-  /// How long a sweep may wait for the worker now (max_registration_wait_s, unless replayed fast).
+  /// How long a sweep may wait for the worker now (max_registration_wait_s for live data).
   std::optional<std::chrono::nanoseconds> registration_wait_limit(Timestamp now_in_data) const;
   std::optional<Timestamp> last_scan_time_;
   std::optional<msgs::Keyframe> latest_keyframe_;   ///< the newest Session keyframe
