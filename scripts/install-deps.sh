@@ -19,8 +19,10 @@ packages=(
   libopencv-dev
   # sim: parallel ray casting
   libtbb-dev
-  # graph: nonlinear least squares (with SuiteSparse)
-  libceres-dev
+  # graph: nonlinear least squares (with SuiteSparse), and OpenBLAS (its thread-safe pthread build) for
+  # the sparse Cholesky's dense blocks: Debian's BLAS alternatives then pick it over the ATLAS
+  # that libceres3 pulls in (measured: sphere2500 0.99 -> 0.67 s; docs/graph.md)
+  libceres-dev libopenblas0-pthread
   # cloud: point-cloud files (PCL), kd-trees (nanoflann); Open3D is the benchmarks' peer
   libpcl-dev libnanoflann-dev libopen3d-dev
   # cloud: the voxel hash map (Abseil flat_hash_map)

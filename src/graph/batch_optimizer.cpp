@@ -8,6 +8,7 @@
 
 #include <ceres/ceres.h>
 #include <fmt/format.h>
+#include <omp.h>
 
 #include "hanzo/fusion/graph/pose_factors.hpp"
 
@@ -270,6 +271,26 @@ Status build_problem(const FactorGraph& graph, const Values& values, const std::
   return ok_status();
 }
 
+// Runs `function` with at most `thread_limit` OpenMP threads in any parallel region it opens.
+// Why: CHOLMOD (SuiteSparse 5.12, Debian 12), which Ceres' sparse Cholesky calls, opens OpenMP
+// regions with a fixed 4 threads (CHOLMOD_OMP_NUM_THREADS) in every supernodal factorization,
+// whatever OMP_NUM_THREADS says; the regions are tiny (copying one supernode), so on a 2-core
+// machine the threads mostly wake and sleep on futexes: measured, sphere2500 2.07 -> 1.04 s and
+// parking-garage 0.69 -> 0.33 s with the limit at 1. A host `teams` region with thread_limit
+// sets the OpenMP thread-limit for this thread only and restores it after (libgomp runs a
+// single host team on the calling thread). Inside a caller's own OpenMP parallel region a
+// teams construct is not allowed, so there the function runs as it is.
+template <typename Function>
+void with_openmp_thread_limit(int thread_limit, Function&& function) {
+  if (omp_get_level() > 0) {
+    function();
+    return;
+  }
+  const int limit = std::max(1, thread_limit);
+#pragma omp teams num_teams(1) thread_limit(limit)
+  function();
+}
+
 }  // namespace
 
 Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, const BatchOptimizerConfig& config) {
@@ -293,7 +314,7 @@ Result<OptimizationSummary> optimize(const FactorGraph& graph, Values& values, c
   options.num_threads = config.num_threads;
   options.logging_type = ceres::SILENT;
   ceres::Solver::Summary summary;
-  ceres::Solve(options, &problem, &summary);
+  with_openmp_thread_limit(config.num_threads, [&] { ceres::Solve(options, &problem, &summary); });
 
   for (const auto& [key, storage] : blocks) values.insert(key, from_parameters(values.all().at(key), storage.data()));
   OptimizationSummary result;
@@ -320,7 +341,9 @@ Result<std::vector<Eigen::MatrixXd>> marginal_covariances(const FactorGraph& gra
   ceres::Covariance::Options options;
   options.num_threads = config.num_threads;
   ceres::Covariance covariance(options);
-  if (!covariance.Compute(pairs, &built.problem)) {
+  bool computed = false;
+  with_openmp_thread_limit(config.num_threads, [&] { computed = covariance.Compute(pairs, &built.problem); });
+  if (!computed) {
     return Error("marginal covariance: the information matrix is rank deficient (fix a gauge variable, constrain every variable)");
   }
   std::vector<Eigen::MatrixXd> result;

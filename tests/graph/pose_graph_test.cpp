@@ -95,7 +95,7 @@ Optimized optimize_file(const std::string& file, PoseGraph::Objective objective,
   return result;
 }
 
-// SE-Sync's published global optima: intel f* = 52.3482 (notebook), garage 1.263 (table; 1.26391 reproduced).
+// SE-Sync's published global optima: intel f* = 52.3482 (notebook), garage 1.263 (table).
 TEST(BatchOptimizer, ReachesThePublishedOptimumOfIntel) {
   const Optimized intel = optimize_file("intel.g2o", PoseGraph::Objective::kChordal);
   EXPECT_NEAR(intel.final_objective, 52.3482, 1e-3 * 52.3482);
@@ -114,9 +114,11 @@ TEST(BatchOptimizer, ReachesThePublishedOptimumOfManhattanFromChainedOdometry) {
 
 TEST(BatchOptimizer, ReachesThePublishedOptimumOfParkingGarage) {
   const Optimized garage = optimize_file("parking-garage.g2o", PoseGraph::Objective::kChordal);
-  // We reach 1.26252, 0.11 % BELOW the published optimum (not reachable for the same cost), so
-  // the cost differs slightly from SE-Sync's in 3D (open question: its quaternion handling).
-  EXPECT_NEAR(garage.final_objective, 1.26391, 5e-3 * 1.26391);
+  // SE-Sync's table gives f* = 1.263 (four digits); we reach 1.262528 (the same value from an
+  // independent numpy evaluation of SE-Sync's cost at our poses), which rounds to it. The
+  // 1.26391 of SOURCE.md's scipy reproduction rounds to 1.264: that run stopped short.
+  EXPECT_NEAR(garage.final_objective, 1.263, 1e-3 * 1.263);
+  EXPECT_GE(garage.final_objective, 1.2625);  // a global optimum cannot be beaten
 }
 
 // Batch optimizations running on several threads at once (a server optimizes many sessions'
