@@ -184,7 +184,9 @@ Status Session::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_o
     return Error("invalid: the optimized pose has non-finite values");
   }
   Event event;
-  event.time = impl.estimator.time();
+  // At the newest fused event (the estimator's time can trail it: rejected events do not move
+  // it), so the correction goes to the end of the history.
+  event.time = impl.history.empty() ? impl.estimator.time() : std::max(impl.estimator.time(), impl.history.back().event.time);
   event.sensor = impl.imu_sensor;
   event.sequence = impl.sequence++;
   // The session's current belief of the keyframe includes the corrections applied since.
@@ -337,7 +339,10 @@ Status Session::Impl::accept(size_t sensor, Event event) {
     return ok_status();
   }
   event.sequence = sequence++;
-  if (estimator.initialized() && event.time < estimator.time()) {
+  // Late: it belongs before something already fused (the history is in fusion order). Not
+  // estimator.time(): events that change nothing (before the IMU aligned, a rejected spike)
+  // leave it behind, and appending an older event then would unsort the history.
+  if (!history.empty() && fused_before(event, history.back().event)) {
     fuse_late(std::move(event));
   } else {
     pending.insert(std::upper_bound(pending.begin(), pending.end(), event, fused_before), std::move(event));
@@ -363,6 +368,8 @@ void Session::Impl::release_pending(bool flush_all) {
 }
 
 void Session::Impl::count(const Event& event, const EventOutcome& outcome) {
+  // A backend correction rides on the IMU sensor's index but is no message of it (`corrections`).
+  if (std::holds_alternative<WorldCorrection>(event.payload)) return;
   SensorStatistics& statistics = sensors[event.sensor];
   if (outcome.fused) {
     ++statistics.fused;
@@ -406,8 +413,12 @@ void Session::Impl::fuse_late(Event event) {
   estimator = index == 0 ? history_base : history[index - 1].after;
   const EventOutcome outcome = estimator.process(event, this);
   count(event, outcome);
-  // A late IMU message (the IMU stream fell behind the others) can make a keyframe, and so can
-  // the IMU messages re-fused after it: those not emitted yet are emitted now.
+  // A late IMU message (its stream fell behind another sensor's, which was fused ahead of it)
+  // still gets its pose, as of its own time: poses come from IMU messages only, and those
+  // arrive in order, so the pose stream stays in time order.
+  if (event.is_imu && outcome.fused && estimator.initialized()) emit_pose(true);
+  // It can make a keyframe, and so can the IMU messages re-fused after it: those not emitted
+  // yet are emitted now.
   if (outcome.keyframe) emit_keyframe(*outcome.keyframe);
   report_gnss(event, outcome);
   ++sensors[event.sensor].rolled_back;
@@ -425,7 +436,7 @@ void Session::Impl::fuse_late(Event event) {
 
 void Session::Impl::prune_history() {
   const double lag = config.frontend.lag_window_s;
-  while (!history.empty() && (estimator.time() - history.front().event.time).seconds() > lag) {
+  while (!history.empty() && (history.back().event.time - history.front().event.time).seconds() > lag) {
     history_base = std::move(history.front().after);
     history.pop_front();
   }

@@ -200,6 +200,43 @@ TEST(Session, LateMessagesInsideTheLagWindowGiveTheInOrderResult) {
   EXPECT_EQ(delayed_session->summary().sensors[2].fused, ordered_session->summary().sensors[2].fused);
 }
 
+// The IMU's stream runs 0.3 s behind the others (separate gRPC streams replayed as fast as
+// possible): the wheels, waiting for the IMU only up to its 0.1 s timeout, are fused ahead of
+// it and every IMU message comes late. Each still gives its pose, as of its own time and equal
+// to the in-order pose at that time, and the pose stream stays in time order.
+TEST(Session, ALaggingImuStreamStillGivesOnePosePerImuMessageInTimeOrder) {
+  const std::vector<Message> in_order = drive(6.0);
+  std::vector<Message> imu_behind;
+  std::vector<Message> held;  // IMU messages, in order
+  for (const Message& m : in_order) {
+    const Timestamp t = msgs::timestamp_of(m.message);
+    while (!held.empty() && (t - msgs::timestamp_of(held.front().message)).seconds() >= 0.3) {
+      imu_behind.push_back(held.front());
+      held.erase(held.begin());
+    }
+    (m.sensor == "imu" ? held : imu_behind).push_back(m);
+  }
+  imu_behind.insert(imu_behind.end(), held.begin(), held.end());
+
+  const auto run = [](const std::vector<Message>& messages, std::vector<msgs::PoseEstimate>& poses) {
+    auto session = make_session();
+    session->set_pose_callback([&poses](const msgs::PoseEstimate& pose) { poses.push_back(pose); });
+    for (const Message& m : messages) EXPECT_TRUE(session->push(m.sensor, m.message).ok());
+    return session->summary();
+  };
+  std::vector<msgs::PoseEstimate> ordered_poses, lagging_poses;
+  const SessionSummary ordered = run(in_order, ordered_poses);
+  const SessionSummary lagging = run(imu_behind, lagging_poses);
+  EXPECT_GT(lagging.rollbacks, 400U);  // the IMU messages came late
+  EXPECT_EQ(lagging.sensors[0].fused, ordered.sensors[0].fused);
+  ASSERT_EQ(lagging_poses.size(), ordered_poses.size());
+  EXPECT_EQ(lagging.poses, lagging_poses.size());
+  for (size_t i = 0; i < lagging_poses.size(); ++i) {
+    ASSERT_EQ(lagging_poses[i].timestamp, ordered_poses[i].timestamp) << i;
+    ASSERT_NEAR((lagging_poses[i].T_world_body.position - ordered_poses[i].T_world_body.position).norm(), 0.0, 1e-9) << i;
+  }
+}
+
 TEST(Session, ReplayIsDeterministicBitForBit) {
   const std::vector<Message> messages = drive(4.0);
   std::vector<msgs::PoseEstimate> first, second;
@@ -262,10 +299,12 @@ TEST(Session, EmitsKeyframesWithRelativeMotionAndTakesBackendCorrections) {
   // The backend says keyframe 20 is 1 m further north: the estimate moves with it.
   const SE3 keyframe_pose = keyframes[20].T_world_body.to_se3();
   const Eigen::Vector3d before = session->latest_pose()->T_world_body.position;
+  const uint64_t imu_fused = session->summary().sensors[0].fused;
   ASSERT_TRUE(session->apply_correction(20, SE3(keyframe_pose.rotation(), keyframe_pose.translation() + Eigen::Vector3d(0, 1, 0))).ok());
   ASSERT_TRUE(session->push("imu", imu_at(30.01)).ok());
   EXPECT_NEAR(session->latest_pose()->T_world_body.position.y() - before.y(), 1.0, 0.01);
   EXPECT_EQ(session->summary().corrections, 1U);
+  EXPECT_EQ(session->summary().sensors[0].fused, imu_fused + 1);  // the IMU message, not the correction
   EXPECT_EQ(reason_of(session->apply_correction(999, SE3())), "unknown_keyframe");
 }
 
