@@ -13,6 +13,7 @@
 
 #include "commands.hpp"
 #include "hanzo/fusion/calib/camera_calibration.hpp"
+#include "hanzo/fusion/service/calibration_json.hpp"
 #include "log_messages.hpp"
 
 namespace hanzo::fusion::app {
@@ -36,24 +37,6 @@ Result<calib::CheckerboardTarget> parse_board(const std::string& text, double sq
     return Error(fmt::format("--board '{}': expected the inner corners as COLUMNSxROWS, e.g. 9x6", text));
   }
   return calib::CheckerboardTarget{std::stoi(match[1]), std::stoi(match[2]), square};
-}
-
-nlohmann::json to_json(const calib::CameraCalibrationResult& result) {
-  nlohmann::json views = nlohmann::json::array();
-  for (const calib::CameraCalibrationView& view : result.views) {
-    if (!view.board_found) continue;
-    views.push_back({{"timestamp_ns", view.time.nanoseconds()}, {"used", view.used}, {"rms_px", view.rms_px}});
-  }
-  const msgs::CameraIntrinsics& k = result.intrinsics;
-  return {{"intrinsics", {{"fx", k.fx}, {"fy", k.fy}, {"cx", k.cx}, {"cy", k.cy}, {"width", k.width}, {"height", k.height}}},
-          {"intrinsics_std", result.intrinsics_std ? nlohmann::json(*result.intrinsics_std) : nlohmann::json(nullptr)},
-          {"distortion_model", msgs::to_string(result.distortion.type)},
-          {"distortion_coeffs", result.distortion.coefficients},
-          {"rms_px", result.rms_px},
-          {"images", result.views_total},
-          {"views_found", result.views_found},
-          {"views_used", result.views_used},
-          {"views", std::move(views)}};
 }
 
 std::string to_text(const std::string& camera, const calib::CameraCalibrationResult& result, const std::string& out) {
@@ -105,7 +88,7 @@ void add_calib_camera_command(CLI::App& calib_app, const Output& output, Command
         if (!written) return report_failure(output, result, written.error().message);
         result["out"] = options->out;
       }
-      result.update(to_json(*calibrated));
+      result.update(service::camera_calibration_to_json(*calibrated));
       result["ok"] = true;
       return report_success(output, result, to_text(options->camera, *calibrated, options->out));
     };

@@ -15,7 +15,7 @@
 #include "commands.hpp"
 #include "hanzo/fusion/calib/motion_calibration.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
-#include "hanzo/fusion/service/motion_calibration_json.hpp"
+#include "hanzo/fusion/service/calibration_json.hpp"
 #include "log_messages.hpp"
 
 namespace hanzo::fusion::app {

@@ -198,3 +198,56 @@ def test_parse_pcd_reads_what_the_server_writes_and_refuses_garbage():
         parse_pcd(b"not a point cloud")
     with pytest.raises(ValueError):
         parse_pcd(header + values.tobytes()[:10])
+
+
+def _board_views(count=8, width=640, height=480, fx=500.0, fy=502.0, cx=322.0, cy=238.0):
+    """PGM files of an 8 x 6 inner-corner checkerboard (5 cm squares) seen by an ideal pinhole
+    camera from `count` poses, rendered by back-projecting each pixel onto the board's plane
+    (3 x 3 supersampled)."""
+    rng = np.random.default_rng(5)
+    square, nx, ny = 0.05, 9, 7  # squares along x, y
+    files = []
+    for _ in range(count):
+        rx, ry, rz = rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3)
+        def rotation(axis, angle):
+            c, s = np.cos(angle), np.sin(angle)
+            i, j = [(1, 2), (0, 2), (0, 1)][axis]
+            r = np.eye(3)
+            r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
+            return r
+        R = rotation(2, rz) @ rotation(1, ry) @ rotation(0, rx)  # board axes in the camera frame
+        center = np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.04, 0.04), rng.uniform(0.55, 0.7)])
+        t = center - R @ np.array([nx * square / 2, ny * square / 2, 0.0])  # the board's corner square origin
+        sub = 3
+        u, v = np.meshgrid((np.arange(width * sub) + 0.5) / sub - 0.5, (np.arange(height * sub) + 0.5) / sub - 0.5)
+        rays = np.stack([(u - cx) / fx, (v - cy) / fy, np.ones_like(u)], axis=-1)
+        normal = R[:, 2]
+        depth = (normal @ t) / (rays @ normal)
+        points = rays * depth[..., None] - t
+        board = points @ R  # board coordinates
+        bx, by = board[..., 0] / square, board[..., 1] / square
+        inside = (bx >= 0) & (bx < nx) & (by >= 0) & (by < ny)
+        dark = ((np.floor(bx).astype(int) + np.floor(by).astype(int)) % 2 == 0) & inside
+        intensity = np.where(dark, 20.0, np.where(inside, 235.0, 180.0))
+        image = intensity.reshape(height, sub, width, sub).mean(axis=(1, 3)).round().astype(np.uint8)
+        files.append(f"P5\n{width} {height}\n255\n".encode() + image.tobytes())
+    return files
+
+
+def test_camera_intrinsics_from_uploaded_images(server):
+    client = FusionClient(server["rest"], token=TOKEN)
+    result = client.calibrate_camera("camera_front", _board_views(), inner_corners=(8, 6), square_size=0.05,
+                                     timestamps_ns=[1000 * i for i in range(8)])
+    k = result["intrinsics"]
+    assert result["sensor"] == "camera_front" and result["views_used"] >= 6 and result["rms_px"] < 0.3
+    assert abs(k["fx"] - 500.0) < 3.0 and abs(k["fy"] - 502.0) < 3.0 and abs(k["cx"] - 322.0) < 3.0 and abs(k["cy"] - 238.0) < 3.0
+    assert (k["width"], k["height"]) == (640, 480)
+    assert all(abs(c) < 0.02 for c in result["distortion_coeffs"])  # an ideal pinhole
+    assert result["views"][0]["timestamp_ns"] % 1000 == 0
+    # Three views cannot calibrate: refused (422), naming the images.
+    with pytest.raises(FusionError) as too_few:
+        client.calibrate_camera("camera_front", _board_views(3), inner_corners=(8, 6), square_size=0.05)
+    assert too_few.value.status == 422 and too_few.value.field == "images"
+    with pytest.raises(FusionError) as not_an_image:
+        client.calibrate_camera("camera_front", [b"GIF89a..."], inner_corners=(8, 6), square_size=0.05)
+    assert not_an_image.value.status == 400 and not_an_image.value.field == "images[0].data"

@@ -1,10 +1,14 @@
-// POST /v1/calibrate: its request body and the JSON of a motion calibration's result.
+// POST /v1/calibrate: its request body (motion or camera procedure) and the JSON of the results.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include <fmt/format.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
-#include "hanzo/fusion/service/motion_calibration_json.hpp"
+#include "hanzo/fusion/core/base64.hpp"
+#include "hanzo/fusion/service/calibration_json.hpp"
 #include "json_codec.hpp"
 
 namespace hanzo::fusion::service {
@@ -31,6 +35,24 @@ json motion_calibration_to_json(const calib::MotionCalibrationSummary& summary) 
           {"rotation_axis_spread", summary.rotation_axis_spread},
           {"translation_observability", summary.translation_observability},
           {"calibration_yaml", calib::to_yaml(calib::Calibration{{result}})}};
+}
+
+json camera_calibration_to_json(const calib::CameraCalibrationResult& result) {
+  json views = json::array();
+  for (const calib::CameraCalibrationView& view : result.views) {
+    if (!view.board_found) continue;
+    views.push_back({{"timestamp_ns", view.time.nanoseconds()}, {"used", view.used}, {"rms_px", view.rms_px}});
+  }
+  const msgs::CameraIntrinsics& k = result.intrinsics;
+  return {{"intrinsics", {{"fx", k.fx}, {"fy", k.fy}, {"cx", k.cx}, {"cy", k.cy}, {"width", k.width}, {"height", k.height}}},
+          {"intrinsics_std", result.intrinsics_std ? json(*result.intrinsics_std) : json(nullptr)},
+          {"distortion_model", msgs::to_string(result.distortion.type)},
+          {"distortion_coeffs", result.distortion.coefficients},
+          {"rms_px", result.rms_px},
+          {"images", result.views_total},
+          {"views_found", result.views_found},
+          {"views_used", result.views_used},
+          {"views", std::move(views)}};
 }
 
 namespace detail {
@@ -76,18 +98,13 @@ ApiResult<std::vector<calib::StampedPose>> pose_rows(const json& object, const s
   return poses;
 }
 
-}  // namespace
-
-ApiResult<CalibrateRequest> parse_calibrate(const std::string& body) {
-  auto document = parse_object(body);
-  if (!document) return document.error();
-  const json& object = document.value();
-  if (auto keys = check_keys(object, {"sensor", "sensor_poses", "body_poses", "gyro", "pair_interval", "max_time_offset",
+ApiResult<MotionCalibrateRequest> parse_motion_calibrate(const json& object) {
+  if (auto keys = check_keys(object, {"procedure", "sensor", "sensor_poses", "body_poses", "gyro", "pair_interval", "max_time_offset",
                                       "estimate_time_offset", "initial_time_offset_ns", "estimate_gyro_bias", "prior_translation"});
       !keys) {
     return keys.error();
   }
-  CalibrateRequest request;
+  MotionCalibrateRequest request;
   calib::MotionCalibrationInput& input = request.input;
   calib::MotionCalibrationConfig& config = request.config;
   if (!object.contains("sensor") || !object["sensor"].is_string()) return invalid("sensor", "expected the sensor's name");
@@ -138,6 +155,117 @@ ApiResult<CalibrateRequest> parse_calibrate(const std::string& body) {
     config.prior_translation = Eigen::Vector3d(prior[0].get<double>(), prior[1].get<double>(), prior[2].get<double>());
   }
   return request;
+}
+
+// An image file's bytes (base64) as a mono8 or bgr8 image message.
+ApiResult<msgs::ImageMessage> decode_image(const json& entry, const std::string& field, std::size_t index) {
+  if (!entry.is_object()) return invalid(field, "expected {\"data\": base64 of an image file, \"timestamp_ns\": optional}");
+  if (auto keys = check_keys(entry, {"data", "timestamp_ns"}); !keys) {
+    return invalid(field + "." + keys.error().field, keys.error().message);
+  }
+  if (!entry.contains("data") || !entry["data"].is_string()) return invalid(field + ".data", "expected base64 text of an image file");
+  auto bytes = base64_decode(entry["data"].get_ref<const std::string&>());
+  if (!bytes) return invalid(field + ".data", bytes.error().message);
+  cv::Mat image;
+  try {
+    image = cv::imdecode(bytes.value(), cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& exception) {
+    return invalid(field + ".data", fmt::format("not an image file ({})", exception.what()));
+  }
+  if (image.empty()) return invalid(field + ".data", fmt::format("not an image file OpenCV can read ({} bytes)", bytes->size()));
+  if (image.depth() != CV_8U) return invalid(field + ".data", "expected 8-bit samples (a 16-bit or float image is no camera frame here)");
+  if (image.channels() == 4) cv::cvtColor(image, image, cv::COLOR_BGRA2BGR);
+  if (image.channels() != 1 && image.channels() != 3) return invalid(field + ".data", fmt::format("{} channels: expected gray or colour", image.channels()));
+  msgs::ImageMessage message;
+  message.timestamp = Timestamp::from_nanoseconds(static_cast<int64_t>(index));
+  if (entry.contains("timestamp_ns")) {
+    if (!entry["timestamp_ns"].is_number_integer()) return invalid(field + ".timestamp_ns", "expected an integer");
+    message.timestamp = Timestamp::from_nanoseconds(entry["timestamp_ns"].get<int64_t>());
+  }
+  message.width = static_cast<uint32_t>(image.cols);
+  message.height = static_cast<uint32_t>(image.rows);
+  message.encoding = image.channels() == 1 ? msgs::ImageEncoding::kMono8 : msgs::ImageEncoding::kBgr8;
+  const std::size_t row_bytes = static_cast<std::size_t>(image.cols) * static_cast<std::size_t>(image.channels());
+  message.data.resize(row_bytes * static_cast<std::size_t>(image.rows));
+  for (int row = 0; row < image.rows; ++row) std::memcpy(message.data.data() + row_bytes * static_cast<std::size_t>(row), image.ptr(row), row_bytes);
+  return message;
+}
+
+ApiResult<CameraCalibrateRequest> parse_camera_calibrate(const json& object) {
+  if (auto keys = check_keys(object, {"procedure", "sensor", "board", "images", "model", "estimate_k3", "max_views"}); !keys) {
+    return keys.error();
+  }
+  CameraCalibrateRequest request;
+  calib::CameraCalibrationConfig& config = request.config;
+  if (!object.contains("sensor") || !object["sensor"].is_string()) return invalid("sensor", "expected the camera's name");
+  request.sensor = object["sensor"].get<std::string>();
+  if (!object.contains("board") || !object["board"].is_object()) {
+    return invalid("board", "expected {\"inner_corners_x\": 9, \"inner_corners_y\": 6, \"square_size\": 0.05}");
+  }
+  const json& board = object["board"];
+  if (auto keys = check_keys(board, {"inner_corners_x", "inner_corners_y", "square_size"}); !keys) {
+    return invalid("board." + keys.error().field, keys.error().message);
+  }
+  for (const auto& [key, target] : {std::pair<const char*, int*>{"inner_corners_x", &config.target.inner_corners_x},
+                                    std::pair<const char*, int*>{"inner_corners_y", &config.target.inner_corners_y}}) {
+    if (!board.contains(key) || !board[key].is_number_integer() || board[key].get<int64_t>() < 2 || board[key].get<int64_t>() > 100) {
+      return invalid(fmt::format("board.{}", key), "expected the count of inner corners (where four squares meet), 2-100");
+    }
+    *target = board[key].get<int>();
+  }
+  if (!board.contains("square_size") || !board["square_size"].is_number() || !std::isfinite(board["square_size"].get<double>()) ||
+      board["square_size"].get<double>() <= 0.0) {
+    return invalid("board.square_size", "expected the edge of a square in metres (> 0)");
+  }
+  config.target.square_size = board["square_size"].get<double>();
+  if (object.contains("model")) {
+    const std::optional<msgs::DistortionType> model =
+        object["model"].is_string() ? msgs::distortion_type_from_string(object["model"].get<std::string>()) : std::nullopt;
+    if (!model || (*model != msgs::DistortionType::kRadtan && *model != msgs::DistortionType::kEquidistant)) {
+      return invalid("model", "expected \"radtan\" or \"equidistant\"");
+    }
+    config.model = *model;
+  }
+  if (object.contains("estimate_k3")) {
+    if (!object["estimate_k3"].is_boolean()) return invalid("estimate_k3", "expected true or false");
+    config.estimate_k3 = object["estimate_k3"].get<bool>();
+  }
+  if (object.contains("max_views")) {
+    if (!object["max_views"].is_number_integer() || object["max_views"].get<int64_t>() < static_cast<int64_t>(config.min_views)) {
+      return invalid("max_views", fmt::format("expected an integer >= {}", config.min_views));
+    }
+    config.max_views = object["max_views"].get<std::size_t>();
+  }
+  if (!object.contains("images") || !object["images"].is_array() || object["images"].empty()) {
+    return invalid("images", "expected a non-empty array of {\"data\": base64 of an image file}");
+  }
+  const json& images = object["images"];
+  for (std::size_t i = 0; i < images.size(); ++i) {
+    auto image = decode_image(images[i], fmt::format("images[{}]", i), i);
+    if (!image) return image.error();
+    request.images.push_back(std::move(image).value());
+  }
+  return request;
+}
+
+}  // namespace
+
+ApiResult<CalibrateRequest> parse_calibrate(const std::string& body) {
+  auto document = parse_object(body);
+  if (!document) return document.error();
+  const json& object = document.value();
+  const std::string procedure = object.contains("procedure") && object["procedure"].is_string() ? object["procedure"].get<std::string>() : "";
+  if (!object.contains("procedure") || procedure == "motion") {
+    auto motion = parse_motion_calibrate(object);
+    if (!motion) return motion.error();
+    return CalibrateRequest{std::move(motion).value()};
+  }
+  if (procedure == "camera_intrinsics") {
+    auto camera = parse_camera_calibrate(object);
+    if (!camera) return camera.error();
+    return CalibrateRequest{std::move(camera).value()};
+  }
+  return invalid("procedure", "expected \"motion\" (hand-eye from motion, the default) or \"camera_intrinsics\" (a checkerboard)");
 }
 
 }  // namespace detail

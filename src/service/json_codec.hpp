@@ -4,9 +4,11 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <variant>
 
 #include <nlohmann/json.hpp>
 
+#include "hanzo/fusion/calib/camera_calibration.hpp"
 #include "hanzo/fusion/calib/motion_calibration.hpp"
 #include "hanzo/fusion/service/api_error.hpp"
 #include "hanzo/fusion/service/session_manager.hpp"
@@ -45,16 +47,29 @@ ApiResult<pipeline::LoopClosureRequest> parse_loop_closure(const std::string& bo
 /// the map; absent: search the whole map), "linear_window_m": 5, "angular_window_rad": 0.5}.
 ApiResult<RelocalizeRequest> parse_relocalize(const std::string& body);
 
-struct CalibrateRequest {
+struct MotionCalibrateRequest {
   calib::MotionCalibrationInput input;
   calib::MotionCalibrationConfig config;
 };
 
-/// The body of POST /v1/calibrate (calibration_codec.cpp): {"sensor": "lidar", "sensor_poses":
-/// [[t, x, y, z, qx, qy, qz, qw], ...] (TUM rows, seconds), and "body_poses" (TUM rows) or "gyro"
-/// ([t, wx, wy, wz] rows, rad/s), optionally "pair_interval", "max_time_offset" (s),
-/// "estimate_time_offset", "estimate_gyro_bias" (booleans), "initial_time_offset_ns",
-/// "prior_translation" ([x, y, z] m)}.
+struct CameraCalibrateRequest {
+  std::string sensor;
+  std::vector<msgs::ImageMessage> images;  ///< decoded: mono8 or bgr8
+  calib::CameraCalibrationConfig config;
+};
+
+using CalibrateRequest = std::variant<MotionCalibrateRequest, CameraCalibrateRequest>;
+
+/// The body of POST /v1/calibrate (calibration_codec.cpp); "procedure" picks the kind:
+/// - "motion" (the default): {"sensor": "lidar", "sensor_poses": [[t, x, y, z, qx, qy, qz, qw],
+///   ...] (TUM rows, seconds), and "body_poses" (TUM rows) or "gyro" ([t, wx, wy, wz] rows,
+///   rad/s), optionally "pair_interval", "max_time_offset" (s), "estimate_time_offset",
+///   "estimate_gyro_bias" (booleans), "initial_time_offset_ns", "prior_translation" ([x, y, z] m)}.
+/// - "camera_intrinsics": {"sensor": "camera_front", "board": {"inner_corners_x": 9,
+///   "inner_corners_y": 6, "square_size": 0.05}, "images": [{"data": base64 of a PNG / JPEG /
+///   any format OpenCV reads (8-bit gray or colour), "timestamp_ns": optional}, ...], optionally
+///   "model" ("radtan" or "equidistant"), "estimate_k3", "max_views"}.
+/// Bad values name their field, e.g. "images[3].data".
 ApiResult<CalibrateRequest> parse_calibrate(const std::string& body);
 
 /// "tx ty tz qx qy qz qw" lines with the timestamp in seconds (TUM format).

@@ -13,7 +13,7 @@
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
-#include "hanzo/fusion/service/motion_calibration_json.hpp"
+#include "hanzo/fusion/service/calibration_json.hpp"
 #include "json_codec.hpp"
 #include "web_assets.hpp"
 
@@ -240,19 +240,29 @@ struct RestServer::Impl {
       send_json(response, 200, detail::relocalization_to_json(result->map_id, result->version, result->outcome));
     }));
 
-    // Motion calibration (docs/calibration.md): CPU work for the caller, nothing stored.
+    // Calibration procedures (docs/calibration.md): CPU work for the caller, nothing stored.
     s.Post("/v1/calibrate", authenticated("POST", "/v1/calibrate", [](const httplib::Request& request, httplib::Response& response,
                                                                     const Principal& caller) {
       if (auto allowed = authorize(caller, Permission::kSessionWrite); !allowed) return send_error(response, allowed.error());
       auto parsed = detail::parse_calibrate(request.body);
       if (!parsed) return send_error(response, parsed.error());
-      auto calibrated = calib::calibrate_from_motion(parsed->input, parsed->config);
-      // Bad values name their field (400); motion that cannot calibrate does not (422).
-      if (!calibrated) {
-        return send_error(response, ApiError::from(calibrated.error().field.empty() ? ErrorCode::kRejected : ErrorCode::kInvalidArgument,
-                                                   calibrated.error()));
+      // Bad values name their field (400); data that cannot calibrate (motion about one axis, too
+      // few views with the whole board: field "images") is refused (422).
+      const auto refused = [&response](const Error& error) {
+        const bool unusable = error.field.empty() || error.field == "images";
+        send_error(response, ApiError::from(unusable ? ErrorCode::kRejected : ErrorCode::kInvalidArgument, error));
+      };
+      if (auto* motion = std::get_if<detail::MotionCalibrateRequest>(&parsed.value())) {
+        auto calibrated = calib::calibrate_from_motion(motion->input, motion->config);
+        if (!calibrated) return refused(calibrated.error());
+        return send_json(response, 200, motion_calibration_to_json(calibrated.value()));
       }
-      send_json(response, 200, motion_calibration_to_json(calibrated.value()));
+      const auto& camera = std::get<detail::CameraCalibrateRequest>(parsed.value());
+      auto calibrated = calib::calibrate_camera(camera.images, camera.config);
+      if (!calibrated) return refused(calibrated.error());
+      nlohmann::json answer = camera_calibration_to_json(calibrated.value());
+      answer["sensor"] = camera.sensor;
+      send_json(response, 200, answer);
     }));
 
     // Stored maps.

@@ -5,12 +5,15 @@
 #include <set>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 
+#include "hanzo/fusion/core/base64.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 
 #include "hanzo/fusion/service/rest_server.hpp"
 #include "service_fixtures.hpp"
 #include "support/calibration_motion.hpp"
+#include "support/checkerboard_views.hpp"
 
 // Last: httplib pulls in <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
 #include <httplib.h>
@@ -409,6 +412,90 @@ TEST_F(RestServerTest, CalibrateRecoversExtrinsicsAndTimeOffset) {
   EXPECT_EQ(one_axis->status, 422) << one_axis->body;
   EXPECT_THAT(error_of(one_axis)["message"].get<std::string>(), HasSubstr("one axis"));
   EXPECT_EQ(http.Post("/v1/calibrate", bearer(kViewerToken), "{}", "application/json")->status, 403);  // session:read only
+}
+
+// POST /v1/calibrate with "procedure": "camera_intrinsics": PNG files (base64) of a checkerboard
+// rendered through a known lens give back its intrinsics; bad images name their field.
+TEST_F(RestServerTest, CalibrateCameraIntrinsicsFromUploadedImages) {
+  RestServerConfig config;
+  config.max_body_bytes = 12u << 20;  // 12 noisy 752 x 480 PNG files: about 5 MB as base64
+  start(config);
+  auto http = client();
+  const sim::CameraSimulatorConfig truth = test_support::lens(
+      {458.654, 457.296, 367.215, 248.375, 752, 480}, {msgs::DistortionType::kRadtan, {-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05}});
+  const std::vector<msgs::ImageMessage> views = test_support::render_views(truth, 12, {0.2, 0.12});
+  json images = json::array();
+  for (const msgs::ImageMessage& view : views) {
+    ASSERT_EQ(view.encoding, msgs::ImageEncoding::kMono8);
+    const cv::Mat image(static_cast<int>(view.height), static_cast<int>(view.width), CV_8UC1, const_cast<uint8_t*>(view.data.data()));
+    std::vector<uint8_t> png;
+    ASSERT_TRUE(cv::imencode(".png", image, png));
+    images.push_back({{"data", base64_encode(png)}, {"timestamp_ns", view.timestamp.nanoseconds()}});
+  }
+  const json request = {{"procedure", "camera_intrinsics"},
+                        {"sensor", "camera_front"},
+                        {"board", {{"inner_corners_x", test_support::kCornersX}, {"inner_corners_y", test_support::kCornersY},
+                                   {"square_size", test_support::kSquare}}},
+                        {"images", images}};
+  auto post = [&](const json& body) { return http.Post("/v1/calibrate", bearer(kRobotToken), body.dump(), "application/json"); };
+  auto calibrated = post(request);
+  ASSERT_EQ(calibrated->status, 200) << calibrated->body.substr(0, 500);
+  const json result = json::parse(calibrated->body);
+  std::printf("camera_intrinsics over REST: %zu bytes of request, fx %.2f fy %.2f cx %.2f cy %.2f, %d views used, RMS %.3f px\n",
+              request.dump().size(), result["intrinsics"]["fx"].get<double>(), result["intrinsics"]["fy"].get<double>(),
+              result["intrinsics"]["cx"].get<double>(), result["intrinsics"]["cy"].get<double>(), result["views_used"].get<int>(),
+              result["rms_px"].get<double>());
+  EXPECT_EQ(result.at("sensor"), "camera_front");
+  EXPECT_EQ(result.at("images"), 12);
+  EXPECT_GE(result.at("views_used").get<int>(), 8);
+  EXPECT_LT(result.at("rms_px").get<double>(), 0.2);
+  const json& k = result.at("intrinsics");
+  EXPECT_NEAR(k.at("fx").get<double>(), truth.intrinsics.fx, 2.5);
+  EXPECT_NEAR(k.at("fy").get<double>(), truth.intrinsics.fy, 2.5);
+  EXPECT_NEAR(k.at("cx").get<double>(), truth.intrinsics.cx, 2.5);
+  EXPECT_NEAR(k.at("cy").get<double>(), truth.intrinsics.cy, 2.5);
+  EXPECT_EQ(k.at("width"), 752);
+  EXPECT_EQ(result.at("distortion_model"), "radtan");
+  EXPECT_NEAR(result.at("distortion_coeffs")[0].get<double>(), -0.2834, 0.03);
+  EXPECT_EQ(result.at("views")[0].at("timestamp_ns"), views[0].timestamp.nanoseconds());
+
+  // Bad requests name their field (400); too few views with the whole board cannot calibrate (422).
+  const auto error_field = [&](const json& body) {
+    auto response = post(body);
+    EXPECT_EQ(response->status, 400) << response->body;
+    return error_of(response)["field"].get<std::string>();
+  };
+  json bad = request;
+  bad["images"][1]["data"] = "not base64!";
+  EXPECT_EQ(error_field(bad), "images[1].data");
+  bad = request;
+  bad["images"][2]["data"] = base64_encode(std::vector<uint8_t>{'h', 'e', 'l', 'l', 'o'});
+  EXPECT_EQ(error_field(bad), "images[2].data");
+  bad = request;
+  std::vector<uint8_t> deep_png;
+  ASSERT_TRUE(cv::imencode(".png", cv::Mat(48, 64, CV_16UC1, cv::Scalar(1000)), deep_png));
+  bad["images"][0]["data"] = base64_encode(deep_png);
+  EXPECT_EQ(error_field(bad), "images[0].data");
+  bad = request;
+  bad["images"][0]["colour"] = 1;
+  EXPECT_EQ(error_field(bad), "images[0].colour");
+  bad = request;
+  bad["board"].erase("square_size");
+  EXPECT_EQ(error_field(bad), "board.square_size");
+  bad = request;
+  bad["model"] = "pinhole";
+  EXPECT_EQ(error_field(bad), "model");
+  bad = request;
+  bad["procedure"] = "stereo";
+  EXPECT_EQ(error_field(bad), "procedure");
+  bad = request;
+  bad["images"] = json::array();
+  EXPECT_EQ(error_field(bad), "images");
+  bad = request;
+  bad["images"] = json::array({images[0], images[1], images[2]});
+  auto too_few = post(bad);
+  EXPECT_EQ(too_few->status, 422) << too_few->body;
+  EXPECT_THAT(error_of(too_few)["message"].get<std::string>(), HasSubstr("6 views are needed"));
 }
 
 TEST_F(RestServerTest, HealthOpenApiAndMetrics) {

@@ -8,10 +8,12 @@
     poses = client.trajectory(session["id"])          # every stored pose, paged for you
     points = client.map_points(session["id"])         # N x 3 numpy array (world frame, m)
     client.loop_closure(session["id"], from_keyframe=4, to_keyframe=120)
+    camera = client.calibrate_camera("camera_front", ["board_00.png", ...], inner_corners=(9, 6), square_size=0.05)
 
 Every failure raises FusionError with the server's HTTP status, error code, message and field.
 """
 
+import base64
 import json
 import ssl
 import urllib.error
@@ -200,6 +202,28 @@ class FusionClient:
         if angular_window_rad is not None:
             body["angular_window_rad"] = float(angular_window_rad)
         return self._request("POST", f"/v1/sessions/{_quote(session_id)}/relocalize", body)
+
+    # --- calibration ---
+    def calibrate_camera(self, sensor, images, inner_corners, square_size, model="radtan", estimate_k3=False, timestamps_ns=None):
+        """A camera's intrinsics and distortion from images of a checkerboard (POST /v1/calibrate,
+        procedure camera_intrinsics). images: image files (paths, or bytes of PNG / JPEG / PGM
+        ...), all the same size; inner_corners: (along a row, along a column), e.g. (9, 6);
+        square_size in metres. Returns intrinsics, distortion_model, distortion_coeffs, rms_px and
+        the views; nothing is stored."""
+        encoded = []
+        for index, image in enumerate(images):
+            if not isinstance(image, (bytes, bytearray)):
+                with open(image, "rb") as file:
+                    image = file.read()
+            entry = {"data": base64.b64encode(bytes(image)).decode("ascii")}
+            if timestamps_ns is not None:
+                entry["timestamp_ns"] = int(timestamps_ns[index])
+            encoded.append(entry)
+        body = {"procedure": "camera_intrinsics", "sensor": sensor, "model": model, "estimate_k3": bool(estimate_k3),
+                "board": {"inner_corners_x": int(inner_corners[0]), "inner_corners_y": int(inner_corners[1]),
+                          "square_size": float(square_size)},
+                "images": encoded}
+        return self._request("POST", "/v1/calibrate", body)
 
 
 def _quote(text):
