@@ -179,14 +179,12 @@ class FusionServiceImpl final : public v1::FusionService::Service {
         }
         reject(pushed.error().code == ErrorCode::kRejected ? "session" : "sensor", modality, pushed.error().message);
       }
-      bool client_gone = false;
-      while (std::optional<msgs::PoseEstimate> pose = poses.pop(std::chrono::milliseconds(0))) {
-        if (!stream.Write(msgs::to_proto(*pose))) {
-          client_gone = true;
-          break;
-        }
-      }
-      if (client_gone) break;
+      // Answers at the stream's own rate: the newest pose since its previous message. The IMU's
+      // stream thereby gets every pose (each IMU sample makes one); a LiDAR stream one per
+      // sweep, not the 20 IMU poses between sweeps (SubscribePose gives every pose).
+      std::optional<msgs::PoseEstimate> newest;
+      while (std::optional<msgs::PoseEstimate> pose = poses.pop(std::chrono::milliseconds(0))) newest = std::move(pose);
+      if (newest && !stream.Write(msgs::to_proto(*newest))) break;  // the client went away
     }
     poses.close();
     return outcome;

@@ -78,7 +78,8 @@ TEST_F(GrpcServerTest, StreamsTheSampleRecordingAndReturnsPosesAtImuRate) {
     while (subscription->Read(&pose)) subscribed.push_back(pose);
   });
   std::thread drain_gnss([&] { v1::PoseEstimate pose; while (gnss->Read(&pose)) {} });
-  std::thread drain_wheels([&] { v1::PoseEstimate pose; while (wheels->Read(&pose)) {} });
+  std::size_t wheel_poses = 0, wheel_messages = 0;
+  std::thread drain_wheels([&] { v1::PoseEstimate pose; while (wheels->Read(&pose)) ++wheel_poses; });
 
   // Three streams are three independent channels: a replay faster than real time would let one
   // run ahead of the others by more than the lag window. Like a real-time robot, write the next
@@ -103,6 +104,7 @@ TEST_F(GrpcServerTest, StreamsTheSampleRecordingAndReturnsPosesAtImuRate) {
       ASSERT_TRUE(gnss->Write(msgs::to_proto(*g)));
     } else if (const auto* w = std::get_if<msgs::WheelOdometryMessage>(&message.message)) {
       ASSERT_TRUE(wheels->Write(msgs::to_proto(*w)));
+      ++wheel_messages;
     }
     wait_until_received();
   }
@@ -128,6 +130,9 @@ TEST_F(GrpcServerTest, StreamsTheSampleRecordingAndReturnsPosesAtImuRate) {
   // The IMU stream carries every pose produced while it was the writer (GNSS / wheel updates
   // emit none of their own), in time order.
   EXPECT_GE(streamed.size(), info.summary.poses - 2);
+  // The other streams answer at their own rate: at most the newest pose after each message.
+  EXPECT_GT(wheel_poses, wheel_messages / 2);
+  EXPECT_LE(wheel_poses, wheel_messages);
   for (std::size_t i = 1; i < streamed.size(); ++i) EXPECT_LT(streamed[i - 1].timestamp_ns(), streamed[i].timestamp_ns());
   ASSERT_FALSE(streamed.empty());
   EXPECT_EQ(streamed.back().timestamp_ns(), static_cast<uint64_t>(info.latest_pose->timestamp.nanoseconds()));
