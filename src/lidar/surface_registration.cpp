@@ -199,6 +199,10 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
   SurfaceEquations equations;
   std::vector<LocalSurface> surfaces;
   SE3 associated_at;
+  double width = std::max(config.kernel_width, config.initial_kernel_width);
+  double mean_range = 0.0;  // m: turns a rotation step into the points' displacement
+  for (const Eigen::Vector3f& point : source) mean_range += static_cast<double>(point.norm());
+  mean_range /= static_cast<double>(source.size());
   for (int iteration = 1; iteration <= config.max_iterations; ++iteration) {
     const SE3::Tangent moved = (associated_at.inverse() * result.T_map_source).log();
     if (iteration == 1 || moved.head<3>().norm() > config.reassociation_translation ||
@@ -208,9 +212,11 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
       ++result.associations;
     }
     // Coarse to fine: the kernel starts wide (a poor prediction, e.g. the constant-velocity
-    // model at the start of a turn, still finds its correspondences) and halves every iteration
-    // down to kernel_width; the gate follows at three widths.
-    const double width = std::max(config.kernel_width, config.initial_kernel_width * std::pow(0.5, iteration - 1));
+    // model at the start of a turn, still finds its correspondences) and halves down to
+    // kernel_width once a step moves the points by less than half the width (a step still
+    // moving them further means the estimate is that far off: a narrower kernel would
+    // down-weight the correspondences that pull it there and crawl); the gate follows at three
+    // widths.
     const bool finest = width <= config.kernel_width;
     equations = linearize(source, surfaces, result.T_map_source, width, std::max(config.max_correspondence_distance, 3.0 * width),
                           config.num_threads);
@@ -233,6 +239,8 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
     }
     result.T_map_source = result.T_map_source * SE3::exp(delta);
     result.iterations = iteration;
+    const double displacement = delta.head<3>().norm() + delta.tail<3>().norm() * mean_range;
+    if (!finest && displacement < 0.5 * width) width = std::max(config.kernel_width, 0.5 * width);
     if (finest && delta.head<3>().norm() < config.translation_tolerance && delta.tail<3>().norm() < config.rotation_tolerance) {
       result.converged = true;
       break;

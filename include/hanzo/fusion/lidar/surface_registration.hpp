@@ -18,9 +18,10 @@
 // Surfaces are fitted again when the estimate has moved more than reassociation_translation
 // or reassociation_rotation since the last fit (a plane stays valid under small motion), so a
 // well-predicted scan is usually associated once or twice. Residuals are weighted by
-// Geman-McClure; its width starts at initial_kernel_width and halves every iteration down to
-// kernel_width (coarse to fine: a poor prediction, such as the constant-velocity model at the
-// start of a turn, still converges), residuals beyond max(max_correspondence_distance, three
+// Geman-McClure; its width starts at initial_kernel_width and halves down to kernel_width after
+// each step that moved the points (translation + rotation x their mean range) by less than
+// half the width (coarse to fine: a poor prediction, such as the constant-velocity model at the
+// start of a turn, still converges, and takes its large steps while the kernel is wide), residuals beyond max(max_correspondence_distance, three
 // widths) are ignored. The prior (T_prior, sigmas) adds
 // Log(T_prior^-1 T)^T P Log(T_prior^-1 T) with P = diag(1/sigma_t^2 x3, 1/sigma_r^2 x3), the
 // residuals having unit variance kernel_width^2.
@@ -45,8 +46,9 @@ struct SurfaceRegistrationConfig {
   double rotation_tolerance = 1e-4;     ///< rad
   double max_correspondence_distance = 0.5;  ///< m
   double kernel_width = 0.1;            ///< m
-  /// m: the first iteration's kernel width, halved every iteration down to kernel_width (the
-  /// gate is max(max_correspondence_distance, 3 widths)); converged only at kernel_width.
+  /// m: the first iteration's kernel width, halved down to kernel_width after each step that
+  /// moved the points less than half the width (the gate is max(max_correspondence_distance,
+  /// 3 widths)); converged only at kernel_width.
   double initial_kernel_width = 0.5;
   double prior_translation_sigma = 1.0; ///< m; <= 0: no prior
   double prior_rotation_sigma = 0.1;    ///< rad; <= 0: no prior
