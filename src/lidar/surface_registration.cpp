@@ -82,30 +82,30 @@ LocalSurface fit_surface(const std::vector<cloud::MapPoint>& neighbours, const S
   return surface;
 }
 
-// Fits the surface of every source point at pose T (parallel; one result per point).
-void associate(const std::vector<Eigen::Vector3f>& source, const cloud::VoxelHashMap& map, const SE3& T,
-               const SurfaceRegistrationConfig& config, std::vector<LocalSurface>& surfaces) {
-  surfaces.assign(source.size(), LocalSurface{});
+// Fits the surface of source points [first, last) at pose T (parallel; one result per point).
+void associate(const std::vector<Eigen::Vector3f>& source, std::size_t first, std::size_t last, const cloud::VoxelHashMap& map,
+               const SE3& T, const SurfaceRegistrationConfig& config, std::vector<LocalSurface>& surfaces) {
   const Eigen::Matrix3f rotation = T.rotation().matrix().cast<float>();
   const Eigen::Vector3f translation = T.translation().cast<float>();
   const double min_vertical_cosine = std::cos(config.vertical_line_angle);
   const float max_distance = static_cast<float>(config.max_neighbour_distance);
-  cloud::parallel_for(source.size(), config.num_threads, [&](std::size_t begin, std::size_t end) {
+  cloud::parallel_for(last - first, config.num_threads, [&](std::size_t begin, std::size_t end) {
     std::vector<cloud::MapPoint> neighbours;
-    for (std::size_t i = begin; i < end; ++i) {
+    for (std::size_t i = first + begin; i < first + end; ++i) {
       map.nearest_k(rotation * source[i] + translation, config.neighbours, max_distance, &neighbours);
       surfaces[i] = fit_surface(neighbours, config, min_vertical_cosine);
     }
   });
 }
 
-SurfaceEquations linearize(const std::vector<Eigen::Vector3f>& source, const std::vector<LocalSurface>& surfaces,
+// The normal equations of source points [0, count).
+SurfaceEquations linearize(const std::vector<Eigen::Vector3f>& source, std::size_t count, const std::vector<LocalSurface>& surfaces,
                            const SE3& T, double kernel_width, double gate, int num_threads) {
   const Eigen::Matrix3d rotation = T.rotation().matrix();
   const Eigen::Vector3d translation = T.translation();
   const double inverse_width = 1.0 / kernel_width;
-  std::vector<SurfaceEquations> partial(cloud::chunk_count(source.size(), num_threads));
-  cloud::parallel_chunks(source.size(), num_threads, [&](std::size_t chunk, std::size_t begin, std::size_t end) {
+  std::vector<SurfaceEquations> partial(cloud::chunk_count(count, num_threads));
+  cloud::parallel_chunks(count, num_threads, [&](std::size_t chunk, std::size_t begin, std::size_t end) {
     SurfaceEquations local;
     for (std::size_t i = begin; i < end; ++i) {
       const LocalSurface& surface = surfaces[i];
@@ -140,6 +140,22 @@ SurfaceEquations linearize(const std::vector<Eigen::Vector3f>& source, const std
   return total;
 }
 
+// Below this many points in the coarse subset, registration uses every point from the start.
+constexpr std::size_t kMinCoarsePoints = 1000;
+
+// The points with index i % stride == 0 first (the coarse subset), then the others, each part in
+// its original order.
+std::vector<Eigen::Vector3f> coarse_first_order(const std::vector<Eigen::Vector3f>& source, std::size_t stride) {
+  if (stride <= 1) return source;
+  std::vector<Eigen::Vector3f> ordered;
+  ordered.reserve(source.size());
+  for (std::size_t i = 0; i < source.size(); i += stride) ordered.push_back(source[i]);
+  for (std::size_t i = 0; i < source.size(); ++i) {
+    if (i % stride != 0) ordered.push_back(source[i]);
+  }
+  return ordered;
+}
+
 }  // namespace
 
 Status SurfaceRegistrationConfig::validate() const {
@@ -166,6 +182,7 @@ Status SurfaceRegistrationConfig::validate() const {
   if (!(reassociation_translation >= 0)) return Error(fmt::format("reassociation_translation: {} < 0", reassociation_translation));
   if (!(reassociation_rotation >= 0)) return Error(fmt::format("reassociation_rotation: {} < 0", reassociation_rotation));
   if (min_correspondences < 6) return Error(fmt::format("min_correspondences: {} < 6", min_correspondences));
+  if (coarse_stride < 1) return Error(fmt::format("coarse_stride: {} < 1", coarse_stride));
   return ok_status();
 }
 
@@ -197,7 +214,13 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
   SurfaceRegistrationResult result;
   result.T_map_source = guess;
   SurfaceEquations equations;
-  std::vector<LocalSurface> surfaces;
+  // The coarse subset (every coarse_stride-th point) first, then the rest: the points are
+  // reordered so that the points in use are always a prefix.
+  const std::vector<Eigen::Vector3f> ordered = coarse_first_order(source, config.coarse_stride);
+  const std::size_t coarse_count = (source.size() + config.coarse_stride - 1) / config.coarse_stride;
+  std::size_t active = coarse_count >= kMinCoarsePoints ? coarse_count : ordered.size();
+  std::size_t associated = 0;  // prefix of `ordered` whose surfaces are fitted
+  std::vector<LocalSurface> surfaces(ordered.size());
   SE3 associated_at;
   double width = std::max(config.kernel_width, config.initial_kernel_width);
   double mean_range = 0.0;  // m: turns a rotation step into the points' displacement
@@ -207,9 +230,15 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
     const SE3::Tangent moved = (associated_at.inverse() * result.T_map_source).log();
     if (iteration == 1 || moved.head<3>().norm() > config.reassociation_translation ||
         moved.tail<3>().norm() > config.reassociation_rotation) {
-      associate(source, map, result.T_map_source, config, surfaces);
+      associated = 0;
       associated_at = result.T_map_source;
       ++result.associations;
+    }
+    // Points taken into use since the last fit join it (the estimate is within the
+    // re-association thresholds of where it was made).
+    if (associated < active) {
+      associate(ordered, associated, active, map, result.T_map_source, config, surfaces);
+      associated = active;
     }
     // Coarse to fine: the kernel starts wide (a poor prediction, e.g. the constant-velocity
     // model at the start of a turn, still finds its correspondences) and halves down to
@@ -218,8 +247,13 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
     // down-weight the correspondences that pull it there and crawl); the gate follows at three
     // widths.
     const bool finest = width <= config.kernel_width;
-    equations = linearize(source, surfaces, result.T_map_source, width, std::max(config.max_correspondence_distance, 3.0 * width),
+    equations = linearize(ordered, active, surfaces, result.T_map_source, width, std::max(config.max_correspondence_distance, 3.0 * width),
                           config.num_threads);
+    if (equations.correspondences() < config.min_correspondences && active < ordered.size()) {
+      active = ordered.size();  // too few on the subset: all points from here on
+      --iteration;
+      continue;
+    }
     if (equations.correspondences() < config.min_correspondences) {
       return Error(fmt::format("surface registration: {} of {} points matched a map surface within {} m {}(need {}); "
                                "the map does not overlap the scan at this pose",
@@ -239,8 +273,12 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
     }
     result.T_map_source = result.T_map_source * SE3::exp(delta);
     result.iterations = iteration;
+    if (active < ordered.size()) ++result.coarse_iterations;
     const double displacement = delta.head<3>().norm() + delta.tail<3>().norm() * mean_range;
-    if (!finest && displacement < 0.5 * width) width = std::max(config.kernel_width, 0.5 * width);
+    if (!finest && displacement < 0.5 * width) {
+      width = std::max(config.kernel_width, 0.5 * width);
+      if (width <= config.kernel_width) active = ordered.size();  // coarse to fine is over: every point from here on
+    }
     if (finest && delta.head<3>().norm() < config.translation_tolerance && delta.tail<3>().norm() < config.rotation_tolerance) {
       result.converged = true;
       break;

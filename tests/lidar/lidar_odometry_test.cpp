@@ -67,6 +67,41 @@ TEST(SurfaceRegistration, RecoversTheTruePoseInTheYardToOneCentimetre) {
   }
 }
 
+// A poor guess (0.5 m, 8 deg off) takes its large steps on every fourth point, then all points
+// finish to the same centimetre as registering all points throughout; when the subset matches
+// too few surfaces, all points are used from the start.
+TEST(SurfaceRegistration, CoarseSubsetTakesTheLargeStepsAndAllPointsTheLast) {
+  const sim::World world = testing_support::registration_world();
+  const cloud::VoxelHashMap map = map_of(world, {pose(0, 0, 1.8, 0), pose(1.0, 0.5, 1.8, 10)});
+  const SE3 truth = pose(0.8, -0.6, 1.8, 25);
+  const cloud::PointCloud scan = testing_support::scan(world, truth, 0.01, 99);
+  std::vector<Eigen::Vector3f> source;
+  for (std::size_t i = 0; i < scan.size(); i += 2) source.push_back(scan.positions[i]);
+  ASSERT_GT(source.size(), 4000u);  // a subset of more than 1000 points
+  const SE3 guess = truth * pose(0.4, -0.3, 0.05, 8);
+  for (const std::size_t stride : {1u, 4u}) {
+    SurfaceRegistrationConfig config;
+    config.coarse_stride = stride;
+    auto result = align_to_surfaces(source, map, guess, guess, config);
+    ASSERT_TRUE(result.ok()) << result.error().message;
+    EXPECT_LT((result->T_map_source.translation() - truth.translation()).norm(), 0.01) << stride;
+    EXPECT_LT(rotation_error_deg(result->T_map_source, truth), 0.05) << stride;
+    EXPECT_TRUE(result->converged);
+    if (stride == 1) {
+      EXPECT_EQ(result->coarse_iterations, 0);
+    } else {
+      EXPECT_GE(result->coarse_iterations, 2);
+    }
+    EXPECT_GT(result->correspondences, source.size() / 2);  // the last iterations saw every point
+  }
+  SurfaceRegistrationConfig demanding;
+  demanding.min_correspondences = source.size() / 2;  // more than a quarter of the points match
+  auto result = align_to_surfaces(source, map, guess, guess, demanding);
+  ASSERT_TRUE(result.ok()) << result.error().message;
+  EXPECT_EQ(result->coarse_iterations, 0);
+  EXPECT_LT((result->T_map_source.translation() - truth.translation()).norm(), 0.01);
+}
+
 TEST(SurfaceRegistration, BareCorridorIsDegenerateAndKeepsThePriorAlongItsAxis) {
   sim::WorldDescription corridor;
   for (const double y : {2.0, -2.0}) {
@@ -109,6 +144,11 @@ TEST(SurfaceRegistration, RefusesBadInput) {
   auto invalid = align_to_surfaces(source, map, SE3(), SE3(), config);
   ASSERT_FALSE(invalid.ok());
   EXPECT_NE(invalid.error().message.find("kernel_width"), std::string::npos);
+  config = {};
+  config.coarse_stride = 0;
+  auto no_stride = align_to_surfaces(source, map, SE3(), SE3(), config);
+  ASSERT_FALSE(no_stride.ok());
+  EXPECT_NE(no_stride.error().message.find("coarse_stride"), std::string::npos);
 }
 
 // Runs LiDAR odometry over a scenario's LiDAR sweeps (the other sensors left out), starting at

