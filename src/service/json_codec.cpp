@@ -159,6 +159,8 @@ json session_to_json(const SessionInfo& info) {
       {"stored_poses", info.stored_poses},
       {"stored_through_ns", info.stored_through ? json(info.stored_through->nanoseconds()) : json(nullptr)},
       {"pose_subscribers", info.pose_subscribers},
+      {"keyframe_subscribers", info.keyframe_subscribers},
+      {"map_subscribers", info.map_subscribers},
       {"latest_pose", info.latest_pose ? pose_to_json(*info.latest_pose) : json(nullptr)},
       {"mapping", mapping_to_json(info.mapping)},
       {"config", info.config_yaml},

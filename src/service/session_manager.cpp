@@ -397,8 +397,12 @@ struct SessionManager::Impl {
     const detail::StorageProgress progress = recorder->progress(managed.record.id);
     info.stored_poses = progress.stored;
     info.stored_through = progress.stored_through;
-    info.pose_subscribers = static_cast<uint64_t>(
-        std::count_if(managed.pose_subscribers.begin(), managed.pose_subscribers.end(), [](const auto& s) { return !s->closed(); }));
+    auto open = [](const auto& subscribers) {
+      return static_cast<uint64_t>(std::count_if(subscribers.begin(), subscribers.end(), [](const auto& s) { return !s->closed(); }));
+    };
+    info.pose_subscribers = open(managed.pose_subscribers);
+    info.keyframe_subscribers = open(managed.keyframe_subscribers);
+    info.map_subscribers = open(managed.map_subscribers);
     info.config_yaml = managed.record.config_yaml;
     info.calibration_yaml = managed.record.calibration_yaml;
     return info;

@@ -248,7 +248,13 @@ TEST_F(MappingEndpointsTest, GrpcServesTheMapAndStreamsKeyframesAndMapUpdates) {
     while (updates->Read(&update)) received_updates.push_back(update);
   });
   // The subscriptions are registered asynchronously, once the calls reach the server.
-  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  for (int attempt = 0; attempt < 3000; ++attempt) {
+    const SessionInfo subscribed = manager_->session_info(kStreamer, session_id_).value();
+    if (subscribed.keyframe_subscribers == 1 && subscribed.map_subscribers == 1) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_EQ(manager_->session_info(kStreamer, session_id_).value().keyframe_subscribers, 1u);
+  EXPECT_EQ(manager_->session_info(kStreamer, session_id_).value().map_subscribers, 1u);
   stream_recording();
   const SessionInfo info = manager_->session_info(kStreamer, session_id_).value();
   ASSERT_TRUE(manager_->end_session(kStreamer, session_id_).ok());  // closes the subscriptions

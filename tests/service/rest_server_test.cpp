@@ -150,6 +150,7 @@ TEST_F(RestServerTest, SessionLifecycle) {
   }
   const json info = json::parse(http.Get(("/v1/sessions/" + id).c_str(), bearer(kViewerToken))->body);
   EXPECT_EQ(total, info["stored_poses"].get<std::size_t>());
+  for (const char* subscribers : {"pose_subscribers", "keyframe_subscribers", "map_subscribers"}) EXPECT_EQ(info[subscribers], 0) << subscribers;
   EXPECT_EQ(pages, static_cast<int>((total + 699) / 700));
   EXPECT_GT(total, 1800u);
   // A page's poses (written as text directly) carry the fields of GET /pose, numbers exact.

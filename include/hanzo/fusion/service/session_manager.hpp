@@ -100,7 +100,9 @@ struct SessionInfo {
   std::optional<msgs::PoseEstimate> latest_pose;
   uint64_t stored_poses = 0;                 // poses committed to storage (durable)
   std::optional<Timestamp> stored_through;   // timestamp of the newest committed pose
-  uint64_t pose_subscribers = 0;
+  uint64_t pose_subscribers = 0;             // open SubscribePose / pose streams
+  uint64_t keyframe_subscribers = 0;         // open SubscribeKeyframes calls
+  uint64_t map_subscribers = 0;              // open SubscribeMap calls
   std::string config_yaml;
   std::string calibration_yaml;
 };
