@@ -216,13 +216,13 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
   SurfaceEquations equations;
   // The coarse subset (every coarse_stride-th point) first, then the rest: the points are
   // reordered so that the points in use are always a prefix.
+  double width = std::max(config.kernel_width, config.initial_kernel_width);
   const std::vector<Eigen::Vector3f> ordered = coarse_first_order(source, config.coarse_stride);
   const std::size_t coarse_count = (source.size() + config.coarse_stride - 1) / config.coarse_stride;
-  std::size_t active = coarse_count >= kMinCoarsePoints ? coarse_count : ordered.size();
+  std::size_t active = coarse_count >= kMinCoarsePoints && width > config.kernel_width ? coarse_count : ordered.size();
   std::size_t associated = 0;  // prefix of `ordered` whose surfaces are fitted
   std::vector<LocalSurface> surfaces(ordered.size());
   SE3 associated_at;
-  double width = std::max(config.kernel_width, config.initial_kernel_width);
   double mean_range = 0.0;  // m: turns a rotation step into the points' displacement
   for (const Eigen::Vector3f& point : source) mean_range += static_cast<double>(point.norm());
   mean_range /= static_cast<double>(source.size());

@@ -94,6 +94,12 @@ TEST(SurfaceRegistration, CoarseSubsetTakesTheLargeStepsAndAllPointsTheLast) {
     }
     EXPECT_GT(result->correspondences, source.size() / 2);  // the last iterations saw every point
   }
+  SurfaceRegistrationConfig narrow;  // the kernel starts at its final width: no coarse phase
+  narrow.initial_kernel_width = narrow.kernel_width;
+  auto narrow_result = align_to_surfaces(source, map, truth * pose(0.05, -0.03, 0.0, 1), truth * pose(0.05, -0.03, 0.0, 1), narrow);
+  ASSERT_TRUE(narrow_result.ok()) << narrow_result.error().message;
+  EXPECT_EQ(narrow_result->coarse_iterations, 0);
+  EXPECT_GT(narrow_result->correspondences, source.size() / 2);
   SurfaceRegistrationConfig demanding;
   demanding.min_correspondences = source.size() / 2;  // more than a quarter of the points match
   auto result = align_to_surfaces(source, map, guess, guess, demanding);

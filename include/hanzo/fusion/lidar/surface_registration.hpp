@@ -22,9 +22,9 @@
 // each step that moved the points (translation + rotation x their mean range) by less than
 // half the width (coarse to fine: a poor prediction, such as the constant-velocity model at the
 // start of a turn, still converges, and takes its large steps while the kernel is wide);
-// residuals beyond max(max_correspondence_distance, three widths) are ignored. Until the first
-// narrowing only every coarse_stride-th point takes part, so the re-associations of those
-// large steps fit a quarter of the surfaces. The prior (T_prior, sigmas) adds
+// residuals beyond max(max_correspondence_distance, three widths) are ignored. Until the kernel
+// reaches kernel_width only every coarse_stride-th point takes part, so the re-associations of
+// those large steps fit a quarter of the surfaces; the last iterations use every point. The prior (T_prior, sigmas) adds
 // Log(T_prior^-1 T)^T P Log(T_prior^-1 T) with P = diag(1/sigma_t^2 x3, 1/sigma_r^2 x3), the
 // residuals having unit variance kernel_width^2.
 //
@@ -64,10 +64,11 @@ struct SurfaceRegistrationConfig {
   double reassociation_translation = 0.05;  ///< m
   double reassociation_rotation = 0.005;    ///< rad
   std::size_t min_correspondences = 50;
-  /// The iterations before the kernel first narrows (the large steps of a poor prediction) use
-  /// every coarse_stride-th source point only; from the first narrowing on, all points. 1: all
-  /// points throughout (also when the subset would hold fewer than 1000 points, or matches fewer
-  /// than min_correspondences).
+  /// The iterations before the kernel reaches kernel_width (the large steps of a poor
+  /// prediction) use every coarse_stride-th source point only; from then on, all points (a run
+  /// that ends at max_iterations before that reports the subset's correspondences). 1: all
+  /// points throughout (also when the subset would hold fewer than 1000 points, matches fewer
+  /// than min_correspondences, or the kernel starts at kernel_width).
   std::size_t coarse_stride = 4;
   int num_threads = 1;                  ///< <= 0: all cores
 
