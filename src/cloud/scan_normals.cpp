@@ -7,6 +7,8 @@
 
 #include <Eigen/Eigenvalues>
 
+#include "hanzo/fusion/cloud/parallel.hpp"
+
 namespace hanzo::fusion::cloud {
 
 namespace {
@@ -28,7 +30,7 @@ float fast_atan2(float y, float x) {
 }
 }  // namespace
 
-ScanNormalEstimator::ScanNormalEstimator(const PointCloud& scan, const ScanNormalConfig& config)
+ScanNormalEstimator::ScanNormalEstimator(const PointCloud& scan, const ScanNormalConfig& config, int num_threads)
     : scan_(scan), config_(config) {
   if (!scan.has_rings() || scan.empty()) return;
   rings_ = static_cast<int>(*std::max_element(scan.rings.begin(), scan.rings.end())) + 1;
@@ -45,7 +47,7 @@ ScanNormalEstimator::ScanNormalEstimator(const PointCloud& scan, const ScanNorma
     std::vector<std::vector<float>> elevations(static_cast<std::size_t>(rings_));
     for (std::size_t i = 0; i < scan.size(); i += 7) {
       const Eigen::Vector3f& p = scan.positions[i];
-      elevations[scan.rings[i]].push_back(std::atan2(p.z(), std::hypot(p.x(), p.y())));
+      elevations[scan.rings[i]].push_back(fast_atan2(p.z(), std::sqrt(p.x() * p.x() + p.y() * p.y())));
     }
     std::vector<float> ring_elevation, steps;
     for (auto& values : elevations) {
@@ -63,14 +65,19 @@ ScanNormalEstimator::ScanNormalEstimator(const PointCloud& scan, const ScanNorma
   }
   image_.assign(static_cast<std::size_t>(rings_) * static_cast<std::size_t>(columns_), kEmpty);
   column_of_.resize(scan.size());
+  const float columns_per_turn = static_cast<float>(columns_ * 0.5 / M_PI);
+  parallel_for(scan.size(), num_threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const Eigen::Vector3f& p = scan.positions[i];
+      // The nearest column centre (azimuth >= 0: adding a half rounds): sensors fire at evenly
+      // spaced azimuths, which then fall on the centres, far from the edges where fast_atan2's
+      // error could move them across.
+      const float column = (fast_atan2(p.y(), p.x()) + static_cast<float>(M_PI)) * columns_per_turn;
+      column_of_[i] = static_cast<int>(column + 0.5F) % columns_;
+    }
+  });
   for (std::size_t i = 0; i < scan.size(); ++i) {
-    const Eigen::Vector3f& p = scan.positions[i];
-    const float azimuth = (fast_atan2(p.y(), p.x()) + static_cast<float>(M_PI)) * static_cast<float>(0.5 / M_PI);
-    // The nearest column centre: sensors fire at evenly spaced azimuths, which then fall on
-    // the centres, far from the edges where fast_atan2's error could move them across.
-    const int column = static_cast<int>(std::lround(azimuth * static_cast<float>(columns_))) % columns_;
-    column_of_[i] = column;
-    uint32_t& cell = image_[static_cast<std::size_t>(scan.rings[i]) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(column)];
+    uint32_t& cell = image_[static_cast<std::size_t>(scan.rings[i]) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(column_of_[i])];
     if (cell == kEmpty) cell = static_cast<uint32_t>(i);
   }
 }

@@ -4,6 +4,8 @@
 #include <cassert>
 #include <utility>
 
+#include <absl/container/flat_hash_set.h>
+
 #include "hanzo/fusion/cloud/parallel.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 
@@ -17,21 +19,31 @@ constexpr uint64_t kInvalidKey = ~uint64_t{0};
 
 }  // namespace
 
-bool pack_voxel_key(const Eigen::Vector3i& voxel, uint64_t* key) {
-  uint64_t packed = 0;
-  for (int axis = 0; axis < 3; ++axis) {
-    const int64_t shifted = int64_t{voxel[axis]} + kKeyOffset;
-    if (shifted < 0 || static_cast<uint64_t>(shifted) > kKeyMask) return false;
-    packed |= static_cast<uint64_t>(shifted) << (kKeyBits * axis);
-  }
-  *key = packed;
-  return true;
-}
-
 Eigen::Vector3i unpack_voxel_key(uint64_t key) {
   Eigen::Vector3i voxel;
   for (int axis = 0; axis < 3; ++axis) voxel[axis] = static_cast<int>(int64_t((key >> (kKeyBits * axis)) & kKeyMask) - kKeyOffset);
   return voxel;
+}
+
+std::vector<uint32_t> first_point_per_voxel(const std::vector<Eigen::Vector3f>& points, const std::vector<uint32_t>& candidates,
+                                            double voxel_size) {
+  assert(voxel_size > 0);
+  const float inverse = static_cast<float>(1.0 / voxel_size);
+  absl::flat_hash_set<uint64_t> occupied;
+  occupied.reserve(candidates.size() / 4);
+  // The keys seen last, by a hash of the key: neighbouring points of a scan mostly share a voxel,
+  // and this small table answers them without the cache misses of the large set.
+  std::vector<uint64_t> recent(4096, kInvalidKey);
+  std::vector<uint32_t> kept;
+  for (const uint32_t i : candidates) {
+    uint64_t key = 0;
+    if (!pack_voxel_key(voxel_coordinates(points[i], inverse), &key)) continue;
+    uint64_t& seen = recent[(key * 0x9E3779B97F4A7C15ULL) >> 52];
+    if (seen == key) continue;
+    seen = key;
+    if (occupied.insert(key).second) kept.push_back(i);
+  }
+  return kept;
 }
 
 PointCloud voxel_downsample(const PointCloud& cloud, double voxel_size, int num_threads) {

@@ -74,9 +74,14 @@ void VoxelHashMap::add(const std::vector<Eigen::Vector3f>& points, const Eigen::
 
   const float max_distance_squared = static_cast<float>(config_.max_distance * config_.max_distance);
   const Eigen::Vector3f origin = sensor_origin.cast<float>();
+  // By the voxel's centre, from its key: reading its first point would miss the cache once per
+  // voxel of the map.
+  const float voxel_size = 1.0F / inverse_voxel_size_;
   absl::erase_if(voxels_, [&](const auto& entry) {
     const std::vector<MapPoint>& voxel = entry.second;
-    if (!voxel.empty() && (voxel.front().position - origin).squaredNorm() <= max_distance_squared) return false;
+    const Eigen::Vector3i coordinates = unpack_voxel_key(entry.first);
+    const Eigen::Vector3f centre = (coordinates.cast<float>().array() + 0.5F) * voxel_size;
+    if (!voxel.empty() && (centre - origin).squaredNorm() <= max_distance_squared) return false;
     point_count_ -= voxel.size();
     return true;
   });

@@ -5,7 +5,6 @@
 #include <cmath>
 
 #include <Eigen/Eigenvalues>
-#include <absl/container/flat_hash_set.h>
 #include <fmt/format.h>
 
 #include "hanzo/fusion/cloud/scan_normals.hpp"
@@ -16,21 +15,6 @@ namespace hanzo::fusion::lidar {
 namespace {
 
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
-
-// The first point of each voxel of edge voxel_size, in input order (an O(n) downsampling that
-// keeps measured points, so their per-point attributes stay valid).
-std::vector<uint32_t> voxel_representatives(const std::vector<Eigen::Vector3f>& points, const std::vector<uint32_t>& candidates,
-                                            double voxel_size) {
-  const float inverse = static_cast<float>(1.0 / voxel_size);
-  absl::flat_hash_set<uint64_t> occupied;
-  occupied.reserve(candidates.size() / 4);
-  std::vector<uint32_t> kept;
-  for (const uint32_t i : candidates) {
-    uint64_t key = 0;
-    if (cloud::pack_voxel_key(cloud::voxel_coordinates(points[i], inverse), &key) && occupied.insert(key).second) kept.push_back(i);
-  }
-  return kept;
-}
 
 // Inverse of an information matrix that may be singular along degenerate directions: those
 // get a variance of 1e9 times the best-constrained one (the registration says nothing there).
@@ -96,7 +80,8 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   const auto started = Clock::now();
   // 2-3. Crop, keep one measured point per map spacing, their normals from the range image,
   // deskew; registration points are those downsampled again.
-  const cloud::ScanNormalEstimator range_image(scan, config_.normals);
+  const int threads = config_.num_threads;
+  const cloud::ScanNormalEstimator range_image(scan, config_.normals, threads);
   std::vector<uint32_t> in_range;
   in_range.reserve(scan.size());
   const float min_squared = static_cast<float>(config_.min_range * config_.min_range);
@@ -117,7 +102,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
                              config_.max_range, config_.min_points));
   }
   // Points closer than the map's spacing would be refused by it anyway (1 cm at least).
-  const std::vector<uint32_t> kept = voxel_representatives(scan.positions, in_range, std::max(map_.point_spacing(), 0.01));
+  const std::vector<uint32_t> kept = cloud::first_point_per_voxel(scan.positions, in_range, std::max(map_.point_spacing(), 0.01));
   cloud::PointCloud map_points;
   map_points.positions.reserve(kept.size());
   for (const uint32_t i : kept) {
@@ -129,12 +114,12 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // the error feeds back through the constant-velocity model and grows).
   const float middle = scan.has_times() ? 0.5F * *std::max_element(scan.times.begin(), scan.times.end()) : 0.0F;
   const Timestamp pose_time = time + Duration::from_seconds(static_cast<double>(middle));
-  if (config_.deskew) deskew(map_points, sweep_motion ? *sweep_motion : SweepMotion::constant_twist(twist_per_second, middle));
+  if (config_.deskew) deskew(map_points, sweep_motion ? *sweep_motion : SweepMotion::constant_twist(twist_per_second, middle), threads);
   map_points.times.clear();
   std::vector<uint32_t> all(map_points.size());
   for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<uint32_t>(i);
   std::vector<Eigen::Vector3f> source;
-  for (const uint32_t i : voxel_representatives(map_points.positions, all, config_.source_voxel_size)) {
+  for (const uint32_t i : cloud::first_point_per_voxel(map_points.positions, all, config_.source_voxel_size)) {
     source.push_back(map_points.positions[i]);
   }
 

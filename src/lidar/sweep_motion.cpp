@@ -6,6 +6,8 @@
 
 #include <fmt/format.h>
 
+#include "hanzo/fusion/cloud/parallel.hpp"
+
 namespace hanzo::fusion::lidar {
 
 SweepMotion SweepMotion::constant_twist(const SE3::Tangent& twist_per_second, double reference_time) {
@@ -54,21 +56,23 @@ bool SweepMotion::is_identity() const {
   return still && poses_.front().log().isZero();
 }
 
-void deskew(cloud::PointCloud& scan, const SweepMotion& motion) {
+void deskew(cloud::PointCloud& scan, const SweepMotion& motion, int num_threads) {
   if (!scan.has_times() || motion.is_identity()) return;
-  // Sweeps are sorted by time in blocks (firing columns): reuse the transform while the time repeats.
-  float cached_time = std::numeric_limits<float>::quiet_NaN();
-  Eigen::Matrix3f rotation = Eigen::Matrix3f::Identity();
-  Eigen::Vector3f translation = Eigen::Vector3f::Zero();
-  for (std::size_t i = 0; i < scan.size(); ++i) {
-    if (scan.times[i] != cached_time) {
-      cached_time = scan.times[i];
-      const SE3 T_reference_sensor = motion.at(static_cast<double>(cached_time));
-      rotation = T_reference_sensor.rotation().matrix().cast<float>();
-      translation = T_reference_sensor.translation().cast<float>();
+  cloud::parallel_for(scan.size(), num_threads, [&](std::size_t begin, std::size_t end) {
+    // Sweeps are sorted by time in blocks (firing columns): reuse the transform while the time repeats.
+    float cached_time = std::numeric_limits<float>::quiet_NaN();
+    Eigen::Matrix3f rotation = Eigen::Matrix3f::Identity();
+    Eigen::Vector3f translation = Eigen::Vector3f::Zero();
+    for (std::size_t i = begin; i < end; ++i) {
+      if (scan.times[i] != cached_time) {
+        cached_time = scan.times[i];
+        const SE3 T_reference_sensor = motion.at(static_cast<double>(cached_time));
+        rotation = T_reference_sensor.rotation().matrix().cast<float>();
+        translation = T_reference_sensor.translation().cast<float>();
+      }
+      scan.positions[i] = rotation * scan.positions[i] + translation;
     }
-    scan.positions[i] = rotation * scan.positions[i] + translation;
-  }
+  });
 }
 
 }  // namespace hanzo::fusion::lidar

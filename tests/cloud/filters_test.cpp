@@ -2,7 +2,10 @@
 // geometry on clouds with known answers.
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <random>
+#include <set>
 
 #include <gtest/gtest.h>
 
@@ -73,6 +76,35 @@ TEST(VoxelGrid, OnePointPerVoxelAtTheCentroid) {
   EXPECT_EQ(one.positions, two.positions);
   EXPECT_LE(one.size(), 40u * 40u * 40u);
   EXPECT_GT(one.size(), 30000u);  // 50k points over 64k voxels: most voxels hold one point
+}
+
+TEST(VoxelGrid, FirstPointPerVoxelKeepsTheFirstCandidateOfEachVoxelInOrder) {
+  // floor, not truncation, below zero: -0.1 and -0.9 share voxel -1; -1.0 is voxel -1 too, -1.01
+  // voxel -2; far coordinates beyond the key range (+-2^20 voxels) are dropped.
+  EXPECT_EQ(floor_to_int(-0.1F), -1);
+  EXPECT_EQ(floor_to_int(-1.0F), -1);
+  EXPECT_EQ(floor_to_int(-1.01F), -2);
+  EXPECT_EQ(floor_to_int(2.99F), 2);
+  EXPECT_EQ(floor_to_int(1e20F), 1073741824);
+  const std::vector<Eigen::Vector3f> points = {{-0.1F, 0.5F, 0.5F}, {0.1F, 0.5F, 0.5F}, {-0.9F, 0.2F, 0.7F}, {5e6F, 0.0F, 0.0F},
+                                               {0.9F, 0.9F, 0.9F},  {-1.01F, 0.5F, 0.5F}, {-1.0F, 0.5F, 0.5F}};
+  EXPECT_EQ(first_point_per_voxel(points, {0, 1, 2, 3, 4, 5, 6}, 1.0), (std::vector<uint32_t>{0, 1, 5}));
+  // Candidates in another order: the first of them per voxel.
+  EXPECT_EQ(first_point_per_voxel(points, {6, 4, 2, 0}, 1.0), (std::vector<uint32_t>{6, 4}));
+
+  // Against a plain set over many points (the small recent-key table must not change the answer).
+  const std::vector<Eigen::Vector3f> many = random_points(50000, 10.0f, 5);
+  std::vector<uint32_t> all(many.size());
+  for (uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+  std::set<std::array<int, 3>> seen;
+  std::vector<uint32_t> expected;
+  for (uint32_t i = 0; i < many.size(); ++i) {
+    const Eigen::Vector3f scaled = many[i] * static_cast<float>(1.0 / 0.7);
+    if (seen.insert({static_cast<int>(std::floor(scaled.x())), static_cast<int>(std::floor(scaled.y())), static_cast<int>(std::floor(scaled.z()))}).second) {
+      expected.push_back(i);
+    }
+  }
+  EXPECT_EQ(first_point_per_voxel(many, all, 0.7), expected);
 }
 
 TEST(OutlierRemoval, DropsIsolatedPoints) {

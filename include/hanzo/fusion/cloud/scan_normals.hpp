@@ -38,7 +38,8 @@ struct ScanNormalConfig {
 /// scan: it must outlive the object.
 class ScanNormalEstimator {
  public:
-  ScanNormalEstimator(const PointCloud& scan, const ScanNormalConfig& config = {});
+  /// Builds the range image (the azimuths on up to num_threads threads; see parallel.hpp).
+  ScanNormalEstimator(const PointCloud& scan, const ScanNormalConfig& config = {}, int num_threads = 1);
   /// The unit normal of point `index` (facing the sensor), or zero; see above.
   Eigen::Vector3f normal(std::size_t index) const;
   /// True when no point on the same ring within two columns or on the adjacent rings within

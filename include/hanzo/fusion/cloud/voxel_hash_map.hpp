@@ -5,7 +5,7 @@
 // - add(): each point goes to its voxel unless the voxel holds max_points_per_voxel points
 //   or a point closer than min_point_spacing already (KISS-ICP >= 1.0's rule): voxels fill
 //   with points spread over the surface instead of the first scan's ring, which matters for a
-//   spinning LiDAR whose rings sample the ground in arcs. Then voxels whose first point lies
+//   spinning LiDAR whose rings sample the ground in arcs. Then voxels whose centre lies
 //   farther than max_distance from the sensor are dropped, so memory follows the sensor.
 // - nearest() / nearest_k(): the nearest map points among the query's voxel and its 26
 //   neighbours (exact within one voxel edge of the query).
@@ -20,6 +20,8 @@
 
 #include <Eigen/Core>
 #include <absl/container/flat_hash_map.h>
+
+#include "hanzo/fusion/cloud/voxel_grid.hpp"
 
 namespace hanzo::fusion::cloud {
 
@@ -55,9 +57,7 @@ class VoxelHashMap {
 
   /// The points of the voxel at `coordinates`, or nullptr when it is empty.
   const std::vector<MapPoint>* find(const Eigen::Vector3i& coordinates) const;
-  Eigen::Vector3i coordinates(const Eigen::Vector3f& position) const {
-    return (position * inverse_voxel_size_).array().floor().cast<int>();
-  }
+  Eigen::Vector3i coordinates(const Eigen::Vector3f& position) const { return voxel_coordinates(position, inverse_voxel_size_); }
   /// The nearest point to `query` among its voxel and the 26 around it.
   bool nearest(const Eigen::Vector3f& query, Eigen::Vector3f* point, float* squared_distance) const;
   /// Up to k nearest points within max_distance (m) of `query`, nearest first, into

@@ -86,8 +86,9 @@ struct LidarOdometryConfig {
   double weather_phantom_fraction = 0.005;
   double weather_return_ratio = 0.8;
   std::size_t min_points = 100;        ///< points after cropping
-  /// Threads for the registration (its registration.num_threads is replaced by this); 1: the
-  /// calling thread only, <= 0: every core.
+  /// Threads for the preprocessing (range image, deskew) and the
+  /// registration (its registration.num_threads is replaced by this); 1: the calling thread
+  /// only, <= 0: every core. Results do not depend on it.
   int num_threads = 1;
 
   /// Ok, or an Error naming the first invalid field.

@@ -52,7 +52,7 @@ class SweepMotion {
 /// Moves every point of `scan` (sensor frame at its own time, `scan.times`) into the sensor frame
 /// at the motion's reference time: p_reference = T_reference_sensor(t) p. Scans without
 /// per-point times are left as they are. Consecutive points with the same time (a firing
-/// column) share one transform.
-void deskew(cloud::PointCloud& scan, const SweepMotion& motion);
+/// column) share one transform. Points are split over up to num_threads threads.
+void deskew(cloud::PointCloud& scan, const SweepMotion& motion, int num_threads = 1);
 
 }  // namespace hanzo::fusion::lidar
