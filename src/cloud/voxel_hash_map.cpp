@@ -1,6 +1,7 @@
 #include "hanzo/fusion/cloud/voxel_hash_map.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cassert>
 #include <cmath>
 #include <limits>
@@ -10,18 +11,32 @@
 namespace hanzo::fusion::cloud {
 namespace {
 
-// The 27 voxels around a query, its own first, then faces, edges and corners (nearest first,
-// so the k-nearest bound shrinks early and prunes the rest).
-const std::vector<Eigen::Vector3i> kNeighbourOffsets = [] {
-  std::vector<Eigen::Vector3i> offsets;
-  for (int dx = -1; dx <= 1; ++dx) {
-    for (int dy = -1; dy <= 1; ++dy) {
-      for (int dz = -1; dz <= 1; ++dz) offsets.emplace_back(dx, dy, dz);
+// The 27 voxels around a query in the order nearest_k() visits them, one order per octant of
+// the query's voxel that the query lies in (bit a set: upper half along axis a): its own voxel
+// first, then those on the query's side before those across (a voxel across lies at least half
+// an edge farther), so the k-nearest bound shrinks early and prunes the rest.
+using NeighbourOrder = std::array<Eigen::Vector3i, 27>;
+const std::array<NeighbourOrder, 8> kNeighbourOrders = [] {
+  std::array<NeighbourOrder, 8> orders;
+  for (int octant = 0; octant < 8; ++octant) {
+    const auto cost = [octant](const Eigen::Vector3i& offset) {
+      int total = 0;
+      for (int axis = 0; axis < 3; ++axis) {
+        const int toward = (octant >> axis) & 1 ? 1 : -1;
+        total += offset[axis] == 0 ? 0 : (offset[axis] == toward ? 1 : 3);
+      }
+      return total;
+    };
+    std::vector<Eigen::Vector3i> offsets;
+    for (int dx = -1; dx <= 1; ++dx) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dz = -1; dz <= 1; ++dz) offsets.emplace_back(dx, dy, dz);
+      }
     }
+    std::stable_sort(offsets.begin(), offsets.end(), [&](const Eigen::Vector3i& a, const Eigen::Vector3i& b) { return cost(a) < cost(b); });
+    std::copy(offsets.begin(), offsets.end(), orders[octant].begin());
   }
-  std::stable_sort(offsets.begin(), offsets.end(),
-                   [](const Eigen::Vector3i& a, const Eigen::Vector3i& b) { return a.cwiseAbs().sum() < b.cwiseAbs().sum(); });
-  return offsets;
+  return orders;
 }();
 
 }  // namespace
@@ -121,8 +136,12 @@ void VoxelHashMap::nearest_k(const Eigen::Vector3f& query, std::size_t k, float 
                              std::vector<MapPoint>* neighbours) const {
   neighbours->clear();
   if (k == 0) return;
-  // A sorted list of at most k (squared distance, point) pairs; k is small (5-10).
-  thread_local std::vector<std::pair<float, MapPoint>> best;
+  // The best k so far, sorted by squared distance (k is small: 5-20).
+  struct Candidate {
+    float squared_distance;
+    const MapPoint* point;
+  };
+  thread_local std::vector<Candidate> best;
   best.clear();
   float bound = max_distance * max_distance;
   const Eigen::Vector3i center = coordinates(query);
@@ -130,7 +149,8 @@ void VoxelHashMap::nearest_k(const Eigen::Vector3f& query, std::size_t k, float 
   const float voxel_size = static_cast<float>(config_.voxel_size);
   const Eigen::Vector3f low = query - center.cast<float>() * voxel_size;  // in [0, voxel_size)
   const Eigen::Vector3f high = Eigen::Vector3f::Constant(voxel_size) - low;
-  for (const Eigen::Vector3i& offset : kNeighbourOffsets) {
+  const int octant = (low.x() > high.x() ? 1 : 0) | (low.y() > high.y() ? 2 : 0) | (low.z() > high.z() ? 4 : 0);
+  for (const Eigen::Vector3i& offset : kNeighbourOrders[static_cast<std::size_t>(octant)]) {
     float box_squared = 0.0F;
     for (int axis = 0; axis < 3; ++axis) {
       const float gap = offset[axis] < 0 ? low[axis] : (offset[axis] > 0 ? high[axis] : 0.0F);
@@ -142,14 +162,18 @@ void VoxelHashMap::nearest_k(const Eigen::Vector3f& query, std::size_t k, float 
     for (const MapPoint& candidate : *voxel) {
       const float d = (candidate.position - query).squaredNorm();
       if (d >= bound) continue;
-      auto position = std::upper_bound(best.begin(), best.end(), d,
-                                       [](float value, const auto& entry) { return value < entry.first; });
-      best.insert(position, {d, candidate});
-      if (best.size() > k) best.pop_back();
-      if (best.size() == k) bound = best.back().first;
+      // Insertion from the back; the last one falls off when k are held.
+      if (best.size() < k) best.push_back({d, &candidate});
+      std::size_t slot = best.size() - 1;
+      while (slot > 0 && best[slot - 1].squared_distance > d) {
+        best[slot] = best[slot - 1];
+        --slot;
+      }
+      best[slot] = {d, &candidate};
+      if (best.size() == k) bound = best.back().squared_distance;
     }
   }
-  for (const auto& entry : best) neighbours->push_back(entry.second);
+  for (const Candidate& entry : best) neighbours->push_back(*entry.point);
 }
 
 std::vector<Eigen::Vector3f> VoxelHashMap::points() const {
