@@ -5,9 +5,10 @@
 // time over StreamImu / StreamPointCloud, stamped with this machine's clock (live data). Both
 // processes share this machine's cores.
 //
-//   build/bench/bench_server_load [--sessions 20] [--seconds 60] [--no-lidar] [--point3] [--json]
+//   build/bench/bench_server_load [--sessions 20] [--seconds 60] [--no-lidar] [--point3] [--default-malloc] [--json]
 //
 // Sweeps go as packed_points (what FusionClient sends); --point3 sends the spec's Point3 list.
+// The server tunes malloc as hanzo-fusion serve does; --default-malloc measures without that.
 //
 // Reports: messages sent, received by the sessions, rejected by reason (lost), LiDAR sweeps
 // registered; pose latency = from writing an IMU message to reading back the PoseEstimate of its
@@ -39,6 +40,7 @@
 #include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/msgs/convert.hpp"
+#include "hanzo/fusion/service/allocator_tuning.hpp"
 #include "hanzo/fusion/service/grpc_server.hpp"
 #include "hanzo/fusion/service/session_manager.hpp"
 #include "hanzo/fusion/service/storage.hpp"
@@ -222,7 +224,7 @@ int run_clients(int commands, int report, const hf::sim::Scenario& scenario, int
 int main(int argc, char** argv) {
   int sessions = 20;
   double seconds = 60.0;
-  bool lidar = true, json_output = false;
+  bool lidar = true, json_output = false, default_malloc = false;
   hf::msgs::PointEncoding point_encoding = hf::msgs::PointEncoding::kPacked;
   for (int i = 1; i < argc; ++i) {
     const std::string argument = argv[i];
@@ -231,8 +233,9 @@ int main(int argc, char** argv) {
     else if (argument == "--no-lidar") lidar = false;
     else if (argument == "--json") json_output = true;
     else if (argument == "--point3") point_encoding = hf::msgs::PointEncoding::kPoint3;
+    else if (argument == "--default-malloc") default_malloc = true;
     else {
-      std::fprintf(stderr, "usage: bench_server_load [--sessions N] [--seconds S] [--no-lidar] [--point3] [--json]\n");
+      std::fprintf(stderr, "usage: bench_server_load [--sessions N] [--seconds S] [--no-lidar] [--point3] [--default-malloc] [--json]\n");
       return 2;
     }
   }
@@ -261,6 +264,8 @@ int main(int argc, char** argv) {
   }
   close(to_client[0]);
   close(from_client[1]);
+  // As hanzo-fusion serve (service/allocator_tuning.hpp); --default-malloc leaves glibc's settings.
+  if (!default_malloc) hf::service::keep_large_buffers_on_heap();
 
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_bench_server_load_{}", getpid());
   std::filesystem::remove_all(dir);

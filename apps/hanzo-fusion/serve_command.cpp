@@ -12,6 +12,8 @@
 #include <fmt/format.h>
 
 #include "commands.hpp"
+#include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/service/allocator_tuning.hpp"
 #include "hanzo/fusion/service/grpc_server.hpp"
 #include "hanzo/fusion/service/rest_server.hpp"
 #include "hanzo/fusion/service/session_manager.hpp"
@@ -62,6 +64,7 @@ int run_serve(const Output& output, const ServeOptions& options) {
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  if (!service::keep_large_buffers_on_heap()) logger()->debug("serve: the C library kept its own malloc thresholds");
 
   auto tokens = load_tokens(options);
   if (!tokens) return report_failure(output, {}, tokens.error().message);
