@@ -201,9 +201,9 @@ std::optional<std::chrono::nanoseconds> MappingSession::registration_wait_limit(
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::duration<double>(*config_.max_registration_wait_s));
 }
 
-Status MappingSession::push(std::string_view sensor, const msgs::SensorMessage& message) {
+Status MappingSession::push(std::string_view sensor, msgs::SensorMessage message) {
   if (odometry_ && sensor == lidar_sensor_) {
-    if (const auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(*scan);
+    if (auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(std::move(*scan));
   }
   const Status pushed = session_->push(sensor, message);
   register_ready_scans();
@@ -219,7 +219,7 @@ void MappingSession::flush() {
   update_backend();
 }
 
-Status MappingSession::push_scan(const msgs::PointCloudMessage& scan) {
+Status MappingSession::push_scan(msgs::PointCloudMessage scan) {
   ++lidar_statistics_.received;
   ++summary_.scans_received;
   auto refuse = [this](std::string_view reason, const std::string& detail) -> Status {
@@ -237,7 +237,8 @@ Status MappingSession::push_scan(const msgs::PointCloudMessage& scan) {
   last_scan_time_ = scan.timestamp;
   if (!lidar_statistics_.first_time.nanoseconds()) lidar_statistics_.first_time = scan.timestamp;
   lidar_statistics_.last_time = scan.timestamp;
-  waiting_scans_.push_back({scan, sweep_end(scan)});
+  const Timestamp end = sweep_end(scan);
+  waiting_scans_.push_back({std::move(scan), end});
   while (waiting_scans_.size() > config_.max_waiting_scans) {
     waiting_scans_.pop_front();
     // Before the first pose the IMU is still aligning (its messages are refused the same way).

@@ -619,7 +619,7 @@ ApiResult<SessionInfo> SessionManager::register_sensor(const Principal& caller, 
 }
 
 ApiStatus SessionManager::push(const Principal& caller, const std::string& session_id, const std::string& sensor,
-                               const msgs::SensorMessage& message) {
+                               msgs::SensorMessage message) {
   auto found = impl_->find(caller, session_id, Permission::kSessionWrite);
   if (!found) return found.error();
   ManagedSession& managed = *found.value();
@@ -645,7 +645,7 @@ ApiStatus SessionManager::push(const Principal& caller, const std::string& sessi
   if (managed.map_updates_installed) Impl::sync_map_updates(managed);  // drops it when the last subscriber left
   managed.push_started = Clock::now();
   ++managed.messages_pushed;
-  const Status pushed = managed.session->push(sensor_name, message);
+  const Status pushed = managed.session->push(sensor_name, std::move(message));
   if (!pushed) return ApiError::from(ErrorCode::kRejected, pushed.error());
   return api_ok();
 }

@@ -173,7 +173,8 @@ class MappingSession {
   /// One message of the named sensor. Errors as Session::push ("reason: ..."); a LiDAR sweep
   /// is refused with "invalid", "duplicate" or "out_of_order" and otherwise accepted (it may
   /// still fail to register later: counted in mapping_summary and the sensor's statistics).
-  Status push(std::string_view sensor, const msgs::SensorMessage& message);
+  /// Taken by value: a sweep moved in is kept without a copy while it waits for the IMU.
+  Status push(std::string_view sensor, msgs::SensorMessage message);
   /// Fuses what waits (Session::flush) and registers the sweeps the IMU has passed.
   void flush();
   /// Errors start with the reason: "invalid: ..." (a bad request), "not_found: ..." (unknown
@@ -216,7 +217,7 @@ class MappingSession {
     SE3 T_world_lidar;         ///< where the map has it now
   };
   MappingSession(std::unique_ptr<Session> session, MappingSessionConfig config, std::string lidar_sensor, const SE3& T_body_lidar);
-  Status push_scan(const msgs::PointCloudMessage& scan);
+  Status push_scan(msgs::PointCloudMessage scan);
   class RegistrationWorker;
   void register_ready_scans();
   /// Fuses what the worker registered (asynchronous_registration).

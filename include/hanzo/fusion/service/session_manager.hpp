@@ -138,8 +138,9 @@ class SessionManager {
 
   /// `sensor` is a configured sensor name; an empty name picks the session's only sensor of the
   /// message's modality (kInvalidArgument when there are several or none).
+  /// By value: a sweep moved in reaches the session without a copy.
   ApiStatus push(const Principal& caller, const std::string& session_id, const std::string& sensor,
-                 const msgs::SensorMessage& message);
+                 msgs::SensorMessage message);
   ApiResult<msgs::PoseEstimate> current_pose(const Principal& caller, const std::string& session_id);
   /// Stored poses with timestamp > after, at most limit (1..100000).
   ApiResult<TrajectoryPage> trajectory(const Principal& caller, const std::string& session_id, Timestamp after,
