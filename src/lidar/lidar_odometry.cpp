@@ -114,14 +114,17 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // the error feeds back through the constant-velocity model and grows).
   const float middle = scan.has_times() ? 0.5F * *std::max_element(scan.times.begin(), scan.times.end()) : 0.0F;
   const Timestamp pose_time = time + Duration::from_seconds(static_cast<double>(middle));
+  // The measured points, for a second deskew with a corrected twist (constant-twist mode only).
+  const bool may_redeskew = config_.deskew && !sweep_motion && config_.redeskew_threshold > 0.0 && map_points.has_times() &&
+                            last_time_ && last_interval_ > 0.0;
+  const cloud::PointCloud measured = may_redeskew ? map_points : cloud::PointCloud();
   if (config_.deskew) deskew(map_points, sweep_motion ? *sweep_motion : SweepMotion::constant_twist(twist_per_second, middle), threads);
-  map_points.times.clear();
   std::vector<uint32_t> all(map_points.size());
   for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<uint32_t>(i);
+  const std::vector<uint32_t> source_indices = cloud::first_point_per_voxel(map_points.positions, all, config_.source_voxel_size);
   std::vector<Eigen::Vector3f> source;
-  for (const uint32_t i : cloud::first_point_per_voxel(map_points.positions, all, config_.source_voxel_size)) {
-    source.push_back(map_points.positions[i]);
-  }
+  source.reserve(source_indices.size());
+  for (const uint32_t i : source_indices) source.push_back(map_points.positions[i]);
 
   LidarOdometryEstimate estimate;
   estimate.phantom_points = phantoms;
@@ -141,8 +144,33 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
     // 4. Registration.
     SurfaceRegistrationConfig registration = config_.registration;
     registration.num_threads = config_.num_threads;
-    auto registered = align_to_surfaces(source, map_, prediction, prediction, registration);
+    SurfaceAssociations associations;
+    auto registered = align_to_surfaces(source, map_, prediction, prediction, registration, may_redeskew ? &associations : nullptr);
     if (!registered) return Error(fmt::format("lidar odometry at {:.6f} s: {}", time.seconds(), registered.error().message));
+    if (may_redeskew) {
+      // The twist at the sweep's middle under constant acceleration: the last interval's mean
+      // twist plus half its change from the interval before.
+      const double interval = (time - *last_time_).seconds();
+      const SE3::Tangent measured_twist = (pose_.inverse() * registered->T_map_source).log() / interval;
+      const SE3::Tangent previous_twist = last_motion_.log() / last_interval_;
+      const SE3::Tangent corrected_twist = measured_twist + 0.5 * (measured_twist - previous_twist);
+      const SE3::Tangent change = (corrected_twist - twist_per_second) * static_cast<double>(middle);
+      if (change.head<3>().norm() + 10.0 * change.tail<3>().norm() > config_.redeskew_threshold) {
+        map_points.positions = measured.positions;
+        deskew(map_points, SweepMotion::constant_twist(corrected_twist, middle), threads);
+        for (std::size_t n = 0; n < source_indices.size(); ++n) source[n] = map_points.positions[source_indices[n]];
+        // From the first estimate, already within centimetres: at the final kernel width, on the
+        // surfaces the first pass matched (the points moved by centimetres).
+        SurfaceRegistrationConfig refine = registration;
+        refine.initial_kernel_width = refine.kernel_width;
+        auto again = align_to_surfaces(source, map_, registered->T_map_source, prediction, refine, &associations);
+        if (!again) return Error(fmt::format("lidar odometry at {:.6f} s: {}", time.seconds(), again.error().message));
+        again->iterations += registered->iterations;
+        again->associations += registered->associations;
+        registered = std::move(again);
+        estimate.redeskewed = true;
+      }
+    }
     T_world_lidar = registered->T_map_source;
     estimate.iterations = registered->iterations;
     estimate.associations = registered->associations;
@@ -163,6 +191,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   }
 
   const auto map_started = Clock::now();
+  map_points.times.clear();
   estimate.registration_seconds = std::chrono::duration<double>(map_started - registration_started).count();
   // 6. Map update (normals only for the points the map keeps; the few degrees a normal turns
   // during the sweep are not deskewed) and state.

@@ -12,7 +12,27 @@
 #include "registration_costs.hpp"
 
 namespace hanzo::fusion::lidar {
+namespace detail {
+
+// The surface near one source point, fitted from its map neighbours.
+enum class Shape : uint8_t { kNone, kPlane, kLine };
+struct LocalSurface {
+  Shape shape = Shape::kNone;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  Eigen::Vector3d direction = Eigen::Vector3d::Zero();  // plane: unit normal; line: unit direction
+};
+
+}  // namespace detail
+
+struct SurfaceAssociations::Data {
+  std::vector<detail::LocalSurface> surfaces;  // in the registration's point order (coarse subset first)
+  SE3 associated_at;
+  std::size_t coarse_stride = 1;
+};
+
 namespace {
+using detail::LocalSurface;
+using detail::Shape;
 
 
 // The normal equations (registration_costs.hpp; hessian = sum rho' J^T J with weights
@@ -27,14 +47,6 @@ struct SurfaceEquations {
     lines += other.lines;
   }
   std::size_t correspondences() const { return normal.correspondences; }
-};
-
-// The surface near one source point, fitted from its map neighbours.
-enum class Shape : uint8_t { kNone, kPlane, kLine };
-struct LocalSurface {
-  Shape shape = Shape::kNone;
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  Eigen::Vector3d direction = Eigen::Vector3d::Zero();  // plane: unit normal; line: unit direction
 };
 
 LocalSurface fit_surface(const std::vector<cloud::MapPoint>& neighbours, const SurfaceRegistrationConfig& config,
@@ -199,7 +211,8 @@ double translation_constraint_ratio(const Eigen::Matrix<double, 6, 6>& informati
 
 Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vector3f>& source,
                                                     const cloud::VoxelHashMap& map, const SE3& guess,
-                                                    const SE3& T_prior, const SurfaceRegistrationConfig& config) {
+                                                    const SE3& T_prior, const SurfaceRegistrationConfig& config,
+                                                    SurfaceAssociations* associations) {
   HANZO_RETURN_IF_ERROR(with_context(config.validate(), "surface registration"));
   if (source.empty()) return Error("surface registration: the source has no points");
   // The residuals' weights are 1 / kernel_width^2 (times the kernel), the prior's 1 / sigma^2.
@@ -223,13 +236,27 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
   std::size_t associated = 0;  // prefix of `ordered` whose surfaces are fitted
   std::vector<LocalSurface> surfaces(ordered.size());
   SE3 associated_at;
+  // Surfaces of an earlier registration of these points, still valid near its pose.
+  bool reuse = false;
+  if (associations != nullptr && associations->data && associations->data->surfaces.size() == ordered.size() &&
+      associations->data->coarse_stride == config.coarse_stride) {
+    const SE3::Tangent apart = (associations->data->associated_at.inverse() * guess).log();
+    if (apart.head<3>().norm() <= 2.0 * config.reassociation_translation && apart.tail<3>().norm() <= 2.0 * config.reassociation_rotation) {
+      surfaces = associations->data->surfaces;
+      associated_at = associations->data->associated_at;
+      active = ordered.size();
+      reuse = true;
+    }
+  }
   double mean_range = 0.0;  // m: turns a rotation step into the points' displacement
   for (const Eigen::Vector3f& point : source) mean_range += static_cast<double>(point.norm());
   mean_range /= static_cast<double>(source.size());
   for (int iteration = 1; iteration <= config.max_iterations; ++iteration) {
     const SE3::Tangent moved = (associated_at.inverse() * result.T_map_source).log();
-    if (iteration == 1 || moved.head<3>().norm() > config.reassociation_translation ||
-        moved.tail<3>().norm() > config.reassociation_rotation) {
+    if (iteration == 1 && reuse) {
+      associated = ordered.size();
+    } else if (iteration == 1 || moved.head<3>().norm() > config.reassociation_translation ||
+               moved.tail<3>().norm() > config.reassociation_rotation) {
       associated = 0;
       associated_at = result.T_map_source;
       ++result.associations;
@@ -283,6 +310,17 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
       result.converged = true;
       break;
     }
+  }
+  if (associations != nullptr) {
+    if (associated < ordered.size()) {  // ended on the coarse subset: the rest at the final estimate
+      associate(ordered, 0, ordered.size(), map, result.T_map_source, config, surfaces);
+      associated_at = result.T_map_source;
+    }
+    auto data = std::make_shared<SurfaceAssociations::Data>();
+    data->surfaces = std::move(surfaces);
+    data->associated_at = associated_at;
+    data->coarse_stride = config.coarse_stride;
+    associations->data = std::move(data);
   }
   result.correspondences = equations.correspondences();
   result.plane_correspondences = equations.correspondences() - equations.lines;

@@ -164,6 +164,7 @@ struct OdometryRun {
   io::Trajectory estimate;
   std::size_t scans = 0;
   std::size_t degenerate = 0;
+  std::size_t redeskewed = 0;
   std::size_t weather_in_rain = 0;     // sweeps flagged weather_degraded inside the rain episode
   std::size_t weather_outside = 0;     // and outside it
   std::size_t phantoms_outside = 0;    // lone near returns dropped outside it
@@ -196,6 +197,7 @@ OdometryRun run_scenario(const std::string& path, double duration_s, LidarOdomet
     if (!estimate) return estimate.error();
     ++run.scans;
     run.degenerate += estimate->degenerate ? 1 : 0;
+    run.redeskewed += estimate->redeskewed ? 1 : 0;
     const bool raining = std::any_of(weather.begin(), weather.end(), [&](const sim::LidarWeatherEpisode& e) {
       return sweep.timestamp + Duration::from_seconds(0.1) >= e.start && sweep.timestamp <= e.end;
     });
@@ -231,6 +233,28 @@ TEST(LidarOdometry, WarehouseRobotVlp16StaysWithinCentimetres) {
   EXPECT_EQ(run.degenerate, 0U);
   EXPECT_LT(rmse(run), 0.1) << "path " << run.path_m << " m";
   EXPECT_LT(final_error(run), 0.005 * run.path_m);
+}
+
+TEST(LidarOdometry, HandheldSwingsAreDeskewedAgainWithTheRegisteredMotion) {
+  // A handheld VLP-16 swung +-0.9 rad every 2.5 s while walking the warehouse, LiDAR only, with
+  // indoor map voxels: the turn rate changes by up to 0.6 rad/s within a sweep, so the constant
+  // twist of the previous motion deskews it wrongly and the map fills with warped sweeps (over
+  // 40 s: 3.9 m RMSE without the second deskew, 5 cm with it).
+  LidarOdometryConfig config;
+  config.map.voxel_size = 0.5;
+  config.registration.max_neighbour_distance = 0.5;
+  config.source_voxel_size = 0.25;
+  const OdometryRun again = run_scenario("examples/scenarios/handheld_lidar.yaml", 20.0, config);
+  config.redeskew_threshold = 0.0;
+  const OdometryRun once = run_scenario("examples/scenarios/handheld_lidar.yaml", 20.0, config);
+  ASSERT_GT(again.path_m, 15.0);
+  // Measured over 20 s: 4.0 cm RMSE, 2.6 cm at the end, 170 of 200 sweeps deskewed again;
+  // once only: 10.8 cm, 15 cm.
+  EXPECT_GT(again.redeskewed, 100U);
+  EXPECT_EQ(once.redeskewed, 0U);
+  EXPECT_LT(rmse(again), 0.07);
+  EXPECT_LT(final_error(again), 0.08);
+  EXPECT_GT(rmse(once), 1.5 * rmse(again));
 }
 
 TEST(LidarOdometry, UrbanVehicleOs1ThroughRainDriftsUnderHalfAPercent) {

@@ -18,6 +18,8 @@
 //  3. Range crop, lone near returns (rain drops, fog) dropped and the sweep flagged
 //     weather_degraded when they or missing returns are many, voxel downsampling: map points at the map's point spacing, registration
 //     points at source_voxel_size (KISS's double downsampling).
+//     A second deskew and registration follow when the registered motion says the constant
+//     twist was off (redeskew_threshold).
 //  4. Registration against the cloud::VoxelHashMap by Gauss-Newton on SE3 (right
 //     perturbation). Each point is matched to the best of the surfaces of its voxel and the six
 //     face neighbours: a planar voxel gives a point-to-plane residual, a line voxel close to
@@ -62,6 +64,13 @@ struct LidarOdometryConfig {
   double min_range = 1.0;              ///< m: closer returns (the vehicle itself) are dropped
   double max_range = 100.0;            ///< m
   bool deskew = true;
+  /// Constant-twist deskewing (no sweep motion from the caller): when the registered motion
+  /// implies a twist at the sweep's middle (the last interval's twist plus half the change from
+  /// the interval before: constant acceleration) that would move a point 10 m out by more than
+  /// this (m) at the sweep's ends compared with the twist the sweep was deskewed with, the sweep
+  /// is deskewed again with it and registered again from the first estimate. Catches a
+  /// handheld sensor's swings, where the turn rate changes within a sweep. <= 0: never.
+  double redeskew_threshold = 0.03;
   cloud::ScanNormalConfig normals;     ///< surface normals from the scan's rings (needs ring ids)
   /// The local map: 1 m voxels (also the neighbour search cells), up to 20 points each,
   /// 0.22 m apart; 100 m around the sensor.
@@ -112,6 +121,7 @@ struct LidarOdometryEstimate {
   int iterations = 0;
   int associations = 0;                ///< surface fits during registration
   bool converged = false;
+  bool redeskewed = false;             ///< deskewed and registered a second time (redeskew_threshold)
   std::size_t source_points = 0;       ///< registration points
   std::size_t correspondences = 0;
   std::size_t plane_correspondences = 0;

@@ -32,6 +32,7 @@
 // min_correspondences matches), an invalid config; they return an Error that says which.
 
 #include <cstddef>
+#include <memory>
 #include <vector>
 
 #include <Eigen/Core>
@@ -90,11 +91,24 @@ struct SurfaceRegistrationResult {
   Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
 };
 
+/// The map surfaces a registration matched to its source points (opaque), to register the same
+/// points again after they moved a little (a sweep deskewed anew) without searching the map
+/// again.
+struct SurfaceAssociations {
+  struct Data;
+  std::shared_ptr<const Data> data;  ///< null: none
+};
+
 /// Aligns `source` (points in the source frame) to the map's surfaces from `guess`, with the
-/// prior centred on `T_prior` (usually the guess itself).
+/// prior centred on `T_prior` (usually the guess itself). `associations` (optional): filled
+/// with the final iteration's surfaces; when it holds surfaces for as many points, made with
+/// the same coarse_stride, at a pose within twice the re-association thresholds of `guess`, the first
+/// iteration uses them instead of searching the map (source[i] must be the same point as
+/// before, moved by no more than the surfaces' extent).
 Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vector3f>& source,
                                                     const cloud::VoxelHashMap& map, const SE3& guess,
-                                                    const SE3& T_prior, const SurfaceRegistrationConfig& config = {});
+                                                    const SE3& T_prior, const SurfaceRegistrationConfig& config = {},
+                                                    SurfaceAssociations* associations = nullptr);
 
 /// Smallest / largest eigenvalue of the translation information of a 6x6 information matrix
 /// (order x, y, z, rx, ry, rz) after marginalizing the rotation (Schur complement): near 0 when

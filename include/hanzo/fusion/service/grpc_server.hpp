@@ -8,14 +8,18 @@
 //                                       only sensor of the stream's modality)
 //
 // Stream{Imu,PointCloud,Image,Gnss,Radar,WheelOdometry}: every message read is pushed into the
-// session; the session's PoseEstimates are written back after each message (all of them since
-// the previous write, from a bounded drop-oldest queue). A message that does not decode or that
+// session; after each message the newest PoseEstimate since the previous write is written back
+// (the IMU stream thereby gets every pose, a LiDAR stream one per sweep). A message that does not decode or that
 // the session rejects is counted (hanzo_fusion_stream_rejected_total{reason}) and skipped: the
 // stream goes on. The stream ends with FAILED_PRECONDITION when the session ends, and with the
 // error's status when the session is unknown or not the caller's.
 // SubscribePose(SessionId): the session's PoseEstimates until the client cancels or the session
 // ends; a slow subscriber loses the oldest (counted), never blocks fusion.
-// SubscribeMap, SubscribeKeyframes, GetMap, LoadMap answer UNIMPLEMENTED in this version.
+// SubscribeKeyframes, SubscribeMap: the session's keyframes / map updates, the same way.
+// GetMap: a session's live map or a stored version of a map of the caller's organization.
+// LoadMap: stores a client's map as the next version of its map id.
+// One thread per open call (gRPC's synchronous server): a push may wait for the session's
+// registration worker, which must not stall other calls.
 //
 // TLS when tls_certificate and tls_private_key (PEM) are given.
 
