@@ -167,11 +167,16 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
         refine.initial_kernel_width = refine.kernel_width;
         refine.max_iterations = std::max(5, registration.max_iterations / 3);
         auto again = align_to_surfaces(source, map_, registered->T_map_source, prediction, refine, &associations);
-        if (!again) return Error(fmt::format("lidar odometry at {:.6f} s: {}", time.seconds(), again.error().message));
-        again->iterations += registered->iterations;
-        again->associations += registered->associations;
-        registered = std::move(again);
-        estimate.redeskewed = true;
+        if (again) {
+          again->iterations += registered->iterations;
+          again->associations += registered->associations;
+          registered = std::move(again);
+          estimate.redeskewed = true;
+        } else {  // keeps the first pass (and its deskew)
+          logger()->debug("lidar odometry at {:.6f} s: the second deskew's registration failed: {}", time.seconds(), again.error().message);
+          map_points.positions = measured.positions;
+          deskew(map_points, SweepMotion::constant_twist(twist_per_second, middle), threads);
+        }
       }
     }
     T_world_lidar = registered->T_map_source;

@@ -69,7 +69,8 @@ struct LidarOdometryConfig {
   /// the interval before: constant acceleration) that would move a point 10 m out by more than
   /// this (m) at the sweep's ends compared with the twist the sweep was deskewed with, the sweep
   /// is deskewed again with it and registered again from the first estimate (at most a third of
-  /// registration.max_iterations, on the first pass's surfaces). Catches a
+  /// registration.max_iterations, on the first pass's surfaces; if that fails, the first pass
+  /// stands). Catches a
   /// handheld sensor's swings, where the turn rate changes within a sweep. <= 0: never.
   double redeskew_threshold = 0.03;
   cloud::ScanNormalConfig normals;     ///< surface normals from the scan's rings (needs ring ids)
