@@ -67,6 +67,33 @@ TEST(SurfaceRegistration, RecoversTheTruePoseInTheYardToOneCentimetre) {
   }
 }
 
+// A second registration of the same points from the first's estimate reuses its surfaces (no
+// map search) and lands on the same pose; from a guess beyond the re-association thresholds it
+// searches the map again.
+TEST(SurfaceRegistration, SecondRegistrationReusesTheFirstSurfaces) {
+  const sim::World world = testing_support::registration_world();
+  const cloud::VoxelHashMap map = map_of(world, {pose(0, 0, 1.8, 0), pose(1.0, 0.5, 1.8, 10)});
+  const SE3 truth = pose(0.8, -0.6, 1.8, 25);
+  const std::vector<Eigen::Vector3f> source = source_points(world, truth);
+  const SE3 guess = truth * pose(0.2, -0.1, 0.0, 2);
+  SurfaceAssociations associations;
+  auto first = align_to_surfaces(source, map, guess, guess, {}, &associations);
+  ASSERT_TRUE(first.ok()) << first.error().message;
+  ASSERT_NE(associations.data, nullptr);
+  SurfaceRegistrationConfig refine;
+  refine.initial_kernel_width = refine.kernel_width;
+  auto second = align_to_surfaces(source, map, first->T_map_source, guess, refine, &associations);
+  ASSERT_TRUE(second.ok()) << second.error().message;
+  EXPECT_EQ(second->associations, 0);
+  EXPECT_LT((second->T_map_source.translation() - truth.translation()).norm(), 0.01);
+  EXPECT_LT(rotation_error_deg(second->T_map_source, truth), 0.05);
+  EXPECT_TRUE(second->converged);
+
+  auto far = align_to_surfaces(source, map, first->T_map_source * pose(0.3, 0.0, 0.0, 0), guess, {}, &associations);
+  ASSERT_TRUE(far.ok()) << far.error().message;
+  EXPECT_GE(far->associations, 1);
+}
+
 // A poor guess (0.5 m, 8 deg off) takes its large steps on every fourth point, then all points
 // finish to the same centimetre as registering all points throughout; when the subset matches
 // too few surfaces, all points are used from the start.
