@@ -22,7 +22,7 @@ void estimate_local_geometry(PointCloud& cloud, const KdTree& tree, const LocalG
   const size_t k = static_cast<size_t>(config.num_neighbors);
   cloud.covariances.resize(cloud.size());
   cloud.normals.resize(cloud.size());
-  const Eigen::Vector3d regularized_eigenvalues(config.plane_epsilon, 1.0, 1.0);
+  const double across_plane_reduction = 1.0 - config.plane_epsilon;
   parallel_for(cloud.size(), config.num_threads, [&](size_t begin, size_t end) {
     std::vector<uint32_t> indices(k);
     std::vector<float> distances(k);
@@ -45,9 +45,10 @@ void estimate_local_geometry(PointCloud& cloud, const KdTree& tree, const LocalG
       }
       Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
       solver.computeDirect(scatter / static_cast<double>(found));
-      const Eigen::Matrix3d& basis = solver.eigenvectors();  // columns sorted by increasing eigenvalue
-      cloud.covariances[i] = (basis * regularized_eigenvalues.asDiagonal() * basis.transpose()).cast<float>();
-      cloud.normals[i] = toward_origin(basis.col(0).cast<float>().normalized(), position);
+      // Eigenvalues (epsilon, 1, 1) in the eigenbasis: I - (1 - epsilon) n n^T for the normal n.
+      const Eigen::Vector3d normal = solver.eigenvectors().col(0).normalized();  // smallest eigenvalue
+      cloud.covariances[i] = (Eigen::Matrix3d::Identity() - across_plane_reduction * normal * normal.transpose()).cast<float>();
+      cloud.normals[i] = toward_origin(normal.cast<float>(), position);
     }
   });
 }

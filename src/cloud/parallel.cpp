@@ -7,6 +7,7 @@
 #include <thread>
 
 #include <tbb/blocked_range.h>
+#include <tbb/parallel_invoke.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -56,6 +57,16 @@ void parallel_chunks(size_t count, int num_threads,
       for (size_t chunk = range.begin(); chunk != range.end(); ++chunk) run_chunk(chunk);
     });
   });
+}
+
+void parallel_invoke(int num_threads, const std::function<void()>& first, const std::function<void()>& second) {
+  const int threads = resolve_threads(num_threads);
+  if (threads == 1) {
+    first();
+    second();
+    return;
+  }
+  arena_for(threads).execute([&] { tbb::parallel_invoke(first, second); });
 }
 
 }  // namespace hanzo::fusion::cloud

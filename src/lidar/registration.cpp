@@ -2,6 +2,7 @@
 
 #include <array>
 #include <cmath>
+#include <optional>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -210,17 +211,7 @@ Result<RegistrationResult> align_once(const cloud::PointCloud& source, const Reg
       return gauss_newton(PointToPlaneCost{positions, {*prepared.tree, max_squared, previous}, prepared.cloud.normals, kernel},
                           source.size(), T_target_source_guess, config);
     case RegistrationMethod::kGicp: {
-      std::vector<Eigen::Matrix3d> source_covariances;
-      if (source.has_covariances()) {
-        source_covariances = to_double(source.covariances);
-      } else {
-        cloud::PointCloud with_geometry;
-        with_geometry.positions = source.positions;
-        cloud::LocalGeometryConfig geometry = config.geometry;
-        geometry.num_threads = config.num_threads;
-        cloud::estimate_local_geometry(with_geometry, geometry);
-        source_covariances = to_double(with_geometry.covariances);
-      }
+      const std::vector<Eigen::Matrix3d> source_covariances = to_double(source.covariances);  // align() made them
       return gauss_newton(GicpCost{positions, source_covariances, {*prepared.tree, max_squared, previous}, prepared.covariances, kernel},
                           source.size(), T_target_source_guess, config);
     }
@@ -249,16 +240,23 @@ Result<RegistrationResult> align_once(const cloud::PointCloud& source, const Reg
   return Error("registration: unknown method");
 }
 
-}  // namespace
+// GICP's source without covariances: its positions with covariances from its own neighbours.
+bool needs_covariances(const cloud::PointCloud& source, const RegistrationConfig& config) {
+  return config.method == RegistrationMethod::kGicp && !source.has_covariances();
+}
 
-Result<RegistrationResult> align(const cloud::PointCloud& source, const RegistrationTarget& target,
-                                 const SE3& T_target_source_guess, const RegistrationConfig& config) {
-  HANZO_RETURN_IF_ERROR(config.validate());
-  HANZO_RETURN_IF_ERROR(check_cloud(source, "source"));
-  if (target.method() != config.method) {
-    return Error(fmt::format("registration: the target was prepared for {}, not {}", to_string(target.method()),
-                             to_string(config.method)));
-  }
+cloud::PointCloud with_covariances(const cloud::PointCloud& source, const RegistrationConfig& config) {
+  cloud::PointCloud out;
+  out.positions = source.positions;
+  cloud::LocalGeometryConfig geometry = config.geometry;
+  geometry.num_threads = config.num_threads;
+  cloud::estimate_local_geometry(out, geometry);
+  return out;
+}
+
+// align() with the inputs checked and GICP's source covariances present.
+Result<RegistrationResult> align_checked(const cloud::PointCloud& source, const RegistrationTarget& target,
+                                         const SE3& T_target_source_guess, const RegistrationConfig& config) {
   SE3 guess = T_target_source_guess;
   int iterations = 0;
   if (config.method != RegistrationMethod::kNdt) {
@@ -276,11 +274,36 @@ Result<RegistrationResult> align(const cloud::PointCloud& source, const Registra
   return result;
 }
 
+}  // namespace
+
+Result<RegistrationResult> align(const cloud::PointCloud& source, const RegistrationTarget& target,
+                                 const SE3& T_target_source_guess, const RegistrationConfig& config) {
+  HANZO_RETURN_IF_ERROR(config.validate());
+  HANZO_RETURN_IF_ERROR(check_cloud(source, "source"));
+  if (target.method() != config.method) {
+    return Error(fmt::format("registration: the target was prepared for {}, not {}", to_string(target.method()),
+                             to_string(config.method)));
+  }
+  if (needs_covariances(source, config)) return align_checked(with_covariances(source, config), target, T_target_source_guess, config);
+  return align_checked(source, target, T_target_source_guess, config);
+}
+
 Result<RegistrationResult> register_clouds(const cloud::PointCloud& source, const cloud::PointCloud& target,
                                            const SE3& T_target_source_guess, const RegistrationConfig& config) {
-  auto prepared = RegistrationTarget::create(target, config);
-  if (!prepared) return prepared.error();
-  return align(source, *prepared, T_target_source_guess, config);
+  HANZO_RETURN_IF_ERROR(config.validate());
+  HANZO_RETURN_IF_ERROR(check_cloud(source, "source"));
+  // The target's tree and covariances and the source's covariances are independent: on two
+  // threads or more they are prepared side by side (each tree build is sequential).
+  std::optional<Result<RegistrationTarget>> prepared;
+  cloud::PointCloud source_with_covariances;
+  const bool source_needs_covariances = needs_covariances(source, config);
+  cloud::parallel_invoke(
+      config.num_threads, [&] { prepared.emplace(RegistrationTarget::create(target, config)); },
+      [&] {
+        if (source_needs_covariances) source_with_covariances = with_covariances(source, config);
+      });
+  if (!*prepared) return prepared->error();
+  return align(source_needs_covariances ? source_with_covariances : source, **prepared, T_target_source_guess, config);
 }
 
 }  // namespace hanzo::fusion::lidar

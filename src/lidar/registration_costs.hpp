@@ -118,6 +118,27 @@ inline void accumulate(const Eigen::Matrix<double, ResidualRows, 6>& J, const Ei
   out.cost += w * squared;
 }
 
+/// accumulate<3> for a residual r = R p + t - target, with J = [R, -R hat(p)], computed in the
+/// rotated frame: J^T W J = K^T W' K and J^T W r = K^T W' r' with K = [I, -hat(p)],
+/// W' = R^T W R and r' = R^T r, so the blocks are W', -W' hat(p), hat(p) W' and
+/// -hat(p) W' hat(p), and the gradient is [W' r'; p x W' r'] (about half the multiplications
+/// of forming J and J^T W J). `weight_rotated` is W', `residual_rotated` r'.
+inline void accumulate_rigid(const Eigen::Vector3d& source_point, const Eigen::Matrix3d& weight_rotated,
+                             const Eigen::Vector3d& residual_rotated, const KernelSettings& kernel, NormalEquations& out) {
+  const Eigen::Vector3d weighted_residual = weight_rotated * residual_rotated;
+  const double squared = residual_rotated.dot(weighted_residual);
+  const double w = kernel_weight(kernel.kernel, kernel.width, std::sqrt(squared));
+  const Eigen::Matrix3d source_hat = SO3::hat(source_point);
+  const Eigen::Matrix3d weight_hat = w * (weight_rotated * source_hat);
+  out.hessian.topLeftCorner<3, 3>() += w * weight_rotated;
+  out.hessian.topRightCorner<3, 3>() -= weight_hat;
+  out.hessian.bottomLeftCorner<3, 3>() -= weight_hat.transpose();
+  out.hessian.bottomRightCorner<3, 3>().noalias() -= source_hat * weight_hat;
+  out.gradient.head<3>() += w * weighted_residual;
+  out.gradient.tail<3>() += w * source_point.cross(weighted_residual);
+  out.cost += w * squared;
+}
+
 struct PointToPointCost {
   const std::vector<Eigen::Vector3d>& source;
   NearestNeighborMatcher matcher;
@@ -127,8 +148,7 @@ struct PointToPointCost {
     const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
     uint32_t j = 0;
     if (!matcher.match(i, q, &j, out)) return;
-    const Eigen::Vector3d r = q - matcher.target(j);
-    accumulate<3>(pose.jacobian(source[i]), Eigen::Matrix3d::Identity(), r, kernel, out);
+    accumulate_rigid(source[i], Eigen::Matrix3d::Identity(), pose.rotation.transpose() * (q - matcher.target(j)), kernel, out);
   }
 };
 
@@ -160,11 +180,11 @@ struct GicpCost {
     const Eigen::Vector3d q = pose.rotation * source[i] + pose.translation;
     uint32_t j = 0;
     if (!matcher.match(i, q, &j, out)) return;
-    // Segal et al. 2009, eq. (2): d^T (C_t + R C_s R^T)^-1 d with d = t - (R p + t_pose).
-    const Eigen::Matrix3d combined =
-        target_covariances[j] + pose.rotation * source_covariances[i] * pose.rotation.transpose();
-    const Eigen::Vector3d r = q - matcher.target(j);
-    accumulate<3>(pose.jacobian(source[i]), combined.inverse(), r, kernel, out);
+    // Segal et al. 2009, eq. (2): d^T (C_t + R C_s R^T)^-1 d with d = t - (R p + t_pose), in the
+    // rotated frame of accumulate_rigid: R^T (C_t + R C_s R^T)^-1 R = (R^T C_t R + C_s)^-1.
+    const Eigen::Matrix3d& R = pose.rotation;
+    const Eigen::Matrix3d combined_rotated = R.transpose() * target_covariances[j] * R + source_covariances[i];
+    accumulate_rigid(source[i], combined_rotated.inverse(), R.transpose() * (q - matcher.target(j)), kernel, out);
   }
 };
 

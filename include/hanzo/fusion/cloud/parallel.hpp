@@ -24,4 +24,8 @@ inline void parallel_for(size_t count, int num_threads, const std::function<void
   parallel_chunks(count, num_threads, [&body](size_t, size_t begin, size_t end) { body(begin, end); });
 }
 
+/// Runs first() and second() concurrently on up to num_threads threads (one after the other on
+/// the calling thread when num_threads is 1); parallel loops inside them share those threads.
+void parallel_invoke(int num_threads, const std::function<void()>& first, const std::function<void()>& second);
+
 }  // namespace hanzo::fusion::cloud
