@@ -63,7 +63,9 @@ class BoundedCount {
 
 struct KdTree::Impl {
   explicit Impl(std::vector<Eigen::Vector3f> points)
-      : array{std::move(points)}, tree(3, array, nanoflann::KDTreeSingleIndexAdaptorParams(8)) {
+      : array{std::move(points)},
+        // nanoflann 1.4 builds in its constructor unless told not to; built once, here.
+        tree(3, array, nanoflann::KDTreeSingleIndexAdaptorParams(8, nanoflann::KDTreeSingleIndexAdaptorFlags::SkipInitialBuildIndex)) {
     if (!array.points.empty()) tree.buildIndex();
   }
   PointArray array;
