@@ -107,19 +107,20 @@ struct KernelSettings {
   double width;
 };
 
-template <int ResidualRows>
-inline void accumulate(const Eigen::Matrix<double, ResidualRows, 6>& J, const Eigen::Matrix<double, ResidualRows, ResidualRows>& W,
-                       const Eigen::Matrix<double, ResidualRows, 1>& r, const KernelSettings& kernel, NormalEquations& out) {
-  const Eigen::Matrix<double, 6, ResidualRows> JtW = J.transpose() * W;
-  const double squared = r.dot(W * r);
-  const double w = kernel_weight(kernel.kernel, kernel.width, std::sqrt(squared));
-  out.hessian.noalias() += w * JtW * J;
-  out.gradient.noalias() += w * JtW * r;
-  out.cost += w * squared;
+/// Adds the weighted row of a point-to-plane residual r = n . (R p + t - m): w j j^T and w j r
+/// with j^T = n^T [R, -R hat(p)] = [a^T, (p x a)^T], a = R^T n (`normal_rotated`).
+inline void accumulate_plane_row(const Eigen::Vector3d& source_point, const Eigen::Vector3d& normal_rotated, double residual,
+                                 double w, NormalEquations& out) {
+  Vector6d row;
+  row.head<3>() = normal_rotated;
+  row.tail<3>() = source_point.cross(normal_rotated);
+  out.hessian.noalias() += (w * row) * row.transpose();
+  out.gradient.noalias() += (w * residual) * row;
+  out.cost += w * residual * residual;
 }
 
-/// accumulate<3> for a residual r = R p + t - target, with J = [R, -R hat(p)], computed in the
-/// rotated frame: J^T W J = K^T W' K and J^T W r = K^T W' r' with K = [I, -hat(p)],
+/// Adds w J^T W J, w J^T W r and w r^T W r (w: the kernel's weight) of a 3-row residual
+/// r = R p + t - target with J = [R, -R hat(p)], computed in the rotated frame: J^T W J = K^T W' K and J^T W r = K^T W' r' with K = [I, -hat(p)],
 /// W' = R^T W R and r' = R^T r, so the blocks are W', -W' hat(p), hat(p) W' and
 /// -hat(p) W' hat(p), and the gradient is [W' r'; p x W' r'] (about half the multiplications
 /// of forming J and J^T W J). `weight_rotated` is W', `residual_rotated` r'.
@@ -163,9 +164,8 @@ struct PointToPlaneCost {
     uint32_t j = 0;
     if (!matcher.match(i, q, &j, out)) return;
     const Eigen::Vector3d normal = target_normals[j].cast<double>();
-    const Eigen::Matrix<double, 1, 1> r(normal.dot(q - matcher.target(j)));
-    const Eigen::Matrix<double, 1, 6> J = normal.transpose() * pose.jacobian(source[i]);
-    accumulate<1>(J, Eigen::Matrix<double, 1, 1>::Identity(), r, kernel, out);
+    const double r = normal.dot(q - matcher.target(j));
+    accumulate_plane_row(source[i], pose.rotation.transpose() * normal, r, kernel_weight(kernel.kernel, kernel.width, std::abs(r)), out);
   }
 };
 

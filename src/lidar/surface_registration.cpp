@@ -126,24 +126,29 @@ SurfaceEquations linearize(const std::vector<Eigen::Vector3f>& source, std::size
       const Eigen::Vector3d offset = rotation * p + translation - surface.mean;
       const Eigen::Vector3d& direction = surface.direction;
       const bool plane = surface.shape == Shape::kPlane;
-      const Eigen::Matrix3d projection = plane ? Eigen::Matrix3d(direction * direction.transpose())
-                                               : Eigen::Matrix3d(Eigen::Matrix3d::Identity() - direction * direction.transpose());
-      const Eigen::Vector3d residual = projection * offset;  // m: the offset's part normal to the surface
-      const double distance = residual.norm();
+      // m: the offset's part normal to the surface (a plane's signed distance, a line's 3-vector).
+      const double plane_distance = plane ? direction.dot(offset) : 0.0;
+      const Eigen::Vector3d line_residual = plane ? Eigen::Vector3d::Zero() : Eigen::Vector3d(offset - direction * direction.dot(offset));
+      const double distance = plane ? std::abs(plane_distance) : line_residual.norm();
       if (distance > gate) continue;
-      // d q / d delta = [R, -R hat(p)]; the projection is fixed.
-      Eigen::Matrix<double, 3, 6> J;
-      J.leftCols<3>() = projection * rotation;
-      J.rightCols<3>() = -projection * rotation * SO3::hat(p);
       const double scaled = distance * inverse_width;
       const double s = 1.0 + scaled * scaled;
       const double weight = inverse_width * inverse_width / (s * s);  // Geman-McClure, residuals in units of the width
-      local.normal.hessian.noalias() += weight * J.transpose() * J;
-      local.normal.gradient.noalias() += weight * J.transpose() * residual;
-      local.normal.cost += weight * distance * distance;
+      if (plane) {
+        accumulate_plane_row(p, rotation.transpose() * direction, plane_distance, weight, local.normal);
+      } else {
+        // d q / d delta = [R, -R hat(p)]; the projection P = I - d d^T is fixed.
+        const Eigen::Matrix3d projection = Eigen::Matrix3d::Identity() - direction * direction.transpose();
+        Eigen::Matrix<double, 3, 6> J;
+        J.leftCols<3>() = projection * rotation;
+        J.rightCols<3>() = -projection * rotation * SO3::hat(p);
+        local.normal.hessian.noalias() += weight * J.transpose() * J;
+        local.normal.gradient.noalias() += weight * J.transpose() * line_residual;
+        local.normal.cost += weight * distance * distance;
+        ++local.lines;
+      }
       local.normal.squared_distance_sum += distance * distance;
       ++local.normal.correspondences;
-      if (!plane) ++local.lines;
     }
     partial[chunk] = local;
   });
