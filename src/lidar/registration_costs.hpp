@@ -120,10 +120,11 @@ inline void accumulate_plane_row(const Eigen::Vector3d& source_point, const Eige
 }
 
 /// Adds w J^T W J, w J^T W r and w r^T W r (w: the kernel's weight) of a 3-row residual
-/// r = R p + t - target with J = [R, -R hat(p)], computed in the rotated frame: J^T W J = K^T W' K and J^T W r = K^T W' r' with K = [I, -hat(p)],
-/// W' = R^T W R and r' = R^T r, so the blocks are W', -W' hat(p), hat(p) W' and
-/// -hat(p) W' hat(p), and the gradient is [W' r'; p x W' r'] (about half the multiplications
-/// of forming J and J^T W J). `weight_rotated` is W', `residual_rotated` r'.
+/// r = R p + t - target with J = [R, -R hat(p)], computed in the rotated frame:
+/// J^T W J = K^T W' K and J^T W r = K^T W' r' with K = [I, -hat(p)], W' = R^T W R, r' = R^T r,
+/// so the blocks are W', -W' hat(p), hat(p) W' and -hat(p) W' hat(p), and the gradient is
+/// [W' r'; p x W' r'] (about half the multiplications of forming J and J^T W J).
+/// `weight_rotated` is W', `residual_rotated` r'.
 inline void accumulate_rigid(const Eigen::Vector3d& source_point, const Eigen::Matrix3d& weight_rotated,
                              const Eigen::Vector3d& residual_rotated, const KernelSettings& kernel, NormalEquations& out) {
   const Eigen::Vector3d weighted_residual = weight_rotated * residual_rotated;
