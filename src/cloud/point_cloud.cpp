@@ -4,6 +4,8 @@
 
 #include <fmt/format.h>
 
+#include "hanzo/fusion/core/finite.hpp"
+
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
 #include "hanzo/fusion/msgs/validate.hpp"
 
@@ -18,6 +20,8 @@ Status check_size(const std::vector<Attribute>& values, size_t points, const cha
 
 template <typename Matrix>
 Status check_finite(const std::vector<Matrix>& values, const char* name) {
+  static_assert(sizeof(Matrix) == sizeof(float) * Matrix::SizeAtCompileTime, "packed float matrices");
+  if (all_finite(values.empty() ? nullptr : values.front().data(), values.size() * Matrix::SizeAtCompileTime)) return ok_status();
   static constexpr const char* kAxes[] = {"x", "y", "z"};
   for (size_t i = 0; i < values.size(); ++i) {
     if (values[i].allFinite()) continue;
@@ -31,6 +35,7 @@ Status check_finite(const std::vector<Matrix>& values, const char* name) {
 }
 
 Status check_finite(const std::vector<float>& values, const char* name) {
+  if (all_finite(values.data(), values.size())) return ok_status();
   for (size_t i = 0; i < values.size(); ++i) {
     if (!std::isfinite(values[i])) return Error(fmt::format("PointCloud.{}[{}]: {}", name, i, values[i]), name);
   }

@@ -7,6 +7,8 @@
 
 #include <fmt/format.h>
 
+#include "hanzo/fusion/core/finite.hpp"
+
 namespace hanzo::fusion::msgs {
 namespace {
 
@@ -122,13 +124,16 @@ Status validate(const PointCloudMessage& message) {
   const size_t count = message.points.size();
   if (count == 0) return check.fail("points", "empty (a point cloud needs at least one point)");
   // Per-point checks format a field name only for the point that fails (a cloud has 10^5 points).
-  for (size_t i = 0; i < count; ++i) {
-    if (!message.points[i].allFinite()) return check.finite_vector(message.points[i], fmt::format("points[{}]", i));
+  if (!all_finite(message.points.front().data(), 3 * count)) {
+    for (size_t i = 0; i < count; ++i) {
+      if (!message.points[i].allFinite()) return check.finite_vector(message.points[i], fmt::format("points[{}]", i));
+    }
   }
   HANZO_RETURN_IF_ERROR(check.per_point(message.intensities, count, "intensities"));
   HANZO_RETURN_IF_ERROR(check.per_point(message.ring_ids, count, "ring_ids"));
   HANZO_RETURN_IF_ERROR(check.per_point(message.point_timestamps, count, "point_timestamps"));
-  for (size_t i = 0; i < message.intensities.size(); ++i) {
+  const bool intensities_valid = all_within(message.intensities.data(), message.intensities.size(), 0.0F, 1.0F);
+  for (size_t i = 0; !intensities_valid && i < message.intensities.size(); ++i) {
     const float intensity = message.intensities[i];
     if (!(intensity >= 0.0F && intensity <= 1.0F)) {
       return check.fail(fmt::format("intensities[{}]", i), fmt::format("{} outside [0, 1]", intensity));
