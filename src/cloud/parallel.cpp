@@ -16,11 +16,6 @@ namespace {
 
 constexpr size_t kMinChunkSize = 512;  // items; smaller chunks cost more in scheduling than they save
 
-int resolve_threads(int num_threads) {
-  if (num_threads > 0) return num_threads;
-  return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-}
-
 // One arena per thread count, created on first use (an arena costs tens of microseconds to
 // create, more than a small registration iteration).
 tbb::task_arena& arena_for(int threads) {
@@ -34,8 +29,13 @@ tbb::task_arena& arena_for(int threads) {
 
 }  // namespace
 
+int thread_count(int num_threads) {
+  if (num_threads > 0) return num_threads;
+  return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+}
+
 size_t chunk_count(size_t count, int num_threads) {
-  const int threads = resolve_threads(num_threads);
+  const int threads = thread_count(num_threads);
   if (threads == 1 || count <= kMinChunkSize) return 1;
   return std::clamp<size_t>(count / kMinChunkSize, 1, static_cast<size_t>(threads) * 4);
 }
@@ -52,7 +52,7 @@ void parallel_chunks(size_t count, int num_threads,
     run_chunk(0);
     return;
   }
-  arena_for(resolve_threads(num_threads)).execute([&] {
+  arena_for(thread_count(num_threads)).execute([&] {
     tbb::parallel_for(tbb::blocked_range<size_t>(0, chunks, 1), [&](const tbb::blocked_range<size_t>& range) {
       for (size_t chunk = range.begin(); chunk != range.end(); ++chunk) run_chunk(chunk);
     });
@@ -60,7 +60,7 @@ void parallel_chunks(size_t count, int num_threads,
 }
 
 void parallel_invoke(int num_threads, const std::function<void()>& first, const std::function<void()>& second) {
-  const int threads = resolve_threads(num_threads);
+  const int threads = thread_count(num_threads);
   if (threads == 1) {
     first();
     second();

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 
+#include "hanzo/fusion/cloud/parallel.hpp"
 #include "hanzo/fusion/cloud/voxel_grid.hpp"
 
 namespace hanzo::fusion::cloud {
@@ -56,37 +57,76 @@ void VoxelHashMap::clear() {
 }
 
 void VoxelHashMap::add(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& normals,
-                       const Eigen::Vector3d& sensor_origin) {
+                       const Eigen::Vector3d& sensor_origin, int num_threads) {
   assert(normals.empty() || normals.size() == points.size());
-  add(points, sensor_origin, [&normals](std::size_t i) { return normals.empty() ? Eigen::Vector3f::Zero().eval() : normals[i]; });
+  add(points, sensor_origin, [&normals](std::size_t i) { return normals.empty() ? Eigen::Vector3f::Zero().eval() : normals[i]; },
+      num_threads);
+}
+
+bool VoxelHashMap::refuses(const std::vector<MapPoint>& voxel, const Eigen::Vector3f& point) const {
+  if (voxel.size() >= static_cast<size_t>(config_.max_points_per_voxel)) return true;
+  for (const MapPoint& existing : voxel) {
+    if ((existing.position - point).squaredNorm() < min_spacing_squared_) return true;
+  }
+  return false;
 }
 
 void VoxelHashMap::add(const std::vector<Eigen::Vector3f>& points, const Eigen::Vector3d& sensor_origin,
-                       const std::function<Eigen::Vector3f(std::size_t)>& normal_of) {
-  const size_t max_points = static_cast<size_t>(config_.max_points_per_voxel);
-  for (size_t i = 0; i < points.size(); ++i) {
-    const Eigen::Vector3f& point = points[i];
-    uint64_t key = 0;
-    if (!point.allFinite() || !pack_voxel_key(coordinates(point), &key)) {
-      ++skipped_points_;
-      continue;
-    }
-    std::vector<MapPoint>& voxel = voxels_[key];
-    if (voxel.size() >= max_points) continue;
-    bool crowded = false;
-    for (const MapPoint& existing : voxel) {
-      if ((existing.position - point).squaredNorm() < min_spacing_squared_) {
-        crowded = true;
-        break;
+                       const std::function<Eigen::Vector3f(std::size_t)>& normal_of, int num_threads) {
+  if (thread_count(num_threads) == 1) {
+    for (size_t i = 0; i < points.size(); ++i) {
+      uint64_t key = 0;
+      if (!points[i].allFinite() || !pack_voxel_key(coordinates(points[i]), &key)) {
+        ++skipped_points_;
+        continue;
       }
+      std::vector<MapPoint>& voxel = voxels_[key];
+      if (!refuses(voxel, points[i])) place(voxel, points[i], normal_of(i));
     }
-    if (crowded) continue;
-    if (voxel.empty()) voxel.reserve(max_points);
-    const Eigen::Vector3f normal = normal_of(i);
-    voxel.push_back({point, normal.allFinite() ? normal : Eigen::Vector3f::Zero()});
-    ++point_count_;
+  } else {
+    add_in_parallel(points, normal_of, num_threads);
   }
+  remove_farther_than(sensor_origin);
+}
 
+void VoxelHashMap::place(std::vector<MapPoint>& voxel, const Eigen::Vector3f& point, const Eigen::Vector3f& normal) {
+  if (voxel.empty()) voxel.reserve(static_cast<size_t>(config_.max_points_per_voxel));
+  voxel.push_back({point, normal.allFinite() ? normal : Eigen::Vector3f::Zero()});
+  ++point_count_;
+}
+
+void VoxelHashMap::add_in_parallel(const std::vector<Eigen::Vector3f>& points,
+                                   const std::function<Eigen::Vector3f(std::size_t)>& normal_of, int num_threads) {
+  // 1. In parallel, against the map as it stands: each point's key, and whether its voxel refuses
+  //    it already (full, or a point within the spacing). Within one add voxels only gain points,
+  //    so such a point would be refused in order too; the others (mostly new surface) are
+  //    candidates, with their normals.
+  enum Fate : uint8_t { kRefused, kOutsideKeyRange, kCandidate };
+  std::vector<uint64_t> keys(points.size());
+  std::vector<Fate> fates(points.size());
+  std::vector<Eigen::Vector3f> normals(points.size());
+  parallel_for(points.size(), num_threads, [&](size_t begin, size_t end) {
+    for (size_t i = begin; i < end; ++i) {
+      const Eigen::Vector3f& point = points[i];
+      if (!point.allFinite() || !pack_voxel_key(coordinates(point), &keys[i])) {
+        fates[i] = kOutsideKeyRange;
+        continue;
+      }
+      const auto voxel = voxels_.find(keys[i]);
+      fates[i] = voxel != voxels_.end() && refuses(voxel->second, point) ? kRefused : kCandidate;
+      if (fates[i] == kCandidate) normals[i] = normal_of(i);
+    }
+  });
+  // 2. The candidates in order, against the points this add has placed too.
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (fates[i] == kOutsideKeyRange) ++skipped_points_;
+    if (fates[i] != kCandidate) continue;
+    std::vector<MapPoint>& voxel = voxels_[keys[i]];
+    if (!refuses(voxel, points[i])) place(voxel, points[i], normals[i]);
+  }
+}
+
+void VoxelHashMap::remove_farther_than(const Eigen::Vector3d& sensor_origin) {
   const float max_distance_squared = static_cast<float>(config_.max_distance * config_.max_distance);
   const Eigen::Vector3f origin = sensor_origin.cast<float>();
   // By the voxel's centre, from its key: reading its first point would miss the cache once per

@@ -205,7 +205,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // during the sweep are not deskewed) and state.
   const Eigen::Matrix3f rotation = T_world_lidar.rotation().matrix().cast<float>();
   map_.add(cloud::transformed(map_points, T_world_lidar).positions, T_world_lidar.translation(),
-           [&](std::size_t i) { return Eigen::Vector3f(rotation * range_image.normal(kept[i])); });
+           [&](std::size_t i) { return Eigen::Vector3f(rotation * range_image.normal(kept[i])); }, threads);
   if (estimate.weather_degraded) {
     ++weather_degraded_scans_;
   } else {

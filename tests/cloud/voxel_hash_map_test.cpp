@@ -42,6 +42,42 @@ TEST(VoxelHashMap, KeepsAtMostMaxPointsPerVoxelAndTheirSpacing) {
   EXPECT_EQ(spaced.point_count(), 2U);
 }
 
+TEST(VoxelHashMap, AddsTheSamePointsInTheSameOrderOnSeveralThreads) {
+  // Three overlapping scans into maps on 1, 2 and 3 threads: the candidates checked in parallel
+  // against the map as it stands, then in order against this scan's own points, must give the
+  // sequential result point for point (normals carry each point's index to check which was kept).
+  const VoxelHashMapConfig config{.voxel_size = 0.5, .max_points_per_voxel = 8, .min_point_spacing = -1.0, .max_distance = 100.0};
+  std::vector<VoxelHashMap> maps(3, VoxelHashMap(config));
+  for (uint32_t scan = 0; scan < 3; ++scan) {
+    std::vector<Eigen::Vector3f> points = random_points(20000, 4.0F, 10 + scan);
+    points[123] = Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN());
+    for (std::size_t threads = 1; threads <= maps.size(); ++threads) {
+      maps[threads - 1].add(points, Eigen::Vector3d::Zero(),
+                            [&](std::size_t i) { return Eigen::Vector3f(static_cast<float>(scan), static_cast<float>(i), 0.0F); },
+                            static_cast<int>(threads));
+    }
+  }
+  ASSERT_GT(maps[0].point_count(), 10000U);
+  ASSERT_LT(maps[0].point_count(), 3 * 20000U);
+  EXPECT_EQ(maps[0].skipped_points(), 3U);
+  for (std::size_t threads = 2; threads <= maps.size(); ++threads) {
+    const VoxelHashMap& map = maps[threads - 1];
+    EXPECT_EQ(map.point_count(), maps[0].point_count());
+    EXPECT_EQ(map.voxel_count(), maps[0].voxel_count());
+    EXPECT_EQ(map.skipped_points(), maps[0].skipped_points());
+    for (const Eigen::Vector3f& position : maps[0].points()) {
+      const std::vector<MapPoint>* expected = maps[0].find(maps[0].coordinates(position));
+      const std::vector<MapPoint>* actual = map.find(map.coordinates(position));
+      ASSERT_NE(actual, nullptr);
+      ASSERT_EQ(actual->size(), expected->size());
+      for (std::size_t k = 0; k < expected->size(); ++k) {
+        EXPECT_EQ((*actual)[k].position, (*expected)[k].position);
+        EXPECT_EQ((*actual)[k].normal, (*expected)[k].normal);
+      }
+    }
+  }
+}
+
 TEST(VoxelHashMap, DropsVoxelsBeyondMaxDistanceAndNonFinitePoints) {
   VoxelHashMap map({.voxel_size = 1.0, .max_points_per_voxel = 20, .min_point_spacing = 0.0, .max_distance = 10.0});
   const float nan = std::numeric_limits<float>::quiet_NaN();

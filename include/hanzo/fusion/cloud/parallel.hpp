@@ -10,6 +10,9 @@
 
 namespace hanzo::fusion::cloud {
 
+/// The threads `num_threads` stands for: itself when > 0, else every hardware thread.
+int thread_count(int num_threads);
+
 /// Number of chunks parallel_chunks() splits `count` items into for `num_threads`.
 size_t chunk_count(size_t count, int num_threads);
 

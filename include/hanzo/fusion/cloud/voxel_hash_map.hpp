@@ -44,15 +44,17 @@ class VoxelHashMap {
  public:
   explicit VoxelHashMap(VoxelHashMapConfig config = {});
 
-  /// Adds map-frame points (rules above), then removes voxels farther than max_distance from
-  /// `sensor_origin`. `normals`: empty, or one per point (zero when unknown). Non-finite
-  /// points are skipped.
+  /// Adds map-frame points (rules above, in the order given), then removes voxels farther than
+  /// max_distance from `sensor_origin`. `normals`: empty, or one per point (zero when
+  /// unknown). Non-finite points are skipped. The points are checked against the map on up to
+  /// num_threads threads (parallel.hpp); the result is the same on any number.
   void add(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& normals,
-           const Eigen::Vector3d& sensor_origin);
-  /// The same, asking normal_of(i) for the normal of points[i] only when the point is kept
-  /// (normals can be costly and most points of a scan fall into full voxels).
+           const Eigen::Vector3d& sensor_origin, int num_threads = 1);
+  /// The same, asking normal_of(i) for the normal of points[i] only when the map does not
+  /// already refuse the point (normals can be costly and most points of a scan fall into full
+  /// or covered voxels). normal_of is called concurrently when num_threads != 1.
   void add(const std::vector<Eigen::Vector3f>& points, const Eigen::Vector3d& sensor_origin,
-           const std::function<Eigen::Vector3f(std::size_t)>& normal_of);
+           const std::function<Eigen::Vector3f(std::size_t)>& normal_of, int num_threads = 1);
   void clear();
 
   /// The points of the voxel at `coordinates`, or nullptr when it is empty.
@@ -79,6 +81,17 @@ class VoxelHashMap {
   double point_spacing() const { return point_spacing_; }
 
  private:
+  /// True when `voxel` is full or holds a point closer than the spacing to `point`.
+  bool refuses(const std::vector<MapPoint>& voxel, const Eigen::Vector3f& point) const;
+  /// Appends the point to its voxel (a non-finite normal stored as zero).
+  void place(std::vector<MapPoint>& voxel, const Eigen::Vector3f& point, const Eigen::Vector3f& normal);
+  /// add()'s insertion on several threads: the points the map refuses as it stands are found in
+  /// parallel, the others placed in order.
+  void add_in_parallel(const std::vector<Eigen::Vector3f>& points, const std::function<Eigen::Vector3f(std::size_t)>& normal_of,
+                       int num_threads);
+  /// Drops the voxels whose centre lies farther than max_distance from `sensor_origin`.
+  void remove_farther_than(const Eigen::Vector3d& sensor_origin);
+
   VoxelHashMapConfig config_;
   float inverse_voxel_size_;
   double point_spacing_;
