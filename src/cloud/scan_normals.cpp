@@ -44,8 +44,13 @@ ScanNormalEstimator::ScanNormalEstimator(const PointCloud& scan, const ScanNorma
   // the median elevation step between adjacent rings over the azimuth bin width.
   window_ = config.column_window;
   if (window_ <= 0) {
+    // 4096 points spread over the sweep suffice for each ring's median elevation (every 7th of a
+    // 130k-point sweep was a third of this constructor's time): k times a large prime modulo the
+    // size visits distinct indices whatever the order of rings and columns in the scan.
+    const std::size_t samples = std::min<std::size_t>(scan.size(), 4096);
     std::vector<std::vector<float>> elevations(static_cast<std::size_t>(rings_));
-    for (std::size_t i = 0; i < scan.size(); i += 7) {
+    for (std::size_t k = 0; k < samples; ++k) {
+      const std::size_t i = (k * 2654435761ULL) % scan.size();
       const Eigen::Vector3f& p = scan.positions[i];
       elevations[scan.rings[i]].push_back(fast_atan2(p.z(), std::sqrt(p.x() * p.x() + p.y() * p.y())));
     }
