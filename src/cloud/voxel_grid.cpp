@@ -25,23 +25,58 @@ Eigen::Vector3i unpack_voxel_key(uint64_t key) {
   return voxel;
 }
 
-std::vector<uint32_t> first_point_per_voxel(const std::vector<Eigen::Vector3f>& points, const std::vector<uint32_t>& candidates,
-                                            double voxel_size) {
-  assert(voxel_size > 0);
-  const float inverse = static_cast<float>(1.0 / voxel_size);
+namespace {
+
+// The first candidate of each voxel within candidates[begin, end), in order, with its key.
+struct FirstOfEachVoxel {
+  std::vector<uint32_t> candidates;
+  std::vector<uint64_t> keys;
+};
+
+FirstOfEachVoxel first_of_each_voxel(const std::vector<Eigen::Vector3f>& points, const std::vector<uint32_t>& candidates,
+                                     size_t begin, size_t end, float inverse_voxel_size) {
+  FirstOfEachVoxel first;
   absl::flat_hash_set<uint64_t> occupied;
-  occupied.reserve(candidates.size() / 4);
+  occupied.reserve((end - begin) / 4);
   // The keys seen last, by a hash of the key: neighbouring points of a scan mostly share a voxel,
   // and this small table answers them without the cache misses of the large set.
   std::vector<uint64_t> recent(4096, kInvalidKey);
-  std::vector<uint32_t> kept;
-  for (const uint32_t i : candidates) {
+  for (size_t n = begin; n < end; ++n) {
     uint64_t key = 0;
-    if (!pack_voxel_key(voxel_coordinates(points[i], inverse), &key)) continue;
+    if (!pack_voxel_key(voxel_coordinates(points[candidates[n]], inverse_voxel_size), &key)) continue;
     uint64_t& seen = recent[(key * 0x9E3779B97F4A7C15ULL) >> 52];
     if (seen == key) continue;
     seen = key;
-    if (occupied.insert(key).second) kept.push_back(i);
+    if (!occupied.insert(key).second) continue;
+    first.candidates.push_back(candidates[n]);
+    first.keys.push_back(key);
+  }
+  return first;
+}
+
+}  // namespace
+
+std::vector<uint32_t> first_point_per_voxel(const std::vector<Eigen::Vector3f>& points, const std::vector<uint32_t>& candidates,
+                                            double voxel_size, int num_threads) {
+  assert(voxel_size > 0);
+  const float inverse = static_cast<float>(1.0 / voxel_size);
+  // Each chunk of consecutive candidates finds its own first per voxel in parallel; a voxel seen
+  // by several chunks then keeps the first chunk's (chunks merged in order): the sequential result.
+  std::vector<FirstOfEachVoxel> chunks(chunk_count(candidates.size(), num_threads));
+  parallel_chunks(candidates.size(), num_threads, [&](size_t chunk, size_t begin, size_t end) {
+    chunks[chunk] = first_of_each_voxel(points, candidates, begin, end, inverse);
+  });
+  if (chunks.size() == 1) return std::move(chunks.front().candidates);
+  size_t total = 0;
+  for (const FirstOfEachVoxel& chunk : chunks) total += chunk.candidates.size();
+  absl::flat_hash_set<uint64_t> occupied;
+  occupied.reserve(total);
+  std::vector<uint32_t> kept;
+  kept.reserve(total);
+  for (const FirstOfEachVoxel& chunk : chunks) {
+    for (size_t n = 0; n < chunk.candidates.size(); ++n) {
+      if (occupied.insert(chunk.keys[n]).second) kept.push_back(chunk.candidates[n]);
+    }
   }
   return kept;
 }

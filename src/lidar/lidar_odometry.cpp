@@ -102,7 +102,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
                              config_.max_range, config_.min_points));
   }
   // Points closer than the map's spacing would be refused by it anyway (1 cm at least).
-  const std::vector<uint32_t> kept = cloud::first_point_per_voxel(scan.positions, in_range, std::max(map_.point_spacing(), 0.01));
+  const std::vector<uint32_t> kept = cloud::first_point_per_voxel(scan.positions, in_range, std::max(map_.point_spacing(), 0.01), threads);
   cloud::PointCloud map_points;
   map_points.positions.reserve(kept.size());
   for (const uint32_t i : kept) {
@@ -121,7 +121,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   if (config_.deskew) deskew(map_points, sweep_motion ? *sweep_motion : SweepMotion::constant_twist(twist_per_second, middle), threads);
   std::vector<uint32_t> all(map_points.size());
   for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<uint32_t>(i);
-  const std::vector<uint32_t> source_indices = cloud::first_point_per_voxel(map_points.positions, all, config_.source_voxel_size);
+  const std::vector<uint32_t> source_indices = cloud::first_point_per_voxel(map_points.positions, all, config_.source_voxel_size, threads);
   std::vector<Eigen::Vector3f> source;
   source.reserve(source_indices.size());
   for (const uint32_t i : source_indices) source.push_back(map_points.positions[i]);

@@ -105,6 +105,9 @@ TEST(VoxelGrid, FirstPointPerVoxelKeepsTheFirstCandidateOfEachVoxelInOrder) {
     }
   }
   EXPECT_EQ(first_point_per_voxel(many, all, 0.7), expected);
+  // On several threads chunks of candidates are merged in order: the same points.
+  EXPECT_EQ(first_point_per_voxel(many, all, 0.7, 2), expected);
+  EXPECT_EQ(first_point_per_voxel(many, all, 0.7, 3), expected);
 }
 
 TEST(OutlierRemoval, DropsIsolatedPoints) {

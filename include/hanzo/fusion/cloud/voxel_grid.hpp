@@ -53,9 +53,10 @@ Eigen::Vector3i unpack_voxel_key(uint64_t key);
 
 /// The first of `candidates` (indices into `points`) in each voxel of edge voxel_size (m, > 0),
 /// in candidate order: an O(n) downsampling that keeps measured points, so their per-point
-/// attributes stay valid. Points outside the key range are dropped.
+/// attributes stay valid. Points outside the key range are dropped. The same on any number of
+/// threads (num_threads: see parallel.hpp).
 std::vector<uint32_t> first_point_per_voxel(const std::vector<Eigen::Vector3f>& points, const std::vector<uint32_t>& candidates,
-                                            double voxel_size);
+                                            double voxel_size, int num_threads = 1);
 
 /// Downsampled copy of `cloud`. voxel_size must be > 0 (m).
 PointCloud voxel_downsample(const PointCloud& cloud, double voxel_size, int num_threads = 1);
