@@ -17,16 +17,6 @@ constexpr int64_t kKeyOffset = int64_t{1} << (kKeyBits - 1);
 constexpr uint64_t kKeyMask = (uint64_t{1} << kKeyBits) - 1;
 constexpr uint64_t kInvalidKey = ~uint64_t{0};
 
-}  // namespace
-
-Eigen::Vector3i unpack_voxel_key(uint64_t key) {
-  Eigen::Vector3i voxel;
-  for (int axis = 0; axis < 3; ++axis) voxel[axis] = static_cast<int>(int64_t((key >> (kKeyBits * axis)) & kKeyMask) - kKeyOffset);
-  return voxel;
-}
-
-namespace {
-
 // The first candidate of each voxel within candidates[begin, end), in order, with its key.
 struct FirstOfEachVoxel {
   std::vector<uint32_t> candidates;
@@ -55,6 +45,12 @@ FirstOfEachVoxel first_of_each_voxel(const std::vector<Eigen::Vector3f>& points,
 }
 
 }  // namespace
+
+Eigen::Vector3i unpack_voxel_key(uint64_t key) {
+  Eigen::Vector3i voxel;
+  for (int axis = 0; axis < 3; ++axis) voxel[axis] = static_cast<int>(int64_t((key >> (kKeyBits * axis)) & kKeyMask) - kKeyOffset);
+  return voxel;
+}
 
 std::vector<uint32_t> first_point_per_voxel(const std::vector<Eigen::Vector3f>& points, const std::vector<uint32_t>& candidates,
                                             double voxel_size, int num_threads) {
