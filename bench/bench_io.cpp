@@ -4,6 +4,10 @@
 // a multi-GB log and reports the peak memory of reading it.
 //
 // Counters: bytes_per_second (file bytes), items_per_second (messages), ratio (file / raw payload).
+// Also the wire encodings of one of those scans as the gRPC streams send it (encode: to_proto +
+// serialize; decode: parse + from_proto, the server's side): the spec's Point3 messages with
+// absolute point_timestamps, packed_points with absolute times, packed_points with
+// point_time_offsets_ns (what `hanzo-fusion stream` sends). Counter: wire_bytes.
 
 #include <unistd.h>
 
@@ -242,6 +246,57 @@ void BM_ReadMultiGigabyteLog(benchmark::State& state) {
   std::filesystem::remove(path);
 }
 
+// 0: Point3 + point_timestamps (the spec), 1: packed_points + point_timestamps, 2: packed_points
+// + point_time_offsets_ns.
+v1::PointCloudMessage wire_scan(int encoding) {
+  const msgs::PointCloudMessage& scan = workload().scans.front();
+  v1::PointCloudMessage out;
+  msgs::to_proto(scan, &out, encoding == 0 ? msgs::PointEncoding::kPoint3 : msgs::PointEncoding::kPacked);
+  if (encoding == 1) {
+    out.clear_point_time_offsets_ns();
+    for (Timestamp time : scan.point_timestamps) out.add_point_timestamps(static_cast<uint64_t>(time.nanoseconds()));
+  }
+  return out;
+}
+
+const char* wire_name(int encoding) {
+  static const char* names[] = {"point3+timestamps", "packed+timestamps", "packed+offsets"};
+  return names[encoding];
+}
+
+void BM_PointCloudWireEncode(benchmark::State& state) {
+  const int encoding = static_cast<int>(state.range(0));
+  const msgs::PointCloudMessage& scan = workload().scans.front();
+  v1::PointCloudMessage message;
+  std::string bytes;
+  for (auto _ : state) {
+    if (encoding == 1) {
+      message = wire_scan(1);  // not a to_proto mode: built as encoding 1 is on the wire
+    } else {
+      msgs::to_proto(scan, &message, encoding == 0 ? msgs::PointEncoding::kPoint3 : msgs::PointEncoding::kPacked);
+    }
+    message.SerializeToString(&bytes);
+    benchmark::DoNotOptimize(bytes.data());
+  }
+  state.SetLabel(wire_name(encoding));
+  state.counters["wire_bytes"] = static_cast<double>(bytes.size());
+  state.counters["points"] = static_cast<double>(scan.points.size());
+}
+
+void BM_PointCloudWireDecode(benchmark::State& state) {
+  const int encoding = static_cast<int>(state.range(0));
+  const std::string bytes = wire_scan(encoding).SerializeAsString();
+  v1::PointCloudMessage message;
+  for (auto _ : state) {
+    if (!message.ParseFromString(bytes)) state.SkipWithError("parse failed");
+    Result<msgs::PointCloudMessage> decoded = msgs::from_proto(message);
+    if (!decoded) state.SkipWithError(decoded.error().message.c_str());
+    benchmark::DoNotOptimize(decoded);
+  }
+  state.SetLabel(wire_name(encoding));
+  state.counters["wire_bytes"] = static_cast<double>(bytes.size());
+}
+
 }  // namespace
 
 // Wall-clock time everywhere (cat runs in a child process). The multi-GB read runs first, while
@@ -253,4 +308,6 @@ BENCHMARK(BM_McapWriteSerialized)->DenseRange(0, 2)->Unit(benchmark::kMillisecon
 BENCHMARK(BM_McapRead)->DenseRange(0, 2)->Unit(benchmark::kMillisecond)->Iterations(5)->UseRealTime();
 BENCHMARK(BM_SensorLogReadDecoded)->DenseRange(0, 2)->Unit(benchmark::kMillisecond)->Iterations(3)->UseRealTime();
 BENCHMARK(BM_CatSameBytes)->Unit(benchmark::kMillisecond)->Iterations(5)->UseRealTime();
+BENCHMARK(BM_PointCloudWireEncode)->DenseRange(0, 2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PointCloudWireDecode)->DenseRange(0, 2)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();

@@ -125,6 +125,18 @@ v1::PointCloudMessage to_proto(const PointCloudMessage& message) {
   return out;
 }
 
+namespace {
+
+// Whether every point time is within the +-2.1 s of point_time_offsets_ns from the sweep's stamp.
+bool fits_in_offsets(const PointCloudMessage& message) {
+  return std::all_of(message.point_timestamps.begin(), message.point_timestamps.end(), [&](Timestamp time) {
+    const int64_t offset = (time - message.timestamp).nanoseconds();
+    return offset >= std::numeric_limits<int32_t>::min() && offset <= std::numeric_limits<int32_t>::max();
+  });
+}
+
+}  // namespace
+
 void to_proto(const PointCloudMessage& message, v1::PointCloudMessage* out, PointEncoding encoding) {
   out->Clear();  // keeps the cleared Point3 objects for add_points() to reuse
   out->set_timestamp_ns(write_time(message.timestamp));
@@ -144,6 +156,12 @@ void to_proto(const PointCloudMessage& message, v1::PointCloudMessage* out, Poin
   }
   out->mutable_intensities()->Add(message.intensities.begin(), message.intensities.end());
   out->mutable_ring_ids()->Add(message.ring_ids.begin(), message.ring_ids.end());
+  if (encoding == PointEncoding::kPacked && fits_in_offsets(message)) {
+    out->mutable_point_time_offsets_ns()->Resize(static_cast<int>(message.point_timestamps.size()), 0);
+    int32_t* offsets = out->mutable_point_time_offsets_ns()->mutable_data();
+    for (Timestamp time : message.point_timestamps) *offsets++ = static_cast<int32_t>((time - message.timestamp).nanoseconds());
+    return;
+  }
   out->mutable_point_timestamps()->Reserve(static_cast<int>(message.point_timestamps.size()));
   for (Timestamp time : message.point_timestamps) out->add_point_timestamps(write_time(time));
 }
@@ -163,7 +181,22 @@ Result<PointCloudMessage> from_proto(const v1::PointCloudMessage& in) {
   for (int i = 0; i < in.packed_points_size(); i += 3) message.points.emplace_back(packed[i], packed[i + 1], packed[i + 2]);
   message.intensities.assign(in.intensities().begin(), in.intensities().end());
   message.ring_ids.assign(in.ring_ids().begin(), in.ring_ids().end());
-  message.point_timestamps.reserve(in.point_timestamps_size());
+  if (in.point_timestamps_size() > 0 && in.point_time_offsets_ns_size() > 0) {
+    return read.fail("point_time_offsets_ns", "set point_timestamps or point_time_offsets_ns, not both");
+  }
+  message.point_timestamps.reserve(static_cast<std::size_t>(in.point_timestamps_size() + in.point_time_offsets_ns_size()));
+  const int64_t stamp = message.timestamp.nanoseconds();
+  if (in.point_time_offsets_ns_size() > 0 && stamp > std::numeric_limits<int64_t>::max() - std::numeric_limits<int32_t>::max()) {
+    return read.fail("point_time_offsets_ns", "timestamp_ns plus an offset overflows 64-bit nanoseconds");
+  }
+  for (int i = 0; i < in.point_time_offsets_ns_size(); ++i) {
+    const int64_t nanoseconds = stamp + in.point_time_offsets_ns(i);
+    if (nanoseconds <= 0) {
+      return read.fail(fmt::format("point_time_offsets_ns[{}]", i), fmt::format("{} ns after timestamp_ns is at or before 1970",
+                                                                                  in.point_time_offsets_ns(i)));
+    }
+    message.point_timestamps.push_back(Timestamp::from_nanoseconds(nanoseconds));
+  }
   for (int i = 0; i < in.point_timestamps_size(); ++i) {
     const uint64_t nanoseconds = in.point_timestamps(i);
     if (nanoseconds > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) {  // named only when wrong (hot path)

@@ -212,6 +212,53 @@ TEST(Convert, PackedPointsMustBeTripletsAndNotMixedWithPoint3) {
   EXPECT_FALSE(from_proto(not_finite).ok());  // validated as any sweep
 }
 
+TEST(Convert, PackedSweepsCarryPointTimesAsFixedWidthOffsetsWhenTheyFit) {
+  PointCloudMessage sweep = testing::point_cloud();
+  sweep.point_timestamps[3] = sweep.timestamp - Duration::from_microseconds(250);  // before the stamp: a negative offset
+  v1::PointCloudMessage packed;
+  to_proto(sweep, &packed, PointEncoding::kPacked);
+  EXPECT_EQ(packed.point_timestamps_size(), 0);
+  ASSERT_EQ(packed.point_time_offsets_ns_size(), static_cast<int>(sweep.points.size()));
+  EXPECT_EQ(packed.point_time_offsets_ns(3), -250000);
+  EXPECT_LT(packed.ByteSizeLong(), to_proto(sweep).ByteSizeLong() - 3 * sweep.points.size());
+  expect_equal(sweep, from_proto(packed).value());  // exact to the nanosecond
+
+  // A point more than 2.1 s from the stamp: the whole sweep keeps absolute times, still exact.
+  PointCloudMessage long_sweep = sweep;
+  long_sweep.point_timestamps.back() = sweep.timestamp + Duration::from_seconds(3.0);
+  to_proto(long_sweep, &packed, PointEncoding::kPacked);
+  EXPECT_EQ(packed.point_time_offsets_ns_size(), 0);
+  EXPECT_EQ(packed.point_timestamps_size(), static_cast<int>(sweep.points.size()));
+  expect_equal(long_sweep, from_proto(packed).value());
+}
+
+TEST(Convert, PointTimeOffsetsAreRefusedWithAbsoluteTimesBeforeTheEpochOrOverflowing) {
+  v1::PointCloudMessage packed;
+  to_proto(testing::point_cloud(), &packed, PointEncoding::kPacked);
+  ASSERT_GT(packed.point_time_offsets_ns_size(), 0);
+
+  v1::PointCloudMessage both = packed;
+  both.add_point_timestamps(packed.timestamp_ns());
+  auto result = from_proto(both);
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().field, "point_time_offsets_ns");
+  EXPECT_THAT(result.error().message, HasSubstr("not both"));
+
+  v1::PointCloudMessage before_epoch = packed;
+  before_epoch.set_timestamp_ns(1000);
+  before_epoch.set_point_time_offsets_ns(7, -1000);
+  result = from_proto(before_epoch);
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().field, "point_time_offsets_ns[7]");
+
+  v1::PointCloudMessage overflowing = packed;
+  overflowing.set_timestamp_ns(static_cast<uint64_t>(std::numeric_limits<int64_t>::max()) - 5);
+  result = from_proto(overflowing);
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().field, "point_time_offsets_ns");
+  EXPECT_THAT(result.error().message, HasSubstr("overflows"));
+}
+
 TEST(Convert, ImageRoundTrip) {
   check_round_trip(testing::image());
   ImageMessage depth = testing::image();

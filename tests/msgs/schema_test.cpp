@@ -47,6 +47,12 @@ TEST(Schema, SensorMessagesHaveTheSpecsFieldNumbers) {
   EXPECT_EQ(packed->number(), 7);
   EXPECT_TRUE(packed->is_packed());
   EXPECT_EQ(packed->type(), FieldDescriptor::TYPE_FLOAT);
+  // So is the point-time offset extension, fixed-width signed.
+  const FieldDescriptor* offsets = v1::PointCloudMessage::descriptor()->FindFieldByName("point_time_offsets_ns");
+  ASSERT_NE(offsets, nullptr);
+  EXPECT_EQ(offsets->number(), 8);
+  EXPECT_TRUE(offsets->is_packed());
+  EXPECT_EQ(offsets->type(), FieldDescriptor::TYPE_SFIXED32);
   // The IMU orientation extension has explicit presence.
   EXPECT_TRUE(v1::ImuMessage::descriptor()->FindFieldByName("orientation")->has_presence());
 }
