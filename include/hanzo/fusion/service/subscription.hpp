@@ -33,10 +33,12 @@ class Subscription {
     ready_.notify_one();
   }
 
-  /// The oldest entry; waits up to `timeout`. nullopt on timeout or when closed and drained.
+  /// The oldest entry; waits up to `timeout` (a zero timeout never waits, nor makes a system
+  /// call: a stream polls its queue after every message). nullopt on timeout or when closed
+  /// and drained.
   std::optional<T> pop(std::chrono::milliseconds timeout) {
     std::unique_lock lock(mutex_);
-    ready_.wait_for(lock, timeout, [&] { return !queue_.empty() || closed_; });
+    if (timeout.count() > 0) ready_.wait_for(lock, timeout, [&] { return !queue_.empty() || closed_; });
     if (queue_.empty()) return std::nullopt;
     T value = std::move(queue_.front());
     queue_.pop_front();
