@@ -1,6 +1,7 @@
 #include "hanzo/fusion/cloud/scan_normals.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -68,6 +69,10 @@ ScanNormalEstimator::ScanNormalEstimator(const PointCloud& scan, const ScanNorma
     }
     window_ = std::clamp(static_cast<int>(std::lround(step / (2.0 * M_PI / columns_))), 1, std::max(1, columns_ / 8));
   }
+  // Column-major (a column's rings side by side): a sweep arrives column by column, so the
+  // points fill the image nearly in memory order (ring-major, each point of a column landed on
+  // another page). Each cell keeps the first point of the sweep that falls in it: in parallel
+  // chunks, the smallest index by an atomic minimum (the same image as one sequential pass).
   image_.assign(static_cast<std::size_t>(rings_) * static_cast<std::size_t>(columns_), kEmpty);
   column_of_.resize(scan.size());
   const float columns_per_turn = static_cast<float>(columns_ * 0.5 / M_PI);
@@ -77,14 +82,15 @@ ScanNormalEstimator::ScanNormalEstimator(const PointCloud& scan, const ScanNorma
       // The nearest column centre (azimuth >= 0: adding a half rounds): sensors fire at evenly
       // spaced azimuths, which then fall on the centres, far from the edges where fast_atan2's
       // error could move them across.
-      const float column = (fast_atan2(p.y(), p.x()) + static_cast<float>(M_PI)) * columns_per_turn;
-      column_of_[i] = static_cast<int>(column + 0.5F) % columns_;
+      int column = static_cast<int>((fast_atan2(p.y(), p.x()) + static_cast<float>(M_PI)) * columns_per_turn + 0.5F);
+      if (column >= columns_) column -= columns_;  // azimuth pi wraps to column 0
+      column_of_[i] = column;
+      std::atomic_ref<uint32_t> cell(image_[cell_index(scan.rings[i], column)]);
+      uint32_t held = cell.load(std::memory_order_relaxed);
+      while (i < held && !cell.compare_exchange_weak(held, static_cast<uint32_t>(i), std::memory_order_relaxed)) {
+      }
     }
   });
-  for (std::size_t i = 0; i < scan.size(); ++i) {
-    uint32_t& cell = image_[static_cast<std::size_t>(scan.rings[i]) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(column_of_[i])];
-    if (cell == kEmpty) cell = static_cast<uint32_t>(i);
-  }
 }
 
 Eigen::Vector3f ScanNormalEstimator::normal(std::size_t i) const {
@@ -102,8 +108,7 @@ Eigen::Vector3f ScanNormalEstimator::normal(std::size_t i) const {
   int count = 0, other_ring = 0;
   for (int r = std::max(0, ring - 1); r <= std::min(rings_ - 1, ring + 1); ++r) {
     for (int dc = -(window_ / stride) * stride; dc <= window_; dc += stride) {
-      const int column = (column_of_[i] + dc + columns_) % columns_;
-      const uint32_t j = image_[static_cast<std::size_t>(r) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(column)];
+      const uint32_t j = image_[cell_index(r, wrapped_column(column_of_[i] + dc))];
       if (j == kEmpty) continue;
       const Eigen::Vector3f d = scan_.positions[j] - p;  // relative to p: well conditioned in float
       if (d.squaredNorm() > max_squared) continue;
@@ -133,8 +138,7 @@ bool ScanNormalEstimator::isolated(std::size_t i, float max_gap) const {
   for (int r = std::max(0, ring - 1); r <= std::min(rings_ - 1, ring + 1); ++r) {
     const int reach = r == ring ? 2 : 1;
     for (int dc = -reach; dc <= reach; ++dc) {
-      const int column = (column_of_[i] + dc + columns_) % columns_;
-      const uint32_t j = image_[static_cast<std::size_t>(r) * static_cast<std::size_t>(columns_) + static_cast<std::size_t>(column)];
+      const uint32_t j = image_[cell_index(r, wrapped_column(column_of_[i] + dc))];
       if (j == kEmpty || j == i) continue;
       if ((scan_.positions[j] - p).squaredNorm() <= max_squared) return false;
     }

@@ -173,6 +173,28 @@ TEST(ScanNormals, FloorAndWallNormalsFromAdjacentRingsPointAtTheSensor) {
   for (std::size_t n = 0; n < subset.size(); ++n) EXPECT_EQ(some[n], normals[subset[n]]);
 }
 
+TEST(ScanNormals, TheRangeImageKeepsEachCellsFirstPointOnAnyNumberOfThreads) {
+  // Second returns 0.7 m behind every third point, appended after the whole sweep (in another
+  // thread's chunk than their first returns): each cell must keep its first return.
+  PointCloud scan = ring_scan();
+  const std::size_t first_returns = scan.size();
+  for (std::size_t i = 0; i < first_returns; i += 3) {
+    scan.positions.push_back(scan.positions[i] * (1.0F + 0.7F / scan.positions[i].norm()));
+    scan.rings.push_back(scan.rings[i]);
+  }
+  const ScanNormalEstimator one_thread(scan, {}, 1);
+  std::size_t with_normal = 0;
+  for (std::size_t i = 0; i < first_returns; ++i) with_normal += one_thread.normal(i).isZero() ? 0 : 1;
+  EXPECT_GT(with_normal, first_returns / 2);
+  for (int threads : {2, 3}) {
+    const ScanNormalEstimator several(scan, {}, threads);
+    for (std::size_t i = 0; i < scan.size(); ++i) {
+      ASSERT_EQ(several.normal(i), one_thread.normal(i)) << "point " << i << " on " << threads << " threads";
+      ASSERT_EQ(several.isolated(i, 0.3F), one_thread.isolated(i, 0.3F)) << "point " << i << " on " << threads << " threads";
+    }
+  }
+}
+
 TEST(ScanNormals, NoRingsOrIsolatedRingsGiveNoNormal) {
   PointCloud scan = ring_scan();
   PointCloud without_rings = scan;

@@ -38,7 +38,8 @@ struct ScanNormalConfig {
 /// scan: it must outlive the object.
 class ScanNormalEstimator {
  public:
-  /// Builds the range image (the azimuths on up to num_threads threads; see parallel.hpp).
+  /// Builds the range image on up to num_threads threads (see parallel.hpp); the same image on
+  /// any number.
   ScanNormalEstimator(const PointCloud& scan, const ScanNormalConfig& config = {}, int num_threads = 1);
   /// The unit normal of point `index` (facing the sensor), or zero; see above.
   Eigen::Vector3f normal(std::size_t index) const;
@@ -49,12 +50,18 @@ class ScanNormalEstimator {
   bool isolated(std::size_t index, float max_gap) const;
 
  private:
+  std::size_t cell_index(int ring, int column) const {
+    return static_cast<std::size_t>(column) * static_cast<std::size_t>(rings_) + static_cast<std::size_t>(ring);
+  }
+  /// A column index up to one turn outside [0, columns_) brought back into it.
+  int wrapped_column(int column) const { return column < 0 ? column + columns_ : column >= columns_ ? column - columns_ : column; }
+
   const PointCloud& scan_;
   ScanNormalConfig config_;
   int rings_ = 0;
   int columns_ = 0;
   int window_ = 1;
-  std::vector<uint32_t> image_;   // ring-major, kEmpty where no point
+  std::vector<uint32_t> image_;   // column-major, kEmpty where no point
   std::vector<int> column_of_;
 };
 
