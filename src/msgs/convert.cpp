@@ -184,6 +184,10 @@ Result<PointCloudMessage> from_proto(const v1::PointCloudMessage& in) {
   if (in.point_timestamps_size() > 0 && in.point_time_offsets_ns_size() > 0) {
     return read.fail("point_time_offsets_ns", "set point_timestamps or point_time_offsets_ns, not both");
   }
+  if (in.point_time_offsets_ns_size() > 0 && static_cast<std::size_t>(in.point_time_offsets_ns_size()) != message.points.size()) {
+    return read.fail("point_time_offsets_ns", fmt::format("{} offsets for {} points (give one per point or none)",
+                                                          in.point_time_offsets_ns_size(), message.points.size()));
+  }
   message.point_timestamps.reserve(static_cast<std::size_t>(in.point_timestamps_size() + in.point_time_offsets_ns_size()));
   const int64_t stamp = message.timestamp.nanoseconds();
   if (in.point_time_offsets_ns_size() > 0 && stamp > std::numeric_limits<int64_t>::max() - std::numeric_limits<int32_t>::max()) {

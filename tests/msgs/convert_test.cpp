@@ -232,7 +232,7 @@ TEST(Convert, PackedSweepsCarryPointTimesAsFixedWidthOffsetsWhenTheyFit) {
   expect_equal(long_sweep, from_proto(packed).value());
 }
 
-TEST(Convert, PointTimeOffsetsAreRefusedWithAbsoluteTimesBeforeTheEpochOrOverflowing) {
+TEST(Convert, PointTimeOffsetsAreRefusedWithAbsoluteTimesMiscountedBeforeTheEpochOrOverflowing) {
   v1::PointCloudMessage packed;
   to_proto(testing::point_cloud(), &packed, PointEncoding::kPacked);
   ASSERT_GT(packed.point_time_offsets_ns_size(), 0);
@@ -243,6 +243,13 @@ TEST(Convert, PointTimeOffsetsAreRefusedWithAbsoluteTimesBeforeTheEpochOrOverflo
   ASSERT_FALSE(result.ok());
   EXPECT_EQ(result.error().field, "point_time_offsets_ns");
   EXPECT_THAT(result.error().message, HasSubstr("not both"));
+
+  v1::PointCloudMessage one_short = packed;
+  one_short.mutable_point_time_offsets_ns()->RemoveLast();
+  result = from_proto(one_short);
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().field, "point_time_offsets_ns");
+  EXPECT_THAT(result.error().message, HasSubstr("99 offsets for 100 points"));
 
   v1::PointCloudMessage before_epoch = packed;
   before_epoch.set_timestamp_ns(1000);
