@@ -125,18 +125,6 @@ v1::PointCloudMessage to_proto(const PointCloudMessage& message) {
   return out;
 }
 
-namespace {
-
-// Whether every point time is within the +-2.1 s of point_time_offsets_ns from the sweep's stamp.
-bool fits_in_offsets(const PointCloudMessage& message) {
-  return std::all_of(message.point_timestamps.begin(), message.point_timestamps.end(), [&](Timestamp time) {
-    const int64_t offset = (time - message.timestamp).nanoseconds();
-    return offset >= std::numeric_limits<int32_t>::min() && offset <= std::numeric_limits<int32_t>::max();
-  });
-}
-
-}  // namespace
-
 void to_proto(const PointCloudMessage& message, v1::PointCloudMessage* out, PointEncoding encoding) {
   out->Clear();  // keeps the cleared Point3 objects for add_points() to reuse
   out->set_timestamp_ns(write_time(message.timestamp));
@@ -156,11 +144,18 @@ void to_proto(const PointCloudMessage& message, v1::PointCloudMessage* out, Poin
   }
   out->mutable_intensities()->Add(message.intensities.begin(), message.intensities.end());
   out->mutable_ring_ids()->Add(message.ring_ids.begin(), message.ring_ids.end());
-  if (encoding == PointEncoding::kPacked && fits_in_offsets(message)) {
-    out->mutable_point_time_offsets_ns()->Resize(static_cast<int>(message.point_timestamps.size()), 0);
-    int32_t* offsets = out->mutable_point_time_offsets_ns()->mutable_data();
-    for (Timestamp time : message.point_timestamps) *offsets++ = static_cast<int32_t>((time - message.timestamp).nanoseconds());
-    return;
+  if (encoding == PointEncoding::kPacked) {
+    // Offsets when every point is within their +-2.1 s of the stamp, else the absolute times.
+    google::protobuf::RepeatedField<int32_t>& offsets = *out->mutable_point_time_offsets_ns();
+    offsets.Resize(static_cast<int>(message.point_timestamps.size()), 0);
+    int32_t* offset = offsets.mutable_data();
+    for (Timestamp time : message.point_timestamps) {
+      const int64_t nanoseconds = (time - message.timestamp).nanoseconds();
+      if (nanoseconds < std::numeric_limits<int32_t>::min() || nanoseconds > std::numeric_limits<int32_t>::max()) break;
+      *offset++ = static_cast<int32_t>(nanoseconds);
+    }
+    if (offset == offsets.data() + offsets.size()) return;
+    offsets.Clear();
   }
   out->mutable_point_timestamps()->Reserve(static_cast<int>(message.point_timestamps.size()));
   for (Timestamp time : message.point_timestamps) out->add_point_timestamps(write_time(time));
