@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numeric>
 
 #include <Eigen/Eigenvalues>
 #include <fmt/format.h>
 
+#include "hanzo/fusion/cloud/parallel.hpp"
 #include "hanzo/fusion/cloud/scan_normals.hpp"
 #include "hanzo/fusion/cloud/voxel_grid.hpp"
 #include "hanzo/fusion/core/logging.hpp"
@@ -82,21 +84,31 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // deskew; registration points are those downsampled again.
   const int threads = config_.num_threads;
   const cloud::ScanNormalEstimator range_image(scan, config_.normals, threads);
-  std::vector<uint32_t> in_range;
-  in_range.reserve(scan.size());
   const float min_squared = static_cast<float>(config_.min_range * config_.min_range);
   const float max_squared = static_cast<float>(config_.max_range * config_.max_range);
   const float phantom_squared = static_cast<float>(config_.phantom_max_range * config_.phantom_max_range);
-  std::size_t phantoms = 0;
-  for (std::size_t i = 0; i < scan.size(); ++i) {
-    const float squared = scan.positions[i].squaredNorm();
-    if (squared < min_squared || squared > max_squared) continue;
-    if (squared < phantom_squared && range_image.isolated(i, static_cast<float>(config_.phantom_max_gap))) {
-      ++phantoms;
-      continue;
+  // The points within range that are not lone near returns, in sweep order (chunks of the sweep
+  // on the odometry's threads, joined in order).
+  std::vector<std::vector<uint32_t>> chunk_in_range(cloud::chunk_count(scan.size(), threads));
+  std::vector<std::size_t> chunk_phantoms(chunk_in_range.size(), 0);
+  cloud::parallel_chunks(scan.size(), threads, [&](std::size_t chunk, std::size_t begin, std::size_t end) {
+    std::vector<uint32_t>& kept_here = chunk_in_range[chunk];
+    kept_here.reserve(end - begin);
+    for (std::size_t i = begin; i < end; ++i) {
+      const float squared = scan.positions[i].squaredNorm();
+      if (squared < min_squared || squared > max_squared) continue;
+      if (squared < phantom_squared && range_image.isolated(i, static_cast<float>(config_.phantom_max_gap))) {
+        ++chunk_phantoms[chunk];
+        continue;
+      }
+      kept_here.push_back(static_cast<uint32_t>(i));
     }
-    in_range.push_back(static_cast<uint32_t>(i));
+  });
+  std::vector<uint32_t> in_range = std::move(chunk_in_range.front());
+  for (std::size_t chunk = 1; chunk < chunk_in_range.size(); ++chunk) {
+    in_range.insert(in_range.end(), chunk_in_range[chunk].begin(), chunk_in_range[chunk].end());
   }
+  const std::size_t phantoms = std::accumulate(chunk_phantoms.begin(), chunk_phantoms.end(), std::size_t{0});
   if (in_range.size() < config_.min_points) {
     return Error(fmt::format("lidar odometry: {} points within {}-{} m (need {})", in_range.size(), config_.min_range,
                              config_.max_range, config_.min_points));
@@ -104,11 +116,14 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // Points closer than the map's spacing would be refused by it anyway (1 cm at least).
   const std::vector<uint32_t> kept = cloud::first_point_per_voxel(scan.positions, in_range, std::max(map_.point_spacing(), 0.01), threads);
   cloud::PointCloud map_points;
-  map_points.positions.reserve(kept.size());
-  for (const uint32_t i : kept) {
-    map_points.positions.push_back(scan.positions[i]);
-    if (scan.has_times()) map_points.times.push_back(scan.times[i]);
-  }
+  map_points.positions.resize(kept.size());
+  if (scan.has_times()) map_points.times.resize(kept.size());
+  cloud::parallel_for(kept.size(), threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t n = begin; n < end; ++n) {
+      map_points.positions[n] = scan.positions[kept[n]];
+      if (scan.has_times()) map_points.times[n] = scan.times[kept[n]];
+    }
+  });
   // The estimate refers to the middle of the sweep: a velocity error then warps the sweep
   // symmetrically about the estimated pose instead of shifting it (referred to the sweep start,
   // the error feeds back through the constant-velocity model and grows).
