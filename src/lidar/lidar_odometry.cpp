@@ -116,23 +116,26 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // Points closer than the map's spacing would be refused by it anyway (1 cm at least).
   const std::vector<uint32_t> kept = cloud::first_point_per_voxel(scan.positions, in_range, std::max(map_.point_spacing(), 0.01), threads);
   cloud::PointCloud map_points;
-  map_points.positions.resize(kept.size());
-  if (scan.has_times()) map_points.times.resize(kept.size());
-  cloud::parallel_for(kept.size(), threads, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t n = begin; n < end; ++n) {
-      map_points.positions[n] = scan.positions[kept[n]];
-      if (scan.has_times()) map_points.times[n] = scan.times[kept[n]];
-    }
-  });
+  // The kept points as measured (again before a second deskew).
+  const auto copy_measured = [&] {
+    map_points.positions.resize(kept.size());
+    if (scan.has_times()) map_points.times.resize(kept.size());
+    cloud::parallel_for(kept.size(), threads, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t n = begin; n < end; ++n) {
+        map_points.positions[n] = scan.positions[kept[n]];
+        if (scan.has_times()) map_points.times[n] = scan.times[kept[n]];
+      }
+    });
+  };
+  copy_measured();
   // The estimate refers to the middle of the sweep: a velocity error then warps the sweep
   // symmetrically about the estimated pose instead of shifting it (referred to the sweep start,
   // the error feeds back through the constant-velocity model and grows).
   const float middle = scan.has_times() ? 0.5F * *std::max_element(scan.times.begin(), scan.times.end()) : 0.0F;
   const Timestamp pose_time = time + Duration::from_seconds(static_cast<double>(middle));
-  // The measured points, for a second deskew with a corrected twist (constant-twist mode only).
+  // A second deskew with a corrected twist (constant-twist mode only).
   const bool may_redeskew = config_.deskew && !sweep_motion && config_.redeskew_threshold > 0.0 && map_points.has_times() &&
                             last_time_ && last_interval_ > 0.0;
-  const cloud::PointCloud measured = may_redeskew ? map_points : cloud::PointCloud();
   if (config_.deskew) deskew(map_points, sweep_motion ? *sweep_motion : SweepMotion::constant_twist(twist_per_second, middle), threads);
   std::vector<uint32_t> all(map_points.size());
   for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<uint32_t>(i);
@@ -171,7 +174,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
       const SE3::Tangent corrected_twist = measured_twist + 0.5 * (measured_twist - previous_twist);
       const SE3::Tangent change = (corrected_twist - twist_per_second) * static_cast<double>(middle);
       if (change.head<3>().norm() + 10.0 * change.tail<3>().norm() > config_.redeskew_threshold) {
-        map_points.positions = measured.positions;
+        copy_measured();
         deskew(map_points, SweepMotion::constant_twist(corrected_twist, middle), threads);
         for (std::size_t n = 0; n < source_indices.size(); ++n) source[n] = map_points.positions[source_indices[n]];
         // From the first estimate, already within centimetres: at the final kernel width, on the
@@ -189,7 +192,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
           estimate.redeskewed = true;
         } else {  // keeps the first pass (and its deskew)
           logger()->debug("lidar odometry at {:.6f} s: the second deskew's registration failed: {}", time.seconds(), again.error().message);
-          map_points.positions = measured.positions;
+          copy_measured();
           deskew(map_points, SweepMotion::constant_twist(twist_per_second, middle), threads);
         }
       }
