@@ -51,33 +51,60 @@ TEST(IncrementalSmoother, ExactGraphStaysExactWithLocalUpdatesOnly) {
 // poses, new poses started from odometry: every update re-optimizes a small part, and after
 // wait_for_batch() the estimate is the optimum (issue 6: the incremental run ends within 1 %).
 // The latest estimate before that depends on when the background batches finished, which the
-// scheduler decides: measured +0.1 to +0.7 % over 25 runs, idle or with other processes on the
-// cores, and +3.1 % when no batch ever finishes (background_batch off), so the bound asserted on
-// it is the one the local updates keep on their own.
-TEST(IncrementalSmoother, IntelPoseByPoseEndsAtTheOptimum) {
-  const PoseGraph graph = read_g2o(kData + "intel.g2o").value();
+// scheduler decides: +0.1 to +0.7 % over 25 runs, idle or with other processes on the cores,
+// but +5.8 % once in a CI run (a batch merged at an unlucky moment): only a sanity bound is
+// asserted on it here; the bound the local updates keep on their own is asserted
+// deterministically by the next test, without background batches.
+struct IntelRun {
+  double latest = 0.0;           // objective of the estimate right after the last update
+  double final_objective = 0.0;  // after wait_for_batch()
+  int max_optimized = 0, max_optimized_merging = 0;
+  int batches_merged = 0;
+};
+
+IntelRun run_intel_pose_by_pose(const PoseGraph& graph, IncrementalSmootherConfig config) {
   const std::vector<GraphUpdate> updates = graph.incremental_updates(PoseGraph::Objective::kChordal).value();
   EXPECT_EQ(updates.size(), 1728u);
-  IncrementalSmootherConfig config;
   config.batch.fixed = graph.fixed;
   IncrementalSmoother smoother(config);
-  int max_optimized = 0, max_optimized_merging = 0;
+  IntelRun run;
   for (const GraphUpdate& update : updates) {
     const IncrementalUpdateSummary summary = smoother.update(update.factors, update.values).value();
-    int& bound = summary.batch_merged ? max_optimized_merging : max_optimized;
+    int& bound = summary.batch_merged ? run.max_optimized_merging : run.max_optimized;
     bound = std::max(bound, summary.optimized_variables);
   }
   EXPECT_EQ(smoother.graph().size(), graph.edges.size());
-  const double latest = se_sync_objective(graph, smoother.estimate()).value();
-  ASSERT_TRUE(smoother.wait_for_batch().ok());
-  const double final_objective = se_sync_objective(graph, smoother.estimate()).value();
-  std::printf("intel incremental: latest %.4f, after wait %.4f, %d batches merged, at most %d variables an update (%d when merging)\n",
-              latest, final_objective, smoother.batches_merged(), max_optimized, max_optimized_merging);
-  EXPECT_LT(latest, 1.04 * 52.3482);
-  EXPECT_NEAR(final_objective, 52.3482, 1e-3 * 52.3482);
-  EXPECT_LT(max_optimized, 150);  // the window and the new factors' neighbourhoods, not the 1728 poses
+  run.latest = se_sync_objective(graph, smoother.estimate()).value();
+  EXPECT_TRUE(smoother.wait_for_batch().ok());
+  run.final_objective = se_sync_objective(graph, smoother.estimate()).value();
+  run.batches_merged = smoother.batches_merged();
+  std::printf("intel incremental (background batches %s): latest %.4f, after wait %.4f, %d batches merged, at most %d variables an "
+              "update (%d when merging)\n",
+              config.background_batch ? "on" : "off", run.latest, run.final_objective, run.batches_merged, run.max_optimized,
+              run.max_optimized_merging);
+  return run;
+}
+
+TEST(IncrementalSmoother, IntelPoseByPoseEndsAtTheOptimum) {
+  const PoseGraph graph = read_g2o(kData + "intel.g2o").value();
+  const IncrementalSmootherConfig config;
+  const IntelRun run = run_intel_pose_by_pose(graph, config);
+  EXPECT_LT(run.latest, 1.15 * 52.3482);  // scheduler-dependent, see above
+  EXPECT_NEAR(run.final_objective, 52.3482, 1e-3 * 52.3482);
+  EXPECT_LT(run.max_optimized, 150);  // the window and the new factors' neighbourhoods, not the 1728 poses
   // A merging update also refits the variables added while the batch ran, at most merge_refit_variables.
-  EXPECT_LT(max_optimized_merging, config.merge_refit_variables + 60);
+  EXPECT_LT(run.max_optimized_merging, config.merge_refit_variables + 60);
+}
+
+TEST(IncrementalSmoother, IntelPoseByPoseLocalUpdatesAloneStayWithinFourPercent) {
+  const PoseGraph graph = read_g2o(kData + "intel.g2o").value();
+  IncrementalSmootherConfig config;
+  config.background_batch = false;  // deterministic: no batch ever merges before wait_for_batch()
+  const IntelRun run = run_intel_pose_by_pose(graph, config);
+  EXPECT_EQ(run.max_optimized_merging, 0);
+  EXPECT_LT(run.latest, 1.04 * 52.3482);
+  EXPECT_NEAR(run.final_objective, 52.3482, 1e-3 * 52.3482);
+  EXPECT_LT(run.max_optimized, 150);
 }
 
 TEST(IncrementalSmoother, RejectsBadUpdatesAndKeepsTheGraph) {
