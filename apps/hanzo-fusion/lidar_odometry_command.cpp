@@ -1,6 +1,6 @@
 // hanzo-fusion lidar-odometry LOG [--topic T] [--ground-truth GT.tum] [--calibration CALIB.yaml]
 //   [--fusion-config FUSION.yaml] [--voxel M] [--source-voxel M] [--threads N] [--max-range M]
-//   [--no-deskew] [--redeskew-threshold M] [--max-scans N] [--trajectory OUT.tum] [--plot DIR]:
+//   [--no-deskew] [--deskew-coupling T,R] [--max-scans N] [--trajectory OUT.tum] [--plot DIR]:
 // LiDAR odometry (lidar/lidar_odometry.hpp) over the point clouds of a sensor log; with
 // --fusion-config, LiDAR-inertial (pipeline/lidar_inertial_odometry.hpp: a Session fuses the
 // log's IMU and the registered poses; the reported trajectory is the Session's). With a ground
@@ -45,7 +45,7 @@ struct LidarOdometryOptions {
   int threads = 1;
   double max_range = 100.0;
   bool no_deskew = false;
-  double redeskew_threshold = lidar::LidarOdometryConfig{}.redeskew_threshold;
+  std::vector<double> deskew_coupling{lidar::LidarOdometryConfig{}.deskew_translation_coupling, lidar::LidarOdometryConfig{}.deskew_rotation_coupling};
   bool loop_closure = false;
   std::size_t max_scans = 0;
   std::string trajectory_out;
@@ -101,7 +101,8 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   config.registration.max_neighbour_distance = options.voxel;
   config.max_range = options.max_range;
   config.deskew = !options.no_deskew;
-  config.redeskew_threshold = options.redeskew_threshold;
+  config.deskew_translation_coupling = options.deskew_coupling[0];
+  config.deskew_rotation_coupling = options.deskew_coupling[1];
   if (Status valid = config.validate(); !valid) return fail(valid.error().message);
 
   SE3 T_body_lidar;
@@ -124,7 +125,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   io::Trajectory estimate;
   std::vector<double> milliseconds;
   std::size_t weather = 0, phantoms = 0;
-  std::size_t refused = 0, degenerate = 0, redeskewed = 0, max_map_points = 0, max_map_bytes = 0, iterations = 0, associations = 0;
+  std::size_t refused = 0, degenerate = 0, max_map_points = 0, max_map_bytes = 0, iterations = 0, associations = 0;
   double stage_seconds[3] = {0.0, 0.0, 0.0};
   std::string first_refusal;
 
@@ -197,7 +198,6 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
     }
     milliseconds.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
     degenerate += added->degenerate ? 1 : 0;
-    redeskewed += added->redeskewed ? 1 : 0;
     weather += added->weather_degraded ? 1 : 0;
     phantoms += added->phantom_points;
     iterations += static_cast<std::size_t>(added->iterations);
@@ -262,7 +262,6 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   result["refused_scans"] = refused;
   if (refused > 0) result["first_refusal"] = first_refusal;
   result["degenerate_scans"] = degenerate;
-  result["redeskewed_scans"] = redeskewed;
   result["weather_degraded_scans"] = weather;
   result["phantom_points"] = phantoms;
   const double scans = static_cast<double>(milliseconds.size());
@@ -339,8 +338,11 @@ void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& ru
   command->add_option("--threads", options->threads, "Registration threads (0: all cores)")->capture_default_str();
   command->add_option("--max-range", options->max_range, "Ignore returns farther than this, m")->capture_default_str();
   command->add_flag("--no-deskew", options->no_deskew, "Use the points as measured (no motion compensation)");
-  command->add_option("--redeskew-threshold", options->redeskew_threshold,
-                      "LiDAR only: deskew and register a sweep again when the registered motion moves its ends by more than this, m at 10 m (0: never)")
+  command->add_option("--deskew-coupling", options->deskew_coupling,
+                      "LiDAR only: how the deskew twist's translation and rotation follow the registered pose (1.5: constant "
+                      "acceleration, 1: the mean twist since the last sweep, 0: the predicted twist)")
+      ->expected(2)
+      ->delimiter(',')
       ->capture_default_str();
   command->add_flag("--loop-closure", options->loop_closure,
                     "LiDAR SLAM: keyframe pose graph with Scan Context loop closure (LiDAR only); scores before and after");

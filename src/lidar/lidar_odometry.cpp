@@ -43,6 +43,12 @@ Status LidarOdometryConfig::validate() const {
   if (!(phantom_max_range >= 0)) return Error(fmt::format("phantom_max_range: {} < 0", phantom_max_range));
   if (!(phantom_max_gap > 0)) return Error(fmt::format("phantom_max_gap: {} <= 0", phantom_max_gap));
   if (!(weather_phantom_fraction >= 0)) return Error(fmt::format("weather_phantom_fraction: {} < 0", weather_phantom_fraction));
+  if (!(deskew_translation_coupling >= 0 && deskew_translation_coupling < 2)) {
+    return Error(fmt::format("deskew_translation_coupling: {} outside [0, 2)", deskew_translation_coupling));
+  }
+  if (!(deskew_rotation_coupling >= 0 && deskew_rotation_coupling < 2)) {
+    return Error(fmt::format("deskew_rotation_coupling: {} outside [0, 2)", deskew_rotation_coupling));
+  }
   if (!(weather_return_ratio >= 0 && weather_return_ratio <= 1)) {
     return Error(fmt::format("weather_return_ratio: {} outside [0, 1]", weather_return_ratio));
   }
@@ -116,26 +122,33 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // Points closer than the map's spacing would be refused by it anyway (1 cm at least).
   const std::vector<uint32_t> kept = cloud::first_point_per_voxel(scan.positions, in_range, std::max(map_.point_spacing(), 0.01), threads);
   cloud::PointCloud map_points;
-  // The kept points as measured (again before a second deskew).
-  const auto copy_measured = [&] {
-    map_points.positions.resize(kept.size());
-    if (scan.has_times()) map_points.times.resize(kept.size());
-    cloud::parallel_for(kept.size(), threads, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t n = begin; n < end; ++n) {
-        map_points.positions[n] = scan.positions[kept[n]];
-        if (scan.has_times()) map_points.times[n] = scan.times[kept[n]];
-      }
-    });
-  };
-  copy_measured();
+  map_points.positions.resize(kept.size());
+  if (scan.has_times()) map_points.times.resize(kept.size());
+  cloud::parallel_for(kept.size(), threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t n = begin; n < end; ++n) {
+      map_points.positions[n] = scan.positions[kept[n]];
+      if (scan.has_times()) map_points.times[n] = scan.times[kept[n]];
+    }
+  });
   // The estimate refers to the middle of the sweep: a velocity error then warps the sweep
   // symmetrically about the estimated pose instead of shifting it (referred to the sweep start,
   // the error feeds back through the constant-velocity model and grows).
   const float middle = scan.has_times() ? 0.5F * *std::max_element(scan.times.begin(), scan.times.end()) : 0.0F;
   const Timestamp pose_time = time + Duration::from_seconds(static_cast<double>(middle));
-  // A second deskew with a corrected twist (constant-twist mode only).
-  const bool may_redeskew = config_.deskew && !sweep_motion && config_.redeskew_threshold > 0.0 && map_points.has_times() &&
-                            last_time_ && last_interval_ > 0.0;
+  // The constant twist follows the registration (from the third sweep: the last motion is known):
+  // twist(T) = c Log(T_previous^-1 T) / interval - (c - 1) previous twist; at the prediction,
+  // with the constant-velocity model, the previous twist itself.
+  const bool coupled = config_.deskew && !sweep_motion && (config_.deskew_translation_coupling > 0.0 || config_.deskew_rotation_coupling > 0.0) &&
+                       map_points.has_times() && last_time_ && last_interval_ > 0.0;
+  SE3::Tangent coupling_factors;  // c per tangent component (0: that half keeps the predicted twist)
+  coupling_factors << Eigen::Vector3d::Constant(config_.deskew_translation_coupling), Eigen::Vector3d::Constant(config_.deskew_rotation_coupling);
+  if (coupled) {
+    const SE3::Tangent previous_twist = last_motion_.log() / last_interval_;
+    for (int k = 0; k < 6; ++k) {
+      const double c = coupling_factors(k);
+      if (c > 0.0) twist_per_second(k) = c * twist_per_second(k) - (c - 1.0) * previous_twist(k);
+    }
+  }
   if (config_.deskew) deskew(map_points, sweep_motion ? *sweep_motion : SweepMotion::constant_twist(twist_per_second, middle), threads);
   std::vector<uint32_t> all(map_points.size());
   for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<uint32_t>(i);
@@ -162,40 +175,20 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
     // 4. Registration.
     SurfaceRegistrationConfig registration = config_.registration;
     registration.num_threads = config_.num_threads;
-    SurfaceAssociations associations;
-    auto registered = align_to_surfaces(source, map_, prediction, prediction, registration, may_redeskew ? &associations : nullptr);
-    if (!registered) return Error(fmt::format("lidar odometry at {:.6f} s: {}", time.seconds(), registered.error().message));
-    if (may_redeskew) {
-      // The twist at the sweep's middle under constant acceleration: the last interval's mean
-      // twist plus half its change from the interval before.
+    DeskewCoupling coupling;
+    if (coupled) {
       const double interval = (time - *last_time_).seconds();
-      const SE3::Tangent measured_twist = (pose_.inverse() * registered->T_map_source).log() / interval;
-      const SE3::Tangent previous_twist = last_motion_.log() / last_interval_;
-      const SE3::Tangent corrected_twist = measured_twist + 0.5 * (measured_twist - previous_twist);
-      const SE3::Tangent change = (corrected_twist - twist_per_second) * static_cast<double>(middle);
-      if (change.head<3>().norm() + 10.0 * change.tail<3>().norm() > config_.redeskew_threshold) {
-        copy_measured();
-        deskew(map_points, SweepMotion::constant_twist(corrected_twist, middle), threads);
-        for (std::size_t n = 0; n < source_indices.size(); ++n) source[n] = map_points.positions[source_indices[n]];
-        // From the first estimate, already within centimetres: at the final kernel width, on the
-        // surfaces the first pass matched (the points moved by centimetres), and at most a third
-        // of the iterations (the sweeps that need it most are a turn onset's, already the
-        // slowest: seen 29 + 18 iterations uncapped).
-        SurfaceRegistrationConfig refine = registration;
-        refine.initial_kernel_width = refine.kernel_width;
-        refine.max_iterations = std::max(5, registration.max_iterations / 3);
-        auto again = align_to_surfaces(source, map_, registered->T_map_source, prediction, refine, &associations);
-        if (again) {
-          again->iterations += registered->iterations;
-          again->associations += registered->associations;
-          registered = std::move(again);
-          estimate.redeskewed = true;
-        } else {  // keeps the first pass (and its deskew)
-          logger()->debug("lidar odometry at {:.6f} s: the second deskew's registration failed: {}", time.seconds(), again.error().message);
-          copy_measured();
-          deskew(map_points, SweepMotion::constant_twist(twist_per_second, middle), threads);
-        }
-      }
+      coupling.translation_gain = config_.deskew_translation_coupling / interval;
+      coupling.rotation_gain = config_.deskew_rotation_coupling / interval;
+      coupling.times.reserve(source_indices.size());
+      for (const uint32_t i : source_indices) coupling.times.push_back(map_points.times[i] - middle);
+    }
+    auto registered = align_to_surfaces(source, map_, prediction, prediction, registration, coupled ? &coupling : nullptr);
+    if (!registered) return Error(fmt::format("lidar odometry at {:.6f} s: {}", time.seconds(), registered.error().message));
+    if (coupled) {  // the map points follow the twist the registration ended at
+      const SE3::Tangent twist_change = coupling_factors.cwiseProduct((prediction.inverse() * registered->T_map_source).log()) /
+                                        (time - *last_time_).seconds();
+      deskew(map_points, SweepMotion::constant_twist(twist_change, middle), threads);
     }
     T_world_lidar = registered->T_map_source;
     estimate.iterations = registered->iterations;

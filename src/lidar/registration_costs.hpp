@@ -108,12 +108,14 @@ struct KernelSettings {
 };
 
 /// Adds the weighted row of a point-to-plane residual r = n . (R p + t - m): w j j^T and w j r
-/// with j^T = n^T [R, -R hat(p)] = [a^T, (p x a)^T], a = R^T n (`normal_rotated`).
+/// with j^T = n^T [R, -R hat(p)] = [a^T, (p x a)^T], a = R^T n (`normal_rotated`); the
+/// translation and rotation halves times the scales (a point that a pose step moves by more or
+/// less than a rigid point: surface_registration.hpp's DeskewCoupling).
 inline void accumulate_plane_row(const Eigen::Vector3d& source_point, const Eigen::Vector3d& normal_rotated, double residual,
-                                 double w, NormalEquations& out) {
+                                 double w, NormalEquations& out, double translation_scale = 1.0, double rotation_scale = 1.0) {
   Vector6d row;
-  row.head<3>() = normal_rotated;
-  row.tail<3>() = source_point.cross(normal_rotated);
+  row.head<3>() = translation_scale * normal_rotated;
+  row.tail<3>() = rotation_scale * source_point.cross(normal_rotated);
   out.hessian.noalias() += (w * row) * row.transpose();
   out.gradient.noalias() += (w * residual) * row;
   out.cost += w * residual * residual;

@@ -11,15 +11,15 @@
 //  2. Deskewing: each point is moved into the sensor frame at the middle of the sweep
 //     (sweep_motion.hpp; needs point times, scans without them are used as they are): with the
 //     caller's sampled motion during the sweep (LiDAR-inertial: the IMU-propagated filter's
-//     poses every IMU period), else with the constant twist between the previous pose and the
-//     prediction. Poses refer to the middle of the sweep: a
-//     velocity error then warps the sweep symmetrically instead of shifting it, which would
-//     feed back through the constant-velocity model.
+//     poses every IMU period), else with a constant twist that follows the registration's
+//     estimate (deskew_coupling): the twist between the previous pose and the prediction,
+//     corrected as the estimate moves from the prediction. Poses refer to the middle of the
+//     sweep: a velocity error then warps the sweep symmetrically instead of shifting it, which
+//     would feed back through the constant-velocity model.
 //  3. Range crop, lone near returns (rain drops, fog) dropped and the sweep flagged
-//     weather_degraded when they or missing returns are many, voxel downsampling: map points at the map's point spacing, registration
-//     points at source_voxel_size (KISS's double downsampling).
-//     A second deskew and registration follow when the registered motion says the constant
-//     twist was off (redeskew_threshold).
+//     weather_degraded when they or missing returns are many, voxel downsampling: map points
+//     at the map's point spacing, registration points at source_voxel_size (KISS's double
+//     downsampling).
 //  4. Registration against the cloud::VoxelHashMap by Gauss-Newton on SE3 (right
 //     perturbation). Each point is matched to the best of the surfaces of its voxel and the six
 //     face neighbours: a planar voxel gives a point-to-plane residual, a line voxel close to
@@ -64,15 +64,18 @@ struct LidarOdometryConfig {
   double min_range = 1.0;              ///< m: closer returns (the vehicle itself) are dropped
   double max_range = 100.0;            ///< m
   bool deskew = true;
-  /// Constant-twist deskewing (no sweep motion from the caller): when the registered motion
-  /// implies a twist at the sweep's middle (the last interval's twist plus half the change from
-  /// the interval before: constant acceleration) that would move a point 10 m out by more than
-  /// this (m) at the sweep's ends compared with the twist the sweep was deskewed with, the sweep
-  /// is deskewed again with it and registered again from the first estimate (at most a third of
-  /// registration.max_iterations, on the first pass's surfaces; if that fails, the first pass
-  /// stands). Catches a
-  /// handheld sensor's swings, where the turn rate changes within a sweep. <= 0: never.
-  double redeskew_threshold = 0.03;
+  /// Constant-twist deskewing (no sweep motion from the caller; from the third sweep): the
+  /// twist that deskews the sweep follows the registration's estimate T, per tangent half with
+  /// its factor c: twist(T) = c Log(T_previous^-1 T) / interval - (c - 1) previous twist
+  /// (lidar::DeskewCoupling). 1.5: the twist at the sweep's middle under constant acceleration
+  /// (the last interval's mean twist plus half its change from the interval before); 1: the
+  /// mean twist; 0: the predicted twist throughout. A turn onset or a handheld sensor's swing
+  /// then finds its own turn rate in one registration. The translation is not coupled by
+  /// default: on a swung handheld sensor with 0.25 m map voxels any translation coupling (0.5-1.5)
+  /// drifted 0.7-1.9 m RMSE over 40 s against 5 cm without; on cars 1.0-1.5 drift a little less
+  /// (docs/lidar-odometry.md, session 24).
+  double deskew_translation_coupling = 0.0;
+  double deskew_rotation_coupling = 1.5;
   cloud::ScanNormalConfig normals;     ///< surface normals from the scan's rings (needs ring ids)
   /// The local map: 1 m voxels (also the neighbour search cells), up to 20 points each,
   /// 0.22 m apart; 100 m around the sensor.
@@ -123,7 +126,6 @@ struct LidarOdometryEstimate {
   int iterations = 0;
   int associations = 0;                ///< surface fits during registration
   bool converged = false;
-  bool redeskewed = false;             ///< deskewed and registered a second time (redeskew_threshold)
   std::size_t source_points = 0;       ///< registration points
   std::size_t correspondences = 0;
   std::size_t plane_correspondences = 0;

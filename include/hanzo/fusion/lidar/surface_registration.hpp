@@ -32,7 +32,6 @@
 // min_correspondences matches), an invalid config; they return an Error that says which.
 
 #include <cstddef>
-#include <memory>
 #include <vector>
 
 #include <Eigen/Core>
@@ -91,24 +90,30 @@ struct SurfaceRegistrationResult {
   Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
 };
 
-/// The map surfaces a registration matched to its source points (opaque), to register the same
-/// points again after they moved a little (a sweep deskewed anew) without searching the map
-/// again.
-struct SurfaceAssociations {
-  struct Data;
-  std::shared_ptr<const Data> data;  ///< null: none
+/// A deskew that follows the estimate (constant-twist deskewing without an IMU). Source point i
+/// was measured times[i] seconds from the pose's reference time (negative: before it) and was
+/// deskewed with the twist the prior's pose implies. The twist is taken to change with the
+/// estimate T by G Log(T_prior^-1 T) per second, G = diag(translation_gain x3, rotation_gain x3),
+/// so the registration moves point i to Exp(times[i] G Log(T_prior^-1 T)) p_i as T moves (second
+/// order in the angle), and a pose step moves it by (1 + gain times[i]) times as much as a rigid
+/// point (its Jacobian's translation and rotation halves scaled so: first order, commutators
+/// dropped). LidarOdometry's gains are its deskew_*_coupling / interval. A sweep deskewed with
+/// the wrong twist then converges to its own motion in one registration instead of crawling
+/// between poses that suit no deskew.
+/// Errors: times not one per source point, a non-finite gain, |gain times[i]| >= 1.
+struct DeskewCoupling {
+  std::vector<float> times;     ///< s from the reference time, one per source point
+  double translation_gain = 0.0;  ///< 1/s; 0 and rotation_gain 0: the deskew stays as given
+  double rotation_gain = 0.0;     ///< 1/s
 };
 
 /// Aligns `source` (points in the source frame) to the map's surfaces from `guess`, with the
-/// prior centred on `T_prior` (usually the guess itself). `associations` (optional): filled
-/// with the final iteration's surfaces; when it holds surfaces for as many points, made with
-/// the same coarse_stride, at a pose within twice the re-association thresholds of `guess`, the first
-/// iteration uses them instead of searching the map (source[i] must be the same point as
-/// before, moved by no more than the surfaces' extent).
+/// prior centred on `T_prior` (usually the guess itself). `deskew` (optional): the source's
+/// deskew follows the estimate (see DeskewCoupling).
 Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vector3f>& source,
                                                     const cloud::VoxelHashMap& map, const SE3& guess,
                                                     const SE3& T_prior, const SurfaceRegistrationConfig& config = {},
-                                                    SurfaceAssociations* associations = nullptr);
+                                                    const DeskewCoupling* deskew = nullptr);
 
 /// Smallest / largest eigenvalue of the translation information of a 6x6 information matrix
 /// (order x, y, z, rx, ry, rz) after marginalizing the rotation (Schur complement): near 0 when
