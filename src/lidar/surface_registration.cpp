@@ -261,8 +261,8 @@ Result<SurfaceRegistrationResult> align_to_surfaces(const std::vector<Eigen::Vec
   // reordered so that the points in use are always a prefix.
   double width = std::max(config.kernel_width, config.initial_kernel_width);
   std::vector<Eigen::Vector3f> ordered = coarse_first_order(source, config.coarse_stride);
-  // Coupled deskew: the points as given (deskewed at T_prior), their times, and the factor
-  // factors 1 + gain t_i by which a pose step moves each (its Jacobian's scales).
+  // Coupled deskew: the points as given (deskewed at T_prior), their times, and the factors
+  // 1 + gain t_i by which a pose step moves each (its Jacobian's scales).
   std::vector<Eigen::Vector3f> ordered_given;
   std::vector<float> ordered_times;
   std::vector<Eigen::Vector2f> scales;

@@ -26,10 +26,12 @@
 // reaches kernel_width only every coarse_stride-th point takes part, so the re-associations of
 // those large steps fit a quarter of the surfaces; the last iterations use every point. The prior (T_prior, sigmas) adds
 // Log(T_prior^-1 T)^T P Log(T_prior^-1 T) with P = diag(1/sigma_t^2 x3, 1/sigma_r^2 x3), the
-// residuals having unit variance kernel_width^2.
+// residuals having unit variance kernel_width^2. With a DeskewCoupling the points also move with
+// the twist the estimate implies (a sweep's deskew followed inside the loop).
 //
 // Failure cases: an empty source, a map without surfaces near the guess (fewer than
-// min_correspondences matches), an invalid config; they return an Error that says which.
+// min_correspondences matches), an invalid config or DeskewCoupling; they return an Error that
+// says which.
 
 #include <cstddef>
 #include <vector>
