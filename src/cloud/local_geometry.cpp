@@ -35,20 +35,21 @@ void estimate_local_geometry(PointCloud& cloud, const KdTree& tree, const LocalG
         cloud.normals[i] = range > 0.0f ? Eigen::Vector3f(-position / range) : Eigen::Vector3f::UnitZ();
         continue;
       }
-      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-      for (size_t n = 0; n < found; ++n) mean += cloud.positions[indices[n]].cast<double>();
-      mean /= static_cast<double>(found);
-      Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+      // Offsets from the query point (within a metre or so: float keeps micrometres).
+      Eigen::Vector3f mean = Eigen::Vector3f::Zero();
+      for (size_t n = 0; n < found; ++n) mean += cloud.positions[indices[n]] - position;
+      mean /= static_cast<float>(found);
+      Eigen::Matrix3f scatter = Eigen::Matrix3f::Zero();
       for (size_t n = 0; n < found; ++n) {
-        const Eigen::Vector3d d = cloud.positions[indices[n]].cast<double>() - mean;
+        const Eigen::Vector3f d = cloud.positions[indices[n]] - position - mean;
         scatter.noalias() += d * d.transpose();
       }
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
-      solver.computeDirect(scatter / static_cast<double>(found));
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> solver;
+      solver.computeDirect(scatter / static_cast<float>(found));
       // Eigenvalues (epsilon, 1, 1) in the eigenbasis: I - (1 - epsilon) n n^T for the normal n.
-      const Eigen::Vector3d normal = solver.eigenvectors().col(0).normalized();  // smallest eigenvalue
-      cloud.covariances[i] = (Eigen::Matrix3d::Identity() - across_plane_reduction * normal * normal.transpose()).cast<float>();
-      cloud.normals[i] = toward_origin(normal.cast<float>(), position);
+      const Eigen::Vector3f normal = solver.eigenvectors().col(0).normalized();  // smallest eigenvalue
+      cloud.covariances[i] = Eigen::Matrix3f::Identity() - static_cast<float>(across_plane_reduction) * normal * normal.transpose();
+      cloud.normals[i] = toward_origin(normal, position);
     }
   });
 }
