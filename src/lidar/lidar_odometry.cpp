@@ -138,8 +138,21 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // The constant twist follows the registration (from the third sweep: the last motion is known):
   // twist(T) = c Log(T_previous^-1 T) / interval - (c - 1) previous twist; at the prediction,
   // with the constant-velocity model, the previous twist itself.
-  const bool coupled = config_.deskew && !sweep_motion && (config_.deskew_translation_coupling > 0.0 || config_.deskew_rotation_coupling > 0.0) &&
-                       map_points.has_times() && last_time_ && last_interval_ > 0.0;
+  bool coupled = config_.deskew && !sweep_motion && (config_.deskew_translation_coupling > 0.0 || config_.deskew_rotation_coupling > 0.0) &&
+                 map_points.has_times() && last_time_ && last_interval_ > 0.0;
+  if (coupled) {
+    // A point as far from the middle as |t| moves by 1 + gain t times the pose: a sweep longer
+    // than about 1.2 intervals (overlapping sweeps, times that do not start at the stamp) would
+    // have points move against the pose; it keeps the predicted twist.
+    const auto [earliest, latest] = std::minmax_element(scan.times.begin(), scan.times.end());
+    const double farthest = std::max(static_cast<double>(*latest - middle), static_cast<double>(middle - *earliest));
+    const double gain = std::max(config_.deskew_translation_coupling, config_.deskew_rotation_coupling) / (time - *last_time_).seconds();
+    if (gain * farthest >= 0.9) {
+      coupled = false;
+      logger()->debug("lidar odometry at {:.6f} s: points {:.3f} s from the sweep's middle: deskewed with the predicted twist",
+                      time.seconds(), farthest);
+    }
+  }
   SE3::Tangent coupling_factors;  // c per tangent component (0: that half keeps the predicted twist)
   coupling_factors << Eigen::Vector3d::Constant(config_.deskew_translation_coupling), Eigen::Vector3d::Constant(config_.deskew_rotation_coupling);
   if (coupled) {

@@ -333,6 +333,24 @@ cloud::PointCloud yard_scan(const SE3& T_world_sensor) {
   return testing_support::scan(testing_support::registration_world(), T_world_sensor, 0.01, 5);
 }
 
+// Points timed from -0.1 to 0 s (a sweep stamped at its end: its "middle" is the stamp) span
+// twice the distance to the middle that the coupled deskew allows at 10 Hz: such sweeps keep the
+// predicted twist instead of failing the registration.
+TEST(LidarOdometry, SweepsTooLongForTheCoupledDeskewKeepThePredictedTwist) {
+  const SE3 T_world_sensor = pose(0.3, -0.2, 1.8, 5);
+  LidarOdometry odometry({}, T_world_sensor);
+  for (int n = 0; n < 4; ++n) {
+    cloud::PointCloud scan = yard_scan(T_world_sensor);
+    scan.times.resize(scan.size());
+    for (std::size_t i = 0; i < scan.size(); ++i) {
+      scan.times[i] = -0.05F - 0.05F * std::atan2(scan.positions[i].y(), scan.positions[i].x()) / static_cast<float>(M_PI);
+    }
+    auto estimate = odometry.add_scan(Timestamp::from_seconds(100.0 + 0.1 * n), scan);
+    ASSERT_TRUE(estimate.ok()) << "sweep " << n << ": " << estimate.error().message;
+    EXPECT_LT((estimate->T_world_lidar.translation() - T_world_sensor.translation()).norm(), 0.01) << "sweep " << n;
+  }
+}
+
 TEST(LidarOdometry, RefusesBadScansAndKeepsItsState) {
   LidarOdometry odometry({}, pose(0, 0, 1.8, 0));
   const Timestamp t0 = Timestamp::from_seconds(100.0);
