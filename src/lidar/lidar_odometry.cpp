@@ -74,8 +74,8 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // 1. Prediction and the twist that deskews the sweep.
   SE3 prediction = pose_;
   SE3::Tangent twist_per_second = SE3::Tangent::Zero();
+  const double interval = last_time_ ? (time - *last_time_).seconds() : 0.0;  // sweeps of equal length: also between middles
   if (last_time_) {
-    const double interval = (time - *last_time_).seconds();  // sweeps of equal length: also between middles
     if (predicted_motion) {
       prediction = pose_ * *predicted_motion;
     } else if (last_interval_ > 0) {
@@ -140,14 +140,15 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   // with the constant-velocity model, the previous twist itself.
   bool coupled = config_.deskew && !sweep_motion && (config_.deskew_translation_coupling > 0.0 || config_.deskew_rotation_coupling > 0.0) &&
                  map_points.has_times() && last_time_ && last_interval_ > 0.0;
+  DeskewCoupling coupling{.times = {}, .translation_gain = config_.deskew_translation_coupling / std::max(interval, 1e-9),
+                          .rotation_gain = config_.deskew_rotation_coupling / std::max(interval, 1e-9)};
   if (coupled) {
     // A point as far from the middle as |t| moves by 1 + gain t times the pose: a sweep longer
     // than about 1.2 intervals (overlapping sweeps, times that do not start at the stamp) would
     // have points move against the pose; it keeps the predicted twist.
     const auto [earliest, latest] = std::minmax_element(scan.times.begin(), scan.times.end());
     const double farthest = std::max(static_cast<double>(*latest - middle), static_cast<double>(middle - *earliest));
-    const double gain = std::max(config_.deskew_translation_coupling, config_.deskew_rotation_coupling) / (time - *last_time_).seconds();
-    if (gain * farthest >= 0.9) {
+    if (std::max(coupling.translation_gain, coupling.rotation_gain) * farthest >= 0.9) {
       coupled = false;
       logger()->debug("lidar odometry at {:.6f} s: points {:.3f} s from the sweep's middle: deskewed with the predicted twist",
                       time.seconds(), farthest);
@@ -188,19 +189,14 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
     // 4. Registration.
     SurfaceRegistrationConfig registration = config_.registration;
     registration.num_threads = config_.num_threads;
-    DeskewCoupling coupling;
     if (coupled) {
-      const double interval = (time - *last_time_).seconds();
-      coupling.translation_gain = config_.deskew_translation_coupling / interval;
-      coupling.rotation_gain = config_.deskew_rotation_coupling / interval;
       coupling.times.reserve(source_indices.size());
       for (const uint32_t i : source_indices) coupling.times.push_back(map_points.times[i] - middle);
     }
     auto registered = align_to_surfaces(source, map_, prediction, prediction, registration, coupled ? &coupling : nullptr);
     if (!registered) return Error(fmt::format("lidar odometry at {:.6f} s: {}", time.seconds(), registered.error().message));
     if (coupled) {  // the map points follow the twist the registration ended at
-      const SE3::Tangent twist_change = coupling_factors.cwiseProduct((prediction.inverse() * registered->T_map_source).log()) /
-                                        (time - *last_time_).seconds();
+      const SE3::Tangent twist_change = coupling_factors.cwiseProduct((prediction.inverse() * registered->T_map_source).log()) / interval;
       deskew(map_points, SweepMotion::constant_twist(twist_change, middle), threads);
     }
     T_world_lidar = registered->T_map_source;
@@ -240,7 +236,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   estimate.map_points = map_.point_count();
   if (last_time_) {
     last_motion_ = estimate.T_previous_current;
-    last_interval_ = (time - *last_time_).seconds();
+    last_interval_ = interval;
   }
   pose_ = T_world_lidar;
   last_time_ = time;
