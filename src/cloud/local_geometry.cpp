@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <cmath>
 
 #include <Eigen/Eigenvalues>
 
@@ -16,12 +17,17 @@ Eigen::Vector3f toward_origin(const Eigen::Vector3f& normal, const Eigen::Vector
 
 }  // namespace
 
-void estimate_local_geometry(PointCloud& cloud, const KdTree& tree, const LocalGeometryConfig& config) {
+void estimate_local_geometry(PointCloud& cloud, const KdTree& tree, const LocalGeometryConfig& config, NeighbourLists* neighbours) {
   assert(tree.size() == cloud.size());
   assert(config.num_neighbors >= 1);
   const size_t k = static_cast<size_t>(config.num_neighbors);
   cloud.covariances.resize(cloud.size());
   cloud.normals.resize(cloud.size());
+  if (neighbours != nullptr) {
+    neighbours->k = std::min(k, cloud.size());
+    neighbours->indices.resize(cloud.size() * neighbours->k);
+    neighbours->radii.resize(cloud.size());
+  }
   const double across_plane_reduction = 1.0 - config.plane_epsilon;
   parallel_for(cloud.size(), config.num_threads, [&](size_t begin, size_t end) {
     std::vector<uint32_t> indices(k);
@@ -29,6 +35,10 @@ void estimate_local_geometry(PointCloud& cloud, const KdTree& tree, const LocalG
     for (size_t i = begin; i < end; ++i) {
       const Eigen::Vector3f& position = cloud.positions[i];
       const size_t found = tree.knn(position, k, indices.data(), distances.data());
+      if (neighbours != nullptr) {
+        std::copy_n(indices.begin(), found, neighbours->indices.begin() + static_cast<std::ptrdiff_t>(i * neighbours->k));
+        neighbours->radii[i] = found > 0 ? std::sqrt(distances[found - 1]) : 0.0f;
+      }
       if (found < 3) {
         cloud.covariances[i] = Eigen::Matrix3f::Identity();
         const float range = position.norm();

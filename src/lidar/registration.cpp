@@ -152,6 +152,7 @@ struct RegistrationTarget::Impl {
   cloud::PointCloud cloud;
   std::unique_ptr<cloud::KdTree> tree;            // ICP, point-to-plane, GICP
   std::vector<Eigen::Matrix3d> covariances;       // GICP
+  cloud::NeighbourLists neighbours;               // when the geometry was estimated here
   std::vector<NdtGrid> ndt;                       // NDT, coarsest first
 };
 
@@ -184,7 +185,7 @@ Result<RegistrationTarget> RegistrationTarget::create(cloud::PointCloud cloud, c
     if (needs_geometry) {
       cloud::LocalGeometryConfig geometry = config.geometry;
       geometry.num_threads = config.num_threads;
-      cloud::estimate_local_geometry(cloud, *impl->tree, geometry);
+      cloud::estimate_local_geometry(cloud, *impl->tree, geometry, &impl->neighbours);
     }
     if (config.method == RegistrationMethod::kGicp) impl->covariances = to_double(cloud.covariances);
   }
@@ -205,14 +206,14 @@ Result<RegistrationResult> align_once(const cloud::PointCloud& source, const Reg
   std::vector<uint32_t> previous(source.size(), kNoCorrespondence);
   switch (config.method) {
     case RegistrationMethod::kPointToPoint:
-      return gauss_newton(PointToPointCost{positions, {*prepared.tree, max_squared, previous}, kernel}, source.size(),
+      return gauss_newton(PointToPointCost{positions, {*prepared.tree, &prepared.neighbours, max_squared, previous}, kernel}, source.size(),
                           T_target_source_guess, config);
     case RegistrationMethod::kPointToPlane:
-      return gauss_newton(PointToPlaneCost{positions, {*prepared.tree, max_squared, previous}, prepared.cloud.normals, kernel},
+      return gauss_newton(PointToPlaneCost{positions, {*prepared.tree, &prepared.neighbours, max_squared, previous}, prepared.cloud.normals, kernel},
                           source.size(), T_target_source_guess, config);
     case RegistrationMethod::kGicp: {
       const std::vector<Eigen::Matrix3d> source_covariances = to_double(source.covariances);  // align() made them
-      return gauss_newton(GicpCost{positions, source_covariances, {*prepared.tree, max_squared, previous}, prepared.covariances, kernel},
+      return gauss_newton(GicpCost{positions, source_covariances, {*prepared.tree, &prepared.neighbours, max_squared, previous}, prepared.covariances, kernel},
                           source.size(), T_target_source_guess, config);
     }
     case RegistrationMethod::kNdt: {

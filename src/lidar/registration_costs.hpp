@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 
 #include "hanzo/fusion/cloud/kdtree.hpp"
+#include "hanzo/fusion/cloud/local_geometry.hpp"
 #include "hanzo/fusion/core/so3.hpp"
 #include "hanzo/fusion/lidar/registration.hpp"
 #include "ndt_grid.hpp"
@@ -67,17 +68,44 @@ struct PoseBlocks {
 };
 
 /// Nearest target point to q within the correspondence distance. `previous` holds each source
-/// point's last correspondence (kNoCorrespondence when none): its distance bounds the search
-/// from the start, so once the motion between iterations is small the kd-tree descent prunes
-/// almost every branch. The result is the same exact nearest neighbour.
+/// point's last correspondence (kNoCorrespondence when none), from which the search starts:
+/// - with the target's neighbour lists (`neighbours`, may be null), the nearest of the previous
+///   point's neighbours is the answer when it lies closer than radii[previous] - |q - previous|:
+///   every target point outside the list is at least that far from q (triangle inequality), so
+///   once the motion between iterations is small most correspondences need no tree search;
+/// - otherwise the previous point's distance bounds the kd-tree search from the start, so the
+///   descent prunes almost every branch.
+/// Either way the result is the same exact nearest neighbour (up to ties).
 constexpr uint32_t kNoCorrespondence = std::numeric_limits<uint32_t>::max();
-inline bool find_correspondence(const cloud::KdTree& tree, const Eigen::Vector3d& q, float max_squared_distance,
-                                uint32_t& previous, uint32_t* index, float* squared_distance) {
+inline bool find_correspondence(const cloud::KdTree& tree, const cloud::NeighbourLists* neighbours, const Eigen::Vector3d& q,
+                                float max_squared_distance, uint32_t& previous, uint32_t* index, float* squared_distance) {
   const Eigen::Vector3f query = q.cast<float>();
+  const std::vector<Eigen::Vector3f>& points = tree.points();
   float bound = max_squared_distance;
   if (previous != kNoCorrespondence) {
+    const float to_previous = (points[previous] - query).squaredNorm();
+    if (neighbours != nullptr && neighbours->k > 0) {
+      const float guaranteed = neighbours->radii[previous] - std::sqrt(to_previous);
+      const uint32_t* list = neighbours->indices.data() + size_t{previous} * neighbours->k;
+      float best = std::numeric_limits<float>::max();
+      uint32_t best_index = previous;
+      for (size_t n = 0; n < neighbours->k; ++n) {
+        const float distance = (points[list[n]] - query).squaredNorm();
+        if (distance < best) {
+          best = distance;
+          best_index = list[n];
+        }
+      }
+      if (guaranteed > 0.0f && best <= guaranteed * guaranteed) {
+        const bool found = best <= max_squared_distance;
+        previous = found ? best_index : kNoCorrespondence;
+        *index = best_index;
+        *squared_distance = best;
+        return found;
+      }
+    }
     // Slightly above the previous point's distance, so the search finds it again at worst.
-    bound = std::min(bound, (tree.points()[previous] - query).squaredNorm() * 1.0001f + 1e-12f);
+    bound = std::min(bound, to_previous * 1.0001f + 1e-12f);
   }
   const bool found = tree.nearest(query, bound, index, squared_distance) ||
                      (bound < max_squared_distance && tree.nearest(query, max_squared_distance, index, squared_distance));
@@ -89,12 +117,13 @@ inline bool find_correspondence(const cloud::KdTree& tree, const Eigen::Vector3d
 /// target point and counts it in the statistics of `out`.
 struct NearestNeighborMatcher {
   const cloud::KdTree& tree;
+  const cloud::NeighbourLists* neighbours;  // the target's, or null
   float max_squared_distance;
   std::vector<uint32_t>& previous;  // one per source point, see find_correspondence
 
   bool match(size_t i, const Eigen::Vector3d& q, uint32_t* j, NormalEquations& out) const {
     float squared_distance = 0.0f;
-    if (!find_correspondence(tree, q, max_squared_distance, previous[i], j, &squared_distance)) return false;
+    if (!find_correspondence(tree, neighbours, q, max_squared_distance, previous[i], j, &squared_distance)) return false;
     out.squared_distance_sum += squared_distance;
     ++out.correspondences;
     return true;

@@ -4,6 +4,9 @@
 // linearization point (as Gauss-Newton does): GICP's W = (C_t + R C_s R^T)^-1, ICP's W = I,
 // point-to-plane's r = n . (T p - t).
 
+#include <algorithm>
+#include <limits>
+#include <random>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -22,7 +25,7 @@ struct Fixture {
   std::vector<Eigen::Vector3d> source{source_point};
   KernelSettings kernel{RobustKernel::kNone, 1.0};
 
-  NearestNeighborMatcher matcher() { return {tree, 1e6f, previous}; }
+  NearestNeighborMatcher matcher() { return {tree, nullptr, 1e6f, previous}; }
 
   // Residual of the source point at T Exp(delta) against the (float) target point.
   Eigen::Vector3d residual(const Vector6d& delta) const {
@@ -95,6 +98,50 @@ TEST(RegistrationCosts, RobustKernelsScaleTheNormalEquationsByTheirWeight) {
   const double weight = kernel_weight(RobustKernel::kCauchy, 0.5, r.norm());
   ASSERT_LT(weight, 0.5);  // the residual is beyond the kernel width
   expect_equations(got, f.numeric_jacobian(), weight * Eigen::Matrix3d::Identity(), r);
+}
+
+// The correspondence update through the target's neighbour lists must give the exact nearest
+// neighbour, as brute force does, for queries that move a little (the lists settle them) and a
+// lot (the tree search takes over), and refuse points beyond the correspondence distance.
+TEST(RegistrationCosts, NeighbourListCorrespondencesAreTheExactNearestNeighbours) {
+  std::mt19937 random(7);
+  std::uniform_real_distribution<float> uniform(-5.0f, 5.0f);
+  cloud::PointCloud target;
+  for (int i = 0; i < 3000; ++i) target.positions.emplace_back(uniform(random), uniform(random), 0.05f * uniform(random));
+  const cloud::KdTree tree(target.positions);
+  cloud::NeighbourLists lists;
+  cloud::estimate_local_geometry(target, tree, {}, &lists);
+  ASSERT_EQ(lists.k, 10u);
+  const auto brute_force = [&](const Eigen::Vector3f& query) {
+    float best = std::numeric_limits<float>::max();
+    for (const Eigen::Vector3f& point : target.positions) best = std::min(best, (point - query).squaredNorm());
+    return best;
+  };
+  const float max_squared = 0.3f * 0.3f;
+  std::normal_distribution<float> step(0.0f, 1.0f);
+  int small_moves_from_a_correspondence = 0;  // where the lists settle most updates
+  for (int trial = 0; trial < 2000; ++trial) {
+    Eigen::Vector3f query(uniform(random), uniform(random), 0.02f * uniform(random));
+    uint32_t previous = kNoCorrespondence;
+    for (float motion : {0.0f, 0.001f, 0.002f, 0.02f, 0.2f, 1.0f}) {  // one query moving, as over Gauss-Newton iterations
+      query += motion * Eigen::Vector3f(step(random), step(random), step(random));
+      const uint32_t before = previous;
+      uint32_t index = 0;
+      float squared = 0.0f;
+      const bool found = find_correspondence(tree, &lists, query.cast<double>(), max_squared, previous, &index, &squared);
+      const float expected = brute_force(query);
+      ASSERT_EQ(found, expected <= max_squared) << "trial " << trial << " motion " << motion;
+      if (found) {
+        EXPECT_FLOAT_EQ(squared, expected);
+        EXPECT_EQ((target.positions[index] - query).squaredNorm(), expected);
+        EXPECT_EQ(previous, index);
+      } else {
+        EXPECT_EQ(previous, kNoCorrespondence);
+      }
+      if (before != kNoCorrespondence && motion <= 0.002f) ++small_moves_from_a_correspondence;
+    }
+  }
+  EXPECT_GT(small_moves_from_a_correspondence, 3500);
 }
 
 }  // namespace

@@ -25,8 +25,20 @@ struct LocalGeometryConfig {
   int num_threads = 1;
 };
 
+/// The neighbours each point's geometry came from: point i's are indices[i * k, (i + 1) * k),
+/// closest first (i itself included), all within radii[i] (m) of it, and every other point of
+/// the cloud at radii[i] or farther. k = min(num_neighbors, cloud size). Registration uses them
+/// to update a correspondence without a tree search (registration_costs.hpp).
+struct NeighbourLists {
+  size_t k = 0;
+  std::vector<uint32_t> indices;
+  std::vector<float> radii;
+};
+
 /// Fills cloud.covariances and cloud.normals. `tree` must index exactly cloud.positions.
-void estimate_local_geometry(PointCloud& cloud, const KdTree& tree, const LocalGeometryConfig& config = {});
+/// `neighbours`, when given, receives the neighbour lists.
+void estimate_local_geometry(PointCloud& cloud, const KdTree& tree, const LocalGeometryConfig& config = {},
+                             NeighbourLists* neighbours = nullptr);
 /// The same, building the tree itself.
 void estimate_local_geometry(PointCloud& cloud, const LocalGeometryConfig& config = {});
 

@@ -104,7 +104,10 @@ struct RegistrationResult {
 };
 
 /// A target cloud prepared once for a method (kd-tree; covariances or normals computed when the
-/// cloud lacks them; the NDT grid) and reused for any number of sources.
+/// cloud lacks them; the NDT grid) and reused for any number of sources. When it computes them,
+/// it keeps each point's neighbours (44 bytes a point with the default 10): after the first
+/// iteration most correspondences are then updated from the previous one's neighbours instead of
+/// a kd-tree search (same nearest neighbours, 7-8 % of GICP's time on the real pair).
 class RegistrationTarget {
  public:
   /// Fails on an empty or invalid cloud or an invalid config.
