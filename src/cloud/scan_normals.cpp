@@ -1,7 +1,6 @@
 #include "hanzo/fusion/cloud/scan_normals.hpp"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -71,8 +70,10 @@ ScanNormalEstimator::ScanNormalEstimator(const PointCloud& scan, const ScanNorma
   }
   // Column-major (a column's rings side by side): a sweep arrives column by column, so the
   // points fill the image nearly in memory order (ring-major, each point of a column landed on
-  // another page). Each cell keeps the first point of the sweep that falls in it: in parallel
-  // chunks, the smallest index by an atomic minimum (the same image as one sequential pass).
+  // another page). The columns are computed in parallel chunks; then each cell keeps the first
+  // point of the sweep that falls in it: one sequential pass from the last point to the first
+  // (plain stores; an atomic minimum per point in the parallel pass cost twice as much as the
+  // columns themselves).
   image_.assign(static_cast<std::size_t>(rings_) * static_cast<std::size_t>(columns_), kEmpty);
   column_of_.resize(scan.size());
   const float columns_per_turn = static_cast<float>(columns_ * 0.5 / M_PI);
@@ -85,12 +86,9 @@ ScanNormalEstimator::ScanNormalEstimator(const PointCloud& scan, const ScanNorma
       int column = static_cast<int>((fast_atan2(p.y(), p.x()) + static_cast<float>(M_PI)) * columns_per_turn + 0.5F);
       if (column >= columns_) column -= columns_;  // azimuth pi wraps to column 0
       column_of_[i] = column;
-      std::atomic_ref<uint32_t> cell(image_[cell_index(scan.rings[i], column)]);
-      uint32_t held = cell.load(std::memory_order_relaxed);
-      while (i < held && !cell.compare_exchange_weak(held, static_cast<uint32_t>(i), std::memory_order_relaxed)) {
-      }
     }
   });
+  for (std::size_t i = scan.size(); i-- > 0;) image_[cell_index(scan.rings[i], column_of_[i])] = static_cast<uint32_t>(i);
 }
 
 Eigen::Vector3f ScanNormalEstimator::normal(std::size_t i) const {
