@@ -204,16 +204,16 @@ Result<RegistrationResult> align_once(const cloud::PointCloud& source, const Reg
   const float max_squared = static_cast<float>(config.max_correspondence_distance * config.max_correspondence_distance);
   const KernelSettings kernel{config.kernel, config.kernel_width};
   std::vector<uint32_t> previous(source.size(), kNoCorrespondence);
+  const auto matcher = [&] { return NearestNeighborMatcher{*prepared.tree, &prepared.neighbours, max_squared, previous}; };
   switch (config.method) {
     case RegistrationMethod::kPointToPoint:
-      return gauss_newton(PointToPointCost{positions, {*prepared.tree, &prepared.neighbours, max_squared, previous}, kernel}, source.size(),
-                          T_target_source_guess, config);
+      return gauss_newton(PointToPointCost{positions, matcher(), kernel}, source.size(), T_target_source_guess, config);
     case RegistrationMethod::kPointToPlane:
-      return gauss_newton(PointToPlaneCost{positions, {*prepared.tree, &prepared.neighbours, max_squared, previous}, prepared.cloud.normals, kernel},
-                          source.size(), T_target_source_guess, config);
+      return gauss_newton(PointToPlaneCost{positions, matcher(), prepared.cloud.normals, kernel}, source.size(), T_target_source_guess,
+                          config);
     case RegistrationMethod::kGicp: {
       const std::vector<Eigen::Matrix3d> source_covariances = to_double(source.covariances);  // align() made them
-      return gauss_newton(GicpCost{positions, source_covariances, {*prepared.tree, &prepared.neighbours, max_squared, previous}, prepared.covariances, kernel},
+      return gauss_newton(GicpCost{positions, source_covariances, matcher(), prepared.covariances, kernel},
                           source.size(), T_target_source_guess, config);
     }
     case RegistrationMethod::kNdt: {
