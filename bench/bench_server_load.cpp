@@ -5,8 +5,11 @@
 // time over StreamImu / StreamPointCloud, stamped with this machine's clock (live data). Both
 // processes share this machine's cores.
 //
-//   build/bench/bench_server_load [--sessions 20] [--seconds 60] [--no-lidar] [--point3] [--default-malloc] [--json]
+//   build/bench/bench_server_load [--sessions 20] [--seconds 60] [--no-lidar] [--point3] [--default-malloc] [--stagger] [--json]
 //
+// By default every session replays the drive in step with the others (all sweeps of all
+// sessions arrive within a millisecond: the worst case); --stagger starts session k k/N of a
+// sweep period later, as independent robots' LiDARs spin out of phase.
 // Sweeps go as packed_points (what FusionClient sends); --point3 sends the spec's Point3 list.
 // The server tunes malloc as hanzo-fusion serve does; --default-malloc measures without that.
 //
@@ -65,11 +68,15 @@ hf::sim::Scenario load_scenario(double seconds, bool lidar) {
 struct Recording {
   std::vector<std::pair<std::string, hf::msgs::SensorMessage>> messages;  // sensor, message; time order
   std::size_t points_per_sweep = 0;
+  double lidar_rate_hz = 10.0;
 };
 
 Recording simulate(const hf::sim::Scenario& scenario) {
   Recording out;
   auto simulation = hf::sim::ScenarioSimulation::create(scenario).value();
+  for (const hf::sim::ScenarioSensor& sensor : scenario.sensors) {
+    if (sensor.modality == hf::config::SensorModality::kLidar) out.lidar_rate_hz = sensor.rate_hz();
+  }
   std::size_t sweeps = 0, points = 0;
   (void)simulation->run([&](const hf::sim::ScenarioSensor& sensor, hf::msgs::SensorMessage&& message) -> hf::Status {
     if (const auto* sweep = std::get_if<hf::msgs::PointCloudMessage>(&message)) {
@@ -115,7 +122,7 @@ struct ClientResult {
 
 // Replays the recording in real time into one session over two streams.
 ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& session_id, const Recording& recording,
-                        hf::msgs::PointEncoding point_encoding) {
+                        hf::msgs::PointEncoding point_encoding, std::chrono::nanoseconds start_delay) {
   ClientResult result;
   struct Stream {
     grpc::ClientContext context;
@@ -145,11 +152,12 @@ ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& se
     while (lidar->Read(&pose)) ++poses;
   });
   hf::v1::PointCloudMessage sweep_proto;
-  const auto started = Clock::now();
+  const auto started = Clock::now() + start_delay;
   const hf::Timestamp first = hf::msgs::timestamp_of(recording.messages.front().second);
   // Live data: stamped by this machine's clock, as a robot's synchronized sensors are (the
   // server sheds load only for live data; recorded data waits).
-  const uint64_t restamp = static_cast<uint64_t>((hf::Timestamp::wall_clock_now() - first).nanoseconds());
+  const uint64_t restamp = static_cast<uint64_t>(
+      (hf::Timestamp::wall_clock_now() + hf::Duration::from_nanoseconds(start_delay.count()) - first).nanoseconds());
   for (const auto& [sensor, message] : recording.messages) {
     const hf::Timestamp time = hf::msgs::timestamp_of(message);
     const auto due = started + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>((time - first).seconds()));
@@ -182,7 +190,8 @@ ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& se
 
 // The client process: simulates the drive, waits for "PORT ID..." on `commands`, streams every
 // session at once, and writes its summary (one JSON object) to `report`.
-int run_clients(int commands, int report, const hf::sim::Scenario& scenario, int sessions, hf::msgs::PointEncoding point_encoding) {
+int run_clients(int commands, int report, const hf::sim::Scenario& scenario, int sessions, hf::msgs::PointEncoding point_encoding,
+                bool stagger) {
   const Recording recording = simulate(scenario);
   std::string line;
   char c = 0;
@@ -198,7 +207,12 @@ int run_clients(int commands, int report, const hf::sim::Scenario& scenario, int
   const auto started = Clock::now();
   std::vector<ClientResult> results(static_cast<std::size_t>(sessions));
   std::vector<std::thread> clients;
-  for (std::size_t s = 0; s < ids.size(); ++s) clients.emplace_back([&, s] { results[s] = run_client(*stub, ids[s], recording, point_encoding); });
+  const double sweep_period = 1.0 / recording.lidar_rate_hz;
+  for (std::size_t s = 0; s < ids.size(); ++s) {
+    const auto delay = std::chrono::duration_cast<std::chrono::nanoseconds>(
+        std::chrono::duration<double>(stagger ? sweep_period * static_cast<double>(s) / static_cast<double>(ids.size()) : 0.0));
+    clients.emplace_back([&, s, delay] { results[s] = run_client(*stub, ids[s], recording, point_encoding, delay); });
+  }
   for (std::thread& client : clients) client.join();
   const double wall = std::chrono::duration<double>(Clock::now() - started).count();
   uint64_t sent = 0, sent_lidar = 0, poses_back = 0, late_writes = 0;
@@ -224,7 +238,7 @@ int run_clients(int commands, int report, const hf::sim::Scenario& scenario, int
 int main(int argc, char** argv) {
   int sessions = 20;
   double seconds = 60.0;
-  bool lidar = true, json_output = false, default_malloc = false;
+  bool lidar = true, json_output = false, default_malloc = false, stagger = false;
   hf::msgs::PointEncoding point_encoding = hf::msgs::PointEncoding::kPacked;
   for (int i = 1; i < argc; ++i) {
     const std::string argument = argv[i];
@@ -234,8 +248,9 @@ int main(int argc, char** argv) {
     else if (argument == "--json") json_output = true;
     else if (argument == "--point3") point_encoding = hf::msgs::PointEncoding::kPoint3;
     else if (argument == "--default-malloc") default_malloc = true;
+    else if (argument == "--stagger") stagger = true;
     else {
-      std::fprintf(stderr, "usage: bench_server_load [--sessions N] [--seconds S] [--no-lidar] [--point3] [--default-malloc] [--json]\n");
+      std::fprintf(stderr, "usage: bench_server_load [--sessions N] [--seconds S] [--no-lidar] [--point3] [--default-malloc] [--stagger] [--json]\n");
       return 2;
     }
   }
@@ -260,7 +275,7 @@ int main(int argc, char** argv) {
     close(to_client[1]);
     close(from_client[0]);
     std::fprintf(stderr, "simulating %.0f s of the warehouse drive...\n", seconds);
-    _exit(run_clients(to_client[0], from_client[1], scenario, sessions, point_encoding));
+    _exit(run_clients(to_client[0], from_client[1], scenario, sessions, point_encoding, stagger));
   }
   close(to_client[0]);
   close(from_client[1]);
