@@ -85,12 +85,12 @@ void BM_Odometry(benchmark::State& state, const std::string& scenario, double se
   double preprocess_seconds = 0.0, registration_seconds = 0.0, map_update_seconds = 0.0;
   io::Trajectory truth, estimate;
   std::size_t map_bytes = 0, points = 0;
-  double associations = 0.0, iterations = 0.0;
+  double associations = 0.0, iterations = 0.0, source_points = 0.0;
   for (auto _ : state) {
     lidar::LidarOdometry odometry(config, data.truth(middle_of(data.sweeps.front())));
     milliseconds.clear();
     preprocess_seconds = registration_seconds = map_update_seconds = 0.0;
-    associations = iterations = 0.0;
+    associations = iterations = source_points = 0.0;
     truth = {};
     estimate = {};
     for (const Sweep& sweep : data.sweeps) {
@@ -108,6 +108,7 @@ void BM_Odometry(benchmark::State& state, const std::string& scenario, double se
       map_update_seconds += result->map_update_seconds;
       associations += result->associations;
       iterations += result->iterations;
+      source_points += static_cast<double>(result->source_points);
       truth.timestamps.push_back(result->time);
       truth.poses.push_back(data.truth(result->time).matrix());
       estimate.timestamps.push_back(result->time);
@@ -139,6 +140,7 @@ void BM_Odometry(benchmark::State& state, const std::string& scenario, double se
   state.counters["map_ms"] = 1e3 * map_update_seconds / sweeps;
   state.counters["associations"] = associations / sweeps;
   state.counters["iterations"] = iterations / sweeps;
+  state.counters["source_points"] = source_points / sweeps;
   state.counters["drift_percent"] = kitti ? kitti->translation_error_percent : -1.0;
   state.counters["drift_deg_100m"] = kitti ? kitti->rotation_error_deg_per_100m : -1.0;
   state.counters["path_m"] = truth.path_length();
