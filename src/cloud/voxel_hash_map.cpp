@@ -42,8 +42,8 @@ const std::array<NeighbourOrder, 8> kNeighbourOrders = [] {
 
 // The points of a voxel, or nullptr: find(), inlined into the searches (a call per neighbouring
 // voxel otherwise, up to 27 a query).
-template <class Voxels>
-[[gnu::always_inline]] inline const std::vector<MapPoint>* points_of(const Voxels& voxels, const Eigen::Vector3i& voxel_coordinates) {
+[[gnu::always_inline]] inline const std::vector<MapPoint>* points_of(const absl::flat_hash_map<uint64_t, std::vector<MapPoint>>& voxels,
+                                                                     const Eigen::Vector3i& voxel_coordinates) {
   uint64_t key = 0;
   if (!pack_voxel_key(voxel_coordinates, &key)) return nullptr;
   const auto it = voxels.find(key);
