@@ -1,6 +1,6 @@
 // Frontend filters: per-IMU propagation and per-update cost of the EKF (block-sparse), the
 // same EKF written densely (DenseEkfReference), the UKF and the particle filter; replay
-// throughput of robot_localization's bag 2 through a Session.
+// throughput of robot_localization's bag 2 through a Frontend.
 
 #include <chrono>
 #include <cstdio>
@@ -17,7 +17,7 @@
 #include "hanzo/fusion/estimate/velocity_models.hpp"
 #include "hanzo/fusion/io/rosbag_import.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
-#include "hanzo/fusion/pipeline/session.hpp"
+#include "hanzo/fusion/pipeline/frontend.hpp"
 
 namespace hanzo::fusion {
 namespace {
@@ -155,7 +155,7 @@ void BM_ParticleUpdateGnss(benchmark::State& state) {
 }
 BENCHMARK(BM_ParticleUpdateGnss)->Arg(1000)->Unit(benchmark::kMicrosecond);
 
-// Replay of robot_localization's bag 2 (61.2 s, 6121 messages) through a Session.
+// Replay of robot_localization's bag 2 (61.2 s, 6121 messages) through a Frontend.
 std::string bag2_log() {
   const std::string log = (std::filesystem::temp_directory_path() / "hanzo_bench_bag2.mcap").string();
   io::SensorLogWriterConfig writer_config;
@@ -179,7 +179,7 @@ void BM_ReplayBag2(benchmark::State& state) {
   while (reader->next(entry).value()) messages.emplace_back(entry.topic == "/imu" ? "imu" : "wheels", std::get<msgs::SensorMessage>(entry.message));
   double seconds = 0.0;
   for (auto _ : state) {
-    auto session = pipeline::Session::create(config, {}).value();
+    auto session = pipeline::Frontend::create(config, {}).value();
     const auto start = std::chrono::steady_clock::now();
     for (const auto& [sensor, message] : messages) benchmark::DoNotOptimize(session->push(sensor, message));
     seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -2,11 +2,11 @@
 //   [--fusion-config FUSION.yaml] [--voxel M] [--source-voxel M] [--threads N] [--max-range M]
 //   [--no-deskew] [--deskew-coupling T,R] [--max-scans N] [--trajectory OUT.tum] [--plot DIR]:
 // LiDAR odometry (lidar/lidar_odometry.hpp) over the point clouds of a sensor log; with
-// --fusion-config, LiDAR-inertial (pipeline/lidar_inertial_odometry.hpp: a Session fuses the
-// log's IMU and the registered poses; the reported trajectory is the Session's). With a ground
+// --fusion-config, LiDAR-inertial (pipeline/lidar_inertial_odometry.hpp: a Frontend fuses the
+// log's IMU and the registered poses; the reported trajectory is the Frontend's). With a ground
 // truth (T_world_body, TUM) the body trajectory is scored: KITTI drift (% and deg/100 m, when
 // the path is longer than 100 m), APE RMSE and final position error (LiDAR only: from the true
-// first pose, no alignment; LiDAR-inertial: after a rigid alignment, the Session's frame being
+// first pose, no alignment; LiDAR-inertial: after a rigid alignment, the Frontend's frame being
 // its own). Reports per-scan latency by stage, degenerate scans and the local map's size.
 
 #include <algorithm>
@@ -53,7 +53,7 @@ struct LidarOdometryOptions {
 };
 
 // The scored part of the report (ground truth given).
-// `aligned`: the estimate's world frame is its own (LiDAR-inertial: the Session's), so APE and
+// `aligned`: the estimate's world frame is its own (LiDAR-inertial: the Frontend's), so APE and
 // the final error are taken after a rigid alignment; the KITTI drift needs none.
 Status score(const io::Trajectory& estimate, const io::Trajectory& ground_truth, const LidarOdometryOptions& options,
              bool aligned, nlohmann::json& result, std::string& text) {
@@ -118,7 +118,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   std::string topic = options.topic;
   std::unique_ptr<lidar::LidarOdometry> odometry;              // LiDAR only
   std::unique_ptr<pipeline::LidarSlam> slam;                   // LiDAR only, --loop-closure
-  std::unique_ptr<pipeline::Session> session;                  // LiDAR-inertial
+  std::unique_ptr<pipeline::Frontend> session;                  // LiDAR-inertial
   std::unique_ptr<pipeline::LidarInertialOdometry> inertial;
   std::string lidar_sensor;
   std::deque<msgs::PointCloudMessage> waiting;  // sweeps waiting for the IMU to pass their end
@@ -142,7 +142,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
       if (!calibration) return Error("--fusion-config needs --calibration");
       auto fusion = config::load_fusion_config(options.fusion_config);
       if (!fusion) return fusion.error();
-      auto created = pipeline::Session::create(*fusion, *calibration);
+      auto created = pipeline::Frontend::create(*fusion, *calibration);
       if (!created) return created.error();
       session = std::move(*created);
       const config::SensorConfig* sensor = session->sensor_for_topic(topic);
@@ -210,7 +210,7 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
     max_map_bytes = std::max(max_map_bytes, used.local_map().memory_bytes());
     estimate.timestamps.push_back(added->time);
     if (session) {
-      // The fused estimate: the Session's pose at the sweep's middle.
+      // The fused estimate: the Frontend's pose at the sweep's middle.
       estimate.poses.push_back(session->pose_at(added->time).value_or(added->T_world_lidar * T_body_lidar.inverse()).matrix());
     } else {
       estimate.poses.push_back((added->T_world_lidar * T_body_lidar.inverse()).matrix());
@@ -331,7 +331,7 @@ void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& ru
   command->add_option("--ground-truth", options->ground_truth, "Ground truth T_world_body (TUM): start there and score the result");
   command->add_option("--calibration", options->calibration, "Calibration YAML with <frame_id>_to_body of the LiDAR (default: identity)");
   command->add_option("--fusion-config", options->fusion_config,
-                      "LiDAR-inertial: run a Session with this fusion configuration (needs --calibration) on the log's IMU")
+                      "LiDAR-inertial: run a Frontend with this fusion configuration (needs --calibration) on the log's IMU")
       ->check(CLI::ExistingFile);
   command->add_option("--voxel", options->voxel, "Local map voxel size and neighbour radius, m")->capture_default_str();
   command->add_option("--source-voxel", options->source_voxel, "Registration points downsampled to this, m (1.0 outdoor, 0.25 indoor)")->capture_default_str();

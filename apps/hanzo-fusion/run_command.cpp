@@ -1,5 +1,5 @@
 // hanzo-fusion run --config C.yaml --calib K.yaml --log L.mcap --out DIR [--gt GT.tum]: replays a
-// sensor log through a pipeline::Session and writes what it estimated:
+// sensor log through a pipeline::Frontend and writes what it estimated:
 //   DIR/trajectory.tum    every PoseEstimate (IMU rate)
 //   DIR/poses.csv         the same with velocity, status and the 6x6 pose covariance
 //   DIR/innovations.csv   every measurement update: sensor, model, time, d^2, applied, innovation
@@ -20,12 +20,16 @@
 #include <fmt/format.h>
 
 #include "commands.hpp"
+#include "hanzo/fusion/core/files.hpp"
 #include "hanzo/fusion/eval/association.hpp"
 #include "hanzo/fusion/eval/plots.hpp"
 #include "hanzo/fusion/eval/pose_error.hpp"
 #include "hanzo/fusion/eval/statistics.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
+#include "hanzo/fusion/maps/fusion_map_file.hpp"
+#include "hanzo/fusion/maps/map_export.hpp"
+#include "hanzo/fusion/maps/provenance.hpp"
 #include "hanzo/fusion/pipeline/session.hpp"
 
 namespace hanzo::fusion::app {
@@ -37,6 +41,7 @@ struct RunOptions {
   std::string log_path;
   std::string out;
   std::string ground_truth;
+  int threads = 1;
 };
 
 // A progress bar on stderr, only when stderr is a terminal.
@@ -95,10 +100,20 @@ Status write_poses_csv(const std::string& path, const std::vector<msgs::PoseEsti
   return file ? ok_status() : Status(Error(fmt::format("{}: write failed", path)));
 }
 
-Status write_keyframes_csv(const std::string& path, const std::vector<msgs::Keyframe>& keyframes) {
+io::Trajectory trajectory_of(const std::vector<pipeline::StampedPose>& poses) {
+  io::Trajectory trajectory;
+  for (const pipeline::StampedPose& pose : poses) {
+    trajectory.timestamps.push_back(pose.timestamp);
+    trajectory.poses.push_back(pose.T_world_body.matrix());
+  }
+  return trajectory;
+}
+
+Status write_keyframes_csv(const std::string& path, const std::vector<msgs::Keyframe>& keyframes, const pipeline::Session& session) {
   std::ofstream file(path);
   if (!file) return Error(fmt::format("{}: cannot write", path));
-  file << "keyframe_id,timestamp_ns,x,y,z,qw,qx,qy,qz,previous_id,rel_x,rel_y,rel_z,rel_qw,rel_qx,rel_qy,rel_qz";
+  file << "keyframe_id,timestamp_ns,x,y,z,qw,qx,qy,qz,opt_x,opt_y,opt_z,opt_qw,opt_qx,opt_qy,opt_qz,"
+          "previous_id,rel_x,rel_y,rel_z,rel_qw,rel_qx,rel_qy,rel_qz";
   for (int i = 0; i < 6; ++i) {
     for (int j = i; j < 6; ++j) file << ",rel_cov_" << i << j;
   }
@@ -107,6 +122,13 @@ Status write_keyframes_csv(const std::string& path, const std::vector<msgs::Keyf
     const auto& p = k.T_world_body.position;
     const auto& q = k.T_world_body.orientation;
     file << fmt::format("{},{},{},{},{},{},{},{},{}", k.keyframe_id, k.timestamp.nanoseconds(), p.x(), p.y(), p.z(), q.w(), q.x(), q.y(), q.z());
+    if (const std::optional<SE3> optimized = session.keyframe_pose(k.keyframe_id)) {
+      const Eigen::Vector3d t = optimized->translation();
+      const Eigen::Quaterniond r = optimized->rotation().quaternion();
+      file << fmt::format(",{},{},{},{},{},{},{}", t.x(), t.y(), t.z(), r.w(), r.x(), r.y(), r.z());
+    } else {
+      file << std::string(7, ',');
+    }
     if (k.T_previous_current && k.relative_covariance) {
       const auto& rp = k.T_previous_current->position;
       const auto& rq = k.T_previous_current->orientation;
@@ -214,6 +236,45 @@ Result<nlohmann::json> evaluate(const std::string& ground_truth_path, const io::
                         {"rpe_1m_rmse_m", rpe.statistics.rmse}};
 }
 
+nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
+  return {{"scans_received", m.scans_received}, {"scans_registered", m.scans_registered},
+          {"scans_refused", m.scans_refused},   {"degenerate_scans", m.degenerate_scans},
+          {"weather_degraded_scans", m.weather_degraded_scans},
+          {"map_keyframes", m.map_keyframes},   {"graph_keyframes", m.graph_keyframes},
+          {"loop_candidates", m.loop_candidates}, {"loop_closures", m.loop_closures},
+          {"gnss_factors", m.gnss_factors},     {"map_memory_bytes", m.map_memory_bytes}};
+}
+
+// The session's map as a FusionMap file with its occupancy and point images; the file names.
+Result<std::vector<std::string>> write_map(const std::filesystem::path& out, const pipeline::Session& session, const RunOptions& options,
+                                           Timestamp created) {
+  msgs::FusionMap map = session.map();
+  map.map_id = "run";
+  map.version = 1;
+  map.created = created;  // the log's last pose: the same log gives the same file
+  map.provenance.algorithm = "pipeline/session";
+  map.provenance.software_version = HANZO_FUSION_VERSION;
+  HANZO_ASSIGN_OR_RETURN(map.sensor_configuration, read_file(options.config_path));
+  msgs::InputLog input;
+  HANZO_ASSIGN_OR_RETURN(input, maps::describe_input_file(options.log_path));
+  map.provenance.input_logs.push_back(input);
+  std::vector<std::string> written;
+  const std::string fmap = (out / "map.fmap").string();
+  HANZO_RETURN_IF_ERROR(maps::write_fusion_map(fmap, map));
+  written.push_back(fmap);
+  if (map.occupancy) {
+    const std::string png = (out / "map.png").string();
+    HANZO_RETURN_IF_ERROR(maps::write_occupancy_png(png, *map.occupancy));
+    written.push_back(png);
+  }
+  if (map.points) {
+    const std::string png = (out / "map_points.png").string();
+    HANZO_RETURN_IF_ERROR(maps::write_points_png(png, *map.points));
+    written.push_back(png);
+  }
+  return written;
+}
+
 int run(const Output& output, const RunOptions& options) {
   nlohmann::json result = {{"log", options.log_path}, {"out", options.out}};
   const auto fail = [&](const std::string& reason) { return report_failure(output, result, reason); };
@@ -225,8 +286,12 @@ int run(const Output& output, const RunOptions& options) {
     if (!loaded) return fail(loaded.error().message);
     calibration = std::move(loaded).value();
   }
-  auto session = pipeline::Session::create(*config, calibration);
-  if (!session) return fail(session.error().message);
+  pipeline::SessionConfig session_config = pipeline::SessionConfig::from(*config);
+  session_config.mode = pipeline::SessionMode::kReplay;
+  session_config.num_threads = options.threads;
+  auto created = pipeline::Session::create(*config, calibration, session_config);
+  if (!created) return fail(created.error().message);
+  pipeline::Session& session = **created;
   auto reader = io::SensorLogReader::open(options.log_path);
   if (!reader) return fail(reader.error().message);
   std::error_code ec;
@@ -236,9 +301,9 @@ int run(const Output& output, const RunOptions& options) {
   std::vector<msgs::PoseEstimate> poses;
   std::vector<pipeline::InnovationRecord> innovations;
   std::vector<msgs::Keyframe> keyframes;
-  (*session)->set_keyframe_callback([&keyframes](const msgs::Keyframe& keyframe) { keyframes.push_back(keyframe); });
-  (*session)->set_pose_callback([&poses](const msgs::PoseEstimate& pose) { poses.push_back(pose); });
-  (*session)->set_innovation_callback([&innovations](const pipeline::InnovationRecord& r) { innovations.push_back(r); });
+  session.set_keyframe_callback([&keyframes](const msgs::Keyframe& keyframe) { keyframes.push_back(keyframe); });
+  session.set_pose_callback([&poses](const msgs::PoseEstimate& pose) { poses.push_back(pose); });
+  session.frontend().set_innovation_callback([&innovations](const pipeline::InnovationRecord& r) { innovations.push_back(r); });
 
   const auto& statistics = (*reader)->mcap().statistics();
   ProgressBar progress(Timestamp::from_nanoseconds(static_cast<int64_t>(statistics.message_start_time)),
@@ -255,9 +320,9 @@ int run(const Output& output, const RunOptions& options) {
       continue;
     }
     if (!*more) break;
-    const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
+    auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
     if (message == nullptr) continue;  // pose estimates in the log (e.g. ground truth)
-    const config::SensorConfig* sensor = (*session)->sensor_for_topic(entry.topic);
+    const config::SensorConfig* sensor = session.frontend().sensor_for_topic(entry.topic);
     if (sensor == nullptr) {
       ++unmapped;
       ++unmapped_topics[entry.topic];
@@ -267,27 +332,49 @@ int run(const Output& output, const RunOptions& options) {
     if (first.is_zero()) first = entry.log_time;
     last = entry.log_time;
     const auto start = std::chrono::steady_clock::now();
-    (void)(*session)->push(sensor->name, *message);  // rejections are counted in the summary
+    (void)session.push(sensor->name, std::move(*message));  // rejections are counted in the summary
     fusion_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     progress.update(entry.log_time);
   }
+  const auto flush_start = std::chrono::steady_clock::now();
+  session.flush();
+  fusion_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - flush_start).count();
   progress.finish();
-  (*session)->flush();
 
-  const pipeline::SessionSummary summary = (*session)->summary();
+  const pipeline::SessionSummary summary = session.summary();
+  const pipeline::MappingSummary mapping = session.mapping_summary();
   const double log_seconds = (last - first).seconds();
   const io::Trajectory trajectory = trajectory_of(poses);
+  const io::Trajectory optimized = trajectory_of(session.optimized_trajectory());
   const std::filesystem::path out(options.out);
-  if (Status s = io::write_trajectory((out / "trajectory.tum").string(), trajectory, io::TrajectoryFormat::kTum); !s) return fail(s.error().message);
-  if (Status s = write_poses_csv((out / "poses.csv").string(), poses); !s) return fail(s.error().message);
-  if (Status s = write_innovations_csv((out / "innovations.csv").string(), innovations); !s) return fail(s.error().message);
-  if (Status s = write_keyframes_csv((out / "keyframes.csv").string(), keyframes); !s) return fail(s.error().message);
+  std::vector<std::string> files;
+  const auto written = [&](const std::string& name, const Status& status) {
+    if (status) files.push_back((out / name).string());
+    return status;
+  };
+  for (const Status& status :
+       {written("trajectory.tum", io::write_trajectory((out / "trajectory.tum").string(), trajectory, io::TrajectoryFormat::kTum)),
+        written("trajectory_optimized.tum",
+                io::write_trajectory((out / "trajectory_optimized.tum").string(), optimized, io::TrajectoryFormat::kTum)),
+        written("poses.csv", write_poses_csv((out / "poses.csv").string(), poses)),
+        written("innovations.csv", write_innovations_csv((out / "innovations.csv").string(), innovations)),
+        written("keyframes.csv", write_keyframes_csv((out / "keyframes.csv").string(), keyframes, session))}) {
+    if (!status) return fail(status.error().message);
+  }
+  if (mapping.map_keyframes > 0) {
+    auto map_files = write_map(out, session, options, poses.empty() ? last : poses.back().timestamp);
+    if (!map_files) return fail(map_files.error().message);
+    files.insert(files.end(), map_files->begin(), map_files->end());
+  }
   auto plots = write_plots(options.out, poses, innovations);
   if (!plots) return fail(plots.error().message);
 
   result["ok"] = true;
+  result["mode"] = pipeline::to_string(session.mode());
   result["summary"] = summary_json(summary, log_seconds);
+  result["mapping"] = mapping_json(mapping);
   result["timing"] = {{"messages", messages},
+                      {"threads", options.threads},
                       {"fusion_seconds", fusion_seconds},
                       {"microseconds_per_message", messages > 0 ? 1e6 * fusion_seconds / static_cast<double>(messages) : 0.0},
                       {"realtime_factor", fusion_seconds > 0.0 ? log_seconds / fusion_seconds : 0.0}};
@@ -300,11 +387,17 @@ int run(const Output& output, const RunOptions& options) {
                                           final_pose.T_world_body.position.z()}},
                             {"state", msgs::to_string(final_pose.status.state)}};
   }
+  result["files"] = files;
   result["plots"] = *plots;
+  // An evaluation that cannot be computed is reported as undefined with the reason; the
+  // outputs above are written either way.
+  const auto score = [&](const char* key, const io::Trajectory& estimate) {
+    auto evaluation = evaluate(options.ground_truth, estimate);
+    result[key] = evaluation ? *evaluation : nlohmann::json{{"undefined", evaluation.error().message}};
+  };
   if (!options.ground_truth.empty()) {
-    auto evaluation = evaluate(options.ground_truth, trajectory);
-    if (!evaluation) return fail(fmt::format("--gt {}: {}", options.ground_truth, evaluation.error().message));
-    result["evaluation"] = *evaluation;
+    score("evaluation", trajectory);
+    score("evaluation_optimized", optimized);
   }
   std::ofstream((out / "summary.json").string()) << result.dump(2) << "\n";
 
@@ -316,19 +409,28 @@ int run(const Output& output, const RunOptions& options) {
     for (const auto& [reason, count] : s.rejected) text += fmt::format("  {}={}", reason, count);
     text += "\n";
   }
+  if (mapping.graph_keyframes > 0) {
+    text += fmt::format("graph: {} keyframes, {} GNSS factors, {} loop closures; map: {} keyframes from {} of {} sweeps registered\n",
+                        mapping.graph_keyframes, mapping.gnss_factors, mapping.loop_closures, mapping.map_keyframes,
+                        mapping.scans_registered, mapping.scans_received);
+  }
   if (!poses.empty()) {
     const auto& p = poses.back().T_world_body.position;
     text += fmt::format("final position ({:.4f}, {:.4f}, {:.4f}) m, state {}\n", p.x(), p.y(), p.z(), msgs::to_string(summary.state));
   }
-  if (result.contains("evaluation")) {
-    const auto& e = result["evaluation"];
+  for (const auto& [key, label] : {std::pair<const char*, const char*>{"evaluation", "real-time"}, {"evaluation_optimized", "optimized"}}) {
+    if (!result.contains(key)) continue;
+    const auto& e = result[key];
+    if (e.contains("undefined")) {
+      text += fmt::format("{}: APE undefined ({})\n", label, e["undefined"].get<std::string>());
+      continue;
+    }
     const std::string aligned = e["ape_se3_aligned_rmse_m"].is_null() ? "undefined" : fmt::format("{:.3f}", e["ape_se3_aligned_rmse_m"].get<double>());
-    text += fmt::format("APE rmse {:.3f} m (max {:.3f}; SE3-aligned {}) over {:.1f} m; RPE (1 m) rmse {:.3f} m\n",
+    text += fmt::format("{}: APE rmse {:.3f} m (max {:.3f}; SE3-aligned {}) over {:.1f} m; RPE (1 m) rmse {:.3f} m\n", label,
                         e["ape_rmse_m"].get<double>(), e["ape_max_m"].get<double>(), aligned, e["distance_m"].get<double>(),
                         e["rpe_1m_rmse_m"].get<double>());
   }
-  text += fmt::format("wrote {}/trajectory.tum, poses.csv, innovations.csv, keyframes.csv ({}), summary.json and {} plots\n", options.out,
-                      keyframes.size(), plots->size());
+  text += fmt::format("wrote {} files and {} plots into {}\n", files.size() + 1, plots->size(), options.out);
   return report_success(output, result, text);
 }
 
@@ -336,12 +438,14 @@ int run(const Output& output, const RunOptions& options) {
 
 void add_run_command(CLI::App& app, const Output& output, Command& run_command) {
   auto options = std::make_shared<RunOptions>();
-  CLI::App* command = app.add_subcommand("run", "Replay a sensor log through the fusion frontend");
+  CLI::App* command = app.add_subcommand("run", "Replay a sensor log through the whole pipeline (filter, LiDAR odometry, graph, map)");
   command->add_option("--config", options->config_path, "Fusion configuration YAML")->required();
   command->add_option("--calib", options->calibration_path, "Calibration YAML (default: every sensor at the body origin)");
   command->add_option("--log", options->log_path, "Sensor log (.mcap)")->required();
   command->add_option("--out", options->out, "Output folder")->required();
   command->add_option("--gt", options->ground_truth, "Ground-truth trajectory (TUM) for APE / RPE");
+  command->add_option("--threads", options->threads, "LiDAR odometry threads (0: all cores); the output does not depend on it")
+      ->capture_default_str();
   command->callback([&output, &run_command, options] { run_command = [&output, options] { return run(output, *options); }; });
 }
 

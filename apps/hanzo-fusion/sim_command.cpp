@@ -7,6 +7,7 @@
 //   DIR/fusion.yaml         a fusion configuration to run the log
 // See docs/simulator.md.
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -36,6 +37,7 @@ struct SimOptions {
   std::optional<int> threads;
   std::string compression = "zstd";
   bool no_foxglove = false;
+  std::vector<std::string> sensors;  // empty: all of the scenario's
 };
 
 io::Trajectory ground_truth(const sim::ScenarioSimulation& simulation) {
@@ -72,6 +74,15 @@ int run_sim(const Output& output, const SimOptions& options) {
   if (options.duration) scenario->duration = *options.duration;
   if (options.seed) sim::set_seed(*scenario, static_cast<uint64_t>(*options.seed));
   if (options.threads) scenario->num_threads = *options.threads;
+  for (const std::string& name : options.sensors) {
+    const bool known = std::any_of(scenario->sensors.begin(), scenario->sensors.end(), [&](const sim::ScenarioSensor& s) { return s.name == name; });
+    if (!known) return report_failure(output, result, fmt::format("--sensors: the scenario has no sensor '{}'", name));
+  }
+  if (!options.sensors.empty()) {
+    std::erase_if(scenario->sensors, [&](const sim::ScenarioSensor& s) {
+      return std::find(options.sensors.begin(), options.sensors.end(), s.name) == options.sensors.end();
+    });
+  }
   Result<std::unique_ptr<sim::ScenarioSimulation>> simulation = sim::ScenarioSimulation::create(std::move(*scenario));
   if (!simulation) return report_failure(output, result, simulation.error().message);
   sim::ScenarioSimulation& run = **simulation;
@@ -179,6 +190,8 @@ void add_sim_command(CLI::App& app, const Output& output, Command& run) {
       ->check(CLI::Range(0, 1024));
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
   command->add_flag("--no-foxglove", options->no_foxglove, "Leave out the Foxglove mirror channels");
+  command->add_option("--sensors", options->sensors, "Simulate only these sensors (names from the scenario, comma-separated)")
+      ->delimiter(',');
   command->callback([&output, &run, options] { run = [&output, options] { return run_sim(output, *options); }; });
 }
 

@@ -336,6 +336,7 @@ class PyIncrementalSmoother {
 
 void bind_laser_slam(py::module_& module);  // laser_slam_bindings.cpp
 void bind_lidar_odometry(py::module_& module);  // lidar_odometry_bindings.cpp
+void bind_session(py::module_& module);  // session_bindings.cpp
 void bind_sensor_models(py::module_& module);   // sensor_model_bindings.cpp
 
 PYBIND11_MODULE(_fusion, module) {
@@ -461,4 +462,5 @@ PYBIND11_MODULE(_fusion, module) {
 
   bind_laser_slam(module);
   bind_lidar_odometry(module);
+  bind_session(module);
 }

@@ -15,6 +15,9 @@ namespace hanzo::fusion::cloud {
 namespace {
 
 constexpr size_t kMinChunkSize = 512;  // items; smaller chunks cost more in scheduling than they save
+// At most this many chunks, whatever the thread count: the partition (and so the rounding of
+// sums combined per chunk) is the same on every machine and thread count.
+constexpr size_t kMaxChunks = 64;
 
 // One arena per thread count, created on first use (an arena costs tens of microseconds to
 // create, more than a small registration iteration).
@@ -34,22 +37,18 @@ int thread_count(int num_threads) {
   return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
 }
 
-size_t chunk_count(size_t count, int num_threads) {
-  const int threads = thread_count(num_threads);
-  if (threads == 1 || count <= kMinChunkSize) return 1;
-  return std::clamp<size_t>(count / kMinChunkSize, 1, static_cast<size_t>(threads) * 4);
-}
+size_t chunk_count(size_t count) { return std::clamp<size_t>(count / kMinChunkSize, 1, kMaxChunks); }
 
 void parallel_chunks(size_t count, int num_threads,
                      const std::function<void(size_t chunk, size_t begin, size_t end)>& body) {
-  const size_t chunks = chunk_count(count, num_threads);
+  const size_t chunks = chunk_count(count);
   const auto run_chunk = [&](size_t chunk) {
     const size_t begin = count * chunk / chunks;
     const size_t end = count * (chunk + 1) / chunks;
     body(chunk, begin, end);
   };
-  if (chunks == 1) {
-    run_chunk(0);
+  if (chunks == 1 || thread_count(num_threads) == 1) {
+    for (size_t chunk = 0; chunk < chunks; ++chunk) run_chunk(chunk);
     return;
   }
   arena_for(thread_count(num_threads)).execute([&] {

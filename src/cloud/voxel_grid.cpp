@@ -56,9 +56,10 @@ std::vector<uint32_t> first_point_per_voxel(const std::vector<Eigen::Vector3f>& 
                                             double voxel_size, int num_threads) {
   assert(voxel_size > 0);
   const float inverse = static_cast<float>(1.0 / voxel_size);
+  if (thread_count(num_threads) == 1) return first_of_each_voxel(points, candidates, 0, candidates.size(), inverse).candidates;
   // Each chunk of consecutive candidates finds its own first per voxel in parallel; a voxel seen
   // by several chunks then keeps the first chunk's (chunks merged in order): the sequential result.
-  std::vector<FirstOfEachVoxel> chunks(chunk_count(candidates.size(), num_threads));
+  std::vector<FirstOfEachVoxel> chunks(chunk_count(candidates.size()));
   parallel_chunks(candidates.size(), num_threads, [&](size_t chunk, size_t begin, size_t end) {
     chunks[chunk] = first_of_each_voxel(points, candidates, begin, end, inverse);
   });

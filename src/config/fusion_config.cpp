@@ -100,6 +100,19 @@ Status validate(const FusionConfig& config) {
   if (frontend.datum) {
     if (Status s = validate(*frontend.datum); !s) return Error{"FusionConfig.frontend.datum: " + s.error().message, "frontend.datum"};
   }
+  const MappingConfig& mapping = config.mapping;
+  for (const auto& [value, field] : {std::pair<double, std::string_view>{mapping.lidar_voxel, "mapping.lidar_voxel"},
+                                     {mapping.lidar_source_voxel, "mapping.lidar_source_voxel"},
+                                     {mapping.lidar_max_range, "mapping.lidar_max_range"},
+                                     {mapping.map_voxel, "mapping.map_voxel"},
+                                     {mapping.occupancy_resolution, "mapping.occupancy_resolution"},
+                                     {mapping.loop_min_travel, "mapping.loop_min_travel"},
+                                     {mapping.loop_search_radius, "mapping.loop_search_radius"},
+                                     {mapping.loop_max_rmse, "mapping.loop_max_rmse"}}) {
+    if (!std::isfinite(value) || value <= 0.0) return Error{fmt::format("FusionConfig.{}: {} (expected > 0)", field, value), std::string(field)};
+  }
+  if (Status s = non_negative(mapping.keyframe_distance, "mapping.keyframe_distance"); !s) return s;
+  if (Status s = non_negative(mapping.keyframe_angle, "mapping.keyframe_angle"); !s) return s;
   std::set<std::string_view> names;
   std::set<std::string_view> topics;
   for (const SensorConfig& sensor : config.sensors) {

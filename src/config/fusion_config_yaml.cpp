@@ -130,6 +130,36 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   return frontend;
 }
 
+Result<double> positive_or(const YamlValue& value, double fallback) {
+  if (!value.present()) return fallback;
+  Result<double> number = value.as_double();
+  if (!number) return number;
+  if (!(*number > 0.0)) return value.error(fmt::format("expected a value > 0, got {}", *number));
+  return number;
+}
+
+Result<MappingConfig> parse_mapping(const YamlValue& node) {
+  MappingConfig mapping;
+  if (!node.present()) return mapping;
+  HANZO_RETURN_IF_ERROR(node.check_keys({"enabled", "lidar_voxel", "lidar_source_voxel", "lidar_max_range", "map_voxel",
+                                         "occupancy_resolution", "keyframe_distance", "keyframe_angle", "loop_closure",
+                                         "loop_min_travel", "loop_search_radius", "loop_max_rmse", "gnss_factors"}));
+  HANZO_ASSIGN_OR_RETURN(mapping.enabled, bool_or(node["enabled"], mapping.enabled));
+  HANZO_ASSIGN_OR_RETURN(mapping.lidar_voxel, positive_or(node["lidar_voxel"], mapping.lidar_voxel));
+  HANZO_ASSIGN_OR_RETURN(mapping.lidar_source_voxel, positive_or(node["lidar_source_voxel"], mapping.lidar_source_voxel));
+  HANZO_ASSIGN_OR_RETURN(mapping.lidar_max_range, positive_or(node["lidar_max_range"], mapping.lidar_max_range));
+  HANZO_ASSIGN_OR_RETURN(mapping.map_voxel, positive_or(node["map_voxel"], mapping.map_voxel));
+  HANZO_ASSIGN_OR_RETURN(mapping.occupancy_resolution, positive_or(node["occupancy_resolution"], mapping.occupancy_resolution));
+  HANZO_ASSIGN_OR_RETURN(mapping.keyframe_distance, yaml::non_negative_or(node["keyframe_distance"], mapping.keyframe_distance));
+  HANZO_ASSIGN_OR_RETURN(mapping.keyframe_angle, yaml::non_negative_or(node["keyframe_angle"], mapping.keyframe_angle));
+  HANZO_ASSIGN_OR_RETURN(mapping.loop_closure, bool_or(node["loop_closure"], mapping.loop_closure));
+  HANZO_ASSIGN_OR_RETURN(mapping.loop_min_travel, positive_or(node["loop_min_travel"], mapping.loop_min_travel));
+  HANZO_ASSIGN_OR_RETURN(mapping.loop_search_radius, positive_or(node["loop_search_radius"], mapping.loop_search_radius));
+  HANZO_ASSIGN_OR_RETURN(mapping.loop_max_rmse, positive_or(node["loop_max_rmse"], mapping.loop_max_rmse));
+  HANZO_ASSIGN_OR_RETURN(mapping.gnss_factors, bool_or(node["gnss_factors"], mapping.gnss_factors));
+  return mapping;
+}
+
 std::optional<msgs::GnssFixType> fix_type_from_string(std::string_view name) {
   for (msgs::GnssFixType type : {msgs::GnssFixType::kNoFix, msgs::GnssFixType::kFix2d, msgs::GnssFixType::kFix3d,
                                  msgs::GnssFixType::kRtkFloat, msgs::GnssFixType::kRtkFixed}) {
@@ -226,9 +256,10 @@ Result<FusionConfig> parse(const YamlValue& root) {
   HANZO_RETURN_IF_ERROR(root.check_keys({"fusion"}));
   const YamlValue fusion = root["fusion"].as_path_root();
   if (!fusion.present()) return fusion.error("missing (the file must start with a 'fusion:' map)");
-  HANZO_RETURN_IF_ERROR(fusion.check_keys({"frontend", "sensors"}));
+  HANZO_RETURN_IF_ERROR(fusion.check_keys({"frontend", "sensors", "mapping"}));
   FusionConfig config;
   HANZO_ASSIGN_OR_RETURN(config.frontend, parse_frontend(fusion["frontend"]));
+  HANZO_ASSIGN_OR_RETURN(config.mapping, parse_mapping(fusion["mapping"]));
   const YamlValue sensors = fusion["sensors"];
   HANZO_RETURN_IF_ERROR(sensors.expect_map());
   std::set<std::string> topics;
@@ -268,6 +299,32 @@ std::string fusion_options_yaml(const SensorFusionOptions& o) {
   if (o.min_fix != d.min_fix) out += fmt::format("      min_fix: {}\n", msgs::to_string(o.min_fix));
   number("velocity_noise", o.velocity_noise, d.velocity_noise);
   return out;
+}
+
+// The mapping block with the keys that differ from the defaults ("" when none do).
+std::string mapping_yaml(const MappingConfig& m) {
+  const MappingConfig d;
+  std::string out;
+  const auto flag = [&out](std::string_view key, bool value, bool fallback) {
+    if (value != fallback) out += fmt::format("    {}: {}\n", key, value);
+  };
+  const auto number = [&out](std::string_view key, double value, double fallback) {
+    if (value != fallback) out += fmt::format("    {}: {}\n", key, format_double(value));
+  };
+  flag("enabled", m.enabled, d.enabled);
+  number("lidar_voxel", m.lidar_voxel, d.lidar_voxel);
+  number("lidar_source_voxel", m.lidar_source_voxel, d.lidar_source_voxel);
+  number("lidar_max_range", m.lidar_max_range, d.lidar_max_range);
+  number("map_voxel", m.map_voxel, d.map_voxel);
+  number("occupancy_resolution", m.occupancy_resolution, d.occupancy_resolution);
+  number("keyframe_distance", m.keyframe_distance, d.keyframe_distance);
+  number("keyframe_angle", m.keyframe_angle, d.keyframe_angle);
+  flag("loop_closure", m.loop_closure, d.loop_closure);
+  number("loop_min_travel", m.loop_min_travel, d.loop_min_travel);
+  number("loop_search_radius", m.loop_search_radius, d.loop_search_radius);
+  number("loop_max_rmse", m.loop_max_rmse, d.loop_max_rmse);
+  flag("gnss_factors", m.gnss_factors, d.gnss_factors);
+  return out.empty() ? out : "  mapping:\n" + out;
 }
 
 }  // namespace
@@ -325,6 +382,7 @@ std::string to_yaml(const FusionConfig& config) {
     out += fmt::format("    datum: {{latitude: {}, longitude: {}, altitude: {}}}\n", format_double(f.datum->latitude_deg),
                        format_double(f.datum->longitude_deg), format_double(f.datum->altitude_m));
   }
+  out += mapping_yaml(config.mapping);
   out += config.sensors.empty() ? "  sensors: {}\n" : "  sensors:\n";
   for (const SensorConfig& sensor : config.sensors) {
     out += fmt::format("    {}:\n", yaml::scalar(sensor.name));

@@ -95,7 +95,7 @@ Result<LidarOdometryEstimate> LidarOdometry::add_scan(Timestamp time, const clou
   const float phantom_squared = static_cast<float>(config_.phantom_max_range * config_.phantom_max_range);
   // The points within range that are not lone near returns, in sweep order (chunks of the sweep
   // on the odometry's threads, joined in order).
-  std::vector<std::vector<uint32_t>> chunk_in_range(cloud::chunk_count(scan.size(), threads));
+  std::vector<std::vector<uint32_t>> chunk_in_range(cloud::chunk_count(scan.size()));
   std::vector<std::size_t> chunk_phantoms(chunk_in_range.size(), 0);
   cloud::parallel_chunks(scan.size(), threads, [&](std::size_t chunk, std::size_t begin, std::size_t end) {
     std::vector<uint32_t>& kept_here = chunk_in_range[chunk];

@@ -54,7 +54,7 @@ std::vector<Eigen::Matrix3d> to_double(const std::vector<Eigen::Matrix3f>& matri
 template <typename Cost>
 NormalEquations linearize(const Cost& cost, size_t count, const SE3& T, int num_threads) {
   const PoseBlocks pose(T);
-  std::vector<NormalEquations> partial(cloud::chunk_count(count, num_threads));
+  std::vector<NormalEquations> partial(cloud::chunk_count(count));
   cloud::parallel_chunks(count, num_threads, [&](size_t chunk, size_t begin, size_t end) {
     NormalEquations local;
     for (size_t i = begin; i < end; ++i) cost.linearize(i, pose, local);

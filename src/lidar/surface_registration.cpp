@@ -106,7 +106,7 @@ SurfaceEquations linearize(const std::vector<Eigen::Vector3f>& source, std::size
   const Eigen::Matrix3d rotation = T.rotation().matrix();
   const Eigen::Vector3d translation = T.translation();
   const double inverse_width = 1.0 / kernel_width;
-  std::vector<SurfaceEquations> partial(cloud::chunk_count(count, num_threads));
+  std::vector<SurfaceEquations> partial(cloud::chunk_count(count));
   cloud::parallel_chunks(count, num_threads, [&](std::size_t chunk, std::size_t begin, std::size_t end) {
     SurfaceEquations local;
     for (std::size_t i = begin; i < end; ++i) {

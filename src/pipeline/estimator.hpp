@@ -1,7 +1,7 @@
 #pragma once
-// Estimator: the part of a Session that turns time-ordered events into filter operations. It
+// Estimator: the part of a Frontend that turns time-ordered events into filter operations. It
 // holds everything fusion depends on (filter, last IMU sample, previous wheel reading, datum,
-// alignment buffer), and is copyable, so the Session can snapshot it after each event and roll
+// alignment buffer), and is copyable, so the Frontend can snapshot it after each event and roll
 // back for a late message. Private to the pipeline module.
 
 #include <memory>
@@ -18,7 +18,7 @@
 #include "hanzo/fusion/estimate/velocity_models.hpp"
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
-#include "hanzo/fusion/pipeline/session.hpp"
+#include "hanzo/fusion/pipeline/frontend.hpp"
 
 namespace hanzo::fusion::pipeline {
 
@@ -51,14 +51,14 @@ struct Event {
 /// Strict order of fusion: time, then IMU before other sensors, then arrival.
 bool fused_before(const Event& a, const Event& b);
 
-/// What the Session needs to know about a sensor, fixed for the session's life.
+/// What the Frontend needs to know about a sensor, fixed for the session's life.
 struct SensorSetup {
   const config::SensorConfig* config = nullptr;
   SE3 T_body_sensor;
   Duration time_offset;
 };
 
-/// One measurement update's outcome, reported to the Session's observer.
+/// One measurement update's outcome, reported to the Frontend's observer.
 struct UpdateReport {
   size_t sensor = 0;
   std::string_view model;

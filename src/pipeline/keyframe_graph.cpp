@@ -20,8 +20,8 @@ Result<graph::GaussianNoise> noise_of(const Eigen::MatrixXd& covariance, const s
 
 KeyframeGraph::KeyframeGraph(KeyframeGraphConfig config) : config_(std::move(config)), smoother_(config_.smoother) {}
 
-void KeyframeGraph::attach(Session& session) {
-  session.set_keyframe_callback([this](const msgs::Keyframe& keyframe) { queued_keyframes_.push_back(keyframe); });
+void KeyframeGraph::attach(Frontend& frontend) {
+  frontend.set_keyframe_callback([this](const msgs::Keyframe& keyframe) { queued_keyframes_.push_back(keyframe); });
 }
 
 Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe) {
@@ -86,7 +86,7 @@ Status KeyframeGraph::add_loop_closure(uint64_t from, uint64_t to, const SE3& T_
   return ok_status();
 }
 
-Result<KeyframeGraphUpdate> KeyframeGraph::process(Session* session) {
+Result<KeyframeGraphUpdate> KeyframeGraph::process(Frontend* frontend) {
   KeyframeGraphUpdate update;
   while (!queued_keyframes_.empty()) {
     const msgs::Keyframe keyframe = queued_keyframes_.front();
@@ -130,10 +130,10 @@ Result<KeyframeGraphUpdate> KeyframeGraph::process(Session* session) {
   }
   const bool loop_closed = loop_closure_pending_;
   loop_closure_pending_ = false;
-  if (session != nullptr && latest_keyframe_ && (loop_closed || !config_.correct_on_loop_closures_only)) {
+  if (frontend != nullptr && latest_keyframe_ && (loop_closed || !config_.correct_on_loop_closures_only)) {
     const SE3 optimized = smoother_.estimate().at<SE3>(graph::X(*latest_keyframe_)).value();
     update.correction_translation_m = (optimized.translation() - frontend_poses_.at(*latest_keyframe_).translation()).norm();
-    HANZO_RETURN_IF_ERROR(session->apply_correction(*latest_keyframe_, optimized));
+    HANZO_RETURN_IF_ERROR(frontend->apply_correction(*latest_keyframe_, optimized));
     update.corrected_session = true;
   }
   return update;

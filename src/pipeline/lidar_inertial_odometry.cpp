@@ -10,9 +10,13 @@
 
 namespace hanzo::fusion::pipeline {
 
-LidarInertialOdometry::LidarInertialOdometry(Session& session, std::string lidar_sensor, const SE3& T_body_lidar,
-                                             LidarInertialOdometryConfig config)
-    : session_(session), lidar_sensor_(std::move(lidar_sensor)), T_body_lidar_(T_body_lidar), config_(std::move(config)) {}
+LidarInertialOdometry::LidarInertialOdometry(Frontend& frontend, std::string lidar_sensor, const SE3& T_body_lidar,
+                                             LidarInertialOdometryConfig config, Duration lidar_time_offset)
+    : frontend_(frontend),
+      lidar_sensor_(std::move(lidar_sensor)),
+      T_body_lidar_(T_body_lidar),
+      config_(std::move(config)),
+      lidar_time_offset_(lidar_time_offset) {}
 
 Result<lidar::LidarOdometryEstimate> LidarInertialOdometry::process(const msgs::PointCloudMessage& scan) {
   PreparedScan prepared;
@@ -35,13 +39,13 @@ Result<LidarInertialOdometry::PreparedScan> LidarInertialOdometry::prepare(const
   const std::vector<float>& times = prepared.cloud.times;
   const double middle = prepared.cloud.has_times() ? 0.5 * static_cast<double>(*std::max_element(times.begin(), times.end())) : 0.0;
   const Timestamp middle_time = scan.timestamp + Duration::from_seconds(middle);
-  const std::optional<SE3> T_world_body = session_.pose_at(middle_time);
+  const std::optional<SE3> T_world_body = frontend_.pose_at(middle_time);
   if (!T_world_body) {
     return refuse(fmt::format("no filter pose at {:.6f} s (the session is not initialized, or the IMU has not reached the "
                               "sweep yet, or the sweep is older than the lag window)", middle_time.seconds()));
   }
   prepared.T_world_lidar_filter = *T_world_body * T_body_lidar_;
-  prepared.world_correction = session_.world_correction();
+  prepared.world_correction = frontend_.world_correction();
   if (config_.imu_deskew && prepared.cloud.has_times()) {
     prepared.sweep_motion = sample_sweep_motion(scan.timestamp, 2.0 * middle, prepared.T_world_lidar_filter);
     if (prepared.sweep_motion) ++statistics_.imu_deskewed;
@@ -61,7 +65,7 @@ std::optional<lidar::SweepMotion> LidarInertialOdometry::sample_sweep_motion(Tim
   for (std::size_t i = 0; i <= samples; ++i) {
     const double t = std::min(static_cast<double>(i) * config_.deskew_sample_interval, sweep_length);
     if (!times.empty() && t <= times.back()) break;
-    const std::optional<SE3> T_world_body = session_.pose_at(scan_time + Duration::from_seconds(t));
+    const std::optional<SE3> T_world_body = frontend_.pose_at(scan_time + Duration::from_seconds(t));
     if (!T_world_body) return std::nullopt;  // the filter does not cover the sweep: constant twist
     times.push_back(t);
     poses.push_back(T_middle_world * *T_world_body * T_body_lidar_);
@@ -114,8 +118,8 @@ Result<LidarInertialOdometry::RegisteredScan> LidarInertialOdometry::fuse(Result
   ++statistics_.scans;
   statistics_.degenerate += estimate.degenerate ? 1 : 0;
   statistics_.weather_degraded += estimate.weather_degraded ? 1 : 0;
-  if (Status fused = session_.push_pose(lidar_sensor_, estimate.time, registered->T_world_lidar, registered->covariance); !fused) {
-    return Error(fmt::format("lidar-inertial odometry ({}): registered, but the session refused the pose: {}", lidar_sensor_,
+  if (Status fused = frontend_.push_pose(lidar_sensor_, estimate.time - lidar_time_offset_, registered->T_world_lidar, registered->covariance); !fused) {
+    return Error(fmt::format("lidar-inertial odometry ({}): registered, but the frontend refused the pose: {}", lidar_sensor_,
                              fused.error().message));
   }
   ++statistics_.fused;

@@ -1,515 +1,640 @@
 #include "hanzo/fusion/pipeline/session.hpp"
 
 #include <algorithm>
-#include <deque>
-#include <set>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
 
 #include <fmt/format.h>
 
-#include "estimator.hpp"
+#include "hanzo/fusion/cloud/point_cloud.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/msgs/validate.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
 
-using config::SensorModality;
-
-SensorModality modality_of(const msgs::SensorMessage& message) {
-  switch (message.index()) {
-    case 0: return SensorModality::kImu;
-    case 1: return SensorModality::kLidar;
-    case 2: return SensorModality::kCamera;
-    case 3: return SensorModality::kGnss;
-    case 4: return SensorModality::kWheelOdometry;
-    default: return SensorModality::kRadar;
-  }
-}
-
-// Modalities whose raw messages the frontend fuses itself (the others arrive as poses from
-// their odometry modules through push_pose()).
-bool fused_directly(SensorModality modality) {
-  return modality == SensorModality::kImu || modality == SensorModality::kGnss || modality == SensorModality::kWheelOdometry ||
-         modality == SensorModality::kRadar;
+Timestamp sweep_end(const msgs::PointCloudMessage& scan) {
+  if (scan.point_timestamps.empty()) return scan.timestamp;
+  return *std::max_element(scan.point_timestamps.begin(), scan.point_timestamps.end());
 }
 
 Error rejection(std::string_view reason, const std::string& detail) { return Error(fmt::format("{}: {}", reason, detail)); }
 
+// A map keyframe moved this much in the graph is moved in the map.
+constexpr double kMapMoveTranslation = 0.01;  // m
+constexpr double kMapMoveRotation = 0.001;    // rad
+
 }  // namespace
 
-uint64_t SensorStatistics::rejected_total() const {
-  uint64_t total = 0;
-  for (const auto& [reason, count] : rejected) total += count;
-  return total;
-}
-
-struct Session::Impl final : UpdateObserver {
-  struct HistoryEntry {
-    Event event;
-    Estimator after;  // the estimator right after fusing event
-  };
-
-  // sensor_setups[i].config is set here to point into this Impl's own configuration.
-  Impl(config::FusionConfig fusion_config, std::vector<SensorSetup> sensor_setups, size_t imu)
-      : config(std::move(fusion_config)), setups(link(std::move(sensor_setups), config)), imu_sensor(imu),
-        estimator(config, setups, imu_sensor), history_base(estimator) {
-    for (const SensorSetup& setup : setups) {
-      SensorStatistics statistics;
-      statistics.name = setup.config->name;
-      statistics.modality = setup.config->modality;
-      sensors.push_back(std::move(statistics));
+// Registers prepared sweeps on a thread of its own, in order; at most `capacity` wait: beyond,
+// submit() blocks (a replay faster than registration slows down instead of losing sweeps), up
+// to `max_wait` when given; then it drops the oldest waiting sweep (a live stream must not wait
+// long).
+class Session::RegistrationWorker {
+ public:
+  RegistrationWorker(LidarInertialOdometry& odometry, std::size_t capacity)
+      : odometry_(odometry), capacity_(capacity), thread_([this] { run(); }) {}
+  ~RegistrationWorker() {
+    {
+      std::lock_guard lock(mutex_);
+      stopping_ = true;
     }
-    last_input.resize(setups.size());
+    changed_.notify_all();
+    thread_.join();
+  }
+  /// Returns the number of waiting sweeps dropped to make room.
+  std::size_t submit(LidarInertialOdometry::PreparedScan scan, std::optional<std::chrono::nanoseconds> max_wait) {
+    std::unique_lock lock(mutex_);
+    const auto has_room = [&] { return jobs_.size() < capacity_; };
+    std::size_t dropped = 0;
+    if (!max_wait) {
+      changed_.wait(lock, has_room);
+    } else if (!changed_.wait_for(lock, *max_wait, has_room)) {
+      for (; jobs_.size() >= capacity_; ++dropped) jobs_.pop_front();
+    }
+    jobs_.push_back(std::move(scan));
+    changed_.notify_all();
+    return dropped;
+  }
+  /// The registrations finished so far, in order.
+  std::vector<Result<LidarInertialOdometry::RegisteredScan>> take_done() {
+    std::lock_guard lock(mutex_);
+    std::vector<Result<LidarInertialOdometry::RegisteredScan>> done(std::make_move_iterator(done_.begin()), std::make_move_iterator(done_.end()));
+    done_.clear();
+    return done;
+  }
+  void wait_idle() {
+    std::unique_lock lock(mutex_);
+    changed_.wait(lock, [&] { return jobs_.empty() && !busy_; });
   }
 
-  static std::vector<SensorSetup> link(std::vector<SensorSetup> sensor_setups, const config::FusionConfig& fusion_config) {
-    for (size_t i = 0; i < sensor_setups.size(); ++i) sensor_setups[i].config = &fusion_config.sensors[i];
-    return sensor_setups;
-  }
-
-  void on_update(const UpdateReport& report) override {
-    if (replaying) return;
-    SensorStatistics& statistics = sensors[report.sensor];
-    const bool applied = report.outcome.status == estimate::UpdateStatus::kApplied;
-    if (applied) {
-      statistics.nis_sum += report.outcome.mahalanobis_squared;
-      statistics.nis_count += static_cast<uint64_t>(report.outcome.innovation.size());
-    }
-    if (innovation_callback) {
-      const auto& innovation = report.outcome.innovation;
-      innovation_callback({statistics.name, report.model, report.time,
-                           std::vector<double>(innovation.data(), innovation.data() + innovation.size()),
-                           report.outcome.mahalanobis_squared, applied});
+ private:
+  void run() {
+    std::unique_lock lock(mutex_);
+    while (true) {
+      changed_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
+      if (stopping_) return;
+      LidarInertialOdometry::PreparedScan scan = std::move(jobs_.front());
+      jobs_.pop_front();
+      busy_ = true;
+      changed_.notify_all();  // a slot is free
+      lock.unlock();
+      Result<LidarInertialOdometry::RegisteredScan> registered = odometry_.register_scan(scan);
+      lock.lock();
+      done_.push_back(std::move(registered));
+      busy_ = false;
+      changed_.notify_all();
     }
   }
 
-  std::optional<size_t> sensor_index(std::string_view name) const {
-    for (size_t i = 0; i < config.sensors.size(); ++i) {
-      if (config.sensors[i].name == name) return i;
-    }
-    return std::nullopt;
-  }
-  Result<size_t> pose_input(std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
-                            const Eigen::Matrix<double, 6, 6>& covariance, const std::function<Status()>& extra);
-  Status accept(size_t sensor, Event event);
-  void fuse_in_order(Event event);
-  void fuse_late(Event event);
-  /// Emits a keyframe unless one with its id (or a later one) was emitted already.
-  void emit_keyframe(const msgs::Keyframe& keyframe);
-  /// Reports a fused GNSS fix (first fusions only: fuse_in_order and a late event itself; a
-  /// replay after a rollback re-fuses fixes already reported).
-  void report_gnss(const Event& event, const EventOutcome& outcome);
-  void count(const Event& event, const EventOutcome& outcome);
-  /// Fuses the pending messages up to the IMU's time (all of them when flush_all).
-  void release_pending(bool flush_all = false);
-  void prune_history();
-  /// Records the PoseEstimate at the estimator's time as latest_pose; calls the pose callback
-  /// when notify (not for poses recomputed while re-fusing after a late message).
-  void emit_pose(bool notify);
-  void update_timeouts();
-  msgs::PoseStatus pose_status() const;
-
-  config::FusionConfig config;
-  std::vector<SensorSetup> setups;
-  size_t imu_sensor;
-  Estimator estimator;
-  Estimator history_base;  // the estimator before the oldest history entry
-  std::deque<HistoryEntry> history;
-  std::vector<Event> pending;  // accepted, waiting for the IMU to reach their time (sorted)
-  std::vector<SensorStatistics> sensors;
-  std::vector<Timestamp> last_input;  // last accepted body-clock time per sensor
-  Timestamp first_input;
-  Timestamp newest;
-  std::optional<Timestamp> pending_jump;
-  uint64_t sequence = 0;
-  bool replaying = false;
-  uint64_t poses = 0;
-  uint64_t rollbacks = 0;
-  uint64_t zero_velocity_updates = 0;
-  std::optional<msgs::PoseEstimate> latest_pose;
-  PoseCallback pose_callback;
-  InnovationCallback innovation_callback;
-  KeyframeCallback keyframe_callback;
-  GnssCallback gnss_callback;
-  // Emitted keyframes, for corrections: the pose before any correction (C^-1 x emitted pose,
-  // C the world correction when it was emitted), so that today's belief is C_now x this.
-  std::map<uint64_t, SE3> keyframe_poses;
-  uint64_t keyframes = 0;
-  uint64_t corrections = 0;
+  LidarInertialOdometry& odometry_;
+  std::size_t capacity_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  std::deque<LidarInertialOdometry::PreparedScan> jobs_;
+  std::deque<Result<LidarInertialOdometry::RegisteredScan>> done_;
+  bool busy_ = false;
+  bool stopping_ = false;
+  std::thread thread_;  // last: starts once the members above exist
 };
 
-Session::Session(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
-Session::~Session() = default;
+std::string_view to_string(SessionMode mode) { return mode == SessionMode::kRealtime ? "realtime" : "replay"; }
+
+maps::MapBuilderConfig SessionConfig::default_map() {
+  maps::MapBuilderConfig map;
+  map.occupancy_2d_config.resolution = 0.1;
+  map.point_map.voxel_size = 0.2;
+  map.point_map.keyframe_voxel_size = 0.1;
+  return map;
+}
+
+SessionConfig SessionConfig::from(const config::FusionConfig& config) {
+  const config::MappingConfig& mapping = config.mapping;
+  SessionConfig session;
+  session.mapping = mapping.enabled;
+  lidar::LidarOdometryConfig& odometry = session.lidar_odometry.odometry;
+  odometry.map.voxel_size = mapping.lidar_voxel;
+  odometry.registration.max_neighbour_distance = mapping.lidar_voxel;
+  odometry.source_voxel_size = mapping.lidar_source_voxel;
+  odometry.max_range = mapping.lidar_max_range;
+  odometry.map.max_distance = mapping.lidar_max_range;
+  session.map.point_map.voxel_size = mapping.map_voxel;
+  session.map.point_map.keyframe_voxel_size = std::min(session.map.point_map.keyframe_voxel_size, mapping.map_voxel);
+  session.map.occupancy_2d_config.resolution = mapping.occupancy_resolution;
+  session.map_keyframe_distance = mapping.keyframe_distance;
+  session.map_keyframe_angle = mapping.keyframe_angle;
+  session.loop_closure = mapping.loop_closure;
+  session.loop.min_travel = mapping.loop_min_travel;
+  session.loop.min_search_radius = mapping.loop_search_radius;
+  session.loop.max_rmse = mapping.loop_max_rmse;
+  session.gnss_factors = mapping.gnss_factors;
+  return session;
+}
+
+Status SessionConfig::validate() const {
+  HANZO_RETURN_IF_ERROR(with_context(lidar_odometry.odometry.validate(), "lidar_odometry"));
+  HANZO_RETURN_IF_ERROR(with_context(loop.validate(), "loop"));
+  HANZO_RETURN_IF_ERROR(with_context(map.validate(), "map"));
+  if (!(loop_translation_sigma > 0) || !(loop_rotation_sigma > 0)) return Error("loop_translation_sigma, loop_rotation_sigma: must be > 0");
+  if (!(map_keyframe_distance >= 0) || !(map_keyframe_angle >= 0)) return Error("map_keyframe_distance, map_keyframe_angle: must be >= 0");
+  if (max_waiting_scans == 0) return Error("max_waiting_scans: must be > 0");
+  if (!(live_window_s > 0)) return Error(fmt::format("live_window_s: {} is not > 0", live_window_s));
+  return ok_status();
+}
 
 Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& config, const calib::Calibration& calibration) {
-  if (Status valid = config::validate(config); !valid) return valid.error();
-  if (Status valid = calib::validate(calibration); !valid) return valid.error();
-  std::vector<SensorSetup> setups;
-  std::optional<size_t> imu;
+  return create(config, calibration, SessionConfig::from(config));
+}
+
+Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& config, const calib::Calibration& calibration,
+                                                 SessionConfig session_config) {
+  session_config.lidar_odometry.odometry.num_threads = session_config.num_threads;
+  HANZO_RETURN_IF_ERROR(with_context(session_config.validate(), "session config"));
+  std::unique_ptr<Frontend> frontend;
+  HANZO_ASSIGN_OR_RETURN(frontend, Frontend::create(config, calibration));
+  std::string lidar_sensor;
+  calib::SensorCalibration lidar_calibration;
   for (const config::SensorConfig& sensor : config.sensors) {
-    if (sensor.modality == SensorModality::kImu && !imu) imu = setups.size();
-    SensorSetup setup;
-    if (const calib::SensorCalibration* entry = calibration.find(sensor.name)) {
-      setup.T_body_sensor = entry->T_body_sensor();
-      setup.time_offset = entry->time_offset;
+    if (!session_config.mapping || sensor.modality != config::SensorModality::kLidar) continue;
+    lidar_sensor = sensor.name;
+    if (const calib::SensorCalibration* entry = calibration.find(sensor.name)) lidar_calibration = *entry;
+    break;
+  }
+  session_config.backend.batch_on_loop_closure = true;
+  // Replay: every optimization inside push(), in order.
+  if (session_config.mode == SessionMode::kReplay) session_config.backend.smoother.background_batch = false;
+  // GPS factors hold fixes the filter fused: the graph corrects the filter at loop closures only.
+  const bool has_gnss = std::any_of(config.sensors.begin(), config.sensors.end(),
+                                    [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kGnss; });
+  if (session_config.gnss_factors && has_gnss) session_config.backend.correct_on_loop_closures_only = true;
+  return std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), lidar_calibration));
+}
+
+Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::string lidar_sensor,
+                 const calib::SensorCalibration& lidar_calibration)
+    : frontend_(std::move(frontend)),
+      config_(std::move(config)),
+      lidar_sensor_(std::move(lidar_sensor)),
+      T_body_lidar_(lidar_calibration.T_body_sensor()),
+      lidar_time_offset_(lidar_calibration.time_offset),
+      graph_(std::make_unique<KeyframeGraph>(config_.backend)),
+      loop_closures_(config_.loop, config_.lidar_odometry.odometry),
+      map_builder_(maps::MapBuilder::create(config_.map).value()) {
+  if (!lidar_sensor_.empty()) {
+    odometry_.emplace(*frontend_, lidar_sensor_, T_body_lidar_, config_.lidar_odometry, lidar_time_offset_);
+    // Two sweeps in the worker's queue: the IMU may then run ~0.3 s ahead of the sweep being
+    // registered, inside the default 0.5 s lag window its late pose must land in.
+    constexpr std::size_t kWorkerQueue = 2;
+    if (config_.mode == SessionMode::kRealtime) worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue);
+  }
+  frontend_->set_pose_callback([this](const msgs::PoseEstimate& pose) {
+    if (config_.keep_trajectory && (uncorrected_poses_.empty() || uncorrected_poses_.back().timestamp < pose.timestamp)) {
+      uncorrected_poses_.push_back({pose.timestamp, frontend_->world_correction().inverse() * pose.T_world_body.to_se3()});
+    }
+    if (pose_callback_) pose_callback_(pose);
+  });
+  frontend_->set_keyframe_callback([this](const msgs::Keyframe& emitted) {
+    if (!config_.mapping) {
+      if (keyframe_callback_) keyframe_callback_(emitted);
+      return;
+    }
+    msgs::Keyframe keyframe = emitted;
+    if (restart_graph_) {  // the first keyframe of a new graph: anchored by its own covariance
+      keyframe.T_previous_current.reset();
+      keyframe.relative_covariance.reset();
+      restart_graph_ = false;
+    }
+    if (Status added = graph_->add_keyframe(keyframe); !added) {
+      logger()->warn("session: keyframe {} not added to the graph: {}", keyframe.keyframe_id, added.error().message);
+      return;
+    }
+    latest_keyframe_ = emitted;
+    latest_keyframe_uncorrected_ = frontend_->world_correction().inverse() * emitted.T_world_body.to_se3();
+    if (config_.keep_trajectory) keyframe_records_.push_back({emitted.keyframe_id, emitted.timestamp, latest_keyframe_uncorrected_});
+    ++summary_.graph_keyframes;
+    if (keyframe_callback_) keyframe_callback_(emitted);
+  });
+  frontend_->set_gnss_callback([this](const FusedGnssFix& fix) { add_gnss_factor(fix); });
+}
+
+void Session::add_gnss_factor(const FusedGnssFix& fix) {
+  if (!config_.gnss_factors || !latest_keyframe_ || restart_graph_ || summary_.relocalizations > 0) return;
+  // Both poses before the Frontend's corrections, where their relative motion is the filter's.
+  const SE3 T_keyframe_fix = latest_keyframe_uncorrected_.inverse() * (fix.world_correction.inverse() * fix.T_world_body);
+  const Status added = graph_->add_gps_at_keyframe(latest_keyframe_->keyframe_id, fix.antenna_world, fix.covariance, T_keyframe_fix * fix.lever_arm);
+  if (!added) {
+    logger()->debug("mapping session: GNSS fix at {:.3f} s not added to the graph: {}", fix.timestamp.seconds(), added.error().message);
+    return;
+  }
+  ++summary_.gnss_factors;
+}
+
+Session::~Session() { worker_.reset(); }  // before the odometry it registers with
+
+std::optional<std::chrono::nanoseconds> Session::registration_wait_limit(Timestamp now_in_data) const {
+  // Live data (stamped by a clock synchronized with this machine's) never waits: a push() that
+  // waited would hold back every IMU pose behind it. Recorded data streamed at any speed waits.
+  if (std::abs((Timestamp::wall_clock_now() - now_in_data).seconds()) > config_.live_window_s) return std::nullopt;
+  return std::chrono::nanoseconds(0);
+}
+
+Status Session::push(std::string_view sensor, msgs::SensorMessage message) {
+  if (!config_.mapping) return frontend_->push(sensor, message);
+  if (odometry_ && sensor == lidar_sensor_) {
+    if (auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(std::move(*scan));
+  }
+  const Status pushed = frontend_->push(sensor, message);
+  register_ready_scans();
+  update_backend();
+  return pushed;
+}
+
+void Session::flush() {
+  frontend_->flush();
+  if (!config_.mapping) return;
+  register_ready_scans();
+  if (worker_) worker_->wait_idle();
+  take_registered();
+  update_backend();
+  if (config_.mode == SessionMode::kRealtime || !latest_keyframe_) return;
+  // Replay: the graph's final estimate over everything (what a background batch would give).
+  if (Result<graph::OptimizationSummary> batch = graph_->smoother().wait_for_batch(); !batch) {
+    logger()->warn("session: final optimization failed: {}", batch.error().message);
+    return;
+  }
+  follow_graph();
+}
+
+Status Session::push_scan(msgs::PointCloudMessage scan) {
+  ++lidar_statistics_.received;
+  ++summary_.scans_received;
+  auto refuse = [this](std::string_view reason, const std::string& detail) -> Status {
+    ++lidar_statistics_.rejected[std::string(reason)];
+    return rejection(reason, detail);
+  };
+  if (Status valid = msgs::validate(scan); !valid) return refuse("invalid", valid.error().message);
+  if (last_scan_time_ && scan.timestamp == *last_scan_time_) {
+    return refuse("duplicate", fmt::format("sweep at {:.6f} s repeats the previous sweep's time", scan.timestamp.seconds()));
+  }
+  if (last_scan_time_ && scan.timestamp < *last_scan_time_) {
+    return refuse("out_of_order", fmt::format("sweep at {:.6f} s is older than the previous sweep ({:.6f} s)", scan.timestamp.seconds(),
+                                              last_scan_time_->seconds()));
+  }
+  last_scan_time_ = scan.timestamp;
+  // Into the body clock (calibration: t_body = t_lidar + offset).
+  if (lidar_time_offset_.nanoseconds() != 0) {
+    scan.timestamp = scan.timestamp + lidar_time_offset_;
+    for (Timestamp& time : scan.point_timestamps) time = time + lidar_time_offset_;
+  }
+  if (!lidar_statistics_.first_time.nanoseconds()) lidar_statistics_.first_time = scan.timestamp;
+  lidar_statistics_.last_time = scan.timestamp;
+  const Timestamp end = sweep_end(scan);
+  waiting_scans_.push_back({std::move(scan), end});
+  while (waiting_scans_.size() > config_.max_waiting_scans) {
+    waiting_scans_.pop_front();
+    // Before the first pose the IMU is still aligning (its messages are refused the same way).
+    count_refused(frontend_->latest_pose() ? "imu_behind" : "aligning");
+  }
+  register_ready_scans();
+  update_backend();
+  return ok_status();
+}
+
+void Session::count_refused(const std::string& reason) {
+  ++lidar_statistics_.rejected[reason];
+  ++summary_.scans_refused;
+}
+
+void Session::register_ready_scans() {
+  take_registered();
+  while (!waiting_scans_.empty()) {
+    const std::optional<msgs::PoseEstimate> latest = frontend_->latest_pose();
+    if (latest && !first_pose_time_) first_pose_time_ = latest->timestamp;
+    if (!latest || latest->timestamp < waiting_scans_.front().end) break;
+    const msgs::PointCloudMessage scan = std::move(waiting_scans_.front().scan);
+    waiting_scans_.pop_front();
+    Result<LidarInertialOdometry::PreparedScan> prepared = odometry_->prepare(scan);
+    if (!prepared) {
+      logger()->debug("mapping session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
+      // A sweep that began before the first pose has no motion to start from (the IMU aligned).
+      count_refused(scan.timestamp < *first_pose_time_ ? "aligning" : "not_registered");
+    } else if (worker_) {
+      const std::size_t dropped = worker_->submit(std::move(prepared).value(), registration_wait_limit(latest->timestamp));
+      for (std::size_t i = 0; i < dropped; ++i) count_refused("registration_behind");
     } else {
-      logger()->info("sensor '{}' has no '{}_to_body' calibration: identity mounting, no time offset", sensor.name, sensor.name);
+      on_registered(odometry_->register_scan(*prepared));
     }
-    setups.push_back(setup);
   }
-  if (!imu) return Error("the configuration has no IMU sensor: the frontend propagates the state with the IMU", "sensors");
-  return std::unique_ptr<Session>(new Session(std::make_unique<Impl>(config, std::move(setups), *imu)));
+  take_registered();
 }
 
-const config::SensorConfig* Session::sensor_for_topic(std::string_view topic) const {
-  for (const config::SensorConfig& sensor : impl_->config.sensors) {
-    if (sensor.topic == topic) return &sensor;
-  }
-  return nullptr;
+void Session::take_registered() {
+  if (!worker_) return;
+  for (Result<LidarInertialOdometry::RegisteredScan>& registered : worker_->take_done()) on_registered(std::move(registered));
 }
 
-const config::FusionConfig& Session::config() const { return impl_->config; }
-void Session::set_pose_callback(PoseCallback callback) { impl_->pose_callback = std::move(callback); }
-void Session::set_innovation_callback(InnovationCallback callback) { impl_->innovation_callback = std::move(callback); }
-void Session::set_keyframe_callback(KeyframeCallback callback) { impl_->keyframe_callback = std::move(callback); }
-void Session::set_gnss_callback(GnssCallback callback) { impl_->gnss_callback = std::move(callback); }
-
-Status Session::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized) {
-  Impl& impl = *impl_;
-  const auto found = impl.keyframe_poses.find(keyframe_id);
-  if (found == impl.keyframe_poses.end()) {
-    return Error(fmt::format("unknown_keyframe: keyframe {} was not emitted by this session (or is too old)", keyframe_id));
+void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result) {
+  Result<LidarInertialOdometry::RegisteredScan> fused = odometry_->fuse(std::move(result));
+  if (!fused) {
+    logger()->debug("mapping session: sweep not fused: {}", fused.error().message);
+    count_refused("not_registered");
+    return;
   }
-  if (!T_world_body_optimized.translation().allFinite() || !T_world_body_optimized.rotation().quaternion().coeffs().allFinite()) {
-    return Error("invalid: the optimized pose has non-finite values");
+  const LidarInertialOdometry::RegisteredScan& registered = *fused;
+  summary_.last_registration_ms = 1e3 * registered.seconds;
+  ++lidar_statistics_.fused;
+  ++summary_.scans_registered;
+  summary_.degenerate_scans += registered.estimate.degenerate ? 1 : 0;
+  summary_.weather_degraded_scans += registered.estimate.weather_degraded ? 1 : 0;
+  const SE3& T_world_lidar = registered.T_world_lidar;
+  if (last_lidar_pose_) path_ += (last_lidar_pose_->inverse() * T_world_lidar).translation().norm();
+  last_lidar_pose_ = T_world_lidar;
+  // A map keyframe: the first sweep after a new Frontend keyframe, once the LiDAR moved enough.
+  if (!latest_keyframe_ || (last_anchor_ && *last_anchor_ == latest_keyframe_->keyframe_id)) return;
+  if (!map_keyframes_.empty()) {
+    const SE3 since = map_keyframes_.back().T_world_lidar.inverse() * T_world_lidar;
+    if (since.translation().norm() < config_.map_keyframe_distance && since.rotation().log().norm() < config_.map_keyframe_angle) return;
   }
-  Event event;
-  // At the newest fused event (the estimator's time can trail it: rejected events do not move
-  // it), so the correction goes to the end of the history.
-  event.time = impl.history.empty() ? impl.estimator.time() : std::max(impl.estimator.time(), impl.history.back().event.time);
-  event.sensor = impl.imu_sensor;
-  event.sequence = impl.sequence++;
-  // The session's current belief of the keyframe includes the corrections applied since.
-  event.payload = WorldCorrection{T_world_body_optimized * (impl.estimator.world_correction() * found->second).inverse()};
-  impl.fuse_in_order(std::move(event));
-  ++impl.corrections;
-  // latest_pose() answers in the corrected world at once; the next IMU sample emits it.
-  if (impl.estimator.initialized()) impl.emit_pose(false);
-  return ok_status();
-}
-std::optional<msgs::PoseEstimate> Session::latest_pose() const { return impl_->latest_pose; }
-SE3 Session::world_correction() const { return impl_->estimator.world_correction(); }
-
-std::optional<SE3> Session::pose_at(Timestamp time) const {
-  // In today's world: corrections fused after the entry move it too.
-  const SE3& correction_now = impl_->estimator.world_correction();
-  const auto pose_of = [&correction_now](const Estimator& estimator) {
-    const estimate::NavigationState state = estimator.filter().state();
-    return correction_now * estimator.world_correction().inverse() * SE3(state.R_world_body, state.position);
-  };
-  const std::deque<Impl::HistoryEntry>& history = impl_->history;
-  // history is in fusion order, so its times do not decrease; the first entry at or after `time`.
-  const auto after = std::lower_bound(history.begin(), history.end(), time,
-                                      [](const Impl::HistoryEntry& entry, Timestamp t) { return entry.event.time < t; });
-  if (after == history.end() || after == history.begin() || !after->after.initialized()) return std::nullopt;
-  const auto before = std::prev(after);
-  if (!before->after.initialized()) return std::nullopt;
-  const double span = (after->event.time - before->event.time).seconds();
-  const double fraction = span > 0.0 ? (time - before->event.time).seconds() / span : 1.0;
-  return SE3::interpolate(pose_of(before->after), pose_of(after->after), fraction);
+  add_map_keyframe(latest_keyframe_->keyframe_id, T_world_lidar, registered.points);
 }
 
-Status Session::push(std::string_view sensor_name, const msgs::SensorMessage& message) {
-  Impl& impl = *impl_;
-  const std::optional<size_t> index = impl.sensor_index(sensor_name);
-  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
-  const size_t sensor = *index;
-  const config::SensorConfig* found = &impl.config.sensors[sensor];
-  SensorStatistics& statistics = impl.sensors[sensor];
-  ++statistics.received;
-  if (modality_of(message) != found->modality) {
-    ++statistics.rejected["wrong_type"];
-    return rejection("wrong_type", fmt::format("sensor '{}' is a {} sensor, the message is {}", sensor_name,
-                                               config::to_string(found->modality), msgs::modality_name(message)));
+void Session::add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points) {
+  // The anchor's pose in today's world (the Frontend's history), for the relative pose.
+  const std::optional<Timestamp> anchor_time = graph_->keyframe_time(anchor);
+  const std::optional<SE3> T_world_anchor = anchor_time ? frontend_->pose_at(*anchor_time) : std::nullopt;
+  if (!T_world_anchor) return;
+  cloud::PointCloud cloud;
+  cloud.positions = points;
+  if (Status inserted = map_builder_.insert(T_world_lidar, cloud); !inserted) {
+    logger()->warn("mapping session: map keyframe not inserted: {}", inserted.error().message);
+    return;
   }
-  if (Status valid = msgs::validate(message); !valid) {
-    ++statistics.rejected["invalid"];
-    return rejection("invalid", fmt::format("{}: {}", sensor_name, valid.error().message));
+  if (Result<std::size_t> added = loop_closures_.add_keyframe(points, path_); !added) {
+    logger()->warn("mapping session: map keyframe not added to loop closure: {}", added.error().message);
   }
-  Event event;
-  event.time = msgs::timestamp_of(message) + impl.setups[sensor].time_offset;
-  event.sensor = sensor;
-  event.is_imu = found->modality == SensorModality::kImu;
-  event.payload = message;
-  return impl.accept(sensor, std::move(event));
+  last_anchor_ = anchor;
+  map_keyframe_of_[anchor] = map_keyframes_.size();
+  map_keyframes_.push_back({anchor, T_world_anchor->inverse() * T_world_lidar, T_world_lidar});
+  ++summary_.map_keyframes;
+  ++summary_.map_version;
+  if (map_update_callback_) {
+    msgs::MapUpdate update;
+    update.version = summary_.map_version;
+    update.timestamp = latest_keyframe_ ? latest_keyframe_->timestamp : Timestamp();
+    msgs::PointLayer layer;
+    layer.points = cloud::transformed(cloud, T_world_lidar).positions;
+    update.added_points = std::move(layer);
+    map_update_callback_(update);
+  }
+  if (!config_.loop_closure || loop_closures_.size() != map_keyframes_.size()) return;
+  update_backend();  // the anchor into the graph before its pose is looked up
+  const std::optional<lidar::LoopClosure> loop = loop_closures_.detect([this](std::size_t k) { return map_keyframe_pose(k); });
+  summary_.loop_candidates = loop_closures_.candidates();
+  if (!loop) return;
+  const MapKeyframe& from = map_keyframes_[loop->from];
+  const MapKeyframe& to = map_keyframes_[loop->to];
+  const SE3 T_anchors = from.T_anchor_lidar * loop->T_from_to * to.T_anchor_lidar.inverse();
+  if (Status added = add_loop_factor(from.anchor, to.anchor, T_anchors, std::nullopt); !added) {
+    logger()->warn("mapping session: loop closure not added: {}", added.error().message);
+    return;
+  }
+  ++summary_.loop_closures;
+  logger()->info("mapping session: loop closed between keyframes {} and {} (inlier RMSE {:.3f} m)", from.anchor, to.anchor,
+                 loop->inlier_rmse);
+  update_backend();
 }
 
-// The checks push_pose() and push_relative_pose() share: the sensor exists (counted as received),
-// the pose is valid and the covariance positive definite. `extra` adds checks of its own.
-Result<size_t> Session::Impl::pose_input(std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
-                                         const Eigen::Matrix<double, 6, 6>& covariance, const std::function<Status()>& extra) {
-  const std::optional<size_t> index = sensor_index(sensor_name);
-  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
-  ++sensors[*index].received;
-  msgs::PoseEstimate as_message;  // validate() checks the pose and covariance the same way
-  as_message.timestamp = timestamp;
-  as_message.T_world_body = msgs::Pose::from_se3(pose);
-  as_message.pose_covariance = covariance;
-  Status valid = msgs::validate(as_message);
-  if (valid && extra) valid = extra();
-  if (valid && covariance.llt().info() != Eigen::Success) valid = Error("covariance is not positive definite");
-  if (!valid) {
-    ++sensors[*index].rejected["invalid"];
-    return rejection("invalid", fmt::format("{}: {}: {}", sensor_name, what, valid.error().message));
-  }
-  return *index;
+SE3 Session::map_keyframe_pose(std::size_t k) const {
+  const MapKeyframe& keyframe = map_keyframes_.at(k);
+  const std::optional<SE3> anchor = graph_->optimized_pose(keyframe.anchor);
+  return anchor ? *anchor * keyframe.T_anchor_lidar : keyframe.T_world_lidar;
 }
 
-Status Session::push_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_world_sensor,
-                          const Eigen::Matrix<double, 6, 6>& covariance) {
-  Impl& impl = *impl_;
-  size_t sensor = 0;
-  HANZO_ASSIGN_OR_RETURN(sensor, impl.pose_input(sensor_name, "pose measurement", timestamp, T_world_sensor, covariance, {}));
-  Event event;
-  event.time = timestamp + impl.setups[sensor].time_offset;
-  event.sensor = sensor;
-  event.payload = PoseMeasurement{T_world_sensor, covariance};
-  return impl.accept(sensor, std::move(event));
+Status Session::add_loop_factor(uint64_t from, uint64_t to, const SE3& T_from_to,
+                                       const std::optional<Eigen::Matrix<double, 6, 6>>& covariance) {
+  Eigen::Matrix<double, 6, 6> loop_covariance = Eigen::Matrix<double, 6, 6>::Zero();
+  loop_covariance.diagonal() << Eigen::Vector3d::Constant(config_.loop_translation_sigma * config_.loop_translation_sigma),
+      Eigen::Vector3d::Constant(config_.loop_rotation_sigma * config_.loop_rotation_sigma);
+  return graph_->add_loop_closure(from, to, T_from_to, covariance.value_or(loop_covariance));
 }
 
-Status Session::push_relative_pose(std::string_view sensor_name, Timestamp from, Timestamp to, const SE3& T_from_to,
-                                   const Eigen::Matrix<double, 6, 6>& covariance) {
-  Impl& impl = *impl_;
-  const double dt = (to - from).seconds();
-  const auto interval = [&]() -> Status {
-    if (from.is_zero()) return Error("the start time is zero");
-    if (!(dt > 0.0)) return Error(fmt::format("the interval must be positive, got {} s", dt));
-    return ok_status();
-  };
-  size_t sensor = 0;
-  HANZO_ASSIGN_OR_RETURN(sensor, impl.pose_input(sensor_name, "relative pose", to, T_from_to, covariance, interval));
-  const Eigen::Matrix3d R_to_from = T_from_to.rotation().matrix().transpose();
-  Event event;
-  event.time = to + impl.setups[sensor].time_offset;
-  event.sensor = sensor;
-  event.payload = VelocityMeasurement{R_to_from * T_from_to.translation() / dt, covariance.topLeftCorner<3, 3>() / (dt * dt)};
-  return impl.accept(sensor, std::move(event));
+void Session::update_backend() {
+  Result<KeyframeGraphUpdate> update = graph_->process(frontend_.get());
+  if (!update) {
+    logger()->warn("mapping session: backend update failed: {}", update.error().message);
+    return;
+  }
+  if (update->factors_added == 0) return;
+  summary_.last_correction_m = update->correction_translation_m;
+  follow_graph();
 }
 
-Status Session::Impl::accept(size_t sensor, Event event) {
-  SensorStatistics& statistics = sensors[sensor];
-  const std::string& name = statistics.name;
-  const Timestamp previous = last_input[sensor];
-  if (!previous.is_zero() && event.time == previous) {
-    ++statistics.rejected["duplicate"];
-    return rejection("duplicate", fmt::format("{}: a message at {} ns was already received", name, event.time.nanoseconds()));
+void Session::follow_graph() {
+  // Map keyframes whose keyframe moved follow it.
+  std::map<uint64_t, SE3> moved;
+  for (std::size_t k = 0; k < map_keyframes_.size(); ++k) {
+    const SE3 T_world_lidar = map_keyframe_pose(k);
+    const SE3 change = map_keyframes_[k].T_world_lidar.inverse() * T_world_lidar;
+    if (change.translation().norm() < kMapMoveTranslation && change.rotation().log().norm() < kMapMoveRotation) continue;
+    moved[k] = T_world_lidar;
+    map_keyframes_[k].T_world_lidar = T_world_lidar;
   }
-  if (!previous.is_zero() && event.time < previous) {
-    ++statistics.rejected["out_of_order"];
-    return rejection("out_of_order", fmt::format("{}: message at {} ns is {:.6f} s older than the sensor's previous one", name,
-                                                 event.time.nanoseconds(), (previous - event.time).seconds()));
+  move_map_keyframes(moved);
+}
+
+void Session::move_map_keyframes(const std::map<uint64_t, SE3>& moved) {
+  if (moved.empty()) return;
+  if (Status corrected = map_builder_.correct_poses(moved); !corrected) {
+    logger()->warn("mapping session: map not corrected: {}", corrected.error().message);
+    return;
   }
-  const double max_future = config.frontend.max_future_s;
-  if (!newest.is_zero() && (event.time - newest).seconds() > max_future) {
-    const bool confirmed = pending_jump && std::abs((event.time - *pending_jump).seconds()) <= max_future;
-    if (!confirmed) {
-      pending_jump = event.time;
-      ++statistics.rejected["future_dated"];
-      return rejection("future_dated", fmt::format("{}: message at {} ns is {:.3f} s ahead of the newest accepted time (limit {} s)", name,
-                                                   event.time.nanoseconds(), (event.time - newest).seconds(), max_future));
+  ++summary_.map_version;
+  if (map_update_callback_) {
+    msgs::MapUpdate update_message;
+    update_message.version = summary_.map_version;
+    update_message.timestamp = latest_keyframe_ ? latest_keyframe_->timestamp : Timestamp();
+    update_message.full_replacement = true;
+    if (map_builder_.point_map()) {
+      msgs::FusionMap map;
+      map_builder_.write_layers(map);
+      update_message.added_points = std::move(map.points);
     }
-    logger()->warn("time jumped forward by {:.3f} s (confirmed by two messages)", (event.time - newest).seconds());
+    map_update_callback_(update_message);
   }
-  pending_jump.reset();
-  const double lag = config.frontend.lag_window_s;
-  if (estimator.initialized() && (estimator.time() - event.time).seconds() > lag) {
-    ++statistics.rejected["too_late"];
-    return rejection("too_late", fmt::format("{}: message at {} ns is {:.3f} s older than the newest fused time (lag window {} s)", name,
-                                             event.time.nanoseconds(), (estimator.time() - event.time).seconds(), lag));
-  }
+}
 
-  last_input[sensor] = event.time;
-  if (statistics.first_time.is_zero()) statistics.first_time = event.time;
-  statistics.last_time = event.time;
-  if (first_input.is_zero()) first_input = event.time;
-  newest = std::max(newest, event.time);
-  const bool is_pose = !std::holds_alternative<msgs::SensorMessage>(event.payload);
-  if (!is_pose && !fused_directly(statistics.modality)) {
-    ++statistics.rejected["not_fused"];
-    return ok_status();
+Result<LoopClosureOutcome> Session::close_loop(const LoopClosureRequest& request) {
+  if (request.from_keyframe.has_value() != request.to_keyframe.has_value()) {
+    return Error("invalid: give both from_keyframe and to_keyframe, or neither");
   }
-  event.sequence = sequence++;
-  // Late: it belongs before something already fused (the history is in fusion order). Not
-  // estimator.time(): events that change nothing (before the IMU aligned, a rejected spike)
-  // leave it behind, and appending an older event then would unsort the history.
-  if (!history.empty() && fused_before(event, history.back().event)) {
-    fuse_late(std::move(event));
+  if (request.T_from_to && !request.from_keyframe) return Error("invalid: a relative pose needs from_keyframe and to_keyframe");
+  if (request.T_from_to && !request.T_from_to->matrix().allFinite()) return Error("invalid: the relative pose is not finite");
+  update_backend();
+  for (const std::optional<uint64_t>& id : {request.from_keyframe, request.to_keyframe}) {
+    if (id && !graph_->keyframe_time(*id)) return Error(fmt::format("not_found: keyframe {} is unknown", *id));
+  }
+  LoopClosureOutcome outcome;
+  if (request.T_from_to) {
+    outcome.from_keyframe = *request.from_keyframe;
+    outcome.to_keyframe = *request.to_keyframe;
+    outcome.T_from_to = *request.T_from_to;
   } else {
-    pending.insert(std::upper_bound(pending.begin(), pending.end(), event, fused_before), std::move(event));
-  }
-  release_pending();
-  return ok_status();
-}
-
-void Session::flush() { impl_->release_pending(true); }
-
-void Session::Impl::release_pending(bool flush_all) {
-  // Measurements wait for the IMU to reach their time; when the IMU is silent they go ahead.
-  const Timestamp imu_time = last_input[imu_sensor];
-  const bool imu_silent = imu_time.is_zero() || (newest - imu_time).seconds() > setups[imu_sensor].config->effective_timeout_s();
-  const Timestamp release = imu_silent || flush_all ? newest : imu_time;
-  size_t released = 0;
-  while (released < pending.size() && pending[released].time <= release) ++released;
-  if (released == 0) return;
-  std::vector<Event> ready(std::make_move_iterator(pending.begin()), std::make_move_iterator(pending.begin() + static_cast<std::ptrdiff_t>(released)));
-  pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(released));
-  for (Event& event : ready) fuse_in_order(std::move(event));
-  prune_history();
-}
-
-void Session::Impl::count(const Event& event, const EventOutcome& outcome) {
-  // A backend correction rides on the IMU sensor's index but is no message of it (`corrections`).
-  if (std::holds_alternative<WorldCorrection>(event.payload)) return;
-  SensorStatistics& statistics = sensors[event.sensor];
-  if (outcome.fused) {
-    ++statistics.fused;
-  } else {
-    ++statistics.rejected[std::string(outcome.reason)];
-  }
-  if (outcome.zero_velocity_update) ++zero_velocity_updates;
-}
-
-void Session::Impl::fuse_in_order(Event event) {
-  const EventOutcome outcome = estimator.process(event, this);
-  count(event, outcome);
-  if (config.frontend.lag_window_s > 0.0) history.push_back({event, estimator});
-  if (event.is_imu && outcome.fused && estimator.initialized()) emit_pose(true);
-  if (outcome.keyframe) emit_keyframe(*outcome.keyframe);
-  report_gnss(event, outcome);
-}
-
-void Session::Impl::report_gnss(const Event& event, const EventOutcome& outcome) {
-  if (!outcome.gnss_fix || !gnss_callback) return;
-  FusedGnssFix fix = *outcome.gnss_fix;
-  fix.sensor = sensors[event.sensor].name;
-  gnss_callback(fix);
-}
-
-void Session::Impl::emit_keyframe(const msgs::Keyframe& keyframe) {
-  // A rollback re-creates keyframes already emitted (same ids): the first emission stands.
-  if (!keyframe_poses.empty() && keyframe.keyframe_id <= keyframe_poses.rbegin()->first) return;
-  constexpr size_t kRememberedKeyframes = 100000;
-  keyframe_poses[keyframe.keyframe_id] = estimator.world_correction().inverse() * keyframe.T_world_body.to_se3();
-  if (keyframe_poses.size() > kRememberedKeyframes) keyframe_poses.erase(keyframe_poses.begin());
-  ++keyframes;
-  if (keyframe_callback) keyframe_callback(keyframe);
-}
-
-void Session::Impl::fuse_late(Event event) {
-  // Restore the estimator from just before the late event, fuse it, then re-fuse what followed.
-  const auto position = std::upper_bound(history.begin(), history.end(), event,
-                                         [](const Event& e, const HistoryEntry& entry) { return fused_before(e, entry.event); });
-  const size_t index = static_cast<size_t>(position - history.begin());
-  estimator = index == 0 ? history_base : history[index - 1].after;
-  const EventOutcome outcome = estimator.process(event, this);
-  count(event, outcome);
-  // A late IMU message (its stream fell behind another sensor's, which was fused ahead of it)
-  // still gets its pose, as of its own time: poses come from IMU messages only, and those
-  // arrive in order, so the pose stream stays in time order.
-  if (event.is_imu && outcome.fused && estimator.initialized()) emit_pose(true);
-  // It can make a keyframe, and so can the IMU messages re-fused after it: those not emitted
-  // yet are emitted now.
-  if (outcome.keyframe) emit_keyframe(*outcome.keyframe);
-  report_gnss(event, outcome);
-  ++sensors[event.sensor].rolled_back;
-  ++rollbacks;
-  history.insert(history.begin() + static_cast<std::ptrdiff_t>(index), HistoryEntry{event, estimator});
-  replaying = true;
-  for (size_t i = index + 1; i < history.size(); ++i) {
-    const EventOutcome again = estimator.process(history[i].event, nullptr);
-    history[i].after = estimator;
-    if (history[i].event.is_imu && again.fused && estimator.initialized()) emit_pose(false);
-    if (again.keyframe) emit_keyframe(*again.keyframe);
-  }
-  replaying = false;
-}
-
-void Session::Impl::prune_history() {
-  const double lag = config.frontend.lag_window_s;
-  while (!history.empty() && (history.back().event.time - history.front().event.time).seconds() > lag) {
-    history_base = std::move(history.front().after);
-    history.pop_front();
-  }
-}
-
-void Session::Impl::update_timeouts() {
-  for (size_t i = 0; i < sensors.size(); ++i) {
-    const Timestamp reference = last_input[i].is_zero() ? first_input : last_input[i];
-    const double timeout = setups[i].config->effective_timeout_s();
-    const bool silent = (newest - reference).seconds() > timeout;
-    if (silent && !sensors[i].timed_out) {
-      ++sensors[i].timeouts;
-      logger()->warn("sensor '{}' timed out: silent for more than {} s; fusing the other sensors", sensors[i].name, timeout);
+    std::optional<lidar::LoopClosure> loop;
+    const auto pose = [this](std::size_t k) { return map_keyframe_pose(k); };
+    if (request.from_keyframe) {
+      const auto from = map_keyframe_of_.find(*request.from_keyframe);
+      const auto to = map_keyframe_of_.find(*request.to_keyframe);
+      if (from == map_keyframe_of_.end() || to == map_keyframe_of_.end()) {
+        return Error(fmt::format("not_found: keyframe {} has no scan (map keyframes: {})",
+                                 from == map_keyframe_of_.end() ? *request.from_keyframe : *request.to_keyframe, map_keyframes_.size()));
+      }
+      Result<lidar::LoopClosure> verified =
+          loop_closures_.verify(from->second, to->second, pose(from->second).inverse() * pose(to->second), pose);
+      if (!verified) {
+        return Error(fmt::format("not_verified: keyframes {} -> {} (map keyframes {} -> {}): {}", *request.from_keyframe,
+                                 *request.to_keyframe, from->second, to->second, verified.error().message));
+      }
+      loop = *verified;
+    } else {
+      loop = loop_closures_.detect(pose);
+      summary_.loop_candidates = loop_closures_.candidates();
+      if (!loop) return Error("not_found: no verified loop closure for the newest map keyframe");
     }
-    sensors[i].timed_out = silent;
+    const MapKeyframe& from = map_keyframes_[loop->from];
+    const MapKeyframe& to = map_keyframes_[loop->to];
+    outcome.from_keyframe = from.anchor;
+    outcome.to_keyframe = to.anchor;
+    outcome.T_from_to = from.T_anchor_lidar * loop->T_from_to * to.T_anchor_lidar.inverse();
+    outcome.registered = true;
+    outcome.inlier_rmse = loop->inlier_rmse;
+    outcome.inlier_fraction = loop->inlier_fraction;
   }
+  HANZO_RETURN_IF_ERROR(add_loop_factor(outcome.from_keyframe, outcome.to_keyframe, outcome.T_from_to, request.covariance));
+  ++summary_.manual_loop_closures;
+  update_backend();
+  outcome.correction_m = summary_.last_correction_m;
+  return outcome;
 }
 
-msgs::PoseStatus Session::Impl::pose_status() const {
-  msgs::PoseStatus status;
-  std::set<SensorModality> modalities;
-  bool any_timed_out = false;
-  for (size_t i = 0; i < sensors.size(); ++i) {
-    any_timed_out = any_timed_out || sensors[i].timed_out;
-    const Timestamp fused = estimator.last_fused()[i];
-    if (fused.is_zero() || (estimator.time() - fused).seconds() > setups[i].config->effective_timeout_s()) continue;
-    modalities.insert(sensors[i].modality);
-    status.active_sensors.push_back(sensors[i].name);
+Result<RelocalizationOutcome> Session::relocalize(const lidar::MapLocalizer& map, const RelocalizationRequest& request) {
+  if (request.T_map_body_guess && !request.T_map_body_guess->matrix().allFinite()) return Error("invalid: the guess is not finite");
+  if (!(request.linear_window >= 0) || !(request.angular_window >= 0)) {
+    return Error("invalid: linear_window and angular_window must be finite and >= 0");
   }
-  status.active_modalities = static_cast<uint32_t>(modalities.size());
-  if (!estimator.initialized()) {
-    status.state = msgs::TrackingState::kInitializing;
-  } else if (sensors[imu_sensor].timed_out) {
-    status.state = msgs::TrackingState::kLost;
-  } else if (any_timed_out || !status.localization_reliable()) {
-    status.state = msgs::TrackingState::kDegraded;
-  } else {
-    status.state = msgs::TrackingState::kTracking;
+  update_backend();
+  if (map_keyframes_.empty() || !latest_keyframe_) {
+    return Error("not_ready: no LiDAR sweep has been mapped yet (the session relocalizes its newest map keyframe)");
   }
-  return status;
+  // The newest map keyframe's sweep with up to two before it, in its frame.
+  const std::size_t newest = map_keyframes_.size() - 1;
+  const SE3 T_world_newest = map_keyframe_pose(newest);
+  std::vector<Eigen::Vector3f> sweep;
+  for (std::size_t k = newest >= 2 ? newest - 2 : 0; k <= newest; ++k) {
+    cloud::PointCloud keyframe;
+    keyframe.positions = loop_closures_.points(k);
+    const std::vector<Eigen::Vector3f> points = cloud::transformed(keyframe, T_world_newest.inverse() * map_keyframe_pose(k)).positions;
+    sweep.insert(sweep.end(), points.begin(), points.end());
+  }
+  lidar::MapLocalizationQuery query;
+  if (request.T_map_body_guess) {
+    // The guess is for the body now; the sweep is older: carry it back by the session's motion.
+    const std::optional<msgs::PoseEstimate> now = frontend_->latest_pose();
+    if (!now) return Error("not_ready: the session has no pose yet");
+    query.T_map_sensor_guess = *request.T_map_body_guess * now->T_world_body.to_se3().inverse() * T_world_newest;
+    query.linear_window = request.linear_window;
+    query.angular_window = request.angular_window;
+  }
+  Result<lidar::MapLocalization> localized = map.localize(sweep, T_world_newest.rotation(), query);
+  if (!localized) return Error("not_found: " + localized.error().message);
+
+  RelocalizationOutcome outcome;
+  outcome.localization = *localized;
+  outcome.T_map_lidar = localized->T_map_sensor;
+  outcome.T_map_world = localized->T_map_sensor * T_world_newest.inverse();
+  outcome.keyframe_id = latest_keyframe_->keyframe_id;
+  // The session's belief of its newest keyframe, moved onto the map (Frontend::apply_correction
+  // composes with the corrections applied before).
+  const SE3 belief = frontend_->world_correction() * latest_keyframe_->T_world_body.to_se3();
+  HANZO_RETURN_IF_ERROR(with_context(frontend_->apply_correction(outcome.keyframe_id, outcome.T_map_world * belief), "invalid"));
+  // The graph holds the old world: a fresh one starts at the next keyframe; the map moves rigidly
+  // and its keyframes stay there (their anchors are not in the new graph).
+  std::map<uint64_t, SE3> moved;
+  for (std::size_t k = 0; k < map_keyframes_.size(); ++k) {
+    map_keyframes_[k].T_world_lidar = outcome.T_map_world * map_keyframe_pose(k);
+    moved[k] = map_keyframes_[k].T_world_lidar;
+  }
+  graph_ = std::make_unique<KeyframeGraph>(config_.backend);
+  restart_graph_ = true;
+  move_map_keyframes(moved);
+  ++summary_.relocalizations;
+  summary_.last_correction_m = ((outcome.T_map_world * belief).translation() - belief.translation()).norm();
+  logger()->info("mapping session: relocalized in the map (moved {:.2f} m; 2D score {:.2f}, RMSE {:.3f} m)", summary_.last_correction_m,
+                 localized->score, localized->inlier_rmse);
+  return outcome;
 }
 
-void Session::Impl::emit_pose(bool notify) {
-  update_timeouts();
-  const estimate::NavigationState state = estimator.filter().state();
-  const estimate::ErrorCovariance covariance = estimator.filter().covariance();
-  msgs::PoseEstimate pose;
-  pose.timestamp = estimator.time();
-  pose.frame_id = "world";
-  pose.child_frame_id = "body";
-  pose.T_world_body = msgs::Pose::from_se3(SE3(state.R_world_body, state.position));
-  pose.velocity = state.velocity;
-  pose.pose_covariance = covariance.topLeftCorner<6, 6>();
-  pose.status = pose_status();
-  latest_pose = pose;
-  if (!notify) return;
-  ++poses;
-  if (pose_callback) pose_callback(pose);
+msgs::FusionMap Session::map() const {
+  msgs::FusionMap map;
+  map.version = summary_.map_version;
+  map_builder_.write_layers(map);
+  return map;
 }
 
 SessionSummary Session::summary() const {
-  SessionSummary summary;
-  summary.sensors = impl_->sensors;
-  summary.poses = impl_->poses;
-  summary.rollbacks = impl_->rollbacks;
-  summary.zero_velocity_updates = impl_->zero_velocity_updates;
-  summary.keyframes = impl_->keyframes;
-  summary.corrections = impl_->corrections;
-  summary.filter = std::string(impl_->estimator.filter().name());
-  // Now, not as of the latest pose: a sensor heard from again after that pose no longer counts
-  // as timed out (the pose's own status stays as it was emitted).
-  summary.state = impl_->latest_pose ? impl_->pose_status().state : msgs::TrackingState::kInitializing;
+  SessionSummary summary = frontend_->summary();
+  for (SensorStatistics& sensor : summary.sensors) {
+    if (!odometry_ || sensor.name != lidar_sensor_) continue;
+    // Sweeps come here, not through Frontend::push: our counts; the Frontend's timeout and
+    // consistency monitoring of the fused poses stay.
+    sensor.received = lidar_statistics_.received;
+    sensor.fused = lidar_statistics_.fused;
+    sensor.rejected = lidar_statistics_.rejected;
+    sensor.first_time = lidar_statistics_.first_time;
+    sensor.last_time = lidar_statistics_.last_time;
+  }
   return summary;
+}
+
+MappingSummary Session::mapping_summary() const {
+  MappingSummary summary = summary_;
+  summary.map_memory_bytes = map_builder_.memory_bytes();
+  return summary;
+}
+
+std::optional<SE3> Session::keyframe_pose(uint64_t keyframe_id) const { return graph_->optimized_pose(keyframe_id); }
+
+std::vector<StampedPose> Session::optimized_trajectory() const {
+  // The correction D = X_optimized * T_uncorrected^-1 of every keyframe the graph knows.
+  std::vector<std::pair<Timestamp, SE3>> corrections;
+  for (const KeyframeRecord& keyframe : keyframe_records_) {
+    if (const std::optional<SE3> optimized = graph_->optimized_pose(keyframe.keyframe_id)) {
+      corrections.emplace_back(keyframe.timestamp, *optimized * keyframe.T_world_body_uncorrected.inverse());
+    }
+  }
+  std::vector<StampedPose> trajectory;
+  trajectory.reserve(uncorrected_poses_.size());
+  std::size_t next = 0;  // the first keyframe after the pose
+  for (const StampedPose& pose : uncorrected_poses_) {
+    while (next < corrections.size() && corrections[next].first <= pose.timestamp) ++next;
+    SE3 correction = frontend_->world_correction();  // no keyframe in the graph: the filter's own
+    if (!corrections.empty()) {
+      if (next == 0) {
+        correction = corrections.front().second;
+      } else if (next == corrections.size()) {
+        correction = corrections.back().second;
+      } else {
+        const auto& [t0, D0] = corrections[next - 1];
+        const auto& [t1, D1] = corrections[next];
+        const double fraction = (pose.timestamp - t0).seconds() / (t1 - t0).seconds();
+        correction = D0 * SE3::exp(fraction * (D0.inverse() * D1).log());
+      }
+    }
+    trajectory.push_back({pose.timestamp, correction * pose.T_world_body});
+  }
+  return trajectory;
 }
 
 }  // namespace hanzo::fusion::pipeline

@@ -107,7 +107,7 @@ struct ManagedSession {
   calib::Calibration calibration;
 
   std::mutex mutex;  // guards everything below
-  std::unique_ptr<pipeline::MappingSession> session;  // null once ended
+  std::unique_ptr<pipeline::Session> session;  // null once ended
   pipeline::SessionSummary final_summary;      // the session's summary when it ended
   pipeline::MappingSummary final_mapping;
   std::optional<msgs::FusionMap> final_map;    // the session's map when it ended (if it had one)
@@ -222,7 +222,7 @@ struct SessionManager::Impl {
     if (!map->points || map->points->points.empty()) {
       return ApiError{ErrorCode::kInvalidArgument, fmt::format("map '{}' version {} has no point layer to localize in", map_id, version), "map_id"};
     }
-    auto created = lidar::MapLocalizer::create(std::move(map->points->points), {}, pipeline::MappingSessionConfig().lidar_odometry.odometry);
+    auto created = lidar::MapLocalizer::create(std::move(map->points->points), {}, pipeline::SessionConfig().lidar_odometry.odometry);
     if (!created) return ApiError::from(ErrorCode::kInvalidArgument, created.error());
     auto prepared = std::make_shared<const lidar::MapLocalizer>(std::move(created).value());
     std::lock_guard lock(localizers_mutex);
@@ -231,14 +231,14 @@ struct SessionManager::Impl {
     return prepared;
   }
 
-  // A pipeline::MappingSession for `managed` with its callbacks wired (not yet installed; map
+  // A pipeline::Session for `managed` with its callbacks wired (not yet installed; map
   // updates: sync_map_updates).
-  Result<std::unique_ptr<pipeline::MappingSession>> make_pipeline(ManagedSession& managed, const config::FusionConfig& configuration,
+  Result<std::unique_ptr<pipeline::Session>> make_pipeline(ManagedSession& managed, const config::FusionConfig& configuration,
                                                                   const calib::Calibration& calibration) {
-    pipeline::MappingSessionConfig mapping;
-    mapping.asynchronous_registration = true;  // the IMU's poses never wait for a LiDAR registration
-    mapping.max_registration_wait_s = 0.0;  // live: a sweep the worker cannot take at once drops the oldest waiting
-    auto session = pipeline::MappingSession::create(configuration, calibration, mapping);
+    pipeline::SessionConfig session_config = pipeline::SessionConfig::from(configuration);
+    session_config.mode = pipeline::SessionMode::kRealtime;  // bounded latency: the IMU's poses never wait for a registration
+    session_config.keep_trajectory = false;                  // the server stores the poses itself
+    auto session = pipeline::Session::create(configuration, calibration, session_config);
     if (!session) return session.error();
     ManagedSession* raw = &managed;
     session.value()->set_pose_callback([this, raw](const msgs::PoseEstimate& pose) { on_pose(*raw, pose); });
@@ -818,7 +818,7 @@ ApiResult<RelocalizeResult> SessionManager::relocalize(const Principal& caller, 
     return ApiError::from(code, outcome.error());
   }
   result.outcome = std::move(outcome).value();
-  managed.latest_pose = managed.session->session().latest_pose();  // already in the map's frame
+  managed.latest_pose = managed.session->frontend().latest_pose();  // already in the map's frame
   logger()->info("session {} relocalized in map {} version {} by {}", session_id, result.map_id, result.version, caller.name);
   return result;
 }

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <set>
 #include <string>
 
@@ -368,7 +369,8 @@ TEST(Cli, RunReplaysTheSampleAndScoresItAgainstGroundTruth) {
   EXPECT_LT(json["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), 0.15);
   EXPECT_LT(json["evaluation"]["rpe_1m_rmse_m"].get<double>(), 0.05);
   EXPECT_EQ(json["summary"]["keyframes"], 19);  // 1 Hz after alignment
-  for (const char* file : {"trajectory.tum", "poses.csv", "innovations.csv", "keyframes.csv", "summary.json", "trajectory.svg", "covariance.svg"}) {
+  for (const char* file : {"trajectory.tum", "trajectory_optimized.tum", "poses.csv", "innovations.csv", "keyframes.csv", "summary.json",
+                           "trajectory.svg", "covariance.svg"}) {
     EXPECT_TRUE(std::filesystem::exists(dir / "run" / file)) << file;
   }
   // Bad input: a configuration without an IMU, a missing log; one line on stderr, exit 1.
@@ -381,6 +383,48 @@ TEST(Cli, RunReplaysTheSampleAndScoresItAgainstGroundTruth) {
                                          (dir / "bad").string()));
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_THAT(missing.err, HasSubstr("none.mcap"));
+  std::filesystem::remove_all(dir);
+}
+
+std::string file_bytes(const std::filesystem::path& path) {
+  std::ifstream file(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>()};
+}
+
+// The whole pipeline through `run` (IMU + wheels + LiDAR in the simulated warehouse): the real-time
+// and the optimized trajectory, the map; the same log twice, on one and on two threads, gives
+// the same files byte for byte (replay mode: no background work, no wall clock).
+TEST(Cli, RunMapsWithTheWholePipelineAndReplaysBitIdenticallyOnAnyThreadCount) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_run_lidar_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  const CliRun simulated = run(fmt::format("sim examples/scenarios/warehouse_robot.yaml --out {} --duration 25 --sensors imu,lidar,wheels "
+                                           "--threads 0 --no-foxglove",
+                                           (dir / "sim").string()));
+  ASSERT_EQ(simulated.exit_code, 0) << simulated.err;
+  const auto replay = [&](int threads) {
+    const std::filesystem::path out = dir / fmt::format("run{}", threads);
+    const CliRun replayed = run(fmt::format("run --config {0}/fusion.yaml --calib {0}/calibration.yaml --log {0}/sensors.mcap --out {1} "
+                                            "--gt {0}/ground_truth.tum --threads {2} --json",
+                                            (dir / "sim").string(), out.string(), threads));
+    EXPECT_EQ(replayed.exit_code, 0) << replayed.err;
+    return nlohmann::json::parse(replayed.out.empty() ? "{}" : replayed.out);
+  };
+  const nlohmann::json one = replay(1);
+  const nlohmann::json two = replay(2);
+  ASSERT_TRUE(one.contains("mapping")) << one.dump();
+  EXPECT_EQ(one["mode"], "replay");
+  EXPECT_GT(one["mapping"]["scans_registered"].get<int>(), 200);
+  EXPECT_GT(one["mapping"]["map_keyframes"].get<int>(), 5);
+  EXPECT_GT(one["mapping"]["graph_keyframes"].get<int>(), 15);
+  for (const char* key : {"evaluation", "evaluation_optimized"}) {
+    ASSERT_TRUE(one[key].contains("ape_se3_aligned_rmse_m")) << one[key].dump();
+    EXPECT_LT(one[key]["ape_se3_aligned_rmse_m"].get<double>(), 0.1) << key;
+  }
+  for (const char* file : {"trajectory.tum", "trajectory_optimized.tum", "map.fmap", "map.png", "map_points.png", "keyframes.csv", "poses.csv"}) {
+    const std::string first = file_bytes(dir / "run1" / file);
+    EXPECT_FALSE(first.empty()) << file;
+    EXPECT_TRUE(first == file_bytes(dir / "run2" / file)) << file << " differs between --threads 1 and --threads 2";
+  }
   std::filesystem::remove_all(dir);
 }
 

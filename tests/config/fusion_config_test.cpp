@@ -1,5 +1,6 @@
 #include "hanzo/fusion/config/fusion_config.hpp"
 
+#include <cmath>
 #include <filesystem>
 
 #include <gmock/gmock.h>
@@ -95,6 +96,10 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   config.frontend.ukf = {0.5, 1.0, -2.0};
   config.frontend.particle_filter = {2000, 0.25, 7};
   config.frontend.datum = GeodeticPoint{48.1, 11.5, 520.25};
+  config.mapping.lidar_source_voxel = 0.25;
+  config.mapping.map_voxel = 0.05;
+  config.mapping.loop_closure = false;
+  config.mapping.keyframe_angle = 0.0;
   config.sensors.push_back({"front_radar", SensorModality::kRadar, "/radar: front", 13.5, "radar link", "continental_ars408",
                             {.timeout_s = 0.3, .velocity_noise = 0.2}});
   config.sensors.push_back({"tracker", SensorModality::kGnss, "/gps", 1.0 / 3.0, "gps_link", "",
@@ -114,12 +119,30 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   EXPECT_EQ(loaded->find_sensor("imu2")->fusion.use_orientation, (std::array<bool, 3>{true, false, true}));
   EXPECT_TRUE(loaded->find_sensor("wheels2")->fusion.use_yaw_rate);
   EXPECT_EQ(loaded->frontend.covariance.process_noise_accel, 0.123456789012345);
+  EXPECT_EQ(loaded->mapping.lidar_source_voxel, 0.25);
+  EXPECT_EQ(loaded->mapping.map_voxel, 0.05);
+  EXPECT_FALSE(loaded->mapping.loop_closure);
+  EXPECT_EQ(loaded->mapping.keyframe_angle, 0.0);
+  EXPECT_EQ(loaded->mapping.occupancy_resolution, MappingConfig{}.occupancy_resolution);
   ASSERT_EQ(loaded->sensors.size(), 10U);
   EXPECT_EQ(loaded->sensors[6].topic, "/radar: front");
   EXPECT_EQ(loaded->sensors[6].modality, SensorModality::kRadar);
   EXPECT_EQ(loaded->sensors[7].modality, SensorModality::kGnss);
   EXPECT_EQ(loaded->sensors[7].rate_hz, 1.0 / 3.0);
   std::filesystem::remove(path);
+}
+
+TEST(FusionConfig, MappingBlockIsCheckedKeyByKey) {
+  const std::string sensors = "  sensors:\n    imu: {rate: 100}\n";
+  EXPECT_THAT(error_of("fusion:\n  mapping:\n    map_voxel: 0\n" + sensors), HasSubstr("fusion.yaml:3: mapping.map_voxel: expected a value > 0, got 0"));
+  EXPECT_THAT(error_of("fusion:\n  mapping:\n    keyframe_distance: -1\n" + sensors), HasSubstr("mapping.keyframe_distance"));
+  EXPECT_THAT(error_of("fusion:\n  mapping:\n    loop_closure: maybe\n" + sensors), HasSubstr("mapping.loop_closure"));
+  EXPECT_THAT(error_of("fusion:\n  mapping:\n    map_voxels: 0.1\n" + sensors), HasSubstr("map_voxels"));
+  FusionConfig config = parse_fusion_config("fusion:\n  mapping: {enabled: false, lidar_voxel: 0.5}\n" + sensors, "fusion.yaml").value();
+  EXPECT_FALSE(config.mapping.enabled);
+  EXPECT_EQ(config.mapping.lidar_voxel, 0.5);
+  config.mapping.loop_max_rmse = std::nan("");
+  EXPECT_THAT(validate(config).error().message, HasSubstr("mapping.loop_max_rmse"));
 }
 
 TEST(FusionConfig, SaveRefusesAnInvalidConfigAndKeepsTheOldFile) {

@@ -1,4 +1,4 @@
-// The backend behind the Session: keyframes become pose nodes, loop closures bend the
+// The backend behind the Frontend: keyframes become pose nodes, loop closures bend the
 // trajectory back onto the truth, corrections flow back into the frontend; GNSS fixes attach
 // to keyframes; bad input changes nothing.
 
@@ -44,8 +44,8 @@ TEST(KeyframeGraph, LoopClosuresCorrectTheDeadReckonedTrajectoryAndTheFrontend) 
   const sim::Scenario scenario = dead_reckoning_warehouse();
   auto simulation = sim::ScenarioSimulation::create(scenario).value();
   const sim::SplineTrajectory& trajectory = simulation->trajectory();
-  auto session = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
-  auto frontend_only = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  auto session = Frontend::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  auto frontend_only = Frontend::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
   std::vector<msgs::Keyframe> frontend_only_keyframes;
   frontend_only->set_keyframe_callback([&](const msgs::Keyframe& keyframe) { frontend_only_keyframes.push_back(keyframe); });
 
@@ -103,7 +103,7 @@ TEST(KeyframeGraph, LoopClosuresCorrectTheDeadReckonedTrajectoryAndTheFrontend) 
   const double optimized_rmse = position_rmse(optimized), dead_reckoned_rmse = position_rmse(dead_reckoned);
   // The live frontend estimate at the end, with and without the backend's corrections, aligned
   // like the keyframes (by the first keyframe).
-  const auto final_error = [&](const Session& fused, const SE3& first_keyframe, Timestamp first_time) {
+  const auto final_error = [&](const Frontend& fused, const SE3& first_keyframe, Timestamp first_time) {
     const SE3 alignment = trajectory.sample(first_time).T_world_body * first_keyframe.inverse();
     const msgs::PoseEstimate pose = *fused.latest_pose();
     return ((alignment * pose.T_world_body.to_se3()).translation() - trajectory.sample(pose.timestamp).T_world_body.translation()).norm();

@@ -1,5 +1,5 @@
-// LiDAR-inertial odometry: simulated IMU + LiDAR go into a Session and a LidarInertialOdometry;
-// the Session's output (IMU rate, LiDAR poses fused) is compared with the ground truth.
+// LiDAR-inertial odometry: simulated IMU + LiDAR go into a Frontend and a LidarInertialOdometry;
+// the Frontend's output (IMU rate, LiDAR poses fused) is compared with the ground truth.
 
 #include <algorithm>
 #include <cmath>
@@ -17,10 +17,10 @@ namespace hanzo::fusion::pipeline {
 namespace {
 
 struct FusedRun {
-  io::Trajectory truth;     // at the Session's poses nearest each fused scan
-  io::Trajectory estimate;  // the Session's T_world_body there
+  io::Trajectory truth;     // at the Frontend's poses nearest each fused scan
+  io::Trajectory estimate;  // the Frontend's T_world_body there
   LidarInertialOdometryStatistics statistics;
-  double worst_velocity_error = 0.0;  // m/s, body frame, Session output vs truth after the first 5 s
+  double worst_velocity_error = 0.0;  // m/s, body frame, Frontend output vs truth after the first 5 s
   double velocity_error_sum = 0.0;
   std::size_t velocity_samples = 0;
 };
@@ -33,7 +33,7 @@ FusedRun run_lidar_inertial(const std::string& path, double duration_s, LidarIne
   scenario.duration = duration_s;
   scenario.num_threads = 0;
   auto simulation = sim::ScenarioSimulation::create(scenario).value();
-  auto session = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  auto session = Frontend::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
   const auto lidar = std::find_if(scenario.sensors.begin(), scenario.sensors.end(),
                                   [](const sim::ScenarioSensor& s) { return s.modality == config::SensorModality::kLidar; });
   LidarInertialOdometry odometry(*session, lidar->name, lidar->T_body_sensor, config);
@@ -43,7 +43,7 @@ FusedRun run_lidar_inertial(const std::string& path, double duration_s, LidarIne
   session->set_pose_callback([&](const msgs::PoseEstimate& pose) {
     latest = pose;
     if ((pose.timestamp - trajectory.start_time()).seconds() > 5.0) {
-      // In the body frame: the Session's world frame differs from the truth's by its unknown
+      // In the body frame: the Frontend's world frame differs from the truth's by its unknown
       // initial yaw (no GNSS) and the tilt of its static alignment.
       const sim::TrajectorySample truth = trajectory.sample(pose.timestamp);
       const Eigen::Vector3d body_truth = truth.T_world_body.rotation().inverse() * truth.velocity_world;
@@ -143,7 +143,7 @@ TEST(LidarInertialOdometry, HandheldSwingsAreDeskewedWithTheImu) {
 
 TEST(LidarInertialOdometry, RefusesSweepsTheSessionCannotPlace) {
   sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_robot.yaml").value();
-  auto session = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  auto session = Frontend::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
   LidarInertialOdometry odometry(*session, "lidar", SE3());
   msgs::PointCloudMessage sweep;
   sweep.timestamp = Timestamp::from_seconds(1700000001.0);

@@ -11,7 +11,7 @@
 
 #include "hanzo/fusion/io/rosbag_import.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
-#include "hanzo/fusion/pipeline/session.hpp"
+#include "hanzo/fusion/pipeline/frontend.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
@@ -43,7 +43,7 @@ struct Replay {
 };
 
 Replay replay(config::FusionConfig config) {
-  auto session = Session::create(config, calib::Calibration{}).value();
+  auto session = Frontend::create(config, calib::Calibration{}).value();
   Replay result;
   session->set_pose_callback([&result](const msgs::PoseEstimate& pose) { result.poses.push_back(pose); });
   auto reader = io::SensorLogReader::open(bag2_log()).value();

@@ -1,5 +1,5 @@
 // The frontend on simulated data with ground truth (sim/): the simulator's messages go straight
-// into a Session, the estimates are compared with the true trajectory.
+// into a Frontend, the estimates are compared with the true trajectory.
 //  - GNSS outage: 30 s of IMU + wheels only keeps the horizontal error under 1 % of the
 //    distance travelled (examples/scenarios/gnss_outage_vehicle.yaml).
 //  - Consistency: the EKF's average NEES over 50 Monte-Carlo runs (different seeds) lies inside
@@ -14,7 +14,7 @@
 #include <gtest/gtest.h>
 
 #include "hanzo/fusion/estimate/chi_square.hpp"
-#include "hanzo/fusion/pipeline/session.hpp"
+#include "hanzo/fusion/pipeline/frontend.hpp"
 #include "hanzo/fusion/sim/scenario.hpp"
 #include "hanzo/fusion/sim/scenario_simulation.hpp"
 
@@ -29,7 +29,7 @@ struct SimulatedRun {
 SimulatedRun simulate_and_fuse(const sim::Scenario& scenario, std::optional<config::FusionConfig> fusion_config = std::nullopt) {
   SimulatedRun run;
   run.simulation = sim::ScenarioSimulation::create(scenario).value();
-  auto session = Session::create(fusion_config.value_or(sim::scenario_fusion_config(scenario)), sim::scenario_calibration(scenario)).value();
+  auto session = Frontend::create(fusion_config.value_or(sim::scenario_fusion_config(scenario)), sim::scenario_calibration(scenario)).value();
   session->set_pose_callback([&run](const msgs::PoseEstimate& pose) { run.poses.push_back(pose); });
   const Status status = run.simulation->run([&session](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) {
     (void)session->push(sensor.name, message);  // rejections (NO_FIX during the outage) are counted

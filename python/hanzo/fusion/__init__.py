@@ -16,6 +16,7 @@ from hanzo.fusion._fusion import (  # noqa: F401
     PinholeCamera,
     PlanarLaserSlam,
     PlanarScanEstimate,
+    Session,
     Point3,
     Pose2,
     Pose3,

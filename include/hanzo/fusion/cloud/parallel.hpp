@@ -13,8 +13,9 @@ namespace hanzo::fusion::cloud {
 /// The threads `num_threads` stands for: itself when > 0, else every hardware thread.
 int thread_count(int num_threads);
 
-/// Number of chunks parallel_chunks() splits `count` items into for `num_threads`.
-size_t chunk_count(size_t count, int num_threads);
+/// Number of chunks parallel_chunks() splits `count` items into (1 up to 64, at least 512 items
+/// a chunk where there are enough); the same for every thread count.
+size_t chunk_count(size_t count);
 
 /// Calls body(chunk, begin, end) for chunk = 0 .. chunk_count(count, num_threads) - 1, the
 /// ranges [begin, end) covering 0 .. count - 1 in order, concurrently on up to num_threads

@@ -67,7 +67,7 @@ struct ParticleFilterSettings {
   uint64_t seed = 1;                // random numbers: the same seed and input give the same output
 };
 
-/// hanzo-fusion's additions to the spec's frontend block (how the Session fuses; all optional).
+/// hanzo-fusion's additions to the spec's frontend block (how the Frontend fuses; all optional).
 struct FrontendConfig {
   FrontendType type = FrontendType::kEkf;
   double predict_rate_hz = 200.0;  // > 0
@@ -132,8 +132,27 @@ struct SensorConfig {
   double effective_timeout_s() const;
 };
 
+/// fusion.mapping: the Frontend's LiDAR odometry, keyframe graph, loop closure and map. The
+/// LiDAR settings apply when a 3D LiDAR is configured; the graph runs with any sensors.
+struct MappingConfig {
+  bool enabled = true;                 // false: the filter alone (no LiDAR odometry, graph or map)
+  double lidar_voxel = 1.0;            // m > 0: LiDAR odometry local-map voxel and neighbour radius
+  double lidar_source_voxel = 1.0;     // m > 0: registration points downsampled to this (0.25 indoors)
+  double lidar_max_range = 100.0;      // m > 0: farther returns ignored
+  double map_voxel = 0.2;              // m > 0: point map layer
+  double occupancy_resolution = 0.1;   // m > 0: 2D occupancy layer
+  double keyframe_distance = 1.0;      // m >= 0 of LiDAR motion between map keyframes
+  double keyframe_angle = 0.2;         // rad >= 0 of LiDAR rotation between map keyframes
+  bool loop_closure = true;            // Scan Context candidates verified by registration
+  double loop_min_travel = 50.0;       // m > 0 of path between the two ends of a loop
+  double loop_search_radius = 10.0;    // m > 0: candidates within this (+5 % of the path between) of the estimate
+  double loop_max_rmse = 0.1;          // m > 0: registration inlier RMSE a loop must reach
+  bool gnss_factors = true;            // fused GNSS fixes become GPS factors of the graph
+};
+
 struct FusionConfig {
   FrontendConfig frontend;
+  MappingConfig mapping;
   std::vector<SensorConfig> sensors;  // in file order
 
   const SensorConfig* find_sensor(std::string_view name) const;

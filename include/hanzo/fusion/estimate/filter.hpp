@@ -1,6 +1,6 @@
 #pragma once
 // Filter: the interface the three frontend filters (EKF, UKF, particle filter) share, so
-// pipeline::Session drives any of them the same way:
+// pipeline::Frontend drives any of them the same way:
 //
 //   reset(state, covariance)   start from a state and its error-state covariance
 //   predict(sample, dt)        propagate by dt seconds with the IMU sample held constant

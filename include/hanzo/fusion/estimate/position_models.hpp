@@ -9,7 +9,7 @@
 namespace hanzo::fusion::estimate {
 
 /// GNSS antenna position in the world frame (ENU around the datum; converting WGS84 to ENU is
-/// the caller's job, pipeline::Session does it with core/geodesy.hpp).
+/// the caller's job, pipeline::Frontend does it with core/geodesy.hpp).
 ///   h(x) = p + R p_body_antenna            (lever arm from the calibration's gnss_to_body)
 ///   H    = [I, -R [p_body_antenna]x, 0, ...]
 class GnssPositionModel final : public MeasurementModel {

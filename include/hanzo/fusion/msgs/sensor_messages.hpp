@@ -126,7 +126,7 @@ struct RadarMessage {
   std::vector<RadarTarget> targets;  // may be empty (nothing detected)
 };
 
-/// Any of the six sensor messages, as the Session and the sensor log carry them.
+/// Any of the six sensor messages, as the Frontend and the sensor log carry them.
 using SensorMessage =
     std::variant<ImuMessage, PointCloudMessage, ImageMessage, GnssMessage, WheelOdometryMessage, RadarMessage>;
 

@@ -4,7 +4,7 @@
 // attach GPS factors to the keyframe at their time; loop closures (LiDAR, visual, or manual
 // through the API) add between factors with a DCS kernel, so a wrong one switches itself off.
 // process() runs one IncrementalSmoother update (graph/incremental_smoother.hpp) and moves the
-// session onto the optimized latest keyframe (Session::apply_correction), closing the loop
+// session onto the optimized latest keyframe (Frontend::apply_correction), closing the loop
 // between frontend and backend (after every update, or only after loop closures:
 // correct_on_loop_closures_only).
 //
@@ -14,7 +14,7 @@
 // (position world, orientation body) to the tangent), which anchors the graph.
 //
 // Use from one thread: attach() queues keyframes from the session's callback; call process()
-// after Session::push returns (never inside a callback).
+// after Frontend::push returns (never inside a callback).
 
 #include <cstdint>
 #include <deque>
@@ -24,7 +24,7 @@
 
 #include "hanzo/fusion/graph/incremental_smoother.hpp"
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
-#include "hanzo/fusion/pipeline/session.hpp"
+#include "hanzo/fusion/pipeline/frontend.hpp"
 
 namespace hanzo::fusion::pipeline {
 
@@ -63,7 +63,7 @@ class KeyframeGraph {
 
   /// Queues the session's keyframes (replaces its keyframe callback). The graph must outlive
   /// the session's pushes.
-  void attach(Session& session);
+  void attach(Frontend& frontend);
 
   /// Queues a keyframe: X(id) at its pose, a between factor from its previous keyframe (which
   /// must be known), or a prior for the first one. Fails on an unknown previous keyframe, a
@@ -87,7 +87,7 @@ class KeyframeGraph {
 
   /// Adds what is queued and re-optimizes; with a session, corrects it onto the optimized
   /// latest keyframe.
-  Result<KeyframeGraphUpdate> process(Session* session = nullptr);
+  Result<KeyframeGraphUpdate> process(Frontend* frontend = nullptr);
 
   /// The optimized pose of a keyframe added by process().
   std::optional<SE3> optimized_pose(uint64_t keyframe_id) const;

@@ -1,23 +1,23 @@
 #pragma once
-// LidarInertialOdometry: LiDAR odometry (lidar/lidar_odometry.hpp) coupled to a Session's
+// LidarInertialOdometry: LiDAR odometry (lidar/lidar_odometry.hpp) coupled to a Frontend's
 // IMU-driven filter (loosely coupled, as LIO-SAM's front end): per scan,
-//  1. the prediction is the motion of the Session's pose (Session::pose_at, the
+//  1. the prediction is the motion of the Frontend's pose (Frontend::pose_at, the
 //     IMU-propagated filter, times T_body_lidar) between the previous and this sweep's
 //     middles. The sweep is deskewed with the filter's poses sampled every
 //     deskew_sample_interval during the sweep (the IMU's motion, accelerations and changing
 //     turn rates included), not with a constant-velocity guess;
 //  2. the scan is registered to the local map from that prediction (LidarOdometry);
 //  3. the result goes back into the filter as a pose measurement of the LiDAR sensor
-//     (Session::push_pose) with the registration covariance, floored at
+//     (Frontend::push_pose) with the registration covariance, floored at
 //     position_sigma_floor / rotation_sigma_floor (the registration's own covariance treats
 //     thousands of points as independent and is far too small). Along degenerate directions
 //     (a corridor's axis) the covariance is large, so the filter keeps its IMU (and wheel)
 //     estimate there.
-// The odometry's world frame is the Session's: the first scan starts at the Session's pose.
-// A scan that arrives before the Session is initialized or outside its history (older than
+// The odometry's world frame is the Frontend's: the first scan starts at the Frontend's pose.
+// A scan that arrives before the Frontend is initialized or outside its history (older than
 // the lag window, newer than the last fused IMU sample) is refused with an Error that says so;
-// nothing changes then. Corrections applied to the Session (Session::apply_correction, by a
-// backend after a loop closure) move the odometry's frame with the Session's world: the local
+// nothing changes then. Corrections applied to the Frontend (Frontend::apply_correction, by a
+// backend after a loop closure) move the odometry's frame with the Frontend's world: the local
 // map stays as it is (it is local) and the pose measurements follow the corrected world.
 
 #include <cstddef>
@@ -30,7 +30,7 @@
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/lidar/lidar_odometry.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
-#include "hanzo/fusion/pipeline/session.hpp"
+#include "hanzo/fusion/pipeline/frontend.hpp"
 
 namespace hanzo::fusion::pipeline {
 
@@ -53,8 +53,8 @@ struct LidarInertialOdometryConfig {
 
 struct LidarInertialOdometryStatistics {
   std::size_t scans = 0;       ///< registered
-  std::size_t refused = 0;     ///< refused scans (Session not ready, bad scan, registration failure)
-  std::size_t fused = 0;       ///< pose measurements the Session accepted
+  std::size_t refused = 0;     ///< refused scans (Frontend not ready, bad scan, registration failure)
+  std::size_t fused = 0;       ///< pose measurements the Frontend accepted
   std::size_t degenerate = 0;  ///< registered scans flagged degenerate
   std::size_t weather_degraded = 0;  ///< registered scans flagged weather_degraded (fused with less weight)
   std::size_t imu_deskewed = 0;      ///< prepared sweeps deskewed with the filter's poses (the others: constant twist)
@@ -62,27 +62,30 @@ struct LidarInertialOdometryStatistics {
 
 class LidarInertialOdometry {
  public:
-  /// `session` must outlive this object; `lidar_sensor` names the Session's LiDAR sensor and
+  /// `frontend` must outlive this object; `lidar_sensor` names the Frontend's LiDAR sensor and
   /// T_body_lidar is its calibration.
-  LidarInertialOdometry(Session& session, std::string lidar_sensor, const SE3& T_body_lidar,
-                        LidarInertialOdometryConfig config = {});
+  /// lidar_time_offset: the LiDAR's calibrated offset (t_body = t_lidar + offset); sweeps come
+  /// to prepare() / process() in the body clock already, and their poses go to the Frontend in
+  /// the LiDAR's clock (Frontend::push_pose applies the offset).
+  LidarInertialOdometry(Frontend& frontend, std::string lidar_sensor, const SE3& T_body_lidar,
+                        LidarInertialOdometryConfig config = {}, Duration lidar_time_offset = {});
 
-  /// Registers one sweep (sensor clock = body clock, as the Session's calibration has it) and
-  /// fuses the result. Push the IMU messages up to the end of the sweep into the Session first.
+  /// Registers one sweep (its times in the body clock) and
+  /// fuses the result. Push the IMU messages up to the end of the sweep into the Frontend first.
   /// = fuse(register_scan(prepare(scan))).
   Result<lidar::LidarOdometryEstimate> process(const msgs::PointCloudMessage& scan);
 
   /// The three steps of process(), for callers that register on another thread (the server:
-  /// the IMU's poses then never wait for a registration). prepare() and fuse() use the Session
-  /// (call them where the Session is used); register_scan() touches only the odometry (one call
-  /// at a time, in the order of prepare(); no Session access), so it may run elsewhere. fuse()
-  /// of a sweep registered late pushes a pose in the past: the Session fuses it by rolling
+  /// the IMU's poses then never wait for a registration). prepare() and fuse() use the Frontend
+  /// (call them where the Frontend is used); register_scan() touches only the odometry (one call
+  /// at a time, in the order of prepare(); no Frontend access), so it may run elsewhere. fuse()
+  /// of a sweep registered late pushes a pose in the past: the Frontend fuses it by rolling
   /// back, if it is still within its lag window.
   struct PreparedScan {
     Timestamp time;                 ///< the sweep's timestamp (its start)
     cloud::PointCloud cloud;
     SE3 T_world_lidar_filter;       ///< the filter's pose at the middle of the sweep
-    SE3 world_correction;           ///< Session::world_correction() then
+    SE3 world_correction;           ///< Frontend::world_correction() then
     /// T_middle_lidar during the sweep from the filter (imu_deskew; none for sweeps without
     /// point times or when the filter lacks a pose inside the sweep).
     std::optional<lidar::SweepMotion> sweep_motion;
@@ -97,7 +100,7 @@ class LidarInertialOdometry {
   Result<PreparedScan> prepare(const msgs::PointCloudMessage& scan);
   Result<RegisteredScan> register_scan(const PreparedScan& scan);
   /// Counts the outcome and fuses a registered sweep; returns it, or the error (registration
-  /// failure, or the Session refusing the pose).
+  /// failure, or the Frontend refusing the pose).
   Result<RegisteredScan> fuse(Result<RegisteredScan> registered);
 
   const LidarInertialOdometryStatistics& statistics() const { return statistics_; }
@@ -107,19 +110,20 @@ class LidarInertialOdometry {
 
  private:
   /// T_middle_lidar every deskew_sample_interval over [0, sweep_length] s after scan_time from
-  /// Session::pose_at; none when the filter lacks a pose there.
+  /// Frontend::pose_at; none when the filter lacks a pose there.
   std::optional<lidar::SweepMotion> sample_sweep_motion(Timestamp scan_time, double sweep_length,
                                                         const SE3& T_world_lidar_middle) const;
 
-  Session& session_;
+  Frontend& frontend_;
   std::string lidar_sensor_;
   SE3 T_body_lidar_;
   LidarInertialOdometryConfig config_;
+  Duration lidar_time_offset_;
   std::unique_ptr<lidar::LidarOdometry> odometry_;
   // register_scan()'s state:
   std::optional<SE3> last_filter_pose_;  ///< the filter's T_world_lidar at the last registered sweep
   SE3 T_world_odometry_;                 ///< the odometry's frame in the session's (corrected) world
-  SE3 correction_at_last_scan_;          ///< Session::world_correction() then
+  SE3 correction_at_last_scan_;          ///< Frontend::world_correction() then
   LidarInertialOdometryStatistics statistics_;
 };
 

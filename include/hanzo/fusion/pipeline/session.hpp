@@ -1,39 +1,63 @@
 #pragma once
-// pipeline::Session: one agent's real-time fusion (spec, "Fusion Pipeline Architecture").
-// Messages from any sensor go in with push(); pose estimates come out at the IMU rate.
+// Session: one agent's whole pipeline (the architecture's "pipeline::Session"): the real-time
+// Frontend filter, the LiDAR(-inertial) odometry, the keyframe factor graph, loop closure and
+// the map. Every face drives it: `hanzo-fusion run`, the server's sessions, the Python
+// `hanzo.fusion.Session`.
 //
-//   auto session = Session::create(fusion_config, calibration).value();
+//   auto session = Session::create(fusion_config, calibration).value();  // mapping: from fusion.mapping
 //   session->set_pose_callback([](const msgs::PoseEstimate& pose) { ... });
-//   for (...) { if (Status s = session->push("gnss", message); !s) log(s.error().message); }
+//   for (...) session->push(sensor, message);      // any sensor, as Frontend::push
+//   session->flush();                               // at the end of a log
+//   msgs::FusionMap map = session->map();           // points + 2D occupancy of the keyframe scans
+//   auto smoothed = session->optimized_trajectory(); // every pose, moved by the optimized graph
 //
-// What push() does with a message (docs/frontend.md has the full story):
-//  1. Input checks, each a rejection with a reason that push() returns and summary() counts:
-//     unknown_sensor, wrong_type (a GNSS message for an IMU sensor), invalid (msgs::validate:
-//     NaN, bad covariance...), duplicate (same timestamp as the sensor's previous message),
-//     out_of_order (older than the sensor's previous message), future_dated (more than
-//     frontend.max_future ahead of the newest accepted time, unless the next message confirms
-//     the jump), too_late (older than the newest fused time by more than frontend.lag_window).
-//     The sensor's calibrated time offset is applied first (t_body = t_sensor + offset).
-//  2. Time ordering: measurements wait until the IMU has reached their time, then are fused in
-//     timestamp order. A message that arrives after the filter has passed its time (inside the
-//     lag window) is fused by restoring the stored estimate from before it and re-fusing what
-//     followed (no silent drop; counted as rolled_back).
-//  3. Fusion, each update chi-square gated (counted per sensor: fused, gated, ...).
-//     IMU: static alignment at start (roll, pitch, gyro bias), then propagation; spikes
-//     rejected; optional attitude (use_orientation). GNSS: fix-type policy, WGS84 -> ENU via
-//     the datum, lever arm. Wheels: forward speed (+ non-holonomic constraint, + yaw rate),
-//     zero-velocity update when the wheels stand still. Poses (LiDAR / visual localization):
-//     push_pose().
-//  4. Monitoring: a sensor silent for longer than its timeout is reported (counted, logged) and
-//     the filter keeps running on the rest. PoseEstimate.status counts the modalities that
-//     constrained the estimate within their timeouts (the IMU counts while it streams); the
-//     spec requires two for reliable localization: state TRACKING with >= 2, DEGRADED with
-//     fewer or with a sensor timed out, LOST without IMU data, INITIALIZING before alignment.
+// Modes (SessionConfig::mode):
+//  - kReplay (default): everything happens inside push(), in message order: the same messages
+//    and configuration give bit-identical poses, keyframes, trajectories and maps, on any
+//    thread count (no worker threads, no background batches, no wall clock).
+//  - kRealtime (the server): LiDAR sweeps are registered on a worker thread of the session's
+//    own, so the IMU's poses never wait for a registration; a registered sweep is fused when
+//    the next message arrives, as a measurement in the past (the Frontend rolls back; it must
+//    come within frontend.lag_window). For live data (message times within live_window_s of
+//    this machine's clock) a sweep the worker cannot take at once drops the oldest waiting one
+//    ("registration_behind": bounded latency, load shedding); recorded data streamed at any
+//    speed waits instead. The graph's full re-optimizations run in the background.
 //
-// Deterministic: the same messages in the same order give bit-identical output. Not
-// thread-safe: one thread pushes (the server serializes per session).
-
+// Per message:
+//  - 3D LiDAR sweeps of the configured LiDAR sensor (the first `lidar` sensor) are checked
+//    (msgs::validate, time after the sensor's previous sweep), moved to the body clock by the
+//    LiDAR's calibrated time offset, and wait until the Frontend's IMU has passed the sweep's
+//    end; then LidarInertialOdometry registers the sweep against its local map from the
+//    filter's motion and fuses the pose into the Frontend. When more than max_waiting_scans
+//    wait (the IMU stopped), the oldest is dropped ("imu_behind"; "aligning" before the
+//    Frontend's first pose).
+//  - Everything else goes to Frontend::push (same checks, same errors).
+//  - Keyframes of the Frontend (frontend.keyframe_interval) become nodes of a KeyframeGraph
+//    (between factors from the filter's relative motion); after each push the graph is updated
+//    and corrects the Frontend. The LiDAR odometry follows the correction (its frame moves with
+//    the Frontend's world).
+//  - Map keyframes: the first registered sweep after a Frontend keyframe, when the LiDAR moved
+//    map_keyframe_distance / map_keyframe_angle since the previous map keyframe, is kept
+//    (deskewed points, sensor frame) with its pose relative to that Frontend keyframe. It goes
+//    into the map (maps::MapBuilder: point map + 2D occupancy by default) and into the loop
+//    closure detector (lidar/loop_closure.hpp: Scan Context + registration). A verified loop
+//    adds a between factor under a DCS kernel (KeyframeGraph::add_loop_closure), the graph
+//    runs a full batch and corrects the Frontend, and every map keyframe whose keyframe moved
+//    is moved in the map (the point map exactly; occupancy keeps what was integrated).
+//  - Manual loop closures (the server's POST /v1/sessions/{id}/loop-closure): close_loop().
+//  - GNSS fixes the filter fused (Frontend::set_gnss_callback) become GPS factors on the newest
+//    Frontend keyframe (gnss_factors), their lever arm carried through the body's motion from
+//    the keyframe to the fix, so that the graph's corrections agree with GNSS instead of
+//    pulling against it (and GNSS bounds the drift of poses a loop closure moves).
+//
+// Frames: world = the Frontend's world (ENU at the datum when GNSS or a datum is configured).
+// Units m, s, rad. Limits: one 3D LiDAR per session; after a relocalization (world = the map's
+// frame) GNSS fixes are no longer added to the graph.
+// Not thread-safe: one thread at a time (the server serializes per session).
+#include <chrono>
+#include <cstddef>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <map>
 #include <memory>
@@ -45,144 +69,248 @@
 #include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/core/result.hpp"
-#include "hanzo/fusion/msgs/estimate_messages.hpp"
-#include "hanzo/fusion/msgs/sensor_messages.hpp"
+#include "hanzo/fusion/lidar/loop_closure.hpp"
+#include "hanzo/fusion/lidar/map_localization.hpp"
+#include "hanzo/fusion/maps/map_builder.hpp"
+#include "hanzo/fusion/msgs/map_messages.hpp"
+#include "hanzo/fusion/pipeline/keyframe_graph.hpp"
+#include "hanzo/fusion/pipeline/lidar_inertial_odometry.hpp"
+#include "hanzo/fusion/pipeline/frontend.hpp"
 
 namespace hanzo::fusion::pipeline {
 
-/// Counters of one configured sensor.
-struct SensorStatistics {
-  std::string name;
-  config::SensorModality modality = config::SensorModality::kImu;
-  uint64_t received = 0;  // push() calls for this sensor
-  uint64_t fused = 0;     // messages whose update moved the estimate (IMU: propagated)
-  uint64_t rolled_back = 0;  // late messages fused by rolling back
-  /// Rejections by reason: the input checks above plus the fusion outcomes "gated",
-  /// "numerical_failure", "no_fix", "weak_fix", "spike", "gimbal_lock", "gap", "not_fused"
-  /// (a modality the frontend does not fuse directly, e.g. raw LiDAR scans without odometry).
-  std::map<std::string, uint64_t> rejected;
-  uint64_t timeouts = 0;     // times the sensor went silent for longer than its timeout
-  bool timed_out = false;    // silent now
-  Timestamp first_time;      // first and last accepted timestamps (body clock)
-  Timestamp last_time;
-  double nis_sum = 0.0;      // sum of normalized innovations squared of fused updates
-  uint64_t nis_count = 0;    // and their degrees of freedom (for the average NIS per dof)
+enum class SessionMode { kReplay, kRealtime };
+std::string_view to_string(SessionMode mode);  // "replay", "realtime"
 
-  uint64_t rejected_total() const;
+struct SessionConfig {
+  /// See the header comment: kReplay is deterministic, kRealtime bounds the latency.
+  SessionMode mode = SessionMode::kReplay;
+  /// Threads of the LiDAR odometry (1: the calling thread; <= 0: every core). Results do not
+  /// depend on it (bit for bit).
+  int num_threads = 1;
+  /// false: the Frontend alone (no LiDAR odometry, graph, loop closure or map); sweeps are
+  /// counted as not fused.
+  bool mapping = true;
+  LidarInertialOdometryConfig lidar_odometry;
+  /// The backend; its batch_on_loop_closure is forced on (a loop closure must correct the
+  /// map and the Frontend at once), smoother.background_batch is set by the mode.
+  KeyframeGraphConfig backend;
+  bool loop_closure = true;
+  /// GNSS fixes the filter fused become GPS factors of the keyframe graph.
+  bool gnss_factors = true;
+  lidar::LoopClosureConfig loop;
+  double loop_translation_sigma = 0.05;  ///< m, loop closure factors (detected and manual)
+  double loop_rotation_sigma = 0.005;    ///< rad
+  double map_keyframe_distance = 1.0;    ///< m of LiDAR motion between map keyframes
+  double map_keyframe_angle = 0.2;       ///< rad
+  /// Map layers. Default: 0.2 m points (keyframes kept at 0.1 m) and a 0.1 m 2D occupancy grid.
+  maps::MapBuilderConfig map = default_map();
+  std::size_t max_waiting_scans = 5;     ///< sweeps waiting for the IMU; beyond, the oldest is dropped
+  /// kRealtime: message times within this of the machine's clock are live data (s).
+  double live_window_s = 10.0;
+  /// Keep every emitted pose (64 bytes each) for optimized_trajectory(); the server does not.
+  bool keep_trajectory = true;
+
+  Status validate() const;
+  static maps::MapBuilderConfig default_map();
+  /// The defaults with the configuration's fusion.mapping block applied.
+  static SessionConfig from(const config::FusionConfig& config);
 };
 
-struct SessionSummary {
-  std::vector<SensorStatistics> sensors;  // in configuration order
-  uint64_t poses = 0;                     // PoseEstimates emitted
-  uint64_t keyframes = 0;
-  uint64_t corrections = 0;               // backend corrections applied
-  uint64_t rollbacks = 0;                 // times the filter rolled back for a late message
-  uint64_t zero_velocity_updates = 0;
-  std::string filter;                     // "ekf", ...
-  /// The tracking state now (the rules of PoseEstimate.status with the sensors' current
-  /// timeouts), which a later message can change without a new pose.
-  msgs::TrackingState state = msgs::TrackingState::kInitializing;
+/// A manual loop closure between two Frontend keyframes (ids from the keyframe callback).
+/// With T_from_to the factor is added as given (a known relative pose, e.g. a surveyed
+/// marker); without it, both keyframes must be map keyframes (have a scan) and keyframe
+/// `to` is registered against the scans around `from` starting at the graph's relative pose.
+/// With neither keyframe, the newest map keyframe is searched against all older ones (the
+/// detector's rules: Scan Context candidate within the search radius, then registration).
+struct LoopClosureRequest {
+  std::optional<uint64_t> from_keyframe;
+  std::optional<uint64_t> to_keyframe;
+  std::optional<SE3> T_from_to;
+  /// Over the tangent (rho, phi) of T_from_to; default: loop_translation/rotation_sigma.
+  std::optional<Eigen::Matrix<double, 6, 6>> covariance;
 };
 
-/// One update, for diagnostics (innovation plots, consistency checks).
-struct InnovationRecord {
-  std::string sensor;
-  std::string_view model;  // "gnss_position", "wheel_odometry", ...
+struct LoopClosureOutcome {
+  uint64_t from_keyframe = 0;
+  uint64_t to_keyframe = 0;
+  SE3 T_from_to;
+  bool registered = false;        ///< verified by registration (else given by the caller)
+  double inlier_rmse = 0.0;       ///< m, when registered
+  double inlier_fraction = 0.0;
+  double correction_m = 0.0;      ///< how far the latest keyframe moved
+};
+
+/// Relocalization against a known map (lidar::MapLocalizer over its point layer): where the
+/// session is in the map's frame. Without a guess the whole map is searched.
+struct RelocalizationRequest {
+  std::optional<SE3> T_map_body_guess;  ///< the body's pose in the map now (e.g. from an operator)
+  double linear_window = 5.0;           ///< m, searched +- around the guess
+  double angular_window = 0.5;          ///< rad, +- around the guess's heading
+};
+
+struct RelocalizationOutcome {
+  SE3 T_map_world;               ///< how the session's world frame was moved onto the map's
+  SE3 T_map_lidar;               ///< the localized sweep (the newest map keyframe's)
+  uint64_t keyframe_id = 0;      ///< the Frontend keyframe the correction was applied at
+  lidar::MapLocalization localization;
+};
+
+struct MappingSummary {
+  uint64_t scans_received = 0;
+  uint64_t scans_registered = 0;
+  uint64_t scans_refused = 0;     ///< refused by the odometry or dropped waiting for the IMU
+  uint64_t degenerate_scans = 0;
+  uint64_t weather_degraded_scans = 0;
+  uint64_t map_keyframes = 0;
+  uint64_t graph_keyframes = 0;
+  uint64_t loop_candidates = 0;
+  uint64_t loop_closures = 0;     ///< detected and verified
+  uint64_t manual_loop_closures = 0;
+  uint64_t map_version = 0;       ///< increases with every change of the map
+  std::size_t map_memory_bytes = 0;
+  double last_registration_ms = 0.0;
+  double last_correction_m = 0.0; ///< the backend's last correction of the latest keyframe
+  uint64_t relocalizations = 0;   ///< successful relocalize() calls
+  uint64_t gnss_factors = 0;      ///< GNSS fixes added to the keyframe graph
+};
+
+/// A pose at a time (body in the world frame).
+struct StampedPose {
   Timestamp timestamp;
-  std::vector<double> innovation;  // z (-) h(x) before the update
-  double mahalanobis_squared = 0.0;
-  bool applied = false;
-};
-
-/// A GNSS fix the filter fused (past the fix-type policy and the chi-square gate), in the
-/// world frame: for the backend's GPS factors.
-struct FusedGnssFix {
-  std::string sensor;
-  Timestamp timestamp;                  ///< body clock
-  Eigen::Vector3d antenna_world;        ///< ENU of the session's datum, m
-  Eigen::Matrix3d covariance;           ///< m^2, ENU
-  Eigen::Vector3d lever_arm;            ///< the antenna in the body frame (calibration), m
-  /// The fused pose at the fix, in the world as the session had it then (corrections applied
-  /// later move it by world_correction(): relate it to other poses through their corrections).
   SE3 T_world_body;
-  SE3 world_correction;                 ///< Session::world_correction() of that world
 };
 
 class Session {
  public:
-  using PoseCallback = std::function<void(const msgs::PoseEstimate&)>;
-  using InnovationCallback = std::function<void(const InnovationRecord&)>;
   using KeyframeCallback = std::function<void(const msgs::Keyframe&)>;
-  using GnssCallback = std::function<void(const FusedGnssFix&)>;
+  using MapUpdateCallback = std::function<void(const msgs::MapUpdate&)>;
 
-  /// Fails when the configuration is invalid or has no IMU sensor (the frontend propagates
-  /// with the IMU), or when the filter type is not available.
+  /// Fails as Frontend::create does, or on an invalid SessionConfig. Without a SessionConfig
+  /// the settings come from the configuration (SessionConfig::from(config)).
   static Result<std::unique_ptr<Session>> create(const config::FusionConfig& config, const calib::Calibration& calibration);
+  static Result<std::unique_ptr<Session>> create(const config::FusionConfig& config, const calib::Calibration& calibration,
+                                                 SessionConfig session_config);
   ~Session();
   Session(const Session&) = delete;
   Session& operator=(const Session&) = delete;
 
-  /// Fuses one message of the named sensor (the configuration's name). Returns an error whose
-  /// message starts with the rejection reason ("too_late: ...") when the message is rejected by
-  /// the input checks; the session is unchanged then. Fusion outcomes (gated...) are counted,
-  /// not returned as errors.
-  Status push(std::string_view sensor, const msgs::SensorMessage& message);
-  /// A pose measurement T_world_sensor of a lidar or camera sensor (LiDAR / visual
-  /// localization), covariance over (position world [m], rotation sensor frame [rad]).
-  Status push_pose(std::string_view sensor, Timestamp timestamp, const SE3& T_world_sensor,
-                   const Eigen::Matrix<double, 6, 6>& covariance);
-
-  /// Fuses every message still waiting for the IMU to reach its time (call at the end of a
-  /// log or when the IMU stops for good); the filter is extrapolated with the last IMU sample.
+  /// One message of the named sensor. Errors as Frontend::push ("reason: ..."); a LiDAR sweep
+  /// is refused with "invalid", "duplicate" or "out_of_order" and otherwise accepted (it may
+  /// still fail to register later: counted in mapping_summary and the sensor's statistics).
+  /// Taken by value: a sweep moved in is kept without a copy while it waits for the IMU.
+  Status push(std::string_view sensor, msgs::SensorMessage message);
+  /// Fuses what waits (Frontend::flush) and registers the sweeps the IMU has passed.
   void flush();
+  /// Errors start with the reason: "invalid: ..." (a bad request), "not_found: ..." (unknown
+  /// keyframe, keyframe without a scan, no loop found by the search), "not_verified: ..." (the
+  /// registration refused the loop: RMSE, overlap, degeneracy). Nothing changes then.
+  Result<LoopClosureOutcome> close_loop(const LoopClosureRequest& request);
+  /// Localizes the newest map keyframe's sweep (with the two before it) in `map` and moves the
+  /// session's world onto the map's frame: poses, keyframes and this session's map come in
+  /// the map's frame from then on (a jump of T_map_world, in one Frontend correction). The
+  /// keyframe graph restarts at the next keyframe (anchored there with the filter's
+  /// covariance); older map keyframes stay where the relocalization put them and loops to
+  /// them are no longer closed. Errors start with the reason: "invalid: ..." (a non-finite
+  /// guess or window), "not_ready: ..." (no map keyframe or Frontend keyframe yet),
+  /// "not_found: ..." (the localizer found no pose that verifies; its reason follows).
+  /// Nothing changes then.
+  Result<RelocalizationOutcome> relocalize(const lidar::MapLocalizer& map, const RelocalizationRequest& request);
 
-  /// A relative-pose measurement of a lidar or camera sensor (LiDAR / visual odometry between
-  /// two scans or frames): T_from_to maps the sensor frame at `to` into the sensor frame at
-  /// `from`; covariance over its tangent (rho, phi), right perturbation. Fused at `to` as the
-  /// sensor's mean velocity over the interval, R^T t / (to - from) in the `to` frame
-  /// (robot_localization's differential mode); fails for to <= from.
-  Status push_relative_pose(std::string_view sensor, Timestamp from, Timestamp to, const SE3& T_from_to,
-                            const Eigen::Matrix<double, 6, 6>& covariance);
-
-  /// The configured sensor that reads `topic`, or nullptr.
-  const config::SensorConfig* sensor_for_topic(std::string_view topic) const;
-  const config::FusionConfig& config() const;
-
-  /// Called for every PoseEstimate (one per IMU message once initialized), in time order.
-  void set_pose_callback(PoseCallback callback);
-  void set_innovation_callback(InnovationCallback callback);
-  /// Called for every Keyframe (frontend.keyframe_interval apart): the pose, its covariance, and
-  /// the relative motion since the previous keyframe with its covariance (from the filter's pose
-  /// clone, cross-correlations included).
-  void set_keyframe_callback(KeyframeCallback callback);
-  /// Called once for every GNSS fix the filter fused (a fix re-fused by a rollback is not
-  /// reported again), after the pose it corrected.
-  void set_gnss_callback(GnssCallback callback);
-
-  /// The backend's hook: keyframe `keyframe_id` is really at T_world_body_optimized. The
-  /// estimate is moved rigidly by T_optimized * T_keyframe^-1 (world frame), now. Fails for a
-  /// keyframe this session never emitted or no longer remembers (it keeps the last 100000).
-  /// Corrections compose: the keyframe's pose is taken as the session believes it now (the
-  /// emitted pose moved by the corrections applied since), so correcting the same keyframe
-  /// twice to the same pose moves the estimate once.
-  Status apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized);
-  /// The product of the corrections fused so far (world frame, newest on the left): a pose
-  /// that was T_world_body before them is world_correction() * T_world_body now.
-  SE3 world_correction() const;
-  /// The latest PoseEstimate, if any.
-  std::optional<msgs::PoseEstimate> latest_pose() const;
-  /// T_world_body at a past time within the lag window (body clock), interpolated between the
-  /// fused estimates around it, in today's world (corrections applied since included): the
-  /// prediction an odometry module (LiDAR, visual) starts from.
-  /// None before initialization, for times older than the kept history or newer than the
-  /// last fused event.
-  std::optional<SE3> pose_at(Timestamp time) const;
+  /// The map's layers (points, occupancy) with version = map_version; other metadata empty.
+  msgs::FusionMap map() const;
+  /// The Frontend's summary with the LiDAR sensor's counters filled in.
   SessionSummary summary() const;
+  MappingSummary mapping_summary() const;
+  /// Optimized T_world_body of a Frontend keyframe known to the graph.
+  std::optional<SE3> keyframe_pose(uint64_t keyframe_id) const;
+  /// Every pose emitted so far (keep_trajectory), moved onto the graph's current estimate: the
+  /// correction of a pose between two keyframes (optimized keyframe pose times the keyframe's
+  /// pose as the filter had it, before any correction, inverted) is interpolated on SE3 between
+  /// theirs by time; before the first and after the last keyframe theirs holds. This is the
+  /// smoothed trajectory of an offline run: GNSS factors, loop closures and later LiDAR poses
+  /// act on every pose, not only on those after the correction. Empty without keep_trajectory.
+  std::vector<StampedPose> optimized_trajectory() const;
+  SessionMode mode() const { return config_.mode; }
+
+  /// Called for every PoseEstimate, in time order (Frontend::set_pose_callback).
+  void set_pose_callback(Frontend::PoseCallback callback) { pose_callback_ = std::move(callback); }
+  /// Every Frontend keyframe as emitted.
+  void set_keyframe_callback(KeyframeCallback callback) { keyframe_callback_ = std::move(callback); }
+  /// New map keyframes (added_points in the world frame) and, after loop closures, the whole
+  /// corrected point map (full_replacement).
+  void set_map_update_callback(MapUpdateCallback callback) { map_update_callback_ = std::move(callback); }
+
+  Frontend& frontend() { return *frontend_; }
+  const Frontend& frontend() const { return *frontend_; }
 
  private:
-  struct Impl;
-  explicit Session(std::unique_ptr<Impl> impl);
-  std::unique_ptr<Impl> impl_;
+  struct MapKeyframe {
+    uint64_t anchor = 0;       ///< the Frontend keyframe
+    SE3 T_anchor_lidar;        ///< the sweep's pose relative to the anchor's body
+    SE3 T_world_lidar;         ///< where the map has it now
+  };
+  Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::string lidar_sensor, const calib::SensorCalibration& lidar_calibration);
+  Status push_scan(msgs::PointCloudMessage scan);
+  class RegistrationWorker;
+  void register_ready_scans();
+  /// Fuses what the worker registered (kRealtime).
+  void take_registered();
+  void on_registered(Result<LidarInertialOdometry::RegisteredScan> registered);
+  void add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points);
+  /// T_world_lidar of map keyframe k by the graph's current estimate.
+  SE3 map_keyframe_pose(std::size_t k) const;
+  Status add_loop_factor(uint64_t from, uint64_t to, const SE3& T_from_to, const std::optional<Eigen::Matrix<double, 6, 6>>& covariance);
+  /// Runs the backend; moves the map keyframes whose keyframe moved (follow_graph).
+  void update_backend();
+  void follow_graph();
+  /// Moves map keyframes (index -> T_world_lidar) in the map and publishes the corrected map.
+  void move_map_keyframes(const std::map<uint64_t, SE3>& moved);
+  void count_refused(const std::string& reason);
+  /// A fused GNSS fix as a GPS factor on the newest keyframe (gnss_factors).
+  void add_gnss_factor(const FusedGnssFix& fix);
+
+  std::unique_ptr<Frontend> frontend_;
+  SessionConfig config_;
+  std::string lidar_sensor_;
+  SE3 T_body_lidar_;
+  Duration lidar_time_offset_;            ///< t_body = t_lidar + offset (calibration)
+  std::unique_ptr<KeyframeGraph> graph_;  ///< replaced by a fresh one at a relocalization
+  bool restart_graph_ = false;  ///< the next keyframe starts the graph (after a relocalization)
+  std::optional<LidarInertialOdometry> odometry_;
+  std::unique_ptr<RegistrationWorker> worker_;  ///< kRealtime
+  lidar::LoopClosureDetector loop_closures_;
+  maps::MapBuilder map_builder_;
+  struct WaitingScan {
+    msgs::PointCloudMessage scan;
+    Timestamp end;  ///< the latest point time (computed once: checked on every IMU message)
+  };
+  std::deque<WaitingScan> waiting_scans_;
+  std::optional<Timestamp> first_pose_time_;  ///< the Frontend's first pose seen
+  /// How long a sweep may wait for the worker now (kRealtime: none for live data, else unbounded).
+  std::optional<std::chrono::nanoseconds> registration_wait_limit(Timestamp now_in_data) const;
+  std::optional<Timestamp> last_scan_time_;
+  std::optional<msgs::Keyframe> latest_keyframe_;   ///< the newest Frontend keyframe
+  SE3 latest_keyframe_uncorrected_;                 ///< its pose before the Frontend's corrections
+  std::vector<MapKeyframe> map_keyframes_;
+  std::map<uint64_t, std::size_t> map_keyframe_of_;  ///< Frontend keyframe id -> map keyframe
+  std::optional<uint64_t> last_anchor_;
+  double path_ = 0.0;                               ///< m of LiDAR path, registered sweeps
+  std::optional<SE3> last_lidar_pose_;
+  SensorStatistics lidar_statistics_;
+  MappingSummary summary_;
+  /// keep_trajectory: emitted poses and keyframes, both as the filter had them before any
+  /// correction (Frontend::world_correction() undone), for optimized_trajectory().
+  std::vector<StampedPose> uncorrected_poses_;
+  struct KeyframeRecord {
+    uint64_t keyframe_id = 0;
+    Timestamp timestamp;
+    SE3 T_world_body_uncorrected;
+  };
+  std::vector<KeyframeRecord> keyframe_records_;
+  Frontend::PoseCallback pose_callback_;
+  KeyframeCallback keyframe_callback_;
+  MapUpdateCallback map_update_callback_;
 };
 
 }  // namespace hanzo::fusion::pipeline

@@ -13,7 +13,7 @@
 //     the storage queue, which a writer thread commits in batches (one transaction each,
 //     every storage_flush_interval). SessionInfo.stored_poses / stored_through say what is
 //     durable: those poses survive kill -9.
-//   - Each session is a pipeline::MappingSession: with a 3D LiDAR it also registers sweeps, keeps
+//   - Each session is a pipeline::Session: with a 3D LiDAR it also registers sweeps, keeps
 //     a keyframe graph, builds a map and closes loops; map(), close_loop(), subscribe_map() and
 //     subscribe_keyframes() serve them (an ended session keeps its final map in memory).
 //   - Maps (with SessionManagerConfig::map_directory, a MapCatalog): each session's map is saved
@@ -21,7 +21,7 @@
 //     changes and when the session ends (so maps survive restarts, and an ended session's map is
 //     read back from the store); clients load maps (load_map: gRPC LoadMap, POST /v1/maps) and
 //     read any stored version; relocalize() localizes a session in a stored map
-//     (pipeline::MappingSession::relocalize) and moves it into that map's frame.
+//     (pipeline::Session::relocalize) and moves it into that map's frame.
 //   - register_sensor: adds a sensor (configuration entry + calibration entry, validated by the
 //     same loaders as the files) before the session has received data; afterwards kConflict.
 //
@@ -37,7 +37,7 @@
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
 #include "hanzo/fusion/msgs/map_messages.hpp"
-#include "hanzo/fusion/pipeline/mapping_session.hpp"
+#include "hanzo/fusion/pipeline/session.hpp"
 #include "hanzo/fusion/service/api_error.hpp"
 #include "hanzo/fusion/service/auth.hpp"
 #include "hanzo/fusion/service/map_catalog.hpp"
@@ -149,7 +149,7 @@ class SessionManager {
   /// Every keyframe the session emits from now on (session:read).
   ApiResult<std::shared_ptr<KeyframeSubscription>> subscribe_keyframes(const Principal& caller, const std::string& session_id);
   /// Map updates from now on (map:read): new keyframe points, full replacements after loop
-  /// closures (MappingSession::set_map_update_callback). map_id is the session id.
+  /// closures (Session::set_map_update_callback). map_id is the session id.
   ApiResult<std::shared_ptr<MapSubscription>> subscribe_map(const Principal& caller, const std::string& session_id);
   /// The session's map (map:read): map_id = session id, version, created, the session's
   /// configuration and calibration, layers. While the live map has no layer yet (a session

@@ -1,0 +1,188 @@
+#pragma once
+// pipeline::Frontend: one agent's real-time fusion (spec, "Fusion Pipeline Architecture").
+// Messages from any sensor go in with push(); pose estimates come out at the IMU rate.
+//
+//   auto session = Frontend::create(fusion_config, calibration).value();
+//   session->set_pose_callback([](const msgs::PoseEstimate& pose) { ... });
+//   for (...) { if (Status s = session->push("gnss", message); !s) log(s.error().message); }
+//
+// What push() does with a message (docs/frontend.md has the full story):
+//  1. Input checks, each a rejection with a reason that push() returns and summary() counts:
+//     unknown_sensor, wrong_type (a GNSS message for an IMU sensor), invalid (msgs::validate:
+//     NaN, bad covariance...), duplicate (same timestamp as the sensor's previous message),
+//     out_of_order (older than the sensor's previous message), future_dated (more than
+//     frontend.max_future ahead of the newest accepted time, unless the next message confirms
+//     the jump), too_late (older than the newest fused time by more than frontend.lag_window).
+//     The sensor's calibrated time offset is applied first (t_body = t_sensor + offset).
+//  2. Time ordering: measurements wait until the IMU has reached their time, then are fused in
+//     timestamp order. A message that arrives after the filter has passed its time (inside the
+//     lag window) is fused by restoring the stored estimate from before it and re-fusing what
+//     followed (no silent drop; counted as rolled_back).
+//  3. Fusion, each update chi-square gated (counted per sensor: fused, gated, ...).
+//     IMU: static alignment at start (roll, pitch, gyro bias), then propagation; spikes
+//     rejected; optional attitude (use_orientation). GNSS: fix-type policy, WGS84 -> ENU via
+//     the datum, lever arm. Wheels: forward speed (+ non-holonomic constraint, + yaw rate),
+//     zero-velocity update when the wheels stand still. Poses (LiDAR / visual localization):
+//     push_pose().
+//  4. Monitoring: a sensor silent for longer than its timeout is reported (counted, logged) and
+//     the filter keeps running on the rest. PoseEstimate.status counts the modalities that
+//     constrained the estimate within their timeouts (the IMU counts while it streams); the
+//     spec requires two for reliable localization: state TRACKING with >= 2, DEGRADED with
+//     fewer or with a sensor timed out, LOST without IMU data, INITIALIZING before alignment.
+//
+// Deterministic: the same messages in the same order give bit-identical output. Not
+// thread-safe: one thread pushes (the server serializes per session).
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/config/fusion_config.hpp"
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
+
+namespace hanzo::fusion::pipeline {
+
+/// Counters of one configured sensor.
+struct SensorStatistics {
+  std::string name;
+  config::SensorModality modality = config::SensorModality::kImu;
+  uint64_t received = 0;  // push() calls for this sensor
+  uint64_t fused = 0;     // messages whose update moved the estimate (IMU: propagated)
+  uint64_t rolled_back = 0;  // late messages fused by rolling back
+  /// Rejections by reason: the input checks above plus the fusion outcomes "gated",
+  /// "numerical_failure", "no_fix", "weak_fix", "spike", "gimbal_lock", "gap", "not_fused"
+  /// (a modality the frontend does not fuse directly, e.g. raw LiDAR scans without odometry).
+  std::map<std::string, uint64_t> rejected;
+  uint64_t timeouts = 0;     // times the sensor went silent for longer than its timeout
+  bool timed_out = false;    // silent now
+  Timestamp first_time;      // first and last accepted timestamps (body clock)
+  Timestamp last_time;
+  double nis_sum = 0.0;      // sum of normalized innovations squared of fused updates
+  uint64_t nis_count = 0;    // and their degrees of freedom (for the average NIS per dof)
+
+  uint64_t rejected_total() const;
+};
+
+struct SessionSummary {
+  std::vector<SensorStatistics> sensors;  // in configuration order
+  uint64_t poses = 0;                     // PoseEstimates emitted
+  uint64_t keyframes = 0;
+  uint64_t corrections = 0;               // backend corrections applied
+  uint64_t rollbacks = 0;                 // times the filter rolled back for a late message
+  uint64_t zero_velocity_updates = 0;
+  std::string filter;                     // "ekf", ...
+  /// The tracking state now (the rules of PoseEstimate.status with the sensors' current
+  /// timeouts), which a later message can change without a new pose.
+  msgs::TrackingState state = msgs::TrackingState::kInitializing;
+};
+
+/// One update, for diagnostics (innovation plots, consistency checks).
+struct InnovationRecord {
+  std::string sensor;
+  std::string_view model;  // "gnss_position", "wheel_odometry", ...
+  Timestamp timestamp;
+  std::vector<double> innovation;  // z (-) h(x) before the update
+  double mahalanobis_squared = 0.0;
+  bool applied = false;
+};
+
+/// A GNSS fix the filter fused (past the fix-type policy and the chi-square gate), in the
+/// world frame: for the backend's GPS factors.
+struct FusedGnssFix {
+  std::string sensor;
+  Timestamp timestamp;                  ///< body clock
+  Eigen::Vector3d antenna_world;        ///< ENU of the session's datum, m
+  Eigen::Matrix3d covariance;           ///< m^2, ENU
+  Eigen::Vector3d lever_arm;            ///< the antenna in the body frame (calibration), m
+  /// The fused pose at the fix, in the world as the session had it then (corrections applied
+  /// later move it by world_correction(): relate it to other poses through their corrections).
+  SE3 T_world_body;
+  SE3 world_correction;                 ///< Frontend::world_correction() of that world
+};
+
+class Frontend {
+ public:
+  using PoseCallback = std::function<void(const msgs::PoseEstimate&)>;
+  using InnovationCallback = std::function<void(const InnovationRecord&)>;
+  using KeyframeCallback = std::function<void(const msgs::Keyframe&)>;
+  using GnssCallback = std::function<void(const FusedGnssFix&)>;
+
+  /// Fails when the configuration is invalid or has no IMU sensor (the frontend propagates
+  /// with the IMU), or when the filter type is not available.
+  static Result<std::unique_ptr<Frontend>> create(const config::FusionConfig& config, const calib::Calibration& calibration);
+  ~Frontend();
+  Frontend(const Frontend&) = delete;
+  Frontend& operator=(const Frontend&) = delete;
+
+  /// Fuses one message of the named sensor (the configuration's name). Returns an error whose
+  /// message starts with the rejection reason ("too_late: ...") when the message is rejected by
+  /// the input checks; the session is unchanged then. Fusion outcomes (gated...) are counted,
+  /// not returned as errors.
+  Status push(std::string_view sensor, const msgs::SensorMessage& message);
+  /// A pose measurement T_world_sensor of a lidar or camera sensor (LiDAR / visual
+  /// localization), covariance over (position world [m], rotation sensor frame [rad]).
+  Status push_pose(std::string_view sensor, Timestamp timestamp, const SE3& T_world_sensor,
+                   const Eigen::Matrix<double, 6, 6>& covariance);
+
+  /// Fuses every message still waiting for the IMU to reach its time (call at the end of a
+  /// log or when the IMU stops for good); the filter is extrapolated with the last IMU sample.
+  void flush();
+
+  /// A relative-pose measurement of a lidar or camera sensor (LiDAR / visual odometry between
+  /// two scans or frames): T_from_to maps the sensor frame at `to` into the sensor frame at
+  /// `from`; covariance over its tangent (rho, phi), right perturbation. Fused at `to` as the
+  /// sensor's mean velocity over the interval, R^T t / (to - from) in the `to` frame
+  /// (robot_localization's differential mode); fails for to <= from.
+  Status push_relative_pose(std::string_view sensor, Timestamp from, Timestamp to, const SE3& T_from_to,
+                            const Eigen::Matrix<double, 6, 6>& covariance);
+
+  /// The configured sensor that reads `topic`, or nullptr.
+  const config::SensorConfig* sensor_for_topic(std::string_view topic) const;
+  const config::FusionConfig& config() const;
+
+  /// Called for every PoseEstimate (one per IMU message once initialized), in time order.
+  void set_pose_callback(PoseCallback callback);
+  void set_innovation_callback(InnovationCallback callback);
+  /// Called for every Keyframe (frontend.keyframe_interval apart): the pose, its covariance, and
+  /// the relative motion since the previous keyframe with its covariance (from the filter's pose
+  /// clone, cross-correlations included).
+  void set_keyframe_callback(KeyframeCallback callback);
+  /// Called once for every GNSS fix the filter fused (a fix re-fused by a rollback is not
+  /// reported again), after the pose it corrected.
+  void set_gnss_callback(GnssCallback callback);
+
+  /// The backend's hook: keyframe `keyframe_id` is really at T_world_body_optimized. The
+  /// estimate is moved rigidly by T_optimized * T_keyframe^-1 (world frame), now. Fails for a
+  /// keyframe this session never emitted or no longer remembers (it keeps the last 100000).
+  /// Corrections compose: the keyframe's pose is taken as the session believes it now (the
+  /// emitted pose moved by the corrections applied since), so correcting the same keyframe
+  /// twice to the same pose moves the estimate once.
+  Status apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized);
+  /// The product of the corrections fused so far (world frame, newest on the left): a pose
+  /// that was T_world_body before them is world_correction() * T_world_body now.
+  SE3 world_correction() const;
+  /// The latest PoseEstimate, if any.
+  std::optional<msgs::PoseEstimate> latest_pose() const;
+  /// T_world_body at a past time within the lag window (body clock), interpolated between the
+  /// fused estimates around it, in today's world (corrections applied since included): the
+  /// prediction an odometry module (LiDAR, visual) starts from.
+  /// None before initialization, for times older than the kept history or newer than the
+  /// last fused event.
+  std::optional<SE3> pose_at(Timestamp time) const;
+  SessionSummary summary() const;
+
+ private:
+  struct Impl;
+  explicit Frontend(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace hanzo::fusion::pipeline

@@ -1,0 +1,515 @@
+#include "hanzo/fusion/pipeline/frontend.hpp"
+
+#include <algorithm>
+#include <deque>
+#include <set>
+
+#include <fmt/format.h>
+
+#include "estimator.hpp"
+#include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/msgs/validate.hpp"
+
+namespace hanzo::fusion::pipeline {
+namespace {
+
+using config::SensorModality;
+
+SensorModality modality_of(const msgs::SensorMessage& message) {
+  switch (message.index()) {
+    case 0: return SensorModality::kImu;
+    case 1: return SensorModality::kLidar;
+    case 2: return SensorModality::kCamera;
+    case 3: return SensorModality::kGnss;
+    case 4: return SensorModality::kWheelOdometry;
+    default: return SensorModality::kRadar;
+  }
+}
+
+// Modalities whose raw messages the frontend fuses itself (the others arrive as poses from
+// their odometry modules through push_pose()).
+bool fused_directly(SensorModality modality) {
+  return modality == SensorModality::kImu || modality == SensorModality::kGnss || modality == SensorModality::kWheelOdometry ||
+         modality == SensorModality::kRadar;
+}
+
+Error rejection(std::string_view reason, const std::string& detail) { return Error(fmt::format("{}: {}", reason, detail)); }
+
+}  // namespace
+
+uint64_t SensorStatistics::rejected_total() const {
+  uint64_t total = 0;
+  for (const auto& [reason, count] : rejected) total += count;
+  return total;
+}
+
+struct Frontend::Impl final : UpdateObserver {
+  struct HistoryEntry {
+    Event event;
+    Estimator after;  // the estimator right after fusing event
+  };
+
+  // sensor_setups[i].config is set here to point into this Impl's own configuration.
+  Impl(config::FusionConfig fusion_config, std::vector<SensorSetup> sensor_setups, size_t imu)
+      : config(std::move(fusion_config)), setups(link(std::move(sensor_setups), config)), imu_sensor(imu),
+        estimator(config, setups, imu_sensor), history_base(estimator) {
+    for (const SensorSetup& setup : setups) {
+      SensorStatistics statistics;
+      statistics.name = setup.config->name;
+      statistics.modality = setup.config->modality;
+      sensors.push_back(std::move(statistics));
+    }
+    last_input.resize(setups.size());
+  }
+
+  static std::vector<SensorSetup> link(std::vector<SensorSetup> sensor_setups, const config::FusionConfig& fusion_config) {
+    for (size_t i = 0; i < sensor_setups.size(); ++i) sensor_setups[i].config = &fusion_config.sensors[i];
+    return sensor_setups;
+  }
+
+  void on_update(const UpdateReport& report) override {
+    if (replaying) return;
+    SensorStatistics& statistics = sensors[report.sensor];
+    const bool applied = report.outcome.status == estimate::UpdateStatus::kApplied;
+    if (applied) {
+      statistics.nis_sum += report.outcome.mahalanobis_squared;
+      statistics.nis_count += static_cast<uint64_t>(report.outcome.innovation.size());
+    }
+    if (innovation_callback) {
+      const auto& innovation = report.outcome.innovation;
+      innovation_callback({statistics.name, report.model, report.time,
+                           std::vector<double>(innovation.data(), innovation.data() + innovation.size()),
+                           report.outcome.mahalanobis_squared, applied});
+    }
+  }
+
+  std::optional<size_t> sensor_index(std::string_view name) const {
+    for (size_t i = 0; i < config.sensors.size(); ++i) {
+      if (config.sensors[i].name == name) return i;
+    }
+    return std::nullopt;
+  }
+  Result<size_t> pose_input(std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
+                            const Eigen::Matrix<double, 6, 6>& covariance, const std::function<Status()>& extra);
+  Status accept(size_t sensor, Event event);
+  void fuse_in_order(Event event);
+  void fuse_late(Event event);
+  /// Emits a keyframe unless one with its id (or a later one) was emitted already.
+  void emit_keyframe(const msgs::Keyframe& keyframe);
+  /// Reports a fused GNSS fix (first fusions only: fuse_in_order and a late event itself; a
+  /// replay after a rollback re-fuses fixes already reported).
+  void report_gnss(const Event& event, const EventOutcome& outcome);
+  void count(const Event& event, const EventOutcome& outcome);
+  /// Fuses the pending messages up to the IMU's time (all of them when flush_all).
+  void release_pending(bool flush_all = false);
+  void prune_history();
+  /// Records the PoseEstimate at the estimator's time as latest_pose; calls the pose callback
+  /// when notify (not for poses recomputed while re-fusing after a late message).
+  void emit_pose(bool notify);
+  void update_timeouts();
+  msgs::PoseStatus pose_status() const;
+
+  config::FusionConfig config;
+  std::vector<SensorSetup> setups;
+  size_t imu_sensor;
+  Estimator estimator;
+  Estimator history_base;  // the estimator before the oldest history entry
+  std::deque<HistoryEntry> history;
+  std::vector<Event> pending;  // accepted, waiting for the IMU to reach their time (sorted)
+  std::vector<SensorStatistics> sensors;
+  std::vector<Timestamp> last_input;  // last accepted body-clock time per sensor
+  Timestamp first_input;
+  Timestamp newest;
+  std::optional<Timestamp> pending_jump;
+  uint64_t sequence = 0;
+  bool replaying = false;
+  uint64_t poses = 0;
+  uint64_t rollbacks = 0;
+  uint64_t zero_velocity_updates = 0;
+  std::optional<msgs::PoseEstimate> latest_pose;
+  PoseCallback pose_callback;
+  InnovationCallback innovation_callback;
+  KeyframeCallback keyframe_callback;
+  GnssCallback gnss_callback;
+  // Emitted keyframes, for corrections: the pose before any correction (C^-1 x emitted pose,
+  // C the world correction when it was emitted), so that today's belief is C_now x this.
+  std::map<uint64_t, SE3> keyframe_poses;
+  uint64_t keyframes = 0;
+  uint64_t corrections = 0;
+};
+
+Frontend::Frontend(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Frontend::~Frontend() = default;
+
+Result<std::unique_ptr<Frontend>> Frontend::create(const config::FusionConfig& config, const calib::Calibration& calibration) {
+  if (Status valid = config::validate(config); !valid) return valid.error();
+  if (Status valid = calib::validate(calibration); !valid) return valid.error();
+  std::vector<SensorSetup> setups;
+  std::optional<size_t> imu;
+  for (const config::SensorConfig& sensor : config.sensors) {
+    if (sensor.modality == SensorModality::kImu && !imu) imu = setups.size();
+    SensorSetup setup;
+    if (const calib::SensorCalibration* entry = calibration.find(sensor.name)) {
+      setup.T_body_sensor = entry->T_body_sensor();
+      setup.time_offset = entry->time_offset;
+    } else {
+      logger()->info("sensor '{}' has no '{}_to_body' calibration: identity mounting, no time offset", sensor.name, sensor.name);
+    }
+    setups.push_back(setup);
+  }
+  if (!imu) return Error("the configuration has no IMU sensor: the frontend propagates the state with the IMU", "sensors");
+  return std::unique_ptr<Frontend>(new Frontend(std::make_unique<Impl>(config, std::move(setups), *imu)));
+}
+
+const config::SensorConfig* Frontend::sensor_for_topic(std::string_view topic) const {
+  for (const config::SensorConfig& sensor : impl_->config.sensors) {
+    if (sensor.topic == topic) return &sensor;
+  }
+  return nullptr;
+}
+
+const config::FusionConfig& Frontend::config() const { return impl_->config; }
+void Frontend::set_pose_callback(PoseCallback callback) { impl_->pose_callback = std::move(callback); }
+void Frontend::set_innovation_callback(InnovationCallback callback) { impl_->innovation_callback = std::move(callback); }
+void Frontend::set_keyframe_callback(KeyframeCallback callback) { impl_->keyframe_callback = std::move(callback); }
+void Frontend::set_gnss_callback(GnssCallback callback) { impl_->gnss_callback = std::move(callback); }
+
+Status Frontend::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized) {
+  Impl& impl = *impl_;
+  const auto found = impl.keyframe_poses.find(keyframe_id);
+  if (found == impl.keyframe_poses.end()) {
+    return Error(fmt::format("unknown_keyframe: keyframe {} was not emitted by this session (or is too old)", keyframe_id));
+  }
+  if (!T_world_body_optimized.translation().allFinite() || !T_world_body_optimized.rotation().quaternion().coeffs().allFinite()) {
+    return Error("invalid: the optimized pose has non-finite values");
+  }
+  Event event;
+  // At the newest fused event (the estimator's time can trail it: rejected events do not move
+  // it), so the correction goes to the end of the history.
+  event.time = impl.history.empty() ? impl.estimator.time() : std::max(impl.estimator.time(), impl.history.back().event.time);
+  event.sensor = impl.imu_sensor;
+  event.sequence = impl.sequence++;
+  // The session's current belief of the keyframe includes the corrections applied since.
+  event.payload = WorldCorrection{T_world_body_optimized * (impl.estimator.world_correction() * found->second).inverse()};
+  impl.fuse_in_order(std::move(event));
+  ++impl.corrections;
+  // latest_pose() answers in the corrected world at once; the next IMU sample emits it.
+  if (impl.estimator.initialized()) impl.emit_pose(false);
+  return ok_status();
+}
+std::optional<msgs::PoseEstimate> Frontend::latest_pose() const { return impl_->latest_pose; }
+SE3 Frontend::world_correction() const { return impl_->estimator.world_correction(); }
+
+std::optional<SE3> Frontend::pose_at(Timestamp time) const {
+  // In today's world: corrections fused after the entry move it too.
+  const SE3& correction_now = impl_->estimator.world_correction();
+  const auto pose_of = [&correction_now](const Estimator& estimator) {
+    const estimate::NavigationState state = estimator.filter().state();
+    return correction_now * estimator.world_correction().inverse() * SE3(state.R_world_body, state.position);
+  };
+  const std::deque<Impl::HistoryEntry>& history = impl_->history;
+  // history is in fusion order, so its times do not decrease; the first entry at or after `time`.
+  const auto after = std::lower_bound(history.begin(), history.end(), time,
+                                      [](const Impl::HistoryEntry& entry, Timestamp t) { return entry.event.time < t; });
+  if (after == history.end() || after == history.begin() || !after->after.initialized()) return std::nullopt;
+  const auto before = std::prev(after);
+  if (!before->after.initialized()) return std::nullopt;
+  const double span = (after->event.time - before->event.time).seconds();
+  const double fraction = span > 0.0 ? (time - before->event.time).seconds() / span : 1.0;
+  return SE3::interpolate(pose_of(before->after), pose_of(after->after), fraction);
+}
+
+Status Frontend::push(std::string_view sensor_name, const msgs::SensorMessage& message) {
+  Impl& impl = *impl_;
+  const std::optional<size_t> index = impl.sensor_index(sensor_name);
+  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
+  const size_t sensor = *index;
+  const config::SensorConfig* found = &impl.config.sensors[sensor];
+  SensorStatistics& statistics = impl.sensors[sensor];
+  ++statistics.received;
+  if (modality_of(message) != found->modality) {
+    ++statistics.rejected["wrong_type"];
+    return rejection("wrong_type", fmt::format("sensor '{}' is a {} sensor, the message is {}", sensor_name,
+                                               config::to_string(found->modality), msgs::modality_name(message)));
+  }
+  if (Status valid = msgs::validate(message); !valid) {
+    ++statistics.rejected["invalid"];
+    return rejection("invalid", fmt::format("{}: {}", sensor_name, valid.error().message));
+  }
+  Event event;
+  event.time = msgs::timestamp_of(message) + impl.setups[sensor].time_offset;
+  event.sensor = sensor;
+  event.is_imu = found->modality == SensorModality::kImu;
+  event.payload = message;
+  return impl.accept(sensor, std::move(event));
+}
+
+// The checks push_pose() and push_relative_pose() share: the sensor exists (counted as received),
+// the pose is valid and the covariance positive definite. `extra` adds checks of its own.
+Result<size_t> Frontend::Impl::pose_input(std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
+                                         const Eigen::Matrix<double, 6, 6>& covariance, const std::function<Status()>& extra) {
+  const std::optional<size_t> index = sensor_index(sensor_name);
+  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
+  ++sensors[*index].received;
+  msgs::PoseEstimate as_message;  // validate() checks the pose and covariance the same way
+  as_message.timestamp = timestamp;
+  as_message.T_world_body = msgs::Pose::from_se3(pose);
+  as_message.pose_covariance = covariance;
+  Status valid = msgs::validate(as_message);
+  if (valid && extra) valid = extra();
+  if (valid && covariance.llt().info() != Eigen::Success) valid = Error("covariance is not positive definite");
+  if (!valid) {
+    ++sensors[*index].rejected["invalid"];
+    return rejection("invalid", fmt::format("{}: {}: {}", sensor_name, what, valid.error().message));
+  }
+  return *index;
+}
+
+Status Frontend::push_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_world_sensor,
+                          const Eigen::Matrix<double, 6, 6>& covariance) {
+  Impl& impl = *impl_;
+  size_t sensor = 0;
+  HANZO_ASSIGN_OR_RETURN(sensor, impl.pose_input(sensor_name, "pose measurement", timestamp, T_world_sensor, covariance, {}));
+  Event event;
+  event.time = timestamp + impl.setups[sensor].time_offset;
+  event.sensor = sensor;
+  event.payload = PoseMeasurement{T_world_sensor, covariance};
+  return impl.accept(sensor, std::move(event));
+}
+
+Status Frontend::push_relative_pose(std::string_view sensor_name, Timestamp from, Timestamp to, const SE3& T_from_to,
+                                   const Eigen::Matrix<double, 6, 6>& covariance) {
+  Impl& impl = *impl_;
+  const double dt = (to - from).seconds();
+  const auto interval = [&]() -> Status {
+    if (from.is_zero()) return Error("the start time is zero");
+    if (!(dt > 0.0)) return Error(fmt::format("the interval must be positive, got {} s", dt));
+    return ok_status();
+  };
+  size_t sensor = 0;
+  HANZO_ASSIGN_OR_RETURN(sensor, impl.pose_input(sensor_name, "relative pose", to, T_from_to, covariance, interval));
+  const Eigen::Matrix3d R_to_from = T_from_to.rotation().matrix().transpose();
+  Event event;
+  event.time = to + impl.setups[sensor].time_offset;
+  event.sensor = sensor;
+  event.payload = VelocityMeasurement{R_to_from * T_from_to.translation() / dt, covariance.topLeftCorner<3, 3>() / (dt * dt)};
+  return impl.accept(sensor, std::move(event));
+}
+
+Status Frontend::Impl::accept(size_t sensor, Event event) {
+  SensorStatistics& statistics = sensors[sensor];
+  const std::string& name = statistics.name;
+  const Timestamp previous = last_input[sensor];
+  if (!previous.is_zero() && event.time == previous) {
+    ++statistics.rejected["duplicate"];
+    return rejection("duplicate", fmt::format("{}: a message at {} ns was already received", name, event.time.nanoseconds()));
+  }
+  if (!previous.is_zero() && event.time < previous) {
+    ++statistics.rejected["out_of_order"];
+    return rejection("out_of_order", fmt::format("{}: message at {} ns is {:.6f} s older than the sensor's previous one", name,
+                                                 event.time.nanoseconds(), (previous - event.time).seconds()));
+  }
+  const double max_future = config.frontend.max_future_s;
+  if (!newest.is_zero() && (event.time - newest).seconds() > max_future) {
+    const bool confirmed = pending_jump && std::abs((event.time - *pending_jump).seconds()) <= max_future;
+    if (!confirmed) {
+      pending_jump = event.time;
+      ++statistics.rejected["future_dated"];
+      return rejection("future_dated", fmt::format("{}: message at {} ns is {:.3f} s ahead of the newest accepted time (limit {} s)", name,
+                                                   event.time.nanoseconds(), (event.time - newest).seconds(), max_future));
+    }
+    logger()->warn("time jumped forward by {:.3f} s (confirmed by two messages)", (event.time - newest).seconds());
+  }
+  pending_jump.reset();
+  const double lag = config.frontend.lag_window_s;
+  if (estimator.initialized() && (estimator.time() - event.time).seconds() > lag) {
+    ++statistics.rejected["too_late"];
+    return rejection("too_late", fmt::format("{}: message at {} ns is {:.3f} s older than the newest fused time (lag window {} s)", name,
+                                             event.time.nanoseconds(), (estimator.time() - event.time).seconds(), lag));
+  }
+
+  last_input[sensor] = event.time;
+  if (statistics.first_time.is_zero()) statistics.first_time = event.time;
+  statistics.last_time = event.time;
+  if (first_input.is_zero()) first_input = event.time;
+  newest = std::max(newest, event.time);
+  const bool is_pose = !std::holds_alternative<msgs::SensorMessage>(event.payload);
+  if (!is_pose && !fused_directly(statistics.modality)) {
+    ++statistics.rejected["not_fused"];
+    return ok_status();
+  }
+  event.sequence = sequence++;
+  // Late: it belongs before something already fused (the history is in fusion order). Not
+  // estimator.time(): events that change nothing (before the IMU aligned, a rejected spike)
+  // leave it behind, and appending an older event then would unsort the history.
+  if (!history.empty() && fused_before(event, history.back().event)) {
+    fuse_late(std::move(event));
+  } else {
+    pending.insert(std::upper_bound(pending.begin(), pending.end(), event, fused_before), std::move(event));
+  }
+  release_pending();
+  return ok_status();
+}
+
+void Frontend::flush() { impl_->release_pending(true); }
+
+void Frontend::Impl::release_pending(bool flush_all) {
+  // Measurements wait for the IMU to reach their time; when the IMU is silent they go ahead.
+  const Timestamp imu_time = last_input[imu_sensor];
+  const bool imu_silent = imu_time.is_zero() || (newest - imu_time).seconds() > setups[imu_sensor].config->effective_timeout_s();
+  const Timestamp release = imu_silent || flush_all ? newest : imu_time;
+  size_t released = 0;
+  while (released < pending.size() && pending[released].time <= release) ++released;
+  if (released == 0) return;
+  std::vector<Event> ready(std::make_move_iterator(pending.begin()), std::make_move_iterator(pending.begin() + static_cast<std::ptrdiff_t>(released)));
+  pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(released));
+  for (Event& event : ready) fuse_in_order(std::move(event));
+  prune_history();
+}
+
+void Frontend::Impl::count(const Event& event, const EventOutcome& outcome) {
+  // A backend correction rides on the IMU sensor's index but is no message of it (`corrections`).
+  if (std::holds_alternative<WorldCorrection>(event.payload)) return;
+  SensorStatistics& statistics = sensors[event.sensor];
+  if (outcome.fused) {
+    ++statistics.fused;
+  } else {
+    ++statistics.rejected[std::string(outcome.reason)];
+  }
+  if (outcome.zero_velocity_update) ++zero_velocity_updates;
+}
+
+void Frontend::Impl::fuse_in_order(Event event) {
+  const EventOutcome outcome = estimator.process(event, this);
+  count(event, outcome);
+  if (config.frontend.lag_window_s > 0.0) history.push_back({event, estimator});
+  if (event.is_imu && outcome.fused && estimator.initialized()) emit_pose(true);
+  if (outcome.keyframe) emit_keyframe(*outcome.keyframe);
+  report_gnss(event, outcome);
+}
+
+void Frontend::Impl::report_gnss(const Event& event, const EventOutcome& outcome) {
+  if (!outcome.gnss_fix || !gnss_callback) return;
+  FusedGnssFix fix = *outcome.gnss_fix;
+  fix.sensor = sensors[event.sensor].name;
+  gnss_callback(fix);
+}
+
+void Frontend::Impl::emit_keyframe(const msgs::Keyframe& keyframe) {
+  // A rollback re-creates keyframes already emitted (same ids): the first emission stands.
+  if (!keyframe_poses.empty() && keyframe.keyframe_id <= keyframe_poses.rbegin()->first) return;
+  constexpr size_t kRememberedKeyframes = 100000;
+  keyframe_poses[keyframe.keyframe_id] = estimator.world_correction().inverse() * keyframe.T_world_body.to_se3();
+  if (keyframe_poses.size() > kRememberedKeyframes) keyframe_poses.erase(keyframe_poses.begin());
+  ++keyframes;
+  if (keyframe_callback) keyframe_callback(keyframe);
+}
+
+void Frontend::Impl::fuse_late(Event event) {
+  // Restore the estimator from just before the late event, fuse it, then re-fuse what followed.
+  const auto position = std::upper_bound(history.begin(), history.end(), event,
+                                         [](const Event& e, const HistoryEntry& entry) { return fused_before(e, entry.event); });
+  const size_t index = static_cast<size_t>(position - history.begin());
+  estimator = index == 0 ? history_base : history[index - 1].after;
+  const EventOutcome outcome = estimator.process(event, this);
+  count(event, outcome);
+  // A late IMU message (its stream fell behind another sensor's, which was fused ahead of it)
+  // still gets its pose, as of its own time: poses come from IMU messages only, and those
+  // arrive in order, so the pose stream stays in time order.
+  if (event.is_imu && outcome.fused && estimator.initialized()) emit_pose(true);
+  // It can make a keyframe, and so can the IMU messages re-fused after it: those not emitted
+  // yet are emitted now.
+  if (outcome.keyframe) emit_keyframe(*outcome.keyframe);
+  report_gnss(event, outcome);
+  ++sensors[event.sensor].rolled_back;
+  ++rollbacks;
+  history.insert(history.begin() + static_cast<std::ptrdiff_t>(index), HistoryEntry{event, estimator});
+  replaying = true;
+  for (size_t i = index + 1; i < history.size(); ++i) {
+    const EventOutcome again = estimator.process(history[i].event, nullptr);
+    history[i].after = estimator;
+    if (history[i].event.is_imu && again.fused && estimator.initialized()) emit_pose(false);
+    if (again.keyframe) emit_keyframe(*again.keyframe);
+  }
+  replaying = false;
+}
+
+void Frontend::Impl::prune_history() {
+  const double lag = config.frontend.lag_window_s;
+  while (!history.empty() && (history.back().event.time - history.front().event.time).seconds() > lag) {
+    history_base = std::move(history.front().after);
+    history.pop_front();
+  }
+}
+
+void Frontend::Impl::update_timeouts() {
+  for (size_t i = 0; i < sensors.size(); ++i) {
+    const Timestamp reference = last_input[i].is_zero() ? first_input : last_input[i];
+    const double timeout = setups[i].config->effective_timeout_s();
+    const bool silent = (newest - reference).seconds() > timeout;
+    if (silent && !sensors[i].timed_out) {
+      ++sensors[i].timeouts;
+      logger()->warn("sensor '{}' timed out: silent for more than {} s; fusing the other sensors", sensors[i].name, timeout);
+    }
+    sensors[i].timed_out = silent;
+  }
+}
+
+msgs::PoseStatus Frontend::Impl::pose_status() const {
+  msgs::PoseStatus status;
+  std::set<SensorModality> modalities;
+  bool any_timed_out = false;
+  for (size_t i = 0; i < sensors.size(); ++i) {
+    any_timed_out = any_timed_out || sensors[i].timed_out;
+    const Timestamp fused = estimator.last_fused()[i];
+    if (fused.is_zero() || (estimator.time() - fused).seconds() > setups[i].config->effective_timeout_s()) continue;
+    modalities.insert(sensors[i].modality);
+    status.active_sensors.push_back(sensors[i].name);
+  }
+  status.active_modalities = static_cast<uint32_t>(modalities.size());
+  if (!estimator.initialized()) {
+    status.state = msgs::TrackingState::kInitializing;
+  } else if (sensors[imu_sensor].timed_out) {
+    status.state = msgs::TrackingState::kLost;
+  } else if (any_timed_out || !status.localization_reliable()) {
+    status.state = msgs::TrackingState::kDegraded;
+  } else {
+    status.state = msgs::TrackingState::kTracking;
+  }
+  return status;
+}
+
+void Frontend::Impl::emit_pose(bool notify) {
+  update_timeouts();
+  const estimate::NavigationState state = estimator.filter().state();
+  const estimate::ErrorCovariance covariance = estimator.filter().covariance();
+  msgs::PoseEstimate pose;
+  pose.timestamp = estimator.time();
+  pose.frame_id = "world";
+  pose.child_frame_id = "body";
+  pose.T_world_body = msgs::Pose::from_se3(SE3(state.R_world_body, state.position));
+  pose.velocity = state.velocity;
+  pose.pose_covariance = covariance.topLeftCorner<6, 6>();
+  pose.status = pose_status();
+  latest_pose = pose;
+  if (!notify) return;
+  ++poses;
+  if (pose_callback) pose_callback(pose);
+}
+
+SessionSummary Frontend::summary() const {
+  SessionSummary summary;
+  summary.sensors = impl_->sensors;
+  summary.poses = impl_->poses;
+  summary.rollbacks = impl_->rollbacks;
+  summary.zero_velocity_updates = impl_->zero_velocity_updates;
+  summary.keyframes = impl_->keyframes;
+  summary.corrections = impl_->corrections;
+  summary.filter = std::string(impl_->estimator.filter().name());
+  // Now, not as of the latest pose: a sensor heard from again after that pose no longer counts
+  // as timed out (the pose's own status stays as it was emitted).
+  summary.state = impl_->latest_pose ? impl_->pose_status().state : msgs::TrackingState::kInitializing;
+  return summary;
+}
+
+}  // namespace hanzo::fusion::pipeline
