@@ -11,3 +11,5 @@ for benchmark in "$build_dir"/bench/bench_*; do
     *) "$benchmark" --benchmark_counters_tabular=true ;;
   esac
 done
+echo "== ablation (bench/ablation.sh)"
+bash bench/ablation.sh "$build_dir"

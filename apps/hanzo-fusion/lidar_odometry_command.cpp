@@ -2,17 +2,18 @@
 //   [--fusion-config FUSION.yaml] [--voxel M] [--source-voxel M] [--threads N] [--max-range M]
 //   [--no-deskew] [--deskew-coupling T,R] [--max-scans N] [--trajectory OUT.tum] [--plot DIR]:
 // LiDAR odometry (lidar/lidar_odometry.hpp) over the point clouds of a sensor log; with
-// --fusion-config, LiDAR-inertial (pipeline/lidar_inertial_odometry.hpp: a Frontend fuses the
-// log's IMU and the registered poses; the reported trajectory is the Frontend's). With a ground
+// --fusion-config, LiDAR-inertial: the log's IMU and this LiDAR through a pipeline::Session in
+// replay mode, as `hanzo-fusion run --sensors IMU,LIDAR` runs them (the reported trajectory is
+// the filter's pose at each sweep's middle; --loop-closure closes loops in it). With a ground
 // truth (T_world_body, TUM) the body trajectory is scored: KITTI drift (% and deg/100 m, when
 // the path is longer than 100 m), APE RMSE and final position error (LiDAR only: from the true
-// first pose, no alignment; LiDAR-inertial: after a rigid alignment, the Frontend's frame being
-// its own). Reports per-scan latency by stage, degenerate scans and the local map's size.
+// first pose, no alignment; LiDAR-inertial: after a rigid alignment, the Session's frame being
+// its own); a score that cannot be computed is reported as undefined, the trajectory is written
+// first. Reports per-scan latency by stage, degenerate scans and the local map's size.
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <deque>
 #include <filesystem>
 
 #include <fmt/format.h>
@@ -27,7 +28,7 @@
 #include "hanzo/fusion/io/sensor_log.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/lidar/lidar_odometry.hpp"
-#include "hanzo/fusion/pipeline/lidar_inertial_odometry.hpp"
+#include "hanzo/fusion/pipeline/session.hpp"
 #include "hanzo/fusion/pipeline/lidar_slam.hpp"
 #include "hanzo/fusion/config/fusion_config.hpp"
 
@@ -118,16 +119,38 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
   std::string topic = options.topic;
   std::unique_ptr<lidar::LidarOdometry> odometry;              // LiDAR only
   std::unique_ptr<pipeline::LidarSlam> slam;                   // LiDAR only, --loop-closure
-  std::unique_ptr<pipeline::Frontend> session;                  // LiDAR-inertial
-  std::unique_ptr<pipeline::LidarInertialOdometry> inertial;
+  std::unique_ptr<pipeline::Session> session;  // LiDAR-inertial
   std::string lidar_sensor;
-  std::deque<msgs::PointCloudMessage> waiting;  // sweeps waiting for the IMU to pass their end
   io::Trajectory estimate;
   std::vector<double> milliseconds;
   std::size_t weather = 0, phantoms = 0;
   std::size_t refused = 0, degenerate = 0, max_map_points = 0, max_map_bytes = 0, iterations = 0, associations = 0;
   double stage_seconds[3] = {0.0, 0.0, 0.0};
   std::string first_refusal;
+
+  // One registered sweep: its statistics and the body pose (T_world_body at the sweep's middle).
+  const auto record_estimate = [&](const lidar::LidarOdometryEstimate& added, double scan_ms, std::size_t local_map_bytes,
+                                   const SE3& T_world_body) {
+    milliseconds.push_back(scan_ms);
+    degenerate += added.degenerate ? 1 : 0;
+    weather += added.weather_degraded ? 1 : 0;
+    phantoms += added.phantom_points;
+    iterations += static_cast<std::size_t>(added.iterations);
+    associations += static_cast<std::size_t>(added.associations);
+    stage_seconds[0] += added.preprocess_seconds;
+    stage_seconds[1] += added.registration_seconds;
+    stage_seconds[2] += added.map_update_seconds;
+    max_map_points = std::max(max_map_points, added.map_points);
+    max_map_bytes = std::max(max_map_bytes, local_map_bytes);
+    estimate.timestamps.push_back(added.time);
+    estimate.poses.push_back(T_world_body.matrix());
+  };
+  // A sweep the Session registered: the fused estimate is the filter's pose at the sweep's middle.
+  const auto record = [&](const pipeline::LidarInertialOdometry::RegisteredScan& registered) {
+    const lidar::LidarOdometryEstimate& added = registered.estimate;
+    const SE3 fused = session->frontend().pose_at(added.time).value_or(registered.T_world_lidar * T_body_lidar.inverse());
+    record_estimate(added, 1e3 * registered.seconds, 0, fused);
+  };
 
   // The first sweep fixes the topic, the LiDAR's calibration and the starting pose.
   const auto start_with = [&](const msgs::PointCloudMessage& scan, const std::string& scan_topic) -> Status {
@@ -142,15 +165,23 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
       if (!calibration) return Error("--fusion-config needs --calibration");
       auto fusion = config::load_fusion_config(options.fusion_config);
       if (!fusion) return fusion.error();
-      auto created = pipeline::Frontend::create(*fusion, *calibration);
-      if (!created) return created.error();
-      session = std::move(*created);
-      const config::SensorConfig* sensor = session->sensor_for_topic(topic);
+      const config::SensorConfig* sensor = nullptr;
+      for (const config::SensorConfig& candidate : fusion->sensors) {
+        if (candidate.topic == topic) sensor = &candidate;
+      }
       if (sensor == nullptr) return Error(fmt::format("{}: no sensor reads {}", options.fusion_config, topic));
       lidar_sensor = sensor->name;
+      // Only what this command feeds: the IMU and this LiDAR (no timeouts of other sensors).
+      std::erase_if(fusion->sensors, [&](const config::SensorConfig& s) { return s.name != lidar_sensor && s.modality != config::SensorModality::kImu; });
+      pipeline::SessionConfig session_config = pipeline::SessionConfig::from(*fusion);
+      session_config.lidar_odometry.odometry = config;
+      session_config.loop_closure = options.loop_closure;
+      session_config.num_threads = options.threads;
+      auto created = pipeline::Session::create(*fusion, *calibration, session_config);
+      if (!created) return created.error();
+      session = std::move(*created);
       if (const calib::SensorCalibration* entry = calibration->find(lidar_sensor)) T_body_lidar = entry->T_body_sensor();
-      inertial = std::make_unique<pipeline::LidarInertialOdometry>(*session, lidar_sensor, T_body_lidar,
-                                                                   pipeline::LidarInertialOdometryConfig{.odometry = config});
+      session->set_scan_callback([&](const pipeline::LidarInertialOdometry::RegisteredScan& registered) { record(registered); });
       return ok_status();
     }
     if (calibration) {
@@ -182,12 +213,11 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
     return ok_status();
   };
 
+  // LiDAR only.
   const auto register_scan = [&](const msgs::PointCloudMessage& scan) {
     const auto start = std::chrono::steady_clock::now();
     Result<lidar::LidarOdometryEstimate> added = Error("");
-    if (inertial) {
-      added = inertial->process(scan);
-    } else if (auto cloud = cloud::from_message(scan); cloud) {
+    if (auto cloud = cloud::from_message(scan); cloud) {
       added = slam ? slam->add_scan(scan.timestamp, *cloud) : odometry->add_scan(scan.timestamp, *cloud);
     } else {
       added = cloud.error();
@@ -196,25 +226,9 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
       if (refused++ == 0) first_refusal = fmt::format("scan at {:.3f} s: {}", scan.timestamp.seconds(), added.error().message);
       return;
     }
-    milliseconds.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
-    degenerate += added->degenerate ? 1 : 0;
-    weather += added->weather_degraded ? 1 : 0;
-    phantoms += added->phantom_points;
-    iterations += static_cast<std::size_t>(added->iterations);
-    associations += static_cast<std::size_t>(added->associations);
-    stage_seconds[0] += added->preprocess_seconds;
-    stage_seconds[1] += added->registration_seconds;
-    stage_seconds[2] += added->map_update_seconds;
-    const lidar::LidarOdometry& used = inertial ? *inertial->odometry() : (slam ? slam->odometry() : *odometry);
-    max_map_points = std::max(max_map_points, added->map_points);
-    max_map_bytes = std::max(max_map_bytes, used.local_map().memory_bytes());
-    estimate.timestamps.push_back(added->time);
-    if (session) {
-      // The fused estimate: the Frontend's pose at the sweep's middle.
-      estimate.poses.push_back(session->pose_at(added->time).value_or(added->T_world_lidar * T_body_lidar.inverse()).matrix());
-    } else {
-      estimate.poses.push_back((added->T_world_lidar * T_body_lidar.inverse()).matrix());
-    }
+    const lidar::LidarOdometry& used = slam ? slam->odometry() : *odometry;
+    record_estimate(*added, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count(),
+                    used.local_map().memory_bytes(), added->T_world_lidar * T_body_lidar.inverse());
   };
 
   io::LogEntry entry;
@@ -224,30 +238,24 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
     if (!*more) break;
     const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
     if (message == nullptr) continue;
-    if (session && std::holds_alternative<msgs::ImuMessage>(*message)) {
-      if (const config::SensorConfig* sensor = session->sensor_for_topic(entry.topic)) {
-        (void)session->push(sensor->name, *message);  // rejections are counted by the session
-        const Timestamp imu_time = msgs::timestamp_of(*message);
-        while (!waiting.empty() && imu_time >= (waiting.front().point_timestamps.empty() ? waiting.front().timestamp
-                                                                                          : waiting.front().point_timestamps.back())) {
-          register_scan(waiting.front());
-          waiting.pop_front();
-        }
-      }
-      continue;
-    }
     const auto* scan = std::get_if<msgs::PointCloudMessage>(message);
-    if (scan == nullptr || (!topic.empty() && entry.topic != topic)) continue;
-    if (!odometry && !inertial && !slam) {
+    if (scan != nullptr && topic.empty()) topic = entry.topic;  // the first point-cloud topic
+    if (scan != nullptr && entry.topic == topic && !odometry && !session && !slam) {
       if (Status started = start_with(*scan, entry.topic); !started) return fail(started.error().message);
     }
     if (session) {
-      waiting.push_back(*scan);
-    } else {
-      register_scan(*scan);
+      // The IMU and this LiDAR; rejections and sweeps that do not register are counted by the session.
+      if (const config::SensorConfig* sensor = session->frontend().sensor_for_topic(entry.topic)) (void)session->push(sensor->name, *message);
+      continue;
     }
+    if (scan != nullptr && entry.topic == topic && (odometry || slam)) register_scan(*scan);
   }
-  if (!odometry && !inertial && !slam) return fail(fmt::format("{}: no point clouds{}", options.log, topic.empty() ? "" : " on " + topic));
+  if (session) {
+    session->flush();
+    refused = session->mapping_summary().scans_refused;
+    if (refused > 0) first_refusal = "see the session's LiDAR counters (aligning, not_registered)";
+  }
+  if (!odometry && !session && !slam) return fail(fmt::format("{}: no point clouds{}", options.log, topic.empty() ? "" : " on " + topic));
   if (milliseconds.empty()) return fail(fmt::format("every scan was refused; first: {}", first_refusal));
 
   std::vector<double> sorted = milliseconds;
@@ -290,34 +298,48 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
                         summary.keyframes, summary.loop_closures, summary.loop_candidates, summary.optimizations,
                         summary.loop_closure_seconds, summary.optimization_seconds);
   }
-  if (ground_truth) {
-    nlohmann::json odometry_result;
-    std::string odometry_text = slam ? "  odometry (before loop closure):\n" : "";
-    if (Status scored = score(estimate, *ground_truth, options, session != nullptr, odometry_result, odometry_text); !scored) {
-      return fail(scored.error().message);
+  if (session) {
+    const pipeline::MappingSummary mapping = session->mapping_summary();
+    result["loop_closure"] = {{"enabled", options.loop_closure}, {"map_keyframes", mapping.map_keyframes},
+                              {"candidates", mapping.loop_candidates}, {"closures", mapping.loop_closures}};
+    if (options.loop_closure) {
+      text += fmt::format("  loop closure: {} map keyframes, {} of {} candidates verified\n", mapping.map_keyframes, mapping.loop_closures,
+                          mapping.loop_candidates);
     }
-    text += odometry_text;
-    if (slam) {
-      // Every sweep through the optimized keyframe graph.
-      io::Trajectory corrected = slam->trajectory();
-      for (Eigen::Matrix4d& pose : corrected.poses) pose = pose * T_body_lidar.inverse().matrix();
-      nlohmann::json slam_result;
-      text += "  after loop closure:\n";
-      if (Status scored = score(corrected, *ground_truth, options, false, slam_result, text); !scored) return fail(scored.error().message);
+  }
+  // Every sweep through the optimized keyframe graph (LiDAR SLAM).
+  std::optional<io::Trajectory> corrected;
+  if (slam) {
+    corrected = slam->trajectory();
+    for (Eigen::Matrix4d& pose : corrected->poses) pose = pose * T_body_lidar.inverse().matrix();
+  }
+  // Outputs first: a score that cannot be computed does not lose them.
+  if (!options.trajectory_out.empty()) {
+    if (Status written = io::write_trajectory(options.trajectory_out, corrected ? *corrected : estimate, io::TrajectoryFormat::kTum); !written) {
+      return fail(written.error().message);
+    }
+    result["trajectory"] = options.trajectory_out;
+  }
+  if (ground_truth) {
+    const auto scored = [&](const io::Trajectory& trajectory, bool aligned, const std::string& heading) {
+      nlohmann::json scores;
+      std::string scored_text = heading;
+      if (Status status = score(trajectory, *ground_truth, options, aligned, scores, scored_text); !status) {
+        scores = {{"undefined", status.error().message}};
+        scored_text = heading + fmt::format("  score undefined: {}\n", status.error().message);
+      }
+      text += scored_text;
+      return scores;
+    };
+    nlohmann::json odometry_result = scored(estimate, session != nullptr, slam ? "  odometry (before loop closure):\n" : "");
+    if (corrected) {
       result["odometry"] = odometry_result;
-      result["slam"] = slam_result;
-      estimate = std::move(corrected);
+      result["slam"] = scored(*corrected, false, "  after loop closure:\n");
     } else {
       result.update(odometry_result);
     }
   }
-  if (!options.trajectory_out.empty()) {
-    if (Status written = io::write_trajectory(options.trajectory_out, estimate, io::TrajectoryFormat::kTum); !written) {
-      return fail(written.error().message);
-    }
-    result["trajectory"] = options.trajectory_out;
-    text += fmt::format("wrote {}\n", options.trajectory_out);
-  }
+  if (!options.trajectory_out.empty()) text += fmt::format("wrote {}\n", options.trajectory_out);
   return report_success(output, result, text);
 }
 
@@ -331,7 +353,7 @@ void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& ru
   command->add_option("--ground-truth", options->ground_truth, "Ground truth T_world_body (TUM): start there and score the result");
   command->add_option("--calibration", options->calibration, "Calibration YAML with <frame_id>_to_body of the LiDAR (default: identity)");
   command->add_option("--fusion-config", options->fusion_config,
-                      "LiDAR-inertial: run a Frontend with this fusion configuration (needs --calibration) on the log's IMU")
+                      "LiDAR-inertial: run a Session with this fusion configuration (needs --calibration) on the log's IMU and this LiDAR")
       ->check(CLI::ExistingFile);
   command->add_option("--voxel", options->voxel, "Local map voxel size and neighbour radius, m")->capture_default_str();
   command->add_option("--source-voxel", options->source_voxel, "Registration points downsampled to this, m (1.0 outdoor, 0.25 indoor)")->capture_default_str();
@@ -345,7 +367,7 @@ void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& ru
       ->delimiter(',')
       ->capture_default_str();
   command->add_flag("--loop-closure", options->loop_closure,
-                    "LiDAR SLAM: keyframe pose graph with Scan Context loop closure (LiDAR only); scores before and after");
+                    "Scan Context loop closure: LiDAR only, a keyframe pose graph (scores before and after); with --fusion-config, the Session's");
   command->add_option("--max-scans", options->max_scans, "Stop after this many scans (0: all)");
   command->add_option("--trajectory", options->trajectory_out, "Write the body trajectory (TUM)");
   command->add_option("--plot", options->plot_dir, "Write an SVG of the trajectory against the ground truth into this folder");

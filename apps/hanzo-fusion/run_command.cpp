@@ -11,6 +11,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -42,6 +43,7 @@ struct RunOptions {
   std::string out;
   std::string ground_truth;
   int threads = 1;
+  std::vector<std::string> sensors;  // empty: every configured sensor
 };
 
 // A progress bar on stderr, only when stderr is a terminal.
@@ -286,6 +288,14 @@ int run(const Output& output, const RunOptions& options) {
     if (!loaded) return fail(loaded.error().message);
     calibration = std::move(loaded).value();
   }
+  for (const std::string& name : options.sensors) {
+    if (config->find_sensor(name) == nullptr) return fail(fmt::format("--sensors: {} configures no sensor '{}'", options.config_path, name));
+  }
+  if (!options.sensors.empty()) {  // ablation: the others' messages are counted as unmapped
+    std::erase_if(config->sensors, [&](const config::SensorConfig& sensor) {
+      return std::find(options.sensors.begin(), options.sensors.end(), sensor.name) == options.sensors.end();
+    });
+  }
   pipeline::SessionConfig session_config = pipeline::SessionConfig::from(*config);
   session_config.mode = pipeline::SessionMode::kReplay;
   session_config.num_threads = options.threads;
@@ -446,6 +456,8 @@ void add_run_command(CLI::App& app, const Output& output, Command& run_command) 
   command->add_option("--gt", options->ground_truth, "Ground-truth trajectory (TUM) for APE / RPE");
   command->add_option("--threads", options->threads, "LiDAR odometry threads (0: all cores); the output does not depend on it")
       ->capture_default_str();
+  command->add_option("--sensors", options->sensors, "Fuse only these configured sensors (comma-separated names), e.g. for an ablation")
+      ->delimiter(',');
   command->callback([&output, &run_command, options] { run_command = [&output, options] { return run(output, *options); }; });
 }
 

@@ -349,6 +349,7 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
   ++summary_.scans_registered;
   summary_.degenerate_scans += registered.estimate.degenerate ? 1 : 0;
   summary_.weather_degraded_scans += registered.estimate.weather_degraded ? 1 : 0;
+  if (scan_callback_) scan_callback_(registered);
   const SE3& T_world_lidar = registered.T_world_lidar;
   if (last_lidar_pose_) path_ += (last_lidar_pose_->inverse() * T_world_lidar).translation().norm();
   last_lidar_pose_ = T_world_lidar;

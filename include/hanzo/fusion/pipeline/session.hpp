@@ -185,6 +185,7 @@ class Session {
  public:
   using KeyframeCallback = std::function<void(const msgs::Keyframe&)>;
   using MapUpdateCallback = std::function<void(const msgs::MapUpdate&)>;
+  using ScanCallback = std::function<void(const LidarInertialOdometry::RegisteredScan&)>;
 
   /// Fails as Frontend::create does, or on an invalid SessionConfig. Without a SessionConfig
   /// the settings come from the configuration (SessionConfig::from(config)).
@@ -237,6 +238,9 @@ class Session {
   void set_pose_callback(Frontend::PoseCallback callback) { pose_callback_ = std::move(callback); }
   /// Every Frontend keyframe as emitted.
   void set_keyframe_callback(KeyframeCallback callback) { keyframe_callback_ = std::move(callback); }
+  /// Every LiDAR sweep registered and fused (its estimate, pose, covariance and timing), after
+  /// the Frontend took its pose.
+  void set_scan_callback(ScanCallback callback) { scan_callback_ = std::move(callback); }
   /// New map keyframes (added_points in the world frame) and, after loop closures, the whole
   /// corrected point map (full_replacement).
   void set_map_update_callback(MapUpdateCallback callback) { map_update_callback_ = std::move(callback); }
@@ -311,6 +315,7 @@ class Session {
   Frontend::PoseCallback pose_callback_;
   KeyframeCallback keyframe_callback_;
   MapUpdateCallback map_update_callback_;
+  ScanCallback scan_callback_;
 };
 
 }  // namespace hanzo::fusion::pipeline
