@@ -84,7 +84,7 @@ class PySession {
     gnss.latitude = latitude;
     gnss.longitude = longitude;
     gnss.altitude = altitude;
-    const std::optional<msgs::GnssFixType> type = fix_type(fix);
+    const std::optional<msgs::GnssFixType> type = msgs::gnss_fix_type_from_string(fix);
     if (!type) throw py::value_error(fmt::format("fix: expected NO_FIX, FIX_2D, FIX_3D, RTK_FLOAT or RTK_FIXED, got '{}'", fix));
     gnss.fix_type = *type;
     gnss.position_covariance = covariance;
@@ -199,14 +199,6 @@ class PySession {
   }
 
  private:
-  static std::optional<msgs::GnssFixType> fix_type(const std::string& name) {
-    for (msgs::GnssFixType type : {msgs::GnssFixType::kNoFix, msgs::GnssFixType::kFix2d, msgs::GnssFixType::kFix3d, msgs::GnssFixType::kRtkFloat,
-                                   msgs::GnssFixType::kRtkFixed}) {
-      if (msgs::to_string(type) == name) return type;
-    }
-    return std::nullopt;
-  }
-
   std::unique_ptr<pipeline::Session> session_;
   std::vector<pipeline::StampedPose> poses_;
 };

@@ -160,14 +160,6 @@ Result<MappingConfig> parse_mapping(const YamlValue& node) {
   return mapping;
 }
 
-std::optional<msgs::GnssFixType> fix_type_from_string(std::string_view name) {
-  for (msgs::GnssFixType type : {msgs::GnssFixType::kNoFix, msgs::GnssFixType::kFix2d, msgs::GnssFixType::kFix3d,
-                                 msgs::GnssFixType::kRtkFloat, msgs::GnssFixType::kRtkFixed}) {
-    if (msgs::to_string(type) == name) return type;
-  }
-  return std::nullopt;
-}
-
 // The per-modality fusion keys; each is valid for one modality only.
 struct ModalityKey {
   std::string_view key;
@@ -212,7 +204,7 @@ Result<SensorFusionOptions> parse_fusion_options(const YamlValue& node, SensorMo
   if (const YamlValue fix = node["min_fix"]; fix.present()) {
     std::string text;
     HANZO_ASSIGN_OR_RETURN(text, fix.as_string());
-    const std::optional<msgs::GnssFixType> type = fix_type_from_string(text);
+    const std::optional<msgs::GnssFixType> type = msgs::gnss_fix_type_from_string(text);
     if (!type || *type == msgs::GnssFixType::kNoFix) return fix.error(fmt::format("expected FIX_2D, FIX_3D, RTK_FLOAT or RTK_FIXED, got '{}'", text));
     options.min_fix = *type;
   }

@@ -15,10 +15,7 @@ namespace {
 enum class CsvKind { kImu, kGnss, kWheel };
 
 Result<msgs::GnssFixType> fix_type_from(const std::string& name) {
-  for (auto type : {msgs::GnssFixType::kNoFix, msgs::GnssFixType::kFix2d, msgs::GnssFixType::kFix3d,
-                    msgs::GnssFixType::kRtkFloat, msgs::GnssFixType::kRtkFixed}) {
-    if (name == msgs::to_string(type)) return type;
-  }
+  if (const std::optional<msgs::GnssFixType> type = msgs::gnss_fix_type_from_string(name)) return *type;
   return Error(fmt::format("fix_type '{}' is not NO_FIX, FIX_2D, FIX_3D, RTK_FLOAT or RTK_FIXED", name));
 }
 

@@ -48,6 +48,13 @@ std::string_view to_string(GnssFixType fix_type) {
   return "invalid";
 }
 
+std::optional<GnssFixType> gnss_fix_type_from_string(std::string_view name) {
+  for (GnssFixType type : {GnssFixType::kNoFix, GnssFixType::kFix2d, GnssFixType::kFix3d, GnssFixType::kRtkFloat, GnssFixType::kRtkFixed}) {
+    if (to_string(type) == name) return type;
+  }
+  return std::nullopt;
+}
+
 std::string_view to_string(TrackingState state) {
   switch (state) {
     case TrackingState::kUnspecified: return "UNSPECIFIED";

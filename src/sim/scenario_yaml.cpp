@@ -376,10 +376,7 @@ Result<msgs::GnssFixType> parse_fix_type(const YamlValue& value, msgs::GnssFixTy
   if (!value.present()) return fallback;
   std::string name;
   HANZO_ASSIGN_OR_RETURN(name, value.as_string());
-  for (msgs::GnssFixType type : {msgs::GnssFixType::kNoFix, msgs::GnssFixType::kFix2d, msgs::GnssFixType::kFix3d,
-                                 msgs::GnssFixType::kRtkFloat, msgs::GnssFixType::kRtkFixed}) {
-    if (msgs::to_string(type) == name) return type;
-  }
+  if (const std::optional<msgs::GnssFixType> type = msgs::gnss_fix_type_from_string(name)) return *type;
   return value.error(fmt::format("unknown fix type '{}' (expected NO_FIX, FIX_2D, FIX_3D, RTK_FLOAT or RTK_FIXED)", name));
 }
 

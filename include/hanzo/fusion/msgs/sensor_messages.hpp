@@ -89,6 +89,8 @@ enum class GnssFixType { kNoFix, kFix2d, kFix3d, kRtkFloat, kRtkFixed };
 
 /// "NO_FIX", "FIX_2D", "FIX_3D", "RTK_FLOAT", "RTK_FIXED" as in the spec.
 std::string_view to_string(GnssFixType fix_type);
+/// The fix type a name of to_string() stands for; none for any other text.
+std::optional<GnssFixType> gnss_fix_type_from_string(std::string_view name);
 
 struct GnssMessage {
   Timestamp timestamp;
