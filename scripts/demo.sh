@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # `make demo`: the main job on the sample data shipped in examples/: validate the fusion
 # configuration and calibration, turn the sample CSV recordings into a sensor log (MCAP), list
-# it, replay it through the fusion frontend (EKF) and score it against its ground truth,
+# it, replay it through the pipeline (the Session: EKF and keyframe graph) and score it against its ground truth,
 # simulate 8 s of the urban_vehicle scenario (all six sensors, with ground truth) and replay
-# that too, map its LiDAR sweeps with the true poses (FusionMap + PNG pictures), then score a
+# that too (LiDAR odometry, graph and map included), map its LiDAR sweeps with the true poses (FusionMap + PNG pictures), then score a
 # sample estimate with evo's APE/RPE (SVG plots). Writes only into build/demo/.
 set -euo pipefail
 build_dir=${1:-build}

@@ -155,14 +155,20 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   HANZO_RETURN_IF_ERROR(with_context(session_config.validate(), "session config"));
   std::unique_ptr<Frontend> frontend;
   HANZO_ASSIGN_OR_RETURN(frontend, Frontend::create(config, calibration));
-  std::string lidar_sensor;
-  calib::SensorCalibration lidar_calibration;
+  std::string lidar_sensor, wheel_sensor;
+  calib::SensorCalibration lidar_calibration, wheel_calibration;
   for (const config::SensorConfig& sensor : config.sensors) {
-    if (!session_config.mapping || sensor.modality != config::SensorModality::kLidar) continue;
-    lidar_sensor = sensor.name;
-    if (const calib::SensorCalibration* entry = calibration.find(sensor.name)) lidar_calibration = *entry;
-    break;
+    const calib::SensorCalibration* entry = calibration.find(sensor.name);
+    if (sensor.modality == config::SensorModality::kLidar && lidar_sensor.empty() && session_config.mapping) {
+      lidar_sensor = sensor.name;
+      if (entry != nullptr) lidar_calibration = *entry;
+    }
+    if (sensor.modality == config::SensorModality::kWheelOdometry && wheel_sensor.empty()) {
+      wheel_sensor = sensor.name;
+      if (entry != nullptr) wheel_calibration = *entry;
+    }
   }
+  if (lidar_sensor.empty()) wheel_sensor.clear();  // nothing to check the wheels against
   session_config.backend.batch_on_loop_closure = true;
   // Replay: every optimization inside push(), in order.
   if (session_config.mode == SessionMode::kReplay) session_config.backend.smoother.background_batch = false;
@@ -170,16 +176,22 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   const bool has_gnss = std::any_of(config.sensors.begin(), config.sensors.end(),
                                     [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kGnss; });
   if (session_config.gnss_factors && has_gnss) session_config.backend.correct_on_loop_closures_only = true;
-  return std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), lidar_calibration));
+  return std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), lidar_calibration,
+                                              std::move(wheel_sensor), wheel_calibration));
 }
 
 Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::string lidar_sensor,
-                 const calib::SensorCalibration& lidar_calibration)
+                 const calib::SensorCalibration& lidar_calibration, std::string wheel_sensor,
+                 const calib::SensorCalibration& wheel_calibration)
     : frontend_(std::move(frontend)),
       config_(std::move(config)),
       lidar_sensor_(std::move(lidar_sensor)),
       T_body_lidar_(lidar_calibration.T_body_sensor()),
       lidar_time_offset_(lidar_calibration.time_offset),
+      wheel_sensor_(std::move(wheel_sensor)),
+      T_body_wheels_(wheel_calibration.T_body_sensor()),
+      wheel_time_offset_(wheel_calibration.time_offset),
+      slip_monitor_(config_.wheel_slip),
       graph_(std::make_unique<KeyframeGraph>(config_.backend)),
       loop_closures_(config_.loop, config_.lidar_odometry.odometry),
       map_builder_(maps::MapBuilder::create(config_.map).value()) {
@@ -246,10 +258,24 @@ Status Session::push(std::string_view sensor, msgs::SensorMessage message) {
   if (odometry_ && sensor == lidar_sensor_) {
     if (auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(std::move(*scan));
   }
+  if (!wheel_sensor_.empty() && sensor == wheel_sensor_) {
+    const auto* wheels = std::get_if<msgs::WheelOdometryMessage>(&message);
+    if (wheels != nullptr && msgs::validate(*wheels).ok() && !wheels_agree(*wheels)) {
+      ++summary_.wheel_messages_withheld;
+      register_ready_scans();
+      update_backend();
+      return ok_status();
+    }
+  }
   const Status pushed = frontend_->push(sensor, message);
   register_ready_scans();
   update_backend();
   return pushed;
+}
+
+bool Session::wheels_agree(const msgs::WheelOdometryMessage& wheels) {
+  slip_monitor_.add_wheels(wheels.timestamp + wheel_time_offset_, 0.5 * (wheels.left_distance + wheels.right_distance));
+  return !slip_monitor_.slipping();
 }
 
 void Session::flush() {
@@ -350,6 +376,23 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
   summary_.degenerate_scans += registered.estimate.degenerate ? 1 : 0;
   summary_.weather_degraded_scans += registered.estimate.weather_degraded ? 1 : 0;
   if (scan_callback_) scan_callback_(registered);
+  if (!wheel_sensor_.empty()) {
+    // The LiDAR's motion since the previous registered sweep, as the wheel frame's forward travel.
+    const lidar::LidarOdometryEstimate& estimate = registered.estimate;
+    if (last_sweep_time_ && !estimate.first_scan) {
+      const SE3 T_body_body = T_body_lidar_ * estimate.T_previous_current * T_body_lidar_.inverse();
+      const SE3 T_wheels_wheels = T_body_wheels_.inverse() * T_body_body * T_body_wheels_;
+      const bool was_slipping = slip_monitor_.slipping();
+      slip_monitor_.add_lidar_motion(*last_sweep_time_, estimate.time, T_wheels_wheels.translation().x(),
+                                     !estimate.degenerate && !estimate.weather_degraded);
+      if (slip_monitor_.slipping() != was_slipping) {
+        logger()->warn("session: wheels {} the LiDAR odometry ({:+.3f} m over {:.1f} s){}", slip_monitor_.slipping() ? "disagree with" : "agree again with",
+                       slip_monitor_.last_difference(), config_.wheel_slip.window_s, slip_monitor_.slipping() ? ": not fused while they slip" : "");
+      }
+      summary_.wheel_slip_episodes = slip_monitor_.episodes();
+    }
+    last_sweep_time_ = estimate.time;
+  }
   const SE3& T_world_lidar = registered.T_world_lidar;
   if (last_lidar_pose_) path_ += (last_lidar_pose_->inverse() * T_world_lidar).translation().norm();
   last_lidar_pose_ = T_world_lidar;
@@ -595,6 +638,11 @@ SessionSummary Session::summary() const {
     sensor.rejected = lidar_statistics_.rejected;
     sensor.first_time = lidar_statistics_.first_time;
     sensor.last_time = lidar_statistics_.last_time;
+  }
+  for (SensorStatistics& sensor : summary.sensors) {
+    if (sensor.name != wheel_sensor_ || summary_.wheel_messages_withheld == 0) continue;
+    sensor.received += summary_.wheel_messages_withheld;  // they never reached the Frontend
+    sensor.rejected["slip"] = summary_.wheel_messages_withheld;
   }
   return summary;
 }

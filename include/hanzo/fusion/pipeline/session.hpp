@@ -31,6 +31,9 @@
 //    filter's motion and fuses the pose into the Frontend. When more than max_waiting_scans
 //    wait (the IMU stopped), the oldest is dropped ("imu_behind"; "aligning" before the
 //    Frontend's first pose).
+//  - Wheel odometry (the first wheel sensor) is checked against the LiDAR odometry's own motion
+//    (WheelSlipMonitor): while the wheels disagree (slip, spin, a wrong scale) their messages
+//    are not fused (counted as rejected "slip"); the filter runs on the IMU and the LiDAR.
 //  - Everything else goes to Frontend::push (same checks, same errors).
 //  - Keyframes of the Frontend (frontend.keyframe_interval) become nodes of a KeyframeGraph
 //    (between factors from the filter's relative motion); after each push the graph is updated
@@ -76,6 +79,7 @@
 #include "hanzo/fusion/pipeline/keyframe_graph.hpp"
 #include "hanzo/fusion/pipeline/lidar_inertial_odometry.hpp"
 #include "hanzo/fusion/pipeline/frontend.hpp"
+#include "hanzo/fusion/pipeline/wheel_slip_monitor.hpp"
 
 namespace hanzo::fusion::pipeline {
 
@@ -110,6 +114,8 @@ struct SessionConfig {
   double live_window_s = 10.0;
   /// Keep every emitted pose (64 bytes each) for optimized_trajectory(); the server does not.
   bool keep_trajectory = true;
+  /// Wheels against the LiDAR's motion (with a 3D LiDAR and wheel odometry).
+  WheelSlipConfig wheel_slip;
 
   Status validate() const;
   static maps::MapBuilderConfig default_map();
@@ -173,6 +179,8 @@ struct MappingSummary {
   double last_correction_m = 0.0; ///< the backend's last correction of the latest keyframe
   uint64_t relocalizations = 0;   ///< successful relocalize() calls
   uint64_t gnss_factors = 0;      ///< GNSS fixes added to the keyframe graph
+  uint64_t wheel_slip_episodes = 0;   ///< times the wheels began to disagree with the LiDAR
+  uint64_t wheel_messages_withheld = 0;  ///< wheel messages not fused because of it
 };
 
 /// A pose at a time (body in the world frame).
@@ -254,7 +262,10 @@ class Session {
     SE3 T_anchor_lidar;        ///< the sweep's pose relative to the anchor's body
     SE3 T_world_lidar;         ///< where the map has it now
   };
-  Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::string lidar_sensor, const calib::SensorCalibration& lidar_calibration);
+  Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::string lidar_sensor, const calib::SensorCalibration& lidar_calibration,
+          std::string wheel_sensor, const calib::SensorCalibration& wheel_calibration);
+  /// Feeds the slip monitor; false when the wheels disagree with the LiDAR (not fused then).
+  bool wheels_agree(const msgs::WheelOdometryMessage& wheels);
   Status push_scan(msgs::PointCloudMessage scan);
   class RegistrationWorker;
   void register_ready_scans();
@@ -279,6 +290,11 @@ class Session {
   std::string lidar_sensor_;
   SE3 T_body_lidar_;
   Duration lidar_time_offset_;            ///< t_body = t_lidar + offset (calibration)
+  std::string wheel_sensor_;              ///< checked against the LiDAR; empty without both
+  SE3 T_body_wheels_;
+  Duration wheel_time_offset_;
+  WheelSlipMonitor slip_monitor_;
+  std::optional<Timestamp> last_sweep_time_;  ///< the previous registered sweep's middle
   std::unique_ptr<KeyframeGraph> graph_;  ///< replaced by a fresh one at a relocalization
   bool restart_graph_ = false;  ///< the next keyframe starts the graph (after a relocalization)
   std::optional<LidarInertialOdometry> odometry_;
