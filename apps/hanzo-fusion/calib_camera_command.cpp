@@ -13,7 +13,7 @@
 
 #include "commands.hpp"
 #include "hanzo/fusion/calib/camera_calibration.hpp"
-#include "hanzo/fusion/service/calibration_json.hpp"
+#include "hanzo/fusion/calib/calibration_json.hpp"
 #include "log_messages.hpp"
 
 namespace hanzo::fusion::app {
@@ -88,7 +88,7 @@ void add_calib_camera_command(CLI::App& calib_app, const Output& output, Command
         if (!written) return report_failure(output, result, written.error().message);
         result["out"] = options->out;
       }
-      result.update(service::camera_calibration_to_json(*calibrated));
+      result.update(calib::camera_calibration_to_json(*calibrated));
       result["ok"] = true;
       return report_success(output, result, to_text(options->camera, *calibrated, options->out));
     };

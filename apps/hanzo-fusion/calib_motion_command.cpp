@@ -15,7 +15,7 @@
 #include "commands.hpp"
 #include "hanzo/fusion/calib/motion_calibration.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
-#include "hanzo/fusion/service/calibration_json.hpp"
+#include "hanzo/fusion/calib/calibration_json.hpp"
 #include "log_messages.hpp"
 
 namespace hanzo::fusion::app {
@@ -138,7 +138,7 @@ void add_calib_motion_command(CLI::App& calib_app, const Output& output, Command
           return report_failure(output, result, written.error().message);
         }
       }
-      result.update(service::motion_calibration_to_json(*summary));
+      result.update(calib::motion_calibration_to_json(*summary));
       result["ok"] = true;
       if (!options->out.empty()) result["out"] = options->out;
       return report_success(output, result, to_text(*summary, options->out));

@@ -34,8 +34,10 @@ int main(int argc, char** argv) {
   app::add_lidar_odometry_command(app, output, run);
   app::add_cloud_commands(app, output, run);
   app::add_map_command(app, output, run);
+#ifdef HANZO_FUSION_WITH_SERVICE
   app::add_serve_command(app, output, run);
   app::add_stream_command(app, output, run);
+#endif
 
   try {
     app.parse(argc, argv);

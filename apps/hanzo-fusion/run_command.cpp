@@ -244,7 +244,8 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"weather_degraded_scans", m.weather_degraded_scans},
           {"map_keyframes", m.map_keyframes},   {"graph_keyframes", m.graph_keyframes},
           {"loop_candidates", m.loop_candidates}, {"loop_closures", m.loop_closures},
-          {"gnss_factors", m.gnss_factors},     {"map_memory_bytes", m.map_memory_bytes}};
+          {"gnss_factors", m.gnss_factors},     {"map_memory_bytes", m.map_memory_bytes},
+          {"wheel_slip_episodes", m.wheel_slip_episodes}, {"wheel_messages_withheld", m.wheel_messages_withheld}};
 }
 
 // The session's map as a FusionMap file with its occupancy and point images; the file names.
@@ -420,9 +421,16 @@ int run(const Output& output, const RunOptions& options) {
     text += "\n";
   }
   if (mapping.graph_keyframes > 0) {
-    text += fmt::format("graph: {} keyframes, {} GNSS factors, {} loop closures; map: {} keyframes from {} of {} sweeps registered\n",
-                        mapping.graph_keyframes, mapping.gnss_factors, mapping.loop_closures, mapping.map_keyframes,
-                        mapping.scans_registered, mapping.scans_received);
+    text += fmt::format("graph: {} keyframes, {} GNSS factors, {} loop closures", mapping.graph_keyframes, mapping.gnss_factors,
+                        mapping.loop_closures);
+    if (mapping.scans_received > 0) {
+      text += fmt::format("; map: {} keyframes from {} of {} sweeps registered", mapping.map_keyframes, mapping.scans_registered,
+                          mapping.scans_received);
+    }
+    if (mapping.wheel_slip_episodes > 0) {
+      text += fmt::format("; wheels slipped {} times ({} messages not fused)", mapping.wheel_slip_episodes, mapping.wheel_messages_withheld);
+    }
+    text += "\n";
   }
   if (!poses.empty()) {
     const auto& p = poses.back().T_world_body.position;

@@ -13,7 +13,7 @@
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
-#include "hanzo/fusion/service/calibration_json.hpp"
+#include "hanzo/fusion/calib/calibration_json.hpp"
 #include "json_codec.hpp"
 #include "web_assets.hpp"
 
@@ -255,12 +255,12 @@ struct RestServer::Impl {
       if (auto* motion = std::get_if<detail::MotionCalibrateRequest>(&parsed.value())) {
         auto calibrated = calib::calibrate_from_motion(motion->input, motion->config);
         if (!calibrated) return refused(calibrated.error());
-        return send_json(response, 200, motion_calibration_to_json(calibrated.value()));
+        return send_json(response, 200, calib::motion_calibration_to_json(calibrated.value()));
       }
       const auto& camera = std::get<detail::CameraCalibrateRequest>(parsed.value());
       auto calibrated = calib::calibrate_camera(camera.images, camera.config);
       if (!calibrated) return refused(calibrated.error());
-      nlohmann::json answer = camera_calibration_to_json(calibrated.value());
+      nlohmann::json answer = calib::camera_calibration_to_json(calibrated.value());
       answer["sensor"] = camera.sensor;
       send_json(response, 200, answer);
     }));

@@ -73,7 +73,7 @@ struct LidarOdometryConfig {
   /// then finds its own turn rate in one registration. The translation is not coupled by
   /// default: on a swung handheld sensor with 0.25 m map voxels any translation coupling (0.5-1.5)
   /// drifted 0.7-1.9 m RMSE over 40 s against 5 cm without; on cars 1.0-1.5 drift a little less
-  /// (docs/lidar-odometry.md, session 24).
+  /// (docs/lidar-odometry.md).
   double deskew_translation_coupling = 0.0;
   double deskew_rotation_coupling = 1.5;
   cloud::ScanNormalConfig normals;     ///< surface normals from the scan's rings (needs ring ids)
