@@ -130,13 +130,7 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   return frontend;
 }
 
-Result<double> positive_or(const YamlValue& value, double fallback) {
-  if (!value.present()) return fallback;
-  Result<double> number = value.as_double();
-  if (!number) return number;
-  if (!(*number > 0.0)) return value.error(fmt::format("expected a value > 0, got {}", *number));
-  return number;
-}
+using yaml::positive_or;
 
 Result<MappingConfig> parse_mapping(const YamlValue& node) {
   MappingConfig mapping;

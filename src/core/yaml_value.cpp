@@ -199,6 +199,14 @@ Result<double> non_negative_or(const YamlValue& value, double fallback) {
   return number;
 }
 
+Result<double> positive_or(const YamlValue& value, double fallback) {
+  if (!value.present()) return fallback;
+  Result<double> number = value.as_double();
+  if (!number) return number;
+  if (!(*number > 0.0)) return value.error(fmt::format("expected a positive number, got {}", *number));
+  return number;
+}
+
 Result<Eigen::Vector3d> vector3_or(const YamlValue& value, const Eigen::Vector3d& fallback, std::string_view description) {
   if (!value.present()) return fallback;
   Result<std::vector<double>> numbers = value.as_doubles(3, description);

@@ -23,19 +23,8 @@ Result<double> number_or(const YamlValue& value, double fallback) {
   return value.as_double();
 }
 
-Result<double> positive_or(const YamlValue& value, double fallback) {
-  double number = 0.0;
-  HANZO_ASSIGN_OR_RETURN(number, number_or(value, fallback));
-  if (!(number > 0.0)) return value.error(fmt::format("expected a positive number, got {}", number));
-  return number;
-}
-
-Result<double> non_negative_or(const YamlValue& value, double fallback) {
-  double number = 0.0;
-  HANZO_ASSIGN_OR_RETURN(number, number_or(value, fallback));
-  if (!(number >= 0.0)) return value.error(fmt::format("expected a number >= 0, got {}", number));
-  return number;
-}
+using yaml::non_negative_or;
+using yaml::positive_or;
 
 Result<double> probability_or(const YamlValue& value, double fallback) {
   double number = 0.0;

@@ -134,7 +134,7 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
 
 TEST(FusionConfig, MappingBlockIsCheckedKeyByKey) {
   const std::string sensors = "  sensors:\n    imu: {rate: 100}\n";
-  EXPECT_THAT(error_of("fusion:\n  mapping:\n    map_voxel: 0\n" + sensors), HasSubstr("fusion.yaml:3: mapping.map_voxel: expected a value > 0, got 0"));
+  EXPECT_THAT(error_of("fusion:\n  mapping:\n    map_voxel: 0\n" + sensors), HasSubstr("fusion.yaml:3: mapping.map_voxel: expected a positive number, got 0"));
   EXPECT_THAT(error_of("fusion:\n  mapping:\n    keyframe_distance: -1\n" + sensors), HasSubstr("mapping.keyframe_distance"));
   EXPECT_THAT(error_of("fusion:\n  mapping:\n    loop_closure: maybe\n" + sensors), HasSubstr("mapping.loop_closure"));
   EXPECT_THAT(error_of("fusion:\n  mapping:\n    map_voxels: 0.1\n" + sensors), HasSubstr("map_voxels"));

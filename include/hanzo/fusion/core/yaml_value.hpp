@@ -87,6 +87,8 @@ namespace hanzo::fusion::yaml {
 
 /// The value as a finite number >= 0, or fallback when absent.
 Result<double> non_negative_or(const YamlValue& value, double fallback);
+/// The value as a finite number > 0, or fallback when absent.
+Result<double> positive_or(const YamlValue& value, double fallback);
 /// A list of three finite numbers >= 0, or fallback when absent; description names the
 /// components in errors ("(x, y, z)").
 Result<Eigen::Vector3d> vector3_or(const YamlValue& value, const Eigen::Vector3d& fallback, std::string_view description);
