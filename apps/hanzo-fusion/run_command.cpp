@@ -248,6 +248,37 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"wheel_slip_episodes", m.wheel_slip_episodes}, {"wheel_messages_withheld", m.wheel_messages_withheld}};
 }
 
+// Each sensor's health at the end and its changes over the log (seconds from the log's start).
+nlohmann::json health_json(const pipeline::Session& session, Timestamp log_start, Timestamp log_end) {
+  const auto entry = [](const pipeline::SensorHealth& health) {
+    return nlohmann::json{{"state", pipeline::to_string(health.state)}, {"reason", pipeline::to_string(health.reason)}};
+  };
+  nlohmann::json final_state = nlohmann::json::object();
+  for (const pipeline::SensorHealth& health : session.health()) final_state[health.sensor] = entry(health);
+  nlohmann::json changes = nlohmann::json::array();
+  // Seconds each sensor spent in each state other than ok, by reason: "degraded:gated" -> s.
+  std::map<std::string, std::map<std::string, double>> not_ok_seconds;
+  const std::vector<pipeline::HealthChange>& all = session.health_changes();
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    const pipeline::HealthChange& change = all[i];
+    nlohmann::json item = entry(change.health);
+    item["t_s"] = (change.time - log_start).seconds();
+    item["sensor"] = change.health.sensor;
+    changes.push_back(std::move(item));
+    if (change.health.state == pipeline::HealthState::kOk) continue;
+    Timestamp until = log_end;
+    for (std::size_t j = i + 1; j < all.size(); ++j) {
+      if (all[j].health.sensor == change.health.sensor) {
+        until = all[j].time;
+        break;
+      }
+    }
+    const std::string key = fmt::format("{}:{}", pipeline::to_string(change.health.state), pipeline::to_string(change.health.reason));
+    not_ok_seconds[change.health.sensor][key] += std::max(0.0, (until - change.time).seconds());
+  }
+  return {{"final", final_state}, {"changes", changes}, {"not_ok_seconds", not_ok_seconds}};
+}
+
 // The session's map as a FusionMap file with its occupancy and point images; the file names.
 Result<std::vector<std::string>> write_map(const std::filesystem::path& out, const pipeline::Session& session, const RunOptions& options,
                                            Timestamp created) {
@@ -314,7 +345,7 @@ int run(const Output& output, const RunOptions& options) {
   std::vector<msgs::Keyframe> keyframes;
   session.set_keyframe_callback([&keyframes](const msgs::Keyframe& keyframe) { keyframes.push_back(keyframe); });
   session.set_pose_callback([&poses](const msgs::PoseEstimate& pose) { poses.push_back(pose); });
-  session.frontend().set_innovation_callback([&innovations](const pipeline::InnovationRecord& r) { innovations.push_back(r); });
+  session.set_innovation_callback([&innovations](const pipeline::InnovationRecord& r) { innovations.push_back(r); });
 
   const auto& statistics = (*reader)->mcap().statistics();
   ProgressBar progress(Timestamp::from_nanoseconds(static_cast<int64_t>(statistics.message_start_time)),
@@ -384,6 +415,7 @@ int run(const Output& output, const RunOptions& options) {
   result["mode"] = pipeline::to_string(session.mode());
   result["summary"] = summary_json(summary, log_seconds);
   result["mapping"] = mapping_json(mapping);
+  result["health"] = health_json(session, first, last);
   result["timing"] = {{"messages", messages},
                       {"threads", options.threads},
                       {"fusion_seconds", fusion_seconds},
@@ -430,6 +462,11 @@ int run(const Output& output, const RunOptions& options) {
     if (mapping.wheel_slip_episodes > 0) {
       text += fmt::format("; wheels slipped {} times ({} messages not fused)", mapping.wheel_slip_episodes, mapping.wheel_messages_withheld);
     }
+    text += "\n";
+  }
+  for (const auto& [sensor, states] : result["health"]["not_ok_seconds"].items()) {
+    text += fmt::format("  {:<12} not ok for", sensor);
+    for (const auto& [state, seconds] : states.items()) text += fmt::format("  {:.1f} s {}", seconds.get<double>(), state);
     text += "\n";
   }
   if (!poses.empty()) {

@@ -184,7 +184,15 @@ class PySession {
       sensor["timeouts"] = s.timeouts;
       sensors.append(sensor);
     }
+    py::dict health;
+    for (const pipeline::SensorHealth& entry : session_->health()) {
+      py::dict item;
+      item["state"] = std::string(pipeline::to_string(entry.state));
+      item["reason"] = std::string(pipeline::to_string(entry.reason));
+      health[py::str(entry.sensor)] = item;
+    }
     py::dict result;
+    result["health"] = health;
     result["mode"] = std::string(pipeline::to_string(session_->mode()));
     result["state"] = std::string(msgs::to_string(summary.state));
     result["poses"] = summary.poses;

@@ -65,6 +65,7 @@ def test_pushed_sample_tracks_the_ground_truth():
     assert [s["name"] for s in summary["sensors"]] == ["imu", "gnss", "wheels"]
     assert summary["sensors"][1]["fused"] == 96
     assert summary["graph_keyframes"] == summary["keyframes"] == 19
+    assert summary["health"] == {name: {"state": "ok", "reason": ""} for name in ("imu", "gnss", "wheels")}
     assert position_rmse(poses) < 1.0
     optimized = session.optimized_trajectory()
     assert np.array_equal(optimized[:, 0], poses[:, 0])

@@ -230,6 +230,10 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
     if (keyframe_callback_) keyframe_callback_(emitted);
   });
   frontend_->set_gnss_callback([this](const FusedGnssFix& fix) { add_gnss_factor(fix); });
+  frontend_->set_innovation_callback([this](const InnovationRecord& record) {
+    last_update_applied_[record.sensor] = record.applied;
+    if (innovation_callback_) innovation_callback_(record);
+  });
 }
 
 void Session::add_gnss_factor(const FusedGnssFix& fix) {
@@ -254,6 +258,17 @@ std::optional<std::chrono::nanoseconds> Session::registration_wait_limit(Timesta
 }
 
 Status Session::push(std::string_view sensor, msgs::SensorMessage message) {
+  if (const auto* gnss = std::get_if<msgs::GnssMessage>(&message)) {
+    if (const config::SensorConfig* configured = frontend_->config().find_sensor(sensor)) {
+      gnss_without_fix_[configured->name] = gnss->fix_type < configured->fusion.min_fix;
+    }
+  }
+  const Status pushed = push_message(sensor, std::move(message));
+  track_health();
+  return pushed;
+}
+
+Status Session::push_message(std::string_view sensor, msgs::SensorMessage message) {
   if (!config_.mapping) return frontend_->push(sensor, message);
   if (odometry_ && sensor == lidar_sensor_) {
     if (auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(std::move(*scan));
@@ -279,6 +294,11 @@ bool Session::wheels_agree(const msgs::WheelOdometryMessage& wheels) {
 }
 
 void Session::flush() {
+  flush_pipeline();
+  track_health();
+}
+
+void Session::flush_pipeline() {
   frontend_->flush();
   if (!config_.mapping) return;
   register_ready_scans();
@@ -332,6 +352,58 @@ Status Session::push_scan(msgs::PointCloudMessage scan) {
 void Session::count_refused(const std::string& reason) {
   ++lidar_statistics_.rejected[reason];
   ++summary_.scans_refused;
+  if (reason == "not_registered") ++registration_failures_;
+}
+
+std::vector<SensorHealth> Session::health() const {
+  // A LiDAR whose sweeps fail this many times in a row no longer constrains the estimate.
+  constexpr int kFailuresForNotRegistered = 3;
+  std::vector<SensorHealth> health;
+  for (const SensorStatistics& sensor : summary().sensors) {
+    SensorHealth entry{sensor.name, sensor.modality, HealthState::kOk, HealthReason::kNone};
+    const auto degraded = [&entry](HealthReason reason) {
+      entry.state = HealthState::kDegraded;
+      entry.reason = reason;
+    };
+    const auto applied = last_update_applied_.find(sensor.name);
+    if (sensor.fused == 0 && sensor.rejected.count("not_fused") != 0) {
+      entry = {sensor.name, sensor.modality, HealthState::kLost, HealthReason::kNotFused};
+    } else if (sensor.name == wheel_sensor_ && slip_monitor_.slipping()) {
+      degraded(HealthReason::kSlip);  // withheld from the Frontend, which may time them out
+    } else if (sensor.timed_out) {
+      entry = {sensor.name, sensor.modality, HealthState::kLost, HealthReason::kTimeout};
+    } else if (sensor.name == lidar_sensor_ && odometry_ && registration_failures_ >= kFailuresForNotRegistered) {
+      degraded(HealthReason::kNotRegistered);
+    } else if (sensor.name == lidar_sensor_ && odometry_ && last_sweep_degenerate_) {
+      degraded(HealthReason::kDegenerateGeometry);
+    } else if (sensor.name == lidar_sensor_ && odometry_ && last_sweep_weather_) {
+      degraded(HealthReason::kWeather);
+    } else if (const auto no_fix = gnss_without_fix_.find(sensor.name); no_fix != gnss_without_fix_.end() && no_fix->second) {
+      degraded(HealthReason::kNoFix);
+    } else if (applied != last_update_applied_.end() && !applied->second) {
+      degraded(HealthReason::kGated);
+    }
+    health.push_back(std::move(entry));
+  }
+  return health;
+}
+
+void Session::track_health() {
+  constexpr double kInterval = 0.2;  // s of data time
+  const std::optional<msgs::PoseEstimate> latest = frontend_->latest_pose();
+  if (!latest || (last_health_time_ && (latest->timestamp - *last_health_time_).seconds() < kInterval)) return;
+  last_health_time_ = latest->timestamp;
+  std::vector<SensorHealth> now = health();
+  for (std::size_t i = 0; i < now.size(); ++i) {
+    const bool changed = i >= last_health_.size() || now[i].state != last_health_[i].state || now[i].reason != last_health_[i].reason;
+    if (!changed) continue;
+    health_changes_.push_back({latest->timestamp, now[i]});
+    if (i < last_health_.size()) {
+      logger()->info("session: {} is {}{}{}", now[i].sensor, to_string(now[i].state), now[i].reason == HealthReason::kNone ? "" : ": ",
+                     to_string(now[i].reason));
+    }
+  }
+  last_health_ = std::move(now);
 }
 
 void Session::register_ready_scans() {
@@ -375,6 +447,9 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
   ++summary_.scans_registered;
   summary_.degenerate_scans += registered.estimate.degenerate ? 1 : 0;
   summary_.weather_degraded_scans += registered.estimate.weather_degraded ? 1 : 0;
+  last_sweep_degenerate_ = registered.estimate.degenerate;
+  last_sweep_weather_ = registered.estimate.weather_degraded;
+  registration_failures_ = 0;
   if (scan_callback_) scan_callback_(registered);
   if (!wheel_sensor_.empty()) {
     // The LiDAR's motion since the previous registered sweep, as the wheel frame's forward travel.

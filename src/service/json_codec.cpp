@@ -134,13 +134,17 @@ json pose_to_json(const msgs::PoseEstimate& pose) {
 json session_to_json(const SessionInfo& info) {
   json sensors = json::array();
   for (const pipeline::SensorStatistics& sensor : info.summary.sensors) {
-    sensors.push_back({{"name", sensor.name},
-                       {"modality", config::to_string(sensor.modality)},
-                       {"received", sensor.received},
-                       {"fused", sensor.fused},
-                       {"rejected", sensor.rejected},
-                       {"timeouts", sensor.timeouts},
-                       {"timed_out", sensor.timed_out}});
+    json entry = {{"name", sensor.name},
+                  {"modality", config::to_string(sensor.modality)},
+                  {"received", sensor.received},
+                  {"fused", sensor.fused},
+                  {"rejected", sensor.rejected},
+                  {"timeouts", sensor.timeouts},
+                  {"timed_out", sensor.timed_out}};
+    for (const pipeline::SensorHealth& health : info.health) {
+      if (health.sensor == sensor.name) entry["health"] = {{"state", pipeline::to_string(health.state)}, {"reason", pipeline::to_string(health.reason)}};
+    }
+    sensors.push_back(std::move(entry));
   }
   return {
       {"id", info.id},

@@ -339,6 +339,11 @@ struct SessionManager::Impl {
               .set_total(static_cast<double>(rejected));
         }
       }
+      for (const pipeline::SensorHealth& health : managed->session->health()) {
+        const MetricLabels labels = {{"session", managed->record.id}, {"sensor", health.sensor}};
+        metrics->gauge("hanzo_fusion_sensor_health", "0 ok, 1 degraded, 2 lost (reason: the session status' sensors[].health)", labels)
+            .set(static_cast<double>(health.state));
+      }
       std::size_t depth = 0;
       uint64_t dropped = 0;
       for (const auto& subscriber : managed->pose_subscribers) {
@@ -393,6 +398,7 @@ struct SessionManager::Impl {
     info.ended = managed.record.ended;
     info.summary = managed.session ? managed.session->summary() : managed.final_summary;
     info.mapping = managed.session ? managed.session->mapping_summary() : managed.final_mapping;
+    if (managed.session) info.health = managed.session->health();
     info.latest_pose = managed.latest_pose;
     const detail::StorageProgress progress = recorder->progress(managed.record.id);
     info.stored_poses = progress.stored;

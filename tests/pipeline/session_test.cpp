@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include "hanzo/fusion/cloud/voxel_hash_map.hpp"
@@ -199,7 +200,8 @@ TEST(Session, GnssFixesBecomeGraphFactorsAndImproveTheKeyframes) {
 // slipping wheels dragged the filter, its LiDAR poses were then gated and the run diverged
 // (115 m); the Session checks the wheels against the LiDAR odometry and stops fusing them while
 // they disagree, so the three sensors together beat IMU + LiDAR alone.
-double warehouse_aligned_rmse(bool with_wheels, SessionSummary* summary_out, MappingSummary* mapping_out) {
+double warehouse_aligned_rmse(bool with_wheels, SessionSummary* summary_out, MappingSummary* mapping_out,
+                              std::vector<HealthChange>* health_out = nullptr) {
   sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_robot.yaml").value();
   std::erase_if(scenario.sensors, [&](const sim::ScenarioSensor& s) {
     return s.modality != config::SensorModality::kLidar && s.modality != config::SensorModality::kImu &&
@@ -224,6 +226,7 @@ double warehouse_aligned_rmse(bool with_wheels, SessionSummary* summary_out, Map
   session->flush();
   if (summary_out) *summary_out = session->summary();
   if (mapping_out) *mapping_out = session->mapping_summary();
+  if (health_out) *health_out = session->health_changes();
   const auto ape = eval::compute_ape(truth, estimate, {.relation = eval::PoseRelation::kTranslation, .alignment = eval::Alignment::kSE3});
   EXPECT_TRUE(ape.ok());
   return ape ? ape->statistics.rmse : 1e9;
@@ -232,7 +235,8 @@ double warehouse_aligned_rmse(bool with_wheels, SessionSummary* summary_out, Map
 TEST(Session, SlippingWheelsAreNotFusedAndAllSensorsBeatImuPlusLidar) {
   SessionSummary summary;
   MappingSummary mapping;
-  const double all = warehouse_aligned_rmse(true, &summary, &mapping);
+  std::vector<HealthChange> health;
+  const double all = warehouse_aligned_rmse(true, &summary, &mapping, &health);
   const double imu_lidar = warehouse_aligned_rmse(false, nullptr, nullptr);
   std::printf("warehouse 45 s, SE3-aligned APE: IMU + LiDAR + wheels %.3f m (%llu wheel messages withheld), IMU + LiDAR %.3f m\n", all,
               static_cast<unsigned long long>(mapping.wheel_messages_withheld), imu_lidar);
@@ -244,6 +248,21 @@ TEST(Session, SlippingWheelsAreNotFusedAndAllSensorsBeatImuPlusLidar) {
   EXPECT_EQ(wheels->rejected.at("slip"), mapping.wheel_messages_withheld);
   EXPECT_LT(all, 0.1);
   EXPECT_LE(all, imu_lidar);
+  // The wheels' health: degraded by slip during the fault (25-33 s after the start), ok again after.
+  std::vector<std::pair<double, std::string>> wheel_health;
+  const Timestamp start = Timestamp::from_seconds(1700000000.0);
+  for (const HealthChange& change : health) {
+    if (change.health.sensor != "wheels") continue;
+    wheel_health.emplace_back((change.time - start).seconds(), fmt::format("{}:{}", to_string(change.health.state), to_string(change.health.reason)));
+  }
+  const auto slip = std::find_if(wheel_health.begin(), wheel_health.end(), [](const auto& change) { return change.second == "degraded:slip"; });
+  ASSERT_NE(slip, wheel_health.end());
+  EXPECT_GT(slip->first, 25.0);
+  EXPECT_LT(slip->first, 27.0);
+  ASSERT_NE(slip + 1, wheel_health.end());
+  EXPECT_EQ((slip + 1)->second, "ok:");
+  EXPECT_GT((slip + 1)->first, 33.0);
+  EXPECT_LT((slip + 1)->first, 36.0);
 }
 
 TEST(Session, RefusesBadSweepsWithAReasonAndKeepsMapping) {

@@ -79,6 +79,7 @@
 #include "hanzo/fusion/pipeline/keyframe_graph.hpp"
 #include "hanzo/fusion/pipeline/lidar_inertial_odometry.hpp"
 #include "hanzo/fusion/pipeline/frontend.hpp"
+#include "hanzo/fusion/pipeline/sensor_health.hpp"
 #include "hanzo/fusion/pipeline/wheel_slip_monitor.hpp"
 
 namespace hanzo::fusion::pipeline {
@@ -240,10 +241,17 @@ class Session {
   /// smoothed trajectory of an offline run: GNSS factors, loop closures and later LiDAR poses
   /// act on every pose, not only on those after the correction. Empty without keep_trajectory.
   std::vector<StampedPose> optimized_trajectory() const;
+  /// Every configured sensor's health now (sensor_health.hpp), in configuration order.
+  std::vector<SensorHealth> health() const;
+  /// The changes of health so far, in time order (evaluated every 0.2 s of data; the first
+  /// entry per sensor is its state once the Frontend emits poses).
+  const std::vector<HealthChange>& health_changes() const { return health_changes_; }
   SessionMode mode() const { return config_.mode; }
 
   /// Called for every PoseEstimate, in time order (Frontend::set_pose_callback).
   void set_pose_callback(Frontend::PoseCallback callback) { pose_callback_ = std::move(callback); }
+  /// Called for every measurement update (Frontend::set_innovation_callback).
+  void set_innovation_callback(Frontend::InnovationCallback callback) { innovation_callback_ = std::move(callback); }
   /// Every Frontend keyframe as emitted.
   void set_keyframe_callback(KeyframeCallback callback) { keyframe_callback_ = std::move(callback); }
   /// Every LiDAR sweep registered and fused (its estimate, pose, covariance and timing), after
@@ -266,6 +274,8 @@ class Session {
           std::string wheel_sensor, const calib::SensorCalibration& wheel_calibration);
   /// Feeds the slip monitor; false when the wheels disagree with the LiDAR (not fused then).
   bool wheels_agree(const msgs::WheelOdometryMessage& wheels);
+  Status push_message(std::string_view sensor, msgs::SensorMessage message);
+  void flush_pipeline();
   Status push_scan(msgs::PointCloudMessage scan);
   class RegistrationWorker;
   void register_ready_scans();
@@ -282,6 +292,8 @@ class Session {
   /// Moves map keyframes (index -> T_world_lidar) in the map and publishes the corrected map.
   void move_map_keyframes(const std::map<uint64_t, SE3>& moved);
   void count_refused(const std::string& reason);
+  /// Records the health changes since the last evaluation (every 0.2 s of data time).
+  void track_health();
   /// A fused GNSS fix as a GPS factor on the newest keyframe (gnss_factors).
   void add_gnss_factor(const FusedGnssFix& fix);
 
@@ -329,6 +341,15 @@ class Session {
   };
   std::vector<KeyframeRecord> keyframe_records_;
   Frontend::PoseCallback pose_callback_;
+  Frontend::InnovationCallback innovation_callback_;
+  std::map<std::string, bool, std::less<>> last_update_applied_;  ///< per sensor: its latest update passed the gate
+  std::map<std::string, bool, std::less<>> gnss_without_fix_;     ///< per GNSS sensor: its latest fix is below min_fix
+  bool last_sweep_degenerate_ = false;
+  bool last_sweep_weather_ = false;
+  int registration_failures_ = 0;  ///< LiDAR sweeps in a row that did not register
+  std::vector<SensorHealth> last_health_;
+  std::vector<HealthChange> health_changes_;
+  std::optional<Timestamp> last_health_time_;
   KeyframeCallback keyframe_callback_;
   MapUpdateCallback map_update_callback_;
   ScanCallback scan_callback_;

@@ -97,6 +97,7 @@ struct SessionInfo {
   std::optional<Timestamp> ended;
   pipeline::SessionSummary summary;          // counts per sensor, state
   pipeline::MappingSummary mapping;          // LiDAR registration, keyframes, loop closures, map
+  std::vector<pipeline::SensorHealth> health;  // per sensor, as summary.sensors (empty once ended)
   std::optional<msgs::PoseEstimate> latest_pose;
   uint64_t stored_poses = 0;                 // poses committed to storage (durable)
   std::optional<Timestamp> stored_through;   // timestamp of the newest committed pose
