@@ -11,7 +11,7 @@ shift || true
 cd "$(dirname "$0")/.."
 cli="$build_dir/apps/hanzo-fusion"
 scenarios=("$@")
-[ ${#scenarios[@]} -gt 0 ] || scenarios=(urban_vehicle warehouse_robot gnss_outage_vehicle)
+[ ${#scenarios[@]} -gt 0 ] || scenarios=(urban_vehicle warehouse_robot gnss_outage_vehicle delivery_van)
 work="$build_dir/ablation"
 mkdir -p "$work"
 

@@ -82,6 +82,9 @@ bool Estimator::align_heading_to_course(const Eigen::Vector3d& antenna_gnss, con
     const SO3 rotation = SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), heading_error);
     const SE3 correction(rotation, course_start_->antenna_gnss - rotation * course_start_->antenna_estimate);
     filter_->apply_world_transform(correction);
+    // A correction of the world like the backend's: what follows the Frontend's world (the LiDAR
+    // odometry's frame, Frontend::pose_at) follows this one too.
+    world_correction_ = correction * world_correction_;
     if (last_keyframe_) last_keyframe_->T_world_body = correction * last_keyframe_->T_world_body;
     logger()->info("heading aligned to the GNSS course over {:.1f} m: corrected by {:.1f} deg", track_gnss.norm(),
                    heading_error * 180.0 / M_PI);

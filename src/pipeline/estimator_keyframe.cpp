@@ -8,6 +8,9 @@ using estimate::ErrorCovariance;
 using estimate::NavigationState;
 
 std::optional<msgs::Keyframe> Estimator::maybe_keyframe(Timestamp time) {
+  // Until the GNSS course gives the heading, the poses' world frame is not known: the backend
+  // gets no keyframes (their motion would include the heading's alignment as a jump).
+  if (heading_pending_) return std::nullopt;
   if (last_keyframe_ && (time - last_keyframe_->time).seconds() < frontend_.keyframe_interval_s) return std::nullopt;
   const NavigationState state = filter_->state();
   const ErrorCovariance P = filter_->covariance();

@@ -33,7 +33,13 @@ TEST(Scenario, ShippedScenariosLoadWithTheirSensorsAndFaults) {
   EXPECT_EQ(gnss.episodes.size(), 2U);
   EXPECT_EQ(std::get<LidarSimulatorConfig>(urban->sensors[1].simulator).weather.size(), 1U);
 
-  for (const char* name : {"drone", "ar_handheld", "handheld_lidar"}) {
+  const Result<Scenario> van = load_scenario("examples/scenarios/delivery_van.yaml");
+  ASSERT_TRUE(van) << van.error().message;
+  ASSERT_EQ(van->sensors.size(), 5U);  // imu, lidar, gnss, wheels, radar
+  EXPECT_EQ(std::get<GnssSimulatorConfig>(van->sensors[2].simulator).episodes.size(), 1U);  // indoors: the outage
+  EXPECT_EQ(std::get<LidarSimulatorConfig>(van->sensors[1].simulator).weather.size(), 1U);  // the rain
+
+  for (const char* name : {"drone", "ar_handheld", "handheld_lidar", "delivery_van"}) {
     const Result<Scenario> scenario = load_scenario(std::string("examples/scenarios/") + name + ".yaml");
     ASSERT_TRUE(scenario) << scenario.error().message;
     const Result<SplineTrajectory> trajectory = make_trajectory(*scenario);
