@@ -242,7 +242,7 @@ void Session::add_gnss_factor(const FusedGnssFix& fix) {
   const SE3 T_keyframe_fix = latest_keyframe_uncorrected_.inverse() * (fix.world_correction.inverse() * fix.T_world_body);
   const Status added = graph_->add_gps_at_keyframe(latest_keyframe_->keyframe_id, fix.antenna_world, fix.covariance, T_keyframe_fix * fix.lever_arm);
   if (!added) {
-    logger()->debug("mapping session: GNSS fix at {:.3f} s not added to the graph: {}", fix.timestamp.seconds(), added.error().message);
+    logger()->debug("session: GNSS fix at {:.3f} s not added to the graph: {}", fix.timestamp.seconds(), added.error().message);
     return;
   }
   ++summary_.gnss_factors;
@@ -416,7 +416,7 @@ void Session::register_ready_scans() {
     waiting_scans_.pop_front();
     Result<LidarInertialOdometry::PreparedScan> prepared = odometry_->prepare(scan);
     if (!prepared) {
-      logger()->debug("mapping session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
+      logger()->debug("session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
       // A sweep that began before the first pose has no motion to start from (the IMU aligned).
       count_refused(scan.timestamp < *first_pose_time_ ? "aligning" : "not_registered");
     } else if (worker_) {
@@ -437,7 +437,7 @@ void Session::take_registered() {
 void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result) {
   Result<LidarInertialOdometry::RegisteredScan> fused = odometry_->fuse(std::move(result));
   if (!fused) {
-    logger()->debug("mapping session: sweep not fused: {}", fused.error().message);
+    logger()->debug("session: sweep not fused: {}", fused.error().message);
     count_refused("not_registered");
     return;
   }
@@ -488,11 +488,11 @@ void Session::add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar, const 
   cloud::PointCloud cloud;
   cloud.positions = points;
   if (Status inserted = map_builder_.insert(T_world_lidar, cloud); !inserted) {
-    logger()->warn("mapping session: map keyframe not inserted: {}", inserted.error().message);
+    logger()->warn("session: map keyframe not inserted: {}", inserted.error().message);
     return;
   }
   if (Result<std::size_t> added = loop_closures_.add_keyframe(points, path_); !added) {
-    logger()->warn("mapping session: map keyframe not added to loop closure: {}", added.error().message);
+    logger()->warn("session: map keyframe not added to loop closure: {}", added.error().message);
   }
   last_anchor_ = anchor;
   map_keyframe_of_[anchor] = map_keyframes_.size();
@@ -517,11 +517,11 @@ void Session::add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar, const 
   const MapKeyframe& to = map_keyframes_[loop->to];
   const SE3 T_anchors = from.T_anchor_lidar * loop->T_from_to * to.T_anchor_lidar.inverse();
   if (Status added = add_loop_factor(from.anchor, to.anchor, T_anchors, std::nullopt); !added) {
-    logger()->warn("mapping session: loop closure not added: {}", added.error().message);
+    logger()->warn("session: loop closure not added: {}", added.error().message);
     return;
   }
   ++summary_.loop_closures;
-  logger()->info("mapping session: loop closed between keyframes {} and {} (inlier RMSE {:.3f} m)", from.anchor, to.anchor,
+  logger()->info("session: loop closed between keyframes {} and {} (inlier RMSE {:.3f} m)", from.anchor, to.anchor,
                  loop->inlier_rmse);
   update_backend();
 }
@@ -543,7 +543,7 @@ Status Session::add_loop_factor(uint64_t from, uint64_t to, const SE3& T_from_to
 void Session::update_backend() {
   Result<KeyframeGraphUpdate> update = graph_->process(frontend_.get());
   if (!update) {
-    logger()->warn("mapping session: backend update failed: {}", update.error().message);
+    logger()->warn("session: backend update failed: {}", update.error().message);
     return;
   }
   if (update->factors_added == 0) return;
@@ -567,7 +567,7 @@ void Session::follow_graph() {
 void Session::move_map_keyframes(const std::map<uint64_t, SE3>& moved) {
   if (moved.empty()) return;
   if (Status corrected = map_builder_.correct_poses(moved); !corrected) {
-    logger()->warn("mapping session: map not corrected: {}", corrected.error().message);
+    logger()->warn("session: map not corrected: {}", corrected.error().message);
     return;
   }
   ++summary_.map_version;
@@ -690,7 +690,7 @@ Result<RelocalizationOutcome> Session::relocalize(const lidar::MapLocalizer& map
   move_map_keyframes(moved);
   ++summary_.relocalizations;
   summary_.last_correction_m = ((outcome.T_map_world * belief).translation() - belief.translation()).norm();
-  logger()->info("mapping session: relocalized in the map (moved {:.2f} m; 2D score {:.2f}, RMSE {:.3f} m)", summary_.last_correction_m,
+  logger()->info("session: relocalized in the map (moved {:.2f} m; 2D score {:.2f}, RMSE {:.3f} m)", summary_.last_correction_m,
                  localized->score, localized->inlier_rmse);
   return outcome;
 }

@@ -1,10 +1,11 @@
 #pragma once
-// pipeline::Frontend: one agent's real-time fusion (spec, "Fusion Pipeline Architecture").
-// Messages from any sensor go in with push(); pose estimates come out at the IMU rate.
+// pipeline::Frontend: one agent's real-time filter (spec, "Fusion Pipeline Architecture"), the
+// first stage of pipeline::Session (session.hpp), which adds the LiDAR odometry, the graph and
+// the map. Messages from any sensor go in with push(); pose estimates come out at the IMU rate.
 //
-//   auto session = Frontend::create(fusion_config, calibration).value();
-//   session->set_pose_callback([](const msgs::PoseEstimate& pose) { ... });
-//   for (...) { if (Status s = session->push("gnss", message); !s) log(s.error().message); }
+//   auto frontend = Frontend::create(fusion_config, calibration).value();
+//   frontend->set_pose_callback([](const msgs::PoseEstimate& pose) { ... });
+//   for (...) { if (Status s = frontend->push("gnss", message); !s) log(s.error().message); }
 //
 // What push() does with a message (docs/frontend.md has the full story):
 //  1. Input checks, each a rejection with a reason that push() returns and summary() counts:
