@@ -142,6 +142,10 @@ Status SessionConfig::validate() const {
   if (!(map_keyframe_distance >= 0) || !(map_keyframe_angle >= 0)) return Error("map_keyframe_distance, map_keyframe_angle: must be >= 0");
   if (max_waiting_scans == 0) return Error("max_waiting_scans: must be > 0");
   if (!(live_window_s > 0)) return Error(fmt::format("live_window_s: {} is not > 0", live_window_s));
+  if (!(wheel_slip.window_s > 0) || !(wheel_slip.recovery_s >= 0) || !(wheel_slip.absolute_tolerance_m >= 0) ||
+      !(wheel_slip.relative_tolerance >= 0)) {
+    return Error("wheel_slip: window_s must be > 0 and the tolerances and recovery_s >= 0");
+  }
   return ok_status();
 }
 

@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include "hanzo/fusion/pipeline/session.hpp"
+
 namespace hanzo::fusion::pipeline {
 namespace {
 
@@ -70,6 +72,16 @@ TEST(WheelSlipMonitor, WindowsWithoutReliableLidarOrWheelDataAreNotJudged) {
   for (int k = 1; k <= 50; ++k) no_wheels.add_lidar_motion(at(0.1 * (k - 1)), at(0.1 * k), 0.1, true);
   EXPECT_FALSE(no_wheels.slipping());
   EXPECT_EQ(no_wheels.episodes(), 0U);
+}
+
+TEST(WheelSlipMonitor, SessionRefusesSettingsThatCannotWork) {
+  const config::FusionConfig config = config::load_fusion_config("examples/data/fusion.yaml").value();
+  SessionConfig settings = SessionConfig::from(config);
+  settings.wheel_slip.window_s = 0.0;
+  const auto refused = Session::create(config, calib::Calibration{}, settings);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("wheel_slip"), std::string::npos) << refused.error().message;
+  EXPECT_TRUE(Session::create(config, calib::Calibration{}).ok());
 }
 
 }  // namespace
