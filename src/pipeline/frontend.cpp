@@ -178,7 +178,7 @@ Status Frontend::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_
   Impl& impl = *impl_;
   const auto found = impl.keyframe_poses.find(keyframe_id);
   if (found == impl.keyframe_poses.end()) {
-    return Error(fmt::format("unknown_keyframe: keyframe {} was not emitted by this session (or is too old)", keyframe_id));
+    return Error(fmt::format("unknown_keyframe: keyframe {} was not emitted by this frontend (or is too old)", keyframe_id));
   }
   if (!T_world_body_optimized.translation().allFinite() || !T_world_body_optimized.rotation().quaternion().coeffs().allFinite()) {
     return Error("invalid: the optimized pose has non-finite values");

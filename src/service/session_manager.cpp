@@ -121,7 +121,7 @@ struct ManagedSession {
   uint64_t saved_map_version = 0;   // the live map_version last saved to the map catalog
   uint64_t stored_map_version = 0;  // the catalog's version of that save (parent of the next)
 
-  // Metric series of this session (removed with it).
+  // Metric series of the managed session (removed with it).
   Counter* poses = nullptr;
   Histogram* pose_latency = nullptr;
   Gauge* covariance_trace = nullptr;

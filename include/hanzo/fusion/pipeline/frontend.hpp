@@ -162,8 +162,8 @@ class Frontend {
 
   /// The backend's hook: keyframe `keyframe_id` is really at T_world_body_optimized. The
   /// estimate is moved rigidly by T_optimized * T_keyframe^-1 (world frame), now. Fails for a
-  /// keyframe this session never emitted or no longer remembers (it keeps the last 100000).
-  /// Corrections compose: the keyframe's pose is taken as the session believes it now (the
+  /// keyframe this Frontend never emitted or no longer remembers (it keeps the last 100000).
+  /// Corrections compose: the keyframe's pose is taken as the Frontend believes it now (the
   /// emitted pose moved by the corrections applied since), so correcting the same keyframe
   /// twice to the same pose moves the estimate once.
   Status apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized);

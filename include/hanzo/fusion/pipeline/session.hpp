@@ -217,7 +217,7 @@ class Session {
   /// registration refused the loop: RMSE, overlap, degeneracy). Nothing changes then.
   Result<LoopClosureOutcome> close_loop(const LoopClosureRequest& request);
   /// Localizes the newest map keyframe's sweep (with the two before it) in `map` and moves the
-  /// session's world onto the map's frame: poses, keyframes and this session's map come in
+  /// Session's world onto the map's frame: poses, keyframes and the Session's own map come in
   /// the map's frame from then on (a jump of T_map_world, in one Frontend correction). The
   /// keyframe graph restarts at the next keyframe (anchored there with the filter's
   /// covariance); older map keyframes stay where the relocalization put them and loops to
