@@ -12,7 +12,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -31,6 +30,7 @@
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
 #include "hanzo/fusion/maps/provenance.hpp"
+#include "hanzo/fusion/pipeline/log_replay.hpp"
 #include "hanzo/fusion/pipeline/session.hpp"
 
 namespace hanzo::fusion::app {
@@ -350,38 +350,11 @@ int run(const Output& output, const RunOptions& options) {
   const auto& statistics = (*reader)->mcap().statistics();
   ProgressBar progress(Timestamp::from_nanoseconds(static_cast<int64_t>(statistics.message_start_time)),
                        Timestamp::from_nanoseconds(static_cast<int64_t>(statistics.message_end_time)));
-  uint64_t messages = 0, unread = 0, unmapped = 0;
-  std::map<std::string, uint64_t> unmapped_topics;
-  double fusion_seconds = 0.0;
-  Timestamp first, last;
-  io::LogEntry entry;
-  while (true) {
-    Result<bool> more = (*reader)->next(entry);
-    if (!more) {
-      ++unread;  // a message that did not decode: counted, the replay goes on
-      continue;
-    }
-    if (!*more) break;
-    auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
-    if (message == nullptr) continue;  // pose estimates in the log (e.g. ground truth)
-    const config::SensorConfig* sensor = session.frontend().sensor_for_topic(entry.topic);
-    if (sensor == nullptr) {
-      ++unmapped;
-      ++unmapped_topics[entry.topic];
-      continue;
-    }
-    ++messages;
-    if (first.is_zero()) first = entry.log_time;
-    last = entry.log_time;
-    const auto start = std::chrono::steady_clock::now();
-    (void)session.push(sensor->name, std::move(*message));  // rejections are counted in the summary
-    fusion_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    progress.update(entry.log_time);
-  }
-  const auto flush_start = std::chrono::steady_clock::now();
-  session.flush();
-  fusion_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - flush_start).count();
+  const pipeline::LogReplaySummary replay = pipeline::replay_log(session, **reader, [&progress](Timestamp time) { progress.update(time); });
   progress.finish();
+  const uint64_t messages = replay.messages;
+  const double fusion_seconds = replay.push_seconds;
+  const Timestamp first = replay.first, last = replay.last;
 
   const pipeline::SessionSummary summary = session.summary();
   const pipeline::MappingSummary mapping = session.mapping_summary();
@@ -421,8 +394,8 @@ int run(const Output& output, const RunOptions& options) {
                       {"fusion_seconds", fusion_seconds},
                       {"microseconds_per_message", messages > 0 ? 1e6 * fusion_seconds / static_cast<double>(messages) : 0.0},
                       {"realtime_factor", fusion_seconds > 0.0 ? log_seconds / fusion_seconds : 0.0}};
-  result["unread_messages"] = unread;
-  result["unmapped_topics"] = unmapped_topics;
+  result["unread_messages"] = replay.unread;
+  result["unmapped_topics"] = replay.unmapped_topics;
   if (!poses.empty()) {
     const msgs::PoseEstimate& final_pose = poses.back();
     result["final_pose"] = {{"timestamp_ns", final_pose.timestamp.nanoseconds()},

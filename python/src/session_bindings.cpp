@@ -17,6 +17,7 @@
 #include <pybind11/stl.h>
 
 #include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/pipeline/log_replay.hpp"
 #include "hanzo/fusion/pipeline/session.hpp"
 
 namespace py = pybind11;
@@ -130,30 +131,13 @@ class PySession {
   py::dict replay(const std::string& log_path) {
     Result<std::unique_ptr<io::SensorLogReader>> reader = io::SensorLogReader::open(log_path);
     if (!reader) throw py::value_error(reader.error().message);
-    uint64_t pushed = 0, rejected = 0, unread = 0, unmapped = 0;
-    io::LogEntry entry;
-    while (true) {
-      Result<bool> more = (*reader)->next(entry);
-      if (!more) {
-        ++unread;
-        continue;
-      }
-      if (!*more) break;
-      auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
-      if (message == nullptr) continue;
-      const config::SensorConfig* sensor = session_->frontend().sensor_for_topic(entry.topic);
-      if (sensor == nullptr) {
-        ++unmapped;
-        continue;
-      }
-      ++pushed;
-      if (!session_->push(sensor->name, std::move(*message))) ++rejected;
-    }
-    session_->flush();
+    const pipeline::LogReplaySummary replay = pipeline::replay_log(*session_, **reader);
+    uint64_t unmapped = 0;
+    for (const auto& [topic, count] : replay.unmapped_topics) unmapped += count;
     py::dict result;
-    result["messages"] = pushed;
-    result["rejected"] = rejected;
-    result["unread"] = unread;
+    result["messages"] = replay.messages;
+    result["rejected"] = replay.rejected;
+    result["unread"] = replay.unread;
     result["unmapped"] = unmapped;
     return result;
   }
