@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Ablation of the modalities (`make bench`, or bench/ablation.sh BUILD_DIR [SCENARIO...]): each
 # shipped scenario is simulated once (cameras left out: nothing fuses them yet), then replayed
-# through `hanzo-fusion run` with the IMU plus each single modality and with every sensor; the
+# through `hanzo-fusion run` with the IMU plus each single modality, with every sensor, and without
+# the IMU (the LiDAR alone, every other sensor); the
 # table gives the APE RMSE of the real-time and the optimized trajectory, in the world frame (no
 # alignment: meaningful where GNSS fixes the frame) and SE3-aligned (the shape alone), and the
 # run's speed. The outputs stay in BUILD_DIR/ablation/.
@@ -42,6 +43,10 @@ print(' '.join(names))")
   subsets=()
   for name in $configured; do [ "$name" = "$imu" ] || subsets+=("$imu,$name"); done
   subsets+=("$(echo $configured | tr ' ' ',')")
+  # Without the IMU (the Frontend's motion model): the LiDAR alone and every other sensor.
+  without_imu=$(for name in $configured; do [ "$name" = "$imu" ] || echo "$name"; done | paste -sd, -)
+  for name in $configured; do case $name in lidar*) [ "$name" = "$without_imu" ] || subsets+=("$name");; esac; done
+  subsets+=("$without_imu")
   for subset in "${subsets[@]}"; do
     out="$work/$scenario-run-${subset//,/+}"
     "$cli" run --config "$sim/fusion.yaml" --calib "$sim/calibration.yaml" --log "$sim/sensors.mcap" --out "$out" \

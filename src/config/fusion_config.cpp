@@ -97,6 +97,12 @@ Status validate(const FusionConfig& config) {
       return Error{fmt::format("FusionConfig.{}: {} (expected > 0 s)", field, value), std::string(field)};
     }
   }
+  for (const auto& [value, field] : {std::pair<double, std::string_view>{frontend.motion_model.acceleration_noise, "frontend.motion_model.acceleration_noise"},
+                                     {frontend.motion_model.angular_acceleration_noise, "frontend.motion_model.angular_acceleration_noise"}}) {
+    if (!std::isfinite(value) || value <= 0.0) {
+      return Error{fmt::format("FusionConfig.{}: {} (expected > 0)", field, value), std::string(field)};
+    }
+  }
   if (frontend.datum) {
     if (Status s = validate(*frontend.datum); !s) return Error{"FusionConfig.frontend.datum: " + s.error().message, "frontend.datum"};
   }

@@ -75,7 +75,7 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   if (!node.present()) return frontend;
   HANZO_RETURN_IF_ERROR(node.check_keys({"type", "predict_rate", "covariance", "gate_probability", "lag_window", "max_future",
                                          "static_alignment", "planar", "zero_velocity_updates", "datum", "ukf", "particle_filter",
-                                         "keyframe_interval", "gate_recovery"}));
+                                         "keyframe_interval", "gate_recovery", "motion_model"}));
   if (node["type"].present()) {
     Result<std::string> name = node["type"].as_string();
     if (!name) return name.error();
@@ -106,6 +106,13 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
     HANZO_ASSIGN_OR_RETURN(frontend.ukf.beta, yaml::non_negative_or(ukf["beta"], frontend.ukf.beta));
     if (ukf["kappa"].present()) HANZO_ASSIGN_OR_RETURN(frontend.ukf.kappa, ukf["kappa"].as_double());
     if (frontend.ukf.kappa <= -18.0) return ukf["kappa"].error("expected a value > -18 (18 + kappa must be positive)");
+  }
+  if (const YamlValue motion = node["motion_model"]; motion.present()) {
+    HANZO_RETURN_IF_ERROR(motion.check_keys({"acceleration_noise", "angular_acceleration_noise"}));
+    MotionModelSettings& model = frontend.motion_model;
+    HANZO_ASSIGN_OR_RETURN(model.acceleration_noise, yaml::positive_or(motion["acceleration_noise"], model.acceleration_noise));
+    HANZO_ASSIGN_OR_RETURN(model.angular_acceleration_noise,
+                           yaml::positive_or(motion["angular_acceleration_noise"], model.angular_acceleration_noise));
   }
   if (const YamlValue particles = node["particle_filter"]; particles.present()) {
     HANZO_RETURN_IF_ERROR(particles.check_keys({"particles", "resample_threshold", "seed"}));
@@ -363,6 +370,12 @@ std::string to_yaml(const FusionConfig& config) {
       pf.seed != defaults.particle_filter.seed) {
     out += fmt::format("    particle_filter: {{particles: {}, resample_threshold: {}, seed: {}}}\n", pf.particles,
                        format_double(pf.resample_threshold), pf.seed);
+  }
+  const MotionModelSettings& motion = f.motion_model;
+  if (motion.acceleration_noise != defaults.motion_model.acceleration_noise ||
+      motion.angular_acceleration_noise != defaults.motion_model.angular_acceleration_noise) {
+    out += fmt::format("    motion_model: {{acceleration_noise: {}, angular_acceleration_noise: {}}}\n", format_double(motion.acceleration_noise),
+                       format_double(motion.angular_acceleration_noise));
   }
   if (f.datum) {
     out += fmt::format("    datum: {{latitude: {}, longitude: {}, altitude: {}}}\n", format_double(f.datum->latitude_deg),

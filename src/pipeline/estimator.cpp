@@ -28,6 +28,12 @@ constexpr double kHorizontalGravitySigma = 1e-6;    // m/s^2: ENU's up is the gr
 constexpr double kGravityMagnitudeSigma = 0.001;    // m/s^2, pseudo-measurement at 1 Hz
 constexpr double kPlanarHeightSigma = 0.005;        // m
 constexpr double kPlanarVerticalSpeedSigma = 0.01;  // m/s
+// Without an IMU (motion model, see estimator.hpp).
+constexpr double kMotionModelOrientationNoise = 0.01;  // rad/sqrt(s): attitude jitter besides the turn rate
+constexpr double kMotionModelAccelBiasSigma = 1e-4;    // m/s^2: the virtual accelerometer has no bias
+constexpr double kMotionModelAccelBiasWalk = 1e-6;     // m/s^2/sqrt(s)
+constexpr double kMotionModelInitialRateSigma = 0.5;   // rad/s: the start may be in a turn
+constexpr double kMotionModelStep = 0.01;              // s: the longest single prediction step
 
 estimate::ImuSample imu_sample(Timestamp time, const msgs::ImuMessage& imu) {
   return {time, imu.angular_velocity, imu.linear_acceleration};
@@ -55,15 +61,22 @@ bool fused_before(const Event& a, const Event& b) {
   return a.sequence < b.sequence;
 }
 
-Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup> sensors, size_t imu_sensor)
+Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup> sensors, std::optional<size_t> imu_sensor)
     : frontend_(config.frontend),
       sensors_(std::move(sensors)),
       imu_sensor_(imu_sensor),
       spike_filter_(estimate::ImuSpikeFilterConfig{}, estimate::ImuNoise{}) {
   const config::CovarianceConfig& covariance = frontend_.covariance;
-  filter_config_.imu_mounting = estimate::ImuMounting::from_transform(sensors_[imu_sensor_].T_body_sensor);
-  filter_config_.imu_noise = {covariance.process_noise_accel, covariance.process_noise_gyro, covariance.accel_bias_random_walk,
-                              covariance.gyro_bias_random_walk, 1.0 / sensors_[imu_sensor_].config->rate_hz};
+  if (imu_sensor_) {
+    filter_config_.imu_mounting = estimate::ImuMounting::from_transform(sensors_[*imu_sensor_].T_body_sensor);
+    filter_config_.imu_noise = {covariance.process_noise_accel, covariance.process_noise_gyro, covariance.accel_bias_random_walk,
+                                covariance.gyro_bias_random_walk, 1.0 / sensors_[*imu_sensor_].config->rate_hz};
+  } else {
+    // Densities (sample interval 1 s): see the class comment.
+    const config::MotionModelSettings& motion = frontend_.motion_model;
+    filter_config_.imu_noise = {motion.acceleration_noise, kMotionModelOrientationNoise, kMotionModelAccelBiasWalk,
+                                motion.angular_acceleration_noise, 1.0};
+  }
   filter_config_.gate_probability = frontend_.gate_probability;
   filter_ = make_filter(filter_config_, frontend_);
   spike_filter_ = estimate::ImuSpikeFilter(estimate::ImuSpikeFilterConfig{}, filter_config_.imu_noise);
@@ -74,9 +87,12 @@ Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup
   // The configured yaw uncertainty says whether the start heading is known: above ~30 degrees
   // it is not, and GNSS fixes wait until the course over ground gives it.
   constexpr double kUnknownYawSigma = 0.5;  // rad
-  heading_pending_ = has_gnss && !sensors_[imu_sensor_].config->fusion.use_orientation[2] &&
-                     frontend_.covariance.initial_orientation.z() > kUnknownYawSigma;
+  const bool imu_heading = imu_sensor_ && sensors_[*imu_sensor_].config->fusion.use_orientation[2];
+  heading_pending_ = has_gnss && !imu_heading && frontend_.covariance.initial_orientation.z() > kUnknownYawSigma;
   gated_since_.resize(2 * sensors_.size());
+  wheel_yaw_rate_needed_ = !imu_sensor_ && std::none_of(sensors_.begin(), sensors_.end(), [](const SensorSetup& s) {
+    return s.config->modality == SensorModality::kLidar || s.config->modality == SensorModality::kCamera;
+  });
 }
 
 Estimator::Estimator(const Estimator& other)
@@ -97,6 +113,7 @@ Estimator::Estimator(const Estimator& other)
       gnss_before_initialization_(other.gnss_before_initialization_),
       wheels_moved_before_initialization_(other.wheels_moved_before_initialization_),
       heading_pending_(other.heading_pending_),
+      wheel_yaw_rate_needed_(other.wheel_yaw_rate_needed_),
       course_start_(other.course_start_),
       gravity_magnitude_(other.gravity_magnitude_),
       last_keyframe_(other.last_keyframe_),
@@ -119,6 +136,10 @@ estimate::GyroReading Estimator::gyro_reading() const {
 }
 
 EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
+  if (!imu_sensor_) {
+    if (!initialized_ && !std::holds_alternative<WorldCorrection>(event.payload)) initialize_without_imu(event);
+    if (!initialized_) return {false, "before_initialization"};
+  }
   if (!initialized_ && !event.is_imu) {
     const auto* message = std::get_if<msgs::SensorMessage>(&event.payload);
     const auto* gnss = message ? std::get_if<msgs::GnssMessage>(message) : nullptr;
@@ -148,6 +169,9 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
     filter_->apply_world_transform(correction->T_correction);
     world_correction_ = correction->T_correction * world_correction_;
     if (last_keyframe_) last_keyframe_->T_world_body = correction->T_correction * last_keyframe_->T_world_body;
+    return {true, {}};
+  } else if (std::holds_alternative<MotionTick>(event.payload)) {
+    predict_to(event.time);
     outcome = {true, {}};
   } else {
     const auto& message = std::get<msgs::SensorMessage>(event.payload);
@@ -163,10 +187,34 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
       outcome = {false, "not_fused"};
     }
   }
+  if (!imu_sensor_ && outcome.fused) {
+    // The motion model's counterparts of what IMU events do.
+    apply_constraints(event);
+    outcome.keyframe = maybe_keyframe(event.time);
+  }
   return outcome;
 }
 
+estimate::ImuSample Estimator::motion_model_sample() const {
+  // Constant velocity in the body's axes (a turning vehicle's velocity turns with it): the
+  // centripetal acceleration w x v_body besides the gravity reaction; w = -gyro bias.
+  const NavigationState state = filter_->state();
+  const Eigen::Vector3d angular_velocity = -state.gyro_bias;
+  const Eigen::Vector3d velocity_body = state.R_world_body.inverse() * state.velocity;
+  return {time_, Eigen::Vector3d::Zero(),
+          state.R_world_body.inverse() * (-state.gravity) + angular_velocity.cross(velocity_body) + state.accel_bias};
+}
+
 void Estimator::predict_to(Timestamp t) {
+  if (!imu_sensor_) {
+    while (time_ < t) {
+      const Timestamp next = std::min(t, time_ + Duration::from_seconds(kMotionModelStep));
+      filter_->predict(motion_model_sample(), (next - time_).seconds());
+      time_ = next;
+    }
+    last_imu_ = motion_model_sample();
+    return;
+  }
   if (t <= time_ || !last_imu_) return;
   filter_->predict(*last_imu_, (t - time_).seconds());
   time_ = t;
@@ -266,6 +314,39 @@ void Estimator::initialize(const Event& event, const msgs::ImuMessage& imu) {
   logger()->info("frontend initialized at t = {:.3f} s (roll {:.2f}, pitch {:.2f} deg)", event.time.seconds(),
                  estimate::roll_pitch_yaw(state.R_world_body.matrix()).x() * 180.0 / M_PI,
                  estimate::roll_pitch_yaw(state.R_world_body.matrix()).y() * 180.0 / M_PI);
+}
+
+void Estimator::initialize_without_imu(const Event& event) {
+  const config::CovarianceConfig& covariance = frontend_.covariance;
+  NavigationState state;
+  state.timestamp = event.time;
+  state.gravity = Eigen::Vector3d(0.0, 0.0, -gravity_magnitude_);
+  Eigen::Matrix3d position_covariance = covariance.initial_position.array().square().matrix().asDiagonal();
+  const auto* message = std::get_if<msgs::SensorMessage>(&event.payload);
+  const auto* gnss = message ? std::get_if<msgs::GnssMessage>(message) : nullptr;
+  if (gnss && frontend_.datum && gnss->fix_type >= sensors_[event.sensor].config->fusion.min_fix) {
+    // With a configured datum the world frame is fixed: start at the fix.
+    enu_ = EnuFrame::create(*frontend_.datum).value();
+    state.position = enu_->to_enu(gnss->geodetic()) - sensors_[event.sensor].T_body_sensor.translation();
+    position_covariance = gnss->position_covariance.value_or(default_gnss_covariance(gnss->fix_type));
+  }
+  ErrorCovariance P = ErrorCovariance::Zero();
+  const auto set_block = [&P](int index, const Eigen::Vector3d& sigmas) {
+    P.block<3, 3>(index, index) = sigmas.array().square().matrix().asDiagonal();
+  };
+  P.block<3, 3>(estimate::kPositionIndex, estimate::kPositionIndex) = position_covariance;
+  set_block(estimate::kOrientationIndex, covariance.initial_orientation);
+  set_block(estimate::kVelocityIndex, covariance.initial_velocity.cwiseMax(kMovingStartVelocitySigma));
+  set_block(estimate::kAccelBiasIndex, Eigen::Vector3d::Constant(kMotionModelAccelBiasSigma));
+  set_block(estimate::kGyroBiasIndex, Eigen::Vector3d::Constant(kMotionModelInitialRateSigma));
+  set_block(estimate::kGravityIndex, Eigen::Vector3d(kHorizontalGravitySigma, kHorizontalGravitySigma, kInitialGravitySigma));
+  filter_->reset(state, P);
+  initialized_ = true;
+  time_ = event.time;
+  last_imu_ = motion_model_sample();
+  last_gravity_update_ = event.time;
+  planar_height_ = state.position.z();
+  logger()->info("frontend initialized at t = {:.3f} s without an IMU: level, constant-velocity motion model", event.time.seconds());
 }
 
 EventOutcome Estimator::process_imu(const Event& event, const msgs::ImuMessage& imu, UpdateObserver* observer) {

@@ -38,6 +38,9 @@ struct WorldCorrection {
   SE3 T_correction;
 };
 
+/// Without an IMU: carry the motion model forward to the event's time (Frontend::propagate_to).
+struct MotionTick {};
+
 /// A message ready for fusion: its sensor (index into FusionConfig::sensors), its body-clock
 /// time and an arrival sequence number (ties at equal times keep arrival order).
 struct Event {
@@ -45,7 +48,7 @@ struct Event {
   size_t sensor = 0;
   uint64_t sequence = 0;
   bool is_imu = false;
-  std::variant<msgs::SensorMessage, PoseMeasurement, VelocityMeasurement, WorldCorrection> payload;
+  std::variant<msgs::SensorMessage, PoseMeasurement, VelocityMeasurement, WorldCorrection, MotionTick> payload;
 };
 
 /// Strict order of fusion: time, then IMU before other sensors, then arrival.
@@ -83,9 +86,18 @@ struct EventOutcome {
   std::optional<FusedGnssFix> gnss_fix;    // a fused GNSS event's fix (sensor name left empty)
 };
 
+/// With an IMU sensor the IMU propagates the state (strapdown) and its messages are the clock.
+/// Without one (imu_sensor empty) the state moves by a motion model between measurements:
+/// constant velocity in the body's axes and constant angular velocity, driven by white noise
+/// (frontend.motion_model). It is the same 18-dimensional filter fed a virtual IMU whose
+/// accelerometer reads the gravity reaction plus the centripetal acceleration of the turn
+/// (R^T (-g) + w x v_body + accel bias) and whose gyro reads zero, so that the gyro-bias state is minus the angular velocity and its
+/// random walk (angular_acceleration_noise) lets the turn rate change; the accelerometer noise
+/// (acceleration_noise) lets the velocity change. The filter starts level at the first event
+/// (at the GNSS fix with a datum), and every fused measurement may emit a keyframe.
 class Estimator {
  public:
-  Estimator(const config::FusionConfig& config, std::vector<SensorSetup> sensors, size_t imu_sensor);
+  Estimator(const config::FusionConfig& config, std::vector<SensorSetup> sensors, std::optional<size_t> imu_sensor);
   Estimator(const Estimator& other);
   Estimator& operator=(const Estimator& other);
   Estimator(Estimator&&) noexcept = default;
@@ -114,9 +126,14 @@ class Estimator {
   EventOutcome process_radar(const Event& event, const msgs::RadarMessage& radar, UpdateObserver* observer);
   EventOutcome process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer);
   void initialize(const Event& event, const msgs::ImuMessage& imu);
+  /// Without an IMU: starts the filter at the first event (see the class comment).
+  void initialize_without_imu(const Event& event);
+  /// Without an IMU: the virtual IMU sample of the motion model at the current estimate.
+  estimate::ImuSample motion_model_sample() const;
   /// The latest accepted gyro reading, for models that need the body rate.
   estimate::GyroReading gyro_reading() const;
-  /// Propagates the filter to t with the last IMU sample held.
+  /// Propagates the filter to t with the last IMU sample held (without an IMU: by the motion
+  /// model, in steps of at most 10 ms).
   void predict_to(Timestamp t);
   /// Runs one gated update and reports it; true when applied.
   /// channel: which of the sensor's updates this is (0, or 1 for a wheel's separate yaw rate),
@@ -129,7 +146,7 @@ class Estimator {
 
   config::FrontendConfig frontend_;
   std::vector<SensorSetup> sensors_;
-  size_t imu_sensor_;
+  std::optional<size_t> imu_sensor_;  ///< none: the motion model propagates
   estimate::FilterConfig filter_config_;
   std::unique_ptr<estimate::Filter> filter_;
   estimate::ImuSpikeFilter spike_filter_;
@@ -151,6 +168,9 @@ class Estimator {
   /// GNSS without an IMU heading: the world heading is unknown until the GNSS track and the
   /// dead-reckoned track over the same stretch can be compared (see align_heading_to_course).
   bool heading_pending_ = false;
+  /// Without an IMU and without a sensor that measures the orientation (LiDAR, camera), the
+  /// wheels' yaw rate is the only measurement of the turn: fused whatever use_yaw_rate says.
+  bool wheel_yaw_rate_needed_ = false;
   struct CourseStart {
     Eigen::Vector3d antenna_gnss;      // ENU
     Eigen::Vector3d antenna_estimate;  // world, dead-reckoned

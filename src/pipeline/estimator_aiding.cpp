@@ -148,7 +148,7 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
   // be good.
   measurement.use_yaw_rate = false;
   outcome.fused = update(event, estimate::WheelOdometryModel(measurement, sensor.T_body_sensor, gyro), observer, &outcome.reason);
-  if (options.use_yaw_rate) {
+  if (options.use_yaw_rate || wheel_yaw_rate_needed_) {
     estimate::WheelOdometryMeasurement yaw = measurement;
     yaw.use_speed = yaw.lateral_constraint = yaw.vertical_constraint = false;
     yaw.use_yaw_rate = true;

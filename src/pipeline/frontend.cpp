@@ -50,7 +50,7 @@ struct Frontend::Impl final : UpdateObserver {
   };
 
   // sensor_setups[i].config is set here to point into this Impl's own configuration.
-  Impl(config::FusionConfig fusion_config, std::vector<SensorSetup> sensor_setups, size_t imu)
+  Impl(config::FusionConfig fusion_config, std::vector<SensorSetup> sensor_setups, std::optional<size_t> imu)
       : config(std::move(fusion_config)), setups(link(std::move(sensor_setups), config)), imu_sensor(imu),
         estimator(config, setups, imu_sensor), history_base(estimator) {
     for (const SensorSetup& setup : setups) {
@@ -94,8 +94,12 @@ struct Frontend::Impl final : UpdateObserver {
   Status accept(size_t sensor, Event event);
   void fuse_in_order(Event event);
   void fuse_late(Event event);
-  /// Emits a keyframe unless one with its id (or a later one) was emitted already.
-  void emit_keyframe(const msgs::Keyframe& keyframe);
+  /// Holds a keyframe the estimator made (a newer version of one held replaces it: a late
+  /// message re-made it) until send_final_keyframes() sends it.
+  void hold_keyframe(const msgs::Keyframe& keyframe);
+  /// Sends the held keyframes no late message can change any more (the filter passed them by
+  /// more than the lag window; all of them when `all`), moved into today's world.
+  void send_final_keyframes(bool all);
   /// Reports a fused GNSS fix (first fusions only: fuse_in_order and a late event itself; a
   /// replay after a rollback re-fuses fixes already reported).
   void report_gnss(const Event& event, const EventOutcome& outcome);
@@ -104,14 +108,23 @@ struct Frontend::Impl final : UpdateObserver {
   void release_pending(bool flush_all = false);
   void prune_history();
   /// Records the PoseEstimate at the estimator's time as latest_pose; calls the pose callback
-  /// when notify (not for poses recomputed while re-fusing after a late message).
+  /// when notify (not for poses recomputed while re-fusing after a late message) and the pose
+  /// is newer than the last one the callback got (the pose stream stays in time order).
   void emit_pose(bool notify);
   void update_timeouts();
+  /// Poses come from fused IMU messages; without an IMU from every fused measurement (not
+  /// from motion-model ticks, which only predict).
+  bool emits_pose(const Event& event, const EventOutcome& outcome) const {
+    if (!outcome.fused || !estimator.initialized()) return false;
+    if (imu_sensor) return event.is_imu;
+    return std::holds_alternative<msgs::SensorMessage>(event.payload) || std::holds_alternative<PoseMeasurement>(event.payload) ||
+           std::holds_alternative<VelocityMeasurement>(event.payload);
+  }
   msgs::PoseStatus pose_status() const;
 
   config::FusionConfig config;
   std::vector<SensorSetup> setups;
-  size_t imu_sensor;
+  std::optional<size_t> imu_sensor;  // none: the motion model propagates (Estimator)
   Estimator estimator;
   Estimator history_base;  // the estimator before the oldest history entry
   std::deque<HistoryEntry> history;
@@ -127,6 +140,7 @@ struct Frontend::Impl final : UpdateObserver {
   uint64_t rollbacks = 0;
   uint64_t zero_velocity_updates = 0;
   std::optional<msgs::PoseEstimate> latest_pose;
+  std::optional<Timestamp> last_notified;  // the newest pose the callback got
   PoseCallback pose_callback;
   InnovationCallback innovation_callback;
   KeyframeCallback keyframe_callback;
@@ -134,6 +148,11 @@ struct Frontend::Impl final : UpdateObserver {
   // Emitted keyframes, for corrections: the pose before any correction (C^-1 x emitted pose,
   // C the world correction when it was emitted), so that today's belief is C_now x this.
   std::map<uint64_t, SE3> keyframe_poses;
+  struct HeldKeyframe {
+    msgs::Keyframe keyframe;
+    SE3 world_correction;  // the estimator's when it made the keyframe
+  };
+  std::map<uint64_t, HeldKeyframe> held_keyframes;
   uint64_t keyframes = 0;
   uint64_t corrections = 0;
 };
@@ -144,6 +163,7 @@ Frontend::~Frontend() = default;
 Result<std::unique_ptr<Frontend>> Frontend::create(const config::FusionConfig& config, const calib::Calibration& calibration) {
   if (Status valid = config::validate(config); !valid) return valid.error();
   if (Status valid = calib::validate(calibration); !valid) return valid.error();
+  if (config.sensors.empty()) return Error("the configuration has no sensors: nothing to fuse", "sensors");
   std::vector<SensorSetup> setups;
   std::optional<size_t> imu;
   for (const config::SensorConfig& sensor : config.sensors) {
@@ -157,8 +177,8 @@ Result<std::unique_ptr<Frontend>> Frontend::create(const config::FusionConfig& c
     }
     setups.push_back(setup);
   }
-  if (!imu) return Error("the configuration has no IMU sensor: the frontend propagates the state with the IMU", "sensors");
-  return std::unique_ptr<Frontend>(new Frontend(std::make_unique<Impl>(config, std::move(setups), *imu)));
+  if (!imu) logger()->info("no IMU sensor: the frontend propagates with a constant-velocity motion model");
+  return std::unique_ptr<Frontend>(new Frontend(std::make_unique<Impl>(config, std::move(setups), imu)));
 }
 
 const config::SensorConfig* Frontend::sensor_for_topic(std::string_view topic) const {
@@ -187,7 +207,7 @@ Status Frontend::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_
   // At the newest fused event (the estimator's time can trail it: rejected events do not move
   // it), so the correction goes to the end of the history.
   event.time = impl.history.empty() ? impl.estimator.time() : std::max(impl.estimator.time(), impl.history.back().event.time);
-  event.sensor = impl.imu_sensor;
+  event.sensor = impl.imu_sensor.value_or(0);
   event.sequence = impl.sequence++;
   // The session's current belief of the keyframe includes the corrections applied since.
   event.payload = WorldCorrection{T_world_body_optimized * (impl.estimator.world_correction() * found->second).inverse()};
@@ -211,7 +231,9 @@ std::optional<SE3> Frontend::pose_at(Timestamp time) const {
   // history is in fusion order, so its times do not decrease; the first entry at or after `time`.
   const auto after = std::lower_bound(history.begin(), history.end(), time,
                                       [](const Impl::HistoryEntry& entry, Timestamp t) { return entry.event.time < t; });
-  if (after == history.end() || after == history.begin() || !after->after.initialized()) return std::nullopt;
+  if (after == history.end() || !after->after.initialized()) return std::nullopt;
+  if (after->event.time == time) return pose_of(after->after);
+  if (after == history.begin()) return std::nullopt;
   const auto before = std::prev(after);
   if (!before->after.initialized()) return std::nullopt;
   const double span = (after->event.time - before->event.time).seconds();
@@ -353,23 +375,46 @@ Status Frontend::Impl::accept(size_t sensor, Event event) {
 
 void Frontend::flush() { impl_->release_pending(true); }
 
+bool Frontend::has_imu() const { return impl_->imu_sensor.has_value(); }
+
+void Frontend::propagate_to(Timestamp time) {
+  Impl& impl = *impl_;
+  if (impl.imu_sensor || time.is_zero()) return;
+  if (!impl.history.empty() && time <= impl.history.back().event.time) return;
+  Event event;
+  event.time = time;
+  event.sequence = impl.sequence++;
+  event.is_imu = true;  // a clock event: before measurements at the same time
+  event.payload = MotionTick{};
+  impl.fuse_in_order(std::move(event));
+  impl.prune_history();
+  impl.send_final_keyframes(false);
+}
+
 void Frontend::Impl::release_pending(bool flush_all) {
   // Measurements wait for the IMU to reach their time; when the IMU is silent they go ahead.
-  const Timestamp imu_time = last_input[imu_sensor];
-  const bool imu_silent = imu_time.is_zero() || (newest - imu_time).seconds() > setups[imu_sensor].config->effective_timeout_s();
-  const Timestamp release = imu_silent || flush_all ? newest : imu_time;
+  // Without an IMU nothing waits (each measurement moves the motion model to its own time).
+  Timestamp release = newest;
+  if (imu_sensor && !flush_all) {
+    const Timestamp imu_time = last_input[*imu_sensor];
+    const bool imu_silent = imu_time.is_zero() || (newest - imu_time).seconds() > setups[*imu_sensor].config->effective_timeout_s();
+    if (!imu_silent) release = imu_time;
+  }
   size_t released = 0;
   while (released < pending.size() && pending[released].time <= release) ++released;
-  if (released == 0) return;
-  std::vector<Event> ready(std::make_move_iterator(pending.begin()), std::make_move_iterator(pending.begin() + static_cast<std::ptrdiff_t>(released)));
-  pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(released));
-  for (Event& event : ready) fuse_in_order(std::move(event));
-  prune_history();
+  if (released > 0) {
+    std::vector<Event> ready(std::make_move_iterator(pending.begin()), std::make_move_iterator(pending.begin() + static_cast<std::ptrdiff_t>(released)));
+    pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(released));
+    for (Event& event : ready) fuse_in_order(std::move(event));
+    prune_history();
+  }
+  send_final_keyframes(flush_all);
 }
 
 void Frontend::Impl::count(const Event& event, const EventOutcome& outcome) {
-  // A backend correction rides on the IMU sensor's index but is no message of it (`corrections`).
-  if (std::holds_alternative<WorldCorrection>(event.payload)) return;
+  // A backend correction rides on the IMU sensor's index but is no message of it (`corrections`);
+  // a motion-model tick is no message either.
+  if (std::holds_alternative<WorldCorrection>(event.payload) || std::holds_alternative<MotionTick>(event.payload)) return;
   SensorStatistics& statistics = sensors[event.sensor];
   if (outcome.fused) {
     ++statistics.fused;
@@ -383,8 +428,8 @@ void Frontend::Impl::fuse_in_order(Event event) {
   const EventOutcome outcome = estimator.process(event, this);
   count(event, outcome);
   if (config.frontend.lag_window_s > 0.0) history.push_back({event, estimator});
-  if (event.is_imu && outcome.fused && estimator.initialized()) emit_pose(true);
-  if (outcome.keyframe) emit_keyframe(*outcome.keyframe);
+  if (emits_pose(event, outcome)) emit_pose(true);
+  if (outcome.keyframe) hold_keyframe(*outcome.keyframe);
   report_gnss(event, outcome);
 }
 
@@ -395,14 +440,41 @@ void Frontend::Impl::report_gnss(const Event& event, const EventOutcome& outcome
   gnss_callback(fix);
 }
 
-void Frontend::Impl::emit_keyframe(const msgs::Keyframe& keyframe) {
-  // A rollback re-creates keyframes already emitted (same ids): the first emission stands.
+void Frontend::Impl::hold_keyframe(const msgs::Keyframe& keyframe) {
+  // Sent keyframes are final (a message that could re-make one is too late).
   if (!keyframe_poses.empty() && keyframe.keyframe_id <= keyframe_poses.rbegin()->first) return;
-  constexpr size_t kRememberedKeyframes = 100000;
-  keyframe_poses[keyframe.keyframe_id] = estimator.world_correction().inverse() * keyframe.T_world_body.to_se3();
-  if (keyframe_poses.size() > kRememberedKeyframes) keyframe_poses.erase(keyframe_poses.begin());
-  ++keyframes;
-  if (keyframe_callback) keyframe_callback(keyframe);
+  held_keyframes[keyframe.keyframe_id] = {keyframe, estimator.world_correction()};
+}
+
+void Frontend::Impl::send_final_keyframes(bool all) {
+  // A keyframe sent while a late message could still re-make it would give the backend the
+  // pose before that message (e.g. before the LiDAR pose of a sweep registered after the IMU
+  // passed it) and the next keyframe's relative motion from the pose after it: the difference
+  // would accumulate in the graph's chain of relative motions.
+  const double lag = config.frontend.lag_window_s;
+  while (!held_keyframes.empty()) {
+    const auto oldest = held_keyframes.begin();
+    if (!all && (estimator.time() - oldest->second.keyframe.timestamp).seconds() <= lag) return;
+    msgs::Keyframe keyframe = std::move(oldest->second.keyframe);
+    const SE3 made_in = oldest->second.world_correction;
+    held_keyframes.erase(oldest);
+    const SE3 T_world_body = keyframe.T_world_body.to_se3();
+    // Backend corrections since the keyframe was made move it into today's world (its
+    // relative motion does not change).
+    const SE3 moved = estimator.world_correction() * made_in.inverse();
+    keyframe.T_world_body = msgs::Pose::from_se3(moved * T_world_body);
+    keyframe.velocity = moved.rotation() * keyframe.velocity;
+    if (keyframe.pose_covariance) {
+      Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Identity();
+      J.topLeftCorner<3, 3>() = moved.rotation().matrix();  // (position world, orientation body)
+      keyframe.pose_covariance = msgs::Matrix6d(J * *keyframe.pose_covariance * J.transpose());
+    }
+    constexpr size_t kRememberedKeyframes = 100000;
+    keyframe_poses[keyframe.keyframe_id] = made_in.inverse() * T_world_body;
+    if (keyframe_poses.size() > kRememberedKeyframes) keyframe_poses.erase(keyframe_poses.begin());
+    ++keyframes;
+    if (keyframe_callback) keyframe_callback(keyframe);
+  }
 }
 
 void Frontend::Impl::fuse_late(Event event) {
@@ -415,11 +487,11 @@ void Frontend::Impl::fuse_late(Event event) {
   count(event, outcome);
   // A late IMU message (its stream fell behind another sensor's, which was fused ahead of it)
   // still gets its pose, as of its own time: poses come from IMU messages only, and those
-  // arrive in order, so the pose stream stays in time order.
-  if (event.is_imu && outcome.fused && estimator.initialized()) emit_pose(true);
-  // It can make a keyframe, and so can the IMU messages re-fused after it: those not emitted
-  // yet are emitted now.
-  if (outcome.keyframe) emit_keyframe(*outcome.keyframe);
+  // arrive in order, so the pose stream stays in time order. Without an IMU a late
+  // measurement gets its pose when it is newer than the last one emitted (emit_pose).
+  if (emits_pose(event, outcome)) emit_pose(true);
+  // It can make a keyframe, and so can the messages re-fused after it: held until final.
+  if (outcome.keyframe) hold_keyframe(*outcome.keyframe);
   report_gnss(event, outcome);
   ++sensors[event.sensor].rolled_back;
   ++rollbacks;
@@ -428,8 +500,8 @@ void Frontend::Impl::fuse_late(Event event) {
   for (size_t i = index + 1; i < history.size(); ++i) {
     const EventOutcome again = estimator.process(history[i].event, nullptr);
     history[i].after = estimator;
-    if (history[i].event.is_imu && again.fused && estimator.initialized()) emit_pose(false);
-    if (again.keyframe) emit_keyframe(*again.keyframe);
+    if (emits_pose(history[i].event, again)) emit_pose(false);
+    if (again.keyframe) hold_keyframe(*again.keyframe);
   }
   replaying = false;
 }
@@ -469,7 +541,7 @@ msgs::PoseStatus Frontend::Impl::pose_status() const {
   status.active_modalities = static_cast<uint32_t>(modalities.size());
   if (!estimator.initialized()) {
     status.state = msgs::TrackingState::kInitializing;
-  } else if (sensors[imu_sensor].timed_out) {
+  } else if (imu_sensor ? sensors[*imu_sensor].timed_out : status.active_modalities == 0) {
     status.state = msgs::TrackingState::kLost;
   } else if (any_timed_out || !status.localization_reliable()) {
     status.state = msgs::TrackingState::kDegraded;
@@ -492,7 +564,8 @@ void Frontend::Impl::emit_pose(bool notify) {
   pose.pose_covariance = covariance.topLeftCorner<6, 6>();
   pose.status = pose_status();
   latest_pose = pose;
-  if (!notify) return;
+  if (!notify || (last_notified && pose.timestamp <= *last_notified)) return;
+  last_notified = pose.timestamp;
   ++poses;
   if (pose_callback) pose_callback(pose);
 }

@@ -413,18 +413,21 @@ void Session::track_health() {
 void Session::register_ready_scans() {
   take_registered();
   while (!waiting_scans_.empty()) {
+    const bool has_imu = frontend_->has_imu();
+    if (!has_imu) frontend_->propagate_to(waiting_scans_.front().end);
     const std::optional<msgs::PoseEstimate> latest = frontend_->latest_pose();
     if (latest && !first_pose_time_) first_pose_time_ = latest->timestamp;
-    if (!latest || latest->timestamp < waiting_scans_.front().end) break;
+    if (has_imu && (!latest || latest->timestamp < waiting_scans_.front().end)) break;
+    const Timestamp now = has_imu ? latest->timestamp : waiting_scans_.front().end;
     const msgs::PointCloudMessage scan = std::move(waiting_scans_.front().scan);
     waiting_scans_.pop_front();
     Result<LidarInertialOdometry::PreparedScan> prepared = odometry_->prepare(scan);
     if (!prepared) {
       logger()->debug("session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
       // A sweep that began before the first pose has no motion to start from (the IMU aligned).
-      count_refused(scan.timestamp < *first_pose_time_ ? "aligning" : "not_registered");
+      count_refused(first_pose_time_ && scan.timestamp >= *first_pose_time_ ? "not_registered" : "aligning");
     } else if (worker_) {
-      const std::size_t dropped = worker_->submit(std::move(prepared).value(), registration_wait_limit(latest->timestamp));
+      const std::size_t dropped = worker_->submit(std::move(prepared).value(), registration_wait_limit(now));
       for (std::size_t i = 0; i < dropped; ++i) count_refused("registration_behind");
     } else {
       on_registered(odometry_->register_scan(*prepared));
@@ -481,14 +484,13 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
     const SE3 since = map_keyframes_.back().T_world_lidar.inverse() * T_world_lidar;
     if (since.translation().norm() < config_.map_keyframe_distance && since.rotation().log().norm() < config_.map_keyframe_angle) return;
   }
-  add_map_keyframe(latest_keyframe_->keyframe_id, T_world_lidar, registered.points);
+  add_map_keyframe(T_world_lidar, registered.points);
 }
 
-void Session::add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points) {
-  // The anchor's pose in today's world (the Frontend's history), for the relative pose.
-  const std::optional<Timestamp> anchor_time = graph_->keyframe_time(anchor);
-  const std::optional<SE3> T_world_anchor = anchor_time ? frontend_->pose_at(*anchor_time) : std::nullopt;
-  if (!T_world_anchor) return;
+void Session::add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points) {
+  // The anchor (the newest keyframe) as the graph got it, in today's world.
+  const uint64_t anchor = latest_keyframe_->keyframe_id;
+  const SE3 T_world_anchor = frontend_->world_correction() * latest_keyframe_uncorrected_;
   cloud::PointCloud cloud;
   cloud.positions = points;
   if (Status inserted = map_builder_.insert(T_world_lidar, cloud); !inserted) {
@@ -500,7 +502,7 @@ void Session::add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar, const 
   }
   last_anchor_ = anchor;
   map_keyframe_of_[anchor] = map_keyframes_.size();
-  map_keyframes_.push_back({anchor, T_world_anchor->inverse() * T_world_lidar, T_world_lidar});
+  map_keyframes_.push_back({anchor, T_world_anchor.inverse() * T_world_lidar, T_world_lidar});
   ++summary_.map_keyframes;
   ++summary_.map_version;
   if (map_update_callback_) {

@@ -13,6 +13,7 @@ void WheelSlipMonitor::add_wheels(Timestamp time, double distance) {
   if (!wheels_.empty() && time <= wheels_.back().time) return;
   wheels_.push_back({time, distance});
   while (wheels_.size() > 2 && (time - wheels_.front().time).seconds() > kHistorySeconds) wheels_.pop_front();
+  judge();
 }
 
 bool WheelSlipMonitor::wheel_distance_at(Timestamp time, double& distance) const {
@@ -33,8 +34,15 @@ void WheelSlipMonitor::add_lidar_motion(Timestamp from, Timestamp to, double for
   if (!(to > from) || !std::isfinite(forward)) return;
   motions_.push_back({from, to, forward, reliable});
   while (!motions_.empty() && (to - motions_.front().from).seconds() > config_.window_s + 1e-9) motions_.pop_front();
-  if (motions_.empty()) return;
+  judge();
+}
+
+void WheelSlipMonitor::judge() {
+  // Once per LiDAR motion, as soon as the wheels cover its window (a sweep can be registered
+  // before the wheel messages of its time arrive, or after).
+  if (motions_.empty() || motions_.back().to <= judged_until_) return;
   const Timestamp start = motions_.front().from;
+  const Timestamp to = motions_.back().to;
   if ((to - start).seconds() < 0.8 * config_.window_s) return;  // not enough of the window yet
   double lidar = 0.0;
   for (std::size_t i = 0; i < motions_.size(); ++i) {
@@ -43,7 +51,9 @@ void WheelSlipMonitor::add_lidar_motion(Timestamp from, Timestamp to, double for
     lidar += motions_[i].forward;
   }
   double wheels_start = 0.0, wheels_end = 0.0;
-  if (!wheel_distance_at(start, wheels_start) || !wheel_distance_at(to, wheels_end)) return;
+  if (!wheel_distance_at(start, wheels_start)) return;
+  if (!wheel_distance_at(to, wheels_end)) return;  // the wheels have not reached it yet
+  judged_until_ = to;
   last_difference_ = (wheels_end - wheels_start) - lidar;
   const bool disagree = std::abs(last_difference_) > config_.absolute_tolerance_m + config_.relative_tolerance * std::abs(lidar);
   if (disagree) {

@@ -373,11 +373,11 @@ TEST(Cli, RunReplaysTheSampleAndScoresItAgainstGroundTruth) {
                            "trajectory.svg", "covariance.svg"}) {
     EXPECT_TRUE(std::filesystem::exists(dir / "run" / file)) << file;
   }
-  // Bad input: a configuration without an IMU, a missing log; one line on stderr, exit 1.
-  const std::string no_imu = write_temp("no_imu.yaml", "fusion:\n  sensors:\n    gnss: {rate: 5}\n");
-  const CliRun refused = run(fmt::format("run --config {} --log {} --out {}", no_imu, log, (dir / "bad").string()));
+  // Bad input: a configuration without sensors, a missing log; one line on stderr, exit 1.
+  const std::string no_sensors = write_temp("no_sensors.yaml", "fusion:\n  sensors: {}\n");
+  const CliRun refused = run(fmt::format("run --config {} --log {} --out {}", no_sensors, log, (dir / "bad").string()));
   EXPECT_EQ(refused.exit_code, 1);
-  EXPECT_THAT(refused.err, HasSubstr("no IMU sensor"));
+  EXPECT_THAT(refused.err, HasSubstr("no sensors"));
   EXPECT_EQ(std::count(refused.err.begin(), refused.err.end(), '\n'), 1);
   const CliRun missing = run(fmt::format("run --config examples/data/fusion.yaml --log {} --out {}", (dir / "none.mcap").string(),
                                          (dir / "bad").string()));

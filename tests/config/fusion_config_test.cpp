@@ -65,7 +65,9 @@ TEST(FusionConfig, EachRuleGivesItsDocumentedError) {
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    tpye: ekf\n"),
             "fusion.yaml:3: frontend.tpye: unknown key (expected one of: type, predict_rate, covariance, gate_probability, lag_window, "
             "max_future, static_alignment, planar, zero_velocity_updates, datum, ukf, particle_filter, keyframe_interval, "
-            "gate_recovery)");
+            "gate_recovery, motion_model)");
+  EXPECT_EQ(error_of("fusion:\n  frontend:\n    motion_model: {acceleration_noise: 0}\n"),
+            "fusion.yaml:3: frontend.motion_model.acceleration_noise: expected a positive number, got 0");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      topic: /imu\n"),
             "fusion.yaml:3: sensors.imu.rate: missing (expected the sensor's rate in Hz)");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      rate: fast\n"),
@@ -95,6 +97,7 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   config.frontend.gate_recovery_s = 0.0;
   config.frontend.ukf = {0.5, 1.0, -2.0};
   config.frontend.particle_filter = {2000, 0.25, 7};
+  config.frontend.motion_model = {1.5, 0.25};
   config.frontend.datum = GeodeticPoint{48.1, 11.5, 520.25};
   config.mapping.lidar_source_voxel = 0.25;
   config.mapping.map_voxel = 0.05;
@@ -119,6 +122,7 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   EXPECT_EQ(loaded->find_sensor("imu2")->fusion.use_orientation, (std::array<bool, 3>{true, false, true}));
   EXPECT_TRUE(loaded->find_sensor("wheels2")->fusion.use_yaw_rate);
   EXPECT_EQ(loaded->frontend.covariance.process_noise_accel, 0.123456789012345);
+  EXPECT_EQ(loaded->frontend.motion_model.angular_acceleration_noise, 0.25);
   EXPECT_EQ(loaded->mapping.lidar_source_voxel, 0.25);
   EXPECT_EQ(loaded->mapping.map_voxel, 0.05);
   EXPECT_FALSE(loaded->mapping.loop_closure);

@@ -2,6 +2,7 @@
 // every input rejection with its reason, late messages fused by rollback exactly as if they had
 // come in order, deterministic replay, sensor timeouts and the modality status.
 
+#include <cmath>
 #include <gtest/gtest.h>
 
 #include "hanzo/fusion/pipeline/frontend.hpp"
@@ -359,12 +360,68 @@ TEST(Frontend, FusesLidarPosesAndRelativePoses) {
   EXPECT_EQ(reason_of(session->push_pose("lidar", at(12.5), SE3(), msgs::Matrix6d::Zero())), "invalid");
 }
 
-TEST(Frontend, RefusesAConfigurationWithoutImu) {
-  config::FusionConfig config = fusion_config();
-  config.sensors.erase(config.sensors.begin());
-  const auto session = Frontend::create(config, {});
-  ASSERT_FALSE(session.ok());
-  EXPECT_NE(session.error().message.find("no IMU"), std::string::npos);
+// Without an IMU the motion model propagates: wheels alone dead-reckon a drive with a turn
+// (speed, yaw rate and the non-holonomic constraint), GNSS added bounds the position.
+TEST(Frontend, RunsWithoutAnImuOnTheMotionModel) {
+  // 1 m/s straight for 5 s, then a 0.2 rad/s left turn at 1 m/s for 5 s (wheels 0.5 m apart).
+  const double separation = 0.5;
+  const auto heading_at = [](double t) { return t < 5.0 ? 0.0 : 0.2 * (t - 5.0); };
+  const auto position_at = [&](double t) -> Eigen::Vector2d {
+    if (t < 5.0) return {t, 0.0};
+    const double radius = 1.0 / 0.2;
+    return {5.0 + radius * std::sin(heading_at(t)), radius * (1.0 - std::cos(heading_at(t)))};
+  };
+  const auto wheels_of = [&](double t) {
+    msgs::WheelOdometryMessage wheels;
+    wheels.timestamp = at(t);
+    const double turned = heading_at(t) * 0.5 * separation;  // each wheel's extra (or missing) travel
+    wheels.left_distance = t - turned;
+    wheels.right_distance = t + turned;
+    wheels.wheel_separation = separation;
+    return wheels;
+  };
+  for (const bool with_gnss : {false, true}) {
+    SCOPED_TRACE(with_gnss ? "wheels + GNSS" : "wheels");
+    config::FusionConfig config;
+    config.frontend.datum = kDatum;
+    config.sensors.push_back({"wheels", config::SensorModality::kWheelOdometry, "/wheels", 50.0, "base_link", "", {}});
+    if (with_gnss) config.sensors.push_back({"gnss", config::SensorModality::kGnss, "/gnss", 5.0, "gnss_link", "", {}});
+    auto frontend = Frontend::create(config, {});
+    ASSERT_TRUE(frontend.ok()) << frontend.error().message;
+    EXPECT_FALSE((*frontend)->has_imu());
+    std::vector<msgs::PoseEstimate> poses;
+    (*frontend)->set_pose_callback([&poses](const msgs::PoseEstimate& pose) { poses.push_back(pose); });
+    const EnuFrame enu = EnuFrame::create(kDatum).value();
+    for (int k = 0; k <= 500; ++k) {
+      const double t = 0.02 * k;
+      ASSERT_TRUE((*frontend)->push("wheels", wheels_of(t)).ok());
+      if (with_gnss && k % 10 == 5) {
+        const Eigen::Vector2d position = position_at(t);
+        const GeodeticPoint point = enu.to_geodetic(Eigen::Vector3d(position.x(), position.y(), 0.0));
+        msgs::GnssMessage gnss;
+        gnss.timestamp = at(t);
+        gnss.latitude = point.latitude_deg;
+        gnss.longitude = point.longitude_deg;
+        gnss.altitude = point.altitude_m;
+        gnss.fix_type = msgs::GnssFixType::kFix3d;
+        gnss.position_covariance = Eigen::Matrix3d::Identity() * 0.25;
+        ASSERT_TRUE((*frontend)->push("gnss", gnss).ok());
+      }
+    }
+    // A pose for every fused measurement (the first wheel reading is only a reference), in time order.
+    ASSERT_GE(poses.size(), 500u);
+    for (std::size_t i = 1; i < poses.size(); ++i) ASSERT_LT(poses[i - 1].timestamp, poses[i].timestamp);
+    const msgs::PoseEstimate& last = poses.back();
+    const SE3 T_world_body = last.T_world_body.to_se3();
+    const Eigen::Vector2d expected = position_at(10.0);
+    EXPECT_LT((T_world_body.translation().head<2>() - expected).norm(), 0.05);
+    const Eigen::Vector3d rpy = T_world_body.rotation().matrix().eulerAngles(2, 1, 0);
+    EXPECT_NEAR(std::remainder(rpy.x() - heading_at(10.0), 2.0 * M_PI), 0.0, 0.01);
+    EXPECT_NEAR(last.velocity.norm(), 1.0, 0.05);
+    // Wheels alone are one modality (DEGRADED); with GNSS two (TRACKING).
+    EXPECT_EQ(last.status.state, with_gnss ? msgs::TrackingState::kTracking : msgs::TrackingState::kDegraded);
+    EXPECT_EQ((*frontend)->summary().sensors[0].fused, 500u);
+  }
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 // started) through the full pipeline: LiDAR-inertial odometry, keyframe graph, map, Scan
 // Context loop closure correcting the Frontend; manual loop closures; bad sweeps.
 
+#include <set>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -200,13 +201,11 @@ TEST(Session, GnssFixesBecomeGraphFactorsAndImproveTheKeyframes) {
 // slipping wheels dragged the filter, its LiDAR poses were then gated and the run diverged
 // (115 m); the Session checks the wheels against the LiDAR odometry and stops fusing them while
 // they disagree, so the three sensors together beat IMU + LiDAR alone.
-double warehouse_aligned_rmse(bool with_wheels, SessionSummary* summary_out, MappingSummary* mapping_out,
+using config::SensorModality;
+double warehouse_aligned_rmse(const std::set<SensorModality>& modalities, SessionSummary* summary_out, MappingSummary* mapping_out,
                               std::vector<HealthChange>* health_out = nullptr) {
   sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_robot.yaml").value();
-  std::erase_if(scenario.sensors, [&](const sim::ScenarioSensor& s) {
-    return s.modality != config::SensorModality::kLidar && s.modality != config::SensorModality::kImu &&
-           !(with_wheels && s.modality == config::SensorModality::kWheelOdometry);
-  });
+  std::erase_if(scenario.sensors, [&](const sim::ScenarioSensor& s) { return modalities.count(s.modality) == 0; });
   scenario.duration = 45.0;
   scenario.num_threads = 0;
   auto simulation = sim::ScenarioSimulation::create(scenario).value();
@@ -236,8 +235,9 @@ TEST(Session, SlippingWheelsAreNotFusedAndAllSensorsBeatImuPlusLidar) {
   SessionSummary summary;
   MappingSummary mapping;
   std::vector<HealthChange> health;
-  const double all = warehouse_aligned_rmse(true, &summary, &mapping, &health);
-  const double imu_lidar = warehouse_aligned_rmse(false, nullptr, nullptr);
+  const double all =
+      warehouse_aligned_rmse({SensorModality::kImu, SensorModality::kLidar, SensorModality::kWheelOdometry}, &summary, &mapping, &health);
+  const double imu_lidar = warehouse_aligned_rmse({SensorModality::kImu, SensorModality::kLidar}, nullptr, nullptr);
   std::printf("warehouse 45 s, SE3-aligned APE: IMU + LiDAR + wheels %.3f m (%llu wheel messages withheld), IMU + LiDAR %.3f m\n", all,
               static_cast<unsigned long long>(mapping.wheel_messages_withheld), imu_lidar);
   EXPECT_EQ(mapping.wheel_slip_episodes, 1U);
@@ -263,6 +263,23 @@ TEST(Session, SlippingWheelsAreNotFusedAndAllSensorsBeatImuPlusLidar) {
   EXPECT_EQ((slip + 1)->second, "ok:");
   EXPECT_GT((slip + 1)->first, 33.0);
   EXPECT_LT((slip + 1)->first, 36.0);
+}
+
+// Without an IMU the Frontend's motion model carries the LiDAR odometry: the LiDAR alone, and
+// with the (slipping) wheels, still map and track the warehouse.
+TEST(Session, RunsWithoutAnImu) {
+  for (const std::set<SensorModality>& modalities :
+       {std::set<SensorModality>{SensorModality::kLidar}, std::set<SensorModality>{SensorModality::kLidar, SensorModality::kWheelOdometry}}) {
+    SessionSummary summary;
+    MappingSummary mapping;
+    const double rmse = warehouse_aligned_rmse(modalities, &summary, &mapping);
+    std::printf("warehouse 45 s without an IMU (%zu sensors): SE3-aligned APE %.3f m, %llu of %llu sweeps registered\n", modalities.size(), rmse,
+                static_cast<unsigned long long>(mapping.scans_registered), static_cast<unsigned long long>(mapping.scans_received));
+    EXPECT_FALSE(summary.sensors.empty());
+    EXPECT_GT(mapping.scans_registered, mapping.scans_received * 95 / 100);
+    EXPECT_GT(mapping.map_keyframes, 10U);
+    EXPECT_LT(rmse, 0.1);
+  }
 }
 
 TEST(Session, RefusesBadSweepsWithAReasonAndKeepsMapping) {

@@ -138,10 +138,10 @@ TEST(SessionManager, OrganizationsAndPermissionsAreEnforced) {
 TEST(SessionManager, BadConfigurationsAreRefusedWithTheField) {
   auto manager = open_manager(testing::scratch_dir());
   ASSERT_TRUE(manager);
-  const auto no_imu = manager->create_session(kRobot, {"", "fusion:\n  sensors:\n    gnss: {rate: 5}\n", ""});
-  ASSERT_FALSE(no_imu.ok());
-  EXPECT_EQ(no_imu.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(no_imu.error().message, HasSubstr("no IMU sensor"));
+  const auto no_sensors = manager->create_session(kRobot, {"", "fusion:\n  sensors: {}\n", ""});
+  ASSERT_FALSE(no_sensors.ok());
+  EXPECT_EQ(no_sensors.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(no_sensors.error().message, HasSubstr("no sensors"));
   const auto negative = manager->create_session(kRobot, {"", "fusion:\n  sensors:\n    imu: {rate: -5}\n", ""});
   ASSERT_FALSE(negative.ok());
   EXPECT_THAT(negative.error().message, HasSubstr("rate"));

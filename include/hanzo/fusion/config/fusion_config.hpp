@@ -60,6 +60,15 @@ struct UkfSettings {
   double kappa = 0.0;    // 18 + kappa > 0
 };
 
+/// frontend.motion_model: how the state moves between measurements when the configuration has
+/// no IMU (LiDAR only, LiDAR + wheels, wheels + GNSS). Constant velocity and constant angular
+/// velocity, both driven by white noise: the velocity random walk acceleration_noise and the
+/// angular-velocity random walk angular_acceleration_noise (continuous-time densities).
+struct MotionModelSettings {
+  double acceleration_noise = 2.0;          // m/s^2/sqrt(Hz), > 0: how fast the speed may change
+  double angular_acceleration_noise = 1.0;  // rad/s^2/sqrt(Hz), > 0: how fast the turn rate may change
+};
+
 /// frontend.particle_filter.
 struct ParticleFilterSettings {
   int particles = 1000;             // 100 .. 100000
@@ -97,6 +106,7 @@ struct FrontendConfig {
   std::optional<GeodeticPoint> datum;
   UkfSettings ukf;
   ParticleFilterSettings particle_filter;
+  MotionModelSettings motion_model;
 };
 
 /// How a sensor's messages are fused (keys under the sensor; each applies to one modality).

@@ -29,7 +29,13 @@
 //     the filter keeps running on the rest. PoseEstimate.status counts the modalities that
 //     constrained the estimate within their timeouts (the IMU counts while it streams); the
 //     spec requires two for reliable localization: state TRACKING with >= 2, DEGRADED with
-//     fewer or with a sensor timed out, LOST without IMU data, INITIALIZING before alignment.
+//     fewer or with a sensor timed out, LOST without IMU data (without an IMU: when no
+//     modality constrained the estimate within its timeout), INITIALIZING before alignment.
+//
+// Without an IMU sensor (LiDAR only, LiDAR + wheels, wheels + GNSS) a constant-velocity
+// motion model propagates instead (frontend.motion_model); without a LiDAR or camera either,
+// the wheels' yaw rate is the turn's only measurement (fused whatever use_yaw_rate says); poses
+// come with each fused measurement.
 //
 // Deterministic: the same messages in the same order give bit-identical output. Not
 // thread-safe: one thread pushes (the server serializes per session).
@@ -116,8 +122,10 @@ class Frontend {
   using KeyframeCallback = std::function<void(const msgs::Keyframe&)>;
   using GnssCallback = std::function<void(const FusedGnssFix&)>;
 
-  /// Fails when the configuration is invalid or has no IMU sensor (the frontend propagates
-  /// with the IMU), or when the filter type is not available.
+  /// Fails when the configuration or the calibration is invalid. Without an IMU sensor the
+  /// state moves by a constant-velocity motion model between measurements
+  /// (frontend.motion_model): the filter starts level at the first message, and poses come
+  /// with every fused measurement instead of every IMU message.
   static Result<std::unique_ptr<Frontend>> create(const config::FusionConfig& config, const calib::Calibration& calibration);
   ~Frontend();
   Frontend(const Frontend&) = delete;
@@ -137,6 +145,15 @@ class Frontend {
   /// log or when the IMU stops for good); the filter is extrapolated with the last IMU sample.
   void flush();
 
+  /// Whether an IMU propagates the state (else the motion model does).
+  bool has_imu() const;
+  /// Without an IMU: moves the estimate to `time` (body clock) by the motion model, starting
+  /// the filter there when it has not started, so that pose_at() covers `time` (the Session
+  /// does this before it registers a LiDAR sweep). Waiting messages are fused first. No pose
+  /// is emitted. Does nothing with an IMU (its messages drive time) or for a time at or
+  /// before the newest fused event.
+  void propagate_to(Timestamp time);
+
   /// A relative-pose measurement of a lidar or camera sensor (LiDAR / visual odometry between
   /// two scans or frames): T_from_to maps the sensor frame at `to` into the sensor frame at
   /// `from`; covariance over its tangent (rho, phi), right perturbation. Fused at `to` as the
@@ -154,7 +171,9 @@ class Frontend {
   void set_innovation_callback(InnovationCallback callback);
   /// Called for every Keyframe (frontend.keyframe_interval apart): the pose, its covariance, and
   /// the relative motion since the previous keyframe with its covariance (from the filter's pose
-  /// clone, cross-correlations included).
+  /// clone, cross-correlations included). A keyframe is sent once it is final: when the filter
+  /// has passed it by more than frontend.lag_window (no late message can re-make it), or at
+  /// flush(); its pose is in the world of the moment it is sent.
   void set_keyframe_callback(KeyframeCallback callback);
   /// Called once for every GNSS fix the filter fused (a fix re-fused by a rollback is not
   /// reported again), after the pose it corrected.

@@ -30,7 +30,9 @@
 //    end; then LidarInertialOdometry registers the sweep against its local map from the
 //    filter's motion and fuses the pose into the Frontend. When more than max_waiting_scans
 //    wait (the IMU stopped), the oldest is dropped ("imu_behind"; "aligning" before the
-//    Frontend's first pose).
+//    Frontend's first pose). Without an IMU the sweep moves the Frontend's motion model to
+//    its end at once (Frontend::propagate_to) and is registered and deskewed from that
+//    prediction; other sensors' messages older than that are fused by the Frontend's rollback.
 //  - Wheel odometry (the first wheel sensor) is checked against the LiDAR odometry's own motion
 //    (WheelSlipMonitor): while the wheels disagree (slip, spin, a wrong scale) their messages
 //    are not fused (counted as rejected "slip"); the filter runs on the IMU and the LiDAR.
@@ -282,7 +284,8 @@ class Session {
   /// Fuses what the worker registered (kRealtime).
   void take_registered();
   void on_registered(Result<LidarInertialOdometry::RegisteredScan> registered);
-  void add_map_keyframe(uint64_t anchor, const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points);
+  /// The sweep as a map keyframe anchored to the newest Frontend keyframe.
+  void add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points);
   /// T_world_lidar of map keyframe k by the graph's current estimate.
   SE3 map_keyframe_pose(std::size_t k) const;
   Status add_loop_factor(uint64_t from, uint64_t to, const SE3& T_from_to, const std::optional<Eigen::Matrix<double, 6, 6>>& covariance);
@@ -315,7 +318,7 @@ class Session {
   maps::MapBuilder map_builder_;
   struct WaitingScan {
     msgs::PointCloudMessage scan;
-    Timestamp end;  ///< the latest point time (computed once: checked on every IMU message)
+    Timestamp end;  ///< the latest point time (computed once: checked on every message)
   };
   std::deque<WaitingScan> waiting_scans_;
   std::optional<Timestamp> first_pose_time_;  ///< the Frontend's first pose seen

@@ -42,6 +42,8 @@ class WheelSlipMonitor {
   double last_difference() const { return last_difference_; }
 
  private:
+  /// Compares the newest LiDAR window with the wheels once they cover it.
+  void judge();
   /// The wheels' distance at `time`, interpolated; false outside their history.
   bool wheel_distance_at(Timestamp time, double& distance) const;
 
@@ -59,6 +61,7 @@ class WheelSlipMonitor {
   std::deque<LidarMotion> motions_;
   bool slipping_ = false;
   Timestamp last_disagreement_;
+  Timestamp judged_until_;  ///< the end of the last window judged
   uint64_t episodes_ = 0;
   double last_difference_ = 0.0;
 };
