@@ -371,6 +371,12 @@ v1::PoseEstimate to_proto(const PoseEstimate& message) {
   status->set_state(static_cast<v1::TrackingState>(static_cast<int>(message.status.state)));
   status->set_active_modalities(message.status.active_modalities);
   for (const std::string& sensor : message.status.active_sensors) status->add_active_sensors(sensor);
+  for (const SensorHealthStatus& health : message.status.sensor_health) {
+    v1::SensorHealth* entry = status->add_sensor_health();
+    entry->set_sensor(health.sensor);
+    entry->set_state(static_cast<v1::HealthState>(static_cast<int>(health.state) + 1));
+    entry->set_reason(static_cast<v1::HealthReason>(static_cast<int>(health.reason)));
+  }
   return out;
 }
 
@@ -392,6 +398,16 @@ Result<PoseEstimate> from_proto(const v1::PoseEstimate& in) {
   message.status.state = static_cast<TrackingState>(static_cast<int>(in.status().state()));
   message.status.active_modalities = in.status().active_modalities();
   message.status.active_sensors.assign(in.status().active_sensors().begin(), in.status().active_sensors().end());
+  for (const v1::SensorHealth& entry : in.status().sensor_health()) {
+    if (!v1::HealthState_IsValid(entry.state()) || entry.state() == v1::HEALTH_STATE_UNSPECIFIED) {
+      return read.fail("status.sensor_health.state", fmt::format("unknown health state {} of sensor '{}'", static_cast<int>(entry.state()), entry.sensor()));
+    }
+    if (!v1::HealthReason_IsValid(entry.reason())) {
+      return read.fail("status.sensor_health.reason", fmt::format("unknown health reason {} of sensor '{}'", static_cast<int>(entry.reason()), entry.sensor()));
+    }
+    message.status.sensor_health.push_back(
+        {entry.sensor(), static_cast<HealthState>(static_cast<int>(entry.state()) - 1), static_cast<HealthReason>(static_cast<int>(entry.reason()))});
+  }
   return validated(std::move(message));
 }
 

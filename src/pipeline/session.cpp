@@ -210,7 +210,12 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
     if (config_.keep_trajectory && (uncorrected_poses_.empty() || uncorrected_poses_.back().timestamp < pose.timestamp)) {
       uncorrected_poses_.push_back({pose.timestamp, frontend_->world_correction().inverse() * pose.T_world_body.to_se3()});
     }
-    if (pose_callback_) pose_callback_(pose);
+    if (!pose_callback_) return;
+    // Each sensor's health as last evaluated (track_health: every 0.2 s of data).
+    msgs::PoseEstimate with_health = pose;
+    with_health.status.sensor_health.reserve(last_health_.size());
+    for (const SensorHealth& health : last_health_) with_health.status.sensor_health.push_back({health.sensor, health.state, health.reason});
+    pose_callback_(with_health);
   });
   frontend_->set_keyframe_callback([this](const msgs::Keyframe& emitted) {
     if (!config_.mapping) {

@@ -119,8 +119,12 @@ json pose_to_json(const msgs::PoseEstimate& pose) {
       {"state", msgs::to_string(pose.status.state)},
       {"active_modalities", pose.status.active_modalities},
       {"active_sensors", pose.status.active_sensors},
+      {"sensor_health", json::array()},
       {"covariance", nullptr},
   };
+  for (const msgs::SensorHealthStatus& health : pose.status.sensor_health) {
+    result["sensor_health"].push_back({{"sensor", health.sensor}, {"state", msgs::to_string(health.state)}, {"reason", msgs::to_string(health.reason)}});
+  }
   if (pose.pose_covariance) {
     json covariance = json::array();
     for (int row = 0; row < 6; ++row) {

@@ -105,6 +105,12 @@ void expect_equal(const PoseEstimate& a, const PoseEstimate& b) {
   EXPECT_EQ(a.status.state, b.status.state);
   EXPECT_EQ(a.status.active_modalities, b.status.active_modalities);
   EXPECT_EQ(a.status.active_sensors, b.status.active_sensors);
+  ASSERT_EQ(a.status.sensor_health.size(), b.status.sensor_health.size());
+  for (std::size_t i = 0; i < a.status.sensor_health.size(); ++i) {
+    EXPECT_EQ(a.status.sensor_health[i].sensor, b.status.sensor_health[i].sensor);
+    EXPECT_EQ(a.status.sensor_health[i].state, b.status.sensor_health[i].state);
+    EXPECT_EQ(a.status.sensor_health[i].reason, b.status.sensor_health[i].reason);
+  }
 }
 
 void expect_equal(const Keyframe& a, const Keyframe& b) {
@@ -321,6 +327,9 @@ TEST(Convert, RejectsWhatTheStructCannotHold) {
   v1::PoseEstimate pose = to_proto(testing::pose_estimate());
   pose.mutable_pose_covariance()->add_data(1.0);
   EXPECT_EQ(from_proto(pose).error().field, "pose_covariance");
+  v1::PoseEstimate health = to_proto(testing::pose_estimate());
+  health.mutable_status()->mutable_sensor_health(1)->set_state(static_cast<v1::HealthState>(9));
+  EXPECT_THAT(from_proto(health).error().message, HasSubstr("unknown health state 9 of sensor 'gnss'"));
 }
 
 TEST(Convert, FromProtoValidates) {

@@ -101,7 +101,8 @@ inline PoseEstimate pose_estimate() {
   m.T_world_body = Pose::from_se3(SE3(SO3::exp({0.1, -0.2, 0.3}), {1.0, 2.0, 3.0}));
   m.velocity = {0.5, -0.1, 0.02};
   m.pose_covariance = covariance6();
-  m.status = {TrackingState::kTracking, 2, {"imu", "gnss"}};
+  m.status = {TrackingState::kTracking, 2, {"imu", "gnss"},
+              {{"imu", HealthState::kOk, HealthReason::kNone}, {"gnss", HealthState::kDegraded, HealthReason::kNoFix}}};
   return m;
 }
 

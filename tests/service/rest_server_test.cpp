@@ -133,6 +133,10 @@ TEST_F(RestServerTest, SessionLifecycle) {
   EXPECT_EQ(pose_json["position"][0].get<double>(), latest.T_world_body.position.x());
   EXPECT_EQ(pose_json["covariance"].size(), 36u);
   EXPECT_EQ(pose_json["state"], msgs::to_string(latest.status.state));
+  // Each configured sensor's health rides on the pose.
+  ASSERT_EQ(pose_json["sensor_health"].size(), manager_->session_info(kViewer, id)->summary.sensors.size());
+  EXPECT_EQ(pose_json["sensor_health"][0]["sensor"], "imu");
+  EXPECT_EQ(pose_json["sensor_health"][0]["state"], "ok");
 
   // Trajectory, paged by 700.
   std::size_t total = 0;

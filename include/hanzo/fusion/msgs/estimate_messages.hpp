@@ -21,10 +21,25 @@ using Matrix6d = Eigen::Matrix<double, 6, 6>;
 enum class TrackingState { kUnspecified, kInitializing, kTracking, kDegraded, kLost };
 std::string_view to_string(TrackingState state);
 
+/// A sensor's health (spec: degraded mode per modality; pipeline/sensor_health.hpp says when).
+enum class HealthState { kOk, kDegraded, kLost };
+enum class HealthReason { kNone, kTimeout, kGated, kNoFix, kDegenerateGeometry, kWeather, kSlip, kNotRegistered, kNotFused };
+std::string_view to_string(HealthState state);    // "ok", "degraded", "lost"
+std::string_view to_string(HealthReason reason);  // "", "timeout", "gated", "no_fix", "degenerate_geometry", ...
+
+struct SensorHealthStatus {
+  std::string sensor;
+  HealthState state = HealthState::kOk;
+  HealthReason reason = HealthReason::kNone;
+};
+
 struct PoseStatus {
   TrackingState state = TrackingState::kUnspecified;
   uint32_t active_modalities = 0;           // modalities that constrained the estimate recently
   std::vector<std::string> active_sensors;  // their sensor names
+  /// Every configured sensor's health when the pose was emitted (a Session's poses; empty from
+  /// a Frontend alone), in configuration order.
+  std::vector<SensorHealthStatus> sensor_health;
   /// The spec allows claiming reliable localization only with two or more modalities.
   bool localization_reliable() const { return active_modalities >= 2; }
 };

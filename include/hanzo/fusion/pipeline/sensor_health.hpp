@@ -18,14 +18,14 @@
 
 #include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
 
 namespace hanzo::fusion::pipeline {
 
-enum class HealthState { kOk, kDegraded, kLost };
-enum class HealthReason { kNone, kTimeout, kGated, kNoFix, kDegenerateGeometry, kWeather, kSlip, kNotRegistered, kNotFused };
-
-std::string_view to_string(HealthState state);    // "ok", "degraded", "lost"
-std::string_view to_string(HealthReason reason);  // "", "timeout", "gated", "degenerate_geometry", ...
+// The states and reasons travel in PoseEstimate.status (msgs), hence defined there.
+using msgs::HealthReason;
+using msgs::HealthState;
+using msgs::to_string;
 
 struct SensorHealth {
   std::string sensor;

@@ -250,7 +250,8 @@ class Session {
   const std::vector<HealthChange>& health_changes() const { return health_changes_; }
   SessionMode mode() const { return config_.mode; }
 
-  /// Called for every PoseEstimate, in time order (Frontend::set_pose_callback).
+  /// Called for every PoseEstimate, in time order (Frontend::set_pose_callback), with every
+  /// sensor's health as last evaluated (status.sensor_health; empty before the first poses).
   void set_pose_callback(Frontend::PoseCallback callback) { pose_callback_ = std::move(callback); }
   /// Called for every measurement update (Frontend::set_innovation_callback).
   void set_innovation_callback(Frontend::InnovationCallback callback) { innovation_callback_ = std::move(callback); }
