@@ -134,7 +134,7 @@ TEST_F(RestServerTest, SessionLifecycle) {
   EXPECT_EQ(pose_json["covariance"].size(), 36u);
   EXPECT_EQ(pose_json["state"], msgs::to_string(latest.status.state));
   // Each configured sensor's health rides on the pose.
-  ASSERT_EQ(pose_json["sensor_health"].size(), manager_->session_info(kViewer, id)->summary.sensors.size());
+  ASSERT_EQ(pose_json["sensor_health"].size(), manager_->session_info(kStreamer, id)->summary.sensors.size());
   EXPECT_EQ(pose_json["sensor_health"][0]["sensor"], "imu");
   EXPECT_EQ(pose_json["sensor_health"][0]["state"], "ok");
 
