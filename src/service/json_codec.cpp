@@ -422,7 +422,18 @@ std::string trajectory_page_to_json(const std::vector<msgs::PoseEstimate>& poses
     numbers({q.w(), q.x(), q.y(), q.z()});
     fmt::format_to(std::back_inserter(out), ",\"position\":");
     numbers({p.x(), p.y(), p.z()});
-    fmt::format_to(std::back_inserter(out), ",\"state\":");
+    fmt::format_to(std::back_inserter(out), ",\"sensor_health\":[");
+    for (std::size_t h = 0; h < pose.status.sensor_health.size(); ++h) {
+      const msgs::SensorHealthStatus& health = pose.status.sensor_health[h];
+      fmt::format_to(std::back_inserter(out), "{}{{\"reason\":", h > 0 ? "," : "");
+      text(std::string(msgs::to_string(health.reason)));
+      fmt::format_to(std::back_inserter(out), ",\"sensor\":");
+      text(health.sensor);
+      fmt::format_to(std::back_inserter(out), ",\"state\":");
+      text(std::string(msgs::to_string(health.state)));
+      out.push_back('}');
+    }
+    fmt::format_to(std::back_inserter(out), "],\"state\":");
     text(std::string(msgs::to_string(pose.status.state)));
     fmt::format_to(std::back_inserter(out), ",\"timestamp_ns\":{},\"velocity\":", pose.timestamp.nanoseconds());
     numbers({pose.velocity.x(), pose.velocity.y(), pose.velocity.z()});
