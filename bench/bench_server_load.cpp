@@ -334,7 +334,7 @@ int main(int argc, char** argv) {
     const hf::service::SessionInfo info = manager->session_info(local, id).value();
     for (const hf::pipeline::SensorStatistics& sensor : info.summary.sensors) {
       received += sensor.received;
-      for (const auto& [reason, count] : sensor.rejected) rejected[sensor.name + ":" + reason] += count;
+      for (const auto& [reason, count] : sensor.rejected) rejected[sensor.name + ":" + std::string(hf::pipeline::to_string(reason))] += count;
     }
     registered += info.mapping.scans_registered;
     stored += info.stored_poses;

@@ -166,7 +166,7 @@ nlohmann::json summary_json(const pipeline::SessionSummary& summary, double log_
                        {"received", s.received},
                        {"fused", s.fused},
                        {"rolled_back", s.rolled_back},
-                       {"rejected", s.rejected},
+                       {"rejected", pipeline::by_name(s.rejected)},
                        {"rate_hz", span > 0.0 ? static_cast<double>(s.received - 1) / span : 0.0},
                        {"timeouts", s.timeouts},
                        {"average_nis_per_dof", s.nis_count > 0 ? s.nis_sum / static_cast<double>(s.nis_count) : 0.0}});
@@ -422,7 +422,7 @@ int run(const Output& output, const RunOptions& options) {
   for (const pipeline::SensorStatistics& s : summary.sensors) {
     text += fmt::format("  {:<12} received {:>7}  fused {:>7}  rolled back {:>4}  rejected {:>5}", s.name, s.received, s.fused,
                         s.rolled_back, s.rejected_total());
-    for (const auto& [reason, count] : s.rejected) text += fmt::format("  {}={}", reason, count);
+    for (const auto& [reason, count] : s.rejected) text += fmt::format("  {}={}", pipeline::to_string(reason), count);
     text += "\n";
   }
   if (mapping.graph_keyframes > 0) {

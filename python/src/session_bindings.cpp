@@ -164,7 +164,7 @@ class PySession {
       sensor["modality"] = std::string(config::to_string(s.modality));
       sensor["received"] = s.received;
       sensor["fused"] = s.fused;
-      sensor["rejected"] = s.rejected;
+      sensor["rejected"] = pipeline::by_name(s.rejected);
       sensor["timeouts"] = s.timeouts;
       sensors.append(sensor);
     }

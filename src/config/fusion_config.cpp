@@ -45,6 +45,18 @@ Status non_negative(double value, std::string_view field) {
 std::string_view to_string(FrontendType type) { return enum_name(kFrontendNames, type); }
 std::optional<FrontendType> frontend_type_from_string(std::string_view name) { return enum_from_name(kFrontendNames, name); }
 std::string_view to_string(SensorModality modality) { return enum_name(kModalityNames, modality); }
+
+SensorModality modality_of(const msgs::SensorMessage& message) {
+  struct Modality {
+    SensorModality operator()(const msgs::ImuMessage&) const { return SensorModality::kImu; }
+    SensorModality operator()(const msgs::PointCloudMessage&) const { return SensorModality::kLidar; }
+    SensorModality operator()(const msgs::ImageMessage&) const { return SensorModality::kCamera; }
+    SensorModality operator()(const msgs::GnssMessage&) const { return SensorModality::kGnss; }
+    SensorModality operator()(const msgs::WheelOdometryMessage&) const { return SensorModality::kWheelOdometry; }
+    SensorModality operator()(const msgs::RadarMessage&) const { return SensorModality::kRadar; }
+  };
+  return std::visit(Modality{}, message);
+}
 std::optional<SensorModality> sensor_modality_from_string(std::string_view name) { return enum_from_name(kModalityNames, name); }
 
 std::optional<SensorModality> infer_modality(std::string_view sensor_name) {

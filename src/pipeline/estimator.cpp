@@ -138,7 +138,7 @@ estimate::GyroReading Estimator::gyro_reading() const {
 EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
   if (!imu_sensor_) {
     if (!initialized_ && !std::holds_alternative<WorldCorrection>(event.payload)) initialize_without_imu(event);
-    if (!initialized_) return {false, "before_initialization"};
+    if (!initialized_) return {false, Rejection::kBeforeInitialization};
   }
   if (!initialized_ && !event.is_imu) {
     const auto* message = std::get_if<msgs::SensorMessage>(&event.payload);
@@ -154,7 +154,7 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
       previous = *wheels;
       previous->timestamp = event.time;
     }
-    return {false, "before_initialization"};
+    return {false, Rejection::kBeforeInitialization};
   }
   EventOutcome outcome;
   if (const auto* pose = std::get_if<PoseMeasurement>(&event.payload)) {
@@ -169,10 +169,10 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
     filter_->apply_world_transform(correction->T_correction);
     world_correction_ = correction->T_correction * world_correction_;
     if (last_keyframe_) last_keyframe_->T_world_body = correction->T_correction * last_keyframe_->T_world_body;
-    return {true, {}};
+    return {true, std::nullopt};
   } else if (std::holds_alternative<MotionTick>(event.payload)) {
     predict_to(event.time);
-    outcome = {true, {}};
+    outcome = {true, std::nullopt};
   } else {
     const auto& message = std::get<msgs::SensorMessage>(event.payload);
     if (const auto* imu = std::get_if<msgs::ImuMessage>(&message)) {
@@ -184,7 +184,7 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
     } else if (const auto* radar = std::get_if<msgs::RadarMessage>(&message)) {
       outcome = process_radar(event, *radar, observer);
     } else {
-      outcome = {false, "not_fused"};
+      outcome = {false, Rejection::kNotFused};
     }
   }
   if (!imu_sensor_ && outcome.fused) {
@@ -221,7 +221,7 @@ void Estimator::predict_to(Timestamp t) {
 }
 
 bool Estimator::update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer,
-                       std::string_view* reason, int channel) {
+                       std::optional<Rejection>* reason, int channel) {
   Timestamp& gated_since = gated_since_[2 * event.sensor + static_cast<size_t>(channel)];
   // A sensor whose every update has been gated for gate_recovery seconds is fused without the
   // gate: by then the estimate (a bad start, a misconfigured noise) is the likelier culprit, and
@@ -232,7 +232,9 @@ bool Estimator::update(const Event& event, const estimate::MeasurementModel& mod
   if (observer != nullptr) observer->on_update({event.sensor, model.name(), event.time, outcome});
   if (outcome.status == estimate::UpdateStatus::kRejectedByGate && gated_since.is_zero()) gated_since = event.time;
   if (outcome.status != estimate::UpdateStatus::kApplied) {
-    if (reason != nullptr) *reason = to_string(outcome.status);
+    if (reason != nullptr) {
+      *reason = outcome.status == estimate::UpdateStatus::kRejectedByGate ? Rejection::kGated : Rejection::kNumericalFailure;
+    }
     return false;
   }
   if (locked_out && outcome.mahalanobis_squared > outcome.gate) {
@@ -351,27 +353,27 @@ void Estimator::initialize_without_imu(const Event& event) {
 
 EventOutcome Estimator::process_imu(const Event& event, const msgs::ImuMessage& imu, UpdateObserver* observer) {
   const estimate::ImuSample sample = imu_sample(event.time, imu);
-  if (!spike_filter_.accept(sample)) return {false, "spike"};
+  if (!spike_filter_.accept(sample)) return {false, Rejection::kSpike};
   if (!initialized_) {
     initialize(event, imu);
-    if (!initialized_) return {false, "aligning"};
+    if (!initialized_) return {false, Rejection::kAligning};
     last_imu_ = sample;
     last_fused_[event.sensor] = event.time;
-    return {true, {}};
+    return {true, std::nullopt};
   }
   predict_to(event.time);
   last_imu_ = sample;
   last_fused_[event.sensor] = event.time;
 
   const config::SensorFusionOptions& options = sensors_[event.sensor].config->fusion;
-  EventOutcome outcome{true, {}};
+  EventOutcome outcome{true, std::nullopt};
   if (imu.orientation && (options.use_orientation[0] || options.use_orientation[1] || options.use_orientation[2])) {
     const Eigen::Matrix3d covariance = imu.orientation_covariance.value_or(
         Eigen::Matrix3d::Identity() * options.orientation_noise * options.orientation_noise);
     const estimate::ImuAttitudeModel model(SO3::from_quaternion_normalized(*imu.orientation), covariance,
                                            filter_config_.imu_mounting.R_body_imu, options.use_orientation);
     if (!model.usable()) {
-      outcome.reason = "gimbal_lock";
+      outcome.reason = Rejection::kGimbalLock;
     } else {
       update(event, model, observer, &outcome.reason);
     }

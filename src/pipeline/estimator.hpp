@@ -19,6 +19,7 @@
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
 #include "hanzo/fusion/pipeline/frontend.hpp"
+#include "hanzo/fusion/pipeline/rejection.hpp"
 
 namespace hanzo::fusion::pipeline {
 
@@ -75,12 +76,12 @@ class UpdateObserver {
   virtual void on_update(const UpdateReport& report) = 0;
 };
 
-/// The result of fusing one event: fused, or why not ("gated", "spike", ...).
+/// The result of fusing one event: fused, or why not (gated, spike, ...).
 struct EventOutcome {
   EventOutcome() = default;
-  EventOutcome(bool was_fused, std::string_view why) : fused(was_fused), reason(why) {}
+  EventOutcome(bool was_fused, std::optional<Rejection> why) : fused(was_fused), reason(why) {}
   bool fused = false;
-  std::string_view reason;
+  std::optional<Rejection> reason;
   bool zero_velocity_update = false;
   std::optional<msgs::Keyframe> keyframe;  // emitted after this IMU event
   std::optional<FusedGnssFix> gnss_fix;    // a fused GNSS event's fix (sensor name left empty)
@@ -138,7 +139,7 @@ class Estimator {
   /// Runs one gated update and reports it; true when applied.
   /// channel: which of the sensor's updates this is (0, or 1 for a wheel's separate yaw rate),
   /// so that each is tracked for gate recovery on its own.
-  bool update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer, std::string_view* reason,
+  bool update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer, std::optional<Rejection>* reason,
               int channel = 0);
   void apply_constraints(const Event& event);
   /// A keyframe when keyframe_interval has passed since the previous one (IMU events only).

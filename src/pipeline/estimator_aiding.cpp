@@ -24,8 +24,8 @@ using estimate::NavigationState;
 
 EventOutcome Estimator::process_gnss(const Event& event, const msgs::GnssMessage& gnss, UpdateObserver* observer) {
   const SensorSetup& sensor = sensors_[event.sensor];
-  if (gnss.fix_type == msgs::GnssFixType::kNoFix) return {false, "no_fix"};
-  if (gnss.fix_type < sensor.config->fusion.min_fix) return {false, "weak_fix"};
+  if (gnss.fix_type == msgs::GnssFixType::kNoFix) return {false, Rejection::kNoFix};
+  if (gnss.fix_type < sensor.config->fusion.min_fix) return {false, Rejection::kWeakFix};
   predict_to(event.time);
   const NavigationState state = filter_->state();
   const Eigen::Vector3d& lever = sensor.T_body_sensor.translation();
@@ -47,7 +47,7 @@ EventOutcome Estimator::process_gnss(const Event& event, const msgs::GnssMessage
   const Eigen::Vector3d antenna_gnss = enu_->to_enu(gnss.geodetic());
   if (heading_pending_ &&
       !align_heading_to_course(antenna_gnss, state.position + state.R_world_body * lever, std::sqrt(std::max(covariance(0, 0), covariance(1, 1))))) {
-    return {false, "heading_unknown"};
+    return {false, Rejection::kHeadingUnknown};
   }
   const estimate::GnssPositionModel model(antenna_gnss, covariance, lever);
   EventOutcome outcome;
@@ -106,9 +106,9 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
   const std::optional<msgs::WheelOdometryMessage> before = previous;
   previous = wheels;
   previous->timestamp = event.time;  // body clock
-  if (!before) return {false, "reference"};
+  if (!before) return {false, Rejection::kReference};
   const double dt = (event.time - before->timestamp).seconds();
-  if (dt <= 0.0 || dt > kWheelGap) return {false, "gap"};
+  if (dt <= 0.0 || dt > kWheelGap) return {false, Rejection::kGap};
   const double left = wheels.left_distance - before->left_distance;
   const double right = wheels.right_distance - before->right_distance;
   predict_to(event.time);
@@ -152,7 +152,7 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
     estimate::WheelOdometryMeasurement yaw = measurement;
     yaw.use_speed = yaw.lateral_constraint = yaw.vertical_constraint = false;
     yaw.use_yaw_rate = true;
-    std::string_view yaw_reason;
+    std::optional<Rejection> yaw_reason;
     if (update(event, estimate::WheelOdometryModel(yaw, sensor.T_body_sensor, gyro), observer, &yaw_reason, 1)) {
       outcome.fused = true;
     } else if (outcome.fused) {
@@ -167,7 +167,7 @@ EventOutcome Estimator::process_radar(const Event& event, const msgs::RadarMessa
   // Seeded by the scan's time: the same scan always gives the same estimate.
   const Result<estimate::RadarEgoVelocity> ego =
       estimate::estimate_radar_ego_velocity(radar.targets, {}, static_cast<uint64_t>(event.time.nanoseconds()));
-  if (!ego) return {false, "no_ego_velocity"};
+  if (!ego) return {false, Rejection::kNoEgoVelocity};
   predict_to(event.time);
   const SensorSetup& sensor = sensors_[event.sensor];
   const estimate::GyroReading gyro = gyro_reading();

@@ -15,25 +15,12 @@ namespace {
 
 using config::SensorModality;
 
-SensorModality modality_of(const msgs::SensorMessage& message) {
-  switch (message.index()) {
-    case 0: return SensorModality::kImu;
-    case 1: return SensorModality::kLidar;
-    case 2: return SensorModality::kCamera;
-    case 3: return SensorModality::kGnss;
-    case 4: return SensorModality::kWheelOdometry;
-    default: return SensorModality::kRadar;
-  }
-}
-
 // Modalities whose raw messages the frontend fuses itself (the others arrive as poses from
 // their odometry modules through push_pose()).
 bool fused_directly(SensorModality modality) {
   return modality == SensorModality::kImu || modality == SensorModality::kGnss || modality == SensorModality::kWheelOdometry ||
          modality == SensorModality::kRadar;
 }
-
-Error rejection(std::string_view reason, const std::string& detail) { return Error(fmt::format("{}: {}", reason, detail)); }
 
 }  // namespace
 
@@ -89,9 +76,10 @@ struct Frontend::Impl final : UpdateObserver {
     }
     return std::nullopt;
   }
-  Result<size_t> pose_input(std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
+  /// Sets *index when the checks pass.
+  PushStatus pose_input(size_t* sensor, std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
                             const Eigen::Matrix<double, 6, 6>& covariance, const std::function<Status()>& extra);
-  Status accept(size_t sensor, Event event);
+  PushStatus accept(size_t sensor, Event event);
   void fuse_in_order(Event event);
   void fuse_late(Event event);
   /// Holds a keyframe the estimator made (a newer version of one held replaces it: a late
@@ -241,22 +229,22 @@ std::optional<SE3> Frontend::pose_at(Timestamp time) const {
   return SE3::interpolate(pose_of(before->after), pose_of(after->after), fraction);
 }
 
-Status Frontend::push(std::string_view sensor_name, const msgs::SensorMessage& message) {
+PushStatus Frontend::push(std::string_view sensor_name, const msgs::SensorMessage& message) {
   Impl& impl = *impl_;
   const std::optional<size_t> index = impl.sensor_index(sensor_name);
-  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
+  if (!index) return PushStatus(Rejection::kUnknownSensor, fmt::format("no sensor named '{}' in the configuration", sensor_name));
   const size_t sensor = *index;
   const config::SensorConfig* found = &impl.config.sensors[sensor];
   SensorStatistics& statistics = impl.sensors[sensor];
   ++statistics.received;
-  if (modality_of(message) != found->modality) {
-    ++statistics.rejected["wrong_type"];
-    return rejection("wrong_type", fmt::format("sensor '{}' is a {} sensor, the message is {}", sensor_name,
+  if (config::modality_of(message) != found->modality) {
+    ++statistics.rejected[Rejection::kWrongType];
+    return PushStatus(Rejection::kWrongType, fmt::format("sensor '{}' is a {} sensor, the message is {}", sensor_name,
                                                config::to_string(found->modality), msgs::modality_name(message)));
   }
   if (Status valid = msgs::validate(message); !valid) {
-    ++statistics.rejected["invalid"];
-    return rejection("invalid", fmt::format("{}: {}", sensor_name, valid.error().message));
+    ++statistics.rejected[Rejection::kInvalid];
+    return PushStatus(Rejection::kInvalid, fmt::format("{}: {}", sensor_name, valid.error().message));
   }
   Event event;
   event.time = msgs::timestamp_of(message) + impl.setups[sensor].time_offset;
@@ -268,10 +256,10 @@ Status Frontend::push(std::string_view sensor_name, const msgs::SensorMessage& m
 
 // The checks push_pose() and push_relative_pose() share: the sensor exists (counted as received),
 // the pose is valid and the covariance positive definite. `extra` adds checks of its own.
-Result<size_t> Frontend::Impl::pose_input(std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
+PushStatus Frontend::Impl::pose_input(size_t* sensor, std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
                                          const Eigen::Matrix<double, 6, 6>& covariance, const std::function<Status()>& extra) {
   const std::optional<size_t> index = sensor_index(sensor_name);
-  if (!index) return rejection("unknown_sensor", fmt::format("no sensor named '{}' in the configuration", sensor_name));
+  if (!index) return PushStatus(Rejection::kUnknownSensor, fmt::format("no sensor named '{}' in the configuration", sensor_name));
   ++sensors[*index].received;
   msgs::PoseEstimate as_message;  // validate() checks the pose and covariance the same way
   as_message.timestamp = timestamp;
@@ -281,17 +269,20 @@ Result<size_t> Frontend::Impl::pose_input(std::string_view sensor_name, std::str
   if (valid && extra) valid = extra();
   if (valid && covariance.llt().info() != Eigen::Success) valid = Error("covariance is not positive definite");
   if (!valid) {
-    ++sensors[*index].rejected["invalid"];
-    return rejection("invalid", fmt::format("{}: {}: {}", sensor_name, what, valid.error().message));
+    ++sensors[*index].rejected[Rejection::kInvalid];
+    return PushStatus(Rejection::kInvalid, fmt::format("{}: {}: {}", sensor_name, what, valid.error().message));
   }
-  return *index;
+  *sensor = *index;
+  return {};
 }
 
-Status Frontend::push_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_world_sensor,
+PushStatus Frontend::push_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_world_sensor,
                           const Eigen::Matrix<double, 6, 6>& covariance) {
   Impl& impl = *impl_;
   size_t sensor = 0;
-  HANZO_ASSIGN_OR_RETURN(sensor, impl.pose_input(sensor_name, "pose measurement", timestamp, T_world_sensor, covariance, {}));
+  if (PushStatus checked = impl.pose_input(&sensor, sensor_name, "pose measurement", timestamp, T_world_sensor, covariance, {}); !checked) {
+    return checked;
+  }
   Event event;
   event.time = timestamp + impl.setups[sensor].time_offset;
   event.sensor = sensor;
@@ -299,7 +290,7 @@ Status Frontend::push_pose(std::string_view sensor_name, Timestamp timestamp, co
   return impl.accept(sensor, std::move(event));
 }
 
-Status Frontend::push_relative_pose(std::string_view sensor_name, Timestamp from, Timestamp to, const SE3& T_from_to,
+PushStatus Frontend::push_relative_pose(std::string_view sensor_name, Timestamp from, Timestamp to, const SE3& T_from_to,
                                    const Eigen::Matrix<double, 6, 6>& covariance) {
   Impl& impl = *impl_;
   const double dt = (to - from).seconds();
@@ -309,7 +300,9 @@ Status Frontend::push_relative_pose(std::string_view sensor_name, Timestamp from
     return ok_status();
   };
   size_t sensor = 0;
-  HANZO_ASSIGN_OR_RETURN(sensor, impl.pose_input(sensor_name, "relative pose", to, T_from_to, covariance, interval));
+  if (PushStatus checked = impl.pose_input(&sensor, sensor_name, "relative pose", to, T_from_to, covariance, interval); !checked) {
+    return checked;
+  }
   const Eigen::Matrix3d R_to_from = T_from_to.rotation().matrix().transpose();
   Event event;
   event.time = to + impl.setups[sensor].time_offset;
@@ -318,17 +311,17 @@ Status Frontend::push_relative_pose(std::string_view sensor_name, Timestamp from
   return impl.accept(sensor, std::move(event));
 }
 
-Status Frontend::Impl::accept(size_t sensor, Event event) {
+PushStatus Frontend::Impl::accept(size_t sensor, Event event) {
   SensorStatistics& statistics = sensors[sensor];
   const std::string& name = statistics.name;
   const Timestamp previous = last_input[sensor];
   if (!previous.is_zero() && event.time == previous) {
-    ++statistics.rejected["duplicate"];
-    return rejection("duplicate", fmt::format("{}: a message at {} ns was already received", name, event.time.nanoseconds()));
+    ++statistics.rejected[Rejection::kDuplicate];
+    return PushStatus(Rejection::kDuplicate, fmt::format("{}: a message at {} ns was already received", name, event.time.nanoseconds()));
   }
   if (!previous.is_zero() && event.time < previous) {
-    ++statistics.rejected["out_of_order"];
-    return rejection("out_of_order", fmt::format("{}: message at {} ns is {:.6f} s older than the sensor's previous one", name,
+    ++statistics.rejected[Rejection::kOutOfOrder];
+    return PushStatus(Rejection::kOutOfOrder, fmt::format("{}: message at {} ns is {:.6f} s older than the sensor's previous one", name,
                                                  event.time.nanoseconds(), (previous - event.time).seconds()));
   }
   const double max_future = config.frontend.max_future_s;
@@ -336,8 +329,8 @@ Status Frontend::Impl::accept(size_t sensor, Event event) {
     const bool confirmed = pending_jump && std::abs((event.time - *pending_jump).seconds()) <= max_future;
     if (!confirmed) {
       pending_jump = event.time;
-      ++statistics.rejected["future_dated"];
-      return rejection("future_dated", fmt::format("{}: message at {} ns is {:.3f} s ahead of the newest accepted time (limit {} s)", name,
+      ++statistics.rejected[Rejection::kFutureDated];
+      return PushStatus(Rejection::kFutureDated, fmt::format("{}: message at {} ns is {:.3f} s ahead of the newest accepted time (limit {} s)", name,
                                                    event.time.nanoseconds(), (event.time - newest).seconds(), max_future));
     }
     logger()->warn("time jumped forward by {:.3f} s (confirmed by two messages)", (event.time - newest).seconds());
@@ -345,8 +338,8 @@ Status Frontend::Impl::accept(size_t sensor, Event event) {
   pending_jump.reset();
   const double lag = config.frontend.lag_window_s;
   if (estimator.initialized() && (estimator.time() - event.time).seconds() > lag) {
-    ++statistics.rejected["too_late"];
-    return rejection("too_late", fmt::format("{}: message at {} ns is {:.3f} s older than the newest fused time (lag window {} s)", name,
+    ++statistics.rejected[Rejection::kTooLate];
+    return PushStatus(Rejection::kTooLate, fmt::format("{}: message at {} ns is {:.3f} s older than the newest fused time (lag window {} s)", name,
                                              event.time.nanoseconds(), (estimator.time() - event.time).seconds(), lag));
   }
 
@@ -357,8 +350,8 @@ Status Frontend::Impl::accept(size_t sensor, Event event) {
   newest = std::max(newest, event.time);
   const bool is_pose = !std::holds_alternative<msgs::SensorMessage>(event.payload);
   if (!is_pose && !fused_directly(statistics.modality)) {
-    ++statistics.rejected["not_fused"];
-    return ok_status();
+    ++statistics.rejected[Rejection::kNotFused];
+    return {};
   }
   event.sequence = sequence++;
   // Late: it belongs before something already fused (the history is in fusion order). Not
@@ -370,7 +363,7 @@ Status Frontend::Impl::accept(size_t sensor, Event event) {
     pending.insert(std::upper_bound(pending.begin(), pending.end(), event, fused_before), std::move(event));
   }
   release_pending();
-  return ok_status();
+  return {};
 }
 
 void Frontend::flush() { impl_->release_pending(true); }
@@ -419,7 +412,7 @@ void Frontend::Impl::count(const Event& event, const EventOutcome& outcome) {
   if (outcome.fused) {
     ++statistics.fused;
   } else {
-    ++statistics.rejected[std::string(outcome.reason)];
+    ++statistics.rejected[outcome.reason.value_or(Rejection::kNotFused)];
   }
   if (outcome.zero_velocity_update) ++zero_velocity_updates;
 }

@@ -46,7 +46,9 @@ Result<LidarInertialOdometry::PreparedScan> LidarInertialOdometry::prepare(const
   }
   prepared.T_world_lidar_filter = *T_world_body * T_body_lidar_;
   prepared.world_correction = frontend_.world_correction();
-  if (config_.imu_deskew && prepared.cloud.has_times()) {
+  // Without an IMU the filter's motion over the sweep is the motion model's extrapolation: the
+  // odometry's own constant twist, which follows the registration, deskews better.
+  if (config_.imu_deskew && frontend_.has_imu() && prepared.cloud.has_times()) {
     prepared.sweep_motion = sample_sweep_motion(scan.timestamp, 2.0 * middle, prepared.T_world_lidar_filter);
     if (prepared.sweep_motion) ++statistics_.imu_deskewed;
   }

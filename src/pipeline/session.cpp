@@ -21,7 +21,6 @@ Timestamp sweep_end(const msgs::PointCloudMessage& scan) {
   return *std::max_element(scan.point_timestamps.begin(), scan.point_timestamps.end());
 }
 
-Error rejection(std::string_view reason, const std::string& detail) { return Error(fmt::format("{}: {}", reason, detail)); }
 
 // A map keyframe moved this much in the graph is moved in the map.
 constexpr double kMapMoveTranslation = 0.01;  // m
@@ -266,18 +265,18 @@ std::optional<std::chrono::nanoseconds> Session::registration_wait_limit(Timesta
   return std::chrono::nanoseconds(0);
 }
 
-Status Session::push(std::string_view sensor, msgs::SensorMessage message) {
+PushStatus Session::push(std::string_view sensor, msgs::SensorMessage message) {
   if (const auto* gnss = std::get_if<msgs::GnssMessage>(&message)) {
     if (const config::SensorConfig* configured = frontend_->config().find_sensor(sensor)) {
       gnss_without_fix_[configured->name] = gnss->fix_type < configured->fusion.min_fix;
     }
   }
-  const Status pushed = push_message(sensor, std::move(message));
+  PushStatus pushed = push_message(sensor, std::move(message));
   track_health();
   return pushed;
 }
 
-Status Session::push_message(std::string_view sensor, msgs::SensorMessage message) {
+PushStatus Session::push_message(std::string_view sensor, msgs::SensorMessage message) {
   if (!config_.mapping) return frontend_->push(sensor, message);
   if (odometry_ && sensor == lidar_sensor_) {
     if (auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(std::move(*scan));
@@ -288,10 +287,10 @@ Status Session::push_message(std::string_view sensor, msgs::SensorMessage messag
       ++summary_.wheel_messages_withheld;
       register_ready_scans();
       update_backend();
-      return ok_status();
+      return {};
     }
   }
-  const Status pushed = frontend_->push(sensor, message);
+  PushStatus pushed = frontend_->push(sensor, message);
   register_ready_scans();
   update_backend();
   return pushed;
@@ -323,19 +322,19 @@ void Session::flush_pipeline() {
   follow_graph();
 }
 
-Status Session::push_scan(msgs::PointCloudMessage scan) {
+PushStatus Session::push_scan(msgs::PointCloudMessage scan) {
   ++lidar_statistics_.received;
   ++summary_.scans_received;
-  auto refuse = [this](std::string_view reason, const std::string& detail) -> Status {
-    ++lidar_statistics_.rejected[std::string(reason)];
-    return rejection(reason, detail);
+  auto refuse = [this](Rejection reason, const std::string& detail) {
+    ++lidar_statistics_.rejected[reason];
+    return PushStatus(reason, detail);
   };
-  if (Status valid = msgs::validate(scan); !valid) return refuse("invalid", valid.error().message);
+  if (Status valid = msgs::validate(scan); !valid) return refuse(Rejection::kInvalid, valid.error().message);
   if (last_scan_time_ && scan.timestamp == *last_scan_time_) {
-    return refuse("duplicate", fmt::format("sweep at {:.6f} s repeats the previous sweep's time", scan.timestamp.seconds()));
+    return refuse(Rejection::kDuplicate, fmt::format("sweep at {:.6f} s repeats the previous sweep's time", scan.timestamp.seconds()));
   }
   if (last_scan_time_ && scan.timestamp < *last_scan_time_) {
-    return refuse("out_of_order", fmt::format("sweep at {:.6f} s is older than the previous sweep ({:.6f} s)", scan.timestamp.seconds(),
+    return refuse(Rejection::kOutOfOrder, fmt::format("sweep at {:.6f} s is older than the previous sweep ({:.6f} s)", scan.timestamp.seconds(),
                                               last_scan_time_->seconds()));
   }
   last_scan_time_ = scan.timestamp;
@@ -351,17 +350,17 @@ Status Session::push_scan(msgs::PointCloudMessage scan) {
   while (waiting_scans_.size() > config_.max_waiting_scans) {
     waiting_scans_.pop_front();
     // Before the first pose the IMU is still aligning (its messages are refused the same way).
-    count_refused(frontend_->latest_pose() ? "imu_behind" : "aligning");
+    count_refused(frontend_->latest_pose() ? Rejection::kImuBehind : Rejection::kAligning);
   }
   register_ready_scans();
   update_backend();
-  return ok_status();
+  return {};
 }
 
-void Session::count_refused(const std::string& reason) {
+void Session::count_refused(Rejection reason) {
   ++lidar_statistics_.rejected[reason];
   ++summary_.scans_refused;
-  if (reason == "not_registered") ++registration_failures_;
+  if (reason == Rejection::kNotRegistered) ++registration_failures_;
 }
 
 std::vector<SensorHealth> Session::health() const {
@@ -375,7 +374,7 @@ std::vector<SensorHealth> Session::health() const {
       entry.reason = reason;
     };
     const auto applied = last_update_applied_.find(sensor.name);
-    if (sensor.fused == 0 && sensor.rejected.count("not_fused") != 0) {
+    if (sensor.fused == 0 && sensor.rejected.count(Rejection::kNotFused) != 0) {
       entry = {sensor.name, sensor.modality, HealthState::kLost, HealthReason::kNotFused};
     } else if (sensor.name == wheel_sensor_ && slip_monitor_.slipping()) {
       degraded(HealthReason::kSlip);  // withheld from the Frontend, which may time them out
@@ -430,10 +429,10 @@ void Session::register_ready_scans() {
     if (!prepared) {
       logger()->debug("session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
       // A sweep that began before the first pose has no motion to start from (the IMU aligned).
-      count_refused(first_pose_time_ && scan.timestamp >= *first_pose_time_ ? "not_registered" : "aligning");
+      count_refused(first_pose_time_ && scan.timestamp >= *first_pose_time_ ? Rejection::kNotRegistered : Rejection::kAligning);
     } else if (worker_) {
       const std::size_t dropped = worker_->submit(std::move(prepared).value(), registration_wait_limit(now));
-      for (std::size_t i = 0; i < dropped; ++i) count_refused("registration_behind");
+      for (std::size_t i = 0; i < dropped; ++i) count_refused(Rejection::kRegistrationBehind);
     } else {
       on_registered(odometry_->register_scan(*prepared));
     }
@@ -450,7 +449,7 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
   Result<LidarInertialOdometry::RegisteredScan> fused = odometry_->fuse(std::move(result));
   if (!fused) {
     logger()->debug("session: sweep not fused: {}", fused.error().message);
-    count_refused("not_registered");
+    count_refused(Rejection::kNotRegistered);
     return;
   }
   const LidarInertialOdometry::RegisteredScan& registered = *fused;
@@ -728,7 +727,7 @@ SessionSummary Session::summary() const {
   for (SensorStatistics& sensor : summary.sensors) {
     if (sensor.name != wheel_sensor_ || summary_.wheel_messages_withheld == 0) continue;
     sensor.received += summary_.wheel_messages_withheld;  // they never reached the Frontend
-    sensor.rejected["slip"] = summary_.wheel_messages_withheld;
+    sensor.rejected[Rejection::kSlip] = summary_.wheel_messages_withheld;
   }
   return summary;
 }

@@ -142,7 +142,7 @@ json session_to_json(const SessionInfo& info) {
                   {"modality", config::to_string(sensor.modality)},
                   {"received", sensor.received},
                   {"fused", sensor.fused},
-                  {"rejected", sensor.rejected},
+                  {"rejected", pipeline::by_name(sensor.rejected)},
                   {"timeouts", sensor.timeouts},
                   {"timed_out", sensor.timed_out}};
     for (const pipeline::SensorHealth& health : info.health) {

@@ -31,17 +31,6 @@ std::string generate_session_id() {
   return fmt::format("{:016x}{:016x}", generator(), generator());
 }
 
-config::SensorModality modality_of(const msgs::SensorMessage& message) {
-  switch (message.index()) {
-    case 0: return config::SensorModality::kImu;
-    case 1: return config::SensorModality::kLidar;
-    case 2: return config::SensorModality::kCamera;
-    case 3: return config::SensorModality::kGnss;
-    case 4: return config::SensorModality::kWheelOdometry;
-    default: return config::SensorModality::kRadar;
-  }
-}
-
 // The text of a YAML/JSON fragment as a node; the error names `what`.
 Result<YAML::Node> parse_fragment(const std::string& text, const std::string& what) {
   try {
@@ -334,7 +323,7 @@ struct SessionManager::Impl {
             .set(sensor.timed_out ? 1.0 : 0.0);
         for (const auto& [reason, rejected] : sensor.rejected) {
           MetricLabels with_reason = labels;
-          with_reason.emplace_back("reason", reason);
+          with_reason.emplace_back("reason", std::string(pipeline::to_string(reason)));
           metrics->counter("hanzo_fusion_messages_rejected_total", "Messages rejected per sensor and reason", with_reason)
               .set_total(static_cast<double>(rejected));
         }
@@ -633,7 +622,7 @@ ApiStatus SessionManager::push(const Principal& caller, const std::string& sessi
   if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
   std::string sensor_name = sensor;
   if (sensor_name.empty()) {
-    const config::SensorModality modality = modality_of(message);
+    const config::SensorModality modality = config::modality_of(message);
     for (const config::SensorConfig& candidate : managed.configuration.sensors) {
       if (candidate.modality != modality) continue;
       if (!sensor_name.empty()) {
@@ -651,8 +640,20 @@ ApiStatus SessionManager::push(const Principal& caller, const std::string& sessi
   if (managed.map_updates_installed) Impl::sync_map_updates(managed);  // drops it when the last subscriber left
   managed.push_started = Clock::now();
   ++managed.messages_pushed;
-  const Status pushed = managed.session->push(sensor_name, std::move(message));
-  if (!pushed) return ApiError::from(ErrorCode::kRejected, pushed.error());
+  const pipeline::PushStatus pushed = managed.session->push(sensor_name, std::move(message));
+  if (!pushed) {
+    // A malformed message or a sensor the session does not have is the request's fault (400,
+    // field "sensor" or "message"); a well-formed message at the wrong time is refused (422).
+    switch (pushed.reason()) {
+      case pipeline::Rejection::kUnknownSensor:
+        return ApiError{ErrorCode::kInvalidArgument, pushed.error().message, "sensor"};
+      case pipeline::Rejection::kWrongType:
+      case pipeline::Rejection::kInvalid:
+        return ApiError{ErrorCode::kInvalidArgument, pushed.error().message, "message"};
+      default:
+        return ApiError::from(ErrorCode::kRejected, pushed.error());
+    }
+  }
   return api_ok();
 }
 

@@ -81,7 +81,13 @@ std::unique_ptr<Frontend> make_session() {
   return std::move(session).value();
 }
 
-std::string reason_of(const Status& status) { return status ? "ok" : status.error().message.substr(0, status.error().message.find(':')); }
+// The typed reason's name; the message for people starts with it.
+std::string reason_of(const PushStatus& status) {
+  if (status) return "ok";
+  const std::string name(to_string(status.reason()));
+  EXPECT_EQ(status.error().message.rfind(name + ": ", 0), 0U) << status.error().message;
+  return name;
+}
 
 TEST(Frontend, TracksTheDriveWithTwoModalities) {
   auto session = make_session();
@@ -100,7 +106,7 @@ TEST(Frontend, TracksTheDriveWithTwoModalities) {
   EXPECT_EQ(summary.poses, 1000U - 100U);  // one per IMU message after 1 s of alignment
   EXPECT_GT(summary.zero_velocity_updates, 40U);  // standing still from 1 s to 2 s
   EXPECT_EQ(summary.sensors[2].fused, 45U);        // the 5 fixes before alignment ended are not fused
-  EXPECT_EQ(summary.sensors[2].rejected.at("before_initialization"), 5U);
+  EXPECT_EQ(summary.sensors[2].rejected.at(Rejection::kBeforeInitialization), 5U);
 }
 
 TEST(Frontend, RejectsBadInputWithAReasonAndKeepsRunning) {
@@ -113,7 +119,7 @@ TEST(Frontend, RejectsBadInputWithAReasonAndKeepsRunning) {
   EXPECT_EQ(reason_of(session->push("imu", gnss_at(3.5))), "wrong_type");
   msgs::ImuMessage nan = imu_at(3.5);
   nan.angular_velocity.x() = std::nan("");
-  const Status invalid = session->push("imu", nan);
+  const PushStatus invalid = session->push("imu", nan);
   EXPECT_EQ(reason_of(invalid), "invalid");
   EXPECT_NE(invalid.error().message.find("angular_velocity.x"), std::string::npos);
   EXPECT_EQ(reason_of(session->push("imu", imu_at(3.0))), "duplicate");
@@ -124,12 +130,12 @@ TEST(Frontend, RejectsBadInputWithAReasonAndKeepsRunning) {
   EXPECT_EQ(session->latest_pose()->T_world_body.position, before.T_world_body.position);
 
   const SessionSummary summary = session->summary();
-  EXPECT_EQ(summary.sensors[0].rejected.at("invalid"), 1U);
-  EXPECT_EQ(summary.sensors[0].rejected.at("duplicate"), 1U);
-  EXPECT_EQ(summary.sensors[0].rejected.at("out_of_order"), 1U);
-  EXPECT_EQ(summary.sensors[1].rejected.at("future_dated"), 1U);
-  EXPECT_EQ(summary.sensors[2].rejected.at("out_of_order"), 1U);
-  EXPECT_EQ(summary.sensors[3].rejected.at("too_late"), 1U);
+  EXPECT_EQ(summary.sensors[0].rejected.at(Rejection::kInvalid), 1U);
+  EXPECT_EQ(summary.sensors[0].rejected.at(Rejection::kDuplicate), 1U);
+  EXPECT_EQ(summary.sensors[0].rejected.at(Rejection::kOutOfOrder), 1U);
+  EXPECT_EQ(summary.sensors[1].rejected.at(Rejection::kFutureDated), 1U);
+  EXPECT_EQ(summary.sensors[2].rejected.at(Rejection::kOutOfOrder), 1U);
+  EXPECT_EQ(summary.sensors[3].rejected.at(Rejection::kTooLate), 1U);
   // The session keeps running.
   ASSERT_TRUE(session->push("imu", imu_at(3.01)).ok());
   EXPECT_EQ(session->latest_pose()->timestamp, at(3.01));
@@ -143,7 +149,7 @@ TEST(Frontend, AGnssJumpOf50MetersIsGatedAndTheEstimateDoesNotMove) {
   ASSERT_TRUE(session->push("gnss", gnss_at(5.005, 50.0)).ok());  // accepted input, rejected by the gate
   ASSERT_TRUE(session->push("imu", imu_at(5.02)).ok());
   const msgs::PoseEstimate after = session->latest_pose().value();
-  EXPECT_EQ(session->summary().sensors[2].rejected.at("gated"), 1U);
+  EXPECT_EQ(session->summary().sensors[2].rejected.at(Rejection::kGated), 1U);
   // Only the 10 ms of motion between the two poses: no pull towards the jump.
   EXPECT_NEAR(after.T_world_body.position.x() - before.T_world_body.position.x(), 0.01, 0.002);
 }
@@ -164,7 +170,7 @@ TEST(Frontend, AnImuSpikeIsRejectedAndTheEstimateDoesNotMove) {
   auto spiked_session = make_session();
   for (const Message& m : clean) ASSERT_TRUE(clean_session->push(m.sensor, m.message).ok());
   for (const Message& m : spiked) ASSERT_TRUE(spiked_session->push(m.sensor, m.message).ok());
-  EXPECT_EQ(spiked_session->summary().sensors[0].rejected.at("spike"), 1U);
+  EXPECT_EQ(spiked_session->summary().sensors[0].rejected.at(Rejection::kSpike), 1U);
   EXPECT_EQ(spiked_session->summary().poses, clean_session->summary().poses);  // no pose for the dropped sample
   // The spike is dropped: the estimate is exactly the one without it.
   EXPECT_EQ(spiked_session->latest_pose()->T_world_body.position, clean_session->latest_pose()->T_world_body.position);
@@ -306,7 +312,9 @@ TEST(Frontend, EmitsKeyframesWithRelativeMotionAndTakesBackendCorrections) {
   EXPECT_NEAR(session->latest_pose()->T_world_body.position.y() - before.y(), 1.0, 0.01);
   EXPECT_EQ(session->summary().corrections, 1U);
   EXPECT_EQ(session->summary().sensors[0].fused, imu_fused + 1);  // the IMU message, not the correction
-  EXPECT_EQ(reason_of(session->apply_correction(999, SE3())), "unknown_keyframe");
+  const Status unknown = session->apply_correction(999, SE3());
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_EQ(unknown.error().message.rfind("unknown_keyframe: ", 0), 0U);
 }
 
 TEST(Frontend, EveryFilterGivesKeyframesARelativeCovarianceWithCrossTerms) {

@@ -245,7 +245,7 @@ TEST(Session, SlippingWheelsAreNotFusedAndAllSensorsBeatImuPlusLidar) {
   EXPECT_LT(mapping.wheel_messages_withheld, 550U);
   const auto wheels = std::find_if(summary.sensors.begin(), summary.sensors.end(), [](const SensorStatistics& s) { return s.name == "wheels"; });
   ASSERT_NE(wheels, summary.sensors.end());
-  EXPECT_EQ(wheels->rejected.at("slip"), mapping.wheel_messages_withheld);
+  EXPECT_EQ(wheels->rejected.at(Rejection::kSlip), mapping.wheel_messages_withheld);
   EXPECT_LT(all, 0.1);
   EXPECT_LE(all, imu_lidar);
   // The wheels' health: degraded by slip during the fault (25-33 s after the start), ok again after.
@@ -313,7 +313,7 @@ TEST(Session, RefusesBadSweepsWithAReasonAndKeepsMapping) {
   const auto lidar = std::find_if(summary.sensors.begin(), summary.sensors.end(),
                                   [](const SensorStatistics& s) { return s.modality == config::SensorModality::kLidar; });
   ASSERT_NE(lidar, summary.sensors.end());
-  EXPECT_EQ(lidar->rejected.at("duplicate") + lidar->rejected.at("invalid"), static_cast<uint64_t>(refused));
+  EXPECT_EQ(lidar->rejected.at(Rejection::kDuplicate) + lidar->rejected.at(Rejection::kInvalid), static_cast<uint64_t>(refused));
   // The good sweeps after the 3 s standstill (alignment) registered all the same.
   EXPECT_GT(mapping->mapping_summary().scans_registered, 45U);
   EXPECT_GT(mapping->mapping_summary().map_keyframes, 2U);
@@ -343,7 +343,7 @@ TEST(Session, AsynchronousRegistrationFusesTheSweepsLateAndKeepsTheTrack) {
   EXPECT_EQ(summary.scans_received, 250U);
   EXPECT_GT(summary.scans_registered, 225U);  // all but those before the IMU's alignment
   EXPECT_GT(summary.map_keyframes, 15U);
-  for (const SensorStatistics& sensor : mapping->summary().sensors) EXPECT_EQ(sensor.rejected.count("registration_behind"), 0U) << sensor.name;
+  for (const SensorStatistics& sensor : mapping->summary().sensors) EXPECT_EQ(sensor.rejected.count(Rejection::kRegistrationBehind), 0U) << sensor.name;
   ASSERT_TRUE(first && latest);
   // Which IMU sample a late sweep is fused behind depends on thread timing: measured 0.08-0.23 m
   // over 25 s on this 2-core machine (the synchronous mode is deterministic).

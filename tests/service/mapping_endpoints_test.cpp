@@ -547,7 +547,7 @@ TEST_F(MappingEndpointsTest, FusionClientStreamsALogIntoANewSessionAndReportsSer
   const SessionInfo info = manager_->session_info(owner, session_id.value()).value();
   for (const pipeline::SensorStatistics& sensor : info.summary.sensors) {
     EXPECT_EQ(sensor.received, streamed->sent_by_sensor.at(sensor.name)) << sensor.name;
-    EXPECT_EQ(sensor.rejected.count("too_late"), 0U) << sensor.name;
+    EXPECT_EQ(sensor.rejected.count(pipeline::Rejection::kTooLate), 0U) << sensor.name;
   }
   EXPECT_GT(info.mapping.scans_registered, 60U);
   EXPECT_THAT(client->get("/v1/sessions/" + session_id.value()).value(), HasSubstr("\"map_keyframes\""));

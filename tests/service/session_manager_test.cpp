@@ -100,9 +100,14 @@ TEST(SessionManager, RejectedMessagesLeaveTheSessionIntact) {
   nan_message.angular_velocity.x() = std::numeric_limits<double>::quiet_NaN();
   const ApiStatus invalid = manager->push(kRobot, session.id, "imu", nan_message);
   ASSERT_FALSE(invalid.ok());
-  EXPECT_EQ(invalid.error().code, ErrorCode::kRejected);
+  // Typed reasons map to error codes: a malformed message or an unknown sensor is the request's
+  // fault (invalid_argument, with the field), a message at the wrong time is rejected.
+  EXPECT_EQ(invalid.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(invalid.error().field, "message");
   EXPECT_THAT(invalid.error().message, HasSubstr("nan"));
-  EXPECT_EQ(manager->push(kRobot, session.id, "lidar", first_imu->message).error().code, ErrorCode::kRejected);
+  const ApiStatus unknown = manager->push(kRobot, session.id, "lidar", first_imu->message);
+  EXPECT_EQ(unknown.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(unknown.error().field, "sensor");
   // No sensor name: the only IMU is picked; a modality the session lacks is refused.
   EXPECT_EQ(manager->push(kRobot, session.id, "", msgs::RadarMessage{}).error().code, ErrorCode::kInvalidArgument);
 

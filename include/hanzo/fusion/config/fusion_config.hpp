@@ -37,6 +37,8 @@ std::optional<FrontendType> frontend_type_from_string(std::string_view name);
 /// camera*, gnss* or gps*, wheel* or odom*, radar*) unless given as `modality:`.
 enum class SensorModality { kImu, kLidar, kCamera, kGnss, kWheelOdometry, kRadar };
 std::string_view to_string(SensorModality modality);  // "imu", "lidar", "camera", "gnss", "wheel_odometry", "radar"
+/// The modality a message belongs to (an ImuMessage: imu, a PointCloudMessage: lidar, ...).
+SensorModality modality_of(const msgs::SensorMessage& message);
 std::optional<SensorModality> sensor_modality_from_string(std::string_view name);
 /// The modality a sensor name implies, if any ("camera_left" -> kCamera, "wheels" -> kWheelOdometry).
 std::optional<SensorModality> infer_modality(std::string_view sensor_name);

@@ -8,7 +8,7 @@
 //   for (...) { if (Status s = frontend->push("gnss", message); !s) log(s.error().message); }
 //
 // What push() does with a message (docs/frontend.md has the full story):
-//  1. Input checks, each a rejection with a reason that push() returns and summary() counts:
+//  1. Input checks, each a Rejection (rejection.hpp) that push() returns and summary() counts:
 //     unknown_sensor, wrong_type (a GNSS message for an IMU sensor), invalid (msgs::validate:
 //     NaN, bad covariance...), duplicate (same timestamp as the sensor's previous message),
 //     out_of_order (older than the sensor's previous message), future_dated (more than
@@ -54,6 +54,7 @@
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
+#include "hanzo/fusion/pipeline/rejection.hpp"
 
 namespace hanzo::fusion::pipeline {
 
@@ -64,10 +65,10 @@ struct SensorStatistics {
   uint64_t received = 0;  // push() calls for this sensor
   uint64_t fused = 0;     // messages whose update moved the estimate (IMU: propagated)
   uint64_t rolled_back = 0;  // late messages fused by rolling back
-  /// Rejections by reason: the input checks above plus the fusion outcomes "gated",
-  /// "numerical_failure", "no_fix", "weak_fix", "spike", "gimbal_lock", "gap", "not_fused"
-  /// (a modality the frontend does not fuse directly, e.g. raw LiDAR scans without odometry).
-  std::map<std::string, uint64_t> rejected;
+  /// Rejections by reason (rejection.hpp): the input checks above plus the fusion outcomes
+  /// (gated, no_fix, spike, ...; not_fused: a modality the frontend does not fuse directly,
+  /// e.g. raw LiDAR scans without odometry).
+  std::map<Rejection, uint64_t> rejected;
   uint64_t timeouts = 0;     // times the sensor went silent for longer than its timeout
   bool timed_out = false;    // silent now
   Timestamp first_time;      // first and last accepted timestamps (body clock)
@@ -131,14 +132,13 @@ class Frontend {
   Frontend(const Frontend&) = delete;
   Frontend& operator=(const Frontend&) = delete;
 
-  /// Fuses one message of the named sensor (the configuration's name). Returns an error whose
-  /// message starts with the rejection reason ("too_late: ...") when the message is rejected by
-  /// the input checks; the session is unchanged then. Fusion outcomes (gated...) are counted,
-  /// not returned as errors.
-  Status push(std::string_view sensor, const msgs::SensorMessage& message);
+  /// Fuses one message of the named sensor (the configuration's name). When the input checks
+  /// refuse it, the PushStatus carries the Rejection (error().message "too_late: ...") and the
+  /// session is unchanged. Fusion outcomes (gated...) are counted, not returned.
+  PushStatus push(std::string_view sensor, const msgs::SensorMessage& message);
   /// A pose measurement T_world_sensor of a lidar or camera sensor (LiDAR / visual
   /// localization), covariance over (position world [m], rotation sensor frame [rad]).
-  Status push_pose(std::string_view sensor, Timestamp timestamp, const SE3& T_world_sensor,
+  PushStatus push_pose(std::string_view sensor, Timestamp timestamp, const SE3& T_world_sensor,
                    const Eigen::Matrix<double, 6, 6>& covariance);
 
   /// Fuses every message still waiting for the IMU to reach its time (call at the end of a
@@ -159,7 +159,7 @@ class Frontend {
   /// `from`; covariance over its tangent (rho, phi), right perturbation. Fused at `to` as the
   /// sensor's mean velocity over the interval, R^T t / (to - from) in the `to` frame
   /// (robot_localization's differential mode); fails for to <= from.
-  Status push_relative_pose(std::string_view sensor, Timestamp from, Timestamp to, const SE3& T_from_to,
+  PushStatus push_relative_pose(std::string_view sensor, Timestamp from, Timestamp to, const SE3& T_from_to,
                             const Eigen::Matrix<double, 6, 6>& covariance);
 
   /// The configured sensor that reads `topic`, or nullptr.

@@ -44,9 +44,10 @@ struct LidarInertialOdometryConfig {
   /// A sweep flagged weather_degraded (rain, fog: LidarOdometryConfig) is fused with its
   /// covariance times this (sigmas x2 by default).
   double weather_covariance_scale = 4.0;
-  /// Deskew with the filter's poses during the sweep (false: the constant twist of the
-  /// predicted motion, as LiDAR-only odometry). The filter's poses are its estimates at those
-  /// times, so an update fused inside a sweep (a GNSS fix) shows as a small step there.
+  /// Deskew with the filter's poses during the sweep when an IMU propagates the filter (false,
+  /// or without an IMU: the odometry's constant twist, which follows the registration, as
+  /// LiDAR-only odometry). The filter's poses are its estimates at those times, so an update
+  /// fused inside a sweep (a GNSS fix) shows as a small step there.
   bool imu_deskew = true;
   double deskew_sample_interval = 0.005;  ///< s between the filter poses sampled (an IMU period at 200 Hz); <= 0: constant twist
 };

@@ -211,7 +211,7 @@ class Session {
   /// is refused with "invalid", "duplicate" or "out_of_order" and otherwise accepted (it may
   /// still fail to register later: counted in mapping_summary and the sensor's statistics).
   /// Taken by value: a sweep moved in is kept without a copy while it waits for the IMU.
-  Status push(std::string_view sensor, msgs::SensorMessage message);
+  PushStatus push(std::string_view sensor, msgs::SensorMessage message);
   /// Fuses what waits (Frontend::flush) and registers the sweeps the IMU has passed.
   void flush();
   /// Errors start with the reason: "invalid: ..." (a bad request), "not_found: ..." (unknown
@@ -277,9 +277,9 @@ class Session {
           std::string wheel_sensor, const calib::SensorCalibration& wheel_calibration);
   /// Feeds the slip monitor; false when the wheels disagree with the LiDAR (not fused then).
   bool wheels_agree(const msgs::WheelOdometryMessage& wheels);
-  Status push_message(std::string_view sensor, msgs::SensorMessage message);
+  PushStatus push_message(std::string_view sensor, msgs::SensorMessage message);
   void flush_pipeline();
-  Status push_scan(msgs::PointCloudMessage scan);
+  PushStatus push_scan(msgs::PointCloudMessage scan);
   class RegistrationWorker;
   void register_ready_scans();
   /// Fuses what the worker registered (kRealtime).
@@ -295,7 +295,7 @@ class Session {
   void follow_graph();
   /// Moves map keyframes (index -> T_world_lidar) in the map and publishes the corrected map.
   void move_map_keyframes(const std::map<uint64_t, SE3>& moved);
-  void count_refused(const std::string& reason);
+  void count_refused(Rejection reason);
   /// Records the health changes since the last evaluation (every 0.2 s of data time).
   void track_health();
   /// A fused GNSS fix as a GPS factor on the newest keyframe (gnss_factors).
