@@ -298,24 +298,29 @@ void Estimator::initialize(const Event& event, const msgs::ImuMessage& imu) {
     gnss_before_initialization_.reset();
   }
 
+  start(state, position_covariance, velocity_sigma, kInitialAccelBiasSigma, gyro_bias_sigma);
+  logger()->info("frontend initialized at t = {:.3f} s (roll {:.2f}, pitch {:.2f} deg)", event.time.seconds(),
+                 estimate::roll_pitch_yaw(state.R_world_body.matrix()).x() * 180.0 / M_PI,
+                 estimate::roll_pitch_yaw(state.R_world_body.matrix()).y() * 180.0 / M_PI);
+}
+
+void Estimator::start(const NavigationState& state, const Eigen::Matrix3d& position_covariance, const Eigen::Vector3d& velocity_sigma,
+                      double accel_bias_sigma, double gyro_bias_sigma) {
   ErrorCovariance P = ErrorCovariance::Zero();
   const auto set_block = [&P](int index, const Eigen::Vector3d& sigmas) {
     P.block<3, 3>(index, index) = sigmas.array().square().matrix().asDiagonal();
   };
   P.block<3, 3>(estimate::kPositionIndex, estimate::kPositionIndex) = position_covariance;
-  set_block(estimate::kOrientationIndex, covariance.initial_orientation);
+  set_block(estimate::kOrientationIndex, frontend_.covariance.initial_orientation);
   set_block(estimate::kVelocityIndex, velocity_sigma);
-  set_block(estimate::kAccelBiasIndex, Eigen::Vector3d::Constant(kInitialAccelBiasSigma));
+  set_block(estimate::kAccelBiasIndex, Eigen::Vector3d::Constant(accel_bias_sigma));
   set_block(estimate::kGyroBiasIndex, Eigen::Vector3d::Constant(gyro_bias_sigma));
   set_block(estimate::kGravityIndex, Eigen::Vector3d(kHorizontalGravitySigma, kHorizontalGravitySigma, kInitialGravitySigma));
   filter_->reset(state, P);
   initialized_ = true;
-  time_ = event.time;
-  last_gravity_update_ = event.time;
+  time_ = state.timestamp;
+  last_gravity_update_ = state.timestamp;
   planar_height_ = state.position.z();
-  logger()->info("frontend initialized at t = {:.3f} s (roll {:.2f}, pitch {:.2f} deg)", event.time.seconds(),
-                 estimate::roll_pitch_yaw(state.R_world_body.matrix()).x() * 180.0 / M_PI,
-                 estimate::roll_pitch_yaw(state.R_world_body.matrix()).y() * 180.0 / M_PI);
 }
 
 void Estimator::initialize_without_imu(const Event& event) {
@@ -332,22 +337,9 @@ void Estimator::initialize_without_imu(const Event& event) {
     state.position = enu_->to_enu(gnss->geodetic()) - sensors_[event.sensor].T_body_sensor.translation();
     position_covariance = gnss->position_covariance.value_or(default_gnss_covariance(gnss->fix_type));
   }
-  ErrorCovariance P = ErrorCovariance::Zero();
-  const auto set_block = [&P](int index, const Eigen::Vector3d& sigmas) {
-    P.block<3, 3>(index, index) = sigmas.array().square().matrix().asDiagonal();
-  };
-  P.block<3, 3>(estimate::kPositionIndex, estimate::kPositionIndex) = position_covariance;
-  set_block(estimate::kOrientationIndex, covariance.initial_orientation);
-  set_block(estimate::kVelocityIndex, covariance.initial_velocity.cwiseMax(kMovingStartVelocitySigma));
-  set_block(estimate::kAccelBiasIndex, Eigen::Vector3d::Constant(kMotionModelAccelBiasSigma));
-  set_block(estimate::kGyroBiasIndex, Eigen::Vector3d::Constant(kMotionModelInitialRateSigma));
-  set_block(estimate::kGravityIndex, Eigen::Vector3d(kHorizontalGravitySigma, kHorizontalGravitySigma, kInitialGravitySigma));
-  filter_->reset(state, P);
-  initialized_ = true;
-  time_ = event.time;
+  start(state, position_covariance, covariance.initial_velocity.cwiseMax(kMovingStartVelocitySigma), kMotionModelAccelBiasSigma,
+        kMotionModelInitialRateSigma);
   last_imu_ = motion_model_sample();
-  last_gravity_update_ = event.time;
-  planar_height_ = state.position.z();
   logger()->info("frontend initialized at t = {:.3f} s without an IMU: level, constant-velocity motion model", event.time.seconds());
 }
 

@@ -127,6 +127,10 @@ class Estimator {
   EventOutcome process_radar(const Event& event, const msgs::RadarMessage& radar, UpdateObserver* observer);
   EventOutcome process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer);
   void initialize(const Event& event, const msgs::ImuMessage& imu);
+  /// Resets the filter to `state` (its timestamp: the start) with the initial covariance of
+  /// the configuration and these sigmas.
+  void start(const estimate::NavigationState& state, const Eigen::Matrix3d& position_covariance, const Eigen::Vector3d& velocity_sigma,
+             double accel_bias_sigma, double gyro_bias_sigma);
   /// Without an IMU: starts the filter at the first event (see the class comment).
   void initialize_without_imu(const Event& event);
   /// Without an IMU: the virtual IMU sample of the motion model at the current estimate.

@@ -45,9 +45,10 @@ msgs::WheelOdometryMessage wheels_at(double t) {
   return wheels;
 }
 
-msgs::GnssMessage gnss_at(double t, double east_offset = 0.0) {
+// A 3D fix at an ENU position of the datum (0.5 m sigma).
+msgs::GnssMessage gnss_at_position(double t, const Eigen::Vector3d& position_enu) {
   const EnuFrame enu = EnuFrame::create(kDatum).value();
-  const GeodeticPoint point = enu.to_geodetic(Eigen::Vector3d(distance_at(t) + east_offset, 0.0, 0.0));
+  const GeodeticPoint point = enu.to_geodetic(position_enu);
   msgs::GnssMessage gnss;
   gnss.timestamp = at(t);
   gnss.latitude = point.latitude_deg;
@@ -56,6 +57,10 @@ msgs::GnssMessage gnss_at(double t, double east_offset = 0.0) {
   gnss.fix_type = msgs::GnssFixType::kFix3d;
   gnss.position_covariance = Eigen::Matrix3d::Identity() * 0.25;
   return gnss;
+}
+
+msgs::GnssMessage gnss_at(double t, double east_offset = 0.0) {
+  return gnss_at_position(t, Eigen::Vector3d(distance_at(t) + east_offset, 0.0, 0.0));
 }
 
 struct Message {
@@ -399,21 +404,12 @@ TEST(Frontend, RunsWithoutAnImuOnTheMotionModel) {
     EXPECT_FALSE((*frontend)->has_imu());
     std::vector<msgs::PoseEstimate> poses;
     (*frontend)->set_pose_callback([&poses](const msgs::PoseEstimate& pose) { poses.push_back(pose); });
-    const EnuFrame enu = EnuFrame::create(kDatum).value();
     for (int k = 0; k <= 500; ++k) {
       const double t = 0.02 * k;
       ASSERT_TRUE((*frontend)->push("wheels", wheels_of(t)).ok());
       if (with_gnss && k % 10 == 5) {
         const Eigen::Vector2d position = position_at(t);
-        const GeodeticPoint point = enu.to_geodetic(Eigen::Vector3d(position.x(), position.y(), 0.0));
-        msgs::GnssMessage gnss;
-        gnss.timestamp = at(t);
-        gnss.latitude = point.latitude_deg;
-        gnss.longitude = point.longitude_deg;
-        gnss.altitude = point.altitude_m;
-        gnss.fix_type = msgs::GnssFixType::kFix3d;
-        gnss.position_covariance = Eigen::Matrix3d::Identity() * 0.25;
-        ASSERT_TRUE((*frontend)->push("gnss", gnss).ok());
+        ASSERT_TRUE((*frontend)->push("gnss", gnss_at_position(t, Eigen::Vector3d(position.x(), position.y(), 0.0))).ok());
       }
     }
     // A pose for every fused measurement (the first wheel reading is only a reference), in time order.
