@@ -203,13 +203,16 @@ TEST(Session, GnssFixesBecomeGraphFactorsAndImproveTheKeyframes) {
 // they disagree, so the three sensors together beat IMU + LiDAR alone.
 using config::SensorModality;
 double warehouse_aligned_rmse(const std::set<SensorModality>& modalities, SessionSummary* summary_out, MappingSummary* mapping_out,
-                              std::vector<HealthChange>* health_out = nullptr) {
+                              std::vector<HealthChange>* health_out = nullptr, SessionMode mode = SessionMode::kReplay) {
   sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_robot.yaml").value();
   std::erase_if(scenario.sensors, [&](const sim::ScenarioSensor& s) { return modalities.count(s.modality) == 0; });
   scenario.duration = 45.0;
   scenario.num_threads = 0;
   auto simulation = sim::ScenarioSimulation::create(scenario).value();
-  auto session = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  const config::FusionConfig fusion = sim::scenario_fusion_config(scenario);
+  SessionConfig session_config = SessionConfig::from(fusion);
+  session_config.mode = mode;
+  auto session = Session::create(fusion, sim::scenario_calibration(scenario), session_config).value();
   io::Trajectory estimate, truth;
   session->set_pose_callback([&](const msgs::PoseEstimate& pose) {
     if (estimate.size() > 0 && (pose.timestamp - estimate.timestamps.back()).seconds() < 0.1) return;
@@ -266,14 +269,18 @@ TEST(Session, SlippingWheelsAreNotFusedAndAllSensorsBeatImuPlusLidar) {
 }
 
 // Without an IMU the Frontend's motion model carries the LiDAR odometry: the LiDAR alone, and
-// with the (slipping) wheels, still map and track the warehouse.
+// with the (slipping) wheels, still map and track the warehouse; in realtime mode too (the
+// registration on the session's worker, its poses fused late).
 TEST(Session, RunsWithoutAnImu) {
-  for (const std::set<SensorModality>& modalities :
-       {std::set<SensorModality>{SensorModality::kLidar}, std::set<SensorModality>{SensorModality::kLidar, SensorModality::kWheelOdometry}}) {
+  const std::set<SensorModality> lidar{SensorModality::kLidar};
+  const std::set<SensorModality> lidar_wheels{SensorModality::kLidar, SensorModality::kWheelOdometry};
+  for (const auto& [modalities, mode] : {std::pair{lidar, SessionMode::kReplay}, std::pair{lidar_wheels, SessionMode::kReplay},
+                                         std::pair{lidar, SessionMode::kRealtime}}) {
     SessionSummary summary;
     MappingSummary mapping;
-    const double rmse = warehouse_aligned_rmse(modalities, &summary, &mapping);
-    std::printf("warehouse 45 s without an IMU (%zu sensors): SE3-aligned APE %.3f m, %llu of %llu sweeps registered\n", modalities.size(), rmse,
+    const double rmse = warehouse_aligned_rmse(modalities, &summary, &mapping, nullptr, mode);
+    std::printf("warehouse 45 s without an IMU (%zu sensors, %s): SE3-aligned APE %.3f m, %llu of %llu sweeps registered\n",
+                modalities.size(), std::string(to_string(mode)).c_str(), rmse,
                 static_cast<unsigned long long>(mapping.scans_registered), static_cast<unsigned long long>(mapping.scans_received));
     EXPECT_FALSE(summary.sensors.empty());
     EXPECT_GT(mapping.scans_registered, mapping.scans_received * 95 / 100);
