@@ -76,7 +76,7 @@ struct Frontend::Impl final : UpdateObserver {
     }
     return std::nullopt;
   }
-  /// Sets *index when the checks pass.
+  /// Sets *sensor (its index) when the checks pass.
   PushStatus pose_input(size_t* sensor, std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
                             const Eigen::Matrix<double, 6, 6>& covariance, const std::function<Status()>& extra);
   PushStatus accept(size_t sensor, Event event);

@@ -21,7 +21,6 @@ Timestamp sweep_end(const msgs::PointCloudMessage& scan) {
   return *std::max_element(scan.point_timestamps.begin(), scan.point_timestamps.end());
 }
 
-
 // A map keyframe moved this much in the graph is moved in the map.
 constexpr double kMapMoveTranslation = 0.01;  // m
 constexpr double kMapMoveRotation = 0.001;    // rad

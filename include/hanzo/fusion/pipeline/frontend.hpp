@@ -5,7 +5,7 @@
 //
 //   auto frontend = Frontend::create(fusion_config, calibration).value();
 //   frontend->set_pose_callback([](const msgs::PoseEstimate& pose) { ... });
-//   for (...) { if (Status s = frontend->push("gnss", message); !s) log(s.error().message); }
+//   for (...) { if (PushStatus s = frontend->push("gnss", message); !s) log(to_string(s.reason()), s.error().message); }
 //
 // What push() does with a message (docs/frontend.md has the full story):
 //  1. Input checks, each a Rejection (rejection.hpp) that push() returns and summary() counts:

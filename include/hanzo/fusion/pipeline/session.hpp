@@ -207,8 +207,8 @@ class Session {
   Session(const Session&) = delete;
   Session& operator=(const Session&) = delete;
 
-  /// One message of the named sensor. Errors as Frontend::push ("reason: ..."); a LiDAR sweep
-  /// is refused with "invalid", "duplicate" or "out_of_order" and otherwise accepted (it may
+  /// One message of the named sensor. Rejections as Frontend::push; a LiDAR sweep is refused
+  /// as invalid, duplicate or out_of_order and otherwise accepted (it may
   /// still fail to register later: counted in mapping_summary and the sensor's statistics).
   /// Taken by value: a sweep moved in is kept without a copy while it waits for the IMU.
   PushStatus push(std::string_view sensor, msgs::SensorMessage message);
