@@ -124,6 +124,14 @@ int run_register(const Output& output, const RegisterOptions& options) {
   text += fmt::format("{} after {} iterations, fitness {:.3f}, inlier RMSE {:.4f} m\ntime: downsampling {:.1f} ms, registration {:.1f} ms\n",
                       registered->converged ? "converged" : "NOT converged", registered->iterations, registered->fitness,
                       registered->inlier_rmse, downsample_ms, registration_ms);
+  if (!registered->converged) {
+    // The estimate is reported (it may still help as a guess), but the command failed.
+    if (!output.json) std::cout << text;
+    return report_failure(output, result,
+                          fmt::format("registration did not converge in {} iterations (fitness {:.3f}, inlier RMSE {:.4f} m): try a better "
+                                      "--init, a larger --max-distance or more --max-iterations",
+                                      registered->iterations, registered->fitness, registered->inlier_rmse));
+  }
   return report_success(output, result, text);
 }
 

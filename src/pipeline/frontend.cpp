@@ -550,8 +550,8 @@ void Frontend::Impl::emit_pose(bool notify) {
   const estimate::ErrorCovariance covariance = estimator.filter().covariance();
   msgs::PoseEstimate pose;
   pose.timestamp = estimator.time();
-  pose.frame_id = "world";
-  pose.child_frame_id = "body";
+  pose.frame_id = msgs::kWorldFrame;
+  pose.child_frame_id = msgs::kBodyFrame;
   pose.T_world_body = msgs::Pose::from_se3(SE3(state.R_world_body, state.position));
   pose.velocity = state.velocity;
   pose.pose_covariance = covariance.topLeftCorner<6, 6>();

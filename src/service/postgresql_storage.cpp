@@ -186,6 +186,8 @@ class PostgresqlStorage final : public Storage {
       for (const pqxx::row& row : rows) {
         msgs::PoseEstimate& estimate = estimates.emplace_back();
         estimate.timestamp = Timestamp::from_nanoseconds(row[0].as<int64_t>());
+        estimate.frame_id = msgs::kWorldFrame;
+        estimate.child_frame_id = msgs::kBodyFrame;
         estimate.T_world_body.position = {row[1].as<double>(), row[2].as<double>(), row[3].as<double>()};
         estimate.T_world_body.orientation =
             Eigen::Quaterniond(row[4].as<double>(), row[5].as<double>(), row[6].as<double>(), row[7].as<double>());

@@ -226,6 +226,8 @@ class SqliteStorage final : public Storage {
     while ((code = query.step()) == SQLITE_ROW) {
       msgs::PoseEstimate& estimate = estimates.emplace_back();
       estimate.timestamp = Timestamp::from_nanoseconds(query.integer(0));
+      estimate.frame_id = msgs::kWorldFrame;
+      estimate.child_frame_id = msgs::kBodyFrame;
       estimate.T_world_body.position = {query.real(1), query.real(2), query.real(3)};
       estimate.T_world_body.orientation = Eigen::Quaterniond(query.real(4), query.real(5), query.real(6), query.real(7));
       estimate.velocity = {query.real(8), query.real(9), query.real(10)};

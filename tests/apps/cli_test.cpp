@@ -515,6 +515,14 @@ TEST(Cli, RegisterRecoversTheReferenceOfTheRealPair) {
   EXPECT_EQ(far.exit_code, 1);
   EXPECT_THAT(far.err, HasSubstr("initial guess"));
   EXPECT_EQ(std::count(far.err.begin(), far.err.end(), '\n'), 1);
+  // Not converged within the iterations allowed: exit 1, still one JSON object saying so.
+  const CliRun unconverged = run(fmt::format("register {0}/source.ply {0}/251370668.pcd --max-iterations 1 --json", dir));
+  EXPECT_EQ(unconverged.exit_code, 1);
+  const nlohmann::json refused = nlohmann::json::parse(unconverged.out);
+  EXPECT_FALSE(refused["ok"].get<bool>());
+  EXPECT_FALSE(refused["converged"].get<bool>());
+  EXPECT_THAT(refused["error"].get<std::string>(), HasSubstr("did not converge in 1 iterations"));
+  EXPECT_EQ(std::count(unconverged.err.begin(), unconverged.err.end(), '\n'), 1);
 }
 
 TEST(Cli, CloudFilterWritesEachStep) {

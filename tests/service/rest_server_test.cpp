@@ -166,6 +166,8 @@ TEST_F(RestServerTest, SessionLifecycle) {
     for (const auto& [key, value] : pose_json.items()) EXPECT_TRUE(paged.contains(key)) << key;
     EXPECT_EQ(paged.size(), pose_json.size());
     EXPECT_EQ(paged["timestamp_ns"], stored[i].timestamp.nanoseconds());
+    EXPECT_EQ(paged["frame_id"], pose_json["frame_id"]);  // "world", as GET /pose
+    EXPECT_EQ(paged["child_frame_id"], pose_json["child_frame_id"]);
     EXPECT_EQ(paged["position"][2].get<double>(), stored[i].T_world_body.position.z());
     EXPECT_EQ(paged["orientation_wxyz"][0].get<double>(), stored[i].T_world_body.orientation.w());
     EXPECT_EQ(paged["velocity"][1].get<double>(), stored[i].velocity.y());

@@ -53,6 +53,10 @@ struct Pose {
   static Pose from_se3(const SE3& pose) { return {pose.translation(), pose.rotation().quaternion()}; }
 };
 
+/// The frame names of every pose the engine emits (stored trajectories carry them too).
+inline constexpr std::string_view kWorldFrame = "world";
+inline constexpr std::string_view kBodyFrame = "body";
+
 struct PoseEstimate {
   Timestamp timestamp;
   std::string frame_id;        // world frame (ENU)
