@@ -61,7 +61,11 @@ Status export_map(const MapOptions& options, nlohmann::json& result) {
   };
   if (format == "pgm") {
     HANZO_RETURN_IF_ERROR(need_occupancy());
-    const std::string yaml = extension_of(options.out) == ".yaml" ? options.out : options.out + ".yaml";
+    // The names as given: --out map.pgm writes map.pgm (+ map.yaml), --out map.yaml map.yaml (+ map.pgm).
+    const std::string extension = extension_of(options.out);
+    const std::string yaml = extension == ".yaml" || extension == ".yml" ? options.out
+                             : extension == ".pgm"                        ? std::filesystem::path(options.out).replace_extension(".yaml").string()
+                                                                          : options.out + ".yaml";
     HANZO_RETURN_IF_ERROR(maps::write_ros_map(yaml, *map.occupancy));
     result["files"] = {yaml, std::filesystem::path(yaml).replace_extension(".pgm").string()};
     return ok_status();
@@ -300,7 +304,7 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
 
   CLI::App* export_app = map_app->add_subcommand("export", "Export a layer: png (picture), pgm (ROS map_server), pcd/ply/bin (points), ply/obj (mesh)");
   export_app->add_option("MAP", options->input, "FusionMap file")->required();
-  export_app->add_option("--out", options->out, "Output file (pgm: the YAML; the .pgm goes next to it)")->required();
+  export_app->add_option("--out", options->out, "Output file (pgm: map.pgm or map.yaml; both files are written side by side)")->required();
   export_app->add_option("--format", options->format, "png, pgm, pcd, ply, bin or obj (default: from --out's extension)");
   export_app->add_option("--layer", options->layer, "occupancy, points or mesh (png default: occupancy, then points; ply: points, then mesh)");
   export_app->add_option("--pixel-size", options->pixel_size, "png of points: meters per pixel (default: 1600 px wide)");

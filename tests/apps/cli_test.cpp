@@ -602,6 +602,12 @@ TEST(Cli, MapBuildInfoExportStoreDiffRedact) {
     ASSERT_EQ(exported.exit_code, 0) << format << ": " << exported.err;
     for (const auto& file : nlohmann::json::parse(exported.out)["files"]) EXPECT_TRUE(std::filesystem::exists(file.get<std::string>()));
   }
+  // --out map.pgm keeps the name as given (the YAML goes beside it).
+  const CliRun pgm = run(fmt::format("map export {} --out {} --json", map, (dir / "named.pgm").string()));
+  ASSERT_EQ(pgm.exit_code, 0) << pgm.err;
+  EXPECT_EQ(nlohmann::json::parse(pgm.out)["files"], nlohmann::json::array({(dir / "named.yaml").string(), (dir / "named.pgm").string()}));
+  EXPECT_TRUE(std::filesystem::exists(dir / "named.pgm"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "named.pgm.pgm"));
 
   // Versions: the built map, then a redacted copy saved as version 2.
   const std::string store = (dir / "store").string();
