@@ -192,6 +192,7 @@ nlohmann::json describe_map(const msgs::FusionMap& map) {
                            {"version", map.version},
                            {"parent_version", map.parent_version},
                            {"created", io::format_seconds(map.created)},
+                           {"created_iso8601", map.created.to_iso8601()},
                            {"frame_id", map.frame_id},
                            {"algorithm", map.provenance.algorithm},
                            {"software_version", map.provenance.software_version}};
@@ -294,8 +295,11 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
         msgs::FusionMap map;
         HANZO_ASSIGN_OR_RETURN(map, maps::read_fusion_map(options->input));
         result.update(describe_map(map));
-        text = fmt::format("{}: map {} version {} (parent {}), frame {}, created {} s, by {}\n{}", options->input, map.map_id, map.version,
-                           map.parent_version, map.frame_id, io::format_seconds(map.created), map.provenance.algorithm,
+        const std::string datum =
+            map.datum ? fmt::format(", datum {:.8f} {:.8f} {:.3f} m", map.datum->latitude_deg, map.datum->longitude_deg, map.datum->altitude_m)
+                      : "";
+        text = fmt::format("{}: map {} version {} (parent {}), frame {}{}, created {}, by {}\n{}", options->input, map.map_id, map.version,
+                           map.parent_version, map.frame_id, datum, map.created.to_iso8601(), map.provenance.algorithm,
                            describe_map_text(result));
         return ok_status();
       });

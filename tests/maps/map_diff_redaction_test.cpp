@@ -110,6 +110,8 @@ TEST(Redaction, LabelsGoAndGeometryCoarsensWithoutLosingObstacles) {
   EXPECT_TRUE(redacted->sensor_configuration.empty());
   EXPECT_EQ(redacted->provenance.input_logs[0].uri, "redacted");
   EXPECT_THAT(redacted->provenance.parameters, HasSubstr("redaction: {drop_labels: true, resolution: 0.5"));
+  EXPECT_EQ(redacted->map_id, map.map_id);  // a store makes it the next version, derived from this one
+  EXPECT_EQ(redacted->version, map.version);
   EXPECT_GE(report.actions.size(), 5u);
 
   // Occupancy: every fine occupied cell lies in a coarse cell at least as occupied.

@@ -14,7 +14,8 @@
 //    resolution through its distances); the report says so.
 // Labels are removed from every layer when drop_labels is set; the sensor configuration and
 // the provenance's input log paths when drop_sensor_details is set. The redaction itself is
-// recorded in the provenance parameters.
+// recorded in the provenance parameters. The result keeps the map id and the version it was made
+// from: saved to a map store it becomes the next version, with that one as its parent.
 
 #include <string>
 #include <vector>
