@@ -202,7 +202,11 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
     // Two sweeps in the worker's queue: the IMU may then run ~0.3 s ahead of the sweep being
     // registered, inside the default 0.5 s lag window its late pose must land in.
     constexpr std::size_t kWorkerQueue = 2;
-    if (config_.mode == SessionMode::kRealtime) worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue);
+    // Without an IMU nothing carries the estimate while a registration runs: sweeps are
+    // registered inside push() in both modes.
+    if (config_.mode == SessionMode::kRealtime && frontend_->has_imu()) {
+      worker_ = std::make_unique<RegistrationWorker>(*odometry_, kWorkerQueue);
+    }
   }
   frontend_->set_pose_callback([this](const msgs::PoseEstimate& pose) {
     if (config_.keep_trajectory && (uncorrected_poses_.empty() || uncorrected_poses_.back().timestamp < pose.timestamp)) {

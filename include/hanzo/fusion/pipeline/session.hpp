@@ -21,7 +21,8 @@
 //    come within frontend.lag_window). For live data (message times within live_window_s of
 //    this machine's clock) a sweep the worker cannot take at once drops the oldest waiting one
 //    ("registration_behind": bounded latency, load shedding); recorded data streamed at any
-//    speed waits instead. The graph's full re-optimizations run in the background.
+//    speed waits instead. Without an IMU sweeps are registered inside push() (nothing else
+//    carries the estimate meanwhile). The graph's full re-optimizations run in the background.
 //
 // Per message:
 //  - 3D LiDAR sweeps of the configured LiDAR sensor (the first `lidar` sensor) are checked
