@@ -7,6 +7,8 @@
 
 #include <fmt/format.h>
 
+#include "hanzo/fusion/core/logging.hpp"
+
 namespace hanzo::fusion::cloud {
 namespace {
 
@@ -91,11 +93,22 @@ Result<PointCloud> to_point_cloud(const RawCloud& raw, bool drop_non_finite) {
   PointCloud cloud;
   cloud.positions.reserve(raw.count);
   std::vector<double> times;
+  size_t dropped = 0;
+  // Indices are the points' positions in the file (0-based), before any point is dropped.
+  const auto finite = [&raw](const RawField* field, size_t i) { return field == nullptr || std::isfinite(raw.value(*field, i)); };
   for (size_t i = 0; i < raw.count; ++i) {
     const Eigen::Vector3d position(raw.value(*x, i), raw.value(*y, i), raw.value(*z, i));
     if (!position.allFinite()) {
-      if (drop_non_finite) continue;
-      return Error(fmt::format("point {} has a non-finite coordinate", i));
+      if (drop_non_finite) {
+        ++dropped;
+        continue;
+      }
+      return Error(fmt::format("point {} of the file has a non-finite coordinate", i));
+    }
+    if (!finite(intensity, i)) return Error(fmt::format("point {} of the file has a non-finite {}", i, intensity->name));
+    if (!finite(time, i)) return Error(fmt::format("point {} of the file has a non-finite {}", i, time->name));
+    if (has_normals && !(finite(normal[0], i) && finite(normal[1], i) && finite(normal[2], i))) {
+      return Error(fmt::format("point {} of the file has a non-finite normal", i));
     }
     cloud.positions.push_back(position.cast<float>());
     if (intensity) cloud.intensities.push_back(static_cast<float>(raw.value(*intensity, i)));
@@ -110,6 +123,9 @@ Result<PointCloud> to_point_cloud(const RawCloud& raw, bool drop_non_finite) {
     const double origin = absolute_time ? *std::min_element(times.begin(), times.end()) : 0.0;
     cloud.times.reserve(times.size());
     for (double t : times) cloud.times.push_back(static_cast<float>(t - origin));
+  }
+  if (dropped > 0) {
+    logger()->warn("dropped {} of {} points with a non-finite (NaN or infinite) coordinate: a sensor's missing returns", dropped, raw.count);
   }
   HANZO_RETURN_IF_ERROR(cloud.validate());
   return cloud;

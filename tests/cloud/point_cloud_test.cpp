@@ -158,6 +158,22 @@ TEST(CloudIo, RejectsBadFiles) {
   ASSERT_FALSE(result.ok());
   EXPECT_NE(result.error().message.find("no x, y, z"), std::string::npos) << result.error().message;
 
+  // Missing returns (NaN coordinates) are dropped; a NaN intensity names the point as in the file.
+  const std::string with_nan = temp_path("with_nan.pcd");
+  std::ofstream(with_nan) << "VERSION .7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nWIDTH 4\nPOINTS 4\nDATA ascii\n"
+                             "1 2 3 10\nnan nan nan 0\n4 5 6 11\n7 8 9 12\n";
+  auto dropped = read_cloud(with_nan);
+  ASSERT_TRUE(dropped.ok()) << dropped.error().message;
+  EXPECT_EQ(dropped->size(), 3u);
+  EXPECT_EQ(dropped->positions[1], Eigen::Vector3f(4, 5, 6));
+  EXPECT_FALSE(read_cloud(with_nan, false).ok());
+  const std::string nan_intensity = temp_path("nan_intensity.pcd");
+  std::ofstream(nan_intensity) << "VERSION .7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nWIDTH 4\nPOINTS 4\nDATA ascii\n"
+                                  "1 2 3 10\nnan nan nan 0\n4 5 6 11\n7 8 9 nan\n";
+  result = read_cloud(nan_intensity);
+  ASSERT_FALSE(result.ok());
+  EXPECT_NE(result.error().message.find("point 3 of the file has a non-finite intensity"), std::string::npos) << result.error().message;
+
   // Writing an invalid cloud fails and leaves the previous file untouched.
   const std::string path = temp_path("kept.pcd");
   ASSERT_TRUE(write_cloud(path, sample_cloud()).ok());

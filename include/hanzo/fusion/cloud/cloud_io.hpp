@@ -21,7 +21,8 @@ namespace hanzo::fusion::cloud {
 
 /// Reads a PCD, PLY or KITTI .bin file. Fails, naming the path, on a missing or malformed file,
 /// a file without x/y/z, non-finite coordinates (unless drop_non_finite: organized clouds mark
-/// missing returns with NaN) or an unknown extension.
+/// missing returns with NaN; how many were dropped is logged as a warning), a non-finite
+/// intensity, time or normal (naming the point's index in the file) or an unknown extension.
 Result<PointCloud> read_cloud(const std::string& path, bool drop_non_finite = true);
 
 /// Writes `cloud` as PCD or PLY (binary) or KITTI .bin, atomically (a temporary file renamed
