@@ -302,9 +302,9 @@ void add_import_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--wheel-separation", options->wheel_separation,
                       "rosbag, carmen: wheel separation (m) to import odometry as differential-drive wheel odometry");
   command->add_flag("--use-record-time", options->use_record_time, "rosbag: bag record time instead of header.stamp");
-  command->add_option("--ground-truth", options->ground_truth,
+  command->add_option("--ground-truth,--gt", options->ground_truth,
                       "carmen, kitti, euroc, tum-rgbd: write the reference trajectory (carmen: the scans' poses) as TUM");
-  command->add_option("--calibration", options->calibration, "kitti, euroc, tum-rgbd: write the sensors' calibration YAML");
+  command->add_option("--calibration,--calib", options->calibration, "kitti, euroc, tum-rgbd: write the sensors' calibration YAML");
   command->add_flag("--no-images", options->no_images, "kitti, euroc: leave the camera images out");
   command->add_option("--poses", options->poses, "kitti: poses file (default SEQUENCE/../../poses/NN.txt when present)");
   command->add_option("--time-origin", options->time_origin, "kitti: Unix time (s) of times.txt's zero")->capture_default_str();

@@ -350,8 +350,8 @@ void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& ru
   CLI::App* command = app.add_subcommand("lidar-odometry", "LiDAR odometry over a sensor log's point clouds (scan to local map)");
   command->add_option("LOG", options->log, "Sensor log (MCAP, e.g. from hanzo-fusion sim or import)")->required();
   command->add_option("--topic", options->topic, "Point-cloud topic (default: the first one)");
-  command->add_option("--ground-truth", options->ground_truth, "Ground truth T_world_body (TUM): start there and score the result");
-  command->add_option("--calibration", options->calibration, "Calibration YAML with <frame_id>_to_body of the LiDAR (default: identity)");
+  command->add_option("--ground-truth,--gt", options->ground_truth, "Ground truth T_world_body (TUM): start there and score the result");
+  command->add_option("--calibration,--calib", options->calibration, "Calibration YAML with <frame_id>_to_body of the LiDAR (default: identity)");
   command->add_option("--fusion-config", options->fusion_config,
                       "LiDAR-inertial: run a Session with this fusion configuration (needs --calibration) on the log's IMU and this LiDAR")
       ->check(CLI::ExistingFile);

@@ -272,7 +272,7 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
   build_app->add_option("--log", build->log, "Sensor log (MCAP)")->required();
   build_app->add_option("--trajectory", build->trajectory, "T_world_body poses (TUM by default)")->required();
   build_app->add_option("--trajectory-format", build->trajectory_format, "tum, kitti or euroc")->capture_default_str();
-  build_app->add_option("--calib", build->calibration, "Calibration YAML with the sensor's extrinsics (default: identity)");
+  build_app->add_option("--calibration,--calib", build->calibration, "Calibration YAML with the sensor's extrinsics (default: identity)");
   build_app->add_option("--topic", build->topic, "Point-cloud topic")->capture_default_str();
   build_app->add_option("--sensor", build->sensor, "Calibration entry of the sensor (default: the topic's last component)");
   build_app->add_option("--occupancy", build->occupancy, "2d, 3d or none")->capture_default_str();

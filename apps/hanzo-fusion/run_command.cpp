@@ -468,10 +468,10 @@ void add_run_command(CLI::App& app, const Output& output, Command& run_command) 
   auto options = std::make_shared<RunOptions>();
   CLI::App* command = app.add_subcommand("run", "Replay a sensor log through the whole pipeline (filter, LiDAR odometry, graph, map)");
   command->add_option("--config", options->config_path, "Fusion configuration YAML")->required();
-  command->add_option("--calib", options->calibration_path, "Calibration YAML (default: every sensor at the body origin)");
+  command->add_option("--calibration,--calib", options->calibration_path, "Calibration YAML (default: every sensor at the body origin)");
   command->add_option("--log", options->log_path, "Sensor log (.mcap)")->required();
   command->add_option("--out", options->out, "Output folder")->required();
-  command->add_option("--gt", options->ground_truth, "Ground-truth trajectory (TUM) for APE / RPE");
+  command->add_option("--ground-truth,--gt", options->ground_truth, "Ground-truth trajectory (TUM) for APE / RPE");
   command->add_option("--threads", options->threads, "LiDAR odometry threads (0: all cores); the output does not depend on it")
       ->capture_default_str();
   command->add_option("--sensors", options->sensors, "Fuse only these configured sensors (comma-separated names), e.g. for an ablation")

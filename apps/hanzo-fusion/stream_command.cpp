@@ -117,7 +117,7 @@ void add_stream_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--server", options->grpc_address, "gRPC address HOST:PORT")->capture_default_str();
   command->add_option("--rest", options->rest_url, "REST URL (default http://HOST:8083, https with --tls-ca)");
   command->add_option("--config", options->config_path, "Fusion configuration: creates the session (its topics map the log)")->check(CLI::ExistingFile);
-  command->add_option("--calib", options->calibration_path, "Calibration of the session created")->check(CLI::ExistingFile);
+  command->add_option("--calibration,--calib", options->calibration_path, "Calibration of the session created")->check(CLI::ExistingFile);
   command->add_option("--session", options->session_id, "Stream into this existing session instead");
   command->add_option("--name", options->name, "Name of the session created (default: the log's path)");
   command->add_option("--token", options->token, "API token (default: $HANZO_FUSION_TOKEN)");

@@ -368,6 +368,15 @@ TEST(Cli, RunReplaysTheSampleAndScoresItAgainstGroundTruth) {
   EXPECT_EQ(json["summary"]["sensors"][1]["fused"], 96);
   EXPECT_LT(json["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), 0.15);
   EXPECT_LT(json["evaluation"]["rpe_1m_rmse_m"].get<double>(), 0.05);
+  // One spelling per concept in every command: --ground-truth / --calibration, with --gt / --calib.
+  const CliRun spelled = run(fmt::format("run --config examples/data/fusion.yaml --log {} --out {} --ground-truth examples/data/ground_truth.tum --json",
+                                         log, (dir / "run_spelled").string()));
+  ASSERT_EQ(spelled.exit_code, 0) << spelled.err;
+  EXPECT_EQ(nlohmann::json::parse(spelled.out)["evaluation"]["ape_rmse_m"], json["evaluation"]["ape_rmse_m"]);
+  for (const char* command : {"run", "lidar-odometry", "import", "stream", "map build"}) {
+    const CliRun help = run(fmt::format("{} --help", command));
+    EXPECT_THAT(help.out, HasSubstr("--calibration,--calib")) << command;
+  }
   EXPECT_EQ(json["summary"]["keyframes"], 19);  // 1 Hz after alignment
   for (const char* file : {"trajectory.tum", "trajectory_optimized.tum", "poses.csv", "innovations.csv", "keyframes.csv", "summary.json",
                            "trajectory.svg", "covariance.svg"}) {
