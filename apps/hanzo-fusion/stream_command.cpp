@@ -1,6 +1,8 @@
 // hanzo-fusion stream LOG --server HOST:PORT: replays a sensor log into a server session over
 // gRPC (docs/server.md, "Stream a log"). Creates the session from --config/--calib over REST
-// unless --session names one; prints what was sent and the session's state at the end.
+// unless --session names one; the session's configuration maps the log's topics to its sensors.
+// Prints what was sent and the session's state at the end; exits 1 when the session accepted
+// none of the messages.
 
 #include <cstdlib>
 
@@ -57,9 +59,6 @@ int run_stream(const Output& output, const StreamCommandOptions& options) {
   if (!options.config_path.empty()) {
     auto configuration = config::load_fusion_config(options.config_path);
     if (!configuration) return fail(configuration.error().message);
-    for (const config::SensorConfig& sensor : configuration->sensors) {
-      if (!sensor.topic.empty()) stream_options.sensor_by_topic[sensor.topic] = sensor.name;
-    }
     config_yaml = config::to_yaml(*configuration);
     if (!options.calibration_path.empty()) {
       auto calibration = calib::load_calibration(options.calibration_path);
@@ -85,19 +84,29 @@ int run_stream(const Output& output, const StreamCommandOptions& options) {
   result["messages_sent"] = summary.messages_sent;
   result["sent_by_sensor"] = summary.sent_by_sensor;
   result["skipped_by_topic"] = summary.skipped_by_topic;
+  result["accepted"] = summary.accepted;
   result["poses_received"] = summary.poses_received;
   result["log_seconds"] = summary.log_seconds;
   result["wall_seconds"] = summary.wall_seconds;
   auto state = client.value()->get("/v1/sessions/" + session_id);
   if (!state) return fail(state.error().message);
   result["session"] = nlohmann::json::parse(state.value(), nullptr, false);
+  if (summary.accepted == 0) {
+    std::string skipped;
+    for (const auto& [topic, count] : summary.skipped_by_topic) skipped += fmt::format("{}{}", skipped.empty() ? "" : ", ", topic);
+    return fail(summary.messages_sent == 0
+                    ? fmt::format("no topic of the log is read by a sensor of session {} (log topics: {})", session_id, skipped)
+                    : fmt::format("session {} accepted none of the {} messages sent (see its sensors' rejections: GET /v1/sessions/{})",
+                                  session_id, summary.messages_sent, session_id));
+  }
   if (options.end) {
     if (Status ended = client.value()->end_session(session_id); !ended) return fail(ended.error().message);
     result["ended"] = true;
   }
-  std::string text = fmt::format("session {}: {} messages streamed ({:.1f} s of log in {:.1f} s), {} poses back", session_id,
-                                 summary.messages_sent, summary.log_seconds, summary.wall_seconds, summary.poses_received);
+  std::string text = fmt::format("session {}: {} messages streamed ({:.1f} s of log in {:.1f} s), {} accepted, {} poses back", session_id,
+                                 summary.messages_sent, summary.log_seconds, summary.wall_seconds, summary.accepted, summary.poses_received);
   for (const auto& [sensor, count] : summary.sent_by_sensor) text += fmt::format("\n  {}: {}", sensor, count);
+  for (const auto& [topic, count] : summary.skipped_by_topic) text += fmt::format("\n  skipped {}: {} (no sensor reads it)", topic, count);
   const nlohmann::json& session = result["session"];
   if (session.is_object() && session.contains("mapping")) {
     const nlohmann::json& mapping = session["mapping"];

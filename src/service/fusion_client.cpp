@@ -14,7 +14,10 @@
 #include <grpcpp/grpcpp.h>
 #include <nlohmann/json.hpp>
 
+#include "hanzo/fusion/config/fusion_config.hpp"
+#include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/pipeline/rejection.hpp"
 #include "hanzo/fusion/msgs/convert.hpp"
 #include "hanzo/fusion/v1/service.grpc.pb.h"
 // Last: httplib pulls in <resolv.h>, whose `_res` macro breaks Eigen headers included after it.
@@ -26,9 +29,10 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using nlohmann::json;
 
-// The server's error of a REST answer: "HTTP 404 not_found: no session 'x'".
-Error http_error(const httplib::Result& response, const std::string& what) {
-  if (!response) return Error(fmt::format("{}: {}", what, httplib::to_string(response.error())));
+// The server's error of a REST answer: "HTTP 404 not_found: no session 'x'"; without an answer
+// the URL tried and why.
+Error http_error(const httplib::Result& response, const std::string& what, const std::string& url) {
+  if (!response) return Error(fmt::format("{}: {} ({})", what, httplib::to_string(response.error()), url));
   std::string message = response->body;
   try {
     const json body = json::parse(response->body);
@@ -111,6 +115,23 @@ class TypedSensorStream final : public SensorStream {
   v1::PointCloudMessage sweep_;  // point cloud streams: the message written, reused
 };
 
+// Messages a session took so far (GET /v1/sessions/ID answer): its sensors' received counts
+// less the rejections by input checks.
+uint64_t accepted_messages(const json& session) {
+  uint64_t accepted = 0;
+  const json sensors = session.value("sensors", json::array());
+  for (const json& sensor : sensors) {
+    uint64_t refused = 0;
+    const json rejected = sensor.value("rejected", json::object());
+    for (const auto& [reason, count] : rejected.items()) {
+      const std::optional<pipeline::Rejection> rejection = pipeline::rejection_from_string(reason);
+      if (rejection && pipeline::is_input_check(*rejection)) refused += count.get<uint64_t>();
+    }
+    accepted += sensor.value("received", uint64_t{0}) - std::min(refused, sensor.value("received", uint64_t{0}));
+  }
+  return accepted;
+}
+
 }  // namespace
 
 struct FusionClient::Impl {
@@ -170,7 +191,7 @@ Result<std::string> FusionClient::create_session(const std::string& name, const 
   json body = {{"name", name}, {"config", config_yaml}};
   if (!calibration_yaml.empty()) body["calibration"] = calibration_yaml;
   const httplib::Result response = impl_->http->Post("/v1/sessions", impl_->headers(), body.dump(), "application/json");
-  if (!response || response->status != 201) return http_error(response, "create session");
+  if (!response || response->status != 201) return http_error(response, "create session", impl_->config.rest_url);
   try {
     return json::parse(response->body).at("id").get<std::string>();
   } catch (const std::exception& error) {
@@ -180,13 +201,13 @@ Result<std::string> FusionClient::create_session(const std::string& name, const 
 
 Result<std::string> FusionClient::get(const std::string& path) {
   const httplib::Result response = impl_->http->Get(path, impl_->headers());
-  if (!response || response->status / 100 != 2) return http_error(response, "GET " + path);
+  if (!response || response->status / 100 != 2) return http_error(response, "GET " + path, impl_->config.rest_url);
   return response->body;
 }
 
 Status FusionClient::end_session(const std::string& session_id) {
   const httplib::Result response = impl_->http->Delete("/v1/sessions/" + session_id, impl_->headers());
-  if (!response || response->status != 200) return http_error(response, "end session");
+  if (!response || response->status != 200) return http_error(response, "end session", impl_->config.rest_url);
   return ok_status();
 }
 
@@ -196,6 +217,22 @@ Result<StreamSummary> FusionClient::stream_log(const std::string& log_path, cons
   }
   std::unique_ptr<io::SensorLogReader> reader;
   HANZO_ASSIGN_OR_RETURN(reader, io::SensorLogReader::open(log_path));
+  // The session as it is: its configuration maps topics, its counts give `accepted`.
+  const auto session_state = [&]() -> Result<json> {
+    std::string body;
+    HANZO_ASSIGN_OR_RETURN(body, get("/v1/sessions/" + session_id));
+    json parsed = json::parse(body, nullptr, false);
+    if (!parsed.is_object()) return Error(fmt::format("GET /v1/sessions/{}: the answer is not a JSON object", session_id));
+    return parsed;
+  };
+  json before;
+  HANZO_ASSIGN_OR_RETURN(before, session_state());
+  std::map<std::string, std::string> sensor_by_topic = options.sensor_by_topic;
+  if (sensor_by_topic.empty()) {
+    auto configuration = config::parse_fusion_config(before.value("config", ""), "the configuration of session " + session_id);
+    if (!configuration) return configuration.error();
+    for (const config::SensorConfig& sensor : configuration->sensors) sensor_by_topic[sensor.topic] = sensor.name;
+  }
   PoseProgress progress;
   std::map<std::string, std::unique_ptr<SensorStream>> streams;  // by sensor
   StreamSummary summary;
@@ -211,14 +248,15 @@ Result<StreamSummary> FusionClient::stream_log(const std::string& log_path, cons
     }
     if (!*more) break;
     const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
-    const auto mapped = options.sensor_by_topic.find(entry.topic);
-    if (message == nullptr || (mapped == options.sensor_by_topic.end() && options.skip_unknown_topics)) {
+    const auto mapped = sensor_by_topic.find(entry.topic);
+    if (message == nullptr || mapped == sensor_by_topic.end()) {
+      if (message != nullptr && summary.skipped_by_topic[entry.topic] == 0) {
+        logger()->warn("stream: no sensor of session '{}' reads topic '{}'; its messages are skipped", session_id, entry.topic);
+      }
       ++summary.skipped_by_topic[entry.topic];
       continue;
     }
-    const std::string sensor = mapped != options.sensor_by_topic.end()          ? mapped->second
-                               : entry.topic.starts_with("/")                   ? entry.topic.substr(1)
-                                                                                : entry.topic;
+    const std::string& sensor = mapped->second;
     const Timestamp time = entry.log_time;
     if (!first_time) first_time = time;
     summary.log_seconds = (time - *first_time).seconds();
@@ -243,7 +281,7 @@ Result<StreamSummary> FusionClient::stream_log(const std::string& log_path, cons
       // The server ended the stream: its status says why (unknown session, permission, ...).
       const grpc::Status status = stream->finish();
       streams.erase(sensor);
-      return Error(fmt::format("stream {} ({}): {}", sensor, entry.topic,
+      return Error(fmt::format("stream {} ({}) to {}: {}", sensor, entry.topic, impl_->config.grpc_address,
                                status.ok() ? "the server closed the stream" : status.error_message()));
     }
     ++summary.messages_sent;
@@ -251,9 +289,14 @@ Result<StreamSummary> FusionClient::stream_log(const std::string& log_path, cons
   }
   for (auto& [sensor, stream] : streams) {
     const grpc::Status status = stream->finish();
-    if (!status.ok() && outcome) outcome = Error(fmt::format("stream {}: {}", sensor, status.error_message()));
+    if (!status.ok() && outcome) {
+      outcome = Error(fmt::format("stream {} to {}: {}", sensor, impl_->config.grpc_address, status.error_message()));
+    }
   }
   if (!outcome) return outcome.error();
+  json after;
+  HANZO_ASSIGN_OR_RETURN(after, session_state());
+  summary.accepted = accepted_messages(after) - std::min(accepted_messages(after), accepted_messages(before));
   summary.wall_seconds = std::chrono::duration<double>(Clock::now() - started).count();
   summary.poses_received = progress.received.load();
   summary.latest_pose = progress.latest;

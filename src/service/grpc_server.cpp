@@ -164,6 +164,7 @@ class FusionServiceImpl final : public v1::FusionService::Service {
     Counter& received = metrics_.counter("hanzo_fusion_stream_messages_total", "Messages read from gRPC streams", {{"modality", modality}});
     ProtoMessage in;
     grpc::Status outcome = grpc::Status::OK;
+    bool warned_unknown_sensor = false;  // once per stream: each of its messages names the same sensor
     while (!stopping_ && stream.Read(&in)) {
       received.increment();
       auto message = msgs::from_proto(in);
@@ -178,6 +179,11 @@ class FusionServiceImpl final : public v1::FusionService::Service {
           break;
         }
         reject(pushed.error().code == ErrorCode::kRejected ? "session" : "sensor", modality, pushed.error().message);
+        if (pushed.error().field == "sensor" && !warned_unknown_sensor) {
+          warned_unknown_sensor = true;
+          logger()->warn("gRPC {} stream into session '{}' (x-sensor '{}'): {}; its messages are dropped", modality, session_id, sensor,
+                         pushed.error().message);
+        }
       }
       // Answers at the stream's own rate: the newest pose since its previous message. The IMU's
       // stream thereby gets every pose (each IMU sample makes one); a LiDAR stream one per

@@ -662,7 +662,7 @@ ApiResult<msgs::PoseEstimate> SessionManager::current_pose(const Principal& call
   if (!found) return found.error();
   std::lock_guard lock(found.value()->mutex);
   if (!found.value()->latest_pose) {
-    return ApiError{ErrorCode::kNotFound, fmt::format("session '{}' has no pose yet (it needs IMU data to initialize)", session_id), ""};
+    return ApiError{ErrorCode::kNotFound, fmt::format("session '{}' has no pose yet", session_id), ""};
   }
   return *found.value()->latest_pose;
 }

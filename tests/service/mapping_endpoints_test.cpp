@@ -512,15 +512,17 @@ TEST_F(MappingEndpointsTest, OldAutosavesArePrunedAndMapsOrVersionsCanBeDeleted)
 }
 
 TEST_F(MappingEndpointsTest, FusionClientStreamsALogIntoANewSessionAndReportsServerErrors) {
-  // The recording as a sensor log, with a pose-estimate topic the client must skip.
+  // The recording as a sensor log under the configuration's topics, with a pose-estimate topic
+  // and a sensor topic no configured sensor reads: the client skips both.
   const std::string log = (testing::scratch_dir() / "urban.mcap").string();
   {
     io::SensorLogWriterConfig writer_config;
     writer_config.foxglove_channels = false;
     auto writer = io::SensorLogWriter::open(log, writer_config).value();
     for (const testing::TimedMessage& message : urban_recording().messages) {
-      ASSERT_TRUE(writer->write("/" + message.sensor, message.message).ok());
+      ASSERT_TRUE(writer->write("/sensors/" + message.sensor, message.message).ok());
     }
+    ASSERT_TRUE(writer->write("/sensors/spare_imu", urban_recording().messages.front().message).ok());
     msgs::PoseEstimate estimate;
     estimate.timestamp = msgs::timestamp_of(urban_recording().messages.back().message);
     ASSERT_TRUE(writer->write("/estimate", estimate).ok());
@@ -539,7 +541,9 @@ TEST_F(MappingEndpointsTest, FusionClientStreamsALogIntoANewSessionAndReportsSer
   auto streamed = client->stream_log(log, session_id.value(), options);
   ASSERT_TRUE(streamed.ok()) << streamed.error().message;
   EXPECT_EQ(streamed->messages_sent, recording.messages.size());
+  EXPECT_EQ(streamed->accepted, recording.messages.size());
   EXPECT_EQ(streamed->skipped_by_topic.at("/estimate"), 1U);
+  EXPECT_EQ(streamed->skipped_by_topic.at("/sensors/spare_imu"), 1U);
   EXPECT_GT(streamed->poses_received, 1000U);
   ASSERT_TRUE(streamed->latest_pose.has_value());
   // Every message reached the session, none too late for it, and the LiDAR mapped.
@@ -553,7 +557,18 @@ TEST_F(MappingEndpointsTest, FusionClientStreamsALogIntoANewSessionAndReportsSer
   EXPECT_THAT(client->get("/v1/sessions/" + session_id.value()).value(), HasSubstr("\"map_keyframes\""));
   ASSERT_TRUE(client->end_session(session_id.value()).ok());
 
-  // Errors name what the server said.
+  // Topics mapped to a sensor the session does not have: sent, none accepted (said, not an error).
+  auto second = client->create_session("misnamed", recording.config_yaml, recording.calibration_yaml);
+  ASSERT_TRUE(second.ok()) << second.error().message;
+  StreamOptions misnamed = options;
+  misnamed.sensor_by_topic = {{"/sensors/imu", "sensors/imu"}};
+  auto unaccepted = client->stream_log(log, second.value(), misnamed);
+  ASSERT_TRUE(unaccepted.ok()) << unaccepted.error().message;
+  EXPECT_GT(unaccepted->messages_sent, 1000U);
+  EXPECT_EQ(unaccepted->accepted, 0U);
+  EXPECT_TRUE(unaccepted->skipped_by_topic.contains("/sensors/lidar"));
+
+  // Errors name what the server said, or the address that did not answer.
   auto ended = client->stream_log(log, session_id.value(), options);
   ASSERT_FALSE(ended.ok());
   EXPECT_THAT(ended.error().message, HasSubstr("ended"));
@@ -566,6 +581,11 @@ TEST_F(MappingEndpointsTest, FusionClientStreamsALogIntoANewSessionAndReportsSer
   ASSERT_FALSE(refused.ok());
   EXPECT_THAT(refused.error().message, HasSubstr("401"));
   EXPECT_FALSE(client->stream_log(log + ".missing", session_id.value(), options).ok());
+  config.token = kRobotToken;
+  config.rest_url = "http://127.0.0.1:1";
+  auto nobody = FusionClient::create(config).value()->stream_log(log, session_id.value(), options);
+  ASSERT_FALSE(nobody.ok());
+  EXPECT_THAT(nobody.error().message, HasSubstr("http://127.0.0.1:1"));
   config.rest_url = "ftp://127.0.0.1";
   EXPECT_FALSE(FusionClient::create(config).ok());
 }

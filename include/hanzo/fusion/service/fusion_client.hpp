@@ -13,8 +13,13 @@
 // fast as the server fuses: a message is sent only when it is at most max_lead_s ahead of the
 // newest PoseEstimate the server has sent back (the session time-orders within its lag window;
 // a stream that ran further ahead would have its messages refused as too late).
-// Failure cases (returned Errors): the server unreachable or refusing (the error carries its
-// status and message), an unreadable log, the server not answering for stall_timeout_s.
+// Topics map to the session's sensors through the session's own configuration (fetched over
+// REST first), as `run` maps them: a log message is streamed when a configured sensor reads its
+// topic, every other topic is skipped, counted and logged at warning level.
+// Failure cases (returned Errors): the server unreachable or refusing (the error carries the
+// URL or address tried, the server's status and message), an unreadable log, the server not
+// answering for stall_timeout_s. A stream the session accepted no message of is not an error
+// here: StreamSummary::accepted says so (`hanzo-fusion stream` exits 1 on it).
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -39,16 +44,18 @@ struct StreamOptions {
   double rate = 1.0;         ///< x real time; 0 = as fast as the server fuses
   double max_lead_s = 0.25;  ///< rate 0: how far ahead of the server's newest pose to send
   double stall_timeout_s = 10.0;
-  /// Log topic -> the session's sensor name. Topics not listed stream as the sensor named like
-  /// the topic without its leading '/' (the importers' and simulator's convention).
+  /// Log topic -> the session's sensor name; topics not listed are skipped. Empty (default):
+  /// the topics of the session's configuration.
   std::map<std::string, std::string> sensor_by_topic;
-  bool skip_unknown_topics = false;  ///< with sensor_by_topic: drop other topics instead
 };
 
 struct StreamSummary {
   uint64_t messages_sent = 0;
   std::map<std::string, uint64_t> sent_by_sensor;
-  std::map<std::string, uint64_t> skipped_by_topic;  ///< not streamed (pose estimates, unknown topics)
+  std::map<std::string, uint64_t> skipped_by_topic;  ///< not streamed (pose estimates, topics no sensor reads)
+  /// Messages the session took: its sensors' `received` counts less the input checks' rejections
+  /// (unknown sensor, malformed, out of order, too late, ...), after minus before the stream.
+  uint64_t accepted = 0;
   uint64_t poses_received = 0;                       ///< PoseEstimates the streams sent back
   std::optional<msgs::PoseEstimate> latest_pose;
   double log_seconds = 0.0;   ///< log time spanned
