@@ -32,7 +32,7 @@ Result<MapBuilder> MapBuilder::create(const MapBuilderConfig& config) {
   return builder;
 }
 
-Status MapBuilder::insert(const SE3& T_world_sensor, const cloud::PointCloud& scan_in_sensor_frame) {
+Status MapBuilder::insert(const SE3& T_world_sensor, const cloud::PointCloud& scan_in_sensor_frame, ScanUse use) {
   if (!T_world_sensor.matrix().allFinite()) return Error{"map builder: sensor pose is not finite", "T_world_sensor"};
   HANZO_RETURN_IF_ERROR(scan_in_sensor_frame.validate());
   const Eigen::Matrix3d rotation = T_world_sensor.rotation().matrix();
@@ -64,7 +64,10 @@ Status MapBuilder::insert(const SE3& T_world_sensor, const cloud::PointCloud& sc
 
   if (occupancy_2d_) HANZO_RETURN_IF_ERROR(occupancy_2d_->insert_scan(origin.head<2>(), planar));
   if (occupancy_3d_) HANZO_RETURN_IF_ERROR(occupancy_3d_->insert_scan(origin, world));
-  if (point_map_) HANZO_RETURN_IF_ERROR(point_map_->add_keyframe(summary_.scans, T_world_sensor, scan_in_sensor_frame));
+  if (point_map_ && use == ScanUse::kAllLayers) {
+    HANZO_RETURN_IF_ERROR(point_map_->add_keyframe(summary_.point_keyframes, T_world_sensor, scan_in_sensor_frame));
+    ++summary_.point_keyframes;
+  }
   if (tsdf_) HANZO_RETURN_IF_ERROR(tsdf_->integrate_scan(origin, world));
   ++summary_.scans;
   summary_.points += world.size();

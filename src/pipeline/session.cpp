@@ -486,12 +486,18 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
   if (last_lidar_pose_) path_ += (last_lidar_pose_->inverse() * T_world_lidar).translation().norm();
   last_lidar_pose_ = T_world_lidar;
   // A map keyframe: the first sweep after a new Frontend keyframe, once the LiDAR moved enough.
-  if (!latest_keyframe_ || (last_anchor_ && *last_anchor_ == latest_keyframe_->keyframe_id)) return;
-  if (!map_keyframes_.empty()) {
+  // Every other sweep goes into the grids only (free space needs many rays through a cell).
+  bool keyframe = latest_keyframe_ && !(last_anchor_ && *last_anchor_ == latest_keyframe_->keyframe_id);
+  if (keyframe && !map_keyframes_.empty()) {
     const SE3 since = map_keyframes_.back().T_world_lidar.inverse() * T_world_lidar;
-    if (since.translation().norm() < config_.map_keyframe_distance && since.rotation().log().norm() < config_.map_keyframe_angle) return;
+    keyframe = since.translation().norm() >= config_.map_keyframe_distance || since.rotation().log().norm() >= config_.map_keyframe_angle;
   }
-  add_map_keyframe(T_world_lidar, registered.points);
+  if (keyframe) return add_map_keyframe(T_world_lidar, registered.points);
+  cloud::PointCloud cloud;
+  cloud.positions = registered.points;
+  if (Status inserted = map_builder_.insert(T_world_lidar, cloud, maps::ScanUse::kGridsOnly); !inserted) {
+    logger()->warn("session: sweep not inserted into the map's grids: {}", inserted.error().message);
+  }
 }
 
 void Session::add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points) {

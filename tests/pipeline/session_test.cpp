@@ -13,6 +13,7 @@
 #include "hanzo/fusion/cloud/voxel_hash_map.hpp"
 #include "hanzo/fusion/eval/pose_error.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
+#include "hanzo/fusion/maps/map_builder.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
 #include "hanzo/fusion/pipeline/session.hpp"
 #include "hanzo/fusion/sim/scenario.hpp"
@@ -287,6 +288,45 @@ TEST(Session, RunsWithoutAnImu) {
     EXPECT_GT(mapping.map_keyframes, 10U);
     EXPECT_LT(rmse, 0.1);
   }
+}
+
+// Cells of a map layer below the free threshold.
+std::size_t free_cells(const msgs::OccupancyGridLayer& layer) {
+  const double threshold = maps::OccupancyConfig{}.free_threshold;
+  return static_cast<std::size_t>(std::count_if(layer.occupancy.begin(), layer.occupancy.end(), [&](float p) { return p < threshold; }));
+}
+
+// The live map's occupancy grid sees what `map build` sees: every registered sweep clears
+// the free space along its rays (the point map keeps keyframes only). Compared with a
+// MapBuilder fed every sweep at its true pose (the grids differ by the Session's unknown
+// initial yaw and its registration error, not in what they contain).
+TEST(Session, LiveOccupancyGridClearsFreeSpaceAsMapBuildDoes) {
+  const sim::Scenario scenario = imu_and_lidar(15.0);
+  auto simulation = sim::ScenarioSimulation::create(scenario).value();
+  auto session = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  maps::MapBuilderConfig builder_config = SessionConfig::from(sim::scenario_fusion_config(scenario)).map;
+  builder_config.points = false;
+  auto builder = maps::MapBuilder::create(builder_config).value();
+  const Status status = simulation->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
+    if (const auto* sweep = std::get_if<msgs::PointCloudMessage>(&message)) {
+      cloud::PointCloud cloud;
+      cloud.positions = sweep->points;
+      const SE3 T_world_lidar = simulation->trajectory().sample(sweep->timestamp).T_world_body * sensor.T_body_sensor;
+      EXPECT_TRUE(builder.insert(T_world_lidar, cloud).ok());
+    }
+    return session->push(sensor.name, message);
+  });
+  ASSERT_TRUE(status.ok()) << status.error().message;
+  session->flush();
+  const msgs::FusionMap live = session->map();
+  msgs::FusionMap built;
+  builder.write_layers(built);
+  ASSERT_TRUE(live.occupancy && built.occupancy);
+  const std::size_t live_free = free_cells(*live.occupancy), built_free = free_cells(*built.occupancy);
+  std::printf("15 s urban drive, 2D grid at %.2f m: %zu free cells live, %zu with map build's insertion\n", live.occupancy->resolution,
+              live_free, built_free);
+  EXPECT_GT(live_free, built_free * 85 / 100);
+  EXPECT_LT(live_free, built_free * 115 / 100);
 }
 
 TEST(Session, RefusesBadSweepsWithAReasonAndKeepsMapping) {

@@ -45,8 +45,17 @@ struct MapBuilderConfig {
   Status validate() const;
 };
 
+/// What a scan is inserted for. A SLAM pipeline keeps every sweep in the grids (free space
+/// needs many rays through a cell; `map build` inserts every scan) but only keyframes in the
+/// point map.
+enum class ScanUse {
+  kAllLayers,  ///< every layer; the point map keeps the scan as its next keyframe
+  kGridsOnly,  ///< occupancy and TSDF only
+};
+
 struct MapBuilderSummary {
-  uint64_t scans = 0;
+  uint64_t scans = 0;            ///< every scan inserted
+  uint64_t point_keyframes = 0;  ///< scans the point map kept (ScanUse::kAllLayers)
   uint64_t points = 0;        ///< returns integrated (before downsampling)
   uint64_t points_in_2d_band = 0;
 };
@@ -56,9 +65,9 @@ class MapBuilder {
   static Result<MapBuilder> create(const MapBuilderConfig& config);
 
   /// Integrates one scan. Invalid clouds or poses are rejected, changing nothing.
-  Status insert(const SE3& T_world_sensor, const cloud::PointCloud& scan_in_sensor_frame);
-  /// Moves earlier scans (numbered 0, 1, ... in insertion order) in the point map after a
-  /// correction. Occupancy layers keep what was integrated (rebuild them from the corrected
+  Status insert(const SE3& T_world_sensor, const cloud::PointCloud& scan_in_sensor_frame, ScanUse use = ScanUse::kAllLayers);
+  /// Moves earlier point-map keyframes (numbered 0, 1, ... in the order of the kAllLayers
+  /// inserts) after a correction. Occupancy layers keep what was integrated (rebuild them from the corrected
   /// poses when the correction is large).
   Status correct_poses(const std::map<uint64_t, SE3>& T_world_sensor_by_scan);
 
