@@ -5,6 +5,7 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include "argument_hint.hpp"
 #include "commands.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 
@@ -43,7 +44,8 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {
     if (error.get_exit_code() == 0) return app.exit(error);  // --help, --version
-    std::cerr << "hanzo-fusion: " << error.what() << " (see hanzo-fusion --help)\n";
+    const std::optional<std::string> hint = app::unknown_argument_hint(app, std::vector<std::string>(argv + 1, argv + argc));
+    std::cerr << "hanzo-fusion: " << hint.value_or(error.what()) << " (see hanzo-fusion --help)\n";
     return 2;
   }
 

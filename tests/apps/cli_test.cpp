@@ -120,6 +120,19 @@ TEST(Cli, MissingFileAndUsageErrors) {
   const CliRun unknown = run("frobnicate");
   EXPECT_NE(unknown.exit_code, 0);
   EXPECT_THAT(unknown.err, HasSubstr("hanzo-fusion:"));
+  // A misspelt option or command is named with the closest valid spelling (exit 2), before any
+  // other complaint about the line.
+  const std::pair<const char*, const char*> misspelt[] = {
+      {"run --config examples/data/fusion.yaml --calibraton c.yaml", "unknown option '--calibraton' for 'run'; did you mean '--calibration'?"},
+      {"map build --log a.mcap --height-band -0.3 1.0 --resoluton 0.1", "did you mean '--resolution'?"},
+      {"map exprt", "unknown command 'exprt' for 'map'; did you mean 'export'?"},
+      {"rn --config x", "did you mean 'run'?"},
+      {"run --jsn", "did you mean '--json'?"}};
+  for (const auto& [line, expected] : misspelt) {
+    const CliRun wrong = run(line);
+    EXPECT_EQ(wrong.exit_code, 2) << line;
+    EXPECT_THAT(wrong.err, HasSubstr(expected)) << line;
+  }
 }
 
 const std::string kEvo = std::string(HANZO_DATA_DIR) + "/trajectory_eval_evo/";
