@@ -60,6 +60,31 @@ ApiResult<std::string> map_format(const httplib::Request& request) {
   return format;
 }
 
+// POST /v1/sessions: a JSON object (name, config, calibration: YAML text or JSON objects), the
+// files themselves as multipart/form-data parts `config`, `calibration`, `name` (curl -F
+// config=@fusion.yaml), or the configuration file as the body with a YAML content type
+// (curl --data-binary @fusion.yaml -H 'Content-Type: application/yaml'; name from ?name=).
+ApiResult<CreateSessionRequest> create_session_request(const httplib::Request& request) {
+  const std::string type = request.get_header_value("Content-Type");
+  if (request.is_multipart_form_data()) {
+    for (const auto& [part, content] : request.files) {
+      if (part != "config" && part != "calibration" && part != "name") {
+        return ApiError{ErrorCode::kInvalidArgument, fmt::format("unknown form part '{}' (known: config, calibration, name)", part), part};
+      }
+    }
+    if (!request.has_file("config")) {
+      return ApiError{ErrorCode::kInvalidArgument, "config is missing (a form part with the fusion configuration file)", "config"};
+    }
+    const auto part = [&](const char* name) { return request.has_file(name) ? request.get_file_value(name).content : std::string(); };
+    return CreateSessionRequest{part("name"), part("config"), part("calibration")};
+  }
+  if (type.starts_with("application/yaml") || type.starts_with("application/x-yaml") || type.starts_with("text/yaml")) {
+    if (request.body.empty()) return ApiError{ErrorCode::kInvalidArgument, "the request body is empty (expected the fusion configuration)", "body"};
+    return CreateSessionRequest{request.has_param("name") ? request.get_param_value("name") : "", request.body, ""};
+  }
+  return detail::parse_create_session(request.body);
+}
+
 // A map as a FusionMap file, or its point layer as binary PCD / PLY.
 void send_map_file(httplib::Response& response, const msgs::FusionMap& map, const std::string& format) {
   Result<std::string> bytes = Error("");
@@ -144,7 +169,7 @@ struct RestServer::Impl {
 
     s.Post("/v1/sessions", authenticated("POST", "/v1/sessions", [this](const httplib::Request& request, httplib::Response& response,
                                                                       const Principal& caller) {
-      auto parsed = detail::parse_create_session(request.body);
+      auto parsed = create_session_request(request);
       if (!parsed) return send_error(response, parsed.error());
       auto created = sessions->create_session(caller, parsed.value());
       if (!created) return send_error(response, created.error());

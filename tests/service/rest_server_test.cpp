@@ -194,6 +194,42 @@ TEST_F(RestServerTest, SessionLifecycle) {
 // which of the fixture's tokens may call it. No token, an unknown token or another scheme: 401;
 // a token of the organization lacking a required permission: 403; another organization's token
 // (an admin's) on a session or map of this one: 403; a token with the permissions: neither.
+// The files themselves, without escaping them into JSON: multipart form parts (curl -F
+// config=@fusion.yaml -F calibration=@calibration.yaml) or the configuration as a YAML body.
+TEST_F(RestServerTest, CreatesSessionsFromPostedYamlFiles) {
+  auto http = client();
+  const std::string configuration = testing::read_text("examples/data/fusion.yaml");
+  const std::string calibration = testing::read_text("examples/calibration.yaml");
+  const httplib::MultipartFormDataItems form = {{"config", configuration, "fusion.yaml", "application/yaml"},
+                                                {"calibration", calibration, "calibration.yaml", "application/yaml"},
+                                                {"name", "from files", "", ""}};
+  auto created = http.Post("/v1/sessions", bearer(kRobotToken), form);
+  ASSERT_TRUE(created);
+  ASSERT_EQ(created->status, 201) << created->body;
+  const json session = json::parse(created->body);
+  EXPECT_EQ(session["name"], "from files");
+  EXPECT_EQ(session["sensors"].size(), 3u);
+  EXPECT_THAT(session["calibration"].get<std::string>(), HasSubstr("imu_to_body"));
+
+  auto yaml_body = http.Post("/v1/sessions?name=yaml%20body", bearer(kRobotToken), configuration, "application/yaml");
+  ASSERT_TRUE(yaml_body);
+  ASSERT_EQ(yaml_body->status, 201) << yaml_body->body;
+  EXPECT_EQ(json::parse(yaml_body->body)["name"], "yaml body");
+
+  // Bad forms name what is wrong; nothing is created.
+  const httplib::MultipartFormDataItems no_config = {{"calibration", calibration, "calibration.yaml", ""}};
+  auto missing = http.Post("/v1/sessions", bearer(kRobotToken), no_config);
+  EXPECT_EQ(missing->status, 400);
+  EXPECT_EQ(error_of(missing)["field"], "config");
+  const httplib::MultipartFormDataItems extra = {{"config", configuration, "", ""}, {"calibraton", calibration, "", ""}};
+  auto unknown = http.Post("/v1/sessions", bearer(kRobotToken), extra);
+  EXPECT_EQ(unknown->status, 400);
+  EXPECT_THAT(error_of(unknown)["message"].get<std::string>(), HasSubstr("calibraton"));
+  auto broken = http.Post("/v1/sessions", bearer(kRobotToken), "fusion: [unclosed", "application/yaml");
+  EXPECT_EQ(broken->status, 400) << broken->body;
+  EXPECT_EQ(json::parse(http.Get("/v1/sessions", bearer(kViewerToken))->body)["sessions"].size(), 2u);
+}
+
 TEST_F(RestServerTest, AuthMatrixOfEveryOperationInTheOpenApiDocument) {
   const std::string session_id = create_session();
   msgs::FusionMap map;
