@@ -13,6 +13,13 @@ int write_log(const Output& output, nlohmann::json& result, const LogWriteOption
   io::SensorLogWriterConfig config;
   config.mcap.compression = *compression;
   config.foxglove_channels = options.foxglove_channels;
+  const std::optional<io::ImageCompression> image_compression = io::image_compression_from_string(options.image_compression);
+  if (!image_compression) {
+    return report_failure(output, result, fmt::format("image compression '{}': expected none, png or jpeg", options.image_compression));
+  }
+  config.image_compression = *image_compression;
+  config.jpeg_quality = options.jpeg_quality;
+  config.point_resolution = options.point_resolution;
   const std::string temporary = options.path + ".partial";
   auto writer = io::SensorLogWriter::open(temporary, config);
   if (!writer) return report_failure(output, result, writer.error().message);

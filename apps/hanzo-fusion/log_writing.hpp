@@ -16,6 +16,9 @@ struct LogWriteOptions {
   std::string path;                  ///< the .mcap to write
   std::string compression = "zstd";  ///< zstd, lz4 or none
   bool foxglove_channels = true;     ///< Foxglove mirror channels
+  std::string image_compression = "none";  ///< none, png or jpeg
+  int jpeg_quality = 90;
+  double point_resolution = 0.0;     ///< m; 0: exact point coordinates
 };
 
 /// Opens PATH.partial, lets `fill` write it, and renames it into place when complete. Returns 0,

@@ -1,6 +1,6 @@
 // hanzo-fusion sim SCENARIO.yaml --out DIR: runs a simulation scenario and writes
-//   DIR/sensors.mcap        the sensor log (every sensor and /ground_truth poses; Foxglove mirrors
-//                           unless --no-foxglove)
+//   DIR/sensors.mcap        the sensor log (every sensor and /ground_truth poses; images as JPEG,
+//                           points to 1 mm by default; Foxglove mirrors with --foxglove)
 //   DIR/ground_truth.tum    the body trajectory at the scenario's ground_truth_rate
 //   DIR/imu_biases.csv      the first IMU's true biases per sample (when there is an IMU)
 //   DIR/calibration.yaml    the sensors' extrinsics and camera intrinsics (spec layout)
@@ -36,7 +36,10 @@ struct SimOptions {
   std::optional<int64_t> seed;
   std::optional<int> threads;
   std::string compression = "zstd";
-  bool no_foxglove = false;
+  bool foxglove = false;
+  std::string image_compression = "jpeg";
+  int jpeg_quality = 90;
+  double point_resolution = 0.001;
   std::vector<std::string> sensors;  // empty: all of the scenario's
 };
 
@@ -93,7 +96,8 @@ int run_sim(const Output& output, const SimOptions& options) {
   const std::filesystem::path folder(options.out);
   const std::string log_path = (folder / "sensors.mcap").string();
   const io::Trajectory truth = ground_truth(run);
-  const int code = write_log(output, result, {log_path, options.compression, !options.no_foxglove}, [&](io::SensorLogWriter& writer) -> Status {
+  const int code = write_log(output, result, {log_path, options.compression, options.foxglove, options.image_compression,
+                                                           options.jpeg_quality, options.point_resolution}, [&](io::SensorLogWriter& writer) -> Status {
     const GeodeticPoint& datum = run.scenario().datum;
     HANZO_RETURN_IF_ERROR(writer.add_metadata({"hanzo.simulation",
                                                {{"scenario", run.scenario().name},
@@ -189,7 +193,16 @@ void add_sim_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--threads", options->threads, "Ray-casting threads for LiDARs and cameras (0: all cores; same output)")
       ->check(CLI::Range(0, 1024));
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
-  command->add_flag("--no-foxglove", options->no_foxglove, "Leave out the Foxglove mirror channels");
+  command->add_flag("--foxglove,!--no-foxglove", options->foxglove,
+                    "Also write Foxglove mirror channels (PointCloud, CompressedImage, ...; about doubles the LiDAR's share)");
+  command->add_option("--image-compression", options->image_compression, "Camera images stored as jpeg, png or none (raw)")
+      ->check(CLI::IsMember({"jpeg", "png", "none"}))
+      ->capture_default_str();
+  command->add_option("--jpeg-quality", options->jpeg_quality, "JPEG quality (1..100)")->check(CLI::Range(1, 100))->capture_default_str();
+  command->add_option("--point-resolution", options->point_resolution,
+                      "LiDAR points stored as multiples of this many meters (0: exact floats)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   command->add_option("--sensors", options->sensors, "Simulate only these sensors (names from the scenario, comma-separated)")
       ->delimiter(',');
   command->callback([&output, &run, options] { run = [&output, options] { return run_sim(output, *options); }; });

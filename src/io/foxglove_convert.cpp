@@ -5,6 +5,7 @@
 #include "foxglove/LocationFix.pb.h"
 #include "foxglove/PointCloud.pb.h"
 #include "foxglove/PoseInFrame.pb.h"
+#include "foxglove/CompressedImage.pb.h"
 #include "foxglove/RawImage.pb.h"
 
 namespace hanzo::fusion::io::foxglove_mirror {
@@ -118,6 +119,15 @@ std::unique_ptr<google::protobuf::Message> to_foxglove(const msgs::PoseEstimate&
   set_time(*out->mutable_timestamp(), pose.timestamp);
   out->set_frame_id(pose.frame_id);
   set_pose(*out->mutable_pose(), pose.T_world_body.position, pose.T_world_body.orientation);
+  return out;
+}
+
+std::unique_ptr<google::protobuf::Message> compressed_image(const v1::ImageMessage& image, const std::string& frame_id_fallback) {
+  auto out = std::make_unique<foxglove::CompressedImage>();
+  set_time(*out->mutable_timestamp(), Timestamp::from_nanoseconds(static_cast<int64_t>(image.timestamp_ns())));
+  out->set_frame_id(image.frame_id().empty() ? frame_id_fallback : image.frame_id());
+  out->set_data(image.data());
+  out->set_format(image.compression());
   return out;
 }
 

@@ -1,12 +1,15 @@
 #include "hanzo/fusion/io/sensor_log.hpp"
 
+#include <cmath>
 #include <set>
+#include <type_traits>
 
 #include <fmt/format.h>
 #include <google/protobuf/descriptor.h>
 #include <google/protobuf/descriptor.pb.h>
 
 #include "foxglove_convert.hpp"
+#include "image_compression.hpp"
 #include "hanzo/fusion/msgs/convert.hpp"
 #include "hanzo/fusion/msgs/validate.hpp"
 #include "hanzo/fusion/v1/estimates.pb.h"
@@ -30,6 +33,11 @@ Result<LogEntry> decode(const mcap::MessageView& view) {
     return Error(fmt::format("{} at {} ns: payload is not a valid {}", view.channel->topic, view.log_time,
                              V1::descriptor()->full_name()));
   }
+  if constexpr (std::is_same_v<V1, v1::ImageMessage>) {
+    if (Status decoded = decompress_image(proto); !decoded) {
+      return Error(fmt::format("{} at {} ns: {}", view.channel->topic, view.log_time, decoded.error().message), decoded.error().field);
+    }
+  }
   auto message = msgs::from_proto(proto);
   if (!message) return Error(fmt::format("{} at {} ns: {}", view.channel->topic, view.log_time, message.error().message));
   LogEntry entry;
@@ -40,6 +48,13 @@ Result<LogEntry> decode(const mcap::MessageView& view) {
 }
 
 }  // namespace
+
+std::optional<ImageCompression> image_compression_from_string(std::string_view name) {
+  if (name == "none") return ImageCompression::kNone;
+  if (name == "png") return ImageCompression::kPng;
+  if (name == "jpeg") return ImageCompression::kJpeg;
+  return std::nullopt;
+}
 
 std::string file_descriptor_set(const google::protobuf::Descriptor& descriptor) {
   google::protobuf::FileDescriptorSet set;
@@ -55,6 +70,12 @@ Result<std::unique_ptr<SensorLogWriter>> SensorLogWriter::open(const std::string
 Result<std::unique_ptr<SensorLogWriter>> SensorLogWriter::open(const std::string& path, const SensorLogWriterConfig& config) {
   if (config.foxglove_channels && config.foxglove_topic_suffix.empty()) {
     return Error("sensor log: foxglove_topic_suffix must not be empty (mirrors would share the topics they mirror)");
+  }
+  if (!(std::isfinite(config.point_resolution) && config.point_resolution >= 0)) {
+    return Error(fmt::format("sensor log: point_resolution {} m: expected 0 (exact) or a positive number", config.point_resolution));
+  }
+  if (config.jpeg_quality < 1 || config.jpeg_quality > 100) {
+    return Error(fmt::format("sensor log: jpeg_quality {}: expected 1..100", config.jpeg_quality));
   }
   std::unique_ptr<mcap::McapWriter> writer;
   HANZO_ASSIGN_OR_RETURN(writer, mcap::McapWriter::open(path, config.mcap));
@@ -87,7 +108,23 @@ Status SensorLogWriter::write(const std::string& topic, const msgs::SensorMessag
         const std::string sensor = sensor_name.empty() ? (topic.starts_with('/') ? topic.substr(1) : topic) : sensor_name;
         const std::map<std::string, std::string> metadata = {{"sensor", sensor},
                                                              {"modality", std::string(msgs::modality_name(message))}};
-        HANZO_RETURN_IF_ERROR(write_proto(topic, msgs::to_proto(typed), typed.timestamp, metadata));
+        using Message = std::decay_t<decltype(typed)>;
+        if constexpr (std::is_same_v<Message, msgs::PointCloudMessage>) {
+          // Packed (or quantized) points and fixed-width time offsets instead of a Point3
+          // message and a varint time per point.
+          v1::PointCloudMessage sweep;
+          msgs::to_proto(typed, &sweep, config_.point_resolution > 0 ? msgs::PointEncoding::kQuantized : msgs::PointEncoding::kPacked,
+                         config_.point_resolution);
+          HANZO_RETURN_IF_ERROR(write_proto(topic, sweep, typed.timestamp, metadata));
+        } else if constexpr (std::is_same_v<Message, msgs::ImageMessage>) {
+          const v1::ImageMessage image = compressed_image(typed, config_.image_compression, config_.jpeg_quality);
+          HANZO_RETURN_IF_ERROR(write_proto(topic, image, typed.timestamp, metadata));
+          if (config_.foxglove_channels && !image.compression().empty()) {
+            return write_mirror(topic, foxglove_mirror::compressed_image(image, sensor).get(), typed.timestamp);  // no second copy of the pixels
+          }
+        } else {
+          HANZO_RETURN_IF_ERROR(write_proto(topic, msgs::to_proto(typed), typed.timestamp, metadata));
+        }
         if (!config_.foxglove_channels) return ok_status();
         return write_mirror(topic, foxglove_mirror::to_foxglove(message, sensor).get(), typed.timestamp);
       },

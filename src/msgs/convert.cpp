@@ -1,5 +1,6 @@
 #include "hanzo/fusion/msgs/convert.hpp"
 
+#include <cmath>
 #include <algorithm>
 #include <limits>
 
@@ -125,11 +126,42 @@ v1::PointCloudMessage to_proto(const PointCloudMessage& message) {
   return out;
 }
 
-void to_proto(const PointCloudMessage& message, v1::PointCloudMessage* out, PointEncoding encoding) {
+namespace {
+
+// The points as deltas of multiples of `resolution`; false (out untouched) when a coordinate is
+// not finite or lies beyond +-2^30 resolutions.
+bool quantize_points(const std::vector<Eigen::Vector3f>& points, double resolution, v1::PointCloudMessage* out) {
+  constexpr double kLimit = double{1 << 30};
+  for (const Eigen::Vector3f& point : points) {
+    if (!((point.cast<double>().array().abs() / resolution) < kLimit).all()) return false;
+  }
+  out->mutable_quantized_points()->Resize(static_cast<int>(3 * points.size()), 0);
+  int32_t* delta = out->mutable_quantized_points()->mutable_data();
+  Eigen::Vector3i previous = Eigen::Vector3i::Zero();
+  for (const Eigen::Vector3f& point : points) {
+    for (int axis = 0; axis < 3; ++axis) {
+      const auto steps = static_cast<int32_t>(std::llround(static_cast<double>(point[axis]) / resolution));
+      *delta++ = steps - previous[axis];  // |steps| < 2^30: the difference fits
+      previous[axis] = steps;
+    }
+  }
+  out->set_point_resolution(resolution);
+  return true;
+}
+
+}  // namespace
+
+void to_proto(const PointCloudMessage& message, v1::PointCloudMessage* out, PointEncoding encoding, double point_resolution) {
   out->Clear();  // keeps the cleared Point3 objects for add_points() to reuse
   out->set_timestamp_ns(write_time(message.timestamp));
   out->set_frame_id(message.frame_id);
-  if (encoding == PointEncoding::kPacked) {
+  if (encoding == PointEncoding::kQuantized &&
+      !(std::isfinite(point_resolution) && point_resolution > 0 && quantize_points(message.points, point_resolution, out))) {
+    encoding = PointEncoding::kPacked;
+  }
+  if (encoding == PointEncoding::kQuantized) {
+    // quantize_points() wrote them.
+  } else if (encoding == PointEncoding::kPacked) {
     out->mutable_packed_points()->Resize(static_cast<int>(3 * message.points.size()), 0.0f);
     float* packed = out->mutable_packed_points()->mutable_data();
     for (const Eigen::Vector3f& point : message.points) packed = std::copy_n(point.data(), 3, packed);
@@ -144,7 +176,7 @@ void to_proto(const PointCloudMessage& message, v1::PointCloudMessage* out, Poin
   }
   out->mutable_intensities()->Add(message.intensities.begin(), message.intensities.end());
   out->mutable_ring_ids()->Add(message.ring_ids.begin(), message.ring_ids.end());
-  if (encoding == PointEncoding::kPacked) {
+  if (encoding != PointEncoding::kPoint3) {
     // Offsets when every point is within their +-2.1 s of the stamp, else the absolute times.
     google::protobuf::RepeatedField<int32_t>& offsets = *out->mutable_point_time_offsets_ns();
     offsets.Resize(static_cast<int>(message.point_timestamps.size()), 0);
@@ -166,14 +198,27 @@ Result<PointCloudMessage> from_proto(const v1::PointCloudMessage& in) {
   PointCloudMessage message;
   HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
   message.frame_id = in.frame_id();
-  if (in.points_size() > 0 && in.packed_points_size() > 0) return read.fail("packed_points", "set points or packed_points, not both");
+  if ((in.points_size() > 0) + (in.packed_points_size() > 0) + (in.quantized_points_size() > 0) > 1) {
+    return read.fail("packed_points", "set one of points, packed_points and quantized_points");
+  }
   if (in.packed_points_size() % 3 != 0) {
     return read.fail("packed_points", fmt::format("{} values is not x, y, z triplets", in.packed_points_size()));
   }
-  message.points.reserve(static_cast<std::size_t>(in.points_size() + in.packed_points_size() / 3));
+  if (in.quantized_points_size() % 3 != 0) {
+    return read.fail("quantized_points", fmt::format("{} values is not x, y, z triplets", in.quantized_points_size()));
+  }
+  if (in.quantized_points_size() > 0 && !(std::isfinite(in.point_resolution()) && in.point_resolution() > 0)) {
+    return read.fail("point_resolution", fmt::format("{} m: quantized points need a positive resolution", in.point_resolution()));
+  }
+  message.points.reserve(static_cast<std::size_t>(in.points_size() + in.packed_points_size() / 3 + in.quantized_points_size() / 3));
   for (const v1::Point3& p : in.points()) message.points.emplace_back(p.x(), p.y(), p.z());
   const float* packed = in.packed_points().data();
   for (int i = 0; i < in.packed_points_size(); i += 3) message.points.emplace_back(packed[i], packed[i + 1], packed[i + 2]);
+  Eigen::Matrix<int64_t, 3, 1> steps = Eigen::Matrix<int64_t, 3, 1>::Zero();
+  for (int i = 0; i < in.quantized_points_size(); i += 3) {
+    for (int axis = 0; axis < 3; ++axis) steps[axis] += in.quantized_points(i + axis);
+    message.points.push_back((steps.cast<double>() * in.point_resolution()).cast<float>());
+  }
   message.intensities.assign(in.intensities().begin(), in.intensities().end());
   message.ring_ids.assign(in.ring_ids().begin(), in.ring_ids().end());
   if (in.point_timestamps_size() > 0 && in.point_time_offsets_ns_size() > 0) {
@@ -249,6 +294,10 @@ Result<ImageMessage> from_proto(const v1::ImageMessage& in) {
     return read.fail("encoding", fmt::format("unknown encoding '{}' (expected rgb8, bgr8, mono8, depth16 or depth32f)", in.encoding()));
   }
   message.encoding = *encoding;
+  if (!in.compression().empty()) {
+    return read.fail("compression", fmt::format("a '{}' image: send raw pixels (sensor logs decode their compressed images when read)",
+                                                in.compression()));
+  }
   message.data.assign(in.data().begin(), in.data().end());
   if (in.has_intrinsics()) {
     const v1::CameraIntrinsics& intrinsics = in.intrinsics();

@@ -341,10 +341,10 @@ TEST(Cli, SimWritesLogGroundTruthCalibrationAndConfig) {
   const nlohmann::json log = nlohmann::json::parse(info.out);
   std::set<std::string> topics;
   for (const auto& channel : log["channels"]) topics.insert(channel["topic"].get<std::string>());
-  for (const char* topic : {"/sensors/imu", "/sensors/lidar", "/sensors/lidar/foxglove", "/sensors/camera_front", "/sensors/wheels",
-                            "/ground_truth", "/ground_truth/foxglove"}) {
+  for (const char* topic : {"/sensors/imu", "/sensors/lidar", "/sensors/camera_front", "/sensors/wheels", "/ground_truth"}) {
     EXPECT_TRUE(topics.count(topic)) << topic;
   }
+  EXPECT_FALSE(topics.count("/sensors/lidar/foxglove")) << "Foxglove mirrors are opt-in (--foxglove)";
   EXPECT_EQ(run(fmt::format("calib check {}", (dir / "calibration.yaml").string())).exit_code, 0);
   EXPECT_EQ(run(fmt::format("config check {}", (dir / "fusion.yaml").string())).exit_code, 0);
   std::ifstream truth(dir / "ground_truth.tum");

@@ -76,7 +76,7 @@ while ((record = stream.nextRecord())) {
     entry.first_points = firstPoints(message, 3);
     entry.first.data = `${message.data.length} bytes`;
   }
-  if (schema.name === "foxglove.RawImage") entry.first.data = `${message.data.length} bytes`;
+  if (schema.name === "foxglove.RawImage" || schema.name === "foxglove.CompressedImage") entry.first.data = `${message.data.length} bytes`;
   channels[channel.topic] = entry;
 }
 console.log(JSON.stringify({ channels, fieldsCompared, mismatches }));

@@ -84,6 +84,29 @@ TEST(FoxgloveMirror, OfficialSchemasDecodeEveryMirrorChannel) {
   std::filesystem::remove(path);
 }
 
+// Images stored as JPEG / PNG are mirrored as the same file in foxglove.CompressedImage.
+TEST(FoxgloveMirror, CompressedImagesAreMirroredAsTheFileItself) {
+  const std::string path =
+      (std::filesystem::temp_directory_path() / fmt::format("hanzo_foxglove_compressed_{}.mcap", ::getpid())).string();
+  SensorLogWriterConfig config;
+  config.image_compression = ImageCompression::kJpeg;
+  {
+    auto writer = SensorLogWriter::open(path, config);
+    ASSERT_TRUE(writer.ok());
+    ASSERT_TRUE((*writer)->write("/camera", fixtures::image()).ok());
+    ASSERT_TRUE((*writer)->close().ok());
+  }
+  const nlohmann::json theirs = test::run_node("foxglove_schemas.mjs", path);
+  ASSERT_FALSE(theirs.is_null());
+  EXPECT_TRUE(theirs["mismatches"].empty()) << theirs["mismatches"].dump();
+  const nlohmann::json& image = theirs["channels"]["/camera/foxglove"];
+  EXPECT_EQ(image["schema"], "foxglove.CompressedImage");
+  EXPECT_EQ(image["first"]["format"], "jpeg");
+  EXPECT_EQ(image["first"]["frame_id"], fixtures::image().frame_id);
+  EXPECT_EQ(image["mirror_of"], "/camera");
+  std::filesystem::remove(path);
+}
+
 TEST(FoxgloveMirror, CanBeLeftOut) {
   const std::string path =
       (std::filesystem::temp_directory_path() / fmt::format("hanzo_foxglove_off_{}.mcap", ::getpid())).string();

@@ -81,7 +81,7 @@ TEST_P(WrittenHereReadThere, FoxgloveReadsEveryMessageAndChecksEveryCrc) {
   // protobufjs decoded our payloads from the FileDescriptorSet in the file.
   EXPECT_EQ(theirs["decoded"]["/imu"]["timestamp_ns"], std::to_string(fixtures::imu().timestamp.nanoseconds()));
   EXPECT_EQ(theirs["decoded"]["/gnss"]["latitude"], fixtures::gnss().latitude);
-  EXPECT_EQ(theirs["decoded"]["/lidar"]["points"].size(), fixtures::point_cloud().points.size());
+  EXPECT_EQ(theirs["decoded"]["/lidar"]["packed_points"].size(), 3 * fixtures::point_cloud().points.size());
   EXPECT_EQ(theirs["decoded"]["/lidar/foxglove"]["point_stride"], 24);
   std::filesystem::remove(path);
 }

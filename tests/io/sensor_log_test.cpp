@@ -1,5 +1,6 @@
 #include "hanzo/fusion/io/sensor_log.hpp"
 
+#include <cmath>
 #include <filesystem>
 #include <string>
 
@@ -12,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "hanzo/fusion/msgs/convert.hpp"
+#include "image_compression.hpp"
 #include "hanzo/fusion/v1/sensors.pb.h"
 #include "msgs/test_messages.hpp"
 
@@ -155,6 +157,138 @@ TEST(SensorLog, UndecodablePayloadIsAnErrorAndReadingContinues) {
   ASSERT_TRUE(second.ok() && *second);
   EXPECT_EQ((*reader)->skipped_messages(), 1u);  // the json channel
   std::filesystem::remove(path);
+}
+
+// A textured image (smooth gradients and edges, as a camera sees): JPEG keeps it within a few
+// grey levels.
+msgs::ImageMessage camera_frame(msgs::ImageEncoding encoding, uint32_t width = 64, uint32_t height = 48) {
+  msgs::ImageMessage image = fixtures::image();
+  image.encoding = encoding;
+  image.width = width;
+  image.height = height;
+  image.intrinsics.reset();
+  const std::size_t channels = msgs::bytes_per_pixel(encoding) / (encoding == msgs::ImageEncoding::kDepth16 ? 2 : 1);
+  image.data.resize(std::size_t{width} * height * msgs::bytes_per_pixel(encoding));
+  for (uint32_t y = 0; y < height; ++y) {
+    for (uint32_t x = 0; x < width; ++x) {
+      for (std::size_t c = 0; c < channels; ++c) {
+        const int value = ((x / 16 + y / 16) % 2 ? 180 : 60) + static_cast<int>(x + 2 * c);
+        const std::size_t index = (std::size_t{y} * width + x) * channels + c;
+        if (encoding == msgs::ImageEncoding::kDepth16) {
+          reinterpret_cast<uint16_t*>(image.data.data())[index] = static_cast<uint16_t>(value * 37);
+        } else {
+          image.data[index] = static_cast<uint8_t>(value);
+        }
+      }
+    }
+  }
+  return image;
+}
+
+// Images stored as PNG come back bit-identical, as JPEG within a few grey levels, as what they
+// were (encoding, size, intrinsics); depth32f stays raw. Bad files are named.
+TEST(SensorLog, ImagesStoredAsPngOrJpegComeBackAsRawPixels) {
+  for (const ImageCompression compression : {ImageCompression::kPng, ImageCompression::kJpeg}) {
+    const std::string path = temp_path("images");
+    const std::vector<msgs::ImageMessage> images = {camera_frame(msgs::ImageEncoding::kRgb8), camera_frame(msgs::ImageEncoding::kBgr8),
+                                                    camera_frame(msgs::ImageEncoding::kMono8), camera_frame(msgs::ImageEncoding::kDepth16),
+                                                    fixtures::image()};
+    msgs::ImageMessage floats = camera_frame(msgs::ImageEncoding::kMono8);
+    floats.encoding = msgs::ImageEncoding::kDepth32f;
+    floats.data.assign(std::size_t{floats.width} * floats.height * 4, 0);
+    SensorLogWriterConfig config;
+    config.image_compression = compression;
+    {
+      auto writer = SensorLogWriter::open(path, config);
+      ASSERT_TRUE(writer.ok());
+      for (std::size_t i = 0; i < images.size(); ++i) ASSERT_TRUE((*writer)->write("/camera" + std::to_string(i), images[i]).ok());
+      ASSERT_TRUE((*writer)->write("/depth32", floats).ok());
+      ASSERT_TRUE((*writer)->close().ok());
+    }
+    auto reader = SensorLogReader::open(path);
+    ASSERT_TRUE(reader.ok());
+    LogEntry entry;
+    for (std::size_t i = 0; i <= images.size(); ++i) {
+      const auto more = (*reader)->next(entry);
+      ASSERT_TRUE(more.ok() && *more) << (more.ok() ? "" : more.error().message);
+      const auto& image = std::get<msgs::ImageMessage>(std::get<msgs::SensorMessage>(entry.message));
+      const msgs::ImageMessage& expected = i < images.size() ? images[i] : floats;
+      ASSERT_EQ(image.encoding, expected.encoding);
+      ASSERT_EQ(image.width, expected.width);
+      ASSERT_EQ(image.height, expected.height);
+      EXPECT_EQ(image.intrinsics.has_value(), expected.intrinsics.has_value());
+      ASSERT_EQ(image.data.size(), expected.data.size());
+      const bool lossless = compression == ImageCompression::kPng || expected.encoding == msgs::ImageEncoding::kDepth16 ||
+                            expected.encoding == msgs::ImageEncoding::kDepth32f;
+      if (lossless) {
+        EXPECT_EQ(image.data, expected.data) << i;
+      } else if (expected.width > 8) {  // the tiny fixture image is noise to JPEG
+        double difference = 0.0;
+        for (std::size_t k = 0; k < image.data.size(); ++k) difference += std::abs(int{image.data[k]} - int{expected.data[k]});
+        EXPECT_LT(difference / static_cast<double>(image.data.size()), 4.0) << i;
+      }
+    }
+    std::filesystem::remove(path);
+  }
+
+  // A stored file that does not decode, or decodes to another size, is an error naming the topic.
+  const std::string path = temp_path("bad_images");
+  v1::ImageMessage broken = msgs::to_proto(camera_frame(msgs::ImageEncoding::kRgb8));
+  broken.set_compression("png");
+  broken.set_data("not a png file");
+  v1::ImageMessage wrong_size = compressed_image(camera_frame(msgs::ImageEncoding::kRgb8), ImageCompression::kPng, 90);
+  wrong_size.set_width(32);
+  v1::ImageMessage unknown = broken;
+  unknown.set_compression("webp");
+  {
+    auto writer = SensorLogWriter::open(path);
+    ASSERT_TRUE(writer.ok());
+    ASSERT_TRUE((*writer)->write_proto("/broken", broken, Timestamp::from_nanoseconds(10)).ok());
+    ASSERT_TRUE((*writer)->write_proto("/wrong_size", wrong_size, Timestamp::from_nanoseconds(20)).ok());
+    ASSERT_TRUE((*writer)->write_proto("/unknown", unknown, Timestamp::from_nanoseconds(30)).ok());
+    ASSERT_TRUE((*writer)->close().ok());
+  }
+  auto reader = SensorLogReader::open(path);
+  ASSERT_TRUE(reader.ok());
+  LogEntry entry;
+  for (const char* expected : {"/broken at 10 ns: data: not a readable png file", "/wrong_size at 20 ns: data: the png file holds 64x48",
+                               "/unknown at 30 ns: compression 'webp'"}) {
+    const auto read = (*reader)->next(entry);
+    ASSERT_FALSE(read.ok()) << expected;
+    EXPECT_THAT(read.error().message, HasSubstr(expected));
+  }
+  std::filesystem::remove(path);
+}
+
+// Points stored quantized come back within half the resolution; exact ones bit-identical.
+TEST(SensorLog, PointsStoredQuantizedComeBackWithinHalfTheResolution) {
+  const std::string path = temp_path("quantized");
+  SensorLogWriterConfig config;
+  config.point_resolution = 0.001;
+  const msgs::PointCloudMessage sweep = fixtures::point_cloud();
+  {
+    auto writer = SensorLogWriter::open(path, config);
+    ASSERT_TRUE(writer.ok());
+    ASSERT_TRUE((*writer)->write("/lidar", sweep).ok());
+    ASSERT_TRUE((*writer)->close().ok());
+  }
+  auto reader = SensorLogReader::open(path);
+  LogEntry entry;
+  ASSERT_TRUE(*(*reader)->next(entry));
+  const auto& back = std::get<msgs::PointCloudMessage>(std::get<msgs::SensorMessage>(entry.message));
+  ASSERT_EQ(back.points.size(), sweep.points.size());
+  for (std::size_t i = 0; i < sweep.points.size(); ++i) {
+    EXPECT_LE((back.points[i] - sweep.points[i]).cwiseAbs().maxCoeff(), 0.0005f + 1e-6f) << i;
+  }
+  EXPECT_EQ(back.intensities, sweep.intensities);
+  EXPECT_EQ(back.ring_ids, sweep.ring_ids);
+  EXPECT_EQ(back.point_timestamps, sweep.point_timestamps);
+  std::filesystem::remove(path);
+  config.point_resolution = -1.0;
+  EXPECT_FALSE(SensorLogWriter::open(path, config).ok());
+  config.point_resolution = 0.0;
+  config.jpeg_quality = 0;
+  EXPECT_FALSE(SensorLogWriter::open(path, config).ok());
 }
 
 }  // namespace

@@ -211,11 +211,55 @@ TEST(Convert, PackedPointsMustBeTripletsAndNotMixedWithPoint3) {
   result = from_proto(both);
   ASSERT_FALSE(result.ok());
   EXPECT_EQ(result.error().field, "packed_points");
-  EXPECT_THAT(result.error().message, HasSubstr("not both"));
+  EXPECT_THAT(result.error().message, HasSubstr("set one of"));
 
   v1::PointCloudMessage not_finite = packed;
   not_finite.set_packed_points(4, std::numeric_limits<float>::quiet_NaN());
   EXPECT_FALSE(from_proto(not_finite).ok());  // validated as any sweep
+}
+
+TEST(Convert, QuantizedPointsComeBackWithinHalfTheResolutionAndFallBackToPackedFarAway) {
+  PointCloudMessage sweep = testing::point_cloud();
+  sweep.points.push_back({-120.0004f, 85.2f, -3.0f});  // a far return: large steps either way
+  sweep.intensities.push_back(0.5f);
+  sweep.ring_ids.push_back(2);
+  sweep.point_timestamps.push_back(sweep.point_timestamps.back());
+  v1::PointCloudMessage quantized;
+  to_proto(sweep, &quantized, PointEncoding::kQuantized, 0.001);
+  EXPECT_EQ(quantized.points_size() + quantized.packed_points_size(), 0);
+  ASSERT_EQ(quantized.quantized_points_size(), static_cast<int>(3 * sweep.points.size()));
+  EXPECT_EQ(quantized.point_resolution(), 0.001);
+  EXPECT_LT(quantized.ByteSizeLong(), [&] {
+    v1::PointCloudMessage packed;
+    to_proto(sweep, &packed, PointEncoding::kPacked);
+    return packed.ByteSizeLong();
+  }());
+  auto back = from_proto(quantized);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  ASSERT_EQ(back->points.size(), sweep.points.size());
+  for (std::size_t i = 0; i < sweep.points.size(); ++i) EXPECT_LE((back->points[i] - sweep.points[i]).cwiseAbs().maxCoeff(), 0.0005f + 2e-5f) << i;
+  EXPECT_EQ(back->point_timestamps, sweep.point_timestamps);
+
+  // Beyond 2^30 resolutions (1074 km at 1 mm), or no usable resolution: packed, exact.
+  PointCloudMessage far = sweep;
+  far.points[0].x() = 2.0e6f;
+  to_proto(far, &quantized, PointEncoding::kQuantized, 0.001);
+  EXPECT_EQ(quantized.quantized_points_size(), 0);
+  expect_equal(far, from_proto(quantized).value());
+  to_proto(sweep, &quantized, PointEncoding::kQuantized, 0.0);
+  EXPECT_EQ(quantized.quantized_points_size(), 0);
+
+  // Malformed: not triplets, no resolution, mixed with packed points.
+  to_proto(sweep, &quantized, PointEncoding::kQuantized, 0.001);
+  v1::PointCloudMessage ragged = quantized;
+  ragged.mutable_quantized_points()->RemoveLast();
+  EXPECT_EQ(from_proto(ragged).error().field, "quantized_points");
+  v1::PointCloudMessage no_resolution = quantized;
+  no_resolution.set_point_resolution(0.0);
+  EXPECT_EQ(from_proto(no_resolution).error().field, "point_resolution");
+  v1::PointCloudMessage mixed = quantized;
+  mixed.add_packed_points(1.0f);
+  EXPECT_THAT(from_proto(mixed).error().message, HasSubstr("set one of points, packed_points and quantized_points"));
 }
 
 TEST(Convert, PackedSweepsCarryPointTimesAsFixedWidthOffsetsWhenTheyFit) {

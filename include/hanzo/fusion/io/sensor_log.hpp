@@ -14,14 +14,17 @@
 // Foxglove mirror channels: so that a log opens in Foxglove with nothing to convert, the
 // writer by default also writes every pose estimate, point cloud, GNSS fix and image on
 // "<topic>/foxglove" in Foxglove's own schema (foxglove.PoseInFrame, foxglove.PointCloud,
-// foxglove.LocationFix, foxglove.RawImage; channel metadata "mirror_of" = the topic). This
-// doubles the size of point-cloud and image data; SensorLogWriterConfig::foxglove_channels =
-// false leaves the mirrors out. Readers of hanzo.fusion.v1 messages skip them.
+// foxglove.LocationFix, foxglove.RawImage, or foxglove.CompressedImage for images stored as
+// PNG / JPEG; channel metadata "mirror_of" = the topic). This doubles the size of point-cloud
+// and image data; SensorLogWriterConfig::foxglove_channels = false leaves the mirrors out.
+// Readers of hanzo.fusion.v1 messages skip them.
 
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <variant>
 
 #include "hanzo/fusion/core/result.hpp"
@@ -41,10 +44,22 @@ namespace hanzo::fusion::io {
 /// and every file it imports (dependencies first), as MCAP's protobuf profile asks.
 std::string file_descriptor_set(const google::protobuf::Descriptor& descriptor);
 
+/// How a writer stores images: raw pixels, or PNG (lossless) / JPEG (lossy) files that the
+/// reader decodes back to raw pixels. Encodings a format cannot hold stay raw (depth32f; depth16
+/// under JPEG).
+enum class ImageCompression { kNone, kPng, kJpeg };
+/// "none", "png", "jpeg".
+std::optional<ImageCompression> image_compression_from_string(std::string_view name);
+
 struct SensorLogWriterConfig {
   mcap::McapWriterConfig mcap;                     ///< chunk size and compression
   bool foxglove_channels = true;                   ///< also write the Foxglove mirror channels
   std::string foxglove_topic_suffix = "/foxglove";  ///< mirror topic = topic + suffix
+  ImageCompression image_compression = ImageCompression::kNone;
+  int jpeg_quality = 90;                           ///< 1..100, with ImageCompression::kJpeg
+  /// Point clouds: 0 stores the exact float coordinates (packed); > 0 stores them as multiples
+  /// of this many meters (msgs::PointEncoding::kQuantized), a third of the size compressed.
+  double point_resolution = 0.0;
 };
 
 class SensorLogWriter {

@@ -19,10 +19,15 @@ v1::PointCloudMessage to_proto(const PointCloudMessage& message);
 /// How a sweep's points go on the wire: the spec's `points` (a Point3 message per point), or
 /// `packed_points` (x, y, z floats in one packed field; an order of magnitude cheaper to encode
 /// and decode). from_proto reads either.
-enum class PointEncoding { kPoint3, kPacked };
+/// How a sweep's points go on the wire: one Point3 per point (the spec's layout), packed floats
+/// (exact, cheapest to encode), or quantized deltas (multiples of point_resolution m, smallest;
+/// falls back to packed when a point lies beyond +-2^30 resolutions). Packed and quantized also
+/// carry per-point times as fixed-width offsets when they fit.
+enum class PointEncoding { kPoint3, kPacked, kQuantized };
 /// Overwrites *out with the sweep, reusing its storage: a stream writing sweeps at sensor rate
 /// keeps one message instead of allocating ~30k points per sweep.
-void to_proto(const PointCloudMessage& message, v1::PointCloudMessage* out, PointEncoding encoding = PointEncoding::kPoint3);
+void to_proto(const PointCloudMessage& message, v1::PointCloudMessage* out, PointEncoding encoding = PointEncoding::kPoint3,
+              double point_resolution = 0.001);
 v1::ImageMessage to_proto(const ImageMessage& message);
 v1::GnssMessage to_proto(const GnssMessage& message);
 v1::WheelOdometryMessage to_proto(const WheelOdometryMessage& message);
