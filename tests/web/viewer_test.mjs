@@ -1,8 +1,9 @@
 // End-to-end test of the web viewer (ctest web.viewer): a server with tokens, a simulated
 // warehouse drive (IMU + VLP-16 + wheels) streamed into a session with `hanzo-fusion stream`,
 // and Debian's chromium (driven by playwright-core) loading GET / while the log streams. The
-// page must list the session, show its live pose, trajectory, map points and sensor table;
-// without a token it must say so. The screenshot is kept: TEST_ARTIFACTS/viewer.png.
+// page must list the session, show its live pose (with its time), trajectory, map points, sensor
+// table, health timeline, position uncertainty, grid scale and overview; without a token it must
+// say so, and a token in the URL must be dropped unused. The screenshot is kept: TEST_ARTIFACTS/viewer.png.
 //
 //   node tests/web/viewer_test.mjs --binary build/apps/hanzo-fusion --out build/test-artifacts
 import { spawn, execFileSync } from 'node:child_process';
@@ -85,10 +86,19 @@ let streamOutput = '';
 stream.stdout.on('data', (chunk) => { streamOutput += chunk; });
 const streamed = new Promise((resolve) => stream.on('exit', resolve));
 
+// A token in the URL is removed from it unread (it would stay in browser history and server
+// logs); the page's token field (kept in sessionStorage) is the way in.
 await page.goto(`${base}/?token=${token}`);
+check(!page.url().includes(token), `the token stayed in the URL: ${page.url()}`);
+check(await page.evaluate(() => window.viewerState.token === ''), 'a token in the URL was used');
+await page.fill('#token', token);
+await page.click('#token-form button');
+check(await page.evaluate(() => sessionStorage.getItem('hanzo-fusion-token')) === token, 'the token is not in sessionStorage');
+check(await page.evaluate(() => localStorage.getItem('hanzo-fusion-token')) === null, 'the token went to localStorage');
 await page.waitForFunction(() => {
   const s = window.viewerState;
-  return s && s.sessions.length === 1 && s.poses > 5 && s.trajectoryPoints > 100 && s.mapPoints > 1000;
+  return s && s.sessions.length === 1 && s.poses > 5 && s.trajectoryPoints > 100 && s.mapPoints > 1000 && s.healthSamples > 5 &&
+         s.sigmaPoints > 100 && s.fits > 0;
 }, null, { timeout: 90000, polling: 500 }).catch(async () => {
   fail(`the page did not show the streaming session: ${JSON.stringify(await page.evaluate(() => window.viewerState))}`);
 });
@@ -97,6 +107,14 @@ const sessionText = await page.textContent('#sessions');
 check(sessionText.includes('warehouse patrol'), `the session list shows '${sessionText}'`);
 const sensorRows = await page.$$eval('#sensors tbody tr', (rows) => rows.map((row) => row.firstChild.textContent));
 check(['imu', 'lidar', 'wheels'].every((name) => sensorRows.includes(name)), `sensor table: ${sensorRows}`);
+// The latest pose's time, the grid's scale, the overview on demand.
+const poseRows = await page.$$eval('#pose tr', (rows) => rows.map((row) => row.textContent));
+check(poseRows.some((text) => /^time20\d\d-\d\d-\d\d \d\d:\d\d:\d\d\.\d{3} UTC$/.test(text)), `pose table: ${poseRows}`);
+check(/^grid \d+(\.\d+)? m$/.test(await page.textContent('#scale')), `grid scale: ${await page.textContent('#scale')}`);
+const fitsBefore = live.fits;
+await page.click('#fit');
+check(await page.evaluate((before) => window.viewerState.fits === before + 1, fitsBefore), 'the overview button did nothing');
+check(!(await page.isChecked('#follow')), 'the overview left "follow the robot" on');
 fs.mkdirSync(out, { recursive: true });
 await page.screenshot({ path: path.join(out, 'viewer.png') });
 

@@ -1,20 +1,37 @@
 // The server's web viewer (GET /): the organization's sessions, the selected session's live pose,
-// trajectory, map points and sensor health, in 3D. Talks to the REST API of the server that
-// serves it (docs/server.md) with the token given in the page (kept in localStorage) or the
-// URL (?token=...&session=...). Polls: sessions every second, the pose 5 times a second, new
-// trajectory poses every second, the map when its version changes.
+// trajectory, map points and sensor health, in 3D, with an overview (zoom to fit), a grid with
+// its scale, the time of the latest pose, a per-sensor health timeline and the position
+// uncertainty over time. Talks to the REST API of the server that serves it (docs/server.md)
+// with the token typed into the page, kept in sessionStorage (never in the URL: a `?token=`
+// there is removed unread, as it lands in browser history and server logs). `?session=ID`
+// selects a session. Polls: sessions every second, the pose 5 times a second, new trajectory
+// poses every second, the map when its version changes.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+import { HealthTimeline, SigmaChart } from './timelines.js';
+
+const query = new URLSearchParams(location.search);
+const tokenInUrl = query.has('token');
+if (tokenInUrl) {
+  query.delete('token');
+  const rest = query.toString();
+  history.replaceState(null, '', `${location.pathname}${rest ? `?${rest}` : ''}`);
+}
 
 const state = {
-  token: new URLSearchParams(location.search).get('token') || localStorage.getItem('hanzo-fusion-token') || '',
-  selected: new URLSearchParams(location.search).get('session') || null,
+  token: sessionStorage.getItem('hanzo-fusion-token') || '',
+  selected: query.get('session') || null,
   sessions: [],
   poses: 0,               // poses received for the selected session
+  latestPoseNs: null,
   trajectoryPoints: 0,
   trajectoryAfter: null,  // next_after of the trajectory paging
   mapVersion: -1,
   mapPoints: 0,
+  gridSpacing: 2,         // m between grid lines
+  healthSamples: 0,       // poses in the health timeline
+  sigmaPoints: 0,         // poses in the uncertainty chart
+  fits: 0,                // overviews shown
   errors: 0,
   lastError: '',
 };
@@ -52,9 +69,24 @@ camera.position.set(-20, -20, 25);
 const controls = new OrbitControls(camera, renderer.domElement);
 controls.target.set(0, 0, 0);
 scene.add(new THREE.AmbientLight(0xffffff, 1.0));
-const grid = new THREE.GridHelper(200, 100, 0x30363d, 0x1f252c);
-grid.rotation.x = Math.PI / 2;
-scene.add(grid);
+let grid = null;
+// A grid covering `box` (or 200 m around the origin) with lines every 1, 2 or 5 x 10^k m, about
+// 20 across; the overlay names the spacing.
+function setGrid(box) {
+  const size = box && !box.isEmpty() ? Math.max(box.max.x - box.min.x, box.max.y - box.min.y, 10) : 200;
+  const step = 10 ** Math.floor(Math.log10(size / 20));
+  const spacing = [1, 2, 5, 10].map((m) => m * step).find((s) => size / s <= 25);
+  const cells = Math.ceil(size / spacing) + 2;
+  const center = box && !box.isEmpty() ? box.getCenter(new THREE.Vector3()) : new THREE.Vector3();
+  if (grid) scene.remove(grid);
+  grid = new THREE.GridHelper(cells * spacing, cells, 0x30363d, 0x1f252c);
+  grid.rotation.x = Math.PI / 2;
+  grid.position.set(Math.round(center.x / spacing) * spacing, Math.round(center.y / spacing) * spacing, box && !box.isEmpty() ? box.min.z : 0);
+  scene.add(grid);
+  state.gridSpacing = spacing;
+  $('scale').textContent = `grid ${spacing >= 1 ? spacing : spacing.toFixed(2)} m`;
+}
+setGrid(null);
 
 const robot = new THREE.AxesHelper(2.0);
 robot.visible = false;
@@ -67,9 +99,34 @@ trajectoryGeometry.setAttribute('position', new THREE.BufferAttribute(trajectory
 trajectoryGeometry.setDrawRange(0, 0);
 scene.add(new THREE.Line(trajectoryGeometry, new THREE.LineBasicMaterial({ color: 0xffa657 })));
 
+const health = new HealthTimeline($('health'));
+const sigma = new SigmaChart($('sigma'));
+
 const mapGeometry = new THREE.BufferGeometry();
 const map = new THREE.Points(mapGeometry, new THREE.PointsMaterial({ size: 0.08, vertexColors: true }));
 scene.add(map);
+
+// The overview: the camera looks down at the whole map and trajectory.
+function fitView() {
+  const box = new THREE.Box3();
+  for (const geometry of [mapGeometry, trajectoryGeometry]) {
+    const positions = geometry.getAttribute('position');
+    const count = geometry === trajectoryGeometry ? state.trajectoryPoints : positions ? positions.count : 0;
+    for (let i = 0; i < count; ++i) box.expandByPoint(new THREE.Vector3().fromBufferAttribute(positions, i));
+  }
+  if (robot.visible) box.expandByPoint(robot.position);
+  if (box.isEmpty()) return;
+  setGrid(box);
+  const center = box.getCenter(new THREE.Vector3());
+  const radius = Math.max(5, box.getSize(new THREE.Vector3()).length() / 2);
+  const distance = radius / Math.sin(THREE.MathUtils.degToRad(camera.fov / 2)) * (camera.aspect < 1 ? 1 / camera.aspect : 1);
+  $('follow').checked = false;
+  controls.target.copy(center);
+  camera.position.set(center.x, center.y - distance * 0.25, center.z + distance);
+  camera.far = Math.max(5000, distance * 4);
+  camera.updateProjectionMatrix();
+  ++state.fits;
+}
 
 function resize() {
   const { clientWidth: width, clientHeight: height } = $('view');
@@ -135,6 +192,9 @@ function resetSessionView() {
   mapGeometry.deleteAttribute('position');
   mapGeometry.deleteAttribute('color');
   robot.visible = false;
+  state.latestPoseNs = null;
+  health.clear();
+  sigma.clear();
 }
 
 // --- side panel ---
@@ -199,7 +259,9 @@ function renderPose(pose) {
     camera.position.add(shift);
   }
   const speed = Math.hypot(...pose.velocity);
+  const time = new Date(Number(pose.timestamp_ns) / 1e6);
   $('pose').replaceChildren(
+    row(['time', `${time.toISOString().replace('T', ' ').replace('Z', ' UTC')}`]),
     row(['state', `${pose.state} (${pose.active_sensors.join(', ')})`]),
     row(['position', pose.position.map((v) => v.toFixed(2)).join(', ')]),
     row(['speed', `${speed.toFixed(2)} m/s`]),
@@ -217,8 +279,13 @@ async function refreshSessions() {
 async function refreshPose() {
   if (!state.selected) return;
   try {
-    renderPose(await api(`/v1/sessions/${state.selected}/pose`));
+    const pose = await api(`/v1/sessions/${state.selected}/pose`);
+    renderPose(pose);
     ++state.poses;
+    state.latestPoseNs = pose.timestamp_ns;
+    health.add(pose.timestamp_ns, pose.sensor_health);
+    health.draw();
+    state.healthSamples = health.samples.length;
   } catch (error) {
     if (error.status !== 404) throw error;  // no pose yet
   }
@@ -232,7 +299,12 @@ async function refreshTrajectory() {
     if (state.trajectoryPoints >= maxTrajectory) break;
     trajectoryPositions.set(pose.position, 3 * state.trajectoryPoints++);
     state.trajectoryAfter = pose.timestamp_ns;
+    sigma.add(pose.timestamp_ns, pose.covariance);
   }
+  if (page.poses.length) sigma.draw();
+  state.sigmaPoints = sigma.points.length;
+  // The first time there is something to see: the overview.
+  if (state.fits === 0 && state.trajectoryPoints > 1) fitView();
   trajectoryGeometry.attributes.position.needsUpdate = true;
   trajectoryGeometry.setDrawRange(0, state.trajectoryPoints);
   trajectoryGeometry.computeBoundingSphere();
@@ -278,8 +350,10 @@ $('token').value = state.token;
 $('token-form').addEventListener('submit', (event) => {
   event.preventDefault();
   state.token = $('token').value.trim();
-  localStorage.setItem('hanzo-fusion-token', state.token);
+  sessionStorage.setItem('hanzo-fusion-token', state.token);
 });
+$('fit').addEventListener('click', fitView);
+if (tokenInUrl) setStatus('a token in the URL is not used (it would stay in browser history): enter it above', 'error');
 every(1000, refreshSessions);
 every(200, refreshPose);
 every(1000, refreshTrajectory);
