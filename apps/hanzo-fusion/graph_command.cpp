@@ -140,6 +140,7 @@ int run_optimize(const Output& output, const GraphOptions& options) {
   result["poses"] = pose_graph->vertices.size();
   result["edges"] = pose_graph->edges.size();
   result["skipped_equivalences"] = pose_graph->skipped_equivalences;
+  result["warnings"] = pose_graph->warnings;
   result["objective"] = options.objective;
   result["g2o_chi2"] = {{"initial", initial_chi2}, {"final", final_chi2}};
   result["se_sync_objective"] = {{"initial", initial_objective}, {"final", final_objective}};

@@ -7,8 +7,10 @@
 #include <set>
 #include <sstream>
 
+#include <Eigen/Eigenvalues>
 #include <fmt/format.h>
 
+#include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/core/yaml_value.hpp"
 #include "hanzo/fusion/graph/pose_factors.hpp"
 
@@ -60,6 +62,23 @@ Value compose(const Value& a, const Value& b) {
 Value inverse(const Value& a) {
   if (const auto* a2 = std::get_if<SE2>(&a)) return a2->inverse();
   return std::get<SE3>(a).inverse();
+}
+
+// Makes an edge's information usable by the optimizer: positive definite. A matrix that is
+// only semi-definite (a block of zeros) or slightly indefinite (rounding in the file) becomes
+// the nearest positive definite one: its eigenvalues raised to at least 1e-6 of the largest
+// (1e-6 when none is positive: next to no weight). Returns "" when it was usable as it is,
+// else what was done.
+std::string repair_information(Eigen::MatrixXd& information) {
+  if (GaussianNoise::from_information(information)) return "";
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(0.5 * (information + information.transpose()));
+  const Eigen::VectorXd& values = eigen.eigenvalues();  // ascending
+  const double floor = values.maxCoeff() > 0 ? 1e-6 * values.maxCoeff() : 1e-6;
+  information = eigen.eigenvectors() * values.cwiseMax(floor).asDiagonal() * eigen.eigenvectors().transpose();
+  information = 0.5 * (information + information.transpose());
+  return fmt::format("the information matrix is not positive definite (eigenvalues {:.3g} .. {:.3g}); "
+                     "used the nearest positive definite one (eigenvalues >= {:.3g})",
+                     values.minCoeff(), values.maxCoeff(), floor);
 }
 
 }  // namespace
@@ -127,7 +146,9 @@ Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_n
         edge.measurement = SE2(numbers[4], Eigen::Vector2d(numbers[2], numbers[3]));
         edge.information = from_upper_triangle(std::vector<double>(numbers.begin() + 5, numbers.end()), 3);
       }
-      if (!GaussianNoise::from_information(edge.information)) return fail("the information matrix is not positive definite");
+      if (std::string repaired = repair_information(edge.information); !repaired.empty()) {
+        graph.warnings.push_back(fmt::format("{}:{}: {}: {}", source_name, number, tag, repaired));
+      }
       (is_3d ? seen_3d : seen_2d) = true;
       graph.edges.push_back(std::move(edge));
     } else if (tag == "VERTEX2" || tag == "VERTEX3") {  // TORO
@@ -159,7 +180,9 @@ Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_n
         edge.measurement = SE2(numbers[4], Eigen::Vector2d(numbers[2], numbers[3]));
         edge.information = toro_2d_information(numbers.data() + 5);
       }
-      if (!GaussianNoise::from_information(edge.information)) return fail("the information matrix is not positive definite");
+      if (std::string repaired = repair_information(edge.information); !repaired.empty()) {
+        graph.warnings.push_back(fmt::format("{}:{}: {}: {}", source_name, number, tag, repaired));
+      }
       (is_3d ? seen_3d : seen_2d) = true;
       graph.edges.push_back(std::move(edge));
     } else if (tag == "EQUIV") {  // TORO vertex equivalences: not supported, skipped
@@ -178,6 +201,11 @@ Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_n
   }
   if (graph.edges.empty()) return Error(fmt::format("{}: no edges", source_name));
   graph.dimension = seen_3d ? 3 : 2;
+  constexpr std::size_t kWarningsLogged = 3;
+  for (std::size_t i = 0; i < std::min(graph.warnings.size(), kWarningsLogged); ++i) logger()->warn("{}", graph.warnings[i]);
+  if (graph.warnings.size() > kWarningsLogged) {
+    logger()->warn("{}: {} more edges with information repaired the same way", source_name, graph.warnings.size() - kWarningsLogged);
+  }
 
   // Vertices without a VERTEX line: chain edges from known vertices (the first edge's start
   // is the origin when nothing is known).

@@ -23,8 +23,11 @@
 // diag(I, I/2) * info * diag(I, I/2) (what GTSAM does too).
 //
 // Errors name the file and line: unknown tags, wrong field counts, non-finite numbers,
-// quaternions off unit norm by more than 1e-3, information that is not positive definite,
-// 2D and 3D mixed, vertices no edge connects to a known one.
+// quaternions off unit norm by more than 1e-3, 2D and 3D mixed, vertices no edge connects to a
+// known one. An information matrix that is not positive definite (semi-definite with a zero
+// block, or slightly indefinite from rounding, as real benchmark files have) is not an error:
+// the nearest positive definite matrix is used (eigenvalues raised to at least 1e-6 of the
+// largest) and a warning naming file and line goes into PoseGraph::warnings (and the log).
 
 #include <string>
 #include <vector>
@@ -48,6 +51,7 @@ struct PoseGraph {
   std::vector<PoseGraphEdge> edges;
   std::vector<Key> fixed;          // FIX lines; the first vertex when there are none
   int skipped_equivalences = 0;    // TORO EQUIV lines (not supported)
+  std::vector<std::string> warnings;  // "file:line: EDGE_SE2: ..." per edge whose information was repaired
 
   /// What the optimizer minimizes: g2o's (geodesic) between factors, or SE-Sync's objective
   /// (chordal rotation distance), whose global optima the SE-Sync papers publish.
