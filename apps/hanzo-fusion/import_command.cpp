@@ -120,6 +120,8 @@ int run_carmen_import(const Output& output, const ImportOptions& options) {
   result["rejected"] = report.rejected;
   result["first_rejection"] = report.first_rejection;
   result["skipped_lines"] = report.skipped_lines;
+  result["timestamps_reconstructed"] = report.timestamps_reconstructed;
+  if (report.timestamps_reconstructed) result["warnings"] = {report.timestamp_warning};
   std::string text = fmt::format("{}: {} scans -> {}, {} odometry -> {}, {} other lines skipped\n", options.sources[0],
                                  report.scans, config.laser_topic, report.odometry,
                                  config.wheel_separation > 0 ? config.odometry_topic : "(left out: no --wheel-separation)",

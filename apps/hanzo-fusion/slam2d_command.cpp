@@ -5,7 +5,8 @@
 // corrupt them to test scan matching and loop closure against them). Reports the APE of the
 // odometry and of the SLAM trajectory against the logged poses, per-scan latency and the
 // time spent in each stage; writes the trajectory (TUM), an occupancy map (ROS map_server YAML
-// + PGM) and an SVG of the trajectory.
+// + PGM) and an SVG of the trajectory. The outputs are written whether or not the evaluation
+// can be computed (an undefined one says why).
 
 #include <algorithm>
 #include <chrono>
@@ -96,10 +97,24 @@ int run_slam2d(const Output& output, const Slam2dOptions& options) {
     odometry_trajectory.poses.push_back(io::pose_matrix(odometry[i]));
     ++e;
   }
+  // The outputs first: an evaluation that cannot be computed (a degenerate alignment) is
+  // reported as undefined, never a reason to throw the results away.
+  std::string written;
+  if (!options.trajectory_out.empty()) {
+    if (Status status = io::write_trajectory(options.trajectory_out, estimate, io::TrajectoryFormat::kTum); !status) return fail(status.error().message);
+    result["trajectory"] = options.trajectory_out;
+    written += fmt::format("wrote {}\n", options.trajectory_out);
+  }
+  if (!options.map_out.empty()) {
+    auto layer = occupancy_map(slam, options.map_resolution);
+    if (!layer) return fail(layer.error().message);
+    if (Status status = maps::write_ros_map(options.map_out, *layer); !status) return fail(status.error().message);
+    result["map"] = options.map_out;
+    written += fmt::format("wrote {} (+ .pgm)\n", options.map_out);
+  }
   const eval::ApeConfig ape_config{.relation = eval::PoseRelation::kTranslation, .alignment = eval::Alignment::kSE3};
   auto odometry_ape = eval::compute_ape(reference, odometry_trajectory, ape_config);
   auto slam_ape = eval::compute_ape(reference, estimate, ape_config);
-  if (!odometry_ape || !slam_ape) return fail(!odometry_ape ? odometry_ape.error().message : slam_ape.error().message);
 
   std::sort(milliseconds.begin(), milliseconds.end());
   const auto percentile = [&](double p) { return milliseconds.empty() ? 0.0 : milliseconds[static_cast<size_t>(p * static_cast<double>(milliseconds.size() - 1))]; };
@@ -116,42 +131,37 @@ int run_slam2d(const Output& output, const Slam2dOptions& options) {
   result["loop_closures"] = summary.loop_closures;
   result["optimizations"] = summary.optimizations;
   result["odometry_error"] = {{"scale_error", options.scale_error}, {"heading_drift_deg_per_m", options.heading_drift_deg_per_m}};
-  result["ape_rmse_m"] = {{"odometry", odometry_ape->statistics.rmse}, {"slam", slam_ape->statistics.rmse}};
-  result["ape_max_m"] = {{"odometry", odometry_ape->statistics.max}, {"slam", slam_ape->statistics.max}};
+  if (!log->report.timestamp_warning.empty()) result["warnings"] = {log->report.timestamp_warning};
+  std::string evaluation_text;
+  if (odometry_ape && slam_ape) {
+    result["ape_rmse_m"] = {{"odometry", odometry_ape->statistics.rmse}, {"slam", slam_ape->statistics.rmse}};
+    result["ape_max_m"] = {{"odometry", odometry_ape->statistics.max}, {"slam", slam_ape->statistics.max}};
+    evaluation_text = fmt::format("  APE RMSE against the logged poses: odometry {:.3f} m -> SLAM {:.3f} m (max {:.3f} m)\n",
+                                  odometry_ape->statistics.rmse, slam_ape->statistics.rmse, slam_ape->statistics.max);
+  } else {
+    const std::string reason = !slam_ape ? slam_ape.error().message : odometry_ape.error().message;
+    result["ape_rmse_m"] = {{"undefined", reason}};
+    evaluation_text = fmt::format("  APE against the logged poses undefined: {}\n", reason);
+  }
   result["seconds"] = {{"total", seconds},
                        {"scan_matching", summary.scan_matching_seconds},
                        {"loop_closure", summary.loop_closure_seconds},
                        {"optimization", summary.optimization_seconds}};
   result["scan_ms"] = {{"p50", percentile(0.5)}, {"p99", percentile(0.99)}, {"max", percentile(1.0)}};
   std::string text = fmt::format(
-      "{}: {} scans ({} refused), {} keyframes, {} loop closures of {} candidates, {} scans unmatched, {} degenerate\n"
-      "  APE RMSE against the logged poses: odometry {:.3f} m -> SLAM {:.3f} m (max {:.3f} m)\n"
-      "  {:.2f} s: scan matching {:.2f} s, loop closure {:.2f} s, optimization {:.2f} s ({} runs); per scan p50 {:.2f} ms, p99 {:.2f} ms, max {:.2f} ms\n",
+      "{}: {} scans ({} refused), {} keyframes, {} loop closures of {} candidates, {} scans unmatched, {} degenerate\n{}"
+      "  {:.2f} s: scan matching {:.2f} s, loop closure {:.2f} s, optimization {:.2f} s ({} runs); per scan p50 {:.2f} ms, p99 {:.2f} ms, max {:.2f} ms\n{}",
       options.log, summary.scans, refused, summary.keyframes, summary.loop_closures, summary.loop_candidates, summary.unmatched_scans,
-      summary.degenerate_scans,
-      odometry_ape->statistics.rmse, slam_ape->statistics.rmse, slam_ape->statistics.max, seconds, summary.scan_matching_seconds,
-      summary.loop_closure_seconds, summary.optimization_seconds, summary.optimizations, percentile(0.5), percentile(0.99), percentile(1.0));
-
-  if (!options.trajectory_out.empty()) {
-    if (Status written = io::write_trajectory(options.trajectory_out, estimate, io::TrajectoryFormat::kTum); !written) return fail(written.error().message);
-    result["trajectory"] = options.trajectory_out;
-    text += fmt::format("wrote {}\n", options.trajectory_out);
-  }
-  if (!options.map_out.empty()) {
-    auto layer = occupancy_map(slam, options.map_resolution);
-    if (!layer) return fail(layer.error().message);
-    if (Status written = maps::write_ros_map(options.map_out, *layer); !written) return fail(written.error().message);
-    result["map"] = options.map_out;
-    text += fmt::format("wrote {} (+ .pgm)\n", options.map_out);
-  }
-  if (!options.plot_dir.empty()) {
+      summary.degenerate_scans, evaluation_text, seconds, summary.scan_matching_seconds, summary.loop_closure_seconds,
+      summary.optimization_seconds, summary.optimizations, percentile(0.5), percentile(0.99), percentile(1.0), written);
+  if (!options.plot_dir.empty() && slam_ape) {
     std::error_code ec;
     std::filesystem::create_directories(options.plot_dir, ec);
     if (ec) return fail(fmt::format("{}: cannot create plot folder ({})", options.plot_dir, ec.message()));
     const std::string path = (std::filesystem::path(options.plot_dir) / "slam2d_trajectory.svg").string();
     const std::string svg = eval::trajectory_top_view_svg(reference, slam_ape->estimate_aligned, slam_ape->errors,
                                                           {"2D laser SLAM (coloured by APE) over the logged poses (grey)", "APE (m)"});
-    if (Status written = eval::write_svg(path, svg); !written) return fail(written.error().message);
+    if (Status status = eval::write_svg(path, svg); !status) return fail(status.error().message);
     result["plots"] = {path};
     text += fmt::format("plot: {}\n", path);
   }

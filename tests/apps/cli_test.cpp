@@ -516,6 +516,30 @@ TEST(Cli, Slam2dMatchesScansAndWritesTrajectoryMapAndPlot) {
   std::filesystem::remove_all(folder);
 }
 
+// A CARMEN log whose times are useless (all the same) still maps: the times are rebuilt with a
+// warning; an evaluation that cannot be computed (the robot never moved: the alignment is
+// degenerate) is reported as undefined, and the trajectory and map are written all the same.
+TEST(Cli, Slam2dWritesItsResultsWhenTimesOrTheEvaluationAreBroken) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_slam2d_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::string ranges;
+  for (int beam = 0; beam < 180; ++beam) ranges += fmt::format(" {:.3f}", 2.0 + 0.5 * std::cos(beam * M_PI / 45.0));
+  std::ofstream log(dir / "standing.log");
+  for (int scan = 0; scan < 6; ++scan) log << "FLASER 180" << ranges << " 0 0 0 0 0 0 1.13486e+09 host 1.13486e+09\n";
+  log.close();
+  const CliRun mapped = run(fmt::format("slam2d {} --trajectory {} --map {} --json", (dir / "standing.log").string(),
+                                        (dir / "standing.tum").string(), (dir / "standing.yaml").string()));
+  ASSERT_EQ(mapped.exit_code, 0) << mapped.err;
+  const nlohmann::json json = nlohmann::json::parse(mapped.out);
+  EXPECT_EQ(json["scans"], 6);
+  EXPECT_THAT(json["warnings"][0].get<std::string>(), HasSubstr("times rebuilt from line order"));
+  EXPECT_TRUE(json["ape_rmse_m"].contains("undefined")) << json["ape_rmse_m"];
+  EXPECT_TRUE(std::filesystem::exists(dir / "standing.tum"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "standing.pgm"));
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, RegisterRecoversTheReferenceOfTheRealPair) {
   const std::string dir = fmt::format("{}/lidar_small_gicp", HANZO_DATA_DIR);
   for (const char* method : {"gicp", "ndt"}) {

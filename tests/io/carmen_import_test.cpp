@@ -5,6 +5,7 @@
 
 #include <unistd.h>
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -118,6 +119,58 @@ TEST(CarmenImport, MalformedLinesNameFileAndLine) {
   EXPECT_THAT(import_file(path, 0.5).error().message, HasSubstr("no FLASER or ODOM lines"));
   EXPECT_THAT(import_file("/nonexistent/missing.log", 0.5).error().message, HasSubstr("cannot open file"));
   std::filesystem::remove(path);
+}
+
+// Scans that all carry one time (the ODOM lines' are fine): their times are rebuilt between the
+// ODOM lines around them, in line order; nothing is dropped and the report says why.
+TEST(CarmenImport, DuplicateScanTimesAreRebuiltFromTheOdometryLines) {
+  const std::string path = temp("duplicate_scans.log");
+  std::ofstream(path) << "ODOM 0 0 0 0 0 0 10.0 host 10.0\n"
+                         "FLASER 4 1.0 2.0 3.0 1.5 0 0 0 0 0 0 7.0 host 7.0\n"
+                         "FLASER 4 1.0 2.0 3.0 1.5 0.1 0 0 0.1 0 0 7.0 host 7.0\n"
+                         "ODOM 0.2 0 0 0 0 0 10.3 host 10.3\n"
+                         "FLASER 4 1.0 2.0 3.0 1.5 0.2 0 0 0.2 0 0 7.0 host 7.0\n"
+                         "FLASER 4 1.0 2.0 3.0 1.5 0.3 0 0 0.3 0 0 7.0 host 7.0\n"
+                         "FLASER 4 1.0 2.0 3.0 1.5 0.4 0 0 0.4 0 0 7.0 host 7.0\n"
+                         "ODOM 0.4 0 0 0 0 0 10.7 host 10.7\n";
+  auto imported = import_file(path, 0.5);
+  ASSERT_TRUE(imported.ok()) << imported.error().message;
+  EXPECT_TRUE(imported->report.timestamps_reconstructed);
+  EXPECT_THAT(imported->report.timestamp_warning, HasSubstr("scan times: 4 of 4 times do not increase"));
+  EXPECT_THAT(imported->report.timestamp_warning, HasSubstr("rebuilt from the ODOM lines' times"));
+  ASSERT_EQ(imported->scans.size(), 5u);
+  const double expected[] = {10.1, 10.2, 10.4, 10.5, 10.6};
+  for (std::size_t i = 0; i < 5; ++i) EXPECT_NEAR(imported->scans[i].timestamp.seconds(), expected[i], 1e-6) << i;
+  EXPECT_EQ(imported->wheels.size(), 3u);
+  EXPECT_EQ(imported->report.rejected, 0u);
+}
+
+// The Intel log written as a logger printing 6 significant digits would: every time reads
+// 1.13486e+09. Scans and odometry are rebuilt from the line order at the nominal scan rate;
+// every scan comes through, in order, with its logged pose.
+TEST(CarmenImport, TimesPrintedWithSixDigitsAreRebuiltFromTheLineOrder) {
+  const std::string original = std::string(HANZO_DATA_DIR) + "/laser2d_carmen/intel-corrected.log.gz";
+  const std::string path = temp("six_digits.log");
+  {
+    CarmenImportConfig config;
+    config.wheel_separation = 0.5;
+    const CarmenLog log = read_carmen(original, config).value();
+    EXPECT_FALSE(log.report.timestamps_reconstructed);
+    std::ofstream out(path);
+    for (const msgs::PointCloudMessage& scan : log.scans) {
+      out << "FLASER 2 1.0 2.0 0 0 0 0 0 0 " << fmt::format("{:.6g} host {:.6g}\n", 1134860000.0 + (scan.timestamp.seconds() - 30.0),
+                                                               1134860000.0 + (scan.timestamp.seconds() - 30.0));
+      out << "ODOM 0 0 0 0 0 0 " << fmt::format("{:.6g} host 0\n", 1134860000.0 + scan.timestamp.seconds());
+    }
+  }
+  auto imported = import_file(path, 0.5);
+  ASSERT_TRUE(imported.ok()) << imported.error().message;
+  EXPECT_THAT(imported->report.timestamp_warning, HasSubstr("(written to 10000 s)"));
+  EXPECT_THAT(imported->report.timestamp_warning, HasSubstr("line order at the nominal 5 Hz scan rate"));
+  EXPECT_EQ(imported->scans.size(), 906u);
+  EXPECT_EQ(imported->wheels.size(), 906u);
+  EXPECT_NEAR((imported->scans.back().timestamp - imported->scans.front().timestamp).seconds(), 905 * 0.2, 1e-6);
+  for (std::size_t i = 1; i < imported->scans.size(); ++i) ASSERT_LT(imported->wheels[i - 1].timestamp, imported->scans[i].timestamp);
 }
 
 }  // namespace

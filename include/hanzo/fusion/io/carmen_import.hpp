@@ -12,7 +12,12 @@
 // poses (x y theta) are returned as a trajectory (for corrected logs: the reference).
 // Times are the ipc_timestamp in seconds. An ODOM line at time 0 (the corrected logs add the
 // corrected pose after every scan that way) re-anchors the odometry instead of being integrated.
-// Lines whose time does not increase are left out and counted.
+// Imperfect times are detected per kind of line: when more than half of the scans' (or the
+// odometry's) times do not increase (duplicates, as in a log printed with 6 significant digits:
+// "1.13486e+09"), that kind's times are rebuilt from the other kind's
+// (evenly between them in line order), or, when neither is usable, from the line order at
+// nominal_scan_rate_hz; the report says so (timestamp_warning, also logged). After that, lines
+// whose time does not increase are left out and counted.
 
 #include <cstdint>
 #include <string>
@@ -30,6 +35,7 @@ struct CarmenImportConfig {
   std::string odometry_topic = "/odom";
   double wheel_separation = 0.0;  ///< m, > 0 to import ODOM lines; 0 leaves them out
   double max_range = 80.0;        ///< m; readings at or beyond it are dropped (the logs use 81.83 / 81.91)
+  double nominal_scan_rate_hz = 5.0;  ///< scan rate assumed when no line's time is usable
 };
 
 struct CarmenImportReport {
@@ -38,6 +44,8 @@ struct CarmenImportReport {
   uint64_t skipped_lines = 0;       ///< NEFF, PARAM, unknown messages, time-0 ODOM re-anchors
   uint64_t rejected = 0;            ///< lines whose time does not increase
   std::string first_rejection;
+  bool timestamps_reconstructed = false;
+  std::string timestamp_warning;    ///< why and how the times were rebuilt ("" when they were used as written)
   Trajectory scan_poses;            ///< T_world_laser of every scan (z = 0)
 };
 
