@@ -28,6 +28,8 @@ constexpr double kHorizontalGravitySigma = 1e-6;    // m/s^2: ENU's up is the gr
 constexpr double kGravityMagnitudeSigma = 0.001;    // m/s^2, pseudo-measurement at 1 Hz
 constexpr double kPlanarHeightSigma = 0.005;        // m
 constexpr double kPlanarVerticalSpeedSigma = 0.01;  // m/s
+constexpr double kPlanarLevelSigma = 0.01;          // rad: roll, pitch of a planar robot without an IMU
+constexpr double kLevelPriorSigma = 0.1;            // rad: roll, pitch of anything else without an IMU
 // Without an IMU (motion model, see estimator.hpp).
 constexpr double kMotionModelOrientationNoise = 0.01;  // rad/sqrt(s): attitude jitter besides the turn rate
 constexpr double kMotionModelAccelBiasSigma = 1e-4;    // m/s^2: the virtual accelerometer has no bias
@@ -378,6 +380,17 @@ EventOutcome Estimator::process_imu(const Event& event, const msgs::ImuMessage& 
 void Estimator::apply_constraints(const Event& event) {
   if (frontend_.planar) {
     filter_->update(estimate::PlanarMotionModel(planar_height_, kPlanarHeightSigma, kPlanarVerticalSpeedSigma));
+  }
+  if (!imu_sensor_) {
+    // Without an IMU nothing measures roll and pitch (the motion model's accelerometer reads the
+    // estimate's own gravity); unheld, they drift, and a wheel speed turns into a wrong ground
+    // speed through the tilt. Held level: firmly on a planar robot, loosely otherwise (a 3D
+    // LiDAR's poses measure them far better where they apply).
+    const double sigma = frontend_.planar ? kPlanarLevelSigma : kLevelPriorSigma;
+    const Eigen::Matrix3d R = filter_->state().R_world_body.matrix();
+    const SO3 level = SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), std::atan2(R(1, 0), R(0, 0)));
+    const estimate::ImuAttitudeModel model(level, Eigen::Matrix3d::Identity() * sigma * sigma, SO3(), {true, true, false});
+    if (model.usable()) filter_->update(model);
   }
   if ((event.time - last_gravity_update_).seconds() >= 1.0) {
     filter_->update(estimate::GravityMagnitudeModel(gravity_magnitude_, kGravityMagnitudeSigma));

@@ -212,6 +212,7 @@ Result<PlanarScanEstimate> PlanarLaserSlam::add_scan(Timestamp time, const lidar
     T_map_last_ = T_odom_laser;
     ++summary_.scans;
     estimate.T_map_laser = T_odom_laser;
+    estimate.T_map_laser_matched = T_odom_laser;
     estimate.keyframe = true;
     estimate.scan_matched = true;
     return estimate;
@@ -243,6 +244,8 @@ Result<PlanarScanEstimate> PlanarLaserSlam::add_scan(Timestamp time, const lidar
   T_map_last_ = keyframe_pose(keyframe) * T_keyframe_laser;
   ++summary_.scans;
   estimate.T_map_laser = T_map_last_;
+  estimate.T_map_laser_matched = match.T_map_laser;
+  estimate.covariance = match.covariance;
   estimate.keyframe = new_keyframe;
   estimate.keyframe_index = keyframe;
   estimate.scan_matched = match.matched;

@@ -125,6 +125,7 @@ SessionConfig SessionConfig::from(const config::FusionConfig& config) {
   session.map_keyframe_distance = mapping.keyframe_distance;
   session.map_keyframe_angle = mapping.keyframe_angle;
   session.loop_closure = mapping.loop_closure;
+  session.planar_laser.slam.loop_closure = mapping.loop_closure;
   session.loop.min_travel = mapping.loop_min_travel;
   session.loop.min_search_radius = mapping.loop_search_radius;
   session.loop.max_rmse = mapping.loop_max_rmse;
@@ -135,6 +136,7 @@ SessionConfig SessionConfig::from(const config::FusionConfig& config) {
 Status SessionConfig::validate() const {
   HANZO_RETURN_IF_ERROR(with_context(lidar_odometry.odometry.validate(), "lidar_odometry"));
   HANZO_RETURN_IF_ERROR(with_context(loop.validate(), "loop"));
+  HANZO_RETURN_IF_ERROR(with_context(planar_laser.validate(), "planar_laser"));
   HANZO_RETURN_IF_ERROR(with_context(map.validate(), "map"));
   if (!(loop_translation_sigma > 0) || !(loop_rotation_sigma > 0)) return Error("loop_translation_sigma, loop_rotation_sigma: must be > 0");
   if (!(map_keyframe_distance >= 0) || !(map_keyframe_angle >= 0)) return Error("map_keyframe_distance, map_keyframe_angle: must be >= 0");
@@ -158,11 +160,13 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   std::unique_ptr<Frontend> frontend;
   HANZO_ASSIGN_OR_RETURN(frontend, Frontend::create(config, calibration));
   std::string lidar_sensor, wheel_sensor;
+  bool planar_laser = false;
   calib::SensorCalibration lidar_calibration, wheel_calibration;
   for (const config::SensorConfig& sensor : config.sensors) {
     const calib::SensorCalibration* entry = calibration.find(sensor.name);
     if (sensor.modality == config::SensorModality::kLidar && lidar_sensor.empty() && session_config.mapping) {
       lidar_sensor = sensor.name;
+      planar_laser = sensor.type == config::kPlanarLaserType;
       if (entry != nullptr) lidar_calibration = *entry;
     }
     if (sensor.modality == config::SensorModality::kWheelOdometry && wheel_sensor.empty()) {
@@ -178,11 +182,11 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   const bool has_gnss = std::any_of(config.sensors.begin(), config.sensors.end(),
                                     [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kGnss; });
   if (session_config.gnss_factors && has_gnss) session_config.backend.correct_on_loop_closures_only = true;
-  return std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), lidar_calibration,
-                                              std::move(wheel_sensor), wheel_calibration));
+  return std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), planar_laser,
+                                              lidar_calibration, std::move(wheel_sensor), wheel_calibration));
 }
 
-Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::string lidar_sensor,
+Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::string lidar_sensor, bool planar_laser,
                  const calib::SensorCalibration& lidar_calibration, std::string wheel_sensor,
                  const calib::SensorCalibration& wheel_calibration)
     : frontend_(std::move(frontend)),
@@ -197,7 +201,16 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
       graph_(std::make_unique<KeyframeGraph>(config_.backend)),
       loop_closures_(config_.loop, config_.lidar_odometry.odometry),
       map_builder_(maps::MapBuilder::create(config_.map).value()) {
-  if (!lidar_sensor_.empty()) {
+  if (planar_laser) {
+    // A loop closure's jump moves the Frontend through its newest keyframe (as the graph does).
+    planar_.emplace(*frontend_, lidar_sensor_, T_body_lidar_, lidar_time_offset_, config_.planar_laser, [this](const SE3& T_correction) {
+      if (!latest_keyframe_) return;
+      const SE3 believed = frontend_->world_correction() * latest_keyframe_uncorrected_;
+      if (Status moved = frontend_->apply_correction(latest_keyframe_->keyframe_id, T_correction * believed); !moved) {
+        logger()->warn("session: the planar laser's loop closure did not move the filter: {}", moved.error().message);
+      }
+    });
+  } else if (!lidar_sensor_.empty()) {
     odometry_.emplace(*frontend_, lidar_sensor_, T_body_lidar_, config_.lidar_odometry, lidar_time_offset_);
     // Two sweeps in the worker's queue: the IMU may then run ~0.3 s ahead of the sweep being
     // registered, inside the default 0.5 s lag window its late pose must land in.
@@ -281,7 +294,7 @@ PushStatus Session::push(std::string_view sensor, msgs::SensorMessage message) {
 
 PushStatus Session::push_message(std::string_view sensor, msgs::SensorMessage message) {
   if (!config_.mapping) return frontend_->push(sensor, message);
-  if (odometry_ && sensor == lidar_sensor_) {
+  if (maps_lidar() && sensor == lidar_sensor_) {
     if (auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(std::move(*scan));
   }
   if (!wheel_sensor_.empty() && sensor == wheel_sensor_) {
@@ -316,6 +329,9 @@ void Session::flush_pipeline() {
   if (worker_) worker_->wait_idle();
   take_registered();
   update_backend();
+  if (planar_ && config_.mode == SessionMode::kReplay) {
+    if (Status finished = planar_->finish(); !finished) logger()->warn("session: the planar graph's final optimization failed: {}", finished.error().message);
+  }
   if (config_.mode == SessionMode::kRealtime || !latest_keyframe_) return;
   // Replay: the graph's final estimate over everything (what a background batch would give).
   if (Result<graph::OptimizationSummary> batch = graph_->smoother().wait_for_batch(); !batch) {
@@ -383,9 +399,9 @@ std::vector<SensorHealth> Session::health() const {
       degraded(HealthReason::kSlip);  // withheld from the Frontend, which may time them out
     } else if (sensor.timed_out) {
       entry = {sensor.name, sensor.modality, HealthState::kLost, HealthReason::kTimeout};
-    } else if (sensor.name == lidar_sensor_ && odometry_ && registration_failures_ >= kFailuresForNotRegistered) {
+    } else if (sensor.name == lidar_sensor_ && maps_lidar() && registration_failures_ >= kFailuresForNotRegistered) {
       degraded(HealthReason::kNotRegistered);
-    } else if (sensor.name == lidar_sensor_ && odometry_ && last_sweep_degenerate_) {
+    } else if (sensor.name == lidar_sensor_ && maps_lidar() && last_sweep_degenerate_) {
       degraded(HealthReason::kDegenerateGeometry);
     } else if (sensor.name == lidar_sensor_ && odometry_ && last_sweep_weather_) {
       degraded(HealthReason::kWeather);
@@ -428,6 +444,10 @@ void Session::register_ready_scans() {
     const Timestamp now = has_imu ? latest->timestamp : waiting_scans_.front().end;
     const msgs::PointCloudMessage scan = std::move(waiting_scans_.front().scan);
     waiting_scans_.pop_front();
+    if (planar_) {
+      on_planar_scan(scan);
+      continue;
+    }
     Result<LidarInertialOdometry::PreparedScan> prepared = odometry_->prepare(scan);
     if (!prepared) {
       logger()->debug("session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
@@ -441,6 +461,49 @@ void Session::register_ready_scans() {
     }
   }
   take_registered();
+}
+
+void Session::check_wheels(Timestamp sweep_time, const std::optional<SE3>& T_previous_current, bool reliable) {
+  if (wheel_sensor_.empty()) return;
+  // The LiDAR's motion since the previous registered sweep, as the wheel frame's forward travel.
+  if (last_sweep_time_ && T_previous_current) {
+    const SE3 T_body_body = T_body_lidar_ * *T_previous_current * T_body_lidar_.inverse();
+    const SE3 T_wheels_wheels = T_body_wheels_.inverse() * T_body_body * T_body_wheels_;
+    const bool was_slipping = slip_monitor_.slipping();
+    slip_monitor_.add_lidar_motion(*last_sweep_time_, sweep_time, T_wheels_wheels.translation().x(), reliable);
+    if (slip_monitor_.slipping() != was_slipping) {
+      logger()->warn("session: wheels {} the LiDAR odometry ({:+.3f} m over {:.1f} s){}", slip_monitor_.slipping() ? "disagree with" : "agree again with",
+                     slip_monitor_.last_difference(), config_.wheel_slip.window_s, slip_monitor_.slipping() ? ": not fused while they slip" : "");
+    }
+    summary_.wheel_slip_episodes = slip_monitor_.episodes();
+  }
+  last_sweep_time_ = sweep_time;
+}
+
+void Session::on_planar_scan(const msgs::PointCloudMessage& scan) {
+  Result<PlanarLaserOdometry::Outcome> outcome = planar_->add_scan(scan);
+  if (!outcome) {
+    logger()->debug("session: scan at {:.3f} s not matched: {}", scan.timestamp.seconds(), outcome.error().message);
+    count_refused(first_pose_time_ && scan.timestamp >= *first_pose_time_ ? Rejection::kNotRegistered : Rejection::kAligning);
+    return;
+  }
+  const PlanarScanEstimate& estimate = outcome->estimate;
+  ++lidar_statistics_.fused;
+  ++summary_.scans_registered;
+  summary_.degenerate_scans += estimate.degenerate ? 1 : 0;
+  last_sweep_degenerate_ = estimate.degenerate;
+  registration_failures_ = estimate.scan_matched ? 0 : registration_failures_ + 1;
+  const PlanarLaserSlamSummary& slam = planar_->slam().summary();
+  summary_.map_keyframes = slam.keyframes;
+  summary_.loop_candidates = slam.loop_candidates;
+  summary_.loop_closures = slam.loop_closures;
+  if (estimate.keyframe || estimate.loop_closures_added > 0) ++summary_.map_version;
+  // The laser's motion since the previous scan (both on the graph as it was before this scan's
+  // loop closures) checks the wheels.
+  const SE3 T_world_laser_matched = lifted(estimate.T_map_laser_matched * planar_part(outcome->T_world_laser).inverse()) * outcome->T_world_laser;
+  check_wheels(scan.timestamp, last_lidar_pose_ ? std::optional<SE3>(last_lidar_pose_->inverse() * T_world_laser_matched) : std::nullopt,
+               estimate.scan_matched && !estimate.degenerate);
+  last_lidar_pose_ = outcome->T_world_laser;
 }
 
 void Session::take_registered() {
@@ -465,23 +528,9 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
   last_sweep_weather_ = registered.estimate.weather_degraded;
   registration_failures_ = 0;
   if (scan_callback_) scan_callback_(registered);
-  if (!wheel_sensor_.empty()) {
-    // The LiDAR's motion since the previous registered sweep, as the wheel frame's forward travel.
-    const lidar::LidarOdometryEstimate& estimate = registered.estimate;
-    if (last_sweep_time_ && !estimate.first_scan) {
-      const SE3 T_body_body = T_body_lidar_ * estimate.T_previous_current * T_body_lidar_.inverse();
-      const SE3 T_wheels_wheels = T_body_wheels_.inverse() * T_body_body * T_body_wheels_;
-      const bool was_slipping = slip_monitor_.slipping();
-      slip_monitor_.add_lidar_motion(*last_sweep_time_, estimate.time, T_wheels_wheels.translation().x(),
-                                     !estimate.degenerate && !estimate.weather_degraded);
-      if (slip_monitor_.slipping() != was_slipping) {
-        logger()->warn("session: wheels {} the LiDAR odometry ({:+.3f} m over {:.1f} s){}", slip_monitor_.slipping() ? "disagree with" : "agree again with",
-                       slip_monitor_.last_difference(), config_.wheel_slip.window_s, slip_monitor_.slipping() ? ": not fused while they slip" : "");
-      }
-      summary_.wheel_slip_episodes = slip_monitor_.episodes();
-    }
-    last_sweep_time_ = estimate.time;
-  }
+  const lidar::LidarOdometryEstimate& estimate = registered.estimate;
+  check_wheels(estimate.time, estimate.first_scan ? std::nullopt : std::optional<SE3>(estimate.T_previous_current),
+               !estimate.degenerate && !estimate.weather_degraded);
   const SE3& T_world_lidar = registered.T_world_lidar;
   if (last_lidar_pose_) path_ += (last_lidar_pose_->inverse() * T_world_lidar).translation().norm();
   last_lidar_pose_ = T_world_lidar;
@@ -716,15 +765,23 @@ Result<RelocalizationOutcome> Session::relocalize(const lidar::MapLocalizer& map
 
 msgs::FusionMap Session::map() const {
   msgs::FusionMap map;
+  if (planar_) {
+    if (Result<msgs::FusionMap> planar = planar_->map(config_.map); planar) {
+      map = std::move(planar).value();
+    } else {
+      logger()->warn("session: the planar laser's map: {}", planar.error().message);
+    }
+  } else {
+    map_builder_.write_layers(map);
+  }
   map.version = summary_.map_version;
-  map_builder_.write_layers(map);
   return map;
 }
 
 SessionSummary Session::summary() const {
   SessionSummary summary = frontend_->summary();
   for (SensorStatistics& sensor : summary.sensors) {
-    if (!odometry_ || sensor.name != lidar_sensor_) continue;
+    if (!maps_lidar() || sensor.name != lidar_sensor_) continue;
     // Sweeps come here, not through Frontend::push: our counts; the Frontend's timeout and
     // consistency monitoring of the fused poses stay.
     sensor.received = lidar_statistics_.received;
@@ -750,6 +807,12 @@ MappingSummary Session::mapping_summary() const {
 std::optional<SE3> Session::keyframe_pose(uint64_t keyframe_id) const { return graph_->optimized_pose(keyframe_id); }
 
 std::vector<StampedPose> Session::optimized_trajectory() const {
+  if (planar_) {
+    // The body at every scan on the planar graph.
+    std::vector<StampedPose> trajectory;
+    for (const auto& [time, T_world_laser] : planar_->trajectory()) trajectory.push_back({time, T_world_laser * T_body_lidar_.inverse()});
+    return trajectory;
+  }
   // The correction D = X_optimized * T_uncorrected^-1 of every keyframe the graph knows.
   std::vector<std::pair<Timestamp, SE3>> corrections;
   for (const KeyframeRecord& keyframe : keyframe_records_) {

@@ -13,9 +13,10 @@
 namespace hanzo::fusion::sim {
 namespace {
 
-constexpr EnumNames<LidarModel, 3> kLidarModelNames{{{LidarModel::kVelodyneVlp16, "velodyne_vlp16"},
+constexpr EnumNames<LidarModel, 4> kLidarModelNames{{{LidarModel::kVelodyneVlp16, "velodyne_vlp16"},
                                                      {LidarModel::kVelodyneHdl64, "velodyne_hdl64"},
-                                                     {LidarModel::kOusterOs1_64, "ouster_os1_64"}}};
+                                                     {LidarModel::kOusterOs1_64, "ouster_os1_64"},
+                                                     {LidarModel::kPlanarLaser, "planar_laser"}}};
 
 constexpr double kDegree = std::numbers::pi / 180.0;
 constexpr float kPhantomIntensity = 0.02F;
@@ -46,6 +47,12 @@ LidarPattern LidarPattern::preset(LidarModel model) {
       pattern.columns = 1024;
       pattern.min_range = 0.3;
       pattern.max_range = 120.0;
+      break;
+    case LidarModel::kPlanarLaser:
+      pattern.elevations = {0.0};
+      pattern.columns = 1440;
+      pattern.min_range = 0.1;
+      pattern.max_range = 30.0;
       break;
   }
   return pattern;

@@ -63,7 +63,7 @@ config::FusionConfig scenario_fusion_config(const Scenario& scenario) {
     }
     if (const auto* lidar = std::get_if<LidarSimulatorConfig>(&sensor.simulator)) {
       // The preset the pattern came from, by its ring count and columns.
-      for (LidarModel model : {LidarModel::kVelodyneVlp16, LidarModel::kVelodyneHdl64, LidarModel::kOusterOs1_64}) {
+      for (LidarModel model : {LidarModel::kVelodyneVlp16, LidarModel::kVelodyneHdl64, LidarModel::kOusterOs1_64, LidarModel::kPlanarLaser}) {
         const LidarPattern preset = LidarPattern::preset(model);
         if (preset.elevations == lidar->pattern.elevations && preset.columns == lidar->pattern.columns) entry.type = to_string(model);
       }

@@ -318,7 +318,7 @@ Result<SensorSimulatorConfig> parse_lidar(const YamlValue& value, double rate, c
   std::string model_name = "velodyne_vlp16";
   if (value["model"].present()) HANZO_ASSIGN_OR_RETURN(model_name, value["model"].as_string());
   const std::optional<LidarModel> model = lidar_model_from_string(model_name);
-  if (!model) return value["model"].error(fmt::format("unknown LiDAR '{}' (expected velodyne_vlp16, velodyne_hdl64 or ouster_os1_64)", model_name));
+  if (!model) return value["model"].error(fmt::format("unknown LiDAR '{}' (expected velodyne_vlp16, velodyne_hdl64, ouster_os1_64 or planar_laser)", model_name));
   config.pattern = LidarPattern::preset(*model);
   HANZO_ASSIGN_OR_RETURN(config.range_noise, non_negative_or(value["range_noise"], config.range_noise));
   HANZO_ASSIGN_OR_RETURN(config.pattern.max_range, positive_or(value["max_range"], config.pattern.max_range));

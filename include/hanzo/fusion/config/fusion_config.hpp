@@ -36,6 +36,8 @@ std::optional<FrontendType> frontend_type_from_string(std::string_view name);
 /// What kind of sensor a configured sensor is. Inferred from the sensor's name (imu*, lidar*,
 /// camera*, gnss* or gps*, wheel* or odom*, radar*) unless given as `modality:`.
 enum class SensorModality { kImu, kLidar, kCamera, kGnss, kWheelOdometry, kRadar };
+/// SensorConfig::type of a lidar sensor that is a 2D laser scanner (planar scan matching).
+inline constexpr std::string_view kPlanarLaserType = "planar_laser";
 std::string_view to_string(SensorModality modality);  // "imu", "lidar", "camera", "gnss", "wheel_odometry", "radar"
 /// The modality a message belongs to (an ImuMessage: imu, a PointCloudMessage: lidar, ...).
 SensorModality modality_of(const msgs::SensorMessage& message);
@@ -137,7 +139,8 @@ struct SensorConfig {
   std::string topic;       // default "/sensors/<name>"
   double rate_hz = 0.0;    // required, > 0: nominal rate, used for timeouts and summaries
   std::string body_frame;  // default "<name>_link"
-  std::string type;        // optional model, e.g. "velodyne_vlp16", "stereo_left"; "" when not given
+  std::string type;        // optional model, e.g. "velodyne_vlp16", "stereo_left"; "" when not given;
+                           // kPlanarLaserType marks a 2D laser scanner (its scans are planar)
   SensorFusionOptions fusion;
 
   /// The timeout in seconds (the default applied).

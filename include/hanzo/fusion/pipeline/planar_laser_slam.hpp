@@ -92,7 +92,9 @@ struct PlanarLaserSlamConfig {
 };
 
 struct PlanarScanEstimate {
-  SE2 T_map_laser;
+  SE2 T_map_laser;                ///< on the graph's estimate after this scan (loop closures included)
+  SE2 T_map_laser_matched;        ///< as the scan matcher found it, before a loop closure moved the graph
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  ///< of the match over (x, y, theta); odometry's when unmatched
   bool keyframe = false;          ///< the scan became keyframe X(keyframe_index)
   size_t keyframe_index = 0;      ///< the keyframe the scan belongs to
   bool scan_matched = false;      ///< false: placed by odometry alone

@@ -34,6 +34,11 @@
 //    Frontend's first pose). Without an IMU the sweep moves the Frontend's motion model to
 //    its end at once (Frontend::propagate_to) and is registered and deskewed from that
 //    prediction; other sensors' messages older than that are fused by the Frontend's rollback.
+//  - A 2D laser scanner (the LiDAR sensor with `type: planar_laser`) goes the same way, but its
+//    scans are matched by PlanarLaserOdometry (planar scan matching with its own keyframes,
+//    loop closures and planar graph; their poses into the Frontend, a loop closure's jump moves
+//    it through the newest keyframe). Its map is ray cast from the planar keyframes at their
+//    optimized poses, and optimized_trajectory() is the body at every scan on that graph.
 //  - Wheel odometry (the first wheel sensor) is checked against the LiDAR odometry's own motion
 //    (WheelSlipMonitor): while the wheels disagree (slip, spin, a wrong scale) their messages
 //    are not fused (counted as rejected "slip"); the filter runs on the IMU and the LiDAR.
@@ -81,6 +86,7 @@
 #include "hanzo/fusion/msgs/map_messages.hpp"
 #include "hanzo/fusion/pipeline/keyframe_graph.hpp"
 #include "hanzo/fusion/pipeline/lidar_inertial_odometry.hpp"
+#include "hanzo/fusion/pipeline/planar_laser_odometry.hpp"
 #include "hanzo/fusion/pipeline/frontend.hpp"
 #include "hanzo/fusion/pipeline/sensor_health.hpp"
 #include "hanzo/fusion/pipeline/wheel_slip_monitor.hpp"
@@ -100,6 +106,10 @@ struct SessionConfig {
   /// counted as not fused.
   bool mapping = true;
   LidarInertialOdometryConfig lidar_odometry;
+  /// A 2D laser scanner (a lidar sensor with `type: planar_laser`): scan matching, keyframes and
+  /// loop closures of its own planar graph (planar_laser_odometry.hpp) instead of the 3D LiDAR
+  /// odometry, Scan Context and the keyframe graph's LiDAR factors.
+  PlanarLaserOdometryConfig planar_laser;
   /// The backend; its batch_on_loop_closure is forced on (a loop closure must correct the
   /// map and the Frontend at once), smoother.background_batch is set by the mode.
   KeyframeGraphConfig backend;
@@ -274,8 +284,8 @@ class Session {
     SE3 T_anchor_lidar;        ///< the sweep's pose relative to the anchor's body
     SE3 T_world_lidar;         ///< where the map has it now
   };
-  Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::string lidar_sensor, const calib::SensorCalibration& lidar_calibration,
-          std::string wheel_sensor, const calib::SensorCalibration& wheel_calibration);
+  Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::string lidar_sensor, bool planar_laser,
+          const calib::SensorCalibration& lidar_calibration, std::string wheel_sensor, const calib::SensorCalibration& wheel_calibration);
   /// Feeds the slip monitor; false when the wheels disagree with the LiDAR (not fused then).
   bool wheels_agree(const msgs::WheelOdometryMessage& wheels);
   PushStatus push_message(std::string_view sensor, msgs::SensorMessage message);
@@ -286,6 +296,9 @@ class Session {
   /// Fuses what the worker registered (kRealtime).
   void take_registered();
   void on_registered(Result<LidarInertialOdometry::RegisteredScan> registered);
+  /// Feeds the slip monitor the LiDAR's motion since the previous registered sweep (none: the
+  /// first); `reliable` false when the geometry or weather made it doubtful.
+  void check_wheels(Timestamp sweep_time, const std::optional<SE3>& T_previous_current, bool reliable);
   /// The sweep as a map keyframe anchored to the newest Frontend keyframe.
   void add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points);
   /// T_world_lidar of map keyframe k by the graph's current estimate.
@@ -315,6 +328,11 @@ class Session {
   std::unique_ptr<KeyframeGraph> graph_;  ///< replaced by a fresh one at a relocalization
   bool restart_graph_ = false;  ///< the next keyframe starts the graph (after a relocalization)
   std::optional<LidarInertialOdometry> odometry_;
+  std::optional<PlanarLaserOdometry> planar_;  ///< instead of odometry_ for a planar_laser sensor
+  /// Whether sweeps of lidar_sensor_ go through a LiDAR pipeline (3D or planar) here.
+  bool maps_lidar() const { return odometry_.has_value() || planar_.has_value(); }
+  /// Matches and fuses one planar scan; its counts as a registered sweep's.
+  void on_planar_scan(const msgs::PointCloudMessage& scan);
   std::unique_ptr<RegistrationWorker> worker_;  ///< kRealtime
   lidar::LoopClosureDetector loop_closures_;
   maps::MapBuilder map_builder_;

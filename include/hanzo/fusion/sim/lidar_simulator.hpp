@@ -34,8 +34,9 @@
 
 namespace hanzo::fusion::sim {
 
-enum class LidarModel { kVelodyneVlp16, kVelodyneHdl64, kOusterOs1_64 };
-/// "velodyne_vlp16", "velodyne_hdl64", "ouster_os1_64" (the fusion configuration's lidar types).
+enum class LidarModel { kVelodyneVlp16, kVelodyneHdl64, kOusterOs1_64, kPlanarLaser };
+/// "velodyne_vlp16", "velodyne_hdl64", "ouster_os1_64", "planar_laser" (the fusion
+/// configuration's lidar types; planar_laser: config::kPlanarLaserType).
 std::string_view to_string(LidarModel model);
 std::optional<LidarModel> lidar_model_from_string(std::string_view name);
 
@@ -50,6 +51,8 @@ struct LidarPattern {
   /// HDL-64E: 64 rings -24.33..+2 deg (lower block 1/2 deg apart, upper block 1/3 deg), 2083 columns, 0.9-120 m.
   /// Rings are numbered from the lowest beam up in every preset.
   /// OS1-64: 64 rings -22.5..+22.5 deg evenly, 1024 columns, 0.3-120 m.
+  /// Planar laser (a 2D scanner such as a SICK or Hokuyo, all round): one ring at 0 deg,
+  /// 1440 columns (0.25 deg), 0.1-30 m.
   static LidarPattern preset(LidarModel model);
 };
 
