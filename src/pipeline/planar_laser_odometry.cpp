@@ -43,6 +43,43 @@ SE3 PlanarLaserOdometry::world_laser(const SE2& planar) const {
   return SE3(pose.rotation(), Eigen::Vector3d(pose.translation().x(), pose.translation().y(), laser_height_));
 }
 
+void PlanarLaserOdometry::add_wheels(const msgs::WheelOdometryMessage& wheels, Timestamp body_time, const SE3& T_body_wheels) {
+  constexpr double kHistory = 10.0;  // s of dead reckoning kept
+  if (!wheel_odometry_.empty() && body_time <= wheel_odometry_.back().first) return;
+  if (!(wheels.wheel_separation > 0) || !std::isfinite(wheels.left_distance) || !std::isfinite(wheels.right_distance)) return;
+  const SE2 T_wheels_laser = planar_part(T_body_wheels.inverse() * T_body_laser_);
+  SE2 T_odom_wheels = wheel_odometry_.empty() ? SE2() : wheel_odometry_.back().second * T_wheels_laser.inverse();
+  if (previous_wheels_) {
+    // Differential drive over the interval: the arc's chord at half the turn.
+    const double left = wheels.left_distance - previous_wheels_->left_distance;
+    const double right = wheels.right_distance - previous_wheels_->right_distance;
+    const double distance = 0.5 * (left + right), turn = (right - left) / wheels.wheel_separation;
+    T_odom_wheels = T_odom_wheels * SE2(turn, Eigen::Vector2d(distance * std::cos(0.5 * turn), distance * std::sin(0.5 * turn)));
+  }
+  previous_wheels_ = wheels;
+  wheel_odometry_.emplace_back(body_time, T_odom_wheels * T_wheels_laser);
+  while (wheel_odometry_.size() > 2 && (body_time - wheel_odometry_.front().first).seconds() > kHistory) wheel_odometry_.pop_front();
+}
+
+std::optional<SE2> PlanarLaserOdometry::wheel_odometry_at(Timestamp time) const {
+  // A scan may arrive before the wheel message after it: the last interval's motion carries
+  // the dead reckoning on for up to this long.
+  constexpr double kMaxExtrapolation = 0.25;  // s
+  if (wheel_odometry_.size() < 2 || time < wheel_odometry_.front().first) return std::nullopt;
+  if (time > wheel_odometry_.back().first) {
+    const auto& [t1, pose1] = wheel_odometry_.back();
+    const auto& [t0, pose0] = *std::prev(wheel_odometry_.end(), 2);
+    if ((time - t1).seconds() > kMaxExtrapolation) return std::nullopt;
+    return pose1 * SE2::exp((pose0.inverse() * pose1).log() * ((time - t1).seconds() / (t1 - t0).seconds()));
+  }
+  const auto after = std::lower_bound(wheel_odometry_.begin(), wheel_odometry_.end(), time,
+                                      [](const std::pair<Timestamp, SE2>& entry, Timestamp t) { return entry.first < t; });
+  if (after == wheel_odometry_.begin()) return after->second;
+  const auto before = std::prev(after);
+  const double fraction = (time - before->first).seconds() / (after->first - before->first).seconds();
+  return SE2::interpolate(before->second, after->second, fraction);
+}
+
 Result<PlanarLaserOdometry::Outcome> PlanarLaserOdometry::add_scan(const msgs::PointCloudMessage& scan) {
   const std::optional<SE3> T_world_body = frontend_.pose_at(scan.timestamp);
   if (!T_world_body) {
@@ -50,9 +87,17 @@ Result<PlanarLaserOdometry::Outcome> PlanarLaserOdometry::add_scan(const msgs::P
   }
   const SE3 T_world_laser_before = *T_world_body * T_body_laser_;
   const SE2 planar_before = planar_part(T_world_laser_before);
-  // The odometry: the filter's motion since the previous scan was fused (its own correction
-  // left out), chained onto the odometry given for that scan.
-  const SE2 T_odom_laser = T_odom_last_ ? *T_odom_last_ * (T_world_laser_after_->inverse() * planar_before) : planar_before;
+  // The odometry: without an IMU the wheels' dead reckoning when it covers the scan; else the
+  // filter's motion since the previous scan was fused (its own correction left out), chained
+  // onto the odometry given for that scan. The first scan is placed at the filter's pose.
+  const std::optional<SE2> wheels = frontend_.has_imu() ? std::nullopt : wheel_odometry_at(scan.timestamp);
+  SE2 T_odom_laser = planar_before;
+  if (T_odom_last_ && wheels && last_wheels_) {
+    T_odom_laser = *T_odom_last_ * (last_wheels_->inverse() * *wheels);
+  } else if (T_odom_last_) {
+    T_odom_laser = *T_odom_last_ * (T_world_laser_after_->inverse() * planar_before);
+  }
+  last_wheels_ = wheels;
   PlanarScanEstimate estimate;
   HANZO_ASSIGN_OR_RETURN(estimate, slam_.add_scan(deskewed(scan, T_world_laser_before), T_odom_laser));
   if (!last_time_) laser_height_ = T_world_laser_before.translation().z();

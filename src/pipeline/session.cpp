@@ -299,6 +299,7 @@ PushStatus Session::push_message(std::string_view sensor, msgs::SensorMessage me
   }
   if (!wheel_sensor_.empty() && sensor == wheel_sensor_) {
     const auto* wheels = std::get_if<msgs::WheelOdometryMessage>(&message);
+    if (planar_ && wheels != nullptr && msgs::validate(*wheels).ok()) planar_->add_wheels(*wheels, wheels->timestamp + wheel_time_offset_, T_body_wheels_);
     if (wheels != nullptr && msgs::validate(*wheels).ok() && !wheels_agree(*wheels)) {
       ++summary_.wheel_messages_withheld;
       register_ready_scans();

@@ -39,18 +39,13 @@ config::SensorConfig sensor(const std::string& name, SensorModality modality, do
   return entry;
 }
 
-// Intel lab: the scans as logged (about one every 3 s: the corrected log keeps keyframes), wheel
-// odometry at 20 Hz along the logged (corrected) poses made 5 % too long with 0.5 deg/m of
-// heading drift. The first 330 scans (17 minutes, the lab's corridors twice round): the
-// session's optimized trajectory stays within 0.2 m of the logged poses. Over the whole log it
-// does not yet: one scan matched badly at 1065.7 s (fitness 0.54) is not recovered by the loop
-// closures (bench/RESULTS.md; `slam2d` reaches 0.07 m on the whole log with the same odometry).
+// Intel lab: the scans as logged (about one every 3 s: the corrected log keeps keyframes, and
+// some lie 0.18 s apart with a 0.5 rad turn between them), wheel odometry at 20 Hz along the
+// logged (corrected) poses made 5 % too long with 0.5 deg/m of heading drift. Without an IMU the
+// planar SLAM's odometry is the wheels' dead reckoning: the session's optimized trajectory lands
+// near what `slam2d` reaches on the same data (0.07 m).
 TEST(PlanarLaserSession, IntelLabScansCorrectDriftingWheels) {
-  io::CarmenLog log = io::read_carmen(std::string(HANZO_DATA_DIR) + "/laser2d_carmen/intel-corrected.log.gz", {}).value();
-  constexpr std::size_t kScans = 330;
-  log.scans.resize(kScans);
-  log.report.scan_poses.timestamps.resize(kScans);
-  log.report.scan_poses.poses.resize(kScans);
+  const io::CarmenLog log = io::read_carmen(std::string(HANZO_DATA_DIR) + "/laser2d_carmen/intel-corrected.log.gz", {}).value();
   std::vector<SE2> logged;
   for (const io::PoseMatrix& pose : log.report.scan_poses.poses) logged.push_back(io::planar_pose(pose));
   const std::vector<SE2> odometry = sim::corrupt_planar_odometry(logged, {.scale_error = 0.05, .heading_drift_per_meter = 0.5 * M_PI / 180.0});
@@ -105,14 +100,14 @@ TEST(PlanarLaserSession, IntelLabScansCorrectDriftingWheels) {
               log.scans.size(), odometry_error, slam_error, static_cast<unsigned long long>(mapping.map_keyframes),
               static_cast<unsigned long long>(mapping.loop_closures));
   EXPECT_GT(odometry_error, 1.0);
-  EXPECT_LT(slam_error, 0.2);
-  EXPECT_GT(mapping.loop_closures, 50U);
+  EXPECT_LT(slam_error, 0.15);
+  EXPECT_GT(mapping.loop_closures, 300U);
   EXPECT_GT(mapping.scans_registered, log.scans.size() * 95 / 100);
   const msgs::FusionMap map = session->map();
   ASSERT_TRUE(map.occupancy.has_value());
   const std::size_t free = static_cast<std::size_t>(std::count_if(map.occupancy->occupancy.begin(), map.occupancy->occupancy.end(),
                                                                    [](float p) { return p < maps::OccupancyConfig{}.free_threshold; }));
-  EXPECT_GT(free, 20000U);
+  EXPECT_GT(free, 20000U);  // 0.1 m cells of a 30 x 30 m lab
 }
 
 // The warehouse drive with a planar laser at 20 Hz (deskewed with the filter's motion):

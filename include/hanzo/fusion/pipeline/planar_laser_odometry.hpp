@@ -2,9 +2,11 @@
 // PlanarLaserOdometry: a 2D laser scanner (a lidar sensor with `type: planar_laser` in the
 // fusion configuration) coupled to a Frontend, as LidarInertialOdometry couples a 3D LiDAR.
 // Per scan:
-//  1. the odometry is the Frontend's motion (wheels, IMU, or the motion model) since the
-//     previous scan, taken from the filter's pose after the previous scan was fused, so that the
-//     laser's own corrections are not counted as motion again;
+//  1. the odometry: with an IMU, the Frontend's motion since the previous scan, taken from the
+//     filter's pose after the previous scan was fused (so that the laser's own corrections are
+//     not counted as motion again); without one, the wheels' own dead reckoning when wheel
+//     messages come in (add_wheels: as a 2D SLAM uses odometry; the motion model cannot follow
+//     a turn faster than its angular_acceleration_noise allows), else the motion model's;
 //  2. the scan is deskewed with the filter's motion during it (per-point times), then
 //     PlanarLaserSlam (planar_laser_slam.hpp) matches it against its local map, makes
 //     keyframes and closes loops;
@@ -20,6 +22,7 @@
 // history), or one PlanarLaserSlam refuses (time not increasing, too few points, non-finite):
 // an Error that says so, nothing changes.
 
+#include <deque>
 #include <functional>
 #include <optional>
 #include <string>
@@ -64,6 +67,9 @@ class PlanarLaserOdometry {
     PlanarScanEstimate estimate;
     SE3 T_world_laser;  ///< after the scan (and any loop closure it made)
   };
+  /// Wheel odometry (body clock), dead-reckoned for the scans' odometry when the Frontend has
+  /// no IMU. T_body_wheels: the wheels' mounting. Messages out of time order are ignored.
+  void add_wheels(const msgs::WheelOdometryMessage& wheels, Timestamp body_time, const SE3& T_body_wheels);
   /// Matches one scan (its timestamp in the body clock) and fuses its pose into the Frontend.
   Result<Outcome> add_scan(const msgs::PointCloudMessage& scan);
   /// Optimizes the whole graph to convergence (a replay's end).
@@ -93,6 +99,12 @@ class PlanarLaserOdometry {
   std::optional<SE2> T_odom_last_;         ///< the odometry handed to the SLAM for the previous scan
   std::optional<SE2> T_world_laser_after_; ///< the filter's planar pose at the previous scan, after it was fused
   std::optional<Timestamp> last_time_;
+  /// Wheel dead reckoning: T_odom_laser by time (the last few seconds), and the previous message.
+  std::deque<std::pair<Timestamp, SE2>> wheel_odometry_;
+  std::optional<msgs::WheelOdometryMessage> previous_wheels_;
+  std::optional<SE2> last_wheels_;  ///< the dead reckoning at the previous scan (none: it did not cover it)
+  /// The wheel odometry's T_odom_laser at `time`, interpolated; none outside what it covers.
+  std::optional<SE2> wheel_odometry_at(Timestamp time) const;
   double laser_height_ = 0.0;              ///< m: z of the laser in the world at the first scan (map keyframes)
 };
 
