@@ -16,6 +16,7 @@ namespace {
 constexpr double kZeroVelocitySigma = 0.005;  // m/s
 constexpr double kZeroRateSigma = 0.002;      // rad/s
 constexpr double kWheelGap = 1.0;             // s: longer gaps between wheel readings are not differenced
+constexpr double kWheelMinIntervalFraction = 0.25;  // of the nominal period: closer readings are merged
 
 }  // namespace
 
@@ -104,10 +105,15 @@ bool Estimator::align_heading_to_course(const Eigen::Vector3d& antenna_gnss, con
 EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdometryMessage& wheels, UpdateObserver* observer) {
   std::optional<msgs::WheelOdometryMessage>& previous = previous_wheels_[event.sensor];
   const std::optional<msgs::WheelOdometryMessage> before = previous;
+  const double dt = before ? (event.time - before->timestamp).seconds() : 0.0;
+  // Distances differenced over a sliver of the nominal period turn timestamp jitter into wild
+  // speeds (a log stamped to the millisecond with readings 1 ms apart): such a reading is merged,
+  // the next one differences over both.
+  const double min_interval = kWheelMinIntervalFraction / sensors_[event.sensor].config->rate_hz;
+  if (before && dt > 0.0 && dt < min_interval) return {false, Rejection::kMerged};
   previous = wheels;
   previous->timestamp = event.time;  // body clock
   if (!before) return {false, Rejection::kReference};
-  const double dt = (event.time - before->timestamp).seconds();
   if (dt <= 0.0 || dt > kWheelGap) return {false, Rejection::kGap};
   const double left = wheels.left_distance - before->left_distance;
   const double right = wheels.right_distance - before->right_distance;

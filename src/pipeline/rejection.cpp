@@ -8,7 +8,7 @@
 namespace hanzo::fusion::pipeline {
 namespace {
 
-constexpr std::array<std::pair<Rejection, std::string_view>, 24> kNames{{
+constexpr std::array<std::pair<Rejection, std::string_view>, 25> kNames{{
     {Rejection::kUnknownSensor, "unknown_sensor"},
     {Rejection::kWrongType, "wrong_type"},
     {Rejection::kInvalid, "invalid"},
@@ -32,6 +32,7 @@ constexpr std::array<std::pair<Rejection, std::string_view>, 24> kNames{{
     {Rejection::kAligning, "aligning"},
     {Rejection::kBeforeInitialization, "before_initialization"},
     {Rejection::kReference, "reference"},
+    {Rejection::kMerged, "merged"},
     {Rejection::kNotFused, "not_fused"},
 }};
 

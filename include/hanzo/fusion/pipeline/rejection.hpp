@@ -11,7 +11,9 @@
 //                      registration_behind (a live sweep dropped: the registration was busy),
 //                      imu_behind (a sweep dropped while waiting for the IMU)
 //   informational      aligning, before_initialization, reference (the first wheel reading),
-//                      not_fused (a modality nothing fuses, e.g. cameras)
+//                      merged (a wheel reading too soon after the previous one to difference:
+//                      the next reading differences over both), not_fused (a modality nothing
+//                      fuses, e.g. cameras)
 
 #include <cstdint>
 #include <map>
@@ -47,6 +49,7 @@ enum class Rejection : uint8_t {
   kAligning,
   kBeforeInitialization,
   kReference,
+  kMerged,
   kNotFused,
 };
 
