@@ -16,6 +16,7 @@
 #include "hanzo/fusion/sim/planar_odometry_error.hpp"
 #include "hanzo/fusion/sim/scenario.hpp"
 #include "hanzo/fusion/sim/scenario_simulation.hpp"
+#include "pipeline/scenario_replay.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
@@ -131,19 +132,9 @@ TEST(PlanarLaserSession, SimulatedWarehouseWithAndWithoutAnImu) {
     const config::FusionConfig fusion = sim::scenario_fusion_config(scenario);
     ASSERT_EQ(fusion.find_sensor("lidar")->type, config::kPlanarLaserType);
     auto session = Session::create(fusion, sim::scenario_calibration(scenario)).value();
-    io::Trajectory estimate, truth;
-    session->set_pose_callback([&](const msgs::PoseEstimate& pose) {
-      if (estimate.size() > 0 && (pose.timestamp - estimate.timestamps.back()).seconds() < 0.1) return;
-      estimate.timestamps.push_back(pose.timestamp);
-      estimate.poses.push_back(pose.T_world_body.to_se3().matrix());
-      truth.timestamps.push_back(pose.timestamp);
-      truth.poses.push_back(simulation->trajectory().sample(pose.timestamp).T_world_body.matrix());
-    });
-    ASSERT_TRUE(simulation->run([&](const sim::ScenarioSensor& s, msgs::SensorMessage&& message) -> Status {
-      (void)session->push(s.name, std::move(message));
-      return ok_status();
-    }).ok());
-    session->flush();
+    const testing::ReplayedTrajectories replayed = testing::replay(*simulation, *session);
+    const io::Trajectory& estimate = replayed.estimate;
+    const io::Trajectory& truth = replayed.truth;
     io::Trajectory optimized, optimized_truth;
     for (const StampedPose& pose : session->optimized_trajectory()) {
       optimized.timestamps.push_back(pose.timestamp);

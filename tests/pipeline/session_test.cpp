@@ -18,6 +18,7 @@
 #include "hanzo/fusion/pipeline/session.hpp"
 #include "hanzo/fusion/sim/scenario.hpp"
 #include "hanzo/fusion/sim/scenario_simulation.hpp"
+#include "pipeline/scenario_replay.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
@@ -214,23 +215,11 @@ double warehouse_aligned_rmse(const std::set<SensorModality>& modalities, Sessio
   SessionConfig session_config = SessionConfig::from(fusion);
   session_config.mode = mode;
   auto session = Session::create(fusion, sim::scenario_calibration(scenario), session_config).value();
-  io::Trajectory estimate, truth;
-  session->set_pose_callback([&](const msgs::PoseEstimate& pose) {
-    if (estimate.size() > 0 && (pose.timestamp - estimate.timestamps.back()).seconds() < 0.1) return;
-    estimate.timestamps.push_back(pose.timestamp);
-    estimate.poses.push_back(pose.T_world_body.to_se3().matrix());
-    truth.timestamps.push_back(pose.timestamp);
-    truth.poses.push_back(simulation->trajectory().sample(pose.timestamp).T_world_body.matrix());
-  });
-  EXPECT_TRUE(simulation->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
-    (void)session->push(sensor.name, std::move(message));
-    return ok_status();
-  }).ok());
-  session->flush();
+  const testing::ReplayedTrajectories replayed = testing::replay(*simulation, *session);
   if (summary_out) *summary_out = session->summary();
   if (mapping_out) *mapping_out = session->mapping_summary();
   if (health_out) *health_out = session->health_changes();
-  const auto ape = eval::compute_ape(truth, estimate, {.relation = eval::PoseRelation::kTranslation, .alignment = eval::Alignment::kSE3});
+  const auto ape = eval::compute_ape(replayed.truth, replayed.estimate, {.relation = eval::PoseRelation::kTranslation, .alignment = eval::Alignment::kSE3});
   EXPECT_TRUE(ape.ok());
   return ape ? ape->statistics.rmse : 1e9;
 }
