@@ -1,10 +1,11 @@
 // hanzo-fusion graph optimize IN.g2o --out OUT.g2o [--objective geodesic|chordal]
-//   [--initialize file|chordal] [--incremental] [--plot DIR]:
+//   [--initialize best|file|chordal] [--incremental] [--plot DIR]:
 // batch optimization of a pose graph; prints g2o's chi2 and SE-Sync's objective before and after,
 // iterations and time.
 
 #include <algorithm>
 #include <chrono>
+#include <optional>
 #include <filesystem>
 
 #include <fmt/format.h>
@@ -23,7 +24,7 @@ struct GraphOptions {
   std::string input;
   std::string out;
   std::string objective = "geodesic";
-  std::string initialize = "file";
+  std::string initialize = "best";
   std::string plot_dir;
   int max_iterations = 100;
   bool incremental = false;
@@ -93,23 +94,32 @@ int run_optimize(const Output& output, const GraphOptions& options) {
   if (options.objective != "geodesic" && options.objective != "chordal") {
     return fail(fmt::format("--objective: expected geodesic or chordal, got '{}'", options.objective));
   }
-  if (options.initialize != "file" && options.initialize != "chordal") {
-    return fail(fmt::format("--initialize: expected file or chordal, got '{}'", options.initialize));
+  if (options.initialize != "file" && options.initialize != "chordal" && options.initialize != "best") {
+    return fail(fmt::format("--initialize: expected best, file or chordal, got '{}'", options.initialize));
+  }
+  if (options.incremental && options.initialize == "chordal") {
+    return fail("--incremental: new poses start from odometry; --initialize chordal does not apply");
   }
   auto pose_graph = graph::read_g2o(options.input);
   if (!pose_graph) return fail(pose_graph.error().message);
   const auto objective = options.objective == "chordal" ? graph::PoseGraph::Objective::kChordal : graph::PoseGraph::Objective::kGeodesic;
   auto factors = pose_graph->factor_graph(objective);
   if (!factors) return fail(factors.error().message);
+  // The objective being minimized, to compare the starts.
+  const auto cost = [&](const graph::Values& v) {
+    return objective == graph::PoseGraph::Objective::kChordal ? graph::se_sync_objective(*pose_graph, v).value() : graph::g2o_chi2(*pose_graph, v).value();
+  };
   graph::Values values = pose_graph->initial;
   double initialization_seconds = 0.0;
-  if (options.initialize == "chordal") {
+  std::optional<graph::Values> chordal;
+  if (options.initialize != "file" && !options.incremental) {
     const auto start = std::chrono::steady_clock::now();
     auto initialized = graph::chordal_initialization(*pose_graph);
-    if (!initialized) return fail(initialized.error().message);
-    values = std::move(*initialized);
+    if (!initialized && options.initialize == "chordal") return fail(initialized.error().message);
+    if (initialized) chordal = std::move(*initialized);
     initialization_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
+  if (options.initialize == "chordal") values = *chordal;
   const double initial_chi2 = graph::g2o_chi2(*pose_graph, values).value();
   const double initial_objective = graph::se_sync_objective(*pose_graph, values).value();
   graph::BatchOptimizerConfig config;
@@ -117,8 +127,8 @@ int run_optimize(const Output& output, const GraphOptions& options) {
   config.max_iterations = options.max_iterations;
   std::string incremental_text;
   graph::OptimizationSummary summary;
+  std::string started_from = options.initialize == "chordal" ? "chordal" : "file";
   if (options.incremental) {
-    if (options.initialize != "file") return fail("--incremental: new poses start from odometry; --initialize does not apply");
     if (Status done = optimize_incrementally(*pose_graph, objective, options.max_iterations, values, summary, result, incremental_text); !done) {
       return fail(done.error().message);
     }
@@ -126,6 +136,18 @@ int run_optimize(const Output& output, const GraphOptions& options) {
     auto solved = graph::optimize(*factors, values, config);
     if (!solved) return fail(solved.error().message);
     summary = *solved;
+    // best: the file's start and the chordal one both optimized, the lower cost kept (a start
+    // far from the optimum ends in a local minimum; the chordal one rarely does).
+    if (options.initialize == "best" && chordal) {
+      graph::Values from_chordal = *chordal;
+      auto other = graph::optimize(*factors, from_chordal, config);
+      result["final_cost_by_start"] = {{"file", cost(values)}, {"chordal", other ? nlohmann::json(cost(from_chordal)) : nlohmann::json(nullptr)}};
+      if (other && cost(from_chordal) < cost(values)) {
+        values = std::move(from_chordal);
+        summary = *other;
+        started_from = "chordal";
+      }
+    }
   }
   const double final_chi2 = graph::g2o_chi2(*pose_graph, values).value();
   const double final_objective = graph::se_sync_objective(*pose_graph, values).value();
@@ -145,6 +167,7 @@ int run_optimize(const Output& output, const GraphOptions& options) {
   result["g2o_chi2"] = {{"initial", initial_chi2}, {"final", final_chi2}};
   result["se_sync_objective"] = {{"initial", initial_objective}, {"final", final_objective}};
   result["initialize"] = options.initialize;
+  result["started_from"] = started_from;
   result["initialization_seconds"] = initialization_seconds;
   result["iterations"] = summary.iterations;
   result["seconds"] = summary.seconds;
@@ -153,7 +176,8 @@ int run_optimize(const Output& output, const GraphOptions& options) {
       "{}: {}D, {} poses, {} edges, {} objective\n  g2o chi2:           {:.6g} -> {:.6g}\n  SE-Sync objective:  {:.6g} -> {:.6g}\n"
       "{}  initialization: {} ({:.3f} s); {} iterations in {:.3f} s ({})\nwrote {}\n",
       options.input, pose_graph->dimension, pose_graph->vertices.size(), pose_graph->edges.size(), options.objective, initial_chi2,
-      final_chi2, initial_objective, final_objective, incremental_text, options.initialize, initialization_seconds, summary.iterations, summary.seconds,
+      final_chi2, initial_objective, final_objective, incremental_text, options.initialize == "best" ? "best start: " + started_from : options.initialize,
+      initialization_seconds, summary.iterations, summary.seconds,
       summary.converged ? "converged" : summary.message, options.out);
   if (!options.plot_dir.empty()) {
     std::error_code ec;
@@ -187,7 +211,8 @@ void add_graph_command(CLI::App& app, const Output& output, Command& run) {
   optimize->add_option("--out", options->out, "Optimized pose graph to write: TORO when it ends in .graph, g2o otherwise")->required();
   optimize->add_option("--objective", options->objective, "geodesic (g2o's errors) or chordal (SE-Sync's objective)")->capture_default_str();
   optimize->add_option("--initialize", options->initialize,
-                       "file (the VERTEX lines, chained odometry for missing ones) or chordal (rotation relaxation)")
+                       "best (optimize from both starts, keep the lower cost), file (the VERTEX lines, chained odometry for missing ones) "
+                       "or chordal (rotation relaxation)")
       ->capture_default_str();
   optimize->add_flag("--incremental", options->incremental,
                      "Feed the graph pose by pose to the incremental smoother (odometry starts) and report update latencies");
