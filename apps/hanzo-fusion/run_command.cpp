@@ -286,7 +286,6 @@ Result<std::vector<std::string>> write_map(const std::filesystem::path& out, con
   map.map_id = "run";
   map.version = 1;
   map.created = created;  // the log's last pose: the same log gives the same file
-  map.provenance.algorithm = "pipeline/session";
   map.provenance.software_version = HANZO_FUSION_VERSION;
   HANZO_ASSIGN_OR_RETURN(map.sensor_configuration, read_file(options.config_path));
   msgs::InputLog input;

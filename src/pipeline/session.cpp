@@ -776,6 +776,7 @@ msgs::FusionMap Session::map() const {
     map_builder_.write_layers(map);
   }
   map.version = summary_.map_version;
+  map.provenance.algorithm = planar_ ? "pipeline/session (planar laser)" : "pipeline/session";
   return map;
 }
 

@@ -167,6 +167,7 @@ TEST_F(MappingEndpointsTest, RestServesTheMapInEveryFormatAndTakesLoopClosures) 
   ASSERT_TRUE(parsed->points.has_value());
   EXPECT_EQ(parsed->points->points.size(), points);
   EXPECT_THAT(parsed->sensor_configuration, HasSubstr("fusion:"));
+  EXPECT_EQ(parsed->provenance.algorithm, "pipeline/session");
   for (const char* format : {"pcd", "ply"}) {
     auto cloud_response = client().Get(path + "/map?format=" + format, bearer(kRobotToken));
     ASSERT_TRUE(cloud_response && cloud_response->status == 200);

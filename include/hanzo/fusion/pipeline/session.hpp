@@ -240,7 +240,8 @@ class Session {
   /// Nothing changes then.
   Result<RelocalizationOutcome> relocalize(const lidar::MapLocalizer& map, const RelocalizationRequest& request);
 
-  /// The map's layers (points, occupancy) with version = map_version; other metadata empty.
+  /// The map's layers (points, occupancy) with version = map_version and provenance.algorithm
+  /// set ("pipeline/session"); other metadata empty.
   msgs::FusionMap map() const;
   /// The Frontend's summary with the LiDAR sensor's counters filled in.
   SessionSummary summary() const;
