@@ -1,7 +1,8 @@
 // hanzo-fusion graph optimize IN.g2o --out OUT.g2o [--objective geodesic|chordal]
-//   [--initialize best|file|chordal] [--incremental] [--plot DIR]:
+//   [--initialize best|file|chordal] [--incremental] [--no-certificate] [--plot DIR]:
 // batch optimization of a pose graph; prints g2o's chi2 and SE-Sync's objective before and after,
-// iterations and time.
+// iterations and time, and whether the solution is certified globally optimal
+// (graph/optimality_certificate.hpp).
 
 #include <algorithm>
 #include <chrono>
@@ -16,6 +17,7 @@
 #include "hanzo/fusion/graph/chordal_initialization.hpp"
 #include "hanzo/fusion/graph/g2o_io.hpp"
 #include "hanzo/fusion/graph/incremental_smoother.hpp"
+#include "hanzo/fusion/graph/optimality_certificate.hpp"
 
 namespace hanzo::fusion::app {
 namespace {
@@ -28,6 +30,7 @@ struct GraphOptions {
   std::string plot_dir;
   int max_iterations = 100;
   bool incremental = false;
+  bool certificate = true;
 };
 
 // The graph fed pose by pose to an IncrementalSmoother; fills `values` with the estimate after
@@ -149,6 +152,28 @@ int run_optimize(const Output& output, const GraphOptions& options) {
       }
     }
   }
+  // The certificate is about SE-Sync's objective: for it the refined poses are written (they
+  // can only be better); geodesic poses are kept and the distance to the certified ones told.
+  std::string certificate_text;
+  if (options.certificate) {
+    auto certificate = graph::certify_global_optimality(*pose_graph, values);
+    if (!certificate) return fail(certificate.error().message);
+    if (objective == graph::PoseGraph::Objective::kChordal && certificate->objective_refined <= cost(values)) values = certificate->refined;
+    result["certified"] = certificate->certified;
+    result["certificate"] = {{"certified", certificate->certified},
+                             {"min_eigenvalue", certificate->min_eigenvalue},
+                             {"se_sync_objective", certificate->objective_refined},
+                             {"max_translation_change", certificate->max_translation_change},
+                             {"max_rotation_change", certificate->max_rotation_change},
+                             {"seconds", certificate->seconds},
+                             {"message", certificate->message}};
+    certificate_text = fmt::format("  certificate: {} (SE-Sync objective {:.6g}, smallest eigenvalue {:.3g}, {:.2f} s)\n", certificate->message,
+                                   certificate->objective_refined, certificate->min_eigenvalue, certificate->seconds);
+    if (objective == graph::PoseGraph::Objective::kGeodesic) {
+      certificate_text += fmt::format("  SE-Sync's optimum from these poses is within {:.3g} m and {:.3g} deg of them\n",
+                                      certificate->max_translation_change, certificate->max_rotation_change * 180.0 / M_PI);
+    }
+  }
   const double final_chi2 = graph::g2o_chi2(*pose_graph, values).value();
   const double final_objective = graph::se_sync_objective(*pose_graph, values).value();
   const bool toro_out = std::filesystem::path(options.out).extension() == ".graph";
@@ -174,11 +199,11 @@ int run_optimize(const Output& output, const GraphOptions& options) {
   result["converged"] = summary.converged;
   std::string text = fmt::format(
       "{}: {}D, {} poses, {} edges, {} objective\n  g2o chi2:           {:.6g} -> {:.6g}\n  SE-Sync objective:  {:.6g} -> {:.6g}\n"
-      "{}  initialization: {} ({:.3f} s); {} iterations in {:.3f} s ({})\nwrote {}\n",
+      "{}  initialization: {} ({:.3f} s); {} iterations in {:.3f} s ({})\n{}wrote {}\n",
       options.input, pose_graph->dimension, pose_graph->vertices.size(), pose_graph->edges.size(), options.objective, initial_chi2,
       final_chi2, initial_objective, final_objective, incremental_text, options.initialize == "best" ? "best start: " + started_from : options.initialize,
       initialization_seconds, summary.iterations, summary.seconds,
-      summary.converged ? "converged" : summary.message, options.out);
+      summary.converged ? "converged" : summary.message, certificate_text, options.out);
   if (!options.plot_dir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(options.plot_dir, ec);
@@ -216,6 +241,8 @@ void add_graph_command(CLI::App& app, const Output& output, Command& run) {
       ->capture_default_str();
   optimize->add_flag("--incremental", options->incremental,
                      "Feed the graph pose by pose to the incremental smoother (odometry starts) and report update latencies");
+  optimize->add_flag("!--no-certificate", options->certificate,
+                     "Skip the global-optimality certificate (SE-Sync's verification, run on the result by default)");
   optimize->add_option("--max-iterations", options->max_iterations, "Levenberg-Marquardt iterations")->capture_default_str();
   optimize->add_option("--plot", options->plot_dir, "Write an SVG of the graph before and after into this folder");
   optimize->callback([&output, &run, options] { run = [&output, options] { return run_optimize(output, *options); }; });

@@ -17,6 +17,7 @@
 #include "hanzo/fusion/graph/batch_optimizer.hpp"
 #include "hanzo/fusion/graph/chordal_initialization.hpp"
 #include "hanzo/fusion/graph/g2o_io.hpp"
+#include "hanzo/fusion/graph/optimality_certificate.hpp"
 #include "hanzo/fusion/graph/incremental_smoother.hpp"
 #include "hanzo/fusion/graph/imu_factors.hpp"
 #include "hanzo/fusion/graph/pose_factors.hpp"
@@ -95,6 +96,17 @@ struct OptimizeResult {
   double se_sync_objective() const { return value_or_raise(graph::se_sync_objective(file(), values)); }
   void write_g2o(const std::string& path) const {
     if (Status written = graph::write_g2o(path, file(), values); !written) throw py::value_error(written.error().message);
+  }
+  py::dict certificate() const {
+    const graph::OptimalityCertificate certificate = value_or_raise(graph::certify_global_optimality(file(), values));
+    py::dict result;
+    result["certified"] = certificate.certified;
+    result["min_eigenvalue"] = certificate.min_eigenvalue;
+    result["se_sync_objective"] = certificate.objective_refined;
+    result["max_translation_change"] = certificate.max_translation_change;
+    result["max_rotation_change"] = certificate.max_rotation_change;
+    result["message"] = certificate.message;
+    return result;
   }
 
   py::object at(graph::Key key) const {
@@ -412,6 +424,9 @@ PYBIND11_MODULE(_fusion, module) {
       .def("se_sync_objective", &OptimizeResult::se_sync_objective,
            "SE-Sync's objective of the result, comparable with its published optima (graphs read from a file)")
       .def("write_g2o", &OptimizeResult::write_g2o, "Writes the file's graph with the optimized vertices", py::arg("path"))
+      .def("certificate", &OptimizeResult::certificate,
+           "SE-Sync's global-optimality certificate of the result, refined on SE-Sync's objective: a dict with certified, "
+           "min_eigenvalue, se_sync_objective, max_translation_change, max_rotation_change, message (graphs read from a file)")
       .def("keys", [](const OptimizeResult& r) {
         std::vector<graph::Key> keys;
         for (const auto& [key, value] : r.values.all()) keys.push_back(key);

@@ -26,6 +26,10 @@ def test_intel_reaches_the_published_optimum_and_round_trips(tmp_path):
     assert geodesic.g2o_chi2() < 0.1 * geodesic.initial_error
     from_chordal = graph.optimize(initialization="chordal")
     assert abs(from_chordal.se_sync_objective() - INTEL_OPTIMUM) / INTEL_OPTIMUM < 1e-3
+    certificate = from_chordal.certificate()
+    assert certificate["certified"], certificate["message"]
+    assert certificate["min_eigenvalue"] >= -1e-6
+    assert certificate["se_sync_objective"] == pytest.approx(INTEL_OPTIMUM, rel=1e-5)
     # Written and read back: the optimized vertices are the new initial values (already optimal).
     out = tmp_path / "intel_optimized.g2o"
     result.write_g2o(str(out))

@@ -14,16 +14,6 @@ namespace {
 using SparseMatrix = Eigen::SparseMatrix<double>;
 using Triplets = std::vector<Eigen::Triplet<double>>;
 
-// The rotation matrix (d x d) and translation of an SE2 / SE3 value.
-Eigen::MatrixXd rotation_of(const Value& pose) {
-  if (const auto* se2 = std::get_if<SE2>(&pose)) return se2->rotation_matrix();
-  return std::get<SE3>(pose).rotation().matrix();
-}
-Eigen::VectorXd translation_of(const Value& pose) {
-  if (const auto* se2 = std::get_if<SE2>(&pose)) return se2->translation();
-  return std::get<SE3>(pose).translation();
-}
-
 // Unknown blocks of `block` scalars per free vertex; anchors have no index.
 struct Unknowns {
   std::map<Key, int> index;  // free vertex -> block index
@@ -134,18 +124,18 @@ Result<Values> chordal_initialization(const PoseGraph& graph) {
   std::vector<SeSyncWeights> weights;
   for (const PoseGraphEdge& edge : graph.edges) {
     weights.push_back(se_sync_weights(edge, d));
-    const Eigen::MatrixXd measured = rotation_of(edge.measurement);
+    const Eigen::MatrixXd measured = pose_rotation(edge.measurement);
     const Eigen::MatrixXd M = d == 3 ? Eigen::MatrixXd(measured.transpose()) : measured;
     const auto known = [&](Key key) {
       const auto anchor = anchor_poses.find(key);
-      return anchor != anchor_poses.end() ? rotation_unknown(rotation_of(anchor->second)) : Eigen::MatrixXd::Zero(d, rotation_columns);
+      return anchor != anchor_poses.end() ? rotation_unknown(pose_rotation(anchor->second)) : Eigen::MatrixXd::Zero(d, rotation_columns);
     };
     rotations.add(edge.from, edge.to, M, weights.back().kappa, known(edge.from), known(edge.to));
   }
   Eigen::MatrixXd rotation_solution;
   HANZO_ASSIGN_OR_RETURN(rotation_solution, rotations.solve("rotation"));
   std::map<Key, Eigen::MatrixXd> rotation;
-  for (const auto& [key, pose] : anchor_poses) rotation[key] = rotation_of(pose);
+  for (const auto& [key, pose] : anchor_poses) rotation[key] = pose_rotation(pose);
   for (const auto& [key, index] : unknowns.index) {
     const Eigen::MatrixXd z = rotation_solution.middleRows(static_cast<Eigen::Index>(index) * d, d);
     if (d == 3) {
@@ -161,11 +151,11 @@ Result<Values> chordal_initialization(const PoseGraph& graph) {
     const PoseGraphEdge& edge = graph.edges[e];
     const auto known = [&](Key key) -> Eigen::MatrixXd {
       const auto anchor = anchor_poses.find(key);
-      return anchor != anchor_poses.end() ? Eigen::MatrixXd(translation_of(anchor->second).transpose()) : Eigen::MatrixXd::Zero(1, d);
+      return anchor != anchor_poses.end() ? Eigen::MatrixXd(pose_translation(anchor->second).transpose()) : Eigen::MatrixXd::Zero(1, d);
     };
     const Eigen::MatrixXd identity = Eigen::MatrixXd::Identity(1, 1);
     translations.add(edge.from, edge.to, identity, weights[e].tau, known(edge.from), known(edge.to));
-    translations.add_constant(edge.from, edge.to, weights[e].tau, (rotation.at(edge.from) * translation_of(edge.measurement)).transpose());
+    translations.add_constant(edge.from, edge.to, weights[e].tau, (rotation.at(edge.from) * pose_translation(edge.measurement)).transpose());
   }
   Eigen::MatrixXd translation_solution;
   HANZO_ASSIGN_OR_RETURN(translation_solution, translations.solve("translation"));

@@ -412,28 +412,29 @@ Result<double> g2o_chi2(const PoseGraph& graph, const Values& values) {
   return chi2;
 }
 
+Eigen::MatrixXd pose_rotation(const Value& pose) {
+  if (const auto* se2 = std::get_if<SE2>(&pose)) return se2->rotation_matrix();
+  return std::get<SE3>(pose).rotation().matrix();
+}
+
+Eigen::VectorXd pose_translation(const Value& pose) {
+  if (const auto* se2 = std::get_if<SE2>(&pose)) return se2->translation();
+  return std::get<SE3>(pose).translation();
+}
+
 Result<double> se_sync_objective(const PoseGraph& graph, const Values& values) {
   double objective = 0.0;
-  const int d = graph.dimension;
   for (const PoseGraphEdge& edge : graph.edges) {
-    Eigen::MatrixXd Ri, Rj, R_measured;
-    Eigen::VectorXd ti, tj, t_measured;
-    if (d == 3) {
-      SE3 Ti, Tj;
-      HANZO_ASSIGN_OR_RETURN(Ti, values.at<SE3>(edge.from));
-      HANZO_ASSIGN_OR_RETURN(Tj, values.at<SE3>(edge.to));
-      const SE3& Z = std::get<SE3>(edge.measurement);
-      Ri = Ti.rotation().matrix(), Rj = Tj.rotation().matrix(), R_measured = Z.rotation().matrix();
-      ti = Ti.translation(), tj = Tj.translation(), t_measured = Z.translation();
-    } else {
-      SE2 Ti, Tj;
-      HANZO_ASSIGN_OR_RETURN(Ti, values.at<SE2>(edge.from));
-      HANZO_ASSIGN_OR_RETURN(Tj, values.at<SE2>(edge.to));
-      const SE2& Z = std::get<SE2>(edge.measurement);
-      Ri = Ti.rotation_matrix(), Rj = Tj.rotation_matrix(), R_measured = Z.rotation_matrix();
-      ti = Ti.translation(), tj = Tj.translation(), t_measured = Z.translation();
+    const auto from = values.all().find(edge.from), to = values.all().find(edge.to);
+    if (from == values.all().end() || to == values.all().end()) {
+      return Error(fmt::format("SE-Sync objective: no pose for {}", key_to_string(from == values.all().end() ? edge.from : edge.to)));
     }
-    const auto [kappa, tau] = se_sync_weights(edge, d);
+    if (from->second.index() != edge.measurement.index() || to->second.index() != edge.measurement.index()) {
+      return Error(fmt::format("SE-Sync objective: edge {} - {} joins poses of another dimension", key_to_string(edge.from), key_to_string(edge.to)));
+    }
+    const Eigen::MatrixXd Ri = pose_rotation(from->second), Rj = pose_rotation(to->second), R_measured = pose_rotation(edge.measurement);
+    const Eigen::VectorXd ti = pose_translation(from->second), tj = pose_translation(to->second), t_measured = pose_translation(edge.measurement);
+    const auto [kappa, tau] = se_sync_weights(edge, graph.dimension);
     objective += kappa * (Rj - Ri * R_measured).squaredNorm() + tau * (tj - ti - Ri * t_measured).squaredNorm();
   }
   return objective;

@@ -497,6 +497,16 @@ TEST(Cli, GraphOptimizeReachesSeSyncOptimumOnIntel) {
   EXPECT_EQ(best_json["started_from"], "chordal");
   EXPECT_NEAR(best_json["se_sync_objective"]["final"].get<double>(), 52.3482, 0.05);
   EXPECT_GT(nlohmann::json::parse(from_file.out)["se_sync_objective"]["final"].get<double>(), 60.0);
+  // The certificate (SE-Sync's verification) tells the two apart: the optimum is certified, the
+  // local minimum the file's start ends in is not.
+  EXPECT_TRUE(best_json["certified"].get<bool>());
+  EXPECT_GE(best_json["certificate"]["min_eigenvalue"].get<double>(), -1e-6);
+  const nlohmann::json trapped = nlohmann::json::parse(from_file.out);
+  EXPECT_FALSE(trapped["certified"].get<bool>());
+  EXPECT_LT(trapped["certificate"]["min_eigenvalue"].get<double>(), -1.0);
+  const CliRun uncertified = run(fmt::format("graph optimize {} --out {} --no-certificate --json", trap, out.string()));
+  ASSERT_EQ(uncertified.exit_code, 0) << uncertified.err;
+  EXPECT_FALSE(nlohmann::json::parse(uncertified.out).contains("certified"));
   std::filesystem::remove(out);
 }
 

@@ -80,6 +80,10 @@ Status write_toro(const std::string& path, const PoseGraph& graph, const Values&
 
 /// g2o's chi2: sum e^T info e with g2o's errors (SE2: (x, y, wrapped theta) of Z^-1 Ti^-1 Tj;
 /// SE3: translation and quaternion vector part, w >= 0).
+/// The rotation matrix (d x d) and the translation (d) of an SE2 or SE3 pose value.
+Eigen::MatrixXd pose_rotation(const Value& pose);
+Eigen::VectorXd pose_translation(const Value& pose);
+
 Result<double> g2o_chi2(const PoseGraph& graph, const Values& values);
 /// SE-Sync's weights of one edge: tau = d / trace(info_tt^-1), kappa = info_thetatheta (2D) or
 /// 3 / (2 trace(info_RR^-1)) (3D); d the graph's dimension.
