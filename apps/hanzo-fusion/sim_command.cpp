@@ -47,9 +47,11 @@ io::Trajectory ground_truth(const sim::ScenarioSimulation& simulation) {
   io::Trajectory trajectory;
   const double rate = simulation.scenario().ground_truth_rate_hz;
   const Timestamp start = simulation.scenario().start_time;
+  const Timestamp log_start = sim::scenario_log_start_time(simulation.scenario());
   for (int64_t k = 0;; ++k) {
     const Timestamp time = start + Duration::from_nanoseconds(std::llround(static_cast<double>(k) * 1e9 / rate));
     if (time > simulation.end_time()) break;
+    if (time < log_start) continue;
     trajectory.timestamps.push_back(time);
     trajectory.poses.push_back(simulation.trajectory().sample(time).T_world_body.matrix());
   }

@@ -1,5 +1,6 @@
 // Reading and writing the fusion configuration YAML (layout: fusion_config.hpp).
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -75,7 +76,7 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   if (!node.present()) return frontend;
   HANZO_RETURN_IF_ERROR(node.check_keys({"type", "predict_rate", "covariance", "gate_probability", "lag_window", "max_future",
                                          "static_alignment", "planar", "zero_velocity_updates", "datum", "ukf", "particle_filter",
-                                         "keyframe_interval", "gate_recovery", "motion_model"}));
+                                         "keyframe_interval", "gate_recovery", "motion_model", "initial_yaw"}));
   if (node["type"].present()) {
     Result<std::string> name = node["type"].as_string();
     if (!name) return name.error();
@@ -99,6 +100,10 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   HANZO_ASSIGN_OR_RETURN(frontend.planar, bool_or(node["planar"], frontend.planar));
   HANZO_ASSIGN_OR_RETURN(frontend.zero_velocity_updates, bool_or(node["zero_velocity_updates"], frontend.zero_velocity_updates));
   if (node["datum"].present()) HANZO_ASSIGN_OR_RETURN(frontend.datum, parse_datum(node["datum"]));
+  if (const YamlValue yaw = node["initial_yaw"]; yaw.present()) {
+    HANZO_ASSIGN_OR_RETURN(frontend.initial_yaw, yaw.as_double());
+    if (!(std::abs(*frontend.initial_yaw) <= 2.0 * M_PI)) return yaw.error(fmt::format("expected radians in [-2 pi, 2 pi], got {}", *frontend.initial_yaw));
+  }
   if (const YamlValue ukf = node["ukf"]; ukf.present()) {
     HANZO_RETURN_IF_ERROR(ukf.check_keys({"alpha", "beta", "kappa"}));
     if (ukf["alpha"].present()) HANZO_ASSIGN_OR_RETURN(frontend.ukf.alpha, ukf["alpha"].as_double());
@@ -359,6 +364,7 @@ std::string to_yaml(const FusionConfig& config) {
   if (f.keyframe_interval_s != defaults.keyframe_interval_s) {
     out += fmt::format("    keyframe_interval: {}  # s\n", format_double(f.keyframe_interval_s));
   }
+  if (f.initial_yaw) out += fmt::format("    initial_yaw: {}  # rad, ENU\n", format_double(*f.initial_yaw));
   if (f.planar) out += "    planar: true\n";
   if (!f.zero_velocity_updates) out += "    zero_velocity_updates: false\n";
   if (f.ukf.alpha != defaults.ukf.alpha || f.ukf.beta != defaults.ukf.beta || f.ukf.kappa != defaults.ukf.kappa) {

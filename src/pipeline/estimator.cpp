@@ -21,7 +21,6 @@ using estimate::NavigationState;
 // Initial uncertainty of the states the spec's configuration does not cover.
 constexpr double kInitialAccelBiasSigma = 0.1;      // m/s^2
 constexpr double kInitialGyroBiasSigma = 0.01;      // rad/s, after static alignment
-constexpr double kUnalignedGyroBiasSigma = 0.05;    // rad/s, when not aligned (moving start)
 constexpr double kMovingStartVelocitySigma = 5.0;   // m/s: a moving start's speed comes from wheels / GNSS
 constexpr double kInitialGravitySigma = 0.02;       // m/s^2, vertical (magnitude)
 constexpr double kHorizontalGravitySigma = 1e-6;    // m/s^2: ENU's up is the gravity direction
@@ -86,11 +85,10 @@ Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup
   last_fused_.resize(sensors_.size());
   const bool has_gnss = std::any_of(sensors_.begin(), sensors_.end(),
                                     [](const SensorSetup& s) { return s.config->modality == SensorModality::kGnss; });
-  // The configured yaw uncertainty says whether the start heading is known: above ~30 degrees
-  // it is not, and GNSS fixes wait until the course over ground gives it.
-  constexpr double kUnknownYawSigma = 0.5;  // rad
+  // With GNSS the world is ENU, and unless the IMU reports its heading nothing says where the
+  // body faces in it: GNSS fixes wait until the GNSS track gives the heading (align_heading).
   const bool imu_heading = imu_sensor_ && sensors_[*imu_sensor_].config->fusion.use_orientation[2];
-  heading_pending_ = has_gnss && !imu_heading && frontend_.covariance.initial_orientation.z() > kUnknownYawSigma;
+  heading_pending_ = has_gnss && !imu_heading && !frontend_.initial_yaw;
   gated_since_.resize(2 * sensors_.size());
   wheel_yaw_rate_needed_ = !imu_sensor_ && std::none_of(sensors_.begin(), sensors_.end(), [](const SensorSetup& s) {
     return s.config->modality == SensorModality::kLidar || s.config->modality == SensorModality::kCamera;
@@ -117,6 +115,11 @@ Estimator::Estimator(const Estimator& other)
       heading_pending_(other.heading_pending_),
       wheel_yaw_rate_needed_(other.wheel_yaw_rate_needed_),
       course_start_(other.course_start_),
+      moving_start_(other.moving_start_),
+      recent_fixes_(other.recent_fixes_),
+      recent_imu_(other.recent_imu_),
+      recent_wheel_speeds_(other.recent_wheel_speeds_),
+      wheel_forward_speed_(other.wheel_forward_speed_),
       gravity_magnitude_(other.gravity_magnitude_),
       last_keyframe_(other.last_keyframe_),
       planar_height_(other.planar_height_),
@@ -261,23 +264,25 @@ void Estimator::initialize(const Event& event, const msgs::ImuMessage& imu) {
     const SO3 R_world_body =
         SO3::from_quaternion_normalized(*imu.orientation) * mounting.R_body_imu.inverse();
     const Eigen::Vector3d rpy = estimate::roll_pitch_yaw(R_world_body.matrix());
-    state.R_world_body = estimate::rotation_from_roll_pitch_yaw(rpy.x(), rpy.y(), options.use_orientation[2] ? rpy.z() : 0.0);
+    const double yaw = options.use_orientation[2] ? rpy.z() : frontend_.initial_yaw.value_or(0.0);
+    state.R_world_body = estimate::rotation_from_roll_pitch_yaw(rpy.x(), rpy.y(), yaw);
     gyro_bias_sigma = kUnalignedGyroBiasSigma;
   } else {
     alignment_samples_.push_back(imu_sample(event.time, imu));
     if ((event.time - alignment_samples_.front().timestamp).seconds() < frontend_.static_alignment_s) return;
     Result<estimate::StaticAlignment> alignment =
         wheels_moved_before_initialization_ ? Result<estimate::StaticAlignment>(Error("the wheels turned"))
-                                            : estimate::align_static(alignment_samples_, mounting, 0.0);
+                                            : estimate::align_static(alignment_samples_, mounting, frontend_.initial_yaw.value_or(0.0));
     if (!alignment) {
       // Moving start: the mean specific force is still the best guess of "up".
       logger()->warn("initializing while moving ({}); roll and pitch from the mean specific force", alignment.error().message);
       estimate::StaticAlignmentConfig permissive;
       permissive.max_accel_std = std::numeric_limits<double>::infinity();
       permissive.max_gyro_std = std::numeric_limits<double>::infinity();
-      alignment = estimate::align_static(alignment_samples_, mounting, 0.0, permissive);
+      alignment = estimate::align_static(alignment_samples_, mounting, frontend_.initial_yaw.value_or(0.0), permissive);
       gyro_bias_sigma = kUnalignedGyroBiasSigma;
       velocity_sigma = velocity_sigma.cwiseMax(kMovingStartVelocitySigma);
+      moving_start_ = true;
       if (!alignment) return;  // not even gravity visible yet: keep collecting
       alignment->gyro_bias.setZero();
     }
@@ -329,6 +334,7 @@ void Estimator::initialize_without_imu(const Event& event) {
   const config::CovarianceConfig& covariance = frontend_.covariance;
   NavigationState state;
   state.timestamp = event.time;
+  state.R_world_body = estimate::rotation_from_roll_pitch_yaw(0.0, 0.0, frontend_.initial_yaw.value_or(0.0));
   state.gravity = Eigen::Vector3d(0.0, 0.0, -gravity_magnitude_);
   Eigen::Matrix3d position_covariance = covariance.initial_position.array().square().matrix().asDiagonal();
   const auto* message = std::get_if<msgs::SensorMessage>(&event.payload);
@@ -358,6 +364,14 @@ EventOutcome Estimator::process_imu(const Event& event, const msgs::ImuMessage& 
   predict_to(event.time);
   last_imu_ = sample;
   last_fused_[event.sensor] = event.time;
+  if (heading_pending_) {
+    // In-motion alignment's IMU window (a few seconds; the GNSS track's mean time is in it).
+    const double seconds = estimate::InMotionAlignmentConfig{}.window;
+    recent_imu_.push_back(sample);
+    const auto old = std::find_if(recent_imu_.begin(), recent_imu_.end(),
+                                  [&](const estimate::ImuSample& s) { return (event.time - s.timestamp).seconds() <= seconds; });
+    recent_imu_.erase(recent_imu_.begin(), old);
+  }
 
   const config::SensorFusionOptions& options = sensors_[event.sensor].config->fusion;
   EventOutcome outcome{true, std::nullopt};

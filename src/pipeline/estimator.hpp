@@ -15,6 +15,7 @@
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/estimate/filter.hpp"
 #include "hanzo/fusion/estimate/imu_spike_filter.hpp"
+#include "hanzo/fusion/estimate/in_motion_alignment.hpp"
 #include "hanzo/fusion/estimate/velocity_models.hpp"
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
@@ -109,6 +110,9 @@ class Estimator {
   EventOutcome process(const Event& event, UpdateObserver* observer);
 
   bool initialized() const { return initialized_; }
+  /// False while GNSS defines the world and the heading in it is not yet known (see
+  /// align_heading): poses are then not TRACKING.
+  bool heading_known() const { return !heading_pending_; }
   /// Time of the last fused event.
   Timestamp time() const { return time_; }
   const estimate::Filter& filter() const { return *filter_; }
@@ -122,8 +126,14 @@ class Estimator {
   EventOutcome process_imu(const Event& event, const msgs::ImuMessage& imu, UpdateObserver* observer);
   EventOutcome process_gnss(const Event& event, const msgs::GnssMessage& gnss, UpdateObserver* observer);
   EventOutcome process_wheels(const Event& event, const msgs::WheelOdometryMessage& wheels, UpdateObserver* observer);
-  /// Returns true once the heading is known (aligning it when the track is long enough).
+  /// Returns true once the heading is known: by in-motion alignment when the start was moving
+  /// or the estimate's speed contradicts the GNSS track's, else by align_heading_to_course.
+  bool align_heading(Timestamp time, const Eigen::Vector3d& antenna_gnss, const Eigen::Vector3d& lever, double horizontal_sigma);
+  /// Static start: the dead-reckoned track against the GNSS track over the same stretch.
   bool align_heading_to_course(const Eigen::Vector3d& antenna_gnss, const Eigen::Vector3d& antenna_estimate, double horizontal_sigma);
+  /// Moves the estimate onto an in-motion alignment (a world correction, so that what follows
+  /// the frontend's world follows it) and sets its velocity and uncertainty.
+  void apply_in_motion_alignment(const estimate::InMotionAlignment& alignment, const Eigen::Vector3d& lever);
   EventOutcome process_radar(const Event& event, const msgs::RadarMessage& radar, UpdateObserver* observer);
   EventOutcome process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer);
   void initialize(const Event& event, const msgs::ImuMessage& imu);
@@ -181,6 +191,15 @@ class Estimator {
     Eigen::Vector3d antenna_estimate;  // world, dead-reckoned
   };
   std::optional<CourseStart> course_start_;
+  /// The IMU's alignment window showed motion (or the wheels turned): the start velocity is
+  /// unknown, so the heading comes from in-motion alignment, and wheels wait for it.
+  bool moving_start_ = false;
+  /// While the heading is pending: the recent GNSS track (world) and IMU samples, and the
+  /// wheels' latest forward speed (its sign says whether the vehicle reverses).
+  std::vector<estimate::GnssTrackPoint> recent_fixes_;
+  std::vector<estimate::ImuSample> recent_imu_;
+  std::vector<std::pair<Timestamp, double>> recent_wheel_speeds_;  ///< forward speed, m/s
+  double wheel_forward_speed_ = 0.0;
   double gravity_magnitude_ = estimate::kStandardGravity;
   struct KeyframeAnchor {
     uint64_t id = 0;

@@ -1,11 +1,13 @@
 // Estimator: the aiding sensors (GNSS with the course-over-ground heading, wheel odometry,
 // radar, poses from LiDAR / visual localization).
 
+#include <algorithm>
 #include <cmath>
 
 #include "estimator.hpp"
 #include "estimator_internal.hpp"
 #include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/estimate/attitude_models.hpp"
 #include "hanzo/fusion/estimate/position_models.hpp"
 #include "hanzo/fusion/estimate/radar_ego_velocity.hpp"
 #include "hanzo/fusion/estimate/velocity_models.hpp"
@@ -17,6 +19,40 @@ constexpr double kZeroVelocitySigma = 0.005;  // m/s
 constexpr double kZeroRateSigma = 0.002;      // rad/s
 constexpr double kWheelGap = 1.0;             // s: longer gaps between wheel readings are not differenced
 constexpr double kWheelMinIntervalFraction = 0.25;  // of the nominal period: closer readings are merged
+
+// Keeps the elements of a time-ordered buffer no older than `seconds` before `now`.
+template <typename T, typename TimeOf>
+void keep_recent(std::vector<T>& buffer, Timestamp now, double seconds, TimeOf time_of) {
+  const auto old = std::find_if(buffer.begin(), buffer.end(), [&](const T& item) { return (now - time_of(item)).seconds() <= seconds; });
+  buffer.erase(buffer.begin(), old);
+}
+
+// The slope of speed over time (m/s^2) and its 1-sigma from the residuals; none with fewer than
+// five readings or a span under half a second.
+std::optional<std::pair<double, double>> acceleration_of(const std::vector<std::pair<Timestamp, double>>& speeds) {
+  if (speeds.size() < 5 || (speeds.back().first - speeds.front().first).seconds() < 0.5) return std::nullopt;
+  double mean_t = 0.0, mean_v = 0.0;
+  for (const auto& [time, speed] : speeds) {
+    mean_t += (time - speeds.front().first).seconds();
+    mean_v += speed;
+  }
+  const double n = static_cast<double>(speeds.size());
+  mean_t /= n;
+  mean_v /= n;
+  double stt = 0.0, stv = 0.0;
+  for (const auto& [time, speed] : speeds) {
+    const double t = (time - speeds.front().first).seconds() - mean_t;
+    stt += t * t;
+    stv += t * (speed - mean_v);
+  }
+  const double slope = stv / stt;
+  double residuals = 0.0;
+  for (const auto& [time, speed] : speeds) {
+    const double t = (time - speeds.front().first).seconds() - mean_t;
+    residuals += std::pow(speed - mean_v - slope * t, 2);
+  }
+  return std::make_pair(slope, std::sqrt(residuals / (n - 2.0) / stt));
+}
 
 }  // namespace
 
@@ -46,8 +82,7 @@ EventOutcome Estimator::process_gnss(const Event& event, const msgs::GnssMessage
   Eigen::Matrix3d covariance = gnss.position_covariance.value_or(default_gnss_covariance(gnss.fix_type));
   if (!(covariance.diagonal().array() > 0.0).all()) covariance = default_gnss_covariance(gnss.fix_type);
   const Eigen::Vector3d antenna_gnss = enu_->to_enu(gnss.geodetic());
-  if (heading_pending_ &&
-      !align_heading_to_course(antenna_gnss, state.position + state.R_world_body * lever, std::sqrt(std::max(covariance(0, 0), covariance(1, 1))))) {
+  if (heading_pending_ && !align_heading(event.time, antenna_gnss, lever, std::sqrt(std::max(covariance(0, 0), covariance(1, 1))))) {
     return {false, Rejection::kHeadingUnknown};
   }
   const estimate::GnssPositionModel model(antenna_gnss, covariance, lever);
@@ -61,11 +96,73 @@ EventOutcome Estimator::process_gnss(const Event& event, const msgs::GnssMessage
   return outcome;
 }
 
+bool Estimator::align_heading(Timestamp time, const Eigen::Vector3d& antenna_gnss, const Eigen::Vector3d& lever, double horizontal_sigma) {
+  // The recent track for in-motion alignment (its window and a little more).
+  const estimate::InMotionAlignmentConfig config;
+  recent_fixes_.push_back({time, antenna_gnss, horizontal_sigma});
+  keep_recent(recent_fixes_, time, config.window, [](const estimate::GnssTrackPoint& fix) { return fix.time; });
+  const NavigationState state = filter_->state();
+  estimate::InMotionAlignmentInput input{recent_fixes_, recent_imu_, filter_config_.imu_mounting, time, gravity_magnitude_,
+                                         wheel_forward_speed_ < 0.0, acceleration_of(recent_wheel_speeds_)};
+  const Result<estimate::InMotionAlignment> in_motion = estimate::align_in_motion(input, config);
+  if (in_motion) {
+    // A static start dead-reckons its track from a known velocity (align_heading_to_course is the
+    // more precise then); a moving start, or an estimate whose speed the GNSS track contradicts
+    // (a start at constant speed looks still to the IMU), takes the in-motion alignment.
+    constexpr double kSpeedMismatch = 1.0;  // m/s, beyond 3 sigma of the GNSS speed
+    const double velocity_sigma = in_motion->velocity_sigma;
+    const bool contradicted = std::abs(state.velocity.head<2>().norm() - in_motion->speed) > 3.0 * velocity_sigma + kSpeedMismatch;
+    if (moving_start_ || contradicted) {
+      apply_in_motion_alignment(*in_motion, lever);
+      return true;
+    }
+  }
+  return align_heading_to_course(antenna_gnss, state.position + state.R_world_body * lever, horizontal_sigma);
+}
+
+void Estimator::apply_in_motion_alignment(const estimate::InMotionAlignment& alignment, const Eigen::Vector3d& lever) {
+  const NavigationState before = filter_->state();
+  const SE3 T_before(before.R_world_body, before.position);
+  const SE3 T_after(alignment.R_world_body, alignment.antenna - alignment.R_world_body * lever);
+  const SE3 correction = T_after * T_before.inverse();
+  filter_->apply_world_transform(correction);
+  world_correction_ = correction * world_correction_;
+  last_keyframe_.reset();  // the motion since it is not known
+  NavigationState state = filter_->state();
+  state.velocity = alignment.velocity;
+  // New uncertainty of position, attitude and velocity; the biases keep theirs (a start that
+  // only looked still gets the gyro-bias uncertainty of a moving one).
+  const ErrorCovariance previous = filter_->covariance();
+  ErrorCovariance P = ErrorCovariance::Zero();
+  const double position_sigma = recent_fixes_.back().horizontal_sigma;
+  P.block<3, 3>(estimate::kPositionIndex, estimate::kPositionIndex) = Eigen::Matrix3d::Identity() * position_sigma * position_sigma;
+  P.block<3, 3>(estimate::kOrientationIndex, estimate::kOrientationIndex) = alignment.orientation_sigma.array().square().matrix().asDiagonal();
+  P.block<3, 3>(estimate::kVelocityIndex, estimate::kVelocityIndex) =
+      Eigen::Matrix3d::Identity() * alignment.velocity_sigma * alignment.velocity_sigma;
+  for (const int index : {estimate::kAccelBiasIndex, estimate::kGyroBiasIndex, estimate::kGravityIndex}) {
+    P.block<3, 3>(index, index) = previous.block<3, 3>(index, index);
+  }
+  P.block<3, 3>(estimate::kGyroBiasIndex, estimate::kGyroBiasIndex) =
+      P.block<3, 3>(estimate::kGyroBiasIndex, estimate::kGyroBiasIndex).cwiseMax(Eigen::Matrix3d::Identity() * std::pow(kUnalignedGyroBiasSigma, 2));
+  filter_->reset(state, P);
+  logger()->info("aligned in motion from the GNSS track at {:.1f} m/s: heading {:.1f} deg, roll {:.1f}, pitch {:.1f} deg",
+                 alignment.speed, estimate::roll_pitch_yaw(alignment.R_world_body.matrix()).z() * 180.0 / M_PI,
+                 estimate::roll_pitch_yaw(alignment.R_world_body.matrix()).x() * 180.0 / M_PI,
+                 estimate::roll_pitch_yaw(alignment.R_world_body.matrix()).y() * 180.0 / M_PI);
+  heading_pending_ = false;
+  moving_start_ = false;
+  course_start_.reset();
+  recent_fixes_.clear();
+  recent_imu_.clear();
+  recent_wheel_speeds_.clear();
+}
+
 bool Estimator::align_heading_to_course(const Eigen::Vector3d& antenna_gnss, const Eigen::Vector3d& antenna_estimate,
                                         double horizontal_sigma) {
   // Course over ground against the dead-reckoned track over the same stretch: their angle is the
-  // heading error. The stretch must be long enough for a course to better than ~0.6 degrees.
-  constexpr double kCourseSigma = 0.01;  // rad
+  // heading error. The stretch must be long enough for a course to better than ~3 degrees; the
+  // filter refines the heading from there.
+  constexpr double kCourseSigma = 0.05;  // rad
   constexpr double kMinimumStretch = 10.0;  // m
   if (!course_start_) {
     course_start_ = CourseStart{antenna_gnss, antenna_estimate};
@@ -117,6 +214,14 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
   if (dt <= 0.0 || dt > kWheelGap) return {false, Rejection::kGap};
   const double left = wheels.left_distance - before->left_distance;
   const double right = wheels.right_distance - before->right_distance;
+  wheel_forward_speed_ = 0.5 * (left + right) / dt;
+  if (heading_pending_) {
+    recent_wheel_speeds_.emplace_back(event.time, wheel_forward_speed_);
+    keep_recent(recent_wheel_speeds_, event.time, 1.0, [](const std::pair<Timestamp, double>& speed) { return speed.first; });
+  }
+  // A moving start's velocity is unknown until in-motion alignment: a wheel speed fused into a
+  // state with the wrong heading and speed would only pull it further off.
+  if (heading_pending_ && moving_start_) return {false, Rejection::kHeadingUnknown};
   predict_to(event.time);
 
   const SensorSetup& sensor = sensors_[event.sensor];

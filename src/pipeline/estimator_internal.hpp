@@ -7,6 +7,9 @@
 
 namespace hanzo::fusion::pipeline {
 
+// Gyro-bias uncertainty of a start without static alignment (moving), rad/s.
+constexpr double kUnalignedGyroBiasSigma = 0.05;
+
 // Default GNSS position noise per fix type when a message has no covariance (1 sigma, m).
 inline Eigen::Matrix3d default_gnss_covariance(msgs::GnssFixType fix) {
   double horizontal = 2.5;

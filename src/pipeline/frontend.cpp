@@ -532,7 +532,7 @@ msgs::PoseStatus Frontend::Impl::pose_status() const {
     status.active_sensors.push_back(sensors[i].name);
   }
   status.active_modalities = static_cast<uint32_t>(modalities.size());
-  if (!estimator.initialized()) {
+  if (!estimator.initialized() || !estimator.heading_known()) {
     status.state = msgs::TrackingState::kInitializing;
   } else if (imu_sensor ? sensors[*imu_sensor].timed_out : status.active_modalities == 0) {
     status.state = msgs::TrackingState::kLost;

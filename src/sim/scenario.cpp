@@ -32,6 +32,8 @@ Timestamp scenario_end_time(const Scenario& scenario, const SplineTrajectory& tr
   return std::min(trajectory.end_time(), scenario.start_time + Duration::from_seconds(*scenario.duration));
 }
 
+Timestamp scenario_log_start_time(const Scenario& scenario) { return scenario.start_time + Duration::from_seconds(scenario.log_start); }
+
 calib::Calibration scenario_calibration(const Scenario& scenario) {
   calib::Calibration calibration;
   for (const ScenarioSensor& sensor : scenario.sensors) {
@@ -72,16 +74,6 @@ config::FusionConfig scenario_fusion_config(const Scenario& scenario) {
     // converted with the same datum to land in it.
     if (sensor.modality == config::SensorModality::kGnss) fusion.frontend.datum = scenario.datum;
     fusion.sensors.push_back(std::move(entry));
-  }
-  // The filter starts facing the world's x axis (east). With GNSS, where the vehicle does not,
-  // the configuration says the heading is unknown and the frontend takes it from the course
-  // over ground (as for a real vehicle whose start heading nobody entered). Without GNSS the
-  // world is the start pose, whatever the heading.
-  constexpr double kKnownHeading = 0.02;  // rad
-  if (!fusion.frontend.datum) return fusion;
-  if (const Result<SplineTrajectory> trajectory = make_trajectory(scenario); trajectory) {
-    const Eigen::Matrix3d R = trajectory->sample(trajectory->start_time()).T_world_body.rotation().matrix();
-    if (std::abs(std::atan2(R(1, 0), R(0, 0))) > kKnownHeading) fusion.frontend.covariance.initial_orientation.z() = M_PI;
   }
   return fusion;
 }

@@ -75,7 +75,10 @@ Result<std::unique_ptr<ScenarioSimulation>> ScenarioSimulation::create(Scenario 
       auto simulator = std::make_shared<RadarSimulator>(*radar, world, path);
       stream->produce = [simulator](Timestamp time) -> std::optional<msgs::SensorMessage> { return simulator->measure(time); };
     }
-    stream->next = simulation->scenario_.start_time;
+    // The first sample at or after the log's start (sample k stays at start_time + k / rate).
+    stream->next_index = static_cast<int64_t>(std::ceil(simulation->scenario_.log_start * stream->rate_hz - 1e-9));
+    stream->next = simulation->scenario_.start_time +
+                   Duration::from_nanoseconds(std::llround(static_cast<double>(stream->next_index) * 1e9 / stream->rate_hz));
     simulation->streams_.push_back(std::move(stream));
   }
   return simulation;

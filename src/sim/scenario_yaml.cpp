@@ -568,7 +568,7 @@ Result<Scenario> parse_scenario(const std::string& yaml_text, const std::string&
   HANZO_RETURN_IF_ERROR(document.check_keys({"scenario"}));
   const YamlValue root = document["scenario"].as_path_root();
   if (!root.is_map()) return document.error("expected a top-level `scenario:` map");
-  HANZO_RETURN_IF_ERROR(root.check_keys({"name", "seed", "start_time", "datum", "ground_truth_rate", "threads", "duration", "world",
+  HANZO_RETURN_IF_ERROR(root.check_keys({"name", "seed", "start_time", "datum", "ground_truth_rate", "threads", "duration", "log_start", "world",
                                          "trajectory", "sensors", "faults"}));
   Scenario scenario;
   HANZO_ASSIGN_OR_RETURN(scenario.name, root["name"].as_string());
@@ -587,6 +587,7 @@ Result<Scenario> parse_scenario(const std::string& yaml_text, const std::string&
   HANZO_ASSIGN_OR_RETURN(scenario.ground_truth_rate_hz, positive_or(root["ground_truth_rate"], scenario.ground_truth_rate_hz));
   HANZO_ASSIGN_OR_RETURN(scenario.num_threads, count_or(root["threads"], scenario.num_threads, 0, 1024));
   if (root["duration"].present()) HANZO_ASSIGN_OR_RETURN(scenario.duration, positive_or(root["duration"], 0.0));
+  HANZO_ASSIGN_OR_RETURN(scenario.log_start, non_negative_or(root["log_start"], 0.0));
   HANZO_RETURN_IF_ERROR(parse_world(root["world"], scenario.start_time, &scenario.world));
   if (!root["trajectory"].present()) return root["trajectory"].error("missing (every scenario needs a trajectory)");
   HANZO_RETURN_IF_ERROR(parse_trajectory(root["trajectory"], &scenario));

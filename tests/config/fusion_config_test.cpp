@@ -65,7 +65,7 @@ TEST(FusionConfig, EachRuleGivesItsDocumentedError) {
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    tpye: ekf\n"),
             "fusion.yaml:3: frontend.tpye: unknown key (expected one of: type, predict_rate, covariance, gate_probability, lag_window, "
             "max_future, static_alignment, planar, zero_velocity_updates, datum, ukf, particle_filter, keyframe_interval, "
-            "gate_recovery, motion_model)");
+            "gate_recovery, motion_model, initial_yaw)");
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    motion_model: {acceleration_noise: 0}\n"),
             "fusion.yaml:3: frontend.motion_model.acceleration_noise: expected a positive number, got 0");
   EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      topic: /imu\n"),

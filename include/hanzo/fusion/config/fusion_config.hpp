@@ -108,6 +108,11 @@ struct FrontendConfig {
   double keyframe_interval_s = 1.0;
   /// WGS84 origin of the world ENU frame; when absent the first GNSS fix becomes the datum.
   std::optional<GeodeticPoint> datum;
+  /// rad, ENU (0 = east, counter-clockwise): the start heading when it is known (a robot that
+  /// always starts docked the same way). Absent: with GNSS the heading comes from the GNSS
+  /// track (poses are INITIALIZING until then); without GNSS the start heading is 0 (the world
+  /// frame is the start pose).
+  std::optional<double> initial_yaw;
   UkfSettings ukf;
   ParticleFilterSettings particle_filter;
   MotionModelSettings motion_model;

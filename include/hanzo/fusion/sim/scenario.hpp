@@ -9,6 +9,7 @@
 //     datum: {latitude: 47.3769, longitude: 8.5417, altitude: 408.0}   # WGS84 of world ENU origin
 //     ground_truth_rate: 200       # Hz of the TUM ground truth
 //     threads: 1                   # ray-casting threads (0: all cores); same output for any count
+//     log_start: 0                 # seconds into the trajectory the log begins (> 0: a start in motion)
 //     world: {ground: ..., boxes: [...], cylinders: [...], walls: [...], people: [...], city: {...}}
 //     trajectory: {type: ground_vehicle | drone | handheld, ...}
 //     sensors:
@@ -67,6 +68,10 @@ struct Scenario {
   double ground_truth_rate_hz = 200.0;
   int num_threads = 1;  ///< ray-casting threads of LiDARs and cameras (0: all cores); output is the same for any count
   std::optional<double> duration;  ///< seconds simulated; default (and at most): the whole trajectory
+  /// Seconds after start_time at which the sensors (and the ground truth) begin: the log of a
+  /// vehicle already moving, as a recording started mid-drive. Fault times stay relative to
+  /// start_time.
+  double log_start = 0.0;
   WorldDescription world;
   TrajectoryType trajectory_type = TrajectoryType::kGroundVehicle;
   GroundPathConfig ground_path;      ///< trajectory_type kGroundVehicle
@@ -87,6 +92,8 @@ void set_seed(Scenario& scenario, uint64_t seed);
 Result<SplineTrajectory> make_trajectory(const Scenario& scenario);
 /// start_time + duration, or the trajectory's end when sooner or no duration is given.
 Timestamp scenario_end_time(const Scenario& scenario, const SplineTrajectory& trajectory);
+/// start_time + log_start: the first sample of every sensor and of the ground truth.
+Timestamp scenario_log_start_time(const Scenario& scenario);
 /// The calibration file of the spec for the scenario's sensors (cameras with intrinsics).
 calib::Calibration scenario_calibration(const Scenario& scenario);
 /// A fusion configuration that runs the scenario's log: its sensors, topics and rates, and the

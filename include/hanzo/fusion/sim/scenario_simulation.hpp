@@ -2,7 +2,8 @@
 // ScenarioSimulation: runs a Scenario, producing every sensor's messages merged in timestamp
 // order (ties in sensor order), as a recorded log would hold them.
 //
-// Each sensor samples at its rate from the scenario start to its end (scenario_end_time);
+// Each sensor samples at its rate from the log's start (scenario_log_start_time) to the
+// scenario's end (scenario_end_time);
 // a LiDAR sweep is stamped at its start and needs the whole sweep inside the trajectory.
 // Messages a sensor cannot produce are left out and counted (a LiDAR sweep that saw
 // nothing); GNSS outages still produce NO_FIX messages as receivers do.
