@@ -171,9 +171,18 @@ nlohmann::json summary_json(const pipeline::SessionSummary& summary, double log_
                        {"timeouts", s.timeouts},
                        {"average_nis_per_dof", s.nis_count > 0 ? s.nis_sum / static_cast<double>(s.nis_count) : 0.0}});
   }
-  return {{"filter", summary.filter},   {"poses", summary.poses}, {"keyframes", summary.keyframes}, {"rollbacks", summary.rollbacks},
-          {"zero_velocity_updates", summary.zero_velocity_updates}, {"final_state", msgs::to_string(summary.state)},
-          {"log_duration_s", log_seconds}, {"sensors", sensors}};
+  nlohmann::json result = {{"filter", summary.filter},
+                            {"poses", summary.poses},
+                            {"keyframes", summary.keyframes},
+                            {"rollbacks", summary.rollbacks},
+                            {"zero_velocity_updates", summary.zero_velocity_updates},
+                            {"final_state", msgs::to_string(summary.state)},
+                            {"log_duration_s", log_seconds},
+                            {"sensors", sensors}};
+  if (summary.wheel_speed_scale) {
+    result["wheel_speed_scale"] = {{"value", *summary.wheel_speed_scale}, {"sigma", summary.wheel_speed_scale_sigma}};
+  }
+  return result;
 }
 
 Result<std::vector<std::string>> write_plots(const std::string& out, const std::vector<msgs::PoseEstimate>& poses,
@@ -444,6 +453,10 @@ int run(const Output& output, const RunOptions& options) {
   if (!poses.empty()) {
     const auto& p = poses.back().T_world_body.position;
     text += fmt::format("final position ({:.4f}, {:.4f}, {:.4f}) m, state {}\n", p.x(), p.y(), p.z(), msgs::to_string(summary.state));
+  }
+  if (summary.wheel_speed_scale) {
+    text += fmt::format("wheel speed scale {:.4f} +- {:.4f} (the wheels read {:+.2f} % of the distance driven)\n", *summary.wheel_speed_scale,
+                        summary.wheel_speed_scale_sigma, 100.0 * (*summary.wheel_speed_scale - 1.0));
   }
   for (const auto& [key, label] : {std::pair<const char*, const char*>{"evaluation", "real-time"}, {"evaluation_optimized", "optimized"}}) {
     if (!result.contains(key)) continue;

@@ -64,6 +64,7 @@ ErrorCovariance process_noise(const ImuNoise& noise, double dt) {
   q.block<3, 3>(kOrientationIndex, kOrientationIndex) = angle_density * dt * I;
   q.block<3, 3>(kAccelBiasIndex, kAccelBiasIndex) = noise.accel_bias_random_walk * noise.accel_bias_random_walk * dt * I;
   q.block<3, 3>(kGyroBiasIndex, kGyroBiasIndex) = noise.gyro_bias_random_walk * noise.gyro_bias_random_walk * dt * I;
+  q(kWheelScaleIndex, kWheelScaleIndex) = noise.wheel_scale_random_walk * noise.wheel_scale_random_walk * dt;
   return q;
 }
 
@@ -97,6 +98,7 @@ void propagate_covariance(ErrorCovariance& P, const ImuTransition& t, const ImuN
     P(kAccelBiasIndex + axis, kAccelBiasIndex + axis) += accel_walk;
     P(kGyroBiasIndex + axis, kGyroBiasIndex + axis) += gyro_walk;
   }
+  P(kWheelScaleIndex, kWheelScaleIndex) += noise.wheel_scale_random_walk * noise.wheel_scale_random_walk * dt;
 }
 
 }  // namespace hanzo::fusion::estimate

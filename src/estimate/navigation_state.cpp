@@ -1,5 +1,7 @@
 #include "hanzo/fusion/estimate/navigation_state.hpp"
 
+#include <cmath>
+
 namespace hanzo::fusion::estimate {
 
 NavigationState NavigationState::plus(const ErrorVector& delta) const {
@@ -10,6 +12,7 @@ NavigationState NavigationState::plus(const ErrorVector& delta) const {
   out.accel_bias += delta.segment<3>(kAccelBiasIndex);
   out.gyro_bias += delta.segment<3>(kGyroBiasIndex);
   out.gravity += delta.segment<3>(kGravityIndex);
+  out.wheel_speed_scale += delta(kWheelScaleIndex);
   return out;
 }
 
@@ -21,12 +24,14 @@ ErrorVector NavigationState::minus(const NavigationState& other) const {
   delta.segment<3>(kAccelBiasIndex) = accel_bias - other.accel_bias;
   delta.segment<3>(kGyroBiasIndex) = gyro_bias - other.gyro_bias;
   delta.segment<3>(kGravityIndex) = gravity - other.gravity;
+  delta(kWheelScaleIndex) = wheel_speed_scale - other.wheel_speed_scale;
   return delta;
 }
 
 bool NavigationState::all_finite() const {
   return position.allFinite() && R_world_body.quaternion().coeffs().allFinite() && velocity.allFinite() &&
-         accel_bias.allFinite() && gyro_bias.allFinite() && gravity.allFinite();
+         accel_bias.allFinite() && gyro_bias.allFinite() && gravity.allFinite() &&
+         std::isfinite(wheel_speed_scale);
 }
 
 void symmetrize(ErrorCovariance& covariance) {

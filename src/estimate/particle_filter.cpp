@@ -28,7 +28,8 @@ void ParticleFilter::reset(const NavigationState& state, const ErrorCovariance& 
   clones_.clear();
   for (size_t i = 1; i < count; ++i) {  // particle 0 stays at the given state
     ErrorVector draw;
-    for (int k = 0; k < kErrorStateDimension; ++k) draw(k) = normal_(random_);
+    // A state with zero variance (the wheel speed scale without wheels) is known: no draw.
+    for (int k = 0; k < kErrorStateDimension; ++k) draw(k) = covariance(k, k) > 0.0 ? normal_(random_) : 0.0;
     particles_[i] = state.plus(root * draw);
   }
 }

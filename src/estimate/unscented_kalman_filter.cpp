@@ -49,11 +49,11 @@ bool UnscentedKalmanFilter::sigma_offsets(Eigen::Matrix<double, kErrorStateDimen
 
 void UnscentedKalmanFilter::predict(const ImuSample& sample, double dt) {
   if (dt <= 0.0) return;
-  // The process model is linear in position, velocity and gravity (for a fixed orientation and
-  // biases). With those dimensions ordered last, the last 9 columns of the Cholesky factor only
-  // touch them, so their 18 sigma points propagate exactly by the linear map and only the
-  // other 18 + 1 go through propagate_state(): half the cost, the same result.
-  constexpr std::array<int, kErrorStateDimension> kOrder{3, 4, 5, 9, 10, 11, 12, 13, 14, 0, 1, 2, 6, 7, 8, 15, 16, 17};
+  // The process model is linear in position, velocity, gravity and the wheel speed scale (for a
+  // fixed orientation and biases). With those dimensions ordered last, the last 10 columns of
+  // the Cholesky factor only touch them, so their 20 sigma points propagate exactly by the
+  // linear map and only the other 18 + 1 go through propagate_state(): half the cost, the same result.
+  constexpr std::array<int, kErrorStateDimension> kOrder{3, 4, 5, 9, 10, 11, 12, 13, 14, 0, 1, 2, 6, 7, 8, 15, 16, 17, 18};
   constexpr int kNonlinear = 9;
   ErrorCovariance permuted;
   for (int i = 0; i < kErrorStateDimension; ++i) {
@@ -97,6 +97,7 @@ void UnscentedKalmanFilter::predict(const ImuSample& sample, double dt) {
         d.segment<3>(kPositionIndex) = dp + dt * dv + 0.5 * dt * dt * dg;
         d.segment<3>(kVelocityIndex) = dv + dt * dg;
         d.segment<3>(kGravityIndex) = dg;
+        d(kWheelScaleIndex) = sign * o(kWheelScaleIndex);
         deltas.col(index) = d;
       }
     }

@@ -44,14 +44,24 @@ MeasurementVector WheelOdometryModel::residual(const NavigationState& state, Mea
   const bool used[3] = {measurement_.use_speed, measurement_.lateral_constraint, measurement_.vertical_constraint};
   for (int axis = 0; axis < 3; ++axis) {
     if (!used[axis]) continue;
-    r(row) = (axis == 0 ? measurement_.forward_speed : 0.0) - velocity(axis);
-    if (jacobian != nullptr) jacobian->row(row) = h.row(axis);
+    // The wheels read the forward speed times their scale; the constraints are zero either way.
+    const double scale = axis == 0 ? state.wheel_speed_scale : 1.0;
+    r(row) = (axis == 0 ? measurement_.forward_speed : 0.0) - scale * velocity(axis);
+    if (jacobian != nullptr) {
+      jacobian->row(row) = scale * h.row(axis);
+      if (axis == 0) (*jacobian)(row, kWheelScaleIndex) = velocity(axis);
+    }
     ++row;
   }
   if (measurement_.use_yaw_rate) {
+    // Both wheels' distances carry the scale, so their yaw rate does too.
     const Eigen::RowVector3d yaw_axis = T_body_wheel_.rotation().matrix().col(2).transpose();  // z of R_bw^T
-    r(row) = measurement_.yaw_rate - yaw_axis.dot(body_rate(state, gyro_));
-    if (jacobian != nullptr) jacobian->block<1, 3>(row, kGyroBiasIndex) = -yaw_axis * gyro_.R_body_imu.matrix();
+    const double yaw_rate = yaw_axis.dot(body_rate(state, gyro_));
+    r(row) = measurement_.yaw_rate - state.wheel_speed_scale * yaw_rate;
+    if (jacobian != nullptr) {
+      jacobian->block<1, 3>(row, kGyroBiasIndex) = -state.wheel_speed_scale * yaw_axis * gyro_.R_body_imu.matrix();
+      (*jacobian)(row, kWheelScaleIndex) = yaw_rate;
+    }
   }
   return r;
 }

@@ -25,6 +25,10 @@ constexpr double kMovingStartVelocitySigma = 5.0;   // m/s: a moving start's spe
 constexpr double kInitialGravitySigma = 0.02;       // m/s^2, vertical (magnitude)
 constexpr double kHorizontalGravitySigma = 1e-6;    // m/s^2: ENU's up is the gravity direction
 constexpr double kGravityMagnitudeSigma = 0.001;    // m/s^2, pseudo-measurement at 1 Hz
+// The wheel speed scale (navigation_state.hpp): an uncalibrated wheel radius is off by a few
+// percent; load and tyre pressure move it slowly.
+constexpr double kInitialWheelScaleSigma = 0.02;
+constexpr double kWheelScaleRandomWalk = 1e-4;      // 1/sqrt(s)
 constexpr double kPlanarHeightSigma = 0.005;        // m
 constexpr double kPlanarVerticalSpeedSigma = 0.01;  // m/s
 constexpr double kPlanarLevelSigma = 0.01;          // rad: roll, pitch of a planar robot without an IMU
@@ -78,13 +82,20 @@ Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup
     filter_config_.imu_noise = {motion.acceleration_noise, kMotionModelOrientationNoise, kMotionModelAccelBiasWalk,
                                 motion.angular_acceleration_noise, 1.0};
   }
+  // The wheel speed scale is estimated where something measures distance besides the wheels
+  // (GNSS, LiDAR or camera poses); against the IMU alone it is not observable, only drift.
+  const auto configured = [this](SensorModality modality) {
+    return std::any_of(sensors_.begin(), sensors_.end(), [modality](const SensorSetup& s) { return s.config->modality == modality; });
+  };
+  estimate_wheel_scale_ = configured(SensorModality::kWheelOdometry) &&
+                (configured(SensorModality::kGnss) || configured(SensorModality::kLidar) || configured(SensorModality::kCamera));
+  if (estimate_wheel_scale_) filter_config_.imu_noise.wheel_scale_random_walk = kWheelScaleRandomWalk;
   filter_config_.gate_probability = frontend_.gate_probability;
   filter_ = make_filter(filter_config_, frontend_);
   spike_filter_ = estimate::ImuSpikeFilter(estimate::ImuSpikeFilterConfig{}, filter_config_.imu_noise);
   previous_wheels_.resize(sensors_.size());
   last_fused_.resize(sensors_.size());
-  const bool has_gnss = std::any_of(sensors_.begin(), sensors_.end(),
-                                    [](const SensorSetup& s) { return s.config->modality == SensorModality::kGnss; });
+  const bool has_gnss = configured(SensorModality::kGnss);
   // With GNSS the world is ENU, and unless the IMU reports its heading nothing says where the
   // body faces in it: GNSS fixes wait until the GNSS track gives the heading (align_heading).
   const bool imu_heading = imu_sensor_ && sensors_[*imu_sensor_].config->fusion.use_orientation[2];
@@ -114,12 +125,14 @@ Estimator::Estimator(const Estimator& other)
       wheels_moved_before_initialization_(other.wheels_moved_before_initialization_),
       heading_pending_(other.heading_pending_),
       wheel_yaw_rate_needed_(other.wheel_yaw_rate_needed_),
+      estimate_wheel_scale_(other.estimate_wheel_scale_),
       course_start_(other.course_start_),
       moving_start_(other.moving_start_),
       recent_fixes_(other.recent_fixes_),
       recent_imu_(other.recent_imu_),
       recent_wheel_speeds_(other.recent_wheel_speeds_),
       wheel_forward_speed_(other.wheel_forward_speed_),
+      wheels_still_at_(other.wheels_still_at_),
       gravity_magnitude_(other.gravity_magnitude_),
       last_keyframe_(other.last_keyframe_),
       planar_height_(other.planar_height_),
@@ -323,6 +336,7 @@ void Estimator::start(const NavigationState& state, const Eigen::Matrix3d& posit
   set_block(estimate::kAccelBiasIndex, Eigen::Vector3d::Constant(accel_bias_sigma));
   set_block(estimate::kGyroBiasIndex, Eigen::Vector3d::Constant(gyro_bias_sigma));
   set_block(estimate::kGravityIndex, Eigen::Vector3d(kHorizontalGravitySigma, kHorizontalGravitySigma, kInitialGravitySigma));
+  if (estimate_wheel_scale_) P(estimate::kWheelScaleIndex, estimate::kWheelScaleIndex) = kInitialWheelScaleSigma * kInitialWheelScaleSigma;
   filter_->reset(state, P);
   initialized_ = true;
   time_ = state.timestamp;

@@ -113,6 +113,8 @@ class Estimator {
   /// False while GNSS defines the world and the heading in it is not yet known (see
   /// align_heading): poses are then not TRACKING.
   bool heading_known() const { return !heading_pending_; }
+  /// Whether the state's wheel speed scale is estimated (wheel odometry with GNSS, LiDAR or a camera).
+  bool estimates_wheel_scale() const { return estimate_wheel_scale_; }
   /// Time of the last fused event.
   Timestamp time() const { return time_; }
   const estimate::Filter& filter() const { return *filter_; }
@@ -134,6 +136,8 @@ class Estimator {
   /// Moves the estimate onto an in-motion alignment (a world correction, so that what follows
   /// the frontend's world follows it) and sets its velocity and uncertainty.
   void apply_in_motion_alignment(const estimate::InMotionAlignment& alignment, const Eigen::Vector3d& lever);
+  /// The wheels' latest reading (at most 0.5 s old) showed no motion, in a start that was not moving.
+  bool standing_still() const;
   EventOutcome process_radar(const Event& event, const msgs::RadarMessage& radar, UpdateObserver* observer);
   EventOutcome process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer);
   void initialize(const Event& event, const msgs::ImuMessage& imu);
@@ -186,9 +190,13 @@ class Estimator {
   /// Without an IMU and without a sensor that measures the orientation (LiDAR, camera), the
   /// wheels' yaw rate is the only measurement of the turn: fused whatever use_yaw_rate says.
   bool wheel_yaw_rate_needed_ = false;
+  /// Wheel odometry and a sensor that measures distance otherwise (GNSS, LiDAR, camera): the
+  /// wheel speed scale state is estimated.
+  bool estimate_wheel_scale_ = false;
   struct CourseStart {
     Eigen::Vector3d antenna_gnss;      // ENU
     Eigen::Vector3d antenna_estimate;  // world, dead-reckoned
+    bool averaged = false;             // the estimate there averaged GNSS fixes while standing still
   };
   std::optional<CourseStart> course_start_;
   /// The IMU's alignment window showed motion (or the wheels turned): the start velocity is
@@ -200,6 +208,8 @@ class Estimator {
   std::vector<estimate::ImuSample> recent_imu_;
   std::vector<std::pair<Timestamp, double>> recent_wheel_speeds_;  ///< forward speed, m/s
   double wheel_forward_speed_ = 0.0;
+  /// The time of the latest wheel reading, when it showed no motion (cleared by one that did).
+  std::optional<Timestamp> wheels_still_at_;
   double gravity_magnitude_ = estimate::kStandardGravity;
   struct KeyframeAnchor {
     uint64_t id = 0;

@@ -82,7 +82,10 @@ EventOutcome Estimator::process_gnss(const Event& event, const msgs::GnssMessage
   Eigen::Matrix3d covariance = gnss.position_covariance.value_or(default_gnss_covariance(gnss.fix_type));
   if (!(covariance.diagonal().array() > 0.0).all()) covariance = default_gnss_covariance(gnss.fix_type);
   const Eigen::Vector3d antenna_gnss = enu_->to_enu(gnss.geodetic());
-  if (heading_pending_ && !align_heading(event.time, antenna_gnss, lever, std::sqrt(std::max(covariance(0, 0), covariance(1, 1))))) {
+  if (heading_pending_ && !align_heading(event.time, antenna_gnss, lever, std::sqrt(std::max(covariance(0, 0), covariance(1, 1)))) &&
+      !standing_still()) {
+    // Standing still, the position does not depend on the heading: the fix is fused (the course
+    // alignment then pivots on the averaged start).
     return {false, Rejection::kHeadingUnknown};
   }
   const estimate::GnssPositionModel model(antenna_gnss, covariance, lever);
@@ -102,6 +105,11 @@ bool Estimator::align_heading(Timestamp time, const Eigen::Vector3d& antenna_gns
   recent_fixes_.push_back({time, antenna_gnss, horizontal_sigma});
   keep_recent(recent_fixes_, time, config.window, [](const estimate::GnssTrackPoint& fix) { return fix.time; });
   const NavigationState state = filter_->state();
+  if (standing_still()) {
+    // The stretch for the course starts where the vehicle last stood.
+    course_start_ = CourseStart{antenna_gnss, state.position + state.R_world_body * lever, true};
+    return false;
+  }
   estimate::InMotionAlignmentInput input{recent_fixes_, recent_imu_, filter_config_.imu_mounting, time, gravity_magnitude_,
                                          wheel_forward_speed_ < 0.0, acceleration_of(recent_wheel_speeds_)};
   const Result<estimate::InMotionAlignment> in_motion = estimate::align_in_motion(input, config);
@@ -118,6 +126,11 @@ bool Estimator::align_heading(Timestamp time, const Eigen::Vector3d& antenna_gns
     }
   }
   return align_heading_to_course(antenna_gnss, state.position + state.R_world_body * lever, horizontal_sigma);
+}
+
+bool Estimator::standing_still() const {
+  constexpr double kRecentWheels = 0.5;  // s
+  return !moving_start_ && wheels_still_at_ && (time_ - *wheels_still_at_).seconds() <= kRecentWheels;
 }
 
 void Estimator::apply_in_motion_alignment(const estimate::InMotionAlignment& alignment, const Eigen::Vector3d& lever) {
@@ -142,6 +155,7 @@ void Estimator::apply_in_motion_alignment(const estimate::InMotionAlignment& ali
   for (const int index : {estimate::kAccelBiasIndex, estimate::kGyroBiasIndex, estimate::kGravityIndex}) {
     P.block<3, 3>(index, index) = previous.block<3, 3>(index, index);
   }
+  P(estimate::kWheelScaleIndex, estimate::kWheelScaleIndex) = previous(estimate::kWheelScaleIndex, estimate::kWheelScaleIndex);
   P.block<3, 3>(estimate::kGyroBiasIndex, estimate::kGyroBiasIndex) =
       P.block<3, 3>(estimate::kGyroBiasIndex, estimate::kGyroBiasIndex).cwiseMax(Eigen::Matrix3d::Identity() * std::pow(kUnalignedGyroBiasSigma, 2));
   filter_->reset(state, P);
@@ -178,7 +192,8 @@ bool Estimator::align_heading_to_course(const Eigen::Vector3d& antenna_gnss, con
   if (std::abs(heading_error) > 2.0 * course_sigma) {
     // Rotate the estimate about the stretch's start onto the GNSS track.
     const SO3 rotation = SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), heading_error);
-    const SE3 correction(rotation, course_start_->antenna_gnss - rotation * course_start_->antenna_estimate);
+    const Eigen::Vector3d& pivot = course_start_->averaged ? course_start_->antenna_estimate : course_start_->antenna_gnss;
+    const SE3 correction(rotation, pivot - rotation * course_start_->antenna_estimate);
     filter_->apply_world_transform(correction);
     // A correction of the world like the backend's: what follows the Frontend's world (the LiDAR
     // odometry's frame, Frontend::pose_at) follows this one too.
@@ -215,6 +230,7 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
   const double left = wheels.left_distance - before->left_distance;
   const double right = wheels.right_distance - before->right_distance;
   wheel_forward_speed_ = 0.5 * (left + right) / dt;
+  wheels_still_at_ = left == 0.0 && right == 0.0 ? std::optional<Timestamp>(event.time) : std::nullopt;
   if (heading_pending_) {
     recent_wheel_speeds_.emplace_back(event.time, wheel_forward_speed_);
     keep_recent(recent_wheel_speeds_, event.time, 1.0, [](const std::pair<Timestamp, double>& speed) { return speed.first; });

@@ -1,6 +1,7 @@
 #include "hanzo/fusion/pipeline/frontend.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <deque>
 #include <set>
 
@@ -575,6 +576,11 @@ SessionSummary Frontend::summary() const {
   // Now, not as of the latest pose: a sensor heard from again after that pose no longer counts
   // as timed out (the pose's own status stays as it was emitted).
   summary.state = impl_->latest_pose ? impl_->pose_status().state : msgs::TrackingState::kInitializing;
+  if (impl_->estimator.initialized() && impl_->estimator.estimates_wheel_scale()) {
+    summary.wheel_speed_scale = impl_->estimator.filter().state().wheel_speed_scale;
+    summary.wheel_speed_scale_sigma =
+        std::sqrt(impl_->estimator.filter().covariance()(estimate::kWheelScaleIndex, estimate::kWheelScaleIndex));
+  }
   return summary;
 }
 

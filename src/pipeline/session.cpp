@@ -249,7 +249,9 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
     }
     latest_keyframe_ = emitted;
     latest_keyframe_uncorrected_ = frontend_->world_correction().inverse() * emitted.T_world_body.to_se3();
-    if (config_.keep_trajectory) keyframe_records_.push_back({emitted.keyframe_id, emitted.timestamp, latest_keyframe_uncorrected_});
+    if (config_.keep_trajectory) {
+      keyframe_records_.push_back({emitted.keyframe_id, emitted.timestamp, latest_keyframe_uncorrected_, frontend_->world_correction()});
+    }
     ++summary_.graph_keyframes;
     if (keyframe_callback_) keyframe_callback_(emitted);
   });
@@ -821,6 +823,16 @@ std::vector<StampedPose> Session::optimized_trajectory() const {
     if (const std::optional<SE3> optimized = graph_->optimized_pose(keyframe.keyframe_id)) {
       corrections.emplace_back(keyframe.timestamp, *optimized * keyframe.T_world_body_uncorrected.inverse());
     }
+  }
+  // Before the first keyframe (a start whose heading the GNSS track gave later): from the
+  // Frontend's world correction of that time at the first pose (it turned the track before the
+  // alignment about its start) to the first keyframe's correction, which applied alone would
+  // swing the whole stretch about the keyframe with any rotation the graph adds.
+  if (!corrections.empty() && !uncorrected_poses_.empty() && uncorrected_poses_.front().timestamp < corrections.front().first) {
+    const auto first = std::find_if(keyframe_records_.begin(), keyframe_records_.end(), [&](const KeyframeRecord& keyframe) {
+      return keyframe.timestamp == corrections.front().first;
+    });
+    corrections.insert(corrections.begin(), {uncorrected_poses_.front().timestamp, first->world_correction});
   }
   std::vector<StampedPose> trajectory;
   trajectory.reserve(uncorrected_poses_.size());

@@ -16,7 +16,7 @@ namespace {
 
 ErrorCovariance initial_covariance() {
   ErrorVector sigmas;
-  sigmas << 5, 5, 5, 0.01, 0.01, 0.01, 0.1, 0.1, 0.1, 0.05, 0.05, 0.05, 0.001, 0.001, 0.001, 1e-6, 1e-6, 0.01;
+  sigmas << 5, 5, 5, 0.01, 0.01, 0.01, 0.1, 0.1, 0.1, 0.05, 0.05, 0.05, 0.001, 0.001, 0.001, 1e-6, 1e-6, 0.01, 0.03;
   return sigmas.array().square().matrix().asDiagonal();
 }
 
@@ -83,10 +83,10 @@ TEST(ImuSpikeFilter, RejectsASpikeAndAcceptsAPersistentChange) {
 }
 
 
-// The EKF's clone bookkeeping against an explicit augmented-state EKF (24 = 18 + 6 cloned pose
+// The EKF's clone bookkeeping against an explicit augmented-state EKF (the error state + 6 cloned pose
 // errors) run densely on the same predictions and updates.
 TEST(ErrorStateEkf, PoseCloneMatchesTheAugmentedStateFilter) {
-  using Augmented = Eigen::Matrix<double, 24, 24>;
+  using Augmented = Eigen::Matrix<double, kErrorStateDimension + 6, kErrorStateDimension + 6>;
   FilterConfig config;
   config.imu_noise.sample_interval = 0.01;
   config.gate_probability = 1.0;
@@ -96,31 +96,31 @@ TEST(ErrorStateEkf, PoseCloneMatchesTheAugmentedStateFilter) {
   for (int k = 0; k < 20; ++k) ekf.predict(turning, 0.01);
   ekf.clone_pose();
   Augmented P = Augmented::Zero();
-  P.topLeftCorner<18, 18>() = ekf.covariance();
-  P.topRightCorner<18, 6>() = ekf.covariance().leftCols<6>();
-  P.bottomLeftCorner<6, 18>() = ekf.covariance().topRows<6>();
+  P.topLeftCorner<kErrorStateDimension, kErrorStateDimension>() = ekf.covariance();
+  P.topRightCorner<kErrorStateDimension, 6>() = ekf.covariance().leftCols<6>();
+  P.bottomLeftCorner<6, kErrorStateDimension>() = ekf.covariance().topRows<6>();
   P.bottomRightCorner<6, 6>() = ekf.covariance().topLeftCorner<6, 6>();
-  Eigen::Matrix<double, 24, 1> clone_delta = Eigen::Matrix<double, 24, 1>::Zero();
+  Eigen::Matrix<double, kErrorStateDimension + 6, 1> clone_delta = Eigen::Matrix<double, kErrorStateDimension + 6, 1>::Zero();
   for (int step = 0; step < 5; ++step) {
     for (int k = 0; k < 10; ++k) {
       ImuTransition transition;
       const NavigationState before = ekf.state();
       propagate_state(before, body_motion(before, turning, config.imu_mounting), 0.01, config.imu_mounting, &transition);
       Augmented phi = Augmented::Identity();
-      phi.topLeftCorner<18, 18>() = transition_matrix(transition);
+      phi.topLeftCorner<kErrorStateDimension, kErrorStateDimension>() = transition_matrix(transition);
       Augmented q = Augmented::Zero();
-      q.topLeftCorner<18, 18>() = process_noise(config.imu_noise, 0.01);
+      q.topLeftCorner<kErrorStateDimension, kErrorStateDimension>() = process_noise(config.imu_noise, 0.01);
       P = phi * P * phi.transpose() + q;
       ekf.predict(turning, 0.01);
     }
     const GnssPositionModel model(Eigen::Vector3d(0.3 * step, -0.2, 0.1), Eigen::Matrix3d::Identity() * 0.5, Eigen::Vector3d(0, 0, 1));
     MeasurementJacobian H;
     const MeasurementVector r = model.residual(ekf.state(), &H);
-    Eigen::Matrix<double, 3, 24> H_augmented = Eigen::Matrix<double, 3, 24>::Zero();
-    H_augmented.leftCols<18>() = H;
+    Eigen::Matrix<double, 3, kErrorStateDimension + 6> H_augmented = Eigen::Matrix<double, 3, kErrorStateDimension + 6>::Zero();
+    H_augmented.leftCols<kErrorStateDimension>() = H;
     const Eigen::Matrix3d S = H_augmented * P * H_augmented.transpose() + model.covariance();
-    const Eigen::Matrix<double, 24, 3> K = P * H_augmented.transpose() * S.inverse();
-    const Eigen::Matrix<double, 24, 1> delta = K * r;
+    const Eigen::Matrix<double, kErrorStateDimension + 6, 3> K = P * H_augmented.transpose() * S.inverse();
+    const Eigen::Matrix<double, kErrorStateDimension + 6, 1> delta = K * r;
     clone_delta.tail<6>() += delta.tail<6>();
     P -= K * S * K.transpose();
     Augmented G = Augmented::Identity();
@@ -130,10 +130,10 @@ TEST(ErrorStateEkf, PoseCloneMatchesTheAugmentedStateFilter) {
   }
   const std::optional<PoseClone> clone = ekf.pose_clone();
   ASSERT_TRUE(clone.has_value());
-  EXPECT_LT((clone->cross - P.bottomLeftCorner<6, 18>()).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((clone->cross - P.bottomLeftCorner<6, kErrorStateDimension>()).cwiseAbs().maxCoeff(), 1e-9);
   EXPECT_LT((clone->covariance - P.bottomRightCorner<6, 6>()).cwiseAbs().maxCoeff(), 1e-9);
   EXPECT_LT((clone->correction - clone_delta.tail<6>()).cwiseAbs().maxCoeff(), 1e-9);
-  EXPECT_LT((ekf.covariance() - P.topLeftCorner<18, 18>()).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((ekf.covariance() - P.topLeftCorner<kErrorStateDimension, kErrorStateDimension>()).cwiseAbs().maxCoeff(), 1e-9);
 }
 
 
@@ -147,7 +147,7 @@ TEST(UnscentedKalmanFilter, PredictEqualsFullSigmaPointPropagation) {
   NavigationState state;
   state.velocity = Eigen::Vector3d(3.0, 1.0, 0.0);
   state.R_world_body = SO3::exp(Eigen::Vector3d(0.1, -0.05, 1.2));
-  Eigen::Matrix<double, 18, 18> A = Eigen::Matrix<double, 18, 18>::Random() * 0.05;
+  Eigen::Matrix<double, kErrorStateDimension, kErrorStateDimension> A = Eigen::Matrix<double, kErrorStateDimension, kErrorStateDimension>::Random() * 0.05;
   const ErrorCovariance P = A * A.transpose() + initial_covariance();
   ukf.reset(state, P);
   const ImuSample sample{Timestamp::from_nanoseconds(1), Eigen::Vector3d(0.2, -0.1, 0.6), Eigen::Vector3d(1.0, 0.5, 9.7)};
@@ -155,12 +155,12 @@ TEST(UnscentedKalmanFilter, PredictEqualsFullSigmaPointPropagation) {
   ukf.predict(sample, dt);
 
   // Reference: the same sigma points (permuted Cholesky), all propagated.
-  constexpr std::array<int, 18> order{3, 4, 5, 9, 10, 11, 12, 13, 14, 0, 1, 2, 6, 7, 8, 15, 16, 17};
-  const double n = 18.0;
+  constexpr std::array<int, kErrorStateDimension> order{3, 4, 5, 9, 10, 11, 12, 13, 14, 0, 1, 2, 6, 7, 8, 15, 16, 17, 18};
+  const double n = kErrorStateDimension;
   const double lambda = ukf_config.alpha * ukf_config.alpha * (n + ukf_config.kappa) - n;
   ErrorCovariance permuted;
-  for (int i = 0; i < 18; ++i) {
-    for (int j = 0; j < 18; ++j) permuted(i, j) = P(order[static_cast<size_t>(i)], order[static_cast<size_t>(j)]);
+  for (int i = 0; i < kErrorStateDimension; ++i) {
+    for (int j = 0; j < kErrorStateDimension; ++j) permuted(i, j) = P(order[static_cast<size_t>(i)], order[static_cast<size_t>(j)]);
   }
   const ErrorCovariance root = Eigen::LLT<ErrorCovariance>((n + lambda) * (permuted + 1e-15 * ErrorCovariance::Identity())).matrixL();
   const auto propagate = [&](const NavigationState& x) {
@@ -169,9 +169,9 @@ TEST(UnscentedKalmanFilter, PredictEqualsFullSigmaPointPropagation) {
   const NavigationState center = propagate(state);
   std::vector<ErrorVector> deltas{ErrorVector::Zero()};
   for (int sign : {1, -1}) {
-    for (int column = 0; column < 18; ++column) {
+    for (int column = 0; column < kErrorStateDimension; ++column) {
       ErrorVector o;
-      for (int i = 0; i < 18; ++i) o(order[static_cast<size_t>(i)]) = sign * root(i, column);
+      for (int i = 0; i < kErrorStateDimension; ++i) o(order[static_cast<size_t>(i)]) = sign * root(i, column);
       deltas.push_back(propagate(state.plus(o)).minus(center));
     }
   }

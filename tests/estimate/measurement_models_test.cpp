@@ -110,12 +110,12 @@ TEST(ImuPropagation, TransitionMatchesNumericalDifferentiation) {
 TEST(ImuPropagation, SparseCovariancePropagationEqualsDenseProduct) {
   std::mt19937 rng(5);
   const ImuMounting mounting{SO3::exp(Eigen::Vector3d(0.1, 0.0, -0.2)), Eigen::Vector3d(0.1, 0.0, 0.05)};
-  const ImuNoise noise{0.2, 0.02, 0.003, 0.0004, 0.005};
+  const ImuNoise noise{0.2, 0.02, 0.003, 0.0004, 0.005, 1e-4};
   const NavigationState state = random_state(rng);
   ImuTransition transition;
   propagate_state(state, body_motion(state, {{}, Eigen::Vector3d(0.2, 0.1, -0.3), Eigen::Vector3d(0.5, 0.2, 9.7)}, mounting), 0.005,
                   mounting, &transition);
-  Eigen::Matrix<double, kErrorStateDimension, kErrorStateDimension> A = Eigen::Matrix<double, 18, 18>::Random();
+  Eigen::Matrix<double, kErrorStateDimension, kErrorStateDimension> A = Eigen::Matrix<double, kErrorStateDimension, kErrorStateDimension>::Random();
   ErrorCovariance P = A * A.transpose() + ErrorCovariance::Identity();
   const ErrorCovariance phi = transition_matrix(transition);
   const ErrorCovariance dense = phi * P * phi.transpose() + process_noise(noise, transition.dt);

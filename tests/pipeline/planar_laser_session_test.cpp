@@ -135,13 +135,9 @@ TEST(PlanarLaserSession, SimulatedWarehouseWithAndWithoutAnImu) {
     const testing::ReplayedTrajectories replayed = testing::replay(*simulation, *session);
     const io::Trajectory& estimate = replayed.estimate;
     const io::Trajectory& truth = replayed.truth;
-    io::Trajectory optimized, optimized_truth;
-    for (const StampedPose& pose : session->optimized_trajectory()) {
-      optimized.timestamps.push_back(pose.timestamp);
-      optimized.poses.push_back(pose.T_world_body.matrix());
-      optimized_truth.timestamps.push_back(pose.timestamp);
-      optimized_truth.poses.push_back(simulation->trajectory().sample(pose.timestamp).T_world_body.matrix());
-    }
+    const testing::ReplayedTrajectories optimized_run = testing::optimized_with_truth(*session, *simulation);
+    const io::Trajectory& optimized = optimized_run.estimate;
+    const io::Trajectory& optimized_truth = optimized_run.truth;
     const bool imu = modalities.count(SensorModality::kImu) != 0;
     const double real_time = aligned_rmse(truth, estimate), smoothed = aligned_rmse(optimized_truth, optimized);
     const MappingSummary mapping = session->mapping_summary();

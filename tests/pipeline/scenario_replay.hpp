@@ -34,4 +34,16 @@ inline ReplayedTrajectories replay(sim::ScenarioSimulation& simulation, Session&
   return out;
 }
 
+/// The session's optimized trajectory and the scenario's body pose at the same times.
+inline ReplayedTrajectories optimized_with_truth(const Session& session, const sim::ScenarioSimulation& simulation) {
+  ReplayedTrajectories out;
+  for (const StampedPose& pose : session.optimized_trajectory()) {
+    out.estimate.timestamps.push_back(pose.timestamp);
+    out.estimate.poses.push_back(pose.T_world_body.matrix());
+    out.truth.timestamps.push_back(pose.timestamp);
+    out.truth.poses.push_back(simulation.trajectory().sample(pose.timestamp).T_world_body.matrix());
+  }
+  return out;
+}
+
 }  // namespace hanzo::fusion::pipeline::testing

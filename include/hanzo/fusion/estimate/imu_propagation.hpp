@@ -52,6 +52,8 @@ struct ImuNoise {
   double accel_bias_random_walk = 0.001;  // m/s^2/sqrt(s)
   double gyro_bias_random_walk = 0.0001;  // rad/s/sqrt(s)
   double sample_interval = 0.005;         // s, 1 / IMU rate (turns per-sample stds into densities)
+  /// 1/sqrt(s): how fast the wheel speed scale may drift (load, tyre pressure); 0 without wheels.
+  double wheel_scale_random_walk = 0.0;
 };
 
 /// Bias-corrected angular velocity and specific force at the body origin, body axes.

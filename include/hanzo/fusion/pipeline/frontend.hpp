@@ -90,6 +90,10 @@ struct SessionSummary {
   /// The tracking state now (the rules of PoseEstimate.status with the sensors' current
   /// timeouts), which a later message can change without a new pose.
   msgs::TrackingState state = msgs::TrackingState::kInitializing;
+  /// With wheel odometry, once initialized: the estimated wheel speed scale (1.02: the wheels
+  /// read 2 % more distance than driven; their radius is 2 % too large) and its 1-sigma.
+  std::optional<double> wheel_speed_scale;
+  double wheel_speed_scale_sigma = 0.0;
 };
 
 /// One update, for diagnostics (innovation plots, consistency checks).

@@ -362,6 +362,7 @@ class Session {
     uint64_t keyframe_id = 0;
     Timestamp timestamp;
     SE3 T_world_body_uncorrected;
+    SE3 world_correction;  ///< the Frontend's world correction when it was emitted
   };
   std::vector<KeyframeRecord> keyframe_records_;
   Frontend::PoseCallback pose_callback_;
