@@ -138,6 +138,9 @@ class Estimator {
   void apply_in_motion_alignment(const estimate::InMotionAlignment& alignment, const Eigen::Vector3d& lever);
   /// The wheels' latest reading (at most 0.5 s old) showed no motion, in a start that was not moving.
   bool standing_still() const;
+  /// A moving start before its alignment: the position is put at the GNSS fix (the dead-reckoned
+  /// one, from an unknown velocity, would be worse than the fix).
+  void hold_at_fix(const Eigen::Vector3d& antenna_gnss, const Eigen::Matrix3d& covariance, const Eigen::Vector3d& lever);
   EventOutcome process_radar(const Event& event, const msgs::RadarMessage& radar, UpdateObserver* observer);
   EventOutcome process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer);
   void initialize(const Event& event, const msgs::ImuMessage& imu);

@@ -86,6 +86,7 @@ EventOutcome Estimator::process_gnss(const Event& event, const msgs::GnssMessage
       !standing_still()) {
     // Standing still, the position does not depend on the heading: the fix is fused (the course
     // alignment then pivots on the averaged start).
+    if (moving_start_) hold_at_fix(antenna_gnss, covariance, lever);
     return {false, Rejection::kHeadingUnknown};
   }
   const estimate::GnssPositionModel model(antenna_gnss, covariance, lever);
@@ -128,6 +129,16 @@ bool Estimator::align_heading(Timestamp time, const Eigen::Vector3d& antenna_gns
   return align_heading_to_course(antenna_gnss, state.position + state.R_world_body * lever, horizontal_sigma);
 }
 
+void Estimator::hold_at_fix(const Eigen::Vector3d& antenna_gnss, const Eigen::Matrix3d& covariance, const Eigen::Vector3d& lever) {
+  NavigationState state = filter_->state();
+  state.position = antenna_gnss - state.R_world_body * lever;
+  ErrorCovariance P = filter_->covariance();
+  P.middleRows<3>(estimate::kPositionIndex).setZero();
+  P.middleCols<3>(estimate::kPositionIndex).setZero();
+  P.block<3, 3>(estimate::kPositionIndex, estimate::kPositionIndex) = covariance;
+  filter_->reset(state, P);
+}
+
 bool Estimator::standing_still() const {
   constexpr double kRecentWheels = 0.5;  // s
   return !moving_start_ && wheels_still_at_ && (time_ - *wheels_still_at_).seconds() <= kRecentWheels;
@@ -137,11 +148,19 @@ void Estimator::apply_in_motion_alignment(const estimate::InMotionAlignment& ali
   const NavigationState before = filter_->state();
   const SE3 T_before(before.R_world_body, before.position);
   const SE3 T_after(alignment.R_world_body, alignment.antenna - alignment.R_world_body * lever);
-  const SE3 correction = T_after * T_before.inverse();
-  filter_->apply_world_transform(correction);
-  world_correction_ = correction * world_correction_;
+  if (!moving_start_) {
+    // The estimate so far was dead-reckoned in a world turned by the heading error: a world
+    // correction moves it (and what follows the frontend's world) onto the GNSS track.
+    const SE3 correction = T_after * T_before.inverse();
+    filter_->apply_world_transform(correction);
+    world_correction_ = correction * world_correction_;
+  }
+  // A moving start's positions were held at the fixes (hold_at_fix), already in the world: the
+  // state is set, the world not moved.
   last_keyframe_.reset();  // the motion since it is not known
   NavigationState state = filter_->state();
+  state.R_world_body = alignment.R_world_body;
+  state.position = T_after.translation();
   state.velocity = alignment.velocity;
   // New uncertainty of position, attitude and velocity; the biases keep theirs (a start that
   // only looked still gets the gyro-bias uncertainty of a moving one).
