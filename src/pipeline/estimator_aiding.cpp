@@ -120,7 +120,8 @@ bool Estimator::align_heading(Timestamp time, const Eigen::Vector3d& antenna_gns
     // (a start at constant speed looks still to the IMU), takes the in-motion alignment.
     constexpr double kSpeedMismatch = 1.0;  // m/s, beyond 3 sigma of the GNSS speed
     const double velocity_sigma = in_motion->velocity_sigma;
-    const bool contradicted = std::abs(state.velocity.head<2>().norm() - in_motion->speed) > 3.0 * velocity_sigma + kSpeedMismatch;
+    const bool contradicted =
+        std::abs(state.velocity.head<2>().norm() - in_motion->velocity.head<2>().norm()) > 3.0 * velocity_sigma + kSpeedMismatch;
     if (moving_start_ || contradicted) {
       apply_in_motion_alignment(*in_motion, lever);
       return true;
