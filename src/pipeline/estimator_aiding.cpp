@@ -227,7 +227,7 @@ bool Estimator::align_heading_to_course(const Eigen::Vector3d& antenna_gnss, con
   constexpr int yaw = estimate::kOrientationIndex + 2;
   P.row(yaw).setZero();
   P.col(yaw).setZero();
-  P(yaw, yaw) = 4.0 * course_sigma * course_sigma;
+  P(yaw, yaw) = course_sigma * course_sigma;
   filter_->reset(filter_->state(), P);
   heading_pending_ = false;
   course_start_.reset();
