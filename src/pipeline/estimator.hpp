@@ -133,8 +133,10 @@ class Estimator {
   bool align_heading(Timestamp time, const Eigen::Vector3d& antenna_gnss, const Eigen::Vector3d& lever, double horizontal_sigma);
   /// Static start: the dead-reckoned track against the GNSS track over the same stretch.
   bool align_heading_to_course(const Eigen::Vector3d& antenna_gnss, const Eigen::Vector3d& antenna_estimate, double horizontal_sigma);
-  /// Moves the estimate onto an in-motion alignment (a world correction, so that what follows
-  /// the frontend's world follows it) and sets its velocity and uncertainty.
+  /// Sets the estimate to an in-motion alignment (attitude, velocity, position, uncertainty).
+  /// After a start that only looked still, the dead-reckoned past moves with it as a world
+  /// correction (what follows the frontend's world follows it); a moving start's positions were
+  /// held at the fixes, so its world stays.
   void apply_in_motion_alignment(const estimate::InMotionAlignment& alignment, const Eigen::Vector3d& lever);
   /// The wheels' latest reading (at most 0.5 s old) showed no motion, in a start that was not moving.
   bool standing_still() const;
@@ -203,7 +205,8 @@ class Estimator {
   };
   std::optional<CourseStart> course_start_;
   /// The IMU's alignment window showed motion (or the wheels turned): the start velocity is
-  /// unknown, so the heading comes from in-motion alignment, and wheels wait for it.
+  /// unknown, so the heading comes from in-motion alignment; until then the position is held at
+  /// each GNSS fix and wheels wait.
   bool moving_start_ = false;
   /// While the heading is pending: the recent GNSS track (world) and IMU samples, and the
   /// wheels' latest forward speed (its sign says whether the vehicle reverses).
