@@ -5,10 +5,14 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/eval/association.hpp"
 #include "hanzo/fusion/eval/pose_error.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/service/session_manager.hpp"
+#include "hanzo/fusion/sim/scenario.hpp"
+#include "hanzo/fusion/sim/scenario_simulation.hpp"
 #include "service_fixtures.hpp"
 
 namespace hanzo::fusion::service {
@@ -81,6 +85,58 @@ TEST(SessionManager, ReplaysTheSampleRecordingStoresEveryPoseAndMatchesGroundTru
   auto ape = eval::compute_ape(associated->reference, associated->estimate, {.alignment = eval::Alignment::kSE3});
   ASSERT_TRUE(ape.ok());
   EXPECT_LT(ape->statistics.rmse, 0.15) << "the served trajectory is as accurate as `hanzo-fusion run`";
+}
+
+// A server session of a 2D laser robot (the warehouse drive with a planar laser at 20 Hz, IMU and
+// wheels, 20 s): the served trajectory follows the truth and the session's map has its grid.
+TEST(SessionManager, ServesA2dLaserSession) {
+  auto manager = open_manager(testing::scratch_dir());
+  ASSERT_TRUE(manager);
+  sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_robot.yaml").value();
+  std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& s) {
+    return s.modality != config::SensorModality::kLidar && s.modality != config::SensorModality::kImu &&
+           s.modality != config::SensorModality::kWheelOdometry;
+  });
+  for (sim::ScenarioSensor& entry : scenario.sensors) {
+    if (entry.modality != config::SensorModality::kLidar) continue;
+    auto& lidar = std::get<sim::LidarSimulatorConfig>(entry.simulator);
+    lidar.pattern = sim::LidarPattern::preset(sim::LidarModel::kPlanarLaser);
+    lidar.rate_hz = 20.0;
+  }
+  scenario.duration = 20.0;
+  scenario.num_threads = 0;
+  const config::FusionConfig fusion = sim::scenario_fusion_config(scenario);
+  ASSERT_EQ(fusion.find_sensor("lidar")->type, config::kPlanarLaserType);
+  const auto created =
+      manager->create_session(kRobot, {"laser", config::to_yaml(fusion), calib::to_yaml(sim::scenario_calibration(scenario))});
+  ASSERT_TRUE(created.ok()) << created.error().message;
+  auto simulation = sim::ScenarioSimulation::create(scenario).value();
+  ASSERT_TRUE(simulation
+                  ->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
+                    const ApiStatus pushed = manager->push(kRobot, created->id, sensor.name, message);
+                    EXPECT_TRUE(pushed.ok()) << pushed.error().message;
+                    return ok_status();
+                  })
+                  .ok());
+  ASSERT_TRUE(manager->flush_storage().ok());
+  io::Trajectory estimate, truth;
+  for (const msgs::PoseEstimate& pose : read_whole_trajectory(*manager, created->id, 1000)) {
+    if (!estimate.timestamps.empty() && (pose.timestamp - estimate.timestamps.back()).seconds() < 0.1) continue;
+    estimate.timestamps.push_back(pose.timestamp);
+    estimate.poses.push_back(pose.T_world_body.to_se3().matrix());
+    truth.timestamps.push_back(pose.timestamp);
+    truth.poses.push_back(simulation->trajectory().sample(pose.timestamp).T_world_body.matrix());
+  }
+  auto ape = eval::compute_ape(truth, estimate, {.alignment = eval::Alignment::kSE3});
+  ASSERT_TRUE(ape.ok()) << ape.error().message;
+  std::printf("served 2D laser session, 20 s warehouse: %zu poses, SE3-aligned APE %.3f m\n", estimate.size(), ape->statistics.rmse);
+  EXPECT_GT(estimate.size(), 150u);
+  EXPECT_LT(ape->statistics.rmse, 0.1);
+  const Principal map_reader{"viewer", "acme", static_cast<uint32_t>(Permission::kMapRead)};
+  const auto map = manager->map(map_reader, created->id);
+  ASSERT_TRUE(map.ok()) << map.error().message;
+  ASSERT_TRUE(map->occupancy.has_value());
+  EXPECT_GT(map->occupancy->size_x * map->occupancy->size_y, 1000u);
 }
 
 TEST(SessionManager, RejectedMessagesLeaveTheSessionIntact) {
