@@ -380,11 +380,9 @@ EventOutcome Estimator::process_imu(const Event& event, const msgs::ImuMessage& 
   last_fused_[event.sensor] = event.time;
   if (heading_pending_) {
     // In-motion alignment's IMU window (a few seconds; the GNSS track's mean time is in it).
-    const double seconds = estimate::InMotionAlignmentConfig{}.window;
     recent_imu_.push_back(sample);
-    const auto old = std::find_if(recent_imu_.begin(), recent_imu_.end(),
-                                  [&](const estimate::ImuSample& s) { return (event.time - s.timestamp).seconds() <= seconds; });
-    recent_imu_.erase(recent_imu_.begin(), old);
+    keep_recent(recent_imu_, event.time, estimate::InMotionAlignmentConfig{}.window,
+                [](const estimate::ImuSample& s) { return s.timestamp; });
   }
 
   const config::SensorFusionOptions& options = sensors_[event.sensor].config->fusion;

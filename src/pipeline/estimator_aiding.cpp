@@ -20,13 +20,6 @@ constexpr double kZeroRateSigma = 0.002;      // rad/s
 constexpr double kWheelGap = 1.0;             // s: longer gaps between wheel readings are not differenced
 constexpr double kWheelMinIntervalFraction = 0.25;  // of the nominal period: closer readings are merged
 
-// Keeps the elements of a time-ordered buffer no older than `seconds` before `now`.
-template <typename T, typename TimeOf>
-void keep_recent(std::vector<T>& buffer, Timestamp now, double seconds, TimeOf time_of) {
-  const auto old = std::find_if(buffer.begin(), buffer.end(), [&](const T& item) { return (now - time_of(item)).seconds() <= seconds; });
-  buffer.erase(buffer.begin(), old);
-}
-
 // The slope of speed over time (m/s^2) and its 1-sigma from the residuals; none with fewer than
 // five readings or a span under half a second.
 std::optional<std::pair<double, double>> acceleration_of(const std::vector<std::pair<Timestamp, double>>& speeds) {

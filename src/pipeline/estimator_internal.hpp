@@ -1,11 +1,23 @@
 #pragma once
 // Helpers shared by the Estimator's source files. Private to the pipeline module.
 
+#include <algorithm>
+#include <vector>
+
 #include <Eigen/Core>
+
+#include "hanzo/fusion/core/time.hpp"
 
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
 
 namespace hanzo::fusion::pipeline {
+
+// Keeps the elements of a time-ordered buffer no older than `seconds` before `now`.
+template <typename T, typename TimeOf>
+void keep_recent(std::vector<T>& buffer, Timestamp now, double seconds, TimeOf time_of) {
+  const auto old = std::find_if(buffer.begin(), buffer.end(), [&](const T& item) { return (now - time_of(item)).seconds() <= seconds; });
+  buffer.erase(buffer.begin(), old);
+}
 
 // Gyro-bias uncertainty of a start without static alignment (moving), rad/s.
 constexpr double kUnalignedGyroBiasSigma = 0.05;
