@@ -40,7 +40,7 @@ NavigationState start_state() {
 
 ErrorCovariance start_covariance() {
   ErrorVector sigmas;
-  sigmas << 0.5, 0.5, 0.5, 0.02, 0.02, 0.1, 0.2, 0.2, 0.2, 0.05, 0.05, 0.05, 0.002, 0.002, 0.002, 1e-6, 1e-6, 0.01, 0.0;
+  sigmas << 0.5, 0.5, 0.5, 0.02, 0.02, 0.1, 0.2, 0.2, 0.2, 0.05, 0.05, 0.05, 0.002, 0.002, 0.002, 1e-6, 1e-6, 0.01, 0.0, 0.0, 0.0;
   return sigmas.array().square().matrix().asDiagonal();
 }
 

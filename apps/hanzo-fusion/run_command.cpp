@@ -182,6 +182,12 @@ nlohmann::json summary_json(const pipeline::SessionSummary& summary, double log_
   if (summary.wheel_speed_scale) {
     result["wheel_speed_scale"] = {{"value", *summary.wheel_speed_scale}, {"sigma", summary.wheel_speed_scale_sigma}};
   }
+  if (summary.gyro_yaw_scale) {
+    result["gyro_yaw_scale"] = {{"value", *summary.gyro_yaw_scale}, {"sigma", summary.gyro_yaw_scale_sigma}};
+  }
+  if (summary.wheel_heading_drift) {
+    result["wheel_heading_drift"] = {{"value", *summary.wheel_heading_drift}, {"sigma", summary.wheel_heading_drift_sigma}};
+  }
   return result;
 }
 
@@ -457,6 +463,14 @@ int run(const Output& output, const RunOptions& options) {
   if (summary.wheel_speed_scale) {
     text += fmt::format("wheel speed scale {:.4f} +- {:.4f} (the wheels read {:+.2f} % of the distance driven)\n", *summary.wheel_speed_scale,
                         summary.wheel_speed_scale_sigma, 100.0 * (*summary.wheel_speed_scale - 1.0));
+  }
+  if (summary.gyro_yaw_scale) {
+    text += fmt::format("gyro yaw-rate scale {:.4f} +- {:.4f} (the gyro reads turns {:+.2f} % off)\n", *summary.gyro_yaw_scale,
+                        summary.gyro_yaw_scale_sigma, 100.0 * (*summary.gyro_yaw_scale - 1.0));
+  }
+  if (summary.wheel_heading_drift) {
+    text += fmt::format("wheel heading drift {:.5f} +- {:.5f} rad/m (the wheels turn {:.2f} deg per 100 m driven straight)\n",
+                        *summary.wheel_heading_drift, summary.wheel_heading_drift_sigma, *summary.wheel_heading_drift * 100.0 * 180.0 / M_PI);
   }
   for (const auto& [key, label] : {std::pair<const char*, const char*>{"evaluation", "real-time"}, {"evaluation_optimized", "optimized"}}) {
     if (!result.contains(key)) continue;

@@ -2,9 +2,21 @@
 
 namespace hanzo::fusion::estimate {
 
+Eigen::Vector3d body_angular_velocity(const NavigationState& state, const Eigen::Vector3d& angular_velocity_imu,
+                                      const SO3& R_body_imu, Eigen::Matrix3d* by_gyro_bias, Eigen::Vector3d* by_yaw_scale) {
+  Eigen::Vector3d w = R_body_imu * (angular_velocity_imu - state.gyro_bias);
+  w.z() /= state.gyro_yaw_scale;
+  if (by_gyro_bias != nullptr) {
+    *by_gyro_bias = -R_body_imu.matrix();
+    by_gyro_bias->row(2) /= state.gyro_yaw_scale;
+  }
+  if (by_yaw_scale != nullptr) *by_yaw_scale = Eigen::Vector3d(0.0, 0.0, -w.z() / state.gyro_yaw_scale);
+  return w;
+}
+
 BodyMotion body_motion(const NavigationState& state, const ImuSample& sample, const ImuMounting& mounting) {
   BodyMotion motion;
-  motion.angular_velocity = mounting.R_body_imu * (sample.angular_velocity - state.gyro_bias);
+  motion.angular_velocity = body_angular_velocity(state, sample.angular_velocity, mounting.R_body_imu);
   const Eigen::Vector3d& w = motion.angular_velocity;
   motion.specific_force =
       mounting.R_body_imu * (sample.linear_acceleration - state.accel_bias) - w.cross(w.cross(mounting.p_body_imu));
@@ -26,12 +38,16 @@ NavigationState propagate_state(const NavigationState& state, const BodyMotion& 
   next.R_world_body = state.R_world_body * delta_rotation;
 
   if (transition != nullptr) {
-    const Eigen::Matrix3d R_body_imu = mounting.R_body_imu.matrix();
     transition->dt = dt;
     transition->velocity_by_orientation = -R * SO3::hat(motion.specific_force) * dt;
-    transition->velocity_by_accel_bias = -R * R_body_imu * dt;
+    transition->velocity_by_accel_bias = -R * mounting.R_body_imu.matrix() * dt;
     transition->orientation_by_orientation = delta_rotation.matrix().transpose();
-    transition->orientation_by_gyro_bias = -right_jacobian * R_body_imu * dt;
+    // dw/dbg = -C R_body_imu and dw/dc = -e_z w_z / c (w = motion.angular_velocity, already divided by c).
+    Eigen::Matrix3d by_gyro_bias = -mounting.R_body_imu.matrix();
+    by_gyro_bias.row(2) /= state.gyro_yaw_scale;
+    transition->orientation_by_gyro_bias = right_jacobian * by_gyro_bias * dt;
+    transition->orientation_by_yaw_scale =
+        right_jacobian * Eigen::Vector3d(0.0, 0.0, -motion.angular_velocity.z() / state.gyro_yaw_scale) * dt;
   }
   return next;
 }
@@ -45,6 +61,7 @@ ErrorCovariance transition_matrix(const ImuTransition& t) {
   phi.block<3, 3>(kPositionIndex, kGravityIndex) = 0.5 * t.dt * t.dt * I;
   phi.block<3, 3>(kOrientationIndex, kOrientationIndex) = t.orientation_by_orientation;
   phi.block<3, 3>(kOrientationIndex, kGyroBiasIndex) = t.orientation_by_gyro_bias;
+  phi.block<3, 1>(kOrientationIndex, kGyroYawScaleIndex) = t.orientation_by_yaw_scale;
   phi.block<3, 3>(kVelocityIndex, kOrientationIndex) = t.velocity_by_orientation;
   phi.block<3, 3>(kVelocityIndex, kAccelBiasIndex) = t.velocity_by_accel_bias;
   phi.block<3, 3>(kVelocityIndex, kGravityIndex) = t.dt * I;
@@ -65,6 +82,8 @@ ErrorCovariance process_noise(const ImuNoise& noise, double dt) {
   q.block<3, 3>(kAccelBiasIndex, kAccelBiasIndex) = noise.accel_bias_random_walk * noise.accel_bias_random_walk * dt * I;
   q.block<3, 3>(kGyroBiasIndex, kGyroBiasIndex) = noise.gyro_bias_random_walk * noise.gyro_bias_random_walk * dt * I;
   q(kWheelScaleIndex, kWheelScaleIndex) = noise.wheel_scale_random_walk * noise.wheel_scale_random_walk * dt;
+  q(kGyroYawScaleIndex, kGyroYawScaleIndex) = noise.gyro_yaw_scale_random_walk * noise.gyro_yaw_scale_random_walk * dt;
+  q(kWheelHeadingDriftIndex, kWheelHeadingDriftIndex) = noise.wheel_heading_drift_random_walk * noise.wheel_heading_drift_random_walk * dt;
   return q;
 }
 
@@ -77,7 +96,8 @@ void propagate_covariance(ErrorCovariance& P, const ImuTransition& t, const ImuN
                              t.velocity_by_accel_bias * P.middleRows<3>(kAccelBiasIndex) +
                              dt * P.middleRows<3>(kGravityIndex);
   const Rows orientation_rows = t.orientation_by_orientation * P.middleRows<3>(kOrientationIndex) +
-                                t.orientation_by_gyro_bias * P.middleRows<3>(kGyroBiasIndex);
+                                t.orientation_by_gyro_bias * P.middleRows<3>(kGyroBiasIndex) +
+                                t.orientation_by_yaw_scale * P.row(kGyroYawScaleIndex);
   // dp' = dp + dt/2 (dv + dv'): the position row is the mean of the old and new velocity rows.
   P.middleRows<3>(kPositionIndex) += 0.5 * dt * (P.middleRows<3>(kVelocityIndex) + velocity_rows);
   P.middleRows<3>(kVelocityIndex) = velocity_rows;
@@ -99,6 +119,8 @@ void propagate_covariance(ErrorCovariance& P, const ImuTransition& t, const ImuN
     P(kGyroBiasIndex + axis, kGyroBiasIndex + axis) += gyro_walk;
   }
   P(kWheelScaleIndex, kWheelScaleIndex) += noise.wheel_scale_random_walk * noise.wheel_scale_random_walk * dt;
+  P(kGyroYawScaleIndex, kGyroYawScaleIndex) += noise.gyro_yaw_scale_random_walk * noise.gyro_yaw_scale_random_walk * dt;
+  P(kWheelHeadingDriftIndex, kWheelHeadingDriftIndex) += noise.wheel_heading_drift_random_walk * noise.wheel_heading_drift_random_walk * dt;
 }
 
 }  // namespace hanzo::fusion::estimate

@@ -13,6 +13,8 @@ NavigationState NavigationState::plus(const ErrorVector& delta) const {
   out.gyro_bias += delta.segment<3>(kGyroBiasIndex);
   out.gravity += delta.segment<3>(kGravityIndex);
   out.wheel_speed_scale += delta(kWheelScaleIndex);
+  out.gyro_yaw_scale += delta(kGyroYawScaleIndex);
+  out.wheel_heading_drift += delta(kWheelHeadingDriftIndex);
   return out;
 }
 
@@ -25,13 +27,16 @@ ErrorVector NavigationState::minus(const NavigationState& other) const {
   delta.segment<3>(kGyroBiasIndex) = gyro_bias - other.gyro_bias;
   delta.segment<3>(kGravityIndex) = gravity - other.gravity;
   delta(kWheelScaleIndex) = wheel_speed_scale - other.wheel_speed_scale;
+  delta(kGyroYawScaleIndex) = gyro_yaw_scale - other.gyro_yaw_scale;
+  delta(kWheelHeadingDriftIndex) = wheel_heading_drift - other.wheel_heading_drift;
   return delta;
 }
 
 bool NavigationState::all_finite() const {
   return position.allFinite() && R_world_body.quaternion().coeffs().allFinite() && velocity.allFinite() &&
          accel_bias.allFinite() && gyro_bias.allFinite() && gravity.allFinite() &&
-         std::isfinite(wheel_speed_scale);
+         std::isfinite(wheel_speed_scale) && std::isfinite(gyro_yaw_scale) && gyro_yaw_scale > 0.0 &&
+         std::isfinite(wheel_heading_drift);
 }
 
 void symmetrize(ErrorCovariance& covariance) {

@@ -49,12 +49,13 @@ bool UnscentedKalmanFilter::sigma_offsets(Eigen::Matrix<double, kErrorStateDimen
 
 void UnscentedKalmanFilter::predict(const ImuSample& sample, double dt) {
   if (dt <= 0.0) return;
-  // The process model is linear in position, velocity, gravity and the wheel speed scale (for a
-  // fixed orientation and biases). With those dimensions ordered last, the last 10 columns of
-  // the Cholesky factor only touch them, so their 20 sigma points propagate exactly by the
-  // linear map and only the other 18 + 1 go through propagate_state(): half the cost, the same result.
-  constexpr std::array<int, kErrorStateDimension> kOrder{3, 4, 5, 9, 10, 11, 12, 13, 14, 0, 1, 2, 6, 7, 8, 15, 16, 17, 18};
-  constexpr int kNonlinear = 9;
+  // The process model is linear in position, velocity, gravity and the wheel states (for a
+  // fixed orientation, biases and gyro yaw scale). With those dimensions ordered last, the last
+  // 11 columns of the Cholesky factor only touch them, so their 22 sigma points propagate exactly
+  // by the linear map and only the other 20 + 1 go through propagate_state(): half the cost, the
+  // same result.
+  constexpr std::array<int, kErrorStateDimension> kOrder{3, 4, 5, 9, 10, 11, 12, 13, 14, 19, 0, 1, 2, 6, 7, 8, 15, 16, 17, 18, 20};
+  constexpr int kNonlinear = 10;
   ErrorCovariance permuted;
   for (int i = 0; i < kErrorStateDimension; ++i) {
     for (int j = 0; j < kErrorStateDimension; ++j) permuted(i, j) = covariance_(kOrder[static_cast<size_t>(i)], kOrder[static_cast<size_t>(j)]);
@@ -98,6 +99,7 @@ void UnscentedKalmanFilter::predict(const ImuSample& sample, double dt) {
         d.segment<3>(kVelocityIndex) = dv + dt * dg;
         d.segment<3>(kGravityIndex) = dg;
         d(kWheelScaleIndex) = sign * o(kWheelScaleIndex);
+        d(kWheelHeadingDriftIndex) = sign * o(kWheelHeadingDriftIndex);
         deltas.col(index) = d;
       }
     }

@@ -1,12 +1,15 @@
 #include "hanzo/fusion/estimate/velocity_models.hpp"
 
+#include "hanzo/fusion/estimate/imu_propagation.hpp"
+
 namespace hanzo::fusion::estimate {
 namespace {
 
 using Jacobian3 = Eigen::Matrix<double, 3, kErrorStateDimension>;
 
-Eigen::Vector3d body_rate(const NavigationState& state, const GyroReading& gyro) {
-  return gyro.R_body_imu * (gyro.angular_velocity - state.gyro_bias);
+Eigen::Vector3d body_rate(const NavigationState& state, const GyroReading& gyro, Eigen::Matrix3d* by_gyro_bias = nullptr,
+                          Eigen::Vector3d* by_yaw_scale = nullptr) {
+  return body_angular_velocity(state, gyro.angular_velocity, gyro.R_body_imu, by_gyro_bias, by_yaw_scale);
 }
 
 // v_s(x) and its Jacobian (see velocity_models.hpp).
@@ -16,13 +19,18 @@ Eigen::Vector3d sensor_velocity(const NavigationState& state, const SE3& T_body_
   const Eigen::Matrix3d R_sensor_body = T_body_sensor.rotation().matrix().transpose();
   const Eigen::Vector3d velocity_body = R_transpose * state.velocity;
   const Eigen::Vector3d& lever = T_body_sensor.translation();
+  Eigen::Matrix3d rate_by_gyro_bias;
+  Eigen::Vector3d rate_by_yaw_scale;
+  const Eigen::Vector3d rate = body_rate(state, gyro, &rate_by_gyro_bias, &rate_by_yaw_scale);
   if (jacobian != nullptr) {
+    // d(w x l) = -[l]x dw.
     jacobian->setZero();
     jacobian->block<3, 3>(0, kOrientationIndex) = R_sensor_body * SO3::hat(velocity_body);
     jacobian->block<3, 3>(0, kVelocityIndex) = R_sensor_body * R_transpose;
-    jacobian->block<3, 3>(0, kGyroBiasIndex) = R_sensor_body * SO3::hat(lever) * gyro.R_body_imu.matrix();
+    jacobian->block<3, 3>(0, kGyroBiasIndex) = -R_sensor_body * SO3::hat(lever) * rate_by_gyro_bias;
+    jacobian->col(kGyroYawScaleIndex) = -R_sensor_body * SO3::hat(lever) * rate_by_yaw_scale;
   }
-  return R_sensor_body * (velocity_body + body_rate(state, gyro).cross(lever));
+  return R_sensor_body * (velocity_body + rate.cross(lever));
 }
 
 }  // namespace
@@ -56,11 +64,17 @@ MeasurementVector WheelOdometryModel::residual(const NavigationState& state, Mea
   if (measurement_.use_yaw_rate) {
     // Both wheels' distances carry the scale, so their yaw rate does too.
     const Eigen::RowVector3d yaw_axis = T_body_wheel_.rotation().matrix().col(2).transpose();  // z of R_bw^T
-    const double yaw_rate = yaw_axis.dot(body_rate(state, gyro_));
-    r(row) = measurement_.yaw_rate - state.wheel_speed_scale * yaw_rate;
+    Eigen::Matrix3d rate_by_gyro_bias;
+    Eigen::Vector3d rate_by_yaw_scale;
+    const double yaw_rate = yaw_axis.dot(body_rate(state, gyro_, &rate_by_gyro_bias, &rate_by_yaw_scale));
+    // Unequal wheel scales add a turn proportional to the forward speed (heading drift d, rad/m).
+    r(row) = measurement_.yaw_rate - state.wheel_speed_scale * yaw_rate - state.wheel_heading_drift * velocity.x();
     if (jacobian != nullptr) {
-      jacobian->block<1, 3>(row, kGyroBiasIndex) = -state.wheel_speed_scale * yaw_axis * gyro_.R_body_imu.matrix();
+      jacobian->row(row) = state.wheel_heading_drift * h.row(0);
+      jacobian->block<1, 3>(row, kGyroBiasIndex) += state.wheel_speed_scale * yaw_axis * rate_by_gyro_bias;
       (*jacobian)(row, kWheelScaleIndex) = yaw_rate;
+      (*jacobian)(row, kGyroYawScaleIndex) += state.wheel_speed_scale * yaw_axis.dot(rate_by_yaw_scale);
+      (*jacobian)(row, kWheelHeadingDriftIndex) = velocity.x();
     }
   }
   return r;
@@ -84,8 +98,13 @@ MeasurementVector ZeroVelocityModel::residual(const NavigationState& state, Meas
     jacobian->block<3, 3>(0, kVelocityIndex).setIdentity();
   }
   if (with_angular_rate_) {
-    r.tail<3>() = -body_rate(state, gyro_);
-    if (jacobian != nullptr) jacobian->block<3, 3>(3, kGyroBiasIndex) = -gyro_.R_body_imu.matrix();
+    Eigen::Matrix3d rate_by_gyro_bias;
+    Eigen::Vector3d rate_by_yaw_scale;
+    r.tail<3>() = -body_rate(state, gyro_, &rate_by_gyro_bias, &rate_by_yaw_scale);
+    if (jacobian != nullptr) {
+      jacobian->block<3, 3>(3, kGyroBiasIndex) = rate_by_gyro_bias;
+      jacobian->block<3, 1>(3, kGyroYawScaleIndex) = rate_by_yaw_scale;
+    }
   }
   return r;
 }

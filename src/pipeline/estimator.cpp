@@ -29,6 +29,14 @@ constexpr double kGravityMagnitudeSigma = 0.001;    // m/s^2, pseudo-measurement
 // percent; load and tyre pressure move it slowly.
 constexpr double kInitialWheelScaleSigma = 0.02;
 constexpr double kWheelScaleRandomWalk = 1e-4;      // 1/sqrt(s)
+// The gyro's yaw-rate scale: MEMS gyros are specified to 0.5-2 %; temperature moves it slowly.
+constexpr double kInitialGyroYawScaleSigma = 0.01;
+constexpr double kGyroYawScaleRandomWalk = 1e-5;    // 1/sqrt(s)
+// The wheels' heading drift: wheel radii 0.15 % apart (a calibrated drive) on a 0.5 m axle drift
+// 0.003 rad/m, uncalibrated ones several times more (learnt wherever the speed varies); tyre
+// pressure and load move it over hours (a faster walk lets it absorb the gyro bias's error).
+constexpr double kInitialWheelHeadingDriftSigma = 0.003;  // rad/m
+constexpr double kWheelHeadingDriftRandomWalk = 1e-6;    // rad/m/sqrt(s)
 constexpr double kPlanarHeightSigma = 0.005;        // m
 constexpr double kPlanarVerticalSpeedSigma = 0.01;  // m/s
 constexpr double kPlanarLevelSigma = 0.01;          // rad: roll, pitch of a planar robot without an IMU
@@ -90,6 +98,14 @@ Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup
   estimate_wheel_scale_ = configured(SensorModality::kWheelOdometry) &&
                 (configured(SensorModality::kGnss) || configured(SensorModality::kLidar) || configured(SensorModality::kCamera));
   if (estimate_wheel_scale_) filter_config_.imu_noise.wheel_scale_random_walk = kWheelScaleRandomWalk;
+  // With an IMU and the wheels' yaw rate fused, the gyro measures the wheels' heading drift
+  // whenever the car drives straight; the gyro's yaw scale needs a heading reference besides.
+  estimate_wheel_heading_drift_ = imu_sensor_ && std::any_of(sensors_.begin(), sensors_.end(), [](const SensorSetup& s) {
+                                    return s.config->modality == SensorModality::kWheelOdometry && s.config->fusion.use_yaw_rate;
+                                  });
+  estimate_gyro_yaw_scale_ = estimate_wheel_heading_drift_ && estimate_wheel_scale_;
+  if (estimate_wheel_heading_drift_) filter_config_.imu_noise.wheel_heading_drift_random_walk = kWheelHeadingDriftRandomWalk;
+  if (estimate_gyro_yaw_scale_) filter_config_.imu_noise.gyro_yaw_scale_random_walk = kGyroYawScaleRandomWalk;
   filter_config_.gate_probability = frontend_.gate_probability;
   filter_ = make_filter(filter_config_, frontend_);
   spike_filter_ = estimate::ImuSpikeFilter(estimate::ImuSpikeFilterConfig{}, filter_config_.imu_noise);
@@ -126,6 +142,8 @@ Estimator::Estimator(const Estimator& other)
       heading_pending_(other.heading_pending_),
       wheel_yaw_rate_needed_(other.wheel_yaw_rate_needed_),
       estimate_wheel_scale_(other.estimate_wheel_scale_),
+      estimate_gyro_yaw_scale_(other.estimate_gyro_yaw_scale_),
+      estimate_wheel_heading_drift_(other.estimate_wheel_heading_drift_),
       course_start_(other.course_start_),
       moving_start_(other.moving_start_),
       recent_fixes_(other.recent_fixes_),
@@ -337,6 +355,12 @@ void Estimator::start(const NavigationState& state, const Eigen::Matrix3d& posit
   set_block(estimate::kGyroBiasIndex, Eigen::Vector3d::Constant(gyro_bias_sigma));
   set_block(estimate::kGravityIndex, Eigen::Vector3d(kHorizontalGravitySigma, kHorizontalGravitySigma, kInitialGravitySigma));
   if (estimate_wheel_scale_) P(estimate::kWheelScaleIndex, estimate::kWheelScaleIndex) = kInitialWheelScaleSigma * kInitialWheelScaleSigma;
+  if (estimate_gyro_yaw_scale_) {
+    P(estimate::kGyroYawScaleIndex, estimate::kGyroYawScaleIndex) = kInitialGyroYawScaleSigma * kInitialGyroYawScaleSigma;
+  }
+  if (estimate_wheel_heading_drift_) {
+    P(estimate::kWheelHeadingDriftIndex, estimate::kWheelHeadingDriftIndex) = kInitialWheelHeadingDriftSigma * kInitialWheelHeadingDriftSigma;
+  }
   filter_->reset(state, P);
   initialized_ = true;
   time_ = state.timestamp;

@@ -115,6 +115,8 @@ class Estimator {
   bool heading_known() const { return !heading_pending_; }
   /// Whether the state's wheel speed scale is estimated (wheel odometry with GNSS, LiDAR or a camera).
   bool estimates_wheel_scale() const { return estimate_wheel_scale_; }
+  bool estimates_gyro_yaw_scale() const { return estimate_gyro_yaw_scale_; }
+  bool estimates_wheel_heading_drift() const { return estimate_wheel_heading_drift_; }
   /// Time of the last fused event.
   Timestamp time() const { return time_; }
   const estimate::Filter& filter() const { return *filter_; }
@@ -198,6 +200,11 @@ class Estimator {
   /// Wheel odometry and a sensor that measures distance otherwise (GNSS, LiDAR, camera): the
   /// wheel speed scale state is estimated.
   bool estimate_wheel_scale_ = false;
+  /// Besides, an IMU and the wheels' yaw rate fused (use_yaw_rate): the gyro's yaw-rate scale
+  /// is estimated (the wheels' yaw rate measures the turn with the wheel scale, the gyro with its own).
+  bool estimate_gyro_yaw_scale_ = false;
+  /// An IMU and the wheels' yaw rate fused: the wheels' heading drift is estimated.
+  bool estimate_wheel_heading_drift_ = false;
   struct CourseStart {
     Eigen::Vector3d antenna_gnss;      // ENU
     Eigen::Vector3d antenna_estimate;  // world, dead-reckoned

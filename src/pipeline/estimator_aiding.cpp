@@ -168,7 +168,9 @@ void Estimator::apply_in_motion_alignment(const estimate::InMotionAlignment& ali
   for (const int index : {estimate::kAccelBiasIndex, estimate::kGyroBiasIndex, estimate::kGravityIndex}) {
     P.block<3, 3>(index, index) = previous.block<3, 3>(index, index);
   }
-  P(estimate::kWheelScaleIndex, estimate::kWheelScaleIndex) = previous(estimate::kWheelScaleIndex, estimate::kWheelScaleIndex);
+  for (const int index : {estimate::kWheelScaleIndex, estimate::kGyroYawScaleIndex, estimate::kWheelHeadingDriftIndex}) {
+    P(index, index) = previous(index, index);
+  }
   P.block<3, 3>(estimate::kGyroBiasIndex, estimate::kGyroBiasIndex) =
       P.block<3, 3>(estimate::kGyroBiasIndex, estimate::kGyroBiasIndex).cwiseMax(Eigen::Matrix3d::Identity() * std::pow(kUnalignedGyroBiasSigma, 2));
   filter_->reset(state, P);

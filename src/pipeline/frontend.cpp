@@ -576,10 +576,21 @@ SessionSummary Frontend::summary() const {
   // Now, not as of the latest pose: a sensor heard from again after that pose no longer counts
   // as timed out (the pose's own status stays as it was emitted).
   summary.state = impl_->latest_pose ? impl_->pose_status().state : msgs::TrackingState::kInitializing;
-  if (impl_->estimator.initialized() && impl_->estimator.estimates_wheel_scale()) {
-    summary.wheel_speed_scale = impl_->estimator.filter().state().wheel_speed_scale;
-    summary.wheel_speed_scale_sigma =
-        std::sqrt(impl_->estimator.filter().covariance()(estimate::kWheelScaleIndex, estimate::kWheelScaleIndex));
+  if (impl_->estimator.initialized()) {
+    const estimate::NavigationState& state = impl_->estimator.filter().state();
+    const estimate::ErrorCovariance& P = impl_->estimator.filter().covariance();
+    if (impl_->estimator.estimates_wheel_scale()) {
+      summary.wheel_speed_scale = state.wheel_speed_scale;
+      summary.wheel_speed_scale_sigma = std::sqrt(P(estimate::kWheelScaleIndex, estimate::kWheelScaleIndex));
+    }
+    if (impl_->estimator.estimates_gyro_yaw_scale()) {
+      summary.gyro_yaw_scale = state.gyro_yaw_scale;
+      summary.gyro_yaw_scale_sigma = std::sqrt(P(estimate::kGyroYawScaleIndex, estimate::kGyroYawScaleIndex));
+    }
+    if (impl_->estimator.estimates_wheel_heading_drift()) {
+      summary.wheel_heading_drift = state.wheel_heading_drift;
+      summary.wheel_heading_drift_sigma = std::sqrt(P(estimate::kWheelHeadingDriftIndex, estimate::kWheelHeadingDriftIndex));
+    }
   }
   return summary;
 }

@@ -49,7 +49,7 @@ ImuSample ImuSimulator::measure(const SplineTrajectory& trajectory, Timestamp ti
   sample.message.timestamp = time;
   sample.message.frame_id = config_.frame_id;
   sample.message.linear_acceleration = specific_force + accel_bias_ + noise(config_.process_noise_accel);
-  sample.message.angular_velocity = angular_rate + gyro_bias_ + noise(config_.process_noise_gyro);
+  sample.message.angular_velocity = config_.gyro_scale_factor.cwiseProduct(angular_rate) + gyro_bias_ + noise(config_.process_noise_gyro);
   const double accel_variance = config_.process_noise_accel * config_.process_noise_accel;
   const double gyro_variance = config_.process_noise_gyro * config_.process_noise_gyro;
   if (accel_variance > 0) sample.message.acceleration_covariance = Eigen::Matrix3d::Identity() * accel_variance;

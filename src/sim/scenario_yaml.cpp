@@ -294,7 +294,7 @@ Result<SE3> parse_to_body(const YamlValue& value) {
 Result<SensorSimulatorConfig> parse_imu(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "process_noise_accel", "process_noise_gyro",
                                           "accel_bias_random_walk", "gyro_bias_random_walk", "initial_accel_bias",
-                                          "initial_gyro_bias", "gravity"}));
+                                          "initial_gyro_bias", "gyro_scale_factor", "gravity"}));
   ImuSimulatorConfig config;
   config.rate_hz = rate;
   config.T_body_imu = sensor.T_body_sensor;
@@ -305,6 +305,8 @@ Result<SensorSimulatorConfig> parse_imu(const YamlValue& value, double rate, con
   HANZO_ASSIGN_OR_RETURN(config.gyro_bias_random_walk, non_negative_or(value["gyro_bias_random_walk"], config.gyro_bias_random_walk));
   HANZO_ASSIGN_OR_RETURN(config.initial_accel_bias, vector_or<3>(value["initial_accel_bias"], config.initial_accel_bias, "(x, y, z)"));
   HANZO_ASSIGN_OR_RETURN(config.initial_gyro_bias, vector_or<3>(value["initial_gyro_bias"], config.initial_gyro_bias, "(x, y, z)"));
+  HANZO_ASSIGN_OR_RETURN(config.gyro_scale_factor, vector_or<3>(value["gyro_scale_factor"], config.gyro_scale_factor, "(x, y, z)"));
+  if ((config.gyro_scale_factor.array() <= 0.0).any()) return value["gyro_scale_factor"].error("scale factors must be > 0");
   HANZO_ASSIGN_OR_RETURN(config.gravity, positive_or(value["gravity"], config.gravity));
   return SensorSimulatorConfig(config);
 }

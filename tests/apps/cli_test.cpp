@@ -380,8 +380,15 @@ TEST(Cli, RunReplaysTheSampleAndScoresItAgainstGroundTruth) {
   EXPECT_EQ(json["summary"]["poses"], 1901);  // 100 Hz IMU after 1 s of alignment
   EXPECT_EQ(json["summary"]["sensors"][1]["name"], "gnss");
   EXPECT_EQ(json["summary"]["sensors"][1]["fused"], 96);
-  EXPECT_LT(json["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), 0.15);
-  EXPECT_LT(json["evaluation"]["rpe_1m_rmse_m"].get<double>(), 0.05);
+  // The sample's wheels are perfect and its speed and turn rate constant: the wheels' heading
+  // drift (estimated because their yaw rate is fused) cannot be told from the gyro bias, which
+  // costs 0.05 m against a filter told the wheels are exact (0.13 m).
+  EXPECT_LT(json["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), 0.2);
+  EXPECT_LT(json["evaluation"]["rpe_1m_rmse_m"].get<double>(), 0.06);
+  EXPECT_NEAR(json["summary"]["wheel_speed_scale"]["value"].get<double>(), 1.0, 3.0 * json["summary"]["wheel_speed_scale"]["sigma"].get<double>());
+  EXPECT_NEAR(json["summary"]["gyro_yaw_scale"]["value"].get<double>(), 1.0, 3.0 * json["summary"]["gyro_yaw_scale"]["sigma"].get<double>());
+  EXPECT_NEAR(json["summary"]["wheel_heading_drift"]["value"].get<double>(), 0.0,
+              3.0 * json["summary"]["wheel_heading_drift"]["sigma"].get<double>());
   // One spelling per concept in every command: --ground-truth / --calibration, with --gt / --calib.
   const CliRun spelled = run(fmt::format("run --config examples/data/fusion.yaml --log {} --out {} --ground-truth examples/data/ground_truth.tum --json",
                                          log, (dir / "run_spelled").string()));

@@ -25,6 +25,9 @@ NavigationState random_state(std::mt19937& rng) {
   state.accel_bias = 0.1 * v();
   state.gyro_bias = 0.01 * v();
   state.gravity = Eigen::Vector3d(0.01, -0.02, -9.8) + 0.01 * v();
+  state.wheel_speed_scale = 1.0 + 0.02 * n(rng);
+  state.gyro_yaw_scale = 1.0 + 0.02 * n(rng);
+  state.wheel_heading_drift = 0.01 * n(rng);
   return state;
 }
 
@@ -110,7 +113,7 @@ TEST(ImuPropagation, TransitionMatchesNumericalDifferentiation) {
 TEST(ImuPropagation, SparseCovariancePropagationEqualsDenseProduct) {
   std::mt19937 rng(5);
   const ImuMounting mounting{SO3::exp(Eigen::Vector3d(0.1, 0.0, -0.2)), Eigen::Vector3d(0.1, 0.0, 0.05)};
-  const ImuNoise noise{0.2, 0.02, 0.003, 0.0004, 0.005, 1e-4};
+  const ImuNoise noise{0.2, 0.02, 0.003, 0.0004, 0.005, 1e-4, 2e-5, 3e-5};
   const NavigationState state = random_state(rng);
   ImuTransition transition;
   propagate_state(state, body_motion(state, {{}, Eigen::Vector3d(0.2, 0.1, -0.3), Eigen::Vector3d(0.5, 0.2, 9.7)}, mounting), 0.005,

@@ -84,7 +84,7 @@ TEST(SessionManager, ReplaysTheSampleRecordingStoresEveryPoseAndMatchesGroundTru
   ASSERT_TRUE(associated.ok()) << associated.error().message;
   auto ape = eval::compute_ape(associated->reference, associated->estimate, {.alignment = eval::Alignment::kSE3});
   ASSERT_TRUE(ape.ok());
-  EXPECT_LT(ape->statistics.rmse, 0.15) << "the served trajectory is as accurate as `hanzo-fusion run`";
+  EXPECT_LT(ape->statistics.rmse, 0.2) << "the served trajectory is as accurate as `hanzo-fusion run` (Cli.RunReplaysTheSample...)";
 }
 
 // A server session of a 2D laser robot (the warehouse drive with a planar laser at 20 Hz, IMU and

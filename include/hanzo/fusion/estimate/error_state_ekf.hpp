@@ -1,7 +1,7 @@
 #pragma once
 // ErrorStateEkf: the error-state (multiplicative) extended Kalman filter (frontend.type: ekf).
-// The nominal NavigationState is integrated by imu_propagation.hpp; the 18x18 covariance of
-// the error state is propagated with the block-sparse Phi P Phi^T + Q. An update computes
+// The nominal NavigationState is integrated by imu_propagation.hpp; the covariance of the error
+// state is propagated with the block-sparse Phi P Phi^T + Q. An update computes
 //   S = H P H^T + R,  K = P H^T S^-1,  dx = K r,  x <- x (+) dx,  P <- P - K S K^T
 // then resets the error (Sola 2017, eq. 285-287: G = I - [dtheta/2]x in the orientation
 // block). Filter contract and gating: filter.hpp.

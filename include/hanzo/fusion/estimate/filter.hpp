@@ -5,7 +5,7 @@
 //   reset(state, covariance)   start from a state and its error-state covariance
 //   predict(sample, dt)        propagate by dt seconds with the IMU sample held constant
 //   update(model)              fuse one measurement (chi-square gated)
-//   state(), covariance()      current estimate (mean) and its 18x18 error-state covariance
+//   state(), covariance()      current estimate (mean) and its error-state covariance (kErrorStateDimension square)
 //   clone()                    a deep copy: snapshots for rolling back to fuse late messages
 //
 // Every update is gated: the squared Mahalanobis distance of the innovation,

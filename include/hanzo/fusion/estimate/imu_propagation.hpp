@@ -3,7 +3,7 @@
 // input; the state (navigation_state.hpp) is integrated from one IMU sample to the next with
 // the sample held constant over the interval (zero-order hold):
 //
-//   w = R_body_imu (w_m - bg)                          body angular velocity
+//   w = C R_body_imu (w_m - bg),  C = diag(1, 1, 1/c)   body angular velocity (c: gyro_yaw_scale)
 //   f = R_body_imu (f_m - ba) - w x (w x p_body_imu)   specific force at the body origin
 //   p' = p + v dt + 1/2 (R f + g) dt^2,   v' = v + (R f + g) dt,   R' = R Exp(w dt)
 //
@@ -14,7 +14,7 @@
 // (Sola, "Quaternion kinematics for the error-state Kalman filter" (2017), eq. 269-270 adapted
 // to a gravity state and a body-to-IMU rotation):
 //   dv'     = dv - R [f]x dt dtheta - R R_body_imu dt dba + dt dg
-//   dtheta' = Exp(w dt)^T dtheta - Jr(w dt) R_body_imu dt dbg
+//   dtheta' = Exp(w dt)^T dtheta - Jr(w dt) C R_body_imu dt dbg - Jr(w dt) e_z (w_z / c) dt dc
 //   dp'     = dp + dt dv + dt/2 (velocity terms above)
 //
 // Noise. The spec's process_noise_accel / _gyro are the standard deviations of ONE sample at
@@ -54,7 +54,17 @@ struct ImuNoise {
   double sample_interval = 0.005;         // s, 1 / IMU rate (turns per-sample stds into densities)
   /// 1/sqrt(s): how fast the wheel speed scale may drift (load, tyre pressure); 0 without wheels.
   double wheel_scale_random_walk = 0.0;
+  /// 1/sqrt(s): how fast the gyro's yaw-rate scale may drift (temperature); 0 where not estimated.
+  double gyro_yaw_scale_random_walk = 0.0;
+  /// rad/m/sqrt(s): how fast the wheels' heading drift may change (load); 0 where not estimated.
+  double wheel_heading_drift_random_walk = 0.0;
 };
+
+/// The body angular velocity w = C R_body_imu (angular_velocity_imu - bg) (see the header
+/// comment), and when wanted its derivatives by the gyro bias (3x3) and by the yaw scale c (3x1).
+Eigen::Vector3d body_angular_velocity(const NavigationState& state, const Eigen::Vector3d& angular_velocity_imu,
+                                      const SO3& R_body_imu, Eigen::Matrix3d* by_gyro_bias = nullptr,
+                                      Eigen::Vector3d* by_yaw_scale = nullptr);
 
 /// Bias-corrected angular velocity and specific force at the body origin, body axes.
 struct BodyMotion {
@@ -70,7 +80,8 @@ struct ImuTransition {
   Eigen::Matrix3d velocity_by_orientation = Eigen::Matrix3d::Zero();     // -R [f]x dt
   Eigen::Matrix3d velocity_by_accel_bias = Eigen::Matrix3d::Zero();      // -R R_body_imu dt
   Eigen::Matrix3d orientation_by_orientation = Eigen::Matrix3d::Identity();  // Exp(w dt)^T
-  Eigen::Matrix3d orientation_by_gyro_bias = Eigen::Matrix3d::Zero();    // -Jr(w dt) R_body_imu dt
+  Eigen::Matrix3d orientation_by_gyro_bias = Eigen::Matrix3d::Zero();    // -Jr(w dt) C R_body_imu dt
+  Eigen::Vector3d orientation_by_yaw_scale = Eigen::Vector3d::Zero();    // -Jr(w dt) e_z (w_z / c) dt
 };
 
 /// Integrates the nominal state over dt >= 0 seconds (timestamp advanced by dt) and fills the
@@ -78,7 +89,7 @@ struct ImuTransition {
 NavigationState propagate_state(const NavigationState& state, const BodyMotion& motion, double dt,
                                 const ImuMounting& mounting, ImuTransition* transition);
 
-/// The full 18x18 transition matrix Phi built from the blocks (for tests and reference code).
+/// The full transition matrix Phi built from the blocks (for tests and reference code).
 ErrorCovariance transition_matrix(const ImuTransition& transition);
 
 /// The discrete process noise Q of one step of length dt (see the header comment).
@@ -97,7 +108,8 @@ void multiply_by_transition_transpose(Eigen::Matrix<double, Rows, kErrorStateDim
                            M.template middleCols<3>(kAccelBiasIndex) * t.velocity_by_accel_bias.transpose() +
                            t.dt * M.template middleCols<3>(kGravityIndex);
   const Columns orientation = M.template middleCols<3>(kOrientationIndex) * t.orientation_by_orientation.transpose() +
-                              M.template middleCols<3>(kGyroBiasIndex) * t.orientation_by_gyro_bias.transpose();
+                              M.template middleCols<3>(kGyroBiasIndex) * t.orientation_by_gyro_bias.transpose() +
+                              M.col(kGyroYawScaleIndex) * t.orientation_by_yaw_scale.transpose();
   // dp' = dp + dt/2 (dv + dv').
   M.template middleCols<3>(kPositionIndex) += 0.5 * t.dt * (M.template middleCols<3>(kVelocityIndex) + velocity);
   M.template middleCols<3>(kVelocityIndex) = velocity;

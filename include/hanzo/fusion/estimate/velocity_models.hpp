@@ -2,10 +2,10 @@
 // Measurement models of velocity (measurement_model.hpp for the contract).
 //
 // A sensor mounted at T_body_sensor moves with the sensor-frame velocity
-//   v_s(x) = R_body_sensor^T (R^T v + w x t_body_sensor),   w = R_body_imu (w_m - bg)
+//   v_s(x) = R_body_sensor^T (R^T v + w x t_body_sensor),   w = C R_body_imu (w_m - bg)
 // where w_m is the latest gyroscope reading (the body rate is not a state; it comes from the
-// IMU with the estimated gyro bias). Jacobian blocks:
-//   d/dtheta = R_bs^T [R^T v]x,   d/dv = R_bs^T R^T,   d/dbg = R_bs^T [t_bs]x R_body_imu.
+// IMU with the estimated gyro bias and yaw scale, C as in imu_propagation.hpp). Jacobian blocks:
+//   d/dtheta = R_bs^T [R^T v]x,   d/dv = R_bs^T R^T,   d/dbg = R_bs^T [t_bs]x C R_body_imu.
 
 #include <Eigen/Core>
 
@@ -47,8 +47,9 @@ class SensorVelocityModel final : public MeasurementModel {
 ///   vertical_constraint (the non-holonomic constraint: a wheel does not slide sideways or leave
 ///   the ground; planar mode drops the vertical one, which contradicts a level-height constraint
 ///   while the IMU reports pitch); yaw rate when use_yaw_rate
-///   (h = z-component of R_body_wheel^T w, which depends only on the gyro bias: skid-steered
-///   bases report yaw rates far off the truth, so it is optional).
+///   (h = s * z-component of R_body_wheel^T w + d * forward speed, with the state's wheel speed
+///   scale s and heading drift d: skid-steered bases report yaw rates far off the truth, so it is
+///   optional). The forward speed is predicted as s * forward speed.
 struct WheelOdometryMeasurement {
   double forward_speed = 0.0;  // m/s
   double yaw_rate = 0.0;       // rad/s

@@ -94,6 +94,14 @@ struct SessionSummary {
   /// read 2 % more distance than driven; their radius is 2 % too large) and its 1-sigma.
   std::optional<double> wheel_speed_scale;
   double wheel_speed_scale_sigma = 0.0;
+  /// With an IMU and the wheels' yaw rate fused (use_yaw_rate), once initialized: the estimated
+  /// gyro yaw-rate scale (1.01: the gyro reads turns about the body's z axis 1 % high) and its 1-sigma.
+  std::optional<double> gyro_yaw_scale;
+  double gyro_yaw_scale_sigma = 0.0;
+  /// With an IMU and the wheels' yaw rate fused: the turn the wheels report per metre driven
+  /// straight (rad/m; (s_right - s_left) / wheel separation for unequal wheel scales) and its 1-sigma.
+  std::optional<double> wheel_heading_drift;
+  double wheel_heading_drift_sigma = 0.0;
 };
 
 /// One update, for diagnostics (innovation plots, consistency checks).

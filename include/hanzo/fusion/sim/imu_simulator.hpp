@@ -3,7 +3,8 @@
 // fusion configuration (config/fusion_config.hpp, `imu:` section):
 //
 //   accelerometer = R_world_imu^T (a_imu - g_world) + accel_bias + n_a,  n_a ~ N(0, process_noise_accel^2)
-//   gyroscope     = omega_imu + gyro_bias + n_g,                          n_g ~ N(0, process_noise_gyro^2)
+//   gyroscope     = K omega_imu + gyro_bias + n_g,                        n_g ~ N(0, process_noise_gyro^2)
+//                   (K = diag(gyro_scale_factor): the gyro's scale error per IMU axis, 1 = none)
 //   bias_{k+1}    = bias_k + N(0, random_walk^2 * dt)   (random walks in unit/s/sqrt(Hz) = unit/sqrt(s))
 //
 // g_world = (0, 0, -gravity) in ENU, so a level IMU at rest reads (0, 0, +gravity). The IMU sits
@@ -33,6 +34,7 @@ struct ImuSimulatorConfig {
   double gyro_bias_random_walk = 0.0001;   ///< rad/s/sqrt(Hz)
   Eigen::Vector3d initial_accel_bias = Eigen::Vector3d::Zero();
   Eigen::Vector3d initial_gyro_bias = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_scale_factor = Eigen::Vector3d::Ones();  ///< reading per true rate, IMU axes
   SE3 T_body_imu;                          ///< mounting (identity: the IMU is the body frame)
   std::string frame_id = "imu";
   uint64_t seed = 1;
