@@ -15,8 +15,9 @@ packages=(
   libzstd-dev liblz4-dev zlib1g-dev libbz2-dev
   # maps: SHA-256 of input files (provenance)
   libssl-dev
-  # io: image files of the dataset importers (KITTI, EuRoC, TUM RGB-D)
-  libopencv-dev
+  # io: image files of the dataset importers (KITTI, EuRoC, TUM RGB-D); privacy: the face
+  # detector runs on OpenCV's dnn module, the licence-plate cascade comes with opencv-data
+  libopencv-dev opencv-data
   # sim: parallel ray casting
   libtbb-dev
   # graph: nonlinear least squares (with SuiteSparse), and OpenBLAS (its thread-safe pthread build) for

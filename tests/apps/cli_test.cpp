@@ -458,6 +458,36 @@ TEST(Cli, RunMapsWithTheWholePipelineAndReplaysBitIdenticallyOnAnyThreadCount) {
   std::filesystem::remove_all(dir);
 }
 
+TEST(Cli, PrivacyBlurRedactsFacesOfAnImageOrAFolderAndRefusesBadInput) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_privacy_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const CliRun one = run(fmt::format("privacy blur {}/privacy_faces/two_people.jpg {} --json", HANZO_DATA_DIR, (dir / "two.png").string()));
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  const nlohmann::json json = nlohmann::json::parse(one.out);
+  EXPECT_EQ(json["faces"], 2);
+  EXPECT_EQ(json["redaction"], "blur");
+  ASSERT_EQ(json["images"].size(), 1U);
+  EXPECT_EQ(json["images"][0]["regions"].size(), 2U);
+  EXPECT_TRUE(std::filesystem::exists(dir / "two.png"));
+  const CliRun folder = run(fmt::format("privacy blur {}/privacy_faces {} --redaction black --no-plates --json", HANZO_DATA_DIR,
+                                        (dir / "all").string()));
+  ASSERT_EQ(folder.exit_code, 0) << folder.err;
+  const nlohmann::json all = nlohmann::json::parse(folder.out);
+  EXPECT_EQ(all["images"].size(), 5U);
+  EXPECT_EQ(all["faces"], 9);  // 1 + 2 + 3 + 2 + 1
+  EXPECT_EQ(all["licence_plates"], 0);
+  const CliRun missing = run(fmt::format("privacy blur {} {}", (dir / "none.jpg").string(), (dir / "out.png").string()));
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_THAT(missing.err, HasSubstr("none.jpg: no such file or folder"));
+  const CliRun not_image = run(fmt::format("privacy blur {} {}", write_temp("text.jpg", "not a picture"), (dir / "out.png").string()));
+  EXPECT_EQ(not_image.exit_code, 1);
+  EXPECT_THAT(not_image.err, HasSubstr("not an image OpenCV can read"));
+  EXPECT_EQ(std::count(not_image.err.begin(), not_image.err.end(), '\n'), 1);
+  EXPECT_FALSE(std::filesystem::exists(dir / "out.png"));
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, GraphOptimizeReachesSeSyncOptimumOnIntel) {
   const std::filesystem::path out = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_graph_{}.g2o", ::getpid());
   const CliRun optimized = run(fmt::format(

@@ -1,0 +1,125 @@
+#include "hanzo/fusion/privacy/privacy_filter.hpp"
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <optional>
+
+#include <fmt/format.h>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/objdetect.hpp>
+
+#include "hanzo/fusion/core/logging.hpp"
+#include "yunet_face_detector.hpp"
+
+namespace hanzo::fusion::privacy {
+namespace {
+
+constexpr const char* kFaceModel = "face_detection_yunet.onnx";
+constexpr const char* kPlateCascade = "/usr/share/opencv4/haarcascades/haarcascade_russian_plate_number.xml";
+
+std::string models_dir() {
+  if (const char* overridden = std::getenv("HANZO_MODELS_DIR"); overridden != nullptr && *overridden != '\0') return overridden;
+  if (std::filesystem::is_regular_file(std::filesystem::path(HANZO_INSTALLED_MODELS_DIR) / kFaceModel)) return HANZO_INSTALLED_MODELS_DIR;
+  return HANZO_SOURCE_MODELS_DIR;
+}
+
+cv::Rect enlarged(const cv::Rect& box, double margin, const cv::Size& size) {
+  const int dx = static_cast<int>(std::lround(margin * box.width)), dy = static_cast<int>(std::lround(margin * box.height));
+  return cv::Rect(box.x - dx, box.y - dy, box.width + 2 * dx, box.height + 2 * dy) & cv::Rect(cv::Point(0, 0), size);
+}
+
+}  // namespace
+
+std::string_view to_string(Redaction redaction) { return redaction == Redaction::kBlur ? "blur" : "black"; }
+
+Result<Redaction> parse_redaction(std::string_view name) {
+  if (name == "blur") return Redaction::kBlur;
+  if (name == "black") return Redaction::kBlackOut;
+  return Error(fmt::format("unknown redaction '{}' (expected blur or black)", name));
+}
+
+std::string default_face_model_path() { return (std::filesystem::path(models_dir()) / kFaceModel).string(); }
+std::string default_plate_cascade_path() { return kPlateCascade; }
+
+struct PrivacyFilter::Models {
+  std::optional<YunetFaceDetector> faces;
+  cv::CascadeClassifier plates;
+};
+
+PrivacyFilter::PrivacyFilter(PrivacyFilterConfig config, std::unique_ptr<Models> models)
+    : config_(std::move(config)), models_(std::move(models)) {}
+PrivacyFilter::~PrivacyFilter() = default;
+
+Result<std::unique_ptr<PrivacyFilter>> PrivacyFilter::create(const PrivacyFilterConfig& config) {
+  if (!(config.face_score_threshold >= 0.0 && config.face_score_threshold <= 1.0)) {
+    return Error(fmt::format("face score threshold must be in [0, 1], got {}", config.face_score_threshold));
+  }
+  if (!(config.margin >= 0.0 && config.margin <= 1.0)) return Error(fmt::format("margin must be in [0, 1], got {}", config.margin));
+  if (config.min_plate_width < 8) return Error(fmt::format("smallest plate width must be >= 8 px, got {}", config.min_plate_width));
+  auto models = std::make_unique<Models>();
+  if (config.faces) {
+    const std::string path = config.face_model_path.empty() ? default_face_model_path() : config.face_model_path;
+    Result<YunetFaceDetector> detector = YunetFaceDetector::load(path);
+    if (!detector) return detector.error();
+    models->faces.emplace(std::move(detector).value());
+  }
+  if (config.licence_plates) {
+    const std::string path = config.plate_cascade_path.empty() ? default_plate_cascade_path() : config.plate_cascade_path;
+    if (!std::filesystem::is_regular_file(path) || !models->plates.load(path)) {
+      return Error(fmt::format("licence plate cascade '{}' cannot be loaded (Debian package opencv-data)", path));
+    }
+  }
+  return std::unique_ptr<PrivacyFilter>(new PrivacyFilter(config, std::move(models)));
+}
+
+Result<std::vector<RedactedRegion>> PrivacyFilter::detect(const cv::Mat& image) {
+  if (image.empty()) return Error("the image is empty");
+  if (image.depth() != CV_8U || (image.channels() != 1 && image.channels() != 3)) {
+    return Error(fmt::format("expected an 8-bit grey or BGR image, got {} channel(s) of depth {}", image.channels(), image.depth()));
+  }
+  cv::Mat bgr, grey;
+  if (image.channels() == 1) {
+    grey = image;
+    cv::cvtColor(image, bgr, cv::COLOR_GRAY2BGR);
+  } else {
+    bgr = image;
+    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  }
+  std::vector<RedactedRegion> regions;
+  try {
+    if (models_->faces) {
+      for (const FaceDetection& face : models_->faces->detect(bgr, config_.face_score_threshold)) regions.push_back({"face", face.box, face.score});
+    }
+    if (config_.licence_plates) {
+      std::vector<cv::Rect> plates;
+      models_->plates.detectMultiScale(grey, plates, 1.1, 3, 0, cv::Size(config_.min_plate_width, config_.min_plate_width / 4));
+      for (const cv::Rect& plate : plates) regions.push_back({"licence_plate", plate, 1.0});
+    }
+  } catch (const cv::Exception& error) {
+    return Error(fmt::format("privacy filter: {}", error.msg));
+  }
+  return regions;
+}
+
+Result<std::vector<RedactedRegion>> PrivacyFilter::apply(cv::Mat& image) {
+  Result<std::vector<RedactedRegion>> regions = detect(image);
+  if (!regions) return regions;
+  for (const RedactedRegion& region : *regions) {
+    const cv::Rect area = enlarged(region.box, config_.margin, image.size());
+    if (area.area() == 0) continue;
+    cv::Mat pixels = image(area);
+    if (config_.redaction == Redaction::kBlackOut) {
+      pixels.setTo(cv::Scalar::all(0));
+    } else {
+      const double sigma = std::max(2.0, 0.25 * std::max(area.width, area.height));
+      cv::Mat blurred;
+      cv::GaussianBlur(pixels, blurred, cv::Size(), sigma, sigma, cv::BORDER_REPLICATE);
+      blurred.copyTo(pixels);
+    }
+  }
+  if (!regions->empty()) logger()->debug("privacy filter: {} region(s) redacted ({})", regions->size(), to_string(config_.redaction));
+  return regions;
+}
+
+}  // namespace hanzo::fusion::privacy
