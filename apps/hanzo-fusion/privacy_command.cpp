@@ -1,5 +1,6 @@
-// hanzo-fusion privacy blur IN OUT: faces and licence plates in an image file (or every image of
-// a folder) blurred or blacked out (privacy/privacy_filter.hpp), with the regions reported.
+// hanzo-fusion privacy blur IN OUT: faces and licence plates in an image file, every image of a
+// folder, or every camera image of a sensor log (MCAP) blurred or blacked out
+// (privacy/privacy_filter.hpp), with the regions reported.
 
 #include <filesystem>
 #include <memory>
@@ -10,7 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "commands.hpp"
-#include "hanzo/fusion/privacy/privacy_filter.hpp"
+#include "hanzo/fusion/privacy/log_redaction.hpp"
 
 namespace hanzo::fusion::app {
 namespace {
@@ -23,7 +24,36 @@ struct PrivacyOptions {
   bool no_plates = false;
   std::string face_model;
   double score_threshold = privacy::PrivacyFilterConfig{}.face_score_threshold;
+  std::string image_compression = "png";  // logs: how the written log stores images
 };
+
+bool is_log_file(const std::filesystem::path& path) { return path.extension() == ".mcap"; }
+
+// A sensor log (privacy/log_redaction.hpp).
+int redact_log_file(const Output& output, nlohmann::json result, privacy::PrivacyFilter& filter, const PrivacyOptions& options) {
+  const std::optional<io::ImageCompression> compression = io::image_compression_from_string(options.image_compression);
+  if (!compression) return report_failure(output, result, fmt::format("--image-compression: unknown '{}' (none, png, jpeg)", options.image_compression));
+  io::SensorLogWriterConfig writer_config;
+  writer_config.image_compression = *compression;
+  Result<privacy::LogRedactionSummary> summary = privacy::redact_log(filter, options.input, options.output, writer_config);
+  if (!summary) return report_failure(output, result, summary.error().message);
+  const auto counts_json = [](const privacy::TopicRedactionCounts& c) {
+    return nlohmann::json{{"images", c.images}, {"redacted_images", c.redacted_images}, {"faces", c.faces}, {"licence_plates", c.licence_plates}};
+  };
+  result["ok"] = true;
+  result["redaction"] = options.redaction;
+  result["messages"] = summary->messages;
+  result.update(counts_json(summary->total));
+  if (summary->input_warning) result["input_warning"] = *summary->input_warning;
+  result["topics"] = nlohmann::json::object();
+  for (const auto& [topic, counts] : summary->by_topic) result["topics"][topic] = counts_json(counts);
+  const privacy::TopicRedactionCounts& total = summary->total;
+  return report_success(output, result,
+                        fmt::format("{} -> {}: {} messages, {} camera images, {} with regions {}: {} face(s), {} licence plate(s)\n",
+                                    options.input, options.output, summary->messages, total.images, total.redacted_images,
+                                    options.redaction == "blur" ? "blurred" : "blacked out", total.faces, total.licence_plates) +
+                            (summary->input_warning ? fmt::format("warning: {}\n", *summary->input_warning) : std::string()));
+}
 
 bool is_image_file(const std::filesystem::path& path) {
   std::string extension = path.extension().string();
@@ -73,6 +103,11 @@ int run_blur(const Output& output, const PrivacyOptions& options) {
   Result<std::unique_ptr<privacy::PrivacyFilter>> filter = privacy::PrivacyFilter::create(config);
   if (!filter) return report_failure(output, result, filter.error().message);
 
+  if (is_log_file(options.input)) {
+    if (!std::filesystem::is_regular_file(options.input)) return report_failure(output, result, fmt::format("{}: no such file", options.input));
+    if (!is_log_file(options.output)) return report_failure(output, result, fmt::format("{}: a sensor log is written to a .mcap file", options.output));
+    return redact_log_file(output, result, **filter, options);
+  }
   std::vector<std::pair<std::filesystem::path, std::filesystem::path>> jobs;
   std::error_code error;
   if (std::filesystem::is_directory(options.input, error)) {
@@ -115,9 +150,10 @@ void add_privacy_command(CLI::App& app, const Output& output, Command& run) {
   CLI::App* privacy_command = app.add_subcommand("privacy", "Privacy filter for camera images (faces, licence plates)");
   privacy_command->require_subcommand(1);
   auto options = std::make_shared<PrivacyOptions>();
-  CLI::App* blur = privacy_command->add_subcommand("blur", "Blur (or black out) faces and licence plates in an image or a folder of images");
-  blur->add_option("IN", options->input, "Image file, or a folder of image files")->required();
-  blur->add_option("OUT", options->output, "Output image file (its extension picks the format), or folder")->required();
+  CLI::App* blur = privacy_command->add_subcommand("blur", "Blur (or black out) faces and licence plates in an image, a folder of images or a sensor log");
+  blur->add_option("IN", options->input, "Image file, folder of image files, or sensor log (.mcap)")->required();
+  blur->add_option("OUT", options->output, "Output image file (its extension picks the format), folder, or sensor log (.mcap)")->required();
+  blur->add_option("--image-compression", options->image_compression, "Sensor logs: how the output stores images: png (default), jpeg or none");
   blur->add_option("--redaction", options->redaction, "blur (default) or black")->check(CLI::IsMember({"blur", "black"}));
   blur->add_flag("--no-faces", options->no_faces, "Do not look for faces");
   blur->add_flag("--no-plates", options->no_plates, "Do not look for licence plates");

@@ -102,10 +102,8 @@ Result<std::vector<RedactedRegion>> PrivacyFilter::detect(const cv::Mat& image) 
   return regions;
 }
 
-Result<std::vector<RedactedRegion>> PrivacyFilter::apply(cv::Mat& image) {
-  Result<std::vector<RedactedRegion>> regions = detect(image);
-  if (!regions) return regions;
-  for (const RedactedRegion& region : *regions) {
+void PrivacyFilter::redact(cv::Mat& image, const std::vector<RedactedRegion>& regions) const {
+  for (const RedactedRegion& region : regions) {
     const cv::Rect area = enlarged(region.box, config_.margin, image.size());
     if (area.area() == 0) continue;
     cv::Mat pixels = image(area);
@@ -118,7 +116,34 @@ Result<std::vector<RedactedRegion>> PrivacyFilter::apply(cv::Mat& image) {
       blurred.copyTo(pixels);
     }
   }
-  if (!regions->empty()) logger()->debug("privacy filter: {} region(s) redacted ({})", regions->size(), to_string(config_.redaction));
+  if (!regions.empty()) logger()->debug("privacy filter: {} region(s) redacted ({})", regions.size(), to_string(config_.redaction));
+}
+
+Result<std::vector<RedactedRegion>> PrivacyFilter::apply(cv::Mat& image) {
+  Result<std::vector<RedactedRegion>> regions = detect(image);
+  if (regions) redact(image, *regions);
+  return regions;
+}
+
+Result<std::vector<RedactedRegion>> PrivacyFilter::apply(msgs::ImageMessage& message) {
+  int type = 0;
+  switch (message.encoding) {
+    case msgs::ImageEncoding::kRgb8:
+    case msgs::ImageEncoding::kBgr8: type = CV_8UC3; break;
+    case msgs::ImageEncoding::kMono8: type = CV_8UC1; break;
+    case msgs::ImageEncoding::kDepth16:
+    case msgs::ImageEncoding::kDepth32f: return std::vector<RedactedRegion>{};
+  }
+  const std::size_t expected = static_cast<std::size_t>(message.width) * message.height * msgs::bytes_per_pixel(message.encoding);
+  if (message.width == 0 || message.height == 0 || message.data.size() != expected) {
+    return Error(fmt::format("image {} x {} {}: {} bytes of data, expected {}", message.width, message.height, msgs::to_string(message.encoding),
+                             message.data.size(), expected));
+  }
+  cv::Mat pixels(static_cast<int>(message.height), static_cast<int>(message.width), type, message.data.data());
+  cv::Mat bgr = pixels;
+  if (message.encoding == msgs::ImageEncoding::kRgb8) cv::cvtColor(pixels, bgr, cv::COLOR_RGB2BGR);
+  Result<std::vector<RedactedRegion>> regions = detect(bgr);
+  if (regions) redact(pixels, *regions);  // the message's own buffer
   return regions;
 }
 

@@ -485,6 +485,20 @@ TEST(Cli, PrivacyBlurRedactsFacesOfAnImageOrAFolderAndRefusesBadInput) {
   EXPECT_THAT(not_image.err, HasSubstr("not an image OpenCV can read"));
   EXPECT_EQ(std::count(not_image.err.begin(), not_image.err.end(), '\n'), 1);
   EXPECT_FALSE(std::filesystem::exists(dir / "out.png"));
+  // A sensor log: its camera images pass the filter, the rest is copied.
+  ASSERT_EQ(run(fmt::format("sim examples/scenarios/camera_checkerboard.yaml --out {} --duration 1 --no-foxglove", (dir / "sim").string())).exit_code, 0);
+  const CliRun log = run(fmt::format("privacy blur {} {} --json", (dir / "sim" / "sensors.mcap").string(), (dir / "blurred.mcap").string()));
+  ASSERT_EQ(log.exit_code, 0) << log.err;
+  const nlohmann::json redacted = nlohmann::json::parse(log.out);
+  EXPECT_EQ(redacted["images"], 6);  // 5 Hz for 1 s, both ends
+  EXPECT_EQ(redacted["faces"], 0);
+  EXPECT_EQ(redacted["messages"], 107);
+  const CliRun info = run(fmt::format("log info {} --json", (dir / "blurred.mcap").string()));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_EQ(nlohmann::json::parse(info.out)["messages"], 107);
+  const CliRun wrong_output = run(fmt::format("privacy blur {} {}", (dir / "sim" / "sensors.mcap").string(), (dir / "out.png").string()));
+  EXPECT_EQ(wrong_output.exit_code, 1);
+  EXPECT_THAT(wrong_output.err, HasSubstr("a sensor log is written to a .mcap file"));
   std::filesystem::remove_all(dir);
 }
 

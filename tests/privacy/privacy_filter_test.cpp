@@ -2,12 +2,17 @@
 // street images (KITTI raw 2011_09_26_drive_0052: cars with German plates, no faces close enough).
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <string>
+
+#include <unistd.h>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/privacy/log_redaction.hpp"
 #include "hanzo/fusion/privacy/privacy_filter.hpp"
 
 namespace hanzo::fusion::privacy {
@@ -158,6 +163,105 @@ TEST(PrivacyFilter, RefusesBadInputWithAReason) {
   EXPECT_FALSE(PrivacyFilter::create(config).ok());
   EXPECT_FALSE(parse_redaction("pixelate").ok());
   EXPECT_EQ(parse_redaction("black").value(), Redaction::kBlackOut);
+}
+
+msgs::ImageMessage image_message(const cv::Mat& bgr, msgs::ImageEncoding encoding, Timestamp time) {
+  cv::Mat pixels = bgr;
+  if (encoding == msgs::ImageEncoding::kRgb8) cv::cvtColor(bgr, pixels, cv::COLOR_BGR2RGB);
+  msgs::ImageMessage message;
+  message.timestamp = time;
+  message.frame_id = "camera";
+  message.width = static_cast<uint32_t>(pixels.cols);
+  message.height = static_cast<uint32_t>(pixels.rows);
+  message.encoding = encoding;
+  message.data.assign(pixels.data, pixels.data + pixels.total() * pixels.elemSize());
+  return message;
+}
+
+// A log with the two-people photo as a bgr8 and an rgb8 camera image, an IMU message and a
+// metadata record: the faces are blurred in both encodings, the rest is copied exactly.
+TEST(LogRedaction, BlursTheCameraImagesOfASensorLogAndCopiesTheRest) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("hanzo_privacy_log_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string input = (dir / "in.mcap").string(), output = (dir / "out.mcap").string();
+  cv::Mat photo = cv::imread(kFaces + "two_people.jpg");
+  ASSERT_FALSE(photo.empty());
+  cv::resize(photo, photo, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
+  const Timestamp start = Timestamp::from_seconds(1700000000.0);
+  msgs::ImuMessage imu;
+  imu.timestamp = start;
+  imu.frame_id = "imu";
+  imu.angular_velocity = Eigen::Vector3d(0.1, -0.2, 0.3);
+  imu.linear_acceleration = Eigen::Vector3d(0.0, 0.1, 9.81);
+  {
+    auto writer = io::SensorLogWriter::open(input).value();
+    ASSERT_TRUE(writer->add_metadata({"calibration", {{"camera_to_body", "identity"}}}).ok());
+    ASSERT_TRUE(writer->write("/imu", msgs::SensorMessage(imu)).ok());
+    ASSERT_TRUE(writer->write("/camera", msgs::SensorMessage(image_message(photo, msgs::ImageEncoding::kBgr8, start + Duration::from_seconds(0.1))),
+                              "front_camera").ok());
+    ASSERT_TRUE(writer->write("/camera", msgs::SensorMessage(image_message(photo, msgs::ImageEncoding::kRgb8, start + Duration::from_seconds(0.2))),
+                              "front_camera").ok());
+    ASSERT_TRUE(writer->close().ok());
+  }
+  auto filter = make_filter();
+  ASSERT_NE(filter, nullptr);
+  auto summary = redact_log(*filter, input, output, {});
+  ASSERT_TRUE(summary.ok()) << summary.error().message;
+  EXPECT_EQ(summary->messages, 3U);
+  EXPECT_EQ(summary->total.images, 2U);
+  EXPECT_EQ(summary->total.redacted_images, 2U);
+  EXPECT_EQ(summary->total.faces, 4U);
+  EXPECT_EQ(summary->by_topic.at("/camera").faces, 4U);
+  EXPECT_FALSE(std::filesystem::exists(output + ".partial"));
+
+  auto reader = io::SensorLogReader::open(output).value();
+  const std::vector<io::mcap::Metadata>& metadata = reader->mcap().metadata();
+  ASSERT_EQ(metadata.size(), 2U);  // the log format's record and the copied one
+  const auto calibration = std::find_if(metadata.begin(), metadata.end(), [](const io::mcap::Metadata& m) { return m.name == "calibration"; });
+  ASSERT_NE(calibration, metadata.end());
+  EXPECT_EQ(calibration->values.at("camera_to_body"), "identity");
+  EXPECT_EQ(reader->mcap().channel_by_topic("/camera")->metadata.at("sensor"), "front_camera");
+  io::LogEntry entry;
+  int images = 0;
+  while (reader->next(entry).value()) {
+    const auto& message = std::get<msgs::SensorMessage>(entry.message);
+    if (const auto* copied = std::get_if<msgs::ImuMessage>(&message)) {
+      EXPECT_EQ(copied->angular_velocity, imu.angular_velocity);
+      EXPECT_EQ(copied->linear_acceleration, imu.linear_acceleration);
+      continue;
+    }
+    const auto& image = std::get<msgs::ImageMessage>(message);
+    const msgs::ImageMessage original = image_message(photo, image.encoding, entry.log_time);
+    ASSERT_EQ(image.data.size(), original.data.size());
+    EXPECT_NE(image.data, original.data);
+    // The redacted image has no face left.
+    cv::Mat pixels(static_cast<int>(image.height), static_cast<int>(image.width), CV_8UC3, const_cast<uint8_t*>(image.data.data()));
+    cv::Mat bgr = pixels.clone();
+    if (image.encoding == msgs::ImageEncoding::kRgb8) cv::cvtColor(pixels, bgr, cv::COLOR_RGB2BGR);
+    EXPECT_EQ(count(filter->detect(bgr).value(), "face"), 0) << msgs::to_string(image.encoding);
+    ++images;
+  }
+  EXPECT_EQ(images, 2);
+
+  // Refused: the input as output, a file that is not a log; no output file is left behind. A
+  // log cut off is redacted as far as it reads, with the reader's warning.
+  EXPECT_FALSE(redact_log(*filter, input, input, {}).ok());
+  const std::string text = (dir / "text.mcap").string();
+  std::ofstream(text) << "not a log";
+  const std::string never = (dir / "never.mcap").string();
+  auto refused = redact_log(*filter, text, never, {});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("magic"), std::string::npos) << refused.error().message;
+  EXPECT_FALSE(std::filesystem::exists(never));
+  EXPECT_FALSE(std::filesystem::exists(never + ".partial"));
+  const std::string cut = (dir / "cut.mcap").string();
+  std::filesystem::copy_file(input, cut);
+  std::filesystem::resize_file(cut, std::filesystem::file_size(input) - 200);
+  auto recovered = redact_log(*filter, cut, (dir / "cut_out.mcap").string(), {});
+  ASSERT_TRUE(recovered.ok()) << recovered.error().message;
+  EXPECT_TRUE(recovered->input_warning.has_value());
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

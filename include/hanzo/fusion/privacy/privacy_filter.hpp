@@ -27,6 +27,7 @@
 #include <opencv2/core.hpp>
 
 #include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
 
 namespace hanzo::fusion::privacy {
 
@@ -76,6 +77,12 @@ class PrivacyFilter {
   Result<std::vector<RedactedRegion>> detect(const cv::Mat& image);
   /// Detects and redacts in place; returns the regions. The image is unchanged on error.
   Result<std::vector<RedactedRegion>> apply(cv::Mat& image);
+  /// Redacts the regions (enlarged by the margin) in any image of their size: 1, 3 or 4
+  /// channels of 8 or 16 bits or float.
+  void redact(cv::Mat& image, const std::vector<RedactedRegion>& regions) const;
+  /// A camera message in place: rgb8, bgr8 and mono8 images are searched and redacted; depth
+  /// images carry no faces and are left as they are (no regions).
+  Result<std::vector<RedactedRegion>> apply(msgs::ImageMessage& image);
 
   const PrivacyFilterConfig& config() const { return config_; }
 
