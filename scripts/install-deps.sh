@@ -18,6 +18,8 @@ packages=(
   # io: image files of the dataset importers (KITTI, EuRoC, TUM RGB-D); privacy: the face
   # detector runs on OpenCV's dnn module, the licence-plate cascade comes with opencv-data
   libopencv-dev opencv-data
+  # crypto: encryption at rest (XChaCha20-Poly1305 secretstream)
+  libsodium-dev
   # sim: parallel ray casting
   libtbb-dev
   # graph: nonlinear least squares (with SuiteSparse), and OpenBLAS (its thread-safe pthread build) for

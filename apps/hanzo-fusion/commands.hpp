@@ -39,5 +39,6 @@ void add_stream_command(CLI::App& app, const Output& output, Command& run);
 void add_slam2d_command(CLI::App& app, const Output& output, Command& run);
 void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& run);
 void add_privacy_command(CLI::App& app, const Output& output, Command& run);
+void add_crypto_command(CLI::App& app, const Output& output, Command& run);
 
 }  // namespace hanzo::fusion::app

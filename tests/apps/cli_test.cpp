@@ -502,6 +502,43 @@ TEST(Cli, PrivacyBlurRedactsFacesOfAnImageOrAFolderAndRefusesBadInput) {
   std::filesystem::remove_all(dir);
 }
 
+TEST(Cli, CryptoEncryptsAndDecryptsWithKeyFilesOrTheEnvironment) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_crypto_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string key = (dir / "a.key").string(), other = (dir / "b.key").string();
+  const CliRun made = run(fmt::format("crypto keygen {} --json", key));
+  ASSERT_EQ(made.exit_code, 0) << made.err;
+  const std::string key_id = nlohmann::json::parse(made.out)["key_id"];
+  EXPECT_EQ(key_id.size(), 16U);
+  EXPECT_EQ(run(fmt::format("crypto keygen {}", key)).exit_code, 1);  // never overwritten
+  ASSERT_EQ(run(fmt::format("crypto keygen {}", other)).exit_code, 0);
+  const std::string plain = write_temp("plain.yaml", "fusion:\n  frontend: {type: ekf}\n");
+  const std::string sealed = (dir / "plain.enc").string(), opened = (dir / "opened.yaml").string();
+  const CliRun encrypted = run(fmt::format("crypto encrypt {} {} --key {} --json", plain, sealed, key));
+  ASSERT_EQ(encrypted.exit_code, 0) << encrypted.err;
+  EXPECT_EQ(nlohmann::json::parse(encrypted.out)["key_id"], key_id);
+  const CliRun wrong = run(fmt::format("crypto decrypt {} {} --key {}", sealed, opened, other));
+  EXPECT_EQ(wrong.exit_code, 1);
+  EXPECT_THAT(wrong.err, HasSubstr(fmt::format("encrypted with key {}, which is not among the keys given", key_id)));
+  EXPECT_FALSE(std::filesystem::exists(opened));
+  // During a rotation every key in use is given; the file names its own.
+  const CliRun decrypted = run(fmt::format("crypto decrypt {} {} --key {} --key {} --json", sealed, opened, other, key));
+  ASSERT_EQ(decrypted.exit_code, 0) << decrypted.err;
+  std::ifstream a(plain), b(opened);
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(a), {}), std::string(std::istreambuf_iterator<char>(b), {}));
+  std::filesystem::resize_file(sealed, std::filesystem::file_size(sealed) - 1);
+  const CliRun cut = run(fmt::format("crypto decrypt {} {} --key {}", sealed, (dir / "cut.yaml").string(), key));
+  EXPECT_EQ(cut.exit_code, 1);
+  EXPECT_THAT(cut.err, HasSubstr("truncated"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "cut.yaml"));
+  ::unsetenv("HANZO_ENCRYPTION_KEY");
+  const CliRun no_key = run(fmt::format("crypto encrypt {} {}", plain, (dir / "x.enc").string()));
+  EXPECT_EQ(no_key.exit_code, 1);
+  EXPECT_THAT(no_key.err, HasSubstr("HANZO_ENCRYPTION_KEY is not set"));
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, GraphOptimizeReachesSeSyncOptimumOnIntel) {
   const std::filesystem::path out = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_graph_{}.g2o", ::getpid());
   const CliRun optimized = run(fmt::format(
