@@ -37,6 +37,8 @@ packages=(
   # service: REST (cpp-httplib), storage (SQLite, PostgreSQL client + server for the tests), load
   # generator of the REST benchmark
   libcpp-httplib-dev libsqlite3-dev libpq-dev libpqxx-dev postgresql openssl curl wrk
+  # service: OIDC bearer JWTs (RS256 / ES256)
+  libjwt-dev
   # tests and benchmarks (Embree: the ray-casting peer of the simulator benchmark; OctoMap: the
   # occupancy-mapping peer of the maps benchmark)
   libgtest-dev libgmock-dev libbenchmark-dev libembree-dev liboctomap-dev

@@ -15,6 +15,7 @@
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/service/allocator_tuning.hpp"
 #include "hanzo/fusion/service/grpc_server.hpp"
+#include "hanzo/fusion/service/jwt_verifier.hpp"
 #include "hanzo/fusion/service/rest_server.hpp"
 #include "hanzo/fusion/service/session_manager.hpp"
 
@@ -28,6 +29,8 @@ struct ServeOptions {
   std::string data_dir = "hanzo-fusion-data";
   std::string database;
   std::string tokens_file;
+  std::string jwks_file;
+  service::JwtVerifierConfig jwt;
   bool insecure_no_auth = false;
   std::string tls_certificate;
   std::string tls_private_key;
@@ -38,22 +41,33 @@ struct ServeOptions {
   std::size_t map_keep_versions = 20;
 };
 
-// The token store from --tokens, HANZO_FUSION_TOKENS_FILE or HANZO_FUSION_TOKENS; null with
-// --insecure-no-auth.
+// The token store from --tokens, HANZO_FUSION_TOKENS_FILE or HANZO_FUSION_TOKENS, with the JWT
+// verifier of --jwks; null with --insecure-no-auth.
 Result<std::shared_ptr<const service::TokenStore>> load_tokens(const ServeOptions& options) {
   const char* file_variable = std::getenv("HANZO_FUSION_TOKENS_FILE");
   const char* inline_variable = std::getenv("HANZO_FUSION_TOKENS");
   const std::string file = !options.tokens_file.empty() ? options.tokens_file : (file_variable ? file_variable : "");
   if (options.insecure_no_auth) {
-    if (!file.empty() || inline_variable != nullptr) return Error("--insecure-no-auth and API tokens exclude each other");
+    if (!file.empty() || inline_variable != nullptr || !options.jwks_file.empty()) {
+      return Error("--insecure-no-auth and API tokens or --jwks exclude each other");
+    }
     return std::shared_ptr<const service::TokenStore>();
   }
-  Result<service::TokenStore> store = Error("");
+  Result<service::TokenStore> store = service::TokenStore();
   if (!file.empty()) store = service::TokenStore::load(file);
   else if (inline_variable != nullptr) store = service::TokenStore::parse_inline(inline_variable);
-  else return Error("no API tokens: give --tokens FILE (or HANZO_FUSION_TOKENS_FILE / HANZO_FUSION_TOKENS), or --insecure-no-auth for local development");
+  else if (options.jwks_file.empty()) {
+    return Error("no API tokens: give --tokens FILE (or HANZO_FUSION_TOKENS_FILE / HANZO_FUSION_TOKENS) or --jwks FILE, or "
+                 "--insecure-no-auth for local development");
+  }
   if (!store) return store.error();
-  if (store->size() == 0) return Error("the token file lists no tokens");
+  if (!options.jwks_file.empty()) {
+    Result<std::shared_ptr<const service::JwtVerifier>> verifier = service::JwtVerifier::load(options.jwks_file, options.jwt);
+    if (!verifier) return verifier.error();
+    store->set_jwt_verifier(*verifier);
+  } else if (store->size() == 0) {
+    return Error("the token file lists no tokens");
+  }
   return std::shared_ptr<const service::TokenStore>(std::make_shared<service::TokenStore>(std::move(store).value()));
 }
 
@@ -145,6 +159,11 @@ void add_serve_command(CLI::App& app, const Output& output, Command& run) {
       ->capture_default_str();
   command->add_option("--db", options->database, "Storage URL: sqlite://PATH or postgresql://USER@HOST:PORT/DB (default sqlite://DATA_DIR/fusion.db)");
   command->add_option("--tokens", options->tokens_file, "API token file (YAML; docs/server.md)");
+  command->add_option("--jwks", options->jwks_file, "JWKS file of an OIDC provider: bearer JWTs (RS256 / ES256) are accepted (docs/security.md)");
+  command->add_option("--jwt-issuer", options->jwt.issuer, "The JWTs' required issuer (\"iss\"), with --jwks");
+  command->add_option("--jwt-audience", options->jwt.audience, "The JWTs' required audience (\"aud\"), with --jwks");
+  command->add_option("--jwt-organization-claim", options->jwt.organization_claim, "Claim naming the organization")->capture_default_str();
+  command->add_option("--jwt-scope-claim", options->jwt.scope_claim, "Claim listing the fusion:* scopes")->capture_default_str();
   command->add_flag("--insecure-no-auth", options->insecure_no_auth, "Serve without authentication (local development only)");
   command->add_option("--tls-cert", options->tls_certificate, "PEM certificate: serve HTTPS (with --tls-key)")->check(CLI::ExistingFile);
   command->add_option("--tls-key", options->tls_private_key, "PEM private key of --tls-cert")->check(CLI::ExistingFile);

@@ -1,4 +1,5 @@
 #include "hanzo/fusion/service/auth.hpp"
+#include "hanzo/fusion/service/jwt_verifier.hpp"
 
 #include <array>
 #include <cctype>
@@ -219,6 +220,11 @@ ApiResult<Principal> authenticate_bearer(const TokenStore* tokens, std::string_v
   }
   const std::optional<std::string_view> token = bearer_token(authorization_header);
   if (!token) return ApiError{ErrorCode::kUnauthenticated, fmt::format("{} is not 'Bearer TOKEN'", field_name), field_name};
+  if (tokens->jwt_verifier() != nullptr && JwtVerifier::looks_like_jwt(*token) && !tokens->authenticate(*token)) {
+    ApiResult<Principal> verified = tokens->jwt_verifier()->verify(*token);
+    if (!verified) return ApiError{ErrorCode::kUnauthenticated, verified.error().message, field_name};
+    return verified;
+  }
   std::optional<Principal> principal = tokens->authenticate(*token);
   if (!principal) return ApiError{ErrorCode::kUnauthenticated, "unknown API token", field_name};
   return std::move(*principal);

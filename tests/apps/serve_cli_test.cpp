@@ -125,6 +125,41 @@ TEST(ServeCli, RefusesToStartWithoutTokensAndSaysWhenAuthIsOff) {
   std::filesystem::remove_all(dir);
 }
 
+// Bearer JWTs of an OIDC provider (tokens signed by tests/apps/jwt_fixture.py with the openssl
+// CLI): a valid token reads sessions, an expired or wrong-audience one gets 401 with the reason,
+// one without fusion scopes 403.
+TEST(ServeCli, AcceptsOidcJwtsAndRefusesBadOnesWithTheReason) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_serve_jwt_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  ASSERT_EQ(std::system(fmt::format("/usr/bin/python3 {}/tests/apps/jwt_fixture.py {}", HANZO_SOURCE_DIR, (dir / "jwt").string()).c_str()), 0);
+  Server server(dir, fmt::format("--data-dir {} --jwks {} --jwt-issuer https://login.example.com/ --jwt-audience hanzo-fusion",
+                                 (dir / "data").string(), (dir / "jwt" / "jwks.json").string()));
+  ASSERT_GT(server.port(), 0) << server.err();
+  const auto with = [&](const std::string& name) {
+    return server.request("/v1/sessions", fmt::format("-H 'Authorization: Bearer {}'", read_file(dir / "jwt" / (name + ".jwt"))));
+  };
+  EXPECT_EQ(with("valid").first, 200) << with("valid").second;
+  const auto expired = with("expired");
+  EXPECT_EQ(expired.first, 401);
+  EXPECT_THAT(expired.second, HasSubstr("token expired at"));
+  const auto audience = with("wrong_audience");
+  EXPECT_EQ(audience.first, 401);
+  EXPECT_THAT(audience.second, HasSubstr("audience \\\"another-service\\\" is not 'hanzo-fusion'"));
+  const auto no_scope = with("no_scope");
+  EXPECT_EQ(no_scope.first, 403);
+  EXPECT_THAT(no_scope.second, HasSubstr("lacks the permission fusion:session:read"));
+  EXPECT_EQ(server.request("/v1/sessions").first, 401);
+  server.stop(SIGTERM);
+  // A JWKS that is not one stops the start with the reason.
+  std::ofstream(dir / "bad.json") << "{\"keys\": 3}";
+  Server refused(dir, fmt::format("--data-dir {} --jwks {} --jwt-issuer i --jwt-audience a", (dir / "data").string(), (dir / "bad.json").string()));
+  EXPECT_EQ(refused.port(), 0);
+  refused.wait();
+  EXPECT_THAT(refused.err(), HasSubstr("bad.json: JWKS: expected a JSON object with a \"keys\" list"));
+  std::filesystem::remove_all(dir);
+}
+
 TEST(ServeCli, SessionsSurviveSigtermAndKillNine) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / "hanzo_cli_serve_restart";
   std::filesystem::remove_all(dir);

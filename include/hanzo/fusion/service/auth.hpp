@@ -14,12 +14,15 @@
 //       token_sha256: "9f86d08..."       # or its SHA-256 (hex), so the file holds no secret
 //
 // Or inline in HANZO_FUSION_TOKENS: "TOKEN=ORG:PERM,PERM;TOKEN=ORG:PERM" (for containers).
+// Besides (or instead of) these static tokens, the store can verify bearer JWTs of an OIDC
+// provider (jwt_verifier.hpp): a token shaped like a JWT goes to the verifier.
 // Tokens shorter than 16 characters are rejected (guessable). Lookups compare SHA-256 digests
 // in constant time. `fusion:admin` implies every other permission, inside its organization:
 // sessions and maps belong to the organization that created them and no token reaches another
 // organization's resources.
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -34,6 +37,8 @@ class YamlValue;
 }
 
 namespace hanzo::fusion::service {
+
+class JwtVerifier;
 
 enum class Permission : uint32_t {
   kSessionRead = 1u << 0,   // fusion:session:read   state, pose, trajectory, subscriptions
@@ -68,11 +73,15 @@ class TokenStore {
   /// The principal of `token`, or nullopt for an unknown token.
   std::optional<Principal> authenticate(std::string_view token) const;
   std::size_t size() const { return principals_.size(); }
+  /// JWTs (tokens of a JWT's shape) are verified by `verifier` (null: only static tokens).
+  void set_jwt_verifier(std::shared_ptr<const JwtVerifier> verifier) { jwt_verifier_ = std::move(verifier); }
+  const JwtVerifier* jwt_verifier() const { return jwt_verifier_.get(); }
 
  private:
   static Result<TokenStore> parse_document(const YamlValue& root);
   Status add(const std::string& digest_hex, Principal principal, const std::string& where);
   std::unordered_map<std::string, Principal> principals_;  // by SHA-256 hex of the token
+  std::shared_ptr<const JwtVerifier> jwt_verifier_;
 };
 
 /// SHA-256 of `text` as 64 lowercase hex digits.
@@ -82,8 +91,9 @@ std::string sha256_hex(std::string_view text);
 std::optional<std::string_view> bearer_token(std::string_view authorization_header);
 
 /// The caller behind an "Authorization" header value (REST header or gRPC metadata): `tokens`
-/// null (auth off) gives Principal::local_development(); a missing, non-Bearer or unknown token
-/// is kUnauthenticated with field `field_name`.
+/// null (auth off) gives Principal::local_development(); a missing, non-Bearer or unknown token,
+/// or a JWT the store's verifier refuses (with its reason), is kUnauthenticated with field
+/// `field_name`.
 ApiResult<Principal> authenticate_bearer(const TokenStore* tokens, std::string_view authorization_header,
                                          const std::string& field_name);
 
