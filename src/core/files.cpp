@@ -2,6 +2,7 @@
 
 #include <cerrno>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -37,6 +38,21 @@ Status write_file_durably(const std::string& path, std::string_view bytes) {
   if (!complete) {
     ::unlink(path.c_str());
     return Error{fmt::format("{}: write failed ({})", path, std::strerror(saved_errno))};
+  }
+  return ok_status();
+}
+
+Status commit_partial_file(const std::string& partial, const std::string& path, const Status& written) {
+  std::error_code ignored;
+  if (!written) {
+    std::filesystem::remove(partial, ignored);
+    return written;
+  }
+  std::error_code error;
+  std::filesystem::rename(partial, path, error);
+  if (error) {
+    std::filesystem::remove(partial, ignored);
+    return Error{fmt::format("{}: cannot write ({})", path, error.message())};
   }
   return ok_status();
 }

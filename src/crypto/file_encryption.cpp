@@ -13,6 +13,8 @@
 #include <fmt/format.h>
 #include <sodium.h>
 
+#include "hanzo/fusion/core/files.hpp"
+
 namespace hanzo::fusion::crypto {
 namespace {
 
@@ -174,16 +176,7 @@ auto write_atomically(const std::string& path, Write write) -> decltype(write(st
     out.close();
     if (result && !out) result = Error(fmt::format("writing {} failed", partial));
   }
-  std::error_code error;
-  if (!result) {
-    std::filesystem::remove(partial, error);
-    return result;
-  }
-  std::filesystem::rename(partial, path, error);
-  if (error) {
-    std::filesystem::remove(partial, error);
-    return Error(fmt::format("cannot write {}: {}", path, error.message()));
-  }
+  if (Status committed = commit_partial_file(partial, path, result ? ok_status() : Status(result.error())); !committed) return committed.error();
   return result;
 }
 

@@ -5,6 +5,8 @@
 
 #include <fmt/format.h>
 
+#include "hanzo/fusion/core/files.hpp"
+
 namespace hanzo::fusion::privacy {
 namespace {
 
@@ -67,16 +69,7 @@ Result<LogRedactionSummary> redact_log(PrivacyFilter& filter, const std::string&
   HANZO_ASSIGN_OR_RETURN(writer, io::SensorLogWriter::open(partial, config));
   Result<LogRedactionSummary> summary = copy_redacted(filter, *reader, *writer, input_path);
   writer.reset();
-  std::error_code error;
-  if (!summary) {
-    std::filesystem::remove(partial, error);
-    return summary;
-  }
-  std::filesystem::rename(partial, output_path, error);
-  if (error) {
-    std::filesystem::remove(partial, error);
-    return Error(fmt::format("cannot write {}: {}", output_path, error.message()));
-  }
+  HANZO_RETURN_IF_ERROR(commit_partial_file(partial, output_path, summary ? ok_status() : Status(summary.error())));
   return summary;
 }
 

@@ -19,4 +19,9 @@ Status write_file_durably(const std::string& path, std::string_view bytes);
 /// fsyncs a folder, so that names created or renamed in it survive a power loss.
 Status sync_directory(const std::string& path);
 
+/// The end of writing a file through a temporary name: when `written` is ok, `partial` is
+/// renamed to `path` (replacing it); otherwise, or when the rename fails, `partial` is removed
+/// and the error returned. Whoever reads `path` sees the old file or the complete new one.
+Status commit_partial_file(const std::string& partial, const std::string& path, const Status& written);
+
 }  // namespace hanzo::fusion
