@@ -38,6 +38,8 @@ struct ImportOptions {
   bool no_images = false;                    // kitti, euroc: leave the cameras out
   std::string poses;                         // kitti: poses file
   double time_origin = 1e9;                  // kitti: Unix time of times.txt's zero
+  std::string privacy;                       // "blur" / "black": camera images redacted before writing
+  std::shared_ptr<ImageRedaction> redaction; // made from `privacy` by run_import
 };
 
 struct SourceMessages {
@@ -58,7 +60,14 @@ Result<std::map<std::string, std::string>> topic_map(const std::vector<std::stri
   return map;
 }
 
-LogWriteOptions log_options(const ImportOptions& options) { return {options.out, options.compression, !options.no_foxglove}; }
+LogWriteOptions log_options(const ImportOptions& options) {
+  LogWriteOptions log;
+  log.path = options.out;
+  log.compression = options.compression;
+  log.foxglove_channels = !options.no_foxglove;
+  log.redaction = options.redaction;
+  return log;
+}
 
 int run_rosbag_import(const Output& output, const ImportOptions& options) {
   nlohmann::json result = {{"format", "rosbag"}, {"sources", options.sources}, {"out", options.out}};
@@ -229,7 +238,17 @@ int run_tum_rgbd_import(const Output& output, const ImportOptions& options) {
   return write_dataset_outputs(output, result, text, options, {&report.ground_truth, &report.calibration});
 }
 
-int run_import(const Output& output, const ImportOptions& options) {
+int run_import(const Output& output, ImportOptions options) {
+  if (!options.privacy.empty()) {
+    privacy::PrivacyFilterConfig config;
+    Result<privacy::Redaction> redaction = privacy::parse_redaction(options.privacy);
+    if (!redaction) return report_failure(output, {{"format", options.format}}, "--privacy: " + redaction.error().message);
+    config.redaction = *redaction;
+    Result<std::unique_ptr<privacy::PrivacyFilter>> filter = privacy::PrivacyFilter::create(config);
+    if (!filter) return report_failure(output, {{"format", options.format}}, filter.error().message);
+    options.redaction = std::make_shared<ImageRedaction>();
+    options.redaction->filter = std::move(filter).value();
+  }
   if (options.format == "rosbag") return run_rosbag_import(output, options);
   if (options.format == "carmen") return run_carmen_import(output, options);
   if (options.format == "kitti") return run_kitti_import(output, options);
@@ -310,6 +329,8 @@ void add_import_command(CLI::App& app, const Output& output, Command& run) {
   command->add_flag("--no-images", options->no_images, "kitti, euroc: leave the camera images out");
   command->add_option("--poses", options->poses, "kitti: poses file (default SEQUENCE/../../poses/NN.txt when present)");
   command->add_option("--time-origin", options->time_origin, "kitti: Unix time (s) of times.txt's zero")->capture_default_str();
+  command->add_option("--privacy", options->privacy, "Blur (blur) or black out (black) faces and licence plates in camera images before they are written")
+      ->check(CLI::IsMember({"blur", "black"}));
   command->callback([&output, &run, options] { run = [&output, options] { return run_import(output, *options); }; });
 }
 

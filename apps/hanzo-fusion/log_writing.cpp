@@ -20,6 +20,16 @@ int write_log(const Output& output, nlohmann::json& result, const LogWriteOption
   config.image_compression = *image_compression;
   config.jpeg_quality = options.jpeg_quality;
   config.point_resolution = options.point_resolution;
+  if (const std::shared_ptr<ImageRedaction> redaction = options.redaction) {
+    config.image_filter = [redaction](msgs::ImageMessage& image) -> Status {
+      Result<std::vector<privacy::RedactedRegion>> regions = redaction->filter->apply(image);
+      if (!regions) return regions.error();
+      ++redaction->images;
+      if (!regions->empty()) ++redaction->redacted_images;
+      for (const privacy::RedactedRegion& region : *regions) ++(region.kind == "face" ? redaction->faces : redaction->licence_plates);
+      return ok_status();
+    };
+  }
   const std::string temporary = options.path + ".partial";
   auto writer = io::SensorLogWriter::open(temporary, config);
   if (!writer) return report_failure(output, result, writer.error().message);
@@ -33,6 +43,11 @@ int write_log(const Output& output, nlohmann::json& result, const LogWriteOption
   std::error_code ec;
   std::filesystem::rename(temporary, options.path, ec);
   if (ec) return report_failure(output, result, fmt::format("{}: cannot move into place ({})", options.path, ec.message()));
+  if (options.redaction) {
+    result["privacy"] = {{"redaction", privacy::to_string(options.redaction->filter->config().redaction)},
+                         {"images", options.redaction->images}, {"redacted_images", options.redaction->redacted_images},
+                         {"faces", options.redaction->faces}, {"licence_plates", options.redaction->licence_plates}};
+  }
   return 0;
 }
 

@@ -2,15 +2,27 @@
 // Writing a sensor log from a subcommand (import, sim): the log appears at its path only when
 // complete, so a failure never leaves a half-written log behind.
 
+#include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 
 #include <nlohmann/json.hpp>
 
 #include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/privacy/privacy_filter.hpp"
 #include "output.hpp"
 
 namespace hanzo::fusion::app {
+
+/// The privacy filter applied to every image before it is written, and what it found.
+struct ImageRedaction {
+  std::shared_ptr<privacy::PrivacyFilter> filter;
+  uint64_t images = 0;
+  uint64_t redacted_images = 0;
+  uint64_t faces = 0;
+  uint64_t licence_plates = 0;
+};
 
 struct LogWriteOptions {
   std::string path;                  ///< the .mcap to write
@@ -19,6 +31,8 @@ struct LogWriteOptions {
   std::string image_compression = "none";  ///< none, png or jpeg
   int jpeg_quality = 90;
   double point_resolution = 0.0;     ///< m; 0: exact point coordinates
+  /// When set, images are redacted before they are written; the counts go to result["privacy"].
+  std::shared_ptr<ImageRedaction> redaction;
 };
 
 /// Opens PATH.partial, lets `fill` write it, and renames it into place when complete. Returns 0,

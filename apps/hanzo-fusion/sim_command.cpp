@@ -99,7 +99,7 @@ int run_sim(const Output& output, const SimOptions& options) {
   const std::string log_path = (folder / "sensors.mcap").string();
   const io::Trajectory truth = ground_truth(run);
   const int code = write_log(output, result, {log_path, options.compression, options.foxglove, options.image_compression,
-                                                           options.jpeg_quality, options.point_resolution}, [&](io::SensorLogWriter& writer) -> Status {
+                                                           options.jpeg_quality, options.point_resolution, nullptr}, [&](io::SensorLogWriter& writer) -> Status {
     const GeodeticPoint& datum = run.scenario().datum;
     HANZO_RETURN_IF_ERROR(writer.add_metadata({"hanzo.simulation",
                                                {{"scenario", run.scenario().name},

@@ -102,6 +102,17 @@ Status SensorLogWriter::write_proto(const std::string& topic, const google::prot
 }
 
 Status SensorLogWriter::write(const std::string& topic, const msgs::SensorMessage& message, const std::string& sensor_name) {
+  if (config_.image_filter) {
+    if (const auto* image = std::get_if<msgs::ImageMessage>(&message)) {
+      msgs::ImageMessage filtered = *image;
+      if (Status passed = config_.image_filter(filtered); !passed) return Error(fmt::format("{}: {}", topic, passed.error().message));
+      return write_message(topic, msgs::SensorMessage(std::move(filtered)), sensor_name);
+    }
+  }
+  return write_message(topic, message, sensor_name);
+}
+
+Status SensorLogWriter::write_message(const std::string& topic, const msgs::SensorMessage& message, const std::string& sensor_name) {
   return std::visit(
       [&](const auto& typed) -> Status {
         if (Status valid = msgs::validate(typed); !valid) return Error(fmt::format("{}: {}", topic, valid.error().message), valid.error().field);

@@ -496,6 +496,26 @@ TEST(Cli, PrivacyBlurRedactsFacesOfAnImageOrAFolderAndRefusesBadInput) {
   const CliRun info = run(fmt::format("log info {} --json", (dir / "blurred.mcap").string()));
   ASSERT_EQ(info.exit_code, 0) << info.err;
   EXPECT_EQ(nlohmann::json::parse(info.out)["messages"], 107);
+  // `import --privacy`: a TUM RGB-D folder whose colour frames are the face photos; the faces are
+  // blurred before the log is written.
+  std::filesystem::create_directories(dir / "tum" / "rgb");
+  std::ofstream list(dir / "tum" / "rgb.txt");
+  list << "# timestamp filename\n";
+  for (const auto& [i, photo] : std::vector<std::pair<int, std::string>>{{0, "two_people.jpg"}, {1, "obama.jpg"}}) {
+    std::filesystem::copy_file(fmt::format("{}/privacy_faces/{}", HANZO_DATA_DIR, photo), dir / "tum" / "rgb" / fmt::format("{}.jpg", i));
+    list << fmt::format("{}.0 rgb/{}.jpg\n", 1700000000 + i, i);
+  }
+  list.close();
+  const CliRun imported = run(fmt::format("import tum-rgbd {} --out {} --privacy blur --json", (dir / "tum").string(), (dir / "tum.mcap").string()));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+  const nlohmann::json privacy = nlohmann::json::parse(imported.out)["privacy"];
+  EXPECT_EQ(privacy["images"], 2);
+  EXPECT_EQ(privacy["faces"], 3);
+  EXPECT_EQ(privacy["redaction"], "blur");
+  // Nothing with a face is left in the log.
+  const CliRun again = run(fmt::format("privacy blur {} {} --json", (dir / "tum.mcap").string(), (dir / "again.mcap").string()));
+  ASSERT_EQ(again.exit_code, 0) << again.err;
+  EXPECT_EQ(nlohmann::json::parse(again.out)["faces"], 0);
   const CliRun wrong_output = run(fmt::format("privacy blur {} {}", (dir / "sim" / "sensors.mcap").string(), (dir / "out.png").string()));
   EXPECT_EQ(wrong_output.exit_code, 1);
   EXPECT_THAT(wrong_output.err, HasSubstr("a sensor log is written to a .mcap file"));

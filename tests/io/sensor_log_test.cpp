@@ -187,6 +187,45 @@ msgs::ImageMessage camera_frame(msgs::ImageEncoding encoding, uint32_t width = 6
 
 // Images stored as PNG come back bit-identical, as JPEG within a few grey levels, as what they
 // were (encoding, size, intrinsics); depth32f stays raw. Bad files are named.
+// The image filter (the privacy filter of `import --privacy`) sees every image before it is
+// written, changes only the copy it is given, and an error from it fails the write.
+TEST(SensorLog, ImageFilterRunsBeforeImagesAreWritten) {
+  const std::string path = temp_path("filtered");
+  const msgs::ImageMessage original = camera_frame(msgs::ImageEncoding::kRgb8);
+  int filtered = 0;
+  SensorLogWriterConfig config;
+  config.image_filter = [&](msgs::ImageMessage& image) -> Status {
+    if (image.frame_id == "refuse") return Error("not allowed");
+    std::fill(image.data.begin(), image.data.end(), uint8_t{0});
+    ++filtered;
+    return ok_status();
+  };
+  {
+    auto writer = SensorLogWriter::open(path, config);
+    ASSERT_TRUE(writer.ok());
+    ASSERT_TRUE((*writer)->write("/camera", original).ok());
+    msgs::ImageMessage refused = original;
+    refused.frame_id = "refuse";
+    const Status error = (*writer)->write("/camera", refused);
+    ASSERT_FALSE(error.ok());
+    EXPECT_EQ(error.error().message, "/camera: not allowed");
+    ASSERT_TRUE((*writer)->close().ok());
+  }
+  EXPECT_EQ(filtered, 1);
+  EXPECT_NE(std::count(original.data.begin(), original.data.end(), uint8_t{0}), static_cast<long>(original.data.size()));
+  auto reader = SensorLogReader::open(path);
+  ASSERT_TRUE(reader.ok());
+  LogEntry entry;
+  int images = 0;
+  while ((*reader)->next(entry).value()) {
+    const auto& image = std::get<msgs::ImageMessage>(std::get<msgs::SensorMessage>(entry.message));
+    EXPECT_EQ(std::count(image.data.begin(), image.data.end(), uint8_t{0}), static_cast<long>(image.data.size()));
+    ++images;
+  }
+  EXPECT_EQ(images, 1);
+  std::filesystem::remove(path);
+}
+
 TEST(SensorLog, ImagesStoredAsPngOrJpegComeBackAsRawPixels) {
   for (const ImageCompression compression : {ImageCompression::kPng, ImageCompression::kJpeg}) {
     const std::string path = temp_path("images");

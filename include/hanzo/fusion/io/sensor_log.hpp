@@ -20,6 +20,7 @@
 // Readers of hanzo.fusion.v1 messages skip them.
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <optional>
@@ -60,6 +61,9 @@ struct SensorLogWriterConfig {
   /// Point clouds: 0 stores the exact float coordinates (packed); > 0 stores them as multiples
   /// of this many meters (msgs::PointEncoding::kQuantized), a third of the size compressed.
   double point_resolution = 0.0;
+  /// When set, every image passes through it (on a copy) before anything of it is written: the
+  /// privacy filter of `import --privacy`. An error fails the write.
+  std::function<Status(msgs::ImageMessage&)> image_filter;
 };
 
 class SensorLogWriter {
@@ -85,6 +89,7 @@ class SensorLogWriter {
   SensorLogWriter(std::unique_ptr<mcap::McapWriter> writer, SensorLogWriterConfig config)
       : mcap_(std::move(writer)), config_(std::move(config)) {}
   Status write_mirror(const std::string& topic, const google::protobuf::Message* mirror, Timestamp time);
+  Status write_message(const std::string& topic, const msgs::SensorMessage& message, const std::string& sensor_name);
 
   std::unique_ptr<mcap::McapWriter> mcap_;
   SensorLogWriterConfig config_;
