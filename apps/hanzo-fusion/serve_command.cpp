@@ -62,7 +62,7 @@ Result<std::shared_ptr<const service::TokenStore>> load_tokens(const ServeOption
   }
   if (!store) return store.error();
   if (!options.jwks_file.empty()) {
-    Result<std::shared_ptr<const service::JwtVerifier>> verifier = service::JwtVerifier::load(options.jwks_file, options.jwt);
+    Result<std::shared_ptr<const service::JwtVerifier>> verifier = service::JwtVerifier::open(options.jwks_file, options.jwt);
     if (!verifier) return verifier.error();
     store->set_jwt_verifier(*verifier);
   } else if (store->size() == 0) {
@@ -159,7 +159,7 @@ void add_serve_command(CLI::App& app, const Output& output, Command& run) {
       ->capture_default_str();
   command->add_option("--db", options->database, "Storage URL: sqlite://PATH or postgresql://USER@HOST:PORT/DB (default sqlite://DATA_DIR/fusion.db)");
   command->add_option("--tokens", options->tokens_file, "API token file (YAML; docs/server.md)");
-  command->add_option("--jwks", options->jwks_file, "JWKS file of an OIDC provider: bearer JWTs (RS256 / ES256) are accepted (docs/security.md)");
+  command->add_option("--jwks", options->jwks_file, "JWKS file or http(s) URL of an OIDC provider: bearer JWTs (RS256 / ES256) are accepted (docs/security.md)");
   command->add_option("--jwt-issuer", options->jwt.issuer, "The JWTs' required issuer (\"iss\"), with --jwks");
   command->add_option("--jwt-audience", options->jwt.audience, "The JWTs' required audience (\"aud\"), with --jwks");
   command->add_option("--jwt-organization-claim", options->jwt.organization_claim, "Claim naming the organization")->capture_default_str();

@@ -15,6 +15,10 @@
 #include <openssl/pem.h>
 
 #include "hanzo/fusion/core/base64.hpp"
+#include "hanzo/fusion/core/logging.hpp"
+
+// Last: httplib pulls in <resolv.h>, whose `_res` macro breaks headers included after it.
+#include <httplib.h>
 
 namespace hanzo::fusion::service {
 namespace {
@@ -89,6 +93,27 @@ Result<std::string> ec_pem(const json& key) {
   return public_key_pem("EC", builder.get());
 }
 
+int64_t unix_now() {
+  return std::chrono::duration_cast<std::chrono::seconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+// The body of a 200 answer to GET `url` (http or https), or why there is none.
+Result<std::string> http_get(const std::string& url) {
+  const std::size_t scheme_end = url.find("://");
+  if (scheme_end == std::string::npos) return Error(fmt::format("{}: not an http(s) URL", url));
+  const std::size_t path_start = url.find('/', scheme_end + 3);
+  const std::string origin = url.substr(0, path_start);
+  const std::string path = path_start == std::string::npos ? "/" : url.substr(path_start);
+  httplib::Client client(origin);
+  client.set_connection_timeout(5);
+  client.set_read_timeout(10);
+  client.set_follow_location(true);
+  const httplib::Result response = client.Get(path);
+  if (!response) return Error(fmt::format("{}: {}", url, httplib::to_string(response.error())));
+  if (response->status != 200) return Error(fmt::format("{}: HTTP {}", url, response->status));
+  return response->body;
+}
+
 ApiError unauthenticated(std::string reason) { return ApiError{ErrorCode::kUnauthenticated, "JWT refused: " + reason, "Authorization"}; }
 
 std::string utc(int64_t seconds) {
@@ -104,14 +129,12 @@ bool JwtVerifier::looks_like_jwt(std::string_view token) {
   return std::all_of(token.begin(), token.end(), [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == '.'; });
 }
 
-Result<std::shared_ptr<const JwtVerifier>> JwtVerifier::create(const std::string& jwks_json, JwtVerifierConfig config) {
-  if (config.issuer.empty()) return Error("JWT verification needs the issuer (--jwt-issuer)");
-  if (config.audience.empty()) return Error("JWT verification needs the audience (--jwt-audience)");
+Result<JwtVerifier::KeySet> JwtVerifier::parse_keys(const std::string& jwks_json) {
   const json jwks = json::parse(jwks_json, nullptr, false);
   if (jwks.is_discarded() || !jwks.is_object() || !jwks.contains("keys") || !jwks["keys"].is_array()) {
     return Error("JWKS: expected a JSON object with a \"keys\" list");
   }
-  std::shared_ptr<JwtVerifier> verifier(new JwtVerifier(std::move(config)));
+  KeySet keys;
   for (std::size_t i = 0; i < jwks["keys"].size(); ++i) {
     const json& key = jwks["keys"][i];
     const std::string kid = key.is_object() ? key.value("kid", "") : "";
@@ -132,10 +155,26 @@ Result<std::shared_ptr<const JwtVerifier>> JwtVerifier::create(const std::string
     }
     if (!pem) return Error(where + ": " + pem.error().message);
     if (key.contains("alg") && key["alg"] != algorithm) continue;  // e.g. an RSA key for PS256
-    if (!verifier->keys_.emplace(kid, Key{algorithm, *pem}).second) return Error(where + ": kid listed twice");
+    if (!keys.emplace(kid, Key{algorithm, *pem}).second) return Error(where + ": kid listed twice");
   }
-  if (verifier->keys_.empty()) return Error("JWKS: no RS256 or ES256 signing key");
+  if (keys.empty()) return Error("JWKS: no RS256 or ES256 signing key");
+  return keys;
+}
+
+Result<std::shared_ptr<const JwtVerifier>> JwtVerifier::make(const std::string& jwks_json, JwtVerifierConfig config, std::string url) {
+  if (config.issuer.empty()) return Error("JWT verification needs the issuer (--jwt-issuer)");
+  if (config.audience.empty()) return Error("JWT verification needs the audience (--jwt-audience)");
+  KeySet keys;
+  HANZO_ASSIGN_OR_RETURN(keys, parse_keys(jwks_json));
+  std::shared_ptr<JwtVerifier> verifier(new JwtVerifier(std::move(config)));
+  verifier->keys_ = std::make_shared<const KeySet>(std::move(keys));
+  verifier->url_ = std::move(url);
+  verifier->last_fetch_s_ = verifier->url_.empty() ? 0 : unix_now();
   return std::shared_ptr<const JwtVerifier>(std::move(verifier));
+}
+
+Result<std::shared_ptr<const JwtVerifier>> JwtVerifier::create(const std::string& jwks_json, JwtVerifierConfig config) {
+  return make(jwks_json, std::move(config), "");
 }
 
 Result<std::shared_ptr<const JwtVerifier>> JwtVerifier::load(const std::string& jwks_path, JwtVerifierConfig config) {
@@ -144,6 +183,56 @@ Result<std::shared_ptr<const JwtVerifier>> JwtVerifier::load(const std::string& 
   std::stringstream text;
   text << in.rdbuf();
   return with_context(create(text.str(), std::move(config)), jwks_path);
+}
+
+Result<std::shared_ptr<const JwtVerifier>> JwtVerifier::fetch(const std::string& jwks_url, JwtVerifierConfig config) {
+  std::string body;
+  HANZO_ASSIGN_OR_RETURN(body, http_get(jwks_url));
+  return with_context(make(body, std::move(config), jwks_url), jwks_url);
+}
+
+Result<std::shared_ptr<const JwtVerifier>> JwtVerifier::open(const std::string& jwks_file_or_url, JwtVerifierConfig config) {
+  if (jwks_file_or_url.starts_with("http://") || jwks_file_or_url.starts_with("https://")) return fetch(jwks_file_or_url, std::move(config));
+  return load(jwks_file_or_url, std::move(config));
+}
+
+std::size_t JwtVerifier::key_count() const {
+  std::lock_guard lock(mutex_);
+  return keys_->size();
+}
+
+std::optional<JwtVerifier::Key> JwtVerifier::find_key(const std::string& kid) const {
+  std::shared_ptr<const KeySet> keys;
+  {
+    std::lock_guard lock(mutex_);
+    keys = keys_;
+  }
+  const auto lookup = [&kid](const KeySet& set) -> std::optional<Key> {
+    auto key = set.find(kid);
+    if (key == set.end() && kid.empty() && set.size() == 1) key = set.begin();
+    if (key == set.end()) return std::nullopt;
+    return key->second;
+  };
+  if (std::optional<Key> found = lookup(*keys); found || url_.empty()) return found;
+  // Unknown kid with keys from a URL: the provider may have rotated them.
+  {
+    std::lock_guard lock(mutex_);
+    const int64_t now = unix_now();
+    if (now - last_fetch_s_ < config_.refetch_interval_s) return lookup(*keys_);
+    last_fetch_s_ = now;
+  }
+  Result<std::string> body = http_get(url_);
+  Result<KeySet> fetched = body ? parse_keys(*body) : Result<KeySet>(body.error());
+  if (!fetched) {
+    logger()->warn("JWKS {}: refetch failed, keeping the previous keys: {}", url_, fetched.error().message);
+    return std::nullopt;
+  }
+  auto fresh = std::make_shared<const KeySet>(std::move(fetched).value());
+  {
+    std::lock_guard lock(mutex_);
+    keys_ = fresh;
+  }
+  return lookup(*fresh);
 }
 
 ApiResult<Principal> JwtVerifier::verify(std::string_view token, int64_t now_s) const {
@@ -156,14 +245,13 @@ ApiResult<Principal> JwtVerifier::verify(std::string_view token, int64_t now_s) 
   const std::string algorithm = header["alg"];
   if (algorithm != "RS256" && algorithm != "ES256") return unauthenticated(fmt::format("algorithm '{}' (RS256 or ES256 accepted)", algorithm));
   const std::string kid = header.value("kid", "");
-  auto key = keys_.find(kid);
-  if (key == keys_.end() && kid.empty() && keys_.size() == 1) key = keys_.begin();
-  if (key == keys_.end()) return unauthenticated(fmt::format("no key '{}' in the JWKS", kid));
-  if (key->second.algorithm != algorithm) return unauthenticated(fmt::format("key '{}' is not an {} key", kid, algorithm));
+  const std::optional<Key> key = find_key(kid);
+  if (!key) return unauthenticated(fmt::format("no key '{}' in the JWKS", kid));
+  if (key->algorithm != algorithm) return unauthenticated(fmt::format("key '{}' is not an {} key", kid, algorithm));
   const std::string token_text(token);
   jwt_t* decoded = nullptr;
-  if (jwt_decode(&decoded, token_text.c_str(), reinterpret_cast<const unsigned char*>(key->second.pem.data()),
-                 static_cast<int>(key->second.pem.size())) != 0 || decoded == nullptr) {
+  if (jwt_decode(&decoded, token_text.c_str(), reinterpret_cast<const unsigned char*>(key->pem.data()),
+                 static_cast<int>(key->pem.size())) != 0 || decoded == nullptr) {
     return unauthenticated("the signature does not verify");
   }
   std::unique_ptr<jwt_t, decltype(&jwt_free)> owner(decoded, &jwt_free);
@@ -182,7 +270,7 @@ ApiResult<Principal> JwtVerifier::verify(std::string_view token, int64_t now_s) 
     for (const json& audience : claims["aud"]) audience_ok = audience_ok || audience == config_.audience;
   }
   if (!audience_ok) return unauthenticated(fmt::format("audience {} is not '{}'", claims.contains("aud") ? claims["aud"].dump() : "missing", config_.audience));
-  const int64_t now = now_s != 0 ? now_s : std::chrono::duration_cast<std::chrono::seconds>(std::chrono::system_clock::now().time_since_epoch()).count();
+  const int64_t now = now_s != 0 ? now_s : unix_now();
   if (!claims.contains("exp") || !claims["exp"].is_number()) return unauthenticated("no expiry (\"exp\")");
   const auto exp = claims["exp"].get<int64_t>();
   if (now > exp + config_.leeway_s) return unauthenticated(fmt::format("token expired at {}", utc(exp)));

@@ -1,11 +1,15 @@
 // Bearer JWTs of an OIDC provider: tokens signed here with fresh RSA-2048 and P-256 keys (libjwt,
 // OpenSSL), published as a JWKS, verified by JwtVerifier and through authenticate_bearer; every
 // refusal is a 401 with its reason, a missing scope a 403.
+#include <chrono>
 #include <memory>
+#include <mutex>
+#include <thread>
 #include <string>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <fmt/format.h>
 #include <jwt.h>
 #include <nlohmann/json.hpp>
 #include <openssl/bn.h>
@@ -16,6 +20,9 @@
 #include "hanzo/fusion/core/base64.hpp"
 #include "hanzo/fusion/service/auth.hpp"
 #include "hanzo/fusion/service/jwt_verifier.hpp"
+
+// Last: httplib pulls in <resolv.h>, whose `_res` macro breaks headers included after it.
+#include <httplib.h>
 
 namespace hanzo::fusion::service {
 namespace {
@@ -203,6 +210,44 @@ TEST_F(JwtVerifierTest, BearerHeadersReachTheVerifierAndScopesDecide) {
   ASSERT_FALSE(maps.ok());
   EXPECT_EQ(maps.error().code, ErrorCode::kPermissionDenied);
   EXPECT_EQ(authorize(principal.value(), Permission::kSessionRead, "globex").error().code, ErrorCode::kPermissionDenied);
+}
+
+// Keys from the provider's jwks_uri (a local HTTP server): fetched at start, fetched again when a
+// token names a kid the keys lack (the provider rotated its keys).
+TEST(JwtVerifier, FetchesKeysFromAUrlAndRefetchesWhenTheProviderRotates) {
+  const SigningKey first = make_key(true, "rsa-1");
+  const SigningKey second = make_key(false, "ec-2");
+  std::mutex mutex;
+  std::string served = json{{"keys", {first.jwk}}}.dump();
+  httplib::Server server;
+  server.Get("/jwks.json", [&](const httplib::Request&, httplib::Response& response) {
+    std::lock_guard lock(mutex);
+    response.set_content(served, "application/json");
+  });
+  const int port = server.bind_to_any_port("127.0.0.1");
+  std::thread thread([&] { server.listen_after_bind(); });
+  while (!server.is_running()) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const std::string url = fmt::format("http://127.0.0.1:{}/jwks.json", port);
+  JwtVerifierConfig config{"https://login.example.com/", "hanzo-fusion"};
+  config.refetch_interval_s = 0;
+  auto verifier = JwtVerifier::open(url, config);
+  ASSERT_TRUE(verifier.ok()) << verifier.error().message;
+  EXPECT_TRUE((*verifier)->verify(sign(first, claims(), "rsa-1"), kNow).ok());
+  EXPECT_FALSE((*verifier)->verify(sign(second, claims(), "ec-2"), kNow).ok());
+  {
+    std::lock_guard lock(mutex);
+    served = json{{"keys", {second.jwk}}}.dump();
+  }
+  auto rotated = (*verifier)->verify(sign(second, claims(), "ec-2"), kNow);
+  EXPECT_TRUE(rotated.ok()) << rotated.error().message;
+  // The provider's answer gone: the refetch fails, the keys it had stay.
+  server.stop();
+  thread.join();
+  EXPECT_TRUE((*verifier)->verify(sign(second, claims(), "ec-2"), kNow).ok());
+  EXPECT_THAT((*verifier)->verify(sign(first, claims(), "rsa-9"), kNow).error().message, HasSubstr("no key 'rsa-9'"));
+  auto unreachable = JwtVerifier::open(url, config);
+  ASSERT_FALSE(unreachable.ok());
+  EXPECT_THAT(unreachable.error().message, HasSubstr(url));
 }
 
 TEST(JwtVerifier, RefusesBadKeySets) {

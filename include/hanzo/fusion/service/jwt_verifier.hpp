@@ -16,9 +16,15 @@
 // the `scope_claim` (default "scope": a space-separated string or a list; other scopes are
 // ignored). A token without the organization claim is refused; one without fusion scopes is
 // accepted with no permissions (every request then gets 403).
+//
+// Keys from a URL (the provider's jwks_uri, http or https): fetched when the verifier is made,
+// and again when a token names a kid the keys lack (the provider rotated its keys), at most once
+// per `refetch_interval_s`; a failed refetch keeps the keys it had.
 
 #include <cstdint>
 #include <map>
+#include <mutex>
+#include <optional>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -35,6 +41,7 @@ struct JwtVerifierConfig {
   std::string organization_claim = "org";
   std::string scope_claim = "scope";
   int64_t leeway_s = 60;                    ///< clock skew allowed on exp / nbf / iat
+  int64_t refetch_interval_s = 60;          ///< keys from a URL: least time between two fetches
 };
 
 class JwtVerifier {
@@ -43,12 +50,16 @@ class JwtVerifier {
   /// keys of other types are skipped, a malformed key is an error naming it.
   static Result<std::shared_ptr<const JwtVerifier>> create(const std::string& jwks_json, JwtVerifierConfig config);
   static Result<std::shared_ptr<const JwtVerifier>> load(const std::string& jwks_path, JwtVerifierConfig config);
+  /// The keys of an http:// or https:// URL (see the header comment).
+  static Result<std::shared_ptr<const JwtVerifier>> fetch(const std::string& jwks_url, JwtVerifierConfig config);
+  /// fetch() for http(s) URLs, load() otherwise.
+  static Result<std::shared_ptr<const JwtVerifier>> open(const std::string& jwks_file_or_url, JwtVerifierConfig config);
   ~JwtVerifier();
 
   /// The principal of a valid token; kUnauthenticated with the reason otherwise. `now_s`: Unix
   /// time (seconds) to check against (0: the system clock).
   ApiResult<Principal> verify(std::string_view token, int64_t now_s = 0) const;
-  std::size_t key_count() const { return keys_.size(); }
+  std::size_t key_count() const;
 
   /// Whether the text has a JWT's shape (three dot-separated base64url parts).
   static bool looks_like_jwt(std::string_view token);
@@ -58,9 +69,18 @@ class JwtVerifier {
     std::string algorithm;  // "RS256" or "ES256"
     std::string pem;        // SubjectPublicKeyInfo PEM
   };
+  using KeySet = std::map<std::string, Key>;  // by kid ("" for a key without one)
   explicit JwtVerifier(JwtVerifierConfig config) : config_(std::move(config)) {}
+  static Result<KeySet> parse_keys(const std::string& jwks_json);
+  static Result<std::shared_ptr<const JwtVerifier>> make(const std::string& jwks_json, JwtVerifierConfig config, std::string url);
+  /// The key for `kid`, refetching the URL's keys once when it is unknown.
+  std::optional<Key> find_key(const std::string& kid) const;
+
   JwtVerifierConfig config_;
-  std::map<std::string, Key> keys_;  // by kid ("" for a key without one)
+  std::string url_;  // "" for keys from a file
+  mutable std::mutex mutex_;
+  mutable std::shared_ptr<const KeySet> keys_;
+  mutable int64_t last_fetch_s_ = 0;
 };
 
 }  // namespace hanzo::fusion::service
