@@ -14,8 +14,9 @@ cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_C_
   -DCMAKE_C_FLAGS="$SANITIZE" -DCMAKE_CXX_FLAGS="$SANITIZE" -DHANZO_FUZZ_LIBFUZZER=ON -DHANZO_WERROR=OFF \
   -DHANZO_BUILD_APPS=OFF -DHANZO_BUILD_PYTHON=OFF -DHANZO_BUILD_BENCHMARKS=OFF -DPython_EXECUTABLE=/usr/bin/python3 > "$BUILD_DIR.configure.log" 2>&1 \
   || { cat "$BUILD_DIR.configure.log"; exit 1; }
-cmake --build "$BUILD_DIR" --target fuzz_json_requests fuzz_proto_messages
-for target in json_requests proto_messages; do
+targets=(json_requests proto_messages encrypted_files jwt_tokens)
+cmake --build "$BUILD_DIR" --target "${targets[@]/#/fuzz_}"
+for target in "${targets[@]}"; do
   mkdir -p "$BUILD_DIR/corpus/$target"
   echo "== fuzz_$target for ${FUZZ_SECONDS} s"
   "$BUILD_DIR/fuzz/fuzz_$target" -max_total_time="$FUZZ_SECONDS" -print_final_stats=1 "$BUILD_DIR/corpus/$target" "fuzz/corpus/$target"
