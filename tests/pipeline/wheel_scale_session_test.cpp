@@ -112,29 +112,18 @@ TEST(WheelScaleSession, EstimatesTheGyroYawRateScaleWhenTheWheelsYawIsFused) {
   }
   auto simulation = sim::ScenarioSimulation::create(scenario).value();
   auto session = Session::create(fusion, sim::scenario_calibration(scenario)).value();
-  io::Trajectory estimate, truth;
+  const testing::ReplayedTrajectories replayed = testing::replay(*simulation, *session);
   double worst_in_outage = 0.0;
-  session->set_pose_callback([&](const msgs::PoseEstimate& pose) {
-    if (!estimate.timestamps.empty() && (pose.timestamp - estimate.timestamps.back()).seconds() < 0.1) return;
-    const Eigen::Matrix4d true_pose = simulation->trajectory().sample(pose.timestamp).T_world_body.matrix();
-    estimate.timestamps.push_back(pose.timestamp);
-    estimate.poses.push_back(pose.T_world_body.to_se3().matrix());
-    truth.timestamps.push_back(pose.timestamp);
-    truth.poses.push_back(true_pose);
-    const double t = (pose.timestamp - scenario.start_time).seconds();
-    if (t > 40.0 && t < 72.0) {
-      worst_in_outage = std::max(worst_in_outage, (pose.T_world_body.position - true_pose.block<3, 1>(0, 3)).head<2>().norm());
-    }
-  });
-  ASSERT_TRUE(simulation->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
-    (void)session->push(sensor.name, std::move(message));
-    return ok_status();
-  }).ok());
-  session->flush();
+  for (std::size_t i = 0; i < replayed.estimate.size(); ++i) {
+    const double t = (replayed.estimate.timestamps[i] - scenario.start_time).seconds();
+    if (t <= 40.0 || t >= 72.0) continue;
+    const Eigen::Vector3d error = replayed.estimate.poses[i].block<3, 1>(0, 3) - replayed.truth.poses[i].block<3, 1>(0, 3);
+    worst_in_outage = std::max(worst_in_outage, error.head<2>().norm());
+  }
   const SessionSummary summary = session->summary();
   ASSERT_TRUE(summary.wheel_speed_scale);
   ASSERT_TRUE(summary.gyro_yaw_scale);
-  const double real_time = ape_rmse(truth, estimate);
+  const double real_time = ape_rmse(replayed.truth, replayed.estimate);
   std::printf("wheels 2 %% long, gyro yaw 1 %% high, wheels' yaw rate fused, 30 s GNSS outage: APE %.3f m, worst in the outage %.2f m; "
               "wheel speed scale %.4f +- %.4f, gyro yaw scale %.4f +- %.4f\n",
               real_time, worst_in_outage, *summary.wheel_speed_scale, summary.wheel_speed_scale_sigma, *summary.gyro_yaw_scale,
