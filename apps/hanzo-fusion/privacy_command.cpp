@@ -11,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "commands.hpp"
+#include "hanzo/fusion/crypto/file_encryption.hpp"
 #include "hanzo/fusion/privacy/log_redaction.hpp"
 
 namespace hanzo::fusion::app {
@@ -28,6 +29,8 @@ struct PrivacyOptions {
 };
 
 bool is_log_file(const std::filesystem::path& path) { return path.extension() == ".mcap"; }
+// A sensor log to read: .mcap, or any file encrypted at rest (logs are what is encrypted).
+bool is_input_log(const std::filesystem::path& path) { return is_log_file(path) || crypto::is_encrypted_file(path.string()); }
 
 // A sensor log (privacy/log_redaction.hpp).
 int redact_log_file(const Output& output, nlohmann::json result, privacy::PrivacyFilter& filter, const PrivacyOptions& options) {
@@ -103,7 +106,7 @@ int run_blur(const Output& output, const PrivacyOptions& options) {
   Result<std::unique_ptr<privacy::PrivacyFilter>> filter = privacy::PrivacyFilter::create(config);
   if (!filter) return report_failure(output, result, filter.error().message);
 
-  if (is_log_file(options.input)) {
+  if (is_input_log(options.input)) {
     if (!std::filesystem::is_regular_file(options.input)) return report_failure(output, result, fmt::format("{}: no such file", options.input));
     if (!is_log_file(options.output)) return report_failure(output, result, fmt::format("{}: a sensor log is written to a .mcap file", options.output));
     return redact_log_file(output, result, **filter, options);

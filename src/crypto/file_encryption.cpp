@@ -1,10 +1,14 @@
 #include "hanzo/fusion/crypto/file_encryption.hpp"
 
+#include <sys/mman.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
@@ -264,6 +268,37 @@ Result<std::string> decrypt_file(const std::string& input, const std::string& ou
   std::ifstream in(input, std::ios::binary);
   if (!in) return Error(fmt::format("{}: cannot read", input));
   return with_context(write_atomically(output, [&](std::ofstream& out) { return decrypt_stream(in, out, keys); }), input);
+}
+
+Result<std::vector<EncryptionKey>> keys_from_environment() {
+  std::vector<EncryptionKey> keys;
+  const char* value = std::getenv("HANZO_ENCRYPTION_KEY");
+  if (value == nullptr) return keys;
+  std::string_view text(value);
+  while (!text.empty()) {
+    const std::size_t comma = text.find(',');
+    Result<EncryptionKey> key = EncryptionKey::from_hex(text.substr(0, comma));
+    if (!key) return with_context(Result<std::vector<EncryptionKey>>(key.error()), "HANZO_ENCRYPTION_KEY");
+    keys.push_back(*key);
+    if (comma == std::string_view::npos) break;
+    text.remove_prefix(comma + 1);
+  }
+  return keys;
+}
+
+Result<int> decrypt_to_memory_file(const std::string& path, const std::vector<EncryptionKey>& keys) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Error(fmt::format("{}: cannot read", path));
+  const int fd = ::memfd_create("hanzo-decrypted", MFD_CLOEXEC);
+  if (fd < 0) return Error(fmt::format("{}: cannot make an in-memory file ({})", path, std::strerror(errno)));
+  std::ofstream out(fmt::format("/proc/self/fd/{}", fd), std::ios::binary);
+  Result<std::string> used = decrypt_stream(in, out, keys);
+  out.close();
+  if (!used || !out) {
+    ::close(fd);
+    return Error(fmt::format("{}: {}", path, used ? "writing the decrypted copy failed" : used.error().message));
+  }
+  return fd;
 }
 
 std::string encrypt(std::string_view plaintext, const EncryptionKey& key) {

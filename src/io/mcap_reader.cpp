@@ -145,7 +145,15 @@ Result<std::unique_ptr<McapReader>> McapReader::open(const std::string& path, co
   std::unique_ptr<McapReader> reader(new McapReader());
   reader->config_ = config;
   reader->path_ = path;
-  reader->fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (crypto::is_encrypted_file(path)) {
+    // Encrypted at rest (crypto/file_encryption.hpp): read a decrypted copy held in memory.
+    std::vector<crypto::EncryptionKey> keys = config.decryption_keys;
+    if (keys.empty()) HANZO_ASSIGN_OR_RETURN(keys, crypto::keys_from_environment());
+    if (keys.empty()) return Error(fmt::format("{}: the file is encrypted; set HANZO_ENCRYPTION_KEY to its key", path));
+    HANZO_ASSIGN_OR_RETURN(reader->fd_, crypto::decrypt_to_memory_file(path, keys));
+  } else {
+    reader->fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  }
   if (reader->fd_ < 0) return Error(fmt::format("{}: cannot open file ({})", path, std::strerror(errno)));
   struct stat info {};
   if (::fstat(reader->fd_, &info) != 0) return Error(fmt::format("{}: cannot stat ({})", path, std::strerror(errno)));

@@ -552,7 +552,23 @@ TEST(Cli, CryptoEncryptsAndDecryptsWithKeyFilesOrTheEnvironment) {
   EXPECT_EQ(cut.exit_code, 1);
   EXPECT_THAT(cut.err, HasSubstr("truncated"));
   EXPECT_FALSE(std::filesystem::exists(dir / "cut.yaml"));
+  // An encrypted sensor log reads like the plain one with the key in the environment.
+  ASSERT_EQ(run(fmt::format("sim examples/scenarios/camera_checkerboard.yaml --out {} --duration 1 --no-foxglove", (dir / "sim").string())).exit_code, 0);
+  const std::string log = (dir / "sim" / "sensors.mcap").string(), sealed_log = (dir / "sensors.mcap.enc").string();
+  ASSERT_EQ(run(fmt::format("crypto encrypt {} {} --key {}", log, sealed_log, key)).exit_code, 0);
+  std::ifstream key_file(key);
+  const std::string key_hex((std::istreambuf_iterator<char>(key_file)), {});
+  ::setenv("HANZO_ENCRYPTION_KEY", key_hex.substr(0, 64).c_str(), 1);
+  const CliRun info = run(fmt::format("log info {} --json", sealed_log));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_EQ(nlohmann::json::parse(info.out)["messages"], 107);
+  const CliRun redacted = run(fmt::format("privacy blur {} {} --json", sealed_log, (dir / "redacted.mcap").string()));
+  ASSERT_EQ(redacted.exit_code, 0) << redacted.err;
+  EXPECT_EQ(nlohmann::json::parse(redacted.out)["images"], 6);
   ::unsetenv("HANZO_ENCRYPTION_KEY");
+  const CliRun locked = run(fmt::format("log info {}", sealed_log));
+  EXPECT_EQ(locked.exit_code, 1);
+  EXPECT_THAT(locked.err, HasSubstr("the file is encrypted; set HANZO_ENCRYPTION_KEY to its key"));
   const CliRun no_key = run(fmt::format("crypto encrypt {} {}", plain, (dir / "x.enc").string()));
   EXPECT_EQ(no_key.exit_code, 1);
   EXPECT_THAT(no_key.err, HasSubstr("HANZO_ENCRYPTION_KEY is not set"));

@@ -1,3 +1,4 @@
+#include "hanzo/fusion/crypto/file_encryption.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
 
 #include <cmath>
@@ -189,6 +190,36 @@ msgs::ImageMessage camera_frame(msgs::ImageEncoding encoding, uint32_t width = 6
 // were (encoding, size, intrinsics); depth32f stays raw. Bad files are named.
 // The image filter (the privacy filter of `import --privacy`) sees every image before it is
 // written, changes only the copy it is given, and an error from it fails the write.
+// A log encrypted at rest (crypto/file_encryption.hpp) reads like the plain one with its key in
+// HANZO_ENCRYPTION_KEY (or among several, comma-separated); without it the reader says so.
+TEST(SensorLog, EncryptedLogsAreReadWithTheKeyFromTheEnvironment) {
+  const std::string plain = temp_path("plain"), sealed = temp_path("sealed");
+  {
+    auto writer = SensorLogWriter::open(plain);
+    ASSERT_TRUE(writer.ok());
+    ASSERT_TRUE((*writer)->write("/imu", msgs::SensorMessage(fixtures::imu())).ok());
+    ASSERT_TRUE((*writer)->close().ok());
+  }
+  const crypto::EncryptionKey key = crypto::EncryptionKey::generate();
+  ASSERT_TRUE(crypto::encrypt_file(plain, sealed, key).ok());
+  ::unsetenv("HANZO_ENCRYPTION_KEY");
+  auto refused = SensorLogReader::open(sealed);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("the file is encrypted; set HANZO_ENCRYPTION_KEY"), std::string::npos);
+  const std::string keys = crypto::EncryptionKey::generate().to_hex() + "," + key.to_hex();
+  ::setenv("HANZO_ENCRYPTION_KEY", keys.c_str(), 1);
+  auto reader = SensorLogReader::open(sealed);
+  ::unsetenv("HANZO_ENCRYPTION_KEY");
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  LogEntry entry;
+  ASSERT_TRUE((*reader)->next(entry).value());
+  EXPECT_EQ(entry.topic, "/imu");
+  EXPECT_EQ(std::get<msgs::ImuMessage>(std::get<msgs::SensorMessage>(entry.message)).angular_velocity, fixtures::imu().angular_velocity);
+  EXPECT_FALSE((*reader)->next(entry).value());
+  std::filesystem::remove(plain);
+  std::filesystem::remove(sealed);
+}
+
 TEST(SensorLog, ImageFilterRunsBeforeImagesAreWritten) {
   const std::string path = temp_path("filtered");
   const msgs::ImageMessage original = camera_frame(msgs::ImageEncoding::kRgb8);

@@ -68,6 +68,15 @@ Status encrypt_file(const std::string& input, const std::string& output, const E
 /// unless every chunk authenticated and the final one was reached. Returns the key id used.
 Result<std::string> decrypt_file(const std::string& input, const std::string& output, const std::vector<EncryptionKey>& keys);
 
+/// The keys of $HANZO_ENCRYPTION_KEY: one key, or several separated by commas (during a
+/// rotation); empty when it is not set.
+Result<std::vector<EncryptionKey>> keys_from_environment();
+
+/// Decrypts `path` into an anonymous in-memory file (memfd_create: nothing reaches the disk) and
+/// returns its descriptor, positioned at 0; the caller closes it. Readers that take a path read
+/// it as "/proc/self/fd/<fd>". Refused as decrypt_file refuses.
+Result<int> decrypt_to_memory_file(const std::string& path, const std::vector<EncryptionKey>& keys);
+
 /// The same on memory (small files, tests).
 std::string encrypt(std::string_view plaintext, const EncryptionKey& key);
 Result<std::string> decrypt(std::string_view ciphertext, const std::vector<EncryptionKey>& keys);

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/crypto/file_encryption.hpp"
 
 namespace hanzo::fusion::io::mcap {
 
@@ -164,6 +165,9 @@ struct McapReaderConfig {
   /// Check chunk CRCs as chunks are decompressed and the summary CRC at open (a mismatch is an
   /// error naming the offset). The data-section CRC is checked by McapReader::verify().
   bool validate_crcs = true;
+  /// A file encrypted at rest (crypto/file_encryption.hpp) is decrypted into memory with these
+  /// keys, or with $HANZO_ENCRYPTION_KEY's when empty; nothing decrypted reaches the disk.
+  std::vector<crypto::EncryptionKey> decryption_keys;
 };
 
 /// Which messages to read: log_time in [start_time, end_time] on the listed topics (all when empty).
