@@ -29,7 +29,10 @@ TEST(FileEncryption, RoundTripsExactly) {
     const std::string plaintext = random_bytes(size, static_cast<uint32_t>(size));
     const std::string ciphertext = encrypt(plaintext, key);
     EXPECT_TRUE(is_encrypted(ciphertext));
-    EXPECT_EQ(ciphertext.find(plaintext.substr(0, std::min<std::size_t>(size, 64))), size == 0 ? 0 : std::string::npos);
+    // No 64-byte run of the plaintext shows in the ciphertext (shorter runs can match by chance).
+    if (size >= 64) {
+      EXPECT_EQ(ciphertext.find(plaintext.substr(0, 64)), std::string::npos);
+    }
     auto decrypted = decrypt(ciphertext, {key});
     ASSERT_TRUE(decrypted.ok()) << decrypted.error().message;
     EXPECT_EQ(*decrypted, plaintext) << size;
