@@ -24,9 +24,7 @@ int write_log(const Output& output, nlohmann::json& result, const LogWriteOption
     config.image_filter = [redaction](msgs::ImageMessage& image) -> Status {
       Result<std::vector<privacy::RedactedRegion>> regions = redaction->filter->apply(image);
       if (!regions) return regions.error();
-      ++redaction->images;
-      if (!regions->empty()) ++redaction->redacted_images;
-      for (const privacy::RedactedRegion& region : *regions) ++(region.kind == "face" ? redaction->faces : redaction->licence_plates);
+      privacy::count_regions(*regions, redaction->counts);
       return ok_status();
     };
   }
@@ -44,9 +42,9 @@ int write_log(const Output& output, nlohmann::json& result, const LogWriteOption
   std::filesystem::rename(temporary, options.path, ec);
   if (ec) return report_failure(output, result, fmt::format("{}: cannot move into place ({})", options.path, ec.message()));
   if (options.redaction) {
-    result["privacy"] = {{"redaction", privacy::to_string(options.redaction->filter->config().redaction)},
-                         {"images", options.redaction->images}, {"redacted_images", options.redaction->redacted_images},
-                         {"faces", options.redaction->faces}, {"licence_plates", options.redaction->licence_plates}};
+    const privacy::TopicRedactionCounts& counts = options.redaction->counts;
+    result["privacy"] = {{"redaction", privacy::to_string(options.redaction->filter->config().redaction)}, {"images", counts.images},
+                         {"redacted_images", counts.redacted_images}, {"faces", counts.faces}, {"licence_plates", counts.licence_plates}};
   }
   return 0;
 }

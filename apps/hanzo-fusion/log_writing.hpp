@@ -10,7 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "hanzo/fusion/io/sensor_log.hpp"
-#include "hanzo/fusion/privacy/privacy_filter.hpp"
+#include "hanzo/fusion/privacy/log_redaction.hpp"
 #include "output.hpp"
 
 namespace hanzo::fusion::app {
@@ -18,10 +18,7 @@ namespace hanzo::fusion::app {
 /// The privacy filter applied to every image before it is written, and what it found.
 struct ImageRedaction {
   std::shared_ptr<privacy::PrivacyFilter> filter;
-  uint64_t images = 0;
-  uint64_t redacted_images = 0;
-  uint64_t faces = 0;
-  uint64_t licence_plates = 0;
+  privacy::TopicRedactionCounts counts;
 };
 
 struct LogWriteOptions {

@@ -83,14 +83,14 @@ Result<nlohmann::json> redact_file(privacy::PrivacyFilter& filter, const std::fi
   }
   if (!written) return Error(fmt::format("{}: cannot write (unknown image extension or unwritable folder)", output.string()));
   nlohmann::json boxes = nlohmann::json::array();
-  int faces = 0, plates = 0;
+  privacy::TopicRedactionCounts counts;
+  privacy::count_regions(regions, counts);
   for (const privacy::RedactedRegion& region : regions) {
-    (region.kind == "face" ? faces : plates) += 1;
     boxes.push_back({{"kind", region.kind}, {"x", region.box.x}, {"y", region.box.y}, {"width", region.box.width},
                      {"height", region.box.height}, {"score", region.score}});
   }
   return nlohmann::json{{"input", input.string()}, {"output", output.string()}, {"width", image.cols}, {"height", image.rows},
-                        {"faces", faces}, {"licence_plates", plates}, {"regions", boxes}};
+                        {"faces", counts.faces}, {"licence_plates", counts.licence_plates}, {"regions", boxes}};
 }
 
 int run_blur(const Output& output, const PrivacyOptions& options) {

@@ -21,8 +21,10 @@ Eigen::Vector3d sensor_velocity(const NavigationState& state, const SE3& T_body_
   const Eigen::Vector3d& lever = T_body_sensor.translation();
   Eigen::Matrix3d rate_by_gyro_bias;
   Eigen::Vector3d rate_by_yaw_scale;
-  const Eigen::Vector3d rate = body_rate(state, gyro, &rate_by_gyro_bias, &rate_by_yaw_scale);
-  if (jacobian != nullptr) {
+  const bool derivatives = jacobian != nullptr;
+  const Eigen::Vector3d rate =
+      body_rate(state, gyro, derivatives ? &rate_by_gyro_bias : nullptr, derivatives ? &rate_by_yaw_scale : nullptr);
+  if (derivatives) {
     // d(w x l) = -[l]x dw.
     jacobian->setZero();
     jacobian->block<3, 3>(0, kOrientationIndex) = R_sensor_body * SO3::hat(velocity_body);
@@ -66,7 +68,9 @@ MeasurementVector WheelOdometryModel::residual(const NavigationState& state, Mea
     const Eigen::RowVector3d yaw_axis = T_body_wheel_.rotation().matrix().col(2).transpose();  // z of R_bw^T
     Eigen::Matrix3d rate_by_gyro_bias;
     Eigen::Vector3d rate_by_yaw_scale;
-    const double yaw_rate = yaw_axis.dot(body_rate(state, gyro_, &rate_by_gyro_bias, &rate_by_yaw_scale));
+    const bool derivatives = jacobian != nullptr;
+    const double yaw_rate =
+        yaw_axis.dot(body_rate(state, gyro_, derivatives ? &rate_by_gyro_bias : nullptr, derivatives ? &rate_by_yaw_scale : nullptr));
     // Unequal wheel scales add a turn proportional to the forward speed (heading drift d, rad/m).
     r(row) = measurement_.yaw_rate - state.wheel_speed_scale * yaw_rate - state.wheel_heading_drift * velocity.x();
     if (jacobian != nullptr) {
@@ -100,7 +104,8 @@ MeasurementVector ZeroVelocityModel::residual(const NavigationState& state, Meas
   if (with_angular_rate_) {
     Eigen::Matrix3d rate_by_gyro_bias;
     Eigen::Vector3d rate_by_yaw_scale;
-    r.tail<3>() = -body_rate(state, gyro_, &rate_by_gyro_bias, &rate_by_yaw_scale);
+    const bool derivatives = jacobian != nullptr;
+    r.tail<3>() = -body_rate(state, gyro_, derivatives ? &rate_by_gyro_bias : nullptr, derivatives ? &rate_by_yaw_scale : nullptr);
     if (jacobian != nullptr) {
       jacobian->block<3, 3>(3, kGyroBiasIndex) = rate_by_gyro_bias;
       jacobian->block<3, 1>(3, kGyroYawScaleIndex) = rate_by_yaw_scale;

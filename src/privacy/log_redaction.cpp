@@ -8,13 +8,13 @@
 #include "hanzo/fusion/core/files.hpp"
 
 namespace hanzo::fusion::privacy {
-namespace {
-
-void count(const std::vector<RedactedRegion>& regions, TopicRedactionCounts& counts) {
+void count_regions(const std::vector<RedactedRegion>& regions, TopicRedactionCounts& counts) {
   ++counts.images;
   if (!regions.empty()) ++counts.redacted_images;
   for (const RedactedRegion& region : regions) ++(region.kind == "face" ? counts.faces : counts.licence_plates);
 }
+
+namespace {
 
 Result<LogRedactionSummary> copy_redacted(PrivacyFilter& filter, io::SensorLogReader& reader, io::SensorLogWriter& writer,
                                           const std::string& input_path) {
@@ -42,8 +42,8 @@ Result<LogRedactionSummary> copy_redacted(PrivacyFilter& filter, io::SensorLogRe
     if (auto* image = std::get_if<msgs::ImageMessage>(&message)) {
       Result<std::vector<RedactedRegion>> regions = filter.apply(*image);
       if (!regions) return Error(fmt::format("{} at {} ns: {}", entry.topic, entry.log_time.nanoseconds(), regions.error().message));
-      count(*regions, summary.by_topic[entry.topic]);
-      count(*regions, summary.total);
+      count_regions(*regions, summary.by_topic[entry.topic]);
+      count_regions(*regions, summary.total);
     }
     const auto sensor = sensor_by_topic.find(entry.topic);
     HANZO_RETURN_IF_ERROR(writer.write(entry.topic, message, sensor == sensor_by_topic.end() ? std::string() : sensor->second));

@@ -10,6 +10,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
@@ -23,6 +24,9 @@ struct TopicRedactionCounts {
   uint64_t faces = 0;
   uint64_t licence_plates = 0;
 };
+
+/// Adds one image and the regions found in it to `counts`.
+void count_regions(const std::vector<RedactedRegion>& regions, TopicRedactionCounts& counts);
 
 struct LogRedactionSummary {
   uint64_t messages = 0;
