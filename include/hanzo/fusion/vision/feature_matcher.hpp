@@ -1,0 +1,62 @@
+#pragma once
+// Descriptor matching between two sets of ORB features.
+//
+// match_descriptors(): brute force over Hamming distances. A query keeps its nearest train
+// descriptor when (1) the distance is at most max_distance, (2) Lowe's ratio test holds:
+// nearest < ratio * second nearest (a nearest without a distinct runner-up is ambiguous: a
+// repeated texture), and (3) with `mutual`, the query is also the train descriptor's nearest.
+//
+// match_guided(): the same tests, but a query is compared only with the train keypoints its
+// predicted position allows (a homography's transfer within radius_px, or the epipolar line of a
+// fundamental matrix within radius_px) and within one pyramid octave of its own: the search
+// that recovers matches a global ratio test loses to distinctiveness over the whole image
+// (wide baselines, repeated structure).
+
+#include <functional>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "hanzo/fusion/vision/orb_extractor.hpp"
+
+namespace hanzo::fusion::vision {
+
+struct FeatureMatch {
+  int query = -1;     ///< index into the first (query) features
+  int train = -1;     ///< index into the second (train) features
+  int distance = 0;   ///< Hamming distance, bits (0..256)
+};
+
+struct DescriptorMatcherConfig {
+  /// Lowe's ratio (0, 1]: nearest < ratio * second nearest. 1 turns the test off.
+  double ratio = 0.8;
+  /// Keep only mutual nearest neighbours.
+  bool mutual = true;
+  /// Largest Hamming distance kept (bits); ORB matches of the same point are mostly under 64.
+  int max_distance = 80;
+};
+
+/// Matches query to train descriptors (both CV_8UC1 with 32 bytes a row); sorted by query.
+std::vector<FeatureMatch> match_descriptors(const cv::Mat& query_descriptors, const cv::Mat& train_descriptors,
+                                            const DescriptorMatcherConfig& config = {});
+
+/// Where the geometry puts a query keypoint in the train image.
+enum class GeometryModel { kHomography, kFundamental };
+
+struct GuidedMatcherConfig {
+  /// Homography: transfer distance; fundamental: distance to the epipolar line (pixels).
+  double radius_px = 6.0;
+  /// Ratio among the candidates in the search region; 1 turns the test off: the region already
+  /// excludes most look-alikes, and the geometry verifies what is kept.
+  double ratio = 1.0;
+  int max_distance = 100;
+  /// Largest difference of pyramid octaves between the two keypoints (-1: any).
+  int max_octave_difference = 2;
+};
+
+/// Matches guided by a 3x3 geometry (train ~ H query, or train^T F query = 0); each train
+/// keypoint is used at most once (the closer descriptor wins). Sorted by query.
+std::vector<FeatureMatch> match_guided(const ImageFeatures& query, const ImageFeatures& train, GeometryModel model,
+                                       const cv::Matx33d& geometry, const GuidedMatcherConfig& config = {});
+
+}  // namespace hanzo::fusion::vision

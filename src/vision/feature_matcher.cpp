@@ -1,0 +1,131 @@
+#include "hanzo/fusion/vision/feature_matcher.hpp"
+
+#include <algorithm>
+#include <climits>
+#include <cmath>
+
+namespace hanzo::fusion::vision {
+namespace {
+
+struct Nearest {
+  int index = -1;
+  int best = INT_MAX;
+  int second = INT_MAX;
+
+  void offer(int candidate, int distance) {
+    if (distance < best) {
+      second = best;
+      best = distance;
+      index = candidate;
+    } else if (distance < second) {
+      second = distance;
+    }
+  }
+  bool passes(double ratio, int max_distance) const {
+    return index >= 0 && best <= max_distance && (ratio >= 1.0 || second == INT_MAX || best < ratio * second);
+  }
+};
+
+// Keeps one match per train keypoint: the one with the smallest distance.
+std::vector<FeatureMatch> unique_by_train(std::vector<FeatureMatch> matches, std::size_t train_count) {
+  std::vector<int> owner(train_count, -1);
+  for (std::size_t i = 0; i < matches.size(); ++i) {
+    int& current = owner[static_cast<std::size_t>(matches[i].train)];
+    if (current < 0 || matches[i].distance < matches[static_cast<std::size_t>(current)].distance) current = static_cast<int>(i);
+  }
+  std::vector<FeatureMatch> kept;
+  for (std::size_t i = 0; i < matches.size(); ++i) {
+    if (owner[static_cast<std::size_t>(matches[i].train)] == static_cast<int>(i)) kept.push_back(matches[i]);
+  }
+  return kept;
+}
+
+}  // namespace
+
+std::vector<FeatureMatch> match_descriptors(const cv::Mat& query_descriptors, const cv::Mat& train_descriptors,
+                                            const DescriptorMatcherConfig& config) {
+  std::vector<FeatureMatch> matches;
+  if (query_descriptors.empty() || train_descriptors.empty()) return matches;
+  const int queries = query_descriptors.rows, trains = train_descriptors.rows;
+  std::vector<Nearest> nearest_query(static_cast<std::size_t>(queries));
+  std::vector<Nearest> nearest_train(static_cast<std::size_t>(trains));  // for the mutual check
+  for (int q = 0; q < queries; ++q) {
+    const unsigned char* query = query_descriptors.ptr<unsigned char>(q);
+    Nearest& best_for_query = nearest_query[static_cast<std::size_t>(q)];
+    for (int t = 0; t < trains; ++t) {
+      const int distance = hamming_distance(query, train_descriptors.ptr<unsigned char>(t));
+      best_for_query.offer(t, distance);
+      Nearest& best_for_train = nearest_train[static_cast<std::size_t>(t)];
+      if (distance < best_for_train.best) {
+        best_for_train.best = distance;
+        best_for_train.index = q;
+      }
+    }
+  }
+  for (int q = 0; q < queries; ++q) {
+    const Nearest& best = nearest_query[static_cast<std::size_t>(q)];
+    if (!best.passes(config.ratio, config.max_distance)) continue;
+    if (config.mutual && nearest_train[static_cast<std::size_t>(best.index)].index != q) continue;
+    matches.push_back({q, best.index, best.best});
+  }
+  return matches;
+}
+
+std::vector<FeatureMatch> match_guided(const ImageFeatures& query, const ImageFeatures& train, GeometryModel model,
+                                       const cv::Matx33d& geometry, const GuidedMatcherConfig& config) {
+  std::vector<FeatureMatch> matches;
+  if (query.keypoints.empty() || train.keypoints.empty()) return matches;
+  // Train keypoints in a grid of radius-sized cells, for the homography's neighbourhood search.
+  const double cell = std::max(config.radius_px, 1.0);
+  const int columns = static_cast<int>(std::ceil(train.image_size.width / cell)) + 1;
+  const int rows = static_cast<int>(std::ceil(train.image_size.height / cell)) + 1;
+  std::vector<std::vector<int>> grid(static_cast<std::size_t>(columns * rows));
+  for (std::size_t t = 0; t < train.keypoints.size(); ++t) {
+    const int column = std::clamp(static_cast<int>(train.keypoints[t].pt.x / cell), 0, columns - 1);
+    const int row = std::clamp(static_cast<int>(train.keypoints[t].pt.y / cell), 0, rows - 1);
+    grid[static_cast<std::size_t>(row * columns + column)].push_back(static_cast<int>(t));
+  }
+  const double radius_squared = config.radius_px * config.radius_px;
+  auto compatible_octave = [&](const cv::KeyPoint& a, const cv::KeyPoint& b) {
+    return config.max_octave_difference < 0 || std::abs(a.octave - b.octave) <= config.max_octave_difference;
+  };
+  for (std::size_t q = 0; q < query.keypoints.size(); ++q) {
+    const cv::KeyPoint& keypoint = query.keypoints[q];
+    const cv::Vec3d x(keypoint.pt.x, keypoint.pt.y, 1.0);
+    const cv::Vec3d mapped = geometry * x;
+    const unsigned char* descriptor = query.descriptors.ptr<unsigned char>(static_cast<int>(q));
+    Nearest nearest;
+    auto consider = [&](int t) {
+      const cv::KeyPoint& candidate = train.keypoints[static_cast<std::size_t>(t)];
+      if (!compatible_octave(keypoint, candidate)) return;
+      nearest.offer(t, hamming_distance(descriptor, train.descriptors.ptr<unsigned char>(t)));
+    };
+    if (model == GeometryModel::kHomography) {
+      if (std::abs(mapped[2]) < 1e-12) continue;
+      const double u = mapped[0] / mapped[2], v = mapped[1] / mapped[2];
+      const int column = static_cast<int>(std::floor(u / cell)), row = static_cast<int>(std::floor(v / cell));
+      for (int r = row - 1; r <= row + 1; ++r) {
+        for (int c = column - 1; c <= column + 1; ++c) {
+          if (r < 0 || c < 0 || r >= rows || c >= columns) continue;
+          for (int t : grid[static_cast<std::size_t>(r * columns + c)]) {
+            const double du = train.keypoints[static_cast<std::size_t>(t)].pt.x - u;
+            const double dv = train.keypoints[static_cast<std::size_t>(t)].pt.y - v;
+            if (du * du + dv * dv <= radius_squared) consider(t);
+          }
+        }
+      }
+    } else {
+      // Epipolar line l = F x in the train image: a u + b v + c = 0.
+      const double norm = std::hypot(mapped[0], mapped[1]);
+      if (norm < 1e-12) continue;
+      for (std::size_t t = 0; t < train.keypoints.size(); ++t) {
+        const cv::Point2f& p = train.keypoints[t].pt;
+        if (std::abs(mapped[0] * p.x + mapped[1] * p.y + mapped[2]) <= config.radius_px * norm) consider(static_cast<int>(t));
+      }
+    }
+    if (nearest.passes(config.ratio, config.max_distance)) matches.push_back({static_cast<int>(q), nearest.index, nearest.best});
+  }
+  return unique_by_train(std::move(matches), train.keypoints.size());
+}
+
+}  // namespace hanzo::fusion::vision
