@@ -40,5 +40,6 @@ void add_slam2d_command(CLI::App& app, const Output& output, Command& run);
 void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& run);
 void add_privacy_command(CLI::App& app, const Output& output, Command& run);
 void add_crypto_command(CLI::App& app, const Output& output, Command& run);
+void add_features_command(CLI::App& app, const Output& output, Command& run);
 
 }  // namespace hanzo::fusion::app

@@ -1,5 +1,6 @@
 #include "hanzo/fusion/calib/calibration.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <set>
 
@@ -8,6 +9,23 @@
 #include "hanzo/fusion/msgs/validate.hpp"
 
 namespace hanzo::fusion::calib {
+
+PinholeCamera CameraCalibration::pinhole_camera() const {
+  PinholeCamera camera;
+  camera.fx = intrinsics.fx;
+  camera.fy = intrinsics.fy;
+  camera.cx = intrinsics.cx;
+  camera.cy = intrinsics.cy;
+  switch (distortion.type) {
+    case msgs::DistortionType::kNone: camera.distortion = PinholeCamera::Distortion::kNone; break;
+    case msgs::DistortionType::kRadtan: camera.distortion = PinholeCamera::Distortion::kRadtan; break;
+    case msgs::DistortionType::kEquidistant: camera.distortion = PinholeCamera::Distortion::kEquidistant; break;
+  }
+  for (std::size_t i = 0; i < std::min(distortion.coefficients.size(), camera.coefficients.size()); ++i) {
+    camera.coefficients[i] = distortion.coefficients[i];
+  }
+  return camera;
+}
 
 SE3 SensorCalibration::T_body_sensor() const {
   const Eigen::Quaterniond q(rotation_wxyz[0], rotation_wxyz[1], rotation_wxyz[2], rotation_wxyz[3]);

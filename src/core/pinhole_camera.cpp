@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include <Eigen/LU>
+
 namespace hanzo::fusion {
 
 Eigen::Vector2d PinholeCamera::distort(const Eigen::Vector2d& normalized, Eigen::Matrix2d* jacobian) const {
@@ -39,6 +41,24 @@ Eigen::Vector2d PinholeCamera::distort(const Eigen::Vector2d& normalized, Eigen:
     }
   }
   return normalized;
+}
+
+std::optional<Eigen::Vector2d> PinholeCamera::undistort(const Eigen::Vector2d& distorted) const {
+  if (distortion == Distortion::kNone) return distorted;
+  Eigen::Vector2d normalized = distorted;
+  for (int step = 0; step < 20; ++step) {
+    Eigen::Matrix2d jacobian;
+    const Eigen::Vector2d residual = distort(normalized, &jacobian) - distorted;
+    if (residual.norm() < 1e-10) return normalized;
+    const Eigen::Vector2d correction = jacobian.partialPivLu().solve(residual);
+    if (!correction.allFinite()) return std::nullopt;
+    normalized -= correction;
+  }
+  return (distort(normalized) - distorted).norm() < 1e-8 ? std::optional<Eigen::Vector2d>(normalized) : std::nullopt;
+}
+
+std::optional<Eigen::Vector2d> PinholeCamera::unproject(const Eigen::Vector2d& pixel) const {
+  return undistort({(pixel.x() - cx) / fx, (pixel.y() - cy) / fy});
 }
 
 std::optional<Eigen::Vector2d> PinholeCamera::project(const Eigen::Vector3d& point_camera, Eigen::Matrix<double, 2, 3>* jacobian) const {

@@ -458,6 +458,30 @@ TEST(Cli, RunMapsWithTheWholePipelineAndReplaysBitIdenticallyOnAnyThreadCount) {
   std::filesystem::remove_all(dir);
 }
 
+TEST(Cli, FeaturesMatchReportsCorrectMatchesAgainstAHomographyAndRefusesBadInput) {
+  const std::string graf = std::string(HANZO_DATA_DIR) + "/feature_matching_graf";
+  const CliRun matched = run(fmt::format("features match {0}/graf1.png {0}/graf2.png --homography {0}/H_graf1_to_graf2_halfres.txt --json", graf));
+  ASSERT_EQ(matched.exit_code, 0) << matched.err;
+  const nlohmann::json json = nlohmann::json::parse(matched.out);
+  EXPECT_EQ(json["keypoints1"], 1000);
+  EXPECT_EQ(json["geometry"]["model"], "homography");
+  EXPECT_GE(json["ground_truth"]["correct"].get<int>(), 300);
+  EXPECT_GE(json["ground_truth"]["precision"].get<double>(), 0.9);
+  const CliRun text = run(fmt::format("features match {0}/graf1.png {0}/graf2.png --no-affine-views", graf));
+  ASSERT_EQ(text.exit_code, 0) << text.err;
+  EXPECT_THAT(text.out, HasSubstr("verified matches"));
+  const CliRun missing = run(fmt::format("features match {0}/graf1.png {0}/graf9.png", graf));
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_THAT(missing.err, HasSubstr("graf9.png: no such file"));
+  EXPECT_EQ(std::count(missing.err.begin(), missing.err.end(), '\n'), 1);
+  const CliRun short_matrix = run(fmt::format("features match {0}/graf1.png {0}/graf2.png --homography {1}", graf, write_temp("h.txt", "1 0 0\n0 1 0\n")));
+  EXPECT_EQ(short_matrix.exit_code, 1);
+  EXPECT_THAT(short_matrix.err, HasSubstr("expected 9 numbers"));
+  const CliRun not_image = run(fmt::format("features match {0}/graf1.png {1}", graf, write_temp("text.png", "not a picture")));
+  EXPECT_EQ(not_image.exit_code, 1);
+  EXPECT_THAT(not_image.err, HasSubstr("not an image OpenCV can read"));
+}
+
 TEST(Cli, PrivacyBlurRedactsFacesOfAnImageOrAFolderAndRefusesBadInput) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_privacy_{}", ::getpid());
   std::filesystem::remove_all(dir);

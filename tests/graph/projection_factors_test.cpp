@@ -62,6 +62,33 @@ TEST(PinholeCamera, MatchesOpenCvAndItsJacobian) {
   EXPECT_FALSE(camera_with(PinholeCamera::Distortion::kNone).project({0.0, 0.0, -1.0}));
 }
 
+// unproject() inverts project() over the image (EuRoC's 752 x 480 camera) for every model, and
+// agrees with OpenCV's undistortPoints / fisheye::undistortPoints.
+TEST(PinholeCamera, UnprojectInvertsProjectAndMatchesOpenCv) {
+  const cv::Matx33d K(458.654, 0.0, 367.215, 0.0, 457.296, 248.375, 0.0, 0.0, 1.0);
+  for (auto distortion : {PinholeCamera::Distortion::kNone, PinholeCamera::Distortion::kRadtan, PinholeCamera::Distortion::kEquidistant}) {
+    const PinholeCamera camera = camera_with(distortion);
+    for (double u = 0.0; u <= 752.0; u += 47.0) {
+      for (double v = 0.0; v <= 480.0; v += 40.0) {
+        const std::optional<Eigen::Vector2d> normalized = camera.unproject({u, v});
+        ASSERT_TRUE(normalized) << u << " " << v;
+        const Eigen::Vector2d pixel = camera.project(normalized->homogeneous()).value();
+        EXPECT_LT((pixel - Eigen::Vector2d(u, v)).norm(), 1e-6) << u << " " << v;
+        std::vector<cv::Point2d> in{{u, v}}, out;
+        if (distortion == PinholeCamera::Distortion::kEquidistant) {
+          cv::fisheye::undistortPoints(in, out, K, cv::Vec4d(camera.coefficients[0], camera.coefficients[1], camera.coefficients[2], camera.coefficients[3]));
+        } else if (distortion == PinholeCamera::Distortion::kRadtan) {
+          cv::undistortPoints(in, out, K, std::vector<double>(camera.coefficients.begin(), camera.coefficients.end()), cv::noArray(), cv::noArray(),
+                              cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-12));
+        } else {
+          out = {{(u - K(0, 2)) / K(0, 0), (v - K(1, 2)) / K(1, 1)}};
+        }
+        EXPECT_LT((*normalized - Eigen::Vector2d(out[0].x, out[0].y)).norm(), 1e-5) << u << " " << v;
+      }
+    }
+  }
+}
+
 // Central differences in the pose's tangent space and the point's coordinates.
 void expect_jacobians_match(const Factor& factor, const Values& values) {
   std::vector<Eigen::MatrixXd> analytic;

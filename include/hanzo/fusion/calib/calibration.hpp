@@ -25,6 +25,7 @@
 
 #include <Eigen/Core>
 
+#include "hanzo/fusion/core/pinhole_camera.hpp"
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/core/time.hpp"
@@ -35,6 +36,10 @@ namespace hanzo::fusion::calib {
 struct CameraCalibration {
   msgs::CameraIntrinsics intrinsics;
   msgs::DistortionModel distortion;
+
+  /// The projection model of these intrinsics (radtan's k3 is 0 when four coefficients are
+  /// given). Expects a validated calibration (validate(): known model, its coefficient count).
+  PinholeCamera pinhole_camera() const;
 };
 
 struct SensorCalibration {

@@ -34,6 +34,14 @@ struct PinholeCamera {
 
   /// The distorted normalized coordinates of normalized ones; jacobian: d distorted / d normalized.
   Eigen::Vector2d distort(const Eigen::Vector2d& normalized, Eigen::Matrix2d* jacobian = nullptr) const;
+
+  /// The inverse of distort() by Gauss-Newton from the distorted point (at most 20 steps, to
+  /// 1e-10); nullopt where it does not converge (outside the region where the model is
+  /// invertible, far beyond the calibrated field of view).
+  std::optional<Eigen::Vector2d> undistort(const Eigen::Vector2d& distorted) const;
+
+  /// The normalized coordinates (x/z, y/z) of a pixel: undistort() of its distorted coordinates.
+  std::optional<Eigen::Vector2d> unproject(const Eigen::Vector2d& pixel) const;
 };
 
 }  // namespace hanzo::fusion
