@@ -2,8 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdint>
-#include <cstring>
 
 #include <fmt/format.h>
 #include <opencv2/features2d.hpp>
@@ -220,17 +218,6 @@ Result<ImageFeatures> OrbExtractor::extract(const cv::Mat& image, const cv::Mat&
   brief->compute(grey, features.keypoints, features.descriptors);
   if (features.descriptors.empty()) features.descriptors = cv::Mat(0, 32, CV_8UC1);
   return features;
-}
-
-int hamming_distance(const unsigned char* descriptor_a, const unsigned char* descriptor_b) {
-  int distance = 0;
-  for (int word = 0; word < 4; ++word) {
-    std::uint64_t a = 0, b = 0;
-    std::memcpy(&a, descriptor_a + 8 * word, 8);
-    std::memcpy(&b, descriptor_b + 8 * word, 8);
-    distance += __builtin_popcountll(a ^ b);
-  }
-  return distance;
 }
 
 }  // namespace hanzo::fusion::vision

@@ -19,6 +19,8 @@
 // Failure: an empty image, a type other than 8-bit grey / BGR / BGRA, an image smaller than
 // 2 x 31 pixels, a mask of another size or type, or a configuration out of range.
 
+#include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -71,6 +73,17 @@ class OrbExtractor {
 };
 
 /// Hamming distance between two 32-byte ORB descriptors (rows of ImageFeatures::descriptors).
-int hamming_distance(const unsigned char* descriptor_a, const unsigned char* descriptor_b);
+/// Inline: the innermost operation of every matcher (the vision module is built with the CPU's
+/// popcount instruction where the architecture has one).
+inline int hamming_distance(const unsigned char* descriptor_a, const unsigned char* descriptor_b) {
+  int distance = 0;
+  for (int word = 0; word < 4; ++word) {
+    std::uint64_t a = 0, b = 0;
+    std::memcpy(&a, descriptor_a + 8 * word, 8);
+    std::memcpy(&b, descriptor_b + 8 * word, 8);
+    distance += __builtin_popcountll(a ^ b);
+  }
+  return distance;
+}
 
 }  // namespace hanzo::fusion::vision

@@ -1,0 +1,132 @@
+// Visual features against OpenCV's own ORB + BFMatcher, one thread each (cv::setNumThreads(1)):
+// ORB extraction of 1000 keypoints on a 640 x 480 EuRoC frame, brute-force matching of 1000 x
+// 1000 descriptors, and whole image-pair matching with the correct matches and precision at
+// 3 px (counters) on the graf pair and on wide-baseline pairs made from graf1 (40 and 70 degrees
+// of viewpoint change, tests/vision/graf_pairs.hpp).
+
+#include <filesystem>
+#include <string>
+
+#include <benchmark/benchmark.h>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "hanzo/fusion/vision/image_pair_matcher.hpp"
+#include "vision/graf_pairs.hpp"
+
+namespace {
+
+using namespace hanzo::fusion::vision;
+using testing::GrafPair;
+
+cv::Mat euroc_frame() {
+  const std::string folder = std::string(HANZO_DATA_DIR) + "/euroc_v101_micro/mav0/cam0/data";
+  std::string first;
+  for (const auto& entry : std::filesystem::directory_iterator(folder)) {
+    if (first.empty() || entry.path().string() < first) first = entry.path().string();
+  }
+  const cv::Mat image = cv::imread(first, cv::IMREAD_GRAYSCALE);
+  return image(cv::Rect((image.cols - 640) / 2, 0, 640, 480)).clone();
+}
+
+void BM_OrbExtract_Hanzo(benchmark::State& state) {
+  const cv::Mat image = euroc_frame();
+  const OrbExtractor extractor;
+  std::size_t keypoints = 0;
+  for (auto _ : state) keypoints = extractor.extract(image).value().size();
+  state.counters["keypoints"] = static_cast<double>(keypoints);
+}
+BENCHMARK(BM_OrbExtract_Hanzo)->Unit(benchmark::kMillisecond);
+
+void BM_OrbExtract_OpenCV(benchmark::State& state) {
+  const cv::Mat image = euroc_frame();
+  cv::Ptr<cv::ORB> orb = cv::ORB::create(1000);
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;
+  for (auto _ : state) orb->detectAndCompute(image, cv::noArray(), keypoints, descriptors);
+  state.counters["keypoints"] = static_cast<double>(keypoints.size());
+}
+BENCHMARK(BM_OrbExtract_OpenCV)->Unit(benchmark::kMillisecond);
+
+void BM_MatchDescriptors_Hanzo(benchmark::State& state) {
+  const GrafPair pair = testing::graf_pair();
+  const ImageFeatures features1 = OrbExtractor().extract(pair.image1).value(), features2 = OrbExtractor().extract(pair.image2).value();
+  std::size_t matches = 0;
+  for (auto _ : state) matches = match_descriptors(features1.descriptors, features2.descriptors).size();
+  state.counters["matches"] = static_cast<double>(matches);
+}
+BENCHMARK(BM_MatchDescriptors_Hanzo)->Unit(benchmark::kMillisecond);
+
+// knnMatch (k = 2) with the 0.8 ratio test, no mutual check (it would need a second pass).
+void BM_MatchDescriptors_OpenCV(benchmark::State& state) {
+  const GrafPair pair = testing::graf_pair();
+  const ImageFeatures features1 = OrbExtractor().extract(pair.image1).value(), features2 = OrbExtractor().extract(pair.image2).value();
+  cv::BFMatcher matcher(cv::NORM_HAMMING);
+  std::size_t matches = 0;
+  for (auto _ : state) {
+    std::vector<std::vector<cv::DMatch>> knn;
+    matcher.knnMatch(features1.descriptors, features2.descriptors, knn, 2);
+    matches = 0;
+    for (const auto& pair_matches : knn) matches += pair_matches.size() == 2 && pair_matches[0].distance < 0.8f * pair_matches[1].distance;
+  }
+  state.counters["matches"] = static_cast<double>(matches);
+}
+BENCHMARK(BM_MatchDescriptors_OpenCV)->Unit(benchmark::kMillisecond);
+
+GrafPair pair_for(int degrees) { return degrees == 0 ? testing::graf_pair() : testing::wide_baseline_pair(degrees); }
+
+void report(benchmark::State& state, const std::vector<PointMatch>& matches, const GrafPair& pair) {
+  const int correct = count_correct_matches(matches, pair.homography, 3.0);
+  state.counters["matches"] = static_cast<double>(matches.size());
+  state.counters["correct"] = correct;
+  state.counters["precision"] = matches.empty() ? 0.0 : static_cast<double>(correct) / static_cast<double>(matches.size());
+}
+
+// Argument: viewpoint change in degrees (0 = the real graf1 -> graf2 pair).
+void BM_PairMatch_Hanzo(benchmark::State& state) {
+  const GrafPair pair = pair_for(static_cast<int>(state.range(0)));
+  std::vector<PointMatch> matches;
+  bool affine_views = false;
+  for (auto _ : state) {
+    ImagePairMatches result = match_image_pair(pair.image1, pair.image2).value();
+    matches = std::move(result.matches);
+    affine_views = result.affine_views_used;
+  }
+  report(state, matches, pair);
+  state.counters["affine_views"] = affine_views;
+}
+BENCHMARK(BM_PairMatch_Hanzo)->Arg(0)->Arg(40)->Arg(70)->Unit(benchmark::kMillisecond);
+
+// OpenCV ORB (1000) + BFMatcher with a plain 0.8 ratio test.
+void BM_PairMatch_OpenCV(benchmark::State& state) {
+  const GrafPair pair = pair_for(static_cast<int>(state.range(0)));
+  cv::Ptr<cv::ORB> orb = cv::ORB::create(1000);
+  std::vector<PointMatch> matches;
+  for (auto _ : state) {
+    std::vector<cv::KeyPoint> keypoints1, keypoints2;
+    cv::Mat descriptors1, descriptors2;
+    orb->detectAndCompute(pair.image1, cv::noArray(), keypoints1, descriptors1);
+    orb->detectAndCompute(pair.image2, cv::noArray(), keypoints2, descriptors2);
+    std::vector<std::vector<cv::DMatch>> knn;
+    cv::BFMatcher(cv::NORM_HAMMING).knnMatch(descriptors1, descriptors2, knn, 2);
+    matches.clear();
+    for (const auto& candidates : knn) {
+      if (candidates.size() == 2 && candidates[0].distance < 0.8f * candidates[1].distance) {
+        matches.push_back({keypoints1[static_cast<std::size_t>(candidates[0].queryIdx)].pt, keypoints2[static_cast<std::size_t>(candidates[0].trainIdx)].pt, 0});
+      }
+    }
+  }
+  report(state, matches, pair);
+}
+BENCHMARK(BM_PairMatch_OpenCV)->Arg(0)->Arg(40)->Arg(70)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  cv::setNumThreads(1);
+  benchmark::Initialize(&argc, argv);
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}
