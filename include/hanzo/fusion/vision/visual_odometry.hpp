@@ -1,0 +1,135 @@
+#pragma once
+// VisualOdometry: monocular visual odometry with a sparse landmark map and a sliding window of
+// keyframes refined by local bundle adjustment (the tracking / local mapping split of
+// ORB-SLAM, Mur-Artal et al. 2015, in one thread).
+//
+//   initialization: the first frame is the reference; a later frame whose matches with it
+//     give an essential matrix (RANSAC on undistorted bearings) with enough inliers and a
+//     median triangulation angle of at least min_initialization_parallax_deg becomes the second
+//     keyframe; its inliers are triangulated. Monocular scale is unobservable: the first
+//     baseline is 1 (every length is in these units, `scale_free` says so);
+//   tracking: the pose is predicted with constant velocity, the local map's landmarks are
+//     projected into the frame and matched to keypoints near their projection (guided by
+//     descriptor distance, within projection_search_radius_px times the keypoint's octave
+//     scale), then the pose is refined by Gauss-Newton on the reprojection errors with a Huber
+//     kernel, observations over the chi-square 95 % bound (5.99 in pixels^2 / octave scale^2)
+//     dropped in four rounds. With too few matches, the frame is matched by descriptors against
+//     the last keyframes and the pose solved by PnP RANSAC (relocalization after a loss);
+//   keyframes: when the tracked landmarks fall under keyframe_tracked_ratio of the last
+//     keyframe's, or max_frames_between_keyframes have passed; new landmarks are triangulated
+//     against the previous keyframes (descriptor matches under the epipolar constraint, both
+//     depths positive, reprojection within the chi-square bound, triangulation angle over
+//     min_triangulation_angle_deg), and the last window_keyframes keyframes and their landmarks
+//     are refined by bundle adjustment (graph::ProjectionFactor, Huber, the window's oldest
+//     two keyframes held: they fix the gauge and the scale). Observations that stay outliers
+//     are removed, landmarks left with fewer than two observations culled.
+//
+// Frames: the world frame is the first keyframe's camera frame (x right, y down, z forward);
+// poses are T_world_camera. Pixels as PinholeCamera (distorted pixels in, distortion handled by
+// the projection model). Each frame's pose is kept relative to its reference keyframe, so
+// trajectory() reflects the bundle adjustment's corrections.
+//
+// Failures: track() refuses an image of another size than the configured one, of an
+// unsupported type, or a time not after the previous frame's (the frame is skipped, the state
+// is unchanged). A frame that cannot be tracked is reported kLost with the reason; tracking
+// resumes by relocalization against the recent keyframes.
+
+#include <deque>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "hanzo/fusion/core/pinhole_camera.hpp"
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/vision/orb_extractor.hpp"
+
+namespace hanzo::fusion::vision {
+
+struct VisualOdometryConfig {
+  /// Features per frame: 2000 as ORB-SLAM uses on KITTI-size images.
+  OrbExtractorConfig features = [] {
+    OrbExtractorConfig config;
+    config.max_features = 2000;
+    return config;
+  }();
+  /// Initialization: essential-matrix inliers and median triangulation angle needed.
+  int min_initialization_inliers = 100;
+  double min_initialization_parallax_deg = 1.0;
+  /// Tracking: search radius around a landmark's projection (pixels at octave 0).
+  double projection_search_radius_px = 15.0;
+  /// Largest Hamming distance of a landmark-keypoint match (bits).
+  int max_descriptor_distance = 64;
+  /// Fewer inliers than this after pose refinement: the frame is lost.
+  int min_tracked_landmarks = 15;
+  /// Keypoint position noise (pixels at octave 0; octave l has sigma scale_factor^l).
+  double pixel_sigma = 1.0;
+  /// Keyframes.
+  double keyframe_tracked_ratio = 0.9;
+  int max_frames_between_keyframes = 10;
+  double min_triangulation_angle_deg = 1.0;
+  /// How many previous keyframes a new keyframe triangulates against.
+  int triangulation_keyframes = 2;
+  /// Local bundle adjustment window (keyframes) and its iterations.
+  int window_keyframes = 7;
+  int bundle_adjustment_iterations = 10;
+};
+
+/// Checks every field; the error names the first field out of range.
+Status validate(const VisualOdometryConfig& config);
+
+enum class TrackingState { kInitializing, kTracking, kLost };
+const char* to_string(TrackingState state);
+
+/// The outcome of one frame.
+struct VisualOdometryFrame {
+  double time = 0.0;  ///< seconds
+  TrackingState state = TrackingState::kInitializing;
+  SE3 T_world_camera;       ///< valid when state is kTracking
+  int tracked_landmarks = 0;
+  bool keyframe = false;
+  bool relocalized = false;  ///< tracked again by relocalization after kLost
+  std::string reason;        ///< why the frame is kInitializing or kLost
+};
+
+struct VisualOdometrySummary {
+  int frames = 0;
+  int tracked_frames = 0;
+  int lost_frames = 0;
+  int keyframes = 0;
+  int landmarks = 0;
+  int relocalizations = 0;
+  bool scale_free = true;  ///< monocular: lengths are in units of the first baseline
+};
+
+class VisualOdometry {
+ public:
+  /// Fails when the configuration is out of range, the camera's focal lengths are not
+  /// positive or the image size is under 64 x 64.
+  static Result<std::unique_ptr<VisualOdometry>> create(const PinholeCamera& camera, cv::Size image_size,
+                                                        const VisualOdometryConfig& config = {});
+  ~VisualOdometry();
+  VisualOdometry(const VisualOdometry&) = delete;
+  VisualOdometry& operator=(const VisualOdometry&) = delete;
+
+  /// Tracks one image (8-bit grey, BGR or BGRA) taken at `time` (seconds).
+  Result<VisualOdometryFrame> track(double time, const cv::Mat& image);
+
+  /// Every tracked frame's time and T_world_camera after the latest bundle adjustment.
+  std::vector<std::pair<double, SE3>> trajectory() const;
+  /// Keyframe poses (time, T_world_camera) and the map's landmark positions (world frame).
+  std::vector<std::pair<double, SE3>> keyframe_poses() const;
+  std::vector<Eigen::Vector3d> landmark_positions() const;
+  VisualOdometrySummary summary() const;
+
+ private:
+  struct State;
+  explicit VisualOdometry(std::unique_ptr<State> state);
+  std::unique_ptr<State> state_;
+};
+
+}  // namespace hanzo::fusion::vision

@@ -1,0 +1,658 @@
+#include "hanzo/fusion/vision/visual_odometry.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <set>
+
+#include <fmt/format.h>
+#include <opencv2/calib3d.hpp>
+
+#include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/graph/batch_optimizer.hpp"
+#include "hanzo/fusion/graph/keys.hpp"
+#include "hanzo/fusion/graph/projection_factors.hpp"
+#include "hanzo/fusion/vision/feature_matcher.hpp"
+#include "pose_refinement.hpp"
+#include "triangulation.hpp"
+
+namespace hanzo::fusion::vision {
+namespace {
+
+constexpr double kDegree = M_PI / 180.0;
+
+// Features of one image with their undistorted normalized coordinates (NaN where the camera
+// model cannot invert the keypoint) and the landmark each keypoint observes (-1: none).
+struct Frame {
+  double time = 0.0;
+  ImageFeatures features;
+  std::vector<Eigen::Vector2d> normalized;
+  std::vector<int> landmark;
+  SE3 T_world_camera;
+};
+
+struct Keyframe {
+  int id = 0;
+  Frame frame;
+};
+
+struct Landmark {
+  Eigen::Vector3d position;
+  cv::Mat descriptor;  // 1 x 32, of the latest observation
+  int octave = 0;      // of the latest observation
+  std::vector<std::pair<int, int>> observations;  // (keyframe id, keypoint)
+};
+
+// A tracked frame: its pose relative to its reference keyframe.
+struct FrameRecord {
+  double time = 0.0;
+  int keyframe = 0;
+  SE3 T_keyframe_camera;
+};
+
+bool has_normalized(const Frame& frame, std::size_t keypoint) { return std::isfinite(frame.normalized[keypoint].x()); }
+
+Eigen::Vector2d pixel_of(const Frame& frame, std::size_t keypoint) {
+  const cv::Point2f& point = frame.features.keypoints[keypoint].pt;
+  return {point.x, point.y};
+}
+
+}  // namespace
+
+const char* to_string(TrackingState state) {
+  switch (state) {
+    case TrackingState::kInitializing: return "initializing";
+    case TrackingState::kTracking: return "tracking";
+    case TrackingState::kLost: return "lost";
+  }
+  return "unknown";
+}
+
+Status validate(const VisualOdometryConfig& config) {
+  if (Status features = validate(config.features); !features) return features;
+  auto positive = [](double value) { return std::isfinite(value) && value > 0.0; };
+  if (config.min_initialization_inliers < 8) return Error("VisualOdometryConfig.min_initialization_inliers: must be at least 8", "min_initialization_inliers");
+  if (!positive(config.min_initialization_parallax_deg)) return Error("VisualOdometryConfig.min_initialization_parallax_deg: must be positive", "min_initialization_parallax_deg");
+  if (!positive(config.projection_search_radius_px)) return Error("VisualOdometryConfig.projection_search_radius_px: must be positive", "projection_search_radius_px");
+  if (config.max_descriptor_distance < 1 || config.max_descriptor_distance > 256) return Error("VisualOdometryConfig.max_descriptor_distance: must be in 1..256", "max_descriptor_distance");
+  if (config.min_tracked_landmarks < 6) return Error("VisualOdometryConfig.min_tracked_landmarks: must be at least 6", "min_tracked_landmarks");
+  if (!positive(config.pixel_sigma)) return Error("VisualOdometryConfig.pixel_sigma: must be positive", "pixel_sigma");
+  if (!(config.keyframe_tracked_ratio > 0.0 && config.keyframe_tracked_ratio <= 1.0)) return Error("VisualOdometryConfig.keyframe_tracked_ratio: must be in (0, 1]", "keyframe_tracked_ratio");
+  if (config.max_frames_between_keyframes < 1) return Error("VisualOdometryConfig.max_frames_between_keyframes: must be at least 1", "max_frames_between_keyframes");
+  if (!positive(config.min_triangulation_angle_deg)) return Error("VisualOdometryConfig.min_triangulation_angle_deg: must be positive", "min_triangulation_angle_deg");
+  if (config.triangulation_keyframes < 1) return Error("VisualOdometryConfig.triangulation_keyframes: must be at least 1", "triangulation_keyframes");
+  if (config.window_keyframes < 2) return Error("VisualOdometryConfig.window_keyframes: must be at least 2", "window_keyframes");
+  if (config.bundle_adjustment_iterations < 0) return Error("VisualOdometryConfig.bundle_adjustment_iterations: must not be negative", "bundle_adjustment_iterations");
+  return ok_status();
+}
+
+struct VisualOdometry::State {
+  PinholeCamera camera;
+  cv::Size image_size;
+  VisualOdometryConfig config;
+  OrbExtractor extractor;
+
+  std::map<int, Keyframe> keyframes;
+  std::map<int, Landmark> landmarks;
+  int next_keyframe_id = 0;
+  int next_landmark_id = 0;
+  std::vector<FrameRecord> frames;
+  VisualOdometrySummary counts;
+
+  std::optional<Frame> reference;  // initialization's first view
+  bool initialized = false;
+  bool lost = false;
+  std::optional<double> last_time;
+  // Constant-velocity model: the last tracked pose and the body twist per second.
+  double last_pose_time = 0.0;
+  SE3 last_pose;
+  SE3::Tangent velocity = SE3::Tangent::Zero();
+  int frames_since_keyframe = 0;
+  int last_keyframe_tracked = 0;
+
+  double sigma(int octave) const { return config.pixel_sigma * std::pow(config.features.scale_factor, octave); }
+
+  Frame make_frame(double time, ImageFeatures features) const {
+    Frame frame;
+    frame.time = time;
+    frame.normalized.reserve(features.size());
+    for (const cv::KeyPoint& keypoint : features.keypoints) {
+      const std::optional<Eigen::Vector2d> normalized = camera.unproject({keypoint.pt.x, keypoint.pt.y});
+      frame.normalized.push_back(normalized.value_or(Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN())));
+    }
+    frame.landmark.assign(features.size(), -1);
+    frame.features = std::move(features);
+    return frame;
+  }
+
+  // ---- map bookkeeping ----
+
+  int add_landmark(const Eigen::Vector3d& position, const Keyframe& first, int keypoint1, Keyframe& second, int keypoint2) {
+    const int id = next_landmark_id++;
+    Landmark landmark;
+    landmark.position = position;
+    landmark.descriptor = second.frame.features.descriptors.row(keypoint2).clone();
+    landmark.octave = second.frame.features.keypoints[static_cast<std::size_t>(keypoint2)].octave;
+    landmark.observations = {{first.id, keypoint1}, {second.id, keypoint2}};
+    landmarks.emplace(id, std::move(landmark));
+    keyframes.at(first.id).frame.landmark[static_cast<std::size_t>(keypoint1)] = id;
+    second.frame.landmark[static_cast<std::size_t>(keypoint2)] = id;
+    return id;
+  }
+
+  void remove_observation(int landmark_id, int keyframe_id) {
+    Landmark& landmark = landmarks.at(landmark_id);
+    auto& observations = landmark.observations;
+    for (auto it = observations.begin(); it != observations.end();) {
+      if (it->first == keyframe_id) {
+        keyframes.at(keyframe_id).frame.landmark[static_cast<std::size_t>(it->second)] = -1;
+        it = observations.erase(it);
+      } else {
+        ++it;
+      }
+    }
+  }
+
+  void remove_landmark(int landmark_id) {
+    for (const auto& [keyframe_id, keypoint] : landmarks.at(landmark_id).observations) {
+      keyframes.at(keyframe_id).frame.landmark[static_cast<std::size_t>(keypoint)] = -1;
+    }
+    landmarks.erase(landmark_id);
+  }
+
+  std::vector<int> window() const {
+    std::vector<int> ids;
+    for (auto it = keyframes.rbegin(); it != keyframes.rend() && static_cast<int>(ids.size()) < config.window_keyframes; ++it) ids.push_back(it->first);
+    std::reverse(ids.begin(), ids.end());
+    return ids;
+  }
+
+  std::vector<int> local_landmarks() const {
+    std::set<int> ids;
+    for (int keyframe_id : window()) {
+      for (int landmark_id : keyframes.at(keyframe_id).frame.landmark) {
+        if (landmark_id >= 0) ids.insert(landmark_id);
+      }
+    }
+    return {ids.begin(), ids.end()};
+  }
+
+  // ---- initialization ----
+
+  VisualOdometryFrame initialize(Frame frame) {
+    VisualOdometryFrame result;
+    result.time = frame.time;
+    result.state = TrackingState::kInitializing;
+    if (!reference || static_cast<int>(reference->features.size()) < config.min_initialization_inliers) {
+      result.reason = fmt::format("first view: {} keypoints", frame.features.size());
+      reference = std::move(frame);
+      return result;
+    }
+    DescriptorMatcherConfig matcher;
+    matcher.ratio = 0.9;
+    matcher.max_distance = config.max_descriptor_distance;
+    std::vector<FeatureMatch> matches;
+    for (const FeatureMatch& match : match_descriptors(reference->features.descriptors, frame.features.descriptors, matcher)) {
+      if (has_normalized(*reference, static_cast<std::size_t>(match.query)) && has_normalized(frame, static_cast<std::size_t>(match.train))) matches.push_back(match);
+    }
+    if (static_cast<int>(matches.size()) < config.min_initialization_inliers) {
+      result.reason = fmt::format("{} matches with the first view (< {}): new first view", matches.size(), config.min_initialization_inliers);
+      reference = std::move(frame);
+      return result;
+    }
+    std::vector<cv::Point2d> points1, points2;
+    for (const FeatureMatch& match : matches) {
+      const Eigen::Vector2d& a = reference->normalized[static_cast<std::size_t>(match.query)];
+      const Eigen::Vector2d& b = frame.normalized[static_cast<std::size_t>(match.train)];
+      points1.emplace_back(a.x(), a.y());
+      points2.emplace_back(b.x(), b.y());
+    }
+    cv::Mat inlier_mask;
+    const double threshold = config.pixel_sigma / camera.fx;
+    const cv::Mat essential = cv::findEssentialMat(points1, points2, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, 0.999, threshold, inlier_mask);
+    if (essential.rows != 3 || essential.cols != 3) {
+      result.reason = "no essential matrix from the matches";
+      return result;
+    }
+    cv::Mat rotation, translation;
+    cv::recoverPose(essential, points1, points2, cv::Mat::eye(3, 3, CV_64F), rotation, translation, inlier_mask);
+    Eigen::Matrix3d R;
+    Eigen::Vector3d t;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) R(r, c) = rotation.at<double>(r, c);
+      t(r) = translation.at<double>(r);
+    }
+    const SE3 T_camera2_camera1(SO3::from_matrix(R), t.normalized());  // the first baseline is the unit of length
+    struct Candidate {
+      Eigen::Vector3d point;
+      int keypoint1, keypoint2;
+      double angle;
+    };
+    std::vector<Candidate> good;
+    for (std::size_t i = 0; i < matches.size(); ++i) {
+      if (inlier_mask.at<unsigned char>(static_cast<int>(i)) == 0) continue;
+      const auto k1 = static_cast<std::size_t>(matches[i].query), k2 = static_cast<std::size_t>(matches[i].train);
+      const std::optional<Eigen::Vector3d> point = triangulate(SE3(), reference->normalized[k1], T_camera2_camera1, frame.normalized[k2]);
+      if (!point) continue;
+      const PoseObservation in1{*point, pixel_of(*reference, k1), sigma(reference->features.keypoints[k1].octave)};
+      const PoseObservation in2{*point, pixel_of(frame, k2), sigma(frame.features.keypoints[k2].octave)};
+      if (reprojection_chi2(SE3(), in1, camera) > kChi2Pixel95 || reprojection_chi2(T_camera2_camera1, in2, camera) > kChi2Pixel95) continue;
+      good.push_back({*point, matches[i].query, matches[i].train, triangulation_angle(SE3(), T_camera2_camera1, *point)});
+    }
+    if (static_cast<int>(good.size()) < config.min_initialization_inliers / 2) {
+      result.reason = fmt::format("{} triangulated points (< {})", good.size(), config.min_initialization_inliers / 2);
+      return result;
+    }
+    std::vector<double> angles;
+    for (const Candidate& candidate : good) angles.push_back(candidate.angle);
+    std::nth_element(angles.begin(), angles.begin() + static_cast<std::ptrdiff_t>(angles.size() / 2), angles.end());
+    const double median_angle = angles[angles.size() / 2];
+    if (median_angle < config.min_initialization_parallax_deg * kDegree) {
+      result.reason = fmt::format("median parallax {:.2f} deg (< {:.2f})", median_angle / kDegree, config.min_initialization_parallax_deg);
+      return result;
+    }
+    // Two keyframes and the landmarks.
+    Keyframe first{next_keyframe_id++, std::move(*reference)};
+    first.frame.T_world_camera = SE3();
+    frame.T_world_camera = T_camera2_camera1.inverse();
+    Keyframe second{next_keyframe_id++, std::move(frame)};
+    reference.reset();
+    keyframes.emplace(first.id, std::move(first));
+    Keyframe& first_stored = keyframes.begin()->second;
+    Keyframe& second_stored = keyframes.emplace(second.id, std::move(second)).first->second;
+    for (const Candidate& candidate : good) {
+      if (candidate.angle < config.min_triangulation_angle_deg * kDegree) continue;
+      add_landmark(candidate.point, first_stored, candidate.keypoint1, second_stored, candidate.keypoint2);
+    }
+    bundle_adjust();
+    frames.push_back({first_stored.frame.time, first_stored.id, SE3()});
+    frames.push_back({second_stored.frame.time, second_stored.id, SE3()});
+    initialized = true;
+    last_pose = second_stored.frame.T_world_camera;
+    last_pose_time = second_stored.frame.time;
+    const double elapsed = second_stored.frame.time - first_stored.frame.time;
+    velocity = elapsed > 0.0 ? SE3::Tangent((first_stored.frame.T_world_camera.inverse() * last_pose).log() / elapsed) : SE3::Tangent::Zero();
+    last_keyframe_tracked = static_cast<int>(landmarks.size());
+    frames_since_keyframe = 0;
+    logger()->info("visual odometry: initialized with {} landmarks (median parallax {:.2f} deg)", landmarks.size(), median_angle / kDegree);
+    result.state = TrackingState::kTracking;
+    result.T_world_camera = last_pose;
+    result.tracked_landmarks = static_cast<int>(landmarks.size());
+    result.keyframe = true;
+    result.reason.clear();
+    return result;
+  }
+
+  // ---- tracking ----
+
+  // Landmark -> keypoint matches by projection at T_camera_world: the keypoint nearest in
+  // descriptor within the search radius (octave-scaled), ratio 0.9 against the runner-up,
+  // each keypoint given to the landmark it matches best.
+  std::vector<std::pair<int, int>> match_by_projection(const Frame& frame, const SE3& T_camera_world, const std::vector<int>& landmark_ids,
+                                                       double radius_scale) const {
+    constexpr int kCell = 32;
+    const int columns = image_size.width / kCell + 1, rows = image_size.height / kCell + 1;
+    std::vector<std::vector<int>> grid(static_cast<std::size_t>(columns * rows));
+    for (std::size_t k = 0; k < frame.features.size(); ++k) {
+      const cv::Point2f& p = frame.features.keypoints[k].pt;
+      grid[static_cast<std::size_t>(std::clamp(static_cast<int>(p.y) / kCell, 0, rows - 1) * columns + std::clamp(static_cast<int>(p.x) / kCell, 0, columns - 1))]
+          .push_back(static_cast<int>(k));
+    }
+    std::vector<std::pair<int, int>> owner(frame.features.size(), {-1, std::numeric_limits<int>::max()});  // (landmark, distance)
+    for (int landmark_id : landmark_ids) {
+      const Landmark& landmark = landmarks.at(landmark_id);
+      const std::optional<Eigen::Vector2d> pixel = camera.project(T_camera_world.act(landmark.position));
+      if (!pixel || pixel->x() < 0 || pixel->y() < 0 || pixel->x() >= image_size.width || pixel->y() >= image_size.height) continue;
+      const double radius = config.projection_search_radius_px * radius_scale * std::pow(config.features.scale_factor, landmark.octave);
+      int best = std::numeric_limits<int>::max(), second = std::numeric_limits<int>::max(), best_keypoint = -1;
+      const int c0 = std::max(0, static_cast<int>((pixel->x() - radius) / kCell)), c1 = std::min(columns - 1, static_cast<int>((pixel->x() + radius) / kCell));
+      const int r0 = std::max(0, static_cast<int>((pixel->y() - radius) / kCell)), r1 = std::min(rows - 1, static_cast<int>((pixel->y() + radius) / kCell));
+      for (int r = r0; r <= r1; ++r) {
+        for (int c = c0; c <= c1; ++c) {
+          for (int k : grid[static_cast<std::size_t>(r * columns + c)]) {
+            const cv::KeyPoint& keypoint = frame.features.keypoints[static_cast<std::size_t>(k)];
+            if (std::abs(keypoint.octave - landmark.octave) > 2) continue;
+            if ((Eigen::Vector2d(keypoint.pt.x, keypoint.pt.y) - *pixel).squaredNorm() > radius * radius) continue;
+            const int distance = hamming_distance(landmark.descriptor.ptr<unsigned char>(), frame.features.descriptors.ptr<unsigned char>(k));
+            if (distance < best) {
+              second = best;
+              best = distance;
+              best_keypoint = k;
+            } else if (distance < second) {
+              second = distance;
+            }
+          }
+        }
+      }
+      if (best_keypoint < 0 || best > config.max_descriptor_distance || (second != std::numeric_limits<int>::max() && best >= 0.9 * second)) continue;
+      auto& slot = owner[static_cast<std::size_t>(best_keypoint)];
+      if (best < slot.second) slot = {landmark_id, best};
+    }
+    std::vector<std::pair<int, int>> matches;  // (keypoint, landmark)
+    for (std::size_t k = 0; k < owner.size(); ++k) {
+      if (owner[k].first >= 0) matches.emplace_back(static_cast<int>(k), owner[k].first);
+    }
+    return matches;
+  }
+
+  PoseRefinement refine(const Frame& frame, const SE3& T_camera_world, const std::vector<std::pair<int, int>>& matches) const {
+    std::vector<PoseObservation> observations;
+    observations.reserve(matches.size());
+    for (const auto& [keypoint, landmark_id] : matches) {
+      observations.push_back({landmarks.at(landmark_id).position, pixel_of(frame, static_cast<std::size_t>(keypoint)),
+                              sigma(frame.features.keypoints[static_cast<std::size_t>(keypoint)].octave)});
+    }
+    return refine_pose(T_camera_world, observations, camera);
+  }
+
+  // Pose from descriptor matches against the recent keyframes' landmarks (PnP RANSAC on
+  // undistorted bearings), for a frame the motion model cannot place.
+  std::optional<SE3> relocalize(const Frame& frame) const {
+    std::vector<int> candidate_landmarks;
+    cv::Mat descriptors;
+    std::set<int> seen;
+    int taken = 0;
+    for (auto it = keyframes.rbegin(); it != keyframes.rend() && taken < 3; ++it, ++taken) {
+      const Frame& keyframe = it->second.frame;
+      for (std::size_t k = 0; k < keyframe.landmark.size(); ++k) {
+        const int id = keyframe.landmark[k];
+        if (id < 0 || !seen.insert(id).second) continue;
+        candidate_landmarks.push_back(id);
+        descriptors.push_back(keyframe.features.descriptors.row(static_cast<int>(k)));
+      }
+    }
+    if (static_cast<int>(candidate_landmarks.size()) < config.min_tracked_landmarks) return std::nullopt;
+    DescriptorMatcherConfig matcher;
+    matcher.ratio = 0.9;
+    matcher.max_distance = config.max_descriptor_distance;
+    std::vector<cv::Point3d> object_points;
+    std::vector<cv::Point2d> image_points;
+    for (const FeatureMatch& match : match_descriptors(descriptors, frame.features.descriptors, matcher)) {
+      const auto k = static_cast<std::size_t>(match.train);
+      if (!has_normalized(frame, k)) continue;
+      const Eigen::Vector3d& p = landmarks.at(candidate_landmarks[static_cast<std::size_t>(match.query)]).position;
+      object_points.emplace_back(p.x(), p.y(), p.z());
+      image_points.emplace_back(frame.normalized[k].x(), frame.normalized[k].y());
+    }
+    if (static_cast<int>(object_points.size()) < config.min_tracked_landmarks) return std::nullopt;
+    cv::Mat rotation_vector, translation;
+    std::vector<int> inliers;
+    const bool solved = cv::solvePnPRansac(object_points, image_points, cv::Mat::eye(3, 3, CV_64F), cv::noArray(), rotation_vector, translation,
+                                           false, 300, static_cast<float>(2.0 * config.pixel_sigma / camera.fx), 0.999, inliers, cv::SOLVEPNP_EPNP);
+    if (!solved || static_cast<int>(inliers.size()) < config.min_tracked_landmarks) return std::nullopt;
+    cv::Mat rotation;
+    cv::Rodrigues(rotation_vector, rotation);
+    Eigen::Matrix3d R;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) R(r, c) = rotation.at<double>(r, c);
+    }
+    return SE3(SO3::from_matrix(R), Eigen::Vector3d(translation.at<double>(0), translation.at<double>(1), translation.at<double>(2)));
+  }
+
+  VisualOdometryFrame track(Frame frame) {
+    VisualOdometryFrame result;
+    result.time = frame.time;
+    const SE3 predicted = last_pose * SE3::exp(velocity * (frame.time - last_pose_time));
+    const std::vector<int> local = local_landmarks();
+    SE3 T_camera_world = predicted.inverse();
+    std::vector<std::pair<int, int>> matches = match_by_projection(frame, T_camera_world, local, 1.0);
+    if (static_cast<int>(matches.size()) < 2 * config.min_tracked_landmarks) matches = match_by_projection(frame, T_camera_world, local, 3.0);
+    PoseRefinement refined = refine(frame, T_camera_world, matches);
+    logger()->debug("visual odometry: frame {:.3f}: {} local landmarks, {} matched, {} inliers", frame.time, local.size(), matches.size(), refined.inliers);
+    if (refined.inliers < config.min_tracked_landmarks) {
+      if (std::optional<SE3> relocalized = relocalize(frame)) {
+        matches = match_by_projection(frame, *relocalized, local, 1.0);
+        refined = refine(frame, *relocalized, matches);
+        result.relocalized = refined.inliers >= config.min_tracked_landmarks;
+      }
+    }
+    if (refined.inliers < config.min_tracked_landmarks) {
+      result.state = TrackingState::kLost;
+      result.reason = fmt::format("{} landmarks tracked (< {})", refined.inliers, config.min_tracked_landmarks);
+      lost = true;
+      ++counts.lost_frames;
+      velocity.setZero();
+      return result;
+    }
+    if (lost && result.relocalized) ++counts.relocalizations;
+    lost = false;
+    for (std::size_t i = 0; i < matches.size(); ++i) {
+      if (refined.inlier[i]) frame.landmark[static_cast<std::size_t>(matches[i].first)] = matches[i].second;
+    }
+    frame.T_world_camera = refined.T_camera_world.inverse();
+    const double elapsed = frame.time - last_pose_time;
+    if (elapsed > 0.0) velocity = (last_pose.inverse() * frame.T_world_camera).log() / elapsed;
+    last_pose = frame.T_world_camera;
+    last_pose_time = frame.time;
+    ++frames_since_keyframe;
+    const int reference_keyframe = keyframes.rbegin()->first;
+    frames.push_back({frame.time, reference_keyframe, keyframes.rbegin()->second.frame.T_world_camera.inverse() * frame.T_world_camera});
+    ++counts.tracked_frames;
+
+    result.state = TrackingState::kTracking;
+    result.T_world_camera = frame.T_world_camera;
+    result.tracked_landmarks = refined.inliers;
+    if (refined.inliers < config.keyframe_tracked_ratio * last_keyframe_tracked || frames_since_keyframe >= config.max_frames_between_keyframes) {
+      add_keyframe(std::move(frame));
+      result.keyframe = true;
+      result.T_world_camera = last_pose;
+    }
+    return result;
+  }
+
+  // ---- keyframes ----
+
+  void add_keyframe(Frame frame) {
+    const int id = next_keyframe_id++;
+    Keyframe& keyframe = keyframes.emplace(id, Keyframe{id, std::move(frame)}).first->second;
+    int tracked = 0;
+    for (std::size_t k = 0; k < keyframe.frame.landmark.size(); ++k) {
+      const int landmark_id = keyframe.frame.landmark[k];
+      if (landmark_id < 0) continue;
+      Landmark& landmark = landmarks.at(landmark_id);
+      landmark.observations.emplace_back(id, static_cast<int>(k));
+      landmark.descriptor = keyframe.frame.features.descriptors.row(static_cast<int>(k)).clone();
+      landmark.octave = keyframe.frame.features.keypoints[k].octave;
+      ++tracked;
+    }
+    int older = 0, created = 0;
+    for (auto it = std::next(keyframes.rbegin()); it != keyframes.rend() && older < config.triangulation_keyframes; ++it, ++older) {
+      created += triangulate_new(it->second, keyframe);
+    }
+    logger()->debug("visual odometry: keyframe {} tracks {} landmarks, {} new", id, tracked, created);
+    bundle_adjust();
+    // The frame's pose after the adjustment.
+    last_pose = keyframe.frame.T_world_camera;
+    frames.back() = {keyframe.frame.time, id, SE3()};
+    frames_since_keyframe = 0;
+    // What the next frames are compared with: the landmarks this keyframe sees.
+    last_keyframe_tracked = static_cast<int>(std::count_if(keyframe.frame.landmark.begin(), keyframe.frame.landmark.end(), [](int l) { return l >= 0; }));
+    ++counts.keyframes;
+  }
+
+  // New landmarks: each keypoint of the newer keyframe without a landmark is matched along its
+  // epipolar line in the older keyframe (within 2 sigma of its octave) to the keypoint nearest
+  // in descriptor (ratio 0.9 against the runner-up on the line), then triangulated and checked.
+  int triangulate_new(const Keyframe& older, Keyframe& newer) {
+    const SE3 T_camera1_world = older.frame.T_world_camera.inverse(), T_camera2_world = newer.frame.T_world_camera.inverse();
+    const SE3 T_camera1_camera2 = T_camera1_world * newer.frame.T_world_camera;
+    if (T_camera1_camera2.translation().norm() < 1e-9) return 0;
+    // Essential matrix E = [t]x R of camera 1 from camera 2: x1^T E x2 = 0 (normalized).
+    const Eigen::Matrix3d essential = SO3::hat(T_camera1_camera2.translation()) * T_camera1_camera2.rotation().matrix();
+    std::vector<int> free1;
+    for (std::size_t k = 0; k < older.frame.landmark.size(); ++k) {
+      if (older.frame.landmark[k] < 0 && has_normalized(older.frame, k)) free1.push_back(static_cast<int>(k));
+    }
+    std::vector<std::pair<int, int>> owner(older.frame.landmark.size(), {-1, std::numeric_limits<int>::max()});  // (k2, distance)
+    for (std::size_t k2 = 0; k2 < newer.frame.landmark.size(); ++k2) {
+      if (newer.frame.landmark[k2] >= 0 || !has_normalized(newer.frame, k2)) continue;
+      const Eigen::Vector3d line = essential * newer.frame.normalized[k2].homogeneous();
+      const double line_norm = line.head<2>().norm();
+      if (line_norm < 1e-12) continue;
+      const int octave2 = newer.frame.features.keypoints[k2].octave;
+      const unsigned char* descriptor = newer.frame.features.descriptors.ptr<unsigned char>(static_cast<int>(k2));
+      int best = std::numeric_limits<int>::max(), second = std::numeric_limits<int>::max(), best_k1 = -1;
+      for (int k1 : free1) {
+        const cv::KeyPoint& keypoint1 = older.frame.features.keypoints[static_cast<std::size_t>(k1)];
+        if (std::abs(keypoint1.octave - octave2) > 1) continue;
+        const double epipolar_px = std::abs(older.frame.normalized[static_cast<std::size_t>(k1)].homogeneous().dot(line)) / line_norm * camera.fx;
+        if (epipolar_px > 2.0 * sigma(keypoint1.octave)) continue;
+        const int distance = hamming_distance(older.frame.features.descriptors.ptr<unsigned char>(k1), descriptor);
+        if (distance < best) {
+          second = best;
+          best = distance;
+          best_k1 = k1;
+        } else if (distance < second) {
+          second = distance;
+        }
+      }
+      if (best_k1 < 0 || best > config.max_descriptor_distance || (second != std::numeric_limits<int>::max() && best >= 0.9 * second)) continue;
+      auto& slot = owner[static_cast<std::size_t>(best_k1)];
+      if (best < slot.second) slot = {static_cast<int>(k2), best};
+    }
+    int created = 0;
+    for (std::size_t k1 = 0; k1 < owner.size(); ++k1) {
+      if (owner[k1].first < 0) continue;
+      const auto k2 = static_cast<std::size_t>(owner[k1].first);
+      const std::optional<Eigen::Vector3d> point = triangulate(T_camera1_world, older.frame.normalized[k1], T_camera2_world, newer.frame.normalized[k2]);
+      if (!point) continue;
+      if (triangulation_angle(T_camera1_world, T_camera2_world, *point) < config.min_triangulation_angle_deg * kDegree) continue;
+      const PoseObservation in1{*point, pixel_of(older.frame, k1), sigma(older.frame.features.keypoints[k1].octave)};
+      const PoseObservation in2{*point, pixel_of(newer.frame, k2), sigma(newer.frame.features.keypoints[k2].octave)};
+      if (reprojection_chi2(T_camera1_world, in1, camera) > kChi2Pixel95 || reprojection_chi2(T_camera2_world, in2, camera) > kChi2Pixel95) continue;
+      add_landmark(*point, older, static_cast<int>(k1), newer, static_cast<int>(k2));
+      ++created;
+    }
+    return created;
+  }
+
+  // Local bundle adjustment over the window; the window's two oldest keyframes are held.
+  void bundle_adjust() {
+    const std::vector<int> window_ids = window();
+    const std::set<int> in_window(window_ids.begin(), window_ids.end());
+    graph::FactorGraph graph;
+    graph::Values values;
+    graph::BatchOptimizerConfig optimizer;
+    optimizer.max_iterations = config.bundle_adjustment_iterations;
+    for (std::size_t i = 0; i < window_ids.size(); ++i) {
+      values.insert(graph::X(static_cast<std::uint64_t>(window_ids[i])), keyframes.at(window_ids[i]).frame.T_world_camera);
+      if (i < 2) optimizer.fixed.push_back(graph::X(static_cast<std::uint64_t>(window_ids[i])));
+    }
+    const graph::RobustKernel huber{graph::RobustKernel::Type::kHuber, std::sqrt(kChi2Pixel95)};
+    std::vector<int> adjusted;
+    for (int landmark_id : local_landmarks()) {
+      const Landmark& landmark = landmarks.at(landmark_id);
+      int observed = 0;
+      for (const auto& observation : landmark.observations) observed += in_window.count(observation.first) > 0;
+      if (observed < 2) continue;
+      // Every observation must be in front of its camera, or the problem cannot be evaluated.
+      const bool in_front = std::all_of(landmark.observations.begin(), landmark.observations.end(), [&](const auto& observation) {
+        return !in_window.count(observation.first) || (keyframes.at(observation.first).frame.T_world_camera.inverse().act(landmark.position).z() > camera.min_depth);
+      });
+      if (!in_front) continue;
+      values.insert(graph::L(static_cast<std::uint64_t>(landmark_id)), landmark.position);
+      adjusted.push_back(landmark_id);
+      for (const auto& [keyframe_id, keypoint] : landmark.observations) {
+        if (!in_window.count(keyframe_id)) continue;
+        const Frame& frame = keyframes.at(keyframe_id).frame;
+        const double pixel_sigma = sigma(frame.features.keypoints[static_cast<std::size_t>(keypoint)].octave);
+        graph.emplace_robust<graph::ProjectionFactor>(huber, graph::X(static_cast<std::uint64_t>(keyframe_id)), graph::L(static_cast<std::uint64_t>(landmark_id)),
+                                                      pixel_of(frame, static_cast<std::size_t>(keypoint)), camera, SE3(),
+                                                      graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(pixel_sigma)).value());
+      }
+    }
+    if (graph.size() > 0 && optimizer.max_iterations > 0) {
+      Result<graph::OptimizationSummary> optimized = graph::optimize(graph, values, optimizer);
+      if (optimized) {
+        for (int keyframe_id : window_ids) keyframes.at(keyframe_id).frame.T_world_camera = values.at<SE3>(graph::X(static_cast<std::uint64_t>(keyframe_id))).value();
+        for (int landmark_id : adjusted) landmarks.at(landmark_id).position = values.at<Eigen::Vector3d>(graph::L(static_cast<std::uint64_t>(landmark_id))).value();
+      } else {
+        logger()->warn("visual odometry: local bundle adjustment failed: {}", optimized.error().message);
+      }
+    }
+    // Observations that remain outliers are removed; landmarks left with one are culled.
+    for (int landmark_id : local_landmarks()) {
+      std::vector<int> outliers;
+      for (const auto& [keyframe_id, keypoint] : landmarks.at(landmark_id).observations) {
+        if (!in_window.count(keyframe_id)) continue;
+        const Frame& frame = keyframes.at(keyframe_id).frame;
+        const PoseObservation observation{landmarks.at(landmark_id).position, pixel_of(frame, static_cast<std::size_t>(keypoint)),
+                                          sigma(frame.features.keypoints[static_cast<std::size_t>(keypoint)].octave)};
+        if (reprojection_chi2(frame.T_world_camera.inverse(), observation, camera) > kChi2Pixel95) outliers.push_back(keyframe_id);
+      }
+      for (int keyframe_id : outliers) remove_observation(landmark_id, keyframe_id);
+      if (landmarks.at(landmark_id).observations.size() < 2) remove_landmark(landmark_id);
+    }
+  }
+};
+
+VisualOdometry::VisualOdometry(std::unique_ptr<State> state) : state_(std::move(state)) {}
+VisualOdometry::~VisualOdometry() = default;
+
+Result<std::unique_ptr<VisualOdometry>> VisualOdometry::create(const PinholeCamera& camera, cv::Size image_size, const VisualOdometryConfig& config) {
+  if (Status valid = validate(config); !valid) return valid.error();
+  if (!(camera.fx > 0.0 && camera.fy > 0.0 && std::isfinite(camera.cx) && std::isfinite(camera.cy))) {
+    return Error(fmt::format("camera: focal lengths must be positive (fx {}, fy {})", camera.fx, camera.fy), "camera");
+  }
+  if (image_size.width < 64 || image_size.height < 64) {
+    return Error(fmt::format("image size {} x {} is smaller than 64 x 64", image_size.width, image_size.height), "image_size");
+  }
+  auto state = std::make_unique<State>();
+  state->camera = camera;
+  state->image_size = image_size;
+  state->config = config;
+  state->extractor = OrbExtractor(config.features);
+  return std::unique_ptr<VisualOdometry>(new VisualOdometry(std::move(state)));
+}
+
+Result<VisualOdometryFrame> VisualOdometry::track(double time, const cv::Mat& image) {
+  State& s = *state_;
+  if (!std::isfinite(time)) return Error("time: not finite", "time");
+  if (s.last_time && time <= *s.last_time) {
+    return Error(fmt::format("time {:.6f} s is not after the previous frame's {:.6f} s: frame skipped", time, *s.last_time), "time");
+  }
+  if (image.cols != s.image_size.width || image.rows != s.image_size.height) {
+    return Error(fmt::format("image is {} x {}, the camera's calibration is for {} x {}", image.cols, image.rows, s.image_size.width, s.image_size.height), "image");
+  }
+  Result<ImageFeatures> features = with_context(s.extractor.extract(image), "image");
+  if (!features) return features.error();
+  s.last_time = time;
+  ++s.counts.frames;
+  Frame frame = s.make_frame(time, std::move(features).value());
+  if (!s.initialized) {
+    VisualOdometryFrame result = s.initialize(std::move(frame));
+    if (result.state == TrackingState::kTracking) s.counts.tracked_frames += 2;
+    return result;
+  }
+  return s.track(std::move(frame));
+}
+
+std::vector<std::pair<double, SE3>> VisualOdometry::trajectory() const {
+  std::vector<std::pair<double, SE3>> poses;
+  poses.reserve(state_->frames.size());
+  for (const FrameRecord& record : state_->frames) poses.emplace_back(record.time, state_->keyframes.at(record.keyframe).frame.T_world_camera * record.T_keyframe_camera);
+  return poses;
+}
+
+std::vector<std::pair<double, SE3>> VisualOdometry::keyframe_poses() const {
+  std::vector<std::pair<double, SE3>> poses;
+  for (const auto& [id, keyframe] : state_->keyframes) poses.emplace_back(keyframe.frame.time, keyframe.frame.T_world_camera);
+  return poses;
+}
+
+std::vector<Eigen::Vector3d> VisualOdometry::landmark_positions() const {
+  std::vector<Eigen::Vector3d> positions;
+  positions.reserve(state_->landmarks.size());
+  for (const auto& [id, landmark] : state_->landmarks) positions.push_back(landmark.position);
+  return positions;
+}
+
+VisualOdometrySummary VisualOdometry::summary() const {
+  VisualOdometrySummary summary = state_->counts;
+  summary.landmarks = static_cast<int>(state_->landmarks.size());
+  summary.keyframes = static_cast<int>(state_->keyframes.size());
+  return summary;
+}
+
+}  // namespace hanzo::fusion::vision

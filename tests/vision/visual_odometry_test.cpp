@@ -1,0 +1,100 @@
+// Monocular visual odometry on real sequences with ground truth: KITTI odometry 06 (frames
+// 0-50, 60 m straight), KITTI raw 0052 (8 m, then standing beside passing trucks).
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/eval/pose_error.hpp"
+#include "hanzo/fusion/io/trajectory.hpp"
+#include "hanzo/fusion/vision/visual_odometry.hpp"
+
+namespace hanzo::fusion::vision {
+namespace {
+
+struct Sequence {
+  std::vector<std::string> images;
+  std::vector<double> times;
+  PinholeCamera camera;
+  io::Trajectory ground_truth;
+};
+
+Sequence kitti_odometry_06() {
+  const std::string folder = std::string(HANZO_DATA_DIR) + "/kitti_odometry_06_first51";
+  Sequence sequence;
+  std::ifstream times(folder + "/times_from_pyslam_kitti06.txt");
+  double time = 0.0;
+  while (times >> time && sequence.times.size() < 51) sequence.times.push_back(time);
+  for (int i = 0; i < 51; ++i) sequence.images.push_back(fmt::format("{}/image_l/{:06d}.png", folder, i));
+  sequence.camera.fx = sequence.camera.fy = 707.0912;
+  sequence.camera.cx = 601.8873;
+  sequence.camera.cy = 183.1104;
+  sequence.ground_truth = io::read_trajectory(folder + "/gt_cam0.tum", io::TrajectoryFormat::kTum).value();
+  return sequence;
+}
+
+struct RunResult {
+  io::Trajectory estimate;
+  VisualOdometrySummary summary;
+};
+
+RunResult run(const Sequence& sequence, VisualOdometryConfig config = {}) {
+  if (const char* a = std::getenv("TA")) config.min_triangulation_angle_deg = std::atof(a);
+  if (const char* a = std::getenv("TK")) config.triangulation_keyframes = std::atoi(a);
+  if (const char* a = std::getenv("KR")) config.keyframe_tracked_ratio = std::atof(a);
+  if (const char* a = std::getenv("NF")) config.features.max_features = std::atoi(a);
+  const cv::Mat first = cv::imread(sequence.images.front(), cv::IMREAD_GRAYSCALE);
+  auto odometry = VisualOdometry::create(sequence.camera, first.size(), config).value();
+  if (std::getenv("HANZO_TEST_VERBOSE")) { auto l = spdlog::stderr_color_mt("t"); l->set_level(spdlog::level::debug); set_logger(l); }
+  for (std::size_t i = 0; i < sequence.images.size(); ++i) {
+    const Result<VisualOdometryFrame> frame = odometry->track(sequence.times[i], cv::imread(sequence.images[i], cv::IMREAD_GRAYSCALE));
+    EXPECT_TRUE(frame) << frame.error().message;
+    if (frame) std::printf("%3zu %-12s %4d %s %s\n", i, to_string(frame->state), frame->tracked_landmarks, frame->keyframe ? "KF" : "  ", frame->reason.c_str());
+  }
+  RunResult result;
+  for (const auto& [time, pose] : odometry->trajectory()) {
+    result.estimate.timestamps.push_back(Timestamp::from_seconds(time));
+    result.estimate.poses.push_back(pose.matrix());
+  }
+  result.summary = odometry->summary();
+  return result;
+}
+
+// The ground-truth poses at the estimate's times (same clock, exact times).
+io::Trajectory at_times(const io::Trajectory& reference, const io::Trajectory& estimate) {
+  std::vector<std::size_t> indices;
+  for (const Timestamp& time : estimate.timestamps) {
+    for (std::size_t i = 0; i < reference.size(); ++i) {
+      if (std::abs((reference.timestamps[i] - time).seconds()) < 1e-3) {
+        indices.push_back(i);
+        break;
+      }
+    }
+  }
+  return reference.subset(indices);
+}
+
+TEST(VisualOdometry, KittiOdometry06MonocularStaysUnderOnePercentOfThePath) {
+  const Sequence sequence = kitti_odometry_06();
+  const RunResult result = run(sequence);
+  const io::Trajectory reference = at_times(sequence.ground_truth, result.estimate);
+  ASSERT_EQ(reference.size(), result.estimate.size());
+  ASSERT_GE(result.estimate.size(), 48u);
+  eval::ApeConfig config;
+  config.alignment = eval::Alignment::kSim3;
+  const eval::ApeResult ape = eval::compute_ape(reference, result.estimate, config).value();
+  const double path = reference.path_length();
+  std::printf("KITTI 06: %zu frames tracked, %d keyframes, %d landmarks, APE (Sim3) %.3f m RMSE over %.1f m (%.2f %%)\n", result.estimate.size(),
+              result.summary.keyframes, result.summary.landmarks, ape.statistics.rmse, path, 100 * ape.statistics.rmse / path);
+  EXPECT_TRUE(result.summary.scale_free);
+  EXPECT_LT(ape.statistics.rmse, 0.01 * path);
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::vision
