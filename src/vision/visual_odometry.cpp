@@ -83,6 +83,9 @@ Status validate(const VisualOdometryConfig& config) {
   if (!positive(config.min_triangulation_angle_deg)) return Error("VisualOdometryConfig.min_triangulation_angle_deg: must be positive", "min_triangulation_angle_deg");
   if (config.triangulation_keyframes < 1) return Error("VisualOdometryConfig.triangulation_keyframes: must be at least 1", "triangulation_keyframes");
   if (config.window_keyframes < 2) return Error("VisualOdometryConfig.window_keyframes: must be at least 2", "window_keyframes");
+  if (!(config.standstill_pixels >= 0.0)) return Error("VisualOdometryConfig.standstill_pixels: must not be negative", "standstill_pixels");
+  if (!(config.moving_object_pixels > 0.0)) return Error("VisualOdometryConfig.moving_object_pixels: must be positive", "moving_object_pixels");
+  if (!(config.standstill_share > 0.0 && config.standstill_share <= 1.0)) return Error("VisualOdometryConfig.standstill_share: must be in (0, 1]", "standstill_share");
   if (config.bundle_adjustment_iterations < 0) return Error("VisualOdometryConfig.bundle_adjustment_iterations: must not be negative", "bundle_adjustment_iterations");
   return ok_status();
 }
@@ -100,7 +103,9 @@ struct VisualOdometry::State {
   std::vector<FrameRecord> frames;
   VisualOdometrySummary counts;
 
-  std::optional<Frame> reference;  // initialization's first view
+  std::optional<Frame> reference;     // initialization's first view
+  std::optional<Frame> still_anchor;  // the last frame tracked in motion: its features,
+  FrameRecord still_anchor_record;    // and its pose relative to its keyframe
   bool initialized = false;
   bool lost = false;
   std::optional<double> last_time;
@@ -244,12 +249,11 @@ struct VisualOdometry::State {
       result.reason = fmt::format("{} triangulated points (< {})", good.size(), config.min_initialization_inliers / 2);
       return result;
     }
-    std::vector<double> angles;
-    for (const Candidate& candidate : good) angles.push_back(candidate.angle);
-    std::nth_element(angles.begin(), angles.begin() + static_cast<std::ptrdiff_t>(angles.size() / 2), angles.end());
-    const double median_angle = angles[angles.size() / 2];
-    if (median_angle < config.min_initialization_parallax_deg * kDegree) {
-      result.reason = fmt::format("median parallax {:.2f} deg (< {:.2f})", median_angle / kDegree, config.min_initialization_parallax_deg);
+    // Enough points seen from clearly different directions (ORB-SLAM's test: a median would
+    // wait for the far points, which forward motion hardly moves).
+    const auto wide = std::count_if(good.begin(), good.end(), [&](const Candidate& c) { return c.angle >= config.min_initialization_parallax_deg * kDegree; });
+    if (wide < config.min_initialization_inliers / 2) {
+      result.reason = fmt::format("{} points with parallax over {:.1f} deg (< {})", wide, config.min_initialization_parallax_deg, config.min_initialization_inliers / 2);
       return result;
     }
     // Two keyframes and the landmarks.
@@ -275,7 +279,7 @@ struct VisualOdometry::State {
     velocity = elapsed > 0.0 ? SE3::Tangent((first_stored.frame.T_world_camera.inverse() * last_pose).log() / elapsed) : SE3::Tangent::Zero();
     last_keyframe_tracked = static_cast<int>(landmarks.size());
     frames_since_keyframe = 0;
-    logger()->info("visual odometry: initialized with {} landmarks (median parallax {:.2f} deg)", landmarks.size(), median_angle / kDegree);
+    logger()->info("visual odometry: initialized with {} landmarks", landmarks.size());
     result.state = TrackingState::kTracking;
     result.T_world_camera = last_pose;
     result.tracked_landmarks = static_cast<int>(landmarks.size());
@@ -421,6 +425,12 @@ struct VisualOdometry::State {
       if (refined.inlier[i]) frame.landmark[static_cast<std::size_t>(matches[i].first)] = matches[i].second;
     }
     frame.T_world_camera = refined.T_camera_world.inverse();
+    const bool standing = still_anchor && standing_still(frame, *still_anchor);
+    if (standing) {
+      // The anchor's pose as the bundle adjustment has left it (it may have become a keyframe).
+      frame.T_world_camera = keyframes.at(still_anchor_record.keyframe).frame.T_world_camera * still_anchor_record.T_keyframe_camera;
+      result.moving_landmarks_removed = remove_moving_landmarks(frame, matches);
+    }
     const double elapsed = frame.time - last_pose_time;
     if (elapsed > 0.0) velocity = (last_pose.inverse() * frame.T_world_camera).log() / elapsed;
     last_pose = frame.T_world_camera;
@@ -433,12 +443,82 @@ struct VisualOdometry::State {
     result.state = TrackingState::kTracking;
     result.T_world_camera = frame.T_world_camera;
     result.tracked_landmarks = refined.inliers;
+    result.standing_still = standing;
+    if (standing) ++counts.standstill_frames;
+    if (standing) return result;
+    still_anchor = Frame{frame.time, frame.features, {}, frame.landmark, frame.T_world_camera};
     if (refined.inliers < config.keyframe_tracked_ratio * last_keyframe_tracked || frames_since_keyframe >= config.max_frames_between_keyframes) {
       add_keyframe(std::move(frame));
       result.keyframe = true;
       result.T_world_camera = last_pose;
     }
+    still_anchor_record = frames.back();
     return result;
+  }
+
+  // Standstill: a large share of the anchor's keypoints (the last frame tracked in motion) are
+  // found again at the same pixel (within standstill_pixels, same octave, a close descriptor).
+  // This does not depend on the pose estimate: moving objects in view (a passing truck) cannot
+  // fake it or hide it. The pose is then held at the anchor's and no keyframe is added: without
+  // a baseline, anything that moves would be triangulated from pose noise and drag the
+  // estimate. The anchor stays while standing, so a slow creep adds up until it shows.
+  bool standing_still(const Frame& frame, const Frame& anchor) const {
+    constexpr int kCell = 16;
+    const int columns = image_size.width / kCell + 1, rows = image_size.height / kCell + 1;
+    std::vector<std::vector<int>> grid(static_cast<std::size_t>(columns * rows));
+    for (std::size_t k = 0; k < frame.features.size(); ++k) {
+      const cv::Point2f& p = frame.features.keypoints[k].pt;
+      grid[static_cast<std::size_t>(std::clamp(static_cast<int>(p.y) / kCell, 0, rows - 1) * columns + std::clamp(static_cast<int>(p.x) / kCell, 0, columns - 1))]
+          .push_back(static_cast<int>(k));
+    }
+    const double radius = config.standstill_pixels;
+    int still = 0;
+    for (std::size_t k = 0; k < anchor.features.size(); ++k) {
+      const cv::KeyPoint& keypoint = anchor.features.keypoints[k];
+      const int column = std::clamp(static_cast<int>(keypoint.pt.x) / kCell, 0, columns - 1), row = std::clamp(static_cast<int>(keypoint.pt.y) / kCell, 0, rows - 1);
+      bool found = false;
+      for (int r = std::max(0, row - 1); r <= std::min(rows - 1, row + 1) && !found; ++r) {
+        for (int c = std::max(0, column - 1); c <= std::min(columns - 1, column + 1) && !found; ++c) {
+          for (int candidate : grid[static_cast<std::size_t>(r * columns + c)]) {
+            const cv::KeyPoint& other = frame.features.keypoints[static_cast<std::size_t>(candidate)];
+            if (other.octave != keypoint.octave || cv::norm(other.pt - keypoint.pt) > radius) continue;
+            if (hamming_distance(anchor.features.descriptors.ptr<unsigned char>(static_cast<int>(k)), frame.features.descriptors.ptr<unsigned char>(candidate)) <=
+                config.max_descriptor_distance / 2) {
+              found = true;
+              break;
+            }
+          }
+        }
+      }
+      still += found;
+    }
+    const double share = static_cast<double>(still) / static_cast<double>(std::max<std::size_t>(1, anchor.features.size()));
+    return share >= config.standstill_share;
+  }
+
+  // While the camera stands still the world does not move in the image: a landmark whose
+  // keypoint has moved more than moving_object_pixels (times its octave scale) from where the
+  // anchor frame saw it sits on something that moves (a passing vehicle) and is removed from the
+  // map, so it cannot drag the pose once the camera moves again. Image displacements, not
+  // reprojection errors: a standstill may hide a creep of a few centimetres, which moves near
+  // points by a few pixels. Returns how many were removed.
+  int remove_moving_landmarks(const Frame& frame, const std::vector<std::pair<int, int>>& matches) {
+    std::map<int, std::size_t> in_anchor;
+    for (std::size_t k = 0; k < still_anchor->landmark.size(); ++k) {
+      if (still_anchor->landmark[k] >= 0) in_anchor.emplace(still_anchor->landmark[k], k);
+    }
+    int removed = 0;
+    for (const auto& [keypoint, landmark_id] : matches) {
+      const auto seen = in_anchor.find(landmark_id);
+      if (seen == in_anchor.end() || !landmarks.count(landmark_id)) continue;
+      const double displacement = (pixel_of(frame, static_cast<std::size_t>(keypoint)) - pixel_of(*still_anchor, seen->second)).norm();
+      if (displacement > config.moving_object_pixels * sigma(frame.features.keypoints[static_cast<std::size_t>(keypoint)].octave) / config.pixel_sigma) {
+        remove_landmark(landmark_id);
+        ++removed;
+      }
+    }
+    counts.moving_landmarks_removed += removed;
+    return removed;
   }
 
   // ---- keyframes ----
