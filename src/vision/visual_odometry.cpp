@@ -42,6 +42,7 @@ struct Landmark {
   cv::Mat descriptor;  // 1 x 32, of the latest observation
   int octave = 0;      // of the latest observation
   std::vector<std::pair<int, int>> observations;  // (keyframe id, keypoint)
+  int created_at = 0;  // keyframe id that created it
 };
 
 // A tracked frame: its pose relative to its reference keyframe.
@@ -140,6 +141,7 @@ struct VisualOdometry::State {
     landmark.descriptor = second.frame.features.descriptors.row(keypoint2).clone();
     landmark.octave = second.frame.features.keypoints[static_cast<std::size_t>(keypoint2)].octave;
     landmark.observations = {{first.id, keypoint1}, {second.id, keypoint2}};
+    landmark.created_at = second.id;
     landmarks.emplace(id, std::move(landmark));
     keyframes.at(first.id).frame.landmark[static_cast<std::size_t>(keypoint1)] = id;
     second.frame.landmark[static_cast<std::size_t>(keypoint2)] = id;
@@ -541,6 +543,7 @@ struct VisualOdometry::State {
       created += triangulate_new(it->second, keyframe);
     }
     logger()->debug("visual odometry: keyframe {} tracks {} landmarks, {} new", id, tracked, created);
+    cull_unconfirmed_landmarks(id);
     bundle_adjust();
     // The frame's pose after the adjustment.
     last_pose = keyframe.frame.T_world_camera;
@@ -549,6 +552,16 @@ struct VisualOdometry::State {
     // What the next frames are compared with: the landmarks this keyframe sees.
     last_keyframe_tracked = static_cast<int>(std::count_if(keyframe.frame.landmark.begin(), keyframe.frame.landmark.end(), [](int l) { return l >= 0; }));
     ++counts.keyframes;
+  }
+
+  // A landmark that three keyframes after its creation is still seen by fewer than three was a
+  // chance match or lies on something that moved (ORB-SLAM's recent map point culling).
+  void cull_unconfirmed_landmarks(int newest_keyframe) {
+    std::vector<int> unconfirmed;
+    for (const auto& [landmark_id, landmark] : landmarks) {
+      if (newest_keyframe - landmark.created_at == 3 && landmark.observations.size() < 3) unconfirmed.push_back(landmark_id);
+    }
+    for (int landmark_id : unconfirmed) remove_landmark(landmark_id);
   }
 
   // New landmarks: each keypoint of the newer keyframe without a landmark is matched along its
