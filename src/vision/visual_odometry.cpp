@@ -30,6 +30,11 @@ struct Frame {
   std::vector<Eigen::Vector2d> normalized;
   std::vector<int> landmark;
   SE3 T_world_camera;
+  // Stereo: the right image (kept until the frame's keyframe decision), its features, and the
+  // right keypoint matched to each left keypoint (-1: none).
+  cv::Mat right_image;
+  ImageFeatures right_features;
+  std::vector<int> right_keypoint;
 };
 
 struct Keyframe {
@@ -59,6 +64,23 @@ Eigen::Vector2d pixel_of(const Frame& frame, std::size_t keypoint) {
   return {point.x, point.y};
 }
 
+Eigen::Vector2d right_pixel_of(const Frame& frame, std::size_t keypoint) {
+  const cv::Point2f& point = frame.right_features.keypoints[static_cast<std::size_t>(frame.right_keypoint[keypoint])].pt;
+  return {point.x, point.y};
+}
+
+// What the standstill test keeps of a frame: its keypoints, descriptors, landmarks and pose.
+Frame anchor_of(const Frame& frame) {
+  Frame anchor;
+  anchor.time = frame.time;
+  anchor.features = frame.features;
+  anchor.landmark = frame.landmark;
+  anchor.T_world_camera = frame.T_world_camera;
+  return anchor;
+}
+
+bool has_right(const Frame& frame, std::size_t keypoint) { return !frame.right_keypoint.empty() && frame.right_keypoint[keypoint] >= 0; }
+
 }  // namespace
 
 const char* to_string(TrackingState state) {
@@ -85,6 +107,7 @@ Status validate(const VisualOdometryConfig& config) {
   if (config.triangulation_keyframes < 1) return Error("VisualOdometryConfig.triangulation_keyframes: must be at least 1", "triangulation_keyframes");
   if (config.window_keyframes < 2) return Error("VisualOdometryConfig.window_keyframes: must be at least 2", "window_keyframes");
   if (!(config.standstill_pixels >= 0.0)) return Error("VisualOdometryConfig.standstill_pixels: must not be negative", "standstill_pixels");
+  if (!(config.max_stereo_depth_baselines > 0.0)) return Error("VisualOdometryConfig.max_stereo_depth_baselines: must be positive", "max_stereo_depth_baselines");
   if (!(config.moving_object_pixels > 0.0)) return Error("VisualOdometryConfig.moving_object_pixels: must be positive", "moving_object_pixels");
   if (!(config.standstill_share > 0.0 && config.standstill_share <= 1.0)) return Error("VisualOdometryConfig.standstill_share: must be in (0, 1]", "standstill_share");
   if (config.bundle_adjustment_iterations < 0) return Error("VisualOdometryConfig.bundle_adjustment_iterations: must not be negative", "bundle_adjustment_iterations");
@@ -96,6 +119,9 @@ struct VisualOdometry::State {
   cv::Size image_size;
   VisualOdometryConfig config;
   OrbExtractor extractor;
+  // Stereo: the right camera and where it sits in the left camera's frame.
+  std::optional<PinholeCamera> right_camera;
+  SE3 T_left_right;
 
   std::map<int, Keyframe> keyframes;
   std::map<int, Landmark> landmarks;
@@ -183,6 +209,140 @@ struct VisualOdometry::State {
       }
     }
     return {ids.begin(), ids.end()};
+  }
+
+  // Observations of a landmark (a stereo keyframe's right image counts as one more), over the
+  // given keyframes only when `window` is given.
+  int observation_count(const Landmark& landmark, const std::set<int>* window = nullptr) const {
+    int count = 0;
+    for (const auto& [keyframe_id, keypoint] : landmark.observations) {
+      if (window != nullptr && !window->count(keyframe_id)) continue;
+      count += 1 + has_right(keyframes.at(keyframe_id).frame, static_cast<std::size_t>(keypoint));
+    }
+    return count;
+  }
+
+  // ---- stereo ----
+
+  // Right features of a frame and the right keypoint of each left one: the nearest descriptor
+  // (ratio 0.9 against the runner-up) among the right keypoints within 2 sigma of the left
+  // keypoint's epipolar line (from the rig's extrinsics) and one octave; each right keypoint
+  // kept by the left keypoint it matches best.
+  void match_stereo(Frame& frame) const {
+    frame.right_keypoint.assign(frame.features.size(), -1);
+    Result<ImageFeatures> right = extractor.extract(frame.right_image);
+    frame.right_image.release();
+    if (!right) return;
+    frame.right_features = std::move(right).value();
+    std::vector<Eigen::Vector2d> right_normalized;
+    for (const cv::KeyPoint& keypoint : frame.right_features.keypoints) {
+      right_normalized.push_back(right_camera->unproject({keypoint.pt.x, keypoint.pt.y}).value_or(Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN())));
+    }
+    const SE3 T_right_left = T_left_right.inverse();
+    const Eigen::Matrix3d essential = SO3::hat(T_right_left.translation()) * T_right_left.rotation().matrix();  // x_r^T E x_l = 0
+    std::vector<std::pair<int, int>> owner(frame.right_features.size(), {-1, std::numeric_limits<int>::max()});
+    for (std::size_t k = 0; k < frame.features.size(); ++k) {
+      if (!has_normalized(frame, k)) continue;
+      const Eigen::Vector3d line = essential * frame.normalized[k].homogeneous();
+      const double line_norm = line.head<2>().norm();
+      if (line_norm < 1e-12) continue;
+      const int octave = frame.features.keypoints[k].octave;
+      const unsigned char* descriptor = frame.features.descriptors.ptr<unsigned char>(static_cast<int>(k));
+      int best = std::numeric_limits<int>::max(), second = std::numeric_limits<int>::max(), best_right = -1;
+      for (std::size_t r = 0; r < frame.right_features.size(); ++r) {
+        const cv::KeyPoint& candidate = frame.right_features.keypoints[r];
+        if (std::abs(candidate.octave - octave) > 1 || !std::isfinite(right_normalized[r].x())) continue;
+        if (std::abs(right_normalized[r].homogeneous().dot(line)) / line_norm * right_camera->fx > 2.0 * sigma(candidate.octave)) continue;
+        const int distance = hamming_distance(descriptor, frame.right_features.descriptors.ptr<unsigned char>(static_cast<int>(r)));
+        if (distance < best) {
+          second = best;
+          best = distance;
+          best_right = static_cast<int>(r);
+        } else if (distance < second) {
+          second = distance;
+        }
+      }
+      if (best_right < 0 || best > config.max_descriptor_distance || (second != std::numeric_limits<int>::max() && best >= 0.9 * second)) continue;
+      auto& slot = owner[static_cast<std::size_t>(best_right)];
+      if (best < slot.second) slot = {static_cast<int>(k), best};
+    }
+    for (std::size_t r = 0; r < owner.size(); ++r) {
+      if (owner[r].first >= 0) frame.right_keypoint[static_cast<std::size_t>(owner[r].first)] = static_cast<int>(r);
+    }
+  }
+
+  // The stereo point of a left keypoint (world frame at the frame's pose), when it lies in front
+  // of both cameras, reprojects within the chi-square bound in both, and is nearer than
+  // max_stereo_depth_baselines rig baselines (farther, its depth is mostly noise).
+  std::optional<Eigen::Vector3d> stereo_point(const Frame& frame, std::size_t keypoint) const {
+    if (!has_right(frame, keypoint)) return std::nullopt;
+    const auto right = static_cast<std::size_t>(frame.right_keypoint[keypoint]);
+    const std::optional<Eigen::Vector2d> right_normalized = right_camera->unproject(right_pixel_of(frame, keypoint));
+    if (!right_normalized) return std::nullopt;
+    const SE3 T_right_left = T_left_right.inverse();
+    const std::optional<Eigen::Vector3d> point_left = triangulate(SE3(), frame.normalized[keypoint], T_right_left, *right_normalized);
+    if (!point_left || point_left->z() <= 0.0 || point_left->z() > config.max_stereo_depth_baselines * T_left_right.translation().norm()) return std::nullopt;
+    const PoseObservation left_observation{*point_left, pixel_of(frame, keypoint), sigma(frame.features.keypoints[keypoint].octave)};
+    const PoseObservation right_observation{*point_left, right_pixel_of(frame, keypoint), sigma(frame.right_features.keypoints[right].octave)};
+    if (reprojection_chi2(SE3(), left_observation, camera) > kChi2Pixel95 || reprojection_chi2(T_right_left, right_observation, *right_camera) > kChi2Pixel95) {
+      return std::nullopt;
+    }
+    return frame.T_world_camera.act(*point_left);
+  }
+
+  // Landmarks from the stereo points of a keyframe's keypoints that have none yet.
+  int add_stereo_landmarks(Keyframe& keyframe) {
+    int created = 0;
+    for (std::size_t k = 0; k < keyframe.frame.features.size(); ++k) {
+      if (keyframe.frame.landmark[k] >= 0) continue;
+      const std::optional<Eigen::Vector3d> point = stereo_point(keyframe.frame, k);
+      if (!point) continue;
+      const int id = next_landmark_id++;
+      Landmark landmark;
+      landmark.position = *point;
+      landmark.descriptor = keyframe.frame.features.descriptors.row(static_cast<int>(k)).clone();
+      landmark.octave = keyframe.frame.features.keypoints[k].octave;
+      landmark.observations = {{keyframe.id, static_cast<int>(k)}};
+      landmark.created_at = keyframe.id;
+      landmarks.emplace(id, std::move(landmark));
+      keyframe.frame.landmark[k] = id;
+      ++created;
+    }
+    return created;
+  }
+
+  // Stereo: the first frame with enough stereo points is the first keyframe (metric scale).
+  VisualOdometryFrame initialize_stereo(Frame frame) {
+    VisualOdometryFrame result;
+    result.time = frame.time;
+    result.state = TrackingState::kInitializing;
+    match_stereo(frame);
+    frame.T_world_camera = SE3();
+    const int id = next_keyframe_id;
+    Keyframe& keyframe = keyframes.emplace(id, Keyframe{id, std::move(frame)}).first->second;
+    const int created = add_stereo_landmarks(keyframe);
+    if (created < config.min_initialization_inliers) {
+      for (int landmark_id : std::vector<int>(keyframe.frame.landmark.begin(), keyframe.frame.landmark.end())) {
+        if (landmark_id >= 0) landmarks.erase(landmark_id);
+      }
+      keyframes.erase(id);
+      result.reason = fmt::format("{} stereo points (< {})", created, config.min_initialization_inliers);
+      return result;
+    }
+    ++next_keyframe_id;
+    frames.push_back({keyframe.frame.time, id, SE3()});
+    initialized = true;
+    last_pose = SE3();
+    last_pose_time = keyframe.frame.time;
+    velocity.setZero();
+    last_keyframe_tracked = created;
+    still_anchor = anchor_of(keyframe.frame);
+    still_anchor_record = frames.back();
+    logger()->info("visual odometry: initialized from one stereo frame with {} landmarks", created);
+    result.state = TrackingState::kTracking;
+    result.tracked_landmarks = created;
+    result.keyframe = true;
+    return result;
   }
 
   // ---- initialization ----
@@ -448,7 +608,7 @@ struct VisualOdometry::State {
     result.standing_still = standing;
     if (standing) ++counts.standstill_frames;
     if (standing) return result;
-    still_anchor = Frame{frame.time, frame.features, {}, frame.landmark, frame.T_world_camera};
+    still_anchor = anchor_of(frame);
     if (refined.inliers < config.keyframe_tracked_ratio * last_keyframe_tracked || frames_since_keyframe >= config.max_frames_between_keyframes) {
       add_keyframe(std::move(frame));
       result.keyframe = true;
@@ -539,6 +699,10 @@ struct VisualOdometry::State {
       ++tracked;
     }
     int older = 0, created = 0;
+    if (right_camera) {
+      match_stereo(keyframe.frame);
+      created += add_stereo_landmarks(keyframe);
+    }
     for (auto it = std::next(keyframes.rbegin()); it != keyframes.rend() && older < config.triangulation_keyframes; ++it, ++older) {
       created += triangulate_new(it->second, keyframe);
     }
@@ -559,7 +723,7 @@ struct VisualOdometry::State {
   void cull_unconfirmed_landmarks(int newest_keyframe) {
     std::vector<int> unconfirmed;
     for (const auto& [landmark_id, landmark] : landmarks) {
-      if (newest_keyframe - landmark.created_at == 3 && landmark.observations.size() < 3) unconfirmed.push_back(landmark_id);
+      if (newest_keyframe - landmark.created_at == 3 && observation_count(landmark) < 3) unconfirmed.push_back(landmark_id);
     }
     for (int landmark_id : unconfirmed) remove_landmark(landmark_id);
   }
@@ -630,15 +794,14 @@ struct VisualOdometry::State {
     optimizer.max_iterations = config.bundle_adjustment_iterations;
     for (std::size_t i = 0; i < window_ids.size(); ++i) {
       values.insert(graph::X(static_cast<std::uint64_t>(window_ids[i])), keyframes.at(window_ids[i]).frame.T_world_camera);
-      if (i < 2) optimizer.fixed.push_back(graph::X(static_cast<std::uint64_t>(window_ids[i])));
+      // Monocular: the two oldest fix the gauge and the scale; stereo: the oldest fixes the gauge.
+      if (i < (right_camera ? 1u : 2u)) optimizer.fixed.push_back(graph::X(static_cast<std::uint64_t>(window_ids[i])));
     }
     const graph::RobustKernel huber{graph::RobustKernel::Type::kHuber, std::sqrt(kChi2Pixel95)};
     std::vector<int> adjusted;
     for (int landmark_id : local_landmarks()) {
       const Landmark& landmark = landmarks.at(landmark_id);
-      int observed = 0;
-      for (const auto& observation : landmark.observations) observed += in_window.count(observation.first) > 0;
-      if (observed < 2) continue;
+      if (observation_count(landmark, &in_window) < 2) continue;
       // Every observation must be in front of its camera, or the problem cannot be evaluated.
       const bool in_front = std::all_of(landmark.observations.begin(), landmark.observations.end(), [&](const auto& observation) {
         return !in_window.count(observation.first) || (keyframes.at(observation.first).frame.T_world_camera.inverse().act(landmark.position).z() > camera.min_depth);
@@ -653,6 +816,12 @@ struct VisualOdometry::State {
         graph.emplace_robust<graph::ProjectionFactor>(huber, graph::X(static_cast<std::uint64_t>(keyframe_id)), graph::L(static_cast<std::uint64_t>(landmark_id)),
                                                       pixel_of(frame, static_cast<std::size_t>(keypoint)), camera, SE3(),
                                                       graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(pixel_sigma)).value());
+        if (has_right(frame, static_cast<std::size_t>(keypoint))) {
+          const double right_sigma = sigma(frame.right_features.keypoints[static_cast<std::size_t>(frame.right_keypoint[static_cast<std::size_t>(keypoint)])].octave);
+          graph.emplace_robust<graph::ProjectionFactor>(huber, graph::X(static_cast<std::uint64_t>(keyframe_id)), graph::L(static_cast<std::uint64_t>(landmark_id)),
+                                                        right_pixel_of(frame, static_cast<std::size_t>(keypoint)), *right_camera, T_left_right,
+                                                        graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(right_sigma)).value());
+        }
       }
     }
     if (graph.size() > 0 && optimizer.max_iterations > 0) {
@@ -672,10 +841,18 @@ struct VisualOdometry::State {
         const Frame& frame = keyframes.at(keyframe_id).frame;
         const PoseObservation observation{landmarks.at(landmark_id).position, pixel_of(frame, static_cast<std::size_t>(keypoint)),
                                           sigma(frame.features.keypoints[static_cast<std::size_t>(keypoint)].octave)};
-        if (reprojection_chi2(frame.T_world_camera.inverse(), observation, camera) > kChi2Pixel95) outliers.push_back(keyframe_id);
+        if (reprojection_chi2(frame.T_world_camera.inverse(), observation, camera) > kChi2Pixel95) {
+          outliers.push_back(keyframe_id);
+        } else if (has_right(frame, static_cast<std::size_t>(keypoint))) {
+          const PoseObservation right{observation.point_world, right_pixel_of(frame, static_cast<std::size_t>(keypoint)),
+                                      sigma(frame.right_features.keypoints[static_cast<std::size_t>(frame.right_keypoint[static_cast<std::size_t>(keypoint)])].octave)};
+          if (reprojection_chi2((frame.T_world_camera * T_left_right).inverse(), right, *right_camera) > kChi2Pixel95) {
+            keyframes.at(keyframe_id).frame.right_keypoint[static_cast<std::size_t>(keypoint)] = -1;
+          }
+        }
       }
       for (int keyframe_id : outliers) remove_observation(landmark_id, keyframe_id);
-      if (landmarks.at(landmark_id).observations.size() < 2) remove_landmark(landmark_id);
+      if (observation_count(landmarks.at(landmark_id)) < 2) remove_landmark(landmark_id);
     }
   }
 };
@@ -699,7 +876,36 @@ Result<std::unique_ptr<VisualOdometry>> VisualOdometry::create(const PinholeCame
   return std::unique_ptr<VisualOdometry>(new VisualOdometry(std::move(state)));
 }
 
+Result<std::unique_ptr<VisualOdometry>> VisualOdometry::create_stereo(const PinholeCamera& left, const PinholeCamera& right, const SE3& T_left_right,
+                                                                      cv::Size image_size, const VisualOdometryConfig& config) {
+  if (!(right.fx > 0.0 && right.fy > 0.0 && std::isfinite(right.cx) && std::isfinite(right.cy))) {
+    return Error(fmt::format("right camera: focal lengths must be positive (fx {}, fy {})", right.fx, right.fy), "right_camera");
+  }
+  if (!(T_left_right.translation().norm() > 1e-3) || !T_left_right.translation().allFinite()) {
+    return Error(fmt::format("stereo baseline {} m: the cameras must be at least 1 mm apart", T_left_right.translation().norm()), "T_left_right");
+  }
+  Result<std::unique_ptr<VisualOdometry>> odometry = create(left, image_size, config);
+  if (!odometry) return odometry.error();
+  (*odometry)->state_->right_camera = right;
+  (*odometry)->state_->T_left_right = T_left_right;
+  (*odometry)->state_->counts.scale_free = false;
+  return odometry;
+}
+
 Result<VisualOdometryFrame> VisualOdometry::track(double time, const cv::Mat& image) {
+  if (state_->right_camera) return Error("stereo visual odometry: track(time, left, right) needs both images", "image");
+  return track_frame(time, image, cv::Mat());
+}
+
+Result<VisualOdometryFrame> VisualOdometry::track(double time, const cv::Mat& left, const cv::Mat& right) {
+  if (!state_->right_camera) return Error("monocular visual odometry: track(time, image) takes one image", "image");
+  if (right.size() != left.size()) {
+    return Error(fmt::format("right image is {} x {}, the left {} x {}", right.cols, right.rows, left.cols, left.rows), "right_image");
+  }
+  return track_frame(time, left, right);
+}
+
+Result<VisualOdometryFrame> VisualOdometry::track_frame(double time, const cv::Mat& image, const cv::Mat& right) {
   State& s = *state_;
   if (!std::isfinite(time)) return Error("time: not finite", "time");
   if (s.last_time && time <= *s.last_time) {
@@ -710,12 +916,16 @@ Result<VisualOdometryFrame> VisualOdometry::track(double time, const cv::Mat& im
   }
   Result<ImageFeatures> features = with_context(s.extractor.extract(image), "image");
   if (!features) return features.error();
+  if (!right.empty() && (right.depth() != CV_8U || (right.channels() != 1 && right.channels() != 3 && right.channels() != 4))) {
+    return Error(fmt::format("right image: type {} is not 8-bit grey, BGR or BGRA", cv::typeToString(right.type())), "right_image");
+  }
   s.last_time = time;
   ++s.counts.frames;
   Frame frame = s.make_frame(time, std::move(features).value());
+  frame.right_image = right;
   if (!s.initialized) {
-    VisualOdometryFrame result = s.initialize(std::move(frame));
-    if (result.state == TrackingState::kTracking) s.counts.tracked_frames += 2;
+    VisualOdometryFrame result = s.right_camera ? s.initialize_stereo(std::move(frame)) : s.initialize(std::move(frame));
+    if (result.state == TrackingState::kTracking) s.counts.tracked_frames += s.right_camera ? 1 : 2;
     return result;
   }
   return s.track(std::move(frame));

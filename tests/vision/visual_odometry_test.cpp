@@ -149,5 +149,58 @@ TEST(VisualOdometry, KittiRaw0052StandsStillBesideMovingTrucks) {
   EXPECT_LT(largest_motion(57), 0.01);
 }
 
+// EuRoC's camera-to-body transform T_BS (row-major 4x4) from a sensor.yaml.
+SE3 euroc_T_body_sensor(const std::string& path) {
+  std::ifstream file(path);
+  std::string text((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+  std::size_t at = text.find("data: [", text.find("T_BS")) + 7;
+  Eigen::Matrix4d matrix;
+  for (int i = 0; i < 16; ++i) {
+    std::size_t used = 0;
+    matrix(i / 4, i % 4) = std::stod(text.substr(at), &used);
+    at = text.find_first_of("-0123456789", at + used);
+  }
+  return SE3::from_matrix(matrix);
+}
+
+// EuRoC V1_01's first 95 stereo frames (752 x 480, radtan distortion, an unrectified rig) while
+// the MAV stands on the floor (Vicon: 2 cm of motion): the estimate must stay still.
+TEST(VisualOdometry, EurocStereoFramesOfAStandingMavGiveAStillEstimate) {
+  const std::string folder = std::string(HANZO_DATA_DIR) + "/euroc_v101_micro/mav0";
+  PinholeCamera left, right;
+  left.fx = 458.654, left.fy = 457.296, left.cx = 367.215, left.cy = 248.375;
+  left.distortion = PinholeCamera::Distortion::kRadtan;
+  left.coefficients = {-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05, 0.0};
+  right.fx = 457.587, right.fy = 456.134, right.cx = 379.999, right.cy = 255.238;
+  right.distortion = PinholeCamera::Distortion::kRadtan;
+  right.coefficients = {-0.28368365, 0.07451284, -0.00010473, -3.55590700e-05, 0.0};
+  const SE3 T_left_right = euroc_T_body_sensor(folder + "/cam0/sensor.yaml").inverse() * euroc_T_body_sensor(folder + "/cam1/sensor.yaml");
+  ASSERT_NEAR(T_left_right.translation().norm(), 0.110, 0.002);  // the rig's 11 cm baseline
+  auto odometry = VisualOdometry::create_stereo(left, right, T_left_right, {752, 480}).value();
+  std::vector<std::string> names;
+  for (const auto& entry : std::filesystem::directory_iterator(folder + "/cam0/data")) names.push_back(entry.path().filename().string());
+  std::sort(names.begin(), names.end());
+  ASSERT_EQ(names.size(), 95u);
+  int tracked = 0;
+  double largest_motion = 0.0, largest_rotation = 0.0;
+  for (const std::string& name : names) {
+    const double time = std::stod(name.substr(0, name.size() - 4)) * 1e-9;
+    const Result<VisualOdometryFrame> frame =
+        odometry->track(time, cv::imread(folder + "/cam0/data/" + name, cv::IMREAD_GRAYSCALE), cv::imread(folder + "/cam1/data/" + name, cv::IMREAD_GRAYSCALE));
+    ASSERT_TRUE(frame) << frame.error().message;
+    if (frame->state != TrackingState::kTracking) continue;
+    ++tracked;
+    largest_motion = std::max(largest_motion, frame->T_world_camera.translation().norm());
+    largest_rotation = std::max(largest_rotation, frame->T_world_camera.rotation().angle());
+  }
+  const VisualOdometrySummary summary = odometry->summary();
+  std::printf("EuRoC stereo: %d of 95 frames tracked, %d landmarks from the first frame, %d standstill frames, largest motion %.4f m / %.3f deg\n",
+              tracked, summary.landmarks, summary.standstill_frames, largest_motion, largest_rotation * 180 / M_PI);
+  EXPECT_FALSE(summary.scale_free);
+  EXPECT_EQ(tracked, 95);
+  EXPECT_LT(largest_motion, 0.02);
+  EXPECT_LT(largest_rotation, 0.5 * M_PI / 180);
+}
+
 }  // namespace
 }  // namespace hanzo::fusion::vision

@@ -1,13 +1,14 @@
 #pragma once
-// VisualOdometry: monocular visual odometry with a sparse landmark map and a sliding window of
-// keyframes refined by local bundle adjustment (the tracking / local mapping split of
+// VisualOdometry: monocular or stereo visual odometry with a sparse landmark map and a sliding
+// window of keyframes refined by local bundle adjustment (the tracking / local mapping split of
 // ORB-SLAM, Mur-Artal et al. 2015, in one thread).
 //
 //   initialization: the first frame is the reference; a later frame whose matches with it
 //     give an essential matrix (RANSAC on undistorted bearings) with enough inliers, half of
 //     them triangulated at an angle of at least min_initialization_parallax_deg, becomes the
 //     second keyframe; its inliers are triangulated. Monocular scale is unobservable: the first
-//     baseline is 1 (every length is in these units, `scale_free` says so);
+//     baseline is 1 (every length is in these units, `scale_free` says so). Stereo: the first
+//     frame with min_initialization_inliers stereo points is the first keyframe (metric);
 //   tracking: the pose is predicted with constant velocity, the local map's landmarks are
 //     projected into the frame and matched to keypoints near their projection (guided by
 //     descriptor distance, within projection_search_radius_px times the keypoint's octave
@@ -19,9 +20,11 @@
 //     keyframe's, or max_frames_between_keyframes have passed; new landmarks are triangulated
 //     against the previous keyframes (descriptor matches under the epipolar constraint, both
 //     depths positive, reprojection within the chi-square bound, triangulation angle over
-//     min_triangulation_angle_deg), and the last window_keyframes keyframes and their landmarks
-//     are refined by bundle adjustment (graph::ProjectionFactor, Huber, the window's oldest
-//     two keyframes held: they fix the gauge and the scale). Observations that stay outliers
+//     min_triangulation_angle_deg) and, stereo, from the keyframe's left-right matches (along
+//     the rig's epipolar lines); the last window_keyframes keyframes and their landmarks are
+//     refined by bundle adjustment (graph::ProjectionFactor for the left and the right image,
+//     Huber; the window's oldest two keyframes held, they fix the gauge and the monocular scale;
+//     stereo holds the oldest only). Observations that stay outliers
 //     are removed, landmarks left with fewer than two observations culled;
 //   standstill: when a large share of the keypoints of the last frame tracked in motion are found
 //     again at the same pixels (standstill_share within standstill_pixels: independent of the
@@ -90,6 +93,9 @@ struct VisualOdometryConfig {
   double min_triangulation_angle_deg = 1.0;
   /// How many previous keyframes a new keyframe triangulates against.
   int triangulation_keyframes = 2;
+  /// Stereo points farther than this many rig baselines are not made landmarks from one frame
+  /// (their depth is mostly noise; they can still be triangulated over time).
+  double max_stereo_depth_baselines = 40.0;
   /// Local bundle adjustment window (keyframes) and its iterations.
   int window_keyframes = 7;
   int bundle_adjustment_iterations = 10;
@@ -136,8 +142,16 @@ class VisualOdometry {
   VisualOdometry(const VisualOdometry&) = delete;
   VisualOdometry& operator=(const VisualOdometry&) = delete;
 
-  /// Tracks one image (8-bit grey, BGR or BGRA) taken at `time` (seconds).
+  /// Stereo: the left camera's frame is the odometry's camera frame; the right camera sits at
+  /// T_left_right (right camera to left camera; any rig, rectified or not, distortion through
+  /// the camera models). Fails as create(), or when the cameras are less than 1 mm apart.
+  static Result<std::unique_ptr<VisualOdometry>> create_stereo(const PinholeCamera& left, const PinholeCamera& right, const SE3& T_left_right,
+                                                               cv::Size image_size, const VisualOdometryConfig& config = {});
+
+  /// Monocular: tracks one image (8-bit grey, BGR or BGRA) taken at `time` (seconds).
   Result<VisualOdometryFrame> track(double time, const cv::Mat& image);
+  /// Stereo: a synchronized pair (same size and types as above).
+  Result<VisualOdometryFrame> track(double time, const cv::Mat& left, const cv::Mat& right);
 
   /// Every tracked frame's time and T_world_camera after the latest bundle adjustment.
   std::vector<std::pair<double, SE3>> trajectory() const;
@@ -149,6 +163,7 @@ class VisualOdometry {
  private:
   struct State;
   explicit VisualOdometry(std::unique_ptr<State> state);
+  Result<VisualOdometryFrame> track_frame(double time, const cv::Mat& image, const cv::Mat& right);
   std::unique_ptr<State> state_;
 };
 
