@@ -200,7 +200,12 @@ Result<ImageFeatures> OrbExtractor::extract(const cv::Mat& image, const cv::Mat&
       corner.angle = intensity_centroid_angle(level_image, cvRound(corner.pt.x), cvRound(corner.pt.y), u_max);
       corner.octave = level;
       corner.size = static_cast<float>(kPatchSize * scale);
-      corner.pt *= static_cast<float>(scale);
+      // Pixel centres: resizing maps a level pixel u to (u + 0.5) k - 0.5 of level 0, k the
+      // size ratio (a plain u k would shift a level-7 keypoint by 1.3 pixels towards the
+      // origin: a bias geometry cannot tell from a wrong principal point).
+      const float ratio_x = static_cast<float>(grey.cols) / static_cast<float>(level_image.cols);
+      const float ratio_y = static_cast<float>(grey.rows) / static_cast<float>(level_image.rows);
+      corner.pt = cv::Point2f((corner.pt.x + 0.5f) * ratio_x - 0.5f, (corner.pt.y + 0.5f) * ratio_y - 0.5f);
       // The level's mask is a resampled copy: the level-0 mask decides at the level-0 pixel.
       if (!mask.empty() && mask.at<unsigned char>(std::min(cvRound(corner.pt.y), mask.rows - 1), std::min(cvRound(corner.pt.x), mask.cols - 1)) == 0) {
         continue;

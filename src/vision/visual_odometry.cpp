@@ -713,8 +713,11 @@ struct VisualOdometry::State {
     last_pose = keyframe.frame.T_world_camera;
     frames.back() = {keyframe.frame.time, id, SE3()};
     frames_since_keyframe = 0;
-    // What the next frames are compared with: the landmarks this keyframe sees.
-    last_keyframe_tracked = static_cast<int>(std::count_if(keyframe.frame.landmark.begin(), keyframe.frame.landmark.end(), [](int l) { return l >= 0; }));
+    // What the next frames are compared with: the landmarks this keyframe sees that other
+    // keyframes confirm (a stereo keyframe's new points, seen by it alone, would make every
+    // following frame look short of landmarks).
+    last_keyframe_tracked = static_cast<int>(std::count_if(keyframe.frame.landmark.begin(), keyframe.frame.landmark.end(),
+                                                           [&](int l) { return l >= 0 && landmarks.at(l).observations.size() >= 2; }));
     ++counts.keyframes;
   }
 

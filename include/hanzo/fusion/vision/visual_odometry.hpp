@@ -95,7 +95,7 @@ struct VisualOdometryConfig {
   int triangulation_keyframes = 2;
   /// Stereo points farther than this many rig baselines are not made landmarks from one frame
   /// (their depth is mostly noise; they can still be triangulated over time).
-  double max_stereo_depth_baselines = 40.0;
+  double max_stereo_depth_baselines = 100.0;
   /// Local bundle adjustment window (keyframes) and its iterations.
   int window_keyframes = 7;
   int bundle_adjustment_iterations = 10;
