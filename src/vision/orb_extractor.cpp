@@ -196,7 +196,17 @@ Result<ImageFeatures> OrbExtractor::extract(const cv::Mat& image, const cv::Mat&
       if (!mask.empty()) cv::resize(cv::Mat(level_mask), level_mask, size, 0, 0, cv::INTER_NEAREST);
     }
     levels_used = level + 1;
-    for (cv::KeyPoint corner : bucketed_corners(level_image, level_mask, budgets[static_cast<std::size_t>(level)], config_)) {
+    std::vector<cv::KeyPoint> corners = bucketed_corners(level_image, level_mask, budgets[static_cast<std::size_t>(level)], config_);
+    if (config_.subpixel && !corners.empty()) {
+      std::vector<cv::Point2f> positions;
+      for (const cv::KeyPoint& corner : corners) positions.push_back(corner.pt);
+      cv::cornerSubPix(level_image, positions, cv::Size(2, 2), cv::Size(-1, -1), cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 5, 0.05));
+      for (std::size_t i = 0; i < corners.size(); ++i) {
+        // A refinement that wanders off (an edge, not a corner) keeps the FAST position.
+        if (cv::norm(positions[i] - corners[i].pt) < 1.0) corners[i].pt = positions[i];
+      }
+    }
+    for (cv::KeyPoint corner : corners) {
       corner.angle = intensity_centroid_angle(level_image, cvRound(corner.pt.x), cvRound(corner.pt.y), u_max);
       corner.octave = level;
       corner.size = static_cast<float>(kPatchSize * scale);

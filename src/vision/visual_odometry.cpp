@@ -225,7 +225,8 @@ struct VisualOdometry::State {
   // ---- stereo ----
 
   // Right features of a frame and the right keypoint of each left one: the nearest descriptor
-  // (ratio 0.9 against the runner-up) among the right keypoints within 2 sigma of the left
+  // (ratio 0.8 against the runner-up: repeated texture along the epipolar line) among the right
+  // keypoints within 2 sigma of the left
   // keypoint's epipolar line (from the rig's extrinsics) and one octave; each right keypoint
   // kept by the left keypoint it matches best.
   void match_stereo(Frame& frame) const {
@@ -262,7 +263,7 @@ struct VisualOdometry::State {
           second = distance;
         }
       }
-      if (best_right < 0 || best > config.max_descriptor_distance || (second != std::numeric_limits<int>::max() && best >= 0.9 * second)) continue;
+      if (best_right < 0 || best > config.max_descriptor_distance || (second != std::numeric_limits<int>::max() && best >= 0.8 * second)) continue;
       auto& slot = owner[static_cast<std::size_t>(best_right)];
       if (best < slot.second) slot = {static_cast<int>(k), best};
     }
@@ -309,6 +310,28 @@ struct VisualOdometry::State {
       ++created;
     }
     return created;
+  }
+
+  // A keyframe of the frame's stereo points, at its pose, that the next frames track against;
+  // false (nothing changed) when it has too few.
+  bool restart_from_stereo(Frame frame) {
+    match_stereo(frame);
+    int points = 0;
+    for (std::size_t k = 0; k < frame.features.size(); ++k) points += frame.landmark[k] < 0 && stereo_point(frame, k).has_value();
+    if (points < config.min_initialization_inliers) return false;
+    const int id = next_keyframe_id++;
+    Keyframe& keyframe = keyframes.emplace(id, Keyframe{id, std::move(frame)}).first->second;
+    add_stereo_landmarks(keyframe);
+    frames.push_back({keyframe.frame.time, id, SE3()});
+    last_pose = keyframe.frame.T_world_camera;
+    last_pose_time = keyframe.frame.time;
+    last_keyframe_tracked = points;
+    frames_since_keyframe = 0;
+    still_anchor = anchor_of(keyframe.frame);
+    still_anchor_record = frames.back();
+    ++counts.map_restarts;
+    logger()->warn("visual odometry: tracking lost at {:.3f} s: map restarted from {} stereo points", keyframe.frame.time, points);
+    return true;
   }
 
   // Stereo: the first frame with enough stereo points is the first keyframe (metric scale).
@@ -578,6 +601,12 @@ struct VisualOdometry::State {
       result.reason = fmt::format("{} landmarks tracked (< {})", refined.inliers, config.min_tracked_landmarks);
       lost = true;
       ++counts.lost_frames;
+      // Stereo: the frame's own stereo points start the map again at the predicted pose (the
+      // trajectory goes on, its error since the last tracked frame kept).
+      if (right_camera) {
+        frame.T_world_camera = predicted;
+        if (restart_from_stereo(std::move(frame))) result.reason += ": map restarted from this stereo frame at the predicted pose";
+      }
       velocity.setZero();
       return result;
     }
@@ -787,21 +816,35 @@ struct VisualOdometry::State {
     return created;
   }
 
-  // Local bundle adjustment over the window; the window's two oldest keyframes are held.
+  // One image observation in the bundle adjustment.
+  struct BundleObservation {
+    int keyframe = 0;
+    int landmark = 0;
+    Eigen::Vector2d pixel;
+    double sigma = 1.0;
+    bool right = false;
+  };
+
+  // Local bundle adjustment over the window (ORB-SLAM's two passes): Huber-robust iterations,
+  // the observations then over the chi-square bound left out, and the same again. Monocular:
+  // the window's two oldest keyframes are held (gauge and scale); stereo: the oldest. A result
+  // that moves a keyframe farther than the window's own length is refused (a weakly tied
+  // keyframe sliding off): the map keeps its values.
   void bundle_adjust() {
     const std::vector<int> window_ids = window();
     const std::set<int> in_window(window_ids.begin(), window_ids.end());
-    graph::FactorGraph graph;
     graph::Values values;
     graph::BatchOptimizerConfig optimizer;
     optimizer.max_iterations = config.bundle_adjustment_iterations;
+    double window_length = 0.0;
     for (std::size_t i = 0; i < window_ids.size(); ++i) {
-      values.insert(graph::X(static_cast<std::uint64_t>(window_ids[i])), keyframes.at(window_ids[i]).frame.T_world_camera);
-      // Monocular: the two oldest fix the gauge and the scale; stereo: the oldest fixes the gauge.
+      const SE3& pose = keyframes.at(window_ids[i]).frame.T_world_camera;
+      values.insert(graph::X(static_cast<std::uint64_t>(window_ids[i])), pose);
+      if (i > 0) window_length += (pose.translation() - keyframes.at(window_ids[i - 1]).frame.T_world_camera.translation()).norm();
       if (i < (right_camera ? 1u : 2u)) optimizer.fixed.push_back(graph::X(static_cast<std::uint64_t>(window_ids[i])));
     }
-    const graph::RobustKernel huber{graph::RobustKernel::Type::kHuber, std::sqrt(kChi2Pixel95)};
     std::vector<int> adjusted;
+    std::vector<BundleObservation> observations;
     for (int landmark_id : local_landmarks()) {
       const Landmark& landmark = landmarks.at(landmark_id);
       if (observation_count(landmark, &in_window) < 2) continue;
@@ -815,27 +858,52 @@ struct VisualOdometry::State {
       for (const auto& [keyframe_id, keypoint] : landmark.observations) {
         if (!in_window.count(keyframe_id)) continue;
         const Frame& frame = keyframes.at(keyframe_id).frame;
-        const double pixel_sigma = sigma(frame.features.keypoints[static_cast<std::size_t>(keypoint)].octave);
-        graph.emplace_robust<graph::ProjectionFactor>(huber, graph::X(static_cast<std::uint64_t>(keyframe_id)), graph::L(static_cast<std::uint64_t>(landmark_id)),
-                                                      pixel_of(frame, static_cast<std::size_t>(keypoint)), camera, SE3(),
-                                                      graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(pixel_sigma)).value());
-        if (has_right(frame, static_cast<std::size_t>(keypoint))) {
-          const double right_sigma = sigma(frame.right_features.keypoints[static_cast<std::size_t>(frame.right_keypoint[static_cast<std::size_t>(keypoint)])].octave);
-          graph.emplace_robust<graph::ProjectionFactor>(huber, graph::X(static_cast<std::uint64_t>(keyframe_id)), graph::L(static_cast<std::uint64_t>(landmark_id)),
-                                                        right_pixel_of(frame, static_cast<std::size_t>(keypoint)), *right_camera, T_left_right,
-                                                        graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(right_sigma)).value());
+        const auto k = static_cast<std::size_t>(keypoint);
+        observations.push_back({keyframe_id, landmark_id, pixel_of(frame, k), sigma(frame.features.keypoints[k].octave), false});
+        if (has_right(frame, k)) {
+          observations.push_back({keyframe_id, landmark_id, right_pixel_of(frame, k),
+                                  sigma(frame.right_features.keypoints[static_cast<std::size_t>(frame.right_keypoint[k])].octave), true});
         }
       }
     }
-    if (graph.size() > 0 && optimizer.max_iterations > 0) {
-      Result<graph::OptimizationSummary> optimized = graph::optimize(graph, values, optimizer);
-      if (optimized) {
-        for (int keyframe_id : window_ids) keyframes.at(keyframe_id).frame.T_world_camera = values.at<SE3>(graph::X(static_cast<std::uint64_t>(keyframe_id))).value();
-        for (int landmark_id : adjusted) landmarks.at(landmark_id).position = values.at<Eigen::Vector3d>(graph::L(static_cast<std::uint64_t>(landmark_id))).value();
-      } else {
+    if (observations.empty() || optimizer.max_iterations == 0) return;
+    const graph::RobustKernel huber{graph::RobustKernel::Type::kHuber, std::sqrt(kChi2Pixel95)};
+    auto chi2 = [&](const BundleObservation& observation, const graph::Values& at) {
+      const SE3 T_world_camera = at.at<SE3>(graph::X(static_cast<std::uint64_t>(observation.keyframe))).value() * (observation.right ? T_left_right : SE3());
+      const PoseObservation pixel{at.at<Eigen::Vector3d>(graph::L(static_cast<std::uint64_t>(observation.landmark))).value(), observation.pixel, observation.sigma};
+      return reprojection_chi2(T_world_camera.inverse(), pixel, observation.right ? *right_camera : camera);
+    };
+    graph::Values adjusted_values = values;
+    std::vector<bool> used(observations.size(), true);
+    for (int pass = 0; pass < 2; ++pass) {
+      graph::FactorGraph graph;
+      for (std::size_t i = 0; i < observations.size(); ++i) {
+        if (!used[i]) continue;
+        const BundleObservation& observation = observations[i];
+        graph.emplace_robust<graph::ProjectionFactor>(huber, graph::X(static_cast<std::uint64_t>(observation.keyframe)), graph::L(static_cast<std::uint64_t>(observation.landmark)),
+                                                      observation.pixel, observation.right ? *right_camera : camera, observation.right ? T_left_right : SE3(),
+                                                      graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(observation.sigma)).value());
+      }
+      graph::Values trial = adjusted_values;
+      Result<graph::OptimizationSummary> optimized = graph::optimize(graph, trial, optimizer);
+      if (!optimized) {
         logger()->warn("visual odometry: local bundle adjustment failed: {}", optimized.error().message);
+        break;
+      }
+      adjusted_values = std::move(trial);
+      for (std::size_t i = 0; i < observations.size(); ++i) used[i] = used[i] && chi2(observations[i], adjusted_values) <= kChi2Pixel95;
+    }
+    const double limit = std::max(window_length, 1e-6);
+    for (int keyframe_id : window_ids) {
+      const double moved = (adjusted_values.at<SE3>(graph::X(static_cast<std::uint64_t>(keyframe_id))).value().translation() -
+                            keyframes.at(keyframe_id).frame.T_world_camera.translation()).norm();
+      if (moved > limit) {
+        logger()->warn("visual odometry: bundle adjustment moved keyframe {} by {:.3f} (window length {:.3f}): refused", keyframe_id, moved, window_length);
+        return;
       }
     }
+    for (int keyframe_id : window_ids) keyframes.at(keyframe_id).frame.T_world_camera = adjusted_values.at<SE3>(graph::X(static_cast<std::uint64_t>(keyframe_id))).value();
+    for (int landmark_id : adjusted) landmarks.at(landmark_id).position = adjusted_values.at<Eigen::Vector3d>(graph::L(static_cast<std::uint64_t>(landmark_id))).value();
     // Observations that remain outliers are removed; landmarks left with one are culled.
     for (int landmark_id : local_landmarks()) {
       std::vector<int> outliers;

@@ -43,6 +43,8 @@ struct OrbExtractorConfig {
   /// cell without any falls back to min_fast_threshold. initial >= min.
   int initial_fast_threshold = 20;
   int min_fast_threshold = 7;
+  /// Sub-pixel keypoint positions (cv::cornerSubPix over 5 x 5 pixels of the keypoint's level).
+  bool subpixel = true;
 };
 
 /// Keypoints and their descriptors (row i describes keypoints[i]; CV_8UC1, 32 bytes a row).

@@ -41,7 +41,8 @@
 // Failures: track() refuses an image of another size than the configured one, of an
 // unsupported type, or a time not after the previous frame's (the frame is skipped, the state
 // is unchanged). A frame that cannot be tracked is reported kLost with the reason; tracking
-// resumes by relocalization against the recent keyframes.
+// resumes by relocalization against the recent keyframes, and with stereo a lost frame's own
+// stereo points start the map again at its predicted pose (summary().map_restarts).
 
 #include <deque>
 #include <map>
@@ -129,6 +130,7 @@ struct VisualOdometrySummary {
   int relocalizations = 0;
   int standstill_frames = 0;
   int moving_landmarks_removed = 0;
+  int map_restarts = 0;  ///< stereo: tracking lost and the map started again from a stereo frame
   bool scale_free = true;  ///< monocular: lengths are in units of the first baseline
 };
 
