@@ -260,7 +260,10 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"map_keyframes", m.map_keyframes},   {"graph_keyframes", m.graph_keyframes},
           {"loop_candidates", m.loop_candidates}, {"loop_closures", m.loop_closures},
           {"gnss_factors", m.gnss_factors},     {"map_memory_bytes", m.map_memory_bytes},
-          {"wheel_slip_episodes", m.wheel_slip_episodes}, {"wheel_messages_withheld", m.wheel_messages_withheld}};
+          {"wheel_slip_episodes", m.wheel_slip_episodes}, {"wheel_messages_withheld", m.wheel_messages_withheld},
+          {"camera_frames_tracked", m.camera_frames_tracked}, {"camera_frames_lost", m.camera_frames_lost},
+          {"visual_keyframes", m.visual_keyframes}, {"visual_landmarks", m.visual_landmarks},
+          {"camera_standstill_frames", m.camera_standstill_frames}, {"visual_scale_free", m.visual_scale_free}};
 }
 
 // Each sensor's health at the end and its changes over the log (seconds from the log's start).
@@ -450,6 +453,11 @@ int run(const Output& output, const RunOptions& options) {
       text += fmt::format("; wheels slipped {} times ({} messages not fused)", mapping.wheel_slip_episodes, mapping.wheel_messages_withheld);
     }
     text += "\n";
+  }
+  if (mapping.camera_frames_tracked + mapping.camera_frames_lost > 0) {
+    text += fmt::format("visual odometry: {} frames tracked, {} lost, {} standing still; {} keyframes, {} landmarks{}\n", mapping.camera_frames_tracked,
+                        mapping.camera_frames_lost, mapping.camera_standstill_frames, mapping.visual_keyframes, mapping.visual_landmarks,
+                        mapping.visual_scale_free ? " (monocular: lengths in units of its first baseline)" : "");
   }
   for (const auto& [sensor, states] : result["health"]["not_ok_seconds"].items()) {
     text += fmt::format("  {:<12} not ok for", sensor);

@@ -93,6 +93,8 @@
 
 namespace hanzo::fusion::pipeline {
 
+class CameraOdometry;
+
 enum class SessionMode { kReplay, kRealtime };
 std::string_view to_string(SessionMode mode);  // "replay", "realtime"
 
@@ -195,6 +197,14 @@ struct MappingSummary {
   uint64_t gnss_factors = 0;      ///< GNSS fixes added to the keyframe graph
   uint64_t wheel_slip_episodes = 0;   ///< times the wheels began to disagree with the LiDAR
   uint64_t wheel_messages_withheld = 0;  ///< wheel messages not fused because of it
+  /// Cameras (visual odometry): frames tracked / lost, its keyframes and landmarks, standstill
+  /// frames, and whether its lengths are scale-free (monocular) or metric (stereo).
+  uint64_t camera_frames_tracked = 0;
+  uint64_t camera_frames_lost = 0;
+  uint64_t visual_keyframes = 0;
+  uint64_t visual_landmarks = 0;
+  uint64_t camera_standstill_frames = 0;
+  bool visual_scale_free = false;
 };
 
 /// A pose at a time (body in the world frame).
@@ -292,6 +302,8 @@ class Session {
   PushStatus push_message(std::string_view sensor, msgs::SensorMessage message);
   void flush_pipeline();
   PushStatus push_scan(msgs::PointCloudMessage scan);
+  /// A camera image for the visual odometry (camera_odometry.hpp), its pose into the Frontend.
+  PushStatus push_image(std::string_view sensor, const msgs::SensorMessage& message);
   class RegistrationWorker;
   void register_ready_scans();
   /// Fuses what the worker registered (kRealtime).
@@ -354,6 +366,11 @@ class Session {
   double path_ = 0.0;                               ///< m of LiDAR path, registered sweeps
   std::optional<SE3> last_lidar_pose_;
   SensorStatistics lidar_statistics_;
+  // Cameras: the visual odometry, its images' counts per sensor, and where its world lies in
+  // the Frontend's (T_frontend_visual, set at its first tracked frame).
+  std::unique_ptr<CameraOdometry> camera_odometry_;
+  std::map<std::string, SensorStatistics, std::less<>> camera_statistics_;
+  std::optional<SE3> visual_world_;
   MappingSummary summary_;
   /// keep_trajectory: emitted poses and keyframes, both as the filter had them before any
   /// correction (Frontend::world_correction() undone), for optimized_trajectory().

@@ -1,0 +1,108 @@
+#include "camera_odometry.hpp"
+
+#include <fmt/format.h>
+#include <opencv2/imgproc.hpp>
+
+#include "hanzo/fusion/core/logging.hpp"
+
+namespace hanzo::fusion::pipeline {
+namespace {
+
+// The image as 8-bit grey (a copy: the message's buffer is not kept).
+Result<cv::Mat> grey_image(const msgs::ImageMessage& image) {
+  const int rows = static_cast<int>(image.height), columns = static_cast<int>(image.width);
+  if (image.data.size() != static_cast<std::size_t>(rows) * static_cast<std::size_t>(columns) * msgs::bytes_per_pixel(image.encoding)) {
+    return Error(fmt::format("image data is {} bytes, {} x {} {} needs {}", image.data.size(), columns, rows, msgs::to_string(image.encoding),
+                             static_cast<std::size_t>(rows) * static_cast<std::size_t>(columns) * msgs::bytes_per_pixel(image.encoding)));
+  }
+  auto* data = const_cast<uint8_t*>(image.data.data());
+  switch (image.encoding) {
+    case msgs::ImageEncoding::kMono8: return cv::Mat(rows, columns, CV_8UC1, data).clone();
+    case msgs::ImageEncoding::kRgb8:
+    case msgs::ImageEncoding::kBgr8: {
+      cv::Mat grey;
+      cv::cvtColor(cv::Mat(rows, columns, CV_8UC3, data), grey, image.encoding == msgs::ImageEncoding::kRgb8 ? cv::COLOR_RGB2GRAY : cv::COLOR_BGR2GRAY);
+      return grey;
+    }
+    default: return Error(fmt::format("image encoding {} is not mono8, rgb8 or bgr8", msgs::to_string(image.encoding)));
+  }
+}
+
+}  // namespace
+
+Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::FusionConfig& config, const calib::Calibration& calibration,
+                                                               const vision::VisualOdometryConfig& odometry_config) {
+  std::vector<const calib::SensorCalibration*> cameras;
+  for (const config::SensorConfig& sensor : config.sensors) {
+    if (sensor.modality != config::SensorModality::kCamera) continue;
+    const calib::SensorCalibration* entry = calibration.find(sensor.name);
+    if (entry != nullptr && entry->camera && cameras.size() < 2) cameras.push_back(entry);
+  }
+  if (cameras.empty()) return std::unique_ptr<CameraOdometry>();
+  const calib::SensorCalibration& left = *cameras[0];
+  const msgs::CameraIntrinsics& intrinsics = left.camera->intrinsics;
+  if (intrinsics.width == 0 || intrinsics.height == 0) {
+    return Error(fmt::format("camera {}: the calibration's intrinsics need the image width and height for visual odometry", left.sensor));
+  }
+  const cv::Size size(static_cast<int>(intrinsics.width), static_cast<int>(intrinsics.height));
+  std::unique_ptr<vision::VisualOdometry> odometry;
+  std::string right_sensor;
+  Duration right_offset;
+  if (cameras.size() == 2 && cameras[1]->camera->intrinsics.width == intrinsics.width && cameras[1]->camera->intrinsics.height == intrinsics.height) {
+    const calib::SensorCalibration& right = *cameras[1];
+    HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create_stereo(left.camera->pinhole_camera(), right.camera->pinhole_camera(),
+                                                                                         left.T_body_sensor().inverse() * right.T_body_sensor(), size,
+                                                                                         odometry_config),
+                                                  fmt::format("cameras {} and {}", left.sensor, right.sensor)));
+    right_sensor = right.sensor;
+    right_offset = right.time_offset;
+  } else {
+    HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create(left.camera->pinhole_camera(), size, odometry_config),
+                                                  fmt::format("camera {}", left.sensor)));
+  }
+  logger()->info("session: {} visual odometry on {}{}", right_sensor.empty() ? "monocular" : "stereo", left.sensor,
+                 right_sensor.empty() ? "" : " + " + right_sensor);
+  return std::unique_ptr<CameraOdometry>(
+      new CameraOdometry(std::move(odometry), left.sensor, std::move(right_sensor), left.T_body_sensor(), left.time_offset, right_offset));
+}
+
+CameraOdometry::CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::string left_sensor, std::string right_sensor,
+                               const SE3& T_body_left, Duration left_offset, Duration right_offset)
+    : odometry_(std::move(odometry)),
+      left_sensor_(std::move(left_sensor)),
+      right_sensor_(std::move(right_sensor)),
+      T_body_left_(T_body_left),
+      left_offset_(left_offset),
+      right_offset_(right_offset) {}
+
+Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::add(std::string_view sensor, const msgs::ImageMessage& image) {
+  cv::Mat grey;
+  HANZO_ASSIGN_OR_RETURN(grey, grey_image(image));
+  if (sensor == left_sensor_) {
+    const Timestamp time = image.timestamp + left_offset_;
+    if (!stereo()) return track(time, grey, cv::Mat());
+    // A left image still waiting lost its right one: tracked alone is not possible for a
+    // stereo odometry, so it is dropped.
+    if (waiting_left_) logger()->debug("session: left image at {:.3f} s had no right image", waiting_left_->first.seconds());
+    waiting_left_.emplace(time, std::move(grey));
+    return std::optional<Tracked>();
+  }
+  const Timestamp time = image.timestamp + right_offset_;
+  if (!waiting_left_ || std::abs((waiting_left_->first - time).seconds()) > 1e-3) {
+    logger()->debug("session: right image at {:.3f} s has no left image of its time: dropped", time.seconds());
+    return std::optional<Tracked>();
+  }
+  const auto [left_time, left] = std::move(*waiting_left_);
+  waiting_left_.reset();
+  return track(left_time, left, grey);
+}
+
+Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track(Timestamp time, const cv::Mat& left, const cv::Mat& right) {
+  Result<vision::VisualOdometryFrame> frame = right.empty() ? odometry_->track(time.seconds(), left) : odometry_->track(time.seconds(), left, right);
+  if (!frame) return frame.error();
+  Tracked tracked{time, std::move(frame).value(), SE3()};
+  tracked.T_world_body = T_body_left_ * tracked.frame.T_world_camera * T_body_left_.inverse();
+  return std::optional<Tracked>(std::move(tracked));
+}
+
+}  // namespace hanzo::fusion::pipeline

@@ -1,0 +1,72 @@
+#pragma once
+// CameraOdometry: the Session's visual odometry (vision::VisualOdometry) on the configuration's
+// cameras, and how its poses reach the Frontend.
+//
+// Cameras: the first camera sensor of the configuration with intrinsics in the calibration is
+// the left (monocular) camera; a second camera with intrinsics of the same size makes it a
+// stereo pair (the right image of a time completes the pair; a left image whose right one
+// never comes, and a right without its left, are dropped). Images must be mono8, rgb8 or bgr8 of
+// the calibrated size; the sensor's time offset moves them to the body clock.
+//
+// Fusion (Session): the odometry's camera poses are pose measurements (Frontend::push_pose).
+// Without an IMU its world (the body frame at its first keyframe) is the Frontend's; with an
+// IMU (stereo: metric) its world is placed once in the Frontend's, by the Frontend's pose at the
+// first tracked frame, as the LiDAR odometry's map is. A monocular camera with an IMU is
+// tracked but not fused: its scale is unknown (visual-inertial initialization is not built),
+// and the counts say so (not_fused).
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/config/fusion_config.hpp"
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
+#include "hanzo/fusion/vision/visual_odometry.hpp"
+
+namespace hanzo::fusion::pipeline {
+
+class CameraOdometry {
+ public:
+  /// A tracked image (pair): the body-clock time and the odometry's outcome, with the camera
+  /// pose moved into the odometry's body world: T_world_body = T_body_left T_left0_left T_body_left^-1.
+  struct Tracked {
+    Timestamp time;
+    vision::VisualOdometryFrame frame;
+    SE3 T_world_body;
+  };
+
+  /// nullptr (no error) when the configuration has no camera with intrinsics.
+  static Result<std::unique_ptr<CameraOdometry>> create(const config::FusionConfig& config, const calib::Calibration& calibration,
+                                                        const vision::VisualOdometryConfig& odometry_config = {});
+
+  bool handles(std::string_view sensor) const { return sensor == left_sensor_ || (stereo() && sensor == right_sensor_); }
+  bool stereo() const { return !right_sensor_.empty(); }
+  const std::string& left_sensor() const { return left_sensor_; }
+  const std::string& right_sensor() const { return right_sensor_; }
+  const SE3& T_body_left() const { return T_body_left_; }
+  /// The left camera's calibrated time offset (t_body = t_camera + offset).
+  Duration left_time_offset() const { return left_offset_; }
+
+  /// Takes an image of a handled sensor. Returns the tracked frame when an image (pair)
+  /// completed; nullopt while a stereo pair waits for its other half. Fails (naming the
+  /// problem) for an image of the wrong encoding or size, or out of time order.
+  Result<std::optional<Tracked>> add(std::string_view sensor, const msgs::ImageMessage& image);
+
+  vision::VisualOdometrySummary summary() const { return odometry_->summary(); }
+
+ private:
+  CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::string left_sensor, std::string right_sensor, const SE3& T_body_left,
+                 Duration left_offset, Duration right_offset);
+  Result<std::optional<Tracked>> track(Timestamp time, const cv::Mat& left, const cv::Mat& right);
+
+  std::unique_ptr<vision::VisualOdometry> odometry_;
+  std::string left_sensor_, right_sensor_;
+  SE3 T_body_left_;
+  Duration left_offset_, right_offset_;
+  std::optional<std::pair<Timestamp, cv::Mat>> waiting_left_;  // stereo: a left image waiting for its right
+};
+
+}  // namespace hanzo::fusion::pipeline
