@@ -2,7 +2,7 @@
 // ORB extraction of 1000 keypoints on a 640 x 480 EuRoC frame, brute-force matching of 1000 x
 // 1000 descriptors, and whole image-pair matching with the correct matches and precision at
 // 3 px (counters) on the graf pair and on wide-baseline pairs made from graf1 (40 and 70 degrees
-// of viewpoint change, tests/vision/graf_pairs.hpp).
+// of viewpoint change, tests/vision/graf_pairs.hpp); monocular visual odometry's time per frame.
 
 #include <filesystem>
 #include <string>
@@ -13,6 +13,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "hanzo/fusion/vision/image_pair_matcher.hpp"
+#include "hanzo/fusion/vision/visual_odometry.hpp"
 #include "vision/graf_pairs.hpp"
 
 namespace {
@@ -120,6 +121,28 @@ void BM_PairMatch_OpenCV(benchmark::State& state) {
   report(state, matches, pair);
 }
 BENCHMARK(BM_PairMatch_OpenCV)->Arg(0)->Arg(40)->Arg(70)->Unit(benchmark::kMillisecond);
+
+// Monocular visual odometry over KITTI odometry 06's first 51 frames (1226 x 370, 2000 ORB
+// features; a keyframe and a local bundle adjustment nearly every frame at 11 m/s): time per
+// frame, all in the calling thread. No peer library on the machine runs visual odometry.
+void BM_VisualOdometryKitti06Mono(benchmark::State& state) {
+  const std::string folder = std::string(HANZO_DATA_DIR) + "/kitti_odometry_06_first51";
+  std::vector<cv::Mat> images;
+  for (int i = 0; i < 51; ++i) images.push_back(cv::imread(cv::format("%s/image_l/%06d.png", folder.c_str(), i), cv::IMREAD_GRAYSCALE));
+  hanzo::fusion::PinholeCamera camera;
+  camera.fx = camera.fy = 707.0912;
+  camera.cx = 601.8873;
+  camera.cy = 183.1104;
+  int keyframes = 0;
+  for (auto _ : state) {
+    auto odometry = VisualOdometry::create(camera, images.front().size()).value();
+    for (std::size_t i = 0; i < images.size(); ++i) benchmark::DoNotOptimize(odometry->track(0.1 * static_cast<double>(i), images[i]));
+    keyframes = odometry->summary().keyframes;
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(images.size()));  // frames per second
+  state.counters["keyframes"] = keyframes;
+}
+BENCHMARK(BM_VisualOdometryKitti06Mono)->Unit(benchmark::kMillisecond)->Iterations(2);
 
 }  // namespace
 
