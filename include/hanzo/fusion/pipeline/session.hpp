@@ -42,6 +42,11 @@
 //  - Wheel odometry (the first wheel sensor) is checked against the LiDAR odometry's own motion
 //    (WheelSlipMonitor): while the wheels disagree (slip, spin, a wrong scale) their messages
 //    are not fused (counted as rejected "slip"); the filter runs on the IMU and the LiDAR.
+//  - Camera images (the first camera with intrinsics, a second of the same size makes a stereo
+//    pair) go to the visual odometry (vision::VisualOdometry, src/pipeline/camera_odometry.hpp);
+//    its camera poses are pose measurements of the Frontend (Frontend::push_pose): without an
+//    IMU in the odometry's own world, with an IMU (stereo) placed once in the Frontend's world
+//    at the first tracked frame. A monocular camera with an IMU is tracked but not fused.
 //  - Everything else goes to Frontend::push (same checks, same errors).
 //  - Keyframes of the Frontend (frontend.keyframe_interval) become nodes of a KeyframeGraph
 //    (between factors from the filter's relative motion); after each push the graph is updated
