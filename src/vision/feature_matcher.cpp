@@ -1,30 +1,10 @@
 #include "hanzo/fusion/vision/feature_matcher.hpp"
 
 #include <algorithm>
-#include <climits>
 #include <cmath>
 
 namespace hanzo::fusion::vision {
 namespace {
-
-struct Nearest {
-  int index = -1;
-  int best = INT_MAX;
-  int second = INT_MAX;
-
-  void offer(int candidate, int distance) {
-    if (distance < best) {
-      second = best;
-      best = distance;
-      index = candidate;
-    } else if (distance < second) {
-      second = distance;
-    }
-  }
-  bool passes(double ratio, int max_distance) const {
-    return index >= 0 && best <= max_distance && (ratio >= 1.0 || second == INT_MAX || best < ratio * second);
-  }
-};
 
 // Keeps one match per train keypoint: the one with the smallest distance.
 std::vector<FeatureMatch> unique_by_train(std::vector<FeatureMatch> matches, std::size_t train_count) {
@@ -47,15 +27,15 @@ std::vector<FeatureMatch> match_descriptors(const cv::Mat& query_descriptors, co
   std::vector<FeatureMatch> matches;
   if (query_descriptors.empty() || train_descriptors.empty()) return matches;
   const int queries = query_descriptors.rows, trains = train_descriptors.rows;
-  std::vector<Nearest> nearest_query(static_cast<std::size_t>(queries));
-  std::vector<Nearest> nearest_train(static_cast<std::size_t>(trains));  // for the mutual check
+  std::vector<NearestCandidates> nearest_query(static_cast<std::size_t>(queries));
+  std::vector<NearestCandidates> nearest_train(static_cast<std::size_t>(trains));  // for the mutual check
   for (int q = 0; q < queries; ++q) {
     const unsigned char* query = query_descriptors.ptr<unsigned char>(q);
-    Nearest& best_for_query = nearest_query[static_cast<std::size_t>(q)];
+    NearestCandidates& best_for_query = nearest_query[static_cast<std::size_t>(q)];
     for (int t = 0; t < trains; ++t) {
       const int distance = hamming_distance(query, train_descriptors.ptr<unsigned char>(t));
       best_for_query.offer(t, distance);
-      Nearest& best_for_train = nearest_train[static_cast<std::size_t>(t)];
+      NearestCandidates& best_for_train = nearest_train[static_cast<std::size_t>(t)];
       if (distance < best_for_train.best) {
         best_for_train.best = distance;
         best_for_train.index = q;
@@ -63,7 +43,7 @@ std::vector<FeatureMatch> match_descriptors(const cv::Mat& query_descriptors, co
     }
   }
   for (int q = 0; q < queries; ++q) {
-    const Nearest& best = nearest_query[static_cast<std::size_t>(q)];
+    const NearestCandidates& best = nearest_query[static_cast<std::size_t>(q)];
     if (!best.passes(config.ratio, config.max_distance)) continue;
     if (config.mutual && nearest_train[static_cast<std::size_t>(best.index)].index != q) continue;
     matches.push_back({q, best.index, best.best});
@@ -94,7 +74,7 @@ std::vector<FeatureMatch> match_guided(const ImageFeatures& query, const ImageFe
     const cv::Vec3d x(keypoint.pt.x, keypoint.pt.y, 1.0);
     const cv::Vec3d mapped = geometry * x;
     const unsigned char* descriptor = query.descriptors.ptr<unsigned char>(static_cast<int>(q));
-    Nearest nearest;
+    NearestCandidates nearest;
     auto consider = [&](int t) {
       const cv::KeyPoint& candidate = train.keypoints[static_cast<std::size_t>(t)];
       if (!compatible_octave(keypoint, candidate)) return;

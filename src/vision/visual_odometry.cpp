@@ -249,21 +249,15 @@ struct VisualOdometry::State {
       if (line_norm < 1e-12) continue;
       const int octave = frame.features.keypoints[k].octave;
       const unsigned char* descriptor = frame.features.descriptors.ptr<unsigned char>(static_cast<int>(k));
-      int best = std::numeric_limits<int>::max(), second = std::numeric_limits<int>::max(), best_right = -1;
+      NearestCandidates nearest;
       for (std::size_t r = 0; r < frame.right_features.size(); ++r) {
         const cv::KeyPoint& candidate = frame.right_features.keypoints[r];
         if (std::abs(candidate.octave - octave) > 1 || !std::isfinite(right_normalized[r].x())) continue;
         if (std::abs(right_normalized[r].homogeneous().dot(line)) / line_norm * right_camera->fx > 2.0 * sigma(candidate.octave)) continue;
-        const int distance = hamming_distance(descriptor, frame.right_features.descriptors.ptr<unsigned char>(static_cast<int>(r)));
-        if (distance < best) {
-          second = best;
-          best = distance;
-          best_right = static_cast<int>(r);
-        } else if (distance < second) {
-          second = distance;
-        }
+        nearest.offer(static_cast<int>(r), hamming_distance(descriptor, frame.right_features.descriptors.ptr<unsigned char>(static_cast<int>(r))));
       }
-      if (best_right < 0 || best > config.max_descriptor_distance || (second != std::numeric_limits<int>::max() && best >= 0.8 * second)) continue;
+      if (!nearest.passes(0.8, config.max_descriptor_distance)) continue;
+      const int best_right = nearest.index, best = nearest.best;
       auto& slot = owner[static_cast<std::size_t>(best_right)];
       if (best < slot.second) slot = {static_cast<int>(k), best};
     }
@@ -494,7 +488,7 @@ struct VisualOdometry::State {
       const std::optional<Eigen::Vector2d> pixel = camera.project(T_camera_world.act(landmark.position));
       if (!pixel || pixel->x() < 0 || pixel->y() < 0 || pixel->x() >= image_size.width || pixel->y() >= image_size.height) continue;
       const double radius = config.projection_search_radius_px * radius_scale * std::pow(config.features.scale_factor, landmark.octave);
-      int best = std::numeric_limits<int>::max(), second = std::numeric_limits<int>::max(), best_keypoint = -1;
+      NearestCandidates nearest;
       const int c0 = std::max(0, static_cast<int>((pixel->x() - radius) / kCell)), c1 = std::min(columns - 1, static_cast<int>((pixel->x() + radius) / kCell));
       const int r0 = std::max(0, static_cast<int>((pixel->y() - radius) / kCell)), r1 = std::min(rows - 1, static_cast<int>((pixel->y() + radius) / kCell));
       for (int r = r0; r <= r1; ++r) {
@@ -503,18 +497,12 @@ struct VisualOdometry::State {
             const cv::KeyPoint& keypoint = frame.features.keypoints[static_cast<std::size_t>(k)];
             if (std::abs(keypoint.octave - landmark.octave) > 2) continue;
             if ((Eigen::Vector2d(keypoint.pt.x, keypoint.pt.y) - *pixel).squaredNorm() > radius * radius) continue;
-            const int distance = hamming_distance(landmark.descriptor.ptr<unsigned char>(), frame.features.descriptors.ptr<unsigned char>(k));
-            if (distance < best) {
-              second = best;
-              best = distance;
-              best_keypoint = k;
-            } else if (distance < second) {
-              second = distance;
-            }
+            nearest.offer(k, hamming_distance(landmark.descriptor.ptr<unsigned char>(), frame.features.descriptors.ptr<unsigned char>(k)));
           }
         }
       }
-      if (best_keypoint < 0 || best > config.max_descriptor_distance || (second != std::numeric_limits<int>::max() && best >= 0.9 * second)) continue;
+      if (!nearest.passes(0.9, config.max_descriptor_distance)) continue;
+      const int best_keypoint = nearest.index, best = nearest.best;
       auto& slot = owner[static_cast<std::size_t>(best_keypoint)];
       if (best < slot.second) slot = {landmark_id, best};
     }
@@ -781,22 +769,16 @@ struct VisualOdometry::State {
       if (line_norm < 1e-12) continue;
       const int octave2 = newer.frame.features.keypoints[k2].octave;
       const unsigned char* descriptor = newer.frame.features.descriptors.ptr<unsigned char>(static_cast<int>(k2));
-      int best = std::numeric_limits<int>::max(), second = std::numeric_limits<int>::max(), best_k1 = -1;
+      NearestCandidates nearest;
       for (int k1 : free1) {
         const cv::KeyPoint& keypoint1 = older.frame.features.keypoints[static_cast<std::size_t>(k1)];
         if (std::abs(keypoint1.octave - octave2) > 1) continue;
         const double epipolar_px = std::abs(older.frame.normalized[static_cast<std::size_t>(k1)].homogeneous().dot(line)) / line_norm * camera.fx;
         if (epipolar_px > 2.0 * sigma(keypoint1.octave)) continue;
-        const int distance = hamming_distance(older.frame.features.descriptors.ptr<unsigned char>(k1), descriptor);
-        if (distance < best) {
-          second = best;
-          best = distance;
-          best_k1 = k1;
-        } else if (distance < second) {
-          second = distance;
-        }
+        nearest.offer(k1, hamming_distance(older.frame.features.descriptors.ptr<unsigned char>(k1), descriptor));
       }
-      if (best_k1 < 0 || best > config.max_descriptor_distance || (second != std::numeric_limits<int>::max() && best >= 0.9 * second)) continue;
+      if (!nearest.passes(0.9, config.max_descriptor_distance)) continue;
+      const int best_k1 = nearest.index, best = nearest.best;
       auto& slot = owner[static_cast<std::size_t>(best_k1)];
       if (best < slot.second) slot = {static_cast<int>(k2), best};
     }

@@ -13,6 +13,7 @@
 // (wide baselines, repeated structure).
 
 #include <functional>
+#include <limits>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -20,6 +21,29 @@
 #include "hanzo/fusion/vision/orb_extractor.hpp"
 
 namespace hanzo::fusion::vision {
+
+/// The nearest and the second-nearest of candidates offered one by one with their descriptor
+/// distances: the state of a ratio test.
+struct NearestCandidates {
+  int index = -1;
+  int best = std::numeric_limits<int>::max();
+  int second = std::numeric_limits<int>::max();
+
+  void offer(int candidate, int distance) {
+    if (distance < best) {
+      second = best;
+      best = distance;
+      index = candidate;
+    } else if (distance < second) {
+      second = distance;
+    }
+  }
+  /// A nearest within max_distance that passes the ratio test (ratio >= 1: no test; a lone
+  /// candidate passes).
+  bool passes(double ratio, int max_distance) const {
+    return index >= 0 && best <= max_distance && (ratio >= 1.0 || second == std::numeric_limits<int>::max() || best < ratio * second);
+  }
+};
 
 struct FeatureMatch {
   int query = -1;     ///< index into the first (query) features
