@@ -9,7 +9,11 @@
 
 #include "hanzo/fusion/msgs/convert.hpp"
 #include "hanzo/fusion/msgs/map_convert.hpp"
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/service/grpc_server.hpp"
+#include "hanzo/fusion/sim/scenario.hpp"
+#include "hanzo/fusion/sim/scenario_simulation.hpp"
 #include "hanzo/fusion/v1/service.grpc.pb.h"
 #include "service_fixtures.hpp"
 
@@ -142,6 +146,54 @@ TEST_F(GrpcServerTest, StreamsTheSampleRecordingAndReturnsPosesAtImuRate) {
   const grpc::Status ended = subscription->Finish();
   EXPECT_EQ(ended.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
   EXPECT_EQ(subscribed.size(), info.summary.poses);
+}
+
+// StreamImage fuses: a session configured with the simulated drone's stereo cameras (no IMU)
+// takes their images over two gRPC streams and tracks them with visual odometry.
+TEST_F(GrpcServerTest, StreamImageFusesStereoCamerasThroughVisualOdometry) {
+  sim::Scenario scenario = sim::load_scenario("examples/scenarios/drone.yaml").value();
+  std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& sensor) { return sensor.modality != config::SensorModality::kCamera; });
+  scenario.duration = 3.0;  // 2 s standing, then the start of the flight
+  scenario.num_threads = 0;
+  const std::string config_yaml = config::to_yaml(sim::scenario_fusion_config(scenario));
+  const std::string calibration_yaml = calib::to_yaml(sim::scenario_calibration(scenario));
+  const std::string cameras = manager_->create_session(kOwner, {"cameras", config_yaml, calibration_yaml}).value().id;
+  grpc::ClientContext left_context, right_context;
+  prepare(left_context, "acme-robot-secret-0001", cameras);
+  prepare(right_context, "acme-robot-secret-0001", cameras);
+  left_context.AddMetadata("x-sensor", "camera_left");
+  right_context.AddMetadata("x-sensor", "camera_right");
+  auto left = stub_->StreamImage(&left_context);
+  auto right = stub_->StreamImage(&right_context);
+  std::thread drain_left([&] { v1::PoseEstimate pose; while (left->Read(&pose)) {} });
+  std::thread drain_right([&] { v1::PoseEstimate pose; while (right->Read(&pose)) {} });
+  uint64_t written = 0;
+  auto simulation = sim::ScenarioSimulation::create(scenario).value();
+  ASSERT_TRUE(simulation->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) {
+    const auto& image = std::get<msgs::ImageMessage>(message);
+    EXPECT_TRUE((sensor.name == "camera_left" ? left : right)->Write(msgs::to_proto(image)));
+    // One stream after the other, in the log's order: the left image of a time before its right.
+    ++written;
+    while (true) {
+      const SessionInfo now = manager_->session_info(kOwner, cameras).value();
+      uint64_t received = 0;
+      for (const pipeline::SensorStatistics& sensor_statistics : now.summary.sensors) received += sensor_statistics.received;
+      if (received >= written) break;
+      std::this_thread::yield();
+    }
+    return ok_status();
+  }).ok());
+  left->WritesDone();
+  right->WritesDone();
+  drain_left.join();
+  drain_right.join();
+  EXPECT_TRUE(left->Finish().ok());
+  EXPECT_TRUE(right->Finish().ok());
+  const SessionInfo info = manager_->session_info(kOwner, cameras).value();
+  EXPECT_EQ(info.mapping.camera_frames_tracked, 31u);  // 10 Hz over 3 s, both ends
+  EXPECT_FALSE(info.mapping.visual_scale_free);
+  for (const pipeline::SensorStatistics& sensor : info.summary.sensors) EXPECT_EQ(sensor.fused, 31u) << sensor.name;
+  ASSERT_TRUE(info.latest_pose.has_value());
 }
 
 TEST_F(GrpcServerTest, AuthErrorsMapToGrpcStatus) {
