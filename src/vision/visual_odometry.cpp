@@ -143,7 +143,9 @@ struct VisualOdometry::State {
   int frames_since_keyframe = 0;
   int last_keyframe_tracked = 0;
 
-  double sigma(int octave) const { return config.pixel_sigma * std::pow(config.features.scale_factor, octave); }
+  // scale_factor^octave for every pyramid level (looked up in the matchers' inner loops).
+  std::vector<double> octave_scale;
+  double sigma(int octave) const { return config.pixel_sigma * octave_scale[static_cast<std::size_t>(octave)]; }
 
   Frame make_frame(double time, ImageFeatures features) const {
     Frame frame;
@@ -487,7 +489,7 @@ struct VisualOdometry::State {
       const Landmark& landmark = landmarks.at(landmark_id);
       const std::optional<Eigen::Vector2d> pixel = camera.project(T_camera_world.act(landmark.position));
       if (!pixel || pixel->x() < 0 || pixel->y() < 0 || pixel->x() >= image_size.width || pixel->y() >= image_size.height) continue;
-      const double radius = config.projection_search_radius_px * radius_scale * std::pow(config.features.scale_factor, landmark.octave);
+      const double radius = config.projection_search_radius_px * radius_scale * octave_scale[static_cast<std::size_t>(landmark.octave)];
       NearestCandidates nearest;
       const int c0 = std::max(0, static_cast<int>((pixel->x() - radius) / kCell)), c1 = std::min(columns - 1, static_cast<int>((pixel->x() + radius) / kCell));
       const int r0 = std::max(0, static_cast<int>((pixel->y() - radius) / kCell)), r1 = std::min(rows - 1, static_cast<int>((pixel->y() + radius) / kCell));
@@ -926,6 +928,7 @@ Result<std::unique_ptr<VisualOdometry>> VisualOdometry::create(const PinholeCame
   state->image_size = image_size;
   state->config = config;
   state->extractor = OrbExtractor(config.features);
+  for (int level = 0; level < config.features.pyramid_levels; ++level) state->octave_scale.push_back(std::pow(config.features.scale_factor, level));
   return std::unique_ptr<VisualOdometry>(new VisualOdometry(std::move(state)));
 }
 
