@@ -971,7 +971,7 @@ Result<VisualOdometryFrame> VisualOdometry::track_frame(double time, const cv::M
     return Error(fmt::format("image is {} x {}, the camera's calibration is for {} x {}", image.cols, image.rows, s.image_size.width, s.image_size.height), "image");
   }
   Result<ImageFeatures> features = with_context(s.extractor.extract(image), "image");
-  if (!features) return features.error();
+  if (!features) return Error(features.error().message, "image");
   if (!right.empty() && (right.depth() != CV_8U || (right.channels() != 1 && right.channels() != 3 && right.channels() != 4))) {
     return Error(fmt::format("right image: type {} is not 8-bit grey, BGR or BGRA", cv::typeToString(right.type())), "right_image");
   }

@@ -116,6 +116,37 @@ TEST(VisualOdometry, KittiOdometry06MonocularStaysUnderOnePercentOfThePath) {
   EXPECT_LT(ape.statistics.rmse, 0.01 * path);
 }
 
+// Bad input: wrong sizes, types and times are refused with the reason (nothing changes); black
+// and saturated frames have no features: the odometry reports them (initializing with the
+// reason, or lost) and tracks again when texture returns.
+TEST(VisualOdometry, RefusesBadFramesAndReportsBlindOnes) {
+  const Sequence sequence = kitti_odometry_06();
+  auto odometry = VisualOdometry::create(sequence.camera, {1226, 370}).value();
+  EXPECT_NE(odometry->track(0.0, cv::Mat(100, 100, CV_8UC1, cv::Scalar(0))).error().message.find("calibration is for 1226 x 370"), std::string::npos);
+  EXPECT_EQ(odometry->track(0.0, cv::Mat(370, 1226, CV_32FC1, cv::Scalar(0))).error().field, "image");
+  EXPECT_EQ(odometry->track(std::nan(""), cv::Mat(370, 1226, CV_8UC1, cv::Scalar(0))).error().field, "time");
+  EXPECT_NE(odometry->track(0.0, cv::Mat(370, 1226, CV_8UC1), cv::Mat(370, 1226, CV_8UC1)).error().message.find("monocular"), std::string::npos);
+  const Result<VisualOdometryFrame> black = odometry->track(0.0, cv::Mat(370, 1226, CV_8UC1, cv::Scalar(0)));
+  ASSERT_TRUE(black);
+  EXPECT_EQ(black->state, TrackingState::kInitializing);
+  EXPECT_NE(black->reason.find("0 keypoints"), std::string::npos) << black->reason;
+  // Initialized on real frames, then blinded: lost with the reason, then tracked again.
+  for (std::size_t i = 0; i < 10; ++i) ASSERT_TRUE(odometry->track(sequence.times[i] + 1.0, cv::imread(sequence.images[i], cv::IMREAD_GRAYSCALE)));
+  EXPECT_FALSE(odometry->track(1.0 + sequence.times[9], cv::imread(sequence.images[9], cv::IMREAD_GRAYSCALE)).ok());  // same time again
+  const Result<VisualOdometryFrame> saturated = odometry->track(1.0 + sequence.times[10], cv::Mat(370, 1226, CV_8UC1, cv::Scalar(255)));
+  ASSERT_TRUE(saturated);
+  EXPECT_EQ(saturated->state, TrackingState::kLost);
+  EXPECT_NE(saturated->reason.find("landmarks tracked"), std::string::npos) << saturated->reason;
+  const Result<VisualOdometryFrame> back = odometry->track(1.0 + sequence.times[11], cv::imread(sequence.images[11], cv::IMREAD_GRAYSCALE));
+  ASSERT_TRUE(back);
+  EXPECT_EQ(back->state, TrackingState::kTracking) << back->reason;
+  EXPECT_EQ(odometry->summary().lost_frames, 1);
+  EXPECT_FALSE(VisualOdometry::create(PinholeCamera{}, {0, 0}).ok());
+  PinholeCamera no_focal = sequence.camera;
+  no_focal.fx = 0.0;
+  EXPECT_EQ(VisualOdometry::create(no_focal, {1226, 370}).error().field, "camera");
+}
+
 // 8 m driving, then 24 frames standing while two trucks pass beside the car (one of them fills
 // half the view): the estimate must neither drift nor be dragged along. The standstill is
 // detected from the image (the static scene's keypoints stay put) and the pose held; landmarks
