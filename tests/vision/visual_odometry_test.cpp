@@ -304,5 +304,48 @@ TEST(VisualOdometry, SimulatedDroneStereoDriftsUnderHalfAPercentOfTheDistance) {
   EXPECT_LT(ape.statistics.rmse, 0.005 * distance);
 }
 
+// The simulated handheld phone (examples/scenarios/ar_handheld.yaml): a mono camera (radtan,
+// 15 Hz) carried through an office, looking around; the first 14 s (before the glare fault).
+// Measured 4.65 % of the 11.8 m walk: the goal is 1 % (the monocular scale drifts through the
+// turns); this bound keeps what is reached.
+TEST(VisualOdometry, SimulatedHandheldMonocularTracksTheWholeWalk) {
+  sim::Scenario scenario = sim::load_scenario("examples/scenarios/ar_handheld.yaml").value();
+  std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& s) { return s.modality != config::SensorModality::kCamera; });
+  scenario.duration = 14.0;
+  scenario.num_threads = 0;
+  auto simulation = sim::ScenarioSimulation::create(scenario).value();
+  const auto& camera_config = std::get<sim::CameraSimulatorConfig>(scenario.sensors[0].simulator);
+  const SE3 T_body_camera = scenario.sensors[0].T_body_sensor;
+  auto odometry = VisualOdometry::create(calib::CameraCalibration{camera_config.intrinsics, camera_config.distortion}.pinhole_camera(),
+                                         {static_cast<int>(camera_config.intrinsics.width), static_cast<int>(camera_config.intrinsics.height)})
+                      .value();
+  ASSERT_TRUE(simulation->run([&](const sim::ScenarioSensor&, msgs::SensorMessage&& message) -> Status {
+    const auto& image = std::get<msgs::ImageMessage>(message);
+    const cv::Mat pixels(static_cast<int>(image.height), static_cast<int>(image.width), image.encoding == msgs::ImageEncoding::kMono8 ? CV_8UC1 : CV_8UC3,
+                         const_cast<uint8_t*>(image.data.data()));
+    Result<VisualOdometryFrame> frame = odometry->track(image.timestamp.seconds(), pixels);
+    if (!frame) return frame.error();
+    if (verbose()) std::printf("%.2f %-12s %4d %s\n", image.timestamp.seconds() - scenario.start_time.seconds(), to_string(frame->state), frame->tracked_landmarks, frame->reason.c_str());
+    return ok_status();
+  }).ok());
+  io::Trajectory estimate, truth;
+  for (const auto& [time, pose] : odometry->trajectory()) {
+    estimate.timestamps.push_back(Timestamp::from_seconds(time));
+    estimate.poses.push_back(pose.matrix());
+    truth.timestamps.push_back(Timestamp::from_seconds(time));
+    truth.poses.push_back((simulation->trajectory().sample(Timestamp::from_seconds(time)).T_world_body * T_body_camera).matrix());
+  }
+  eval::ApeConfig config;
+  config.alignment = eval::Alignment::kSim3;
+  const eval::ApeResult ape = eval::compute_ape(truth, estimate, config).value();
+  const double path = truth.path_length();
+  const VisualOdometrySummary summary = odometry->summary();
+  std::printf("handheld mono: %d of %d frames tracked, %d lost, APE (Sim3) %.3f m over %.1f m (%.2f %%)\n", summary.tracked_frames, summary.frames,
+              summary.lost_frames, ape.statistics.rmse, path, 100 * ape.statistics.rmse / path);
+  EXPECT_TRUE(summary.scale_free);
+  EXPECT_EQ(summary.lost_frames, 0);
+  EXPECT_LT(ape.statistics.rmse, 0.06 * path);
+}
+
 }  // namespace
 }  // namespace hanzo::fusion::vision
