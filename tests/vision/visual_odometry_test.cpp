@@ -306,7 +306,7 @@ TEST(VisualOdometry, SimulatedDroneStereoDriftsUnderHalfAPercentOfTheDistance) {
 
 // The simulated handheld phone (examples/scenarios/ar_handheld.yaml): a mono camera (radtan,
 // 15 Hz) carried through an office, looking around; the first 14 s (before the glare fault).
-// Measured 4.65 % of the 11.8 m walk: the goal is 1 % (the monocular scale drifts through the
+// Measured 2.35 % of the 11.8 m walk: the goal is 1 % (the monocular scale drifts through the
 // turns); this bound keeps what is reached.
 TEST(VisualOdometry, SimulatedHandheldMonocularTracksTheWholeWalk) {
   sim::Scenario scenario = sim::load_scenario("examples/scenarios/ar_handheld.yaml").value();
@@ -339,12 +339,18 @@ TEST(VisualOdometry, SimulatedHandheldMonocularTracksTheWholeWalk) {
   config.alignment = eval::Alignment::kSim3;
   const eval::ApeResult ape = eval::compute_ape(truth, estimate, config).value();
   const double path = truth.path_length();
+  if (verbose()) {
+    for (std::size_t i = 0; i < truth.size(); i += 15) {
+      const Eigen::Vector3d e = ape.estimate_aligned.position(i), r = truth.position(i);
+      std::printf("%.1f est %6.2f %6.2f %6.2f truth %6.2f %6.2f %6.2f error %.3f\n", truth.timestamps[i].seconds() - scenario.start_time.seconds(), e.x(), e.y(), e.z(), r.x(), r.y(), r.z(), ape.errors[i]);
+    }
+  }
   const VisualOdometrySummary summary = odometry->summary();
   std::printf("handheld mono: %d of %d frames tracked, %d lost, APE (Sim3) %.3f m over %.1f m (%.2f %%)\n", summary.tracked_frames, summary.frames,
               summary.lost_frames, ape.statistics.rmse, path, 100 * ape.statistics.rmse / path);
   EXPECT_TRUE(summary.scale_free);
   EXPECT_EQ(summary.lost_frames, 0);
-  EXPECT_LT(ape.statistics.rmse, 0.06 * path);
+  EXPECT_LT(ape.statistics.rmse, 0.03 * path);
 }
 
 }  // namespace
