@@ -49,6 +49,7 @@ class CameraOdometry {
   const SE3& T_body_left() const { return T_body_left_; }
   /// The left camera's calibrated time offset (t_body = t_camera + offset).
   Duration left_time_offset() const { return left_offset_; }
+  Duration right_time_offset() const { return right_offset_; }
 
   /// Takes an image of a handled sensor. Returns the tracked frame when an image (pair)
   /// completed; nullopt while a stereo pair waits for its other half. Fails (naming the

@@ -312,6 +312,14 @@ PushStatus Frontend::push_relative_pose(std::string_view sensor_name, Timestamp 
   return impl.accept(sensor, std::move(event));
 }
 
+void Frontend::note_input(std::string_view sensor_name, Timestamp time) {
+  Impl& impl = *impl_;
+  const std::optional<size_t> index = impl.sensor_index(sensor_name);
+  if (!index) return;
+  const Timestamp body_time = time + impl.setups[*index].time_offset;
+  if (body_time > impl.last_input[*index]) impl.last_input[*index] = body_time;
+}
+
 PushStatus Frontend::Impl::accept(size_t sensor, Event event) {
   SensorStatistics& statistics = sensors[sensor];
   const std::string& name = statistics.name;

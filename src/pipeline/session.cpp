@@ -444,7 +444,10 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
     ++left.rejected[Rejection::kAligning];  // the Frontend has no pose at the frame's time yet
   } else if (fused) {
     ++left.fused;
-    if (camera_odometry_->stereo()) ++camera_statistics_[camera_odometry_->right_sensor()].fused;
+    if (camera_odometry_->stereo()) {
+      ++camera_statistics_[camera_odometry_->right_sensor()].fused;
+      frontend_->note_input(camera_odometry_->right_sensor(), sensor_time + camera_odometry_->left_time_offset() - camera_odometry_->right_time_offset());
+    }
   } else {
     logger()->debug("session: visual odometry pose not fused: {}", fused.error().message);
   }
@@ -878,16 +881,6 @@ SessionSummary Session::summary() const {
     sensor.rejected = camera->second.rejected;
     sensor.first_time = camera->second.first_time;
     sensor.last_time = camera->second.last_time;
-  }
-  // A stereo pair's right camera reaches the Frontend through the left one's poses: its
-  // silence is the left camera's.
-  const auto left = std::find_if(summary.sensors.begin(), summary.sensors.end(), [&](const SensorStatistics& sensor) {
-    return camera_odometry_ && camera_odometry_->stereo() && sensor.name == camera_odometry_->left_sensor();
-  });
-  for (SensorStatistics& sensor : summary.sensors) {
-    if (left == summary.sensors.end() || !camera_odometry_->handles(sensor.name) || sensor.name == left->name) continue;
-    sensor.timed_out = left->timed_out;
-    sensor.timeouts = left->timeouts;
   }
   for (SensorStatistics& sensor : summary.sensors) {
     if (sensor.name != wheel_sensor_ || summary_.wheel_messages_withheld == 0) continue;

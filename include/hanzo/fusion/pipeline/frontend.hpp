@@ -174,6 +174,11 @@ class Frontend {
   PushStatus push_relative_pose(std::string_view sensor, Timestamp from, Timestamp to, const SE3& T_from_to,
                             const Eigen::Matrix<double, 6, 6>& covariance);
 
+  /// Marks that `sensor`'s data arrived at `time` (sensor clock) although it reaches the filter
+  /// through another sensor's measurements (the right camera of a stereo pair, fused through the
+  /// left camera's poses): its timeout monitoring counts it as heard. Ignores unknown sensors.
+  void note_input(std::string_view sensor, Timestamp time);
+
   /// The configured sensor that reads `topic`, or nullptr.
   const config::SensorConfig* sensor_for_topic(std::string_view topic) const;
   const config::FusionConfig& config() const;
