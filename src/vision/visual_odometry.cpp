@@ -79,6 +79,34 @@ Frame anchor_of(const Frame& frame) {
   return anchor;
 }
 
+// Keypoint indices in square cells of `cell` pixels, for neighbourhood searches.
+class KeypointGrid {
+ public:
+  KeypointGrid(const std::vector<cv::KeyPoint>& keypoints, cv::Size image_size, int cell)
+      : cell_(cell), columns_(image_size.width / cell + 1), rows_(image_size.height / cell + 1), cells_(static_cast<std::size_t>(columns_ * rows_)) {
+    for (std::size_t k = 0; k < keypoints.size(); ++k) {
+      cells_[static_cast<std::size_t>(row_of(keypoints[k].pt.y) * columns_ + column_of(keypoints[k].pt.x))].push_back(static_cast<int>(k));
+    }
+  }
+  /// Calls visit(k) for every keypoint in the cells that overlap the square of half-side
+  /// `radius` around (u, v) (a superset of the keypoints within `radius`).
+  template <typename Visit>
+  void for_each_near(double u, double v, double radius, Visit&& visit) const {
+    for (int r = row_of(v - radius); r <= row_of(v + radius); ++r) {
+      for (int c = column_of(u - radius); c <= column_of(u + radius); ++c) {
+        for (int k : cells_[static_cast<std::size_t>(r * columns_ + c)]) visit(k);
+      }
+    }
+  }
+
+ private:
+  int column_of(double u) const { return std::clamp(static_cast<int>(std::floor(u / cell_)), 0, columns_ - 1); }
+  int row_of(double v) const { return std::clamp(static_cast<int>(std::floor(v / cell_)), 0, rows_ - 1); }
+
+  int cell_, columns_, rows_;
+  std::vector<std::vector<int>> cells_;
+};
+
 bool has_right(const Frame& frame, std::size_t keypoint) { return !frame.right_keypoint.empty() && frame.right_keypoint[keypoint] >= 0; }
 
 }  // namespace
@@ -476,14 +504,7 @@ struct VisualOdometry::State {
   // each keypoint given to the landmark it matches best.
   std::vector<std::pair<int, int>> match_by_projection(const Frame& frame, const SE3& T_camera_world, const std::vector<int>& landmark_ids,
                                                        double radius_scale) const {
-    constexpr int kCell = 32;
-    const int columns = image_size.width / kCell + 1, rows = image_size.height / kCell + 1;
-    std::vector<std::vector<int>> grid(static_cast<std::size_t>(columns * rows));
-    for (std::size_t k = 0; k < frame.features.size(); ++k) {
-      const cv::Point2f& p = frame.features.keypoints[k].pt;
-      grid[static_cast<std::size_t>(std::clamp(static_cast<int>(p.y) / kCell, 0, rows - 1) * columns + std::clamp(static_cast<int>(p.x) / kCell, 0, columns - 1))]
-          .push_back(static_cast<int>(k));
-    }
+    const KeypointGrid grid(frame.features.keypoints, image_size, 32);
     std::vector<std::pair<int, int>> owner(frame.features.size(), {-1, std::numeric_limits<int>::max()});  // (landmark, distance)
     for (int landmark_id : landmark_ids) {
       const Landmark& landmark = landmarks.at(landmark_id);
@@ -491,18 +512,12 @@ struct VisualOdometry::State {
       if (!pixel || pixel->x() < 0 || pixel->y() < 0 || pixel->x() >= image_size.width || pixel->y() >= image_size.height) continue;
       const double radius = config.projection_search_radius_px * radius_scale * octave_scale[static_cast<std::size_t>(landmark.octave)];
       NearestCandidates nearest;
-      const int c0 = std::max(0, static_cast<int>((pixel->x() - radius) / kCell)), c1 = std::min(columns - 1, static_cast<int>((pixel->x() + radius) / kCell));
-      const int r0 = std::max(0, static_cast<int>((pixel->y() - radius) / kCell)), r1 = std::min(rows - 1, static_cast<int>((pixel->y() + radius) / kCell));
-      for (int r = r0; r <= r1; ++r) {
-        for (int c = c0; c <= c1; ++c) {
-          for (int k : grid[static_cast<std::size_t>(r * columns + c)]) {
-            const cv::KeyPoint& keypoint = frame.features.keypoints[static_cast<std::size_t>(k)];
-            if (std::abs(keypoint.octave - landmark.octave) > 2) continue;
-            if ((Eigen::Vector2d(keypoint.pt.x, keypoint.pt.y) - *pixel).squaredNorm() > radius * radius) continue;
-            nearest.offer(k, hamming_distance(landmark.descriptor.ptr<unsigned char>(), frame.features.descriptors.ptr<unsigned char>(k)));
-          }
-        }
-      }
+      grid.for_each_near(pixel->x(), pixel->y(), radius, [&](int k) {
+        const cv::KeyPoint& keypoint = frame.features.keypoints[static_cast<std::size_t>(k)];
+        if (std::abs(keypoint.octave - landmark.octave) > 2) return;
+        if ((Eigen::Vector2d(keypoint.pt.x, keypoint.pt.y) - *pixel).squaredNorm() > radius * radius) return;
+        nearest.offer(k, hamming_distance(landmark.descriptor.ptr<unsigned char>(), frame.features.descriptors.ptr<unsigned char>(k)));
+      });
       if (!nearest.passes(0.9, config.max_descriptor_distance)) continue;
       const int best_keypoint = nearest.index, best = nearest.best;
       auto& slot = owner[static_cast<std::size_t>(best_keypoint)];
@@ -644,33 +659,18 @@ struct VisualOdometry::State {
   // a baseline, anything that moves would be triangulated from pose noise and drag the
   // estimate. The anchor stays while standing, so a slow creep adds up until it shows.
   bool standing_still(const Frame& frame, const Frame& anchor) const {
-    constexpr int kCell = 16;
-    const int columns = image_size.width / kCell + 1, rows = image_size.height / kCell + 1;
-    std::vector<std::vector<int>> grid(static_cast<std::size_t>(columns * rows));
-    for (std::size_t k = 0; k < frame.features.size(); ++k) {
-      const cv::Point2f& p = frame.features.keypoints[k].pt;
-      grid[static_cast<std::size_t>(std::clamp(static_cast<int>(p.y) / kCell, 0, rows - 1) * columns + std::clamp(static_cast<int>(p.x) / kCell, 0, columns - 1))]
-          .push_back(static_cast<int>(k));
-    }
+    const KeypointGrid grid(frame.features.keypoints, image_size, 16);
     const double radius = config.standstill_pixels;
     int still = 0;
     for (std::size_t k = 0; k < anchor.features.size(); ++k) {
       const cv::KeyPoint& keypoint = anchor.features.keypoints[k];
-      const int column = std::clamp(static_cast<int>(keypoint.pt.x) / kCell, 0, columns - 1), row = std::clamp(static_cast<int>(keypoint.pt.y) / kCell, 0, rows - 1);
+      const unsigned char* descriptor = anchor.features.descriptors.ptr<unsigned char>(static_cast<int>(k));
       bool found = false;
-      for (int r = std::max(0, row - 1); r <= std::min(rows - 1, row + 1) && !found; ++r) {
-        for (int c = std::max(0, column - 1); c <= std::min(columns - 1, column + 1) && !found; ++c) {
-          for (int candidate : grid[static_cast<std::size_t>(r * columns + c)]) {
-            const cv::KeyPoint& other = frame.features.keypoints[static_cast<std::size_t>(candidate)];
-            if (other.octave != keypoint.octave || cv::norm(other.pt - keypoint.pt) > radius) continue;
-            if (hamming_distance(anchor.features.descriptors.ptr<unsigned char>(static_cast<int>(k)), frame.features.descriptors.ptr<unsigned char>(candidate)) <=
-                config.max_descriptor_distance / 2) {
-              found = true;
-              break;
-            }
-          }
-        }
-      }
+      grid.for_each_near(keypoint.pt.x, keypoint.pt.y, radius, [&](int candidate) {
+        const cv::KeyPoint& other = frame.features.keypoints[static_cast<std::size_t>(candidate)];
+        found = found || (other.octave == keypoint.octave && cv::norm(other.pt - keypoint.pt) <= radius &&
+                          hamming_distance(descriptor, frame.features.descriptors.ptr<unsigned char>(candidate)) <= config.max_descriptor_distance / 2);
+      });
       still += found;
     }
     const double share = static_cast<double>(still) / static_cast<double>(std::max<std::size_t>(1, anchor.features.size()));
