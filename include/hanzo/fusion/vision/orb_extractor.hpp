@@ -36,8 +36,8 @@ struct OrbExtractorConfig {
   double scale_factor = 1.2;
   int pyramid_levels = 8;
   /// Grid cell side in pixels at every level (bucketing); 8..256. Smaller cells spread the
-  /// keypoints more evenly but take weaker corners: 48 keeps 342 correct graf matches (32: 311,
-  /// 64: 341) and reaches 87 of the 96 cells of a 16 x 6 grid on a KITTI frame (OpenCV ORB: 51).
+  /// keypoints more evenly but take weaker corners; 48 balances the two (docs/vision.md: 87 of
+  /// the 96 cells of a 16 x 6 grid on a KITTI frame, OpenCV's ORB 51).
   int cell_size = 48;
   /// FAST thresholds (grey levels, 1..255): corners at initial_fast_threshold are preferred, a
   /// cell without any falls back to min_fast_threshold. initial >= min.

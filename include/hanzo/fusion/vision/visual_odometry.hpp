@@ -97,9 +97,8 @@ struct VisualOdometryConfig {
   /// Stereo points farther than this many rig baselines are not made landmarks from one frame
   /// (their depth is mostly noise; they can still be triangulated over time).
   double max_stereo_depth_baselines = 100.0;
-  /// Local bundle adjustment window (keyframes) and its iterations.
-  /// 12: against 7, KITTI 06 0.065 -> 0.046 m, KITTI raw 0052 1.15 -> 0.57 %, the handheld
-  /// walk 4.65 -> 2.35 %, at 78 instead of 62 ms a KITTI frame (20: worse on all but the drone).
+  /// Local bundle adjustment window (keyframes; about a second of a 10-15 Hz camera, which
+  /// holds the monocular scale through turns) and its iterations per pass.
   int window_keyframes = 12;
   int bundle_adjustment_iterations = 10;
 };
