@@ -41,5 +41,6 @@ void add_lidar_odometry_command(CLI::App& app, const Output& output, Command& ru
 void add_privacy_command(CLI::App& app, const Output& output, Command& run);
 void add_crypto_command(CLI::App& app, const Output& output, Command& run);
 void add_features_command(CLI::App& app, const Output& output, Command& run);
+void add_vision_command(CLI::App& app, const Output& output, Command& run);
 
 }  // namespace hanzo::fusion::app

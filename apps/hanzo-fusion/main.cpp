@@ -38,6 +38,7 @@ int main(int argc, char** argv) {
   app::add_privacy_command(app, output, run);
   app::add_crypto_command(app, output, run);
   app::add_features_command(app, output, run);
+  app::add_vision_command(app, output, run);
 #ifdef HANZO_FUSION_WITH_SERVICE
   app::add_serve_command(app, output, run);
   app::add_stream_command(app, output, run);

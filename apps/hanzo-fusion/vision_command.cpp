@@ -1,0 +1,168 @@
+// hanzo-fusion vision vocabulary IMAGES... --out V: trains a bag-of-words vocabulary on the ORB
+// features of images (vision/vocabulary.hpp).
+// hanzo-fusion vision query IMAGE IMAGES... [--vocabulary V]: ranks images by their
+// bag-of-words similarity to IMAGE (place recognition; vision/place_database.hpp).
+// IMAGES are image files or folders (their images, recursively, in name order).
+
+#include <algorithm>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "commands.hpp"
+#include "hanzo/fusion/vision/orb_extractor.hpp"
+#include "hanzo/fusion/vision/place_database.hpp"
+#include "hanzo/fusion/vision/vocabulary.hpp"
+
+namespace hanzo::fusion::app {
+namespace {
+
+struct VocabularyOptions {
+  std::vector<std::string> inputs;
+  std::string out;
+  int branching = vision::VocabularyConfig{}.branching;
+  int levels = vision::VocabularyConfig{}.levels;
+  int max_features = vision::OrbExtractorConfig{}.max_features;
+  int step = 1;
+};
+
+struct QueryOptions {
+  std::string image;
+  std::vector<std::string> inputs;
+  std::string vocabulary;  // empty: the default vocabulary
+  int max_features = vision::OrbExtractorConfig{}.max_features;
+  int top = 5;
+};
+
+bool is_image_name(const std::filesystem::path& path) {
+  std::string extension = path.extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return extension == ".png" || extension == ".jpg" || extension == ".jpeg" || extension == ".pgm" || extension == ".ppm" || extension == ".bmp" ||
+         extension == ".tif" || extension == ".tiff";
+}
+
+// The image files named by `inputs` (files as given, folders searched recursively, sorted),
+// every `step`-th of each folder.
+Result<std::vector<std::string>> collect_images(const std::vector<std::string>& inputs, int step) {
+  std::vector<std::string> images;
+  for (const std::string& input : inputs) {
+    std::error_code error;
+    if (std::filesystem::is_directory(input, error)) {
+      std::vector<std::string> found;
+      for (const auto& entry : std::filesystem::recursive_directory_iterator(input, error)) {
+        if (entry.is_regular_file() && is_image_name(entry.path())) found.push_back(entry.path().string());
+      }
+      if (error) return Error(fmt::format("{}: cannot list the folder ({})", input, error.message()));
+      std::sort(found.begin(), found.end());
+      if (found.empty()) return Error(fmt::format("{}: no images (.png, .jpg, .pgm, .ppm, .bmp, .tif) in the folder", input));
+      for (std::size_t i = 0; i < found.size(); i += static_cast<std::size_t>(step)) images.push_back(found[i]);
+    } else if (std::filesystem::is_regular_file(input, error)) {
+      images.push_back(input);
+    } else {
+      return Error(fmt::format("{}: no such file or folder", input));
+    }
+  }
+  return images;
+}
+
+Result<cv::Mat> descriptors_of(const std::string& path, const vision::OrbExtractor& extractor) {
+  if (!std::filesystem::is_regular_file(path)) return Error(fmt::format("{}: no such file", path));
+  cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
+  if (image.empty()) return Error(fmt::format("{}: not an image OpenCV can read", path));
+  Result<vision::ImageFeatures> features = extractor.extract(image);
+  if (!features) return Error(fmt::format("{}: {}", path, features.error().message));
+  return features->descriptors;
+}
+
+int run_vocabulary(const Output& output, const VocabularyOptions& options) {
+  nlohmann::json result = {{"out", options.out}};
+  Result<std::vector<std::string>> images = collect_images(options.inputs, options.step);
+  if (!images) return report_failure(output, result, images.error().message);
+  vision::OrbExtractorConfig features;
+  features.max_features = options.max_features;
+  const vision::OrbExtractor extractor(features);
+  std::vector<cv::Mat> descriptors;
+  for (const std::string& path : *images) {
+    Result<cv::Mat> described = descriptors_of(path, extractor);
+    if (!described) return report_failure(output, result, described.error().message);
+    descriptors.push_back(*described);
+  }
+  vision::VocabularyConfig config;
+  config.branching = options.branching;
+  config.levels = options.levels;
+  vision::VocabularyTrainingSummary summary;
+  Result<vision::Vocabulary> vocabulary = vision::Vocabulary::train(descriptors, config, &summary);
+  if (!vocabulary) return report_failure(output, result, vocabulary.error().message);
+  if (Status saved = vocabulary->save(options.out); !saved) return report_failure(output, result, saved.error().message);
+  result["ok"] = true;
+  result["images"] = summary.images;
+  result["descriptors"] = summary.descriptors;
+  result["words"] = summary.words;
+  result["branching"] = config.branching;
+  result["levels"] = config.levels;
+  return report_success(output, result,
+                        fmt::format("{}: {} words (branching {}, {} levels) from {} descriptors of {} images\n", options.out, summary.words,
+                                    config.branching, config.levels, summary.descriptors, summary.images));
+}
+
+int run_query(const Output& output, const QueryOptions& options) {
+  nlohmann::json result = {{"image", options.image}};
+  Result<vision::Vocabulary> loaded = options.vocabulary.empty() ? vision::Vocabulary::load_default() : vision::Vocabulary::load(options.vocabulary);
+  if (!loaded) return report_failure(output, result, loaded.error().message);
+  auto vocabulary = std::make_shared<const vision::Vocabulary>(std::move(*loaded));
+  Result<std::vector<std::string>> images = collect_images(options.inputs, 1);
+  if (!images) return report_failure(output, result, images.error().message);
+  vision::OrbExtractorConfig features;
+  features.max_features = options.max_features;
+  const vision::OrbExtractor extractor(features);
+  vision::PlaceDatabase database(vocabulary);
+  for (const std::string& path : *images) {
+    Result<cv::Mat> described = descriptors_of(path, extractor);
+    if (!described) return report_failure(output, result, described.error().message);
+    database.add(vocabulary->transform(*described));
+  }
+  Result<cv::Mat> query = descriptors_of(options.image, extractor);
+  if (!query) return report_failure(output, result, query.error().message);
+  nlohmann::json ranked = nlohmann::json::array();
+  std::string text = fmt::format("{} against {} images ({} words):\n", options.image, images->size(), vocabulary->words());
+  for (const vision::PlaceMatch& match : database.query(vocabulary->transform(*query), options.top)) {
+    const std::string& path = (*images)[static_cast<std::size_t>(match.entry)];
+    ranked.push_back({{"image", path}, {"score", match.score}});
+    text += fmt::format("  {:.4f}  {}\n", match.score, path);
+  }
+  result["ok"] = true;
+  result["matches"] = ranked;
+  return report_success(output, result, text);
+}
+
+}  // namespace
+
+void add_vision_command(CLI::App& app, const Output& output, Command& run) {
+  CLI::App* vision_app = app.add_subcommand("vision", "Visual place recognition: bag-of-words vocabularies and queries");
+  vision_app->require_subcommand(1);
+
+  auto train = std::make_shared<VocabularyOptions>();
+  CLI::App* vocabulary = vision_app->add_subcommand("vocabulary", "Train a bag-of-words vocabulary on the ORB features of images");
+  vocabulary->add_option("IMAGES", train->inputs, "Image files or folders (searched recursively)")->required();
+  vocabulary->add_option("--out", train->out, "Vocabulary file to write")->required();
+  vocabulary->add_option("--branching", train->branching, "Children per tree node")->check(CLI::Range(2, 64));
+  vocabulary->add_option("--levels", train->levels, "Tree depth (words: branching^levels at most)")->check(CLI::Range(1, 8));
+  vocabulary->add_option("--max-features", train->max_features, "ORB keypoints per image")->check(CLI::Range(10, 100000));
+  vocabulary->add_option("--step", train->step, "Use every N-th image of each folder")->check(CLI::Range(1, 100000));
+  vocabulary->callback([&output, &run, train] { run = [&output, train] { return run_vocabulary(output, *train); }; });
+
+  auto query = std::make_shared<QueryOptions>();
+  CLI::App* query_app = vision_app->add_subcommand("query", "Rank images by bag-of-words similarity to one image (place recognition)");
+  query_app->add_option("IMAGE", query->image, "The query image")->required();
+  query_app->add_option("IMAGES", query->inputs, "Image files or folders to search (recursively)")->required();
+  query_app->add_option("--vocabulary", query->vocabulary, "Vocabulary file (default: the one shipped in models/)");
+  query_app->add_option("--max-features", query->max_features, "ORB keypoints per image")->check(CLI::Range(10, 100000));
+  query_app->add_option("--top", query->top, "How many images to report")->check(CLI::Range(1, 100000));
+  query_app->callback([&output, &run, query] { run = [&output, query] { return run_query(output, *query); }; });
+}
+
+}  // namespace hanzo::fusion::app
