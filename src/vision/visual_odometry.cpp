@@ -14,7 +14,9 @@
 #include "hanzo/fusion/graph/keys.hpp"
 #include "hanzo/fusion/graph/projection_factors.hpp"
 #include "hanzo/fusion/vision/feature_matcher.hpp"
+#include "hanzo/fusion/vision/place_database.hpp"
 #include "pose_refinement.hpp"
+#include "similarity_pose_graph.hpp"
 #include "triangulation.hpp"
 
 namespace hanzo::fusion::vision {
@@ -40,6 +42,7 @@ struct Frame {
 struct Keyframe {
   int id = 0;
   Frame frame;
+  bool starts_map = false;  // a stereo map restart: its pose was predicted, not tracked
 };
 
 struct Landmark {
@@ -109,6 +112,19 @@ class KeypointGrid {
 
 bool has_right(const Frame& frame, std::size_t keypoint) { return !frame.right_keypoint.empty() && frame.right_keypoint[keypoint] >= 0; }
 
+// The default vocabulary, loaded once per process; null (logged) when it cannot be read.
+std::shared_ptr<const Vocabulary> default_vocabulary() {
+  static const std::shared_ptr<const Vocabulary> vocabulary = []() -> std::shared_ptr<const Vocabulary> {
+    Result<Vocabulary> loaded = Vocabulary::load_default();
+    if (!loaded) {
+      logger()->warn("visual odometry: loop closure off: {}", loaded.error().message);
+      return nullptr;
+    }
+    return std::make_shared<const Vocabulary>(std::move(*loaded));
+  }();
+  return vocabulary;
+}
+
 }  // namespace
 
 const char* to_string(TrackingState state) {
@@ -139,6 +155,9 @@ Status validate(const VisualOdometryConfig& config) {
   if (!(config.moving_object_pixels > 0.0)) return Error("VisualOdometryConfig.moving_object_pixels: must be positive", "moving_object_pixels");
   if (!(config.standstill_share > 0.0 && config.standstill_share <= 1.0)) return Error("VisualOdometryConfig.standstill_share: must be in (0, 1]", "standstill_share");
   if (config.bundle_adjustment_iterations < 0) return Error("VisualOdometryConfig.bundle_adjustment_iterations: must not be negative", "bundle_adjustment_iterations");
+  if (config.loop_min_keyframe_gap < config.window_keyframes) return Error("VisualOdometryConfig.loop_min_keyframe_gap: must be at least window_keyframes", "loop_min_keyframe_gap");
+  if (config.loop_min_inliers < 3) return Error("VisualOdometryConfig.loop_min_inliers: must be at least 3", "loop_min_inliers");
+  if (config.loop_cooldown_keyframes < 0) return Error("VisualOdometryConfig.loop_cooldown_keyframes: must not be negative", "loop_cooldown_keyframes");
   return ok_status();
 }
 
@@ -170,6 +189,13 @@ struct VisualOdometry::State {
   SE3::Tangent velocity = SE3::Tangent::Zero();
   int frames_since_keyframe = 0;
   int last_keyframe_tracked = 0;
+
+  // Loop closure: the keyframes' bags of words (entry i is keyframe place_keyframe[i]).
+  std::shared_ptr<const Vocabulary> vocabulary;
+  std::optional<PlaceDatabase> places;
+  std::vector<int> place_keyframe;
+  std::vector<std::pair<int, int>> loops;  // (candidate, current) keyframes of closed loops
+  int keyframes_since_loop = std::numeric_limits<int>::max() / 2;
 
   // scale_factor^octave for every pyramid level (looked up in the matchers' inner loops).
   std::vector<double> octave_scale;
@@ -344,7 +370,7 @@ struct VisualOdometry::State {
     for (std::size_t k = 0; k < frame.features.size(); ++k) points += frame.landmark[k] < 0 && stereo_point(frame, k).has_value();
     if (points < config.min_initialization_inliers) return false;
     const int id = next_keyframe_id++;
-    Keyframe& keyframe = keyframes.emplace(id, Keyframe{id, std::move(frame)}).first->second;
+    Keyframe& keyframe = keyframes.emplace(id, Keyframe{id, std::move(frame), true}).first->second;
     add_stereo_landmarks(keyframe);
     frames.push_back({keyframe.frame.time, id, SE3()});
     last_pose = keyframe.frame.T_world_camera;
@@ -540,23 +566,28 @@ struct VisualOdometry::State {
     return refine_pose(T_camera_world, observations, camera);
   }
 
-  // Pose from descriptor matches against the recent keyframes' landmarks (PnP RANSAC on
-  // undistorted bearings), for a frame the motion model cannot place.
-  std::optional<SE3> relocalize(const Frame& frame) const {
-    std::vector<int> candidate_landmarks;
-    cv::Mat descriptors;
+  // The landmarks the given keyframes see, each once, with the descriptor of that observation.
+  std::vector<int> landmarks_seen_by(const std::vector<int>& keyframe_ids, cv::Mat* descriptors = nullptr) const {
+    std::vector<int> ids;
     std::set<int> seen;
-    int taken = 0;
-    for (auto it = keyframes.rbegin(); it != keyframes.rend() && taken < 3; ++it, ++taken) {
-      const Frame& keyframe = it->second.frame;
+    for (int keyframe_id : keyframe_ids) {
+      const Frame& keyframe = keyframes.at(keyframe_id).frame;
       for (std::size_t k = 0; k < keyframe.landmark.size(); ++k) {
         const int id = keyframe.landmark[k];
-        if (id < 0 || !seen.insert(id).second) continue;
-        candidate_landmarks.push_back(id);
-        descriptors.push_back(keyframe.features.descriptors.row(static_cast<int>(k)));
+        if (id < 0 || !landmarks.count(id) || !seen.insert(id).second) continue;
+        ids.push_back(id);
+        if (descriptors != nullptr) descriptors->push_back(keyframe.features.descriptors.row(static_cast<int>(k)));
       }
     }
-    if (static_cast<int>(candidate_landmarks.size()) < config.min_tracked_landmarks) return std::nullopt;
+    return ids;
+  }
+
+  // T_camera_world of a frame from descriptor matches against the given keyframes' landmarks
+  // (PnP RANSAC on undistorted bearings), with at least min_inliers inliers.
+  std::optional<SE3> solve_pnp(const Frame& frame, const std::vector<int>& keyframe_ids, int min_inliers) const {
+    cv::Mat descriptors;
+    const std::vector<int> candidate_landmarks = landmarks_seen_by(keyframe_ids, &descriptors);
+    if (static_cast<int>(candidate_landmarks.size()) < min_inliers) return std::nullopt;
     DescriptorMatcherConfig matcher;
     matcher.ratio = 0.9;
     matcher.max_distance = config.max_descriptor_distance;
@@ -569,12 +600,12 @@ struct VisualOdometry::State {
       object_points.emplace_back(p.x(), p.y(), p.z());
       image_points.emplace_back(frame.normalized[k].x(), frame.normalized[k].y());
     }
-    if (static_cast<int>(object_points.size()) < config.min_tracked_landmarks) return std::nullopt;
+    if (static_cast<int>(object_points.size()) < min_inliers) return std::nullopt;
     cv::Mat rotation_vector, translation;
     std::vector<int> inliers;
     const bool solved = cv::solvePnPRansac(object_points, image_points, cv::Mat::eye(3, 3, CV_64F), cv::noArray(), rotation_vector, translation,
                                            false, 300, static_cast<float>(2.0 * config.pixel_sigma / camera.fx), 0.999, inliers, cv::SOLVEPNP_EPNP);
-    if (!solved || static_cast<int>(inliers.size()) < config.min_tracked_landmarks) return std::nullopt;
+    if (!solved || static_cast<int>(inliers.size()) < min_inliers) return std::nullopt;
     cv::Mat rotation;
     cv::Rodrigues(rotation_vector, rotation);
     Eigen::Matrix3d R;
@@ -582,6 +613,13 @@ struct VisualOdometry::State {
       for (int c = 0; c < 3; ++c) R(r, c) = rotation.at<double>(r, c);
     }
     return SE3(SO3::from_matrix(R), Eigen::Vector3d(translation.at<double>(0), translation.at<double>(1), translation.at<double>(2)));
+  }
+
+  // Pose of a frame the motion model cannot place, against the last three keyframes.
+  std::optional<SE3> relocalize(const Frame& frame) const {
+    std::vector<int> recent;
+    for (auto it = keyframes.rbegin(); it != keyframes.rend() && recent.size() < 3; ++it) recent.push_back(it->first);
+    return solve_pnp(frame, recent, config.min_tracked_landmarks);
   }
 
   VisualOdometryFrame track(Frame frame) {
@@ -644,7 +682,7 @@ struct VisualOdometry::State {
     if (standing) return result;
     still_anchor = anchor_of(frame);
     if (refined.inliers < config.keyframe_tracked_ratio * last_keyframe_tracked || frames_since_keyframe >= config.max_frames_between_keyframes) {
-      add_keyframe(std::move(frame));
+      result.loop_closed = add_keyframe(std::move(frame));
       result.keyframe = true;
       result.T_world_camera = last_pose;
     }
@@ -704,7 +742,8 @@ struct VisualOdometry::State {
 
   // ---- keyframes ----
 
-  void add_keyframe(Frame frame) {
+  // Returns whether the keyframe closed a loop.
+  bool add_keyframe(Frame frame) {
     const int id = next_keyframe_id++;
     Keyframe& keyframe = keyframes.emplace(id, Keyframe{id, std::move(frame)}).first->second;
     int tracked = 0;
@@ -728,7 +767,8 @@ struct VisualOdometry::State {
     logger()->debug("visual odometry: keyframe {} tracks {} landmarks, {} new", id, tracked, created);
     cull_unconfirmed_landmarks(id);
     bundle_adjust();
-    // The frame's pose after the adjustment.
+    const bool loop_closed = close_loop(id);
+    // The frame's pose after the adjustment (and the loop correction).
     last_pose = keyframe.frame.T_world_camera;
     frames.back() = {keyframe.frame.time, id, SE3()};
     frames_since_keyframe = 0;
@@ -738,6 +778,7 @@ struct VisualOdometry::State {
     last_keyframe_tracked = static_cast<int>(std::count_if(keyframe.frame.landmark.begin(), keyframe.frame.landmark.end(),
                                                            [&](int l) { return l >= 0 && landmarks.at(l).observations.size() >= 2; }));
     ++counts.keyframes;
+    return loop_closed;
   }
 
   // A landmark that three keyframes after its creation is still seen by fewer than three was a
@@ -798,6 +839,132 @@ struct VisualOdometry::State {
       ++created;
     }
     return created;
+  }
+
+  // ---- loop closure ----
+
+  static constexpr int kDirectIndexLevelsUp = 2;
+
+  // Adds the keyframes not in the place database yet, then looks for a loop closing at the
+  // newest keyframe `keyframe_id` and corrects the map when one is verified.
+  bool close_loop(int keyframe_id) {
+    if (!places) return false;
+    for (auto it = keyframes.upper_bound(place_keyframe.empty() ? -1 : place_keyframe.back()); it != keyframes.end(); ++it) {
+      FeatureVector features;
+      BowVector bow = vocabulary->transform(it->second.frame.features.descriptors, &features, kDirectIndexLevelsUp);
+      places->add(std::move(bow), std::move(features));
+      place_keyframe.push_back(it->first);
+    }
+    const int entry = places->size() - 1;
+    if (place_keyframe.back() != keyframe_id || ++keyframes_since_loop <= config.loop_cooldown_keyframes) return false;
+    const int before = entry - config.loop_min_keyframe_gap + 1;
+    if (before <= 0) return false;
+    const BowVector& bow = places->bow(entry);
+    double min_score = 1.0;
+    for (int previous = std::max(0, entry - 3); previous < entry; ++previous) min_score = std::min(min_score, Vocabulary::score(bow, places->bow(previous)));
+    for (const PlaceMatch& candidate : places->query(bow, 3, before, std::max(min_score, 0.01))) {
+      ++counts.loop_candidates;
+      const int candidate_id = place_keyframe[static_cast<std::size_t>(candidate.entry)];
+      const std::optional<std::pair<Similarity, int>> loop = verify_loop(candidate_id, keyframe_id);
+      if (!loop) continue;
+      correct_loop(candidate_id, keyframe_id, loop->first);
+      logger()->info("visual odometry: loop closed: keyframe {} ({:.2f} s) with keyframe {} ({:.2f} s), score {:.3f}, {} inliers, scale {:.3f}",
+                     keyframe_id, keyframes.at(keyframe_id).frame.time, candidate_id, keyframes.at(candidate_id).frame.time, candidate.score,
+                     loop->second, loop->first.scale);
+      keyframes_since_loop = 0;
+      ++counts.loop_closures;
+      return true;
+    }
+    return false;
+  }
+
+  // The similarity taking the newest keyframe's map onto the candidate's: the keyframe is
+  // placed in the candidate's map by PnP RANSAC against the landmarks of the candidate and its
+  // two neighbours on each side, refined on their projections; monocular, the scale is the
+  // median ratio of the depths of the matched landmarks in the two maps. None when fewer than
+  // loop_min_inliers landmarks agree.
+  std::optional<std::pair<Similarity, int>> verify_loop(int candidate_id, int current_id) const {
+    std::vector<int> neighbours;
+    for (auto it = keyframes.find(candidate_id), first = it; it != keyframes.end() && std::distance(first, it) <= 2; ++it) neighbours.push_back(it->first);
+    for (auto it = std::make_reverse_iterator(keyframes.find(candidate_id)); it != keyframes.rend() && neighbours.size() < 5; ++it) neighbours.push_back(it->first);
+    const Frame& current = keyframes.at(current_id).frame;
+    const std::optional<SE3> placed = solve_pnp(current, neighbours, config.loop_min_inliers);
+    if (!placed) {
+      logger()->debug("visual odometry: loop candidate keyframe {} for {}: no PnP solution", candidate_id, current_id);
+      return std::nullopt;
+    }
+    const std::vector<std::pair<int, int>> matches = match_by_projection(current, *placed, landmarks_seen_by(neighbours), 1.0);
+    const PoseRefinement refined = refine(current, *placed, matches);
+    logger()->debug("visual odometry: loop candidate keyframe {} for {}: {} of {} projected matches agree", candidate_id, current_id, refined.inliers, matches.size());
+    if (refined.inliers < config.loop_min_inliers) return std::nullopt;
+    double scale = 1.0;
+    if (!right_camera) {
+      const SE3 T_current_world = current.T_world_camera.inverse();
+      std::vector<double> ratios;
+      for (std::size_t i = 0; i < matches.size(); ++i) {
+        const int own = current.landmark[static_cast<std::size_t>(matches[i].first)];
+        if (!refined.inlier[i] || own < 0 || !landmarks.count(own)) continue;
+        const double depth_candidate = refined.T_camera_world.act(landmarks.at(matches[i].second).position).z();
+        const double depth_current = T_current_world.act(landmarks.at(own).position).z();
+        if (depth_candidate > 0.0 && depth_current > 0.0) ratios.push_back(depth_candidate / depth_current);
+      }
+      if (ratios.size() < 10) return std::nullopt;
+      std::nth_element(ratios.begin(), ratios.begin() + static_cast<std::ptrdiff_t>(ratios.size() / 2), ratios.end());
+      scale = ratios[ratios.size() / 2];
+    }
+    // A point p of the current map: q = T_world_current^-1 p in the current camera, then
+    // T_world_current_corrected (scale q) in the candidate's map.
+    const Similarity S = Similarity::from(refined.T_camera_world.inverse()) * Similarity{Eigen::Quaterniond::Identity(), Eigen::Vector3d::Zero(), scale} *
+                         Similarity::from(current.T_world_camera).inverse();
+    return std::make_pair(S, refined.inliers);
+  }
+
+  // Pose graph over the keyframes from the candidate on (the candidate and older held), the loop
+  // edge from the verified similarity S (current map -> candidate map); landmarks, frames and the
+  // motion model follow their keyframes.
+  void correct_loop(int candidate_id, int current_id, const Similarity& S_corrected_current) {
+    std::map<int, Similarity> S_world_keyframe;
+    for (auto it = keyframes.find(candidate_id); it != keyframes.end(); ++it) S_world_keyframe[it->first] = Similarity::from(it->second.frame.T_world_camera);
+    const std::map<int, Similarity> before = S_world_keyframe;
+    std::vector<SimilarityEdge> edges;
+    std::vector<int> ids;
+    for (const auto& entry : S_world_keyframe) ids.push_back(entry.first);
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      for (std::size_t j = i + 1; j < std::min(ids.size(), i + 3); ++j) {
+        const bool across_restart = std::any_of(ids.begin() + static_cast<std::ptrdiff_t>(i) + 1, ids.begin() + static_cast<std::ptrdiff_t>(j) + 1,
+                                                [&](int id) { return keyframes.at(id).starts_map; });
+        edges.push_back({ids[i], ids[j], before.at(ids[i]).inverse() * before.at(ids[j]), across_restart ? 1e-3 : 1.0});
+      }
+    }
+    // Earlier loops inside the corrected stretch keep their keyframes' relative poses.
+    for (const auto& [from, to] : loops) {
+      if (from >= candidate_id) edges.push_back({from, to, before.at(from).inverse() * before.at(to), 10.0});
+    }
+    const Similarity S_world_current_corrected = S_corrected_current * before.at(current_id);
+    edges.push_back({candidate_id, current_id, before.at(candidate_id).inverse() * S_world_current_corrected, 10.0});
+    loops.emplace_back(candidate_id, current_id);
+    // Start from the corrected pose for the current keyframe's window (the rest follows).
+    for (int id : window()) {
+      if (id > candidate_id) S_world_keyframe[id] = S_corrected_current * before.at(id);
+    }
+    const SimilarityPoseGraphSummary summary = optimize_similarity_pose_graph(S_world_keyframe, edges, {candidate_id}, right_camera.has_value(), 20);
+    logger()->debug("visual odometry: loop pose graph: {} keyframes, cost {:.4g} -> {:.4g} in {} iterations", ids.size(), summary.initial_cost,
+                    summary.final_cost, summary.iterations);
+    // Corrections: S_new S_old^-1 per keyframe.
+    std::map<int, Similarity> correction;
+    for (const auto& [id, pose] : S_world_keyframe) correction[id] = pose * before.at(id).inverse();
+    for (auto& [landmark_id, landmark] : landmarks) {
+      const auto found = correction.find(landmark.created_at);
+      if (found != correction.end() && found->first != candidate_id) landmark.position = found->second * landmark.position;
+    }
+    for (const auto& [id, pose] : S_world_keyframe) keyframes.at(id).frame.T_world_camera = pose.rigid();
+    for (FrameRecord& record : frames) {
+      const auto found = S_world_keyframe.find(record.keyframe);
+      if (found != S_world_keyframe.end()) record.T_keyframe_camera.translation() *= found->second.scale;
+    }
+    const double scale = S_world_keyframe.at(current_id).scale;
+    velocity.head<3>() *= scale;
+    if (still_anchor) still_anchor.reset();
   }
 
   // One image observation in the bundle adjustment.
@@ -929,6 +1096,11 @@ Result<std::unique_ptr<VisualOdometry>> VisualOdometry::create(const PinholeCame
   state->config = config;
   state->extractor = OrbExtractor(config.features);
   for (int level = 0; level < config.features.pyramid_levels; ++level) state->octave_scale.push_back(std::pow(config.features.scale_factor, level));
+  if (config.loop_closure) {
+    state->vocabulary = config.vocabulary ? config.vocabulary : default_vocabulary();
+    if (state->vocabulary) state->places.emplace(state->vocabulary);
+  }
+  state->counts.loop_closure_enabled = state->places.has_value();
   return std::unique_ptr<VisualOdometry>(new VisualOdometry(std::move(state)));
 }
 

@@ -26,6 +26,18 @@
 //     Huber; the window's oldest two keyframes held, they fix the gauge and the monocular scale;
 //     stereo holds the oldest only). Observations that stay outliers
 //     are removed, landmarks left with fewer than two observations culled;
+//   loop closure: every keyframe's ORB descriptors become a bag of words (vision/vocabulary.hpp)
+//     in a place database; a new keyframe queries the keyframes at least loop_min_keyframe_gap
+//     older, keeping those that score at least as high as its least similar of its three
+//     predecessors (ORB-SLAM's threshold). A candidate's landmarks are matched to the new
+//     keyframe's through the direct index (same vocabulary node, ratio 0.75, at most 50 bits), and a
+//     similarity (monocular: with scale; stereo: rigid) between the two maps is found by RANSAC
+//     over 3-point Umeyama fits, inliers reprojecting within the chi-square bound in both
+//     keyframes. With loop_min_inliers, the keyframes since the candidate are corrected by a
+//     pose graph (consecutive keyframes, their neighbours two apart, and the loop; the candidate and
+//     older keyframes held; Strasdat et al. 2010), every landmark moved with the keyframe that
+//     created it, and tracking goes on from the corrected pose. The edge into a stereo map
+//     restart is weak (its pose was only predicted), so a loop pulls that jump straight;
 //   standstill: when a large share of the keypoints of the last frame tracked in motion are found
 //     again at the same pixels (standstill_share within standstill_pixels: independent of the
 //     pose estimate, so objects moving in view cannot fake or hide it), the pose is held at that
@@ -57,6 +69,7 @@
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
+#include "hanzo/fusion/vision/vocabulary.hpp"
 
 namespace hanzo::fusion::vision {
 
@@ -101,6 +114,20 @@ struct VisualOdometryConfig {
   /// holds the monocular scale through turns) and its iterations per pass.
   int window_keyframes = 12;
   int bundle_adjustment_iterations = 10;
+  /// Loop closure (see the header comment). `vocabulary` null: the default vocabulary
+  /// (Vocabulary::load_default); when it cannot be loaded loop closure is off (logged, and
+  /// summary().loop_closure_enabled says so).
+  bool loop_closure = true;
+  std::shared_ptr<const Vocabulary> vocabulary;
+  /// Candidates are at least this many keyframes older than the query (recent keyframes look
+  /// alike without closing a loop).
+  int loop_min_keyframe_gap = 30;
+  /// 3D-3D matches consistent with one similarity (reprojected within the chi-square bound
+  /// in both keyframes) needed to accept a loop.
+  int loop_min_inliers = 30;
+  /// Keyframes after a closed loop before the next query (the loop's neighbours would close it
+  /// again).
+  int loop_cooldown_keyframes = 5;
 };
 
 /// Checks every field; the error names the first field out of range.
@@ -119,6 +146,7 @@ struct VisualOdometryFrame {
   bool relocalized = false;  ///< tracked again by relocalization after kLost
   bool standing_still = false;  ///< standstill detected: the pose is held
   int moving_landmarks_removed = 0;  ///< landmarks that moved while the camera stood still
+  bool loop_closed = false;  ///< this frame's keyframe closed a loop (the trajectory was corrected)
   std::string reason;        ///< why the frame is kInitializing or kLost
 };
 
@@ -132,6 +160,9 @@ struct VisualOdometrySummary {
   int standstill_frames = 0;
   int moving_landmarks_removed = 0;
   int map_restarts = 0;  ///< stereo: tracking lost and the map started again from a stereo frame
+  int loop_candidates = 0;  ///< place-recognition candidates checked geometrically
+  int loop_closures = 0;    ///< loops accepted and corrected
+  bool loop_closure_enabled = false;
   bool scale_free = true;  ///< monocular: lengths are in units of the first baseline
 };
 
