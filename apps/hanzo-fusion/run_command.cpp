@@ -263,7 +263,8 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"wheel_slip_episodes", m.wheel_slip_episodes}, {"wheel_messages_withheld", m.wheel_messages_withheld},
           {"camera_frames_tracked", m.camera_frames_tracked}, {"camera_frames_lost", m.camera_frames_lost},
           {"visual_keyframes", m.visual_keyframes}, {"visual_landmarks", m.visual_landmarks},
-          {"camera_standstill_frames", m.camera_standstill_frames}, {"visual_scale_free", m.visual_scale_free}};
+          {"camera_standstill_frames", m.camera_standstill_frames}, {"visual_loop_closures", m.visual_loop_closures},
+          {"visual_scale_free", m.visual_scale_free}};
 }
 
 // Each sensor's health at the end and its changes over the log (seconds from the log's start).
@@ -455,8 +456,9 @@ int run(const Output& output, const RunOptions& options) {
     text += "\n";
   }
   if (mapping.camera_frames_tracked + mapping.camera_frames_lost > 0) {
-    text += fmt::format("visual odometry: {} frames tracked, {} lost, {} standing still; {} keyframes, {} landmarks{}\n", mapping.camera_frames_tracked,
-                        mapping.camera_frames_lost, mapping.camera_standstill_frames, mapping.visual_keyframes, mapping.visual_landmarks,
+    text += fmt::format("visual odometry: {} frames tracked, {} lost, {} standing still; {} keyframes, {} landmarks, {} loops closed{}\n",
+                        mapping.camera_frames_tracked, mapping.camera_frames_lost, mapping.camera_standstill_frames, mapping.visual_keyframes,
+                        mapping.visual_landmarks, mapping.visual_loop_closures,
                         mapping.visual_scale_free ? " (monocular: lengths in units of its first baseline)" : "");
   }
   for (const auto& [sensor, states] : result["health"]["not_ok_seconds"].items()) {

@@ -898,6 +898,7 @@ MappingSummary Session::mapping_summary() const {
     summary.visual_keyframes = static_cast<uint64_t>(visual.keyframes);
     summary.visual_landmarks = static_cast<uint64_t>(visual.landmarks);
     summary.camera_standstill_frames = static_cast<uint64_t>(visual.standstill_frames);
+    summary.visual_loop_closures = static_cast<uint64_t>(visual.loop_closures);
     summary.visual_scale_free = visual.scale_free;
   }
   summary.map_memory_bytes = map_builder_.memory_bytes();

@@ -584,7 +584,7 @@ struct VisualOdometry::State {
 
   // T_camera_world of a frame from descriptor matches against the given keyframes' landmarks
   // (PnP RANSAC on undistorted bearings), with at least min_inliers inliers.
-  std::optional<SE3> solve_pnp(const Frame& frame, const std::vector<int>& keyframe_ids, int min_inliers) const {
+  std::optional<SE3> solve_pnp(const Frame& frame, const std::vector<int>& keyframe_ids, int min_inliers, double min_inlier_share = 0.0) const {
     cv::Mat descriptors;
     const std::vector<int> candidate_landmarks = landmarks_seen_by(keyframe_ids, &descriptors);
     if (static_cast<int>(candidate_landmarks.size()) < min_inliers) return std::nullopt;
@@ -605,7 +605,10 @@ struct VisualOdometry::State {
     std::vector<int> inliers;
     const bool solved = cv::solvePnPRansac(object_points, image_points, cv::Mat::eye(3, 3, CV_64F), cv::noArray(), rotation_vector, translation,
                                            false, 300, static_cast<float>(2.0 * config.pixel_sigma / camera.fx), 0.999, inliers, cv::SOLVEPNP_EPNP);
-    if (!solved || static_cast<int>(inliers.size()) < min_inliers) return std::nullopt;
+    if (!solved || static_cast<int>(inliers.size()) < min_inliers || static_cast<double>(inliers.size()) < min_inlier_share * static_cast<double>(object_points.size())) {
+      logger()->debug("visual odometry: PnP: {} matches, {} inliers: refused", object_points.size(), inliers.size());
+      return std::nullopt;
+    }
     cv::Mat rotation;
     cv::Rodrigues(rotation_vector, rotation);
     Eigen::Matrix3d R;
@@ -844,6 +847,10 @@ struct VisualOdometry::State {
   // ---- loop closure ----
 
   static constexpr int kDirectIndexLevelsUp = 2;
+  // Loop verification: the PnP inliers' least share of the descriptor matches, and the most the
+  // refinement may move the PnP pose (times the landmarks' median depth; radians).
+  static constexpr double kLoopMinInlierShare = 0.2;
+  static constexpr double kLoopMaxRefinement = 0.05;
 
   // Adds the keyframes not in the place database yet, then looks for a loop closing at the
   // newest keyframe `keyframe_id` and corrects the map when one is verified.
@@ -888,7 +895,7 @@ struct VisualOdometry::State {
     for (auto it = keyframes.find(candidate_id), first = it; it != keyframes.end() && std::distance(first, it) <= 2; ++it) neighbours.push_back(it->first);
     for (auto it = std::make_reverse_iterator(keyframes.find(candidate_id)); it != keyframes.rend() && neighbours.size() < 5; ++it) neighbours.push_back(it->first);
     const Frame& current = keyframes.at(current_id).frame;
-    const std::optional<SE3> placed = solve_pnp(current, neighbours, config.loop_min_inliers);
+    const std::optional<SE3> placed = solve_pnp(current, neighbours, config.loop_min_inliers, kLoopMinInlierShare);
     if (!placed) {
       logger()->debug("visual odometry: loop candidate keyframe {} for {}: no PnP solution", candidate_id, current_id);
       return std::nullopt;
@@ -897,6 +904,19 @@ struct VisualOdometry::State {
     const PoseRefinement refined = refine(current, *placed, matches);
     logger()->debug("visual odometry: loop candidate keyframe {} for {}: {} of {} projected matches agree", candidate_id, current_id, refined.inliers, matches.size());
     if (refined.inliers < config.loop_min_inliers) return std::nullopt;
+    // A true placement barely moves when refined on many more landmarks; one that slides
+    // (a periodic texture such as a tiled floor offers a shifted fit) is refused.
+    std::vector<double> depths;
+    for (std::size_t i = 0; i < matches.size(); ++i) {
+      if (refined.inlier[i]) depths.push_back(refined.T_camera_world.act(landmarks.at(matches[i].second).position).z());
+    }
+    std::nth_element(depths.begin(), depths.begin() + static_cast<std::ptrdiff_t>(depths.size() / 2), depths.end());
+    const SE3 refinement = *placed * refined.T_camera_world.inverse();
+    if (refinement.translation().norm() > kLoopMaxRefinement * depths[depths.size() / 2] || refinement.rotation().angle() > kLoopMaxRefinement) {
+      logger()->debug("visual odometry: loop candidate keyframe {} for {}: refinement moved the PnP pose {:.3f} (median depth {:.3f}), {:.2f} deg: refused",
+                      candidate_id, current_id, refinement.translation().norm(), depths[depths.size() / 2], refinement.rotation().angle() / kDegree);
+      return std::nullopt;
+    }
     double scale = 1.0;
     if (!right_camera) {
       const SE3 T_current_world = current.T_world_camera.inverse();
@@ -962,6 +982,10 @@ struct VisualOdometry::State {
       const auto found = S_world_keyframe.find(record.keyframe);
       if (found != S_world_keyframe.end()) record.T_keyframe_camera.translation() *= found->second.scale;
     }
+    logger()->debug("visual odometry: loop correction moved keyframe {} from ({:.3f} {:.3f} {:.3f}) to ({:.3f} {:.3f} {:.3f}); loop said ({:.3f} {:.3f} {:.3f})", current_id,
+                    before.at(current_id).translation.x(), before.at(current_id).translation.y(), before.at(current_id).translation.z(),
+                    S_world_keyframe.at(current_id).translation.x(), S_world_keyframe.at(current_id).translation.y(), S_world_keyframe.at(current_id).translation.z(),
+                    S_world_current_corrected.translation.x(), S_world_current_corrected.translation.y(), S_world_current_corrected.translation.z());
     const double scale = S_world_keyframe.at(current_id).scale;
     velocity.head<3>() *= scale;
     if (still_anchor) still_anchor.reset();

@@ -76,9 +76,9 @@ bool is_imu(const sim::ScenarioSensor& sensor) { return sensor.modality == confi
 
 TEST(CameraSession, StereoCamerasAloneTrackTheDrone) {
   const SessionRun run = run_session(is_camera);
-  std::printf("cameras only: SE3-aligned APE %.3f m, %lu frames tracked, %lu lost, %lu keyframes\n", run.ape_se3_m,
+  std::printf("cameras only: SE3-aligned APE %.3f m, %lu frames tracked, %lu lost, %lu keyframes, %lu loops closed\n", run.ape_se3_m,
               static_cast<unsigned long>(run.mapping.camera_frames_tracked), static_cast<unsigned long>(run.mapping.camera_frames_lost),
-              static_cast<unsigned long>(run.mapping.visual_keyframes));
+              static_cast<unsigned long>(run.mapping.visual_keyframes), static_cast<unsigned long>(run.mapping.visual_loop_closures));
   EXPECT_EQ(run.mapping.camera_frames_tracked, 121u);  // 10 Hz over 12 s, both ends
   EXPECT_FALSE(run.mapping.visual_scale_free);
   EXPECT_LT(run.ape_se3_m, 0.1);

@@ -8,19 +8,31 @@
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>
+#include <spdlog/sinks/stdout_sinks.h>
+#include <spdlog/spdlog.h>
 #include <opencv2/imgcodecs.hpp>
 
 #include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/eval/pose_error.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/sim/scenario_simulation.hpp"
+#include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/vision/visual_odometry.hpp"
 
 namespace hanzo::fusion::vision {
 namespace {
 
 // HANZO_TEST_VERBOSE=1: every frame's state and the errors along the way.
-bool verbose() { return std::getenv("HANZO_TEST_VERBOSE") != nullptr; }
+bool verbose() {
+  static const bool enabled = [] {
+    if (std::getenv("HANZO_TEST_VERBOSE") == nullptr) return false;
+    auto stderr_logger = std::make_shared<spdlog::logger>("test", std::make_shared<spdlog::sinks::stderr_sink_mt>());
+    stderr_logger->set_level(spdlog::level::debug);
+    set_logger(stderr_logger);
+    return true;
+  }();
+  return enabled;
+}
 
 struct Sequence {
   std::vector<std::string> images;

@@ -203,12 +203,14 @@ struct MappingSummary {
   uint64_t wheel_slip_episodes = 0;   ///< times the wheels began to disagree with the LiDAR
   uint64_t wheel_messages_withheld = 0;  ///< wheel messages not fused because of it
   /// Cameras (visual odometry): frames tracked / lost, its keyframes and landmarks, standstill
-  /// frames, and whether its lengths are scale-free (monocular) or metric (stereo).
+  /// frames, visual loop closures, and whether its lengths are scale-free (monocular) or metric
+  /// (stereo).
   uint64_t camera_frames_tracked = 0;
   uint64_t camera_frames_lost = 0;
   uint64_t visual_keyframes = 0;
   uint64_t visual_landmarks = 0;
   uint64_t camera_standstill_frames = 0;
+  uint64_t visual_loop_closures = 0;
   bool visual_scale_free = false;
 };
 
