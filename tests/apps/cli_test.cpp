@@ -504,6 +504,41 @@ TEST(Cli, FeaturesMatchReportsCorrectMatchesAgainstAHomographyAndRefusesBadInput
   EXPECT_THAT(not_image.err, HasSubstr("not an image OpenCV can read"));
 }
 
+// A vocabulary trained on the EuRoC room and the calibration boards finds the KITTI street
+// frame next to the one queried (a vocabulary file round trip through the commands).
+TEST(Cli, VisionVocabularyTrainsAndVisionQueryRanksPlacesAndBothRefuseBadInput) {
+  const std::string data = HANZO_DATA_DIR;
+  const std::filesystem::path vocabulary = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_vocabulary_{}.hzvoc", ::getpid());
+  const CliRun trained = run(fmt::format("vision vocabulary {0}/euroc_v101_micro/mav0/cam0/data {0}/camera_calib_opencv_stereo --step 4 --out {1} --json", data,
+                                         vocabulary.string()));
+  ASSERT_EQ(trained.exit_code, 0) << trained.err;
+  const nlohmann::json json = nlohmann::json::parse(trained.out);
+  EXPECT_GT(json["words"].get<int>(), 1000);
+  EXPECT_EQ(json["images"], 24 + 7);
+  const std::string street = data + "/kitti_odometry_06_first51/image_l";
+  const CliRun queried = run(fmt::format("vision query {0}/000020.png {0}/000010.png {0}/000019.png {0}/000040.png {1}/euroc_v101_micro/mav0/cam1/data/1403715273262142976.png "
+                                         "--vocabulary {2} --top 2 --json", street, data, vocabulary.string()));
+  ASSERT_EQ(queried.exit_code, 0) << queried.err;
+  const nlohmann::json ranked = nlohmann::json::parse(queried.out)["matches"];
+  ASSERT_EQ(ranked.size(), 2u);
+  EXPECT_THAT(ranked[0]["image"].get<std::string>(), HasSubstr("000019.png"));
+  const CliRun with_default = run(fmt::format("vision query {0}/000020.png {0}/000019.png {0}/000040.png", street));
+  ASSERT_EQ(with_default.exit_code, 0) << with_default.err;
+  EXPECT_THAT(with_default.out, HasSubstr("000019.png"));
+
+  const CliRun empty_folder = run(fmt::format("vision vocabulary {} --out {}", std::filesystem::temp_directory_path().string() + "/hanzo_no_such_folder", vocabulary.string()));
+  EXPECT_EQ(empty_folder.exit_code, 1);
+  EXPECT_THAT(empty_folder.err, HasSubstr("no such file or folder"));
+  const CliRun corrupt = run(fmt::format("vision query {0}/000020.png {0}/000019.png --vocabulary {1}", street, write_temp("bad.hzvoc", "HZVOCAB garbage")));
+  EXPECT_EQ(corrupt.exit_code, 1);
+  EXPECT_THAT(corrupt.err, HasSubstr("bad.hzvoc"));
+  EXPECT_EQ(std::count(corrupt.err.begin(), corrupt.err.end(), '\n'), 1);
+  const CliRun not_image = run(fmt::format("vision query {} {}/000019.png", write_temp("text.png", "not a picture"), street));
+  EXPECT_EQ(not_image.exit_code, 1);
+  EXPECT_THAT(not_image.err, HasSubstr("not an image OpenCV can read"));
+  std::filesystem::remove(vocabulary);
+}
+
 TEST(Cli, PrivacyBlurRedactsFacesOfAnImageOrAFolderAndRefusesBadInput) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_privacy_{}", ::getpid());
   std::filesystem::remove_all(dir);
