@@ -2,7 +2,11 @@
 // ORB extraction of 1000 keypoints on a 640 x 480 EuRoC frame, brute-force matching of 1000 x
 // 1000 descriptors, and whole image-pair matching with the correct matches and precision at
 // 3 px (counters) on the graf pair and on wide-baseline pairs made from graf1 (40 and 70 degrees
-// of viewpoint change, tests/vision/graf_pairs.hpp); monocular visual odometry's time per frame.
+// of viewpoint change, tests/vision/graf_pairs.hpp); monocular visual odometry's time per frame;
+// place recognition with the default vocabulary: a keyframe's bag of words (2000 descriptors),
+// a query against 510 keyframes, and training a vocabulary on 51 images (no bag-of-words
+// library for binary descriptors is packaged: DBoW2/3 are not, and OpenCV's BOWKMeansTrainer
+// clusters float descriptors only).
 
 #include <filesystem>
 #include <string>
@@ -13,6 +17,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "hanzo/fusion/vision/image_pair_matcher.hpp"
+#include "hanzo/fusion/vision/place_database.hpp"
 #include "hanzo/fusion/vision/visual_odometry.hpp"
 #include "vision/graf_pairs.hpp"
 
@@ -143,6 +148,48 @@ void BM_VisualOdometryKitti06Mono(benchmark::State& state) {
   state.counters["keyframes"] = keyframes;
 }
 BENCHMARK(BM_VisualOdometryKitti06Mono)->Unit(benchmark::kMillisecond)->Iterations(2);
+
+std::vector<cv::Mat> kitti06_descriptors(int features) {
+  OrbExtractorConfig config;
+  config.max_features = features;
+  const OrbExtractor extractor(config);
+  std::vector<cv::Mat> descriptors;
+  for (int i = 0; i < 51; ++i) {
+    const cv::Mat image = cv::imread(cv::format("%s/kitti_odometry_06_first51/image_l/%06d.png", HANZO_DATA_DIR, i), cv::IMREAD_GRAYSCALE);
+    descriptors.push_back(extractor.extract(image).value().descriptors);
+  }
+  return descriptors;
+}
+
+void BM_BagOfWordsTransform(benchmark::State& state) {
+  const Vocabulary vocabulary = Vocabulary::load_default().value();
+  const cv::Mat descriptors = kitti06_descriptors(2000).front();
+  FeatureVector features;
+  for (auto _ : state) benchmark::DoNotOptimize(vocabulary.transform(descriptors, &features));
+  state.counters["descriptors"] = descriptors.rows;
+}
+BENCHMARK(BM_BagOfWordsTransform)->Unit(benchmark::kMillisecond);
+
+void BM_PlaceQuery510Keyframes(benchmark::State& state) {
+  auto vocabulary = std::make_shared<const Vocabulary>(Vocabulary::load_default().value());
+  std::vector<BowVector> bows;
+  for (const cv::Mat& descriptors : kitti06_descriptors(2000)) bows.push_back(vocabulary->transform(descriptors));
+  PlaceDatabase database(vocabulary);
+  for (int copy = 0; copy < 10; ++copy) {
+    for (const BowVector& bow : bows) database.add(bow);
+  }
+  for (auto _ : state) benchmark::DoNotOptimize(database.query(bows[25], 3));
+  state.counters["entries"] = database.size();
+}
+BENCHMARK(BM_PlaceQuery510Keyframes)->Unit(benchmark::kMillisecond);
+
+void BM_VocabularyTraining51Images(benchmark::State& state) {
+  const std::vector<cv::Mat> descriptors = kitti06_descriptors(1000);
+  int words = 0;
+  for (auto _ : state) words = Vocabulary::train(descriptors).value().words();
+  state.counters["words"] = words;
+}
+BENCHMARK(BM_VocabularyTraining51Images)->Unit(benchmark::kMillisecond)->Iterations(1);
 
 }  // namespace
 
