@@ -241,6 +241,10 @@ nlohmann::json describe_map(const msgs::FusionMap& map) {
   if (map.mesh) {
     layers["mesh"] = {{"vertices", map.mesh->vertices.size()}, {"triangles", map.mesh->triangle_indices.size() / 3}};
   }
+  if (map.visual_landmarks) {
+    layers["visual_landmarks"] = {{"camera", map.visual_landmarks->camera}, {"landmarks", map.visual_landmarks->positions.size()},
+                                  {"keyframes", map.visual_landmarks->keyframes.size()}};
+  }
   result["layers"] = layers;
   return result;
 }
@@ -260,6 +264,11 @@ std::string describe_map_text(const nlohmann::json& description) {
   }
   if (layers.contains("tsdf")) text += fmt::format("  tsdf: {} blocks\n", layers["tsdf"]["blocks"].get<std::size_t>());
   if (layers.contains("mesh")) text += fmt::format("  mesh: {} triangles\n", layers["mesh"]["triangles"].get<std::size_t>());
+  if (layers.contains("visual_landmarks")) {
+    const auto& v = layers["visual_landmarks"];
+    text += fmt::format("  visual landmarks: {} seen by {} keyframes of camera {}\n", v["landmarks"].get<std::size_t>(), v["keyframes"].get<std::size_t>(),
+                        v["camera"].get<std::string>());
+  }
   return text;
 }
 

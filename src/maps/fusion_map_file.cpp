@@ -70,6 +70,7 @@ std::vector<v1::FusionMap> cut_into_pieces(const v1::FusionMap& map, std::size_t
   metadata.clear_occupancy();
   metadata.clear_tsdf();
   metadata.clear_mesh();
+  metadata.clear_visual_landmarks();
   pieces.push_back(std::move(metadata));
 
   if (map.has_points()) {
@@ -121,6 +122,22 @@ std::vector<v1::FusionMap> cut_into_pieces(const v1::FusionMap& map, std::size_t
         copy_slice(layer.triangle_indices(), begin, end, pieces.emplace_back().mutable_mesh()->mutable_triangle_indices());
       });
     }
+  }
+  if (map.has_visual_landmarks()) {
+    // Landmarks first, then keyframes (their indices refer to the whole landmark list, which
+    // the merge rebuilds in order).
+    const v1::VisualLandmarkLayer& layer = map.visual_landmarks();
+    pieces.emplace_back().mutable_visual_landmarks()->set_camera(layer.camera());
+    for_each_slice(layer.positions_size(), chunk_bytes / 60, [&](int begin, int end) {
+      v1::VisualLandmarkLayer* piece = pieces.emplace_back().mutable_visual_landmarks();
+      copy_slice(layer.positions(), begin, end, piece->mutable_positions());
+      copy_slice(layer.descriptors(), 4 * begin, 4 * end, piece->mutable_descriptors());
+      copy_slice(layer.position_std(), begin, end, piece->mutable_position_std());
+      copy_slice(layer.observations(), begin, end, piece->mutable_observations());
+    });
+    for_each_slice(layer.keyframes_size(), std::max<std::size_t>(1, chunk_bytes / 4096), [&](int begin, int end) {
+      copy_slice(layer.keyframes(), begin, end, pieces.emplace_back().mutable_visual_landmarks()->mutable_keyframes());
+    });
   }
   return pieces;
 }

@@ -65,6 +65,27 @@ void write(const MeshLayer& layer, v1::MeshLayer* out) {
   write_labels(layer.vertex_labels, out->mutable_vertex_labels());
 }
 
+void write(const VisualLandmarkLayer& layer, v1::VisualLandmarkLayer* out) {
+  out->set_camera(layer.camera);
+  write_points(layer.positions, out->mutable_positions());
+  out->mutable_descriptors()->Reserve(static_cast<int>(4 * layer.descriptors.size()));
+  for (const std::array<uint8_t, 32>& descriptor : layer.descriptors) {
+    for (int word = 0; word < 4; ++word) {
+      uint64_t value = 0;
+      for (int byte = 7; byte >= 0; --byte) value = (value << 8) | descriptor[static_cast<std::size_t>(8 * word + byte)];
+      out->add_descriptors(value);
+    }
+  }
+  out->mutable_position_std()->Add(layer.position_std.begin(), layer.position_std.end());
+  out->mutable_observations()->Add(layer.observations.begin(), layer.observations.end());
+  for (const VisualKeyframe& keyframe : layer.keyframes) {
+    v1::VisualKeyframe* k = out->add_keyframes();
+    k->set_time_ns(wire::write_time(keyframe.time));
+    write(keyframe.T_world_camera, k->mutable_pose());
+    k->mutable_landmarks()->Add(keyframe.landmarks.begin(), keyframe.landmarks.end());
+  }
+}
+
 // ---- from the wire (already validated) --------------------------------------------------
 
 template <typename RepeatedPoints>
@@ -123,6 +144,31 @@ MeshLayer read(const v1::MeshLayer& in) {
   return {read_points(in.vertices()), {in.triangle_indices().begin(), in.triangle_indices().end()}, read_labels(in.vertex_labels())};
 }
 
+Result<VisualLandmarkLayer> read(const v1::VisualLandmarkLayer& in) {
+  VisualLandmarkLayer layer;
+  layer.camera = in.camera();
+  layer.positions = read_points(in.positions());
+  layer.descriptors.resize(static_cast<std::size_t>(in.positions_size()));
+  for (std::size_t i = 0; i < layer.descriptors.size(); ++i) {
+    for (int word = 0; word < 4; ++word) {
+      uint64_t value = in.descriptors(static_cast<int>(4 * i) + word);
+      for (int byte = 0; byte < 8; ++byte, value >>= 8) layer.descriptors[i][static_cast<std::size_t>(8 * word + byte)] = static_cast<uint8_t>(value & 0xff);
+    }
+  }
+  layer.position_std.assign(in.position_std().begin(), in.position_std().end());
+  layer.observations.assign(in.observations().begin(), in.observations().end());
+  for (const v1::VisualKeyframe& k : in.keyframes()) {
+    VisualKeyframe keyframe;
+    HANZO_ASSIGN_OR_RETURN(keyframe.time, wire::read_time(k.time_ns(), "VisualKeyframe", "time_ns"));
+    const v1::Pose& pose = k.pose();
+    keyframe.T_world_camera.position = {pose.position().x(), pose.position().y(), pose.position().z()};
+    keyframe.T_world_camera.orientation = Eigen::Quaterniond(pose.orientation().w(), pose.orientation().x(), pose.orientation().y(), pose.orientation().z()).normalized();
+    keyframe.landmarks.assign(k.landmarks().begin(), k.landmarks().end());
+    layer.keyframes.push_back(std::move(keyframe));
+  }
+  return layer;
+}
+
 }  // namespace
 
 v1::FusionMap to_proto(const FusionMap& map) {
@@ -152,6 +198,7 @@ v1::FusionMap to_proto(const FusionMap& map) {
   if (map.occupancy) write(*map.occupancy, out.mutable_occupancy());
   if (map.tsdf) write(*map.tsdf, out.mutable_tsdf());
   if (map.mesh) write(*map.mesh, out.mutable_mesh());
+  if (map.visual_landmarks) write(*map.visual_landmarks, out.mutable_visual_landmarks());
   return out;
 }
 
@@ -186,6 +233,7 @@ Result<FusionMap> from_proto(const v1::FusionMap& in) {
   if (in.has_occupancy()) map.occupancy = read(in.occupancy());
   if (in.has_tsdf()) map.tsdf = read(in.tsdf());
   if (in.has_mesh()) map.mesh = read(in.mesh());
+  if (in.has_visual_landmarks()) HANZO_ASSIGN_OR_RETURN(map.visual_landmarks, read(in.visual_landmarks()));
   return map;
 }
 

@@ -142,6 +142,32 @@ class MapChecker {
     return labels(layer.vertex_labels(), field + ".vertex_labels");
   }
 
+  Status visual_landmarks(const v1::VisualLandmarkLayer& layer, const std::string& field) const {
+    HANZO_RETURN_IF_ERROR(points(layer.positions(), field + ".positions"));
+    const int count = layer.positions_size();
+    if (layer.descriptors_size() != 4 * count) {
+      return fail(field + ".descriptors", fmt::format("{} words for {} landmarks (expected 4 per landmark: 256-bit ORB descriptors)", layer.descriptors_size(), count));
+    }
+    HANZO_RETURN_IF_ERROR(per_element(layer.position_std(), count, field + ".position_std", "landmarks"));
+    HANZO_RETURN_IF_ERROR(per_element(layer.observations(), count, field + ".observations", "landmarks"));
+    for (int i = 0; i < layer.position_std_size(); ++i) {
+      if (!std::isfinite(layer.position_std(i)) || layer.position_std(i) < 0.0F) {
+        return fail(fmt::format("{}.position_std[{}]", field, i), fmt::format("{} (expected a finite value >= 0)", layer.position_std(i)));
+      }
+    }
+    for (int k = 0; k < layer.keyframes_size(); ++k) {
+      const v1::VisualKeyframe& keyframe = layer.keyframes(k);
+      const std::string keyframe_field = fmt::format("{}.keyframes[{}]", field, k);
+      HANZO_RETURN_IF_ERROR(pose(keyframe.pose(), keyframe_field + ".pose"));
+      for (int i = 0; i < keyframe.landmarks_size(); ++i) {
+        if (keyframe.landmarks(i) >= static_cast<uint32_t>(count)) {
+          return fail(fmt::format("{}.landmarks[{}]", keyframe_field, i), fmt::format("index {} past the {} landmarks", keyframe.landmarks(i), count));
+        }
+      }
+    }
+    return ok_status();
+  }
+
  private:
   std::string_view message_name_;
 };
@@ -163,6 +189,7 @@ Status validate(const v1::FusionMap& map) {
   if (map.has_occupancy()) HANZO_RETURN_IF_ERROR(check.occupancy(map.occupancy(), "occupancy"));
   if (map.has_tsdf()) HANZO_RETURN_IF_ERROR(check.tsdf(map.tsdf(), "tsdf"));
   if (map.has_mesh()) HANZO_RETURN_IF_ERROR(check.mesh(map.mesh(), "mesh"));
+  if (map.has_visual_landmarks()) HANZO_RETURN_IF_ERROR(check.visual_landmarks(map.visual_landmarks(), "visual_landmarks"));
   return ok_status();
 }
 

@@ -206,6 +206,7 @@ json map_to_json(const msgs::FusionMap& map) {
   }
   if (map.tsdf) layers["tsdf"] = {{"blocks", map.tsdf->blocks.size()}};
   if (map.mesh) layers["mesh"] = {{"vertices", map.mesh->vertices.size()}};
+  if (map.visual_landmarks) layers["visual_landmarks"] = {{"landmarks", map.visual_landmarks->positions.size()}, {"keyframes", map.visual_landmarks->keyframes.size()}};
   return {{"map_id", map.map_id}, {"version", map.version}, {"created_ns", map.created.nanoseconds()},
           {"frame_id", map.frame_id}, {"format_version", map.format_version}, {"layers", std::move(layers)}};
 }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numeric>
 #include <set>
@@ -1201,6 +1202,46 @@ std::vector<Eigen::Vector3d> VisualOdometry::landmark_positions() const {
   positions.reserve(state_->landmarks.size());
   for (const auto& [id, landmark] : state_->landmarks) positions.push_back(landmark.position);
   return positions;
+}
+
+msgs::VisualLandmarkLayer VisualOdometry::landmark_layer(const std::string& camera_name) const {
+  msgs::VisualLandmarkLayer layer;
+  layer.camera = camera_name;
+  std::map<int, uint32_t> index_of;
+  for (const auto& [id, landmark] : state_->landmarks) {
+    if (landmark.observations.size() < 2 || !landmark.position.allFinite()) continue;
+    index_of[id] = static_cast<uint32_t>(layer.positions.size());
+    layer.positions.push_back(landmark.position.cast<float>());
+    std::array<uint8_t, 32> descriptor{};
+    std::memcpy(descriptor.data(), landmark.descriptor.ptr<unsigned char>(), descriptor.size());
+    layer.descriptors.push_back(descriptor);
+    layer.observations.push_back(static_cast<uint32_t>(landmark.observations.size()));
+    // Depth uncertainty of a triangulated point: depth^2 sigma_px / (f baseline), with the
+    // widest baseline among its observing cameras (the stereo rig's for a stereo observation).
+    double baseline = 0.0, depth = std::numeric_limits<double>::infinity();
+    for (const auto& [keyframe_a, keypoint_a] : landmark.observations) {
+      const Frame& frame_a = state_->keyframes.at(keyframe_a).frame;
+      const Eigen::Vector3d centre_a = frame_a.T_world_camera.translation();
+      depth = std::min(depth, (landmark.position - centre_a).norm());
+      if (has_right(frame_a, static_cast<std::size_t>(keypoint_a))) baseline = std::max(baseline, state_->T_left_right.translation().norm());
+      for (const auto& [keyframe_b, keypoint_b] : landmark.observations) {
+        baseline = std::max(baseline, (state_->keyframes.at(keyframe_b).frame.T_world_camera.translation() - centre_a).norm());
+      }
+    }
+    const double sigma = baseline > 0.0 ? depth * depth * state_->config.pixel_sigma / (state_->camera.fx * baseline) : std::numeric_limits<double>::max();
+    layer.position_std.push_back(static_cast<float>(std::min(sigma, 1e6)));
+  }
+  for (const auto& [id, keyframe] : state_->keyframes) {
+    msgs::VisualKeyframe out;
+    out.time = Timestamp::from_seconds(keyframe.frame.time);
+    out.T_world_camera = msgs::Pose::from_se3(keyframe.frame.T_world_camera);
+    for (int landmark_id : keyframe.frame.landmark) {
+      const auto found = index_of.find(landmark_id);
+      if (found != index_of.end()) out.landmarks.push_back(found->second);
+    }
+    layer.keyframes.push_back(std::move(out));
+  }
+  return layer;
 }
 
 VisualOdometrySummary VisualOdometry::summary() const {

@@ -4,6 +4,7 @@
 // grids, TSDFs and point maps on top of these; conversion to and from the wire is in
 // msgs/map_convert.hpp, checks in msgs/map_validation.hpp.
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -56,6 +57,22 @@ struct MeshLayer {
   std::vector<SemanticLabel> vertex_labels;  // empty or one per vertex
 };
 
+struct VisualKeyframe {
+  Timestamp time;
+  Pose T_world_camera;              // optical frame (x right, y down, z forward)
+  std::vector<uint32_t> landmarks;  // indices into the layer's landmarks
+};
+
+// Sparse visual landmarks with ORB descriptors and the keyframes that saw them (relocalization).
+struct VisualLandmarkLayer {
+  std::string camera;                                    // sensor name
+  std::vector<Eigen::Vector3f> positions;                // world frame, meters
+  std::vector<std::array<uint8_t, 32>> descriptors;      // one ORB descriptor per landmark
+  std::vector<float> position_std;                       // 1-sigma (m); empty or one per landmark
+  std::vector<uint32_t> observations;                    // empty or one per landmark
+  std::vector<VisualKeyframe> keyframes;
+};
+
 struct InputLog {
   std::string uri;
   std::string sha256;  // hex digest
@@ -82,6 +99,7 @@ struct FusionMap {
   std::optional<OccupancyGridLayer> occupancy;
   std::optional<TsdfLayer> tsdf;
   std::optional<MeshLayer> mesh;
+  std::optional<VisualLandmarkLayer> visual_landmarks;
 };
 
 struct MapUpdate {

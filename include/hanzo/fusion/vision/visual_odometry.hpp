@@ -68,6 +68,7 @@
 #include "hanzo/fusion/core/pinhole_camera.hpp"
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/msgs/map_messages.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
 #include "hanzo/fusion/vision/vocabulary.hpp"
 
@@ -192,6 +193,12 @@ class VisualOdometry {
   /// Keyframe poses (time, T_world_camera) and the map's landmark positions (world frame).
   std::vector<std::pair<double, SE3>> keyframe_poses() const;
   std::vector<Eigen::Vector3d> landmark_positions() const;
+  /// The map as a FusionMap layer (msgs::VisualLandmarkLayer): every landmark seen by at least
+  /// two keyframes (position, the descriptor of its latest observation, how many keyframes saw
+  /// it, and its depth uncertainty depth^2 pixel_sigma / (fx baseline) over the widest baseline
+  /// among the cameras that saw it, in map units) and every keyframe (time, T_world_camera, the landmarks it sees), for relocalizing a
+  /// camera later (vision/map_relocalizer.hpp).
+  msgs::VisualLandmarkLayer landmark_layer(const std::string& camera_name) const;
   VisualOdometrySummary summary() const;
 
  private:

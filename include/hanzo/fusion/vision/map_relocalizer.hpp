@@ -1,0 +1,79 @@
+#pragma once
+// MapRelocalizer: places a camera image in a saved visual landmark map (the FusionMap's
+// visual_landmarks layer, written from VisualOdometry::landmark_layer).
+//
+//   1. Each map keyframe's bag of words is built from the descriptors of the landmarks it sees;
+//      the image's ORB features query them (vision/place_database.hpp) for the `candidates` best.
+//   2. For each candidate, the landmarks of it and its `neighbour_keyframes` neighbours on each
+//      side are matched to the image's keypoints by descriptor (ratio 0.9, mutual) and the pose is
+//      solved by PnP RANSAC on undistorted bearings, then refined by Gauss-Newton on the
+//      reprojection errors (Huber, chi-square outlier rounds; vision/pose_refinement).
+//   3. The first candidate with min_inliers inliers wins.
+//
+// Frames: the map's world frame (the odometry's: its first keyframe's camera frame, or the
+// Session's world); the result is T_world_camera of the image's camera (optical frame).
+// Failures: create() refuses a layer without landmarks or keyframes and a camera without
+// positive focal lengths; relocalize() returns an Error naming why no pose was found (no
+// features, no candidate, too few inliers) and never changes the map.
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "hanzo/fusion/core/pinhole_camera.hpp"
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/msgs/map_messages.hpp"
+#include "hanzo/fusion/vision/orb_extractor.hpp"
+#include "hanzo/fusion/vision/vocabulary.hpp"
+
+namespace hanzo::fusion::vision {
+
+struct MapRelocalizerConfig {
+  /// Features of the query image (more than tracking uses: the view may be far from the map's).
+  OrbExtractorConfig features = [] {
+    OrbExtractorConfig config;
+    config.max_features = 2000;
+    return config;
+  }();
+  int candidates = 5;           ///< keyframes tried, best bag-of-words score first
+  int neighbour_keyframes = 2;  ///< keyframes on each side whose landmarks join a candidate's
+  int min_inliers = 30;         ///< refined inliers needed to accept a pose
+  double pixel_sigma = 1.0;     ///< keypoint noise at octave 0 (pixels)
+  /// Landmarks whose position_std exceeds this (map units) are left out: a far point seen over a
+  /// short baseline is mostly off along its ray, and from another viewpoint it pulls the pose
+  /// back toward the one that made it. 0: use all.
+  double max_landmark_std = 0.1;
+  /// Null: the default vocabulary (Vocabulary::load_default).
+  std::shared_ptr<const Vocabulary> vocabulary;
+};
+
+struct MapRelocalization {
+  SE3 T_world_camera;
+  int inliers = 0;
+  int keyframe = 0;       ///< index of the map keyframe that placed it
+  double score = 0.0;     ///< its bag-of-words score
+};
+
+class MapRelocalizer {
+ public:
+  static Result<MapRelocalizer> create(msgs::VisualLandmarkLayer map, const PinholeCamera& camera, MapRelocalizerConfig config = {});
+
+  /// The pose of an 8-bit grey, BGR or BGRA image in the map.
+  Result<MapRelocalization> relocalize(const cv::Mat& image) const;
+
+  const msgs::VisualLandmarkLayer& map() const { return map_; }
+
+ private:
+  MapRelocalizer() = default;
+  msgs::VisualLandmarkLayer map_;
+  PinholeCamera camera_;
+  MapRelocalizerConfig config_;
+  std::shared_ptr<const Vocabulary> vocabulary_;
+  std::vector<BowVector> keyframe_words_;
+  cv::Mat descriptors_;  // one row per landmark
+};
+
+}  // namespace hanzo::fusion::vision

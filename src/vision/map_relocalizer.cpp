@@ -1,0 +1,124 @@
+#include "hanzo/fusion/vision/map_relocalizer.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+#include <opencv2/calib3d.hpp>
+
+#include "hanzo/fusion/vision/feature_matcher.hpp"
+#include "pose_refinement.hpp"
+
+namespace hanzo::fusion::vision {
+
+Result<MapRelocalizer> MapRelocalizer::create(msgs::VisualLandmarkLayer map, const PinholeCamera& camera, MapRelocalizerConfig config) {
+  if (map.positions.empty() || map.keyframes.empty()) {
+    return Error(fmt::format("visual landmark map: {} landmarks and {} keyframes (needs both)", map.positions.size(), map.keyframes.size()));
+  }
+  if (map.descriptors.size() != map.positions.size()) {
+    return Error(fmt::format("visual landmark map: {} descriptors for {} landmarks", map.descriptors.size(), map.positions.size()));
+  }
+  if (!(camera.fx > 0.0 && camera.fy > 0.0)) return Error(fmt::format("camera: focal lengths must be positive (fx {}, fy {})", camera.fx, camera.fy));
+  if (config.min_inliers < 6 || config.candidates < 1 || config.neighbour_keyframes < 0 || !(config.pixel_sigma > 0.0) || !(config.max_landmark_std >= 0.0)) {
+    return Error("MapRelocalizerConfig: min_inliers >= 6, candidates >= 1, neighbour_keyframes >= 0, pixel_sigma > 0 and max_landmark_std >= 0 are required");
+  }
+  if (!map.position_std.empty() && map.position_std.size() != map.positions.size()) {
+    return Error(fmt::format("visual landmark map: {} uncertainties for {} landmarks", map.position_std.size(), map.positions.size()));
+  }
+  if (Status features = validate(config.features); !features) return features.error();
+  MapRelocalizer relocalizer;
+  relocalizer.vocabulary_ = config.vocabulary;
+  if (!relocalizer.vocabulary_) {
+    Result<Vocabulary> loaded = Vocabulary::load_default();
+    if (!loaded) return loaded.error();
+    relocalizer.vocabulary_ = std::make_shared<const Vocabulary>(std::move(*loaded));
+  }
+  relocalizer.descriptors_ = cv::Mat(static_cast<int>(map.descriptors.size()), 32, CV_8UC1);
+  for (std::size_t i = 0; i < map.descriptors.size(); ++i) std::copy(map.descriptors[i].begin(), map.descriptors[i].end(), relocalizer.descriptors_.ptr<uint8_t>(static_cast<int>(i)));
+  for (const msgs::VisualKeyframe& keyframe : map.keyframes) {
+    cv::Mat seen;
+    for (uint32_t landmark : keyframe.landmarks) {
+      if (landmark >= map.positions.size()) return Error(fmt::format("visual landmark map: a keyframe sees landmark {} of {}", landmark, map.positions.size()));
+      seen.push_back(relocalizer.descriptors_.row(static_cast<int>(landmark)));
+    }
+    relocalizer.keyframe_words_.push_back(relocalizer.vocabulary_->transform(seen));
+  }
+  relocalizer.map_ = std::move(map);
+  relocalizer.camera_ = camera;
+  relocalizer.config_ = std::move(config);
+  return relocalizer;
+}
+
+Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const {
+  Result<ImageFeatures> extracted = OrbExtractor(config_.features).extract(image);
+  if (!extracted) return extracted.error();
+  const ImageFeatures& features = *extracted;
+  if (features.size() < static_cast<std::size_t>(config_.min_inliers)) {
+    return Error(fmt::format("relocalization: {} features in the image (< {})", features.size(), config_.min_inliers));
+  }
+  const BowVector words = vocabulary_->transform(features.descriptors);
+  std::vector<std::pair<double, int>> ranked;
+  for (std::size_t k = 0; k < keyframe_words_.size(); ++k) ranked.emplace_back(Vocabulary::score(words, keyframe_words_[k]), static_cast<int>(k));
+  std::sort(ranked.begin(), ranked.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  ranked.resize(std::min<std::size_t>(ranked.size(), static_cast<std::size_t>(config_.candidates)));
+
+  std::vector<Eigen::Vector2d> normalized;
+  for (const cv::KeyPoint& keypoint : features.keypoints) {
+    normalized.push_back(camera_.unproject({keypoint.pt.x, keypoint.pt.y}).value_or(Eigen::Vector2d::Constant(std::nan(""))));
+  }
+  int best_inliers = 0;
+  for (const auto& [score, candidate] : ranked) {
+    // The landmarks of the candidate and its neighbours.
+    std::vector<uint32_t> landmarks;
+    const int first = std::max(0, candidate - config_.neighbour_keyframes);
+    const int last = std::min(static_cast<int>(map_.keyframes.size()) - 1, candidate + config_.neighbour_keyframes);
+    for (int k = first; k <= last; ++k) {
+      for (uint32_t landmark : map_.keyframes[static_cast<std::size_t>(k)].landmarks) {
+        if (config_.max_landmark_std <= 0.0 || map_.position_std.empty() || map_.position_std[landmark] <= config_.max_landmark_std) landmarks.push_back(landmark);
+      }
+    }
+    std::sort(landmarks.begin(), landmarks.end());
+    landmarks.erase(std::unique(landmarks.begin(), landmarks.end()), landmarks.end());
+    if (static_cast<int>(landmarks.size()) < config_.min_inliers) continue;
+    cv::Mat candidate_descriptors;
+    for (uint32_t landmark : landmarks) candidate_descriptors.push_back(descriptors_.row(static_cast<int>(landmark)));
+    DescriptorMatcherConfig matcher;
+    matcher.ratio = 0.75;
+    matcher.max_distance = 50;
+    std::vector<cv::Point3d> object_points;
+    std::vector<cv::Point2d> image_points;
+    std::vector<PoseObservation> observations;
+    for (const FeatureMatch& match : match_descriptors(candidate_descriptors, features.descriptors, matcher)) {
+      const auto k = static_cast<std::size_t>(match.train);
+      if (!std::isfinite(normalized[k].x())) continue;
+      const Eigen::Vector3d p = map_.positions[landmarks[static_cast<std::size_t>(match.query)]].cast<double>();
+      object_points.emplace_back(p.x(), p.y(), p.z());
+      image_points.emplace_back(normalized[k].x(), normalized[k].y());
+      const cv::KeyPoint& keypoint = features.keypoints[k];
+      observations.push_back({p, {keypoint.pt.x, keypoint.pt.y}, config_.pixel_sigma * std::pow(config_.features.scale_factor, keypoint.octave)});
+    }
+    if (static_cast<int>(object_points.size()) < config_.min_inliers) continue;
+    cv::Mat rotation_vector, translation;
+    std::vector<int> inliers;
+    if (!cv::solvePnPRansac(object_points, image_points, cv::Mat::eye(3, 3, CV_64F), cv::noArray(), rotation_vector, translation, false, 500,
+                            static_cast<float>(2.0 * config_.pixel_sigma / camera_.fx), 0.999, inliers, cv::SOLVEPNP_EPNP) ||
+        static_cast<int>(inliers.size()) < config_.min_inliers) {
+      best_inliers = std::max(best_inliers, static_cast<int>(inliers.size()));
+      continue;
+    }
+    cv::Mat rotation;
+    cv::Rodrigues(rotation_vector, rotation);
+    Eigen::Matrix3d R;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) R(r, c) = rotation.at<double>(r, c);
+    }
+    const SE3 T_camera_world(SO3::from_matrix(R), Eigen::Vector3d(translation.at<double>(0), translation.at<double>(1), translation.at<double>(2)));
+    const PoseRefinement refined = refine_pose(T_camera_world, observations, camera_);
+    best_inliers = std::max(best_inliers, refined.inliers);
+    if (refined.inliers < config_.min_inliers) continue;
+    return MapRelocalization{refined.T_camera_world.inverse(), refined.inliers, candidate, score};
+  }
+  return Error(fmt::format("relocalization: no pose with {} inliers among the {} most similar keyframes (best {})", config_.min_inliers, ranked.size(), best_inliers));
+}
+
+}  // namespace hanzo::fusion::vision
