@@ -57,6 +57,8 @@ class CameraOdometry {
   Result<std::optional<Tracked>> add(std::string_view sensor, const msgs::ImageMessage& image);
 
   vision::VisualOdometrySummary summary() const { return odometry_->summary(); }
+  /// The odometry's landmark map (its world: the left camera at its first keyframe).
+  msgs::VisualLandmarkLayer landmark_layer() const { return odometry_->landmark_layer(left_sensor_); }
 
  private:
   CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::string left_sensor, std::string right_sensor, const SE3& T_body_left,

@@ -853,6 +853,16 @@ msgs::FusionMap Session::map() const {
   } else {
     map_builder_.write_layers(map);
   }
+  if (camera_odometry_ && visual_world_) {
+    // The odometry's world (its left camera at the first keyframe) in the Session's.
+    msgs::VisualLandmarkLayer layer = camera_odometry_->landmark_layer();
+    if (!layer.positions.empty()) {
+      const SE3 T_world_odometry = *visual_world_ * camera_odometry_->T_body_left();
+      for (Eigen::Vector3f& position : layer.positions) position = (T_world_odometry * position.cast<double>()).cast<float>();
+      for (msgs::VisualKeyframe& keyframe : layer.keyframes) keyframe.T_world_camera = msgs::Pose::from_se3(T_world_odometry * keyframe.T_world_camera.to_se3());
+      map.visual_landmarks = std::move(layer);
+    }
+  }
   map.version = summary_.map_version;
   map.provenance.algorithm = planar_ ? "pipeline/session (planar laser)" : "pipeline/session";
   return map;

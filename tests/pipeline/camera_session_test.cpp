@@ -41,6 +41,8 @@ struct SessionRun {
   double ape_se3_m = 0.0;
   MappingSummary mapping;
   SessionSummary summary;
+  msgs::FusionMap map;
+  io::Trajectory estimate;
 };
 
 // The Session on the recording with only the sensors `keep` says.
@@ -67,6 +69,8 @@ SessionRun run_session(const std::function<bool(const sim::ScenarioSensor&)>& ke
   SessionRun run;
   run.ape_se3_m = eval::compute_ape(truth, estimate, config).value().statistics.rmse;
   run.mapping = session->mapping_summary();
+  run.map = session->map();
+  run.estimate = estimate;
   run.summary = session->summary();
   return run;
 }
@@ -83,6 +87,26 @@ TEST(CameraSession, StereoCamerasAloneTrackTheDrone) {
   EXPECT_FALSE(run.mapping.visual_scale_free);
   EXPECT_LT(run.ape_se3_m, 0.1);
   for (const SensorStatistics& sensor : run.summary.sensors) EXPECT_EQ(sensor.fused, sensor.received) << sensor.name;
+  // The Session's map has the odometry's landmarks, in the Session's world: each keyframe's
+  // camera near where the Session put the camera at that time (the Session's filter smooths the
+  // poses of a drone at 3 m/s, and bundle adjustment moves keyframes after their frame was
+  // reported: up to 16 cm measured).
+  ASSERT_TRUE(run.map.visual_landmarks.has_value());
+  const msgs::VisualLandmarkLayer& layer = *run.map.visual_landmarks;
+  EXPECT_GT(layer.positions.size(), 1000u);
+  EXPECT_EQ(layer.keyframes.size(), run.mapping.visual_keyframes);
+  const Recording& recording = drone_recording();
+  const SE3 T_body_left = std::find_if(recording.scenario.sensors.begin(), recording.scenario.sensors.end(), is_camera)->T_body_sensor;
+  int compared = 0;
+  for (const msgs::VisualKeyframe& keyframe : layer.keyframes) {
+    for (std::size_t i = 0; i < run.estimate.size(); ++i) {
+      if (run.estimate.timestamps[i] != keyframe.time) continue;
+      const SE3 T_world_camera = SE3::from_matrix(run.estimate.poses[i]) * T_body_left;
+      EXPECT_LT((T_world_camera.translation() - keyframe.T_world_camera.position).norm(), 0.25) << keyframe.time.seconds();
+      ++compared;
+    }
+  }
+  EXPECT_GE(compared, 5);
 }
 
 TEST(CameraSession, StereoOdometryFusedWithTheImuBeatsTheImuAlone) {
