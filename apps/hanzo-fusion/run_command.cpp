@@ -302,6 +302,9 @@ nlohmann::json health_json(const pipeline::Session& session, Timestamp log_start
 Result<std::vector<std::string>> write_map(const std::filesystem::path& out, const pipeline::Session& session, const RunOptions& options,
                                            Timestamp created) {
   msgs::FusionMap map = session.map();
+  // A camera-only run has landmarks but no scans: no empty point or occupancy layers.
+  if (map.occupancy && map.occupancy->occupancy.empty()) map.occupancy.reset();
+  if (map.points && map.points->points.empty()) map.points.reset();
   map.map_id = "run";
   map.version = 1;
   map.created = created;  // the log's last pose: the same log gives the same file
@@ -394,7 +397,7 @@ int run(const Output& output, const RunOptions& options) {
         written("keyframes.csv", write_keyframes_csv((out / "keyframes.csv").string(), keyframes, session))}) {
     if (!status) return fail(status.error().message);
   }
-  if (mapping.map_keyframes > 0) {
+  if (mapping.map_keyframes > 0 || mapping.visual_keyframes > 0) {
     auto map_files = write_map(out, session, options, poses.empty() ? last : poses.back().timestamp);
     if (!map_files) return fail(map_files.error().message);
     files.insert(files.end(), map_files->begin(), map_files->end());

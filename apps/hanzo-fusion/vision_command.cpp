@@ -2,6 +2,8 @@
 // features of images (vision/vocabulary.hpp).
 // hanzo-fusion vision query IMAGE IMAGES... [--vocabulary V]: ranks images by their
 // bag-of-words similarity to IMAGE (place recognition; vision/place_database.hpp).
+// hanzo-fusion vision relocalize MAP IMAGE --calib CALIB: places a camera image in a saved map's
+// visual landmarks (vision/map_relocalizer.hpp).
 // IMAGES are image files or folders (their images, recursively, in name order).
 
 #include <algorithm>
@@ -14,6 +16,9 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "commands.hpp"
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/maps/fusion_map_file.hpp"
+#include "hanzo/fusion/vision/map_relocalizer.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
 #include "hanzo/fusion/vision/place_database.hpp"
 #include "hanzo/fusion/vision/vocabulary.hpp"
@@ -36,6 +41,13 @@ struct QueryOptions {
   std::string vocabulary;  // empty: the default vocabulary
   int max_features = vision::OrbExtractorConfig{}.max_features;
   int top = 5;
+};
+
+struct RelocalizeOptions {
+  std::string map;
+  std::string image;
+  std::string calib;
+  std::string camera;  // empty: the map's camera
 };
 
 bool is_image_name(const std::filesystem::path& path) {
@@ -139,6 +151,46 @@ int run_query(const Output& output, const QueryOptions& options) {
   return report_success(output, result, text);
 }
 
+nlohmann::json pose_json(const SE3& pose) {
+  const Eigen::Quaterniond& q = pose.rotation().quaternion();
+  return {{"position", {pose.translation().x(), pose.translation().y(), pose.translation().z()}}, {"orientation_wxyz", {q.w(), q.x(), q.y(), q.z()}}};
+}
+
+int run_relocalize(const Output& output, const RelocalizeOptions& options) {
+  nlohmann::json result = {{"map", options.map}, {"image", options.image}};
+  Result<msgs::FusionMap> map = maps::read_fusion_map(options.map);
+  if (!map) return report_failure(output, result, map.error().message);
+  if (!map->visual_landmarks) return report_failure(output, result, fmt::format("{}: the map has no visual landmarks layer (made by a run with cameras)", options.map));
+  const std::string camera = options.camera.empty() ? map->visual_landmarks->camera : options.camera;
+  Result<calib::Calibration> calibration = calib::load_calibration(options.calib);
+  if (!calibration) return report_failure(output, result, calibration.error().message);
+  const calib::SensorCalibration* sensor = calibration->find(camera);
+  if (sensor == nullptr || !sensor->camera) return report_failure(output, result, fmt::format("{}: no intrinsics for camera '{}'", options.calib, camera));
+  if (!std::filesystem::is_regular_file(options.image)) return report_failure(output, result, fmt::format("{}: no such file", options.image));
+  const cv::Mat image = cv::imread(options.image, cv::IMREAD_GRAYSCALE);
+  if (image.empty()) return report_failure(output, result, fmt::format("{}: not an image OpenCV can read", options.image));
+  if (image.cols != static_cast<int>(sensor->camera->intrinsics.width) || image.rows != static_cast<int>(sensor->camera->intrinsics.height)) {
+    return report_failure(output, result, fmt::format("{}: {} x {} pixels, but camera '{}' is calibrated for {} x {}", options.image, image.cols, image.rows, camera,
+                                                      sensor->camera->intrinsics.width, sensor->camera->intrinsics.height));
+  }
+  Result<vision::MapRelocalizer> relocalizer = vision::MapRelocalizer::create(*map->visual_landmarks, sensor->camera->pinhole_camera());
+  if (!relocalizer) return report_failure(output, result, relocalizer.error().message);
+  Result<vision::MapRelocalization> placed = relocalizer->relocalize(image);
+  if (!placed) return report_failure(output, result, placed.error().message);
+  const SE3 T_world_body = placed->T_world_camera * sensor->T_body_sensor().inverse();
+  result["ok"] = true;
+  result["camera"] = camera;
+  result["T_world_camera"] = pose_json(placed->T_world_camera);
+  result["T_world_body"] = pose_json(T_world_body);
+  result["inliers"] = placed->inliers;
+  result["keyframe"] = placed->keyframe;
+  result["score"] = placed->score;
+  const Eigen::Vector3d& p = T_world_body.translation();
+  return report_success(output, result,
+                        fmt::format("{}: body at ({:.3f}, {:.3f}, {:.3f}) m in {} ({} inliers, near keyframe {})\n", options.image, p.x(), p.y(), p.z(),
+                                    options.map, placed->inliers, placed->keyframe));
+}
+
 }  // namespace
 
 void add_vision_command(CLI::App& app, const Output& output, Command& run) {
@@ -163,6 +215,14 @@ void add_vision_command(CLI::App& app, const Output& output, Command& run) {
   query_app->add_option("--max-features", query->max_features, "ORB keypoints per image")->check(CLI::Range(10, 100000));
   query_app->add_option("--top", query->top, "How many images to report")->check(CLI::Range(1, 100000));
   query_app->callback([&output, &run, query] { run = [&output, query] { return run_query(output, *query); }; });
+
+  auto relocalize = std::make_shared<RelocalizeOptions>();
+  CLI::App* relocalize_app = vision_app->add_subcommand("relocalize", "Place a camera image in a saved map's visual landmarks");
+  relocalize_app->add_option("MAP", relocalize->map, "FusionMap file with a visual landmarks layer (from run with cameras)")->required();
+  relocalize_app->add_option("IMAGE", relocalize->image, "The camera image")->required();
+  relocalize_app->add_option("--calib", relocalize->calib, "Calibration YAML with the camera's intrinsics and extrinsics")->required();
+  relocalize_app->add_option("--camera", relocalize->camera, "Camera sensor name (default: the map's)");
+  relocalize_app->callback([&output, &run, relocalize] { run = [&output, relocalize] { return run_relocalize(output, *relocalize); }; });
 }
 
 }  // namespace hanzo::fusion::app

@@ -16,6 +16,10 @@
 #include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/io/trajectory.hpp"
 #include <nlohmann/json.hpp>
 
 namespace {
@@ -443,6 +447,44 @@ TEST(Cli, RunTracksACameraOnlyConfigurationWithVisualOdometry) {
   EXPECT_EQ(json["mapping"]["camera_frames_lost"], 0);
   EXPECT_EQ(json["mapping"]["visual_scale_free"], false);
   EXPECT_LT(json["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), 0.1);  // 4.9 m flown; measured 0.047 m
+
+  // The run's map carries the odometry's landmarks, and a camera image is placed in it.
+  using namespace hanzo::fusion;
+  const std::string map = (dir / "run" / "map.fmap").string();
+  const CliRun info = run(fmt::format("map info {} --json", map));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_GT(nlohmann::json::parse(info.out)["layers"]["visual_landmarks"]["landmarks"].get<int>(), 500);
+  auto reader = io::SensorLogReader::open((dir / "sim" / "sensors.mcap").string()).value();
+  io::LogEntry entry;
+  int left_images = 0;
+  Timestamp image_time;
+  const std::string image_path = (dir / "left.png").string();
+  for (Result<bool> more = reader->next(entry); more && *more; more = reader->next(entry)) {
+    const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
+    const auto* image = message ? std::get_if<msgs::ImageMessage>(message) : nullptr;
+    if (image == nullptr || entry.topic.find("camera_left") == std::string::npos || ++left_images < 40) continue;
+    ASSERT_EQ(image->encoding, msgs::ImageEncoding::kMono8);
+    cv::imwrite(image_path, cv::Mat(static_cast<int>(image->height), static_cast<int>(image->width), CV_8UC1, const_cast<uint8_t*>(image->data.data())));
+    image_time = image->timestamp;
+    break;
+  }
+  ASSERT_EQ(left_images, 40);
+  const CliRun placed = run(fmt::format("vision relocalize {} {} --calib {}/calibration.yaml --json", map, image_path, (dir / "sim").string()));
+  ASSERT_EQ(placed.exit_code, 0) << placed.err;
+  const nlohmann::json pose = nlohmann::json::parse(placed.out);
+  EXPECT_GE(pose["inliers"].get<int>(), 30);
+  const io::Trajectory trajectory = io::read_trajectory((dir / "run" / "trajectory.tum").string(), io::TrajectoryFormat::kTum).value();
+  const auto& position = pose["T_world_body"]["position"];
+  double nearest = 1e9;
+  for (std::size_t i = 0; i < trajectory.size(); ++i) {
+    if (std::abs((trajectory.timestamps[i] - image_time).seconds()) > 0.01) continue;
+    nearest = std::min(nearest, (trajectory.position(i) - Eigen::Vector3d(position[0].get<double>(), position[1].get<double>(), position[2].get<double>())).norm());
+  }
+  EXPECT_LT(nearest, 0.1);
+  const CliRun wrong_size = run(fmt::format("vision relocalize {} {}/graf1.png --calib {}/calibration.yaml", map,
+                                            std::string(HANZO_DATA_DIR) + "/feature_matching_graf", (dir / "sim").string()));
+  EXPECT_EQ(wrong_size.exit_code, 1);
+  EXPECT_THAT(wrong_size.err, HasSubstr("is calibrated for 640 x 480"));
   std::filesystem::remove_all(dir);
 }
 
