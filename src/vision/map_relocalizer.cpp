@@ -4,7 +4,6 @@
 #include <cmath>
 
 #include <fmt/format.h>
-#include <opencv2/calib3d.hpp>
 
 #include "hanzo/fusion/vision/feature_matcher.hpp"
 #include "pose_refinement.hpp"
@@ -98,22 +97,12 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
       observations.push_back({p, {keypoint.pt.x, keypoint.pt.y}, config_.pixel_sigma * std::pow(config_.features.scale_factor, keypoint.octave)});
     }
     if (static_cast<int>(object_points.size()) < config_.min_inliers) continue;
-    cv::Mat rotation_vector, translation;
-    std::vector<int> inliers;
-    if (!cv::solvePnPRansac(object_points, image_points, cv::Mat::eye(3, 3, CV_64F), cv::noArray(), rotation_vector, translation, false, 500,
-                            static_cast<float>(2.0 * config_.pixel_sigma / camera_.fx), 0.999, inliers, cv::SOLVEPNP_EPNP) ||
-        static_cast<int>(inliers.size()) < config_.min_inliers) {
-      best_inliers = std::max(best_inliers, static_cast<int>(inliers.size()));
+    const std::optional<PnpSolution> solved = solve_pnp_ransac(object_points, image_points, 2.0 * config_.pixel_sigma / camera_.fx, 500);
+    if (!solved || static_cast<int>(solved->inliers.size()) < config_.min_inliers) {
+      best_inliers = std::max(best_inliers, solved ? static_cast<int>(solved->inliers.size()) : 0);
       continue;
     }
-    cv::Mat rotation;
-    cv::Rodrigues(rotation_vector, rotation);
-    Eigen::Matrix3d R;
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) R(r, c) = rotation.at<double>(r, c);
-    }
-    const SE3 T_camera_world(SO3::from_matrix(R), Eigen::Vector3d(translation.at<double>(0), translation.at<double>(1), translation.at<double>(2)));
-    const PoseRefinement refined = refine_pose(T_camera_world, observations, camera_);
+    const PoseRefinement refined = refine_pose(solved->T_camera_world, observations, camera_);
     best_inliers = std::max(best_inliers, refined.inliers);
     if (refined.inliers < config_.min_inliers) continue;
     return MapRelocalization{refined.T_camera_world.inverse(), refined.inliers, candidate, score};

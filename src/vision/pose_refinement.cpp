@@ -4,6 +4,7 @@
 #include <limits>
 
 #include <Eigen/Cholesky>
+#include <opencv2/calib3d.hpp>
 
 namespace hanzo::fusion::vision {
 
@@ -52,6 +53,25 @@ PoseRefinement refine_pose(const SE3& T_camera_world, const std::vector<PoseObse
     }
   }
   return result;
+}
+
+std::optional<PnpSolution> solve_pnp_ransac(const std::vector<cv::Point3d>& points_world, const std::vector<cv::Point2d>& normalized, double threshold,
+                                            int iterations) {
+  if (points_world.size() < 4 || points_world.size() != normalized.size()) return std::nullopt;
+  cv::Mat rotation_vector, translation;
+  PnpSolution solution;
+  if (!cv::solvePnPRansac(points_world, normalized, cv::Mat::eye(3, 3, CV_64F), cv::noArray(), rotation_vector, translation, false, iterations,
+                          static_cast<float>(threshold), 0.999, solution.inliers, cv::SOLVEPNP_EPNP)) {
+    return std::nullopt;
+  }
+  cv::Mat rotation;
+  cv::Rodrigues(rotation_vector, rotation);
+  Eigen::Matrix3d R;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) R(r, c) = rotation.at<double>(r, c);
+  }
+  solution.T_camera_world = SE3(SO3::from_matrix(R), Eigen::Vector3d(translation.at<double>(0), translation.at<double>(1), translation.at<double>(2)));
+  return solution;
 }
 
 }  // namespace hanzo::fusion::vision

@@ -6,9 +6,11 @@
 // Perturbation: T_camera_world <- exp(delta) T_camera_world, delta = (rho, phi):
 //   d p_camera / d delta = [I, -[p_camera]x].
 
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
+#include <opencv2/core.hpp>
 
 #include "hanzo/fusion/core/pinhole_camera.hpp"
 #include "hanzo/fusion/core/se3.hpp"
@@ -32,6 +34,17 @@ PoseRefinement refine_pose(const SE3& T_camera_world, const std::vector<PoseObse
 
 /// Squared whitened reprojection error of one observation (infinity behind the camera).
 double reprojection_chi2(const SE3& T_camera_world, const PoseObservation& observation, const PinholeCamera& camera);
+
+struct PnpSolution {
+  SE3 T_camera_world;
+  std::vector<int> inliers;  ///< indices into the correspondences
+};
+
+/// T_camera_world from 3D points (world frame) and their undistorted normalized image
+/// coordinates by EPnP inside RANSAC (OpenCV's solvePnPRansac, 99.9 % confidence); inliers within
+/// `threshold` (normalized units: pixels / fx). None when fewer than 4 correspondences or it fails.
+std::optional<PnpSolution> solve_pnp_ransac(const std::vector<cv::Point3d>& points_world, const std::vector<cv::Point2d>& normalized, double threshold,
+                                            int iterations);
 
 /// The chi-square 95 % bound of a 2D pixel residual.
 inline constexpr double kChi2Pixel95 = 5.991;

@@ -1,31 +1,12 @@
 #include "similarity_pose_graph.hpp"
 
 #include <cmath>
-#include <random>
 
 #include <ceres/ceres.h>
 #include <Eigen/Geometry>
 
 namespace hanzo::fusion::vision {
 namespace {
-
-std::optional<Similarity> umeyama_fit(const std::vector<Eigen::Vector3d>& source, const std::vector<Eigen::Vector3d>& target,
-                                      const std::vector<std::size_t>& pairs, bool fix_scale) {
-  Eigen::Matrix3Xd from(3, static_cast<Eigen::Index>(pairs.size())), to(3, static_cast<Eigen::Index>(pairs.size()));
-  for (std::size_t i = 0; i < pairs.size(); ++i) {
-    from.col(static_cast<Eigen::Index>(i)) = source[pairs[i]];
-    to.col(static_cast<Eigen::Index>(i)) = target[pairs[i]];
-  }
-  const Eigen::Matrix4d transform = Eigen::umeyama(from, to, !fix_scale);
-  if (!transform.allFinite()) return std::nullopt;
-  Similarity fit;
-  const Eigen::Matrix3d scaled_rotation = transform.topLeftCorner<3, 3>();
-  fit.scale = fix_scale ? 1.0 : std::cbrt(scaled_rotation.determinant());
-  if (!(fit.scale > 1e-6) || !std::isfinite(fit.scale)) return std::nullopt;
-  fit.rotation = Eigen::Quaterniond(scaled_rotation / fit.scale).normalized();
-  fit.translation = transform.topRightCorner<3, 1>();
-  return fit;
-}
 
 // Residual of one edge over (q_from, t_from, ln s_from, q_to, t_to, ln s_to).
 struct SimilarityEdgeResidual {
@@ -56,43 +37,6 @@ struct SimilarityEdgeResidual {
 };
 
 }  // namespace
-
-std::optional<SimilarityEstimate> estimate_similarity(const std::vector<Eigen::Vector3d>& source, const std::vector<Eigen::Vector3d>& target,
-                                                      const std::function<bool(const Similarity&, std::size_t)>& is_inlier, bool fix_scale,
-                                                      int iterations, uint64_t seed) {
-  if (source.size() != target.size() || source.size() < 3) return std::nullopt;
-  std::mt19937_64 random(seed);
-  std::uniform_int_distribution<std::size_t> pick(0, source.size() - 1);
-  auto score = [&](const Similarity& fit) {
-    SimilarityEstimate estimate{fit, std::vector<char>(source.size(), 0), 0};
-    for (std::size_t i = 0; i < source.size(); ++i) {
-      estimate.inlier[i] = is_inlier(fit, i);
-      estimate.inliers += estimate.inlier[i];
-    }
-    return estimate;
-  };
-  std::optional<SimilarityEstimate> best;
-  for (int iteration = 0; iteration < iterations; ++iteration) {
-    const std::size_t a = pick(random), b = pick(random), c = pick(random);
-    if (a == b || b == c || a == c) continue;
-    // Degenerate (nearly collinear) triples give no rotation.
-    if ((source[b] - source[a]).cross(source[c] - source[a]).norm() < 1e-9) continue;
-    const std::optional<Similarity> fit = umeyama_fit(source, target, {a, b, c}, fix_scale);
-    if (!fit) continue;
-    SimilarityEstimate estimate = score(*fit);
-    if (!best || estimate.inliers > best->inliers) best = std::move(estimate);
-  }
-  if (!best || best->inliers < 3) return std::nullopt;
-  std::vector<std::size_t> inliers;
-  for (std::size_t i = 0; i < source.size(); ++i) {
-    if (best->inlier[i]) inliers.push_back(i);
-  }
-  if (const std::optional<Similarity> refit = umeyama_fit(source, target, inliers, fix_scale)) {
-    SimilarityEstimate refined = score(*refit);
-    if (refined.inliers >= best->inliers) best = std::move(refined);
-  }
-  return best;
-}
 
 SimilarityPoseGraphSummary optimize_similarity_pose_graph(std::map<int, Similarity>& S_world_node, const std::vector<SimilarityEdge>& edges,
                                                           const std::set<int>& fixed, bool fix_scale, int max_iterations) {

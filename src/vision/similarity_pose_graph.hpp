@@ -1,8 +1,6 @@
 #pragma once
 // Loop-closure geometry of the visual odometry (internal to the vision module):
 //  - Similarity: a 3D similarity transform p -> scale R p + t (Sim3; scale 1 is an SE3);
-//  - estimate_similarity: RANSAC over 3-point Umeyama fits (Umeyama 1991, eq. 40-42) of
-//    matched 3D points, the caller judging inliers (reprojection in both keyframes);
 //  - optimize_similarity_pose_graph: the pose graph of keyframe similarities after a loop
 //    closure (ORB-SLAM's essential-graph optimization, Strasdat et al. 2010 "Scale Drift-Aware
 //    Large Scale Monocular SLAM"), Levenberg-Marquardt on Ceres.
@@ -12,10 +10,7 @@
 // t_estimated - t_measured (in `from`'s units), ln s_estimated - ln s_measured, where
 // estimated = S_world_from^-1 S_world_to; weighted by the edge's weight (identity otherwise).
 
-#include <cstdint>
-#include <functional>
 #include <map>
-#include <optional>
 #include <set>
 #include <vector>
 
@@ -43,19 +38,6 @@ struct Similarity {
     return {inverse_rotation, -(inverse_rotation * translation) / scale, 1.0 / scale};
   }
 };
-
-struct SimilarityEstimate {
-  Similarity S_target_source;  ///< target ~ S * source
-  std::vector<char> inlier;    ///< per pair
-  int inliers = 0;
-};
-
-/// RANSAC: `iterations` random triples fit by Umeyama (with scale unless fix_scale); the fit
-/// with the most pairs passing is_inlier(S, pair) is refit on its inliers and checked again.
-/// None when fewer than 3 pairs or no fit has 3 inliers.
-std::optional<SimilarityEstimate> estimate_similarity(const std::vector<Eigen::Vector3d>& source, const std::vector<Eigen::Vector3d>& target,
-                                                      const std::function<bool(const Similarity&, std::size_t)>& is_inlier, bool fix_scale,
-                                                      int iterations, uint64_t seed);
 
 struct SimilarityEdge {
   int from = 0;

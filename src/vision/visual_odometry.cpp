@@ -602,21 +602,13 @@ struct VisualOdometry::State {
       image_points.emplace_back(frame.normalized[k].x(), frame.normalized[k].y());
     }
     if (static_cast<int>(object_points.size()) < min_inliers) return std::nullopt;
-    cv::Mat rotation_vector, translation;
-    std::vector<int> inliers;
-    const bool solved = cv::solvePnPRansac(object_points, image_points, cv::Mat::eye(3, 3, CV_64F), cv::noArray(), rotation_vector, translation,
-                                           false, 300, static_cast<float>(2.0 * config.pixel_sigma / camera.fx), 0.999, inliers, cv::SOLVEPNP_EPNP);
-    if (!solved || static_cast<int>(inliers.size()) < min_inliers || static_cast<double>(inliers.size()) < min_inlier_share * static_cast<double>(object_points.size())) {
-      logger()->debug("visual odometry: PnP: {} matches, {} inliers: refused", object_points.size(), inliers.size());
+    const std::optional<PnpSolution> solved = solve_pnp_ransac(object_points, image_points, 2.0 * config.pixel_sigma / camera.fx, 300);
+    const std::size_t inliers = solved ? solved->inliers.size() : 0;
+    if (static_cast<int>(inliers) < min_inliers || static_cast<double>(inliers) < min_inlier_share * static_cast<double>(object_points.size())) {
+      logger()->debug("visual odometry: PnP: {} matches, {} inliers: refused", object_points.size(), inliers);
       return std::nullopt;
     }
-    cv::Mat rotation;
-    cv::Rodrigues(rotation_vector, rotation);
-    Eigen::Matrix3d R;
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) R(r, c) = rotation.at<double>(r, c);
-    }
-    return SE3(SO3::from_matrix(R), Eigen::Vector3d(translation.at<double>(0), translation.at<double>(1), translation.at<double>(2)));
+    return solved->T_camera_world;
   }
 
   // Pose of a frame the motion model cannot place, against the last three keyframes.
