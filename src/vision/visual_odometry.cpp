@@ -156,7 +156,7 @@ Status validate(const VisualOdometryConfig& config) {
   if (!(config.moving_object_pixels > 0.0)) return Error("VisualOdometryConfig.moving_object_pixels: must be positive", "moving_object_pixels");
   if (!(config.standstill_share > 0.0 && config.standstill_share <= 1.0)) return Error("VisualOdometryConfig.standstill_share: must be in (0, 1]", "standstill_share");
   if (config.bundle_adjustment_iterations < 0) return Error("VisualOdometryConfig.bundle_adjustment_iterations: must not be negative", "bundle_adjustment_iterations");
-  if (config.loop_min_keyframe_gap < config.window_keyframes) return Error("VisualOdometryConfig.loop_min_keyframe_gap: must be at least window_keyframes", "loop_min_keyframe_gap");
+  if (config.loop_closure && config.loop_min_keyframe_gap < config.window_keyframes) return Error("VisualOdometryConfig.loop_min_keyframe_gap: must be at least window_keyframes", "loop_min_keyframe_gap");
   if (config.loop_min_inliers < 3) return Error("VisualOdometryConfig.loop_min_inliers: must be at least 3", "loop_min_inliers");
   if (config.loop_cooldown_keyframes < 0) return Error("VisualOdometryConfig.loop_cooldown_keyframes: must not be negative", "loop_cooldown_keyframes");
   return ok_status();

@@ -29,13 +29,15 @@
 //   loop closure: every keyframe's ORB descriptors become a bag of words (vision/vocabulary.hpp)
 //     in a place database; a new keyframe queries the keyframes at least loop_min_keyframe_gap
 //     older, keeping those that score at least as high as its least similar of its three
-//     predecessors (ORB-SLAM's threshold). A candidate's landmarks are matched to the new
-//     keyframe's through the direct index (same vocabulary node, ratio 0.75, at most 50 bits), and a
-//     similarity (monocular: with scale; stereo: rigid) between the two maps is found by RANSAC
-//     over 3-point Umeyama fits, inliers reprojecting within the chi-square bound in both
-//     keyframes. With loop_min_inliers, the keyframes since the candidate are corrected by a
-//     pose graph (consecutive keyframes, their neighbours two apart, and the loop; the candidate and
-//     older keyframes held; Strasdat et al. 2010), every landmark moved with the keyframe that
+//     predecessors (ORB-SLAM's threshold). The new keyframe is placed in the candidate's map by
+//     PnP RANSAC against the landmarks of the candidate and its two neighbours on each side (the
+//     inliers at least 20 % of the descriptor matches), then refined on their projections; a
+//     refinement that slides the PnP pose (over 5 % of the depth or 0.05 rad: a periodic
+//     texture's shifted fit) is refused. Monocular, the scale between the maps is the median
+//     depth ratio of landmarks both have. With loop_min_inliers, the keyframes since the
+//     candidate are corrected by a similarity pose graph (consecutive keyframes, their neighbours
+//     two apart, earlier loops and the new one; the candidate and older keyframes held; Strasdat
+//     et al. 2010), every landmark moved with the keyframe that
 //     created it, and tracking goes on from the corrected pose. The edge into a stereo map
 //     restart is weak (its pose was only predicted), so a loop pulls that jump straight;
 //   standstill: when a large share of the keypoints of the last frame tracked in motion are found
@@ -123,8 +125,8 @@ struct VisualOdometryConfig {
   /// Candidates are at least this many keyframes older than the query (recent keyframes look
   /// alike without closing a loop).
   int loop_min_keyframe_gap = 30;
-  /// 3D-3D matches consistent with one similarity (reprojected within the chi-square bound
-  /// in both keyframes) needed to accept a loop.
+  /// Landmarks of the candidate's map that must agree with the keyframe's placement in it (PnP
+  /// inliers, and again after the refinement on their projections) to accept a loop.
   int loop_min_inliers = 30;
   /// Keyframes after a closed loop before the next query (the loop's neighbours would close it
   /// again).
