@@ -1,8 +1,12 @@
-// hanzo-fusion log info LOG [--verify] | log export LOG --topic T [--format csv] [--out FILE]
+// hanzo-fusion log info LOG [--verify] | log export LOG --topic T [--format csv|png] [--out FILE|FOLDER]
 
 #include <algorithm>
+#include <filesystem>
 #include <memory>
 #include <string>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include <fmt/format.h>
 
@@ -89,10 +93,28 @@ int run_info(const Output& output, const std::string& path, bool verify) {
   return report_success(output, result, text);
 }
 
+// One image message as a PNG (8-bit grey or colour; depth images as 16-bit grey in their units).
+Status write_png(const msgs::ImageMessage& image, const std::string& file) {
+  const int rows = static_cast<int>(image.height), cols = static_cast<int>(image.width);
+  cv::Mat pixels;
+  switch (image.encoding) {
+    case msgs::ImageEncoding::kMono8: pixels = cv::Mat(rows, cols, CV_8UC1, const_cast<uint8_t*>(image.data.data())); break;
+    case msgs::ImageEncoding::kBgr8: pixels = cv::Mat(rows, cols, CV_8UC3, const_cast<uint8_t*>(image.data.data())); break;
+    case msgs::ImageEncoding::kRgb8: cv::cvtColor(cv::Mat(rows, cols, CV_8UC3, const_cast<uint8_t*>(image.data.data())), pixels, cv::COLOR_RGB2BGR); break;
+    case msgs::ImageEncoding::kDepth16: pixels = cv::Mat(rows, cols, CV_16UC1, const_cast<uint8_t*>(image.data.data())); break;
+    case msgs::ImageEncoding::kDepth32f:
+      cv::Mat(rows, cols, CV_32FC1, const_cast<uint8_t*>(image.data.data())).convertTo(pixels, CV_16UC1, 1000.0);  // millimetres
+      break;
+  }
+  if (!cv::imwrite(file, pixels)) return Error(fmt::format("{}: cannot write", file));
+  return ok_status();
+}
+
 int run_export(const Output& output, const std::string& path, const std::string& topic, const std::string& format,
                const std::string& out_path) {
   nlohmann::json result = {{"file", path}, {"topic", topic}, {"format", format}};
-  if (format != "csv") return report_failure(output, result, fmt::format("unknown export format '{}' (expected csv)", format));
+  if (format != "csv" && format != "png") return report_failure(output, result, fmt::format("unknown export format '{}' (expected csv or png)", format));
+  if (format == "png" && out_path.empty()) return report_failure(output, result, "--format png needs --out FOLDER (one PNG per image)");
   if (output.json && out_path.empty()) {
     return report_failure(output, result, "--json needs --out FILE (stdout carries the JSON result)");
   }
@@ -109,10 +131,25 @@ int run_export(const Output& output, const std::string& path, const std::string&
   std::string csv;
   uint64_t messages = 0;
   io::LogEntry entry;
+  if (format == "png") {
+    std::error_code error;
+    std::filesystem::create_directories(out_path, error);
+    if (error) return report_failure(output, result, fmt::format("{}: cannot create the folder ({})", out_path, error.message()));
+  }
   while (true) {
     auto more = (*reader)->next(entry);
     if (!more) return report_failure(output, result, more.error().message);
     if (!*more) break;
+    if (format == "png") {
+      const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
+      const auto* image = message != nullptr ? std::get_if<msgs::ImageMessage>(message) : nullptr;
+      if (image == nullptr) return report_failure(output, result, fmt::format("{}: topic '{}' does not carry images (png exports camera topics)", path, topic));
+      // Named by the image's time in nanoseconds: the files sort in time order.
+      const std::string file = (std::filesystem::path(out_path) / fmt::format("{}.png", image->timestamp.nanoseconds())).string();
+      if (Status written = write_png(*image, file); !written) return report_failure(output, result, written.error().message);
+      ++messages;
+      continue;
+    }
     if (messages++ == 0) csv += io::csv_header(entry);
     io::append_csv_rows(entry, csv);
   }
@@ -122,6 +159,10 @@ int run_export(const Output& output, const std::string& path, const std::string&
   }
   result["ok"] = true;
   result["messages"] = messages;
+  if (format == "png") {
+    result["out"] = out_path;
+    return report_success(output, result, fmt::format("{}: {} images of {} written to {}/\n", path, messages, topic, out_path));
+  }
   if (out_path.empty()) {
     std::fwrite(csv.data(), 1, csv.size(), stdout);
     return 0;
@@ -148,15 +189,15 @@ void add_log_command(CLI::App& app, const Output& output, Command& run) {
     run = [&output, info_path, verify] { return run_info(output, *info_path, *verify); };
   });
 
-  CLI::App* export_command = log_command->add_subcommand("export", "Write one topic's messages as CSV");
+  CLI::App* export_command = log_command->add_subcommand("export", "Write one topic's messages as CSV, or a camera topic's images as PNG files");
   struct ExportOptions {
     std::string path, topic, format = "csv", out;
   };
   auto options = std::make_shared<ExportOptions>();
   export_command->add_option("LOG", options->path, "Sensor log (.mcap)")->required();
   export_command->add_option("--topic", options->topic, "Topic to export, e.g. /imu")->required();
-  export_command->add_option("--format", options->format, "Output format (csv)")->capture_default_str();
-  export_command->add_option("--out", options->out, "Output file (default: stdout)");
+  export_command->add_option("--format", options->format, "Output format: csv, or png for a camera topic (one file per image)")->capture_default_str();
+  export_command->add_option("--out", options->out, "Output file (default: stdout); with png the folder for the images");
   export_command->callback([&output, &run, options] {
     run = [&output, options] { return run_export(output, options->path, options->topic, options->format, options->out); };
   });

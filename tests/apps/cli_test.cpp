@@ -16,9 +16,7 @@
 #include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
 
-#include "hanzo/fusion/io/sensor_log.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include <nlohmann/json.hpp>
 
@@ -454,21 +452,19 @@ TEST(Cli, RunTracksACameraOnlyConfigurationWithVisualOdometry) {
   const CliRun info = run(fmt::format("map info {} --json", map));
   ASSERT_EQ(info.exit_code, 0) << info.err;
   EXPECT_GT(nlohmann::json::parse(info.out)["layers"]["visual_landmarks"]["landmarks"].get<int>(), 500);
-  auto reader = io::SensorLogReader::open((dir / "sim" / "sensors.mcap").string()).value();
-  io::LogEntry entry;
-  int left_images = 0;
-  Timestamp image_time;
-  const std::string image_path = (dir / "left.png").string();
-  for (Result<bool> more = reader->next(entry); more && *more; more = reader->next(entry)) {
-    const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
-    const auto* image = message ? std::get_if<msgs::ImageMessage>(message) : nullptr;
-    if (image == nullptr || entry.topic.find("camera_left") == std::string::npos || ++left_images < 40) continue;
-    ASSERT_EQ(image->encoding, msgs::ImageEncoding::kMono8);
-    cv::imwrite(image_path, cv::Mat(static_cast<int>(image->height), static_cast<int>(image->width), CV_8UC1, const_cast<uint8_t*>(image->data.data())));
-    image_time = image->timestamp;
-    break;
-  }
-  ASSERT_EQ(left_images, 40);
+  const CliRun exported = run(fmt::format("log export {}/sensors.mcap --topic /sensors/camera_left --format png --out {} --json", (dir / "sim").string(),
+                                          (dir / "left").string()));
+  ASSERT_EQ(exported.exit_code, 0) << exported.err;
+  EXPECT_EQ(nlohmann::json::parse(exported.out)["messages"], 51);
+  std::vector<std::string> images;
+  for (const auto& file : std::filesystem::directory_iterator(dir / "left")) images.push_back(file.path().string());
+  std::sort(images.begin(), images.end());
+  ASSERT_EQ(images.size(), 51u);
+  const std::string image_path = images[39];
+  const Timestamp image_time = Timestamp::from_nanoseconds(std::stoll(std::filesystem::path(image_path).stem().string()));
+  const CliRun not_images = run(fmt::format("log export {}/sensors.mcap --topic /sensors/camera_left --format png", (dir / "sim").string()));
+  EXPECT_EQ(not_images.exit_code, 1);
+  EXPECT_THAT(not_images.err, HasSubstr("needs --out FOLDER"));
   const CliRun placed = run(fmt::format("vision relocalize {} {} --calib {}/calibration.yaml --json", map, image_path, (dir / "sim").string()));
   ASSERT_EQ(placed.exit_code, 0) << placed.err;
   const nlohmann::json pose = nlohmann::json::parse(placed.out);
