@@ -839,7 +839,6 @@ struct VisualOdometry::State {
 
   // ---- loop closure ----
 
-  static constexpr int kDirectIndexLevelsUp = 2;
   // Loop verification: the PnP inliers' least share of the descriptor matches, and the most the
   // refinement may move the PnP pose (times the landmarks' median depth; radians).
   static constexpr double kLoopMinInlierShare = 0.2;
@@ -850,9 +849,7 @@ struct VisualOdometry::State {
   bool close_loop(int keyframe_id) {
     if (!places) return false;
     for (auto it = keyframes.upper_bound(place_keyframe.empty() ? -1 : place_keyframe.back()); it != keyframes.end(); ++it) {
-      FeatureVector features;
-      BowVector bow = vocabulary->transform(it->second.frame.features.descriptors, &features, kDirectIndexLevelsUp);
-      places->add(std::move(bow), std::move(features));
+      places->add(vocabulary->transform(it->second.frame.features.descriptors));
       place_keyframe.push_back(it->first);
     }
     const int entry = places->size() - 1;
