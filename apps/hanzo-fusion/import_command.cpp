@@ -1,6 +1,7 @@
 // hanzo-fusion import FORMAT SRC... --out LOG.mcap: converts recordings into a sensor log.
-// Formats: csv (IMU / GNSS / wheel odometry files), rosbag (ROS1 bag v2.0), carmen (2D laser
-// logs), kitti (odometry sequences), euroc (ASL folders), tum-rgbd; see docs/sensor-logs.md.
+// Formats: csv (IMU / GNSS / wheel odometry files), rosbag (ROS 1 bag v2.0), ros2bag (rosbag2:
+// MCAP or SQLite storage), carmen (2D laser logs), kitti (odometry sequences), euroc (ASL
+// folders), tum-rgbd; see docs/sensor-logs.md.
 
 #include <algorithm>
 #include <filesystem>
@@ -32,9 +33,10 @@ struct ImportOptions {
   bool no_foxglove = false;                  // leave out the Foxglove mirror channels
   std::vector<std::string> topic_overrides;  // "STEM=/topic" (csv) or "/ros/topic=/topic" (rosbag)
   double wheel_separation = 0.0;             // rosbag: nav_msgs/Odometry -> wheel odometry
-  bool use_record_time = false;              // rosbag
+  bool use_record_time = false;              // rosbag, ros2bag
+  std::string body_frame;                    // rosbag, ros2bag: the calibration's body frame
   std::string ground_truth;                  // carmen, kitti, euroc, tum-rgbd: reference trajectory as TUM
-  std::string calibration;                   // kitti, euroc, tum-rgbd: the sensors' calibration YAML
+  std::string calibration;                   // kitti, euroc, tum-rgbd, bags: the sensors' calibration YAML
   bool no_images = false;                    // kitti, euroc: leave the cameras out
   std::string poses;                         // kitti: poses file
   double time_origin = 1e9;                  // kitti: Unix time of times.txt's zero
@@ -69,39 +71,63 @@ LogWriteOptions log_options(const ImportOptions& options) {
   return log;
 }
 
+// rosbag (ROS 1) and ros2bag (ROS 2: a bag folder or its .mcap / .db3 file).
 int run_rosbag_import(const Output& output, const ImportOptions& options) {
-  nlohmann::json result = {{"format", "rosbag"}, {"sources", options.sources}, {"out", options.out}};
-  if (options.sources.size() != 1) return report_failure(output, result, "rosbag import takes one bag (SRC) at a time");
+  nlohmann::json result = {{"format", options.format}, {"sources", options.sources}, {"out", options.out}};
+  if (options.sources.size() != 1) return report_failure(output, result, fmt::format("{} import takes one bag (SRC) at a time", options.format));
   io::RosbagImportConfig config;
   auto map = topic_map(options.topic_overrides, "/ros/topic=/log/topic");
   if (!map) return report_failure(output, result, map.error().message);
   config.topic_map = *map;
   if (options.wheel_separation > 0.0) config.wheel_separation = options.wheel_separation;
   config.use_record_time = options.use_record_time;
+  config.body_frame = options.body_frame;
+  const bool ros2 = options.format == "ros2bag";
   io::RosbagImportReport report;
   const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
-    HANZO_ASSIGN_OR_RETURN(report, io::import_rosbag(options.sources[0], writer, config));
-    return writer.add_metadata({"import", {{"importer", "rosbag"}, {"source", options.sources[0]}}});
+    HANZO_ASSIGN_OR_RETURN(report, ros2 ? io::import_rosbag2(options.sources[0], writer, config)
+                                        : io::import_rosbag(options.sources[0], writer, config));
+    return writer.add_metadata({"import", {{"importer", options.format}, {"source", options.sources[0]}}});
   });
   if (code != 0) return code;
   result["ok"] = true;
-  result["bag"] = {{"chunks", report.bag.chunks}, {"messages", report.bag.messages}, {"complete", report.bag.complete},
-                   {"compressions", report.bag.chunk_compressions}};
+  result["bag"] = {{"storage", report.storage}, {"messages", report.messages}, {"warnings", report.warnings}};
+  std::string text = fmt::format("{}: {} storage, {} messages\n", options.sources[0], report.storage, report.messages);
+  if (!ros2) {
+    result["bag"].update({{"chunks", report.bag.chunks}, {"complete", report.bag.complete}, {"compressions", report.bag.chunk_compressions}});
+  }
+  for (const std::string& warning : report.warnings) text += "  warning: " + warning + "\n";
   nlohmann::json topics = nlohmann::json::array();
   uint64_t imported = 0;
-  std::string text = fmt::format("{}: {} chunks, {} messages{}\n", options.sources[0], report.bag.chunks, report.bag.messages,
-                                 report.bag.complete ? "" : " (cut off: read up to the last complete record)");
   for (const io::TopicImportReport& topic : report.topics) {
     imported += topic.imported;
-    topics.push_back({{"ros_topic", topic.ros_topic}, {"ros_type", topic.ros_type}, {"topic", topic.topic},
+    topics.push_back({{"ros_topic", topic.ros_topic}, {"ros_type", topic.ros_type}, {"topic", topic.topic}, {"frame_id", topic.frame_id},
                       {"imported", topic.imported}, {"rejected", topic.rejected}, {"first_rejection", topic.first_rejection}});
     text += fmt::format("  {} ({}) -> {}: {} messages", topic.ros_topic, topic.ros_type, topic.topic, topic.imported);
     text += topic.rejected == 0 ? "\n" : fmt::format(", {} rejected (first {})\n", topic.rejected, topic.first_rejection);
   }
+  for (const auto& [ros_topic, count] : report.calibration_topics) text += fmt::format("  {}: {} messages read for the calibration\n", ros_topic, count);
   for (const auto& [ros_topic, type] : report.skipped_topics) text += fmt::format("  {} ({}) skipped\n", ros_topic, type);
   result["topics"] = topics;
   result["skipped_topics"] = report.skipped_topics;
+  result["calibration_topics"] = report.calibration_topics;
   result["messages"] = imported;
+  result["body_frame"] = report.body_frame;
+  result["calibration_sensors"] = report.calibration.sensors.size();
+  result["calibration_notes"] = report.calibration_notes;
+  for (const std::string& note : report.calibration_notes) text += "  calibration: " + note + "\n";
+  if (!options.calibration.empty()) {
+    if (report.calibration.sensors.empty()) {
+      return report_failure(output, result, fmt::format("--calibration: the bag places no imported sensor (no /tf_static, no "
+                                                        "CameraInfo connecting them){}", report.calibration_notes.empty() ? "" : ": " + report.calibration_notes.front()));
+    }
+    if (Status written = calib::save_calibration(report.calibration, options.calibration); !written) {
+      return report_failure(output, result, written.error().message);
+    }
+    result["calibration"] = options.calibration;
+    text += fmt::format("  calibration ({} sensors, body frame {}) written to {}\n", report.calibration.sensors.size(),
+                        report.body_frame, options.calibration);
+  }
   text += fmt::format("{}: {} messages\n", options.out, imported);
   return report_success(output, result, text);
 }
@@ -249,14 +275,14 @@ int run_import(const Output& output, ImportOptions options) {
     options.redaction = std::make_shared<ImageRedaction>();
     options.redaction->filter = std::move(filter).value();
   }
-  if (options.format == "rosbag") return run_rosbag_import(output, options);
+  if (options.format == "rosbag" || options.format == "ros2bag") return run_rosbag_import(output, options);
   if (options.format == "carmen") return run_carmen_import(output, options);
   if (options.format == "kitti") return run_kitti_import(output, options);
   if (options.format == "euroc") return run_euroc_import(output, options);
   if (options.format == "tum-rgbd") return run_tum_rgbd_import(output, options);
   nlohmann::json result = {{"format", options.format}, {"sources", options.sources}, {"out", options.out}};
   if (options.format != "csv") {
-    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, carmen, kitti, euroc, tum-rgbd)", options.format));
+    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, ros2bag, carmen, kitti, euroc, tum-rgbd)", options.format));
   }
   auto stems = topic_map(options.topic_overrides, "FILE_STEM=/topic");
   if (!stems) return report_failure(output, result, stems.error().message);
@@ -312,20 +338,22 @@ int run_import(const Output& output, ImportOptions options) {
 void add_import_command(CLI::App& app, const Output& output, Command& run) {
   auto options = std::make_shared<ImportOptions>();
   CLI::App* command = app.add_subcommand("import", "Convert recordings into a sensor log (MCAP)");
-  command->add_option("FORMAT", options->format, "Input format: csv, rosbag, carmen, kitti, euroc or tum-rgbd")->required();
-  command->add_option("SRC", options->sources, "Input files (kitti, euroc, tum-rgbd: the sequence folder)")->required();
+  command->add_option("FORMAT", options->format, "Input format: csv, rosbag (ROS 1), ros2bag, carmen, kitti, euroc or tum-rgbd")->required();
+  command->add_option("SRC", options->sources, "Input files (kitti, euroc, tum-rgbd: the sequence folder; ros2bag: the bag folder or its .mcap / .db3 file)")->required();
   command->add_option("--out", options->out, "Sensor log to write (.mcap)")->required();
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
   command->add_flag("--no-foxglove", options->no_foxglove,
                     "Leave out the Foxglove mirror channels (<topic>/foxglove for poses, clouds, fixes, images)");
   command->add_option("--topic", options->topic_overrides,
-                      "csv: FILE_STEM=/topic (default /FILE_STEM); rosbag: /ros/topic=/topic (only these are imported)");
+                      "csv: FILE_STEM=/topic (default /FILE_STEM); rosbag, ros2bag: /ros/topic=/topic (only these are imported)");
   command->add_option("--wheel-separation", options->wheel_separation,
-                      "rosbag, carmen: wheel separation (m) to import odometry as differential-drive wheel odometry");
-  command->add_flag("--use-record-time", options->use_record_time, "rosbag: bag record time instead of header.stamp");
+                      "rosbag, ros2bag, carmen: wheel separation (m) to import odometry / twists as differential-drive wheel odometry");
+  command->add_flag("--use-record-time", options->use_record_time, "rosbag, ros2bag: bag record time instead of header.stamp");
   command->add_option("--ground-truth,--gt", options->ground_truth,
                       "carmen, kitti, euroc, tum-rgbd: write the reference trajectory (carmen: the scans' poses) as TUM");
-  command->add_option("--calibration,--calib", options->calibration, "kitti, euroc, tum-rgbd: write the sensors' calibration YAML");
+  command->add_option("--calibration,--calib", options->calibration, "kitti, euroc, tum-rgbd, rosbag, ros2bag: write the sensors' calibration YAML (bags: from /tf_static and CameraInfo)");
+  command->add_option("--body-frame", options->body_frame,
+                      "rosbag, ros2bag: the calibration's body frame (default base_link, base_footprint, the IMU's frame)");
   command->add_flag("--no-images", options->no_images, "kitti, euroc: leave the camera images out");
   command->add_option("--poses", options->poses, "kitti: poses file (default SEQUENCE/../../poses/NN.txt when present)");
   command->add_option("--time-origin", options->time_origin, "kitti: Unix time (s) of times.txt's zero")->capture_default_str();

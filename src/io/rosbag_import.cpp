@@ -5,20 +5,45 @@
 
 #include <fmt/format.h>
 
-#include "hanzo/fusion/io/ros1_conversion.hpp"
+#include "hanzo/fusion/io/ros2_bag.hpp"
+#include "hanzo/fusion/io/ros_conversion.hpp"
 #include "hanzo/fusion/msgs/validate.hpp"
+#include "ros_static_calibration.hpp"
+#include "ros_wire_reader.hpp"
 
 namespace hanzo::fusion::io {
 namespace {
 
-bool supported(const std::string& type) {
-  return type == "sensor_msgs/Imu" || type == "sensor_msgs/NavSatFix" || type == "sensor_msgs/PointCloud2" ||
-         type == "sensor_msgs/Image" || type == "nav_msgs/Odometry";
+// Types written to the log (normalized ROS 1 names).
+const std::set<std::string> kSensorTypes = {"sensor_msgs/Imu",      "sensor_msgs/NavSatFix",       "sensor_msgs/PointCloud2",
+                                            "sensor_msgs/Image",    "sensor_msgs/CompressedImage", "nav_msgs/Odometry",
+                                            "geometry_msgs/TwistStamped"};
+bool is_camera(const std::string& type) { return type == "sensor_msgs/Image" || type == "sensor_msgs/CompressedImage"; }
+bool is_odometry(const std::string& type) { return type == "nav_msgs/Odometry" || type == "geometry_msgs/TwistStamped"; }
+
+std::vector<std::string> topic_parts(const std::string& ros_topic) {
+  std::vector<std::string> parts;
+  for (std::size_t start = 0; start <= ros_topic.size();) {
+    const std::size_t slash = std::min(ros_topic.find('/', start), ros_topic.size());
+    if (slash > start) parts.push_back(ros_topic.substr(start, slash - start));
+    start = slash + 1;
+  }
+  return parts;
 }
 
-std::string default_topic(const std::string& ros_topic) {
-  const auto slash = ros_topic.find_last_of('/');
-  return "/" + (slash == std::string::npos ? ros_topic : ros_topic.substr(slash + 1));
+// The log topic of a ROS topic when the topic map does not name one (rosbag_import.hpp).
+std::string default_topic(const std::string& ros_topic, const std::string& type, const std::set<std::string>& taken) {
+  // Drivers' generic last names say less than their namespace: "/imu/data", "/ouster/points".
+  static const std::set<std::string> kGeneric = {"data", "data_raw", "raw", "points", "fix", "twist", "compressed"};
+  std::vector<std::string> parts = topic_parts(ros_topic);
+  while (parts.size() > 1 && (kGeneric.count(parts.back()) != 0 || (is_camera(type) && parts.back().rfind("image", 0) == 0))) {
+    parts.pop_back();
+  }
+  const std::string name = "/" + (parts.empty() ? std::string("topic") : parts.back());
+  if (taken.count(name) == 0) return name;
+  std::string whole;
+  for (const std::string& part : topic_parts(ros_topic)) whole += (whole.empty() ? "" : "_") + part;
+  return "/" + whole;
 }
 
 // The decoded message with its time replaced by stamp(time) (per-point times move along).
@@ -33,9 +58,181 @@ Result<msgs::SensorMessage> restamped(Result<Message> message, const StampFuncti
   return msgs::SensorMessage(std::move(*message));
 }
 
-struct TopicState {
-  TopicImportReport report;
-  std::optional<ros1::WheelDistanceIntegrator> wheels;
+// The frame of a decoded message; GNSS fixes keep none, so theirs comes from the ROS header.
+std::string frame_of(const msgs::SensorMessage& message, std::string_view data, ros::Serialization serialization) {
+  return std::visit(
+      [&](const auto& m) {
+        if constexpr (requires { m.frame_id; }) {
+          return m.frame_id;
+        } else {
+          ros::WireReader r(data, serialization);
+          return r.header().second;
+        }
+      },
+      message);
+}
+
+// Turns the messages of one bag (ROS 1 or ROS 2) into log messages and the calibration.
+class TopicImporter {
+ public:
+  TopicImporter(std::string path, SensorLogWriter& writer, const RosbagImportConfig& config)
+      : path_(std::move(path)), writer_(writer), config_(config) {}
+
+  // Called for every topic of the bag before its messages; `serialization` empty when the
+  // topic's serialization cannot be read.
+  Status add_topic(const std::string& ros_topic, const std::string& stored_type, std::optional<ros::Serialization> serialization) {
+    bag_topics_.insert(ros_topic);
+    const std::string type = ros::normalized_type(stored_type);
+    if (serialization && (type == "sensor_msgs/CameraInfo" || (type == "tf2_msgs/TFMessage" && ros_topic == "/tf_static"))) {
+      calibration_topics_[ros_topic] = {type, *serialization};
+      report_.calibration_topics[ros_topic] = 0;
+      return ok_status();
+    }
+    const bool selected = config_.topic_map.empty() || config_.topic_map.count(ros_topic) != 0;
+    if (!selected || !serialization || kSensorTypes.count(type) == 0) {
+      report_.skipped_topics[ros_topic] = serialization ? stored_type : stored_type + " (serialization not readable)";
+      return ok_status();
+    }
+    if (topics_.count(ros_topic) != 0) return ok_status();  // several publishers of one topic
+    TopicState state;
+    state.type = type;
+    state.serialization = *serialization;
+    state.report.ros_topic = ros_topic;
+    state.report.ros_type = stored_type;
+    if (is_odometry(type)) {
+      if (!config_.wheel_separation || !(*config_.wheel_separation > 0.0)) {
+        return Error(fmt::format("{}: topic {} is {}: give the wheel separation of the base (--wheel-separation METRES) to "
+                                 "import it as wheel odometry, or leave it out", path_, ros_topic, type));
+      }
+      state.wheels.emplace(*config_.wheel_separation);
+    }
+    topics_.emplace(ros_topic, std::move(state));
+    return ok_status();
+  }
+
+  // After all add_topic calls: names the log topics and checks the topic map.
+  Status finish_topics() {
+    for (const auto& [ros_topic, topic] : config_.topic_map) {
+      if (bag_topics_.count(ros_topic) == 0) return Error(fmt::format("{}: the bag has no topic '{}'", path_, ros_topic));
+      if (topics_.count(ros_topic) == 0) {
+        const auto skipped = report_.skipped_topics.find(ros_topic);
+        const std::string type = skipped != report_.skipped_topics.end() ? skipped->second : calibration_topics_[ros_topic].first;
+        return Error(fmt::format("{}: topic '{}' has type {}, which cannot be imported", path_, ros_topic, type));
+      }
+    }
+    std::set<std::string> taken;
+    for (auto& [ros_topic, state] : topics_) {  // mapped names first: defaults must not take them
+      const auto mapped = config_.topic_map.find(ros_topic);
+      if (mapped != config_.topic_map.end()) taken.insert(state.report.topic = mapped->second);
+    }
+    for (auto& [ros_topic, state] : topics_) {
+      if (state.report.topic.empty()) taken.insert(state.report.topic = default_topic(ros_topic, state.type, taken));
+    }
+    return ok_status();
+  }
+
+  // One message; only a failure to write the log is an error.
+  Status on_message(const std::string& ros_topic, int64_t record_time_ns, std::string_view data) {
+    ++report_.messages;
+    const Timestamp record_time = Timestamp::from_nanoseconds(record_time_ns);
+    if (const auto calibration = calibration_topics_.find(ros_topic); calibration != calibration_topics_.end()) {
+      read_calibration(ros_topic, calibration->second.first, calibration->second.second, data);
+      return ok_status();
+    }
+    const auto it = topics_.find(ros_topic);
+    if (it == topics_.end()) return ok_status();
+    TopicState& state = it->second;
+    Result<msgs::SensorMessage> converted = convert(state, record_time, data);
+    // A message that does not decode or validate is left out and counted.
+    const Status valid = converted ? std::visit([](const auto& m) { return msgs::validate(m); }, *converted)
+                                   : Status(converted.error());
+    if (!valid) {
+      if (state.report.rejected++ == 0) {
+        state.report.first_rejection = fmt::format("at {} ns: {}", record_time_ns, valid.error().message);
+      }
+      return ok_status();
+    }
+    if (state.report.imported == 0) state.report.frame_id = frame_of(*converted, data, state.serialization);
+    HANZO_RETURN_IF_ERROR(writer_.write(state.report.topic, *converted, state.report.topic.substr(1)));
+    ++state.report.imported;
+    return ok_status();
+  }
+
+  RosbagImportReport finish() {
+    std::vector<ros::ImportedSensor> sensors;
+    for (auto& [ros_topic, state] : topics_) {
+      if (state.report.imported > 0) {
+        sensors.push_back({state.report.topic.substr(1), ros_topic, state.report.frame_id, is_camera(state.type),
+                           state.type == "sensor_msgs/Imu"});
+      }
+      report_.topics.push_back(std::move(state.report));
+    }
+    ros::StaticCalibration calibration = ros::static_calibration(sensors, transforms_, camera_infos_, config_.body_frame);
+    report_.body_frame = calibration.body_frame;
+    report_.calibration = std::move(calibration.calibration);
+    report_.calibration_notes.insert(report_.calibration_notes.end(), calibration.notes.begin(), calibration.notes.end());
+    if (Status valid = calib::validate(report_.calibration); !valid) {
+      report_.calibration_notes.push_back("no calibration: " + valid.error().message);
+      report_.calibration.sensors.clear();
+    }
+    return std::move(report_);
+  }
+
+ private:
+  struct TopicState {
+    std::string type;  // normalized
+    ros::Serialization serialization = ros::Serialization::kRos1;
+    TopicImportReport report;
+    std::optional<ros::WheelDistanceIntegrator> wheels;
+  };
+
+  Result<msgs::SensorMessage> convert(TopicState& state, Timestamp record_time, std::string_view data) {
+    auto stamp = [&](Timestamp header_stamp) { return config_.use_record_time || header_stamp.is_zero() ? record_time : header_stamp; };
+    const ros::Serialization s = state.serialization;
+    const std::string& type = state.type;
+    if (type == "sensor_msgs/Imu") return restamped(ros::imu_from_ros(data, s), stamp);
+    if (type == "sensor_msgs/NavSatFix") return restamped(ros::gnss_from_ros(data, s), stamp);
+    if (type == "sensor_msgs/PointCloud2") return restamped(ros::point_cloud_from_ros(data, s), stamp);
+    if (type == "sensor_msgs/Image") return restamped(ros::image_from_ros(data, s), stamp);
+    if (type == "sensor_msgs/CompressedImage") return restamped(ros::compressed_image_from_ros(data, s), stamp);
+    auto twist = type == "nav_msgs/Odometry" ? ros::odometry_twist_from_ros(data, s) : ros::twist_stamped_from_ros(data, s);
+    if (!twist) return twist.error();
+    twist->stamp = stamp(twist->stamp);
+    return restamped(state.wheels->add(*twist), [](Timestamp t) { return t; });
+  }
+
+  void read_calibration(const std::string& ros_topic, const std::string& type, ros::Serialization serialization, std::string_view data) {
+    ++report_.calibration_topics[ros_topic];
+    if (type == "sensor_msgs/CameraInfo") {
+      auto info = ros::camera_info_from_ros(data, serialization);
+      if (!info) {
+        if (camera_info_errors_.insert(ros_topic).second) report_.calibration_notes.push_back(ros_topic + ": " + info.error().message);
+        return;
+      }
+      for (const ros::CameraInfoOnTopic& known : camera_infos_) {
+        if (known.ros_topic == ros_topic) return;  // the first one of a topic counts (they repeat with every image)
+      }
+      camera_infos_.push_back({ros_topic, std::move(*info)});
+      return;
+    }
+    auto transforms = ros::transforms_from_ros(data, serialization);
+    if (!transforms) {
+      report_.calibration_notes.push_back(ros_topic + ": " + transforms.error().message);
+      return;
+    }
+    transforms_.insert(transforms_.end(), transforms->begin(), transforms->end());
+  }
+
+  std::string path_;
+  SensorLogWriter& writer_;
+  const RosbagImportConfig& config_;
+  RosbagImportReport report_;
+  std::set<std::string> bag_topics_;
+  std::map<std::string, TopicState> topics_;  // by ROS topic
+  std::map<std::string, std::pair<std::string, ros::Serialization>> calibration_topics_;  // ROS topic -> type
+  std::vector<ros::FrameTransform> transforms_;
+  std::vector<ros::CameraInfoOnTopic> camera_infos_;
+  std::set<std::string> camera_info_errors_;
 };
 
 }  // namespace
@@ -43,76 +240,42 @@ struct TopicState {
 Result<RosbagImportReport> import_rosbag(const std::string& path, SensorLogWriter& writer, const RosbagImportConfig& config) {
   std::map<uint32_t, ros1::Connection> connections;
   HANZO_ASSIGN_OR_RETURN(connections, ros1::read_bag_connections(path));
-  RosbagImportReport report;
-  std::map<std::string, TopicState> topics;  // by ROS topic
-  std::set<std::string> bag_topics;
+  TopicImporter importer(path, writer, config);
   for (const auto& [id, connection] : connections) {
-    bag_topics.insert(connection.topic);
-    const bool selected = config.topic_map.empty() || config.topic_map.count(connection.topic) != 0;
-    if (!selected || !supported(connection.type)) {
-      report.skipped_topics[connection.topic] = connection.type;
-      continue;
-    }
-    if (topics.count(connection.topic) != 0) continue;  // several publishers of one topic
-    TopicState state;
-    state.report.ros_topic = connection.topic;
-    state.report.ros_type = connection.type;
-    const auto mapped = config.topic_map.find(connection.topic);
-    state.report.topic = mapped == config.topic_map.end() ? default_topic(connection.topic) : mapped->second;
-    if (connection.type == "nav_msgs/Odometry") {
-      if (!config.wheel_separation || !(*config.wheel_separation > 0.0)) {
-        return Error(fmt::format("{}: topic {} is nav_msgs/Odometry: give the wheel separation of the base "
-                                 "(--wheel-separation METRES) to import it as wheel odometry, or leave it out",
-                                 path, connection.topic));
-      }
-      state.wheels.emplace(*config.wheel_separation);
-    }
-    topics.emplace(connection.topic, std::move(state));
+    HANZO_RETURN_IF_ERROR(importer.add_topic(connection.topic, connection.type, ros::Serialization::kRos1));
   }
-  for (const auto& [ros_topic, topic] : config.topic_map) {
-    if (bag_topics.count(ros_topic) == 0) return Error(fmt::format("{}: the bag has no topic '{}'", path, ros_topic));
-    if (topics.count(ros_topic) == 0) {
-      return Error(fmt::format("{}: topic '{}' has type {}, which cannot be imported", path, ros_topic, report.skipped_topics[ros_topic]));
-    }
-  }
+  HANZO_RETURN_IF_ERROR(importer.finish_topics());
+  ros1::BagSummary bag;
+  HANZO_ASSIGN_OR_RETURN(bag, ros1::read_bag(path, [&](const ros1::BagMessage& message) {
+    return importer.on_message(message.connection->topic, message.record_time.nanoseconds(), message.data);
+  }));
+  RosbagImportReport report = importer.finish();
+  report.storage = "ros1";
+  report.bag = bag;
+  if (!bag.complete) report.warnings.push_back(fmt::format("{}: cut off; read up to the last complete record", path));
+  return report;
+}
 
-  auto on_message = [&](const ros1::BagMessage& message) -> Status {
-    const auto it = topics.find(message.connection->topic);
-    if (it == topics.end()) return ok_status();
-    TopicState& state = it->second;
-    const std::string& type = message.connection->type;
-    const Timestamp record_time = Timestamp::from_nanoseconds(message.record_time.nanoseconds());
-    auto stamp = [&](Timestamp header_stamp) { return config.use_record_time || header_stamp.is_zero() ? record_time : header_stamp; };
-    Result<msgs::SensorMessage> converted = Error("");
-    if (type == "sensor_msgs/Imu") {
-      converted = restamped(ros1::imu_from_ros(message.data), stamp);
-    } else if (type == "sensor_msgs/NavSatFix") {
-      converted = restamped(ros1::gnss_from_ros(message.data), stamp);
-    } else if (type == "sensor_msgs/PointCloud2") {
-      converted = restamped(ros1::point_cloud_from_ros(message.data), stamp);
-    } else if (type == "sensor_msgs/Image") {
-      converted = restamped(ros1::image_from_ros(message.data), stamp);
-    } else {  // nav_msgs/Odometry
-      auto twist = ros1::odometry_twist_from_ros(message.data);
-      if (twist) twist->stamp = stamp(twist->stamp);
-      converted = twist ? restamped(state.wheels->add(*twist), [](Timestamp t) { return t; }) : Error(twist.error());
-    }
-    // A message that does not decode or validate is left out and counted; only a failure to
-    // write the log ends the import.
-    const Status valid = converted ? std::visit([](const auto& m) { return msgs::validate(m); }, *converted)
-                                   : Status(converted.error());
-    if (!valid) {
-      if (state.report.rejected++ == 0) {
-        state.report.first_rejection = fmt::format("at {} ns: {}", record_time.nanoseconds(), valid.error().message);
-      }
-      return ok_status();
-    }
-    HANZO_RETURN_IF_ERROR(writer.write(state.report.topic, *converted, state.report.topic.substr(1)));
-    ++state.report.imported;
-    return ok_status();
+Result<RosbagImportReport> import_rosbag2(const std::string& path, SensorLogWriter& writer, const RosbagImportConfig& config) {
+  ros2::Bag bag;
+  HANZO_ASSIGN_OR_RETURN(bag, ros2::open_bag(path));
+  TopicImporter importer(path, writer, config);
+  auto serialization_of = [](const std::string& format) -> std::optional<ros::Serialization> {
+    if (format == "cdr") return ros::Serialization::kCdr;
+    if (format == "ros1") return ros::Serialization::kRos1;
+    return std::nullopt;
   };
-  HANZO_ASSIGN_OR_RETURN(report.bag, ros1::read_bag(path, on_message));
-  for (auto& [ros_topic, state] : topics) report.topics.push_back(std::move(state.report));
+  for (const ros2::Topic& topic : bag.topics) {
+    HANZO_RETURN_IF_ERROR(importer.add_topic(topic.name, topic.type, serialization_of(topic.serialization_format)));
+  }
+  HANZO_RETURN_IF_ERROR(importer.finish_topics());
+  ros2::BagSummary summary;
+  HANZO_ASSIGN_OR_RETURN(summary, ros2::read_bag(bag, [&](const ros2::BagMessage& message) {
+    return importer.on_message(message.topic->name, message.record_time_ns, message.data);
+  }));
+  RosbagImportReport report = importer.finish();
+  report.storage = bag.storage;
+  report.warnings = summary.warnings;
   return report;
 }
 

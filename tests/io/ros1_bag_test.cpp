@@ -14,13 +14,14 @@
 #include <lz4frame.h>
 
 #include "hanzo/fusion/io/ros1_bag.hpp"
-#include "hanzo/fusion/io/ros1_conversion.hpp"
+#include "hanzo/fusion/io/ros_conversion.hpp"
 #include "hanzo/fusion/io/rosbag_import.hpp"
 
 namespace hanzo::fusion::io::ros1 {
 namespace {
 
 using ::testing::HasSubstr;
+constexpr ros::Serialization kRos1 = ros::Serialization::kRos1;
 
 // ROS1 serialization helpers.
 struct Ser {
@@ -135,7 +136,7 @@ TEST(Ros1Bag, ReadsUncompressedAndLz4ChunksInFileOrder) {
   std::vector<int64_t> times;
   auto summary = read_bag(path, [&](const BagMessage& m) {
     EXPECT_EQ(m.connection->type, "sensor_msgs/Imu");
-    auto imu = imu_from_ros(m.data);
+    auto imu = ros::imu_from_ros(m.data, kRos1);
     EXPECT_TRUE(imu.ok());
     times.push_back(imu->timestamp.nanoseconds());
     return ok_status();
@@ -177,20 +178,20 @@ TEST(Ros1Bag, RejectsOtherFilesAndVersions) {
 }
 
 TEST(Ros1Conversion, NavSatFixStatusAndCovariance) {
-  auto fix = gnss_from_ros(navsatfix_data(0));
+  auto fix = ros::gnss_from_ros(navsatfix_data(0), kRos1);
   ASSERT_TRUE(fix.ok());
   EXPECT_EQ(fix->timestamp.nanoseconds(), 100'000'000'000);
   EXPECT_EQ(fix->fix_type, msgs::GnssFixType::kFix3d);
   EXPECT_DOUBLE_EQ(fix->latitude, 48.1);
   ASSERT_TRUE(fix->position_covariance.has_value());
   EXPECT_EQ((*fix->position_covariance)(2, 2), 4.0);
-  EXPECT_EQ(gnss_from_ros(navsatfix_data(-1))->fix_type, msgs::GnssFixType::kNoFix);
-  EXPECT_EQ(gnss_from_ros(navsatfix_data(2))->fix_type, msgs::GnssFixType::kRtkFixed);
-  EXPECT_THAT(gnss_from_ros(navsatfix_data(0).substr(0, 30)).error().message, HasSubstr("NavSatFix: truncated"));
+  EXPECT_EQ(ros::gnss_from_ros(navsatfix_data(-1), kRos1)->fix_type, msgs::GnssFixType::kNoFix);
+  EXPECT_EQ(ros::gnss_from_ros(navsatfix_data(2), kRos1)->fix_type, msgs::GnssFixType::kRtkFixed);
+  EXPECT_THAT(ros::gnss_from_ros(navsatfix_data(0).substr(0, 30), kRos1).error().message, HasSubstr("NavSatFix: truncated"));
 }
 
 TEST(Ros1Conversion, PointCloud2FieldsScaledAndNanDropped) {
-  auto cloud = point_cloud_from_ros(pointcloud_data());
+  auto cloud = ros::point_cloud_from_ros(pointcloud_data(), kRos1);
   ASSERT_TRUE(cloud.ok()) << cloud.error().message;
   ASSERT_EQ(cloud->points.size(), 2u);  // the NaN point is dropped
   EXPECT_EQ(cloud->points[1], Eigen::Vector3f(2.0F, 0.5F, -0.25F));
@@ -198,23 +199,23 @@ TEST(Ros1Conversion, PointCloud2FieldsScaledAndNanDropped) {
   EXPECT_FLOAT_EQ(cloud->intensities[1], 0.2F);
   EXPECT_EQ(cloud->ring_ids, (std::vector<uint32_t>{3, 5}));
   EXPECT_NEAR((cloud->point_timestamps[1] - cloud->timestamp).nanoseconds(), 100'000'000, 2);  // 0.1 as float32
-  EXPECT_THAT(point_cloud_from_ros(pointcloud_data().substr(0, 60)).error().message, HasSubstr("truncated"));
+  EXPECT_THAT(ros::point_cloud_from_ros(pointcloud_data().substr(0, 60), kRos1).error().message, HasSubstr("truncated"));
 }
 
 TEST(Ros1Conversion, ImageRowPaddingIsRemoved) {
-  auto image = image_from_ros(image_data());
+  auto image = ros::image_from_ros(image_data(), kRos1);
   ASSERT_TRUE(image.ok()) << image.error().message;
   EXPECT_EQ(image->encoding, msgs::ImageEncoding::kMono8);
   EXPECT_EQ(image->data, (std::vector<uint8_t>{1, 2, 3, 4, 5, 6}));
   std::string yuv = image_data();
   const auto at = yuv.find("mono8");
   yuv.replace(at, 5, "yuv42");
-  EXPECT_THAT(image_from_ros(yuv).error().message, HasSubstr("encoding 'yuv42' is not supported"));
+  EXPECT_THAT(ros::image_from_ros(yuv, kRos1).error().message, HasSubstr("encoding 'yuv42' is not supported"));
 }
 
 TEST(Ros1Conversion, WheelIntegratorRejectsTimeGoingBack) {
-  WheelDistanceIntegrator integrator(0.5);
-  OdometryTwist twist;
+  ros::WheelDistanceIntegrator integrator(0.5);
+  ros::OdometryTwist twist;
   twist.stamp = Timestamp::from_nanoseconds(1'000'000'000);
   twist.forward_speed = 1.0;
   twist.yaw_rate = 0.2;
@@ -246,12 +247,12 @@ TEST(RosbagImport, AllTypesWithBadMessagesCountedNotFatal) {
   ASSERT_EQ(report->topics.size(), 4u);
   std::map<std::string, TopicImportReport> by_topic;
   for (const auto& t : report->topics) by_topic[t.topic] = t;
-  EXPECT_EQ(by_topic["/data"].imported, 1u);
-  EXPECT_EQ(by_topic["/data"].rejected, 1u);
-  EXPECT_THAT(by_topic["/data"].first_rejection, HasSubstr("linear_acceleration.z"));
+  EXPECT_EQ(by_topic["/imu"].imported, 1u);
+  EXPECT_EQ(by_topic["/imu"].rejected, 1u);
+  EXPECT_THAT(by_topic["/imu"].first_rejection, HasSubstr("linear_acceleration.z"));
   EXPECT_EQ(by_topic["/fix"].imported, 1u);
   EXPECT_EQ(by_topic["/velodyne_points"].imported, 1u);
-  EXPECT_EQ(by_topic["/image"].imported, 1u);
+  EXPECT_EQ(by_topic["/camera"].imported, 1u);  // a camera is named by its namespace
   EXPECT_EQ(report->skipped_topics.at("/tf"), "tf2_msgs/TFMessage");
 
   auto missing = SensorLogWriter::open(log);

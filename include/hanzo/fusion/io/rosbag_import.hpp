@@ -1,6 +1,18 @@
 #pragma once
-// ROS1 bag -> sensor log: the topics of supported types (ros1_conversion.hpp) become channels
-// of the log, named by a topic map ("/imu/data" -> "/imu") or "/<last part of the ROS topic>".
+// ROS bags -> sensor log: ROS 1 bags (v2.0) and ROS 2 bags (rosbag2: MCAP or SQLite storage,
+// ros2_bag.hpp). The topics of supported types (ros_conversion.hpp) become channels of the log,
+// named by a topic map ("/imu/data" -> "/imu") or by default "/" + the last part of the ROS
+// topic ("/velodyne_points", "/hesai/pandar" -> "/pandar"), where generic last parts (data,
+// data_raw, raw, points, fix, twist, compressed, and image* of cameras) give way to the
+// namespace ("/imu/data" -> "/imu", "/ouster/points" -> "/ouster", "/camera/left/image_raw" ->
+// "/left", "/cam0/image_raw/compressed" -> "/cam0"); a name taken by an earlier topic -> the
+// whole ROS topic with '_' for '/' ("/camera/image_raw/compressed" -> "/camera_image_raw_compressed").
+// The sensor name of each channel is its log topic without the leading '/'.
+//
+// Calibration: /tf_static (tf2_msgs/TFMessage) and sensor_msgs/CameraInfo topics are not
+// written to the log; they give each imported sensor's T_body_sensor (the static transform tree
+// from the body frame to the frame_id of the sensor's messages) and each camera's intrinsics
+// (the CameraInfo of the same frame_id, or of the same topic namespace).
 
 #include <cstdint>
 #include <map>
@@ -8,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/io/ros1_bag.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
@@ -15,33 +28,51 @@
 namespace hanzo::fusion::io {
 
 struct RosbagImportConfig {
-  /// ROS topic -> log topic. When not empty, only these ROS topics are imported.
+  /// ROS topic -> log topic. When not empty, only these ROS topics are imported (calibration
+  /// topics are read all the same).
   std::map<std::string, std::string> topic_map;
-  /// Wheel separation (m) of the differential-drive base; needed to import nav_msgs/Odometry.
+  /// Wheel separation (m) of the differential-drive base; needed to import nav_msgs/Odometry
+  /// and geometry_msgs/TwistStamped as wheel odometry.
   std::optional<double> wheel_separation;
   /// Use the bag's record time instead of header.stamp (also used when a stamp is zero).
   bool use_record_time = false;
+  /// The frame the calibration's transforms map into. Empty: base_link, else base_footprint,
+  /// else the frame of the first IMU topic, else of the first camera, else of the first sensor.
+  std::string body_frame;
 };
 
 struct TopicImportReport {
   std::string ros_topic;
   std::string ros_type;
   std::string topic;          ///< in the log
+  std::string frame_id;       ///< of its first message
   uint64_t imported = 0;
   uint64_t rejected = 0;      ///< messages that did not decode or failed validation
   std::string first_rejection;  ///< the reason of the first rejected message
 };
 
 struct RosbagImportReport {
-  ros1::BagSummary bag;
+  std::string storage;       ///< "ros1" (a ROS 1 bag), "mcap" or "sqlite3" (ROS 2 storage)
+  uint64_t messages = 0;     ///< messages in the bag, imported or not
+  ros1::BagSummary bag;      ///< ROS 1 bags: chunks and their compressions
+  std::vector<std::string> warnings;                     ///< e.g. a cut-off storage file, read to its last chunk
   std::vector<TopicImportReport> topics;                 ///< imported topics, by ROS topic
   std::map<std::string, std::string> skipped_topics;     ///< ROS topic -> type, unsupported or not selected
+  std::map<std::string, uint64_t> calibration_topics;    ///< /tf_static and CameraInfo topics -> messages read
+
+  std::string body_frame;           ///< the calibration's body frame; empty when nothing was found
+  calib::Calibration calibration;   ///< imported sensors placed by /tf_static, cameras with intrinsics
+  std::vector<std::string> calibration_notes;  ///< what could not be placed, and why
 };
 
-/// Imports every message of the selected topics, in bag order. Messages that do not decode or
-/// fail validation are counted per topic (with the first reason) and left out; the import
-/// fails for a malformed bag, a topic-map entry naming a topic the bag lacks, Odometry without
-/// a wheel separation, or a write error.
+/// Imports every message of the selected topics of a ROS 1 bag, in bag order. Messages that do
+/// not decode or fail validation are counted per topic (with the first reason) and left out;
+/// the import fails for a malformed bag, a topic-map entry naming a topic the bag lacks or of a
+/// type that cannot be imported, odometry without a wheel separation, or a write error.
 Result<RosbagImportReport> import_rosbag(const std::string& path, SensorLogWriter& writer, const RosbagImportConfig& config);
+
+/// The same for a ROS 2 bag: a folder with metadata.yaml, or one .mcap / .db3 storage file.
+/// Topics in a serialization other than cdr (or ros1 in MCAP) are skipped and listed.
+Result<RosbagImportReport> import_rosbag2(const std::string& path, SensorLogWriter& writer, const RosbagImportConfig& config);
 
 }  // namespace hanzo::fusion::io
