@@ -1,5 +1,6 @@
 #include "hanzo/fusion/io/rosbag_import.hpp"
 
+#include <algorithm>
 #include <set>
 #include <type_traits>
 
@@ -142,19 +143,30 @@ class TopicImporter {
     const auto it = topics_.find(ros_topic);
     if (it == topics_.end()) return ok_status();
     TopicState& state = it->second;
-    Result<msgs::SensorMessage> converted = convert(state, record_time, data);
-    // A message that does not decode or validate is left out and counted.
-    const Status valid = converted ? std::visit([](const auto& m) { return msgs::validate(m); }, *converted)
-                                   : Status(converted.error());
-    if (!valid) {
-      if (state.report.rejected++ == 0) {
-        state.report.first_rejection = fmt::format("at {} ns: {}", record_time_ns, valid.error().message);
-      }
+    if (is_odometry(state.type)) {
+      // Twists are integrated in stamp order once all are read: recorders store by arrival,
+      // in which odometry stamps may go back.
+      auto twist = state.type == "nav_msgs/Odometry" ? ros::odometry_twist_from_ros(data, state.serialization)
+                                                     : ros::twist_stamped_from_ros(data, state.serialization);
+      if (!twist) return reject(state, record_time_ns, twist.error().message);
+      twist->stamp = stamp(twist->stamp, record_time);
+      state.twists.push_back({record_time_ns, *twist});
       return ok_status();
     }
-    if (state.report.imported == 0) state.report.frame_id = frame_of(*converted, data, state.serialization);
-    HANZO_RETURN_IF_ERROR(writer_.write(state.report.topic, *converted, state.report.topic.substr(1)));
-    ++state.report.imported;
+    return write(state, record_time_ns, convert(state, record_time, data), data);
+  }
+
+  // After the last message: integrates and writes the odometry topics.
+  Status flush() {
+    for (auto& [ros_topic, state] : topics_) {
+      std::stable_sort(state.twists.begin(), state.twists.end(),
+                       [](const auto& a, const auto& b) { return a.second.stamp < b.second.stamp; });
+      for (const auto& [record_time_ns, twist] : state.twists) {
+        Result<msgs::WheelOdometryMessage> wheels = state.wheels->add(twist);
+        HANZO_RETURN_IF_ERROR(write(state, record_time_ns, wheels ? Result<msgs::SensorMessage>(*wheels) : wheels.error(), {}));
+      }
+      state.twists.clear();
+    }
     return ok_status();
   }
 
@@ -184,21 +196,39 @@ class TopicImporter {
     ros::Serialization serialization = ros::Serialization::kRos1;
     TopicImportReport report;
     std::optional<ros::WheelDistanceIntegrator> wheels;
+    std::vector<std::pair<int64_t, ros::OdometryTwist>> twists;  // odometry: (record time ns, twist) until flush()
   };
 
-  Result<msgs::SensorMessage> convert(TopicState& state, Timestamp record_time, std::string_view data) {
-    auto stamp = [&](Timestamp header_stamp) { return config_.use_record_time || header_stamp.is_zero() ? record_time : header_stamp; };
+  Timestamp stamp(Timestamp header_stamp, Timestamp record_time) const {
+    return config_.use_record_time || header_stamp.is_zero() ? record_time : header_stamp;
+  }
+
+  // Counts a message left out (did not decode or validate), keeping the first reason.
+  Status reject(TopicState& state, int64_t record_time_ns, const std::string& reason) {
+    if (state.report.rejected++ == 0) state.report.first_rejection = fmt::format("at {} ns: {}", record_time_ns, reason);
+    return ok_status();
+  }
+
+  // Writes a converted message that validates; only a failure to write the log is an error.
+  Status write(TopicState& state, int64_t record_time_ns, const Result<msgs::SensorMessage>& converted, std::string_view data) {
+    const Status valid = converted ? std::visit([](const auto& m) { return msgs::validate(m); }, *converted)
+                                   : Status(converted.error());
+    if (!valid) return reject(state, record_time_ns, valid.error().message);
+    if (state.report.imported == 0) state.report.frame_id = frame_of(*converted, data, state.serialization);
+    HANZO_RETURN_IF_ERROR(writer_.write(state.report.topic, *converted, state.report.topic.substr(1)));
+    ++state.report.imported;
+    return ok_status();
+  }
+
+  Result<msgs::SensorMessage> convert(const TopicState& state, Timestamp record_time, std::string_view data) const {
+    auto stamp = [&](Timestamp header_stamp) { return this->stamp(header_stamp, record_time); };
     const ros::Serialization s = state.serialization;
     const std::string& type = state.type;
     if (type == "sensor_msgs/Imu") return restamped(ros::imu_from_ros(data, s), stamp);
     if (type == "sensor_msgs/NavSatFix") return restamped(ros::gnss_from_ros(data, s), stamp);
     if (type == "sensor_msgs/PointCloud2") return restamped(ros::point_cloud_from_ros(data, s), stamp);
     if (type == "sensor_msgs/Image") return restamped(ros::image_from_ros(data, s), stamp);
-    if (type == "sensor_msgs/CompressedImage") return restamped(ros::compressed_image_from_ros(data, s), stamp);
-    auto twist = type == "nav_msgs/Odometry" ? ros::odometry_twist_from_ros(data, s) : ros::twist_stamped_from_ros(data, s);
-    if (!twist) return twist.error();
-    twist->stamp = stamp(twist->stamp);
-    return restamped(state.wheels->add(*twist), [](Timestamp t) { return t; });
+    return restamped(ros::compressed_image_from_ros(data, s), stamp);  // sensor_msgs/CompressedImage
   }
 
   void read_calibration(const std::string& ros_topic, const std::string& type, ros::Serialization serialization, std::string_view data) {
@@ -249,6 +279,7 @@ Result<RosbagImportReport> import_rosbag(const std::string& path, SensorLogWrite
   HANZO_ASSIGN_OR_RETURN(bag, ros1::read_bag(path, [&](const ros1::BagMessage& message) {
     return importer.on_message(message.connection->topic, message.record_time.nanoseconds(), message.data);
   }));
+  HANZO_RETURN_IF_ERROR(importer.flush());
   RosbagImportReport report = importer.finish();
   report.storage = "ros1";
   report.bag = bag;
@@ -273,6 +304,7 @@ Result<RosbagImportReport> import_rosbag2(const std::string& path, SensorLogWrit
   HANZO_ASSIGN_OR_RETURN(summary, ros2::read_bag(bag, [&](const ros2::BagMessage& message) {
     return importer.on_message(message.topic->name, message.record_time_ns, message.data);
   }));
+  HANZO_RETURN_IF_ERROR(importer.flush());
   RosbagImportReport report = importer.finish();
   report.storage = bag.storage;
   report.warnings = summary.warnings;

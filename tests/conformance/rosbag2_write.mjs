@@ -1,45 +1,21 @@
-// Writes a ROS 2 bag the way rosbag2 lays it out (a folder with metadata.yaml and one storage
-// file) with Foxglove's libraries: messages serialized to CDR by @foxglove/rosmsg2-serialization
-// from the ROS 2 Humble definitions of @foxglove/rosmsg-msgs-common, stored in MCAP by
-// @mcap/core (profile ros2) or in rosbag2's SQLite schema by sql.js. Prints one JSON object with
-// the values written, for tests/io/rosbag2_conformance_test.cpp to compare the import against.
+// Writes a ROS 2 bag (rosbag2_writing.mjs) holding every sensor type the importer reads, in the
+// layouts of the common ROS 2 drivers, and prints one JSON object with the values written, for
+// tests/io/rosbag2_conformance_test.cpp to compare the import against.
 // Usage: node rosbag2_write.mjs DIR mcap|sqlite3
-import { mkdir, open, writeFile } from "node:fs/promises";
-import { createRequire } from "node:module";
+import { mkdir } from "node:fs/promises";
 import { deflateSync } from "node:zlib";
 import { crc32 } from "@foxglove/crc";
-import { McapWriter } from "@mcap/core";
-import { MessageWriter } from "@foxglove/rosmsg2-serialization";
-import { ros2humble } from "@foxglove/rosmsg-msgs-common";
-import { stringify } from "@foxglove/rosmsg";
-
-const require = createRequire(import.meta.url);
-const initSqlJs = require("sql.js");
+import { ros2Name, serialize, writeBag } from "./rosbag2_writing.mjs";
 
 const [dir, storage] = process.argv.slice(2);
 await mkdir(dir, { recursive: true });
-
-// The definition of `type` followed by every type it uses (MessageWriter's input).
-function definitions(type) {
-  const out = [];
-  const visit = (name) => {
-    if (out.some((d) => d.name === name)) return;
-    const definition = ros2humble[name];
-    out.push(definition);
-    for (const field of definition.definitions) if (field.isComplex) visit(field.type);
-  };
-  visit(type);
-  return out;
-}
-const ros2Name = (type) => type.replace("/", "/msg/");  // sensor_msgs/Imu -> sensor_msgs/msg/Imu
 
 const T0 = 1700000000n * 1000000000n;  // header stamps start here (ns)
 const time = (ns) => ({ sec: Number(ns / 1000000000n), nanosec: Number(ns % 1000000000n) });
 const messages = [];  // { topic, type, recordTime (ns), data }
 const written = {};   // per topic: what the test compares against
 function add(topic, type, recordTime, message, expected) {
-  const writer = new MessageWriter(definitions(type));
-  messages.push({ topic, type, recordTime, data: writer.writeMessage(message) });
+  messages.push({ topic, type, recordTime, data: serialize(type, message) });
   (written[topic] ??= { type: ros2Name(type), messages: [] }).messages.push(expected);
 }
 const header = (ns, frame_id) => ({ stamp: time(ns), frame_id });
@@ -220,81 +196,5 @@ add("/tf_static", "tf2_msgs/TFMessage", T0, { transforms }, { transforms: transf
   rotation_wxyz: [t.transform.rotation.w, t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z] })) });
 add("/chatter", "std_msgs/String", T0, { data: "not a sensor" }, {});
 
-// rosbag2 stores messages by record time.
-messages.sort((a, b) => (a.recordTime < b.recordTime ? -1 : a.recordTime > b.recordTime ? 1 : 0));
-const topics = [...new Set(messages.map((m) => m.topic))].map((topic) => ({
-  topic, type: messages.find((m) => m.topic === topic).type, count: messages.filter((m) => m.topic === topic).length,
-}));
-const file = `${dir.split("/").pop()}_0.${storage === "mcap" ? "mcap" : "db3"}`;
-
-if (storage === "mcap") {
-  const handle = await open(`${dir}/${file}`, "w");
-  let position = 0n;
-  const writable = {
-    position: () => position,
-    write: async (buffer) => { await handle.write(buffer); position += BigInt(buffer.byteLength); },
-  };
-  const writer = new McapWriter({ writable, useChunks: true, chunkSize: 4096 });
-  await writer.start({ profile: "ros2", library: "rosbag2 conformance (@mcap/core)" });
-  const channelIds = {};
-  for (const { topic, type } of topics) {
-    const schemaId = await writer.registerSchema({ name: ros2Name(type), encoding: "ros2msg",
-                                                   data: new TextEncoder().encode(stringify(definitions(type))) });
-    channelIds[topic] = await writer.registerChannel({ topic, schemaId, messageEncoding: "cdr",
-                                                       metadata: new Map([["offered_qos_profiles", ""]]) });
-  }
-  let sequence = 0;
-  for (const m of messages) {
-    await writer.addMessage({ channelId: channelIds[m.topic], sequence: sequence++, logTime: m.recordTime,
-                              publishTime: m.recordTime, data: m.data });
-  }
-  await writer.end();
-  await handle.close();
-} else {
-  const SQL = await initSqlJs();
-  const db = new SQL.Database();
-  db.run(`CREATE TABLE schema(schema_version INTEGER PRIMARY KEY, ros_distro TEXT NOT NULL);
-          INSERT INTO schema VALUES (3, 'humble');
-          CREATE TABLE metadata(id INTEGER PRIMARY KEY, metadata_version INTEGER NOT NULL, metadata TEXT NOT NULL);
-          CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT NOT NULL,
-                              serialization_format TEXT NOT NULL, offered_qos_profiles TEXT NOT NULL);
-          CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL, timestamp INTEGER NOT NULL,
-                                data BLOB NOT NULL);
-          CREATE INDEX timestamp_idx ON messages (timestamp ASC);`);
-  topics.forEach(({ topic, type }, i) => db.run("INSERT INTO topics VALUES (?, ?, ?, 'cdr', '')", [i + 1, topic, ros2Name(type)]));
-  const topicId = Object.fromEntries(topics.map(({ topic }, i) => [topic, i + 1]));
-  messages.forEach((m, i) => db.run("INSERT INTO messages VALUES (?, ?, ?, ?)",
-                                    [i + 1, topicId[m.topic], m.recordTime.toString(), m.data]));
-  await writeFile(`${dir}/${file}`, db.export());
-  db.close();
-}
-
-const first = messages[0].recordTime, last = messages[messages.length - 1].recordTime;
-await writeFile(`${dir}/metadata.yaml`, `rosbag2_bagfile_information:
-  version: 5
-  storage_identifier: ${storage}
-  duration:
-    nanoseconds: ${last - first}
-  starting_time:
-    nanoseconds_since_epoch: ${first}
-  message_count: ${messages.length}
-  topics_with_message_count:
-${topics.map(({ topic, type, count }) => `    - topic_metadata:
-        name: ${topic}
-        type: ${ros2Name(type)}
-        serialization_format: cdr
-        offered_qos_profiles: ""
-      message_count: ${count}`).join("\n")}
-  compression_format: ""
-  compression_mode: ""
-  relative_file_paths:
-    - ${file}
-  files:
-    - path: ${file}
-      starting_time:
-        nanoseconds_since_epoch: ${first}
-      duration:
-        nanoseconds: ${last - first}
-      message_count: ${messages.length}
-`);
+const file = await writeBag(dir, storage, messages);
 console.log(JSON.stringify({ file, messages: messages.length, topics: written }));

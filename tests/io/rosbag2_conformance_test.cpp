@@ -343,6 +343,59 @@ TEST(Rosbag2Compression, MessageAndFileModesReadTheSameValues) {
   fs::remove_all(dir);
 }
 
+// Real data: robot_localization's test2.bag (Jackal IMU + wheel odometry, 61 s) converted to a
+// ROS 2 bag by Foxglove's libraries (ros1_to_ros2.mjs) imports into exactly the log the ROS 1
+// bag gives; the ROS 2 bag stores by arrival, in which 163 odometry stamps go back.
+TEST(Rosbag2RealData, RobotLocalizationBagAsRos2ImportsLikeTheRos1Bag) {
+  const std::string ros1_bag = std::string(HANZO_DATA_DIR) + "/robot_localization/test2.bag";
+  const fs::path dir = temp_path("test2");
+  fs::remove_all(dir);
+  const nlohmann::json converted = test::run_node("ros1_to_ros2.mjs", ros1_bag + " " + dir.string() + " sqlite3");
+  ASSERT_FALSE(converted.is_null());
+  EXPECT_EQ(converted["topics"]["/imu/data"], 3061);
+  RosbagImportConfig config;
+  config.topic_map = {{"/imu/data", "/imu"}, {"/jackal_velocity_controller/odom", "/wheels"}};
+  auto ros2 = import(dir.string(), config);
+  ASSERT_TRUE(ros2.ok()) << ros2.error().message;
+
+  const fs::path log = temp_path("test2_ros1.mcap");
+  {
+    auto writer = SensorLogWriter::open(log.string());
+    ASSERT_TRUE(writer.ok());
+    config.wheel_separation = kWheelSeparation;
+    ASSERT_TRUE(import_rosbag(ros1_bag, **writer, config).ok());
+    ASSERT_TRUE((*writer)->close().ok());
+  }
+  auto reader = SensorLogReader::open(log.string());
+  ASSERT_TRUE(reader.ok());
+  std::map<std::string, std::vector<msgs::SensorMessage>> ros1;
+  LogEntry entry;
+  while (*(*reader)->next(entry)) ros1[entry.topic].push_back(std::get<msgs::SensorMessage>(entry.message));
+  for (const TopicImportReport& topic : ros2->report.topics) EXPECT_EQ(topic.rejected, 0u) << topic.first_rejection;
+  ASSERT_EQ(ros2->by_topic.at("/imu").size(), 3061u);
+  ASSERT_EQ(ros2->by_topic.at("/wheels").size(), 3060u);
+  const auto imu1 = messages_of<msgs::ImuMessage>(*ros2, "/imu");
+  const auto wheels2 = messages_of<msgs::WheelOdometryMessage>(*ros2, "/wheels");
+  ASSERT_EQ(ros1.at("/imu").size(), imu1.size());
+  ASSERT_EQ(ros1.at("/wheels").size(), wheels2.size());
+  for (std::size_t i = 0; i < imu1.size(); ++i) {
+    const auto& a = std::get<msgs::ImuMessage>(ros1.at("/imu")[i]);
+    ASSERT_EQ(a.timestamp, imu1[i].timestamp) << i;
+    ASSERT_EQ(a.frame_id, imu1[i].frame_id) << i;
+    ASSERT_EQ(a.angular_velocity, imu1[i].angular_velocity) << i;
+    ASSERT_EQ(a.linear_acceleration, imu1[i].linear_acceleration) << i;
+    ASSERT_EQ(a.orientation->coeffs(), imu1[i].orientation->coeffs()) << i;
+  }
+  for (std::size_t i = 0; i < wheels2.size(); ++i) {
+    const auto& a = std::get<msgs::WheelOdometryMessage>(ros1.at("/wheels")[i]);
+    ASSERT_EQ(a.timestamp, wheels2[i].timestamp) << i;
+    ASSERT_EQ(a.left_distance, wheels2[i].left_distance) << i;
+    ASSERT_EQ(a.right_distance, wheels2[i].right_distance) << i;
+  }
+  fs::remove(log);
+  fs::remove_all(dir);
+}
+
 TEST(Rosbag2Errors, BrokenBagsAreRefusedNamingTheProblem) {
   const fs::path dir = temp_path("errors");
   const nlohmann::json written = write_bag(dir, "sqlite3");

@@ -65,7 +65,9 @@ struct RosbagImportReport {
   std::vector<std::string> calibration_notes;  ///< what could not be placed, and why
 };
 
-/// Imports every message of the selected topics of a ROS 1 bag, in bag order. Messages that do
+/// Imports every message of the selected topics of a ROS 1 bag, in bag order (odometry twists
+/// are integrated into wheel distances in stamp order: recorders store messages by arrival, in
+/// which odometry stamps may go back; equal stamps are rejected). Messages that do
 /// not decode or fail validation are counted per topic (with the first reason) and left out;
 /// the import fails for a malformed bag, a topic-map entry naming a topic the bag lacks or of a
 /// type that cannot be imported, odometry without a wheel separation, or a write error.
