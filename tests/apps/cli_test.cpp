@@ -17,6 +17,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include <nlohmann/json.hpp>
 
@@ -324,6 +325,46 @@ TEST(Cli, ImportRosbagTest2) {
   EXPECT_EQ(summary["channels"][1]["messages"], 3060);
   EXPECT_NEAR(summary["duration_s"].get<double>(), 61.2, 0.01);
   std::filesystem::remove(log);
+}
+
+// The ROS 2 sample bag (examples/rosbag2_sample: written by Foxglove's libraries with
+// tests/conformance/rosbag2_write.mjs): every sensor type, the calibration from /tf_static.
+TEST(Cli, ImportRos2BagWithCalibration) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_ros2_{}", ::getpid());
+  std::filesystem::create_directories(dir);
+  const std::string log = (dir / "bag.mcap").string(), calibration = (dir / "calibration.yaml").string();
+  const CliRun without_separation = run(fmt::format("import ros2bag examples/rosbag2_sample --out {}", log));
+  EXPECT_EQ(without_separation.exit_code, 1);
+  EXPECT_THAT(without_separation.err, HasSubstr("--wheel-separation"));
+  EXPECT_FALSE(std::filesystem::exists(log));
+  const CliRun missing = run(fmt::format("import ros2bag {} --out {}", (dir / "nope").string(), log));
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_THAT(missing.err, HasSubstr("no such file or folder"));
+
+  const CliRun imported = run(fmt::format(
+      "import ros2bag examples/rosbag2_sample --out {} --wheel-separation 0.5 --calibration {} --json", log, calibration));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+  const nlohmann::json json = nlohmann::json::parse(imported.out);
+  EXPECT_EQ(json["bag"]["storage"], "mcap");
+  EXPECT_EQ(json["bag"]["messages"], 95);
+  EXPECT_EQ(json["messages"], 92);  // all but /tf_static, CameraInfo and a std_msgs/String
+  EXPECT_EQ(json["skipped_topics"]["/chatter"], "std_msgs/msg/String");
+  EXPECT_EQ(json["body_frame"], "base_link");
+  EXPECT_EQ(json["calibration_sensors"], 9);
+  const auto loaded = hanzo::fusion::calib::load_calibration(calibration);
+  ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+  ASSERT_NE(loaded->find("imu"), nullptr);
+  EXPECT_EQ(loaded->find("imu")->translation, Eigen::Vector3d(0.1, 0.0, 0.2));
+  ASSERT_TRUE(loaded->find("camera") && loaded->find("camera")->camera.has_value());
+  const CliRun info = run(fmt::format("log info {} --json", log));
+  const nlohmann::json summary = nlohmann::json::parse(info.out);
+  std::map<std::string, int> messages;
+  for (const auto& channel : summary["channels"]) messages[channel["topic"]] = channel["messages"];
+  EXPECT_EQ(messages["/imu"], 50);
+  EXPECT_EQ(messages["/ouster"], 3);
+  EXPECT_EQ(messages["/camera"], 3);
+  EXPECT_EQ(messages["/wheel"], 10);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(Cli, SimWritesLogGroundTruthCalibrationAndConfig) {
