@@ -27,6 +27,7 @@ Status update_calibration_entry(const std::string& path, const std::string& sens
 void add_eval_command(CLI::App& app, const Output& output, Command& run);
 void add_log_command(CLI::App& app, const Output& output, Command& run);
 void add_import_command(CLI::App& app, const Output& output, Command& run);
+void add_export_command(CLI::App& app, const Output& output, Command& run);
 void add_sim_command(CLI::App& app, const Output& output, Command& run);
 void add_run_command(CLI::App& app, const Output& output, Command& run);
 void add_graph_command(CLI::App& app, const Output& output, Command& run);

@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   app::add_eval_command(app, output, run);
   app::add_log_command(app, output, run);
   app::add_import_command(app, output, run);
+  app::add_export_command(app, output, run);
   app::add_sim_command(app, output, run);
   app::add_run_command(app, output, run);
   app::add_graph_command(app, output, run);

@@ -556,6 +556,41 @@ TEST(Cli, RunMapsWithTheWholePipelineAndReplaysBitIdenticallyOnAnyThreadCount) {
     EXPECT_FALSE(first.empty()) << file;
     EXPECT_TRUE(first == file_bytes(dir / "run2" / file)) << file << " differs between --threads 1 and --threads 2";
   }
+  // The run's poses (with covariances) and map as a ROS 2 bag.
+  const CliRun exported = run(fmt::format("export ros2bag --out {} --poses {} --map {} --json", (dir / "ros2").string(),
+                                          (dir / "run1" / "poses.csv").string(), (dir / "run1" / "map.fmap").string()));
+  ASSERT_EQ(exported.exit_code, 0) << exported.err;
+  const nlohmann::json bag = nlohmann::json::parse(exported.out);
+  EXPECT_EQ(bag["topics"]["/trajectory"], 1);
+  EXPECT_EQ(bag["topics"]["/map/points"], 1);
+  EXPECT_EQ(bag["topics"]["/map/occupancy"], 1);
+  EXPECT_GT(bag["topics"]["/pose"].get<int>(), 100);
+  EXPECT_TRUE(std::filesystem::exists(dir / "ros2" / "metadata.yaml"));
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Cli, ExportRos2BagRefusesBadInputAndLeavesNothingBehind) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_export_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  const CliRun exported = run(fmt::format("export ros2bag --out {} --trajectory examples/data/ground_truth.tum --json", dir.string()));
+  ASSERT_EQ(exported.exit_code, 0) << exported.err;
+  const nlohmann::json json = nlohmann::json::parse(exported.out);
+  EXPECT_EQ(json["topics"]["/trajectory"], 1);
+  EXPECT_GT(json["topics"]["/pose"].get<int>(), 10);
+  const CliRun again = run(fmt::format("export ros2bag --out {} --trajectory examples/data/ground_truth.tum", dir.string()));
+  EXPECT_EQ(again.exit_code, 1);
+  EXPECT_THAT(again.err, HasSubstr("exists"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "metadata.yaml"));  // the first bag is untouched
+  const std::string other = dir.string() + "_2";
+  const CliRun nothing = run(fmt::format("export ros2bag --out {}", other));
+  EXPECT_EQ(nothing.exit_code, 1);
+  EXPECT_THAT(nothing.err, HasSubstr("nothing to export"));
+  const CliRun not_poses = run(fmt::format("export ros2bag --out {} --poses examples/data/ground_truth.tum", other));
+  EXPECT_EQ(not_poses.exit_code, 1);
+  EXPECT_THAT(not_poses.err, HasSubstr("no column 'timestamp_ns'"));
+  const CliRun no_map = run(fmt::format("export ros2bag --out {} --map {}/missing.fmap", other, dir.string()));
+  EXPECT_EQ(no_map.exit_code, 1);
+  EXPECT_FALSE(std::filesystem::exists(other));
   std::filesystem::remove_all(dir);
 }
 

@@ -1,0 +1,65 @@
+#pragma once
+// Writing ROS 2 bags (rosbag2 folders: metadata.yaml + one MCAP file, profile "ros2", schemas
+// as ROS 2 message definitions ("ros2msg"), messages as little-endian CDR) of what hanzo-fusion
+// produces, so that trajectories and maps open in RViz 2 (`ros2 bag play`) and Foxglove:
+//
+//   geometry_msgs/msg/PoseStamped, geometry_msgs/msg/PoseWithCovarianceStamped, nav_msgs/msg/Path,
+//   sensor_msgs/msg/PointCloud2 (x, y, z float32 [+ intensity float32]), nav_msgs/msg/OccupancyGrid.
+//
+// The *_cdr functions encode one message (ROS 2 Humble layouts, as read back by Foxglove's
+// @foxglove/rosmsg2-serialization in tests/io/rosbag2_export_conformance_test.cpp).
+
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
+#include "hanzo/fusion/msgs/map_messages.hpp"
+
+namespace hanzo::fusion::io::ros2 {
+
+struct StampedPose {
+  Timestamp stamp;
+  msgs::Pose pose;
+};
+
+std::string pose_stamped_cdr(Timestamp stamp, const std::string& frame_id, const msgs::Pose& pose);
+/// `covariance`: ROS's row-major 6x6 over (x, y, z, rotation about X, Y, Z), all in `frame_id`.
+std::string pose_with_covariance_stamped_cdr(Timestamp stamp, const std::string& frame_id, const msgs::Pose& pose,
+                                             const Eigen::Matrix<double, 6, 6>& covariance);
+/// The path's header carries `stamp`; each pose its own.
+std::string path_cdr(Timestamp stamp, const std::string& frame_id, const std::vector<StampedPose>& poses);
+/// An unorganized cloud (height 1); `intensities` empty or one per point.
+std::string point_cloud_cdr(Timestamp stamp, const std::string& frame_id, const std::vector<Eigen::Vector3f>& points,
+                            const std::vector<float>& intensities);
+/// A 2D layer (size_z 1): probability p -> round(100 p), unknown (exactly 0.5) -> -1. Fails for
+/// a 3D layer (flatten it first: maps/map_export.hpp) or a layer whose cells do not fill it.
+Result<std::string> occupancy_grid_cdr(Timestamp stamp, const std::string& frame_id, const msgs::OccupancyGridLayer& layer);
+
+/// Writes one bag folder. Not thread-safe.
+class BagWriter {
+ public:
+  /// Creates `folder` (which must not exist, as with `ros2 bag record -o`) and its MCAP file.
+  static Result<std::unique_ptr<BagWriter>> create(const std::string& folder);
+  ~BagWriter();
+  BagWriter(const BagWriter&) = delete;
+  BagWriter& operator=(const BagWriter&) = delete;
+
+  /// `type` one of the types above ("nav_msgs/msg/Path"); `cdr` from its encoder. The record
+  /// time is the message's log time in the bag.
+  Status write(const std::string& topic, const std::string& type, Timestamp record_time, const std::string& cdr);
+  /// Finishes the MCAP file and writes metadata.yaml (topics with counts, start, duration).
+  Status close();
+
+ private:
+  struct State;
+  explicit BagWriter(std::unique_ptr<State> state);
+  std::unique_ptr<State> state_;
+};
+
+}  // namespace hanzo::fusion::io::ros2

@@ -1,0 +1,265 @@
+#include "hanzo/fusion/io/ros2_bag_writer.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include <fmt/format.h>
+
+#include "hanzo/fusion/io/mcap.hpp"
+
+namespace hanzo::fusion::io::ros2 {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Little-endian CDR (XCDR1): a 4-byte encapsulation header, then primitives aligned to their
+// size counted from the end of that header.
+class CdrWriter {
+ public:
+  CdrWriter() : out_{'\0', '\x01', '\0', '\0'} {}
+  template <typename T>
+  CdrWriter& put(T value) {
+    while ((out_.size() - 4) % sizeof(T) != 0) out_.push_back('\0');
+    char bytes[sizeof(T)];
+    std::memcpy(bytes, &value, sizeof(T));  // the machine is little-endian (x86-64, arm64)
+    out_.append(bytes, sizeof(T));
+    return *this;
+  }
+  CdrWriter& string(const std::string& text) {
+    put(static_cast<uint32_t>(text.size() + 1));
+    out_ += text;
+    out_.push_back('\0');
+    return *this;
+  }
+  CdrWriter& bytes(const void* data, std::size_t size) {
+    put(static_cast<uint32_t>(size));
+    out_.append(static_cast<const char*>(data), size);
+    return *this;
+  }
+  // builtin_interfaces/Time: whole seconds (rounded down) and nanoseconds in [0, 1e9).
+  CdrWriter& time(Timestamp stamp) {
+    const int64_t ns = stamp.nanoseconds();
+    const int64_t sec = ns >= 0 ? ns / 1'000'000'000 : -((-ns + 999'999'999) / 1'000'000'000);
+    return put(static_cast<int32_t>(sec)).put(static_cast<uint32_t>(ns - sec * 1'000'000'000));
+  }
+  CdrWriter& header(Timestamp stamp, const std::string& frame_id) { return time(stamp).string(frame_id); }
+  CdrWriter& pose(const msgs::Pose& pose) {
+    const Eigen::Quaterniond q = pose.orientation.normalized();
+    return put(pose.position.x()).put(pose.position.y()).put(pose.position.z()).put(q.x()).put(q.y()).put(q.z()).put(q.w());
+  }
+  std::string take() { return std::move(out_); }
+
+ private:
+  std::string out_;
+};
+
+// ROS 2 message definitions (the "ros2msg" schema text: the type's own fields, then each type
+// it uses after a separator line and "MSG: pkg/Type").
+const std::map<std::string, std::string>& definitions() {
+  static const std::map<std::string, std::string> kDefinitions = {
+      {"builtin_interfaces/Time", "int32 sec\nuint32 nanosec\n"},
+      {"std_msgs/Header", "builtin_interfaces/Time stamp\nstring frame_id\n"},
+      {"geometry_msgs/Point", "float64 x\nfloat64 y\nfloat64 z\n"},
+      {"geometry_msgs/Quaternion", "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"},
+      {"geometry_msgs/Pose", "geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n"},
+      {"geometry_msgs/PoseStamped", "std_msgs/Header header\ngeometry_msgs/Pose pose\n"},
+      {"geometry_msgs/PoseWithCovariance", "geometry_msgs/Pose pose\nfloat64[36] covariance\n"},
+      {"geometry_msgs/PoseWithCovarianceStamped", "std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n"},
+      {"nav_msgs/Path", "std_msgs/Header header\ngeometry_msgs/PoseStamped[] poses\n"},
+      {"sensor_msgs/PointField",
+       "uint8 INT8=1\nuint8 UINT8=2\nuint8 INT16=3\nuint8 UINT16=4\nuint8 INT32=5\nuint8 UINT32=6\nuint8 FLOAT32=7\n"
+       "uint8 FLOAT64=8\nstring name\nuint32 offset\nuint8 datatype\nuint32 count\n"},
+      {"sensor_msgs/PointCloud2",
+       "std_msgs/Header header\nuint32 height\nuint32 width\nsensor_msgs/PointField[] fields\nbool is_bigendian\n"
+       "uint32 point_step\nuint32 row_step\nuint8[] data\nbool is_dense\n"},
+      {"nav_msgs/MapMetaData",
+       "builtin_interfaces/Time map_load_time\nfloat32 resolution\nuint32 width\nuint32 height\ngeometry_msgs/Pose origin\n"},
+      {"nav_msgs/OccupancyGrid", "std_msgs/Header header\nnav_msgs/MapMetaData info\nint8[] data\n"},
+  };
+  return kDefinitions;
+}
+
+// "nav_msgs/msg/Path" -> its schema text, or "" for a type this writer does not know.
+std::string schema_text(const std::string& type) {
+  std::string name = type;
+  if (const auto at = name.find("/msg/"); at != std::string::npos) name.erase(at, 4);
+  const auto& all = definitions();
+  if (all.count(name) == 0) return "";
+  // Depth-first over the field types, each dependency once.
+  std::vector<std::string> order;
+  std::vector<std::string> pending = {name};
+  while (!pending.empty()) {
+    const std::string current = pending.back();
+    pending.pop_back();
+    if (std::find(order.begin(), order.end(), current) != order.end()) continue;
+    order.push_back(current);
+    std::istringstream lines(all.at(current));
+    std::vector<std::string> uses;
+    for (std::string line; std::getline(lines, line);) {
+      std::string field_type = line.substr(0, line.find(' '));
+      if (const auto bracket = field_type.find('['); bracket != std::string::npos) field_type.resize(bracket);
+      if (all.count(field_type) != 0) uses.push_back(field_type);
+    }
+    pending.insert(pending.end(), uses.rbegin(), uses.rend());
+  }
+  std::string text = all.at(name);
+  for (std::size_t i = 1; i < order.size(); ++i) {
+    text += std::string(80, '=') + "\nMSG: " + order[i] + "\n" + all.at(order[i]);
+  }
+  return text;
+}
+
+}  // namespace
+
+std::string pose_stamped_cdr(Timestamp stamp, const std::string& frame_id, const msgs::Pose& pose) {
+  return CdrWriter().header(stamp, frame_id).pose(pose).take();
+}
+
+std::string pose_with_covariance_stamped_cdr(Timestamp stamp, const std::string& frame_id, const msgs::Pose& pose,
+                                             const Eigen::Matrix<double, 6, 6>& covariance) {
+  CdrWriter w;
+  w.header(stamp, frame_id).pose(pose);
+  for (int row = 0; row < 6; ++row) {
+    for (int column = 0; column < 6; ++column) w.put(covariance(row, column));
+  }
+  return w.take();
+}
+
+std::string path_cdr(Timestamp stamp, const std::string& frame_id, const std::vector<StampedPose>& poses) {
+  CdrWriter w;
+  w.header(stamp, frame_id).put(static_cast<uint32_t>(poses.size()));
+  for (const StampedPose& p : poses) w.header(p.stamp, frame_id).pose(p.pose);
+  return w.take();
+}
+
+std::string point_cloud_cdr(Timestamp stamp, const std::string& frame_id, const std::vector<Eigen::Vector3f>& points,
+                            const std::vector<float>& intensities) {
+  const bool with_intensity = !intensities.empty() && intensities.size() == points.size();
+  const uint32_t point_step = with_intensity ? 16 : 12;
+  CdrWriter w;
+  w.header(stamp, frame_id).put<uint32_t>(1).put(static_cast<uint32_t>(points.size()));
+  const char* names[] = {"x", "y", "z", "intensity"};
+  const uint32_t field_count = with_intensity ? 4 : 3;
+  w.put(field_count);
+  for (uint32_t f = 0; f < field_count; ++f) w.string(names[f]).put(f * 4).put<uint8_t>(7).put<uint32_t>(1);  // FLOAT32
+  std::string data(static_cast<std::size_t>(point_step) * points.size(), '\0');
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    std::memcpy(data.data() + i * point_step, points[i].data(), 12);
+    if (with_intensity) std::memcpy(data.data() + i * point_step + 12, &intensities[i], 4);
+  }
+  w.put<uint8_t>(0).put(point_step).put(static_cast<uint32_t>(data.size())).bytes(data.data(), data.size());
+  const bool dense = std::all_of(points.begin(), points.end(), [](const Eigen::Vector3f& p) { return p.allFinite(); });
+  w.put<uint8_t>(dense ? 1 : 0);
+  return w.take();
+}
+
+Result<std::string> occupancy_grid_cdr(Timestamp stamp, const std::string& frame_id, const msgs::OccupancyGridLayer& layer) {
+  if (layer.size_z != 1) return Error(fmt::format("occupancy grid: {} layers in z; nav_msgs/OccupancyGrid is 2D (flatten it)", layer.size_z));
+  if (layer.occupancy.size() != static_cast<std::size_t>(layer.size_x) * layer.size_y) {
+    return Error(fmt::format("occupancy grid: {} cells for {} x {}", layer.occupancy.size(), layer.size_x, layer.size_y));
+  }
+  CdrWriter w;
+  w.header(stamp, frame_id).time(stamp).put(static_cast<float>(layer.resolution)).put(layer.size_x).put(layer.size_y);
+  w.pose(layer.origin);
+  std::string cells(layer.occupancy.size(), '\0');
+  for (std::size_t i = 0; i < cells.size(); ++i) {
+    const float p = layer.occupancy[i];
+    const bool unknown = p == 0.5f || !std::isfinite(p);
+    cells[i] = static_cast<char>(unknown ? -1 : static_cast<int8_t>(std::lround(std::clamp(p, 0.0f, 1.0f) * 100.0f)));
+  }
+  w.bytes(cells.data(), cells.size());
+  return w.take();
+}
+
+struct BagWriter::State {
+  fs::path folder;
+  std::string file;  // the MCAP file's name in the folder
+  std::unique_ptr<mcap::McapWriter> mcap;
+  struct Topic {
+    std::string type;
+    uint16_t channel = 0;
+    uint64_t count = 0;
+  };
+  std::map<std::string, Topic> topics;
+  int64_t first_ns = 0;
+  int64_t last_ns = 0;
+  uint64_t messages = 0;
+  bool closed = false;
+};
+
+BagWriter::BagWriter(std::unique_ptr<State> state) : state_(std::move(state)) {}
+BagWriter::~BagWriter() {
+  if (!state_->closed) (void)close();
+}
+
+Result<std::unique_ptr<BagWriter>> BagWriter::create(const std::string& folder) {
+  std::error_code error;
+  if (fs::exists(folder, error)) return Error(fmt::format("{}: exists; a ROS 2 bag is written into a new folder", folder));
+  if (!fs::create_directories(folder, error)) return Error(fmt::format("{}: cannot create the folder: {}", folder, error.message()));
+  auto state = std::make_unique<State>();
+  state->folder = folder;
+  state->file = fs::path(folder).lexically_normal().filename().string();
+  if (state->file.empty()) state->file = fs::path(folder).lexically_normal().parent_path().filename().string();
+  state->file += "_0.mcap";
+  mcap::McapWriterConfig config;
+  config.profile = "ros2";
+  HANZO_ASSIGN_OR_RETURN(state->mcap, mcap::McapWriter::open((state->folder / state->file).string(), config));
+  return std::unique_ptr<BagWriter>(new BagWriter(std::move(state)));
+}
+
+Status BagWriter::write(const std::string& topic, const std::string& type, Timestamp record_time, const std::string& cdr) {
+  State& s = *state_;
+  if (s.closed) return Error("ROS 2 bag writer: already closed");
+  auto it = s.topics.find(topic);
+  if (it == s.topics.end()) {
+    const std::string text = schema_text(type);
+    if (text.empty()) return Error(fmt::format("ROS 2 bag writer: type '{}' of topic {} is not one it writes", type, topic));
+    uint16_t schema = 0;
+    HANZO_ASSIGN_OR_RETURN(schema, s.mcap->add_schema(type, "ros2msg", text));
+    uint16_t channel = 0;
+    HANZO_ASSIGN_OR_RETURN(channel, s.mcap->add_channel(schema, topic, "cdr", {{"offered_qos_profiles", ""}}));
+    it = s.topics.emplace(topic, State::Topic{type, channel, 0}).first;
+  } else if (it->second.type != type) {
+    return Error(fmt::format("ROS 2 bag writer: topic {} has type {}, not {}", topic, it->second.type, type));
+  }
+  const int64_t ns = record_time.nanoseconds();
+  if (ns < 0) return Error(fmt::format("ROS 2 bag writer: record time {} ns is before 1970", ns));
+  HANZO_RETURN_IF_ERROR(s.mcap->write(it->second.channel, static_cast<uint64_t>(ns), static_cast<uint64_t>(ns), cdr));
+  s.first_ns = s.messages == 0 ? ns : std::min(s.first_ns, ns);
+  s.last_ns = s.messages == 0 ? ns : std::max(s.last_ns, ns);
+  ++s.messages;
+  ++it->second.count;
+  return ok_status();
+}
+
+Status BagWriter::close() {
+  State& s = *state_;
+  if (s.closed) return ok_status();
+  s.closed = true;
+  HANZO_RETURN_IF_ERROR(s.mcap->close());
+  std::string topics;
+  for (const auto& [name, topic] : s.topics) {
+    topics += fmt::format("    - topic_metadata:\n        name: {}\n        type: {}\n        serialization_format: cdr\n"
+                          "        offered_qos_profiles: \"\"\n      message_count: {}\n", name, topic.type, topic.count);
+  }
+  const std::string metadata = fmt::format(
+      "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n  duration:\n    nanoseconds: {duration}\n"
+      "  starting_time:\n    nanoseconds_since_epoch: {start}\n  message_count: {count}\n  topics_with_message_count:{topics}\n"
+      "  compression_format: \"\"\n  compression_mode: \"\"\n  relative_file_paths:\n    - {file}\n  files:\n"
+      "    - path: {file}\n      starting_time:\n        nanoseconds_since_epoch: {start}\n      duration:\n"
+      "        nanoseconds: {duration}\n      message_count: {count}\n",
+      fmt::arg("duration", s.last_ns - s.first_ns), fmt::arg("start", s.first_ns), fmt::arg("count", s.messages),
+      fmt::arg("topics", topics.empty() ? " []" : "\n" + topics.substr(0, topics.size() - 1)), fmt::arg("file", s.file));
+  std::ofstream out(s.folder / "metadata.yaml", std::ios::binary);
+  out << metadata;
+  out.close();
+  if (!out) return Error(fmt::format("{}: cannot write metadata.yaml", s.folder.string()));
+  return ok_status();
+}
+
+}  // namespace hanzo::fusion::io::ros2

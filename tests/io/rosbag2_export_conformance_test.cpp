@@ -1,0 +1,146 @@
+// ROS 2 bags written by io/ros2_bag_writer.hpp, read back by Foxglove's libraries alone
+// (tests/conformance/rosbag2_read.mjs: the schemas parsed from the bag's own message
+// definitions, the CDR decoded by @foxglove/rosmsg2-serialization): every value comes back.
+
+#include <unistd.h>
+
+#include <filesystem>
+
+#include <fmt/format.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "hanzo/fusion/io/ros2_bag.hpp"
+#include "hanzo/fusion/io/ros2_bag_writer.hpp"
+#include "node_runner.hpp"
+
+namespace hanzo::fusion::io::ros2 {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+TEST(Rosbag2Export, FoxgloveReadsEveryValueWritten) {
+  const fs::path dir = fs::temp_directory_path() / fmt::format("hanzo_ros2_export_{}", ::getpid());
+  fs::remove_all(dir);
+  std::vector<StampedPose> path;
+  for (int i = 0; i < 20; ++i) {
+    const Timestamp t = Timestamp::from_nanoseconds(1'700'000'000'000'000'000 + i * 100'000'000LL);
+    const Eigen::Quaterniond q(Eigen::AngleAxisd(0.1 * i, Eigen::Vector3d(0.2, 0.3, 1.0).normalized()));
+    path.push_back({t, {Eigen::Vector3d(0.5 * i, -0.25 * i, 0.01 * i * i), q}});
+  }
+  Eigen::Matrix<double, 6, 6> covariance;
+  for (int r = 0; r < 6; ++r) {
+    for (int c = 0; c < 6; ++c) covariance(r, c) = r == c ? 0.01 * (r + 1) : 1e-4 * (r + c);
+  }
+  std::vector<Eigen::Vector3f> points;
+  std::vector<float> intensities;
+  for (int i = 0; i < 500; ++i) {
+    points.emplace_back(0.1f * static_cast<float>(i), std::sin(0.1f * static_cast<float>(i)), -1.5f);
+    intensities.push_back(static_cast<float>(i % 7) / 7.0f);
+  }
+  msgs::OccupancyGridLayer grid;
+  grid.resolution = 0.05;
+  grid.size_x = 7;
+  grid.size_y = 5;
+  grid.origin.position = {-1.0, 2.0, 0.0};
+  grid.origin.orientation = Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ()));
+  for (uint32_t i = 0; i < grid.size_x * grid.size_y; ++i) grid.occupancy.push_back(i % 3 == 0 ? 0.5f : static_cast<float>(i) / 35.0f);
+
+  {
+    auto writer = BagWriter::create(dir.string());
+    ASSERT_TRUE(writer.ok()) << writer.error().message;
+    for (const StampedPose& p : path) {
+      ASSERT_TRUE((*writer)->write("/pose", "geometry_msgs/msg/PoseStamped", p.stamp, pose_stamped_cdr(p.stamp, "map", p.pose)).ok());
+      ASSERT_TRUE((*writer)->write("/pose_cov", "geometry_msgs/msg/PoseWithCovarianceStamped", p.stamp,
+                                   pose_with_covariance_stamped_cdr(p.stamp, "map", p.pose, covariance)).ok());
+    }
+    ASSERT_TRUE((*writer)->write("/trajectory", "nav_msgs/msg/Path", path.back().stamp, path_cdr(path.back().stamp, "map", path)).ok());
+    ASSERT_TRUE((*writer)->write("/map/points", "sensor_msgs/msg/PointCloud2", path.back().stamp,
+                                 point_cloud_cdr(path.back().stamp, "map", points, intensities)).ok());
+    auto occupancy = occupancy_grid_cdr(path.back().stamp, "map", grid);
+    ASSERT_TRUE(occupancy.ok()) << occupancy.error().message;
+    ASSERT_TRUE((*writer)->write("/map/occupancy", "nav_msgs/msg/OccupancyGrid", path.back().stamp, *occupancy).ok());
+    EXPECT_THAT((*writer)->write("/pose", "nav_msgs/msg/Path", path[0].stamp, "").error().message, HasSubstr("has type"));
+    EXPECT_THAT((*writer)->write("/x", "std_msgs/msg/String", path[0].stamp, "").error().message, HasSubstr("not one it writes"));
+    ASSERT_TRUE((*writer)->close().ok());
+  }
+  EXPECT_THAT(BagWriter::create(dir.string()).error().message, HasSubstr("exists"));
+
+  // Our own reader sees the bag as rosbag2 describes it.
+  auto bag = open_bag(dir.string());
+  ASSERT_TRUE(bag.ok()) << bag.error().message;
+  EXPECT_EQ(bag->storage, "mcap");
+  ASSERT_EQ(bag->topics.size(), 5u);
+
+  const nlohmann::json read = test::run_node("rosbag2_read.mjs", bag->files.front());
+  ASSERT_FALSE(read.is_null());
+  EXPECT_EQ(read["profile"], "ros2");
+  const auto& topics = read["topics"];
+  auto expect_pose = [](const nlohmann::json& json, const msgs::Pose& pose) {
+    EXPECT_EQ(json["position"]["x"].get<double>(), pose.position.x());
+    EXPECT_EQ(json["position"]["y"].get<double>(), pose.position.y());
+    EXPECT_EQ(json["position"]["z"].get<double>(), pose.position.z());
+    const Eigen::Quaterniond q = pose.orientation.normalized();
+    EXPECT_EQ(json["orientation"]["w"].get<double>(), q.w());
+    EXPECT_EQ(json["orientation"]["x"].get<double>(), q.x());
+    EXPECT_EQ(json["orientation"]["z"].get<double>(), q.z());
+  };
+  auto expect_stamp = [](const nlohmann::json& header, Timestamp t) {
+    EXPECT_EQ(header["stamp"]["sec"].get<int64_t>() * 1'000'000'000 + header["stamp"]["nanosec"].get<int64_t>(), t.nanoseconds());
+  };
+  ASSERT_EQ(topics["/pose"]["messages"].size(), path.size());
+  EXPECT_EQ(topics["/pose"]["schema"], "geometry_msgs/msg/PoseStamped");
+  EXPECT_EQ(topics["/pose"]["schemaEncoding"], "ros2msg");
+  EXPECT_EQ(topics["/pose"]["messageEncoding"], "cdr");
+  for (std::size_t i = 0; i < path.size(); ++i) {
+    const auto& m = topics["/pose"]["messages"][i];
+    EXPECT_EQ(m["header"]["frame_id"], "map");
+    expect_stamp(m["header"], path[i].stamp);
+    EXPECT_EQ(topics["/pose"]["logTimes"][i], std::to_string(path[i].stamp.nanoseconds()));
+    expect_pose(m["pose"], path[i].pose);
+    const auto& c = topics["/pose_cov"]["messages"][i]["pose"];
+    expect_pose(c["pose"], path[i].pose);
+    for (int k = 0; k < 36; ++k) EXPECT_EQ(c["covariance"][k].get<double>(), covariance(k / 6, k % 6));
+  }
+  const auto& trajectory = topics["/trajectory"]["messages"][0];
+  ASSERT_EQ(trajectory["poses"].size(), path.size());
+  for (std::size_t i = 0; i < path.size(); ++i) {
+    expect_stamp(trajectory["poses"][i]["header"], path[i].stamp);
+    expect_pose(trajectory["poses"][i]["pose"], path[i].pose);
+  }
+  const auto& cloud = topics["/map/points"]["messages"][0];
+  EXPECT_EQ(cloud["height"], 1);
+  EXPECT_EQ(cloud["is_dense"], true);
+  ASSERT_EQ(cloud["points"].size(), points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(cloud["points"][i][a].get<float>(), points[i][a]);
+    EXPECT_EQ(cloud["points"][i][3].get<float>(), intensities[i]);
+  }
+  const auto& occupancy = topics["/map/occupancy"]["messages"][0];
+  EXPECT_EQ(occupancy["info"]["width"], 7);
+  EXPECT_EQ(occupancy["info"]["height"], 5);
+  EXPECT_EQ(occupancy["info"]["resolution"].get<float>(), 0.05f);
+  expect_pose(occupancy["info"]["origin"], grid.origin);
+  ASSERT_EQ(occupancy["data"].size(), grid.occupancy.size());
+  for (std::size_t i = 0; i < grid.occupancy.size(); ++i) {
+    const int expected = i % 3 == 0 ? -1 : static_cast<int>(std::lround(grid.occupancy[i] * 100.0f));
+    EXPECT_EQ(occupancy["data"][i].get<int>(), expected) << i;
+  }
+  fs::remove_all(dir);
+}
+
+TEST(Rosbag2Export, ThreeDimensionalGridsAreRefused) {
+  msgs::OccupancyGridLayer grid;
+  grid.size_x = 2;
+  grid.size_y = 2;
+  grid.size_z = 2;
+  grid.occupancy.assign(8, 0.5f);
+  EXPECT_THAT(occupancy_grid_cdr(Timestamp(), "map", grid).error().message, HasSubstr("flatten"));
+  grid.size_z = 1;
+  EXPECT_THAT(occupancy_grid_cdr(Timestamp(), "map", grid).error().message, HasSubstr("8 cells for 2 x 2"));
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::io::ros2
