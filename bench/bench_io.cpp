@@ -8,10 +8,14 @@
 // serialize; decode: parse + from_proto, the server's side): the spec's Point3 messages with
 // absolute point_timestamps, packed_points with absolute times, packed_points with
 // point_time_offsets_ns (what `hanzo-fusion stream` sends). Counter: wire_bytes.
+// And ROS 2: one of those scans as a sensor_msgs/PointCloud2 in CDR, in each LiDAR driver's
+// layout, encoded (export ros2bag) and decoded (import ros2bag), next to PCL's
+// fromPCLPointCloud2 of the same bytes into PointXYZI (x, y, z, intensity only).
 
 #include <unistd.h>
 
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <filesystem>
 #include <random>
@@ -20,9 +24,12 @@
 #include <fmt/format.h>
 
 #include "hanzo/fusion/io/mcap.hpp"
+#include "hanzo/fusion/io/ros2_bag_writer.hpp"
+#include "hanzo/fusion/io/ros_conversion.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
 #include "hanzo/fusion/msgs/convert.hpp"
 #include "hanzo/fusion/v1/sensors.pb.h"
+#include "io_peers.hpp"
 
 namespace {
 
@@ -297,6 +304,57 @@ void BM_PointCloudWireDecode(benchmark::State& state) {
   state.counters["wire_bytes"] = static_cast<double>(bytes.size());
 }
 
+const char* kLayoutNames[] = {"plain", "velodyne", "ouster", "livox", "hesai"};
+
+const msgs::PointCloudMessage& ros_scan() {
+  static const msgs::PointCloudMessage scan = [] {
+    std::mt19937 rng(7);
+    return make_scan(0, rng);
+  }();
+  return scan;
+}
+
+void BM_Ros2PointCloudEncode(benchmark::State& state) {
+  const auto layout = static_cast<io::ros2::LidarLayout>(state.range(0));
+  std::string cdr;
+  for (auto _ : state) {
+    cdr = io::ros2::point_cloud_cdr(ros_scan(), layout);
+    benchmark::DoNotOptimize(cdr.data());
+  }
+  state.SetLabel(kLayoutNames[state.range(0)]);
+  state.counters["bytes"] = static_cast<double>(cdr.size());
+  state.counters["points"] = static_cast<double>(ros_scan().points.size());
+}
+
+void BM_Ros2PointCloudDecode(benchmark::State& state) {
+  const auto layout = static_cast<io::ros2::LidarLayout>(state.range(0));
+  const std::string cdr = io::ros2::point_cloud_cdr(ros_scan(), layout);
+  for (auto _ : state) {
+    Result<msgs::PointCloudMessage> cloud = io::ros::point_cloud_from_ros(cdr, io::ros::Serialization::kCdr);
+    if (!cloud) state.SkipWithError(cloud.error().message.c_str());
+    benchmark::DoNotOptimize(cloud);
+  }
+  state.SetLabel(kLayoutNames[state.range(0)]);
+  state.counters["points"] = static_cast<double>(ros_scan().points.size());
+}
+
+// The peer: PCL's conversion of the Velodyne layout's bytes (x, y, z, intensity, ring, time).
+void BM_Ros2PointCloudDecodePcl(benchmark::State& state) {
+  const msgs::PointCloudMessage& scan = ros_scan();
+  const uint32_t point_step = 22;
+  std::vector<uint8_t> data(point_step * scan.points.size());
+  for (std::size_t i = 0; i < scan.points.size(); ++i) {
+    std::memcpy(data.data() + i * point_step, scan.points[i].data(), 12);
+    std::memcpy(data.data() + i * point_step + 12, &scan.intensities[i], 4);
+  }
+  const std::vector<bench::Cloud2Field> fields = {{"x", 0, 7}, {"y", 4, 7}, {"z", 8, 7}, {"intensity", 12, 7}, {"ring", 16, 4}, {"time", 18, 7}};
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(bench::pcl_points_from_cloud2(fields, point_step, static_cast<uint32_t>(scan.points.size()), data));
+  }
+  state.SetLabel("PCL 1.13 fromPCLPointCloud2 -> PointXYZI");
+  state.counters["points"] = static_cast<double>(scan.points.size());
+}
+
 }  // namespace
 
 // Wall-clock time everywhere (cat runs in a child process). The multi-GB read runs first, while
@@ -310,4 +368,7 @@ BENCHMARK(BM_SensorLogReadDecoded)->DenseRange(0, 2)->Unit(benchmark::kMilliseco
 BENCHMARK(BM_CatSameBytes)->Unit(benchmark::kMillisecond)->Iterations(5)->UseRealTime();
 BENCHMARK(BM_PointCloudWireEncode)->DenseRange(0, 2)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_PointCloudWireDecode)->DenseRange(0, 2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Ros2PointCloudEncode)->DenseRange(1, 4)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Ros2PointCloudDecode)->DenseRange(1, 4)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Ros2PointCloudDecodePcl)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_MAIN();

@@ -1,20 +1,25 @@
-// hanzo-fusion export ros2bag --out DIR [--trajectory FILE] [--poses RUN/poses.csv] [--map MAP.fmap]:
-// results as a ROS 2 bag (io/ros2_bag_writer.hpp) for RViz 2 and Foxglove; docs/sensor-logs.md.
+// hanzo-fusion export ros2bag --out DIR [--log LOG] [--trajectory FILE | --poses RUN/poses.csv]
+// [--map MAP.fmap]: sensor data and results as a ROS 2 bag (io/ros2_bag_writer.hpp) for RViz 2
+// and Foxglove; docs/sensor-logs.md.
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <memory>
 #include <optional>
 #include <sstream>
 #include <string>
+#include <type_traits>
+#include <variant>
 #include <vector>
 
 #include <fmt/format.h>
 
 #include "commands.hpp"
 #include "hanzo/fusion/io/ros2_bag_writer.hpp"
+#include "hanzo/fusion/io/sensor_log.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
@@ -28,8 +33,67 @@ struct ExportOptions {
   std::string trajectory_format = "tum";
   std::string poses;
   std::string map;
+  std::string log;
+  std::string lidar_layout = "velodyne";
   std::string frame = std::string(msgs::kWorldFrame);
 };
+
+// Writes every sensor message of a log into the bag under its topic; wheel odometry becomes
+// TwistStamped (speeds from consecutive distances; the first message of a topic 0). Returns
+// the counts of what was left out (radar, estimates) by topic.
+Result<std::map<std::string, uint64_t>> export_log(const std::string& path, io::ros2::LidarLayout layout,
+                                                   const std::function<Status(const std::string&, const std::string&, Timestamp,
+                                                                              const std::string&)>& write) {
+  std::unique_ptr<io::SensorLogReader> reader;
+  HANZO_ASSIGN_OR_RETURN(reader, io::SensorLogReader::open(path));
+  std::map<std::string, uint64_t> left_out;
+  std::map<std::string, msgs::WheelOdometryMessage> previous_wheels;
+  io::LogEntry entry;
+  while (true) {
+    bool more = false;
+    HANZO_ASSIGN_OR_RETURN(more, reader->next(entry));
+    if (!more) return left_out;
+    const auto* sensor = std::get_if<msgs::SensorMessage>(&entry.message);
+    if (sensor == nullptr) {
+      ++left_out[entry.topic];
+      continue;
+    }
+    const std::string frame = entry.topic.substr(entry.topic.find_last_of('/') + 1);
+    Status written = std::visit(
+        [&](const auto& m) -> Status {
+          using Message = std::decay_t<decltype(m)>;
+          if constexpr (std::is_same_v<Message, msgs::ImuMessage>) {
+            return write(entry.topic, "sensor_msgs/msg/Imu", entry.log_time, io::ros2::imu_cdr(m));
+          } else if constexpr (std::is_same_v<Message, msgs::PointCloudMessage>) {
+            return write(entry.topic, "sensor_msgs/msg/PointCloud2", entry.log_time, io::ros2::point_cloud_cdr(m, layout));
+          } else if constexpr (std::is_same_v<Message, msgs::ImageMessage>) {
+            return write(entry.topic, "sensor_msgs/msg/Image", entry.log_time, io::ros2::image_cdr(m));
+          } else if constexpr (std::is_same_v<Message, msgs::GnssMessage>) {
+            return write(entry.topic, "sensor_msgs/msg/NavSatFix", entry.log_time, io::ros2::navsatfix_cdr(m, frame));
+          } else if constexpr (std::is_same_v<Message, msgs::WheelOdometryMessage>) {
+            double speed = 0.0, yaw_rate = 0.0;
+            const auto previous = previous_wheels.find(entry.topic);
+            if (previous != previous_wheels.end()) {
+              const double dt = (m.timestamp - previous->second.timestamp).seconds();
+              const double left = m.left_distance - previous->second.left_distance;
+              const double right = m.right_distance - previous->second.right_distance;
+              if (dt > 0.0) {
+                speed = 0.5 * (left + right) / dt;
+                yaw_rate = (right - left) / m.wheel_separation / dt;
+              }
+            }
+            previous_wheels[entry.topic] = m;
+            return write(entry.topic, "geometry_msgs/msg/TwistStamped", entry.log_time,
+                         io::ros2::twist_stamped_cdr(m.timestamp, m.frame_id, speed, yaw_rate));
+          } else {
+            ++left_out[entry.topic];
+            return ok_status();
+          }
+        },
+        *sensor);
+    HANZO_RETURN_IF_ERROR(written);
+  }
+}
 
 struct PoseWithCovariance {
   io::ros2::StampedPose pose;
@@ -96,9 +160,11 @@ Result<std::vector<PoseWithCovariance>> read_run_poses(const std::string& path) 
 
 int run_export_ros2bag(const Output& output, const ExportOptions& options) {
   nlohmann::json result = {{"format", "ros2bag"}, {"out", options.out}};
-  if (options.trajectory.empty() && options.poses.empty() && options.map.empty()) {
-    return report_failure(output, result, "nothing to export: give --trajectory, --poses and/or --map");
+  if (options.trajectory.empty() && options.poses.empty() && options.map.empty() && options.log.empty()) {
+    return report_failure(output, result, "nothing to export: give --log, --trajectory, --poses and/or --map");
   }
+  Result<io::ros2::LidarLayout> layout = io::ros2::lidar_layout_from_name(options.lidar_layout);
+  if (!layout) return report_failure(output, result, "--lidar-layout: " + layout.error().message);
   if (!options.trajectory.empty() && !options.poses.empty()) {
     return report_failure(output, result, "--trajectory and --poses both give the trajectory: give one");
   }
@@ -132,7 +198,9 @@ int run_export_ros2bag(const Output& output, const ExportOptions& options) {
     ++counts[topic];
     return (*writer)->write(topic, type, time, cdr);
   };
+  std::map<std::string, uint64_t> left_out;
   const Status written = [&]() -> Status {
+    if (!options.log.empty()) HANZO_ASSIGN_OR_RETURN(left_out, export_log(options.log, *layout, write));
     for (std::size_t i = 0; i < path.size(); ++i) {
       if (poses_with_covariance.empty()) {
         HANZO_RETURN_IF_ERROR(write("/pose", "geometry_msgs/msg/PoseStamped", path[i].stamp,
@@ -170,8 +238,10 @@ int run_export_ros2bag(const Output& output, const ExportOptions& options) {
   }
   result["ok"] = true;
   result["topics"] = counts;
+  result["left_out"] = left_out;
   std::string text = fmt::format("{}: ROS 2 bag (MCAP)\n", options.out);
   for (const auto& [topic, count] : counts) text += fmt::format("  {}: {} messages\n", topic, count);
+  for (const auto& [topic, count] : left_out) text += fmt::format("  {}: {} messages left out (no ROS 2 type written for them)\n", topic, count);
   return report_success(output, result, text);
 }
 
@@ -188,6 +258,10 @@ void add_export_command(CLI::App& app, const Output& output, Command& run) {
   ros2bag->add_option("--poses", options->poses,
                       "A run's poses.csv -> /trajectory and /pose as PoseWithCovarianceStamped (instead of --trajectory)");
   ros2bag->add_option("--map", options->map, "FusionMap -> /map/points (PointCloud2), /map/occupancy (OccupancyGrid)");
+  ros2bag->add_option("--log", options->log,
+                      "Sensor log: IMU, clouds, images, GNSS, wheel odometry (as TwistStamped) under their topics");
+  ros2bag->add_option("--lidar-layout", options->lidar_layout, "Point layout of the clouds: plain, velodyne, ouster, livox, hesai")
+      ->capture_default_str();
   ros2bag->add_option("--frame", options->frame, "frame_id of the trajectory's poses")->capture_default_str();
   ros2bag->callback([&output, &run, options] { run = [&output, options] { return run_export_ros2bag(output, *options); }; });
 }

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <sstream>
 
 #include <fmt/format.h>
@@ -52,6 +53,12 @@ class CdrWriter {
     const Eigen::Quaterniond q = pose.orientation.normalized();
     return put(pose.position.x()).put(pose.position.y()).put(pose.position.z()).put(q.x()).put(q.y()).put(q.z()).put(q.w());
   }
+  CdrWriter& vector3(const Eigen::Vector3d& v) { return put(v.x()).put(v.y()).put(v.z()); }
+  // float64[9]: the matrix row by row, or `unset` then zeros when there is none.
+  CdrWriter& covariance(const std::optional<Eigen::Matrix3d>& matrix, double unset = 0.0) {
+    for (int i = 0; i < 9; ++i) put(matrix ? (*matrix)(i / 3, i % 3) : (i == 0 ? unset : 0.0));
+    return *this;
+  }
   std::string take() { return std::move(out_); }
 
  private:
@@ -80,6 +87,22 @@ const std::map<std::string, std::string>& definitions() {
       {"nav_msgs/MapMetaData",
        "builtin_interfaces/Time map_load_time\nfloat32 resolution\nuint32 width\nuint32 height\ngeometry_msgs/Pose origin\n"},
       {"nav_msgs/OccupancyGrid", "std_msgs/Header header\nnav_msgs/MapMetaData info\nint8[] data\n"},
+      {"geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n"},
+      {"geometry_msgs/Twist", "geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n"},
+      {"geometry_msgs/TwistStamped", "std_msgs/Header header\ngeometry_msgs/Twist twist\n"},
+      {"sensor_msgs/Imu",
+       "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n"
+       "geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\n"
+       "geometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n"},
+      {"sensor_msgs/NavSatStatus",
+       "int8 STATUS_NO_FIX=-1\nint8 STATUS_FIX=0\nint8 STATUS_SBAS_FIX=1\nint8 STATUS_GBAS_FIX=2\nuint16 SERVICE_GPS=1\n"
+       "int8 status\nuint16 service\n"},
+      {"sensor_msgs/NavSatFix",
+       "std_msgs/Header header\nsensor_msgs/NavSatStatus status\nfloat64 latitude\nfloat64 longitude\nfloat64 altitude\n"
+       "float64[9] position_covariance\nuint8 COVARIANCE_TYPE_UNKNOWN=0\nuint8 COVARIANCE_TYPE_APPROXIMATED=1\n"
+       "uint8 COVARIANCE_TYPE_DIAGONAL_KNOWN=2\nuint8 COVARIANCE_TYPE_KNOWN=3\nuint8 position_covariance_type\n"},
+      {"sensor_msgs/Image",
+       "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n"},
   };
   return kDefinitions;
 }
@@ -173,6 +196,117 @@ Result<std::string> occupancy_grid_cdr(Timestamp stamp, const std::string& frame
     cells[i] = static_cast<char>(unknown ? -1 : static_cast<int8_t>(std::lround(std::clamp(p, 0.0f, 1.0f) * 100.0f)));
   }
   w.bytes(cells.data(), cells.size());
+  return w.take();
+}
+
+Result<LidarLayout> lidar_layout_from_name(const std::string& name) {
+  if (name == "plain") return LidarLayout::kPlain;
+  if (name == "velodyne") return LidarLayout::kVelodyne;
+  if (name == "ouster") return LidarLayout::kOuster;
+  if (name == "livox") return LidarLayout::kLivox;
+  if (name == "hesai") return LidarLayout::kHesai;
+  return Error(fmt::format("unknown LiDAR layout '{}' (plain, velodyne, ouster, livox, hesai)", name));
+}
+
+std::string imu_cdr(const msgs::ImuMessage& imu) {
+  CdrWriter w;
+  w.header(imu.timestamp, imu.frame_id);
+  const Eigen::Quaterniond q = imu.orientation.value_or(Eigen::Quaterniond(0, 0, 0, 0));
+  w.put(q.x()).put(q.y()).put(q.z()).put(q.w());
+  // ROS: orientation_covariance[0] = -1 says "no orientation".
+  w.covariance(imu.orientation ? imu.orientation_covariance : std::nullopt, imu.orientation ? 0.0 : -1.0);
+  w.vector3(imu.angular_velocity).covariance(imu.gyroscope_covariance);
+  w.vector3(imu.linear_acceleration).covariance(imu.acceleration_covariance);
+  return w.take();
+}
+
+std::string navsatfix_cdr(const msgs::GnssMessage& fix, const std::string& frame_id) {
+  const int8_t status = fix.fix_type == msgs::GnssFixType::kNoFix ? -1
+                        : (fix.fix_type == msgs::GnssFixType::kRtkFixed || fix.fix_type == msgs::GnssFixType::kRtkFloat) ? 2
+                                                                                                                            : 0;
+  CdrWriter w;
+  w.header(fix.timestamp, frame_id).put(status).put<uint16_t>(1).put(fix.latitude).put(fix.longitude).put(fix.altitude);
+  w.covariance(fix.position_covariance).put<uint8_t>(fix.position_covariance ? 3 : 0);
+  return w.take();
+}
+
+std::string image_cdr(const msgs::ImageMessage& image) {
+  static const std::map<msgs::ImageEncoding, std::string> kNames = {{msgs::ImageEncoding::kRgb8, "rgb8"},
+                                                                     {msgs::ImageEncoding::kBgr8, "bgr8"},
+                                                                     {msgs::ImageEncoding::kMono8, "mono8"},
+                                                                     {msgs::ImageEncoding::kDepth16, "16UC1"},
+                                                                     {msgs::ImageEncoding::kDepth32f, "32FC1"}};
+  CdrWriter w;
+  w.header(image.timestamp, image.frame_id).put(image.height).put(image.width).string(kNames.at(image.encoding)).put<uint8_t>(0);
+  w.put(static_cast<uint32_t>(image.width * msgs::bytes_per_pixel(image.encoding))).bytes(image.data.data(), image.data.size());
+  return w.take();
+}
+
+std::string twist_stamped_cdr(Timestamp stamp, const std::string& frame_id, double forward_speed, double yaw_rate) {
+  return CdrWriter().header(stamp, frame_id).vector3({forward_speed, 0, 0}).vector3({0, 0, yaw_rate}).take();
+}
+
+std::string point_cloud_cdr(const msgs::PointCloudMessage& cloud, LidarLayout layout) {
+  struct Field {
+    const char* name;
+    uint32_t offset;
+    uint8_t datatype;  // 2 UINT8, 4 UINT16, 6 UINT32, 7 FLOAT32, 8 FLOAT64
+  };
+  std::vector<Field> fields;
+  uint32_t point_step = 0;
+  switch (layout) {
+    case LidarLayout::kPlain:
+    case LidarLayout::kVelodyne:
+      fields = {{"x", 0, 7}, {"y", 4, 7}, {"z", 8, 7}, {"intensity", 12, 7}, {"ring", 16, 4}, {"time", 18, 7}};
+      point_step = 22;
+      break;
+    case LidarLayout::kOuster:
+      fields = {{"x", 0, 7}, {"y", 4, 7}, {"z", 8, 7}, {"intensity", 16, 7}, {"t", 20, 6}, {"reflectivity", 24, 4}, {"ring", 26, 4}};
+      point_step = 32;
+      break;
+    case LidarLayout::kLivox:
+      fields = {{"x", 0, 7}, {"y", 4, 7}, {"z", 8, 7}, {"intensity", 12, 7}, {"tag", 16, 2}, {"line", 17, 2}, {"timestamp", 18, 8}};
+      point_step = 26;
+      break;
+    case LidarLayout::kHesai:
+      fields = {{"x", 0, 7}, {"y", 4, 7}, {"z", 8, 7}, {"intensity", 16, 7}, {"timestamp", 24, 8}, {"ring", 32, 4}};
+      point_step = 48;
+      break;
+  }
+  std::string data(static_cast<std::size_t>(point_step) * cloud.points.size(), '\0');
+  for (std::size_t i = 0; i < cloud.points.size(); ++i) {
+    char* point = data.data() + i * point_step;
+    const float intensity = cloud.intensities.empty() ? 0.0f : cloud.intensities[i];
+    const uint32_t ring = cloud.ring_ids.empty() ? 0 : cloud.ring_ids[i];
+    const Timestamp time = cloud.point_timestamps.empty() ? cloud.timestamp : cloud.point_timestamps[i];
+    const int64_t offset_ns = (time - cloud.timestamp).nanoseconds();
+    for (const Field& f : fields) {
+      const std::string_view name = f.name;
+      char* at = point + f.offset;
+      if (name == "x" || name == "y" || name == "z") {
+        std::memcpy(at, &cloud.points[i][name[0] - 'x'], 4);
+      } else if (name == "intensity") {
+        std::memcpy(at, &intensity, 4);
+      } else if (name == "ring" || name == "line") {
+        if (f.datatype == 4) { const uint16_t v = static_cast<uint16_t>(ring); std::memcpy(at, &v, 2); }
+        else *at = static_cast<char>(ring);
+      } else if (name == "time") {
+        const float seconds = static_cast<float>(static_cast<double>(offset_ns) * 1e-9);
+        std::memcpy(at, &seconds, 4);
+      } else if (name == "t") {
+        const uint32_t ns = static_cast<uint32_t>(std::max<int64_t>(offset_ns, 0));
+        std::memcpy(at, &ns, 4);
+      } else if (name == "timestamp") {
+        const double value = layout == LidarLayout::kLivox ? static_cast<double>(time.nanoseconds()) : time.seconds();
+        std::memcpy(at, &value, 8);
+      }
+    }
+  }
+  CdrWriter w;
+  w.header(cloud.timestamp, cloud.frame_id).put<uint32_t>(1).put(static_cast<uint32_t>(cloud.points.size()));
+  w.put(static_cast<uint32_t>(fields.size()));
+  for (const Field& f : fields) w.string(f.name).put(f.offset).put(f.datatype).put<uint32_t>(1);
+  w.put<uint8_t>(0).put(point_step).put(static_cast<uint32_t>(data.size())).bytes(data.data(), data.size()).put<uint8_t>(1);
   return w.take();
 }
 

@@ -4,7 +4,9 @@
 // produces, so that trajectories and maps open in RViz 2 (`ros2 bag play`) and Foxglove:
 //
 //   geometry_msgs/msg/PoseStamped, geometry_msgs/msg/PoseWithCovarianceStamped, nav_msgs/msg/Path,
-//   sensor_msgs/msg/PointCloud2 (x, y, z float32 [+ intensity float32]), nav_msgs/msg/OccupancyGrid.
+//   sensor_msgs/msg/PointCloud2 (x, y, z float32 [+ intensity float32]), nav_msgs/msg/OccupancyGrid;
+//   and sensor data (a sensor log as a ROS 2 bag): sensor_msgs/msg/Imu, NavSatFix, Image,
+//   PointCloud2 in a LiDAR driver's layout, geometry_msgs/msg/TwistStamped.
 //
 // The *_cdr functions encode one message (ROS 2 Humble layouts, as read back by Foxglove's
 // @foxglove/rosmsg2-serialization in tests/io/rosbag2_export_conformance_test.cpp).
@@ -20,6 +22,7 @@
 #include "hanzo/fusion/core/time.hpp"
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/msgs/map_messages.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
 
 namespace hanzo::fusion::io::ros2 {
 
@@ -40,6 +43,25 @@ std::string point_cloud_cdr(Timestamp stamp, const std::string& frame_id, const 
 /// A 2D layer (size_z 1): probability p -> round(100 p), unknown (exactly 0.5) -> -1. Fails for
 /// a 3D layer (flatten it first: maps/map_export.hpp) or a layer whose cells do not fill it.
 Result<std::string> occupancy_grid_cdr(Timestamp stamp, const std::string& frame_id, const msgs::OccupancyGridLayer& layer);
+
+/// Point layouts of the common ROS 2 LiDAR drivers (ros_conversion.hpp reads them all):
+///   kPlain    x y z intensity (float32), ring (uint16), time (float32 s after the stamp)
+///   kVelodyne the same (velodyne_pointcloud)
+///   kOuster   x y z, intensity at 16, t (uint32 ns after the stamp), reflectivity, ring (uint16)
+///   kLivox    x y z intensity (float32), tag, line (uint8), timestamp (float64 absolute ns)
+///   kHesai    x y z, intensity at 16, timestamp (float64 absolute s) at 24, ring (uint16) at 32
+/// Intensities are written as stored ([0, 1]); missing rings are 0, missing point times the stamp.
+enum class LidarLayout { kPlain, kVelodyne, kOuster, kLivox, kHesai };
+Result<LidarLayout> lidar_layout_from_name(const std::string& name);
+
+std::string imu_cdr(const msgs::ImuMessage& imu);
+/// NO_FIX -> status -1, FIX_2D/3D -> 0, RTK_FLOAT/FIXED -> 2 (GBAS); covariance "known" when given.
+std::string navsatfix_cdr(const msgs::GnssMessage& fix, const std::string& frame_id);
+/// rgb8, bgr8, mono8, 16UC1 (depth16), 32FC1 (depth32f).
+std::string image_cdr(const msgs::ImageMessage& image);
+std::string point_cloud_cdr(const msgs::PointCloudMessage& cloud, LidarLayout layout);
+/// Forward speed (m/s) and yaw rate (rad/s) as geometry_msgs/TwistStamped.
+std::string twist_stamped_cdr(Timestamp stamp, const std::string& frame_id, double forward_speed, double yaw_rate);
 
 /// Writes one bag folder. Not thread-safe.
 class BagWriter {
