@@ -5,6 +5,7 @@
 #include <zstd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -76,7 +77,7 @@ class DecompressedFile {
   static Result<std::unique_ptr<DecompressedFile>> create(const std::string& compressed_path) {
     std::ifstream in(compressed_path, std::ios::binary);
     if (!in) return Error(fmt::format("{}: cannot open", compressed_path));
-    static int counter = 0;
+    static std::atomic<int> counter = 0;  // several imports in one process get their own files
     const fs::path name = fs::path(compressed_path).filename().replace_extension("");  // drop ".zstd"
     auto file = std::unique_ptr<DecompressedFile>(new DecompressedFile(
         (fs::temp_directory_path() / fmt::format("hanzo_rosbag2_{}_{}_{}", ::getpid(), counter++, name.string())).string()));
