@@ -32,8 +32,11 @@ packages=(
   libabsl-dev
   # apps
   libcli11-dev
-  # Python bindings (pybind11) and their tests (pytest, numpy), on Debian's /usr/bin/python3
-  pybind11-dev python3-dev python3-numpy python3-pytest
+  # Python package (pybind11; pip, venv, setuptools and wheel build and install it; grpcio and
+  # protobuf for its gRPC client; mypy writes and checks its type stubs) and its tests (pytest,
+  # numpy), on Debian's /usr/bin/python3
+  pybind11-dev python3-dev python3-numpy python3-pytest python3-pip python3-venv python3-setuptools python3-wheel
+  python3-grpcio python3-protobuf python3-mypy
   # service: REST (cpp-httplib), storage (SQLite, PostgreSQL client + server for the tests), load
   # generator of the REST benchmark
   libcpp-httplib-dev libsqlite3-dev libpq-dev libpqxx-dev postgresql openssl curl wrk

@@ -349,15 +349,18 @@ class PyIncrementalSmoother {
 void bind_laser_slam(py::module_& module);  // laser_slam_bindings.cpp
 void bind_lidar_odometry(py::module_& module);  // lidar_odometry_bindings.cpp
 void bind_session(py::module_& module);  // session_bindings.cpp
+void bind_sensor_log(py::module_& module);  // log_bindings.cpp
+void bind_evaluation(py::module_& module);  // evaluation_bindings.cpp
 void bind_sensor_models(py::module_& module);   // sensor_model_bindings.cpp
 
 PYBIND11_MODULE(_fusion, module) {
   module.doc() = "hanzo-fusion: factor graphs for sensor fusion and SLAM";
+  module.attr("__version__") = HANZO_FUSION_VERSION;
 
-  module.def("X", &graph::X, "Pose key X(i)", py::arg("i"));
-  module.def("V", &graph::V, "Velocity key V(i)", py::arg("i"));
-  module.def("B", &graph::B, "IMU bias key B(i)", py::arg("i"));
-  module.def("L", &graph::L, "Landmark key L(j)", py::arg("j"));
+  module.def("X", &graph::X, "The key of pose i", py::arg("i"));
+  module.def("V", &graph::V, "The key of velocity i", py::arg("i"));
+  module.def("B", &graph::B, "The key of IMU bias i", py::arg("i"));
+  module.def("L", &graph::L, "The key of landmark j", py::arg("j"));
   module.def("key_to_string", &graph::key_to_string, py::arg("key"));
   bind_sensor_models(module);  // before FactorGraph, whose signatures name its classes
   module.def(
@@ -478,4 +481,6 @@ PYBIND11_MODULE(_fusion, module) {
   bind_laser_slam(module);
   bind_lidar_odometry(module);
   bind_session(module);
+  bind_sensor_log(module);
+  bind_evaluation(module);
 }

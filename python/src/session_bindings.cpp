@@ -19,6 +19,7 @@
 #include "hanzo/fusion/io/sensor_log.hpp"
 #include "hanzo/fusion/pipeline/log_replay.hpp"
 #include "hanzo/fusion/pipeline/session.hpp"
+#include "message_conversion.hpp"
 
 namespace py = pybind11;
 using namespace hanzo::fusion;
@@ -67,6 +68,10 @@ class PySession {
     const Status pushed = session_->push(sensor, std::move(message));
     if (pushed) return std::nullopt;
     return pushed.error().message;
+  }
+
+  std::optional<std::string> push_message(const std::string& sensor, const py::object& message) {
+    return push(sensor, python::sensor_message_from_python(message));
   }
 
   std::optional<std::string> push_imu(const std::string& sensor, double time_s, const Eigen::Vector3d& acceleration,
@@ -203,6 +208,9 @@ void bind_session(py::module_& module) {
                         "docs/python.md")
       .def(py::init<const std::string&, const std::optional<std::string>&, int>(), py::arg("config"), py::arg("calibration") = std::nullopt,
            py::arg("threads") = 1, "config: fusion configuration YAML path; calibration: calibration YAML path")
+      .def("push", &PySession::push_message, py::arg("sensor"), py::arg("message"),
+           "A hanzo.fusion.messages message (Imu, PointCloud, Image, Gnss, WheelOdometry, Radar) from the named sensor. "
+           "Returns None, or the rejection 'reason: detail'")
       .def("push_imu", &PySession::push_imu, py::arg("sensor"), py::arg("time_s"), py::arg("acceleration"), py::arg("angular_velocity"),
            "Specific force (m/s^2) and turn rate (rad/s) in the IMU frame. Returns None, or the rejection 'reason: detail'")
       .def("push_gnss", &PySession::push_gnss, py::arg("sensor"), py::arg("time_s"), py::arg("latitude"), py::arg("longitude"),

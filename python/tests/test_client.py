@@ -253,3 +253,43 @@ def test_camera_intrinsics_from_uploaded_images(server):
     with pytest.raises(FusionError) as not_an_image:
         client.calibrate_camera("camera_front", [b"GIF89a..."], inner_corners=(8, 6), square_size=0.05)
     assert not_an_image.value.status == 400 and not_an_image.value.field == "images[0].data"
+
+
+def test_grpc_streams_from_python(server):
+    """hanzo.fusion.streaming: the simulated drive read with read_log and streamed over gRPC from Python."""
+    streaming = pytest.importorskip("hanzo.fusion.streaming")
+    from hanzo.fusion import Imu, read_log
+
+    client = FusionClient(server["rest"], token=TOKEN)
+    sim = server["sim"]
+    session = client.create_session((sim / "fusion.yaml").read_text(), (sim / "calibration.yaml").read_text(), name="python-grpc")
+    sensors = {"/sensors/imu": "imu", "/sensors/lidar": "lidar", "/sensors/wheels": "wheels"}
+    with streaming.SensorStreams(server["grpc"], session["id"], token=TOKEN) as streams:
+        sent = streams.send_log(str(sim / "sensors.mcap"), sensors, rate=5.0)
+    expected = {}
+    for record in read_log(str(sim / "sensors.mcap")):
+        if record.topic in sensors:
+            expected[sensors[record.topic]] = expected.get(sensors[record.topic], 0) + 1
+    assert sent == expected and sent["imu"] > 1500
+    state = client.session(session["id"])
+    received = {s["name"]: s["received"] for s in state["sensors"]}
+    assert all(received[name] == count for name, count in sent.items()), (received, sent)
+    assert state["mapping"]["scans_registered"] > 50
+    assert len(streams.poses) > 1000
+    last = streams.poses[-1]
+    assert last.tracking_state in ("TRACKING", "DEGRADED") and last.covariance.shape == (6, 6)
+    # The session's world starts at the robot's first pose: compare the distance driven.
+    truth = np.loadtxt(sim / "ground_truth.tum")
+    index = np.searchsorted(truth[:, 0], last.time_s).clip(0, len(truth) - 1)
+    first = streams.poses[0]
+    first_index = np.searchsorted(truth[:, 0], first.time_s).clip(0, len(truth) - 1)
+    driven = np.linalg.norm(truth[index, 1:4] - truth[first_index, 1:4])
+    assert driven > 5 and abs(np.linalg.norm(last.position - first.position) - driven) < 0.3
+    client.end_session(session["id"])
+
+    # Refusals come back as StreamError with the gRPC status: no token, an unknown session.
+    for token, session_id, code in ((None, session["id"], "UNAUTHENTICATED"), (TOKEN, "no-such-session", "NOT_FOUND")):
+        with pytest.raises(streaming.StreamError) as refused:
+            with streaming.SensorStreams(server["grpc"], session_id, token=token) as streams:
+                streams.send("imu", Imu(1_700_000_000_000_000_000, np.array([0, 0, 9.81]), np.zeros(3)))
+        assert refused.value.code.name == code, refused.value

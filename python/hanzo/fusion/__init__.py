@@ -1,5 +1,8 @@
-"""hanzo-fusion's Python API: factor graphs for sensor fusion and SLAM.
+"""hanzo-fusion's Python API: the whole sensor-fusion pipeline (Session), sensor logs, trajectory
+evaluation, factor graphs, LiDAR odometry and 2D laser SLAM; clients of the server in
+hanzo.fusion.client (REST) and hanzo.fusion.streaming (gRPC). docs/python.md.
 
+    from hanzo.fusion import Session, read_log, replay, ape
     from hanzo.fusion import FactorGraph, Pose3, Point3, X
 """
 
@@ -22,8 +25,25 @@ from hanzo.fusion._fusion import (  # noqa: F401
     Pose3,
     V,
     X,
+    ape,
     geodetic_to_enu,
     key_to_string,
     read_carmen,
     read_g2o,
+    read_trajectory,
+    rpe,
+    write_trajectory,
+)
+from hanzo.fusion.log import LogWriter, read_log, replay  # noqa: F401
+from hanzo.fusion.messages import (  # noqa: F401
+    CameraIntrinsics,
+    Distortion,
+    Gnss,
+    Image,
+    Imu,
+    LogRecord,
+    PointCloud,
+    PoseEstimate,
+    Radar,
+    WheelOdometry,
 )
