@@ -566,6 +566,21 @@ TEST(Cli, RunMapsWithTheWholePipelineAndReplaysBitIdenticallyOnAnyThreadCount) {
   EXPECT_EQ(bag["topics"]["/map/occupancy"], 1);
   EXPECT_GT(bag["topics"]["/pose"].get<int>(), 100);
   EXPECT_TRUE(std::filesystem::exists(dir / "ros2" / "metadata.yaml"));
+  // The sweeps with the optimized poses as training data, in both layouts.
+  for (const std::string layout : {"kitti", "nuscenes"}) {
+    const CliRun dataset = run(fmt::format("export dataset {0}/sensors.mcap --trajectory {1}/trajectory_optimized.tum --calib {0}/calibration.yaml "
+                                           "--out {2} --layout {3} --json",
+                                           (dir / "sim").string(), (dir / "run1").string(), (dir / layout).string(), layout));
+    ASSERT_EQ(dataset.exit_code, 0) << dataset.err;
+    const nlohmann::json summary = nlohmann::json::parse(dataset.out);
+    EXPECT_EQ(summary["reference_messages"], 250);
+    EXPECT_GT(summary["frames"].get<int>(), 230);  // the sweeps before the IMU aligned have no pose
+    EXPECT_EQ(summary["frames"].get<int>() + summary["left_out_outside_trajectory"].get<int>(), 250);
+    EXPECT_EQ(summary["deskewed_sweeps"], summary["frames"]);
+    EXPECT_EQ(summary["files_by_sensor"]["lidar"], summary["frames"]);
+  }
+  EXPECT_TRUE(std::filesystem::exists(dir / "kitti" / "poses" / "00.txt"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "nuscenes" / "v1.0-hanzo" / "sample_data.json"));
   std::filesystem::remove_all(dir);
 }
 
