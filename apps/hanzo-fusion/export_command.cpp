@@ -41,6 +41,8 @@ struct ExportOptions {
   std::string log;
   std::string lidar_layout = "velodyne";
   std::string frame = std::string(msgs::kWorldFrame);
+  std::string calibration;
+  std::string body_frame = "base_link";
 };
 
 struct DatasetOptions {
@@ -61,25 +63,76 @@ struct DatasetOptions {
   std::string scene = "scene-0001";
 };
 
+using WriteFunction = std::function<Status(const std::string&, const std::string&, Timestamp, const std::string&)>;
+
+// The message with `frame_id` set where it was empty (GNSS fixes carry none).
+msgs::SensorMessage with_frame(const msgs::SensorMessage& message, const std::string& frame_id) {
+  msgs::SensorMessage named = message;
+  std::visit(
+      [&](auto& m) {
+        if constexpr (!std::is_same_v<std::decay_t<decltype(m)>, msgs::GnssMessage>) {
+          if (m.frame_id.empty()) m.frame_id = frame_id;
+        }
+      },
+      named);
+  return named;
+}
+
+std::string frame_of(const msgs::SensorMessage& message) {
+  return std::visit(
+      [](const auto& m) -> std::string {
+        if constexpr (std::is_same_v<std::decay_t<decltype(m)>, msgs::GnssMessage>) {
+          return "";
+        } else {
+          return m.frame_id;
+        }
+      },
+      message);
+}
+
+struct ExportedLog {
+  std::map<std::string, uint64_t> left_out;   // topic -> messages without a ROS 2 type written for them
+  std::vector<std::string> calibrated;        // sensors placed in /tf_static
+};
+
 // Writes every sensor message of a log into the bag under its topic; wheel odometry becomes
-// TwistStamped (speeds from consecutive distances; the first message of a topic 0). Returns
-// the counts of what was left out (radar, estimates) by topic.
-Result<std::map<std::string, uint64_t>> export_log(const std::string& path, io::ros2::LidarLayout layout,
-                                                   const std::function<Status(const std::string&, const std::string&, Timestamp,
-                                                                              const std::string&)>& write) {
+// TwistStamped (speeds from consecutive distances; the first message of a topic 0). With a
+// calibration, each sensor it places (by the channel's sensor name) gets a static transform
+// from `body_frame` to its messages' frame (named after the sensor when they carry none) in
+// /tf_static, and each calibrated camera a CameraInfo with every image on <topic>/camera_info.
+Result<ExportedLog> export_log(const std::string& path, io::ros2::LidarLayout layout, const calib::Calibration* calibration,
+                               const std::string& body_frame, const WriteFunction& write) {
   std::unique_ptr<io::SensorLogReader> reader;
   HANZO_ASSIGN_OR_RETURN(reader, io::SensorLogReader::open(path));
-  std::map<std::string, uint64_t> left_out;
+  std::map<std::string, std::string> sensor_by_topic;
+  for (const auto& [id, channel] : reader->mcap().channels()) {
+    if (const auto sensor = channel.metadata.find("sensor"); sensor != channel.metadata.end()) sensor_by_topic[channel.topic] = sensor->second;
+  }
+  ExportedLog exported;
   std::map<std::string, msgs::WheelOdometryMessage> previous_wheels;
+  std::vector<io::ros::FrameTransform> transforms;
+  std::optional<Timestamp> first_time;
   io::LogEntry entry;
   while (true) {
     bool more = false;
     HANZO_ASSIGN_OR_RETURN(more, reader->next(entry));
-    if (!more) return left_out;
-    const auto* sensor = std::get_if<msgs::SensorMessage>(&entry.message);
-    if (sensor == nullptr) {
-      ++left_out[entry.topic];
+    if (!more) break;
+    const auto* logged = std::get_if<msgs::SensorMessage>(&entry.message);
+    if (logged == nullptr) {
+      ++exported.left_out[entry.topic];
       continue;
+    }
+    if (!first_time) first_time = entry.log_time;
+    const std::string sensor_name = sensor_by_topic.count(entry.topic) ? sensor_by_topic.at(entry.topic) : "";
+    const calib::SensorCalibration* placed = calibration && !sensor_name.empty() ? calibration->find(sensor_name) : nullptr;
+    const bool needs_frame = placed != nullptr && frame_of(*logged).empty() && !std::holds_alternative<msgs::GnssMessage>(*logged);
+    const msgs::SensorMessage named = needs_frame ? with_frame(*logged, sensor_name) : msgs::SensorMessage{};
+    const msgs::SensorMessage& message = needs_frame ? named : *logged;
+    if (placed != nullptr && std::find(exported.calibrated.begin(), exported.calibrated.end(), sensor_name) == exported.calibrated.end()) {
+      const std::string child = std::holds_alternative<msgs::GnssMessage>(message) ? entry.topic.substr(entry.topic.find_last_of('/') + 1)
+                                                                                    : frame_of(message);
+      transforms.push_back({*first_time, body_frame, child, placed->T_body_sensor()});
+      exported.calibrated.push_back(sensor_name);
     }
     const std::string frame = entry.topic.substr(entry.topic.find_last_of('/') + 1);
     Status written = std::visit(
@@ -90,7 +143,10 @@ Result<std::map<std::string, uint64_t>> export_log(const std::string& path, io::
           } else if constexpr (std::is_same_v<Message, msgs::PointCloudMessage>) {
             return write(entry.topic, "sensor_msgs/msg/PointCloud2", entry.log_time, io::ros2::point_cloud_cdr(m, layout));
           } else if constexpr (std::is_same_v<Message, msgs::ImageMessage>) {
-            return write(entry.topic, "sensor_msgs/msg/Image", entry.log_time, io::ros2::image_cdr(m));
+            HANZO_RETURN_IF_ERROR(write(entry.topic, "sensor_msgs/msg/Image", entry.log_time, io::ros2::image_cdr(m)));
+            if (placed == nullptr || !placed->camera) return ok_status();
+            return write(entry.topic + "/camera_info", "sensor_msgs/msg/CameraInfo", entry.log_time,
+                         io::ros2::camera_info_cdr(m.timestamp, m.frame_id, *placed->camera, m.width, m.height));
           } else if constexpr (std::is_same_v<Message, msgs::GnssMessage>) {
             return write(entry.topic, "sensor_msgs/msg/NavSatFix", entry.log_time, io::ros2::navsatfix_cdr(m, frame));
           } else if constexpr (std::is_same_v<Message, msgs::WheelOdometryMessage>) {
@@ -109,13 +165,15 @@ Result<std::map<std::string, uint64_t>> export_log(const std::string& path, io::
             return write(entry.topic, "geometry_msgs/msg/TwistStamped", entry.log_time,
                          io::ros2::twist_stamped_cdr(m.timestamp, m.frame_id, speed, yaw_rate));
           } else {
-            ++left_out[entry.topic];
+            ++exported.left_out[entry.topic];
             return ok_status();
           }
         },
-        *sensor);
+        message);
     HANZO_RETURN_IF_ERROR(written);
   }
+  if (!transforms.empty()) HANZO_RETURN_IF_ERROR(write("/tf_static", "tf2_msgs/msg/TFMessage", *first_time, io::ros2::tf_message_cdr(transforms)));
+  return exported;
 }
 
 struct PoseWithCovariance {
@@ -208,6 +266,13 @@ int run_export_ros2bag(const Output& output, const ExportOptions& options) {
     poses_with_covariance = std::move(*read);
     for (const PoseWithCovariance& pose : poses_with_covariance) path.push_back(pose.pose);
   }
+  std::optional<calib::Calibration> calibration;
+  if (!options.calibration.empty()) {
+    if (options.log.empty()) return report_failure(output, result, "--calib places the sensors of --log: give --log too");
+    Result<calib::Calibration> loaded = calib::load_calibration(options.calibration);
+    if (!loaded) return report_failure(output, result, loaded.error().message);
+    calibration = std::move(*loaded);
+  }
   std::optional<msgs::FusionMap> map;
   if (!options.map.empty()) {
     Result<msgs::FusionMap> read = maps::read_fusion_map(options.map);
@@ -221,9 +286,11 @@ int run_export_ros2bag(const Output& output, const ExportOptions& options) {
     ++counts[topic];
     return (*writer)->write(topic, type, time, cdr);
   };
-  std::map<std::string, uint64_t> left_out;
+  ExportedLog exported_log;
   const Status written = [&]() -> Status {
-    if (!options.log.empty()) HANZO_ASSIGN_OR_RETURN(left_out, export_log(options.log, *layout, write));
+    if (!options.log.empty()) {
+      HANZO_ASSIGN_OR_RETURN(exported_log, export_log(options.log, *layout, calibration ? &*calibration : nullptr, options.body_frame, write));
+    }
     for (std::size_t i = 0; i < path.size(); ++i) {
       if (poses_with_covariance.empty()) {
         HANZO_RETURN_IF_ERROR(write("/pose", "geometry_msgs/msg/PoseStamped", path[i].stamp,
@@ -261,10 +328,16 @@ int run_export_ros2bag(const Output& output, const ExportOptions& options) {
   }
   result["ok"] = true;
   result["topics"] = counts;
-  result["left_out"] = left_out;
+  result["left_out"] = exported_log.left_out;
+  if (calibration) result["calibrated_sensors"] = exported_log.calibrated;
   std::string text = fmt::format("{}: ROS 2 bag (MCAP)\n", options.out);
   for (const auto& [topic, count] : counts) text += fmt::format("  {}: {} messages\n", topic, count);
-  for (const auto& [topic, count] : left_out) text += fmt::format("  {}: {} messages left out (no ROS 2 type written for them)\n", topic, count);
+  if (calibration) {
+    std::string names;
+    for (const std::string& name : exported_log.calibrated) names += (names.empty() ? "" : ", ") + name;
+    text += fmt::format("  /tf_static: {} placed from {} ({})\n", options.body_frame, options.calibration, names.empty() ? "no sensor" : names);
+  }
+  for (const auto& [topic, count] : exported_log.left_out) text += fmt::format("  {}: {} messages left out (no ROS 2 type written for them)\n", topic, count);
   return report_success(output, result, text);
 }
 
@@ -374,6 +447,9 @@ void add_export_command(CLI::App& app, const Output& output, Command& run) {
   ros2bag->add_option("--lidar-layout", options->lidar_layout, "Point layout of the clouds: plain, velodyne, ouster, livox, hesai")
       ->capture_default_str();
   ros2bag->add_option("--frame", options->frame, "frame_id of the trajectory's poses")->capture_default_str();
+  ros2bag->add_option("--calib", options->calibration,
+                      "With --log: the sensors' extrinsics as /tf_static, camera intrinsics as <image topic>/camera_info");
+  ros2bag->add_option("--body-frame", options->body_frame, "Parent frame of /tf_static")->capture_default_str();
   ros2bag->callback([&output, &run, options] { run = [&output, options] { return run_export_ros2bag(output, *options); }; });
 
   auto dataset_options = std::make_shared<DatasetOptions>();

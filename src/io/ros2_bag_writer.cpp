@@ -101,6 +101,13 @@ const std::map<std::string, std::string>& definitions() {
        "std_msgs/Header header\nsensor_msgs/NavSatStatus status\nfloat64 latitude\nfloat64 longitude\nfloat64 altitude\n"
        "float64[9] position_covariance\nuint8 COVARIANCE_TYPE_UNKNOWN=0\nuint8 COVARIANCE_TYPE_APPROXIMATED=1\n"
        "uint8 COVARIANCE_TYPE_DIAGONAL_KNOWN=2\nuint8 COVARIANCE_TYPE_KNOWN=3\nuint8 position_covariance_type\n"},
+      {"geometry_msgs/Transform", "geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n"},
+      {"geometry_msgs/TransformStamped", "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n"},
+      {"tf2_msgs/TFMessage", "geometry_msgs/TransformStamped[] transforms\n"},
+      {"sensor_msgs/RegionOfInterest", "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify\n"},
+      {"sensor_msgs/CameraInfo",
+       "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\nfloat64[] d\nfloat64[9] k\nfloat64[9] r\n"
+       "float64[12] p\nuint32 binning_x\nuint32 binning_y\nsensor_msgs/RegionOfInterest roi\n"},
       {"sensor_msgs/Image",
        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n"},
   };
@@ -239,6 +246,36 @@ std::string image_cdr(const msgs::ImageMessage& image) {
   CdrWriter w;
   w.header(image.timestamp, image.frame_id).put(image.height).put(image.width).string(kNames.at(image.encoding)).put<uint8_t>(0);
   w.put(static_cast<uint32_t>(image.width * msgs::bytes_per_pixel(image.encoding))).bytes(image.data.data(), image.data.size());
+  return w.take();
+}
+
+std::string tf_message_cdr(const std::vector<ros::FrameTransform>& transforms) {
+  CdrWriter w;
+  w.put(static_cast<uint32_t>(transforms.size()));
+  for (const ros::FrameTransform& transform : transforms) {
+    w.header(transform.stamp, transform.parent_frame).string(transform.child_frame);
+    w.vector3(transform.T_parent_child.translation());
+    const Eigen::Quaterniond& q = transform.T_parent_child.rotation().quaternion();
+    w.put(q.x()).put(q.y()).put(q.z()).put(q.w());
+  }
+  return w.take();
+}
+
+std::string camera_info_cdr(Timestamp stamp, const std::string& frame_id, const calib::CameraCalibration& camera, uint32_t width,
+                            uint32_t height) {
+  const msgs::CameraIntrinsics& k = camera.intrinsics;
+  const bool equidistant = camera.distortion.type == msgs::DistortionType::kEquidistant;
+  std::vector<double> d = camera.distortion.coefficients;
+  if (!equidistant) d.resize(5, 0.0);  // plumb_bob: k1 k2 p1 p2 k3
+  CdrWriter w;
+  w.header(stamp, frame_id).put(height).put(width).string(equidistant ? "equidistant" : "plumb_bob");
+  w.put(static_cast<uint32_t>(d.size()));
+  for (const double value : d) w.put(value);
+  for (const double value : {k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0}) w.put(value);
+  for (const double value : {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0}) w.put(value);
+  for (const double value : {k.fx, 0.0, k.cx, 0.0, 0.0, k.fy, k.cy, 0.0, 0.0, 0.0, 1.0, 0.0}) w.put(value);
+  w.put<uint32_t>(0).put<uint32_t>(0);                                                        // binning
+  w.put<uint32_t>(0).put<uint32_t>(0).put<uint32_t>(0).put<uint32_t>(0).put<uint8_t>(0);  // roi
   return w.take();
 }
 

@@ -48,6 +48,11 @@ TEST(Rosbag2Export, FoxgloveReadsEveryValueWritten) {
   grid.origin.orientation = Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ()));
   for (uint32_t i = 0; i < grid.size_x * grid.size_y; ++i) grid.occupancy.push_back(i % 3 == 0 ? 0.5f : static_cast<float>(i) / 35.0f);
 
+  const std::vector<ros::FrameTransform> transforms = {
+      {path[0].stamp, "base_link", "lidar", SE3(SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), 0.4), Eigen::Vector3d(0.3, -0.1, 1.2))},
+      {path[0].stamp, "base_link", "cam_optical", SE3(SO3::from_wxyz(Eigen::Vector4d(0.5, -0.5, 0.5, -0.5)), Eigen::Vector3d(0.1, 0.05, 0.0))}};
+  const calib::CameraCalibration fisheye{{458.6, 457.3, 367.2, 248.4, 752, 480}, {msgs::DistortionType::kEquidistant, {0.01, -0.02, 0.003, -0.0004}}};
+  const calib::CameraCalibration pinhole{{500.0, 501.0, 320.5, 180.5, 640, 360}, {}};
   {
     auto writer = BagWriter::create(dir.string());
     ASSERT_TRUE(writer.ok()) << writer.error().message;
@@ -62,6 +67,11 @@ TEST(Rosbag2Export, FoxgloveReadsEveryValueWritten) {
     auto occupancy = occupancy_grid_cdr(path.back().stamp, "map", grid);
     ASSERT_TRUE(occupancy.ok()) << occupancy.error().message;
     ASSERT_TRUE((*writer)->write("/map/occupancy", "nav_msgs/msg/OccupancyGrid", path.back().stamp, *occupancy).ok());
+    ASSERT_TRUE((*writer)->write("/tf_static", "tf2_msgs/msg/TFMessage", path[0].stamp, tf_message_cdr(transforms)).ok());
+    ASSERT_TRUE((*writer)->write("/cam/camera_info", "sensor_msgs/msg/CameraInfo", path[0].stamp,
+                                 camera_info_cdr(path[0].stamp, "cam_optical", fisheye, 752, 480)).ok());
+    ASSERT_TRUE((*writer)->write("/cam2/camera_info", "sensor_msgs/msg/CameraInfo", path[0].stamp,
+                                 camera_info_cdr(path[0].stamp, "cam2", pinhole, 640, 360)).ok());
     EXPECT_THAT((*writer)->write("/pose", "nav_msgs/msg/Path", path[0].stamp, "").error().message, HasSubstr("has type"));
     EXPECT_THAT((*writer)->write("/x", "std_msgs/msg/String", path[0].stamp, "").error().message, HasSubstr("not one it writes"));
     ASSERT_TRUE((*writer)->close().ok());
@@ -72,7 +82,7 @@ TEST(Rosbag2Export, FoxgloveReadsEveryValueWritten) {
   auto bag = open_bag(dir.string());
   ASSERT_TRUE(bag.ok()) << bag.error().message;
   EXPECT_EQ(bag->storage, "mcap");
-  ASSERT_EQ(bag->topics.size(), 5u);
+  ASSERT_EQ(bag->topics.size(), 8u);
 
   const nlohmann::json read = test::run_node("rosbag2_read.mjs", bag->files.front());
   ASSERT_FALSE(read.is_null());
@@ -127,6 +137,47 @@ TEST(Rosbag2Export, FoxgloveReadsEveryValueWritten) {
   for (std::size_t i = 0; i < grid.occupancy.size(); ++i) {
     const int expected = i % 3 == 0 ? -1 : static_cast<int>(std::lround(grid.occupancy[i] * 100.0f));
     EXPECT_EQ(occupancy["data"][i].get<int>(), expected) << i;
+  }
+  const auto& tf = topics["/tf_static"]["messages"][0]["transforms"];
+  ASSERT_EQ(tf.size(), transforms.size());
+  for (std::size_t i = 0; i < transforms.size(); ++i) {
+    EXPECT_EQ(tf[i]["header"]["frame_id"], "base_link");
+    EXPECT_EQ(tf[i]["child_frame_id"], transforms[i].child_frame);
+    expect_stamp(tf[i]["header"], transforms[i].stamp);
+    const Eigen::Vector3d& t = transforms[i].T_parent_child.translation();
+    const Eigen::Quaterniond& q = transforms[i].T_parent_child.rotation().quaternion();
+    EXPECT_EQ(tf[i]["transform"]["translation"]["x"].get<double>(), t.x());
+    EXPECT_EQ(tf[i]["transform"]["translation"]["z"].get<double>(), t.z());
+    EXPECT_EQ(tf[i]["transform"]["rotation"]["w"].get<double>(), q.w());
+    EXPECT_EQ(tf[i]["transform"]["rotation"]["y"].get<double>(), q.y());
+  }
+  const auto& info = topics["/cam/camera_info"]["messages"][0];
+  EXPECT_EQ(info["header"]["frame_id"], "cam_optical");
+  EXPECT_EQ(info["width"], 752);
+  EXPECT_EQ(info["height"], 480);
+  EXPECT_EQ(info["distortion_model"], "equidistant");
+  EXPECT_EQ(info["d"].get<std::vector<double>>(), fisheye.distortion.coefficients);
+  EXPECT_EQ(info["k"].get<std::vector<double>>(), (std::vector<double>{458.6, 0, 367.2, 0, 457.3, 248.4, 0, 0, 1}));
+  EXPECT_EQ(info["p"][2].get<double>(), 367.2);
+  EXPECT_EQ(info["roi"]["do_rectify"], false);
+  const auto& plain = topics["/cam2/camera_info"]["messages"][0];
+  EXPECT_EQ(plain["distortion_model"], "plumb_bob");
+  EXPECT_EQ(plain["d"].get<std::vector<double>>(), std::vector<double>(5, 0.0));
+  // Our importer's decoders take them back as they were.
+  auto camera_back = ros::camera_info_from_ros(camera_info_cdr(path[0].stamp, "cam_optical", fisheye, 752, 480), ros::Serialization::kCdr);
+  ASSERT_TRUE(camera_back.ok()) << camera_back.error().message;
+  EXPECT_EQ(camera_back->frame_id, "cam_optical");
+  EXPECT_EQ(camera_back->camera.intrinsics.fx, fisheye.intrinsics.fx);
+  EXPECT_EQ(camera_back->camera.intrinsics.cy, fisheye.intrinsics.cy);
+  EXPECT_EQ(camera_back->camera.intrinsics.width, 752u);
+  EXPECT_EQ(camera_back->camera.distortion.type, msgs::DistortionType::kEquidistant);
+  EXPECT_EQ(camera_back->camera.distortion.coefficients, fisheye.distortion.coefficients);
+  auto tf_back = ros::transforms_from_ros(tf_message_cdr(transforms), ros::Serialization::kCdr);
+  ASSERT_TRUE(tf_back.ok()) << tf_back.error().message;
+  ASSERT_EQ(tf_back->size(), transforms.size());
+  for (std::size_t i = 0; i < transforms.size(); ++i) {
+    EXPECT_EQ((*tf_back)[i].child_frame, transforms[i].child_frame);
+    EXPECT_TRUE((*tf_back)[i].T_parent_child.matrix().isApprox(transforms[i].T_parent_child.matrix(), 1e-15));
   }
   fs::remove_all(dir);
 }

@@ -6,7 +6,8 @@
 //   geometry_msgs/msg/PoseStamped, geometry_msgs/msg/PoseWithCovarianceStamped, nav_msgs/msg/Path,
 //   sensor_msgs/msg/PointCloud2 (x, y, z float32 [+ intensity float32]), nav_msgs/msg/OccupancyGrid;
 //   and sensor data (a sensor log as a ROS 2 bag): sensor_msgs/msg/Imu, NavSatFix, Image,
-//   PointCloud2 in a LiDAR driver's layout, geometry_msgs/msg/TwistStamped.
+//   PointCloud2 in a LiDAR driver's layout, geometry_msgs/msg/TwistStamped; the calibration as
+//   tf2_msgs/msg/TFMessage (/tf_static) and sensor_msgs/msg/CameraInfo.
 //
 // The *_cdr functions encode one message (ROS 2 Humble layouts, as read back by Foxglove's
 // @foxglove/rosmsg2-serialization in tests/io/rosbag2_export_conformance_test.cpp).
@@ -18,8 +19,10 @@
 
 #include <Eigen/Core>
 
+#include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/io/ros_conversion.hpp"
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/msgs/map_messages.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
@@ -60,6 +63,12 @@ std::string navsatfix_cdr(const msgs::GnssMessage& fix, const std::string& frame
 /// rgb8, bgr8, mono8, 16UC1 (depth16), 32FC1 (depth32f).
 std::string image_cdr(const msgs::ImageMessage& image);
 std::string point_cloud_cdr(const msgs::PointCloudMessage& cloud, LidarLayout layout);
+/// tf2_msgs/TFMessage: one TransformStamped per transform (header frame = parent).
+std::string tf_message_cdr(const std::vector<ros::FrameTransform>& transforms);
+/// sensor_msgs/CameraInfo of an image of `width` x `height`: K, R = I, P = [K | 0]; distortion
+/// "plumb_bob" (k1 k2 p1 p2 k3; none: zeros) or "equidistant" (k1..k4).
+std::string camera_info_cdr(Timestamp stamp, const std::string& frame_id, const calib::CameraCalibration& camera, uint32_t width,
+                            uint32_t height);
 /// Forward speed (m/s) and yaw rate (rad/s) as geometry_msgs/TwistStamped.
 std::string twist_stamped_cdr(Timestamp stamp, const std::string& frame_id, double forward_speed, double yaw_rate);
 
