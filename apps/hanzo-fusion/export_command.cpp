@@ -43,6 +43,7 @@ struct ExportOptions {
   std::string frame = std::string(msgs::kWorldFrame);
   std::string calibration;
   std::string body_frame = "base_link";
+  std::string storage = "mcap";
 };
 
 struct DatasetOptions {
@@ -246,6 +247,8 @@ int run_export_ros2bag(const Output& output, const ExportOptions& options) {
   }
   Result<io::ros2::LidarLayout> layout = io::ros2::lidar_layout_from_name(options.lidar_layout);
   if (!layout) return report_failure(output, result, "--lidar-layout: " + layout.error().message);
+  Result<io::ros2::BagStorage> storage = io::ros2::bag_storage_from_name(options.storage);
+  if (!storage) return report_failure(output, result, "--storage: " + storage.error().message);
   if (!options.trajectory.empty() && !options.poses.empty()) {
     return report_failure(output, result, "--trajectory and --poses both give the trajectory: give one");
   }
@@ -279,7 +282,7 @@ int run_export_ros2bag(const Output& output, const ExportOptions& options) {
     if (!read) return report_failure(output, result, read.error().message);
     map = std::move(*read);
   }
-  auto writer = io::ros2::BagWriter::create(options.out);
+  auto writer = io::ros2::BagWriter::create(options.out, *storage);
   if (!writer) return report_failure(output, result, writer.error().message);
   std::map<std::string, uint64_t> counts;
   auto write = [&](const std::string& topic, const std::string& type, Timestamp time, const std::string& cdr) -> Status {
@@ -330,7 +333,8 @@ int run_export_ros2bag(const Output& output, const ExportOptions& options) {
   result["topics"] = counts;
   result["left_out"] = exported_log.left_out;
   if (calibration) result["calibrated_sensors"] = exported_log.calibrated;
-  std::string text = fmt::format("{}: ROS 2 bag (MCAP)\n", options.out);
+  result["storage"] = options.storage;
+  std::string text = fmt::format("{}: ROS 2 bag ({})\n", options.out, options.storage);
   for (const auto& [topic, count] : counts) text += fmt::format("  {}: {} messages\n", topic, count);
   if (calibration) {
     std::string names;
@@ -435,7 +439,7 @@ void add_export_command(CLI::App& app, const Output& output, Command& run) {
   CLI::App* export_app = app.add_subcommand("export", "Export results in other ecosystems' formats");
   export_app->require_subcommand(1);
   auto options = std::make_shared<ExportOptions>();
-  CLI::App* ros2bag = export_app->add_subcommand("ros2bag", "A trajectory and a map as a ROS 2 bag (MCAP) for RViz 2 and Foxglove");
+  CLI::App* ros2bag = export_app->add_subcommand("ros2bag", "A trajectory, a map and sensor data as a ROS 2 bag for RViz 2 and Foxglove");
   ros2bag->add_option("--out", options->out, "Bag folder to create (must not exist)")->required();
   ros2bag->add_option("--trajectory", options->trajectory, "Trajectory file -> /trajectory (nav_msgs/Path) and /pose (PoseStamped)");
   ros2bag->add_option("--trajectory-format", options->trajectory_format, "tum, kitti or euroc")->capture_default_str();
@@ -450,6 +454,7 @@ void add_export_command(CLI::App& app, const Output& output, Command& run) {
   ros2bag->add_option("--calib", options->calibration,
                       "With --log: the sensors' extrinsics as /tf_static, camera intrinsics as <image topic>/camera_info");
   ros2bag->add_option("--body-frame", options->body_frame, "Parent frame of /tf_static")->capture_default_str();
+  ros2bag->add_option("--storage", options->storage, "mcap (ROS 2 Iron and later) or sqlite3 (.db3: Foxy to Humble)")->capture_default_str();
   ros2bag->callback([&output, &run, options] { run = [&output, options] { return run_export_ros2bag(output, *options); }; });
 
   auto dataset_options = std::make_shared<DatasetOptions>();

@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include <fmt/format.h>
+#include <sqlite3.h>
 
 #include "hanzo/fusion/io/mcap.hpp"
 
@@ -347,13 +348,110 @@ std::string point_cloud_cdr(const msgs::PointCloudMessage& cloud, LidarLayout la
   return w.take();
 }
 
+Result<BagStorage> bag_storage_from_name(const std::string& name) {
+  if (name == "mcap") return BagStorage::kMcap;
+  if (name == "sqlite3") return BagStorage::kSqlite3;
+  return Error(fmt::format("unknown ROS 2 bag storage '{}' (mcap or sqlite3)", name));
+}
+
+namespace {
+
+// rosbag2's sqlite3 storage as ROS 2 Humble writes it: schema version 3 (topics with their QoS
+// profiles, no type hashes), the messages in one table with a timestamp index. One transaction
+// for the whole bag (committed by close(); a crash leaves a database without it).
+class SqliteBag {
+ public:
+  static Result<std::unique_ptr<SqliteBag>> open(const std::string& path) {
+    auto bag = std::unique_ptr<SqliteBag>(new SqliteBag());
+    if (sqlite3_open_v2(path.c_str(), &bag->db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr) != SQLITE_OK) {
+      return Error(fmt::format("{}: cannot create the database: {}", path, bag->db_ ? sqlite3_errmsg(bag->db_) : "out of memory"));
+    }
+    bag->path_ = path;
+    HANZO_RETURN_IF_ERROR(bag->execute(
+        "PRAGMA journal_mode=MEMORY; PRAGMA synchronous=OFF;"
+        "CREATE TABLE schema(schema_version INTEGER PRIMARY KEY, ros_distro TEXT NOT NULL);"
+        "INSERT INTO schema VALUES (3, 'humble');"
+        "CREATE TABLE metadata(id INTEGER PRIMARY KEY, metadata_version INTEGER NOT NULL, metadata TEXT NOT NULL);"
+        "CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT NOT NULL, serialization_format TEXT NOT NULL,"
+        " offered_qos_profiles TEXT NOT NULL);"
+        "CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL, timestamp INTEGER NOT NULL, data BLOB NOT NULL);"
+        "CREATE INDEX timestamp_idx ON messages (timestamp ASC);"
+        "BEGIN TRANSACTION;"));
+    if (sqlite3_prepare_v2(bag->db_, "INSERT INTO messages (topic_id, timestamp, data) VALUES (?, ?, ?)", -1, &bag->insert_, nullptr) !=
+        SQLITE_OK) {
+      return bag->failure("prepare");
+    }
+    return bag;
+  }
+  ~SqliteBag() {
+    sqlite3_finalize(insert_);
+    sqlite3_close(db_);
+  }
+
+  Result<int64_t> add_topic(const std::string& name, const std::string& type) {
+    sqlite3_stmt* statement = nullptr;
+    if (sqlite3_prepare_v2(db_, "INSERT INTO topics (name, type, serialization_format, offered_qos_profiles) VALUES (?, ?, 'cdr', '')", -1,
+                           &statement, nullptr) != SQLITE_OK) {
+      return failure("prepare");
+    }
+    sqlite3_bind_text(statement, 1, name.c_str(), -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(statement, 2, type.c_str(), -1, SQLITE_TRANSIENT);
+    const int stepped = sqlite3_step(statement);
+    sqlite3_finalize(statement);
+    if (stepped != SQLITE_DONE) return failure("insert a topic");
+    return sqlite3_last_insert_rowid(db_);
+  }
+
+  Status add_message(int64_t topic_id, int64_t time_ns, const std::string& cdr) {
+    sqlite3_reset(insert_);
+    sqlite3_bind_int64(insert_, 1, topic_id);
+    sqlite3_bind_int64(insert_, 2, time_ns);
+    sqlite3_bind_blob64(insert_, 3, cdr.data(), cdr.size(), SQLITE_STATIC);
+    if (sqlite3_step(insert_) != SQLITE_DONE) return failure("insert a message");
+    return ok_status();
+  }
+
+  Status close(const std::string& metadata_yaml) {
+    sqlite3_stmt* statement = nullptr;
+    if (sqlite3_prepare_v2(db_, "INSERT INTO metadata (metadata_version, metadata) VALUES (5, ?)", -1, &statement, nullptr) != SQLITE_OK) {
+      return failure("prepare");
+    }
+    sqlite3_bind_text(statement, 1, metadata_yaml.c_str(), -1, SQLITE_TRANSIENT);
+    const int stepped = sqlite3_step(statement);
+    sqlite3_finalize(statement);
+    if (stepped != SQLITE_DONE) return failure("write the metadata");
+    return execute("COMMIT;");
+  }
+
+ private:
+  SqliteBag() = default;
+  Status execute(const char* sql) {
+    char* message = nullptr;
+    if (sqlite3_exec(db_, sql, nullptr, nullptr, &message) != SQLITE_OK) {
+      const std::string reason = message ? message : "unknown error";
+      sqlite3_free(message);
+      return Error(fmt::format("{}: {}", path_, reason));
+    }
+    return ok_status();
+  }
+  Error failure(const char* what) const { return Error(fmt::format("{}: cannot {}: {}", path_, what, sqlite3_errmsg(db_))); }
+
+  sqlite3* db_ = nullptr;
+  sqlite3_stmt* insert_ = nullptr;
+  std::string path_;
+};
+
+}  // namespace
+
 struct BagWriter::State {
   fs::path folder;
-  std::string file;  // the MCAP file's name in the folder
+  std::string file;  // the storage file's name in the folder
+  BagStorage storage = BagStorage::kMcap;
   std::unique_ptr<mcap::McapWriter> mcap;
+  std::unique_ptr<SqliteBag> sqlite;
   struct Topic {
     std::string type;
-    uint16_t channel = 0;
+    int64_t id = 0;  // MCAP channel or sqlite topic id
     uint64_t count = 0;
   };
   std::map<std::string, Topic> topics;
@@ -368,18 +466,24 @@ BagWriter::~BagWriter() {
   if (!state_->closed) (void)close();
 }
 
-Result<std::unique_ptr<BagWriter>> BagWriter::create(const std::string& folder) {
+Result<std::unique_ptr<BagWriter>> BagWriter::create(const std::string& folder, BagStorage storage) {
   std::error_code error;
   if (fs::exists(folder, error)) return Error(fmt::format("{}: exists; a ROS 2 bag is written into a new folder", folder));
   if (!fs::create_directories(folder, error)) return Error(fmt::format("{}: cannot create the folder: {}", folder, error.message()));
   auto state = std::make_unique<State>();
   state->folder = folder;
+  state->storage = storage;
   state->file = fs::path(folder).lexically_normal().filename().string();
   if (state->file.empty()) state->file = fs::path(folder).lexically_normal().parent_path().filename().string();
-  state->file += "_0.mcap";
-  mcap::McapWriterConfig config;
-  config.profile = "ros2";
-  HANZO_ASSIGN_OR_RETURN(state->mcap, mcap::McapWriter::open((state->folder / state->file).string(), config));
+  if (storage == BagStorage::kSqlite3) {
+    state->file += "_0.db3";
+    HANZO_ASSIGN_OR_RETURN(state->sqlite, SqliteBag::open((state->folder / state->file).string()));
+  } else {
+    state->file += "_0.mcap";
+    mcap::McapWriterConfig config;
+    config.profile = "ros2";
+    HANZO_ASSIGN_OR_RETURN(state->mcap, mcap::McapWriter::open((state->folder / state->file).string(), config));
+  }
   return std::unique_ptr<BagWriter>(new BagWriter(std::move(state)));
 }
 
@@ -390,17 +494,25 @@ Status BagWriter::write(const std::string& topic, const std::string& type, Times
   if (it == s.topics.end()) {
     const std::string text = schema_text(type);
     if (text.empty()) return Error(fmt::format("ROS 2 bag writer: type '{}' of topic {} is not one it writes", type, topic));
-    uint16_t schema = 0;
-    HANZO_ASSIGN_OR_RETURN(schema, s.mcap->add_schema(type, "ros2msg", text));
-    uint16_t channel = 0;
-    HANZO_ASSIGN_OR_RETURN(channel, s.mcap->add_channel(schema, topic, "cdr", {{"offered_qos_profiles", ""}}));
-    it = s.topics.emplace(topic, State::Topic{type, channel, 0}).first;
+    int64_t id = 0;
+    if (s.sqlite) {
+      HANZO_ASSIGN_OR_RETURN(id, s.sqlite->add_topic(topic, type));
+    } else {
+      uint16_t schema = 0;
+      HANZO_ASSIGN_OR_RETURN(schema, s.mcap->add_schema(type, "ros2msg", text));
+      HANZO_ASSIGN_OR_RETURN(id, s.mcap->add_channel(schema, topic, "cdr", {{"offered_qos_profiles", ""}}));
+    }
+    it = s.topics.emplace(topic, State::Topic{type, id, 0}).first;
   } else if (it->second.type != type) {
     return Error(fmt::format("ROS 2 bag writer: topic {} has type {}, not {}", topic, it->second.type, type));
   }
   const int64_t ns = record_time.nanoseconds();
   if (ns < 0) return Error(fmt::format("ROS 2 bag writer: record time {} ns is before 1970", ns));
-  HANZO_RETURN_IF_ERROR(s.mcap->write(it->second.channel, static_cast<uint64_t>(ns), static_cast<uint64_t>(ns), cdr));
+  if (s.sqlite) {
+    HANZO_RETURN_IF_ERROR(s.sqlite->add_message(it->second.id, ns, cdr));
+  } else {
+    HANZO_RETURN_IF_ERROR(s.mcap->write(static_cast<uint16_t>(it->second.id), static_cast<uint64_t>(ns), static_cast<uint64_t>(ns), cdr));
+  }
   s.first_ns = s.messages == 0 ? ns : std::min(s.first_ns, ns);
   s.last_ns = s.messages == 0 ? ns : std::max(s.last_ns, ns);
   ++s.messages;
@@ -412,20 +524,26 @@ Status BagWriter::close() {
   State& s = *state_;
   if (s.closed) return ok_status();
   s.closed = true;
-  HANZO_RETURN_IF_ERROR(s.mcap->close());
+  if (s.mcap) HANZO_RETURN_IF_ERROR(s.mcap->close());
   std::string topics;
   for (const auto& [name, topic] : s.topics) {
     topics += fmt::format("    - topic_metadata:\n        name: {}\n        type: {}\n        serialization_format: cdr\n"
                           "        offered_qos_profiles: \"\"\n      message_count: {}\n", name, topic.type, topic.count);
   }
   const std::string metadata = fmt::format(
-      "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n  duration:\n    nanoseconds: {duration}\n"
+      "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: {storage}\n  duration:\n    nanoseconds: {duration}\n"
       "  starting_time:\n    nanoseconds_since_epoch: {start}\n  message_count: {count}\n  topics_with_message_count:{topics}\n"
       "  compression_format: \"\"\n  compression_mode: \"\"\n  relative_file_paths:\n    - {file}\n  files:\n"
       "    - path: {file}\n      starting_time:\n        nanoseconds_since_epoch: {start}\n      duration:\n"
       "        nanoseconds: {duration}\n      message_count: {count}\n",
       fmt::arg("duration", s.last_ns - s.first_ns), fmt::arg("start", s.first_ns), fmt::arg("count", s.messages),
-      fmt::arg("topics", topics.empty() ? " []" : "\n" + topics.substr(0, topics.size() - 1)), fmt::arg("file", s.file));
+      fmt::arg("topics", topics.empty() ? " []" : "\n" + topics.substr(0, topics.size() - 1)), fmt::arg("file", s.file),
+      fmt::arg("storage", s.sqlite ? "sqlite3" : "mcap"));
+  if (s.sqlite) {
+    const Status committed = s.sqlite->close(metadata);
+    s.sqlite.reset();
+    HANZO_RETURN_IF_ERROR(committed);
+  }
   std::ofstream out(s.folder / "metadata.yaml", std::ios::binary);
   out << metadata;
   out.close();

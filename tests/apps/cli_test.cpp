@@ -625,15 +625,16 @@ TEST(Cli, SimulatedLogThroughRos2BagsOfEachLidarLayoutRunsLikeTheOriginal) {
   std::filesystem::remove_all(dir);
 }
 
-// A stereo camera drone (IMU + two cameras) through a ROS 2 bag: images as sensor_msgs/Image,
-// the calibration as /tf_static and CameraInfo. Imported back, the calibration is the original
+// A stereo camera drone (IMU + two cameras) through a ROS 2 bag (sqlite3 storage): images as
+// sensor_msgs/Image, the calibration as /tf_static and CameraInfo. Imported back, the calibration is the original
 // and the run (visual-inertial) gives the same trajectory.
 TEST(Cli, StereoCameraBagThroughRos2CarriesItsCalibrationAndRunsLikeTheOriginal) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_ros2_camera_{}", ::getpid());
   std::filesystem::remove_all(dir);
   const std::string sim = (dir / "sim").string(), bag = (dir / "bag").string();
   ASSERT_EQ(run(fmt::format("sim examples/scenarios/drone.yaml --out {} --duration 10 --no-foxglove", sim)).exit_code, 0);
-  const CliRun exported = run(fmt::format("export ros2bag --log {0}/sensors.mcap --calib {0}/calibration.yaml --out {1} --json", sim, bag));
+  const CliRun exported = run(fmt::format("export ros2bag --log {0}/sensors.mcap --calib {0}/calibration.yaml --storage sqlite3 --out {1} --json",
+                                          sim, bag));
   ASSERT_EQ(exported.exit_code, 0) << exported.err;
   const nlohmann::json topics = nlohmann::json::parse(exported.out)["topics"];
   EXPECT_EQ(topics["/tf_static"], 1);

@@ -1,26 +1,18 @@
-// Reads a ROS 2 bag (MCAP storage) with Foxglove's libraries alone: @mcap/core for the file,
-// @foxglove/rosmsg to parse each schema's ROS 2 message definition as stored in the bag,
-// @foxglove/rosmsg2-serialization to decode the CDR. Prints one JSON object: the profile, each
-// topic's schema name and encoding, and its decoded messages (PointCloud2 data as points,
-// OccupancyGrid data as numbers), for tests/io/rosbag2_export_conformance_test.cpp.
-// Usage: node rosbag2_read.mjs FILE.mcap
-import { open } from "node:fs/promises";
+// Reads a ROS 2 bag's storage file with Foxglove's libraries alone: MCAP by @mcap/core, each
+// schema's ROS 2 message definition as stored in the bag parsed by @foxglove/rosmsg; sqlite3
+// (.db3, which stores no definitions) by sql.js with the definitions of
+// @foxglove/rosmsg-msgs-common (ROS 2 Humble); the CDR decoded by @foxglove/rosmsg2-serialization.
+// Prints one JSON object: the profile, each topic's schema name and encoding, and its decoded
+// messages (PointCloud2 data as points, OccupancyGrid data as numbers), for
+// tests/io/rosbag2_export_conformance_test.cpp.
+// Usage: node rosbag2_read.mjs FILE.mcap|FILE.db3
+import { open, readFile } from "node:fs/promises";
 import { McapIndexedReader } from "@mcap/core";
 import { loadDecompressHandlers } from "@mcap/support";
 import { parse } from "@foxglove/rosmsg";
 import { MessageReader } from "@foxglove/rosmsg2-serialization";
-
-const handle = await open(process.argv[2], "r");
-const size = BigInt((await handle.stat()).size);
-const readable = {
-  size: async () => size,
-  read: async (offset, length) => {
-    const buffer = new Uint8Array(Number(length));
-    await handle.read(buffer, 0, Number(length), Number(offset));
-    return buffer;
-  },
-};
-const reader = await McapIndexedReader.Initialize({ readable, decompressHandlers: await loadDecompressHandlers() });
+import { createRequire } from "node:module";
+import { definitions } from "./rosbag2_writing.mjs";
 
 // Plain JSON of a decoded message: bigints as strings, typed arrays as arrays.
 function plain(value) {
@@ -42,24 +34,52 @@ function cloudPoints(cloud) {
   }
   return points;
 }
-
-const decoders = new Map();
 const topics = {};
+function add(topic, schema, schemaEncoding, messageEncoding, logTime, decoded) {
+  if (schema === "sensor_msgs/msg/PointCloud2") {
+    decoded.points = cloudPoints(decoded);
+    delete decoded.data;
+  }
+  topics[topic] ??= { schema, schemaEncoding, messageEncoding, logTimes: [], messages: [] };
+  topics[topic].logTimes.push(logTime.toString());
+  topics[topic].messages.push(plain(decoded));
+}
+
+if (process.argv[2].endsWith(".db3")) {
+  const SQL = await createRequire(import.meta.url)("sql.js")();
+  const db = new SQL.Database(await readFile(process.argv[2]));
+  const types = new Map();
+  for (const [id, name, type, format] of db.exec("SELECT id, name, type, serialization_format FROM topics")[0].values) {
+    types.set(id, { name, type, format, reader: new MessageReader(definitions(type.replace("/msg/", "/"))) });
+  }
+  for (const [topicId, timestamp, data] of db.exec("SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id")[0].values) {
+    const topic = types.get(topicId);
+    add(topic.name, topic.type, "", topic.format, timestamp, topic.reader.readMessage(data));
+  }
+  const schema = db.exec("SELECT schema_version, ros_distro FROM schema")[0].values[0];
+  console.log(JSON.stringify({ profile: "", schema_version: schema[0], ros_distro: schema[1], topics }));
+  process.exit(0);
+}
+
+const handle = await open(process.argv[2], "r");
+const size = BigInt((await handle.stat()).size);
+const readable = {
+  size: async () => size,
+  read: async (offset, length) => {
+    const buffer = new Uint8Array(Number(length));
+    await handle.read(buffer, 0, Number(length), Number(offset));
+    return buffer;
+  },
+};
+const reader = await McapIndexedReader.Initialize({ readable, decompressHandlers: await loadDecompressHandlers() });
+const decoders = new Map();
 for await (const message of reader.readMessages()) {
   const channel = reader.channelsById.get(message.channelId);
   const schema = reader.schemasById.get(channel.schemaId);
   if (!decoders.has(schema.id)) {
     decoders.set(schema.id, new MessageReader(parse(new TextDecoder().decode(schema.data), { ros2: true })));
   }
-  const decoded = decoders.get(schema.id).readMessage(message.data);
-  if (schema.name === "sensor_msgs/msg/PointCloud2") {
-    decoded.points = cloudPoints(decoded);
-    delete decoded.data;
-  }
-  topics[channel.topic] ??= { schema: schema.name, schemaEncoding: schema.encoding, messageEncoding: channel.messageEncoding,
-                              logTimes: [], messages: [] };
-  topics[channel.topic].logTimes.push(message.logTime.toString());
-  topics[channel.topic].messages.push(plain(decoded));
+  add(channel.topic, schema.name, schema.encoding, channel.messageEncoding, message.logTime, decoders.get(schema.id).readMessage(message.data));
 }
 await handle.close();
 console.log(JSON.stringify({ profile: reader.header.profile, topics }));

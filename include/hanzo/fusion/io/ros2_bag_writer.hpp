@@ -72,11 +72,19 @@ std::string camera_info_cdr(Timestamp stamp, const std::string& frame_id, const 
 /// Forward speed (m/s) and yaw rate (rad/s) as geometry_msgs/TwistStamped.
 std::string twist_stamped_cdr(Timestamp stamp, const std::string& frame_id, double forward_speed, double yaw_rate);
 
+/// The storage of a bag: MCAP (ROS 2 Iron and later record it; Humble with its MCAP plugin) or
+/// sqlite3 (.db3, the default of Foxy to Humble), both read by `ros2 bag play` and Foxglove.
+enum class BagStorage { kMcap, kSqlite3 };
+/// "mcap", "sqlite3".
+Result<BagStorage> bag_storage_from_name(const std::string& name);
+
 /// Writes one bag folder. Not thread-safe.
 class BagWriter {
  public:
-  /// Creates `folder` (which must not exist, as with `ros2 bag record -o`) and its MCAP file.
-  static Result<std::unique_ptr<BagWriter>> create(const std::string& folder);
+  /// Creates `folder` (which must not exist, as with `ros2 bag record -o`) and its storage file
+  /// (MCAP with each type's message definition as its schema; sqlite3 in ROS 2 Humble's layout:
+  /// tables schema, metadata, topics, messages).
+  static Result<std::unique_ptr<BagWriter>> create(const std::string& folder, BagStorage storage = BagStorage::kMcap);
   ~BagWriter();
   BagWriter(const BagWriter&) = delete;
   BagWriter& operator=(const BagWriter&) = delete;
@@ -84,7 +92,7 @@ class BagWriter {
   /// `type` one of the types above ("nav_msgs/msg/Path"); `cdr` from its encoder. The record
   /// time is the message's log time in the bag.
   Status write(const std::string& topic, const std::string& type, Timestamp record_time, const std::string& cdr);
-  /// Finishes the MCAP file and writes metadata.yaml (topics with counts, start, duration).
+  /// Finishes the storage file and writes metadata.yaml (topics with counts, start, duration).
   Status close();
 
  private:
