@@ -13,3 +13,5 @@ for benchmark in "$build_dir"/bench/bench_*; do
 done
 echo "== ablation (bench/ablation.sh)"
 bash bench/ablation.sh "$build_dir"
+echo "== python layer (bench/python_bench.py)"
+PYTHONPATH="$build_dir/python" /usr/bin/python3 bench/python_bench.py "$build_dir"
