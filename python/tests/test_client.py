@@ -5,6 +5,7 @@ import json
 import os
 import pathlib
 import subprocess
+import threading
 import time
 
 import numpy as np
@@ -264,6 +265,11 @@ def test_grpc_streams_from_python(server):
     sim = server["sim"]
     session = client.create_session((sim / "fusion.yaml").read_text(), (sim / "calibration.yaml").read_text(), name="python-grpc")
     sensors = {"/sensors/imu": "imu", "/sensors/lidar": "lidar", "/sensors/wheels": "wheels"}
+    subscribed = []
+    subscriber = threading.Thread(target=lambda: subscribed.extend(streaming.subscribe_poses(server["grpc"], session["id"], token=TOKEN)),
+                                  daemon=True)
+    subscriber.start()
+    time.sleep(0.5)  # subscribed before the first pose
     with streaming.SensorStreams(server["grpc"], session["id"], token=TOKEN) as streams:
         sent = streams.send_log(str(sim / "sensors.mcap"), sensors, rate=5.0)
     expected = {}
@@ -286,6 +292,9 @@ def test_grpc_streams_from_python(server):
     driven = np.linalg.norm(truth[index, 1:4] - truth[first_index, 1:4])
     assert driven > 5 and abs(np.linalg.norm(last.position - first.position) - driven) < 0.3
     client.end_session(session["id"])
+    subscriber.join(timeout=30)  # the subscription ends with the session
+    assert not subscriber.is_alive()
+    assert len(subscribed) > 1000 and subscribed[-1].timestamp_ns >= last.timestamp_ns
 
     # Refusals come back as StreamError with the gRPC status: no token, an unknown session.
     for token, session_id, code in ((None, session["id"], "UNAUTHENTICATED"), (TOKEN, "no-such-session", "NOT_FOUND")):

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <map>
 #include <optional>
@@ -182,6 +183,23 @@ std::optional<Timestamp> nearest(const std::vector<Timestamp>& times, Timestamp 
   return best;
 }
 
+// Calls `visit(sensor index, topic, message)` for every sensor message of the log on a topic of
+// `sensor_by_topic`, in log order; stops at the first error.
+Status visit_sensor_messages(const std::string& log_path, const std::map<std::string, std::size_t>& sensor_by_topic,
+                             const std::function<Status(std::size_t, const std::string&, const msgs::SensorMessage&)>& visit) {
+  std::unique_ptr<SensorLogReader> reader;
+  HANZO_ASSIGN_OR_RETURN(reader, SensorLogReader::open(log_path));
+  LogEntry entry;
+  while (true) {
+    bool more = false;
+    HANZO_ASSIGN_OR_RETURN(more, reader->next(entry));
+    if (!more) return ok_status();
+    const auto found = sensor_by_topic.find(entry.topic);
+    const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
+    if (found != sensor_by_topic.end() && message != nullptr) HANZO_RETURN_IF_ERROR(visit(found->second, entry.topic, *message));
+  }
+}
+
 Status check_config(const DatasetExportConfig& config) {
   if (config.sensors.empty()) return Error("no sensors to export: name at least one LiDAR or camera");
   if (config.every < 1) return Error(fmt::format("every: expected an integer >= 1, got {}", config.every));
@@ -234,27 +252,16 @@ Result<DatasetExportSummary> export_dataset(const std::string& log_path, const T
 
   // Pass 1: the message times of every sensor (body clock).
   std::vector<std::vector<Timestamp>> times(sensors.size());
-  {
-    std::unique_ptr<SensorLogReader> reader;
-    HANZO_ASSIGN_OR_RETURN(reader, SensorLogReader::open(log_path));
-    LogEntry entry;
-    while (true) {
-      bool more = false;
-      HANZO_ASSIGN_OR_RETURN(more, reader->next(entry));
-      if (!more) break;
-      const auto found = sensor_by_topic.find(entry.topic);
-      const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
-      if (found == sensor_by_topic.end() || message == nullptr) continue;
-      const bool is_image = std::holds_alternative<msgs::ImageMessage>(*message);
-      const bool is_cloud = std::holds_alternative<msgs::PointCloudMessage>(*message);
-      const LayoutSensor& sensor = sensors[found->second];
-      if (sensor.is_camera ? !is_image : !is_cloud) {
-        return Error(fmt::format("{}: topic {} carries {} messages, not {} ({})", log_path, entry.topic, msgs::modality_name(*message),
-                                 sensor.is_camera ? "images" : "point clouds", sensor.name));
-      }
-      times[found->second].push_back(msgs::timestamp_of(*message) + time_offsets[found->second]);
+  HANZO_RETURN_IF_ERROR(visit_sensor_messages(log_path, sensor_by_topic, [&](std::size_t s, const std::string& topic, const msgs::SensorMessage& message) -> Status {
+    const bool is_image = std::holds_alternative<msgs::ImageMessage>(message);
+    const bool is_cloud = std::holds_alternative<msgs::PointCloudMessage>(message);
+    if (sensors[s].is_camera ? !is_image : !is_cloud) {
+      return Error(fmt::format("{}: topic {} carries {} messages, not {} ({})", log_path, topic, msgs::modality_name(message),
+                               sensors[s].is_camera ? "images" : "point clouds", sensors[s].name));
     }
-  }
+    times[s].push_back(msgs::timestamp_of(message) + time_offsets[s]);
+    return ok_status();
+  }));
   for (std::vector<Timestamp>& sensor_times : times) std::sort(sensor_times.begin(), sensor_times.end());
   DatasetExportSummary summary;
   summary.reference_messages = times[*reference].size();
@@ -314,55 +321,44 @@ Result<DatasetExportSummary> export_dataset(const std::string& log_path, const T
                                                      : dataset::make_nuscenes_writer(out_dir, sensors, frames, config);
 
   // Pass 2: the data.
-  const Status written = [&]() -> Status {
-    std::unique_ptr<SensorLogReader> reader;
-    HANZO_ASSIGN_OR_RETURN(reader, SensorLogReader::open(log_path));
-    std::map<std::size_t, UndistortMaps> undistort_cache;
-    LogEntry entry;
-    while (true) {
-      bool more = false;
-      HANZO_ASSIGN_OR_RETURN(more, reader->next(entry));
-      if (!more) break;
-      const auto found = sensor_by_topic.find(entry.topic);
-      const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
-      if (found == sensor_by_topic.end() || message == nullptr) continue;
-      const std::size_t s = found->second;
-      const Timestamp time = msgs::timestamp_of(*message) + time_offsets[s];
-      const auto uses = frames_of_message.find({s, time});
-      if (uses == frames_of_message.end()) continue;
-      const SE3 T_world_body = *poses.at(time);
-      if (const auto* cloud = std::get_if<msgs::PointCloudMessage>(message)) {
-        LayoutCloud out{cloud->points, cloud->intensities, cloud->ring_ids};
-        if (config.deskew && !cloud->point_timestamps.empty()) {
-          out = deskewed(*cloud, poses, sensors[s].T_body_sensor, time_offsets[s]);
-          ++summary.deskewed_sweeps;
-        }
-        for (const std::size_t frame : uses->second) HANZO_RETURN_IF_ERROR(writer->write_cloud(frame, s, time, T_world_body, out));
-      } else {
-        msgs::ImageMessage image = std::get<msgs::ImageMessage>(*message);
-        const msgs::CameraIntrinsics& intrinsics = sensors[s].intrinsics;
-        if (intrinsics.width != 0 && (intrinsics.width != image.width || intrinsics.height != image.height)) {
-          return Error(fmt::format("{}: image of {} at {:.6f} s is {}x{}, its calibration says {}x{}", log_path, sensors[s].name,
-                                   time.seconds(), image.width, image.height, intrinsics.width, intrinsics.height));
-        }
-        if (cameras[s]->distortion != PinholeCamera::Distortion::kNone) {
-          auto maps = undistort_cache.find(s);
-          if (maps == undistort_cache.end()) {
-            maps = undistort_cache.emplace(s, undistort_maps(*cameras[s], static_cast<int>(image.width), static_cast<int>(image.height))).first;
-          }
-          if (maps->second.map_x.cols != static_cast<int>(image.width) || maps->second.map_x.rows != static_cast<int>(image.height)) {
-            return Error(fmt::format("{}: images of {} change size ({}x{} at {:.6f} s)", log_path, sensors[s].name, image.width, image.height,
-                                     time.seconds()));
-          }
-          image = undistorted(image, maps->second);
-          ++summary.undistorted_images;
-        }
-        for (const std::size_t frame : uses->second) HANZO_RETURN_IF_ERROR(writer->write_image(frame, s, time, T_world_body, image));
+  std::map<std::size_t, UndistortMaps> undistort_cache;
+  Status written = visit_sensor_messages(log_path, sensor_by_topic, [&](std::size_t s, const std::string&, const msgs::SensorMessage& message) -> Status {
+    const Timestamp time = msgs::timestamp_of(message) + time_offsets[s];
+    const auto uses = frames_of_message.find({s, time});
+    if (uses == frames_of_message.end()) return ok_status();
+    const SE3 T_world_body = *poses.at(time);
+    if (const auto* cloud = std::get_if<msgs::PointCloudMessage>(&message)) {
+      LayoutCloud out{cloud->points, cloud->intensities, cloud->ring_ids};
+      if (config.deskew && !cloud->point_timestamps.empty()) {
+        out = deskewed(*cloud, poses, sensors[s].T_body_sensor, time_offsets[s]);
+        ++summary.deskewed_sweeps;
       }
-      summary.files_by_sensor[sensors[s].name] += uses->second.size();
+      for (const std::size_t frame : uses->second) HANZO_RETURN_IF_ERROR(writer->write_cloud(frame, s, time, T_world_body, out));
+    } else {
+      msgs::ImageMessage image = std::get<msgs::ImageMessage>(message);
+      const msgs::CameraIntrinsics& intrinsics = sensors[s].intrinsics;
+      if (intrinsics.width != 0 && (intrinsics.width != image.width || intrinsics.height != image.height)) {
+        return Error(fmt::format("{}: image of {} at {:.6f} s is {}x{}, its calibration says {}x{}", log_path, sensors[s].name, time.seconds(),
+                                 image.width, image.height, intrinsics.width, intrinsics.height));
+      }
+      if (cameras[s]->distortion != PinholeCamera::Distortion::kNone) {
+        auto maps = undistort_cache.find(s);
+        if (maps == undistort_cache.end()) {
+          maps = undistort_cache.emplace(s, undistort_maps(*cameras[s], static_cast<int>(image.width), static_cast<int>(image.height))).first;
+        }
+        if (maps->second.map_x.cols != static_cast<int>(image.width) || maps->second.map_x.rows != static_cast<int>(image.height)) {
+          return Error(fmt::format("{}: images of {} change size ({}x{} at {:.6f} s)", log_path, sensors[s].name, image.width, image.height,
+                                   time.seconds()));
+        }
+        image = undistorted(image, maps->second);
+        ++summary.undistorted_images;
+      }
+      for (const std::size_t frame : uses->second) HANZO_RETURN_IF_ERROR(writer->write_image(frame, s, time, T_world_body, image));
     }
-    return writer->finish();
-  }();
+    summary.files_by_sensor[sensors[s].name] += uses->second.size();
+    return ok_status();
+  });
+  if (written) written = writer->finish();
   if (!written) {
     writer.reset();
     std::filesystem::remove_all(out_dir, error);

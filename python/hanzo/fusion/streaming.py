@@ -261,7 +261,9 @@ class SensorStreams:
 
 def subscribe_poses(address: str, session_id: str, token: Optional[str] = None,
                     root_certificates: Optional[bytes] = None) -> Iterator[messages.PoseEstimate]:
-    """Every pose the session emits from now on (SubscribePose), until the session ends."""
+    """Every pose the session emits from now on (SubscribePose); the iteration ends when the
+    session ends (the server then closes the stream with FAILED_PRECONDITION). Any other refusal
+    (unknown session, token) raises StreamError."""
     channel = grpc.insecure_channel(address) if root_certificates is None else grpc.secure_channel(
         address, grpc.ssl_channel_credentials(root_certificates))
     metadata = [("authorization", f"Bearer {token}")] if token else []
@@ -269,7 +271,8 @@ def subscribe_poses(address: str, session_id: str, token: Optional[str] = None,
         for pose in service_pb2_grpc.FusionServiceStub(channel).SubscribePose(service_pb2.SessionId(id=session_id), metadata=metadata):
             yield pose_from_proto(pose)
     except grpc.RpcError as error:
-        raise StreamError("SubscribePose", error.code(), error.details()) from None
+        if error.code() != grpc.StatusCode.FAILED_PRECONDITION:
+            raise StreamError("SubscribePose", error.code(), error.details()) from None
     finally:
         channel.close()
 
