@@ -4,6 +4,8 @@
 
 #include <signal.h>
 
+#include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -17,6 +19,8 @@
 #include "hanzo/fusion/service/grpc_server.hpp"
 #include "hanzo/fusion/service/jwt_verifier.hpp"
 #include "hanzo/fusion/service/rest_server.hpp"
+#include "hanzo/fusion/crypto/file_encryption.hpp"
+#include "hanzo/fusion/privacy/privacy_filter.hpp"
 #include "hanzo/fusion/service/session_manager.hpp"
 
 namespace hanzo::fusion::app {
@@ -39,6 +43,12 @@ struct ServeOptions {
   std::size_t threads = 8;
   int map_save_interval_s = 30;
   std::size_t map_keep_versions = 20;
+  bool record_sessions = false;
+  std::string recording_privacy = "blur";
+  bool allow_unfiltered_recordings = false;
+  std::string recording_key;
+  double recording_retention_days = 30.0;
+  double recording_max_gb = 0.0;
 };
 
 // The token store from --tokens, HANZO_FUSION_TOKENS_FILE or HANZO_FUSION_TOKENS, with the JWT
@@ -92,6 +102,20 @@ int run_serve(const Output& output, const ServeOptions& options) {
   manager_config.map_directory = (std::filesystem::path(options.data_dir) / "maps").string();
   manager_config.map_save_interval = std::chrono::seconds(options.map_save_interval_s);
   manager_config.map_keep_versions = options.map_keep_versions;
+  service::RecordingConfig& recording = manager_config.recording;
+  recording.directory = (std::filesystem::path(options.data_dir) / "recordings").string();
+  recording.record_by_default = options.record_sessions;
+  auto redaction = privacy::parse_redaction(options.recording_privacy);
+  if (!redaction) return report_failure(output, {}, "--recording-privacy: " + redaction.error().message);
+  recording.redaction = *redaction;
+  recording.allow_unfiltered = options.allow_unfiltered_recordings;
+  if (!options.recording_key.empty()) {
+    auto key = crypto::EncryptionKey::load(options.recording_key);
+    if (!key) return report_failure(output, {}, "--recording-key: " + key.error().message);
+    recording.key = std::move(*key);
+  }
+  recording.retention = std::chrono::hours(static_cast<int64_t>(std::lround(options.recording_retention_days * 24.0)));
+  recording.max_total_bytes = static_cast<uint64_t>(options.recording_max_gb * 1e9);
   auto sessions = service::SessionManager::create(manager_config, std::move(storage).value(), metrics);
   if (!sessions) return report_failure(output, {}, sessions.error().message);
 
@@ -157,6 +181,19 @@ void add_serve_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--map-keep-versions", options->map_keep_versions,
                       "Newest versions kept of each session's map; older autosaves are deleted (0: keep all; loaded maps are never pruned)")
       ->capture_default_str();
+  command->add_flag("--record-sessions", options->record_sessions,
+                    "Record every session's raw sensor streams into DATA_DIR/recordings (a session may say \"record\": false; without "
+                    "this flag sessions record when they ask)");
+  command->add_option("--recording-privacy", options->recording_privacy, "Faces and licence plates in recorded images: blur or black")
+      ->capture_default_str();
+  command->add_flag("--allow-unfiltered-recordings", options->allow_unfiltered_recordings,
+                    "Let a session record its images unfiltered (\"privacy\": \"off\")");
+  command->add_option("--recording-key", options->recording_key, "Key file: finished recordings are encrypted (docs/security.md)")
+      ->check(CLI::ExistingFile);
+  command->add_option("--recording-retention-days", options->recording_retention_days, "Finished recordings older than this are deleted (0: kept)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
+  command->add_option("--recording-max-gb", options->recording_max_gb, "Beyond this size of finished recordings the oldest are deleted (0: no cap)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
   command->add_option("--db", options->database, "Storage URL: sqlite://PATH or postgresql://USER@HOST:PORT/DB (default sqlite://DATA_DIR/fusion.db)");
   command->add_option("--tokens", options->tokens_file, "API token file (YAML; docs/server.md)");
   command->add_option("--jwks", options->jwks_file, "JWKS file or http(s) URL of an OIDC provider: bearer JWTs (RS256 / ES256) are accepted (docs/security.md)");

@@ -140,8 +140,14 @@ Result<std::vector<RedactedRegion>> PrivacyFilter::apply(msgs::ImageMessage& mes
                              message.data.size(), expected));
   }
   cv::Mat pixels(static_cast<int>(message.height), static_cast<int>(message.width), type, message.data.data());
-  cv::Mat bgr = pixels;
-  if (message.encoding == msgs::ImageEncoding::kRgb8) cv::cvtColor(pixels, bgr, cv::COLOR_RGB2BGR);
+  // The detector reads BGR: rgb8 is converted into a buffer of its own (converting into a header
+  // that shares the message's pixels would swap the message's channels in place).
+  cv::Mat bgr;
+  if (message.encoding == msgs::ImageEncoding::kRgb8) {
+    cv::cvtColor(pixels, bgr, cv::COLOR_RGB2BGR);
+  } else {
+    bgr = pixels;
+  }
   Result<std::vector<RedactedRegion>> regions = detect(bgr);
   if (regions) redact(pixels, *regions);  // the message's own buffer
   return regions;

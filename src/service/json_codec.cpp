@@ -173,7 +173,21 @@ json session_to_json(const SessionInfo& info) {
       {"mapping", mapping_to_json(info.mapping)},
       {"config", info.config_yaml},
       {"calibration", info.calibration_yaml},
+      {"recording", info.recording ? recording_to_json(*info.recording) : json(nullptr)},
   };
+}
+
+json recording_to_json(const RecordingInfo& recording) {
+  return {{"file", recording.file},
+          {"status", recording.active ? "recording" : "finished"},
+          {"encrypted", recording.encrypted},
+          {"privacy", recording.privacy},
+          {"messages", recording.messages},
+          {"invalid_messages", recording.invalid_messages},
+          {"bytes", recording.bytes},
+          {"privacy_audit", {{"images", recording.images}, {"redacted_images", recording.redacted_images}, {"faces", recording.faces},
+                             {"licence_plates", recording.licence_plates}}},
+          {"error", recording.error ? json(*recording.error) : json(nullptr)}};
 }
 
 json mapping_to_json(const pipeline::MappingSummary& mapping) {
@@ -319,11 +333,18 @@ ApiResult<CreateSessionRequest> parse_create_session(const std::string& body) {
   auto document = parse_object(body);
   if (!document) return document.error();
   const json& object = document.value();
-  if (auto keys = check_keys(object, {"name", "config", "calibration"}); !keys) return keys.error();
+  if (auto keys = check_keys(object, {"name", "config", "calibration", "record", "privacy"}); !keys) return keys.error();
   CreateSessionRequest request;
   auto name = optional_string(object, "name");
   if (!name) return name.error();
   request.name = name.value();
+  if (object.contains("record") && !object["record"].is_null()) {
+    if (!object["record"].is_boolean()) return ApiError{ErrorCode::kInvalidArgument, "record: expected true or false", "record"};
+    request.record = object["record"].get<bool>();
+  }
+  auto privacy = optional_string(object, "privacy");
+  if (!privacy) return privacy.error();
+  request.privacy = privacy.value();
   if (!object.contains("config")) return ApiError{ErrorCode::kInvalidArgument, "config is missing (the fusion configuration)", "config"};
   auto configuration = yaml_document(object, "config", "fusion");
   if (!configuration) return configuration.error();

@@ -22,6 +22,7 @@ ApiStatus check_keys(const nlohmann::json& object, std::initializer_list<std::st
 
 nlohmann::json pose_to_json(const msgs::PoseEstimate& pose);
 nlohmann::json session_to_json(const SessionInfo& info);
+nlohmann::json recording_to_json(const RecordingInfo& recording);
 nlohmann::json error_to_json(const ApiError& error);
 nlohmann::json mapping_to_json(const pipeline::MappingSummary& mapping);
 /// A map's metadata and layer sizes (GET /v1/sessions/{id}/map?format=json).

@@ -3,6 +3,7 @@
 #include <charconv>
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <thread>
 
@@ -76,11 +77,18 @@ ApiResult<CreateSessionRequest> create_session_request(const httplib::Request& r
       return ApiError{ErrorCode::kInvalidArgument, "config is missing (a form part with the fusion configuration file)", "config"};
     }
     const auto part = [&](const char* name) { return request.has_file(name) ? request.get_file_value(name).content : std::string(); };
-    return CreateSessionRequest{part("name"), part("config"), part("calibration")};
+    CreateSessionRequest created;
+    created.name = part("name");
+    created.config_yaml = part("config");
+    created.calibration_yaml = part("calibration");
+    return created;
   }
   if (type.starts_with("application/yaml") || type.starts_with("application/x-yaml") || type.starts_with("text/yaml")) {
     if (request.body.empty()) return ApiError{ErrorCode::kInvalidArgument, "the request body is empty (expected the fusion configuration)", "body"};
-    return CreateSessionRequest{request.has_param("name") ? request.get_param_value("name") : "", request.body, ""};
+    CreateSessionRequest created;
+    created.name = request.has_param("name") ? request.get_param_value("name") : "";
+    created.config_yaml = request.body;
+    return created;
   }
   return detail::parse_create_session(request.body);
 }
@@ -211,6 +219,27 @@ struct RestServer::Impl {
       auto pose = sessions->current_pose(caller, request.matches[1]);
       if (!pose) return send_error(response, pose.error());
       send_json(response, 200, detail::pose_to_json(pose.value()));
+    }));
+    s.Get(session + "/recording", authenticated("GET", "/v1/sessions/{id}/recording", [this](const httplib::Request& request,
+                                                                                          httplib::Response& response,
+                                                                                          const Principal& caller) {
+      auto path = sessions->recording_path(caller, request.matches[1]);
+      if (!path) return send_error(response, path.error());
+      auto file = std::make_shared<std::ifstream>(path.value(), std::ios::binary);
+      std::error_code error;
+      const auto size = std::filesystem::file_size(path.value(), error);
+      if (!*file || error) return send_error(response, {ErrorCode::kInternal, fmt::format("cannot read the recording of session '{}'", std::string(request.matches[1])), ""});
+      response.set_header("Content-Disposition", fmt::format("attachment; filename=\"{}\"", std::filesystem::path(path.value()).filename().string()));
+      // Streamed from the file: a recording can be gigabytes.
+      response.set_content_provider(static_cast<std::size_t>(size), "application/octet-stream",
+                                    [file](std::size_t offset, std::size_t length, httplib::DataSink& sink) {
+                                      std::string buffer(std::min<std::size_t>(length, 1 << 20), '\0');
+                                      file->seekg(static_cast<std::streamoff>(offset));
+                                      file->read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+                                      if (file->gcount() <= 0) return false;
+                                      sink.write(buffer.data(), static_cast<std::size_t>(file->gcount()));
+                                      return true;
+                                    });
     }));
     s.Get(session + "/trajectory", authenticated("GET", "/v1/sessions/{id}/trajectory", [this](const httplib::Request& request,
                                                                                             httplib::Response& response,

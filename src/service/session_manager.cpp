@@ -1,6 +1,7 @@
 #include "hanzo/fusion/service/session_manager.hpp"
 
 #include <algorithm>
+#include <filesystem>
 #include <condition_variable>
 #include <list>
 #include <map>
@@ -107,6 +108,7 @@ struct ManagedSession {
   bool map_updates_installed = false;  // the session's map update callback (only while subscribed)
   uint64_t messages_pushed = 0;
   Clock::time_point push_started;
+  std::unique_ptr<SessionRecording> recording;  // raw sensor log, when the session records
   uint64_t saved_map_version = 0;   // the live map_version last saved to the map catalog
   uint64_t stored_map_version = 0;  // the catalog's version of that save (parent of the next)
 
@@ -400,7 +402,50 @@ struct SessionManager::Impl {
     info.map_subscribers = open(managed.map_subscribers);
     info.config_yaml = managed.record.config_yaml;
     info.calibration_yaml = managed.record.calibration_yaml;
+    if (managed.recording) info.recording = managed.recording->info();
     return info;
+  }
+
+  // The recording a create request asks for: none, or started with its privacy redaction.
+  ApiResult<std::unique_ptr<SessionRecording>> start_recording(const CreateSessionRequest& request, const std::string& session_id) {
+    const RecordingConfig& recording = config.recording;
+    if (!request.record.value_or(recording.record_by_default)) {
+      if (!request.privacy.empty()) return ApiError{ErrorCode::kInvalidArgument, "privacy: applies to a recording; set record too", "privacy"};
+      return std::unique_ptr<SessionRecording>();
+    }
+    if (recording.directory.empty()) {
+      return ApiError{ErrorCode::kInvalidArgument, "record: this server records no sessions (start it with --recordings-dir)", "record"};
+    }
+    std::optional<privacy::Redaction> redaction = recording.redaction;
+    if (request.privacy == "off") {
+      if (!recording.allow_unfiltered) {
+        return ApiError{ErrorCode::kInvalidArgument, "privacy: this server filters every recorded image (off is not allowed)", "privacy"};
+      }
+      redaction.reset();
+    } else if (!request.privacy.empty()) {
+      auto parsed = privacy::parse_redaction(request.privacy);
+      if (!parsed) return ApiError{ErrorCode::kInvalidArgument, "privacy: " + parsed.error().message + " or off", "privacy"};
+      redaction = *parsed;
+    }
+    auto started = SessionRecording::start(recording, session_id, redaction);
+    if (!started) return ApiError::from(ErrorCode::kInternal, started.error());
+    return std::move(started).value();
+  }
+
+  // Retention over the finished recordings (those of sessions still recording are kept).
+  void apply_retention() {
+    if (config.recording.directory.empty()) return;
+    std::vector<std::string> active;
+    {
+      std::shared_lock lock(sessions_mutex);
+      for (const auto& [id, managed] : sessions) {
+        std::lock_guard session_lock(managed->mutex);
+        if (managed->recording && managed->recording->info().active) active.push_back(managed->recording->info().file);
+      }
+    }
+    if (auto outcome = apply_recording_retention(config.recording, active); !outcome) {
+      logger()->warn("recording retention: {}", outcome.error().message);
+    }
   }
 
   std::size_t active_count_locked(const std::string& organization, bool organization_only) const {
@@ -477,6 +522,7 @@ Result<std::unique_ptr<SessionManager>> SessionManager::create(const SessionMana
   Impl* raw = impl.get();
   impl->metrics->add_collector([raw] { raw->collect_metrics(); });
   if (impl->catalog && config.map_save_interval.count() > 0) impl->map_saver = std::thread([raw] { raw->run_map_saver(); });
+  impl->apply_retention();  // recordings of earlier runs that expired meanwhile
   logger()->info("sessions: {} restored from {} storage ({} stored in all)", impl->active_count_locked("", false),
                  impl->storage->backend(), impl->sessions.size());
   return std::unique_ptr<SessionManager>(new SessionManager(std::move(impl)));
@@ -503,6 +549,9 @@ ApiResult<SessionInfo> SessionManager::create_session(const Principal& caller, c
   auto pipeline = impl_->make_pipeline(*managed, managed->configuration, managed->calibration);
   if (!pipeline) return ApiError{ErrorCode::kInvalidArgument, "config: " + pipeline.error().message, "config"};
   managed->session = std::move(pipeline).value();
+  auto recording = impl_->start_recording(request, record.id);
+  if (!recording) return recording.error();
+  managed->recording = std::move(recording).value();
 
   std::unique_lock lock(impl_->sessions_mutex);
   if (impl_->active_count_locked("", false) >= impl_->config.max_sessions) {
@@ -549,6 +598,22 @@ ApiResult<SessionInfo> SessionManager::session_info(const Principal& caller, con
   return impl_->info_locked(*managed.value());
 }
 
+ApiResult<std::string> SessionManager::recording_path(const Principal& caller, const std::string& session_id) {
+  auto managed = impl_->find(caller, session_id, Permission::kSessionRead);
+  if (!managed) return managed.error();
+  std::lock_guard lock(managed.value()->mutex);
+  if (!managed.value()->recording) return ApiError{ErrorCode::kNotFound, fmt::format("session '{}' was not recorded", session_id), ""};
+  const RecordingInfo info = managed.value()->recording->info();
+  if (info.active) {
+    return ApiError{ErrorCode::kConflict, fmt::format("the recording of session '{}' is still being written; end the session first", session_id), ""};
+  }
+  const std::string path = (std::filesystem::path(impl_->config.recording.directory) / info.file).string();
+  if (!std::filesystem::exists(path)) {
+    return ApiError{ErrorCode::kNotFound, fmt::format("the recording of session '{}' was deleted (retention policy)", session_id), ""};
+  }
+  return path;
+}
+
 ApiResult<SessionInfo> SessionManager::end_session(const Principal& caller, const std::string& session_id) {
   auto found = impl_->find(caller, session_id, Permission::kSessionWrite);
   if (!found) return found.error();
@@ -570,7 +635,11 @@ ApiResult<SessionInfo> SessionManager::end_session(const Principal& caller, cons
   if (!impl_->catalog) managed.final_map = impl_->map_locked(managed);
   managed.session.reset();
   Impl::close_subscribers(managed);
+  if (managed.recording) {
+    if (const Status finished = managed.recording->finish(); !finished) logger()->error("session {}: recording: {}", session_id, finished.error().message);
+  }
   lock.unlock();
+  impl_->apply_retention();
   if (const Status flushed = impl_->recorder->flush(); !flushed) return ApiError::from(ErrorCode::kInternal, flushed.error());
   impl_->metrics->remove_series("session", session_id);
   logger()->info("session {} ended by {}", session_id, caller.name);
@@ -638,6 +707,11 @@ ApiStatus SessionManager::push(const Principal& caller, const std::string& sessi
     }
   }
   if (managed.map_updates_installed) Impl::sync_map_updates(managed);  // drops it when the last subscriber left
+  if (managed.recording) {
+    if (const config::SensorConfig* configured = managed.configuration.find_sensor(sensor_name)) {
+      managed.recording->record(configured->topic, sensor_name, message);
+    }
+  }
   managed.push_started = Clock::now();
   ++managed.messages_pushed;
   const pipeline::PushStatus pushed = managed.session->push(sensor_name, std::move(message));

@@ -2,6 +2,7 @@
 // street images (KITTI raw 2011_09_26_drive_0052: cars with German plates, no faces close enough).
 #include <algorithm>
 #include <filesystem>
+#include <map>
 #include <fstream>
 #include <string>
 
@@ -166,8 +167,12 @@ TEST(PrivacyFilter, RefusesBadInputWithAReason) {
 }
 
 msgs::ImageMessage image_message(const cv::Mat& bgr, msgs::ImageEncoding encoding, Timestamp time) {
-  cv::Mat pixels = bgr;
-  if (encoding == msgs::ImageEncoding::kRgb8) cv::cvtColor(bgr, pixels, cv::COLOR_BGR2RGB);
+  cv::Mat pixels;  // a buffer of its own: converting into a header sharing `bgr` would change the photo
+  if (encoding == msgs::ImageEncoding::kRgb8) {
+    cv::cvtColor(bgr, pixels, cv::COLOR_BGR2RGB);
+  } else {
+    pixels = bgr;
+  }
   msgs::ImageMessage message;
   message.timestamp = time;
   message.frame_id = "camera";
@@ -224,6 +229,7 @@ TEST(LogRedaction, BlursTheCameraImagesOfASensorLogAndCopiesTheRest) {
   EXPECT_EQ(reader->mcap().channel_by_topic("/camera")->metadata.at("sensor"), "front_camera");
   io::LogEntry entry;
   int images = 0;
+  std::map<msgs::ImageEncoding, std::vector<uint8_t>> written_by_encoding;
   while (reader->next(entry).value()) {
     const auto& message = std::get<msgs::SensorMessage>(entry.message);
     if (const auto* copied = std::get_if<msgs::ImuMessage>(&message)) {
@@ -235,14 +241,23 @@ TEST(LogRedaction, BlursTheCameraImagesOfASensorLogAndCopiesTheRest) {
     const msgs::ImageMessage original = image_message(photo, image.encoding, entry.log_time);
     ASSERT_EQ(image.data.size(), original.data.size());
     EXPECT_NE(image.data, original.data);
+    written_by_encoding[image.encoding] = image.data;
     // The redacted image has no face left.
     cv::Mat pixels(static_cast<int>(image.height), static_cast<int>(image.width), CV_8UC3, const_cast<uint8_t*>(image.data.data()));
     cv::Mat bgr = pixels.clone();
-    if (image.encoding == msgs::ImageEncoding::kRgb8) cv::cvtColor(pixels, bgr, cv::COLOR_RGB2BGR);
+    if (image.encoding == msgs::ImageEncoding::kRgb8) cv::cvtColor(pixels, bgr, cv::COLOR_RGB2BGR);  // into the clone's own buffer
     EXPECT_EQ(count(filter->detect(bgr).value(), "face"), 0) << msgs::to_string(image.encoding);
     ++images;
   }
   EXPECT_EQ(images, 2);
+  // The rgb8 image comes back in its own channel order: swapped to BGR it is the bgr8 one, blur
+  // and all (the blur treats channels alike).
+  const std::vector<uint8_t>& rgb = written_by_encoding[msgs::ImageEncoding::kRgb8];
+  const std::vector<uint8_t>& bgr = written_by_encoding[msgs::ImageEncoding::kBgr8];
+  ASSERT_EQ(rgb.size(), bgr.size());
+  std::size_t differing = 0;
+  for (std::size_t i = 0; i + 2 < rgb.size(); i += 3) differing += rgb[i] != bgr[i + 2] || rgb[i + 1] != bgr[i + 1] || rgb[i + 2] != bgr[i];
+  EXPECT_EQ(differing, 0u);
 
   // Refused: the input as output, a file that is not a log; no output file is left behind. A
   // log cut off is redacted as far as it reads, with the reader's warning.

@@ -22,6 +22,10 @@
 //     read back from the store); clients load maps (load_map: gRPC LoadMap, POST /v1/maps) and
 //     read any stored version; relocalize() localizes a session in a stored map
 //     (pipeline::Session::relocalize) and moves it into that map's frame.
+//   - Recording (session_recording.hpp, SessionManagerConfig::recording): a session created
+//     with record (or by the server's default) writes every message pushed into it to a sensor
+//     log, images through the privacy filter; the log is finished (and encrypted with the
+//     server's key) when the session ends, and the retention policy then runs.
 //   - register_sensor: adds a sensor (configuration entry + calibration entry, validated by the
 //     same loaders as the files) before the session has received data; afterwards kConflict.
 //
@@ -42,6 +46,7 @@
 #include "hanzo/fusion/service/auth.hpp"
 #include "hanzo/fusion/service/map_catalog.hpp"
 #include "hanzo/fusion/service/metrics.hpp"
+#include "hanzo/fusion/service/session_recording.hpp"
 #include "hanzo/fusion/service/storage.hpp"
 #include "hanzo/fusion/service/subscription.hpp"
 
@@ -63,6 +68,7 @@ struct SessionManagerConfig {
   /// for a day would otherwise keep 2880 versions.
   std::size_t map_keep_versions = 20;
   std::size_t cached_localizers = 4;                // prepared maps kept for relocalize()
+  RecordingConfig recording;                         // raw sensor logging of sessions (off without a folder)
 };
 
 struct RelocalizeRequest {
@@ -81,6 +87,8 @@ struct CreateSessionRequest {
   std::string name;              // free text for people; "" gives "session-<id prefix>"
   std::string config_yaml;       // the spec's fusion configuration (`fusion:` document)
   std::string calibration_yaml;  // the spec's calibration (`calibration:` document); "" for none
+  std::optional<bool> record = std::nullopt;  // record the raw sensor streams; empty: the server's default
+  std::string privacy = "";      // the recording's images: "blur", "black", "off"; "": the server's default
 };
 
 struct SensorRegistration {
@@ -106,6 +114,7 @@ struct SessionInfo {
   uint64_t map_subscribers = 0;              // open SubscribeMap calls
   std::string config_yaml;
   std::string calibration_yaml;
+  std::optional<RecordingInfo> recording;    // when the session records (or recorded)
 };
 
 struct TrajectoryPage {
@@ -183,6 +192,9 @@ class SessionManager {
   /// kConflict: an ended session, or one that has no mapped sweep yet; kRejected: no pose in
   /// the map verified (the reason says why). Nothing changes on an error.
   ApiResult<RelocalizeResult> relocalize(const Principal& caller, const std::string& session_id, const RelocalizeRequest& request);
+  /// The path of a session's finished recording (session:read); kNotFound without one,
+  /// kConflict while it is still being written.
+  ApiResult<std::string> recording_path(const Principal& caller, const std::string& session_id);
   /// Saves the maps of the sessions whose map changed since their last save (the saver thread
   /// calls it every map_save_interval; tests call it directly).
   Status save_session_maps();
