@@ -302,3 +302,35 @@ def test_grpc_streams_from_python(server):
             with streaming.SensorStreams(server["grpc"], session_id, token=token) as streams:
                 streams.send("imu", Imu(1_700_000_000_000_000_000, np.array([0, 0, 9.81]), np.zeros(3)))
         assert refused.value.code.name == code, refused.value
+
+
+def test_recorded_session_gives_back_its_sensor_log(server, tmp_path):
+    """A session created with record=True: what was streamed in comes back as a sensor log."""
+    from hanzo.fusion import read_log
+
+    client = FusionClient(server["rest"], token=TOKEN)
+    sim = server["sim"]
+    with pytest.raises(FusionError) as unfiltered:
+        client.create_session((sim / "fusion.yaml").read_text(), (sim / "calibration.yaml").read_text(), record=True, privacy="off")
+    assert unfiltered.value.status == 400 and unfiltered.value.field == "privacy"
+    session = client.create_session((sim / "fusion.yaml").read_text(), (sim / "calibration.yaml").read_text(), name="recorded",
+                                    record=True)
+    assert session["recording"]["status"] == "recording" and session["recording"]["privacy"] == "blur"
+    subprocess.run([BINARY, "stream", str(sim / "sensors.mcap"), "--server", server["grpc"], "--rest", server["rest"], "--session",
+                    session["id"], "--config", str(sim / "fusion.yaml"), "--token", TOKEN, "--rate", "max", "--json"],
+                   check=True, capture_output=True, text=True)
+    with pytest.raises(FusionError) as busy:
+        client.recording(session["id"])
+    assert busy.value.status == 409
+    ended = client.end_session(session["id"])
+    received = sum(s["received"] for s in ended["sensors"])
+    assert ended["recording"]["status"] == "finished" and ended["recording"]["messages"] == received > 2000
+    (tmp_path / "recorded.mcap").write_bytes(client.recording(session["id"]))
+    topics = {}
+    for record in read_log(str(tmp_path / "recorded.mcap")):
+        topics[record.topic] = topics.get(record.topic, 0) + 1
+    assert sum(topics.values()) == received
+    assert set(topics) == {"/sensors/imu", "/sensors/lidar", "/sensors/wheels"}
+    with pytest.raises(FusionError) as viewer_missing:
+        FusionClient(server["rest"], token=VIEWER_TOKEN).recording("no-such-session")
+    assert viewer_missing.value.status == 404

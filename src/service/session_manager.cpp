@@ -342,6 +342,19 @@ struct SessionManager::Impl {
         dropped += subscriber->dropped();
       }
       const MetricLabels labels = {{"session", managed->record.id}};
+      if (managed->recording) {  // the privacy audit of the session's recording
+        const RecordingInfo recording = managed->recording->info();
+        metrics->counter("hanzo_fusion_recorded_messages_total", "Messages written to the session's recording", labels)
+            .set_total(static_cast<double>(recording.messages));
+        metrics->counter("hanzo_fusion_recorded_images_total", "Recorded images the privacy filter checked", labels)
+            .set_total(static_cast<double>(recording.images));
+        for (const auto& [kind, regions] : {std::pair<const char*, uint64_t>{"face", recording.faces}, {"licence_plate", recording.licence_plates}}) {
+          MetricLabels with_kind = labels;
+          with_kind.emplace_back("kind", kind);
+          metrics->counter("hanzo_fusion_privacy_redactions_total", "Regions redacted in recorded images", with_kind)
+              .set_total(static_cast<double>(regions));
+        }
+      }
       metrics->gauge("hanzo_fusion_subscriber_queue_depth", "Deepest pose subscriber queue", labels).set(static_cast<double>(depth));
       metrics->counter("hanzo_fusion_subscriber_dropped_total", "Poses dropped for slow subscribers (oldest first)", labels)
           .set_total(static_cast<double>(dropped));

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
@@ -170,7 +171,8 @@ TEST(SessionRecording, SessionsRecordWhenAskedAndRefuseWhatTheServerDoesNotAllow
   ASSERT_TRUE(storage.ok());
   SessionManagerConfig config;
   config.recording.directory = (dir / "recordings").string();
-  auto manager = SessionManager::create(config, std::move(storage).value(), std::make_shared<MetricsRegistry>());
+  auto metrics = std::make_shared<MetricsRegistry>();
+  auto manager = SessionManager::create(config, std::move(storage).value(), metrics);
   ASSERT_TRUE(manager.ok()) << manager.error().message;
   const std::string fusion_yaml = testing::read_text("examples/data/fusion.yaml");
 
@@ -198,6 +200,7 @@ TEST(SessionRecording, SessionsRecordWhenAskedAndRefuseWhatTheServerDoesNotAllow
   const std::vector<testing::TimedMessage> sample = testing::sample_recording();
   for (const testing::TimedMessage& message : sample) ASSERT_TRUE((*manager)->push(kRobot, session->id, message.sensor, message.message).ok());
   EXPECT_EQ((*manager)->recording_path(kRobot, session->id).error().code, ErrorCode::kConflict);  // still being written
+  EXPECT_THAT(metrics->render(), HasSubstr(fmt::format("hanzo_fusion_recorded_messages_total{{session=\"{}\"}} {}", session->id, sample.size())));
   auto ended = (*manager)->end_session(kRobot, session->id);
   ASSERT_TRUE(ended.ok());
   EXPECT_EQ(ended->recording->messages, sample.size());

@@ -99,11 +99,17 @@ class FusionClient:
         return self._request("GET", "/v1/health")
 
     # --- sessions ---
-    def create_session(self, config, calibration=None, name=""):
-        """config / calibration: the YAML text of the files, or the same as dicts."""
+    def create_session(self, config, calibration=None, name="", record=None, privacy=None):
+        """config / calibration: the YAML text of the files, or the same as dicts. record: record
+        the raw sensor streams (None: the server's default); privacy: "blur", "black" or "off"
+        for the recorded images (None: the server's default)."""
         body = {"name": name, "config": config}
         if calibration:
             body["calibration"] = calibration
+        if record is not None:
+            body["record"] = record
+        if privacy is not None:
+            body["privacy"] = privacy
         return self._request("POST", "/v1/sessions", body)
 
     def sessions(self):
@@ -120,6 +126,12 @@ class FusionClient:
 
     def end_session(self, session_id):
         return self._request("DELETE", f"/v1/sessions/{_quote(session_id)}")
+
+    def recording(self, session_id):
+        """The bytes of an ended session's recording (a sensor log; encrypted when the server
+        encrypts recordings: decrypt with `hanzo-fusion crypto decrypt`)."""
+        payload, _ = self._request("GET", f"/v1/sessions/{_quote(session_id)}/recording", raw=True)
+        return payload
 
     # --- estimates ---
     def pose(self, session_id):
