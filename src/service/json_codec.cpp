@@ -184,6 +184,7 @@ json recording_to_json(const RecordingInfo& recording) {
           {"privacy", recording.privacy},
           {"messages", recording.messages},
           {"invalid_messages", recording.invalid_messages},
+          {"dropped_messages", recording.dropped_messages},
           {"bytes", recording.bytes},
           {"privacy_audit", {{"images", recording.images}, {"redacted_images", recording.redacted_images}, {"faces", recording.faces},
                              {"licence_plates", recording.licence_plates}}},

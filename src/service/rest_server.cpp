@@ -4,6 +4,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <thread>
 
@@ -61,16 +62,28 @@ ApiResult<std::string> map_format(const httplib::Request& request) {
   return format;
 }
 
-// POST /v1/sessions: a JSON object (name, config, calibration: YAML text or JSON objects), the
-// files themselves as multipart/form-data parts `config`, `calibration`, `name` (curl -F
-// config=@fusion.yaml), or the configuration file as the body with a YAML content type
-// (curl --data-binary @fusion.yaml -H 'Content-Type: application/yaml'; name from ?name=).
+// The recording options of a form or query: record (true / false), privacy.
+ApiStatus recording_options(const std::function<std::optional<std::string>(const char*)>& value, CreateSessionRequest& created) {
+  if (const std::optional<std::string> record = value("record")) {
+    if (*record != "true" && *record != "false") return ApiError{ErrorCode::kInvalidArgument, "record: expected true or false", "record"};
+    created.record = *record == "true";
+  }
+  if (const std::optional<std::string> privacy = value("privacy")) created.privacy = *privacy;
+  return api_ok();
+}
+
+// POST /v1/sessions: a JSON object (name, config, calibration: YAML text or JSON objects; record,
+// privacy), the files themselves as multipart/form-data parts `config`, `calibration`, `name`,
+// `record`, `privacy` (curl -F config=@fusion.yaml), or the configuration file as the body with a
+// YAML content type (curl --data-binary @fusion.yaml -H 'Content-Type: application/yaml'; name,
+// record and privacy from the query).
 ApiResult<CreateSessionRequest> create_session_request(const httplib::Request& request) {
   const std::string type = request.get_header_value("Content-Type");
   if (request.is_multipart_form_data()) {
     for (const auto& [part, content] : request.files) {
-      if (part != "config" && part != "calibration" && part != "name") {
-        return ApiError{ErrorCode::kInvalidArgument, fmt::format("unknown form part '{}' (known: config, calibration, name)", part), part};
+      if (part != "config" && part != "calibration" && part != "name" && part != "record" && part != "privacy") {
+        return ApiError{ErrorCode::kInvalidArgument, fmt::format("unknown form part '{}' (known: config, calibration, name, record, privacy)", part),
+                        part};
       }
     }
     if (!request.has_file("config")) {
@@ -81,6 +94,9 @@ ApiResult<CreateSessionRequest> create_session_request(const httplib::Request& r
     created.name = part("name");
     created.config_yaml = part("config");
     created.calibration_yaml = part("calibration");
+    const ApiStatus options = recording_options(
+        [&](const char* name) { return request.has_file(name) ? std::optional<std::string>(part(name)) : std::nullopt; }, created);
+    if (!options) return options.error();
     return created;
   }
   if (type.starts_with("application/yaml") || type.starts_with("application/x-yaml") || type.starts_with("text/yaml")) {
@@ -88,6 +104,10 @@ ApiResult<CreateSessionRequest> create_session_request(const httplib::Request& r
     CreateSessionRequest created;
     created.name = request.has_param("name") ? request.get_param_value("name") : "";
     created.config_yaml = request.body;
+    const ApiStatus options = recording_options(
+        [&](const char* name) { return request.has_param(name) ? std::optional<std::string>(request.get_param_value(name)) : std::nullopt; },
+        created);
+    if (!options) return options.error();
     return created;
   }
   return detail::parse_create_session(request.body);

@@ -3,7 +3,11 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <condition_variable>
+#include <deque>
 #include <filesystem>
+#include <mutex>
+#include <thread>
 
 #include <fmt/format.h>
 
@@ -15,16 +19,76 @@ namespace hanzo::fusion::service {
 
 namespace fs = std::filesystem;
 
+namespace {
+
+// Bytes a queued message holds (its payload), for the queue's budget.
+uint64_t payload_bytes(const msgs::SensorMessage& message) {
+  if (const auto* cloud = std::get_if<msgs::PointCloudMessage>(&message)) return cloud->points.size() * 24 + 64;
+  if (const auto* image = std::get_if<msgs::ImageMessage>(&message)) return image->data.size() + 64;
+  return 256;
+}
+
+struct QueuedMessage {
+  std::string topic;
+  std::string sensor;
+  msgs::SensorMessage message;
+  uint64_t bytes = 0;
+};
+
+}  // namespace
+
 struct SessionRecording::State {
   RecordingConfig config;
   fs::path path;  // the MCAP being written
-  std::unique_ptr<privacy::PrivacyFilter> filter;
-  std::unique_ptr<io::SensorLogWriter> writer;
+  std::unique_ptr<privacy::PrivacyFilter> filter;  // used by the writer thread only
+  std::unique_ptr<io::SensorLogWriter> writer;     // used by the writer thread only
+
+  mutable std::mutex mutex;  // guards everything below
+  std::condition_variable wake;
+  std::deque<QueuedMessage> queue;
+  uint64_t queued_bytes = 0;
+  bool stopping = false;
+  bool finished = false;
   privacy::TopicRedactionCounts audit;
   RecordingInfo info;
+  std::thread thread;
+
+  void run() {
+    while (true) {
+      QueuedMessage next;
+      {
+        std::unique_lock lock(mutex);
+        wake.wait(lock, [&] { return stopping || !queue.empty(); });
+        if (queue.empty()) return;
+        next = std::move(queue.front());
+        queue.pop_front();
+        queued_bytes -= next.bytes;
+      }
+      write(next);
+    }
+  }
+
+  void write(const QueuedMessage& queued) {
+    if (!writer) return;  // stopped by an earlier error
+    const Status written = writer->write(queued.topic, queued.message, queued.sensor);
+    std::lock_guard lock(mutex);
+    if (written) {
+      ++info.messages;
+    } else if (!written.error().field.empty()) {  // msgs::validate refused it: the session refuses it too
+      ++info.invalid_messages;
+    } else {
+      info.error = written.error().message;
+      logger()->error("recording {} stopped: {}", path.string(), written.error().message);
+      (void)writer->close();
+      writer.reset();
+    }
+  }
 };
 
-SessionRecording::SessionRecording(std::unique_ptr<State> state) : state_(std::move(state)) {}
+SessionRecording::SessionRecording(std::unique_ptr<State> state) : state_(std::move(state)) {
+  State* raw = state_.get();
+  state_->thread = std::thread([raw] { raw->run(); });
+}
 
 SessionRecording::~SessionRecording() {
   if (const Status finished = finish(); !finished) logger()->warn("recording {}: {}", state_->path.string(), finished.error().message);
@@ -52,6 +116,7 @@ Result<std::unique_ptr<SessionRecording>> SessionRecording::start(const Recordin
     writer_config.image_filter = [raw](msgs::ImageMessage& image) -> Status {
       std::vector<privacy::RedactedRegion> regions;
       HANZO_ASSIGN_OR_RETURN(regions, raw->filter->apply(image));
+      std::lock_guard lock(raw->mutex);
       privacy::count_regions(regions, raw->audit);
       return ok_status();
     };
@@ -63,48 +128,61 @@ Result<std::unique_ptr<SessionRecording>> SessionRecording::start(const Recordin
 
 void SessionRecording::record(const std::string& topic, const std::string& sensor, const msgs::SensorMessage& message) {
   State& s = *state_;
-  if (!s.writer) return;
-  const Status written = s.writer->write(topic, message, sensor);
-  if (written) {
-    ++s.info.messages;
-    return;
+  const uint64_t bytes = payload_bytes(message);
+  {
+    std::lock_guard lock(s.mutex);
+    if (s.stopping || s.info.error) return;
+    if (s.queued_bytes + bytes > s.config.max_queued_bytes) {
+      if (s.info.dropped_messages++ == 0) logger()->warn("recording {}: the writer is behind; messages are left out", s.path.string());
+      return;
+    }
+    s.queue.push_back({topic, sensor, message, bytes});
+    s.queued_bytes += bytes;
   }
-  if (!written.error().field.empty()) {  // msgs::validate refused it: the session will refuse it too
-    ++s.info.invalid_messages;
-    return;
-  }
-  s.info.error = written.error().message;
-  logger()->error("recording {} stopped: {}", s.path.string(), written.error().message);
-  (void)s.writer->close();
-  s.writer.reset();
+  s.wake.notify_one();
 }
 
 Status SessionRecording::finish() {
   State& s = *state_;
-  if (!s.info.active) return ok_status();
-  s.info.active = false;
+  {
+    std::lock_guard lock(s.mutex);
+    if (s.finished) return s.info.error ? Status(Error(*s.info.error)) : ok_status();
+    s.finished = true;
+    s.stopping = true;
+  }
+  s.wake.notify_one();
+  if (s.thread.joinable()) s.thread.join();  // writes what is queued first
+  std::optional<std::string> failure;
   if (s.writer) {
     const Status closed = s.writer->close();
     s.writer.reset();
-    if (!closed && !s.info.error) s.info.error = closed.error().message;
+    if (!closed) failure = closed.error().message;
   }
   std::error_code error;
-  if (s.config.key && fs::exists(s.path, error)) {
-    const fs::path encrypted = s.path.string() + ".enc";
-    if (const Status done = crypto::encrypt_file(s.path.string(), encrypted.string(), *s.config.key); !done) {
-      s.info.error = "encryption: " + done.error().message;
-      return done;
+  fs::path path = s.path;
+  bool encrypted = false;
+  if (!failure && s.config.key && fs::exists(path, error)) {
+    const fs::path sealed = path.string() + ".enc";
+    if (const Status done = crypto::encrypt_file(path.string(), sealed.string(), *s.config.key); !done) {
+      failure = "encryption: " + done.error().message;
+    } else {
+      fs::remove(path, error);
+      path = sealed;
+      encrypted = true;
     }
-    fs::remove(s.path, error);
-    s.path = encrypted;
-    s.info.file = encrypted.filename().string();
-    s.info.encrypted = true;
   }
-  s.info.bytes = fs::exists(s.path, error) ? fs::file_size(s.path, error) : 0;
+  std::lock_guard lock(s.mutex);
+  s.path = path;
+  s.info.active = false;
+  s.info.file = path.filename().string();
+  s.info.encrypted = encrypted;
+  s.info.bytes = fs::exists(path, error) ? fs::file_size(path, error) : 0;
+  if (failure && !s.info.error) s.info.error = failure;
   return s.info.error ? Status(Error(*s.info.error)) : ok_status();
 }
 
 RecordingInfo SessionRecording::info() const {
+  std::lock_guard lock(state_->mutex);
   RecordingInfo info = state_->info;
   info.images = state_->audit.images;
   info.redacted_images = state_->audit.redacted_images;

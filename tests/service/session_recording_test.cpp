@@ -119,6 +119,15 @@ TEST(SessionRecording, WritesWhatCameAndBlursFacesBeforeWriting) {
   }
   EXPECT_GT(changed_inside, 1000u);
   EXPECT_EQ(changed_outside, 0u);
+
+  // A writer too far behind leaves messages out (counted) instead of stalling the session.
+  config.max_queued_bytes = 1;
+  auto behind = SessionRecording::start(config, "s1b", std::nullopt);
+  ASSERT_TRUE(behind.ok());
+  for (int i = 0; i < 5; ++i) (*behind)->record("/imu", "imu", imu_at(kStart + Duration::from_milliseconds(10 * i)));
+  ASSERT_TRUE((*behind)->finish().ok());
+  EXPECT_EQ((*behind)->info().dropped_messages, 5u);
+  EXPECT_EQ((*behind)->info().messages, 0u);
   fs::remove_all(dir);
 }
 
@@ -200,7 +209,7 @@ TEST(SessionRecording, SessionsRecordWhenAskedAndRefuseWhatTheServerDoesNotAllow
   const std::vector<testing::TimedMessage> sample = testing::sample_recording();
   for (const testing::TimedMessage& message : sample) ASSERT_TRUE((*manager)->push(kRobot, session->id, message.sensor, message.message).ok());
   EXPECT_EQ((*manager)->recording_path(kRobot, session->id).error().code, ErrorCode::kConflict);  // still being written
-  EXPECT_THAT(metrics->render(), HasSubstr(fmt::format("hanzo_fusion_recorded_messages_total{{session=\"{}\"}} {}", session->id, sample.size())));
+  EXPECT_THAT(metrics->render(), HasSubstr(fmt::format("hanzo_fusion_recorded_messages_total{{session=\"{}\"}}", session->id)));
   auto ended = (*manager)->end_session(kRobot, session->id);
   ASSERT_TRUE(ended.ok());
   EXPECT_EQ(ended->recording->messages, sample.size());

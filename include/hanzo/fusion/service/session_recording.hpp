@@ -15,8 +15,12 @@
 //   - Retention: apply_recording_retention() deletes finished recordings older than the
 //     retention and, beyond a total size, the oldest ones; recordings still being written are
 //     never deleted.
-// A message that fails validation is not written (counted); a write error stops the recording
-// (the error is kept and reported) without affecting the session's fusion.
+// Writing (privacy filter, serialization, compression) runs on the recording's own thread: the
+// session only queues a copy, so recording never slows fusion. When the writer falls behind
+// (the privacy filter takes ~70 ms an image on one core) and the queue holds max_queued_bytes,
+// further messages are left out of the recording and counted (dropped_messages) rather than
+// stalling the session. A message that fails validation is not written (counted); a write
+// error stops the recording (the error is kept and reported) without affecting the fusion.
 
 #include <chrono>
 #include <cstdint>
@@ -48,6 +52,8 @@ struct RecordingConfig {
   std::chrono::hours retention{24 * 30};
   /// Beyond this many bytes of finished recordings the oldest are deleted (0: no cap).
   uint64_t max_total_bytes = 0;
+  /// Messages waiting for the writer, at most (bytes of their payloads); beyond it messages are dropped.
+  uint64_t max_queued_bytes = 512ull << 20;
 };
 
 /// What a session's recording holds; reported in the session status.
@@ -58,6 +64,7 @@ struct RecordingInfo {
   std::string privacy;         ///< "blur", "black" or "off"
   uint64_t messages = 0;       ///< written
   uint64_t invalid_messages = 0;  ///< not written: failed validation
+  uint64_t dropped_messages = 0;  ///< not written: the writer was max_queued_bytes behind
   uint64_t bytes = 0;          ///< of the file (when finished) or written so far (approximate while active)
   uint64_t images = 0;         ///< privacy audit: images checked
   uint64_t redacted_images = 0;
@@ -76,10 +83,10 @@ class SessionRecording {
   SessionRecording(const SessionRecording&) = delete;
   SessionRecording& operator=(const SessionRecording&) = delete;
 
-  /// Writes one message as it arrived on `topic` from `sensor` (the privacy filter runs on a
-  /// copy of images first). Not thread-safe: the session manager calls it under the session lock.
+  /// Queues a copy of one message as it arrived on `topic` from `sensor` for the writer thread
+  /// (which runs the privacy filter on images first). Thread-safe.
   void record(const std::string& topic, const std::string& sensor, const msgs::SensorMessage& message);
-  /// Finishes the log (and encrypts it with the config's key). Idempotent.
+  /// Writes what is queued, finishes the log (and encrypts it with the config's key). Idempotent.
   Status finish();
   RecordingInfo info() const;
 
