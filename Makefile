@@ -7,7 +7,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
-.PHONY: all deps configure build test demo bench fuzz install clean
+.PHONY: all deps configure build test demo bench fuzz sanitize install clean
 
 all: build
 
@@ -33,6 +33,11 @@ bench: build
 # libFuzzer (clang + AddressSanitizer) on the JSON and protobuf decoders, FUZZ_SECONDS each.
 fuzz: deps
 	@bash scripts/fuzz.sh $(BUILD_DIR)-fuzz
+
+# The tests under AddressSanitizer + UndefinedBehaviorSanitizer, the service and pipeline tests
+# under ThreadSanitizer ($(BUILD_DIR)-asan, $(BUILD_DIR)-tsan; about an hour on 2 cores).
+sanitize: deps
+	@bash scripts/sanitize.sh $(BUILD_DIR)
 
 install: build
 	cmake --install $(BUILD_DIR) $(if $(PREFIX),--prefix $(PREFIX),)
