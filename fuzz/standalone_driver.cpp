@@ -1,13 +1,20 @@
 // Runs a fuzz target without libFuzzer (GCC builds, ctest): every seed file given, then
 // `--iterations N` inputs made by mutating the seeds (bit flips, byte changes, insertions,
 // deletions, truncation, splicing two seeds) with a fixed random seed, so a failure
-// reproduces. `make fuzz` builds the same targets with clang's libFuzzer instead.
+// reproduces. `make fuzz` builds the same targets with clang's libFuzzer instead. An input that
+// crashes the target (a signal, an uncaught exception) is written to crash-<target>.bin in the
+// current folder: rerun it with fuzz_TARGET crash-<target>.bin.
 //
 //   fuzz_TARGET [--iterations N] [--seed S] SEED_FILE_OR_DIR...
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <csignal>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -18,6 +25,25 @@
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size);
 
 namespace {
+
+const std::vector<uint8_t>* current_input = nullptr;
+char crash_path[256] = "crash.bin";
+
+// Saves the input being run, then lets the signal do what it does.
+void save_crashing_input(int signal_number) {
+  if (current_input != nullptr) {
+    const int fd = ::open(crash_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (fd >= 0) {
+      (void)!::write(fd, current_input->data(), current_input->size());
+      ::close(fd);
+      (void)!::write(2, "crashing input saved to ", 24);
+      (void)!::write(2, crash_path, std::strlen(crash_path));
+      (void)!::write(2, "\n", 1);
+    }
+  }
+  std::signal(signal_number, SIG_DFL);
+  std::raise(signal_number);
+}
 
 std::vector<uint8_t> read_file(const std::filesystem::path& path) {
   std::ifstream file(path, std::ios::binary);
@@ -64,12 +90,19 @@ int main(int argc, char** argv) {
     }
   }
   if (seeds.empty()) seeds.emplace_back();
-  for (const auto& input : seeds) LLVMFuzzerTestOneInput(input.data(), input.size());
+  std::snprintf(crash_path, sizeof(crash_path), "crash-%s.bin", std::filesystem::path(argv[0]).filename().c_str());
+  for (const int signal_number : {SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGILL}) std::signal(signal_number, save_crashing_input);
+  for (const auto& input : seeds) {
+    current_input = &input;
+    LLVMFuzzerTestOneInput(input.data(), input.size());
+  }
   std::mt19937_64 random(seed);
   for (long i = 0; i < iterations; ++i) {
     const std::vector<uint8_t> input = mutate(seeds[random() % seeds.size()], seeds, random);
+    current_input = &input;
     LLVMFuzzerTestOneInput(input.data(), input.size());
   }
+  current_input = nullptr;
   std::printf("%zu seeds and %ld mutated inputs ran without a crash\n", seeds.size(), iterations);
   return 0;
 }

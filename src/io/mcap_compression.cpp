@@ -50,6 +50,19 @@ Result<std::string> decompress(std::string_view compression, std::string_view in
     }
     return std::string(input);
   }
+  // The declared size comes from the file: check it before allocating it.
+  if (uncompressed_size > kMaxChunkBytes) {
+    return Error(fmt::format("chunk declares {} bytes uncompressed, more than the {} a chunk may hold", uncompressed_size, kMaxChunkBytes));
+  }
+  if (compression == "zstd") {
+    const unsigned long long frame_size = ZSTD_getFrameContentSize(input.data(), input.size());
+    if (frame_size == ZSTD_CONTENTSIZE_ERROR) return Error("zstd decompression failed: not a zstd frame");
+    if (frame_size != ZSTD_CONTENTSIZE_UNKNOWN && frame_size != uncompressed_size) {
+      return Error(fmt::format("zstd chunk holds {} bytes, its header says {}", frame_size, uncompressed_size));
+    }
+  } else if (compression == "lz4" && uncompressed_size > input.size() * 256 + (1u << 16)) {  // LZ4's ratio is at most ~255
+    return Error(fmt::format("lz4 chunk of {} bytes cannot hold the {} its header says", input.size(), uncompressed_size));
+  }
   std::string output;
   output.resize(uncompressed_size);
   if (compression == "zstd") {

@@ -3,6 +3,7 @@
 #include <bzlib.h>
 #include <cerrno>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 
 #include <fmt/format.h>
@@ -53,6 +54,7 @@ Result<std::string> decompress_chunk(const std::string& compression, std::string
     return std::string(data);
   }
   if (compression == "bz2") {
+    if (size > mcap::kMaxChunkBytes) return Error(fmt::format("chunk declares {} bytes uncompressed, more than {}", size, mcap::kMaxChunkBytes));
     std::string out(size, '\0');
     unsigned int out_size = size;
     const int status = BZ2_bzBuffToBuffDecompress(out.data(), &out_size, const_cast<char*>(data.data()),
@@ -157,6 +159,8 @@ Result<BagSummary> walk_file(const std::string& path, std::map<uint32_t, Connect
     }
     return Error(fmt::format("{}: not a ROS bag (bad magic line)", path));
   }
+  std::error_code size_error;
+  const uint64_t file_size = std::filesystem::file_size(path, size_error);
   BagSummary summary;
   Walker walker{connections, on_message, summary};
   uint64_t offset = kMagic.size();
@@ -168,6 +172,8 @@ Result<BagSummary> walk_file(const std::string& path, std::map<uint32_t, Connect
       if (!file.read(length_bytes, 4)) return false;
       ByteReader r(std::string_view(length_bytes, 4));
       const uint32_t length = r.u32();
+      // A length past the end of the file is a cut-off (or corrupted) record: never allocate it.
+      if (!size_error && offset + into.size() + 4 + length > file_size) return false;
       into.append(length_bytes, 4);
       const std::size_t before = into.size();
       into.resize(before + length);

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <optional>
+#include <utility>
 
 #include <fmt/format.h>
 #include <opencv2/imgcodecs.hpp>
@@ -102,8 +104,9 @@ Result<msgs::PointCloudMessage> point_cloud_from_ros(std::string_view data, Seri
     uint32_t offset;
     uint8_t datatype;
   };
-  std::vector<Field> fields(r.u32());
-  if (!r.ok() || fields.size() > 1024) return truncated("sensor_msgs/PointCloud2");
+  const uint32_t field_count = r.u32();
+  if (!r.ok() || field_count > 1024) return truncated("sensor_msgs/PointCloud2");  // checked before anything is allocated
+  std::vector<Field> fields(field_count);
   for (Field& f : fields) {
     f.name = r.string();
     f.offset = r.u32();
@@ -133,7 +136,8 @@ Result<msgs::PointCloudMessage> point_cloud_from_ros(std::string_view data, Seri
   const Field* intensity = find({"intensity", "i"});
   const Field* ring = find({"ring", "line", "channel"});
   const Field* time = find({"time", "t", "timestamp", "time_stamp", "offset_time"});
-  if (static_cast<uint64_t>(row_step) * height > bytes.size() || static_cast<uint64_t>(point_step) * width > row_step) {
+  if (static_cast<uint64_t>(row_step) * height > bytes.size() || static_cast<uint64_t>(point_step) * width > row_step ||
+      (row_step == 0 && height > 1)) {
     return Error(fmt::format("sensor_msgs/PointCloud2: {} x {} points of {} bytes do not fit in {} bytes", height, width,
                              point_step, bytes.size()));
   }
@@ -154,7 +158,7 @@ Result<msgs::PointCloudMessage> point_cloud_from_ros(std::string_view data, Seri
     return bytes.data() + static_cast<std::size_t>(row) * row_step + static_cast<std::size_t>(column) * point_step;
   };
   const PointTimeUnit time_unit =
-      time && width * height > 0 ? point_time_unit(*time, value(*time, point_at(0, 0)), cloud.timestamp) : PointTimeUnit::kOffsetSeconds;
+      time && width > 0 && height > 0 ? point_time_unit(*time, value(*time, point_at(0, 0)), cloud.timestamp) : PointTimeUnit::kOffsetSeconds;
   for (uint32_t row = 0; row < height; ++row) {
     for (uint32_t column = 0; column < width; ++column) {
       const char* point = point_at(row, column);
@@ -209,7 +213,7 @@ Result<msgs::ImageMessage> image_from_ros(std::string_view data, Serialization s
   else if (encoding == "32FC1") image.encoding = msgs::ImageEncoding::kDepth32f;
   else return Error(fmt::format("sensor_msgs/Image: encoding '{}' is not supported (rgb8, bgr8, mono8, 16UC1, 32FC1)", encoding));
   const std::size_t row_bytes = static_cast<std::size_t>(image.width) * msgs::bytes_per_pixel(image.encoding);
-  if (step < row_bytes || static_cast<uint64_t>(step) * image.height > pixels.size()) {
+  if (image.width == 0 || image.height == 0 || step < row_bytes || static_cast<uint64_t>(step) * image.height > pixels.size()) {
     return Error(fmt::format("sensor_msgs/Image: {}x{} {} with step {} does not fit in {} bytes", image.width, image.height,
                              encoding, step, pixels.size()));
   }
@@ -255,6 +259,29 @@ Result<OdometryTwist> twist_stamped_from_ros(std::string_view data, Serializatio
   return twist;
 }
 
+namespace {
+
+// Width and height a PNG or JPEG file declares (none for anything else, or a header cut short),
+// read before decoding so that a file declaring a huge image is refused without allocating it.
+std::optional<std::pair<uint32_t, uint32_t>> declared_image_size(std::string_view file) {
+  const auto byte = [&](std::size_t i) { return static_cast<uint32_t>(static_cast<unsigned char>(file[i])); };
+  if (file.size() >= 24 && file.substr(1, 3) == "PNG") {  // IHDR: width, height big-endian at 16
+    return std::pair{(byte(16) << 24) | (byte(17) << 16) | (byte(18) << 8) | byte(19), (byte(20) << 24) | (byte(21) << 16) | (byte(22) << 8) | byte(23)};
+  }
+  if (file.size() >= 4 && byte(0) == 0xFF && byte(1) == 0xD8) {  // JPEG: the first start-of-frame marker
+    for (std::size_t i = 2; i + 9 <= file.size();) {
+      if (byte(i) != 0xFF) return std::nullopt;
+      const uint32_t marker = byte(i + 1);
+      const bool start_of_frame = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
+      if (start_of_frame) return std::pair{(byte(i + 7) << 8) | byte(i + 8), (byte(i + 5) << 8) | byte(i + 6)};
+      i += 2 + ((byte(i + 2) << 8) | byte(i + 3));
+    }
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
 Result<msgs::ImageMessage> compressed_image_from_ros(std::string_view data, Serialization serialization) {
   WireReader r(data, serialization);
   msgs::ImageMessage image;
@@ -271,6 +298,10 @@ Result<msgs::ImageMessage> compressed_image_from_ros(std::string_view data, Seri
     }
     if (file.size() < 12) return truncated("sensor_msgs/CompressedImage");
     file.remove_prefix(12);
+  }
+  constexpr uint64_t kMaxPixels = 1ull << 26;  // 67 Mpx: beyond any camera
+  if (const auto size = declared_image_size(file); size && static_cast<uint64_t>(size->first) * size->second > kMaxPixels) {
+    return Error(fmt::format("sensor_msgs/CompressedImage: the file declares {} x {} pixels, more than {}", size->first, size->second, kMaxPixels));
   }
   const cv::Mat encoded(1, static_cast<int>(file.size()), CV_8UC1, const_cast<char*>(file.data()));
   cv::Mat decoded = file.empty() ? cv::Mat() : cv::imdecode(encoded, cv::IMREAD_UNCHANGED);

@@ -1,4 +1,5 @@
 #include "hanzo/fusion/io/mcap.hpp"
+#include "mcap_compression.hpp"
 
 #include <filesystem>
 #include <string>
@@ -284,6 +285,26 @@ TEST(Mcap, WriterRejectsMisuse) {
   EXPECT_TRUE((*reader)->verify().ok());
   EXPECT_THAT(McapWriter::open("/nonexistent/dir/x.mcap").error().message, HasSubstr("cannot create file"));
   std::filesystem::remove(path);
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::io::mcap
+
+namespace hanzo::fusion::io::mcap {
+namespace {
+
+// A chunk's declared uncompressed size comes from the file: it is checked before it is
+// allocated (found by fuzz/sensor_logs_fuzzer.cpp and fuzz/ros_messages_fuzzer.cpp).
+TEST(McapChunks, DeclaredSizesAreCheckedBeforeAllocating) {
+  const std::string content(1000, 'a');
+  const std::string zstd = compress(Compression::kZstd, 1, content).value();
+  EXPECT_EQ(decompress("zstd", zstd, content.size()).value(), content);
+  EXPECT_THAT(decompress("zstd", zstd, 1ull << 40).error().message, ::testing::HasSubstr("more than"));
+  EXPECT_THAT(decompress("zstd", zstd, 2000).error().message, ::testing::HasSubstr("holds 1000 bytes, its header says 2000"));
+  EXPECT_THAT(decompress("zstd", "not zstd", 10).error().message, ::testing::HasSubstr("not a zstd frame"));
+  const std::string lz4 = compress(Compression::kLz4, 0, content).value();
+  EXPECT_EQ(decompress("lz4", lz4, content.size()).value(), content);
+  EXPECT_THAT(decompress("lz4", lz4, 500'000'000).error().message, ::testing::HasSubstr("cannot hold"));
 }
 
 }  // namespace

@@ -177,6 +177,25 @@ TEST(Ros1Bag, RejectsOtherFilesAndVersions) {
   for (const auto& p : {not_bag, v12, bad_chunk, orphan}) std::filesystem::remove(p);
 }
 
+// Lengths and sizes the file declares are checked before they are allocated: a record longer
+// than the rest of the file is a cut-off recording; a bz2 chunk declaring more than 1 GiB is refused.
+TEST(Ros1Bag, DeclaredLengthsAreCheckedBeforeAllocating) {
+  const std::string first = chunk(connection(0, "/imu", "sensor_msgs/Imu") + message(0, 10, imu_data(10)), "none");
+  std::string huge_record(8, '\0');
+  const uint32_t header_length = 0xFFFFFFF0u;
+  std::memcpy(huge_record.data(), &header_length, 4);
+  const std::string path = write_temp("huge", bag_file(first) + huge_record);
+  std::size_t count = 0;
+  auto summary = read_bag(path, [&](const BagMessage&) { ++count; return ok_status(); });
+  ASSERT_TRUE(summary.ok()) << summary.error().message;
+  EXPECT_FALSE(summary->complete);
+  EXPECT_EQ(count, 1u);
+  const std::string bz2 = write_temp("bz2_huge", bag_file(record(field_int<uint8_t>("op", 5) + field("compression", "bz2") +
+                                                                     field_int<uint32_t>("size", 0xFFFFFFF0u), "BZh9")));
+  EXPECT_THAT(read_bag(bz2, [](const BagMessage&) { return ok_status(); }).error().message, HasSubstr("more than"));
+  for (const auto& p : {path, bz2}) std::filesystem::remove(p);
+}
+
 TEST(Ros1Conversion, NavSatFixStatusAndCovariance) {
   auto fix = ros::gnss_from_ros(navsatfix_data(0), kRos1);
   ASSERT_TRUE(fix.ok());

@@ -216,6 +216,38 @@ TEST(CdrDecoding, CompressedDepthAndUndecodableImages) {
   EXPECT_THAT(compressed_image_from_ros(garbage.data(), kCdr).error().message, HasSubstr("do not decode as JPEG or PNG"));
 }
 
+// Sizes a message declares are checked before anything of that size is allocated (inputs the
+// fuzz target fuzz/ros_messages_fuzzer.cpp found, as std::bad_alloc or minutes-long loops).
+TEST(CdrDecoding, DeclaredSizesAreCheckedBeforeAllocating) {
+  CdrWriter fields;
+  fields.header(1, 0, "lidar").put<uint32_t>(1).put<uint32_t>(2).put<uint32_t>(0xFFFFFFF0u);  // field count
+  EXPECT_FALSE(point_cloud_from_ros(fields.data(), kCdr).ok());
+
+  CdrWriter rows;  // 4e9 empty rows of a cloud with no points per row
+  rows.header(1, 0, "lidar").put<uint32_t>(4000000000u).put<uint32_t>(0).put<uint32_t>(3);
+  for (uint32_t f = 0; f < 3; ++f) rows.string(std::string(1, static_cast<char>('x' + f))).put<uint32_t>(f * 4).put<uint8_t>(7).put<uint32_t>(1);
+  rows.put<uint8_t>(0).put<uint32_t>(12).put<uint32_t>(0).bytes("").put<uint8_t>(1);
+  EXPECT_FALSE(point_cloud_from_ros(rows.data(), kCdr).ok());
+
+  CdrWriter empty_image;  // 0 x 4e9 pixels
+  empty_image.header(1, 0, "camera").put<uint32_t>(4000000000u).put<uint32_t>(0).string("mono8").put<uint8_t>(0).put<uint32_t>(0).bytes("");
+  EXPECT_FALSE(image_from_ros(empty_image.data(), kCdr).ok());
+
+  // A PNG whose header declares 100000 x 100000 pixels: refused before OpenCV would allocate them.
+  cv::Mat tiny(2, 2, CV_8UC1, cv::Scalar(7));
+  std::vector<uchar> png;
+  ASSERT_TRUE(cv::imencode(".png", tiny, png));
+  for (int i : {16, 20}) {  // IHDR width and height, big-endian
+    png[static_cast<std::size_t>(i)] = 0;
+    png[static_cast<std::size_t>(i) + 1] = 0x01;
+    png[static_cast<std::size_t>(i) + 2] = 0x86;
+    png[static_cast<std::size_t>(i) + 3] = 0xA0;
+  }
+  CdrWriter huge;
+  huge.header(1, 0, "camera").string("png").bytes(std::string(png.begin(), png.end()));
+  EXPECT_THAT(compressed_image_from_ros(huge.data(), kCdr).error().message, HasSubstr("declares 100000 x 100000 pixels"));
+}
+
 TEST(CdrDecoding, TypeNames) {
   EXPECT_EQ(normalized_type("sensor_msgs/msg/Imu"), "sensor_msgs/Imu");
   EXPECT_EQ(normalized_type("sensor_msgs/Imu"), "sensor_msgs/Imu");
