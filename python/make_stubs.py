@@ -37,5 +37,7 @@ for line in stub.read_text().splitlines():
     result = array.sub(lambda m: f"numpy.typing.NDArray[numpy.{m.group(1)}]", result)
     lines.append(head + arrow + result)
 text = "\n".join(lines) + "\n"
+if "__version__" not in text:
+    text += "\n__version__: str\n"
 text = text.replace("import numpy\n", "import numpy\nimport numpy.typing\n", 1)
 stub.write_text(text)

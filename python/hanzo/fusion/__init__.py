@@ -34,6 +34,7 @@ from hanzo.fusion._fusion import (  # noqa: F401
     rpe,
     write_trajectory,
 )
+from hanzo.fusion._fusion import __version__  # noqa: F401
 from hanzo.fusion.log import LogWriter, read_log, replay  # noqa: F401
 from hanzo.fusion.messages import (  # noqa: F401
     CameraIntrinsics,
