@@ -1,26 +1,17 @@
 // Reads an MCAP file with Foxglove's own MCAP library (@mcap/core, @mcap/support) and prints
 // one JSON object describing it, for tests/io/mcap_conformance_test.cpp to compare with what the
 // C++ writer wrote. Usage: node mcap_read.mjs FILE
-import { open, readFile } from "node:fs/promises";
+import { readFile } from "node:fs/promises";
 import { crc32 } from "@foxglove/crc";
-import { McapIndexedReader, McapStreamReader } from "@mcap/core";
+import { McapStreamReader } from "@mcap/core";
 import { loadDecompressHandlers, protobufFromBinaryDescriptor } from "@mcap/support";
+import { openIndexedMcap } from "./mcap_file.mjs";
 
 const path = process.argv[2];
 const decompressHandlers = await loadDecompressHandlers();
 
 // 1. Indexed reading: footer, summary (its CRC is checked), chunk indexes, messages in log-time order.
-const handle = await open(path, "r");
-const size = BigInt((await handle.stat()).size);
-const readable = {
-  size: async () => size,
-  read: async (offset, length) => {
-    const buffer = new Uint8Array(Number(length));
-    await handle.read(buffer, 0, Number(length), Number(offset));
-    return buffer;
-  },
-};
-const reader = await McapIndexedReader.Initialize({ readable, decompressHandlers });
+const { reader, handle } = await openIndexedMcap(path, decompressHandlers);
 const channels = [...reader.channelsById.values()].map((c) => {
   const schema = reader.schemasById.get(c.schemaId);
   return { id: c.id, topic: c.topic, messageEncoding: c.messageEncoding, metadata: Object.fromEntries(c.metadata),

@@ -6,9 +6,8 @@
 // messages (PointCloud2 data as points, OccupancyGrid data as numbers), for
 // tests/io/rosbag2_export_conformance_test.cpp.
 // Usage: node rosbag2_read.mjs FILE.mcap|FILE.db3
-import { open, readFile } from "node:fs/promises";
-import { McapIndexedReader } from "@mcap/core";
-import { loadDecompressHandlers } from "@mcap/support";
+import { readFile } from "node:fs/promises";
+import { openIndexedMcap } from "./mcap_file.mjs";
 import { parse } from "@foxglove/rosmsg";
 import { MessageReader } from "@foxglove/rosmsg2-serialization";
 import { createRequire } from "node:module";
@@ -61,17 +60,7 @@ if (process.argv[2].endsWith(".db3")) {
   process.exit(0);
 }
 
-const handle = await open(process.argv[2], "r");
-const size = BigInt((await handle.stat()).size);
-const readable = {
-  size: async () => size,
-  read: async (offset, length) => {
-    const buffer = new Uint8Array(Number(length));
-    await handle.read(buffer, 0, Number(length), Number(offset));
-    return buffer;
-  },
-};
-const reader = await McapIndexedReader.Initialize({ readable, decompressHandlers: await loadDecompressHandlers() });
+const { reader, handle } = await openIndexedMcap(process.argv[2]);
 const decoders = new Map();
 for await (const message of reader.readMessages()) {
   const channel = reader.channelsById.get(message.channelId);
