@@ -20,6 +20,8 @@ packages=(
   libopencv-dev opencv-data
   # crypto: encryption at rest (XChaCha20-Poly1305 secretstream)
   libsodium-dev
+  # object_store: S3 requests (libcurl; the SigV4 signature is computed with libsodium)
+  libcurl4-openssl-dev
   # sim: parallel ray casting
   libtbb-dev
   # graph: nonlinear least squares (with SuiteSparse), and OpenBLAS (its thread-safe pthread build) for
@@ -73,9 +75,9 @@ else
 fi
 
 # npm packages, pinned by their package-lock.json: the conformance tests' (Foxglove's MCAP
-# library...) and the web viewer's (three.js, esbuild, playwright-core); skipped when
-# node_modules already matches the lock file.
-for folder in tests/conformance web; do
+# library...), the object-store tests' local S3 server (s3rver) and the web viewer's (three.js,
+# esbuild, playwright-core); skipped when node_modules already matches the lock file.
+for folder in tests/conformance tests/s3server web; do
   dir="$(dirname "$0")/../$folder"
   stamp="$dir/node_modules/.installed-lock"
   if ! cmp -s "$dir/package-lock.json" "$stamp"; then
