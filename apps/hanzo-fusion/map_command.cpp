@@ -10,6 +10,7 @@
 #include "commands.hpp"
 #include "hanzo/fusion/cloud/cloud_io.hpp"
 #include "hanzo/fusion/cloud/voxel_grid.hpp"
+#include "hanzo/fusion/crypto/file_encryption.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_diff.hpp"
@@ -34,6 +35,7 @@ struct MapOptions {
   bool drop_labels = false;
   bool drop_sensor_details = false;
   std::string store;
+  std::vector<std::string> key_files;
   std::string map_id;
   uint64_t version = 0;
   std::string at;
@@ -43,6 +45,30 @@ std::string extension_of(const std::string& path) {
   std::string extension = std::filesystem::path(path).extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return std::tolower(c); });
   return extension;
+}
+
+// The map store of --store: versions saved encrypted with the first --key; every --key and the
+// keys of $HANZO_ENCRYPTION_KEY decrypt.
+Result<maps::MapStore> open_store(const MapOptions& options) {
+  maps::MapStoreConfig config;
+  for (const std::string& file : options.key_files) {
+    Result<crypto::EncryptionKey> key = crypto::EncryptionKey::load(file);
+    if (!key) return Error(fmt::format("--key: {}", key.error().message));
+    if (!config.encryption_key) {
+      config.encryption_key = *key;
+    } else {
+      config.decryption_keys.push_back(*key);
+    }
+  }
+  std::vector<crypto::EncryptionKey> environment;
+  HANZO_ASSIGN_OR_RETURN(environment, crypto::keys_from_environment());
+  config.decryption_keys.insert(config.decryption_keys.end(), environment.begin(), environment.end());
+  return maps::MapStore::open(options.store, std::move(config));
+}
+
+void add_store_options(CLI::App* app, MapOptions& options) {
+  app->add_option("--store", options.store, "Map store: a folder, or s3://BUCKET/PREFIX (docs/security.md)")->required();
+  app->add_option("--key", options.key_files, "Key file: the first encrypts saved versions; each decrypts (repeatable)");
 }
 
 Status export_map(const MapOptions& options, nlohmann::json& result) {
@@ -173,7 +199,7 @@ std::string diff_text(const nlohmann::json& diff) {
 
 nlohmann::json version_json(const maps::MapVersionInfo& info) {
   return {{"map_id", info.map_id},           {"version", info.version},   {"parent_version", info.parent_version},
-          {"created", io::format_seconds(info.created)}, {"file_bytes", info.file_bytes}, {"path", info.path}};
+          {"created", io::format_seconds(info.created)}, {"file_bytes", info.file_bytes}, {"location", info.location}, {"encrypted", !info.key_id.empty()}};
 }
 
 template <typename Function>
@@ -402,30 +428,30 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
 
   CLI::App* save_app = map_app->add_subcommand("save", "Store a map file as the next version of its map in a map store");
   save_app->add_option("MAP", options->input, "FusionMap file")->required();
-  save_app->add_option("--store", options->store, "Map store folder")->required();
+  add_store_options(save_app, *options);
   save_app->callback([&output, &run, options] {
     run = [&output, options] {
       return run_reporting(output, {{"map", options->input}, {"store", options->store}}, [&](nlohmann::json& result, std::string& text) -> Status {
         msgs::FusionMap map;
         HANZO_ASSIGN_OR_RETURN(map, maps::read_fusion_map(options->input));
-        auto store = maps::MapStore::open(options->store);
+        auto store = open_store(*options);
         if (!store) return store.error();
         maps::MapVersionInfo info;
         HANZO_ASSIGN_OR_RETURN(info, store->save(map));
         result.update(version_json(info));
-        text = fmt::format("stored map {} version {} (parent {}) at {}\n", info.map_id, info.version, info.parent_version, info.path);
+        text = fmt::format("stored map {} version {} (parent {}) at {}\n", info.map_id, info.version, info.parent_version, info.location);
         return ok_status();
       });
     };
   });
 
   CLI::App* versions_app = map_app->add_subcommand("versions", "List the maps of a store, or the versions of one map");
-  versions_app->add_option("--store", options->store, "Map store folder")->required();
+  add_store_options(versions_app, *options);
   versions_app->add_option("MAP_ID", options->map_id, "List this map's versions (default: every map)");
   versions_app->callback([&output, &run, options] {
     run = [&output, options] {
       return run_reporting(output, {{"store", options->store}}, [&](nlohmann::json& result, std::string& text) -> Status {
-        auto store = maps::MapStore::open(options->store);
+        auto store = open_store(*options);
         if (!store) return store.error();
         std::vector<std::string> ids{options->map_id};
         if (options->map_id.empty()) HANZO_ASSIGN_OR_RETURN(ids, store->map_ids());
@@ -450,14 +476,14 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
 
   CLI::App* checkout_app = map_app->add_subcommand("checkout", "Copy a version of a stored map to a file (latest, --version or --at)");
   checkout_app->add_option("MAP_ID", options->map_id, "Map id")->required();
-  checkout_app->add_option("--store", options->store, "Map store folder")->required();
+  add_store_options(checkout_app, *options);
   checkout_app->add_option("--version", options->version, "Version number");
   checkout_app->add_option("--at", options->at, "The version current at this time (seconds since the epoch)");
   checkout_app->add_option("--out", options->out, "Output FusionMap file")->required();
   checkout_app->callback([&output, &run, options] {
     run = [&output, options] {
       return run_reporting(output, {{"store", options->store}, {"map_id", options->map_id}}, [&](nlohmann::json& result, std::string& text) -> Status {
-        auto store = maps::MapStore::open(options->store);
+        auto store = open_store(*options);
         if (!store) return store.error();
         msgs::FusionMap map;
         if (!options->at.empty()) {

@@ -119,7 +119,9 @@ Result<std::string> read_key_id(std::istream& in) {
   return key_id;
 }
 
-Result<std::string> decrypt_stream(std::istream& in, std::ostream& out, const std::vector<EncryptionKey>& keys) {
+// With `prefix_only`, `in` holds only the first bytes of a file: decryption stops without an
+// error where they end (after the last complete chunk) instead of calling that truncation.
+Result<std::string> decrypt_stream(std::istream& in, std::ostream& out, const std::vector<EncryptionKey>& keys, bool prefix_only = false) {
   initialize_sodium();
   std::string key_id;
   HANZO_ASSIGN_OR_RETURN(key_id, read_key_id(in));
@@ -141,13 +143,17 @@ Result<std::string> decrypt_stream(std::istream& in, std::ostream& out, const st
   thread_local std::string ciphertext, plaintext(kChunkSize, '\0');
   for (uint64_t chunk = 0;; ++chunk) {
     std::array<char, 4> length_bytes{};
-    HANZO_ASSIGN_OR_RETURN(got, read_exact(in, length_bytes.data(), 4, fmt::format("chunk {}'s length", chunk)));
+    got = read_exact(in, length_bytes.data(), 4, fmt::format("chunk {}'s length", chunk));
+    if (prefix_only && (!got || !*got)) break;
+    if (!got) return got.error();
     if (!*got) return Error(fmt::format("truncated: the file ends after chunk {} without the final chunk", chunk));
     uint32_t length = 0;
     for (int i = 0; i < 4; ++i) length |= static_cast<uint32_t>(static_cast<unsigned char>(length_bytes[static_cast<std::size_t>(i)])) << (8 * i);
     if (length < kOverhead || length > kChunkSize + kOverhead) return Error(fmt::format("chunk {}: invalid length {}", chunk, length));
     ciphertext.resize(length);
-    HANZO_ASSIGN_OR_RETURN(got, read_exact(in, ciphertext.data(), length, fmt::format("chunk {}", chunk)));
+    got = read_exact(in, ciphertext.data(), length, fmt::format("chunk {}", chunk));
+    if (prefix_only && (!got || !*got)) break;
+    if (!got) return got.error();
     if (!*got) return Error(fmt::format("truncated: the file ends before chunk {}", chunk));
     unsigned long long size = 0;
     unsigned char tag = 0;
@@ -162,7 +168,7 @@ Result<std::string> decrypt_stream(std::istream& in, std::ostream& out, const st
     if (tag == crypto_secretstream_xchacha20poly1305_TAG_FINAL) break;
   }
   sodium_memzero(plaintext.data(), plaintext.size());
-  if (in.peek() != std::char_traits<char>::eof()) return Error("bytes after the final chunk: the file was changed");
+  if (!prefix_only && in.peek() != std::char_traits<char>::eof()) return Error("bytes after the final chunk: the file was changed");
   if (!out) return Error("writing the decrypted output failed");
   return key_id;
 }
@@ -253,6 +259,11 @@ Result<std::string> encrypted_key_id(const std::string& path) {
   return with_context(read_key_id(in), path);
 }
 
+Result<std::string> encrypted_key_id_of(std::string_view first_bytes) {
+  std::istringstream in{std::string(first_bytes.substr(0, std::min<std::size_t>(first_bytes.size(), 8 + 1 + 255)))};
+  return read_key_id(in);
+}
+
 Status encrypt_file(const std::string& input, const std::string& output, const EncryptionKey& key) {
   std::ifstream in(input, std::ios::binary);
   if (!in) return Error(fmt::format("{}: cannot read", input));
@@ -312,6 +323,13 @@ Result<std::string> decrypt(std::string_view ciphertext, const std::vector<Encry
   std::istringstream in{std::string(ciphertext)};
   std::ostringstream out;
   HANZO_RETURN_IF_ERROR(decrypt_stream(in, out, keys));
+  return out.str();
+}
+
+Result<std::string> decrypt_prefix(std::string_view first_bytes, const std::vector<EncryptionKey>& keys) {
+  std::istringstream in{std::string(first_bytes)};
+  std::ostringstream out;
+  HANZO_RETURN_IF_ERROR(decrypt_stream(in, out, keys, true));
   return out.str();
 }
 

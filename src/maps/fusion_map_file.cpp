@@ -291,6 +291,13 @@ Result<msgs::FusionMap> parse_fusion_map_metadata(std::string_view bytes, const 
   return decode(bytes, source_name, true);
 }
 
+Result<uint64_t> fusion_map_metadata_bytes(std::string_view first_bytes) {
+  if (first_bytes.size() < kFileHeaderBytes + kChunkHeaderBytes || first_bytes.substr(0, kMagic.size()) != kMagic) {
+    return Error("not a FusionMap file, or shorter than its header");
+  }
+  return kFileHeaderBytes + kChunkHeaderBytes + std::min(get<uint64_t>(first_bytes, kFileHeaderBytes + 16), kMaxChunkBytes);
+}
+
 Status write_fusion_map(const std::string& path, const msgs::FusionMap& map, const FusionMapFileConfig& config) {
   std::string bytes;
   HANZO_ASSIGN_OR_RETURN(bytes, serialize_fusion_map(map, config));

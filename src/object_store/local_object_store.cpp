@@ -166,6 +166,19 @@ class LocalObjectStore final : public ObjectStore {
     return sync_directory(folder.string());
   }
 
+  Status remove_all(const std::string& prefix) override {
+    std::vector<ObjectInfo> objects;
+    HANZO_ASSIGN_OR_RETURN(objects, list(prefix));
+    for (const ObjectInfo& object : objects) HANZO_RETURN_IF_ERROR(remove(object.key));
+    if (prefix.ends_with('/')) {  // a folder: also the temporary files of interrupted writes
+      HANZO_RETURN_IF_ERROR(validate_object_key(prefix.substr(0, prefix.size() - 1)));
+      std::error_code error;
+      fs::remove_all(root_ / prefix, error);
+      if (error) return Error(fmt::format("{}: cannot delete ({})", (root_ / prefix).string(), error.message()));
+    }
+    return ok_status();
+  }
+
  private:
   static fs::path temporary_path(const fs::path& target) {
     thread_local std::mt19937_64 random(std::random_device{}());

@@ -246,6 +246,13 @@ class S3ObjectStore final : public ObjectStore {
     return ok_status();
   }
 
+  Status remove_all(const std::string& prefix) override {
+    std::vector<ObjectInfo> objects;
+    HANZO_ASSIGN_OR_RETURN(objects, list(prefix));
+    for (const ObjectInfo& object : objects) HANZO_RETURN_IF_ERROR(remove(object.key));
+    return ok_status();
+  }
+
  private:
   Status put_multipart(const std::string& key, const std::string& path, uint64_t size) {
     Response response;

@@ -9,14 +9,13 @@
 
 namespace hanzo::fusion::service {
 
-Result<std::unique_ptr<MapCatalog>> MapCatalog::open(const std::string& root, Storage& storage) {
-  Result<maps::MapStore> store = maps::MapStore::open(root);
-  if (!store) return store.error();
+Result<std::unique_ptr<MapCatalog>> MapCatalog::open(maps::MapStore store, Storage& storage) {
   std::vector<MapRecord> records;
   HANZO_ASSIGN_OR_RETURN(records, storage.maps());
-  std::unique_ptr<MapCatalog> catalog(new MapCatalog(std::move(store).value(), storage));
+  const std::string location = store.location();
+  std::unique_ptr<MapCatalog> catalog(new MapCatalog(std::move(store), storage));
   for (MapRecord& record : records) catalog->owners_.emplace(record.map_id, std::move(record));
-  logger()->info("maps: {} stored maps in {}", catalog->owners_.size(), root);
+  logger()->info("maps: {} stored maps in {}", catalog->owners_.size(), location);
   return catalog;
 }
 
@@ -69,28 +68,32 @@ ApiResult<msgs::FusionMap> MapCatalog::load(const std::string& organization, con
   }
   Result<msgs::FusionMap> map = store_.load(map_id, version);
   if (!map) {
-    return ApiError{ErrorCode::kNotFound,
-                    version ? fmt::format("map '{}' has no version {}", map_id, *version) : fmt::format("map '{}' has no stored version", map_id),
-                    "version"};
+    if (map.error().field == "map_id" || map.error().field == "version") {
+      return ApiError{ErrorCode::kNotFound,
+                      version ? fmt::format("map '{}' has no version {}", map_id, *version) : fmt::format("map '{}' has no stored version", map_id),
+                      "version"};
+    }
+    return ApiError::from(ErrorCode::kInternal, map.error());  // unreadable: the reason (a damaged file, a missing key) says why
   }
   return std::move(map).value();
 }
 
 ApiResult<std::pair<uint64_t, std::string>> MapCatalog::file(const std::string& organization, const std::string& map_id,
                                                              std::optional<uint64_t> version) const {
-  auto stored = find(organization, map_id);
-  if (!stored) return stored.error();
-  const auto& versions = stored->versions;
-  const auto found = version ? std::find_if(versions.begin(), versions.end(), [&](const maps::MapVersionInfo& v) { return v.version == *version; })
-                             : (versions.empty() ? versions.end() : std::prev(versions.end()));
-  if (found == versions.end()) {
-    return ApiError{ErrorCode::kNotFound,
-                    version ? fmt::format("map '{}' has no version {}", map_id, *version) : fmt::format("map '{}' has no stored version", map_id),
-                    "version"};
+  {
+    std::lock_guard lock(mutex_);
+    if (auto owned = owned_locked(organization, map_id); !owned) return owned.error();
   }
-  Result<std::string> bytes = read_file(found->path);
-  if (!bytes) return ApiError::from(ErrorCode::kInternal, bytes.error());
-  return std::make_pair(found->version, std::move(bytes).value());
+  Result<std::pair<uint64_t, std::string>> file = store_.file(map_id, version);
+  if (!file) {
+    if (file.error().field == "map_id" || file.error().field == "version") {
+      return ApiError{ErrorCode::kNotFound,
+                      version ? fmt::format("map '{}' has no version {}", map_id, *version) : fmt::format("map '{}' has no stored version", map_id),
+                      "version"};
+    }
+    return ApiError::from(ErrorCode::kInternal, file.error());
+  }
+  return std::move(file).value();
 }
 
 ApiResult<StoredMap> MapCatalog::find(const std::string& organization, const std::string& map_id) const {

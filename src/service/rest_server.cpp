@@ -243,21 +243,19 @@ struct RestServer::Impl {
     s.Get(session + "/recording", authenticated("GET", "/v1/sessions/{id}/recording", [this](const httplib::Request& request,
                                                                                           httplib::Response& response,
                                                                                           const Principal& caller) {
-      auto path = sessions->recording_path(caller, request.matches[1]);
-      if (!path) return send_error(response, path.error());
-      auto file = std::make_shared<std::ifstream>(path.value(), std::ios::binary);
-      std::error_code error;
-      const auto size = std::filesystem::file_size(path.value(), error);
-      if (!*file || error) return send_error(response, {ErrorCode::kInternal, fmt::format("cannot read the recording of session '{}'", std::string(request.matches[1])), ""});
-      response.set_header("Content-Disposition", fmt::format("attachment; filename=\"{}\"", std::filesystem::path(path.value()).filename().string()));
-      // Streamed from the file: a recording can be gigabytes.
-      response.set_content_provider(static_cast<std::size_t>(size), "application/octet-stream",
-                                    [file](std::size_t offset, std::size_t length, httplib::DataSink& sink) {
-                                      std::string buffer(std::min<std::size_t>(length, 1 << 20), '\0');
-                                      file->seekg(static_cast<std::streamoff>(offset));
-                                      file->read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
-                                      if (file->gcount() <= 0) return false;
-                                      sink.write(buffer.data(), static_cast<std::size_t>(file->gcount()));
+      auto stored = sessions->recording(caller, request.matches[1]);
+      if (!stored) return send_error(response, stored.error());
+      const std::string key = stored->key;
+      response.set_header("Content-Disposition", fmt::format("attachment; filename=\"{}\"", std::filesystem::path(key).filename().string()));
+      // Streamed in ranges from where it is kept (a file, or S3): a recording can be gigabytes.
+      response.set_content_provider(static_cast<std::size_t>(stored->bytes), "application/octet-stream",
+                                    [store = stored->store, key](std::size_t offset, std::size_t length, httplib::DataSink& sink) {
+                                      Result<std::string> bytes = store->get_range(key, offset, std::min<std::size_t>(length, 4 << 20));
+                                      if (!bytes || bytes->empty()) {
+                                        logger()->error("streaming {}: {}", store->location_of(key), bytes ? "ended early" : bytes.error().message);
+                                        return false;
+                                      }
+                                      sink.write(bytes->data(), bytes->size());
                                       return true;
                                     });
     }));

@@ -503,8 +503,13 @@ Result<std::unique_ptr<SessionManager>> SessionManager::create(const SessionMana
                                                          config.max_pending_poses, *impl->metrics);
   impl->active_sessions_gauge = &impl->metrics->gauge("hanzo_fusion_active_sessions", "Sessions running");
 
-  if (!config.map_directory.empty()) {
-    HANZO_ASSIGN_OR_RETURN(impl->catalog, MapCatalog::open(config.map_directory, *impl->storage));
+  if (config.object_store) {
+    if (!impl->config.recording.archive) impl->config.recording.archive = config.object_store;
+    HANZO_ASSIGN_OR_RETURN(impl->catalog, MapCatalog::open(maps::MapStore(config.object_store, "maps/", config.map_store), *impl->storage));
+  } else if (!config.map_directory.empty()) {
+    Result<maps::MapStore> store = maps::MapStore::open(config.map_directory, config.map_store);
+    if (!store) return store.error();
+    HANZO_ASSIGN_OR_RETURN(impl->catalog, MapCatalog::open(std::move(store).value(), *impl->storage));
   }
   std::vector<SessionRecord> records;
   HANZO_ASSIGN_OR_RETURN(records, impl->storage->sessions());
@@ -611,20 +616,24 @@ ApiResult<SessionInfo> SessionManager::session_info(const Principal& caller, con
   return impl_->info_locked(*managed.value());
 }
 
-ApiResult<std::string> SessionManager::recording_path(const Principal& caller, const std::string& session_id) {
+ApiResult<StoredRecording> SessionManager::recording(const Principal& caller, const std::string& session_id) {
   auto managed = impl_->find(caller, session_id, Permission::kSessionRead);
   if (!managed) return managed.error();
-  std::lock_guard lock(managed.value()->mutex);
+  std::unique_lock lock(managed.value()->mutex);
   if (!managed.value()->recording) return ApiError{ErrorCode::kNotFound, fmt::format("session '{}' was not recorded", session_id), ""};
   const RecordingInfo info = managed.value()->recording->info();
+  lock.unlock();
   if (info.active) {
     return ApiError{ErrorCode::kConflict, fmt::format("the recording of session '{}' is still being written; end the session first", session_id), ""};
   }
-  const std::string path = (std::filesystem::path(impl_->config.recording.directory) / info.file).string();
-  if (!std::filesystem::exists(path)) {
-    return ApiError{ErrorCode::kNotFound, fmt::format("the recording of session '{}' was deleted (retention policy)", session_id), ""};
+  Result<StoredRecording> stored = find_recording(impl_->config.recording, info.file);
+  if (!stored) {
+    if (stored.error().field == object_store::kNotFound) {
+      return ApiError{ErrorCode::kNotFound, fmt::format("the recording of session '{}' was deleted (retention policy)", session_id), ""};
+    }
+    return ApiError::from(ErrorCode::kInternal, stored.error());
   }
-  return path;
+  return std::move(stored).value();
 }
 
 ApiResult<SessionInfo> SessionManager::end_session(const Principal& caller, const std::string& session_id) {

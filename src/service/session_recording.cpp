@@ -28,6 +28,21 @@ uint64_t payload_bytes(const msgs::SensorMessage& message) {
   return 256;
 }
 
+constexpr std::string_view kArchivePrefix = "recordings/";
+
+bool is_recording_file(const std::string& name) { return name.ends_with(".mcap") || name.ends_with(".mcap.enc"); }
+
+// Uploads a finished recording to the archive and removes the local file; its archive location.
+Result<std::string> archive_recording(object_store::ObjectStore& archive, const fs::path& path) {
+  const std::string key = std::string(kArchivePrefix) + path.filename().string();
+  HANZO_RETURN_IF_ERROR(archive.put_file(key, path.string()));
+  std::error_code error;
+  fs::remove(path, error);
+  if (error) logger()->warn("{}: stored in {}, but the local copy could not be removed ({})", path.string(), archive.location_of(key), error.message());
+  logger()->info("recording {} stored in {}", path.filename().string(), archive.location_of(key));
+  return archive.location_of(key);
+}
+
 struct QueuedMessage {
   std::string topic;
   std::string sensor;
@@ -104,6 +119,7 @@ Result<std::unique_ptr<SessionRecording>> SessionRecording::start(const Recordin
   state->config = config;
   state->path = fs::path(config.directory) / (session_id + ".mcap");
   state->info.file = state->path.filename().string();
+  state->info.location = state->path.string();
   state->info.active = true;
   state->info.privacy = redaction ? std::string(privacy::to_string(*redaction)) : "off";
   io::SensorLogWriterConfig writer_config;
@@ -171,12 +187,23 @@ Status SessionRecording::finish() {
       encrypted = true;
     }
   }
+  const uint64_t bytes = fs::exists(path, error) ? fs::file_size(path, error) : 0;
+  std::string location = path.string();
+  if (!failure && s.config.archive && fs::exists(path, error)) {
+    Result<std::string> archived = archive_recording(*s.config.archive, path);
+    if (archived) {
+      location = *archived;
+    } else {  // kept in the folder; the next retention pass uploads it
+      failure = "archive: " + archived.error().message;
+    }
+  }
   std::lock_guard lock(s.mutex);
   s.path = path;
   s.info.active = false;
   s.info.file = path.filename().string();
+  s.info.location = location;
   s.info.encrypted = encrypted;
-  s.info.bytes = fs::exists(path, error) ? fs::file_size(path, error) : 0;
+  s.info.bytes = bytes;
   if (failure && !s.info.error) s.info.error = failure;
   return s.info.error ? Status(Error(*s.info.error)) : ok_status();
 }
@@ -198,36 +225,64 @@ RecordingInfo SessionRecording::info() const {
 
 Result<RetentionOutcome> apply_recording_retention(const RecordingConfig& config, const std::vector<std::string>& active_files) {
   RetentionOutcome outcome;
-  if (config.directory.empty() || !fs::exists(config.directory)) return outcome;
-  struct Finished {
-    fs::path path;
-    fs::file_time_type modified;
-    uint64_t bytes;
-  };
-  std::vector<Finished> finished;
+  if (config.directory.empty()) return outcome;
+  const auto active = [&](const std::string& name) { return std::find(active_files.begin(), active_files.end(), name) != active_files.end(); };
   std::error_code error;
-  for (const fs::directory_entry& entry : fs::directory_iterator(config.directory, error)) {
-    const std::string name = entry.path().filename().string();
-    const bool recording = name.ends_with(".mcap") || name.ends_with(".mcap.enc");
-    if (!recording || !entry.is_regular_file() || std::find(active_files.begin(), active_files.end(), name) != active_files.end()) continue;
-    finished.push_back({entry.path(), entry.last_write_time(), entry.file_size()});
+  if (config.archive && fs::is_directory(config.directory, error)) {
+    for (const fs::directory_entry& entry : fs::directory_iterator(config.directory, error)) {
+      const std::string name = entry.path().filename().string();
+      if (!is_recording_file(name) || !entry.is_regular_file() || active(name)) continue;
+      if (Result<std::string> archived = archive_recording(*config.archive, entry.path()); !archived) return archived.error();
+    }
   }
-  if (error) return Error(fmt::format("{}: cannot list the recordings ({})", config.directory, error.message()));
-  std::sort(finished.begin(), finished.end(), [](const Finished& a, const Finished& b) { return a.modified < b.modified; });
+  std::shared_ptr<object_store::ObjectStore> store = config.archive;
+  std::string prefix(kArchivePrefix);
+  if (!store) {
+    if (!fs::is_directory(config.directory, error)) return outcome;
+    std::unique_ptr<object_store::ObjectStore> local;
+    HANZO_ASSIGN_OR_RETURN(local, object_store::open_local_object_store(config.directory));
+    store = std::move(local);
+    prefix.clear();
+  }
+  std::vector<object_store::ObjectInfo> objects;
+  HANZO_ASSIGN_OR_RETURN(objects, store->list(prefix));
+  std::vector<object_store::ObjectInfo> finished;
+  for (object_store::ObjectInfo& object : objects) {
+    const std::string name = object.key.substr(prefix.size());
+    if (is_recording_file(name) && name.find('/') == std::string::npos && !active(name)) finished.push_back(std::move(object));
+  }
+  std::sort(finished.begin(), finished.end(), [](const auto& a, const auto& b) { return a.modified < b.modified; });
   uint64_t total = 0;
-  for (const Finished& f : finished) total += f.bytes;
-  const auto cutoff = fs::file_time_type::clock::now() - config.retention;
-  for (const Finished& f : finished) {
+  for (const object_store::ObjectInfo& f : finished) total += f.size;
+  const Timestamp cutoff = Timestamp::wall_clock_now() - Duration::from_seconds(std::chrono::duration<double>(config.retention).count());
+  for (const object_store::ObjectInfo& f : finished) {
     const bool expired = config.retention.count() > 0 && f.modified < cutoff;
     const bool over_cap = config.max_total_bytes > 0 && total > config.max_total_bytes;
     if (!expired && !over_cap) continue;
-    if (!fs::remove(f.path, error)) return Error(fmt::format("{}: cannot delete ({})", f.path.string(), error.message()));
-    outcome.deleted.push_back(f.path.filename().string());
-    outcome.bytes_freed += f.bytes;
-    total -= f.bytes;
+    HANZO_RETURN_IF_ERROR(store->remove(f.key));
+    outcome.deleted.push_back(f.key.substr(prefix.size()));
+    outcome.bytes_freed += f.size;
+    total -= f.size;
   }
   for (const std::string& name : outcome.deleted) logger()->info("recording {} deleted by the retention policy", name);
   return outcome;
+}
+
+Result<StoredRecording> find_recording(const RecordingConfig& config, const std::string& file) {
+  const fs::path local = fs::path(config.directory) / file;
+  std::error_code error;
+  if (!config.directory.empty() && fs::is_regular_file(local, error)) {
+    std::unique_ptr<object_store::ObjectStore> folder;
+    HANZO_ASSIGN_OR_RETURN(folder, object_store::open_local_object_store(config.directory));
+    return StoredRecording{std::move(folder), file, fs::file_size(local, error)};
+  }
+  if (config.archive) {
+    const std::string key = std::string(kArchivePrefix) + file;
+    std::optional<object_store::ObjectInfo> info;
+    HANZO_ASSIGN_OR_RETURN(info, config.archive->stat(key));
+    if (info) return StoredRecording{config.archive, key, info->size};
+  }
+  return Error(fmt::format("recording {}: not stored (deleted by the retention policy)", file), std::string(object_store::kNotFound));
 }
 
 }  // namespace hanzo::fusion::service

@@ -189,7 +189,7 @@ TEST(SessionRecording, SessionsRecordWhenAskedAndRefuseWhatTheServerDoesNotAllow
   auto unrecorded = (*manager)->create_session(kRobot, plain);
   ASSERT_TRUE(unrecorded.ok());
   EXPECT_FALSE(unrecorded->recording.has_value());  // the server's default: not recorded
-  EXPECT_EQ((*manager)->recording_path(kRobot, unrecorded->id).error().code, ErrorCode::kNotFound);
+  EXPECT_EQ((*manager)->recording(kRobot, unrecorded->id).error().code, ErrorCode::kNotFound);
 
   CreateSessionRequest unfiltered{"unfiltered", fusion_yaml, ""};
   unfiltered.record = true;
@@ -208,14 +208,14 @@ TEST(SessionRecording, SessionsRecordWhenAskedAndRefuseWhatTheServerDoesNotAllow
   EXPECT_EQ(session->recording->privacy, "blur");
   const std::vector<testing::TimedMessage> sample = testing::sample_recording();
   for (const testing::TimedMessage& message : sample) ASSERT_TRUE((*manager)->push(kRobot, session->id, message.sensor, message.message).ok());
-  EXPECT_EQ((*manager)->recording_path(kRobot, session->id).error().code, ErrorCode::kConflict);  // still being written
+  EXPECT_EQ((*manager)->recording(kRobot, session->id).error().code, ErrorCode::kConflict);  // still being written
   EXPECT_THAT(metrics->render(), HasSubstr(fmt::format("hanzo_fusion_recorded_messages_total{{session=\"{}\"}}", session->id)));
   auto ended = (*manager)->end_session(kRobot, session->id);
   ASSERT_TRUE(ended.ok());
   EXPECT_EQ(ended->recording->messages, sample.size());
-  auto path = (*manager)->recording_path(kRobot, session->id);
-  ASSERT_TRUE(path.ok()) << path.error().message;
-  const std::vector<io::LogEntry> entries = read_log(path.value());
+  auto stored = (*manager)->recording(kRobot, session->id);
+  ASSERT_TRUE(stored.ok()) << stored.error().message;
+  const std::vector<io::LogEntry> entries = read_log(stored->store->location_of(stored->key));
   ASSERT_EQ(entries.size(), sample.size());
   EXPECT_EQ(entries.front().topic, "/imu");  // the configuration's topics
 

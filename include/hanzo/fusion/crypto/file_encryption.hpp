@@ -61,6 +61,8 @@ bool is_encrypted_file(const std::string& path);
 
 /// The id of the key that encrypted `path`, from its header.
 Result<std::string> encrypted_key_id(const std::string& path);
+/// The same from a file's first bytes (at least its header).
+Result<std::string> encrypted_key_id_of(std::string_view first_bytes);
 
 /// Encrypts `input` into `output` (written as output + ".partial", renamed when complete).
 Status encrypt_file(const std::string& input, const std::string& output, const EncryptionKey& key);
@@ -80,5 +82,16 @@ Result<int> decrypt_to_memory_file(const std::string& path, const std::vector<En
 /// The same on memory (small files, tests).
 std::string encrypt(std::string_view plaintext, const EncryptionKey& key);
 Result<std::string> decrypt(std::string_view ciphertext, const std::vector<EncryptionKey>& keys);
+
+/// The plaintext of the complete chunks among the first bytes of an encrypted file (each chunk
+/// authenticated), for a peek at a file's start, such as a map's metadata, without fetching all
+/// of it. Says nothing about the rest of the file: decrypt the whole file to trust all of it.
+Result<std::string> decrypt_prefix(std::string_view first_bytes, const std::vector<EncryptionKey>& keys);
+
+/// Bytes an encrypted file needs for its first `plaintext_bytes` bytes of plaintext.
+inline constexpr uint64_t encrypted_prefix_bytes(uint64_t plaintext_bytes) {
+  constexpr uint64_t kChunk = uint64_t{1} << 20, kPerChunk = 4 + 17, kHeader = 8 + 1 + 255 + 24;
+  return kHeader + plaintext_bytes + ((plaintext_bytes + kChunk - 1) / kChunk + 1) * kPerChunk;
+}
 
 }  // namespace hanzo::fusion::crypto

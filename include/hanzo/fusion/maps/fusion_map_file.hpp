@@ -53,6 +53,9 @@ Result<msgs::FusionMap> parse_fusion_map(std::string_view bytes, const std::stri
 /// The metadata of a file (its first chunk: no layers), without decoding the layers.
 Result<msgs::FusionMap> parse_fusion_map_metadata(std::string_view bytes, const std::string& source_name = "FusionMap");
 
+/// How many leading bytes of a file parse_fusion_map_metadata needs (header and first chunk),
+/// read from its first 40 bytes (fewer: an error). At most kMaxChunkBytes + 40.
+Result<uint64_t> fusion_map_metadata_bytes(std::string_view first_bytes);
 /// Writes atomically (temporary file, fsync, rename): readers see the old file or the new one.
 Status write_fusion_map(const std::string& path, const msgs::FusionMap& map, const FusionMapFileConfig& config = {});
 Result<msgs::FusionMap> read_fusion_map(const std::string& path);

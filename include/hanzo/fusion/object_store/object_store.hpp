@@ -77,6 +77,9 @@ class ObjectStore {
   virtual Result<std::vector<ObjectInfo>> list(const std::string& prefix) const = 0;
   /// Deletes an object; deleting a missing object is not an error.
   virtual Status remove(const std::string& key) = 0;
+  /// Deletes every object whose key starts with `prefix` (on disk also what interrupted writes
+  /// left there). A failure part way leaves the objects not yet deleted.
+  virtual Status remove_all(const std::string& prefix) = 0;
 };
 
 /// A key is 1..1024 bytes of printable ASCII, without a leading '/', "//", '\\', or a "." or ".."

@@ -1,6 +1,7 @@
 #pragma once
 // MapCatalog: the server's stored maps. Each map is a series of versions in a maps::MapStore
-// folder (the server's DATA_DIR/maps: one FusionMap file per version, never overwritten); who
+// (the server's DATA_DIR/maps, or maps/ in its S3 bucket: one FusionMap file per version, never
+// overwritten, encrypted when the server has an encryption key); who
 // owns a map is a row of the Storage's `maps` table and every saved version a row of
 // `map_versions`, so SQL users can list them next to the sessions.
 //
@@ -35,9 +36,8 @@ struct StoredMap {
 
 class MapCatalog {
  public:
-  /// Opens the map folder `root` (created when missing) with the owners `storage` lists.
-  /// `storage` must outlive the catalog.
-  static Result<std::unique_ptr<MapCatalog>> open(const std::string& root, Storage& storage);
+  /// The maps of `store` with the owners `storage` lists. `storage` must outlive the catalog.
+  static Result<std::unique_ptr<MapCatalog>> open(maps::MapStore store, Storage& storage);
 
   /// Stores `map` as the next version of map.map_id (a new UUID when empty), owned by
   /// `organization` when the id is new (`session_id`, `name` describe it then). The stored
@@ -48,8 +48,8 @@ class MapCatalog {
   /// A stored version (the latest when `version` is empty) of a map of `organization`.
   ApiResult<msgs::FusionMap> load(const std::string& organization, const std::string& map_id,
                                   std::optional<uint64_t> version = std::nullopt) const;
-  /// The FusionMap file of a stored version, as stored (the latest when `version` is empty):
-  /// served without decoding it. Also returns the version.
+  /// The FusionMap file of a stored version (the latest when `version` is empty; decrypted when
+  /// stored encrypted): served without decoding it. Also returns the version.
   ApiResult<std::pair<uint64_t, std::string>> file(const std::string& organization, const std::string& map_id,
                                                    std::optional<uint64_t> version = std::nullopt) const;
   /// The maps of `organization`, oldest first, each with its versions.

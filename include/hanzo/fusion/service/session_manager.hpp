@@ -16,7 +16,7 @@
 //   - Each session is a pipeline::Session: with a 3D LiDAR it also registers sweeps, keeps
 //     a keyframe graph, builds a map and closes loops; map(), close_loop(), subscribe_map() and
 //     subscribe_keyframes() serve them (an ended session keeps its final map in memory).
-//   - Maps (with SessionManagerConfig::map_directory, a MapCatalog): each session's map is saved
+//   - Maps (SessionManagerConfig::map_directory or object_store, a MapCatalog): each session's map is saved
 //     as a new version of the map whose id is the session id every map_save_interval while it
 //     changes and when the session ends (so maps survive restarts, and an ended session's map is
 //     read back from the store); clients load maps (load_map: gRPC LoadMap, POST /v1/maps) and
@@ -58,9 +58,14 @@ struct SessionManagerConfig {
   std::chrono::milliseconds storage_flush_interval{20};  // how often queued poses are committed
   std::size_t max_pending_poses = 2'000'000;        // storage queue bound; beyond it poses are dropped (counted)
   std::size_t subscriber_queue_capacity = 1024;     // per subscriber, drop-oldest beyond it
-  /// Folder of the stored maps (a maps::MapStore; the server uses DATA_DIR/maps). Empty: maps
-  /// are not stored (load_map, stored maps and relocalize answer kUnavailable).
+  /// Folder of the stored maps (a maps::MapStore; the server uses DATA_DIR/maps). Empty, and no
+  /// object_store: maps are not stored (load_map, stored maps and relocalize answer kUnavailable).
   std::string map_directory;
+  /// An object store (an S3 bucket) that keeps the maps (under maps/) instead of map_directory
+  /// and the finished recordings (under recordings/, when recording.archive is not set).
+  std::shared_ptr<object_store::ObjectStore> object_store;
+  /// Stored maps: encryption key (versions saved encrypted) and the keys that decrypt.
+  maps::MapStoreConfig map_store;
   /// How often a changed session map is saved as a new version (0: only when the session ends).
   std::chrono::seconds map_save_interval{30};
   /// Retention: the newest versions kept of each session's map (older ones are deleted after
@@ -192,9 +197,10 @@ class SessionManager {
   /// kConflict: an ended session, or one that has no mapped sweep yet; kRejected: no pose in
   /// the map verified (the reason says why). Nothing changes on an error.
   ApiResult<RelocalizeResult> relocalize(const Principal& caller, const std::string& session_id, const RelocalizeRequest& request);
-  /// The path of a session's finished recording (session:read); kNotFound without one,
-  /// kConflict while it is still being written.
-  ApiResult<std::string> recording_path(const Principal& caller, const std::string& session_id);
+  /// Where a session's finished recording is kept (session:read): its folder or the object
+  /// store; kNotFound without one (or once retention deleted it), kConflict while it is still
+  /// being written.
+  ApiResult<StoredRecording> recording(const Principal& caller, const std::string& session_id);
   /// Saves the maps of the sessions whose map changed since their last save (the saver thread
   /// calls it every map_save_interval; tests call it directly).
   Status save_session_maps();

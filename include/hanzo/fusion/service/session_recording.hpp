@@ -12,9 +12,13 @@
 //     XChaCha20-Poly1305 secretstream) into <id>.mcap.enc and the plaintext removed when the
 //     session ends. While the session runs, the log being written is a plaintext file (mode
 //     0600) in the recordings folder.
+//   - Object storage: with an archive store (an S3 bucket), the finished (and encrypted) log is
+//     uploaded as recordings/<file> and the local file removed once stored. When the upload
+//     fails the file stays in the recordings folder (and is served from there); the next
+//     retention pass uploads it.
 //   - Retention: apply_recording_retention() deletes finished recordings older than the
-//     retention and, beyond a total size, the oldest ones; recordings still being written are
-//     never deleted.
+//     retention and, beyond a total size, the oldest ones, wherever they are kept; recordings
+//     still being written are never deleted.
 // Writing (privacy filter, serialization, compression) runs on the recording's own thread: the
 // session only queues a copy, so recording never slows fusion. When the writer falls behind
 // (the privacy filter takes ~70 ms an image on one core) and the queue holds max_queued_bytes,
@@ -32,6 +36,7 @@
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/crypto/file_encryption.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
+#include "hanzo/fusion/object_store/object_store.hpp"
 #include "hanzo/fusion/privacy/privacy_filter.hpp"
 
 namespace hanzo::fusion::service {
@@ -48,6 +53,9 @@ struct RecordingConfig {
   bool allow_unfiltered = false;
   /// Finished recordings are encrypted with this key (none: kept as plain MCAP).
   std::optional<crypto::EncryptionKey> key;
+  /// Finished recordings are moved into this store as recordings/<file>; null: they stay in
+  /// `directory`.
+  std::shared_ptr<object_store::ObjectStore> archive;
   /// Finished recordings older than this are deleted by apply_recording_retention (0: kept).
   std::chrono::hours retention{24 * 30};
   /// Beyond this many bytes of finished recordings the oldest are deleted (0: no cap).
@@ -58,7 +66,8 @@ struct RecordingConfig {
 
 /// What a session's recording holds; reported in the session status.
 struct RecordingInfo {
-  std::string file;            ///< name in the recordings folder (<id>.mcap, <id>.mcap.enc when finished encrypted)
+  std::string file;            ///< file name (<id>.mcap, <id>.mcap.enc when finished encrypted)
+  std::string location;        ///< where it is: its path, or its s3:// URL once archived
   bool active = false;         ///< still being written
   bool encrypted = false;
   std::string privacy;         ///< "blur", "black" or "off"
@@ -102,8 +111,19 @@ struct RetentionOutcome {
   uint64_t bytes_freed = 0;
 };
 
-/// Deletes finished recordings (*.mcap, *.mcap.enc not in `active_files`) modified before
-/// now - retention, then the oldest while the rest exceed max_total_bytes.
+/// Archives finished recordings left in the folder (an earlier upload failed), then deletes
+/// finished recordings (*.mcap, *.mcap.enc not in `active_files`) stored before now - retention,
+/// then the oldest while the rest exceed max_total_bytes.
 Result<RetentionOutcome> apply_recording_retention(const RecordingConfig& config, const std::vector<std::string>& active_files);
+
+/// A finished recording where it is kept: the archive (key recordings/<file>) or the folder.
+struct StoredRecording {
+  std::shared_ptr<object_store::ObjectStore> store;
+  std::string key;
+  uint64_t bytes = 0;
+};
+/// The finished recording `file`: in the folder while it has not been archived, else in the
+/// archive. An Error with field object_store::kNotFound when it is in neither (deleted).
+Result<StoredRecording> find_recording(const RecordingConfig& config, const std::string& file);
 
 }  // namespace hanzo::fusion::service
