@@ -20,6 +20,7 @@
 #include "hanzo/fusion/service/jwt_verifier.hpp"
 #include "hanzo/fusion/service/rest_server.hpp"
 #include "hanzo/fusion/crypto/file_encryption.hpp"
+#include "hanzo/fusion/object_store/object_store.hpp"
 #include "hanzo/fusion/privacy/privacy_filter.hpp"
 #include "hanzo/fusion/service/session_manager.hpp"
 
@@ -46,7 +47,8 @@ struct ServeOptions {
   bool record_sessions = false;
   std::string recording_privacy = "blur";
   bool allow_unfiltered_recordings = false;
-  std::string recording_key;
+  std::string encryption_key;
+  std::string object_store;
   double recording_retention_days = 30.0;
   double recording_max_gb = 0.0;
 };
@@ -109,10 +111,20 @@ int run_serve(const Output& output, const ServeOptions& options) {
   if (!redaction) return report_failure(output, {}, "--recording-privacy: " + redaction.error().message);
   recording.redaction = *redaction;
   recording.allow_unfiltered = options.allow_unfiltered_recordings;
-  if (!options.recording_key.empty()) {
-    auto key = crypto::EncryptionKey::load(options.recording_key);
-    if (!key) return report_failure(output, {}, "--recording-key: " + key.error().message);
-    recording.key = std::move(*key);
+  if (!options.encryption_key.empty()) {
+    auto key = crypto::EncryptionKey::load(options.encryption_key);
+    if (!key) return report_failure(output, {}, "--encryption-key: " + key.error().message);
+    recording.key = *key;
+    manager_config.map_store.encryption_key = *key;
+  }
+  // Maps stored before a key rotation name their key: the keys of $HANZO_ENCRYPTION_KEY decrypt too.
+  auto old_keys = crypto::keys_from_environment();
+  if (!old_keys) return report_failure(output, {}, "HANZO_ENCRYPTION_KEY: " + old_keys.error().message);
+  manager_config.map_store.decryption_keys = std::move(*old_keys);
+  if (!options.object_store.empty()) {
+    auto objects = object_store::open_object_store(options.object_store);
+    if (!objects) return report_failure(output, {}, "--object-store: " + objects.error().message);
+    manager_config.object_store = std::move(*objects);
   }
   recording.retention = std::chrono::hours(static_cast<int64_t>(std::lround(options.recording_retention_days * 24.0)));
   recording.max_total_bytes = static_cast<uint64_t>(options.recording_max_gb * 1e9);
@@ -188,8 +200,12 @@ void add_serve_command(CLI::App& app, const Output& output, Command& run) {
       ->capture_default_str();
   command->add_flag("--allow-unfiltered-recordings", options->allow_unfiltered_recordings,
                     "Let a session record its images unfiltered (\"privacy\": \"off\")");
-  command->add_option("--recording-key", options->recording_key, "Key file: finished recordings are encrypted (docs/security.md)")
+  command->add_option("--encryption-key", options->encryption_key,
+                      "Key file: finished recordings and stored map versions are encrypted at rest (docs/security.md)")
       ->check(CLI::ExistingFile);
+  command->add_option("--object-store", options->object_store,
+                      "s3://BUCKET/PREFIX[?endpoint=URL&region=R]: maps and finished recordings are kept there instead of DATA_DIR "
+                      "(credentials from AWS_ACCESS_KEY_ID / AWS_SECRET_ACCESS_KEY; docs/security.md)");
   command->add_option("--recording-retention-days", options->recording_retention_days, "Finished recordings older than this are deleted (0: kept)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
   command->add_option("--recording-max-gb", options->recording_max_gb, "Beyond this size of finished recordings the oldest are deleted (0: no cap)")

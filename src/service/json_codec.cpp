@@ -181,6 +181,7 @@ json recording_to_json(const RecordingInfo& recording) {
   return {{"file", recording.file},
           {"status", recording.active ? "recording" : "finished"},
           {"encrypted", recording.encrypted},
+          {"location", recording.archived ? json(recording.location) : json(nullptr)},  // server paths stay private
           {"privacy", recording.privacy},
           {"messages", recording.messages},
           {"invalid_messages", recording.invalid_messages},

@@ -620,16 +620,28 @@ ApiResult<StoredRecording> SessionManager::recording(const Principal& caller, co
   auto managed = impl_->find(caller, session_id, Permission::kSessionRead);
   if (!managed) return managed.error();
   std::unique_lock lock(managed.value()->mutex);
-  if (!managed.value()->recording) return ApiError{ErrorCode::kNotFound, fmt::format("session '{}' was not recorded", session_id), ""};
-  const RecordingInfo info = managed.value()->recording->info();
-  lock.unlock();
-  if (info.active) {
-    return ApiError{ErrorCode::kConflict, fmt::format("the recording of session '{}' is still being written; end the session first", session_id), ""};
+  std::vector<std::string> files;
+  if (managed.value()->recording) {
+    const RecordingInfo info = managed.value()->recording->info();
+    if (info.active) {
+      return ApiError{ErrorCode::kConflict, fmt::format("the recording of session '{}' is still being written; end the session first", session_id),
+                      ""};
+    }
+    files.push_back(info.file);
+  } else if (managed.value()->record.ended) {  // recorded by an earlier run of the server
+    files = {session_id + ".mcap.enc", session_id + ".mcap"};
   }
-  Result<StoredRecording> stored = find_recording(impl_->config.recording, info.file);
+  lock.unlock();
+  if (files.empty()) return ApiError{ErrorCode::kNotFound, fmt::format("session '{}' was not recorded", session_id), ""};
+  Result<StoredRecording> stored = Error("", std::string(object_store::kNotFound));
+  for (const std::string& file : files) {
+    stored = find_recording(impl_->config.recording, file);
+    if (stored || stored.error().field != object_store::kNotFound) break;
+  }
   if (!stored) {
     if (stored.error().field == object_store::kNotFound) {
-      return ApiError{ErrorCode::kNotFound, fmt::format("the recording of session '{}' was deleted (retention policy)", session_id), ""};
+      return ApiError{ErrorCode::kNotFound,
+                      fmt::format("session '{}' has no recording: not recorded, or deleted by the retention policy", session_id), ""};
     }
     return ApiError::from(ErrorCode::kInternal, stored.error());
   }

@@ -189,10 +189,12 @@ Status SessionRecording::finish() {
   }
   const uint64_t bytes = fs::exists(path, error) ? fs::file_size(path, error) : 0;
   std::string location = path.string();
+  bool archived_ok = false;
   if (!failure && s.config.archive && fs::exists(path, error)) {
     Result<std::string> archived = archive_recording(*s.config.archive, path);
     if (archived) {
       location = *archived;
+      archived_ok = true;
     } else {  // kept in the folder; the next retention pass uploads it
       failure = "archive: " + archived.error().message;
     }
@@ -202,6 +204,7 @@ Status SessionRecording::finish() {
   s.info.active = false;
   s.info.file = path.filename().string();
   s.info.location = location;
+  s.info.archived = archived_ok;
   s.info.encrypted = encrypted;
   s.info.bytes = bytes;
   if (failure && !s.info.error) s.info.error = failure;

@@ -31,6 +31,10 @@ def main(out: Path) -> None:
         "expired": dict(base, scope="fusion:session:read", exp=now - 3600),
         "no_scope": dict(base, scope="openid profile"),
         "wrong_audience": dict(base, aud="another-service", scope="fusion:session:read"),
+        # every fusion scope, of two organizations
+        "acme_operator": dict(base, scope="fusion:session:read fusion:session:write fusion:map:read fusion:map:write"),
+        "globex_operator": dict(base, sub="robot-9", org="globex",
+                                scope="fusion:session:read fusion:session:write fusion:map:read fusion:map:write"),
     }
     header = b64url(json.dumps({"alg": "RS256", "typ": "JWT", "kid": "test-key"}).encode())
     for name, claims in tokens.items():

@@ -18,6 +18,7 @@
 #include "hanzo/fusion/io/sensor_log.hpp"
 #include "hanzo/fusion/service/session_manager.hpp"
 #include "hanzo/fusion/service/session_recording.hpp"
+#include "support/local_s3_server.hpp"
 #include "service_fixtures.hpp"
 
 namespace hanzo::fusion::service {
@@ -171,6 +172,64 @@ TEST(SessionRecording, FinishedRecordingsAreEncryptedAndTheRetentionPolicyDelete
   ASSERT_TRUE(outcome.ok());
   EXPECT_EQ(outcome->deleted, std::vector<std::string>{"older.mcap"});
   EXPECT_TRUE(fs::exists(dir / "recordings" / "s2.mcap.enc"));
+  fs::remove_all(dir);
+}
+
+// With an archive store (S3 here), finished recordings move there; an upload that fails leaves
+// the recording in the folder, still served, until a retention pass stores it; retention then
+// applies to the archive.
+TEST(SessionRecording, FinishedRecordingsMoveToTheObjectStoreAndRetentionAppliesThere) {
+  const fs::path dir = testing::scratch_dir();
+  hanzo::fusion::testing::LocalS3Server s3(dir / "s3", "fleet");
+  ASSERT_EQ(s3.error(), "");
+  RecordingConfig config;
+  config.directory = (dir / "recordings").string();
+  config.key = crypto::EncryptionKey::generate();
+  config.archive = std::move(object_store::open_s3_object_store(s3.config("site-a")).value());
+  const auto record = [&](const RecordingConfig& with, const std::string& id) {
+    auto recording = SessionRecording::start(with, id, std::nullopt);
+    EXPECT_TRUE(recording.ok());
+    for (int i = 0; i < 50; ++i) (*recording)->record("/imu", "imu", imu_at(kStart + Duration::from_milliseconds(10 * i)));
+    const Status finished = (*recording)->finish();
+    return std::make_pair(finished, (*recording)->info());
+  };
+  const auto [finished, info] = record(config, "s3-session");
+  ASSERT_TRUE(finished) << finished.error().message;
+  EXPECT_TRUE(info.archived);
+  EXPECT_EQ(info.location, "s3://fleet/site-a/recordings/s3-session.mcap.enc");
+  EXPECT_FALSE(fs::exists(dir / "recordings" / "s3-session.mcap.enc"));
+  auto stored = find_recording(config, "s3-session.mcap.enc");
+  ASSERT_TRUE(stored) << stored.error().message;
+  EXPECT_EQ(stored->bytes, info.bytes);
+  ASSERT_TRUE(stored->store->get_to_file(stored->key, (dir / "download.enc").string()));
+  ASSERT_TRUE(crypto::decrypt_file((dir / "download.enc").string(), (dir / "download.mcap").string(), {*config.key}));
+  EXPECT_EQ(read_log((dir / "download.mcap").string()).size(), 50u);
+
+  // The object store is down: the recording stays in the folder and is served from there.
+  RecordingConfig unreachable = config;
+  object_store::S3Config nowhere = s3.config("site-a");
+  nowhere.endpoint = "http://127.0.0.1:9";
+  nowhere.max_attempts = 1;
+  unreachable.archive = std::move(object_store::open_s3_object_store(nowhere).value());
+  const auto [failed, kept] = record(unreachable, "offline-session");
+  ASSERT_FALSE(failed);
+  EXPECT_THAT(failed.error().message, HasSubstr("archive: "));
+  EXPECT_FALSE(kept.archived);
+  ASSERT_TRUE(fs::exists(dir / "recordings" / "offline-session.mcap.enc"));
+  EXPECT_EQ(find_recording(unreachable, "offline-session.mcap.enc")->store->location(), "file://" + (dir / "recordings").string());
+  // Back online, the next retention pass stores it.
+  ASSERT_TRUE(apply_recording_retention(config, {}));
+  EXPECT_FALSE(fs::exists(dir / "recordings" / "offline-session.mcap.enc"));
+  EXPECT_TRUE(find_recording(config, "offline-session.mcap.enc")->store->location().starts_with("s3://"));
+
+  // Retention over the archive: a size cap below both deletes the older first.
+  config.max_total_bytes = info.bytes + 10;
+  auto outcome = apply_recording_retention(config, {});
+  ASSERT_TRUE(outcome) << outcome.error().message;
+  EXPECT_EQ(outcome->deleted.size(), 1u);
+  auto missing = find_recording(config, outcome->deleted.front());
+  ASSERT_FALSE(missing);
+  EXPECT_EQ(missing.error().field, object_store::kNotFound);
   fs::remove_all(dir);
 }
 

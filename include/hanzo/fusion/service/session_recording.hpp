@@ -68,6 +68,7 @@ struct RecordingConfig {
 struct RecordingInfo {
   std::string file;            ///< file name (<id>.mcap, <id>.mcap.enc when finished encrypted)
   std::string location;        ///< where it is: its path, or its s3:// URL once archived
+  bool archived = false;       ///< moved into the archive store
   bool active = false;         ///< still being written
   bool encrypted = false;
   std::string privacy;         ///< "blur", "black" or "off"
