@@ -361,7 +361,23 @@ struct RestServer::Impl {
       if (!format) return send_error(response, format.error());
       auto version = integer_parameter(request, "version", 0, 0, std::numeric_limits<int64_t>::max());
       if (!version) return send_error(response, version.error());
-      const std::optional<uint64_t> wanted = version.value() > 0 ? std::optional<uint64_t>(static_cast<uint64_t>(version.value())) : std::nullopt;
+      std::optional<uint64_t> wanted = version.value() > 0 ? std::optional<uint64_t>(static_cast<uint64_t>(version.value())) : std::nullopt;
+      // A temporal query: the newest version created at or before at_ns.
+      auto at = integer_parameter(request, "at_ns", -1, 0, std::numeric_limits<int64_t>::max());
+      if (!at) return send_error(response, at.error());
+      if (at.value() >= 0) {
+        if (wanted) return send_error(response, {ErrorCode::kInvalidArgument, "give version or at_ns, not both", "at_ns"});
+        auto info = sessions->stored_map_info(caller, request.matches[1]);
+        if (!info) return send_error(response, info.error());
+        for (const maps::MapVersionInfo& stored : info->versions) {
+          if (stored.unreadable.empty() && stored.created.nanoseconds() <= at.value()) wanted = stored.version;
+        }
+        if (!wanted) {
+          return send_error(response, {ErrorCode::kNotFound,
+                                       fmt::format("map '{}' has no version created at or before {} ns", std::string(request.matches[1]), at.value()),
+                                       "at_ns"});
+        }
+      }
       if (format.value() == "json") {
         auto info = sessions->stored_map_info(caller, request.matches[1]);
         if (!info) return send_error(response, info.error());

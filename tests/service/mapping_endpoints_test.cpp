@@ -7,6 +7,7 @@
 
 #include <gmock/gmock.h>
 #include <grpcpp/grpcpp.h>
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -376,6 +377,17 @@ TEST_F(MappingEndpointsTest, StoresMapVersionsLoadsMapsAndRelocalizesASessionInT
   EXPECT_EQ(parsed->points->points.front(), known.points->points.front());
   auto pcd = get("/v1/maps/" + known_id + "?format=pcd", kRobotToken);
   ASSERT_TRUE(pcd && pcd->status == 200);
+  // Temporal queries: the version current at a time, by its creation time.
+  const int64_t second_created = versions_json["versions"][1]["created_ns"];
+  const int64_t first_created = versions_json["versions"][0]["created_ns"];
+  auto then = get(fmt::format("/v1/maps/{}?format=json&at_ns={}", known_id, second_created), kRobotToken);
+  ASSERT_TRUE(then && then->status == 200);
+  auto at_first = get(fmt::format("/v1/maps/{}?at_ns={}", known_id, first_created), kRobotToken);
+  ASSERT_TRUE(at_first && at_first->status == 200);
+  EXPECT_EQ(maps::parse_fusion_map(at_first->body)->version, first_created < second_created ? 1u : 2u);
+  EXPECT_EQ(get(fmt::format("/v1/maps/{}?at_ns={}", known_id, second_created), kRobotToken)->body, get("/v1/maps/" + known_id + "?version=2", kRobotToken)->body);
+  EXPECT_EQ(get(fmt::format("/v1/maps/{}?at_ns={}", known_id, first_created - 1), kRobotToken)->status, 404);
+  EXPECT_EQ(get(fmt::format("/v1/maps/{}?at_ns=5&version=1", known_id), kRobotToken)->status, 400);
   EXPECT_EQ(get("/v1/maps/" + known_id + "?version=9", kRobotToken)->status, 404);
   EXPECT_EQ(get("/v1/maps/" + known_id + "?version=x", kRobotToken)->status, 400);
   EXPECT_EQ(get("/v1/maps/no-such-map", kRobotToken)->status, 404);
