@@ -5,8 +5,10 @@
 #include <fstream>
 #include <random>
 
+#include <fmt/format.h>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "hanzo/fusion/object_store/object_store.hpp"
 #include "hanzo/fusion/object_store/s3_signature.hpp"
@@ -40,6 +42,61 @@ TEST(S3Signature, MatchesTheWorkedExampleOfTheS3Reference) {
             "AWS4-HMAC-SHA256 Credential=AKIAIOSFODNN7EXAMPLE/20130524/us-east-1/s3/aws4_request,"
             "SignedHeaders=host;range;x-amz-content-sha256;x-amz-date,"
             "Signature=f0e8bdb87c964420e857bd35b5d6ed310bd44f0170aba48dd91039c6036bdb41");
+}
+
+// Every kind of request the client sends, signed here and by Amazon's own signer
+// (@smithy/signature-v4, the AWS SDK for JavaScript's; tests/conformance/sigv4_sign.mjs).
+TEST(S3Signature, AgreesWithTheAwsSdkSignerOnEveryKindOfRequest) {
+  const std::string date = "20261128T101500Z";
+  const auto request = [&](std::string method, std::string path, std::vector<std::pair<std::string, std::string>> query,
+                           std::vector<std::pair<std::string, std::string>> extra, std::string_view payload) {
+    SignableRequest signable{std::move(method), std::move(path), std::move(query), std::move(extra), sha256_hex(payload)};
+    signable.headers.emplace_back("host", "127.0.0.1:4568");
+    signable.headers.emplace_back("x-amz-date", date);
+    signable.headers.emplace_back("x-amz-content-sha256", signable.payload_sha256);
+    return signable;
+  };
+  const std::vector<SignableRequest> requests = {
+      request("PUT", "/fleet/site-a/maps/warehouse/00000000000000000001.fmap", {}, {{"if-none-match", "*"}}, "map bytes"),
+      request("GET", "/fleet", {{"list-type", "2"}, {"prefix", "site-a/maps/x y+z/"}, {"max-keys", "3"}, {"continuation-token", "1/ab+c=="}}, {}, ""),
+      request("POST", "/fleet/site-a/recordings/a b(1)!/\xc3\xbc.mcap", {{"uploads", ""}}, {}, ""),
+      request("PUT", "/fleet/site-a/recordings/r.mcap", {{"partNumber", "2"}, {"uploadId", "2~abc_DEF-123.xyz"}}, {}, std::string(70000, 'p')),
+      request("POST", "/fleet/site-a/recordings/r.mcap", {{"uploadId", "2~abc"}}, {{"content-type", "application/xml"}},
+              "<CompleteMultipartUpload></CompleteMultipartUpload>"),
+      request("GET", "/fleet/site-a/maps/m/1.fmap", {}, {{"range", "bytes=0-65535"}, {"x-amz-security-token", "FwoGZXIvYXdzE//token+/="}}, ""),
+      request("DELETE", "/fleet/site-a/maps/m/1.fmap", {}, {}, ""),
+  };
+  const SigningKeys keys{"AKIDEXAMPLE", "wJalrXUtnFEMI/K7MDENG+bPxRfiCYEXAMPLEKEY"};
+  nlohmann::json input = nlohmann::json::array();
+  for (const SignableRequest& r : requests) {
+    nlohmann::json query = nlohmann::json::object(), headers = nlohmann::json::object();
+    for (const auto& [name, value] : r.query) query[name] = value;
+    for (const auto& [name, value] : r.headers) headers[name] = value;
+    input.push_back({{"method", r.method}, {"path", r.path}, {"query", query}, {"headers", headers}, {"access_key", keys.access_key_id},
+                     {"secret", keys.secret_access_key}, {"region", "eu-central-1"}, {"amz_date", date}});
+  }
+  const fs::path file = fs::temp_directory_path() / "hanzo_sigv4_requests.json";
+  std::ofstream(file) << input.dump();
+  FILE* pipe = popen(fmt::format("{} tests/conformance/sigv4_sign.mjs {}", HANZO_NODE_EXECUTABLE, file.string()).c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::string output;
+  char buffer[4096];
+  for (std::size_t n = 0; (n = std::fread(buffer, 1, sizeof(buffer), pipe)) > 0;) output.append(buffer, n);
+  ASSERT_EQ(pclose(pipe), 0) << output;
+  const nlohmann::json expected = nlohmann::json::parse(output);
+  ASSERT_EQ(expected.size(), requests.size());
+  const auto part = [](const std::string& header, const std::string& name) {
+    const auto at = header.find(name + "=");
+    return header.substr(at + name.size() + 1, header.find_first_of(", ", at) - at - name.size() - 1);
+  };
+  for (std::size_t i = 0; i < requests.size(); ++i) {
+    const std::string ours = authorization_header(requests[i], keys, "eu-central-1", date);
+    const std::string theirs = expected[i];
+    EXPECT_EQ(part(ours, "SignedHeaders"), part(theirs, "SignedHeaders")) << requests[i].method << " " << requests[i].path;
+    EXPECT_EQ(part(ours, "Signature"), part(theirs, "Signature")) << requests[i].method << " " << requests[i].path;
+    EXPECT_EQ(part(ours, "Credential"), part(theirs, "Credential"));
+  }
+  fs::remove(file);
 }
 
 TEST(S3Signature, EncodesUrisAndQueriesTheWaySigV4Does) {
