@@ -23,7 +23,10 @@ const hanzo::fusion::crypto::EncryptionKey& key() {
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace hanzo::fusion;
   const std::string bytes(reinterpret_cast<const char*>(data), size);
-  (void)crypto::decrypt(bytes, {key()});  // refused or decrypted, never a crash
+  const auto whole = crypto::decrypt(bytes, {key()});  // refused or decrypted, never a crash
+  // The prefix reader (map metadata peeks) gives a prefix of what the whole file decrypts to.
+  const auto prefix = crypto::decrypt_prefix(bytes, {key()});
+  if (whole && prefix && whole->compare(0, prefix->size(), *prefix) != 0) std::abort();
   auto round_trip = crypto::decrypt(crypto::encrypt(bytes, key()), {key()});
   if (!round_trip || *round_trip != bytes) std::abort();
   return 0;

@@ -14,7 +14,7 @@ cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_C_
   -DCMAKE_C_FLAGS="$SANITIZE" -DCMAKE_CXX_FLAGS="$SANITIZE" -DHANZO_FUZZ_LIBFUZZER=ON -DHANZO_WERROR=OFF \
   -DHANZO_BUILD_APPS=OFF -DHANZO_BUILD_PYTHON=OFF -DHANZO_BUILD_BENCHMARKS=OFF -DPython_EXECUTABLE=/usr/bin/python3 > "$BUILD_DIR.configure.log" 2>&1 \
   || { cat "$BUILD_DIR.configure.log"; exit 1; }
-targets=(json_requests proto_messages encrypted_files jwt_tokens ros_messages text_formats sensor_logs point_cloud_files)
+targets=(json_requests proto_messages encrypted_files jwt_tokens ros_messages text_formats sensor_logs point_cloud_files s3_responses)
 cmake --build "$BUILD_DIR" --target "${targets[@]/#/fuzz_}"
 for target in "${targets[@]}"; do
   mkdir -p "$BUILD_DIR/corpus/$target"
