@@ -29,7 +29,7 @@ msgs::FusionMap point_map(const std::string& map_id, float value, int64_t create
 }
 
 TEST(MapStoreOnS3, VersionsTemporalQueriesAndDeletionWorkAsOnDisk) {
-  const fs::path folder = fs::temp_directory_path() / "hanzo_map_store_s3";
+  const fs::path folder = testing_maps::temp_path("s3");
   testing::LocalS3Server server(folder, "fusion-maps");
   ASSERT_EQ(server.error(), "");
   testing::LocalS3Server::use_credentials();

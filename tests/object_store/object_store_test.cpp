@@ -1,6 +1,9 @@
 // The ObjectStore contract, run on both backends: the local disk and an S3 server (s3rver on
-// 127.0.0.1, which checks every request's Signature Version 4). Plus the signature against the
-// Amazon S3 API reference's worked example, and the S3 client's refusals and error messages.
+// 127.0.0.1, which checks each request's access key but not its signature). Plus the Signature
+// Version 4 against the Amazon S3 API reference's worked example and the AWS SDK's own signer,
+// and the S3 client's refusals and error messages.
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -75,7 +78,7 @@ TEST(S3Signature, AgreesWithTheAwsSdkSignerOnEveryKindOfRequest) {
     input.push_back({{"method", r.method}, {"path", r.path}, {"query", query}, {"headers", headers}, {"access_key", keys.access_key_id},
                      {"secret", keys.secret_access_key}, {"region", "eu-central-1"}, {"amz_date", date}});
   }
-  const fs::path file = fs::temp_directory_path() / "hanzo_sigv4_requests.json";
+  const fs::path file = fs::temp_directory_path() / fmt::format("hanzo_sigv4_requests_{}.json", ::getpid());
   std::ofstream(file) << input.dump();
   FILE* pipe = popen(fmt::format("{} tests/conformance/sigv4_sign.mjs {}", HANZO_NODE_EXECUTABLE, file.string()).c_str(), "r");
   ASSERT_NE(pipe, nullptr);
@@ -147,7 +150,8 @@ enum class Backend { kLocal, kS3 };
 class ObjectStoreContract : public ::testing::TestWithParam<Backend> {
  protected:
   void SetUp() override {
-    folder_ = fs::temp_directory_path() / fmt::format("hanzo_object_store_{}", GetParam() == Backend::kS3 ? "s3" : "local");
+    // One folder per test process: ctest runs tests side by side.
+    folder_ = fs::temp_directory_path() / fmt::format("hanzo_object_store_{}_{}", GetParam() == Backend::kS3 ? "s3" : "local", ::getpid());
     fs::remove_all(folder_);
     if (GetParam() == Backend::kLocal) {
       auto opened = open_local_object_store((folder_ / "store").string());
@@ -252,7 +256,7 @@ INSTANTIATE_TEST_SUITE_P(Backends, ObjectStoreContract, ::testing::Values(Backen
                          [](const auto& instance) { return instance.param == Backend::kS3 ? std::string("S3") : std::string("LocalDisk"); });
 
 TEST(S3ObjectStore, WrongCredentialsAndMissingBucketsAreReportedWithS3sReason) {
-  const fs::path folder = fs::temp_directory_path() / "hanzo_object_store_s3_errors";
+  const fs::path folder = fs::temp_directory_path() / fmt::format("hanzo_object_store_s3_errors_{}", ::getpid());
   testing::LocalS3Server server(folder, "fusion-test");
   ASSERT_EQ(server.error(), "");
   // s3rver knows one access key (it checks the key, not Signature Version 4 signatures: those
