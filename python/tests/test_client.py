@@ -131,6 +131,11 @@ def test_stored_maps_and_relocalization(server):
     assert read_only.value.status == 403
     versions = client.stored_map(first, format="json")["versions"]
     assert parse_pcd(client.stored_map(first, versions[-1]["version"], "pcd")).shape[1] == 3
+    # The map as it was when its first version was saved (a temporal query), and before that: none.
+    assert client.stored_map(first, at_ns=versions[0]["created_ns"]) == client.stored_map(first, versions[0]["version"])
+    with pytest.raises(FusionError) as too_early:
+        client.stored_map(first, at_ns=versions[0]["created_ns"] - 1)
+    assert too_early.value.status == 404 and too_early.value.field == "at_ns"
 
     # A second drive relocalizes in the first one's map: the same world, so (almost) no move.
     second = json.loads(subprocess.run(stream, check=True, capture_output=True, text=True).stdout)["session_id"]

@@ -189,11 +189,14 @@ class FusionClient:
         query = f"?name={_quote(name)}" if name else ""
         return self._request("POST", f"/v1/maps{query}", bytes(fusion_map))
 
-    def stored_map(self, map_id, version=None, format="fmap"):
-        """A stored version (the latest when None): FusionMap / PCD / PLY bytes; json: the versions."""
+    def stored_map(self, map_id, version=None, format="fmap", at_ns=None):
+        """A stored version (the latest when None; with at_ns the newest created at or before that
+        time, ns since the epoch): FusionMap / PCD / PLY bytes; json: the versions."""
         query = {"format": format}
         if version is not None:
             query["version"] = int(version)
+        if at_ns is not None:
+            query["at_ns"] = int(at_ns)
         payload, _ = self._request("GET", f"/v1/maps/{_quote(map_id)}?{urllib.parse.urlencode(query)}", raw=True)
         return json.loads(payload) if format == "json" else payload
 
