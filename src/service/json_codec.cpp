@@ -91,6 +91,8 @@ ApiResult<json> parse_object(const std::string& body) {
     document = json::parse(body);
   } catch (const json::parse_error& error) {
     return ApiError{ErrorCode::kInvalidArgument, fmt::format("malformed JSON at byte {}: {}", error.byte, error.what()), "body"};
+  } catch (const json::exception& error) {  // out_of_range: a number too large for any type
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("malformed JSON: {}", error.what()), "body"};
   }
   if (!document.is_object()) return ApiError{ErrorCode::kInvalidArgument, "expected a JSON object", "body"};
   return document;

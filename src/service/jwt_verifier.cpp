@@ -1,7 +1,9 @@
 #include "hanzo/fusion/service/jwt_verifier.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 #include <fmt/chrono.h>
@@ -45,6 +47,22 @@ struct BuilderDeleter { void operator()(OSSL_PARAM_BLD* p) const { OSSL_PARAM_BL
 struct ParamsDeleter { void operator()(OSSL_PARAM* p) const { OSSL_PARAM_free(p); } };
 struct BioDeleter { void operator()(BIO* p) const { BIO_free(p); } };
 
+// A member that is a string, else `fallback` (missing, or another type: JWKS and token JSON are
+// outside input, and json::value() would throw on a type mismatch).
+std::string text_member(const json& object, const char* name, const char* fallback = "") {
+  const auto found = object.find(name);
+  return found != object.end() && found->is_string() ? found->get<std::string>() : std::string(fallback);
+}
+
+// A numeric claim (seconds since the epoch) clamped to years 1..9999; empty when absent or not a number.
+std::optional<int64_t> time_claim(const json& claims, const char* name) {
+  const auto found = claims.find(name);
+  if (found == claims.end() || !found->is_number()) return std::nullopt;
+  const double value = found->get<double>();
+  if (!(value == value)) return std::nullopt;
+  return static_cast<int64_t>(std::clamp(value, -62135596800.0, 253402300799.0));
+}
+
 Result<std::string> field(const json& key, const char* name) {
   if (!key.contains(name) || !key[name].is_string()) return Error(fmt::format("missing \"{}\"", name));
   return with_context(base64url_decode(key[name].get<std::string>()), name);
@@ -81,7 +99,7 @@ Result<std::string> rsa_pem(const json& key) {
 }
 
 Result<std::string> ec_pem(const json& key) {
-  if (key.value("crv", "") != "P-256") return Error(fmt::format("curve '{}' (ES256 needs P-256)", key.value("crv", "")));
+  if (text_member(key, "crv") != "P-256") return Error(fmt::format("curve '{}' (ES256 needs P-256)", text_member(key, "crv")));
   std::string x, y;
   HANZO_ASSIGN_OR_RETURN(x, field(key, "x"));
   HANZO_ASSIGN_OR_RETURN(y, field(key, "y"));
@@ -137,11 +155,11 @@ Result<JwtVerifier::KeySet> JwtVerifier::parse_keys(const std::string& jwks_json
   KeySet keys;
   for (std::size_t i = 0; i < jwks["keys"].size(); ++i) {
     const json& key = jwks["keys"][i];
-    const std::string kid = key.is_object() ? key.value("kid", "") : "";
+    const std::string kid = key.is_object() ? text_member(key, "kid") : "";
     const std::string where = fmt::format("JWKS key {}{}", i, kid.empty() ? "" : " (kid " + kid + ")");
     if (!key.is_object()) return Error(where + ": not an object");
     if (key.contains("use") && key["use"] != "sig") continue;  // encryption keys
-    const std::string type = key.value("kty", "");
+    const std::string type = text_member(key, "kty");
     Result<std::string> pem = Error("");
     std::string algorithm;
     if (type == "RSA") {
@@ -244,7 +262,7 @@ ApiResult<Principal> JwtVerifier::verify(std::string_view token, int64_t now_s) 
   }
   const std::string algorithm = header["alg"];
   if (algorithm != "RS256" && algorithm != "ES256") return unauthenticated(fmt::format("algorithm '{}' (RS256 or ES256 accepted)", algorithm));
-  const std::string kid = header.value("kid", "");
+  const std::string kid = text_member(header, "kid");
   const std::optional<Key> key = find_key(kid);
   if (!key) return unauthenticated(fmt::format("no key '{}' in the JWKS", kid));
   if (key->algorithm != algorithm) return unauthenticated(fmt::format("key '{}' is not an {} key", kid, algorithm));
@@ -261,8 +279,8 @@ ApiResult<Principal> JwtVerifier::verify(std::string_view token, int64_t now_s) 
   std::free(grants);
   if (!claims.is_object()) return unauthenticated("the claims are not a JSON object");
 
-  if (claims.value("iss", "") != config_.issuer) {
-    return unauthenticated(fmt::format("issuer '{}' is not '{}'", claims.value("iss", ""), config_.issuer));
+  if (text_member(claims, "iss") != config_.issuer) {
+    return unauthenticated(fmt::format("issuer '{}' is not '{}'", text_member(claims, "iss"), config_.issuer));
   }
   bool audience_ok = false;
   if (claims.contains("aud") && claims["aud"].is_string()) audience_ok = claims["aud"] == config_.audience;
@@ -271,16 +289,16 @@ ApiResult<Principal> JwtVerifier::verify(std::string_view token, int64_t now_s) 
   }
   if (!audience_ok) return unauthenticated(fmt::format("audience {} is not '{}'", claims.contains("aud") ? claims["aud"].dump() : "missing", config_.audience));
   const int64_t now = now_s != 0 ? now_s : unix_now();
-  if (!claims.contains("exp") || !claims["exp"].is_number()) return unauthenticated("no expiry (\"exp\")");
-  const auto exp = claims["exp"].get<int64_t>();
-  if (now > exp + config_.leeway_s) return unauthenticated(fmt::format("token expired at {}", utc(exp)));
+  const std::optional<int64_t> exp = time_claim(claims, "exp");
+  if (!exp) return unauthenticated("no expiry (\"exp\")");
+  if (now > *exp + config_.leeway_s) return unauthenticated(fmt::format("token expired at {}", utc(*exp)));
   for (const char* not_before : {"nbf", "iat"}) {
-    if (claims.contains(not_before) && claims[not_before].is_number() && claims[not_before].get<int64_t>() > now + config_.leeway_s) {
-      return unauthenticated(fmt::format("token not valid before {} (\"{}\")", utc(claims[not_before].get<int64_t>()), not_before));
+    if (const std::optional<int64_t> start = time_claim(claims, not_before); start && *start > now + config_.leeway_s) {
+      return unauthenticated(fmt::format("token not valid before {} (\"{}\")", utc(*start), not_before));
     }
   }
   Principal principal;
-  principal.name = claims.value("sub", "jwt");
+  principal.name = text_member(claims, "sub", "jwt");
   if (!claims.contains(config_.organization_claim) || !claims[config_.organization_claim].is_string() ||
       claims[config_.organization_claim].get<std::string>().empty()) {
     return unauthenticated(fmt::format("no organization claim \"{}\"", config_.organization_claim));

@@ -184,6 +184,18 @@ TEST_F(JwtVerifierTest, RefusesEachBadTokenWithItsReason) {
   changed[dot + 5] = changed[dot + 5] == 'A' ? 'B' : 'A';
   EXPECT_NE(refusal(changed), "accepted");
   EXPECT_THAT(refusal("not-a-jwt"), HasSubstr("not a JWT"));
+  // A header whose kid is not a string, before any signature is checked: refused, never thrown.
+  // base64url of {"alg":"RS256","kid":5} and of {}
+  const std::string odd_header = "eyJhbGciOiJSUzI1NiIsImtpZCI6NX0.e30.c2ln";
+  EXPECT_THAT(refusal(odd_header), HasSubstr("no key ''"));
+  // Claims of the wrong type in a validly signed token.
+  wrong = claims();
+  wrong["iss"] = 7;
+  EXPECT_THAT(refusal(sign(rsa_, wrong, "rsa-1")), HasSubstr("issuer '' is not"));
+  wrong = claims();
+  wrong["exp"] = 1e300;  // beyond any time: clamped to the year 9999
+  wrong["sub"] = false;
+  EXPECT_EQ(refusal(sign(rsa_, wrong, "rsa-1")), "accepted");
 }
 
 TEST_F(JwtVerifierTest, BearerHeadersReachTheVerifierAndScopesDecide) {
@@ -259,6 +271,10 @@ TEST(JwtVerifier, RefusesBadKeySets) {
   EXPECT_THAT(JwtVerifier::create(R"({"keys": [{"kty": "EC", "crv": "P-384", "x": "AA", "y": "AA"}]})", config).error().message,
               HasSubstr("P-384"));
   EXPECT_THAT(JwtVerifier::create(R"({"keys": []})", {"", "aud"}).error().message, HasSubstr("issuer"));
+  // Members of the wrong type (found by libFuzzer: json::value threw): refused, never thrown.
+  EXPECT_THAT(JwtVerifier::create(R"({"keys": [{"kty": 1}]})", config).error().message, HasSubstr("no RS256 or ES256"));
+  EXPECT_THAT(JwtVerifier::create(R"({"keys": [{"kty": "EC", "kid": [], "crv": 256, "x": "AA", "y": "AA"}]})", config).error().message,
+              HasSubstr("ES256 needs P-256"));
   EXPECT_THAT(JwtVerifier::load("/nonexistent/jwks.json", config).error().message, HasSubstr("/nonexistent/jwks.json"));
 }
 

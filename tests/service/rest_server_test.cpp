@@ -335,6 +335,10 @@ TEST_F(RestServerTest, BadRequestsGetTheDocumentedErrors) {
   EXPECT_EQ(malformed->status, 400);
   EXPECT_EQ(error_of(malformed)["field"], "body");
   EXPECT_THAT(error_of(malformed)["message"].get<std::string>(), HasSubstr("malformed JSON"));
+  // A number beyond any type (found by libFuzzer): 400, not an exception out of the parser.
+  auto overflow = post("/v1/sessions", R"({"name": "lidar", "config": 3333333333333333333333E0000000000000000000000000000000000000000026308527823222})");
+  EXPECT_EQ(overflow->status, 400);
+  EXPECT_THAT(error_of(overflow)["message"].get<std::string>(), HasSubstr("malformed JSON"));
   EXPECT_EQ(error_of(post("/v1/sessions", "[1, 2]"))["message"], "expected a JSON object");
   EXPECT_EQ(error_of(post("/v1/sessions", ""))["field"], "body");
   auto wrong_type = post("/v1/sessions", R"({"config": 5})");
