@@ -124,7 +124,8 @@ Result<msgs::PointCloudMessage> point_cloud_from_ros(std::string_view data, Seri
   auto find = [&](std::initializer_list<const char*> names) -> const Field* {
     for (const char* name : names) {
       for (const Field& f : fields) {
-        if (f.name == name && f.datatype >= 1 && f.datatype <= 8 && f.offset + kSize[f.datatype] <= point_step) return &f;
+        // In 64 bits: an offset near 2^32 must not wrap around into range.
+        if (f.name == name && f.datatype >= 1 && f.datatype <= 8 && uint64_t{f.offset} + kSize[f.datatype] <= point_step) return &f;
       }
     }
     return nullptr;

@@ -229,6 +229,16 @@ TEST(CdrDecoding, DeclaredSizesAreCheckedBeforeAllocating) {
   rows.put<uint8_t>(0).put<uint32_t>(12).put<uint32_t>(0).bytes("").put<uint8_t>(1);
   EXPECT_FALSE(point_cloud_from_ros(rows.data(), kCdr).ok());
 
+  // A field offset near 2^32 (found by libFuzzer): offset + size wrapped into the point step and
+  // the reader went 4 GB past the data. Such a field is not used; without x, the cloud is refused.
+  CdrWriter wrapped;
+  wrapped.header(1, 0, "lidar").put<uint32_t>(1).put<uint32_t>(1).put<uint32_t>(3);
+  for (uint32_t f = 0; f < 3; ++f) {
+    wrapped.string(std::string(1, static_cast<char>('x' + f))).put<uint32_t>(f == 0 ? 0xFFFFFFFEu : f * 4).put<uint8_t>(7).put<uint32_t>(1);
+  }
+  wrapped.put<uint8_t>(0).put<uint32_t>(12).put<uint32_t>(12).bytes(std::string(12, '\0')).put<uint8_t>(1);
+  EXPECT_THAT(point_cloud_from_ros(wrapped.data(), kCdr).error().message, HasSubstr("no x, y, z fields"));
+
   CdrWriter empty_image;  // 0 x 4e9 pixels
   empty_image.header(1, 0, "camera").put<uint32_t>(4000000000u).put<uint32_t>(0).string("mono8").put<uint8_t>(0).put<uint32_t>(0).bytes("");
   EXPECT_FALSE(image_from_ros(empty_image.data(), kCdr).ok());
