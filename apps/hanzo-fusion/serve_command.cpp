@@ -124,6 +124,9 @@ int run_serve(const Output& output, const ServeOptions& options) {
   if (!options.object_store.empty()) {
     auto objects = object_store::open_object_store(options.object_store);
     if (!objects) return report_failure(output, {}, "--object-store: " + objects.error().message);
+    // One listing now, so that an unreachable store, a missing bucket or refused credentials
+    // stop the start with the reason instead of failing the first save.
+    if (auto probe = (*objects)->list(".hanzo-fusion-probe/"); !probe) return report_failure(output, {}, "--object-store: " + probe.error().message);
     manager_config.object_store = std::move(*objects);
   }
   recording.retention = std::chrono::hours(static_cast<int64_t>(std::lround(options.recording_retention_days * 24.0)));

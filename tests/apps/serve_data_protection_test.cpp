@@ -166,6 +166,14 @@ TEST(ServeDataProtection, ACameraSessionRecordsBlurredAndEncryptedIntoS3AndOnlyI
   ASSERT_GT(restarted.port(), 0) << restarted.err();
   check_reads(restarted);
   restarted.stop(SIGTERM);
+
+  // A bucket that does not exist stops the start with S3's reason.
+  Server refused(dir, fmt::format("--data-dir {} --insecure-no-auth --object-store '{}'", (dir / "other").string(),
+                                  fmt::format("s3://no-such-bucket/x?endpoint={}", s3.endpoint())));
+  EXPECT_EQ(refused.port(), 0);
+  refused.wait();
+  EXPECT_THAT(refused.err(), HasSubstr("--object-store: "));
+  EXPECT_THAT(refused.err(), HasSubstr("NoSuchBucket"));
   fs::remove_all(dir);
 }
 
