@@ -162,7 +162,8 @@ Result<MapVersionInfo> MapStore::read_version_info(const object_store::ObjectInf
     Result<std::string> key_id = crypto::encrypted_key_id_of(head);
     info.key_id = key_id ? *key_id : std::string{};
   }
-  // A version that cannot be read is listed with the reason (fetching it failed: an error).
+  // A version whose first bytes do not decode (damaged, or its key not given) is listed with the
+  // reason; failing to fetch them at all (the store unreachable) is an error.
   const auto unreadable = [&](const std::string& reason) {
     info.unreadable = reason;
     logger()->warn("map store: {}", reason);
