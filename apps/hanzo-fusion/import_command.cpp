@@ -17,6 +17,8 @@
 #include "hanzo/fusion/io/carmen_import.hpp"
 #include "hanzo/fusion/io/csv_import.hpp"
 #include "hanzo/fusion/io/euroc_import.hpp"
+#include "hanzo/fusion/io/image_folder_import.hpp"
+#include "hanzo/fusion/msgs/validate.hpp"
 #include "hanzo/fusion/io/kitti_import.hpp"
 #include "hanzo/fusion/io/rosbag_import.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
@@ -39,7 +41,12 @@ struct ImportOptions {
   std::string calibration;                   // kitti, euroc, tum-rgbd, bags: the sensors' calibration YAML
   bool no_images = false;                    // kitti, euroc: leave the cameras out
   std::string poses;                         // kitti: poses file
-  double time_origin = 1e9;                  // kitti: Unix time of times.txt's zero
+  double time_origin = 1e9;                  // kitti, images: Unix time of relative times' zero
+  std::string times;                         // images: times file
+  double rate = 0.0;                         // images: frames per second
+  std::vector<double> intrinsics;            // images: fx fy cx cy
+  std::vector<double> distortion;            // images: radtan k1 k2 p1 p2 [k3]
+  double baseline = 0.0;                     // images: stereo baseline (m)
   std::string privacy;                       // "blur" / "black": camera images redacted before writing
   std::shared_ptr<ImageRedaction> redaction; // made from `privacy` by run_import
 };
@@ -264,6 +271,45 @@ int run_tum_rgbd_import(const Output& output, const ImportOptions& options) {
   return write_dataset_outputs(output, result, text, options, {&report.ground_truth, &report.calibration});
 }
 
+int run_image_folder_import(const Output& output, const ImportOptions& options) {
+  nlohmann::json result = {{"format", "images"}, {"sources", options.sources}, {"out", options.out}};
+  io::ImageFolderImportConfig config;
+  config.times_path = options.times;
+  config.rate_hz = options.rate;
+  config.time_origin = options.time_origin;
+  config.baseline = options.baseline;
+  if (!options.intrinsics.empty()) {
+    if (options.intrinsics.size() != 4) return report_failure(output, result, fmt::format("--intrinsics: {} numbers (expected fx,fy,cx,cy)", options.intrinsics.size()));
+    calib::CameraCalibration camera;
+    camera.intrinsics = {options.intrinsics[0], options.intrinsics[1], options.intrinsics[2], options.intrinsics[3], 0, 0};
+    if (!options.distortion.empty()) camera.distortion = {msgs::DistortionType::kRadtan, options.distortion};
+    if (Status valid = msgs::validate(camera.intrinsics, "--intrinsics"); !valid) return report_failure(output, result, valid.error().message);
+    if (Status valid = msgs::validate(camera.distortion, "--distortion"); !valid) return report_failure(output, result, valid.error().message);
+    config.camera = camera;
+  } else if (!options.distortion.empty()) {
+    return report_failure(output, result, "--distortion: give --intrinsics too");
+  }
+  if (!options.calibration.empty() && !config.camera) return report_failure(output, result, "--calibration: give the camera's --intrinsics");
+  io::ImageFolderImportReport report;
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
+    HANZO_ASSIGN_OR_RETURN(report, io::import_image_folders(options.sources, writer, config));
+    return writer.add_metadata({"import", {{"importer", "images"}, {"source", fmt::format("{}", fmt::join(options.sources, " "))}}});
+  });
+  if (code != 0) return code;
+  result["images"] = report.images;
+  result["rejected"] = report.rejected;
+  result["first_rejection"] = report.first_rejection;
+  result["time_source"] = report.time_source;
+  result["width"] = report.width;
+  result["height"] = report.height;
+  std::string text = fmt::format("{}: {} images ({}x{}) -> {}; times from the {}\n", fmt::join(options.sources, ", "), report.images, report.width,
+                                 report.height, fmt::join(config.topics.begin(), config.topics.begin() + static_cast<std::ptrdiff_t>(options.sources.size()), ", "),
+                                 report.time_source);
+  if (report.rejected > 0) text += fmt::format("  {} left out (first: {})\n", report.rejected, report.first_rejection);
+  io::Trajectory no_ground_truth;
+  return write_dataset_outputs(output, result, text, options, {&no_ground_truth, &report.calibration});
+}
+
 int run_import(const Output& output, ImportOptions options) {
   if (!options.privacy.empty()) {
     privacy::PrivacyFilterConfig config;
@@ -280,9 +326,10 @@ int run_import(const Output& output, ImportOptions options) {
   if (options.format == "kitti") return run_kitti_import(output, options);
   if (options.format == "euroc") return run_euroc_import(output, options);
   if (options.format == "tum-rgbd") return run_tum_rgbd_import(output, options);
+  if (options.format == "images") return run_image_folder_import(output, options);
   nlohmann::json result = {{"format", options.format}, {"sources", options.sources}, {"out", options.out}};
   if (options.format != "csv") {
-    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, ros2bag, carmen, kitti, euroc, tum-rgbd)", options.format));
+    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, ros2bag, carmen, kitti, euroc, tum-rgbd, images)", options.format));
   }
   auto stems = topic_map(options.topic_overrides, "FILE_STEM=/topic");
   if (!stems) return report_failure(output, result, stems.error().message);
@@ -338,8 +385,8 @@ int run_import(const Output& output, ImportOptions options) {
 void add_import_command(CLI::App& app, const Output& output, Command& run) {
   auto options = std::make_shared<ImportOptions>();
   CLI::App* command = app.add_subcommand("import", "Convert recordings into a sensor log (MCAP)");
-  command->add_option("FORMAT", options->format, "Input format: csv, rosbag (ROS 1), ros2bag, carmen, kitti, euroc or tum-rgbd")->required();
-  command->add_option("SRC", options->sources, "Input files (kitti, euroc, tum-rgbd: the sequence folder; ros2bag: the bag folder or its .mcap / .db3 file)")->required();
+  command->add_option("FORMAT", options->format, "Input format: csv, rosbag (ROS 1), ros2bag, carmen, kitti, euroc, tum-rgbd or images (a folder of image files)")->required();
+  command->add_option("SRC", options->sources, "Input files (kitti, euroc, tum-rgbd: the sequence folder; ros2bag: the bag folder or its .mcap / .db3 file; images: one folder, or two for a stereo pair)")->required();
   command->add_option("--out", options->out, "Sensor log to write (.mcap)")->required();
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
   command->add_flag("--no-foxglove", options->no_foxglove,
@@ -351,12 +398,17 @@ void add_import_command(CLI::App& app, const Output& output, Command& run) {
   command->add_flag("--use-record-time", options->use_record_time, "rosbag, ros2bag: bag record time instead of header.stamp");
   command->add_option("--ground-truth,--gt", options->ground_truth,
                       "carmen, kitti, euroc, tum-rgbd: write the reference trajectory (carmen: the scans' poses) as TUM");
-  command->add_option("--calibration,--calib", options->calibration, "kitti, euroc, tum-rgbd, rosbag, ros2bag: write the sensors' calibration YAML (bags: from /tf_static and CameraInfo)");
+  command->add_option("--calibration,--calib", options->calibration, "kitti, euroc, tum-rgbd, rosbag, ros2bag, images: write the sensors' calibration YAML (bags: from /tf_static and CameraInfo; images: needs --intrinsics)");
   command->add_option("--body-frame", options->body_frame,
                       "rosbag, ros2bag: the calibration's body frame (default base_link, base_footprint, the IMU's frame)");
   command->add_flag("--no-images", options->no_images, "kitti, euroc: leave the camera images out");
   command->add_option("--poses", options->poses, "kitti: poses file (default SEQUENCE/../../poses/NN.txt when present)");
-  command->add_option("--time-origin", options->time_origin, "kitti: Unix time (s) of times.txt's zero")->capture_default_str();
+  command->add_option("--time-origin", options->time_origin, "kitti, images: Unix time (s) of relative times' zero")->capture_default_str();
+  command->add_option("--times", options->times, "images: times file, a line per image: TIME (s) or TIME NAME (default: times in the file names)");
+  command->add_option("--rate", options->rate, "images: frames per second, when neither a times file nor the names give times");
+  command->add_option("--intrinsics", options->intrinsics, "images: the camera's fx,fy,cx,cy (pixels)")->delimiter(',');
+  command->add_option("--distortion", options->distortion, "images: radtan coefficients k1,k2,p1,p2[,k3]")->delimiter(',');
+  command->add_option("--baseline", options->baseline, "images, two folders: the stereo baseline (m; the right camera along the left one's x axis)");
   command->add_option("--privacy", options->privacy, "Blur (blur) or black out (black) faces and licence plates in camera images before they are written")
       ->check(CLI::IsMember({"blur", "black"}));
   command->callback([&output, &run, options] { run = [&output, options] { return run_import(output, *options); }; });

@@ -628,11 +628,10 @@ ApiResult<StoredRecording> SessionManager::recording(const Principal& caller, co
                       ""};
     }
     files.push_back(info.file);
-  } else if (managed.value()->record.ended) {  // recorded by an earlier run of the server
+  } else {  // recorded by an earlier run of the server (a session still running then records no more)
     files = {session_id + ".mcap.enc", session_id + ".mcap"};
   }
   lock.unlock();
-  if (files.empty()) return ApiError{ErrorCode::kNotFound, fmt::format("session '{}' was not recorded", session_id), ""};
   Result<StoredRecording> stored = Error("", std::string(object_store::kNotFound));
   for (const std::string& file : files) {
     stored = find_recording(impl_->config.recording, file);

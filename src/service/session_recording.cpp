@@ -43,6 +43,19 @@ Result<std::string> archive_recording(object_store::ObjectStore& archive, const 
   return archive.location_of(key);
 }
 
+// Encrypts a plain recording into <file>.enc (keeping its modification time, which retention
+// goes by) and removes the plaintext; the sealed path.
+Result<fs::path> seal_recording(const fs::path& path, const crypto::EncryptionKey& key) {
+  const fs::path sealed = path.string() + ".enc";
+  std::error_code error;
+  const fs::file_time_type modified = fs::last_write_time(path, error);
+  if (const Status done = crypto::encrypt_file(path.string(), sealed.string(), key); !done) return Error("encryption: " + done.error().message);
+  if (!error) fs::last_write_time(sealed, modified, error);
+  fs::remove(path, error);
+  if (error) return Error(fmt::format("{}: encrypted, but the plaintext could not be removed ({})", path.string(), error.message()));
+  return sealed;
+}
+
 struct QueuedMessage {
   std::string topic;
   std::string sensor;
@@ -178,12 +191,10 @@ Status SessionRecording::finish() {
   fs::path path = s.path;
   bool encrypted = false;
   if (!failure && s.config.key && fs::exists(path, error)) {
-    const fs::path sealed = path.string() + ".enc";
-    if (const Status done = crypto::encrypt_file(path.string(), sealed.string(), *s.config.key); !done) {
-      failure = "encryption: " + done.error().message;
+    if (Result<fs::path> sealed = seal_recording(path, *s.config.key); !sealed) {
+      failure = sealed.error().message;
     } else {
-      fs::remove(path, error);
-      path = sealed;
+      path = *sealed;
       encrypted = true;
     }
   }
@@ -231,6 +242,19 @@ Result<RetentionOutcome> apply_recording_retention(const RecordingConfig& config
   if (config.directory.empty()) return outcome;
   const auto active = [&](const std::string& name) { return std::find(active_files.begin(), active_files.end(), name) != active_files.end(); };
   std::error_code error;
+  // Plain recordings left by an earlier run (a server stopped without finishing them, or a failed
+  // encryption) are encrypted before anything else happens to them.
+  if (config.key && fs::is_directory(config.directory, error)) {
+    std::vector<fs::path> plain;
+    for (const fs::directory_entry& entry : fs::directory_iterator(config.directory, error)) {
+      const std::string name = entry.path().filename().string();
+      if (name.ends_with(".mcap") && entry.is_regular_file() && !active(name)) plain.push_back(entry.path());
+    }
+    for (const fs::path& path : plain) {
+      HANZO_RETURN_IF_ERROR(seal_recording(path, *config.key));
+      logger()->warn("recording {} was not encrypted (left by an earlier run); encrypted now", path.filename().string());
+    }
+  }
   if (config.archive && fs::is_directory(config.directory, error)) {
     for (const fs::directory_entry& entry : fs::directory_iterator(config.directory, error)) {
       const std::string name = entry.path().filename().string();

@@ -7,6 +7,7 @@
 
 #include "hanzo/fusion/vision/feature_matcher.hpp"
 #include "pose_refinement.hpp"
+#include "projection_matching.hpp"
 
 namespace hanzo::fusion::vision {
 
@@ -18,8 +19,9 @@ Result<MapRelocalizer> MapRelocalizer::create(msgs::VisualLandmarkLayer map, con
     return Error(fmt::format("visual landmark map: {} descriptors for {} landmarks", map.descriptors.size(), map.positions.size()));
   }
   if (!(camera.fx > 0.0 && camera.fy > 0.0)) return Error(fmt::format("camera: focal lengths must be positive (fx {}, fy {})", camera.fx, camera.fy));
-  if (config.min_inliers < 6 || config.candidates < 1 || config.neighbour_keyframes < 0 || !(config.pixel_sigma > 0.0) || !(config.max_landmark_std >= 0.0)) {
-    return Error("MapRelocalizerConfig: min_inliers >= 6, candidates >= 1, neighbour_keyframes >= 0, pixel_sigma > 0 and max_landmark_std >= 0 are required");
+  if (config.min_inliers < 6 || config.candidates < 1 || config.neighbour_keyframes < 0 || !(config.pixel_sigma > 0.0) || !(config.max_landmark_std >= 0.0) ||
+      !(config.projection_search_radius_px > 0.0)) {
+    return Error("MapRelocalizerConfig: min_inliers >= 6, candidates >= 1, neighbour_keyframes >= 0, pixel_sigma > 0, max_landmark_std >= 0 and projection_search_radius_px > 0 are required");
   }
   if (!map.position_std.empty() && map.position_std.size() != map.positions.size()) {
     return Error(fmt::format("visual landmark map: {} uncertainties for {} landmarks", map.position_std.size(), map.positions.size()));
@@ -48,6 +50,31 @@ Result<MapRelocalizer> MapRelocalizer::create(msgs::VisualLandmarkLayer map, con
   return relocalizer;
 }
 
+bool MapRelocalizer::usable(uint32_t landmark) const {
+  return config_.max_landmark_std <= 0.0 || map_.position_std.empty() || map_.position_std[landmark] <= config_.max_landmark_std;
+}
+
+PoseRefinement MapRelocalizer::refine_by_projection(const SE3& T_camera_world, const ImageFeatures& features, const KeypointGrid& grid,
+                                                    double radius_px) const {
+  std::vector<ProjectedLandmark> landmarks;
+  for (std::size_t i = 0; i < map_.positions.size(); ++i) {
+    if (usable(static_cast<uint32_t>(i))) landmarks.push_back({map_.positions[i].cast<double>(), descriptors_.ptr<unsigned char>(static_cast<int>(i)), -1, static_cast<int>(i)});
+  }
+  ProjectionSearch search;
+  search.radius_px = radius_px;
+  search.scale_factor = config_.features.scale_factor;
+  search.ratio = 0.8;
+  search.max_descriptor_distance = 64;
+  std::vector<PoseObservation> observations;
+  for (const auto& [keypoint_index, landmark] : match_by_projection(landmarks, features, grid, camera_, T_camera_world, search)) {
+    const cv::KeyPoint& keypoint = features.keypoints[static_cast<std::size_t>(keypoint_index)];
+    observations.push_back({map_.positions[static_cast<std::size_t>(landmark)].cast<double>(), {keypoint.pt.x, keypoint.pt.y},
+                            config_.pixel_sigma * std::pow(config_.features.scale_factor, keypoint.octave)});
+  }
+  if (observations.size() < 6) return {T_camera_world, {}, 0};
+  return refine_pose(T_camera_world, observations, camera_);
+}
+
 Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const {
   Result<ImageFeatures> extracted = OrbExtractor(config_.features).extract(image);
   if (!extracted) return extracted.error();
@@ -65,7 +92,9 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
   for (const cv::KeyPoint& keypoint : features.keypoints) {
     normalized.push_back(camera_.unproject({keypoint.pt.x, keypoint.pt.y}).value_or(Eigen::Vector2d::Constant(std::nan(""))));
   }
+  const KeypointGrid grid(features.keypoints, features.image_size, 32);
   int best_inliers = 0;
+  std::optional<MapRelocalization> best;  // the candidate whose pose explains the most landmarks
   for (const auto& [score, candidate] : ranked) {
     // The landmarks of the candidate and its neighbours.
     std::vector<uint32_t> landmarks;
@@ -73,7 +102,7 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
     const int last = std::min(static_cast<int>(map_.keyframes.size()) - 1, candidate + config_.neighbour_keyframes);
     for (int k = first; k <= last; ++k) {
       for (uint32_t landmark : map_.keyframes[static_cast<std::size_t>(k)].landmarks) {
-        if (config_.max_landmark_std <= 0.0 || map_.position_std.empty() || map_.position_std[landmark] <= config_.max_landmark_std) landmarks.push_back(landmark);
+        if (usable(landmark)) landmarks.push_back(landmark);
       }
     }
     std::sort(landmarks.begin(), landmarks.end());
@@ -102,11 +131,19 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
       best_inliers = std::max(best_inliers, solved ? static_cast<int>(solved->inliers.size()) : 0);
       continue;
     }
-    const PoseRefinement refined = refine_pose(solved->T_camera_world, observations, camera_);
+    PoseRefinement refined = refine_pose(solved->T_camera_world, observations, camera_);
     best_inliers = std::max(best_inliers, refined.inliers);
     if (refined.inliers < config_.min_inliers) continue;
-    return MapRelocalization{refined.T_camera_world.inverse(), refined.inliers, candidate, score};
+    // Every map landmark the pose brings into view, matched by projection, then the pose refined
+    // on all of them: a first radius for the PnP pose, a tighter one for the refined pose.
+    for (const double radius : {config_.projection_search_radius_px, config_.projection_search_radius_px / 2.0}) {
+      const PoseRefinement guided = refine_by_projection(refined.T_camera_world, features, grid, radius);
+      if (guided.inliers < refined.inliers) break;
+      refined = guided;
+    }
+    if (!best || refined.inliers > best->inliers) best = MapRelocalization{refined.T_camera_world.inverse(), refined.inliers, candidate, score};
   }
+  if (best) return *best;
   return Error(fmt::format("relocalization: no pose with {} inliers among the {} most similar keyframes (best {})", config_.min_inliers, ranked.size(), best_inliers));
 }
 

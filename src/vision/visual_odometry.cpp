@@ -17,6 +17,7 @@
 #include "hanzo/fusion/vision/feature_matcher.hpp"
 #include "hanzo/fusion/vision/place_database.hpp"
 #include "pose_refinement.hpp"
+#include "projection_matching.hpp"
 #include "similarity_pose_graph.hpp"
 #include "triangulation.hpp"
 
@@ -82,34 +83,6 @@ Frame anchor_of(const Frame& frame) {
   anchor.T_world_camera = frame.T_world_camera;
   return anchor;
 }
-
-// Keypoint indices in square cells of `cell` pixels, for neighbourhood searches.
-class KeypointGrid {
- public:
-  KeypointGrid(const std::vector<cv::KeyPoint>& keypoints, cv::Size image_size, int cell)
-      : cell_(cell), columns_(image_size.width / cell + 1), rows_(image_size.height / cell + 1), cells_(static_cast<std::size_t>(columns_ * rows_)) {
-    for (std::size_t k = 0; k < keypoints.size(); ++k) {
-      cells_[static_cast<std::size_t>(row_of(keypoints[k].pt.y) * columns_ + column_of(keypoints[k].pt.x))].push_back(static_cast<int>(k));
-    }
-  }
-  /// Calls visit(k) for every keypoint in the cells that overlap the square of half-side
-  /// `radius` around (u, v) (a superset of the keypoints within `radius`).
-  template <typename Visit>
-  void for_each_near(double u, double v, double radius, Visit&& visit) const {
-    for (int r = row_of(v - radius); r <= row_of(v + radius); ++r) {
-      for (int c = column_of(u - radius); c <= column_of(u + radius); ++c) {
-        for (int k : cells_[static_cast<std::size_t>(r * columns_ + c)]) visit(k);
-      }
-    }
-  }
-
- private:
-  int column_of(double u) const { return std::clamp(static_cast<int>(std::floor(u / cell_)), 0, columns_ - 1); }
-  int row_of(double v) const { return std::clamp(static_cast<int>(std::floor(v / cell_)), 0, rows_ - 1); }
-
-  int cell_, columns_, rows_;
-  std::vector<std::vector<int>> cells_;
-};
 
 bool has_right(const Frame& frame, std::size_t keypoint) { return !frame.right_keypoint.empty() && frame.right_keypoint[keypoint] >= 0; }
 
@@ -526,35 +499,21 @@ struct VisualOdometry::State {
 
   // ---- tracking ----
 
-  // Landmark -> keypoint matches by projection at T_camera_world: the keypoint nearest in
-  // descriptor within the search radius (octave-scaled), ratio 0.9 against the runner-up,
-  // each keypoint given to the landmark it matches best.
+  // Landmark -> keypoint matches by projection at T_camera_world (projection_matching.hpp),
+  // the search radius scaled by radius_scale.
   std::vector<std::pair<int, int>> match_by_projection(const Frame& frame, const SE3& T_camera_world, const std::vector<int>& landmark_ids,
                                                        double radius_scale) const {
-    const KeypointGrid grid(frame.features.keypoints, image_size, 32);
-    std::vector<std::pair<int, int>> owner(frame.features.size(), {-1, std::numeric_limits<int>::max()});  // (landmark, distance)
+    std::vector<ProjectedLandmark> queries;
+    queries.reserve(landmark_ids.size());
     for (int landmark_id : landmark_ids) {
       const Landmark& landmark = landmarks.at(landmark_id);
-      const std::optional<Eigen::Vector2d> pixel = camera.project(T_camera_world.act(landmark.position));
-      if (!pixel || pixel->x() < 0 || pixel->y() < 0 || pixel->x() >= image_size.width || pixel->y() >= image_size.height) continue;
-      const double radius = config.projection_search_radius_px * radius_scale * octave_scale[static_cast<std::size_t>(landmark.octave)];
-      NearestCandidates nearest;
-      grid.for_each_near(pixel->x(), pixel->y(), radius, [&](int k) {
-        const cv::KeyPoint& keypoint = frame.features.keypoints[static_cast<std::size_t>(k)];
-        if (std::abs(keypoint.octave - landmark.octave) > 2) return;
-        if ((Eigen::Vector2d(keypoint.pt.x, keypoint.pt.y) - *pixel).squaredNorm() > radius * radius) return;
-        nearest.offer(k, hamming_distance(landmark.descriptor.ptr<unsigned char>(), frame.features.descriptors.ptr<unsigned char>(k)));
-      });
-      if (!nearest.passes(0.9, config.max_descriptor_distance)) continue;
-      const int best_keypoint = nearest.index, best = nearest.best;
-      auto& slot = owner[static_cast<std::size_t>(best_keypoint)];
-      if (best < slot.second) slot = {landmark_id, best};
+      queries.push_back({landmark.position, landmark.descriptor.ptr<unsigned char>(), landmark.octave, landmark_id});
     }
-    std::vector<std::pair<int, int>> matches;  // (keypoint, landmark)
-    for (std::size_t k = 0; k < owner.size(); ++k) {
-      if (owner[k].first >= 0) matches.emplace_back(static_cast<int>(k), owner[k].first);
-    }
-    return matches;
+    ProjectionSearch search;
+    search.radius_px = config.projection_search_radius_px * radius_scale;
+    search.scale_factor = config.features.scale_factor;
+    search.max_descriptor_distance = config.max_descriptor_distance;
+    return vision::match_by_projection(queries, frame.features, KeypointGrid(frame.features.keypoints, image_size, 32), camera, T_camera_world, search);
   }
 
   PoseRefinement refine(const Frame& frame, const SE3& T_camera_world, const std::vector<std::pair<int, int>>& matches) const {

@@ -14,6 +14,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "hanzo/fusion/io/euroc_import.hpp"
+#include "hanzo/fusion/io/image_folder_import.hpp"
 #include "hanzo/fusion/io/kitti_import.hpp"
 #include "hanzo/fusion/io/tum_rgbd_import.hpp"
 
@@ -390,6 +391,128 @@ TEST(TumRgbdImport, ColourAndDepthMergedWithFreiburgIntrinsics) {
   ASSERT_FALSE(bad.ok());
   EXPECT_THAT(bad.error().message, HasSubstr("rgb.txt:4: 3 fields (expected: timestamp filename)"));
   fs::remove_all(root);
+}
+
+
+// ---- Image folders ------------------------------------------------------------------------
+
+// KITTI 06's real left images (1226 x 370) with the sequence's times.txt: the order, the times
+// and the pixels as in the files, and the calibration from the given intrinsics.
+TEST(ImageFolderImport, RealSequenceWithATimesFileAndIntrinsics) {
+  const std::string folder = std::string(HANZO_DATA_DIR) + "/kitti_odometry_06_first51/image_l";
+  const fs::path dir = temp_dir("images_kitti");
+  ImageFolderImportConfig config;
+  config.times_path = std::string(HANZO_DATA_DIR) + "/kitti_odometry_06_first51/times_from_pyslam_kitti06.txt";
+  config.camera = calib::CameraCalibration{{707.0912, 707.0912, 601.8873, 183.1104, 0, 0}, {}};
+  ImageFolderImportReport report;
+  auto entries = import_and_read(dir, [&](SensorLogWriter& writer) -> Status {
+    HANZO_ASSIGN_OR_RETURN(report, import_image_folders({folder}, writer, config));
+    return ok_status();
+  });
+  ASSERT_TRUE(entries.ok()) << entries.error().message;
+  EXPECT_EQ(report.images, 51u);
+  EXPECT_EQ(report.rejected, 0u);
+  EXPECT_EQ(report.time_source, "times file");
+  EXPECT_EQ(report.width, 1226u);
+  EXPECT_EQ(report.height, 370u);
+  ASSERT_EQ(entries->size(), 51u);
+  const auto& tenth = std::get<msgs::ImageMessage>(std::get<msgs::SensorMessage>((*entries)[10].message));
+  EXPECT_EQ((*entries)[10].topic, "/cam0");
+  EXPECT_EQ(tenth.timestamp, Timestamp::from_seconds(1e9) + Duration::from_nanoseconds(parse_seconds("1.038877e+00")->nanoseconds()));  // line 11
+  EXPECT_EQ(tenth.encoding, msgs::ImageEncoding::kMono8);
+  const cv::Mat file = cv::imread(folder + "/000010.png", cv::IMREAD_GRAYSCALE);
+  ASSERT_EQ(tenth.data.size(), file.total());
+  EXPECT_EQ(std::memcmp(tenth.data.data(), file.data, file.total()), 0);
+  ASSERT_TRUE(tenth.intrinsics.has_value());
+  EXPECT_EQ(tenth.intrinsics->width, 1226u);
+  ASSERT_EQ(report.calibration.sensors.size(), 1u);
+  EXPECT_EQ(report.calibration.sensors[0].sensor, "cam0");
+  EXPECT_DOUBLE_EQ(report.calibration.sensors[0].camera->intrinsics.cx, 601.8873);
+  fs::remove_all(dir);
+}
+
+// EuRoC's stereo folders: times from the nanosecond file names, pairs in order, the right camera
+// one baseline along x.
+TEST(ImageFolderImport, StereoFoldersTimedByTheirFileNames) {
+  const std::string cam0 = std::string(HANZO_DATA_DIR) + "/euroc_v101_micro/mav0/cam0/data";
+  const std::string cam1 = std::string(HANZO_DATA_DIR) + "/euroc_v101_micro/mav0/cam1/data";
+  const fs::path dir = temp_dir("images_euroc");
+  ImageFolderImportConfig config;
+  config.camera = calib::CameraCalibration{{458.654, 457.296, 367.215, 248.375, 0, 0}, {msgs::DistortionType::kRadtan, {-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05}}};
+  EXPECT_THAT(status_of(import_image_folders({cam0, cam1}, *SensorLogWriter::open((dir / "x.mcap").string()).value(), config)).error().message,
+              HasSubstr("baseline"));
+  config.baseline = 0.110;
+  ImageFolderImportReport report;
+  auto entries = import_and_read(dir, [&](SensorLogWriter& writer) -> Status {
+    HANZO_ASSIGN_OR_RETURN(report, import_image_folders({cam0, cam1}, writer, config));
+    return ok_status();
+  });
+  ASSERT_TRUE(entries.ok()) << entries.error().message;
+  EXPECT_EQ(report.time_source, "file names");
+  EXPECT_EQ(report.images, 2u * 95u);
+  ASSERT_EQ(entries->size(), 2u * 95u);
+  const auto& first = std::get<msgs::ImageMessage>(std::get<msgs::SensorMessage>((*entries)[0].message));
+  const auto& second = std::get<msgs::ImageMessage>(std::get<msgs::SensorMessage>((*entries)[1].message));
+  EXPECT_EQ(first.timestamp, Timestamp::from_nanoseconds(1403715273262142976));
+  EXPECT_EQ(second.timestamp, first.timestamp);
+  EXPECT_NE((*entries)[0].topic, (*entries)[1].topic);
+  ASSERT_TRUE(first.distortion.has_value());
+  ASSERT_EQ(report.calibration.sensors.size(), 2u);
+  EXPECT_EQ(report.calibration.sensors[1].sensor, "cam1");
+  EXPECT_DOUBLE_EQ(report.calibration.sensors[1].translation.x(), 0.110);
+  fs::remove_all(dir);
+}
+
+// Frames named frame1 .. frame12 at a frame rate, in number order; a corrupt file and an image
+// of another size are left out and counted, the rest imported; what cannot be imported at all
+// is an error naming why.
+TEST(ImageFolderImport, NumberOrderRateAndBadFiles) {
+  const fs::path dir = temp_dir("images_rate");
+  for (int i = 1; i <= 12; ++i) write_gray(dir / "frames" / fmt::format("frame{}.png", i), static_cast<uint8_t>(10 * i), 64, 48);
+  write_text(dir / "frames" / "frame5.png", "not an image");
+  write_gray(dir / "frames" / "frame7.png", 70, 32, 48);
+  write_text(dir / "frames" / "notes.txt", "not an image either");
+  ImageFolderImportConfig config;
+  const std::string frames = (dir / "frames").string();
+  EXPECT_THAT(status_of(import_image_folders({frames}, *SensorLogWriter::open((dir / "x.mcap").string()).value(), config)).error().message,
+              HasSubstr("times file or a frame rate"));
+  config.rate_hz = 10.0;
+  ImageFolderImportReport report;
+  auto entries = import_and_read(dir, [&](SensorLogWriter& writer) -> Status {
+    HANZO_ASSIGN_OR_RETURN(report, import_image_folders({frames}, writer, config));
+    return ok_status();
+  });
+  ASSERT_TRUE(entries.ok()) << entries.error().message;
+  EXPECT_EQ(report.images, 10u);
+  EXPECT_EQ(report.rejected, 2u);
+  EXPECT_THAT(report.first_rejection, HasSubstr("frame5.png"));
+  ASSERT_EQ(entries->size(), 10u);
+  std::vector<int> values;
+  for (const LogEntry& entry : *entries) values.push_back(std::get<msgs::ImageMessage>(std::get<msgs::SensorMessage>(entry.message)).data[0]);
+  EXPECT_EQ(values, (std::vector<int>{10, 20, 30, 40, 60, 80, 90, 100, 110, 120}));
+  const auto& last = std::get<msgs::ImageMessage>(std::get<msgs::SensorMessage>(entries->back().message));
+  EXPECT_EQ(last.timestamp, Timestamp::from_seconds(1e9) + Duration::from_milliseconds(1100));  // frame12: the 12th at 10 Hz
+
+  // A times file of "TIME NAME" lines orders by its lines; one whose count differs is refused.
+  write_text(dir / "named.txt", "# time name\n0.5 frame2.png\n0.6 frame1.png\n");
+  write_gray(dir / "two" / "frame1.png", 1, 64, 48);
+  write_gray(dir / "two" / "frame2.png", 2, 64, 48);
+  config.times_path = (dir / "named.txt").string();
+  auto named = import_and_read(dir, [&](SensorLogWriter& writer) -> Status {
+    HANZO_ASSIGN_OR_RETURN(report, import_image_folders({(dir / "two").string()}, writer, config));
+    return ok_status();
+  });
+  ASSERT_TRUE(named.ok()) << named.error().message;
+  ASSERT_EQ(named->size(), 2u);
+  EXPECT_EQ(std::get<msgs::ImageMessage>(std::get<msgs::SensorMessage>((*named)[0].message)).data[0], 2);
+  write_text(dir / "short.txt", "0.1\n");
+  config.times_path = (dir / "short.txt").string();
+  EXPECT_THAT(status_of(import_image_folders({(dir / "two").string()}, *SensorLogWriter::open((dir / "y.mcap").string()).value(), config)).error().message,
+              HasSubstr("1 times for 2 images"));
+  fs::create_directories(dir / "empty");
+  EXPECT_THAT(status_of(import_image_folders({(dir / "empty").string()}, *SensorLogWriter::open((dir / "z.mcap").string()).value(), config)).error().message,
+              HasSubstr("no image files"));
+  fs::remove_all(dir);
 }
 
 }  // namespace

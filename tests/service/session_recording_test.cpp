@@ -158,19 +158,31 @@ TEST(SessionRecording, FinishedRecordingsAreEncryptedAndTheRetentionPolicyDelete
   const auto long_ago = fs::file_time_type::clock::now() - std::chrono::hours(24 * 40);
   fs::last_write_time(dir / "recordings" / "old.mcap", long_ago);
   fs::last_write_time(dir / "recordings" / "active.mcap", long_ago);
+  // A plain recording an earlier run left (stopped without finishing it) is encrypted first,
+  // keeping its age.
+  std::ofstream(dir / "recordings" / "left.mcap") << std::string(800, 'y');
+  fs::last_write_time(dir / "recordings" / "left.mcap", fs::file_time_type::clock::now() - std::chrono::hours(2));
   auto outcome = apply_recording_retention(config, {"active.mcap"});
   ASSERT_TRUE(outcome.ok()) << outcome.error().message;
-  EXPECT_EQ(outcome->deleted, std::vector<std::string>{"old.mcap"});
+  EXPECT_EQ(outcome->deleted, std::vector<std::string>{"old.mcap.enc"});
   EXPECT_TRUE(fs::exists(dir / "recordings" / "s2.mcap.enc"));
-  EXPECT_TRUE(fs::exists(dir / "recordings" / "active.mcap"));
+  EXPECT_TRUE(fs::exists(dir / "recordings" / "active.mcap"));  // being written: untouched
   EXPECT_TRUE(fs::exists(dir / "recordings" / "notes.txt"));
+  EXPECT_FALSE(fs::exists(dir / "recordings" / "left.mcap"));
+  ASSERT_TRUE(crypto::is_encrypted_file((dir / "recordings" / "left.mcap.enc").string()));
+  EXPECT_LT(fs::last_write_time(dir / "recordings" / "left.mcap.enc"), fs::file_time_type::clock::now() - std::chrono::minutes(90));
+  ASSERT_TRUE(crypto::decrypt_file((dir / "recordings" / "left.mcap.enc").string(), (dir / "left.mcap").string(), {*config.key}).ok());
+  std::string left_bytes;
+  std::getline(std::ifstream(dir / "left.mcap"), left_bytes);
+  EXPECT_EQ(left_bytes, std::string(800, 'y'));
+  fs::remove(dir / "recordings" / "left.mcap.enc");
   // A size cap deletes the oldest finished recordings first.
   std::ofstream(dir / "recordings" / "older.mcap") << std::string(5000, 'x');
   fs::last_write_time(dir / "recordings" / "older.mcap", fs::file_time_type::clock::now() - std::chrono::hours(1));
   config.max_total_bytes = fs::file_size(dir / "recordings" / "s2.mcap.enc") + 100;
   outcome = apply_recording_retention(config, {"active.mcap"});
   ASSERT_TRUE(outcome.ok());
-  EXPECT_EQ(outcome->deleted, std::vector<std::string>{"older.mcap"});
+  EXPECT_EQ(outcome->deleted, std::vector<std::string>{"older.mcap.enc"});
   EXPECT_TRUE(fs::exists(dir / "recordings" / "s2.mcap.enc"));
   fs::remove_all(dir);
 }
@@ -294,6 +306,40 @@ TEST(SessionRecording, SessionsRecordWhenAskedAndRefuseWhatTheServerDoesNotAllow
   auto without = SessionManager::create({}, std::move(storage_without).value(), std::make_shared<MetricsRegistry>());
   ASSERT_TRUE(without.ok());
   EXPECT_EQ((*without)->create_session(kRobot, recorded).error().field, "record");
+  fs::remove_all(dir);
+}
+
+// A session still recording when the server stops: its log is finished (encrypted) at the stop
+// and, after the restart, served for the session that goes on running unrecorded.
+TEST(SessionRecording, ARecordingCutByAServerStopIsServedAfterTheRestart) {
+  const fs::path dir = testing::scratch_dir();
+  SessionManagerConfig config;
+  config.recording.directory = (dir / "recordings").string();
+  config.recording.key = crypto::EncryptionKey::generate();
+  const std::string fusion_yaml = testing::read_text("examples/data/fusion.yaml");
+  const std::vector<testing::TimedMessage> sample = testing::sample_recording();
+  std::string id;
+  {
+    auto manager = SessionManager::create(config, open_storage("sqlite://" + (dir / "sessions.db").string()).value(), nullptr);
+    ASSERT_TRUE(manager.ok()) << manager.error().message;
+    CreateSessionRequest recorded{"recorded", fusion_yaml, ""};
+    recorded.record = true;
+    auto session = (*manager)->create_session(kRobot, recorded);
+    ASSERT_TRUE(session.ok()) << session.error().message;
+    id = session->id;
+    for (const testing::TimedMessage& message : sample) ASSERT_TRUE((*manager)->push(kRobot, id, message.sensor, message.message).ok());
+  }  // the server stops
+  EXPECT_FALSE(fs::exists(dir / "recordings" / (id + ".mcap")));  // no plaintext left
+  auto manager = SessionManager::create(config, open_storage("sqlite://" + (dir / "sessions.db").string()).value(), nullptr);
+  ASSERT_TRUE(manager.ok()) << manager.error().message;
+  auto restored = (*manager)->session_info(kRobot, id);
+  ASSERT_TRUE(restored.ok());
+  EXPECT_FALSE(restored->ended.has_value());
+  auto stored = (*manager)->recording(kRobot, id);
+  ASSERT_TRUE(stored.ok()) << stored.error().message;
+  EXPECT_EQ(stored->key, id + ".mcap.enc");
+  ASSERT_TRUE(crypto::decrypt_file(stored->store->location_of(stored->key), (dir / "plain.mcap").string(), {*config.recording.key}).ok());
+  EXPECT_EQ(read_log((dir / "plain.mcap").string()).size(), sample.size());
   fs::remove_all(dir);
 }
 

@@ -71,8 +71,14 @@ DroneMap map_the_drone_flight() {
   return result;
 }
 
+// Mapped once for the tests of this file (a 16 s stereo flight takes about 40 s).
+const DroneMap& drone_map() {
+  static const DroneMap map = map_the_drone_flight();
+  return map;
+}
+
 TEST(VisualLandmarkMap, SavedMapRoundTripsAndRelocalizesAViewRolledThirtyDegreesFromEveryKeyframe) {
-  DroneMap drone = map_the_drone_flight();
+  const DroneMap& drone = drone_map();
   const msgs::VisualLandmarkLayer& layer = drone.layer;
   ASSERT_GT(layer.positions.size(), 1000u);
   ASSERT_GT(layer.keyframes.size(), 30u);
@@ -103,8 +109,7 @@ TEST(VisualLandmarkMap, SavedMapRoundTripsAndRelocalizesAViewRolledThirtyDegrees
   }
 
   // A viewpoint the flight never had: the camera of a mid-flight keyframe rolled 40 degrees about
-  // its optical axis (the drone flies nearly level). Views 1-2 m away from the keyframes are
-  // placed 0.6 m off (bench/RESULTS.md): the goal of 2 m and 30 degrees is not met yet.
+  // its optical axis (the drone flies nearly level). Views 2 m away as well: the next test.
   const sim::SplineTrajectory& truth = drone.simulation->trajectory();
   const SE3 T_body_camera = drone.scenario.sensors[0].T_body_sensor;
   const msgs::VisualKeyframe& middle = layer.keyframes[layer.keyframes.size() / 2];
@@ -135,6 +140,57 @@ TEST(VisualLandmarkMap, SavedMapRoundTripsAndRelocalizesAViewRolledThirtyDegrees
   Result<MapRelocalization> nowhere = relocalizer.relocalize(elsewhere);
   ASSERT_FALSE(nowhere);
   EXPECT_NE(nowhere.error().message.find("features"), std::string::npos) << nowhere.error().message;
+}
+
+// Views 2 m from every keyframe and rolled 35 degrees about the optical axis: above, below and
+// beside the middle of the flight.
+TEST(VisualLandmarkMap, RelocalizesViewsTwoMetresAndThirtyDegreesFromEveryKeyframe) {
+  const DroneMap& drone = drone_map();
+  const msgs::VisualLandmarkLayer& layer = drone.layer;
+  const sim::SplineTrajectory& truth = drone.simulation->trajectory();
+  const SE3 T_body_camera = drone.scenario.sensors[0].T_body_sensor;
+  const SE3 T_simulation_map = truth.sample(layer.keyframes.front().time).T_world_body * T_body_camera;
+  auto relocalizer = MapRelocalizer::create(layer, camera_of(drone.scenario.sensors[0])).value();
+  int placed_views = 0, tried = 0;
+  for (std::size_t which = 4; which + 4 < layer.keyframes.size(); which += 4) {
+    const Timestamp time = layer.keyframes[which].time;
+    const SE3 T_world_flown = truth.sample(time).T_world_body * T_body_camera;
+    const Eigen::Vector3d velocity = truth.sample(time).velocity_world;
+    const Eigen::Vector3d side = Eigen::Vector3d::UnitZ().cross(velocity).normalized();
+    for (const Eigen::Vector3d& offset : {Eigen::Vector3d(0, 0, 2.2), Eigen::Vector3d(0, 0, -2.2), Eigen::Vector3d(2.2 * side), Eigen::Vector3d(-2.2 * side)}) {
+      const SE3 T_world_camera = SE3(T_world_flown.rotation() * SO3::exp(Eigen::Vector3d(0, 0, 35 * kDegree)), T_world_flown.translation() + offset);
+      double nearest_angle = 1e9, nearest_distance = 1e9;
+      for (const msgs::VisualKeyframe& keyframe : layer.keyframes) {
+        const SE3 T_world_keyframe = truth.sample(keyframe.time).T_world_body * T_body_camera;
+        nearest_angle = std::min(nearest_angle, (T_world_keyframe.rotation().inverse() * T_world_camera.rotation()).angle());
+        nearest_distance = std::min(nearest_distance, (T_world_keyframe.translation() - T_world_camera.translation()).norm());
+      }
+      if (nearest_angle < 30 * kDegree || nearest_distance < 2.0) continue;
+      ++tried;
+      const cv::Mat image = render_at(drone.scenario.sensors[0], drone.simulation->world(), T_world_camera * T_body_camera.inverse());
+      Result<MapRelocalization> placed = relocalizer.relocalize(image);
+      if (!placed) {
+        std::printf("view at keyframe %zu offset (%.1f %.1f %.1f): %s\n", which, offset.x(), offset.y(), offset.z(), placed.error().message.c_str());
+        continue;
+      }
+      const SE3 error = (T_simulation_map.inverse() * T_world_camera).inverse() * placed->T_world_camera;
+      // Relative to the nearest map keyframe (the map's own drift left out).
+      const SE3 T_map_keyframe = layer.keyframes[which].T_world_camera.to_se3();
+      const SE3 T_truth_keyframe = truth.sample(time).T_world_body * T_body_camera;
+      const SE3 local = (T_truth_keyframe.inverse() * T_world_camera).inverse() * (T_map_keyframe.inverse() * placed->T_world_camera);
+      std::printf("  local error %.3f m, %.2f deg\n", local.translation().norm(), local.rotation().angle() / kDegree);
+      std::printf("view at keyframe %zu offset (%.1f %.1f %.1f), %.2f m / %.1f deg from the nearest keyframe: %d inliers, error %.3f m, %.2f deg\n", which,
+                  offset.x(), offset.y(), offset.z(), nearest_distance, nearest_angle / kDegree, placed->inliers, error.translation().norm(),
+                  error.rotation().angle() / kDegree);
+      if (local.translation().norm() < 0.3 && local.rotation().angle() < 2 * kDegree) ++placed_views;
+    }
+  }
+  // Measured (bench/RESULTS.md): 15 such views, 11 given a pose, 2 of them within 0.3 m and
+  // 2 degrees of the truth relative to the nearest keyframe; the others 0.5-1.9 m off. The goal
+  // (every such view placed) is not met.
+  std::printf("placed %d of %d views within 0.3 m / 2 deg\n", placed_views, tried);
+  EXPECT_GE(tried, 10);
+  EXPECT_GE(placed_views, 2);
 }
 
 TEST(VisualLandmarkMap, BadLayersAreRefusedNamingTheField) {

@@ -112,7 +112,9 @@ struct RetentionOutcome {
   uint64_t bytes_freed = 0;
 };
 
-/// Archives finished recordings left in the folder (an earlier upload failed), then deletes
+/// With a key, encrypts the plain recordings (*.mcap not in `active_files`: left by a server that
+/// stopped without finishing them, or whose encryption failed) keeping their modification times;
+/// archives finished recordings left in the folder (an earlier upload failed), then deletes
 /// finished recordings (*.mcap, *.mcap.enc not in `active_files`) stored before now - retention,
 /// then the oldest while the rest exceed max_total_bytes.
 Result<RetentionOutcome> apply_recording_retention(const RecordingConfig& config, const std::vector<std::string>& active_files);

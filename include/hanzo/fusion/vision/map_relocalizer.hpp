@@ -8,7 +8,9 @@
 //      side are matched to the image's keypoints by descriptor (ratio 0.9, mutual) and the pose is
 //      solved by PnP RANSAC on undistorted bearings, then refined by Gauss-Newton on the
 //      reprojection errors (Huber, chi-square outlier rounds; vision/pose_refinement).
-//   3. The first candidate with min_inliers inliers wins.
+//   3. The first candidate with min_inliers inliers wins. Its pose then brings every usable map
+//      landmark into view: they are matched by projection (within projection_search_radius_px,
+//      then half of it) and the pose refined on all of them (ORB-SLAM's relocalization scheme).
 //
 // Frames: the map's world frame (the odometry's: its first keyframe's camera frame, or the
 // Session's world); the result is T_world_camera of the image's camera (optical frame).
@@ -42,6 +44,7 @@ struct MapRelocalizerConfig {
   int neighbour_keyframes = 2;  ///< keyframes on each side whose landmarks join a candidate's
   int min_inliers = 30;         ///< refined inliers needed to accept a pose
   double pixel_sigma = 1.0;     ///< keypoint noise at octave 0 (pixels)
+  double projection_search_radius_px = 10.0;  ///< guided matching around the PnP pose, at octave 0
   /// Landmarks whose position_std exceeds this (map units) are left out: a far point seen over a
   /// short baseline is mostly off along its ray, and from another viewpoint it pulls the pose
   /// back toward the one that made it. 0: use all.
@@ -57,6 +60,9 @@ struct MapRelocalization {
   double score = 0.0;     ///< its bag-of-words score
 };
 
+class KeypointGrid;
+struct PoseRefinement;
+
 class MapRelocalizer {
  public:
   static Result<MapRelocalizer> create(msgs::VisualLandmarkLayer map, const PinholeCamera& camera, MapRelocalizerConfig config = {});
@@ -68,6 +74,8 @@ class MapRelocalizer {
 
  private:
   MapRelocalizer() = default;
+  bool usable(uint32_t landmark) const;  // under max_landmark_std
+  PoseRefinement refine_by_projection(const SE3& T_camera_world, const ImageFeatures& features, const KeypointGrid& grid, double radius_px) const;
   msgs::VisualLandmarkLayer map_;
   PinholeCamera camera_;
   MapRelocalizerConfig config_;
