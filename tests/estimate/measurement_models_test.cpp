@@ -149,7 +149,14 @@ TEST(StaticAlignment, RecoversRollPitchAndGyroBiasAndRefusesMotion) {
   EXPECT_LT((alignment->R_world_body.inverse() * truth).angle(), 0.003);
   EXPECT_LT((alignment->gyro_bias - bias).norm(), 0.005);
   EXPECT_NEAR(alignment->gravity_magnitude, 9.81, 0.01);
-  for (size_t i = 0; i < samples.size(); i += 2) samples[i].linear_acceleration.x() += 3.0;  // shaking
+  // Vibration (100 Hz, +-3 m/s^2, zero mean: the body stays put) is not motion.
+  std::vector<ImuSample> vibrating = samples;
+  for (size_t i = 0; i < vibrating.size(); ++i) vibrating[i].linear_acceleration.x() += i % 2 == 0 ? 3.0 : -3.0;
+  const Result<StaticAlignment> vibrated = align_static(vibrating, ImuMounting{}, 0.0);
+  ASSERT_TRUE(vibrated.ok()) << vibrated.error().message;
+  EXPECT_LT((vibrated->R_world_body.inverse() * truth).angle(), 0.003);
+  // A push (1 m/s^2 forward for 0.3 s, then braking) is.
+  for (size_t i = 40; i < 100; ++i) samples[i].linear_acceleration.x() += i < 70 ? 1.0 : -1.0;
   const Result<StaticAlignment> moving = align_static(samples, ImuMounting{}, 0.0);
   ASSERT_FALSE(moving.ok());
   EXPECT_NE(moving.error().message.find("moving"), std::string::npos);
