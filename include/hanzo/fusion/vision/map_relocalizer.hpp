@@ -8,9 +8,10 @@
 //      side are matched to the image's keypoints by descriptor (ratio 0.9, mutual) and the pose is
 //      solved by PnP RANSAC on undistorted bearings, then refined by Gauss-Newton on the
 //      reprojection errors (Huber, chi-square outlier rounds; vision/pose_refinement).
-//   3. The first candidate with min_inliers inliers wins. Its pose then brings every usable map
-//      landmark into view: they are matched by projection (within projection_search_radius_px,
-//      then half of it) and the pose refined on all of them (ORB-SLAM's relocalization scheme).
+//   3. A candidate with min_inliers inliers brings every usable map landmark into view with its
+//      pose: they are matched by projection (within projection_search_radius_px, then half of
+//      it) and the pose refined on all of them (ORB-SLAM's relocalization scheme). The candidate
+//      whose pose explains the most landmarks wins.
 //
 // Frames: the map's world frame (the odometry's: its first keyframe's camera frame, or the
 // Session's world); the result is T_world_camera of the image's camera (optical frame).
