@@ -3,9 +3,12 @@
 // reprojection error; with --out writes them into the camera's entry of a calibration YAML
 // (its mount and time offset kept; an entry at the body origin when the file has none).
 
+#include <algorithm>
+#include <cctype>
+#include <charconv>
 #include <memory>
-#include <regex>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <fmt/format.h>
@@ -32,11 +35,17 @@ struct CameraOptions {
 };
 
 Result<calib::CheckerboardTarget> parse_board(const std::string& text, double square) {
-  std::smatch match;
-  if (!std::regex_match(text, match, std::regex(R"((\d+)x(\d+))"))) {
+  // COLUMNSxROWS, each all digits and within an int.
+  const auto whole = [](std::string_view digits, int& value) {
+    return !digits.empty() && std::all_of(digits.begin(), digits.end(), [](unsigned char c) { return std::isdigit(c); }) &&
+           std::from_chars(digits.data(), digits.data() + digits.size(), value).ec == std::errc();
+  };
+  const std::size_t x = text.find('x');
+  int columns = 0, rows = 0;
+  if (x == std::string::npos || !whole(std::string_view(text).substr(0, x), columns) || !whole(std::string_view(text).substr(x + 1), rows)) {
     return Error(fmt::format("--board '{}': expected the inner corners as COLUMNSxROWS, e.g. 9x6", text));
   }
-  return calib::CheckerboardTarget{std::stoi(match[1]), std::stoi(match[2]), square};
+  return calib::CheckerboardTarget{columns, rows, square};
 }
 
 std::string to_text(const std::string& camera, const calib::CameraCalibrationResult& result, const std::string& out) {

@@ -1284,6 +1284,8 @@ TEST(Cli, CalibCameraRecoversTheLensOfTheCheckerboardScenario) {
   EXPECT_THAT(no_images.err, HasSubstr("no images on /nothing"));
   EXPECT_EQ(std::count(no_images.err.begin(), no_images.err.end(), '\n'), 1);
   EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --board nine", d)).err, HasSubstr("COLUMNSxROWS"));
+  EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --board 99999999999x6", d)).err, HasSubstr("COLUMNSxROWS"));  // beyond an int
+  EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --board 8x", d)).err, HasSubstr("COLUMNSxROWS"));
   EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --model pinhole", d)).err, HasSubstr("radtan or equidistant"));
   std::filesystem::remove_all(dir);
 }
