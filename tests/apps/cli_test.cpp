@@ -616,7 +616,8 @@ TEST(Cli, SimulatedLogThroughRos2BagsOfEachLidarLayoutRunsLikeTheOriginal) {
     }
     const CliRun imported = run(fmt::format("import ros2bag {} --out {} --wheel-separation 0.5{} --json", bag, log, topics));
     ASSERT_EQ(imported.exit_code, 0) << imported.err;
-    for (const auto& topic : nlohmann::json::parse(imported.out)["topics"]) EXPECT_EQ(topic["rejected"], 0) << topic.dump();
+    const nlohmann::json import_report = nlohmann::json::parse(imported.out);  // kept: the loop reads into it
+    for (const auto& topic : import_report["topics"]) EXPECT_EQ(topic["rejected"], 0) << topic.dump();
     const nlohmann::json replayed = run_log(log, bag + "_run");
     ASSERT_TRUE(replayed.contains("evaluation") && replayed["evaluation"]["ape_se3_aligned_rmse_m"].is_number()) << replayed.dump();
     EXPECT_NEAR(replayed["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), direct_ape, 0.002);
@@ -1153,7 +1154,8 @@ TEST(Cli, MapBuildInfoExportStoreDiffRedact) {
     const std::string out = (dir / ("intel_export." + std::string(format == "pgm" ? "yaml" : format))).string();
     const CliRun exported = run(fmt::format("map export {} --format {} --out {} --json", map, format, out));
     ASSERT_EQ(exported.exit_code, 0) << format << ": " << exported.err;
-    for (const auto& file : nlohmann::json::parse(exported.out)["files"]) EXPECT_TRUE(std::filesystem::exists(file.get<std::string>()));
+    const nlohmann::json export_report = nlohmann::json::parse(exported.out);  // kept: the loop reads into it
+    for (const auto& file : export_report["files"]) EXPECT_TRUE(std::filesystem::exists(file.get<std::string>()));
   }
   // --out map.pgm keeps the name as given (the YAML goes beside it).
   const CliRun pgm = run(fmt::format("map export {} --out {} --json", map, (dir / "named.pgm").string()));
