@@ -54,12 +54,8 @@ bool MapRelocalizer::usable(uint32_t landmark) const {
   return config_.max_landmark_std <= 0.0 || map_.position_std.empty() || map_.position_std[landmark] <= config_.max_landmark_std;
 }
 
-PoseRefinement MapRelocalizer::refine_by_projection(const SE3& T_camera_world, const ImageFeatures& features, const KeypointGrid& grid,
-                                                    double radius_px) const {
-  std::vector<ProjectedLandmark> landmarks;
-  for (std::size_t i = 0; i < map_.positions.size(); ++i) {
-    if (usable(static_cast<uint32_t>(i))) landmarks.push_back({map_.positions[i].cast<double>(), descriptors_.ptr<unsigned char>(static_cast<int>(i)), -1, static_cast<int>(i)});
-  }
+PoseRefinement MapRelocalizer::refine_by_projection(const SE3& T_camera_world, const std::vector<ProjectedLandmark>& landmarks,
+                                                    const ImageFeatures& features, const KeypointGrid& grid, double radius_px) const {
   ProjectionSearch search;
   search.radius_px = radius_px;
   search.scale_factor = config_.features.scale_factor;
@@ -93,6 +89,12 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
     normalized.push_back(camera_.unproject({keypoint.pt.x, keypoint.pt.y}).value_or(Eigen::Vector2d::Constant(std::nan(""))));
   }
   const KeypointGrid grid(features.keypoints, features.image_size, 32);
+  std::vector<ProjectedLandmark> usable_landmarks;  // what matching by projection looks for
+  for (std::size_t i = 0; i < map_.positions.size(); ++i) {
+    if (usable(static_cast<uint32_t>(i))) {
+      usable_landmarks.push_back({map_.positions[i].cast<double>(), descriptors_.ptr<unsigned char>(static_cast<int>(i)), -1, static_cast<int>(i)});
+    }
+  }
   int best_inliers = 0;
   std::optional<MapRelocalization> best;  // the candidate whose pose explains the most landmarks
   for (const auto& [score, candidate] : ranked) {
@@ -137,7 +139,7 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
     // Every map landmark the pose brings into view, matched by projection, then the pose refined
     // on all of them: a first radius for the PnP pose, a tighter one for the refined pose.
     for (const double radius : {config_.projection_search_radius_px, config_.projection_search_radius_px / 2.0}) {
-      const PoseRefinement guided = refine_by_projection(refined.T_camera_world, features, grid, radius);
+      const PoseRefinement guided = refine_by_projection(refined.T_camera_world, usable_landmarks, features, grid, radius);
       if (guided.inliers < refined.inliers) break;
       refined = guided;
     }

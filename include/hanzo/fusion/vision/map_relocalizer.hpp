@@ -63,6 +63,7 @@ struct MapRelocalization {
 
 class KeypointGrid;
 struct PoseRefinement;
+struct ProjectedLandmark;
 
 class MapRelocalizer {
  public:
@@ -76,7 +77,8 @@ class MapRelocalizer {
  private:
   MapRelocalizer() = default;
   bool usable(uint32_t landmark) const;  // under max_landmark_std
-  PoseRefinement refine_by_projection(const SE3& T_camera_world, const ImageFeatures& features, const KeypointGrid& grid, double radius_px) const;
+  PoseRefinement refine_by_projection(const SE3& T_camera_world, const std::vector<ProjectedLandmark>& landmarks, const ImageFeatures& features,
+                                      const KeypointGrid& grid, double radius_px) const;
   msgs::VisualLandmarkLayer map_;
   PinholeCamera camera_;
   MapRelocalizerConfig config_;
