@@ -1,0 +1,161 @@
+#pragma once
+// Msckf: the Multi-State Constraint Kalman Filter (Mourikis and Roumeliotis 2007, "A
+// Multi-State Constraint Kalman Filter for Vision-aided Inertial Navigation"), the core of
+// visual-inertial odometry: an error-state EKF over the IMU state and a sliding window of cloned
+// body poses, updated by feature tracks without keeping the features in the state.
+//
+// State (error-state order; x_true = x (+) dx as estimate/navigation_state.hpp):
+//   IMU    15: dp (0), dtheta (3, body frame, right perturbation), dv (6), dba (9), dbg (12)
+//   clones 6 each, oldest first: dp, dtheta of T_world_body at a camera time.
+// Gravity is fixed at the initial state's (its direction from the initialization); the wheel and
+// gyro-scale entries of NavigationState are not used.
+//
+// Per camera frame (process_frame):
+//   1. the IMU state is propagated to the frame time (estimate/imu_propagation.hpp) and its pose
+//      cloned: P <- [P, P J^T; J P, J P J^T] with J selecting (dp, dtheta);
+//   2. the features to use are those whose track ended (not observed in this frame) and, when
+//      the window is full, those observed by the oldest clone; each needs observations from at
+//      least two clones (mono) or two observations (stereo);
+//   3. each feature is triangulated from its observations (linear multi-view least squares,
+//      then Gauss-Newton on the reprojection errors) with the clone poses; a feature behind a
+//      camera, nearer than min_depth or farther than max_depth, or badly conditioned is dropped;
+//   4. its stacked residuals r = H_x dx + H_f dp_f + n (2 rows per observation, normalized image
+//      coordinates) are projected onto the left null space of H_f (Householder QR):
+//      r0 = N^T r = N^T H_x dx + N^T n (eq. 23-24 of the paper), removing the feature's error;
+//   5. a feature whose r0^T (H0 P H0^T + sigma^2 I)^-1 r0 exceeds the chi-square quantile
+//      (chi_square_probability, 2m - 3 degrees of freedom) is dropped as an outlier;
+//   6. the accepted rows are stacked; with more rows than the state has entries they are
+//      compressed by a QR decomposition (eq. 26-28), then one EKF update:
+//      K = P H^T (H P H^T + sigma^2 I)^-1, dx = K r, P <- (I - K H) P (I - K H)^T + K sigma^2 K^T;
+//   7. the used observations are deleted, and when the window holds more than max_clones clones
+//      the oldest is marginalized (its rows and columns removed).
+// Measurement Jacobians are evaluated at the clone poses of the update (the current estimates).
+//
+// Frames: world is the frame of the initial state (z up for gravity (0, 0, -g)); body as the
+// NavigationState; cameras at T_body_camera (x right, y down, z forward). Observations are
+// UNDISTORTED normalized coordinates (x/z, y/z) of the camera (PinholeCamera::unproject).
+//
+// Failures: process_frame() refuses a time before the last one, an unknown camera index or a
+// non-finite observation (the frame is skipped, the state unchanged); propagate() refuses a
+// sample older than the state or non-finite. A filter whose covariance stops being finite
+// (numerical breakdown) refuses further frames: reset it from an initialization.
+
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <optional>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/estimate/imu_propagation.hpp"
+#include "hanzo/fusion/estimate/navigation_state.hpp"
+
+namespace hanzo::fusion::vision {
+
+inline constexpr int kMsckfImuDimension = 15;
+inline constexpr int kMsckfCloneDimension = 6;
+
+struct MsckfConfig {
+  /// Clones in the sliding window (OpenVINS's default 11: about 0.5-1 s of a 10-20 Hz camera).
+  int max_clones = 11;
+  /// Feature position noise, pixels (turned into normalized units by each camera's focal length).
+  double pixel_sigma = 1.0;
+  /// Probability of the chi-square gate per feature (0.95: OpenVINS's).
+  double chi_square_probability = 0.95;
+  /// Triangulated features nearer or farther than this (metres, in every observing camera) are
+  /// dropped: too near is a tracking error, too far carries no translation information.
+  double min_depth = 0.1;
+  double max_depth = 60.0;
+  /// Gauss-Newton iterations of the feature triangulation.
+  int triangulation_iterations = 8;
+  /// IMU noise (estimate/imu_propagation.hpp's model and units).
+  estimate::ImuNoise imu_noise;
+};
+
+/// Checks every field; the error names the first field out of range.
+Status validate(const MsckfConfig& config);
+
+/// A camera of the rig: where it sits on the body, and its focal length (pixels) to turn
+/// pixel_sigma into normalized units.
+struct MsckfCamera {
+  SE3 T_body_camera;
+  double focal_length_px = 500.0;
+};
+
+/// One feature seen in one camera image: its track id (the same id in every frame and camera
+/// that sees the same point) and undistorted normalized coordinates (x/z, y/z).
+struct FeatureObservation {
+  uint64_t feature_id = 0;
+  int camera = 0;  ///< index into the cameras given at creation
+  Eigen::Vector2d normalized = Eigen::Vector2d::Zero();
+};
+
+/// The outcome of one frame's update.
+struct MsckfUpdateSummary {
+  int features_offered = 0;          ///< features whose tracks were used or tried
+  int features_used = 0;             ///< passed triangulation and the chi-square gate
+  int rejected_triangulation = 0;    ///< behind / too near / too far / ill-conditioned
+  int rejected_chi_square = 0;       ///< outliers by the gate
+  int residual_rows = 0;             ///< rows of the stacked update after null-space projection
+  int clones = 0;                    ///< clones in the window after the frame
+};
+
+/// A cloned body pose in the window.
+struct MsckfClone {
+  Timestamp timestamp;
+  SE3 T_world_body;
+};
+
+class Msckf {
+ public:
+  /// Fails when the configuration is out of range, no or more than two cameras are given, a
+  /// focal length is not positive, the state is not finite or the covariance is not a finite
+  /// symmetric 15 x 15 matrix with a positive diagonal (IMU error order above).
+  static Result<Msckf> create(const MsckfConfig& config, const std::vector<MsckfCamera>& cameras,
+                              const estimate::NavigationState& initial_state, const Eigen::MatrixXd& initial_covariance);
+
+  /// Integrates the IMU state to the sample's time with the mean of the previous and this
+  /// sample's readings held over the interval (the first sample is held back to the state time).
+  Status propagate(const estimate::ImuSample& sample);
+
+  /// Clones the pose at `time` (propagated from the last IMU sample, held) and updates with the
+  /// tracks this frame ends (header comment). The observations are this frame's, every camera.
+  Result<MsckfUpdateSummary> process_frame(Timestamp time, const std::vector<FeatureObservation>& observations);
+
+  const estimate::NavigationState& state() const { return state_; }
+  /// The full error covariance (15 + 6 clones square).
+  const Eigen::MatrixXd& covariance() const { return covariance_; }
+  const std::deque<MsckfClone>& clones() const { return clones_; }
+  /// Features with observations waiting for their track to end.
+  int pending_features() const { return static_cast<int>(tracks_.size()); }
+
+ private:
+  struct TrackObservation {
+    Timestamp clone_time;
+    int camera = 0;
+    Eigen::Vector2d normalized;
+  };
+
+  Msckf(const MsckfConfig& config, std::vector<MsckfCamera> cameras, const estimate::NavigationState& state,
+        const Eigen::MatrixXd& covariance);
+  void propagate_interval(const estimate::ImuSample& reading, double dt);
+  void augment(Timestamp time);
+  void marginalize_oldest_clone();
+  MsckfUpdateSummary update(const std::vector<uint64_t>& feature_ids);
+  void apply_correction(const Eigen::VectorXd& correction);
+
+  MsckfConfig config_;
+  std::vector<MsckfCamera> cameras_;
+  estimate::NavigationState state_;
+  Eigen::MatrixXd covariance_;
+  std::deque<MsckfClone> clones_;
+  std::map<uint64_t, std::vector<TrackObservation>> tracks_;
+  std::optional<estimate::ImuSample> last_sample_;
+  bool diverged_ = false;
+};
+
+}  // namespace hanzo::fusion::vision

@@ -1,0 +1,55 @@
+#pragma once
+// The feature side of the MSCKF update (msckf.hpp): a point seen from several camera poses is
+// triangulated, and each observation's residual is linearized in the clone pose and the point.
+//
+// Measurement model of one observation, camera c on clone i (T_world_body = (R, p)):
+//   p_body   = R^T (p_f - p)
+//   p_camera = R_body_camera^T (p_body - p_body_camera)
+//   z        = (p_camera.x / p_camera.z, p_camera.y / p_camera.z)   undistorted normalized
+// Jacobians (right perturbation R Exp(dtheta), p + dp, p_f + dp_f):
+//   dz/dp_camera = 1/Z [1 0 -x/z; 0 1 -y/z]
+//   dp_camera/dp_f = R_body_camera^T R^T,  dp_camera/dp = -R_body_camera^T R^T,
+//   dp_camera/dtheta = R_body_camera^T [p_body]x
+// (tests/vision/msckf_test.cpp checks them numerically).
+
+#include <optional>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "hanzo/fusion/core/se3.hpp"
+
+namespace hanzo::fusion::vision {
+
+/// One observation of a feature with the poses it was taken from.
+struct FeatureView {
+  SE3 T_world_body;
+  SE3 T_body_camera;
+  Eigen::Vector2d normalized = Eigen::Vector2d::Zero();
+};
+
+/// The linearized observation: residual = measured - predicted, and its Jacobians by the clone's
+/// (dp, dtheta) and by the point's world position.
+struct FeatureLinearization {
+  Eigen::Vector2d residual = Eigen::Vector2d::Zero();
+  Eigen::Matrix<double, 2, 6> by_clone = Eigen::Matrix<double, 2, 6>::Zero();
+  Eigen::Matrix<double, 2, 3> by_point = Eigen::Matrix<double, 2, 3>::Zero();
+  double depth = 0.0;  ///< the point's z in the camera, metres
+};
+
+FeatureLinearization linearize_observation(const FeatureView& view, const Eigen::Vector3d& point_world);
+
+struct FeatureTriangulationConfig {
+  double min_depth = 0.1;   ///< metres, in every view
+  double max_depth = 60.0;  ///< metres, in every view
+  int iterations = 8;       ///< Gauss-Newton iterations after the linear solution
+};
+
+/// The world point that best explains the views (at least two, from at least two camera
+/// positions): the linear solution of [b]x (R_camera_world p_f + t_camera_world) = 0 over every
+/// view, refined by Gauss-Newton on the normalized reprojection errors. nullopt when the views
+/// are degenerate (too little parallax: the 3 x 3 normal matrix is near singular) or a depth
+/// is outside [min_depth, max_depth].
+std::optional<Eigen::Vector3d> triangulate_feature(const std::vector<FeatureView>& views, const FeatureTriangulationConfig& config);
+
+}  // namespace hanzo::fusion::vision

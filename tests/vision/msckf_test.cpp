@@ -1,0 +1,261 @@
+// The MSCKF core: Jacobians against finite differences, triangulation, and visual-inertial
+// odometry on a simulated drone flight (stereo and monocular) against the simulator's truth.
+
+#include "hanzo/fusion/vision/msckf.hpp"
+
+#include <cmath>
+#include <random>
+#include <set>
+
+#include <gtest/gtest.h>
+
+#include "hanzo/fusion/sim/drone_trajectory.hpp"
+#include "hanzo/fusion/sim/imu_simulator.hpp"
+#include "msckf_feature.hpp"
+
+namespace hanzo::fusion::vision {
+namespace {
+
+SE3 random_pose(std::mt19937_64& random, double translation) {
+  std::normal_distribution<double> normal(0.0, 1.0);
+  return SE3(SO3::exp(Eigen::Vector3d(normal(random), normal(random), normal(random))),
+             translation * Eigen::Vector3d(normal(random), normal(random), normal(random)));
+}
+
+// Body FLU, camera x right, y down, z forward: z_camera = x_body, x_camera = -y_body, y_camera = -z_body.
+SO3 forward_camera_rotation() {
+  Eigen::Matrix3d R_body_camera;
+  R_body_camera.col(0) = Eigen::Vector3d(0, -1, 0);
+  R_body_camera.col(1) = Eigen::Vector3d(0, 0, -1);
+  R_body_camera.col(2) = Eigen::Vector3d(1, 0, 0);
+  return SO3::from_matrix(R_body_camera);
+}
+
+TEST(MsckfFeature, JacobiansMatchFiniteDifferences) {
+  std::mt19937_64 random(7);
+  for (int trial = 0; trial < 20; ++trial) {
+    FeatureView view{random_pose(random, 2.0), SE3(forward_camera_rotation(), Eigen::Vector3d(0.1, -0.05, 0.02)), Eigen::Vector2d(0.1, -0.2)};
+    const SE3 T_world_camera = view.T_world_body * view.T_body_camera;
+    const Eigen::Vector3d point = T_world_camera * Eigen::Vector3d(0.3, -0.2, 4.0);
+    const FeatureLinearization linear = linearize_observation(view, point);
+    const double step = 1e-6;
+    for (int k = 0; k < 6; ++k) {
+      Eigen::Matrix<double, 6, 1> delta = Eigen::Matrix<double, 6, 1>::Zero();
+      delta(k) = step;
+      FeatureView moved = view;
+      moved.T_world_body = SE3(view.T_world_body.rotation() * SO3::exp(delta.tail<3>()), view.T_world_body.translation() + delta.head<3>());
+      // residual = measured - predicted, so its derivative is minus the predicted one.
+      const Eigen::Vector2d numeric = -(linearize_observation(moved, point).residual - linear.residual) / step;
+      EXPECT_LT((numeric - linear.by_clone.col(k)).norm(), 1e-5) << "clone column " << k;
+    }
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d moved_point = point + step * Eigen::Vector3d::Unit(k);
+      const Eigen::Vector2d numeric = -(linearize_observation(view, moved_point).residual - linear.residual) / step;
+      EXPECT_LT((numeric - linear.by_point.col(k)).norm(), 1e-5) << "point column " << k;
+    }
+  }
+}
+
+std::vector<FeatureView> views_of(const Eigen::Vector3d& point, const std::vector<SE3>& body_poses, const SE3& T_body_camera) {
+  std::vector<FeatureView> views;
+  for (const SE3& T_world_body : body_poses) {
+    const Eigen::Vector3d in_camera = (T_world_body * T_body_camera).inverse() * point;
+    views.push_back({T_world_body, T_body_camera, in_camera.head<2>() / in_camera.z()});
+  }
+  return views;
+}
+
+TEST(MsckfFeature, TriangulatesExactlyAndRefusesDegenerateViews) {
+  const SE3 T_body_camera(forward_camera_rotation(), Eigen::Vector3d::Zero());
+  const Eigen::Vector3d point(6.0, 1.0, 0.5);
+  const std::vector<SE3> moving = {SE3(), SE3(SO3::exp(Eigen::Vector3d(0, 0, 0.05)), Eigen::Vector3d(0.2, 0.3, 0.0)),
+                                   SE3(SO3::exp(Eigen::Vector3d(0, 0.02, -0.05)), Eigen::Vector3d(0.5, -0.2, 0.1))};
+  const std::optional<Eigen::Vector3d> found = triangulate_feature(views_of(point, moving, T_body_camera), {});
+  ASSERT_TRUE(found);
+  EXPECT_LT((*found - point).norm(), 1e-9);
+
+  // Rotation only: no parallax, no depth.
+  const std::vector<SE3> rotating = {SE3(), SE3(SO3::exp(Eigen::Vector3d(0, 0, 0.05)), Eigen::Vector3d::Zero())};
+  EXPECT_FALSE(triangulate_feature(views_of(point, rotating, T_body_camera), {}));
+  // Farther than max_depth.
+  FeatureTriangulationConfig near_only;
+  near_only.max_depth = 4.0;
+  EXPECT_FALSE(triangulate_feature(views_of(point, moving, T_body_camera), near_only));
+  // One view is not enough.
+  EXPECT_FALSE(triangulate_feature(views_of(point, {SE3()}, T_body_camera), {}));
+}
+
+// A simulated flight: the drone's figure of eight in a 20 x 16 x 6 m hall whose walls, floor and
+// ceiling carry random points, seen by a forward camera (640 x 480, f = 400 px, 20 Hz, 1 px noise)
+// that keeps at most 150 tracks (continuing tracks first, as a feature tracker does).
+struct FlightResult {
+  double distance = 0.0;         // metres flown
+  double final_error = 0.0;      // metres, position at the end
+  double max_yaw_error_deg = 0.0;
+  int features_used = 0;
+  int rejected_chi_square = 0;
+  Eigen::Vector3d accel_bias_error = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_bias_error = Eigen::Vector3d::Zero();
+};
+
+std::vector<Eigen::Vector3d> hall_points(std::mt19937_64& random) {
+  std::uniform_real_distribution<double> x(-10.0, 10.0), y(-8.0, 8.0), z(0.0, 6.0);
+  std::vector<Eigen::Vector3d> points;
+  for (int i = 0; i < 1500; ++i) {
+    points.emplace_back(-10.0, y(random), z(random));
+    points.emplace_back(10.0, y(random), z(random));
+    points.emplace_back(x(random), -8.0, z(random));
+    points.emplace_back(x(random), 8.0, z(random));
+  }
+  for (int i = 0; i < 1000; ++i) {
+    points.emplace_back(x(random), y(random), 0.0);
+    points.emplace_back(x(random), y(random), 6.0);
+  }
+  return points;
+}
+
+FlightResult fly(bool stereo, double flight_seconds, double outlier_share = 0.0) {
+  std::mt19937_64 random(42);
+  sim::DroneTrajectoryConfig drone;
+  drone.duration = flight_seconds;
+  const Timestamp start = Timestamp::from_seconds(1000.0);
+  const sim::SplineTrajectory trajectory = sim::make_drone_trajectory(start, drone).value();
+  sim::ImuSimulatorConfig imu_config;
+  imu_config.initial_accel_bias = Eigen::Vector3d(0.05, -0.04, 0.03);
+  imu_config.initial_gyro_bias = Eigen::Vector3d(0.003, -0.002, 0.001);
+  const std::vector<sim::ImuSample> imu = sim::ImuSimulator(imu_config).simulate(trajectory);
+  const std::vector<Eigen::Vector3d> points = hall_points(random);
+
+  std::vector<MsckfCamera> cameras = {{SE3(forward_camera_rotation(), Eigen::Vector3d(0.1, 0.0, 0.0)), 400.0}};
+  if (stereo) cameras.push_back({cameras[0].T_body_camera * SE3(SO3(), Eigen::Vector3d(0.11, 0.0, 0.0)), 400.0});
+
+  const sim::TrajectorySample first = trajectory.sample(start);
+  estimate::NavigationState state;
+  state.timestamp = start;
+  state.position = first.T_world_body.translation();
+  state.R_world_body = first.T_world_body.rotation();
+  state.velocity = first.velocity_world;
+  state.gravity = Eigen::Vector3d(0, 0, -imu_config.gravity);
+  Eigen::Matrix<double, 15, 1> sigma;
+  sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d::Constant(1e-2),
+      Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.01);
+  MsckfConfig config;
+  config.imu_noise.process_noise_accel = imu_config.process_noise_accel;
+  config.imu_noise.process_noise_gyro = imu_config.process_noise_gyro;
+  config.imu_noise.sample_interval = 1.0 / imu_config.rate_hz;
+  Msckf filter = Msckf::create(config, cameras, state, sigma.array().square().matrix().asDiagonal().toDenseMatrix()).value();
+
+  std::normal_distribution<double> pixel_noise(0.0, 1.0);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  std::set<uint64_t> tracked;
+  FlightResult result;
+  Eigen::Vector3d previous_position = state.position;
+  const Duration frame_interval = Duration::from_milliseconds(50);
+  Timestamp next_frame = start + frame_interval;
+  for (const sim::ImuSample& sample : imu) {
+    while (next_frame <= sample.message.timestamp) {
+      const SE3 T_world_body = trajectory.sample(next_frame).T_world_body;
+      std::vector<FeatureObservation> observations;
+      std::set<uint64_t> visible;
+      auto observe = [&](uint64_t id, int camera, bool allow_outlier) -> std::optional<Eigen::Vector2d> {
+        const Eigen::Vector3d in_camera = (T_world_body * cameras[camera].T_body_camera).inverse() * points[id];
+        if (in_camera.z() < 0.3) return std::nullopt;
+        Eigen::Vector2d pixel = 400.0 * in_camera.head<2>() / in_camera.z() + Eigen::Vector2d(320, 240);
+        if (pixel.x() < 0 || pixel.y() < 0 || pixel.x() >= 640 || pixel.y() >= 480) return std::nullopt;
+        pixel += Eigen::Vector2d(pixel_noise(random), pixel_noise(random));
+        if (allow_outlier && uniform(random) < outlier_share) pixel += Eigen::Vector2d(40.0, -30.0);
+        return (pixel - Eigen::Vector2d(320, 240)) / 400.0;
+      };
+      auto add = [&](uint64_t id) {
+        const std::optional<Eigen::Vector2d> left = observe(id, 0, true);
+        if (!left) return;
+        visible.insert(id);
+        observations.push_back({id, 0, *left});
+        if (stereo) {
+          if (const std::optional<Eigen::Vector2d> right = observe(id, 1, false)) observations.push_back({id, 1, *right});
+        }
+      };
+      for (uint64_t id : tracked) add(id);
+      for (uint64_t id = 0; id < points.size() && visible.size() < 150; ++id) {
+        if (!tracked.count(id)) add(id);
+      }
+      tracked = visible;
+      const MsckfUpdateSummary summary = filter.process_frame(next_frame, observations).value();
+      result.features_used += summary.features_used;
+      result.rejected_chi_square += summary.rejected_chi_square;
+      const SE3 truth = trajectory.sample(next_frame).T_world_body;
+      result.distance += (truth.translation() - previous_position).norm();
+      previous_position = truth.translation();
+      const double yaw_error = std::abs((truth.rotation().inverse() * filter.state().R_world_body).log().z());
+      result.max_yaw_error_deg = std::max(result.max_yaw_error_deg, yaw_error * 180.0 / M_PI);
+      next_frame += frame_interval;
+    }
+    estimate::ImuSample reading{sample.message.timestamp, sample.message.angular_velocity, sample.message.linear_acceleration};
+    EXPECT_TRUE(filter.propagate(reading));
+  }
+  const sim::TrajectorySample last = trajectory.sample(filter.state().timestamp);
+  result.final_error = (filter.state().position - last.T_world_body.translation()).norm();
+  result.accel_bias_error = filter.state().accel_bias - imu.back().accel_bias;
+  result.gyro_bias_error = filter.state().gyro_bias - imu.back().gyro_bias;
+  return result;
+}
+
+TEST(Msckf, SimulatedDroneStereoDriftsUnderHalfAPercentOfTheDistance) {
+  const FlightResult flight = fly(true, 40.0);
+  RecordProperty("distance_m", std::to_string(flight.distance));
+  RecordProperty("final_error_m", std::to_string(flight.final_error));
+  std::printf("stereo: %.1f m flown, final error %.3f m (%.2f %%), yaw error max %.2f deg, gyro bias error %.5f rad/s, accel %.4f\n",
+              flight.distance, flight.final_error, 100.0 * flight.final_error / flight.distance, flight.max_yaw_error_deg,
+              flight.gyro_bias_error.norm(), flight.accel_bias_error.norm());
+  EXPECT_GT(flight.distance, 50.0);
+  EXPECT_LT(flight.final_error, 0.005 * flight.distance);
+  EXPECT_LT(flight.gyro_bias_error.norm(), 1e-3);
+}
+
+TEST(Msckf, SimulatedDroneMonocularDriftsUnderOnePercentOfTheDistance) {
+  const FlightResult flight = fly(false, 40.0);
+  std::printf("mono: %.1f m flown, final error %.3f m (%.2f %%), yaw error max %.2f deg, gyro bias error %.5f rad/s, accel %.4f\n",
+              flight.distance, flight.final_error, 100.0 * flight.final_error / flight.distance, flight.max_yaw_error_deg,
+              flight.gyro_bias_error.norm(), flight.accel_bias_error.norm());
+  EXPECT_LT(flight.final_error, 0.01 * flight.distance);
+}
+
+TEST(Msckf, GatesWrongTracksAndStaysAccurate) {
+  // 5 % of the observations 50 px off: the chi-square gate drops their features.
+  const FlightResult flight = fly(true, 20.0, 0.05);
+  std::printf("outliers: %d features rejected by the gate, %d used, final error %.3f m over %.1f m\n", flight.rejected_chi_square,
+              flight.features_used, flight.final_error, flight.distance);
+  EXPECT_GT(flight.rejected_chi_square, 100);
+  EXPECT_LT(flight.final_error, 0.01 * flight.distance);
+}
+
+TEST(Msckf, RefusesBadInputAndKeepsItsState) {
+  const std::vector<MsckfCamera> cameras = {{SE3(forward_camera_rotation(), Eigen::Vector3d::Zero()), 400.0}};
+  estimate::NavigationState state;
+  state.timestamp = Timestamp::from_seconds(10.0);
+  const Eigen::MatrixXd covariance = 1e-4 * Eigen::MatrixXd::Identity(15, 15);
+  EXPECT_FALSE(Msckf::create(MsckfConfig{}, {}, state, covariance));
+  EXPECT_FALSE(Msckf::create(MsckfConfig{}, cameras, state, Eigen::MatrixXd::Identity(9, 9)));
+  MsckfConfig bad;
+  bad.max_clones = 1;
+  const auto refused = Msckf::create(bad, cameras, state, covariance);
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("max_clones"), std::string::npos);
+
+  Msckf filter = Msckf::create(MsckfConfig{}, cameras, state, covariance).value();
+  EXPECT_FALSE(filter.process_frame(Timestamp::from_seconds(10.0), {}));  // no IMU sample yet
+  const estimate::ImuSample still{Timestamp::from_seconds(10.005), Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 0, estimate::kStandardGravity)};
+  ASSERT_TRUE(filter.propagate(still));
+  EXPECT_FALSE(filter.propagate({Timestamp::from_seconds(10.0), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()}));  // older
+  EXPECT_FALSE(filter.propagate({Timestamp::from_seconds(10.01), Eigen::Vector3d(NAN, 0, 0), Eigen::Vector3d::Zero()}));
+  ASSERT_TRUE(filter.process_frame(Timestamp::from_seconds(10.01), {{1, 0, Eigen::Vector2d(0.1, 0.1)}}));
+  EXPECT_FALSE(filter.process_frame(Timestamp::from_seconds(10.01), {}));  // not after the previous frame
+  EXPECT_FALSE(filter.process_frame(Timestamp::from_seconds(10.02), {{2, 1, Eigen::Vector2d(0.1, 0.1)}}));  // no camera 1
+  EXPECT_FALSE(filter.process_frame(Timestamp::from_seconds(10.02), {{2, 0, Eigen::Vector2d(NAN, 0.1)}}));
+  EXPECT_EQ(filter.clones().size(), 1u);
+  EXPECT_EQ(filter.pending_features(), 1);
+  EXPECT_TRUE(filter.covariance().allFinite());
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::vision
