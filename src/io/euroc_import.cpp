@@ -122,6 +122,16 @@ struct CameraStream {
 
 }  // namespace
 
+Result<calib::SensorCalibration> read_euroc_camera_calibration(const std::string& sensor_yaml_path, const std::string& sensor_name) {
+  const Result<YamlValue> yaml = YamlValue::load_file(sensor_yaml_path);
+  if (!yaml) return yaml.error();
+  SE3 T_body_camera;
+  HANZO_ASSIGN_OR_RETURN(T_body_camera, read_T_BS(*yaml));
+  calib::SensorCalibration sensor = calib::SensorCalibration::from_transform(sensor_name, T_body_camera);
+  HANZO_ASSIGN_OR_RETURN(sensor.camera, read_camera(*yaml));
+  return sensor;
+}
+
 Result<EurocImportReport> import_euroc(const std::string& dir, SensorLogWriter& writer, const EurocImportConfig& config) {
   fs::path mav(dir);
   if (fs::is_directory(mav / "mav0")) mav /= "mav0";
@@ -162,14 +172,10 @@ Result<EurocImportReport> import_euroc(const std::string& dir, SensorLogWriter& 
       camera.report_index = report.streams.size();
       report.streams.push_back({"/" + camera.name, 0, 0, {}});
       HANZO_ASSIGN_OR_RETURN(camera.rows, read_rows(camera.dir / "data.csv", 1, report.streams.back()));
-      SE3 T_body_camera;
       if (fs::is_regular_file(camera.dir / "sensor.yaml")) {
-        const Result<YamlValue> yaml = YamlValue::load_file((camera.dir / "sensor.yaml").string());
-        if (!yaml) return yaml.error();
-        HANZO_ASSIGN_OR_RETURN(T_body_camera, read_T_BS(*yaml));
-        HANZO_ASSIGN_OR_RETURN(camera.camera, read_camera(*yaml));
-        calib::SensorCalibration sensor = calib::SensorCalibration::from_transform(camera.name, T_body_camera);
-        sensor.camera = camera.camera;
+        calib::SensorCalibration sensor;
+        HANZO_ASSIGN_OR_RETURN(sensor, read_euroc_camera_calibration((camera.dir / "sensor.yaml").string(), camera.name));
+        camera.camera = *sensor.camera;
         report.calibration.sensors.push_back(sensor);
       }
     }

@@ -4,43 +4,20 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 
 #include "hanzo/fusion/estimate/static_alignment.hpp"
+#include "support/euroc_micro.hpp"
 
 namespace hanzo::fusion::estimate {
 namespace {
 
 constexpr double kDegree = M_PI / 180.0;
 
-// EuRoC imu0/data.csv: timestamp [ns], w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2].
-std::vector<ImuSample> read_euroc_imu(const std::string& path, double first_seconds, double seconds) {
-  std::ifstream file(path);
-  std::vector<ImuSample> samples;
-  std::string line;
-  int64_t start_ns = -1;
-  while (std::getline(file, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    std::replace(line.begin(), line.end(), ',', ' ');
-    std::istringstream fields(line);
-    int64_t ns = 0;
-    ImuSample sample;
-    fields >> ns >> sample.angular_velocity.x() >> sample.angular_velocity.y() >> sample.angular_velocity.z() >> sample.linear_acceleration.x() >>
-        sample.linear_acceleration.y() >> sample.linear_acceleration.z();
-    if (start_ns < 0) start_ns = ns;
-    const double t = static_cast<double>(ns - start_ns) * 1e-9;
-    if (t < first_seconds) continue;
-    if (t >= first_seconds + seconds) break;
-    sample.timestamp = Timestamp::from_nanoseconds(ns);
-    samples.push_back(sample);
-  }
-  return samples;
-}
+using test_support::read_euroc_imu;
 
 TEST(StaticAlignment, EurocMavStandingWithItsRotorsRunningMatchesOpenVins) {
   const std::string data = std::string(HANZO_DATA_DIR) + "/euroc_v101_micro";

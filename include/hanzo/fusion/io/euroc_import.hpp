@@ -49,6 +49,10 @@ struct EurocImportReport {
   calib::Calibration calibration;  ///< imu and cameras to body
 };
 
+/// One camera's sensor.yaml (T_BS, intrinsics, distortion) as the calibration of `sensor_name`,
+/// without importing anything; fails naming the file and field as import_euroc() does.
+Result<calib::SensorCalibration> read_euroc_camera_calibration(const std::string& sensor_yaml_path, const std::string& sensor_name);
+
 Result<EurocImportReport> import_euroc(const std::string& dir, SensorLogWriter& writer, const EurocImportConfig& config);
 
 }  // namespace hanzo::fusion::io

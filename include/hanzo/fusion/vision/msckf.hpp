@@ -53,6 +53,7 @@
 #include "hanzo/fusion/core/time.hpp"
 #include "hanzo/fusion/estimate/imu_propagation.hpp"
 #include "hanzo/fusion/estimate/navigation_state.hpp"
+#include "hanzo/fusion/vision/feature_observation.hpp"
 
 namespace hanzo::fusion::vision {
 
@@ -84,14 +85,6 @@ Status validate(const MsckfConfig& config);
 struct MsckfCamera {
   SE3 T_body_camera;
   double focal_length_px = 500.0;
-};
-
-/// One feature seen in one camera image: its track id (the same id in every frame and camera
-/// that sees the same point) and undistorted normalized coordinates (x/z, y/z).
-struct FeatureObservation {
-  uint64_t feature_id = 0;
-  int camera = 0;  ///< index into the cameras given at creation
-  Eigen::Vector2d normalized = Eigen::Vector2d::Zero();
 };
 
 /// The outcome of one frame's update.

@@ -1,0 +1,256 @@
+#include "hanzo/fusion/vision/feature_tracker.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <optional>
+
+#include <fmt/format.h>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
+
+namespace hanzo::fusion::vision {
+namespace {
+
+bool positive(double value) { return std::isfinite(value) && value > 0.0; }
+
+Result<cv::Mat> to_grey(const cv::Mat& image, cv::Size expected, const char* which) {
+  if (image.empty()) return Error(fmt::format("FeatureTracker: the {} image is empty", which), "image");
+  if (image.size() != expected)
+    return Error(fmt::format("FeatureTracker: the {} image is {}x{}; the tracker was made for {}x{}", which, image.cols, image.rows,
+                             expected.width, expected.height), "image");
+  if (image.type() == CV_8UC1) return image;
+  cv::Mat grey;
+  if (image.type() == CV_8UC3) {
+    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  } else if (image.type() == CV_8UC4) {
+    cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
+  } else {
+    return Error(fmt::format("FeatureTracker: the {} image has OpenCV type {}; 8-bit grey, BGR or BGRA expected", which, image.type()),
+                 "image");
+  }
+  return grey;
+}
+
+bool inside(const cv::Point2f& point, cv::Size size) {
+  return point.x >= 1.0f && point.y >= 1.0f && point.x < static_cast<float>(size.width) - 1.0f && point.y < static_cast<float>(size.height) - 1.0f;
+}
+
+std::optional<Eigen::Vector2d> normalized(const PinholeCamera& camera, const cv::Point2f& pixel) {
+  return camera.unproject(Eigen::Vector2d(pixel.x, pixel.y));
+}
+
+}  // namespace
+
+Status validate(const FeatureTrackerConfig& config) {
+  if (config.max_features < 8) return Error("FeatureTrackerConfig.max_features: must be at least 8", "max_features");
+  if (!positive(config.min_distance_px)) return Error("FeatureTrackerConfig.min_distance_px: must be positive", "min_distance_px");
+  if (!(config.quality_level > 0.0 && config.quality_level < 1.0)) return Error("FeatureTrackerConfig.quality_level: must be in (0, 1)", "quality_level");
+  if (config.window_px < 5 || config.window_px % 2 == 0) return Error("FeatureTrackerConfig.window_px: must be odd and at least 5", "window_px");
+  if (config.pyramid_levels < 0 || config.pyramid_levels > 8) return Error("FeatureTrackerConfig.pyramid_levels: must be in 0..8", "pyramid_levels");
+  if (!positive(config.ransac_threshold_px)) return Error("FeatureTrackerConfig.ransac_threshold_px: must be positive", "ransac_threshold_px");
+  if (!positive(config.stereo_epipolar_px)) return Error("FeatureTrackerConfig.stereo_epipolar_px: must be positive", "stereo_epipolar_px");
+  return ok_status();
+}
+
+struct FeatureTracker::State {
+  FeatureTrackerConfig config;
+  cv::Size image_size;
+  PinholeCamera left;
+  std::optional<PinholeCamera> right;
+  Eigen::Matrix3d essential = Eigen::Matrix3d::Zero();  // x_right^T E x_left = 0
+  Eigen::Matrix3d R_right_left = Eigen::Matrix3d::Identity();
+  cv::Mat previous_grey;
+  std::vector<cv::Point2f> points;
+  std::vector<uint64_t> ids;
+  std::map<uint64_t, cv::Point2f> right_points;  // last right-image position per id
+  uint64_t next_id = 0;
+
+  Result<TrackedFrame> track(const cv::Mat& left_image, const cv::Mat* right_image);
+  void track_over_time(const cv::Mat& grey, TrackedFrame& frame);
+  void detect(const cv::Mat& grey, TrackedFrame& frame);
+  void match_right(const cv::Mat& grey, const cv::Mat& right_grey, TrackedFrame& frame);
+};
+
+namespace {
+
+Status check_camera(const PinholeCamera& camera, const char* which) {
+  if (!positive(camera.fx) || !positive(camera.fy)) return Error(fmt::format("FeatureTracker: the {} camera's focal lengths must be positive", which), "camera");
+  return ok_status();
+}
+
+}  // namespace
+
+FeatureTracker::FeatureTracker(std::unique_ptr<State> state) : state_(std::move(state)) {}
+FeatureTracker::~FeatureTracker() = default;
+
+Result<std::unique_ptr<FeatureTracker>> FeatureTracker::create(const PinholeCamera& camera, cv::Size image_size, const FeatureTrackerConfig& config) {
+  HANZO_RETURN_IF_ERROR(validate(config));
+  HANZO_RETURN_IF_ERROR(check_camera(camera, "left"));
+  if (image_size.width < 32 || image_size.height < 32)
+    return Error(fmt::format("FeatureTracker: image size {}x{} is under 32x32", image_size.width, image_size.height), "image_size");
+  auto state = std::make_unique<State>();
+  state->config = config;
+  state->image_size = image_size;
+  state->left = camera;
+  return std::unique_ptr<FeatureTracker>(new FeatureTracker(std::move(state)));
+}
+
+Result<std::unique_ptr<FeatureTracker>> FeatureTracker::create_stereo(const PinholeCamera& left, const PinholeCamera& right, const SE3& T_left_right,
+                                                                     cv::Size image_size, const FeatureTrackerConfig& config) {
+  std::unique_ptr<FeatureTracker> tracker;
+  HANZO_ASSIGN_OR_RETURN(tracker, create(left, image_size, config));
+  HANZO_RETURN_IF_ERROR(check_camera(right, "right"));
+  if (!(T_left_right.translation().norm() >= 1e-3)) return Error("FeatureTracker: the stereo cameras are less than 1 mm apart", "T_left_right");
+  const SE3 T_right_left = T_left_right.inverse();
+  tracker->state_->right = right;
+  tracker->state_->R_right_left = T_right_left.rotation().matrix();
+  tracker->state_->essential = SO3::hat(T_right_left.translation()) * T_right_left.rotation().matrix();
+  return tracker;
+}
+
+Result<TrackedFrame> FeatureTracker::track(const cv::Mat& image) { return state_->track(image, nullptr); }
+
+Result<TrackedFrame> FeatureTracker::track(const cv::Mat& left, const cv::Mat& right) {
+  if (!state_->right) return Error("FeatureTracker: a stereo pair given to a monocular tracker", "image");
+  return state_->track(left, &right);
+}
+
+Result<TrackedFrame> FeatureTracker::State::track(const cv::Mat& left_image, const cv::Mat* right_image) {
+  cv::Mat grey;
+  HANZO_ASSIGN_OR_RETURN(grey, to_grey(left_image, image_size, "left"));
+  cv::Mat right_grey;
+  if (right_image) {
+    HANZO_ASSIGN_OR_RETURN(right_grey, to_grey(*right_image, image_size, "right"));
+  }
+  TrackedFrame frame;
+  track_over_time(grey, frame);
+  detect(grey, frame);
+
+  // Features whose pixel does not undistort are dropped from the tracks too.
+  std::vector<cv::Point2f> kept_points;
+  std::vector<uint64_t> kept_ids;
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (const std::optional<Eigen::Vector2d> coordinates = normalized(left, points[i])) {
+      frame.observations.push_back({ids[i], 0, *coordinates});
+      kept_points.push_back(points[i]);
+      kept_ids.push_back(ids[i]);
+    }
+  }
+  points = std::move(kept_points);
+  ids = std::move(kept_ids);
+  if (right_image) match_right(grey, right_grey, frame);
+  previous_grey = grey;
+  return frame;
+}
+
+void FeatureTracker::State::track_over_time(const cv::Mat& grey, TrackedFrame& frame) {
+  if (previous_grey.empty() || points.empty()) return;
+  std::vector<cv::Point2f> moved;
+  std::vector<unsigned char> status;
+  std::vector<float> error;
+  const cv::Size window(config.window_px, config.window_px);
+  cv::calcOpticalFlowPyrLK(previous_grey, grey, points, moved, status, error, window, config.pyramid_levels);
+  std::vector<cv::Point2f> before, after;
+  std::vector<uint64_t> tracked_ids;
+  std::vector<double> displacements;
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (!status[i] || !inside(moved[i], image_size)) continue;
+    before.push_back(points[i]);
+    after.push_back(moved[i]);
+    tracked_ids.push_back(ids[i]);
+    displacements.push_back(std::hypot(moved[i].x - points[i].x, moved[i].y - points[i].y));
+  }
+  std::vector<unsigned char> inlier(after.size(), 1);
+  if (after.size() >= 8) {
+    std::nth_element(displacements.begin(), displacements.begin() + static_cast<long>(displacements.size() / 2), displacements.end());
+    if (displacements[displacements.size() / 2] > 1.0) {
+      // RANSAC on undistorted pixels (normalized coordinates scaled by the focal length).
+      std::vector<cv::Point2f> undistorted_before, undistorted_after;
+      std::vector<size_t> index;
+      for (size_t i = 0; i < after.size(); ++i) {
+        const std::optional<Eigen::Vector2d> a = normalized(left, before[i]), b = normalized(left, after[i]);
+        if (!a || !b) continue;
+        undistorted_before.emplace_back(static_cast<float>(left.fx * a->x()), static_cast<float>(left.fy * a->y()));
+        undistorted_after.emplace_back(static_cast<float>(left.fx * b->x()), static_cast<float>(left.fy * b->y()));
+        index.push_back(i);
+      }
+      if (index.size() >= 8) {
+        std::vector<unsigned char> mask;
+        const cv::Mat fundamental =
+            cv::findFundamentalMat(undistorted_before, undistorted_after, cv::FM_RANSAC, config.ransac_threshold_px, 0.99, mask);
+        if (!fundamental.empty() && mask.size() == index.size()) {
+          for (size_t k = 0; k < index.size(); ++k) inlier[index[k]] = mask[k];
+        }
+      }
+    }
+  }
+  points.clear();
+  ids.clear();
+  for (size_t i = 0; i < after.size(); ++i) {
+    if (!inlier[i]) {
+      ++frame.rejected_ransac;
+      continue;
+    }
+    points.push_back(after[i]);
+    ids.push_back(tracked_ids[i]);
+  }
+  frame.tracked = static_cast<int>(points.size());
+}
+
+void FeatureTracker::State::detect(const cv::Mat& grey, TrackedFrame& frame) {
+  const int wanted = config.max_features - static_cast<int>(points.size());
+  if (wanted <= 0) return;
+  cv::Mat mask(image_size, CV_8UC1, cv::Scalar(255));
+  const int radius = static_cast<int>(std::ceil(config.min_distance_px));
+  for (const cv::Point2f& point : points) cv::circle(mask, point, radius, cv::Scalar(0), cv::FILLED);
+  std::vector<cv::Point2f> corners;
+  cv::goodFeaturesToTrack(grey, corners, wanted, config.quality_level, config.min_distance_px, mask, 3);
+  for (const cv::Point2f& corner : corners) {
+    points.push_back(corner);
+    ids.push_back(next_id++);
+  }
+  frame.new_features = static_cast<int>(corners.size());
+}
+
+void FeatureTracker::State::match_right(const cv::Mat& grey, const cv::Mat& right_grey, TrackedFrame& frame) {
+  std::map<uint64_t, cv::Point2f> matched;
+  if (!points.empty()) {
+    std::vector<cv::Point2f> guess;
+    for (size_t i = 0; i < points.size(); ++i) {
+      // The last right position, else where the point would be at infinite depth.
+      const auto last = right_points.find(ids[i]);
+      std::optional<Eigen::Vector2d> at_infinity;
+      if (last == right_points.end()) {
+        if (const std::optional<Eigen::Vector2d> coordinates = normalized(left, points[i])) at_infinity = right->project(R_right_left * coordinates->homogeneous());
+      }
+      guess.push_back(last != right_points.end() ? last->second
+                      : at_infinity            ? cv::Point2f(static_cast<float>(at_infinity->x()), static_cast<float>(at_infinity->y()))
+                                               : points[i]);
+    }
+    std::vector<cv::Point2f> back = points;
+    std::vector<unsigned char> status, back_status;
+    std::vector<float> error;
+    const cv::Size window(config.window_px, config.window_px);
+    const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.01);
+    cv::calcOpticalFlowPyrLK(grey, right_grey, points, guess, status, error, window, config.pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    cv::calcOpticalFlowPyrLK(right_grey, grey, guess, back, back_status, error, window, config.pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    for (size_t i = 0; i < points.size(); ++i) {
+      if (!status[i] || !back_status[i] || !inside(guess[i], image_size)) continue;
+      if (std::hypot(back[i].x - points[i].x, back[i].y - points[i].y) > 1.0) continue;
+      const std::optional<Eigen::Vector2d> left_coordinates = normalized(left, points[i]);
+      const std::optional<Eigen::Vector2d> right_coordinates = normalized(*right, guess[i]);
+      if (!left_coordinates || !right_coordinates) continue;
+      const Eigen::Vector3d line = essential * left_coordinates->homogeneous();
+      const double distance = std::abs(right_coordinates->homogeneous().dot(line)) / line.head<2>().norm() * right->fx;
+      if (!(distance <= config.stereo_epipolar_px)) continue;
+      frame.observations.push_back({ids[i], 1, *right_coordinates});
+      matched[ids[i]] = guess[i];
+    }
+  }
+  frame.stereo_matches = static_cast<int>(matched.size());
+  right_points = std::move(matched);
+}
+
+}  // namespace hanzo::fusion::vision
