@@ -47,6 +47,9 @@ Status validate(const FeatureTrackerConfig& config) {
   if (config.max_features < 8) return Error("FeatureTrackerConfig.max_features: must be at least 8", "max_features");
   if (!positive(config.min_distance_px)) return Error("FeatureTrackerConfig.min_distance_px: must be positive", "min_distance_px");
   if (!(config.quality_level > 0.0 && config.quality_level < 1.0)) return Error("FeatureTrackerConfig.quality_level: must be in (0, 1)", "quality_level");
+  if (!(config.min_image_quality >= 0.0 && config.min_image_quality < 1.0)) return Error("FeatureTrackerConfig.min_image_quality: must be in [0, 1)", "min_image_quality");
+  if (config.grid_columns < 1 || config.grid_rows < 1 || config.grid_columns * config.grid_rows > config.max_features)
+    return Error("FeatureTrackerConfig.grid_columns, grid_rows: at least 1 each and at most max_features cells", "grid_columns");
   if (config.window_px < 5 || config.window_px % 2 == 0) return Error("FeatureTrackerConfig.window_px: must be odd and at least 5", "window_px");
   if (config.pyramid_levels < 0 || config.pyramid_levels > 8) return Error("FeatureTrackerConfig.pyramid_levels: must be in 0..8", "pyramid_levels");
   if (!positive(config.ransac_threshold_px)) return Error("FeatureTrackerConfig.ransac_threshold_px: must be positive", "ransac_threshold_px");
@@ -200,18 +203,69 @@ void FeatureTracker::State::track_over_time(const cv::Mat& grey, TrackedFrame& f
 }
 
 void FeatureTracker::State::detect(const cv::Mat& grey, TrackedFrame& frame) {
-  const int wanted = config.max_features - static_cast<int>(points.size());
-  if (wanted <= 0) return;
-  cv::Mat mask(image_size, CV_8UC1, cv::Scalar(255));
+  if (static_cast<int>(points.size()) >= config.max_features) return;
+  const int columns = config.grid_columns, rows = config.grid_rows;
+  const int per_cell = (config.max_features + columns * rows - 1) / (columns * rows);
+  auto cell_of = [&](const cv::Point2f& point) {
+    const int column = std::clamp(static_cast<int>(point.x * static_cast<float>(columns) / static_cast<float>(image_size.width)), 0, columns - 1);
+    const int row = std::clamp(static_cast<int>(point.y * static_cast<float>(rows) / static_cast<float>(image_size.height)), 0, rows - 1);
+    return row * columns + column;
+  };
+  std::vector<int> in_cell(static_cast<size_t>(columns * rows), 0);
+  cv::Mat free(image_size, CV_8UC1, cv::Scalar(255));
   const int radius = static_cast<int>(std::ceil(config.min_distance_px));
-  for (const cv::Point2f& point : points) cv::circle(mask, point, radius, cv::Scalar(0), cv::FILLED);
-  std::vector<cv::Point2f> corners;
-  cv::goodFeaturesToTrack(grey, corners, wanted, config.quality_level, config.min_distance_px, mask, 3);
-  for (const cv::Point2f& corner : corners) {
-    points.push_back(corner);
-    ids.push_back(next_id++);
+  for (const cv::Point2f& point : points) {
+    ++in_cell[static_cast<size_t>(cell_of(point))];
+    cv::circle(free, point, radius, cv::Scalar(0), cv::FILLED);
   }
-  frame.new_features = static_cast<int>(corners.size());
+
+  // Shi-Tomasi scores, their 3 x 3 local maxima, grouped by cell, strongest first.
+  cv::Mat score, dilated;
+  cv::cornerMinEigenVal(grey, score, 3, 3);
+  cv::dilate(score, dilated, cv::Mat());
+  double image_best = 0.0;
+  cv::minMaxLoc(score, nullptr, &image_best);
+  const float floor = static_cast<float>(config.min_image_quality * image_best);
+  std::vector<std::vector<std::pair<float, cv::Point>>> candidates(static_cast<size_t>(columns * rows));
+  for (int y = 1; y < image_size.height - 1; ++y) {
+    const float* value = score.ptr<float>(y);
+    const float* maximum = dilated.ptr<float>(y);
+    const unsigned char* open = free.ptr<unsigned char>(y);
+    for (int x = 1; x < image_size.width - 1; ++x) {
+      if (value[x] > floor && value[x] == maximum[x] && open[x]) {
+        candidates[static_cast<size_t>(cell_of(cv::Point2f(static_cast<float>(x), static_cast<float>(y))))].emplace_back(value[x], cv::Point(x, y));
+      }
+    }
+  }
+  auto take = [&](const cv::Point& pixel) {
+    if (!free.at<unsigned char>(pixel)) return false;
+    points.emplace_back(static_cast<float>(pixel.x), static_cast<float>(pixel.y));
+    ids.push_back(next_id++);
+    ++frame.new_features;
+    cv::circle(free, pixel, radius, cv::Scalar(0), cv::FILLED);
+    return true;
+  };
+  // Each cell its share; what cells without texture leave goes to the strongest corners left.
+  std::vector<std::pair<float, cv::Point>> left_over;
+  for (size_t cell = 0; cell < candidates.size(); ++cell) {
+    std::vector<std::pair<float, cv::Point>>& list = candidates[cell];
+    if (list.empty()) continue;
+    std::sort(list.begin(), list.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    const float cell_floor = static_cast<float>(config.quality_level) * list.front().first;
+    for (const auto& candidate : list) {
+      if (candidate.first < cell_floor) break;
+      if (in_cell[cell] < per_cell && static_cast<int>(points.size()) < config.max_features) {
+        if (take(candidate.second)) ++in_cell[cell];
+      } else {
+        left_over.push_back(candidate);
+      }
+    }
+  }
+  std::sort(left_over.begin(), left_over.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  for (const auto& candidate : left_over) {
+    if (static_cast<int>(points.size()) >= config.max_features) break;
+    take(candidate.second);
+  }
 }
 
 void FeatureTracker::State::match_right(const cv::Mat& grey, const cv::Mat& right_grey, TrackedFrame& frame) {

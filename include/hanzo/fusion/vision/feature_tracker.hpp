@@ -7,8 +7,11 @@
 //      features end their tracks;
 //   2. when the features moved (median over 1 px), the tracked pairs are checked by a RANSAC
 //      fundamental matrix on undistorted coordinates (ransac_threshold_px); outliers end;
-//   3. new Shi-Tomasi corners (cv::goodFeaturesToTrack, quality_level) at least min_distance_px
-//      from every kept feature top the image up to max_features; each gets a new id;
+//   3. new Shi-Tomasi corners (the local maxima of cv::cornerMinEigenVal) at least min_distance_px
+//      from every kept feature top the image up to max_features, spread over a grid of cells
+//      (each cell gets its share, its strongest corners first, down to quality_level of its
+//      strongest and min_image_quality of the image's strongest: a strong checkerboard does not
+//      starve the weakly textured rest of the image); each gets a new id;
 //   4. stereo: every left feature is searched in the right image by Lucas-Kanade (started at
 //      its last right position, else at the left position), and kept when the result lies
 //      within stereo_epipolar_px of the rig's epipolar line and tracks back to the left
@@ -38,8 +41,12 @@ struct FeatureTrackerConfig {
   int max_features = 200;
   /// Least distance between features (pixels): spreads them over the image.
   double min_distance_px = 20.0;
-  /// Shi-Tomasi corner strength relative to the image's strongest.
+  /// Shi-Tomasi corner strength relative to the strongest in its cell, and to the image's strongest.
   double quality_level = 0.01;
+  double min_image_quality = 0.001;
+  /// Detection grid: each of the cells gets max_features / cells new features at most.
+  int grid_columns = 8;
+  int grid_rows = 5;
   /// Lucas-Kanade window (pixels, odd) and pyramid levels above the image.
   int window_px = 21;
   int pyramid_levels = 3;
