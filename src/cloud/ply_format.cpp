@@ -143,6 +143,12 @@ Result<RawCloud> parse_ply(const std::string& bytes) {
     if (position == std::string::npos) return Error("PLY ascii data ends before the vertices");
     ++position;
   }
+  // Every ascii value takes at least two bytes (a digit and a separator): a count the file cannot
+  // hold is refused before its memory is taken.
+  const size_t remaining = bytes.size() > position ? bytes.size() - position : 0;
+  if (raw.count > remaining / std::max<size_t>(1, 2 * raw.fields.size())) {
+    return Error(fmt::format("PLY ascii data holds {} bytes, too few for the {} vertices the header declares", remaining, raw.count));
+  }
   raw.bytes.resize(data_size);
   for (size_t i = 0; i < raw.count; ++i) {
     if (position >= bytes.size()) return Error(fmt::format("PLY ascii data holds {} of {} vertices", i, raw.count));

@@ -146,6 +146,14 @@ TEST(CloudIo, RejectsBadFiles) {
   result = read_cloud(huge_ply);
   ASSERT_FALSE(result.ok());
   EXPECT_NE(result.error().message.find("vertex data holds 0 bytes"), std::string::npos) << result.error().message;
+  // An ascii header declaring 2.1 billion vertices over two lines (found by fuzzing: the reader
+  // took 56 GB for them before reading a line).
+  const std::string huge_ascii_ply = temp_path("huge_ascii.ply");
+  std::ofstream(huge_ascii_ply) << "ply\nformat ascii 1.0\nelement vertex 2111111111\nproperty float x\nproperty float y\n"
+                                   "property float z\nproperty uchar r)ng\nend_header\n1 2 3 4\n5 6 7 8\n";
+  result = read_cloud(huge_ascii_ply);
+  ASSERT_FALSE(result.ok());
+  EXPECT_NE(result.error().message.find("too few for the 2111111111 vertices"), std::string::npos) << result.error().message;
   const std::string lying_pcd = temp_path("lying.pcd");
   std::ofstream(lying_pcd) << "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1000\nHEIGHT 1\n"
                               "POINTS 1000\nDATA binary\n0123456789ab";
