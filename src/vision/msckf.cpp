@@ -154,13 +154,15 @@ Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vecto
 MsckfUpdateSummary Msckf::update(const std::vector<uint64_t>& feature_ids) {
   MsckfUpdateSummary summary;
   const Eigen::Index n = covariance_.rows();
+  const Eigen::Index clone_states = n - kImu;
   std::map<Timestamp, int> clone_index;
   for (size_t i = 0; i < clones_.size(); ++i) clone_index[clones_[i].timestamp] = static_cast<int>(i);
   const FeatureTriangulationConfig triangulation{config_.min_depth, config_.max_depth, config_.triangulation_iterations};
 
-  std::vector<Eigen::MatrixXd> accepted_jacobians;
-  std::vector<Eigen::VectorXd> accepted_residuals;
-  Eigen::Index rows = 0;
+  // The accepted rows, accumulated as information over the clone states: J = sum H0^T H0 and
+  // g = sum H0^T r0 (whitened rows; H0 touches clone states only).
+  Eigen::MatrixXd information = Eigen::MatrixXd::Zero(clone_states, clone_states);
+  Eigen::VectorXd information_vector = Eigen::VectorXd::Zero(clone_states);
   for (uint64_t id : feature_ids) {
     const std::vector<TrackObservation>& track = tracks_.at(id);
     if (track.size() < 2) continue;
@@ -177,66 +179,77 @@ MsckfUpdateSummary Msckf::update(const std::vector<uint64_t>& feature_ids) {
       ++summary.rejected_triangulation;
       continue;
     }
-    // Whitened (each row divided by its noise) stacked residual and Jacobians.
+    // Whitened residual r and Jacobians: H_c (one 2 x 6 block per observation, on its clone)
+    // and H_f (2m x 3).
     const Eigen::Index m = 2 * static_cast<Eigen::Index>(views.size());
-    Eigen::MatrixXd by_state = Eigen::MatrixXd::Zero(m, n + 1);  // last column: the residual
+    std::vector<Eigen::Matrix<double, 2, kClone>> by_clone(views.size());
     Eigen::MatrixXd by_point(m, 3);
+    Eigen::VectorXd residual(m);
     for (size_t k = 0; k < views.size(); ++k) {
       const FeatureLinearization linear = linearize_observation(views[k], *point);
       const double inverse_sigma = cameras_[track[k].camera].focal_length_px / config_.pixel_sigma;
       const Eigen::Index row = 2 * static_cast<Eigen::Index>(k);
-      by_state.block<2, kClone>(row, kImu + kClone * view_clones[k]) = inverse_sigma * linear.by_clone;
-      by_state.block<2, 1>(row, n) = inverse_sigma * linear.residual;
+      by_clone[k] = inverse_sigma * linear.by_clone;
       by_point.middleRows<2>(row) = inverse_sigma * linear.by_point;
+      residual.segment<2>(row) = inverse_sigma * linear.residual;
     }
-    // Left null space of by_point: the last m - 3 rows after applying Q^T (eq. 23-24).
+    // Q = [Q1 N] from the QR decomposition of H_f: N spans its left null space (eq. 23-24), and
+    // r0 = N^T r, H0 = N^T H_c no longer depend on the feature's error.
     const Eigen::HouseholderQR<Eigen::MatrixXd> qr(by_point);
-    by_state.applyOnTheLeft(qr.householderQ().transpose());
-    const Eigen::MatrixXd projected_jacobian = by_state.bottomLeftCorner(m - 3, n);
-    const Eigen::VectorXd projected_residual = by_state.bottomRightCorner(m - 3, 1);
+    const Eigen::MatrixXd q = qr.householderQ() * Eigen::MatrixXd::Identity(m, m);
+    const auto range = q.leftCols(3);
+    const auto null_space = q.rightCols(m - 3);
 
-    Eigen::MatrixXd innovation = projected_jacobian * covariance_ * projected_jacobian.transpose();
-    innovation.diagonal().array() += 1.0;
+    // Chi-square gate: r0^T (N^T (H_c P H_c^T + I) N)^-1 r0, with H_c P H_c^T built block by
+    // block from the 6 x 6 clone covariances (H_c is block-sparse).
+    Eigen::MatrixXd projected_covariance = Eigen::MatrixXd::Identity(m, m);
+    for (size_t k = 0; k < views.size(); ++k) {
+      const Eigen::Index clone_k = kImu + kClone * view_clones[k];
+      const Eigen::Matrix<double, 2, kClone> left = by_clone[k];
+      for (size_t l = k; l < views.size(); ++l) {
+        const Eigen::Index clone_l = kImu + kClone * view_clones[l];
+        const Eigen::Matrix2d block = left * covariance_.block<kClone, kClone>(clone_k, clone_l) * by_clone[l].transpose();
+        projected_covariance.block<2, 2>(2 * static_cast<Eigen::Index>(k), 2 * static_cast<Eigen::Index>(l)) += block;
+        if (l != k) projected_covariance.block<2, 2>(2 * static_cast<Eigen::Index>(l), 2 * static_cast<Eigen::Index>(k)) += block.transpose();
+      }
+    }
+    const Eigen::VectorXd projected_residual = null_space.transpose() * residual;
+    const Eigen::MatrixXd innovation = null_space.transpose() * projected_covariance * null_space;
     const double chi_square = projected_residual.dot(innovation.ldlt().solve(projected_residual));
     if (!(chi_square <= estimate::chi_square_quantile(config_.chi_square_probability, static_cast<int>(m - 3)))) {
       ++summary.rejected_chi_square;
       continue;
     }
     ++summary.features_used;
-    rows += m - 3;
-    accepted_jacobians.push_back(projected_jacobian);
-    accepted_residuals.push_back(projected_residual);
-  }
-  if (rows == 0) return summary;
+    summary.residual_rows += static_cast<int>(m - 3);
 
-  Eigen::MatrixXd jacobian(rows, n);
-  Eigen::VectorXd residual(rows);
-  Eigen::Index row = 0;
-  for (size_t i = 0; i < accepted_jacobians.size(); ++i) {
-    jacobian.middleRows(row, accepted_jacobians[i].rows()) = accepted_jacobians[i];
-    residual.segment(row, accepted_residuals[i].rows()) = accepted_residuals[i];
-    row += accepted_jacobians[i].rows();
+    // H0^T H0 = H_c^T (I - Q1 Q1^T) H_c and H0^T r0 = H_c^T (r - Q1 Q1^T r).
+    const Eigen::VectorXd orthogonal_residual = residual - range * (range.transpose() * residual);
+    Eigen::MatrixXd by_range = Eigen::MatrixXd::Zero(clone_states, 3);  // H_c^T Q1
+    for (size_t k = 0; k < views.size(); ++k) {
+      const Eigen::Index at = kClone * view_clones[k];
+      const Eigen::Index row = 2 * static_cast<Eigen::Index>(k);
+      information.block<kClone, kClone>(at, at) += by_clone[k].transpose() * by_clone[k];
+      by_range.middleRows<kClone>(at) += by_clone[k].transpose() * range.middleRows<2>(row);
+      information_vector.segment<kClone>(at) += by_clone[k].transpose() * orthogonal_residual.segment<2>(row);
+    }
+    information.noalias() -= by_range * by_range.transpose();
   }
-  // Measurement compression (eq. 26-28): with more rows than states, H = Q1 T_H and only
-  // T_H dx + Q1^T r are kept (the noise stays identity after the orthonormal Q1^T).
-  if (rows > n) {
-    Eigen::MatrixXd stacked(rows, n + 1);
-    stacked << jacobian, residual;
-    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(jacobian);
-    stacked.applyOnTheLeft(qr.householderQ().transpose());
-    jacobian = stacked.topLeftCorner(n, n).triangularView<Eigen::Upper>();
-    residual = stacked.topRightCorner(n, 1);
-  }
-  summary.residual_rows = static_cast<int>(rows);
+  if (summary.features_used == 0) return summary;
 
-  // K = P H^T S^-1 with S = H P H^T + I; P <- P - K S K^T = P - K (H P).
-  const Eigen::MatrixXd jacobian_covariance = jacobian * covariance_;
-  Eigen::MatrixXd innovation = jacobian_covariance * jacobian.transpose();
-  innovation.diagonal().array() += 1.0;
-  const Eigen::LDLT<Eigen::MatrixXd> innovation_ldlt(innovation);
-  const Eigen::MatrixXd gain = innovation_ldlt.solve(jacobian_covariance).transpose();
-  apply_correction(gain * residual);
-  covariance_ -= gain * jacobian_covariance;
+  // The EKF update with all rows at once (the measurement compression of eq. 26-28 in
+  // information form): P+ = (P^-1 + J)^-1, dx = P+ g. With P = F F^T (pivoted LDLT: P is
+  // singular right after a clone is added), P+ = F (I + F^T J F)^-1 F^T, which needs no inverse
+  // of P and stays symmetric positive semi-definite.
+  const Eigen::LDLT<Eigen::MatrixXd> factor(covariance_);
+  Eigen::MatrixXd root = factor.matrixL();
+  root = factor.transpositionsP().transpose() * (root * factor.vectorD().cwiseMax(0.0).cwiseSqrt().asDiagonal());
+  const Eigen::MatrixXd clone_root = root.bottomRows(clone_states);  // J and g touch the clone rows only
+  Eigen::MatrixXd gain_system = clone_root.transpose() * information * clone_root;
+  gain_system.diagonal().array() += 1.0;
+  const Eigen::LLT<Eigen::MatrixXd> gain_factor(gain_system);
+  apply_correction(root * gain_factor.solve(clone_root.transpose() * information_vector));
+  covariance_ = root * gain_factor.solve(root.transpose());
   covariance_ = 0.5 * (covariance_ + covariance_.transpose()).eval();
   return summary;
 }
