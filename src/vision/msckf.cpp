@@ -31,6 +31,7 @@ Status validate(const MsckfConfig& config) {
   if (!positive(config.min_depth)) return Error("MsckfConfig.min_depth: must be positive", "min_depth");
   if (!(std::isfinite(config.max_depth) && config.max_depth > config.min_depth))
     return Error("MsckfConfig.max_depth: must be finite and above min_depth", "max_depth");
+  if (!(config.min_parallax_deg >= 0.0 && config.min_parallax_deg < 90.0)) return Error("MsckfConfig.min_parallax_deg: must be in [0, 90)", "min_parallax_deg");
   if (config.triangulation_iterations < 0) return Error("MsckfConfig.triangulation_iterations: must not be negative", "triangulation_iterations");
   const estimate::ImuNoise& noise = config.imu_noise;
   if (!positive(noise.process_noise_accel) || !positive(noise.process_noise_gyro) || !positive(noise.sample_interval) ||
@@ -59,6 +60,10 @@ Msckf::Msckf(const MsckfConfig& config, std::vector<MsckfCamera> cameras, const 
              const Eigen::MatrixXd& covariance)
     : config_(config), cameras_(std::move(cameras)), state_(state), covariance_(covariance) {}
 
+Eigen::Matrix<double, kMsckfImuDimension, kMsckfImuDimension> Msckf::imu_covariance() const {
+  return interval_transition_ * covariance_.topLeftCorner<kImu, kImu>() * interval_transition_.transpose() + interval_noise_;
+}
+
 Status Msckf::propagate(const estimate::ImuSample& sample) {
   if (!sample.angular_velocity.allFinite() || !sample.linear_acceleration.allFinite())
     return Error(fmt::format("Msckf: IMU sample at {:.6f} s is not finite", sample.timestamp.seconds()), "imu");
@@ -80,14 +85,22 @@ void Msckf::propagate_interval(const estimate::ImuSample& reading, double dt) {
   const estimate::BodyMotion motion = estimate::body_motion(state_, reading, kImuIsBody);
   estimate::ImuTransition transition;
   state_ = estimate::propagate_state(state_, motion, dt, kImuIsBody, &transition);
-  const Eigen::Matrix<double, kImu, kImu> phi = estimate::transition_matrix(transition).topLeftCorner<kImu, kImu>();
-  const Eigen::Matrix<double, kImu, kImu> noise = estimate::process_noise(config_.imu_noise, dt).topLeftCorner<kImu, kImu>();
+  const ImuMatrix phi = estimate::transition_matrix(transition).topLeftCorner<kImu, kImu>();
+  const ImuMatrix noise = estimate::process_noise(config_.imu_noise, dt).topLeftCorner<kImu, kImu>();
+  interval_transition_ = phi * interval_transition_;
+  interval_noise_ = phi * interval_noise_ * phi.transpose() + noise;
+}
+
+void Msckf::apply_interval_propagation() {
+  const ImuMatrix& phi = interval_transition_;
   const Eigen::Index n = covariance_.rows();
-  covariance_.topLeftCorner<kImu, kImu>() = phi * covariance_.topLeftCorner<kImu, kImu>() * phi.transpose() + noise;
+  covariance_.topLeftCorner<kImu, kImu>() = phi * covariance_.topLeftCorner<kImu, kImu>() * phi.transpose() + interval_noise_;
   if (n > kImu) {
     covariance_.topRightCorner(kImu, n - kImu) = phi * covariance_.topRightCorner(kImu, n - kImu);
     covariance_.bottomLeftCorner(n - kImu, kImu) = covariance_.topRightCorner(kImu, n - kImu).transpose();
   }
+  interval_transition_.setIdentity();
+  interval_noise_.setZero();
 }
 
 void Msckf::augment(Timestamp time) {
@@ -130,6 +143,7 @@ Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vecto
   }
 
   if (time > state_.timestamp) propagate_interval(*last_sample_, (time - state_.timestamp).seconds());
+  apply_interval_propagation();
   augment(time);
   std::set<uint64_t> seen;
   for (const FeatureObservation& observation : observations) {
@@ -157,7 +171,8 @@ MsckfUpdateSummary Msckf::update(const std::vector<uint64_t>& feature_ids) {
   const Eigen::Index clone_states = n - kImu;
   std::map<Timestamp, int> clone_index;
   for (size_t i = 0; i < clones_.size(); ++i) clone_index[clones_[i].timestamp] = static_cast<int>(i);
-  const FeatureTriangulationConfig triangulation{config_.min_depth, config_.max_depth, config_.triangulation_iterations};
+  const FeatureTriangulationConfig triangulation{config_.min_depth, config_.max_depth, config_.triangulation_iterations,
+                                                 config_.min_parallax_deg * M_PI / 180.0};
 
   // The accepted rows, accumulated as information over the clone states: J = sum H0^T H0 and
   // g = sum H0^T r0 (whitened rows; H0 touches clone states only).

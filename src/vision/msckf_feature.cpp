@@ -3,6 +3,9 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 
+#include <algorithm>
+#include <cmath>
+
 namespace hanzo::fusion::vision {
 
 FeatureLinearization linearize_observation(const FeatureView& view, const Eigen::Vector3d& point_world) {
@@ -74,6 +77,16 @@ std::optional<Eigen::Vector3d> triangulate_feature(const std::vector<FeatureView
     if (step.norm() < 1e-9 * (1.0 + point.norm())) break;
   }
   if (!point.allFinite() || !depths_within(views, point, config)) return std::nullopt;
+  // The widest angle between two of the viewing rays.
+  double widest = 0.0;
+  for (size_t i = 0; i < views.size(); ++i) {
+    const Eigen::Vector3d ray_i = (point - (views[i].T_world_body * views[i].T_body_camera).translation()).normalized();
+    for (size_t j = i + 1; j < views.size(); ++j) {
+      const Eigen::Vector3d ray_j = (point - (views[j].T_world_body * views[j].T_body_camera).translation()).normalized();
+      widest = std::max(widest, std::atan2(ray_i.cross(ray_j).norm(), ray_i.dot(ray_j)));
+    }
+  }
+  if (widest < config.min_parallax_rad) return std::nullopt;
   return point;
 }
 

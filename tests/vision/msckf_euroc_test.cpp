@@ -114,9 +114,10 @@ TEST(MsckfEuroc, StandingMavStaysWithinTwoCentimetresOfOpenVins) {
   std::printf("EuRoC V1_01 standing: %d frames, %.1f stereo matches and %.1f features used per frame, max position error %.4f m\n", frames,
               static_cast<double>(stereo_matches) / frames, static_cast<double>(features_used) / frames, max_error);
   EXPECT_GE(frames, 70);
-  // Standing still only stereo features triangulate; each is used once per window of 11 clones.
+  // Standing still only near stereo features (2 deg of parallax over the 11 cm baseline: within
+  // 3 m) triangulate; each is used once per window of 11 clones.
   EXPECT_GT(stereo_matches, 50 * frames);
-  EXPECT_GT(features_used, 5 * frames);
+  EXPECT_GT(features_used, 2 * frames);
   EXPECT_LT(max_error, 0.02);
 }
 

@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include "hanzo/fusion/estimate/chi_square.hpp"
 #include "hanzo/fusion/sim/drone_trajectory.hpp"
 #include "hanzo/fusion/sim/imu_simulator.hpp"
 #include "msckf_feature.hpp"
@@ -96,6 +97,14 @@ struct FlightResult {
   int rejected_chi_square = 0;
   Eigen::Vector3d accel_bias_error = Eigen::Vector3d::Zero();
   Eigen::Vector3d gyro_bias_error = Eigen::Vector3d::Zero();
+  std::vector<double> position_nees, orientation_nees;  // per frame, 3 degrees of freedom each
+};
+
+struct FlightOptions {
+  bool stereo = true;
+  double seconds = 40.0;
+  double outlier_share = 0.0;  // observations moved 50 px
+  uint64_t seed = 42;          // points, pixel noise, IMU noise and the true initial biases
 };
 
 std::vector<Eigen::Vector3d> hall_points(std::mt19937_64& random) {
@@ -114,15 +123,19 @@ std::vector<Eigen::Vector3d> hall_points(std::mt19937_64& random) {
   return points;
 }
 
-FlightResult fly(bool stereo, double flight_seconds, double outlier_share = 0.0) {
-  std::mt19937_64 random(42);
+FlightResult fly(const FlightOptions& options) {
+  const bool stereo = options.stereo;
+  std::mt19937_64 random(options.seed);
   sim::DroneTrajectoryConfig drone;
-  drone.duration = flight_seconds;
+  drone.duration = options.seconds;
   const Timestamp start = Timestamp::from_seconds(1000.0);
   const sim::SplineTrajectory trajectory = sim::make_drone_trajectory(start, drone).value();
   sim::ImuSimulatorConfig imu_config;
-  imu_config.initial_accel_bias = Eigen::Vector3d(0.05, -0.04, 0.03);
-  imu_config.initial_gyro_bias = Eigen::Vector3d(0.003, -0.002, 0.001);
+  // True initial biases drawn from the filter's initial covariance (the estimate starts at zero).
+  std::normal_distribution<double> accel_bias(0.0, 0.05), gyro_bias(0.0, 0.005);
+  imu_config.initial_accel_bias = Eigen::Vector3d(accel_bias(random), accel_bias(random), accel_bias(random));
+  imu_config.initial_gyro_bias = Eigen::Vector3d(gyro_bias(random), gyro_bias(random), gyro_bias(random));
+  imu_config.seed = options.seed;
   const std::vector<sim::ImuSample> imu = sim::ImuSimulator(imu_config).simulate(trajectory);
   const std::vector<Eigen::Vector3d> points = hall_points(random);
 
@@ -138,7 +151,7 @@ FlightResult fly(bool stereo, double flight_seconds, double outlier_share = 0.0)
   state.gravity = Eigen::Vector3d(0, 0, -imu_config.gravity);
   Eigen::Matrix<double, 15, 1> sigma;
   sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d::Constant(1e-2),
-      Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.01);
+      Eigen::Vector3d::Constant(0.05), Eigen::Vector3d::Constant(0.005);
   MsckfConfig config;
   config.imu_noise.process_noise_accel = imu_config.process_noise_accel;
   config.imu_noise.process_noise_gyro = imu_config.process_noise_gyro;
@@ -163,7 +176,7 @@ FlightResult fly(bool stereo, double flight_seconds, double outlier_share = 0.0)
         Eigen::Vector2d pixel = 400.0 * in_camera.head<2>() / in_camera.z() + Eigen::Vector2d(320, 240);
         if (pixel.x() < 0 || pixel.y() < 0 || pixel.x() >= 640 || pixel.y() >= 480) return std::nullopt;
         pixel += Eigen::Vector2d(pixel_noise(random), pixel_noise(random));
-        if (allow_outlier && uniform(random) < outlier_share) pixel += Eigen::Vector2d(40.0, -30.0);
+        if (allow_outlier && uniform(random) < options.outlier_share) pixel += Eigen::Vector2d(40.0, -30.0);
         return (pixel - Eigen::Vector2d(320, 240)) / 400.0;
       };
       auto add = [&](uint64_t id) {
@@ -187,6 +200,10 @@ FlightResult fly(bool stereo, double flight_seconds, double outlier_share = 0.0)
       result.distance += (truth.translation() - previous_position).norm();
       previous_position = truth.translation();
       const double yaw_error = std::abs((truth.rotation().inverse() * filter.state().R_world_body).log().z());
+      const Eigen::Vector3d position_error = truth.translation() - filter.state().position;
+      const Eigen::Vector3d orientation_error = (filter.state().R_world_body.inverse() * truth.rotation()).log();
+      result.position_nees.push_back(position_error.dot(filter.covariance().block<3, 3>(0, 0).ldlt().solve(position_error)));
+      result.orientation_nees.push_back(orientation_error.dot(filter.covariance().block<3, 3>(3, 3).ldlt().solve(orientation_error)));
       result.max_yaw_error_deg = std::max(result.max_yaw_error_deg, yaw_error * 180.0 / M_PI);
       next_frame += frame_interval;
     }
@@ -201,7 +218,7 @@ FlightResult fly(bool stereo, double flight_seconds, double outlier_share = 0.0)
 }
 
 TEST(Msckf, SimulatedDroneStereoDriftsUnderHalfAPercentOfTheDistance) {
-  const FlightResult flight = fly(true, 40.0);
+  const FlightResult flight = fly({});
   RecordProperty("distance_m", std::to_string(flight.distance));
   RecordProperty("final_error_m", std::to_string(flight.final_error));
   std::printf("stereo: %.1f m flown, final error %.3f m (%.2f %%), yaw error max %.2f deg, gyro bias error %.5f rad/s, accel %.4f\n",
@@ -213,7 +230,7 @@ TEST(Msckf, SimulatedDroneStereoDriftsUnderHalfAPercentOfTheDistance) {
 }
 
 TEST(Msckf, SimulatedDroneMonocularDriftsUnderOnePercentOfTheDistance) {
-  const FlightResult flight = fly(false, 40.0);
+  const FlightResult flight = fly({.stereo = false});
   std::printf("mono: %.1f m flown, final error %.3f m (%.2f %%), yaw error max %.2f deg, gyro bias error %.5f rad/s, accel %.4f\n",
               flight.distance, flight.final_error, 100.0 * flight.final_error / flight.distance, flight.max_yaw_error_deg,
               flight.gyro_bias_error.norm(), flight.accel_bias_error.norm());
@@ -222,11 +239,44 @@ TEST(Msckf, SimulatedDroneMonocularDriftsUnderOnePercentOfTheDistance) {
 
 TEST(Msckf, GatesWrongTracksAndStaysAccurate) {
   // 5 % of the observations 50 px off: the chi-square gate drops their features.
-  const FlightResult flight = fly(true, 20.0, 0.05);
+  const FlightResult flight = fly({.seconds = 20.0, .outlier_share = 0.05});
   std::printf("outliers: %d features rejected by the gate, %d used, final error %.3f m over %.1f m\n", flight.rejected_chi_square,
               flight.features_used, flight.final_error, flight.distance);
   EXPECT_GT(flight.rejected_chi_square, 100);
   EXPECT_LT(flight.final_error, 0.01 * flight.distance);
+}
+
+// Consistency: the average NEES of position and orientation (3 degrees of freedom each) over
+// Monte-Carlo runs of a monocular flight (IMU noise, pixel noise, points and true initial biases
+// drawn per run). A consistent filter averages 3, inside the 95 % band of chi-square(3 runs) / runs.
+TEST(Msckf, MonteCarloNeesStaysWithinTwiceTheConsistentValue) {
+  const int runs = 10;
+  std::vector<double> position, orientation;
+  for (int run = 0; run < runs; ++run) {
+    const FlightResult flight = fly({.stereo = false, .seconds = 20.0, .seed = 100 + static_cast<uint64_t>(run)});
+    if (position.empty()) {
+      position.assign(flight.position_nees.size(), 0.0);
+      orientation.assign(flight.orientation_nees.size(), 0.0);
+    }
+    for (size_t k = 0; k < position.size(); ++k) {
+      position[k] += flight.position_nees[k] / runs;
+      orientation[k] += flight.orientation_nees[k] / runs;
+    }
+  }
+  const double low = estimate::chi_square_quantile(0.025, 3 * runs) / runs, high = estimate::chi_square_quantile(0.975, 3 * runs) / runs;
+  double mean_position = 0, mean_orientation = 0;
+  int position_inside = 0, orientation_inside = 0;
+  for (size_t k = 0; k < position.size(); ++k) {
+    mean_position += position[k] / static_cast<double>(position.size());
+    mean_orientation += orientation[k] / static_cast<double>(orientation.size());
+    position_inside += position[k] >= low && position[k] <= high;
+    orientation_inside += orientation[k] >= low && orientation[k] <= high;
+  }
+  const double frames = static_cast<double>(position.size());
+  std::printf("NEES over %d runs: position mean %.2f (%.0f %% of frames in [%.2f, %.2f]), orientation mean %.2f (%.0f %%)\n", runs,
+              mean_position, 100.0 * position_inside / frames, low, high, mean_orientation, 100.0 * orientation_inside / frames);
+  EXPECT_LT(mean_position, 6.0);
+  EXPECT_LT(mean_orientation, 6.0);
 }
 
 TEST(Msckf, RefusesBadInputAndKeepsItsState) {

@@ -11,26 +11,31 @@
 // gyro-scale entries of NavigationState are not used.
 //
 // Per camera frame (process_frame):
-//   1. the IMU state is propagated to the frame time (estimate/imu_propagation.hpp) and its pose
-//      cloned: P <- [P, P J^T; J P, J P J^T] with J selecting (dp, dtheta);
+//   1. the IMU state is propagated to the frame time (estimate/imu_propagation.hpp; the IMU
+//      transition and noise of the samples since the last frame are applied to the covariance
+//      at once) and its pose cloned: P <- [P, P J^T; J P, J P J^T] with J selecting (dp, dtheta);
 //   2. the features to use are those whose track ended (not observed in this frame) and, when
-//      the window is full, those observed by the oldest clone; each needs observations from at
-//      least two clones (mono) or two observations (stereo);
+//      the window is full, those observed by the oldest clone; each needs two observations;
 //   3. each feature is triangulated from its observations (linear multi-view least squares,
 //      then Gauss-Newton on the reprojection errors) with the clone poses; a feature behind a
-//      camera, nearer than min_depth or farther than max_depth, or badly conditioned is dropped;
-//   4. its stacked residuals r = H_x dx + H_f dp_f + n (2 rows per observation, normalized image
-//      coordinates) are projected onto the left null space of H_f (Householder QR):
-//      r0 = N^T r = N^T H_x dx + N^T n (eq. 23-24 of the paper), removing the feature's error;
-//   5. a feature whose r0^T (H0 P H0^T + sigma^2 I)^-1 r0 exceeds the chi-square quantile
-//      (chi_square_probability, 2m - 3 degrees of freedom) is dropped as an outlier;
-//   6. the accepted rows are stacked; with more rows than the state has entries they are
-//      compressed by a QR decomposition (eq. 26-28), then one EKF update:
-//      K = P H^T (H P H^T + sigma^2 I)^-1, dx = K r, P <- (I - K H) P (I - K H)^T + K sigma^2 K^T;
+//      camera, nearer than min_depth or farther than max_depth, seen over less than
+//      min_parallax_deg, or badly conditioned is dropped;
+//   4. its whitened residuals r = H_c dx + H_f dp_f + n (2 rows per observation, normalized image
+//      coordinates over their noise) are projected onto the left null space N of H_f (from its
+//      Householder QR, H_f = [Q1 N] [R; 0]): r0 = N^T r = N^T H_c dx + N^T n (eq. 23-24 of the
+//      paper), removing the feature's error;
+//   5. a feature whose r0^T (N^T (H_c P H_c^T + I) N)^-1 r0 exceeds the chi-square quantile
+//      (chi_square_probability, 2m - 3 degrees of freedom) is dropped as an outlier (H_c P H_c^T
+//      is built from the 6 x 6 covariance blocks of the clones the feature was seen in);
+//   6. the accepted features are summed as information over the clone states,
+//      J = sum H0^T H0 = sum H_c^T (I - Q1 Q1^T) H_c and g = sum H0^T r0: the same update as the
+//      paper's QR compression of the stacked rows (eq. 26-28) at a fraction of its cost. With
+//      P = F F^T (pivoted LDLT; P is singular right after a clone is added):
+//      P <- F (I + F^T J F)^-1 F^T, dx = F (I + F^T J F)^-1 F^T g, then x <- x (+) dx;
 //   7. the used observations are deleted, and when the window holds more than max_clones clones
 //      the oldest is marginalized (its rows and columns removed).
-// Measurement Jacobians are evaluated at the clone poses of the update (the current estimates).
-//
+// Jacobians are evaluated at the current estimates (first-estimate Jacobians are not used).
+
 // Frames: world is the frame of the initial state (z up for gravity (0, 0, -g)); body as the
 // NavigationState; cameras at T_body_camera (x right, y down, z forward). Observations are
 // UNDISTORTED normalized coordinates (x/z, y/z) of the camera (PinholeCamera::unproject).
@@ -71,6 +76,10 @@ struct MsckfConfig {
   /// dropped: too near is a tracking error, too far carries no translation information.
   double min_depth = 0.1;
   double max_depth = 60.0;
+  /// A feature whose viewing rays are never this far apart (degrees) is not used: its depth is
+  /// mostly noise, and a wrong depth turns rotation information into false translation
+  /// information (a camera standing still would otherwise grow overconfident).
+  double min_parallax_deg = 2.0;
   /// Gauss-Newton iterations of the feature triangulation.
   int triangulation_iterations = 8;
   /// IMU noise (estimate/imu_propagation.hpp's model and units).
@@ -120,8 +129,10 @@ class Msckf {
   Result<MsckfUpdateSummary> process_frame(Timestamp time, const std::vector<FeatureObservation>& observations);
 
   const estimate::NavigationState& state() const { return state_; }
-  /// The full error covariance (15 + 6 clones square).
+  /// The full error covariance (15 + 6 clones square) at the last frame.
   const Eigen::MatrixXd& covariance() const { return covariance_; }
+  /// The IMU state's error covariance now (propagated through the samples since the last frame).
+  Eigen::Matrix<double, kMsckfImuDimension, kMsckfImuDimension> imu_covariance() const;
   const std::deque<MsckfClone>& clones() const { return clones_; }
   /// Features with observations waiting for their track to end.
   int pending_features() const { return static_cast<int>(tracks_.size()); }
@@ -135,7 +146,9 @@ class Msckf {
 
   Msckf(const MsckfConfig& config, std::vector<MsckfCamera> cameras, const estimate::NavigationState& state,
         const Eigen::MatrixXd& covariance);
+  using ImuMatrix = Eigen::Matrix<double, kMsckfImuDimension, kMsckfImuDimension>;
   void propagate_interval(const estimate::ImuSample& reading, double dt);
+  void apply_interval_propagation();
   void augment(Timestamp time);
   void marginalize_oldest_clone();
   MsckfUpdateSummary update(const std::vector<uint64_t>& feature_ids);
@@ -148,6 +161,10 @@ class Msckf {
   std::deque<MsckfClone> clones_;
   std::map<uint64_t, std::vector<TrackObservation>> tracks_;
   std::optional<estimate::ImuSample> last_sample_;
+  // The IMU transition and noise accumulated since the last frame, applied to the covariance at
+  // the next frame (one product with the clone columns per frame instead of per IMU sample).
+  ImuMatrix interval_transition_ = ImuMatrix::Identity();
+  ImuMatrix interval_noise_ = ImuMatrix::Zero();
   bool diverged_ = false;
 };
 
