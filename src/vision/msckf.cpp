@@ -21,6 +21,12 @@ const estimate::ImuMounting kImuIsBody{};
 
 bool positive(double value) { return std::isfinite(value) && value > 0.0; }
 
+// One observation's Jacobian block on 6 states starting at `offset` (counted after the IMU's).
+struct StateBlock {
+  Eigen::Index offset = 0;
+  Eigen::Matrix<double, 2, 6> jacobian;
+};
+
 }  // namespace
 
 Status validate(const MsckfConfig& config) {
@@ -32,6 +38,8 @@ Status validate(const MsckfConfig& config) {
   if (!(std::isfinite(config.max_depth) && config.max_depth > config.min_depth))
     return Error("MsckfConfig.max_depth: must be finite and above min_depth", "max_depth");
   if (!(config.min_parallax_deg >= 0.0 && config.min_parallax_deg < 90.0)) return Error("MsckfConfig.min_parallax_deg: must be in [0, 90)", "min_parallax_deg");
+  if (!positive(config.extrinsic_rotation_sigma) || !positive(config.extrinsic_translation_sigma) || !positive(config.time_offset_sigma))
+    return Error("MsckfConfig: extrinsic_rotation_sigma, extrinsic_translation_sigma and time_offset_sigma must be positive", "extrinsic_rotation_sigma");
   if (config.triangulation_iterations < 0) return Error("MsckfConfig.triangulation_iterations: must not be negative", "triangulation_iterations");
   const estimate::ImuNoise& noise = config.imu_noise;
   if (!positive(noise.process_noise_accel) || !positive(noise.process_noise_gyro) || !positive(noise.sample_interval) ||
@@ -41,7 +49,8 @@ Status validate(const MsckfConfig& config) {
 }
 
 Result<Msckf> Msckf::create(const MsckfConfig& config, const std::vector<MsckfCamera>& cameras,
-                            const estimate::NavigationState& initial_state, const Eigen::MatrixXd& initial_covariance) {
+                            const estimate::NavigationState& initial_state, const Eigen::MatrixXd& initial_covariance,
+                            Duration time_offset) {
   HANZO_RETURN_IF_ERROR(validate(config));
   if (cameras.empty() || cameras.size() > 2) return Error(fmt::format("Msckf: {} cameras given; one or two are supported", cameras.size()), "cameras");
   for (size_t i = 0; i < cameras.size(); ++i) {
@@ -53,12 +62,26 @@ Result<Msckf> Msckf::create(const MsckfConfig& config, const std::vector<MsckfCa
   if (initial_covariance.rows() != kImu || initial_covariance.cols() != kImu || !initial_covariance.allFinite() ||
       !initial_covariance.isApprox(initial_covariance.transpose(), 1e-9) || !(initial_covariance.diagonal().array() > 0.0).all())
     return Error("Msckf: the initial covariance must be a finite symmetric 15 x 15 matrix with a positive diagonal", "initial_covariance");
-  return Msckf(config, cameras, initial_state, initial_covariance);
+  return Msckf(config, cameras, initial_state, initial_covariance, time_offset.seconds());
 }
 
 Msckf::Msckf(const MsckfConfig& config, std::vector<MsckfCamera> cameras, const estimate::NavigationState& state,
-             const Eigen::MatrixXd& covariance)
-    : config_(config), cameras_(std::move(cameras)), state_(state), covariance_(covariance) {}
+             const Eigen::MatrixXd& imu_covariance, double time_offset)
+    : config_(config), cameras_(std::move(cameras)), state_(state), time_offset_(time_offset) {
+  const Eigen::Index calibration =
+      (config_.calibrate_time_offset ? 1 : 0) + (config_.calibrate_extrinsics ? 6 * static_cast<Eigen::Index>(cameras_.size()) : 0);
+  first_clone_ = kImu + calibration;
+  covariance_ = Eigen::MatrixXd::Zero(first_clone_, first_clone_);
+  covariance_.topLeftCorner<kImu, kImu>() = imu_covariance;
+  if (config_.calibrate_time_offset) covariance_(time_offset_index(), time_offset_index()) = config_.time_offset_sigma * config_.time_offset_sigma;
+  if (config_.calibrate_extrinsics) {
+    for (int camera = 0; camera < static_cast<int>(cameras_.size()); ++camera) {
+      const Eigen::Index at = extrinsic_index(camera);
+      covariance_.block<3, 3>(at, at).diagonal().setConstant(config_.extrinsic_translation_sigma * config_.extrinsic_translation_sigma);
+      covariance_.block<3, 3>(at + 3, at + 3).diagonal().setConstant(config_.extrinsic_rotation_sigma * config_.extrinsic_rotation_sigma);
+    }
+  }
+}
 
 Eigen::Matrix<double, kMsckfImuDimension, kMsckfImuDimension> Msckf::imu_covariance() const {
   return interval_transition_ * covariance_.topLeftCorner<kImu, kImu>() * interval_transition_.transpose() + interval_noise_;
@@ -104,26 +127,36 @@ void Msckf::apply_interval_propagation() {
 }
 
 void Msckf::augment(Timestamp time) {
+  // The clone's error is the IMU's (dp, dtheta), plus, with the time offset estimated, the
+  // motion over an error dt of it: (v, w) dt (OpenVINS's clone Jacobian).
+  Eigen::Matrix<double, 6, 1> rates;
+  rates << state_.velocity, last_sample_->angular_velocity - state_.gyro_bias;
   const Eigen::Index n = covariance_.rows();
+  Eigen::MatrixXd rows = covariance_.topRows(kClone);  // J P
+  if (config_.calibrate_time_offset) rows += rates * covariance_.row(time_offset_index());
+  Eigen::Matrix<double, kClone, kClone> corner = rows.leftCols<kClone>();  // J P J^T
+  if (config_.calibrate_time_offset) corner += rows.col(time_offset_index()) * rates.transpose();
   Eigen::MatrixXd grown(n + kClone, n + kClone);
   grown.topLeftCorner(n, n) = covariance_;
-  grown.bottomLeftCorner(kClone, n) = covariance_.topRows(kClone);  // the clone's error is the IMU's (dp, dtheta)
-  grown.topRightCorner(n, kClone) = covariance_.leftCols(kClone);
-  grown.bottomRightCorner<kClone, kClone>() = covariance_.topLeftCorner<kClone, kClone>();
+  grown.bottomLeftCorner(kClone, n) = rows;
+  grown.topRightCorner(n, kClone) = rows.transpose();
+  grown.bottomRightCorner<kClone, kClone>() = 0.5 * (corner + corner.transpose());
   covariance_ = std::move(grown);
   clones_.push_back({time, SE3(state_.R_world_body, state_.position)});
+  clone_rates_.push_back(rates);
 }
 
 void Msckf::marginalize_oldest_clone() {
   const Eigen::Index n = covariance_.rows();
-  const Eigen::Index rest = n - kImu - kClone;
+  const Eigen::Index rest = n - first_clone_ - kClone;
   Eigen::MatrixXd reduced(n - kClone, n - kClone);
-  reduced.topLeftCorner<kImu, kImu>() = covariance_.topLeftCorner<kImu, kImu>();
-  reduced.topRightCorner(kImu, rest) = covariance_.topRightCorner(kImu, rest);
-  reduced.bottomLeftCorner(rest, kImu) = covariance_.bottomLeftCorner(rest, kImu);
+  reduced.topLeftCorner(first_clone_, first_clone_) = covariance_.topLeftCorner(first_clone_, first_clone_);
+  reduced.topRightCorner(first_clone_, rest) = covariance_.topRightCorner(first_clone_, rest);
+  reduced.bottomLeftCorner(rest, first_clone_) = covariance_.bottomLeftCorner(rest, first_clone_);
   reduced.bottomRightCorner(rest, rest) = covariance_.bottomRightCorner(rest, rest);
   covariance_ = std::move(reduced);
   clones_.pop_front();
+  clone_rates_.pop_front();
 }
 
 Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vector<FeatureObservation>& observations) {
@@ -132,9 +165,10 @@ Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vecto
   if (!clones_.empty() && time <= clones_.back().timestamp)
     return Error(fmt::format("Msckf: frame at {:.6f} s is not after the previous frame ({:.6f} s)", time.seconds(),
                              clones_.back().timestamp.seconds()), "time");
-  if (time < state_.timestamp)
-    return Error(fmt::format("Msckf: frame at {:.6f} s is older than the IMU state ({:.6f} s); process frames before later IMU samples",
-                             time.seconds(), state_.timestamp.seconds()), "time");
+  const Timestamp frame_body_time = body_time(time);
+  if (frame_body_time < state_.timestamp)
+    return Error(fmt::format("Msckf: frame at {:.6f} s (body time {:.6f} s) is older than the IMU state ({:.6f} s); process frames before "
+                             "later IMU samples", time.seconds(), frame_body_time.seconds(), state_.timestamp.seconds()), "time");
   for (const FeatureObservation& observation : observations) {
     if (observation.camera < 0 || observation.camera >= static_cast<int>(cameras_.size()))
       return Error(fmt::format("Msckf: feature {} names camera {}; the rig has {}", observation.feature_id, observation.camera, cameras_.size()),
@@ -142,7 +176,7 @@ Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vecto
     if (!observation.normalized.allFinite()) return Error(fmt::format("Msckf: feature {} is not finite", observation.feature_id), "normalized");
   }
 
-  if (time > state_.timestamp) propagate_interval(*last_sample_, (time - state_.timestamp).seconds());
+  if (frame_body_time > state_.timestamp) propagate_interval(*last_sample_, (frame_body_time - state_.timestamp).seconds());
   apply_interval_propagation();
   augment(time);
   std::set<uint64_t> seen;
@@ -168,16 +202,16 @@ Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vecto
 MsckfUpdateSummary Msckf::update(const std::vector<uint64_t>& feature_ids) {
   MsckfUpdateSummary summary;
   const Eigen::Index n = covariance_.rows();
-  const Eigen::Index clone_states = n - kImu;
-  std::map<Timestamp, int> clone_index;
-  for (size_t i = 0; i < clones_.size(); ++i) clone_index[clones_[i].timestamp] = static_cast<int>(i);
+  const Eigen::Index other_states = n - kImu;  // calibration and clones: what H touches
+  std::map<Timestamp, int> clone_of_time;
+  for (size_t i = 0; i < clones_.size(); ++i) clone_of_time[clones_[i].timestamp] = static_cast<int>(i);
   const FeatureTriangulationConfig triangulation{config_.min_depth, config_.max_depth, config_.triangulation_iterations,
                                                  config_.min_parallax_deg * M_PI / 180.0};
 
-  // The accepted rows, accumulated as information over the clone states: J = sum H0^T H0 and
-  // g = sum H0^T r0 (whitened rows; H0 touches clone states only).
-  Eigen::MatrixXd information = Eigen::MatrixXd::Zero(clone_states, clone_states);
-  Eigen::VectorXd information_vector = Eigen::VectorXd::Zero(clone_states);
+  // The accepted rows, accumulated as information over the states after the IMU's: J = sum
+  // H0^T H0 and g = sum H0^T r0 (whitened rows; H0 touches clones and extrinsics only).
+  Eigen::MatrixXd information = Eigen::MatrixXd::Zero(other_states, other_states);
+  Eigen::VectorXd information_vector = Eigen::VectorXd::Zero(other_states);
   for (uint64_t id : feature_ids) {
     const std::vector<TrackObservation>& track = tracks_.at(id);
     if (track.size() < 2) continue;
@@ -185,7 +219,7 @@ MsckfUpdateSummary Msckf::update(const std::vector<uint64_t>& feature_ids) {
     std::vector<FeatureView> views;
     std::vector<int> view_clones;
     for (const TrackObservation& observation : track) {
-      const int index = clone_index.at(observation.clone_time);
+      const int index = clone_of_time.at(observation.clone_time);
       views.push_back({clones_[index].T_world_body, cameras_[observation.camera].T_body_camera, observation.normalized});
       view_clones.push_back(index);
     }
@@ -194,17 +228,18 @@ MsckfUpdateSummary Msckf::update(const std::vector<uint64_t>& feature_ids) {
       ++summary.rejected_triangulation;
       continue;
     }
-    // Whitened residual r and Jacobians: H_c (one 2 x 6 block per observation, on its clone)
-    // and H_f (2m x 3).
+    // Whitened residual r and Jacobians: H_c (2 x 6 blocks per observation: on its clone and,
+    // when calibrated, on its camera's extrinsics) and H_f (2m x 3).
     const Eigen::Index m = 2 * static_cast<Eigen::Index>(views.size());
-    std::vector<Eigen::Matrix<double, 2, kClone>> by_clone(views.size());
+    std::vector<std::vector<StateBlock>> blocks(views.size());
     Eigen::MatrixXd by_point(m, 3);
     Eigen::VectorXd residual(m);
     for (size_t k = 0; k < views.size(); ++k) {
       const FeatureLinearization linear = linearize_observation(views[k], *point);
       const double inverse_sigma = cameras_[track[k].camera].focal_length_px / config_.pixel_sigma;
       const Eigen::Index row = 2 * static_cast<Eigen::Index>(k);
-      by_clone[k] = inverse_sigma * linear.by_clone;
+      blocks[k].push_back({clone_index(static_cast<size_t>(view_clones[k])) - kImu, inverse_sigma * linear.by_clone});
+      if (config_.calibrate_extrinsics) blocks[k].push_back({extrinsic_index(track[k].camera) - kImu, inverse_sigma * linear.by_extrinsic});
       by_point.middleRows<2>(row) = inverse_sigma * linear.by_point;
       residual.segment<2>(row) = inverse_sigma * linear.residual;
     }
@@ -216,14 +251,16 @@ MsckfUpdateSummary Msckf::update(const std::vector<uint64_t>& feature_ids) {
     const auto null_space = q.rightCols(m - 3);
 
     // Chi-square gate: r0^T (N^T (H_c P H_c^T + I) N)^-1 r0, with H_c P H_c^T built block by
-    // block from the 6 x 6 clone covariances (H_c is block-sparse).
+    // block from the 6 x 6 covariance blocks (H_c is block-sparse).
     Eigen::MatrixXd projected_covariance = Eigen::MatrixXd::Identity(m, m);
     for (size_t k = 0; k < views.size(); ++k) {
-      const Eigen::Index clone_k = kImu + kClone * view_clones[k];
-      const Eigen::Matrix<double, 2, kClone> left = by_clone[k];
       for (size_t l = k; l < views.size(); ++l) {
-        const Eigen::Index clone_l = kImu + kClone * view_clones[l];
-        const Eigen::Matrix2d block = left * covariance_.block<kClone, kClone>(clone_k, clone_l) * by_clone[l].transpose();
+        Eigen::Matrix2d block = Eigen::Matrix2d::Zero();
+        for (const StateBlock& a : blocks[k]) {
+          for (const StateBlock& b : blocks[l]) {
+            block += a.jacobian * covariance_.block<kClone, kClone>(kImu + a.offset, kImu + b.offset) * b.jacobian.transpose();
+          }
+        }
         projected_covariance.block<2, 2>(2 * static_cast<Eigen::Index>(k), 2 * static_cast<Eigen::Index>(l)) += block;
         if (l != k) projected_covariance.block<2, 2>(2 * static_cast<Eigen::Index>(l), 2 * static_cast<Eigen::Index>(k)) += block.transpose();
       }
@@ -240,13 +277,14 @@ MsckfUpdateSummary Msckf::update(const std::vector<uint64_t>& feature_ids) {
 
     // H0^T H0 = H_c^T (I - Q1 Q1^T) H_c and H0^T r0 = H_c^T (r - Q1 Q1^T r).
     const Eigen::VectorXd orthogonal_residual = residual - range * (range.transpose() * residual);
-    Eigen::MatrixXd by_range = Eigen::MatrixXd::Zero(clone_states, 3);  // H_c^T Q1
+    Eigen::MatrixXd by_range = Eigen::MatrixXd::Zero(other_states, 3);  // H_c^T Q1
     for (size_t k = 0; k < views.size(); ++k) {
-      const Eigen::Index at = kClone * view_clones[k];
       const Eigen::Index row = 2 * static_cast<Eigen::Index>(k);
-      information.block<kClone, kClone>(at, at) += by_clone[k].transpose() * by_clone[k];
-      by_range.middleRows<kClone>(at) += by_clone[k].transpose() * range.middleRows<2>(row);
-      information_vector.segment<kClone>(at) += by_clone[k].transpose() * orthogonal_residual.segment<2>(row);
+      for (const StateBlock& a : blocks[k]) {
+        for (const StateBlock& b : blocks[k]) information.block<kClone, kClone>(a.offset, b.offset) += a.jacobian.transpose() * b.jacobian;
+        by_range.middleRows<kClone>(a.offset) += a.jacobian.transpose() * range.middleRows<2>(row);
+        information_vector.segment<kClone>(a.offset) += a.jacobian.transpose() * orthogonal_residual.segment<2>(row);
+      }
     }
     information.noalias() -= by_range * by_range.transpose();
   }
@@ -259,7 +297,7 @@ MsckfUpdateSummary Msckf::update(const std::vector<uint64_t>& feature_ids) {
   const Eigen::LDLT<Eigen::MatrixXd> factor(covariance_);
   Eigen::MatrixXd root = factor.matrixL();
   root = factor.transpositionsP().transpose() * (root * factor.vectorD().cwiseMax(0.0).cwiseSqrt().asDiagonal());
-  const Eigen::MatrixXd clone_root = root.bottomRows(clone_states);  // J and g touch the clone rows only
+  const Eigen::MatrixXd clone_root = root.bottomRows(other_states);  // J and g touch these rows only
   Eigen::MatrixXd gain_system = clone_root.transpose() * information * clone_root;
   gain_system.diagonal().array() += 1.0;
   const Eigen::LLT<Eigen::MatrixXd> gain_factor(gain_system);
@@ -273,11 +311,16 @@ void Msckf::apply_correction(const Eigen::VectorXd& correction) {
   estimate::ErrorVector imu_correction = estimate::ErrorVector::Zero();
   imu_correction.head<kImu>() = correction.head<kImu>();
   state_ = state_.plus(imu_correction);
-  for (size_t i = 0; i < clones_.size(); ++i) {
-    const Eigen::Matrix<double, kClone, 1> delta = correction.segment<kClone>(kImu + kClone * static_cast<Eigen::Index>(i));
-    SE3& pose = clones_[i].T_world_body;
+  if (config_.calibrate_time_offset) time_offset_ += correction(time_offset_index());
+  auto correct = [](SE3& pose, const Eigen::Matrix<double, 6, 1>& delta) {
     pose = SE3(pose.rotation() * SO3::exp(delta.tail<3>()), pose.translation() + delta.head<3>());
+  };
+  if (config_.calibrate_extrinsics) {
+    for (int camera = 0; camera < static_cast<int>(cameras_.size()); ++camera) {
+      correct(cameras_[static_cast<size_t>(camera)].T_body_camera, correction.segment<6>(extrinsic_index(camera)));
+    }
   }
+  for (size_t i = 0; i < clones_.size(); ++i) correct(clones_[i].T_world_body, correction.segment<kClone>(clone_index(i)));
 }
 
 }  // namespace hanzo::fusion::vision

@@ -24,6 +24,8 @@ FeatureLinearization linearize_observation(const FeatureView& view, const Eigen:
   out.by_point = projection * camera_by_world;
   out.by_clone.leftCols<3>() = -out.by_point;
   out.by_clone.rightCols<3>() = projection * R_camera_body * SO3::hat(point_body);
+  out.by_extrinsic.leftCols<3>() = -projection * R_camera_body;
+  out.by_extrinsic.rightCols<3>() = projection * SO3::hat(point_camera);
   return out;
 }
 

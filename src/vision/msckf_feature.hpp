@@ -10,6 +10,8 @@
 //   dz/dp_camera = 1/Z [1 0 -x/z; 0 1 -y/z]
 //   dp_camera/dp_f = R_body_camera^T R^T,  dp_camera/dp = -R_body_camera^T R^T,
 //   dp_camera/dtheta = R_body_camera^T [p_body]x
+// and by the camera's extrinsics (R_body_camera Exp(dphi), p_body_camera + dq):
+//   dp_camera/dq = -R_body_camera^T,  dp_camera/dphi = [p_camera]x
 // (tests/vision/msckf_test.cpp checks them numerically).
 
 #include <optional>
@@ -29,11 +31,12 @@ struct FeatureView {
 };
 
 /// The linearized observation: residual = measured - predicted, and its Jacobians by the clone's
-/// (dp, dtheta) and by the point's world position.
+/// (dp, dtheta), by the point's world position and by the camera's extrinsics.
 struct FeatureLinearization {
   Eigen::Vector2d residual = Eigen::Vector2d::Zero();
   Eigen::Matrix<double, 2, 6> by_clone = Eigen::Matrix<double, 2, 6>::Zero();
   Eigen::Matrix<double, 2, 3> by_point = Eigen::Matrix<double, 2, 3>::Zero();
+  Eigen::Matrix<double, 2, 6> by_extrinsic = Eigen::Matrix<double, 2, 6>::Zero();  ///< by (dq, dphi) of T_body_camera
   double depth = 0.0;  ///< the point's z in the camera, metres
 };
 

@@ -89,7 +89,7 @@ TEST(MsckfEuroc, StandingMavStaysWithinTwoCentimetresOfOpenVins) {
   int frames = 0, features_used = 0, stereo_matches = 0;
   for (const Frame& frame : read_frames(data + "/mav0")) {
     if (frame.timestamp <= state.timestamp) continue;
-    while (next_sample < imu.size() && imu[next_sample].timestamp <= frame.timestamp) ASSERT_TRUE(filter.propagate(imu[next_sample++]));
+    while (next_sample < imu.size() && imu[next_sample].timestamp <= filter.body_time(frame.timestamp)) ASSERT_TRUE(filter.propagate(imu[next_sample++]));
     const cv::Mat left_image = cv::imread(frame.left, cv::IMREAD_GRAYSCALE), right_image = cv::imread(frame.right, cv::IMREAD_GRAYSCALE);
     if (left_image.empty() || right_image.empty()) break;  // data.csv lists frames past the excerpt's 95
     const auto tracked = (*tracker)->track(left_image, right_image);

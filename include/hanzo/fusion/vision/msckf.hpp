@@ -84,6 +84,14 @@ struct MsckfConfig {
   int triangulation_iterations = 8;
   /// IMU noise (estimate/imu_propagation.hpp's model and units).
   estimate::ImuNoise imu_noise;
+  /// Online calibration by state augmentation (as OpenVINS): each camera's T_body_camera and the
+  /// rig's time offset (t_body = t_camera + time_offset) are estimated, starting from the values
+  /// given at creation with these standard deviations as their prior.
+  bool calibrate_extrinsics = true;
+  double extrinsic_rotation_sigma = 0.1;      ///< rad
+  double extrinsic_translation_sigma = 0.05;  ///< m
+  bool calibrate_time_offset = true;
+  double time_offset_sigma = 0.02;            ///< s
 };
 
 /// Checks every field; the error names the first field out of range.
@@ -108,8 +116,8 @@ struct MsckfUpdateSummary {
 
 /// A cloned body pose in the window.
 struct MsckfClone {
-  Timestamp timestamp;
-  SE3 T_world_body;
+  Timestamp timestamp;  ///< the frame's camera time
+  SE3 T_world_body;     ///< at the frame's body time (camera time + time offset)
 };
 
 class Msckf {
@@ -117,16 +125,23 @@ class Msckf {
   /// Fails when the configuration is out of range, no or more than two cameras are given, a
   /// focal length is not positive, the state is not finite or the covariance is not a finite
   /// symmetric 15 x 15 matrix with a positive diagonal (IMU error order above).
+  /// time_offset: the cameras' clock against the body's (t_body = t_camera + time_offset),
+  /// calibrated online when the configuration says so, as are the cameras' T_body_camera.
   static Result<Msckf> create(const MsckfConfig& config, const std::vector<MsckfCamera>& cameras,
-                              const estimate::NavigationState& initial_state, const Eigen::MatrixXd& initial_covariance);
+                              const estimate::NavigationState& initial_state, const Eigen::MatrixXd& initial_covariance,
+                              Duration time_offset = {});
 
   /// Integrates the IMU state to the sample's time with the mean of the previous and this
   /// sample's readings held over the interval (the first sample is held back to the state time).
   Status propagate(const estimate::ImuSample& sample);
 
-  /// Clones the pose at `time` (propagated from the last IMU sample, held) and updates with the
-  /// tracks this frame ends (header comment). The observations are this frame's, every camera.
+  /// Clones the pose at the frame's body time (`time`, the cameras' clock, plus time_offset();
+  /// propagated from the last IMU sample, held) and updates with the tracks this frame ends
+  /// (header comment). The observations are this frame's, every camera. Feed the IMU samples up
+  /// to body_time(time) first, and no later ones.
   Result<MsckfUpdateSummary> process_frame(Timestamp time, const std::vector<FeatureObservation>& observations);
+  /// The body time of a camera time with the current time-offset estimate.
+  Timestamp body_time(Timestamp camera_time) const { return camera_time + Duration::from_seconds(time_offset_); }
 
   const estimate::NavigationState& state() const { return state_; }
   /// The full error covariance (15 + 6 clones square) at the last frame.
@@ -134,6 +149,9 @@ class Msckf {
   /// The IMU state's error covariance now (propagated through the samples since the last frame).
   Eigen::Matrix<double, kMsckfImuDimension, kMsckfImuDimension> imu_covariance() const;
   const std::deque<MsckfClone>& clones() const { return clones_; }
+  /// The cameras with their current (calibrated) T_body_camera, and the time offset (seconds).
+  const std::vector<MsckfCamera>& cameras() const { return cameras_; }
+  double time_offset() const { return time_offset_; }
   /// Features with observations waiting for their track to end.
   int pending_features() const { return static_cast<int>(tracks_.size()); }
 
@@ -145,7 +163,12 @@ class Msckf {
   };
 
   Msckf(const MsckfConfig& config, std::vector<MsckfCamera> cameras, const estimate::NavigationState& state,
-        const Eigen::MatrixXd& covariance);
+        const Eigen::MatrixXd& imu_covariance, double time_offset);
+  // Error-state layout: IMU (15), time offset (1, when calibrated), extrinsics (6 per camera, when
+  // calibrated), clones (6 each).
+  Eigen::Index time_offset_index() const { return kMsckfImuDimension; }
+  Eigen::Index extrinsic_index(int camera) const { return kMsckfImuDimension + (config_.calibrate_time_offset ? 1 : 0) + 6 * camera; }
+  Eigen::Index clone_index(size_t clone) const { return first_clone_ + kMsckfCloneDimension * static_cast<Eigen::Index>(clone); }
   using ImuMatrix = Eigen::Matrix<double, kMsckfImuDimension, kMsckfImuDimension>;
   void propagate_interval(const estimate::ImuSample& reading, double dt);
   void apply_interval_propagation();
@@ -159,6 +182,9 @@ class Msckf {
   estimate::NavigationState state_;
   Eigen::MatrixXd covariance_;
   std::deque<MsckfClone> clones_;
+  std::deque<Eigen::Matrix<double, 6, 1>> clone_rates_;  // d(dp, dtheta)/d(time offset): velocity, body rate
+  double time_offset_ = 0.0;
+  Eigen::Index first_clone_ = kMsckfImuDimension;
   std::map<uint64_t, std::vector<TrackObservation>> tracks_;
   std::optional<estimate::ImuSample> last_sample_;
   // The IMU transition and noise accumulated since the last frame, applied to the covariance at
