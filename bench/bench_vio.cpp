@@ -36,17 +36,17 @@ SE3 forward_camera() {
   return SE3(SO3::from_matrix(R_body_camera), Eigen::Vector3d::Zero());
 }
 
-// A filter flying at 1 m/s along x with 100 features seen in each of its 11 clones (20 Hz).
+// A filter flying sideways at 1 m/s with 100 features seen in each of its 11 clones (20 Hz).
 Msckf full_window() {
   estimate::NavigationState state;
   state.timestamp = Timestamp::from_seconds(100.0);
-  state.velocity = Eigen::Vector3d(1.0, 0.0, 0.0);
+  state.velocity = Eigen::Vector3d(0.0, 1.0, 0.0);  // sideways: every feature gets parallax
   const Eigen::MatrixXd covariance = 1e-4 * Eigen::MatrixXd::Identity(15, 15);
   MsckfConfig config;
   config.calibrate_time_offset = false;  // the observations below are made at the frame times
   Msckf filter = Msckf::create(config, {{forward_camera(), 458.0}}, state, covariance).value();
   std::mt19937_64 random(3);
-  std::uniform_real_distribution<double> lateral(-2.0, 2.0), depth(4.0, 9.0);
+  std::uniform_real_distribution<double> lateral(-1.5, 1.5), depth(2.0, 5.0);
   std::vector<Eigen::Vector3d> points;
   for (int i = 0; i < 100; ++i) points.emplace_back(depth(random), lateral(random), 1.5 * lateral(random) / 2.0);
   const estimate::ImuSample level{state.timestamp, Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 0, estimate::kStandardGravity)};
