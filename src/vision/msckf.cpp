@@ -40,6 +40,8 @@ Status validate(const MsckfConfig& config) {
   if (!(config.min_parallax_deg >= 0.0 && config.min_parallax_deg < 90.0)) return Error("MsckfConfig.min_parallax_deg: must be in [0, 90)", "min_parallax_deg");
   if (!positive(config.extrinsic_rotation_sigma) || !positive(config.extrinsic_translation_sigma) || !positive(config.time_offset_sigma))
     return Error("MsckfConfig: extrinsic_rotation_sigma, extrinsic_translation_sigma and time_offset_sigma must be positive", "extrinsic_rotation_sigma");
+  if (!(config.zero_velocity_max_disparity_px >= 0.0) || !positive(config.zero_velocity_sigma))
+    return Error("MsckfConfig: zero_velocity_max_disparity_px must not be negative, zero_velocity_sigma must be positive", "zero_velocity_sigma");
   if (config.triangulation_iterations < 0) return Error("MsckfConfig.triangulation_iterations: must not be negative", "triangulation_iterations");
   const estimate::ImuNoise& noise = config.imu_noise;
   if (!positive(noise.process_noise_accel) || !positive(noise.process_noise_gyro) || !positive(noise.sample_interval) ||
@@ -162,9 +164,9 @@ void Msckf::marginalize_oldest_clone() {
 Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vector<FeatureObservation>& observations) {
   if (diverged_) return Error("Msckf: the covariance is no longer finite; the filter must be initialized again", "state");
   if (!last_sample_) return Error("Msckf: a frame before any IMU sample", "imu");
-  if (!clones_.empty() && time <= clones_.back().timestamp)
+  if (last_frame_time_ && time <= *last_frame_time_)
     return Error(fmt::format("Msckf: frame at {:.6f} s is not after the previous frame ({:.6f} s)", time.seconds(),
-                             clones_.back().timestamp.seconds()), "time");
+                             last_frame_time_->seconds()), "time");
   const Timestamp frame_body_time = body_time(time);
   if (frame_body_time < state_.timestamp)
     return Error(fmt::format("Msckf: frame at {:.6f} s (body time {:.6f} s) is older than the IMU state ({:.6f} s); process frames before "
@@ -178,6 +180,19 @@ Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vecto
 
   if (frame_body_time > state_.timestamp) propagate_interval(*last_sample_, (frame_body_time - state_.timestamp).seconds());
   apply_interval_propagation();
+  const bool standing = config_.zero_velocity_update && standing_still(observations);
+  last_frame_time_ = time;
+  previous_observations_.clear();
+  for (const FeatureObservation& observation : observations) {
+    if (observation.camera == 0) previous_observations_[observation.feature_id] = observation.normalized;
+  }
+  if (standing && update_zero_velocity()) {
+    MsckfUpdateSummary summary;
+    summary.zero_velocity = true;
+    summary.clones = static_cast<int>(clones_.size());
+    if (!covariance_.allFinite() || !state_.all_finite()) diverged_ = true;
+    return summary;
+  }
   augment(time);
   std::set<uint64_t> seen;
   for (const FeatureObservation& observation : observations) {
@@ -305,6 +320,33 @@ MsckfUpdateSummary Msckf::update(const std::vector<uint64_t>& feature_ids) {
   covariance_ = root * gain_factor.solve(root.transpose());
   covariance_ = 0.5 * (covariance_ + covariance_.transpose()).eval();
   return summary;
+}
+
+bool Msckf::standing_still(const std::vector<FeatureObservation>& observations) const {
+  std::vector<double> disparities;
+  for (const FeatureObservation& observation : observations) {
+    if (observation.camera != 0) continue;
+    const auto previous = previous_observations_.find(observation.feature_id);
+    if (previous != previous_observations_.end()) disparities.push_back((observation.normalized - previous->second).norm() * cameras_[0].focal_length_px);
+  }
+  if (disparities.size() < 10) return false;
+  std::nth_element(disparities.begin(), disparities.begin() + static_cast<long>(disparities.size() / 2), disparities.end());
+  return disparities[disparities.size() / 2] < config_.zero_velocity_max_disparity_px;
+}
+
+bool Msckf::update_zero_velocity() {
+  // z = 0 = v + n: H selects the velocity; r = -v, S = P_vv + sigma^2 I.
+  const Eigen::Vector3d residual = -state_.velocity;
+  Eigen::Matrix3d innovation = covariance_.block<3, 3>(estimate::kVelocityIndex, estimate::kVelocityIndex);
+  innovation.diagonal().array() += config_.zero_velocity_sigma * config_.zero_velocity_sigma;
+  const Eigen::LDLT<Eigen::Matrix3d> innovation_ldlt(innovation);
+  if (!(residual.dot(innovation_ldlt.solve(residual)) <= estimate::chi_square_quantile(config_.chi_square_probability, 3))) return false;
+  const Eigen::MatrixXd velocity_rows = covariance_.middleRows<3>(estimate::kVelocityIndex);  // H P
+  const Eigen::MatrixXd gain = innovation_ldlt.solve(velocity_rows).transpose();
+  apply_correction(gain * residual);
+  covariance_ -= gain * velocity_rows;
+  covariance_ = 0.5 * (covariance_ + covariance_.transpose()).eval();
+  return true;
 }
 
 void Msckf::apply_correction(const Eigen::VectorXd& correction) {

@@ -318,6 +318,34 @@ TEST(Msckf, CalibratesAFiveDegreeExtrinsicErrorAndATenMillisecondTimeOffset) {
   }
 }
 
+TEST(Msckf, StandingStillUpdatesTheVelocityToZeroInsteadOfCloning) {
+  // A still, level IMU and 30 features that do not move; the velocity starts 5 cm/s off.
+  estimate::NavigationState state;
+  state.timestamp = Timestamp::from_seconds(10.0);
+  state.velocity = Eigen::Vector3d(0.05, 0.0, 0.0);
+  Eigen::Matrix<double, 15, 1> sigma;
+  sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d::Constant(0.1),
+      Eigen::Vector3d::Constant(0.05), Eigen::Vector3d::Constant(0.005);
+  Msckf filter = Msckf::create(MsckfConfig{}, {{SE3(forward_camera_rotation(), Eigen::Vector3d::Zero()), 400.0}}, state,
+                               sigma.array().square().matrix().asDiagonal().toDenseMatrix())
+                     .value();
+  std::vector<FeatureObservation> still;
+  for (uint64_t id = 0; id < 30; ++id) still.push_back({id, 0, Eigen::Vector2d(0.01 * static_cast<double>(id) - 0.15, 0.1)});
+  int zero_velocity = 0;
+  for (int frame = 1; frame <= 20; ++frame) {
+    const Timestamp time = state.timestamp + Duration::from_milliseconds(50 * frame);
+    for (int k = 9; k >= 0; --k) {
+      ASSERT_TRUE(filter.propagate({time - Duration::from_milliseconds(5 * k), Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 0, estimate::kStandardGravity)}));
+    }
+    const auto summary = filter.process_frame(time, still);
+    ASSERT_TRUE(summary) << summary.error().message;
+    zero_velocity += summary->zero_velocity;
+  }
+  EXPECT_EQ(zero_velocity, 19);  // every frame after the first (which has nothing to compare with)
+  EXPECT_EQ(filter.clones().size(), 1u);
+  EXPECT_LT(filter.state().velocity.norm(), 0.01);
+}
+
 TEST(Msckf, RefusesBadInputAndKeepsItsState) {
   const std::vector<MsckfCamera> cameras = {{SE3(forward_camera_rotation(), Eigen::Vector3d::Zero()), 400.0}};
   estimate::NavigationState state;

@@ -92,6 +92,14 @@ struct MsckfConfig {
   double extrinsic_translation_sigma = 0.05;  ///< m
   bool calibrate_time_offset = true;
   double time_offset_sigma = 0.02;            ///< s
+  /// Zero-velocity update (as OpenVINS's): when the features of camera 0 moved less than
+  /// zero_velocity_max_disparity_px (median over at least 10 seen in the previous frame too), the
+  /// frame is not cloned (standing still gives no parallax) and the velocity is updated to zero
+  /// with zero_velocity_sigma instead, unless that measurement fails the chi-square gate (a slow
+  /// creep the features cannot see).
+  bool zero_velocity_update = true;
+  double zero_velocity_max_disparity_px = 0.5;
+  double zero_velocity_sigma = 0.01;          ///< m/s
 };
 
 /// Checks every field; the error names the first field out of range.
@@ -112,6 +120,7 @@ struct MsckfUpdateSummary {
   int rejected_chi_square = 0;       ///< outliers by the gate
   int residual_rows = 0;             ///< rows of the stacked update after null-space projection
   int clones = 0;                    ///< clones in the window after the frame
+  bool zero_velocity = false;        ///< standing still: updated to zero velocity, not cloned
 };
 
 /// A cloned body pose in the window.
@@ -176,6 +185,8 @@ class Msckf {
   void marginalize_oldest_clone();
   MsckfUpdateSummary update(const std::vector<uint64_t>& feature_ids);
   void apply_correction(const Eigen::VectorXd& correction);
+  bool standing_still(const std::vector<FeatureObservation>& observations) const;
+  bool update_zero_velocity();
 
   MsckfConfig config_;
   std::vector<MsckfCamera> cameras_;
@@ -187,6 +198,8 @@ class Msckf {
   Eigen::Index first_clone_ = kMsckfImuDimension;
   std::map<uint64_t, std::vector<TrackObservation>> tracks_;
   std::optional<estimate::ImuSample> last_sample_;
+  std::optional<Timestamp> last_frame_time_;
+  std::map<uint64_t, Eigen::Vector2d> previous_observations_;  // camera 0's, by feature id
   // The IMU transition and noise accumulated since the last frame, applied to the covariance at
   // the next frame (one product with the clone columns per frame instead of per IMU sample).
   ImuMatrix interval_transition_ = ImuMatrix::Identity();
