@@ -13,8 +13,8 @@
 namespace hanzo::fusion::config {
 namespace {
 
-constexpr EnumNames<FrontendType, 3> kFrontendNames{
-    {{FrontendType::kEkf, "ekf"}, {FrontendType::kUkf, "ukf"}, {FrontendType::kParticle, "particle"}}};
+constexpr EnumNames<FrontendType, 4> kFrontendNames{
+    {{FrontendType::kEkf, "ekf"}, {FrontendType::kUkf, "ukf"}, {FrontendType::kParticle, "particle"}, {FrontendType::kMsckf, "msckf"}}};
 
 constexpr EnumNames<SensorModality, 6> kModalityNames{{{SensorModality::kImu, "imu"},
                                                                                     {SensorModality::kLidar, "lidar"},

@@ -81,7 +81,7 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
     Result<std::string> name = node["type"].as_string();
     if (!name) return name.error();
     const std::optional<FrontendType> type = frontend_type_from_string(*name);
-    if (!type) return node["type"].error(fmt::format("expected ekf, ukf or particle, got '{}'", *name));
+    if (!type) return node["type"].error(fmt::format("expected ekf, ukf, particle or msckf, got '{}'", *name));
     frontend.type = *type;
   }
   if (node["predict_rate"].present()) HANZO_ASSIGN_OR_RETURN(frontend.predict_rate_hz, positive_rate(node["predict_rate"]));

@@ -45,10 +45,13 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
     return Error(fmt::format("camera {}: the calibration's intrinsics need the image width and height for visual odometry", left.sensor));
   }
   const cv::Size size(static_cast<int>(intrinsics.width), static_cast<int>(intrinsics.height));
+  const bool stereo_pair = cameras.size() == 2 && cameras[1]->camera->intrinsics.width == intrinsics.width &&
+                           cameras[1]->camera->intrinsics.height == intrinsics.height;
+  if (config.frontend.type == config::FrontendType::kMsckf) return create_visual_inertial(config, calibration, cameras, stereo_pair, size);
   std::unique_ptr<vision::VisualOdometry> odometry;
   std::string right_sensor;
   Duration right_offset;
-  if (cameras.size() == 2 && cameras[1]->camera->intrinsics.width == intrinsics.width && cameras[1]->camera->intrinsics.height == intrinsics.height) {
+  if (stereo_pair) {
     const calib::SensorCalibration& right = *cameras[1];
     HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create_stereo(left.camera->pinhole_camera(), right.camera->pinhole_camera(),
                                                                                          left.T_body_sensor().inverse() * right.T_body_sensor(), size,
@@ -64,6 +67,49 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
                  right_sensor.empty() ? "" : " + " + right_sensor);
   return std::unique_ptr<CameraOdometry>(
       new CameraOdometry(std::move(odometry), left.sensor, std::move(right_sensor), left.T_body_sensor(), left.time_offset, right_offset));
+}
+
+Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(const config::FusionConfig& config, const calib::Calibration& calibration,
+                                                                               const std::vector<const calib::SensorCalibration*>& cameras,
+                                                                               bool stereo_pair, cv::Size size) {
+  const auto imu = std::find_if(config.sensors.begin(), config.sensors.end(),
+                                [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kImu; });
+  if (imu == config.sensors.end()) return Error("frontend.type msckf: visual-inertial odometry needs an IMU sensor", "frontend.type");
+  SE3 T_body_imu;
+  Duration imu_offset;
+  if (const calib::SensorCalibration* entry = calibration.find(imu->name)) {
+    T_body_imu = entry->T_body_sensor();
+    imu_offset = entry->time_offset;
+  }
+  std::vector<MsckfCameraSetup> setups;
+  for (size_t i = 0; i < (stereo_pair ? 2u : 1u); ++i) setups.push_back({cameras[i]->camera->pinhole_camera(), cameras[i]->T_body_sensor()});
+  const config::CovarianceConfig& covariance = config.frontend.covariance;
+  const estimate::ImuNoise noise{covariance.process_noise_accel, covariance.process_noise_gyro, covariance.accel_bias_random_walk,
+                                 covariance.gyro_bias_random_walk, 1.0 / imu->rate_hz};
+  std::unique_ptr<MsckfOdometry> inertial;
+  HANZO_ASSIGN_OR_RETURN(inertial, with_context(MsckfOdometry::create(setups, size, T_body_imu, noise), fmt::format("camera {}", cameras[0]->sensor)));
+  const calib::SensorCalibration& left = *cameras[0];
+  logger()->info("session: {} visual-inertial odometry (MSCKF) on {}{} and {}", stereo_pair ? "stereo" : "monocular", left.sensor,
+                 stereo_pair ? " + " + cameras[1]->sensor : "", imu->name);
+  auto odometry = std::unique_ptr<CameraOdometry>(new CameraOdometry(nullptr, left.sensor, stereo_pair ? cameras[1]->sensor : "", left.T_body_sensor(),
+                                                                     left.time_offset, stereo_pair ? cameras[1]->time_offset : Duration()));
+  odometry->inertial_ = std::move(inertial);
+  odometry->imu_sensor_ = imu->name;
+  odometry->imu_offset_ = imu_offset;
+  odometry->inertial_summary_.scale_free = false;
+  return odometry;
+}
+
+void CameraOdometry::add_imu(const msgs::ImuMessage& imu) {
+  if (!inertial_ || !imu.angular_velocity.allFinite() || !imu.linear_acceleration.allFinite()) return;
+  inertial_->add_imu({imu.timestamp + imu_offset_, imu.angular_velocity, imu.linear_acceleration});
+}
+
+vision::VisualOdometrySummary CameraOdometry::summary() const {
+  if (!inertial_) return odometry_->summary();
+  vision::VisualOdometrySummary summary = inertial_summary_;
+  summary.standstill_frames = inertial_->zero_velocity_frames();
+  return summary;
 }
 
 CameraOdometry::CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::string left_sensor, std::string right_sensor,
@@ -98,6 +144,18 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::add(std::string_v
 }
 
 Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track(Timestamp time, const cv::Mat& left, const cv::Mat& right) {
+  if (inertial_) {
+    MsckfOdometry::Frame frame;
+    HANZO_ASSIGN_OR_RETURN(frame, inertial_->track(time, left, right));
+    Tracked tracked{time, {}, frame.T_world_body};
+    tracked.frame.time = time.seconds();
+    tracked.frame.state = frame.tracking ? vision::TrackingState::kTracking : vision::TrackingState::kInitializing;
+    tracked.frame.standing_still = frame.update.zero_velocity;
+    tracked.frame.reason = frame.reason;
+    ++inertial_summary_.frames;
+    inertial_summary_.tracked_frames += frame.tracking;
+    return std::optional<Tracked>(std::move(tracked));
+  }
   Result<vision::VisualOdometryFrame> frame = right.empty() ? odometry_->track(time.seconds(), left) : odometry_->track(time.seconds(), left, right);
   if (!frame) return frame.error();
   Tracked tracked{time, std::move(frame).value(), SE3()};

@@ -8,6 +8,10 @@
 // never comes, and a right without its left, are dropped). Images must be mono8, rgb8 or bgr8 of
 // the calibrated size; the sensor's time offset moves them to the body clock.
 //
+// With frontend.type msckf and an IMU, the odometry is visual-inertial instead
+// (msckf_odometry.hpp: KLT tracks and the MSCKF, metric with one camera too): the Session gives
+// it the IMU's samples as well, and its body poses are fused the same way.
+//
 // Fusion (Session): the odometry's camera poses are pose measurements (Frontend::push_pose).
 // Without an IMU its world (the body frame at its first keyframe) is the Frontend's; with an
 // IMU (stereo: metric) its world is placed once in the Frontend's, by the Frontend's pose at the
@@ -25,6 +29,7 @@
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
 #include "hanzo/fusion/vision/visual_odometry.hpp"
+#include "msckf_odometry.hpp"
 
 namespace hanzo::fusion::pipeline {
 
@@ -38,7 +43,8 @@ class CameraOdometry {
     SE3 T_world_body;
   };
 
-  /// nullptr (no error) when the configuration has no camera with intrinsics.
+  /// nullptr (no error) when the configuration has no camera with intrinsics. Fails for
+  /// frontend.type msckf without an IMU sensor.
   static Result<std::unique_ptr<CameraOdometry>> create(const config::FusionConfig& config, const calib::Calibration& calibration,
                                                         const vision::VisualOdometryConfig& odometry_config = {});
 
@@ -56,16 +62,30 @@ class CameraOdometry {
   /// problem) for an image of the wrong encoding or size, or out of time order.
   Result<std::optional<Tracked>> add(std::string_view sensor, const msgs::ImageMessage& image);
 
-  vision::VisualOdometrySummary summary() const { return odometry_->summary(); }
+  /// Visual-inertial (frontend.type msckf): the odometry wants the IMU's samples (add_imu()).
+  bool visual_inertial() const { return inertial_ != nullptr; }
+  const std::string& imu_sensor() const { return imu_sensor_; }
+  /// An IMU message of imu_sensor() (sensor clock; the calibrated offset is applied here).
+  void add_imu(const msgs::ImuMessage& imu);
+
+  vision::VisualOdometrySummary summary() const;
   /// The odometry's landmark map (its world: the left camera at its first keyframe).
-  msgs::VisualLandmarkLayer landmark_layer() const { return odometry_->landmark_layer(left_sensor_); }
+  /// (Empty for the visual-inertial odometry: it keeps no landmarks.)
+  msgs::VisualLandmarkLayer landmark_layer() const { return odometry_ ? odometry_->landmark_layer(left_sensor_) : msgs::VisualLandmarkLayer{}; }
 
  private:
   CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::string left_sensor, std::string right_sensor, const SE3& T_body_left,
                  Duration left_offset, Duration right_offset);
+  static Result<std::unique_ptr<CameraOdometry>> create_visual_inertial(const config::FusionConfig& config, const calib::Calibration& calibration,
+                                                                        const std::vector<const calib::SensorCalibration*>& cameras, bool stereo_pair,
+                                                                        cv::Size size);
   Result<std::optional<Tracked>> track(Timestamp time, const cv::Mat& left, const cv::Mat& right);
 
-  std::unique_ptr<vision::VisualOdometry> odometry_;
+  std::unique_ptr<vision::VisualOdometry> odometry_;  // null when visual-inertial
+  std::unique_ptr<MsckfOdometry> inertial_;
+  std::string imu_sensor_;
+  Duration imu_offset_;
+  vision::VisualOdometrySummary inertial_summary_;
   std::string left_sensor_, right_sensor_;
   SE3 T_body_left_;
   Duration left_offset_, right_offset_;

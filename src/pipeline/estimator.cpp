@@ -61,7 +61,8 @@ std::unique_ptr<estimate::Filter> make_filter(const estimate::FilterConfig& conf
       return std::make_unique<estimate::ParticleFilter>(
           config, estimate::ParticleFilterConfig{settings.particles, settings.resample_threshold, settings.seed});
     }
-    case config::FrontendType::kEkf: break;
+    case config::FrontendType::kEkf:
+    case config::FrontendType::kMsckf: break;  // the EKF; the cameras go through the MSCKF (camera_odometry.hpp)
   }
   return std::make_unique<estimate::ErrorStateEkf>(config);
 }

@@ -303,6 +303,9 @@ PushStatus Session::push(std::string_view sensor, msgs::SensorMessage message) {
 PushStatus Session::push_message(std::string_view sensor, msgs::SensorMessage message) {
   if (!config_.mapping) return frontend_->push(sensor, message);
   if (camera_odometry_ && camera_odometry_->handles(sensor)) return push_image(sensor, message);
+  if (camera_odometry_ && camera_odometry_->visual_inertial() && sensor == camera_odometry_->imu_sensor()) {
+    if (const auto* imu = std::get_if<msgs::ImuMessage>(&message)) camera_odometry_->add_imu(*imu);
+  }
   if (maps_lidar() && sensor == lidar_sensor_) {
     if (auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(std::move(*scan));
   }
@@ -427,7 +430,8 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
       visual_world_ = *T_world_body * frame.T_world_body.inverse();
     }
   }
-  const bool monocular_with_imu = frontend_->has_imu() && !camera_odometry_->stereo();
+  // (A monocular visual-inertial odometry is metric.)
+  const bool monocular_with_imu = frontend_->has_imu() && !camera_odometry_->stereo() && !camera_odometry_->visual_inertial();
   Status fused = ok_status();
   if (visual_world_ && !monocular_with_imu) {
     // Poses of the camera: 5.5 cm and 1 degree (its slow drift is not in the covariance, as

@@ -53,7 +53,7 @@ TEST(FusionConfig, DefaultsApplyWhereTheFileIsSilent) {
 
 TEST(FusionConfig, EachRuleGivesItsDocumentedError) {
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    type: kalman\n"),
-            "fusion.yaml:3: frontend.type: expected ekf, ukf or particle, got 'kalman'");
+            "fusion.yaml:3: frontend.type: expected ekf, ukf, particle or msckf, got 'kalman'");
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    predict_rate: -5\n"),
             "fusion.yaml:3: frontend.predict_rate: expected a positive rate in Hz, got -5");
   EXPECT_EQ(error_of("fusion:\n  frontend:\n    covariance:\n      initial_position: [0.1, 0.1]\n"),

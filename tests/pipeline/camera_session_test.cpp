@@ -46,11 +46,14 @@ struct SessionRun {
 };
 
 // The Session on the recording with only the sensors `keep` says.
-SessionRun run_session(const std::function<bool(const sim::ScenarioSensor&)>& keep) {
+SessionRun run_session(const std::function<bool(const sim::ScenarioSensor&)>& keep,
+                       config::FrontendType frontend_type = config::FrontendType::kEkf) {
   const Recording& recording = drone_recording();
   sim::Scenario scenario = recording.scenario;
   std::erase_if(scenario.sensors, [&](const sim::ScenarioSensor& sensor) { return !keep(sensor); });
-  auto session = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  config::FusionConfig fusion_config = sim::scenario_fusion_config(scenario);
+  fusion_config.frontend.type = frontend_type;
+  auto session = Session::create(fusion_config, sim::scenario_calibration(scenario)).value();
   io::Trajectory estimate, truth;
   session->set_pose_callback([&](const msgs::PoseEstimate& pose) {
     if (!estimate.empty() && pose.timestamp <= estimate.timestamps.back()) return;
@@ -114,6 +117,29 @@ TEST(CameraSession, StereoOdometryFusedWithTheImuBeatsTheImuAlone) {
   const SessionRun fused = run_session([](const sim::ScenarioSensor& sensor) { return is_imu(sensor) || is_camera(sensor); });
   std::printf("IMU alone: SE3-aligned APE %.3f m; IMU + stereo odometry: %.3f m\n", inertial.ape_se3_m, fused.ape_se3_m);
   EXPECT_LT(fused.ape_se3_m, 0.8 * inertial.ape_se3_m);
+}
+
+// frontend.type msckf: the images through the MSCKF (KLT tracks), its poses fused into the EKF.
+TEST(CameraSession, VisualInertialOdometryBeatsTheImuAloneStereoAndMonocular) {
+  const SessionRun inertial = run_session(is_imu);
+  const SessionRun stereo = run_session([](const sim::ScenarioSensor& sensor) { return is_imu(sensor) || is_camera(sensor); },
+                                        config::FrontendType::kMsckf);
+  const SessionRun mono = run_session([](const sim::ScenarioSensor& sensor) { return is_imu(sensor) || sensor.name == "camera_left"; },
+                                      config::FrontendType::kMsckf);
+  std::printf("IMU alone: SE3-aligned APE %.3f m; with the MSCKF, stereo: %.3f m (%lu frames tracked, %lu standing), monocular: %.3f m (%lu)\n",
+              inertial.ape_se3_m, stereo.ape_se3_m, static_cast<unsigned long>(stereo.mapping.camera_frames_tracked),
+              static_cast<unsigned long>(stereo.mapping.camera_standstill_frames), mono.ape_se3_m,
+              static_cast<unsigned long>(mono.mapping.camera_frames_tracked));
+  EXPECT_GT(stereo.mapping.camera_frames_tracked, 100u);  // 121 frames; the first second initializes
+  EXPECT_GT(mono.mapping.camera_frames_tracked, 100u);
+  EXPECT_FALSE(mono.mapping.visual_scale_free);
+  EXPECT_LT(stereo.ape_se3_m, 0.8 * inertial.ape_se3_m);
+  EXPECT_LT(mono.ape_se3_m, 0.8 * inertial.ape_se3_m);
+  for (const SensorStatistics& sensor : mono.summary.sensors) {
+    if (sensor.name == "camera_left") {
+      EXPECT_GT(sensor.fused, 100u);
+    }
+  }
 }
 
 }  // namespace

@@ -29,8 +29,9 @@
 
 namespace hanzo::fusion::config {
 
-enum class FrontendType { kEkf, kUkf, kParticle };
-std::string_view to_string(FrontendType type);  // "ekf", "ukf", "particle"
+/// kMsckf: the EKF, with the cameras' images through visual-inertial odometry (the MSCKF).
+enum class FrontendType { kEkf, kUkf, kParticle, kMsckf };
+std::string_view to_string(FrontendType type);  // "ekf", "ukf", "particle", "msckf"
 std::optional<FrontendType> frontend_type_from_string(std::string_view name);
 
 /// What kind of sensor a configured sensor is. Inferred from the sensor's name (imu*, lidar*,

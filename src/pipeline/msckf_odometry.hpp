@@ -1,0 +1,70 @@
+#pragma once
+// MsckfOdometry: the Session's visual-inertial odometry (frontend.type: msckf): the KLT feature
+// tracker and the MSCKF (vision/feature_tracker.hpp, vision/msckf.hpp) on the cameras and the IMU.
+//
+// IMU samples (body clock) are buffered; a frame first propagates the filter through the samples
+// up to its body time (camera time + the filter's time offset), so images may arrive a little
+// after the IMU samples that follow them. Before the filter starts, a frame starts it by static
+// alignment (estimate/static_alignment.hpp) on the last second of IMU before it: roll, pitch and
+// the gyro bias; heading 0; at rest. A platform moving at the start stays initializing
+// (in-motion visual-inertial initialization is not built) until it stands still for a second.
+//
+// World: gravity-aligned (z up), heading and origin those of the IMU at the start; poses are
+// T_world_body (the IMU's pose moved by the calibration's imu_to_body).
+
+#include <deque>
+#include <memory>
+#include <optional>
+
+#include <opencv2/core.hpp>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/estimate/imu_propagation.hpp"
+#include "hanzo/fusion/vision/feature_tracker.hpp"
+#include "hanzo/fusion/vision/msckf.hpp"
+
+namespace hanzo::fusion::pipeline {
+
+struct MsckfCameraSetup {
+  PinholeCamera camera;
+  SE3 T_body_camera;
+};
+
+class MsckfOdometry {
+ public:
+  struct Frame {
+    bool tracking = false;  ///< false while initializing (the reason says why)
+    SE3 T_world_body;
+    vision::MsckfUpdateSummary update;
+    std::string reason;
+  };
+
+  /// One or two cameras (the second makes a stereo rig), the IMU's mounting and noise; fails
+  /// as the tracker and the filter do on a bad calibration.
+  static Result<std::unique_ptr<MsckfOdometry>> create(const std::vector<MsckfCameraSetup>& cameras, cv::Size image_size, const SE3& T_body_imu,
+                                                       const estimate::ImuNoise& imu_noise);
+
+  /// An IMU sample on the body clock, in time order (older or repeated samples are ignored).
+  void add_imu(const estimate::ImuSample& sample);
+  /// A frame (grey images; right empty for a single camera) at its body-clock time.
+  Result<Frame> track(Timestamp time, const cv::Mat& left, const cv::Mat& right);
+
+  int zero_velocity_frames() const { return zero_velocity_frames_; }
+  bool initialized() const { return filter_.has_value(); }
+
+ private:
+  MsckfOdometry(std::unique_ptr<vision::FeatureTracker> tracker, std::vector<vision::MsckfCamera> cameras, const SE3& T_body_imu,
+                const estimate::ImuNoise& imu_noise);
+  std::optional<std::string> start_filter(Timestamp time);
+
+  std::unique_ptr<vision::FeatureTracker> tracker_;
+  std::vector<vision::MsckfCamera> cameras_;  // T_imu_camera: the MSCKF's body is the IMU
+  SE3 T_body_imu_;
+  estimate::ImuNoise imu_noise_;
+  std::optional<vision::Msckf> filter_;
+  std::deque<estimate::ImuSample> imu_;  // not yet propagated (before the start: the last seconds)
+  int zero_velocity_frames_ = 0;
+};
+
+}  // namespace hanzo::fusion::pipeline
