@@ -1,5 +1,6 @@
 #include "hanzo/fusion/core/time.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <ctime>
@@ -8,8 +9,20 @@
 
 namespace hanzo::fusion {
 
+namespace {
+
+// The seconds an int64 count of nanoseconds holds (about 292 years), kept a little inside so the
+// rounding below cannot overflow. NaN maps to 0.
+double representable_seconds(double seconds) {
+  constexpr double kLimit = 9.2e9;
+  if (std::isnan(seconds)) return 0.0;
+  return std::clamp(seconds, -kLimit, kLimit);
+}
+
+}  // namespace
+
 Duration Duration::from_seconds(double seconds) {
-  return Duration(static_cast<int64_t>(std::llround(seconds * 1e9)));
+  return Duration(static_cast<int64_t>(std::llround(representable_seconds(seconds) * 1e9)));
 }
 
 Timestamp Timestamp::wall_clock_now() {
@@ -19,8 +32,9 @@ Timestamp Timestamp::wall_clock_now() {
 
 Timestamp Timestamp::from_seconds(double seconds_since_epoch) {
   // Split into whole and fractional seconds first so the nanoseconds keep full precision.
-  const double whole = std::floor(seconds_since_epoch);
-  const auto fraction_ns = static_cast<int64_t>(std::llround((seconds_since_epoch - whole) * 1e9));
+  const double seconds = representable_seconds(seconds_since_epoch);
+  const double whole = std::floor(seconds);
+  const auto fraction_ns = static_cast<int64_t>(std::llround((seconds - whole) * 1e9));
   return Timestamp(static_cast<int64_t>(whole) * 1'000'000'000 + fraction_ns);
 }
 

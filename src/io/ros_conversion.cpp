@@ -175,6 +175,11 @@ Result<msgs::PointCloudMessage> point_cloud_from_ros(std::string_view data, Seri
       if (time) {
         const double t = value(*time, point);
         if (!std::isfinite(t)) return Error("sensor_msgs/PointCloud2: a non-finite point time");
+        // Offsets beyond a day and absolute times beyond int64 nanoseconds are not point times.
+        const bool offset = time_unit == PointTimeUnit::kOffsetSeconds || time_unit == PointTimeUnit::kOffsetNanoseconds;
+        const bool nanoseconds = time_unit == PointTimeUnit::kOffsetNanoseconds || time_unit == PointTimeUnit::kAbsoluteNanoseconds;
+        const double seconds = nanoseconds ? t * 1e-9 : t;
+        if (std::abs(seconds) > (offset ? 86400.0 : 9.0e9)) return Error(fmt::format("sensor_msgs/PointCloud2: point time {} is out of range", t));
         switch (time_unit) {
           case PointTimeUnit::kOffsetSeconds:
             cloud.point_timestamps.push_back(cloud.timestamp + Duration::from_nanoseconds(std::llround(t * 1e9)));
@@ -183,7 +188,7 @@ Result<msgs::PointCloudMessage> point_cloud_from_ros(std::string_view data, Seri
             cloud.point_timestamps.push_back(cloud.timestamp + Duration::from_nanoseconds(static_cast<int64_t>(t)));
             break;
           case PointTimeUnit::kAbsoluteSeconds:
-            cloud.point_timestamps.push_back(Timestamp::from_nanoseconds(std::llround(t * 1e6) * 1000));
+            cloud.point_timestamps.push_back(Timestamp::from_nanoseconds(std::llround(t * 1e6) * 1000));  // microseconds: float noise
             break;
           case PointTimeUnit::kAbsoluteNanoseconds:
             cloud.point_timestamps.push_back(Timestamp::from_nanoseconds(std::llround(t)));

@@ -87,7 +87,10 @@ Result<Timestamp> parse_seconds(const std::string& text) {
       scale /= 10;
     }
   }
+  // int64 nanoseconds hold +-292 years around 1970: a time beyond is refused, not wrapped.
+  constexpr int64_t kLargestSeconds = 9'000'000'000;
   if (plain && pos == text.size()) {
+    if (whole > kLargestSeconds) return Error(fmt::format("'{}' is beyond the times this format holds (years 1685-2255)", text));
     const int64_t ns = whole * 1'000'000'000 + fraction_ns;
     return Timestamp::from_nanoseconds(negative ? -ns : ns);
   }
@@ -96,6 +99,7 @@ Result<Timestamp> parse_seconds(const std::string& text) {
   if (error != std::errc() || end != text.data() + text.size() || !std::isfinite(seconds)) {
     return Error(fmt::format("'{}' is not a time in seconds", text));
   }
+  if (std::abs(seconds) > static_cast<double>(kLargestSeconds)) return Error(fmt::format("'{}' is beyond the times this format holds (years 1685-2255)", text));
   return Timestamp::from_seconds(seconds);
 }
 

@@ -1,5 +1,7 @@
 #include "hanzo/fusion/core/time.hpp"
 
+#include <cmath>
+
 #include <gtest/gtest.h>
 
 namespace hanzo::fusion {
@@ -21,6 +23,12 @@ TEST(Time, FromSecondsKeepsNanosecondsOfTodaysEpoch) {
   const Timestamp t = Timestamp::from_seconds(1403636579.763555584);
   EXPECT_NEAR(static_cast<double>(t.nanoseconds() - 1403636579763555584), 0.0, 250.0);
   EXPECT_TRUE(Timestamp().is_zero());
+}
+
+TEST(Time, SecondsBeyondInt64NanosecondsSaturate) {
+  EXPECT_GT(Timestamp::from_seconds(1e300).nanoseconds(), 9'000'000'000'000'000'000);
+  EXPECT_LT(Duration::from_seconds(-1e300).nanoseconds(), -9'000'000'000'000'000'000);
+  EXPECT_EQ(Duration::from_seconds(std::nan("")).nanoseconds(), 0);
 }
 
 TEST(Time, Iso8601) {

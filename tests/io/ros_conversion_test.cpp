@@ -141,6 +141,10 @@ TEST(CdrDecoding, PointTimesRelativeOrAbsoluteBySize) {
   ASSERT_TRUE(offsets.ok());
   EXPECT_EQ(offsets->point_timestamps[0].nanoseconds(), 1'700'000'000'000'781'250);
   EXPECT_FALSE(point_cloud_from_ros(cloud_with_time(1'700'000'000, 8, std::nan("")), kCdr).ok());
+  // Times beyond int64 nanoseconds are refused (found by UBSan: the conversion overflowed).
+  auto huge = point_cloud_from_ros(cloud_with_time(1'700'000'000, 8, -9.3e18), kCdr);
+  ASSERT_FALSE(huge.ok());
+  EXPECT_NE(huge.error().message.find("out of range"), std::string::npos) << huge.error().message;
 }
 
 std::string camera_info(const std::string& model, std::vector<double> d, double fx) {

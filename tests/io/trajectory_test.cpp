@@ -29,6 +29,9 @@ TEST(ParseSeconds, PlainDecimalsAreExact) {
   EXPECT_FALSE(parse_seconds("abc").ok());
   EXPECT_FALSE(parse_seconds("1.5x").ok());
   EXPECT_FALSE(parse_seconds("nan").ok());
+  // Beyond int64 nanoseconds (found by UBSan: the multiplication overflowed).
+  EXPECT_NE(parse_seconds("17002000000").error().message.find("beyond"), std::string::npos);
+  EXPECT_FALSE(parse_seconds("1e300").ok());
   EXPECT_EQ(format_seconds(Timestamp::from_nanoseconds(1311868164363181000)), "1311868164.363181");
   EXPECT_EQ(format_seconds(Timestamp::from_nanoseconds(2000000000)), "2");
 }
