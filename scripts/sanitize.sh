@@ -2,7 +2,8 @@
 # `make sanitize`: the test suite under AddressSanitizer + UndefinedBehaviorSanitizer (GCC, in
 # BUILD_DIR-asan), then the service and pipeline tests under ThreadSanitizer (BUILD_DIR-tsan).
 # Any report fails the run (halt_on_error). The Python and web-viewer tests are left out: they
-# load the library into interpreters that are not built with the sanitizers.
+# load the library into interpreters that are not built with the sanitizers; so is the install
+# test, whose consumer project links the installed libraries without the sanitizer runtime.
 # SANITIZE_TESTS (a ctest -R regex) narrows the ASan run, e.g. SANITIZE_TESTS='^(Mcap|Rosbag)'.
 set -euo pipefail
 build_dir=${1:-build}
@@ -20,7 +21,7 @@ cmake --build "$asan" -j "$jobs"
 export ASAN_OPTIONS=detect_leaks=1:halt_on_error=1:abort_on_error=1
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 export LSAN_OPTIONS=suppressions="$PWD/scripts/lsan.supp"
-ctest --test-dir "$asan" --output-on-failure -j "$jobs" -E '^(python\.pytest|web\.viewer)$' ${SANITIZE_TESTS:+-R "$SANITIZE_TESTS"}
+ctest --test-dir "$asan" --output-on-failure -j "$jobs" -E '^(python\.pytest|web\.viewer|install\..*)$' ${SANITIZE_TESTS:+-R "$SANITIZE_TESTS"}
 
 tsan="$build_dir-tsan"
 configure "$tsan" "-fsanitize=thread"
