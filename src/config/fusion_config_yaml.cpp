@@ -342,7 +342,7 @@ Result<FusionConfig> load_fusion_config(const std::string& path) {
 std::string to_yaml(const FusionConfig& config) {
   const CovarianceConfig& c = config.frontend.covariance;
   std::string out = "fusion:\n  frontend:\n";
-  out += fmt::format("    type: {}  # ekf | ukf | particle\n", to_string(config.frontend.type));
+  out += fmt::format("    type: {}  # ekf | ukf | particle | msckf\n", to_string(config.frontend.type));
   out += fmt::format("    predict_rate: {}  # Hz, IMU propagation rate\n", format_double(config.frontend.predict_rate_hz));
   out += "    covariance:\n";
   out += fmt::format("      initial_position: {}  # meters, diagonal\n", yaml::flow_sequence(c.initial_position));
