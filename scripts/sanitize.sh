@@ -25,6 +25,7 @@ ctest --test-dir "$asan" --output-on-failure -j "$jobs" -E '^(python\.pytest|web
 
 tsan="$build_dir-tsan"
 configure "$tsan" "-fsanitize=thread"
+# Set before the build: gtest_discover_tests runs the test binaries.
+export TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1:suppressions="$PWD/scripts/tsan.supp"
 cmake --build "$tsan" -j "$jobs" --target test_service test_pipeline hanzo-fusion
-export TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1
 ctest --test-dir "$tsan" --output-on-failure -j "$jobs" -R '^(SessionManager|RestServer|GrpcServer|SessionRecording|MappingEndpoints|Session)\.'
