@@ -11,6 +11,8 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "hanzo/fusion/core/thread_sanitizer.hpp"
+
 namespace hanzo::fusion::cloud {
 namespace {
 
@@ -33,6 +35,7 @@ tbb::task_arena& arena_for(int threads) {
 }  // namespace
 
 int thread_count(int num_threads) {
+  if (kUnderThreadSanitizer) return 1;  // core/thread_sanitizer.hpp
   if (num_threads > 0) return num_threads;
   return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
 }

@@ -10,6 +10,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "hanzo/fusion/core/thread_sanitizer.hpp"
 #include "hanzo/fusion/core/enum_names.hpp"
 
 namespace hanzo::fusion::sim {
@@ -196,7 +197,7 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
     }
   };
   const tbb::blocked_range<int> all_tile_rows(0, tiles_down, 1);
-  if (config_.num_threads == 1) {
+  if (config_.num_threads == 1 || kUnderThreadSanitizer) {  // core/thread_sanitizer.hpp
     render_tile_rows(all_tile_rows);
   } else {
     tbb::task_arena arena(config_.num_threads <= 0 ? tbb::task_arena::automatic : config_.num_threads);

@@ -8,6 +8,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "hanzo/fusion/core/thread_sanitizer.hpp"
 #include "hanzo/fusion/core/enum_names.hpp"
 
 namespace hanzo::fusion::sim {
@@ -121,7 +122,7 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
     }
   };
   const tbb::blocked_range<int> all_columns(0, pattern.columns, 64);
-  if (config_.num_threads == 1) {
+  if (config_.num_threads == 1 || kUnderThreadSanitizer) {  // core/thread_sanitizer.hpp
     cast_columns(all_columns);
   } else {
     tbb::task_arena arena(config_.num_threads <= 0 ? tbb::task_arena::automatic : config_.num_threads);
