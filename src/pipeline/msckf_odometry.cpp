@@ -93,6 +93,7 @@ Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat&
   Result<vision::MsckfUpdateSummary> update = filter_->process_frame(time, tracked.observations);
   if (!update) {
     frame.reason = update.error().message;
+    if (filter_->diverged()) filter_.reset();  // start again from the next still second
     return frame;
   }
   frame.tracking = true;

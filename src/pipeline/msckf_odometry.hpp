@@ -8,6 +8,7 @@
 // alignment (estimate/static_alignment.hpp) on the last second of IMU before it: roll, pitch and
 // the gyro bias; heading 0; at rest. A platform moving at the start stays initializing
 // (in-motion visual-inertial initialization is not built) until it stands still for a second.
+// A filter whose covariance breaks down numerically is dropped and started again the same way.
 //
 // World: gravity-aligned (z up), heading and origin those of the IMU at the start; poses are
 // T_world_body (the IMU's pose moved by the calibration's imu_to_body).

@@ -145,7 +145,6 @@ void Msckf::augment(Timestamp time) {
   grown.bottomRightCorner<kClone, kClone>() = 0.5 * (corner + corner.transpose());
   covariance_ = std::move(grown);
   clones_.push_back({time, SE3(state_.R_world_body, state_.position)});
-  clone_rates_.push_back(rates);
 }
 
 void Msckf::marginalize_oldest_clone() {
@@ -158,7 +157,6 @@ void Msckf::marginalize_oldest_clone() {
   reduced.bottomRightCorner(rest, rest) = covariance_.bottomRightCorner(rest, rest);
   covariance_ = std::move(reduced);
   clones_.pop_front();
-  clone_rates_.pop_front();
 }
 
 Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vector<FeatureObservation>& observations) {

@@ -161,6 +161,8 @@ class Msckf {
   /// The cameras with their current (calibrated) T_body_camera, and the time offset (seconds).
   const std::vector<MsckfCamera>& cameras() const { return cameras_; }
   double time_offset() const { return time_offset_; }
+  /// True once the covariance stopped being finite: the filter refuses frames from then on.
+  bool diverged() const { return diverged_; }
   /// Features with observations waiting for their track to end.
   int pending_features() const { return static_cast<int>(tracks_.size()); }
 
@@ -193,7 +195,6 @@ class Msckf {
   estimate::NavigationState state_;
   Eigen::MatrixXd covariance_;
   std::deque<MsckfClone> clones_;
-  std::deque<Eigen::Matrix<double, 6, 1>> clone_rates_;  // d(dp, dtheta)/d(time offset): velocity, body rate
   double time_offset_ = 0.0;
   Eigen::Index first_clone_ = kMsckfImuDimension;
   std::map<uint64_t, std::vector<TrackObservation>> tracks_;
