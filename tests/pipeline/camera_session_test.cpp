@@ -142,5 +142,15 @@ TEST(CameraSession, VisualInertialOdometryBeatsTheImuAloneStereoAndMonocular) {
   }
 }
 
+TEST(CameraSession, VisualInertialOdometryWithoutAnImuIsRefusedNamingTheField) {
+  sim::Scenario scenario = drone_recording().scenario;
+  std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& sensor) { return !is_camera(sensor); });
+  config::FusionConfig fusion_config = sim::scenario_fusion_config(scenario);
+  fusion_config.frontend.type = config::FrontendType::kMsckf;
+  const auto refused = Session::create(fusion_config, sim::scenario_calibration(scenario));
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("needs an IMU"), std::string::npos) << refused.error().message;
+}
+
 }  // namespace
 }  // namespace hanzo::fusion::pipeline
