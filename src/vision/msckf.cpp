@@ -169,7 +169,11 @@ Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vecto
   if (frame_body_time < state_.timestamp)
     return Error(fmt::format("Msckf: frame at {:.6f} s (body time {:.6f} s) is older than the IMU state ({:.6f} s); process frames before "
                              "later IMU samples", time.seconds(), frame_body_time.seconds(), state_.timestamp.seconds()), "time");
+  std::set<std::pair<uint64_t, int>> in_frame;
   for (const FeatureObservation& observation : observations) {
+    if (!in_frame.insert({observation.feature_id, observation.camera}).second)
+      return Error(fmt::format("Msckf: feature {} is observed twice by camera {} in one frame", observation.feature_id, observation.camera),
+                   "feature_id");
     if (observation.camera < 0 || observation.camera >= static_cast<int>(cameras_.size()))
       return Error(fmt::format("Msckf: feature {} names camera {}; the rig has {}", observation.feature_id, observation.camera, cameras_.size()),
                    "camera");

@@ -369,6 +369,9 @@ TEST(Msckf, RefusesBadInputAndKeepsItsState) {
   EXPECT_FALSE(filter.process_frame(Timestamp::from_seconds(10.01), {}));  // not after the previous frame
   EXPECT_FALSE(filter.process_frame(Timestamp::from_seconds(10.02), {{2, 1, Eigen::Vector2d(0.1, 0.1)}}));  // no camera 1
   EXPECT_FALSE(filter.process_frame(Timestamp::from_seconds(10.02), {{2, 0, Eigen::Vector2d(NAN, 0.1)}}));
+  const auto twice = filter.process_frame(Timestamp::from_seconds(10.02), {{2, 0, Eigen::Vector2d(0.1, 0.1)}, {2, 0, Eigen::Vector2d(0.2, 0.1)}});
+  ASSERT_FALSE(twice);
+  EXPECT_NE(twice.error().message.find("twice"), std::string::npos);
   EXPECT_EQ(filter.clones().size(), 1u);
   EXPECT_EQ(filter.pending_features(), 1);
   EXPECT_TRUE(filter.covariance().allFinite());

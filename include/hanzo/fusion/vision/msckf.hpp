@@ -40,8 +40,8 @@
 // NavigationState; cameras at T_body_camera (x right, y down, z forward). Observations are
 // UNDISTORTED normalized coordinates (x/z, y/z) of the camera (PinholeCamera::unproject).
 //
-// Failures: process_frame() refuses a time before the last one, an unknown camera index or a
-// non-finite observation (the frame is skipped, the state unchanged); propagate() refuses a
+// Failures: process_frame() refuses a time before the last one, an unknown camera index, a
+// feature observed twice by one camera or a non-finite observation (the frame is skipped, the state unchanged); propagate() refuses a
 // sample older than the state or non-finite. A filter whose covariance stops being finite
 // (numerical breakdown) refuses further frames: reset it from an initialization.
 
