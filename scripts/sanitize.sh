@@ -28,4 +28,4 @@ configure "$tsan" "-fsanitize=thread"
 # Set before the build: gtest_discover_tests runs the test binaries.
 export TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1:suppressions="$PWD/scripts/tsan.supp"
 cmake --build "$tsan" -j "$jobs" --target test_service test_pipeline hanzo-fusion
-ctest --test-dir "$tsan" --output-on-failure -j "$jobs" -R '^(SessionManager|RestServer|GrpcServer|SessionRecording|MappingEndpoints|Session)\.'
+ctest --test-dir "$tsan" --output-on-failure -j "$jobs" -R '^(SessionManager|RestServerTest|GrpcServerTest|SessionRecording|MappingEndpointsTest|Session)\.'
