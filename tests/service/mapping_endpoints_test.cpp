@@ -111,7 +111,7 @@ class MappingEndpointsTest : public ::testing::Test {
   }
   httplib::Client client() const {
     httplib::Client http("127.0.0.1", rest_->port());
-    http.set_read_timeout(60, 0);
+    http.set_read_timeout(300, 0);  // generous: relocalization under ThreadSanitizer takes minutes
     return http;
   }
   static httplib::Headers bearer(const std::string& token) { return {{"Authorization", "Bearer " + token}}; }
