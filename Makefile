@@ -35,7 +35,7 @@ fuzz: deps
 	@bash scripts/fuzz.sh $(BUILD_DIR)-fuzz
 
 # The tests under AddressSanitizer + UndefinedBehaviorSanitizer, the service and pipeline tests
-# under ThreadSanitizer ($(BUILD_DIR)-asan, $(BUILD_DIR)-tsan; about an hour on 2 cores).
+# under ThreadSanitizer ($(BUILD_DIR)-asan, $(BUILD_DIR)-tsan; about three hours on 2 cores).
 sanitize: deps
 	@bash scripts/sanitize.sh $(BUILD_DIR)
 
