@@ -24,7 +24,6 @@ Result<std::unique_ptr<MsckfOdometry>> MsckfOdometry::create(const std::vector<M
   }
   std::vector<vision::MsckfCamera> msckf_cameras;
   for (const MsckfCameraSetup& setup : cameras) msckf_cameras.push_back({T_body_imu.inverse() * setup.T_body_camera, setup.camera.fx});
-  HANZO_RETURN_IF_ERROR(vision::validate(vision::MsckfConfig{}));
   return std::unique_ptr<MsckfOdometry>(new MsckfOdometry(std::move(tracker), std::move(msckf_cameras), T_body_imu, imu_noise));
 }
 
