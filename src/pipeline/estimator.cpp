@@ -258,14 +258,14 @@ void Estimator::predict_to(Timestamp t) {
 }
 
 bool Estimator::update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer,
-                       std::optional<Rejection>* reason, int channel) {
+                       std::optional<Rejection>* reason, int channel, bool gated) {
   Timestamp& gated_since = gated_since_[2 * event.sensor + static_cast<size_t>(channel)];
   // A sensor whose every update has been gated for gate_recovery seconds is fused without the
   // gate: by then the estimate (a bad start, a misconfigured noise) is the likelier culprit, and
   // gating it out forever would lock the filter out of its own aiding sensors.
   const double recovery = frontend_.gate_recovery_s;
   const bool locked_out = recovery > 0.0 && !gated_since.is_zero() && (event.time - gated_since).seconds() > recovery;
-  const estimate::UpdateOutcome outcome = filter_->update(model, !locked_out);
+  const estimate::UpdateOutcome outcome = filter_->update(model, gated && !locked_out);
   if (observer != nullptr) observer->on_update({event.sensor, model.name(), event.time, outcome});
   if (outcome.status == estimate::UpdateStatus::kRejectedByGate && gated_since.is_zero()) gated_since = event.time;
   if (outcome.status != estimate::UpdateStatus::kApplied) {
@@ -274,7 +274,7 @@ bool Estimator::update(const Event& event, const estimate::MeasurementModel& mod
     }
     return false;
   }
-  if (locked_out && outcome.mahalanobis_squared > outcome.gate) {
+  if (gated && locked_out && outcome.mahalanobis_squared > outcome.gate) {
     logger()->warn("sensor '{}' disagreed with the estimate for {:.1f} s: fused without the gate (d^2 = {:.1f})",
                    sensors_[event.sensor].config->name, (event.time - gated_since).seconds(), outcome.mahalanobis_squared);
   }

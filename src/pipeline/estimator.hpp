@@ -27,6 +27,7 @@ namespace hanzo::fusion::pipeline {
 struct PoseMeasurement {
   SE3 T_world_sensor;
   Eigen::Matrix<double, 6, 6> covariance;
+  bool gated = true;  // false: fused without the chi-square gate (Frontend::push_pose)
 };
 
 /// A sensor's own velocity in its axes (from a relative pose of LiDAR / visual odometry).
@@ -161,11 +162,11 @@ class Estimator {
   /// Propagates the filter to t with the last IMU sample held (without an IMU: by the motion
   /// model, in steps of at most 10 ms).
   void predict_to(Timestamp t);
-  /// Runs one gated update and reports it; true when applied.
+  /// Runs one update (gated unless `gated` is false) and reports it; true when applied.
   /// channel: which of the sensor's updates this is (0, or 1 for a wheel's separate yaw rate),
   /// so that each is tracked for gate recovery on its own.
   bool update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer, std::optional<Rejection>* reason,
-              int channel = 0);
+              int channel = 0, bool gated = true);
   void apply_constraints(const Event& event);
   /// A keyframe when keyframe_interval has passed since the previous one (IMU events only).
   std::optional<msgs::Keyframe> maybe_keyframe(Timestamp time);

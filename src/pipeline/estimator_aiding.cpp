@@ -325,7 +325,7 @@ EventOutcome Estimator::process_pose(const Event& event, const PoseMeasurement& 
   predict_to(event.time);
   const estimate::PoseModel model(pose.T_world_sensor, pose.covariance, sensors_[event.sensor].T_body_sensor);
   EventOutcome outcome;
-  outcome.fused = update(event, model, observer, &outcome.reason);
+  outcome.fused = update(event, model, observer, &outcome.reason, 0, pose.gated);
   return outcome;
 }
 

@@ -278,7 +278,7 @@ PushStatus Frontend::Impl::pose_input(size_t* sensor, std::string_view sensor_na
 }
 
 PushStatus Frontend::push_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_world_sensor,
-                          const Eigen::Matrix<double, 6, 6>& covariance) {
+                          const Eigen::Matrix<double, 6, 6>& covariance, bool gated) {
   Impl& impl = *impl_;
   size_t sensor = 0;
   if (PushStatus checked = impl.pose_input(&sensor, sensor_name, "pose measurement", timestamp, T_world_sensor, covariance, {}); !checked) {
@@ -287,7 +287,7 @@ PushStatus Frontend::push_pose(std::string_view sensor_name, Timestamp timestamp
   Event event;
   event.time = timestamp + impl.setups[sensor].time_offset;
   event.sensor = sensor;
-  event.payload = PoseMeasurement{T_world_sensor, covariance};
+  event.payload = PoseMeasurement{T_world_sensor, covariance, gated};
   return impl.accept(sensor, std::move(event));
 }
 

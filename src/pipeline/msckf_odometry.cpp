@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/estimate/static_alignment.hpp"
 
 namespace hanzo::fusion::pipeline {
@@ -97,6 +98,9 @@ Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat&
   }
   frame.tracking = true;
   frame.update = *update;
+  logger()->debug("msckf: frame {:.3f} s: {} of {} features used ({} not triangulated, {} chi-square outliers), {} clones{}", time.seconds(),
+                  update->features_used, update->features_offered, update->rejected_triangulation, update->rejected_chi_square, update->clones,
+                  update->zero_velocity ? ", standing still" : "");
   zero_velocity_frames_ += update->zero_velocity;
   frame.T_world_body = SE3(filter_->state().R_world_body, filter_->state().position) * T_body_imu_.inverse();
   return frame;

@@ -436,10 +436,14 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
   if (visual_world_ && !monocular_with_imu) {
     // Poses of the camera: 5.5 cm and 1 degree (its slow drift is not in the covariance, as
     // with the LiDAR odometry's poses). Loose enough that the IMU filter's chi-square gate
-    // accepts them while it drifts between frames (bench/RESULTS.md, 2026-11-28).
+    // accepts them while it drifts between frames (bench/RESULTS.md, 2026-11-28). The
+    // visual-inertial filter's poses are fused without the gate: it rejected its outliers
+    // feature by feature, and it integrates the same IMU with the images' help, so where the two
+    // disagree (a correction after a stretch with few features) it is the one to follow.
     Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
     covariance.diagonal() << 3e-3, 3e-3, 3e-3, 3e-4, 3e-4, 3e-4;
-    fused = frontend_->push_pose(camera_odometry_->left_sensor(), sensor_time, *visual_world_ * frame.T_world_body * camera_odometry_->T_body_left(), covariance);
+    fused = frontend_->push_pose(camera_odometry_->left_sensor(), sensor_time, *visual_world_ * frame.T_world_body * camera_odometry_->T_body_left(), covariance,
+                                 !camera_odometry_->visual_inertial());
   }
   if (monocular_with_imu) {
     ++left.rejected[Rejection::kNotFused];  // monocular scale: needs visual-inertial initialization

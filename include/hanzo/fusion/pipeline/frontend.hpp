@@ -150,8 +150,12 @@ class Frontend {
   PushStatus push(std::string_view sensor, const msgs::SensorMessage& message);
   /// A pose measurement T_world_sensor of a lidar or camera sensor (LiDAR / visual
   /// localization), covariance over (position world [m], rotation sensor frame [rad]).
+  /// gated = false fuses it without the chi-square gate: for poses whose source already
+  /// rejected its outliers and whose corrections the filter must follow (a visual-inertial
+  /// filter's poses: it integrates the same IMU with the images' help and is the better
+  /// estimate; a phone-grade IMU between its frames is not a reason to refuse its poses).
   PushStatus push_pose(std::string_view sensor, Timestamp timestamp, const SE3& T_world_sensor,
-                   const Eigen::Matrix<double, 6, 6>& covariance);
+                   const Eigen::Matrix<double, 6, 6>& covariance, bool gated = true);
 
   /// Fuses every message still waiting for the IMU to reach its time (call at the end of a
   /// log or when the IMU stops for good); the filter is extrapolated with the last IMU sample.
