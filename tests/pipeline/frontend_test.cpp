@@ -374,6 +374,32 @@ TEST(Frontend, FusesLidarPosesAndRelativePoses) {
   EXPECT_EQ(reason_of(session->push_pose("lidar", at(12.5), SE3(), msgs::Matrix6d::Zero())), "invalid");
 }
 
+// A pose far from the estimate is gated; the same pose pushed ungated (a visual-inertial
+// filter's, which the EKF must follow) is fused.
+TEST(Frontend, UngatedPosesAreFusedWhereTheGateRefusesThem) {
+  auto session = make_session();
+  const msgs::Matrix6d covariance = msgs::Matrix6d::Identity() * 1e-4;
+  for (const Message& m : drive(12.0)) {
+    if (m.sensor != "imu") continue;
+    ASSERT_TRUE(session->push(m.sensor, m.message).ok());
+    const double t = (msgs::timestamp_of(m.message) - at(0)).seconds();
+    if (std::lround(t * 100.0) % 10 == 5 && t > 0.1) {
+      const SE3 motion(SO3(), Eigen::Vector3d(distance_at(t) - distance_at(t - 0.1), 0.0, 0.0));
+      ASSERT_TRUE(session->push_relative_pose("lidar", at(t - 0.1), at(t), motion, covariance).ok());
+    }
+  }
+  const SE3 off_by_two_metres(SO3(), Eigen::Vector3d(9.005, 2.0, 0.0));
+  ASSERT_TRUE(session->push_pose("lidar", at(12.005), off_by_two_metres, covariance).ok());
+  ASSERT_TRUE(session->push("imu", imu_at(12.01)).ok());
+  EXPECT_NEAR(session->latest_pose()->T_world_body.position.y(), 0.0, 0.05);
+  EXPECT_EQ(session->summary().sensors[3].rejected.at(Rejection::kGated), 1U);
+
+  ASSERT_TRUE(session->push_pose("lidar", at(12.015), off_by_two_metres, covariance, false).ok());
+  ASSERT_TRUE(session->push("imu", imu_at(12.02)).ok());
+  EXPECT_NEAR(session->latest_pose()->T_world_body.position.y(), 2.0, 0.1);
+  EXPECT_EQ(session->summary().sensors[3].rejected.at(Rejection::kGated), 1U);
+}
+
 // Without an IMU the motion model propagates: wheels alone dead-reckon a drive with a turn
 // (speed, yaw rate and the non-holonomic constraint), GNSS added bounds the position.
 TEST(Frontend, RunsWithoutAnImuOnTheMotionModel) {
