@@ -264,7 +264,8 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"camera_frames_tracked", m.camera_frames_tracked}, {"camera_frames_lost", m.camera_frames_lost},
           {"visual_keyframes", m.visual_keyframes}, {"visual_landmarks", m.visual_landmarks},
           {"camera_standstill_frames", m.camera_standstill_frames}, {"visual_loop_closures", m.visual_loop_closures},
-          {"visual_scale_free", m.visual_scale_free}};
+          {"visual_scale_free", m.visual_scale_free}, {"camera_dark_frames", m.camera_dark_frames},
+          {"camera_glare_frames", m.camera_glare_frames}, {"camera_motion_blur_frames", m.camera_motion_blur_frames}};
 }
 
 // Each sensor's health at the end and its changes over the log (seconds from the log's start).
@@ -463,6 +464,10 @@ int run(const Output& output, const RunOptions& options) {
                         mapping.camera_frames_tracked, mapping.camera_frames_lost, mapping.camera_standstill_frames, mapping.visual_keyframes,
                         mapping.visual_landmarks, mapping.visual_loop_closures,
                         mapping.visual_scale_free ? " (monocular: lengths in units of its first baseline)" : "");
+    if (mapping.camera_dark_frames + mapping.camera_glare_frames + mapping.camera_motion_blur_frames > 0) {
+      text += fmt::format("  images: {} dark, {} with glare, {} blurred by motion\n", mapping.camera_dark_frames, mapping.camera_glare_frames,
+                          mapping.camera_motion_blur_frames);
+    }
   }
   for (const auto& [sensor, states] : result["health"]["not_ok_seconds"].items()) {
     text += fmt::format("  {:<12} not ok for", sensor);

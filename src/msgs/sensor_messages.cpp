@@ -86,6 +86,10 @@ std::string_view to_string(HealthReason reason) {
     case HealthReason::kSlip: return "slip";
     case HealthReason::kNotRegistered: return "not_registered";
     case HealthReason::kNotFused: return "not_fused";
+    case HealthReason::kDark: return "dark";
+    case HealthReason::kGlare: return "glare";
+    case HealthReason::kMotionBlur: return "motion_blur";
+    case HealthReason::kFewFeatures: return "few_features";
   }
   return "invalid";
 }

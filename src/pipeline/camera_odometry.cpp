@@ -144,21 +144,37 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::add(std::string_v
 }
 
 Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track(Timestamp time, const cv::Mat& left, const cv::Mat& right) {
+  vision::ImageQuality quality;
+  HANZO_ASSIGN_OR_RETURN(quality, image_quality_.assess(left));
+  switch (quality.condition) {
+    case vision::ImageCondition::kGood: break;
+    case vision::ImageCondition::kDark: ++image_conditions_.dark; break;
+    case vision::ImageCondition::kGlare: ++image_conditions_.glare; break;
+    case vision::ImageCondition::kMotionBlur: ++image_conditions_.motion_blur; break;
+  }
   if (inertial_) {
     MsckfOdometry::Frame frame;
     HANZO_ASSIGN_OR_RETURN(frame, inertial_->track(time, left, right));
-    Tracked tracked{time, {}, frame.T_world_body};
+    Tracked tracked{time, {}, frame.T_world_body, quality};
     tracked.frame.time = time.seconds();
     tracked.frame.state = frame.tracking ? vision::TrackingState::kTracking : vision::TrackingState::kInitializing;
     tracked.frame.standing_still = frame.update.zero_velocity;
     tracked.frame.reason = frame.reason;
+    if (frame.tracking && (quality.condition == vision::ImageCondition::kDark || frame.tracked_features < kMinTrackedFeatures)) {
+      tracked.frame.state = vision::TrackingState::kLost;
+      tracked.frame.reason = quality.condition == vision::ImageCondition::kDark
+                                 ? fmt::format("dark image (mean grey level {:.0f})", quality.mean_intensity)
+                                 : fmt::format("{} features continued from the previous image ({} image)", frame.tracked_features,
+                                               vision::to_string(quality.condition));
+    }
     ++inertial_summary_.frames;
-    inertial_summary_.tracked_frames += frame.tracking;
+    inertial_summary_.tracked_frames += tracked.frame.state == vision::TrackingState::kTracking;
+    inertial_summary_.lost_frames += tracked.frame.state == vision::TrackingState::kLost;
     return std::optional<Tracked>(std::move(tracked));
   }
   Result<vision::VisualOdometryFrame> frame = right.empty() ? odometry_->track(time.seconds(), left) : odometry_->track(time.seconds(), left, right);
   if (!frame) return frame.error();
-  Tracked tracked{time, std::move(frame).value(), SE3()};
+  Tracked tracked{time, std::move(frame).value(), SE3(), quality};
   tracked.T_world_body = T_body_left_ * tracked.frame.T_world_camera * T_body_left_.inverse();
   return std::optional<Tracked>(std::move(tracked));
 }

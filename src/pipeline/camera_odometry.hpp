@@ -12,6 +12,11 @@
 // (msckf_odometry.hpp: KLT tracks and the MSCKF, metric with one camera too): the Session gives
 // it the IMU's samples as well, and its body poses are fused the same way.
 //
+// Every left image's quality is assessed (vision/image_quality.hpp: dark, glare, motion blur) and
+// counted. The visual-inertial odometry's frame is lost when its image is dark or fewer than
+// kMinTrackedFeatures features continued from the previous image: the filter goes on with the
+// IMU and what features it has, and tracking resumes by itself once the images are usable again.
+//
 // Fusion (Session): the odometry's camera poses are pose measurements (Frontend::push_pose).
 // Without an IMU its world (the body frame at its first keyframe) is the Frontend's; with an
 // IMU (stereo: metric) its world is placed once in the Frontend's, by the Frontend's pose at the
@@ -28,6 +33,7 @@
 #include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
+#include "hanzo/fusion/vision/image_quality.hpp"
 #include "hanzo/fusion/vision/visual_odometry.hpp"
 #include "msckf_odometry.hpp"
 
@@ -41,7 +47,16 @@ class CameraOdometry {
     Timestamp time;
     vision::VisualOdometryFrame frame;
     SE3 T_world_body;
+    vision::ImageQuality image_quality;  ///< the left image's
   };
+  /// Left images by condition (good ones are not counted).
+  struct ImageConditionCounts {
+    uint64_t dark = 0;
+    uint64_t glare = 0;
+    uint64_t motion_blur = 0;
+  };
+  /// Visual-inertial frames with fewer features continued from the previous image are lost.
+  static constexpr int kMinTrackedFeatures = 20;
 
   /// nullptr (no error) when the configuration has no camera with intrinsics. Fails for
   /// frontend.type msckf without an IMU sensor.
@@ -69,6 +84,7 @@ class CameraOdometry {
   void add_imu(const msgs::ImuMessage& imu);
 
   vision::VisualOdometrySummary summary() const;
+  const ImageConditionCounts& image_conditions() const { return image_conditions_; }
   /// The odometry's landmark map (its world: the left camera at its first keyframe).
   /// (Empty for the visual-inertial odometry: it keeps no landmarks.)
   msgs::VisualLandmarkLayer landmark_layer() const { return odometry_ ? odometry_->landmark_layer(left_sensor_) : msgs::VisualLandmarkLayer{}; }
@@ -90,6 +106,8 @@ class CameraOdometry {
   SE3 T_body_left_;
   Duration left_offset_, right_offset_;
   std::optional<std::pair<Timestamp, cv::Mat>> waiting_left_;  // stereo: a left image waiting for its right
+  vision::ImageQualityMonitor image_quality_ = vision::ImageQualityMonitor::create().value();
+  ImageConditionCounts image_conditions_;
 };
 
 }  // namespace hanzo::fusion::pipeline

@@ -79,6 +79,7 @@ Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat&
   vision::TrackedFrame tracked;
   HANZO_ASSIGN_OR_RETURN(tracked, right.empty() ? tracker_->track(left) : tracker_->track(left, right));
   Frame frame;
+  frame.tracked_features = tracked.tracked;
   if (!filter_) {
     if (std::optional<std::string> waiting = start_filter(time)) {
       frame.reason = *waiting;
@@ -98,9 +99,9 @@ Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat&
   }
   frame.tracking = true;
   frame.update = *update;
-  logger()->debug("msckf: frame {:.3f} s: {} of {} features used ({} not triangulated, {} chi-square outliers), {} clones{}", time.seconds(),
-                  update->features_used, update->features_offered, update->rejected_triangulation, update->rejected_chi_square, update->clones,
-                  update->zero_velocity ? ", standing still" : "");
+  logger()->debug("msckf: frame {:.3f} s: {} tracked, {} of {} features used ({} not triangulated, {} chi-square outliers), {} clones{}",
+                  time.seconds(), tracked.tracked, update->features_used, update->features_offered, update->rejected_triangulation,
+                  update->rejected_chi_square, update->clones, update->zero_velocity ? ", standing still" : "");
   zero_velocity_frames_ += update->zero_velocity;
   frame.T_world_body = SE3(filter_->state().R_world_body, filter_->state().position) * T_body_imu_.inverse();
   return frame;

@@ -39,6 +39,7 @@ class MsckfOdometry {
     SE3 T_world_body;
     vision::MsckfUpdateSummary update;
     std::string reason;
+    int tracked_features = 0;  ///< left features continued from the previous image
   };
 
   /// One or two cameras (the second makes a stereo rig), the IMU's mounting and noise; fails

@@ -414,11 +414,24 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
   SensorStatistics& left = camera_statistics_[camera_odometry_->left_sensor()];
   if (frame.frame.state != vision::TrackingState::kTracking) {
     // Before the odometry's first pose (initializing) as a sensor still aligning; lost frames
-    // as not registered.
+    // as not registered, their image's condition the health's reason.
     const bool lost = frame.frame.state == vision::TrackingState::kLost;
     ++left.rejected[lost ? Rejection::kNotRegistered : Rejection::kAligning];
+    if (lost) {
+      switch (frame.image_quality.condition) {
+        case vision::ImageCondition::kDark: camera_lost_reason_ = HealthReason::kDark; break;
+        case vision::ImageCondition::kGlare: camera_lost_reason_ = HealthReason::kGlare; break;
+        case vision::ImageCondition::kMotionBlur: camera_lost_reason_ = HealthReason::kMotionBlur; break;
+        case vision::ImageCondition::kGood: camera_lost_reason_ = HealthReason::kFewFeatures; break;
+      }
+      logger()->debug("session: camera frame at {:.3f} s lost: {}", frame.time.seconds(), frame.frame.reason);
+      // The camera streams (not a timeout) though its frames are not fused.
+      frontend_->note_input(camera_odometry_->left_sensor(), frame.time - camera_odometry_->left_time_offset());
+      if (camera_odometry_->stereo()) frontend_->note_input(camera_odometry_->right_sensor(), frame.time - camera_odometry_->right_time_offset());
+    }
     return {};
   }
+  camera_lost_reason_.reset();
   const Timestamp sensor_time = frame.time - camera_odometry_->left_time_offset();
   // The odometry's world in the Frontend's: the identity without an IMU (the odometry's world,
   // the body at its first keyframe, is the Frontend's); with an IMU the Frontend's pose at the
@@ -494,6 +507,8 @@ std::vector<SensorHealth> Session::health() const {
       degraded(HealthReason::kWeather);
     } else if (const auto no_fix = gnss_without_fix_.find(sensor.name); no_fix != gnss_without_fix_.end() && no_fix->second) {
       degraded(HealthReason::kNoFix);
+    } else if (camera_lost_reason_ && camera_odometry_ && camera_odometry_->handles(sensor.name)) {
+      degraded(*camera_lost_reason_);
     } else if (applied != last_update_applied_.end() && !applied->second) {
       degraded(HealthReason::kGated);
     }
@@ -918,6 +933,10 @@ MappingSummary Session::mapping_summary() const {
     summary.camera_standstill_frames = static_cast<uint64_t>(visual.standstill_frames);
     summary.visual_loop_closures = static_cast<uint64_t>(visual.loop_closures);
     summary.visual_scale_free = visual.scale_free;
+    const CameraOdometry::ImageConditionCounts& conditions = camera_odometry_->image_conditions();
+    summary.camera_dark_frames = conditions.dark;
+    summary.camera_glare_frames = conditions.glare;
+    summary.camera_motion_blur_frames = conditions.motion_blur;
   }
   summary.map_memory_bytes = map_builder_.memory_bytes();
   return summary;

@@ -212,6 +212,12 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"map_memory_bytes", mapping.map_memory_bytes},
       {"last_registration_ms", mapping.last_registration_ms},
       {"last_correction_m", mapping.last_correction_m},
+      {"camera_frames_tracked", mapping.camera_frames_tracked},
+      {"camera_frames_lost", mapping.camera_frames_lost},
+      {"camera_standstill_frames", mapping.camera_standstill_frames},
+      {"camera_dark_frames", mapping.camera_dark_frames},
+      {"camera_glare_frames", mapping.camera_glare_frames},
+      {"camera_motion_blur_frames", mapping.camera_motion_blur_frames},
   };
 }
 

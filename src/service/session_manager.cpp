@@ -366,6 +366,19 @@ struct SessionManager::Impl {
           .set_total(static_cast<double>(mapping.degenerate_scans));
       metrics->counter("hanzo_fusion_lidar_weather_degraded_scans_total", "Sweeps flagged for rain, fog or dust (fused with less weight)", labels)
           .set_total(static_cast<double>(mapping.weather_degraded_scans));
+      for (const auto& [outcome, frames] : {std::pair<const char*, uint64_t>{"tracked", mapping.camera_frames_tracked}, {"lost", mapping.camera_frames_lost}}) {
+        MetricLabels with_outcome = labels;
+        with_outcome.emplace_back("outcome", outcome);
+        metrics->counter("hanzo_fusion_camera_frames_total", "Camera frames by tracking outcome", with_outcome).set_total(static_cast<double>(frames));
+      }
+      for (const auto& [condition, frames] : {std::pair<const char*, uint64_t>{"dark", mapping.camera_dark_frames},
+                                              {"glare", mapping.camera_glare_frames},
+                                              {"motion_blur", mapping.camera_motion_blur_frames}}) {
+        MetricLabels with_condition = labels;
+        with_condition.emplace_back("condition", condition);
+        metrics->counter("hanzo_fusion_camera_degraded_images_total", "Camera images too dark, washed out by glare or blurred by motion", with_condition)
+            .set_total(static_cast<double>(frames));
+      }
       metrics->gauge("hanzo_fusion_lidar_registration_seconds", "Time of the latest sweep registration", labels)
           .set(mapping.last_registration_ms / 1000.0);
       metrics->counter("hanzo_fusion_loop_closures_total", "Loop closures added (detected and manual)", labels)

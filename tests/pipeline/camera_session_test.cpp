@@ -7,6 +7,7 @@
 // Compared with the true trajectory after an SE3 alignment (the camera-only world has no
 // gravity or heading of its own).
 
+#include <functional>
 #include <optional>
 #include <string>
 
@@ -15,6 +16,7 @@
 #include "hanzo/fusion/eval/pose_error.hpp"
 #include "hanzo/fusion/pipeline/session.hpp"
 #include "hanzo/fusion/sim/scenario.hpp"
+#include "hanzo/fusion/sim/camera_simulator.hpp"
 #include "hanzo/fusion/sim/scenario_simulation.hpp"
 
 namespace hanzo::fusion::pipeline {
@@ -26,10 +28,12 @@ struct Recording {
   std::vector<std::pair<std::string, msgs::SensorMessage>> messages;
 };
 
-Recording simulate(const std::string& scenario_file, std::optional<double> duration) {
+Recording simulate(const std::string& scenario_file, std::optional<double> duration,
+                   const std::function<void(sim::Scenario&)>& edit = nullptr) {
   Recording r;
   r.scenario = sim::load_scenario(scenario_file).value();
   r.scenario.duration = duration;
+  if (edit) edit(r.scenario);
   r.scenario.num_threads = 0;
   r.simulation = sim::ScenarioSimulation::create(r.scenario).value();
   EXPECT_TRUE(r.simulation->run([&r](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) {
@@ -49,6 +53,7 @@ struct SessionRun {
   double distance_m = 0.0;  // travelled along the true trajectory
   MappingSummary mapping;
   SessionSummary summary;
+  std::vector<HealthChange> health_changes;
   msgs::FusionMap map;
   io::Trajectory estimate;
 };
@@ -83,6 +88,7 @@ SessionRun run_session(const std::function<bool(const sim::ScenarioSensor&)>& ke
   run.map = session->map();
   run.estimate = estimate;
   run.summary = session->summary();
+  run.health_changes = session->health_changes();
   return run;
 }
 
@@ -155,16 +161,66 @@ TEST(CameraSession, VisualInertialOdometryBeatsTheImuAloneStereoAndMonocular) {
 TEST(CameraSession, VisualInertialOdometryTracksTheHandheldPhoneWithinOnePercent) {
   const Recording recording = simulate("examples/scenarios/ar_handheld.yaml", std::nullopt);
   const SessionRun run = run_session([](const sim::ScenarioSensor&) { return true; }, config::FrontendType::kMsckf, recording);
-  std::printf("ar_handheld, monocular MSCKF: SE3-aligned APE %.3f m over %.1f m (%.2f %%), %lu of %lu frames tracked\n", run.ape_se3_m,
-              run.distance_m, 100.0 * run.ape_se3_m / run.distance_m, static_cast<unsigned long>(run.mapping.camera_frames_tracked),
-              static_cast<unsigned long>(run.mapping.camera_frames_tracked + run.mapping.camera_frames_lost));
+  std::printf("ar_handheld, monocular MSCKF: SE3-aligned APE %.3f m over %.1f m (%.2f %%), %lu of %lu frames tracked, %lu glare images\n",
+              run.ape_se3_m, run.distance_m, 100.0 * run.ape_se3_m / run.distance_m, static_cast<unsigned long>(run.mapping.camera_frames_tracked),
+              static_cast<unsigned long>(run.mapping.camera_frames_tracked + run.mapping.camera_frames_lost),
+              static_cast<unsigned long>(run.mapping.camera_glare_frames));
   EXPECT_GT(run.distance_m, 25.0);
   EXPECT_LT(run.ape_se3_m, 0.01 * run.distance_m);
+  EXPECT_GT(run.mapping.camera_glare_frames, 30u);  // 14-17 s at 15 Hz: 46 frames
+  EXPECT_EQ(run.mapping.camera_dark_frames, 0u);
   for (const SensorStatistics& sensor : run.summary.sensors) {
     if (sensor.modality == config::SensorModality::kCamera) {
       EXPECT_GT(sensor.fused, 400u);  // 15 Hz over 33 s; the first second initializes
     }
   }
+}
+
+// Lights out (6-8 s: 5 % of the light, 3x the noise) and motion blur (9-10 s, 150 ms exposure) on
+// the drone's cameras: the dark frames are lost and reported (health degraded: dark), the IMU
+// carries the estimate, and tracking resumes by itself.
+TEST(CameraSession, VisualInertialOdometryReportsDarkAndBlurredFramesAndResumes) {
+  const Recording recording = simulate("examples/scenarios/drone.yaml", 12.0, [](sim::Scenario& scenario) {
+    for (sim::ScenarioSensor& sensor : scenario.sensors) {
+      auto* camera = std::get_if<sim::CameraSimulatorConfig>(&sensor.simulator);
+      if (camera == nullptr) continue;
+      sim::CameraFaultEpisode darkness, blur;
+      darkness.type = sim::CameraFaultType::kDarkness;
+      darkness.start = scenario.start_time + Duration::from_seconds(6.0);
+      darkness.end = scenario.start_time + Duration::from_seconds(8.0);
+      blur.type = sim::CameraFaultType::kMotionBlur;
+      blur.start = scenario.start_time + Duration::from_seconds(9.0);
+      blur.end = scenario.start_time + Duration::from_seconds(10.0);
+      blur.exposure_time = 0.15;  // a long exposure in dim light while the drone turns
+      blur.blur_samples = 12;
+      camera->faults = {darkness, blur};
+    }
+  });
+  const SessionRun run = run_session([](const sim::ScenarioSensor&) { return true; }, config::FrontendType::kMsckf, recording);
+  std::printf("drone with lights out and motion blur, stereo MSCKF: SE3-aligned APE %.3f m; %lu frames tracked, %lu lost; "
+              "images: %lu dark, %lu blurred, %lu glare\n",
+              run.ape_se3_m, static_cast<unsigned long>(run.mapping.camera_frames_tracked), static_cast<unsigned long>(run.mapping.camera_frames_lost),
+              static_cast<unsigned long>(run.mapping.camera_dark_frames), static_cast<unsigned long>(run.mapping.camera_motion_blur_frames),
+              static_cast<unsigned long>(run.mapping.camera_glare_frames));
+  EXPECT_GE(run.mapping.camera_dark_frames, 19u);  // 21 frames at 10 Hz
+  EXPECT_LE(run.mapping.camera_dark_frames, 21u);
+  EXPECT_GE(run.mapping.camera_frames_lost, run.mapping.camera_dark_frames);
+  EXPECT_GE(run.mapping.camera_motion_blur_frames, 3u);
+  EXPECT_EQ(run.mapping.camera_glare_frames, 0u);
+  EXPECT_GT(run.mapping.camera_frames_tracked, 80u);  // the frames after the darkness tracked again
+  // Reported: degraded (dark) while the lights are out, ok again after.
+  std::optional<double> dark_from, ok_again;
+  for (const HealthChange& change : run.health_changes) {
+    if (change.health.sensor != "camera_left") continue;
+    const double t = (change.time - recording.scenario.start_time).seconds();
+    if (change.health.reason == HealthReason::kDark && !dark_from) dark_from = t;
+    if (dark_from && change.health.state == HealthState::kOk && !ok_again) ok_again = t;
+  }
+  ASSERT_TRUE(dark_from.has_value());
+  ASSERT_TRUE(ok_again.has_value());
+  EXPECT_NEAR(*dark_from, 6.0, 0.5);
+  EXPECT_NEAR(*ok_again, 8.0, 0.5);
+  EXPECT_LT(run.ape_se3_m, 0.1);  // the IMU alone: 0.142 m over the whole 12 s
 }
 
 TEST(CameraSession, VisualInertialOdometryWithoutAnImuIsRefusedNamingTheField) {

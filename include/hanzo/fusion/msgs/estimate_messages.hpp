@@ -23,7 +23,10 @@ std::string_view to_string(TrackingState state);
 
 /// A sensor's health (spec: degraded mode per modality; pipeline/sensor_health.hpp says when).
 enum class HealthState { kOk, kDegraded, kLost };
-enum class HealthReason { kNone, kTimeout, kGated, kNoFix, kDegenerateGeometry, kWeather, kSlip, kNotRegistered, kNotFused };
+enum class HealthReason {
+  kNone, kTimeout, kGated, kNoFix, kDegenerateGeometry, kWeather, kSlip, kNotRegistered, kNotFused,
+  kDark, kGlare, kMotionBlur, kFewFeatures  // a camera's tracking lost, and why
+};
 std::string_view to_string(HealthState state);    // "ok", "degraded", "lost"
 std::string_view to_string(HealthReason reason);  // "", "timeout", "gated", "no_fix", "degenerate_geometry", ...
 

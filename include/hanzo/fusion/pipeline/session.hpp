@@ -212,6 +212,11 @@ struct MappingSummary {
   uint64_t camera_standstill_frames = 0;
   uint64_t visual_loop_closures = 0;
   bool visual_scale_free = false;
+  /// Left camera images too dark, washed out by glare, or blurred by motion
+  /// (vision/image_quality.hpp); such frames may still be tracked.
+  uint64_t camera_dark_frames = 0;
+  uint64_t camera_glare_frames = 0;
+  uint64_t camera_motion_blur_frames = 0;
 };
 
 /// A pose at a time (body in the world frame).
@@ -395,6 +400,7 @@ class Session {
   std::map<std::string, bool, std::less<>> gnss_without_fix_;     ///< per GNSS sensor: its latest fix is below min_fix
   bool last_sweep_degenerate_ = false;
   bool last_sweep_weather_ = false;
+  std::optional<HealthReason> camera_lost_reason_;  // the latest camera frame was lost, and why
   int registration_failures_ = 0;  ///< LiDAR sweeps in a row that did not register
   std::vector<SensorHealth> last_health_;
   std::vector<HealthChange> health_changes_;
