@@ -3,13 +3,19 @@
 #include <fmt/format.h>
 
 #include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/estimate/attitude_models.hpp"
 #include "hanzo/fusion/estimate/static_alignment.hpp"
+#include "moving_start.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
 
 constexpr double kAlignmentSeconds = 1.0;  // still IMU used to start the filter
 constexpr size_t kMaxBufferedSamples = 20000;
+// Initial velocity standard deviations of a start in motion (m/s): unknown (one camera), or
+// measured from two stereo frames.
+constexpr double kMovingStartVelocitySigma = 1.0;
+constexpr double kStereoVelocitySigma = 0.2;
 
 }  // namespace
 
@@ -56,20 +62,38 @@ std::optional<std::string> MsckfOdometry::start_filter(Timestamp time) {
     return std::string("initializing: waiting for a second of IMU data");
   }
   const Result<estimate::StaticAlignment> aligned = estimate::align_static(still, estimate::ImuMounting{}, 0.0);
-  if (!aligned) return fmt::format("initializing: waiting for a still start ({})", aligned.error().message);
   estimate::NavigationState state;
   state.timestamp = still.back().timestamp;
-  state.R_world_body = aligned->R_world_body;
-  state.gyro_bias = aligned->gyro_bias;
-  state.gravity = Eigen::Vector3d(0.0, 0.0, -aligned->gravity_magnitude);
+  state.gravity = Eigen::Vector3d(0.0, 0.0, -(aligned ? aligned->gravity_magnitude : estimate::kStandardGravity));
   Eigen::Matrix<double, 15, 1> sigma;
-  sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d(0.02, 0.02, 1e-3), Eigen::Vector3d::Constant(0.02),
-      Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.005);
+  if (aligned) {
+    state.R_world_body = aligned->R_world_body;
+    state.gyro_bias = aligned->gyro_bias;
+    sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d(0.02, 0.02, 1e-3), Eigen::Vector3d::Constant(0.02),
+        Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.005);
+  } else {
+    // In motion (moving_start.hpp): the tilt from the IMU; the velocity from two stereo frames,
+    // or unknown (zero, 1 m/s) with one camera, for the images to find.
+    state.R_world_body = tilt_from_moving_imu(still);
+    double velocity_sigma = kMovingStartVelocitySigma;
+    if (cameras_.size() == 2) {
+      if (!stereo_velocity_) return fmt::format("initializing: moving ({}); measuring the velocity from the stereo images", aligned.error().message);
+      state.velocity = state.R_world_body * *stereo_velocity_;
+      velocity_sigma = kStereoVelocitySigma;
+    }
+    sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d(0.05, 0.05, 1e-3), Eigen::Vector3d::Constant(velocity_sigma),
+        Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.01);
+    logger()->info("msckf: starting in motion (roll {:.1f}, pitch {:.1f} degrees; velocity {:.2f} m/s{})",
+                   estimate::roll_pitch_yaw(state.R_world_body.matrix()).x() * 180.0 / M_PI,
+                   estimate::roll_pitch_yaw(state.R_world_body.matrix()).y() * 180.0 / M_PI, state.velocity.norm(),
+                   cameras_.size() == 2 ? " from the stereo images" : ", unknown: the images will tell");
+  }
   vision::MsckfConfig config;
   config.imu_noise = imu_noise_;
   Result<vision::Msckf> filter = vision::Msckf::create(config, cameras_, state, sigma.array().square().matrix().asDiagonal().toDenseMatrix());
   if (!filter) return "initializing: " + filter.error().message;
   filter_.emplace(std::move(filter).value());
+  previous_stereo_.reset();
   (void)filter_->propagate(still.back());
   while (!imu_.empty() && imu_.front().timestamp <= state.timestamp) imu_.pop_front();
   return std::nullopt;
@@ -80,6 +104,17 @@ Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat&
   HANZO_ASSIGN_OR_RETURN(tracked, right.empty() ? tracker_->track(left) : tracker_->track(left, right));
   Frame frame;
   frame.tracked_features = tracked.tracked;
+  if (!filter_ && cameras_.size() == 2) {
+    // Before the start: the velocity from this and the previous stereo frame, in case it moves.
+    std::map<uint64_t, Eigen::Vector3d> points = triangulate_stereo(tracked.observations, cameras_);
+    stereo_velocity_.reset();
+    if (previous_stereo_) {
+      const std::vector<estimate::ImuSample> samples(imu_.begin(), imu_.end());
+      stereo_velocity_ = stereo_velocity(previous_stereo_->second, points, gyro_rotation(samples, previous_stereo_->first, time),
+                                         (time - previous_stereo_->first).seconds());
+    }
+    previous_stereo_.emplace(time, std::move(points));
+  }
   if (!filter_) {
     if (std::optional<std::string> waiting = start_filter(time)) {
       frame.reason = *waiting;

@@ -6,14 +6,17 @@
 // up to its body time (camera time + the filter's time offset), so images may arrive a little
 // after the IMU samples that follow them. Before the filter starts, a frame starts it by static
 // alignment (estimate/static_alignment.hpp) on the last second of IMU before it: roll, pitch and
-// the gyro bias; heading 0; at rest. A platform moving at the start stays initializing
-// (in-motion visual-inertial initialization is not built) until it stands still for a second.
+// the gyro bias; heading 0; at rest. A platform moving at the start starts in motion
+// (moving_start.hpp): roll and pitch from the second's mean specific force, the velocity from
+// the last two stereo frames (one camera: zero with a 1 m/s standard deviation, for the images
+// to correct), the gyro bias zero.
 // A filter whose covariance breaks down numerically is dropped and started again the same way.
 //
 // World: gravity-aligned (z up), heading and origin those of the IMU at the start; poses are
 // T_world_body (the IMU's pose moved by the calibration's imu_to_body).
 
 #include <deque>
+#include <map>
 #include <memory>
 #include <optional>
 
@@ -66,6 +69,10 @@ class MsckfOdometry {
   estimate::ImuNoise imu_noise_;
   std::optional<vision::Msckf> filter_;
   std::deque<estimate::ImuSample> imu_;  // not yet propagated (before the start: the last seconds)
+  // Stereo, before the start: the last frame's stereo points (body frame) and the velocity
+  // they and the frame before gave (body frame), for a start in motion.
+  std::optional<std::pair<Timestamp, std::map<uint64_t, Eigen::Vector3d>>> previous_stereo_;
+  std::optional<Eigen::Vector3d> stereo_velocity_;
   int zero_velocity_frames_ = 0;
 };
 

@@ -13,6 +13,8 @@
 
 #include "hanzo/fusion/cloud/point_cloud.hpp"
 #include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/estimate/attitude_models.hpp"
+#include "hanzo/fusion/estimate/static_alignment.hpp"
 #include "hanzo/fusion/msgs/validate.hpp"
 
 namespace hanzo::fusion::pipeline {
@@ -441,6 +443,14 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
       visual_world_ = SE3();
     } else if (const std::optional<SE3> T_world_body = frontend_->pose_at(frame.time)) {
       visual_world_ = *T_world_body * frame.T_world_body.inverse();
+      if (camera_odometry_->visual_inertial()) {
+        // Both worlds are gravity-aligned (z up): only heading and origin differ. Keeping the
+        // filter's roll and pitch at this instant out (off by degrees after a start in motion)
+        // keeps the odometry's tilt, which its IMU and images observe better.
+        const Eigen::Vector3d rpy = estimate::roll_pitch_yaw(visual_world_->rotation().matrix());
+        const SO3 heading = estimate::rotation_from_roll_pitch_yaw(0.0, 0.0, rpy.z());
+        visual_world_ = SE3(heading, T_world_body->translation() - heading * frame.T_world_body.translation());
+      }
     }
   }
   // (A monocular visual-inertial odometry is metric.)

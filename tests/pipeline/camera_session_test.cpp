@@ -223,6 +223,25 @@ TEST(CameraSession, VisualInertialOdometryReportsDarkAndBlurredFramesAndResumes)
   EXPECT_LT(run.ape_se3_m, 0.1);  // the IMU alone: 0.142 m over the whole 12 s
 }
 
+// Logs that begin in motion (log_start: 6 s into the trajectory): the drone flying its figure
+// eights (stereo: the velocity from the first stereo frames) and the phone carried at walking
+// pace (one camera: the velocity left for the images to find). No still second is waited for.
+TEST(CameraSession, VisualInertialOdometryStartsInMotion) {
+  const auto moving = [](sim::Scenario& scenario) { scenario.log_start = 6.0; };
+  const Recording drone = simulate("examples/scenarios/drone.yaml", 18.0, moving);  // (duration: from the trajectory start)
+  const SessionRun flying = run_session([](const sim::ScenarioSensor&) { return true; }, config::FrontendType::kMsckf, drone);
+  const Recording phone = simulate("examples/scenarios/ar_handheld.yaml", 26.0, moving);
+  const SessionRun walking = run_session([](const sim::ScenarioSensor&) { return true; }, config::FrontendType::kMsckf, phone);
+  std::printf("started in motion: drone, stereo: SE3-aligned APE %.3f m over %.1f m, %lu frames tracked; phone, one camera: %.3f m over %.1f m, "
+              "%lu frames tracked\n",
+              flying.ape_se3_m, flying.distance_m, static_cast<unsigned long>(flying.mapping.camera_frames_tracked), walking.ape_se3_m,
+              walking.distance_m, static_cast<unsigned long>(walking.mapping.camera_frames_tracked));
+  EXPECT_GT(flying.mapping.camera_frames_tracked, 100u);  // 10 Hz over 12 s, from the second frame
+  EXPECT_LT(flying.ape_se3_m, 0.01 * flying.distance_m);
+  EXPECT_GT(walking.mapping.camera_frames_tracked, 250u);  // 15 Hz over 20 s, after a second of IMU
+  EXPECT_LT(walking.ape_se3_m, 0.015 * walking.distance_m);
+}
+
 TEST(CameraSession, VisualInertialOdometryWithoutAnImuIsRefusedNamingTheField) {
   sim::Scenario scenario = drone_recording().scenario;
   std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& sensor) { return !is_camera(sensor); });
