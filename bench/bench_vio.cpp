@@ -5,7 +5,9 @@
 //   - the KLT feature tracker on EuRoC V1_01 stereo pairs (752 x 480, 200 features) against the
 //     same steps done with OpenCV alone (cv::goodFeaturesToTrack + cv::calcOpticalFlowPyrLK left
 //     to right, no grid, no checks): the peer for the tracker's own bookkeeping and checks;
-//   - the whole VIO step per stereo frame on EuRoC (tracking + propagation + update).
+//   - the whole VIO step per stereo frame on EuRoC (tracking + propagation + update);
+//   - the image-quality check per EuRoC image (dark / glare / motion blur) against the usual
+//     blur check done with OpenCV alone (the variance of the Laplacian at full resolution).
 // No VIO library is packaged for Debian (OpenVINS, VINS-Fusion, Kimera are not): the MSCKF has no
 // peer on the machine; OpenVINS's and VINS-Fusion's published timings are in docs/vision.md.
 
@@ -22,6 +24,7 @@
 
 #include "hanzo/fusion/io/euroc_import.hpp"
 #include "hanzo/fusion/vision/feature_tracker.hpp"
+#include "hanzo/fusion/vision/image_quality.hpp"
 #include "hanzo/fusion/vision/msckf.hpp"
 
 namespace {
@@ -130,6 +133,33 @@ void BM_FeatureTrackerStereo_Hanzo(benchmark::State& state) {
   state.counters["stereo_matches"] = matches;
 }
 BENCHMARK(BM_FeatureTrackerStereo_Hanzo)->Unit(benchmark::kMillisecond);
+
+void BM_ImageQuality_Hanzo(benchmark::State& state) {
+  cv::setNumThreads(1);
+  const EurocStereo& data = euroc();
+  ImageQualityMonitor monitor = ImageQualityMonitor::create().value();
+  size_t frame = 0;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(monitor.assess(data.left[frame]).value().sharpness);
+    frame = (frame + 1) % data.left.size();
+  }
+}
+BENCHMARK(BM_ImageQuality_Hanzo)->Unit(benchmark::kMillisecond);
+
+void BM_ImageQuality_OpenCVLaplacianVariance(benchmark::State& state) {
+  cv::setNumThreads(1);
+  const EurocStereo& data = euroc();
+  size_t frame = 0;
+  for (auto _ : state) {
+    cv::Mat laplacian;
+    cv::Laplacian(data.left[frame], laplacian, CV_64F);
+    cv::Scalar mean, deviation;
+    cv::meanStdDev(laplacian, mean, deviation);
+    benchmark::DoNotOptimize(deviation[0]);
+    frame = (frame + 1) % data.left.size();
+  }
+}
+BENCHMARK(BM_ImageQuality_OpenCVLaplacianVariance)->Unit(benchmark::kMillisecond);
 
 void BM_FeatureTrackerStereo_OpenCV(benchmark::State& state) {
   cv::setNumThreads(1);
