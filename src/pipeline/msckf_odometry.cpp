@@ -16,6 +16,9 @@ constexpr size_t kMaxBufferedSamples = 20000;
 // measured from two stereo frames.
 constexpr double kMovingStartVelocitySigma = 1.0;
 constexpr double kStereoVelocitySigma = 0.2;
+// Moving frames without a stereo velocity (too few stereo points: dark, blank) before a stereo
+// rig starts anyway with the velocity unknown, as one camera does.
+constexpr int kMaxFramesWithoutStereoVelocity = 10;
 
 }  // namespace
 
@@ -76,17 +79,18 @@ std::optional<std::string> MsckfOdometry::start_filter(Timestamp time) {
     // or unknown (zero, 1 m/s) with one camera, for the images to find.
     state.R_world_body = tilt_from_moving_imu(still);
     double velocity_sigma = kMovingStartVelocitySigma;
-    if (cameras_.size() == 2) {
-      if (!stereo_velocity_) return fmt::format("initializing: moving ({}); measuring the velocity from the stereo images", aligned.error().message);
+    if (cameras_.size() == 2 && stereo_velocity_) {
       state.velocity = state.R_world_body * *stereo_velocity_;
       velocity_sigma = kStereoVelocitySigma;
+    } else if (cameras_.size() == 2 && ++frames_without_stereo_velocity_ < kMaxFramesWithoutStereoVelocity) {
+      return fmt::format("initializing: moving ({}); measuring the velocity from the stereo images", aligned.error().message);
     }
     sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d(0.05, 0.05, 1e-3), Eigen::Vector3d::Constant(velocity_sigma),
         Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.01);
     logger()->info("msckf: starting in motion (roll {:.1f}, pitch {:.1f} degrees; velocity {:.2f} m/s{})",
                    estimate::roll_pitch_yaw(state.R_world_body.matrix()).x() * 180.0 / M_PI,
                    estimate::roll_pitch_yaw(state.R_world_body.matrix()).y() * 180.0 / M_PI, state.velocity.norm(),
-                   cameras_.size() == 2 ? " from the stereo images" : ", unknown: the images will tell");
+                   velocity_sigma == kStereoVelocitySigma ? " from the stereo images" : ", unknown: the images will tell");
   }
   vision::MsckfConfig config;
   config.imu_noise = imu_noise_;
@@ -94,6 +98,7 @@ std::optional<std::string> MsckfOdometry::start_filter(Timestamp time) {
   if (!filter) return "initializing: " + filter.error().message;
   filter_.emplace(std::move(filter).value());
   previous_stereo_.reset();
+  frames_without_stereo_velocity_ = 0;
   (void)filter_->propagate(still.back());
   while (!imu_.empty() && imu_.front().timestamp <= state.timestamp) imu_.pop_front();
   return std::nullopt;

@@ -8,8 +8,8 @@
 // alignment (estimate/static_alignment.hpp) on the last second of IMU before it: roll, pitch and
 // the gyro bias; heading 0; at rest. A platform moving at the start starts in motion
 // (moving_start.hpp): roll and pitch from the second's mean specific force, the velocity from
-// the last two stereo frames (one camera: zero with a 1 m/s standard deviation, for the images
-// to correct), the gyro bias zero.
+// the last two stereo frames (one camera, or a rig whose stereo points give no velocity for 10
+// frames: zero with a 1 m/s standard deviation, for the images to correct), the gyro bias zero.
 // A filter whose covariance breaks down numerically is dropped and started again the same way.
 //
 // World: gravity-aligned (z up), heading and origin those of the IMU at the start; poses are
@@ -73,6 +73,7 @@ class MsckfOdometry {
   // they and the frame before gave (body frame), for a start in motion.
   std::optional<std::pair<Timestamp, std::map<uint64_t, Eigen::Vector3d>>> previous_stereo_;
   std::optional<Eigen::Vector3d> stereo_velocity_;
+  int frames_without_stereo_velocity_ = 0;
   int zero_velocity_frames_ = 0;
 };
 

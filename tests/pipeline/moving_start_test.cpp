@@ -7,6 +7,7 @@
 #include "hanzo/fusion/estimate/attitude_models.hpp"
 #include "hanzo/fusion/estimate/static_alignment.hpp"
 #include "moving_start.hpp"
+#include "msckf_odometry.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
@@ -76,6 +77,36 @@ TEST(MovingStart, StereoVelocityFromTwoFramesDespiteOutliers) {
   EXPECT_FALSE(stereo_velocity(previous_points, current_points, R_previous_current, 0.0).has_value());
   // A single camera gives no stereo points.
   EXPECT_TRUE(triangulate_stereo(previous, {cameras[0]}).empty());
+}
+
+// A stereo rig moving in front of a blank wall: no stereo points, so no velocity from them; after
+// ten such frames it starts anyway with the velocity unknown instead of waiting for ever.
+TEST(MovingStart, AStereoRigThatSeesNothingStartsWithTheVelocityUnknown) {
+  PinholeCamera camera;
+  camera.fx = camera.fy = 400.0;
+  camera.cx = 319.5;
+  camera.cy = 239.5;
+  const std::vector<MsckfCameraSetup> rig{{camera, SE3(SO3(), Eigen::Vector3d(0.0, 0.0, 0.05))},
+                                          {camera, SE3(SO3(), Eigen::Vector3d(0.11, 0.0, 0.05))}};
+  auto odometry = MsckfOdometry::create(rig, cv::Size(640, 480), SE3(), estimate::ImuNoise{}).value();
+  const cv::Mat blank(480, 640, CV_8UC1, cv::Scalar(128));
+  int waiting_for_velocity = 0;
+  std::optional<double> started;
+  for (int i = 0; i <= 600; ++i) {  // 3 s at 200 Hz, swaying: 2 m/s^2 and 0.5 rad/s
+    const double t = 0.005 * i;
+    estimate::ImuSample sample;
+    sample.timestamp = Timestamp::from_seconds(50.0 + t);
+    sample.angular_velocity = Eigen::Vector3d(0.0, 0.0, 0.5 * std::sin(3.0 * t));
+    sample.linear_acceleration = Eigen::Vector3d(2.0 * std::sin(4.0 * t), 0.0, estimate::kStandardGravity);
+    odometry->add_imu(sample);
+    if (i % 20 != 0 || i == 0) continue;  // frames at 10 Hz
+    const MsckfOdometry::Frame frame = odometry->track(sample.timestamp, blank, blank).value();
+    if (frame.tracking && !started) started = t;
+    if (!frame.tracking && frame.reason.find("measuring the velocity") != std::string::npos) ++waiting_for_velocity;
+  }
+  ASSERT_TRUE(started.has_value());
+  EXPECT_EQ(waiting_for_velocity, 9);
+  EXPECT_NEAR(*started, 1.7, 0.15);  // 0.8 s of IMU (the least the alignment takes), then ten frames
 }
 
 }  // namespace
