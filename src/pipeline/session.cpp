@@ -460,13 +460,18 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
     // Poses of the camera: 5.5 cm and 1 degree (its slow drift is not in the covariance, as
     // with the LiDAR odometry's poses). Loose enough that the IMU filter's chi-square gate
     // accepts them while it drifts between frames (bench/RESULTS.md, 2026-11-28). The
-    // visual-inertial filter's poses are fused without the gate: it rejected its outliers
-    // feature by feature, and it integrates the same IMU with the images' help, so where the two
-    // disagree (a correction after a stretch with few features) it is the one to follow.
+    // visual-inertial filter's poses are fused without the gate when no GNSS tells the filter
+    // otherwise: it rejected its outliers feature by feature, and it integrates the same IMU with
+    // the images' help, so where the two disagree (a correction after a stretch with few
+    // features) it is the one to follow. With GNSS the gate stays: the fixes may rightly
+    // disagree with the odometry's drift.
     Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
     covariance.diagonal() << 3e-3, 3e-3, 3e-3, 3e-4, 3e-4, 3e-4;
+    const auto& sensors = frontend_->config().sensors;
+    const bool has_gnss = std::any_of(sensors.begin(), sensors.end(),
+                                      [](const config::SensorConfig& configured) { return configured.modality == config::SensorModality::kGnss; });
     fused = frontend_->push_pose(camera_odometry_->left_sensor(), sensor_time, *visual_world_ * frame.T_world_body * camera_odometry_->T_body_left(), covariance,
-                                 !camera_odometry_->visual_inertial());
+                                 !camera_odometry_->visual_inertial() || has_gnss);
   }
   if (monocular_with_imu) {
     ++left.rejected[Rejection::kNotFused];  // monocular scale: needs visual-inertial initialization
