@@ -20,6 +20,11 @@
 namespace hanzo::fusion::pipeline {
 namespace {
 
+bool configures_gnss(const config::FusionConfig& config) {
+  return std::any_of(config.sensors.begin(), config.sensors.end(),
+                     [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kGnss; });
+}
+
 Timestamp sweep_end(const msgs::PointCloudMessage& scan) {
   if (scan.point_timestamps.empty()) return scan.timestamp;
   return *std::max_element(scan.point_timestamps.begin(), scan.point_timestamps.end());
@@ -183,9 +188,7 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   // Replay: every optimization inside push(), in order.
   if (session_config.mode == SessionMode::kReplay) session_config.backend.smoother.background_batch = false;
   // GPS factors hold fixes the filter fused: the graph corrects the filter at loop closures only.
-  const bool has_gnss = std::any_of(config.sensors.begin(), config.sensors.end(),
-                                    [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kGnss; });
-  if (session_config.gnss_factors && has_gnss) session_config.backend.correct_on_loop_closures_only = true;
+  if (session_config.gnss_factors && configures_gnss(config)) session_config.backend.correct_on_loop_closures_only = true;
   std::unique_ptr<CameraOdometry> camera_odometry;
   if (session_config.mapping) HANZO_ASSIGN_OR_RETURN(camera_odometry, CameraOdometry::create(config, calibration));
   auto session = std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), planar_laser,
@@ -467,11 +470,8 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
     // disagree with the odometry's drift.
     Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
     covariance.diagonal() << 3e-3, 3e-3, 3e-3, 3e-4, 3e-4, 3e-4;
-    const auto& sensors = frontend_->config().sensors;
-    const bool has_gnss = std::any_of(sensors.begin(), sensors.end(),
-                                      [](const config::SensorConfig& configured) { return configured.modality == config::SensorModality::kGnss; });
     fused = frontend_->push_pose(camera_odometry_->left_sensor(), sensor_time, *visual_world_ * frame.T_world_body * camera_odometry_->T_body_left(), covariance,
-                                 !camera_odometry_->visual_inertial() || has_gnss);
+                                 !camera_odometry_->visual_inertial() || configures_gnss(frontend_->config()));
   }
   if (monocular_with_imu) {
     ++left.rejected[Rejection::kNotFused];  // monocular scale: needs visual-inertial initialization
