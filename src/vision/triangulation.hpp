@@ -5,6 +5,7 @@
 // (Hartley and Zisserman, 12.2), and the checks a new landmark must pass.
 
 #include <optional>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -15,6 +16,9 @@ namespace hanzo::fusion::vision {
 /// The world point, or nullopt when the system is degenerate (point at infinity).
 std::optional<Eigen::Vector3d> triangulate(const SE3& T_camera1_world, const Eigen::Vector2d& normalized1, const SE3& T_camera2_world,
                                            const Eigen::Vector2d& normalized2);
+
+/// The same over any number of views (at least two): 2 rows per view, the null vector by SVD.
+std::optional<Eigen::Vector3d> triangulate_views(const std::vector<SE3>& T_camera_world, const std::vector<Eigen::Vector2d>& normalized);
 
 /// The angle (radians) between the two viewing rays of a world point.
 double triangulation_angle(const SE3& T_camera1_world, const SE3& T_camera2_world, const Eigen::Vector3d& point_world);
