@@ -66,7 +66,8 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
   logger()->info("session: {} visual odometry on {}{}", right_sensor.empty() ? "monocular" : "stereo", left.sensor,
                  right_sensor.empty() ? "" : " + " + right_sensor);
   return std::unique_ptr<CameraOdometry>(
-      new CameraOdometry(std::move(odometry), left.sensor, std::move(right_sensor), left.T_body_sensor(), left.time_offset, right_offset));
+      new CameraOdometry(std::move(odometry), left.sensor, std::move(right_sensor), left.camera->pinhole_camera(), left.T_body_sensor(),
+                                                            left.time_offset, right_offset));
 }
 
 Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(const config::FusionConfig& config, const calib::Calibration& calibration,
@@ -91,7 +92,7 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(c
   const calib::SensorCalibration& left = *cameras[0];
   logger()->info("session: {} visual-inertial odometry (MSCKF) on {}{} and {}", stereo_pair ? "stereo" : "monocular", left.sensor,
                  stereo_pair ? " + " + cameras[1]->sensor : "", imu->name);
-  auto odometry = std::unique_ptr<CameraOdometry>(new CameraOdometry(nullptr, left.sensor, stereo_pair ? cameras[1]->sensor : "", left.T_body_sensor(),
+  auto odometry = std::unique_ptr<CameraOdometry>(new CameraOdometry(nullptr, left.sensor, stereo_pair ? cameras[1]->sensor : "", left.camera->pinhole_camera(), left.T_body_sensor(),
                                                                      left.time_offset, stereo_pair ? cameras[1]->time_offset : Duration()));
   odometry->inertial_ = std::move(inertial);
   odometry->imu_sensor_ = imu->name;
@@ -113,10 +114,11 @@ vision::VisualOdometrySummary CameraOdometry::summary() const {
 }
 
 CameraOdometry::CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::string left_sensor, std::string right_sensor,
-                               const SE3& T_body_left, Duration left_offset, Duration right_offset)
+                               const PinholeCamera& left_camera, const SE3& T_body_left, Duration left_offset, Duration right_offset)
     : odometry_(std::move(odometry)),
       left_sensor_(std::move(left_sensor)),
       right_sensor_(std::move(right_sensor)),
+      left_camera_(left_camera),
       T_body_left_(T_body_left),
       left_offset_(left_offset),
       right_offset_(right_offset) {}
@@ -155,7 +157,11 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track(Timestamp t
   if (inertial_) {
     MsckfOdometry::Frame frame;
     HANZO_ASSIGN_OR_RETURN(frame, inertial_->track(time, left, right));
-    Tracked tracked{time, {}, frame.T_world_body, quality};
+    Tracked tracked;
+    tracked.time = time;
+    tracked.T_world_body = frame.T_world_body;
+    tracked.image_quality = quality;
+    tracked.left_image = left;
     tracked.frame.time = time.seconds();
     tracked.frame.state = frame.tracking ? vision::TrackingState::kTracking : vision::TrackingState::kInitializing;
     tracked.frame.standing_still = frame.update.zero_velocity;
@@ -174,7 +180,7 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track(Timestamp t
   }
   Result<vision::VisualOdometryFrame> frame = right.empty() ? odometry_->track(time.seconds(), left) : odometry_->track(time.seconds(), left, right);
   if (!frame) return frame.error();
-  Tracked tracked{time, std::move(frame).value(), SE3(), quality};
+  Tracked tracked{time, std::move(frame).value(), SE3(), quality, left};
   tracked.T_world_body = T_body_left_ * tracked.frame.T_world_camera * T_body_left_.inverse();
   return std::optional<Tracked>(std::move(tracked));
 }

@@ -48,6 +48,7 @@ class CameraOdometry {
     vision::VisualOdometryFrame frame;
     SE3 T_world_body;
     vision::ImageQuality image_quality;  ///< the left image's
+    cv::Mat left_image;                  ///< 8-bit grey (shared, not copied)
   };
   /// Left images by condition (good ones are not counted).
   struct ImageConditionCounts {
@@ -68,6 +69,7 @@ class CameraOdometry {
   const std::string& left_sensor() const { return left_sensor_; }
   const std::string& right_sensor() const { return right_sensor_; }
   const SE3& T_body_left() const { return T_body_left_; }
+  const PinholeCamera& left_camera() const { return left_camera_; }
   /// The left camera's calibrated time offset (t_body = t_camera + offset).
   Duration left_time_offset() const { return left_offset_; }
   Duration right_time_offset() const { return right_offset_; }
@@ -90,8 +92,8 @@ class CameraOdometry {
   msgs::VisualLandmarkLayer landmark_layer() const { return odometry_ ? odometry_->landmark_layer(left_sensor_) : msgs::VisualLandmarkLayer{}; }
 
  private:
-  CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::string left_sensor, std::string right_sensor, const SE3& T_body_left,
-                 Duration left_offset, Duration right_offset);
+  CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::string left_sensor, std::string right_sensor, const PinholeCamera& left_camera,
+                 const SE3& T_body_left, Duration left_offset, Duration right_offset);
   static Result<std::unique_ptr<CameraOdometry>> create_visual_inertial(const config::FusionConfig& config, const calib::Calibration& calibration,
                                                                         const std::vector<const calib::SensorCalibration*>& cameras, bool stereo_pair,
                                                                         cv::Size size);
@@ -103,6 +105,7 @@ class CameraOdometry {
   Duration imu_offset_;
   vision::VisualOdometrySummary inertial_summary_;
   std::string left_sensor_, right_sensor_;
+  PinholeCamera left_camera_;
   SE3 T_body_left_;
   Duration left_offset_, right_offset_;
   std::optional<std::pair<Timestamp, cv::Mat>> waiting_left_;  // stereo: a left image waiting for its right

@@ -1,6 +1,7 @@
 #include "hanzo/fusion/pipeline/session.hpp"
 
 #include "camera_odometry.hpp"
+#include "visual_loop_closures.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -194,6 +195,15 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   auto session = std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), planar_laser,
                                                       lidar_calibration, std::move(wheel_sensor), wheel_calibration));
   session->camera_odometry_ = std::move(camera_odometry);
+  if (session->camera_odometry_ && session->camera_odometry_->visual_inertial() && session->config_.loop_closure) {
+    Result<vision::VisualLoopDetector> detector = vision::VisualLoopDetector::create(session->camera_odometry_->left_camera());
+    if (detector) {
+      session->visual_loops_ = std::make_unique<VisualLoopClosures>(std::move(detector).value(), session->camera_odometry_->T_body_left(),
+                                                                    session->config_.map_keyframe_distance, session->config_.map_keyframe_angle);
+    } else {
+      logger()->warn("session: visual loop closure off: {}", detector.error().message);
+    }
+  }
   return session;
 }
 
@@ -430,6 +440,7 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
         case vision::ImageCondition::kGood: camera_lost_reason_ = HealthReason::kFewFeatures; break;
       }
       logger()->debug("session: camera frame at {:.3f} s lost: {}", frame.time.seconds(), frame.frame.reason);
+      if (visual_loops_) visual_loops_->note_lost();
       // The camera streams (not a timeout) though its frames are not fused.
       frontend_->note_input(camera_odometry_->left_sensor(), frame.time - camera_odometry_->left_time_offset());
       if (camera_odometry_->stereo()) frontend_->note_input(camera_odometry_->right_sensor(), frame.time - camera_odometry_->right_time_offset());
@@ -438,6 +449,10 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
   }
   camera_lost_reason_.reset();
   const Timestamp sensor_time = frame.time - camera_odometry_->left_time_offset();
+  // Backend corrections since the previous frame moved the Frontend's world: the odometry's
+  // world follows them (as the LiDAR odometry's does).
+  if (visual_world_) visual_world_ = frontend_->world_correction() * visual_world_correction_.inverse() * *visual_world_;
+  visual_world_correction_ = frontend_->world_correction();
   // The odometry's world in the Frontend's: the identity without an IMU (the odometry's world,
   // the body at its first keyframe, is the Frontend's); with an IMU the Frontend's pose at the
   // first tracked frame, once, as the LiDAR odometry's map is.
@@ -486,9 +501,38 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
   } else {
     logger()->debug("session: visual odometry pose not fused: {}", fused.error().message);
   }
+  if (visual_loops_ && fused && visual_world_ && latest_keyframe_ && !restart_graph_) add_visual_place(frame.time, frame.left_image, frame.T_world_body);
   register_ready_scans();
   update_backend();
   return {};
+}
+
+void Session::add_visual_place(Timestamp time, const cv::Mat& image, const SE3& T_odometry_body) {
+  const std::optional<SE3> T_world_body = frontend_->pose_at(time);
+  if (!T_world_body) return;
+  // Both before the Frontend's corrections, where their relative motion is the filter's.
+  const SE3 T_anchor_body = latest_keyframe_uncorrected_.inverse() * frontend_->world_correction().inverse() * *T_world_body;
+  Result<std::optional<VisualLoopClosures::LoopFactor>> loop =
+      visual_loops_->add(time, image, T_odometry_body, latest_keyframe_->keyframe_id, latest_keyframe_->timestamp, T_anchor_body);
+  if (!loop) {
+    logger()->warn("session: camera image at {:.3f} s not added as a place: {}", time.seconds(), loop.error().message);
+    return;
+  }
+  if (!*loop) return;
+  const VisualLoopClosures::LoopFactor& factor = **loop;
+  if (factor.from_keyframe == factor.to_keyframe) return;
+  if (Status added = add_loop_factor(factor.from_keyframe, factor.to_keyframe, factor.T_from_to, factor.covariance); !added) {
+    logger()->warn("session: visual loop closure not added: {}", added.error().message);
+    return;
+  }
+  ++summary_.loop_closures;
+  const SE3& T = factor.T_from_to;
+  logger()->info("session: visual loop closed between keyframes {} ({:.3f} s) and {} ({:.3f} s): {} inliers, cameras {:.2f} m apart; "
+                 "t = ({:.4f} {:.4f} {:.4f}), q = ({:.5f} {:.5f} {:.5f} {:.5f})",
+                 factor.from_keyframe, graph_->keyframe_time(factor.from_keyframe).value_or(Timestamp()).seconds(), factor.to_keyframe,
+                 latest_keyframe_->timestamp.seconds(), factor.loop.inliers, factor.loop.T_place_current.translation().norm(), T.translation().x(),
+                 T.translation().y(), T.translation().z(), T.rotation().quaternion().w(), T.rotation().quaternion().x(), T.rotation().quaternion().y(),
+                 T.rotation().quaternion().z());
 }
 
 void Session::count_refused(Rejection reason) {
@@ -947,6 +991,10 @@ MappingSummary Session::mapping_summary() const {
     summary.visual_landmarks = static_cast<uint64_t>(visual.landmarks);
     summary.camera_standstill_frames = static_cast<uint64_t>(visual.standstill_frames);
     summary.visual_loop_closures = static_cast<uint64_t>(visual.loop_closures);
+    if (visual_loops_) {
+      summary.visual_loop_closures = static_cast<uint64_t>(visual_loops_->loops());
+      summary.loop_candidates += static_cast<uint64_t>(visual_loops_->candidates_checked());
+    }
     summary.visual_scale_free = visual.scale_free;
     const CameraOdometry::ImageConditionCounts& conditions = camera_odometry_->image_conditions();
     summary.camera_dark_frames = conditions.dark;

@@ -24,7 +24,13 @@ constexpr double kMaxRefinement = 0.05;
 
 Status validate(const VisualLoopDetectorConfig& config) {
   HANZO_RETURN_IF_ERROR(with_context(validate(config.features), "features"));
-  if (config.min_place_gap < 2) return Error("VisualLoopDetectorConfig.min_place_gap: must be at least 2", "min_place_gap");
+  if (config.triangulation_neighbours < 1) return Error("VisualLoopDetectorConfig.triangulation_neighbours: must be at least 1", "triangulation_neighbours");
+  if (config.min_views < 2 || config.min_views > 2 * config.triangulation_neighbours + 1) {
+    return Error("VisualLoopDetectorConfig.min_views: must be at least 2 and at most 2 triangulation_neighbours + 1", "min_views");
+  }
+  if (config.min_place_gap < 2 * config.triangulation_neighbours + 1) {
+    return Error("VisualLoopDetectorConfig.min_place_gap: must exceed twice triangulation_neighbours", "min_place_gap");
+  }
   if (config.candidates < 1) return Error("VisualLoopDetectorConfig.candidates: must be at least 1", "candidates");
   if (config.min_inliers < 6) return Error("VisualLoopDetectorConfig.min_inliers: must be at least 6", "min_inliers");
   if (!(config.min_inlier_share >= 0.0 && config.min_inlier_share <= 1.0)) {
@@ -73,11 +79,12 @@ Result<std::optional<VisualLoop>> VisualLoopDetector::add(const cv::Mat& image, 
   const BowVector bow = vocabulary_->transform(place.features.descriptors, &words_by_node);
   const int current = database_.add(bow, std::move(words_by_node));
   places_.push_back(std::move(place));
-  const std::size_t newest = places_.size() - 1;
-  if (newest >= 1) triangulate_points(newest - 1);
-  // Two places back is a candidate only from now on: its points are all it needs.
-  if (newest >= 2) {
-    Place& old = places_[newest - 2];
+  // The place `span` back now has all its neighbours: its points are triangulated, and the
+  // place 2 span back, whose neighbours they were, keeps only its points from now on.
+  const std::size_t newest = places_.size() - 1, span = static_cast<std::size_t>(config_.triangulation_neighbours);
+  if (newest >= span) triangulate_points(newest - span);
+  if (newest >= 2 * span) {
+    Place& old = places_[newest - 2 * span];
     old.features = ImageFeatures();
     old.normalized = {};
   }
@@ -106,16 +113,17 @@ Result<std::optional<VisualLoop>> VisualLoopDetector::add(const cv::Mat& image, 
 void VisualLoopDetector::triangulate_points(std::size_t index) {
   Place& middle = places_[index];
   if (middle.features.size() == 0) return;
-  // Views of the place's keypoints in its neighbours (the one before, when it still has its
-  // features, and the one after), with the neighbour's pose in the place's camera frame.
+  // Views of the place's keypoints in its neighbours, with the neighbour's pose in the place's
+  // camera frame.
   struct View {
     const Place* place;
     SE3 T_view_middle;
     std::vector<int> keypoint_of;  // per middle keypoint, -1 when not matched
   };
   std::vector<View> views;
-  for (std::size_t neighbour : {index - 1, index + 1}) {
-    if (neighbour >= places_.size() || places_[neighbour].features.size() == 0) continue;
+  const std::size_t span = static_cast<std::size_t>(config_.triangulation_neighbours);
+  for (std::size_t neighbour = index >= span ? index - span : 0; neighbour <= index + span && neighbour < places_.size(); ++neighbour) {
+    if (neighbour == index || places_[neighbour].features.size() == 0) continue;
     View view{&places_[neighbour], places_[neighbour].T_odometry_camera.inverse() * middle.T_odometry_camera,
               std::vector<int>(middle.features.size(), -1)};
     for (const FeatureMatch& match : match_descriptors(middle.features.descriptors, view.place->features.descriptors)) {
@@ -142,7 +150,7 @@ void VisualLoopDetector::triangulate_points(std::size_t index) {
       normalized.push_back(*view.place->normalized[static_cast<std::size_t>(other)]);
       seen.push_back({Eigen::Vector3d::Zero(), {other_keypoint.pt.x, other_keypoint.pt.y}, keypoint_sigma(other_keypoint)});
     }
-    if (poses.size() < 2) continue;
+    if (static_cast<int>(poses.size()) < config_.min_views) continue;
     const std::optional<Eigen::Vector3d> point = triangulate_views(poses, normalized);
     if (!point) continue;
     bool consistent = true;

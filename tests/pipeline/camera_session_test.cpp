@@ -50,6 +50,7 @@ const Recording& drone_recording() {
 
 struct SessionRun {
   double ape_se3_m = 0.0;
+  double optimized_ape_se3_m = 0.0;  // optimized_trajectory(): every pose on the final graph
   double distance_m = 0.0;  // travelled along the true trajectory
   MappingSummary mapping;
   SessionSummary summary;
@@ -60,11 +61,13 @@ struct SessionRun {
 
 // The Session on the recording (the drone's by default) with only the sensors `keep` says.
 SessionRun run_session(const std::function<bool(const sim::ScenarioSensor&)>& keep,
-                       config::FrontendType frontend_type = config::FrontendType::kEkf, const Recording& recording = drone_recording()) {
+                       config::FrontendType frontend_type = config::FrontendType::kEkf, const Recording& recording = drone_recording(),
+                       const std::function<void(config::FusionConfig&)>& edit_config = nullptr) {
   sim::Scenario scenario = recording.scenario;
   std::erase_if(scenario.sensors, [&](const sim::ScenarioSensor& sensor) { return !keep(sensor); });
   config::FusionConfig fusion_config = sim::scenario_fusion_config(scenario);
   fusion_config.frontend.type = frontend_type;
+  if (edit_config) edit_config(fusion_config);
   auto session = Session::create(fusion_config, sim::scenario_calibration(scenario)).value();
   io::Trajectory estimate, truth;
   session->set_pose_callback([&](const msgs::PoseEstimate& pose) {
@@ -83,6 +86,12 @@ SessionRun run_session(const std::function<bool(const sim::ScenarioSensor&)>& ke
   config.alignment = eval::Alignment::kSE3;
   SessionRun run;
   run.ape_se3_m = eval::compute_ape(truth, estimate, config).value().statistics.rmse;
+  io::Trajectory optimized;
+  for (const StampedPose& pose : session->optimized_trajectory()) {
+    optimized.timestamps.push_back(pose.timestamp);
+    optimized.poses.push_back(pose.T_world_body.matrix());
+  }
+  if (optimized.size() == truth.size()) run.optimized_ape_se3_m = eval::compute_ape(truth, optimized, config).value().statistics.rmse;
   for (std::size_t i = 1; i < truth.size(); ++i) run.distance_m += (truth.poses[i].col(3) - truth.poses[i - 1].col(3)).norm();
   run.mapping = session->mapping_summary();
   run.map = session->map();
@@ -240,6 +249,29 @@ TEST(CameraSession, VisualInertialOdometryStartsInMotion) {
   EXPECT_LT(flying.ape_se3_m, 0.01 * flying.distance_m);
   EXPECT_GT(walking.mapping.camera_frames_tracked, 250u);  // 15 Hz over 20 s, after a second of IMU
   EXPECT_LT(walking.ape_se3_m, 0.015 * walking.distance_m);
+}
+
+// The whole drone flight (40 s, three figure eights, lights out 18-24 s, blur 30-31 s) with the
+// stereo MSCKF: camera places close loops with where the drone flew before, the loop factors
+// move the graph and the Session. The odometry drifts only 0.15 % of the distance here, about
+// what a loop measures, so the gain is small (optimized trajectory 0.095 vs 0.106 m when
+// written); the test asserts loops are closed and do not make it worse. Compared with loop
+// closure off on the same images.
+TEST(CameraSession, VisualInertialOdometryClosesLoopsOverTheDronesFigureEights) {
+  const Recording recording = simulate("examples/scenarios/drone.yaml", std::nullopt);
+  const auto all = [](const sim::ScenarioSensor&) { return true; };
+  const SessionRun looped = run_session(all, config::FrontendType::kMsckf, recording);
+  const SessionRun open = run_session(all, config::FrontendType::kMsckf, recording, [](config::FusionConfig& config) { config.mapping.loop_closure = false; });
+  std::printf("drone flight, stereo MSCKF over %.1f m: loop closure on: %lu loops of %lu candidates, SE3-aligned APE %.3f m (optimized %.3f m); "
+              "off: %.3f m (optimized %.3f m)\n",
+              looped.distance_m, static_cast<unsigned long>(looped.mapping.loop_closures), static_cast<unsigned long>(looped.mapping.loop_candidates),
+              looped.ape_se3_m, looped.optimized_ape_se3_m, open.ape_se3_m, open.optimized_ape_se3_m);
+  EXPECT_GE(looped.mapping.loop_closures, 3u);
+  EXPECT_EQ(looped.mapping.visual_loop_closures, looped.mapping.loop_closures);
+  EXPECT_EQ(open.mapping.loop_closures, 0u);
+  EXPECT_LT(looped.ape_se3_m, 0.005 * looped.distance_m);
+  EXPECT_LT(looped.optimized_ape_se3_m, 1.05 * open.optimized_ape_se3_m);
+  EXPECT_LT(looped.ape_se3_m, 1.15 * open.ape_se3_m);
 }
 
 TEST(CameraSession, VisualInertialOdometryWithoutAnImuIsRefusedNamingTheField) {

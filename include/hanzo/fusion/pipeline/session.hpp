@@ -47,6 +47,13 @@
 //    its camera poses are pose measurements of the Frontend (Frontend::push_pose): without an
 //    IMU in the odometry's own world, with an IMU (stereo) placed once in the Frontend's world
 //    at the first tracked frame. A monocular camera with an IMU is tracked but not fused.
+//    With frontend.type msckf the odometry is visual-inertial (its poses metric with one camera
+//    too) and keeps no map, so the Session closes its loops: every map_keyframe_distance /
+//    map_keyframe_angle of its motion a tracked left image becomes a place of a
+//    vision::VisualLoopDetector, anchored to the newest Frontend keyframe
+//    (src/pipeline/visual_loop_closures.hpp); a verified loop adds a loop factor (DCS kernel,
+//    the detector's covariance) and the graph corrects the Frontend, whose world the
+//    odometry's poses then follow.
 //  - Everything else goes to Frontend::push (same checks, same errors).
 //  - Keyframes of the Frontend (frontend.keyframe_interval) become nodes of a KeyframeGraph
 //    (between factors from the filter's relative motion); after each push the graph is updated
@@ -96,9 +103,14 @@
 #include "hanzo/fusion/pipeline/sensor_health.hpp"
 #include "hanzo/fusion/pipeline/wheel_slip_monitor.hpp"
 
+namespace cv {
+class Mat;
+}
+
 namespace hanzo::fusion::pipeline {
 
 class CameraOdometry;
+class VisualLoopClosures;
 
 enum class SessionMode { kReplay, kRealtime };
 std::string_view to_string(SessionMode mode);  // "replay", "realtime"
@@ -126,7 +138,7 @@ struct SessionConfig {
   lidar::LoopClosureConfig loop;
   double loop_translation_sigma = 0.05;  ///< m, loop closure factors (detected and manual)
   double loop_rotation_sigma = 0.005;    ///< rad
-  double map_keyframe_distance = 1.0;    ///< m of LiDAR motion between map keyframes
+  double map_keyframe_distance = 1.0;    ///< m of LiDAR motion between map keyframes (camera motion between visual places)
   double map_keyframe_angle = 0.2;       ///< rad
   /// Map layers. Default: 0.2 m points (keyframes kept at 0.1 m) and a 0.1 m 2D occupancy grid.
   maps::MapBuilderConfig map = default_map();
@@ -335,6 +347,8 @@ class Session {
   /// Moves map keyframes (index -> T_world_lidar) in the map and publishes the corrected map.
   void move_map_keyframes(const std::map<uint64_t, SE3>& moved);
   void count_refused(Rejection reason);
+  /// A tracked left image offered as a visual place; a verified loop becomes a loop factor.
+  void add_visual_place(Timestamp time, const cv::Mat& image, const SE3& T_odometry_body);
   /// Records the health changes since the last evaluation (every 0.2 s of data time).
   void track_health();
   /// A fused GNSS fix as a GPS factor on the newest keyframe (gnss_factors).
@@ -383,6 +397,8 @@ class Session {
   std::unique_ptr<CameraOdometry> camera_odometry_;
   std::map<std::string, SensorStatistics, std::less<>> camera_statistics_;
   std::optional<SE3> visual_world_;
+  SE3 visual_world_correction_;  ///< the Frontend's world correction visual_world_ follows
+  std::unique_ptr<VisualLoopClosures> visual_loops_;  ///< frontend.type msckf with loop_closure
   MappingSummary summary_;
   /// keep_trajectory: emitted poses and keyframes, both as the filter had them before any
   /// correction (Frontend::world_correction() undone), for optimized_trajectory().

@@ -4,12 +4,12 @@
 // distance apart, each with the odometry's pose of the camera.
 //
 //   1. Each place's ORB features (vision/orb_extractor.hpp) are matched by descriptor (mutual,
-//      ratio 0.8) with the places before and after it and triangulated from all their views
+//      ratio 0.8) with triangulation_neighbours places on each side and triangulated from all views
 //      (linear, Hartley and Zisserman 12.2) with the odometry's relative poses (accurate over
 //      the short distances between places; its drift does not matter here): points with at
 //      least min_parallax_degrees between two rays, in front of every camera and within the
 //      chi-square 95 % bound of every keypoint are kept, in the place's camera frame. A place
-//      gets its points when the next one is added.
+//      gets its points when its last neighbour is added.
 //   2. A new place's bag of words (vision/place_database.hpp) queries the places at least
 //      min_place_gap older, above the score it has with its own recent places (DBoW2's
 //      normalization, Galvez-Lopez and Tardos 2012, section V); the `candidates` best are tried.
@@ -43,7 +43,14 @@ namespace hanzo::fusion::vision {
 
 struct VisualLoopDetectorConfig {
   OrbExtractorConfig features;       ///< per place (1000 features)
-  int min_place_gap = 15;            ///< places between a candidate and the new place (>= 2)
+  /// Places on each side whose views triangulate a place's points (its points come when the
+  /// last of them is added). Two: baselines up to twice the place spacing each way.
+  int triangulation_neighbours = 2;
+  /// Views a point needs (the place's own included): with three, a keypoint matched to a
+  /// look-alike on its epipolar line (a checker floor, a tiled wall) is not triangulated, since
+  /// the second neighbour's epipolar line crosses the first's.
+  int min_views = 3;
+  int min_place_gap = 15;            ///< places between a candidate and the new place (> 2 triangulation_neighbours)
   int candidates = 3;                ///< best bag-of-words candidates verified per place
   int min_inliers = 40;              ///< refined PnP inliers to accept a loop
   double min_inlier_share = 0.5;     ///< of the candidate's descriptor matches
@@ -53,12 +60,13 @@ struct VisualLoopDetectorConfig {
   double min_parallax_degrees = 3.0;
   /// The loop's standard deviations (covariance of VisualLoop): a floor, plus a share of the
   /// distance between the two cameras (its points, triangulated over a short baseline, place a
-  /// camera seen from further away less well). Measured on the drone's flight: errors of
-  /// 0.6-4 cm plus up to 3.4 % of the distance, 0.06-0.9 degrees.
-  double translation_sigma = 0.05;              ///< m
-  double translation_sigma_per_metre = 0.03;    ///< m per m apart
-  double rotation_sigma = 0.005;                ///< rad
-  double rotation_sigma_per_metre = 0.003;      ///< rad per m apart
+  /// camera seen from further away less well). On the drone's flight the loops were off by
+  /// 1-14 cm and 0.1-0.8 degrees at 0.2-4 m apart, inside one sigma of these; half these
+  /// sigmas made the Session's loop-closed trajectory worse than none (bench/RESULTS.md).
+  double translation_sigma = 0.1;               ///< m
+  double translation_sigma_per_metre = 0.06;    ///< m per m apart
+  double rotation_sigma = 0.01;                 ///< rad
+  double rotation_sigma_per_metre = 0.006;      ///< rad per m apart
   double pixel_sigma = 1.0;          ///< keypoint noise at octave 0 (pixels)
   int cooldown_places = 3;           ///< places after a loop before the next one is searched
   /// Null: the default vocabulary (Vocabulary::load_default).
@@ -90,7 +98,7 @@ class VisualLoopDetector {
   int size() const { return static_cast<int>(places_.size()); }
   int candidates_checked() const { return candidates_checked_; }
   int loops() const { return loops_; }
-  /// The triangulated points of a place (its camera frame); empty until the next place.
+  /// The triangulated points of a place (its camera frame); empty until its last neighbour.
   std::vector<Eigen::Vector3d> points(int place) const;
 
  private:
@@ -102,7 +110,7 @@ class VisualLoopDetector {
     cv::Mat point_descriptors;             // one row per point
   };
   VisualLoopDetector(const PinholeCamera& camera, VisualLoopDetectorConfig config, std::shared_ptr<const Vocabulary> vocabulary);
-  void triangulate_points(std::size_t index);  // with the places before (if kept) and after
+  void triangulate_points(std::size_t index);  // with its neighbours' views
   std::optional<VisualLoop> verify(int candidate, const Place& current) const;
   double keypoint_sigma(const cv::KeyPoint& keypoint) const;
 
