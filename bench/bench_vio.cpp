@@ -7,7 +7,10 @@
 //     to right, no grid, no checks): the peer for the tracker's own bookkeeping and checks;
 //   - the whole VIO step per stereo frame on EuRoC (tracking + propagation + update);
 //   - the image-quality check per EuRoC image (dark / glare / motion blur) against the usual
-//     blur check done with OpenCV alone (the variance of the Laplacian at full resolution).
+//     blur check done with OpenCV alone (the variance of the Laplacian at full resolution);
+//   - a visual place of the loop detector (ORB features, triangulation with its neighbours, the
+//     bag-of-words query over 300 places and the candidates' PnP) against OpenCV's ORB
+//     detectAndCompute alone on the same image (1000 features), the step it cannot skip.
 // No VIO library is packaged for Debian (OpenVINS, VINS-Fusion, Kimera are not): the MSCKF has no
 // peer on the machine; OpenVINS's and VINS-Fusion's published timings are in docs/vision.md.
 
@@ -18,6 +21,7 @@
 
 #include <benchmark/benchmark.h>
 #include <opencv2/core/utility.hpp>
+#include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
@@ -26,6 +30,7 @@
 #include "hanzo/fusion/vision/feature_tracker.hpp"
 #include "hanzo/fusion/vision/image_quality.hpp"
 #include "hanzo/fusion/vision/msckf.hpp"
+#include "hanzo/fusion/vision/visual_loop_detector.hpp"
 
 namespace {
 
@@ -225,6 +230,39 @@ void BM_VioStepEurocStereo(benchmark::State& state) {
   state.counters["ms_per_frame"] = benchmark::Counter(static_cast<double>(state.iterations() * frames), benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
 BENCHMARK(BM_VioStepEurocStereo)->Unit(benchmark::kMillisecond)->Iterations(3);
+
+// Places 1 m apart along the camera's x axis, EuRoC's images in turn (the MAV stands still in
+// them: few points survive triangulation, so candidates are queried and mostly refused).
+void BM_VisualLoopDetectorPlace_Hanzo(benchmark::State& state) {
+  cv::setNumThreads(1);
+  const EurocStereo& data = euroc();
+  VisualLoopDetector detector = VisualLoopDetector::create(data.left_camera).value();
+  int place = 0;
+  const auto add = [&] {
+    const SE3 pose(SO3(), Eigen::Vector3d(place, 0.0, 0.0));
+    benchmark::DoNotOptimize(detector.add(data.left[static_cast<size_t>(place) % data.left.size()], pose).value());
+    ++place;
+  };
+  while (place < 300) add();
+  for (auto _ : state) add();
+  state.counters["candidates_per_place"] = static_cast<double>(detector.candidates_checked()) / place;
+}
+BENCHMARK(BM_VisualLoopDetectorPlace_Hanzo)->Unit(benchmark::kMillisecond);
+
+void BM_VisualLoopDetectorPlace_OpenCVOrb(benchmark::State& state) {
+  cv::setNumThreads(1);
+  const EurocStereo& data = euroc();
+  cv::Ptr<cv::ORB> orb = cv::ORB::create(1000);
+  size_t frame = 0;
+  for (auto _ : state) {
+    std::vector<cv::KeyPoint> keypoints;
+    cv::Mat descriptors;
+    orb->detectAndCompute(data.left[frame], cv::noArray(), keypoints, descriptors);
+    benchmark::DoNotOptimize(descriptors.data);
+    frame = (frame + 1) % data.left.size();
+  }
+}
+BENCHMARK(BM_VisualLoopDetectorPlace_OpenCVOrb)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 
