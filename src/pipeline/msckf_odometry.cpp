@@ -19,6 +19,17 @@ constexpr double kStereoVelocitySigma = 0.2;
 // Moving frames without a stereo velocity (too few stereo points: dark, blank) before a stereo
 // rig starts anyway with the velocity unknown, as one camera does.
 constexpr int kMaxFramesWithoutStereoVelocity = 10;
+// One camera in motion: the window of frames aligned with the IMU, how long alignment may keep
+// failing before the start without it, and the start's standard deviations after alignment
+// (velocity, roll/pitch, gyro bias). Window and sigmas chosen over seven simulated starts in
+// motion (bench/RESULTS.md, 2026-11-29): a 1 s or 2 s window, or 0.3 m/s, diverged on one.
+constexpr double kVisualInertialWindowSeconds = 1.5;
+constexpr double kMaxAligningSeconds = 2.0;
+constexpr double kAlignedVelocitySigma = 0.5;
+constexpr double kAlignedTiltSigma = 0.01;
+constexpr double kAlignedGyroBiasSigma = 0.01;
+// IMU kept before the start: the alignment window and a margin.
+constexpr double kPreStartImuSeconds = kVisualInertialWindowSeconds + 1.0;
 
 }  // namespace
 
@@ -46,7 +57,7 @@ void MsckfOdometry::add_imu(const estimate::ImuSample& sample) {
   if (filter_ && sample.timestamp <= filter_->state().timestamp) return;
   imu_.push_back(sample);
   if (!filter_) {
-    while (!imu_.empty() && (sample.timestamp - imu_.front().timestamp).seconds() > 2.0 * kAlignmentSeconds) imu_.pop_front();
+    while (!imu_.empty() && (sample.timestamp - imu_.front().timestamp).seconds() > kPreStartImuSeconds) imu_.pop_front();
   } else {
     // No frames for a long time: propagate the oldest samples rather than keep them all.
     while (imu_.size() > kMaxBufferedSamples) {
@@ -76,10 +87,27 @@ std::optional<std::string> MsckfOdometry::start_filter(Timestamp time) {
         Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.005);
   } else {
     // In motion (moving_start.hpp): the tilt from the IMU; the velocity from two stereo frames,
-    // or unknown (zero, 1 m/s) with one camera, for the images to find.
+    // or with one camera from the visual-inertial alignment, else unknown (zero, 1 m/s) for the
+    // images to find.
     state.R_world_body = tilt_from_moving_imu(still);
     double velocity_sigma = kMovingStartVelocitySigma;
-    if (cameras_.size() == 2 && stereo_velocity_) {
+    if (cameras_.size() == 1) {
+      std::string why;
+      if (std::optional<vision::VisualInertialAlignment> aligned_in_motion = align_in_motion(time, why)) {
+        state.R_world_body = aligned_in_motion->R_world_imu;
+        state.velocity = aligned_in_motion->velocity_world;
+        state.gyro_bias = aligned_in_motion->gyro_bias;
+        sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d(kAlignedTiltSigma, kAlignedTiltSigma, 1e-3), Eigen::Vector3d::Constant(kAlignedVelocitySigma),
+            Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(kAlignedGyroBiasSigma);
+        logger()->info("msckf: starting in motion from the visual-inertial alignment of {} frames (velocity {:.2f} m/s, scale {:.3f}, gravity off by {:.1f} %)",
+                       aligned_in_motion->frames, state.velocity.norm(), aligned_in_motion->scale, 100.0 * aligned_in_motion->gravity_error);
+        return start_with(state, sigma, still.back());
+      }
+      if (!aligning_since_ || (time - *aligning_since_).seconds() < kMaxAligningSeconds) {
+        return fmt::format("initializing: moving; aligning the images with the IMU ({})", why);
+      }
+      logger()->info("msckf: the visual-inertial alignment kept failing ({}): starting with the velocity unknown", why);
+    } else if (cameras_.size() == 2 && stereo_velocity_) {
       state.velocity = state.R_world_body * *stereo_velocity_;
       velocity_sigma = kStereoVelocitySigma;
     } else if (cameras_.size() == 2 && ++frames_without_stereo_velocity_ < kMaxFramesWithoutStereoVelocity) {
@@ -92,6 +120,11 @@ std::optional<std::string> MsckfOdometry::start_filter(Timestamp time) {
                    estimate::roll_pitch_yaw(state.R_world_body.matrix()).y() * 180.0 / M_PI, state.velocity.norm(),
                    velocity_sigma == kStereoVelocitySigma ? " from the stereo images" : ", unknown: the images will tell");
   }
+  return start_with(state, sigma, still.back());
+}
+
+std::optional<std::string> MsckfOdometry::start_with(const estimate::NavigationState& state, const Eigen::Matrix<double, 15, 1>& sigma,
+                                                     const estimate::ImuSample& last_sample) {
   vision::MsckfConfig config;
   config.imu_noise = imu_noise_;
   Result<vision::Msckf> filter = vision::Msckf::create(config, cameras_, state, sigma.array().square().matrix().asDiagonal().toDenseMatrix());
@@ -99,9 +132,32 @@ std::optional<std::string> MsckfOdometry::start_filter(Timestamp time) {
   filter_.emplace(std::move(filter).value());
   previous_stereo_.reset();
   frames_without_stereo_velocity_ = 0;
-  (void)filter_->propagate(still.back());
+  alignment_frames_.clear();
+  aligning_since_.reset();
+  (void)filter_->propagate(last_sample);
   while (!imu_.empty() && imu_.front().timestamp <= state.timestamp) imu_.pop_front();
   return std::nullopt;
+}
+
+std::optional<vision::VisualInertialAlignment> MsckfOdometry::align_in_motion(Timestamp time, std::string& why) {
+  if (alignment_frames_.empty() || (time - alignment_frames_.front().time).seconds() < 0.95 * kVisualInertialWindowSeconds) {
+    why = "collecting frames";
+    return std::nullopt;
+  }
+  if (!aligning_since_) aligning_since_ = time;
+  vision::VisualInertialAlignmentConfig config;
+  config.focal_length_px = cameras_[0].focal_length_px;
+  config.process_noise_accel = imu_noise_.process_noise_accel;
+  config.process_noise_gyro = imu_noise_.process_noise_gyro;
+  config.sample_interval = imu_noise_.sample_interval;
+  const std::vector<vision::AlignmentFrame> frames(alignment_frames_.begin(), alignment_frames_.end());
+  const std::vector<estimate::ImuSample> samples(imu_.begin(), imu_.end());
+  Result<vision::VisualInertialAlignment> aligned = vision::align_visual_inertial(frames, samples, cameras_[0].T_body_camera, config);
+  if (!aligned) {
+    why = aligned.error().message;
+    return std::nullopt;
+  }
+  return std::move(aligned).value();
 }
 
 Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat& left, const cv::Mat& right) {
@@ -119,6 +175,11 @@ Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat&
                                          (time - previous_stereo_->first).seconds());
     }
     previous_stereo_.emplace(time, std::move(points));
+  }
+  if (!filter_ && cameras_.size() == 1) {
+    // Before the start: the window of tracks for a start in motion.
+    alignment_frames_.push_back({time, tracked.observations});
+    while ((time - alignment_frames_.front().time).seconds() > kVisualInertialWindowSeconds) alignment_frames_.pop_front();
   }
   if (!filter_) {
     if (std::optional<std::string> waiting = start_filter(time)) {

@@ -62,7 +62,7 @@ struct SessionRun {
 // The Session on the recording (the drone's by default) with only the sensors `keep` says.
 SessionRun run_session(const std::function<bool(const sim::ScenarioSensor&)>& keep,
                        config::FrontendType frontend_type = config::FrontendType::kEkf, const Recording& recording = drone_recording(),
-                       const std::function<void(config::FusionConfig&)>& edit_config = nullptr) {
+                       const std::function<void(config::FusionConfig&)>& edit_config = nullptr, double evaluate_after_s = 0.0) {
   sim::Scenario scenario = recording.scenario;
   std::erase_if(scenario.sensors, [&](const sim::ScenarioSensor& sensor) { return !keep(sensor); });
   config::FusionConfig fusion_config = sim::scenario_fusion_config(scenario);
@@ -70,8 +70,11 @@ SessionRun run_session(const std::function<bool(const sim::ScenarioSensor&)>& ke
   if (edit_config) edit_config(fusion_config);
   auto session = Session::create(fusion_config, sim::scenario_calibration(scenario)).value();
   io::Trajectory estimate, truth;
+  std::optional<Timestamp> first_pose;
   session->set_pose_callback([&](const msgs::PoseEstimate& pose) {
     if (!estimate.empty() && pose.timestamp <= estimate.timestamps.back()) return;
+    if (!first_pose) first_pose = pose.timestamp;
+    if ((pose.timestamp - *first_pose).seconds() < evaluate_after_s) return;
     estimate.timestamps.push_back(pose.timestamp);
     estimate.poses.push_back(pose.T_world_body.to_se3().matrix());
     truth.timestamps.push_back(pose.timestamp);
@@ -232,23 +235,31 @@ TEST(CameraSession, VisualInertialOdometryReportsDarkAndBlurredFramesAndResumes)
   EXPECT_LT(run.ape_se3_m, 0.1);  // the IMU alone: 0.142 m over the whole 12 s
 }
 
-// Logs that begin in motion (log_start: 6 s into the trajectory): the drone flying its figure
-// eights (stereo: the velocity from the first stereo frames) and the phone carried at walking
-// pace (one camera: the velocity left for the images to find). No still second is waited for.
+// Logs that begin in motion: the drone flying its figure eights 6 s into the trajectory
+// (stereo: the velocity from the first stereo frames), and the phone carried at walking pace
+// starting 3, 6 and 9 s into the walk (one camera: the state from the visual-inertial alignment
+// of the first 1.5 s of tracks). No still second is waited for. The phone's error is taken from
+// the third second on: before the alignment the Session's filter has only the phone-grade IMU
+// and an unknown velocity. From 6 s a person walks through the view while the alignment's
+// frames are taken, and its velocity is 0.26 m/s off: 3.5 % there when written, 0.4 and 0.5 %
+// from 3 and 9 s (without the alignment, zero velocity +- 1 m/s: 15.8 m from 3 s).
 TEST(CameraSession, VisualInertialOdometryStartsInMotion) {
-  const auto moving = [](sim::Scenario& scenario) { scenario.log_start = 6.0; };
-  const Recording drone = simulate("examples/scenarios/drone.yaml", 18.0, moving);  // (duration: from the trajectory start)
-  const SessionRun flying = run_session([](const sim::ScenarioSensor&) { return true; }, config::FrontendType::kMsckf, drone);
-  const Recording phone = simulate("examples/scenarios/ar_handheld.yaml", 26.0, moving);
-  const SessionRun walking = run_session([](const sim::ScenarioSensor&) { return true; }, config::FrontendType::kMsckf, phone);
-  std::printf("started in motion: drone, stereo: SE3-aligned APE %.3f m over %.1f m, %lu frames tracked; phone, one camera: %.3f m over %.1f m, "
-              "%lu frames tracked\n",
-              flying.ape_se3_m, flying.distance_m, static_cast<unsigned long>(flying.mapping.camera_frames_tracked), walking.ape_se3_m,
-              walking.distance_m, static_cast<unsigned long>(walking.mapping.camera_frames_tracked));
+  const auto starting_at = [](double seconds) { return [seconds](sim::Scenario& scenario) { scenario.log_start = seconds; }; };
+  const auto all = [](const sim::ScenarioSensor&) { return true; };
+  const Recording drone = simulate("examples/scenarios/drone.yaml", 18.0, starting_at(6.0));  // (duration: from the trajectory start)
+  const SessionRun flying = run_session(all, config::FrontendType::kMsckf, drone);
+  std::printf("started in motion: drone, stereo: SE3-aligned APE %.3f m over %.1f m, %lu frames tracked\n", flying.ape_se3_m, flying.distance_m,
+              static_cast<unsigned long>(flying.mapping.camera_frames_tracked));
   EXPECT_GT(flying.mapping.camera_frames_tracked, 100u);  // 10 Hz over 12 s, from the second frame
   EXPECT_LT(flying.ape_se3_m, 0.01 * flying.distance_m);
-  EXPECT_GT(walking.mapping.camera_frames_tracked, 250u);  // 15 Hz over 20 s, after a second of IMU
-  EXPECT_LT(walking.ape_se3_m, 0.015 * walking.distance_m);
+  for (const double start : {3.0, 6.0, 9.0}) {
+    const Recording phone = simulate("examples/scenarios/ar_handheld.yaml", start + 14.0, starting_at(start));
+    const SessionRun walking = run_session(all, config::FrontendType::kMsckf, phone, nullptr, 2.0);
+    std::printf("  phone from %.0f s, one camera: %.3f m over %.1f m, %lu frames tracked\n", start, walking.ape_se3_m, walking.distance_m,
+                static_cast<unsigned long>(walking.mapping.camera_frames_tracked));
+    EXPECT_GT(walking.mapping.camera_frames_tracked, 150u) << start;  // 15 Hz over 14 s, after 1.5 s of alignment
+    EXPECT_LT(walking.ape_se3_m, 0.04 * walking.distance_m) << start;
+  }
 }
 
 // The whole drone flight (40 s, three figure eights, lights out 18-24 s, blur 30-31 s) with the
