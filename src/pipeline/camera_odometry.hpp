@@ -20,9 +20,9 @@
 // Fusion (Session): the odometry's camera poses are pose measurements (Frontend::push_pose).
 // Without an IMU its world (the body frame at its first keyframe) is the Frontend's; with an
 // IMU (stereo: metric) its world is placed once in the Frontend's, by the Frontend's pose at the
-// first tracked frame, as the LiDAR odometry's map is. A monocular camera with an IMU is
-// tracked but not fused: its scale is unknown (visual-inertial initialization is not built),
-// and the counts say so (not_fused).
+// first tracked frame, as the LiDAR odometry's map is. A monocular visual odometry with an IMU
+// is tracked but not fused: its scale is unknown (the visual-inertial odometry, frontend.type
+// msckf, is metric with one camera), and the counts say so (not_fused).
 
 #include <memory>
 #include <optional>
