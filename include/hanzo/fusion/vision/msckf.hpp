@@ -69,7 +69,11 @@ struct MsckfConfig {
   /// Clones in the sliding window (OpenVINS's default 11: about 0.5-1 s of a 10-20 Hz camera).
   int max_clones = 11;
   /// Feature position noise, pixels (turned into normalized units by each camera's focal length).
-  double pixel_sigma = 1.0;
+  /// Twice a tracker's 1 px: the extra absorbs the linearization error of features triangulated
+  /// from the current estimates (no first-estimate Jacobians). Monte-Carlo NEES with 1 px noise
+  /// (50 runs): position 4.0 and orientation 3.3 at 2 px, 5.5 and 3.9 at 1.5 px, 6.4 and 5.0
+  /// at 1 px (10 runs), consistent is 3; drift on the simulated flight 0.17-0.22 % either way.
+  double pixel_sigma = 2.0;
   /// Probability of the chi-square gate per feature (0.95: OpenVINS's).
   double chi_square_probability = 0.95;
   /// Triangulated features nearer or farther than this (metres, in every observing camera) are
