@@ -526,13 +526,8 @@ void Session::add_visual_place(Timestamp time, const cv::Mat& image, const SE3& 
     return;
   }
   ++summary_.loop_closures;
-  const SE3& T = factor.T_from_to;
-  logger()->info("session: visual loop closed between keyframes {} ({:.3f} s) and {} ({:.3f} s): {} inliers, cameras {:.2f} m apart; "
-                 "t = ({:.4f} {:.4f} {:.4f}), q = ({:.5f} {:.5f} {:.5f} {:.5f})",
-                 factor.from_keyframe, graph_->keyframe_time(factor.from_keyframe).value_or(Timestamp()).seconds(), factor.to_keyframe,
-                 latest_keyframe_->timestamp.seconds(), factor.loop.inliers, factor.loop.T_place_current.translation().norm(), T.translation().x(),
-                 T.translation().y(), T.translation().z(), T.rotation().quaternion().w(), T.rotation().quaternion().x(), T.rotation().quaternion().y(),
-                 T.rotation().quaternion().z());
+  logger()->info("session: visual loop closed between keyframes {} and {}: {} inliers, cameras {:.2f} m apart", factor.from_keyframe,
+                 factor.to_keyframe, factor.loop.inliers, factor.loop.T_place_current.translation().norm());
 }
 
 void Session::count_refused(Rejection reason) {
