@@ -9,6 +9,7 @@
 
 #include "hanzo/fusion/estimate/chi_square.hpp"
 #include "msckf_feature.hpp"
+#include "msckf_invariant_error.hpp"
 
 namespace hanzo::fusion::vision {
 namespace {
@@ -74,7 +75,8 @@ Msckf::Msckf(const MsckfConfig& config, std::vector<MsckfCamera> cameras, const 
       (config_.calibrate_time_offset ? 1 : 0) + (config_.calibrate_extrinsics ? 6 * static_cast<Eigen::Index>(cameras_.size()) : 0);
   first_clone_ = kImu + calibration;
   covariance_ = Eigen::MatrixXd::Zero(first_clone_, first_clone_);
-  covariance_.topLeftCorner<kImu, kImu>() = imu_covariance;
+  const ImuMatrix to_invariant = invariant_from_imu_error(state_);
+  covariance_.topLeftCorner<kImu, kImu>() = to_invariant * imu_covariance * to_invariant.transpose();
   if (config_.calibrate_time_offset) covariance_(time_offset_index(), time_offset_index()) = config_.time_offset_sigma * config_.time_offset_sigma;
   if (config_.calibrate_extrinsics) {
     for (int camera = 0; camera < static_cast<int>(cameras_.size()); ++camera) {
@@ -86,7 +88,28 @@ Msckf::Msckf(const MsckfConfig& config, std::vector<MsckfCamera> cameras, const 
 }
 
 Eigen::Matrix<double, kMsckfImuDimension, kMsckfImuDimension> Msckf::imu_covariance() const {
-  return interval_transition_ * covariance_.topLeftCorner<kImu, kImu>() * interval_transition_.transpose() + interval_noise_;
+  // Body-frame error at the interval's start (the last frame's state), then the interval's
+  // body-frame transition and noise.
+  const ImuMatrix at_start = imu_error_from_invariant(interval_empty_ ? state_ : interval_start_);
+  const ImuMatrix transition = interval_transition_ * at_start;
+  return transition * covariance_.topLeftCorner<kImu, kImu>() * transition.transpose() + interval_noise_;
+}
+
+Eigen::MatrixXd Msckf::body_error_from_invariant() const {
+  const Eigen::Index n = covariance_.rows();
+  Eigen::MatrixXd T = Eigen::MatrixXd::Identity(n, n);
+  T.topLeftCorner<kImu, kImu>() = imu_error_from_invariant(state_);
+  for (size_t i = 0; i < clones_.size(); ++i) {
+    const SE3& pose = clones_[i].T_world_body;
+    T.block<kClone, kClone>(clone_index(i), clone_index(i)) = pose_error_from_invariant(pose.rotation(), pose.translation());
+  }
+  return T;
+}
+
+Eigen::MatrixXd Msckf::covariance() const {
+  const Eigen::MatrixXd T = body_error_from_invariant();
+  Eigen::MatrixXd body = T * covariance_ * T.transpose();
+  return 0.5 * (body + body.transpose());
 }
 
 Status Msckf::propagate(const estimate::ImuSample& sample) {
@@ -107,6 +130,10 @@ Status Msckf::propagate(const estimate::ImuSample& sample) {
 }
 
 void Msckf::propagate_interval(const estimate::ImuSample& reading, double dt) {
+  if (interval_empty_) {
+    interval_start_ = state_;
+    interval_empty_ = false;
+  }
   const estimate::BodyMotion motion = estimate::body_motion(state_, reading, kImuIsBody);
   estimate::ImuTransition transition;
   state_ = estimate::propagate_state(state_, motion, dt, kImuIsBody, &transition);
@@ -117,22 +144,31 @@ void Msckf::propagate_interval(const estimate::ImuSample& reading, double dt) {
 }
 
 void Msckf::apply_interval_propagation() {
-  const ImuMatrix& phi = interval_transition_;
+  if (interval_empty_) return;
+  // The body-frame transition between the interval's two states in invariant coordinates:
+  // Phi_xi = T(x_now)^-1 Phi T(x_start). Its rotation / velocity / position block is the
+  // state-independent one of the invariant filter; only the bias columns depend on the estimate.
+  const ImuMatrix to_invariant = invariant_from_imu_error(state_);
+  const ImuMatrix phi = to_invariant * interval_transition_ * imu_error_from_invariant(interval_start_);
+  const ImuMatrix noise = to_invariant * interval_noise_ * to_invariant.transpose();
   const Eigen::Index n = covariance_.rows();
-  covariance_.topLeftCorner<kImu, kImu>() = phi * covariance_.topLeftCorner<kImu, kImu>() * phi.transpose() + interval_noise_;
+  covariance_.topLeftCorner<kImu, kImu>() = phi * covariance_.topLeftCorner<kImu, kImu>() * phi.transpose() + noise;
   if (n > kImu) {
     covariance_.topRightCorner(kImu, n - kImu) = phi * covariance_.topRightCorner(kImu, n - kImu);
     covariance_.bottomLeftCorner(n - kImu, kImu) = covariance_.topRightCorner(kImu, n - kImu).transpose();
   }
   interval_transition_.setIdentity();
   interval_noise_.setZero();
+  interval_empty_ = true;
 }
 
 void Msckf::augment(Timestamp time) {
-  // The clone's error is the IMU's (dp, dtheta), plus, with the time offset estimated, the
-  // motion over an error dt of it: (v, w) dt (OpenVINS's clone Jacobian).
+  // The clone's error is the IMU's (xi_p, phi), plus, with the time offset estimated, the
+  // motion over an error dt of it (OpenVINS's clone Jacobian): (v, w_body) dt in body-frame
+  // error, (v + [p]x R w_body, R w_body) dt in invariant error.
+  const Eigen::Vector3d angular_velocity_world = state_.R_world_body * (last_sample_->angular_velocity - state_.gyro_bias);
   Eigen::Matrix<double, 6, 1> rates;
-  rates << state_.velocity, last_sample_->angular_velocity - state_.gyro_bias;
+  rates << state_.velocity + state_.position.cross(angular_velocity_world), angular_velocity_world;
   const Eigen::Index n = covariance_.rows();
   Eigen::MatrixXd rows = covariance_.topRows(kClone);  // J P
   if (config_.calibrate_time_offset) rows += rates * covariance_.row(time_offset_index());
@@ -184,16 +220,17 @@ Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vecto
   apply_interval_propagation();
   const bool standing = config_.zero_velocity_update && standing_still(observations);
   last_frame_time_ = time;
-  previous_observations_.clear();
-  for (const FeatureObservation& observation : observations) {
-    if (observation.camera == 0) previous_observations_[observation.feature_id] = observation.normalized;
-  }
   if (standing && update_zero_velocity()) {
     MsckfUpdateSummary summary;
     summary.zero_velocity = true;
     summary.clones = static_cast<int>(clones_.size());
     if (!covariance_.allFinite() || !state_.all_finite()) diverged_ = true;
     return summary;
+  }
+  // Moving: the next frames' displacements count from this one.
+  standing_reference_.clear();
+  for (const FeatureObservation& observation : observations) {
+    if (observation.camera == 0) standing_reference_[observation.feature_id] = observation.normalized;
   }
   augment(time);
   std::set<uint64_t> seen;
@@ -255,7 +292,9 @@ MsckfUpdateSummary Msckf::update(const std::vector<uint64_t>& feature_ids) {
       const FeatureLinearization linear = linearize_observation(views[k], *point);
       const double inverse_sigma = cameras_[track[k].camera].focal_length_px / config_.pixel_sigma;
       const Eigen::Index row = 2 * static_cast<Eigen::Index>(k);
-      blocks[k].push_back({clone_index(static_cast<size_t>(view_clones[k])) - kImu, inverse_sigma * linear.by_clone});
+      const SE3& clone = clones_[static_cast<size_t>(view_clones[k])].T_world_body;
+      blocks[k].push_back({clone_index(static_cast<size_t>(view_clones[k])) - kImu,
+                           inverse_sigma * linear.by_clone * pose_error_from_invariant(clone.rotation(), clone.translation())});
       if (config_.calibrate_extrinsics) blocks[k].push_back({extrinsic_index(track[k].camera) - kImu, inverse_sigma * linear.by_extrinsic});
       by_point.middleRows<2>(row) = inverse_sigma * linear.by_point;
       residual.segment<2>(row) = inverse_sigma * linear.residual;
@@ -328,22 +367,29 @@ bool Msckf::standing_still(const std::vector<FeatureObservation>& observations) 
   std::vector<double> disparities;
   for (const FeatureObservation& observation : observations) {
     if (observation.camera != 0) continue;
-    const auto previous = previous_observations_.find(observation.feature_id);
-    if (previous != previous_observations_.end()) disparities.push_back((observation.normalized - previous->second).norm() * cameras_[0].focal_length_px);
+    const auto reference = standing_reference_.find(observation.feature_id);
+    if (reference != standing_reference_.end()) disparities.push_back((observation.normalized - reference->second).norm() * cameras_[0].focal_length_px);
   }
   if (disparities.size() < 10) return false;
   std::nth_element(disparities.begin(), disparities.begin() + static_cast<long>(disparities.size() / 2), disparities.end());
-  return disparities[disparities.size() / 2] < config_.zero_velocity_max_disparity_px;
+  // The median displacement of a feature that did not move: two observations with pixel_sigma
+  // per axis each differ by a Rayleigh(sqrt(2) sigma) length, median 2 sqrt(ln 2) sigma.
+  const double noise_median = 2.0 * std::sqrt(std::log(2.0)) * config_.pixel_sigma;
+  return disparities[disparities.size() / 2] < config_.zero_velocity_max_disparity_px + noise_median;
 }
 
 bool Msckf::update_zero_velocity() {
-  // z = 0 = v + n: H selects the velocity; r = -v, S = P_vv + sigma^2 I.
+  // z = 0 = v + n with dv = xi_v - [v]x phi: H = [-[v]x on phi, I on xi_v]; r = -v,
+  // S = H P H^T + sigma^2 I.
   const Eigen::Vector3d residual = -state_.velocity;
-  Eigen::Matrix3d innovation = covariance_.block<3, 3>(estimate::kVelocityIndex, estimate::kVelocityIndex);
+  const Eigen::Matrix3d by_orientation = -SO3::hat(state_.velocity);
+  const Eigen::MatrixXd velocity_rows =
+      covariance_.middleRows<3>(estimate::kVelocityIndex) + by_orientation * covariance_.middleRows<3>(estimate::kOrientationIndex);  // H P
+  Eigen::Matrix3d innovation = velocity_rows.middleCols<3>(estimate::kVelocityIndex) +
+                               velocity_rows.middleCols<3>(estimate::kOrientationIndex) * by_orientation.transpose();
   innovation.diagonal().array() += config_.zero_velocity_sigma * config_.zero_velocity_sigma;
   const Eigen::LDLT<Eigen::Matrix3d> innovation_ldlt(innovation);
   if (!(residual.dot(innovation_ldlt.solve(residual)) <= estimate::chi_square_quantile(config_.chi_square_probability, 3))) return false;
-  const Eigen::MatrixXd velocity_rows = covariance_.middleRows<3>(estimate::kVelocityIndex);  // H P
   const Eigen::MatrixXd gain = innovation_ldlt.solve(velocity_rows).transpose();
   apply_correction(gain * residual);
   covariance_ -= gain * velocity_rows;
@@ -352,19 +398,18 @@ bool Msckf::update_zero_velocity() {
 }
 
 void Msckf::apply_correction(const Eigen::VectorXd& correction) {
-  estimate::ErrorVector imu_correction = estimate::ErrorVector::Zero();
-  imu_correction.head<kImu>() = correction.head<kImu>();
-  state_ = state_.plus(imu_correction);
+  state_ = apply_invariant_error(state_, correction.head<kImu>());
   if (config_.calibrate_time_offset) time_offset_ += correction(time_offset_index());
-  auto correct = [](SE3& pose, const Eigen::Matrix<double, 6, 1>& delta) {
-    pose = SE3(pose.rotation() * SO3::exp(delta.tail<3>()), pose.translation() + delta.head<3>());
-  };
   if (config_.calibrate_extrinsics) {
+    // Extrinsics keep their body-frame error: R_body_camera Exp(dphi), p_body_camera + dq.
+    auto correct = [](SE3& pose, const Eigen::Matrix<double, 6, 1>& delta) {
+      pose = SE3(pose.rotation() * SO3::exp(delta.tail<3>()), pose.translation() + delta.head<3>());
+    };
     for (int camera = 0; camera < static_cast<int>(cameras_.size()); ++camera) {
       correct(cameras_[static_cast<size_t>(camera)].T_body_camera, correction.segment<6>(extrinsic_index(camera)));
     }
   }
-  for (size_t i = 0; i < clones_.size(); ++i) correct(clones_[i].T_world_body, correction.segment<kClone>(clone_index(i)));
+  for (size_t i = 0; i < clones_.size(); ++i) clones_[i].T_world_body = apply_invariant_error(clones_[i].T_world_body, correction.segment<kClone>(clone_index(i)));
 }
 
 }  // namespace hanzo::fusion::vision

@@ -13,6 +13,7 @@
 #include "hanzo/fusion/sim/drone_trajectory.hpp"
 #include "hanzo/fusion/sim/imu_simulator.hpp"
 #include "msckf_feature.hpp"
+#include "msckf_invariant_error.hpp"
 
 namespace hanzo::fusion::vision {
 namespace {
@@ -62,6 +63,56 @@ TEST(MsckfFeature, JacobiansMatchFiniteDifferences) {
       const Eigen::Vector2d numeric = -(linearize_observation(view, moved_point).residual - linear.residual) / step;
       EXPECT_LT((numeric - linear.by_point.col(k)).norm(), 1e-5) << "point column " << k;
     }
+  }
+}
+
+// The invariant error's conversion to the body-frame error matches the exact maps, and in it a
+// rotation of everything about gravity and a translation of everything are the same error
+// vectors at any estimate, which a feature's Jacobians cannot see (msckf.hpp: why the filter
+// needs no first-estimate Jacobians).
+TEST(MsckfInvariantError, ConversionsMatchTheExactMapsAndGlobalMotionsStayUnobservable) {
+  std::mt19937_64 random(11);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  const double step = 1e-6;
+  for (int trial = 0; trial < 10; ++trial) {
+    estimate::NavigationState state;
+    const SE3 pose = random_pose(random, 20.0);
+    state.R_world_body = pose.rotation();
+    state.position = pose.translation();
+    state.velocity = Eigen::Vector3d(normal(random), normal(random), normal(random)) * 3.0;
+    const ImuErrorMatrix to_body = imu_error_from_invariant(state);
+    EXPECT_LT((invariant_from_imu_error(state) * to_body - ImuErrorMatrix::Identity()).norm(), 1e-9);
+    for (int k = 0; k < 15; ++k) {
+      Eigen::Matrix<double, 15, 1> error = Eigen::Matrix<double, 15, 1>::Zero();
+      error(k) = step;
+      const estimate::NavigationState moved = apply_invariant_error(state, error);
+      Eigen::Matrix<double, 15, 1> numeric;
+      numeric << moved.position - state.position, (state.R_world_body.inverse() * moved.R_world_body).log(), moved.velocity - state.velocity,
+          moved.accel_bias - state.accel_bias, moved.gyro_bias - state.gyro_bias;
+      EXPECT_LT((numeric / step - to_body.col(k)).norm(), 1e-4) << "IMU column " << k;
+    }
+    const PoseErrorMatrix pose_to_body = pose_error_from_invariant(pose.rotation(), pose.translation());
+    for (int k = 0; k < 6; ++k) {
+      Eigen::Matrix<double, 6, 1> error = Eigen::Matrix<double, 6, 1>::Zero();
+      error(k) = step;
+      const SE3 moved = apply_invariant_error(pose, error);
+      Eigen::Matrix<double, 6, 1> numeric;
+      numeric << moved.translation() - pose.translation(), (pose.rotation().inverse() * moved.rotation()).log();
+      EXPECT_LT((numeric / step - pose_to_body.col(k)).norm(), 1e-4) << "pose column " << k;
+    }
+    // A feature seen from this pose with a residual (the estimate is off): H_c T u_c + H_f u_f = 0
+    // for a yaw of everything (u_c = (0, e_z), u_f = e_z x p_f) and a translation (u_c = (t, 0), u_f = t).
+    const FeatureView view{pose, SE3(forward_camera_rotation(), Eigen::Vector3d(0.1, -0.05, 0.02)), Eigen::Vector2d(0.05, 0.1)};
+    const Eigen::Vector3d point = (pose * view.T_body_camera) * Eigen::Vector3d(0.4, -0.3, 5.0);
+    const FeatureLinearization linear = linearize_observation(view, point);
+    const Eigen::Matrix<double, 2, 6> by_invariant_clone = linear.by_clone * pose_to_body;
+    Eigen::Matrix<double, 6, 1> yaw = Eigen::Matrix<double, 6, 1>::Zero();
+    yaw(5) = 1.0;
+    EXPECT_LT((by_invariant_clone * yaw + linear.by_point * Eigen::Vector3d::UnitZ().cross(point)).norm(), 1e-9);
+    const Eigen::Vector3d shift(0.3, -1.2, 0.7);
+    Eigen::Matrix<double, 6, 1> translation = Eigen::Matrix<double, 6, 1>::Zero();
+    translation.head<3>() = shift;
+    EXPECT_LT((by_invariant_clone * translation + linear.by_point * shift).norm(), 1e-9);
   }
 }
 
@@ -156,17 +207,21 @@ FlightResult fly(const FlightOptions& options) {
   std::vector<MsckfCamera> cameras = {{SE3(forward_camera_rotation(), Eigen::Vector3d(0.1, 0.0, 0.0)), 400.0}};
   if (stereo) cameras.push_back({cameras[0].T_body_camera * SE3(SO3(), Eigen::Vector3d(0.11, 0.0, 0.0)), 400.0});
 
-  const sim::TrajectorySample first = trajectory.sample(start);
-  estimate::NavigationState state;
-  state.timestamp = start;
-  state.position = first.T_world_body.translation();
-  state.R_world_body = first.T_world_body.rotation();
-  state.velocity = first.velocity_world;
-  state.gravity = Eigen::Vector3d(0, 0, -imu_config.gravity);
+  // The initial state's errors drawn from the filter's initial covariance, as the biases are.
   Eigen::Matrix<double, 15, 1> sigma;
   sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d::Constant(1e-2),
       Eigen::Vector3d::Constant(0.05), Eigen::Vector3d::Constant(0.005);
+  std::normal_distribution<double> unit(0.0, 1.0);
+  auto draw = [&](double standard_deviation) -> Eigen::Vector3d { return Eigen::Vector3d(unit(random), unit(random), unit(random)) * standard_deviation; };
+  const sim::TrajectorySample first = trajectory.sample(start);
+  estimate::NavigationState state;
+  state.timestamp = start;
+  state.position = first.T_world_body.translation() + draw(sigma(0));
+  state.R_world_body = first.T_world_body.rotation() * SO3::exp(draw(sigma(3)));
+  state.velocity = first.velocity_world + draw(sigma(6));
+  state.gravity = Eigen::Vector3d(0, 0, -imu_config.gravity);
   MsckfConfig config;
+  config.pixel_sigma = 1.0;  // the simulated image noise
   config.imu_noise.process_noise_accel = imu_config.process_noise_accel;
   config.imu_noise.process_noise_gyro = imu_config.process_noise_gyro;
   config.imu_noise.sample_interval = 1.0 / imu_config.rate_hz;
@@ -272,11 +327,12 @@ TEST(Msckf, GatesWrongTracksAndStaysAccurate) {
 }
 
 // Consistency: the average NEES of position and orientation (3 degrees of freedom each) over 50
-// Monte-Carlo runs of a monocular flight (IMU noise, 1 px pixel noise, points and true initial
-// biases drawn per run). A consistent filter averages 3, inside the 95 % band of
-// chi-square(3 runs) / runs ([2.36, 3.72] for 50 runs). The filter's 2 px feature noise (for 1 px
-// of image noise) absorbs the linearization error of features triangulated from the current
-// estimates; with 1 px it averaged 6.4 and 5.0 (10 runs).
+// Monte-Carlo runs of a monocular flight (IMU noise, 1 px pixel noise, points, the initial state's
+// errors and the true initial biases drawn per run; the filter assumes the simulated 1 px). A
+// consistent filter averages 3, inside the 95 % band of chi-square(3 runs) / runs ([2.36, 3.72]
+// for 50 runs). The flight hovers for its first 2 s: the zero-velocity updates hold the position
+// closer than its covariance says (the true velocity is exactly zero), so the NEES is low there;
+// what matters more is that the filter is seldom overconfident (above the band).
 TEST(Msckf, MonteCarloNeesOverFiftyRunsStaysNearTheConsistentValue) {
   const int runs = 50;
   std::vector<double> position, orientation;
@@ -292,23 +348,32 @@ TEST(Msckf, MonteCarloNeesOverFiftyRunsStaysNearTheConsistentValue) {
     }
   }
   const double low = estimate::chi_square_quantile(0.025, 3 * runs) / runs, high = estimate::chi_square_quantile(0.975, 3 * runs) / runs;
-  double mean_position = 0, mean_orientation = 0;
-  int position_inside = 0, orientation_inside = 0;
-  for (size_t k = 0; k < position.size(); ++k) {
-    mean_position += position[k] / static_cast<double>(position.size());
-    mean_orientation += orientation[k] / static_cast<double>(orientation.size());
-    position_inside += position[k] >= low && position[k] <= high;
-    orientation_inside += orientation[k] >= low && orientation[k] <= high;
-  }
-  const double frames = static_cast<double>(position.size());
-  std::printf("NEES over %d runs: position mean %.2f (%.0f %% of frames in [%.2f, %.2f]), orientation mean %.2f (%.0f %%)\n", runs,
-              mean_position, 100.0 * position_inside / frames, low, high, mean_orientation, 100.0 * orientation_inside / frames);
+  struct Profile {
+    double mean = 0.0, inside = 0.0, above = 0.0;  // shares of the frames
+  };
+  const auto profile = [&](const std::vector<double>& nees) {
+    Profile out;
+    for (const double value : nees) {
+      out.mean += value / static_cast<double>(nees.size());
+      out.inside += (value >= low && value <= high) / static_cast<double>(nees.size());
+      out.above += (value > high) / static_cast<double>(nees.size());
+    }
+    return out;
+  };
+  const Profile position_profile = profile(position), orientation_profile = profile(orientation);
+  std::printf("NEES over %d runs: position mean %.2f (%.0f %% of frames in [%.2f, %.2f], %.0f %% above), orientation mean %.2f (%.0f %%, %.0f %% above)\n",
+              runs, position_profile.mean, 100.0 * position_profile.inside, low, high, 100.0 * position_profile.above, orientation_profile.mean,
+              100.0 * orientation_profile.inside, 100.0 * orientation_profile.above);
   // The goal is 80 % of the run inside the band for both; orientation meets it, position
-  // (69 % when written) is overconfident where the flight begins.
-  EXPECT_LT(mean_position, 4.7);
-  EXPECT_LT(mean_orientation, 4.7);
-  EXPECT_GT(orientation_inside / frames, 0.8);
-  EXPECT_GT(position_inside / frames, 0.6);
+  // (66 % when written) is below the band while hovering and somewhat above it in the first turns.
+  EXPECT_GT(position_profile.mean, low);
+  EXPECT_LT(position_profile.mean, high);
+  EXPECT_GT(orientation_profile.mean, low);
+  EXPECT_LT(orientation_profile.mean, high);
+  EXPECT_GT(orientation_profile.inside, 0.8);
+  EXPECT_GT(position_profile.inside, 0.6);
+  EXPECT_LT(position_profile.above, 0.25);
+  EXPECT_LT(orientation_profile.above, 0.1);
 }
 
 TEST(Msckf, CalibratesAFiveDegreeExtrinsicErrorAndATenMillisecondTimeOffset) {
@@ -317,7 +382,7 @@ TEST(Msckf, CalibratesAFiveDegreeExtrinsicErrorAndATenMillisecondTimeOffset) {
     std::printf("%s, 5 deg and 10 ms off: extrinsic rotation %.3f deg and time offset %.2f ms off at the end; final error %.3f m over %.1f m\n",
                 stereo ? "stereo" : "mono", flight.extrinsic_error_deg, 1e3 * flight.time_offset_error_s, flight.final_error, flight.distance);
     EXPECT_LT(flight.extrinsic_error_deg, 0.3);
-    // Goal 1 ms; the estimate ends 1.0 ms (mono) and 1.8 ms (stereo) short, a bias that scales
+    // Goal 1 ms; the estimate ends 0.4 ms (mono) and 1.5 ms (stereo) short, a bias that scales
     // with the IMU interval (-3.3 ms at 100 Hz, -2.0 at 200 Hz, -0.4 at 1 kHz with a true offset
     // of 0): the discrete IMU integration, not the calibration.
     EXPECT_LT(std::abs(flight.time_offset_error_s), 0.0025);

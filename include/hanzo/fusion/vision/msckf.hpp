@@ -4,16 +4,29 @@
 // visual-inertial odometry: an error-state EKF over the IMU state and a sliding window of cloned
 // body poses, updated by feature tracks without keeping the features in the state.
 //
-// State (error-state order; x_true = x (+) dx as estimate/navigation_state.hpp):
-//   IMU    15: dp (0), dtheta (3, body frame, right perturbation), dv (6), dba (9), dbg (12)
-//   clones 6 each, oldest first: dp, dtheta of T_world_body at a camera time.
-// Gravity is fixed at the initial state's (its direction from the initialization); the wheel and
-// gyro-scale entries of NavigationState are not used.
+// State: the IMU's NavigationState (estimate/navigation_state.hpp) and a sliding window of cloned
+// body poses. Gravity is fixed at the initial state's (its direction from the initialization); the
+// wheel and gyro-scale entries of NavigationState are not used.
+//
+// Error state (the covariance's coordinates): the right-invariant error of the IMU's extended pose
+// and of each clone (Barrau and Bonnabel 2017, "The Invariant Extended Kalman Filter as a Stable
+// Observer"; its use in an MSCKF: Heo and Park 2018, "Consistent EKF-Based Visual-Inertial
+// Odometry on Matrix Lie Group"), in world coordinates:
+//   R = Exp(phi) R_est,  v = Exp(phi) v_est + xi_v,  p = Exp(phi) p_est + xi_p
+//   IMU    15: xi_p (0), phi (3), xi_v (6), dba (9), dbg (12)   (biases additive)
+//   clones 6 each, oldest first: xi_p, phi of T_world_body at a camera time.
+// The directions the cameras and the IMU cannot observe (a rotation of everything about gravity,
+// a translation of everything) are then the same vectors at every estimate, so the propagation
+// and the feature Jacobians keep them unobservable wherever they are linearized: the consistency
+// first-estimate Jacobians (Li and Mourikis 2013) buy, without holding Jacobians at old
+// estimates. covariance() and imu_covariance() convert to the body-frame error of
+// NavigationState (dp, dtheta with R = R_est Exp(dtheta), dv, dba, dbg) that the rest of the
+// library uses: dp = xi_p - [p]x phi, dtheta = R^T phi, dv = xi_v - [v]x phi.
 //
 // Per camera frame (process_frame):
 //   1. the IMU state is propagated to the frame time (estimate/imu_propagation.hpp; the IMU
 //      transition and noise of the samples since the last frame are applied to the covariance
-//      at once) and its pose cloned: P <- [P, P J^T; J P, J P J^T] with J selecting (dp, dtheta);
+//      at once) and its pose cloned: P <- [P, P J^T; J P, J P J^T] with J selecting (xi_p, phi);
 //   2. the features to use are those whose track ended (not observed in this frame) and, when
 //      the window is full, those observed by the oldest clone; each needs two observations;
 //   3. each feature is triangulated from its observations (linear multi-view least squares,
@@ -34,7 +47,6 @@
 //      P <- F (I + F^T J F)^-1 F^T, dx = F (I + F^T J F)^-1 F^T g, then x <- x (+) dx;
 //   7. the used observations are deleted, and when the window holds more than max_clones clones
 //      the oldest is marginalized (its rows and columns removed).
-// Jacobians are evaluated at the current estimates (first-estimate Jacobians are not used).
 
 // Frames: world is the frame of the initial state (z up for gravity (0, 0, -g)); body as the
 // NavigationState; cameras at T_body_camera (x right, y down, z forward). Observations are
@@ -69,10 +81,9 @@ struct MsckfConfig {
   /// Clones in the sliding window (OpenVINS's default 11: about 0.5-1 s of a 10-20 Hz camera).
   int max_clones = 11;
   /// Feature position noise, pixels (turned into normalized units by each camera's focal length).
-  /// Twice a tracker's 1 px: the extra absorbs the linearization error of features triangulated
-  /// from the current estimates (no first-estimate Jacobians). Monte-Carlo NEES with 1 px noise
-  /// (50 runs): position 4.0 and orientation 3.3 at 2 px, 5.5 and 3.9 at 1.5 px, 6.4 and 5.0
-  /// at 1 px (10 runs), consistent is 3; drift on the simulated flight 0.17-0.22 % either way.
+  /// 2 px for the KLT tracker (feature_tracker.hpp) on real images: its errors are larger and
+  /// less regular than 1 px of white noise (JPEG, blur, people walking through). With 1 px of
+  /// simulated white noise, pixel_sigma = 1 is consistent (tests/vision/msckf_test.cpp).
   double pixel_sigma = 2.0;
   /// Probability of the chi-square gate per feature (0.95: OpenVINS's).
   double chi_square_probability = 0.95;
@@ -97,10 +108,12 @@ struct MsckfConfig {
   bool calibrate_time_offset = true;
   double time_offset_sigma = 0.02;            ///< s
   /// Zero-velocity update (as OpenVINS's): when the features of camera 0 moved less than
-  /// zero_velocity_max_disparity_px (median over at least 10 seen in the previous frame too), the
-  /// frame is not cloned (standing still gives no parallax) and the velocity is updated to zero
-  /// with zero_velocity_sigma instead, unless that measurement fails the chi-square gate (a slow
-  /// creep the features cannot see).
+  /// zero_velocity_max_disparity_px beyond their noise (median over at least 10 features, each
+  /// against its position in the last frame that was cloned, so that a slow creep adds up;
+  /// the noise's share is the median displacement of a still feature with pixel_sigma), the frame
+  /// is not cloned (standing still gives no parallax) and the velocity is updated to zero with
+  /// zero_velocity_sigma instead, unless that measurement fails the chi-square gate (a creep the
+  /// features cannot see yet).
   bool zero_velocity_update = true;
   double zero_velocity_max_disparity_px = 0.5;
   double zero_velocity_sigma = 0.01;          ///< m/s
@@ -157,8 +170,10 @@ class Msckf {
   Timestamp body_time(Timestamp camera_time) const { return camera_time + Duration::from_seconds(time_offset_); }
 
   const estimate::NavigationState& state() const { return state_; }
-  /// The full error covariance (15 + 6 clones square) at the last frame.
-  const Eigen::MatrixXd& covariance() const { return covariance_; }
+  /// The full error covariance at the last frame in NavigationState's body-frame error (header
+  /// comment): IMU (15), time offset (1, when calibrated), extrinsics (6 per camera, when
+  /// calibrated), clones (dp, dtheta each).
+  Eigen::MatrixXd covariance() const;
   /// The IMU state's error covariance now (propagated through the samples since the last frame).
   Eigen::Matrix<double, kMsckfImuDimension, kMsckfImuDimension> imu_covariance() const;
   const std::deque<MsckfClone>& clones() const { return clones_; }
@@ -186,6 +201,8 @@ class Msckf {
   Eigen::Index clone_index(size_t clone) const { return first_clone_ + kMsckfCloneDimension * static_cast<Eigen::Index>(clone); }
   using ImuMatrix = Eigen::Matrix<double, kMsckfImuDimension, kMsckfImuDimension>;
   void propagate_interval(const estimate::ImuSample& reading, double dt);
+  // The body-frame error of the whole state from the invariant one: dx = T xi (header comment).
+  Eigen::MatrixXd body_error_from_invariant() const;
   void apply_interval_propagation();
   void augment(Timestamp time);
   void marginalize_oldest_clone();
@@ -197,18 +214,21 @@ class Msckf {
   MsckfConfig config_;
   std::vector<MsckfCamera> cameras_;
   estimate::NavigationState state_;
-  Eigen::MatrixXd covariance_;
+  Eigen::MatrixXd covariance_;  // invariant error (header comment)
   std::deque<MsckfClone> clones_;
   double time_offset_ = 0.0;
   Eigen::Index first_clone_ = kMsckfImuDimension;
   std::map<uint64_t, std::vector<TrackObservation>> tracks_;
   std::optional<estimate::ImuSample> last_sample_;
   std::optional<Timestamp> last_frame_time_;
-  std::map<uint64_t, Eigen::Vector2d> previous_observations_;  // camera 0's, by feature id
-  // The IMU transition and noise accumulated since the last frame, applied to the covariance at
-  // the next frame (one product with the clone columns per frame instead of per IMU sample).
+  std::map<uint64_t, Eigen::Vector2d> standing_reference_;  // camera 0's in the last cloned frame, by feature id
+  // The IMU transition and noise accumulated since the last frame (body-frame error, from the
+  // state at the interval's start to the state now), applied to the covariance at the next frame
+  // (one product with the clone columns per frame instead of per IMU sample).
   ImuMatrix interval_transition_ = ImuMatrix::Identity();
   ImuMatrix interval_noise_ = ImuMatrix::Zero();
+  estimate::NavigationState interval_start_;
+  bool interval_empty_ = true;
   bool diverged_ = false;
 };
 
