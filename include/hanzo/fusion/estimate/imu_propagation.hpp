@@ -5,7 +5,9 @@
 //
 //   w = C R_body_imu (w_m - bg),  C = diag(1, 1, 1/c)   body angular velocity (c: gyro_yaw_scale)
 //   f = R_body_imu (f_m - ba) - w x (w x p_body_imu)   specific force at the body origin
-//   p' = p + v dt + 1/2 (R f + g) dt^2,   v' = v + (R f + g) dt,   R' = R Exp(w dt)
+//   p' = p + v dt + 1/2 (Rm f + g) dt^2,   v' = v + (Rm f + g) dt,   R' = R Exp(w dt)
+// with Rm = R Exp(w dt / 2), the attitude at the interval's middle: the force turns with the body
+// over the interval (R alone leaves an error of first order in dt; bench/RESULTS.md).
 //
 // The lever-arm term with the angular acceleration (dw/dt x p_body_imu) is left out: it needs
 // the derivative of a noisy gyro and is negligible for IMUs within ~0.3 m of the body origin.
@@ -13,7 +15,7 @@
 // Error-state transition (right perturbation, navigation_state.hpp), first order in dt
 // (Sola, "Quaternion kinematics for the error-state Kalman filter" (2017), eq. 269-270 adapted
 // to a gravity state and a body-to-IMU rotation):
-//   dv'     = dv - R [f]x dt dtheta - R R_body_imu dt dba + dt dg
+//   dv'     = dv - R [Em f]x dt dtheta - R Em R_body_imu dt dba + dt dg,   Em = Exp(w dt / 2)
 //   dtheta' = Exp(w dt)^T dtheta - Jr(w dt) C R_body_imu dt dbg - Jr(w dt) e_z (w_z / c) dt dc
 //   dp'     = dp + dt dv + dt/2 (velocity terms above)
 //
@@ -77,8 +79,8 @@ BodyMotion body_motion(const NavigationState& state, const ImuSample& sample, co
 /// The non-identity blocks of the error-state transition of one step (see the header comment).
 struct ImuTransition {
   double dt = 0.0;
-  Eigen::Matrix3d velocity_by_orientation = Eigen::Matrix3d::Zero();     // -R [f]x dt
-  Eigen::Matrix3d velocity_by_accel_bias = Eigen::Matrix3d::Zero();      // -R R_body_imu dt
+  Eigen::Matrix3d velocity_by_orientation = Eigen::Matrix3d::Zero();     // -R [Em f]x dt
+  Eigen::Matrix3d velocity_by_accel_bias = Eigen::Matrix3d::Zero();      // -R Em R_body_imu dt
   Eigen::Matrix3d orientation_by_orientation = Eigen::Matrix3d::Identity();  // Exp(w dt)^T
   Eigen::Matrix3d orientation_by_gyro_bias = Eigen::Matrix3d::Zero();    // -Jr(w dt) C R_body_imu dt
   Eigen::Vector3d orientation_by_yaw_scale = Eigen::Vector3d::Zero();    // -Jr(w dt) e_z (w_z / c) dt
