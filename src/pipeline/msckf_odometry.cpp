@@ -12,17 +12,18 @@ namespace {
 
 constexpr double kAlignmentSeconds = 1.0;  // still IMU used to start the filter
 constexpr size_t kMaxBufferedSamples = 20000;
-// Initial velocity standard deviations of a start in motion (m/s): unknown (one camera), or
-// measured from two stereo frames.
+// Initial velocity standard deviations of a start in motion without the visual-inertial
+// alignment (m/s): unknown, or measured from two stereo frames.
 constexpr double kMovingStartVelocitySigma = 1.0;
 constexpr double kStereoVelocitySigma = 0.2;
-// Moving frames without a stereo velocity (too few stereo points: dark, blank) before a stereo
-// rig starts anyway with the velocity unknown, as one camera does.
+// Moving frames without a stereo velocity (too few stereo points: dark, blank, far walls) before
+// a stereo rig whose alignment failed starts anyway with the velocity unknown.
 constexpr int kMaxFramesWithoutStereoVelocity = 10;
-// One camera in motion: the window of frames aligned with the IMU, how long alignment may keep
-// failing before the start without it, and the start's standard deviations after alignment
-// (velocity, roll/pitch, gyro bias). Window and sigmas chosen over seven simulated starts in
-// motion (bench/RESULTS.md, 2026-11-29): a 1 s or 2 s window, or 0.3 m/s, diverged on one.
+// In motion (one camera or two): the window of camera 0's frames aligned with the IMU, how long
+// alignment may keep failing before the start without it, and the start's standard deviations
+// after alignment (velocity, roll/pitch, gyro bias). Window and sigmas chosen over seven
+// simulated starts in motion (bench/RESULTS.md, 2026-11-29): a 1 s or 2 s window, or 0.3 m/s,
+// diverged on one.
 constexpr double kVisualInertialWindowSeconds = 1.5;
 constexpr double kMaxAligningSeconds = 2.0;
 constexpr double kAlignedVelocitySigma = 0.5;
@@ -86,33 +87,32 @@ std::optional<std::string> MsckfOdometry::start_filter(Timestamp time) {
     sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d(0.02, 0.02, 1e-3), Eigen::Vector3d::Constant(0.02),
         Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.005);
   } else {
-    // In motion (moving_start.hpp): the tilt from the IMU; the velocity from two stereo frames,
-    // or with one camera from the visual-inertial alignment, else unknown (zero, 1 m/s) for the
-    // images to find.
+    // In motion: the visual-inertial alignment of camera 0's first frames (tilt, velocity, gyro
+    // bias); when it keeps failing, the tilt from the IMU (moving_start.hpp) and the velocity
+    // from two stereo frames, or unknown (zero, 1 m/s) for the images to find.
+    std::string why;
+    if (std::optional<vision::VisualInertialAlignment> aligned_in_motion = align_in_motion(time, why)) {
+      state.R_world_body = aligned_in_motion->R_world_imu;
+      state.velocity = aligned_in_motion->velocity_world;
+      state.gyro_bias = aligned_in_motion->gyro_bias;
+      sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d(kAlignedTiltSigma, kAlignedTiltSigma, 1e-3), Eigen::Vector3d::Constant(kAlignedVelocitySigma),
+          Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(kAlignedGyroBiasSigma);
+      logger()->info("msckf: starting in motion from the visual-inertial alignment of {} frames (velocity {:.2f} m/s, scale {:.3f}, gravity off by {:.1f} %)",
+                     aligned_in_motion->frames, state.velocity.norm(), aligned_in_motion->scale, 100.0 * aligned_in_motion->gravity_error);
+      return start_with(state, sigma, still.back());
+    }
+    if (!aligning_since_ || (time - *aligning_since_).seconds() < kMaxAligningSeconds) {
+      return fmt::format("initializing: moving; aligning the images with the IMU ({})", why);
+    }
     state.R_world_body = tilt_from_moving_imu(still);
     double velocity_sigma = kMovingStartVelocitySigma;
-    if (cameras_.size() == 1) {
-      std::string why;
-      if (std::optional<vision::VisualInertialAlignment> aligned_in_motion = align_in_motion(time, why)) {
-        state.R_world_body = aligned_in_motion->R_world_imu;
-        state.velocity = aligned_in_motion->velocity_world;
-        state.gyro_bias = aligned_in_motion->gyro_bias;
-        sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d(kAlignedTiltSigma, kAlignedTiltSigma, 1e-3), Eigen::Vector3d::Constant(kAlignedVelocitySigma),
-            Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(kAlignedGyroBiasSigma);
-        logger()->info("msckf: starting in motion from the visual-inertial alignment of {} frames (velocity {:.2f} m/s, scale {:.3f}, gravity off by {:.1f} %)",
-                       aligned_in_motion->frames, state.velocity.norm(), aligned_in_motion->scale, 100.0 * aligned_in_motion->gravity_error);
-        return start_with(state, sigma, still.back());
-      }
-      if (!aligning_since_ || (time - *aligning_since_).seconds() < kMaxAligningSeconds) {
-        return fmt::format("initializing: moving; aligning the images with the IMU ({})", why);
-      }
-      logger()->info("msckf: the visual-inertial alignment kept failing ({}): starting with the velocity unknown", why);
-    } else if (cameras_.size() == 2 && stereo_velocity_) {
+    if (cameras_.size() == 2 && stereo_velocity_) {
       state.velocity = state.R_world_body * *stereo_velocity_;
       velocity_sigma = kStereoVelocitySigma;
     } else if (cameras_.size() == 2 && ++frames_without_stereo_velocity_ < kMaxFramesWithoutStereoVelocity) {
-      return fmt::format("initializing: moving ({}); measuring the velocity from the stereo images", aligned.error().message);
+      return fmt::format("initializing: moving ({}); the alignment failed ({}); measuring the velocity from the stereo images", aligned.error().message, why);
     }
+    logger()->info("msckf: the visual-inertial alignment kept failing ({}): starting from the IMU's tilt", why);
     sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d(0.05, 0.05, 1e-3), Eigen::Vector3d::Constant(velocity_sigma),
         Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.01);
     logger()->info("msckf: starting in motion (roll {:.1f}, pitch {:.1f} degrees; velocity {:.2f} m/s{})",
@@ -176,7 +176,7 @@ Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat&
     }
     previous_stereo_.emplace(time, std::move(points));
   }
-  if (!filter_ && cameras_.size() == 1) {
+  if (!filter_) {
     // Before the start: the window of tracks for a start in motion.
     alignment_frames_.push_back({time, tracked.observations});
     while ((time - alignment_frames_.front().time).seconds() > kVisualInertialWindowSeconds) alignment_frames_.pop_front();

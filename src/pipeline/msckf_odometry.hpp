@@ -6,13 +6,13 @@
 // up to its body time (camera time + the filter's time offset), so images may arrive a little
 // after the IMU samples that follow them. Before the filter starts, a frame starts it by static
 // alignment (estimate/static_alignment.hpp) on the last second of IMU before it: roll, pitch and
-// the gyro bias; heading 0; at rest. A platform moving at the start starts in motion
-// (moving_start.hpp): roll and pitch from the second's mean specific force, the velocity from
-// the last two stereo frames, the gyro bias zero. One camera starts from the visual-inertial
-// alignment of its last 1.5 s of tracks with the IMU (vision/visual_inertial_alignment.hpp:
-// velocity, gravity direction and gyro bias); when that keeps failing (too little parallax,
-// images and IMU disagreeing) for 2 s more, or a stereo rig's points give no velocity for 10
-// frames, it starts with zero velocity and a 1 m/s standard deviation for the images to correct.
+// the gyro bias; heading 0; at rest. A platform moving at the start starts in motion from the
+// visual-inertial alignment of camera 0's last 1.5 s of tracks with the IMU
+// (vision/visual_inertial_alignment.hpp: velocity, gravity direction and gyro bias); when that
+// keeps failing (too little parallax, images and IMU disagreeing) for 2 s more, from roll and
+// pitch of the second's mean specific force (moving_start.hpp) and, with two cameras, the
+// velocity from the last two stereo frames, else with zero velocity and a 1 m/s standard
+// deviation for the images to correct (a stereo rig waits up to 10 frames for a stereo velocity).
 // A filter whose covariance breaks down numerically is dropped and started again the same way.
 //
 // World: gravity-aligned (z up), heading and origin those of the IMU at the start; poses are
@@ -68,7 +68,7 @@ class MsckfOdometry {
   std::optional<std::string> start_filter(Timestamp time);
   std::optional<std::string> start_with(const estimate::NavigationState& state, const Eigen::Matrix<double, 15, 1>& sigma,
                                         const estimate::ImuSample& last_sample);
-  // One camera in motion: the alignment of the frames kept so far, or nullopt with `why`.
+  // In motion: the alignment of the frames kept so far, or nullopt with `why`.
   std::optional<vision::VisualInertialAlignment> align_in_motion(Timestamp time, std::string& why);
 
   std::unique_ptr<vision::FeatureTracker> tracker_;
@@ -82,7 +82,7 @@ class MsckfOdometry {
   std::optional<std::pair<Timestamp, std::map<uint64_t, Eigen::Vector3d>>> previous_stereo_;
   std::optional<Eigen::Vector3d> stereo_velocity_;
   int frames_without_stereo_velocity_ = 0;
-  // One camera, before the start: the last frames' tracks for the visual-inertial alignment.
+  // Before the start: the last frames' tracks for the visual-inertial alignment.
   std::deque<vision::AlignmentFrame> alignment_frames_;
   std::optional<Timestamp> aligning_since_;  // first alignment attempt
   int zero_velocity_frames_ = 0;

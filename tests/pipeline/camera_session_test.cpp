@@ -246,12 +246,21 @@ TEST(CameraSession, VisualInertialOdometryReportsDarkAndBlurredFramesAndResumes)
 TEST(CameraSession, VisualInertialOdometryStartsInMotion) {
   const auto starting_at = [](double seconds) { return [seconds](sim::Scenario& scenario) { scenario.log_start = seconds; }; };
   const auto all = [](const sim::ScenarioSensor&) { return true; };
-  const Recording drone = simulate("examples/scenarios/drone.yaml", 18.0, starting_at(6.0));  // (duration: from the trajectory start)
-  const SessionRun flying = run_session(all, config::FrontendType::kMsckf, drone);
-  std::printf("started in motion: drone, stereo: SE3-aligned APE %.3f m over %.1f m, %lu frames tracked\n", flying.ape_se3_m, flying.distance_m,
-              static_cast<unsigned long>(flying.mapping.camera_frames_tracked));
-  EXPECT_GT(flying.mapping.camera_frames_tracked, 100u);  // 10 Hz over 12 s, from the second frame
-  EXPECT_LT(flying.ape_se3_m, 0.01 * flying.distance_m);
+  for (const double start : {6.0, 12.0}) {
+    // From 12 s the stereo points of the first frames are too far for a two-frame velocity. The
+    // hall's lights stay on (the scenario's darkness from 18 s is another test's).
+    const Recording drone = simulate("examples/scenarios/drone.yaml", start + 12.0, [&](sim::Scenario& scenario) {  // (duration: from the trajectory start)
+      starting_at(start)(scenario);
+      for (sim::ScenarioSensor& sensor : scenario.sensors) {
+        if (auto* camera = std::get_if<sim::CameraSimulatorConfig>(&sensor.simulator)) camera->faults.clear();
+      }
+    });
+    const SessionRun flying = run_session(all, config::FrontendType::kMsckf, drone);
+    std::printf("started in motion: drone from %.0f s, stereo: SE3-aligned APE %.3f m over %.1f m, %lu frames tracked\n", start, flying.ape_se3_m,
+                flying.distance_m, static_cast<unsigned long>(flying.mapping.camera_frames_tracked));
+    EXPECT_GT(flying.mapping.camera_frames_tracked, 95u) << start;  // 10 Hz over 12 s, after 1.5 s of alignment
+    EXPECT_LT(flying.ape_se3_m, 0.01 * flying.distance_m) << start;
+  }
   for (const double start : {3.0, 6.0, 9.0}) {
     const Recording phone = simulate("examples/scenarios/ar_handheld.yaml", start + 14.0, starting_at(start));
     const SessionRun walking = run_session(all, config::FrontendType::kMsckf, phone, nullptr, 2.0);
