@@ -16,9 +16,6 @@ constexpr size_t kMaxBufferedSamples = 20000;
 // alignment (m/s): unknown, or measured from two stereo frames.
 constexpr double kMovingStartVelocitySigma = 1.0;
 constexpr double kStereoVelocitySigma = 0.2;
-// Moving frames without a stereo velocity (too few stereo points: dark, blank, far walls) before
-// a stereo rig whose alignment failed starts anyway with the velocity unknown.
-constexpr int kMaxFramesWithoutStereoVelocity = 10;
 // In motion (one camera or two): the window of camera 0's frames aligned with the IMU, how long
 // alignment may keep failing before the start without it, and the start's standard deviations
 // after alignment (velocity, roll/pitch, gyro bias). Window and sigmas chosen over seven
@@ -88,8 +85,8 @@ std::optional<std::string> MsckfOdometry::start_filter(Timestamp time) {
         Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.005);
   } else {
     // In motion: the visual-inertial alignment of camera 0's first frames (tilt, velocity, gyro
-    // bias); when it keeps failing, the tilt from the IMU (moving_start.hpp) and the velocity
-    // from two stereo frames, or unknown (zero, 1 m/s) for the images to find.
+    // bias); when it fails, the tilt from the IMU (moving_start.hpp) and the velocity from two
+    // stereo frames, or, after 2 s of failures, unknown (zero, 1 m/s) for the images to find.
     std::string why;
     if (std::optional<vision::VisualInertialAlignment> aligned_in_motion = align_in_motion(time, why)) {
       state.R_world_body = aligned_in_motion->R_world_imu;
@@ -101,18 +98,18 @@ std::optional<std::string> MsckfOdometry::start_filter(Timestamp time) {
                      aligned_in_motion->frames, state.velocity.norm(), aligned_in_motion->scale, 100.0 * aligned_in_motion->gravity_error);
       return start_with(state, sigma, still.back());
     }
-    if (!aligning_since_ || (time - *aligning_since_).seconds() < kMaxAligningSeconds) {
-      return fmt::format("initializing: moving; aligning the images with the IMU ({})", why);
+    // A stereo rig whose alignment failed starts from its two-frame velocity when it has one.
+    const bool stereo_fallback = cameras_.size() == 2 && stereo_velocity_ && aligning_since_;
+    if (!stereo_fallback && (!aligning_since_ || (time - *aligning_since_).seconds() < kMaxAligningSeconds)) {
+      return fmt::format("initializing: moving ({}); aligning the images with the IMU ({})", aligned.error().message, why);
     }
+    logger()->info("msckf: the visual-inertial alignment failed ({}): starting from the IMU's tilt", why);
     state.R_world_body = tilt_from_moving_imu(still);
     double velocity_sigma = kMovingStartVelocitySigma;
-    if (cameras_.size() == 2 && stereo_velocity_) {
+    if (stereo_fallback) {
       state.velocity = state.R_world_body * *stereo_velocity_;
       velocity_sigma = kStereoVelocitySigma;
-    } else if (cameras_.size() == 2 && ++frames_without_stereo_velocity_ < kMaxFramesWithoutStereoVelocity) {
-      return fmt::format("initializing: moving ({}); the alignment failed ({}); measuring the velocity from the stereo images", aligned.error().message, why);
     }
-    logger()->info("msckf: the visual-inertial alignment kept failing ({}): starting from the IMU's tilt", why);
     sigma << Eigen::Vector3d::Constant(1e-3), Eigen::Vector3d(0.05, 0.05, 1e-3), Eigen::Vector3d::Constant(velocity_sigma),
         Eigen::Vector3d::Constant(0.1), Eigen::Vector3d::Constant(0.01);
     logger()->info("msckf: starting in motion (roll {:.1f}, pitch {:.1f} degrees; velocity {:.2f} m/s{})",
@@ -131,7 +128,6 @@ std::optional<std::string> MsckfOdometry::start_with(const estimate::NavigationS
   if (!filter) return "initializing: " + filter.error().message;
   filter_.emplace(std::move(filter).value());
   previous_stereo_.reset();
-  frames_without_stereo_velocity_ = 0;
   alignment_frames_.clear();
   aligning_since_.reset();
   (void)filter_->propagate(last_sample);

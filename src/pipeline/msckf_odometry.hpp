@@ -9,10 +9,10 @@
 // the gyro bias; heading 0; at rest. A platform moving at the start starts in motion from the
 // visual-inertial alignment of camera 0's last 1.5 s of tracks with the IMU
 // (vision/visual_inertial_alignment.hpp: velocity, gravity direction and gyro bias); when that
-// keeps failing (too little parallax, images and IMU disagreeing) for 2 s more, from roll and
-// pitch of the second's mean specific force (moving_start.hpp) and, with two cameras, the
-// velocity from the last two stereo frames, else with zero velocity and a 1 m/s standard
-// deviation for the images to correct (a stereo rig waits up to 10 frames for a stereo velocity).
+// fails (too little parallax, images and IMU disagreeing), from roll and pitch of the second's
+// mean specific force (moving_start.hpp) and, with two cameras, the velocity from the last two
+// stereo frames; without one, after 2 s more of failures, with zero velocity and a 1 m/s
+// standard deviation for the images to correct.
 // A filter whose covariance breaks down numerically is dropped and started again the same way.
 //
 // World: gravity-aligned (z up), heading and origin those of the IMU at the start; poses are
@@ -81,7 +81,6 @@ class MsckfOdometry {
   // they and the frame before gave (body frame), for a start in motion.
   std::optional<std::pair<Timestamp, std::map<uint64_t, Eigen::Vector3d>>> previous_stereo_;
   std::optional<Eigen::Vector3d> stereo_velocity_;
-  int frames_without_stereo_velocity_ = 0;
   // Before the start: the last frames' tracks for the visual-inertial alignment.
   std::deque<vision::AlignmentFrame> alignment_frames_;
   std::optional<Timestamp> aligning_since_;  // first alignment attempt
