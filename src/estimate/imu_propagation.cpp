@@ -30,7 +30,8 @@ NavigationState propagate_state(const NavigationState& state, const BodyMotion& 
   SO3::Jacobian right_jacobian;
   const SO3 delta_rotation = SO3::exp(rotation_vector, &right_jacobian);
   // The specific force acts at the interval's mid attitude R Exp(w dt / 2).
-  const Eigen::Vector3d force_at_mid_attitude = SO3::exp(0.5 * rotation_vector) * motion.specific_force;
+  const Eigen::Matrix3d half_rotation = SO3::exp(0.5 * rotation_vector).matrix();
+  const Eigen::Vector3d force_at_mid_attitude = half_rotation * motion.specific_force;
   const Eigen::Vector3d acceleration = R * force_at_mid_attitude + state.gravity;
 
   NavigationState next = state;
@@ -42,7 +43,7 @@ NavigationState propagate_state(const NavigationState& state, const BodyMotion& 
   if (transition != nullptr) {
     transition->dt = dt;
     transition->velocity_by_orientation = -R * SO3::hat(force_at_mid_attitude) * dt;
-    transition->velocity_by_accel_bias = -R * SO3::exp(0.5 * rotation_vector).matrix() * mounting.R_body_imu.matrix() * dt;
+    transition->velocity_by_accel_bias = -R * half_rotation * mounting.R_body_imu.matrix() * dt;
     transition->orientation_by_orientation = delta_rotation.matrix().transpose();
     // dw/dbg = -C R_body_imu and dw/dc = -e_z w_z / c (w = motion.angular_velocity, already divided by c).
     Eigen::Matrix3d by_gyro_bias = -mounting.R_body_imu.matrix();
