@@ -258,6 +258,7 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"scans_refused", m.scans_refused},   {"degenerate_scans", m.degenerate_scans},
           {"weather_degraded_scans", m.weather_degraded_scans},
           {"map_keyframes", m.map_keyframes},   {"graph_keyframes", m.graph_keyframes},
+          {"graph_landmarks", m.graph_landmarks}, {"graph_projections", m.graph_projections},
           {"loop_candidates", m.loop_candidates}, {"loop_closures", m.loop_closures},
           {"gnss_factors", m.gnss_factors},     {"map_memory_bytes", m.map_memory_bytes},
           {"wheel_slip_episodes", m.wheel_slip_episodes}, {"wheel_messages_withheld", m.wheel_messages_withheld},
@@ -450,6 +451,9 @@ int run(const Output& output, const RunOptions& options) {
   if (mapping.graph_keyframes > 0) {
     text += fmt::format("graph: {} keyframes, {} GNSS factors, {} loop closures", mapping.graph_keyframes, mapping.gnss_factors,
                         mapping.loop_closures);
+    if (mapping.graph_landmarks > 0) {
+      text += fmt::format("; visual-inertial: {} landmarks, {} projections", mapping.graph_landmarks, mapping.graph_projections);
+    }
     if (mapping.scans_received > 0) {
       text += fmt::format("; map: {} keyframes from {} of {} sweeps registered", mapping.map_keyframes, mapping.scans_registered,
                           mapping.scans_received);

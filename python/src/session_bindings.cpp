@@ -190,6 +190,7 @@ class PySession {
     result["scans_registered"] = mapping.scans_registered;
     result["map_keyframes"] = mapping.map_keyframes;
     result["graph_keyframes"] = mapping.graph_keyframes;
+    result["graph_landmarks"] = mapping.graph_landmarks;
     result["loop_closures"] = mapping.loop_closures;
     result["gnss_factors"] = mapping.gnss_factors;
     return result;

@@ -36,6 +36,7 @@
 #include "hanzo/fusion/vision/image_quality.hpp"
 #include "hanzo/fusion/vision/visual_odometry.hpp"
 #include "msckf_odometry.hpp"
+#include "visual_inertial_factors.hpp"
 
 namespace hanzo::fusion::pipeline {
 
@@ -84,6 +85,11 @@ class CameraOdometry {
   const std::string& imu_sensor() const { return imu_sensor_; }
   /// An IMU message of imu_sensor() (sensor clock; the calibrated offset is applied here).
   void add_imu(const msgs::ImuMessage& imu);
+  /// Visual-inertial: the keyframe graph's IMU and landmark factors, fed with the IMU samples
+  /// (body axes, body clock) and the tracked frames' features (null otherwise).
+  VisualInertialFactors* keyframe_factors() { return keyframe_factors_.get(); }
+  /// Visual-inertial: the filter's IMU biases in body axes (nullopt before it starts).
+  std::optional<graph::ImuBias> imu_bias_body() const;
 
   vision::VisualOdometrySummary summary() const;
   const ImageConditionCounts& image_conditions() const { return image_conditions_; }
@@ -101,6 +107,9 @@ class CameraOdometry {
 
   std::unique_ptr<vision::VisualOdometry> odometry_;  // null when visual-inertial
   std::unique_ptr<MsckfOdometry> inertial_;
+  std::unique_ptr<VisualInertialFactors> keyframe_factors_;
+  SE3 T_body_imu_;
+  std::optional<std::pair<Timestamp, Eigen::Vector3d>> previous_body_rate_;  // body axes, rad/s
   std::string imu_sensor_;
   Duration imu_offset_;
   vision::VisualOdometrySummary inertial_summary_;

@@ -24,7 +24,7 @@ void KeyframeGraph::attach(Frontend& frontend) {
   frontend.set_keyframe_callback([this](const msgs::Keyframe& keyframe) { queued_keyframes_.push_back(keyframe); });
 }
 
-Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe) {
+Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe, bool relative_motion_factor) {
   const uint64_t id = keyframe.keyframe_id;
   if (frontend_poses_.count(id) != 0) return Error(fmt::format("keyframe {}: already added", id));
   const SE3 T_world_body = keyframe.T_world_body.to_se3();
@@ -34,8 +34,10 @@ Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe) {
     }
     graph::GaussianNoise noise;
     HANZO_ASSIGN_OR_RETURN(noise, noise_of(*keyframe.relative_covariance, fmt::format("keyframe {} relative covariance", id)));
-    pending_.factors.emplace<graph::BetweenFactorSE3>(graph::X(keyframe.previous_keyframe_id), graph::X(id),
-                                                      keyframe.T_previous_current->to_se3(), noise);
+    if (relative_motion_factor) {
+      pending_.factors.emplace<graph::BetweenFactorSE3>(graph::X(keyframe.previous_keyframe_id), graph::X(id),
+                                                        keyframe.T_previous_current->to_se3(), noise);
+    }
   } else {
     if (!keyframe.pose_covariance) return Error(fmt::format("keyframe {}: the first keyframe needs a pose covariance", id));
     // (position world, orientation body) -> tangent (rho = R^T dp, phi).
@@ -45,12 +47,25 @@ Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe) {
     HANZO_ASSIGN_OR_RETURN(noise, noise_of(J * *keyframe.pose_covariance * J.transpose(), fmt::format("keyframe {} pose covariance", id)));
     pending_.factors.emplace<graph::PriorFactorSE3>(graph::X(id), T_world_body, noise);
   }
-  pending_.values.insert(graph::X(id), T_world_body);
+  pending_.values.insert(graph::X(id), initial_pose(keyframe));
   frontend_poses_[id] = T_world_body;
   keyframe_at_[keyframe.timestamp.nanoseconds()] = id;
   keyframe_times_[id] = keyframe.timestamp;
   latest_keyframe_ = id;
   return ok_status();
+}
+
+SE3 KeyframeGraph::initial_pose(const msgs::Keyframe& keyframe) const {
+  if (!keyframe.T_previous_current) return keyframe.T_world_body.to_se3();
+  const graph::Key previous = graph::X(keyframe.previous_keyframe_id);
+  Result<SE3> T_world_previous = pending_.values.exists(previous) ? pending_.values.at<SE3>(previous) : smoother_.estimate().at<SE3>(previous);
+  if (!T_world_previous) return keyframe.T_world_body.to_se3();
+  return *T_world_previous * keyframe.T_previous_current->to_se3();
+}
+
+void KeyframeGraph::add_factors(const graph::GraphUpdate& update) {
+  for (const graph::FactorPointer& factor : update.factors.factors()) pending_.factors.add(factor);
+  for (const auto& [key, value] : update.values.all()) pending_.values.insert(key, value);
 }
 
 Status KeyframeGraph::add_gps(Timestamp time, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,

@@ -156,11 +156,17 @@ std::optional<vision::VisualInertialAlignment> MsckfOdometry::align_in_motion(Ti
   return std::move(aligned).value();
 }
 
+std::optional<std::pair<Eigen::Vector3d, Eigen::Vector3d>> MsckfOdometry::imu_bias() const {
+  if (!filter_) return std::nullopt;
+  return std::make_pair(filter_->state().accel_bias, filter_->state().gyro_bias);
+}
+
 Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat& left, const cv::Mat& right) {
   vision::TrackedFrame tracked;
   HANZO_ASSIGN_OR_RETURN(tracked, right.empty() ? tracker_->track(left) : tracker_->track(left, right));
   Frame frame;
   frame.tracked_features = tracked.tracked;
+  frame.observations = tracked.observations;
   if (!filter_ && cameras_.size() == 2) {
     // Before the start: the velocity from this and the previous stereo frame, in case it moves.
     std::map<uint64_t, Eigen::Vector3d> points = triangulate_stereo(tracked.observations, cameras_);

@@ -47,6 +47,7 @@ class MsckfOdometry {
     vision::MsckfUpdateSummary update;
     std::string reason;
     int tracked_features = 0;  ///< left features continued from the previous image
+    std::vector<vision::FeatureObservation> observations;  ///< the tracker's, both cameras
   };
 
   /// One or two cameras (the second makes a stereo rig), the IMU's mounting and noise; fails
@@ -60,6 +61,8 @@ class MsckfOdometry {
   Result<Frame> track(Timestamp time, const cv::Mat& left, const cv::Mat& right);
 
   int zero_velocity_frames() const { return zero_velocity_frames_; }
+  /// The filter's IMU biases (IMU axes: accelerometer m/s^2, gyroscope rad/s); nullopt before it starts.
+  std::optional<std::pair<Eigen::Vector3d, Eigen::Vector3d>> imu_bias() const;
   bool initialized() const { return filter_.has_value(); }
 
  private:

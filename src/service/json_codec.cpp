@@ -202,6 +202,8 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"degenerate_scans", mapping.degenerate_scans},
       {"weather_degraded_scans", mapping.weather_degraded_scans},
       {"graph_keyframes", mapping.graph_keyframes},
+      {"graph_landmarks", mapping.graph_landmarks},
+      {"graph_projections", mapping.graph_projections},
       {"map_keyframes", mapping.map_keyframes},
       {"loop_candidates", mapping.loop_candidates},
       {"loop_closures", mapping.loop_closures},

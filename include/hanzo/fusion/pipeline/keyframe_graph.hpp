@@ -66,9 +66,18 @@ class KeyframeGraph {
   void attach(Frontend& frontend);
 
   /// Queues a keyframe: X(id) at its pose, a between factor from its previous keyframe (which
-  /// must be known), or a prior for the first one. Fails on an unknown previous keyframe, a
-  /// repeated id or covariances that are not positive definite.
-  Status add_keyframe(const msgs::Keyframe& keyframe);
+  /// must be known; left out with relative_motion_factor = false, for a caller that links the
+  /// two by other factors, add_factors()), or a prior for the first one. Fails on an unknown
+  /// previous keyframe, a repeated id or covariances that are not positive definite.
+  Status add_keyframe(const msgs::Keyframe& keyframe, bool relative_motion_factor = true);
+  /// Where add_keyframe() starts X(id): the previous keyframe's current estimate moved by the
+  /// relative motion (so that a graph that moved away from the frontend's world, by its loop
+  /// closures or its own factors, gets new keyframes where its old ones are), or the keyframe's
+  /// pose for the first one.
+  SE3 initial_pose(const msgs::Keyframe& keyframe) const;
+  /// Queues factors and the initial values of the variables they introduce, on keyframes
+  /// added so far (IMU preintegration, landmark projections: visual_inertial_factors.hpp).
+  void add_factors(const graph::GraphUpdate& update);
   /// A GNSS position (world ENU m, covariance m^2) at `time`, through the antenna's lever arm
   /// (body frame). Queued until process() finds the keyframe within gps_max_time_offset_s
   /// (it may be emitted after the fix); dropped, and counted, when none comes. Fails on

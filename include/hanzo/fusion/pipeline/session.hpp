@@ -135,6 +135,9 @@ struct SessionConfig {
   bool loop_closure = true;
   /// GNSS fixes the filter fused become GPS factors of the keyframe graph.
   bool gnss_factors = true;
+  /// frontend.type msckf: the keyframe graph holds IMU preintegration and landmark projection
+  /// factors (visual_inertial_factors.hpp) instead of the odometry's relative motions.
+  bool visual_inertial_factors = true;
   lidar::LoopClosureConfig loop;
   double loop_translation_sigma = 0.05;  ///< m, loop closure factors (detected and manual)
   double loop_rotation_sigma = 0.005;    ///< rad
@@ -203,6 +206,9 @@ struct MappingSummary {
   uint64_t weather_degraded_scans = 0;
   uint64_t map_keyframes = 0;
   uint64_t graph_keyframes = 0;
+  /// Landmarks of the visual-inertial keyframe graph (frontend.type msckf) and their projections.
+  uint64_t graph_landmarks = 0;
+  uint64_t graph_projections = 0;
   uint64_t loop_candidates = 0;
   uint64_t loop_closures = 0;     ///< detected and verified
   uint64_t manual_loop_closures = 0;

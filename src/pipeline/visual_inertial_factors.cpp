@@ -1,0 +1,198 @@
+#include "visual_inertial_factors.hpp"
+
+#include <algorithm>
+
+#include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/graph/imu_factors.hpp"
+#include "hanzo/fusion/graph/keys.hpp"
+#include "hanzo/fusion/graph/projection_factors.hpp"
+#include "hanzo/fusion/vision/feature_triangulation.hpp"
+
+namespace hanzo::fusion::pipeline {
+namespace {
+
+constexpr double kMaxImuGapSeconds = 0.1;      // longer between two samples: the IMU was lost
+constexpr double kImuHistorySeconds = 30.0;    // samples kept when no keyframe comes
+constexpr double kFrameHistorySeconds = 2.0;   // frames kept (the Frontend's keyframes lag the images)
+
+}  // namespace
+
+VisualInertialFactors::VisualInertialFactors(std::vector<Camera> cameras, const graph::ImuPreintegrationConfig& imu, double accel_bias_random_walk,
+                                             double gyro_bias_random_walk, VisualInertialFactorsConfig config)
+    : cameras_(std::move(cameras)),
+      imu_(imu),
+      accel_bias_random_walk_(accel_bias_random_walk),
+      gyro_bias_random_walk_(gyro_bias_random_walk),
+      config_(config) {}
+
+void VisualInertialFactors::add_imu(const estimate::ImuSample& sample) {
+  if (!samples_.empty() && sample.timestamp <= samples_.back().timestamp) return;
+  samples_.push_back(sample);
+  const Timestamp keep_from = previous_ ? previous_->time : sample.timestamp - Duration::from_seconds(kImuHistorySeconds);
+  while (samples_.size() > 1 && samples_[1].timestamp <= keep_from) samples_.pop_front();
+  while (samples_.size() > 1 && (sample.timestamp - samples_.front().timestamp).seconds() > kImuHistorySeconds) samples_.pop_front();
+}
+
+void VisualInertialFactors::add_frame(Timestamp time, const SE3& T_odometry_body, std::vector<vision::FeatureObservation> observations) {
+  if (!frames_.empty() && time <= frames_.back().time) return;
+  frames_.push_back({time, T_odometry_body, std::move(observations)});
+  while ((time - frames_.front().time).seconds() > kFrameHistorySeconds) frames_.pop_front();
+}
+
+const VisualInertialFactors::Frame* VisualInertialFactors::frame_for(Timestamp keyframe_time) const {
+  for (auto it = frames_.rbegin(); it != frames_.rend(); ++it) {
+    if (it->time > keyframe_time) continue;
+    if ((keyframe_time - it->time).seconds() > config_.max_frame_gap_s) break;
+    return &*it;
+  }
+  return nullptr;
+}
+
+void VisualInertialFactors::odometry_restarted() { tracks_.clear(); }
+
+void VisualInertialFactors::restart() {
+  previous_.reset();
+  tracks_.clear();
+  landmarks_.clear();
+  made_.clear();
+}
+
+std::optional<graph::ImuPreintegration> VisualInertialFactors::preintegrate(Timestamp from, Timestamp to, const graph::ImuBias& bias) const {
+  // Each sample's reading holds from the sample before it (as the filters propagate).
+  graph::ImuPreintegration preintegration(imu_, bias);
+  for (size_t k = 1; k < samples_.size(); ++k) {
+    const Timestamp start = samples_[k - 1].timestamp;
+    const Timestamp end = samples_[k].timestamp;
+    if (end <= from) continue;
+    if (start >= to) break;
+    if ((end - start).seconds() > kMaxImuGapSeconds) return std::nullopt;
+    const double dt = (std::min(end, to) - std::max(start, from)).seconds();
+    if (dt <= 0.0) continue;
+    if (!preintegration.integrate(samples_[k].linear_acceleration, samples_[k].angular_velocity, dt)) return std::nullopt;
+  }
+  // The interval must be covered: samples up to `to` and from `from` on.
+  if (preintegration.sample_count() == 0 || std::abs(preintegration.delta_time() - (to - from).seconds()) > 1e-6) return std::nullopt;
+  return preintegration;
+}
+
+std::optional<SE3> VisualInertialFactors::body_motion_back(const msgs::Keyframe& keyframe, const graph::ImuBias& bias, Timestamp frame_time) const {
+  if (frame_time == keyframe.timestamp) return SE3();
+  const std::optional<graph::ImuPreintegration> interval = preintegrate(frame_time, keyframe.timestamp, bias);
+  if (!interval) return std::nullopt;
+  // Forster eq. 38 solved for the state at the frame (f) from the keyframe's (k):
+  //   R_f = R_k dR^T,  v_f = v_k - g T - R_f dv,  p_f = p_k - v_f T - 1/2 g T^2 - R_f dp.
+  const SE3 T_world_keyframe = keyframe.T_world_body.to_se3();
+  const double T = interval->delta_time();
+  const graph::ImuDeltas& delta = interval->deltas();
+  const SO3 R_world_frame = T_world_keyframe.rotation() * delta.rotation.inverse();
+  const Eigen::Vector3d velocity_frame = keyframe.velocity - imu_.gravity * T - R_world_frame * delta.velocity;
+  const Eigen::Vector3d position_frame = T_world_keyframe.translation() - velocity_frame * T - 0.5 * imu_.gravity * T * T - R_world_frame * delta.position;
+  return T_world_keyframe.inverse() * SE3(R_world_frame, position_frame);
+}
+
+void VisualInertialFactors::add_projection(KeyframeFactors& out, uint64_t feature, const View& view) const {
+  const double focal = cameras_[static_cast<size_t>(view.camera)].focal_length_px;
+  PinholeCamera camera;
+  camera.fx = camera.fy = focal;
+  camera.min_depth = 1e-3;
+  const graph::GaussianNoise noise = graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(config_.pixel_sigma)).value();
+  out.update.factors.emplace_robust<graph::ProjectionFactor>(graph::RobustKernel{graph::RobustKernel::Type::kHuber, config_.huber_threshold},
+                                                             graph::X(view.keyframe), graph::L(feature), focal * view.normalized, camera,
+                                                             view.T_keyframe_frame * cameras_[static_cast<size_t>(view.camera)].T_body_camera, noise);
+  ++out.projections;
+}
+
+VisualInertialFactors::KeyframeFactors VisualInertialFactors::keyframe(const msgs::Keyframe& keyframe, const graph::ImuBias& bias_body) {
+  KeyframeFactors out;
+  const uint64_t id = keyframe.keyframe_id;
+  const SE3 T_world_body = keyframe.T_world_body.to_se3();
+  out.update.values.insert(graph::V(id), keyframe.velocity);
+  out.update.values.insert(graph::B(id), bias_body);
+  std::optional<graph::ImuPreintegration> preintegration;
+  if (previous_ && keyframe.T_previous_current && keyframe.previous_keyframe_id == previous_->id) {
+    preintegration = preintegrate(previous_->time, keyframe.timestamp, previous_->bias);
+  }
+  if (preintegration) {
+    const double dt = preintegration->delta_time();
+    Result<std::shared_ptr<graph::ImuFactor>> imu =
+        graph::ImuFactor::create(graph::X(previous_->id), graph::V(previous_->id), graph::X(id), graph::V(id), graph::B(previous_->id), *preintegration);
+    Result<std::shared_ptr<graph::ImuBiasRandomWalkFactor>> walk =
+        graph::ImuBiasRandomWalkFactor::create(graph::B(previous_->id), graph::B(id), dt, accel_bias_random_walk_, gyro_bias_random_walk_);
+    if (imu && walk) {
+      out.update.factors.add(*imu);
+      out.update.factors.add(*walk);
+      out.imu_factor = true;
+    } else {
+      logger()->debug("visual-inertial graph: keyframe {}: {}", id, imu ? walk.error().message : imu.error().message);
+    }
+  }
+  if (!out.imu_factor) {
+    // A new chain: priors on its first velocity and biases.
+    Eigen::Matrix<double, 6, 1> bias_sigmas;
+    bias_sigmas << Eigen::Vector3d::Constant(config_.accel_bias_prior_sigma), Eigen::Vector3d::Constant(config_.gyro_bias_prior_sigma);
+    out.update.factors.emplace<graph::PriorFactorVector3>(
+        graph::V(id), keyframe.velocity, graph::GaussianNoise::from_sigmas(Eigen::Vector3d::Constant(config_.velocity_prior_sigma)).value());
+    out.update.factors.emplace<graph::PriorFactorImuBias>(graph::B(id), bias_body, graph::GaussianNoise::from_sigmas(bias_sigmas).value());
+  }
+  previous_ = Anchor{id, keyframe.timestamp, bias_body};
+
+  // The camera frame just before the keyframe: its observations, from the keyframe's body.
+  const Frame* frame = frame_for(keyframe.timestamp);
+  const std::optional<SE3> T_keyframe_frame = frame != nullptr ? body_motion_back(keyframe, bias_body, frame->time) : std::nullopt;
+  if (T_keyframe_frame) {
+    std::set<uint64_t> seen;
+    for (const vision::FeatureObservation& observation : frame->observations) {
+      if (observation.camera < 0 || observation.camera >= static_cast<int>(cameras_.size())) continue;
+      const View view{id, *T_keyframe_frame, frame->T_odometry_body, observation.camera, observation.normalized};
+      seen.insert(observation.feature_id);
+      if (landmarks_.count(observation.feature_id) != 0) {
+        add_projection(out, observation.feature_id, view);
+      } else {
+        tracks_[observation.feature_id].push_back(view);
+      }
+    }
+    // Tracks that ended never come back (the tracker does not reuse ids).
+    for (auto it = tracks_.begin(); it != tracks_.end();) it = seen.count(it->first) ? std::next(it) : tracks_.erase(it);
+    for (auto it = landmarks_.begin(); it != landmarks_.end();) it = seen.count(*it) ? std::next(it) : landmarks_.erase(it);
+    make_landmarks(out, T_world_body * *T_keyframe_frame * frame->T_odometry_body.inverse());
+  }
+  return out;
+}
+
+void VisualInertialFactors::make_landmarks(KeyframeFactors& out, const SE3& T_world_odometry) {
+  // Tracks seen at two keyframes or more, the longest first.
+  std::vector<std::pair<size_t, uint64_t>> candidates;
+  for (const auto& [feature, views] : tracks_) {
+    if (views.front().keyframe != views.back().keyframe && made_.count(feature) == 0) candidates.emplace_back(views.size(), feature);
+  }
+  std::sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) { return a.first > b.first || (a.first == b.first && a.second < b.second); });
+  vision::FeatureTriangulationConfig triangulation;
+  triangulation.min_depth = config_.min_depth_m;
+  triangulation.max_depth = config_.max_depth_m;
+  triangulation.min_parallax_rad = config_.min_parallax_rad;
+  for (const auto& [length, feature] : candidates) {
+    if (out.new_landmarks >= config_.max_new_landmarks) break;
+    const std::vector<View>& views = tracks_.at(feature);
+    std::vector<vision::FeatureView> feature_views;
+    for (const View& view : views) {
+      feature_views.push_back({view.T_odometry_body, cameras_[static_cast<size_t>(view.camera)].T_body_camera, view.normalized});
+    }
+    const std::optional<Eigen::Vector3d> point_odometry = vision::triangulate_feature(feature_views, triangulation);
+    if (!point_odometry) continue;
+    bool consistent = true;
+    for (size_t k = 0; k < views.size() && consistent; ++k) {
+      const Eigen::Vector3d p_camera = (feature_views[k].T_world_body * feature_views[k].T_body_camera).inverse() * *point_odometry;
+      const double focal = cameras_[static_cast<size_t>(views[k].camera)].focal_length_px;
+      consistent = focal * (p_camera.head<2>() / p_camera.z() - views[k].normalized).norm() <= config_.max_reprojection_sigmas * config_.pixel_sigma;
+    }
+    if (!consistent) continue;
+    out.update.values.insert(graph::L(feature), Eigen::Vector3d(T_world_odometry * *point_odometry));
+    for (const View& view : views) add_projection(out, feature, view);
+    ++out.new_landmarks;
+    landmarks_.insert(feature);
+    made_.insert(feature);
+  }
+  for (uint64_t feature : landmarks_) tracks_.erase(feature);
+}
+
+}  // namespace hanzo::fusion::pipeline

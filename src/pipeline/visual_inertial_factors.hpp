@@ -1,0 +1,137 @@
+#pragma once
+// VisualInertialFactors: the Session's keyframe graph as a visual-inertial problem (frontend.type
+// msckf): between two keyframes an IMU preintegration factor and a bias random walk take the
+// place of the odometry's relative-motion factor, and features the tracker followed across
+// keyframes become landmarks L(feature id) with Huber-robust projection factors, so that the
+// graph re-estimates the whole trajectory from the raw measurements (as VINS-Fusion's and
+// OKVIS's keyframe optimizations do) and loop closures pull it through the IMU and landmarks.
+//
+// Variables (graph/keys.hpp): X(k) = T_world_body of keyframe k (added by the KeyframeGraph),
+// V(k) world velocity (m/s), B(k) the IMU's biases in body axes, L(j) world points (m). The
+// first keyframe of a chain gets priors on V and B; a keyframe whose IMU interval cannot be
+// integrated (two samples more than 0.1 s apart, no samples) starts a new chain and keeps the
+// odometry's relative-motion factor instead.
+//
+// Measurements: IMU samples of the body origin's motion in body axes on the body clock (the
+// caller moves them through the calibration's imu_to_body); camera frames as the tracker's
+// undistorted normalized observations. A keyframe (at an IMU sample's
+// time) takes the last camera frame at most max_frame_gap_s before it: its observations are
+// projected from the camera at T_keyframe_frame T_body_camera, T_keyframe_frame the body's
+// motion over that gap (integrated from the IMU and the keyframe's velocity, held fixed).
+//
+// Landmarks: a track seen at two keyframes or more is triangulated from the odometry's poses of
+// its frames (vision/feature_triangulation.hpp: locally the odometry's geometry is the best
+// there is) and placed in the graph's world through its newest view's keyframe; it becomes a
+// landmark when its views span min_parallax_rad and all reproject within
+// max_reprojection_sigmas; the longest tracks first, at most max_new_landmarks per keyframe. A
+// landmark gets a projection factor from every later keyframe that sees it. Projection noise:
+// pixel_sigma at the camera's focal length.
+
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <optional>
+#include <set>
+#include <vector>
+
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/estimate/imu_propagation.hpp"
+#include "hanzo/fusion/graph/factor_graph.hpp"
+#include "hanzo/fusion/graph/imu_preintegration.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
+#include "hanzo/fusion/vision/feature_observation.hpp"
+
+namespace hanzo::fusion::pipeline {
+
+struct VisualInertialFactorsConfig {
+  double pixel_sigma = 2.0;             ///< px: projection noise (the MSCKF's, for the KLT tracker)
+  double huber_threshold = 1.345;       ///< Huber kernel of the projections, in sigmas
+  int max_new_landmarks = 60;           ///< landmarks made per keyframe, longest tracks first
+  double min_parallax_rad = 0.02;       ///< widest angle between a new landmark's viewing rays
+  double min_depth_m = 0.2;             ///< a new landmark's depth in every view
+  double max_depth_m = 60.0;
+  double max_reprojection_sigmas = 3.0; ///< a new landmark's views must reproject within this
+  double max_frame_gap_s = 0.1;         ///< the camera frame a keyframe uses is at most this older
+  double velocity_prior_sigma = 0.5;    ///< m/s, the first keyframe of a chain
+  double accel_bias_prior_sigma = 0.1;  ///< m/s^2
+  double gyro_bias_prior_sigma = 0.01;  ///< rad/s
+};
+
+class VisualInertialFactors {
+ public:
+  struct Camera {
+    SE3 T_body_camera;
+    double focal_length_px = 1.0;
+  };
+  /// The factors a keyframe brings (its X(k) value and odometry factor are the KeyframeGraph's).
+  struct KeyframeFactors {
+    graph::GraphUpdate update;
+    bool imu_factor = false;  ///< the IMU factor replaces the odometry's relative motion
+    int new_landmarks = 0;
+    int projections = 0;
+  };
+  /// cameras: 0 the left (or only) one, 1 the right one of a stereo rig; imu: noise and gravity
+  /// of the preintegration; random walks as the spec's accel_bias_random_walk (m/s^2/sqrt(s))
+  /// and gyro_bias_random_walk (rad/s/sqrt(s)).
+  VisualInertialFactors(std::vector<Camera> cameras, const graph::ImuPreintegrationConfig& imu, double accel_bias_random_walk,
+                        double gyro_bias_random_walk, VisualInertialFactorsConfig config = {});
+
+  /// An IMU sample of the body origin in body axes on the body clock; older or repeated samples
+  /// are ignored.
+  void add_imu(const estimate::ImuSample& sample);
+  /// A tracked camera frame (body-clock time): the odometry's body pose in its own world and the
+  /// features' undistorted normalized coordinates.
+  void add_frame(Timestamp time, const SE3& T_odometry_body, std::vector<vision::FeatureObservation> observations);
+
+
+  /// The factors of a new keyframe: bias_body the odometry's IMU biases at its time (the
+  /// preintegration's linearization point and B(k)'s first value).
+  KeyframeFactors keyframe(const msgs::Keyframe& keyframe, const graph::ImuBias& bias_body);
+  /// The graph was replaced: the next keyframe starts a new chain, landmarks are forgotten.
+  void restart();
+  /// The odometry started again in a new world of its own: tracks before and after do not
+  /// triangulate together (landmarks already made keep their place).
+  void odometry_restarted();
+
+ private:
+  struct Frame {
+    Timestamp time;
+    SE3 T_odometry_body;
+    std::vector<vision::FeatureObservation> observations;
+  };
+  struct View {
+    uint64_t keyframe;
+    SE3 T_keyframe_frame;  // the body at the frame, in the keyframe's body frame
+    SE3 T_odometry_body;   // the body at the frame, in the odometry's world
+    int camera;
+    Eigen::Vector2d normalized;
+  };
+  struct Anchor {
+    uint64_t id;
+    Timestamp time;
+    graph::ImuBias bias;
+  };
+  // The frame a keyframe at `keyframe_time` uses: the last one at or before it, at most
+  // max_frame_gap_s earlier (frames are tracked ahead of the Frontend's keyframes); null if none.
+  const Frame* frame_for(Timestamp keyframe_time) const;
+  std::optional<graph::ImuPreintegration> preintegrate(Timestamp from, Timestamp to, const graph::ImuBias& bias) const;
+  // T_keyframe_frame: the body's motion from the keyframe back to a frame before it (its IMU).
+  std::optional<SE3> body_motion_back(const msgs::Keyframe& keyframe, const graph::ImuBias& bias, Timestamp frame_time) const;
+  void add_projection(KeyframeFactors& out, uint64_t feature, const View& view) const;
+  void make_landmarks(KeyframeFactors& out, const SE3& T_world_keyframe);
+
+  std::vector<Camera> cameras_;
+  graph::ImuPreintegrationConfig imu_;
+  double accel_bias_random_walk_;
+  double gyro_bias_random_walk_;
+  VisualInertialFactorsConfig config_;
+  std::deque<estimate::ImuSample> samples_;
+  std::deque<Frame> frames_;  // the last seconds'
+  std::optional<Anchor> previous_;                  // the last keyframe of the chain
+  std::map<uint64_t, std::vector<View>> tracks_;    // features seen at keyframes, not landmarks yet
+  std::set<uint64_t> landmarks_;                    // features with an L in the graph, still tracked
+  std::set<uint64_t> made_;                         // every feature with an L in the graph
+};
+
+}  // namespace hanzo::fusion::pipeline
