@@ -24,7 +24,7 @@ void KeyframeGraph::attach(Frontend& frontend) {
   frontend.set_keyframe_callback([this](const msgs::Keyframe& keyframe) { queued_keyframes_.push_back(keyframe); });
 }
 
-Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe, bool relative_motion_factor) {
+Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe) {
   const uint64_t id = keyframe.keyframe_id;
   if (frontend_poses_.count(id) != 0) return Error(fmt::format("keyframe {}: already added", id));
   const SE3 T_world_body = keyframe.T_world_body.to_se3();
@@ -34,10 +34,8 @@ Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe, bool relative
     }
     graph::GaussianNoise noise;
     HANZO_ASSIGN_OR_RETURN(noise, noise_of(*keyframe.relative_covariance, fmt::format("keyframe {} relative covariance", id)));
-    if (relative_motion_factor) {
-      pending_.factors.emplace<graph::BetweenFactorSE3>(graph::X(keyframe.previous_keyframe_id), graph::X(id),
-                                                        keyframe.T_previous_current->to_se3(), noise);
-    }
+    pending_.factors.emplace<graph::BetweenFactorSE3>(graph::X(keyframe.previous_keyframe_id), graph::X(id),
+                                                      keyframe.T_previous_current->to_se3(), noise);
   } else {
     if (!keyframe.pose_covariance) return Error(fmt::format("keyframe {}: the first keyframe needs a pose covariance", id));
     // (position world, orientation body) -> tangent (rho = R^T dp, phi).

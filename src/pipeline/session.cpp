@@ -194,6 +194,10 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   // visual-inertial graph's newest keyframe after every update doubled its error or worse.)
   const bool visual_inertial_graph = session_config.visual_inertial_factors && config.frontend.type == config::FrontendType::kMsckf;
   if ((session_config.gnss_factors && configures_gnss(config)) || visual_inertial_graph) session_config.backend.correct_on_loop_closures_only = true;
+  // Landmarks make the graph far less linear than a pose graph: Levenberg-Marquardt starts from
+  // Ceres' default trust region (the pose graphs' 1e8, nearly Gauss-Newton, had every step of
+  // some updates rejected on the simulated walks, leaving the graph stuck).
+  if (visual_inertial_graph) session_config.backend.smoother.batch.initial_trust_region_radius = 1e4;
   std::unique_ptr<CameraOdometry> camera_odometry;
   if (session_config.mapping) HANZO_ASSIGN_OR_RETURN(camera_odometry, CameraOdometry::create(config, calibration));
   auto session = std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), planar_laser,
@@ -280,10 +284,14 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
         const SE3 T_world_body = graph_->initial_pose(keyframe);
         in_graph.velocity = T_world_body.rotation() * (keyframe.T_world_body.to_se3().rotation().inverse() * keyframe.velocity);
         in_graph.T_world_body = msgs::Pose::from_se3(T_world_body);
-        inertial = factors->keyframe(in_graph, *bias);
+        inertial = factors->keyframe(in_graph, *bias, graph_->smoother().estimate());
       }
     }
-    if (Status added = graph_->add_keyframe(keyframe, !(inertial && inertial->imu_factor)); !added) {
+    // Linked by the IMU, the filter's relative motion stays as a weak anchor only.
+    if (inertial && inertial->imu_factor && keyframe.relative_covariance) {
+      *keyframe.relative_covariance *= VisualInertialFactorsConfig{}.odometry_covariance_scale;
+    }
+    if (Status added = graph_->add_keyframe(keyframe); !added) {
       logger()->warn("session: keyframe {} not added to the graph: {}", keyframe.keyframe_id, added.error().message);
       return;
     }

@@ -102,64 +102,99 @@ void VisualInertialFactors::add_projection(KeyframeFactors& out, uint64_t featur
   ++out.projections;
 }
 
-VisualInertialFactors::KeyframeFactors VisualInertialFactors::keyframe(const msgs::Keyframe& keyframe, const graph::ImuBias& bias_body) {
+bool VisualInertialFactors::in_front(const View& view, const SE3& T_world_keyframe, const Eigen::Vector3d& point_world) const {
+  const SE3 T_world_camera = T_world_keyframe * view.T_keyframe_frame * cameras_[static_cast<size_t>(view.camera)].T_body_camera;
+  return (T_world_camera.inverse() * point_world).z() >= config_.min_depth_m;
+}
+
+VisualInertialFactors::KeyframeFactors VisualInertialFactors::keyframe(const msgs::Keyframe& keyframe, const graph::ImuBias& bias_body,
+                                                                       const graph::Values& estimate) {
   KeyframeFactors out;
   const uint64_t id = keyframe.keyframe_id;
   const SE3 T_world_body = keyframe.T_world_body.to_se3();
-  out.update.values.insert(graph::V(id), keyframe.velocity);
-  out.update.values.insert(graph::B(id), bias_body);
-  std::optional<graph::ImuPreintegration> preintegration;
+  Eigen::Vector3d velocity = keyframe.velocity;
+  graph::ImuBias bias = bias_body;
+  // Linked to the previous keyframe by the IMU: the preintegration from the graph's bias there,
+  // B(k) started there too (the odometry's bias would be far off the random walk's sigmas).
   if (previous_ && keyframe.T_previous_current && keyframe.previous_keyframe_id == previous_->id) {
-    preintegration = preintegrate(previous_->time, keyframe.timestamp, previous_->bias);
-  }
-  if (preintegration) {
-    const double dt = preintegration->delta_time();
-    Result<std::shared_ptr<graph::ImuFactor>> imu =
-        graph::ImuFactor::create(graph::X(previous_->id), graph::V(previous_->id), graph::X(id), graph::V(id), graph::B(previous_->id), *preintegration);
-    Result<std::shared_ptr<graph::ImuBiasRandomWalkFactor>> walk =
-        graph::ImuBiasRandomWalkFactor::create(graph::B(previous_->id), graph::B(id), dt, accel_bias_random_walk_, gyro_bias_random_walk_);
+    const Result<SE3> T_world_previous = estimate.at<SE3>(graph::X(previous_->id));
+    const Result<Eigen::Vector3d> velocity_previous = estimate.at<Eigen::Vector3d>(graph::V(previous_->id));
+    const Result<graph::ImuBias> bias_previous = estimate.at<graph::ImuBias>(graph::B(previous_->id));
+    std::optional<graph::ImuPreintegration> preintegration;
+    if (T_world_previous && velocity_previous && bias_previous) preintegration = preintegrate(previous_->time, keyframe.timestamp, *bias_previous);
+    Result<std::shared_ptr<graph::ImuFactor>> imu = Error("no IMU interval");
+    Result<std::shared_ptr<graph::ImuBiasRandomWalkFactor>> walk = Error("no IMU interval");
+    if (preintegration) {
+      imu = graph::ImuFactor::create(graph::X(previous_->id), graph::V(previous_->id), graph::X(id), graph::V(id), graph::B(previous_->id),
+                                     *preintegration);
+      walk = graph::ImuBiasRandomWalkFactor::create(graph::B(previous_->id), graph::B(id), preintegration->delta_time(), accel_bias_random_walk_,
+                                                    gyro_bias_random_walk_);
+    }
     if (imu && walk) {
       out.update.factors.add(*imu);
       out.update.factors.add(*walk);
       out.imu_factor = true;
+      SE3 T_world_predicted;
+      preintegration->predict(*T_world_previous, *velocity_previous, *bias_previous, &T_world_predicted, &velocity);
+      bias = *bias_previous;
     } else {
       logger()->debug("visual-inertial graph: keyframe {}: {}", id, imu ? walk.error().message : imu.error().message);
     }
   }
+  // The camera frame just before the keyframe, and the body's motion from the keyframe back to it.
+  const Frame* frame = frame_for(keyframe.timestamp);
+  const std::optional<SE3> T_keyframe_frame = frame != nullptr ? body_motion_back(keyframe, bias, frame->time) : std::nullopt;
+  // The velocity: the odometry's (its poses around the frame, in the graph's world) where there
+  // are frames on both sides, else the IMU's prediction, else the keyframe's.
+  if (T_keyframe_frame) {
+    const auto at = std::find_if(frames_.begin(), frames_.end(), [&](const Frame& f) { return &f == frame; });
+    if (at != frames_.begin() && std::next(at) != frames_.end()) {
+      const Frame& before = *std::prev(at);
+      const Frame& after = *std::next(at);
+      const double span = (after.time - before.time).seconds();
+      if (span > 0.0 && span <= 2.0 * config_.max_frame_gap_s) {
+        const SO3 R_world_odometry = (T_world_body * *T_keyframe_frame * frame->T_odometry_body.inverse()).rotation();
+        velocity = R_world_odometry * ((after.T_odometry_body.translation() - before.T_odometry_body.translation()) / span);
+      }
+    }
+  }
   if (!out.imu_factor) {
-    // A new chain: priors on its first velocity and biases.
+    // A new chain: priors on its velocity and biases.
     Eigen::Matrix<double, 6, 1> bias_sigmas;
     bias_sigmas << Eigen::Vector3d::Constant(config_.accel_bias_prior_sigma), Eigen::Vector3d::Constant(config_.gyro_bias_prior_sigma);
     out.update.factors.emplace<graph::PriorFactorVector3>(
-        graph::V(id), keyframe.velocity, graph::GaussianNoise::from_sigmas(Eigen::Vector3d::Constant(config_.velocity_prior_sigma)).value());
-    out.update.factors.emplace<graph::PriorFactorImuBias>(graph::B(id), bias_body, graph::GaussianNoise::from_sigmas(bias_sigmas).value());
+        graph::V(id), velocity, graph::GaussianNoise::from_sigmas(Eigen::Vector3d::Constant(config_.velocity_prior_sigma)).value());
+    out.update.factors.emplace<graph::PriorFactorImuBias>(graph::B(id), bias, graph::GaussianNoise::from_sigmas(bias_sigmas).value());
   }
-  previous_ = Anchor{id, keyframe.timestamp, bias_body};
+  out.update.values.insert(graph::V(id), velocity);
+  out.update.values.insert(graph::B(id), bias);
+  previous_ = Anchor{id, keyframe.timestamp};
 
-  // The camera frame just before the keyframe: its observations, from the keyframe's body.
-  const Frame* frame = frame_for(keyframe.timestamp);
-  const std::optional<SE3> T_keyframe_frame = frame != nullptr ? body_motion_back(keyframe, bias_body, frame->time) : std::nullopt;
+  // The frame's observations, from the keyframe's body.
   if (T_keyframe_frame) {
     std::set<uint64_t> seen;
     for (const vision::FeatureObservation& observation : frame->observations) {
       if (observation.camera < 0 || observation.camera >= static_cast<int>(cameras_.size())) continue;
       const View view{id, *T_keyframe_frame, frame->T_odometry_body, observation.camera, observation.normalized};
-      seen.insert(observation.feature_id);
       if (landmarks_.count(observation.feature_id) != 0) {
+        const Result<Eigen::Vector3d> point = estimate.at<Eigen::Vector3d>(graph::L(observation.feature_id));
+        if (!point || !in_front(view, T_world_body, *point)) continue;  // the landmark ends
         add_projection(out, observation.feature_id, view);
       } else {
         tracks_[observation.feature_id].push_back(view);
       }
+      seen.insert(observation.feature_id);
     }
     // Tracks that ended never come back (the tracker does not reuse ids).
     for (auto it = tracks_.begin(); it != tracks_.end();) it = seen.count(it->first) ? std::next(it) : tracks_.erase(it);
     for (auto it = landmarks_.begin(); it != landmarks_.end();) it = seen.count(*it) ? std::next(it) : landmarks_.erase(it);
-    make_landmarks(out, T_world_body * *T_keyframe_frame * frame->T_odometry_body.inverse());
+    make_landmarks(out, T_world_body, T_world_body * *T_keyframe_frame * frame->T_odometry_body.inverse(), estimate);
   }
   return out;
 }
 
-void VisualInertialFactors::make_landmarks(KeyframeFactors& out, const SE3& T_world_odometry) {
+void VisualInertialFactors::make_landmarks(KeyframeFactors& out, const SE3& T_world_keyframe, const SE3& T_world_odometry,
+                                           const graph::Values& estimate) {
   // Tracks seen at two keyframes or more, the longest first.
   std::vector<std::pair<size_t, uint64_t>> candidates;
   for (const auto& [feature, views] : tracks_) {
@@ -186,7 +221,15 @@ void VisualInertialFactors::make_landmarks(KeyframeFactors& out, const SE3& T_wo
       consistent = focal * (p_camera.head<2>() / p_camera.z() - views[k].normalized).norm() <= config_.max_reprojection_sigmas * config_.pixel_sigma;
     }
     if (!consistent) continue;
-    out.update.values.insert(graph::L(feature), Eigen::Vector3d(T_world_odometry * *point_odometry));
+    // In the graph's world every view must see it in front (its keyframes' estimates there may
+    // have moved from the odometry's poses).
+    const Eigen::Vector3d point_world = T_world_odometry * *point_odometry;
+    for (size_t k = 0; k < views.size() && consistent; ++k) {
+      const Result<SE3> T_world_view = views[k].keyframe == views.back().keyframe ? Result<SE3>(T_world_keyframe) : estimate.at<SE3>(graph::X(views[k].keyframe));
+      consistent = T_world_view && in_front(views[k], *T_world_view, point_world);
+    }
+    if (!consistent) continue;
+    out.update.values.insert(graph::L(feature), point_world);
     for (const View& view : views) add_projection(out, feature, view);
     ++out.new_landmarks;
     landmarks_.insert(feature);

@@ -86,8 +86,11 @@ struct Flight {
 };
 
 // Feeds `seconds` of flight: IMU at 200 Hz (skipping [gap_from, gap_to)), frames at 20 Hz,
-// keyframes every 0.5 s (5 ms after a frame) with poses 10 cm / 1 degree off the truth.
-Flight fly(VisualInertialFactors& factors, double seconds, double gap_from = 1e9, double gap_to = 1e9, double restart_at = 1e9) {
+// keyframes every 0.5 s (5 ms after a frame) with poses 10 cm / 1 degree off the truth. With a
+// graph, each keyframe's factors go into it at once and its estimates are the lookups; without,
+// the truth is.
+Flight fly(VisualInertialFactors& factors, double seconds, KeyframeGraph* graph = nullptr, double gap_from = 1e9, double gap_to = 1e9,
+           double restart_at = 1e9, bool landmarks_behind = false) {
   std::mt19937_64 random(7);
   std::normal_distribution<double> normal(0.0, 1.0);
   const std::vector<Eigen::Vector3d> points = cylinder_points();
@@ -123,26 +126,43 @@ Flight fly(VisualInertialFactors& factors, double seconds, double gap_from = 1e9
     }
     keyframe.T_world_body = msgs::Pose::from_se3(believed);
     keyframe.velocity = true_velocity(t) + 0.1 * Eigen::Vector3d(normal(random), normal(random), normal(random));
-    flight.factors.push_back(factors.keyframe(keyframe, graph::ImuBias{}));
-    flight.keyframes.push_back(keyframe);
     flight.truth.push_back(T_world_body);
+    // Without a graph, the truth as its estimate (landmarks_behind: mirrored behind the camera).
+    graph::Values truth;
+    for (size_t i = 0; i + 1 < flight.truth.size(); ++i) {
+      truth.insert(graph::X(i), flight.truth[i]);
+      truth.insert(graph::V(i), true_velocity(flight.keyframes[i].timestamp.seconds() - 100.0));
+      truth.insert(graph::B(i), graph::ImuBias{});
+    }
+    const SE3 T_world_camera = T_world_body * body_to_camera();
+    for (size_t j = 0; j < points.size(); ++j) {
+      Eigen::Vector3d p_camera = T_world_camera.inverse() * points[j];
+      if (landmarks_behind) p_camera.z() = -p_camera.z();
+      truth.insert(graph::L(j), T_world_camera * p_camera);
+    }
+    flight.factors.push_back(factors.keyframe(keyframe, graph::ImuBias{}, graph != nullptr ? graph->smoother().estimate() : truth));
+    flight.keyframes.push_back(keyframe);
+    if (graph != nullptr) {
+      msgs::Keyframe anchored = keyframe;  // as the Session does: the odometry's motion a weak anchor
+      if (flight.factors.back().imu_factor) *anchored.relative_covariance *= VisualInertialFactorsConfig{}.odometry_covariance_scale;
+      EXPECT_TRUE(graph->add_keyframe(anchored).ok());
+      graph->add_factors(flight.factors.back().update);
+      EXPECT_TRUE(graph->process().ok());
+    }
   }
   return flight;
 }
 
 TEST(VisualInertialFactors, ImuAndLandmarkFactorsPutKeyframesBackOntoTheTruth) {
   VisualInertialFactors factors = make_factors();
-  const Flight flight = fly(factors, 6.0);
-  ASSERT_EQ(flight.keyframes.size(), 12u);
   KeyframeGraphConfig config;
   config.smoother.background_batch = false;
   KeyframeGraph graph(config);
+  const Flight flight = fly(factors, 6.0, &graph);
+  ASSERT_EQ(flight.keyframes.size(), 12u);
   double initial_error = 0.0;
   for (size_t k = 0; k < flight.keyframes.size(); ++k) {
     EXPECT_EQ(flight.factors[k].imu_factor, k > 0) << "keyframe " << k;
-    ASSERT_TRUE(graph.add_keyframe(flight.keyframes[k], !flight.factors[k].imu_factor).ok());
-    graph.add_factors(flight.factors[k].update);
-    ASSERT_TRUE(graph.process().ok());
     initial_error = std::max(initial_error, (flight.keyframes[k].T_world_body.to_se3().translation() - flight.truth[k].translation()).norm());
   }
   int landmarks = 0, projections = 0;
@@ -171,7 +191,7 @@ TEST(VisualInertialFactors, ImuAndLandmarkFactorsPutKeyframesBackOntoTheTruth) {
 
 TEST(VisualInertialFactors, AnImuGapStartsANewChainWithPriors) {
   VisualInertialFactors factors = make_factors();
-  const Flight flight = fly(factors, 4.0, 1.2, 2.6);  // no IMU for 1.4 s: the keyframes at 1.505 and 2.005, 2.505 s
+  const Flight flight = fly(factors, 4.0, nullptr, 1.2, 2.6);  // no IMU for 1.4 s: the keyframes at 1.505 and 2.005, 2.505 s
   ASSERT_EQ(flight.keyframes.size(), 8u);
   for (size_t k = 1; k < flight.keyframes.size(); ++k) {
     const double t = flight.keyframes[k].timestamp.seconds() - 100.0;
@@ -188,7 +208,7 @@ TEST(VisualInertialFactors, TracksAcrossAnOdometryRestartAreNotTriangulatedToget
   // The odometry's world jumps at 1.5 s: a landmark triangulated from views on both sides of the
   // jump would land metres off; none is made until its views are all after the restart.
   VisualInertialFactors factors = make_factors();
-  const Flight flight = fly(factors, 3.0, 1e9, 1e9, 1.5);
+  const Flight flight = fly(factors, 3.0, nullptr, 1e9, 1e9, 1.5);
   ASSERT_EQ(flight.keyframes.size(), 6u);
   EXPECT_GT(flight.factors[2].new_landmarks, 0);   // 0.005 + 1.0 s: views at 0.5 and 1.0 s
   EXPECT_EQ(flight.factors[3].new_landmarks, 0);   // 1.505 s: its frame is the restart's
@@ -200,6 +220,22 @@ TEST(VisualInertialFactors, TracksAcrossAnOdometryRestartAreNotTriangulatedToget
       EXPECT_NEAR((std::get<Eigen::Vector3d>(value) - cylinder_points()[graph::symbol_index(key)]).norm(), 0.0, 1.0);
     }
   }
+}
+
+TEST(VisualInertialFactors, ObservationsOfLandmarksTheGraphPutsBehindTheCameraAreNotProjected) {
+  // The graph's landmarks behind the camera that sees them (its estimates gone wrong): a factor
+  // there could not be evaluated, so only the views that make a landmark get projections.
+  VisualInertialFactors factors = make_factors();
+  const Flight flight = fly(factors, 3.0, nullptr, 1e9, 1e9, 1e9, true);
+  int projections = 0;
+  for (const VisualInertialFactors::KeyframeFactors& made : flight.factors) {
+    for (const graph::FactorPointer& factor : made.update.factors.factors()) {
+      if (factor->dimension() != 2) continue;
+      ++projections;
+      EXPECT_TRUE(made.update.values.exists(factor->keys()[1])) << graph::key_to_string(factor->keys()[1]) << " is not a new landmark";
+    }
+  }
+  EXPECT_GT(projections, 100);
 }
 
 }  // namespace

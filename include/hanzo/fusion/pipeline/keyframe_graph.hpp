@@ -65,11 +65,10 @@ class KeyframeGraph {
   /// the session's pushes.
   void attach(Frontend& frontend);
 
-  /// Queues a keyframe: X(id) at its pose, a between factor from its previous keyframe (which
-  /// must be known; left out with relative_motion_factor = false, for a caller that links the
-  /// two by other factors, add_factors()), or a prior for the first one. Fails on an unknown
-  /// previous keyframe, a repeated id or covariances that are not positive definite.
-  Status add_keyframe(const msgs::Keyframe& keyframe, bool relative_motion_factor = true);
+  /// Queues a keyframe: X(id) at initial_pose(), a between factor from its previous keyframe
+  /// (which must be known), or a prior for the first one. Fails on an unknown previous
+  /// keyframe, a repeated id or covariances that are not positive definite.
+  Status add_keyframe(const msgs::Keyframe& keyframe);
   /// Where add_keyframe() starts X(id): the previous keyframe's current estimate moved by the
   /// relative motion (so that a graph that moved away from the frontend's world, by its loop
   /// closures or its own factors, gets new keyframes where its old ones are), or the keyframe's
