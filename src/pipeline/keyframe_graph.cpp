@@ -63,7 +63,9 @@ SE3 KeyframeGraph::initial_pose(const msgs::Keyframe& keyframe) const {
 
 void KeyframeGraph::add_factors(const graph::GraphUpdate& update) {
   for (const graph::FactorPointer& factor : update.factors.factors()) pending_.factors.add(factor);
-  for (const auto& [key, value] : update.values.all()) pending_.values.insert(key, value);
+  for (const auto& [key, value] : update.values.all()) {
+    if (!smoother_.estimate().exists(key)) pending_.values.insert(key, value);  // known: its estimate stays
+  }
 }
 
 Status KeyframeGraph::add_gps(Timestamp time, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,

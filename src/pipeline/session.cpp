@@ -190,7 +190,7 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   if (session_config.mode == SessionMode::kReplay) session_config.backend.smoother.background_batch = false;
   // GPS factors hold fixes the filter fused, IMU and landmark factors (visual_inertial_factors)
   // the measurements the visual-inertial odometry fused: the graph corrects the filter at loop
-  // closures only. (Measured on seven simulated flights and walks: moving the filter onto the
+  // closures only. (Measured on six simulated flights and walks: moving the filter onto the
   // visual-inertial graph's newest keyframe after every update doubled its error or worse.)
   const bool visual_inertial_graph = session_config.visual_inertial_factors && config.frontend.type == config::FrontendType::kMsckf;
   if ((session_config.gnss_factors && configures_gnss(config)) || visual_inertial_graph) session_config.backend.correct_on_loop_closures_only = true;
@@ -272,10 +272,10 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
       keyframe.relative_covariance.reset();
       restart_graph_ = false;
     }
-    // Visual-inertial: the IMU and landmark factors (the IMU factor replaces the relative motion).
+    // Visual-inertial: the IMU and landmark factors.
     std::optional<VisualInertialFactors::KeyframeFactors> inertial;
-    if (VisualInertialFactors* factors = camera_odometry_ ? camera_odometry_->keyframe_factors() : nullptr;
-        factors != nullptr && config_.visual_inertial_factors) {
+    VisualInertialFactors* factors = camera_odometry_ && config_.visual_inertial_factors ? camera_odometry_->keyframe_factors() : nullptr;
+    if (factors != nullptr) {
       if (keyframe.keyframe_id == 0 || !keyframe.T_previous_current) factors->restart();
       const std::optional<graph::ImuBias> bias = camera_odometry_->imu_bias_body();
       if (bias) {
@@ -293,6 +293,7 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
     }
     if (Status added = graph_->add_keyframe(keyframe); !added) {
       logger()->warn("session: keyframe {} not added to the graph: {}", keyframe.keyframe_id, added.error().message);
+      if (factors != nullptr) factors->restart();  // its factors are dropped: the next keyframe starts a new chain
       return;
     }
     if (inertial) {

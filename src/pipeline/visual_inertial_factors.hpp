@@ -101,7 +101,8 @@ class VisualInertialFactors {
   /// camera (at least min_depth_m); one that is not ends the landmark (a projection behind the
   /// camera cannot be evaluated: the optimizer could not start from there).
   KeyframeFactors keyframe(const msgs::Keyframe& keyframe, const graph::ImuBias& bias_body, const graph::Values& estimate);
-  /// The graph was replaced: the next keyframe starts a new chain, landmarks are forgotten.
+  /// The graph was replaced, or the last keyframe's factors were not added: the next keyframe
+  /// starts a new chain, landmarks are forgotten.
   void restart();
   /// The odometry started again in a new world of its own: tracks before and after do not
   /// triangulate together (landmarks already made keep their place).

@@ -9,6 +9,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "hanzo/fusion/graph/imu_factors.hpp"
+#include "hanzo/fusion/graph/keys.hpp"
 #include "hanzo/fusion/pipeline/keyframe_graph.hpp"
 #include "hanzo/fusion/sim/scenario.hpp"
 #include "hanzo/fusion/sim/scenario_simulation.hpp"
@@ -164,6 +166,41 @@ TEST(KeyframeGraph, GnssFixesAttachToKeyframesAndBadInputIsRefused) {
               HasSubstr("keyframe 7 is unknown"));
   EXPECT_THAT(backend.add_gps_at_keyframe(0, {0.0, 0.0, 0.0}, -Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero()).error().message,
               HasSubstr("covariance"));
+}
+
+// Factors from elsewhere (visual_inertial_factors.hpp) join the keyframes; a value given again
+// for a variable the graph has keeps the graph's estimate, and a new keyframe starts where the
+// graph has its predecessor, not where the frontend put it.
+TEST(KeyframeGraph, AddedFactorsJoinTheKeyframesAndKnownValuesKeepTheirEstimate) {
+  KeyframeGraphConfig config;
+  config.smoother.background_batch = false;
+  KeyframeGraph graph(config);
+  msgs::Keyframe first;
+  first.keyframe_id = 0;
+  first.timestamp = Timestamp::from_seconds(10.0);
+  first.pose_covariance = Eigen::Matrix<double, 6, 6>::Identity() * 1e-6;
+  ASSERT_TRUE(graph.add_keyframe(first).ok());
+  graph::GraphUpdate update;
+  update.values.insert(graph::L(7), Eigen::Vector3d(1.0, 2.0, 3.0));
+  update.factors.emplace<graph::PriorFactorVector3>(graph::L(7), Eigen::Vector3d(1.0, 2.0, 3.0),
+                                                    graph::GaussianNoise::from_sigmas(Eigen::Vector3d::Constant(0.1)).value());
+  graph.add_factors(update);
+  ASSERT_TRUE(graph.process().ok());
+  graph::GraphUpdate again;
+  again.values.insert(graph::L(7), Eigen::Vector3d(50.0, 50.0, 50.0));
+  graph.add_factors(again);
+  msgs::Keyframe second = first;
+  second.keyframe_id = 1;
+  second.timestamp = Timestamp::from_seconds(11.0);
+  second.T_world_body = msgs::Pose::from_se3(SE3(SO3(), Eigen::Vector3d(5.0, 0.0, 0.0)));  // the frontend's world moved
+  second.previous_keyframe_id = 0;
+  second.T_previous_current = msgs::Pose::from_se3(SE3(SO3(), Eigen::Vector3d(1.0, 0.0, 0.0)));
+  second.relative_covariance = Eigen::Matrix<double, 6, 6>::Identity() * 1e-4;
+  EXPECT_NEAR((graph.initial_pose(second).translation() - Eigen::Vector3d(1.0, 0.0, 0.0)).norm(), 0.0, 1e-9);
+  ASSERT_TRUE(graph.add_keyframe(second).ok());
+  ASSERT_TRUE(graph.process().ok());
+  EXPECT_NEAR((graph.smoother().estimate().at<Eigen::Vector3d>(graph::L(7)).value() - Eigen::Vector3d(1.0, 2.0, 3.0)).norm(), 0.0, 1e-6);
+  EXPECT_NEAR((graph.optimized_pose(1)->translation() - Eigen::Vector3d(1.0, 0.0, 0.0)).norm(), 0.0, 1e-6);
 }
 
 }  // namespace

@@ -75,7 +75,8 @@ class KeyframeGraph {
   /// pose for the first one.
   SE3 initial_pose(const msgs::Keyframe& keyframe) const;
   /// Queues factors and the initial values of the variables they introduce, on keyframes
-  /// added so far (IMU preintegration, landmark projections: visual_inertial_factors.hpp).
+  /// added so far (IMU preintegration, landmark projections: visual_inertial_factors.hpp). A
+  /// value for a variable the graph already has is ignored (its estimate stays).
   void add_factors(const graph::GraphUpdate& update);
   /// A GNSS position (world ENU m, covariance m^2) at `time`, through the antenna's lever arm
   /// (body frame). Queued until process() finds the keyframe within gps_max_time_offset_s

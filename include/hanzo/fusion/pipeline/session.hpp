@@ -136,7 +136,7 @@ struct SessionConfig {
   /// GNSS fixes the filter fused become GPS factors of the keyframe graph.
   bool gnss_factors = true;
   /// frontend.type msckf: the keyframe graph holds IMU preintegration and landmark projection
-  /// factors (visual_inertial_factors.hpp) instead of the odometry's relative motions.
+  /// factors (visual_inertial_factors.hpp), the odometry's relative motions only as a weak anchor.
   bool visual_inertial_factors = true;
   lidar::LoopClosureConfig loop;
   double loop_translation_sigma = 0.05;  ///< m, loop closure factors (detected and manual)
