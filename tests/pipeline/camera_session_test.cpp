@@ -290,7 +290,8 @@ TEST(CameraSession, VisualInertialOdometryClosesLoopsOverTheDronesFigureEights) 
   EXPECT_EQ(looped.mapping.visual_loop_closures, looped.mapping.loop_closures);
   EXPECT_EQ(open.mapping.loop_closures, 0u);
   EXPECT_LT(looped.ape_se3_m, 0.005 * looped.distance_m);
-  EXPECT_LT(looped.optimized_ape_se3_m, 1.05 * open.optimized_ape_se3_m);
+  // The visual-inertial graph's loops pull its whole trajectory in (measured 0.046 against 0.109 m).
+  EXPECT_LT(looped.optimized_ape_se3_m, 0.7 * open.optimized_ape_se3_m);
   EXPECT_LT(looped.ape_se3_m, 1.15 * open.ape_se3_m);
 }
 
