@@ -23,7 +23,8 @@ VisualInertialFactors::VisualInertialFactors(std::vector<Camera> cameras, const 
       imu_(imu),
       accel_bias_random_walk_(accel_bias_random_walk),
       gyro_bias_random_walk_(gyro_bias_random_walk),
-      config_(config) {}
+      config_(config),
+      projection_noise_(graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(config.pixel_sigma)).value()) {}
 
 void VisualInertialFactors::add_imu(const estimate::ImuSample& sample) {
   if (!samples_.empty() && sample.timestamp <= samples_.back().timestamp) return;
@@ -39,13 +40,13 @@ void VisualInertialFactors::add_frame(Timestamp time, const SE3& T_odometry_body
   while ((time - frames_.front().time).seconds() > kFrameHistorySeconds) frames_.pop_front();
 }
 
-const VisualInertialFactors::Frame* VisualInertialFactors::frame_for(Timestamp keyframe_time) const {
+std::deque<VisualInertialFactors::Frame>::const_iterator VisualInertialFactors::frame_for(Timestamp keyframe_time) const {
   for (auto it = frames_.rbegin(); it != frames_.rend(); ++it) {
     if (it->time > keyframe_time) continue;
     if ((keyframe_time - it->time).seconds() > config_.max_frame_gap_s) break;
-    return &*it;
+    return std::prev(it.base());
   }
-  return nullptr;
+  return frames_.end();
 }
 
 void VisualInertialFactors::odometry_restarted() { tracks_.clear(); }
@@ -95,10 +96,10 @@ void VisualInertialFactors::add_projection(KeyframeFactors& out, uint64_t featur
   PinholeCamera camera;
   camera.fx = camera.fy = focal;
   camera.min_depth = 1e-3;
-  const graph::GaussianNoise noise = graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(config_.pixel_sigma)).value();
   out.update.factors.emplace_robust<graph::ProjectionFactor>(graph::RobustKernel{graph::RobustKernel::Type::kHuber, config_.huber_threshold},
                                                              graph::X(view.keyframe), graph::L(feature), focal * view.normalized, camera,
-                                                             view.T_keyframe_frame * cameras_[static_cast<size_t>(view.camera)].T_body_camera, noise);
+                                                             view.T_keyframe_frame * cameras_[static_cast<size_t>(view.camera)].T_body_camera,
+                                                             projection_noise_);
   ++out.projections;
 }
 
@@ -142,15 +143,14 @@ VisualInertialFactors::KeyframeFactors VisualInertialFactors::keyframe(const msg
     }
   }
   // The camera frame just before the keyframe, and the body's motion from the keyframe back to it.
-  const Frame* frame = frame_for(keyframe.timestamp);
-  const std::optional<SE3> T_keyframe_frame = frame != nullptr ? body_motion_back(keyframe, bias, frame->time) : std::nullopt;
+  const auto frame = frame_for(keyframe.timestamp);
+  const std::optional<SE3> T_keyframe_frame = frame != frames_.end() ? body_motion_back(keyframe, bias, frame->time) : std::nullopt;
   // The velocity: the odometry's (its poses around the frame, in the graph's world) where there
   // are frames on both sides, else the IMU's prediction, else the keyframe's.
   if (T_keyframe_frame) {
-    const auto at = std::find_if(frames_.begin(), frames_.end(), [&](const Frame& f) { return &f == frame; });
-    if (at != frames_.begin() && std::next(at) != frames_.end()) {
-      const Frame& before = *std::prev(at);
-      const Frame& after = *std::next(at);
+    if (frame != frames_.begin() && std::next(frame) != frames_.end()) {
+      const Frame& before = *std::prev(frame);
+      const Frame& after = *std::next(frame);
       const double span = (after.time - before.time).seconds();
       if (span > 0.0 && span <= 2.0 * config_.max_frame_gap_s) {
         const SO3 R_world_odometry = (T_world_body * *T_keyframe_frame * frame->T_odometry_body.inverse()).rotation();
@@ -234,8 +234,8 @@ void VisualInertialFactors::make_landmarks(KeyframeFactors& out, const SE3& T_wo
     ++out.new_landmarks;
     landmarks_.insert(feature);
     made_.insert(feature);
+    tracks_.erase(feature);  // (views is not used after this)
   }
-  for (uint64_t feature : landmarks_) tracks_.erase(feature);
 }
 
 }  // namespace hanzo::fusion::pipeline

@@ -126,8 +126,8 @@ class VisualInertialFactors {
     Timestamp time;
   };
   // The frame a keyframe at `keyframe_time` uses: the last one at or before it, at most
-  // max_frame_gap_s earlier (frames are tracked ahead of the Frontend's keyframes); null if none.
-  const Frame* frame_for(Timestamp keyframe_time) const;
+  // max_frame_gap_s earlier (frames are tracked ahead of the Frontend's keyframes); end() if none.
+  std::deque<Frame>::const_iterator frame_for(Timestamp keyframe_time) const;
   std::optional<graph::ImuPreintegration> preintegrate(Timestamp from, Timestamp to, const graph::ImuBias& bias) const;
   // T_keyframe_frame: the body's motion from the keyframe back to a frame before it (its IMU).
   std::optional<SE3> body_motion_back(const msgs::Keyframe& keyframe, const graph::ImuBias& bias, Timestamp frame_time) const;
@@ -142,6 +142,7 @@ class VisualInertialFactors {
   double accel_bias_random_walk_;
   double gyro_bias_random_walk_;
   VisualInertialFactorsConfig config_;
+  graph::GaussianNoise projection_noise_;  // pixel_sigma, both axes
   std::deque<estimate::ImuSample> samples_;
   std::deque<Frame> frames_;  // the last seconds'
   std::optional<Anchor> previous_;                  // the last keyframe of the chain
