@@ -11,6 +11,7 @@
 #include <omp.h>
 
 #include "hanzo/fusion/graph/pose_factors.hpp"
+#include "hanzo/fusion/graph/projection_factors.hpp"
 
 namespace hanzo::fusion::graph {
 namespace {
@@ -177,6 +178,42 @@ class PosePairCost final : public ceres::SizedCostFunction<FactorType::Residual:
   std::shared_ptr<const FactorType> factor_;
 };
 
+// The fast path for landmark projections (most of a visual graph): an SE3 pose and a world point.
+template <typename FactorType>
+class ProjectionCost final : public ceres::SizedCostFunction<FactorType::Residual::RowsAtCompileTime, 7, 3> {
+ public:
+  static constexpr int kResiduals = FactorType::Residual::RowsAtCompileTime;
+  explicit ProjectionCost(std::shared_ptr<const FactorType> factor) : factor_(std::move(factor)) {}
+
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    typename FactorType::PoseJacobian d_pose;
+    typename FactorType::PointJacobian d_point;
+    const bool want_pose = jacobians != nullptr && jacobians[0] != nullptr, want_point = jacobians != nullptr && jacobians[1] != nullptr;
+    const std::optional<typename FactorType::Residual> r = factor_->whitened_error(se3_from(parameters[0]), Eigen::Map<const Eigen::Vector3d>{parameters[1]},
+                                                                                   want_pose ? &d_pose : nullptr, want_point ? &d_point : nullptr);
+    if (!r || !r->allFinite()) return false;
+    Eigen::Map<typename FactorType::Residual>{residuals} = *r;
+    if (want_pose) {
+      Eigen::Map<Eigen::Matrix<double, kResiduals, 7, Eigen::RowMajor>> J(jacobians[0]);
+      J.template leftCols<6>() = d_pose;
+      J.col(6).setZero();
+    }
+    if (want_point) Eigen::Map<Eigen::Matrix<double, kResiduals, 3, Eigen::RowMajor>>{jacobians[1]} = d_point;
+    return true;
+  }
+
+ private:
+  std::shared_ptr<const FactorType> factor_;
+};
+
+template <typename FactorType>
+ceres::CostFunction* projection_cost(const FactorPointer& factor, const std::vector<Value>& prototypes) {
+  auto typed = std::dynamic_pointer_cast<const FactorType>(factor);
+  if (!typed || typed->dimension() != FactorType::Residual::RowsAtCompileTime) return nullptr;
+  if (prototypes.size() != 2 || !std::holds_alternative<SE3>(prototypes[0]) || !std::holds_alternative<Eigen::Vector3d>(prototypes[1])) return nullptr;
+  return new ProjectionCost<FactorType>(typed);
+}
+
 // The fast path's cost for `factor` when it is a pose-pair factor of Pose on two variables of
 // that type (a factor on variables of another type keeps the generic path, whose evaluate()
 // refuses them by name).
@@ -191,7 +228,8 @@ ceres::CostFunction* pose_pair_cost(const FactorPointer& factor, const std::vect
 ceres::CostFunction* cost_of(const FactorPointer& factor, std::vector<Value> prototypes) {
   for (ceres::CostFunction* fast : {pose_pair_cost<BetweenFactor, SE2, 3>(factor, prototypes), pose_pair_cost<BetweenFactor, SE3, 7>(factor, prototypes),
                                     pose_pair_cost<ChordalBetweenFactor, SE2, 3>(factor, prototypes),
-                                    pose_pair_cost<ChordalBetweenFactor, SE3, 7>(factor, prototypes)}) {
+                                    pose_pair_cost<ChordalBetweenFactor, SE3, 7>(factor, prototypes),
+                                    projection_cost<ProjectionFactor>(factor, prototypes), projection_cost<StereoProjectionFactor>(factor, prototypes)}) {
     if (fast != nullptr) return fast;
   }
   return new FactorCost(factor, std::move(prototypes));

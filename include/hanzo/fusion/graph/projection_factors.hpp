@@ -11,6 +11,8 @@
 // A landmark at or behind the camera (depth <= the camera's min_depth) fails to evaluate: the
 // optimizer rejects a step that puts it there (GTSAM's cheirality exception).
 
+#include <optional>
+
 #include "hanzo/fusion/core/pinhole_camera.hpp"
 #include "hanzo/fusion/graph/factor.hpp"
 
@@ -22,8 +24,18 @@ class ProjectionFactor final : public Factor {
   ProjectionFactor(Key pose, Key landmark, const Eigen::Vector2d& measured, const PinholeCamera& camera, const SE3& T_body_camera,
                    GaussianNoise noise)
       : Factor({pose, landmark}), measured_(measured), camera_(camera), T_body_camera_(T_body_camera), noise_(std::move(noise)) {}
-  int dimension() const override { return 2; }
+  int dimension() const override { return noise_.dimension(); }
+  /// Fails when the landmark is at or behind the camera or the noise is not 2x2.
   Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
+
+  using Residual = Eigen::Vector2d;
+  using PoseJacobian = Eigen::Matrix<double, 2, 6>;
+  using PointJacobian = Eigen::Matrix<double, 2, 3>;
+  /// The whitened residual at (T_world_body, p_world) and, when asked, its Jacobians:
+  /// evaluate()'s work without the Values lookup and in fixed-size types (the batch optimizer's
+  /// fast path). nullopt when the landmark is at or behind the camera. Requires dimension() == 2.
+  std::optional<Residual> whitened_error(const SE3& T_world_body, const Eigen::Vector3d& p_world, PoseJacobian* d_pose,
+                                         PointJacobian* d_point) const;
 
  private:
   Eigen::Vector2d measured_;
@@ -43,8 +55,18 @@ class StereoProjectionFactor final : public Factor {
                          const SE3& T_body_camera, GaussianNoise noise)
       : Factor({pose, landmark}), measured_(measured), camera_(camera), baseline_(baseline), T_body_camera_(T_body_camera),
         noise_(std::move(noise)) {}
-  int dimension() const override { return 3; }
+  int dimension() const override { return noise_.dimension(); }
+  /// Fails when the landmark is at or behind the camera, the camera has distortion or the
+  /// noise is not 3x3.
   Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
+
+  using Residual = Eigen::Vector3d;
+  using PoseJacobian = Eigen::Matrix<double, 3, 6>;
+  using PointJacobian = Eigen::Matrix3d;
+  /// As ProjectionFactor::whitened_error; nullopt also when the camera has distortion.
+  /// Requires dimension() == 3.
+  std::optional<Residual> whitened_error(const SE3& T_world_body, const Eigen::Vector3d& p_world, PoseJacobian* d_pose,
+                                         PointJacobian* d_point) const;
 
  private:
   Eigen::Vector3d measured_;
