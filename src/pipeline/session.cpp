@@ -198,6 +198,15 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   // Ceres' default trust region (the pose graphs' 1e8, nearly Gauss-Newton, had every step of
   // some updates rejected on the simulated walks, leaving the graph stuck).
   if (visual_inertial_graph) session_config.backend.smoother.batch.initial_trust_region_radius = 1e4;
+  // Each keyframe brings X, V, B and up to 60 landmarks: the smoother's window of recent
+  // variables must span a few keyframes (its pose-graph default, 50, is less than one here, and a
+  // walk started in motion with fewer landmarks per keyframe then diverged). Two factor hops
+  // (keyframe -> landmark -> the keyframes that saw it) reach what a new keyframe moves; a third
+  // (all those keyframes' landmarks) cost a quarter of the run and changed no estimate.
+  if (visual_inertial_graph) {
+    session_config.backend.smoother.recent_variables = std::max(session_config.backend.smoother.recent_variables, 200);
+    session_config.backend.smoother.neighbour_hops = std::min(session_config.backend.smoother.neighbour_hops, 2);
+  }
   std::unique_ptr<CameraOdometry> camera_odometry;
   if (session_config.mapping) HANZO_ASSIGN_OR_RETURN(camera_odometry, CameraOdometry::create(config, calibration));
   auto session = std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), planar_laser,

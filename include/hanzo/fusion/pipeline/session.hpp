@@ -137,6 +137,9 @@ struct SessionConfig {
   bool gnss_factors = true;
   /// frontend.type msckf: the keyframe graph holds IMU preintegration and landmark projection
   /// factors (visual_inertial_factors.hpp), the odometry's relative motions only as a weak anchor.
+  /// Such a graph corrects the Frontend at loop closures only, and its smoother re-optimizes at
+  /// least the newest 200 variables (a few keyframes with their landmarks) and at most 2 factor
+  /// hops around a new keyframe; Levenberg-Marquardt starts from a trust region of 1e4.
   bool visual_inertial_factors = true;
   lidar::LoopClosureConfig loop;
   double loop_translation_sigma = 0.05;  ///< m, loop closure factors (detected and manual)
