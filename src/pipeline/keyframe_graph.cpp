@@ -139,9 +139,14 @@ Result<KeyframeGraphUpdate> KeyframeGraph::process(Frontend* frontend) {
   }
   pending_ = graph::GraphUpdate{};
   if (config_.batch_on_loop_closure && loop_closure_pending_) {
+    // Loop closures soon after the last batch wait (their factors are in) for the next one.
+    const Timestamp now = latest_keyframe_ ? keyframe_times_.at(*latest_keyframe_) : Timestamp();
+    if (last_loop_batch_ && (now - *last_loop_batch_).seconds() < config_.loop_batch_interval_s) return update;
     if (Result<graph::OptimizationSummary> batch = smoother_.wait_for_batch(); !batch) {
       return Error(fmt::format("keyframe graph: {}", batch.error().message));
     }
+    last_loop_batch_ = now;
+    update.loop_batch = true;
   }
   const bool loop_closed = loop_closure_pending_;
   loop_closure_pending_ = false;

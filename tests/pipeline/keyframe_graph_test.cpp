@@ -39,10 +39,19 @@ double position_rmse(const std::vector<std::pair<SE3, SE3>>& estimate_and_truth)
   return std::sqrt(squared / static_cast<double>(estimate_and_truth.size()));
 }
 
+struct LoopClosureRun {
+  int closures = 0;
+  int corrections = 0;
+  std::vector<Timestamp> loop_batches;  // keyframe times of the loop closures' batches
+  size_t keyframes = 0;
+  double optimized_rmse = 0.0, dead_reckoned_rmse = 0.0;            // keyframe positions
+  double final_with_backend = 0.0, final_dead_reckoned = 0.0;      // the live frontend at the end
+};
+
 // Loop closures as a place recognizer would report them on the second lap: for a keyframe
 // within 0.8 m of one at least 40 keyframes older, the true relative pose with 2 cm / 0.2 deg
 // noise; plus one wrong closure (5 m off) that the DCS kernel must ignore.
-TEST(KeyframeGraph, LoopClosuresCorrectTheDeadReckonedTrajectoryAndTheFrontend) {
+LoopClosureRun run_warehouse_loop_closures(double loop_batch_interval_s) {
   const sim::Scenario scenario = dead_reckoning_warehouse();
   auto simulation = sim::ScenarioSimulation::create(scenario).value();
   const sim::SplineTrajectory& trajectory = simulation->trajectory();
@@ -54,6 +63,7 @@ TEST(KeyframeGraph, LoopClosuresCorrectTheDeadReckonedTrajectoryAndTheFrontend) 
   KeyframeGraphConfig config;  // deterministic: a full batch after loop closures, none in the background
   config.smoother.background_batch = false;
   config.batch_on_loop_closure = true;
+  config.loop_batch_interval_s = loop_batch_interval_s;
   KeyframeGraph backend(config);
   backend.attach(*session);
   std::mt19937_64 random(4);
@@ -61,14 +71,15 @@ TEST(KeyframeGraph, LoopClosuresCorrectTheDeadReckonedTrajectoryAndTheFrontend) 
   Eigen::Matrix<double, 6, 6> closure_covariance = Eigen::Matrix<double, 6, 6>::Identity();
   closure_covariance.topLeftCorner<3, 3>() *= 0.02 * 0.02;
   closure_covariance.bottomRightCorner<3, 3>() *= 0.0035 * 0.0035;
-  int closures = 0, corrections = 0;
+  LoopClosureRun run;
   bool wrong_closure_added = false;
   size_t known_keyframes = 0;
   const Status status = simulation->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) {
     (void)frontend_only->push(sensor.name, message);
     (void)session->push(sensor.name, message);
     const KeyframeGraphUpdate update = backend.process(session.get()).value();
-    if (update.corrected_session) ++corrections;
+    if (update.corrected_session) ++run.corrections;
+    if (update.loop_batch) run.loop_batches.push_back(*backend.keyframe_time(backend.keyframe_ids().back()));
     const std::vector<uint64_t> ids = backend.keyframe_ids();
     for (; known_keyframes < ids.size(); ++known_keyframes) {
       const uint64_t id = ids[known_keyframes];
@@ -79,7 +90,7 @@ TEST(KeyframeGraph, LoopClosuresCorrectTheDeadReckonedTrajectoryAndTheFrontend) 
         SE3::Tangent noise;
         for (int k = 0; k < 6; ++k) noise(k) = normal(random) * (k < 3 ? 0.02 : 0.0035);
         EXPECT_TRUE(backend.add_loop_closure(older, id, older_truth.inverse() * truth * SE3::exp(noise), closure_covariance).ok());
-        ++closures;
+        ++run.closures;
         if (!wrong_closure_added) {
           EXPECT_TRUE(backend.add_loop_closure(older / 2, id, SE3(SO3(), Eigen::Vector3d(5.0, 0.0, 0.0)), closure_covariance).ok());
           wrong_closure_added = true;
@@ -89,11 +100,11 @@ TEST(KeyframeGraph, LoopClosuresCorrectTheDeadReckonedTrajectoryAndTheFrontend) 
     }
     return ok_status();
   });
-  ASSERT_TRUE(status.ok());
+  EXPECT_TRUE(status.ok());
   session->flush();
   frontend_only->flush();
-  ASSERT_TRUE(backend.process(session.get()).ok());
-  ASSERT_TRUE(backend.smoother().wait_for_batch().ok());
+  EXPECT_TRUE(backend.process(session.get()).ok());
+  EXPECT_TRUE(backend.smoother().wait_for_batch().ok());
 
   std::vector<std::pair<SE3, SE3>> optimized, dead_reckoned;
   for (uint64_t id : backend.keyframe_ids()) {
@@ -102,7 +113,9 @@ TEST(KeyframeGraph, LoopClosuresCorrectTheDeadReckonedTrajectoryAndTheFrontend) 
   for (const msgs::Keyframe& keyframe : frontend_only_keyframes) {
     dead_reckoned.emplace_back(keyframe.T_world_body.to_se3(), trajectory.sample(keyframe.timestamp).T_world_body);
   }
-  const double optimized_rmse = position_rmse(optimized), dead_reckoned_rmse = position_rmse(dead_reckoned);
+  run.keyframes = optimized.size();
+  run.optimized_rmse = position_rmse(optimized);
+  run.dead_reckoned_rmse = position_rmse(dead_reckoned);
   // The live frontend estimate at the end, with and without the backend's corrections, aligned
   // like the keyframes (by the first keyframe).
   const auto final_error = [&](const Frontend& fused, const SE3& first_keyframe, Timestamp first_time) {
@@ -110,17 +123,36 @@ TEST(KeyframeGraph, LoopClosuresCorrectTheDeadReckonedTrajectoryAndTheFrontend) 
     const msgs::PoseEstimate pose = *fused.latest_pose();
     return ((alignment * pose.T_world_body.to_se3()).translation() - trajectory.sample(pose.timestamp).T_world_body.translation()).norm();
   };
-  const double final_with_backend = final_error(*session, *backend.frontend_pose(0), *backend.keyframe_time(0));
-  const double final_dead_reckoned =
+  run.final_with_backend = final_error(*session, *backend.frontend_pose(0), *backend.keyframe_time(0));
+  run.final_dead_reckoned =
       final_error(*frontend_only, frontend_only_keyframes.front().T_world_body.to_se3(), frontend_only_keyframes.front().timestamp);
-  std::printf("warehouse, IMU + wheels, %zu keyframes, %d loop closures: keyframe position RMSE %.3f m dead reckoning, %.3f m "
-              "with the backend; final frontend error %.3f m -> %.3f m (%d corrections)\n",
-              optimized.size(), closures, dead_reckoned_rmse, optimized_rmse, final_dead_reckoned, final_with_backend, corrections);
-  EXPECT_GT(closures, 20);
-  EXPECT_GT(optimized.size(), 100u);
-  EXPECT_LT(optimized_rmse, 0.4 * dead_reckoned_rmse);
-  EXPECT_LT(final_with_backend, 0.1 * final_dead_reckoned);
-  EXPECT_GT(corrections, 100);
+  std::printf("warehouse, IMU + wheels, %zu keyframes, %d loop closures, %zu loop batches (at most one per %.0f s): keyframe position RMSE "
+              "%.3f m dead reckoning, %.3f m with the backend; final frontend error %.3f m -> %.3f m (%d corrections)\n",
+              run.keyframes, run.closures, run.loop_batches.size(), loop_batch_interval_s, run.dead_reckoned_rmse, run.optimized_rmse,
+              run.final_dead_reckoned, run.final_with_backend, run.corrections);
+  return run;
+}
+
+TEST(KeyframeGraph, LoopClosuresCorrectTheDeadReckonedTrajectoryAndTheFrontend) {
+  const LoopClosureRun run = run_warehouse_loop_closures(0.0);
+  EXPECT_GT(run.closures, 20);
+  EXPECT_GT(run.keyframes, 100u);
+  EXPECT_LT(run.optimized_rmse, 0.4 * run.dead_reckoned_rmse);
+  EXPECT_LT(run.final_with_backend, 0.1 * run.final_dead_reckoned);
+  EXPECT_GT(run.corrections, 100);
+  EXPECT_GE(run.loop_batches.size(), 20u);  // one per update with loop closures
+}
+
+// Loop batches at most every 10 s: the closures in between wait for the next one, and the
+// trajectory and the live estimate end up as well corrected.
+TEST(KeyframeGraph, LoopBatchesKeepTheirIntervalAndCorrectAsWell) {
+  const LoopClosureRun run = run_warehouse_loop_closures(10.0);
+  EXPECT_GT(run.closures, 20);
+  ASSERT_GE(run.loop_batches.size(), 2u);
+  EXPECT_LT(run.loop_batches.size(), static_cast<size_t>(run.closures) / 2);
+  for (size_t i = 1; i < run.loop_batches.size(); ++i) EXPECT_GE((run.loop_batches[i] - run.loop_batches[i - 1]).seconds(), 10.0);
+  EXPECT_LT(run.optimized_rmse, 0.4 * run.dead_reckoned_rmse);
+  EXPECT_LT(run.final_with_backend, 0.1 * run.final_dead_reckoned);
 }
 
 TEST(KeyframeGraph, GnssFixesAttachToKeyframesAndBadInputIsRefused) {

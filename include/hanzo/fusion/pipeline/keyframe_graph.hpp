@@ -39,6 +39,12 @@ struct KeyframeGraphConfig {
   /// smoother.background_batch = false this makes the backend deterministic (offline runs,
   /// tests); in real time it blocks process() for the length of a batch.
   bool batch_on_loop_closure = false;
+  /// With batch_on_loop_closure: loop closures within this long (keyframe time) of the last
+  /// loop closure's batch join through the incremental update only and correct the Frontend at
+  /// the first update after the interval, with that update's batch (s; 0: every loop closure
+  /// runs its batch). Bounds the batches' share of the time where the same places come back
+  /// often (a figure eight flown over and over closes a loop every few seconds).
+  double loop_batch_interval_s = 0.0;
   /// Correct the session only after updates that add loop closures (information the filter
   /// does not have). For graphs that also hold measurements the filter fused (GPS factors):
   /// moving the filter onto a smoothed estimate of its own measurements counts them twice;
@@ -54,6 +60,7 @@ struct KeyframeGraphUpdate {
   int factors_added = 0;
   int fixes_dropped = 0;            ///< GNSS fixes no keyframe came near
   bool corrected_session = false;   ///< apply_correction was called
+  bool loop_batch = false;          ///< a full batch ran for loop closures (batch_on_loop_closure)
   double correction_translation_m = 0.0;  ///< how far the correction moved the latest keyframe
 };
 
@@ -117,6 +124,7 @@ class KeyframeGraph {
   std::map<int64_t, uint64_t> keyframe_at_;  // timestamp ns -> keyframe id
   std::optional<uint64_t> latest_keyframe_;
   bool loop_closure_pending_ = false;
+  std::optional<Timestamp> last_loop_batch_;  // keyframe time of the last loop closure's batch
   struct Fix {
     Timestamp time;
     Eigen::Vector3d position_world;
