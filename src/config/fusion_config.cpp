@@ -104,7 +104,7 @@ Status validate(const FusionConfig& config) {
   if (Status s = non_negative(frontend.gate_recovery_s, "frontend.gate_recovery"); !s) return s;
   for (const auto& [value, field] : {std::pair<double, std::string_view>{frontend.max_future_s, "frontend.max_future"},
                                      {frontend.static_alignment_s, "frontend.static_alignment"},
-                                     {frontend.keyframe_interval_s, "frontend.keyframe_interval"}}) {
+                                     {frontend.keyframe_interval(), "frontend.keyframe_interval"}}) {
     if (!std::isfinite(value) || value <= 0.0) {
       return Error{fmt::format("FusionConfig.{}: {} (expected > 0 s)", field, value), std::string(field)};
     }

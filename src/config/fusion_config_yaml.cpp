@@ -96,11 +96,7 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
   HANZO_ASSIGN_OR_RETURN(frontend.gate_recovery_s, yaml::non_negative_or(node["gate_recovery"], frontend.gate_recovery_s));
   if (node["max_future"].present()) HANZO_ASSIGN_OR_RETURN(frontend.max_future_s, positive_seconds(node["max_future"]));
   if (node["static_alignment"].present()) HANZO_ASSIGN_OR_RETURN(frontend.static_alignment_s, positive_seconds(node["static_alignment"]));
-  if (node["keyframe_interval"].present()) {
-    HANZO_ASSIGN_OR_RETURN(frontend.keyframe_interval_s, positive_seconds(node["keyframe_interval"]));
-  } else if (frontend.type == FrontendType::kMsckf) {
-    frontend.keyframe_interval_s = kVisualInertialKeyframeInterval;
-  }
+  if (node["keyframe_interval"].present()) HANZO_ASSIGN_OR_RETURN(frontend.keyframe_interval_s, positive_seconds(node["keyframe_interval"]));
   HANZO_ASSIGN_OR_RETURN(frontend.planar, bool_or(node["planar"], frontend.planar));
   HANZO_ASSIGN_OR_RETURN(frontend.zero_velocity_updates, bool_or(node["zero_velocity_updates"], frontend.zero_velocity_updates));
   if (node["datum"].present()) HANZO_ASSIGN_OR_RETURN(frontend.datum, parse_datum(node["datum"]));
@@ -365,9 +361,7 @@ std::string to_yaml(const FusionConfig& config) {
   if (f.static_alignment_s != defaults.static_alignment_s) {
     out += fmt::format("    static_alignment: {}  # s\n", format_double(f.static_alignment_s));
   }
-  if (f.keyframe_interval_s != (f.type == FrontendType::kMsckf ? kVisualInertialKeyframeInterval : defaults.keyframe_interval_s)) {
-    out += fmt::format("    keyframe_interval: {}  # s\n", format_double(f.keyframe_interval_s));
-  }
+  if (f.keyframe_interval_s) out += fmt::format("    keyframe_interval: {}  # s\n", format_double(*f.keyframe_interval_s));
   if (f.initial_yaw) out += fmt::format("    initial_yaw: {}  # rad, ENU\n", format_double(*f.initial_yaw));
   if (f.planar) out += "    planar: true\n";
   if (!f.zero_velocity_updates) out += "    zero_velocity_updates: false\n";

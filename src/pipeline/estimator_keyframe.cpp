@@ -11,7 +11,7 @@ std::optional<msgs::Keyframe> Estimator::maybe_keyframe(Timestamp time) {
   // Until the GNSS course gives the heading, the poses' world frame is not known: the backend
   // gets no keyframes (their motion would include the heading's alignment as a jump).
   if (heading_pending_) return std::nullopt;
-  if (last_keyframe_ && (time - last_keyframe_->time).seconds() < frontend_.keyframe_interval_s) return std::nullopt;
+  if (last_keyframe_ && (time - last_keyframe_->time).seconds() < frontend_.keyframe_interval()) return std::nullopt;
   const NavigationState state = filter_->state();
   const ErrorCovariance P = filter_->covariance();
   const SE3 T_world_body(state.R_world_body, state.position);

@@ -194,20 +194,19 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   // visual-inertial graph's newest keyframe after every update doubled its error or worse.)
   const bool visual_inertial_graph = session_config.visual_inertial_factors && config.frontend.type == config::FrontendType::kMsckf;
   if ((session_config.gnss_factors && configures_gnss(config)) || visual_inertial_graph) session_config.backend.correct_on_loop_closures_only = true;
-  // Landmarks make the graph far less linear than a pose graph: Levenberg-Marquardt starts from
-  // Ceres' default trust region (the pose graphs' 1e8, nearly Gauss-Newton, had every step of
-  // some updates rejected on the simulated walks, leaving the graph stuck).
-  if (visual_inertial_graph) session_config.backend.smoother.batch.initial_trust_region_radius = 1e4;
-  // Each keyframe brings X, V, B and up to 60 landmarks: the smoother's window of recent
-  // variables must span a few keyframes (its pose-graph default, 50, is less than one here, and a
-  // walk started in motion with fewer landmarks per keyframe then diverged). Two factor hops
-  // (keyframe -> landmark -> the keyframes that saw it) reach what a new keyframe moves; a third
-  // (all those keyframes' landmarks) cost a quarter of the run and changed no estimate. Each
-  // loop closure's batch re-optimizes every landmark: at most one every 10 s of keyframes (a
-  // drone over the same figure eights for 160 s closed 72 loops, and their batches took 40 % of
-  // the run).
+  // The visual-inertial graph's smoother. Landmarks make it far less linear than a pose graph:
+  // Levenberg-Marquardt starts from Ceres' default trust region (the pose graphs' 1e8, nearly
+  // Gauss-Newton, had every step of some updates rejected on the simulated walks, leaving the
+  // graph stuck). Each keyframe brings X, V, B and up to 60 landmarks: the window of recent
+  // variables must span several keyframes (the pose-graph default, 50, is less than one here;
+  // walks started in motion diverged with 50 and 200). Two factor hops (keyframe -> landmark ->
+  // the keyframes that saw it) reach what a new keyframe moves; a third (all those keyframes'
+  // landmarks) cost a quarter of the run and changed no estimate. A loop closure's batch
+  // re-optimizes every landmark: at most one every 10 s of keyframes (a drone over the same
+  // figure eights for 160 s closed 72 loops, and their batches took 40 % of the run).
   if (visual_inertial_graph) {
-    session_config.backend.smoother.recent_variables = std::max(session_config.backend.smoother.recent_variables, 200);
+    session_config.backend.smoother.batch.initial_trust_region_radius = 1e4;
+    session_config.backend.smoother.recent_variables = std::max(session_config.backend.smoother.recent_variables, 400);
     session_config.backend.smoother.neighbour_hops = std::min(session_config.backend.smoother.neighbour_hops, 2);
     session_config.backend.loop_batch_interval_s = std::max(session_config.backend.loop_batch_interval_s, 10.0);
   }

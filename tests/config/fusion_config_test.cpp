@@ -49,21 +49,28 @@ TEST(FusionConfig, DefaultsApplyWhereTheFileIsSilent) {
   EXPECT_EQ(loaded->sensors[0].topic, "/sensors/imu");
   EXPECT_EQ(loaded->sensors[0].body_frame, "imu_link");
   EXPECT_EQ(loaded->sensors[0].type, "");
-  EXPECT_EQ(loaded->frontend.keyframe_interval_s, 1.0);
+  EXPECT_EQ(loaded->frontend.keyframe_interval(), kDefaultKeyframeInterval);
 }
 
 TEST(FusionConfig, TheMsckfKeyframeIntervalDefaultsToHalfASecondAndRoundTrips) {
   const std::string head = "fusion:\n  frontend:\n    type: msckf\n";
   const std::string sensors = "  sensors:\n    imu:\n      rate: 100\n";
   const FusionConfig silent = parse_fusion_config(head + sensors, "fusion.yaml").value();
-  EXPECT_EQ(silent.frontend.keyframe_interval_s, kVisualInertialKeyframeInterval);
+  EXPECT_EQ(silent.frontend.keyframe_interval(), kVisualInertialKeyframeInterval);
   const FusionConfig one_second = parse_fusion_config(head + "    keyframe_interval: 1.0\n" + sensors, "fusion.yaml").value();
-  EXPECT_EQ(one_second.frontend.keyframe_interval_s, 1.0);
+  EXPECT_EQ(one_second.frontend.keyframe_interval(), 1.0);
   for (const FusionConfig& config : {silent, one_second}) {
     const Result<FusionConfig> reloaded = parse_fusion_config(to_yaml(config), "fusion.yaml");
     ASSERT_TRUE(reloaded.ok()) << reloaded.error().message;
     EXPECT_EQ(reloaded->frontend.keyframe_interval_s, config.frontend.keyframe_interval_s);
   }
+  // A configuration built in code gets the same defaults, and they follow the type.
+  FrontendConfig in_code;
+  EXPECT_EQ(in_code.keyframe_interval(), kDefaultKeyframeInterval);
+  in_code.type = FrontendType::kMsckf;
+  EXPECT_EQ(in_code.keyframe_interval(), kVisualInertialKeyframeInterval);
+  in_code.keyframe_interval_s = 2.0;
+  EXPECT_EQ(in_code.keyframe_interval(), 2.0);
 }
 
 TEST(FusionConfig, EachRuleGivesItsDocumentedError) {

@@ -81,10 +81,12 @@ struct ParticleFilterSettings {
   uint64_t seed = 1;                // random numbers: the same seed and input give the same output
 };
 
-/// s: the keyframe interval of frontend.type msckf read from YAML without one. Features tracked
-/// from one keyframe to the next become the visual-inertial graph's landmarks; measured on six
-/// simulated flights and walks, 0.5 s gave a graph 1.9-4x more accurate than 1 s (bench/RESULTS.md).
+/// s: the keyframe interval of frontend.type msckf when none is given. Features tracked from one
+/// keyframe to the next become the visual-inertial graph's landmarks; measured on six simulated
+/// flights and walks, 0.5 s gave a graph 1.9-4x more accurate than 1 s (bench/RESULTS.md).
 inline constexpr double kVisualInertialKeyframeInterval = 0.5;
+/// s: the keyframe interval of the other frontends when none is given (the spec's 1 Hz).
+inline constexpr double kDefaultKeyframeInterval = 1.0;
 
 /// hanzo-fusion's additions to the spec's frontend block (how the Frontend fuses; all optional).
 struct FrontendConfig {
@@ -110,9 +112,12 @@ struct FrontendConfig {
   /// Zero-velocity updates when the wheels stand still.
   bool zero_velocity_updates = true;
   /// s > 0: a Keyframe (pose + relative motion and covariance since the previous one) for the
-  /// backend every this many seconds (spec default 1 Hz). A YAML file with frontend.type msckf
-  /// and no keyframe_interval gets kVisualInertialKeyframeInterval instead.
-  double keyframe_interval_s = 1.0;
+  /// backend every this many seconds. Absent: kDefaultKeyframeInterval (the spec's 1 Hz), or
+  /// kVisualInertialKeyframeInterval for type msckf (keyframe_interval() says which applies).
+  std::optional<double> keyframe_interval_s;
+  double keyframe_interval() const {
+    return keyframe_interval_s.value_or(type == FrontendType::kMsckf ? kVisualInertialKeyframeInterval : kDefaultKeyframeInterval);
+  }
   /// WGS84 origin of the world ENU frame; when absent the first GNSS fix becomes the datum.
   std::optional<GeodeticPoint> datum;
   /// rad, ENU (0 = east, counter-clockwise): the start heading when it is known (a robot that

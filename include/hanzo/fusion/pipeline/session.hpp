@@ -138,7 +138,7 @@ struct SessionConfig {
   /// frontend.type msckf: the keyframe graph holds IMU preintegration and landmark projection
   /// factors (visual_inertial_factors.hpp), the odometry's relative motions only as a weak anchor.
   /// Such a graph corrects the Frontend at loop closures only, and its smoother re-optimizes at
-  /// least the newest 200 variables (a few keyframes with their landmarks) and at most 2 factor
+  /// least the newest 400 variables (several keyframes with their landmarks) and at most 2 factor
   /// hops around a new keyframe; Levenberg-Marquardt starts from a trust region of 1e4; loop
   /// closures run their batch at most every 10 s (backend.loop_batch_interval_s).
   bool visual_inertial_factors = true;
