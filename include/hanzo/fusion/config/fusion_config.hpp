@@ -83,7 +83,7 @@ struct ParticleFilterSettings {
 
 /// s: the keyframe interval of frontend.type msckf when none is given. Features tracked from one
 /// keyframe to the next become the visual-inertial graph's landmarks; measured on six simulated
-/// flights and walks, 0.5 s gave a graph 1.9-4x more accurate than 1 s (bench/RESULTS.md).
+/// flights and walks, 0.5 s gave a graph 1.1-3.2x more accurate than 1 s (bench/RESULTS.md).
 inline constexpr double kVisualInertialKeyframeInterval = 0.5;
 /// s: the keyframe interval of the other frontends when none is given (the spec's 1 Hz).
 inline constexpr double kDefaultKeyframeInterval = 1.0;
