@@ -41,7 +41,7 @@ packages=(
   python3-grpcio python3-protobuf python3-mypy
   # service: REST (cpp-httplib), storage (SQLite, PostgreSQL client + server for the tests), load
   # generator of the REST benchmark
-  libcpp-httplib-dev libsqlite3-dev libpq-dev libpqxx-dev postgresql openssl curl wrk
+  libcpp-httplib-dev libbrotli-dev libsqlite3-dev libpq-dev libpqxx-dev postgresql openssl curl wrk
   # service: OIDC bearer JWTs (RS256 / ES256)
   libjwt-dev
   # tests and benchmarks (Embree: the ray-casting peer of the simulator benchmark; OctoMap: the

@@ -73,7 +73,19 @@ std::string frame_of(const msgs::SensorMessage& message) {
 struct ExportedLog {
   std::map<std::string, uint64_t> left_out;   // topic -> messages without a ROS 2 type written for them
   std::vector<std::string> calibrated;        // sensors placed in /tf_static
+  std::map<std::string, std::string> sensor_by_topic;  // the exported topics' sensor names
+  std::optional<double> wheel_separation;     // m, of the first wheel message
 };
+
+// What the import needs to give back the same log (rosbag_import.hpp): the topics' sensor names,
+// the wheel separation and the calibration, as metadata.yaml's custom_data.
+std::map<std::string, std::string> recorded_log(const ExportedLog& exported, const calib::Calibration* calibration) {
+  std::map<std::string, std::string> custom_data;
+  if (!exported.sensor_by_topic.empty()) custom_data["hanzo_fusion.sensors"] = nlohmann::json(exported.sensor_by_topic).dump();
+  if (exported.wheel_separation) custom_data["hanzo_fusion.wheel_separation"] = fmt::format("{}", *exported.wheel_separation);
+  if (calibration != nullptr) custom_data["hanzo_fusion.calibration"] = calib::to_yaml(*calibration);
+  return custom_data;
+}
 
 // Writes every sensor message of a log into the bag under its topic; wheel odometry becomes
 // TwistStamped (speeds from consecutive distances; the first message of a topic 0). With a
@@ -115,6 +127,10 @@ Result<ExportedLog> export_log(const std::string& path, io::ros2::LidarLayout la
       exported.calibrated.push_back(sensor_name);
     }
     const std::string frame = entry.topic.substr(entry.topic.find_last_of('/') + 1);
+    if (!sensor_name.empty()) exported.sensor_by_topic[entry.topic] = sensor_name;
+    if (const auto* wheels = std::get_if<msgs::WheelOdometryMessage>(&message); wheels && !exported.wheel_separation) {
+      exported.wheel_separation = wheels->wheel_separation;
+    }
     Status written = std::visit(
         [&](const auto& m) -> Status {
           using Message = std::decay_t<decltype(m)>;
@@ -300,6 +316,7 @@ int run_export_ros2bag(const Output& output, const ExportOptions& options) {
       }
       if (!map->points && !map->occupancy) return Error(fmt::format("{}: the map has no point or occupancy layer to export", options.map));
     }
+    (*writer)->set_custom_data(recorded_log(exported_log, calibration ? &*calibration : nullptr));
     return (*writer)->close();
   }();
   if (!written) {

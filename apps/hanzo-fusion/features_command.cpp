@@ -88,7 +88,8 @@ int run_match(const Output& output, const MatchOptions& options) {
   result["affine_views_used"] = matched->affine_views_used;
   std::string text = fmt::format("{} -> {}: {} / {} keypoints, {} putative matches, {} {}\n", options.image1, options.image2,
                                  matched->features1.size(), matched->features2.size(), matched->putative.size(), matched->matches.size(),
-                                 matched->geometry_found ? "verified matches" : "matches (no geometry found: unverified)");
+                                 matched->geometry_found ? "verified matches (putative, affine-view and guided matches that fit the geometry)"
+                                                         : "matches (no geometry found: unverified)");
   if (matched->geometry_found) {
     const char* model = matched->model == vision::GeometryModel::kHomography ? "homography" : "fundamental";
     result["geometry"] = {{"model", model}, {"matrix", matrix_json(matched->geometry)}};

@@ -155,23 +155,33 @@ int run_optimize(const Output& output, const GraphOptions& options) {
   // The certificate is about SE-Sync's objective: for it the refined poses are written (they
   // can only be better); geodesic poses are kept and the distance to the certified ones told.
   std::string certificate_text;
+  bool written_certified = false;
   if (options.certificate) {
     auto certificate = graph::certify_global_optimality(*pose_graph, values);
     if (!certificate) return fail(certificate.error().message);
     if (objective == graph::PoseGraph::Objective::kChordal && certificate->objective_refined <= cost(values)) values = certificate->refined;
-    result["certified"] = certificate->certified;
+    // The certificate is about the refined poses: those are the written ones only for chordal.
+    written_certified = certificate->certified && objective == graph::PoseGraph::Objective::kChordal;
+    result["certified"] = written_certified;
     result["certificate"] = {{"certified", certificate->certified},
+                             {"about", written_certified || objective == graph::PoseGraph::Objective::kChordal
+                                           ? "the written poses"
+                                           : "SE-Sync's optimum near the written poses (not written: --objective chordal writes it)"},
                              {"min_eigenvalue", certificate->min_eigenvalue},
+                             {"eigenvalue_tolerance", certificate->eigenvalue_tolerance},
                              {"se_sync_objective", certificate->objective_refined},
                              {"max_translation_change", certificate->max_translation_change},
                              {"max_rotation_change", certificate->max_rotation_change},
                              {"seconds", certificate->seconds},
                              {"message", certificate->message}};
-    certificate_text = fmt::format("  certificate: {} (SE-Sync objective {:.6g}, smallest eigenvalue {:.3g}, {:.2f} s)\n", certificate->message,
-                                   certificate->objective_refined, certificate->min_eigenvalue, certificate->seconds);
+    certificate_text = fmt::format("  certificate: {} (SE-Sync objective {:.6g}, smallest eigenvalue {:.3g}, tolerance {:.3g}, {:.2f} s)\n",
+                                   certificate->message, certificate->objective_refined, certificate->min_eigenvalue,
+                                   certificate->eigenvalue_tolerance, certificate->seconds);
     if (objective == graph::PoseGraph::Objective::kGeodesic) {
-      certificate_text += fmt::format("  SE-Sync's optimum from these poses is within {:.3g} m and {:.3g} deg of them\n",
-                                      certificate->max_translation_change, certificate->max_rotation_change * 180.0 / M_PI);
+      certificate_text += fmt::format(
+          "  the certificate is about SE-Sync's optimum, within {:.3g} m and {:.3g} deg of the written (geodesic) poses; "
+          "--objective chordal writes it\n",
+          certificate->max_translation_change, certificate->max_rotation_change * 180.0 / M_PI);
     }
   }
   const double final_chi2 = graph::g2o_chi2(*pose_graph, values).value();
@@ -187,8 +197,17 @@ int run_optimize(const Output& output, const GraphOptions& options) {
   result["poses"] = pose_graph->vertices.size();
   result["edges"] = pose_graph->edges.size();
   result["skipped_equivalences"] = pose_graph->skipped_equivalences;
-  result["warnings"] = pose_graph->warnings;
+  nlohmann::json warnings = nlohmann::json::array();
+  std::string warnings_text;
+  for (const graph::WarningGroup& group : graph::group_warnings(pose_graph->warnings)) {
+    warnings.push_back({{"kind", group.kind}, {"count", group.count}, {"first", group.first}});
+    warnings_text += fmt::format("  warning: {} edges {}; first: {}\n", group.count, group.kind, group.first.front());
+  }
+  result["warnings"] = warnings;
   result["objective"] = options.objective;
+  // What the written poses minimize: g2o's geodesic errors with the (repaired) information, or
+  // SE-Sync's chordal objective.
+  result["written_poses_minimize"] = objective == graph::PoseGraph::Objective::kChordal ? "se_sync_chordal" : "g2o_geodesic";
   result["g2o_chi2"] = {{"initial", initial_chi2}, {"final", final_chi2}};
   result["se_sync_objective"] = {{"initial", initial_objective}, {"final", final_objective}};
   result["initialize"] = options.initialize;
@@ -198,12 +217,14 @@ int run_optimize(const Output& output, const GraphOptions& options) {
   result["seconds"] = summary.seconds;
   result["converged"] = summary.converged;
   std::string text = fmt::format(
-      "{}: {}D, {} poses, {} edges, {} objective\n  g2o chi2:           {:.6g} -> {:.6g}\n  SE-Sync objective:  {:.6g} -> {:.6g}\n"
-      "{}  initialization: {} ({:.3f} s); {} iterations in {:.3f} s ({})\n{}wrote {}\n",
-      options.input, pose_graph->dimension, pose_graph->vertices.size(), pose_graph->edges.size(), options.objective, initial_chi2,
-      final_chi2, initial_objective, final_objective, incremental_text, options.initialize == "best" ? "best start: " + started_from : options.initialize,
-      initialization_seconds, summary.iterations, summary.seconds,
-      summary.converged ? "converged" : summary.message, certificate_text, options.out);
+      "{}: {}D, {} poses, {} edges, {} objective\n{}  g2o chi2:           {:.6g} -> {:.6g}\n  SE-Sync objective:  {:.6g} -> {:.6g}\n"
+      "{}  initialization: {} ({:.3f} s); {} iterations in {:.3f} s ({})\n{}wrote {} (poses minimizing {}{})\n",
+      options.input, pose_graph->dimension, pose_graph->vertices.size(), pose_graph->edges.size(), options.objective, warnings_text,
+      initial_chi2, final_chi2, initial_objective, final_objective, incremental_text,
+      options.initialize == "best" ? "best start: " + started_from : options.initialize, initialization_seconds, summary.iterations,
+      summary.seconds, summary.converged ? "converged" : summary.message, certificate_text, options.out,
+      objective == graph::PoseGraph::Objective::kChordal ? "SE-Sync's chordal objective" : "g2o's geodesic errors",
+      written_certified ? ", certified globally optimal" : (options.certificate ? ", not certified" : ""));
   if (!options.plot_dir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(options.plot_dir, ec);

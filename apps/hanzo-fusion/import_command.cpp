@@ -132,7 +132,8 @@ int run_rosbag_import(const Output& output, const ImportOptions& options) {
       return report_failure(output, result, written.error().message);
     }
     result["calibration"] = options.calibration;
-    text += fmt::format("  calibration ({} sensors, body frame {}) written to {}\n", report.calibration.sensors.size(),
+    text += fmt::format("  calibration ({} sensor{}, body frame {}) written to {}\n", report.calibration.sensors.size(),
+                        report.calibration.sensors.size() == 1 ? "" : "s",
                         report.body_frame, options.calibration);
   }
   text += fmt::format("{}: {} messages\n", options.out, imported);
@@ -195,7 +196,8 @@ int write_dataset_outputs(const Output& output, nlohmann::json& result, std::str
       return report_failure(output, result, written.error().message);
     }
     result["calibration"] = options.calibration;
-    text += fmt::format("  calibration ({} sensors) written to {}\n", outputs.calibration->sensors.size(), options.calibration);
+    text += fmt::format("  calibration ({} sensor{}) written to {}\n", outputs.calibration->sensors.size(),
+                        outputs.calibration->sensors.size() == 1 ? "" : "s", options.calibration);
   }
   result["ok"] = true;
   return report_success(output, result, text);
@@ -211,7 +213,9 @@ int run_kitti_import(const Output& output, const ImportOptions& options) {
   io::KittiImportReport report;
   const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
     HANZO_ASSIGN_OR_RETURN(report, io::import_kitti(options.sources[0], writer, config));
-    return writer.add_metadata({"import", {{"importer", "kitti"}, {"source", options.sources[0]}}});
+    // KITTI's times are relative: `run --gt` takes the origin off to pair them with relative ground truth.
+    return writer.add_metadata({"import", {{"importer", "kitti"}, {"source", options.sources[0]},
+                                           {"relative_time_origin_s", fmt::format("{}", options.time_origin)}}});
   });
   if (code != 0) return code;
   result["frames"] = report.frames;
@@ -293,7 +297,9 @@ int run_image_folder_import(const Output& output, const ImportOptions& options) 
   io::ImageFolderImportReport report;
   const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
     HANZO_ASSIGN_OR_RETURN(report, io::import_image_folders(options.sources, writer, config));
-    return writer.add_metadata({"import", {{"importer", "images"}, {"source", fmt::format("{}", fmt::join(options.sources, " "))}}});
+    std::map<std::string, std::string> values = {{"importer", "images"}, {"source", fmt::format("{}", fmt::join(options.sources, " "))}};
+    if (report.relative_times) values["relative_time_origin_s"] = fmt::format("{}", options.time_origin);
+    return writer.add_metadata({"import", values});
   });
   if (code != 0) return code;
   result["images"] = report.images;

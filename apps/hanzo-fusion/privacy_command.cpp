@@ -12,6 +12,7 @@
 
 #include "commands.hpp"
 #include "hanzo/fusion/crypto/file_encryption.hpp"
+#include "hanzo/fusion/io/image_file_check.hpp"
 #include "hanzo/fusion/privacy/log_redaction.hpp"
 
 namespace hanzo::fusion::app {
@@ -62,7 +63,7 @@ bool is_image_file(const std::filesystem::path& path) {
   std::string extension = path.extension().string();
   for (char& c : extension) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return extension == ".png" || extension == ".jpg" || extension == ".jpeg" || extension == ".bmp" || extension == ".pgm" ||
-         extension == ".ppm" || extension == ".tif" || extension == ".tiff";
+         extension == ".ppm" || extension == ".tif" || extension == ".tiff" || extension == ".webp";
 }
 
 // One image: read, redact, write (the output's extension picks its format). Nothing is written
@@ -71,6 +72,9 @@ Result<nlohmann::json> redact_file(privacy::PrivacyFilter& filter, const std::fi
   if (!cv::haveImageWriter(output.string())) {
     return Error(fmt::format("{}: no image format for the extension '{}' (png, jpg, bmp, tif...)", output.string(), output.extension().string()));
   }
+  // A decoder fills what a cut-off file lacks: a face in the missing part would be written as
+  // it is, so an incomplete file is refused.
+  HANZO_RETURN_IF_ERROR(io::check_image_file_complete(input.string()));
   cv::Mat image = cv::imread(input.string(), cv::IMREAD_COLOR);
   if (image.empty()) return Error(fmt::format("{}: not an image OpenCV can read", input.string()));
   std::vector<privacy::RedactedRegion> regions;
@@ -114,13 +118,13 @@ int run_blur(const Output& output, const PrivacyOptions& options) {
   std::vector<std::pair<std::filesystem::path, std::filesystem::path>> jobs;
   std::error_code error;
   if (std::filesystem::is_directory(options.input, error)) {
-    std::filesystem::create_directories(options.output, error);
-    if (error) return report_failure(output, result, fmt::format("cannot create {}: {}", options.output, error.message()));
     for (const auto& entry : std::filesystem::directory_iterator(options.input)) {
       if (entry.is_regular_file() && is_image_file(entry.path())) jobs.emplace_back(entry.path(), std::filesystem::path(options.output) / entry.path().filename());
     }
     std::sort(jobs.begin(), jobs.end());
     if (jobs.empty()) return report_failure(output, result, fmt::format("{}: no image files in the folder", options.input));
+    std::filesystem::create_directories(options.output, error);  // only once there is something to write
+    if (error) return report_failure(output, result, fmt::format("cannot create {}: {}", options.output, error.message()));
   } else if (std::filesystem::is_regular_file(options.input, error)) {
     jobs.emplace_back(options.input, options.output);
   } else {

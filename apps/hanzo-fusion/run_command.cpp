@@ -15,12 +15,18 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
+#include <cstdlib>
 #include <map>
+#include <optional>
+#include <set>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "commands.hpp"
 #include "hanzo/fusion/core/files.hpp"
+#include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/eval/association.hpp"
 #include "hanzo/fusion/eval/plots.hpp"
 #include "hanzo/fusion/eval/pose_error.hpp"
@@ -42,9 +48,77 @@ struct RunOptions {
   std::string log_path;
   std::string out;
   std::string ground_truth;
+  std::optional<double> ground_truth_time_offset;  // s added to the estimate's times to pair them with the ground truth's
   int threads = 1;
   std::vector<std::string> sensors;  // empty: every configured sensor
+  bool allow_partial = false;        // a corrupted or truncated log still exits 0
 };
+
+// "1 keyframe", "2 keyframes".
+std::string count_of(uint64_t count, std::string_view thing) { return fmt::format("{} {}{}", count, thing, count == 1 ? "" : "s"); }
+
+// Cameras whose calibration entry has no intrinsics take those of their first image in the log
+// that carries them (the ones a ROS camera_info or an importer stored); the names of the cameras
+// so completed. A camera left without intrinsics is refused later, by name.
+Result<std::vector<std::string>> intrinsics_from_images(const config::FusionConfig& config, calib::Calibration& calibration,
+                                                        const std::string& log_path) {
+  std::vector<std::string> completed;
+  for (const config::SensorConfig& sensor : config.sensors) {
+    if (sensor.modality != config::SensorModality::kCamera) continue;
+    auto entry = std::find_if(calibration.sensors.begin(), calibration.sensors.end(),
+                              [&](const calib::SensorCalibration& s) { return s.sensor == sensor.name; });
+    if (entry != calibration.sensors.end() && entry->camera) continue;
+    io::mcap::ReadOptions only_this;
+    only_this.topics = {sensor.topic};
+    std::unique_ptr<io::SensorLogReader> reader;
+    HANZO_ASSIGN_OR_RETURN(reader, io::SensorLogReader::open(log_path, only_this));
+    io::LogEntry image_entry;
+    constexpr int kImagesLookedAt = 100;
+    for (int looked = 0; looked < kImagesLookedAt; ++looked) {
+      const Result<bool> more = reader->next(image_entry);
+      if (more && !*more) break;
+      const auto* message = more ? std::get_if<msgs::SensorMessage>(&image_entry.message) : nullptr;
+      const auto* image = message != nullptr ? std::get_if<msgs::ImageMessage>(message) : nullptr;
+      if (image == nullptr || !image->intrinsics) continue;
+      calib::CameraCalibration camera{*image->intrinsics, image->distortion.value_or(msgs::DistortionModel{})};
+      if (camera.intrinsics.width == 0 || camera.intrinsics.height == 0) {
+        camera.intrinsics.width = image->width;
+        camera.intrinsics.height = image->height;
+      }
+      if (entry == calibration.sensors.end()) {
+        calibration.sensors.push_back(calib::SensorCalibration{});
+        calibration.sensors.back().sensor = sensor.name;
+        entry = std::prev(calibration.sensors.end());
+      }
+      entry->camera = std::move(camera);
+      completed.push_back(sensor.name);
+      break;
+    }
+  }
+  return completed;
+}
+
+// Fails when no configured sensor's topic is in the log (nothing would be fused); warns for
+// each configured sensor whose topic is missing.
+Status check_topics(const config::FusionConfig& config, const io::mcap::McapReader& log, const std::string& log_path,
+                    nlohmann::json& result) {
+  std::set<std::string> log_topics;
+  for (const auto& [id, channel] : log.channels()) {
+    if (channel.metadata.count("mirror_of") == 0) log_topics.insert(channel.topic);  // not the Foxglove mirrors
+  }
+  std::vector<std::string> configured, missing;
+  for (const config::SensorConfig& sensor : config.sensors) {
+    configured.push_back(sensor.topic);
+    if (log_topics.count(sensor.topic) == 0) missing.push_back(fmt::format("{} ({})", sensor.name, sensor.topic));
+  }
+  if (!config.sensors.empty() && missing.size() == config.sensors.size()) {
+    return Error(fmt::format("{} has none of the configured sensors' topics ({}); its topics: {}", log_path, fmt::join(configured, ", "),
+                             log_topics.empty() ? "none" : fmt::format("{}", fmt::join(log_topics, ", "))));
+  }
+  result["sensors_without_messages"] = missing;
+  for (const std::string& sensor : missing) logger()->warn("{}: no messages for configured sensor {}", log_path, sensor);
+  return ok_status();
+}
 
 // A progress bar on stderr, only when stderr is a terminal.
 class ProgressBar {
@@ -227,17 +301,50 @@ Result<std::vector<std::string>> write_plots(const std::string& out, const std::
   return written;
 }
 
-Result<nlohmann::json> evaluate(const std::string& ground_truth_path, const io::Trajectory& estimate) {
+// How the estimate's times are paired with the ground truth's: the given offset; or, for a log
+// whose importer put relative times (a dataset's times from 0) at an origin (`import` metadata
+// relative_time_origin_s) and a ground truth in relative times, that origin taken off; or as
+// they are.
+struct TimePairing {
+  double estimate_time_offset_s = 0.0;
+  std::string description = "times as they are";
+};
+
+TimePairing time_pairing(const RunOptions& options, const io::mcap::McapReader& log, const io::Trajectory& reference) {
+  if (options.ground_truth_time_offset) {
+    return {*options.ground_truth_time_offset, fmt::format("estimate times {:+.9g} s (--gt-time-offset)", *options.ground_truth_time_offset)};
+  }
+  constexpr double kRelativeBelow = 1e8;  // s: times before 1973 are relative, as the importers read them
+  for (const io::mcap::Metadata& metadata : log.metadata()) {
+    const auto origin = metadata.values.find("relative_time_origin_s");
+    if (metadata.name != "import" || origin == metadata.values.end() || reference.empty()) continue;
+    const double origin_s = std::strtod(origin->second.c_str(), nullptr);
+    if (reference.timestamps.front().seconds() < kRelativeBelow && origin_s >= kRelativeBelow) {
+      return {-origin_s, fmt::format("the log's relative times start at {} s (its importer's origin) and the ground truth's at 0: "
+                                     "paired with the origin taken off",
+                                     origin->second)};
+    }
+  }
+  return {};
+}
+
+Result<nlohmann::json> evaluate(const std::string& ground_truth_path, const io::Trajectory& estimate, const RunOptions& options,
+                                const io::mcap::McapReader& log) {
   io::Trajectory reference;
   HANZO_ASSIGN_OR_RETURN(reference, io::read_trajectory(ground_truth_path, io::TrajectoryFormat::kTum));
+  const TimePairing pairing = time_pairing(options, log, reference);
   eval::AssociatedTrajectories pairs;
-  HANZO_ASSIGN_OR_RETURN(pairs, eval::associate(reference, estimate, eval::AssociationConfig{0.01, 0.0}));
+  HANZO_ASSIGN_OR_RETURN(pairs, with_context(eval::associate(reference, estimate, eval::AssociationConfig{0.01, pairing.estimate_time_offset_s}),
+                                             pairing.description));
   eval::ApeResult ape;
   HANZO_ASSIGN_OR_RETURN(ape, eval::compute_ape(pairs.reference, pairs.estimate));
   eval::ApeConfig aligned_config;
   aligned_config.alignment = eval::Alignment::kSE3;
   // Undefined for a straight-line trajectory (the alignment's rotation is not determined).
   const Result<eval::ApeResult> aligned = eval::compute_ape(pairs.reference, pairs.estimate, aligned_config);
+  eval::ApeConfig similarity_config;
+  similarity_config.alignment = eval::Alignment::kSim3;  // a monocular camera's trajectory has no metric scale
+  const Result<eval::ApeResult> similar = eval::compute_ape(pairs.reference, pairs.estimate, similarity_config);
   eval::RpeConfig rpe_config;
   rpe_config.delta = 1.0;
   rpe_config.delta_unit = eval::DeltaUnit::kMeters;
@@ -245,10 +352,13 @@ Result<nlohmann::json> evaluate(const std::string& ground_truth_path, const io::
   HANZO_ASSIGN_OR_RETURN(rpe, eval::compute_rpe(pairs.reference, pairs.estimate, rpe_config));
   const double distance = pairs.reference.path_length();
   return nlohmann::json{{"pairs", ape.statistics.count},
+                        {"time_pairing", pairing.description},
+                        {"estimate_time_offset_s", pairing.estimate_time_offset_s},
                         {"distance_m", distance},
                         {"ape_rmse_m", ape.statistics.rmse},
                         {"ape_max_m", ape.statistics.max},
                         {"ape_se3_aligned_rmse_m", aligned ? nlohmann::json(aligned->statistics.rmse) : nlohmann::json()},
+                        {"ape_sim3_aligned_rmse_m", similar ? nlohmann::json(similar->statistics.rmse) : nlohmann::json()},
                         {"final_error_m", ape.errors.empty() ? 0.0 : ape.errors.back()},
                         {"rpe_1m_rmse_m", rpe.statistics.rmse}};
 }
@@ -351,14 +461,30 @@ int run(const Output& output, const RunOptions& options) {
       return std::find(options.sensors.begin(), options.sensors.end(), sensor.name) == options.sensors.end();
     });
   }
+  auto reader = io::SensorLogReader::open(options.log_path);
+  if (!reader) return fail(reader.error().message);
+  if (Status topics = check_topics(*config, (*reader)->mcap(), options.log_path, result); !topics) return fail(topics.error().message);
+  // Without a calibration every sensor is at the body origin; cameras may still take their
+  // intrinsics from the images (they then need entries of their own, identity for the others).
+  const bool calibrated = !calibration.sensors.empty();
+  auto completed = intrinsics_from_images(*config, calibration, options.log_path);
+  if (!completed) return fail(completed.error().message);
+  if (!calibrated && !completed->empty()) {
+    for (const config::SensorConfig& sensor : config->sensors) {
+      if (calibration.find(sensor.name) != nullptr) continue;
+      calibration.sensors.push_back(calib::SensorCalibration{});
+      calibration.sensors.back().sensor = sensor.name;
+    }
+    logger()->warn("no calibration: every sensor is mounted at the body origin with no time offset");
+  }
+  for (const std::string& camera : *completed) logger()->info("camera '{}': intrinsics from its images in {}", camera, options.log_path);
+  result["intrinsics_from_images"] = *completed;
   pipeline::SessionConfig session_config = pipeline::SessionConfig::from(*config);
   session_config.mode = pipeline::SessionMode::kReplay;
   session_config.num_threads = options.threads;
   auto created = pipeline::Session::create(*config, calibration, session_config);
   if (!created) return fail(created.error().message);
   pipeline::Session& session = **created;
-  auto reader = io::SensorLogReader::open(options.log_path);
-  if (!reader) return fail(reader.error().message);
   std::error_code ec;
   std::filesystem::create_directories(options.out, ec);
   if (ec) return fail(fmt::format("{}: cannot create the output folder ({})", options.out, ec.message()));
@@ -407,7 +533,12 @@ int run(const Output& output, const RunOptions& options) {
   auto plots = write_plots(options.out, poses, innovations);
   if (!plots) return fail(plots.error().message);
 
-  result["ok"] = true;
+  // A log read only in part (corrupted chunks, a truncated file, messages that do not decode)
+  // gives outputs for what was read, and fails unless --allow-partial.
+  const std::string incomplete = replay.incomplete();
+  result["ok"] = incomplete.empty() || options.allow_partial;
+  result["partial"] = !incomplete.empty();
+  if (!incomplete.empty()) result["incomplete"] = incomplete;
   result["mode"] = pipeline::to_string(session.mode());
   result["summary"] = summary_json(summary, log_seconds);
   result["mapping"] = mapping_json(mapping);
@@ -431,7 +562,7 @@ int run(const Output& output, const RunOptions& options) {
   // An evaluation that cannot be computed is reported as undefined with the reason; the
   // outputs above are written either way.
   const auto score = [&](const char* key, const io::Trajectory& estimate) {
-    auto evaluation = evaluate(options.ground_truth, estimate);
+    auto evaluation = evaluate(options.ground_truth, estimate, options, (*reader)->mcap());
     result[key] = evaluation ? *evaluation : nlohmann::json{{"undefined", evaluation.error().message}};
   };
   if (!options.ground_truth.empty()) {
@@ -440,8 +571,10 @@ int run(const Output& output, const RunOptions& options) {
   }
   std::ofstream((out / "summary.json").string()) << result.dump(2) << "\n";
 
-  std::string text = fmt::format("{} poses from {} messages ({:.1f} s of log) in {:.3f} s: {:.0f}x real time\n", summary.poses, messages,
-                                 log_seconds, fusion_seconds, fusion_seconds > 0.0 ? log_seconds / fusion_seconds : 0.0);
+  const double realtime_factor = fusion_seconds > 0.0 ? log_seconds / fusion_seconds : 0.0;
+  std::string text = fmt::format("{} poses from {} messages ({:.1f} s of log) in {:.3f} s: {}x real time\n", summary.poses, messages,
+                                 log_seconds, fusion_seconds,
+                                 realtime_factor < 10.0 ? fmt::format("{:.2f}", realtime_factor) : fmt::format("{:.0f}", realtime_factor));
   for (const pipeline::SensorStatistics& s : summary.sensors) {
     text += fmt::format("  {:<12} received {:>7}  fused {:>7}  rolled back {:>4}  rejected {:>5}", s.name, s.received, s.fused,
                         s.rolled_back, s.rejected_total());
@@ -449,8 +582,8 @@ int run(const Output& output, const RunOptions& options) {
     text += "\n";
   }
   if (mapping.graph_keyframes > 0) {
-    text += fmt::format("graph: {} keyframes, {} GNSS factors, {} loop closures", mapping.graph_keyframes, mapping.gnss_factors,
-                        mapping.loop_closures);
+    text += fmt::format("graph: {}, {}, {}", count_of(mapping.graph_keyframes, "keyframe"), count_of(mapping.gnss_factors, "GNSS factor"),
+                        count_of(mapping.loop_closures, "loop closure"));
     if (mapping.graph_landmarks > 0) {
       text += fmt::format("; visual-inertial: {} landmarks, {} projections", mapping.graph_landmarks, mapping.graph_projections);
     }
@@ -464,9 +597,13 @@ int run(const Output& output, const RunOptions& options) {
     text += "\n";
   }
   if (mapping.camera_frames_tracked + mapping.camera_frames_lost > 0) {
-    text += fmt::format("visual odometry: {} frames tracked, {} lost, {} standing still; {} keyframes, {} landmarks, {} loops closed{}\n",
-                        mapping.camera_frames_tracked, mapping.camera_frames_lost, mapping.camera_standstill_frames, mapping.visual_keyframes,
-                        mapping.visual_landmarks, mapping.visual_loop_closures,
+    // The visual-inertial odometry keeps its landmarks in the graph (counted on the graph's line).
+    const bool own_map = mapping.visual_keyframes + mapping.visual_landmarks > 0 || mapping.graph_landmarks == 0;
+    text += fmt::format("visual odometry: {} tracked, {} lost, {} standing still{}{}\n", count_of(mapping.camera_frames_tracked, "frame"),
+                        mapping.camera_frames_lost, mapping.camera_standstill_frames,
+                        own_map ? fmt::format("; {}, {}, {} closed", count_of(mapping.visual_keyframes, "keyframe"),
+                                              count_of(mapping.visual_landmarks, "landmark"), count_of(mapping.visual_loop_closures, "loop"))
+                                : "",
                         mapping.visual_scale_free ? " (monocular: lengths in units of its first baseline)" : "");
     if (mapping.camera_dark_frames + mapping.camera_glare_frames + mapping.camera_motion_blur_frames > 0) {
       text += fmt::format("  images: {} dark, {} with glare, {} blurred by motion\n", mapping.camera_dark_frames, mapping.camera_glare_frames,
@@ -480,7 +617,13 @@ int run(const Output& output, const RunOptions& options) {
   }
   if (!poses.empty()) {
     const auto& p = poses.back().T_world_body.position;
-    text += fmt::format("final position ({:.4f}, {:.4f}, {:.4f}) m, state {}\n", p.x(), p.y(), p.z(), msgs::to_string(summary.state));
+    // Why a run whose sensors are all healthy ends DEGRADED: the spec calls localization
+    // reliable only with two or more modalities constraining it.
+    const msgs::PoseStatus& status = poses.back().status;
+    const std::string why = summary.state == msgs::TrackingState::kDegraded && !status.localization_reliable()
+                                ? fmt::format(" ({} modality active: reliable localization takes two or more)", status.active_modalities)
+                                : "";
+    text += fmt::format("final position ({:.4f}, {:.4f}, {:.4f}) m, state {}{}\n", p.x(), p.y(), p.z(), msgs::to_string(summary.state), why);
   }
   if (summary.wheel_speed_scale) {
     text += fmt::format("wheel speed scale {:.4f} +- {:.4f} (the wheels read {:+.2f} % of the distance driven)\n", *summary.wheel_speed_scale,
@@ -501,12 +644,25 @@ int run(const Output& output, const RunOptions& options) {
       text += fmt::format("{}: APE undefined ({})\n", label, e["undefined"].get<std::string>());
       continue;
     }
-    const std::string aligned = e["ape_se3_aligned_rmse_m"].is_null() ? "undefined" : fmt::format("{:.3f}", e["ape_se3_aligned_rmse_m"].get<double>());
-    text += fmt::format("{}: APE rmse {:.3f} m (max {:.3f}; SE3-aligned {}) over {:.1f} m; RPE (1 m) rmse {:.3f} m\n", label,
-                        e["ape_rmse_m"].get<double>(), e["ape_max_m"].get<double>(), aligned, e["distance_m"].get<double>(),
-                        e["rpe_1m_rmse_m"].get<double>());
+    if (e["time_pairing"] != "times as they are") text += fmt::format("{}: times paired so: {}\n", label, e["time_pairing"].get<std::string>());
+    // The SE3-aligned figure leads: the run's world (the first GNSS fix, or where the body
+    // started) need not be the ground truth's, so the unaligned one measures both frames' offset
+    // as well as the error unless they share a datum.
+    // A monocular run's lengths are in units of its first baseline: Sim3 (scale too) leads.
+    const char* aligned_key = mapping.visual_scale_free ? "ape_sim3_aligned_rmse_m" : "ape_se3_aligned_rmse_m";
+    const std::string aligned =
+        e[aligned_key].is_null() ? "undefined (no alignment for a straight path)" : fmt::format("{:.3f} m", e[aligned_key].get<double>());
+    text += fmt::format("{}: APE rmse {} {}-aligned over {:.1f} m; in the run's world frame {:.3f} m (max {:.3f}; meaningful when it "
+                        "shares the ground truth's datum); RPE (1 m) rmse {:.3f} m\n",
+                        label, aligned, mapping.visual_scale_free ? "Sim3" : "SE3", e["distance_m"].get<double>(), e["ape_rmse_m"].get<double>(),
+                        e["ape_max_m"].get<double>(), e["rpe_1m_rmse_m"].get<double>());
   }
   text += fmt::format("wrote {} files and {} plots into {}\n", files.size() + 1, plots->size(), options.out);
+  if (!incomplete.empty()) {
+    if (options.allow_partial) return report_success(output, result, text + fmt::format("warning: partial log: {}\n", incomplete));
+    if (!output.json) std::cout << text;
+    return fail(fmt::format("partial log: {} (outputs written for what was read; --allow-partial accepts it)", incomplete));
+  }
   return report_success(output, result, text);
 }
 
@@ -520,8 +676,13 @@ void add_run_command(CLI::App& app, const Output& output, Command& run_command) 
   command->add_option("--log", options->log_path, "Sensor log (.mcap)")->required();
   command->add_option("--out", options->out, "Output folder")->required();
   command->add_option("--ground-truth,--gt", options->ground_truth, "Ground-truth trajectory (TUM) for APE / RPE");
+  command->add_option("--gt-time-offset", options->ground_truth_time_offset,
+                      "Seconds added to the estimate's times to pair them with the ground truth's (default: 0, or the importer's "
+                      "relative-time origin taken off when the ground truth's times are relative)");
   command->add_option("--threads", options->threads, "LiDAR odometry threads (0: all cores); the output does not depend on it")
       ->capture_default_str();
+  command->add_flag("--allow-partial", options->allow_partial,
+                    "Exit 0 for a log read only in part (corrupted chunks, truncated file, undecodable messages); the summary says what was lost");
   command->add_option("--sensors", options->sensors, "Fuse only these configured sensors (comma-separated names), e.g. for an ablation")
       ->delimiter(',');
   command->callback([&output, &run_command, options] { run_command = [&output, options] { return run(output, *options); }; });

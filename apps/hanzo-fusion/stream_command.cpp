@@ -114,7 +114,7 @@ int run_stream(const Output& output, const StreamCommandOptions& options) {
                         session.value("tracking_state", "?"), session.value("stored_poses", 0), mapping.value("scans_registered", 0),
                         mapping.value("scans_received", 0), mapping.value("map_keyframes", 0), mapping.value("loop_closures", 0));
   }
-  return report_success(output, result, text);
+  return report_success(output, result, text + "\n");
 }
 
 }  // namespace

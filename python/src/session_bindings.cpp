@@ -132,11 +132,17 @@ class PySession {
     return push(sensor, std::move(cloud));
   }
 
-  // Every sensor message of the log whose topic a configured sensor reads; then flush().
-  py::dict replay(const std::string& log_path) {
+  // Every sensor message of the log whose topic a configured sensor reads; then flush(). A log
+  // read only in part (corrupted chunks, truncated, undecodable messages) raises ValueError
+  // after the replay unless allow_partial (then "partial" and "incomplete" say what was lost).
+  py::dict replay(const std::string& log_path, bool allow_partial) {
     Result<std::unique_ptr<io::SensorLogReader>> reader = io::SensorLogReader::open(log_path);
     if (!reader) throw py::value_error(reader.error().message);
     const pipeline::LogReplaySummary replay = pipeline::replay_log(*session_, **reader);
+    const std::string incomplete = replay.incomplete();
+    if (!incomplete.empty() && !allow_partial) {
+      throw py::value_error(fmt::format("partial log: {} (the session holds what was read; allow_partial=True accepts it)", incomplete));
+    }
     uint64_t unmapped = 0;
     for (const auto& [topic, count] : replay.unmapped_topics) unmapped += count;
     py::dict result;
@@ -144,6 +150,8 @@ class PySession {
     result["rejected"] = replay.rejected;
     result["unread"] = replay.unread;
     result["unmapped"] = unmapped;
+    result["partial"] = !incomplete.empty();
+    result["incomplete"] = incomplete;
     return result;
   }
 
@@ -222,7 +230,9 @@ void bind_session(py::module_& module) {
       .def("push_point_cloud", &PySession::push_point_cloud, py::arg("sensor"), py::arg("time_s"), py::arg("points"),
            py::arg("times") = std::nullopt, py::arg("rings") = std::nullopt,
            "A LiDAR sweep: N x 3 points (sensor frame, m), optional per-point times (s after time_s) and ring indices")
-      .def("replay", &PySession::replay, py::arg("log"), "Pushes every message of a sensor log (MCAP) a sensor reads, then flushes")
+      .def("replay", &PySession::replay, py::arg("log"), py::arg("allow_partial") = false,
+           "Pushes every message of a sensor log (MCAP) a sensor reads, then flushes; raises ValueError for a log read only in part "
+           "(corrupted chunks, truncated) unless allow_partial")
       .def("flush", &PySession::flush, "Fuses what still waits (call at the end of the data)")
       .def("poses", &PySession::poses, "Real-time poses as emitted: N x 8 (t, x, y, z, qw, qx, qy, qz), body in the world")
       .def("optimized_trajectory", &PySession::optimized_trajectory, "The same poses moved onto the optimized graph: N x 8")

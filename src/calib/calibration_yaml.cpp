@@ -62,10 +62,13 @@ Result<SensorCalibration> parse_entry(const std::string& key, const YamlValue& n
   if (key.size() <= kSuffix.size() || !key.ends_with(kSuffix)) {
     return node.error("expected an entry named <sensor>_to_body (for example lidar_to_body)");
   }
-  if (!node.is_map()) return node.error("expected a map with rotation, translation, time_offset_ns (and intrinsics for cameras)");
-  HANZO_RETURN_IF_ERROR(node.check_keys({"rotation", "translation", "time_offset_ns", "intrinsics"}));
   SensorCalibration entry;
   entry.sensor = key.substr(0, key.size() - kSuffix.size());
+  if (const Result<std::string> word = node.as_string(); word && *word == "identity") return entry;  // mounted at the body origin, no time offset
+  if (!node.is_map()) {
+    return node.error("expected a map with rotation, translation, time_offset_ns (and intrinsics for cameras), or 'identity'");
+  }
+  HANZO_RETURN_IF_ERROR(node.check_keys({"rotation", "translation", "time_offset_ns", "intrinsics"}));
   const YamlValue rotation = node["rotation"];
   if (rotation.present()) {
     std::vector<double> wxyz;

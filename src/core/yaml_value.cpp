@@ -6,6 +6,8 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
+#include <map>
+#include <optional>
 #include <sstream>
 
 #include <fcntl.h>
@@ -34,6 +36,27 @@ bool parse_double(const std::string& text, double* value) {
   return YAML::convert<double>::decode(YAML::Node(text), *value);
 }
 
+// The first key that appears twice in one map (yaml-cpp keeps both and its lookups return the
+// first, so a second value would be silently ignored): "line L: duplicate key 'k' (first at line F)".
+std::optional<std::string> duplicate_key(const YAML::Node& node) {
+  if (node.IsMap()) {
+    std::map<std::string, int> lines;
+    for (const auto& entry : node) {
+      if (entry.first.IsScalar()) {
+        const int line = entry.first.Mark().line + 1;
+        const auto [first, inserted] = lines.emplace(entry.first.Scalar(), line);
+        if (!inserted) return fmt::format("{}: duplicate key '{}' (first at line {})", line, entry.first.Scalar(), first->second);
+      }
+      if (auto found = duplicate_key(entry.second)) return found;
+    }
+  } else if (node.IsSequence()) {
+    for (const auto& item : node) {
+      if (auto found = duplicate_key(item)) return found;
+    }
+  }
+  return std::nullopt;
+}
+
 }  // namespace
 
 YamlValue::YamlValue(YAML::Node node, std::shared_ptr<const std::string> source, std::string path, int line)
@@ -42,6 +65,7 @@ YamlValue::YamlValue(YAML::Node node, std::shared_ptr<const std::string> source,
 Result<YamlValue> YamlValue::load_string(const std::string& text, const std::string& source_name) {
   try {
     YAML::Node root = YAML::Load(text);
+    if (auto duplicate = duplicate_key(root)) return Error{fmt::format("{}:{}", source_name, *duplicate)};
     return YamlValue(root, std::make_shared<const std::string>(source_name), "", std::max(1, root.Mark().line + 1));
   } catch (const YAML::Exception& e) {
     return Error{fmt::format("{}:{}:{}: YAML syntax error: {}", source_name, e.mark.line + 1, e.mark.column + 1, e.msg)};

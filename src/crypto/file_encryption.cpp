@@ -221,7 +221,7 @@ Result<EncryptionKey> EncryptionKey::from_hex(std::string_view text) {
 
 Result<EncryptionKey> EncryptionKey::load(const std::string& path) {
   std::ifstream in(path);
-  if (!in) return Error(fmt::format("{}: cannot read the key file", path));
+  if (!in) return Error(fmt::format("{}: cannot read the key file ({})", path, std::strerror(errno)));
   std::stringstream text;
   text << in.rdbuf();
   return with_context(from_hex(text.str()), path);

@@ -7,6 +7,7 @@
 #include <set>
 #include <sstream>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <fmt/format.h>
 
@@ -81,7 +82,41 @@ std::string repair_information(Eigen::MatrixXd& information) {
                      values.minCoeff(), values.maxCoeff(), floor);
 }
 
+// Whether the translation and rotation blocks SE-Sync reads are positive definite.
+bool se_sync_blocks_usable(const Eigen::MatrixXd& information, int dimension) {
+  const int rotation = dimension == 3 ? 3 : 1;
+  const Eigen::LLT<Eigen::MatrixXd> translation_block(information.topLeftCorner(dimension, dimension));
+  const Eigen::LLT<Eigen::MatrixXd> rotation_block(information.bottomRightCorner(rotation, rotation));
+  return translation_block.info() == Eigen::Success && rotation_block.info() == Eigen::Success;
+}
+
+// Sets edge.information from edge.file_information (repaired where needed) and records why.
+void take_information(PoseGraphEdge& edge, PoseGraph& graph, const std::string& where) {
+  edge.information = edge.file_information;
+  if (std::string repaired = repair_information(edge.information); !repaired.empty()) {
+    graph.warnings.push_back({"information_repaired", fmt::format("{}: {}", where, repaired)});
+  }
+  const int dimension = static_cast<int>(edge.file_information.rows()) == 6 ? 3 : 2;
+  if (!se_sync_blocks_usable(edge.file_information, dimension)) {
+    graph.warnings.push_back({"se_sync_weights_from_repaired",
+                              fmt::format("{}: a translation or rotation block of the information matrix is not positive definite; "
+                                          "SE-Sync's weights come from the repaired matrix",
+                                          where)});
+  }
+}
+
 }  // namespace
+
+std::vector<WarningGroup> group_warnings(const std::vector<PoseGraphWarning>& warnings, std::size_t examples) {
+  std::vector<WarningGroup> groups;
+  for (const PoseGraphWarning& warning : warnings) {
+    auto group = std::find_if(groups.begin(), groups.end(), [&](const WarningGroup& g) { return g.kind == warning.kind; });
+    if (group == groups.end()) group = groups.insert(groups.end(), WarningGroup{warning.kind, 0, {}});
+    ++group->count;
+    if (group->first.size() < examples) group->first.push_back(warning.text);
+  }
+  return groups;
+}
 
 Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_name) {
   PoseGraph graph;
@@ -141,14 +176,12 @@ Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_n
         SO3 rotation;
         HANZO_ASSIGN_OR_RETURN(rotation, with_context(unit_rotation(numbers[5], numbers[6], numbers[7], numbers[8]), fmt::format("{}:{}", source_name, number)));
         edge.measurement = SE3(rotation, Eigen::Vector3d(numbers[2], numbers[3], numbers[4]));
-        edge.information = from_upper_triangle(std::vector<double>(numbers.begin() + 9, numbers.end()), 6);
+        edge.file_information = from_upper_triangle(std::vector<double>(numbers.begin() + 9, numbers.end()), 6);
       } else {
         edge.measurement = SE2(numbers[4], Eigen::Vector2d(numbers[2], numbers[3]));
-        edge.information = from_upper_triangle(std::vector<double>(numbers.begin() + 5, numbers.end()), 3);
+        edge.file_information = from_upper_triangle(std::vector<double>(numbers.begin() + 5, numbers.end()), 3);
       }
-      if (std::string repaired = repair_information(edge.information); !repaired.empty()) {
-        graph.warnings.push_back(fmt::format("{}:{}: {}: {}", source_name, number, tag, repaired));
-      }
+      take_information(edge, graph, fmt::format("{}:{}: {}", source_name, number, tag));
       (is_3d ? seen_3d : seen_2d) = true;
       graph.edges.push_back(std::move(edge));
     } else if (tag == "VERTEX2" || tag == "VERTEX3") {  // TORO
@@ -175,14 +208,12 @@ Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_n
       if (is_3d) {
         edge.measurement = SE3(from_roll_pitch_yaw(numbers[5], numbers[6], numbers[7]), Eigen::Vector3d(numbers[2], numbers[3], numbers[4]));
         const Eigen::MatrixXd D = toro_to_g2o_scaling();
-        edge.information = D * from_upper_triangle(std::vector<double>(numbers.begin() + 8, numbers.end()), 6) * D;
+        edge.file_information = D * from_upper_triangle(std::vector<double>(numbers.begin() + 8, numbers.end()), 6) * D;
       } else {
         edge.measurement = SE2(numbers[4], Eigen::Vector2d(numbers[2], numbers[3]));
-        edge.information = toro_2d_information(numbers.data() + 5);
+        edge.file_information = toro_2d_information(numbers.data() + 5);
       }
-      if (std::string repaired = repair_information(edge.information); !repaired.empty()) {
-        graph.warnings.push_back(fmt::format("{}:{}: {}: {}", source_name, number, tag, repaired));
-      }
+      take_information(edge, graph, fmt::format("{}:{}: {}", source_name, number, tag));
       (is_3d ? seen_3d : seen_2d) = true;
       graph.edges.push_back(std::move(edge));
     } else if (tag == "EQUIV") {  // TORO vertex equivalences: not supported, skipped
@@ -201,10 +232,9 @@ Result<PoseGraph> parse_g2o(const std::string& text, const std::string& source_n
   }
   if (graph.edges.empty()) return Error(fmt::format("{}: no edges", source_name));
   graph.dimension = seen_3d ? 3 : 2;
-  constexpr std::size_t kWarningsLogged = 3;
-  for (std::size_t i = 0; i < std::min(graph.warnings.size(), kWarningsLogged); ++i) logger()->warn("{}", graph.warnings[i]);
-  if (graph.warnings.size() > kWarningsLogged) {
-    logger()->warn("{}: {} more edges with information repaired the same way", source_name, graph.warnings.size() - kWarningsLogged);
+  for (const WarningGroup& group : group_warnings(graph.warnings)) {
+    for (const std::string& example : group.first) logger()->warn("{}", example);
+    if (group.count > group.first.size()) logger()->warn("{}: {} more edges with the same warning ({})", source_name, group.count - group.first.size(), group.kind);
   }
 
   // Vertices without a VERTEX line: chain edges from known vertices (the first edge's start
@@ -247,8 +277,10 @@ Result<PoseGraph> read_g2o(const std::string& path) {
 }
 
 SeSyncWeights se_sync_weights(const PoseGraphEdge& edge, int d) {
-  const double tau = d / edge.information.topLeftCorner(d, d).inverse().trace();
-  const double kappa = d == 3 ? 3.0 / (2.0 * edge.information.bottomRightCorner(3, 3).inverse().trace()) : edge.information(2, 2);
+  const Eigen::MatrixXd& information =
+      edge.file_information.size() > 0 && se_sync_blocks_usable(edge.file_information, d) ? edge.file_information : edge.information;
+  const double tau = d / information.topLeftCorner(d, d).inverse().trace();
+  const double kappa = d == 3 ? 3.0 / (2.0 * information.bottomRightCorner(3, 3).inverse().trace()) : information(2, 2);
   return {kappa, tau};
 }
 
@@ -369,7 +401,7 @@ Status write_pose_graph(const std::string& path, const PoseGraph& graph, const V
   }
   for (const PoseGraphEdge& edge : graph.edges) {
     out += fmt::format("{} {} {} {}{}\n", edge_tag, symbol_index(edge.from), symbol_index(edge.to), pose_fields(edge.measurement, format),
-                       information_fields(edge.information, format));
+                       information_fields(edge.file_information.size() > 0 ? edge.file_information : edge.information, format));
   }
   if (!toro) {
     for (Key key : graph.fixed) out += fmt::format("FIX {}\n", symbol_index(key));

@@ -190,13 +190,15 @@ Result<OptimalityCertificate> certify_global_optimality(const PoseGraph& graph, 
 
   const SparseMatrix M = data_matrix(graph, layout);
   const SparseMatrix S = certificate_matrix(M, pose_matrix(layout, certificate.refined), layout);
-  certificate.certified = positive_definite(S, config.eigenvalue_tolerance);
-  certificate.min_eigenvalue = smallest_eigenvalue(S, config.eigenvalue_tolerance, certificate.certified);
+  const double tolerance = std::max(config.eigenvalue_tolerance, config.relative_eigenvalue_tolerance * M.diagonal().maxCoeff());
+  certificate.eigenvalue_tolerance = tolerance;
+  certificate.certified = positive_definite(S, tolerance);
+  certificate.min_eigenvalue = smallest_eigenvalue(S, tolerance, certificate.certified);
   certificate.message = certificate.certified
                             ? "certified globally optimal"
-                            : fmt::format("not certified: the certificate matrix has eigenvalue {:.3g} < -{:g} (a local minimum or saddle, "
+                            : fmt::format("not certified: the certificate matrix has eigenvalue {:.3g} < -{:.3g} (a local minimum or saddle, "
                                           "or the relaxation is not exact for this graph)",
-                                          certificate.min_eigenvalue, config.eigenvalue_tolerance);
+                                          certificate.min_eigenvalue, tolerance);
   return finish();
 }
 

@@ -1,5 +1,7 @@
 #include "image_compression.hpp"
 
+#include "hanzo/fusion/io/image_file_check.hpp"
+
 #include <algorithm>
 
 #include <fmt/format.h>
@@ -58,6 +60,7 @@ Status decompress_image(v1::ImageMessage& image) {
                  "encoding");
   }
   const std::string& data = image.data();
+  if (Status complete = check_image_complete(data, "data"); !complete) return Error(complete.error().message, "data");
   cv::Mat decoded;
   try {
     decoded = cv::imdecode(cv::Mat(1, static_cast<int>(data.size()), CV_8UC1, const_cast<char*>(data.data())), cv::IMREAD_UNCHANGED);

@@ -1,5 +1,7 @@
 #include "image_files.hpp"
 
+#include "hanzo/fusion/io/image_file_check.hpp"
+
 #include <cmath>
 #include <filesystem>
 
@@ -12,6 +14,7 @@ namespace hanzo::fusion::io {
 Result<msgs::ImageMessage> read_image_file(const std::string& path, Timestamp timestamp, const std::string& frame_id,
                                            double depth_to_millimeters) {
   if (!std::filesystem::is_regular_file(path)) return Error(fmt::format("{}: no such image file", path));
+  HANZO_RETURN_IF_ERROR(check_image_file_complete(path));
   cv::Mat image;
   try {
     image = cv::imread(path, cv::IMREAD_UNCHANGED);

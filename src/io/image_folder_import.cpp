@@ -150,6 +150,9 @@ Result<ImageFolderImportReport> import_image_folders(const std::vector<std::stri
   } else {
     return Error(fmt::format("{}: the file names are not times; give a times file or a frame rate", folders[0]));
   }
+  const Timestamp origin = Timestamp::from_seconds(config.time_origin);
+  report.relative_times = report.time_source == "rate" || (report.time_source == "times file" && !times.empty() && times.front() >= origin &&
+                                                          times.front() < origin + Duration::from_seconds(1e8));
 
   std::optional<msgs::CameraIntrinsics> intrinsics;
   if (config.camera) intrinsics = config.camera->intrinsics;

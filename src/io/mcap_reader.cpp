@@ -539,10 +539,7 @@ Result<bool> MessageIterator::next(MessageView& message) {
   while (s.next_block < blocks.size() && (s.queue.empty() || blocks[s.next_block].start_time <= s.queue.top().log_time)) {
     const std::size_t index = s.next_block++;
     if (blocks[index].end_time < s.options.start_time || blocks[index].start_time > s.options.end_time) continue;
-    if (Status status = s.load(index); !status) {
-      s.failed = true;
-      return status.error();
-    }
+    if (Status status = s.load(index); !status) return status.error();  // the block is skipped; the next call goes on
   }
   if (s.queue.empty()) return false;
   const State::Pending top = s.queue.top();

@@ -246,6 +246,9 @@ Status read_metadata(const fs::path& folder, Bag& bag) {
       }
       bag.files.push_back(resolved.string());
     }
+    if (const YAML::Node custom = info["custom_data"]; custom && custom.IsMap()) {
+      for (const auto& entry : custom) bag.custom_data[entry.first.as<std::string>("")] = entry.second.as<std::string>("");
+    }
     if (const YAML::Node topics = info["topics_with_message_count"]; topics && topics.IsSequence()) {
       for (const YAML::Node& entry : topics) {
         const YAML::Node metadata = entry["topic_metadata"];

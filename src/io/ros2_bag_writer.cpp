@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 #include <sqlite3.h>
 
 #include "hanzo/fusion/io/mcap.hpp"
@@ -458,6 +459,7 @@ struct BagWriter::State {
   int64_t first_ns = 0;
   int64_t last_ns = 0;
   uint64_t messages = 0;
+  std::map<std::string, std::string> custom_data;
   bool closed = false;
 };
 
@@ -520,6 +522,8 @@ Status BagWriter::write(const std::string& topic, const std::string& type, Times
   return ok_status();
 }
 
+void BagWriter::set_custom_data(std::map<std::string, std::string> custom_data) { state_->custom_data = std::move(custom_data); }
+
 Status BagWriter::close() {
   State& s = *state_;
   if (s.closed) return ok_status();
@@ -530,7 +534,7 @@ Status BagWriter::close() {
     topics += fmt::format("    - topic_metadata:\n        name: {}\n        type: {}\n        serialization_format: cdr\n"
                           "        offered_qos_profiles: \"\"\n      message_count: {}\n", name, topic.type, topic.count);
   }
-  const std::string metadata = fmt::format(
+  std::string metadata = fmt::format(
       "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: {storage}\n  duration:\n    nanoseconds: {duration}\n"
       "  starting_time:\n    nanoseconds_since_epoch: {start}\n  message_count: {count}\n  topics_with_message_count:{topics}\n"
       "  compression_format: \"\"\n  compression_mode: \"\"\n  relative_file_paths:\n    - {file}\n  files:\n"
@@ -539,6 +543,9 @@ Status BagWriter::close() {
       fmt::arg("duration", s.last_ns - s.first_ns), fmt::arg("start", s.first_ns), fmt::arg("count", s.messages),
       fmt::arg("topics", topics.empty() ? " []" : "\n" + topics.substr(0, topics.size() - 1)), fmt::arg("file", s.file),
       fmt::arg("storage", s.sqlite ? "sqlite3" : "mcap"));
+  // Values as YAML double-quoted scalars (JSON strings are: the escapes are YAML's too).
+  if (!s.custom_data.empty()) metadata += "  custom_data:\n";
+  for (const auto& [key, value] : s.custom_data) metadata += fmt::format("    {}: {}\n", nlohmann::json(key).dump(), nlohmann::json(value).dump());
   if (s.sqlite) {
     const Status committed = s.sqlite->close(metadata);
     s.sqlite.reset();

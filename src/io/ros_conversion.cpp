@@ -1,4 +1,5 @@
 #include "hanzo/fusion/io/ros_conversion.hpp"
+#include "hanzo/fusion/io/image_file_check.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -309,6 +310,7 @@ Result<msgs::ImageMessage> compressed_image_from_ros(std::string_view data, Seri
   if (const auto size = declared_image_size(file); size && static_cast<uint64_t>(size->first) * size->second > kMaxPixels) {
     return Error(fmt::format("sensor_msgs/CompressedImage: the file declares {} x {} pixels, more than {}", size->first, size->second, kMaxPixels));
   }
+  if (Status complete = check_image_complete(std::string(file), "sensor_msgs/CompressedImage"); !complete) return complete.error();
   const cv::Mat encoded(1, static_cast<int>(file.size()), CV_8UC1, const_cast<char*>(file.data()));
   cv::Mat decoded = file.empty() ? cv::Mat() : cv::imdecode(encoded, cv::IMREAD_UNCHANGED);
   if (decoded.empty()) {

@@ -1,10 +1,12 @@
 #include "hanzo/fusion/io/rosbag_import.hpp"
 
 #include <algorithm>
+#include <cstdlib>
 #include <set>
 #include <type_traits>
 
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 
 #include "hanzo/fusion/io/ros2_bag.hpp"
 #include "hanzo/fusion/io/ros_conversion.hpp"
@@ -174,7 +176,7 @@ class TopicImporter {
     std::vector<ros::ImportedSensor> sensors;
     for (auto& [ros_topic, state] : topics_) {
       if (state.report.imported > 0) {
-        sensors.push_back({state.report.topic.substr(1), ros_topic, state.report.frame_id, is_camera(state.type),
+        sensors.push_back({sensor_name(state.report.topic), ros_topic, state.report.frame_id, is_camera(state.type),
                            state.type == "sensor_msgs/Imu"});
       }
       report_.topics.push_back(std::move(state.report));
@@ -199,6 +201,11 @@ class TopicImporter {
     std::vector<std::pair<int64_t, ros::OdometryTwist>> twists;  // odometry: (record time ns, twist) until flush()
   };
 
+  std::string sensor_name(const std::string& topic) const {
+    const auto named = config_.sensor_names.find(topic);
+    return named != config_.sensor_names.end() ? named->second : topic.substr(1);
+  }
+
   Timestamp stamp(Timestamp header_stamp, Timestamp record_time) const {
     return config_.use_record_time || header_stamp.is_zero() ? record_time : header_stamp;
   }
@@ -215,7 +222,7 @@ class TopicImporter {
                                    : Status(converted.error());
     if (!valid) return reject(state, record_time_ns, valid.error().message);
     if (state.report.imported == 0) state.report.frame_id = frame_of(*converted, data, state.serialization);
-    HANZO_RETURN_IF_ERROR(writer_.write(state.report.topic, *converted, state.report.topic.substr(1)));
+    HANZO_RETURN_IF_ERROR(writer_.write(state.report.topic, *converted, sensor_name(state.report.topic)));
     ++state.report.imported;
     return ok_status();
   }
@@ -287,9 +294,48 @@ Result<RosbagImportReport> import_rosbag(const std::string& path, SensorLogWrite
   return report;
 }
 
-Result<RosbagImportReport> import_rosbag2(const std::string& path, SensorLogWriter& writer, const RosbagImportConfig& config) {
+namespace {
+
+// What `hanzo-fusion export ros2bag` recorded of the log (rosbag_import.hpp): the configuration
+// the import runs with, and the calibration to report (none when the bag carries none).
+Result<std::optional<calib::Calibration>> apply_recorded_log(const ros2::Bag& bag, const std::string& path, RosbagImportConfig& config) {
+  const auto recorded = [&](const char* key) -> std::optional<std::string> {
+    const auto found = bag.custom_data.find(key);
+    return found == bag.custom_data.end() ? std::nullopt : std::optional<std::string>(found->second);
+  };
+  if (const std::optional<std::string> sensors = recorded("hanzo_fusion.sensors"); sensors && config.topic_map.empty()) {
+    const nlohmann::json names = nlohmann::json::parse(*sensors, nullptr, false);
+    if (!names.is_object()) return Error(fmt::format("{}: custom_data hanzo_fusion.sensors is not a JSON object", path));
+    for (const auto& [topic, sensor] : names.items()) {
+      if (!sensor.is_string()) return Error(fmt::format("{}: custom_data hanzo_fusion.sensors: '{}' has no sensor name", path, topic));
+      config.topic_map[topic] = topic;
+      config.sensor_names[topic] = sensor.get<std::string>();
+    }
+  }
+  if (const std::optional<std::string> separation = recorded("hanzo_fusion.wheel_separation"); separation && !config.wheel_separation) {
+    char* end = nullptr;
+    const double metres = std::strtod(separation->c_str(), &end);
+    if (end == separation->c_str() || !(metres > 0.0)) {
+      return Error(fmt::format("{}: custom_data hanzo_fusion.wheel_separation '{}' is not a positive number", path, *separation));
+    }
+    config.wheel_separation = metres;
+  }
+  if (const std::optional<std::string> calibration = recorded("hanzo_fusion.calibration")) {
+    calib::Calibration parsed;
+    HANZO_ASSIGN_OR_RETURN(parsed, calib::parse_calibration(*calibration, path + " (custom_data hanzo_fusion.calibration)"));
+    return std::optional<calib::Calibration>(std::move(parsed));
+  }
+  return std::optional<calib::Calibration>();
+}
+
+}  // namespace
+
+Result<RosbagImportReport> import_rosbag2(const std::string& path, SensorLogWriter& writer, const RosbagImportConfig& given) {
   ros2::Bag bag;
   HANZO_ASSIGN_OR_RETURN(bag, ros2::open_bag(path));
+  RosbagImportConfig config = given;
+  std::optional<calib::Calibration> recorded_calibration;
+  HANZO_ASSIGN_OR_RETURN(recorded_calibration, apply_recorded_log(bag, path, config));
   TopicImporter importer(path, writer, config);
   auto serialization_of = [](const std::string& format) -> std::optional<ros::Serialization> {
     if (format == "cdr") return ros::Serialization::kCdr;
@@ -308,6 +354,10 @@ Result<RosbagImportReport> import_rosbag2(const std::string& path, SensorLogWrit
   RosbagImportReport report = importer.finish();
   report.storage = bag.storage;
   report.warnings = summary.warnings;
+  if (recorded_calibration) {
+    report.calibration = std::move(*recorded_calibration);
+    report.calibration_notes.push_back("the calibration the bag was exported with (custom_data hanzo_fusion.calibration)");
+  }
   return report;
 }
 

@@ -164,9 +164,14 @@ Result<std::unique_ptr<SensorLogReader>> SensorLogReader::open(const std::string
 Result<bool> SensorLogReader::next(LogEntry& entry) {
   mcap::MessageView view;
   while (true) {
-    bool more = false;
-    HANZO_ASSIGN_OR_RETURN(more, iterator_->next(view));
-    if (!more) return false;
+    Result<bool> more = iterator_->next(view);
+    if (!more) {
+      if (corrupted_chunks_++ == 0) first_chunk_error_ = more.error().message;
+      return more.error();
+    }
+    if (!*more) return false;
+    ++records_read_;
+    last_log_time_ = Timestamp::from_nanoseconds(static_cast<int64_t>(view.log_time));
     const std::string type = view.schema != nullptr && view.schema->encoding == "protobuf" ? view.schema->name : "";
     Result<LogEntry> decoded = Error("");
     if (type == v1::ImuMessage::descriptor()->full_name()) decoded = decode<v1::ImuMessage>(view);

@@ -124,7 +124,7 @@ Result<msgs::FusionMap> redact_map(const msgs::FusionMap& map, const RedactionCo
     const int factor = static_cast<int>(std::lround(resolution / out.occupancy->resolution));
     if (factor > 1) {
       HANZO_ASSIGN_OR_RETURN(out.occupancy, coarsen_occupancy(*out.occupancy, factor));
-      note(fmt::format("occupancy: {} m -> {} m cells", map.occupancy->resolution, out.occupancy->resolution));
+      note(fmt::format("occupancy: {:.6g} m -> {:.6g} m cells", map.occupancy->resolution, out.occupancy->resolution));
     }
   }
   if (out.mesh && resolution > 0.0) {

@@ -1,5 +1,7 @@
 #include "camera_odometry.hpp"
 
+#include <algorithm>
+
 #include <fmt/format.h>
 #include <opencv2/imgproc.hpp>
 
@@ -48,6 +50,16 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
   const bool stereo_pair = cameras.size() == 2 && cameras[1]->camera->intrinsics.width == intrinsics.width &&
                            cameras[1]->camera->intrinsics.height == intrinsics.height;
   if (config.frontend.type == config::FrontendType::kMsckf) return create_visual_inertial(config, calibration, cameras, stereo_pair, size);
+  // A monocular camera beside an IMU needs the visual-inertial frontend for its scale: the
+  // loosely coupled filters cannot use its poses, so its images are not processed at all.
+  const bool has_imu = std::any_of(config.sensors.begin(), config.sensors.end(),
+                                   [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kImu; });
+  if (has_imu && !stereo_pair) {
+    logger()->warn("camera '{}' is not fused by frontend.type {} with an IMU (a single camera's scale needs the visual-inertial "
+                   "frontend): set frontend.type: msckf to fuse it; its images are counted as not_fused",
+                   left.sensor, config::to_string(config.frontend.type));
+    return std::unique_ptr<CameraOdometry>();
+  }
   std::unique_ptr<vision::VisualOdometry> odometry;
   std::string right_sensor;
   Duration right_offset;

@@ -48,6 +48,7 @@ struct Frontend::Impl final : UpdateObserver {
       sensors.push_back(std::move(statistics));
     }
     last_input.resize(setups.size());
+    last_heard.resize(setups.size());
   }
 
   static std::vector<SensorSetup> link(std::vector<SensorSetup> sensor_setups, const config::FusionConfig& fusion_config) {
@@ -120,6 +121,8 @@ struct Frontend::Impl final : UpdateObserver {
   std::vector<Event> pending;  // accepted, waiting for the IMU to reach their time (sorted)
   std::vector<SensorStatistics> sensors;
   std::vector<Timestamp> last_input;  // last accepted body-clock time per sensor
+  std::vector<Timestamp> last_heard;  // last body-clock time each sensor was heard (accepted or noted): its timeout
+  double timeout_grace_s = 0.0;       // set_timeout_grace()
   Timestamp first_input;
   Timestamp newest;
   std::optional<Timestamp> pending_jump;
@@ -153,16 +156,29 @@ Result<std::unique_ptr<Frontend>> Frontend::create(const config::FusionConfig& c
   if (Status valid = config::validate(config); !valid) return valid.error();
   if (Status valid = calib::validate(calibration); !valid) return valid.error();
   if (config.sensors.empty()) return Error("the configuration has no sensors: nothing to fuse", "sensors");
+  // A calibration that leaves a sensor out is refused: a silent identity mounting would skew
+  // every measurement of that sensor. Without any calibration every sensor is at the origin.
+  if (calibration.sensors.empty()) logger()->warn("no calibration: every sensor is mounted at the body origin with no time offset");
   std::vector<SensorSetup> setups;
   std::optional<size_t> imu;
   for (const config::SensorConfig& sensor : config.sensors) {
     if (sensor.modality == SensorModality::kImu && !imu) imu = setups.size();
     SensorSetup setup;
-    if (const calib::SensorCalibration* entry = calibration.find(sensor.name)) {
+    const calib::SensorCalibration* entry = calibration.find(sensor.name);
+    if (entry != nullptr) {
       setup.T_body_sensor = entry->T_body_sensor();
       setup.time_offset = entry->time_offset;
-    } else {
-      logger()->info("sensor '{}' has no '{}_to_body' calibration: identity mounting, no time offset", sensor.name, sensor.name);
+    } else if (!calibration.sensors.empty()) {
+      return Error(fmt::format("the calibration has no '{0}_to_body' entry for sensor '{0}' (write its mounting, or '{0}_to_body: identity' "
+                               "for the body origin)",
+                               sensor.name),
+                   sensor.name + "_to_body");
+    }
+    if (sensor.modality == SensorModality::kCamera && (entry == nullptr || !entry->camera)) {
+      return Error(fmt::format("camera '{0}' has no intrinsics: add 'intrinsics:' (fx, fy, cx, cy, width, height) to '{0}_to_body' in the "
+                               "calibration",
+                               sensor.name),
+                   sensor.name + "_to_body.intrinsics");
     }
     setups.push_back(setup);
   }
@@ -317,8 +333,10 @@ void Frontend::note_input(std::string_view sensor_name, Timestamp time) {
   const std::optional<size_t> index = impl.sensor_index(sensor_name);
   if (!index) return;
   const Timestamp body_time = time + impl.setups[*index].time_offset;
-  if (body_time > impl.last_input[*index]) impl.last_input[*index] = body_time;
+  if (body_time > impl.last_heard[*index]) impl.last_heard[*index] = body_time;
 }
+
+void Frontend::set_timeout_grace(double seconds) { impl_->timeout_grace_s = std::max(0.0, seconds); }
 
 PushStatus Frontend::Impl::accept(size_t sensor, Event event) {
   SensorStatistics& statistics = sensors[sensor];
@@ -353,6 +371,7 @@ PushStatus Frontend::Impl::accept(size_t sensor, Event event) {
   }
 
   last_input[sensor] = event.time;
+  last_heard[sensor] = std::max(last_heard[sensor], event.time);
   if (statistics.first_time.is_zero()) statistics.first_time = event.time;
   statistics.last_time = event.time;
   if (first_input.is_zero()) first_input = event.time;
@@ -518,8 +537,8 @@ void Frontend::Impl::prune_history() {
 
 void Frontend::Impl::update_timeouts() {
   for (size_t i = 0; i < sensors.size(); ++i) {
-    const Timestamp reference = last_input[i].is_zero() ? first_input : last_input[i];
-    const double timeout = setups[i].config->effective_timeout_s();
+    const Timestamp reference = last_heard[i].is_zero() ? first_input : last_heard[i];
+    const double timeout = setups[i].config->effective_timeout_s() + timeout_grace_s;
     const bool silent = (newest - reference).seconds() > timeout;
     if (silent && !sensors[i].timed_out) {
       ++sensors[i].timeouts;

@@ -1,6 +1,10 @@
 #include "hanzo/fusion/pipeline/log_replay.hpp"
 
+#include <algorithm>
 #include <chrono>
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <utility>
 
 namespace hanzo::fusion::pipeline {
@@ -13,11 +17,23 @@ LogReplaySummary replay_log(Session& session, io::SensorLogReader& reader, const
     summary.push_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return result;
   };
+  const io::mcap::Statistics& statistics = reader.mcap().statistics();
+  summary.records_in_file = statistics.message_count;
+  summary.file_start = Timestamp::from_nanoseconds(static_cast<int64_t>(statistics.message_start_time));
+  summary.file_end = Timestamp::from_nanoseconds(static_cast<int64_t>(statistics.message_end_time));
+  if (reader.mcap().warning()) summary.truncation = *reader.mcap().warning();
   io::LogEntry entry;
   while (true) {
     Result<bool> more = reader.next(entry);
+    summary.records_read = reader.records_read();
+    summary.read_until = std::max(summary.read_until, reader.last_log_time());
     if (!more) {
-      ++summary.unread;
+      if (reader.corrupted_chunks() > summary.corrupted_chunks) {  // a corrupted chunk, skipped
+        summary.corrupted_chunks = reader.corrupted_chunks();
+        summary.first_chunk_error = reader.first_chunk_error();
+      } else if (summary.unread++ == 0) {
+        summary.first_unread_error = more.error().message;
+      }
       continue;
     }
     if (!*more) break;
@@ -40,6 +56,17 @@ LogReplaySummary replay_log(Session& session, io::SensorLogReader& reader, const
     return 0;
   });
   return summary;
+}
+
+std::string LogReplaySummary::incomplete() const {
+  std::vector<std::string> what;
+  if (corrupted_chunks > 0) what.push_back(fmt::format("{} corrupted chunk{} skipped ({})", corrupted_chunks, corrupted_chunks == 1 ? "" : "s", first_chunk_error));
+  if (!truncation.empty()) what.push_back(truncation);
+  if (unread > 0) what.push_back(fmt::format("{} message{} did not decode (first: {})", unread, unread == 1 ? "" : "s", first_unread_error));
+  if (what.empty()) return "";
+  const double read_seconds = read_until > file_start ? (read_until - file_start).seconds() : 0.0;
+  const double file_seconds = file_end > file_start ? (file_end - file_start).seconds() : 0.0;
+  return fmt::format("{}: read {:.1f} s of {:.1f} s of log ({} of {} messages)", fmt::join(what, "; "), read_seconds, file_seconds, records_read, records_in_file);
 }
 
 }  // namespace hanzo::fusion::pipeline

@@ -8,7 +8,7 @@
 namespace hanzo::fusion::pipeline {
 namespace {
 
-constexpr std::array<std::pair<Rejection, std::string_view>, 25> kNames{{
+constexpr std::array<std::pair<Rejection, std::string_view>, 26> kNames{{
     {Rejection::kUnknownSensor, "unknown_sensor"},
     {Rejection::kWrongType, "wrong_type"},
     {Rejection::kInvalid, "invalid"},
@@ -34,6 +34,7 @@ constexpr std::array<std::pair<Rejection, std::string_view>, 25> kNames{{
     {Rejection::kReference, "reference"},
     {Rejection::kMerged, "merged"},
     {Rejection::kNotFused, "not_fused"},
+    {Rejection::kTrackingLost, "tracking_lost"},
 }};
 
 }  // namespace

@@ -210,6 +210,8 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
     session_config.backend.smoother.neighbour_hops = std::min(session_config.backend.smoother.neighbour_hops, 2);
     session_config.backend.loop_batch_interval_s = std::max(session_config.backend.loop_batch_interval_s, 10.0);
   }
+  // Live, each sensor streams on its own: one may lag another by up to the lag window.
+  if (session_config.mode == SessionMode::kRealtime) frontend->set_timeout_grace(config.frontend.lag_window_s);
   std::unique_ptr<CameraOdometry> camera_odometry;
   if (session_config.mapping) HANZO_ASSIGN_OR_RETURN(camera_odometry, CameraOdometry::create(config, calibration));
   auto session = std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), planar_laser,
@@ -430,6 +432,7 @@ PushStatus Session::push_scan(msgs::PointCloudMessage scan) {
                                               last_scan_time_->seconds()));
   }
   last_scan_time_ = scan.timestamp;
+  frontend_->note_input(lidar_sensor_, scan.timestamp);  // heard, though its pose comes after registration
   // Into the body clock (calibration: t_body = t_lidar + offset).
   if (lidar_time_offset_.nanoseconds() != 0) {
     scan.timestamp = scan.timestamp + lidar_time_offset_;
@@ -464,6 +467,8 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
                   fmt::format("camera {}: image at {:.6f} s is not after the previous one ({:.6f} s)", sensor, image->timestamp.seconds(),
                               statistics.last_time.seconds()));
   }
+  // The camera streams: heard by the timeout monitoring whether or not its frame gives a pose.
+  frontend_->note_input(sensor, image->timestamp);
   Result<std::optional<CameraOdometry::Tracked>> tracked = camera_odometry_->add(sensor, *image);
   if (!tracked) return refuse(Rejection::kInvalid, fmt::format("camera {}: {}", sensor, tracked.error().message));
   if (statistics.first_time.nanoseconds() == 0) statistics.first_time = image->timestamp;
@@ -473,10 +478,10 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
   // Counted on the left camera (a pair is one measurement).
   SensorStatistics& left = camera_statistics_[camera_odometry_->left_sensor()];
   if (frame.frame.state != vision::TrackingState::kTracking) {
-    // Before the odometry's first pose (initializing) as a sensor still aligning; lost frames
-    // as not registered, their image's condition the health's reason.
+    // Before the odometry's first pose: before its initialization; lost frames as lost, their
+    // image's condition the health's reason.
     const bool lost = frame.frame.state == vision::TrackingState::kLost;
-    ++left.rejected[lost ? Rejection::kNotRegistered : Rejection::kAligning];
+    ++left.rejected[lost ? Rejection::kTrackingLost : Rejection::kBeforeInitialization];
     if (lost) {
       switch (frame.image_quality.condition) {
         case vision::ImageCondition::kDark: camera_lost_reason_ = HealthReason::kDark; break;
@@ -1002,14 +1007,28 @@ SessionSummary Session::summary() const {
     sensor.first_time = lidar_statistics_.first_time;
     sensor.last_time = lidar_statistics_.last_time;
   }
+  // The left camera's poses go to the Frontend, which applies or gates them: its counts say
+  // how many frames were fused (a stereo pair is one measurement, counted on both cameras).
+  std::optional<SensorStatistics> pose_outcomes;
+  if (camera_odometry_) {
+    for (const SensorStatistics& sensor : summary.sensors) {
+      if (sensor.name == camera_odometry_->left_sensor()) pose_outcomes = sensor;
+    }
+  }
   for (SensorStatistics& sensor : summary.sensors) {
     const auto camera = camera_statistics_.find(sensor.name);
     if (camera == camera_statistics_.end()) continue;
-    // Images come here, not through Frontend::push: our counts; the Frontend's monitoring of
-    // the fused poses stays.
+    // Images come here, not through Frontend::push: our counts of the images, the Frontend's
+    // of the poses it fused or gated; its monitoring of the fused poses stays.
     sensor.received = camera->second.received;
-    sensor.fused = camera->second.fused;
     sensor.rejected = camera->second.rejected;
+    sensor.fused = camera->second.fused;
+    if (pose_outcomes) {
+      sensor.fused = std::min(camera->second.fused, pose_outcomes->fused);
+      for (const auto& [reason, count] : pose_outcomes->rejected) {
+        if (!is_input_check(reason)) sensor.rejected[reason] += count;
+      }
+    }
     sensor.first_time = camera->second.first_time;
     sensor.last_time = camera->second.last_time;
   }

@@ -32,7 +32,20 @@ using nlohmann::json;
 // The server's error of a REST answer: "HTTP 404 not_found: no session 'x'"; without an answer
 // the URL tried and why.
 Error http_error(const httplib::Result& response, const std::string& what, const std::string& url) {
-  if (!response) return Error(fmt::format("{}: {} ({})", what, httplib::to_string(response.error()), url));
+  if (!response) {
+    // httplib names only the step that failed ("Connection"): say what it means.
+    std::string reason;
+    switch (response.error()) {
+      case httplib::Error::Connection: reason = "cannot connect: is the server running and listening there?"; break;
+      case httplib::Error::ConnectionTimeout: reason = "the connection timed out"; break;
+      case httplib::Error::Read: reason = "the server closed the connection or sent nothing"; break;
+      case httplib::Error::Write: reason = "the request could not be sent"; break;
+      case httplib::Error::SSLConnection: reason = "the TLS handshake failed (is it an https server?)"; break;
+      case httplib::Error::SSLServerVerification: reason = "the server's TLS certificate was not verified"; break;
+      default: reason = httplib::to_string(response.error()); break;
+    }
+    return Error(fmt::format("{}: {} ({})", what, reason, url));
+  }
   std::string message = response->body;
   try {
     const json body = json::parse(response->body);

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <thread>
 
 #include <fmt/format.h>
@@ -16,6 +17,7 @@
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
 #include "hanzo/fusion/calib/calibration_json.hpp"
+#include "http_compression.hpp"
 #include "json_codec.hpp"
 #include "web_assets.hpp"
 
@@ -31,6 +33,30 @@ constexpr const char* kSessionPattern = "([0-9a-zA-Z_-]{1,64})";
 void send_json(httplib::Response& response, int status, const json& body) {
   response.status = status;
   response.set_content(body.dump(), kJson);
+}
+
+// A large text or JSON body compressed at a fast level for a client that accepts it, and sent
+// as a sized content provider, which httplib neither recompresses nor re-encodes
+// (http_compression.hpp). Small bodies (where httplib's own compression costs little) and
+// binary ones are left as they are.
+void compress_large_body(const httplib::Request& request, httplib::Response& response) {
+  constexpr std::size_t kMinimumBytes = 16 * 1024;
+  if (response.body.size() < kMinimumBytes || response.has_header("Content-Encoding")) return;
+  const std::string type = response.get_header_value("Content-Type");
+  if (type.rfind("text/", 0) != 0 && type.rfind(kJson, 0) != 0) return;
+  const detail::ContentEncoding encoding = detail::negotiate_encoding(request.get_header_value("Accept-Encoding"));
+  auto body = std::make_shared<std::string>();
+  if (Result<std::string> compressed = detail::compress(response.body, encoding); compressed && encoding != detail::ContentEncoding::kIdentity) {
+    *body = std::move(compressed).value();
+    response.set_header("Content-Encoding", std::string(detail::to_string(encoding)));
+  } else {
+    body->swap(response.body);
+  }
+  response.body.clear();
+  response.set_header("Vary", "Accept-Encoding");
+  response.set_content_provider(body->size(), type, [body](std::size_t offset, std::size_t length, httplib::DataSink& sink) {
+    return sink.write(body->data() + offset, length);
+  });
 }
 
 void send_error(httplib::Response& response, const ApiError& error) {
@@ -155,6 +181,7 @@ struct RestServer::Impl {
                                                                         httplib::Response& response) {
       const auto started = Clock::now();
       handler(request, response);
+      compress_large_body(request, response);
       if (response.status == -1) response.status = 200;  // httplib's default, made explicit for the count
       latency.observe(std::chrono::duration<double>(Clock::now() - started).count());
       metrics->counter("hanzo_fusion_http_requests_total", "REST requests by route and status",

@@ -69,6 +69,10 @@ Result<std::pair<config::FusionConfig, calib::Calibration>> with_sensor(const co
     if (!entry.IsMap()) return Error("calibration: expected the sensor's calibration entry (a map)", "calibration");
   }
   calibration_node["calibration"][registration.name + "_to_body"] = entry;
+  // A session without a calibration runs its sensors at the body origin: they keep it, now said.
+  for (const config::SensorConfig& sensor : configuration.sensors) {
+    if (calibration.find(sensor.name) == nullptr) calibration_node["calibration"][sensor.name + "_to_body"] = YAML::Node(YAML::NodeType::Map);
+  }
   calib::Calibration new_calibration;
   HANZO_ASSIGN_OR_RETURN(new_calibration,
                          with_context(calib::parse_calibration(emit(calibration_node), "sensor registration"), "calibration"));

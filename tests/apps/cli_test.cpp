@@ -48,6 +48,11 @@ CliRun run(const std::string& arguments) {
   return result;
 }
 
+std::string file_bytes(const std::filesystem::path& path) {
+  std::ifstream file(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>()};
+}
+
 std::string write_temp(const std::string& name, const std::string& text) {
   const std::filesystem::path path = std::filesystem::temp_directory_path() / name;
   std::ofstream(path) << text;
@@ -456,12 +461,39 @@ TEST(Cli, RunReplaysTheSampleAndScoresItAgainstGroundTruth) {
                                          (dir / "bad").string()));
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_THAT(missing.err, HasSubstr("none.mcap"));
+  // A configuration none of whose topics is in the log fuses nothing: refused, naming both.
+  const std::string other_topics = write_temp("other_topics.yaml", "fusion:\n  sensors:\n    imu:\n      topic: /other/imu\n      rate: 100\n");
+  const CliRun unmatched = run(fmt::format("run --config {} --log {} --out {}", other_topics, log, (dir / "bad").string()));
+  EXPECT_EQ(unmatched.exit_code, 1);
+  EXPECT_THAT(unmatched.err, HasSubstr("has none of the configured sensors' topics (/other/imu); its topics: /gnss, /imu, /wheels"));
+  // A calibration that leaves sensors out: refused, naming the entry to add.
+  const std::string imu_only = write_temp("imu_only_calibration.yaml", "calibration:\n  imu_to_body: identity\n");
+  const CliRun uncalibrated = run(fmt::format("run --config examples/data/fusion.yaml --calib {} --log {} --out {}", imu_only, log,
+                                              (dir / "bad").string()));
+  EXPECT_EQ(uncalibrated.exit_code, 1);
+  EXPECT_THAT(uncalibrated.err, HasSubstr("no 'gnss_to_body' entry for sensor 'gnss'"));
+  // A corrupted log: what could be read is replayed and written, and the run fails unless the
+  // user accepts a partial log.
+  std::string bytes = file_bytes(log);
+  for (std::size_t i = 0; i < 4; ++i) bytes[bytes.size() / 2 + i] = static_cast<char>(0xA5);
+  const std::string corrupted = (dir / "corrupted.mcap").string();
+  std::ofstream(corrupted, std::ios::binary) << bytes;
+  const CliRun partial = run(fmt::format("run --config examples/data/fusion.yaml --log {} --out {}", corrupted, (dir / "partial").string()));
+  EXPECT_EQ(partial.exit_code, 1);
+  EXPECT_THAT(partial.err, HasSubstr("partial log: 1 corrupted chunk skipped"));
+  EXPECT_THAT(partial.err, HasSubstr("--allow-partial"));
+  std::ifstream summary_file(dir / "partial" / "summary.json");
+  ASSERT_TRUE(summary_file.good());
+  const nlohmann::json partial_summary = nlohmann::json::parse(summary_file);
+  EXPECT_EQ(partial_summary["ok"], false);
+  EXPECT_EQ(partial_summary["partial"], true);
+  const CliRun accepted = run(fmt::format("run --config examples/data/fusion.yaml --log {} --out {} --allow-partial --json", corrupted,
+                                          (dir / "accepted").string()));
+  EXPECT_EQ(accepted.exit_code, 0) << accepted.err;
+  const nlohmann::json accepted_json = nlohmann::json::parse(accepted.out);
+  EXPECT_EQ(accepted_json["partial"], true);
+  EXPECT_THAT(accepted_json["incomplete"].get<std::string>(), HasSubstr("corrupted chunk"));
   std::filesystem::remove_all(dir);
-}
-
-std::string file_bytes(const std::filesystem::path& path) {
-  std::ifstream file(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>()};
 }
 
 // The whole pipeline through `run` (IMU + wheels + LiDAR in the simulated warehouse): the real-time
@@ -610,14 +642,22 @@ TEST(Cli, SimulatedLogThroughRos2BagsOfEachLidarLayoutRunsLikeTheOriginal) {
     const CliRun exported = run(fmt::format("export ros2bag --log {}/sensors.mcap --lidar-layout {} --out {} --json", sim, layout, bag));
     ASSERT_EQ(exported.exit_code, 0) << exported.err;
     EXPECT_GT(nlohmann::json::parse(exported.out)["left_out"]["/ground_truth"].get<int>(), 0);  // estimates have no sensor type
-    std::string topics;
-    for (const char* topic : {"/sensors/imu", "/sensors/lidar", "/sensors/wheels"}) {
-      topics += fmt::format(" --topic {0}={0}", topic);
+    // The bag records the log's topic and sensor names and the wheel separation: imported as it
+    // is, it gives back the same log. Topic maps and a separation given by hand still apply.
+    std::string options;
+    if (layout != "velodyne") {
+      options = " --wheel-separation 0.5";
+      for (const char* topic : {"/sensors/imu", "/sensors/lidar", "/sensors/wheels"}) options += fmt::format(" --topic {0}={0}", topic);
     }
-    const CliRun imported = run(fmt::format("import ros2bag {} --out {} --wheel-separation 0.5{} --json", bag, log, topics));
+    const CliRun imported = run(fmt::format("import ros2bag {} --out {}{} --json", bag, log, options));
     ASSERT_EQ(imported.exit_code, 0) << imported.err;
     const nlohmann::json import_report = nlohmann::json::parse(imported.out);  // kept: the loop reads into it
     for (const auto& topic : import_report["topics"]) EXPECT_EQ(topic["rejected"], 0) << topic.dump();
+    if (layout == "velodyne") {
+      std::set<std::string> topics;
+      for (const auto& topic : import_report["topics"]) topics.insert(topic["topic"].get<std::string>());
+      EXPECT_EQ(topics, (std::set<std::string>{"/sensors/imu", "/sensors/lidar", "/sensors/wheels"}));
+    }
     const nlohmann::json replayed = run_log(log, bag + "_run");
     ASSERT_TRUE(replayed.contains("evaluation") && replayed["evaluation"]["ape_se3_aligned_rmse_m"].is_number()) << replayed.dump();
     EXPECT_NEAR(replayed["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), direct_ape, 0.002);
@@ -654,18 +694,11 @@ TEST(Cli, StereoCameraBagThroughRos2CarriesItsCalibrationAndRunsLikeTheOriginal)
     if (sensor.camera) {
       EXPECT_EQ(found->camera->intrinsics.fx, sensor.camera->intrinsics.fx);
       EXPECT_EQ(found->camera->intrinsics.cx, sensor.camera->intrinsics.cx);
-      std::vector<double> coefficients = sensor.camera->distortion.coefficients;
-      coefficients.resize(5, 0.0);  // plumb_bob carries k3
-      EXPECT_EQ(found->camera->distortion.coefficients, coefficients);
+      EXPECT_EQ(found->camera->distortion.coefficients, sensor.camera->distortion.coefficients);  // the exported calibration itself
     }
+    EXPECT_EQ(found->time_offset, sensor.time_offset) << sensor.sensor;
   }
-  // The imported topics drop the generic namespace (/sensors/camera_left -> /camera_left).
-  std::ifstream config_in(sim + "/fusion.yaml");
-  std::stringstream config_text;
-  config_text << config_in.rdbuf();
-  std::string config = config_text.str();
-  for (std::size_t at = config.find("/sensors/"); at != std::string::npos; at = config.find("/sensors/", at)) config.replace(at, 9, "/");
-  std::ofstream((dir / "back_fusion.yaml").string()) << config;
+  // The bag keeps the log's topics: the original configuration reads the imported log.
   auto run_log = [&](const std::string& config_path, const std::string& calibration, const std::string& log, const std::string& out) {
     const CliRun ran = run(fmt::format("run --config {} --calib {} --log {} --out {} --gt {}/ground_truth.tum --json", config_path, calibration,
                                        log, out, sim));
@@ -673,7 +706,7 @@ TEST(Cli, StereoCameraBagThroughRos2CarriesItsCalibrationAndRunsLikeTheOriginal)
     return nlohmann::json::parse(ran.out.empty() ? "{}" : ran.out);
   };
   const nlohmann::json direct = run_log(sim + "/fusion.yaml", sim + "/calibration.yaml", sim + "/sensors.mcap", (dir / "direct").string());
-  const nlohmann::json replayed = run_log((dir / "back_fusion.yaml").string(), (dir / "back_calibration.yaml").string(),
+  const nlohmann::json replayed = run_log(sim + "/fusion.yaml", (dir / "back_calibration.yaml").string(),
                                           (dir / "back.mcap").string(), (dir / "back_run").string());
   ASSERT_TRUE(direct.contains("evaluation") && replayed.contains("evaluation")) << replayed.dump();
   EXPECT_GT(replayed["mapping"]["camera_frames_tracked"].get<int>(), 90);
@@ -783,11 +816,24 @@ TEST(Cli, ImageFolderImportRunsAsCameraOnlyVisualSlam) {
   EXPECT_EQ(report["time_source"], "times file");
   EXPECT_EQ(report["width"], 1226);
   const std::string config = write_temp("hanzo_cli_camera_only.yaml", "fusion:\n  sensors:\n    cam0:\n      topic: /cam0\n      modality: camera\n      rate: 10\n");
-  const CliRun slam = run(fmt::format("run --config {} --calibration {} --log {} --out {} --json", config, calibration, log, (dir / "run").string()));
+  const CliRun slam = run(fmt::format("run --config {} --calibration {} --log {} --out {} --gt {}/gt_cam0.tum --json", config, calibration, log,
+                                      (dir / "run").string(), data));
   ASSERT_EQ(slam.exit_code, 0) << slam.err;
-  const nlohmann::json mapping = nlohmann::json::parse(slam.out)["mapping"];
+  const nlohmann::json slam_json = nlohmann::json::parse(slam.out);
+  const nlohmann::json mapping = slam_json["mapping"];
   EXPECT_GE(mapping["camera_frames_tracked"].get<int>(), 45);
   EXPECT_EQ(mapping["visual_scale_free"], true);
+  // Every image is accounted for: fused (its pose applied by the filter) or rejected with a reason.
+  const nlohmann::json& camera = slam_json["summary"]["sensors"][0];
+  int accounted = camera["fused"].get<int>();
+  for (const auto& [reason, count] : camera["rejected"].items()) accounted += count.get<int>();
+  EXPECT_EQ(accounted, camera["received"].get<int>()) << camera.dump();
+  EXPECT_FALSE(camera["rejected"].contains("aligning"));  // no IMU: nothing to align
+  // The importer's relative times (origin 1e9 s) are paired with the ground truth's (from 0).
+  const nlohmann::json& evaluation = slam_json["evaluation"];
+  ASSERT_FALSE(evaluation.contains("undefined")) << evaluation.dump();
+  EXPECT_THAT(evaluation["time_pairing"].get<std::string>(), HasSubstr("origin taken off"));
+  EXPECT_GE(evaluation["pairs"].get<int>(), 30);
   const CliRun ape = run(fmt::format("eval ape {}/gt_cam0.tum {} --align sim3 --t-offset -1000000000 --json", data, (dir / "run" / "trajectory.tum").string()));
   ASSERT_EQ(ape.exit_code, 0) << ape.err;
   const double rmse = nlohmann::json::parse(ape.out)["statistics"]["rmse"].get<double>();
@@ -831,6 +877,14 @@ TEST(Cli, PrivacyBlurRedactsFacesOfAnImageOrAFolderAndRefusesBadInput) {
   EXPECT_EQ(not_image.exit_code, 1);
   EXPECT_THAT(not_image.err, HasSubstr("not an image OpenCV can read"));
   EXPECT_EQ(std::count(not_image.err.begin(), not_image.err.end(), '\n'), 1);
+  EXPECT_FALSE(std::filesystem::exists(dir / "out.png"));
+  // A cut-off JPEG decodes with its missing part grey (libjpeg only prints a warning): a face
+  // there would be written unblurred, so the file is refused.
+  const std::string whole_photo = file_bytes(fmt::format("{}/privacy_faces/two_people.jpg", HANZO_DATA_DIR));
+  std::ofstream((dir / "cut.jpg").string(), std::ios::binary) << whole_photo.substr(0, whole_photo.size() * 3 / 5);
+  const CliRun cut = run(fmt::format("privacy blur {} {}", (dir / "cut.jpg").string(), (dir / "out.png").string()));
+  EXPECT_EQ(cut.exit_code, 1);
+  EXPECT_THAT(cut.err, HasSubstr("cut.jpg: truncated JPEG"));
   EXPECT_FALSE(std::filesystem::exists(dir / "out.png"));
   // A sensor log: its camera images pass the filter, the rest is copied.
   ASSERT_EQ(run(fmt::format("sim examples/scenarios/camera_checkerboard.yaml --out {} --duration 1 --no-foxglove", (dir / "sim").string())).exit_code, 0);
@@ -933,6 +987,18 @@ TEST(Cli, GraphOptimizeReachesSeSyncOptimumOnIntel) {
   EXPECT_EQ(json["initialize"], "chordal");
   EXPECT_NEAR(json["se_sync_objective"]["final"].get<double>(), 52.3482, 0.05);
   EXPECT_GT(json["g2o_chi2"]["initial"].get<double>(), json["g2o_chi2"]["final"].get<double>());
+  // The written poses are the certified ones, and the output says what they minimize.
+  EXPECT_EQ(json["written_poses_minimize"], "se_sync_chordal");
+  EXPECT_TRUE(json["certified"].get<bool>());
+  EXPECT_EQ(json["certificate"]["about"], "the written poses");
+  // Geodesic poses are not SE-Sync's optimum: the certificate is about the optimum near them.
+  const CliRun geodesic = run(fmt::format("graph optimize {}/pose_graph/se_sync/intel.g2o --out {} --json", HANZO_DATA_DIR, out.string()));
+  ASSERT_EQ(geodesic.exit_code, 0) << geodesic.err;
+  const nlohmann::json geodesic_json = nlohmann::json::parse(geodesic.out);
+  EXPECT_EQ(geodesic_json["written_poses_minimize"], "g2o_geodesic");
+  EXPECT_FALSE(geodesic_json["certified"].get<bool>());
+  EXPECT_TRUE(geodesic_json["certificate"]["certified"].get<bool>());
+  EXPECT_THAT(geodesic_json["certificate"]["about"].get<std::string>(), HasSubstr("not written"));
   EXPECT_TRUE(std::filesystem::exists(out));
   std::filesystem::remove(out);
   const CliRun bad = run(fmt::format("graph optimize {} --out {}", write_temp("bad.g2o", "VERTEX_SE2 0 0 0\n"), out.string()));

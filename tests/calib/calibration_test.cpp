@@ -77,7 +77,7 @@ TEST(Calibration, EachRuleGivesItsDocumentedError) {
             "calibration.yaml:3: imu_to_body.translation: item 0: expected a finite number, got '.nan'");
   EXPECT_EQ(error_of("calibration:\n  imu_to_body: 5\n"),
             "calibration.yaml:2: imu_to_body: expected a map with rotation, translation, time_offset_ns (and intrinsics "
-            "for cameras)");
+            "for cameras), or 'identity'");
   EXPECT_EQ(error_of("sensors: {}\n"), "calibration.yaml:1: sensors: unknown key (expected one of: calibration)");
   EXPECT_THAT(error_of("calibration:\n  imu_to_body: {rotation: [1, 0\n"), HasSubstr("YAML syntax error"));
 }

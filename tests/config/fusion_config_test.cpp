@@ -106,6 +106,11 @@ TEST(FusionConfig, EachRuleGivesItsDocumentedError) {
   EXPECT_EQ(error_of("other: 1\n").substr(0, 14), "fusion.yaml:1:");
   EXPECT_EQ(error_of(""), "fusion.yaml:1: fusion: missing (the file must start with a 'fusion:' map)");
   EXPECT_THAT(error_of("fusion:\n  frontend: [\n"), HasSubstr("YAML syntax error"));
+  // A key given twice would silently keep one value: refused with both lines.
+  EXPECT_EQ(error_of("fusion:\n  frontend:\n    type: ekf\n    predict_rate: 100\n    type: msckf\n"),
+            "fusion.yaml:5: duplicate key 'type' (first at line 3)");
+  EXPECT_EQ(error_of("fusion:\n  sensors:\n    imu:\n      rate: 100\n    imu:\n      rate: 200\n"),
+            "fusion.yaml:5: duplicate key 'imu' (first at line 3)");
 }
 
 TEST(FusionConfig, LoadSaveLoadIsLossless) {

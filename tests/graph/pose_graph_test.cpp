@@ -184,8 +184,8 @@ TEST(ChordalInitialization, RecoversExactPosesAndRefusesDisconnectedGraphs) {
       return std::get<SE2>(truth[i]).inverse() * std::get<SE2>(truth[j]);
     };
     const Eigen::MatrixXd information = Eigen::MatrixXd::Identity(3 * (dimension - 1), 3 * (dimension - 1));
-    for (int i = 0; i + 1 < 40; ++i) graph.edges.push_back({X(i), X(i + 1), relative(i, i + 1), information});
-    for (int i = 0; i < 30; i += 3) graph.edges.push_back({X(i), X(i + 7), relative(i, i + 7), information});
+    for (int i = 0; i + 1 < 40; ++i) graph.edges.push_back({X(i), X(i + 1), relative(i, i + 1), information, information});
+    for (int i = 0; i < 30; i += 3) graph.edges.push_back({X(i), X(i + 7), relative(i, i + 7), information, information});
     const Values values = chordal_initialization(graph).value();
     for (int i = 0; i < 40; ++i) {
       if (dimension == 3) {
@@ -198,7 +198,7 @@ TEST(ChordalInitialization, RecoversExactPosesAndRefusesDisconnectedGraphs) {
     }
     graph.vertices.push_back(X(99));  // no edge reaches it
     EXPECT_THAT(chordal_initialization(graph).error().message, HasSubstr("connected to an anchor"));
-    graph.edges.push_back({X(99), X(98), relative(0, 1), information});
+    graph.edges.push_back({X(99), X(98), relative(0, 1), information, information});
     EXPECT_THAT(chordal_initialization(graph).error().message, HasSubstr("x98 is not a vertex"));
   }
 }
@@ -378,9 +378,16 @@ TEST(G2o, RepairsInformationThatIsNotPositiveDefiniteAndWarnsWithTheLine) {
   EXPECT_TRUE(reference.warnings.empty());
   const Result<PoseGraph> planar = parse_g2o(square(no_z), "planar.g2o");
   ASSERT_TRUE(planar.ok()) << planar.error().message;
-  ASSERT_EQ(planar->warnings.size(), 4u);
-  EXPECT_THAT(planar->warnings[0], HasSubstr("planar.g2o:2: EDGE_SE3:QUAT: the information matrix is not positive definite"));
-  EXPECT_THAT(planar->warnings[3], HasSubstr("planar.g2o:5: "));
+  // Two warnings per edge: repaired for the geodesic factors, and SE-Sync's weights from the
+  // repaired matrix (the translation block itself has no z information).
+  ASSERT_EQ(planar->warnings.size(), 8u);
+  EXPECT_THAT(planar->warnings[0].text, HasSubstr("planar.g2o:2: EDGE_SE3:QUAT: the information matrix is not positive definite"));
+  EXPECT_EQ(planar->warnings[1].kind, "se_sync_weights_from_repaired");
+  EXPECT_THAT(planar->warnings[6].text, HasSubstr("planar.g2o:5: "));
+  const std::vector<WarningGroup> groups = group_warnings(planar->warnings);
+  ASSERT_EQ(groups.size(), 2u);
+  EXPECT_EQ(groups[0].count, 4u);
+  EXPECT_EQ(groups[1].count, 4u);
   const Values expected = solve(reference), repaired = solve(*planar);
   for (int i = 0; i < 4; ++i) {
     const SE3 a = expected.at<SE3>(X(i)).value(), b = repaired.at<SE3>(X(i)).value();
@@ -392,9 +399,9 @@ TEST(G2o, RepairsInformationThatIsNotPositiveDefiniteAndWarnsWithTheLine) {
   const std::string vertices = "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n";
   const Result<PoseGraph> rounded = parse_g2o(vertices + "EDGE_SE2 0 1 1 0 0 1 1.0000001 0 1 0 1\nEDGE_SE2 0 1 1 0 0 -1 0 0 1 0 1\n", "rounded.g2o");
   ASSERT_TRUE(rounded.ok()) << rounded.error().message;
-  ASSERT_EQ(rounded->warnings.size(), 2u);
-  EXPECT_THAT(rounded->warnings[0], HasSubstr("rounded.g2o:3: EDGE_SE2:"));
-  EXPECT_THAT(rounded->warnings[1], HasSubstr("rounded.g2o:4: EDGE_SE2:"));
+  ASSERT_EQ(rounded->warnings.size(), 4u);
+  EXPECT_THAT(rounded->warnings[0].text, HasSubstr("rounded.g2o:3: EDGE_SE2:"));
+  EXPECT_THAT(rounded->warnings[2].text, HasSubstr("rounded.g2o:4: EDGE_SE2:"));
   for (const PoseGraphEdge& edge : rounded->edges) EXPECT_TRUE(GaussianNoise::from_information(edge.information).ok());
 }
 

@@ -240,9 +240,20 @@ TEST(Mcap, CorruptionGivesAClearError) {
   MessageIterator it = (*corrupted)->messages();
   MessageView view;
   Result<bool> more = true;
-  while (more.ok() && *more) more = it.next(view);
+  std::size_t before = 0, after = 0;
+  while (more.ok() && *more) {
+    more = it.next(view);
+    if (more.ok() && *more) ++before;
+  }
   ASSERT_FALSE(more.ok());
   EXPECT_THAT(more.error().message, HasSubstr(fmt::format("chunk at byte {}: CRC mismatch", chunk.chunk_start_offset)));
+  // The rest of the file is still read: only the corrupted chunk's messages are lost.
+  for (more = it.next(view); more.ok() && *more; more = it.next(view)) ++after;
+  ASSERT_TRUE(more.ok());
+  const uint64_t in_chunk = (*reader)->statistics().message_count - before - after;
+  EXPECT_GT(in_chunk, 0u);
+  EXPECT_GT(after, 0u);
+  EXPECT_EQ(before + after + in_chunk, 300u);
   EXPECT_THAT((*corrupted)->verify().error().message, HasSubstr("CRC mismatch"));
 
   // A flipped byte in the summary fails at open.

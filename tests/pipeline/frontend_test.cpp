@@ -5,6 +5,7 @@
 #include <cmath>
 #include <gtest/gtest.h>
 
+#include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/pipeline/frontend.hpp"
 
 namespace hanzo::fusion::pipeline {
@@ -145,6 +146,35 @@ TEST(Frontend, RejectsBadInputWithAReasonAndKeepsRunning) {
   // The session keeps running.
   ASSERT_TRUE(session->push("imu", imu_at(3.01)).ok());
   EXPECT_EQ(session->latest_pose()->timestamp, at(3.01));
+}
+
+TEST(Frontend, RefusesACalibrationThatLeavesASensorOutOrACameraWithoutIntrinsics) {
+  // No calibration at all: every sensor at the body origin (with a warning).
+  EXPECT_TRUE(Frontend::create(fusion_config(), calib::Calibration{}).ok());
+  // A calibration that names some sensors but not the GNSS: refused, naming the key to add.
+  calib::Calibration partial;
+  for (const char* sensor : {"imu", "wheels", "lidar"}) partial.sensors.push_back(calib::SensorCalibration::from_transform(sensor, SE3()));
+  const auto refused = Frontend::create(fusion_config(), partial);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("no 'gnss_to_body' entry for sensor 'gnss'"), std::string::npos) << refused.error().message;
+  EXPECT_EQ(refused.error().field, "gnss_to_body");
+  // An explicit identity is an entry: accepted.
+  const calib::Calibration explicit_identity =
+      calib::parse_calibration("calibration:\n  imu_to_body: identity\n  wheels_to_body: identity\n  lidar_to_body: identity\n"
+                               "  gnss_to_body: identity\n",
+                               "identity.yaml")
+          .value();
+  EXPECT_EQ(explicit_identity.find("gnss")->T_body_sensor().translation().norm(), 0.0);
+  EXPECT_TRUE(Frontend::create(fusion_config(), explicit_identity).ok());
+  // A camera without intrinsics would give no pose from any image: refused by name.
+  config::FusionConfig with_camera = fusion_config();
+  with_camera.sensors.push_back({"camera", config::SensorModality::kCamera, "/camera", 20.0, "camera_link", "", {}});
+  calib::Calibration no_intrinsics = explicit_identity;
+  no_intrinsics.sensors.push_back(calib::SensorCalibration::from_transform("camera", SE3()));
+  const auto blind = Frontend::create(with_camera, no_intrinsics);
+  ASSERT_FALSE(blind.ok());
+  EXPECT_NE(blind.error().message.find("camera 'camera' has no intrinsics"), std::string::npos) << blind.error().message;
+  EXPECT_EQ(blind.error().field, "camera_to_body.intrinsics");
 }
 
 TEST(Frontend, AGnssJumpOf50MetersIsGatedAndTheEstimateDoesNotMove) {

@@ -74,6 +74,11 @@ page.on('pageerror', (error) => pageErrors.push(error.message));
 await page.goto(`${base}/`);
 await page.waitForFunction(() => document.getElementById('status').textContent === 'enter an API token', null, { timeout: 15000 })
   .catch(() => fail('without a token the page does not ask for one'));
+// ... and stops polling until one is entered (no console full of 401s).
+let unauthorized = 0;
+page.on('response', (response) => { if (response.status() === 401) ++unauthorized; });
+await new Promise((resolve) => setTimeout(resolve, 2000));
+check(unauthorized === 0, `the page kept polling without a token: ${unauthorized} answers 401 in 2 s`);
 
 // 4. A session streaming the log (1.5x real time) while the page watches it.
 const simDir = path.join(scratch, 'sim');

@@ -20,6 +20,7 @@ if (tokenInUrl) {
 
 const state = {
   token: sessionStorage.getItem('hanzo-fusion-token') || '',
+  needsToken: false,      // a 401 came back: polling waits for a token
   selected: query.get('session') || null,
   sessions: [],
   poses: 0,               // poses received for the selected session
@@ -232,7 +233,9 @@ function renderDetails(session) {
   body.replaceChildren();
   for (const sensor of session.sensors) {
     const rejected = Object.values(sensor.rejected || {}).reduce((a, b) => a + b, 0);
-    const tr = row([sensor.name, sensor.received, sensor.fused, rejected, sensor.timed_out ? 'silent' : '']);
+    // Received but never fused (a modality the configured frontend does not use) is no outage.
+    const notFused = !sensor.timed_out && sensor.fused === 0 && sensor.received > 0 && (sensor.rejected || {}).not_fused > 0;
+    const tr = row([sensor.name, sensor.received, sensor.fused, rejected, sensor.timed_out ? 'silent' : notFused ? 'not fused' : '']);
     tr.title = Object.entries(sensor.rejected || {}).map(([reason, count]) => `${reason}: ${count}`).join('\n');
     if (sensor.timed_out) tr.classList.add('timed-out');
     body.appendChild(tr);
@@ -328,7 +331,8 @@ async function refreshSession() {
 function every(milliseconds, task) {
   let running = false;
   const tick = async () => {
-    if (running) return;
+    // Until a token is entered a server with auth answers 401 to everything: wait for it.
+    if (running || state.needsToken) return;
     running = true;
     try {
       await task();
@@ -337,6 +341,7 @@ function every(milliseconds, task) {
     } catch (error) {
       ++state.errors;
       state.lastError = error.message;
+      if (error.status === 401) state.needsToken = true;
       setStatus(error.status === 401 ? 'enter an API token' : error.message, 'error');
     } finally {
       running = false;
@@ -350,6 +355,7 @@ $('token').value = state.token;
 $('token-form').addEventListener('submit', (event) => {
   event.preventDefault();
   state.token = $('token').value.trim();
+  state.needsToken = false;
   sessionStorage.setItem('hanzo-fusion-token', state.token);
 });
 $('fit').addEventListener('click', fitView);

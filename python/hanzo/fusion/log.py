@@ -67,10 +67,11 @@ class LogWriter:
         self.close()
 
 
-def replay(log: str, config: str, calibration: Optional[str] = None, threads: int = 1) -> _fusion.Session:
+def replay(log: str, config: str, calibration: Optional[str] = None, threads: int = 1, allow_partial: bool = False) -> _fusion.Session:
     """The whole pipeline (as `hanzo-fusion run`) over a sensor log: returns the Session after the
     last message, to read poses(), optimized_trajectory(), map_points() and summary() from.
-    Raises ValueError for a configuration, calibration or log that cannot be read."""
+    Raises ValueError for a configuration, calibration or log that cannot be read, and for a log
+    read only in part (corrupted chunks, truncated) unless allow_partial."""
     session = _fusion.Session(config, calibration, threads)
-    session.replay(log)
+    session.replay(log, allow_partial)
     return session

@@ -25,9 +25,13 @@
 // Errors name the file and line: unknown tags, wrong field counts, non-finite numbers,
 // quaternions off unit norm by more than 1e-3, 2D and 3D mixed, vertices no edge connects to a
 // known one. An information matrix that is not positive definite (semi-definite with a zero
-// block, or slightly indefinite from rounding, as real benchmark files have) is not an error:
-// the nearest positive definite matrix is used (eigenvalues raised to at least 1e-6 of the
-// largest) and a warning naming file and line goes into PoseGraph::warnings (and the log).
+// block, or indefinite, as real benchmark files have) is not an error: the geodesic factors use
+// the nearest positive definite matrix (eigenvalues raised to at least 1e-6 of the largest) and
+// a warning naming file and line goes into PoseGraph::warnings (and the log). SE-Sync's
+// objective takes only the translation and rotation blocks of the file's matrix (SE-Sync's
+// read_g2o), so it is computed from the file's numbers whenever those blocks are positive
+// definite, whatever the coupling between them; only where a block itself is not (a zero row)
+// do its weights come from the repaired matrix, with a warning of its own kind.
 
 #include <string>
 #include <vector>
@@ -41,7 +45,18 @@ struct PoseGraphEdge {
   Key from = 0;
   Key to = 0;
   Value measurement;               // SE2 or SE3: pose `to` in frame `from`
-  Eigen::MatrixXd information;     // as in the file (g2o's error coordinates)
+  Eigen::MatrixXd information;     // file_information, or the nearest positive definite matrix
+  Eigen::MatrixXd file_information;  // as in the file (g2o's error coordinates; TORO's converted); empty: `information`
+};
+
+/// One thing the reader repaired or could not take as written. `kind` groups warnings of the
+/// same cause (a large benchmark file can have thousands): "information_repaired" (the full
+/// matrix is not positive definite; the geodesic factors use the nearest one),
+/// "se_sync_weights_from_repaired" (a translation or rotation block of the file's matrix is not
+/// positive definite, so SE-Sync's weights come from the repaired matrix).
+struct PoseGraphWarning {
+  std::string kind;
+  std::string text;  ///< "file:line: TAG: what"
 };
 
 struct PoseGraph {
@@ -51,7 +66,7 @@ struct PoseGraph {
   std::vector<PoseGraphEdge> edges;
   std::vector<Key> fixed;          // FIX lines; the first vertex when there are none
   int skipped_equivalences = 0;    // TORO EQUIV lines (not supported)
-  std::vector<std::string> warnings;  // "file:line: EDGE_SE2: ..." per edge whose information was repaired
+  std::vector<PoseGraphWarning> warnings;  // per edge, in file order
 
   /// What the optimizer minimizes: g2o's (geodesic) between factors, or SE-Sync's objective
   /// (chordal rotation distance), whose global optima the SE-Sync papers publish.
@@ -78,20 +93,30 @@ Status write_g2o(const std::string& path, const PoseGraph& graph, const Values& 
 /// The same in TORO's format (VERTEX2/EDGE2 or VERTEX3/EDGE3; FIX lines are not part of it).
 Status write_toro(const std::string& path, const PoseGraph& graph, const Values& values);
 
-/// g2o's chi2: sum e^T info e with g2o's errors (SE2: (x, y, wrapped theta) of Z^-1 Ti^-1 Tj;
-/// SE3: translation and quaternion vector part, w >= 0).
 /// The rotation matrix (d x d) and the translation (d) of an SE2 or SE3 pose value.
 Eigen::MatrixXd pose_rotation(const Value& pose);
 Eigen::VectorXd pose_translation(const Value& pose);
 
+/// g2o's chi2: sum e^T info e with g2o's errors (SE2: (x, y, wrapped theta) of Z^-1 Ti^-1 Tj;
+/// SE3: translation and quaternion vector part, w >= 0), info the (repaired) information the
+/// geodesic factors use.
 Result<double> g2o_chi2(const PoseGraph& graph, const Values& values);
 /// SE-Sync's weights of one edge: tau = d / trace(info_tt^-1), kappa = info_thetatheta (2D) or
-/// 3 / (2 trace(info_RR^-1)) (3D); d the graph's dimension.
+/// 3 / (2 trace(info_RR^-1)) (3D); d the graph's dimension; info the file's information where
+/// its blocks are positive definite, else the repaired one (header comment).
 struct SeSyncWeights {
   double kappa = 0.0;  ///< rotation
   double tau = 0.0;    ///< translation
 };
 SeSyncWeights se_sync_weights(const PoseGraphEdge& edge, int dimension);
+
+/// Warnings of one kind: how many, and the first few lines.
+struct WarningGroup {
+  std::string kind;
+  std::size_t count = 0;
+  std::vector<std::string> first;
+};
+std::vector<WarningGroup> group_warnings(const std::vector<PoseGraphWarning>& warnings, std::size_t examples = 3);
 
 /// SE-Sync's objective (Rosen et al. 2019): sum kappa ||R_j - R_i R~||_F^2 + tau ||t_j - t_i - R_i t~||^2
 /// with tau = d / trace(info_tt^-1), kappa = info_thetatheta (2D) or 3 / (2 trace(info_RR^-1)) (3D).

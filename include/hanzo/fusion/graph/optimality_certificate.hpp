@@ -14,9 +14,13 @@
 //   S = M - BlockDiag(Lambda)   (the certificate matrix).
 // S X^T = 0 at a critical point; if moreover S is positive semidefinite, X is a global minimum
 // of F over all poses (the semidefinite relaxation is exact). Numerically: certified when
-// lambda_min(S) >= -eigenvalue_tolerance, tested by a sparse Cholesky factorization of
-// S + eigenvalue_tolerance I (it succeeds exactly when that matrix is positive definite, up to
-// rounding of the order 1e-16 ||S||).
+// lambda_min(S) >= -tolerance, tested by a sparse Cholesky factorization of S + tolerance I (it
+// succeeds exactly when that matrix is positive definite, up to rounding of the order
+// 1e-16 ||S||). The tolerance scales with the problem: the eigenvalues of S scale with the
+// measurements' weights, and so does the error a critical point found to double precision
+// leaves in them, so
+//   tolerance = max(eigenvalue_tolerance, relative_eigenvalue_tolerance * max_k M_kk).
+// (SE-Sync itself accepts lambda_min >= -1e-4 on benchmarks whose max M_kk is 1e2 .. 1e5.)
 //
 // The solution to certify is first refined on F itself (Levenberg-Marquardt with tight
 // tolerances, only the gauge vertex held), because the multipliers are those of an exact
@@ -36,9 +40,11 @@
 namespace hanzo::fusion::graph {
 
 struct OptimalityCertificateConfig {
-  /// Certified when the certificate matrix's smallest eigenvalue is >= -eigenvalue_tolerance
-  /// (units of the objective; SE-Sync's test).
+  /// Certified when the certificate matrix's smallest eigenvalue is >= -tolerance, tolerance the
+  /// larger of eigenvalue_tolerance (units of the objective) and relative_eigenvalue_tolerance
+  /// times the largest diagonal entry of the data matrix M (header comment).
   double eigenvalue_tolerance = 1e-6;
+  double relative_eigenvalue_tolerance = 1e-8;
   /// Levenberg-Marquardt iterations of the refinement on SE-Sync's objective.
   int refinement_iterations = 50;
 };
@@ -47,6 +53,8 @@ struct OptimalityCertificate {
   bool certified = false;
   /// Smallest eigenvalue of S, to about 1 % (or 1e-12 ||S||, below which it is reported as 0).
   double min_eigenvalue = 0.0;
+  /// The tolerance the test used (config comment).
+  double eigenvalue_tolerance = 0.0;
   /// SE-Sync's objective at the given solution and at the refined (certified) one.
   double objective_given = 0.0;
   double objective_refined = 0.0;

@@ -47,6 +47,7 @@ struct ImageFolderImportReport {
   uint64_t rejected = 0;           ///< files left out
   std::string first_rejection;
   std::string time_source;         ///< "times file", "file names" or "rate"
+  bool relative_times = false;     ///< the times are relative ones placed at config.time_origin
   uint32_t width = 0, height = 0;  ///< of the images
   calib::Calibration calibration;  ///< the cameras (empty without config.camera)
 };

@@ -184,7 +184,9 @@ class McapReader;
 class MessageIterator {
  public:
   /// true and fills `message` when there is one; false at the end; an error for a corrupted
-  /// chunk (CRC mismatch, bad compression, malformed record), naming its file offset.
+  /// chunk (CRC mismatch, bad compression, malformed record), naming its file offset. The
+  /// corrupted chunk's messages are lost (those before a malformed record still come out); the
+  /// next call goes on with the rest of the file.
   Result<bool> next(MessageView& message);
   ~MessageIterator();
   MessageIterator(MessageIterator&&) noexcept;

@@ -17,6 +17,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -43,6 +44,7 @@ struct Bag {
   std::string compression_mode;     ///< "" , "FILE" or "MESSAGE"
   std::vector<std::string> files;   ///< storage files, in reading order
   std::vector<Topic> topics;        ///< every topic of every file, by name
+  std::map<std::string, std::string> custom_data;  ///< metadata.yaml's custom_data (the recorder's own keys)
 };
 
 struct BagSummary {

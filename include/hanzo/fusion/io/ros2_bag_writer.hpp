@@ -12,6 +12,7 @@
 // The *_cdr functions encode one message (ROS 2 Humble layouts, as read back by Foxglove's
 // @foxglove/rosmsg2-serialization in tests/io/rosbag2_export_conformance_test.cpp).
 
+#include <map>
 #include <memory>
 #include <string>
 #include <utility>
@@ -92,7 +93,11 @@ class BagWriter {
   /// `type` one of the types above ("nav_msgs/msg/Path"); `cdr` from its encoder. The record
   /// time is the message's log time in the bag.
   Status write(const std::string& topic, const std::string& type, Timestamp record_time, const std::string& cdr);
-  /// Finishes the storage file and writes metadata.yaml (topics with counts, start, duration).
+  /// Strings for metadata.yaml's `custom_data` (rosbag2's map of the recorder's own keys); what
+  /// the importer reads back (import_rosbag2: `hanzo_fusion.*` keys).
+  void set_custom_data(std::map<std::string, std::string> custom_data);
+  /// Finishes the storage file and writes metadata.yaml (topics with counts, start, duration,
+  /// custom_data).
   Status close();
 
  private:

@@ -39,6 +39,8 @@ struct RosbagImportConfig {
   /// The frame the calibration's transforms map into. Empty: base_link, else base_footprint,
   /// else the frame of the first IMU topic, else of the first camera, else of the first sensor.
   std::string body_frame;
+  /// Log topic -> sensor name of its channel (default: the topic without its leading '/').
+  std::map<std::string, std::string> sensor_names;
 };
 
 struct TopicImportReport {
@@ -65,6 +67,14 @@ struct RosbagImportReport {
   std::vector<std::string> calibration_notes;  ///< what could not be placed, and why
 };
 
+/// A ROS 2 bag written by `hanzo-fusion export ros2bag` carries, in metadata.yaml's custom_data,
+/// what the log called its topics and sensors (`hanzo_fusion.sensors`: a JSON object ROS topic ->
+/// sensor name), the wheels' separation (`hanzo_fusion.wheel_separation`, m) and the calibration
+/// it was exported with (`hanzo_fusion.calibration`, the calibration YAML). import_rosbag2 then
+/// gives back the same log: topics and sensor names kept (unless `topic_map` names others), the
+/// wheel separation used unless given, and that calibration (time offsets and all) instead of the
+/// one rebuilt from /tf_static.
+///
 /// Imports every message of the selected topics of a ROS 1 bag, in bag order (odometry twists
 /// are integrated into wheel distances in stamp order: recorders store messages by arrival, in
 /// which odometry stamps may go back; equal stamps are rejected). Messages that do

@@ -112,17 +112,29 @@ class SensorLogReader {
 
   /// true and fills `entry`; false at the end. A message that does not decode or fails
   /// validation returns an error naming topic and time; reading can continue with the next
-  /// call (a corrupted chunk, however, ends the iteration).
+  /// call. A corrupted chunk returns its error once (its messages are lost) and is counted in
+  /// corrupted_chunks(); later calls go on with the rest of the file.
   Result<bool> next(LogEntry& entry);
 
   const mcap::McapReader& mcap() const { return *mcap_; }
   uint64_t skipped_messages() const { return skipped_; }
+  /// Messages of any topic taken from the file so far (decoded, skipped or refused).
+  uint64_t records_read() const { return records_read_; }
+  /// Log time of the last message taken from the file.
+  Timestamp last_log_time() const { return last_log_time_; }
+  /// Corrupted chunks met so far, and the first one's error ("" while none).
+  uint64_t corrupted_chunks() const { return corrupted_chunks_; }
+  const std::string& first_chunk_error() const { return first_chunk_error_; }
 
  private:
   SensorLogReader() = default;
   std::unique_ptr<mcap::McapReader> mcap_;
   std::unique_ptr<mcap::MessageIterator> iterator_;
   uint64_t skipped_ = 0;
+  uint64_t records_read_ = 0;
+  Timestamp last_log_time_;
+  uint64_t corrupted_chunks_ = 0;
+  std::string first_chunk_error_;
 };
 
 }  // namespace hanzo::fusion::io

@@ -179,9 +179,16 @@ class Frontend {
                             const Eigen::Matrix<double, 6, 6>& covariance);
 
   /// Marks that `sensor`'s data arrived at `time` (sensor clock) although it reaches the filter
-  /// through another sensor's measurements (the right camera of a stereo pair, fused through the
-  /// left camera's poses): its timeout monitoring counts it as heard. Ignores unknown sensors.
+  /// only later or through another sensor's measurements (images before the visual odometry's
+  /// first pose, the right camera of a stereo pair): its timeout monitoring counts it as heard;
+  /// the ordering checks of its own measurements are not affected. Ignores unknown sensors.
   void note_input(std::string_view sensor, Timestamp time);
+
+  /// Extra silence (s of data time, >= 0; default 0) tolerated before a sensor counts as timed
+  /// out. A live session's sensors reach it through separate streams that may run up to the lag
+  /// window apart (a client replaying a log at full speed, one stream per sensor): without it the
+  /// stream that lags is reported silent while it is only behind.
+  void set_timeout_grace(double seconds);
 
   /// The configured sensor that reads `topic`, or nullptr.
   const config::SensorConfig* sensor_for_topic(std::string_view topic) const;

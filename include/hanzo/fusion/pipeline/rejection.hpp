@@ -9,7 +9,9 @@
 //                      no_ego_velocity, heading_unknown, slip (wheels that disagree with the
 //                      LiDAR), not_registered (a LiDAR sweep that did not register),
 //                      registration_behind (a live sweep dropped: the registration was busy),
-//                      imu_behind (a sweep dropped while waiting for the IMU)
+//                      imu_behind (a sweep dropped while waiting for the IMU), tracking_lost (a
+//                      camera frame the visual odometry could not track: dark, glare, motion
+//                      blur or too few features; the health names which)
 //   informational      aligning, before_initialization, reference (the first wheel reading),
 //                      merged (a wheel reading too soon after the previous one to difference:
 //                      the next reading differences over both), not_fused (a modality nothing
@@ -51,6 +53,7 @@ enum class Rejection : uint8_t {
   kReference,
   kMerged,
   kNotFused,
+  kTrackingLost,
 };
 
 std::string_view to_string(Rejection rejection);
