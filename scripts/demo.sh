@@ -24,8 +24,8 @@ echo
 echo "== hanzo-fusion log info $out/sample.mcap --verify"
 "$cli" log info "$out/sample.mcap" --verify
 echo
-echo "== hanzo-fusion run --config examples/data/fusion.yaml --log $out/sample.mcap --out $out/run --gt examples/data/ground_truth.tum"
-"$cli" run --config examples/data/fusion.yaml --log "$out/sample.mcap" --out "$out/run" --gt examples/data/ground_truth.tum
+echo "== hanzo-fusion run --config examples/data/fusion.yaml --calib examples/data/calibration.yaml --log $out/sample.mcap --out $out/run --gt examples/data/ground_truth.tum"
+"$cli" run --config examples/data/fusion.yaml --calib examples/data/calibration.yaml --log "$out/sample.mcap" --out "$out/run" --gt examples/data/ground_truth.tum
 echo
 echo "== hanzo-fusion sim examples/scenarios/urban_vehicle.yaml --out $out/urban --duration 8 --threads 0"
 "$cli" sim examples/scenarios/urban_vehicle.yaml --out "$out/urban" --duration 8 --threads 0

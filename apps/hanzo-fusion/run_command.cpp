@@ -650,11 +650,11 @@ int run(const Output& output, const RunOptions& options) {
     // as well as the error unless they share a datum.
     // A monocular run's lengths are in units of its first baseline: Sim3 (scale too) leads.
     const char* aligned_key = mapping.visual_scale_free ? "ape_sim3_aligned_rmse_m" : "ape_se3_aligned_rmse_m";
-    const std::string aligned =
-        e[aligned_key].is_null() ? "undefined (no alignment for a straight path)" : fmt::format("{:.3f} m", e[aligned_key].get<double>());
-    text += fmt::format("{}: APE rmse {} {}-aligned over {:.1f} m; in the run's world frame {:.3f} m (max {:.3f}; meaningful when it "
+    const std::string aligned = e[aligned_key].is_null() ? "undefined (a straight path leaves the alignment's rotation free)"
+                                                         : fmt::format("{:.3f} m", e[aligned_key].get<double>());
+    text += fmt::format("{}: APE rmse ({}-aligned) {} over {:.1f} m; in the run's world frame {:.3f} m (max {:.3f}; meaningful when it "
                         "shares the ground truth's datum); RPE (1 m) rmse {:.3f} m\n",
-                        label, aligned, mapping.visual_scale_free ? "Sim3" : "SE3", e["distance_m"].get<double>(), e["ape_rmse_m"].get<double>(),
+                        label, mapping.visual_scale_free ? "Sim3" : "SE3", aligned, e["distance_m"].get<double>(), e["ape_rmse_m"].get<double>(),
                         e["ape_max_m"].get<double>(), e["rpe_1m_rmse_m"].get<double>());
   }
   text += fmt::format("wrote {} files and {} plots into {}\n", files.size() + 1, plots->size(), options.out);

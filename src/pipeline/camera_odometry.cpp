@@ -55,8 +55,8 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
   const bool has_imu = std::any_of(config.sensors.begin(), config.sensors.end(),
                                    [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kImu; });
   if (has_imu && !stereo_pair) {
-    logger()->warn("camera '{}' is not fused by frontend.type {} with an IMU (a single camera's scale needs the visual-inertial "
-                   "frontend): set frontend.type: msckf to fuse it; its images are counted as not_fused",
+    logger()->warn("camera '{}' is not used by frontend.type {} beside an IMU (a single camera's scale needs the visual-inertial "
+                   "frontend, frontend.type: msckf); its images are counted as not_fused",
                    left.sensor, config::to_string(config.frontend.type));
     return std::unique_ptr<CameraOdometry>();
   }
