@@ -375,6 +375,7 @@ PushStatus Session::push_message(std::string_view sensor, msgs::SensorMessage me
     const auto* wheels = std::get_if<msgs::WheelOdometryMessage>(&message);
     if (planar_ && wheels != nullptr && msgs::validate(*wheels).ok()) planar_->add_wheels(*wheels, wheels->timestamp + wheel_time_offset_, T_body_wheels_);
     if (wheels != nullptr && msgs::validate(*wheels).ok() && !wheels_agree(*wheels)) {
+      frontend_->note_input(sensor, wheels->timestamp);  // withheld while they slip, not silent
       ++summary_.wheel_messages_withheld;
       register_ready_scans();
       update_backend();

@@ -11,8 +11,8 @@
 namespace hanzo::fusion::service::detail {
 namespace {
 
-constexpr int kBrotliQuality = 4;  // 0..11; 11 is brotli's (and httplib's) default
-constexpr int kGzipLevel = 4;      // 1..9
+constexpr int kBrotliQuality = 1;  // 0..11; 11 is brotli's (and httplib's) default; bench_service PageCompression
+constexpr int kGzipLevel = 1;      // 1..9
 
 std::string trimmed_lower(std::string_view text) {
   while (!text.empty() && std::isspace(static_cast<unsigned char>(text.front()))) text.remove_prefix(1);

@@ -280,6 +280,35 @@ TEST(Frontend, ALaggingImuStreamStillGivesOnePosePerImuMessageInTimeOrder) {
   }
 }
 
+TEST(Frontend, SensorsStreamingBehindTheImuAreNotTimedOutWithTheLiveGrace) {
+  // Live, one stream per sensor: the wheels and GNSS arrive 0.3 s after the IMU of their time
+  // (inside the 0.5 s lag window). Judged by data time alone the wheels (timeout 0.1 s) look
+  // silent; with the grace a live session gets, they do not.
+  const std::vector<Message> messages = drive(6.0);
+  std::vector<Message> imu_first;
+  std::vector<std::pair<double, Message>> waiting;  // (IMU time after which it arrives, message)
+  for (const Message& m : messages) {
+    const double t = std::visit([](const auto& typed) { return (typed.timestamp - at(0.0)).seconds(); }, m.message);
+    if (m.sensor != "imu") {
+      waiting.emplace_back(t + 0.3, m);
+      continue;
+    }
+    imu_first.push_back(m);
+    while (!waiting.empty() && waiting.front().first <= t) {
+      imu_first.push_back(waiting.front().second);
+      waiting.erase(waiting.begin());
+    }
+  }
+  const auto wheel_timeouts = [&](double grace) {
+    auto session = make_session();
+    session->set_timeout_grace(grace);
+    for (const Message& m : imu_first) (void)session->push(m.sensor, m.message);
+    return session->summary().sensors[1].timeouts;
+  };
+  EXPECT_GT(wheel_timeouts(0.0), 0U);
+  EXPECT_EQ(wheel_timeouts(fusion_config().frontend.lag_window_s), 0U);
+}
+
 TEST(Frontend, ReplayIsDeterministicBitForBit) {
   const std::vector<Message> messages = drive(4.0);
   std::vector<msgs::PoseEstimate> first, second;
