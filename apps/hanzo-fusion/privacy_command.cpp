@@ -59,12 +59,6 @@ int redact_log_file(const Output& output, nlohmann::json result, privacy::Privac
                             (summary->input_warning ? fmt::format("warning: {}\n", *summary->input_warning) : std::string()));
 }
 
-bool is_image_file(const std::filesystem::path& path) {
-  std::string extension = path.extension().string();
-  for (char& c : extension) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return extension == ".png" || extension == ".jpg" || extension == ".jpeg" || extension == ".bmp" || extension == ".pgm" ||
-         extension == ".ppm" || extension == ".tif" || extension == ".tiff" || extension == ".webp";
-}
 
 // One image: read, redact, write (the output's extension picks its format). Nothing is written
 // when any step fails.
@@ -119,7 +113,7 @@ int run_blur(const Output& output, const PrivacyOptions& options) {
   std::error_code error;
   if (std::filesystem::is_directory(options.input, error)) {
     for (const auto& entry : std::filesystem::directory_iterator(options.input)) {
-      if (entry.is_regular_file() && is_image_file(entry.path())) jobs.emplace_back(entry.path(), std::filesystem::path(options.output) / entry.path().filename());
+      if (entry.is_regular_file() && io::has_image_extension(entry.path().string())) jobs.emplace_back(entry.path(), std::filesystem::path(options.output) / entry.path().filename());
     }
     std::sort(jobs.begin(), jobs.end());
     if (jobs.empty()) return report_failure(output, result, fmt::format("{}: no image files in the folder", options.input));

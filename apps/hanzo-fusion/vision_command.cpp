@@ -17,6 +17,7 @@
 
 #include "commands.hpp"
 #include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/io/image_file_check.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/vision/map_relocalizer.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
@@ -50,13 +51,6 @@ struct RelocalizeOptions {
   std::string camera;  // empty: the map's camera
 };
 
-bool is_image_name(const std::filesystem::path& path) {
-  std::string extension = path.extension().string();
-  std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return extension == ".png" || extension == ".jpg" || extension == ".jpeg" || extension == ".pgm" || extension == ".ppm" || extension == ".bmp" ||
-         extension == ".tif" || extension == ".tiff";
-}
-
 // The image files named by `inputs` (files as given, folders searched recursively, sorted),
 // every `step`-th of each folder.
 Result<std::vector<std::string>> collect_images(const std::vector<std::string>& inputs, int step) {
@@ -66,7 +60,7 @@ Result<std::vector<std::string>> collect_images(const std::vector<std::string>& 
     if (std::filesystem::is_directory(input, error)) {
       std::vector<std::string> found;
       for (const auto& entry : std::filesystem::recursive_directory_iterator(input, error)) {
-        if (entry.is_regular_file() && is_image_name(entry.path())) found.push_back(entry.path().string());
+        if (entry.is_regular_file() && io::has_image_extension(entry.path().string())) found.push_back(entry.path().string());
       }
       if (error) return Error(fmt::format("{}: cannot list the folder ({})", input, error.message()));
       std::sort(found.begin(), found.end());

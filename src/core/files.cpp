@@ -1,9 +1,12 @@
 #include "hanzo/fusion/core/files.hpp"
 
+#include "hanzo/fusion/core/logging.hpp"
+
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <cstdlib>
 #include <sstream>
 
 #include <fcntl.h>
@@ -65,6 +68,20 @@ Status sync_directory(const std::string& path) {
   ::close(fd);
   if (!synced) return Error{fmt::format("{}: cannot sync folder ({})", path, std::strerror(saved_errno))};
   return ok_status();
+}
+
+std::string find_model_file(const std::string& file_name, const std::string& installed_dir, const std::string& source_dir) {
+  namespace fs = std::filesystem;
+  const char* environment = std::getenv("HANZO_MODELS_DIR");
+  const bool overridden = environment != nullptr && *environment != '\0';
+  if (overridden) {
+    if (fs::is_regular_file(fs::path(environment) / file_name)) return (fs::path(environment) / file_name).string();
+    logger()->warn("HANZO_MODELS_DIR={} holds no {}: looking in {} and {}", environment, file_name, installed_dir, source_dir);
+  }
+  for (const std::string& folder : {installed_dir, source_dir}) {
+    if (fs::is_regular_file(fs::path(folder) / file_name)) return (fs::path(folder) / file_name).string();
+  }
+  return (fs::path(overridden ? environment : source_dir) / file_name).string();
 }
 
 }  // namespace hanzo::fusion

@@ -1,6 +1,11 @@
 #include "hanzo/fusion/io/image_file_check.hpp"
 
+#include <algorithm>
+#include <array>
+#include <cctype>
 #include <cstdint>
+#include <filesystem>
+#include <string_view>
 
 #include <fmt/format.h>
 
@@ -61,6 +66,13 @@ Status check_png(const std::string& bytes, const std::string& name) {
 }
 
 }  // namespace
+
+bool has_image_extension(const std::string& path) {
+  std::string extension = std::filesystem::path(path).extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  static constexpr std::array<std::string_view, 10> kExtensions = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm", ".webp"};
+  return std::find(kExtensions.begin(), kExtensions.end(), extension) != kExtensions.end();
+}
 
 Status check_image_complete(const std::string& bytes, const std::string& name) {
   if (bytes.size() >= 3 && byte_at(bytes, 0) == 0xFF && byte_at(bytes, 1) == 0xD8 && byte_at(bytes, 2) == 0xFF) return check_jpeg(bytes, name);

@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include "hanzo/fusion/core/files.hpp"
+#include "hanzo/fusion/io/image_file_check.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "image_files.hpp"
 #include "text_lines.hpp"
@@ -17,13 +18,6 @@ namespace hanzo::fusion::io {
 namespace {
 
 namespace fs = std::filesystem;
-
-bool is_image_file(const fs::path& path) {
-  std::string extension = path.extension().string();
-  std::transform(extension.begin(), extension.end(), extension.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  static const char* kExtensions[] = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm", ".webp"};
-  return std::any_of(std::begin(kExtensions), std::end(kExtensions), [&](const char* known) { return extension == known; });
-}
 
 // Name order with digit runs compared as numbers: "frame9" < "frame10", "000009" < "000010".
 bool natural_less(const std::string& a, const std::string& b) {
@@ -54,7 +48,7 @@ Result<std::vector<fs::path>> list_images(const std::string& folder) {
   if (!fs::is_directory(folder, error)) return Error(fmt::format("{}: not a folder", folder));
   std::vector<fs::path> images;
   for (const fs::directory_entry& entry : fs::directory_iterator(folder, error)) {
-    if (entry.is_regular_file() && is_image_file(entry.path())) images.push_back(entry.path());
+    if (entry.is_regular_file() && has_image_extension(entry.path().string())) images.push_back(entry.path());
   }
   if (error) return Error(fmt::format("{}: {}", folder, error.message()));
   if (images.empty()) return Error(fmt::format("{}: no image files (png, jpg, bmp, tif, pgm, ppm, webp)", folder));

@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/objdetect.hpp>
 
+#include "hanzo/fusion/core/files.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 #include "yunet_face_detector.hpp"
 
@@ -17,12 +18,6 @@ namespace {
 
 constexpr const char* kFaceModel = "face_detection_yunet.onnx";
 constexpr const char* kPlateCascade = "/usr/share/opencv4/haarcascades/haarcascade_russian_plate_number.xml";
-
-std::string models_dir() {
-  if (const char* overridden = std::getenv("HANZO_MODELS_DIR"); overridden != nullptr && *overridden != '\0') return overridden;
-  if (std::filesystem::is_regular_file(std::filesystem::path(HANZO_INSTALLED_MODELS_DIR) / kFaceModel)) return HANZO_INSTALLED_MODELS_DIR;
-  return HANZO_SOURCE_MODELS_DIR;
-}
 
 cv::Rect enlarged(const cv::Rect& box, double margin, const cv::Size& size) {
   const int dx = static_cast<int>(std::lround(margin * box.width)), dy = static_cast<int>(std::lround(margin * box.height));
@@ -39,7 +34,7 @@ Result<Redaction> parse_redaction(std::string_view name) {
   return Error(fmt::format("unknown redaction '{}' (expected blur or black)", name));
 }
 
-std::string default_face_model_path() { return (std::filesystem::path(models_dir()) / kFaceModel).string(); }
+std::string default_face_model_path() { return find_model_file(kFaceModel, HANZO_INSTALLED_MODELS_DIR, HANZO_SOURCE_MODELS_DIR); }
 std::string default_plate_cascade_path() { return kPlateCascade; }
 
 struct PrivacyFilter::Models {

@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include <fmt/format.h>
+#include <opencv2/core/utils/logger.hpp>
 #include <opencv2/imgproc.hpp>
 
 namespace hanzo::fusion::privacy {
@@ -21,13 +22,21 @@ Result<YunetFaceDetector> YunetFaceDetector::load(const std::string& model_path)
   if (!std::filesystem::is_regular_file(model_path)) {
     return Error(fmt::format("face model '{}' not found (set HANZO_MODELS_DIR or the face model path)", model_path));
   }
+  // OpenCV logs a bad file's parse errors over several lines of its own: silenced here, and its
+  // exception's message put on one line.
+  const cv::utils::logging::LogLevel level = cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
+  Result<YunetFaceDetector> loaded = Error("");
   try {
     cv::dnn::Net net = cv::dnn::readNetFromONNX(model_path);
-    if (net.empty()) return Error(fmt::format("face model '{}': not a network OpenCV can read", model_path));
-    return YunetFaceDetector(std::move(net));
+    loaded = net.empty() ? Result<YunetFaceDetector>(Error(fmt::format("face model '{}': not a network OpenCV can read", model_path)))
+                         : Result<YunetFaceDetector>(YunetFaceDetector(std::move(net)));
   } catch (const cv::Exception& error) {
-    return Error(fmt::format("face model '{}': {}", model_path, error.msg));
+    std::string reason = error.msg;
+    std::replace(reason.begin(), reason.end(), '\n', ' ');
+    loaded = Error(fmt::format("face model '{}': not an ONNX network OpenCV can read ({})", model_path, reason));
   }
+  cv::utils::logging::setLogLevel(level);
+  return loaded;
 }
 
 void YunetFaceDetector::detect_at_scale(const cv::Mat& bgr, double score_threshold, double scale, std::vector<cv::Rect2d>* boxes,

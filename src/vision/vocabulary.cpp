@@ -55,12 +55,6 @@ T take(const std::string& bytes, std::size_t& offset) {
   return value;
 }
 
-std::string models_dir() {
-  if (const char* overridden = std::getenv("HANZO_MODELS_DIR"); overridden != nullptr && *overridden != '\0') return overridden;
-  if (std::filesystem::is_regular_file(std::filesystem::path(HANZO_INSTALLED_MODELS_DIR) / kDefaultFile)) return HANZO_INSTALLED_MODELS_DIR;
-  return HANZO_SOURCE_MODELS_DIR;
-}
-
 }  // namespace
 
 Status validate(const VocabularyConfig& config) {
@@ -327,7 +321,7 @@ Result<Vocabulary> Vocabulary::load(const std::string& path) {
 }
 
 Result<Vocabulary> Vocabulary::load_default() {
-  const std::string path = (std::filesystem::path(models_dir()) / kDefaultFile).string();
+  const std::string path = find_model_file(kDefaultFile, HANZO_INSTALLED_MODELS_DIR, HANZO_SOURCE_MODELS_DIR);
   Result<Vocabulary> loaded = load(path);
   if (!loaded) return Error(fmt::format("default vocabulary: {}", loaded.error().message));
   return loaded;

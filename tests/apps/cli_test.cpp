@@ -881,6 +881,18 @@ TEST(Cli, PrivacyBlurRedactsFacesOfAnImageOrAFolderAndRefusesBadInput) {
   EXPECT_THAT(not_image.err, HasSubstr("not an image OpenCV can read"));
   EXPECT_EQ(std::count(not_image.err.begin(), not_image.err.end(), '\n'), 1);
   EXPECT_FALSE(std::filesystem::exists(dir / "out.png"));
+  // A HANZO_MODELS_DIR without the model is passed over with a warning (the search order of
+  // docs/security.md); a file that is no ONNX network is refused on one line naming it.
+  ::setenv("HANZO_MODELS_DIR", "/nonexistent-models", 1);
+  const CliRun fallback = run(fmt::format("privacy blur {}/privacy_faces/two_people.jpg {} --json", HANZO_DATA_DIR, (dir / "fallback.png").string()));
+  ::unsetenv("HANZO_MODELS_DIR");
+  EXPECT_EQ(fallback.exit_code, 0) << fallback.err;
+  EXPECT_THAT(fallback.err, HasSubstr("HANZO_MODELS_DIR=/nonexistent-models holds no face_detection_yunet.onnx"));
+  const CliRun bad_model = run(fmt::format("privacy blur {}/privacy_faces/two_people.jpg {} --face-model {}", HANZO_DATA_DIR,
+                                           (dir / "bad_model.png").string(), write_temp("bad_model.onnx", "not a network")));
+  EXPECT_EQ(bad_model.exit_code, 1);
+  EXPECT_THAT(bad_model.err, HasSubstr("bad_model.onnx': not an ONNX network"));
+  EXPECT_EQ(std::count(bad_model.err.begin(), bad_model.err.end(), '\n'), 1) << bad_model.err;
   // A cut-off JPEG decodes with its missing part grey (libjpeg only prints a warning): a face
   // there would be written unblurred, so the file is refused.
   const std::string whole_photo = file_bytes(fmt::format("{}/privacy_faces/two_people.jpg", HANZO_DATA_DIR));

@@ -24,4 +24,10 @@ Status sync_directory(const std::string& path);
 /// and the error returned. Whoever reads `path` sees the old file or the complete new one.
 Status commit_partial_file(const std::string& partial, const std::string& path, const Status& written);
 
+/// Where a shipped model file is: the first of $HANZO_MODELS_DIR, `installed_dir` and
+/// `source_dir` that holds `file_name` (the search order of docs/security.md). A
+/// $HANZO_MODELS_DIR without the file is passed over with a warning naming it. When none holds
+/// it: the path in $HANZO_MODELS_DIR when set, else in `source_dir` (for the caller's error).
+std::string find_model_file(const std::string& file_name, const std::string& installed_dir, const std::string& source_dir);
+
 }  // namespace hanzo::fusion

@@ -18,6 +18,11 @@
 
 namespace hanzo::fusion::io {
 
+/// Whether the file name has an extension of the image formats the readers take (png, jpg,
+/// jpeg, bmp, tif, tiff, pgm, ppm, pnm, webp; any case): the image folders of importers and of
+/// the vision and privacy commands.
+bool has_image_extension(const std::string& path);
+
 /// Checks the bytes of an image file (its name is only for the message).
 Status check_image_complete(const std::string& bytes, const std::string& name);
 /// Reads `path` and checks it.
