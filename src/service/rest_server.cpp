@@ -7,7 +7,9 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <string_view>
 #include <thread>
+#include <tuple>
 
 #include <fmt/format.h>
 #include <httplib.h>
@@ -98,11 +100,39 @@ ApiStatus recording_options(const std::function<std::optional<std::string>(const
   return api_ok();
 }
 
+// A YAML body holding the configuration and, optionally, the calibration (`fusion:` and
+// `calibration:` at the top level: the two files one after the other, with or without `---`):
+// split into the two texts, each keeping the body's line numbers (the other's lines left blank),
+// so errors name the lines the client sent.
+std::pair<std::string, std::string> split_configuration_and_calibration(const std::string& body) {
+  std::string config, calibration;
+  bool in_calibration = false;
+  std::size_t start = 0;
+  while (start < body.size()) {
+    std::size_t end = body.find('\n', start);
+    if (end == std::string::npos) end = body.size();
+    const std::string_view line(body.data() + start, end - start);
+    const bool top_level_key = !line.empty() && line[0] != ' ' && line[0] != '\t' && line[0] != '#' && line.find(':') != std::string_view::npos;
+    if (line.starts_with("---")) {
+      in_calibration = false;
+    } else if (top_level_key) {
+      in_calibration = line.starts_with("calibration:");
+    }
+    const std::string kept = line.starts_with("---") || line.starts_with("...") ? std::string() : std::string(line);
+    config += (in_calibration ? std::string() : kept) + "\n";
+    calibration += (in_calibration ? kept : std::string()) + "\n";
+    start = end + 1;
+  }
+  if (calibration.find_first_not_of(" \t\n") == std::string::npos) calibration.clear();
+  return {config, calibration};
+}
+
 // POST /v1/sessions: a JSON object (name, config, calibration: YAML text or JSON objects; record,
 // privacy), the files themselves as multipart/form-data parts `config`, `calibration`, `name`,
 // `record`, `privacy` (curl -F config=@fusion.yaml), or the configuration file as the body with a
-// YAML content type (curl --data-binary @fusion.yaml -H 'Content-Type: application/yaml'; name,
-// record and privacy from the query).
+// YAML content type (curl --data-binary @fusion.yaml -H 'Content-Type: application/yaml', the
+// calibration after the configuration in the same body when there is one; name, record and
+// privacy from the query).
 ApiResult<CreateSessionRequest> create_session_request(const httplib::Request& request) {
   const std::string type = request.get_header_value("Content-Type");
   if (request.is_multipart_form_data()) {
@@ -129,7 +159,7 @@ ApiResult<CreateSessionRequest> create_session_request(const httplib::Request& r
     if (request.body.empty()) return ApiError{ErrorCode::kInvalidArgument, "the request body is empty (expected the fusion configuration)", "body"};
     CreateSessionRequest created;
     created.name = request.has_param("name") ? request.get_param_value("name") : "";
-    created.config_yaml = request.body;
+    std::tie(created.config_yaml, created.calibration_yaml) = split_configuration_and_calibration(request.body);
     const ApiStatus options = recording_options(
         [&](const char* name) { return request.has_param(name) ? std::optional<std::string>(request.get_param_value(name)) : std::nullopt; },
         created);

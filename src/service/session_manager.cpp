@@ -567,11 +567,11 @@ ApiResult<SessionInfo> SessionManager::create_session(const Principal& caller, c
   if (const ApiStatus allowed = authorize(caller, Permission::kSessionWrite); !allowed) return allowed.error();
   auto managed = std::make_shared<ManagedSession>();
   auto configuration = config::parse_fusion_config(request.config_yaml, "config");
-  if (!configuration) return ApiError::from(ErrorCode::kInvalidArgument, with_context(configuration, "config").error());
+  if (!configuration) return ApiError::from(ErrorCode::kInvalidArgument, configuration.error());  // "config:LINE: ..." already
   managed->configuration = std::move(configuration).value();
   if (!request.calibration_yaml.empty()) {
     auto calibration = calib::parse_calibration(request.calibration_yaml, "calibration");
-    if (!calibration) return ApiError::from(ErrorCode::kInvalidArgument, with_context(calibration, "calibration").error());
+    if (!calibration) return ApiError::from(ErrorCode::kInvalidArgument, calibration.error());  // "calibration:LINE: ..." already
     managed->calibration = std::move(calibration).value();
   }
   SessionRecord& record = managed->record;

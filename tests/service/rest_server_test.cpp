@@ -234,6 +234,18 @@ TEST_F(RestServerTest, CreatesSessionsFromPostedYamlFiles) {
   ASSERT_TRUE(yaml_body);
   ASSERT_EQ(yaml_body->status, 201) << yaml_body->body;
   EXPECT_EQ(json::parse(yaml_body->body)["name"], "yaml body");
+  // The calibration after the configuration in one YAML body (with or without ---) is taken too;
+  // an error in it names the body's own line.
+  auto both = http.Post("/v1/sessions?name=both", bearer(kRobotToken), configuration + "---\n" + calibration, "application/yaml");
+  ASSERT_TRUE(both);
+  ASSERT_EQ(both->status, 201) << both->body;
+  EXPECT_THAT(json::parse(both->body)["calibration"].get<std::string>(), HasSubstr("gnss_to_body"));
+  const std::size_t calibration_line = static_cast<std::size_t>(std::count(configuration.begin(), configuration.end(), '\n')) + 4;  // gnss's translation
+  std::string broken_calibration = calibration;
+  broken_calibration.replace(broken_calibration.find("1.2"), 3, "x");
+  auto bad_both = http.Post("/v1/sessions", bearer(kRobotToken), configuration + broken_calibration, "application/yaml");
+  EXPECT_EQ(bad_both->status, 400);
+  EXPECT_THAT(error_of(bad_both)["message"].get<std::string>(), HasSubstr("calibration:" + std::to_string(calibration_line) + ":"));
 
   // Bad forms name what is wrong; nothing is created.
   const httplib::MultipartFormDataItems no_config = {{"calibration", calibration, "calibration.yaml", ""}};
@@ -246,7 +258,7 @@ TEST_F(RestServerTest, CreatesSessionsFromPostedYamlFiles) {
   EXPECT_THAT(error_of(unknown)["message"].get<std::string>(), HasSubstr("calibraton"));
   auto broken = http.Post("/v1/sessions", bearer(kRobotToken), "fusion: [unclosed", "application/yaml");
   EXPECT_EQ(broken->status, 400) << broken->body;
-  EXPECT_EQ(json::parse(http.Get("/v1/sessions", bearer(kViewerToken))->body)["sessions"].size(), 2u);
+  EXPECT_EQ(json::parse(http.Get("/v1/sessions", bearer(kViewerToken))->body)["sessions"].size(), 3u);
 }
 
 TEST_F(RestServerTest, AuthMatrixOfEveryOperationInTheOpenApiDocument) {
