@@ -168,6 +168,7 @@ Result<ExportedLog> export_log(const std::string& path, io::ros2::LidarLayout la
         message);
     HANZO_RETURN_IF_ERROR(written);
   }
+  HANZO_RETURN_IF_ERROR(reader->complete());  // a partial log is not exported as a whole one
   if (!transforms.empty()) HANZO_RETURN_IF_ERROR(write("/tf_static", "tf2_msgs/msg/TFMessage", *first_time, io::ros2::tf_message_cdr(transforms)));
   return exported;
 }

@@ -250,6 +250,8 @@ int run_lidar_odometry(const Output& output, const LidarOdometryOptions& options
     }
     if (scan != nullptr && entry.topic == topic && (odometry || slam)) register_scan(*scan);
   }
+  const bool read_to_the_end = options.max_scans == 0 || milliseconds.size() + refused < options.max_scans;
+  if (Status whole = (*reader)->complete(); read_to_the_end && !whole) return fail(whole.error().message);
   if (session) {
     session->flush();
     refused = session->mapping_summary().scans_refused;

@@ -153,6 +153,7 @@ int run_export(const Output& output, const std::string& path, const std::string&
     if (messages++ == 0) csv += io::csv_header(entry);
     io::append_csv_rows(entry, csv);
   }
+  if (Status whole = (*reader)->complete(); !whole) return report_failure(output, result, whole.error().message);
   if (messages == 0 && (*reader)->skipped_messages() > 0) {
     return report_failure(output, result, fmt::format("{}: topic '{}' does not carry hanzo.fusion.v1 messages (a Foxglove mirror or "
                                                       "another tool's channel); export its source topic instead", path, topic));

@@ -102,6 +102,7 @@ Result<nlohmann::json> build(const MapBuildOptions& options) {
     HANZO_RETURN_IF_ERROR(with_context(builder.insert(*T_world_body * T_body_sensor, scan),
                                        fmt::format("{} at {} s", options.topic, points->timestamp.seconds())));
   }
+  HANZO_RETURN_IF_ERROR(reader->complete());  // a map of part of the log is not passed off as the whole
   if (builder.summary().scans == 0) {
     return Error{fmt::format("{}: no point cloud on topic {} within the trajectory's time span", options.log, options.topic)};
   }

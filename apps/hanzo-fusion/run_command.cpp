@@ -112,6 +112,7 @@ Status check_topics(const config::FusionConfig& config, const io::mcap::McapRead
     if (log_topics.count(sensor.topic) == 0) missing.push_back(fmt::format("{} ({})", sensor.name, sensor.topic));
   }
   if (!config.sensors.empty() && missing.size() == config.sensors.size()) {
+    if (log.warning()) return Error(fmt::format("partial log: {}: none of the configured sensors' topics could be read", *log.warning()));
     return Error(fmt::format("{} has none of the configured sensors' topics ({}); its topics: {}", log_path, fmt::join(configured, ", "),
                              log_topics.empty() ? "none" : fmt::format("{}", fmt::join(log_topics, ", "))));
   }

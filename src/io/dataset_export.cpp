@@ -193,7 +193,7 @@ Status visit_sensor_messages(const std::string& log_path, const std::map<std::st
   while (true) {
     bool more = false;
     HANZO_ASSIGN_OR_RETURN(more, reader->next(entry));
-    if (!more) return ok_status();
+    if (!more) return reader->complete();  // a dataset of part of the log is not passed off as the whole
     const auto found = sensor_by_topic.find(entry.topic);
     const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
     if (found != sensor_by_topic.end() && message != nullptr) HANZO_RETURN_IF_ERROR(visit(found->second, entry.topic, *message));

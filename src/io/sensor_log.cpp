@@ -191,4 +191,13 @@ Result<bool> SensorLogReader::next(LogEntry& entry) {
   }
 }
 
+Status SensorLogReader::complete() const {
+  if (mcap_->warning()) return Error(*mcap_->warning());
+  if (corrupted_chunks_ > 0) {
+    return Error(fmt::format("{} corrupted chunk{} skipped, their messages lost (first: {})", corrupted_chunks_, corrupted_chunks_ == 1 ? "" : "s",
+                             first_chunk_error_));
+  }
+  return ok_status();
+}
+
 }  // namespace hanzo::fusion::io

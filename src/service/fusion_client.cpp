@@ -300,6 +300,7 @@ Result<StreamSummary> FusionClient::stream_log(const std::string& log_path, cons
     ++summary.messages_sent;
     ++summary.sent_by_sensor[sensor];
   }
+  if (outcome) outcome = with_context(reader->complete(), log_path);  // a partial log streamed is said so
   for (auto& [sensor, stream] : streams) {
     const grpc::Status status = stream->finish();
     if (!status.ok() && outcome) {

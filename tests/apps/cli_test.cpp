@@ -493,6 +493,16 @@ TEST(Cli, RunReplaysTheSampleAndScoresItAgainstGroundTruth) {
   const nlohmann::json accepted_json = nlohmann::json::parse(accepted.out);
   EXPECT_EQ(accepted_json["partial"], true);
   EXPECT_THAT(accepted_json["incomplete"].get<std::string>(), HasSubstr("corrupted chunk"));
+  // The other readers of a log say so too: exporting a cut-off log fails naming what was lost.
+  const std::string whole = file_bytes(log), cut = (dir / "cut.mcap").string();
+  std::ofstream(cut, std::ios::binary) << whole.substr(0, whole.size() * 2 / 3);
+  const CliRun cut_export = run(fmt::format("log export {} --topic /imu --out {}", cut, (dir / "imu.csv").string()));
+  EXPECT_EQ(cut_export.exit_code, 1);
+  EXPECT_THAT(cut_export.err, HasSubstr("file is truncated"));
+  const CliRun cut_run = run(fmt::format("run --config examples/data/fusion.yaml --log {} --out {}", cut, (dir / "cut_run").string()));
+  EXPECT_EQ(cut_run.exit_code, 1);
+  EXPECT_THAT(cut_run.err, HasSubstr("partial log: "));
+  EXPECT_THAT(cut_run.err, HasSubstr("file is truncated"));
   std::filesystem::remove_all(dir);
 }
 

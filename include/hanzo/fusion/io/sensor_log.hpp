@@ -122,6 +122,10 @@ class SensorLogReader {
   uint64_t records_read() const { return records_read_; }
   /// Log time of the last message taken from the file.
   Timestamp last_log_time() const { return last_log_time_; }
+  /// After the last message: fails when the file was not read whole (truncated after its last
+  /// complete record, or corrupted chunks skipped), saying what was lost; ok otherwise. Readers
+  /// that must not pass a partial log off as a whole one call it at the end.
+  Status complete() const;
   /// Corrupted chunks met so far, and the first one's error ("" while none).
   uint64_t corrupted_chunks() const { return corrupted_chunks_; }
   const std::string& first_chunk_error() const { return first_chunk_error_; }
