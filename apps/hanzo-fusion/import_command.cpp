@@ -213,9 +213,11 @@ int run_kitti_import(const Output& output, const ImportOptions& options) {
   io::KittiImportReport report;
   const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
     HANZO_ASSIGN_OR_RETURN(report, io::import_kitti(options.sources[0], writer, config));
-    // KITTI's times are relative: `run --gt` takes the origin off to pair them with relative ground truth.
-    return writer.add_metadata({"import", {{"importer", "kitti"}, {"source", options.sources[0]},
-                                           {"relative_time_origin_s", fmt::format("{}", options.time_origin)}}});
+    // KITTI's times are relative (unless `export dataset` kept the absolute ones): `run --gt`
+    // takes the origin off to pair them with relative ground truth.
+    std::map<std::string, std::string> values = {{"importer", "kitti"}, {"source", options.sources[0]}};
+    if (!report.absolute_times) values["relative_time_origin_s"] = fmt::format("{}", options.time_origin);
+    return writer.add_metadata({"import", values});
   });
   if (code != 0) return code;
   result["frames"] = report.frames;

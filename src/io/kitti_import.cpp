@@ -1,5 +1,6 @@
 #include "hanzo/fusion/io/kitti_import.hpp"
 
+#include <charconv>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -67,6 +68,27 @@ Result<std::vector<Timestamp>> read_times(const std::string& path, Timestamp ori
   return times;
 }
 
+// `export dataset`'s timestamps_ns.txt: the frames' absolute times, integer nanoseconds a line.
+Result<std::vector<Timestamp>> read_nanosecond_times(const std::string& path) {
+  std::string text;
+  HANZO_ASSIGN_OR_RETURN(text, read_file(path));
+  std::vector<Timestamp> times;
+  std::istringstream stream(text);
+  std::string line;
+  for (std::size_t line_number = 1; std::getline(stream, line); ++line_number) {
+    const std::vector<std::string> fields = split_fields(line);
+    if (fields.empty()) continue;
+    int64_t nanoseconds = 0;
+    const auto [end, error] = std::from_chars(fields[0].data(), fields[0].data() + fields[0].size(), nanoseconds);
+    if (error != std::errc() || end != fields[0].data() + fields[0].size() || nanoseconds <= 0) {
+      return Error(fmt::format("{}:{}: '{}' is not a time in nanoseconds", path, line_number, fields[0]));
+    }
+    if (!times.empty() && nanoseconds <= times.back().nanoseconds()) return Error(fmt::format("{}:{}: time does not increase", path, line_number));
+    times.push_back(Timestamp::from_nanoseconds(nanoseconds));
+  }
+  return times;
+}
+
 Result<msgs::PointCloudMessage> read_velodyne_bin(const std::string& path, Timestamp time) {
   std::string bytes;
   HANZO_ASSIGN_OR_RETURN(bytes, read_file(path));
@@ -117,6 +139,17 @@ Result<KittiImportReport> import_kitti(const std::string& sequence_dir, SensorLo
   if (!fs::is_directory(root)) return Error(fmt::format("{}: not a directory (expected a KITTI sequence folder)", sequence_dir));
   std::vector<Timestamp> times;
   HANZO_ASSIGN_OR_RETURN(times, read_times((root / "times.txt").string(), Timestamp::from_seconds(config.time_origin)));
+  KittiImportReport report;
+  // A sequence `export dataset` wrote also keeps the absolute times: those, when they match.
+  if (const fs::path absolute = root / "timestamps_ns.txt"; fs::is_regular_file(absolute)) {
+    std::vector<Timestamp> stamps;
+    HANZO_ASSIGN_OR_RETURN(stamps, read_nanosecond_times(absolute.string()));
+    if (stamps.size() != times.size()) {
+      return Error(fmt::format("{}: {} times for the {} frames of times.txt", absolute.string(), stamps.size(), times.size()));
+    }
+    times = std::move(stamps);
+    report.absolute_times = true;
+  }
   std::map<std::string, Matrix34> calib;
   HANZO_ASSIGN_OR_RETURN(calib, read_calib((root / "calib.txt").string()));
   const auto tr = calib.count("Tr") ? calib.find("Tr") : calib.find("Tr_velo_to_cam");
@@ -124,7 +157,6 @@ Result<KittiImportReport> import_kitti(const std::string& sequence_dir, SensorLo
   const SE3 T_cam0_lidar = to_se3(tr->second);
   const SE3 T_lidar_cam0 = T_cam0_lidar.inverse();
 
-  KittiImportReport report;
   report.frames = times.size();
   report.calibration.sensors.push_back(calib::SensorCalibration::from_transform(config.lidar_topic.substr(1), SE3()));
 

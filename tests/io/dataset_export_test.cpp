@@ -245,6 +245,13 @@ TEST(DatasetExport, KittiLayoutPutsEveryPointBackOnTheWorld) {
   ASSERT_TRUE(reimported.ok()) << reimported.error().message;
   EXPECT_EQ(reimported->frames, 20u);
   EXPECT_EQ(reimported->images, 20u);
+  // ... at the log's own times (timestamps_ns.txt), not times.txt's relative ones moved to 2001.
+  EXPECT_TRUE(reimported->absolute_times);
+  std::istringstream stamps(read_text(sequence / "timestamps_ns.txt"));
+  int64_t first_ns = 0;
+  stamps >> first_ns;
+  ASSERT_FALSE(reimported->ground_truth.timestamps.empty());
+  EXPECT_EQ(reimported->ground_truth.timestamps.front().nanoseconds(), first_ns);
   EXPECT_EQ(reimported->points, 20u * scene.world_points.size());
   const SE3 T_lidar0_world = (body_at(kLidarOffset.seconds()) * kT_body_lidar).inverse();
   for (int frame = 0; frame < 20; ++frame) {

@@ -10,7 +10,9 @@
 // Frames become messages on the LiDAR topic (PointCloudMessage, intensity = reflectance) and,
 // when the image folders exist, on the two camera topics (mono8, intrinsics from P0 / P1, no
 // distortion: the images are rectified). Time of frame i = time_origin + times[i]: the
-// odometry benchmark has no absolute time, and the sensor log wants Unix time.
+// odometry benchmark has no absolute time, and the sensor log wants Unix time. A sequence that
+// `hanzo-fusion export dataset` wrote also has SEQUENCE/timestamps_ns.txt (each frame's Unix time,
+// integer ns): those are taken instead (they must be as many as times.txt's).
 //
 // The body frame is the Velodyne (x forward, y left, z up: FLU). The calibration returned
 // holds lidar_to_body (identity), cam0_to_body = Tr^-1, cam1_to_body = Tr^-1 T_cam0_cam1 (the
@@ -48,6 +50,7 @@ struct KittiImportReport {
   uint64_t images = 0;
   uint64_t points = 0;
   std::string poses_path;           ///< the poses file used, empty when none
+  bool absolute_times = false;      ///< the times came from timestamps_ns.txt (absolute), not times.txt + time_origin
   Trajectory ground_truth;          ///< T_lidar0_lidar per frame; empty without a poses file
   calib::Calibration calibration;   ///< lidar, cam0, cam1 to body (= lidar)
 };
