@@ -1023,6 +1023,16 @@ SessionSummary Session::summary() const {
     // of the poses it fused or gated; its monitoring of the fused poses stays.
     sensor.received = camera->second.received;
     sensor.rejected = camera->second.rejected;
+    // A stereo pair is one measurement, its outcomes counted on the left camera: the right one
+    // shows the same, so that each camera's images add up.
+    if (camera_odometry_ && camera_odometry_->stereo() && sensor.name == camera_odometry_->right_sensor()) {
+      const auto left = camera_statistics_.find(camera_odometry_->left_sensor());
+      if (left != camera_statistics_.end()) {
+        for (const auto& [reason, count] : left->second.rejected) {
+          if (!is_input_check(reason)) sensor.rejected[reason] += count;
+        }
+      }
+    }
     sensor.fused = camera->second.fused;
     if (pose_outcomes) {
       sensor.fused = std::min(camera->second.fused, pose_outcomes->fused);

@@ -528,6 +528,12 @@ TEST(Cli, RunTracksACameraOnlyConfigurationWithVisualOdometry) {
   EXPECT_EQ(json["mapping"]["camera_frames_lost"], 0);
   EXPECT_EQ(json["mapping"]["visual_scale_free"], false);
   EXPECT_LT(json["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), 0.1);  // 4.9 m flown; measured 0.047 m
+  // Each camera's images add up (a pair's outcomes shown on both cameras).
+  for (const auto& camera : json["summary"]["sensors"]) {
+    int accounted = camera["fused"].get<int>();
+    for (const auto& [reason, count] : camera["rejected"].items()) accounted += count.get<int>();
+    EXPECT_EQ(accounted, camera["received"].get<int>()) << camera.dump();
+  }
 
   // The run's map carries the odometry's landmarks, and a camera image is placed in it.
   using namespace hanzo::fusion;
