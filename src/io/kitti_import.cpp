@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <sstream>
 
@@ -47,7 +48,9 @@ Result<std::map<std::string, Matrix34>> read_calib(const std::string& path) {
   return matrices;
 }
 
-Result<std::vector<Timestamp>> read_times(const std::string& path, Timestamp origin) {
+// One increasing time a line (first field), each read by `parse`: times.txt's seconds since the
+// start (at `origin`), or `export dataset`'s timestamps_ns.txt (Unix time, integer ns).
+Result<std::vector<Timestamp>> read_frame_times(const std::string& path, const std::function<Result<Timestamp>(const std::string&)>& parse) {
   std::string text;
   HANZO_ASSIGN_OR_RETURN(text, read_file(path));
   std::vector<Timestamp> times;
@@ -56,37 +59,30 @@ Result<std::vector<Timestamp>> read_times(const std::string& path, Timestamp ori
   for (std::size_t line_number = 1; std::getline(stream, line); ++line_number) {
     const std::vector<std::string> fields = split_fields(line);
     if (fields.empty()) continue;
-    auto seconds = parse_seconds(fields[0]);
-    if (!seconds) return Error(fmt::format("{}:{}: {}", path, line_number, seconds.error().message));
-    const Timestamp time = origin + Duration::from_nanoseconds(seconds->nanoseconds());
-    if (!times.empty() && time <= times.back()) {
-      return Error(fmt::format("{}:{}: time {} s does not increase", path, line_number, fields[0]));
-    }
-    times.push_back(time);
+    const Result<Timestamp> time = parse(fields[0]);
+    if (!time) return Error(fmt::format("{}:{}: {}", path, line_number, time.error().message));
+    if (!times.empty() && *time <= times.back()) return Error(fmt::format("{}:{}: time {} does not increase", path, line_number, fields[0]));
+    times.push_back(*time);
   }
   if (times.empty()) return Error(fmt::format("{}: no frame times", path));
   return times;
 }
 
-// `export dataset`'s timestamps_ns.txt: the frames' absolute times, integer nanoseconds a line.
+Result<std::vector<Timestamp>> read_times(const std::string& path, Timestamp origin) {
+  return read_frame_times(path, [origin](const std::string& field) -> Result<Timestamp> {
+    Result<Timestamp> seconds = parse_seconds(field);
+    if (!seconds) return seconds.error();
+    return origin + Duration::from_nanoseconds(seconds->nanoseconds());
+  });
+}
+
 Result<std::vector<Timestamp>> read_nanosecond_times(const std::string& path) {
-  std::string text;
-  HANZO_ASSIGN_OR_RETURN(text, read_file(path));
-  std::vector<Timestamp> times;
-  std::istringstream stream(text);
-  std::string line;
-  for (std::size_t line_number = 1; std::getline(stream, line); ++line_number) {
-    const std::vector<std::string> fields = split_fields(line);
-    if (fields.empty()) continue;
+  return read_frame_times(path, [](const std::string& field) -> Result<Timestamp> {
     int64_t nanoseconds = 0;
-    const auto [end, error] = std::from_chars(fields[0].data(), fields[0].data() + fields[0].size(), nanoseconds);
-    if (error != std::errc() || end != fields[0].data() + fields[0].size() || nanoseconds <= 0) {
-      return Error(fmt::format("{}:{}: '{}' is not a time in nanoseconds", path, line_number, fields[0]));
-    }
-    if (!times.empty() && nanoseconds <= times.back().nanoseconds()) return Error(fmt::format("{}:{}: time does not increase", path, line_number));
-    times.push_back(Timestamp::from_nanoseconds(nanoseconds));
-  }
-  return times;
+    const auto [end, error] = std::from_chars(field.data(), field.data() + field.size(), nanoseconds);
+    if (error != std::errc() || end != field.data() + field.size() || nanoseconds <= 0) return Error(fmt::format("'{}' is not a time in nanoseconds", field));
+    return Timestamp::from_nanoseconds(nanoseconds);
+  });
 }
 
 Result<msgs::PointCloudMessage> read_velodyne_bin(const std::string& path, Timestamp time) {
