@@ -24,7 +24,7 @@ struct EvalOptions {
   std::string reference_times;  // KITTI times files (optional)
   std::string estimate_times;
   double max_time_difference_s = 0.01;
-  double time_offset_s = 0.0;
+  std::optional<double> time_offset_s;  // none: 0, or guessed between relative and absolute times
   std::string relation = "trans_part";
   std::string alignment = "none";
   int align_num_poses = -1;
@@ -39,6 +39,7 @@ struct LoadedPair {
   eval::AssociatedTrajectories associated;
   std::size_t dropped_duplicates = 0;
   bool has_times = true;  // false for KITTI files without times files (times are frame numbers)
+  std::string pairing_note;  // how the times were paired when the offset was guessed ("" otherwise), one line
 };
 
 std::optional<std::string> optional_path(const std::string& path) {
@@ -47,7 +48,10 @@ std::optional<std::string> optional_path(const std::string& path) {
 
 // Reads both files and pairs their poses: by index for KITTI (no times in the format unless
 // times files are given), by timestamp otherwise.
-Result<LoadedPair> load_pair(const EvalOptions& options) {
+// Without --t-offset, a ground truth in relative times (a dataset's, from 0) and an estimate in
+// absolute ones (or the reverse) are paired by eval::guess_relative_time_offset; `result` gets
+// time_pairing and estimate_time_offset_s.
+Result<LoadedPair> load_pair(const EvalOptions& options, nlohmann::json& result) {
   io::TrajectoryFormat format;
   HANZO_ASSIGN_OR_RETURN(format, io::trajectory_format_from_name(options.format));
   io::Trajectory reference, estimate;
@@ -65,7 +69,17 @@ Result<LoadedPair> load_pair(const EvalOptions& options) {
     loaded.associated.estimate = std::move(estimate);
     return loaded;
   }
-  eval::AssociationConfig association{options.max_time_difference_s, options.time_offset_s};
+  eval::AssociationConfig association{options.max_time_difference_s, options.time_offset_s.value_or(0.0)};
+  std::string pairing = options.time_offset_s ? "estimate times shifted by --t-offset" : "times as they are";
+  if (!options.time_offset_s) {
+    if (const std::optional<eval::TimeOffsetGuess> guess = eval::guess_relative_time_offset(reference, estimate)) {
+      association.estimate_time_offset_s = guess->estimate_time_offset_s;
+      pairing = guess->description;
+      loaded.pairing_note = fmt::format("time pairing: {} (--t-offset sets it)\n", pairing);
+    }
+  }
+  result["time_pairing"] = pairing;
+  result["estimate_time_offset_s"] = association.estimate_time_offset_s;
   HANZO_ASSIGN_OR_RETURN(loaded.associated, eval::associate(reference, estimate, association));
   return loaded;
 }
@@ -136,7 +150,7 @@ int run_ape(const Output& output, const EvalOptions& options) {
   if (!alignment) return report_failure(output, result, alignment.error().message);
   config.relation = *relation;
   config.alignment = *alignment;
-  auto loaded = load_pair(options);
+  auto loaded = load_pair(options, result);
   if (!loaded) return report_failure(output, result, loaded.error().message);
   auto ape = eval::compute_ape(loaded->associated.reference, loaded->associated.estimate, config);
   if (!ape) return report_failure(output, result, ape.error().message);
@@ -151,7 +165,7 @@ int run_ape(const Output& output, const EvalOptions& options) {
   result["alignment"] = alignment_json(config.alignment, ape->alignment);
   result["statistics"] = statistics_json(ape->statistics);
   result["dropped_duplicate_timestamps"] = loaded->dropped_duplicates;
-  std::string text = title + "\n\n" + statistics_text(ape->statistics);
+  std::string text = loaded->pairing_note + title + "\n\n" + statistics_text(ape->statistics);
   if (!options.plot_dir.empty()) {
     auto plots = write_plots(options.plot_dir, "ape", ape->reference, ape->estimate_aligned, ape->errors,
                              seconds_of(ape->reference), ape->statistics,
@@ -179,7 +193,7 @@ int run_rpe(const Output& output, const EvalOptions& options) {
   config.relation = *relation;
   config.alignment = *alignment;
   config.delta_unit = *unit;
-  auto loaded = load_pair(options);
+  auto loaded = load_pair(options, result);
   if (!loaded) return report_failure(output, result, loaded.error().message);
   const io::Trajectory& reference = loaded->associated.reference;
   auto rpe = eval::compute_rpe(reference, loaded->associated.estimate, config);
@@ -197,7 +211,7 @@ int run_rpe(const Output& output, const EvalOptions& options) {
   result["alignment"] = alignment_json(config.alignment, rpe->alignment);
   result["statistics"] = statistics_json(rpe->statistics);
   result["dropped_duplicate_timestamps"] = loaded->dropped_duplicates;
-  std::string text = title + "\n\n" + statistics_text(rpe->statistics);
+  std::string text = loaded->pairing_note + title + "\n\n" + statistics_text(rpe->statistics);
   if (!options.plot_dir.empty()) {
     // Errors belong to the second pose of each pair (evo's convention for plotting).
     std::vector<std::size_t> ends;
@@ -221,7 +235,7 @@ int run_rpe(const Output& output, const EvalOptions& options) {
 
 int run_kitti(const Output& output, const EvalOptions& options) {
   nlohmann::json result = {{"metric", "kitti"}, {"reference", options.reference_path}, {"estimate", options.estimate_path}};
-  auto loaded = load_pair(options);
+  auto loaded = load_pair(options, result);
   if (!loaded) return report_failure(output, result, loaded.error().message);
   auto kitti = eval::compute_kitti_odometry_error(loaded->associated.reference, loaded->associated.estimate);
   if (!kitti) return report_failure(output, result, kitti.error().message);
@@ -230,7 +244,7 @@ int run_kitti(const Output& output, const EvalOptions& options) {
   result["translation_error_percent"] = kitti->translation_error_percent;
   result["rotation_error_deg_per_100m"] = kitti->rotation_error_deg_per_100m;
   nlohmann::json per_length = nlohmann::json::array();
-  std::string text = fmt::format("KITTI odometry error over {} segments of 100..800 m\n  translation {:.4f} %\n"
+  std::string text = loaded->pairing_note + fmt::format("KITTI odometry error over {} segments of 100..800 m\n  translation {:.4f} %\n"
                                  "  rotation    {:.4f} deg/100m\n\n  length  segments  t_err(%)  r_err(deg/100m)\n",
                                  kitti->segments, kitti->translation_error_percent, kitti->rotation_error_deg_per_100m);
   for (const auto& length : kitti->per_length) {
@@ -253,8 +267,9 @@ void add_common_options(CLI::App* command, EvalOptions& options) {
   command->add_option("--est-times", options.estimate_times, "KITTI: times file of the estimate");
   command->add_option("--t-max-diff", options.max_time_difference_s, "Largest time difference of a pose pair (s)")
       ->capture_default_str();
-  command->add_option("--t-offset", options.time_offset_s, "Added to the estimate's times before pairing (s)")
-      ->capture_default_str();
+  command->add_option("--t-offset", options.time_offset_s,
+                      "Added to the estimate's times before pairing (s); default 0, or the importers' time origin when one "
+                      "trajectory is in relative times and the other in absolute ones");
 }
 
 void add_error_options(CLI::App* command, EvalOptions& options) {

@@ -40,6 +40,7 @@ struct ExportOptions {
   std::string calibration;
   std::string body_frame = "base_link";
   std::string storage = "mcap";
+  bool raw_images = false;
 };
 
 
@@ -88,12 +89,14 @@ std::map<std::string, std::string> recorded_log(const ExportedLog& exported, con
 }
 
 // Writes every sensor message of a log into the bag under its topic; wheel odometry becomes
-// TwistStamped (speeds from consecutive distances; the first message of a topic 0). With a
+// TwistStamped (speeds from consecutive distances; the first message of a topic 0). An 8-bit
+// image stored as a JPEG / PNG file goes out as CompressedImage with that file (Image with
+// `raw_images`; depth always as Image). With a
 // calibration, each sensor it places (by the channel's sensor name) gets a static transform
 // from `body_frame` to its messages' frame (named after the sensor when they carry none) in
 // /tf_static, and each calibrated camera a CameraInfo with every image on <topic>/camera_info.
 Result<ExportedLog> export_log(const std::string& path, io::ros2::LidarLayout layout, const calib::Calibration* calibration,
-                               const std::string& body_frame, const WriteFunction& write) {
+                               const std::string& body_frame, bool raw_images, const WriteFunction& write) {
   std::unique_ptr<io::SensorLogReader> reader;
   HANZO_ASSIGN_OR_RETURN(reader, io::SensorLogReader::open(path));
   std::map<std::string, std::string> sensor_by_topic;
@@ -139,7 +142,12 @@ Result<ExportedLog> export_log(const std::string& path, io::ros2::LidarLayout la
           } else if constexpr (std::is_same_v<Message, msgs::PointCloudMessage>) {
             return write(entry.topic, "sensor_msgs/msg/PointCloud2", entry.log_time, io::ros2::point_cloud_cdr(m, layout));
           } else if constexpr (std::is_same_v<Message, msgs::ImageMessage>) {
-            HANZO_RETURN_IF_ERROR(write(entry.topic, "sensor_msgs/msg/Image", entry.log_time, io::ros2::image_cdr(m)));
+            if (raw_images || entry.stored_image_format.empty()) {
+              HANZO_RETURN_IF_ERROR(write(entry.topic, "sensor_msgs/msg/Image", entry.log_time, io::ros2::image_cdr(m)));
+            } else {
+              HANZO_RETURN_IF_ERROR(write(entry.topic, "sensor_msgs/msg/CompressedImage", entry.log_time,
+                                          io::ros2::compressed_image_cdr(m, entry.stored_image_format, entry.stored_image_file)));
+            }
             if (placed == nullptr || !placed->camera) return ok_status();
             return write(entry.topic + "/camera_info", "sensor_msgs/msg/CameraInfo", entry.log_time,
                          io::ros2::camera_info_cdr(m.timestamp, m.frame_id, *placed->camera, m.width, m.height));
@@ -288,7 +296,8 @@ int run_export_ros2bag(const Output& output, const ExportOptions& options) {
   ExportedLog exported_log;
   const Status written = [&]() -> Status {
     if (!options.log.empty()) {
-      HANZO_ASSIGN_OR_RETURN(exported_log, export_log(options.log, *layout, calibration ? &*calibration : nullptr, options.body_frame, write));
+      HANZO_ASSIGN_OR_RETURN(exported_log, export_log(options.log, *layout, calibration ? &*calibration : nullptr, options.body_frame,
+                                                            options.raw_images, write));
     }
     for (std::size_t i = 0; i < path.size(); ++i) {
       if (poses_with_covariance.empty()) {
@@ -364,6 +373,8 @@ void add_export_command(CLI::App& app, const Output& output, Command& run) {
                       "With --log: the sensors' extrinsics as /tf_static, camera intrinsics as <image topic>/camera_info");
   ros2bag->add_option("--body-frame", options->body_frame, "Parent frame of /tf_static")->capture_default_str();
   ros2bag->add_option("--storage", options->storage, "mcap (ROS 2 Iron and later) or sqlite3 (.db3: Foxy to Humble)")->capture_default_str();
+  ros2bag->add_flag("--raw-images", options->raw_images,
+                    "Write every image as sensor_msgs/Image (by default a log's JPEG / PNG images go out unchanged as CompressedImage)");
   ros2bag->callback([&output, &run, options] { run = [&output, options] { return run_export_ros2bag(output, *options); }; });
 
   add_export_dataset_command(*export_app, output, run);

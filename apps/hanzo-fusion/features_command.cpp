@@ -13,6 +13,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "commands.hpp"
+#include "image_input.hpp"
 #include "hanzo/fusion/vision/image_pair_matcher.hpp"
 
 namespace hanzo::fusion::app {
@@ -44,13 +45,6 @@ Result<cv::Matx33d> read_homography(const std::string& path) {
   return homography;
 }
 
-Result<cv::Mat> read_image(const std::string& path) {
-  if (!std::filesystem::is_regular_file(path)) return Error(fmt::format("{}: no such file", path));
-  cv::Mat image = cv::imread(path, cv::IMREAD_COLOR);
-  if (image.empty()) return Error(fmt::format("{}: not an image OpenCV can read", path));
-  return image;
-}
-
 nlohmann::json matrix_json(const cv::Matx33d& matrix) {
   nlohmann::json rows = nlohmann::json::array();
   for (int r = 0; r < 3; ++r) rows.push_back({matrix(r, 0), matrix(r, 1), matrix(r, 2)});
@@ -59,9 +53,9 @@ nlohmann::json matrix_json(const cv::Matx33d& matrix) {
 
 int run_match(const Output& output, const MatchOptions& options) {
   nlohmann::json result = {{"image1", options.image1}, {"image2", options.image2}};
-  Result<cv::Mat> image1 = read_image(options.image1);
+  Result<cv::Mat> image1 = read_image_input(options.image1, cv::IMREAD_COLOR);
   if (!image1) return report_failure(output, result, image1.error().message);
-  Result<cv::Mat> image2 = read_image(options.image2);
+  Result<cv::Mat> image2 = read_image_input(options.image2, cv::IMREAD_COLOR);
   if (!image2) return report_failure(output, result, image2.error().message);
   std::optional<cv::Matx33d> truth;
   if (!options.homography.empty()) {

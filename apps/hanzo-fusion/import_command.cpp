@@ -319,6 +319,12 @@ int run_image_folder_import(const Output& output, const ImportOptions& options) 
 }
 
 int run_import(const Output& output, ImportOptions options) {
+  if (!(options.time_origin > 0.0)) {  // a zero time means "no time" in a sensor log
+    return report_failure(output, {{"format", options.format}},
+                          fmt::format("--time-origin {}: relative times need an origin after 0 (a time of 0 is no time in a sensor log); "
+                                      "keep the default 1e9: `run --gt` and `eval` pair the log with a ground truth in relative times",
+                                      options.time_origin));
+  }
   if (!options.privacy.empty()) {
     privacy::PrivacyFilterConfig config;
     Result<privacy::Redaction> redaction = privacy::parse_redaction(options.privacy);

@@ -11,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "commands.hpp"
+#include "image_input.hpp"
 #include "hanzo/fusion/crypto/file_encryption.hpp"
 #include "hanzo/fusion/io/image_file_check.hpp"
 #include "hanzo/fusion/privacy/log_redaction.hpp"
@@ -68,9 +69,8 @@ Result<nlohmann::json> redact_file(privacy::PrivacyFilter& filter, const std::fi
   }
   // A decoder fills what a cut-off file lacks: a face in the missing part would be written as
   // it is, so an incomplete file is refused.
-  HANZO_RETURN_IF_ERROR(io::check_image_file_complete(input.string()));
-  cv::Mat image = cv::imread(input.string(), cv::IMREAD_COLOR);
-  if (image.empty()) return Error(fmt::format("{}: not an image OpenCV can read", input.string()));
+  cv::Mat image;
+  HANZO_ASSIGN_OR_RETURN(image, read_image_input(input.string(), cv::IMREAD_COLOR));
   std::vector<privacy::RedactedRegion> regions;
   HANZO_ASSIGN_OR_RETURN(regions, with_context(filter.apply(image), input.string()));
   bool written = false;

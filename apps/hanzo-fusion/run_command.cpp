@@ -315,12 +315,11 @@ TimePairing time_pairing(const RunOptions& options, const io::mcap::McapReader& 
   if (options.ground_truth_time_offset) {
     return {*options.ground_truth_time_offset, fmt::format("estimate times {:+.9g} s (--gt-time-offset)", *options.ground_truth_time_offset)};
   }
-  constexpr double kRelativeBelow = 1e8;  // s: times before 1973 are relative, as the importers read them
   for (const io::mcap::Metadata& metadata : log.metadata()) {
     const auto origin = metadata.values.find("relative_time_origin_s");
     if (metadata.name != "import" || origin == metadata.values.end() || reference.empty()) continue;
     const double origin_s = std::strtod(origin->second.c_str(), nullptr);
-    if (reference.timestamps.front().seconds() < kRelativeBelow && origin_s >= kRelativeBelow) {
+    if (reference.timestamps.front().seconds() < eval::kRelativeTimesBelow_s && origin_s >= eval::kRelativeTimesBelow_s) {
       return {-origin_s, fmt::format("the log's relative times start at {} s (its importer's origin) and the ground truth's at 0: "
                                      "paired with the origin taken off",
                                      origin->second)};

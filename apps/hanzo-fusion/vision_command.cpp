@@ -16,6 +16,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "commands.hpp"
+#include "image_input.hpp"
 #include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/io/image_file_check.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
@@ -76,9 +77,8 @@ Result<std::vector<std::string>> collect_images(const std::vector<std::string>& 
 }
 
 Result<cv::Mat> descriptors_of(const std::string& path, const vision::OrbExtractor& extractor) {
-  if (!std::filesystem::is_regular_file(path)) return Error(fmt::format("{}: no such file", path));
-  cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
-  if (image.empty()) return Error(fmt::format("{}: not an image OpenCV can read", path));
+  cv::Mat image;
+  HANZO_ASSIGN_OR_RETURN(image, read_image_input(path, cv::IMREAD_GRAYSCALE));
   Result<vision::ImageFeatures> features = extractor.extract(image);
   if (!features) return Error(fmt::format("{}: {}", path, features.error().message));
   return features->descriptors;
@@ -160,9 +160,9 @@ int run_relocalize(const Output& output, const RelocalizeOptions& options) {
   if (!calibration) return report_failure(output, result, calibration.error().message);
   const calib::SensorCalibration* sensor = calibration->find(camera);
   if (sensor == nullptr || !sensor->camera) return report_failure(output, result, fmt::format("{}: no intrinsics for camera '{}'", options.calib, camera));
-  if (!std::filesystem::is_regular_file(options.image)) return report_failure(output, result, fmt::format("{}: no such file", options.image));
-  const cv::Mat image = cv::imread(options.image, cv::IMREAD_GRAYSCALE);
-  if (image.empty()) return report_failure(output, result, fmt::format("{}: not an image OpenCV can read", options.image));
+  Result<cv::Mat> read = read_image_input(options.image, cv::IMREAD_GRAYSCALE);
+  if (!read) return report_failure(output, result, read.error().message);
+  const cv::Mat& image = *read;
   if (image.cols != static_cast<int>(sensor->camera->intrinsics.width) || image.rows != static_cast<int>(sensor->camera->intrinsics.height)) {
     return report_failure(output, result, fmt::format("{}: {} x {} pixels, but camera '{}' is calibrated for {} x {}", options.image, image.cols, image.rows, camera,
                                                       sensor->camera->intrinsics.width, sensor->camera->intrinsics.height));

@@ -67,4 +67,27 @@ Result<AssociatedTrajectories> associate(const io::Trajectory& reference, const 
   return out;
 }
 
+std::optional<TimeOffsetGuess> guess_relative_time_offset(const io::Trajectory& reference, const io::Trajectory& estimate) {
+  if (reference.empty() || estimate.empty()) return std::nullopt;
+  const double reference_start = reference.timestamps.front().seconds(), estimate_start = estimate.timestamps.front().seconds();
+  const bool reference_relative = reference_start < kRelativeTimesBelow_s, estimate_relative = estimate_start < kRelativeTimesBelow_s;
+  if (reference_relative == estimate_relative) return std::nullopt;
+  const bool overlap = estimate.timestamps.front() <= reference.timestamps.back() && reference.timestamps.front() <= estimate.timestamps.back();
+  if (overlap) return std::nullopt;
+  const double absolute_start = reference_relative ? estimate_start : reference_start;
+  const double sign = reference_relative ? -1.0 : 1.0;  // the estimate's times move toward the reference's
+  if (absolute_start >= kDefaultRelativeTimeOrigin_s && absolute_start < kDefaultRelativeTimeOrigin_s + kRelativeTimesBelow_s) {
+    return TimeOffsetGuess{sign * kDefaultRelativeTimeOrigin_s,
+                           fmt::format("the {} is in relative times and the {} at the importers' origin {:.0f} s: paired with "
+                                       "estimate times {:+.0f} s",
+                                       reference_relative ? "reference" : "estimate", reference_relative ? "estimate" : "reference",
+                                       kDefaultRelativeTimeOrigin_s, sign * kDefaultRelativeTimeOrigin_s)};
+  }
+  const double offset = reference_start - estimate_start;
+  return TimeOffsetGuess{offset, fmt::format("the {} is in relative times and the {} in absolute ones: paired first time with first "
+                                             "time (estimate times {:+.9g} s)",
+                                             reference_relative ? "reference" : "estimate", reference_relative ? "estimate" : "reference",
+                                             offset)};
+}
+
 }  // namespace hanzo::fusion::eval

@@ -112,6 +112,7 @@ const std::map<std::string, std::string>& definitions() {
        "float64[12] p\nuint32 binning_x\nuint32 binning_y\nsensor_msgs/RegionOfInterest roi\n"},
       {"sensor_msgs/Image",
        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n"},
+      {"sensor_msgs/CompressedImage", "std_msgs/Header header\nstring format\nuint8[] data\n"},
   };
   return kDefinitions;
 }
@@ -248,6 +249,14 @@ std::string image_cdr(const msgs::ImageMessage& image) {
   CdrWriter w;
   w.header(image.timestamp, image.frame_id).put(image.height).put(image.width).string(kNames.at(image.encoding)).put<uint8_t>(0);
   w.put(static_cast<uint32_t>(image.width * msgs::bytes_per_pixel(image.encoding))).bytes(image.data.data(), image.data.size());
+  return w.take();
+}
+
+std::string compressed_image_cdr(const msgs::ImageMessage& image, const std::string& format, const std::string& file) {
+  const std::string encoding(msgs::to_string(image.encoding));
+  CdrWriter w;
+  w.header(image.timestamp, image.frame_id).string(fmt::format("{}; {} compressed {}", encoding, format, encoding));
+  w.bytes(file.data(), file.size());
   return w.take();
 }
 

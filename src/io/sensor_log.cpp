@@ -33,7 +33,12 @@ Result<LogEntry> decode(const mcap::MessageView& view) {
     return Error(fmt::format("{} at {} ns: payload is not a valid {}", view.channel->topic, view.log_time,
                              V1::descriptor()->full_name()));
   }
+  std::string stored_format, stored_file;
   if constexpr (std::is_same_v<V1, v1::ImageMessage>) {
+    if (!proto.compression().empty() && proto.encoding() != "depth16") {
+      stored_format = proto.compression();
+      stored_file = proto.data();
+    }
     if (Status decoded = decompress_image(proto); !decoded) {
       return Error(fmt::format("{} at {} ns: {}", view.channel->topic, view.log_time, decoded.error().message), decoded.error().field);
     }
@@ -44,6 +49,8 @@ Result<LogEntry> decode(const mcap::MessageView& view) {
   entry.topic = view.channel->topic;
   entry.log_time = Timestamp::from_nanoseconds(static_cast<int64_t>(view.log_time));
   entry.message = std::move(*message);
+  entry.stored_image_format = std::move(stored_format);
+  entry.stored_image_file = std::move(stored_file);
   return entry;
 }
 

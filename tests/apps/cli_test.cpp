@@ -24,6 +24,7 @@
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 struct CliRun {
   int exit_code = -1;
@@ -686,7 +687,7 @@ TEST(Cli, SimulatedLogThroughRos2BagsOfEachLidarLayoutRunsLikeTheOriginal) {
 }
 
 // A stereo camera drone (IMU + two cameras) through a ROS 2 bag (sqlite3 storage): images as
-// sensor_msgs/Image, the calibration as /tf_static and CameraInfo. Imported back, the calibration is the original
+// sensor_msgs/CompressedImage, the calibration as /tf_static and CameraInfo. Imported back, the calibration is the original
 // and the run (visual-inertial) gives the same trajectory.
 TEST(Cli, StereoCameraBagThroughRos2CarriesItsCalibrationAndRunsLikeTheOriginal) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_ros2_camera_{}", ::getpid());
@@ -699,6 +700,13 @@ TEST(Cli, StereoCameraBagThroughRos2CarriesItsCalibrationAndRunsLikeTheOriginal)
   const nlohmann::json topics = nlohmann::json::parse(exported.out)["topics"];
   EXPECT_EQ(topics["/tf_static"], 1);
   EXPECT_EQ(topics["/sensors/camera_left/camera_info"], topics["/sensors/camera_left"]);
+  // The log's JPEG images go out unchanged as CompressedImage: the bag is about the log's size
+  // (as raw Images it is several times larger).
+  std::uintmax_t bag_bytes = 0;
+  for (const auto& file : std::filesystem::recursive_directory_iterator(bag)) {
+    if (file.is_regular_file()) bag_bytes += file.file_size();
+  }
+  EXPECT_LT(static_cast<double>(bag_bytes), 1.5 * static_cast<double>(std::filesystem::file_size(sim + "/sensors.mcap")));
   const CliRun imported = run(fmt::format("import ros2bag {0} --out {1}/back.mcap --calibration {1}/back_calibration.yaml --json", bag,
                                           dir.string()));
   ASSERT_EQ(imported.exit_code, 0) << imported.err;
@@ -781,6 +789,13 @@ TEST(Cli, FeaturesMatchReportsCorrectMatchesAgainstAHomographyAndRefusesBadInput
   const CliRun not_image = run(fmt::format("features match {0}/graf1.png {1}", graf, write_temp("text.png", "not a picture")));
   EXPECT_EQ(not_image.exit_code, 1);
   EXPECT_THAT(not_image.err, HasSubstr("not an image OpenCV can read"));
+  // A cut-off PNG: the program's one line, not libpng's.
+  std::ifstream whole(graf + "/graf2.png", std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(whole)), std::istreambuf_iterator<char>());
+  const CliRun truncated = run(fmt::format("features match {0}/graf1.png {1}", graf, write_temp("cut.png", bytes.substr(0, bytes.size() / 2))));
+  EXPECT_EQ(truncated.exit_code, 1);
+  EXPECT_THAT(truncated.err, HasSubstr("truncated PNG"));
+  EXPECT_THAT(truncated.err, Not(HasSubstr("libpng")));
 }
 
 // A vocabulary trained on the EuRoC room and the calibration boards finds the KITTI street
@@ -853,9 +868,13 @@ TEST(Cli, ImageFolderImportRunsAsCameraOnlyVisualSlam) {
   ASSERT_FALSE(evaluation.contains("undefined")) << evaluation.dump();
   EXPECT_THAT(evaluation["time_pairing"].get<std::string>(), HasSubstr("origin taken off"));
   EXPECT_GE(evaluation["pairs"].get<int>(), 30);
-  const CliRun ape = run(fmt::format("eval ape {}/gt_cam0.tum {} --align sim3 --t-offset -1000000000 --json", data, (dir / "run" / "trajectory.tum").string()));
+  // eval pairs them too, without --t-offset, and says how.
+  const CliRun ape = run(fmt::format("eval ape {}/gt_cam0.tum {} --align sim3 --json", data, (dir / "run" / "trajectory.tum").string()));
   ASSERT_EQ(ape.exit_code, 0) << ape.err;
-  const double rmse = nlohmann::json::parse(ape.out)["statistics"]["rmse"].get<double>();
+  const nlohmann::json ape_json = nlohmann::json::parse(ape.out);
+  EXPECT_EQ(ape_json["estimate_time_offset_s"], -1e9);
+  EXPECT_THAT(ape_json["time_pairing"].get<std::string>(), HasSubstr("importers' origin"));
+  const double rmse = ape_json["statistics"]["rmse"].get<double>();
   std::printf("KITTI 06 image folder, camera-only run: Sim3-aligned APE %.3f m over 60 m\n", rmse);
   EXPECT_LT(rmse, 0.6);  // 1 % of the path
 
@@ -867,6 +886,11 @@ TEST(Cli, ImageFolderImportRunsAsCameraOnlyVisualSlam) {
   const CliRun three = run(fmt::format("import images {}/image_l --rate 10 --intrinsics 707,707,601 --out {}", data, (dir / "x.mcap").string()));
   EXPECT_EQ(three.exit_code, 1);
   EXPECT_THAT(three.err, HasSubstr("--intrinsics: 3 numbers"));
+  const CliRun zero_origin = run(fmt::format("import images {0}/image_l --times {0}/times_from_pyslam_kitti06.txt --time-origin 0 --out {1}", data,
+                                             (dir / "zero.mcap").string()));
+  EXPECT_EQ(zero_origin.exit_code, 1);
+  EXPECT_THAT(zero_origin.err, HasSubstr("--time-origin 0: relative times need an origin after 0"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "zero.mcap"));
   std::filesystem::remove_all(dir);
 }
 

@@ -201,5 +201,38 @@ TEST(Association, MatchesNearestWithinMaxDifferenceAndOffset) {
   EXPECT_EQ(shifted->reference_indices[9], 45u);
 }
 
+// A dataset's ground truth in its own times (from 100 s here) and an estimate from the imported
+// log (the same times + 1e9 s, starting later): paired with the importers' origin taken off.
+// Otherwise, the first times are paired; overlapping or both-absolute times are left alone.
+TEST(Association, GuessesTheOffsetBetweenRelativeAndAbsoluteTimes) {
+  const io::Trajectory reference = curve(50);
+  io::Trajectory estimate;
+  for (std::size_t i = 7; i < 50; ++i) {
+    estimate.timestamps.push_back(reference.timestamps[i] + Duration::from_seconds(kDefaultRelativeTimeOrigin_s));
+    estimate.poses.push_back(reference.poses[i]);
+  }
+  const std::optional<TimeOffsetGuess> guess = guess_relative_time_offset(reference, estimate);
+  ASSERT_TRUE(guess.has_value());
+  EXPECT_EQ(guess->estimate_time_offset_s, -kDefaultRelativeTimeOrigin_s);
+  EXPECT_THAT(guess->description, HasSubstr("importers' origin"));
+  const auto paired = associate(reference, estimate, {0.01, guess->estimate_time_offset_s});
+  ASSERT_TRUE(paired.ok());
+  EXPECT_EQ(paired->estimate.size(), 43u);
+  EXPECT_EQ(paired->reference_indices.front(), 7u);
+  // The reverse: the reference absolute, the estimate relative.
+  const std::optional<TimeOffsetGuess> reverse = guess_relative_time_offset(estimate, reference);
+  ASSERT_TRUE(reverse.has_value());
+  EXPECT_EQ(reverse->estimate_time_offset_s, kDefaultRelativeTimeOrigin_s);
+  // Another origin: first time to first time.
+  io::Trajectory elsewhere = reference;
+  for (Timestamp& t : elsewhere.timestamps) t = t + Duration::from_seconds(1.7e9);
+  const std::optional<TimeOffsetGuess> first_times = guess_relative_time_offset(reference, elsewhere);
+  ASSERT_TRUE(first_times.has_value());
+  EXPECT_NEAR(first_times->estimate_time_offset_s, -1.7e9, 1e-6);
+  EXPECT_THAT(first_times->description, HasSubstr("first time with first time"));
+  EXPECT_FALSE(guess_relative_time_offset(reference, reference).has_value());
+  EXPECT_FALSE(guess_relative_time_offset(elsewhere, estimate).has_value());
+}
+
 }  // namespace
 }  // namespace hanzo::fusion::eval

@@ -56,6 +56,7 @@ TEST_P(Rosbag2Export, FoxgloveReadsEveryValueWritten) {
       {path[0].stamp, "base_link", "cam_optical", SE3(SO3::from_wxyz(Eigen::Vector4d(0.5, -0.5, 0.5, -0.5)), Eigen::Vector3d(0.1, 0.05, 0.0))}};
   const calib::CameraCalibration fisheye{{458.6, 457.3, 367.2, 248.4, 752, 480}, {msgs::DistortionType::kEquidistant, {0.01, -0.02, 0.003, -0.0004}}};
   const calib::CameraCalibration pinhole{{500.0, 501.0, 320.5, 180.5, 640, 360}, {}};
+  const std::string compressed_file("\x89PNG\r\n\x1a\n\0\xff", 10);  // the bytes are passed on as they are
   {
     auto writer = BagWriter::create(dir.string(), GetParam());
     ASSERT_TRUE(writer.ok()) << writer.error().message;
@@ -75,6 +76,12 @@ TEST_P(Rosbag2Export, FoxgloveReadsEveryValueWritten) {
                                  camera_info_cdr(path[0].stamp, "cam_optical", fisheye, 752, 480)).ok());
     ASSERT_TRUE((*writer)->write("/cam2/camera_info", "sensor_msgs/msg/CameraInfo", path[0].stamp,
                                  camera_info_cdr(path[0].stamp, "cam2", pinhole, 640, 360)).ok());
+    msgs::ImageMessage image;
+    image.timestamp = path[1].stamp;
+    image.frame_id = "cam2";
+    image.encoding = msgs::ImageEncoding::kMono8;
+    ASSERT_TRUE((*writer)->write("/cam2", "sensor_msgs/msg/CompressedImage", image.timestamp,
+                                 compressed_image_cdr(image, "png", compressed_file)).ok());
     EXPECT_THAT((*writer)->write("/pose", "nav_msgs/msg/Path", path[0].stamp, "").error().message, HasSubstr("has type"));
     EXPECT_THAT((*writer)->write("/x", "std_msgs/msg/String", path[0].stamp, "").error().message, HasSubstr("not one it writes"));
     ASSERT_TRUE((*writer)->close().ok());
@@ -85,7 +92,7 @@ TEST_P(Rosbag2Export, FoxgloveReadsEveryValueWritten) {
   auto bag = open_bag(dir.string());
   ASSERT_TRUE(bag.ok()) << bag.error().message;
   EXPECT_EQ(bag->storage, sqlite ? "sqlite3" : "mcap");
-  ASSERT_EQ(bag->topics.size(), 8u);
+  ASSERT_EQ(bag->topics.size(), 9u);
 
   const nlohmann::json read = test::run_node("rosbag2_read.mjs", bag->files.front());
   ASSERT_FALSE(read.is_null());
@@ -171,6 +178,13 @@ TEST_P(Rosbag2Export, FoxgloveReadsEveryValueWritten) {
   const auto& plain = topics["/cam2/camera_info"]["messages"][0];
   EXPECT_EQ(plain["distortion_model"], "plumb_bob");
   EXPECT_EQ(plain["d"].get<std::vector<double>>(), std::vector<double>(5, 0.0));
+  const auto& compressed = topics["/cam2"]["messages"][0];
+  EXPECT_EQ(compressed["header"]["frame_id"], "cam2");
+  expect_stamp(compressed["header"], path[1].stamp);
+  EXPECT_EQ(compressed["format"], "mono8; png compressed mono8");
+  std::vector<int> file_bytes;
+  for (const char c : compressed_file) file_bytes.push_back(static_cast<uint8_t>(c));
+  EXPECT_EQ(compressed["data"].get<std::vector<int>>(), file_bytes);
   // Our importer's decoders take them back as they were.
   auto camera_back = ros::camera_info_from_ros(camera_info_cdr(path[0].stamp, "cam_optical", fisheye, 752, 480), ros::Serialization::kCdr);
   ASSERT_TRUE(camera_back.ok()) << camera_back.error().message;

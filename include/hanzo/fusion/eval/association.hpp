@@ -8,6 +8,9 @@
 #include <cstddef>
 #include <vector>
 
+#include <optional>
+#include <string>
+
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 
@@ -30,5 +33,24 @@ struct AssociatedTrajectories {
 /// Fails when no pair is found (names the time ranges so an offset or a wrong file is easy to spot).
 Result<AssociatedTrajectories> associate(const io::Trajectory& reference, const io::Trajectory& estimate,
                                          const AssociationConfig& config = {});
+
+/// Times below this (s, 1973) are relative ones (a dataset's times from 0), not Unix times.
+inline constexpr double kRelativeTimesBelow_s = 1e8;
+/// Where the importers place relative times by default (`import kitti|images --time-origin`):
+/// 1e9 s, 2001-09-09T01:46:40Z.
+inline constexpr double kDefaultRelativeTimeOrigin_s = 1e9;
+
+/// A constant offset between a trajectory in relative times and one in absolute times.
+struct TimeOffsetGuess {
+  double estimate_time_offset_s = 0.0;  ///< added to the estimate's times (AssociationConfig)
+  std::string description;              ///< how the times were paired, one sentence
+};
+
+/// When the two time ranges do not overlap and exactly one trajectory starts before
+/// kRelativeTimesBelow_s, the offset that pairs them: -/+ kDefaultRelativeTimeOrigin_s when the
+/// absolute one lies within [origin, origin + kRelativeTimesBelow_s) (an imported dataset's
+/// estimate against the dataset's own ground truth), else the difference of the first times.
+/// None otherwise (times overlap, both relative, both absolute, or an empty trajectory).
+std::optional<TimeOffsetGuess> guess_relative_time_offset(const io::Trajectory& reference, const io::Trajectory& estimate);
 
 }  // namespace hanzo::fusion::eval

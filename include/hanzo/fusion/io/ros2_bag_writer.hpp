@@ -5,7 +5,7 @@
 //
 //   geometry_msgs/msg/PoseStamped, geometry_msgs/msg/PoseWithCovarianceStamped, nav_msgs/msg/Path,
 //   sensor_msgs/msg/PointCloud2 (x, y, z float32 [+ intensity float32]), nav_msgs/msg/OccupancyGrid;
-//   and sensor data (a sensor log as a ROS 2 bag): sensor_msgs/msg/Imu, NavSatFix, Image,
+//   and sensor data (a sensor log as a ROS 2 bag): sensor_msgs/msg/Imu, NavSatFix, Image, CompressedImage,
 //   PointCloud2 in a LiDAR driver's layout, geometry_msgs/msg/TwistStamped; the calibration as
 //   tf2_msgs/msg/TFMessage (/tf_static) and sensor_msgs/msg/CameraInfo.
 //
@@ -63,6 +63,10 @@ std::string imu_cdr(const msgs::ImuMessage& imu);
 std::string navsatfix_cdr(const msgs::GnssMessage& fix, const std::string& frame_id);
 /// rgb8, bgr8, mono8, 16UC1 (depth16), 32FC1 (depth32f).
 std::string image_cdr(const msgs::ImageMessage& image);
+/// sensor_msgs/CompressedImage holding `file` (a JPEG or PNG of `image`'s pixels; `image` gives
+/// stamp, frame and encoding), format as image_transport writes it: "<encoding>; jpeg compressed
+/// <encoding>" ("png" alike), e.g. "mono8; jpeg compressed mono8".
+std::string compressed_image_cdr(const msgs::ImageMessage& image, const std::string& format, const std::string& file);
 std::string point_cloud_cdr(const msgs::PointCloudMessage& cloud, LidarLayout layout);
 /// tf2_msgs/TFMessage: one TransformStamped per transform (header frame = parent).
 std::string tf_message_cdr(const std::vector<ros::FrameTransform>& transforms);

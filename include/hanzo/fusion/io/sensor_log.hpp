@@ -102,6 +102,10 @@ struct LogEntry {
   std::string topic;
   Timestamp log_time;
   std::variant<msgs::SensorMessage, msgs::PoseEstimate> message;
+  /// For an 8-bit image stored compressed: the stored file ("jpeg" or "png") as it is in the log,
+  /// so a writer can pass it on without encoding it again; empty formats otherwise.
+  std::string stored_image_format;
+  std::string stored_image_file;
 };
 
 /// Reads a sensor log in log-time order, decoding the hanzo.fusion.v1 messages. Channels with
