@@ -49,6 +49,9 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev libembree-dev liboctomap-dev
   # make fuzz: clang with libFuzzer and AddressSanitizer
   clang libclang-rt-14-dev
+  # ai (learned features, HANZO_FUSION_AI): libtorch on the CPU; its reference tests run the same
+  # weights through Debian's PyTorch and torchvision (deformable convolutions)
+  libtorch-dev python3-torch python3-torchvision python3-pil
   # the web viewer's end-to-end test (playwright-core drives Debian's chromium headless)
   chromium
 )

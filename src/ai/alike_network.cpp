@@ -1,0 +1,123 @@
+// ALIKE (Zhao et al., IEEE TMM 2022): encoder, aggregation and a joint head whose last channel is
+// the score map, with the upstream state_dict's tensor names.
+#include <fmt/format.h>
+
+#include "learned_network.hpp"
+#include "torch_layers.hpp"
+
+namespace hanzo::fusion::ai {
+namespace {
+
+struct AlikeSize {
+  int64_t c1, c2, c3, c4, dim;
+  bool single_head;
+};
+
+AlikeSize alike_size(LearnedModel model) {
+  switch (model) {
+    case LearnedModel::kAlikeT: return {8, 16, 32, 64, 64, true};
+    case LearnedModel::kAlikeS: return {8, 16, 48, 96, 96, true};
+    case LearnedModel::kAlikeN: return {16, 32, 64, 128, 128, true};
+    default: return {32, 64, 128, 128, 128, false};  // alike-l
+  }
+}
+
+using Expected = std::vector<std::pair<std::string, std::vector<int64_t>>>;
+
+class AlikeNetwork final : public LearnedFeatureExtractor::Network {
+ public:
+  AlikeNetwork(AlikeSize size, NetworkWeights weights) : size_(size), weights_(std::move(weights)) {}
+
+  static Expected expected(const AlikeSize& s) {
+    Expected e;
+    auto conv = [&](const std::string& name, int64_t out, int64_t in, int64_t k) { e.push_back({name, {out, in, k, k}}); };
+    conv("block1.conv1.weight", s.c1, 3, 3);
+    expect_batch_norm(e, "block1.bn1", s.c1);
+    conv("block1.conv2.weight", s.c1, s.c1, 3);
+    expect_batch_norm(e, "block1.bn2", s.c1);
+    const int64_t in[4] = {0, s.c1, s.c2, s.c3}, out[4] = {0, s.c2, s.c3, s.c4};
+    for (int b = 1; b <= 3; ++b) {
+      const std::string block = fmt::format("block{}", b + 1);
+      conv(block + ".conv1.weight", out[b], in[b], 3);
+      expect_batch_norm(e, block + ".bn1", out[b]);
+      conv(block + ".conv2.weight", out[b], out[b], 3);
+      expect_batch_norm(e, block + ".bn2", out[b]);
+      conv(block + ".downsample.weight", out[b], in[b], 1);
+      e.push_back({block + ".downsample.bias", {out[b]}});
+    }
+    conv("conv1.weight", s.dim / 4, s.c1, 1);
+    conv("conv2.weight", s.dim / 4, s.c2, 1);
+    conv("conv3.weight", s.dim / 4, s.c3, 1);
+    conv("conv4.weight", s.dim / 4, s.c4, 1);
+    if (!s.single_head) conv("convhead1.weight", s.dim, s.dim, 1);
+    conv("convhead2.weight", s.dim + 1, s.dim, 1);
+    return e;
+  }
+
+  DenseMaps dense(const at::Tensor& image) const override {
+    const int64_t height = image.size(2), width = image.size(3);
+    // Zeros right and bottom up to a multiple of 32 (upstream's extract_dense_map).
+    const int64_t pad_h = (32 - height % 32) % 32, pad_w = (32 - width % 32) % 32;
+    const at::Tensor padded = at::constant_pad_nd(image, {0, pad_w, 0, pad_h}, 0.0);
+    const NetworkWeights& w = weights_;
+    auto conv_block = [&](const at::Tensor& x) {
+      at::Tensor y = at::relu(batch_norm(convolution(x, w, "block1.conv1.weight", "", 1), w, "block1.bn1"));
+      return at::relu(batch_norm(convolution(y, w, "block1.conv2.weight", "", 1), w, "block1.bn2"));
+    };
+    auto res_block = [&](const at::Tensor& x, const std::string& block) {
+      at::Tensor y = at::relu(batch_norm(convolution(x, w, block + ".conv1.weight", "", 1), w, block + ".bn1"));
+      y = batch_norm(convolution(y, w, block + ".conv2.weight", "", 1), w, block + ".bn2");
+      return at::relu(y + convolution(x, w, block + ".downsample.weight", block + ".downsample.bias", 0));
+    };
+    const at::Tensor x1 = conv_block(padded);
+    const at::Tensor x2 = res_block(at::max_pool2d(x1, {2, 2}, {2, 2}), "block2");
+    const at::Tensor x3 = res_block(at::max_pool2d(x2, {4, 4}, {4, 4}), "block3");
+    const at::Tensor x4 = res_block(at::max_pool2d(x3, {4, 4}, {4, 4}), "block4");
+    const int64_t full_h = padded.size(2), full_w = padded.size(3);
+    auto up = [&](const at::Tensor& x, const char* name) {
+      const at::Tensor y = at::relu(convolution(x, w, name, "", 0));
+      return y.size(2) == full_h ? y : at::upsample_bilinear2d(y, {full_h, full_w}, /*align_corners=*/true);
+    };
+    at::Tensor x1234 = at::cat({up(x1, "conv1.weight"), up(x2, "conv2.weight"), up(x3, "conv3.weight"), up(x4, "conv4.weight")}, 1);
+    if (!size_.single_head) x1234 = at::relu(convolution(x1234, w, "convhead1.weight", "", 0));
+    const at::Tensor head = convolution(x1234, w, "convhead2.weight", "", 0);
+    auto crop = [&](const at::Tensor& x) { return x.slice(2, 0, height).slice(3, 0, width).contiguous(); };
+    const at::Tensor descriptors = crop(head.slice(1, 0, size_.dim));
+    const at::Tensor scores = at::sigmoid(crop(head.slice(1, size_.dim, size_.dim + 1)));
+    return {scores, normalize(descriptors, 1)};
+  }
+
+  // The descriptor map at the keypoints: bilinear with sub-pixel keypoints, else at the pixel.
+  at::Tensor describe(const DenseMaps& maps, const at::Tensor& keypoints, bool subpixel) const override {
+    const at::Tensor& map = maps.feature_map;
+    const int64_t height = map.size(2), width = map.size(3);
+    if (keypoints.size(0) == 0) return at::zeros({0, map.size(1)}, map.options());
+    at::Tensor descriptors;
+    if (subpixel) {
+      descriptors = sample(map, keypoints).t();
+    } else {
+      const at::Tensor wh = at::tensor({static_cast<float>(width - 1), static_cast<float>(height - 1)}, map.options()).view({1, 2});
+      const at::Tensor pixels = ((keypoints + 1) / 2 * wh).to(at::kLong);
+      const at::Tensor index = pixels.select(1, 1) * width + pixels.select(1, 0);
+      descriptors = map[0].reshape({map.size(1), -1}).index_select(1, index).t();
+    }
+    return normalize(descriptors, 1);
+  }
+
+  int descriptor_size() const override { return static_cast<int>(size_.dim); }
+
+ private:
+  AlikeSize size_;
+  NetworkWeights weights_;
+};
+
+}  // namespace
+
+Result<std::unique_ptr<LearnedFeatureExtractor::Network>> make_alike_network(LearnedModel model, const StateDict& state, const std::string& path) {
+  const AlikeSize size = alike_size(model);
+  NetworkWeights weights;
+  HANZO_ASSIGN_OR_RETURN(weights, NetworkWeights::take(state, AlikeNetwork::expected(size), path));
+  return std::unique_ptr<LearnedFeatureExtractor::Network>(std::make_unique<AlikeNetwork>(size, std::move(weights)));
+}
+
+}  // namespace hanzo::fusion::ai

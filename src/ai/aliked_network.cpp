@@ -1,0 +1,162 @@
+// ALIKED (Zhao et al., IEEE TIM 2023): encoder, aggregation, score head and the sparse deformable
+// descriptor head, with the upstream state_dict's tensor names.
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "learned_network.hpp"
+#include "torch_layers.hpp"
+
+namespace hanzo::fusion::ai {
+namespace {
+
+struct AlikedSize {
+  int64_t c1, c2, c3, c4, dim, positions;
+};
+
+AlikedSize aliked_size(LearnedModel model) {
+  switch (model) {
+    case LearnedModel::kAlikedT16: return {8, 16, 32, 64, 64, 16};
+    case LearnedModel::kAlikedN32: return {16, 32, 64, 128, 128, 32};
+    default: return {16, 32, 64, 128, 128, 16};  // n16, n16rot
+  }
+}
+
+using Expected = std::vector<std::pair<std::string, std::vector<int64_t>>>;
+
+class AlikedNetwork final : public LearnedFeatureExtractor::Network {
+ public:
+  AlikedNetwork(AlikedSize size, NetworkWeights weights) : size_(size), weights_(std::move(weights)) {}
+
+  static Expected expected(const AlikedSize& s) {
+    Expected e;
+    auto conv = [&](const std::string& name, int64_t out, int64_t in, int64_t k) { e.push_back({name, {out, in, k, k}}); };
+    conv("block1.conv1.weight", s.c1, 3, 3);
+    expect_batch_norm(e, "block1.bn1", s.c1);
+    conv("block1.conv2.weight", s.c1, s.c1, 3);
+    expect_batch_norm(e, "block1.bn2", s.c1);
+    const int64_t in[4] = {0, s.c1, s.c2, s.c3}, out[4] = {0, s.c2, s.c3, s.c4};
+    for (int b = 1; b <= 3; ++b) {
+      const std::string block = fmt::format("block{}", b + 1);
+      for (int c = 1; c <= 2; ++c) {
+        const int64_t conv_in = c == 1 ? in[b] : out[b];
+        if (b == 1) {
+          conv(fmt::format("{}.conv{}.weight", block, c), out[b], conv_in, 3);
+        } else {  // deformable
+          conv(fmt::format("{}.conv{}.offset_conv.weight", block, c), 18, conv_in, 3);
+          e.push_back({fmt::format("{}.conv{}.offset_conv.bias", block, c), {18}});
+          conv(fmt::format("{}.conv{}.regular_conv.weight", block, c), out[b], conv_in, 3);
+        }
+        expect_batch_norm(e, fmt::format("{}.bn{}", block, c), out[b]);
+      }
+      conv(block + ".downsample.weight", out[b], in[b], 1);
+      e.push_back({block + ".downsample.bias", {out[b]}});
+    }
+    conv("conv1.weight", s.dim / 4, s.c1, 1);
+    conv("conv2.weight", s.dim / 4, s.c2, 1);
+    conv("conv3.weight", s.dim / 4, s.c3, 1);
+    conv("conv4.weight", s.dim / 4, s.dim, 1);
+    conv("score_head.0.weight", 8, s.dim, 1);
+    conv("score_head.2.weight", 4, 8, 3);
+    conv("score_head.4.weight", 4, 4, 3);
+    conv("score_head.6.weight", 1, 4, 3);
+    e.push_back({"desc_head.agg_weights", {s.positions, s.dim, s.dim}});
+    conv("desc_head.offset_conv.0.weight", 2 * s.positions, s.dim, 3);
+    e.push_back({"desc_head.offset_conv.0.bias", {2 * s.positions}});
+    conv("desc_head.offset_conv.2.weight", 2 * s.positions, 2 * s.positions, 1);
+    e.push_back({"desc_head.offset_conv.2.bias", {2 * s.positions}});
+    conv("desc_head.sf_conv.weight", s.dim, s.dim, 1);
+    return e;
+  }
+
+  DenseMaps dense(const at::Tensor& image) const override {
+    const int64_t height = image.size(2), width = image.size(3);
+    // Pad to a multiple of 32 with replicated edges, centred (RAFT's InputPadder).
+    const int64_t pad_h = (32 - height % 32) % 32, pad_w = (32 - width % 32) % 32;
+    const int64_t left = pad_w / 2, top = pad_h / 2;
+    const at::Tensor padded = at::replication_pad2d(image, {left, pad_w - left, top, pad_h - top});
+    const NetworkWeights& w = weights_;
+    auto conv_block = [&](const at::Tensor& x) {
+      at::Tensor y = at::selu(batch_norm(convolution(x, w, "block1.conv1.weight", "", 1), w, "block1.bn1"));
+      return at::selu(batch_norm(convolution(y, w, "block1.conv2.weight", "", 1), w, "block1.bn2"));
+    };
+    auto res_block = [&](const at::Tensor& x, const std::string& block, bool deformable) {
+      auto conv = [&](const at::Tensor& input, int c) {
+        const std::string name = fmt::format("{}.conv{}", block, c);
+        return deformable ? deformable_convolution(input, w, name) : convolution(input, w, name + ".weight", "", 1);
+      };
+      at::Tensor y = at::selu(batch_norm(conv(x, 1), w, block + ".bn1"));
+      y = batch_norm(conv(y, 2), w, block + ".bn2");
+      return at::selu(y + convolution(x, w, block + ".downsample.weight", block + ".downsample.bias", 0));
+    };
+    const at::Tensor x1 = conv_block(padded);
+    const at::Tensor x2 = res_block(at::avg_pool2d(x1, {2, 2}, {2, 2}), "block2", false);
+    const at::Tensor x3 = res_block(at::avg_pool2d(x2, {4, 4}, {4, 4}), "block3", true);
+    const at::Tensor x4 = res_block(at::avg_pool2d(x3, {4, 4}, {4, 4}), "block4", true);
+    const int64_t full_h = padded.size(2), full_w = padded.size(3);
+    auto up = [&](const at::Tensor& x, const char* name) {
+      const at::Tensor y = at::selu(convolution(x, w, name, "", 0));
+      return y.size(2) == full_h ? y : at::upsample_bilinear2d(y, {full_h, full_w}, /*align_corners=*/true);
+    };
+    const at::Tensor x1234 = at::cat({up(x1, "conv1.weight"), up(x2, "conv2.weight"), up(x3, "conv3.weight"), up(x4, "conv4.weight")}, 1);
+    at::Tensor score = at::selu(convolution(x1234, w, "score_head.0.weight", "", 0));
+    score = at::selu(convolution(score, w, "score_head.2.weight", "", 1));
+    score = at::selu(convolution(score, w, "score_head.4.weight", "", 1));
+    score = at::sigmoid(convolution(score, w, "score_head.6.weight", "", 1));
+    const at::Tensor features = normalize(x1234, 1);
+    auto unpad = [&](const at::Tensor& x) { return x.slice(2, top, top + height).slice(3, left, left + width).contiguous(); };
+    return {unpad(score), unpad(features)};
+  }
+
+  // SDDH (paper eq. 6-8): offsets of M positions from the keypoint's 3x3 patch, features sampled
+  // there, a 1x1 convolution + SELU, and a learned weighted sum over the positions.
+  at::Tensor describe(const DenseMaps& maps, const at::Tensor& keypoints, bool /*subpixel*/) const override {
+    const at::Tensor& features = maps.feature_map;  // [1, C, H, W]
+    const int64_t channels = features.size(1), height = features.size(2), width = features.size(3), count = keypoints.size(0);
+    if (count == 0) return at::zeros({0, channels}, features.options());
+    const at::Tensor wh = at::tensor({static_cast<float>(width - 1), static_cast<float>(height - 1)}, features.options()).view({1, 2});
+    const at::Tensor pixels = (keypoints / 2 + 0.5) * wh;  // [N, 2] (x, y)
+    // 3x3 patches around the keypoints' pixels (zeros outside the map).
+    const at::Tensor integer = pixels.to(at::kLong);
+    const at::Tensor padded = at::constant_pad_nd(features[0], {1, 1, 1, 1}, 0.0);  // [C, H + 2, W + 2]
+    std::vector<at::Tensor> taps;
+    for (int64_t dy = 0; dy < 3; ++dy) {
+      for (int64_t dx = 0; dx < 3; ++dx) {
+        const at::Tensor index = (integer.select(1, 1) + dy) * (width + 2) + integer.select(1, 0) + dx;
+        taps.push_back(padded.reshape({channels, -1}).index_select(1, index));  // [C, N]
+      }
+    }
+    const at::Tensor patches = at::stack(taps, 2).permute({1, 0, 2}).reshape({count, channels, 3, 3});
+    const double max_offset = static_cast<double>(std::max(height, width)) / 4.0;
+    const NetworkWeights& w = weights_;
+    at::Tensor offsets = at::selu(convolution(patches, w, "desc_head.offset_conv.0.weight", "desc_head.offset_conv.0.bias", 0));
+    offsets = convolution(offsets, w, "desc_head.offset_conv.2.weight", "desc_head.offset_conv.2.bias", 0).clamp(-max_offset, max_offset);
+    const int64_t positions = size_.positions;
+    const at::Tensor offset = offsets.view({count, 2, positions}).permute({0, 2, 1});  // [N, M, 2] (x, y)
+    const at::Tensor positions_normalized = (pixels.unsqueeze(1) + offset) * (2.0 / wh.unsqueeze(0)) - 1.0;  // [N, M, 2]
+    const at::Tensor sampled = sample(features, positions_normalized.reshape({count * positions, 2}));  // [C, N M]
+    at::Tensor per_position = sampled.view({channels, count, positions, 1}).permute({1, 0, 2, 3});  // [N, C, M, 1]
+    per_position = at::selu(convolution(per_position.contiguous(), w, "desc_head.sf_conv.weight", "", 0)).squeeze(-1);  // [N, C, M]
+    // descriptor_d = sum_{p, c} features[n, c, p] agg[p, c, d]
+    const at::Tensor descriptors = at::mm(per_position.permute({0, 2, 1}).reshape({count, positions * channels}),
+                                          w["desc_head.agg_weights"].reshape({positions * channels, channels}));
+    return normalize(descriptors, 1);
+  }
+
+  int descriptor_size() const override { return static_cast<int>(size_.dim); }
+
+ private:
+  AlikedSize size_;
+  NetworkWeights weights_;
+};
+
+}  // namespace
+
+Result<std::unique_ptr<LearnedFeatureExtractor::Network>> make_aliked_network(LearnedModel model, const StateDict& state, const std::string& path) {
+  const AlikedSize size = aliked_size(model);
+  NetworkWeights weights;
+  HANZO_ASSIGN_OR_RETURN(weights, NetworkWeights::take(state, AlikedNetwork::expected(size), path));
+  return std::unique_ptr<LearnedFeatureExtractor::Network>(std::make_unique<AlikedNetwork>(size, std::move(weights)));
+}
+
+}  // namespace hanzo::fusion::ai
