@@ -15,6 +15,9 @@
 #include "commands.hpp"
 #include "image_input.hpp"
 #include "hanzo/fusion/vision/image_pair_matcher.hpp"
+#ifdef HANZO_FUSION_WITH_AI
+#include "hanzo/fusion/ai/learned_features.hpp"
+#endif
 
 namespace hanzo::fusion::app {
 namespace {
@@ -28,7 +31,34 @@ struct MatchOptions {
   int max_features = vision::OrbExtractorConfig{}.max_features;
   double threshold_px = 3.0;
   bool no_affine_views = false;
+  std::string detector = "orb";
+  std::string model;  // learned detectors: the weights (.pth)
 };
+
+// The detector named by --detector: null for ORB (the matcher's own), else a learned one.
+Result<std::unique_ptr<vision::FeatureExtractor>> make_detector(const MatchOptions& options) {
+  if (options.detector == "orb") {
+    if (!options.model.empty()) return Error("--model: ORB takes no model (give --detector aliked-t16, ...)");
+    return std::unique_ptr<vision::FeatureExtractor>();
+  }
+#ifdef HANZO_FUSION_WITH_AI
+  const std::optional<ai::LearnedModel> model = ai::learned_model_from_name(options.detector);
+  if (!model) {
+    return Error(fmt::format("--detector {}: unknown (orb, aliked-t16, aliked-n16, aliked-n16rot, aliked-n32, alike-t, alike-s, alike-n, alike-l)",
+                             options.detector));
+  }
+  ai::LearnedFeatureConfig config;
+  config.model = *model;
+  config.model_path = options.model;
+  config.max_keypoints = options.max_features;
+  std::unique_ptr<ai::LearnedFeatureExtractor> extractor;
+  HANZO_ASSIGN_OR_RETURN(extractor, ai::LearnedFeatureExtractor::load(config));
+  return std::unique_ptr<vision::FeatureExtractor>(std::move(extractor));
+#else
+  return Error(fmt::format("--detector {}: this build has no learned features (built without HANZO_FUSION_AI; install libtorch-dev)",
+                           options.detector));
+#endif
+}
 
 // Nine numbers, row-major, image-1 pixels to image-2 pixels (the Oxford data sets' format).
 Result<cv::Matx33d> read_homography(const std::string& path) {
@@ -63,14 +93,17 @@ int run_match(const Output& output, const MatchOptions& options) {
     if (!read) return report_failure(output, result, "--homography: " + read.error().message);
     truth = *read;
   }
+  Result<std::unique_ptr<vision::FeatureExtractor>> detector = make_detector(options);
+  if (!detector) return report_failure(output, result, detector.error().message);
+  result["detector"] = options.detector;
   vision::ImagePairMatcherConfig config;
   config.features.max_features = options.max_features;
   config.ransac_threshold_px = options.threshold_px;
   config.geometry = options.geometry == "homography"    ? vision::PairGeometry::kHomography
                     : options.geometry == "fundamental" ? vision::PairGeometry::kFundamental
                                                         : vision::PairGeometry::kAuto;
-  if (options.no_affine_views) config.view_tilts.clear();
-  Result<vision::ImagePairMatches> matched = vision::match_image_pair(*image1, *image2, config);
+  if (options.no_affine_views || *detector) config.view_tilts.clear();  // learned features need no simulated views
+  Result<vision::ImagePairMatches> matched = vision::match_image_pair(*image1, *image2, config, detector->get());
   if (!matched) return report_failure(output, result, matched.error().message);
 
   result["ok"] = true;
@@ -120,19 +153,24 @@ int run_match(const Output& output, const MatchOptions& options) {
 }  // namespace
 
 void add_features_command(CLI::App& app, const Output& output, Command& run) {
-  CLI::App* features = app.add_subcommand("features", "Image features: ORB extraction and matching");
+  CLI::App* features = app.add_subcommand("features", "Image features: ORB or learned (ALIKED, ALIKE) extraction and matching");
   features->require_subcommand(1);
   auto options = std::make_shared<MatchOptions>();
-  CLI::App* match = features->add_subcommand("match", "Match two images (ORB, ratio + mutual test, robust geometry, guided matching)");
+  CLI::App* match = features->add_subcommand("match", "Match two images (ORB or learned features, ratio + mutual test, robust geometry, guided matching)");
   match->add_option("IMG1", options->image1, "First image")->required();
   match->add_option("IMG2", options->image2, "Second image")->required();
   match->add_option("--homography", options->homography,
                     "Ground-truth homography IMG1 -> IMG2 (9 numbers, row-major): report correct matches and precision");
-  match->add_option("--max-features", options->max_features, "ORB keypoints per image")->check(CLI::Range(1, 100000));
+  match->add_option("--detector", options->detector,
+                    "Keypoints and descriptors: orb (default) or a learned model: aliked-t16, aliked-n16, aliked-n16rot, aliked-n32, "
+                    "alike-t, alike-s, alike-n, alike-l (its weights from --model or $HANZO_FUSION_MODELS)")
+      ->capture_default_str();
+  match->add_option("--model", options->model, "Learned detectors: the model file (.pth)");
+  match->add_option("--max-features", options->max_features, "Keypoints per image (at most)")->check(CLI::Range(1, 100000));
   match->add_option("--threshold", options->threshold_px, "Pixels: geometry verification and ground-truth check")->check(CLI::Range(0.1, 100.0));
   match->add_option("--geometry", options->geometry, "auto (default), homography or fundamental")
       ->check(CLI::IsMember({"auto", "homography", "fundamental"}));
-  match->add_flag("--no-affine-views", options->no_affine_views, "Do not simulate affine views when the first geometry is weak");
+  match->add_flag("--no-affine-views", options->no_affine_views, "Do not simulate affine views when the first geometry is weak (ORB; learned detectors never do)");
   match->add_option("--draw", options->draw, "Write an image of the matches (its extension picks the format)");
   match->callback([&output, &run, options] { run = [&output, options] { return run_match(output, *options); }; });
 }

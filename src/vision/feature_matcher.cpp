@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include <opencv2/core.hpp>
+
 namespace hanzo::fusion::vision {
 namespace {
 
@@ -20,7 +22,36 @@ std::vector<FeatureMatch> unique_by_train(std::vector<FeatureMatch> matches, std
   return kept;
 }
 
+// Every query-train distance of float descriptors (kFloatDistanceScale x Euclidean), from the
+// dot products of one matrix product: |a - b|^2 = |a|^2 + |b|^2 - 2 a.b.
+cv::Mat float_distances(const cv::Mat& query, const cv::Mat& train) {
+  cv::Mat dot;
+  cv::gemm(query, train, 1.0, cv::noArray(), 0.0, dot, cv::GEMM_2_T);
+  cv::Mat query_norms, train_norms;
+  cv::reduce(query.mul(query), query_norms, 1, cv::REDUCE_SUM);
+  cv::reduce(train.mul(train), train_norms, 1, cv::REDUCE_SUM);
+  cv::Mat distances(dot.size(), CV_32SC1);
+  for (int q = 0; q < dot.rows; ++q) {
+    const float* row = dot.ptr<float>(q);
+    int* out = distances.ptr<int>(q);
+    for (int t = 0; t < dot.cols; ++t) {
+      const float squared = std::max(0.0F, query_norms.at<float>(q) + train_norms.at<float>(t) - 2.0F * row[t]);
+      out[t] = static_cast<int>(std::lround(kFloatDistanceScale * std::sqrt(squared)));
+    }
+  }
+  return distances;
+}
+
 }  // namespace
+
+int descriptor_distance(const cv::Mat& descriptors_a, int a, const cv::Mat& descriptors_b, int b) {
+  if (descriptors_a.type() == CV_8UC1) return hamming_distance(descriptors_a.ptr<unsigned char>(a), descriptors_b.ptr<unsigned char>(b));
+  const float* x = descriptors_a.ptr<float>(a);
+  const float* y = descriptors_b.ptr<float>(b);
+  double squared = 0.0;
+  for (int i = 0; i < descriptors_a.cols; ++i) squared += (x[i] - y[i]) * (x[i] - y[i]);
+  return static_cast<int>(std::lround(kFloatDistanceScale * std::sqrt(squared)));
+}
 
 std::vector<FeatureMatch> match_descriptors(const cv::Mat& query_descriptors, const cv::Mat& train_descriptors,
                                             const DescriptorMatcherConfig& config) {
@@ -29,11 +60,14 @@ std::vector<FeatureMatch> match_descriptors(const cv::Mat& query_descriptors, co
   const int queries = query_descriptors.rows, trains = train_descriptors.rows;
   std::vector<NearestCandidates> nearest_query(static_cast<std::size_t>(queries));
   std::vector<NearestCandidates> nearest_train(static_cast<std::size_t>(trains));  // for the mutual check
+  const bool binary = query_descriptors.type() == CV_8UC1;
+  const cv::Mat distances = binary ? cv::Mat() : float_distances(query_descriptors, train_descriptors);
   for (int q = 0; q < queries; ++q) {
     const unsigned char* query = query_descriptors.ptr<unsigned char>(q);
+    const int* float_row = binary ? nullptr : distances.ptr<int>(q);
     NearestCandidates& best_for_query = nearest_query[static_cast<std::size_t>(q)];
     for (int t = 0; t < trains; ++t) {
-      const int distance = hamming_distance(query, train_descriptors.ptr<unsigned char>(t));
+      const int distance = binary ? hamming_distance(query, train_descriptors.ptr<unsigned char>(t)) : float_row[t];
       best_for_query.offer(t, distance);
       NearestCandidates& best_for_train = nearest_train[static_cast<std::size_t>(t)];
       if (distance < best_for_train.best) {
@@ -44,7 +78,9 @@ std::vector<FeatureMatch> match_descriptors(const cv::Mat& query_descriptors, co
   }
   for (int q = 0; q < queries; ++q) {
     const NearestCandidates& best = nearest_query[static_cast<std::size_t>(q)];
-    if (!best.passes(config.ratio, config.max_distance)) continue;
+    const bool passes = binary ? best.passes(config.ratio, config.max_distance)
+                               : best.passes(config.float_ratio, static_cast<int>(config.max_float_distance * kFloatDistanceScale));
+    if (!passes) continue;
     if (config.mutual && nearest_train[static_cast<std::size_t>(best.index)].index != q) continue;
     matches.push_back({q, best.index, best.best});
   }
@@ -73,12 +109,11 @@ std::vector<FeatureMatch> match_guided(const ImageFeatures& query, const ImageFe
     const cv::KeyPoint& keypoint = query.keypoints[q];
     const cv::Vec3d x(keypoint.pt.x, keypoint.pt.y, 1.0);
     const cv::Vec3d mapped = geometry * x;
-    const unsigned char* descriptor = query.descriptors.ptr<unsigned char>(static_cast<int>(q));
     NearestCandidates nearest;
     auto consider = [&](int t) {
       const cv::KeyPoint& candidate = train.keypoints[static_cast<std::size_t>(t)];
       if (!compatible_octave(keypoint, candidate)) return;
-      nearest.offer(t, hamming_distance(descriptor, train.descriptors.ptr<unsigned char>(t)));
+      nearest.offer(t, descriptor_distance(query.descriptors, static_cast<int>(q), train.descriptors, t));
     };
     if (model == GeometryModel::kHomography) {
       if (std::abs(mapped[2]) < 1e-12) continue;
@@ -103,7 +138,8 @@ std::vector<FeatureMatch> match_guided(const ImageFeatures& query, const ImageFe
         if (std::abs(mapped[0] * p.x + mapped[1] * p.y + mapped[2]) <= config.radius_px * norm) consider(static_cast<int>(t));
       }
     }
-    if (nearest.passes(config.ratio, config.max_distance)) matches.push_back({static_cast<int>(q), nearest.index, nearest.best});
+    const int max_distance = query.descriptors.type() == CV_8UC1 ? config.max_distance : static_cast<int>(config.max_float_distance * kFloatDistanceScale);
+    if (nearest.passes(config.ratio, max_distance)) matches.push_back({static_cast<int>(q), nearest.index, nearest.best});
   }
   return unique_by_train(std::move(matches), train.keypoints.size());
 }

@@ -153,8 +153,7 @@ cv::Mat to_grey(const cv::Mat& image) {
 // Matches of every simulated view of `source` against the other image's features. swap: the
 // source is image 2 (points go to point2).
 Result<std::vector<PointMatch>> affine_view_matches(const cv::Mat& source, const ImageFeatures& other, bool swap,
-                                                   const ImagePairMatcherConfig& config) {
-  const OrbExtractor extractor(config.features);
+                                                   const ImagePairMatcherConfig& config, const FeatureExtractor& extractor) {
   const cv::Mat grey = to_grey(source);
   std::vector<PointMatch> matches;
   for (double tilt : config.view_tilts) {
@@ -216,9 +215,11 @@ Status validate(const ImagePairMatcherConfig& config) {
   return ok_status();
 }
 
-Result<ImagePairMatches> match_image_pair(const cv::Mat& image1, const cv::Mat& image2, const ImagePairMatcherConfig& config) {
+Result<ImagePairMatches> match_image_pair(const cv::Mat& image1, const cv::Mat& image2, const ImagePairMatcherConfig& config,
+                                          const FeatureExtractor* features) {
   if (Status valid = validate(config); !valid) return valid.error();
-  const OrbExtractor extractor(config.features);
+  const OrbFeatureExtractor orb(config.features);
+  const FeatureExtractor& extractor = features != nullptr ? *features : orb;
   Result<ImageFeatures> features1 = with_context(extractor.extract(image1), "image 1");
   if (!features1) return features1.error();
   Result<ImageFeatures> features2 = with_context(extractor.extract(image2), "image 2");
@@ -234,8 +235,8 @@ Result<ImagePairMatches> match_image_pair(const cv::Mat& image1, const cv::Mat& 
   if (weak(estimate, seeds.size(), config) && !config.view_tilts.empty()) {
     std::vector<PointMatch> pooled = seeds;
     for (bool swap : {false, true}) {
-      Result<std::vector<PointMatch>> views = swap ? affine_view_matches(image2, result.features1, true, config)
-                                                   : affine_view_matches(image1, result.features2, false, config);
+      Result<std::vector<PointMatch>> views = swap ? affine_view_matches(image2, result.features1, true, config, extractor)
+                                                   : affine_view_matches(image1, result.features2, false, config, extractor);
       if (views) pooled.insert(pooled.end(), views->begin(), views->end());
     }
     GeometryEstimate from_views = estimate_geometry(pooled, config);

@@ -15,6 +15,8 @@
 
 #include "hanzo/fusion/ai/learned_features.hpp"
 #include "hanzo/fusion/ai/state_dict.hpp"
+#include "hanzo/fusion/vision/image_pair_matcher.hpp"
+#include "vision/graf_pairs.hpp"
 
 namespace hanzo::fusion::ai {
 namespace {
@@ -186,6 +188,32 @@ TEST(LearnedFeatures, RefusesImagesTheNetworksCannotTake) {
   LearnedFeatureConfig bad = config;
   bad.max_keypoints = 0;
   EXPECT_THAT(LearnedFeatureExtractor::load(bad).error().message, HasSubstr("max_keypoints"));
+}
+
+// Image-pair matching with learned features and no simulated views: the graf pair (20 degrees)
+// and graf1 seen from 40 and 60 degrees further round (known homographies).
+TEST(LearnedFeatures, MatchWideBaselinePairsWithoutAffineViews) {
+  for (const LearnedModel model : {LearnedModel::kAlikedT16, LearnedModel::kAlikedN16}) {
+    LearnedFeatureConfig config;
+    config.model = model;
+    config.model_path = model_file(model);
+    auto extractor = LearnedFeatureExtractor::load(config);
+    ASSERT_TRUE(extractor.ok()) << extractor.error().message;
+    vision::ImagePairMatcherConfig matcher;
+    matcher.view_tilts.clear();
+    for (const double degrees : {0.0, 40.0, 60.0}) {
+      const vision::testing::GrafPair pair = degrees == 0.0 ? vision::testing::graf_pair() : vision::testing::wide_baseline_pair(degrees);
+      auto matched = vision::match_image_pair(pair.image1, pair.image2, matcher, extractor->get());
+      ASSERT_TRUE(matched.ok()) << matched.error().message;
+      const int correct = vision::count_correct_matches(matched->matches, pair.homography, 3.0);
+      const double precision = matched->matches.empty() ? 0.0 : static_cast<double>(correct) / static_cast<double>(matched->matches.size());
+      std::printf("%s, %s: %d correct matches at 3 px, precision %.3f (%zu putative)\n", std::string(to_string(model)).c_str(),
+                  degrees == 0.0 ? "graf1-graf2" : fmt::format("{:.0f} degrees", degrees).c_str(), correct, precision, matched->putative.size());
+      EXPECT_TRUE(matched->geometry_found);
+      EXPECT_GE(correct, 200);  // ORB needs simulated affine views for 258-278 at 40 degrees (docs/vision.md)
+      EXPECT_GE(precision, 0.9);
+    }
+  }
 }
 
 }  // namespace

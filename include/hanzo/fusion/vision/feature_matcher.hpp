@@ -1,5 +1,8 @@
 #pragma once
-// Descriptor matching between two sets of ORB features.
+// Descriptor matching between two sets of features: binary ORB descriptors (CV_8UC1, 32 bytes a
+// row) by Hamming distance, or learned float descriptors (CV_32FC1 unit rows) by Euclidean
+// distance, held as an integer 1000 x the distance (kFloatDistanceScale) so both share one
+// matcher; each kind has its own largest distance in the configurations.
 //
 // match_descriptors(): brute force over Hamming distances. A query keeps its nearest train
 // descriptor when (1) the distance is at most max_distance, (2) Lowe's ratio test holds:
@@ -45,10 +48,17 @@ struct NearestCandidates {
   }
 };
 
+/// Float descriptors' distances are held as kFloatDistanceScale x the Euclidean distance.
+inline constexpr double kFloatDistanceScale = 1000.0;
+
+/// Distance between row `a` of `descriptors_a` and row `b` of `descriptors_b` (both CV_8UC1 or
+/// both CV_32FC1, of the same width): Hamming bits, or kFloatDistanceScale x Euclidean.
+int descriptor_distance(const cv::Mat& descriptors_a, int a, const cv::Mat& descriptors_b, int b);
+
 struct FeatureMatch {
   int query = -1;     ///< index into the first (query) features
   int train = -1;     ///< index into the second (train) features
-  int distance = 0;   ///< Hamming distance, bits (0..256)
+  int distance = 0;   ///< Hamming bits (0..256), or kFloatDistanceScale x Euclidean (0..2000 for unit vectors)
 };
 
 struct DescriptorMatcherConfig {
@@ -58,9 +68,15 @@ struct DescriptorMatcherConfig {
   bool mutual = true;
   /// Largest Hamming distance kept (bits); ORB matches of the same point are mostly under 64.
   int max_distance = 80;
+  /// Float descriptors: the ratio test's ratio and the largest Euclidean distance of the unit
+  /// vectors (0..2) kept. Learned descriptors are more distinctive than ORB's, so a looser
+  /// ratio keeps more correct matches (docs/vision.md, graf).
+  double float_ratio = 0.95;
+  double max_float_distance = 1.2;
 };
 
-/// Matches query to train descriptors (both CV_8UC1 with 32 bytes a row); sorted by query.
+/// Matches query to train descriptors (both CV_8UC1 with 32 bytes a row, or both CV_32FC1 of one
+/// width); sorted by query.
 std::vector<FeatureMatch> match_descriptors(const cv::Mat& query_descriptors, const cv::Mat& train_descriptors,
                                             const DescriptorMatcherConfig& config = {});
 
@@ -74,6 +90,8 @@ struct GuidedMatcherConfig {
   /// excludes most look-alikes, and the geometry verifies what is kept.
   double ratio = 1.0;
   int max_distance = 100;
+  /// Float descriptors: the largest Euclidean distance of the unit vectors (0..2).
+  double max_float_distance = 1.2;
   /// Largest difference of pyramid octaves between the two keypoints (-1: any).
   int max_octave_difference = 2;
 };

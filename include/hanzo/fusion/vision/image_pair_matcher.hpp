@@ -2,8 +2,8 @@
 // match_image_pair(): verified correspondences between two images of the same scene, the
 // matching that `hanzo-fusion features match`, relocalization and loop verification use.
 //
-//   1. ORB features in both images (OrbExtractor) and putative descriptor matches (ratio test +
-//      mutual check, match_descriptors());
+//   1. features in both images (ORB, or the FeatureExtractor given: learned ones) and putative
+//      descriptor matches (ratio test + mutual check, match_descriptors());
 //   2. a robust geometry from them (OpenCV's USAC with MAGSAC++ scoring): a homography (planar
 //      scene or pure rotation) or a fundamental matrix (general scene); kAuto takes the
 //      homography when it explains at least homography_preference of the fundamental matrix's
@@ -27,6 +27,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "hanzo/fusion/vision/feature_extractor.hpp"
 #include "hanzo/fusion/vision/feature_matcher.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
 
@@ -55,7 +56,7 @@ struct ImagePairMatcherConfig {
 struct PointMatch {
   cv::Point2f point1;
   cv::Point2f point2;
-  int distance = 0;  ///< Hamming distance of the descriptors (bits)
+  int distance = 0;  ///< descriptor distance (FeatureMatch::distance)
   /// Indices into features1 / features2; -1 for a point found in an affine view.
   int keypoint1 = -1;
   int keypoint2 = -1;
@@ -78,7 +79,10 @@ struct ImagePairMatches {
 
 Status validate(const ImagePairMatcherConfig& config);
 
-Result<ImagePairMatches> match_image_pair(const cv::Mat& image1, const cv::Mat& image2, const ImagePairMatcherConfig& config = {});
+/// `features`: the extractor of both images (and of the affine views); null: ORB with
+/// config.features.
+Result<ImagePairMatches> match_image_pair(const cv::Mat& image1, const cv::Mat& image2, const ImagePairMatcherConfig& config = {},
+                                          const FeatureExtractor* features = nullptr);
 
 /// The matches whose image-2 point lies within threshold_px of the homography's transfer of the
 /// image-1 point (a ground-truth check: `features match --homography`).
