@@ -73,34 +73,37 @@ class AlikeNetwork final : public LearnedFeatureExtractor::Network {
     const at::Tensor x2 = res_block(at::max_pool2d(x1, {2, 2}, {2, 2}), "block2");
     const at::Tensor x3 = res_block(at::max_pool2d(x2, {4, 4}, {4, 4}), "block3");
     const at::Tensor x4 = res_block(at::max_pool2d(x3, {4, 4}, {4, 4}), "block4");
-    const int64_t full_h = padded.size(2), full_w = padded.size(3);
-    auto up = [&](const at::Tensor& x, const char* name) {
-      const at::Tensor y = at::relu(convolution(x, w, name, "", 0));
-      return y.size(2) == full_h ? y : at::upsample_bilinear2d(y, {full_h, full_w}, /*align_corners=*/true);
-    };
-    at::Tensor x1234 = at::cat({up(x1, "conv1.weight"), up(x2, "conv2.weight"), up(x3, "conv3.weight"), up(x4, "conv4.weight")}, 1);
-    if (!size_.single_head) x1234 = at::relu(convolution(x1234, w, "convhead1.weight", "", 0));
-    const at::Tensor head = convolution(x1234, w, "convhead2.weight", "", 0);
-    auto crop = [&](const at::Tensor& x) { return x.slice(2, 0, height).slice(3, 0, width).contiguous(); };
-    const at::Tensor descriptors = crop(head.slice(1, 0, size_.dim));
-    const at::Tensor scores = at::sigmoid(crop(head.slice(1, size_.dim, size_.dim + 1)));
-    return {scores, normalize(descriptors, 1)};
+    DenseMaps maps;
+    FeaturePyramid& pyramid = maps.features;
+    pyramid.levels = {at::relu(convolution(x1, w, "conv1.weight", "", 0)), at::relu(convolution(x2, w, "conv2.weight", "", 0)),
+                      at::relu(convolution(x3, w, "conv3.weight", "", 0)), at::relu(convolution(x4, w, "conv4.weight", "", 0))};
+    pyramid.padded_height = padded.size(2);
+    pyramid.padded_width = padded.size(3);
+    pyramid.height = height;
+    pyramid.width = width;
+    // The score is the head's last channel: with one head a projection of the features; alike-l's
+    // hidden 1x1 layer (with ReLU) is computed at full resolution.
+    const at::Tensor score_row = w["convhead2.weight"].flatten(1).slice(0, size_.dim, size_.dim + 1);
+    const at::Tensor logit = size_.single_head ? pyramid.project(score_row)
+                                               : at::conv2d(at::relu(pyramid.project(w["convhead1.weight"].flatten(1))), score_row.view({1, size_.dim, 1, 1}));
+    maps.score_map = at::sigmoid(logit).slice(2, 0, height).slice(3, 0, width).contiguous();
+    return maps;
   }
 
-  // The descriptor map at the keypoints: bilinear with sub-pixel keypoints, else at the pixel.
+  // The normalized descriptor map at the keypoints: bilinear with sub-pixel keypoints (then
+  // normalized again), else at the keypoint's pixel.
   at::Tensor describe(const DenseMaps& maps, const at::Tensor& keypoints, bool subpixel) const override {
-    const at::Tensor& map = maps.feature_map;
-    const int64_t height = map.size(2), width = map.size(3);
-    if (keypoints.size(0) == 0) return at::zeros({0, map.size(1)}, map.options());
-    at::Tensor descriptors;
-    if (subpixel) {
-      descriptors = sample(map, keypoints).t();
-    } else {
-      const at::Tensor wh = at::tensor({static_cast<float>(width - 1), static_cast<float>(height - 1)}, map.options()).view({1, 2});
-      const at::Tensor pixels = ((keypoints + 1) / 2 * wh).to(at::kLong);
-      const at::Tensor index = pixels.select(1, 1) * width + pixels.select(1, 0);
-      descriptors = map[0].reshape({map.size(1), -1}).index_select(1, index).t();
-    }
+    const FeaturePyramid& pyramid = maps.features;
+    if (keypoints.size(0) == 0) return at::zeros({0, size_.dim}, keypoints.options());
+    const at::Tensor descriptor_rows = weights_["convhead2.weight"].flatten(1).slice(0, 0, size_.dim).t();  // [C, dim]
+    const at::Tensor hidden = size_.single_head ? at::Tensor() : weights_["convhead1.weight"].flatten(1).t();
+    auto descriptor = [&](const at::Tensor& features) {
+      const at::Tensor input = hidden.defined() ? at::relu(at::mm(features, hidden)) : features;
+      return normalize(at::mm(input, descriptor_rows), 1);
+    };
+    const at::Tensor wh = at::tensor({static_cast<float>(pyramid.width - 1), static_cast<float>(pyramid.height - 1)}, keypoints.options()).view({1, 2});
+    const at::Tensor pixels = (keypoints + 1) / 2 * wh;
+    const at::Tensor descriptors = subpixel ? pyramid.interpolate(pixels, descriptor) : descriptor(pyramid.at_pixels(pixels.to(at::kLong)));
     return normalize(descriptors, 1);
   }
 

@@ -93,52 +93,51 @@ class AlikedNetwork final : public LearnedFeatureExtractor::Network {
     const at::Tensor x2 = res_block(at::avg_pool2d(x1, {2, 2}, {2, 2}), "block2", false);
     const at::Tensor x3 = res_block(at::avg_pool2d(x2, {4, 4}, {4, 4}), "block3", true);
     const at::Tensor x4 = res_block(at::avg_pool2d(x3, {4, 4}, {4, 4}), "block4", true);
-    const int64_t full_h = padded.size(2), full_w = padded.size(3);
-    auto up = [&](const at::Tensor& x, const char* name) {
-      const at::Tensor y = at::selu(convolution(x, w, name, "", 0));
-      return y.size(2) == full_h ? y : at::upsample_bilinear2d(y, {full_h, full_w}, /*align_corners=*/true);
-    };
-    const at::Tensor x1234 = at::cat({up(x1, "conv1.weight"), up(x2, "conv2.weight"), up(x3, "conv3.weight"), up(x4, "conv4.weight")}, 1);
-    at::Tensor score = at::selu(convolution(x1234, w, "score_head.0.weight", "", 0));
+    DenseMaps maps;
+    FeaturePyramid& pyramid = maps.features;
+    pyramid.levels = {at::selu(convolution(x1, w, "conv1.weight", "", 0)), at::selu(convolution(x2, w, "conv2.weight", "", 0)),
+                      at::selu(convolution(x3, w, "conv3.weight", "", 0)), at::selu(convolution(x4, w, "conv4.weight", "", 0))};
+    pyramid.padded_height = padded.size(2);
+    pyramid.padded_width = padded.size(3);
+    pyramid.top = top;
+    pyramid.left = left;
+    pyramid.height = height;
+    pyramid.width = width;
+    // Score head on the aggregated features; its first layer is a 1x1 convolution (projected).
+    at::Tensor score = at::selu(pyramid.project(w["score_head.0.weight"].flatten(1)));
     score = at::selu(convolution(score, w, "score_head.2.weight", "", 1));
     score = at::selu(convolution(score, w, "score_head.4.weight", "", 1));
     score = at::sigmoid(convolution(score, w, "score_head.6.weight", "", 1));
-    const at::Tensor features = normalize(x1234, 1);
-    auto unpad = [&](const at::Tensor& x) { return x.slice(2, top, top + height).slice(3, left, left + width).contiguous(); };
-    return {unpad(score), unpad(features)};
+    maps.score_map = score.slice(2, top, top + height).slice(3, left, left + width).contiguous();
+    return maps;
   }
 
-  // SDDH (paper eq. 6-8): offsets of M positions from the keypoint's 3x3 patch, features sampled
-  // there, a 1x1 convolution + SELU, and a learned weighted sum over the positions.
+  // SDDH (paper eq. 6-8): offsets of M positions from the keypoint's 3x3 patch of the normalized
+  // features, the features sampled there, a 1x1 convolution + SELU, and a learned weighted sum
+  // over the positions.
   at::Tensor describe(const DenseMaps& maps, const at::Tensor& keypoints, bool /*subpixel*/) const override {
-    const at::Tensor& features = maps.feature_map;  // [1, C, H, W]
-    const int64_t channels = features.size(1), height = features.size(2), width = features.size(3), count = keypoints.size(0);
-    if (count == 0) return at::zeros({0, channels}, features.options());
-    const at::Tensor wh = at::tensor({static_cast<float>(width - 1), static_cast<float>(height - 1)}, features.options()).view({1, 2});
+    const FeaturePyramid& pyramid = maps.features;
+    const int64_t channels = pyramid.channels(), count = keypoints.size(0), positions = size_.positions;
+    if (count == 0) return at::zeros({0, channels}, keypoints.options());
+    const at::Tensor wh = at::tensor({static_cast<float>(pyramid.width - 1), static_cast<float>(pyramid.height - 1)}, keypoints.options()).view({1, 2});
     const at::Tensor pixels = (keypoints / 2 + 0.5) * wh;  // [N, 2] (x, y)
-    // 3x3 patches around the keypoints' pixels (zeros outside the map).
     const at::Tensor integer = pixels.to(at::kLong);
-    const at::Tensor padded = at::constant_pad_nd(features[0], {1, 1, 1, 1}, 0.0);  // [C, H + 2, W + 2]
-    std::vector<at::Tensor> taps;
-    for (int64_t dy = 0; dy < 3; ++dy) {
-      for (int64_t dx = 0; dx < 3; ++dx) {
-        const at::Tensor index = (integer.select(1, 1) + dy) * (width + 2) + integer.select(1, 0) + dx;
-        taps.push_back(padded.reshape({channels, -1}).index_select(1, index));  // [C, N]
-      }
-    }
-    const at::Tensor patches = at::stack(taps, 2).permute({1, 0, 2}).reshape({count, channels, 3, 3});
-    const double max_offset = static_cast<double>(std::max(height, width)) / 4.0;
+    auto unit = [](const at::Tensor& features) { return normalize(features, 1); };
+    // 3x3 patches around the keypoints' pixels (zeros outside the image), taps row-major.
+    const at::Tensor steps = at::arange(-1, 2, integer.options());
+    const at::Tensor taps = at::stack({steps.repeat({3}), steps.repeat_interleave(3)}, 1);  // [9, 2] (dx, dy)
+    const at::Tensor tap_pixels = (integer.unsqueeze(1) + taps.unsqueeze(0)).reshape({count * 9, 2});
+    const at::Tensor patches = unit(pyramid.at_pixels(tap_pixels)).view({count, 3, 3, channels}).permute({0, 3, 1, 2}).contiguous();
+    const double max_offset = static_cast<double>(std::max(pyramid.height, pyramid.width)) / 4.0;
     const NetworkWeights& w = weights_;
     at::Tensor offsets = at::selu(convolution(patches, w, "desc_head.offset_conv.0.weight", "desc_head.offset_conv.0.bias", 0));
     offsets = convolution(offsets, w, "desc_head.offset_conv.2.weight", "desc_head.offset_conv.2.bias", 0).clamp(-max_offset, max_offset);
-    const int64_t positions = size_.positions;
     const at::Tensor offset = offsets.view({count, 2, positions}).permute({0, 2, 1});  // [N, M, 2] (x, y)
-    const at::Tensor positions_normalized = (pixels.unsqueeze(1) + offset) * (2.0 / wh.unsqueeze(0)) - 1.0;  // [N, M, 2]
-    const at::Tensor sampled = sample(features, positions_normalized.reshape({count * positions, 2}));  // [C, N M]
-    at::Tensor per_position = sampled.view({channels, count, positions, 1}).permute({1, 0, 2, 3});  // [N, C, M, 1]
-    per_position = at::selu(convolution(per_position.contiguous(), w, "desc_head.sf_conv.weight", "", 0)).squeeze(-1);  // [N, C, M]
-    // descriptor_d = sum_{p, c} features[n, c, p] agg[p, c, d]
-    const at::Tensor descriptors = at::mm(per_position.permute({0, 2, 1}).reshape({count, positions * channels}),
+    const at::Tensor sample_positions = (pixels.unsqueeze(1) + offset).reshape({count * positions, 2});
+    const at::Tensor sampled = pyramid.interpolate(sample_positions, unit);  // [N M, C]
+    const at::Tensor per_position = at::selu(at::mm(sampled, w["desc_head.sf_conv.weight"].flatten(1).t()));  // 1x1 conv, [N M, C]
+    // descriptor_d = sum_{p, c} features[n, p, c] agg[p, c, d]
+    const at::Tensor descriptors = at::mm(per_position.reshape({count, positions * channels}),
                                           w["desc_head.agg_weights"].reshape({positions * channels, channels}));
     return normalize(descriptors, 1);
   }

@@ -3,6 +3,7 @@
 #include <array>
 #include <cstdlib>
 #include <filesystem>
+#include <thread>
 
 #include <ATen/Parallel.h>
 #include <c10/core/InferenceMode.h>
@@ -94,7 +95,7 @@ Result<std::unique_ptr<LearnedFeatureExtractor>> LearnedFeatureExtractor::load(c
   std::unique_ptr<Network> network;
   HANZO_ASSIGN_OR_RETURN(network, is_aliked(config.model) ? make_aliked_network(config.model, state, path)
                                                           : make_alike_network(config.model, state, path));
-  if (config.threads > 0) at::set_num_threads(config.threads);
+  at::set_num_threads(config.threads > 0 ? config.threads : static_cast<int>(std::max(1U, std::thread::hardware_concurrency())));
   return std::unique_ptr<LearnedFeatureExtractor>(new LearnedFeatureExtractor(config, std::move(path), std::move(network)));
 }
 

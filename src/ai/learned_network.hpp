@@ -7,12 +7,13 @@
 
 #include "hanzo/fusion/ai/learned_features.hpp"
 #include "hanzo/fusion/ai/state_dict.hpp"
+#include "feature_pyramid.hpp"
 
 namespace hanzo::fusion::ai {
 
 struct DenseMaps {
   at::Tensor score_map;    ///< [1, 1, H, W], sigmoid scores
-  at::Tensor feature_map;  ///< [1, C, H, W]: ALIKED's normalized features, ALIKE's normalized descriptor map
+  FeaturePyramid features;  ///< the aggregated features, for the descriptors
 };
 
 class LearnedFeatureExtractor::Network {
@@ -21,7 +22,8 @@ class LearnedFeatureExtractor::Network {
   /// `image`: [1, 3, H, W] RGB in [0, 1]; the maps have the image's size (padding undone).
   virtual DenseMaps dense(const at::Tensor& image) const = 0;
   /// Unit descriptors [N, D] of keypoints at normalized positions [N, 2] ((x, y) in [-1, 1]
-  /// over the corner pixels); `subpixel`: ALIKE samples its map bilinearly, else at the pixel.
+  /// over the image's corner pixels); `subpixel`: ALIKE samples its map bilinearly, else at the
+  /// pixel.
   virtual at::Tensor describe(const DenseMaps& maps, const at::Tensor& keypoints, bool subpixel) const = 0;
   virtual int descriptor_size() const = 0;
 };

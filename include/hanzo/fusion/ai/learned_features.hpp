@@ -66,7 +66,8 @@ struct LearnedFeatureConfig {
   int nms_radius = 2;
   /// Soft-argmax refinement of keypoints to sub-pixel positions.
   bool subpixel = true;
-  /// CPU threads of the network (0: libtorch's default, one per core).
+  /// CPU threads of the network (0: one per core). libtorch's thread pool is per process: the
+  /// last extractor loaded sets it.
   int threads = 0;
 };
 
