@@ -85,6 +85,7 @@ void report(benchmark::State& state, const std::vector<int>& photos, const std::
 void BM_YunetPhotos(benchmark::State& state) {
   privacy::PrivacyFilterConfig config;
   config.licence_plates = false;
+  config.face_model_path = std::string(HANZO_MODELS_DIR) + "/yunet/face_detection_yunet.onnx";
   auto filter = privacy::PrivacyFilter::create(config).value();
   const std::vector<cv::Mat> photos = load(photo_paths());
   for (auto _ : state) benchmark::DoNotOptimize(yunet_faces(*filter, photos));

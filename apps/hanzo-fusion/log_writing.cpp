@@ -43,7 +43,8 @@ int write_log(const Output& output, nlohmann::json& result, const LogWriteOption
   if (ec) return report_failure(output, result, fmt::format("{}: cannot move into place ({})", options.path, ec.message()));
   if (options.redaction) {
     const privacy::TopicRedactionCounts& counts = options.redaction->counts;
-    result["privacy"] = {{"redaction", privacy::to_string(options.redaction->filter->config().redaction)}, {"images", counts.images},
+    result["privacy"] = {{"redaction", privacy::to_string(options.redaction->filter->config().redaction)},
+                         {"face_detector", options.redaction->filter->face_detector()}, {"images", counts.images},
                          {"redacted_images", counts.redacted_images}, {"faces", counts.faces}, {"licence_plates", counts.licence_plates}};
   }
   return 0;

@@ -103,6 +103,7 @@ int run_blur(const Output& output, const PrivacyOptions& options) {
   config.face_score_threshold = options.score_threshold;
   Result<std::unique_ptr<privacy::PrivacyFilter>> filter = privacy::PrivacyFilter::create(config);
   if (!filter) return report_failure(output, result, filter.error().message);
+  result["face_detector"] = (*filter)->face_detector();
 
   if (is_input_log(options.input)) {
     if (!std::filesystem::is_regular_file(options.input)) return report_failure(output, result, fmt::format("{}: no such file", options.input));

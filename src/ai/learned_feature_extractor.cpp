@@ -1,7 +1,6 @@
 #include "hanzo/fusion/ai/learned_features.hpp"
 
 #include <array>
-#include <cstdlib>
 #include <filesystem>
 #include <thread>
 
@@ -10,6 +9,7 @@
 #include <fmt/format.h>
 #include <opencv2/imgproc.hpp>
 
+#include "hanzo/fusion/core/files.hpp"
 #include "learned_network.hpp"
 
 namespace hanzo::fusion::ai {
@@ -60,17 +60,12 @@ Result<std::string> find_learned_model(LearnedModel model, const std::string& pa
     return path;
   }
   const std::string file = std::string(to_string(model)) + ".pth";
-  const char* folder = std::getenv("HANZO_FUSION_MODELS");
-  if (folder == nullptr || *folder == '\0') {
-    return Error(fmt::format("no model file for {}: give its path (the `model` key, --model) or a models folder in HANZO_FUSION_MODELS "
-                             "holding {}",
-                             to_string(model), file));
+  Result<std::string> found = find_model_file(file, "", "");
+  if (!found) {
+    return Error(fmt::format("{}: give the {} weights' path (the `model` key, --model) or put {} in ${}", found.error().message, to_string(model),
+                             file, kModelsEnvironment));
   }
-  const std::filesystem::path root(folder);
-  for (const std::filesystem::path& candidate : {root / file, root / (is_aliked(model) ? "aliked" : "alike") / file}) {
-    if (std::filesystem::is_regular_file(candidate)) return candidate.string();
-  }
-  return Error(fmt::format("no {} in HANZO_FUSION_MODELS={} (nor in its {}/ folder)", file, folder, is_aliked(model) ? "aliked" : "alike"));
+  return found;
 }
 
 Status validate(const LearnedFeatureConfig& config) {

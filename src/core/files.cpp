@@ -4,6 +4,7 @@
 
 #include <cerrno>
 #include <cstring>
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <cstdlib>
@@ -13,6 +14,7 @@
 #include <unistd.h>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 namespace hanzo::fusion {
 
@@ -70,18 +72,36 @@ Status sync_directory(const std::string& path) {
   return ok_status();
 }
 
-std::string find_model_file(const std::string& file_name, const std::string& installed_dir, const std::string& source_dir) {
+Result<std::string> find_model_file(const std::string& file_name, const std::string& installed_dir, const std::string& source_dir) {
   namespace fs = std::filesystem;
-  const char* environment = std::getenv("HANZO_MODELS_DIR");
-  const bool overridden = environment != nullptr && *environment != '\0';
-  if (overridden) {
-    if (fs::is_regular_file(fs::path(environment) / file_name)) return (fs::path(environment) / file_name).string();
-    logger()->warn("HANZO_MODELS_DIR={} holds no {}: looking in {} and {}", environment, file_name, installed_dir, source_dir);
+  const char* environment = std::getenv(kModelsEnvironment);
+  const bool given = environment != nullptr && *environment != '\0';
+  std::vector<std::string> looked;
+  if (given) {
+    const fs::path root(environment);
+    if (fs::is_regular_file(root / file_name)) return (root / file_name).string();
+    std::error_code ec;
+    std::vector<fs::path> folders;
+    for (fs::directory_iterator entry(root, ec), end; !ec && entry != end; entry.increment(ec)) {
+      if (entry->is_directory()) folders.push_back(entry->path());
+    }
+    std::sort(folders.begin(), folders.end());  // the same choice on every machine
+    for (const fs::path& folder : folders) {
+      if (fs::is_regular_file(folder / file_name)) return (folder / file_name).string();
+    }
+    looked.push_back(fmt::format("{}={} (and its folders)", kModelsEnvironment, environment));
+  } else {
+    looked.push_back(fmt::format("${} (not set)", kModelsEnvironment));
   }
   for (const std::string& folder : {installed_dir, source_dir}) {
-    if (fs::is_regular_file(fs::path(folder) / file_name)) return (fs::path(folder) / file_name).string();
+    if (folder.empty()) continue;
+    if (fs::is_regular_file(fs::path(folder) / file_name)) {
+      if (given) logger()->warn("{}={} holds no {}: using {}", kModelsEnvironment, environment, file_name, (fs::path(folder) / file_name).string());
+      return (fs::path(folder) / file_name).string();
+    }
+    looked.push_back(folder);
   }
-  return (fs::path(overridden ? environment : source_dir) / file_name).string();
+  return Error(fmt::format("{} not found (looked in {})", file_name, fmt::join(looked, ", ")));
 }
 
 }  // namespace hanzo::fusion

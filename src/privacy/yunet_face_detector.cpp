@@ -20,7 +20,7 @@ constexpr float kNmsThreshold = 0.3F;  // intersection over union
 
 Result<YunetFaceDetector> YunetFaceDetector::load(const std::string& model_path) {
   if (!std::filesystem::is_regular_file(model_path)) {
-    return Error(fmt::format("face model '{}' not found (set HANZO_MODELS_DIR or the face model path)", model_path));
+    return Error(fmt::format("face model '{}' not found", model_path));
   }
   // OpenCV logs a bad file's parse errors over several lines of its own: silenced here, and its
   // exception's message put on one line.

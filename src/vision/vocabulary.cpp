@@ -321,8 +321,9 @@ Result<Vocabulary> Vocabulary::load(const std::string& path) {
 }
 
 Result<Vocabulary> Vocabulary::load_default() {
-  const std::string path = find_model_file(kDefaultFile, HANZO_INSTALLED_MODELS_DIR, HANZO_SOURCE_MODELS_DIR);
-  Result<Vocabulary> loaded = load(path);
+  const Result<std::string> path = find_model_file(kDefaultFile, HANZO_INSTALLED_MODELS_DIR, HANZO_SOURCE_MODELS_DIR);
+  if (!path) return Error(fmt::format("default vocabulary: {}", path.error().message));
+  Result<Vocabulary> loaded = load(*path);
   if (!loaded) return Error(fmt::format("default vocabulary: {}", loaded.error().message));
   return loaded;
 }

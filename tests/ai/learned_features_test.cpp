@@ -159,7 +159,7 @@ TEST(LearnedFeatures, ModelsAreFoundOrRefusedWithTheirNames) {
   ASSERT_TRUE(found.ok()) << found.error().message;
   EXPECT_EQ(std::filesystem::path(*found).filename(), "aliked-n16.pth");
   ::setenv("HANZO_FUSION_MODELS", "/nonexistent", 1);
-  EXPECT_THAT(find_learned_model(LearnedModel::kAlikedN16).error().message, HasSubstr("no aliked-n16.pth in HANZO_FUSION_MODELS=/nonexistent"));
+  EXPECT_THAT(find_learned_model(LearnedModel::kAlikedN16).error().message, HasSubstr("aliked-n16.pth not found (looked in HANZO_FUSION_MODELS=/nonexistent"));
   ::unsetenv("HANZO_FUSION_MODELS");
   EXPECT_THAT(find_learned_model(LearnedModel::kAlikedN16).error().message, HasSubstr("HANZO_FUSION_MODELS"));
   EXPECT_EQ(learned_model_from_name("aliked-n16rot"), LearnedModel::kAlikedN16Rot);

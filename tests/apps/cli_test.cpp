@@ -921,13 +921,21 @@ TEST(Cli, PrivacyBlurRedactsFacesOfAnImageOrAFolderAndRefusesBadInput) {
   EXPECT_THAT(not_image.err, HasSubstr("not an image OpenCV can read"));
   EXPECT_EQ(std::count(not_image.err.begin(), not_image.err.end(), '\n'), 1);
   EXPECT_FALSE(std::filesystem::exists(dir / "out.png"));
-  // A HANZO_MODELS_DIR without the model is passed over with a warning (the search order of
-  // docs/security.md); a file that is no ONNX network is refused on one line naming it.
-  ::setenv("HANZO_MODELS_DIR", "/nonexistent-models", 1);
+  // Without YuNet's file (the repository does not ship it), faces are searched with OpenCV's
+  // Haar cascade, with a warning naming where the file was looked for; a file that is no ONNX
+  // network is refused on one line naming it.
+  EXPECT_EQ(json["face_detector"], "yunet");
+  const char* models = std::getenv("HANZO_FUSION_MODELS");
+  const std::string shared_models = models != nullptr ? models : "";
+  ::setenv("HANZO_FUSION_MODELS", "/nonexistent-models", 1);
   const CliRun fallback = run(fmt::format("privacy blur {}/privacy_faces/two_people.jpg {} --json", HANZO_DATA_DIR, (dir / "fallback.png").string()));
-  ::unsetenv("HANZO_MODELS_DIR");
+  ::setenv("HANZO_FUSION_MODELS", shared_models.c_str(), 1);
   EXPECT_EQ(fallback.exit_code, 0) << fallback.err;
-  EXPECT_THAT(fallback.err, HasSubstr("HANZO_MODELS_DIR=/nonexistent-models holds no face_detection_yunet.onnx"));
+  EXPECT_THAT(fallback.err, HasSubstr("face_detection_yunet.onnx not found (looked in HANZO_FUSION_MODELS=/nonexistent-models"));
+  EXPECT_THAT(fallback.err, HasSubstr("Haar cascade"));
+  const nlohmann::json fallback_json = nlohmann::json::parse(fallback.out);
+  EXPECT_EQ(fallback_json["face_detector"], "haar_cascade");
+  EXPECT_GE(fallback_json["faces"].get<int>(), 2);  // both faces of the photo
   const CliRun bad_model = run(fmt::format("privacy blur {}/privacy_faces/two_people.jpg {} --face-model {}", HANZO_DATA_DIR,
                                            (dir / "bad_model.png").string(), write_temp("bad_model.onnx", "not a network")));
   EXPECT_EQ(bad_model.exit_code, 1);

@@ -48,9 +48,9 @@ std::optional<LearnedModel> learned_model_from_name(std::string_view name);
 /// Every model, in the order above.
 const std::vector<LearnedModel>& all_learned_models();
 
-/// Where a model's weights are: `path` when not empty; else `<name>.pth` in $HANZO_FUSION_MODELS
-/// or its `aliked/` or `alike/` folder (a copy of the upstream layout). Fails naming what was
-/// looked for when none exists.
+/// Where a model's weights are: `path` when not empty; else `<name>.pth` found by
+/// find_model_file() in $HANZO_FUSION_MODELS or one of its folders. Fails naming what was looked
+/// for when none exists.
 Result<std::string> find_learned_model(LearnedModel model, const std::string& path = {});
 
 struct LearnedFeatureConfig {

@@ -24,10 +24,17 @@ Status sync_directory(const std::string& path);
 /// and the error returned. Whoever reads `path` sees the old file or the complete new one.
 Status commit_partial_file(const std::string& partial, const std::string& path, const Status& written);
 
-/// Where a shipped model file is: the first of $HANZO_MODELS_DIR, `installed_dir` and
-/// `source_dir` that holds `file_name` (the search order of docs/security.md). A
-/// $HANZO_MODELS_DIR without the file is passed over with a warning naming it. When none holds
-/// it: the path in $HANZO_MODELS_DIR when set, else in `source_dir` (for the caller's error).
-std::string find_model_file(const std::string& file_name, const std::string& installed_dir, const std::string& source_dir);
+/// The environment variable naming the models folder the programs look in first: model files
+/// the repository does not ship (YuNet, ALIKED, ALIKE: their owners' licences) and overrides of
+/// the shipped ones.
+inline constexpr const char* kModelsEnvironment = "HANZO_FUSION_MODELS";
+
+/// Where a model file is (the search order of docs/security.md): the first of
+/// $HANZO_FUSION_MODELS/<file_name>, $HANZO_FUSION_MODELS/<folder>/<file_name> (one level of
+/// folders, e.g. a copy of a models tree with a folder per model), `installed_dir` and
+/// `source_dir` (empty ones skipped) that holds `file_name`. A $HANZO_FUSION_MODELS without the
+/// file is passed over with a warning when another place has it. None: an error naming every
+/// place looked in.
+Result<std::string> find_model_file(const std::string& file_name, const std::string& installed_dir, const std::string& source_dir);
 
 }  // namespace hanzo::fusion

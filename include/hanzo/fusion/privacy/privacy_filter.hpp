@@ -3,8 +3,10 @@
 // before anything is stored (spec, security: camera data from public spaces passes a privacy
 // filter before storage).
 //
-// Faces: the YuNet detector (models/face_detection_yunet.onnx, OpenCV's model zoo) run with
-// cv::dnn on the image padded to a multiple of 32 pixels, its outputs decoded here (Debian's
+// Faces: the YuNet detector (face_detection_yunet.onnx from OpenCV's model zoo, which the
+// repository does not ship: the file given, or found by find_model_file() in
+// $HANZO_FUSION_MODELS) run with cv::dnn on the image padded to a multiple of 32 pixels, its
+// outputs decoded here (Debian's
 // OpenCV 4.6 FaceDetectorYN expects the model's older output format). Per stride s in {8, 16, 32}
 // and cell (row r, column c) of the (W/s) x (H/s) map:
 //   score = sqrt(class * objectness),
@@ -12,6 +14,10 @@
 // followed by non-maximum suppression. Images larger than 640 pixels are searched again at
 // 640 pixels on their longer side, so faces larger than the network's largest anchors are
 // found too. Measured recall and false positives: docs/security.md.
+//
+// Without the YuNet file (and no path given), faces are found by OpenCV's Haar frontal-face
+// cascade (Debian's opencv-data), with a warning: its recall is lower and it finds more false
+// faces (docs/security.md); face_detector() says which one runs.
 //
 // Licence plates: OpenCV's Haar cascade for plates (Debian's opencv-data,
 // haarcascade_russian_plate_number.xml), on the grey image.
@@ -41,7 +47,7 @@ struct PrivacyFilterConfig {
   Redaction redaction = Redaction::kBlur;
   bool faces = true;
   bool licence_plates = true;
-  /// YuNet ONNX file; "" = default_face_model_path().
+  /// YuNet ONNX file; "" = find_face_model(), else the Haar cascade fallback.
   std::string face_model_path;
   /// Face score threshold in [0, 1]: 0.7 finds every face of the test photos (down to 24 px)
   /// and none in 78 street images; 0.6 added a 19 x 24 px false face (docs/security.md).
@@ -60,10 +66,12 @@ struct RedactedRegion {
   double score = 1.0;  ///< detector score in [0, 1] (1 for the plate cascade, which has none)
 };
 
-/// Where the programs look for the shipped models: $HANZO_MODELS_DIR, else the installed
-/// share/hanzo-fusion/models, else the source tree's models/ (a build that was not installed).
-std::string default_face_model_path();
+/// face_detection_yunet.onnx as find_model_file() finds it ($HANZO_FUSION_MODELS, the installed
+/// share/hanzo-fusion/models, the source tree's models/); an error naming where it looked.
+Result<std::string> find_face_model();
+/// Debian's opencv-data cascades: licence plates, and the frontal faces of the fallback.
 std::string default_plate_cascade_path();
+std::string default_face_cascade_path();
 
 class PrivacyFilter {
  public:
@@ -85,6 +93,8 @@ class PrivacyFilter {
   Result<std::vector<RedactedRegion>> apply(msgs::ImageMessage& image);
 
   const PrivacyFilterConfig& config() const { return config_; }
+  /// "yunet", "haar_cascade" (YuNet's file was not found) or "none" (faces not searched).
+  std::string_view face_detector() const;
 
  private:
   struct Models;

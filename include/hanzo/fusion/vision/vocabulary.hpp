@@ -69,8 +69,8 @@ class Vocabulary {
   /// Reads a vocabulary file (see the format above).
   static Result<Vocabulary> load(const std::string& path);
   /// The default vocabulary shipped with the project (models/orb_vocabulary.hzvoc, trained by
-  /// `hanzo-fusion vision vocabulary`, see docs/vision.md): from $HANZO_MODELS_DIR when set,
-  /// else the installed share/hanzo-fusion/models folder, else the source tree's models/.
+  /// `hanzo-fusion vision vocabulary`, see docs/vision.md), found by find_model_file():
+  /// $HANZO_FUSION_MODELS, the installed share/hanzo-fusion/models folder, the source tree's models/.
   static Result<Vocabulary> load_default();
   /// Writes the file durably through a temporary name.
   Status save(const std::string& path) const;
