@@ -14,6 +14,7 @@
 
 #include "commands.hpp"
 #include "image_input.hpp"
+#include "hanzo/fusion/vision/correspondence_filter.hpp"
 #include "hanzo/fusion/vision/image_pair_matcher.hpp"
 #ifdef HANZO_FUSION_WITH_AI
 #include "hanzo/fusion/ai/learned_features.hpp"
@@ -33,7 +34,34 @@ struct MatchOptions {
   bool no_affine_views = false;
   std::string detector = "orb";
   std::string model;  // learned detectors: the weights (.pth)
+  std::string matcher = "ratio";
+  std::string filter_model;  // --matcher learned: the filter's weights (default: the trained one)
+  std::string putative_out;  // training data of the correspondence filter
 };
+
+// The mutual nearest neighbours of the pair (no ratio test: what the correspondence filter
+// classifies) as rows of the filter's inputs, with a label when the true homography is known
+// (1: within threshold_px of it). The data `make train-correspondence-filter` learns from.
+Status write_putative_matches(const std::string& path, const vision::ImagePairMatches& matched, const vision::ImagePairMatcherConfig& config,
+                              const std::optional<cv::Matx33d>& truth, double threshold_px) {
+  vision::DescriptorMatcherConfig mutual_only = config.descriptors;
+  mutual_only.ratio = 1.0;
+  mutual_only.float_ratio = 1.0;
+  std::ofstream out(path);
+  if (!out) return Error(fmt::format("--putative-out {}: cannot write", path));
+  out << "image_1_x,image_1_y,image_2_x,image_2_y,distance,ratio,correct\n";
+  for (const vision::FeatureMatch& match : vision::match_descriptors(matched.features1.descriptors, matched.features2.descriptors, mutual_only)) {
+    for (const float value : vision::correspondence_inputs(match, matched.features1, matched.features2)) out << fmt::format("{},", value);
+    if (truth) {
+      const vision::PointMatch point{matched.features1.keypoints[static_cast<std::size_t>(match.query)].pt,
+                                     matched.features2.keypoints[static_cast<std::size_t>(match.train)].pt, match.distance, match.query, match.train};
+      out << vision::count_correct_matches({point}, *truth, threshold_px);
+    }
+    out << "\n";
+  }
+  if (!out) return Error(fmt::format("--putative-out {}: write failed", path));
+  return ok_status();
+}
 
 // The detector named by --detector: null for ORB (the matcher's own), else a learned one.
 Result<std::unique_ptr<vision::FeatureExtractor>> make_detector(const MatchOptions& options) {
@@ -103,6 +131,15 @@ int run_match(const Output& output, const MatchOptions& options) {
                     : options.geometry == "fundamental" ? vision::PairGeometry::kFundamental
                                                         : vision::PairGeometry::kAuto;
   if (options.no_affine_views || *detector) config.view_tilts.clear();  // learned features need no simulated views
+  result["matcher"] = options.matcher;
+  if (options.matcher == "learned") {
+    Result<vision::CorrespondenceFilter> filter = options.filter_model.empty() ? vision::CorrespondenceFilter::load_default()
+                                                                                : vision::CorrespondenceFilter::load(options.filter_model);
+    if (!filter) return report_failure(output, result, filter.error().message);
+    config.putative_filter = std::make_shared<const vision::CorrespondenceFilter>(std::move(filter).value());
+  } else if (!options.filter_model.empty()) {
+    return report_failure(output, result, "--filter-model: give --matcher learned too");
+  }
   Result<vision::ImagePairMatches> matched = vision::match_image_pair(*image1, *image2, config, detector->get());
   if (!matched) return report_failure(output, result, matched.error().message);
 
@@ -127,6 +164,12 @@ int run_match(const Output& output, const MatchOptions& options) {
     const double precision = matched->matches.empty() ? 0.0 : static_cast<double>(correct) / static_cast<double>(matched->matches.size());
     result["ground_truth"] = {{"correct", correct}, {"precision", precision}, {"threshold_px", options.threshold_px}};
     text += fmt::format("ground truth: {} correct within {} px, precision {:.1f} %\n", correct, options.threshold_px, 100.0 * precision);
+  }
+  if (!options.putative_out.empty()) {
+    if (Status written = write_putative_matches(options.putative_out, *matched, config, truth, options.threshold_px); !written) {
+      return report_failure(output, result, written.error().message);
+    }
+    result["putative_out"] = options.putative_out;
   }
   if (!options.draw.empty()) {
     std::vector<cv::KeyPoint> points1, points2;
@@ -167,6 +210,14 @@ void add_features_command(CLI::App& app, const Output& output, Command& run) {
       ->capture_default_str();
   match->add_option("--model", options->model, "Learned detectors: the model file (.pth)");
   match->add_option("--max-features", options->max_features, "Keypoints per image (at most)")->check(CLI::Range(1, 100000));
+  match->add_option("--matcher", options->matcher,
+                    "Putative matches: ratio (Lowe's ratio test, default) or learned (the trained correspondence filter on the mutual "
+                    "nearest neighbours)")
+      ->check(CLI::IsMember({"ratio", "learned"}))
+      ->capture_default_str();
+  match->add_option("--filter-model", options->filter_model, "--matcher learned: the filter's weights (default: models/trained/correspondence_filter.json)");
+  match->add_option("--putative-out", options->putative_out,
+                    "Write the mutual nearest neighbours as the correspondence filter's inputs (CSV; a `correct` label with --homography)");
   match->add_option("--threshold", options->threshold_px, "Pixels: geometry verification and ground-truth check")->check(CLI::Range(0.1, 100.0));
   match->add_option("--geometry", options->geometry, "auto (default), homography or fundamental")
       ->check(CLI::IsMember({"auto", "homography", "fundamental"}));

@@ -96,7 +96,7 @@ Result<std::string> find_model_file(const std::string& file_name, const std::str
   for (const std::string& folder : {installed_dir, source_dir}) {
     if (folder.empty()) continue;
     if (fs::is_regular_file(fs::path(folder) / file_name)) {
-      if (given) logger()->warn("{}={} holds no {}: using {}", kModelsEnvironment, environment, file_name, (fs::path(folder) / file_name).string());
+      if (given) logger()->debug("{}={} holds no {}: using {}", kModelsEnvironment, environment, file_name, (fs::path(folder) / file_name).string());
       return (fs::path(folder) / file_name).string();
     }
     looked.push_back(folder);

@@ -42,6 +42,10 @@ cv::Mat float_distances(const cv::Mat& query, const cv::Mat& train) {
   return distances;
 }
 
+int second_or_none(const NearestCandidates& candidates) {
+  return candidates.second == std::numeric_limits<int>::max() ? -1 : candidates.second;
+}
+
 }  // namespace
 
 int descriptor_distance(const cv::Mat& descriptors_a, int a, const cv::Mat& descriptors_b, int b) {
@@ -82,7 +86,7 @@ std::vector<FeatureMatch> match_descriptors(const cv::Mat& query_descriptors, co
                                : best.passes(config.float_ratio, static_cast<int>(config.max_float_distance * kFloatDistanceScale));
     if (!passes) continue;
     if (config.mutual && nearest_train[static_cast<std::size_t>(best.index)].index != q) continue;
-    matches.push_back({q, best.index, best.best});
+    matches.push_back({q, best.index, best.best, second_or_none(best)});
   }
   return matches;
 }
@@ -139,7 +143,7 @@ std::vector<FeatureMatch> match_guided(const ImageFeatures& query, const ImageFe
       }
     }
     const int max_distance = query.descriptors.type() == CV_8UC1 ? config.max_distance : static_cast<int>(config.max_float_distance * kFloatDistanceScale);
-    if (nearest.passes(config.ratio, max_distance)) matches.push_back({static_cast<int>(q), nearest.index, nearest.best});
+    if (nearest.passes(config.ratio, max_distance)) matches.push_back({static_cast<int>(q), nearest.index, nearest.best, second_or_none(nearest)});
   }
   return unique_by_train(std::move(matches), train.keypoints.size());
 }

@@ -228,7 +228,15 @@ Result<ImagePairMatches> match_image_pair(const cv::Mat& image1, const cv::Mat& 
   ImagePairMatches result;
   result.features1 = std::move(features1).value();
   result.features2 = std::move(features2).value();
-  result.putative = match_descriptors(result.features1.descriptors, result.features2.descriptors, config.descriptors);
+  if (config.putative_filter) {
+    DescriptorMatcherConfig mutual_only = config.descriptors;
+    mutual_only.ratio = 1.0;
+    mutual_only.float_ratio = 1.0;
+    result.putative = config.putative_filter->filter(match_descriptors(result.features1.descriptors, result.features2.descriptors, mutual_only),
+                                                     result.features1, result.features2, config.putative_filter_threshold);
+  } else {
+    result.putative = match_descriptors(result.features1.descriptors, result.features2.descriptors, config.descriptors);
+  }
   std::vector<PointMatch> seeds = to_points(result.putative, result.features1, result.features2);
 
   GeometryEstimate estimate = estimate_geometry(seeds, config);

@@ -32,9 +32,8 @@ inline constexpr const char* kModelsEnvironment = "HANZO_FUSION_MODELS";
 /// Where a model file is (the search order of docs/security.md): the first of
 /// $HANZO_FUSION_MODELS/<file_name>, $HANZO_FUSION_MODELS/<folder>/<file_name> (one level of
 /// folders, e.g. a copy of a models tree with a folder per model), `installed_dir` and
-/// `source_dir` (empty ones skipped) that holds `file_name`. A $HANZO_FUSION_MODELS without the
-/// file is passed over with a warning when another place has it. None: an error naming every
-/// place looked in.
+/// `source_dir` (empty ones skipped) that holds `file_name`. None: an error naming every place
+/// looked in.
 Result<std::string> find_model_file(const std::string& file_name, const std::string& installed_dir, const std::string& source_dir);
 
 }  // namespace hanzo::fusion

@@ -59,6 +59,7 @@ struct FeatureMatch {
   int query = -1;     ///< index into the first (query) features
   int train = -1;     ///< index into the second (train) features
   int distance = 0;   ///< Hamming bits (0..256), or kFloatDistanceScale x Euclidean (0..2000 for unit vectors)
+  int second_distance = -1;  ///< the runner-up's distance (the ratio test's denominator); -1: none
 };
 
 struct DescriptorMatcherConfig {

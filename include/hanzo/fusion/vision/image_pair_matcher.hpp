@@ -23,10 +23,12 @@
 // errors from OrbExtractor::extract() (empty, wrong type, too small), prefixed "image 1" /
 // "image 2", or a configuration out of range.
 
+#include <memory>
 #include <vector>
 
 #include <opencv2/core.hpp>
 
+#include "hanzo/fusion/vision/correspondence_filter.hpp"
 #include "hanzo/fusion/vision/feature_extractor.hpp"
 #include "hanzo/fusion/vision/feature_matcher.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
@@ -50,6 +52,11 @@ struct ImagePairMatcherConfig {
   double min_inlier_ratio = 0.3;
   /// Tilts simulated when the geometry is weak (each > 1); empty: no affine views.
   std::vector<double> view_tilts{1.41421356, 2.0, 2.82842712};
+  /// A learned classifier of putative matches: when set, the putative matches are the mutual
+  /// nearest neighbours without a ratio test, kept where its inlier probability is at least
+  /// putative_filter_threshold, instead of the ratio test.
+  std::shared_ptr<const CorrespondenceFilter> putative_filter;
+  double putative_filter_threshold = 0.5;
 };
 
 /// A correspondence: a point of image 1 and of image 2 (pixels).
