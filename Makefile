@@ -7,7 +7,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
-.PHONY: all deps configure build test demo bench fuzz sanitize install clean
+.PHONY: all deps configure build test demo bench fuzz sanitize install clean train-correspondence-filter
 
 all: build
 
@@ -26,6 +26,12 @@ test: build
 
 demo: build
 	@bash scripts/demo.sh $(BUILD_DIR)
+
+# The learned correspondence filter's weights (models/trained/correspondence_filter.json) from
+# simulated camera images (models/trained/train_correspondence_filter.py; about 20 minutes).
+train-correspondence-filter: build
+	@/usr/bin/python3 models/trained/train_correspondence_filter.py --cli $(BUILD_DIR)/apps/hanzo-fusion \
+		--work $(BUILD_DIR)/train-correspondence-filter --out models/trained/correspondence_filter.json
 
 bench: build
 	@bash scripts/bench.sh $(BUILD_DIR)

@@ -12,10 +12,12 @@
 #include <string>
 
 #include <benchmark/benchmark.h>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "hanzo/fusion/vision/correspondence_filter.hpp"
 #include "hanzo/fusion/vision/image_pair_matcher.hpp"
 #include "hanzo/fusion/vision/place_database.hpp"
 #include "hanzo/fusion/vision/visual_odometry.hpp"
@@ -103,6 +105,46 @@ void BM_PairMatch_Hanzo(benchmark::State& state) {
   state.counters["affine_views"] = affine_views;
 }
 BENCHMARK(BM_PairMatch_Hanzo)->Arg(0)->Arg(40)->Arg(70)->Unit(benchmark::kMillisecond);
+
+// The putative matches and the geometry from them, no affine views and no guided matching
+// (putative_only): ratio test (0.8) + RANSAC against the learned correspondence filter + RANSAC
+// (argument 1), at equal features; counters: the putative matches' precision and recall among
+// the mutual nearest neighbours' correct ones, and the verified matches.
+void BM_PutativeFilter(benchmark::State& state) {
+  const GrafPair pair = pair_for(40);
+  const bool learned = state.range(0) == 1;
+  const OrbExtractor extractor;
+  const ImageFeatures features1 = extractor.extract(pair.image1).value(), features2 = extractor.extract(pair.image2).value();
+  const CorrespondenceFilter filter = CorrespondenceFilter::load_default().value();
+  DescriptorMatcherConfig mutual_only;
+  mutual_only.ratio = 1.0;
+  auto correct_of = [&](const std::vector<FeatureMatch>& matches) {
+    std::vector<PointMatch> points;
+    for (const FeatureMatch& m : matches) {
+      points.push_back({features1.keypoints[static_cast<std::size_t>(m.query)].pt, features2.keypoints[static_cast<std::size_t>(m.train)].pt, m.distance, m.query, m.train});
+    }
+    return count_correct_matches(points, pair.homography, 3.0);
+  };
+  std::vector<FeatureMatch> putative;
+  cv::Mat homography;
+  for (auto _ : state) {
+    putative = learned ? filter.filter(match_descriptors(features1.descriptors, features2.descriptors, mutual_only), features1, features2)
+                       : match_descriptors(features1.descriptors, features2.descriptors);
+    std::vector<cv::Point2f> points1, points2;
+    for (const FeatureMatch& m : putative) {
+      points1.push_back(features1.keypoints[static_cast<std::size_t>(m.query)].pt);
+      points2.push_back(features2.keypoints[static_cast<std::size_t>(m.train)].pt);
+    }
+    homography = cv::findHomography(points1, points2, cv::USAC_MAGSAC, 3.0, cv::noArray(), 10000, 0.9999);
+  }
+  const int correct = correct_of(putative);
+  const int reachable = correct_of(match_descriptors(features1.descriptors, features2.descriptors, mutual_only));
+  state.counters["putative"] = static_cast<double>(putative.size());
+  state.counters["precision"] = putative.empty() ? 0.0 : static_cast<double>(correct) / static_cast<double>(putative.size());
+  state.counters["recall"] = reachable == 0 ? 0.0 : static_cast<double>(correct) / reachable;
+  state.counters["geometry"] = homography.empty() ? 0 : 1;
+}
+BENCHMARK(BM_PutativeFilter)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 // OpenCV ORB (1000) + BFMatcher with a plain 0.8 ratio test.
 void BM_PairMatch_OpenCV(benchmark::State& state) {

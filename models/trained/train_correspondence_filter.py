@@ -174,14 +174,17 @@ def export(net, path, metadata):
     net.eval()
     layers = {}
 
+    def values(tensor):  # float32 values, written with the 9 digits that give them back exactly
+        return [float(f"{v:.9g}") for v in tensor.float().flatten().tolist()]
+
     def linear(name, conv):
-        layers[name + ".weight"] = conv.weight.detach()[:, :, 0].flatten().tolist()
-        layers[name + ".bias"] = conv.bias.detach().tolist()
+        layers[name + ".weight"] = values(conv.weight.detach()[:, :, 0])
+        layers[name + ".bias"] = values(conv.bias.detach())
 
     def folded(name, norm):
         scale = norm.weight.detach() / torch.sqrt(norm.running_var + norm.eps)
-        layers[name.replace("?", "scale")] = scale.tolist()
-        layers[name.replace("?", "shift")] = (norm.bias.detach() - norm.running_mean * scale).tolist()
+        layers[name.replace("?", "scale")] = values(scale)
+        layers[name.replace("?", "shift")] = values(norm.bias.detach() - norm.running_mean * scale)
 
     linear("input", net.input)
     for b, block in enumerate(net.blocks):
