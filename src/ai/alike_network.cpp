@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include "learned_network.hpp"
+#include "encoder.hpp"
 #include "torch_layers.hpp"
 
 namespace hanzo::fusion::ai {
@@ -30,25 +31,8 @@ class AlikeNetwork final : public LearnedFeatureExtractor::Network {
 
   static Expected expected(const AlikeSize& s) {
     Expected e;
+    expect_encoder(e, {s.c1, s.c2, s.c3, s.c4, s.dim}, EncoderKind::kAlike);
     auto conv = [&](const std::string& name, int64_t out, int64_t in, int64_t k) { e.push_back({name, {out, in, k, k}}); };
-    conv("block1.conv1.weight", s.c1, 3, 3);
-    expect_batch_norm(e, "block1.bn1", s.c1);
-    conv("block1.conv2.weight", s.c1, s.c1, 3);
-    expect_batch_norm(e, "block1.bn2", s.c1);
-    const int64_t in[4] = {0, s.c1, s.c2, s.c3}, out[4] = {0, s.c2, s.c3, s.c4};
-    for (int b = 1; b <= 3; ++b) {
-      const std::string block = fmt::format("block{}", b + 1);
-      conv(block + ".conv1.weight", out[b], in[b], 3);
-      expect_batch_norm(e, block + ".bn1", out[b]);
-      conv(block + ".conv2.weight", out[b], out[b], 3);
-      expect_batch_norm(e, block + ".bn2", out[b]);
-      conv(block + ".downsample.weight", out[b], in[b], 1);
-      e.push_back({block + ".downsample.bias", {out[b]}});
-    }
-    conv("conv1.weight", s.dim / 4, s.c1, 1);
-    conv("conv2.weight", s.dim / 4, s.c2, 1);
-    conv("conv3.weight", s.dim / 4, s.c3, 1);
-    conv("conv4.weight", s.dim / 4, s.c4, 1);
     if (!s.single_head) conv("convhead1.weight", s.dim, s.dim, 1);
     conv("convhead2.weight", s.dim + 1, s.dim, 1);
     return e;
@@ -60,25 +44,9 @@ class AlikeNetwork final : public LearnedFeatureExtractor::Network {
     const int64_t pad_h = (32 - height % 32) % 32, pad_w = (32 - width % 32) % 32;
     const at::Tensor padded = at::constant_pad_nd(image, {0, pad_w, 0, pad_h}, 0.0);
     const NetworkWeights& w = weights_;
-    auto conv_block = [&](const at::Tensor& x) {
-      at::Tensor y = at::relu(batch_norm(convolution(x, w, "block1.conv1.weight", "", 1), w, "block1.bn1"));
-      return at::relu(batch_norm(convolution(y, w, "block1.conv2.weight", "", 1), w, "block1.bn2"));
-    };
-    auto res_block = [&](const at::Tensor& x, const std::string& block) {
-      at::Tensor y = at::relu(batch_norm(convolution(x, w, block + ".conv1.weight", "", 1), w, block + ".bn1"));
-      y = batch_norm(convolution(y, w, block + ".conv2.weight", "", 1), w, block + ".bn2");
-      return at::relu(y + convolution(x, w, block + ".downsample.weight", block + ".downsample.bias", 0));
-    };
-    const at::Tensor x1 = conv_block(padded);
-    const at::Tensor x2 = res_block(at::max_pool2d(x1, {2, 2}, {2, 2}), "block2");
-    const at::Tensor x3 = res_block(at::max_pool2d(x2, {4, 4}, {4, 4}), "block3");
-    const at::Tensor x4 = res_block(at::max_pool2d(x3, {4, 4}, {4, 4}), "block4");
     DenseMaps maps;
+    maps.features = encode(padded, w, EncoderKind::kAlike);
     FeaturePyramid& pyramid = maps.features;
-    pyramid.levels = {at::relu(convolution(x1, w, "conv1.weight", "", 0)), at::relu(convolution(x2, w, "conv2.weight", "", 0)),
-                      at::relu(convolution(x3, w, "conv3.weight", "", 0)), at::relu(convolution(x4, w, "conv4.weight", "", 0))};
-    pyramid.padded_height = padded.size(2);
-    pyramid.padded_width = padded.size(3);
     pyramid.height = height;
     pyramid.width = width;
     // The score is the head's last channel: with one head a projection of the features; alike-l's

@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 
 #include "learned_network.hpp"
+#include "encoder.hpp"
 #include "torch_layers.hpp"
 
 namespace hanzo::fusion::ai {
@@ -30,32 +31,8 @@ class AlikedNetwork final : public LearnedFeatureExtractor::Network {
 
   static Expected expected(const AlikedSize& s) {
     Expected e;
+    expect_encoder(e, {s.c1, s.c2, s.c3, s.c4, s.dim}, EncoderKind::kAliked);
     auto conv = [&](const std::string& name, int64_t out, int64_t in, int64_t k) { e.push_back({name, {out, in, k, k}}); };
-    conv("block1.conv1.weight", s.c1, 3, 3);
-    expect_batch_norm(e, "block1.bn1", s.c1);
-    conv("block1.conv2.weight", s.c1, s.c1, 3);
-    expect_batch_norm(e, "block1.bn2", s.c1);
-    const int64_t in[4] = {0, s.c1, s.c2, s.c3}, out[4] = {0, s.c2, s.c3, s.c4};
-    for (int b = 1; b <= 3; ++b) {
-      const std::string block = fmt::format("block{}", b + 1);
-      for (int c = 1; c <= 2; ++c) {
-        const int64_t conv_in = c == 1 ? in[b] : out[b];
-        if (b == 1) {
-          conv(fmt::format("{}.conv{}.weight", block, c), out[b], conv_in, 3);
-        } else {  // deformable
-          conv(fmt::format("{}.conv{}.offset_conv.weight", block, c), 18, conv_in, 3);
-          e.push_back({fmt::format("{}.conv{}.offset_conv.bias", block, c), {18}});
-          conv(fmt::format("{}.conv{}.regular_conv.weight", block, c), out[b], conv_in, 3);
-        }
-        expect_batch_norm(e, fmt::format("{}.bn{}", block, c), out[b]);
-      }
-      conv(block + ".downsample.weight", out[b], in[b], 1);
-      e.push_back({block + ".downsample.bias", {out[b]}});
-    }
-    conv("conv1.weight", s.dim / 4, s.c1, 1);
-    conv("conv2.weight", s.dim / 4, s.c2, 1);
-    conv("conv3.weight", s.dim / 4, s.c3, 1);
-    conv("conv4.weight", s.dim / 4, s.dim, 1);
     conv("score_head.0.weight", 8, s.dim, 1);
     conv("score_head.2.weight", 4, 8, 3);
     conv("score_head.4.weight", 4, 4, 3);
@@ -76,29 +53,9 @@ class AlikedNetwork final : public LearnedFeatureExtractor::Network {
     const int64_t left = pad_w / 2, top = pad_h / 2;
     const at::Tensor padded = at::replication_pad2d(image, {left, pad_w - left, top, pad_h - top});
     const NetworkWeights& w = weights_;
-    auto conv_block = [&](const at::Tensor& x) {
-      at::Tensor y = at::selu(batch_norm(convolution(x, w, "block1.conv1.weight", "", 1), w, "block1.bn1"));
-      return at::selu(batch_norm(convolution(y, w, "block1.conv2.weight", "", 1), w, "block1.bn2"));
-    };
-    auto res_block = [&](const at::Tensor& x, const std::string& block, bool deformable) {
-      auto conv = [&](const at::Tensor& input, int c) {
-        const std::string name = fmt::format("{}.conv{}", block, c);
-        return deformable ? deformable_convolution(input, w, name) : convolution(input, w, name + ".weight", "", 1);
-      };
-      at::Tensor y = at::selu(batch_norm(conv(x, 1), w, block + ".bn1"));
-      y = batch_norm(conv(y, 2), w, block + ".bn2");
-      return at::selu(y + convolution(x, w, block + ".downsample.weight", block + ".downsample.bias", 0));
-    };
-    const at::Tensor x1 = conv_block(padded);
-    const at::Tensor x2 = res_block(at::avg_pool2d(x1, {2, 2}, {2, 2}), "block2", false);
-    const at::Tensor x3 = res_block(at::avg_pool2d(x2, {4, 4}, {4, 4}), "block3", true);
-    const at::Tensor x4 = res_block(at::avg_pool2d(x3, {4, 4}, {4, 4}), "block4", true);
     DenseMaps maps;
+    maps.features = encode(padded, w, EncoderKind::kAliked);
     FeaturePyramid& pyramid = maps.features;
-    pyramid.levels = {at::selu(convolution(x1, w, "conv1.weight", "", 0)), at::selu(convolution(x2, w, "conv2.weight", "", 0)),
-                      at::selu(convolution(x3, w, "conv3.weight", "", 0)), at::selu(convolution(x4, w, "conv4.weight", "", 0))};
-    pyramid.padded_height = padded.size(2);
-    pyramid.padded_width = padded.size(3);
     pyramid.top = top;
     pyramid.left = left;
     pyramid.height = height;
