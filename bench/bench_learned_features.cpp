@@ -4,7 +4,9 @@
 // cores (libtorch's threads; ORB is single-threaded); and image-pair matching of graf1 against
 // graf1 seen from 40 degrees further round (tests/vision/graf_pairs.hpp), with correct matches at
 // 3 px and precision as counters: learned features without simulated views, ORB with them.
-// Weights from $HANZO_FUSION_MODELS, else ../shared/models.
+// Weights from $HANZO_FUSION_MODELS, else ../shared/models. Its own process, apart from
+// bench_vision: that one pins OpenCV to one thread, which slows libtorch sharing its OpenMP
+// runtime (alike-t 58 ms here, about 140 ms there).
 
 #include <cstdlib>
 #include <filesystem>
@@ -17,21 +19,14 @@
 
 #include "hanzo/fusion/ai/learned_features.hpp"
 #include "hanzo/fusion/vision/image_pair_matcher.hpp"
+#include "euroc_frame.hpp"
 #include "vision/graf_pairs.hpp"
 
 namespace {
 
 using namespace hanzo::fusion;
 
-cv::Mat euroc_frame() {
-  const std::string folder = std::string(HANZO_DATA_DIR) + "/euroc_v101_micro/mav0/cam0/data";
-  std::string first;
-  for (const auto& entry : std::filesystem::directory_iterator(folder)) {
-    if (first.empty() || entry.path().string() < first) first = entry.path().string();
-  }
-  const cv::Mat image = cv::imread(first, cv::IMREAD_GRAYSCALE);
-  return image(cv::Rect((image.cols - 640) / 2, 0, 640, 480)).clone();
-}
+using hanzo::fusion::bench::euroc_frame;
 
 std::unique_ptr<ai::LearnedFeatureExtractor> learned(ai::LearnedModel model, int max_keypoints) {
   if (std::getenv("HANZO_FUSION_MODELS") == nullptr) ::setenv("HANZO_FUSION_MODELS", HANZO_MODELS_DIR, 1);

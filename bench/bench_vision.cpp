@@ -21,6 +21,7 @@
 #include "hanzo/fusion/vision/image_pair_matcher.hpp"
 #include "hanzo/fusion/vision/place_database.hpp"
 #include "hanzo/fusion/vision/visual_odometry.hpp"
+#include "euroc_frame.hpp"
 #include "vision/graf_pairs.hpp"
 
 namespace {
@@ -28,15 +29,7 @@ namespace {
 using namespace hanzo::fusion::vision;
 using testing::GrafPair;
 
-cv::Mat euroc_frame() {
-  const std::string folder = std::string(HANZO_DATA_DIR) + "/euroc_v101_micro/mav0/cam0/data";
-  std::string first;
-  for (const auto& entry : std::filesystem::directory_iterator(folder)) {
-    if (first.empty() || entry.path().string() < first) first = entry.path().string();
-  }
-  const cv::Mat image = cv::imread(first, cv::IMREAD_GRAYSCALE);
-  return image(cv::Rect((image.cols - 640) / 2, 0, 640, 480)).clone();
-}
+using hanzo::fusion::bench::euroc_frame;
 
 void BM_OrbExtract_Hanzo(benchmark::State& state) {
   const cv::Mat image = euroc_frame();
