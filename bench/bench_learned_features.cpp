@@ -5,8 +5,8 @@
 // graf1 seen from 40 degrees further round (tests/vision/graf_pairs.hpp), with correct matches at
 // 3 px and precision as counters: learned features without simulated views, ORB with them.
 // Weights from $HANZO_FUSION_MODELS, else ../shared/models. Its own process, apart from
-// bench_vision: that one pins OpenCV to one thread, which slows libtorch sharing its OpenMP
-// runtime (alike-t 58 ms here, about 140 ms there).
+// bench_vision: that one pins OpenCV to one thread, which slowed libtorch, sharing its OpenMP
+// runtime, in the same process.
 
 #include <cstdlib>
 #include <filesystem>
