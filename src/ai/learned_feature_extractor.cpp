@@ -1,6 +1,9 @@
 #include "hanzo/fusion/ai/learned_features.hpp"
 
+#include <algorithm>
 #include <array>
+#include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <thread>
 

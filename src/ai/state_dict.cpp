@@ -1,5 +1,7 @@
 #include "hanzo/fusion/ai/state_dict.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <functional>
