@@ -159,7 +159,7 @@ void add_privacy_command(CLI::App& app, const Output& output, Command& run) {
   blur->add_option("--redaction", options->redaction, "blur (default) or black")->check(CLI::IsMember({"blur", "black"}));
   blur->add_flag("--no-faces", options->no_faces, "Do not look for faces");
   blur->add_flag("--no-plates", options->no_plates, "Do not look for licence plates");
-  blur->add_option("--face-model", options->face_model, "YuNet ONNX model (default: the shipped models/face_detection_yunet.onnx)");
+  blur->add_option("--face-model", options->face_model, "YuNet ONNX model (default: face_detection_yunet.onnx in $HANZO_FUSION_MODELS; without it OpenCV's Haar cascade)");
   blur->add_option("--score-threshold", options->score_threshold, "Face score threshold in [0, 1]")->check(CLI::Range(0.0, 1.0));
   blur->callback([&output, &run, options] { run = [&output, options] { return run_blur(output, *options); }; });
 }
