@@ -69,8 +69,7 @@ class AlikeNetwork final : public LearnedFeatureExtractor::Network {
       const at::Tensor input = hidden.defined() ? at::relu(at::mm(features, hidden)) : features;
       return normalize(at::mm(input, descriptor_rows), 1);
     };
-    const at::Tensor wh = at::tensor({static_cast<float>(pyramid.width - 1), static_cast<float>(pyramid.height - 1)}, keypoints.options()).view({1, 2});
-    const at::Tensor pixels = (keypoints + 1) / 2 * wh;
+    const at::Tensor pixels = pyramid.to_pixels(keypoints);
     const at::Tensor descriptors = subpixel ? pyramid.interpolate(pixels, descriptor) : descriptor(pyramid.at_pixels(pixels.to(at::kLong)));
     return normalize(descriptors, 1);
   }

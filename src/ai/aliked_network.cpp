@@ -76,8 +76,7 @@ class AlikedNetwork final : public LearnedFeatureExtractor::Network {
     const FeaturePyramid& pyramid = maps.features;
     const int64_t channels = pyramid.channels(), count = keypoints.size(0), positions = size_.positions;
     if (count == 0) return at::zeros({0, channels}, keypoints.options());
-    const at::Tensor wh = at::tensor({static_cast<float>(pyramid.width - 1), static_cast<float>(pyramid.height - 1)}, keypoints.options()).view({1, 2});
-    const at::Tensor pixels = (keypoints / 2 + 0.5) * wh;  // [N, 2] (x, y)
+    const at::Tensor pixels = pyramid.to_pixels(keypoints);  // [N, 2] (x, y)
     const at::Tensor integer = pixels.to(at::kLong);
     auto unit = [](const at::Tensor& features) { return normalize(features, 1); };
     // 3x3 patches around the keypoints' pixels (zeros outside the image), taps row-major.

@@ -8,6 +8,11 @@ int64_t FeaturePyramid::channels() const {
   return total;
 }
 
+at::Tensor FeaturePyramid::to_pixels(const at::Tensor& normalized) const {
+  const at::Tensor wh = at::tensor({static_cast<float>(width - 1), static_cast<float>(height - 1)}, normalized.options()).view({1, 2});
+  return (normalized + 1) / 2 * wh;
+}
+
 at::Tensor FeaturePyramid::project(const at::Tensor& weight) const {
   at::Tensor sum;
   int64_t column = 0;

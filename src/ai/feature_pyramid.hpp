@@ -23,6 +23,9 @@ struct FeaturePyramid {
   int64_t top = 0, left = 0, height = 0, width = 0;
 
   int64_t channels() const;
+  /// Normalized positions [N, 2] ((x, y) in [-1, 1] over the image's corner pixels, as DKD gives
+  /// keypoints) in image pixels.
+  at::Tensor to_pixels(const at::Tensor& normalized) const;
   /// weight [O, channels()] applied as a 1x1 convolution to the full-resolution features:
   /// [1, O, padded_height, padded_width].
   at::Tensor project(const at::Tensor& weight) const;
