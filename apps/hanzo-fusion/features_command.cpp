@@ -14,11 +14,9 @@
 
 #include "commands.hpp"
 #include "image_input.hpp"
+#include "hanzo/fusion/pipeline/feature_extractors.hpp"
 #include "hanzo/fusion/vision/correspondence_filter.hpp"
 #include "hanzo/fusion/vision/image_pair_matcher.hpp"
-#ifdef HANZO_FUSION_WITH_AI
-#include "hanzo/fusion/ai/learned_features.hpp"
-#endif
 
 namespace hanzo::fusion::app {
 namespace {
@@ -64,28 +62,12 @@ Status write_putative_matches(const std::string& path, const vision::ImagePairMa
 }
 
 // The detector named by --detector: null for ORB (the matcher's own), else a learned one.
-Result<std::unique_ptr<vision::FeatureExtractor>> make_detector(const MatchOptions& options) {
+Result<std::shared_ptr<const vision::FeatureExtractor>> make_detector(const MatchOptions& options) {
   if (options.detector == "orb") {
     if (!options.model.empty()) return Error("--model: ORB takes no model (give --detector aliked-t16, ...)");
-    return std::unique_ptr<vision::FeatureExtractor>();
+    return std::shared_ptr<const vision::FeatureExtractor>();
   }
-#ifdef HANZO_FUSION_WITH_AI
-  const std::optional<ai::LearnedModel> model = ai::learned_model_from_name(options.detector);
-  if (!model) {
-    return Error(fmt::format("--detector {}: unknown (orb, aliked-t16, aliked-n16, aliked-n16rot, aliked-n32, alike-t, alike-s, alike-n, alike-l)",
-                             options.detector));
-  }
-  ai::LearnedFeatureConfig config;
-  config.model = *model;
-  config.model_path = options.model;
-  config.max_keypoints = options.max_features;
-  std::unique_ptr<ai::LearnedFeatureExtractor> extractor;
-  HANZO_ASSIGN_OR_RETURN(extractor, ai::LearnedFeatureExtractor::load(config));
-  return std::unique_ptr<vision::FeatureExtractor>(std::move(extractor));
-#else
-  return Error(fmt::format("--detector {}: this build has no learned features (built without HANZO_FUSION_AI; install libtorch-dev)",
-                           options.detector));
-#endif
+  return pipeline::make_feature_extractor({options.detector, options.model}, options.max_features, "--detector");
 }
 
 // Nine numbers, row-major, image-1 pixels to image-2 pixels (the Oxford data sets' format).
@@ -121,7 +103,7 @@ int run_match(const Output& output, const MatchOptions& options) {
     if (!read) return report_failure(output, result, "--homography: " + read.error().message);
     truth = *read;
   }
-  Result<std::unique_ptr<vision::FeatureExtractor>> detector = make_detector(options);
+  Result<std::shared_ptr<const vision::FeatureExtractor>> detector = make_detector(options);
   if (!detector) return report_failure(output, result, detector.error().message);
   result["detector"] = options.detector;
   vision::ImagePairMatcherConfig config;

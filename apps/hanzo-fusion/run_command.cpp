@@ -376,7 +376,9 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"visual_keyframes", m.visual_keyframes}, {"visual_landmarks", m.visual_landmarks},
           {"camera_standstill_frames", m.camera_standstill_frames}, {"visual_loop_closures", m.visual_loop_closures},
           {"visual_scale_free", m.visual_scale_free}, {"camera_dark_frames", m.camera_dark_frames},
-          {"camera_glare_frames", m.camera_glare_frames}, {"camera_motion_blur_frames", m.camera_motion_blur_frames}};
+          {"camera_glare_frames", m.camera_glare_frames}, {"camera_motion_blur_frames", m.camera_motion_blur_frames},
+          {"camera_features", m.camera_features}, {"camera_feature_ms", m.camera_feature_ms},
+          {"camera_learned_matcher", m.camera_learned_matcher}};
 }
 
 // Each sensor's health at the end and its changes over the log (seconds from the log's start).
@@ -605,6 +607,8 @@ int run(const Output& output, const RunOptions& options) {
                                               count_of(mapping.visual_landmarks, "landmark"), count_of(mapping.visual_loop_closures, "loop"))
                                 : "",
                         mapping.visual_scale_free ? " (monocular: lengths in units of its first baseline)" : "");
+    text += fmt::format("  features: {}, {:.1f} ms per frame{}\n", mapping.camera_features, mapping.camera_feature_ms,
+                        mapping.camera_learned_matcher ? "; first views matched through the learned correspondence filter" : "");
     if (mapping.camera_dark_frames + mapping.camera_glare_frames + mapping.camera_motion_blur_frames > 0) {
       text += fmt::format("  images: {} dark, {} with glare, {} blurred by motion\n", mapping.camera_dark_frames, mapping.camera_glare_frames,
                           mapping.camera_motion_blur_frames);

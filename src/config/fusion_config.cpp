@@ -7,6 +7,7 @@
 #include <utility>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "hanzo/fusion/core/enum_names.hpp"
 
@@ -33,6 +34,8 @@ constexpr std::array<std::pair<std::string_view, SensorModality>, 8> kModalityPr
                                                                                        {"odom", SensorModality::kWheelOdometry},
                                                                                        {"radar", SensorModality::kRadar}}};
 
+constexpr EnumNames<MatcherType, 2> kMatcherNames{{{MatcherType::kRatio, "ratio"}, {MatcherType::kLearned, "learned"}}};
+
 Status non_negative(double value, std::string_view field) {
   if (!std::isfinite(value) || value < 0.0) {
     return Error{fmt::format("FusionConfig.{}: {} (expected a finite value >= 0)", field, value), std::string(field)};
@@ -45,6 +48,21 @@ Status non_negative(double value, std::string_view field) {
 std::string_view to_string(FrontendType type) { return enum_name(kFrontendNames, type); }
 std::optional<FrontendType> frontend_type_from_string(std::string_view name) { return enum_from_name(kFrontendNames, name); }
 std::string_view to_string(SensorModality modality) { return enum_name(kModalityNames, modality); }
+std::string_view to_string(MatcherType type) { return enum_name(kMatcherNames, type); }
+
+const std::vector<std::string_view>& feature_type_names() {
+  static const std::vector<std::string_view> names{"orb", "aliked-t16", "aliked-n16", "aliked-n16rot", "aliked-n32", "alike-t", "alike-s", "alike-n", "alike-l"};
+  return names;
+}
+
+Status validate(const FeatureSelection& features, const std::string& field) {
+  const std::vector<std::string_view>& names = feature_type_names();
+  if (std::find(names.begin(), names.end(), features.type) == names.end()) {
+    return Error{fmt::format("{}: unknown type '{}' (expected {})", field, features.type, fmt::join(names, ", ")), field};
+  }
+  if (!features.learned() && !features.model.empty()) return Error{fmt::format("{}: ORB takes no model (the learned types do)", field), field};
+  return ok_status();
+}
 
 SensorModality modality_of(const msgs::SensorMessage& message) {
   struct Modality {
@@ -131,6 +149,7 @@ Status validate(const FusionConfig& config) {
   }
   if (Status s = non_negative(mapping.keyframe_distance, "mapping.keyframe_distance"); !s) return s;
   if (Status s = non_negative(mapping.keyframe_angle, "mapping.keyframe_angle"); !s) return s;
+  if (Status s = validate(config.vision.features, "vision.features"); !s) return with_context(s, "FusionConfig");
   std::set<std::string_view> names;
   std::set<std::string_view> topics;
   for (const SensorConfig& sensor : config.sensors) {
@@ -145,6 +164,10 @@ Status validate(const FusionConfig& config) {
       return Error{fmt::format("FusionConfig.{}.rate: {} (expected > 0 Hz)", field, sensor.rate_hz), field + ".rate"};
     }
     if (sensor.body_frame.empty()) return Error{fmt::format("FusionConfig.{}.body_frame: empty", field), field + ".body_frame"};
+    if (sensor.features) {
+      if (sensor.modality != SensorModality::kCamera) return Error{fmt::format("FusionConfig.{}.features: applies to camera sensors only", field), field + ".features"};
+      if (Status s = validate(*sensor.features, field + ".features"); !s) return with_context(s, "FusionConfig");
+    }
     const SensorFusionOptions& o = sensor.fusion;
     if (Status s = non_negative(o.timeout_s, field + ".timeout"); !s) return s;
     for (const auto& [value, key] : {std::pair<double, std::string_view>{o.orientation_noise, "orientation_noise"},

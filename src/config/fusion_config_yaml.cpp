@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 #include <set>
+#include <algorithm>
 #include <array>
 
 #include <fmt/ranges.h>
@@ -166,6 +167,39 @@ Result<MappingConfig> parse_mapping(const YamlValue& node) {
   return mapping;
 }
 
+// `features: aliked-t16` or `features: {type: aliked-t16, model: PATH}`.
+Result<FeatureSelection> parse_features(const YamlValue& node) {
+  FeatureSelection features;
+  if (node.is_map()) {
+    HANZO_RETURN_IF_ERROR(node.check_keys({"type", "model"}));
+    if (node["type"].present()) HANZO_ASSIGN_OR_RETURN(features.type, node["type"].as_string());
+    if (node["model"].present()) HANZO_ASSIGN_OR_RETURN(features.model, node["model"].as_string());
+  } else {
+    HANZO_ASSIGN_OR_RETURN(features.type, node.as_string());
+  }
+  const std::vector<std::string_view>& names = feature_type_names();
+  if (std::find(names.begin(), names.end(), features.type) == names.end()) {
+    return (node.is_map() ? node["type"] : node).error(fmt::format("expected {}, got '{}'", fmt::join(names, ", "), features.type));
+  }
+  if (!features.learned() && !features.model.empty()) return node["model"].error("ORB takes no model (the learned types do)");
+  return features;
+}
+
+Result<VisionConfig> parse_vision(const YamlValue& node) {
+  VisionConfig vision;
+  if (!node.present()) return vision;
+  HANZO_RETURN_IF_ERROR(node.check_keys({"features", "matcher"}));
+  if (node["features"].present()) HANZO_ASSIGN_OR_RETURN(vision.features, parse_features(node["features"]));
+  if (const YamlValue matcher = node["matcher"]; matcher.present()) {
+    std::string name;
+    HANZO_ASSIGN_OR_RETURN(name, matcher.as_string());
+    if (name == "ratio") vision.matcher = MatcherType::kRatio;
+    else if (name == "learned") vision.matcher = MatcherType::kLearned;
+    else return matcher.error(fmt::format("expected ratio or learned, got '{}'", name));
+  }
+  return vision;
+}
+
 // The per-modality fusion keys; each is valid for one modality only.
 struct ModalityKey {
   std::string_view key;
@@ -224,7 +258,7 @@ Result<SensorConfig> parse_sensor(const std::string& name, const YamlValue& node
   if (!node.is_map()) return node.error("expected a map with topic, rate, body_frame (and optionally type, modality)");
   HANZO_RETURN_IF_ERROR(node.check_keys({"topic", "rate", "body_frame", "type", "modality", "timeout", "use_orientation",
                                          "orientation_noise", "speed_noise", "yaw_rate_noise", "lateral_speed_noise",
-                                         "use_yaw_rate", "non_holonomic", "min_fix", "velocity_noise"}));
+                                         "use_yaw_rate", "non_holonomic", "min_fix", "velocity_noise", "features"}));
   const std::optional<SensorModality> inferred = infer_modality(name);
   if (node["modality"].present()) {
     Result<std::string> text = node["modality"].as_string();
@@ -247,6 +281,10 @@ Result<SensorConfig> parse_sensor(const std::string& name, const YamlValue& node
   if (sensor.body_frame.empty()) return node["body_frame"].error("expected a frame name, got an empty string");
   if (node["type"].present()) HANZO_ASSIGN_OR_RETURN(sensor.type, node["type"].as_string());
   HANZO_ASSIGN_OR_RETURN(sensor.fusion, parse_fusion_options(node, sensor.modality));
+  if (const YamlValue features = node["features"]; features.present()) {
+    if (sensor.modality != SensorModality::kCamera) return features.error(fmt::format("applies to camera sensors only (this sensor is {})", to_string(sensor.modality)));
+    HANZO_ASSIGN_OR_RETURN(sensor.features, parse_features(features));
+  }
   return sensor;
 }
 
@@ -254,10 +292,11 @@ Result<FusionConfig> parse(const YamlValue& root) {
   HANZO_RETURN_IF_ERROR(root.check_keys({"fusion"}));
   const YamlValue fusion = root["fusion"].as_path_root();
   if (!fusion.present()) return fusion.error("missing (the file must start with a 'fusion:' map)");
-  HANZO_RETURN_IF_ERROR(fusion.check_keys({"frontend", "sensors", "mapping"}));
+  HANZO_RETURN_IF_ERROR(fusion.check_keys({"frontend", "sensors", "mapping", "vision"}));
   FusionConfig config;
   HANZO_ASSIGN_OR_RETURN(config.frontend, parse_frontend(fusion["frontend"]));
   HANZO_ASSIGN_OR_RETURN(config.mapping, parse_mapping(fusion["mapping"]));
+  HANZO_ASSIGN_OR_RETURN(config.vision, parse_vision(fusion["vision"]));
   const YamlValue sensors = fusion["sensors"];
   HANZO_RETURN_IF_ERROR(sensors.expect_map());
   std::set<std::string> topics;
@@ -325,6 +364,21 @@ std::string mapping_yaml(const MappingConfig& m) {
   return out.empty() ? out : "  mapping:\n" + out;
 }
 
+// `features: TYPE` or, with a model path, `features: {type: TYPE, model: PATH}`.
+std::string features_yaml(const FeatureSelection& features) {
+  if (features.model.empty()) return std::string(features.type);
+  return fmt::format("{{type: {}, model: {}}}", features.type, yaml::scalar(features.model));
+}
+
+// The vision block with the keys that differ from the defaults ("" when none do).
+std::string vision_yaml(const VisionConfig& v) {
+  const VisionConfig d;
+  std::string out;
+  if (!(v.features == d.features)) out += fmt::format("    features: {}\n", features_yaml(v.features));
+  if (v.matcher != d.matcher) out += fmt::format("    matcher: {}\n", to_string(v.matcher));
+  return out.empty() ? out : "  vision:\n" + out;
+}
+
 }  // namespace
 
 Result<FusionConfig> parse_fusion_config(const std::string& yaml_text, const std::string& source_name) {
@@ -386,6 +440,7 @@ std::string to_yaml(const FusionConfig& config) {
                        format_double(f.datum->longitude_deg), format_double(f.datum->altitude_m));
   }
   out += mapping_yaml(config.mapping);
+  out += vision_yaml(config.vision);
   out += config.sensors.empty() ? "  sensors: {}\n" : "  sensors:\n";
   for (const SensorConfig& sensor : config.sensors) {
     out += fmt::format("    {}:\n", yaml::scalar(sensor.name));
@@ -395,6 +450,7 @@ std::string to_yaml(const FusionConfig& config) {
     out += fmt::format("      body_frame: {}\n", yaml::scalar(sensor.body_frame));
     if (!sensor.type.empty()) out += fmt::format("      type: {}\n", yaml::scalar(sensor.type));
     out += fusion_options_yaml(sensor.fusion);
+    if (sensor.features) out += fmt::format("      features: {}\n", features_yaml(*sensor.features));
   }
   return out;
 }

@@ -127,11 +127,16 @@ std::vector<v1::FusionMap> cut_into_pieces(const v1::FusionMap& map, std::size_t
     // Landmarks first, then keyframes (their indices refer to the whole landmark list, which
     // the merge rebuilds in order).
     const v1::VisualLandmarkLayer& layer = map.visual_landmarks();
-    pieces.emplace_back().mutable_visual_landmarks()->set_camera(layer.camera());
-    for_each_slice(layer.positions_size(), chunk_bytes / 60, [&](int begin, int end) {
+    v1::VisualLandmarkLayer* head = pieces.emplace_back().mutable_visual_landmarks();
+    head->set_camera(layer.camera());
+    head->set_descriptor_type(layer.descriptor_type());
+    head->set_float_descriptor_size(layer.float_descriptor_size());
+    const auto floats = static_cast<int>(layer.float_descriptor_size());
+    for_each_slice(layer.positions_size(), chunk_bytes / (60 + 4 * static_cast<std::size_t>(floats)), [&](int begin, int end) {
       v1::VisualLandmarkLayer* piece = pieces.emplace_back().mutable_visual_landmarks();
       copy_slice(layer.positions(), begin, end, piece->mutable_positions());
-      copy_slice(layer.descriptors(), 4 * begin, 4 * end, piece->mutable_descriptors());
+      if (layer.descriptors_size() > 0) copy_slice(layer.descriptors(), 4 * begin, 4 * end, piece->mutable_descriptors());
+      copy_slice(layer.float_descriptors(), floats * begin, floats * end, piece->mutable_float_descriptors());
       copy_slice(layer.position_std(), begin, end, piece->mutable_position_std());
       copy_slice(layer.observations(), begin, end, piece->mutable_observations());
     });

@@ -76,6 +76,11 @@ void write(const VisualLandmarkLayer& layer, v1::VisualLandmarkLayer* out) {
       out->add_descriptors(value);
     }
   }
+  if (layer.descriptor_type != "orb") {
+    out->set_descriptor_type(layer.descriptor_type);
+    out->set_float_descriptor_size(layer.float_descriptor_size);
+    out->mutable_float_descriptors()->Add(layer.float_descriptors.begin(), layer.float_descriptors.end());
+  }
   out->mutable_position_std()->Add(layer.position_std.begin(), layer.position_std.end());
   out->mutable_observations()->Add(layer.observations.begin(), layer.observations.end());
   for (const VisualKeyframe& keyframe : layer.keyframes) {
@@ -148,7 +153,10 @@ Result<VisualLandmarkLayer> read(const v1::VisualLandmarkLayer& in) {
   VisualLandmarkLayer layer;
   layer.camera = in.camera();
   layer.positions = read_points(in.positions());
-  layer.descriptors.resize(static_cast<std::size_t>(in.positions_size()));
+  if (!in.descriptor_type().empty()) layer.descriptor_type = in.descriptor_type();
+  layer.float_descriptor_size = in.float_descriptor_size();
+  layer.float_descriptors.assign(in.float_descriptors().begin(), in.float_descriptors().end());
+  layer.descriptors.resize(in.descriptors_size() > 0 ? static_cast<std::size_t>(in.positions_size()) : 0);
   for (std::size_t i = 0; i < layer.descriptors.size(); ++i) {
     for (int word = 0; word < 4; ++word) {
       uint64_t value = in.descriptors(static_cast<int>(4 * i) + word);

@@ -145,8 +145,19 @@ class MapChecker {
   Status visual_landmarks(const v1::VisualLandmarkLayer& layer, const std::string& field) const {
     HANZO_RETURN_IF_ERROR(points(layer.positions(), field + ".positions"));
     const int count = layer.positions_size();
-    if (layer.descriptors_size() != 4 * count) {
-      return fail(field + ".descriptors", fmt::format("{} words for {} landmarks (expected 4 per landmark: 256-bit ORB descriptors)", layer.descriptors_size(), count));
+    if (layer.descriptor_type().empty() || layer.descriptor_type() == "orb") {
+      if (layer.descriptors_size() != 4 * count) {
+        return fail(field + ".descriptors", fmt::format("{} words for {} landmarks (expected 4 per landmark: 256-bit ORB descriptors)", layer.descriptors_size(), count));
+      }
+    } else {
+      const uint64_t size = layer.float_descriptor_size();
+      if (size == 0 || static_cast<uint64_t>(layer.float_descriptors_size()) != size * static_cast<uint64_t>(count) || layer.descriptors_size() != 0) {
+        return fail(field + ".float_descriptors", fmt::format("{} floats of size {} for {} landmarks with {} descriptors (expected float_descriptor_size floats per landmark, no binary words)",
+                                                              layer.float_descriptors_size(), size, count, layer.descriptor_type()));
+      }
+      for (int i = 0; i < layer.float_descriptors_size(); ++i) {
+        if (!std::isfinite(layer.float_descriptors(i))) return fail(fmt::format("{}.float_descriptors[{}]", field, i), "not finite");
+      }
     }
     HANZO_RETURN_IF_ERROR(per_element(layer.position_std(), count, field + ".position_std", "landmarks"));
     HANZO_RETURN_IF_ERROR(per_element(layer.observations(), count, field + ".observations", "landmarks"));

@@ -6,9 +6,14 @@
 #include <opencv2/imgproc.hpp>
 
 #include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/pipeline/feature_extractors.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
+
+// A learned detector offers the visual-inertial tracker this many candidates per feature it keeps
+// (the grid then spreads them).
+constexpr int kTrackerCandidates = 4;
 
 // The image as 8-bit grey (a copy: the message's buffer is not kept).
 Result<cv::Mat> grey_image(const msgs::ImageMessage& image) {
@@ -28,6 +33,40 @@ Result<cv::Mat> grey_image(const msgs::ImageMessage& image) {
     }
     default: return Error(fmt::format("image encoding {} is not mono8, rgb8 or bgr8", msgs::to_string(image.encoding)));
   }
+}
+
+// The features the cameras are configured with (fusion.vision.features or the left camera's own)
+// and the configuration key they come from; a stereo pair's cameras must agree.
+Result<std::pair<config::FeatureSelection, std::string>> configured_features(const config::FusionConfig& config, const std::string& left,
+                                                                            const std::string& right) {
+  // The cameras are sensors of the configuration.
+  const config::SensorConfig& left_sensor = *config.find_sensor(left);
+  const config::FeatureSelection& features = config.features_of(left_sensor);
+  if (!right.empty()) {
+    const config::FeatureSelection& right_features = config.features_of(*config.find_sensor(right));
+    if (!(right_features == features)) {
+      return Error(fmt::format("sensors.{}.features: {} differs from {}'s {} (a stereo pair matches one kind of descriptor)", right,
+                               right_features.type, left, features.type),
+                   fmt::format("sensors.{}.features", right));
+    }
+  }
+  return std::pair{features, left_sensor.features ? fmt::format("sensors.{}.features", left) : std::string("vision.features")};
+}
+
+// The configured features and matcher into the visual odometry's configuration.
+Status apply_vision_config(const config::FusionConfig& config, const std::string& left, const std::string& right,
+                           vision::VisualOdometryConfig& odometry) {
+  if (!odometry.extractor) {
+    std::pair<config::FeatureSelection, std::string> features;
+    HANZO_ASSIGN_OR_RETURN(features, configured_features(config, left, right));
+    HANZO_ASSIGN_OR_RETURN(odometry.extractor, make_feature_extractor(features.first, odometry.features.max_features, features.second, odometry.features));
+  }
+  if (config.vision.matcher == config::MatcherType::kLearned && !odometry.putative_filter) {
+    Result<vision::CorrespondenceFilter> filter = vision::CorrespondenceFilter::load_default();
+    if (!filter) return Error("vision.matcher learned: " + filter.error().message, "vision.matcher");
+    odometry.putative_filter = std::make_shared<const vision::CorrespondenceFilter>(std::move(filter).value());
+  }
+  return ok_status();
 }
 
 }  // namespace
@@ -60,6 +99,8 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
                    left.sensor, config::to_string(config.frontend.type));
     return std::unique_ptr<CameraOdometry>();
   }
+  vision::VisualOdometryConfig configured = odometry_config;
+  HANZO_RETURN_IF_ERROR(apply_vision_config(config, left.sensor, stereo_pair ? cameras[1]->sensor : "", configured));
   std::unique_ptr<vision::VisualOdometry> odometry;
   std::string right_sensor;
   Duration right_offset;
@@ -67,16 +108,17 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
     const calib::SensorCalibration& right = *cameras[1];
     HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create_stereo(left.camera->pinhole_camera(), right.camera->pinhole_camera(),
                                                                                          left.T_body_sensor().inverse() * right.T_body_sensor(), size,
-                                                                                         odometry_config),
+                                                                                         configured),
                                                   fmt::format("cameras {} and {}", left.sensor, right.sensor)));
     right_sensor = right.sensor;
     right_offset = right.time_offset;
   } else {
-    HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create(left.camera->pinhole_camera(), size, odometry_config),
+    HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create(left.camera->pinhole_camera(), size, configured),
                                                   fmt::format("camera {}", left.sensor)));
   }
-  logger()->info("session: {} visual odometry on {}{}", right_sensor.empty() ? "monocular" : "stereo", left.sensor,
-                 right_sensor.empty() ? "" : " + " + right_sensor);
+  logger()->info("session: {} visual odometry on {}{} ({} features{})", right_sensor.empty() ? "monocular" : "stereo", left.sensor,
+                 right_sensor.empty() ? "" : " + " + right_sensor, configured.extractor->name(),
+                 configured.putative_filter ? ", learned correspondence filter" : "");
   return std::unique_ptr<CameraOdometry>(
       new CameraOdometry(std::move(odometry), left.sensor, std::move(right_sensor), left.camera->pinhole_camera(), left.T_body_sensor(),
                                                             left.time_offset, right_offset));
@@ -99,8 +141,19 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(c
   const config::CovarianceConfig& covariance = config.frontend.covariance;
   const estimate::ImuNoise noise{covariance.process_noise_accel, covariance.process_noise_gyro, covariance.accel_bias_random_walk,
                                  covariance.gyro_bias_random_walk, 1.0 / imu->rate_hz};
+  // Learned features detect the tracker's new features; the classical detector is Shi-Tomasi's.
+  vision::FeatureTrackerConfig tracker;
+  std::pair<config::FeatureSelection, std::string> features;
+  HANZO_ASSIGN_OR_RETURN(features, configured_features(config, cameras[0]->sensor, stereo_pair ? cameras[1]->sensor : ""));
+  if (features.first.learned()) {
+    HANZO_ASSIGN_OR_RETURN(tracker.detector, make_feature_extractor(features.first, kTrackerCandidates * tracker.max_features, features.second));
+  }
+  if (config.vision.matcher == config::MatcherType::kLearned) {
+    logger()->warn("vision.matcher learned: the visual-inertial odometry follows features by optical flow (no descriptor matches to "
+                   "filter); its tracks are checked by RANSAC");
+  }
   std::unique_ptr<MsckfOdometry> inertial;
-  HANZO_ASSIGN_OR_RETURN(inertial, with_context(MsckfOdometry::create(setups, size, T_body_imu, noise), fmt::format("camera {}", cameras[0]->sensor)));
+  HANZO_ASSIGN_OR_RETURN(inertial, with_context(MsckfOdometry::create(setups, size, T_body_imu, noise, tracker), fmt::format("camera {}", cameras[0]->sensor)));
   const calib::SensorCalibration& left = *cameras[0];
   logger()->info("session: {} visual-inertial odometry (MSCKF) on {}{} and {}", stereo_pair ? "stereo" : "monocular", left.sensor,
                  stereo_pair ? " + " + cameras[1]->sensor : "", imu->name);
@@ -119,6 +172,7 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(c
   odometry->imu_sensor_ = imu->name;
   odometry->imu_offset_ = imu_offset;
   odometry->inertial_summary_.scale_free = false;
+  odometry->inertial_summary_.features = tracker.detector ? tracker.detector->name() : "shi-tomasi";
   return odometry;
 }
 
@@ -223,6 +277,8 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track(Timestamp t
       keyframe_factors_->odometry_restarted();  // (re)initializing: a new odometry world follows
     }
     ++inertial_summary_.frames;
+    ++inertial_summary_.feature_frames;
+    inertial_summary_.feature_seconds += frame.feature_seconds;
     inertial_summary_.tracked_frames += tracked.frame.state == vision::TrackingState::kTracking;
     inertial_summary_.lost_frames += tracked.frame.state == vision::TrackingState::kLost;
     return std::optional<Tracked>(std::move(tracked));

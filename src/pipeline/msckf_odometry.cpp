@@ -1,5 +1,7 @@
 #include "msckf_odometry.hpp"
 
+#include <chrono>
+
 #include <fmt/format.h>
 
 #include "hanzo/fusion/core/logging.hpp"
@@ -32,14 +34,16 @@ constexpr double kPreStartImuSeconds = kVisualInertialWindowSeconds + 1.0;
 }  // namespace
 
 Result<std::unique_ptr<MsckfOdometry>> MsckfOdometry::create(const std::vector<MsckfCameraSetup>& cameras, cv::Size image_size,
-                                                             const SE3& T_body_imu, const estimate::ImuNoise& imu_noise) {
+                                                             const SE3& T_body_imu, const estimate::ImuNoise& imu_noise,
+                                                             const vision::FeatureTrackerConfig& tracker_config) {
   if (cameras.empty() || cameras.size() > 2) return Error(fmt::format("MsckfOdometry: {} cameras; one or two are supported", cameras.size()));
   std::unique_ptr<vision::FeatureTracker> tracker;
   if (cameras.size() == 2) {
     HANZO_ASSIGN_OR_RETURN(tracker, vision::FeatureTracker::create_stereo(cameras[0].camera, cameras[1].camera,
-                                                                          cameras[0].T_body_camera.inverse() * cameras[1].T_body_camera, image_size));
+                                                                          cameras[0].T_body_camera.inverse() * cameras[1].T_body_camera, image_size,
+                                                                          tracker_config));
   } else {
-    HANZO_ASSIGN_OR_RETURN(tracker, vision::FeatureTracker::create(cameras[0].camera, image_size));
+    HANZO_ASSIGN_OR_RETURN(tracker, vision::FeatureTracker::create(cameras[0].camera, image_size, tracker_config));
   }
   std::vector<vision::MsckfCamera> msckf_cameras;
   for (const MsckfCameraSetup& setup : cameras) msckf_cameras.push_back({T_body_imu.inverse() * setup.T_body_camera, setup.camera.fx});
@@ -163,8 +167,10 @@ std::optional<std::pair<Eigen::Vector3d, Eigen::Vector3d>> MsckfOdometry::imu_bi
 
 Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat& left, const cv::Mat& right) {
   vision::TrackedFrame tracked;
+  const auto start = std::chrono::steady_clock::now();
   HANZO_ASSIGN_OR_RETURN(tracked, right.empty() ? tracker_->track(left) : tracker_->track(left, right));
   Frame frame;
+  frame.feature_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   frame.tracked_features = tracked.tracked;
   frame.observations = tracked.observations;
   if (!filter_ && cameras_.size() == 2) {

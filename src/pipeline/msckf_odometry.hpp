@@ -48,12 +48,13 @@ class MsckfOdometry {
     std::string reason;
     int tracked_features = 0;  ///< left features continued from the previous image
     std::vector<vision::FeatureObservation> observations;  ///< the tracker's, both cameras
+    double feature_seconds = 0.0;  ///< the tracker's time on this frame (detection and optical flow)
   };
 
   /// One or two cameras (the second makes a stereo rig), the IMU's mounting and noise; fails
   /// as the tracker and the filter do on a bad calibration.
   static Result<std::unique_ptr<MsckfOdometry>> create(const std::vector<MsckfCameraSetup>& cameras, cv::Size image_size, const SE3& T_body_imu,
-                                                       const estimate::ImuNoise& imu_noise);
+                                                       const estimate::ImuNoise& imu_noise, const vision::FeatureTrackerConfig& tracker = {});
 
   /// An IMU sample on the body clock, in time order (older or repeated samples are ignored).
   void add_imu(const estimate::ImuSample& sample);

@@ -1066,6 +1066,9 @@ MappingSummary Session::mapping_summary() const {
       summary.loop_candidates += static_cast<uint64_t>(visual_loops_->candidates_checked());
     }
     summary.visual_scale_free = visual.scale_free;
+    summary.camera_features = visual.features;
+    summary.camera_feature_ms = visual.feature_frames > 0 ? 1000.0 * visual.feature_seconds / visual.feature_frames : 0.0;
+    summary.camera_learned_matcher = visual.learned_matcher;
     const CameraOdometry::ImageConditionCounts& conditions = camera_odometry_->image_conditions();
     summary.camera_dark_frames = conditions.dark;
     summary.camera_glare_frames = conditions.glare;

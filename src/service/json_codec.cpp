@@ -220,6 +220,9 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"camera_dark_frames", mapping.camera_dark_frames},
       {"camera_glare_frames", mapping.camera_glare_frames},
       {"camera_motion_blur_frames", mapping.camera_motion_blur_frames},
+      {"camera_features", mapping.camera_features},
+      {"camera_feature_ms", mapping.camera_feature_ms},
+      {"camera_learned_matcher", mapping.camera_learned_matcher},
   };
 }
 

@@ -383,6 +383,14 @@ struct SessionManager::Impl {
         metrics->counter("hanzo_fusion_camera_degraded_images_total", "Camera images too dark, washed out by glare or blurred by motion", with_condition)
             .set_total(static_cast<double>(frames));
       }
+      if (!mapping.camera_features.empty()) {
+        MetricLabels with_detector = labels;
+        with_detector.emplace_back("detector", mapping.camera_features);
+        with_detector.emplace_back("matcher", mapping.camera_learned_matcher ? "learned" : "ratio");
+        metrics->gauge("hanzo_fusion_camera_feature_seconds", "Mean time of the cameras' feature stage per frame, by detector (learned or classical) and matcher",
+                       with_detector)
+            .set(mapping.camera_feature_ms / 1000.0);
+      }
       metrics->gauge("hanzo_fusion_lidar_registration_seconds", "Time of the latest sweep registration", labels)
           .set(mapping.last_registration_ms / 1000.0);
       metrics->counter("hanzo_fusion_loop_closures_total", "Loop closures added (detected and manual)", labels)

@@ -57,6 +57,10 @@ int descriptor_distance(const cv::Mat& descriptors_a, int a, const cv::Mat& desc
   return static_cast<int>(std::lround(kFloatDistanceScale * std::sqrt(squared)));
 }
 
+int descriptor_distance_limit(const cv::Mat& descriptors, int max_hamming_bits, double max_euclidean) {
+  return descriptors.type() == CV_8UC1 ? max_hamming_bits : static_cast<int>(std::lround(kFloatDistanceScale * max_euclidean));
+}
+
 std::vector<FeatureMatch> match_descriptors(const cv::Mat& query_descriptors, const cv::Mat& train_descriptors,
                                             const DescriptorMatcherConfig& config) {
   std::vector<FeatureMatch> matches;
@@ -83,7 +87,7 @@ std::vector<FeatureMatch> match_descriptors(const cv::Mat& query_descriptors, co
   for (int q = 0; q < queries; ++q) {
     const NearestCandidates& best = nearest_query[static_cast<std::size_t>(q)];
     const bool passes = binary ? best.passes(config.ratio, config.max_distance)
-                               : best.passes(config.float_ratio, static_cast<int>(config.max_float_distance * kFloatDistanceScale));
+                               : best.passes(config.float_ratio, descriptor_distance_limit(query_descriptors, config.max_distance, config.max_float_distance));
     if (!passes) continue;
     if (config.mutual && nearest_train[static_cast<std::size_t>(best.index)].index != q) continue;
     matches.push_back({q, best.index, best.best, second_or_none(best)});
@@ -142,7 +146,7 @@ std::vector<FeatureMatch> match_guided(const ImageFeatures& query, const ImageFe
         if (std::abs(mapped[0] * p.x + mapped[1] * p.y + mapped[2]) <= config.radius_px * norm) consider(static_cast<int>(t));
       }
     }
-    const int max_distance = query.descriptors.type() == CV_8UC1 ? config.max_distance : static_cast<int>(config.max_float_distance * kFloatDistanceScale);
+    const int max_distance = descriptor_distance_limit(query.descriptors, config.max_distance, config.max_float_distance);
     if (nearest.passes(config.ratio, max_distance)) matches.push_back({static_cast<int>(q), nearest.index, nearest.best, second_or_none(nearest)});
   }
   return unique_by_train(std::move(matches), train.keypoints.size());

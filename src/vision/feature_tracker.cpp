@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <optional>
 
@@ -9,6 +10,8 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
+
+#include "hanzo/fusion/core/logging.hpp"
 
 namespace hanzo::fusion::vision {
 namespace {
@@ -202,6 +205,32 @@ void FeatureTracker::State::track_over_time(const cv::Mat& grey, TrackedFrame& f
   frame.tracked = static_cast<int>(points.size());
 }
 
+namespace {
+
+// Shi-Tomasi scores (cv::cornerMinEigenVal), their 3 x 3 local maxima over min_image_quality of the
+// image's strongest where `free` is set, into the candidates of their cell.
+void detect_corners(const cv::Mat& grey, const cv::Mat& free, double min_image_quality, const std::function<int(const cv::Point2f&)>& cell_of,
+                    std::vector<std::vector<std::pair<float, cv::Point>>>& candidates) {
+  cv::Mat score, dilated;
+  cv::cornerMinEigenVal(grey, score, 3, 3);
+  cv::dilate(score, dilated, cv::Mat());
+  double image_best = 0.0;
+  cv::minMaxLoc(score, nullptr, &image_best);
+  const float floor = static_cast<float>(min_image_quality * image_best);
+  for (int y = 1; y < grey.rows - 1; ++y) {
+    const float* value = score.ptr<float>(y);
+    const float* maximum = dilated.ptr<float>(y);
+    const unsigned char* open = free.ptr<unsigned char>(y);
+    for (int x = 1; x < grey.cols - 1; ++x) {
+      if (value[x] > floor && value[x] == maximum[x] && open[x]) {
+        candidates[static_cast<size_t>(cell_of(cv::Point2f(static_cast<float>(x), static_cast<float>(y))))].emplace_back(value[x], cv::Point(x, y));
+      }
+    }
+  }
+}
+
+}  // namespace
+
 void FeatureTracker::State::detect(const cv::Mat& grey, TrackedFrame& frame) {
   if (static_cast<int>(points.size()) >= config.max_features) return;
   const int columns = config.grid_columns, rows = config.grid_rows;
@@ -219,23 +248,21 @@ void FeatureTracker::State::detect(const cv::Mat& grey, TrackedFrame& frame) {
     cv::circle(free, point, radius, cv::Scalar(0), cv::FILLED);
   }
 
-  // Shi-Tomasi scores, their 3 x 3 local maxima, grouped by cell, strongest first.
-  cv::Mat score, dilated;
-  cv::cornerMinEigenVal(grey, score, 3, 3);
-  cv::dilate(score, dilated, cv::Mat());
-  double image_best = 0.0;
-  cv::minMaxLoc(score, nullptr, &image_best);
-  const float floor = static_cast<float>(config.min_image_quality * image_best);
   std::vector<std::vector<std::pair<float, cv::Point>>> candidates(static_cast<size_t>(columns * rows));
-  for (int y = 1; y < image_size.height - 1; ++y) {
-    const float* value = score.ptr<float>(y);
-    const float* maximum = dilated.ptr<float>(y);
-    const unsigned char* open = free.ptr<unsigned char>(y);
-    for (int x = 1; x < image_size.width - 1; ++x) {
-      if (value[x] > floor && value[x] == maximum[x] && open[x]) {
-        candidates[static_cast<size_t>(cell_of(cv::Point2f(static_cast<float>(x), static_cast<float>(y))))].emplace_back(value[x], cv::Point(x, y));
-      }
+  if (config.detector) {
+    // The detector's keypoints (its scores), grouped by cell, strongest first.
+    Result<ImageFeatures> detected = config.detector->extract(grey);
+    if (!detected) {
+      logger()->warn("feature tracker: {} detection failed: {}", config.detector->name(), detected.error().message);
+      return;
     }
+    for (const cv::KeyPoint& keypoint : detected->keypoints) {
+      const cv::Point pixel(static_cast<int>(std::lround(keypoint.pt.x)), static_cast<int>(std::lround(keypoint.pt.y)));
+      if (pixel.x < 0 || pixel.y < 0 || pixel.x >= image_size.width || pixel.y >= image_size.height || !free.at<unsigned char>(pixel)) continue;
+      candidates[static_cast<size_t>(cell_of(keypoint.pt))].emplace_back(keypoint.response, pixel);
+    }
+  } else {
+    detect_corners(grey, free, config.min_image_quality, cell_of, candidates);
   }
   auto take = [&](const cv::Point& pixel) {
     if (!free.at<unsigned char>(pixel)) return false;

@@ -15,6 +15,10 @@ Result<MapRelocalizer> MapRelocalizer::create(msgs::VisualLandmarkLayer map, con
   if (map.positions.empty() || map.keyframes.empty()) {
     return Error(fmt::format("visual landmark map: {} landmarks and {} keyframes (needs both)", map.positions.size(), map.keyframes.size()));
   }
+  if (map.descriptor_type != "orb") {
+    return Error(fmt::format("visual landmark map: its landmarks carry {} descriptors; relocalization matches ORB descriptors (a map made with vision.features orb)",
+                             map.descriptor_type));
+  }
   if (map.descriptors.size() != map.positions.size()) {
     return Error(fmt::format("visual landmark map: {} descriptors for {} landmarks", map.descriptors.size(), map.positions.size()));
   }
@@ -92,7 +96,7 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
   std::vector<ProjectedLandmark> usable_landmarks;  // what matching by projection looks for
   for (std::size_t i = 0; i < map_.positions.size(); ++i) {
     if (usable(static_cast<uint32_t>(i))) {
-      usable_landmarks.push_back({map_.positions[i].cast<double>(), descriptors_.ptr<unsigned char>(static_cast<int>(i)), -1, static_cast<int>(i)});
+      usable_landmarks.push_back({map_.positions[i].cast<double>(), descriptors_.row(static_cast<int>(i)), -1, static_cast<int>(i)});
     }
   }
   int best_inliers = 0;

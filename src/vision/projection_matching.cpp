@@ -29,7 +29,7 @@ std::vector<std::pair<int, int>> match_by_projection(const std::vector<Projected
       if (landmark.octave >= 0 && std::abs(keypoint.octave - landmark.octave) > search.max_octave_difference) return;
       const double radius = landmark.octave >= 0 ? widest : radius_at(keypoint.octave);
       if ((Eigen::Vector2d(keypoint.pt.x, keypoint.pt.y) - *pixel).squaredNorm() > radius * radius) return;
-      nearest.offer(k, hamming_distance(landmark.descriptor, features.descriptors.ptr<unsigned char>(k)));
+      nearest.offer(k, descriptor_distance(landmark.descriptor, 0, features.descriptors, k));
     });
     if (!nearest.passes(search.ratio, search.max_descriptor_distance)) continue;
     auto& slot = owner[static_cast<std::size_t>(nearest.index)];

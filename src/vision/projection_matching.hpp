@@ -49,7 +49,7 @@ class KeypointGrid {
 /// A landmark to look for in the image.
 struct ProjectedLandmark {
   Eigen::Vector3d position_world;
-  const unsigned char* descriptor = nullptr;  ///< 32 bytes (ORB)
+  cv::Mat descriptor;                         ///< one row: CV_8UC1 (ORB) or CV_32FC1 (learned), as the keypoints'
   int octave = -1;                            ///< the pyramid level it was seen at; -1: unknown (any level)
   int id = 0;                                 ///< returned in the matches
 };
@@ -58,7 +58,7 @@ struct ProjectionSearch {
   double radius_px = 15.0;          ///< search radius around the projection at octave 0
   double scale_factor = 1.2;        ///< the radius grows by this per octave of the landmark (or the keypoint, when unknown)
   double ratio = 0.9;               ///< best against second-best descriptor distance
-  int max_descriptor_distance = 64;
+  int max_descriptor_distance = 64;  ///< descriptor_distance()'s units (Hamming bits for ORB)
   int max_octave_difference = 2;    ///< keypoints further from the landmark's octave are skipped
 };
 

@@ -1,6 +1,7 @@
 #include "hanzo/fusion/vision/visual_odometry.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -49,7 +50,7 @@ struct Keyframe {
 
 struct Landmark {
   Eigen::Vector3d position;
-  cv::Mat descriptor;  // 1 x 32, of the latest observation
+  cv::Mat descriptor;  // one row (the keypoints' type), of the latest observation
   int octave = 0;      // of the latest observation
   std::vector<std::pair<int, int>> observations;  // (keyframe id, keypoint)
   int created_at = 0;  // keyframe id that created it
@@ -117,6 +118,9 @@ Status validate(const VisualOdometryConfig& config) {
   if (!positive(config.min_initialization_parallax_deg)) return Error("VisualOdometryConfig.min_initialization_parallax_deg: must be positive", "min_initialization_parallax_deg");
   if (!positive(config.projection_search_radius_px)) return Error("VisualOdometryConfig.projection_search_radius_px: must be positive", "projection_search_radius_px");
   if (config.max_descriptor_distance < 1 || config.max_descriptor_distance > 256) return Error("VisualOdometryConfig.max_descriptor_distance: must be in 1..256", "max_descriptor_distance");
+  if (!(config.max_float_descriptor_distance > 0.0 && config.max_float_descriptor_distance <= 2.0)) {
+    return Error("VisualOdometryConfig.max_float_descriptor_distance: must be in (0, 2]", "max_float_descriptor_distance");
+  }
   if (config.min_tracked_landmarks < 6) return Error("VisualOdometryConfig.min_tracked_landmarks: must be at least 6", "min_tracked_landmarks");
   if (!positive(config.pixel_sigma)) return Error("VisualOdometryConfig.pixel_sigma: must be positive", "pixel_sigma");
   if (!(config.keyframe_tracked_ratio > 0.0 && config.keyframe_tracked_ratio <= 1.0)) return Error("VisualOdometryConfig.keyframe_tracked_ratio: must be in (0, 1]", "keyframe_tracked_ratio");
@@ -131,6 +135,9 @@ Status validate(const VisualOdometryConfig& config) {
   if (config.bundle_adjustment_iterations < 0) return Error("VisualOdometryConfig.bundle_adjustment_iterations: must not be negative", "bundle_adjustment_iterations");
   if (config.loop_closure && config.loop_min_keyframe_gap < config.window_keyframes) return Error("VisualOdometryConfig.loop_min_keyframe_gap: must be at least window_keyframes", "loop_min_keyframe_gap");
   if (config.loop_min_inliers < 3) return Error("VisualOdometryConfig.loop_min_inliers: must be at least 3", "loop_min_inliers");
+  if (!(config.putative_filter_threshold > 0.0 && config.putative_filter_threshold < 1.0)) {
+    return Error("VisualOdometryConfig.putative_filter_threshold: must be in (0, 1)", "putative_filter_threshold");
+  }
   if (config.loop_cooldown_keyframes < 0) return Error("VisualOdometryConfig.loop_cooldown_keyframes: must not be negative", "loop_cooldown_keyframes");
   return ok_status();
 }
@@ -139,7 +146,7 @@ struct VisualOdometry::State {
   PinholeCamera camera;
   cv::Size image_size;
   VisualOdometryConfig config;
-  OrbExtractor extractor;
+  std::shared_ptr<const FeatureExtractor> extractor;
   // Stereo: the right camera and where it sits in the left camera's frame.
   std::optional<PinholeCamera> right_camera;
   SE3 T_left_right;
@@ -174,6 +181,18 @@ struct VisualOdometry::State {
   // scale_factor^octave for every pyramid level (looked up in the matchers' inner loops).
   std::vector<double> octave_scale;
   double sigma(int octave) const { return config.pixel_sigma * octave_scale[static_cast<std::size_t>(octave)]; }
+  // The image's features, their extraction timed.
+  Result<ImageFeatures> extract(const cv::Mat& image) {
+    const auto start = std::chrono::steady_clock::now();
+    Result<ImageFeatures> features = extractor->extract(image);
+    counts.feature_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return features;
+  }
+
+  // The largest descriptor distance of a match between descriptors like `descriptors`.
+  int max_distance(const cv::Mat& descriptors) const {
+    return descriptor_distance_limit(descriptors, config.max_descriptor_distance, config.max_float_descriptor_distance);
+  }
 
   Frame make_frame(double time, ImageFeatures features) const {
     Frame frame;
@@ -259,9 +278,9 @@ struct VisualOdometry::State {
   // keypoints within 2 sigma of the left
   // keypoint's epipolar line (from the rig's extrinsics) and one octave; each right keypoint
   // kept by the left keypoint it matches best.
-  void match_stereo(Frame& frame) const {
+  void match_stereo(Frame& frame) {
     frame.right_keypoint.assign(frame.features.size(), -1);
-    Result<ImageFeatures> right = extractor.extract(frame.right_image);
+    Result<ImageFeatures> right = extract(frame.right_image);
     frame.right_image.release();
     if (!right) return;
     frame.right_features = std::move(right).value();
@@ -278,15 +297,14 @@ struct VisualOdometry::State {
       const double line_norm = line.head<2>().norm();
       if (line_norm < 1e-12) continue;
       const int octave = frame.features.keypoints[k].octave;
-      const unsigned char* descriptor = frame.features.descriptors.ptr<unsigned char>(static_cast<int>(k));
       NearestCandidates nearest;
       for (std::size_t r = 0; r < frame.right_features.size(); ++r) {
         const cv::KeyPoint& candidate = frame.right_features.keypoints[r];
         if (std::abs(candidate.octave - octave) > 1 || !std::isfinite(right_normalized[r].x())) continue;
         if (std::abs(right_normalized[r].homogeneous().dot(line)) / line_norm * right_camera->fx > 2.0 * sigma(candidate.octave)) continue;
-        nearest.offer(static_cast<int>(r), hamming_distance(descriptor, frame.right_features.descriptors.ptr<unsigned char>(static_cast<int>(r))));
+        nearest.offer(static_cast<int>(r), descriptor_distance(frame.features.descriptors, static_cast<int>(k), frame.right_features.descriptors, static_cast<int>(r)));
       }
-      if (!nearest.passes(0.8, config.max_descriptor_distance)) continue;
+      if (!nearest.passes(0.8, max_distance(frame.features.descriptors))) continue;
       const int best_right = nearest.index, best = nearest.best;
       auto& slot = owner[static_cast<std::size_t>(best_right)];
       if (best < slot.second) slot = {static_cast<int>(k), best};
@@ -403,11 +421,17 @@ struct VisualOdometry::State {
       reference = std::move(frame);
       return result;
     }
-    DescriptorMatcherConfig matcher;
-    matcher.ratio = 0.9;
-    matcher.max_distance = config.max_descriptor_distance;
+    std::vector<FeatureMatch> putative;
+    if (config.putative_filter) {
+      DescriptorMatcherConfig mutual_only = descriptor_matcher();
+      mutual_only.ratio = mutual_only.float_ratio = 1.0;
+      putative = config.putative_filter->filter(match_descriptors(reference->features.descriptors, frame.features.descriptors, mutual_only),
+                                                reference->features, frame.features, config.putative_filter_threshold);
+    } else {
+      putative = match_descriptors(reference->features.descriptors, frame.features.descriptors, descriptor_matcher());
+    }
     std::vector<FeatureMatch> matches;
-    for (const FeatureMatch& match : match_descriptors(reference->features.descriptors, frame.features.descriptors, matcher)) {
+    for (const FeatureMatch& match : putative) {
       if (has_normalized(*reference, static_cast<std::size_t>(match.query)) && has_normalized(frame, static_cast<std::size_t>(match.train))) matches.push_back(match);
     }
     if (static_cast<int>(matches.size()) < config.min_initialization_inliers) {
@@ -497,6 +521,16 @@ struct VisualOdometry::State {
     return result;
   }
 
+  // Descriptor matching of a frame against a reference or a map: ratio 0.9, mutual.
+  DescriptorMatcherConfig descriptor_matcher() const {
+    DescriptorMatcherConfig matcher;
+    matcher.ratio = 0.9;
+    matcher.float_ratio = 0.9;
+    matcher.max_distance = config.max_descriptor_distance;
+    matcher.max_float_distance = config.max_float_descriptor_distance;
+    return matcher;
+  }
+
   // ---- tracking ----
 
   // Landmark -> keypoint matches by projection at T_camera_world (projection_matching.hpp),
@@ -507,12 +541,12 @@ struct VisualOdometry::State {
     queries.reserve(landmark_ids.size());
     for (int landmark_id : landmark_ids) {
       const Landmark& landmark = landmarks.at(landmark_id);
-      queries.push_back({landmark.position, landmark.descriptor.ptr<unsigned char>(), landmark.octave, landmark_id});
+      queries.push_back({landmark.position, landmark.descriptor, landmark.octave, landmark_id});
     }
     ProjectionSearch search;
     search.radius_px = config.projection_search_radius_px * radius_scale;
     search.scale_factor = config.features.scale_factor;
-    search.max_descriptor_distance = config.max_descriptor_distance;
+    search.max_descriptor_distance = max_distance(frame.features.descriptors);
     return vision::match_by_projection(queries, frame.features, KeypointGrid(frame.features.keypoints, image_size, 32), camera, T_camera_world, search);
   }
 
@@ -548,12 +582,9 @@ struct VisualOdometry::State {
     cv::Mat descriptors;
     const std::vector<int> candidate_landmarks = landmarks_seen_by(keyframe_ids, &descriptors);
     if (static_cast<int>(candidate_landmarks.size()) < min_inliers) return std::nullopt;
-    DescriptorMatcherConfig matcher;
-    matcher.ratio = 0.9;
-    matcher.max_distance = config.max_descriptor_distance;
     std::vector<cv::Point3d> object_points;
     std::vector<cv::Point2d> image_points;
-    for (const FeatureMatch& match : match_descriptors(descriptors, frame.features.descriptors, matcher)) {
+    for (const FeatureMatch& match : match_descriptors(descriptors, frame.features.descriptors, descriptor_matcher())) {
       const auto k = static_cast<std::size_t>(match.train);
       if (!has_normalized(frame, k)) continue;
       const Eigen::Vector3d& p = landmarks.at(candidate_landmarks[static_cast<std::size_t>(match.query)]).position;
@@ -654,15 +685,15 @@ struct VisualOdometry::State {
   bool standing_still(const Frame& frame, const Frame& anchor) const {
     const KeypointGrid grid(frame.features.keypoints, image_size, 16);
     const double radius = config.standstill_pixels;
+    const int close = max_distance(anchor.features.descriptors) / 2;
     int still = 0;
     for (std::size_t k = 0; k < anchor.features.size(); ++k) {
       const cv::KeyPoint& keypoint = anchor.features.keypoints[k];
-      const unsigned char* descriptor = anchor.features.descriptors.ptr<unsigned char>(static_cast<int>(k));
       bool found = false;
       grid.for_each_near(keypoint.pt.x, keypoint.pt.y, radius, [&](int candidate) {
         const cv::KeyPoint& other = frame.features.keypoints[static_cast<std::size_t>(candidate)];
         found = found || (other.octave == keypoint.octave && cv::norm(other.pt - keypoint.pt) <= radius &&
-                          hamming_distance(descriptor, frame.features.descriptors.ptr<unsigned char>(candidate)) <= config.max_descriptor_distance / 2);
+                          descriptor_distance(anchor.features.descriptors, static_cast<int>(k), frame.features.descriptors, candidate) <= close);
       });
       still += found;
     }
@@ -766,16 +797,15 @@ struct VisualOdometry::State {
       const double line_norm = line.head<2>().norm();
       if (line_norm < 1e-12) continue;
       const int octave2 = newer.frame.features.keypoints[k2].octave;
-      const unsigned char* descriptor = newer.frame.features.descriptors.ptr<unsigned char>(static_cast<int>(k2));
       NearestCandidates nearest;
       for (int k1 : free1) {
         const cv::KeyPoint& keypoint1 = older.frame.features.keypoints[static_cast<std::size_t>(k1)];
         if (std::abs(keypoint1.octave - octave2) > 1) continue;
         const double epipolar_px = std::abs(older.frame.normalized[static_cast<std::size_t>(k1)].homogeneous().dot(line)) / line_norm * camera.fx;
         if (epipolar_px > 2.0 * sigma(keypoint1.octave)) continue;
-        nearest.offer(k1, hamming_distance(older.frame.features.descriptors.ptr<unsigned char>(k1), descriptor));
+        nearest.offer(k1, descriptor_distance(older.frame.features.descriptors, k1, newer.frame.features.descriptors, static_cast<int>(k2)));
       }
-      if (!nearest.passes(0.9, config.max_descriptor_distance)) continue;
+      if (!nearest.passes(0.9, max_distance(newer.frame.features.descriptors))) continue;
       const int best_k1 = nearest.index, best = nearest.best;
       auto& slot = owner[static_cast<std::size_t>(best_k1)];
       if (best < slot.second) slot = {static_cast<int>(k2), best};
@@ -1067,13 +1097,25 @@ Result<std::unique_ptr<VisualOdometry>> VisualOdometry::create(const PinholeCame
   state->camera = camera;
   state->image_size = image_size;
   state->config = config;
-  state->extractor = OrbExtractor(config.features);
-  for (int level = 0; level < config.features.pyramid_levels; ++level) state->octave_scale.push_back(std::pow(config.features.scale_factor, level));
-  if (config.loop_closure) {
+  state->extractor = config.extractor ? config.extractor : std::make_shared<const OrbFeatureExtractor>(config.features);
+  // The octaves' scales are ORB's pyramid's (an ORB extractor given brings its own); learned
+  // keypoints are all of octave 0.
+  if (const auto* orb = dynamic_cast<const OrbFeatureExtractor*>(state->extractor.get())) state->config.features = orb->config();
+  for (int level = 0; level < state->config.features.pyramid_levels; ++level) {
+    state->octave_scale.push_back(std::pow(state->config.features.scale_factor, level));
+  }
+  const bool binary_descriptors = state->extractor->descriptor_type() == CV_8UC1;
+  if (config.loop_closure && !binary_descriptors) {
+    logger()->warn("visual odometry: loop closure off: the bag-of-words vocabulary is of binary descriptors, {} gives float ones",
+                   state->extractor->name());
+  }
+  if (config.loop_closure && binary_descriptors) {
     state->vocabulary = config.vocabulary ? config.vocabulary : default_vocabulary();
     if (state->vocabulary) state->places.emplace(state->vocabulary);
   }
   state->counts.loop_closure_enabled = state->places.has_value();
+  state->counts.features = state->extractor->name();
+  state->counts.learned_matcher = config.putative_filter != nullptr;
   return std::unique_ptr<VisualOdometry>(new VisualOdometry(std::move(state)));
 }
 
@@ -1115,13 +1157,14 @@ Result<VisualOdometryFrame> VisualOdometry::track_frame(double time, const cv::M
   if (image.cols != s.image_size.width || image.rows != s.image_size.height) {
     return Error(fmt::format("image is {} x {}, the camera's calibration is for {} x {}", image.cols, image.rows, s.image_size.width, s.image_size.height), "image");
   }
-  Result<ImageFeatures> features = with_context(s.extractor.extract(image), "image");
+  Result<ImageFeatures> features = with_context(s.extract(image), "image");
   if (!features) return Error(features.error().message, "image");
   if (!right.empty() && (right.depth() != CV_8U || (right.channels() != 1 && right.channels() != 3 && right.channels() != 4))) {
     return Error(fmt::format("right image: type {} is not 8-bit grey, BGR or BGRA", cv::typeToString(right.type())), "right_image");
   }
   s.last_time = time;
   ++s.counts.frames;
+  ++s.counts.feature_frames;
   Frame frame = s.make_frame(time, std::move(features).value());
   frame.right_image = right;
   if (!s.initialized) {
@@ -1160,9 +1203,15 @@ msgs::VisualLandmarkLayer VisualOdometry::landmark_layer(const std::string& came
     if (landmark.observations.size() < 2 || !landmark.position.allFinite()) continue;
     index_of[id] = static_cast<uint32_t>(layer.positions.size());
     layer.positions.push_back(landmark.position.cast<float>());
-    std::array<uint8_t, 32> descriptor{};
-    std::memcpy(descriptor.data(), landmark.descriptor.ptr<unsigned char>(), descriptor.size());
-    layer.descriptors.push_back(descriptor);
+    if (landmark.descriptor.type() == CV_8UC1) {
+      std::array<uint8_t, 32> descriptor{};
+      std::memcpy(descriptor.data(), landmark.descriptor.ptr<unsigned char>(), descriptor.size());
+      layer.descriptors.push_back(descriptor);
+    } else {
+      layer.descriptor_type = state_->extractor->name();
+      layer.float_descriptor_size = static_cast<uint32_t>(landmark.descriptor.cols);
+      layer.float_descriptors.insert(layer.float_descriptors.end(), landmark.descriptor.ptr<float>(), landmark.descriptor.ptr<float>() + landmark.descriptor.cols);
+    }
     layer.observations.push_back(static_cast<uint32_t>(landmark.observations.size()));
     // Depth uncertainty of a triangulated point: depth^2 sigma_px / (f baseline), with the
     // widest baseline among its observing cameras (the stereo rig's for a stereo observation).

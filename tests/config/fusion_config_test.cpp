@@ -138,6 +138,9 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
                             {.use_orientation = {true, false, true}, .orientation_noise = 0.02}});
   config.sensors.push_back({"wheels2", SensorModality::kWheelOdometry, "/wheels2", 50.0, "base_link", "",
                             {.speed_noise = 0.1, .use_yaw_rate = true, .non_holonomic = false}});
+  config.vision.features = {"aliked-n16", "/models/ALIKED weights/aliked-n16.pth"};
+  config.vision.matcher = MatcherType::kLearned;
+  config.sensors.push_back({"camera_front", SensorModality::kCamera, "/camera", 20.0, "camera_link", "", {}, FeatureSelection{"orb", ""}});
   const std::filesystem::path path = std::filesystem::temp_directory_path() / "hanzo_fusion_config_test.yaml";
   ASSERT_TRUE(save_fusion_config(config, path.string()).ok());
   const Result<FusionConfig> loaded = load_fusion_config(path.string());
@@ -155,7 +158,11 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   EXPECT_FALSE(loaded->mapping.loop_closure);
   EXPECT_EQ(loaded->mapping.keyframe_angle, 0.0);
   EXPECT_EQ(loaded->mapping.occupancy_resolution, MappingConfig{}.occupancy_resolution);
-  ASSERT_EQ(loaded->sensors.size(), 10U);
+  EXPECT_EQ(loaded->vision.features, (FeatureSelection{"aliked-n16", "/models/ALIKED weights/aliked-n16.pth"}));
+  EXPECT_EQ(loaded->vision.matcher, MatcherType::kLearned);
+  EXPECT_EQ(loaded->features_of(*loaded->find_sensor("camera_front")).type, "orb");
+  EXPECT_EQ(loaded->features_of(*loaded->find_sensor("imu2")).type, "aliked-n16");
+  ASSERT_EQ(loaded->sensors.size(), 11U);
   EXPECT_EQ(loaded->sensors[6].topic, "/radar: front");
   EXPECT_EQ(loaded->sensors[6].modality, SensorModality::kRadar);
   EXPECT_EQ(loaded->sensors[7].modality, SensorModality::kGnss);
@@ -174,6 +181,24 @@ TEST(FusionConfig, MappingBlockIsCheckedKeyByKey) {
   EXPECT_EQ(config.mapping.lidar_voxel, 0.5);
   config.mapping.loop_max_rmse = std::nan("");
   EXPECT_THAT(validate(config).error().message, HasSubstr("mapping.loop_max_rmse"));
+}
+
+TEST(FusionConfig, VisionBlockChoosesFeaturesPerCamera) {
+  const std::string sensors = "  sensors:\n    camera: {rate: 10, features: alike-t}\n    camera_rear: {rate: 10}\n";
+  FusionConfig config = parse_fusion_config("fusion:\n  vision: {features: {type: aliked-t16, model: weights.pth}, matcher: learned}\n" + sensors,
+                                            "fusion.yaml").value();
+  EXPECT_EQ(config.features_of(config.sensors[0]), (FeatureSelection{"alike-t", ""}));
+  EXPECT_EQ(config.features_of(config.sensors[1]), (FeatureSelection{"aliked-t16", "weights.pth"}));
+  EXPECT_EQ(config.vision.matcher, MatcherType::kLearned);
+  EXPECT_EQ(parse_fusion_config("fusion:\n" + sensors, "fusion.yaml").value().vision.features.type, "orb");  // the default
+  EXPECT_THAT(error_of("fusion:\n  vision:\n    features: superpoint\n" + sensors),
+              HasSubstr("fusion.yaml:3: vision.features: expected orb, aliked-t16, aliked-n16, aliked-n16rot, aliked-n32, alike-t, alike-s, alike-n, alike-l, got 'superpoint'"));
+  EXPECT_THAT(error_of("fusion:\n  vision: {features: {type: orb, model: x.pth}}\n" + sensors), HasSubstr("ORB takes no model"));
+  EXPECT_THAT(error_of("fusion:\n  vision: {matcher: superglue}\n" + sensors), HasSubstr("expected ratio or learned, got 'superglue'"));
+  EXPECT_THAT(error_of("fusion:\n  vision: {place_recognition: bow}\n" + sensors), HasSubstr("place_recognition"));
+  EXPECT_THAT(error_of("fusion:\n  sensors:\n    imu: {rate: 100, features: orb}\n"), HasSubstr("applies to camera sensors only (this sensor is imu)"));
+  config.sensors[1].features = FeatureSelection{"orb", "x.pth"};
+  EXPECT_THAT(validate(config).error().message, HasSubstr("sensors.camera_rear.features: ORB takes no model"));
 }
 
 TEST(FusionConfig, SaveRefusesAnInvalidConfigAndKeepsTheOldFile) {

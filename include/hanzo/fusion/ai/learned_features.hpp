@@ -88,6 +88,7 @@ class LearnedFeatureExtractor final : public vision::FeatureExtractor {
   /// extract() and the score map.
   Result<LearnedFeatureMaps> extract_with_maps(const cv::Mat& image, const cv::Mat& mask = cv::Mat()) const;
   std::string name() const override { return std::string(to_string(config_.model)); }
+  int descriptor_type() const override { return CV_32FC1; }
   const LearnedFeatureConfig& config() const { return config_; }
   /// The weights' file.
   const std::string& model_path() const { return model_path_; }

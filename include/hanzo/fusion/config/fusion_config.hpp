@@ -150,6 +150,32 @@ struct SensorFusionOptions {
   double velocity_noise = 0.1;  // m/s, ego-velocity per axis
 };
 
+/// A keypoint detector and descriptor of the visual frontends: ORB (classical, the default) or a
+/// learned model (the AI module, HANZO_FUSION_AI: docs/learned-features.md).
+struct FeatureSelection {
+  std::string type = "orb";  // one of feature_type_names()
+  std::string model;         // learned: the weights (.pth); empty: <type>.pth in $HANZO_FUSION_MODELS
+  bool learned() const { return type != "orb"; }
+  bool operator==(const FeatureSelection& other) const { return type == other.type && model == other.model; }
+};
+/// "orb", then the learned models: "aliked-t16", "aliked-n16", "aliked-n16rot", "aliked-n32",
+/// "alike-t", "alike-s", "alike-n", "alike-l".
+const std::vector<std::string_view>& feature_type_names();
+/// A known type; a model path only for a learned one. `field` names the key in the error.
+Status validate(const FeatureSelection& features, const std::string& field);
+
+/// How the visual odometry matches two views before RANSAC: kRatio, the ratio test; kLearned,
+/// the learned correspondence filter (vision/correspondence_filter.hpp) on mutual matches.
+enum class MatcherType { kRatio, kLearned };
+std::string_view to_string(MatcherType type);  // "ratio", "learned"
+
+/// fusion.vision: the visual frontends' features and matching; a camera sensor's `features`
+/// key overrides `features` for that camera.
+struct VisionConfig {
+  FeatureSelection features;
+  MatcherType matcher = MatcherType::kRatio;
+};
+
 struct SensorConfig {
   std::string name;  // the key under `sensors:`, also the calibration's "<name>_to_body"
   SensorModality modality = SensorModality::kImu;
@@ -159,6 +185,7 @@ struct SensorConfig {
   std::string type;        // optional model, e.g. "velodyne_vlp16", "stereo_left"; "" when not given;
                            // kPlanarLaserType marks a 2D laser scanner (its scans are planar)
   SensorFusionOptions fusion;
+  std::optional<FeatureSelection> features = std::nullopt;  // cameras: this camera's features (else fusion.vision.features)
 
   /// The timeout in seconds (the default applied).
   double effective_timeout_s() const;
@@ -185,9 +212,12 @@ struct MappingConfig {
 struct FusionConfig {
   FrontendConfig frontend;
   MappingConfig mapping;
+  VisionConfig vision;
   std::vector<SensorConfig> sensors;  // in file order
 
   const SensorConfig* find_sensor(std::string_view name) const;
+  /// The features a camera uses: its own `features`, else vision.features.
+  const FeatureSelection& features_of(const SensorConfig& camera) const { return camera.features ? *camera.features : vision.features; }
 };
 
 /// Checks a configuration built in code with the same rules the loader applies: positive

@@ -67,7 +67,10 @@ struct VisualKeyframe {
 struct VisualLandmarkLayer {
   std::string camera;                                    // sensor name
   std::vector<Eigen::Vector3f> positions;                // world frame, meters
-  std::vector<std::array<uint8_t, 32>> descriptors;      // one ORB descriptor per landmark
+  std::vector<std::array<uint8_t, 32>> descriptors;      // one ORB descriptor per landmark (descriptor_type "orb")
+  std::string descriptor_type = "orb";                   // the extractor's name; a learned one ("aliked-t16") fills float_descriptors
+  uint32_t float_descriptor_size = 0;                    // floats per landmark in float_descriptors
+  std::vector<float> float_descriptors;                  // row-major, one unit-length row per landmark
   std::vector<float> position_std;                       // 1-sigma (m); empty or one per landmark
   std::vector<uint32_t> observations;                    // empty or one per landmark
   std::vector<VisualKeyframe> keyframes;

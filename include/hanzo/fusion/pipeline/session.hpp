@@ -239,6 +239,14 @@ struct MappingSummary {
   uint64_t camera_dark_frames = 0;
   uint64_t camera_glare_frames = 0;
   uint64_t camera_motion_blur_frames = 0;
+  /// The cameras' feature stage: its detector ("orb"; "shi-tomasi" in the visual-inertial
+  /// odometry; or a learned model, "aliked-t16", ...: fusion.vision.features), its mean time per
+  /// frame (ms, wall clock: extraction, or the visual-inertial tracker's detection and optical
+  /// flow), and whether the learned correspondence filter matched the first views
+  /// (fusion.vision.matcher learned). Empty / 0 / false without cameras.
+  std::string camera_features;
+  double camera_feature_ms = 0.0;
+  bool camera_learned_matcher = false;
 };
 
 /// A pose at a time (body in the world frame).

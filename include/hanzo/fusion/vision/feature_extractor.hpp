@@ -25,6 +25,8 @@ class FeatureExtractor {
   virtual Result<ImageFeatures> extract(const cv::Mat& image, const cv::Mat& mask = cv::Mat()) const = 0;
   /// "orb", "aliked-t16", ...
   virtual std::string name() const = 0;
+  /// The descriptors' type: CV_8UC1 (binary) or CV_32FC1 (float).
+  virtual int descriptor_type() const = 0;
 };
 
 /// OrbExtractor behind the FeatureExtractor interface.
@@ -33,6 +35,8 @@ class OrbFeatureExtractor final : public FeatureExtractor {
   explicit OrbFeatureExtractor(OrbExtractorConfig config = {}) : orb_(std::move(config)) {}
   Result<ImageFeatures> extract(const cv::Mat& image, const cv::Mat& mask = cv::Mat()) const override { return orb_.extract(image, mask); }
   std::string name() const override { return "orb"; }
+  int descriptor_type() const override { return CV_8UC1; }
+  const OrbExtractorConfig& config() const { return orb_.config(); }
 
  private:
   OrbExtractor orb_;

@@ -55,6 +55,11 @@ inline constexpr double kFloatDistanceScale = 1000.0;
 /// both CV_32FC1, of the same width): Hamming bits, or kFloatDistanceScale x Euclidean.
 int descriptor_distance(const cv::Mat& descriptors_a, int a, const cv::Mat& descriptors_b, int b);
 
+/// The largest distance of a match in descriptor_distance()'s units for rows like `descriptors`':
+/// `max_hamming_bits` for binary (CV_8UC1) rows, kFloatDistanceScale x `max_euclidean` for float
+/// (CV_32FC1) rows.
+int descriptor_distance_limit(const cv::Mat& descriptors, int max_hamming_bits, double max_euclidean);
+
 struct FeatureMatch {
   int query = -1;     ///< index into the first (query) features
   int train = -1;     ///< index into the second (train) features

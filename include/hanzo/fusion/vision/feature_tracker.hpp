@@ -7,7 +7,7 @@
 //      features end their tracks;
 //   2. when the features moved (median over 1 px), the tracked pairs are checked by a RANSAC
 //      fundamental matrix on undistorted coordinates (ransac_threshold_px); outliers end;
-//   3. new Shi-Tomasi corners (the local maxima of cv::cornerMinEigenVal) at least min_distance_px
+//   3. new Shi-Tomasi corners (or a detector's keypoints, FeatureTrackerConfig::detector) (the local maxima of cv::cornerMinEigenVal) at least min_distance_px
 //      from every kept feature top the image up to max_features, spread over a grid of cells
 //      (each cell gets its share, its strongest corners first, down to quality_level of its
 //      strongest and min_image_quality of the image's strongest: a strong checkerboard does not
@@ -32,6 +32,7 @@
 #include "hanzo/fusion/core/pinhole_camera.hpp"
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/vision/feature_extractor.hpp"
 #include "hanzo/fusion/vision/feature_observation.hpp"
 
 namespace hanzo::fusion::vision {
@@ -54,6 +55,11 @@ struct FeatureTrackerConfig {
   double ransac_threshold_px = 1.0;
   /// Largest distance of a right-image match from the epipolar line (pixels).
   double stereo_epipolar_px = 2.0;
+  /// New features from this detector's keypoints (their scores) instead of Shi-Tomasi corners,
+  /// with the same grid, spacing and quality_level; null: Shi-Tomasi. A learned detector
+  /// (ai::LearnedFeatureExtractor) finds corners ORB and Shi-Tomasi miss in dim or weakly textured
+  /// images; its descriptors are not used (the tracks follow optical flow).
+  std::shared_ptr<const FeatureExtractor> detector;
 };
 
 /// Checks every field; the error names the first field out of range.

@@ -71,6 +71,8 @@
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/msgs/map_messages.hpp"
+#include "hanzo/fusion/vision/correspondence_filter.hpp"
+#include "hanzo/fusion/vision/feature_extractor.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
 #include "hanzo/fusion/vision/vocabulary.hpp"
 
@@ -89,8 +91,20 @@ struct VisualOdometryConfig {
   double min_initialization_parallax_deg = 1.0;
   /// Tracking: search radius around a landmark's projection (pixels at octave 0).
   double projection_search_radius_px = 15.0;
-  /// Largest Hamming distance of a landmark-keypoint match (bits).
+  /// The keypoint detector and descriptor; null: ORB with `features` (the default). A learned
+  /// extractor (ai::LearnedFeatureExtractor, float descriptors) is matched by Euclidean distance
+  /// under max_float_descriptor_distance; its keypoints are all of octave 0 (one scale), and
+  /// loop closure needs place recognition for its descriptors (the bag of words is binary).
+  std::shared_ptr<const FeatureExtractor> extractor;
+  /// Largest Hamming distance of a landmark-keypoint match (bits, binary descriptors).
   int max_descriptor_distance = 64;
+  /// Largest Euclidean distance of a match of unit-length float descriptors (0..2).
+  double max_float_descriptor_distance = 1.0;
+  /// Initialization's two-view matches: null, the ratio test (0.9); else the learned
+  /// correspondence filter keeps the mutual matches it classifies as inliers (probability >=
+  /// putative_filter_threshold) before the essential-matrix RANSAC.
+  std::shared_ptr<const CorrespondenceFilter> putative_filter;
+  double putative_filter_threshold = 0.5;
   /// Fewer inliers than this after pose refinement: the frame is lost.
   int min_tracked_landmarks = 15;
   /// Keypoint position noise (pixels at octave 0; octave l has sigma scale_factor^l).
@@ -167,6 +181,10 @@ struct VisualOdometrySummary {
   int loop_closures = 0;    ///< loops accepted and corrected
   bool loop_closure_enabled = false;
   bool scale_free = true;  ///< monocular: lengths are in units of the first baseline
+  std::string features = "orb";      ///< the extractor's name (FeatureExtractor::name)
+  int feature_frames = 0;            ///< frames whose features were extracted (a stereo pair is one)
+  double feature_seconds = 0.0;      ///< the time their extraction took (both images of a pair), wall clock
+  bool learned_matcher = false;      ///< initialization filtered its matches by the learned correspondence filter
 };
 
 class VisualOdometry {
