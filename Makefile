@@ -7,7 +7,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
-.PHONY: all deps configure build test demo bench fuzz sanitize install clean train-correspondence-filter
+.PHONY: all deps configure build test demo bench fuzz sanitize install clean train-correspondence-filter train-place-recognition
 
 all: build
 
@@ -32,6 +32,10 @@ demo: build
 train-correspondence-filter: build
 	@/usr/bin/python3 models/trained/train_correspondence_filter.py --cli $(BUILD_DIR)/apps/hanzo-fusion \
 		--work $(BUILD_DIR)/train-correspondence-filter --out models/trained/correspondence_filter.json
+
+train-place-recognition: build
+	@bash models/trained/place_recognition/train.sh $(BUILD_DIR)/apps/hanzo-fusion $(BUILD_DIR)/train-place-recognition \
+		models/trained/vlad_aliked-t16.hzvlad
 
 bench: build
 	@bash scripts/bench.sh $(BUILD_DIR)

@@ -45,5 +45,7 @@ void add_privacy_command(CLI::App& app, const Output& output, Command& run);
 void add_crypto_command(CLI::App& app, const Output& output, Command& run);
 void add_features_command(CLI::App& app, const Output& output, Command& run);
 void add_vision_command(CLI::App& app, const Output& output, Command& run);
+/// vision vlad, vision place-recall (vision_place_command.cpp), under `vision`.
+void add_vision_place_commands(CLI::App& vision_app, const Output& output, Command& run);
 
 }  // namespace hanzo::fusion::app

@@ -52,30 +52,6 @@ struct RelocalizeOptions {
   std::string camera;  // empty: the map's camera
 };
 
-// The image files named by `inputs` (files as given, folders searched recursively, sorted),
-// every `step`-th of each folder.
-Result<std::vector<std::string>> collect_images(const std::vector<std::string>& inputs, int step) {
-  std::vector<std::string> images;
-  for (const std::string& input : inputs) {
-    std::error_code error;
-    if (std::filesystem::is_directory(input, error)) {
-      std::vector<std::string> found;
-      for (const auto& entry : std::filesystem::recursive_directory_iterator(input, error)) {
-        if (entry.is_regular_file() && io::has_image_extension(entry.path().string())) found.push_back(entry.path().string());
-      }
-      if (error) return Error(fmt::format("{}: cannot list the folder ({})", input, error.message()));
-      std::sort(found.begin(), found.end());
-      if (found.empty()) return Error(fmt::format("{}: no images (.png, .jpg, .pgm, .ppm, .bmp, .tif) in the folder", input));
-      for (std::size_t i = 0; i < found.size(); i += static_cast<std::size_t>(step)) images.push_back(found[i]);
-    } else if (std::filesystem::is_regular_file(input, error)) {
-      images.push_back(input);
-    } else {
-      return Error(fmt::format("{}: no such file or folder", input));
-    }
-  }
-  return images;
-}
-
 Result<cv::Mat> descriptors_of(const std::string& path, const vision::OrbExtractor& extractor) {
   cv::Mat image;
   HANZO_ASSIGN_OR_RETURN(image, read_image_input(path, cv::IMREAD_GRAYSCALE));
@@ -188,7 +164,7 @@ int run_relocalize(const Output& output, const RelocalizeOptions& options) {
 }  // namespace
 
 void add_vision_command(CLI::App& app, const Output& output, Command& run) {
-  CLI::App* vision_app = app.add_subcommand("vision", "Visual place recognition: bag-of-words vocabularies and queries");
+  CLI::App* vision_app = app.add_subcommand("vision", "Visual place recognition: bag-of-words vocabularies, learned (VLAD) models, queries, recall");
   vision_app->require_subcommand(1);
 
   auto train = std::make_shared<VocabularyOptions>();
@@ -217,6 +193,8 @@ void add_vision_command(CLI::App& app, const Output& output, Command& run) {
   relocalize_app->add_option("--calib", relocalize->calib, "Calibration YAML with the camera's intrinsics and extrinsics")->required();
   relocalize_app->add_option("--camera", relocalize->camera, "Camera sensor name (default: the map's)");
   relocalize_app->callback([&output, &run, relocalize] { run = [&output, relocalize] { return run_relocalize(output, *relocalize); }; });
+
+  add_vision_place_commands(*vision_app, output, run);
 }
 
 }  // namespace hanzo::fusion::app

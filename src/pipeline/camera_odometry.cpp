@@ -7,6 +7,7 @@
 
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/pipeline/feature_extractors.hpp"
+#include "hanzo/fusion/vision/image_message.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
@@ -14,26 +15,6 @@ namespace {
 // A learned detector offers the visual-inertial tracker this many candidates per feature it keeps
 // (the grid then spreads them).
 constexpr int kTrackerCandidates = 4;
-
-// The image as 8-bit grey (a copy: the message's buffer is not kept).
-Result<cv::Mat> grey_image(const msgs::ImageMessage& image) {
-  const int rows = static_cast<int>(image.height), columns = static_cast<int>(image.width);
-  if (image.data.size() != static_cast<std::size_t>(rows) * static_cast<std::size_t>(columns) * msgs::bytes_per_pixel(image.encoding)) {
-    return Error(fmt::format("image data is {} bytes, {} x {} {} needs {}", image.data.size(), columns, rows, msgs::to_string(image.encoding),
-                             static_cast<std::size_t>(rows) * static_cast<std::size_t>(columns) * msgs::bytes_per_pixel(image.encoding)));
-  }
-  auto* data = const_cast<uint8_t*>(image.data.data());
-  switch (image.encoding) {
-    case msgs::ImageEncoding::kMono8: return cv::Mat(rows, columns, CV_8UC1, data).clone();
-    case msgs::ImageEncoding::kRgb8:
-    case msgs::ImageEncoding::kBgr8: {
-      cv::Mat grey;
-      cv::cvtColor(cv::Mat(rows, columns, CV_8UC3, data), grey, image.encoding == msgs::ImageEncoding::kRgb8 ? cv::COLOR_RGB2GRAY : cv::COLOR_BGR2GRAY);
-      return grey;
-    }
-    default: return Error(fmt::format("image encoding {} is not mono8, rgb8 or bgr8", msgs::to_string(image.encoding)));
-  }
-}
 
 // The features the cameras are configured with (fusion.vision.features or the left camera's own)
 // and the configuration key they come from; a stereo pair's cameras must agree.
@@ -223,7 +204,7 @@ CameraOdometry::CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry,
 
 Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::add(std::string_view sensor, const msgs::ImageMessage& image) {
   cv::Mat grey;
-  HANZO_ASSIGN_OR_RETURN(grey, grey_image(image));
+  HANZO_ASSIGN_OR_RETURN(grey, vision::grey_image(image));
   if (sensor == left_sensor_) {
     const Timestamp time = image.timestamp + left_offset_;
     if (!stereo()) return track(time, grey, cv::Mat());

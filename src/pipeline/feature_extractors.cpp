@@ -1,5 +1,7 @@
 #include "hanzo/fusion/pipeline/feature_extractors.hpp"
 
+#include <string>
+
 #include <fmt/format.h>
 
 #ifdef HANZO_FUSION_WITH_AI

@@ -6,6 +6,7 @@
 
 #include <Eigen/Dense>
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -71,6 +72,23 @@ Eigen::Vector3f sky_color(const Eigen::Vector3d& direction_world) {
   return Eigen::Vector3f(0.78F, 0.82F, 0.86F) * (1.0F - up) + Eigen::Vector3f(0.35F, 0.5F, 0.8F) * up;
 }
 
+// Shadow rays start this far off the surface (metres) and look this far for an occluder.
+constexpr double kShadowOffset = 1e-3;
+constexpr double kShadowDistance = 100.0;
+
+// The albedo of a surface point under snow: upward surfaces in 0.4 m patches (a hash of the
+// patch, so the same patches every frame), white with a fifth of the texture showing through.
+Eigen::Vector3f snowy(const Eigen::Vector3f& albedo, const RayHit& hit, double snow_cover) {
+  if (snow_cover <= 0.0 || hit.normal.z() < 0.7) return albedo;
+  const auto cell_x = static_cast<int64_t>(std::floor(hit.point.x() / 0.4)), cell_y = static_cast<int64_t>(std::floor(hit.point.y() / 0.4));
+  uint64_t hash = static_cast<uint64_t>(cell_x) * 0x9E3779B97F4A7C15ULL ^ static_cast<uint64_t>(cell_y) * 0xC2B2AE3D27D4EB4FULL;
+  hash ^= hash >> 31;
+  hash *= 0xBF58476D1CE4E5B9ULL;
+  hash ^= hash >> 29;
+  if (static_cast<double>(hash >> 11) / static_cast<double>(uint64_t{1} << 53) >= snow_cover) return albedo;
+  return Eigen::Vector3f::Constant(0.72F) + 0.2F * albedo;
+}
+
 }  // namespace
 
 std::string_view to_string(CameraFaultType type) { return enum_name(kFaultNames, type); }
@@ -90,6 +108,11 @@ Result<CameraSimulator> CameraSimulator::create(CameraSimulatorConfig config, co
   if (!counts_ok) {
     return Error{fmt::format("camera distortion {}: wrong number of coefficients ({})", msgs::to_string(config.distortion.type), coefficients),
                  "distortion"};
+  }
+  if (!(config.exposure > 0.0) || !(config.snow_cover >= 0.0 && config.snow_cover <= 1.0) || !(config.tint.minCoeff() >= 0.0F)) {
+    return Error{fmt::format("camera lighting: exposure > 0, snow_cover in [0, 1] and tint >= 0 are required (got {}, {}, [{}])", config.exposure,
+                             config.snow_cover, fmt::join(config.tint.data(), config.tint.data() + 3, ", ")),
+                 "lighting"};
   }
   if (config.supersampling < 1 || config.supersampling > 4) {
     return Error{fmt::format("camera supersampling: expected 1..4, got {}", config.supersampling), "supersampling"};
@@ -177,6 +200,7 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
         const int column_end = std::min(width, (tile_column + 1) * kTilePixels) * s;
         for (int row = tile_row * kTilePixels * s; row < std::min(height, (tile_row + 1) * kTilePixels) * s; ++row) {
           int object_hint = -1;  // neighbouring pixels mostly see the same object
+          int shadow_hint = -1;
           const Eigen::Vector3f* ray = &rays_[static_cast<std::size_t>(row) * width * s];
           Eigen::Vector3f* pixel_row = &radiance[static_cast<std::size_t>(row / s) * width];
           for (int column = tile_column * kTilePixels * s; column < column_end; ++column) {
@@ -185,8 +209,12 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
                 tile.valid ? snapshot.cast(group, direction, &object_hint) : snapshot.cast(origin, direction, config_.max_distance, &object_hint);
             Eigen::Vector3f color;
             if (hit) {
-              const double light = config_.ambient + config_.diffuse * std::max(0.0, hit->normal.dot(sun_direction_));
-              color = hit->material->texture.color(hit->surface_uv.x(), hit->surface_uv.y(), &texture_cache) * static_cast<float>(light);
+              double sunlit = std::max(0.0, hit->normal.dot(sun_direction_));
+              if (sunlit > 0.0 && config_.shadows && snapshot.cast(hit->point + kShadowOffset * hit->normal, sun_direction_, kShadowDistance, &shadow_hint)) {
+                sunlit = 0.0;
+              }
+              const Eigen::Vector3f albedo = hit->material->texture.color(hit->surface_uv.x(), hit->surface_uv.y(), &texture_cache).cwiseProduct(config_.tint);
+              color = snowy(albedo, *hit, config_.snow_cover) * static_cast<float>(config_.ambient + config_.diffuse * sunlit);
             } else {
               color = sky_color(direction);
             }
@@ -207,7 +235,7 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
 
 msgs::ImageMessage CameraSimulator::measure(Timestamp time) {
   const auto width = static_cast<int>(config_.intrinsics.width), height = static_cast<int>(config_.intrinsics.height);
-  double brightness = 1.0, noise = config_.pixel_noise;
+  double brightness = config_.exposure, noise = config_.pixel_noise;
   const CameraFaultEpisode* glare = nullptr;
   const CameraFaultEpisode* blur = nullptr;
   for (const CameraFaultEpisode& fault : config_.faults) {

@@ -329,7 +329,7 @@ Result<SensorSimulatorConfig> parse_lidar(const YamlValue& value, double rate, c
 
 Result<SensorSimulatorConfig> parse_camera(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "width", "height", "fx", "fy", "cx", "cy",
-                                          "distortion_model", "distortion_coeffs", "encoding", "supersampling", "pixel_noise"}));
+                                          "distortion_model", "distortion_coeffs", "encoding", "supersampling", "pixel_noise", "lighting"}));
   CameraSimulatorConfig config;
   config.rate_hz = rate;
   config.T_body_camera = sensor.T_body_sensor;
@@ -360,6 +360,21 @@ Result<SensorSimulatorConfig> parse_camera(const YamlValue& value, double rate, 
   }
   HANZO_ASSIGN_OR_RETURN(config.supersampling, count_or(value["supersampling"], config.supersampling, 1, 4));
   HANZO_ASSIGN_OR_RETURN(config.pixel_noise, non_negative_or(value["pixel_noise"], config.pixel_noise));
+  if (const YamlValue lighting = value["lighting"]; lighting.present()) {
+    HANZO_RETURN_IF_ERROR(lighting.check_keys({"sun_direction", "ambient", "diffuse", "exposure", "shadows", "tint", "snow_cover"}));
+    HANZO_ASSIGN_OR_RETURN(config.sun_direction, vector_or<3>(lighting["sun_direction"], config.sun_direction, "(x, y, z) towards the sun"));
+    if (!(config.sun_direction.norm() > 0.0)) return lighting["sun_direction"].error("expected a non-zero direction");
+    HANZO_ASSIGN_OR_RETURN(config.ambient, non_negative_or(lighting["ambient"], config.ambient));
+    HANZO_ASSIGN_OR_RETURN(config.diffuse, non_negative_or(lighting["diffuse"], config.diffuse));
+    HANZO_ASSIGN_OR_RETURN(config.exposure, positive_or(lighting["exposure"], config.exposure));
+    if (lighting["shadows"].present()) HANZO_ASSIGN_OR_RETURN(config.shadows, lighting["shadows"].as_bool());
+    Eigen::Vector3d tint = config.tint.cast<double>();
+    HANZO_ASSIGN_OR_RETURN(tint, vector_or<3>(lighting["tint"], tint, "(r, g, b) gains"));
+    if ((tint.array() < 0.0).any()) return lighting["tint"].error("gains must be >= 0");
+    config.tint = tint.cast<float>();
+    HANZO_ASSIGN_OR_RETURN(config.snow_cover, non_negative_or(lighting["snow_cover"], config.snow_cover));
+    if (config.snow_cover > 1.0) return lighting["snow_cover"].error(fmt::format("expected a share in [0, 1], got {}", config.snow_cover));
+  }
   return SensorSimulatorConfig(config);
 }
 

@@ -10,10 +10,10 @@
 #include <random>
 
 #include <fmt/format.h>
-#include <zlib.h>
 
 #include "hanzo/fusion/core/files.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
+#include "binary_file.hpp"
 
 namespace hanzo::fusion::vision {
 namespace {
@@ -42,18 +42,8 @@ void majority(const std::vector<const unsigned char*>& descriptors, const std::v
   }
 }
 
-template <typename T>
-void put(std::string& out, T value) {
-  out.append(reinterpret_cast<const char*>(&value), sizeof(T));
-}
-
-template <typename T>
-T take(const std::string& bytes, std::size_t& offset) {
-  T value;
-  std::memcpy(&value, bytes.data() + offset, sizeof(T));
-  offset += sizeof(T);
-  return value;
-}
+using binary_file::put;
+using binary_file::take;
 
 }  // namespace
 
@@ -267,7 +257,7 @@ Status Vocabulary::save(const std::string& path) const {
     out.append(reinterpret_cast<const char*>(node.descriptor), kDescriptorBytes);
     put<double>(out, node.weight);
   }
-  put<uint32_t>(out, static_cast<uint32_t>(::crc32(0L, reinterpret_cast<const Bytef*>(out.data()), static_cast<uInt>(out.size()))));
+  put<uint32_t>(out, binary_file::crc32_of(out, out.size()));
   const std::string partial = path + ".partial";
   return commit_partial_file(partial, path, write_file_durably(partial, out));
 }
@@ -297,7 +287,7 @@ Result<Vocabulary> Vocabulary::load(const std::string& path) {
   }
   uint32_t stored_crc;
   std::memcpy(&stored_crc, bytes.data() + bytes.size() - 4, 4);
-  const auto crc = static_cast<uint32_t>(::crc32(0L, reinterpret_cast<const Bytef*>(bytes.data()), static_cast<uInt>(bytes.size() - 4)));
+  const uint32_t crc = binary_file::crc32_of(bytes, bytes.size() - 4);
   if (crc != stored_crc) return Error(fmt::format("{}: checksum mismatch (stored {:08x}, computed {:08x}): the file is corrupted", path, stored_crc, crc));
   vocabulary.nodes_.resize(node_count);
   for (uint32_t index = 0; index < node_count; ++index) {

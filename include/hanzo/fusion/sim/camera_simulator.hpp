@@ -8,9 +8,13 @@
 // projecting a world point with the message's intrinsics and distortion (e.g. cv::projectPoints)
 // lands where the renderer drew it.
 //
-// Shading: texture colour * (ambient + diffuse * max(0, n . sun_direction)), a vertical sky
-// gradient where a ray hits nothing, Gaussian pixel noise (std in 8-bit grey levels), then
-// quantized to mono8 (Rec. 709 luminance) or rgb8. supersampling s renders s x s rays per pixel
+// Shading: albedo * (ambient + diffuse * max(0, n . sun_direction) * lit), a vertical sky
+// gradient where a ray hits nothing, all times exposure, Gaussian pixel noise (std in 8-bit grey
+// levels), then quantized to mono8 (Rec. 709 luminance) or rgb8. The albedo is the texture's
+// colour times tint, on upward surfaces (ground, roofs: normal z > 0.7) covered by snow in
+// 0.4 m patches over snow_cover of their area; lit is 0 where a shadow ray towards the sun hits
+// something within 100 m (shadows on), else 1. The same route rendered with another sun,
+// exposure, shadows, tint or snow is the same place at another time of day or season. supersampling s renders s x s rays per pixel
 // and averages them (anti-aliased edges for sub-pixel corner detection).
 //
 // Faults inside an episode's [start, end]:
@@ -66,6 +70,10 @@ struct CameraSimulatorConfig {
   Eigen::Vector3d sun_direction{0.3, 0.2, 0.93};        ///< world, towards the sun (normalized when used)
   double ambient = 0.45;
   double diffuse = 0.55;
+  double exposure = 1.0;                                ///< radiance gain (> 0): dusk 0.3, the noise stays
+  bool shadows = false;                                 ///< cast shadows (a second ray per pixel)
+  Eigen::Vector3f tint{1.0F, 1.0F, 1.0F};               ///< per-channel albedo gain (>= 0): foliage, a season's colours
+  double snow_cover = 0.0;                              ///< share of upward surfaces under snow, 0..1
   double max_distance = 200.0;                          ///< metres: farther surfaces are sky
   int num_threads = 1;                                  ///< rendering threads (TBB); 0: all cores
   std::vector<CameraFaultEpisode> faults;
