@@ -378,7 +378,7 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"visual_scale_free", m.visual_scale_free}, {"camera_dark_frames", m.camera_dark_frames},
           {"camera_glare_frames", m.camera_glare_frames}, {"camera_motion_blur_frames", m.camera_motion_blur_frames},
           {"camera_features", m.camera_features}, {"camera_feature_ms", m.camera_feature_ms},
-          {"camera_learned_matcher", m.camera_learned_matcher}};
+          {"camera_learned_matcher", m.camera_learned_matcher}, {"visual_place_recognition", m.visual_place_recognition}};
 }
 
 // Each sensor's health at the end and its changes over the log (seconds from the log's start).
@@ -607,8 +607,11 @@ int run(const Output& output, const RunOptions& options) {
                                               count_of(mapping.visual_landmarks, "landmark"), count_of(mapping.visual_loop_closures, "loop"))
                                 : "",
                         mapping.visual_scale_free ? " (monocular: lengths in units of its first baseline)" : "");
-    text += fmt::format("  features: {}, {:.1f} ms per frame{}\n", mapping.camera_features, mapping.camera_feature_ms,
-                        mapping.camera_learned_matcher ? "; first views matched through the learned correspondence filter" : "");
+    text += fmt::format("  features: {}, {:.1f} ms per frame{}{}\n", mapping.camera_features, mapping.camera_feature_ms,
+                        mapping.camera_learned_matcher ? "; first views matched through the learned correspondence filter" : "",
+                        mapping.visual_place_recognition == "learned" ? "; loop candidates by learned place recognition (VLAD)"
+                        : mapping.visual_place_recognition.empty() && mapping.visual_keyframes > 0 ? "; no loop closure"
+                                                                                                    : "");
     if (mapping.camera_dark_frames + mapping.camera_glare_frames + mapping.camera_motion_blur_frames > 0) {
       text += fmt::format("  images: {} dark, {} with glare, {} blurred by motion\n", mapping.camera_dark_frames, mapping.camera_glare_frames,
                           mapping.camera_motion_blur_frames);

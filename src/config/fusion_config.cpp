@@ -35,6 +35,7 @@ constexpr std::array<std::pair<std::string_view, SensorModality>, 8> kModalityPr
                                                                                        {"radar", SensorModality::kRadar}}};
 
 constexpr EnumNames<MatcherType, 2> kMatcherNames{{{MatcherType::kRatio, "ratio"}, {MatcherType::kLearned, "learned"}}};
+constexpr EnumNames<PlaceRecognitionType, 2> kPlaceRecognitionNames{{{PlaceRecognitionType::kBow, "bow"}, {PlaceRecognitionType::kLearned, "learned"}}};
 
 Status non_negative(double value, std::string_view field) {
   if (!std::isfinite(value) || value < 0.0) {
@@ -49,6 +50,7 @@ std::string_view to_string(FrontendType type) { return enum_name(kFrontendNames,
 std::optional<FrontendType> frontend_type_from_string(std::string_view name) { return enum_from_name(kFrontendNames, name); }
 std::string_view to_string(SensorModality modality) { return enum_name(kModalityNames, modality); }
 std::string_view to_string(MatcherType type) { return enum_name(kMatcherNames, type); }
+std::string_view to_string(PlaceRecognitionType type) { return enum_name(kPlaceRecognitionNames, type); }
 
 const std::vector<std::string_view>& feature_type_names() {
   static const std::vector<std::string_view> names{"orb", "aliked-t16", "aliked-n16", "aliked-n16rot", "aliked-n32", "alike-t", "alike-s", "alike-n", "alike-l"};

@@ -188,7 +188,7 @@ Result<FeatureSelection> parse_features(const YamlValue& node) {
 Result<VisionConfig> parse_vision(const YamlValue& node) {
   VisionConfig vision;
   if (!node.present()) return vision;
-  HANZO_RETURN_IF_ERROR(node.check_keys({"features", "matcher"}));
+  HANZO_RETURN_IF_ERROR(node.check_keys({"features", "matcher", "place_recognition", "place_model"}));
   if (node["features"].present()) HANZO_ASSIGN_OR_RETURN(vision.features, parse_features(node["features"]));
   if (const YamlValue matcher = node["matcher"]; matcher.present()) {
     std::string name;
@@ -197,6 +197,14 @@ Result<VisionConfig> parse_vision(const YamlValue& node) {
     else if (name == "learned") vision.matcher = MatcherType::kLearned;
     else return matcher.error(fmt::format("expected ratio or learned, got '{}'", name));
   }
+  if (const YamlValue place = node["place_recognition"]; place.present()) {
+    std::string name;
+    HANZO_ASSIGN_OR_RETURN(name, place.as_string());
+    if (name == "bow") vision.place_recognition = PlaceRecognitionType::kBow;
+    else if (name == "learned") vision.place_recognition = PlaceRecognitionType::kLearned;
+    else return place.error(fmt::format("expected bow or learned, got '{}'", name));
+  }
+  if (node["place_model"].present()) HANZO_ASSIGN_OR_RETURN(vision.place_model, node["place_model"].as_string());
   return vision;
 }
 
@@ -376,6 +384,8 @@ std::string vision_yaml(const VisionConfig& v) {
   std::string out;
   if (!(v.features == d.features)) out += fmt::format("    features: {}\n", features_yaml(v.features));
   if (v.matcher != d.matcher) out += fmt::format("    matcher: {}\n", to_string(v.matcher));
+  if (v.place_recognition) out += fmt::format("    place_recognition: {}\n", to_string(*v.place_recognition));
+  if (!v.place_model.empty()) out += fmt::format("    place_model: {}\n", yaml::scalar(v.place_model));
   return out.empty() ? out : "  vision:\n" + out;
 }
 

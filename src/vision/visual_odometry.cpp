@@ -17,6 +17,7 @@
 #include "hanzo/fusion/graph/projection_factors.hpp"
 #include "hanzo/fusion/vision/feature_matcher.hpp"
 #include "hanzo/fusion/vision/place_database.hpp"
+#include "hanzo/fusion/vision/vlad.hpp"
 #include "pose_refinement.hpp"
 #include "projection_matching.hpp"
 #include "similarity_pose_graph.hpp"
@@ -171,9 +172,11 @@ struct VisualOdometry::State {
   int frames_since_keyframe = 0;
   int last_keyframe_tracked = 0;
 
-  // Loop closure: the keyframes' bags of words (entry i is keyframe place_keyframe[i]).
+  // Loop closure: the keyframes' bags of words or VLAD vectors (entry i is keyframe place_keyframe[i]).
   std::shared_ptr<const Vocabulary> vocabulary;
   std::optional<PlaceDatabase> places;
+  std::shared_ptr<const VladModel> place_model;  // learned place recognition: one vector per keyframe
+  std::vector<Eigen::VectorXf> place_vectors;
   std::vector<int> place_keyframe;
   std::vector<std::pair<int, int>> loops;  // (candidate, current) keyframes of closed loops
   int keyframes_since_loop = std::numeric_limits<int>::max() / 2;
@@ -835,20 +838,50 @@ struct VisualOdometry::State {
 
   // Adds the keyframes not in the place database yet, then looks for a loop closing at the
   // newest keyframe `keyframe_id` and corrects the map when one is verified.
+  // Place recognition over the keyframes: bags of words (ORB) or VLAD vectors (learned).
+  bool place_recognition() const { return places.has_value() || place_model != nullptr; }
+
+  void add_place(const Frame& keyframe) {
+    if (place_model) {
+      // describe() fails only on descriptors of another kind, which create() rules out.
+      Result<Eigen::VectorXf> described = place_model->describe(keyframe.features.descriptors);
+      place_vectors.push_back(described ? std::move(described).value() : Eigen::VectorXf::Zero(place_model->dimensions()));
+    } else {
+      places->add(vocabulary->transform(keyframe.features.descriptors));
+    }
+  }
+
+  double place_score(int entry_a, int entry_b) const {
+    if (place_model) return VladModel::similarity(place_vectors[static_cast<std::size_t>(entry_a)], place_vectors[static_cast<std::size_t>(entry_b)]);
+    return Vocabulary::score(places->bow(entry_a), places->bow(entry_b));
+  }
+
+  // The `count` best entries among [0, before) scoring at least min_score, best first.
+  std::vector<PlaceMatch> query_places(int entry, int count, int before, double min_score) const {
+    if (!place_model) return places->query(places->bow(entry), count, before, min_score);
+    std::vector<PlaceMatch> matches;
+    for (int candidate = 0; candidate < before; ++candidate) {
+      const double score = place_score(entry, candidate);
+      if (score >= min_score) matches.push_back({candidate, score});
+    }
+    std::sort(matches.begin(), matches.end(), [](const PlaceMatch& a, const PlaceMatch& b) { return a.score > b.score; });
+    if (static_cast<int>(matches.size()) > count) matches.resize(static_cast<std::size_t>(count));
+    return matches;
+  }
+
   bool close_loop(int keyframe_id) {
-    if (!places) return false;
+    if (!place_recognition()) return false;
     for (auto it = keyframes.upper_bound(place_keyframe.empty() ? -1 : place_keyframe.back()); it != keyframes.end(); ++it) {
-      places->add(vocabulary->transform(it->second.frame.features.descriptors));
+      add_place(it->second.frame);
       place_keyframe.push_back(it->first);
     }
-    const int entry = places->size() - 1;
+    const int entry = static_cast<int>(place_keyframe.size()) - 1;
     if (place_keyframe.back() != keyframe_id || ++keyframes_since_loop <= config.loop_cooldown_keyframes) return false;
     const int before = entry - config.loop_min_keyframe_gap + 1;
     if (before <= 0) return false;
-    const BowVector& bow = places->bow(entry);
     double min_score = 1.0;
-    for (int previous = std::max(0, entry - 3); previous < entry; ++previous) min_score = std::min(min_score, Vocabulary::score(bow, places->bow(previous)));
-    for (const PlaceMatch& candidate : places->query(bow, 3, before, std::max(min_score, 0.01))) {
+    for (int previous = std::max(0, entry - 3); previous < entry; ++previous) min_score = std::min(min_score, place_score(entry, previous));
+    for (const PlaceMatch& candidate : query_places(entry, 3, before, std::max(min_score, 0.01))) {
       ++counts.loop_candidates;
       const int candidate_id = place_keyframe[static_cast<std::size_t>(candidate.entry)];
       const std::optional<std::pair<Similarity, int>> loop = verify_loop(candidate_id, keyframe_id);
@@ -1105,15 +1138,23 @@ Result<std::unique_ptr<VisualOdometry>> VisualOdometry::create(const PinholeCame
     state->octave_scale.push_back(std::pow(state->config.features.scale_factor, level));
   }
   const bool binary_descriptors = state->extractor->descriptor_type() == CV_8UC1;
-  if (config.loop_closure && !binary_descriptors) {
-    logger()->warn("visual odometry: loop closure off: the bag-of-words vocabulary is of binary descriptors, {} gives float ones",
+  if (config.place_model && (binary_descriptors || config.place_model->extractor_name() != state->extractor->name())) {
+    return Error(fmt::format("VisualOdometryConfig.place_model: trained on {} descriptors, the features are {}'s", config.place_model->extractor_name(),
+                             state->extractor->name()),
+                 "place_model");
+  }
+  if (config.loop_closure && !binary_descriptors && !config.place_model) {
+    logger()->warn("visual odometry: loop closure off: the bag-of-words vocabulary is of binary descriptors, {} gives float ones "
+                   "(learned place recognition needs a place model for them)",
                    state->extractor->name());
   }
+  if (config.loop_closure && config.place_model) state->place_model = config.place_model;
   if (config.loop_closure && binary_descriptors) {
     state->vocabulary = config.vocabulary ? config.vocabulary : default_vocabulary();
     if (state->vocabulary) state->places.emplace(state->vocabulary);
   }
-  state->counts.loop_closure_enabled = state->places.has_value();
+  state->counts.loop_closure_enabled = state->place_recognition();
+  state->counts.place_recognition = state->place_model ? "learned" : state->places ? "bow" : "";
   state->counts.features = state->extractor->name();
   state->counts.learned_matcher = config.putative_filter != nullptr;
   return std::unique_ptr<VisualOdometry>(new VisualOdometry(std::move(state)));

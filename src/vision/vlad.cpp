@@ -131,6 +131,16 @@ Result<VladModel> VladModel::train(const std::vector<cv::Mat>& image_descriptors
   return model;
 }
 
+Result<VladModel> VladModel::load_default(const std::string& extractor_name) {
+  const Result<std::string> path = find_model_file("vlad_" + extractor_name + ".hzvlad", HANZO_INSTALLED_MODELS_DIR, HANZO_SOURCE_MODELS_DIR "/trained");
+  if (!path) return Error(fmt::format("the trained place-recognition model for {}: {}", extractor_name, path.error().message));
+  Result<VladModel> model = load(*path);
+  if (model && model->extractor_name() != extractor_name) {
+    return Error(fmt::format("{}: trained on {} descriptors, not {}", *path, model->extractor_name(), extractor_name));
+  }
+  return model;
+}
+
 Status VladModel::save(const std::string& path) const {
   std::string out(kMagic, sizeof(kMagic));
   put<uint32_t>(out, kVersion);

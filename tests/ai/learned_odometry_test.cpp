@@ -46,11 +46,33 @@ TEST(LearnedOdometry, AlikedOnKittiOdometry06IsNoWorseThanOrb) {
               orb.summary.landmarks, learned_rmse, learned.summary.landmarks, 1000.0 * learned.summary.feature_seconds / learned.summary.feature_frames);
   EXPECT_EQ(learned.summary.tracked_frames, 51);
   EXPECT_EQ(learned.summary.features, "aliked-t16");
-  EXPECT_FALSE(learned.summary.loop_closure_enabled);  // the bag of words is of binary descriptors
+  EXPECT_FALSE(learned.summary.loop_closure_enabled);  // no place model given: the bag of words is of binary descriptors
   // Both are 0.04-0.05 m over 60 m here; the learned runs' spread over settings (0.036 m to
   // 0.052 m for max_float_descriptor_distance 0.7 to 1.2) is larger than the gap to ORB.
   EXPECT_LE(learned_rmse, orb_rmse * 1.2);
   EXPECT_LT(learned_rmse, 0.01 * sequence.ground_truth.path_length());
+}
+
+// Learned place recognition: the shipped VLAD model is for aliked-t16's descriptors; another
+// extractor's are refused by name.
+TEST(LearnedOdometry, LoopClosureUsesTheVladModelOfItsFeatures) {
+  const auto model = std::make_shared<const vision::VladModel>(vision::VladModel::load_default("aliked-t16").value());
+  const PinholeCamera camera = vision::sequences::kitti_odometry_06().camera;
+  vision::VisualOdometryConfig config;
+  config.extractor = aliked_t16();
+  config.place_model = model;
+  const auto odometry = vision::VisualOdometry::create(camera, {1226, 370}, config).value();
+  EXPECT_TRUE(odometry->summary().loop_closure_enabled);
+  EXPECT_EQ(odometry->summary().place_recognition, "learned");
+  LearnedFeatureConfig alike;
+  alike.model = LearnedModel::kAlikeT;
+  alike.model_path = kModels + "/alike/alike-t.pth";
+  config.extractor = LearnedFeatureExtractor::load(alike).value();
+  const auto refused = vision::VisualOdometry::create(camera, {1226, 370}, config);
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().field, "place_model");
+  EXPECT_NE(refused.error().message.find("trained on aliked-t16 descriptors, the features are alike-t's"), std::string::npos);
+  EXPECT_FALSE(vision::VladModel::load_default("alike-t"));  // none shipped
 }
 
 // The landmark layer of a learned map carries the float descriptors and survives a map file

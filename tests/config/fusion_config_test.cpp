@@ -140,6 +140,8 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
                             {.speed_noise = 0.1, .use_yaw_rate = true, .non_holonomic = false}});
   config.vision.features = {"aliked-n16", "/models/ALIKED weights/aliked-n16.pth"};
   config.vision.matcher = MatcherType::kLearned;
+  config.vision.place_recognition = PlaceRecognitionType::kLearned;
+  config.vision.place_model = "models/vlad.hzvlad";
   config.sensors.push_back({"camera_front", SensorModality::kCamera, "/camera", 20.0, "camera_link", "", {}, FeatureSelection{"orb", ""}});
   const std::filesystem::path path = std::filesystem::temp_directory_path() / "hanzo_fusion_config_test.yaml";
   ASSERT_TRUE(save_fusion_config(config, path.string()).ok());
@@ -160,6 +162,8 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   EXPECT_EQ(loaded->mapping.occupancy_resolution, MappingConfig{}.occupancy_resolution);
   EXPECT_EQ(loaded->vision.features, (FeatureSelection{"aliked-n16", "/models/ALIKED weights/aliked-n16.pth"}));
   EXPECT_EQ(loaded->vision.matcher, MatcherType::kLearned);
+  EXPECT_EQ(loaded->vision.place_recognition, PlaceRecognitionType::kLearned);
+  EXPECT_EQ(loaded->vision.place_model, "models/vlad.hzvlad");
   EXPECT_EQ(loaded->features_of(*loaded->find_sensor("camera_front")).type, "orb");
   EXPECT_EQ(loaded->features_of(*loaded->find_sensor("imu2")).type, "aliked-n16");
   ASSERT_EQ(loaded->sensors.size(), 11U);
@@ -195,7 +199,10 @@ TEST(FusionConfig, VisionBlockChoosesFeaturesPerCamera) {
               HasSubstr("fusion.yaml:3: vision.features: expected orb, aliked-t16, aliked-n16, aliked-n16rot, aliked-n32, alike-t, alike-s, alike-n, alike-l, got 'superpoint'"));
   EXPECT_THAT(error_of("fusion:\n  vision: {features: {type: orb, model: x.pth}}\n" + sensors), HasSubstr("ORB takes no model"));
   EXPECT_THAT(error_of("fusion:\n  vision: {matcher: superglue}\n" + sensors), HasSubstr("expected ratio or learned, got 'superglue'"));
-  EXPECT_THAT(error_of("fusion:\n  vision: {place_recognition: bow}\n" + sensors), HasSubstr("place_recognition"));
+  EXPECT_THAT(error_of("fusion:\n  vision: {place_recognition: netvlad}\n" + sensors), HasSubstr("expected bow or learned, got 'netvlad'"));
+  EXPECT_FALSE(config.vision.place_recognition);  // unset: chosen by the features
+  EXPECT_EQ(parse_fusion_config("fusion:\n  vision: {place_recognition: learned, place_model: v.hzvlad}\n" + sensors, "fusion.yaml").value().vision.place_recognition,
+            PlaceRecognitionType::kLearned);
   EXPECT_THAT(error_of("fusion:\n  sensors:\n    imu: {rate: 100, features: orb}\n"), HasSubstr("applies to camera sensors only (this sensor is imu)"));
   config.sensors[1].features = FeatureSelection{"orb", "x.pth"};
   EXPECT_THAT(validate(config).error().message, HasSubstr("sensors.camera_rear.features: ORB takes no model"));

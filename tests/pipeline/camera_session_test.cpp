@@ -308,5 +308,23 @@ TEST(CameraSession, VisualInertialOdometryWithoutAnImuIsRefusedNamingTheField) {
   EXPECT_NE(refused.error().message.find("needs an IMU"), std::string::npos) << refused.error().message;
 }
 
+// Learned place recognition aggregates learned descriptors: with ORB features it is refused by
+// the key, as is a learned type this build cannot run.
+TEST(CameraSession, PlaceRecognitionMustFitTheFeatures) {
+  sim::Scenario scenario = drone_recording().scenario;
+  std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& sensor) { return !is_camera(sensor); });
+  config::FusionConfig fusion_config = sim::scenario_fusion_config(scenario);
+  fusion_config.vision.place_recognition = config::PlaceRecognitionType::kLearned;
+  const auto refused = Session::create(fusion_config, sim::scenario_calibration(scenario));
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().field, "vision.place_recognition");
+  EXPECT_NE(refused.error().message.find("VLAD aggregates learned descriptors"), std::string::npos) << refused.error().message;
+  fusion_config.vision.place_recognition.reset();
+  fusion_config.vision.features = {"aliked-t16", "/nonexistent/aliked-t16.pth"};
+  const auto missing = Session::create(fusion_config, sim::scenario_calibration(scenario));
+  ASSERT_FALSE(missing);
+  EXPECT_NE(missing.error().message.find("vision.features"), std::string::npos) << missing.error().message;
+}
+
 }  // namespace
 }  // namespace hanzo::fusion::pipeline

@@ -169,11 +169,19 @@ Status validate(const FeatureSelection& features, const std::string& field);
 enum class MatcherType { kRatio, kLearned };
 std::string_view to_string(MatcherType type);  // "ratio", "learned"
 
-/// fusion.vision: the visual frontends' features and matching; a camera sensor's `features`
-/// key overrides `features` for that camera.
+/// Where the visual odometry's loop-closure candidates come from: kBow, bags of ORB words;
+/// kLearned, VLAD vectors of learned descriptors (vision/vlad.hpp).
+enum class PlaceRecognitionType { kBow, kLearned };
+std::string_view to_string(PlaceRecognitionType type);  // "bow", "learned"
+
+/// fusion.vision: the visual frontends' features, matching and place recognition; a camera
+/// sensor's `features` key overrides `features` for that camera.
 struct VisionConfig {
   FeatureSelection features;
   MatcherType matcher = MatcherType::kRatio;
+  /// Unset: bow with ORB features, learned with learned ones (each the only kind that fits).
+  std::optional<PlaceRecognitionType> place_recognition;
+  std::string place_model;  // learned: the VLAD model file; empty: vlad_<features>.hzvlad of the trained models
 };
 
 struct SensorConfig {

@@ -247,6 +247,9 @@ struct MappingSummary {
   std::string camera_features;
   double camera_feature_ms = 0.0;
   bool camera_learned_matcher = false;
+  /// The visual odometry's loop-closure candidates: "bow", "learned" (VLAD), "" when it closes
+  /// no loops (fusion.vision.place_recognition).
+  std::string visual_place_recognition;
 };
 
 /// A pose at a time (body in the world frame).

@@ -74,6 +74,7 @@
 #include "hanzo/fusion/vision/correspondence_filter.hpp"
 #include "hanzo/fusion/vision/feature_extractor.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
+#include "hanzo/fusion/vision/vlad.hpp"
 #include "hanzo/fusion/vision/vocabulary.hpp"
 
 namespace hanzo::fusion::vision {
@@ -136,6 +137,11 @@ struct VisualOdometryConfig {
   /// summary().loop_closure_enabled says so).
   bool loop_closure = true;
   std::shared_ptr<const Vocabulary> vocabulary;
+  /// Learned place recognition for learned (float) descriptors: each keyframe's VLAD vector
+  /// (vision/vlad.hpp) instead of its bag of words, candidates ranked by cosine similarity with
+  /// the same thresholds. The model must be trained on the extractor's descriptors (create()
+  /// fails otherwise); null with float descriptors: no loop closure (logged).
+  std::shared_ptr<const VladModel> place_model;
   /// Candidates are at least this many keyframes older than the query (recent keyframes look
   /// alike without closing a loop).
   int loop_min_keyframe_gap = 30;
@@ -180,6 +186,7 @@ struct VisualOdometrySummary {
   int loop_candidates = 0;  ///< place-recognition candidates checked geometrically
   int loop_closures = 0;    ///< loops accepted and corrected
   bool loop_closure_enabled = false;
+  std::string place_recognition;  ///< "bow", "learned" (VLAD), "" when loop closure is off
   bool scale_free = true;  ///< monocular: lengths are in units of the first baseline
   std::string features = "orb";      ///< the extractor's name (FeatureExtractor::name)
   int feature_frames = 0;            ///< frames whose features were extracted (a stereo pair is one)

@@ -55,6 +55,9 @@ class VladModel {
   /// clusters.
   static Result<VladModel> train(const std::vector<cv::Mat>& image_descriptors, const std::string& extractor_name, const VladConfig& config = {});
   static Result<VladModel> load(const std::string& path);
+  /// The project's trained model for `extractor_name`'s descriptors: `vlad_<name>.hzvlad`
+  /// found by find_model_file() ($HANZO_FUSION_MODELS, the installed models, models/trained).
+  static Result<VladModel> load_default(const std::string& extractor_name);
   Status save(const std::string& path) const;
 
   /// The unit global descriptor of an image's descriptors (CV_32FC1 rows of descriptor_size());
