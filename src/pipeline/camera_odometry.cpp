@@ -35,9 +35,9 @@ Result<std::pair<config::FeatureSelection, std::string>> configured_features(con
 }
 
 // vision.place_recognition (and place_model) for the extractor's descriptors: bags of words for
-// ORB's, a VLAD model for learned ones. Unset, each gets its own kind; a learned model that
-// cannot be found then leaves loop closure off with a warning, as an optional stage does.
-Status apply_place_recognition(const config::VisionConfig& vision, const vision::FeatureExtractor& extractor, vision::VisualOdometryConfig& odometry) {
+// ORB's (null), a VLAD model for learned ones. Unset, each gets its own kind; a learned model
+// that cannot be found then gives null with a warning (no loop closure), as an optional stage.
+Result<std::shared_ptr<const vision::VladModel>> place_model_for(const config::VisionConfig& vision, const vision::FeatureExtractor& extractor) {
   const bool learned_descriptors = extractor.descriptor_type() != CV_8UC1;
   const config::PlaceRecognitionType type =
       vision.place_recognition.value_or(learned_descriptors ? config::PlaceRecognitionType::kLearned : config::PlaceRecognitionType::kBow);
@@ -46,21 +46,19 @@ Status apply_place_recognition(const config::VisionConfig& vision, const vision:
       return Error(fmt::format("vision.place_recognition bow: the bag of words is of ORB descriptors, {} gives float ones (use learned)", extractor.name()),
                    "vision.place_recognition");
     }
-    return ok_status();
+    return std::shared_ptr<const vision::VladModel>();
   }
   if (!learned_descriptors) {
     return Error("vision.place_recognition learned: VLAD aggregates learned descriptors; vision.features is orb (choose a learned model)",
                  "vision.place_recognition");
   }
-  if (odometry.place_model || !odometry.loop_closure) return ok_status();
   Result<vision::VladModel> model = vision.place_model.empty() ? vision::VladModel::load_default(extractor.name()) : vision::VladModel::load(vision.place_model);
   if (!model && !vision.place_recognition && vision.place_model.empty()) {
     logger()->warn("vision.place_recognition: {}; the visual odometry closes no loops", model.error().message);
-    return ok_status();
+    return std::shared_ptr<const vision::VladModel>();
   }
   if (!model) return Error("vision.place_model: " + model.error().message, "vision.place_model");
-  odometry.place_model = std::make_shared<const vision::VladModel>(std::move(model).value());
-  return ok_status();
+  return std::shared_ptr<const vision::VladModel>(std::make_shared<const vision::VladModel>(std::move(model).value()));
 }
 
 // The configured features and matcher into the visual odometry's configuration.
@@ -71,7 +69,7 @@ Status apply_vision_config(const config::FusionConfig& config, const std::string
     HANZO_ASSIGN_OR_RETURN(features, configured_features(config, left, right));
     HANZO_ASSIGN_OR_RETURN(odometry.extractor, make_feature_extractor(features.first, odometry.features.max_features, features.second, odometry.features));
   }
-  HANZO_RETURN_IF_ERROR(apply_place_recognition(config.vision, *odometry.extractor, odometry));
+  if (odometry.loop_closure && !odometry.place_model) HANZO_ASSIGN_OR_RETURN(odometry.place_model, place_model_for(config.vision, *odometry.extractor));
   if (config.vision.matcher == config::MatcherType::kLearned && !odometry.putative_filter) {
     Result<vision::CorrespondenceFilter> filter = vision::CorrespondenceFilter::load_default();
     if (!filter) return Error("vision.matcher learned: " + filter.error().message, "vision.matcher");
@@ -158,6 +156,9 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(c
   HANZO_ASSIGN_OR_RETURN(features, configured_features(config, cameras[0]->sensor, stereo_pair ? cameras[1]->sensor : ""));
   if (features.first.learned()) {
     HANZO_ASSIGN_OR_RETURN(tracker.detector, make_feature_extractor(features.first, kTrackerCandidates * tracker.max_features, features.second));
+  }
+  if (config.vision.place_recognition == config::PlaceRecognitionType::kLearned) {
+    logger()->warn("vision.place_recognition learned: the visual-inertial odometry's loop detector ranks places by bags of ORB words");
   }
   if (config.vision.matcher == config::MatcherType::kLearned) {
     logger()->warn("vision.matcher learned: the visual-inertial odometry follows features by optical flow (no descriptor matches to "

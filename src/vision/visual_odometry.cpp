@@ -859,14 +859,7 @@ struct VisualOdometry::State {
   // The `count` best entries among [0, before) scoring at least min_score, best first.
   std::vector<PlaceMatch> query_places(int entry, int count, int before, double min_score) const {
     if (!place_model) return places->query(places->bow(entry), count, before, min_score);
-    std::vector<PlaceMatch> matches;
-    for (int candidate = 0; candidate < before; ++candidate) {
-      const double score = place_score(entry, candidate);
-      if (score >= min_score) matches.push_back({candidate, score});
-    }
-    std::sort(matches.begin(), matches.end(), [](const PlaceMatch& a, const PlaceMatch& b) { return a.score > b.score; });
-    if (static_cast<int>(matches.size()) > count) matches.resize(static_cast<std::size_t>(count));
-    return matches;
+    return rank_places(place_vectors, place_vectors[static_cast<std::size_t>(entry)], count, before, min_score);
   }
 
   bool close_loop(int keyframe_id) {

@@ -30,6 +30,17 @@ Status check_descriptors(const cv::Mat& descriptors, int width) {
 
 }  // namespace
 
+std::vector<PlaceMatch> rank_places(const std::vector<Eigen::VectorXf>& vectors, const Eigen::VectorXf& query, int count, int before, double min_score) {
+  std::vector<PlaceMatch> matches;
+  for (int entry = 0; entry < std::min(before, static_cast<int>(vectors.size())); ++entry) {
+    const double score = VladModel::similarity(query, vectors[static_cast<std::size_t>(entry)]);
+    if (score >= min_score) matches.push_back({entry, score});
+  }
+  std::sort(matches.begin(), matches.end(), [](const PlaceMatch& a, const PlaceMatch& b) { return a.score > b.score; });
+  if (static_cast<int>(matches.size()) > count) matches.resize(static_cast<std::size_t>(std::max(count, 0)));
+  return matches;
+}
+
 Status validate(const VladConfig& config) {
   if (config.clusters < 2 || config.clusters > 1024) return Error("VladConfig.clusters: must be in 2..1024", "clusters");
   if (config.dimensions < 1) return Error("VladConfig.dimensions: must be at least 1", "dimensions");

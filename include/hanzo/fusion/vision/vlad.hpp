@@ -29,6 +29,7 @@
 #include <opencv2/core.hpp>
 
 #include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/vision/place_database.hpp"
 
 namespace hanzo::fusion::vision {
 
@@ -82,5 +83,9 @@ class VladModel {
   RowMatrix projection_;  // P x K D
   int training_images_ = 0;
 };
+
+/// The `count` entries of `vectors` (global descriptors, entry = index) among [0, before) most
+/// similar to `query` with a similarity of at least min_score, best first.
+std::vector<PlaceMatch> rank_places(const std::vector<Eigen::VectorXf>& vectors, const Eigen::VectorXf& query, int count, int before, double min_score);
 
 }  // namespace hanzo::fusion::vision
