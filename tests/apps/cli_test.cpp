@@ -767,6 +767,22 @@ TEST(Cli, ExportRos2BagRefusesBadInputAndLeavesNothingBehind) {
   std::filesystem::remove_all(dir);
 }
 
+// Learned place recognition's commands refuse what they cannot use, in one line, writing nothing.
+TEST(Cli, VisionVladAndPlaceRecallRefuseBadInputWithOneLine) {
+  const std::string graf = std::string(HANZO_DATA_DIR) + "/feature_matching_graf";
+  const std::string out = (std::filesystem::temp_directory_path() / "hanzo_cli_orb.hzvlad").string();
+  const CliRun orb = run(fmt::format("vision vlad {0}/graf1.png {0}/graf2.png --detector orb --out {1}", graf, out));
+  EXPECT_EQ(orb.exit_code, 1);
+  EXPECT_THAT(orb.err, HasSubstr("VLAD aggregates learned (float) descriptors"));
+  EXPECT_EQ(std::count(orb.err.begin(), orb.err.end(), '\n'), 1);
+  EXPECT_FALSE(std::filesystem::exists(out));
+  const CliRun not_model = run(fmt::format("vision place-recall --database day.mcap --database-poses day.tum --queries dusk.mcap --query-poses dusk.tum --vlad {} --json",
+                                           write_temp("not_a_model.hzvlad", "HZVOCAB")));
+  EXPECT_EQ(not_model.exit_code, 1);
+  EXPECT_THAT(not_model.err, HasSubstr("not a hanzo-fusion VLAD model"));
+  EXPECT_EQ(nlohmann::json::parse(not_model.out)["ok"], false);
+}
+
 TEST(Cli, FeaturesMatchReportsCorrectMatchesAgainstAHomographyAndRefusesBadInput) {
   const std::string graf = std::string(HANZO_DATA_DIR) + "/feature_matching_graf";
   const CliRun matched = run(fmt::format("features match {0}/graf1.png {0}/graf2.png --homography {0}/H_graf1_to_graf2_halfres.txt --json", graf));
