@@ -57,6 +57,9 @@ Status validate(const FeatureTrackerConfig& config) {
   if (config.pyramid_levels < 0 || config.pyramid_levels > 8) return Error("FeatureTrackerConfig.pyramid_levels: must be in 0..8", "pyramid_levels");
   if (!positive(config.ransac_threshold_px)) return Error("FeatureTrackerConfig.ransac_threshold_px: must be positive", "ransac_threshold_px");
   if (!positive(config.stereo_epipolar_px)) return Error("FeatureTrackerConfig.stereo_epipolar_px: must be positive", "stereo_epipolar_px");
+  if (!(config.detector_refill_share > 0.0 && config.detector_refill_share <= 1.0)) {
+    return Error("FeatureTrackerConfig.detector_refill_share: must be in (0, 1]", "detector_refill_share");
+  }
   return ok_status();
 }
 
@@ -233,6 +236,7 @@ void detect_corners(const cv::Mat& grey, const cv::Mat& free, double min_image_q
 
 void FeatureTracker::State::detect(const cv::Mat& grey, TrackedFrame& frame) {
   if (static_cast<int>(points.size()) >= config.max_features) return;
+  if (config.detector && static_cast<double>(points.size()) >= config.detector_refill_share * config.max_features) return;
   const int columns = config.grid_columns, rows = config.grid_rows;
   const int per_cell = (config.max_features + columns * rows - 1) / (columns * rows);
   auto cell_of = [&](const cv::Point2f& point) {
