@@ -25,6 +25,8 @@ void add_calib_camera_command(CLI::App& calib_app, const Output& output, Command
 Status update_calibration_entry(const std::string& path, const std::string& sensor,
                                 const std::function<void(calib::SensorCalibration&)>& change);
 void add_eval_command(CLI::App& app, const Output& output, Command& run);
+/// reconstruct splats, render (HANZO_FUSION_AI builds).
+void add_reconstruct_command(CLI::App& app, const Output& output, Command& run);
 void add_log_command(CLI::App& app, const Output& output, Command& run);
 void add_import_command(CLI::App& app, const Output& output, Command& run);
 void add_export_command(CLI::App& app, const Output& output, Command& run);

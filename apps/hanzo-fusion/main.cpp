@@ -40,6 +40,9 @@ int main(int argc, char** argv) {
   app::add_crypto_command(app, output, run);
   app::add_features_command(app, output, run);
   app::add_vision_command(app, output, run);
+#ifdef HANZO_FUSION_WITH_NEURAL
+  app::add_reconstruct_command(app, output, run);
+#endif
 #ifdef HANZO_FUSION_WITH_SERVICE
   app::add_serve_command(app, output, run);
   app::add_stream_command(app, output, run);

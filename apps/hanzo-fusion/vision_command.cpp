@@ -3,7 +3,7 @@
 // hanzo-fusion vision query IMAGE IMAGES... [--vocabulary V]: ranks images by their
 // bag-of-words similarity to IMAGE (place recognition; vision/place_database.hpp).
 // hanzo-fusion vision relocalize MAP IMAGE --calib CALIB: places a camera image in a saved map's
-// visual landmarks (vision/map_relocalizer.hpp).
+// visual landmarks (vision/map_relocalizer.hpp), with the features the map was made with.
 // IMAGES are image files or folders (their images, recursively, in name order).
 
 #include <algorithm>
@@ -20,6 +20,7 @@
 #include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/io/image_file_check.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
+#include "hanzo/fusion/pipeline/feature_extractors.hpp"
 #include "hanzo/fusion/vision/map_relocalizer.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
 #include "hanzo/fusion/vision/place_database.hpp"
@@ -50,6 +51,8 @@ struct RelocalizeOptions {
   std::string image;
   std::string calib;
   std::string camera;  // empty: the map's camera
+  std::string model;        // learned maps: the detector's weights (empty: found by name)
+  std::string place_model;  // learned maps: the VLAD model (empty: the shipped one for the features)
 };
 
 Result<cv::Mat> descriptors_of(const std::string& path, const vision::OrbExtractor& extractor) {
@@ -143,7 +146,20 @@ int run_relocalize(const Output& output, const RelocalizeOptions& options) {
     return report_failure(output, result, fmt::format("{}: {} x {} pixels, but camera '{}' is calibrated for {} x {}", options.image, image.cols, image.rows, camera,
                                                       sensor->camera->intrinsics.width, sensor->camera->intrinsics.height));
   }
-  Result<vision::MapRelocalizer> relocalizer = vision::MapRelocalizer::create(*map->visual_landmarks, sensor->camera->pinhole_camera());
+  vision::MapRelocalizerConfig config;
+  const std::string& features = map->visual_landmarks->descriptor_type;
+  if (features != "orb") {
+    Result<std::shared_ptr<const vision::FeatureExtractor>> extractor =
+        pipeline::make_feature_extractor({features, options.model}, config.features.max_features, fmt::format("{} (the map's features)", options.map));
+    if (!extractor) return report_failure(output, result, extractor.error().message);
+    config.extractor = *extractor;
+  }
+  if (!options.place_model.empty()) {
+    Result<vision::VladModel> model = vision::VladModel::load(options.place_model);
+    if (!model) return report_failure(output, result, fmt::format("--place-model {}: {}", options.place_model, model.error().message));
+    config.place_model = std::make_shared<const vision::VladModel>(std::move(*model));
+  }
+  Result<vision::MapRelocalizer> relocalizer = vision::MapRelocalizer::create(*map->visual_landmarks, sensor->camera->pinhole_camera(), config);
   if (!relocalizer) return report_failure(output, result, relocalizer.error().message);
   Result<vision::MapRelocalization> placed = relocalizer->relocalize(image);
   if (!placed) return report_failure(output, result, placed.error().message);
@@ -155,6 +171,8 @@ int run_relocalize(const Output& output, const RelocalizeOptions& options) {
   result["inliers"] = placed->inliers;
   result["keyframe"] = placed->keyframe;
   result["score"] = placed->score;
+  result["features"] = features;
+  result["place_recognition"] = placed->place_recognition;
   const Eigen::Vector3d& p = T_world_body.translation();
   return report_success(output, result,
                         fmt::format("{}: body at ({:.3f}, {:.3f}, {:.3f}) m in {} ({} inliers, near keyframe {})\n", options.image, p.x(), p.y(), p.z(),
@@ -192,6 +210,8 @@ void add_vision_command(CLI::App& app, const Output& output, Command& run) {
   relocalize_app->add_option("IMAGE", relocalize->image, "The camera image")->required();
   relocalize_app->add_option("--calib", relocalize->calib, "Calibration YAML with the camera's intrinsics and extrinsics")->required();
   relocalize_app->add_option("--camera", relocalize->camera, "Camera sensor name (default: the map's)");
+  relocalize_app->add_option("--model", relocalize->model, "A learned map's detector weights (.pth; default: found in $HANZO_FUSION_MODELS)");
+  relocalize_app->add_option("--place-model", relocalize->place_model, "A learned map's VLAD model (.hzvlad; default: the one shipped for its features)");
   relocalize_app->callback([&output, &run, relocalize] { run = [&output, relocalize] { return run_relocalize(output, *relocalize); }; });
 
   add_vision_place_commands(*vision_app, output, run);

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <fmt/format.h>
+#include <spdlog/spdlog.h>
 
 #include "hanzo/fusion/vision/feature_matcher.hpp"
 #include "pose_refinement.hpp"
@@ -11,16 +12,24 @@
 
 namespace hanzo::fusion::vision {
 
+namespace {
+// Learned descriptors: the largest Euclidean distance of unit rows matched (as the odometry's
+// max_float_descriptor_distance) and the candidates' ratio test.
+constexpr double kMaxFloatDistance = 1.0;
+constexpr double kFloatRatio = 0.9;
+}  // namespace
+
 Result<MapRelocalizer> MapRelocalizer::create(msgs::VisualLandmarkLayer map, const PinholeCamera& camera, MapRelocalizerConfig config) {
   if (map.positions.empty() || map.keyframes.empty()) {
     return Error(fmt::format("visual landmark map: {} landmarks and {} keyframes (needs both)", map.positions.size(), map.keyframes.size()));
   }
-  if (map.descriptor_type != "orb") {
-    return Error(fmt::format("visual landmark map: its landmarks carry {} descriptors; relocalization matches ORB descriptors (a map made with vision.features orb)",
-                             map.descriptor_type));
-  }
-  if (map.descriptors.size() != map.positions.size()) {
+  const bool orb_map = map.descriptor_type == "orb";
+  if (orb_map && map.descriptors.size() != map.positions.size()) {
     return Error(fmt::format("visual landmark map: {} descriptors for {} landmarks", map.descriptors.size(), map.positions.size()));
+  }
+  if (!orb_map && (map.float_descriptor_size == 0 || map.float_descriptors.size() != map.float_descriptor_size * map.positions.size())) {
+    return Error(fmt::format("visual landmark map: {} float descriptors of {} for {} landmarks", map.float_descriptors.size(), map.float_descriptor_size,
+                             map.positions.size()));
   }
   if (!(camera.fx > 0.0 && camera.fy > 0.0)) return Error(fmt::format("camera: focal lengths must be positive (fx {}, fy {})", camera.fx, camera.fy));
   if (config.min_inliers < 6 || config.candidates < 1 || config.neighbour_keyframes < 0 || !(config.pixel_sigma > 0.0) || !(config.max_landmark_std >= 0.0) ||
@@ -30,23 +39,64 @@ Result<MapRelocalizer> MapRelocalizer::create(msgs::VisualLandmarkLayer map, con
   if (!map.position_std.empty() && map.position_std.size() != map.positions.size()) {
     return Error(fmt::format("visual landmark map: {} uncertainties for {} landmarks", map.position_std.size(), map.positions.size()));
   }
-  if (Status features = validate(config.features); !features) return features.error();
   MapRelocalizer relocalizer;
-  relocalizer.vocabulary_ = config.vocabulary;
-  if (!relocalizer.vocabulary_) {
-    Result<Vocabulary> loaded = Vocabulary::load_default();
-    if (!loaded) return loaded.error();
-    relocalizer.vocabulary_ = std::make_shared<const Vocabulary>(std::move(*loaded));
+  relocalizer.extractor_ = config.extractor;
+  if (!relocalizer.extractor_) {
+    if (Status features = validate(config.features); !features) return features.error();
+    relocalizer.extractor_ = std::make_shared<const OrbFeatureExtractor>(config.features);
   }
-  relocalizer.descriptors_ = cv::Mat(static_cast<int>(map.descriptors.size()), 32, CV_8UC1);
-  for (std::size_t i = 0; i < map.descriptors.size(); ++i) std::copy(map.descriptors[i].begin(), map.descriptors[i].end(), relocalizer.descriptors_.ptr<uint8_t>(static_cast<int>(i)));
+  const auto* orb = dynamic_cast<const OrbFeatureExtractor*>(relocalizer.extractor_.get());
+  relocalizer.scale_factor_ = orb != nullptr ? orb->config().scale_factor : 1.0;
+  if (relocalizer.extractor_->name() != map.descriptor_type) {
+    return Error(fmt::format("visual landmark map: its landmarks carry {} descriptors, the image's features are {}'s (relocalize with the map's features)",
+                             map.descriptor_type, relocalizer.extractor_->name()));
+  }
   for (const msgs::VisualKeyframe& keyframe : map.keyframes) {
-    cv::Mat seen;
     for (uint32_t landmark : keyframe.landmarks) {
       if (landmark >= map.positions.size()) return Error(fmt::format("visual landmark map: a keyframe sees landmark {} of {}", landmark, map.positions.size()));
-      seen.push_back(relocalizer.descriptors_.row(static_cast<int>(landmark)));
     }
-    relocalizer.keyframe_words_.push_back(relocalizer.vocabulary_->transform(seen));
+  }
+  const auto landmark_count = static_cast<int>(map.positions.size());
+  if (orb_map) {
+    relocalizer.descriptors_ = cv::Mat(landmark_count, 32, CV_8UC1);
+    for (std::size_t i = 0; i < map.descriptors.size(); ++i) std::copy(map.descriptors[i].begin(), map.descriptors[i].end(), relocalizer.descriptors_.ptr<uint8_t>(static_cast<int>(i)));
+  } else {
+    relocalizer.descriptors_ = cv::Mat(landmark_count, static_cast<int>(map.float_descriptor_size), CV_32FC1);
+    std::copy(map.float_descriptors.begin(), map.float_descriptors.end(), relocalizer.descriptors_.ptr<float>(0));
+  }
+  const auto keyframe_descriptors = [&](const msgs::VisualKeyframe& keyframe) {
+    cv::Mat seen;
+    for (uint32_t landmark : keyframe.landmarks) seen.push_back(relocalizer.descriptors_.row(static_cast<int>(landmark)));
+    return seen;
+  };
+  if (orb_map) {
+    relocalizer.vocabulary_ = config.vocabulary;
+    if (!relocalizer.vocabulary_) {
+      Result<Vocabulary> loaded = Vocabulary::load_default();
+      if (!loaded) return loaded.error();
+      relocalizer.vocabulary_ = std::make_shared<const Vocabulary>(std::move(*loaded));
+    }
+    for (const msgs::VisualKeyframe& keyframe : map.keyframes) relocalizer.keyframe_words_.push_back(relocalizer.vocabulary_->transform(keyframe_descriptors(keyframe)));
+  } else {
+    relocalizer.place_model_ = config.learned_place_recognition ? config.place_model : nullptr;
+    if (!relocalizer.place_model_ && config.learned_place_recognition) {
+      if (Result<VladModel> loaded = VladModel::load_default(map.descriptor_type)) {
+        relocalizer.place_model_ = std::make_shared<const VladModel>(std::move(*loaded));
+      } else {
+        spdlog::info("relocalization: no VLAD model for {} ({}); candidate keyframes by matched landmarks", map.descriptor_type, loaded.error().message);
+      }
+    }
+    if (relocalizer.place_model_ && relocalizer.place_model_->extractor_name() != map.descriptor_type) {
+      return Error(fmt::format("MapRelocalizerConfig.place_model: trained on {} descriptors, the map's are {}", relocalizer.place_model_->extractor_name(),
+                               map.descriptor_type));
+    }
+    if (relocalizer.place_model_) {
+      for (const msgs::VisualKeyframe& keyframe : map.keyframes) {
+        Result<Eigen::VectorXf> described = relocalizer.place_model_->describe(keyframe_descriptors(keyframe));
+        if (!described) return Error("visual landmark map: " + described.error().message);
+        relocalizer.keyframe_vlad_.push_back(std::move(*described));
+      }
+    }
   }
   relocalizer.map_ = std::move(map);
   relocalizer.camera_ = camera;
@@ -62,31 +112,55 @@ PoseRefinement MapRelocalizer::refine_by_projection(const SE3& T_camera_world, c
                                                     const ImageFeatures& features, const KeypointGrid& grid, double radius_px) const {
   ProjectionSearch search;
   search.radius_px = radius_px;
-  search.scale_factor = config_.features.scale_factor;
+  search.scale_factor = scale_factor_;
   search.ratio = 0.8;
-  search.max_descriptor_distance = 64;
+  search.max_descriptor_distance = descriptor_distance_limit(descriptors_, 64, kMaxFloatDistance);
   std::vector<PoseObservation> observations;
   for (const auto& [keypoint_index, landmark] : match_by_projection(landmarks, features, grid, camera_, T_camera_world, search)) {
     const cv::KeyPoint& keypoint = features.keypoints[static_cast<std::size_t>(keypoint_index)];
     observations.push_back({map_.positions[static_cast<std::size_t>(landmark)].cast<double>(), {keypoint.pt.x, keypoint.pt.y},
-                            config_.pixel_sigma * std::pow(config_.features.scale_factor, keypoint.octave)});
+                            config_.pixel_sigma * std::pow(scale_factor_, keypoint.octave)});
   }
   if (observations.size() < 6) return {T_camera_world, {}, 0};
   return refine_pose(T_camera_world, observations, camera_);
 }
 
+std::vector<std::pair<double, int>> MapRelocalizer::rank_keyframes(const ImageFeatures& features) const {
+  std::vector<std::pair<double, int>> ranked;
+  if (binary()) {
+    const BowVector words = vocabulary_->transform(features.descriptors);
+    for (std::size_t k = 0; k < keyframe_words_.size(); ++k) ranked.emplace_back(Vocabulary::score(words, keyframe_words_[k]), static_cast<int>(k));
+  } else if (place_model_) {
+    const Result<Eigen::VectorXf> query = place_model_->describe(features.descriptors);
+    if (!query) return {};
+    for (std::size_t k = 0; k < keyframe_vlad_.size(); ++k) ranked.emplace_back(VladModel::similarity(*query, keyframe_vlad_[k]), static_cast<int>(k));
+  } else {
+    // Each keyframe scores the share of its landmarks that the image's descriptors match.
+    DescriptorMatcherConfig matcher;
+    matcher.float_ratio = kFloatRatio;
+    matcher.max_float_distance = kMaxFloatDistance;
+    std::vector<char> matched(map_.positions.size(), 0);
+    for (const FeatureMatch& match : match_descriptors(descriptors_, features.descriptors, matcher)) matched[static_cast<std::size_t>(match.query)] = 1;
+    for (std::size_t k = 0; k < map_.keyframes.size(); ++k) {
+      const std::vector<uint32_t>& seen = map_.keyframes[k].landmarks;
+      const auto hits = std::count_if(seen.begin(), seen.end(), [&](uint32_t landmark) { return matched[landmark] != 0; });
+      ranked.emplace_back(seen.empty() ? 0.0 : static_cast<double>(hits) / static_cast<double>(seen.size()), static_cast<int>(k));
+    }
+  }
+  std::sort(ranked.begin(), ranked.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  ranked.resize(std::min<std::size_t>(ranked.size(), static_cast<std::size_t>(config_.candidates)));
+  return ranked;
+}
+
 Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const {
-  Result<ImageFeatures> extracted = OrbExtractor(config_.features).extract(image);
+  Result<ImageFeatures> extracted = extractor_->extract(image);
   if (!extracted) return extracted.error();
   const ImageFeatures& features = *extracted;
   if (features.size() < static_cast<std::size_t>(config_.min_inliers)) {
     return Error(fmt::format("relocalization: {} features in the image (< {})", features.size(), config_.min_inliers));
   }
-  const BowVector words = vocabulary_->transform(features.descriptors);
-  std::vector<std::pair<double, int>> ranked;
-  for (std::size_t k = 0; k < keyframe_words_.size(); ++k) ranked.emplace_back(Vocabulary::score(words, keyframe_words_[k]), static_cast<int>(k));
-  std::sort(ranked.begin(), ranked.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
-  ranked.resize(std::min<std::size_t>(ranked.size(), static_cast<std::size_t>(config_.candidates)));
+  const std::vector<std::pair<double, int>> ranked = rank_keyframes(features);
+  const std::string place_recognition = binary() ? "bow" : place_model_ ? "learned" : "matches";
 
   std::vector<Eigen::Vector2d> normalized;
   for (const cv::KeyPoint& keypoint : features.keypoints) {
@@ -119,6 +193,8 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
     DescriptorMatcherConfig matcher;
     matcher.ratio = 0.75;
     matcher.max_distance = 50;
+    matcher.float_ratio = kFloatRatio;
+    matcher.max_float_distance = kMaxFloatDistance;
     std::vector<cv::Point3d> object_points;
     std::vector<cv::Point2d> image_points;
     std::vector<PoseObservation> observations;
@@ -129,7 +205,7 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
       object_points.emplace_back(p.x(), p.y(), p.z());
       image_points.emplace_back(normalized[k].x(), normalized[k].y());
       const cv::KeyPoint& keypoint = features.keypoints[k];
-      observations.push_back({p, {keypoint.pt.x, keypoint.pt.y}, config_.pixel_sigma * std::pow(config_.features.scale_factor, keypoint.octave)});
+      observations.push_back({p, {keypoint.pt.x, keypoint.pt.y}, config_.pixel_sigma * std::pow(scale_factor_, keypoint.octave)});
     }
     if (static_cast<int>(object_points.size()) < config_.min_inliers) continue;
     const std::optional<PnpSolution> solved = solve_pnp_ransac(object_points, image_points, 2.0 * config_.pixel_sigma / camera_.fx, 500);
@@ -137,7 +213,11 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
       best_inliers = std::max(best_inliers, solved ? static_cast<int>(solved->inliers.size()) : 0);
       continue;
     }
-    PoseRefinement refined = refine_pose(solved->T_camera_world, observations, camera_);
+    // Refined on the PnP inliers: with many wrong matches among all, Gauss-Newton from the PnP
+    // pose can be pulled away before the outlier rounds drop them.
+    std::vector<PoseObservation> inlier_observations;
+    for (const int inlier : solved->inliers) inlier_observations.push_back(observations[static_cast<std::size_t>(inlier)]);
+    PoseRefinement refined = refine_pose(solved->T_camera_world, inlier_observations, camera_);
     best_inliers = std::max(best_inliers, refined.inliers);
     if (refined.inliers < config_.min_inliers) continue;
     // Every map landmark the pose brings into view, matched by projection, then the pose refined
@@ -147,7 +227,7 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
       if (guided.inliers < refined.inliers) break;
       refined = guided;
     }
-    if (!best || refined.inliers > best->inliers) best = MapRelocalization{refined.T_camera_world.inverse(), refined.inliers, candidate, score};
+    if (!best || refined.inliers > best->inliers) best = MapRelocalization{refined.T_camera_world.inverse(), refined.inliers, candidate, score, place_recognition};
   }
   if (best) return *best;
   return Error(fmt::format("relocalization: no pose with {} inliers among the {} most similar keyframes (best {})", config_.min_inliers, ranked.size(), best_inliers));

@@ -76,18 +76,26 @@ TEST(LearnedOdometry, LoopClosureUsesTheVladModelOfItsFeatures) {
 }
 
 // The landmark layer of a learned map carries the float descriptors and survives a map file
-// exactly; relocalization (ORB descriptors) refuses it by name.
+// exactly; relocalization with the map's features (candidates by VLAD, or by matched landmarks)
+// places a later frame the map never saw where the odometry tracked it; ORB features are refused.
 TEST(LearnedOdometry, LandmarkLayerKeepsFloatDescriptorsThroughAMapFile) {
   vision::sequences::Sequence sequence = vision::sequences::kitti_odometry_06();
-  sequence.images.resize(12);
-  sequence.times.resize(12);
   vision::VisualOdometryConfig config;
   config.extractor = aliked_t16();
   auto odometry = vision::VisualOdometry::create(sequence.camera, {1226, 370}, config).value();
-  for (std::size_t i = 0; i < sequence.images.size(); ++i) ASSERT_TRUE(odometry->track(sequence.times[i], cv::imread(sequence.images[i])));
+  constexpr std::size_t kMapped = 12, kQuery = 15;  // frames in the map; the frame placed in it
   msgs::FusionMap map;
   map.map_id = "learned";
-  map.visual_landmarks = odometry->landmark_layer("cam0");
+  SE3 T_world_query;  // the odometry's pose of the query frame (the world: the first camera's frame)
+  for (std::size_t i = 0; i <= kQuery; ++i) {
+    if (i == kMapped) map.visual_landmarks = odometry->landmark_layer("cam0");
+    const Result<vision::VisualOdometryFrame> frame = odometry->track(sequence.times[i], cv::imread(sequence.images[i]));
+    ASSERT_TRUE(frame) << i;
+    if (i == kQuery) {
+      ASSERT_EQ(frame->state, vision::TrackingState::kTracking);
+      T_world_query = frame->T_world_camera;
+    }
+  }
   const msgs::VisualLandmarkLayer& layer = *map.visual_landmarks;
   ASSERT_GT(layer.positions.size(), 100u);
   EXPECT_EQ(layer.descriptor_type, "aliked-t16");
@@ -103,9 +111,29 @@ TEST(LearnedOdometry, LandmarkLayerKeepsFloatDescriptorsThroughAMapFile) {
   EXPECT_EQ(loaded.visual_landmarks->descriptor_type, "aliked-t16");
   EXPECT_EQ(loaded.visual_landmarks->float_descriptors, layer.float_descriptors);
   EXPECT_EQ(loaded.visual_landmarks->positions, layer.positions);
-  const Result<vision::MapRelocalizer> relocalizer = vision::MapRelocalizer::create(layer, sequence.camera);
-  ASSERT_FALSE(relocalizer);
-  EXPECT_NE(relocalizer.error().message.find("aliked-t16 descriptors"), std::string::npos) << relocalizer.error().message;
+
+  const Result<vision::MapRelocalizer> orb = vision::MapRelocalizer::create(*loaded.visual_landmarks, sequence.camera);
+  ASSERT_FALSE(orb);
+  EXPECT_NE(orb.error().message.find("carry aliked-t16 descriptors, the image's features are orb's"), std::string::npos) << orb.error().message;
+
+  const double travelled = T_world_query.translation().norm();
+  const cv::Mat query = cv::imread(sequence.images[kQuery]);
+  for (const bool learned_place_recognition : {true, false}) {
+    vision::MapRelocalizerConfig relocalization;
+    relocalization.extractor = aliked_t16();
+    relocalization.learned_place_recognition = learned_place_recognition;
+    const auto relocalizer = vision::MapRelocalizer::create(*loaded.visual_landmarks, sequence.camera, relocalization);
+    ASSERT_TRUE(relocalizer) << relocalizer.error().message;
+    const Result<vision::MapRelocalization> placed = relocalizer->relocalize(query);
+    ASSERT_TRUE(placed) << placed.error().message;
+    EXPECT_EQ(placed->place_recognition, learned_place_recognition ? "learned" : "matches");
+    const SE3 error = T_world_query.inverse() * placed->T_world_camera;
+    std::printf("relocalized frame %zu (%s): %d inliers, %.3f of %.3f map units travelled, %.2f deg\n", kQuery, placed->place_recognition.c_str(),
+                placed->inliers, error.translation().norm(), travelled, error.rotation().log().norm() * 180.0 / M_PI);
+    EXPECT_GE(placed->inliers, 50);
+    EXPECT_LT(error.translation().norm(), 0.03 * travelled);
+    EXPECT_LT(error.rotation().log().norm(), 0.5 * M_PI / 180.0);
+  }
 }
 
 // The visual-inertial tracker takes its new features from a learned detector: they are the

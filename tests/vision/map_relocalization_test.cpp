@@ -185,12 +185,12 @@ TEST(VisualLandmarkMap, RelocalizesViewsTwoMetresAndThirtyDegreesFromEveryKeyfra
       if (local.translation().norm() < 0.3 && local.rotation().angle() < 2 * kDegree) ++placed_views;
     }
   }
-  // Measured (bench/RESULTS.md): 15 such views, 11 given a pose, 2 of them within 0.3 m and
-  // 2 degrees of the truth relative to the nearest keyframe; the others 0.5-1.9 m off. The goal
+  // Measured (bench/RESULTS.md): 15 such views, 8 given a pose, 5 of them within 0.3 m and
+  // 2 degrees of the truth relative to the nearest keyframe; the other 3 1.0-1.6 m off. The goal
   // (every such view placed) is not met.
   std::printf("placed %d of %d views within 0.3 m / 2 deg\n", placed_views, tried);
   EXPECT_GE(tried, 10);
-  EXPECT_GE(placed_views, 2);
+  EXPECT_GE(placed_views, 4);
 }
 
 TEST(VisualLandmarkMap, BadLayersAreRefusedNamingTheField) {

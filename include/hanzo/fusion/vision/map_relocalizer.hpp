@@ -2,8 +2,13 @@
 // MapRelocalizer: places a camera image in a saved visual landmark map (the FusionMap's
 // visual_landmarks layer, written from VisualOdometry::landmark_layer).
 //
-//   1. Each map keyframe's bag of words is built from the descriptors of the landmarks it sees;
-//      the image's ORB features query them (vision/place_database.hpp) for the `candidates` best.
+//   1. The `candidates` map keyframes most like the image. ORB maps: each keyframe's bag of words
+//      is built from the descriptors of the landmarks it sees and the image's ORB features query
+//      them (vision/place_database.hpp). Learned maps (float descriptors, e.g. aliked-t16): each
+//      keyframe's VLAD vector is aggregated from its landmarks' descriptors and compared with the
+//      image's (vision/vlad.hpp); without a VLAD model for the map's features, the image's
+//      descriptors are matched to every map landmark and each keyframe scores the share of its
+//      landmarks matched.
 //   2. For each candidate, the landmarks of it and its `neighbour_keyframes` neighbours on each
 //      side are matched to the image's keypoints by descriptor (ratio 0.9, mutual) and the pose is
 //      solved by PnP RANSAC on undistorted bearings, then refined by Gauss-Newton on the
@@ -15,8 +20,9 @@
 //
 // Frames: the map's world frame (the odometry's: its first keyframe's camera frame, or the
 // Session's world); the result is T_world_camera of the image's camera (optical frame).
-// Failures: create() refuses a layer without landmarks or keyframes and a camera without
-// positive focal lengths; relocalize() returns an Error naming why no pose was found (no
+// Failures: create() refuses a layer without landmarks or keyframes, descriptors that do not
+// fit the landmarks, an extractor (or VLAD model) of other features than the map's and a camera
+// without positive focal lengths; relocalize() returns an Error naming why no pose was found (no
 // features, no candidate, too few inliers) and never changes the map.
 
 #include <memory>
@@ -29,13 +35,19 @@
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/msgs/map_messages.hpp"
+#include "hanzo/fusion/vision/feature_extractor.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
 #include "hanzo/fusion/vision/vocabulary.hpp"
+#include "hanzo/fusion/vision/vlad.hpp"
 
 namespace hanzo::fusion::vision {
 
 struct MapRelocalizerConfig {
-  /// Features of the query image (more than tracking uses: the view may be far from the map's).
+  /// The query image's features for a map of learned features: an extractor whose name() is the
+  /// map's descriptor_type (pipeline/feature_extractors.hpp makes one from the name). Null: ORB
+  /// with `features` (an ORB map only).
+  std::shared_ptr<const FeatureExtractor> extractor;
+  /// ORB features of the query image (more than tracking uses: the view may be far from the map's).
   OrbExtractorConfig features = [] {
     OrbExtractorConfig config;
     config.max_features = 2000;
@@ -50,15 +62,21 @@ struct MapRelocalizerConfig {
   /// short baseline is mostly off along its ray, and from another viewpoint it pulls the pose
   /// back toward the one that made it. 0: use all.
   double max_landmark_std = 0.1;
-  /// Null: the default vocabulary (Vocabulary::load_default).
+  /// ORB maps. Null: the default vocabulary (Vocabulary::load_default).
   std::shared_ptr<const Vocabulary> vocabulary;
+  /// Learned maps: the VLAD model of the map's features. Null: VladModel::load_default(the map's
+  /// descriptor_type), and when there is none, candidates by matched landmarks.
+  std::shared_ptr<const VladModel> place_model;
+  /// Learned maps: false ranks candidates by matched landmarks even where a VLAD model exists.
+  bool learned_place_recognition = true;
 };
 
 struct MapRelocalization {
   SE3 T_world_camera;
   int inliers = 0;
   int keyframe = 0;       ///< index of the map keyframe that placed it
-  double score = 0.0;     ///< its bag-of-words score
+  double score = 0.0;     ///< its place score (bag of words, VLAD cosine, or share of its landmarks matched)
+  std::string place_recognition;  ///< how candidates were found: "bow", "learned" (VLAD) or "matches"
 };
 
 class KeypointGrid;
@@ -82,9 +100,15 @@ class MapRelocalizer {
   msgs::VisualLandmarkLayer map_;
   PinholeCamera camera_;
   MapRelocalizerConfig config_;
-  std::shared_ptr<const Vocabulary> vocabulary_;
-  std::vector<BowVector> keyframe_words_;
-  cv::Mat descriptors_;  // one row per landmark
+  std::vector<std::pair<double, int>> rank_keyframes(const ImageFeatures& features) const;  // best `candidates` first
+  bool binary() const { return descriptors_.type() == CV_8UC1; }
+  std::shared_ptr<const FeatureExtractor> extractor_;
+  std::shared_ptr<const Vocabulary> vocabulary_;      // ORB maps
+  std::vector<BowVector> keyframe_words_;             // ORB maps
+  std::shared_ptr<const VladModel> place_model_;      // learned maps with a VLAD model
+  std::vector<Eigen::VectorXf> keyframe_vlad_;        // learned maps with a VLAD model
+  double scale_factor_ = 1.0;  // the extractor's pyramid scale per octave (ORB)
+  cv::Mat descriptors_;  // one row per landmark: CV_8UC1 32 bytes (ORB) or CV_32FC1 (learned)
 };
 
 }  // namespace hanzo::fusion::vision

@@ -1,0 +1,112 @@
+#pragma once
+// SplatTrainer: optimizes a GaussianCloud so that its renders match posed images (3D Gaussian
+// splatting, Kerbl et al., SIGGRAPH 2023, Sec. 5).
+//
+// Each step renders one view (splat_rasterizer.hpp), takes the loss
+//   L = (1 - ssim_weight) |render - image|_1 + ssim_weight (1 - SSIM(render, image))   (paper eq. 7)
+// (means over pixels and channels), back-propagates it and moves every parameter by Adam with
+// its own learning rate; the positions' rate decays exponentially from position_lr_initial to
+// position_lr_final over the run and is multiplied by the scene extent. The spherical harmonics'
+// active degree grows by one every sh_degree_interval steps.
+// Adaptive density control (paper Sec. 5.2), every densify_interval steps between densify_from
+// and densify_until: Gaussians whose mean view-space gradient (normalized device coordinates)
+// reaches densify_gradient_threshold are cloned when small (largest scale <= dense_percent x
+// extent) and split in two (scales / 1.6, positions drawn from the Gaussian) when large; those
+// with opacity under min_opacity, or (after the first opacity reset) larger than a tenth of the
+// extent, are removed; max_gaussians caps the count. Every opacity_reset_interval steps the
+// opacities are lowered to at most 0.01.
+//
+// Deterministic for a seed: views are visited in a seeded random order, splits draw from a
+// seeded generator, and the rasterizer's gradients do not depend on the thread schedule.
+
+#include <cstdint>
+#include <functional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/neural/gaussian_cloud.hpp"
+#include "hanzo/fusion/neural/splat_rasterizer.hpp"
+#include "hanzo/fusion/neural/view_dataset.hpp"
+
+namespace hanzo::fusion::neural {
+
+struct SplatTrainingConfig {
+  int iterations = 7000;          ///< steps (one view each)
+  int sh_degree = 3;              ///< degree of the colour's spherical harmonics (0..3)
+  int sh_degree_interval = 1000;  ///< steps between raising the active degree
+  double position_lr_initial = 1.6e-4;  ///< x scene extent
+  double position_lr_final = 1.6e-6;    ///< x scene extent
+  double sh_dc_lr = 2.5e-3;
+  double sh_rest_lr = 2.5e-3 / 20.0;
+  double opacity_lr = 0.025;
+  double scale_lr = 5e-3;
+  double rotation_lr = 1e-3;
+  double ssim_weight = 0.2;
+  int densify_from = 500;
+  int densify_until = 0;  ///< 0: half the iterations
+  int densify_interval = 100;
+  int opacity_reset_interval = 3000;
+  double densify_gradient_threshold = 2e-4;
+  double dense_percent = 0.01;
+  double min_opacity = 0.005;
+  int max_gaussians = 500000;
+  int initial_gaussians = 50000;  ///< random initialization when there are no points
+  uint64_t seed = 1;
+  RasterizerConfig rasterizer;    ///< background and near plane (the active degree is the trainer's)
+};
+
+Status validate(const SplatTrainingConfig& config);
+
+/// Gaussians spread uniformly in the cube of half-size `half_size` around `centre`, grey, opacity
+/// 0.1, isotropic with about the spacing of their neighbours. With views that carry masks
+/// (RGBA), only points inside every view's foreground that sees them are kept (the visual hull).
+GaussianCloud initialize_gaussians(const std::vector<PosedView>& views, const Eigen::Vector3d& centre, double half_size, int count, int sh_degree,
+                                   uint64_t seed);
+
+class SplatTrainer {
+ public:
+  /// `scene_extent`: the scene's size for the learning rates and densification (scene units).
+  static Result<SplatTrainer> create(GaussianCloud initial, double scene_extent, SplatTrainingConfig config);
+
+  /// One step on `view` (its image and camera). Returns the loss.
+  double step(const PosedView& view);
+
+  const GaussianCloud& cloud() const { return cloud_; }
+  int iteration() const { return iteration_; }
+  const SplatTrainingConfig& config() const { return config_; }
+  RasterizerConfig render_config() const;  ///< the rasterizer settings at the current step
+
+ private:
+  SplatTrainer() = default;
+  void densify_and_prune();
+  void reset_opacity();
+  void apply_keep(const std::vector<bool>& keep);
+  void append_gaussians(const std::vector<std::size_t>& sources, bool split);
+
+  GaussianCloud cloud_;
+  double extent_ = 1.0;
+  SplatTrainingConfig config_;
+  int iteration_ = 0;
+  GaussianGradients gradients_;
+  std::vector<std::vector<float>> adam_m_, adam_v_;  // per parameter group
+  std::vector<float> densify_gradient_sum_;
+  std::vector<int> densify_count_;
+  std::mt19937_64 random_;
+};
+
+struct ViewScore {
+  std::string name;
+  double psnr = 0.0, ssim = 0.0;
+};
+struct EvaluationSummary {
+  std::vector<ViewScore> views;
+  double mean_psnr = 0.0, mean_ssim = 0.0;
+  double seconds_per_view = 0.0;  ///< rendering only
+};
+
+/// Renders every view that has an image and scores it (PSNR, SSIM).
+EvaluationSummary evaluate_splats(const GaussianCloud& cloud, const std::vector<PosedView>& views, const RasterizerConfig& config);
+
+}  // namespace hanzo::fusion::neural
