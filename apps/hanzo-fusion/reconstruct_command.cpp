@@ -17,11 +17,11 @@
 #include <fmt/format.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 
 #include "commands.hpp"
 #include "hanzo/fusion/core/files.hpp"
+#include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/neural/splat_ply.hpp"
 #include "hanzo/fusion/neural/splat_trainer.hpp"
 #include "hanzo/fusion/neural/view_dataset.hpp"
@@ -44,6 +44,7 @@ struct ReconstructOptions {
   int threads = 0;
   double progress_seconds = 10.0;
   double max_seconds = 0.0;  // 0: no limit
+  double coarse_share = 0.5;  // share of the first steps trained at half resolution
 };
 
 struct RenderOptions {
@@ -81,6 +82,16 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
   dataset_config.skip_every = options.hold_every;
   Result<neural::ViewDataset> train = neural::load_transforms(options.transforms, dataset_config);
   if (!train) return report_failure(output, result, train.error().message);
+  // Coarse to fine: the first steps see the images at half resolution (a quarter of the pixels).
+  std::vector<neural::PosedView> coarse_views;
+  if (options.coarse_share > 0.0 && train->views.front().camera.width >= 64) {
+    neural::ViewDatasetConfig coarse_config = dataset_config;
+    coarse_config.downscale = 2 * options.downscale;
+    Result<neural::ViewDataset> coarse = neural::load_transforms(options.transforms, coarse_config);
+    if (!coarse) return report_failure(output, result, coarse.error().message);
+    coarse_views = std::move(coarse->views);
+  }
+  const int coarse_steps = coarse_views.empty() ? 0 : static_cast<int>(options.coarse_share * options.iterations);
   std::vector<neural::PosedView> held_back;
   if (!options.eval.empty() || options.hold_every > 0) {
     neural::ViewDatasetConfig eval_config = dataset_config;
@@ -118,7 +129,7 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
   int steps = 0;
   for (int iteration = 0; iteration < config.iterations; ++iteration) {
     if (options.max_seconds > 0.0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= options.max_seconds) {
-      spdlog::warn("reconstruct splats: stopped after {} of {} steps (--max-seconds {})", iteration, config.iterations, options.max_seconds);
+      logger()->warn("reconstruct splats: stopped after {} of {} steps (--max-seconds {})", iteration, config.iterations, options.max_seconds);
       break;
     }
     if (order.empty()) {
@@ -128,7 +139,7 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
     }
     const std::size_t view = order.back();
     order.pop_back();
-    const double loss = trainer->step(train->views[view]);
+    const double loss = trainer->step(iteration < coarse_steps ? coarse_views[view] : train->views[view]);
     if (!std::isfinite(loss)) return report_failure(output, result, fmt::format("training diverged at step {} (loss {})", iteration + 1, loss));
     loss_sum += loss;
     ++loss_count;
@@ -136,9 +147,11 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
     const auto now = std::chrono::steady_clock::now();
     if (std::chrono::duration<double>(now - last_report).count() >= options.progress_seconds || iteration + 1 == config.iterations) {
       const double seconds = std::chrono::duration<double>(now - start).count();
-      const double left = seconds / (iteration + 1) * (config.iterations - iteration - 1);
-      spdlog::info("reconstruct splats: step {}/{}, loss {:.4f}, {} Gaussians, {:.0f} s, about {:.0f} s left", iteration + 1, config.iterations,
-                   loss_sum / loss_count, trainer->cloud().size(), seconds, left);
+      // Time left by work done: a half-resolution step counts a quarter of a full one.
+      const auto work = [&](int step) { return 0.25 * std::min(step, coarse_steps) + std::max(0, step - coarse_steps); };
+      const double left = seconds / work(iteration + 1) * (work(config.iterations) - work(iteration + 1));
+      fmt::print(stderr, "reconstruct splats: step {}/{}, loss {:.4f}, {} Gaussians, {:.0f} s, about {:.0f} s left\n", iteration + 1, config.iterations,
+                 loss_sum / loss_count, trainer->cloud().size(), seconds, left);
       loss_sum = 0.0;
       loss_count = 0;
       last_report = now;
@@ -256,6 +269,7 @@ void add_reconstruct_command(CLI::App& app, const Output& output, Command& run) 
   splats_app->add_option("--background", splats->background, "Behind transparent pixels and the Gaussians: white or black");
   splats_app->add_option("--seed", splats->seed, "Random seed (initialization, view order, splits)");
   splats_app->add_option("--threads", splats->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
+  splats_app->add_option("--coarse-share", splats->coarse_share, "Share of the first steps trained at half resolution (0: none)")->check(CLI::Range(0.0, 1.0));
   splats_app->add_option("--max-seconds", splats->max_seconds, "Stop training after this many seconds (0: run every step)")->check(CLI::Range(0.0, 1e7));
   splats_app->add_option("--progress-seconds", splats->progress_seconds, "Seconds between progress lines on stderr")->check(CLI::Range(0.0, 1e6));
   splats_app->callback([&output, &run, splats] { run = [&output, splats] { return run_reconstruct_splats(output, *splats); }; });

@@ -22,9 +22,10 @@ enum Group { kPosition = 0, kLogScale, kRotation, kOpacity, kSh, kGroups };
 Status validate(const SplatTrainingConfig& config) {
   if (config.iterations < 1) return Error("SplatTrainingConfig.iterations: must be >= 1", "iterations");
   if (config.sh_degree < 0 || config.sh_degree > kMaxShDegree) return Error("SplatTrainingConfig.sh_degree: must be 0..3", "sh_degree");
-  if (config.sh_degree_interval < 1 || config.densify_interval < 1 || config.opacity_reset_interval < 1) {
-    return Error("SplatTrainingConfig: sh_degree_interval, densify_interval and opacity_reset_interval must be >= 1");
+  if (config.sh_degree_interval < 1 || config.densify_interval < 1 || config.opacity_reset_interval < 0 || config.densify_from < 0 || config.densify_until < 0) {
+    return Error("SplatTrainingConfig: sh_degree_interval and densify_interval must be >= 1, densify_from, densify_until and opacity_reset_interval >= 0");
   }
+  if (!(config.max_screen_share > 0.0)) return Error("SplatTrainingConfig.max_screen_share: must be > 0", "max_screen_share");
   for (double rate : {config.position_lr_initial, config.position_lr_final, config.sh_dc_lr, config.sh_rest_lr, config.opacity_lr, config.scale_lr,
                       config.rotation_lr}) {
     if (!(rate >= 0.0 && std::isfinite(rate))) return Error("SplatTrainingConfig: learning rates must be finite and >= 0");
@@ -82,6 +83,8 @@ Result<SplatTrainer> SplatTrainer::create(GaussianCloud initial, double scene_ex
   if (initial.sh_degree != config.sh_degree) return Error(fmt::format("SplatTrainer: the initial Gaussians are of degree {}, the config's {}", initial.sh_degree, config.sh_degree));
   if (!(scene_extent > 0.0 && std::isfinite(scene_extent))) return Error("SplatTrainer: the scene extent must be positive");
   if (config.densify_until == 0) config.densify_until = config.iterations / 2;
+  if (config.densify_from == 0) config.densify_from = std::min(500, config.iterations / 10);
+  if (config.opacity_reset_interval == 0) config.opacity_reset_interval = std::max(1000, config.iterations / 10);
   SplatTrainer trainer;
   trainer.cloud_ = std::move(initial);
   trainer.extent_ = scene_extent;
@@ -94,6 +97,7 @@ Result<SplatTrainer> SplatTrainer::create(GaussianCloud initial, double scene_ex
   }
   trainer.densify_gradient_sum_.assign(trainer.cloud_.size(), 0.0f);
   trainer.densify_count_.assign(trainer.cloud_.size(), 0);
+  trainer.max_screen_share_.assign(trainer.cloud_.size(), 0.0f);
   return trainer;
 }
 
@@ -152,10 +156,12 @@ double SplatTrainer::step(const PosedView& view) {
       values[i] -= static_cast<float>(lr * (m[i] / bias1) / (std::sqrt(v[i] / bias2) + kAdamEpsilon));
     }
   }
+  const float image_size = static_cast<float>(std::max(render.width, render.height));
   for (std::size_t i = 0; i < cloud_.size(); ++i) {
     if (gradients_.visible_views[i] == 0) continue;
     densify_gradient_sum_[i] += gradients_.screen_gradient_norm[i];
     densify_count_[i] += 1;
+    max_screen_share_[i] = std::max(max_screen_share_[i], static_cast<float>(render.radius[i]) / image_size);
   }
 
   if (iteration_ < config_.densify_until && iteration_ >= config_.densify_from && iteration_ % config_.densify_interval == 0) densify_and_prune();
@@ -237,11 +243,14 @@ void SplatTrainer::densify_and_prune() {
   const bool prune_large = iteration_ > config_.opacity_reset_interval;
   for (std::size_t i = 0; i < cloud_.size(); ++i) {
     if (sigmoid(cloud_.opacity_logit[i]) < config_.min_opacity) keep[i] = false;
-    if (prune_large && std::exp(Eigen::Map<const Eigen::Vector3f>(&cloud_.log_scale[3 * i]).maxCoeff()) > 0.1 * extent_) keep[i] = false;
+    if (!prune_large) continue;
+    if (std::exp(Eigen::Map<const Eigen::Vector3f>(&cloud_.log_scale[3 * i]).maxCoeff()) > 0.1 * extent_) keep[i] = false;
+    if (i < max_screen_share_.size() && max_screen_share_[i] > config_.max_screen_share) keep[i] = false;  // new ones have no record yet
   }
   apply_keep(keep);
   densify_gradient_sum_.assign(cloud_.size(), 0.0f);
   densify_count_.assign(cloud_.size(), 0);
+  max_screen_share_.assign(cloud_.size(), 0.0f);
 }
 
 void SplatTrainer::reset_opacity() {

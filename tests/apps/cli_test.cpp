@@ -20,6 +20,7 @@
 #include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 namespace {
 
@@ -1434,6 +1435,56 @@ TEST(Cli, CalibCameraRecoversTheLensOfTheCheckerboardScenario) {
   EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --board 99999999999x6", d)).err, HasSubstr("COLUMNSxROWS"));  // beyond an int
   EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --board 8x", d)).err, HasSubstr("COLUMNSxROWS"));
   EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --model pinhole", d)).err, HasSubstr("radtan or equidistant"));
+  std::filesystem::remove_all(dir);
+}
+
+// Gaussian splats from the command line (AI builds): the lego renders at an eighth of their size,
+// every 4th frame held back and scored; render writes one PNG (and depth) per frame of a poses
+// file in its order and scores them; a poses file that names no images still renders; bad
+// input gets one line.
+TEST(Cli, ReconstructSplatsAndRenderThemAtAPosesFile) {
+  if (run("reconstruct --help").exit_code != 0) GTEST_SKIP() << "built without HANZO_FUSION_AI";
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_splats_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  const std::string lego = std::string(HANZO_DATA_DIR) + "/nerf_lego_400";
+  const CliRun trained = run(fmt::format("reconstruct splats {}/transforms_train.json --out {}/splats --downscale 8 --iterations 300 "
+                                         "--initial-gaussians 5000 --hold-every 4 --json",
+                                         lego, dir.string()));
+  ASSERT_EQ(trained.exit_code, 0) << trained.err;
+  const nlohmann::json result = nlohmann::json::parse(trained.out);
+  EXPECT_EQ(result["train_views"], 75);
+  EXPECT_EQ(result["eval"]["views"], 25);
+  EXPECT_EQ(result["iterations"], 300);
+  EXPECT_GT(result["eval"]["psnr"].get<double>(), 18.0);
+  EXPECT_TRUE(std::filesystem::exists(dir / "splats" / "reconstruction.json"));
+  EXPECT_THAT(trained.err, HasSubstr("step 300/300"));  // progress on stderr
+
+  const CliRun rendered = run(fmt::format("render {}/splats --poses {}/transforms_val.json --out {}/views --downscale 8 --depth --json", dir.string(), lego,
+                                          dir.string()));
+  ASSERT_EQ(rendered.exit_code, 0) << rendered.err;
+  const nlohmann::json views = nlohmann::json::parse(rendered.out);
+  EXPECT_EQ(views["views"], 25);
+  EXPECT_EQ(views["files"][24]["frame"], "./val/r_96");
+  EXPECT_GT(views["eval"]["psnr"].get<double>(), 18.0);
+  const cv::Mat first = cv::imread((dir / "views" / "0000.png").string());
+  EXPECT_EQ(first.cols, 50);
+  EXPECT_EQ(cv::imread((dir / "views" / "0024_depth.png").string(), cv::IMREAD_UNCHANGED).type(), CV_16UC1);
+
+  // Poses without images (a camera path): rendered, not scored.
+  std::ofstream(dir / "path.json") << R"({"camera_angle_x": 0.69, "w": 400, "h": 400, "frames": [{"file_path": "none", "transform_matrix": )"
+                                   << R"([[1,0,0,0],[0,0,-1,-4],[0,1,0,0],[0,0,0,1]]}]})";
+  const CliRun path = run(fmt::format("render {}/splats --poses {}/path.json --out {}/path --json", dir.string(), dir.string(), dir.string()));
+  ASSERT_EQ(path.exit_code, 0) << path.err;
+  EXPECT_FALSE(nlohmann::json::parse(path.out).contains("eval"));
+  EXPECT_EQ(cv::imread((dir / "path" / "0000.png").string()).cols, 400);
+
+  const CliRun missing = run(fmt::format("reconstruct splats {}/nothing.json --out {}/x", dir.string(), dir.string()));
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_THAT(missing.err, HasSubstr("nothing.json"));
+  EXPECT_EQ(std::count(missing.err.begin(), missing.err.end(), '\n'), 1);
+  const CliRun not_splats = run(fmt::format("render {}/transforms_val.json --poses {}/transforms_val.json --out {}/y", lego, lego, dir.string()));
+  EXPECT_EQ(not_splats.exit_code, 1);
+  EXPECT_THAT(not_splats.err, HasSubstr("not a PLY file"));
   std::filesystem::remove_all(dir);
 }
 

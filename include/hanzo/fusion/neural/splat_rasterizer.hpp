@@ -43,7 +43,7 @@ struct SplatCamera {
 
 struct RasterizerConfig {
   Eigen::Vector3f background = Eigen::Vector3f::Ones();  ///< colour behind every Gaussian (0..1)
-  double near = 0.01;          ///< Gaussians closer than this (scene units along z) are skipped
+  double near = 0.2;           ///< Gaussians closer than this (scene units along z) are skipped, as the reference does
   double low_pass = 0.3;       ///< pixels^2 added to the 2D covariance's diagonal (anti-aliasing)
   int active_sh_degree = 3;    ///< SH degree used (<= the cloud's): the trainer raises it over time
   bool normalize_depth = true;  ///< depth divided by the accumulated alpha

@@ -13,7 +13,8 @@
 // reaches densify_gradient_threshold are cloned when small (largest scale <= dense_percent x
 // extent) and split in two (scales / 1.6, positions drawn from the Gaussian) when large; those
 // with opacity under min_opacity, or (after the first opacity reset) larger than a tenth of the
-// extent, are removed; max_gaussians caps the count. Every opacity_reset_interval steps the
+// extent or drawn wider than max_screen_share of the image since the last densification, are
+// removed (the floaters); max_gaussians caps the count. Every opacity_reset_interval steps the
 // opacities are lowered to at most 0.01.
 //
 // Deterministic for a seed: views are visited in a seeded random order, splits draw from a
@@ -33,7 +34,7 @@
 namespace hanzo::fusion::neural {
 
 struct SplatTrainingConfig {
-  int iterations = 7000;          ///< steps (one view each)
+  int iterations = 6000;          ///< steps (one view each)
   int sh_degree = 3;              ///< degree of the colour's spherical harmonics (0..3)
   int sh_degree_interval = 1000;  ///< steps between raising the active degree
   double position_lr_initial = 1.6e-4;  ///< x scene extent
@@ -44,10 +45,13 @@ struct SplatTrainingConfig {
   double scale_lr = 5e-3;
   double rotation_lr = 1e-3;
   double ssim_weight = 0.2;
-  int densify_from = 500;
-  int densify_until = 0;  ///< 0: half the iterations
+  // The reference's schedule (30,000 steps: densify from 500 to 15,000, reset every 3,000) in
+  // shares of the run, so that a short run still densifies, resets and prunes.
+  int densify_from = 0;            ///< 0: the smaller of 500 and a tenth of the iterations
+  int densify_until = 0;           ///< 0: half the iterations
   int densify_interval = 100;
-  int opacity_reset_interval = 3000;
+  int opacity_reset_interval = 0;  ///< 0: a tenth of the iterations, at least 1000
+  double max_screen_share = 0.025;  ///< after the first reset, Gaussians wider than this share of the image are removed
   double densify_gradient_threshold = 2e-4;
   double dense_percent = 0.01;
   double min_opacity = 0.005;
@@ -93,6 +97,7 @@ class SplatTrainer {
   std::vector<std::vector<float>> adam_m_, adam_v_;  // per parameter group
   std::vector<float> densify_gradient_sum_;
   std::vector<int> densify_count_;
+  std::vector<float> max_screen_share_;  // largest drawn radius / image size since the last densification
   std::mt19937_64 random_;
 };
 
