@@ -177,7 +177,7 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
   if (!held_back.empty()) {
     const neural::EvaluationSummary scores = neural::evaluate_splats(trainer->cloud(), held_back, render_config);
     result["eval"] = scores_json(scores);
-    text += fmt::format("held-back views: {} , PSNR {:.2f} dB, SSIM {:.4f}, {:.0f} ms per view\n", scores.views.size(), scores.mean_psnr, scores.mean_ssim,
+    text += fmt::format("held-back views: {}, PSNR {:.2f} dB, SSIM {:.4f}, {:.0f} ms per view\n", scores.views.size(), scores.mean_psnr, scores.mean_ssim,
                         1000.0 * scores.seconds_per_view);
   }
   const std::string provenance = (std::filesystem::path(options.out) / "reconstruction.json").string();

@@ -147,7 +147,8 @@ double SplatTrainer::step(const PosedView& view) {
     const double base_lr = group == kPosition ? position_lr : group == kLogScale ? config_.scale_lr : group == kRotation ? config_.rotation_lr
                                                             : group == kOpacity  ? config_.opacity_lr : config_.sh_dc_lr;
     for (std::size_t i = 0; i < values.size(); ++i) {
-      // Only Gaussians drawn in this view move (as the reference's sparse Adam update of the visible).
+      // Only parameters with a gradient in this view move (sparse Adam: Gaussians out of view keep
+      // their moments until they are seen again).
       const float g = gradient[i];
       if (g == 0.0f) continue;
       const double lr = group == kSh && static_cast<int>(i % static_cast<std::size_t>(sh_floats)) >= dc_floats ? config_.sh_rest_lr : base_lr;

