@@ -103,6 +103,25 @@ inline bool evaluate(const TileSplat& splat, float px, float py, float& dx, floa
   return alpha >= kMinAlpha;
 }
 
+// Runs visit(first list index of the tile, its splats, the row's splats, x, y, pixel index) for
+// every pixel, the tiles in parallel; both passes walk the same splats in the same order.
+template <typename Visit>
+void for_each_tile_pixel(const SplatRender& render, Visit&& visit) {
+  tbb::parallel_for(0, render.tiles_x * render.tiles_y, [&](int tile) {
+    const int tile_x = tile % render.tiles_x, tile_y = tile / render.tiles_x;
+    const uint32_t begin = render.tile_range[static_cast<std::size_t>(tile)], end = render.tile_range[static_cast<std::size_t>(tile) + 1];
+    thread_local std::vector<TileSplat> splats;
+    thread_local std::vector<uint32_t> row;
+    gather_tile(render, begin, end, splats);
+    for (int y = tile_y * kTileSize; y < std::min(render.height, (tile_y + 1) * kTileSize); ++y) {
+      gather_row(splats, static_cast<float>(y), row);
+      for (int x = tile_x * kTileSize; x < std::min(render.width, (tile_x + 1) * kTileSize); ++x) {
+        visit(begin, splats, row, x, y, static_cast<std::size_t>(y) * static_cast<std::size_t>(render.width) + static_cast<std::size_t>(x));
+      }
+    }
+  });
+}
+
 }  // namespace
 
 int SplatRender::drawn() const {
@@ -218,37 +237,26 @@ SplatRender render_splats(const GaussianCloud& cloud, const SplatCamera& camera_
   out.alpha.assign(pixels, 0.0f);
   out.final_transmittance.assign(pixels, 1.0f);
   out.contributors.assign(pixels, 0);
-  tbb::parallel_for(0, tile_count, [&](int tile) {
-    const int tile_x = tile % out.tiles_x, tile_y = tile / out.tiles_x;
-    const uint32_t begin = out.tile_range[static_cast<std::size_t>(tile)], end = out.tile_range[static_cast<std::size_t>(tile) + 1];
-    thread_local std::vector<TileSplat> splats;
-    thread_local std::vector<uint32_t> row;
-    gather_tile(out, begin, end, splats);
-    for (int y = tile_y * kTileSize; y < std::min(out.height, (tile_y + 1) * kTileSize); ++y) {
-      gather_row(splats, static_cast<float>(y), row);
-      for (int x = tile_x * kTileSize; x < std::min(out.width, (tile_x + 1) * kTileSize); ++x) {
-        float transmittance = 1.0f, depth = 0.0f;
-        Eigen::Vector3f colour = Eigen::Vector3f::Zero();
-        uint32_t walked = 0;
-        for (const uint32_t j : row) {
-          float dx = 0.0f, dy = 0.0f, gaussian = 0.0f, alpha = 0.0f;
-          if (!evaluate(splats[j], static_cast<float>(x), static_cast<float>(y), dx, dy, gaussian, alpha)) continue;
-          const float next = transmittance * (1.0f - alpha);
-          if (next < kMinTransmittance) break;
-          colour += splats[j].colour * (alpha * transmittance);
-          depth += splats[j].depth * alpha * transmittance;
-          transmittance = next;
-          walked = j + 1;
-        }
-        const std::size_t pixel = static_cast<std::size_t>(y) * static_cast<std::size_t>(out.width) + static_cast<std::size_t>(x);
-        const Eigen::Vector3f final_colour = colour + transmittance * config.background;
-        std::copy(final_colour.data(), final_colour.data() + 3, &out.image[3 * pixel]);
-        out.alpha[pixel] = 1.0f - transmittance;
-        out.depth[pixel] = config.normalize_depth && out.alpha[pixel] > 1e-6f ? depth / out.alpha[pixel] : depth;
-        out.final_transmittance[pixel] = transmittance;
-        out.contributors[pixel] = walked;
-      }
+  for_each_tile_pixel(out, [&](uint32_t, const std::vector<TileSplat>& splats, const std::vector<uint32_t>& row, int x, int y, std::size_t pixel) {
+    float transmittance = 1.0f, depth = 0.0f;
+    Eigen::Vector3f colour = Eigen::Vector3f::Zero();
+    uint32_t walked = 0;
+    for (const uint32_t j : row) {
+      float dx = 0.0f, dy = 0.0f, gaussian = 0.0f, alpha = 0.0f;
+      if (!evaluate(splats[j], static_cast<float>(x), static_cast<float>(y), dx, dy, gaussian, alpha)) continue;
+      const float next = transmittance * (1.0f - alpha);
+      if (next < kMinTransmittance) break;
+      colour += splats[j].colour * (alpha * transmittance);
+      depth += splats[j].depth * alpha * transmittance;
+      transmittance = next;
+      walked = j + 1;
     }
+    const Eigen::Vector3f final_colour = colour + transmittance * config.background;
+    std::copy(final_colour.data(), final_colour.data() + 3, &out.image[3 * pixel]);
+    out.alpha[pixel] = 1.0f - transmittance;
+    out.depth[pixel] = config.normalize_depth && out.alpha[pixel] > 1e-6f ? depth / out.alpha[pixel] : depth;
+    out.final_transmittance[pixel] = transmittance;
+    out.contributors[pixel] = walked;
   });
   return out;
 }
@@ -277,51 +285,39 @@ void render_splats_backward(const GaussianCloud& cloud, const SplatCamera& camer
   const auto n = static_cast<int>(cloud.size());
   const int degree = active_degree(cloud, config);
   const int coefficients = sh_coefficients(cloud.sh_degree);
-  const int tile_count = forward.tiles_x * forward.tiles_y;
   std::vector<float> slots(forward.tile_gaussians.size() * kSlot, 0.0f);
 
   // 1. Per pixel, back to front: dL/d(2D mean, conic, colour, opacity) into the pair's slot.
-  tbb::parallel_for(0, tile_count, [&](int tile) {
-    const int tile_x = tile % forward.tiles_x, tile_y = tile / forward.tiles_x;
-    const uint32_t begin = forward.tile_range[static_cast<std::size_t>(tile)], end = forward.tile_range[static_cast<std::size_t>(tile) + 1];
-    thread_local std::vector<TileSplat> splats;
-    thread_local std::vector<uint32_t> row;
-    gather_tile(forward, begin, end, splats);
-    for (int y = tile_y * kTileSize; y < std::min(forward.height, (tile_y + 1) * kTileSize); ++y) {
-      gather_row(splats, static_cast<float>(y), row);
-      for (int x = tile_x * kTileSize; x < std::min(forward.width, (tile_x + 1) * kTileSize); ++x) {
-        const std::size_t pixel = static_cast<std::size_t>(y) * static_cast<std::size_t>(forward.width) + static_cast<std::size_t>(x);
-        const Eigen::Vector3f dL_dpixel = Eigen::Map<const Eigen::Vector3f>(&loss_gradient_image[3 * pixel]);
-        const float final_transmittance = forward.final_transmittance[pixel];
-        const float background_dot = config.background.dot(dL_dpixel);
-        float transmittance = final_transmittance, last_alpha = 0.0f;
-        Eigen::Vector3f behind = Eigen::Vector3f::Zero(), last_colour = Eigen::Vector3f::Zero();  // colour blended behind the current one
-        // The row's splats before the last contributor, back to front.
-        const auto last = std::lower_bound(row.begin(), row.end(), forward.contributors[pixel]);
-        for (auto it = last; it != row.begin();) {
-          const uint32_t j = *--it;
-          const TileSplat& splat = splats[j];
-          float dx = 0.0f, dy = 0.0f, gaussian = 0.0f, alpha = 0.0f;
-          if (!evaluate(splat, static_cast<float>(x), static_cast<float>(y), dx, dy, gaussian, alpha)) continue;
-          transmittance /= (1.0f - alpha);
-          float* slot = &slots[static_cast<std::size_t>(begin + j) * kSlot];
-          behind = last_alpha * last_colour + (1.0f - last_alpha) * behind;
-          last_colour = splat.colour;
-          float dL_dalpha = (splat.colour - behind).dot(dL_dpixel) * transmittance;
-          for (int c = 0; c < 3; ++c) slot[5 + c] += alpha * transmittance * dL_dpixel[c];
-          last_alpha = alpha;
-          dL_dalpha += -final_transmittance / (1.0f - alpha) * background_dot;
-          if (splat.opacity * gaussian >= kMaxAlpha) continue;  // clamped: alpha does not move with the Gaussian
-          const float dL_dgaussian = splat.opacity * dL_dalpha;
-          const float gdx = gaussian * dx, gdy = gaussian * dy;
-          slot[0] += dL_dgaussian * (-gdx * splat.a - gdy * splat.b);
-          slot[1] += dL_dgaussian * (-gdy * splat.c - gdx * splat.b);
-          slot[2] += -0.5f * gdx * dx * dL_dgaussian;
-          slot[3] += -gdx * dy * dL_dgaussian;
-          slot[4] += -0.5f * gdy * dy * dL_dgaussian;
-          slot[8] += gaussian * dL_dalpha;
-        }
-      }
+  for_each_tile_pixel(forward, [&](uint32_t begin, const std::vector<TileSplat>& splats, const std::vector<uint32_t>& row, int x, int y, std::size_t pixel) {
+    const Eigen::Vector3f dL_dpixel = Eigen::Map<const Eigen::Vector3f>(&loss_gradient_image[3 * pixel]);
+    const float final_transmittance = forward.final_transmittance[pixel];
+    const float background_dot = config.background.dot(dL_dpixel);
+    float transmittance = final_transmittance, last_alpha = 0.0f;
+    Eigen::Vector3f behind = Eigen::Vector3f::Zero(), last_colour = Eigen::Vector3f::Zero();  // colour blended behind the current one
+    // The row's splats before the last contributor, back to front.
+    const auto last = std::lower_bound(row.begin(), row.end(), forward.contributors[pixel]);
+    for (auto it = last; it != row.begin();) {
+      const uint32_t j = *--it;
+      const TileSplat& splat = splats[j];
+      float dx = 0.0f, dy = 0.0f, gaussian = 0.0f, alpha = 0.0f;
+      if (!evaluate(splat, static_cast<float>(x), static_cast<float>(y), dx, dy, gaussian, alpha)) continue;
+      transmittance /= (1.0f - alpha);
+      float* slot = &slots[static_cast<std::size_t>(begin + j) * kSlot];
+      behind = last_alpha * last_colour + (1.0f - last_alpha) * behind;
+      last_colour = splat.colour;
+      float dL_dalpha = (splat.colour - behind).dot(dL_dpixel) * transmittance;
+      for (int c = 0; c < 3; ++c) slot[5 + c] += alpha * transmittance * dL_dpixel[c];
+      last_alpha = alpha;
+      dL_dalpha += -final_transmittance / (1.0f - alpha) * background_dot;
+      if (splat.opacity * gaussian >= kMaxAlpha) continue;  // clamped: alpha does not move with the Gaussian
+      const float dL_dgaussian = splat.opacity * dL_dalpha;
+      const float gdx = gaussian * dx, gdy = gaussian * dy;
+      slot[0] += dL_dgaussian * (-gdx * splat.a - gdy * splat.b);
+      slot[1] += dL_dgaussian * (-gdy * splat.c - gdx * splat.b);
+      slot[2] += -0.5f * gdx * dx * dL_dgaussian;
+      slot[3] += -gdx * dy * dL_dgaussian;
+      slot[4] += -0.5f * gdy * dy * dL_dgaussian;
+      slot[8] += gaussian * dL_dalpha;
     }
   });
 
