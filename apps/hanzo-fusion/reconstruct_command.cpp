@@ -1,9 +1,11 @@
 // hanzo-fusion reconstruct splats TRANSFORMS --out DIR: trains 3D Gaussian splats on posed images
 // (a NeRF / Blender-style transforms.json; neural/splat_trainer.hpp) and writes DIR/splats.ply
 // (the 3DGS viewers' layout) and DIR/reconstruction.json (provenance and metrics).
-// hanzo-fusion render DIR --poses POSES.json --out VIEWS: renders DIR's splats at every camera of
-// a transforms-style JSON, in its frame order and at its resolution, one PNG per frame (depth as
-// 16-bit PNG on request); where the poses file's images exist, PSNR and SSIM against them.
+// hanzo-fusion reconstruct nerf TRANSFORMS --out DIR: trains a hash-grid NeRF
+// (neural/nerf_trainer.hpp) and writes DIR/nerf.hznerf and DIR/reconstruction.json.
+// hanzo-fusion render DIR --poses POSES.json --out VIEWS: renders DIR's splats or NeRF at every
+// camera of a transforms-style JSON, in its frame order and at its resolution, one PNG per frame
+// (depth as 16-bit PNG on request); where the poses file's images exist, PSNR and SSIM against them.
 
 #include <algorithm>
 #include <chrono>
@@ -22,6 +24,8 @@
 #include "commands.hpp"
 #include "hanzo/fusion/core/files.hpp"
 #include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/neural/log_views.hpp"
+#include "hanzo/fusion/neural/nerf_trainer.hpp"
 #include "hanzo/fusion/neural/splat_ply.hpp"
 #include "hanzo/fusion/neural/splat_trainer.hpp"
 #include "hanzo/fusion/neural/view_dataset.hpp"
@@ -29,17 +33,25 @@
 namespace hanzo::fusion::app {
 namespace {
 
-struct ReconstructOptions {
+/// Where the posed images come from: a transforms.json, or a sensor log with a trajectory and a
+/// calibration; which are held back for scoring.
+struct InputOptions {
   std::string transforms;
-  std::string out;
+  std::string log, trajectory, calibration, camera, topic;
+  int max_views = neural::LogViewsConfig{}.max_views;
   std::string eval;    // held-back views (a transforms file)
-  int hold_every = 0;  // hold back every N-th frame of TRANSFORMS instead
+  int hold_every = 0;  // hold back every N-th view instead
   int downscale = 1;
+  std::string background = "white";
+};
+
+struct ReconstructOptions {
+  InputOptions input;
+  std::string out;
   int iterations = neural::SplatTrainingConfig{}.iterations;
   int max_gaussians = neural::SplatTrainingConfig{}.max_gaussians;
   int initial_gaussians = neural::SplatTrainingConfig{}.initial_gaussians;
   int sh_degree = neural::SplatTrainingConfig{}.sh_degree;
-  std::string background = "white";
   uint64_t seed = 1;
   int threads = 0;
   double progress_seconds = 10.0;
@@ -47,8 +59,19 @@ struct ReconstructOptions {
   double coarse_share = 0.5;  // share of the first steps trained at half resolution
 };
 
+struct NerfOptions {
+  InputOptions input;
+  std::string out;
+  int iterations = neural::NerfTrainingConfig{}.iterations;
+  int samples_per_step = neural::NerfTrainingConfig{}.samples_per_step;
+  uint64_t seed = 1;
+  int threads = 0;
+  double progress_seconds = 10.0;
+  double max_seconds = 0.0;
+};
+
 struct RenderOptions {
-  std::string splats;  // folder with splats.ply, or the .ply
+  std::string model;  // folder with splats.ply or nerf.hznerf, or the file itself
   std::string poses;
   std::string out;
   int downscale = 1;
@@ -70,40 +93,115 @@ nlohmann::json scores_json(const neural::EvaluationSummary& summary) {
           {"per_view", views}};
 }
 
-int run_reconstruct_splats(const Output& output, const ReconstructOptions& options) {
-  nlohmann::json result = {{"transforms", options.transforms}, {"out", options.out}};
-  std::unique_ptr<tbb::global_control> threads;
-  if (options.threads > 0) threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
-  Result<Eigen::Vector3f> background = background_colour(options.background);
-  if (!background) return report_failure(output, result, background.error().message);
+/// Training views (every frame but the held-back ones) and held-back views with images.
+struct Inputs {
+  neural::ViewDataset train;
+  std::vector<neural::PosedView> held_back;
+  nlohmann::json source;  // where the views came from, for the provenance
+};
+
+Result<Inputs> load_inputs(const InputOptions& options, const Eigen::Vector3f& background) {
+  Inputs inputs;
+  if (options.transforms.empty() == options.log.empty()) return Error("give either TRANSFORMS or --log (with --trajectory and --calibration)");
+  if (!options.log.empty()) {
+    if (options.trajectory.empty() || options.calibration.empty()) return Error("--log needs --trajectory and --calibration");
+    if (!options.eval.empty()) return Error("--eval takes a transforms.json; with --log hold views back by --hold-every");
+    neural::LogViewsConfig config;
+    config.camera = options.camera;
+    config.topic = options.topic;
+    config.max_views = options.max_views;
+    config.downscale = options.downscale;
+    neural::LogViews views;
+    HANZO_ASSIGN_OR_RETURN(views, neural::load_log_views(options.log, options.trajectory, options.calibration, config));
+    inputs.train = std::move(views.dataset);
+    inputs.source = {{"log", options.log},           {"trajectory", options.trajectory}, {"calibration", options.calibration}, {"topic", views.topic},
+                     {"images", views.images}, {"without_pose", views.outside_trajectory}};
+    if (options.hold_every > 0) {
+      std::vector<neural::PosedView> train;
+      for (std::size_t i = 0; i < inputs.train.views.size(); ++i) {
+        (static_cast<int>(i + 1) % options.hold_every == 0 ? inputs.held_back : train).push_back(std::move(inputs.train.views[i]));
+      }
+      if (train.empty()) return Error(fmt::format("--hold-every {} leaves no view to train on", options.hold_every));
+      inputs.train.views = std::move(train);
+    }
+    return inputs;
+  }
   neural::ViewDatasetConfig dataset_config;
   dataset_config.downscale = options.downscale;
-  dataset_config.background = *background;
-  dataset_config.skip_every = options.hold_every;
-  Result<neural::ViewDataset> train = neural::load_transforms(options.transforms, dataset_config);
-  if (!train) return report_failure(output, result, train.error().message);
-  // Coarse to fine: the first steps see the images at half resolution (a quarter of the pixels).
-  std::vector<neural::PosedView> coarse_views;
-  if (options.coarse_share > 0.0 && train->views.front().camera.width >= 64) {
-    neural::ViewDatasetConfig coarse_config = dataset_config;
-    coarse_config.downscale = 2 * options.downscale;
-    Result<neural::ViewDataset> coarse = neural::load_transforms(options.transforms, coarse_config);
-    if (!coarse) return report_failure(output, result, coarse.error().message);
-    coarse_views = std::move(coarse->views);
-  }
-  const int coarse_steps = coarse_views.empty() ? 0 : static_cast<int>(options.coarse_share * options.iterations);
-  std::vector<neural::PosedView> held_back;
+  dataset_config.background = background;
+  neural::ViewDatasetConfig train_config = dataset_config;
+  train_config.skip_every = options.hold_every;
+  HANZO_ASSIGN_OR_RETURN(inputs.train, neural::load_transforms(options.transforms, train_config));
+  inputs.source = {{"transforms", options.transforms}};
   if (!options.eval.empty() || options.hold_every > 0) {
     neural::ViewDatasetConfig eval_config = dataset_config;
-    eval_config.skip_every = 0;
     eval_config.only_every = options.hold_every;
-    Result<neural::ViewDataset> eval = neural::load_transforms(options.eval.empty() ? options.transforms : options.eval, eval_config);
-    if (!eval) return report_failure(output, result, eval.error().message);
-    held_back = std::move(eval->views);
+    neural::ViewDataset eval_set;
+    HANZO_ASSIGN_OR_RETURN(eval_set, neural::load_transforms(options.eval.empty() ? options.transforms : options.eval, eval_config));
+    inputs.held_back = std::move(eval_set.views);
   }
+  return inputs;
+}
+
+/// The input and held-back options both reconstruct commands take.
+void add_input_options(CLI::App* command, InputOptions& input) {
+  command->add_option("TRANSFORMS", input.transforms, "NeRF / Blender-style transforms.json (camera-to-world poses, intrinsics, image paths)");
+  command->add_option("--log", input.log, "Sensor log whose camera images to use (instead of TRANSFORMS)");
+  command->add_option("--trajectory", input.trajectory, "With --log: T_world_body of the session (TUM), e.g. its optimized trajectory");
+  command->add_option("--calibration", input.calibration, "With --log: calibration.yaml with the camera's intrinsics and camera_to_body");
+  command->add_option("--camera", input.camera, "With --log: the calibration's camera (default: its first)");
+  command->add_option("--topic", input.topic, "With --log: the images' topic (default: /sensors/<camera>)");
+  command->add_option("--max-views", input.max_views, "With --log: most views kept (evenly thinned)")->check(CLI::Range(1, 100000));
+  command->add_option("--eval", input.eval, "Held-back views (a transforms.json) scored after training");
+  command->add_option("--hold-every", input.hold_every, "Hold back every N-th view and score them after training")->check(CLI::Range(2, 1000));
+  command->add_option("--downscale", input.downscale, "Divide the images' resolution by this")->check(CLI::Range(1, 64));
+  command->add_option("--background", input.background, "Behind transparent pixels and the scene: white or black");
+}
+
+Status create_folder(const std::string& folder) {
   std::error_code created;
-  std::filesystem::create_directories(options.out, created);
-  if (created) return report_failure(output, result, fmt::format("{}: cannot create the folder ({})", options.out, created.message()));
+  std::filesystem::create_directories(folder, created);
+  if (created) return Error(fmt::format("{}: cannot create the folder ({})", folder, created.message()));
+  return ok_status();
+}
+
+/// A progress line on stderr with the time left, at most every `interval` seconds.
+class ProgressReporter {
+ public:
+  ProgressReporter(std::string what, double interval) : what_(std::move(what)), interval_(interval) {}
+  double seconds() const { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count(); }
+  /// Whether a line is due (`interval` passed since the last one).
+  bool due() const { return std::chrono::duration<double>(std::chrono::steady_clock::now() - last_).count() >= interval_; }
+  /// `done` and `total` in units of work; `detail` follows the step count.
+  void report(int step, int steps, double done, double total, const std::string& detail) {
+    const auto now = std::chrono::steady_clock::now();
+    const double elapsed = seconds();
+    fmt::print(stderr, "{}: step {}/{}, {}, {:.0f} s, about {:.0f} s left\n", what_, step, steps, detail, elapsed, elapsed / done * (total - done));
+    last_ = now;
+  }
+
+ private:
+  std::string what_;
+  double interval_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now(), last_ = start_;
+};
+
+int run_reconstruct_splats(const Output& output, const ReconstructOptions& options) {
+  nlohmann::json result = {{"out", options.out}};
+  std::unique_ptr<tbb::global_control> threads;
+  if (options.threads > 0) threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
+  Result<Eigen::Vector3f> background = background_colour(options.input.background);
+  if (!background) return report_failure(output, result, background.error().message);
+  Result<Inputs> inputs = load_inputs(options.input, *background);
+  if (!inputs) return report_failure(output, result, inputs.error().message);
+  result["source"] = inputs->source;
+  const neural::ViewDataset* train = &inputs->train;
+  const std::vector<neural::PosedView>& held_back = inputs->held_back;
+  // Coarse to fine: the first steps see the images at half resolution (a quarter of the pixels).
+  std::vector<neural::PosedView> coarse_views;
+  if (options.coarse_share > 0.0 && train->views.front().camera.width >= 64) coarse_views = neural::downscaled(train->views, 2);
+  const int coarse_steps = coarse_views.empty() ? 0 : static_cast<int>(options.coarse_share * options.iterations);
+  if (Status created = create_folder(options.out); !created) return report_failure(output, result, created.error().message);
 
   neural::SplatTrainingConfig config;
   config.iterations = options.iterations;
@@ -113,22 +211,26 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
   config.seed = options.seed;
   config.rasterizer.background = *background;
   if (Status valid = neural::validate(config); !valid) return report_failure(output, result, valid.error().message);
-  // The scene: half the cameras' mean distance around where they look; extent as 3DGS takes it.
-  const double extent = 1.1 * train->camera_distance;
-  neural::GaussianCloud initial =
-      neural::initialize_gaussians(train->views, train->scene_centre, 0.5 * train->camera_distance, config.initial_gaussians, config.sh_degree, config.seed);
+  // The scene: the reader's box, else half the cameras' mean distance around where they look;
+  // extent as 3DGS takes it (1.1 x the cameras' distance).
+  const bool boxed = train->box_half_size > 0.0;
+  const Eigen::Vector3d centre = boxed ? train->box_centre : train->scene_centre;
+  const double half_size = boxed ? train->box_half_size : 0.5 * train->camera_distance;
+  const double extent = 2.2 * half_size;
+  neural::GaussianCloud initial = neural::initialize_gaussians(train->views, centre, half_size, config.initial_gaussians, config.sh_degree, config.seed);
   Result<neural::SplatTrainer> trainer = neural::SplatTrainer::create(std::move(initial), extent, config);
   if (!trainer) return report_failure(output, result, trainer.error().message);
 
   std::mt19937_64 order_random(config.seed);
   std::vector<std::size_t> order;
-  const auto start = std::chrono::steady_clock::now();
-  auto last_report = start;
+  ProgressReporter progress("reconstruct splats", options.progress_seconds);
+  // Time left by work done: a half-resolution step counts a quarter of a full one.
+  const auto work = [&](int step) { return 0.25 * std::min(step, coarse_steps) + std::max(0, step - coarse_steps); };
   double loss_sum = 0.0;
   int loss_count = 0;
   int steps = 0;
   for (int iteration = 0; iteration < config.iterations; ++iteration) {
-    if (options.max_seconds > 0.0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= options.max_seconds) {
+    if (options.max_seconds > 0.0 && progress.seconds() >= options.max_seconds) {
       logger()->warn("reconstruct splats: stopped after {} of {} steps (--max-seconds {})", iteration, config.iterations, options.max_seconds);
       break;
     }
@@ -144,20 +246,14 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
     loss_sum += loss;
     ++loss_count;
     steps = iteration + 1;
-    const auto now = std::chrono::steady_clock::now();
-    if (std::chrono::duration<double>(now - last_report).count() >= options.progress_seconds || iteration + 1 == config.iterations) {
-      const double seconds = std::chrono::duration<double>(now - start).count();
-      // Time left by work done: a half-resolution step counts a quarter of a full one.
-      const auto work = [&](int step) { return 0.25 * std::min(step, coarse_steps) + std::max(0, step - coarse_steps); };
-      const double left = seconds / work(iteration + 1) * (work(config.iterations) - work(iteration + 1));
-      fmt::print(stderr, "reconstruct splats: step {}/{}, loss {:.4f}, {} Gaussians, {:.0f} s, about {:.0f} s left\n", iteration + 1, config.iterations,
-                 loss_sum / loss_count, trainer->cloud().size(), seconds, left);
+    if (progress.due() || steps == config.iterations) {
+      const std::string detail = fmt::format("loss {:.4f}, {} Gaussians", loss_sum / loss_count, trainer->cloud().size());
+      progress.report(steps, config.iterations, work(steps), work(config.iterations), detail);
       loss_sum = 0.0;
       loss_count = 0;
-      last_report = now;
     }
   }
-  const double training_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double training_seconds = progress.seconds();
   const std::string ply = (std::filesystem::path(options.out) / "splats.ply").string();
   if (Status written = neural::write_splat_ply(ply, trainer->cloud()); !written) return report_failure(output, result, written.error().message);
   const neural::RasterizerConfig render_config = trainer->render_config();
@@ -170,7 +266,7 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
   result["train_views"] = train->views.size();
   result["model_bytes"] = std::filesystem::file_size(ply);
   result["sh_degree"] = config.sh_degree;
-  result["background"] = options.background;
+  result["background"] = options.input.background;
   result["resolution"] = {train->views.front().camera.width, train->views.front().camera.height};
   std::string text = fmt::format("{}: {} Gaussians after {} steps on {} views ({:.0f} s, {:.1f} MB)\n", ply, trainer->cloud().size(), steps,
                                  train->views.size(), training_seconds, static_cast<double>(std::filesystem::file_size(ply)) / 1e6);
@@ -185,15 +281,128 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
   return report_success(output, result, text);
 }
 
+int run_reconstruct_nerf(const Output& output, const NerfOptions& options) {
+  nlohmann::json result = {{"out", options.out}};
+  std::unique_ptr<tbb::global_control> threads;
+  if (options.threads > 0) threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
+  Result<Eigen::Vector3f> background = background_colour(options.input.background);
+  if (!background) return report_failure(output, result, background.error().message);
+  Result<Inputs> inputs = load_inputs(options.input, *background);
+  if (!inputs) return report_failure(output, result, inputs.error().message);
+  result["source"] = inputs->source;
+  if (Status created = create_folder(options.out); !created) return report_failure(output, result, created.error().message);
+
+  neural::NerfFieldConfig field_config;
+  field_config.seed = options.seed;
+  neural::set_scene_box(inputs->train, field_config);
+  Result<neural::NerfField> field = neural::NerfField::create(field_config);
+  if (!field) return report_failure(output, result, field.error().message);
+  neural::NerfTrainingConfig config;
+  config.iterations = options.iterations;
+  config.samples_per_step = options.samples_per_step;
+  config.image_background = *background;
+  config.seed = options.seed;
+  Result<neural::NerfTrainer> trainer = neural::NerfTrainer::create(std::move(*field), inputs->train.views, config);
+  if (!trainer) return report_failure(output, result, trainer.error().message);
+
+  ProgressReporter progress("reconstruct nerf", options.progress_seconds);
+  double loss_sum = 0.0;
+  int loss_count = 0;
+  int steps = 0;
+  for (int iteration = 0; iteration < config.iterations; ++iteration) {
+    if (options.max_seconds > 0.0 && progress.seconds() >= options.max_seconds) {
+      logger()->warn("reconstruct nerf: stopped after {} of {} steps (--max-seconds {})", iteration, config.iterations, options.max_seconds);
+      break;
+    }
+    const double loss = trainer->step();
+    if (!std::isfinite(loss)) return report_failure(output, result, fmt::format("training diverged at step {} (loss {})", iteration + 1, loss));
+    loss_sum += loss;
+    ++loss_count;
+    steps = iteration + 1;
+    if (progress.due() || steps == config.iterations) {
+      const std::string detail = fmt::format("PSNR {:.2f} dB, {:.0f} samples a ray, {} rays, {} occupied cells", -10.0 * std::log10(loss_sum / loss_count),
+                                             trainer->samples_per_ray(), trainer->rays_per_step(), trainer->field().occupancy().occupied_count());
+      progress.report(steps, config.iterations, steps, config.iterations, detail);
+      loss_sum = 0.0;
+      loss_count = 0;
+    }
+  }
+  const double training_seconds = progress.seconds();
+  const std::string model = (std::filesystem::path(options.out) / "nerf.hznerf").string();
+  if (Status written = neural::save_nerf(model, trainer->field()); !written) return report_failure(output, result, written.error().message);
+  const neural::ViewDataset& train = inputs->train;
+  result["ok"] = true;
+  result["nerf"] = model;
+  result["parameters"] = trainer->field().parameter_count();
+  result["iterations"] = steps;
+  result["iterations_planned"] = config.iterations;
+  result["training_seconds"] = training_seconds;
+  result["train_views"] = train.views.size();
+  result["model_bytes"] = std::filesystem::file_size(model);
+  result["background"] = options.input.background;
+  result["resolution"] = {train.views.front().camera.width, train.views.front().camera.height};
+  const neural::NerfFieldConfig& box = trainer->field().config();
+  result["box"] = {{"centre", {box.box_centre.x(), box.box_centre.y(), box.box_centre.z()}}, {"half_size", box.box_half_size}};
+  std::string text = fmt::format("{}: {} parameters after {} steps on {} views ({:.0f} s, {:.1f} MB)\n", model, trainer->field().parameter_count(), steps,
+                                 train.views.size(), training_seconds, static_cast<double>(std::filesystem::file_size(model)) / 1e6);
+  if (!inputs->held_back.empty()) {
+    const neural::EvaluationSummary scores = neural::evaluate_nerf(trainer->field(), inputs->held_back, *background);
+    result["eval"] = scores_json(scores);
+    text += fmt::format("held-back views: {}, PSNR {:.2f} dB, SSIM {:.4f}, {:.0f} ms per view\n", scores.views.size(), scores.mean_psnr, scores.mean_ssim,
+                        1000.0 * scores.seconds_per_view);
+  }
+  const std::string provenance = (std::filesystem::path(options.out) / "reconstruction.json").string();
+  if (Status written = write_file_durably(provenance, result.dump(2) + "\n"); !written) return report_failure(output, result, written.error().message);
+  return report_success(output, result, text);
+}
+
+/// A trained scene (splats or a NeRF) that renders colour and depth at a camera.
+struct Scene {
+  std::string kind;  // "splats" or "nerf"
+  std::string file;
+  std::size_t size = 0;  // Gaussians or parameters
+  std::function<neural::NerfRender(const neural::SplatCamera&)> render;
+};
+
+Result<Scene> load_scene(const std::string& path, const Eigen::Vector3f& background) {
+  std::string file = path;
+  if (std::filesystem::is_directory(path)) {
+    const std::filesystem::path nerf = std::filesystem::path(path) / "nerf.hznerf";
+    file = std::filesystem::exists(nerf) ? nerf.string() : (std::filesystem::path(path) / "splats.ply").string();
+  }
+  Scene scene;
+  scene.file = file;
+  if (std::filesystem::path(file).extension() == ".hznerf") {
+    Result<neural::NerfField> field = neural::load_nerf(file);
+    if (!field) return field.error();
+    scene.kind = "nerf";
+    scene.size = field->parameter_count();
+    auto shared = std::make_shared<neural::NerfField>(std::move(*field));
+    scene.render = [shared, background](const neural::SplatCamera& camera) { return shared->render(camera, background); };
+    return scene;
+  }
+  neural::GaussianCloud cloud;
+  HANZO_ASSIGN_OR_RETURN(cloud, neural::read_splat_ply(file));
+  scene.kind = "splats";
+  scene.size = cloud.size();
+  auto shared = std::make_shared<neural::GaussianCloud>(std::move(cloud));
+  neural::RasterizerConfig config;
+  config.background = background;
+  scene.render = [shared, config](const neural::SplatCamera& camera) {
+    neural::SplatRender splats = neural::render_splats(*shared, camera, config);
+    return neural::NerfRender{splats.width, splats.height, std::move(splats.image), std::move(splats.depth), std::move(splats.alpha)};
+  };
+  return scene;
+}
+
 int run_render(const Output& output, const RenderOptions& options) {
-  nlohmann::json result = {{"splats", options.splats}, {"poses", options.poses}, {"out", options.out}};
+  nlohmann::json result = {{"model", options.model}, {"poses", options.poses}, {"out", options.out}};
   std::unique_ptr<tbb::global_control> threads;
   if (options.threads > 0) threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
   Result<Eigen::Vector3f> background = background_colour(options.background);
   if (!background) return report_failure(output, result, background.error().message);
-  const std::string ply = std::filesystem::is_directory(options.splats) ? (std::filesystem::path(options.splats) / "splats.ply").string() : options.splats;
-  Result<neural::GaussianCloud> cloud = neural::read_splat_ply(ply);
-  if (!cloud) return report_failure(output, result, cloud.error().message);
+  Result<Scene> scene = load_scene(options.model, *background);
+  if (!scene) return report_failure(output, result, scene.error().message);
   neural::ViewDatasetConfig dataset_config;
   dataset_config.downscale = options.downscale;
   dataset_config.background = *background;
@@ -203,17 +412,13 @@ int run_render(const Output& output, const RenderOptions& options) {
   // Reference images where the poses file's images can be read (for PSNR and SSIM).
   dataset_config.load_images = true;
   Result<neural::ViewDataset> references = neural::load_transforms(options.poses, dataset_config);
-  std::error_code created;
-  std::filesystem::create_directories(options.out, created);
-  if (created) return report_failure(output, result, fmt::format("{}: cannot create the folder ({})", options.out, created.message()));
-  neural::RasterizerConfig config;
-  config.background = *background;
+  if (Status created = create_folder(options.out); !created) return report_failure(output, result, created.error().message);
   double seconds = 0.0;
   nlohmann::json files = nlohmann::json::array();
   for (std::size_t i = 0; i < poses->views.size(); ++i) {
     const neural::PosedView& view = poses->views[i];
     const auto begin = std::chrono::steady_clock::now();
-    const neural::SplatRender render = neural::render_splats(*cloud, view.camera, config);
+    const neural::NerfRender render = scene->render(view.camera);
     seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
     cv::Mat rgb(render.height, render.width, CV_32FC3, const_cast<float*>(render.image.data()));
     cv::Mat bgr8;
@@ -236,13 +441,15 @@ int run_render(const Output& output, const RenderOptions& options) {
   }
   result["ok"] = true;
   result["views"] = poses->views.size();
-  result["gaussians"] = cloud->size();
+  result["kind"] = scene->kind;
+  result["model"] = scene->file;
+  result[scene->kind == "nerf" ? "parameters" : "gaussians"] = scene->size;
   result["render_ms_per_view"] = 1000.0 * seconds / static_cast<double>(poses->views.size());
   result["files"] = files;
-  std::string text = fmt::format("{}: {} views of {} Gaussians, {:.0f} ms per view\n", options.out, poses->views.size(), cloud->size(),
-                                 1000.0 * seconds / static_cast<double>(poses->views.size()));
+  std::string text = fmt::format("{}: {} views of {} ({} {}), {:.0f} ms per view\n", options.out, poses->views.size(), scene->file, scene->size,
+                                 scene->kind == "nerf" ? "parameters" : "Gaussians", 1000.0 * seconds / static_cast<double>(poses->views.size()));
   if (references) {
-    const neural::EvaluationSummary scores = neural::evaluate_splats(*cloud, references->views, config);
+    const neural::EvaluationSummary scores = neural::score_views(references->views, [&](const neural::SplatCamera& camera) { return scene->render(camera).image; });
     result["eval"] = scores_json(scores);
     text += fmt::format("against the poses file's images: PSNR {:.2f} dB, SSIM {:.4f}\n", scores.mean_psnr, scores.mean_ssim);
   }
@@ -252,21 +459,16 @@ int run_render(const Output& output, const RenderOptions& options) {
 }  // namespace
 
 void add_reconstruct_command(CLI::App& app, const Output& output, Command& run) {
-  CLI::App* reconstruct = app.add_subcommand("reconstruct", "Neural reconstruction from posed images: 3D Gaussian splats");
+  CLI::App* reconstruct = app.add_subcommand("reconstruct", "Neural reconstruction from posed images: 3D Gaussian splats or a hash-grid NeRF");
   reconstruct->require_subcommand(1);
   auto splats = std::make_shared<ReconstructOptions>();
   CLI::App* splats_app = reconstruct->add_subcommand("splats", "Train 3D Gaussian splats on the images of a transforms.json");
-  splats_app->add_option("TRANSFORMS", splats->transforms, "NeRF / Blender-style transforms.json (camera-to-world poses, intrinsics, image paths)")
-      ->required();
+  add_input_options(splats_app, splats->input);
   splats_app->add_option("--out", splats->out, "Folder for splats.ply and reconstruction.json")->required();
-  splats_app->add_option("--eval", splats->eval, "Held-back views (a transforms.json) scored after training");
-  splats_app->add_option("--hold-every", splats->hold_every, "Hold back every N-th frame of TRANSFORMS and score them after training")->check(CLI::Range(2, 1000));
-  splats_app->add_option("--downscale", splats->downscale, "Divide the images' resolution by this")->check(CLI::Range(1, 64));
   splats_app->add_option("--iterations", splats->iterations, "Training steps (one view each)")->check(CLI::Range(1, 10000000));
   splats_app->add_option("--max-gaussians", splats->max_gaussians, "Most Gaussians densification may make")->check(CLI::Range(1, 100000000));
   splats_app->add_option("--initial-gaussians", splats->initial_gaussians, "Gaussians of the random initialization")->check(CLI::Range(1, 100000000));
   splats_app->add_option("--sh-degree", splats->sh_degree, "Spherical-harmonics degree of the colours")->check(CLI::Range(0, 3));
-  splats_app->add_option("--background", splats->background, "Behind transparent pixels and the Gaussians: white or black");
   splats_app->add_option("--seed", splats->seed, "Random seed (initialization, view order, splits)");
   splats_app->add_option("--threads", splats->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
   splats_app->add_option("--coarse-share", splats->coarse_share, "Share of the first steps trained at half resolution (0: none)")->check(CLI::Range(0.0, 1.0));
@@ -274,9 +476,21 @@ void add_reconstruct_command(CLI::App& app, const Output& output, Command& run) 
   splats_app->add_option("--progress-seconds", splats->progress_seconds, "Seconds between progress lines on stderr")->check(CLI::Range(0.0, 1e6));
   splats_app->callback([&output, &run, splats] { run = [&output, splats] { return run_reconstruct_splats(output, *splats); }; });
 
+  auto nerf = std::make_shared<NerfOptions>();
+  CLI::App* nerf_app = reconstruct->add_subcommand("nerf", "Train a hash-grid NeRF (instant-ngp layout) on the images of a transforms.json");
+  add_input_options(nerf_app, nerf->input);
+  nerf_app->add_option("--out", nerf->out, "Folder for nerf.hznerf and reconstruction.json")->required();
+  nerf_app->add_option("--iterations", nerf->iterations, "Training steps")->check(CLI::Range(1, 10000000));
+  nerf_app->add_option("--samples-per-step", nerf->samples_per_step, "Field evaluations per step")->check(CLI::Range(256, 1 << 24));
+  nerf_app->add_option("--seed", nerf->seed, "Random seed (weights, rays)");
+  nerf_app->add_option("--threads", nerf->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
+  nerf_app->add_option("--max-seconds", nerf->max_seconds, "Stop training after this many seconds (0: run every step)")->check(CLI::Range(0.0, 1e7));
+  nerf_app->add_option("--progress-seconds", nerf->progress_seconds, "Seconds between progress lines on stderr")->check(CLI::Range(0.0, 1e6));
+  nerf_app->callback([&output, &run, nerf] { run = [&output, nerf] { return run_reconstruct_nerf(output, *nerf); }; });
+
   auto render = std::make_shared<RenderOptions>();
-  CLI::App* render_app = app.add_subcommand("render", "Render trained splats at the cameras of a transforms.json, one PNG per frame");
-  render_app->add_option("SPLATS", render->splats, "Folder written by reconstruct splats, or its splats.ply")->required();
+  CLI::App* render_app = app.add_subcommand("render", "Render trained splats or a NeRF at the cameras of a transforms.json, one PNG per frame");
+  render_app->add_option("MODEL", render->model, "Folder written by reconstruct splats|nerf, or its splats.ply / nerf.hznerf")->required();
   render_app->add_option("--poses", render->poses, "transforms.json whose frames give the cameras (and reference images, when present)")->required();
   render_app->add_option("--out", render->out, "Folder for the PNGs (0000.png, ... in frame order)")->required();
   render_app->add_option("--downscale", render->downscale, "Divide the poses' resolution by this")->check(CLI::Range(1, 64));

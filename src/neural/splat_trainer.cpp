@@ -1,7 +1,6 @@
 #include "hanzo/fusion/neural/splat_trainer.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <numeric>
 
@@ -262,25 +261,7 @@ void SplatTrainer::reset_opacity() {
 }
 
 EvaluationSummary evaluate_splats(const GaussianCloud& cloud, const std::vector<PosedView>& views, const RasterizerConfig& config) {
-  EvaluationSummary summary;
-  double seconds = 0.0;
-  for (const PosedView& view : views) {
-    if (view.image.pixels.empty()) continue;
-    const auto start = std::chrono::steady_clock::now();
-    const SplatRender render = render_splats(cloud, view.camera, config);
-    seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    ViewScore score{view.name, psnr(render.image, view.image.pixels), ssim(render.image, view.image.pixels, render.width, render.height)};
-    summary.mean_psnr += score.psnr;
-    summary.mean_ssim += score.ssim;
-    summary.views.push_back(std::move(score));
-  }
-  if (!summary.views.empty()) {
-    const auto count = static_cast<double>(summary.views.size());
-    summary.mean_psnr /= count;
-    summary.mean_ssim /= count;
-    summary.seconds_per_view = seconds / count;
-  }
-  return summary;
+  return score_views(views, [&](const SplatCamera& camera) { return render_splats(cloud, camera, config).image; });
 }
 
 }  // namespace hanzo::fusion::neural

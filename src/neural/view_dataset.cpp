@@ -1,5 +1,7 @@
 #include "hanzo/fusion/neural/view_dataset.hpp"
+#include "view_images.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -48,7 +50,8 @@ Status read_intrinsics(const Json& object, Intrinsics& intrinsics, const std::st
   return ok_status();
 }
 
-// The 8-bit image as RGB floats (RGBA composited on the background, its alpha as the mask).
+}  // namespace
+
 Status to_view_image(const cv::Mat& read, const ViewDatasetConfig& config, PosedView& view) {
   cv::Mat rgb, alpha;
   if (read.channels() == 4) {
@@ -84,7 +87,24 @@ Status to_view_image(const cv::Mat& read, const ViewDatasetConfig& config, Posed
   return ok_status();
 }
 
-}  // namespace
+void set_scene_extent(ViewDataset& dataset) {
+  // The point nearest to every optical axis: sum (I - d d^T) x = sum (I - d d^T) c.
+  Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  for (const PosedView& view : dataset.views) {
+    const Eigen::Vector3d d = view.camera.R_camera_world.row(2).transpose();
+    const Eigen::Matrix3d projector = Eigen::Matrix3d::Identity() - d * d.transpose();
+    a += projector;
+    b += projector * view.camera.centre_world();
+  }
+  Eigen::Vector3d mean_centre = Eigen::Vector3d::Zero();
+  for (const PosedView& view : dataset.views) mean_centre += view.camera.centre_world() / static_cast<double>(dataset.views.size());
+  const Eigen::FullPivLU<Eigen::Matrix3d> lu(a);
+  dataset.scene_centre = lu.rank() == 3 ? Eigen::Vector3d(lu.solve(b)) : mean_centre;
+  double distance = 0.0;
+  for (const PosedView& view : dataset.views) distance += (view.camera.centre_world() - dataset.scene_centre).norm() / static_cast<double>(dataset.views.size());
+  dataset.camera_distance = std::max(distance, 1e-6);
+}
 
 Result<ViewDataset> load_transforms(const std::string& path, const ViewDatasetConfig& config) {
   if (config.downscale < 1 || config.every < 1 || config.skip_every < 0 || config.only_every < 0) {
@@ -175,22 +195,9 @@ Result<ViewDataset> load_transforms(const std::string& path, const ViewDatasetCo
     dataset.views.push_back(std::move(view));
   }
   if (dataset.views.empty()) return Error(fmt::format("{}: no frames left after the selection", path), "frames");
-  // The point nearest to every optical axis: sum (I - d d^T) x = sum (I - d d^T) c.
-  Eigen::Matrix3d a = Eigen::Matrix3d::Zero();
-  Eigen::Vector3d b = Eigen::Vector3d::Zero();
-  for (const PosedView& view : dataset.views) {
-    const Eigen::Vector3d d = view.camera.R_camera_world.row(2).transpose();
-    const Eigen::Matrix3d projector = Eigen::Matrix3d::Identity() - d * d.transpose();
-    a += projector;
-    b += projector * view.camera.centre_world();
-  }
-  Eigen::Vector3d mean_centre = Eigen::Vector3d::Zero();
-  for (const PosedView& view : dataset.views) mean_centre += view.camera.centre_world() / static_cast<double>(dataset.views.size());
-  const Eigen::FullPivLU<Eigen::Matrix3d> lu(a);
-  dataset.scene_centre = lu.rank() == 3 ? Eigen::Vector3d(lu.solve(b)) : mean_centre;
-  double distance = 0.0;
-  for (const PosedView& view : dataset.views) distance += (view.camera.centre_world() - dataset.scene_centre).norm() / static_cast<double>(dataset.views.size());
-  dataset.camera_distance = std::max(distance, 1e-6);
+  HANZO_ASSIGN_OR_RETURN(dataset.aabb_scale, number(root, "aabb_scale", 0.0, path));
+  if (dataset.aabb_scale < 0.0) return Error(fmt::format("{}: 'aabb_scale' must be positive", path), "aabb_scale");
+  set_scene_extent(dataset);
   return dataset;
 }
 
@@ -208,6 +215,60 @@ Status save_transforms(const std::string& path, const std::vector<PosedView>& vi
                       {"cy", camera.cy + 0.5}, {"w", camera.width}, {"h", camera.height}});
   }
   return write_file_durably(path, Json{{"frames", frames}}.dump(2) + "\n");
+}
+
+std::vector<PosedView> downscaled(const std::vector<PosedView>& views, int factor) {
+  std::vector<PosedView> out;
+  for (const PosedView& view : views) {
+    PosedView small;
+    small.name = view.name;
+    small.camera = view.camera;
+    small.camera.width = view.camera.width / factor;
+    small.camera.height = view.camera.height / factor;
+    small.camera.fx /= factor;
+    small.camera.fy /= factor;
+    small.camera.cx = (view.camera.cx + 0.5) / factor - 0.5;
+    small.camera.cy = (view.camera.cy + 0.5) / factor - 0.5;
+    const cv::Size size(small.camera.width, small.camera.height);
+    if (!view.image.pixels.empty()) {
+      const cv::Mat image(view.image.height, view.image.width, CV_32FC3, const_cast<float*>(view.image.pixels.data()));
+      cv::Mat resized;
+      cv::resize(image, resized, size, 0, 0, cv::INTER_AREA);
+      small.image.width = resized.cols;
+      small.image.height = resized.rows;
+      small.image.pixels.assign(reinterpret_cast<const float*>(resized.data), reinterpret_cast<const float*>(resized.data) + 3 * resized.total());
+    }
+    if (!view.mask.empty()) {
+      const cv::Mat mask(view.image.height, view.image.width, CV_32FC1, const_cast<float*>(view.mask.data()));
+      cv::Mat resized;
+      cv::resize(mask, resized, size, 0, 0, cv::INTER_AREA);
+      small.mask.assign(reinterpret_cast<const float*>(resized.data), reinterpret_cast<const float*>(resized.data) + resized.total());
+    }
+    out.push_back(std::move(small));
+  }
+  return out;
+}
+
+EvaluationSummary score_views(const std::vector<PosedView>& views, const std::function<std::vector<float>(const SplatCamera&)>& render) {
+  EvaluationSummary summary;
+  double seconds = 0.0;
+  for (const PosedView& view : views) {
+    if (view.image.pixels.empty()) continue;
+    const auto start = std::chrono::steady_clock::now();
+    const std::vector<float> image = render(view.camera);
+    seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    ViewScore score{view.name, psnr(image, view.image.pixels), ssim(image, view.image.pixels, view.camera.width, view.camera.height)};
+    summary.mean_psnr += score.psnr;
+    summary.mean_ssim += score.ssim;
+    summary.views.push_back(std::move(score));
+  }
+  if (!summary.views.empty()) {
+    const auto count = static_cast<double>(summary.views.size());
+    summary.mean_psnr /= count;
+    summary.mean_ssim /= count;
+    summary.seconds_per_view = seconds / count;
+  }
+  return summary;
 }
 
 }  // namespace hanzo::fusion::neural

@@ -1488,4 +1488,80 @@ TEST(Cli, ReconstructSplatsAndRenderThemAtAPosesFile) {
   std::filesystem::remove_all(dir);
 }
 
+// Splats from a session's own data (AI builds): the simulated phone's camera images at the poses
+// of a trajectory through the calibration's camera, every 4th view held back and scored; a
+// trajectory that misses the log, a calibration without a camera and a wrong topic are refused.
+TEST(Cli, ReconstructSplatsFromASensorLogAndATrajectory) {
+  if (run("reconstruct --help").exit_code != 0) GTEST_SKIP() << "built without HANZO_FUSION_AI";
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_log_splats_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  const std::string d = dir.string();
+  ASSERT_EQ(run(fmt::format("sim examples/scenarios/ar_handheld.yaml --out {} --duration 8 --sensors camera --no-foxglove", d)).exit_code, 0);
+  const CliRun trained = run(fmt::format("reconstruct splats --log {0}/sensors.mcap --trajectory {0}/ground_truth.tum --calibration {0}/calibration.yaml "
+                                         "--out {0}/splats --downscale 4 --iterations 600 --initial-gaussians 5000 --hold-every 4 --json",
+                                         d));
+  ASSERT_EQ(trained.exit_code, 0) << trained.err;
+  const nlohmann::json result = nlohmann::json::parse(trained.out);
+  EXPECT_EQ(result["source"]["topic"], "/sensors/camera");
+  EXPECT_EQ(result["source"]["images"], 121);  // 15 Hz over 8 s
+  EXPECT_EQ(result["source"]["without_pose"], 0);
+  const int views = result["train_views"].get<int>() + result["eval"]["views"].get<int>();
+  EXPECT_GT(views, 30);  // kept every 10 cm or 5 degrees of the walk: 41
+  EXPECT_LT(views, 121);
+  EXPECT_EQ(result["eval"]["views"], views / 4);
+  EXPECT_EQ(result["resolution"][0], 160);
+  EXPECT_GT(result["eval"]["psnr"].get<double>(), 18.5);  // measured 20.1
+
+  std::ofstream(dir / "late.tum") << "1000 0 0 0 0 0 0 1\n1001 1 0 0 0 0 0 1\n";
+  const CliRun outside = run(fmt::format("reconstruct nerf --log {0}/sensors.mcap --trajectory {0}/late.tum --calibration {0}/calibration.yaml --out {0}/x", d));
+  EXPECT_EQ(outside.exit_code, 1);
+  EXPECT_THAT(outside.err, HasSubstr("inside"));
+  EXPECT_EQ(std::count(outside.err.begin(), outside.err.end(), '\n'), 1);
+  const CliRun topic = run(fmt::format(
+      "reconstruct splats --log {0}/sensors.mcap --trajectory {0}/ground_truth.tum --calibration {0}/calibration.yaml --topic /nothing --out {0}/x", d));
+  EXPECT_EQ(topic.exit_code, 1);
+  EXPECT_THAT(topic.err, HasSubstr("no images on /nothing (image topics: /sensors/camera)"));
+  const CliRun both = run(fmt::format("reconstruct splats {0}/a.json --log {0}/sensors.mcap --out {0}/x", d));
+  EXPECT_EQ(both.exit_code, 1);
+  EXPECT_THAT(both.err, HasSubstr("either TRANSFORMS or --log"));
+  std::filesystem::remove_all(dir);
+}
+
+// A hash-grid NeRF from the command line (AI builds): the lego at an eighth of its size for a few
+// steps, every 4th frame held back and scored; render finds nerf.hznerf in the folder.
+TEST(Cli, ReconstructNerfAndRenderIt) {
+  if (run("reconstruct --help").exit_code != 0) GTEST_SKIP() << "built without HANZO_FUSION_AI";
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_nerf_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  const std::string lego = std::string(HANZO_DATA_DIR) + "/nerf_lego_400";
+  const CliRun trained = run(fmt::format("reconstruct nerf {}/transforms_train.json --out {}/nerf --downscale 8 --iterations 80 "
+                                         "--samples-per-step 16384 --hold-every 4 --json",
+                                         lego, dir.string()));
+  ASSERT_EQ(trained.exit_code, 0) << trained.err;
+  const nlohmann::json result = nlohmann::json::parse(trained.out);
+  EXPECT_EQ(result["train_views"], 75);
+  EXPECT_EQ(result["eval"]["views"], 25);
+  EXPECT_EQ(result["iterations"], 80);
+  EXPECT_GT(result["eval"]["psnr"].get<double>(), 17.0);
+  EXPECT_NEAR(result["box"]["half_size"].get<double>(), 1.51, 0.05);
+  EXPECT_THAT(trained.err, HasSubstr("step 80/80"));
+
+  const CliRun rendered = run(fmt::format("render {}/nerf --poses {}/transforms_val.json --out {}/views --downscale 8 --depth --json", dir.string(), lego,
+                                          dir.string()));
+  ASSERT_EQ(rendered.exit_code, 0) << rendered.err;
+  const nlohmann::json views = nlohmann::json::parse(rendered.out);
+  EXPECT_EQ(views["kind"], "nerf");
+  EXPECT_EQ(views["views"], 25);
+  EXPECT_GT(views["eval"]["psnr"].get<double>(), 17.0);
+  EXPECT_EQ(cv::imread((dir / "views" / "0003.png").string()).cols, 50);
+  EXPECT_EQ(cv::imread((dir / "views" / "0003_depth.png").string(), cv::IMREAD_UNCHANGED).type(), CV_16UC1);
+
+  std::ofstream(dir / "nerf" / "nerf.hznerf", std::ios::trunc) << "HZNERF1\n{";
+  const CliRun broken = run(fmt::format("render {}/nerf --poses {}/transforms_val.json --out {}/x", dir.string(), lego, dir.string()));
+  EXPECT_EQ(broken.exit_code, 1);
+  EXPECT_THAT(broken.err, HasSubstr("nerf.hznerf"));
+  EXPECT_EQ(std::count(broken.err.begin(), broken.err.end(), '\n'), 1);
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace

@@ -7,6 +7,7 @@
 // Images are RGB float rows (3 floats a pixel, 0..1) of width x height; mismatched sizes are a
 // programming error (asserted by the callers' shapes, not checked here).
 
+#include <string>
 #include <vector>
 
 namespace hanzo::fusion::neural {
@@ -21,5 +22,16 @@ double psnr(const std::vector<float>& image, const std::vector<float>& reference
 
 /// Mean SSIM over pixels and channels; with `gradient` (resized to the image), dSSIM/dimage.
 double ssim(const std::vector<float>& image, const std::vector<float>& reference, int width, int height, std::vector<float>* gradient = nullptr);
+
+/// Scores of rendered views against held-back images.
+struct ViewScore {
+  std::string name;
+  double psnr = 0.0, ssim = 0.0;
+};
+struct EvaluationSummary {
+  std::vector<ViewScore> views;
+  double mean_psnr = 0.0, mean_ssim = 0.0;
+  double seconds_per_view = 0.0;  ///< rendering only
+};
 
 }  // namespace hanzo::fusion::neural

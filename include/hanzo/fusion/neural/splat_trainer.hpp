@@ -101,16 +101,6 @@ class SplatTrainer {
   std::mt19937_64 random_;
 };
 
-struct ViewScore {
-  std::string name;
-  double psnr = 0.0, ssim = 0.0;
-};
-struct EvaluationSummary {
-  std::vector<ViewScore> views;
-  double mean_psnr = 0.0, mean_ssim = 0.0;
-  double seconds_per_view = 0.0;  ///< rendering only
-};
-
 /// Renders every view that has an image and scores it (PSNR, SSIM).
 EvaluationSummary evaluate_splats(const GaussianCloud& cloud, const std::vector<PosedView>& views, const RasterizerConfig& config);
 

@@ -17,6 +17,7 @@
 // non-finite intrinsic or matrix, no frames, an image that cannot be read or whose size differs
 // from the given w / h.
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -51,6 +52,10 @@ struct ViewDataset {
   /// distance from it (the scene's scale for learning rates and initialization).
   Eigen::Vector3d scene_centre = Eigen::Vector3d::Zero();
   double camera_distance = 1.0;
+  double aabb_scale = 0.0;  ///< instant-ngp's scene-box scale when the file gives one (0: none)
+  /// A box around what the views see, when the reader knows one (sensor logs; 0: none).
+  Eigen::Vector3d box_centre = Eigen::Vector3d::Zero();
+  double box_half_size = 0.0;
 };
 
 Result<ViewDataset> load_transforms(const std::string& path, const ViewDatasetConfig& config = {});
@@ -58,5 +63,13 @@ Result<ViewDataset> load_transforms(const std::string& path, const ViewDatasetCo
 /// Writes `views`' cameras as a transforms.json (fl_x, fl_y, cx, cy, w, h per frame, no
 /// distortion) with the given file paths.
 Status save_transforms(const std::string& path, const std::vector<PosedView>& views, const std::vector<std::string>& file_paths);
+
+/// The views at 1/factor of their resolution (images area-averaged, masks too, intrinsics scaled
+/// about the pixel centres).
+std::vector<PosedView> downscaled(const std::vector<PosedView>& views, int factor);
+
+/// Renders every view that has an image (`render`: RGB floats at the camera's resolution) and
+/// scores it against the image (PSNR, SSIM), with the rendering time per view.
+EvaluationSummary score_views(const std::vector<PosedView>& views, const std::function<std::vector<float>(const SplatCamera&)>& render);
 
 }  // namespace hanzo::fusion::neural
