@@ -35,7 +35,6 @@ __attribute__((always_inline)) inline void multiply_kernel(const float* x, std::
     }
     for (int i = 0; i < in; ++i) {
       const float xi = xr[i];
-      if (xi == 0.0f) continue;  // ReLU zeros
       const float* w = weights + static_cast<std::size_t>(i) * static_cast<std::size_t>(out);
       for (int j = 0; j < out; ++j) acc[j] += xi * w[j];
     }
@@ -62,7 +61,6 @@ __attribute__((always_inline)) inline void accumulate_outer_kernel(const float* 
       }
       for (std::size_t r = first; r < last; ++r) {
         const float xi = x[r * x_stride + static_cast<std::size_t>(i)];
-        if (xi == 0.0f) continue;
         const float* gr = g + r * static_cast<std::size_t>(out);
         for (int j = 0; j < out; ++j) acc[j] += xi * gr[j];
       }
@@ -90,7 +88,6 @@ __attribute__((always_inline)) inline void multiply_transposed_kernel(const floa
     }
     for (int j = 0; j < out; ++j) {
       const float gj = gr[j];
-      if (gj == 0.0f) continue;
       const float* w = weights_transposed + static_cast<std::size_t>(j) * static_cast<std::size_t>(in);
       for (int i = 0; i < in; ++i) acc[i] += gj * w[i];
     }

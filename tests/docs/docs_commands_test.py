@@ -16,13 +16,15 @@ import subprocess
 import sys
 
 
-def help_text(cli, path):
-    @functools.lru_cache(maxsize=None)
-    def cached(joined):
-        result = subprocess.run([cli, *joined.split(), "--help"], capture_output=True, text=True, timeout=30)
-        return result.stdout if result.returncode == 0 else None
+@functools.lru_cache(maxsize=None)
+def _help_page(cli, joined):
+    result = subprocess.run([cli, *joined.split(), "--help"], capture_output=True, text=True, timeout=30)
+    return result.stdout if result.returncode == 0 else None
 
-    return cached(" ".join(path))
+
+def help_text(cli, path):
+    """The `--help` page of the subcommand path (None when it fails), run once per path."""
+    return _help_page(cli, " ".join(path))
 
 
 def subcommands(text):
