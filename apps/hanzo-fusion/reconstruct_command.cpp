@@ -3,6 +3,8 @@
 // (the 3DGS viewers' layout) and DIR/reconstruction.json (provenance and metrics).
 // hanzo-fusion reconstruct nerf TRANSFORMS --out DIR: trains a hash-grid NeRF
 // (neural/nerf_trainer.hpp) and writes DIR/nerf.hznerf and DIR/reconstruction.json.
+// Both take a sensor log instead of TRANSFORMS: --log LOG --trajectory T.tum --calibration C.yaml
+// (neural/log_views.hpp).
 // hanzo-fusion render DIR --poses POSES.json --out VIEWS: renders DIR's splats or NeRF at every
 // camera of a transforms-style JSON, in its frame order and at its resolution, one PNG per frame
 // (depth as 16-bit PNG on request); where the poses file's images exist, PSNR and SSIM against them.

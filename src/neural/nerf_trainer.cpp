@@ -120,17 +120,12 @@ void NerfTrainer::adam_step(double learning_rate) {
   }
 }
 
-double NerfTrainer::step() {
-  if (iteration_ % config_.occupancy_interval == 0) update_occupancy();
+void NerfTrainer::draw_rays(RayBatch& batch) {
   const std::vector<PosedView>& views = *views_;
   std::uniform_int_distribution<std::size_t> any_view(0, views.size() - 1);
   std::uniform_real_distribution<float> unit(0.0f, 1.0f);
   const float step_length = field_.step();
-
-  // Rays of random pixels, marched until the step's sample budget is spent.
-  RaySamples samples;
-  std::vector<Eigen::Vector3f> directions;
-  std::vector<float> target, background;
+  RaySamples& samples = batch.samples;
   const auto budget = static_cast<std::size_t>(config_.samples_per_step);
   int marched = 0;
   while (marched < rays_ && samples.size() < budget) {
@@ -161,10 +156,21 @@ double NerfTrainer::step() {
       back = Eigen::Vector3f(unit(random_), unit(random_), unit(random_));
       colour += (1.0f - view.mask[pixel]) * (back - config_.image_background);
     }
-    directions.push_back(direction);
-    target.insert(target.end(), colour.data(), colour.data() + 3);
-    background.insert(background.end(), back.data(), back.data() + 3);
+    batch.directions.push_back(direction);
+    batch.target.insert(batch.target.end(), colour.data(), colour.data() + 3);
+    batch.background.insert(batch.background.end(), back.data(), back.data() + 3);
   }
+}
+
+double NerfTrainer::step() {
+  if (iteration_ % config_.occupancy_interval == 0) update_occupancy();
+  // Rays of random pixels, marched until the step's sample budget is spent.
+  RayBatch batch;
+  draw_rays(batch);
+  const RaySamples& samples = batch.samples;
+  const std::vector<float>& target = batch.target;
+  const std::vector<float>& background = batch.background;
+  const auto budget = static_cast<std::size_t>(config_.samples_per_step);
   const std::size_t rays = samples.rays();
   const std::size_t count = samples.size();
   // The next step's ray count from the running samples per ray.
@@ -176,7 +182,7 @@ double NerfTrainer::step() {
 
   std::vector<float> sample_directions(3 * count);
   for (std::size_t r = 0; r < rays; ++r) {
-    for (uint32_t i = samples.ray_begin[r]; i < samples.ray_begin[r + 1]; ++i) std::copy_n(directions[r].data(), 3, &sample_directions[3 * i]);
+    for (uint32_t i = samples.ray_begin[r]; i < samples.ray_begin[r + 1]; ++i) std::copy_n(batch.directions[r].data(), 3, &sample_directions[3 * i]);
   }
   NerfField::Network& network = field_.network();
   std::vector<float> density(count), colour(3 * count);
@@ -191,8 +197,7 @@ double NerfTrainer::step() {
     colour_gradient[i] = scale * difference;
   }
   std::vector<float> density_gradient(count), sample_colour_gradient(3 * count);
-  composite_backward(samples, density.data(), colour.data(), background.data(), rendered, colour_gradient.data(), density_gradient.data(),
-                     sample_colour_gradient.data());
+  composite_backward(samples, density.data(), colour.data(), rendered, colour_gradient.data(), density_gradient.data(), sample_colour_gradient.data());
   for (std::vector<float>& gradient : gradients_) std::fill(gradient.begin(), gradient.end(), 0.0f);
   network.backward(samples.position.data(), count, network.training_cache, density_gradient.data(), sample_colour_gradient.data(), gradients_);
 

@@ -33,9 +33,8 @@ CompositeResult composite(const RaySamples& samples, const float* density, const
   return result;
 }
 
-void composite_backward(const RaySamples& samples, const float* density, const float* colour, const float* background, const CompositeResult& result,
-                        const float* colour_gradient, float* density_gradient, float* sample_colour_gradient, float min_transmittance) {
-  (void)background;
+void composite_backward(const RaySamples& samples, const float* density, const float* colour, const CompositeResult& result, const float* colour_gradient,
+                        float* density_gradient, float* sample_colour_gradient, float min_transmittance) {
   const std::size_t rays = samples.rays();
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays, 256), [&](const tbb::blocked_range<std::size_t>& range) {
     for (std::size_t r = range.begin(); r != range.end(); ++r) {

@@ -196,7 +196,7 @@ TEST(VolumeRendering, CompositingGradientsMatchCentralDifferences) {
   };
   const CompositeResult result = composite(samples, density.data(), colour.data(), background.data());
   std::vector<float> density_gradient(samples.size()), colour_gradient(colour.size());
-  composite_backward(samples, density.data(), colour.data(), background.data(), result, weights.data(), density_gradient.data(), colour_gradient.data());
+  composite_backward(samples, density.data(), colour.data(), result, weights.data(), density_gradient.data(), colour_gradient.data());
   std::vector<std::size_t> all_densities(samples.size()), all_colours(colour.size());
   std::iota(all_densities.begin(), all_densities.end(), 0);
   std::iota(all_colours.begin(), all_colours.end(), 0);

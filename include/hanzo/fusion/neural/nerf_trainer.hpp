@@ -28,6 +28,7 @@
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/neural/nerf_field.hpp"
 #include "hanzo/fusion/neural/view_dataset.hpp"
+#include "hanzo/fusion/neural/volume_rendering.hpp"
 
 namespace hanzo::fusion::neural {
 
@@ -73,6 +74,13 @@ class NerfTrainer {
 
  private:
   explicit NerfTrainer(NerfField field) : field_(std::move(field)) {}
+  /// The step's rays: their samples, directions, target colours and backgrounds.
+  struct RayBatch {
+    RaySamples samples;
+    std::vector<Eigen::Vector3f> directions;
+    std::vector<float> target, background;  // 3 per ray
+  };
+  void draw_rays(RayBatch& batch);
   void mark_seen_cells();
   void update_occupancy();
   void adam_step(double learning_rate);

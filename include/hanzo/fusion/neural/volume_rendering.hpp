@@ -43,7 +43,8 @@ CompositeResult composite(const RaySamples& samples, const float* density, const
                           float min_transmittance = 1e-4f);
 
 /// dL/d density and dL/d colour (3 per sample) from dL/d colour per ray; `result` is composite()'s.
-void composite_backward(const RaySamples& samples, const float* density, const float* colour, const float* background, const CompositeResult& result,
-                        const float* colour_gradient, float* density_gradient, float* sample_colour_gradient, float min_transmittance = 1e-4f);
+/// (The background enters through result.colour.)
+void composite_backward(const RaySamples& samples, const float* density, const float* colour, const CompositeResult& result, const float* colour_gradient,
+                        float* density_gradient, float* sample_colour_gradient, float min_transmittance = 1e-4f);
 
 }  // namespace hanzo::fusion::neural
