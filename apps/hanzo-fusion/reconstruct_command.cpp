@@ -100,9 +100,25 @@ struct Inputs {
   neural::ViewDataset train;
   std::vector<neural::PosedView> held_back;
   nlohmann::json source;  // where the views came from, for the provenance
+  Eigen::Vector3f background = Eigen::Vector3f::Ones();
 };
 
-Result<Inputs> load_inputs(const InputOptions& options, const Eigen::Vector3f& background) {
+Status create_folder(const std::string& folder);
+
+/// The views from a transforms.json or a sensor log, with held-back ones, on `background`.
+Result<Inputs> load_inputs_from(const InputOptions& options, const Eigen::Vector3f& background);
+/// load_inputs_from() on the --background colour, with the output folder `out` created.
+Result<Inputs> load_inputs(const InputOptions& options, const std::string& out) {
+  Eigen::Vector3f background;
+  HANZO_ASSIGN_OR_RETURN(background, background_colour(options.background));
+  Inputs inputs;
+  HANZO_ASSIGN_OR_RETURN(inputs, load_inputs_from(options, background));
+  inputs.background = background;
+  HANZO_RETURN_IF_ERROR(create_folder(out));
+  return inputs;
+}
+
+Result<Inputs> load_inputs_from(const InputOptions& options, const Eigen::Vector3f& background) {
   Inputs inputs;
   if (options.transforms.empty() == options.log.empty()) return Error("give either TRANSFORMS or --log (with --trajectory and --calibration)");
   if (!options.log.empty()) {
@@ -188,22 +204,27 @@ class ProgressReporter {
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now(), last_ = start_;
 };
 
+/// Writes DIR/reconstruction.json and reports the result.
+int finish_reconstruction(const Output& output, nlohmann::json& result, const std::string& out, const std::string& text) {
+  const std::string provenance = (std::filesystem::path(out) / "reconstruction.json").string();
+  if (Status written = write_file_durably(provenance, result.dump(2) + "\n"); !written) return report_failure(output, result, written.error().message);
+  return report_success(output, result, text);
+}
+
 int run_reconstruct_splats(const Output& output, const ReconstructOptions& options) {
   nlohmann::json result = {{"out", options.out}};
   std::unique_ptr<tbb::global_control> threads;
   if (options.threads > 0) threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
-  Result<Eigen::Vector3f> background = background_colour(options.input.background);
-  if (!background) return report_failure(output, result, background.error().message);
-  Result<Inputs> inputs = load_inputs(options.input, *background);
+  Result<Inputs> inputs = load_inputs(options.input, options.out);
   if (!inputs) return report_failure(output, result, inputs.error().message);
   result["source"] = inputs->source;
+  const Eigen::Vector3f* background = &inputs->background;
   const neural::ViewDataset* train = &inputs->train;
   const std::vector<neural::PosedView>& held_back = inputs->held_back;
   // Coarse to fine: the first steps see the images at half resolution (a quarter of the pixels).
   std::vector<neural::PosedView> coarse_views;
   if (options.coarse_share > 0.0 && train->views.front().camera.width >= 64) coarse_views = neural::downscaled(train->views, 2);
   const int coarse_steps = coarse_views.empty() ? 0 : static_cast<int>(options.coarse_share * options.iterations);
-  if (Status created = create_folder(options.out); !created) return report_failure(output, result, created.error().message);
 
   neural::SplatTrainingConfig config;
   config.iterations = options.iterations;
@@ -278,21 +299,17 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
     text += fmt::format("held-back views: {}, PSNR {:.2f} dB, SSIM {:.4f}, {:.0f} ms per view\n", scores.views.size(), scores.mean_psnr, scores.mean_ssim,
                         1000.0 * scores.seconds_per_view);
   }
-  const std::string provenance = (std::filesystem::path(options.out) / "reconstruction.json").string();
-  if (Status written = write_file_durably(provenance, result.dump(2) + "\n"); !written) return report_failure(output, result, written.error().message);
-  return report_success(output, result, text);
+  return finish_reconstruction(output, result, options.out, text);
 }
 
 int run_reconstruct_nerf(const Output& output, const NerfOptions& options) {
   nlohmann::json result = {{"out", options.out}};
   std::unique_ptr<tbb::global_control> threads;
   if (options.threads > 0) threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
-  Result<Eigen::Vector3f> background = background_colour(options.input.background);
-  if (!background) return report_failure(output, result, background.error().message);
-  Result<Inputs> inputs = load_inputs(options.input, *background);
+  Result<Inputs> inputs = load_inputs(options.input, options.out);
   if (!inputs) return report_failure(output, result, inputs.error().message);
   result["source"] = inputs->source;
-  if (Status created = create_folder(options.out); !created) return report_failure(output, result, created.error().message);
+  const Eigen::Vector3f* background = &inputs->background;
 
   neural::NerfFieldConfig field_config;
   field_config.seed = options.seed;
@@ -353,9 +370,7 @@ int run_reconstruct_nerf(const Output& output, const NerfOptions& options) {
     text += fmt::format("held-back views: {}, PSNR {:.2f} dB, SSIM {:.4f}, {:.0f} ms per view\n", scores.views.size(), scores.mean_psnr, scores.mean_ssim,
                         1000.0 * scores.seconds_per_view);
   }
-  const std::string provenance = (std::filesystem::path(options.out) / "reconstruction.json").string();
-  if (Status written = write_file_durably(provenance, result.dump(2) + "\n"); !written) return report_failure(output, result, written.error().message);
-  return report_success(output, result, text);
+  return finish_reconstruction(output, result, options.out, text);
 }
 
 /// A trained scene (splats or a NeRF) that renders colour and depth at a camera.
