@@ -275,7 +275,7 @@ void add_common_options(CLI::App* command, EvalOptions& options) {
 void add_error_options(CLI::App* command, EvalOptions& options) {
   command->add_option("-r,--relation", options.relation, "trans_part, angle_deg, angle_rad, rot_part or full")
       ->capture_default_str();
-  command->add_option("--align", options.alignment, "none, se3, sim3, scale, translation or origin")->capture_default_str();
+  command->add_option("--align", options.alignment, "none, se3, sim3, scale, translation, origin or yaw (rotation about the vertical + translation)")->capture_default_str();
   command->add_option("--n-to-align", options.align_num_poses, "Align on the first N pose pairs only (-1: all)")
       ->capture_default_str();
   command->add_option("--plot", options.plot_dir, "Write SVG plots (top view coloured by error, error over time) here");

@@ -342,6 +342,9 @@ Result<nlohmann::json> evaluate(const std::string& ground_truth_path, const io::
   aligned_config.alignment = eval::Alignment::kSE3;
   // Undefined for a straight-line trajectory (the alignment's rotation is not determined).
   const Result<eval::ApeResult> aligned = eval::compute_ape(pairs.reference, pairs.estimate, aligned_config);
+  eval::ApeConfig yaw_config;
+  yaw_config.alignment = eval::Alignment::kYaw;  // roll and pitch are observable wherever an IMU measures gravity
+  const Result<eval::ApeResult> yaw_aligned = eval::compute_ape(pairs.reference, pairs.estimate, yaw_config);
   eval::ApeConfig similarity_config;
   similarity_config.alignment = eval::Alignment::kSim3;  // a monocular camera's trajectory has no metric scale
   const Result<eval::ApeResult> similar = eval::compute_ape(pairs.reference, pairs.estimate, similarity_config);
@@ -358,6 +361,7 @@ Result<nlohmann::json> evaluate(const std::string& ground_truth_path, const io::
                         {"ape_rmse_m", ape.statistics.rmse},
                         {"ape_max_m", ape.statistics.max},
                         {"ape_se3_aligned_rmse_m", aligned ? nlohmann::json(aligned->statistics.rmse) : nlohmann::json()},
+                        {"ape_yaw_aligned_rmse_m", yaw_aligned ? nlohmann::json(yaw_aligned->statistics.rmse) : nlohmann::json()},
                         {"ape_sim3_aligned_rmse_m", similar ? nlohmann::json(similar->statistics.rmse) : nlohmann::json()},
                         {"final_error_m", ape.errors.empty() ? 0.0 : ape.errors.back()},
                         {"rpe_1m_rmse_m", rpe.statistics.rmse}};

@@ -1,8 +1,10 @@
 #include "hanzo/fusion/eval/alignment.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
+#include <Eigen/Geometry>
 #include <Eigen/SVD>
 #include <fmt/format.h>
 
@@ -10,10 +12,10 @@ namespace hanzo::fusion::eval {
 
 Result<Alignment> alignment_from_name(const std::string& name) {
   for (Alignment a : {Alignment::kNone, Alignment::kSE3, Alignment::kSim3, Alignment::kScale, Alignment::kTranslation,
-                      Alignment::kOrigin}) {
+                      Alignment::kOrigin, Alignment::kYaw}) {
     if (name == alignment_name(a)) return a;
   }
-  return Error(fmt::format("unknown alignment '{}' (expected none, se3, sim3, scale, translation or origin)", name));
+  return Error(fmt::format("unknown alignment '{}' (expected none, se3, sim3, scale, translation, origin or yaw)", name));
 }
 
 const char* alignment_name(Alignment alignment) {
@@ -24,6 +26,7 @@ const char* alignment_name(Alignment alignment) {
     case Alignment::kScale: return "scale";
     case Alignment::kTranslation: return "translation";
     case Alignment::kOrigin: return "origin";
+    case Alignment::kYaw: return "yaw";
   }
   return "?";
 }
@@ -67,6 +70,36 @@ Result<SimilarityTransform> umeyama_alignment(const std::vector<Eigen::Vector3d>
   return out;
 }
 
+Result<SimilarityTransform> yaw_alignment(const std::vector<Eigen::Vector3d>& source, const std::vector<Eigen::Vector3d>& target) {
+  if (source.size() != target.size() || source.size() < 2) {
+    return Error(fmt::format("yaw alignment needs at least 2 point pairs, as many sources as targets ({} vs {})", source.size(), target.size()));
+  }
+  Eigen::Vector3d mean_source = Eigen::Vector3d::Zero();
+  Eigen::Vector3d mean_target = Eigen::Vector3d::Zero();
+  for (std::size_t i = 0; i < source.size(); ++i) {
+    mean_source += source[i];
+    mean_target += target[i];
+  }
+  mean_source /= static_cast<double>(source.size());
+  mean_target /= static_cast<double>(source.size());
+  // The yaw minimizing sum |y - R_z x|^2 over centred points: atan2(sum (x cross y)_z, sum x.y) horizontally.
+  double sine = 0.0;
+  double cosine = 0.0;
+  for (std::size_t i = 0; i < source.size(); ++i) {
+    const Eigen::Vector3d x = source[i] - mean_source;
+    const Eigen::Vector3d y = target[i] - mean_target;
+    sine += x.x() * y.y() - x.y() * y.x();
+    cosine += x.x() * y.x() + x.y() * y.y();
+  }
+  if (std::hypot(sine, cosine) <= std::numeric_limits<double>::epsilon()) {
+    return Error("yaw alignment is degenerate: the horizontal positions are all at one point");
+  }
+  SimilarityTransform out;
+  out.rotation = Eigen::AngleAxisd(std::atan2(sine, cosine), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  out.translation = mean_target - out.rotation * mean_source;
+  return out;
+}
+
 Result<SimilarityTransform> align_trajectory(io::Trajectory& estimate, const io::Trajectory& reference,
                                              Alignment alignment, int num_poses) {
   if (estimate.size() != reference.size()) {
@@ -94,7 +127,11 @@ Result<SimilarityTransform> align_trajectory(io::Trajectory& estimate, const io:
       target[i] = reference.position(i);
     }
     const bool with_scale = alignment == Alignment::kSim3 || alignment == Alignment::kScale;
-    HANZO_ASSIGN_OR_RETURN(transform, umeyama_alignment(source, target, with_scale));
+    if (alignment == Alignment::kYaw) {
+      HANZO_ASSIGN_OR_RETURN(transform, yaw_alignment(source, target));
+    } else {
+      HANZO_ASSIGN_OR_RETURN(transform, umeyama_alignment(source, target, with_scale));
+    }
     if (alignment == Alignment::kScale) {  // keep only the scale, as evo -s does
       transform.rotation.setIdentity();
       transform.translation.setZero();

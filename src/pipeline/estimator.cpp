@@ -118,6 +118,7 @@ Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup
   const bool imu_heading = imu_sensor_ && sensors_[*imu_sensor_].config->fusion.use_orientation[2];
   heading_pending_ = has_gnss && !imu_heading && !frontend_.initial_yaw;
   gated_since_.resize(2 * sensors_.size());
+  map_links_.resize(sensors_.size());
   wheel_yaw_rate_needed_ = !imu_sensor_ && std::none_of(sensors_.begin(), sensors_.end(), [](const SensorSetup& s) {
     return s.config->modality == SensorModality::kLidar || s.config->modality == SensorModality::kCamera;
   });
@@ -156,7 +157,8 @@ Estimator::Estimator(const Estimator& other)
       last_keyframe_(other.last_keyframe_),
       planar_height_(other.planar_height_),
       last_gravity_update_(other.last_gravity_update_),
-      world_correction_(other.world_correction_) {}
+      world_correction_(other.world_correction_),
+      map_links_(other.map_links_) {}
 
 Estimator& Estimator::operator=(const Estimator& other) {
   if (this != &other) *this = Estimator(other);
@@ -206,6 +208,9 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
     filter_->apply_world_transform(correction->T_correction);
     world_correction_ = correction->T_correction * world_correction_;
     if (last_keyframe_) last_keyframe_->T_world_body = correction->T_correction * last_keyframe_->T_world_body;
+    for (std::optional<MapLink>& link : map_links_) {
+      if (link && !link->frame) link->T_world_map = correction->T_correction * link->T_world_map;
+    }
     return {true, std::nullopt};
   } else if (std::holds_alternative<MotionTick>(event.payload)) {
     predict_to(event.time);
@@ -259,14 +264,20 @@ void Estimator::predict_to(Timestamp t) {
 
 bool Estimator::update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer,
                        std::optional<Rejection>* reason, int channel, bool gated) {
+  return update_with(event, model.name(), [&](bool apply_gate) { return filter_->update(model, apply_gate); }, observer, reason, channel,
+                     gated);
+}
+
+bool Estimator::update_with(const Event& event, std::string_view model_name, const std::function<estimate::UpdateOutcome(bool)>& apply,
+                            UpdateObserver* observer, std::optional<Rejection>* reason, int channel, bool gated) {
   Timestamp& gated_since = gated_since_[2 * event.sensor + static_cast<size_t>(channel)];
   // A sensor whose every update has been gated for gate_recovery seconds is fused without the
   // gate: by then the estimate (a bad start, a misconfigured noise) is the likelier culprit, and
   // gating it out forever would lock the filter out of its own aiding sensors.
   const double recovery = frontend_.gate_recovery_s;
   const bool locked_out = recovery > 0.0 && !gated_since.is_zero() && (event.time - gated_since).seconds() > recovery;
-  const estimate::UpdateOutcome outcome = filter_->update(model, gated && !locked_out);
-  if (observer != nullptr) observer->on_update({event.sensor, model.name(), event.time, outcome});
+  const estimate::UpdateOutcome outcome = apply(gated && !locked_out);
+  if (observer != nullptr) observer->on_update({event.sensor, model_name, event.time, outcome});
   if (outcome.status == estimate::UpdateStatus::kRejectedByGate && gated_since.is_zero()) gated_since = event.time;
   if (outcome.status != estimate::UpdateStatus::kApplied) {
     if (reason != nullptr) {
@@ -362,11 +373,16 @@ void Estimator::start(const NavigationState& state, const Eigen::Matrix3d& posit
   if (estimate_wheel_heading_drift_) {
     P(estimate::kWheelHeadingDriftIndex, estimate::kWheelHeadingDriftIndex) = kInitialWheelHeadingDriftSigma * kInitialWheelHeadingDriftSigma;
   }
-  filter_->reset(state, P);
+  reset_filter(state, P);
   initialized_ = true;
   time_ = state.timestamp;
   last_gravity_update_ = state.timestamp;
   planar_height_ = state.position.z();
+}
+
+void Estimator::reset_filter(const NavigationState& state, const ErrorCovariance& covariance) {
+  filter_->reset(state, covariance);
+  for (std::optional<MapLink>& link : map_links_) link.reset();
 }
 
 void Estimator::initialize_without_imu(const Event& event) {

@@ -4,6 +4,7 @@
 // alignment buffer), and is copyable, so the Frontend can snapshot it after each event and roll
 // back for a late message. Private to the pipeline module.
 
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string_view>
@@ -25,9 +26,10 @@
 namespace hanzo::fusion::pipeline {
 
 struct PoseMeasurement {
-  SE3 T_world_sensor;
+  SE3 T_world_sensor;  ///< with in_map: T_map_sensor, in the sensor's own map frame
   Eigen::Matrix<double, 6, 6> covariance;
   bool gated = true;  // false: fused without the chi-square gate (Frontend::push_pose)
+  bool in_map = false;  // Frontend::push_map_pose
 };
 
 /// A sensor's own velocity in its axes (from a relative pose of LiDAR / visual odometry).
@@ -126,6 +128,9 @@ class Estimator {
   /// The product of the backend corrections fused so far (world frame, newest on the left):
   /// a pose estimated before them is T * that pose in today's world.
   const SE3& world_correction() const { return world_correction_; }
+  /// The current estimate of `sensor`'s map frame in the world (Frontend::push_map_pose);
+  /// none before its first map pose was fused.
+  std::optional<SE3> map_frame(size_t sensor) const;
 
  private:
   EventOutcome process_imu(const Event& event, const msgs::ImuMessage& imu, UpdateObserver* observer);
@@ -153,6 +158,9 @@ class Estimator {
   /// the configuration and these sigmas.
   void start(const estimate::NavigationState& state, const Eigen::Matrix3d& position_covariance, const Eigen::Vector3d& velocity_sigma,
              double accel_bias_sigma, double gyro_bias_sigma);
+  /// filter_->reset(); the map frames go with the old covariance (the next map pose of each
+  /// sensor defines its frame again at the estimate).
+  void reset_filter(const estimate::NavigationState& state, const estimate::ErrorCovariance& covariance);
   /// Without an IMU: starts the filter at the first event (see the class comment).
   void initialize_without_imu(const Event& event);
   /// Without an IMU: the virtual IMU sample of the motion model at the current estimate.
@@ -167,6 +175,11 @@ class Estimator {
   /// so that each is tracked for gate recovery on its own.
   bool update(const Event& event, const estimate::MeasurementModel& model, UpdateObserver* observer, std::optional<Rejection>* reason,
               int channel = 0, bool gated = true);
+  /// update() for any filter operation: apply(gate) runs it with or without the gate.
+  bool update_with(const Event& event, std::string_view model_name, const std::function<estimate::UpdateOutcome(bool)>& apply,
+                   UpdateObserver* observer, std::optional<Rejection>* reason, int channel, bool gated);
+  /// A pose in the sensor's own map frame: the first one defines the frame at the estimate.
+  EventOutcome process_map_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer);
   void apply_constraints(const Event& event);
   /// A keyframe when keyframe_interval has passed since the previous one (IMU events only).
   std::optional<msgs::Keyframe> maybe_keyframe(Timestamp time);
@@ -235,6 +248,13 @@ class Estimator {
   double planar_height_ = 0.0;
   Timestamp last_gravity_update_;
   SE3 world_correction_;
+  /// Per sensor, its map frame once defined: the filter's index, or (filters without map
+  /// frames) the frame fixed in the world where it was defined, moved by world corrections.
+  struct MapLink {
+    std::optional<int> frame;
+    SE3 T_world_map;
+  };
+  std::vector<std::optional<MapLink>> map_links_;
 };
 
 }  // namespace hanzo::fusion::pipeline

@@ -130,7 +130,7 @@ void Estimator::hold_at_fix(const Eigen::Vector3d& antenna_gnss, const Eigen::Ma
   P.middleRows<3>(estimate::kPositionIndex).setZero();
   P.middleCols<3>(estimate::kPositionIndex).setZero();
   P.block<3, 3>(estimate::kPositionIndex, estimate::kPositionIndex) = covariance;
-  filter_->reset(state, P);
+  reset_filter(state, P);
 }
 
 bool Estimator::standing_still() const {
@@ -173,7 +173,7 @@ void Estimator::apply_in_motion_alignment(const estimate::InMotionAlignment& ali
   }
   P.block<3, 3>(estimate::kGyroBiasIndex, estimate::kGyroBiasIndex) =
       P.block<3, 3>(estimate::kGyroBiasIndex, estimate::kGyroBiasIndex).cwiseMax(Eigen::Matrix3d::Identity() * std::pow(kUnalignedGyroBiasSigma, 2));
-  filter_->reset(state, P);
+  reset_filter(state, P);
   logger()->info("aligned in motion from the GNSS track at {:.1f} m/s: heading {:.1f} deg, roll {:.1f}, pitch {:.1f} deg",
                  alignment.speed, estimate::roll_pitch_yaw(alignment.R_world_body.matrix()).z() * 180.0 / M_PI,
                  estimate::roll_pitch_yaw(alignment.R_world_body.matrix()).x() * 180.0 / M_PI,
@@ -223,7 +223,7 @@ bool Estimator::align_heading_to_course(const Eigen::Vector3d& antenna_gnss, con
   P.row(yaw).setZero();
   P.col(yaw).setZero();
   P(yaw, yaw) = course_sigma * course_sigma;
-  filter_->reset(filter_->state(), P);
+  reset_filter(filter_->state(), P);
   heading_pending_ = false;
   course_start_.reset();
   return true;
@@ -322,11 +322,44 @@ EventOutcome Estimator::process_radar(const Event& event, const msgs::RadarMessa
 }
 
 EventOutcome Estimator::process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer) {
+  if (pose.in_map) return process_map_pose(event, pose, observer);
   predict_to(event.time);
   const estimate::PoseModel model(pose.T_world_sensor, pose.covariance, sensors_[event.sensor].T_body_sensor);
   EventOutcome outcome;
   outcome.fused = update(event, model, observer, &outcome.reason, 0, pose.gated);
   return outcome;
+}
+
+EventOutcome Estimator::process_map_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer) {
+  predict_to(event.time);
+  const SE3& T_body_sensor = sensors_[event.sensor].T_body_sensor;
+  std::optional<MapLink>& link = map_links_[event.sensor];
+  if (!link) {
+    // The first pose defines the frame: the map is where the estimate puts the sensor now.
+    const SE3 T_body_map = T_body_sensor * pose.T_world_sensor.inverse();
+    const estimate::NavigationState state = filter_->state();
+    link = MapLink{filter_->add_map_frame(T_body_map), SE3(state.R_world_body, state.position) * T_body_map};
+    return {true, std::nullopt};
+  }
+  EventOutcome outcome;
+  if (link->frame) {
+    const estimate::MapPoseModel model(*link->frame, pose.T_world_sensor, pose.covariance, T_body_sensor);
+    outcome.fused = update_with(event, model.name(), [&](bool apply_gate) { return filter_->update_map_pose(model, apply_gate); },
+                                observer, &outcome.reason, 0, pose.gated);
+  } else {
+    // The covariance's position block from the map's axes to the world's.
+    Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Identity();
+    J.topLeftCorner<3, 3>() = link->T_world_map.rotation().matrix();
+    const estimate::PoseModel model(link->T_world_map * pose.T_world_sensor, J * pose.covariance * J.transpose(), T_body_sensor);
+    outcome.fused = update(event, model, observer, &outcome.reason, 0, pose.gated);
+  }
+  return outcome;
+}
+
+std::optional<SE3> Estimator::map_frame(size_t sensor) const {
+  const std::optional<MapLink>& link = map_links_[sensor];
+  if (!link) return std::nullopt;
+  return link->frame ? filter_->map_frame(*link->frame) : std::optional<SE3>(link->T_world_map);
 }
 
 

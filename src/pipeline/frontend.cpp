@@ -307,6 +307,26 @@ PushStatus Frontend::push_pose(std::string_view sensor_name, Timestamp timestamp
   return impl.accept(sensor, std::move(event));
 }
 
+PushStatus Frontend::push_map_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_map_sensor,
+                                   const Eigen::Matrix<double, 6, 6>& covariance) {
+  Impl& impl = *impl_;
+  size_t sensor = 0;
+  if (PushStatus checked = impl.pose_input(&sensor, sensor_name, "map pose measurement", timestamp, T_map_sensor, covariance, {}); !checked) {
+    return checked;
+  }
+  Event event;
+  event.time = timestamp + impl.setups[sensor].time_offset;
+  event.sensor = sensor;
+  event.payload = PoseMeasurement{T_map_sensor, covariance, true, true};
+  return impl.accept(sensor, std::move(event));
+}
+
+std::optional<SE3> Frontend::map_frame(std::string_view sensor_name) const {
+  const std::optional<size_t> index = impl_->sensor_index(sensor_name);
+  if (!index) return std::nullopt;
+  return impl_->estimator.map_frame(*index);
+}
+
 PushStatus Frontend::push_relative_pose(std::string_view sensor_name, Timestamp from, Timestamp to, const SE3& T_from_to,
                                    const Eigen::Matrix<double, 6, 6>& covariance) {
   Impl& impl = *impl_;

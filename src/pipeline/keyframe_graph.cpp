@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 
 #include "hanzo/fusion/graph/imu_factors.hpp"
+#include "hanzo/fusion/estimate/navigation_state.hpp"
 #include "hanzo/fusion/graph/pose_factors.hpp"
 
 namespace hanzo::fusion::pipeline {
@@ -44,6 +45,18 @@ Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe) {
     graph::GaussianNoise noise;
     HANZO_ASSIGN_OR_RETURN(noise, noise_of(J * *keyframe.pose_covariance * J.transpose(), fmt::format("keyframe {} pose covariance", id)));
     pending_.factors.emplace<graph::PriorFactorSE3>(graph::X(id), T_world_body, noise);
+  }
+  if (config_.level_from_keyframes && keyframe.pose_covariance) {
+    // r = R^T (-g) - up_body moves by [up_body]x dtheta (body frame); nothing along gravity.
+    const Eigen::Vector3d up_body = T_world_body.rotation().inverse() * Eigen::Vector3d(0.0, 0.0, estimate::kStandardGravity);
+    const Eigen::Matrix3d attitude = keyframe.pose_covariance->bottomRightCorner<3, 3>() +
+                                     Eigen::Matrix3d::Identity() * config_.level_sigma_floor * config_.level_sigma_floor;
+    const Eigen::Matrix3d hat = SO3::hat(up_body);
+    const Eigen::Matrix3d covariance = config_.level_correlated_keyframes * (hat * attitude * hat.transpose()) +
+                                       Eigen::Matrix3d::Identity() * std::pow(estimate::kStandardGravity * config_.level_sigma_floor, 2);
+    graph::GaussianNoise level_noise;
+    HANZO_ASSIGN_OR_RETURN(level_noise, noise_of(covariance, fmt::format("keyframe {} attitude covariance", id)));
+    pending_.factors.emplace<graph::GravityFactor>(graph::X(id), up_body, level_noise);
   }
   pending_.values.insert(graph::X(id), initial_pose(keyframe));
   frontend_poses_[id] = T_world_body;

@@ -96,10 +96,10 @@ Result<LidarInertialOdometry::RegisteredScan> LidarInertialOdometry::register_sc
                          with_context(odometry_->add_scan(scan.time, scan.cloud, motion, scan.sweep_motion), "lidar-inertial odometry (" + lidar_sensor_ + ")"));
   last_filter_pose_ = T_world_lidar;
   registered.T_world_lidar = T_world_odometry_ * registered.estimate.T_world_lidar;
-  // Covariance over (position in the world, rotation in the sensor frame): the tangent's
-  // translation rho is in the sensor frame (right perturbation), so position = R rho.
+  // Covariance over (position in the odometry's axes, rotation in the sensor frame): the
+  // tangent's translation rho is in the sensor frame (right perturbation), so position = R rho.
   Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Identity();
-  J.topLeftCorner<3, 3>() = registered.T_world_lidar.rotation().matrix();
+  J.topLeftCorner<3, 3>() = registered.estimate.T_world_lidar.rotation().matrix();
   Eigen::Matrix<double, 6, 6> covariance = J * registered.estimate.covariance * J.transpose();
   covariance = 0.5 * (covariance + covariance.transpose());
   covariance.diagonal().head<3>().array() += config_.position_sigma_floor * config_.position_sigma_floor;
@@ -120,11 +120,25 @@ Result<LidarInertialOdometry::RegisteredScan> LidarInertialOdometry::fuse(Result
   ++statistics_.scans;
   statistics_.degenerate += estimate.degenerate ? 1 : 0;
   statistics_.weather_degraded += estimate.weather_degraded ? 1 : 0;
-  if (Status fused = frontend_.push_pose(lidar_sensor_, estimate.time - lidar_time_offset_, registered->T_world_lidar, registered->covariance); !fused) {
+  const Timestamp sensor_time = estimate.time - lidar_time_offset_;
+  Status fused;
+  if (config_.estimate_map_frame) {
+    fused = frontend_.push_map_pose(lidar_sensor_, sensor_time, estimate.T_world_lidar, registered->covariance);
+  } else {
+    // The covariance's position block from the odometry's axes to the world's.
+    Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Identity();
+    J.topLeftCorner<3, 3>() = T_world_odometry_.rotation().matrix();
+    fused = frontend_.push_pose(lidar_sensor_, sensor_time, registered->T_world_lidar, J * registered->covariance * J.transpose());
+  }
+  if (!fused) {
     return Error(fmt::format("lidar-inertial odometry ({}): registered, but the frontend refused the pose: {}", lidar_sensor_,
                              fused.error().message));
   }
   ++statistics_.fused;
+  // The map frame as the filter estimates it now (none yet when the pose waits for the IMU).
+  if (config_.estimate_map_frame) {
+    if (const std::optional<SE3> T_world_map = frontend_.map_frame(lidar_sensor_)) registered->T_world_lidar = *T_world_map * estimate.T_world_lidar;
+  }
   return registered;
 }
 

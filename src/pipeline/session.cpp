@@ -166,6 +166,8 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
 Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& config, const calib::Calibration& calibration,
                                                  SessionConfig session_config) {
   session_config.lidar_odometry.odometry.num_threads = session_config.num_threads;
+  // With GNSS the LiDAR map's pose in the world is observable and wanted (lidar_inertial_odometry.hpp).
+  if (configures_gnss(config)) session_config.lidar_odometry.estimate_map_frame = true;
   HANZO_RETURN_IF_ERROR(with_context(session_config.validate(), "session config"));
   std::unique_ptr<Frontend> frontend;
   HANZO_ASSIGN_OR_RETURN(frontend, Frontend::create(config, calibration));
@@ -194,6 +196,11 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   // visual-inertial graph's newest keyframe after every update doubled its error or worse.)
   const bool visual_inertial_graph = session_config.visual_inertial_factors && config.frontend.type == config::FrontendType::kMsckf;
   if ((session_config.gnss_factors && configures_gnss(config)) || visual_inertial_graph) session_config.backend.correct_on_loop_closures_only = true;
+  // With an IMU the keyframes' roll and pitch are measured (gravity); the visual-inertial graph
+  // has its own IMU factors.
+  session_config.backend.level_from_keyframes =
+      !visual_inertial_graph && std::any_of(config.sensors.begin(), config.sensors.end(),
+                                            [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kImu; });
   // The visual-inertial graph's smoother. Landmarks make it far less linear than a pose graph:
   // Levenberg-Marquardt starts from Ceres' default trust region (the pose graphs' 1e8, nearly
   // Gauss-Newton, had every step of some updates rejected on the simulated walks, leaving the

@@ -23,6 +23,7 @@
 
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/estimate/imu_propagation.hpp"
+#include "hanzo/fusion/estimate/map_frame.hpp"
 #include "hanzo/fusion/estimate/measurement_model.hpp"
 #include "hanzo/fusion/estimate/navigation_state.hpp"
 
@@ -85,6 +86,21 @@ class Filter {
   /// covariances then leave the cross terms out.
   virtual void clone_pose() {}
   virtual std::optional<PoseClone> pose_clone() const { return std::nullopt; }
+
+  /// Map frames (map_frame.hpp): a frame attached to the current body pose by T_body_map,
+  /// estimated from now on with the state; returns its index (0, 1, ... in creation order), or
+  /// none where the filter does not estimate map frames (its users then fix the frame in the
+  /// world at the current estimate). reset() removes them; apply_world_transform() moves them
+  /// with the world.
+  virtual std::optional<int> add_map_frame(const SE3& /*T_body_map*/) { return std::nullopt; }
+  /// The current estimate of map frame `frame`'s pose in the world; none for an unknown index.
+  virtual std::optional<SE3> map_frame(int /*frame*/) const { return std::nullopt; }
+  /// Fuses a pose in a map frame (gated as update()); a numerical failure for an unknown frame.
+  virtual UpdateOutcome update_map_pose(const MapPoseModel& /*model*/, bool /*apply_gate*/ = true) {
+    UpdateOutcome outcome;
+    outcome.status = UpdateStatus::kNumericalFailure;
+    return outcome;
+  }
 };
 
 /// The gate every filter applies: d^2 = r^T S^-1 r from S's Cholesky factorization. Sets

@@ -23,9 +23,13 @@ enum class Alignment {
   kScale,        ///< scale only (evo -s)
   kTranslation,  ///< translation only: the position means coincide
   kOrigin,       ///< first poses coincide (evo --align_origin)
+  /// rotation about the vertical + translation (4 degrees of freedom): for estimates whose roll
+  /// and pitch are observable (an IMU measures gravity), so that a tilted estimate is not
+  /// aligned away as with se3 (Zhang and Scaramuzza, IROS 2018, "posyaw")
+  kYaw,
 };
 
-/// "none", "se3", "sim3", "scale", "translation", "origin".
+/// "none", "se3", "sim3", "scale", "translation", "origin", "yaw".
 Result<Alignment> alignment_from_name(const std::string& name);
 const char* alignment_name(Alignment alignment);
 
@@ -41,6 +45,10 @@ struct SimilarityTransform {
 /// (fewer than two non-zero singular values of the cross-covariance: all points on a line).
 Result<SimilarityTransform> umeyama_alignment(const std::vector<Eigen::Vector3d>& source,
                                               const std::vector<Eigen::Vector3d>& target, bool with_scale);
+
+/// The yaw and translation mapping `source` onto `target` in least squares (z is the vertical).
+/// Fails for fewer than 2 pairs or when the horizontal positions do not determine the yaw.
+Result<SimilarityTransform> yaw_alignment(const std::vector<Eigen::Vector3d>& source, const std::vector<Eigen::Vector3d>& target);
 
 /// Aligns `estimate` in place onto `reference` (associated: same size) using the first
 /// `num_poses` pairs (all when <= 0 or more than there are). Returns the transform applied.

@@ -157,6 +157,21 @@ class Frontend {
   PushStatus push_pose(std::string_view sensor, Timestamp timestamp, const SE3& T_world_sensor,
                    const Eigen::Matrix<double, 6, 6>& covariance, bool gated = true);
 
+  /// A pose of a lidar or camera sensor in its own map frame (an odometry's local map), covariance
+  /// over (position in the map's axes [m], rotation sensor frame [rad]). The sensor's first map
+  /// pose defines the frame where the estimate puts the sensor then; from there the map frame's
+  /// pose in the world is estimated with the state (estimate/map_frame.hpp: its roll and pitch
+  /// against gravity once turns separate them from the accelerometer bias, its position and
+  /// heading against GNSS), so that a map started from a tilted alignment or a poor first fix
+  /// does not hold the estimate there. With a filter that does not estimate map frames (ukf,
+  /// particle) the frame stays fixed where it was defined, moved by world corrections. A
+  /// filter reset (a heading alignment) defines the frame again at the next map pose.
+  PushStatus push_map_pose(std::string_view sensor, Timestamp timestamp, const SE3& T_map_sensor,
+                           const Eigen::Matrix<double, 6, 6>& covariance);
+  /// The current estimate of `sensor`'s map frame in the world (push_map_pose), in today's
+  /// world; none before the sensor's first map pose was fused or for an unknown sensor.
+  std::optional<SE3> map_frame(std::string_view sensor) const;
+
   /// Fuses every message still waiting for the IMU to reach its time (call at the end of a
   /// log or when the IMU stops for good); the filter is extrapolated with the last IMU sample.
   void flush();

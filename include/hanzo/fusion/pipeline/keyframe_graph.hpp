@@ -53,6 +53,16 @@ struct KeyframeGraphConfig {
   /// without the graph's corrections), while the graph's keyframes with GPS factors were
   /// better than the filter's (0.44 m).
   bool correct_on_loop_closures_only = false;
+  /// Hold each keyframe's roll and pitch near the Frontend's (a GravityFactor: the body's "up"
+  /// as the keyframe's attitude says, with its attitude covariance plus level_sigma_floor). The
+  /// relative motions between keyframes carry no gravity: without this the graph keeps the
+  /// tilt of its first keyframe (the start's alignment, off by the accelerometer bias) while
+  /// the Frontend levels its map once turns make the bias observable. For Frontends with an
+  /// IMU (the Session sets it). The filter's attitudes at successive keyframes share their
+  /// errors, so each is weighted as if it were level_correlated_keyframes keyframes' worth.
+  bool level_from_keyframes = false;
+  double level_sigma_floor = 0.002;  ///< rad
+  double level_correlated_keyframes = 10.0;
 };
 
 struct KeyframeGraphUpdate {

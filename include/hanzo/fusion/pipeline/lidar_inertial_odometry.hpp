@@ -7,18 +7,20 @@
 //     deskew_sample_interval during the sweep (the IMU's motion, accelerations and changing
 //     turn rates included), not with a constant-velocity guess;
 //  2. the scan is registered to the local map from that prediction (LidarOdometry);
-//  3. the result goes back into the filter as a pose measurement of the LiDAR sensor
-//     (Frontend::push_pose) with the registration covariance, floored at
+//  3. the result goes back into the filter as a pose of the LiDAR sensor in the odometry's map
+//     (Frontend::push_map_pose: the map frame's pose in the world is estimated with the state,
+//     so the map's tilt from the start's alignment is levelled and GNSS can move the map) with
+//     the registration covariance, floored at
 //     position_sigma_floor / rotation_sigma_floor (the registration's own covariance treats
 //     thousands of points as independent and is far too small). Along degenerate directions
 //     (a corridor's axis) the covariance is large, so the filter keeps its IMU (and wheel)
 //     estimate there.
-// The odometry's world frame is the Frontend's: the first scan starts at the Frontend's pose.
+// The odometry's frame starts at the Frontend's pose at the first scan.
 // A scan that arrives before the Frontend is initialized or outside its history (older than
 // the lag window, newer than the last fused IMU sample) is refused with an Error that says so;
 // nothing changes then. Corrections applied to the Frontend (Frontend::apply_correction, by a
-// backend after a loop closure) move the odometry's frame with the Frontend's world: the local
-// map stays as it is (it is local) and the pose measurements follow the corrected world.
+// backend after a loop closure) move the map frame with the Frontend's world: the local map
+// stays as it is (it is local) and the scans' world poses follow the corrected world.
 
 #include <cstddef>
 #include <memory>
@@ -49,6 +51,14 @@ struct LidarInertialOdometryConfig {
   /// LiDAR-only odometry). The filter's poses are its estimates at those times, so an update
   /// fused inside a sweep (a GNSS fix) shows as a small step there.
   bool imu_deskew = true;
+  /// Fuse the registered poses in the odometry's map frame, whose pose in the world the filter
+  /// estimates (true), or as world poses with the map fixed where the first scan put it (false).
+  /// Fixed, a start tilted by the accelerometer bias (about 0.5 degrees for 0.08 m/s^2) or a first
+  /// GNSS fix off by a metre stays in every pose; estimated, the real-time poses are levelled and
+  /// moved onto the GNSS world as those become observable (a turn, the fixes), and the poses before
+  /// carry the correction as a change: segments across it drift more (measured in
+  /// bench/RESULTS.md). The Session estimates it when GNSS defines the world.
+  bool estimate_map_frame = false;
   double deskew_sample_interval = 0.005;  ///< s between the filter poses sampled (an IMU period at 200 Hz); <= 0: constant twist
 };
 
@@ -93,8 +103,10 @@ class LidarInertialOdometry {
   };
   struct RegisteredScan {
     lidar::LidarOdometryEstimate estimate;  ///< in the odometry's frame
-    SE3 T_world_lidar;                      ///< in the session's world
-    Eigen::Matrix<double, 6, 6> covariance; ///< of the pose measurement (floors, weather included)
+    SE3 T_world_lidar;                      ///< in the session's world (after fuse(): the filter's map frame)
+    /// of the pose measurement (floors, weather included), over (position in the odometry's
+    /// axes, rotation sensor frame)
+    Eigen::Matrix<double, 6, 6> covariance;
     std::vector<Eigen::Vector3f> points;    ///< the deskewed sweep (sensor frame), for maps
     double seconds = 0.0;                   ///< time the registration took
   };
