@@ -143,16 +143,17 @@ UpdateOutcome ErrorStateEkf::update_augmented(const Eigen::Matrix<double, M, 1>&
   }
   state_ = updated;
   covariance_.noalias() -= K * PHt.transpose();  // K S K^T = K (P H^T)^T
+  Eigen::Matrix<double, 6, M> clone_gain;
+  if (clone_) clone_gain = llt.solve(clone_U.transpose()).transpose();
   Eigen::VectorXd anchor_delta;
   if (!anchors_.empty()) {
     const AnchorGain anchor_K = llt.solve(anchor_U.transpose()).transpose();
     anchor_delta = anchor_K * r;
     anchor_cross_.noalias() -= anchor_K * PHt.transpose();
     anchor_covariance_.noalias() -= anchor_K * anchor_U.transpose();
-    if (clone_) clone_anchor_cross_.noalias() -= llt.solve(clone_U.transpose()).transpose() * anchor_U.transpose();
+    if (clone_) clone_anchor_cross_.noalias() -= clone_gain * anchor_U.transpose();
   }
   if (clone_) {
-    const Eigen::Matrix<double, 6, M> clone_gain = llt.solve(clone_U.transpose()).transpose();
     clone_->correction += clone_gain * r;
     clone_->covariance -= clone_gain * clone_U.transpose();
     clone_->cross -= clone_gain * PHt.transpose();

@@ -82,6 +82,8 @@ struct Frontend::Impl final : UpdateObserver {
   PushStatus pose_input(size_t* sensor, std::string_view sensor_name, std::string_view what, Timestamp timestamp, const SE3& pose,
                             const Eigen::Matrix<double, 6, 6>& covariance, const std::function<Status()>& extra);
   PushStatus accept(size_t sensor, Event event);
+  /// pose_input()'s checks, then the measurement into the time order (push_pose, push_map_pose).
+  PushStatus push_pose_measurement(std::string_view sensor_name, std::string_view what, Timestamp timestamp, PoseMeasurement measurement);
   void fuse_in_order(Event event);
   void fuse_late(Event event);
   /// Holds a keyframe the estimator made (a newer version of one held replaces it: a late
@@ -293,32 +295,27 @@ PushStatus Frontend::Impl::pose_input(size_t* sensor, std::string_view sensor_na
   return {};
 }
 
-PushStatus Frontend::push_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_world_sensor,
-                          const Eigen::Matrix<double, 6, 6>& covariance, bool gated) {
-  Impl& impl = *impl_;
+PushStatus Frontend::Impl::push_pose_measurement(std::string_view sensor_name, std::string_view what, Timestamp timestamp,
+                                                  PoseMeasurement measurement) {
   size_t sensor = 0;
-  if (PushStatus checked = impl.pose_input(&sensor, sensor_name, "pose measurement", timestamp, T_world_sensor, covariance, {}); !checked) {
+  if (PushStatus checked = pose_input(&sensor, sensor_name, what, timestamp, measurement.T_world_sensor, measurement.covariance, {}); !checked) {
     return checked;
   }
   Event event;
-  event.time = timestamp + impl.setups[sensor].time_offset;
+  event.time = timestamp + setups[sensor].time_offset;
   event.sensor = sensor;
-  event.payload = PoseMeasurement{T_world_sensor, covariance, gated};
-  return impl.accept(sensor, std::move(event));
+  event.payload = std::move(measurement);
+  return accept(sensor, std::move(event));
+}
+
+PushStatus Frontend::push_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_world_sensor,
+                          const Eigen::Matrix<double, 6, 6>& covariance, bool gated) {
+  return impl_->push_pose_measurement(sensor_name, "pose measurement", timestamp, PoseMeasurement{T_world_sensor, covariance, gated});
 }
 
 PushStatus Frontend::push_map_pose(std::string_view sensor_name, Timestamp timestamp, const SE3& T_map_sensor,
                                    const Eigen::Matrix<double, 6, 6>& covariance) {
-  Impl& impl = *impl_;
-  size_t sensor = 0;
-  if (PushStatus checked = impl.pose_input(&sensor, sensor_name, "map pose measurement", timestamp, T_map_sensor, covariance, {}); !checked) {
-    return checked;
-  }
-  Event event;
-  event.time = timestamp + impl.setups[sensor].time_offset;
-  event.sensor = sensor;
-  event.payload = PoseMeasurement{T_map_sensor, covariance, true, true};
-  return impl.accept(sensor, std::move(event));
+  return impl_->push_pose_measurement(sensor_name, "map pose measurement", timestamp, PoseMeasurement{T_map_sensor, covariance, true, true});
 }
 
 std::optional<SE3> Frontend::map_frame(std::string_view sensor_name) const {
