@@ -147,6 +147,7 @@ Status SessionConfig::validate() const {
   HANZO_RETURN_IF_ERROR(with_context(lidar_odometry.odometry.validate(), "lidar_odometry"));
   HANZO_RETURN_IF_ERROR(with_context(loop.validate(), "loop"));
   HANZO_RETURN_IF_ERROR(with_context(planar_laser.validate(), "planar_laser"));
+  HANZO_RETURN_IF_ERROR(with_context(lidar_merge.validate(), "lidar_merge"));
   HANZO_RETURN_IF_ERROR(with_context(map.validate(), "map"));
   if (!(loop_translation_sigma > 0) || !(loop_rotation_sigma > 0)) return Error("loop_translation_sigma, loop_rotation_sigma: must be > 0");
   if (!(map_keyframe_distance >= 0) || !(map_keyframe_angle >= 0)) return Error("map_keyframe_distance, map_keyframe_angle: must be >= 0");
@@ -224,6 +225,23 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   auto session = std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), planar_laser,
                                                       lidar_calibration, std::move(wheel_sensor), wheel_calibration));
   session->camera_odometry_ = std::move(camera_odometry);
+  // Every further 3D LiDAR joins the first one's sweeps.
+  if (session->odometry_) {
+    std::vector<LidarSweepMerger::Secondary> secondaries;
+    for (const config::SensorConfig& sensor : config.sensors) {
+      if (sensor.modality != config::SensorModality::kLidar || sensor.name == session->lidar_sensor_ || sensor.type == config::kPlanarLaserType) continue;
+      const calib::SensorCalibration* entry = calibration.find(sensor.name);
+      const calib::SensorCalibration calibrated = entry != nullptr ? *entry : calib::SensorCalibration{};
+      secondaries.push_back({sensor.name, session->T_body_lidar_.inverse() * calibrated.T_body_sensor()});
+      session->secondary_lidars_.push_back({calibrated.time_offset, std::nullopt, {}});
+    }
+    if (!secondaries.empty()) {
+      LidarSweepMergerConfig merge = session->config_.lidar_merge;
+      merge.min_range = session->config_.lidar_odometry.odometry.min_range;
+      merge.max_range = session->config_.lidar_odometry.odometry.max_range;
+      session->merger_.emplace(std::move(secondaries), merge);
+    }
+  }
   if (session->camera_odometry_ && session->camera_odometry_->visual_inertial() && session->config_.loop_closure) {
     Result<vision::VisualLoopDetector> detector = vision::VisualLoopDetector::create(session->camera_odometry_->left_camera());
     if (detector) {
@@ -378,6 +396,12 @@ PushStatus Session::push_message(std::string_view sensor, msgs::SensorMessage me
   if (maps_lidar() && sensor == lidar_sensor_) {
     if (auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(std::move(*scan));
   }
+  if (merger_) {
+    for (std::size_t i = 0; i < merger_->size(); ++i) {
+      if (sensor != merger_->secondary(i).sensor) continue;
+      if (const auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_secondary_scan(i, *scan);
+    }
+  }
   if (!wheel_sensor_.empty() && sensor == wheel_sensor_) {
     const auto* wheels = std::get_if<msgs::WheelOdometryMessage>(&message);
     if (planar_ && wheels != nullptr && msgs::validate(*wheels).ok()) planar_->add_wheels(*wheels, wheels->timestamp + wheel_time_offset_, T_body_wheels_);
@@ -408,7 +432,7 @@ void Session::flush() {
 void Session::flush_pipeline() {
   frontend_->flush();
   if (!config_.mapping) return;
-  register_ready_scans();
+  register_ready_scans(/*final=*/true);
   if (worker_) worker_->wait_idle();
   take_registered();
   update_backend();
@@ -455,6 +479,35 @@ PushStatus Session::push_scan(msgs::PointCloudMessage scan) {
     // Before the first pose the IMU is still aligning (its messages are refused the same way).
     count_refused(frontend_->latest_pose() ? Rejection::kImuBehind : Rejection::kAligning);
   }
+  register_ready_scans();
+  update_backend();
+  return {};
+}
+
+PushStatus Session::push_secondary_scan(std::size_t index, const msgs::PointCloudMessage& scan) {
+  SecondaryLidar& lidar = secondary_lidars_[index];
+  const std::string& sensor = merger_->secondary(index).sensor;
+  ++lidar.statistics.received;
+  auto refuse = [&lidar](Rejection reason, const std::string& detail) {
+    ++lidar.statistics.rejected[reason];
+    return PushStatus(reason, detail);
+  };
+  if (Status valid = msgs::validate(scan); !valid) return refuse(Rejection::kInvalid, fmt::format("{}: {}", sensor, valid.error().message));
+  if (lidar.last_time && scan.timestamp <= *lidar.last_time) {
+    return refuse(scan.timestamp == *lidar.last_time ? Rejection::kDuplicate : Rejection::kOutOfOrder,
+                  fmt::format("{}: sweep at {:.6f} s is not after the previous sweep ({:.6f} s)", sensor, scan.timestamp.seconds(),
+                              lidar.last_time->seconds()));
+  }
+  lidar.last_time = scan.timestamp;
+  frontend_->note_input(sensor, scan.timestamp);
+  if (lidar.statistics.first_time.nanoseconds() == 0) lidar.statistics.first_time = scan.timestamp;
+  lidar.statistics.last_time = scan.timestamp;
+  msgs::PointCloudMessage in_body_clock = scan;
+  if (lidar.time_offset.nanoseconds() != 0) {
+    in_body_clock.timestamp = in_body_clock.timestamp + lidar.time_offset;
+    for (Timestamp& time : in_body_clock.point_timestamps) time = time + lidar.time_offset;
+  }
+  if (Status added = merger_->add(index, in_body_clock); !added) return refuse(Rejection::kInvalid, added.error().message);
   register_ready_scans();
   update_backend();
   return {};
@@ -647,7 +700,7 @@ void Session::track_health() {
   last_health_ = std::move(now);
 }
 
-void Session::register_ready_scans() {
+void Session::register_ready_scans(bool final) {
   take_registered();
   while (!waiting_scans_.empty()) {
     const bool has_imu = frontend_->has_imu();
@@ -656,6 +709,7 @@ void Session::register_ready_scans() {
     if (latest && !first_pose_time_) first_pose_time_ = latest->timestamp;
     if (has_imu && (!latest || latest->timestamp < waiting_scans_.front().end)) break;
     const Timestamp now = has_imu ? latest->timestamp : waiting_scans_.front().end;
+    if (merger_ && has_imu && !final && !merger_->ready(waiting_scans_.front().end, now)) break;
     const msgs::PointCloudMessage scan = std::move(waiting_scans_.front().scan);
     waiting_scans_.pop_front();
     if (planar_) {
@@ -663,6 +717,7 @@ void Session::register_ready_scans() {
       continue;
     }
     Result<LidarInertialOdometry::PreparedScan> prepared = odometry_->prepare(scan);
+    if (prepared && merger_) merger_->merge(prepared->cloud, prepared->time);
     if (!prepared) {
       logger()->debug("session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
       // A sweep that began before the first pose has no motion to start from (the IMU aligned).
@@ -1014,6 +1069,20 @@ SessionSummary Session::summary() const {
     sensor.rejected = lidar_statistics_.rejected;
     sensor.first_time = lidar_statistics_.first_time;
     sensor.last_time = lidar_statistics_.last_time;
+  }
+  for (SensorStatistics& sensor : summary.sensors) {
+    for (std::size_t i = 0; merger_ && i < merger_->size(); ++i) {
+      if (sensor.name != merger_->secondary(i).sensor) continue;
+      // Sweeps come here and join the first LiDAR's: fused when their points did.
+      const SensorStatistics& input = secondary_lidars_[i].statistics;
+      const LidarSweepMergerStatistics& merged = merger_->statistics(i);
+      sensor.received = input.received;
+      sensor.rejected = input.rejected;
+      sensor.fused = merged.merged_sweeps;
+      if (merged.late_sweeps > 0) sensor.rejected[Rejection::kNotFused] = merged.late_sweeps;
+      sensor.first_time = input.first_time;
+      sensor.last_time = input.last_time;
+    }
   }
   // The left camera's poses go to the Frontend, which applies or gates them: its counts say
   // how many frames were fused (a stereo pair is one measurement, counted on both cameras).

@@ -98,6 +98,7 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
   };
   std::vector<Return> returns(capacity);
   std::vector<Timestamp> column_times(pattern.columns);
+  std::vector<char> in_view(pattern.columns, 1);  // inside horizontal_fov
   std::vector<Eigen::Vector3d> directions(capacity);  // sensor frame
   auto cast_columns = [&](const tbb::blocked_range<int>& range) {
     for (int column = range.begin(); column < range.end(); ++column) {
@@ -106,6 +107,8 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
       const SE3 T_world_lidar = trajectory_.sample(time).T_world_body * config_.T_body_lidar;
       const WorldSnapshot snapshot = world_.at(time);
       const double azimuth = std::numbers::pi - 2.0 * std::numbers::pi * column / pattern.columns;
+      in_view[column] = std::abs(azimuth) <= 0.5 * pattern.horizontal_fov + 1e-12;
+      if (!in_view[column]) continue;
       const double cos_azimuth = std::cos(azimuth), sin_azimuth = std::sin(azimuth);
       int object_hint = -1;  // neighbouring beams mostly see the same object
       for (int ring = 0; ring < rings; ++ring) {
@@ -131,6 +134,7 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
 
   // Phase 2 (in ray order, so the noise draws are reproducible): weather, noise, range limits.
   for (std::size_t index = 0; index < capacity; ++index) {
+    if (!in_view[index / rings]) continue;
     double range = returns[index].range;
     float intensity = returns[index].intensity;
     if (weather != nullptr && uniform(random_) < weather->phantom_probability) {

@@ -312,7 +312,7 @@ Result<SensorSimulatorConfig> parse_imu(const YamlValue& value, double rate, con
 }
 
 Result<SensorSimulatorConfig> parse_lidar(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
-  HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "model", "range_noise", "max_range"}));
+  HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "model", "range_noise", "max_range", "horizontal_fov_deg"}));
   LidarSimulatorConfig config;
   config.rate_hz = rate;
   config.T_body_lidar = sensor.T_body_sensor;
@@ -324,6 +324,10 @@ Result<SensorSimulatorConfig> parse_lidar(const YamlValue& value, double rate, c
   config.pattern = LidarPattern::preset(*model);
   HANZO_ASSIGN_OR_RETURN(config.range_noise, non_negative_or(value["range_noise"], config.range_noise));
   HANZO_ASSIGN_OR_RETURN(config.pattern.max_range, positive_or(value["max_range"], config.pattern.max_range));
+  double fov_degrees = 360.0;
+  HANZO_ASSIGN_OR_RETURN(fov_degrees, positive_or(value["horizontal_fov_deg"], fov_degrees));
+  if (fov_degrees > 360.0) return value["horizontal_fov_deg"].error(fmt::format("{} degrees: at most 360", fov_degrees));
+  config.pattern.horizontal_fov = fov_degrees * std::numbers::pi / 180.0;
   return SensorSimulatorConfig(config);
 }
 

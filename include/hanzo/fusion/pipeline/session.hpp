@@ -34,6 +34,12 @@
 //    Frontend's first pose). Without an IMU the sweep moves the Frontend's motion model to
 //    its end at once (Frontend::propagate_to) and is registered and deskewed from that
 //    prediction; other sensors' messages older than that are fused by the Frontend's rollback.
+//  - Sweeps of every further 3D LiDAR get the same input checks, then join the first LiDAR's
+//    sweeps (LidarSweepMerger: each point in the first LiDAR's frame by the calibrations, at its
+//    own time): one registration over every LiDAR's points. A sweep of the first LiDAR waits
+//    for the others to reach its end (at most lidar_merge.wait_s of IMU time; a LiDAR silent
+//    for lidar_merge.silent_after_s is not waited for). Their statistics: "fused" when their
+//    points joined a sweep of the first LiDAR, "not_fused" when they came too late for any.
 //  - A 2D laser scanner (the LiDAR sensor with `type: planar_laser`) goes the same way, but its
 //    scans are matched by PlanarLaserOdometry (planar scan matching with its own keyframes,
 //    loop closures and planar graph; their poses into the Frontend, a loop closure's jump moves
@@ -74,7 +80,8 @@
 //    pulling against it (and GNSS bounds the drift of poses a loop closure moves).
 //
 // Frames: world = the Frontend's world (ENU at the datum when GNSS or a datum is configured).
-// Units m, s, rad. Limits: one 3D LiDAR per session; after a relocalization (world = the map's
+// Units m, s, rad. Limits: the first LiDAR paces the merged sweeps (without it the others are
+// not registered); after a relocalization (world = the map's
 // frame) GNSS fixes are no longer added to the graph.
 // Not thread-safe: one thread at a time (the server serializes per session).
 #include <chrono>
@@ -98,6 +105,7 @@
 #include "hanzo/fusion/msgs/map_messages.hpp"
 #include "hanzo/fusion/pipeline/keyframe_graph.hpp"
 #include "hanzo/fusion/pipeline/lidar_inertial_odometry.hpp"
+#include "hanzo/fusion/pipeline/lidar_sweep_merger.hpp"
 #include "hanzo/fusion/pipeline/planar_laser_odometry.hpp"
 #include "hanzo/fusion/pipeline/frontend.hpp"
 #include "hanzo/fusion/pipeline/sensor_health.hpp"
@@ -125,6 +133,9 @@ struct SessionConfig {
   /// counted as not fused.
   bool mapping = true;
   LidarInertialOdometryConfig lidar_odometry;
+  /// Further 3D LiDARs joined to the first one's sweeps (its min_range / max_range are replaced
+  /// by lidar_odometry's).
+  LidarSweepMergerConfig lidar_merge;
   /// A 2D laser scanner (a lidar sensor with `type: planar_laser`): scan matching, keyframes and
   /// loop closures of its own planar graph (planar_laser_odometry.hpp) instead of the 3D LiDAR
   /// odometry, Scan Context and the keyframe graph's LiDAR factors.
@@ -350,7 +361,8 @@ class Session {
   /// A camera image for the visual odometry (camera_odometry.hpp), its pose into the Frontend.
   PushStatus push_image(std::string_view sensor, const msgs::SensorMessage& message);
   class RegistrationWorker;
-  void register_ready_scans();
+  /// final: at flush, the other LiDARs are not waited for (nothing more comes).
+  void register_ready_scans(bool final = false);
   /// Fuses what the worker registered (kRealtime).
   void take_registered();
   void on_registered(Result<LidarInertialOdometry::RegisteredScan> registered);
@@ -401,6 +413,15 @@ class Session {
     Timestamp end;  ///< the latest point time (computed once: checked on every message)
   };
   std::deque<WaitingScan> waiting_scans_;
+  /// The other 3D LiDARs' sweeps, joined to the first's (none with one LiDAR).
+  std::optional<LidarSweepMerger> merger_;
+  struct SecondaryLidar {
+    Duration time_offset;         ///< t_body = t_lidar + offset
+    std::optional<Timestamp> last_time;
+    SensorStatistics statistics;  ///< input checks (fused / not_fused come from the merger)
+  };
+  std::vector<SecondaryLidar> secondary_lidars_;  ///< as merger_'s secondaries
+  PushStatus push_secondary_scan(std::size_t index, const msgs::PointCloudMessage& scan);
   std::optional<Timestamp> first_pose_time_;  ///< the Frontend's first pose seen
   /// How long a sweep may wait for the worker now (kRealtime: none for live data, else unbounded).
   std::optional<std::chrono::nanoseconds> registration_wait_limit(Timestamp now_in_data) const;

@@ -46,6 +46,10 @@ struct LidarPattern {
   int columns = 1800;              ///< firings per revolution
   double min_range = 0.5;          ///< metres
   double max_range = 100.0;        ///< metres
+  /// Horizontal field of view centred on the sensor's x axis (radians, (0, 2 pi]): a LiDAR
+  /// mounted where the vehicle blocks part of its turn, or a forward-looking one. Columns
+  /// outside give no returns (their time in the sweep stays).
+  double horizontal_fov = 2.0 * 3.14159265358979323846;
 
   /// VLP-16: 16 rings -15..+15 deg every 2 deg, 1800 columns (0.2 deg at 10 Hz), 0.5-100 m.
   /// HDL-64E: 64 rings -24.33..+2 deg (lower block 1/2 deg apart, upper block 1/3 deg), 2083 columns, 0.9-120 m.
