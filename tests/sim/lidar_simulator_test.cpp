@@ -69,6 +69,22 @@ TEST(LidarSimulator, RangesEqualAnalyticDistancesToKnownPlanes) {
   }
 }
 
+TEST(LidarSimulator, AHorizontalFieldOfViewKeepsTheReturnsInsideIt) {
+  const World world = plane_world();
+  const SplineTrajectory trajectory = straight_trajectory(0.0);
+  LidarSimulatorConfig config;
+  config.range_noise = 0.0;
+  const std::size_t all_round = LidarSimulator(config, world, trajectory).measure(kStart + Duration::from_seconds(1.0)).points.size();
+  config.pattern.horizontal_fov = M_PI / 2.0;  // 45 degrees either side of the x axis
+  LidarSimulator lidar(config, world, trajectory);
+  const msgs::PointCloudMessage cloud = lidar.measure(kStart + Duration::from_seconds(1.0));
+  ASSERT_TRUE(msgs::validate(cloud));
+  for (const Eigen::Vector3f& point : cloud.points) ASSERT_LE(std::abs(std::atan2(point.y(), point.x())), M_PI / 4.0 + 1e-3);
+  // A quarter of the ground (and all of the wall, ahead) is left.
+  EXPECT_GT(cloud.points.size(), all_round / 5);
+  EXPECT_LT(cloud.points.size(), all_round / 2);
+}
+
 TEST(LidarSimulator, PointTimesAreMonotonicAndDistortionFollowsTheMotion) {
   const World world = plane_world();
   const double speed = 10.0;  // m/s towards the wall: 1 m of motion during a sweep

@@ -138,6 +138,7 @@ TEST(Scenario, BadFilesFailNamingLineAndKey) {
   };
   const std::vector<Case> cases = {
       {with("    lidar: {model: livox}\n"), "s.yaml:8: sensors.lidar.model: unknown LiDAR 'livox'"},
+      {with("    lidar: {horizontal_fov_deg: 400}\n"), "sensors.lidar.horizontal_fov_deg: 400 degrees: at most 360"},
       {with("    thermometer: {rate: 1}\n"), "sensors.thermometer: cannot tell the sensor's modality"},
       {with("    imu2: {rate: -5}\n"), "sensors.imu2.rate: expected a positive number, got -5"},
       {with("    camera: {width: 640.5}\n"), "sensors.camera.width: expected an integer, got '640.5'"},
