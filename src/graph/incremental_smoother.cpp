@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/graph/marginalization.hpp"
 
 namespace hanzo::fusion::graph {
 namespace {
@@ -51,7 +52,7 @@ IncrementalSmoother::~IncrementalSmoother() {
 void IncrementalSmoother::start_batch() {
   batch_ = std::make_unique<Batch>();
   batch_->variable_count = insertion_order_.size();
-  factors_in_last_batch_ = graph_.size();
+  revision_in_last_batch_ = revision_;
   batch_->factor_count = graph_.size();
   BatchOptimizerConfig background = config_.batch;
   background.max_iterations = config_.background_max_iterations;
@@ -121,6 +122,7 @@ Result<IncrementalUpdateSummary> IncrementalSmoother::update(const FactorGraph& 
     }
     graph_.add(factor);
   }
+  if (!new_factors.factors().empty() || new_values.size() > 0) ++revision_;
   // After a merge, the variables added while the batch ran were only moved rigidly, and the
   // older variables of the factors added meanwhile (loop closures) lost their local moves to
   // the batch's solution: the factors added since the snapshot count as new (the newest first)
@@ -176,11 +178,50 @@ Result<IncrementalUpdateSummary> IncrementalSmoother::update(const FactorGraph& 
     summary.local_chi2_after = solved->final_chi2;
   }
 
-  if (config_.background_batch && !batch_ && graph_.size() != factors_in_last_batch_) {
+  if (config_.background_batch && !batch_ && revision_ != revision_in_last_batch_) {
     start_batch();
     summary.batch_started = true;
   }
   return summary;
+}
+
+Result<std::vector<Key>> IncrementalSmoother::marginalize(const std::set<Key>& keys) {
+  for (Key key : keys) {
+    if (!estimate_.exists(key)) return Error(fmt::format("marginalize: {} is not in the graph", key_to_string(key)));
+    if (std::find(config_.batch.fixed.begin(), config_.batch.fixed.end(), key) != config_.batch.fixed.end()) {
+      return Error(fmt::format("marginalize: {} is held fixed (the gauge)", key_to_string(key)));
+    }
+  }
+  if (batch_) {
+    batch_->result.wait();
+    merge(*batch_);
+    batch_.reset();
+  }
+  std::set<std::size_t> touching;
+  for (Key key : keys) touching.insert(factors_of_[key].begin(), factors_of_[key].end());
+  std::vector<FactorPointer> removed;
+  for (std::size_t index : touching) removed.push_back(graph_.factors()[index]);
+  Marginalization marginal;
+  HANZO_ASSIGN_OR_RETURN(marginal, graph::marginalize(removed, estimate_, keys));
+  // Rebuild the graph without the removed factors and variables, the prior added last.
+  FactorGraph remaining;
+  for (std::size_t index = 0; index < graph_.size(); ++index) {
+    if (!touching.count(index)) remaining.add(graph_.factors()[index]);
+  }
+  if (marginal.prior) remaining.add(marginal.prior);
+  graph_ = std::move(remaining);
+  factors_of_.clear();
+  for (std::size_t index = 0; index < graph_.size(); ++index) {
+    for (Key key : graph_.factors()[index]->keys()) factors_of_[key].push_back(index);
+  }
+  Values kept;
+  for (const auto& [key, value] : estimate_.all()) {
+    if (!keys.count(key)) kept.insert(key, value);
+  }
+  estimate_ = std::move(kept);
+  std::erase_if(insertion_order_, [&keys](Key key) { return keys.count(key) != 0; });
+  ++revision_;
+  return marginal.kept;
 }
 
 Result<OptimizationSummary> IncrementalSmoother::wait_for_batch() {
@@ -190,12 +231,12 @@ Result<OptimizationSummary> IncrementalSmoother::wait_for_batch() {
     batch_.reset();
   }
   OptimizationSummary summary;
-  if (graph_.size() == factors_in_last_batch_) {
+  if (revision_ == revision_in_last_batch_) {
     summary.converged = true;
     summary.message = "nothing to do: the last batch covered the whole graph";
     return summary;
   }
-  factors_in_last_batch_ = graph_.size();
+  revision_in_last_batch_ = revision_;
   Result<OptimizationSummary> solved = optimize(graph_, estimate_, config_.batch);
   if (!solved) return Error(fmt::format("incremental smoother: final batch: {}", solved.error().message));
   return *solved;

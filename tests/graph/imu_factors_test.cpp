@@ -10,6 +10,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "graph/jacobian_check.hpp"
+
 #include "hanzo/fusion/graph/batch_optimizer.hpp"
 #include "hanzo/fusion/graph/imu_factors.hpp"
 #include "hanzo/fusion/graph/pose_factors.hpp"
@@ -176,41 +178,6 @@ TEST(ImuPreintegration, RejectsBadSamples) {
   EXPECT_EQ(preintegration.sample_count(), 0);
   EXPECT_THAT(ImuFactor::create(X(0), V(0), X(1), V(1), B(0), preintegration).error().message, HasSubstr("no IMU sample"));
   EXPECT_FALSE(ImuBiasRandomWalkFactor::create(B(0), B(1), 0.0, 1e-3, 1e-4).ok());
-}
-
-// Central differences of the whitened residual in each variable's tangent space (any type).
-Value perturbed(const Value& value, int k, double h) {
-  if (const auto* se3 = std::get_if<SE3>(&value)) {
-    SE3::Tangent delta = SE3::Tangent::Zero();
-    delta(k) = h;
-    return *se3 * SE3::exp(delta);
-  }
-  if (const auto* bias = std::get_if<ImuBias>(&value)) {
-    Eigen::Matrix<double, 6, 1> stacked = bias->vector();
-    stacked(k) += h;
-    return ImuBias::from_vector(stacked);
-  }
-  Eigen::Vector3d vector = std::get<Eigen::Vector3d>(value);
-  vector(k) += h;
-  return vector;
-}
-
-void expect_jacobians_match(const Factor& factor, const Values& values) {
-  std::vector<Eigen::MatrixXd> analytic;
-  ASSERT_TRUE(factor.evaluate(values, &analytic).ok());
-  ASSERT_EQ(analytic.size(), factor.keys().size());
-  constexpr double h = 1e-6;
-  for (size_t v = 0; v < factor.keys().size(); ++v) {
-    const Value& value = values.all().at(factor.keys()[v]);
-    for (int k = 0; k < analytic[v].cols(); ++k) {
-      Values plus = values, minus = values;
-      plus.insert(factor.keys()[v], perturbed(value, k, h));
-      minus.insert(factor.keys()[v], perturbed(value, k, -h));
-      const Eigen::VectorXd numeric = (factor.evaluate(plus, nullptr).value() - factor.evaluate(minus, nullptr).value()) / (2 * h);
-      EXPECT_LT((analytic[v].col(k) - numeric).cwiseAbs().maxCoeff(), 1e-6 * (1.0 + numeric.cwiseAbs().maxCoeff()))
-          << key_to_string(factor.keys()[v]) << " column " << k;
-    }
-  }
 }
 
 TEST(ImuFactors, JacobiansMatchNumericalDifferentiation) {

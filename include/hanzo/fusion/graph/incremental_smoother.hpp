@@ -25,6 +25,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <vector>
 
 #include "hanzo/fusion/core/result.hpp"
@@ -75,6 +76,13 @@ class IncrementalSmoother {
   /// optimization fails.
   Result<IncrementalUpdateSummary> update(const FactorGraph& new_factors, const Values& new_values);
 
+  /// Takes `keys` out of the graph (a sliding window's oldest variables): waits for a running
+  /// batch and merges it, then replaces every factor touching them by one prior on the variables
+  /// those factors also touch (graph/marginalization.hpp, at the current estimate: first-estimate
+  /// Jacobians from then on). Fails, changing nothing, on an unknown key or a fixed (gauge) one.
+  /// Returns the prior's keys.
+  Result<std::vector<Key>> marginalize(const std::set<Key>& keys);
+
   /// Waits for a running batch and merges it; then, when the graph changed since that batch
   /// began, runs one more full batch here. Afterwards the estimate is the whole graph's optimum.
   Result<OptimizationSummary> wait_for_batch();
@@ -94,7 +102,8 @@ class IncrementalSmoother {
   std::vector<Key> insertion_order_;                  // keys in the order they were added
   std::map<Key, std::vector<std::size_t>> factors_of_;  // key -> indices into graph_.factors()
   std::unique_ptr<Batch> batch_;                      // the running background batch, if any
-  std::size_t factors_in_last_batch_ = 0;             // graph size when the last batch began
+  std::size_t revision_ = 0;                          // counts the graph's changes
+  std::size_t revision_in_last_batch_ = 0;            // revision_ when the last batch began
   int batches_merged_ = 0;
 };
 
