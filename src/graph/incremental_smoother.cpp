@@ -185,7 +185,15 @@ Result<IncrementalUpdateSummary> IncrementalSmoother::update(const FactorGraph& 
   return summary;
 }
 
-Result<std::vector<Key>> IncrementalSmoother::marginalize(const std::set<Key>& keys) {
+std::vector<FactorPointer> IncrementalSmoother::factors_of(Key key) const {
+  std::vector<FactorPointer> out;
+  const auto found = factors_of_.find(key);
+  if (found == factors_of_.end()) return out;
+  for (std::size_t index : found->second) out.push_back(graph_.factors()[index]);
+  return out;
+}
+
+Result<std::vector<Key>> IncrementalSmoother::marginalize(const std::set<Key>& keys, const std::function<bool(const Factor&)>& keep) {
   for (Key key : keys) {
     if (!estimate_.exists(key)) return Error(fmt::format("marginalize: {} is not in the graph", key_to_string(key)));
     if (std::find(config_.batch.fixed.begin(), config_.batch.fixed.end(), key) != config_.batch.fixed.end()) {
@@ -198,7 +206,11 @@ Result<std::vector<Key>> IncrementalSmoother::marginalize(const std::set<Key>& k
     batch_.reset();
   }
   std::set<std::size_t> touching;
-  for (Key key : keys) touching.insert(factors_of_[key].begin(), factors_of_[key].end());
+  for (Key key : keys) {
+    for (std::size_t index : factors_of_[key]) {
+      if (!keep || !keep(*graph_.factors()[index])) touching.insert(index);
+    }
+  }
   std::vector<FactorPointer> removed;
   for (std::size_t index : touching) removed.push_back(graph_.factors()[index]);
   Marginalization marginal;
@@ -214,12 +226,17 @@ Result<std::vector<Key>> IncrementalSmoother::marginalize(const std::set<Key>& k
   for (std::size_t index = 0; index < graph_.size(); ++index) {
     for (Key key : graph_.factors()[index]->keys()) factors_of_[key].push_back(index);
   }
+  // Variables a kept factor still uses stay.
+  std::set<Key> removed_keys;
+  for (Key key : keys) {
+    if (factors_of_.count(key) == 0) removed_keys.insert(key);
+  }
   Values kept;
   for (const auto& [key, value] : estimate_.all()) {
-    if (!keys.count(key)) kept.insert(key, value);
+    if (!removed_keys.count(key)) kept.insert(key, value);
   }
   estimate_ = std::move(kept);
-  std::erase_if(insertion_order_, [&keys](Key key) { return keys.count(key) != 0; });
+  std::erase_if(insertion_order_, [&removed_keys](Key key) { return removed_keys.count(key) != 0; });
   ++revision_;
   return marginal.kept;
 }

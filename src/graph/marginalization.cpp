@@ -60,6 +60,18 @@ double robust_weight(const RobustKernel& kernel, double s) {
   return 1.0;
 }
 
+// The inverse of a symmetric positive semi-definite matrix over its eigenvalues above
+// relative_floor times the largest (zero along the others: directions nothing constrains).
+Eigen::MatrixXd pseudo_inverse(const Eigen::MatrixXd& symmetric, double relative_floor) {
+  if (symmetric.size() == 0) return symmetric;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> solver(symmetric);
+  const Eigen::VectorXd& lambda = solver.eigenvalues();
+  const double floor = relative_floor * std::max(lambda.maxCoeff(), 0.0);
+  Eigen::VectorXd inverse = Eigen::VectorXd::Zero(lambda.size());
+  for (Eigen::Index i = 0; i < lambda.size(); ++i) inverse(i) = lambda(i) > floor && lambda(i) > 0.0 ? 1.0 / lambda(i) : 0.0;
+  return solver.eigenvectors() * inverse.asDiagonal() * solver.eigenvectors().transpose();
+}
+
 }  // namespace
 
 LinearizedPriorFactor::LinearizedPriorFactor(std::vector<Key> keys, std::vector<Value> linearization_point, Eigen::MatrixXd jacobian,
@@ -88,28 +100,55 @@ Result<Eigen::VectorXd> LinearizedPriorFactor::evaluate(const Values& values, st
 
 Result<Marginalization> marginalize(const std::vector<FactorPointer>& factors, const Values& values, const std::set<Key>& marginalized,
                                     const MarginalizationConfig& config) {
-  // Ordering: the marginalized variables first, then the blanket, each in key order.
+  for (Key key : marginalized) {
+    if (!values.exists(key)) return Error(fmt::format("marginalize: no value for {}", key_to_string(key)));
+  }
+  // Marginalized variables that share no factor with each other (landmarks, as a rule: each
+  // only touches the poses that saw it) are eliminated first, one small block at a time; the
+  // rest of the marginalized variables and the blanket form a dense system.
+  std::map<Key, std::set<Key>> neighbours;
   std::set<Key> kept_set;
   for (const FactorPointer& factor : factors) {
     for (Key key : factor->keys()) {
+      if (!values.exists(key)) return Error(fmt::format("marginalize: no value for {}", key_to_string(key)));
       if (!marginalized.count(key)) kept_set.insert(key);
+      for (Key other : factor->keys()) {
+        if (other != key) neighbours[key].insert(other);
+      }
     }
   }
-  std::map<Key, int> offset_of;
-  int marginal_size = 0, total = 0;
+  std::vector<Key> ordered(marginalized.begin(), marginalized.end());
+  std::stable_partition(ordered.begin(), ordered.end(), [](Key key) { return symbol_character(key) == 'l'; });
+  std::set<Key> independent;
+  for (Key key : ordered) {
+    const std::set<Key>& around = neighbours[key];
+    if (std::none_of(around.begin(), around.end(), [&](Key other) { return independent.count(other) != 0; })) independent.insert(key);
+  }
+  // Dense part: the other marginalized variables first, then the blanket.
+  std::map<Key, int> dense_offset;
+  int dense_size = 0;
   for (Key key : marginalized) {
-    if (!values.exists(key)) return Error(fmt::format("marginalize: no value for {}", key_to_string(key)));
-    offset_of[key] = total;
-    total += tangent_dimension(values.all().at(key));
+    if (independent.count(key)) continue;
+    dense_offset[key] = dense_size;
+    dense_size += tangent_dimension(values.all().at(key));
   }
-  marginal_size = total;
+  const int marginal_size = dense_size;
   for (Key key : kept_set) {
-    if (!values.exists(key)) return Error(fmt::format("marginalize: no value for {}", key_to_string(key)));
-    offset_of[key] = total;
-    total += tangent_dimension(values.all().at(key));
+    dense_offset[key] = dense_size;
+    dense_size += tangent_dimension(values.all().at(key));
   }
-  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(total, total);
-  Eigen::VectorXd g = Eigen::VectorXd::Zero(total);
+  struct Block {
+    Eigen::MatrixXd H;                      // its own information
+    Eigen::VectorXd g;
+    std::map<Key, Eigen::MatrixXd> cross;  // H_(dense key, this)
+  };
+  std::map<Key, Block> blocks;
+  for (Key key : independent) {
+    const int size = tangent_dimension(values.all().at(key));
+    blocks[key] = {Eigen::MatrixXd::Zero(size, size), Eigen::VectorXd::Zero(size), {}};
+  }
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(dense_size, dense_size);
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(dense_size);
   for (const FactorPointer& factor : factors) {
     std::vector<Eigen::MatrixXd> jacobians;
     Eigen::VectorXd r;
@@ -118,24 +157,45 @@ Result<Marginalization> marginalize(const std::vector<FactorPointer>& factors, c
     const double weight = robust_weight(factor->robust_kernel(), r.squaredNorm());
     const std::vector<Key>& keys = factor->keys();
     for (std::size_t a = 0; a < keys.size(); ++a) {
-      const int row = offset_of.at(keys[a]);
-      g.segment(row, jacobians[a].cols()) += weight * jacobians[a].transpose() * r;
+      const Eigen::MatrixXd Jt = weight * jacobians[a].transpose();
+      const auto block = blocks.find(keys[a]);
+      if (block != blocks.end()) {
+        block->second.g += Jt * r;
+      } else {
+        g.segment(dense_offset.at(keys[a]), Jt.rows()) += Jt * r;
+      }
       for (std::size_t b = 0; b < keys.size(); ++b) {
-        H.block(row, offset_of.at(keys[b]), jacobians[a].cols(), jacobians[b].cols()) += weight * jacobians[a].transpose() * jacobians[b];
+        const Eigen::MatrixXd product = Jt * jacobians[b];
+        const bool a_block = block != blocks.end(), b_block = blocks.count(keys[b]) != 0;
+        if (a_block && b_block) {
+          block->second.H += product;  // the same variable: independent ones share no factor
+        } else if (b_block) {
+          Eigen::MatrixXd& cross = blocks.at(keys[b]).cross[keys[a]];
+          if (cross.size() == 0) cross = Eigen::MatrixXd::Zero(product.rows(), product.cols());
+          cross += product;
+        } else if (!a_block) {
+          H.block(dense_offset.at(keys[a]), dense_offset.at(keys[b]), product.rows(), product.cols()) += product;
+        }
+      }
+    }
+  }
+  // Stage 1: each independent block eliminated into the dense system.
+  for (const auto& [key, block] : blocks) {
+    const Eigen::MatrixXd inverse = pseudo_inverse(block.H, config.relative_eigenvalue_floor);
+    for (const auto& [p, cross_p] : block.cross) {
+      const Eigen::MatrixXd left = cross_p * inverse;
+      g.segment(dense_offset.at(p), left.rows()) -= left * block.g;
+      for (const auto& [q, cross_q] : block.cross) {
+        H.block(dense_offset.at(p), dense_offset.at(q), left.rows(), cross_q.rows()) -= left * cross_q.transpose();
       }
     }
   }
   Marginalization out;
   out.kept.assign(kept_set.begin(), kept_set.end());
-  const int kept_size = total - marginal_size;
+  const int kept_size = dense_size - marginal_size;
   if (kept_size == 0) return out;
-  // H_mm^-1 as a pseudo-inverse (eigen-decomposition of the symmetric block).
-  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> marginal(H.topLeftCorner(marginal_size, marginal_size));
-  const Eigen::VectorXd& lambda = marginal.eigenvalues();
-  const double floor = config.relative_eigenvalue_floor * std::max(lambda.size() > 0 ? lambda.maxCoeff() : 0.0, 0.0);
-  Eigen::VectorXd inverse_lambda = Eigen::VectorXd::Zero(lambda.size());
-  for (Eigen::Index i = 0; i < lambda.size(); ++i) inverse_lambda(i) = lambda(i) > floor && lambda(i) > 0.0 ? 1.0 / lambda(i) : 0.0;
-  const Eigen::MatrixXd H_mm_inverse = marginal.eigenvectors() * inverse_lambda.asDiagonal() * marginal.eigenvectors().transpose();
+  // Stage 2: the dense Schur complement.
+  const Eigen::MatrixXd H_mm_inverse = pseudo_inverse(H.topLeftCorner(marginal_size, marginal_size), config.relative_eigenvalue_floor);
   const Eigen::MatrixXd H_bm = H.bottomLeftCorner(kept_size, marginal_size);
   Eigen::MatrixXd H_b = H.bottomRightCorner(kept_size, kept_size) - H_bm * H_mm_inverse * H_bm.transpose();
   H_b = 0.5 * (H_b + H_b.transpose());

@@ -219,6 +219,17 @@ TEST(IncrementalSmoother, ASlidingWindowStaysBoundedAndEndsNearTheFullOptimum) {
   EXPECT_LT(error.translation().norm(), 0.02);
   EXPECT_LT(error.rotation().log().norm(), 0.002);
 
+  // Kept factors keep their variable: X(70)'s pose-graph copy stays with its fix, its window
+  // factors (odometry) go into the prior.
+  const std::size_t factors_before = window.graph().size();
+  const Result<std::vector<Key>> split_pose =
+      window.marginalize({X(kPoses - kWindow)}, [](const Factor& factor) { return dynamic_cast<const PriorFactorSE3*>(&factor) != nullptr; });
+  ASSERT_TRUE(split_pose.ok()) << split_pose.error().message;
+  EXPECT_TRUE(window.estimate().exists(X(kPoses - kWindow)));
+  EXPECT_EQ(window.factors_of(X(kPoses - kWindow)).size(), 1U) << "its fix only";
+  EXPECT_EQ(*split_pose, (std::vector<Key>{X(kPoses - kWindow + 1)}));
+  EXPECT_LT(window.graph().size(), factors_before);
+
   // Refused, changing nothing: an unknown key, a fixed one.
   const Result<std::vector<Key>> unknown = window.marginalize({X(0)});
   ASSERT_FALSE(unknown.ok());

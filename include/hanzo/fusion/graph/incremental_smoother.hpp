@@ -21,6 +21,7 @@
 // Updates are applied in order from one thread; estimate() is the latest merged estimate.
 
 #include <cstddef>
+#include <functional>
 #include <future>
 #include <map>
 #include <memory>
@@ -79,9 +80,14 @@ class IncrementalSmoother {
   /// Takes `keys` out of the graph (a sliding window's oldest variables): waits for a running
   /// batch and merges it, then replaces every factor touching them by one prior on the variables
   /// those factors also touch (graph/marginalization.hpp, at the current estimate: first-estimate
-  /// Jacobians from then on). Fails, changing nothing, on an unknown key or a fixed (gauge) one.
-  /// Returns the prior's keys.
-  Result<std::vector<Key>> marginalize(const std::set<Key>& keys);
+  /// Jacobians from then on). Factors `keep` selects stay as they are, with their variables: a
+  /// pose that leaves a visual-inertial window but stays in the pose graph of older keyframes
+  /// gives its window factors to the prior and keeps its pose-graph factors (its window copy is
+  /// marginalized, the pose-graph copy stays). Fails, changing nothing, on an unknown key or a
+  /// fixed (gauge) one. Returns the prior's keys (none: nothing was left to constrain).
+  Result<std::vector<Key>> marginalize(const std::set<Key>& keys, const std::function<bool(const Factor&)>& keep = {});
+  /// The factors touching `key`.
+  std::vector<FactorPointer> factors_of(Key key) const;
 
   /// Waits for a running batch and merges it; then, when the graph changed since that batch
   /// began, runs one more full batch here. Afterwards the estimate is the whole graph's optimum.
