@@ -1,10 +1,12 @@
 #include "hanzo/fusion/pipeline/keyframe_graph.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include <fmt/format.h>
 
 #include "hanzo/fusion/graph/imu_factors.hpp"
+#include "hanzo/fusion/graph/keys.hpp"
 #include "hanzo/fusion/estimate/navigation_state.hpp"
 #include "hanzo/fusion/graph/pose_factors.hpp"
 
@@ -25,7 +27,7 @@ void KeyframeGraph::attach(Frontend& frontend) {
   frontend.set_keyframe_callback([this](const msgs::Keyframe& keyframe) { queued_keyframes_.push_back(keyframe); });
 }
 
-Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe) {
+Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe, double relative_covariance_scale) {
   const uint64_t id = keyframe.keyframe_id;
   if (frontend_poses_.count(id) != 0) return Error(fmt::format("keyframe {}: already added", id));
   const SE3 T_world_body = keyframe.T_world_body.to_se3();
@@ -34,7 +36,7 @@ Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe) {
       return Error(fmt::format("keyframe {}: its previous keyframe {} is unknown", id, keyframe.previous_keyframe_id));
     }
     graph::GaussianNoise noise;
-    HANZO_ASSIGN_OR_RETURN(noise, noise_of(*keyframe.relative_covariance, fmt::format("keyframe {} relative covariance", id)));
+    HANZO_ASSIGN_OR_RETURN(noise, noise_of(relative_covariance_scale * *keyframe.relative_covariance, fmt::format("keyframe {} relative covariance", id)));
     pending_.factors.emplace<graph::BetweenFactorSE3>(graph::X(keyframe.previous_keyframe_id), graph::X(id),
                                                       keyframe.T_previous_current->to_se3(), noise);
   } else {
@@ -45,6 +47,7 @@ Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe) {
     graph::GaussianNoise noise;
     HANZO_ASSIGN_OR_RETURN(noise, noise_of(J * *keyframe.pose_covariance * J.transpose(), fmt::format("keyframe {} pose covariance", id)));
     pending_.factors.emplace<graph::PriorFactorSE3>(graph::X(id), T_world_body, noise);
+    mark_pose_graph_factor();
   }
   if (config_.level_from_keyframes && keyframe.pose_covariance) {
     // r = R^T (-g) - up_body moves by [up_body]x dtheta (body frame); nothing along gravity.
@@ -57,6 +60,11 @@ Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe) {
     graph::GaussianNoise level_noise;
     HANZO_ASSIGN_OR_RETURN(level_noise, noise_of(covariance, fmt::format("keyframe {} attitude covariance", id)));
     pending_.factors.emplace<graph::GravityFactor>(graph::X(id), up_body, level_noise);
+    mark_pose_graph_factor();
+  }
+  if (config_.window_keyframes > 0) {
+    window_.push_back({id, keyframe.T_previous_current ? std::optional<uint64_t>(keyframe.previous_keyframe_id) : std::nullopt,
+                       keyframe.relative_covariance.value_or(Eigen::Matrix<double, 6, 6>::Identity())});
   }
   pending_.values.insert(graph::X(id), initial_pose(keyframe));
   frontend_poses_[id] = T_world_body;
@@ -98,6 +106,7 @@ Status KeyframeGraph::add_gps_at_keyframe(uint64_t keyframe_id, const Eigen::Vec
   HANZO_ASSIGN_OR_RETURN(noise, noise_of(covariance, "gps covariance"));
   pending_.factors.emplace_robust<graph::GpsFactor>(graph::RobustKernel{graph::RobustKernel::Type::kCauchy, config_.gps_cauchy_scale},
                                                     graph::X(keyframe_id), position_world, lever_arm, noise);
+  mark_pose_graph_factor();
   return ok_status();
 }
 
@@ -110,6 +119,7 @@ Status KeyframeGraph::add_loop_closure(uint64_t from, uint64_t to, const SE3& T_
   HANZO_ASSIGN_OR_RETURN(noise, noise_of(covariance, fmt::format("loop closure {} - {} covariance", from, to)));
   pending_.factors.emplace_robust<graph::BetweenFactorSE3>(graph::RobustKernel{graph::RobustKernel::Type::kDcs, config_.loop_closure_dcs_phi},
                                                            graph::X(from), graph::X(to), T_from_to, noise);
+  mark_pose_graph_factor();
   loop_closure_pending_ = true;
   return ok_status();
 }
@@ -137,6 +147,7 @@ Result<KeyframeGraphUpdate> KeyframeGraph::process(Frontend* frontend) {
     }
     if (nearest) {
       pending_.factors.emplace<graph::GpsFactor>(graph::X(*nearest), fix->position_world, fix->lever_arm, fix->noise);
+      mark_pose_graph_factor();
       fix = pending_fixes_.erase(fix);
     } else if (time + max_offset < latest_time) {
       ++update.fixes_dropped;
@@ -151,6 +162,9 @@ Result<KeyframeGraphUpdate> KeyframeGraph::process(Frontend* frontend) {
     return Error(fmt::format("keyframe graph: {}", updated.error().message));
   }
   pending_ = graph::GraphUpdate{};
+  while (config_.window_keyframes > 0 && window_.size() > static_cast<std::size_t>(config_.window_keyframes)) {
+    HANZO_RETURN_IF_ERROR(leave_window(update));
+  }
   if (config_.batch_on_loop_closure && loop_closure_pending_) {
     // Loop closures soon after the last batch wait (their factors are in) for the next one.
     const Timestamp now = latest_keyframe_ ? keyframe_times_.at(*latest_keyframe_) : Timestamp();
@@ -170,6 +184,54 @@ Result<KeyframeGraphUpdate> KeyframeGraph::process(Frontend* frontend) {
     update.corrected_session = true;
   }
   return update;
+}
+
+Status KeyframeGraph::leave_window(KeyframeGraphUpdate& update) {
+  const WindowKeyframe leaving = window_.front();
+  window_.pop_front();
+  const WindowKeyframe& next = window_.front();
+  const graph::Values& estimate = smoother_.estimate();
+  // Its velocity, biases and the landmarks it saw go, with its pose's window factors.
+  std::set<graph::Key> keys = {graph::X(leaving.id)};
+  for (const graph::Key key : {graph::V(leaving.id), graph::B(leaving.id)}) {
+    if (estimate.exists(key)) keys.insert(key);
+  }
+  std::vector<uint64_t> landmarks;
+  for (const graph::FactorPointer& factor : smoother_.factors_of(graph::X(leaving.id))) {
+    if (pose_graph_factors_.count(factor.get())) continue;
+    for (const graph::Key key : factor->keys()) {
+      if (graph::symbol_character(key) == 'l' && keys.insert(key).second) landmarks.push_back(graph::symbol_index(key));
+    }
+  }
+  // The pose graph's link to the next keyframe, from the window's estimate before it changes.
+  std::optional<graph::FactorGraph> link;
+  if (next.previous == leaving.id) {
+    const Result<SE3> T_world_leaving = estimate.at<SE3>(graph::X(leaving.id));
+    const Result<SE3> T_world_next = estimate.at<SE3>(graph::X(next.id));
+    graph::GaussianNoise noise;
+    HANZO_ASSIGN_OR_RETURN(noise, noise_of(next.relative_covariance, fmt::format("keyframe {} relative covariance", next.id)));
+    if (T_world_leaving && T_world_next) {
+      link.emplace();
+      link->emplace<graph::BetweenFactorSE3>(graph::X(leaving.id), graph::X(next.id), T_world_leaving->inverse() * *T_world_next, noise);
+    }
+  }
+  Result<std::vector<graph::Key>> marginalized =
+      smoother_.marginalize(keys, [this](const graph::Factor& factor) { return pose_graph_factors_.count(&factor) != 0; });
+  if (!marginalized) return Error(fmt::format("keyframe graph: keyframe {} leaving the window: {}", leaving.id, marginalized.error().message));
+  if (link) {
+    pose_graph_factors_.insert(link->factors().back().get());
+    if (Result<graph::IncrementalUpdateSummary> linked = smoother_.update(*link, {}); !linked) {
+      return Error(fmt::format("keyframe graph: the pose graph's link to keyframe {}: {}", next.id, linked.error().message));
+    }
+  }
+  ++update.keyframes_left_window;
+  update.marginalized_landmarks.insert(update.marginalized_landmarks.end(), landmarks.begin(), landmarks.end());
+  return ok_status();
+}
+
+std::optional<uint64_t> KeyframeGraph::window_start() const {
+  if (!window_.empty()) return window_.front().id;
+  return std::nullopt;
 }
 
 std::optional<SE3> KeyframeGraph::optimized_pose(uint64_t keyframe_id) const {

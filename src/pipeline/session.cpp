@@ -31,6 +31,9 @@ Timestamp sweep_end(const msgs::PointCloudMessage& scan) {
   return *std::max_element(scan.point_timestamps.begin(), scan.point_timestamps.end());
 }
 
+// The visual-inertial graph's window (KeyframeGraphConfig::window_keyframes), keyframes.
+const int kVisualInertialWindowKeyframes = std::getenv("HZ_WINDOW") ? std::atoi(std::getenv("HZ_WINDOW")) : 20;
+
 // A map keyframe moved this much in the graph is moved in the map.
 constexpr double kMapMoveTranslation = 0.01;  // m
 constexpr double kMapMoveRotation = 0.001;    // rad
@@ -217,6 +220,7 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
     session_config.backend.smoother.recent_variables = std::max(session_config.backend.smoother.recent_variables, 400);
     session_config.backend.smoother.neighbour_hops = std::min(session_config.backend.smoother.neighbour_hops, 2);
     session_config.backend.loop_batch_interval_s = std::max(session_config.backend.loop_batch_interval_s, 10.0);
+    if (session_config.backend.window_keyframes == 0) session_config.backend.window_keyframes = kVisualInertialWindowKeyframes;
   }
   // Live, each sensor streams on its own: one may lag another by up to the lag window.
   if (session_config.mode == SessionMode::kRealtime) frontend->set_timeout_grace(config.frontend.lag_window_s);
@@ -327,10 +331,8 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
       }
     }
     // Linked by the IMU, the filter's relative motion stays as a weak anchor only.
-    if (inertial && inertial->imu_factor && keyframe.relative_covariance) {
-      *keyframe.relative_covariance *= VisualInertialFactorsConfig{}.odometry_covariance_scale;
-    }
-    if (Status added = graph_->add_keyframe(keyframe); !added) {
+    const double relative_scale = inertial && inertial->imu_factor ? VisualInertialFactorsConfig{}.odometry_covariance_scale : 1.0;
+    if (Status added = graph_->add_keyframe(keyframe, relative_scale); !added) {
       logger()->warn("session: keyframe {} not added to the graph: {}", keyframe.keyframe_id, added.error().message);
       if (factors != nullptr) factors->restart();  // its factors are dropped: the next keyframe starts a new chain
       return;
@@ -882,6 +884,12 @@ void Session::update_backend() {
   if (!update) {
     logger()->warn("session: backend update failed: {}", update.error().message);
     return;
+  }
+  if (update->keyframes_left_window > 0 && camera_odometry_ && config_.visual_inertial_factors) {
+    if (VisualInertialFactors* factors = camera_odometry_->keyframe_factors(); factors != nullptr) {
+      factors->forget_landmarks(update->marginalized_landmarks);
+      if (const std::optional<uint64_t> start = graph_->window_start()) factors->set_window_start(*start);
+    }
   }
   if (update->factors_added == 0) return;
   summary_.last_correction_m = update->correction_translation_m;

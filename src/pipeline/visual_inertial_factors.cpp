@@ -51,8 +51,21 @@ std::deque<VisualInertialFactors::Frame>::const_iterator VisualInertialFactors::
 
 void VisualInertialFactors::odometry_restarted() { tracks_.clear(); }
 
+void VisualInertialFactors::set_window_start(uint64_t keyframe_id) {
+  window_start_ = keyframe_id;
+  for (auto it = tracks_.begin(); it != tracks_.end();) {
+    std::erase_if(it->second, [keyframe_id](const View& view) { return view.keyframe < keyframe_id; });
+    it = it->second.empty() ? tracks_.erase(it) : std::next(it);
+  }
+}
+
+void VisualInertialFactors::forget_landmarks(const std::vector<uint64_t>& feature_ids) {
+  for (const uint64_t feature : feature_ids) landmarks_.erase(feature);
+}
+
 void VisualInertialFactors::restart() {
   previous_.reset();
+  window_start_ = 0;
   tracks_.clear();
   landmarks_.clear();
   made_.clear();

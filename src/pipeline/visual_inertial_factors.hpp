@@ -26,7 +26,9 @@
 // landmark when its views span min_parallax_rad and all reproject within
 // max_reprojection_sigmas; the longest tracks first, at most max_new_landmarks per keyframe. A
 // landmark gets a projection factor from every later keyframe that sees it. Projection noise:
-// pixel_sigma at the camera's focal length.
+// pixel_sigma at the camera's focal length. With a sliding window (KeyframeGraphConfig::
+// window_keyframes) only views at the window's keyframes make landmarks, and a landmark
+// marginalized with the keyframe that leaves the window gets no more projections.
 
 #include <cstdint>
 #include <deque>
@@ -107,6 +109,12 @@ class VisualInertialFactors {
   /// The odometry started again in a new world of its own: tracks before and after do not
   /// triangulate together (landmarks already made keep their place).
   void odometry_restarted();
+  /// The graph keeps the variables of keyframes from `keyframe_id` on only (a sliding window):
+  /// views at older keyframes no longer make landmarks (their poses left the window's factors).
+  void set_window_start(uint64_t keyframe_id);
+  /// Landmarks the graph marginalized: their later observations are not projected (the track
+  /// does not become a landmark again).
+  void forget_landmarks(const std::vector<uint64_t>& feature_ids);
 
  private:
   struct Frame {
@@ -149,6 +157,7 @@ class VisualInertialFactors {
   std::map<uint64_t, std::vector<View>> tracks_;    // features seen at keyframes, not landmarks yet
   std::set<uint64_t> landmarks_;                    // features with an L in the graph, still tracked
   std::set<uint64_t> made_;                         // every feature with an L in the graph
+  uint64_t window_start_ = 0;                       // views at older keyframes make no landmarks
 };
 
 }  // namespace hanzo::fusion::pipeline

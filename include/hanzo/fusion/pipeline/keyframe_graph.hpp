@@ -20,6 +20,7 @@
 #include <deque>
 #include <map>
 #include <optional>
+#include <set>
 #include <vector>
 
 #include "hanzo/fusion/graph/incremental_smoother.hpp"
@@ -63,6 +64,17 @@ struct KeyframeGraphConfig {
   bool level_from_keyframes = false;
   double level_sigma_floor = 0.002;  ///< rad
   double level_correlated_keyframes = 10.0;
+  /// Keyframes whose variables besides the pose (velocities, IMU biases, landmarks: what the
+  /// visual-inertial factors add) stay in the graph; 0: every keyframe's stay. When a keyframe
+  /// leaves this window its velocity, biases and the landmarks it saw are marginalized
+  /// (graph/marginalization.hpp) with every factor on them and its pose's window factors
+  /// (IMU, projections, the Frontend's relative motion): a prior on the window that remains.
+  /// Its pose stays, as a node of the pose graph of older keyframes, with its pose-graph factors
+  /// (the first keyframe's prior, GNSS, gravity, loop closures) and a link to the next
+  /// keyframe: their relative pose as the window estimated it, with the Frontend's relative
+  /// covariance. Memory and the cost of a loop closure's batch then grow with the keyframes'
+  /// poses only, not with the landmarks.
+  int window_keyframes = 0;
 };
 
 struct KeyframeGraphUpdate {
@@ -71,6 +83,8 @@ struct KeyframeGraphUpdate {
   int fixes_dropped = 0;            ///< GNSS fixes no keyframe came near
   bool corrected_session = false;   ///< apply_correction was called
   bool loop_batch = false;          ///< a full batch ran for loop closures (batch_on_loop_closure)
+  int keyframes_left_window = 0;    ///< keyframes whose variables were marginalized (window_keyframes)
+  std::vector<uint64_t> marginalized_landmarks;  ///< L(j) indices marginalized with them
   double correction_translation_m = 0.0;  ///< how far the correction moved the latest keyframe
 };
 
@@ -85,7 +99,10 @@ class KeyframeGraph {
   /// Queues a keyframe: X(id) at initial_pose(), a between factor from its previous keyframe
   /// (which must be known), or a prior for the first one. Fails on an unknown previous
   /// keyframe, a repeated id or covariances that are not positive definite.
-  Status add_keyframe(const msgs::Keyframe& keyframe);
+  /// relative_covariance_scale multiplies the relative motion's covariance in its between
+  /// factor (a weak anchor where other factors, IMU, link the keyframes); the pose graph's link
+  /// made when the keyframe leaves the window takes it unscaled.
+  Status add_keyframe(const msgs::Keyframe& keyframe, double relative_covariance_scale = 1.0);
   /// Where add_keyframe() starts X(id): the previous keyframe's current estimate moved by the
   /// relative motion (so that a graph that moved away from the frontend's world, by its loop
   /// closures or its own factors, gets new keyframes where its old ones are), or the keyframe's
@@ -122,6 +139,9 @@ class KeyframeGraph {
   std::optional<Timestamp> keyframe_time(uint64_t keyframe_id) const;
   /// Ids of the keyframes added so far, in order.
   std::vector<uint64_t> keyframe_ids() const;
+  /// The oldest keyframe whose variables besides the pose are in the graph (window_keyframes);
+  /// none before the first keyframe.
+  std::optional<uint64_t> window_start() const;
   graph::IncrementalSmoother& smoother() { return smoother_; }
 
  private:
@@ -142,6 +162,22 @@ class KeyframeGraph {
     graph::GaussianNoise noise;
   };
   std::deque<Fix> pending_fixes_;
+  // The window (window_keyframes): its keyframes, oldest first, with their relative motion's
+  // unscaled covariance for the link made when they leave; the factors that stay with a pose
+  // when it leaves.
+  struct WindowKeyframe {
+    uint64_t id;
+    std::optional<uint64_t> previous;
+    Eigen::Matrix<double, 6, 6> relative_covariance;
+  };
+  std::deque<WindowKeyframe> window_;
+  std::set<const graph::Factor*> pose_graph_factors_;
+  // The newest factor in pending_ stays with its poses when they leave the window (they hold
+  // it: the pointer stays valid).
+  void mark_pose_graph_factor() {
+    if (config_.window_keyframes > 0) pose_graph_factors_.insert(pending_.factors.factors().back().get());
+  }
+  Status leave_window(KeyframeGraphUpdate& update);
 };
 
 }  // namespace hanzo::fusion::pipeline
