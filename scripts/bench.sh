@@ -8,6 +8,7 @@ for benchmark in "$build_dir"/bench/bench_*; do
   echo "== $(basename "$benchmark")"
   case "$(basename "$benchmark")" in
     bench_server_load) "$benchmark" ;;  # its own table (not Google Benchmark): 20 sessions for 60 s
+    bench_memory) "$benchmark" ;;       # its own table: a 10-minute flight, two configurations
     *) "$benchmark" --benchmark_counters_tabular=true ;;
   esac
 done

@@ -31,9 +31,6 @@ Timestamp sweep_end(const msgs::PointCloudMessage& scan) {
   return *std::max_element(scan.point_timestamps.begin(), scan.point_timestamps.end());
 }
 
-// The visual-inertial graph's window (KeyframeGraphConfig::window_keyframes), keyframes.
-const int kVisualInertialWindowKeyframes = std::getenv("HZ_WINDOW") ? std::atoi(std::getenv("HZ_WINDOW")) : 20;
-
 // A map keyframe moved this much in the graph is moved in the map.
 constexpr double kMapMoveTranslation = 0.01;  // m
 constexpr double kMapMoveRotation = 0.001;    // rad
@@ -151,6 +148,7 @@ Status SessionConfig::validate() const {
   HANZO_RETURN_IF_ERROR(with_context(loop.validate(), "loop"));
   HANZO_RETURN_IF_ERROR(with_context(planar_laser.validate(), "planar_laser"));
   HANZO_RETURN_IF_ERROR(with_context(lidar_merge.validate(), "lidar_merge"));
+  if (visual_inertial_window_keyframes < 0) return Error(fmt::format("visual_inertial_window_keyframes: {} is not >= 0", visual_inertial_window_keyframes));
   HANZO_RETURN_IF_ERROR(with_context(map.validate(), "map"));
   if (!(loop_translation_sigma > 0) || !(loop_rotation_sigma > 0)) return Error("loop_translation_sigma, loop_rotation_sigma: must be > 0");
   if (!(map_keyframe_distance >= 0) || !(map_keyframe_angle >= 0)) return Error("map_keyframe_distance, map_keyframe_angle: must be >= 0");
@@ -220,7 +218,7 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
     session_config.backend.smoother.recent_variables = std::max(session_config.backend.smoother.recent_variables, 400);
     session_config.backend.smoother.neighbour_hops = std::min(session_config.backend.smoother.neighbour_hops, 2);
     session_config.backend.loop_batch_interval_s = std::max(session_config.backend.loop_batch_interval_s, 10.0);
-    if (session_config.backend.window_keyframes == 0) session_config.backend.window_keyframes = kVisualInertialWindowKeyframes;
+    session_config.backend.window_keyframes = session_config.visual_inertial_window_keyframes;
   }
   // Live, each sensor streams on its own: one may lag another by up to the lag window.
   if (session_config.mode == SessionMode::kRealtime) frontend->set_timeout_grace(config.frontend.lag_window_s);

@@ -13,6 +13,10 @@
 // body frame. The first keyframe gets a prior with the frontend's covariance (converted from
 // (position world, orientation body) to the tangent), which anchors the graph.
 //
+// With window_keyframes, the variables of keyframes older than the window besides their poses
+// (velocities, biases, landmarks) are marginalized into a prior on the window: memory and the
+// loop closures' batches then grow with the poses of the pose graph of older keyframes only.
+//
 // Use from one thread: attach() queues keyframes from the session's callback; call process()
 // after Frontend::push returns (never inside a callback).
 

@@ -153,6 +153,11 @@ struct SessionConfig {
   /// hops around a new keyframe; Levenberg-Marquardt starts from a trust region of 1e4; loop
   /// closures run their batch at most every 10 s (backend.loop_batch_interval_s).
   bool visual_inertial_factors = true;
+  /// The visual-inertial graph's sliding window (backend.window_keyframes): 40 keyframes (20 s
+  /// at the msckf keyframe interval); older keyframes keep their poses only. 0: every keyframe's
+  /// variables and landmarks stay (memory and loop-closure batches grow with the flight).
+  /// Measured against keeping everything in bench/RESULTS.md.
+  int visual_inertial_window_keyframes = 40;
   lidar::LoopClosureConfig loop;
   double loop_translation_sigma = 0.05;  ///< m, loop closure factors (detected and manual)
   double loop_rotation_sigma = 0.005;    ///< rad
