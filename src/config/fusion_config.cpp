@@ -151,6 +151,9 @@ Status validate(const FusionConfig& config) {
   }
   if (Status s = non_negative(mapping.keyframe_distance, "mapping.keyframe_distance"); !s) return s;
   if (Status s = non_negative(mapping.keyframe_angle, "mapping.keyframe_angle"); !s) return s;
+  if (mapping.visual_inertial_window < 0) {
+    return Error{fmt::format("FusionConfig.mapping.visual_inertial_window: {} (expected >= 0)", mapping.visual_inertial_window), "mapping.visual_inertial_window"};
+  }
   if (Status s = validate(config.vision.features, "vision.features"); !s) return with_context(s, "FusionConfig");
   std::set<std::string_view> names;
   std::set<std::string_view> topics;

@@ -140,6 +140,7 @@ SessionConfig SessionConfig::from(const config::FusionConfig& config) {
   session.loop.min_search_radius = mapping.loop_search_radius;
   session.loop.max_rmse = mapping.loop_max_rmse;
   session.gnss_factors = mapping.gnss_factors;
+  session.visual_inertial_window_keyframes = mapping.visual_inertial_window;
   return session;
 }
 

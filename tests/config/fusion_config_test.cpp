@@ -130,6 +130,7 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   config.mapping.map_voxel = 0.05;
   config.mapping.loop_closure = false;
   config.mapping.keyframe_angle = 0.0;
+  config.mapping.visual_inertial_window = 0;
   config.sensors.push_back({"front_radar", SensorModality::kRadar, "/radar: front", 13.5, "radar link", "continental_ars408",
                             {.timeout_s = 0.3, .velocity_noise = 0.2}});
   config.sensors.push_back({"tracker", SensorModality::kGnss, "/gps", 1.0 / 3.0, "gps_link", "",
@@ -159,6 +160,7 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   EXPECT_EQ(loaded->mapping.map_voxel, 0.05);
   EXPECT_FALSE(loaded->mapping.loop_closure);
   EXPECT_EQ(loaded->mapping.keyframe_angle, 0.0);
+  EXPECT_EQ(loaded->mapping.visual_inertial_window, 0);
   EXPECT_EQ(loaded->mapping.occupancy_resolution, MappingConfig{}.occupancy_resolution);
   EXPECT_EQ(loaded->vision.features, (FeatureSelection{"aliked-n16", "/models/ALIKED weights/aliked-n16.pth"}));
   EXPECT_EQ(loaded->vision.matcher, MatcherType::kLearned);
@@ -177,6 +179,8 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
 TEST(FusionConfig, MappingBlockIsCheckedKeyByKey) {
   const std::string sensors = "  sensors:\n    imu: {rate: 100}\n";
   EXPECT_THAT(error_of("fusion:\n  mapping:\n    map_voxel: 0\n" + sensors), HasSubstr("fusion.yaml:3: mapping.map_voxel: expected a positive number, got 0"));
+  EXPECT_THAT(error_of("fusion:\n  mapping:\n    visual_inertial_window: -3\n" + sensors),
+              HasSubstr("fusion.yaml:3: mapping.visual_inertial_window: expected a number of keyframes >= 0, got -3"));
   EXPECT_THAT(error_of("fusion:\n  mapping:\n    keyframe_distance: -1\n" + sensors), HasSubstr("mapping.keyframe_distance"));
   EXPECT_THAT(error_of("fusion:\n  mapping:\n    loop_closure: maybe\n" + sensors), HasSubstr("mapping.loop_closure"));
   EXPECT_THAT(error_of("fusion:\n  mapping:\n    map_voxels: 0.1\n" + sensors), HasSubstr("map_voxels"));

@@ -153,7 +153,8 @@ struct SessionConfig {
   /// hops around a new keyframe; Levenberg-Marquardt starts from a trust region of 1e4; loop
   /// closures run their batch at most every 10 s (backend.loop_batch_interval_s).
   bool visual_inertial_factors = true;
-  /// The visual-inertial graph's sliding window (backend.window_keyframes): 40 keyframes (20 s
+  /// The visual-inertial graph's sliding window (backend.window_keyframes; the configuration's
+  /// fusion.mapping.visual_inertial_window): 40 keyframes (20 s
   /// at the msckf keyframe interval); older keyframes keep their poses only. 0: every keyframe's
   /// variables and landmarks stay (memory and loop-closure batches grow with the flight).
   /// Measured against keeping everything in bench/RESULTS.md.
