@@ -31,6 +31,13 @@ Timestamp sweep_end(const msgs::PointCloudMessage& scan) {
   return *std::max_element(scan.point_timestamps.begin(), scan.point_timestamps.end());
 }
 
+// A sweep's times into the body clock (calibration: t_body = t_lidar + offset).
+void to_body_clock(msgs::PointCloudMessage& scan, Duration offset) {
+  if (offset.nanoseconds() == 0) return;
+  scan.timestamp = scan.timestamp + offset;
+  for (Timestamp& time : scan.point_timestamps) time = time + offset;
+}
+
 // A map keyframe moved this much in the graph is moved in the map.
 constexpr double kMapMoveTranslation = 0.01;  // m
 constexpr double kMapMoveRotation = 0.001;    // rad
@@ -400,7 +407,7 @@ PushStatus Session::push_message(std::string_view sensor, msgs::SensorMessage me
   if (merger_) {
     for (std::size_t i = 0; i < merger_->size(); ++i) {
       if (sensor != merger_->secondary(i).sensor) continue;
-      if (const auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_secondary_scan(i, *scan);
+      if (auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_secondary_scan(i, std::move(*scan));
     }
   }
   if (!wheel_sensor_.empty() && sensor == wheel_sensor_) {
@@ -466,11 +473,7 @@ PushStatus Session::push_scan(msgs::PointCloudMessage scan) {
   }
   last_scan_time_ = scan.timestamp;
   frontend_->note_input(lidar_sensor_, scan.timestamp);  // heard, though its pose comes after registration
-  // Into the body clock (calibration: t_body = t_lidar + offset).
-  if (lidar_time_offset_.nanoseconds() != 0) {
-    scan.timestamp = scan.timestamp + lidar_time_offset_;
-    for (Timestamp& time : scan.point_timestamps) time = time + lidar_time_offset_;
-  }
+  to_body_clock(scan, lidar_time_offset_);
   if (!lidar_statistics_.first_time.nanoseconds()) lidar_statistics_.first_time = scan.timestamp;
   lidar_statistics_.last_time = scan.timestamp;
   const Timestamp end = sweep_end(scan);
@@ -485,7 +488,7 @@ PushStatus Session::push_scan(msgs::PointCloudMessage scan) {
   return {};
 }
 
-PushStatus Session::push_secondary_scan(std::size_t index, const msgs::PointCloudMessage& scan) {
+PushStatus Session::push_secondary_scan(std::size_t index, msgs::PointCloudMessage scan) {
   SecondaryLidar& lidar = secondary_lidars_[index];
   const std::string& sensor = merger_->secondary(index).sensor;
   ++lidar.statistics.received;
@@ -503,12 +506,8 @@ PushStatus Session::push_secondary_scan(std::size_t index, const msgs::PointClou
   frontend_->note_input(sensor, scan.timestamp);
   if (lidar.statistics.first_time.nanoseconds() == 0) lidar.statistics.first_time = scan.timestamp;
   lidar.statistics.last_time = scan.timestamp;
-  msgs::PointCloudMessage in_body_clock = scan;
-  if (lidar.time_offset.nanoseconds() != 0) {
-    in_body_clock.timestamp = in_body_clock.timestamp + lidar.time_offset;
-    for (Timestamp& time : in_body_clock.point_timestamps) time = time + lidar.time_offset;
-  }
-  if (Status added = merger_->add(index, in_body_clock); !added) return refuse(Rejection::kInvalid, added.error().message);
+  to_body_clock(scan, lidar.time_offset);
+  if (Status added = merger_->add(index, scan); !added) return refuse(Rejection::kInvalid, added.error().message);
   register_ready_scans();
   update_backend();
   return {};

@@ -427,7 +427,7 @@ class Session {
     SensorStatistics statistics;  ///< input checks (fused / not_fused come from the merger)
   };
   std::vector<SecondaryLidar> secondary_lidars_;  ///< as merger_'s secondaries
-  PushStatus push_secondary_scan(std::size_t index, const msgs::PointCloudMessage& scan);
+  PushStatus push_secondary_scan(std::size_t index, msgs::PointCloudMessage scan);
   std::optional<Timestamp> first_pose_time_;  ///< the Frontend's first pose seen
   /// How long a sweep may wait for the worker now (kRealtime: none for live data, else unbounded).
   std::optional<std::chrono::nanoseconds> registration_wait_limit(Timestamp now_in_data) const;
