@@ -16,10 +16,11 @@ Result<std::optional<VisualLoopClosures::LoopFactor>> VisualLoopClosures::add(Ti
   std::optional<vision::VisualLoop> loop;
   HANZO_ASSIGN_OR_RETURN(loop, detector_.add(image, T_odometry_body * T_body_camera_));
   last_place_ = T_odometry_body;
-  anchors_.push_back({anchor_keyframe, T_anchor_body});
+  const Anchor offered{anchor_keyframe, T_anchor_body};
+  if (static_cast<int>(anchors_.size()) < detector_.size()) anchors_.push_back(offered);  // kept as a place
   if (!loop) return std::optional<LoopFactor>();
   const Anchor& from = anchors_.at(static_cast<std::size_t>(loop->place));
-  const Anchor& to = anchors_.at(static_cast<std::size_t>(loop->current));
+  const Anchor& to = offered;
   // T_from_to = A T_place_current B with A = T_from_camera, B = T_camera_to; a right
   // perturbation of T_place_current is one of T_from_to by Ad(B^-1).
   const SE3 A = from.T_anchor_body * T_body_camera_;

@@ -77,17 +77,23 @@ Result<std::optional<VisualLoop>> VisualLoopDetector::add(const cv::Mat& image, 
   for (const cv::KeyPoint& keypoint : place.features.keypoints) place.normalized.push_back(camera_.unproject({keypoint.pt.x, keypoint.pt.y}));
   FeatureVector words_by_node;
   const BowVector bow = vocabulary_->transform(place.features.descriptors, &words_by_node);
-  const int current = database_.add(bow, std::move(words_by_node));
-  places_.push_back(std::move(place));
-  // The place `span` back now has all its neighbours: its points are triangulated, and the
-  // place 2 span back, whose neighbours they were, keeps only its points from now on.
-  const std::size_t newest = places_.size() - 1, span = static_cast<std::size_t>(config_.triangulation_neighbours);
-  if (newest >= span) triangulate_points(newest - span);
-  if (newest >= 2 * span) {
-    Place& old = places_[newest - 2 * span];
-    old.features = ImageFeatures();
-    old.normalized = {};
+  const bool kept = !covered(T_odometry_camera);
+  const int current = kept ? database_.add(bow, std::move(words_by_node)) : size();
+  if (kept) {
+    places_.push_back(std::move(place));
+    // The place `span` back now has all its neighbours: its points are triangulated, and the
+    // place 2 span back, whose neighbours they were, keeps only its points from now on.
+    const std::size_t newest = places_.size() - 1, span = static_cast<std::size_t>(config_.triangulation_neighbours);
+    if (newest >= span) triangulate_points(newest - span);
+    if (newest >= 2 * span) {
+      Place& old = places_[newest - 2 * span];
+      old.features = ImageFeatures();
+      old.normalized = {};
+    }
+  } else {
+    ++covered_places_;
   }
+  const Place& offered = kept ? places_.back() : place;
   ++places_since_loop_;
 
   const int before = current - config_.min_place_gap + 1;
@@ -97,9 +103,9 @@ Result<std::optional<VisualLoop>> VisualLoopDetector::add(const cv::Mat& image, 
   for (int recent = std::max(0, current - 3); recent < current; ++recent) min_score = std::min(min_score, Vocabulary::score(bow, database_.bow(recent)));
   for (const PlaceMatch& candidate : database_.query(bow, config_.candidates, before, std::max(min_score, 0.01))) {
     ++candidates_checked_;
-    std::optional<VisualLoop> loop = verify(candidate.entry, places_.back());
+    std::optional<VisualLoop> loop = verify(candidate.entry, offered);
     if (!loop) continue;
-    loop->current = current;
+    loop->current = kept ? current : -1;
     loop->score = candidate.score;
     ++loops_;
     places_since_loop_ = 0;
@@ -108,6 +114,16 @@ Result<std::optional<VisualLoop>> VisualLoopDetector::add(const cv::Mat& image, 
     return loop;
   }
   return std::optional<VisualLoop>();
+}
+
+bool VisualLoopDetector::covered(const SE3& T_odometry_camera) const {
+  if (!(config_.covered_place_distance > 0)) return false;
+  const int older = size() - config_.min_place_gap;
+  for (int i = 0; i < older; ++i) {
+    const SE3 between = places_[static_cast<std::size_t>(i)].T_odometry_camera.inverse() * T_odometry_camera;
+    if (between.translation().norm() < config_.covered_place_distance && between.rotation().log().norm() < config_.covered_place_angle) return true;
+  }
+  return false;
 }
 
 void VisualLoopDetector::triangulate_points(std::size_t index) {

@@ -6,6 +6,9 @@
 
 #include <cstdio>
 
+#include <optional>
+#include <utility>
+
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 
@@ -47,30 +50,38 @@ TEST(VisualLoopDetector, FindsTheDronesLoopsWithTheirTrueRelativePose) {
   const RenderedFlight flight = render_drone(34.0);
   ASSERT_GT(flight.images.size(), 300u);
   VisualLoopDetector detector = VisualLoopDetector::create(flight.camera).value();
-  std::vector<std::size_t> place_image;  // image of each place
+  std::vector<std::size_t> place_image;  // image of each place kept
+  std::optional<std::size_t> last_offered;
   double travelled = 0.0;
   SE3 drift;
-  std::vector<VisualLoop> loops;
+  std::vector<std::pair<VisualLoop, std::size_t>> loops;  // with the image that closed it
   for (std::size_t i = 0; i < flight.images.size(); ++i) {
     if (i > 0) {
       const double step = (flight.T_world_camera[i].translation() - flight.T_world_camera[i - 1].translation()).norm();
       travelled += step;
       drift = SE3(SO3::exp(Eigen::Vector3d(0.0, 0.0, 0.05 * kDegree * step)), Eigen::Vector3d(0.01 * step, -0.005 * step, 0.0)) * drift;
     }
-    if (!place_image.empty()) {
-      const SE3 since = flight.T_world_camera[place_image.back()].inverse() * flight.T_world_camera[i];
+    if (last_offered) {
+      const SE3 since = flight.T_world_camera[*last_offered].inverse() * flight.T_world_camera[i];
       if (since.translation().norm() < 0.75 && since.rotation().log().norm() < 15.0 * kDegree) continue;
     }
+    const int places_before = detector.size();
     Result<std::optional<VisualLoop>> loop = detector.add(flight.images[i], drift * flight.T_world_camera[i]);
     ASSERT_TRUE(loop) << loop.error().message;
-    place_image.push_back(i);
-    if (*loop) loops.push_back(**loop);
+    last_offered = i;
+    const bool kept = detector.size() > places_before;
+    if (kept) place_image.push_back(i);
+    if (*loop) {
+      EXPECT_EQ((*loop)->current, kept ? places_before : -1);
+      loops.emplace_back(**loop, i);
+    }
   }
-  std::printf("%d places over %.1f m, %d candidates checked, %zu loops\n", detector.size(), travelled, detector.candidates_checked(), loops.size());
+  std::printf("%d places (%d revisits not kept) over %.1f m, %d candidates checked, %zu loops\n", detector.size(), detector.covered_places(),
+              travelled, detector.candidates_checked(), loops.size());
   EXPECT_GE(loops.size(), 3u);
-  for (const VisualLoop& loop : loops) {
-    const SE3 truth = flight.T_world_camera[place_image[static_cast<std::size_t>(loop.place)]].inverse() *
-                      flight.T_world_camera[place_image[static_cast<std::size_t>(loop.current)]];
+  EXPECT_GT(detector.covered_places(), 0) << "the figure eights pass the same places again";
+  for (const auto& [loop, image] : loops) {
+    const SE3 truth = flight.T_world_camera[place_image[static_cast<std::size_t>(loop.place)]].inverse() * flight.T_world_camera[image];
     const SE3 error = truth.inverse() * loop.T_place_current;
     std::printf("  place %d -> %d: %d inliers of %d, %.3f m apart, error %.3f m %.3f deg\n", loop.place, loop.current, loop.inliers, loop.matches,
                 truth.translation().norm(), error.translation().norm(), error.rotation().log().norm() / kDegree);

@@ -69,6 +69,12 @@ struct VisualLoopDetectorConfig {
   double rotation_sigma_per_metre = 0.006;      ///< rad per m apart
   double pixel_sigma = 1.0;          ///< keypoint noise at octave 0 (pixels)
   int cooldown_places = 3;           ///< places after a loop before the next one is searched
+  /// A place offered within this distance (m) and covered_place_angle (rad) of a place at least
+  /// min_place_gap older, by the odometry's poses, is a view the database already has (a
+  /// revisit): it is searched for a loop like any other but not kept, so that flying the same
+  /// rounds again and again does not grow the database. 0 keeps every place.
+  double covered_place_distance = 0.5;
+  double covered_place_angle = 0.2;
   /// Null: the default vocabulary (Vocabulary::load_default).
   std::shared_ptr<const Vocabulary> vocabulary;
 };
@@ -77,7 +83,7 @@ Status validate(const VisualLoopDetectorConfig& config);
 
 struct VisualLoop {
   int place = -1;    ///< the earlier place
-  int current = -1;  ///< the place just added
+  int current = -1;  ///< the place just added; -1 when it was not kept (covered_place_distance)
   SE3 T_place_current;
   /// Over the tangent (rho, phi) of T_place_current, right perturbation: the configured
   /// standard deviations at the distance between the two cameras.
@@ -92,12 +98,15 @@ class VisualLoopDetector {
   static Result<VisualLoopDetector> create(const PinholeCamera& camera, VisualLoopDetectorConfig config = {});
 
   /// Adds an 8-bit grey (or BGR) image as place size() at the odometry's T_odometry_camera,
-  /// triangulates the previous place's points with it, and looks for a loop closing here.
+  /// triangulates the previous place's points with it, and looks for a loop closing here. A
+  /// place covered by an older one (covered_place_distance) is only searched, not added.
   Result<std::optional<VisualLoop>> add(const cv::Mat& image, const SE3& T_odometry_camera);
 
   int size() const { return static_cast<int>(places_.size()); }
   int candidates_checked() const { return candidates_checked_; }
   int loops() const { return loops_; }
+  /// Places offered but not kept: views the database already had.
+  int covered_places() const { return covered_places_; }
   /// The triangulated points of a place (its camera frame); empty until its last neighbour.
   std::vector<Eigen::Vector3d> points(int place) const;
 
@@ -122,6 +131,9 @@ class VisualLoopDetector {
   std::vector<Place> places_;
   int candidates_checked_ = 0;
   int loops_ = 0;
+  int covered_places_ = 0;
+  // Whether a place at least min_place_gap older lies within covered_place_distance / angle.
+  bool covered(const SE3& T_odometry_camera) const;
   int places_since_loop_ = 1 << 20;
 };
 
