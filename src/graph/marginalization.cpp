@@ -15,24 +15,21 @@ int tangent_dimension(const Value& value) {
   return 3;  // SE2, Vector3
 }
 
+// Log(x0^-1 x) of a Lie group element and its Jacobian Jr^-1 (right perturbation of x).
+template <typename Group>
+Result<Eigen::VectorXd> group_offset(Key key, const Group& x0, const Values& values, Eigen::MatrixXd* jacobian) {
+  Group x;
+  HANZO_ASSIGN_OR_RETURN(x, values.at<Group>(key));
+  typename Group::Jacobian J;
+  const typename Group::Tangent d = (x0.inverse() * x).log(&J);
+  if (jacobian) *jacobian = J;
+  return Eigen::VectorXd(d);
+}
+
 // x (-) x0 in x0's tangent and its Jacobian with respect to a right perturbation of x.
 Result<Eigen::VectorXd> tangent_offset(Key key, const Value& x0, const Values& values, Eigen::MatrixXd* jacobian) {
-  if (const auto* pose = std::get_if<SE3>(&x0)) {
-    SE3 x;
-    HANZO_ASSIGN_OR_RETURN(x, values.at<SE3>(key));
-    SE3::Jacobian J;
-    const SE3::Tangent d = (pose->inverse() * x).log(&J);
-    if (jacobian) *jacobian = J;
-    return Eigen::VectorXd(d);
-  }
-  if (const auto* pose = std::get_if<SE2>(&x0)) {
-    SE2 x;
-    HANZO_ASSIGN_OR_RETURN(x, values.at<SE2>(key));
-    SE2::Jacobian J;
-    const SE2::Tangent d = (pose->inverse() * x).log(&J);
-    if (jacobian) *jacobian = J;
-    return Eigen::VectorXd(d);
-  }
+  if (const auto* pose = std::get_if<SE3>(&x0)) return group_offset(key, *pose, values, jacobian);
+  if (const auto* pose = std::get_if<SE2>(&x0)) return group_offset(key, *pose, values, jacobian);
   if (const auto* bias = std::get_if<ImuBias>(&x0)) {
     ImuBias x;
     HANZO_ASSIGN_OR_RETURN(x, values.at<ImuBias>(key));
