@@ -373,6 +373,7 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"weather_degraded_scans", m.weather_degraded_scans},
           {"map_keyframes", m.map_keyframes},   {"graph_keyframes", m.graph_keyframes},
           {"graph_landmarks", m.graph_landmarks}, {"graph_projections", m.graph_projections},
+          {"graph_imu_factors", m.graph_imu_factors}, {"graph_lidar_factors", m.graph_lidar_factors},
           {"loop_candidates", m.loop_candidates}, {"loop_closures", m.loop_closures},
           {"gnss_factors", m.gnss_factors},     {"map_memory_bytes", m.map_memory_bytes},
           {"wheel_slip_episodes", m.wheel_slip_episodes}, {"wheel_messages_withheld", m.wheel_messages_withheld},
@@ -592,6 +593,9 @@ int run(const Output& output, const RunOptions& options) {
                         count_of(mapping.loop_closures, "loop closure"));
     if (mapping.graph_landmarks > 0) {
       text += fmt::format("; visual-inertial: {} landmarks, {} projections", mapping.graph_landmarks, mapping.graph_projections);
+    }
+    if (mapping.graph_lidar_factors > 0) {
+      text += fmt::format("; LiDAR-inertial: {} IMU and {} LiDAR links", mapping.graph_imu_factors, mapping.graph_lidar_factors);
     }
     if (mapping.scans_received > 0) {
       text += fmt::format("; map: {} keyframes from {} of {} sweeps registered", mapping.map_keyframes, mapping.scans_registered,

@@ -174,15 +174,13 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(c
   odometry->inertial_ = std::move(inertial);
   std::vector<VisualInertialFactors::Camera> factor_cameras;
   for (const MsckfCameraSetup& setup : setups) factor_cameras.push_back({setup.T_body_camera, setup.camera.fx});
-  graph::ImuPreintegrationConfig preintegration;
-  preintegration.process_noise_accel = noise.process_noise_accel;
-  preintegration.process_noise_gyro = noise.process_noise_gyro;
-  preintegration.sample_interval = noise.sample_interval;
-  odometry->keyframe_factors_ = std::make_unique<VisualInertialFactors>(std::move(factor_cameras), preintegration, noise.accel_bias_random_walk,
-                                                                        noise.gyro_bias_random_walk);
+  const ImuChainNoise chain = imu_chain_noise(config, *imu);
+  odometry->keyframe_factors_ = std::make_unique<VisualInertialFactors>(std::move(factor_cameras), chain.preintegration, chain.accel_bias_random_walk,
+                                                                        chain.gyro_bias_random_walk);
   odometry->T_body_imu_ = T_body_imu;
   odometry->imu_sensor_ = imu->name;
   odometry->imu_offset_ = imu_offset;
+  odometry->body_imu_.emplace(T_body_imu, imu_offset);
   odometry->inertial_summary_.scale_free = false;
   odometry->inertial_summary_.features = tracker.detector ? tracker.detector->name() : "shi-tomasi";
   return odometry;
@@ -191,19 +189,7 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(c
 void CameraOdometry::add_imu(const msgs::ImuMessage& imu) {
   if (!inertial_ || !imu.angular_velocity.allFinite() || !imu.linear_acceleration.allFinite()) return;
   inertial_->add_imu({imu.timestamp + imu_offset_, imu.angular_velocity, imu.linear_acceleration});
-  // The body origin's motion: f_body = f_imu - dw/dt x p - w x (w x p), p the IMU's lever arm
-  // (body axes; dw/dt from the previous sample).
-  const Timestamp time = imu.timestamp + imu_offset_;
-  const Eigen::Vector3d rate = T_body_imu_.rotation() * imu.angular_velocity;
-  const Eigen::Vector3d& lever_arm = T_body_imu_.translation();
-  Eigen::Vector3d angular_acceleration = Eigen::Vector3d::Zero();
-  if (previous_body_rate_ && time > previous_body_rate_->first) {
-    angular_acceleration = (rate - previous_body_rate_->second) / (time - previous_body_rate_->first).seconds();
-  }
-  previous_body_rate_.emplace(time, rate);
-  const Eigen::Vector3d specific_force = T_body_imu_.rotation() * imu.linear_acceleration - angular_acceleration.cross(lever_arm) -
-                                         rate.cross(rate.cross(lever_arm));
-  keyframe_factors_->add_imu({time, rate, specific_force});
+  if (const std::optional<estimate::ImuSample> sample = body_imu_->convert(imu)) keyframe_factors_->add_imu(*sample);
 }
 
 std::optional<graph::ImuBias> CameraOdometry::imu_bias_body() const {

@@ -36,6 +36,7 @@
 #include "hanzo/fusion/vision/image_quality.hpp"
 #include "hanzo/fusion/vision/visual_odometry.hpp"
 #include "msckf_odometry.hpp"
+#include "imu_keyframe_chain.hpp"
 #include "visual_inertial_factors.hpp"
 
 namespace hanzo::fusion::pipeline {
@@ -109,7 +110,7 @@ class CameraOdometry {
   std::unique_ptr<MsckfOdometry> inertial_;
   std::unique_ptr<VisualInertialFactors> keyframe_factors_;
   SE3 T_body_imu_;
-  std::optional<std::pair<Timestamp, Eigen::Vector3d>> previous_body_rate_;  // body axes, rad/s
+  std::optional<BodyImu> body_imu_;  // the IMU's samples as the body origin's motion (keyframe factors)
   std::string imu_sensor_;
   Duration imu_offset_;
   vision::VisualOdometrySummary inertial_summary_;

@@ -227,6 +227,12 @@ Status Frontend::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_
 std::optional<msgs::PoseEstimate> Frontend::latest_pose() const { return impl_->latest_pose; }
 SE3 Frontend::world_correction() const { return impl_->estimator.world_correction(); }
 
+std::optional<std::pair<Eigen::Vector3d, Eigen::Vector3d>> Frontend::imu_bias() const {
+  if (!has_imu() || !impl_->estimator.initialized()) return std::nullopt;
+  const estimate::NavigationState state = impl_->estimator.filter().state();
+  return std::make_pair(state.accel_bias, state.gyro_bias);
+}
+
 std::optional<SE3> Frontend::pose_at(Timestamp time) const {
   // In today's world: corrections fused after the entry move it too.
   const SE3& correction_now = impl_->estimator.world_correction();

@@ -1,6 +1,8 @@
 #include "hanzo/fusion/pipeline/session.hpp"
 
 #include "camera_odometry.hpp"
+#include "imu_keyframe_chain.hpp"
+#include "lidar_inertial_factors.hpp"
 #include "visual_loop_closures.hpp"
 
 #include <algorithm>
@@ -205,12 +207,16 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   // closures only. (Measured on six simulated flights and walks: moving the filter onto the
   // visual-inertial graph's newest keyframe after every update doubled its error or worse.)
   const bool visual_inertial_graph = session_config.visual_inertial_factors && config.frontend.type == config::FrontendType::kMsckf;
-  if ((session_config.gnss_factors && configures_gnss(config)) || visual_inertial_graph) session_config.backend.correct_on_loop_closures_only = true;
-  // With an IMU the keyframes' roll and pitch are measured (gravity); the visual-inertial graph
-  // has its own IMU factors.
-  session_config.backend.level_from_keyframes =
-      !visual_inertial_graph && std::any_of(config.sensors.begin(), config.sensors.end(),
-                                            [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kImu; });
+  const auto imu = std::find_if(config.sensors.begin(), config.sensors.end(),
+                                [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kImu; });
+  const bool lidar_inertial_graph =
+      session_config.lidar_inertial_factors && !visual_inertial_graph && !lidar_sensor.empty() && !planar_laser && imu != config.sensors.end();
+  if ((session_config.gnss_factors && configures_gnss(config)) || visual_inertial_graph || lidar_inertial_graph) {
+    session_config.backend.correct_on_loop_closures_only = true;
+  }
+  // With an IMU the keyframes' roll and pitch are measured (gravity); the visual- and
+  // LiDAR-inertial graphs have their own IMU factors.
+  session_config.backend.level_from_keyframes = !visual_inertial_graph && !lidar_inertial_graph && imu != config.sensors.end();
   // The visual-inertial graph's smoother. Landmarks make it far less linear than a pose graph:
   // Levenberg-Marquardt starts from Ceres' default trust region (the pose graphs' 1e8, nearly
   // Gauss-Newton, had every step of some updates rejected on the simulated walks, leaving the
@@ -235,6 +241,15 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   auto session = std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), planar_laser,
                                                       lidar_calibration, std::move(wheel_sensor), wheel_calibration));
   session->camera_odometry_ = std::move(camera_odometry);
+  if (lidar_inertial_graph) {
+    const calib::SensorCalibration* entry = calibration.find(imu->name);
+    const calib::SensorCalibration imu_calibration = entry != nullptr ? *entry : calib::SensorCalibration{};
+    const ImuChainNoise noise = imu_chain_noise(config, *imu);
+    session->lidar_factors_ = std::make_unique<LidarInertialFactors>(session->T_body_lidar_, noise.preintegration, noise.accel_bias_random_walk,
+                                                                     noise.gyro_bias_random_walk);
+    session->body_imu_ = std::make_unique<BodyImu>(imu_calibration.T_body_sensor(), imu_calibration.time_offset);
+    session->imu_sensor_ = imu->name;
+  }
   // Every further 3D LiDAR joins the first one's sweeps.
   if (session->odometry_) {
     std::vector<LidarSweepMerger::Secondary> secondaries;
@@ -321,27 +336,48 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
       keyframe.relative_covariance.reset();
       restart_graph_ = false;
     }
-    // Visual-inertial: the IMU and landmark factors.
+    // In the graph's world (it moves away from the Frontend's between loop closures).
+    const auto in_graph_world = [this](const msgs::Keyframe& emitted_keyframe) {
+      msgs::Keyframe in_graph = emitted_keyframe;
+      const SE3 T_world_body = graph_->initial_pose(emitted_keyframe);
+      in_graph.velocity = T_world_body.rotation() * (emitted_keyframe.T_world_body.to_se3().rotation().inverse() * emitted_keyframe.velocity);
+      in_graph.T_world_body = msgs::Pose::from_se3(T_world_body);
+      return in_graph;
+    };
+    const bool chain_starts = keyframe.keyframe_id == 0 || !keyframe.T_previous_current;
+    // Visual-inertial: the IMU and landmark factors; LiDAR-inertial: the IMU and LiDAR factors.
     std::optional<VisualInertialFactors::KeyframeFactors> inertial;
+    std::optional<LidarInertialFactors::KeyframeFactors> lidar_inertial;
     VisualInertialFactors* factors = camera_odometry_ && config_.visual_inertial_factors ? camera_odometry_->keyframe_factors() : nullptr;
     if (factors != nullptr) {
-      if (keyframe.keyframe_id == 0 || !keyframe.T_previous_current) factors->restart();
-      const std::optional<graph::ImuBias> bias = camera_odometry_->imu_bias_body();
-      if (bias) {
-        // In the graph's world (it moves away from the Frontend's between loop closures).
-        msgs::Keyframe in_graph = keyframe;
-        const SE3 T_world_body = graph_->initial_pose(keyframe);
-        in_graph.velocity = T_world_body.rotation() * (keyframe.T_world_body.to_se3().rotation().inverse() * keyframe.velocity);
-        in_graph.T_world_body = msgs::Pose::from_se3(T_world_body);
-        inertial = factors->keyframe(in_graph, *bias, graph_->smoother().estimate());
+      if (chain_starts) factors->restart();
+      if (const std::optional<graph::ImuBias> bias = camera_odometry_->imu_bias_body()) {
+        inertial = factors->keyframe(in_graph_world(keyframe), *bias, graph_->smoother().estimate());
       }
+    } else if (lidar_factors_) {
+      if (chain_starts) lidar_factors_->restart();
+      graph::ImuBias bias;
+      if (const auto filter_bias = frontend_->imu_bias()) {
+        bias.accelerometer = body_imu_->T_body_imu().rotation() * filter_bias->first;
+        bias.gyroscope = body_imu_->T_body_imu().rotation() * filter_bias->second;
+      }
+      lidar_inertial = lidar_factors_->keyframe(in_graph_world(keyframe), bias, graph_->smoother().estimate());
     }
-    // Linked by the IMU, the filter's relative motion stays as a weak anchor only.
-    const double relative_scale = inertial && inertial->imu_factor ? VisualInertialFactorsConfig{}.odometry_covariance_scale : 1.0;
+    // Linked by the IMU (and the LiDAR), the filter's relative motion stays as a weak anchor only.
+    double relative_scale = 1.0;
+    if (inertial && inertial->imu_factor) relative_scale = VisualInertialFactorsConfig{}.odometry_covariance_scale;
+    if (lidar_inertial && lidar_inertial->imu_factor && lidar_inertial->lidar_factor) relative_scale = lidar_factors_->config().odometry_covariance_scale;
     if (Status added = graph_->add_keyframe(keyframe, relative_scale); !added) {
       logger()->warn("session: keyframe {} not added to the graph: {}", keyframe.keyframe_id, added.error().message);
-      if (factors != nullptr) factors->restart();  // its factors are dropped: the next keyframe starts a new chain
+      // Its factors are dropped: the next keyframe starts new chains.
+      if (factors != nullptr) factors->restart();
+      if (lidar_factors_) lidar_factors_->restart();
       return;
+    }
+    if (lidar_inertial) {
+      graph_->add_factors(lidar_inertial->update);
+      summary_.graph_lidar_factors += lidar_inertial->lidar_factor ? 1 : 0;
+      summary_.graph_imu_factors += lidar_inertial->imu_factor ? 1 : 0;
     }
     if (inertial) {
       graph_->add_factors(inertial->update);
@@ -400,6 +436,11 @@ PushStatus Session::push_message(std::string_view sensor, msgs::SensorMessage me
   if (camera_odometry_ && camera_odometry_->handles(sensor)) return push_image(sensor, message);
   if (camera_odometry_ && camera_odometry_->visual_inertial() && sensor == camera_odometry_->imu_sensor()) {
     if (const auto* imu = std::get_if<msgs::ImuMessage>(&message)) camera_odometry_->add_imu(*imu);
+  }
+  if (lidar_factors_ && sensor == imu_sensor_) {
+    if (const auto* imu = std::get_if<msgs::ImuMessage>(&message)) {
+      if (const std::optional<estimate::ImuSample> sample = body_imu_->convert(*imu)) lidar_factors_->add_imu(*sample);
+    }
   }
   if (maps_lidar() && sensor == lidar_sensor_) {
     if (auto* scan = std::get_if<msgs::PointCloudMessage>(&message)) return push_scan(std::move(*scan));
@@ -798,6 +839,10 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
   registration_failures_ = 0;
   if (scan_callback_) scan_callback_(registered);
   const lidar::LidarOdometryEstimate& estimate = registered.estimate;
+  if (lidar_factors_) {
+    const double weather = estimate.weather_degraded ? config_.lidar_odometry.weather_covariance_scale : 1.0;
+    lidar_factors_->add_sweep(estimate.time, estimate.T_world_lidar, weather * estimate.covariance, estimate.first_scan);
+  }
   check_wheels(estimate.time, estimate.first_scan ? std::nullopt : std::optional<SE3>(estimate.T_previous_current),
                !estimate.degenerate && !estimate.weather_degraded);
   const SE3& T_world_lidar = registered.T_world_lidar;

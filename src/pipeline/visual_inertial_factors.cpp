@@ -11,8 +11,6 @@
 namespace hanzo::fusion::pipeline {
 namespace {
 
-constexpr double kMaxImuGapSeconds = 0.1;      // longer between two samples: the IMU was lost
-constexpr double kImuHistorySeconds = 30.0;    // samples kept when no keyframe comes
 constexpr double kFrameHistorySeconds = 2.0;   // frames kept (the Frontend's keyframes lag the images)
 
 }  // namespace
@@ -20,19 +18,11 @@ constexpr double kFrameHistorySeconds = 2.0;   // frames kept (the Frontend's ke
 VisualInertialFactors::VisualInertialFactors(std::vector<Camera> cameras, const graph::ImuPreintegrationConfig& imu, double accel_bias_random_walk,
                                              double gyro_bias_random_walk, VisualInertialFactorsConfig config)
     : cameras_(std::move(cameras)),
-      imu_(imu),
-      accel_bias_random_walk_(accel_bias_random_walk),
-      gyro_bias_random_walk_(gyro_bias_random_walk),
       config_(config),
+      chain_(imu, accel_bias_random_walk, gyro_bias_random_walk, config.priors),
       projection_noise_(graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(config.pixel_sigma)).value()) {}
 
-void VisualInertialFactors::add_imu(const estimate::ImuSample& sample) {
-  if (!samples_.empty() && sample.timestamp <= samples_.back().timestamp) return;
-  samples_.push_back(sample);
-  const Timestamp keep_from = previous_ ? previous_->time : sample.timestamp - Duration::from_seconds(kImuHistorySeconds);
-  while (samples_.size() > 1 && samples_[1].timestamp <= keep_from) samples_.pop_front();
-  while (samples_.size() > 1 && (sample.timestamp - samples_.front().timestamp).seconds() > kImuHistorySeconds) samples_.pop_front();
-}
+void VisualInertialFactors::add_imu(const estimate::ImuSample& sample) { chain_.add_imu(sample); }
 
 void VisualInertialFactors::add_frame(Timestamp time, const SE3& T_odometry_body, std::vector<vision::FeatureObservation> observations) {
   if (!frames_.empty() && time <= frames_.back().time) return;
@@ -64,44 +54,11 @@ void VisualInertialFactors::forget_landmarks(const std::vector<uint64_t>& featur
 }
 
 void VisualInertialFactors::restart() {
-  previous_.reset();
+  chain_.restart();
   window_start_ = 0;
   tracks_.clear();
   landmarks_.clear();
   made_.clear();
-}
-
-std::optional<graph::ImuPreintegration> VisualInertialFactors::preintegrate(Timestamp from, Timestamp to, const graph::ImuBias& bias) const {
-  // Each sample's reading holds from the sample before it (as the filters propagate).
-  graph::ImuPreintegration preintegration(imu_, bias);
-  for (size_t k = 1; k < samples_.size(); ++k) {
-    const Timestamp start = samples_[k - 1].timestamp;
-    const Timestamp end = samples_[k].timestamp;
-    if (end <= from) continue;
-    if (start >= to) break;
-    if ((end - start).seconds() > kMaxImuGapSeconds) return std::nullopt;
-    const double dt = (std::min(end, to) - std::max(start, from)).seconds();
-    if (dt <= 0.0) continue;
-    if (!preintegration.integrate(samples_[k].linear_acceleration, samples_[k].angular_velocity, dt)) return std::nullopt;
-  }
-  // The interval must be covered: samples up to `to` and from `from` on.
-  if (preintegration.sample_count() == 0 || std::abs(preintegration.delta_time() - (to - from).seconds()) > 1e-6) return std::nullopt;
-  return preintegration;
-}
-
-std::optional<SE3> VisualInertialFactors::body_motion_back(const msgs::Keyframe& keyframe, const graph::ImuBias& bias, Timestamp frame_time) const {
-  if (frame_time == keyframe.timestamp) return SE3();
-  const std::optional<graph::ImuPreintegration> interval = preintegrate(frame_time, keyframe.timestamp, bias);
-  if (!interval) return std::nullopt;
-  // Forster eq. 38 solved for the state at the frame (f) from the keyframe's (k):
-  //   R_f = R_k dR^T,  v_f = v_k - g T - R_f dv,  p_f = p_k - v_f T - 1/2 g T^2 - R_f dp.
-  const SE3 T_world_keyframe = keyframe.T_world_body.to_se3();
-  const double T = interval->delta_time();
-  const graph::ImuDeltas& delta = interval->deltas();
-  const SO3 R_world_frame = T_world_keyframe.rotation() * delta.rotation.inverse();
-  const Eigen::Vector3d velocity_frame = keyframe.velocity - imu_.gravity * T - R_world_frame * delta.velocity;
-  const Eigen::Vector3d position_frame = T_world_keyframe.translation() - velocity_frame * T - 0.5 * imu_.gravity * T * T - R_world_frame * delta.position;
-  return T_world_keyframe.inverse() * SE3(R_world_frame, position_frame);
 }
 
 void VisualInertialFactors::add_projection(KeyframeFactors& out, uint64_t feature, const View& view) const {
@@ -126,38 +83,13 @@ VisualInertialFactors::KeyframeFactors VisualInertialFactors::keyframe(const msg
   KeyframeFactors out;
   const uint64_t id = keyframe.keyframe_id;
   const SE3 T_world_body = keyframe.T_world_body.to_se3();
-  Eigen::Vector3d velocity = keyframe.velocity;
-  graph::ImuBias bias = bias_body;
-  // Linked to the previous keyframe by the IMU: the preintegration from the graph's bias there,
-  // B(k) started there too (the odometry's bias would be far off the random walk's sigmas).
-  if (previous_ && keyframe.T_previous_current && keyframe.previous_keyframe_id == previous_->id) {
-    const Result<SE3> T_world_previous = estimate.at<SE3>(graph::X(previous_->id));
-    const Result<Eigen::Vector3d> velocity_previous = estimate.at<Eigen::Vector3d>(graph::V(previous_->id));
-    const Result<graph::ImuBias> bias_previous = estimate.at<graph::ImuBias>(graph::B(previous_->id));
-    std::optional<graph::ImuPreintegration> preintegration;
-    if (T_world_previous && velocity_previous && bias_previous) preintegration = preintegrate(previous_->time, keyframe.timestamp, *bias_previous);
-    Result<std::shared_ptr<graph::ImuFactor>> imu = Error("no IMU interval");
-    Result<std::shared_ptr<graph::ImuBiasRandomWalkFactor>> walk = Error("no IMU interval");
-    if (preintegration) {
-      imu = graph::ImuFactor::create(graph::X(previous_->id), graph::V(previous_->id), graph::X(id), graph::V(id), graph::B(previous_->id),
-                                     *preintegration);
-      walk = graph::ImuBiasRandomWalkFactor::create(graph::B(previous_->id), graph::B(id), preintegration->delta_time(), accel_bias_random_walk_,
-                                                    gyro_bias_random_walk_);
-    }
-    if (imu && walk) {
-      out.update.factors.add(*imu);
-      out.update.factors.add(*walk);
-      out.imu_factor = true;
-      SE3 T_world_predicted;
-      preintegration->predict(*T_world_previous, *velocity_previous, *bias_previous, &T_world_predicted, &velocity);
-      bias = *bias_previous;
-    } else {
-      logger()->debug("visual-inertial graph: keyframe {}: {}", id, imu ? walk.error().message : imu.error().message);
-    }
-  }
+  // Linked to the previous keyframe by the IMU.
+  const ImuKeyframeChain::Link link = chain_.link(keyframe, bias_body, estimate, out.update);
+  out.imu_factor = link.imu_factor;
+  Eigen::Vector3d velocity = link.velocity;
   // The camera frame just before the keyframe, and the body's motion from the keyframe back to it.
   const auto frame = frame_for(keyframe.timestamp);
-  const std::optional<SE3> T_keyframe_frame = frame != frames_.end() ? body_motion_back(keyframe, bias, frame->time) : std::nullopt;
+  const std::optional<SE3> T_keyframe_frame = frame != frames_.end() ? chain_.body_motion(keyframe, link.bias, frame->time) : std::nullopt;
   // The velocity: the odometry's (its poses around the frame, in the graph's world) where there
   // are frames on both sides, else the IMU's prediction, else the keyframe's.
   if (T_keyframe_frame) {
@@ -171,17 +103,7 @@ VisualInertialFactors::KeyframeFactors VisualInertialFactors::keyframe(const msg
       }
     }
   }
-  if (!out.imu_factor) {
-    // A new chain: priors on its velocity and biases.
-    Eigen::Matrix<double, 6, 1> bias_sigmas;
-    bias_sigmas << Eigen::Vector3d::Constant(config_.accel_bias_prior_sigma), Eigen::Vector3d::Constant(config_.gyro_bias_prior_sigma);
-    out.update.factors.emplace<graph::PriorFactorVector3>(
-        graph::V(id), velocity, graph::GaussianNoise::from_sigmas(Eigen::Vector3d::Constant(config_.velocity_prior_sigma)).value());
-    out.update.factors.emplace<graph::PriorFactorImuBias>(graph::B(id), bias, graph::GaussianNoise::from_sigmas(bias_sigmas).value());
-  }
-  out.update.values.insert(graph::V(id), velocity);
-  out.update.values.insert(graph::B(id), bias);
-  previous_ = Anchor{id, keyframe.timestamp};
+  chain_.close(keyframe, velocity, link, out.update);
 
   // The frame's observations, from the keyframe's body.
   if (T_keyframe_frame) {

@@ -8,10 +8,9 @@
 // OKVIS's keyframe optimizations do) and loop closures pull it through the IMU and landmarks.
 //
 // Variables (graph/keys.hpp): X(k) = T_world_body of keyframe k (added by the KeyframeGraph),
-// V(k) world velocity (m/s), B(k) the IMU's biases in body axes, L(j) world points (m). The
-// first keyframe of a chain gets priors on V and B; a keyframe whose IMU interval cannot be
-// integrated (two samples more than 0.1 s apart, no samples) starts a new chain, linked to the
-// previous one by the odometry's relative motion at full weight.
+// V(k) world velocity (m/s), B(k) the IMU's biases in body axes (imu_keyframe_chain.hpp: a
+// keyframe the IMU cannot link starts a new chain, linked to the previous one by the odometry's
+// relative motion at full weight), L(j) world points (m).
 //
 // Measurements: IMU samples of the body origin's motion in body axes on the body clock (the
 // caller moves them through the calibration's imu_to_body); camera frames as the tracker's
@@ -44,6 +43,7 @@
 #include "hanzo/fusion/graph/imu_preintegration.hpp"
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "hanzo/fusion/vision/feature_observation.hpp"
+#include "imu_keyframe_chain.hpp"
 
 namespace hanzo::fusion::pipeline {
 
@@ -56,9 +56,7 @@ struct VisualInertialFactorsConfig {
   double max_depth_m = 60.0;
   double max_reprojection_sigmas = 3.0; ///< a new landmark's views must reproject within this
   double max_frame_gap_s = 0.1;         ///< the camera frame a keyframe uses is at most this older
-  double velocity_prior_sigma = 0.5;    ///< m/s, the first keyframe of a chain
-  double accel_bias_prior_sigma = 0.1;  ///< m/s^2
-  double gyro_bias_prior_sigma = 0.01;  ///< rad/s
+  ImuChainPriors priors;                ///< V and B of the first keyframe of a chain
   /// Where the IMU links two keyframes the odometry's relative motion stays in the graph with
   /// its covariance scaled by this (standard deviations x10): a weak anchor that counts the
   /// odometry's measurements a hundredth a second time. On six simulated flights and walks it
@@ -129,16 +127,9 @@ class VisualInertialFactors {
     int camera;
     Eigen::Vector2d normalized;
   };
-  struct Anchor {
-    uint64_t id;
-    Timestamp time;
-  };
   // The frame a keyframe at `keyframe_time` uses: the last one at or before it, at most
   // max_frame_gap_s earlier (frames are tracked ahead of the Frontend's keyframes); end() if none.
   std::deque<Frame>::const_iterator frame_for(Timestamp keyframe_time) const;
-  std::optional<graph::ImuPreintegration> preintegrate(Timestamp from, Timestamp to, const graph::ImuBias& bias) const;
-  // T_keyframe_frame: the body's motion from the keyframe back to a frame before it (its IMU).
-  std::optional<SE3> body_motion_back(const msgs::Keyframe& keyframe, const graph::ImuBias& bias, Timestamp frame_time) const;
   void add_projection(KeyframeFactors& out, uint64_t feature, const View& view) const;
   // Whether the view's camera, with the body at T_world_keyframe, sees the point at least
   // min_depth_m in front.
@@ -146,14 +137,10 @@ class VisualInertialFactors {
   void make_landmarks(KeyframeFactors& out, const SE3& T_world_keyframe, const SE3& T_world_odometry, const graph::Values& estimate);
 
   std::vector<Camera> cameras_;
-  graph::ImuPreintegrationConfig imu_;
-  double accel_bias_random_walk_;
-  double gyro_bias_random_walk_;
   VisualInertialFactorsConfig config_;
+  ImuKeyframeChain chain_;
   graph::GaussianNoise projection_noise_;  // pixel_sigma, both axes
-  std::deque<estimate::ImuSample> samples_;
   std::deque<Frame> frames_;  // the last seconds'
-  std::optional<Anchor> previous_;                  // the last keyframe of the chain
   std::map<uint64_t, std::vector<View>> tracks_;    // features seen at keyframes, not landmarks yet
   std::set<uint64_t> landmarks_;                    // features with an L in the graph, still tracked
   std::set<uint64_t> made_;                         // every feature with an L in the graph

@@ -204,6 +204,8 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"graph_keyframes", mapping.graph_keyframes},
       {"graph_landmarks", mapping.graph_landmarks},
       {"graph_projections", mapping.graph_projections},
+      {"graph_imu_factors", mapping.graph_imu_factors},
+      {"graph_lidar_factors", mapping.graph_lidar_factors},
       {"map_keyframes", mapping.map_keyframes},
       {"loop_candidates", mapping.loop_candidates},
       {"loop_closures", mapping.loop_closures},

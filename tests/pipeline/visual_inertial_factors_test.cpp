@@ -11,35 +11,16 @@
 
 #include "hanzo/fusion/graph/keys.hpp"
 #include "hanzo/fusion/pipeline/keyframe_graph.hpp"
+#include "circle_motion.hpp"
 #include "visual_inertial_factors.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
 
-// A body circling at 1.5 m/s (radius 3 m, 0.5 rad/s, heaving 0.3 m), facing along its motion,
-// with a forward camera; points on a cylinder of radius 6 m around the circle's centre.
-constexpr double kRadius = 3.0;
-constexpr double kRate = 0.5;
+// The body circles (circle_motion.hpp), facing along its motion, with a forward camera; points
+// on a cylinder of radius 6 m around the circle's centre.
+using namespace circle_motion;
 constexpr double kFocal = 400.0;
-const Eigen::Vector3d kGravity(0.0, 0.0, -9.80665);
-
-SE3 true_pose(double t) {
-  const Eigen::Vector3d position(kRadius * std::cos(kRate * t), kRadius * std::sin(kRate * t), 0.3 * std::sin(2.0 * kRate * t));
-  return SE3(SO3::exp(Eigen::Vector3d(0.0, 0.0, kRate * t + M_PI / 2.0)), position);
-}
-
-Eigen::Vector3d true_velocity(double t) {
-  return Eigen::Vector3d(-kRadius * kRate * std::sin(kRate * t), kRadius * kRate * std::cos(kRate * t), 0.6 * kRate * std::cos(2.0 * kRate * t));
-}
-
-// The IMU reading of the sample at t, held over (t - dt, t]: the motion at the interval's middle.
-estimate::ImuSample imu_sample(double t, double dt) {
-  const double m = t - dt / 2.0;
-  const Eigen::Vector3d acceleration(-kRadius * kRate * kRate * std::cos(kRate * m), -kRadius * kRate * kRate * std::sin(kRate * m),
-                                     -1.2 * kRate * kRate * std::sin(2.0 * kRate * m));
-  const SO3 R_world_body = true_pose(m).rotation();
-  return {Timestamp::from_seconds(100.0 + t), Eigen::Vector3d(0.0, 0.0, kRate), R_world_body.inverse() * (acceleration - kGravity)};
-}
 
 SE3 body_to_camera() {  // camera z forward (body x), x right (body -y), y down (body -z)
   Eigen::Matrix3d R_body_camera;

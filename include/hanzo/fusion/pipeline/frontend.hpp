@@ -47,6 +47,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "hanzo/fusion/calib/calibration.hpp"
@@ -232,6 +233,9 @@ class Frontend {
   /// The product of the corrections fused so far (world frame, newest on the left): a pose
   /// that was T_world_body before them is world_correction() * T_world_body now.
   SE3 world_correction() const;
+  /// The IMU's bias estimates now (accelerometer m/s^2, gyroscope rad/s, in the IMU's axes);
+  /// none before initialization or without an IMU.
+  std::optional<std::pair<Eigen::Vector3d, Eigen::Vector3d>> imu_bias() const;
   /// The latest PoseEstimate, if any.
   std::optional<msgs::PoseEstimate> latest_pose() const;
   /// T_world_body at a past time within the lag window (body clock), interpolated between the

@@ -62,8 +62,10 @@
 //    odometry's poses then follow.
 //  - Everything else goes to Frontend::push (same checks, same errors).
 //  - Keyframes of the Frontend (frontend.keyframe_interval) become nodes of a KeyframeGraph
-//    (between factors from the filter's relative motion); after each push the graph is updated
-//    and corrects the Frontend. The LiDAR odometry follows the correction (its frame moves with
+//    (between factors from the filter's relative motion; with an IMU and a camera (msckf) or a
+//    3D LiDAR, IMU preintegration and the visual landmarks' or the LiDAR odometry's factors,
+//    the filter's relative motion a weak anchor); after each push the graph is updated
+//    and corrects the Frontend (at loop closures only where it holds what the filter fused). The LiDAR odometry follows the correction (its frame moves with
 //    the Frontend's world).
 //  - Map keyframes: the first registered sweep after a Frontend keyframe, when the LiDAR moved
 //    map_keyframe_distance / map_keyframe_angle since the previous map keyframe, is kept
@@ -118,6 +120,8 @@ class Mat;
 namespace hanzo::fusion::pipeline {
 
 class CameraOdometry;
+class LidarInertialFactors;
+class BodyImu;
 class VisualLoopClosures;
 
 enum class SessionMode { kReplay, kRealtime };
@@ -159,6 +163,11 @@ struct SessionConfig {
   /// variables and landmarks stay (memory and loop-closure batches grow with the flight).
   /// Measured against keeping everything in bench/RESULTS.md.
   int visual_inertial_window_keyframes = 40;
+  /// A 3D LiDAR and an IMU: the keyframe graph holds IMU preintegration factors and the LiDAR
+  /// odometry's relative motions with their registration covariance (lidar_inertial_factors.hpp),
+  /// the filter's relative motions only as a weak anchor; such a graph corrects the Frontend at
+  /// loop closures only. false: between factors from the filter's relative motion.
+  bool lidar_inertial_factors = true;
   lidar::LoopClosureConfig loop;
   double loop_translation_sigma = 0.05;  ///< m, loop closure factors (detected and manual)
   double loop_rotation_sigma = 0.005;    ///< rad
@@ -230,6 +239,10 @@ struct MappingSummary {
   /// Landmarks of the visual-inertial keyframe graph (frontend.type msckf) and their projections.
   uint64_t graph_landmarks = 0;
   uint64_t graph_projections = 0;
+  /// Keyframes the LiDAR-inertial keyframe graph links to the previous one by IMU
+  /// preintegration and by the LiDAR odometry's relative motion (lidar_inertial_factors).
+  uint64_t graph_imu_factors = 0;
+  uint64_t graph_lidar_factors = 0;
   uint64_t loop_candidates = 0;
   uint64_t loop_closures = 0;     ///< detected and verified
   uint64_t manual_loop_closures = 0;
@@ -406,6 +419,10 @@ class Session {
   std::unique_ptr<KeyframeGraph> graph_;  ///< replaced by a fresh one at a relocalization
   bool restart_graph_ = false;  ///< the next keyframe starts the graph (after a relocalization)
   std::optional<LidarInertialOdometry> odometry_;
+  /// The LiDAR-inertial graph's factors (lidar_inertial_factors) and the IMU they integrate.
+  std::unique_ptr<LidarInertialFactors> lidar_factors_;
+  std::unique_ptr<BodyImu> body_imu_;
+  std::string imu_sensor_;
   std::optional<PlanarLaserOdometry> planar_;  ///< instead of odometry_ for a planar_laser sensor
   /// Whether sweeps of lidar_sensor_ go through a LiDAR pipeline (3D or planar) here.
   bool maps_lidar() const { return odometry_.has_value() || planar_.has_value(); }
