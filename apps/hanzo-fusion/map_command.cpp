@@ -271,6 +271,22 @@ nlohmann::json describe_map(const msgs::FusionMap& map) {
     layers["visual_landmarks"] = {{"camera", map.visual_landmarks->camera}, {"landmarks", map.visual_landmarks->positions.size()},
                                   {"keyframes", map.visual_landmarks->keyframes.size()}};
   }
+  const auto trained = [](const msgs::NeuralProvenance& provenance) {
+    return nlohmann::json{{"views", provenance.views},
+                          {"iterations", provenance.iterations},
+                          {"training_seconds", provenance.training_seconds},
+                          {"evaluated_views", provenance.evaluated_views},
+                          {"psnr_db", provenance.psnr_db},
+                          {"ssim", provenance.ssim}};
+  };
+  if (map.gaussian_splats) {
+    layers["gaussian_splats"] = {{"gaussians", map.gaussian_splats->size()}, {"sh_degree", map.gaussian_splats->sh_degree},
+                                 {"trained", trained(map.gaussian_splats->provenance)}};
+  }
+  if (map.neural_field) {
+    layers["neural_field"] = {{"encoding", map.neural_field->encoding}, {"bytes", map.neural_field->model.size()},
+                              {"trained", trained(map.neural_field->provenance)}};
+  }
   result["layers"] = layers;
   return result;
 }
@@ -294,6 +310,22 @@ std::string describe_map_text(const nlohmann::json& description) {
     const auto& v = layers["visual_landmarks"];
     text += fmt::format("  visual landmarks: {} seen by {} keyframes of camera {}\n", v["landmarks"].get<std::size_t>(), v["keyframes"].get<std::size_t>(),
                         v["camera"].get<std::string>());
+  }
+  const auto trained_text = [](const nlohmann::json& trained) {
+    std::string line = fmt::format("trained on {} views, {} steps", trained["views"].get<uint32_t>(), trained["iterations"].get<uint64_t>());
+    if (trained["evaluated_views"].get<uint32_t>() > 0) {
+      line += fmt::format(", {:.2f} dB PSNR on {} held-back views", trained["psnr_db"].get<double>(), trained["evaluated_views"].get<uint32_t>());
+    }
+    return line;
+  };
+  if (layers.contains("gaussian_splats")) {
+    const auto& g = layers["gaussian_splats"];
+    text += fmt::format("  gaussian splats: {} (SH degree {}), {}\n", g["gaussians"].get<std::size_t>(), g["sh_degree"].get<uint32_t>(), trained_text(g["trained"]));
+  }
+  if (layers.contains("neural_field")) {
+    const auto& n = layers["neural_field"];
+    text += fmt::format("  neural field: {} ({:.1f} MB), {}\n", n["encoding"].get<std::string>(), static_cast<double>(n["bytes"].get<std::size_t>()) / 1e6,
+                        trained_text(n["trained"]));
   }
   return text;
 }

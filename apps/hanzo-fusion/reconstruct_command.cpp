@@ -5,7 +5,9 @@
 // (neural/nerf_trainer.hpp) and writes DIR/nerf.hznerf and DIR/reconstruction.json.
 // Both take a sensor log instead of TRANSFORMS: --log LOG --trajectory T.tum --calibration C.yaml
 // (neural/log_views.hpp).
-// hanzo-fusion render DIR --poses POSES.json --out VIEWS: renders DIR's splats or NeRF at every
+// With --map MAP.fmap the splats or the NeRF also become a layer of that FusionMap (created when
+// missing, else its next version; neural/map_layers.hpp).
+// hanzo-fusion render DIR --poses POSES.json --out VIEWS: renders DIR's (or a FusionMap's) splats or NeRF at every
 // camera of a transforms-style JSON, in its frame order and at its resolution, one PNG per frame
 // (depth as 16-bit PNG on request); where the poses file's images exist, PSNR and SSIM against them.
 
@@ -26,7 +28,10 @@
 #include "commands.hpp"
 #include "hanzo/fusion/core/files.hpp"
 #include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/maps/fusion_map_file.hpp"
+#include "hanzo/fusion/maps/map_store.hpp"
 #include "hanzo/fusion/neural/log_views.hpp"
+#include "hanzo/fusion/neural/map_layers.hpp"
 #include "hanzo/fusion/neural/nerf_trainer.hpp"
 #include "hanzo/fusion/neural/splat_ply.hpp"
 #include "hanzo/fusion/neural/splat_trainer.hpp"
@@ -45,6 +50,7 @@ struct InputOptions {
   int hold_every = 0;  // hold back every N-th view instead
   int downscale = 1;
   std::string background = "white";
+  std::string map;     // FusionMap file that also gets the result as a layer
 };
 
 struct ReconstructOptions {
@@ -73,7 +79,8 @@ struct NerfOptions {
 };
 
 struct RenderOptions {
-  std::string model;  // folder with splats.ply or nerf.hznerf, or the file itself
+  std::string model;  // folder with splats.ply or nerf.hznerf, the file itself, or a FusionMap (.fmap)
+  std::string layer;  // of a FusionMap: "splats" or "nerf" (default: splats when it has them)
   std::string poses;
   std::string out;
   int downscale = 1;
@@ -174,6 +181,44 @@ void add_input_options(CLI::App* command, InputOptions& input) {
   command->add_option("--hold-every", input.hold_every, "Hold back every N-th view and score them after training")->check(CLI::Range(2, 1000));
   command->add_option("--downscale", input.downscale, "Divide the images' resolution by this")->check(CLI::Range(1, 64));
   command->add_option("--background", input.background, "Behind transparent pixels and the scene: white or black");
+  command->add_option("--map", input.map, "Also store the result as a layer of this FusionMap (.fmap; created when missing, else its next version)");
+}
+
+/// How the layer was trained, for its provenance.
+msgs::NeuralProvenance neural_provenance(const nlohmann::json& result) {
+  msgs::NeuralProvenance provenance;
+  provenance.source = result.value("source", nlohmann::json::object()).dump();
+  provenance.views = result.value("train_views", 0u);
+  provenance.iterations = result.value("iterations", uint64_t{0});
+  provenance.training_seconds = result.value("training_seconds", 0.0);
+  if (result.contains("eval")) {
+    provenance.evaluated_views = result["eval"].value("views", 0u);
+    provenance.psnr_db = result["eval"].value("psnr", 0.0);
+    provenance.ssim = result["eval"].value("ssim", 0.0);
+  }
+  return provenance;
+}
+
+/// Puts a layer into the FusionMap at `path` (read when it exists: its next version, the other
+/// layers kept; else a new map) and writes it atomically; reports the map in `result["map"]`.
+Status store_layer(const std::string& path, const std::string& layer_name, const std::function<void(msgs::FusionMap&)>& set_layer,
+                   nlohmann::json& result) {
+  msgs::FusionMap map;
+  if (std::filesystem::exists(path)) {
+    HANZO_ASSIGN_OR_RETURN(map, maps::read_fusion_map(path));
+    map.parent_version = map.version;
+    ++map.version;
+  } else {
+    map.map_id = maps::generate_map_id();
+    map.version = 1;
+    map.created = Timestamp::wall_clock_now();
+    map.provenance.algorithm = "neural/reconstruct";
+    map.provenance.software_version = HANZO_FUSION_VERSION;
+  }
+  set_layer(map);
+  HANZO_RETURN_IF_ERROR(maps::write_fusion_map(path, map));
+  result["map"] = {{"path", path}, {"map_id", map.map_id}, {"version", map.version}, {"layer", layer_name}};
+  return ok_status();
 }
 
 Status create_folder(const std::string& folder) {
@@ -299,6 +344,12 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
     text += fmt::format("held-back views: {}, PSNR {:.2f} dB, SSIM {:.4f}, {:.0f} ms per view\n", scores.views.size(), scores.mean_psnr, scores.mean_ssim,
                         1000.0 * scores.seconds_per_view);
   }
+  if (!options.input.map.empty()) {
+    const msgs::GaussianSplatLayer layer = neural::to_splat_layer(trainer->cloud(), neural_provenance(result));
+    const Status stored = store_layer(options.input.map, "gaussian_splats", [&layer](msgs::FusionMap& map) { map.gaussian_splats = layer; }, result);
+    if (!stored) return report_failure(output, result, stored.error().message);
+    text += fmt::format("{}: version {} with the splats\n", options.input.map, result["map"]["version"].get<uint64_t>());
+  }
   return finish_reconstruction(output, result, options.out, text);
 }
 
@@ -370,6 +421,12 @@ int run_reconstruct_nerf(const Output& output, const NerfOptions& options) {
     text += fmt::format("held-back views: {}, PSNR {:.2f} dB, SSIM {:.4f}, {:.0f} ms per view\n", scores.views.size(), scores.mean_psnr, scores.mean_ssim,
                         1000.0 * scores.seconds_per_view);
   }
+  if (!options.input.map.empty()) {
+    const msgs::NeuralFieldLayer layer = neural::to_neural_field_layer(trainer->field(), neural_provenance(result));
+    const Status stored = store_layer(options.input.map, "neural_field", [&layer](msgs::FusionMap& map) { map.neural_field = layer; }, result);
+    if (!stored) return report_failure(output, result, stored.error().message);
+    text += fmt::format("{}: version {} with the neural field\n", options.input.map, result["map"]["version"].get<uint64_t>());
+  }
   return finish_reconstruction(output, result, options.out, text);
 }
 
@@ -381,25 +438,17 @@ struct Scene {
   std::function<neural::NerfRender(const neural::SplatCamera&)> render;
 };
 
-Result<Scene> load_scene(const std::string& path, const Eigen::Vector3f& background) {
-  std::string file = path;
-  if (std::filesystem::is_directory(path)) {
-    const std::filesystem::path nerf = std::filesystem::path(path) / "nerf.hznerf";
-    file = std::filesystem::exists(nerf) ? nerf.string() : (std::filesystem::path(path) / "splats.ply").string();
-  }
+Scene nerf_scene(neural::NerfField field, const Eigen::Vector3f& background) {
   Scene scene;
-  scene.file = file;
-  if (std::filesystem::path(file).extension() == ".hznerf") {
-    Result<neural::NerfField> field = neural::load_nerf(file);
-    if (!field) return field.error();
-    scene.kind = "nerf";
-    scene.size = field->parameter_count();
-    auto shared = std::make_shared<neural::NerfField>(std::move(*field));
-    scene.render = [shared, background](const neural::SplatCamera& camera) { return shared->render(camera, background); };
-    return scene;
-  }
-  neural::GaussianCloud cloud;
-  HANZO_ASSIGN_OR_RETURN(cloud, neural::read_splat_ply(file));
+  scene.kind = "nerf";
+  scene.size = field.parameter_count();
+  auto shared = std::make_shared<neural::NerfField>(std::move(field));
+  scene.render = [shared, background](const neural::SplatCamera& camera) { return shared->render(camera, background); };
+  return scene;
+}
+
+Scene splat_scene(neural::GaussianCloud cloud, const Eigen::Vector3f& background) {
+  Scene scene;
   scene.kind = "splats";
   scene.size = cloud.size();
   auto shared = std::make_shared<neural::GaussianCloud>(std::move(cloud));
@@ -412,13 +461,57 @@ Result<Scene> load_scene(const std::string& path, const Eigen::Vector3f& backgro
   return scene;
 }
 
+/// A FusionMap's splats or neural field (`layer`: "splats", "nerf", or empty: splats when there).
+Result<Scene> load_map_scene(const std::string& path, const std::string& layer, const Eigen::Vector3f& background) {
+  msgs::FusionMap map;
+  HANZO_ASSIGN_OR_RETURN(map, maps::read_fusion_map(path));
+  if (layer != "" && layer != "splats" && layer != "nerf") return Error(fmt::format("--layer: '{}' (splats or nerf)", layer));
+  if (layer != "nerf" && map.gaussian_splats) {
+    neural::GaussianCloud cloud;
+    HANZO_ASSIGN_OR_RETURN(cloud, neural::from_splat_layer(*map.gaussian_splats));
+    return splat_scene(std::move(cloud), background);
+  }
+  if (layer != "splats" && map.neural_field) {
+    Result<neural::NerfField> field = neural::from_neural_field_layer(*map.neural_field);
+    if (!field) return Error(fmt::format("{}: {}", path, field.error().message));
+    return nerf_scene(std::move(*field), background);
+  }
+  return Error(fmt::format("{}: no {} layer in this map (reconstruct splats|nerf --map adds one)", path,
+                           layer == "nerf" ? "neural_field" : layer == "splats" ? "gaussian_splats" : "gaussian_splats or neural_field"));
+}
+
+Result<Scene> load_scene(const std::string& path, const std::string& layer, const Eigen::Vector3f& background) {
+  std::string file = path;
+  if (std::filesystem::is_directory(path)) {
+    const std::filesystem::path nerf = std::filesystem::path(path) / "nerf.hznerf";
+    file = std::filesystem::exists(nerf) ? nerf.string() : (std::filesystem::path(path) / "splats.ply").string();
+  }
+  Scene scene;
+  if (std::filesystem::path(file).extension() == ".fmap") {
+    HANZO_ASSIGN_OR_RETURN(scene, load_map_scene(file, layer, background));
+  } else if (!layer.empty()) {
+    return Error("--layer applies to a FusionMap (.fmap) only");
+  } else if (std::filesystem::path(file).extension() == ".hznerf") {
+    Result<neural::NerfField> field = neural::load_nerf(file);
+    if (!field) return field.error();
+    scene = nerf_scene(std::move(*field), background);
+  } else {
+    neural::GaussianCloud cloud;
+    HANZO_ASSIGN_OR_RETURN(cloud, neural::read_splat_ply(file));
+    scene = splat_scene(std::move(cloud), background);
+  }
+  scene.file = file;
+  return scene;
+}
+
+
 int run_render(const Output& output, const RenderOptions& options) {
   nlohmann::json result = {{"model", options.model}, {"poses", options.poses}, {"out", options.out}};
   std::unique_ptr<tbb::global_control> threads;
   if (options.threads > 0) threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
   Result<Eigen::Vector3f> background = background_colour(options.background);
   if (!background) return report_failure(output, result, background.error().message);
-  Result<Scene> scene = load_scene(options.model, *background);
+  Result<Scene> scene = load_scene(options.model, options.layer, *background);
   if (!scene) return report_failure(output, result, scene.error().message);
   neural::ViewDatasetConfig dataset_config;
   dataset_config.downscale = options.downscale;
@@ -507,7 +600,8 @@ void add_reconstruct_command(CLI::App& app, const Output& output, Command& run) 
 
   auto render = std::make_shared<RenderOptions>();
   CLI::App* render_app = app.add_subcommand("render", "Render trained splats or a NeRF at the cameras of a transforms.json, one PNG per frame");
-  render_app->add_option("MODEL", render->model, "Folder written by reconstruct splats|nerf, or its splats.ply / nerf.hznerf")->required();
+  render_app->add_option("MODEL", render->model, "Folder written by reconstruct splats|nerf, its splats.ply / nerf.hznerf, or a FusionMap (.fmap) with such a layer")->required();
+  render_app->add_option("--layer", render->layer, "Of a FusionMap with both: splats or nerf (default: splats)");
   render_app->add_option("--poses", render->poses, "transforms.json whose frames give the cameras (and reference images, when present)")->required();
   render_app->add_option("--out", render->out, "Folder for the PNGs (0000.png, ... in frame order)")->required();
   render_app->add_option("--downscale", render->downscale, "Divide the poses' resolution by this")->check(CLI::Range(1, 64));

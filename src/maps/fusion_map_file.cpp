@@ -71,6 +71,8 @@ std::vector<v1::FusionMap> cut_into_pieces(const v1::FusionMap& map, std::size_t
   metadata.clear_tsdf();
   metadata.clear_mesh();
   metadata.clear_visual_landmarks();
+  metadata.clear_gaussian_splats();
+  metadata.clear_neural_field();
   pieces.push_back(std::move(metadata));
 
   if (map.has_points()) {
@@ -143,6 +145,34 @@ std::vector<v1::FusionMap> cut_into_pieces(const v1::FusionMap& map, std::size_t
     for_each_slice(layer.keyframes_size(), std::max<std::size_t>(1, chunk_bytes / 4096), [&](int begin, int end) {
       copy_slice(layer.keyframes(), begin, end, pieces.emplace_back().mutable_visual_landmarks()->mutable_keyframes());
     });
+  }
+  if (map.has_gaussian_splats()) {
+    const v1::GaussianSplatLayer& layer = map.gaussian_splats();
+    v1::GaussianSplatLayer* head = pieces.emplace_back().mutable_gaussian_splats();
+    head->set_sh_degree(layer.sh_degree());
+    *head->mutable_provenance() = layer.provenance();
+    const int sh = layer.opacity_logits_size() > 0 ? layer.sh_size() / layer.opacity_logits_size() : 0;
+    for_each_slice(layer.opacity_logits_size(), chunk_bytes / (4 * (11 + static_cast<std::size_t>(sh))), [&](int begin, int end) {
+      v1::GaussianSplatLayer* piece = pieces.emplace_back().mutable_gaussian_splats();
+      copy_slice(layer.positions(), 3 * begin, 3 * end, piece->mutable_positions());
+      copy_slice(layer.log_scales(), 3 * begin, 3 * end, piece->mutable_log_scales());
+      copy_slice(layer.rotations(), 4 * begin, 4 * end, piece->mutable_rotations());
+      copy_slice(layer.opacity_logits(), begin, end, piece->mutable_opacity_logits());
+      copy_slice(layer.sh(), sh * begin, sh * end, piece->mutable_sh());
+    });
+  }
+  if (map.has_neural_field()) {
+    // The model's bytes in parts of chunk_bytes (their concatenation is the model).
+    const v1::NeuralFieldLayer& layer = map.neural_field();
+    v1::NeuralFieldLayer* head = pieces.emplace_back().mutable_neural_field();
+    head->set_encoding(layer.encoding());
+    *head->mutable_provenance() = layer.provenance();
+    const std::size_t part_bytes = std::max<std::size_t>(1, chunk_bytes);
+    for (const std::string& part : layer.model_parts()) {
+      for (std::size_t begin = 0; begin < part.size(); begin += part_bytes) {
+        pieces.emplace_back().mutable_neural_field()->add_model_parts(part.substr(begin, part_bytes));
+      }
+    }
   }
   return pieces;
 }

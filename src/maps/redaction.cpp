@@ -137,6 +137,15 @@ Result<msgs::FusionMap> redact_map(const msgs::FusionMap& map, const RedactionCo
     out.tsdf.reset();
     note("tsdf: layer removed");
   }
+  // Photorealistic layers render the facility from any viewpoint: removed at any resolution.
+  if (out.gaussian_splats && resolution > 0.0) {
+    out.gaussian_splats.reset();
+    note("gaussian_splats: layer removed");
+  }
+  if (out.neural_field && resolution > 0.0) {
+    out.neural_field.reset();
+    note("neural_field: layer removed");
+  }
   if (config.drop_labels) {
     std::size_t dropped = 0;
     if (out.points) dropped += std::exchange(out.points->labels, {}).size();

@@ -177,6 +177,56 @@ Result<VisualLandmarkLayer> read(const v1::VisualLandmarkLayer& in) {
   return layer;
 }
 
+void write(const NeuralProvenance& provenance, v1::NeuralProvenance* out) {
+  out->set_source(provenance.source);
+  out->set_views(provenance.views);
+  out->set_iterations(provenance.iterations);
+  out->set_training_seconds(provenance.training_seconds);
+  out->set_evaluated_views(provenance.evaluated_views);
+  out->set_psnr_db(provenance.psnr_db);
+  out->set_ssim(provenance.ssim);
+}
+
+NeuralProvenance read(const v1::NeuralProvenance& in) {
+  return {in.source(), in.views(), in.iterations(), in.training_seconds(), in.evaluated_views(), in.psnr_db(), in.ssim()};
+}
+
+void write(const GaussianSplatLayer& layer, v1::GaussianSplatLayer* out) {
+  out->set_sh_degree(layer.sh_degree);
+  out->mutable_positions()->Add(layer.positions.begin(), layer.positions.end());
+  out->mutable_log_scales()->Add(layer.log_scales.begin(), layer.log_scales.end());
+  out->mutable_rotations()->Add(layer.rotations.begin(), layer.rotations.end());
+  out->mutable_opacity_logits()->Add(layer.opacity_logits.begin(), layer.opacity_logits.end());
+  out->mutable_sh()->Add(layer.sh.begin(), layer.sh.end());
+  write(layer.provenance, out->mutable_provenance());
+}
+
+GaussianSplatLayer read(const v1::GaussianSplatLayer& in) {
+  GaussianSplatLayer layer;
+  layer.sh_degree = in.sh_degree();
+  layer.positions.assign(in.positions().begin(), in.positions().end());
+  layer.log_scales.assign(in.log_scales().begin(), in.log_scales().end());
+  layer.rotations.assign(in.rotations().begin(), in.rotations().end());
+  layer.opacity_logits.assign(in.opacity_logits().begin(), in.opacity_logits().end());
+  layer.sh.assign(in.sh().begin(), in.sh().end());
+  layer.provenance = read(in.provenance());
+  return layer;
+}
+
+void write(const NeuralFieldLayer& layer, v1::NeuralFieldLayer* out) {
+  out->set_encoding(layer.encoding);
+  *out->add_model_parts() = layer.model;
+  write(layer.provenance, out->mutable_provenance());
+}
+
+NeuralFieldLayer read(const v1::NeuralFieldLayer& in) {
+  NeuralFieldLayer layer;
+  layer.encoding = in.encoding();
+  for (const std::string& part : in.model_parts()) layer.model += part;
+  layer.provenance = read(in.provenance());
+  return layer;
+}
+
 }  // namespace
 
 v1::FusionMap to_proto(const FusionMap& map) {
@@ -207,6 +257,8 @@ v1::FusionMap to_proto(const FusionMap& map) {
   if (map.tsdf) write(*map.tsdf, out.mutable_tsdf());
   if (map.mesh) write(*map.mesh, out.mutable_mesh());
   if (map.visual_landmarks) write(*map.visual_landmarks, out.mutable_visual_landmarks());
+  if (map.gaussian_splats) write(*map.gaussian_splats, out.mutable_gaussian_splats());
+  if (map.neural_field) write(*map.neural_field, out.mutable_neural_field());
   return out;
 }
 
@@ -242,6 +294,8 @@ Result<FusionMap> from_proto(const v1::FusionMap& in) {
   if (in.has_tsdf()) map.tsdf = read(in.tsdf());
   if (in.has_mesh()) map.mesh = read(in.mesh());
   if (in.has_visual_landmarks()) HANZO_ASSIGN_OR_RETURN(map.visual_landmarks, read(in.visual_landmarks()));
+  if (in.has_gaussian_splats()) map.gaussian_splats = read(in.gaussian_splats());
+  if (in.has_neural_field()) map.neural_field = read(in.neural_field());
   return map;
 }
 

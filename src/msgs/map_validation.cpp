@@ -179,6 +179,37 @@ class MapChecker {
     return ok_status();
   }
 
+  Status gaussian_splats(const v1::GaussianSplatLayer& layer, const std::string& field) const {
+    if (layer.sh_degree() > 3) return fail(field + ".sh_degree", fmt::format("{} (expected 0 to 3)", layer.sh_degree()));
+    const int64_t count = layer.opacity_logits_size();
+    const int64_t sh_floats = 3 * int64_t{layer.sh_degree() + 1} * (layer.sh_degree() + 1);
+    struct Group {
+      const char* name;
+      const google::protobuf::RepeatedField<float>& values;
+      int64_t width;  // floats per Gaussian
+    };
+    const Group groups[] = {{"positions", layer.positions(), 3}, {"log_scales", layer.log_scales(), 3}, {"rotations", layer.rotations(), 4},
+                            {"opacity_logits", layer.opacity_logits(), 1}, {"sh", layer.sh(), sh_floats}};
+    for (const Group& group : groups) {
+      if (group.values.size() != group.width * count) {
+        return fail(fmt::format("{}.{}", field, group.name),
+                    fmt::format("{} floats for {} Gaussians (expected {} per Gaussian)", group.values.size(), count, group.width));
+      }
+      for (int i = 0; i < group.values.size(); ++i) {
+        if (!std::isfinite(group.values.Get(i))) return fail(fmt::format("{}.{}[{}]", field, group.name, i), "not finite");
+      }
+    }
+    return ok_status();
+  }
+
+  Status neural_field(const v1::NeuralFieldLayer& layer, const std::string& field) const {
+    if (layer.encoding() != "hznerf1") return fail(field + ".encoding", fmt::format("\"{}\" (this build reads \"hznerf1\")", layer.encoding()));
+    std::size_t bytes = 0;
+    for (const std::string& part : layer.model_parts()) bytes += part.size();
+    if (bytes == 0) return fail(field + ".model_parts", "empty (no model)");
+    return ok_status();
+  }
+
  private:
   std::string_view message_name_;
 };
@@ -201,6 +232,8 @@ Status validate(const v1::FusionMap& map) {
   if (map.has_tsdf()) HANZO_RETURN_IF_ERROR(check.tsdf(map.tsdf(), "tsdf"));
   if (map.has_mesh()) HANZO_RETURN_IF_ERROR(check.mesh(map.mesh(), "mesh"));
   if (map.has_visual_landmarks()) HANZO_RETURN_IF_ERROR(check.visual_landmarks(map.visual_landmarks(), "visual_landmarks"));
+  if (map.has_gaussian_splats()) HANZO_RETURN_IF_ERROR(check.gaussian_splats(map.gaussian_splats(), "gaussian_splats"));
+  if (map.has_neural_field()) HANZO_RETURN_IF_ERROR(check.neural_field(map.neural_field(), "neural_field"));
   return ok_status();
 }
 

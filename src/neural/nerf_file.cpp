@@ -24,7 +24,7 @@ void append_floats(std::string& out, const float* data, std::size_t count) { out
 
 }  // namespace
 
-Status save_nerf(const std::string& path, const NerfField& field) {
+std::string serialize_nerf(const NerfField& field) {
   const NerfFieldConfig& c = field.config();
   const NerfField::Network& network = field.network();
   nlohmann::json sizes = nlohmann::json::array();
@@ -49,15 +49,20 @@ Status save_nerf(const std::string& path, const NerfField& field) {
   const OccupancyGrid& grid = field.occupancy();
   append_floats(out, grid.values().data(), grid.values().size());
   out.append(reinterpret_cast<const char*>(grid.seen().data()), grid.seen().size());
-  return write_file_durably(path, out);
+  return out;
 }
+
+Status save_nerf(const std::string& path, const NerfField& field) { return write_file_durably(path, serialize_nerf(field)); }
 
 Result<NerfField> load_nerf(const std::string& path) {
   std::ifstream file(path, std::ios::binary);
   if (!file) return Error(fmt::format("{}: cannot open", path));
   std::stringstream buffer;
   buffer << file.rdbuf();
-  const std::string data = buffer.str();
+  return parse_nerf(buffer.str(), path);
+}
+
+Result<NerfField> parse_nerf(std::string_view data, const std::string& path) {
   const std::size_t magic = std::strlen(kMagic);
   if (data.compare(0, magic, kMagic) != 0) return Error(fmt::format("{}: not a NeRF file (no HZNERF1 header)", path));
   const std::size_t line_end = data.find('\n', magic);
@@ -105,7 +110,7 @@ Result<NerfField> load_nerf(const std::string& path) {
   std::vector<float> values(grid.cells());
   if (!read_floats(values.data(), values.size())) return Error(fmt::format("{}: truncated in the occupancy grid", path));
   if (data.size() - offset != grid.cells()) return Error(fmt::format("{}: {} bytes after the occupancy values, expected {}", path, data.size() - offset, grid.cells()));
-  std::vector<uint8_t> seen(data.begin() + static_cast<std::ptrdiff_t>(offset), data.end());
+  std::vector<uint8_t> seen(data.begin() + static_cast<std::ptrdiff_t>(offset), data.end());  // (string_view iterators)
   grid.restore(std::move(values), std::move(seen));
   return field;
 }

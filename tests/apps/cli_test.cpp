@@ -1564,4 +1564,62 @@ TEST(Cli, ReconstructNerfAndRenderIt) {
   std::filesystem::remove_all(dir);
 }
 
+// Splats and a NeRF as layers of one FusionMap (AI builds): each reconstruct --map makes the
+// map's next version and keeps the other layer; map info reports them with their training;
+// render draws the map's layers exactly as the folders' files; a missing layer is refused.
+TEST(Cli, ReconstructionsBecomeLayersOfAFusionMap) {
+  if (run("reconstruct --help").exit_code != 0) GTEST_SKIP() << "built without HANZO_FUSION_AI";
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_neural_map_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  const std::string d = dir.string();
+  const std::string lego = std::string(HANZO_DATA_DIR) + "/nerf_lego_400";
+  const CliRun splats = run(fmt::format("reconstruct splats {0}/transforms_train.json --out {1}/splats --downscale 8 --iterations 100 "
+                                        "--initial-gaussians 2000 --hold-every 4 --map {1}/scene.fmap --json",
+                                        lego, d));
+  ASSERT_EQ(splats.exit_code, 0) << splats.err;
+  const nlohmann::json trained = nlohmann::json::parse(splats.out);
+  EXPECT_EQ(trained["map"]["version"], 1);
+  EXPECT_EQ(trained["map"]["layer"], "gaussian_splats");
+  std::filesystem::copy_file(dir / "scene.fmap", dir / "splats_only.fmap");
+  const CliRun nerf = run(fmt::format("reconstruct nerf {0}/transforms_train.json --out {1}/nerf --downscale 8 --iterations 20 "
+                                      "--samples-per-step 8192 --map {1}/scene.fmap --json",
+                                      lego, d));
+  ASSERT_EQ(nerf.exit_code, 0) << nerf.err;
+  EXPECT_EQ(nlohmann::json::parse(nerf.out)["map"]["version"], 2);
+  EXPECT_EQ(nlohmann::json::parse(nerf.out)["map"]["map_id"], trained["map"]["map_id"]);
+
+  const CliRun info = run(fmt::format("map info {}/scene.fmap --json", d));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  const nlohmann::json layers = nlohmann::json::parse(info.out)["layers"];
+  EXPECT_EQ(layers["gaussian_splats"]["gaussians"], trained["gaussians"]);
+  EXPECT_EQ(layers["gaussian_splats"]["trained"]["views"], 75);
+  EXPECT_EQ(layers["gaussian_splats"]["trained"]["evaluated_views"], 25);
+  EXPECT_EQ(layers["gaussian_splats"]["trained"]["psnr_db"], trained["eval"]["psnr"]);
+  EXPECT_EQ(layers["neural_field"]["bytes"], nlohmann::json::parse(nerf.out)["model_bytes"]);
+  EXPECT_EQ(layers["neural_field"]["trained"]["iterations"], 20);
+  EXPECT_THAT(run(fmt::format("map info {}/scene.fmap", d)).out, HasSubstr("gaussian splats: "));
+
+  // The map's layers render exactly as the folders' files.
+  for (const auto& [layer, folder] : {std::pair<std::string, std::string>{"splats", "splats"}, {"nerf", "nerf"}}) {
+    const CliRun from_map = run(fmt::format("render {0}/scene.fmap --layer {1} --poses {2}/transforms_val.json --out {0}/map_{1} --downscale 8 --json", d, layer, lego));
+    ASSERT_EQ(from_map.exit_code, 0) << from_map.err;
+    EXPECT_EQ(nlohmann::json::parse(from_map.out)["kind"], layer);
+    ASSERT_EQ(run(fmt::format("render {0}/{1} --poses {2}/transforms_val.json --out {0}/folder_{1} --downscale 8", d, folder, lego)).exit_code, 0);
+    for (const char* view : {"0000.png", "0013.png"}) {
+      const cv::Mat a = cv::imread((dir / ("map_" + layer) / view).string());
+      const cv::Mat b = cv::imread((dir / ("folder_" + layer) / view).string());
+      ASSERT_FALSE(a.empty());
+      EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0) << layer << " " << view;
+    }
+  }
+  const CliRun missing = run(fmt::format("render {0}/splats_only.fmap --layer nerf --poses {1}/transforms_val.json --out {0}/x", d, lego));
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_THAT(missing.err, HasSubstr("no neural_field layer"));
+  EXPECT_EQ(std::count(missing.err.begin(), missing.err.end(), '\n'), 1);
+  const CliRun not_a_map = run(fmt::format("render {0}/splats --layer nerf --poses {1}/transforms_val.json --out {0}/x", d, lego));
+  EXPECT_EQ(not_a_map.exit_code, 1);
+  EXPECT_THAT(not_a_map.err, HasSubstr("--layer applies to a FusionMap"));
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace

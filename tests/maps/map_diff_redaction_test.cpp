@@ -107,6 +107,9 @@ TEST(Redaction, LabelsGoAndGeometryCoarsensWithoutLosingObstacles) {
   EXPECT_LT(redacted->points->points.size(), map.points->points.size());
   EXPECT_EQ(redacted->points->voxel_size, 0.5);
   EXPECT_FALSE(redacted->tsdf.has_value());
+  EXPECT_FALSE(redacted->gaussian_splats.has_value());  // photorealistic: gone at any resolution
+  EXPECT_FALSE(redacted->neural_field.has_value());
+  EXPECT_THAT(report.actions, ::testing::Contains("gaussian_splats: layer removed"));
   EXPECT_TRUE(redacted->sensor_configuration.empty());
   EXPECT_EQ(redacted->provenance.input_logs[0].uri, "redacted");
   EXPECT_THAT(redacted->provenance.parameters, HasSubstr("redaction: {drop_labels: true, resolution: 0.5"));

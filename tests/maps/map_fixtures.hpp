@@ -75,6 +75,24 @@ inline msgs::FusionMap full_map() {
   }
   for (uint32_t i = 0; i + 2 < 300; ++i) mesh.triangle_indices.insert(mesh.triangle_indices.end(), {i, i + 1, i + 2});
   map.mesh = mesh;
+
+  msgs::GaussianSplatLayer splats;
+  splats.sh_degree = 1;
+  for (int i = 0; i < 200; ++i) {
+    const auto f = static_cast<float>(i);
+    splats.positions.insert(splats.positions.end(), {f, -f, 0.5f * f});
+    splats.log_scales.insert(splats.log_scales.end(), {-3.0f, -2.5f, -2.0f - 0.001f * f});
+    splats.rotations.insert(splats.rotations.end(), {1.0f, 0.0f, 0.01f * f, 0.0f});
+    splats.opacity_logits.push_back(0.02f * f - 2.0f);
+    for (int k = 0; k < 12; ++k) splats.sh.push_back(0.01f * static_cast<float>((i + k) % 50));
+  }
+  splats.provenance = {"{\"transforms\":\"scene.json\"}", 40, 3000, 120.5, 10, 24.5, 0.81};
+  map.gaussian_splats = splats;
+
+  msgs::NeuralFieldLayer field;
+  for (int i = 0; i < 5000; ++i) field.model.push_back(static_cast<char>(i % 256));  // every byte value, zeros included
+  field.provenance = {"{\"log\":\"drive.mcap\"}", 30, 500, 60.0, 0, 0.0, 0.0};
+  map.neural_field = field;
   return map;
 }
 
@@ -136,6 +154,31 @@ inline void expect_same(const msgs::FusionMap& a, const msgs::FusionMap& b) {
     EXPECT_EQ(a.mesh->vertices, b.mesh->vertices);
     EXPECT_EQ(a.mesh->triangle_indices, b.mesh->triangle_indices);
     EXPECT_EQ(a.mesh->vertex_labels, b.mesh->vertex_labels);
+  }
+  const auto expect_same_provenance = [](const msgs::NeuralProvenance& x, const msgs::NeuralProvenance& y) {
+    EXPECT_EQ(x.source, y.source);
+    EXPECT_EQ(x.views, y.views);
+    EXPECT_EQ(x.iterations, y.iterations);
+    EXPECT_EQ(x.training_seconds, y.training_seconds);
+    EXPECT_EQ(x.evaluated_views, y.evaluated_views);
+    EXPECT_EQ(x.psnr_db, y.psnr_db);
+    EXPECT_EQ(x.ssim, y.ssim);
+  };
+  ASSERT_EQ(a.gaussian_splats.has_value(), b.gaussian_splats.has_value());
+  if (a.gaussian_splats) {
+    EXPECT_EQ(a.gaussian_splats->sh_degree, b.gaussian_splats->sh_degree);
+    EXPECT_EQ(a.gaussian_splats->positions, b.gaussian_splats->positions);
+    EXPECT_EQ(a.gaussian_splats->log_scales, b.gaussian_splats->log_scales);
+    EXPECT_EQ(a.gaussian_splats->rotations, b.gaussian_splats->rotations);
+    EXPECT_EQ(a.gaussian_splats->opacity_logits, b.gaussian_splats->opacity_logits);
+    EXPECT_EQ(a.gaussian_splats->sh, b.gaussian_splats->sh);
+    expect_same_provenance(a.gaussian_splats->provenance, b.gaussian_splats->provenance);
+  }
+  ASSERT_EQ(a.neural_field.has_value(), b.neural_field.has_value());
+  if (a.neural_field) {
+    EXPECT_EQ(a.neural_field->encoding, b.neural_field->encoding);
+    EXPECT_EQ(a.neural_field->model, b.neural_field->model);
+    expect_same_provenance(a.neural_field->provenance, b.neural_field->provenance);
   }
 }
 

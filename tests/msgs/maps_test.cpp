@@ -69,6 +69,20 @@ v1::FusionMap full_map() {
   *mesh->add_vertices() = point(1, 0, 0);
   *mesh->add_vertices() = point(0, 1, 0);
   for (uint32_t index : {0U, 1U, 2U}) mesh->add_triangle_indices(index);
+  v1::GaussianSplatLayer* splats = map.mutable_gaussian_splats();
+  splats->set_sh_degree(0);
+  for (int i = 0; i < 2; ++i) {
+    for (float value : {0.1F * i, 0.0F, 1.0F}) splats->add_positions(value);
+    for (float value : {-3.0F, -3.0F, -3.0F}) splats->add_log_scales(value);
+    for (float value : {1.0F, 0.0F, 0.0F, 0.0F}) splats->add_rotations(value);
+    splats->add_opacity_logits(0.5F);
+    for (float value : {0.2F, 0.3F, 0.4F}) splats->add_sh(value);
+  }
+  splats->mutable_provenance()->set_views(12);
+  v1::NeuralFieldLayer* field = map.mutable_neural_field();
+  field->set_encoding("hznerf1");
+  field->add_model_parts(std::string("HZNERF1\n\0\1", 10));
+  field->mutable_provenance()->set_iterations(500);
   return map;
 }
 
@@ -134,6 +148,24 @@ TEST(MapValidation, BadLayersAreRejectedNamingTheField) {
   map = full_map();
   map.mutable_mesh()->set_triangle_indices(2, 3);
   expect_rejected(map, "mesh.triangle_indices[2]", "index 3 past the 3 vertices");
+  map = full_map();
+  map.mutable_gaussian_splats()->mutable_rotations()->RemoveLast();
+  expect_rejected(map, "gaussian_splats.rotations", "7 floats for 2 Gaussians (expected 4 per Gaussian)");
+  map = full_map();
+  map.mutable_gaussian_splats()->set_sh_degree(1);  // 12 SH floats a Gaussian, 3 given
+  expect_rejected(map, "gaussian_splats.sh", "6 floats for 2 Gaussians (expected 12 per Gaussian)");
+  map = full_map();
+  map.mutable_gaussian_splats()->set_sh_degree(4);
+  expect_rejected(map, "gaussian_splats.sh_degree", "4 (expected 0 to 3)");
+  map = full_map();
+  map.mutable_gaussian_splats()->set_positions(4, std::numeric_limits<float>::infinity());
+  expect_rejected(map, "gaussian_splats.positions[4]", "not finite");
+  map = full_map();
+  map.mutable_neural_field()->set_encoding("nerfstudio");
+  expect_rejected(map, "neural_field.encoding", "this build reads \"hznerf1\"");
+  map = full_map();
+  map.mutable_neural_field()->clear_model_parts();
+  expect_rejected(map, "neural_field.model_parts", "empty");
 }
 
 TEST(MapValidation, MapUpdate) {

@@ -11,7 +11,9 @@
 //  - mesh: vertex clustering at r (vertices in one voxel merge into their centroid; triangles
 //    that collapse are dropped; vertex labels do not survive the clustering);
 //  - TSDF: removed (a coarse TSDF would still describe the surfaces at the original
-//    resolution through its distances); the report says so.
+//    resolution through its distances); the report says so;
+//  - Gaussian splats and the neural field: removed whenever r > 0 (they render the facility
+//    photorealistically from any viewpoint).
 // Labels are removed from every layer when drop_labels is set; the sensor configuration and
 // the provenance's input log paths when drop_sensor_details is set. The redaction itself is
 // recorded in the provenance parameters. The result keeps the map id and the version it was made

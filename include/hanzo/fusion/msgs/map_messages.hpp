@@ -5,6 +5,7 @@
 // msgs/map_convert.hpp, checks in msgs/map_validation.hpp.
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -76,6 +77,38 @@ struct VisualLandmarkLayer {
   std::vector<VisualKeyframe> keyframes;
 };
 
+/// How a neural layer was trained (views, steps, metrics on held-back views).
+struct NeuralProvenance {
+  std::string source;             // the views' origin: a transforms.json, or a sensor log + trajectory
+  uint32_t views = 0;             // training views
+  uint64_t iterations = 0;        // optimizer steps
+  double training_seconds = 0.0;
+  uint32_t evaluated_views = 0;   // held-back views scored (0: no metrics)
+  double psnr_db = 0.0;
+  double ssim = 0.0;
+};
+
+/// 3D Gaussian splats, world frame, laid out as neural::GaussianCloud (structure of arrays):
+/// per Gaussian 3 positions, 3 log_scales, 4 rotations (w, x, y, z), 1 opacity_logits and
+/// 3 (sh_degree + 1)^2 sh coefficients (coefficient-major, RGB).
+struct GaussianSplatLayer {
+  uint32_t sh_degree = 3;
+  std::vector<float> positions;
+  std::vector<float> log_scales;
+  std::vector<float> rotations;
+  std::vector<float> opacity_logits;
+  std::vector<float> sh;
+  NeuralProvenance provenance;
+  std::size_t size() const { return opacity_logits.size(); }
+};
+
+/// A neural radiance field as its model file's bytes (`encoding` "hznerf1": neural/nerf_field.hpp).
+struct NeuralFieldLayer {
+  std::string encoding = "hznerf1";
+  std::string model;
+  NeuralProvenance provenance;
+};
+
 struct InputLog {
   std::string uri;
   std::string sha256;  // hex digest
@@ -103,6 +136,8 @@ struct FusionMap {
   std::optional<TsdfLayer> tsdf;
   std::optional<MeshLayer> mesh;
   std::optional<VisualLandmarkLayer> visual_landmarks;
+  std::optional<GaussianSplatLayer> gaussian_splats;
+  std::optional<NeuralFieldLayer> neural_field;
 };
 
 struct MapUpdate {

@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -87,6 +88,11 @@ class NerfField {
   std::unique_ptr<Network> network_;
 };
 
+/// The model file ("HZNERF1\n", a JSON header line, the parameter groups and the occupancy grid:
+/// src/neural/nerf_file.cpp) and its bytes; parse_nerf refuses a wrong header, sizes that
+/// disagree with the configuration and truncated data, prefixing errors with `source`.
+std::string serialize_nerf(const NerfField& field);
+Result<NerfField> parse_nerf(std::string_view bytes, const std::string& source);
 Status save_nerf(const std::string& path, const NerfField& field);
 Result<NerfField> load_nerf(const std::string& path);
 
