@@ -7,6 +7,10 @@
 // (neural/log_views.hpp).
 // With --map MAP.fmap the splats or the NeRF also become a layer of that FusionMap (created when
 // missing, else its next version; neural/map_layers.hpp).
+// hanzo-fusion reconstruct surface MODEL --out DIR: the NeRF's surface by marching cubes on its
+// density (neural/surface.hpp) and, with --poses, the depth rendered at those cameras fused
+// into a TSDF (neural::fuse_rendered_depth) and meshed: DIR/surface.ply, DIR/depth_mesh.ply; --map stores them
+// as the map's mesh and tsdf layers.
 // hanzo-fusion render DIR --poses POSES.json --out VIEWS: renders DIR's (or a FusionMap's) splats or NeRF at every
 // camera of a transforms-style JSON, in its frame order and at its resolution, one PNG per frame
 // (depth as 16-bit PNG on request); where the poses file's images exist, PSNR and SSIM against them.
@@ -29,9 +33,12 @@
 #include "hanzo/fusion/core/files.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
+#include "hanzo/fusion/maps/map_export.hpp"
+#include "hanzo/fusion/maps/tsdf.hpp"
 #include "hanzo/fusion/maps/map_store.hpp"
 #include "hanzo/fusion/neural/log_views.hpp"
 #include "hanzo/fusion/neural/map_layers.hpp"
+#include "hanzo/fusion/neural/surface.hpp"
 #include "hanzo/fusion/neural/nerf_trainer.hpp"
 #include "hanzo/fusion/neural/splat_ply.hpp"
 #include "hanzo/fusion/neural/splat_trainer.hpp"
@@ -76,6 +83,20 @@ struct NerfOptions {
   int threads = 0;
   double progress_seconds = 10.0;
   double max_seconds = 0.0;
+};
+
+struct SurfaceOptions {
+  std::string model;  // as RenderOptions::model
+  std::string layer;
+  std::string poses;  // cameras whose rendered depth is fused into a TSDF
+  std::string out;
+  int resolution = neural::NerfSurfaceConfig{}.resolution;
+  float density_threshold = neural::NerfSurfaceConfig{}.density_threshold;
+  double voxel = 0.0;         // TSDF voxel (scene units); 0: the scene's extent / 256
+  double min_opacity = 0.5;   // rendered pixels less opaque give no depth
+  int downscale = 1;
+  std::string map;
+  int threads = 0;
 };
 
 struct RenderOptions {
@@ -433,6 +454,7 @@ int run_reconstruct_nerf(const Output& output, const NerfOptions& options) {
 /// A trained scene (splats or a NeRF) that renders colour and depth at a camera.
 struct Scene {
   std::string kind;  // "splats" or "nerf"
+  std::shared_ptr<const neural::NerfField> nerf;  // the field, for a NeRF
   std::string file;
   std::size_t size = 0;  // Gaussians or parameters
   std::function<neural::NerfRender(const neural::SplatCamera&)> render;
@@ -444,6 +466,7 @@ Scene nerf_scene(neural::NerfField field, const Eigen::Vector3f& background) {
   scene.size = field.parameter_count();
   auto shared = std::make_shared<neural::NerfField>(std::move(field));
   scene.render = [shared, background](const neural::SplatCamera& camera) { return shared->render(camera, background); };
+  scene.nerf = shared;
   return scene;
 }
 
@@ -566,6 +589,74 @@ int run_render(const Output& output, const RenderOptions& options) {
   return report_success(output, result, text);
 }
 
+int run_surface(const Output& output, const SurfaceOptions& options) {
+  nlohmann::json result = {{"model", options.model}, {"out", options.out}};
+  std::unique_ptr<tbb::global_control> threads;
+  if (options.threads > 0) threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
+  Result<Scene> scene = load_scene(options.model, options.layer, Eigen::Vector3f::Zero());
+  if (!scene) return report_failure(output, result, scene.error().message);
+  if (!scene->nerf && options.poses.empty()) {
+    return report_failure(output, result, fmt::format("{}: splats have no density to mesh; give --poses to fuse their rendered depth", scene->file));
+  }
+  if (Status created = create_folder(options.out); !created) return report_failure(output, result, created.error().message);
+  std::string text;
+  std::optional<msgs::MeshLayer> surface;
+  if (scene->nerf) {
+    Result<msgs::MeshLayer> mesh = neural::extract_surface(*scene->nerf, {options.resolution, options.density_threshold});
+    if (!mesh) return report_failure(output, result, mesh.error().message);
+    const std::string path = (std::filesystem::path(options.out) / "surface.ply").string();
+    if (Status written = maps::write_mesh(path, *mesh); !written) return report_failure(output, result, written.error().message);
+    result["surface"] = {{"mesh", path}, {"vertices", mesh->vertices.size()}, {"triangles", mesh->triangle_indices.size() / 3},
+                         {"resolution", options.resolution}, {"density_threshold", options.density_threshold}};
+    text += fmt::format("{}: {} triangles where the density crosses {}\n", path, mesh->triangle_indices.size() / 3, options.density_threshold);
+    surface = std::move(*mesh);
+  }
+  std::optional<msgs::TsdfLayer> tsdf;
+  if (!options.poses.empty()) {
+    neural::ViewDatasetConfig dataset_config;
+    dataset_config.downscale = options.downscale;
+    dataset_config.load_images = false;
+    Result<neural::ViewDataset> poses = neural::load_transforms(options.poses, dataset_config);
+    if (!poses) return report_failure(output, result, poses.error().message);
+    if (poses->views.empty()) return report_failure(output, result, fmt::format("{}: no frames", options.poses));
+    // The voxel: two pixels at the first view's median rendered depth unless given (the detail
+    // the renders hold; a scene's scale is its own).
+    double voxel = options.voxel;
+    if (voxel <= 0.0) {
+      const neural::PosedView& first = poses->views.front();
+      const neural::NerfRender render = scene->render(first.camera);
+      std::vector<float> depths;
+      for (std::size_t i = 0; i < render.depth.size(); ++i) {
+        if (render.depth[i] > 0.0f && (render.opacity.empty() || render.opacity[i] >= options.min_opacity)) depths.push_back(render.depth[i]);
+      }
+      if (depths.empty()) return report_failure(output, result, fmt::format("{}: nothing rendered at the first camera of {}; give --voxel", scene->file, options.poses));
+      std::nth_element(depths.begin(), depths.begin() + static_cast<std::ptrdiff_t>(depths.size() / 2), depths.end());
+      voxel = 2.0 * depths[depths.size() / 2] / first.camera.fx;
+    }
+    Result<maps::TsdfVolume> volume = neural::fuse_rendered_depth(scene->render, poses->views, {voxel, options.min_opacity});
+    if (!volume) return report_failure(output, result, volume.error().message);
+    const msgs::MeshLayer mesh = volume->extract_mesh();
+    const std::string path = (std::filesystem::path(options.out) / "depth_mesh.ply").string();
+    if (Status written = maps::write_mesh(path, mesh); !written) return report_failure(output, result, written.error().message);
+    result["depth_fusion"] = {{"mesh", path}, {"views", poses->views.size()}, {"voxel", voxel}, {"blocks", volume->block_count()},
+                              {"vertices", mesh.vertices.size()}, {"triangles", mesh.triangle_indices.size() / 3}};
+    text += fmt::format("{}: {} triangles from the depth of {} views fused at {:.4g} voxels\n", path, mesh.triangle_indices.size() / 3, poses->views.size(), voxel);
+    tsdf = volume->to_layer();
+    if (!surface) surface = mesh;
+  }
+  if (!options.map.empty()) {
+    const Status stored = store_layer(options.map, "mesh", [&](msgs::FusionMap& map) {
+      map.mesh = surface;
+      if (tsdf) map.tsdf = tsdf;
+    }, result);
+    if (!stored) return report_failure(output, result, stored.error().message);
+    text += fmt::format("{}: version {} with the mesh{}\n", options.map, result["map"]["version"].get<uint64_t>(), tsdf ? " and the TSDF" : "");
+  }
+  result["ok"] = true;
+  result["kind"] = scene->kind;
+  return report_success(output, result, text);
+}
+
 }  // namespace
 
 void add_reconstruct_command(CLI::App& app, const Output& output, Command& run) {
@@ -597,6 +688,21 @@ void add_reconstruct_command(CLI::App& app, const Output& output, Command& run) 
   nerf_app->add_option("--max-seconds", nerf->max_seconds, "Stop training after this many seconds (0: run every step)")->check(CLI::Range(0.0, 1e7));
   nerf_app->add_option("--progress-seconds", nerf->progress_seconds, "Seconds between progress lines on stderr")->check(CLI::Range(0.0, 1e6));
   nerf_app->callback([&output, &run, nerf] { run = [&output, nerf] { return run_reconstruct_nerf(output, *nerf); }; });
+
+  auto surface = std::make_shared<SurfaceOptions>();
+  CLI::App* surface_app = reconstruct->add_subcommand("surface", "Mesh a NeRF's density by marching cubes; with --poses, fuse the rendered depth into a TSDF");
+  surface_app->add_option("MODEL", surface->model, "Folder written by reconstruct splats|nerf, its model file, or a FusionMap (.fmap) with such a layer")->required();
+  surface_app->add_option("--layer", surface->layer, "Of a FusionMap with both: splats or nerf (default: splats)");
+  surface_app->add_option("--poses", surface->poses, "transforms.json whose cameras' rendered depth is fused into a TSDF");
+  surface_app->add_option("--out", surface->out, "Folder for surface.ply and depth_mesh.ply")->required();
+  surface_app->add_option("--resolution", surface->resolution, "Density samples along each axis of the NeRF's box")->check(CLI::Range(2, 1024));
+  surface_app->add_option("--density-threshold", surface->density_threshold, "Density at the surface (per unit-cube length)")->check(CLI::PositiveNumber);
+  surface_app->add_option("--voxel", surface->voxel, "TSDF voxel in scene units (default: two pixels at the first view's median depth)")->check(CLI::NonNegativeNumber);
+  surface_app->add_option("--min-opacity", surface->min_opacity, "Rendered pixels less opaque give no depth")->check(CLI::Range(0.0, 1.0));
+  surface_app->add_option("--downscale", surface->downscale, "Divide the poses' resolution by this")->check(CLI::Range(1, 64));
+  surface_app->add_option("--map", surface->map, "Also store the mesh (and the TSDF) as layers of this FusionMap (created when missing, else its next version)");
+  surface_app->add_option("--threads", surface->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
+  surface_app->callback([&output, &run, surface] { run = [&output, surface] { return run_surface(output, *surface); }; });
 
   auto render = std::make_shared<RenderOptions>();
   CLI::App* render_app = app.add_subcommand("render", "Render trained splats or a NeRF at the cameras of a transforms.json, one PNG per frame");

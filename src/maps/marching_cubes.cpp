@@ -1,14 +1,17 @@
-// Marching cubes over the TSDF's voxel centres. The case tables (which cube edges the surface
+// Marching cubes over the TSDF's voxel centres and over dense sample grids. The case tables (which cube edges the surface
 // crosses, and how those crossings form triangles, for each of the 256 inside/outside corner
 // patterns) are the classic ones of Lorensen & Cline as PCL ships them in
 // pcl/surface/marching_cubes.h (pcl::edgeTable, pcl::triTable); PCL's corner numbering is used:
 // corner i sits at (x, y, z) = ((i ^ i >> 1) & 1, i >> 2 & 1, i >> 1 & 1) from the cube's base.
 
 #include <array>
+#include <cmath>
 #include <unordered_map>
 
+#include <fmt/format.h>
 #include <pcl/surface/marching_cubes.h>
 
+#include "hanzo/fusion/maps/marching_cubes.hpp"
 #include "tsdf_storage.hpp"
 
 namespace hanzo::fusion::maps {
@@ -21,15 +24,70 @@ Eigen::Vector3i corner_offset(int corner) {
   return {((corner ^ (corner >> 1)) & 1), (corner >> 2) & 1, (corner >> 1) & 1};
 }
 
+/// Triangulates the cube at `base` (voxel coordinates) whose corner values `lookup` gives (false:
+/// unknown, no triangles), sharing vertices through `vertex_of_edge`; vertex positions are
+/// `to_position(voxel coordinates)`.
+template <typename Lookup, typename ToPosition>
+void triangulate_cube(const Eigen::Vector3i& base, const Lookup& lookup, const ToPosition& to_position,
+                      std::array<std::unordered_map<uint64_t, uint32_t>, 3>& vertex_of_edge, msgs::MeshLayer& mesh) {
+  std::array<float, 8> values{};
+  int cube_index = 0;
+  for (int corner = 0; corner < 8; ++corner) {
+    if (!lookup(base + corner_offset(corner), &values[static_cast<std::size_t>(corner)])) return;
+    if (values[static_cast<std::size_t>(corner)] < 0.0f) cube_index |= 1 << corner;
+  }
+  if (pcl::edgeTable[cube_index] == 0) return;
+  std::array<uint32_t, 12> edge_vertices{};
+  for (int edge = 0; edge < 12; ++edge) {
+    if ((pcl::edgeTable[cube_index] & (1u << edge)) == 0) continue;
+    int a = kEdgeCorners[static_cast<std::size_t>(edge)][0];
+    int b = kEdgeCorners[static_cast<std::size_t>(edge)][1];
+    if ((corner_offset(b) - corner_offset(a)).sum() < 0) std::swap(a, b);
+    const Eigen::Vector3i low = base + corner_offset(a);
+    const Eigen::Vector3i step = corner_offset(b) - corner_offset(a);
+    const int axis = step.x() != 0 ? 0 : (step.y() != 0 ? 1 : 2);
+    const uint64_t low_key = TsdfStorage::block_key(low);  // same 21-bit packing, on voxels
+    const auto [entry, inserted] = vertex_of_edge[static_cast<std::size_t>(axis)].emplace(low_key, static_cast<uint32_t>(mesh.vertices.size()));
+    if (inserted) {
+      const float da = values[static_cast<std::size_t>(a)];
+      const float db = values[static_cast<std::size_t>(b)];
+      const double t = da / (da - db);
+      mesh.vertices.push_back(to_position((low.cast<double>().array() + t * step.cast<double>().array()).matrix()).template cast<float>());
+    }
+    edge_vertices[static_cast<std::size_t>(edge)] = entry->second;
+  }
+  for (int i = 0; pcl::triTable[cube_index][i] != -1; i += 3) {
+    for (int k = 0; k < 3; ++k) mesh.triangle_indices.push_back(edge_vertices[static_cast<std::size_t>(pcl::triTable[cube_index][i + k])]);
+  }
+}
+
 }  // namespace
+
+Result<msgs::MeshLayer> marching_cubes(const SampleGrid& grid) {
+  if (!(grid.spacing > 0.0)) return Error(fmt::format("marching cubes: spacing {} (expected > 0)", grid.spacing));
+  if ((grid.size.array() < 0).any() || static_cast<std::size_t>(grid.size.cast<int64_t>().prod()) != grid.values.size()) {
+    return Error(fmt::format("marching cubes: {} values for a {} x {} x {} grid", grid.values.size(), grid.size.x(), grid.size.y(), grid.size.z()));
+  }
+  msgs::MeshLayer mesh;
+  std::array<std::unordered_map<uint64_t, uint32_t>, 3> vertex_of_edge;
+  const auto lookup = [&grid](const Eigen::Vector3i& at, float* value) {
+    *value = grid.values[static_cast<std::size_t>((int64_t{at.z()} * grid.size.y() + at.y()) * grid.size.x() + at.x())];
+    return std::isfinite(*value);
+  };
+  const auto to_position = [&grid](const Eigen::Vector3d& voxel) -> Eigen::Vector3d { return grid.origin + grid.spacing * voxel; };
+  for (int z = 0; z + 1 < grid.size.z(); ++z) {
+    for (int y = 0; y + 1 < grid.size.y(); ++y) {
+      for (int x = 0; x + 1 < grid.size.x(); ++x) triangulate_cube({x, y, z}, lookup, to_position, vertex_of_edge, mesh);
+    }
+  }
+  return mesh;
+}
 
 msgs::MeshLayer marching_cubes(const TsdfStorage& storage) {
   msgs::MeshLayer mesh;
   const int size = storage.block_size;
   // Vertices shared between cubes: one per (voxel at the edge's low end, edge axis).
   std::array<std::unordered_map<uint64_t, uint32_t>, 3> vertex_of_edge;
-  std::array<Eigen::Vector3i, 8> offsets;
-  for (int corner = 0; corner < 8; ++corner) offsets[static_cast<std::size_t>(corner)] = corner_offset(corner);
 
   for (const uint64_t key : storage.sorted_keys()) {
     const Eigen::Vector3i block_index = TsdfStorage::block_from_key(key);
@@ -50,43 +108,13 @@ msgs::MeshLayer marching_cubes(const TsdfStorage& storage) {
       return true;
     };
 
+    const auto to_position = [&storage](const Eigen::Vector3d& voxel) -> Eigen::Vector3d { return (voxel.array() + 0.5).matrix() * storage.voxel_size; };
     for (int z = 0; z < size; ++z) {
       for (int y = 0; y < size; ++y) {
         for (int x = 0; x < size; ++x) {
-          std::array<float, 8> values{};
-          bool complete = true;
-          int cube_index = 0;
-          for (int corner = 0; corner < 8 && complete; ++corner) {
-            complete = lookup(Eigen::Vector3i(x, y, z) + offsets[static_cast<std::size_t>(corner)], &values[static_cast<std::size_t>(corner)]);
-            if (values[static_cast<std::size_t>(corner)] < 0.0f) cube_index |= 1 << corner;
-          }
-          if (!complete || pcl::edgeTable[cube_index] == 0) continue;
-          const Eigen::Vector3i base = block_index * size + Eigen::Vector3i(x, y, z);
-          std::array<uint32_t, 12> edge_vertices{};
-          for (int edge = 0; edge < 12; ++edge) {
-            if ((pcl::edgeTable[cube_index] & (1u << edge)) == 0) continue;
-            int a = kEdgeCorners[static_cast<std::size_t>(edge)][0];
-            int b = kEdgeCorners[static_cast<std::size_t>(edge)][1];
-            if ((offsets[static_cast<std::size_t>(b)] - offsets[static_cast<std::size_t>(a)]).sum() < 0) std::swap(a, b);
-            const Eigen::Vector3i low = base + offsets[static_cast<std::size_t>(a)];
-            const Eigen::Vector3i step = offsets[static_cast<std::size_t>(b)] - offsets[static_cast<std::size_t>(a)];
-            const int axis = step.x() != 0 ? 0 : (step.y() != 0 ? 1 : 2);
-            const uint64_t low_key = TsdfStorage::block_key(low);  // same 21-bit packing, on voxels
-            const auto [entry, inserted] = vertex_of_edge[static_cast<std::size_t>(axis)].emplace(low_key, static_cast<uint32_t>(mesh.vertices.size()));
-            if (inserted) {
-              const float da = values[static_cast<std::size_t>(a)];
-              const float db = values[static_cast<std::size_t>(b)];
-              const double t = da / (da - db);
-              const Eigen::Vector3d position = (low.cast<double>().array() + 0.5 + t * step.cast<double>().array()) * storage.voxel_size;
-              mesh.vertices.push_back(position.cast<float>());
-            }
-            edge_vertices[static_cast<std::size_t>(edge)] = entry->second;
-          }
-          for (int i = 0; pcl::triTable[cube_index][i] != -1; i += 3) {
-            for (int k = 0; k < 3; ++k) {
-              mesh.triangle_indices.push_back(edge_vertices[static_cast<std::size_t>(pcl::triTable[cube_index][i + k])]);
-            }
-          }
+          const Eigen::Vector3i local(x, y, z);
+          triangulate_cube(block_index * size + local, [&](const Eigen::Vector3i& at, float* distance) { return lookup(at - block_index * size, distance); },
+                           to_position, vertex_of_edge, mesh);
         }
       }
     }

@@ -1565,8 +1565,9 @@ TEST(Cli, ReconstructNerfAndRenderIt) {
 }
 
 // Splats and a NeRF as layers of one FusionMap (AI builds): each reconstruct --map makes the
-// map's next version and keeps the other layer; map info reports them with their training;
-// render draws the map's layers exactly as the folders' files; a missing layer is refused.
+// map's next version and keeps the other layers; map info reports them with their training;
+// render draws the map's layers exactly as the folders' files; surfaces (rendered depth fused
+// into a TSDF, the NeRF's density meshed) join the map; a missing layer is refused.
 TEST(Cli, ReconstructionsBecomeLayersOfAFusionMap) {
   if (run("reconstruct --help").exit_code != 0) GTEST_SKIP() << "built without HANZO_FUSION_AI";
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_neural_map_{}", ::getpid());
@@ -1612,6 +1613,27 @@ TEST(Cli, ReconstructionsBecomeLayersOfAFusionMap) {
       EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0) << layer << " " << view;
     }
   }
+  // Surfaces: the splats' rendered depth fused into a TSDF, stored as the map's mesh and tsdf
+  // layers; the NeRF's density meshed; splats without cameras have no surface to give.
+  const CliRun fused = run(fmt::format("reconstruct surface {0}/scene.fmap --poses {1}/transforms_val.json --downscale 8 --out {0}/surface "
+                                       "--map {0}/scene.fmap --json", d, lego));
+  ASSERT_EQ(fused.exit_code, 0) << fused.err;
+  const nlohmann::json surface = nlohmann::json::parse(fused.out);
+  EXPECT_EQ(surface["kind"], "splats");
+  EXPECT_EQ(surface["depth_fusion"]["views"], 25);
+  EXPECT_GT(surface["depth_fusion"]["triangles"].get<int>(), 100);
+  EXPECT_EQ(surface["map"]["version"], 3);
+  const nlohmann::json with_mesh = nlohmann::json::parse(run(fmt::format("map info {}/scene.fmap --json", d)).out)["layers"];
+  EXPECT_EQ(with_mesh["mesh"]["triangles"], surface["depth_fusion"]["triangles"]);
+  EXPECT_TRUE(with_mesh.contains("tsdf"));
+  EXPECT_TRUE(with_mesh.contains("gaussian_splats"));
+  const CliRun density = run(fmt::format("reconstruct surface {0}/nerf --resolution 64 --out {0}/nerf_surface --json", d));
+  ASSERT_EQ(density.exit_code, 0) << density.err;
+  EXPECT_TRUE(std::filesystem::exists(dir / "nerf_surface" / "surface.ply"));
+  const CliRun no_surface = run(fmt::format("reconstruct surface {0}/splats_only.fmap --out {0}/x", d));
+  EXPECT_EQ(no_surface.exit_code, 1);
+  EXPECT_THAT(no_surface.err, HasSubstr("give --poses"));
+
   const CliRun missing = run(fmt::format("render {0}/splats_only.fmap --layer nerf --poses {1}/transforms_val.json --out {0}/x", d, lego));
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_THAT(missing.err, HasSubstr("no neural_field layer"));

@@ -1,6 +1,9 @@
 #include "hanzo/fusion/maps/tsdf.hpp"
 
+#include "hanzo/fusion/maps/marching_cubes.hpp"
+
 #include <cmath>
+#include <limits>
 #include <map>
 #include <vector>
 
@@ -102,6 +105,35 @@ TEST(Tsdf, SphereFromDepthImagesMeshesWithinOneVoxel) {
   EXPECT_GT(volume.sample({1.1, 0.0, 0.0}).first, 0.05f);
   EXPECT_LT(volume.sample({0.9, 0.0, 0.0}).first, -0.05f);
   EXPECT_EQ(volume.sample({5.0, 5.0, 5.0}).second, 0.0f);
+}
+
+TEST(MarchingCubes, ASampledSphereMeshesOnItsRadiusAndUnknownSamplesLeaveAHole) {
+  // |p| - 0.7 sampled every 0.05 m over [-1, 1]^3 (origin off the lattice of the centre).
+  const double spacing = 0.05;
+  const Eigen::Vector3d origin(-1.0, -1.01, -0.98);
+  const Eigen::Vector3i size(41, 41, 41);
+  std::vector<float> values;
+  for (int z = 0; z < size.z(); ++z) {
+    for (int y = 0; y < size.y(); ++y) {
+      for (int x = 0; x < size.x(); ++x) values.push_back(static_cast<float>((origin + spacing * Eigen::Vector3d(x, y, z)).norm() - 0.7));
+    }
+  }
+  const Result<msgs::MeshLayer> mesh = marching_cubes({size, origin, spacing, values});
+  ASSERT_TRUE(mesh.ok()) << mesh.error().message;
+  ASSERT_GT(mesh->triangle_indices.size(), 3000u);
+  for (const Eigen::Vector3f& vertex : mesh->vertices) EXPECT_NEAR(vertex.norm(), 0.7, 0.1 * spacing);
+  // Shared vertices: a closed surface has V - E + F = 2 with E = 3F / 2.
+  EXPECT_EQ(static_cast<int64_t>(mesh->vertices.size()) - static_cast<int64_t>(mesh->triangle_indices.size()) / 6, 2);
+  // The +x half unknown: only the -x half meshes.
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    if (static_cast<int>(i % 41) > 20) values[i] = std::numeric_limits<float>::quiet_NaN();
+  }
+  const Result<msgs::MeshLayer> half = marching_cubes({size, origin, spacing, values});
+  ASSERT_TRUE(half.ok());
+  for (const Eigen::Vector3f& vertex : half->vertices) EXPECT_LE(vertex.x(), origin.x() + 20 * spacing + 1e-6);
+  EXPECT_LT(half->triangle_indices.size(), mesh->triangle_indices.size() * 0.6);
+  EXPECT_FALSE(marching_cubes({size, origin, spacing, std::span<const float>(values).first(10)}).ok());
+  EXPECT_FALSE(marching_cubes({size, origin, 0.0, values}).ok());
 }
 
 TEST(Tsdf, PlaneFromARangeScan) {
