@@ -66,6 +66,7 @@ struct ReconstructOptions {
   int iterations = neural::SplatTrainingConfig{}.iterations;
   int max_gaussians = neural::SplatTrainingConfig{}.max_gaussians;
   int initial_gaussians = neural::SplatTrainingConfig{}.initial_gaussians;
+  std::string points;  // FusionMap whose point layer places the initial Gaussians
   int sh_degree = neural::SplatTrainingConfig{}.sh_degree;
   uint64_t seed = 1;
   int threads = 0;
@@ -306,7 +307,17 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
   const Eigen::Vector3d centre = boxed ? train->box_centre : train->scene_centre;
   const double half_size = boxed ? train->box_half_size : 0.5 * train->camera_distance;
   const double extent = 2.2 * half_size;
-  neural::GaussianCloud initial = neural::initialize_gaussians(train->views, centre, half_size, config.initial_gaussians, config.sh_degree, config.seed);
+  neural::GaussianCloud initial;
+  if (!options.points.empty()) {
+    Result<msgs::FusionMap> map = maps::read_fusion_map(options.points);
+    if (!map) return report_failure(output, result, map.error().message);
+    if (!map->points || map->points->points.empty()) return report_failure(output, result, fmt::format("{}: no point layer to start the Gaussians from", options.points));
+    initial = neural::initialize_gaussians_at_points(train->views, map->points->points, config.initial_gaussians, config.sh_degree, config.seed);
+    if (initial.size() == 0) return report_failure(output, result, fmt::format("{}: none of its points is in front of a view", options.points));
+    result["initial_points"] = {{"map", options.points}, {"points", map->points->points.size()}, {"gaussians", initial.size()}};
+  } else {
+    initial = neural::initialize_gaussians(train->views, centre, half_size, config.initial_gaussians, config.sh_degree, config.seed);
+  }
   Result<neural::SplatTrainer> trainer = neural::SplatTrainer::create(std::move(initial), extent, config);
   if (!trainer) return report_failure(output, result, trainer.error().message);
 
@@ -668,7 +679,8 @@ void add_reconstruct_command(CLI::App& app, const Output& output, Command& run) 
   splats_app->add_option("--out", splats->out, "Folder for splats.ply and reconstruction.json")->required();
   splats_app->add_option("--iterations", splats->iterations, "Training steps (one view each)")->check(CLI::Range(1, 10000000));
   splats_app->add_option("--max-gaussians", splats->max_gaussians, "Most Gaussians densification may make")->check(CLI::Range(1, 100000000));
-  splats_app->add_option("--initial-gaussians", splats->initial_gaussians, "Gaussians of the random initialization")->check(CLI::Range(1, 100000000));
+  splats_app->add_option("--initial-gaussians", splats->initial_gaussians, "Gaussians of the initialization (random, or at most this many map points)")->check(CLI::Range(1, 100000000));
+  splats_app->add_option("--points", splats->points, "Start the Gaussians at this FusionMap's points (a session's map.fmap, in the trajectory's world) instead of random ones");
   splats_app->add_option("--sh-degree", splats->sh_degree, "Spherical-harmonics degree of the colours")->check(CLI::Range(0, 3));
   splats_app->add_option("--seed", splats->seed, "Random seed (initialization, view order, splits)");
   splats_app->add_option("--threads", splats->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));

@@ -1,6 +1,9 @@
 #include "hanzo/fusion/neural/splat_trainer.hpp"
 
 #include <algorithm>
+#include <map>
+#include <limits>
+#include <array>
 #include <cmath>
 #include <numeric>
 
@@ -71,6 +74,87 @@ GaussianCloud initialize_gaussians(const std::vector<PosedView>& views, const Ei
   const auto log_scale = static_cast<float>(std::log(0.5 * spacing));
   for (const Eigen::Vector3d& point : points) {
     cloud.add(point.cast<float>(), Eigen::Vector3f::Constant(log_scale), Eigen::Vector4f(1, 0, 0, 0), logit(0.1f), Eigen::Vector3f::Zero());
+  }
+  return cloud;
+}
+
+GaussianCloud initialize_gaussians_at_points(const std::vector<PosedView>& views, const std::vector<Eigen::Vector3f>& points, int count, int sh_degree,
+                                            uint64_t seed) {
+  // An even selection: every point when there are few enough, else a seeded sample.
+  std::vector<std::size_t> chosen(points.size());
+  std::iota(chosen.begin(), chosen.end(), std::size_t{0});
+  if (count > 0 && chosen.size() > static_cast<std::size_t>(count)) {
+    std::mt19937_64 random(seed);
+    std::shuffle(chosen.begin(), chosen.end(), random);
+    chosen.resize(static_cast<std::size_t>(count));
+    std::sort(chosen.begin(), chosen.end());
+  }
+  // The colour of the first view that sees the point.
+  std::vector<Eigen::Vector3f> kept;
+  std::vector<Eigen::Vector3f> colours;
+  for (const std::size_t index : chosen) {
+    const Eigen::Vector3d point = points[index].cast<double>();
+    for (const PosedView& view : views) {
+      const Eigen::Vector3d p = view.camera.R_camera_world * point + view.camera.t_camera_world;
+      if (p.z() <= 0.0) continue;
+      const auto u = static_cast<int>(std::lround(view.camera.fx * p.x() / p.z() + view.camera.cx));
+      const auto v = static_cast<int>(std::lround(view.camera.fy * p.y() / p.z() + view.camera.cy));
+      if (u < 0 || v < 0 || u >= view.image.width || v >= view.image.height) continue;
+      const std::size_t pixel = 3 * (static_cast<std::size_t>(v) * static_cast<std::size_t>(view.image.width) + static_cast<std::size_t>(u));
+      kept.push_back(points[index]);
+      colours.emplace_back(view.image.pixels[pixel], view.image.pixels[pixel + 1], view.image.pixels[pixel + 2]);
+      break;
+    }
+  }
+  // Scales: the mean distance to the three nearest kept points (a voxel hash at the mean spacing).
+  Eigen::AlignedBox3f box;
+  for (const Eigen::Vector3f& point : kept) box.extend(point);
+  // The points' mean spacing as if they filled their box, its largest face or its longest edge
+  // (a map of surfaces, a floor, a line), whichever is largest.
+  double spacing = 1.0;
+  if (!kept.empty()) {
+    Eigen::Vector3d extent = box.sizes().cast<double>();
+    std::sort(extent.data(), extent.data() + 3);
+    const auto n = static_cast<double>(kept.size());
+    spacing = std::max({std::cbrt(extent.prod() / n), std::sqrt(extent(1) * extent(2) / n), extent(2) / n, 1e-6});
+  }
+  const auto cell_of = [spacing](const Eigen::Vector3f& point) {
+    return std::array<int64_t, 3>{static_cast<int64_t>(std::floor(point.x() / spacing)), static_cast<int64_t>(std::floor(point.y() / spacing)),
+                                  static_cast<int64_t>(std::floor(point.z() / spacing))};
+  };
+  std::map<std::array<int64_t, 3>, std::vector<std::size_t>> cells;
+  for (std::size_t i = 0; i < kept.size(); ++i) cells[cell_of(kept[i])].push_back(i);
+  GaussianCloud cloud;
+  cloud.sh_degree = sh_degree;
+  for (std::size_t i = 0; i < kept.size(); ++i) {
+    std::array<float, 3> nearest{std::numeric_limits<float>::max(), std::numeric_limits<float>::max(), std::numeric_limits<float>::max()};
+    const std::array<int64_t, 3> cell = cell_of(kept[i]);
+    for (int64_t dz = -1; dz <= 1; ++dz) {
+      for (int64_t dy = -1; dy <= 1; ++dy) {
+        for (int64_t dx = -1; dx <= 1; ++dx) {
+          const auto found = cells.find({cell[0] + dx, cell[1] + dy, cell[2] + dz});
+          if (found == cells.end()) continue;
+          for (const std::size_t j : found->second) {
+            if (j == i) continue;
+            const float distance = (kept[j] - kept[i]).norm();
+            if (distance < nearest[2]) {
+              nearest[2] = distance;
+              std::sort(nearest.begin(), nearest.end());
+            }
+          }
+        }
+      }
+    }
+    float sum = 0.0f;
+    int found = 0;
+    for (const float distance : nearest) {
+      if (distance == std::numeric_limits<float>::max()) continue;
+      sum += distance;
+      ++found;
+    }
+    const double scale = found > 0 ? sum / static_cast<float>(found) : spacing;
+    cloud.add(kept[i], Eigen::Vector3f::Constant(static_cast<float>(std::log(std::max(1e-6, scale)))), Eigen::Vector4f(1, 0, 0, 0), logit(0.1f),
+              sh_dc_of_colour(colours[i]));
   }
   return cloud;
 }

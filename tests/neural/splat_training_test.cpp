@@ -60,6 +60,34 @@ TEST(ViewDataset, BadTransformsFilesAreRefusedNamingTheField) {
 
 // 100 x 100 pixels, 600 steps, 15,000 Gaussians at most: the val views (never trained on) reach
 // 22 dB.
+TEST(SplatTraining, GaussiansStartAtMapPointsWithTheColourTheViewsSee) {
+  // A camera at the origin looking along +z at a 40 x 40 image whose left half is red, right
+  // half blue; map points on a 0.1 m lattice at z = 2 (inside the view) and one behind it.
+  PosedView view;
+  view.camera = {40, 40, 40.0, 40.0, 19.5, 19.5, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero()};
+  view.image.width = view.image.height = 40;
+  for (int v = 0; v < 40; ++v) {
+    for (int u = 0; u < 40; ++u) view.image.pixels.insert(view.image.pixels.end(), {u < 20 ? 1.0f : 0.0f, 0.0f, u < 20 ? 0.0f : 1.0f});
+  }
+  std::vector<Eigen::Vector3f> points;
+  for (int i = -4; i <= 4; ++i) {
+    for (int j = -4; j <= 4; ++j) points.emplace_back(0.1f * i + 0.05f, 0.1f * j, 2.0f);
+  }
+  points.emplace_back(0.0f, 0.0f, -1.0f);  // behind the camera: no view sees it
+  const GaussianCloud all = initialize_gaussians_at_points({view}, points, 1000, 0, 1);
+  ASSERT_EQ(all.size(), 81u);
+  ASSERT_TRUE(all.consistent());
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    const float x = all.position[3 * i];
+    const Eigen::Vector3f colour = Eigen::Vector3f(all.sh[3 * i], all.sh[3 * i + 1], all.sh[3 * i + 2]) * 0.28209479f + Eigen::Vector3f::Constant(0.5f);
+    EXPECT_NEAR(colour.x(), x < 0.0f ? 1.0f : 0.0f, 1e-4) << "point at x " << x;
+    EXPECT_NEAR(colour.z(), x < 0.0f ? 0.0f : 1.0f, 1e-4) << "point at x " << x;
+    EXPECT_NEAR(std::exp(all.log_scale[3 * i]), 0.1, 0.05);  // the lattice spacing (edges: its nearest three)
+    EXPECT_NEAR(sigmoid(all.opacity_logit[i]), 0.1f, 1e-5);
+  }
+  EXPECT_EQ(initialize_gaussians_at_points({view}, points, 20, 0, 1).size(), 20u);  // at most `count`
+}
+
 TEST(SplatTraining, LegoAtQuarterResolutionScoresOnTheHeldOutViews) {
   ViewDatasetConfig config;
   config.downscale = 4;

@@ -69,6 +69,13 @@ Status validate(const SplatTrainingConfig& config);
 GaussianCloud initialize_gaussians(const std::vector<PosedView>& views, const Eigen::Vector3d& centre, double half_size, int count, int sh_degree,
                                    uint64_t seed);
 
+/// Gaussians at a map's points (world frame, the views' frame: a session's map), at most `count`
+/// of them (an even, seeded selection), each coloured by the first view that sees it in front of
+/// its camera, opacity 0.1, isotropic with the mean distance to its three nearest selected
+/// neighbours (Kerbl et al. Sec. 5.1); points no view sees are left out.
+GaussianCloud initialize_gaussians_at_points(const std::vector<PosedView>& views, const std::vector<Eigen::Vector3f>& points, int count, int sh_degree,
+                                            uint64_t seed);
+
 class SplatTrainer {
  public:
   /// `scene_extent`: the scene's size for the learning rates and densification (scene units).
