@@ -3,10 +3,12 @@
 // and the exact IMU readings of its origin (body axes): the keyframe factor tests' motion.
 
 #include <cmath>
+#include <random>
 
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/core/time.hpp"
 #include "hanzo/fusion/estimate/imu_propagation.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
 
 namespace hanzo::fusion::pipeline::circle_motion {
 
@@ -31,6 +33,31 @@ inline estimate::ImuSample imu_sample(double t, double dt) {
                                      -1.2 * kRate * kRate * std::sin(2.0 * kRate * m));
   const SO3 R_world_body = true_pose(m).rotation();
   return {Timestamp::from_seconds(kStart + t), Eigen::Vector3d(0.0, 0.0, kRate), R_world_body.inverse() * (acceleration - kGravity)};
+}
+
+// The Frontend's keyframe `id` at t: the pose 10 cm / 1 degree off the truth (exact for the first,
+// which carries a tight pose covariance), the relative motion from `previous` (covariance 1e-2),
+// the velocity off by velocity_noise per axis.
+inline msgs::Keyframe noisy_keyframe(uint64_t id, double t, const msgs::Keyframe* previous, double velocity_noise, std::mt19937_64& random) {
+  std::normal_distribution<double> normal(0.0, 1.0);
+  msgs::Keyframe keyframe;
+  keyframe.keyframe_id = id;
+  keyframe.timestamp = Timestamp::from_seconds(kStart + t);
+  const SE3 T_world_body = true_pose(t);
+  SE3 believed = T_world_body;
+  if (previous != nullptr) {
+    const Eigen::Vector3d position_error = 0.1 * Eigen::Vector3d(normal(random), normal(random), normal(random)).normalized();
+    const Eigen::Vector3d rotation_error = (M_PI / 180.0) * Eigen::Vector3d(normal(random), normal(random), normal(random)).normalized();
+    believed = SE3(T_world_body.rotation() * SO3::exp(rotation_error), T_world_body.translation() + position_error);
+    keyframe.previous_keyframe_id = previous->keyframe_id;
+    keyframe.T_previous_current = msgs::Pose::from_se3(previous->T_world_body.to_se3().inverse() * believed);
+    keyframe.relative_covariance = Eigen::Matrix<double, 6, 6>::Identity() * 1e-2;
+  } else {
+    keyframe.pose_covariance = Eigen::Matrix<double, 6, 6>::Identity() * 1e-8;
+  }
+  keyframe.T_world_body = msgs::Pose::from_se3(believed);
+  keyframe.velocity = true_velocity(t) + velocity_noise * Eigen::Vector3d(normal(random), normal(random), normal(random));
+  return keyframe;
 }
 
 }  // namespace hanzo::fusion::pipeline::circle_motion

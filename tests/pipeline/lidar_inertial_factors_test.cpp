@@ -58,7 +58,6 @@ void add_to_graph(LidarInertialFactors& factors, KeyframeGraph& graph, Drive& fl
 // keyframe goes into the graph 0.3 s of data later (the Frontend's lag window), with its factors.
 Drive drive(LidarInertialFactors& factors, KeyframeGraph& graph, const DriveOptions& options) {
   std::mt19937_64 random(3);
-  std::normal_distribution<double> normal(0.0, 1.0);
   // The odometry's map frame: tilted and turned against the world (only relative motion is used).
   SE3 T_odometry_world(SO3::exp(Eigen::Vector3d(0.02, -0.01, 0.7)), Eigen::Vector3d(4.0, -1.0, 0.5));
   Drive flight;
@@ -79,23 +78,8 @@ Drive drive(LidarInertialFactors& factors, KeyframeGraph& graph, const DriveOpti
       add_to_graph(factors, graph, flight, flight.keyframes[flight.factors.size()]);
     }
     if (k % 100 != 1) continue;
-    msgs::Keyframe keyframe;
-    keyframe.keyframe_id = flight.keyframes.size();
-    keyframe.timestamp = Timestamp::from_seconds(kStart + t);
+    const msgs::Keyframe keyframe = noisy_keyframe(flight.keyframes.size(), t, flight.keyframes.empty() ? nullptr : &flight.keyframes.back(), 0.03, random);
     const SE3 T_world_body = true_pose(t);
-    SE3 believed = T_world_body;
-    if (keyframe.keyframe_id > 0) {
-      const Eigen::Vector3d position_error = 0.1 * Eigen::Vector3d(normal(random), normal(random), normal(random)).normalized();
-      const Eigen::Vector3d rotation_error = (M_PI / 180.0) * Eigen::Vector3d(normal(random), normal(random), normal(random)).normalized();
-      believed = SE3(T_world_body.rotation() * SO3::exp(rotation_error), T_world_body.translation() + position_error);
-      keyframe.previous_keyframe_id = keyframe.keyframe_id - 1;
-      keyframe.T_previous_current = msgs::Pose::from_se3(flight.keyframes.back().T_world_body.to_se3().inverse() * believed);
-      keyframe.relative_covariance = Eigen::Matrix<double, 6, 6>::Identity() * 1e-2;
-    } else {
-      keyframe.pose_covariance = Eigen::Matrix<double, 6, 6>::Identity() * 1e-8;
-    }
-    keyframe.T_world_body = msgs::Pose::from_se3(believed);
-    keyframe.velocity = true_velocity(t) + 0.03 * Eigen::Vector3d(normal(random), normal(random), normal(random));
     flight.truth.push_back(T_world_body);
     flight.keyframes.push_back(keyframe);
   }

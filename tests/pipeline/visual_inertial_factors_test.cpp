@@ -73,7 +73,6 @@ struct Flight {
 Flight fly(VisualInertialFactors& factors, double seconds, KeyframeGraph* graph = nullptr, double gap_from = 1e9, double gap_to = 1e9,
            double restart_at = 1e9, bool landmarks_behind = false) {
   std::mt19937_64 random(7);
-  std::normal_distribution<double> normal(0.0, 1.0);
   const std::vector<Eigen::Vector3d> points = cylinder_points();
   // The odometry's own world: anywhere (only its local geometry is used).
   SE3 T_odometry_world(SO3::exp(Eigen::Vector3d(0.1, -0.2, 1.0)), Eigen::Vector3d(5.0, -2.0, 1.0));
@@ -90,23 +89,8 @@ Flight fly(VisualInertialFactors& factors, double seconds, KeyframeGraph* graph 
       factors.add_frame(Timestamp::from_seconds(100.0 + t), T_odometry_world * true_pose(t), observe(true_pose(t), points, random));
     }
     if (k % 100 != 1) continue;
-    msgs::Keyframe keyframe;
-    keyframe.keyframe_id = flight.keyframes.size();
-    keyframe.timestamp = Timestamp::from_seconds(100.0 + t);
+    const msgs::Keyframe keyframe = noisy_keyframe(flight.keyframes.size(), t, flight.keyframes.empty() ? nullptr : &flight.keyframes.back(), 0.1, random);
     const SE3 T_world_body = true_pose(t);
-    SE3 believed = T_world_body;
-    if (keyframe.keyframe_id > 0) {
-      const Eigen::Vector3d position_error = 0.1 * Eigen::Vector3d(normal(random), normal(random), normal(random)).normalized();
-      const Eigen::Vector3d rotation_error = (M_PI / 180.0) * Eigen::Vector3d(normal(random), normal(random), normal(random)).normalized();
-      believed = SE3(T_world_body.rotation() * SO3::exp(rotation_error), T_world_body.translation() + position_error);
-      keyframe.previous_keyframe_id = keyframe.keyframe_id - 1;
-      keyframe.T_previous_current = msgs::Pose::from_se3(flight.keyframes.back().T_world_body.to_se3().inverse() * believed);
-      keyframe.relative_covariance = Eigen::Matrix<double, 6, 6>::Identity() * 1e-2;
-    } else {
-      keyframe.pose_covariance = Eigen::Matrix<double, 6, 6>::Identity() * 1e-8;
-    }
-    keyframe.T_world_body = msgs::Pose::from_se3(believed);
-    keyframe.velocity = true_velocity(t) + 0.1 * Eigen::Vector3d(normal(random), normal(random), normal(random));
     flight.truth.push_back(T_world_body);
     // Without a graph, the truth as its estimate (landmarks_behind: mirrored behind the camera).
     graph::Values truth;
