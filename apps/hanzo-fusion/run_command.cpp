@@ -36,6 +36,7 @@
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
 #include "hanzo/fusion/maps/provenance.hpp"
+#include "hanzo/fusion/maps/splat_ply.hpp"
 #include "hanzo/fusion/pipeline/log_replay.hpp"
 #include "hanzo/fusion/pipeline/session.hpp"
 
@@ -374,6 +375,8 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"map_keyframes", m.map_keyframes},   {"graph_keyframes", m.graph_keyframes},
           {"graph_landmarks", m.graph_landmarks}, {"graph_projections", m.graph_projections},
           {"graph_imu_factors", m.graph_imu_factors}, {"graph_lidar_factors", m.graph_lidar_factors},
+          {"splat_views", m.splat_views}, {"splat_iterations", m.splat_iterations}, {"splat_gaussians", m.splat_gaussians},
+          {"splat_images_skipped", m.splat_images_skipped},
           {"loop_candidates", m.loop_candidates}, {"loop_closures", m.loop_closures},
           {"gnss_factors", m.gnss_factors},     {"map_memory_bytes", m.map_memory_bytes},
           {"wheel_slip_episodes", m.wheel_slip_episodes}, {"wheel_messages_withheld", m.wheel_messages_withheld},
@@ -445,6 +448,11 @@ Result<std::vector<std::string>> write_map(const std::filesystem::path& out, con
     const std::string png = (out / "map_points.png").string();
     HANZO_RETURN_IF_ERROR(maps::write_points_png(png, *map.points));
     written.push_back(png);
+  }
+  if (map.gaussian_splats) {  // fusion.mapping.splats: the PLY 3DGS viewers open
+    const std::string ply = (out / "splats.ply").string();
+    HANZO_RETURN_IF_ERROR(write_file_durably(ply, maps::encode_splat_ply(*map.gaussian_splats)));
+    written.push_back(ply);
   }
   return written;
 }
@@ -605,6 +613,10 @@ int run(const Output& output, const RunOptions& options) {
       text += fmt::format("; wheels slipped {} times ({} messages not fused)", mapping.wheel_slip_episodes, mapping.wheel_messages_withheld);
     }
     text += "\n";
+  }
+  if (mapping.splat_views > 0) {
+    text += fmt::format("splats: {} Gaussians from {} after {} steps\n", mapping.splat_gaussians, count_of(mapping.splat_views, "view"),
+                        mapping.splat_iterations);
   }
   if (mapping.camera_frames_tracked + mapping.camera_frames_lost > 0) {
     // The visual-inertial odometry keeps its landmarks in the graph (counted on the graph's line).

@@ -154,6 +154,12 @@ Status validate(const FusionConfig& config) {
   if (mapping.visual_inertial_window < 0) {
     return Error{fmt::format("FusionConfig.mapping.visual_inertial_window: {} (expected >= 0)", mapping.visual_inertial_window), "mapping.visual_inertial_window"};
   }
+  const SplatMappingConfig& splats = mapping.splats;
+  if (splats.image_width < 16 || splats.steps_per_view < 1 || !(splats.cpu_share > 0.0 && splats.cpu_share <= 1.0) || splats.max_gaussians < 1000) {
+    return Error{fmt::format("FusionConfig.mapping.splats: image_width {} (>= 16), steps_per_view {} (>= 1), cpu_share {} (in (0, 1]), max_gaussians {} (>= 1000)",
+                             splats.image_width, splats.steps_per_view, splats.cpu_share, splats.max_gaussians),
+                 "mapping.splats"};
+  }
   if (Status s = validate(config.vision.features, "vision.features"); !s) return with_context(s, "FusionConfig");
   std::set<std::string_view> names;
   std::set<std::string_view> topics;

@@ -145,12 +145,36 @@ Result<FrontendConfig> parse_frontend(const YamlValue& node) {
 
 using yaml::positive_or;
 
+// `splats: true` or `splats: {enabled: true, image_width: 160, ...}`.
+Result<SplatMappingConfig> parse_splats(const YamlValue& node) {
+  SplatMappingConfig splats;
+  if (!node.present()) return splats;
+  if (!node.is_map()) {
+    HANZO_ASSIGN_OR_RETURN(splats.enabled, node.as_bool());
+    return splats;
+  }
+  HANZO_RETURN_IF_ERROR(node.check_keys({"enabled", "image_width", "steps_per_view", "cpu_share", "max_gaussians"}));
+  HANZO_ASSIGN_OR_RETURN(splats.enabled, bool_or(node["enabled"], true));
+  HANZO_ASSIGN_OR_RETURN(splats.cpu_share, positive_or(node["cpu_share"], splats.cpu_share));
+  if (splats.cpu_share > 1.0) return node["cpu_share"].error(fmt::format("expected a share of one core in (0, 1], got {}", splats.cpu_share));
+  for (auto [key, value, least] : {std::tuple{"image_width", &splats.image_width, 16}, std::tuple{"steps_per_view", &splats.steps_per_view, 1},
+                                   std::tuple{"max_gaussians", &splats.max_gaussians, 1000}}) {
+    const YamlValue& entry = node[key];
+    if (!entry.present()) continue;
+    int64_t number = 0;
+    HANZO_ASSIGN_OR_RETURN(number, entry.as_int64());
+    if (number < least || number > 100000000) return entry.error(fmt::format("expected an integer >= {}, got {}", least, number));
+    *value = static_cast<int>(number);
+  }
+  return splats;
+}
+
 Result<MappingConfig> parse_mapping(const YamlValue& node) {
   MappingConfig mapping;
   if (!node.present()) return mapping;
   HANZO_RETURN_IF_ERROR(node.check_keys({"enabled", "lidar_voxel", "lidar_source_voxel", "lidar_max_range", "map_voxel",
                                          "occupancy_resolution", "keyframe_distance", "keyframe_angle", "loop_closure",
-                                         "loop_min_travel", "loop_search_radius", "loop_max_rmse", "gnss_factors", "visual_inertial_window"}));
+                                         "loop_min_travel", "loop_search_radius", "loop_max_rmse", "gnss_factors", "visual_inertial_window", "splats"}));
   HANZO_ASSIGN_OR_RETURN(mapping.enabled, bool_or(node["enabled"], mapping.enabled));
   HANZO_ASSIGN_OR_RETURN(mapping.lidar_voxel, positive_or(node["lidar_voxel"], mapping.lidar_voxel));
   HANZO_ASSIGN_OR_RETURN(mapping.lidar_source_voxel, positive_or(node["lidar_source_voxel"], mapping.lidar_source_voxel));
@@ -170,6 +194,7 @@ Result<MappingConfig> parse_mapping(const YamlValue& node) {
     if (keyframes < 0 || keyframes > 1000000) return window.error(fmt::format("expected a number of keyframes >= 0, got {}", keyframes));
     mapping.visual_inertial_window = static_cast<int>(keyframes);
   }
+  HANZO_ASSIGN_OR_RETURN(mapping.splats, parse_splats(node["splats"]));
   return mapping;
 }
 
@@ -376,6 +401,13 @@ std::string mapping_yaml(const MappingConfig& m) {
   number("loop_max_rmse", m.loop_max_rmse, d.loop_max_rmse);
   flag("gnss_factors", m.gnss_factors, d.gnss_factors);
   if (m.visual_inertial_window != d.visual_inertial_window) out += fmt::format("    visual_inertial_window: {}\n", m.visual_inertial_window);
+  const SplatMappingConfig& splats = m.splats;
+  const SplatMappingConfig splat_defaults;
+  if (splats.enabled != splat_defaults.enabled || splats.image_width != splat_defaults.image_width || splats.steps_per_view != splat_defaults.steps_per_view ||
+      splats.cpu_share != splat_defaults.cpu_share || splats.max_gaussians != splat_defaults.max_gaussians) {
+    out += fmt::format("    splats: {{enabled: {}, image_width: {}, steps_per_view: {}, cpu_share: {}, max_gaussians: {}}}\n", splats.enabled, splats.image_width,
+                       splats.steps_per_view, format_double(splats.cpu_share), splats.max_gaussians);
+  }
   return out.empty() ? out : "  mapping:\n" + out;
 }
 

@@ -53,6 +53,46 @@ Result<cv::Mat> to_mat(const msgs::ImageMessage& image) {
 
 }  // namespace
 
+void place_camera(SplatCamera& camera, const SE3& T_world_camera) {
+  const SE3 T_camera_world = T_world_camera.inverse();
+  camera.R_camera_world = T_camera_world.rotation().matrix();
+  camera.t_camera_world = T_camera_world.translation();
+}
+
+Result<PosedView> image_view(const msgs::ImageMessage& image, const msgs::CameraIntrinsics& intrinsics, const msgs::DistortionModel& distortion,
+                             const SE3& T_world_camera, int downscale) {
+  if (downscale < 1) return Error(fmt::format("image_view: downscale {} is not >= 1", downscale));
+  if (intrinsics.width != 0 && (image.width != intrinsics.width || image.height != intrinsics.height)) {
+    return Error(fmt::format("image at {} is {} x {}, the camera {} x {}", image.timestamp.to_iso8601(), image.width, image.height, intrinsics.width,
+                             intrinsics.height));
+  }
+  cv::Mat read;
+  HANZO_ASSIGN_OR_RETURN(read, to_mat(image));
+  const cv::Matx33d k(intrinsics.fx, 0, intrinsics.cx, 0, intrinsics.fy, intrinsics.cy, 0, 0, 1);
+  if (distortion.type == msgs::DistortionType::kRadtan) {
+    cv::Mat undistorted;
+    cv::undistort(read, undistorted, k, distortion.coefficients, k);
+    read = undistorted;
+  } else if (distortion.type == msgs::DistortionType::kEquidistant) {
+    cv::Mat undistorted;
+    cv::fisheye::undistortImage(read, undistorted, k, distortion.coefficients, k);
+    read = undistorted;
+  }
+  PosedView view;
+  ViewDatasetConfig image_config;
+  image_config.downscale = downscale;
+  HANZO_RETURN_IF_ERROR(to_view_image(read, image_config, view));
+  const double s = static_cast<double>(downscale);
+  view.camera.width = view.image.width;
+  view.camera.height = view.image.height;
+  view.camera.fx = intrinsics.fx / s;
+  view.camera.fy = intrinsics.fy / s;
+  view.camera.cx = (intrinsics.cx + 0.5) / s - 0.5;
+  view.camera.cy = (intrinsics.cy + 0.5) / s - 0.5;
+  place_camera(view.camera, T_world_camera);
+  return view;
+}
+
 Result<LogViews> load_log_views(const std::string& log_path, const std::string& trajectory_path, const std::string& calibration_path,
                                 const LogViewsConfig& config) {
   if (config.downscale < 1 || config.max_views < 1 || !(config.min_translation >= 0.0) || !(config.min_rotation_degrees >= 0.0) || !(config.max_gap > 0.0)) {
@@ -82,8 +122,6 @@ Result<LogViews> load_log_views(const std::string& log_path, const std::string& 
   const SE3 T_body_camera = camera->T_body_sensor();
   const msgs::CameraIntrinsics& intrinsics = camera->camera->intrinsics;
   const msgs::DistortionModel& distortion = camera->camera->distortion;
-  ViewDatasetConfig image_config;
-  image_config.downscale = config.downscale;
   std::set<std::string> image_topics;
   std::vector<PosedView> views;
   std::optional<SE3> last_kept;
@@ -113,31 +151,9 @@ Result<LogViews> load_log_views(const std::string& log_path, const std::string& 
       return Error(fmt::format("{}: {} image at {} is {} x {}, the calibration's camera {} x {}", log_path, entry.topic, message->timestamp.to_iso8601(),
                                message->width, message->height, intrinsics.width, intrinsics.height));
     }
-    cv::Mat read;
-    HANZO_ASSIGN_OR_RETURN(read, to_mat(*message));
-    const cv::Matx33d k(intrinsics.fx, 0, intrinsics.cx, 0, intrinsics.fy, intrinsics.cy, 0, 0, 1);
-    if (distortion.type == msgs::DistortionType::kRadtan) {
-      cv::Mat undistorted;
-      cv::undistort(read, undistorted, k, distortion.coefficients, k);
-      read = undistorted;
-    } else if (distortion.type == msgs::DistortionType::kEquidistant) {
-      cv::Mat undistorted;
-      cv::fisheye::undistortImage(read, undistorted, k, distortion.coefficients, k);
-      read = undistorted;
-    }
     PosedView view;
+    HANZO_ASSIGN_OR_RETURN(view, image_view(*message, intrinsics, distortion, T_world_camera, config.downscale));
     view.name = fmt::format("{}@{}", entry.topic, message->timestamp.to_iso8601());
-    HANZO_RETURN_IF_ERROR(to_view_image(read, image_config, view));
-    const double s = static_cast<double>(config.downscale);
-    view.camera.width = view.image.width;
-    view.camera.height = view.image.height;
-    view.camera.fx = intrinsics.fx / s;
-    view.camera.fy = intrinsics.fy / s;
-    view.camera.cx = (intrinsics.cx + 0.5) / s - 0.5;
-    view.camera.cy = (intrinsics.cy + 0.5) / s - 0.5;
-    const SE3 T_camera_world = T_world_camera.inverse();
-    view.camera.R_camera_world = T_camera_world.rotation().matrix();
-    view.camera.t_camera_world = T_camera_world.translation();
     views.push_back(std::move(view));
     last_kept = T_world_camera;
   }

@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include "hanzo/fusion/maps/splat_ply.hpp"
+
 namespace hanzo::fusion::neural {
 
 msgs::GaussianSplatLayer to_splat_layer(const GaussianCloud& cloud, msgs::NeuralProvenance provenance) {
@@ -17,7 +19,7 @@ msgs::GaussianSplatLayer to_splat_layer(const GaussianCloud& cloud, msgs::Neural
 }
 
 Result<GaussianCloud> from_splat_layer(const msgs::GaussianSplatLayer& layer) {
-  if (layer.sh_degree > static_cast<uint32_t>(kMaxShDegree)) return Error(fmt::format("gaussian_splats: sh_degree {} (expected 0 to {})", layer.sh_degree, kMaxShDegree));
+  HANZO_RETURN_IF_ERROR(maps::validate_splats(layer));
   GaussianCloud cloud;
   cloud.sh_degree = static_cast<int>(layer.sh_degree);
   cloud.position = layer.positions;
@@ -25,10 +27,6 @@ Result<GaussianCloud> from_splat_layer(const msgs::GaussianSplatLayer& layer) {
   cloud.rotation = layer.rotations;
   cloud.opacity_logit = layer.opacity_logits;
   cloud.sh = layer.sh;
-  if (!cloud.consistent()) {
-    return Error(fmt::format("gaussian_splats: {} Gaussians with {} positions, {} log_scales, {} rotations, {} sh floats (degree {}), or a value not finite",
-                             cloud.size(), cloud.position.size(), cloud.log_scale.size(), cloud.rotation.size(), cloud.sh.size(), cloud.sh_degree));
-  }
   return cloud;
 }
 

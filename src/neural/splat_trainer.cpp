@@ -253,6 +253,35 @@ double SplatTrainer::step(const PosedView& view) {
   return loss;
 }
 
+void SplatTrainer::grow_optimizer_state() {
+  for (int group = 0; group < kGroups; ++group) {
+    const std::size_t size = cloud_.parameters()[static_cast<std::size_t>(group)].size();
+    adam_m_[static_cast<std::size_t>(group)].resize(size, 0.0f);
+    adam_v_[static_cast<std::size_t>(group)].resize(size, 0.0f);
+  }
+}
+
+Status SplatTrainer::add_gaussians(const GaussianCloud& more) {
+  if (more.sh_degree != cloud_.sh_degree) return Error(fmt::format("SplatTrainer: Gaussians of degree {} added to degree {}", more.sh_degree, cloud_.sh_degree));
+  if (!more.consistent()) return Error("SplatTrainer: the added Gaussians' arrays do not fit their count and degree, or hold non-finite values");
+  const std::size_t cap = static_cast<std::size_t>(config_.max_gaussians);
+  const std::size_t count = std::min(more.size(), cap > cloud_.size() ? cap - cloud_.size() : 0);
+  const auto append = [count](std::vector<float>& to, const std::vector<float>& from, std::size_t width) {
+    to.insert(to.end(), from.begin(), from.begin() + static_cast<std::ptrdiff_t>(count * width));
+  };
+  append(cloud_.position, more.position, 3);
+  append(cloud_.log_scale, more.log_scale, 3);
+  append(cloud_.rotation, more.rotation, 4);
+  append(cloud_.opacity_logit, more.opacity_logit, 1);
+  append(cloud_.sh, more.sh, static_cast<std::size_t>(cloud_.sh_floats()));
+  grow_optimizer_state();
+  densify_gradient_sum_.resize(cloud_.size(), 0.0f);
+  densify_count_.resize(cloud_.size(), 0);
+  max_screen_share_.resize(cloud_.size(), 0.0f);
+  gradients_.resize_like(cloud_);
+  return ok_status();
+}
+
 void SplatTrainer::apply_keep(const std::vector<bool>& keep) {
   cloud_.filter(keep);
   const std::size_t sh_width = static_cast<std::size_t>(cloud_.sh_floats());
@@ -292,11 +321,7 @@ void SplatTrainer::append_gaussians(const std::vector<std::size_t>& sources, boo
       std::copy(sh.begin(), sh.end(), cloud_.sh.end() - cloud_.sh_floats());
     }
   }
-  for (int group = 0; group < kGroups; ++group) {
-    const std::size_t size = cloud_.parameters()[static_cast<std::size_t>(group)].size();
-    adam_m_[static_cast<std::size_t>(group)].resize(size, 0.0f);
-    adam_v_[static_cast<std::size_t>(group)].resize(size, 0.0f);
-  }
+  grow_optimizer_state();
 }
 
 void SplatTrainer::densify_and_prune() {

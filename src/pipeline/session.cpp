@@ -3,6 +3,7 @@
 #include "camera_odometry.hpp"
 #include "imu_keyframe_chain.hpp"
 #include "lidar_inertial_factors.hpp"
+#include "session_splats.hpp"
 #include "visual_loop_closures.hpp"
 
 #include <algorithm>
@@ -22,6 +23,23 @@
 
 namespace hanzo::fusion::pipeline {
 namespace {
+
+/// The splats of the first camera with intrinsics (fusion.mapping.splats).
+Result<std::unique_ptr<SessionSplats>> create_session_splats(const config::FusionConfig& config, const calib::Calibration& calibration,
+                                                             const SessionConfig& session, bool maps_3d_lidar) {
+  for (const config::SensorConfig& sensor : config.sensors) {
+    const calib::SensorCalibration* entry = calibration.find(sensor.name);
+    if (sensor.modality != config::SensorModality::kCamera || entry == nullptr || !entry->camera) continue;
+    SplatCameraModel camera{sensor.name, entry->camera->intrinsics, entry->camera->distortion, entry->T_body_sensor(), entry->time_offset};
+    SessionSplatsConfig splats;
+    splats.settings = config.mapping.splats;
+    splats.realtime = session.mode == SessionMode::kRealtime;
+    splats.threads = session.num_threads;
+    splats.seed_from_map = maps_3d_lidar;
+    return SessionSplats::create(std::move(camera), splats);
+  }
+  return Error("mapping.splats: no camera with intrinsics in the calibration");
+}
 
 bool configures_gnss(const config::FusionConfig& config) {
   return std::any_of(config.sensors.begin(), config.sensors.end(),
@@ -241,6 +259,9 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   auto session = std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), planar_laser,
                                                       lidar_calibration, std::move(wheel_sensor), wheel_calibration));
   session->camera_odometry_ = std::move(camera_odometry);
+  if (config.mapping.splats.enabled && session->config_.mapping) {
+    HANZO_ASSIGN_OR_RETURN(session->splats_, create_session_splats(config, calibration, session->config_, session->odometry_.has_value()));
+  }
   if (lidar_inertial_graph) {
     const calib::SensorCalibration* entry = calibration.find(imu->name);
     const calib::SensorCalibration imu_calibration = entry != nullptr ? *entry : calib::SensorCalibration{};
@@ -421,14 +442,24 @@ std::optional<std::chrono::nanoseconds> Session::registration_wait_limit(Timesta
 }
 
 PushStatus Session::push(std::string_view sensor, msgs::SensorMessage message) {
+  if (splats_ && sensor == splats_->sensor()) {
+    if (const auto* image = std::get_if<msgs::ImageMessage>(&message); image != nullptr && msgs::validate(*image).ok()) splats_->add_image(*image);
+  }
   if (const auto* gnss = std::get_if<msgs::GnssMessage>(&message)) {
     if (const config::SensorConfig* configured = frontend_->config().find_sensor(sensor)) {
       gnss_without_fix_[configured->name] = gnss->fix_type < configured->fusion.min_fix;
     }
   }
   PushStatus pushed = push_message(sensor, std::move(message));
+  take_splat_views();
   track_health();
   return pushed;
+}
+
+void Session::take_splat_views() {
+  if (!splats_ || !latest_keyframe_) return;
+  splats_->take_views([this](Timestamp time) { return frontend_->pose_at(time); }, latest_keyframe_->keyframe_id,
+                      frontend_->world_correction() * latest_keyframe_uncorrected_);
 }
 
 PushStatus Session::push_message(std::string_view sensor, msgs::SensorMessage message) {
@@ -475,6 +506,7 @@ bool Session::wheels_agree(const msgs::WheelOdometryMessage& wheels) {
 
 void Session::flush() {
   flush_pipeline();
+  take_splat_views();
   track_health();
 }
 
@@ -879,6 +911,7 @@ void Session::add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen
   last_anchor_ = anchor;
   map_keyframe_of_[anchor] = map_keyframes_.size();
   map_keyframes_.push_back({anchor, T_world_anchor.inverse() * T_world_lidar, T_world_lidar});
+  if (splats_) splats_->add_points(cloud::transformed(cloud, T_world_lidar).positions);
   ++summary_.map_keyframes;
   ++summary_.map_version;
   if (map_update_callback_) {
@@ -940,6 +973,7 @@ void Session::update_backend() {
 }
 
 void Session::follow_graph() {
+  if (splats_) splats_->move_views([this](uint64_t keyframe) { return graph_->optimized_pose(keyframe); });
   // Map keyframes whose keyframe moved follow it.
   std::map<uint64_t, SE3> moved;
   for (std::size_t k = 0; k < map_keyframes_.size(); ++k) {
@@ -1104,6 +1138,7 @@ msgs::FusionMap Session::map() const {
       map.visual_landmarks = std::move(layer);
     }
   }
+  if (splats_) map.gaussian_splats = splats_->layer();
   map.version = summary_.map_version;
   map.provenance.algorithm = planar_ ? "pipeline/session (planar laser)" : "pipeline/session";
   return map;
@@ -1201,6 +1236,13 @@ MappingSummary Session::mapping_summary() const {
     summary.camera_dark_frames = conditions.dark;
     summary.camera_glare_frames = conditions.glare;
     summary.camera_motion_blur_frames = conditions.motion_blur;
+  }
+  if (splats_) {
+    const SessionSplatsSummary splats = splats_->summary();
+    summary.splat_views = splats.views;
+    summary.splat_iterations = splats.iterations;
+    summary.splat_gaussians = splats.gaussians;
+    summary.splat_images_skipped = splats.images_skipped;
   }
   summary.map_memory_bytes = map_builder_.memory_bytes();
   return summary;

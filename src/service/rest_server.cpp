@@ -18,6 +18,7 @@
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
+#include "hanzo/fusion/maps/splat_ply.hpp"
 #include "hanzo/fusion/calib/calibration_json.hpp"
 #include "http_compression.hpp"
 #include "json_codec.hpp"
@@ -84,8 +85,8 @@ ApiResult<int64_t> integer_parameter(const httplib::Request& request, const std:
 // `?format=`: fmap (default), pcd, ply or json; kInvalidArgument otherwise.
 ApiResult<std::string> map_format(const httplib::Request& request) {
   const std::string format = request.has_param("format") ? request.get_param_value("format") : "fmap";
-  if (format != "fmap" && format != "pcd" && format != "ply" && format != "json") {
-    return ApiError{ErrorCode::kInvalidArgument, fmt::format("format '{}': use fmap, pcd, ply or json", format), "format"};
+  if (format != "fmap" && format != "pcd" && format != "ply" && format != "json" && format != "splats") {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("format '{}': use fmap, pcd, ply, splats or json", format), "format"};
   }
   return format;
 }
@@ -169,18 +170,23 @@ ApiResult<CreateSessionRequest> create_session_request(const httplib::Request& r
   return detail::parse_create_session(request.body);
 }
 
-// A map as a FusionMap file, or its point layer as binary PCD / PLY.
+// A map as a FusionMap file, its point layer as binary PCD / PLY, or its Gaussian splats as the
+// PLY of 3D Gaussian splatting viewers.
 void send_map_file(httplib::Response& response, const msgs::FusionMap& map, const std::string& format) {
   Result<std::string> bytes = Error("");
   if (format == "fmap") {
     bytes = maps::serialize_fusion_map(map);
+  } else if (format == "splats") {
+    if (!map.gaussian_splats) return send_error(response, {ErrorCode::kNotFound, "the map has no Gaussian splats (yet)", "format"});
+    bytes = maps::encode_splat_ply(*map.gaussian_splats);
   } else if (!map.points) {
     return send_error(response, {ErrorCode::kNotFound, "the map has no point layer", "format"});
   } else {
     bytes = cloud::encode_cloud(maps::to_point_cloud(*map.points), format);
   }
   if (!bytes) return send_error(response, ApiError::from(ErrorCode::kInternal, bytes.error()));
-  response.set_header("Content-Disposition", fmt::format("attachment; filename=\"{}-v{}.{}\"", map.map_id, map.version, format));
+  response.set_header("Content-Disposition",
+                       fmt::format("attachment; filename=\"{}-v{}.{}\"", map.map_id, map.version, format == "splats" ? "splats.ply" : format));
   response.set_content(std::move(bytes).value(), "application/octet-stream");
 }
 

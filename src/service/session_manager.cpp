@@ -266,7 +266,8 @@ struct SessionManager::Impl {
   // The session's map with its metadata; caller holds managed.mutex.
   std::optional<msgs::FusionMap> map_locked(const ManagedSession& managed) const {
     if (!managed.session) return managed.final_map;
-    if (managed.session->mapping_summary().map_keyframes == 0) return std::nullopt;
+    const pipeline::MappingSummary mapping = managed.session->mapping_summary();
+    if (mapping.map_keyframes == 0 && mapping.splat_gaussians == 0) return std::nullopt;
     msgs::FusionMap map = managed.session->map();
     map.map_id = managed.record.id;
     map.created = managed.latest_pose ? managed.latest_pose->timestamp : managed.record.created;

@@ -131,6 +131,7 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   config.mapping.loop_closure = false;
   config.mapping.keyframe_angle = 0.0;
   config.mapping.visual_inertial_window = 0;
+  config.mapping.splats = {.enabled = true, .image_width = 320, .steps_per_view = 4, .cpu_share = 0.25, .max_gaussians = 50000};
   config.sensors.push_back({"front_radar", SensorModality::kRadar, "/radar: front", 13.5, "radar link", "continental_ars408",
                             {.timeout_s = 0.3, .velocity_noise = 0.2}});
   config.sensors.push_back({"tracker", SensorModality::kGnss, "/gps", 1.0 / 3.0, "gps_link", "",
@@ -161,6 +162,10 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   EXPECT_FALSE(loaded->mapping.loop_closure);
   EXPECT_EQ(loaded->mapping.keyframe_angle, 0.0);
   EXPECT_EQ(loaded->mapping.visual_inertial_window, 0);
+  EXPECT_TRUE(loaded->mapping.splats.enabled);
+  EXPECT_EQ(loaded->mapping.splats.image_width, 320);
+  EXPECT_EQ(loaded->mapping.splats.cpu_share, 0.25);
+  EXPECT_EQ(loaded->mapping.splats.max_gaussians, 50000);
   EXPECT_EQ(loaded->mapping.occupancy_resolution, MappingConfig{}.occupancy_resolution);
   EXPECT_EQ(loaded->vision.features, (FeatureSelection{"aliked-n16", "/models/ALIKED weights/aliked-n16.pth"}));
   EXPECT_EQ(loaded->vision.matcher, MatcherType::kLearned);
@@ -184,6 +189,10 @@ TEST(FusionConfig, MappingBlockIsCheckedKeyByKey) {
   EXPECT_THAT(error_of("fusion:\n  mapping:\n    keyframe_distance: -1\n" + sensors), HasSubstr("mapping.keyframe_distance"));
   EXPECT_THAT(error_of("fusion:\n  mapping:\n    loop_closure: maybe\n" + sensors), HasSubstr("mapping.loop_closure"));
   EXPECT_THAT(error_of("fusion:\n  mapping:\n    map_voxels: 0.1\n" + sensors), HasSubstr("map_voxels"));
+  EXPECT_THAT(error_of("fusion:\n  mapping:\n    splats: {cpu_share: 2}\n" + sensors), HasSubstr("mapping.splats.cpu_share: expected a share of one core in (0, 1], got 2"));
+  EXPECT_THAT(error_of("fusion:\n  mapping:\n    splats: {image_width: 8}\n" + sensors), HasSubstr("mapping.splats.image_width: expected an integer >= 16, got 8"));
+  EXPECT_TRUE(parse_fusion_config("fusion:\n  mapping:\n    splats: true\n" + sensors, "fusion.yaml").value().mapping.splats.enabled);
+  EXPECT_TRUE(parse_fusion_config("fusion:\n  mapping:\n    splats: {steps_per_view: 5}\n" + sensors, "fusion.yaml").value().mapping.splats.enabled);
   FusionConfig config = parse_fusion_config("fusion:\n  mapping: {enabled: false, lidar_voxel: 0.5}\n" + sensors, "fusion.yaml").value();
   EXPECT_FALSE(config.mapping.enabled);
   EXPECT_EQ(config.mapping.lidar_voxel, 0.5);

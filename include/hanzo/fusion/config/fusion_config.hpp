@@ -201,6 +201,16 @@ struct SensorConfig {
 
 /// fusion.mapping: the Frontend's LiDAR odometry, keyframe graph, loop closure and map. The
 /// LiDAR settings apply when a 3D LiDAR is configured; the graph runs with any sensors.
+/// 3D Gaussian splats trained while a session runs, from its camera's images at the session's
+/// poses (pipeline/session_splats.hpp; builds with the AI module, HANZO_FUSION_AI).
+struct SplatMappingConfig {
+  bool enabled = false;         // off: the training takes CPU a small computer's odometry may need
+  int image_width = 160;        // px >= 16: views downscaled by the integer factor nearest this width
+  int steps_per_view = 10;      // >= 1, replay: optimizer steps after each new view (deterministic)
+  double cpu_share = 0.5;       // (0, 1], realtime: share of one core the background training takes
+  int max_gaussians = 200000;   // >= 1000
+};
+
 struct MappingConfig {
   bool enabled = true;                 // false: the filter alone (no LiDAR odometry, graph or map)
   double lidar_voxel = 1.0;            // m > 0: LiDAR odometry local-map voxel and neighbour radius
@@ -216,6 +226,7 @@ struct MappingConfig {
   double loop_max_rmse = 0.1;          // m > 0: registration inlier RMSE a loop must reach
   bool gnss_factors = true;            // fused GNSS fixes become GPS factors of the graph
   int visual_inertial_window = 40;     // keyframes >= 0 of the visual-inertial graph's sliding window (0: keep every keyframe)
+  SplatMappingConfig splats;
 };
 
 struct FusionConfig {

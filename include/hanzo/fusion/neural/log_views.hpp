@@ -22,6 +22,8 @@
 #include <string>
 
 #include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
 #include "hanzo/fusion/neural/view_dataset.hpp"
 
 namespace hanzo::fusion::neural {
@@ -45,5 +47,15 @@ struct LogViews {
 
 Result<LogViews> load_log_views(const std::string& log_path, const std::string& trajectory_path, const std::string& calibration_path,
                                 const LogViewsConfig& config = {});
+
+/// One camera image as a view at T_world_camera (OpenCV optical frame): undistorted to the
+/// pinhole camera with the same focal lengths (radtan, equidistant), downscaled by `downscale`
+/// (area averaging), colour kept, mono8 grey in all three channels. Fails for a depth image,
+/// data that does not fill the image, or a size other than the intrinsics' (when they give one).
+Result<PosedView> image_view(const msgs::ImageMessage& image, const msgs::CameraIntrinsics& intrinsics, const msgs::DistortionModel& distortion,
+                             const SE3& T_world_camera, int downscale);
+
+/// Sets the camera's R_camera_world and t_camera_world from T_world_camera.
+void place_camera(SplatCamera& camera, const SE3& T_world_camera);
 
 }  // namespace hanzo::fusion::neural

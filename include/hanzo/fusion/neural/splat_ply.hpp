@@ -1,14 +1,7 @@
 #pragma once
-// Gaussians as the PLY that 3D Gaussian splatting viewers read (the reference implementation's
-// layout): binary little-endian, one vertex per Gaussian with float properties
-//   x y z nx ny nz f_dc_0 f_dc_1 f_dc_2 f_rest_0 .. f_rest_{3 (K-1) - 1} opacity
-//   scale_0 scale_1 scale_2 rot_0 rot_1 rot_2 rot_3
-// where K = (degree + 1)^2, f_rest is channel-major (all of red's higher coefficients, then
-// green's, then blue's), opacity is the logit, scale the log of the standard deviations and rot
-// the quaternion (w, x, y, z); the normals are zero.
-//
-// read_splat_ply() takes that layout back (any property order, the degree from the f_rest
-// count); it refuses another format, a missing property, a truncated body and non-finite values.
+// Gaussians as the PLY file that 3D Gaussian splatting viewers read: the layout of
+// maps/splat_ply.hpp (the reference implementation's), written and read as a GaussianCloud.
+// read_splat_ply() refuses what decode_splat_ply() refuses, each error naming the file.
 
 #include <string>
 

@@ -83,6 +83,13 @@ class SplatTrainer {
 
   /// One step on `view` (its image and camera). Returns the loss.
   double step(const PosedView& view);
+  /// Appends Gaussians (a scene that grows as a session's views arrive), their optimizer state
+  /// and densification statistics zero, at most up to max_gaussians (the first ones of `more`).
+  /// Fails for another degree or inconsistent arrays; nothing changes then.
+  Status add_gaussians(const GaussianCloud& more);
+  /// Changes the cap of densification and add_gaussians (a growing scene's budget); Gaussians
+  /// beyond it stay.
+  void set_max_gaussians(int max_gaussians) { config_.max_gaussians = max_gaussians; }
 
   const GaussianCloud& cloud() const { return cloud_; }
   int iteration() const { return iteration_; }
@@ -95,6 +102,8 @@ class SplatTrainer {
   void reset_opacity();
   void apply_keep(const std::vector<bool>& keep);
   void append_gaussians(const std::vector<std::size_t>& sources, bool split);
+  /// Zero Adam moments for Gaussians appended since (the arrays' new sizes).
+  void grow_optimizer_state();
 
   GaussianCloud cloud_;
   double extent_ = 1.0;

@@ -60,6 +60,10 @@
 //    (src/pipeline/visual_loop_closures.hpp); a verified loop adds a loop factor (DCS kernel,
 //    the detector's covariance) and the graph corrects the Frontend, whose world the
 //    odometry's poses then follow.
+//  - With fusion.mapping.splats, images of the first camera with intrinsics also train 3D
+//    Gaussian splats (session_splats.hpp) at the Session's poses, anchored to keyframes so that
+//    they follow the graph; seeded at the map keyframes' points. Replay trains inside push()
+//    (deterministic), realtime on a worker thread of their own with a bounded share of a core.
 //  - Everything else goes to Frontend::push (same checks, same errors).
 //  - Keyframes of the Frontend (frontend.keyframe_interval) become nodes of a KeyframeGraph
 //    (between factors from the filter's relative motion; with an IMU and a camera (msckf) or a
@@ -122,6 +126,7 @@ namespace hanzo::fusion::pipeline {
 class CameraOdometry;
 class LidarInertialFactors;
 class BodyImu;
+class SessionSplats;
 class VisualLoopClosures;
 
 enum class SessionMode { kReplay, kRealtime };
@@ -280,6 +285,12 @@ struct MappingSummary {
   /// The visual odometry's loop-closure candidates: "bow", "learned" (VLAD), "" when it closes
   /// no loops (fusion.vision.place_recognition).
   std::string visual_place_recognition;
+  /// Gaussian splats trained from the camera (fusion.mapping.splats; session_splats.hpp): views,
+  /// optimizer steps, Gaussians now, images not used (no pose, unreadable); zero when off.
+  uint64_t splat_views = 0;
+  uint64_t splat_iterations = 0;
+  uint64_t splat_gaussians = 0;
+  uint64_t splat_images_skipped = 0;
 };
 
 /// A pose at a time (body in the world frame).
@@ -325,8 +336,9 @@ class Session {
   /// Nothing changes then.
   Result<RelocalizationOutcome> relocalize(const lidar::MapLocalizer& map, const RelocalizationRequest& request);
 
-  /// The map's layers (points, occupancy) with version = map_version and provenance.algorithm
-  /// set ("pipeline/session"); other metadata empty.
+  /// The map's layers (points, occupancy; the cameras' landmarks; the Gaussian splats trained so
+  /// far with fusion.mapping.splats) with version = map_version and provenance.algorithm set
+  /// ("pipeline/session"); other metadata empty. The splats change without map_version.
   msgs::FusionMap map() const;
   /// The Frontend's summary with the LiDAR sensor's counters filled in.
   SessionSummary summary() const;
@@ -464,6 +476,9 @@ class Session {
   std::optional<SE3> visual_world_;
   SE3 visual_world_correction_;  ///< the Frontend's world correction visual_world_ follows
   std::unique_ptr<VisualLoopClosures> visual_loops_;  ///< frontend.type msckf with loop_closure
+  std::unique_ptr<SessionSplats> splats_;             ///< fusion.mapping.splats
+  /// Images of the splats' camera waiting for the Frontend's pose become views.
+  void take_splat_views();
   MappingSummary summary_;
   /// keep_trajectory: emitted poses and keyframes, both as the filter had them before any
   /// correction (Frontend::world_correction() undone), for optimized_trajectory().
