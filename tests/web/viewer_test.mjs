@@ -3,7 +3,10 @@
 // and Debian's chromium (driven by playwright-core) loading GET / while the log streams. The
 // page must list the session, show its live pose (with its time), trajectory, map points, sensor
 // table, health timeline, position uncertainty, grid scale and overview; without a token it must
-// say so, and a token in the URL must be dropped unused. The screenshot is kept: TEST_ARTIFACTS/viewer.png.
+// say so, and a token in the URL must be dropped unused. Then a FusionMap with Gaussian splats
+// (`hanzo-fusion run` with fusion.mapping.splats on the warehouse with its camera), uploaded
+// and opened with ?map=ID, must be drawn by the splat renderer. The screenshots are kept:
+// TEST_ARTIFACTS/viewer.png, viewer-splats.png.
 //
 //   node tests/web/viewer_test.mjs --binary build/apps/hanzo-fusion --out build/test-artifacts
 import { spawn, execFileSync } from 'node:child_process';
@@ -52,7 +55,7 @@ const token = 'viewer-test-token-0123456789';
 fs.writeFileSync(path.join(scratch, 'tokens.yaml'), `tokens:
   - name: viewer-test
     organization: acme
-    permissions: [fusion:session:write, fusion:session:read, fusion:map:read]
+    permissions: [fusion:session:write, fusion:session:read, fusion:map:read, fusion:map:write]
     token: "${token}"
 `);
 const server = spawn(binary, ['serve', '--tokens', path.join(scratch, 'tokens.yaml'), '--port', '0', '--grpc-port', '0', '--bind', '127.0.0.1',
@@ -131,8 +134,67 @@ await page.waitForFunction((stored) => window.viewerState.trajectoryPoints >= st
   .catch(() => fail('the trajectory did not catch up with the stored poses'));
 check(pageErrors.length === 0, `page errors: ${pageErrors.join('; ')}`);
 check(fs.statSync(path.join(out, 'viewer.png')).size > 10000, 'the screenshot is empty');
+
+// 6. A FusionMap with Gaussian splats: 12 s of the warehouse with its camera, mapped with splats.
+const splatSim = path.join(scratch, 'splat-sim');
+execFileSync(binary, ['sim', 'examples/scenarios/warehouse_robot.yaml', '--out', splatSim, '--duration', '12', '--no-foxglove'], { stdio: ['ignore', 'ignore', 'inherit'] });
+const splatConfig = fs.readFileSync(path.join(splatSim, 'fusion.yaml'), 'utf8').replace(/^fusion:\n/m, 'fusion:\n  mapping:\n    splats: {image_width: 80}\n');
+fs.writeFileSync(path.join(splatSim, 'fusion-splats.yaml'), splatConfig);
+execFileSync(binary, ['run', '--config', path.join(splatSim, 'fusion-splats.yaml'), '--calibration', path.join(splatSim, 'calibration.yaml'),
+                      '--log', path.join(splatSim, 'sensors.mcap'), '--out', path.join(splatSim, 'run'), '--json'], { stdio: ['ignore', 'ignore', 'inherit'] });
+const upload = await fetch(`${base}/v1/maps?name=warehouse-splats`, { method: 'POST', headers: { Authorization: `Bearer ${token}` },
+                                                                       body: fs.readFileSync(path.join(splatSim, 'run', 'map.fmap')) });
+check(upload.status === 201, `uploading the map with splats: HTTP ${upload.status}`);
+const { map_id: mapId } = await upload.json();
+const splatPly = await fetch(`${base}/v1/maps/${mapId}?format=splats`, { headers: { Authorization: `Bearer ${token}` } });
+check(splatPly.status === 200 && (await splatPly.text()).startsWith('ply\n'), `GET /v1/maps/${mapId}?format=splats: HTTP ${splatPly.status}`);
+await page.goto(`${base}/?map=${mapId}`);
+await page.waitForFunction(() => window.viewerState.storedMapShown && window.viewerState.splats > 1000, null, { timeout: 60000, polling: 500 })
+  .catch(async () => fail(`the page did not show the map's splats: ${JSON.stringify(await page.evaluate(() => window.viewerState))}`));
+// The pixels the splats draw: points hidden, the share of the view that differs from the
+// background with the splats shown, less that without them (the grid).
+const drawnShare = () => page.evaluate(() => {
+  const source = document.querySelector('#view canvas');
+  const copy = document.createElement('canvas');
+  copy.width = source.width;
+  copy.height = source.height;
+  const context = copy.getContext('2d');
+  context.drawImage(source, 0, 0);
+  const { data } = context.getImageData(0, 0, copy.width, copy.height);
+  let drawn = 0;
+  for (let i = 0; i < data.length; i += 4) {
+    if (Math.abs(data[i] - 0x10) + Math.abs(data[i + 1] - 0x14) + Math.abs(data[i + 2] - 0x18) > 30) ++drawn;
+  }
+  return drawn / (data.length / 4);
+});
+const settle = () => new Promise((resolve) => setTimeout(resolve, 1500));
+// Spark sorts and draws on its own schedule: poll (at most 30 s) until `done(share)`.
+const drawnUntil = async (done) => {
+  let share = await drawnShare();
+  for (let tries = 0; tries < 20 && !done(share); ++tries) {
+    await settle();
+    share = await drawnShare();
+  }
+  return share;
+};
+// Points and grid hidden: what differs from the background is the splats.
+await page.click('#show-points');
+await page.click('#show-grid');
+const covered = await drawnUntil((share) => share > 0.015);
+await page.screenshot({ path: path.join(out, 'viewer-splats.png') });
+check(covered > 0.015, `the splats cover ${(100 * covered).toFixed(1)} % of the view`);  // 12 s of the warehouse seen from above: about 3 %
+// The splats switch off and on again.
+await page.click('#show-splats');
+const hidden = await drawnUntil((share) => share < 0.001);
+check(hidden < 0.001, `with the splats switched off ${(100 * hidden).toFixed(1)} % of the view is drawn`);
+await page.click('#show-splats');
+const shownAgain = await drawnUntil((share) => share > 0.015);
+check(shownAgain > 0.015, `switched on again the splats cover ${(100 * shownAgain).toFixed(1)} % of the view`);
+const splatsShown = await page.evaluate(() => window.viewerState.splats);
+check(pageErrors.length === 0, `page errors: ${pageErrors.join('; ')}`);
 await browser.close();
 server.kill('SIGTERM');
 await new Promise((resolve) => server.on('exit', resolve));
 console.log(`web.viewer: ok: while streaming ${live.poses} live poses, ${live.trajectoryPoints} trajectory poses, ${live.mapPoints} map points shown; ` +
-            `${summary.messages_sent} messages streamed; screenshot ${path.join(out, 'viewer.png')}`);
+            `${summary.messages_sent} messages streamed; screenshot ${path.join(out, 'viewer.png')}; a stored map's ${splatsShown} splats cover ` +
+            `${(100 * covered).toFixed(1)} % of the view (${path.join(out, 'viewer-splats.png')})`);

@@ -1,13 +1,16 @@
 // The server's web viewer (GET /): the organization's sessions, the selected session's live pose,
-// trajectory, map points and sensor health, in 3D, with an overview (zoom to fit), a grid with
+// trajectory, map points, Gaussian splats (fusion.mapping.splats; drawn by Spark, a three.js
+// splat renderer) and sensor health, in 3D, with an overview (zoom to fit), a grid with
 // its scale, the time of the latest pose, a per-sensor health timeline and the position
 // uncertainty over time. Talks to the REST API of the server that serves it (docs/server.md)
 // with the token typed into the page, kept in sessionStorage (never in the URL: a `?token=`
 // there is removed unread, as it lands in browser history and server logs). `?session=ID`
-// selects a session. Polls: sessions every second, the pose 5 times a second, new trajectory
-// poses every second, the map when its version changes.
+// selects a session, `?map=ID` shows a stored FusionMap's points and splats instead. Polls: sessions every second, the pose 5 times a second, new trajectory
+// poses every second, the map when its version changes, the splats at most every 5 s while they
+// train.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+import { SparkRenderer, SplatMesh } from '@sparkjsdev/spark';
 import { HealthTimeline, SigmaChart } from './timelines.js';
 
 const query = new URLSearchParams(location.search);
@@ -22,6 +25,8 @@ const state = {
   token: sessionStorage.getItem('hanzo-fusion-token') || '',
   needsToken: false,      // a 401 came back: polling waits for a token
   selected: query.get('session') || null,
+  storedMap: query.get('map') || null,  // a stored FusionMap shown instead of a session
+  storedMapShown: false,
   sessions: [],
   poses: 0,               // poses received for the selected session
   latestPoseNs: null,
@@ -29,6 +34,9 @@ const state = {
   trajectoryAfter: null,  // next_after of the trajectory paging
   mapVersion: -1,
   mapPoints: 0,
+  splats: 0,              // Gaussians drawn
+  splatIterations: -1,    // the session's training steps when they were fetched
+  splatFetchedAt: 0,      // ms (performance.now())
   gridSpacing: 2,         // m between grid lines
   healthSamples: 0,       // poses in the health timeline
   sigmaPoints: 0,         // poses in the uncertainty chart
@@ -83,6 +91,7 @@ function setGrid(box) {
   grid = new THREE.GridHelper(cells * spacing, cells, 0x30363d, 0x1f252c);
   grid.rotation.x = Math.PI / 2;
   grid.position.set(Math.round(center.x / spacing) * spacing, Math.round(center.y / spacing) * spacing, box && !box.isEmpty() ? box.min.z : 0);
+  grid.visible = $('show-grid').checked;
   scene.add(grid);
   state.gridSpacing = spacing;
   $('scale').textContent = `grid ${spacing >= 1 ? spacing : spacing.toFixed(2)} m`;
@@ -106,6 +115,34 @@ const sigma = new SigmaChart($('sigma'));
 const mapGeometry = new THREE.BufferGeometry();
 const map = new THREE.Points(mapGeometry, new THREE.PointsMaterial({ size: 0.08, vertexColors: true }));
 scene.add(map);
+
+// Gaussian splats (the map's splat layer, as the PLY of GET .../map?format=splats), world frame.
+scene.add(new SparkRenderer({ renderer }));
+let splatMesh = null;
+async function showSplats(bytes) {
+  const header = new TextDecoder().decode(new Uint8Array(bytes, 0, Math.min(bytes.byteLength, 4096)));
+  const count = Number((header.match(/^element vertex (\d+)$/m) || [, 0])[1]);
+  const mesh = new SplatMesh({ fileBytes: bytes, fileType: 'ply' });
+  await mesh.initialized;
+  if (splatMesh) {
+    scene.remove(splatMesh);
+    splatMesh.dispose();
+  }
+  splatMesh = mesh;
+  placeSplats();
+  state.splats = count;
+}
+// Shown and hidden by joining and leaving the scene (Spark redraws when its set of splat meshes
+// changes; a visibility flag alone waits for the next camera motion).
+function placeSplats() {
+  if (!splatMesh) return;
+  if ($('show-splats').checked) scene.add(splatMesh);
+  else scene.remove(splatMesh);
+  splatMesh.needsUpdate = true;
+}
+$('show-splats').addEventListener('change', placeSplats);
+$('show-points').addEventListener('change', () => { map.visible = $('show-points').checked; });
+$('show-grid').addEventListener('change', () => { grid.visible = $('show-grid').checked; });
 
 // The overview: the camera looks down at the whole map and trajectory.
 function fitView() {
@@ -192,6 +229,13 @@ function resetSessionView() {
   trajectoryGeometry.setDrawRange(0, 0);
   mapGeometry.deleteAttribute('position');
   mapGeometry.deleteAttribute('color');
+  if (splatMesh) {
+    scene.remove(splatMesh);
+    splatMesh.dispose();
+    splatMesh = null;
+  }
+  state.splats = 0;
+  state.splatIterations = -1;
   robot.visible = false;
   state.latestPoseNs = null;
   health.clear();
@@ -247,6 +291,7 @@ function renderDetails(session) {
     row(['map keyframes', mapping.map_keyframes ?? 0]),
     row(['loop closures', (mapping.loop_closures ?? 0) + (mapping.manual_loop_closures ?? 0)]),
     row(['map points', state.mapPoints]),
+    row(['splats', `${state.splats} drawn; ${mapping.splat_gaussians ?? 0} Gaussians, ${mapping.splat_views ?? 0} views, ${mapping.splat_iterations ?? 0} steps`]),
   );
 }
 
@@ -325,7 +370,35 @@ async function refreshSession() {
       if (error.status !== 404 && error.status !== 403) throw error;  // no map, or no map:read
     }
   }
+  const mapping = session.mapping || {};
+  const training = mapping.splat_iterations ?? 0;
+  if ((mapping.splat_gaussians ?? 0) > 0 && training !== state.splatIterations && performance.now() - state.splatFetchedAt > 5000) {
+    state.splatFetchedAt = performance.now();
+    try {
+      await showSplats(await api(`/v1/sessions/${state.selected}/map?format=splats`, { binary: true }));
+      state.splatIterations = training;
+    } catch (error) {
+      if (error.status !== 404 && error.status !== 403) throw error;
+    }
+  }
   renderDetails(session);
+}
+
+// A stored FusionMap (?map=ID): its points and splats, once.
+async function showStoredMap() {
+  if (state.storedMapShown) return;
+  const path = `/v1/maps/${encodeURIComponent(state.storedMap)}`;
+  const optional = async (format, show) => {
+    try {
+      await show(await api(`${path}?format=${format}`, { binary: true }));
+    } catch (error) {
+      if (error.status !== 404) throw error;  // a map without that layer
+    }
+  };
+  await optional('pcd', (bytes) => showMap(parsePcd(bytes)));
+  await optional('splats', showSplats);
+  state.storedMapShown = true;
+  fitView();
 }
 
 function every(milliseconds, task) {
@@ -336,7 +409,8 @@ function every(milliseconds, task) {
     running = true;
     try {
       await task();
-      if (state.sessions.length) setStatus(`${state.sessions.length} session(s); ${state.trajectoryPoints} poses, ${state.mapPoints} map points`);
+      if (state.storedMap) setStatus(`map ${state.storedMap}: ${state.mapPoints} points, ${state.splats} splats`);
+      else if (state.sessions.length) setStatus(`${state.sessions.length} session(s); ${state.trajectoryPoints} poses, ${state.mapPoints} map points, ${state.splats} splats`);
       else setStatus('no sessions yet');
     } catch (error) {
       ++state.errors;
@@ -360,7 +434,11 @@ $('token-form').addEventListener('submit', (event) => {
 });
 $('fit').addEventListener('click', fitView);
 if (tokenInUrl) setStatus('a token in the URL is not used (it would stay in browser history): enter it above', 'error');
-every(1000, refreshSessions);
-every(200, refreshPose);
-every(1000, refreshTrajectory);
-every(1000, refreshSession);
+if (state.storedMap) {
+  every(2000, showStoredMap);
+} else {
+  every(1000, refreshSessions);
+  every(200, refreshPose);
+  every(1000, refreshTrajectory);
+  every(1000, refreshSession);
+}
