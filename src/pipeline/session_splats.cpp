@@ -140,25 +140,26 @@ bool SessionSplats::Impl::train_step() {
 
 neural::GaussianCloud SessionSplats::Impl::seed_gaussians(const neural::PosedView& view) {
   const neural::SplatCamera& c = view.camera;
-  std::vector<std::size_t> seen;
-  for (std::size_t i = 0; i < pool.size(); ++i) {
-    const Eigen::Vector3d p = c.R_camera_world * pool[i].cast<double>() + c.t_camera_world;
-    if (p.z() < 0.2 || p.z() > config.max_depth) continue;
-    const double u = c.fx * p.x() / p.z() + c.cx, v = c.fy * p.y() / p.z() + c.cy;
-    if (u >= 0.0 && v >= 0.0 && u <= c.width - 1 && v <= c.height - 1) seen.push_back(i);
-  }
   std::vector<Eigen::Vector3f> points;
   const auto wanted = static_cast<std::size_t>(config.gaussians_per_view);
   if (config.seed_from_map) {
+    std::vector<std::size_t> seen;
+    for (std::size_t i = 0; i < pool.size(); ++i) {
+      const Eigen::Vector3d p = c.R_camera_world * pool[i].cast<double>() + c.t_camera_world;
+      if (p.z() < 0.2 || p.z() > config.max_depth) continue;
+      const double u = c.fx * p.x() / p.z() + c.cx, v = c.fy * p.y() / p.z() + c.cy;
+      if (u >= 0.0 && v >= 0.0 && u <= c.width - 1 && v <= c.height - 1) seen.push_back(i);
+    }
     // An even selection; the chosen leave the pool (the others may seed a later view).
-    std::vector<bool> taken(pool.size(), false);
     const std::size_t count = std::min(wanted, seen.size());
+    if (count == 0) return {};
+    std::vector<bool> taken(pool.size(), false);
     for (std::size_t k = 0; k < count; ++k) taken[seen[k * seen.size() / count]] = true;
     std::vector<Eigen::Vector3f> kept;
     kept.reserve(pool.size() - count);
     for (std::size_t i = 0; i < pool.size(); ++i) (taken[i] ? points : kept).push_back(pool[i]);
     pool = std::move(kept);
-  } else {  // no map points (yet): random ones in front of the camera
+  } else {  // no 3D LiDAR: random points in front of the camera
     std::uniform_real_distribution<double> column(0.0, c.width - 1), row(0.0, c.height - 1), depth(1.0, std::max(1.0, config.max_depth / 2.0));
     const Eigen::Matrix3d R_world_camera = c.R_camera_world.transpose();
     for (std::size_t k = 0; k < wanted / 4; ++k) {
