@@ -31,10 +31,11 @@ struct SplatRun {
   calib::Calibration calibration;
 };
 
-SplatRun run_warehouse(SessionMode mode, double duration) {
+SplatRun run_warehouse(SessionMode mode, double duration, bool lidar = true) {
   sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_robot.yaml").value();
-  std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& s) {
-    return s.modality != config::SensorModality::kImu && s.modality != config::SensorModality::kLidar && s.modality != config::SensorModality::kCamera;
+  std::erase_if(scenario.sensors, [&](const sim::ScenarioSensor& s) {
+    return s.modality != config::SensorModality::kImu && (s.modality != config::SensorModality::kLidar || !lidar) &&
+           s.modality != config::SensorModality::kCamera;
   });
   scenario.duration = duration;
   scenario.num_threads = 0;
@@ -132,6 +133,18 @@ TEST(SessionSplats, RealtimeSessionTrainsInTheBackground) {
   ASSERT_TRUE(map.gaussian_splats.has_value());
   EXPECT_GT(map.gaussian_splats->opacity_logits.size(), 1000U);
   EXPECT_GT(map.gaussian_splats->provenance.training_seconds, 0.0);
+}
+
+// Without a LiDAR no map points seed them: each view starts Gaussians at random depths in front
+// of it, and the training still reproduces the images.
+TEST(SessionSplats, WithoutALidarGaussiansStartInFrontOfEachView) {
+  const SplatRun run = run_warehouse(SessionMode::kReplay, 8.0, /*lidar=*/false);
+  const pipeline::MappingSummary mapping = run.session->mapping_summary();
+  EXPECT_GT(mapping.splat_views, 5U);
+  EXPECT_GE(mapping.splat_iterations, (mapping.splat_views - 1) * 10);  // every view seeds Gaussians
+  const msgs::FusionMap map = run.session->map();
+  ASSERT_TRUE(map.gaussian_splats.has_value());
+  EXPECT_GE(map.gaussian_splats->opacity_logits.size(), 500U);
 }
 
 TEST(SessionSplats, NeedACamera) {
