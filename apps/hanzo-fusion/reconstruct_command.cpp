@@ -41,11 +41,15 @@
 #include "hanzo/fusion/neural/surface.hpp"
 #include "hanzo/fusion/neural/nerf_trainer.hpp"
 #include "hanzo/fusion/neural/splat_ply.hpp"
+#include "hanzo/fusion/neural/view_points.hpp"
 #include "hanzo/fusion/neural/splat_trainer.hpp"
 #include "hanzo/fusion/neural/view_dataset.hpp"
 
 namespace hanzo::fusion::app {
 namespace {
+
+/// Triangulated points below this start no splats (random ones in the box instead).
+constexpr std::size_t kMinTriangulatedPoints = 1000;
 
 /// Where the posed images come from: a transforms.json, or a sensor log with a trajectory and a
 /// calibration; which are held back for scoring.
@@ -316,7 +320,18 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
     if (initial.size() == 0) return report_failure(output, result, fmt::format("{}: none of its points is in front of a view", options.points));
     result["initial_points"] = {{"map", options.points}, {"points", map->points->points.size()}, {"gaussians", initial.size()}};
   } else {
-    initial = neural::initialize_gaussians(train->views, centre, half_size, config.initial_gaussians, config.sh_degree, config.seed);
+    // Without masks (a real capture: the scene reaches beyond any box) the Gaussians start at
+    // points triangulated from the views' features, as 3DGS starts at SfM points; with masks, or
+    // where too few triangulate, random ones in the box (on the masks' visual hull).
+    std::vector<Eigen::Vector3f> points;
+    const bool masked = std::any_of(train->views.begin(), train->views.end(), [](const neural::PosedView& view) { return !view.mask.empty(); });
+    if (!masked) points = neural::triangulate_view_points(train->views);
+    if (points.size() >= kMinTriangulatedPoints) {
+      initial = neural::initialize_gaussians_at_points(train->views, points, config.initial_gaussians, config.sh_degree, config.seed);
+      result["initial_points"] = {{"triangulated", points.size()}, {"gaussians", initial.size()}};
+    } else {
+      initial = neural::initialize_gaussians(train->views, centre, half_size, config.initial_gaussians, config.sh_degree, config.seed);
+    }
   }
   Result<neural::SplatTrainer> trainer = neural::SplatTrainer::create(std::move(initial), extent, config);
   if (!trainer) return report_failure(output, result, trainer.error().message);
