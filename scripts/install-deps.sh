@@ -79,7 +79,7 @@ fi
 
 # npm packages, pinned by their package-lock.json: the conformance tests' (Foxglove's MCAP
 # library...), the object-store tests' local S3 server (s3rver) and the web viewer's (three.js,
-# esbuild, playwright-core); skipped when node_modules already matches the lock file.
+# Spark, esbuild, playwright-core); skipped when node_modules already matches the lock file.
 for folder in tests/conformance tests/s3server web; do
   dir="$(dirname "$0")/../$folder"
   stamp="$dir/node_modules/.installed-lock"
