@@ -19,6 +19,13 @@ namespace {
 
 const std::string kLego = std::string(HANZO_DATA_DIR) + "/nerf_lego_400";
 
+/// The lego's `split` ("train", "val") at 1/downscale of its resolution.
+Result<ViewDataset> lego(const std::string& split, int downscale) {
+  ViewDatasetConfig config;
+  config.downscale = downscale;
+  return load_transforms(kLego + "/transforms_" + split + ".json", config);
+}
+
 TEST(ViewDataset, LegoCamerasFollowTheBlenderConvention) {
   ViewDatasetConfig config;
   config.load_images = false;
@@ -90,10 +97,8 @@ TEST(SplatTraining, GaussiansStartAtMapPointsWithTheColourTheViewsSee) {
 }
 
 TEST(SplatTraining, LegoAtQuarterResolutionScoresOnTheHeldOutViews) {
-  ViewDatasetConfig config;
-  config.downscale = 4;
-  const Result<ViewDataset> train = load_transforms(kLego + "/transforms_train.json", config);
-  const Result<ViewDataset> val = load_transforms(kLego + "/transforms_val.json", config);
+  const Result<ViewDataset> train = lego("train", 4);
+  const Result<ViewDataset> val = lego("val", 4);
   ASSERT_TRUE(train && val);
   SplatTrainingConfig training;
   training.iterations = 600;
@@ -126,20 +131,12 @@ TEST(SplatTraining, LegoAtQuarterResolutionScoresOnTheHeldOutViews) {
   EXPECT_TRUE(trainer->cloud().consistent());
 }
 
-}  // namespace
-}  // namespace hanzo::fusion::neural
-
-namespace hanzo::fusion::neural {
-namespace {
-
 // Points triangulated from the lego's training views (their features matched between nearby
 // views, the known cameras) lie on the model: in the val views, which they never came from,
 // they fall on the foreground.
 TEST(ViewPoints, TriangulatedLegoPointsLieOnTheModelInUnseenViews) {
-  ViewDatasetConfig config;
-  config.downscale = 2;
-  const Result<ViewDataset> train = load_transforms(kLego + "/transforms_train.json", config);
-  const Result<ViewDataset> val = load_transforms(kLego + "/transforms_val.json", config);
+  const Result<ViewDataset> train = lego("train", 2);
+  const Result<ViewDataset> val = lego("val", 2);
   ASSERT_TRUE(train && val);
   const std::vector<Eigen::Vector3f> points = triangulate_view_points(train->views);
   std::size_t seen = 0, on_model = 0;
