@@ -147,12 +147,9 @@ Result<LogViews> load_log_views(const std::string& log_path, const std::string& 
       const double degrees = motion.rotation().log().norm() * 180.0 / M_PI;
       if (motion.translation().norm() < config.min_translation && degrees < config.min_rotation_degrees) continue;
     }
-    if (intrinsics.width != 0 && (message->width != intrinsics.width || message->height != intrinsics.height)) {
-      return Error(fmt::format("{}: {} image at {} is {} x {}, the calibration's camera {} x {}", log_path, entry.topic, message->timestamp.to_iso8601(),
-                               message->width, message->height, intrinsics.width, intrinsics.height));
-    }
-    PosedView view;
-    HANZO_ASSIGN_OR_RETURN(view, image_view(*message, intrinsics, distortion, T_world_camera, config.downscale));
+    Result<PosedView> converted = image_view(*message, intrinsics, distortion, T_world_camera, config.downscale);
+    if (!converted) return Error(fmt::format("{}: {}: {}", log_path, entry.topic, converted.error().message));
+    PosedView view = std::move(converted).value();
     view.name = fmt::format("{}@{}", entry.topic, message->timestamp.to_iso8601());
     views.push_back(std::move(view));
     last_kept = T_world_camera;
