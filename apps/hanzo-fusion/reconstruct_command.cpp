@@ -41,6 +41,7 @@
 #include "hanzo/fusion/neural/surface.hpp"
 #include "hanzo/fusion/neural/nerf_trainer.hpp"
 #include "hanzo/fusion/neural/splat_ply.hpp"
+#include "hanzo/fusion/neural/splat_rasterizer_cuda.hpp"
 #include "hanzo/fusion/neural/view_points.hpp"
 #include "hanzo/fusion/neural/splat_trainer.hpp"
 #include "hanzo/fusion/neural/view_dataset.hpp"
@@ -77,6 +78,7 @@ struct ReconstructOptions {
   double progress_seconds = 10.0;
   double max_seconds = 0.0;  // 0: no limit
   double coarse_share = 0.5;  // share of the first steps trained at half resolution
+  std::string device = "cpu";  // cpu, cuda or auto
 };
 
 struct NerfOptions {
@@ -113,6 +115,7 @@ struct RenderOptions {
   bool depth = false;
   std::string background = "white";
   int threads = 0;
+  std::string device = "cpu";  // splats: cpu, cuda or auto
 };
 
 Result<Eigen::Vector3f> background_colour(const std::string& name) {
@@ -303,6 +306,9 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
   config.initial_gaussians = options.initial_gaussians;
   config.sh_degree = options.sh_degree;
   config.seed = options.seed;
+  Result<neural::SplatDevice> device = neural::parse_splat_device(options.device);
+  if (!device) return report_failure(output, result, "--device: " + device.error().message);
+  config.device = *device;
   config.rasterizer.background = *background;
   if (Status valid = neural::validate(config); !valid) return report_failure(output, result, valid.error().message);
   // The scene: the reader's box, else half the cameras' mean distance around where they look;
@@ -377,6 +383,7 @@ int run_reconstruct_splats(const Output& output, const ReconstructOptions& optio
   result["gaussians"] = trainer->cloud().size();
   result["iterations"] = steps;
   result["iterations_planned"] = config.iterations;
+  result["device"] = trainer->device_name();
   result["training_seconds"] = training_seconds;
   result["train_views"] = train->views.size();
   result["model_bytes"] = std::filesystem::file_size(ply);
@@ -482,6 +489,7 @@ struct Scene {
   std::string kind;  // "splats" or "nerf"
   std::shared_ptr<const neural::NerfField> nerf;  // the field, for a NeRF
   std::string file;
+  std::string device = "cpu";  // where it renders: cpu or the CUDA device's name
   std::size_t size = 0;  // Gaussians or parameters
   std::function<neural::NerfRender(const neural::SplatCamera&)> render;
 };
@@ -496,29 +504,49 @@ Scene nerf_scene(neural::NerfField field, const Eigen::Vector3f& background) {
   return scene;
 }
 
-Scene splat_scene(neural::GaussianCloud cloud, const Eigen::Vector3f& background) {
+/// Splats rendered on the CPU or a CUDA device (`auto`: CUDA when present); a device error while
+/// rendering moves the rest to the CPU (logged).
+Result<Scene> splat_scene(neural::GaussianCloud cloud, const Eigen::Vector3f& background, neural::SplatDevice device) {
   Scene scene;
   scene.kind = "splats";
   scene.size = cloud.size();
   auto shared = std::make_shared<neural::GaussianCloud>(std::move(cloud));
   neural::RasterizerConfig config;
   config.background = background;
-  scene.render = [shared, config](const neural::SplatCamera& camera) {
-    neural::SplatRender splats = neural::render_splats(*shared, camera, config);
+  std::shared_ptr<neural::CudaSplatRasterizer> gpu;
+  if (device != neural::SplatDevice::kCpu) {
+    Result<neural::CudaSplatRasterizer> created = neural::CudaSplatRasterizer::create();
+    Status uploaded = created ? created->upload(*shared) : Status(created.error());
+    if (uploaded) {
+      gpu = std::make_shared<neural::CudaSplatRasterizer>(std::move(created).value());
+      scene.device = gpu->device_name();
+    } else if (device == neural::SplatDevice::kCuda) {
+      return Error("--device cuda: " + uploaded.error().message);
+    } else {
+      logger()->info("rendering on the CPU ({})", uploaded.error().message);
+    }
+  }
+  scene.render = [shared, config, gpu](const neural::SplatCamera& camera) mutable {
+    Result<neural::SplatRender> rendered = gpu ? gpu->render(camera, config) : Result<neural::SplatRender>(Error("cpu"));
+    if (gpu && !rendered) {
+      logger()->warn("the CUDA device failed ({}); rendering continues on the CPU", rendered.error().message);
+      gpu.reset();
+    }
+    neural::SplatRender splats = rendered ? std::move(rendered).value() : neural::render_splats(*shared, camera, config);
     return neural::NerfRender{splats.width, splats.height, std::move(splats.image), std::move(splats.depth), std::move(splats.alpha)};
   };
   return scene;
 }
 
 /// A FusionMap's splats or neural field (`layer`: "splats", "nerf", or empty: splats when there).
-Result<Scene> load_map_scene(const std::string& path, const std::string& layer, const Eigen::Vector3f& background) {
+Result<Scene> load_map_scene(const std::string& path, const std::string& layer, const Eigen::Vector3f& background, neural::SplatDevice device) {
   msgs::FusionMap map;
   HANZO_ASSIGN_OR_RETURN(map, maps::read_fusion_map(path));
   if (layer != "" && layer != "splats" && layer != "nerf") return Error(fmt::format("--layer: '{}' (splats or nerf)", layer));
   if (layer != "nerf" && map.gaussian_splats) {
     neural::GaussianCloud cloud;
     HANZO_ASSIGN_OR_RETURN(cloud, neural::from_splat_layer(*map.gaussian_splats));
-    return splat_scene(std::move(cloud), background);
+    return splat_scene(std::move(cloud), background, device);
   }
   if (layer != "splats" && map.neural_field) {
     Result<neural::NerfField> field = neural::from_neural_field_layer(*map.neural_field);
@@ -529,7 +557,8 @@ Result<Scene> load_map_scene(const std::string& path, const std::string& layer, 
                            layer == "nerf" ? "neural_field" : layer == "splats" ? "gaussian_splats" : "gaussian_splats or neural_field"));
 }
 
-Result<Scene> load_scene(const std::string& path, const std::string& layer, const Eigen::Vector3f& background) {
+Result<Scene> load_scene(const std::string& path, const std::string& layer, const Eigen::Vector3f& background,
+                         neural::SplatDevice device = neural::SplatDevice::kCpu) {
   std::string file = path;
   if (std::filesystem::is_directory(path)) {
     const std::filesystem::path nerf = std::filesystem::path(path) / "nerf.hznerf";
@@ -537,7 +566,7 @@ Result<Scene> load_scene(const std::string& path, const std::string& layer, cons
   }
   Scene scene;
   if (std::filesystem::path(file).extension() == ".fmap") {
-    HANZO_ASSIGN_OR_RETURN(scene, load_map_scene(file, layer, background));
+    HANZO_ASSIGN_OR_RETURN(scene, load_map_scene(file, layer, background, device));
   } else if (!layer.empty()) {
     return Error("--layer applies to a FusionMap (.fmap) only");
   } else if (std::filesystem::path(file).extension() == ".hznerf") {
@@ -547,7 +576,7 @@ Result<Scene> load_scene(const std::string& path, const std::string& layer, cons
   } else {
     neural::GaussianCloud cloud;
     HANZO_ASSIGN_OR_RETURN(cloud, neural::read_splat_ply(file));
-    scene = splat_scene(std::move(cloud), background);
+    HANZO_ASSIGN_OR_RETURN(scene, splat_scene(std::move(cloud), background, device));
   }
   scene.file = file;
   return scene;
@@ -560,7 +589,9 @@ int run_render(const Output& output, const RenderOptions& options) {
   if (options.threads > 0) threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
   Result<Eigen::Vector3f> background = background_colour(options.background);
   if (!background) return report_failure(output, result, background.error().message);
-  Result<Scene> scene = load_scene(options.model, options.layer, *background);
+  Result<neural::SplatDevice> device = neural::parse_splat_device(options.device);
+  if (!device) return report_failure(output, result, "--device: " + device.error().message);
+  Result<Scene> scene = load_scene(options.model, options.layer, *background, *device);
   if (!scene) return report_failure(output, result, scene.error().message);
   neural::ViewDatasetConfig dataset_config;
   dataset_config.downscale = options.downscale;
@@ -601,6 +632,7 @@ int run_render(const Output& output, const RenderOptions& options) {
   result["ok"] = true;
   result["views"] = poses->views.size();
   result["kind"] = scene->kind;
+  result["device"] = scene->device;
   result["model"] = scene->file;
   result[scene->kind == "nerf" ? "parameters" : "gaussians"] = scene->size;
   result["render_ms_per_view"] = 1000.0 * seconds / static_cast<double>(poses->views.size());
@@ -702,6 +734,7 @@ void add_reconstruct_command(CLI::App& app, const Output& output, Command& run) 
   splats_app->add_option("--coarse-share", splats->coarse_share, "Share of the first steps trained at half resolution (0: none)")->check(CLI::Range(0.0, 1.0));
   splats_app->add_option("--max-seconds", splats->max_seconds, "Stop training after this many seconds (0: run every step)")->check(CLI::Range(0.0, 1e7));
   splats_app->add_option("--progress-seconds", splats->progress_seconds, "Seconds between progress lines on stderr")->check(CLI::Range(0.0, 1e6));
+  splats_app->add_option("--device", splats->device, "Where the rasterizer runs: cpu (deterministic), cuda (fails without a device) or auto");
   splats_app->callback([&output, &run, splats] { run = [&output, splats] { return run_reconstruct_splats(output, *splats); }; });
 
   auto nerf = std::make_shared<NerfOptions>();
@@ -741,6 +774,7 @@ void add_reconstruct_command(CLI::App& app, const Output& output, Command& run) 
   render_app->add_flag("--depth", render->depth, "Also write depth (16-bit PNG, millimetres of the scene unit)");
   render_app->add_option("--background", render->background, "white or black");
   render_app->add_option("--threads", render->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
+  render_app->add_option("--device", render->device, "Where splats render: cpu, cuda (fails without a device) or auto");
   render_app->callback([&output, &run, render] { run = [&output, render] { return run_render(output, *render); }; });
 }
 

@@ -1,21 +1,21 @@
 #pragma once
 // Real spherical harmonics up to degree 3 in the ordering of 3D Gaussian splatting (the
 // Condon-Shortley phase folded in: Y_1 = (-C1 y, C1 z, -C1 x), ...), evaluated at a unit
-// direction; templated so that ceres::Jet gives the Jacobian.
+// direction; templated so that a dual number gives the Jacobian; host and device code.
 
-#include <array>
+#include "host_device.hpp"
 
 namespace hanzo::fusion::neural::detail {
 
 inline constexpr double kShC0 = 0.28209479177387814;
-inline constexpr double kShC1 = 0.4886025119029199;
-inline constexpr std::array<double, 5> kShC2 = {1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396};
-inline constexpr std::array<double, 7> kShC3 = {-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-                                                -0.4570457994644658, 1.445305721320277, -0.5900435899266435};
 
 /// basis[k] for k < (degree + 1)^2 at the unit direction (x, y, z).
 template <typename T>
-void sh_basis(int degree, const T& x, const T& y, const T& z, T* basis) {
+HANZO_HD void sh_basis(int degree, const T& x, const T& y, const T& z, T* basis) {
+  constexpr double kShC1 = 0.4886025119029199;
+  constexpr double kShC2[5] = {1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396};
+  constexpr double kShC3[7] = {-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
+                               -0.4570457994644658, 1.445305721320277, -0.5900435899266435};
   basis[0] = T(kShC0);
   if (degree < 1) return;
   basis[1] = T(-kShC1) * y;

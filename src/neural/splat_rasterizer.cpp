@@ -4,82 +4,25 @@
 #include <cmath>
 #include <numeric>
 
-#include <ceres/jet.h>
 #include <tbb/parallel_for.h>
 
-#include "spherical_harmonics.hpp"
+#include "splat_kernels.hpp"
 
 namespace hanzo::fusion::neural {
 
 namespace {
 
-constexpr float kMinAlpha = 1.0f / 255.0f;
-constexpr float kMaxAlpha = 0.99f;
-constexpr float kMinTransmittance = 1e-4f;
-// |x/z| and |y/z| are clamped to this multiple of the half field of view in the Jacobian (as the
-// reference implementation does): Gaussians far outside the view get a bounded footprint.
-constexpr float kFrustumMargin = 1.3f;
-
-Eigen::Matrix3f rotation_of(const float* q_raw, Eigen::Vector4f& q_unit, float& norm) {
-  const Eigen::Vector4f q(q_raw[0], q_raw[1], q_raw[2], q_raw[3]);
-  norm = std::max(q.norm(), 1e-12f);
-  q_unit = q / norm;
-  const float w = q_unit[0], x = q_unit[1], y = q_unit[2], z = q_unit[3];
-  Eigen::Matrix3f r;
-  r << 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),  //
-      2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),   //
-      2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y);
-  return r;
-}
-
-struct CameraF {
-  Eigen::Matrix3f R;
-  Eigen::Vector3f t, centre;
-  float fx, fy, cx, cy, limit_x, limit_y;
-  explicit CameraF(const SplatCamera& camera)
-      : R(camera.R_camera_world.cast<float>()),
-        t(camera.t_camera_world.cast<float>()),
-        centre(camera.centre_world().cast<float>()),
-        fx(static_cast<float>(camera.fx)),
-        fy(static_cast<float>(camera.fy)),
-        cx(static_cast<float>(camera.cx)),
-        cy(static_cast<float>(camera.cy)),
-        limit_x(kFrustumMargin * 0.5f * static_cast<float>(camera.width) / static_cast<float>(camera.fx)),
-        limit_y(kFrustumMargin * 0.5f * static_cast<float>(camera.height) / static_cast<float>(camera.fy)) {}
-};
-
-// The affine projection's Jacobian at the camera-frame mean (x/z, y/z clamped as above).
-Eigen::Matrix<float, 2, 3> projection_jacobian(const CameraF& camera, const Eigen::Vector3f& p) {
-  const float z = p.z();
-  const float tx = std::clamp(p.x() / z, -camera.limit_x, camera.limit_x) * z;
-  const float ty = std::clamp(p.y() / z, -camera.limit_y, camera.limit_y) * z;
-  Eigen::Matrix<float, 2, 3> jacobian;
-  jacobian << camera.fx / z, 0.0f, -camera.fx * tx / (z * z), 0.0f, camera.fy / z, -camera.fy * ty / (z * z);
-  return jacobian;
-}
+using kernels::TileSplat;
+static_assert(kernels::kTileSize == kTileSize);
 
 int active_degree(const GaussianCloud& cloud, const RasterizerConfig& config) { return std::clamp(config.active_sh_degree, 0, cloud.sh_degree); }
-
-// A tile's Gaussian, gathered contiguously for the pixel loops of both passes.
-struct TileSplat {
-  float x, y;            // mean (pixels)
-  float a, b, c;         // conic
-  float opacity;
-  float min_power;       // ln(1 / (255 opacity)): below it alpha < 1/255
-  float x0, x1, y0, y1;  // the box where alpha can reach 1/255
-  Eigen::Vector3f colour;
-  float depth;
-};
 
 void gather_tile(const SplatRender& render, uint32_t begin, uint32_t end, std::vector<TileSplat>& splats) {
   splats.clear();
   for (uint32_t k = begin; k < end; ++k) {
     const uint32_t g = render.tile_gaussians[k];
-    const Eigen::Vector2f& mean = render.mean_2d[g];
-    const Eigen::Vector2f& extent = render.extent[g];
-    const Eigen::Vector3f& conic = render.conic[g];
-    splats.push_back({mean.x(), mean.y(), conic[0], conic[1], conic[2], render.opacity[g], std::log(kMinAlpha / render.opacity[g]), mean.x() - extent.x(),
-                      mean.x() + extent.x(), mean.y() - extent.y(), mean.y() + extent.y(), render.colour[g], render.view_depth[g]});
+    splats.push_back(kernels::make_tile_splat(render.mean_2d[g].data(), render.extent[g].data(), render.conic[g].data(), render.opacity[g],
+                                              render.colour[g].data(), render.view_depth[g]));
   }
 }
 
@@ -91,17 +34,31 @@ void gather_row(const std::vector<TileSplat>& splats, float y, std::vector<uint3
   }
 }
 
-// Whether the splat reaches alpha >= 1/255 at pixel (px, py); its offset, Gaussian and alpha.
-inline bool evaluate(const TileSplat& splat, float px, float py, float& dx, float& dy, float& gaussian, float& alpha) {
-  if (px < splat.x0 || px > splat.x1 || py < splat.y0 || py > splat.y1) return false;
-  dx = splat.x - px;
-  dy = splat.y - py;
-  const float power = -0.5f * (splat.a * dx * dx + splat.c * dy * dy) - splat.b * dx * dy;
-  if (power > 0.0f || power < splat.min_power) return false;
-  gaussian = std::exp(power);
-  alpha = std::min(kMaxAlpha, splat.opacity * gaussian);
-  return alpha >= kMinAlpha;
+}  // namespace
+
+kernels::CameraParams camera_params(const SplatCamera& camera) {
+  kernels::CameraParams params{};
+  const Eigen::Matrix3f rotation = camera.R_camera_world.cast<float>();
+  const Eigen::Vector3f centre = camera.centre_world().cast<float>();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) params.R[3 * r + c] = rotation(r, c);
+    params.t[r] = static_cast<float>(camera.t_camera_world[r]);
+    params.centre[r] = centre[r];
+  }
+  params.fx = static_cast<float>(camera.fx);
+  params.fy = static_cast<float>(camera.fy);
+  params.cx = static_cast<float>(camera.cx);
+  params.cy = static_cast<float>(camera.cy);
+  params.limit_x = kernels::kFrustumMargin * 0.5f * static_cast<float>(camera.width) / params.fx;
+  params.limit_y = kernels::kFrustumMargin * 0.5f * static_cast<float>(camera.height) / params.fy;
+  params.width = camera.width;
+  params.height = camera.height;
+  params.tiles_x = (camera.width + kTileSize - 1) / kTileSize;
+  params.tiles_y = (camera.height + kTileSize - 1) / kTileSize;
+  return params;
 }
+
+namespace {
 
 // Runs visit(first list index of the tile, its splats, the row's splats, x, y, pixel index) for
 // every pixel, the tiles in parallel; both passes walk the same splats in the same order.
@@ -129,15 +86,15 @@ int SplatRender::drawn() const {
 }
 
 SplatRender render_splats(const GaussianCloud& cloud, const SplatCamera& camera_in, const RasterizerConfig& config) {
-  const CameraF camera(camera_in);
+  const kernels::CameraParams camera = camera_params(camera_in);
   const auto n = static_cast<int>(cloud.size());
   const int degree = active_degree(cloud, config);
-  const int coefficients = sh_coefficients(cloud.sh_degree);
+  const int sh_floats = cloud.sh_floats();
   SplatRender out;
   out.width = camera_in.width;
   out.height = camera_in.height;
-  out.tiles_x = (out.width + kTileSize - 1) / kTileSize;
-  out.tiles_y = (out.height + kTileSize - 1) / kTileSize;
+  out.tiles_x = camera.tiles_x;
+  out.tiles_y = camera.tiles_y;
   out.mean_2d.assign(static_cast<std::size_t>(n), Eigen::Vector2f::Zero());
   out.conic.assign(static_cast<std::size_t>(n), Eigen::Vector3f::Zero());
   out.colour.assign(static_cast<std::size_t>(n), Eigen::Vector3f::Zero());
@@ -152,54 +109,21 @@ SplatRender render_splats(const GaussianCloud& cloud, const SplatCamera& camera_
   tbb::parallel_for(tbb::blocked_range<int>(0, n, 1024), [&](const tbb::blocked_range<int>& range) {
     for (int i = range.begin(); i != range.end(); ++i) {
       const auto index = static_cast<std::size_t>(i);
-      const Eigen::Vector3f p_world = Eigen::Map<const Eigen::Vector3f>(&cloud.position[3 * index]);
-      const Eigen::Vector3f p = camera.R * p_world + camera.t;
-      if (!(p.z() > static_cast<float>(config.near))) continue;
-      Eigen::Vector4f q_unit;
-      float q_norm = 0.0f;
-      const Eigen::Matrix3f rotation = rotation_of(&cloud.rotation[4 * index], q_unit, q_norm);
-      const Eigen::Vector3f scale = Eigen::Map<const Eigen::Vector3f>(&cloud.log_scale[3 * index]).array().exp();
-      const Eigen::Matrix3f m = rotation * scale.asDiagonal();
-      const Eigen::Matrix3f sigma = m * m.transpose();
-      const Eigen::Matrix<float, 2, 3> t = projection_jacobian(camera, p) * camera.R;
-      Eigen::Matrix2f cov = t * sigma * t.transpose();
-      cov(0, 0) += static_cast<float>(config.low_pass);
-      cov(1, 1) += static_cast<float>(config.low_pass);
-      const float det = cov(0, 0) * cov(1, 1) - cov(0, 1) * cov(0, 1);
-      if (!(det > 0.0f)) continue;
-      const float opacity = sigmoid(cloud.opacity_logit[index]);
-      if (opacity < kMinAlpha) continue;
-      const float level = 2.0f * std::log(opacity / kMinAlpha);  // q at which alpha falls to 1/255
-      const Eigen::Vector2f extent(std::sqrt(level * cov(0, 0)), std::sqrt(level * cov(1, 1)));
-      const Eigen::Vector2f mean(camera.fx * p.x() / p.z() + camera.cx, camera.fy * p.y() / p.z() + camera.cy);
-      const auto tile_of = [](float pixel) { return static_cast<int>(std::floor(pixel / static_cast<float>(kTileSize))); };
-      const Eigen::Vector4i rect(std::clamp(tile_of(mean.x() - extent.x()), 0, out.tiles_x), std::clamp(tile_of(mean.y() - extent.y()), 0, out.tiles_y),
-                                 std::clamp(tile_of(mean.x() + extent.x()) + 1, 0, out.tiles_x),
-                                 std::clamp(tile_of(mean.y() + extent.y()) + 1, 0, out.tiles_y));
-      if (rect[2] <= rect[0] || rect[3] <= rect[1]) continue;
-      // Colour along the viewing direction.
-      const Eigen::Vector3f direction = (p_world - camera.centre).normalized();
-      float basis[16];
-      detail::sh_basis(degree, direction.x(), direction.y(), direction.z(), basis);
-      Eigen::Vector3f colour = Eigen::Vector3f::Constant(0.5f);
-      const float* sh = &cloud.sh[index * static_cast<std::size_t>(3 * coefficients)];
-      for (int k = 0; k < sh_coefficients(degree); ++k) colour += basis[k] * Eigen::Map<const Eigen::Vector3f>(sh + 3 * k);
-      uint8_t clamped = 0;
-      for (int c = 0; c < 3; ++c) {
-        if (colour[c] < 0.0f) {
-          colour[c] = 0.0f;
-          clamped |= static_cast<uint8_t>(1 << c);
-        }
+      kernels::Projection projection;
+      if (!kernels::project_gaussian(&cloud.position[3 * index], &cloud.log_scale[3 * index], &cloud.rotation[4 * index], cloud.opacity_logit[index],
+                                     &cloud.sh[index * static_cast<std::size_t>(sh_floats)], degree, camera, static_cast<float>(config.near),
+                                     static_cast<float>(config.low_pass), projection)) {
+        continue;
       }
-      out.mean_2d[index] = mean;
-      out.conic[index] = Eigen::Vector3f(cov(1, 1) / det, -cov(0, 1) / det, cov(0, 0) / det);
-      out.colour[index] = colour;
-      out.colour_clamped[index] = clamped;
-      out.view_depth[index] = p.z();
-      out.radius[index] = std::max(1, static_cast<int>(std::ceil(extent.maxCoeff())));
-      out.extent[index] = extent;
-      out.opacity[index] = opacity;
-      rects[index] = rect;
+      out.mean_2d[index] = Eigen::Vector2f(projection.mean[0], projection.mean[1]);
+      out.conic[index] = Eigen::Vector3f(projection.conic[0], projection.conic[1], projection.conic[2]);
+      out.colour[index] = Eigen::Vector3f(projection.colour[0], projection.colour[1], projection.colour[2]);
+      out.colour_clamped[index] = static_cast<uint8_t>(projection.clamped);
+      out.view_depth[index] = projection.depth;
+      out.radius[index] = projection.radius;
+      out.extent[index] = Eigen::Vector2f(projection.extent[0], projection.extent[1]);
+      out.opacity[index] = projection.opacity;
+      rects[index] = Eigen::Vector4i(projection.rect[0], projection.rect[1], projection.rect[2], projection.rect[3]);
     }
   });
 
@@ -243,10 +167,10 @@ SplatRender render_splats(const GaussianCloud& cloud, const SplatCamera& camera_
     uint32_t walked = 0;
     for (const uint32_t j : row) {
       float dx = 0.0f, dy = 0.0f, gaussian = 0.0f, alpha = 0.0f;
-      if (!evaluate(splats[j], static_cast<float>(x), static_cast<float>(y), dx, dy, gaussian, alpha)) continue;
+      if (!kernels::evaluate_splat(splats[j], static_cast<float>(x), static_cast<float>(y), dx, dy, gaussian, alpha)) continue;
       const float next = transmittance * (1.0f - alpha);
-      if (next < kMinTransmittance) break;
-      colour += splats[j].colour * (alpha * transmittance);
+      if (next < kernels::kMinTransmittance) break;
+      colour += Eigen::Map<const Eigen::Vector3f>(splats[j].colour) * (alpha * transmittance);
       depth += splats[j].depth * alpha * transmittance;
       transmittance = next;
       walked = j + 1;
@@ -261,72 +185,37 @@ SplatRender render_splats(const GaussianCloud& cloud, const SplatCamera& camera_
   return out;
 }
 
-namespace {
-
-// Per (tile, Gaussian) pair: dL/d(mean_2d x, y), dL/d(conic a, b, c), dL/d(colour r, g, b), dL/d(opacity).
-constexpr int kSlot = 9;
-
-// dL/dR (3 x 3) to dL/d(unit quaternion w, x, y, z).
-Eigen::Vector4f rotation_gradient_to_quaternion(const Eigen::Matrix3f& dR, const Eigen::Vector4f& q) {
-  const float w = q[0], x = q[1], y = q[2], z = q[3];
-  Eigen::Matrix3f dw, dx, dy, dz;
-  dw << 0, -z, y, z, 0, -x, -y, x, 0;
-  dx << 0, y, z, y, -2 * x, -w, z, w, -2 * x;
-  dy << -2 * y, x, w, x, 0, z, -w, z, -2 * y;
-  dz << -2 * z, -w, x, w, -2 * z, y, x, y, 0;
-  return 2.0f * Eigen::Vector4f(dR.cwiseProduct(dw).sum(), dR.cwiseProduct(dx).sum(), dR.cwiseProduct(dy).sum(), dR.cwiseProduct(dz).sum());
-}
-
-}  // namespace
-
 void render_splats_backward(const GaussianCloud& cloud, const SplatCamera& camera_in, const RasterizerConfig& config, const SplatRender& forward,
                             const std::vector<float>& loss_gradient_image, GaussianGradients& gradients) {
-  const CameraF camera(camera_in);
+  constexpr int kPair = kernels::kPairGradients;
+  const kernels::CameraParams camera = camera_params(camera_in);
   const auto n = static_cast<int>(cloud.size());
   const int degree = active_degree(cloud, config);
-  const int coefficients = sh_coefficients(cloud.sh_degree);
-  std::vector<float> slots(forward.tile_gaussians.size() * kSlot, 0.0f);
+  const int sh_floats = cloud.sh_floats();
+  std::vector<float> slots(forward.tile_gaussians.size() * kPair, 0.0f);
 
   // 1. Per pixel, back to front: dL/d(2D mean, conic, colour, opacity) into the pair's slot.
   for_each_tile_pixel(forward, [&](uint32_t begin, const std::vector<TileSplat>& splats, const std::vector<uint32_t>& row, int x, int y, std::size_t pixel) {
-    const Eigen::Vector3f dL_dpixel = Eigen::Map<const Eigen::Vector3f>(&loss_gradient_image[3 * pixel]);
-    const float final_transmittance = forward.final_transmittance[pixel];
-    const float background_dot = config.background.dot(dL_dpixel);
-    float transmittance = final_transmittance, last_alpha = 0.0f;
-    Eigen::Vector3f behind = Eigen::Vector3f::Zero(), last_colour = Eigen::Vector3f::Zero();  // colour blended behind the current one
+    kernels::PixelBackward walk(&loss_gradient_image[3 * pixel], forward.final_transmittance[pixel], config.background.data());
     // The row's splats before the last contributor, back to front.
     const auto last = std::lower_bound(row.begin(), row.end(), forward.contributors[pixel]);
     for (auto it = last; it != row.begin();) {
       const uint32_t j = *--it;
-      const TileSplat& splat = splats[j];
       float dx = 0.0f, dy = 0.0f, gaussian = 0.0f, alpha = 0.0f;
-      if (!evaluate(splat, static_cast<float>(x), static_cast<float>(y), dx, dy, gaussian, alpha)) continue;
-      transmittance /= (1.0f - alpha);
-      float* slot = &slots[static_cast<std::size_t>(begin + j) * kSlot];
-      behind = last_alpha * last_colour + (1.0f - last_alpha) * behind;
-      last_colour = splat.colour;
-      float dL_dalpha = (splat.colour - behind).dot(dL_dpixel) * transmittance;
-      for (int c = 0; c < 3; ++c) slot[5 + c] += alpha * transmittance * dL_dpixel[c];
-      last_alpha = alpha;
-      dL_dalpha += -final_transmittance / (1.0f - alpha) * background_dot;
-      if (splat.opacity * gaussian >= kMaxAlpha) continue;  // clamped: alpha does not move with the Gaussian
-      const float dL_dgaussian = splat.opacity * dL_dalpha;
-      const float gdx = gaussian * dx, gdy = gaussian * dy;
-      slot[0] += dL_dgaussian * (-gdx * splat.a - gdy * splat.b);
-      slot[1] += dL_dgaussian * (-gdy * splat.c - gdx * splat.b);
-      slot[2] += -0.5f * gdx * dx * dL_dgaussian;
-      slot[3] += -gdx * dy * dL_dgaussian;
-      slot[4] += -0.5f * gdy * dy * dL_dgaussian;
-      slot[8] += gaussian * dL_dalpha;
+      if (!kernels::evaluate_splat(splats[j], static_cast<float>(x), static_cast<float>(y), dx, dy, gaussian, alpha)) continue;
+      float pair[kPair];
+      walk.step(splats[j], dx, dy, gaussian, alpha, pair);
+      float* slot = &slots[static_cast<std::size_t>(begin + j) * kPair];
+      for (int k = 0; k < kPair; ++k) slot[k] += pair[k];
     }
   });
 
   // 2. The pairs summed per Gaussian in list order (deterministic).
-  std::vector<float> per_gaussian(static_cast<std::size_t>(n) * kSlot, 0.0f);
+  std::vector<float> per_gaussian(static_cast<std::size_t>(n) * kPair, 0.0f);
   for (std::size_t k = 0; k < forward.tile_gaussians.size(); ++k) {
-    float* sum = &per_gaussian[static_cast<std::size_t>(forward.tile_gaussians[k]) * kSlot];
-    const float* slot = &slots[k * kSlot];
-    for (int j = 0; j < kSlot; ++j) sum[j] += slot[j];
+    float* sum = &per_gaussian[static_cast<std::size_t>(forward.tile_gaussians[k]) * kPair];
+    const float* slot = &slots[k * kPair];
+    for (int j = 0; j < kPair; ++j) sum[j] += slot[j];
   }
 
   // 3. Per Gaussian: through the projection, the 2D covariance, scale, rotation and colour.
@@ -334,89 +223,16 @@ void render_splats_backward(const GaussianCloud& cloud, const SplatCamera& camer
     for (int i = range.begin(); i != range.end(); ++i) {
       const auto index = static_cast<std::size_t>(i);
       if (forward.radius[index] == 0) continue;
-      const float* g = &per_gaussian[index * kSlot];
-      const Eigen::Vector2f dL_dmean(g[0], g[1]);
-      gradients.screen_gradient_norm[index] += Eigen::Vector2f(dL_dmean.x() * 0.5f * static_cast<float>(forward.width), dL_dmean.y() * 0.5f * static_cast<float>(forward.height)).norm();
+      kernels::Projection projection{};
+      std::copy(forward.conic[index].data(), forward.conic[index].data() + 3, projection.conic);
+      projection.opacity = forward.opacity[index];
+      projection.clamped = forward.colour_clamped[index];
+      const kernels::GaussianGradientOut out{&gradients.position[3 * index], &gradients.log_scale[3 * index], &gradients.rotation[4 * index],
+                                             &gradients.opacity_logit[index], &gradients.sh[index * static_cast<std::size_t>(sh_floats)]};
+      gradients.screen_gradient_norm[index] +=
+          kernels::gaussian_backward(&cloud.position[3 * index], &cloud.log_scale[3 * index], &cloud.rotation[4 * index],
+                                     &cloud.sh[index * static_cast<std::size_t>(sh_floats)], degree, camera, projection, &per_gaussian[index * kPair], out);
       gradients.visible_views[index] += 1;
-      const float opacity = forward.opacity[index];
-      gradients.opacity_logit[index] += g[8] * opacity * (1.0f - opacity);
-
-      const Eigen::Vector3f p_world = Eigen::Map<const Eigen::Vector3f>(&cloud.position[3 * index]);
-      const Eigen::Vector3f p = camera.R * p_world + camera.t;
-      Eigen::Vector3f dL_dp_world = Eigen::Vector3f::Zero();
-
-      // Colour (spherical harmonics; clamped channels pass nothing).
-      Eigen::Vector3f dL_dcolour(g[5], g[6], g[7]);
-      for (int c = 0; c < 3; ++c) {
-        if ((forward.colour_clamped[index] >> c) & 1) dL_dcolour[c] = 0.0f;
-      }
-      const Eigen::Vector3f view = p_world - camera.centre;
-      const float view_norm = std::max(view.norm(), 1e-12f);
-      const Eigen::Vector3f direction = view / view_norm;
-      using Jet = ceres::Jet<float, 3>;
-      Jet basis[16];
-      detail::sh_basis(degree, Jet(direction.x(), 0), Jet(direction.y(), 1), Jet(direction.z(), 2), basis);
-      const float* sh = &cloud.sh[index * static_cast<std::size_t>(3 * coefficients)];
-      float* dL_dsh = &gradients.sh[index * static_cast<std::size_t>(3 * coefficients)];
-      Eigen::Vector3f dL_ddirection = Eigen::Vector3f::Zero();
-      for (int k = 0; k < sh_coefficients(degree); ++k) {
-        const Eigen::Map<const Eigen::Vector3f> coefficient(sh + 3 * k);
-        for (int c = 0; c < 3; ++c) dL_dsh[3 * k + c] += basis[k].a * dL_dcolour[c];
-        dL_ddirection += coefficient.dot(dL_dcolour) * basis[k].v;
-      }
-      dL_dp_world += (dL_ddirection - direction * direction.dot(dL_ddirection)) / view_norm;
-
-      // Conic -> 2D covariance -> (J W) and Sigma.
-      Eigen::Vector4f q_unit;
-      float q_norm = 0.0f;
-      const Eigen::Matrix3f rotation = rotation_of(&cloud.rotation[4 * index], q_unit, q_norm);
-      const Eigen::Vector3f scale = Eigen::Map<const Eigen::Vector3f>(&cloud.log_scale[3 * index]).array().exp();
-      const Eigen::Matrix3f m = rotation * scale.asDiagonal();
-      const Eigen::Matrix3f sigma = m * m.transpose();
-      const Eigen::Matrix<float, 2, 3> jacobian = projection_jacobian(camera, p);
-      const Eigen::Matrix<float, 2, 3> t = jacobian * camera.R;
-      const Eigen::Vector3f& conic = forward.conic[index];
-      Eigen::Matrix2f conic_matrix;
-      conic_matrix << conic[0], conic[1], conic[1], conic[2];
-      Eigen::Matrix2f dL_dconic;
-      dL_dconic << g[2], 0.5f * g[3], 0.5f * g[3], g[4];
-      const Eigen::Matrix2f dL_dcov = -conic_matrix * dL_dconic * conic_matrix;
-      const Eigen::Matrix3f dL_dsigma = t.transpose() * dL_dcov * t;
-      const Eigen::Matrix<float, 2, 3> dL_dt = 2.0f * dL_dcov * t * sigma;
-      const Eigen::Matrix<float, 2, 3> dL_djacobian = dL_dt * camera.R.transpose();
-
-      // Projection: the mean in pixels and the Jacobian's dependence on the camera-frame mean.
-      const float z = p.z(), z2 = z * z, z3 = z2 * z;
-      const bool inside_x = std::abs(p.x() / z) <= camera.limit_x, inside_y = std::abs(p.y() / z) <= camera.limit_y;
-      const float tx_over_z = std::clamp(p.x() / z, -camera.limit_x, camera.limit_x), ty_over_z = std::clamp(p.y() / z, -camera.limit_y, camera.limit_y);
-      Eigen::Vector3f dL_dp(dL_dmean.x() * camera.fx / z, dL_dmean.y() * camera.fy / z,
-                            -dL_dmean.x() * camera.fx * p.x() / z2 - dL_dmean.y() * camera.fy * p.y() / z2);
-      dL_dp.z() += -dL_djacobian(0, 0) * camera.fx / z2 - dL_djacobian(1, 1) * camera.fy / z2;
-      if (inside_x) {
-        dL_dp.x() += -dL_djacobian(0, 2) * camera.fx / z2;
-        dL_dp.z() += dL_djacobian(0, 2) * 2.0f * camera.fx * p.x() / z3;
-      } else {
-        dL_dp.z() += dL_djacobian(0, 2) * camera.fx * tx_over_z / z2;
-      }
-      if (inside_y) {
-        dL_dp.y() += -dL_djacobian(1, 2) * camera.fy / z2;
-        dL_dp.z() += dL_djacobian(1, 2) * 2.0f * camera.fy * p.y() / z3;
-      } else {
-        dL_dp.z() += dL_djacobian(1, 2) * camera.fy * ty_over_z / z2;
-      }
-      dL_dp_world += camera.R.transpose() * dL_dp;
-      for (int a = 0; a < 3; ++a) gradients.position[3 * index + static_cast<std::size_t>(a)] += dL_dp_world[a];
-
-      // Sigma = M M^T, M = R diag(s).
-      const Eigen::Matrix3f dL_dm = 2.0f * dL_dsigma * m;
-      Eigen::Matrix3f dL_drotation;
-      for (int a = 0; a < 3; ++a) {
-        gradients.log_scale[3 * index + static_cast<std::size_t>(a)] += scale[a] * rotation.col(a).dot(dL_dm.col(a));
-        dL_drotation.col(a) = scale[a] * dL_dm.col(a);
-      }
-      const Eigen::Vector4f dL_dq_unit = rotation_gradient_to_quaternion(dL_drotation, q_unit);
-      const Eigen::Vector4f dL_dq = (dL_dq_unit - q_unit * q_unit.dot(dL_dq_unit)) / q_norm;
-      for (int a = 0; a < 4; ++a) gradients.rotation[4 * index + static_cast<std::size_t>(a)] += dL_dq[a];
     }
   });
 }

@@ -9,6 +9,7 @@
 
 #include <fmt/format.h>
 
+#include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/neural/image_metrics.hpp"
 
 namespace hanzo::fusion::neural {
@@ -173,6 +174,16 @@ Result<SplatTrainer> SplatTrainer::create(GaussianCloud initial, double scene_ex
   trainer.extent_ = scene_extent;
   trainer.config_ = config;
   trainer.random_.seed(config.seed);
+  if (config.device != SplatDevice::kCpu) {
+    Result<CudaSplatRasterizer> gpu = CudaSplatRasterizer::create();
+    if (gpu) {
+      trainer.gpu_ = std::make_shared<CudaSplatRasterizer>(std::move(gpu).value());
+    } else if (config.device == SplatDevice::kCuda) {
+      return Error(fmt::format("SplatTrainer: device cuda: {}", gpu.error().message));
+    } else {
+      logger()->info("SplatTrainer: training on the CPU ({})", gpu.error().message);
+    }
+  }
   trainer.gradients_.resize_like(trainer.cloud_);
   for (std::span<float> group : trainer.cloud_.parameters()) {
     trainer.adam_m_.emplace_back(group.size(), 0.0f);
@@ -190,12 +201,10 @@ RasterizerConfig SplatTrainer::render_config() const {
   return config;
 }
 
-double SplatTrainer::step(const PosedView& view) {
-  const RasterizerConfig rasterizer = render_config();
-  const SplatRender render = render_splats(cloud_, view.camera, rasterizer);
+double SplatTrainer::loss_of(const SplatRender& render, const PosedView& view, std::vector<float>& loss_gradient) const {
   const std::vector<float>& image = view.image.pixels;
   const auto count = static_cast<double>(render.image.size());
-  std::vector<float> loss_gradient(render.image.size());
+  loss_gradient.resize(render.image.size());
   double l1 = 0.0;
   const auto l1_weight = static_cast<float>((1.0 - config_.ssim_weight) / count);
   for (std::size_t i = 0; i < render.image.size(); ++i) {
@@ -210,8 +219,42 @@ double SplatTrainer::step(const PosedView& view) {
     loss += config_.ssim_weight * (1.0 - similarity);
     for (std::size_t i = 0; i < loss_gradient.size(); ++i) loss_gradient[i] -= static_cast<float>(config_.ssim_weight) * ssim_gradient[i];
   }
+  return loss;
+}
+
+bool SplatTrainer::gpu_pass(const PosedView& view, const RasterizerConfig& rasterizer, SplatRender& render, double& loss) {
   gradients_.set_zero();
-  render_splats_backward(cloud_, view.camera, rasterizer, render, loss_gradient, gradients_);
+  Status status = gpu_->upload(cloud_);
+  if (status) {
+    Result<SplatRender> rendered = gpu_->render(view.camera, rasterizer);
+    if (rendered) {
+      render = std::move(rendered).value();
+      std::vector<float> loss_gradient;
+      loss = loss_of(render, view, loss_gradient);
+      status = gpu_->backward(loss_gradient, gradients_);
+    } else {
+      status = rendered.error();
+    }
+  }
+  if (status) return true;
+  logger()->warn("SplatTrainer: the CUDA device failed ({}); training continues on the CPU", status.error().message);
+  gpu_.reset();
+  return false;
+}
+
+std::string SplatTrainer::device_name() const { return gpu_ ? gpu_->device_name() : "cpu"; }
+
+double SplatTrainer::step(const PosedView& view) {
+  const RasterizerConfig rasterizer = render_config();
+  SplatRender render;
+  double loss = 0.0;
+  if (!gpu_ || !gpu_pass(view, rasterizer, render, loss)) {
+    render = render_splats(cloud_, view.camera, rasterizer);
+    std::vector<float> loss_gradient;
+    loss = loss_of(render, view, loss_gradient);
+    gradients_.set_zero();
+    render_splats_backward(cloud_, view.camera, rasterizer, render, loss_gradient, gradients_);
+  }
 
   // Adam (Kingma and Ba, ICLR 2015, Algorithm 1) per parameter group.
   ++iteration_;

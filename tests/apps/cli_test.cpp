@@ -1469,6 +1469,27 @@ TEST(Cli, ReconstructSplatsAndRenderThemAtAPosesFile) {
   const cv::Mat first = cv::imread((dir / "views" / "0000.png").string());
   EXPECT_EQ(first.cols, 50);
   EXPECT_EQ(cv::imread((dir / "views" / "0024_depth.png").string(), cv::IMREAD_UNCHANGED).type(), CV_16UC1);
+  EXPECT_EQ(views["device"], "cpu");
+
+  // --device auto renders on a CUDA device when there is one, else the CPU: the same scores;
+  // --device cuda without a device is refused with the reason.
+  const CliRun automatic = run(fmt::format("render {}/splats --poses {}/transforms_val.json --out {}/auto --downscale 8 --device auto --json", dir.string(),
+                                           lego, dir.string()));
+  ASSERT_EQ(automatic.exit_code, 0) << automatic.err;
+  const nlohmann::json auto_views = nlohmann::json::parse(automatic.out);
+  EXPECT_NEAR(auto_views["eval"]["psnr"].get<double>(), views["eval"]["psnr"].get<double>(), 0.01);
+  const CliRun cuda = run(fmt::format("render {}/splats --poses {}/transforms_val.json --out {}/cuda --downscale 8 --device cuda", dir.string(), lego,
+                                      dir.string()));
+  if (auto_views["device"] == "cpu") {
+    EXPECT_EQ(cuda.exit_code, 1);
+    EXPECT_THAT(cuda.err, HasSubstr("--device cuda: "));
+    EXPECT_EQ(std::count(cuda.err.begin(), cuda.err.end(), '\n'), 1);
+  } else {
+    EXPECT_EQ(cuda.exit_code, 0) << cuda.err;
+  }
+  const CliRun bad_device = run(fmt::format("render {}/splats --poses {}/transforms_val.json --out {}/x --device gpu", dir.string(), lego, dir.string()));
+  EXPECT_EQ(bad_device.exit_code, 1);
+  EXPECT_THAT(bad_device.err, HasSubstr("unknown device 'gpu'"));
 
   // Poses without images (a camera path): rendered, not scored.
   std::ofstream(dir / "path.json") << R"({"camera_angle_x": 0.69, "w": 400, "h": 400, "frames": [{"file_path": "none", "transform_matrix": )"

@@ -17,11 +17,13 @@
 // removed (the floaters); max_gaussians caps the count. Every opacity_reset_interval steps the
 // opacities are lowered to at most 0.01.
 //
-// Deterministic for a seed: views are visited in a seeded random order, splits draw from a
-// seeded generator, and the rasterizer's gradients do not depend on the thread schedule.
+// Deterministic for a seed on the CPU: views are visited in a seeded random order, splits draw
+// from a seeded generator, and the rasterizer's gradients do not depend on the thread schedule.
+// On a CUDA device (`device`) the gradients' sums depend on the GPU's schedule (float rounding).
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
@@ -29,6 +31,7 @@
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/neural/gaussian_cloud.hpp"
 #include "hanzo/fusion/neural/splat_rasterizer.hpp"
+#include "hanzo/fusion/neural/splat_rasterizer_cuda.hpp"
 #include "hanzo/fusion/neural/view_dataset.hpp"
 
 namespace hanzo::fusion::neural {
@@ -59,6 +62,10 @@ struct SplatTrainingConfig {
   int initial_gaussians = 50000;  ///< random initialization when there are no points
   uint64_t seed = 1;
   RasterizerConfig rasterizer;    ///< background and near plane (the active degree is the trainer's)
+  /// Where renders and gradients run: the CPU (default, deterministic), a CUDA device (creation
+  /// fails without one), or auto (CUDA when present). A device error during training moves the
+  /// rest of the run to the CPU (logged).
+  SplatDevice device = SplatDevice::kCpu;
 };
 
 Status validate(const SplatTrainingConfig& config);
@@ -95,6 +102,8 @@ class SplatTrainer {
   int iteration() const { return iteration_; }
   const SplatTrainingConfig& config() const { return config_; }
   RasterizerConfig render_config() const;  ///< the rasterizer settings at the current step
+  /// "cpu" or the CUDA device's name (where the steps run now).
+  std::string device_name() const;
 
  private:
   SplatTrainer() = default;
@@ -104,6 +113,11 @@ class SplatTrainer {
   void append_gaussians(const std::vector<std::size_t>& sources, bool split);
   /// Zero Adam moments for Gaussians appended since (the arrays' new sizes).
   void grow_optimizer_state();
+  /// The loss (paper eq. 7) of a render against the view's image; dL/dimage into `loss_gradient`.
+  double loss_of(const SplatRender& render, const PosedView& view, std::vector<float>& loss_gradient) const;
+  /// Renders, takes the loss and back-propagates into gradients_ on the CUDA device; false (and
+  /// the CPU from now on) on a device error.
+  bool gpu_pass(const PosedView& view, const RasterizerConfig& rasterizer, SplatRender& render, double& loss);
 
   GaussianCloud cloud_;
   double extent_ = 1.0;
@@ -115,6 +129,7 @@ class SplatTrainer {
   std::vector<int> densify_count_;
   std::vector<float> max_screen_share_;  // largest drawn radius / image size since the last densification
   std::mt19937_64 random_;
+  std::shared_ptr<CudaSplatRasterizer> gpu_;  // null: the CPU
 };
 
 /// Renders every view that has an image and scores it (PSNR, SSIM).
