@@ -1,19 +1,25 @@
-// Memory of a long visual-inertial session (issue: "resident size after 10 minutes within 10 % of
-// that after 2 minutes"): the simulated drone's figure eights (examples/scenarios/drone.yaml,
-// stereo cameras + IMU, its trajectory made `--seconds` long) streamed straight from the
-// simulator into a Session as the server runs one (frontend msckf with the visual-inertial graph,
-// loop closure on, no trajectory kept), resident memory sampled every 60 s of log. Each
-// configuration runs in a fresh process: the session's sliding window (the default) and every
-// keyframe's variables kept (visual_inertial_window_keyframes 0, the graph before the window).
+// Memory of long sessions (issue: "resident size after 10 minutes within 10 % of that after 2
+// minutes"): the simulated drone's figure eights (examples/scenarios/drone.yaml, stereo cameras +
+// IMU, its trajectory made `--seconds` long) and the urban car's loop (urban_vehicle.yaml: IMU,
+// LiDAR, GNSS, wheels, camera, radar) driven as many laps as fill `--seconds`, streamed straight
+// from the simulator into a Session as the server runs one (the generated configuration, loop
+// closure on, no trajectory kept), resident memory sampled every 60 s of log. Each configuration
+// runs in a fresh process; the drone also with every keyframe's variables kept
+// (visual_inertial_window_keyframes 0, the graph before the window).
 //
-//   build/bench/bench_memory [--seconds 600] [--json]
+//   build/bench/bench_memory [--seconds 600] [--scenario drone|urban_vehicle] [--json] [--window-only]
+//
+// --window-only runs the default configuration alone in this process (for heap profilers:
+// heaptrack build/bench/bench_memory --seconds 300 --scenario drone --window-only).
 //
 // Reports per configuration: resident MB at each minute, growth from 2 min to the end, real-time
 // factor (simulation included: it renders the images), landmarks and loop closures.
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -47,11 +53,24 @@ struct Outcome {
   uint64_t loop_closures = 0;
 };
 
-Outcome run(double seconds, int window) {
-  hf::sim::Scenario scenario = hf::sim::load_scenario(std::string(HANZO_SOURCE_DIR) + "/examples/scenarios/drone.yaml").value();
-  scenario.drone.duration = seconds;
+// The drone's figure eights made `seconds` long, or the urban car's loop driven as many laps as
+// fill them.
+hf::sim::Scenario long_scenario(const std::string& name, double seconds) {
+  hf::sim::Scenario scenario = hf::sim::load_scenario(std::string(HANZO_SOURCE_DIR) + "/examples/scenarios/" + name + ".yaml").value();
   scenario.num_threads = 0;
+  if (name == "drone") {
+    scenario.drone.duration = seconds;
+  } else {
+    const double lap = (hf::sim::ScenarioSimulation::create(scenario).value()->end_time() - scenario.start_time).seconds();
+    scenario.ground_path.laps = std::max(1, static_cast<int>(std::ceil(seconds / lap)));
+  }
+  return scenario;
+}
+
+Outcome run(const std::string& name, double seconds, int window) {
+  const hf::sim::Scenario scenario = long_scenario(name, seconds);
   auto simulation = hf::sim::ScenarioSimulation::create(scenario).value();
+  simulation->set_record_imu_bias_truth(false);  // the session's memory, not the simulator's records
   hf::pipeline::SessionConfig config = hf::pipeline::SessionConfig::from(hf::sim::scenario_fusion_config(scenario));
   config.keep_trajectory = false;
   config.visual_inertial_window_keyframes = window;
@@ -74,13 +93,13 @@ Outcome run(double seconds, int window) {
 }
 
 // run() in a child process (each configuration from a fresh heap), its outcome through a pipe.
-Outcome run_in_child(double seconds, int window) {
+Outcome run_in_child(const std::string& name, double seconds, int window) {
   int pipe_ends[2];
   if (::pipe(pipe_ends) != 0) return {};
   const pid_t child = ::fork();
   if (child == 0) {
     ::close(pipe_ends[0]);
-    const Outcome outcome = run(seconds, window);
+    const Outcome outcome = run(name, seconds, window);
     const std::string text = nlohmann::json{{"resident_mb", outcome.resident_mb}, {"seconds", outcome.seconds}, {"landmarks", outcome.landmarks},
                                             {"loop_closures", outcome.loop_closures}}.dump();
     if (::write(pipe_ends[1], text.data(), text.size()) < 0) std::_Exit(2);
@@ -107,36 +126,49 @@ Outcome run_in_child(double seconds, int window) {
 
 int main(int argc, char** argv) {
   double seconds = 600.0;
-  bool json = false;
+  bool json = false, window_only = false;
+  std::vector<std::string> scenarios = {"drone", "urban_vehicle"};
   for (int i = 1; i < argc; ++i) {
     if (std::strcmp(argv[i], "--seconds") == 0 && i + 1 < argc) {
       seconds = std::stod(argv[++i]);
+    } else if (std::strcmp(argv[i], "--scenario") == 0 && i + 1 < argc && (std::strcmp(argv[i + 1], "drone") == 0 || std::strcmp(argv[i + 1], "urban_vehicle") == 0)) {
+      scenarios = {argv[++i]};
     } else if (std::strcmp(argv[i], "--json") == 0) {
       json = true;
+    } else if (std::strcmp(argv[i], "--window-only") == 0) {
+      window_only = true;
     } else {
-      std::fprintf(stderr, "usage: bench_memory [--seconds S] [--json]\n");
+      std::fprintf(stderr, "usage: bench_memory [--seconds S] [--scenario drone|urban_vehicle] [--json] [--window-only]\n");
       return 2;
     }
   }
   const auto defaults = std::make_unique<hf::pipeline::SessionConfig>();
   const int window = defaults->visual_inertial_window_keyframes;
   nlohmann::json report = nlohmann::json::object();
-  if (!json) std::printf("| drone %.0f s, stereo + IMU | resident MB each minute | 2 min -> end | real time | landmarks | loops |\n|---|---|---|---|---|---|\n", seconds);
-  for (const int configuration : {window, 0}) {
-    const Outcome outcome = run_in_child(seconds, configuration);
-    if (outcome.resident_mb.size() < 2) {
-      std::fprintf(stderr, "bench_memory: the run with window %d failed\n", configuration);
-      return 1;
+  for (const std::string& name : scenarios) {
+    const bool visual = name == "drone";  // the window applies to the visual-inertial graph
+    if (!json) {
+      std::printf("| %s %.0f s, %s | resident MB each minute | 2 min -> end | real time | landmarks | loops |\n|---|---|---|---|---|---|\n", name.c_str(),
+                  seconds, visual ? "stereo + IMU" : "every sensor, looped");
     }
-    const double growth = outcome.resident_mb.back() / outcome.resident_mb[1] - 1.0;
-    const std::string name = configuration > 0 ? fmt::format("window {} keyframes", configuration) : "every keyframe kept";
-    report[name] = {{"resident_mb", outcome.resident_mb}, {"growth_from_2_min", growth}, {"real_time_factor", seconds / outcome.seconds},
-                    {"landmarks", outcome.landmarks}, {"loop_closures", outcome.loop_closures}};
-    if (json) continue;
-    std::string minutes;
-    for (const double mb : outcome.resident_mb) minutes += fmt::format("{}{:.0f}", minutes.empty() ? "" : " ", mb);
-    std::printf("| %s | %s | %+.1f %% | %.2fx | %lu | %lu |\n", name.c_str(), minutes.c_str(), 100.0 * growth, seconds / outcome.seconds,
-                static_cast<unsigned long>(outcome.landmarks), static_cast<unsigned long>(outcome.loop_closures));
+    for (const int configuration : {window, 0}) {
+      if ((window_only || !visual) && configuration != window) continue;
+      const Outcome outcome = window_only ? run(name, seconds, configuration) : run_in_child(name, seconds, configuration);
+      if (outcome.resident_mb.size() < 2) {
+        std::fprintf(stderr, "bench_memory: the %s run with window %d failed\n", name.c_str(), configuration);
+        return 1;
+      }
+      const double growth = outcome.resident_mb.back() / outcome.resident_mb[1] - 1.0;
+      const std::string label = !visual ? "defaults" : configuration > 0 ? fmt::format("window {} keyframes", configuration) : "every keyframe kept";
+      const double log_seconds = 60.0 * static_cast<double>(outcome.resident_mb.size());
+      report[name][label] = {{"resident_mb", outcome.resident_mb}, {"growth_from_2_min", growth}, {"real_time_factor", log_seconds / outcome.seconds},
+                             {"landmarks", outcome.landmarks}, {"loop_closures", outcome.loop_closures}};
+      if (json) continue;
+      std::string minutes;
+      for (const double mb : outcome.resident_mb) minutes += fmt::format("{}{:.0f}", minutes.empty() ? "" : " ", mb);
+      std::printf("| %s | %s | %+.1f %% | %.2fx | %lu | %lu |\n", label.c_str(), minutes.c_str(), 100.0 * growth, log_seconds / outcome.seconds,
+                  static_cast<unsigned long>(outcome.landmarks), static_cast<unsigned long>(outcome.loop_closures));
+    }
   }
   if (json) std::printf("%s\n", report.dump().c_str());
   return 0;

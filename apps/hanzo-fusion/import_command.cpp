@@ -1,7 +1,7 @@
 // hanzo-fusion import FORMAT SRC... --out LOG.mcap: converts recordings into a sensor log.
 // Formats: csv (IMU / GNSS / wheel odometry files), rosbag (ROS 1 bag v2.0), ros2bag (rosbag2:
 // MCAP or SQLite storage), carmen (2D laser logs), kitti (odometry sequences), euroc (ASL
-// folders), tum-rgbd; see docs/sensor-logs.md.
+// folders), tum-rgbd, nmea (GNSS receiver logs); see docs/sensor-logs.md.
 
 #include <algorithm>
 #include <filesystem>
@@ -14,6 +14,8 @@
 
 #include "commands.hpp"
 #include "log_writing.hpp"
+#include "hanzo/fusion/core/files.hpp"
+#include "hanzo/fusion/drivers/nmea.hpp"
 #include "hanzo/fusion/io/carmen_import.hpp"
 #include "hanzo/fusion/io/csv_import.hpp"
 #include "hanzo/fusion/io/euroc_import.hpp"
@@ -49,6 +51,7 @@ struct ImportOptions {
   double baseline = 0.0;                     // images: stereo baseline (m)
   std::string privacy;                       // "blur" / "black": camera images redacted before writing
   std::shared_ptr<ImageRedaction> redaction; // made from `privacy` by run_import
+  std::string date;                          // nmea: UTC date of fixes before the log's first RMC / ZDA
 };
 
 struct SourceMessages {
@@ -318,6 +321,58 @@ int run_image_folder_import(const Output& output, const ImportOptions& options) 
   return write_dataset_outputs(output, result, text, options, {&no_ground_truth, &report.calibration});
 }
 
+/// NMEA-0183 receiver logs (raw bytes, binary in between skipped) into GnssMessages on /gnss
+/// (sensor "gnss", or --topic /gnss=/other).
+int run_nmea_import(const Output& output, const ImportOptions& options) {
+  nlohmann::json result = {{"format", "nmea"}, {"sources", options.sources}, {"out", options.out}};
+  auto topics = topic_map(options.topic_overrides, "/gnss=/topic");
+  if (!topics) return report_failure(output, result, topics.error().message);
+  const auto renamed = topics->find("/gnss");
+  const std::string topic = renamed == topics->end() ? "/gnss" : renamed->second;
+  drivers::NmeaDecoderConfig config;
+  config.date = options.date;
+  Result<drivers::NmeaDecoder> decoder = drivers::NmeaDecoder::create(config);
+  if (!decoder) return report_failure(output, result, "--date: " + decoder.error().message);
+  std::vector<msgs::GnssMessage> fixes;
+  for (const std::string& path : options.sources) {
+    Result<std::string> bytes = read_file(path);
+    if (!bytes) return report_failure(output, result, bytes.error().message);
+    decoder->feed(*bytes, fixes);
+  }
+  decoder->flush(fixes);
+  const drivers::NmeaStatistics& statistics = decoder->statistics();
+  result["fixes"] = fixes.size();
+  result["sentences"] = statistics.sentences;
+  result["checksum_errors"] = statistics.checksum_errors;
+  result["malformed"] = statistics.malformed;
+  result["skipped_bytes"] = statistics.skipped_bytes;
+  result["without_date"] = statistics.no_date;
+  result["without_position"] = statistics.no_position;
+  result["gst_covariances"] = statistics.gst;
+  result["without_geoid_separation"] = statistics.no_geoid_separation;
+  if (fixes.empty()) {
+    std::string why = statistics.sentences == 0 ? "no NMEA sentence" : "no GGA sentence with a position";
+    if (statistics.no_date > 0) why = fmt::format("{} GGA fixes but no date (no RMC or ZDA sentence): give --date YYYY-MM-DD", statistics.no_date);
+    return report_failure(output, result, fmt::format("{}: {}", fmt::join(options.sources, ", "), why));
+  }
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
+    HANZO_RETURN_IF_ERROR(writer.add_metadata({"import", {{"importer", "nmea"}, {"source", fmt::format("{}", fmt::join(options.sources, " "))}}}));
+    for (const msgs::GnssMessage& fix : fixes) HANZO_RETURN_IF_ERROR(writer.write(topic, fix, "gnss"));
+    return ok_status();
+  });
+  if (code != 0) return code;
+  result["ok"] = true;
+  result["topic"] = topic;
+  std::string text = fmt::format("{}: {} fixes on {} from {} sentences ({:.1f} s)\n", options.out, fixes.size(), topic, statistics.sentences,
+                                 (fixes.back().timestamp - fixes.front().timestamp).seconds());
+  if (statistics.checksum_errors + statistics.malformed + statistics.no_date > 0) {
+    text += fmt::format("  left out: {} checksum errors, {} malformed sentences (first: {}), {} fixes before the first date; {} bytes between sentences skipped\n",
+                        statistics.checksum_errors, statistics.malformed, statistics.first_error.empty() ? "none" : statistics.first_error,
+                        statistics.no_date, statistics.skipped_bytes);
+  }
+  return report_success(output, result, text);
+}
+
 int run_import(const Output& output, ImportOptions options) {
   if (!(options.time_origin > 0.0)) {  // a zero time means "no time" in a sensor log
     return report_failure(output, {{"format", options.format}},
@@ -341,9 +396,10 @@ int run_import(const Output& output, ImportOptions options) {
   if (options.format == "euroc") return run_euroc_import(output, options);
   if (options.format == "tum-rgbd") return run_tum_rgbd_import(output, options);
   if (options.format == "images") return run_image_folder_import(output, options);
+  if (options.format == "nmea") return run_nmea_import(output, options);
   nlohmann::json result = {{"format", options.format}, {"sources", options.sources}, {"out", options.out}};
   if (options.format != "csv") {
-    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, ros2bag, carmen, kitti, euroc, tum-rgbd, images)", options.format));
+    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, ros2bag, carmen, kitti, euroc, tum-rgbd, images, nmea)", options.format));
   }
   auto stems = topic_map(options.topic_overrides, "FILE_STEM=/topic");
   if (!stems) return report_failure(output, result, stems.error().message);
@@ -399,14 +455,14 @@ int run_import(const Output& output, ImportOptions options) {
 void add_import_command(CLI::App& app, const Output& output, Command& run) {
   auto options = std::make_shared<ImportOptions>();
   CLI::App* command = app.add_subcommand("import", "Convert recordings into a sensor log (MCAP)");
-  command->add_option("FORMAT", options->format, "Input format: csv, rosbag (ROS 1), ros2bag, carmen, kitti, euroc, tum-rgbd or images (a folder of image files)")->required();
+  command->add_option("FORMAT", options->format, "Input format: csv, rosbag (ROS 1), ros2bag, carmen, kitti, euroc, tum-rgbd, images (a folder of image files) or nmea (GNSS receiver logs)")->required();
   command->add_option("SRC", options->sources, "Input files (kitti, euroc, tum-rgbd: the sequence folder; ros2bag: the bag folder or its .mcap / .db3 file; images: one folder, or two for a stereo pair)")->required();
   command->add_option("--out", options->out, "Sensor log to write (.mcap)")->required();
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
   command->add_flag("--no-foxglove", options->no_foxglove,
                     "Leave out the Foxglove mirror channels (<topic>/foxglove for poses, clouds, fixes, images)");
   command->add_option("--topic", options->topic_overrides,
-                      "csv: FILE_STEM=/topic (default /FILE_STEM); rosbag, ros2bag: /ros/topic=/topic (only these are imported)");
+                      "csv: FILE_STEM=/topic (default /FILE_STEM); rosbag, ros2bag: /ros/topic=/topic (only these are imported); nmea: /gnss=/topic");
   command->add_option("--wheel-separation", options->wheel_separation,
                       "rosbag, ros2bag, carmen: wheel separation (m) to import odometry / twists as differential-drive wheel odometry");
   command->add_flag("--use-record-time", options->use_record_time, "rosbag, ros2bag: bag record time instead of header.stamp");
@@ -423,6 +479,7 @@ void add_import_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--intrinsics", options->intrinsics, "images: the camera's fx,fy,cx,cy (pixels)")->delimiter(',');
   command->add_option("--distortion", options->distortion, "images: radtan coefficients k1,k2,p1,p2[,k3]")->delimiter(',');
   command->add_option("--baseline", options->baseline, "images, two folders: the stereo baseline (m; the right camera along the left one's x axis)");
+  command->add_option("--date", options->date, "nmea: UTC date (YYYY-MM-DD) of fixes before the log's first RMC or ZDA sentence");
   command->add_option("--privacy", options->privacy, "Blur (blur) or black out (black) faces and licence plates in camera images before they are written")
       ->check(CLI::IsMember({"blur", "black"}));
   command->callback([&output, &run, options] { run = [&output, options] { return run_import(output, *options); }; });

@@ -40,10 +40,11 @@ Result<std::unique_ptr<ScenarioSimulation>> ScenarioSimulation::create(Scenario 
     if (const auto* imu = std::get_if<ImuSimulatorConfig>(&sensor.simulator)) {
       auto simulator = std::make_shared<ImuSimulator>(*imu);
       std::vector<ImuBiasTruth>* truth = first_imu ? &simulation->imu_bias_truth_ : nullptr;
+      const bool* record = &simulation->record_imu_bias_truth_;
       first_imu = false;
-      stream->produce = [simulator, &path, truth](Timestamp time) -> std::optional<msgs::SensorMessage> {
+      stream->produce = [simulator, &path, truth, record](Timestamp time) -> std::optional<msgs::SensorMessage> {
         ImuSample sample = simulator->measure(path, time);
-        if (truth != nullptr) truth->push_back({time, sample.accel_bias, sample.gyro_bias});
+        if (truth != nullptr && *record) truth->push_back({time, sample.accel_bias, sample.gyro_bias});
         return std::move(sample.message);
       };
     } else if (const auto* lidar = std::get_if<LidarSimulatorConfig>(&sensor.simulator)) {

@@ -281,6 +281,41 @@ TEST(Cli, ImportKittiWritesLogGroundTruthAndCalibration) {
   std::filesystem::remove_all(root);
 }
 
+// A real receiver's NMEA log (u-blox NEO-M9N, 60 s with GST) into a sensor log: one fix per
+// epoch on /gnss with the GST's covariance; a file without NMEA and GGA without a date are
+// refused with the reason, and --date supplies the date.
+TEST(Cli, ImportNmeaReceiverLog) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_nmea_{}", ::getpid());
+  std::filesystem::create_directories(dir);
+  const std::string receiver = std::string(HANZO_DATA_DIR) + "/drivers/gnss_nmea_gpsd/ublox-neo-m9n-nmea.log";
+  const CliRun imported = run(fmt::format("import nmea {} --out {}/gnss.mcap --json", receiver, dir.string()));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+  const nlohmann::json result = nlohmann::json::parse(imported.out);
+  EXPECT_EQ(result["fixes"], 61);
+  EXPECT_EQ(result["gst_covariances"], 61);
+  EXPECT_EQ(result["checksum_errors"], 0);
+  const CliRun info = run(fmt::format("log info {}/gnss.mcap --json", dir.string()));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_THAT(info.out, HasSubstr("\"/gnss\""));
+
+  const CliRun not_nmea = run(fmt::format("import nmea README.md --out {}/x.mcap", dir.string()));
+  EXPECT_EQ(not_nmea.exit_code, 1);
+  EXPECT_THAT(not_nmea.err, HasSubstr("README.md: no NMEA sentence"));
+  std::ofstream(dir / "gga.nmea") << "$GPGGA,120000.00,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*67\r\n";
+  const CliRun undated = run(fmt::format("import nmea {0}/gga.nmea --out {0}/y.mcap", dir.string()));
+  EXPECT_EQ(undated.exit_code, 1);
+  EXPECT_THAT(undated.err, HasSubstr("give --date YYYY-MM-DD"));
+  EXPECT_EQ(std::count(undated.err.begin(), undated.err.end(), '\n'), 1);
+  EXPECT_FALSE(std::filesystem::exists(dir / "y.mcap"));
+  const CliRun dated = run(fmt::format("import nmea {0}/gga.nmea --out {0}/y.mcap --date 2024-05-01 --json", dir.string()));
+  ASSERT_EQ(dated.exit_code, 0) << dated.err;
+  EXPECT_EQ(nlohmann::json::parse(dated.out)["fixes"], 1);
+  const CliRun missing = run(fmt::format("import nmea {} --out {}/z.mcap", (dir / "gga.nmea").string() + "x", dir.string()));
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_THAT(missing.err, HasSubstr("gga.nmeax"));
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, ImportRejectsBadCsvAndLeavesNoLog) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_bad_{}", ::getpid());
   std::filesystem::create_directories(dir);
