@@ -16,6 +16,8 @@
 #include "log_writing.hpp"
 #include "hanzo/fusion/core/files.hpp"
 #include "hanzo/fusion/drivers/nmea.hpp"
+#include "hanzo/fusion/drivers/pcap.hpp"
+#include "hanzo/fusion/drivers/velodyne.hpp"
 #include "hanzo/fusion/io/carmen_import.hpp"
 #include "hanzo/fusion/io/csv_import.hpp"
 #include "hanzo/fusion/io/euroc_import.hpp"
@@ -52,6 +54,9 @@ struct ImportOptions {
   std::string privacy;                       // "blur" / "black": camera images redacted before writing
   std::shared_ptr<ImageRedaction> redaction; // made from `privacy` by run_import
   std::string date;                          // nmea: UTC date of fixes before the log's first RMC / ZDA
+  std::string driver;                        // pcap: velodyne
+  std::string model;                         // pcap, velodyne: VLP-16, VLP-32C, HDL-32E, HDL-64E, VLS-128
+  int port = 0;                              // pcap: the LiDAR's data port (0: the driver's default)
 };
 
 struct SourceMessages {
@@ -373,6 +378,89 @@ int run_nmea_import(const Output& output, const ImportOptions& options) {
   return report_success(output, result, text);
 }
 
+/// A LiDAR's packet capture into one PointCloudMessage per rotation on /lidar (sensor "lidar").
+int run_pcap_import(const Output& output, const ImportOptions& options) {
+  nlohmann::json result = {{"format", "pcap"}, {"sources", options.sources}, {"out", options.out}, {"driver", options.driver}};
+  if (options.driver != "velodyne") {
+    return report_failure(output, result, fmt::format("--driver '{}': the pcap import decodes velodyne captures", options.driver));
+  }
+  if (options.model.empty()) return report_failure(output, result, "--model: give the Velodyne's model (VLP-16, VLP-32C, HDL-32E, HDL-64E, VLS-128)");
+  Result<drivers::VelodyneModel> model = drivers::parse_velodyne_model(options.model);
+  if (!model) return report_failure(output, result, "--model: " + model.error().message);
+  drivers::VelodyneCalibration calibration = drivers::nominal_velodyne_calibration(*model);
+  if (!options.calibration.empty()) {
+    Result<drivers::VelodyneCalibration> loaded = drivers::load_velodyne_calibration(options.calibration);
+    if (!loaded) return report_failure(output, result, loaded.error().message);
+    calibration = std::move(*loaded);
+  }
+  drivers::VelodyneDecoderConfig config;
+  config.model = *model;
+  config.frame_id = "lidar";
+  Result<drivers::VelodyneDecoder> decoder = drivers::VelodyneDecoder::create(calibration, config);
+  if (!decoder) return report_failure(output, result, decoder.error().message);
+  auto topics = topic_map(options.topic_overrides, "/lidar=/topic");
+  if (!topics) return report_failure(output, result, topics.error().message);
+  const auto renamed = topics->find("/lidar");
+  const std::string topic = renamed == topics->end() ? "/lidar" : renamed->second;
+  const uint16_t data_port = static_cast<uint16_t>(options.port > 0 ? options.port : 2368);
+  constexpr uint16_t kPositionPort = 8308;
+  std::vector<msgs::PointCloudMessage> frames;
+  uint64_t other_ports = 0;
+  drivers::PcapStatistics capture;
+  for (const std::string& path : options.sources) {
+    Result<drivers::PcapReader> reader = drivers::PcapReader::open(path);
+    if (!reader) return report_failure(output, result, reader.error().message);
+    while (true) {
+      Result<std::optional<drivers::UdpDatagram>> datagram = reader->next();
+      if (!datagram) return report_failure(output, result, datagram.error().message);
+      if (!*datagram) break;
+      if ((*datagram)->destination_port != data_port && (*datagram)->destination_port != kPositionPort) {
+        ++other_ports;
+        continue;
+      }
+      decoder->add_packet((*datagram)->payload, (*datagram)->time, frames);
+    }
+    const drivers::PcapStatistics& read = reader->statistics();
+    capture.records += read.records;
+    capture.datagrams += read.datagrams;
+    capture.other_packets += read.other_packets;
+    capture.truncated += read.truncated;
+  }
+  decoder->flush(frames);
+  const drivers::VelodyneStatistics& statistics = decoder->statistics();
+  result["frames"] = frames.size();
+  result["points"] = statistics.points;
+  result["packets"] = statistics.packets;
+  result["position_packets"] = statistics.position_packets;
+  result["malformed_packets"] = statistics.malformed;
+  result["records"] = capture.records;
+  result["other_packets"] = capture.other_packets + other_ports;
+  result["truncated_records"] = capture.truncated;
+  result["calibration"] = options.calibration.empty() ? "nominal" : options.calibration;
+  if (frames.empty()) {
+    return report_failure(output, result,
+                          fmt::format("{}: no Velodyne rotation decoded ({} datagrams to port {}, {} malformed{}{})", fmt::join(options.sources, ", "),
+                                      statistics.packets + statistics.malformed, data_port, statistics.malformed,
+                                      statistics.first_error.empty() ? "" : ": ", statistics.first_error));
+  }
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
+    HANZO_RETURN_IF_ERROR(writer.add_metadata({"import", {{"importer", "pcap velodyne"}, {"model", options.model}, {"source", fmt::format("{}", fmt::join(options.sources, " "))}}}));
+    for (const msgs::PointCloudMessage& frame : frames) HANZO_RETURN_IF_ERROR(writer.write(topic, frame, "lidar"));
+    return ok_status();
+  });
+  if (code != 0) return code;
+  result["ok"] = true;
+  result["topic"] = topic;
+  std::string text = fmt::format("{}: {} rotations ({} points) on {} from {} packets ({:.1f} s){}\n", options.out, frames.size(), statistics.points, topic,
+                                 statistics.packets, (frames.back().timestamp - frames.front().timestamp).seconds(),
+                                 options.calibration.empty() ? "; nominal calibration: give --calibration for the unit's" : "");
+  if (statistics.malformed + capture.truncated > 0) {
+    text += fmt::format("  left out: {} malformed packets (first: {}), {} truncated records\n", statistics.malformed,
+                        statistics.first_error.empty() ? "none" : statistics.first_error, capture.truncated);
+  }
+  return report_success(output, result, text);
+}
+
 int run_import(const Output& output, ImportOptions options) {
   if (!(options.time_origin > 0.0)) {  // a zero time means "no time" in a sensor log
     return report_failure(output, {{"format", options.format}},
@@ -397,9 +485,10 @@ int run_import(const Output& output, ImportOptions options) {
   if (options.format == "tum-rgbd") return run_tum_rgbd_import(output, options);
   if (options.format == "images") return run_image_folder_import(output, options);
   if (options.format == "nmea") return run_nmea_import(output, options);
+  if (options.format == "pcap") return run_pcap_import(output, options);
   nlohmann::json result = {{"format", options.format}, {"sources", options.sources}, {"out", options.out}};
   if (options.format != "csv") {
-    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, ros2bag, carmen, kitti, euroc, tum-rgbd, images, nmea)", options.format));
+    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, ros2bag, carmen, kitti, euroc, tum-rgbd, images, nmea, pcap)", options.format));
   }
   auto stems = topic_map(options.topic_overrides, "FILE_STEM=/topic");
   if (!stems) return report_failure(output, result, stems.error().message);
@@ -455,7 +544,7 @@ int run_import(const Output& output, ImportOptions options) {
 void add_import_command(CLI::App& app, const Output& output, Command& run) {
   auto options = std::make_shared<ImportOptions>();
   CLI::App* command = app.add_subcommand("import", "Convert recordings into a sensor log (MCAP)");
-  command->add_option("FORMAT", options->format, "Input format: csv, rosbag (ROS 1), ros2bag, carmen, kitti, euroc, tum-rgbd, images (a folder of image files) or nmea (GNSS receiver logs)")->required();
+  command->add_option("FORMAT", options->format, "Input format: csv, rosbag (ROS 1), ros2bag, carmen, kitti, euroc, tum-rgbd, images (a folder of image files), nmea (GNSS receiver logs) or pcap (a LiDAR's packet capture)")->required();
   command->add_option("SRC", options->sources, "Input files (kitti, euroc, tum-rgbd: the sequence folder; ros2bag: the bag folder or its .mcap / .db3 file; images: one folder, or two for a stereo pair)")->required();
   command->add_option("--out", options->out, "Sensor log to write (.mcap)")->required();
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
@@ -468,7 +557,7 @@ void add_import_command(CLI::App& app, const Output& output, Command& run) {
   command->add_flag("--use-record-time", options->use_record_time, "rosbag, ros2bag: bag record time instead of header.stamp");
   command->add_option("--ground-truth,--gt", options->ground_truth,
                       "carmen, kitti, euroc, tum-rgbd: write the reference trajectory (carmen: the scans' poses) as TUM");
-  command->add_option("--calibration,--calib", options->calibration, "kitti, euroc, tum-rgbd, rosbag, ros2bag, images: write the sensors' calibration YAML (bags: from /tf_static and CameraInfo; images: needs --intrinsics)");
+  command->add_option("--calibration,--calib", options->calibration, "kitti, euroc, tum-rgbd, rosbag, ros2bag, images: write the sensors' calibration YAML (bags: from /tf_static and CameraInfo; images: needs --intrinsics); pcap: read the LiDAR's calibration (Velodyne db.xml or ROS YAML)");
   command->add_option("--body-frame", options->body_frame,
                       "rosbag, ros2bag: the calibration's body frame (default base_link, base_footprint, the IMU's frame)");
   command->add_flag("--no-images", options->no_images, "kitti, euroc: leave the camera images out");
@@ -479,6 +568,9 @@ void add_import_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--intrinsics", options->intrinsics, "images: the camera's fx,fy,cx,cy (pixels)")->delimiter(',');
   command->add_option("--distortion", options->distortion, "images: radtan coefficients k1,k2,p1,p2[,k3]")->delimiter(',');
   command->add_option("--baseline", options->baseline, "images, two folders: the stereo baseline (m; the right camera along the left one's x axis)");
+  command->add_option("--driver", options->driver, "pcap: the sensor's driver (velodyne)");
+  command->add_option("--model", options->model, "pcap, velodyne: VLP-16, VLP-32C, HDL-32E, HDL-64E or VLS-128");
+  command->add_option("--port", options->port, "pcap: the LiDAR's UDP data port (default: velodyne 2368)")->check(CLI::Range(1, 65535));
   command->add_option("--date", options->date, "nmea: UTC date (YYYY-MM-DD) of fixes before the log's first RMC or ZDA sentence");
   command->add_option("--privacy", options->privacy, "Blur (blur) or black out (black) faces and licence plates in camera images before they are written")
       ->check(CLI::IsMember({"blur", "black"}));

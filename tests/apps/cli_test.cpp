@@ -316,6 +316,38 @@ TEST(Cli, ImportNmeaReceiverLog) {
   std::filesystem::remove_all(dir);
 }
 
+// A Velodyne VLP-16's packet capture into a sensor log: one cloud per rotation on /lidar with
+// per-point times; another driver, a missing model and a file that is no capture are refused.
+TEST(Cli, ImportVelodynePacketCapture) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_pcap_{}", ::getpid());
+  std::filesystem::create_directories(dir);
+  const std::string veloview = std::string(HANZO_DATA_DIR) + "/drivers/velodyne_veloview/";
+  const CliRun imported = run(fmt::format("import pcap {0}vlp-16-test-90deg-1-50-frames.pcap --driver velodyne --model VLP-16 "
+                                          "--calibration {0}calib/VLP-16.xml --out {1}/lidar.mcap --json",
+                                          veloview, dir.string()));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+  const nlohmann::json result = nlohmann::json::parse(imported.out);
+  EXPECT_EQ(result["frames"], 52);
+  EXPECT_EQ(result["packets"], 1902);
+  EXPECT_EQ(result["position_packets"], 367);
+  EXPECT_EQ(result["malformed_packets"], 0);
+  const CliRun info = run(fmt::format("log info {}/lidar.mcap --json", dir.string()));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_THAT(info.out, HasSubstr("\"/lidar\""));
+
+  const CliRun ouster = run(fmt::format("import pcap {}vlp-16-test-90deg-1-50-frames.pcap --driver ouster --model VLP-16 --out {}/x.mcap", veloview, dir.string()));
+  EXPECT_EQ(ouster.exit_code, 1);
+  EXPECT_THAT(ouster.err, HasSubstr("--driver 'ouster'"));
+  const CliRun no_model = run(fmt::format("import pcap {}vlp-16-test-90deg-1-50-frames.pcap --driver velodyne --out {}/x.mcap", veloview, dir.string()));
+  EXPECT_EQ(no_model.exit_code, 1);
+  EXPECT_THAT(no_model.err, HasSubstr("--model"));
+  const CliRun not_capture = run(fmt::format("import pcap README.md --driver velodyne --model VLP-16 --out {}/x.mcap", dir.string()));
+  EXPECT_EQ(not_capture.exit_code, 1);
+  EXPECT_THAT(not_capture.err, HasSubstr("not a packet capture"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.mcap"));
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, ImportRejectsBadCsvAndLeavesNoLog) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_bad_{}", ::getpid());
   std::filesystem::create_directories(dir);
