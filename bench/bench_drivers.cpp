@@ -1,7 +1,8 @@
 // Sensor drivers' decoding speed on one core, from recordings held in memory (the decoders
 // alone: no file or socket reads): a Velodyne VLP-16 capture (1902 data packets in 2.52 s,
 // 754 packets/s recorded) and an HDL-32E capture (2702 in 1.49 s), and an NMEA-0183 receiver log
-// (u-blox ZED-F9P with UBX binary in between, 655 epochs in 654 s). `x real time`: recorded
+// (u-blox ZED-F9P with UBX binary in between, 655 epochs in 654 s), and an Ouster OS-1-64 frame
+// (the decoder is created per run: its 64 x 1024 direction table included). `x real time`: recorded
 // seconds decoded per second. No packaged peer decodes these on this machine (PCL's Velodyne
 // grabbers need libpcap support, which Debian's PCL is built without).
 #include <fstream>
@@ -13,6 +14,7 @@
 #include <benchmark/benchmark.h>
 
 #include "hanzo/fusion/drivers/nmea.hpp"
+#include "hanzo/fusion/drivers/ouster.hpp"
 #include "hanzo/fusion/drivers/pcap.hpp"
 #include "hanzo/fusion/drivers/velodyne.hpp"
 
@@ -66,6 +68,26 @@ void BM_VelodyneHdl32e(benchmark::State& state) {
   decode_velodyne(state, "velodyne_veloview/monterey-first-100-packets.pcap", "velodyne_veloview/calib/HDL-32.xml", drivers::VelodyneModel::kHdl32e);
 }
 BENCHMARK(BM_VelodyneHdl32e)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Ouster OS-1-64 (LEGACY, 1024 x 10: one frame of 64 packets and 11 IMU packets, 0.1 s).
+void BM_OusterOs1_64(benchmark::State& state) {
+  const Capture& recorded = capture("ouster_sdk_pcaps/OS-1-64_1024x10_fw20.pcap");
+  const drivers::OusterMetadata metadata = drivers::load_ouster_metadata(kDrivers + "ouster_sdk_pcaps/OS-1-64_sensor_config_reduced.json").value();
+  std::size_t points = 0;
+  for (auto _ : state) {
+    auto decoder = drivers::OusterDecoder::create(metadata).value();
+    std::vector<drivers::OusterFrame> frames;
+    std::vector<msgs::ImuMessage> imu;
+    for (const drivers::UdpDatagram& datagram : recorded.datagrams) decoder.add_packet(datagram.payload, datagram.time, frames, imu);
+    decoder.flush(frames);
+    points = frames.empty() ? 0 : frames[0].cloud.points.size();
+    benchmark::DoNotOptimize(frames.data());
+  }
+  // One frame of a 10 Hz sensor: 0.1 s recorded.
+  state.counters["points/s"] = benchmark::Counter(static_cast<double>(points * state.iterations()), benchmark::Counter::kIsRate);
+  state.counters["x real time"] = benchmark::Counter(0.1 * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_OusterOs1_64)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_PcapRead(benchmark::State& state) {
   std::ifstream file(kDrivers + "velodyne_veloview/monterey-first-100-packets.pcap", std::ios::binary);

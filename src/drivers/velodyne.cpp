@@ -251,10 +251,16 @@ void VelodyneDecoder::emit(std::vector<msgs::PointCloudMessage>& frames) {
   if (frame_.points.empty()) return;
   frame_.timestamp = *std::min_element(frame_.point_timestamps.begin(), frame_.point_timestamps.end());
   ++statistics_.frames;
-  statistics_.points += frame_.points.size();
+  const std::size_t size = frame_.points.size();
+  statistics_.points += size;
   frames.push_back(std::move(frame_));
   frame_ = msgs::PointCloudMessage();
   frame_.frame_id = config_.frame_id;
+  // The next rotation is about as large: one allocation per array instead of a doubling series.
+  frame_.points.reserve(size + size / 8);
+  frame_.intensities.reserve(size + size / 8);
+  frame_.ring_ids.reserve(size + size / 8);
+  frame_.point_timestamps.reserve(size + size / 8);
 }
 
 void VelodyneDecoder::add_packet(std::string_view payload, Timestamp capture_time, std::vector<msgs::PointCloudMessage>& frames) {
