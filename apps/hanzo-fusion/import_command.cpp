@@ -16,6 +16,7 @@
 #include "log_writing.hpp"
 #include "hanzo/fusion/core/files.hpp"
 #include "hanzo/fusion/drivers/nmea.hpp"
+#include "hanzo/fusion/drivers/ouster.hpp"
 #include "hanzo/fusion/drivers/pcap.hpp"
 #include "hanzo/fusion/drivers/velodyne.hpp"
 #include "hanzo/fusion/io/carmen_import.hpp"
@@ -57,6 +58,7 @@ struct ImportOptions {
   std::string driver;                        // pcap: velodyne
   std::string model;                         // pcap, velodyne: VLP-16, VLP-32C, HDL-32E, HDL-64E, VLS-128
   int port = 0;                              // pcap: the LiDAR's data port (0: the driver's default)
+  std::string metadata;                      // pcap, ouster: the sensor's metadata JSON
 };
 
 struct SourceMessages {
@@ -378,11 +380,93 @@ int run_nmea_import(const Output& output, const ImportOptions& options) {
   return report_success(output, result, text);
 }
 
+/// Every UDP datagram of the captures, in file order, to `visit`; fails on a capture that
+/// cannot be read on, adding its counts to `capture`.
+Status for_each_datagram(const std::vector<std::string>& paths, drivers::PcapStatistics& capture,
+                         const std::function<void(const drivers::UdpDatagram&)>& visit) {
+  for (const std::string& path : paths) {
+    Result<drivers::PcapReader> reader = drivers::PcapReader::open(path);
+    if (!reader) return reader.error();
+    while (true) {
+      Result<std::optional<drivers::UdpDatagram>> datagram = reader->next();
+      if (!datagram) return datagram.error();
+      if (!*datagram) break;
+      visit(**datagram);
+    }
+    const drivers::PcapStatistics& read = reader->statistics();
+    capture.records += read.records;
+    capture.datagrams += read.datagrams;
+    capture.other_packets += read.other_packets;
+    capture.truncated += read.truncated;
+  }
+  return ok_status();
+}
+
+/// An Ouster capture with its metadata into one PointCloudMessage per frame on /lidar and the
+/// IMU packets on /imu, in time order.
+int run_ouster_pcap_import(const Output& output, const ImportOptions& options, nlohmann::json result) {
+  if (options.metadata.empty()) return report_failure(output, result, "--metadata: give the Ouster's metadata JSON (ouster-cli or the sensor's HTTP API writes it)");
+  Result<drivers::OusterMetadata> metadata = drivers::load_ouster_metadata(options.metadata);
+  if (!metadata) return report_failure(output, result, metadata.error().message);
+  Result<drivers::OusterDecoder> decoder = drivers::OusterDecoder::create(*metadata);
+  if (!decoder) return report_failure(output, result, fmt::format("{}: {}", options.metadata, decoder.error().message));
+  const uint16_t lidar_port = static_cast<uint16_t>(options.port > 0 ? options.port : 7502);
+  constexpr uint16_t kImuPort = 7503;
+  std::vector<drivers::OusterFrame> frames;
+  std::vector<msgs::ImuMessage> imu;
+  uint64_t other_ports = 0;
+  drivers::PcapStatistics capture;
+  const Status read = for_each_datagram(options.sources, capture, [&](const drivers::UdpDatagram& datagram) {
+    if (datagram.destination_port != lidar_port && datagram.destination_port != kImuPort) {
+      ++other_ports;
+      return;
+    }
+    decoder->add_packet(datagram.payload, datagram.time, frames, imu);
+  });
+  if (!read) return report_failure(output, result, read.error().message);
+  decoder->flush(frames);
+  const drivers::OusterStatistics& statistics = decoder->statistics();
+  result["frames"] = frames.size();
+  result["incomplete_frames"] = statistics.incomplete_frames;
+  result["imu_samples"] = imu.size();
+  result["packets"] = statistics.lidar_packets;
+  result["malformed_packets"] = statistics.malformed;
+  result["invalid_columns"] = statistics.invalid_columns;
+  result["other_packets"] = capture.other_packets + other_ports;
+  result["truncated_records"] = capture.truncated;
+  if (frames.empty()) {
+    return report_failure(output, result,
+                          fmt::format("{}: no Ouster frame decoded ({} datagrams to port {}, {} malformed{}{})", fmt::join(options.sources, ", "),
+                                      statistics.lidar_packets + statistics.malformed, lidar_port, statistics.malformed,
+                                      statistics.first_error.empty() ? "" : ": ", statistics.first_error));
+  }
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
+    HANZO_RETURN_IF_ERROR(writer.add_metadata({"import", {{"importer", "pcap ouster"}, {"metadata", options.metadata}, {"source", fmt::format("{}", fmt::join(options.sources, " "))}}}));
+    std::size_t next_imu = 0;
+    for (const drivers::OusterFrame& frame : frames) {
+      for (; next_imu < imu.size() && imu[next_imu].timestamp <= frame.cloud.timestamp; ++next_imu) HANZO_RETURN_IF_ERROR(writer.write("/imu", imu[next_imu], "imu"));
+      HANZO_RETURN_IF_ERROR(writer.write("/lidar", frame.cloud, "lidar"));
+    }
+    for (; next_imu < imu.size(); ++next_imu) HANZO_RETURN_IF_ERROR(writer.write("/imu", imu[next_imu], "imu"));
+    return ok_status();
+  });
+  if (code != 0) return code;
+  result["ok"] = true;
+  std::string text = fmt::format("{}: {} frames ({} incomplete) on /lidar, {} IMU samples on /imu, from {} packets\n", options.out, frames.size(),
+                                 statistics.incomplete_frames, imu.size(), statistics.lidar_packets);
+  if (statistics.malformed + capture.truncated > 0) {
+    text += fmt::format("  left out: {} malformed packets (first: {}), {} truncated records\n", statistics.malformed,
+                        statistics.first_error.empty() ? "none" : statistics.first_error, capture.truncated);
+  }
+  return report_success(output, result, text);
+}
+
 /// A LiDAR's packet capture into one PointCloudMessage per rotation on /lidar (sensor "lidar").
 int run_pcap_import(const Output& output, const ImportOptions& options) {
   nlohmann::json result = {{"format", "pcap"}, {"sources", options.sources}, {"out", options.out}, {"driver", options.driver}};
+  if (options.driver == "ouster") return run_ouster_pcap_import(output, options, result);
   if (options.driver != "velodyne") {
-    return report_failure(output, result, fmt::format("--driver '{}': the pcap import decodes velodyne captures", options.driver));
+    return report_failure(output, result, fmt::format("--driver '{}': the pcap import decodes velodyne and ouster captures", options.driver));
   }
   if (options.model.empty()) return report_failure(output, result, "--model: give the Velodyne's model (VLP-16, VLP-32C, HDL-32E, HDL-64E, VLS-128)");
   Result<drivers::VelodyneModel> model = drivers::parse_velodyne_model(options.model);
@@ -407,25 +491,14 @@ int run_pcap_import(const Output& output, const ImportOptions& options) {
   std::vector<msgs::PointCloudMessage> frames;
   uint64_t other_ports = 0;
   drivers::PcapStatistics capture;
-  for (const std::string& path : options.sources) {
-    Result<drivers::PcapReader> reader = drivers::PcapReader::open(path);
-    if (!reader) return report_failure(output, result, reader.error().message);
-    while (true) {
-      Result<std::optional<drivers::UdpDatagram>> datagram = reader->next();
-      if (!datagram) return report_failure(output, result, datagram.error().message);
-      if (!*datagram) break;
-      if ((*datagram)->destination_port != data_port && (*datagram)->destination_port != kPositionPort) {
-        ++other_ports;
-        continue;
-      }
-      decoder->add_packet((*datagram)->payload, (*datagram)->time, frames);
+  const Status read = for_each_datagram(options.sources, capture, [&](const drivers::UdpDatagram& datagram) {
+    if (datagram.destination_port != data_port && datagram.destination_port != kPositionPort) {
+      ++other_ports;
+      return;
     }
-    const drivers::PcapStatistics& read = reader->statistics();
-    capture.records += read.records;
-    capture.datagrams += read.datagrams;
-    capture.other_packets += read.other_packets;
-    capture.truncated += read.truncated;
-  }
+    decoder->add_packet(datagram.payload, datagram.time, frames);
+  });
+  if (!read) return report_failure(output, result, read.error().message);
   decoder->flush(frames);
   const drivers::VelodyneStatistics& statistics = decoder->statistics();
   result["frames"] = frames.size();
@@ -568,9 +641,10 @@ void add_import_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--intrinsics", options->intrinsics, "images: the camera's fx,fy,cx,cy (pixels)")->delimiter(',');
   command->add_option("--distortion", options->distortion, "images: radtan coefficients k1,k2,p1,p2[,k3]")->delimiter(',');
   command->add_option("--baseline", options->baseline, "images, two folders: the stereo baseline (m; the right camera along the left one's x axis)");
-  command->add_option("--driver", options->driver, "pcap: the sensor's driver (velodyne)");
+  command->add_option("--driver", options->driver, "pcap: the sensor's driver (velodyne, ouster)");
+  command->add_option("--metadata", options->metadata, "pcap, ouster: the sensor's metadata JSON");
   command->add_option("--model", options->model, "pcap, velodyne: VLP-16, VLP-32C, HDL-32E, HDL-64E or VLS-128");
-  command->add_option("--port", options->port, "pcap: the LiDAR's UDP data port (default: velodyne 2368)")->check(CLI::Range(1, 65535));
+  command->add_option("--port", options->port, "pcap: the LiDAR's UDP data port (default: velodyne 2368, ouster 7502)")->check(CLI::Range(1, 65535));
   command->add_option("--date", options->date, "nmea: UTC date (YYYY-MM-DD) of fixes before the log's first RMC or ZDA sentence");
   command->add_option("--privacy", options->privacy, "Blur (blur) or black out (black) faces and licence plates in camera images before they are written")
       ->check(CLI::IsMember({"blur", "black"}));

@@ -317,7 +317,8 @@ TEST(Cli, ImportNmeaReceiverLog) {
 }
 
 // A Velodyne VLP-16's packet capture into a sensor log: one cloud per rotation on /lidar with
-// per-point times; another driver, a missing model and a file that is no capture are refused.
+// per-point times; an Ouster's frame and IMU packets; an unknown driver, a missing model or
+// metadata and a file that is no capture are refused.
 TEST(Cli, ImportVelodynePacketCapture) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_pcap_{}", ::getpid());
   std::filesystem::create_directories(dir);
@@ -335,9 +336,22 @@ TEST(Cli, ImportVelodynePacketCapture) {
   ASSERT_EQ(info.exit_code, 0) << info.err;
   EXPECT_THAT(info.out, HasSubstr("\"/lidar\""));
 
-  const CliRun ouster = run(fmt::format("import pcap {}vlp-16-test-90deg-1-50-frames.pcap --driver ouster --model VLP-16 --out {}/x.mcap", veloview, dir.string()));
-  EXPECT_EQ(ouster.exit_code, 1);
-  EXPECT_THAT(ouster.err, HasSubstr("--driver 'ouster'"));
+  const CliRun hesai = run(fmt::format("import pcap {}vlp-16-test-90deg-1-50-frames.pcap --driver hesai --model VLP-16 --out {}/x.mcap", veloview, dir.string()));
+  EXPECT_EQ(hesai.exit_code, 1);
+  EXPECT_THAT(hesai.err, HasSubstr("--driver 'hesai'"));
+  // An Ouster with its metadata: the frame on /lidar, its IMU packets on /imu; without metadata refused.
+  const std::string ouster = std::string(HANZO_DATA_DIR) + "/drivers/ouster_sdk_pcaps/";
+  const CliRun os1 = run(fmt::format("import pcap {0}OS-1-64_1024x10_fw20.pcap --driver ouster --metadata {0}OS-1-64_sensor_config_reduced.json "
+                                     "--out {1}/os1.mcap --json",
+                                     ouster, dir.string()));
+  ASSERT_EQ(os1.exit_code, 0) << os1.err;
+  const nlohmann::json os1_result = nlohmann::json::parse(os1.out);
+  EXPECT_EQ(os1_result["frames"], 1);
+  EXPECT_EQ(os1_result["incomplete_frames"], 0);
+  EXPECT_EQ(os1_result["imu_samples"], 11);
+  const CliRun no_metadata = run(fmt::format("import pcap {0}OS-1-64_1024x10_fw20.pcap --driver ouster --out {1}/x.mcap", ouster, dir.string()));
+  EXPECT_EQ(no_metadata.exit_code, 1);
+  EXPECT_THAT(no_metadata.err, HasSubstr("--metadata"));
   const CliRun no_model = run(fmt::format("import pcap {}vlp-16-test-90deg-1-50-frames.pcap --driver velodyne --out {}/x.mcap", veloview, dir.string()));
   EXPECT_EQ(no_model.exit_code, 1);
   EXPECT_THAT(no_model.err, HasSubstr("--model"));
