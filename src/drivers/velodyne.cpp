@@ -221,8 +221,8 @@ double VelodyneDecoder::firing_offset(int block, int channel) const {
     case VelodyneModel::kVlp16: return 1e-6 * (block * 110.592 + (channel / 16) * 55.296 + (channel % 16) * 2.304);
     case VelodyneModel::kHdl32e: return 1e-6 * (block * 46.08 + channel * 1.152);
     case VelodyneModel::kVlp32c: return 1e-6 * (block * 55.296 + (channel / 2) * 2.304);
-    case VelodyneModel::kHdl64e: return 1e-6 * ((block / 2) * 48.0 + channel * 1.5);
-    case VelodyneModel::kVls128: return 1e-6 * ((block / 4) * 53.3 + (channel / 8) * 2.665);
+    case VelodyneModel::kHdl64e: return 1e-6 * ((block / 2) * 48.0);  // per firing: lasers of a block fire together
+    case VelodyneModel::kVls128: return 1e-6 * ((block / 4) * 53.3);
   }
   return 0.0;
 }

@@ -29,7 +29,8 @@
 // Times: the packet's microseconds past the hour, in the hour of the capture time nearest to
 // it, plus each laser's firing offset (VLP-16: 55.296 us per sequence, 2.304 us per laser;
 // HDL-32E: 46.08 us per block, 1.152 us per laser; VLP-32C: 55.296 us per block, 2.304 us per
-// laser pair; HDL-64E: 48 us per upper/lower block pair; VLS-128: 53.3 us per four blocks).
+// laser pair; HDL-64E: 48 us per upper/lower block pair and VLS-128: 53.3 us per four blocks, the
+// lasers of a firing at its time).
 //
 // Frames: a rotation ends where the azimuth wraps (passes cut_angle_deg, default 0, the
 // azimuth a frame starts at); a rotation's first frame may be partial. Dual-return packets give
