@@ -1,6 +1,8 @@
 // Fuzz target: packet captures (drivers/pcap.hpp) and Velodyne packets (drivers/velodyne.hpp)
 // on any bytes. The input is read as a capture (classic pcap or pcapng: refused or read to its
-// end, never a crash) and, cut into data- and position-packet-sized pieces, fed to a VLP-16
+// end, never a crash), and again wrapped as the UDP payload of a one-record capture (so that a
+// packet seed reaches the Ethernet / IPv4 / UDP parsing without a committed capture file);
+// cut into data- and position-packet-sized pieces, it is fed to a VLP-16
 // and an HDL-32E decoder, and into Ouster packet sizes for a 16-beam decoder of each profile:
 // every point finite, every cloud's per-point arrays as long as its points, its time the
 // earliest point's.
@@ -16,15 +18,48 @@
 #include "hanzo/fusion/drivers/pcap.hpp"
 #include "hanzo/fusion/drivers/velodyne.hpp"
 
+namespace {
+
+template <typename T>
+void append(std::string& out, T value) {
+  out.append(reinterpret_cast<const char*>(&value), sizeof(T));
+}
+
+// A classic little-endian pcap of one Ethernet / IPv4 / UDP frame to port 2368 carrying `payload`
+// (lengths cut to 16 bits as a capture's would be).
+std::string capture_of(const std::string& payload) {
+  std::string frame(12, '\xff');
+  frame += std::string("\x08\x00", 2);
+  const auto total = static_cast<uint16_t>(std::min<std::size_t>(payload.size() + 28, 0xffff));
+  const auto udp_length = static_cast<uint16_t>(std::min<std::size_t>(payload.size() + 8, 0xffff));
+  const unsigned char ip[20] = {0x45, 0, static_cast<unsigned char>(total >> 8), static_cast<unsigned char>(total & 0xff), 0, 1, 0, 0, 64, 17, 0, 0,
+                                192, 168, 1, 201, 255, 255, 255, 255};
+  frame.append(reinterpret_cast<const char*>(ip), sizeof(ip));
+  const unsigned char udp[8] = {0x09, 0x40, 0x09, 0x40, static_cast<unsigned char>(udp_length >> 8), static_cast<unsigned char>(udp_length & 0xff), 0, 0};
+  frame.append(reinterpret_cast<const char*>(udp), sizeof(udp));
+  frame += payload;
+  std::string capture;
+  for (const uint32_t word : {0xa1b2c3d4u, 0x00040002u, 0u, 0u, 65535u, 1u}) append(capture, word);
+  for (const uint32_t word : {1700000000u, 0u, static_cast<uint32_t>(frame.size()), static_cast<uint32_t>(frame.size())}) append(capture, word);
+  return capture + frame;
+}
+
+void read_capture(const std::string& bytes) {
+  auto reader = hanzo::fusion::drivers::PcapReader::from_bytes(bytes);
+  if (!reader) return;
+  for (int count = 0; count < 100000; ++count) {
+    auto datagram = reader->next();
+    if (!datagram || !*datagram) break;
+  }
+}
+
+}  // namespace
+
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace hanzo::fusion;
   const std::string bytes(reinterpret_cast<const char*>(data), size);
-  if (auto reader = drivers::PcapReader::from_bytes(bytes)) {
-    for (int count = 0; count < 100000; ++count) {
-      auto datagram = reader->next();
-      if (!datagram || !*datagram) break;
-    }
-  }
+  read_capture(bytes);
+  read_capture(capture_of(bytes));
   for (const drivers::VelodyneModel model : {drivers::VelodyneModel::kVlp16, drivers::VelodyneModel::kHdl32e}) {
     drivers::VelodyneDecoderConfig config;
     config.model = model;
