@@ -402,6 +402,12 @@ Status for_each_datagram(const std::vector<std::string>& paths, drivers::PcapSta
   return ok_status();
 }
 
+/// The report's line on packets a LiDAR import left out (none: empty).
+std::string left_out_packets(uint64_t malformed, const std::string& first_error, uint64_t truncated) {
+  if (malformed + truncated == 0) return {};
+  return fmt::format("  left out: {} malformed packets (first: {}), {} truncated records\n", malformed, first_error.empty() ? "none" : first_error, truncated);
+}
+
 /// An Ouster capture with its metadata into one PointCloudMessage per frame on /lidar and the
 /// IMU packets on /imu, in time order.
 int run_ouster_pcap_import(const Output& output, const ImportOptions& options, nlohmann::json result) {
@@ -454,10 +460,7 @@ int run_ouster_pcap_import(const Output& output, const ImportOptions& options, n
   result["ok"] = true;
   std::string text = fmt::format("{}: {} frames ({} incomplete) on /lidar, {} IMU samples on /imu, from {} packets\n", options.out, frames.size(),
                                  statistics.incomplete_frames, imu.size(), statistics.lidar_packets);
-  if (statistics.malformed + capture.truncated > 0) {
-    text += fmt::format("  left out: {} malformed packets (first: {}), {} truncated records\n", statistics.malformed,
-                        statistics.first_error.empty() ? "none" : statistics.first_error, capture.truncated);
-  }
+  text += left_out_packets(statistics.malformed, statistics.first_error, capture.truncated);
   return report_success(output, result, text);
 }
 
@@ -527,10 +530,7 @@ int run_pcap_import(const Output& output, const ImportOptions& options) {
   std::string text = fmt::format("{}: {} rotations ({} points) on {} from {} packets ({:.1f} s){}\n", options.out, frames.size(), statistics.points, topic,
                                  statistics.packets, (frames.back().timestamp - frames.front().timestamp).seconds(),
                                  options.calibration.empty() ? "; nominal calibration: give --calibration for the unit's" : "");
-  if (statistics.malformed + capture.truncated > 0) {
-    text += fmt::format("  left out: {} malformed packets (first: {}), {} truncated records\n", statistics.malformed,
-                        statistics.first_error.empty() ? "none" : statistics.first_error, capture.truncated);
-  }
+  text += left_out_packets(statistics.malformed, statistics.first_error, capture.truncated);
   return report_success(output, result, text);
 }
 
