@@ -13,7 +13,8 @@
 // heaptrack build/bench/bench_memory --seconds 300 --scenario drone --window-only).
 //
 // Reports per configuration: resident MB at each minute, growth from 2 min to the end, real-time
-// factor (simulation included: it renders the images), landmarks and loop closures.
+// factor (simulation included: it renders the images), landmarks, loop closures and LiDAR map
+// keyframes kept (and offered at places the map had: revisits).
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -51,6 +52,8 @@ struct Outcome {
   double seconds = 0.0;             // wall time
   uint64_t landmarks = 0;
   uint64_t loop_closures = 0;
+  uint64_t map_keyframes = 0;  // LiDAR map keyframes kept
+  uint64_t map_revisits = 0;   // offered at places the map had, not kept
 };
 
 // The drone's figure eights made `seconds` long, or the urban car's loop driven as many laps as
@@ -89,6 +92,8 @@ Outcome run(const std::string& name, double seconds, int window) {
   outcome.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - began).count();
   outcome.landmarks = session->mapping_summary().graph_landmarks;
   outcome.loop_closures = session->mapping_summary().loop_closures;
+  outcome.map_keyframes = session->mapping_summary().map_keyframes;
+  outcome.map_revisits = session->mapping_summary().map_revisits;
   return outcome;
 }
 
@@ -101,7 +106,8 @@ Outcome run_in_child(const std::string& name, double seconds, int window) {
     ::close(pipe_ends[0]);
     const Outcome outcome = run(name, seconds, window);
     const std::string text = nlohmann::json{{"resident_mb", outcome.resident_mb}, {"seconds", outcome.seconds}, {"landmarks", outcome.landmarks},
-                                            {"loop_closures", outcome.loop_closures}}.dump();
+                                            {"loop_closures", outcome.loop_closures}, {"map_keyframes", outcome.map_keyframes},
+                                            {"map_revisits", outcome.map_revisits}}.dump();
     if (::write(pipe_ends[1], text.data(), text.size()) < 0) std::_Exit(2);
     std::_Exit(0);
   }
@@ -119,6 +125,8 @@ Outcome run_in_child(const std::string& name, double seconds, int window) {
   outcome.seconds = parsed["seconds"];
   outcome.landmarks = parsed["landmarks"];
   outcome.loop_closures = parsed["loop_closures"];
+  outcome.map_keyframes = parsed["map_keyframes"];
+  outcome.map_revisits = parsed["map_revisits"];
   return outcome;
 }
 
@@ -148,7 +156,8 @@ int main(int argc, char** argv) {
   for (const std::string& name : scenarios) {
     const bool visual = name == "drone";  // the window applies to the visual-inertial graph
     if (!json) {
-      std::printf("| %s %.0f s, %s | resident MB each minute | 2 min -> end | real time | landmarks | loops |\n|---|---|---|---|---|---|\n", name.c_str(),
+      std::printf("| %s %.0f s, %s | resident MB each minute | 2 min -> end | real time | landmarks | loops | map keyframes (revisits) |\n"
+                  "|---|---|---|---|---|---|---|\n", name.c_str(),
                   seconds, visual ? "stereo + IMU" : "every sensor, looped");
     }
     for (const int configuration : {window, 0}) {
@@ -162,12 +171,14 @@ int main(int argc, char** argv) {
       const std::string label = !visual ? "defaults" : configuration > 0 ? fmt::format("window {} keyframes", configuration) : "every keyframe kept";
       const double log_seconds = 60.0 * static_cast<double>(outcome.resident_mb.size());
       report[name][label] = {{"resident_mb", outcome.resident_mb}, {"growth_from_2_min", growth}, {"real_time_factor", log_seconds / outcome.seconds},
-                             {"landmarks", outcome.landmarks}, {"loop_closures", outcome.loop_closures}};
+                             {"landmarks", outcome.landmarks}, {"loop_closures", outcome.loop_closures},
+                             {"map_keyframes", outcome.map_keyframes}, {"map_revisits", outcome.map_revisits}};
       if (json) continue;
       std::string minutes;
       for (const double mb : outcome.resident_mb) minutes += fmt::format("{}{:.0f}", minutes.empty() ? "" : " ", mb);
-      std::printf("| %s | %s | %+.1f %% | %.2fx | %lu | %lu |\n", label.c_str(), minutes.c_str(), 100.0 * growth, log_seconds / outcome.seconds,
-                  static_cast<unsigned long>(outcome.landmarks), static_cast<unsigned long>(outcome.loop_closures));
+      std::printf("| %s | %s | %+.1f %% | %.2fx | %lu | %lu | %lu (%lu) |\n", label.c_str(), minutes.c_str(), 100.0 * growth,
+                  log_seconds / outcome.seconds, static_cast<unsigned long>(outcome.landmarks), static_cast<unsigned long>(outcome.loop_closures),
+                  static_cast<unsigned long>(outcome.map_keyframes), static_cast<unsigned long>(outcome.map_revisits));
     }
   }
   if (json) std::printf("%s\n", report.dump().c_str());

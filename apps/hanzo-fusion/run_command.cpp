@@ -372,7 +372,7 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
   return {{"scans_received", m.scans_received}, {"scans_registered", m.scans_registered},
           {"scans_refused", m.scans_refused},   {"degenerate_scans", m.degenerate_scans},
           {"weather_degraded_scans", m.weather_degraded_scans},
-          {"map_keyframes", m.map_keyframes},   {"graph_keyframes", m.graph_keyframes},
+          {"map_keyframes", m.map_keyframes},   {"map_revisits", m.map_revisits}, {"graph_keyframes", m.graph_keyframes},
           {"graph_landmarks", m.graph_landmarks}, {"graph_projections", m.graph_projections},
           {"graph_imu_factors", m.graph_imu_factors}, {"graph_lidar_factors", m.graph_lidar_factors},
           {"splat_views", m.splat_views}, {"splat_iterations", m.splat_iterations}, {"splat_gaussians", m.splat_gaussians},

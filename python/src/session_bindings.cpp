@@ -197,6 +197,7 @@ class PySession {
     result["sensors"] = sensors;
     result["scans_registered"] = mapping.scans_registered;
     result["map_keyframes"] = mapping.map_keyframes;
+    result["map_revisits"] = mapping.map_revisits;
     result["graph_keyframes"] = mapping.graph_keyframes;
     result["graph_landmarks"] = mapping.graph_landmarks;
     result["loop_closures"] = mapping.loop_closures;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include <fmt/format.h>
 
@@ -18,6 +19,9 @@ Status LoopClosureConfig::validate() const {
   }
   if (!(search_radius_per_meter >= 0)) return Error(fmt::format("search_radius_per_meter: {} < 0", search_radius_per_meter));
   if (!(min_travel >= 0)) return Error(fmt::format("min_travel: {} < 0", min_travel));
+  if (!(covered_distance >= 0)) return Error(fmt::format("covered_distance: {} < 0", covered_distance));
+  if (!(covered_angle >= 0)) return Error(fmt::format("covered_angle: {} < 0", covered_angle));
+  if (!(covered_max_spacing >= 0)) return Error(fmt::format("covered_max_spacing: {} < 0", covered_max_spacing));
   if (submap_keyframes < 0) return Error(fmt::format("submap_keyframes: {} < 0", submap_keyframes));
   if (!(min_inlier_fraction >= 0 && min_inlier_fraction <= 1)) {
     return Error(fmt::format("min_inlier_fraction: {} outside [0, 1]", min_inlier_fraction));
@@ -44,6 +48,37 @@ Result<std::size_t> LoopClosureDetector::add_keyframe(std::vector<Eigen::Vector3
   newest_descriptor_ = std::move(descriptor);
   keyframes_.push_back({std::move(cloud.positions), path});
   return k;
+}
+
+bool LoopClosureDetector::covered(const SE3& T_world_query, double path, const PoseLookup& T_world_keyframe) const {
+  if (!(config_.covered_distance > 0)) return false;
+  const Eigen::Vector3d query = T_world_query.translation();
+  std::optional<SE3> previous;  // keyframe k - 1, when old enough
+  for (std::size_t k = 0; k < keyframes_.size() && path - keyframes_[k].path >= config_.min_travel; ++k) {
+    const SE3 T_world_keyframe_k = T_world_keyframe(k);
+    const Eigen::Vector3d b = T_world_keyframe_k.translation();
+    // The nearest point of the segment from keyframe k - 1 to k (or keyframe k itself).
+    SE3 nearer = T_world_keyframe_k;
+    Eigen::Vector3d nearest = b;
+    if (previous && (b - previous->translation()).norm() <= config_.covered_max_spacing) {
+      const Eigen::Vector3d a = previous->translation();
+      const double length_squared = (b - a).squaredNorm();
+      const double along = length_squared > 0 ? std::clamp((query - a).dot(b - a) / length_squared, 0.0, 1.0) : 1.0;
+      nearest = a + along * (b - a);
+      if (along < 0.5) nearer = *previous;
+    }
+    previous = T_world_keyframe_k;
+    if ((query - nearest).norm() > config_.covered_distance) continue;
+    if ((nearer.rotation().inverse() * T_world_query.rotation()).log().norm() <= config_.covered_angle) return true;
+  }
+  return false;
+}
+
+void LoopClosureDetector::remove_newest() {
+  if (keyframes_.empty()) return;
+  keyframes_.pop_back();
+  scan_contexts_.remove_newest();
+  newest_descriptor_.reset();
 }
 
 std::optional<LoopClosure> LoopClosureDetector::detect(const PoseLookup& T_world_keyframe) {

@@ -883,8 +883,8 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
   // A map keyframe: the first sweep after a new Frontend keyframe, once the LiDAR moved enough.
   // Every other sweep goes into the grids only (free space needs many rays through a cell).
   bool keyframe = latest_keyframe_ && !(last_anchor_ && *last_anchor_ == latest_keyframe_->keyframe_id);
-  if (keyframe && !map_keyframes_.empty()) {
-    const SE3 since = map_keyframes_.back().T_world_lidar.inverse() * T_world_lidar;
+  if (keyframe && last_offered_map_keyframe_) {
+    const SE3 since = last_offered_map_keyframe_->inverse() * T_world_lidar;
     keyframe = since.translation().norm() >= config_.map_keyframe_distance || since.rotation().log().norm() >= config_.map_keyframe_angle;
   }
   if (keyframe) return add_map_keyframe(T_world_lidar, registered.points);
@@ -899,18 +899,34 @@ void Session::add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen
   // The anchor (the newest keyframe) as the graph got it, in today's world.
   const uint64_t anchor = latest_keyframe_->keyframe_id;
   const SE3 T_world_anchor = frontend_->world_correction() * latest_keyframe_uncorrected_;
+  if (pending_revisit_) {  // the previous revisit was searched: the detector forgets it now
+    loop_closures_.remove_newest();
+    pending_revisit_.reset();
+  }
+  last_anchor_ = anchor;
+  last_offered_map_keyframe_ = T_world_lidar;
+  const bool aligned = loop_closures_.size() == map_keyframes_.size();
+  const bool revisit = config_.loop_closure && aligned &&
+                       loop_closures_.covered(T_world_lidar, path_, [this](std::size_t k) { return map_keyframe_pose(k); });
   cloud::PointCloud cloud;
   cloud.positions = points;
-  if (Status inserted = map_builder_.insert(T_world_lidar, cloud); !inserted) {
+  if (Status inserted = map_builder_.insert(T_world_lidar, cloud, revisit ? maps::ScanUse::kGridsOnly : maps::ScanUse::kAllLayers);
+      !inserted) {
     logger()->warn("session: map keyframe not inserted: {}", inserted.error().message);
     return;
   }
-  if (Result<std::size_t> added = loop_closures_.add_keyframe(points, path_); !added) {
-    logger()->warn("session: map keyframe not added to loop closure: {}", added.error().message);
+  const MapKeyframe keyframe{anchor, T_world_anchor.inverse() * T_world_lidar, T_world_lidar};
+  const Result<std::size_t> added = loop_closures_.add_keyframe(points, path_);
+  if (!added) logger()->warn("session: map keyframe not added to loop closure: {}", added.error().message);
+  const bool searchable = added && aligned;
+  if (revisit) {
+    ++summary_.map_revisits;
+    if (added) pending_revisit_ = keyframe;
+    if (searchable) detect_lidar_loop();
+    return;
   }
-  last_anchor_ = anchor;
   map_keyframe_of_[anchor] = map_keyframes_.size();
-  map_keyframes_.push_back({anchor, T_world_anchor.inverse() * T_world_lidar, T_world_lidar});
+  map_keyframes_.push_back(keyframe);
   if (splats_) splats_->add_points(cloud::transformed(cloud, T_world_lidar).positions);
   ++summary_.map_keyframes;
   ++summary_.map_version;
@@ -923,13 +939,17 @@ void Session::add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen
     update.added_points = std::move(layer);
     map_update_callback_(update);
   }
-  if (!config_.loop_closure || loop_closures_.size() != map_keyframes_.size()) return;
+  if (searchable) detect_lidar_loop();
+}
+
+void Session::detect_lidar_loop() {
+  if (!config_.loop_closure) return;
   update_backend();  // the anchor into the graph before its pose is looked up
   const std::optional<lidar::LoopClosure> loop = loop_closures_.detect([this](std::size_t k) { return map_keyframe_pose(k); });
   summary_.loop_candidates = loop_closures_.candidates();
   if (!loop) return;
-  const MapKeyframe& from = map_keyframes_[loop->from];
-  const MapKeyframe& to = map_keyframes_[loop->to];
+  const MapKeyframe& from = map_keyframe(loop->from);
+  const MapKeyframe& to = map_keyframe(loop->to);
   const SE3 T_anchors = from.T_anchor_lidar * loop->T_from_to * to.T_anchor_lidar.inverse();
   if (Status added = add_loop_factor(from.anchor, to.anchor, T_anchors, std::nullopt); !added) {
     logger()->warn("session: loop closure not added: {}", added.error().message);
@@ -941,8 +961,12 @@ void Session::add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen
   update_backend();
 }
 
+const Session::MapKeyframe& Session::map_keyframe(std::size_t k) const {
+  return k == map_keyframes_.size() && pending_revisit_ ? *pending_revisit_ : map_keyframes_.at(k);
+}
+
 SE3 Session::map_keyframe_pose(std::size_t k) const {
-  const MapKeyframe& keyframe = map_keyframes_.at(k);
+  const MapKeyframe& keyframe = map_keyframe(k);
   const std::optional<SE3> anchor = graph_->optimized_pose(keyframe.anchor);
   return anchor ? *anchor * keyframe.T_anchor_lidar : keyframe.T_world_lidar;
 }
@@ -1044,8 +1068,8 @@ Result<LoopClosureOutcome> Session::close_loop(const LoopClosureRequest& request
       summary_.loop_candidates = loop_closures_.candidates();
       if (!loop) return Error("not_found: no verified loop closure for the newest map keyframe");
     }
-    const MapKeyframe& from = map_keyframes_[loop->from];
-    const MapKeyframe& to = map_keyframes_[loop->to];
+    const MapKeyframe& from = map_keyframe(loop->from);
+    const MapKeyframe& to = map_keyframe(loop->to);
     outcome.from_keyframe = from.anchor;
     outcome.to_keyframe = to.anchor;
     outcome.T_from_to = from.T_anchor_lidar * loop->T_from_to * to.T_anchor_lidar.inverse();

@@ -210,6 +210,7 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"splat_iterations", mapping.splat_iterations},
       {"splat_gaussians", mapping.splat_gaussians},
       {"map_keyframes", mapping.map_keyframes},
+      {"map_revisits", mapping.map_revisits},
       {"loop_candidates", mapping.loop_candidates},
       {"loop_closures", mapping.loop_closures},
       {"manual_loop_closures", mapping.manual_loop_closures},

@@ -13,6 +13,10 @@
 //     matched and a translation that is not degenerate (LidarOdometryConfig::degeneracy_ratio).
 // The detector keeps the keyframes' points (sensor frame) and path lengths; the poses stay the
 // caller's (a pose graph's current estimate), passed to each call.
+// Revisits: a keyframe within covered_distance / covered_angle of the path through keyframes at
+// least min_travel of path older (covered()) is a view the detector already has; the caller searches
+// it for a loop like any other and then drops it (remove_newest()), so that driving the same
+// streets again and again does not grow the keyframes.
 //
 // Frames: T_world_keyframe maps keyframe sensor-frame points into the caller's world;
 // LoopClosure::T_from_to maps points of keyframe `to` into keyframe `from`'s frame.
@@ -43,6 +47,13 @@ struct LoopClosureConfig {
   int submap_keyframes = 5;   ///< keyframes on each side of the candidate
   double max_rmse = 0.1;      ///< m
   double min_inlier_fraction = 0.5;
+  /// A keyframe this close (m, rad) to the path between two successive keyframes at least
+  /// min_travel of path older is a revisit (covered()). Keyframes come by time as well as by
+  /// distance (one about every 7 m at 10 m/s on the simulated drive), so a retraced route
+  /// passes between the older ones, not through them. 0 m: none is.
+  double covered_distance = 1.0;
+  double covered_angle = 0.2;
+  double covered_max_spacing = 15.0;  ///< m; successive keyframes further apart cover only their own places
   Status validate() const;
 };
 
@@ -64,6 +75,13 @@ class LoopClosureDetector {
 
   /// Adds keyframe number size(): its points (sensor frame) and the path travelled by then (m).
   Result<std::size_t> add_keyframe(std::vector<Eigen::Vector3f> points, double path);
+  /// Whether a keyframe at T_world_query (path `path`, m) would be a revisit: within
+  /// covered_distance of the segment between two successive keyframes (or of one keyframe) at
+  /// least min_travel of path older and within covered_angle of the nearer one's orientation,
+  /// by the caller's current poses.
+  bool covered(const SE3& T_world_query, double path, const PoseLookup& T_world_keyframe) const;
+  /// Forgets the newest keyframe (a revisit searched for a loop). No-op when there is none.
+  void remove_newest();
   /// A verified loop closing at the newest keyframe, or none. Counts candidates.
   std::optional<LoopClosure> detect(const PoseLookup& T_world_keyframe);
   /// Registers keyframe `to` against the submap around keyframe `from` starting at guess

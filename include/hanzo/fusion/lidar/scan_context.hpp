@@ -70,6 +70,10 @@ class ScanContextDatabase {
   explicit ScanContextDatabase(ScanContextConfig config = {});
   /// Adds a keyframe's descriptor under `id`. Fails when the size differs from the config's.
   Status add(uint64_t id, ScanContext descriptor);
+  /// Removes the newest entry (no-op when empty).
+  void remove_newest() {
+    if (!entries_.empty()) entries_.pop_back();
+  }
   /// The best match among all but the exclude_recent newest entries, if its distance is below
   /// max_distance.
   Result<std::optional<ScanContextMatch>> query(const ScanContext& descriptor) const;

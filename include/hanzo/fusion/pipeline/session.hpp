@@ -75,7 +75,10 @@
 //    map_keyframe_distance / map_keyframe_angle since the previous map keyframe, is kept
 //    (deskewed points, sensor frame) with its pose relative to that Frontend keyframe. It goes
 //    into the map (maps::MapBuilder: point map + 2D occupancy by default) and into the loop
-//    closure detector (lidar/loop_closure.hpp: Scan Context + registration). A verified loop
+//    closure detector (lidar/loop_closure.hpp: Scan Context + registration); one at a place
+//    the map already has (a revisit, LoopClosureConfig::covered_distance) is searched for a
+//    loop, then goes into the grids only and is not kept (memory stays flat on a route driven
+//    again and again). A verified loop
 //    adds a between factor under a DCS kernel (KeyframeGraph::add_loop_closure), the graph
 //    runs a full batch and corrects the Frontend, and every map keyframe whose keyframe moved
 //    is moved in the map (the point map exactly; occupancy keeps what was integrated).
@@ -240,6 +243,9 @@ struct MappingSummary {
   uint64_t degenerate_scans = 0;
   uint64_t weather_degraded_scans = 0;
   uint64_t map_keyframes = 0;
+  /// Map keyframes offered at places the map already had (LoopClosureConfig::covered_distance):
+  /// searched for a loop, their sweep put into the grids only, not kept.
+  uint64_t map_revisits = 0;
   uint64_t graph_keyframes = 0;
   /// Landmarks of the visual-inertial keyframe graph (frontend.type msckf) and their projections.
   uint64_t graph_landmarks = 0;
@@ -402,7 +408,12 @@ class Session {
   void check_wheels(Timestamp sweep_time, const std::optional<SE3>& T_previous_current, bool reliable);
   /// The sweep as a map keyframe anchored to the newest Frontend keyframe.
   void add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points);
+  /// Looks for a loop closing at the loop closure detector's newest keyframe (kept or a
+  /// revisit); a verified one becomes a loop factor.
+  void detect_lidar_loop();
   /// T_world_lidar of map keyframe k by the graph's current estimate.
+  /// The loop closure detector's keyframe k: map_keyframes_[k], or the pending revisit.
+  const MapKeyframe& map_keyframe(std::size_t k) const;
   SE3 map_keyframe_pose(std::size_t k) const;
   Status add_loop_factor(uint64_t from, uint64_t to, const SE3& T_from_to, const std::optional<Eigen::Matrix<double, 6, 6>>& covariance);
   /// Runs the backend; moves the map keyframes whose keyframe moved (follow_graph).
@@ -464,8 +475,12 @@ class Session {
   std::optional<msgs::Keyframe> latest_keyframe_;   ///< the newest Frontend keyframe
   SE3 latest_keyframe_uncorrected_;                 ///< its pose before the Frontend's corrections
   std::vector<MapKeyframe> map_keyframes_;
+  /// The newest map keyframe offered when it was a revisit: the loop closure detector keeps it
+  /// (as keyframe map_keyframes_.size()) until the next one is offered, for close_loop().
+  std::optional<MapKeyframe> pending_revisit_;
   std::map<uint64_t, std::size_t> map_keyframe_of_;  ///< Frontend keyframe id -> map keyframe
   std::optional<uint64_t> last_anchor_;
+  std::optional<SE3> last_offered_map_keyframe_;  ///< kept or revisit: the spacing of map keyframes
   double path_ = 0.0;                               ///< m of LiDAR path, registered sweeps
   std::optional<SE3> last_lidar_pose_;
   SensorStatistics lidar_statistics_;
