@@ -1,7 +1,7 @@
 // hanzo-fusion import FORMAT SRC... --out LOG.mcap: converts recordings into a sensor log.
 // Formats: csv (IMU / GNSS / wheel odometry files), rosbag (ROS 1 bag v2.0), ros2bag (rosbag2:
 // MCAP or SQLite storage), carmen (2D laser logs), kitti (odometry sequences), euroc (ASL
-// folders), tum-rgbd, nmea (GNSS receiver logs); see docs/sensor-logs.md.
+// folders), tum-rgbd, nmea (GNSS receiver logs), xsens (IMU streams), pcap; see docs/sensor-logs.md.
 
 #include <algorithm>
 #include <filesystem>
@@ -16,6 +16,7 @@
 #include "log_writing.hpp"
 #include "hanzo/fusion/core/files.hpp"
 #include "hanzo/fusion/drivers/nmea.hpp"
+#include "hanzo/fusion/drivers/xsens.hpp"
 #include "hanzo/fusion/drivers/ouster.hpp"
 #include "hanzo/fusion/drivers/pcap.hpp"
 #include "hanzo/fusion/drivers/velodyne.hpp"
@@ -380,6 +381,70 @@ int run_nmea_import(const Output& output, const ImportOptions& options) {
   return report_success(output, result, text);
 }
 
+/// Xsens MTData2 streams (raw serial bytes) into ImuMessages on /imu (sensor "imu") and the
+/// receiver's GNSS PVT fixes on /gnss (sensor "gnss"); --topic /imu=/other, /gnss=/other.
+int run_xsens_import(const Output& output, const ImportOptions& options) {
+  nlohmann::json result = {{"format", "xsens"}, {"sources", options.sources}, {"out", options.out}};
+  auto topics = topic_map(options.topic_overrides, "/imu=/topic or /gnss=/topic");
+  if (!topics) return report_failure(output, result, topics.error().message);
+  const auto topic_of = [&](const std::string& standard) {
+    const auto renamed = topics->find(standard);
+    return renamed == topics->end() ? standard : renamed->second;
+  };
+  drivers::XsensDecoder decoder;
+  std::vector<msgs::ImuMessage> imu;
+  std::vector<msgs::GnssMessage> fixes;
+  for (const std::string& path : options.sources) {
+    Result<std::string> bytes = read_file(path);
+    if (!bytes) return report_failure(output, result, bytes.error().message);
+    decoder.feed(*bytes, imu, fixes);
+  }
+  const drivers::XsensStatistics& statistics = decoder.statistics();
+  result["imu_messages"] = imu.size();
+  result["gnss_fixes"] = fixes.size();
+  result["frames"] = statistics.messages;
+  result["mtdata2"] = statistics.mtdata2;
+  result["checksum_errors"] = statistics.checksum_errors;
+  result["malformed"] = statistics.malformed;
+  result["skipped_bytes"] = statistics.skipped_bytes;
+  result["cut_off_bytes"] = decoder.pending_bytes();
+  result["without_inertial"] = statistics.without_inertial;
+  result["gnss_without_fix"] = statistics.gnss_without_fix;
+  result["device_clock"] = statistics.device_clock;
+  if (imu.empty()) {
+    const std::string why = statistics.messages == 0 ? "no Xsens frame (preamble 0xFA 0xFF with a valid checksum)"
+                            : statistics.mtdata2 == 0 ? fmt::format("{} Xsens frames but no MTData2 message", statistics.messages)
+                                                      : fmt::format("{} MTData2 messages but none with acceleration and rate of turn "
+                                                                    "(or DeltaV and DeltaQ) and a time", statistics.mtdata2);
+    return report_failure(output, result, fmt::format("{}: {}", fmt::join(options.sources, ", "), why));
+  }
+  const std::string imu_topic = topic_of("/imu"), gnss_topic = topic_of("/gnss");
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
+    HANZO_RETURN_IF_ERROR(writer.add_metadata({"import", {{"importer", "xsens"}, {"source", fmt::format("{}", fmt::join(options.sources, " "))}}}));
+    std::size_t next_fix = 0;
+    for (const msgs::ImuMessage& sample : imu) {
+      for (; next_fix < fixes.size() && fixes[next_fix].timestamp <= sample.timestamp; ++next_fix) {
+        HANZO_RETURN_IF_ERROR(writer.write(gnss_topic, fixes[next_fix], "gnss"));
+      }
+      HANZO_RETURN_IF_ERROR(writer.write(imu_topic, sample, "imu"));
+    }
+    for (; next_fix < fixes.size(); ++next_fix) HANZO_RETURN_IF_ERROR(writer.write(gnss_topic, fixes[next_fix], "gnss"));
+    return ok_status();
+  });
+  if (code != 0) return code;
+  result["ok"] = true;
+  result["topics"] = fixes.empty() ? nlohmann::json{imu_topic} : nlohmann::json{imu_topic, gnss_topic};
+  std::string text = fmt::format("{}: {} IMU messages on {} ({:.1f} s){}\n", options.out, imu.size(), imu_topic,
+                                 (imu.back().timestamp - imu.front().timestamp).seconds(),
+                                 fixes.empty() ? "" : fmt::format(", {} GNSS fixes on {}", fixes.size(), gnss_topic));
+  if (statistics.device_clock > 0) text += fmt::format("  {} messages timed by the device's clock (no valid UTC yet)\n", statistics.device_clock);
+  if (statistics.checksum_errors + statistics.malformed + decoder.pending_bytes() > 0) {
+    text += fmt::format("  left out: {} frames with a bad checksum, {} malformed (first: {}), {} bytes cut off at the end\n", statistics.checksum_errors,
+                        statistics.malformed, statistics.first_error.empty() ? "none" : statistics.first_error, decoder.pending_bytes());
+  }
+  return report_success(output, result, text);
+}
+
 /// Every UDP datagram of the captures, in file order, to `visit`; fails on a capture that
 /// cannot be read on, adding its counts to `capture`.
 Status for_each_datagram(const std::vector<std::string>& paths, drivers::PcapStatistics& capture,
@@ -558,10 +623,11 @@ int run_import(const Output& output, ImportOptions options) {
   if (options.format == "tum-rgbd") return run_tum_rgbd_import(output, options);
   if (options.format == "images") return run_image_folder_import(output, options);
   if (options.format == "nmea") return run_nmea_import(output, options);
+  if (options.format == "xsens") return run_xsens_import(output, options);
   if (options.format == "pcap") return run_pcap_import(output, options);
   nlohmann::json result = {{"format", options.format}, {"sources", options.sources}, {"out", options.out}};
   if (options.format != "csv") {
-    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, ros2bag, carmen, kitti, euroc, tum-rgbd, images, nmea, pcap)", options.format));
+    return report_failure(output, result, fmt::format("unknown import format '{}' (supported: csv, rosbag, ros2bag, carmen, kitti, euroc, tum-rgbd, images, nmea, xsens, pcap)", options.format));
   }
   auto stems = topic_map(options.topic_overrides, "FILE_STEM=/topic");
   if (!stems) return report_failure(output, result, stems.error().message);
@@ -617,14 +683,14 @@ int run_import(const Output& output, ImportOptions options) {
 void add_import_command(CLI::App& app, const Output& output, Command& run) {
   auto options = std::make_shared<ImportOptions>();
   CLI::App* command = app.add_subcommand("import", "Convert recordings into a sensor log (MCAP)");
-  command->add_option("FORMAT", options->format, "Input format: csv, rosbag (ROS 1), ros2bag, carmen, kitti, euroc, tum-rgbd, images (a folder of image files), nmea (GNSS receiver logs) or pcap (a LiDAR's packet capture)")->required();
+  command->add_option("FORMAT", options->format, "Input format: csv, rosbag (ROS 1), ros2bag, carmen, kitti, euroc, tum-rgbd, images (a folder of image files), nmea (GNSS receiver logs), xsens (an Xsens IMU's MTData2 stream) or pcap (a LiDAR's packet capture)")->required();
   command->add_option("SRC", options->sources, "Input files (kitti, euroc, tum-rgbd: the sequence folder; ros2bag: the bag folder or its .mcap / .db3 file; images: one folder, or two for a stereo pair)")->required();
   command->add_option("--out", options->out, "Sensor log to write (.mcap)")->required();
   command->add_option("--compression", options->compression, "Chunk compression: zstd, lz4 or none")->capture_default_str();
   command->add_flag("--no-foxglove", options->no_foxglove,
                     "Leave out the Foxglove mirror channels (<topic>/foxglove for poses, clouds, fixes, images)");
   command->add_option("--topic", options->topic_overrides,
-                      "csv: FILE_STEM=/topic (default /FILE_STEM); rosbag, ros2bag: /ros/topic=/topic (only these are imported); nmea: /gnss=/topic");
+                      "csv: FILE_STEM=/topic (default /FILE_STEM); rosbag, ros2bag: /ros/topic=/topic (only these are imported); nmea: /gnss=/topic; xsens: /imu=/topic, /gnss=/topic");
   command->add_option("--wheel-separation", options->wheel_separation,
                       "rosbag, ros2bag, carmen: wheel separation (m) to import odometry / twists as differential-drive wheel odometry");
   command->add_flag("--use-record-time", options->use_record_time, "rosbag, ros2bag: bag record time instead of header.stamp");

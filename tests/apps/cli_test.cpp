@@ -316,6 +316,35 @@ TEST(Cli, ImportNmeaReceiverLog) {
   std::filesystem::remove_all(dir);
 }
 
+// An Xsens MTi-G-710's serial stream into a sensor log: IMU on /imu, its receiver's fixes on
+// /gnss; a file without Xsens frames is refused.
+TEST(Cli, ImportXsensImuStream) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_xsens_{}", ::getpid());
+  std::filesystem::create_directories(dir);
+  const std::string stream = std::string(HANZO_DATA_DIR) + "/drivers/imu_xsens_mti_g710/testdata/3/output.bin";
+  const CliRun imported = run(fmt::format("import xsens {} --out {}/imu.mcap --json", stream, dir.string()));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+  const nlohmann::json result = nlohmann::json::parse(imported.out);
+  EXPECT_EQ(result["imu_messages"], 96);
+  EXPECT_EQ(result["gnss_fixes"], 4);
+  EXPECT_EQ(result["checksum_errors"], 0);
+  EXPECT_EQ(result["device_clock"], 0);
+  const CliRun info = run(fmt::format("log info {}/imu.mcap --json", dir.string()));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_THAT(info.out, HasSubstr("\"/imu\""));
+  EXPECT_THAT(info.out, HasSubstr("\"/gnss\""));
+  const CliRun renamed = run(fmt::format("import xsens {} --out {}/renamed.mcap --topic /imu=/xsens/imu --json", stream, dir.string()));
+  ASSERT_EQ(renamed.exit_code, 0) << renamed.err;
+  EXPECT_EQ(nlohmann::json::parse(renamed.out)["topics"][0], "/xsens/imu");
+
+  const CliRun not_xsens = run(fmt::format("import xsens README.md --out {}/x.mcap", dir.string()));
+  EXPECT_EQ(not_xsens.exit_code, 1);
+  EXPECT_THAT(not_xsens.err, HasSubstr("README.md: no Xsens frame"));
+  EXPECT_EQ(std::count(not_xsens.err.begin(), not_xsens.err.end(), '\n'), 1);
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.mcap"));
+  std::filesystem::remove_all(dir);
+}
+
 // A Velodyne VLP-16's packet capture into a sensor log: one cloud per rotation on /lidar with
 // per-point times; an Ouster's frame and IMU packets; an unknown driver, a missing model or
 // metadata and a file that is no capture are refused.
