@@ -213,7 +213,8 @@ Result<XsensMtData2> decode_mtdata2(std::span<const uint8_t> payload) {
 std::optional<Eigen::Quaterniond> xsens_orientation_enu(const XsensMtData2& message) {
   Eigen::Matrix3d R_local_sensor;
   if (message.quaternion) {
-    if (!(message.quaternion->norm() > 0.5)) return std::nullopt;
+    const double norm = message.quaternion->norm();
+    if (!(norm > 0.5 && norm < 2.0)) return std::nullopt;  // not a rotation (or not finite)
     R_local_sensor = message.quaternion->normalized().toRotationMatrix();
   } else if (message.euler_degrees) {
     const Eigen::Vector3d radians = *message.euler_degrees * (M_PI / 180.0);
@@ -312,7 +313,8 @@ std::optional<Timestamp> XsensDecoder::time_of(const XsensMtData2& message) {
 void XsensDecoder::handle(const XsensMtData2& message, std::vector<msgs::ImuMessage>& imu, std::vector<msgs::GnssMessage>& gnss) {
   if (message.gnss_pvt) {
     const XsensGnssPvt& pvt = *message.gnss_pvt;
-    const bool fix = (pvt.fix_type >= 2 && pvt.fix_type <= 4) && (pvt.flags & 0x01) != 0;
+    const bool fix = (pvt.fix_type >= 2 && pvt.fix_type <= 4) && (pvt.flags & 0x01) != 0 && std::abs(pvt.latitude) <= 900'000'000 &&
+                     std::abs(pvt.longitude) <= 1'800'000'000;
     Result<Timestamp> time = timestamp_of(pvt.year, pvt.month, pvt.day, pvt.hour, pvt.minute, pvt.second, pvt.nano);
     if (!fix || (pvt.valid & 0x03) != 0x03 || !time) {
       ++statistics_.gnss_without_fix;
@@ -352,6 +354,10 @@ void XsensDecoder::handle(const XsensMtData2& message, std::vector<msgs::ImuMess
   } else {
     const Eigen::AngleAxisd turned(message.delta_q->normalized());
     out.angular_velocity = turned.angle() * turned.axis() / *interval;
+  }
+  if (!out.linear_acceleration.allFinite() || !out.angular_velocity.allFinite()) {
+    error(statistics_.malformed, fmt::format("MTData2 message {}: acceleration or rate of turn not finite", message.packet_counter.value_or(0)));
+    return;
   }
   out.orientation = xsens_orientation_enu(message);
   imu.push_back(std::move(out));

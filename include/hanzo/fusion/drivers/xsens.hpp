@@ -125,11 +125,11 @@ struct XsensStatistics {
   uint64_t imu_messages = 0;     ///< ImuMessages emitted
   uint64_t gnss_fixes = 0;       ///< GnssMessages emitted
   uint64_t checksum_errors = 0;
-  uint64_t malformed = 0;        ///< MTData2 payloads that did not decode
+  uint64_t malformed = 0;        ///< MTData2 payloads that did not decode, or with non-finite inertial values
   uint64_t other_messages = 0;   ///< frames of other message identifiers
   uint64_t skipped_bytes = 0;    ///< bytes outside frames
   uint64_t without_inertial = 0; ///< MTData2 messages without inertial data or time (or no interval yet for DeltaV / DeltaQ)
-  uint64_t gnss_without_fix = 0; ///< GNSSPVTData without a 2D / 3D fix or without a valid date and time
+  uint64_t gnss_without_fix = 0; ///< GNSSPVTData without a 2D / 3D fix, a valid date and time, or a position in range
   uint64_t device_clock = 0;     ///< ImuMessages timed by SampleTimeFine alone (no valid UTC yet)
   uint64_t unknown_packets = 0;
   std::string first_error;       ///< the first checksum or decoding error, for a one-line report
