@@ -3,17 +3,19 @@
 // end, never a crash), and again wrapped as the UDP payload of a one-record capture (so that a
 // packet seed reaches the Ethernet / IPv4 / UDP parsing without a committed capture file);
 // cut into data- and position-packet-sized pieces, it is fed to a VLP-16
-// and an HDL-32E decoder, and into Ouster packet sizes for a 16-beam decoder of each profile:
-// every point finite, every cloud's per-point arrays as long as its points, its time the
-// earliest point's.
+// and an HDL-32E decoder, into Ouster packet sizes for a 16-beam decoder of each profile, and
+// into Pandar40P packet sizes for a Hesai decoder on the packets' own clock: every point finite,
+// every cloud's per-point arrays as long as its points, its time the earliest point's.
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
 #include <string>
 #include <vector>
 
+#include "hanzo/fusion/drivers/hesai.hpp"
 #include "hanzo/fusion/drivers/ouster.hpp"
 #include "hanzo/fusion/drivers/pcap.hpp"
 #include "hanzo/fusion/drivers/velodyne.hpp"
@@ -53,6 +55,17 @@ void read_capture(const std::string& bytes) {
   }
 }
 
+// Clouds of a rotation decoder: points, finite, per-point arrays as long, time the earliest point's.
+void check_rotations(const std::vector<hanzo::fusion::msgs::PointCloudMessage>& frames) {
+  for (const hanzo::fusion::msgs::PointCloudMessage& frame : frames) {
+    if (frame.points.empty() || frame.point_timestamps.size() != frame.points.size() || frame.ring_ids.size() != frame.points.size()) std::abort();
+    if (frame.timestamp != *std::min_element(frame.point_timestamps.begin(), frame.point_timestamps.end())) std::abort();
+    for (const Eigen::Vector3f& point : frame.points) {
+      if (!point.allFinite()) std::abort();
+    }
+  }
+}
+
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -70,13 +83,23 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       decoder.add_packet(std::string_view(bytes).substr(offset, piece), Timestamp::from_nanoseconds(1'700'000'000'000'000'000LL), frames);
     }
     decoder.flush(frames);
-    for (const msgs::PointCloudMessage& frame : frames) {
-      if (frame.points.empty() || frame.point_timestamps.size() != frame.points.size() || frame.ring_ids.size() != frame.points.size()) std::abort();
-      if (frame.timestamp != *std::min_element(frame.point_timestamps.begin(), frame.point_timestamps.end())) std::abort();
-      for (const Eigen::Vector3f& point : frame.points) {
-        if (!point.allFinite()) std::abort();
-      }
+    check_rotations(frames);
+  }
+  {
+    drivers::HesaiCalibration calibration;
+    for (int channel = 0; channel < drivers::kHesaiPandar40Channels; ++channel) {
+      calibration.channels.push_back({(15.0 - channel) * M_PI / 180.0, (channel % 4 - 1.5) * M_PI / 180.0, -1e-6 * channel});
     }
+    drivers::HesaiDecoderConfig config;
+    config.time_source = drivers::HesaiTimeSource::kPacket;
+    auto decoder = drivers::HesaiDecoder::create(calibration, config).value();
+    std::vector<msgs::PointCloudMessage> frames;
+    const std::size_t piece = size > 0 && data[0] % 2 == 0 ? 1262 : 1266;
+    for (std::size_t offset = 0; offset < size; offset += piece) {
+      decoder.add_packet(std::string_view(bytes).substr(offset, piece), Timestamp::from_nanoseconds(1'700'000'000'000'000'000LL), frames);
+    }
+    decoder.flush(frames);
+    check_rotations(frames);
   }
   for (const char* profile : {"LEGACY", "RNG15_RFL8_NIR8"}) {
     drivers::OusterMetadata metadata;

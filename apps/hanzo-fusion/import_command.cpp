@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -15,6 +16,7 @@
 #include "commands.hpp"
 #include "log_writing.hpp"
 #include "hanzo/fusion/core/files.hpp"
+#include "hanzo/fusion/drivers/hesai.hpp"
 #include "hanzo/fusion/drivers/nmea.hpp"
 #include "hanzo/fusion/drivers/xsens.hpp"
 #include "hanzo/fusion/drivers/ouster.hpp"
@@ -60,6 +62,7 @@ struct ImportOptions {
   std::string model;                         // pcap, velodyne: VLP-16, VLP-32C, HDL-32E, HDL-64E, VLS-128
   int port = 0;                              // pcap: the LiDAR's data port (0: the driver's default)
   std::string metadata;                      // pcap, ouster: the sensor's metadata JSON
+  std::string firetime;                      // pcap, hesai: the firetime correction CSV
 };
 
 struct SourceMessages {
@@ -529,12 +532,87 @@ int run_ouster_pcap_import(const Output& output, const ImportOptions& options, n
   return report_success(output, result, text);
 }
 
+/// The other destination ports of a capture, most datagrams first ("2369 (200 datagrams)").
+std::string busiest_ports(const std::map<uint16_t, uint64_t>& other_ports) {
+  std::vector<std::pair<uint64_t, uint16_t>> by_count;
+  for (const auto& [port, count] : other_ports) by_count.emplace_back(count, port);
+  std::sort(by_count.rbegin(), by_count.rend());
+  std::vector<std::string> listed;
+  for (std::size_t i = 0; i < std::min<std::size_t>(by_count.size(), 3); ++i) listed.push_back(fmt::format("{} ({} datagrams)", by_count[i].second, by_count[i].first));
+  return listed.empty() ? "none" : fmt::format("{}", fmt::join(listed, ", "));
+}
+
+/// A Hesai Pandar40P capture with the unit's angle (and firetime) corrections into one
+/// PointCloudMessage per rotation on /lidar.
+int run_hesai_pcap_import(const Output& output, const ImportOptions& options, nlohmann::json result) {
+  if (options.calibration.empty()) return report_failure(output, result, "--calibration: give the Pandar40P's angle correction CSV (Channel,Elevation,Azimuth)");
+  Result<drivers::HesaiCalibration> calibration = drivers::load_hesai_calibration(options.calibration, options.firetime);
+  if (!calibration) return report_failure(output, result, calibration.error().message);
+  drivers::HesaiDecoderConfig config;
+  config.frame_id = "lidar";
+  Result<drivers::HesaiDecoder> decoder = drivers::HesaiDecoder::create(*calibration, config);
+  if (!decoder) return report_failure(output, result, decoder.error().message);
+  auto topics = topic_map(options.topic_overrides, "/lidar=/topic");
+  if (!topics) return report_failure(output, result, topics.error().message);
+  const auto renamed = topics->find("/lidar");
+  const std::string topic = renamed == topics->end() ? "/lidar" : renamed->second;
+  const uint16_t data_port = static_cast<uint16_t>(options.port > 0 ? options.port : 2368);
+  std::vector<msgs::PointCloudMessage> frames;
+  std::map<uint16_t, uint64_t> other_ports;
+  drivers::PcapStatistics capture;
+  const Status read = for_each_datagram(options.sources, capture, [&](const drivers::UdpDatagram& datagram) {
+    if (datagram.destination_port != data_port) {
+      ++other_ports[datagram.destination_port];
+      return;
+    }
+    decoder->add_packet(datagram.payload, datagram.time, frames);
+  });
+  if (!read) return report_failure(output, result, read.error().message);
+  decoder->flush(frames);
+  const drivers::HesaiStatistics& statistics = decoder->statistics();
+  uint64_t other_datagrams = 0;
+  for (const auto& [port, count] : other_ports) other_datagrams += count;
+  result["frames"] = frames.size();
+  result["points"] = statistics.points;
+  result["packets"] = statistics.packets;
+  result["malformed_packets"] = statistics.malformed;
+  result["capture_clock_packets"] = statistics.capture_clock_packets;
+  result["records"] = capture.records;
+  result["other_packets"] = capture.other_packets + other_datagrams;
+  result["truncated_records"] = capture.truncated;
+  result["firetime"] = options.firetime.empty() ? "none" : options.firetime;
+  if (frames.empty()) {
+    return report_failure(output, result,
+                          fmt::format("{}: no Hesai rotation decoded ({} datagrams to port {}, {} malformed{}{}; other ports: {})",
+                                      fmt::join(options.sources, ", "), statistics.packets + statistics.malformed, data_port, statistics.malformed,
+                                      statistics.first_error.empty() ? "" : ": ", statistics.first_error, busiest_ports(other_ports)));
+  }
+  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
+    HANZO_RETURN_IF_ERROR(writer.add_metadata({"import", {{"importer", "pcap hesai"}, {"model", "Pandar40P"}, {"source", fmt::format("{}", fmt::join(options.sources, " "))}}}));
+    for (const msgs::PointCloudMessage& frame : frames) HANZO_RETURN_IF_ERROR(writer.write(topic, frame, "lidar"));
+    return ok_status();
+  });
+  if (code != 0) return code;
+  result["ok"] = true;
+  result["topic"] = topic;
+  std::string text = fmt::format("{}: {} rotations ({} points) on {} from {} packets ({:.2f} s)\n", options.out, frames.size(), statistics.points, topic,
+                                 statistics.packets, (frames.back().timestamp - frames.front().timestamp).seconds());
+  if (statistics.capture_clock_packets > 0) {
+    text += fmt::format("  {} packets timed by the capture's clock (the sensor's own was more than 10 s off: not synchronized)\n",
+                        statistics.capture_clock_packets);
+  }
+  if (options.firetime.empty()) text += "  no --firetime file: every channel of a block at the block's time\n";
+  text += left_out_packets(statistics.malformed, statistics.first_error, capture.truncated);
+  return report_success(output, result, text);
+}
+
 /// A LiDAR's packet capture into one PointCloudMessage per rotation on /lidar (sensor "lidar").
 int run_pcap_import(const Output& output, const ImportOptions& options) {
   nlohmann::json result = {{"format", "pcap"}, {"sources", options.sources}, {"out", options.out}, {"driver", options.driver}};
   if (options.driver == "ouster") return run_ouster_pcap_import(output, options, result);
+  if (options.driver == "hesai") return run_hesai_pcap_import(output, options, result);
   if (options.driver != "velodyne") {
-    return report_failure(output, result, fmt::format("--driver '{}': the pcap import decodes velodyne and ouster captures", options.driver));
+    return report_failure(output, result, fmt::format("--driver '{}': the pcap import decodes velodyne, ouster and hesai captures", options.driver));
   }
   if (options.model.empty()) return report_failure(output, result, "--model: give the Velodyne's model (VLP-16, VLP-32C, HDL-32E, HDL-64E, VLS-128)");
   Result<drivers::VelodyneModel> model = drivers::parse_velodyne_model(options.model);
@@ -696,7 +774,7 @@ void add_import_command(CLI::App& app, const Output& output, Command& run) {
   command->add_flag("--use-record-time", options->use_record_time, "rosbag, ros2bag: bag record time instead of header.stamp");
   command->add_option("--ground-truth,--gt", options->ground_truth,
                       "carmen, kitti, euroc, tum-rgbd: write the reference trajectory (carmen: the scans' poses) as TUM");
-  command->add_option("--calibration,--calib", options->calibration, "kitti, euroc, tum-rgbd, rosbag, ros2bag, images: write the sensors' calibration YAML (bags: from /tf_static and CameraInfo; images: needs --intrinsics); pcap: read the LiDAR's calibration (Velodyne db.xml or ROS YAML)");
+  command->add_option("--calibration,--calib", options->calibration, "kitti, euroc, tum-rgbd, rosbag, ros2bag, images: write the sensors' calibration YAML (bags: from /tf_static and CameraInfo; images: needs --intrinsics); pcap: read the LiDAR's calibration (Velodyne db.xml or ROS YAML; Hesai angle correction CSV)");
   command->add_option("--body-frame", options->body_frame,
                       "rosbag, ros2bag: the calibration's body frame (default base_link, base_footprint, the IMU's frame)");
   command->add_flag("--no-images", options->no_images, "kitti, euroc: leave the camera images out");
@@ -707,10 +785,11 @@ void add_import_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--intrinsics", options->intrinsics, "images: the camera's fx,fy,cx,cy (pixels)")->delimiter(',');
   command->add_option("--distortion", options->distortion, "images: radtan coefficients k1,k2,p1,p2[,k3]")->delimiter(',');
   command->add_option("--baseline", options->baseline, "images, two folders: the stereo baseline (m; the right camera along the left one's x axis)");
-  command->add_option("--driver", options->driver, "pcap: the sensor's driver (velodyne, ouster)");
+  command->add_option("--driver", options->driver, "pcap: the sensor's driver (velodyne, ouster, hesai)");
+  command->add_option("--firetime", options->firetime, "pcap, hesai: the Pandar40P's firetime correction CSV (Channel,fire time(us))");
   command->add_option("--metadata", options->metadata, "pcap, ouster: the sensor's metadata JSON");
   command->add_option("--model", options->model, "pcap, velodyne: VLP-16, VLP-32C, HDL-32E, HDL-64E or VLS-128");
-  command->add_option("--port", options->port, "pcap: the LiDAR's UDP data port (default: velodyne 2368, ouster 7502)")->check(CLI::Range(1, 65535));
+  command->add_option("--port", options->port, "pcap: the LiDAR's UDP data port (default: velodyne 2368, ouster 7502, hesai 2368)")->check(CLI::Range(1, 65535));
   command->add_option("--date", options->date, "nmea: UTC date (YYYY-MM-DD) of fixes before the log's first RMC or ZDA sentence");
   command->add_option("--privacy", options->privacy, "Blur (blur) or black out (black) faces and licence plates in camera images before they are written")
       ->check(CLI::IsMember({"blur", "black"}));

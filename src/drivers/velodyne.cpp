@@ -11,6 +11,8 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include "byte_order.hpp"
+
 namespace hanzo::fusion::drivers {
 
 namespace {
@@ -21,13 +23,6 @@ constexpr int kBlocks = 12;
 constexpr int kBlockBytes = 100;
 constexpr int kChannels = 32;
 constexpr double kDegrees = M_PI / 180.0;
-
-uint16_t little16(std::string_view data, std::size_t at) {
-  return static_cast<uint16_t>(static_cast<uint8_t>(data[at]) | (static_cast<uint8_t>(data[at + 1]) << 8));
-}
-uint32_t little32(std::string_view data, std::size_t at) {
-  return static_cast<uint32_t>(little16(data, at)) | (static_cast<uint32_t>(little16(data, at + 2)) << 16);
-}
 
 // The text between <tag> and </tag> from `from` on, and where it ends; none when absent.
 std::optional<std::pair<std::string, std::size_t>> element(const std::string& text, const std::string& tag, std::size_t from) {
@@ -185,7 +180,7 @@ VelodyneCalibration nominal_velodyne_calibration(VelodyneModel model) {
 }
 
 VelodyneDecoder::VelodyneDecoder(VelodyneCalibration calibration, VelodyneDecoderConfig config)
-    : calibration_(std::move(calibration)), config_(std::move(config)) {
+    : calibration_(std::move(calibration)), config_(std::move(config)), rotation_(config_.frame_id, config_.cut_angle_deg) {
   for (const VelodyneLaser& laser : calibration_.lasers) {
     trig_.push_back({std::cos(laser.vertical_angle), std::sin(laser.vertical_angle), std::cos(laser.rotational_correction),
                      std::sin(laser.rotational_correction)});
@@ -199,7 +194,6 @@ VelodyneDecoder::VelodyneDecoder(VelodyneCalibration calibration, VelodyneDecode
   });
   ring_.resize(order.size());
   for (std::size_t rank = 0; rank < order.size(); ++rank) ring_[static_cast<std::size_t>(order[rank])] = static_cast<uint32_t>(rank);
-  frame_.frame_id = config_.frame_id;
 }
 
 Result<VelodyneDecoder> VelodyneDecoder::create(VelodyneCalibration calibration, VelodyneDecoderConfig config) {
@@ -241,26 +235,16 @@ void VelodyneDecoder::add_return(int laser, double azimuth_deg, uint16_t raw_dis
   const double x_sensor = xy * sin_angle - calibration.horizontal_offset * cos_angle;
   const double y_sensor = xy * cos_angle + calibration.horizontal_offset * sin_angle;
   const double z = distance * trig.sin_vertical + calibration.vertical_offset * trig.cos_vertical;
-  frame_.points.emplace_back(static_cast<float>(y_sensor), static_cast<float>(-x_sensor), static_cast<float>(z));
-  frame_.intensities.push_back(static_cast<float>(intensity) / 255.0F);
-  frame_.ring_ids.push_back(ring_[static_cast<std::size_t>(laser)]);
-  frame_.point_timestamps.push_back(time);
+  rotation_.add(Eigen::Vector3f(static_cast<float>(y_sensor), static_cast<float>(-x_sensor), static_cast<float>(z)), intensity,
+                ring_[static_cast<std::size_t>(laser)], time);
 }
 
-void VelodyneDecoder::emit(std::vector<msgs::PointCloudMessage>& frames) {
-  if (frame_.points.empty()) return;
-  frame_.timestamp = *std::min_element(frame_.point_timestamps.begin(), frame_.point_timestamps.end());
+void VelodyneDecoder::emit(std::vector<msgs::PointCloudMessage>& frames) { count(rotation_.emit(frames)); }
+
+void VelodyneDecoder::count(std::size_t emitted_points) {
+  if (emitted_points == 0) return;
   ++statistics_.frames;
-  const std::size_t size = frame_.points.size();
-  statistics_.points += size;
-  frames.push_back(std::move(frame_));
-  frame_ = msgs::PointCloudMessage();
-  frame_.frame_id = config_.frame_id;
-  // The next rotation is about as large: one allocation per array instead of a doubling series.
-  frame_.points.reserve(size + size / 8);
-  frame_.intensities.reserve(size + size / 8);
-  frame_.ring_ids.reserve(size + size / 8);
-  frame_.point_timestamps.reserve(size + size / 8);
+  statistics_.points += emitted_points;
 }
 
 void VelodyneDecoder::add_packet(std::string_view payload, Timestamp capture_time, std::vector<msgs::PointCloudMessage>& frames) {
@@ -314,9 +298,7 @@ void VelodyneDecoder::add_packet(std::string_view payload, Timestamp capture_tim
     int gap = block + firing_blocks < kBlocks ? azimuths[next] - azimuths[block] : azimuths[block] - azimuths[next];
     if (gap < 0) gap += 36000;
     if (gap > 500) gap = 0;  // a jump of more than 5 degrees (corrupt data): no interpolation
-    const double from_cut = std::fmod(azimuths[block] / 100.0 - config_.cut_angle_deg + 360.0, 360.0);
-    if (last_azimuth_ && from_cut < *last_azimuth_) emit(frames);
-    last_azimuth_ = from_cut;
+    count(rotation_.start_block(azimuths[block] / 100.0, frames));
     const bool second_return = dual && block % 2 == 1;
     for (int channel = 0; channel < kChannels; ++channel) {
       const std::size_t at = static_cast<std::size_t>(block * kBlockBytes + 4 + channel * 3);

@@ -316,6 +316,37 @@ TEST(Cli, ImportNmeaReceiverLog) {
   std::filesystem::remove_all(dir);
 }
 
+// A Hesai Pandar40P capture (pcapng, port 2369) into a sensor log with the unit's corrections;
+// the default port finds nothing and says which ports the capture has.
+TEST(Cli, ImportHesaiPacketCapture) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_hesai_{}", ::getpid());
+  std::filesystem::create_directories(dir);
+  const std::string folder = std::string(HANZO_DATA_DIR) + "/drivers/hesai_pandar40p_velocity_report/";
+  const std::string common = fmt::format("import pcap {0}lidar_20Hz.pcapng --driver hesai --calibration {0}calib/Pandar40P_Angle_Correction_File.csv", folder);
+  const CliRun imported = run(fmt::format("{} --firetime {}calib/Pandar40P_Firetime_Correction_File.csv --port 2369 --out {}/lidar.mcap --json", common,
+                                          folder, dir.string()));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+  const nlohmann::json result = nlohmann::json::parse(imported.out);
+  EXPECT_EQ(result["frames"], 3);
+  EXPECT_EQ(result["packets"], 200);
+  EXPECT_EQ(result["malformed_packets"], 0);
+  EXPECT_EQ(result["capture_clock_packets"], 200);
+  const CliRun info = run(fmt::format("log info {}/lidar.mcap --json", dir.string()));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_THAT(info.out, HasSubstr("\"/lidar\""));
+
+  const CliRun wrong_port = run(fmt::format("{} --out {}/x.mcap", common, dir.string()));
+  EXPECT_EQ(wrong_port.exit_code, 1);
+  EXPECT_THAT(wrong_port.err, HasSubstr("0 datagrams to port 2368"));
+  EXPECT_THAT(wrong_port.err, HasSubstr("other ports: 2369 (200 datagrams)"));
+  EXPECT_EQ(std::count(wrong_port.err.begin(), wrong_port.err.end(), '\n'), 1);
+  const CliRun no_calibration = run(fmt::format("import pcap {}lidar_20Hz.pcapng --driver hesai --out {}/x.mcap", folder, dir.string()));
+  EXPECT_EQ(no_calibration.exit_code, 1);
+  EXPECT_THAT(no_calibration.err, HasSubstr("--calibration"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "x.mcap"));
+  std::filesystem::remove_all(dir);
+}
+
 // An Xsens MTi-G-710's serial stream into a sensor log: IMU on /imu, its receiver's fixes on
 // /gnss; a file without Xsens frames is refused.
 TEST(Cli, ImportXsensImuStream) {
@@ -365,9 +396,9 @@ TEST(Cli, ImportVelodynePacketCapture) {
   ASSERT_EQ(info.exit_code, 0) << info.err;
   EXPECT_THAT(info.out, HasSubstr("\"/lidar\""));
 
-  const CliRun hesai = run(fmt::format("import pcap {}vlp-16-test-90deg-1-50-frames.pcap --driver hesai --model VLP-16 --out {}/x.mcap", veloview, dir.string()));
-  EXPECT_EQ(hesai.exit_code, 1);
-  EXPECT_THAT(hesai.err, HasSubstr("--driver 'hesai'"));
+  const CliRun unknown = run(fmt::format("import pcap {}vlp-16-test-90deg-1-50-frames.pcap --driver robosense --model VLP-16 --out {}/x.mcap", veloview, dir.string()));
+  EXPECT_EQ(unknown.exit_code, 1);
+  EXPECT_THAT(unknown.err, HasSubstr("--driver 'robosense'"));
   // An Ouster with its metadata: the frame on /lidar, its IMU packets on /imu; without metadata refused.
   const std::string ouster = std::string(HANZO_DATA_DIR) + "/drivers/ouster_sdk_pcaps/";
   const CliRun os1 = run(fmt::format("import pcap {0}OS-1-64_1024x10_fw20.pcap --driver ouster --metadata {0}OS-1-64_sensor_config_reduced.json "

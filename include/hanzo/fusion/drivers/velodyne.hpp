@@ -46,6 +46,7 @@
 
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/drivers/rotation_frame.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
 
 namespace hanzo::fusion::drivers {
@@ -110,6 +111,7 @@ class VelodyneDecoder {
   VelodyneDecoder(VelodyneCalibration calibration, VelodyneDecoderConfig config);
   void malformed(const std::string& what);
   void emit(std::vector<msgs::PointCloudMessage>& frames);
+  void count(std::size_t emitted_points);  ///< statistics of a rotation emitted (0: none)
   void add_return(int laser, double azimuth_deg, uint16_t raw_distance, uint8_t intensity, Timestamp time);
   /// Firing offset (s) of channel `channel` (0-31) of block `block` (0-11).
   double firing_offset(int block, int channel) const;
@@ -119,8 +121,7 @@ class VelodyneDecoder {
   std::vector<Trig> trig_;
   std::vector<uint32_t> ring_;  // per laser: its rank by elevation (0 the lowest)
   VelodyneStatistics statistics_;
-  msgs::PointCloudMessage frame_;
-  std::optional<double> last_azimuth_;  // of the previous block, degrees from the cut angle
+  RotationFrame rotation_;
 };
 
 }  // namespace hanzo::fusion::drivers
