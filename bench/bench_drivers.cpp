@@ -1,8 +1,9 @@
 // Sensor drivers' decoding speed on one core, from recordings held in memory (the decoders
 // alone: no file or socket reads): a Velodyne VLP-16 capture (1902 data packets in 2.52 s,
 // 754 packets/s recorded) and an HDL-32E capture (2702 in 1.49 s), and an NMEA-0183 receiver log
-// (u-blox ZED-F9P with UBX binary in between, 655 epochs in 654 s), and an Ouster OS-1-64 frame
-// (the decoder is created per run: its 64 x 1024 direction table included). `x real time`: recorded
+// (u-blox ZED-F9P with UBX binary in between, 655 epochs in 654 s), an Ouster OS-1-64 frame
+// (the decoder is created per run: its 64 x 1024 direction table included), a Hesai Pandar40P
+// capture (200 packets) and an Xsens MTi-G-710 stream (100 messages). `x real time`: recorded
 // seconds decoded per second. No packaged peer decodes these on this machine (PCL's Velodyne
 // grabbers need libpcap support, which Debian's PCL is built without).
 #include <fstream>
@@ -13,10 +14,12 @@
 
 #include <benchmark/benchmark.h>
 
+#include "hanzo/fusion/drivers/hesai.hpp"
 #include "hanzo/fusion/drivers/nmea.hpp"
 #include "hanzo/fusion/drivers/ouster.hpp"
 #include "hanzo/fusion/drivers/pcap.hpp"
 #include "hanzo/fusion/drivers/velodyne.hpp"
+#include "hanzo/fusion/drivers/xsens.hpp"
 
 namespace {
 
@@ -88,6 +91,47 @@ void BM_OusterOs1_64(benchmark::State& state) {
   state.counters["x real time"] = benchmark::Counter(0.1 * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_OusterOs1_64)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Hesai Pandar40P (200 packets, 0.11 s at 20 Hz, the unit's angle and firetime corrections).
+void BM_HesaiPandar40p(benchmark::State& state) {
+  const Capture& recorded = capture("hesai_pandar40p_velocity_report/lidar_20Hz.pcapng");
+  const std::string calibration = kDrivers + "hesai_pandar40p_velocity_report/calib/Pandar40P_";
+  const drivers::HesaiCalibration channels =
+      drivers::load_hesai_calibration(calibration + "Angle_Correction_File.csv", calibration + "Firetime_Correction_File.csv").value();
+  std::size_t points = 0;
+  for (auto _ : state) {
+    auto decoder = drivers::HesaiDecoder::create(channels).value();
+    std::vector<msgs::PointCloudMessage> frames;
+    for (const drivers::UdpDatagram& datagram : recorded.datagrams) decoder.add_packet(datagram.payload, datagram.time, frames);
+    decoder.flush(frames);
+    points = decoder.statistics().points;
+    benchmark::DoNotOptimize(frames.data());
+  }
+  state.counters["packets/s"] = benchmark::Counter(static_cast<double>(recorded.datagrams.size() * state.iterations()), benchmark::Counter::kIsRate);
+  state.counters["points/s"] = benchmark::Counter(static_cast<double>(points * state.iterations()), benchmark::Counter::kIsRate);
+  state.counters["x real time"] = benchmark::Counter(recorded.seconds * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_HesaiPandar40p)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Xsens MTi-G-710 (100 MTData2 messages at 100 Hz, 13 outputs in FP16.32, 0.95 s).
+void BM_XsensMtData2(benchmark::State& state) {
+  std::ifstream file(kDrivers + "imu_xsens_mti_g710/testdata/3/output.bin", std::ios::binary);
+  std::ostringstream bytes;
+  bytes << file.rdbuf();
+  const std::string content = bytes.str();
+  double seconds = 0.0;
+  for (auto _ : state) {
+    drivers::XsensDecoder decoder;
+    std::vector<msgs::ImuMessage> imu;
+    std::vector<msgs::GnssMessage> fixes;
+    decoder.feed(content, imu, fixes);
+    seconds = (imu.back().timestamp - imu.front().timestamp).seconds();
+    benchmark::DoNotOptimize(imu.data());
+  }
+  state.counters["MB/s"] = benchmark::Counter(static_cast<double>(content.size() * state.iterations()) / 1e6, benchmark::Counter::kIsRate);
+  state.counters["x real time"] = benchmark::Counter(seconds * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_XsensMtData2)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
 void BM_PcapRead(benchmark::State& state) {
   std::ifstream file(kDrivers + "velodyne_veloview/monterey-first-100-packets.pcap", std::ios::binary);

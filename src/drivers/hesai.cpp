@@ -97,6 +97,9 @@ Result<HesaiCalibration> load_hesai_calibration(const std::string& angle_file, c
 
 HesaiDecoder::HesaiDecoder(HesaiCalibration calibration, HesaiDecoderConfig config)
     : calibration_(std::move(calibration)), config_(std::move(config)), rotation_(config_.frame_id, config_.cut_angle_deg) {
+  for (const HesaiChannel& channel : calibration_.channels) {
+    trig_.push_back({std::cos(channel.elevation), std::sin(channel.elevation), std::cos(channel.azimuth_offset), std::sin(channel.azimuth_offset)});
+  }
   std::vector<int> order(calibration_.channels.size());
   std::iota(order.begin(), order.end(), 0);
   std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
@@ -166,20 +169,23 @@ void HesaiDecoder::add_packet(std::string_view payload, Timestamp capture_time, 
     const Timestamp block_time = packet_time - Duration::from_seconds(kLastBlockOffset + kBlockPeriod * firings_after);
     const bool second_return = dual && block % 2 == 1;
     const double block_azimuth = azimuths[block] / 100.0 * kDegrees;
+    const double sin_block = std::sin(block_azimuth), cos_block = std::cos(block_azimuth);
     for (int channel = 0; channel < kHesaiPandar40Channels; ++channel) {
       const std::size_t at = static_cast<std::size_t>(block) * kBlockBytes + 4 + static_cast<std::size_t>(channel) * 3;
       const uint16_t raw_distance = little16(payload, at);
       if (second_return && raw_distance == previous_distances[channel]) continue;  // the same echo twice
       previous_distances[channel] = raw_distance;
       if (raw_distance == 0) continue;  // no echo
-      const HesaiChannel& calibration = calibration_.channels[static_cast<std::size_t>(channel)];
+      const Trig& trig = trig_[static_cast<std::size_t>(channel)];
       const double distance = raw_distance * kDistanceResolution;
-      const double azimuth = block_azimuth + calibration.azimuth_offset;
-      const double horizontal = distance * std::cos(calibration.elevation);
-      const double x_sensor = horizontal * std::sin(azimuth), y_sensor = horizontal * std::cos(azimuth);
-      rotation_.add(Eigen::Vector3f(static_cast<float>(y_sensor), static_cast<float>(-x_sensor),
-                                    static_cast<float>(distance * std::sin(calibration.elevation))),
-                    byte(at + 2), ring_[static_cast<std::size_t>(channel)], block_time + Duration::from_seconds(calibration.firetime));
+      // sin / cos of the block's azimuth plus the channel's offset.
+      const double sin_azimuth = sin_block * trig.cos_offset + cos_block * trig.sin_offset;
+      const double cos_azimuth = cos_block * trig.cos_offset - sin_block * trig.sin_offset;
+      const double horizontal = distance * trig.cos_elevation;
+      const double x_sensor = horizontal * sin_azimuth, y_sensor = horizontal * cos_azimuth;
+      rotation_.add(Eigen::Vector3f(static_cast<float>(y_sensor), static_cast<float>(-x_sensor), static_cast<float>(distance * trig.sin_elevation)),
+                    byte(at + 2), ring_[static_cast<std::size_t>(channel)],
+                    block_time + Duration::from_seconds(calibration_.channels[static_cast<std::size_t>(channel)].firetime));
     }
   }
 }

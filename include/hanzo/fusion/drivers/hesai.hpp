@@ -98,8 +98,12 @@ class HesaiDecoder {
   void malformed(const std::string& what);
   void count(std::size_t emitted_points);
 
+  struct Trig {
+    double cos_elevation, sin_elevation, cos_offset, sin_offset;
+  };
   HesaiCalibration calibration_;
   HesaiDecoderConfig config_;
+  std::vector<Trig> trig_;  // per channel
   std::vector<uint32_t> ring_;  // per channel: its rank by elevation (0 the lowest)
   HesaiStatistics statistics_;
   RotationFrame rotation_;
