@@ -29,6 +29,8 @@ void add_eval_command(CLI::App& app, const Output& output, Command& run);
 void add_reconstruct_command(CLI::App& app, const Output& output, Command& run);
 void add_log_command(CLI::App& app, const Output& output, Command& run);
 void add_import_command(CLI::App& app, const Output& output, Command& run);
+void add_drive_command(CLI::App& app, const Output& output, Command& run);
+void add_send_command(CLI::App& app, const Output& output, Command& run);
 void add_export_command(CLI::App& app, const Output& output, Command& run);
 /// `export dataset` under the `export` command (export_dataset_command.cpp).
 void add_export_dataset_command(CLI::App& export_app, const Output& output, Command& run);

@@ -28,6 +28,8 @@ int main(int argc, char** argv) {
   app::add_eval_command(app, output, run);
   app::add_log_command(app, output, run);
   app::add_import_command(app, output, run);
+  app::add_drive_command(app, output, run);
+  app::add_send_command(app, output, run);
   app::add_export_command(app, output, run);
   app::add_sim_command(app, output, run);
   app::add_run_command(app, output, run);

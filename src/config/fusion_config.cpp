@@ -86,6 +86,15 @@ std::optional<SensorModality> infer_modality(std::string_view sensor_name) {
   return std::nullopt;
 }
 
+const std::vector<std::pair<std::string_view, SensorModality>>& sensor_driver_types() {
+  static const std::vector<std::pair<std::string_view, SensorModality>> types = {{"velodyne", SensorModality::kLidar},
+                                                                                 {"ouster", SensorModality::kLidar},
+                                                                                 {"hesai", SensorModality::kLidar},
+                                                                                 {"nmea", SensorModality::kGnss},
+                                                                                 {"xsens", SensorModality::kImu}};
+  return types;
+}
+
 double SensorConfig::effective_timeout_s() const {
   if (fusion.timeout_s > 0.0) return fusion.timeout_s;
   return std::max(0.1, 5.0 / rate_hz);

@@ -291,13 +291,34 @@ Result<SensorFusionOptions> parse_fusion_options(const YamlValue& node, SensorMo
   return options;
 }
 
+Result<SensorDriverConfig> parse_driver(const YamlValue& node, SensorModality modality) {
+  if (!node.is_map()) return node.error("expected a map with type and source (and the driver's files)");
+  HANZO_RETURN_IF_ERROR(node.check_keys({"type", "source", "model", "calibration", "firetime", "metadata"}));
+  SensorDriverConfig driver;
+  for (const auto& [key, field] : {std::pair{"type", &driver.type}, {"source", &driver.source}, {"model", &driver.model},
+                                   {"calibration", &driver.calibration}, {"firetime", &driver.firetime}, {"metadata", &driver.metadata}}) {
+    if (node[key].present()) HANZO_ASSIGN_OR_RETURN(*field, node[key].as_string());
+  }
+  const auto& types = sensor_driver_types();
+  const auto type = std::find_if(types.begin(), types.end(), [&](const auto& entry) { return entry.first == driver.type; });
+  if (type == types.end()) return node["type"].error(fmt::format("expected velodyne, ouster, hesai, nmea or xsens, got '{}'", driver.type));
+  if (type->second != modality) {
+    return node["type"].error(fmt::format("a {} driver delivers {} data (this sensor is {})", driver.type, to_string(type->second), to_string(modality)));
+  }
+  if (driver.source.empty()) return node["source"].error("missing (udp://:PORT, tcp://HOST:PORT or serial:///dev/NAME?baud=N)");
+  if (driver.type == "velodyne" && driver.model.empty()) return node["model"].error("missing (VLP-16, VLP-32C, HDL-32E, HDL-64E or VLS-128)");
+  if (driver.type == "hesai" && driver.calibration.empty()) return node["calibration"].error("missing (the unit's angle correction CSV)");
+  if (driver.type == "ouster" && driver.metadata.empty()) return node["metadata"].error("missing (the sensor's metadata JSON)");
+  return driver;
+}
+
 Result<SensorConfig> parse_sensor(const std::string& name, const YamlValue& node) {
   SensorConfig sensor;
   sensor.name = name;
   if (!node.is_map()) return node.error("expected a map with topic, rate, body_frame (and optionally type, modality)");
   HANZO_RETURN_IF_ERROR(node.check_keys({"topic", "rate", "body_frame", "type", "modality", "timeout", "use_orientation",
                                          "orientation_noise", "speed_noise", "yaw_rate_noise", "lateral_speed_noise",
-                                         "use_yaw_rate", "non_holonomic", "min_fix", "velocity_noise", "features"}));
+                                         "use_yaw_rate", "non_holonomic", "min_fix", "velocity_noise", "features", "driver"}));
   const std::optional<SensorModality> inferred = infer_modality(name);
   if (node["modality"].present()) {
     Result<std::string> text = node["modality"].as_string();
@@ -324,6 +345,7 @@ Result<SensorConfig> parse_sensor(const std::string& name, const YamlValue& node
     if (sensor.modality != SensorModality::kCamera) return features.error(fmt::format("applies to camera sensors only (this sensor is {})", to_string(sensor.modality)));
     HANZO_ASSIGN_OR_RETURN(sensor.features, parse_features(features));
   }
+  if (const YamlValue driver = node["driver"]; driver.present()) HANZO_ASSIGN_OR_RETURN(sensor.driver, parse_driver(driver, sensor.modality));
   return sensor;
 }
 

@@ -19,6 +19,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -184,6 +185,20 @@ struct VisionConfig {
   std::string place_model;  // learned: the VLAD model file; empty: vlad_<features>.hzvlad of the trained models
 };
 
+/// A live sensor's driver (`hanzo-fusion drive`, docs/drivers.md): the decoder of its bytes and
+/// where they come from. Paths as given (relative to the working directory).
+struct SensorDriverConfig {
+  std::string type;         // velodyne, ouster, hesai (lidar); nmea (gnss); xsens (imu)
+  std::string source;       // udp://[address]:port, tcp://host:port, serial:///dev/NAME?baud=N
+  std::string model;        // velodyne: VLP-16, VLP-32C, HDL-32E, HDL-64E, VLS-128
+  std::string calibration;  // velodyne: db.xml or ROS YAML (optional); hesai: angle correction CSV (required)
+  std::string firetime;     // hesai: firetime correction CSV (optional)
+  std::string metadata;     // ouster: the sensor's metadata JSON (required)
+};
+
+/// The driver types and the modality each one delivers.
+const std::vector<std::pair<std::string_view, SensorModality>>& sensor_driver_types();
+
 struct SensorConfig {
   std::string name;  // the key under `sensors:`, also the calibration's "<name>_to_body"
   SensorModality modality = SensorModality::kImu;
@@ -194,6 +209,7 @@ struct SensorConfig {
                            // kPlanarLaserType marks a 2D laser scanner (its scans are planar)
   SensorFusionOptions fusion;
   std::optional<FeatureSelection> features = std::nullopt;  // cameras: this camera's features (else fusion.vision.features)
+  std::optional<SensorDriverConfig> driver = std::nullopt;  // live input (`drive`); none: fed by logs, gRPC, REST
 
   /// The timeout in seconds (the default applied).
   double effective_timeout_s() const;
