@@ -32,6 +32,13 @@ struct Capture {
   double seconds = 0.0;  // recorded span
 };
 
+std::string file_bytes(const std::string& file) {
+  std::ifstream stream(kDrivers + file, std::ios::binary);
+  std::ostringstream bytes;
+  bytes << stream.rdbuf();
+  return bytes.str();
+}
+
 const Capture& capture(const std::string& file) {
   static std::map<std::string, Capture> loaded;
   Capture& capture = loaded[file];
@@ -115,10 +122,7 @@ BENCHMARK(BM_HesaiPandar40p)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Xsens MTi-G-710 (100 MTData2 messages at 100 Hz, 13 outputs in FP16.32, 0.95 s).
 void BM_XsensMtData2(benchmark::State& state) {
-  std::ifstream file(kDrivers + "imu_xsens_mti_g710/testdata/3/output.bin", std::ios::binary);
-  std::ostringstream bytes;
-  bytes << file.rdbuf();
-  const std::string content = bytes.str();
+  const std::string content = file_bytes("imu_xsens_mti_g710/testdata/3/output.bin");
   double seconds = 0.0;
   for (auto _ : state) {
     drivers::XsensDecoder decoder;
@@ -134,10 +138,7 @@ void BM_XsensMtData2(benchmark::State& state) {
 BENCHMARK(BM_XsensMtData2)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
 void BM_PcapRead(benchmark::State& state) {
-  std::ifstream file(kDrivers + "velodyne_veloview/monterey-first-100-packets.pcap", std::ios::binary);
-  std::ostringstream bytes;
-  bytes << file.rdbuf();
-  const std::string content = bytes.str();
+  const std::string content = file_bytes("velodyne_veloview/monterey-first-100-packets.pcap");
   for (auto _ : state) {
     auto reader = drivers::PcapReader::from_bytes(content).value();
     std::size_t datagrams = 0;
@@ -149,10 +150,7 @@ void BM_PcapRead(benchmark::State& state) {
 BENCHMARK(BM_PcapRead)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_NmeaZedF9p(benchmark::State& state) {
-  std::ifstream file(kDrivers + "gnss_nmea_gpsd/ublox-zed-f9p_hpg1.11.log", std::ios::binary);
-  std::ostringstream bytes;
-  bytes << file.rdbuf();
-  const std::string content = bytes.str();
+  const std::string content = file_bytes("gnss_nmea_gpsd/ublox-zed-f9p_hpg1.11.log");
   double seconds = 0.0;
   for (auto _ : state) {
     auto decoder = drivers::NmeaDecoder::create().value();

@@ -542,53 +542,48 @@ std::string busiest_ports(const std::map<uint16_t, uint64_t>& other_ports) {
   return listed.empty() ? "none" : fmt::format("{}", fmt::join(listed, ", "));
 }
 
-/// A Hesai Pandar40P capture with the unit's angle (and firetime) corrections into one
-/// PointCloudMessage per rotation on /lidar.
-int run_hesai_pcap_import(const Output& output, const ImportOptions& options, nlohmann::json result) {
-  if (options.calibration.empty()) return report_failure(output, result, "--calibration: give the Pandar40P's angle correction CSV (Channel,Elevation,Azimuth)");
-  Result<drivers::HesaiCalibration> calibration = drivers::load_hesai_calibration(options.calibration, options.firetime);
-  if (!calibration) return report_failure(output, result, calibration.error().message);
-  drivers::HesaiDecoderConfig config;
-  config.frame_id = "lidar";
-  Result<drivers::HesaiDecoder> decoder = drivers::HesaiDecoder::create(*calibration, config);
-  if (!decoder) return report_failure(output, result, decoder.error().message);
+/// A spinning LiDAR's capture (Velodyne, Hesai: `decoder`) into one PointCloudMessage per
+/// rotation on /lidar (sensor "lidar"): the datagrams to `ports` (the first the data port) are
+/// decoded; `describe` adds the driver's own counts to the JSON and notes to the text.
+template <typename Decoder>
+int import_rotations(const Output& output, const ImportOptions& options, nlohmann::json& result, Decoder& decoder, const std::string& name,
+                     const std::vector<uint16_t>& ports, const std::function<void(nlohmann::json&, std::string&)>& describe) {
   auto topics = topic_map(options.topic_overrides, "/lidar=/topic");
   if (!topics) return report_failure(output, result, topics.error().message);
   const auto renamed = topics->find("/lidar");
   const std::string topic = renamed == topics->end() ? "/lidar" : renamed->second;
-  const uint16_t data_port = static_cast<uint16_t>(options.port > 0 ? options.port : 2368);
   std::vector<msgs::PointCloudMessage> frames;
   std::map<uint16_t, uint64_t> other_ports;
+  uint64_t other_datagrams = 0;
   drivers::PcapStatistics capture;
   const Status read = for_each_datagram(options.sources, capture, [&](const drivers::UdpDatagram& datagram) {
-    if (datagram.destination_port != data_port) {
+    if (std::find(ports.begin(), ports.end(), datagram.destination_port) == ports.end()) {
       ++other_ports[datagram.destination_port];
+      ++other_datagrams;
       return;
     }
-    decoder->add_packet(datagram.payload, datagram.time, frames);
+    decoder.add_packet(datagram.payload, datagram.time, frames);
   });
   if (!read) return report_failure(output, result, read.error().message);
-  decoder->flush(frames);
-  const drivers::HesaiStatistics& statistics = decoder->statistics();
-  uint64_t other_datagrams = 0;
-  for (const auto& [port, count] : other_ports) other_datagrams += count;
+  decoder.flush(frames);
+  const auto& statistics = decoder.statistics();
   result["frames"] = frames.size();
   result["points"] = statistics.points;
   result["packets"] = statistics.packets;
   result["malformed_packets"] = statistics.malformed;
-  result["capture_clock_packets"] = statistics.capture_clock_packets;
   result["records"] = capture.records;
   result["other_packets"] = capture.other_packets + other_datagrams;
   result["truncated_records"] = capture.truncated;
-  result["firetime"] = options.firetime.empty() ? "none" : options.firetime;
+  std::string notes;
+  describe(result, notes);
   if (frames.empty()) {
     return report_failure(output, result,
-                          fmt::format("{}: no Hesai rotation decoded ({} datagrams to port {}, {} malformed{}{}; other ports: {})",
-                                      fmt::join(options.sources, ", "), statistics.packets + statistics.malformed, data_port, statistics.malformed,
+                          fmt::format("{}: no {} rotation decoded ({} datagrams to port {}, {} malformed{}{}; other ports: {})", fmt::join(options.sources, ", "),
+                                      name, statistics.packets + statistics.malformed, ports.front(), statistics.malformed,
                                       statistics.first_error.empty() ? "" : ": ", statistics.first_error, busiest_ports(other_ports)));
   }
   const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
-    HANZO_RETURN_IF_ERROR(writer.add_metadata({"import", {{"importer", "pcap hesai"}, {"model", "Pandar40P"}, {"source", fmt::format("{}", fmt::join(options.sources, " "))}}}));
+    HANZO_RETURN_IF_ERROR(writer.add_metadata({"import", {{"importer", "pcap " + options.driver}, {"model", options.model}, {"source", fmt::format("{}", fmt::join(options.sources, " "))}}}));
     for (const msgs::PointCloudMessage& frame : frames) HANZO_RETURN_IF_ERROR(writer.write(topic, frame, "lidar"));
     return ok_status();
   });
@@ -597,13 +592,30 @@ int run_hesai_pcap_import(const Output& output, const ImportOptions& options, nl
   result["topic"] = topic;
   std::string text = fmt::format("{}: {} rotations ({} points) on {} from {} packets ({:.2f} s)\n", options.out, frames.size(), statistics.points, topic,
                                  statistics.packets, (frames.back().timestamp - frames.front().timestamp).seconds());
-  if (statistics.capture_clock_packets > 0) {
-    text += fmt::format("  {} packets timed by the capture's clock (the sensor's own was more than 10 s off: not synchronized)\n",
-                        statistics.capture_clock_packets);
-  }
-  if (options.firetime.empty()) text += "  no --firetime file: every channel of a block at the block's time\n";
-  text += left_out_packets(statistics.malformed, statistics.first_error, capture.truncated);
+  text += notes + left_out_packets(statistics.malformed, statistics.first_error, capture.truncated);
   return report_success(output, result, text);
+}
+
+/// A Hesai Pandar40P capture with the unit's angle (and firetime) corrections.
+int run_hesai_pcap_import(const Output& output, const ImportOptions& options, nlohmann::json result) {
+  if (options.calibration.empty()) return report_failure(output, result, "--calibration: give the Pandar40P's angle correction CSV (Channel,Elevation,Azimuth)");
+  Result<drivers::HesaiCalibration> calibration = drivers::load_hesai_calibration(options.calibration, options.firetime);
+  if (!calibration) return report_failure(output, result, calibration.error().message);
+  drivers::HesaiDecoderConfig config;
+  config.frame_id = "lidar";
+  Result<drivers::HesaiDecoder> decoder = drivers::HesaiDecoder::create(*calibration, config);
+  if (!decoder) return report_failure(output, result, decoder.error().message);
+  return import_rotations(output, options, result, *decoder, "Hesai", {static_cast<uint16_t>(options.port > 0 ? options.port : 2368)},
+                          [&](nlohmann::json& counts, std::string& notes) {
+                            const drivers::HesaiStatistics& statistics = decoder->statistics();
+                            counts["capture_clock_packets"] = statistics.capture_clock_packets;
+                            counts["firetime"] = options.firetime.empty() ? "none" : options.firetime;
+                            if (statistics.capture_clock_packets > 0) {
+                              notes += fmt::format("  {} packets timed by the capture's clock (the sensor's own was more than 10 s off: not synchronized)\n",
+                                                   statistics.capture_clock_packets);
+                            }
+                            if (options.firetime.empty()) notes += "  no --firetime file: every channel of a block at the block's time\n";
+                          });
 }
 
 /// A LiDAR's packet capture into one PointCloudMessage per rotation on /lidar (sensor "lidar").
@@ -628,53 +640,13 @@ int run_pcap_import(const Output& output, const ImportOptions& options) {
   config.frame_id = "lidar";
   Result<drivers::VelodyneDecoder> decoder = drivers::VelodyneDecoder::create(calibration, config);
   if (!decoder) return report_failure(output, result, decoder.error().message);
-  auto topics = topic_map(options.topic_overrides, "/lidar=/topic");
-  if (!topics) return report_failure(output, result, topics.error().message);
-  const auto renamed = topics->find("/lidar");
-  const std::string topic = renamed == topics->end() ? "/lidar" : renamed->second;
-  const uint16_t data_port = static_cast<uint16_t>(options.port > 0 ? options.port : 2368);
   constexpr uint16_t kPositionPort = 8308;
-  std::vector<msgs::PointCloudMessage> frames;
-  uint64_t other_ports = 0;
-  drivers::PcapStatistics capture;
-  const Status read = for_each_datagram(options.sources, capture, [&](const drivers::UdpDatagram& datagram) {
-    if (datagram.destination_port != data_port && datagram.destination_port != kPositionPort) {
-      ++other_ports;
-      return;
-    }
-    decoder->add_packet(datagram.payload, datagram.time, frames);
-  });
-  if (!read) return report_failure(output, result, read.error().message);
-  decoder->flush(frames);
-  const drivers::VelodyneStatistics& statistics = decoder->statistics();
-  result["frames"] = frames.size();
-  result["points"] = statistics.points;
-  result["packets"] = statistics.packets;
-  result["position_packets"] = statistics.position_packets;
-  result["malformed_packets"] = statistics.malformed;
-  result["records"] = capture.records;
-  result["other_packets"] = capture.other_packets + other_ports;
-  result["truncated_records"] = capture.truncated;
-  result["calibration"] = options.calibration.empty() ? "nominal" : options.calibration;
-  if (frames.empty()) {
-    return report_failure(output, result,
-                          fmt::format("{}: no Velodyne rotation decoded ({} datagrams to port {}, {} malformed{}{})", fmt::join(options.sources, ", "),
-                                      statistics.packets + statistics.malformed, data_port, statistics.malformed,
-                                      statistics.first_error.empty() ? "" : ": ", statistics.first_error));
-  }
-  const int code = write_log(output, result, log_options(options), [&](io::SensorLogWriter& writer) -> Status {
-    HANZO_RETURN_IF_ERROR(writer.add_metadata({"import", {{"importer", "pcap velodyne"}, {"model", options.model}, {"source", fmt::format("{}", fmt::join(options.sources, " "))}}}));
-    for (const msgs::PointCloudMessage& frame : frames) HANZO_RETURN_IF_ERROR(writer.write(topic, frame, "lidar"));
-    return ok_status();
-  });
-  if (code != 0) return code;
-  result["ok"] = true;
-  result["topic"] = topic;
-  std::string text = fmt::format("{}: {} rotations ({} points) on {} from {} packets ({:.1f} s){}\n", options.out, frames.size(), statistics.points, topic,
-                                 statistics.packets, (frames.back().timestamp - frames.front().timestamp).seconds(),
-                                 options.calibration.empty() ? "; nominal calibration: give --calibration for the unit's" : "");
-  text += left_out_packets(statistics.malformed, statistics.first_error, capture.truncated);
-  return report_success(output, result, text);
+  return import_rotations(output, options, result, *decoder, "Velodyne", {static_cast<uint16_t>(options.port > 0 ? options.port : 2368), kPositionPort},
+                          [&](nlohmann::json& counts, std::string& notes) {
+                            counts["position_packets"] = decoder->statistics().position_packets;
+                            counts["calibration"] = options.calibration.empty() ? "nominal" : options.calibration;
+                            if (options.calibration.empty()) notes += "  nominal calibration: give --calibration for the unit's\n";
+                          });
 }
 
 int run_import(const Output& output, ImportOptions options) {
