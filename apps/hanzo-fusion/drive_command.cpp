@@ -1,6 +1,8 @@
-// hanzo-fusion drive --config fusion.yaml --record LOG.mcap [--duration S]: the live sensors of
-// the configuration (fusion.sensors.<name>.driver: a driver and its udp:// / tcp:// / serial://
-// source) read on one thread each, decoded, and written to a sensor log on the sensors' topics.
+// hanzo-fusion drive --config fusion.yaml (--record LOG.mcap | --out DIR) [--calib C] [--duration S]:
+// the live sensors of the configuration (fusion.sensors.<name>.driver: a driver and its udp:// /
+// tcp:// / serial:// source) read on one thread each, decoded, written to a sensor log on the
+// sensors' topics and / or fused by a Session as `run` fuses a log (every message in arrival
+// order; DIR/trajectory.tum).
 // Runs for --duration seconds or until SIGINT / SIGTERM. A sensor that stays silent longer than
 // its timeout is reported (once per silence) and the others go on; a malformed packet or
 // sentence is counted and skipped. Exit 0 when every sensor delivered messages; 1 otherwise
@@ -9,6 +11,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -20,9 +23,12 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.hpp"
+#include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/drivers/byte_source.hpp"
+#include "hanzo/fusion/io/trajectory.hpp"
+#include "hanzo/fusion/pipeline/session.hpp"
 #include "live_decoder.hpp"
 #include "log_writing.hpp"
 
@@ -32,7 +38,9 @@ namespace {
 
 struct DriveOptions {
   std::string config;
+  std::string calibration;
   std::string record;
+  std::string out;
   double duration = 0.0;  // s; 0: until SIGINT / SIGTERM
 };
 
@@ -111,7 +119,26 @@ int run_drive(const Output& output, const DriveOptions& options) {
   if (sensors.empty()) {
     return report_failure(output, result, fmt::format("{}: no sensor has a driver (fusion.sensors.<name>.driver: type and source)", options.config));
   }
-  if (options.record.empty()) return report_failure(output, result, "--record: give the sensor log to write");
+  if (options.record.empty() && options.out.empty()) return report_failure(output, result, "give --record LOG.mcap, --out DIR or both");
+  std::unique_ptr<pipeline::Session> session;
+  std::vector<msgs::PoseEstimate> poses;
+  if (!options.out.empty()) {
+    calib::Calibration calibration;
+    if (!options.calibration.empty()) {
+      Result<calib::Calibration> loaded = calib::load_calibration(options.calibration);
+      if (!loaded) return report_failure(output, result, loaded.error().message);
+      calibration = std::move(*loaded);
+    }
+    pipeline::SessionConfig session_config = pipeline::SessionConfig::from(*config);
+    session_config.mode = pipeline::SessionMode::kReplay;  // every message fused, in arrival order
+    Result<std::unique_ptr<pipeline::Session>> created = pipeline::Session::create(*config, calibration, session_config);
+    if (!created) return report_failure(output, result, created.error().message);
+    session = std::move(*created);
+    session->set_pose_callback([&poses](const msgs::PoseEstimate& pose) { poses.push_back(pose); });
+    std::error_code error;
+    std::filesystem::create_directories(options.out, error);
+    if (error) return report_failure(output, result, fmt::format("{}: cannot create the output folder ({})", options.out, error.message()));
+  }
   stop_requested = false;
   struct sigaction action{};
   action.sa_handler = request_stop;
@@ -121,10 +148,10 @@ int run_drive(const Output& output, const DriveOptions& options) {
   std::vector<std::thread> readers;
   for (const std::unique_ptr<LiveSensor>& live : sensors) readers.emplace_back([&stop, raw = live.get()] { read_sensor(*raw, stop); });
   const auto started = std::chrono::steady_clock::now();
-  LogWriteOptions log;
-  log.path = options.record;
-  const int code = write_log(output, result, log, [&](io::SensorLogWriter& writer) -> Status {
-    HANZO_RETURN_IF_ERROR(writer.add_metadata({"import", {{"importer", "drive"}, {"config", options.config}}}));
+  uint64_t refused = 0;
+  // Until the duration passes or a signal comes: what the readers decoded goes to the log
+  // (when recording) and the session, sensor by sensor.
+  const auto consume = [&](io::SensorLogWriter* writer) -> Status {
     Status written = ok_status();
     const auto drain = [&] {
       for (const std::unique_ptr<LiveSensor>& live : sensors) {
@@ -134,7 +161,10 @@ int run_drive(const Output& output, const DriveOptions& options) {
           ready.swap(live->ready);
         }
         for (const msgs::SensorMessage& message : ready) {
-          if (Status status = writer.write(live->sensor->topic, message, live->sensor->name); !status && written) written = status;
+          if (writer != nullptr) {
+            if (Status status = writer->write(live->sensor->topic, message, live->sensor->name); !status && written) written = status;
+          }
+          if (session && !session->push(live->sensor->name, message)) ++refused;
         }
       }
     };
@@ -147,13 +177,40 @@ int run_drive(const Output& output, const DriveOptions& options) {
     readers.clear();
     drain();
     return written;
-  });
+  };
+  int code = 0;
+  if (!options.record.empty()) {
+    LogWriteOptions log;
+    log.path = options.record;
+    code = write_log(output, result, log, [&](io::SensorLogWriter& writer) -> Status {
+      HANZO_RETURN_IF_ERROR(writer.add_metadata({"import", {{"importer", "drive"}, {"config", options.config}}}));
+      return consume(&writer);
+    });
+  } else if (Status consumed = consume(nullptr); !consumed) {
+    code = report_failure(output, result, consumed.error().message);
+  }
   stop = true;
   for (std::thread& reader : readers) reader.join();
   if (code != 0) return code;
+  if (session) {
+    session->flush();
+    io::Trajectory trajectory;
+    for (const msgs::PoseEstimate& pose : poses) {
+      if (!trajectory.timestamps.empty() && pose.timestamp <= trajectory.timestamps.back()) continue;
+      trajectory.timestamps.push_back(pose.timestamp);
+      trajectory.poses.push_back(pose.T_world_body.to_se3().matrix());
+    }
+    const std::string path = (std::filesystem::path(options.out) / "trajectory.tum").string();
+    if (Status written = io::write_trajectory(path, trajectory, io::TrajectoryFormat::kTum); !written) return report_failure(output, result, written.error().message);
+    result["poses"] = trajectory.size();
+    result["refused_messages"] = refused;
+    result["trajectory"] = path;
+  }
   std::vector<std::string> without;
   nlohmann::json per_sensor = nlohmann::json::object();
-  std::string text = fmt::format("{}: {:.1f} s recorded\n", options.record, std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
+  std::string text = fmt::format("{}: {:.1f} s{}\n", options.record.empty() ? options.out : options.record,
+                                 std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count(),
+                                 session ? fmt::format(", {} poses in {}", result["poses"].get<uint64_t>(), result["trajectory"].get<std::string>()) : "");
   for (const std::unique_ptr<LiveSensor>& live : sensors) {
     const LiveDecoderCounts counts = live->decoder->counts();
     per_sensor[live->sensor->name] = {{"source", live->source->address().url}, {"driver", live->sensor->driver->type}, {"topic", live->sensor->topic},
@@ -167,7 +224,8 @@ int run_drive(const Output& output, const DriveOptions& options) {
   }
   result["sensors"] = per_sensor;
   if (!without.empty()) {
-    return report_failure(output, result, fmt::format("{}: no messages from {} (the log keeps what the others sent)", options.record, fmt::join(without, ", ")));
+    return report_failure(output, result, fmt::format("{}: no messages from {} (the others' were kept)", options.record.empty() ? options.out : options.record,
+                                                      fmt::join(without, ", ")));
   }
   result["ok"] = true;
   return report_success(output, result, text);
@@ -177,9 +235,11 @@ int run_drive(const Output& output, const DriveOptions& options) {
 
 void add_drive_command(CLI::App& app, const Output& output, Command& run) {
   auto options = std::make_shared<DriveOptions>();
-  CLI::App* command = app.add_subcommand("drive", "Read the configured live sensors (drivers on UDP, TCP or serial sources) into a sensor log");
+  CLI::App* command = app.add_subcommand("drive", "Read the configured live sensors (drivers on UDP, TCP or serial sources) into a sensor log and / or a session");
   command->add_option("--config", options->config, "fusion.yaml whose sensors have a driver (type and source)")->required();
-  command->add_option("--record", options->record, "Sensor log to write (.mcap)")->required();
+  command->add_option("--record", options->record, "Sensor log to write (.mcap)");
+  command->add_option("--out", options->out, "Fuse the sensors in a session (as run does) and write its trajectory.tum here");
+  command->add_option("--calib", options->calibration, "Sensor calibration YAML for --out (default: every sensor at the body origin)");
   command->add_option("--duration", options->duration, "Seconds to record (default: until Ctrl-C / SIGTERM)")->check(CLI::NonNegativeNumber);
   command->callback([&output, &run, options] { run = [&output, options] { return run_drive(output, *options); }; });
 }
