@@ -20,6 +20,7 @@ void add_calib_command(CLI::App& app, const Output& output, Command& run);
 /// added by add_calib_command.
 void add_calib_motion_command(CLI::App& calib_app, const Output& output, Command& run);
 void add_calib_camera_command(CLI::App& calib_app, const Output& output, Command& run);
+void add_calib_stereo_command(CLI::App& calib_app, const Output& output, Command& run);
 /// Changes the entry of `sensor` in the calibration YAML `path` (an entry at the body origin is
 /// added when missing, the file created when missing); the other entries are kept.
 Status update_calibration_entry(const std::string& path, const std::string& sensor,

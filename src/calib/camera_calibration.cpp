@@ -171,6 +171,7 @@ Result<CameraCalibrationResult> calibrate_camera(const std::vector<msgs::ImageMe
     if (!view.board_found) continue;
     cv::cornerSubPix(grey, corners, cv::Size(5, 5), cv::Size(-1, -1),
                      cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-3));
+    for (const cv::Point2f& corner : corners) view.corners.emplace_back(corner.x, corner.y);
     detections.push_back({i, std::move(corners)});
   }
   result.views_found = detections.size();

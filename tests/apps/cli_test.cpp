@@ -1631,6 +1631,38 @@ TEST(Cli, CalibMotionRecoversTheLidarMountOfTheCalibrationWalk) {
   std::filesystem::remove_all(dir);
 }
 
+// calib stereo on OpenCV's sample pairs: the rig into a calibration file whose right camera is
+// the left's mount times the solved pose; uneven pairs refused in one line.
+TEST(Cli, CalibStereoWritesBothCamerasOfOpenCvsSamplePairs) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_stereo_{}", ::getpid());
+  std::filesystem::create_directories(dir);
+  const std::string folder = std::string(HANZO_DATA_DIR) + "/camera_calib_opencv_stereo/";
+  std::string left, right;
+  for (const int number : {1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14}) {
+    left += fmt::format(" {}left{:02}.jpg", folder, number);
+    right += fmt::format(" {}right{:02}.jpg", folder, number);
+  }
+  // A mount for the left camera already in the file: kept, and the right one placed from it.
+  std::ofstream(dir / "rig.yaml") << "calibration:\n  left_to_body:\n    rotation: [1.0, 0.0, 0.0, 0.0]\n    translation: [0.1, 0.0, 0.5]\n";
+  const CliRun solved = run(fmt::format("calib stereo --left{} --right{} --board 9x6 --square 0.025 --out {}/rig.yaml --json", left, right, dir.string()));
+  ASSERT_EQ(solved.exit_code, 0) << solved.err;
+  const nlohmann::json result = nlohmann::json::parse(solved.out);
+  EXPECT_EQ(result["pairs_used"], 13);
+  EXPECT_NEAR(result["baseline"].get<double>(), 3.33 * 0.025, 0.002);
+  EXPECT_LT(result["epipolar_error_px"].get<double>(), 0.3);
+  const hanzo::fusion::calib::Calibration rig = hanzo::fusion::calib::load_calibration((dir / "rig.yaml").string()).value();
+  ASSERT_NE(rig.find("right"), nullptr);
+  ASSERT_TRUE(rig.find("right")->camera.has_value());
+  const Eigen::Vector3d right_position = rig.find("right")->T_body_sensor().translation();
+  EXPECT_NEAR(right_position.x(), 0.1 + result["T_left_right"]["position"][0].get<double>(), 1e-9);
+  EXPECT_NEAR(right_position.z(), 0.5 + result["T_left_right"]["position"][2].get<double>(), 1e-9);
+  const CliRun uneven = run(fmt::format("calib stereo --left{} --right {}right01.jpg --board 9x6", left, folder));
+  EXPECT_EQ(uneven.exit_code, 1);
+  EXPECT_THAT(uneven.err, HasSubstr("13 left and 1 right images"));
+  EXPECT_EQ(std::count(uneven.err.begin(), uneven.err.end(), '\n'), 1);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, CalibCameraRecoversTheLensOfTheCheckerboardScenario) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_calib_camera_{}", ::getpid());
   std::filesystem::remove_all(dir);

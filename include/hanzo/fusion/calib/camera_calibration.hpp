@@ -58,6 +58,9 @@ struct CameraCalibrationView {
   bool used = false;       ///< in the final solve
   double rms_px = 0.0;     ///< reprojection RMS of its corners (solved views)
   SE3 T_camera_target;     ///< solved views
+  /// The board's inner corners (px, sub-pixel), row by row from the target's first corner;
+  /// views where the whole board was found.
+  std::vector<Eigen::Vector2f> corners;
 };
 
 struct CameraCalibrationResult {
