@@ -50,14 +50,12 @@ const Capture& capture(const std::string& file) {
   return capture;
 }
 
-void decode_velodyne(benchmark::State& state, const std::string& file, const std::string& calibration, drivers::VelodyneModel model) {
-  const Capture& recorded = capture(file);
-  drivers::VelodyneDecoderConfig config;
-  config.model = model;
-  const drivers::VelodyneCalibration lasers = drivers::load_velodyne_calibration(kDrivers + calibration).value();
+// Every packet of `recorded` through a fresh decoder (`make`: Velodyne, Hesai) per pass.
+template <typename MakeDecoder>
+void decode_rotations(benchmark::State& state, const Capture& recorded, const MakeDecoder& make) {
   std::size_t points = 0;
   for (auto _ : state) {
-    auto decoder = drivers::VelodyneDecoder::create(lasers, config).value();
+    auto decoder = make();
     std::vector<msgs::PointCloudMessage> frames;
     for (const drivers::UdpDatagram& datagram : recorded.datagrams) decoder.add_packet(datagram.payload, datagram.time, frames);
     decoder.flush(frames);
@@ -67,6 +65,13 @@ void decode_velodyne(benchmark::State& state, const std::string& file, const std
   state.counters["packets/s"] = benchmark::Counter(static_cast<double>(recorded.datagrams.size() * state.iterations()), benchmark::Counter::kIsRate);
   state.counters["points/s"] = benchmark::Counter(static_cast<double>(points * state.iterations()), benchmark::Counter::kIsRate);
   state.counters["x real time"] = benchmark::Counter(recorded.seconds * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+
+void decode_velodyne(benchmark::State& state, const std::string& file, const std::string& calibration, drivers::VelodyneModel model) {
+  drivers::VelodyneDecoderConfig config;
+  config.model = model;
+  const drivers::VelodyneCalibration lasers = drivers::load_velodyne_calibration(kDrivers + calibration).value();
+  decode_rotations(state, capture(file), [&] { return drivers::VelodyneDecoder::create(lasers, config).value(); });
 }
 
 void BM_VelodyneVlp16(benchmark::State& state) {
@@ -101,22 +106,10 @@ BENCHMARK(BM_OusterOs1_64)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Hesai Pandar40P (200 packets, 0.11 s at 20 Hz, the unit's angle and firetime corrections).
 void BM_HesaiPandar40p(benchmark::State& state) {
-  const Capture& recorded = capture("hesai_pandar40p_velocity_report/lidar_20Hz.pcapng");
   const std::string calibration = kDrivers + "hesai_pandar40p_velocity_report/calib/Pandar40P_";
   const drivers::HesaiCalibration channels =
       drivers::load_hesai_calibration(calibration + "Angle_Correction_File.csv", calibration + "Firetime_Correction_File.csv").value();
-  std::size_t points = 0;
-  for (auto _ : state) {
-    auto decoder = drivers::HesaiDecoder::create(channels).value();
-    std::vector<msgs::PointCloudMessage> frames;
-    for (const drivers::UdpDatagram& datagram : recorded.datagrams) decoder.add_packet(datagram.payload, datagram.time, frames);
-    decoder.flush(frames);
-    points = decoder.statistics().points;
-    benchmark::DoNotOptimize(frames.data());
-  }
-  state.counters["packets/s"] = benchmark::Counter(static_cast<double>(recorded.datagrams.size() * state.iterations()), benchmark::Counter::kIsRate);
-  state.counters["points/s"] = benchmark::Counter(static_cast<double>(points * state.iterations()), benchmark::Counter::kIsRate);
-  state.counters["x real time"] = benchmark::Counter(recorded.seconds * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+  decode_rotations(state, capture("hesai_pandar40p_velocity_report/lidar_20Hz.pcapng"), [&] { return drivers::HesaiDecoder::create(channels).value(); });
 }
 BENCHMARK(BM_HesaiPandar40p)->Unit(benchmark::kMillisecond)->UseRealTime();
 
