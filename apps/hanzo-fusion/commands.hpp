@@ -3,11 +3,14 @@
 
 #include <functional>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
 #include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/io/trajectory.hpp"
+#include "hanzo/fusion/msgs/estimate_messages.hpp"
 #include "output.hpp"
 
 namespace hanzo::fusion::app {
@@ -31,6 +34,8 @@ void add_reconstruct_command(CLI::App& app, const Output& output, Command& run);
 void add_log_command(CLI::App& app, const Output& output, Command& run);
 void add_import_command(CLI::App& app, const Output& output, Command& run);
 void add_drive_command(CLI::App& app, const Output& output, Command& run);
+/// The session's poses as a trajectory (run_command.cpp): times increasing, a repeated time kept once.
+io::Trajectory trajectory_of(const std::vector<msgs::PoseEstimate>& poses);
 void add_send_command(CLI::App& app, const Output& output, Command& run);
 void add_export_command(CLI::App& app, const Output& output, Command& run);
 /// `export dataset` under the `export` command (export_dataset_command.cpp).

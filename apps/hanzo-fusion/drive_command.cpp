@@ -194,12 +194,7 @@ int run_drive(const Output& output, const DriveOptions& options) {
   if (code != 0) return code;
   if (session) {
     session->flush();
-    io::Trajectory trajectory;
-    for (const msgs::PoseEstimate& pose : poses) {
-      if (!trajectory.timestamps.empty() && pose.timestamp <= trajectory.timestamps.back()) continue;
-      trajectory.timestamps.push_back(pose.timestamp);
-      trajectory.poses.push_back(pose.T_world_body.to_se3().matrix());
-    }
+    const io::Trajectory trajectory = trajectory_of(poses);
     const std::string path = (std::filesystem::path(options.out) / "trajectory.tum").string();
     if (Status written = io::write_trajectory(path, trajectory, io::TrajectoryFormat::kTum); !written) return report_failure(output, result, written.error().message);
     result["poses"] = trajectory.size();

@@ -145,15 +145,6 @@ class ProgressBar {
   int last_percent_ = -1;
 };
 
-io::Trajectory trajectory_of(const std::vector<msgs::PoseEstimate>& poses) {
-  io::Trajectory trajectory;
-  for (const msgs::PoseEstimate& pose : poses) {
-    if (!trajectory.timestamps.empty() && pose.timestamp <= trajectory.timestamps.back()) continue;
-    trajectory.timestamps.push_back(pose.timestamp);
-    trajectory.poses.push_back(pose.T_world_body.to_se3().matrix());
-  }
-  return trajectory;
-}
 
 Status write_poses_csv(const std::string& path, const std::vector<msgs::PoseEstimate>& poses) {
   std::ofstream file(path);
@@ -177,6 +168,8 @@ Status write_poses_csv(const std::string& path, const std::vector<msgs::PoseEsti
   }
   return file ? ok_status() : Status(Error(fmt::format("{}: write failed", path)));
 }
+
+using app::trajectory_of;  // the PoseEstimate overload (commands.hpp) beside this one
 
 io::Trajectory trajectory_of(const std::vector<pipeline::StampedPose>& poses) {
   io::Trajectory trajectory;
@@ -694,6 +687,16 @@ int run(const Output& output, const RunOptions& options) {
 }
 
 }  // namespace
+
+io::Trajectory trajectory_of(const std::vector<msgs::PoseEstimate>& poses) {
+  io::Trajectory trajectory;
+  for (const msgs::PoseEstimate& pose : poses) {
+    if (!trajectory.timestamps.empty() && pose.timestamp <= trajectory.timestamps.back()) continue;
+    trajectory.timestamps.push_back(pose.timestamp);
+    trajectory.poses.push_back(pose.T_world_body.to_se3().matrix());
+  }
+  return trajectory;
+}
 
 void add_run_command(CLI::App& app, const Output& output, Command& run_command) {
   auto options = std::make_shared<RunOptions>();
