@@ -202,6 +202,7 @@ class PySession {
     result["graph_landmarks"] = mapping.graph_landmarks;
     result["loop_closures"] = mapping.loop_closures;
     result["gnss_factors"] = mapping.gnss_factors;
+    result["graph_velocity_factors"] = mapping.graph_velocity_factors;
     return result;
   }
 

@@ -100,14 +100,58 @@ Result<Eigen::VectorXd> GpsFactor::evaluate(const Values& values, std::vector<Ei
   SE3 T;
   HANZO_ASSIGN_OR_RETURN(T, values.at<SE3>(keys()[0]));
   const Eigen::Matrix3d R = T.rotation().matrix();
-  const Eigen::Vector3d r = T.translation() + R * lever_arm_ - position_world_;
+  Eigen::Vector3d r = T.translation() + R * lever_arm_ - position_world_;
+  if (keys().size() == 2) {
+    Eigen::Vector3d error;
+    HANZO_ASSIGN_OR_RETURN(error, values.at<Eigen::Vector3d>(keys()[1]));
+    r += error_scale_ * error;
+  }
   const Eigen::MatrixXd& U = noise_.sqrt_information();
   if (jacobians != nullptr) {
     Eigen::Matrix<double, 3, 6> J;
     J << R, -R * SO3::hat(lever_arm_);
     *jacobians = {U * J};
+    if (keys().size() == 2) jacobians->push_back(U * error_scale_);
   }
   return Eigen::VectorXd(U * r);
+}
+
+Result<std::shared_ptr<GaussMarkovFactor>> GaussMarkovFactor::create(Key value_i, Key value_j, double dt, double tau,
+                                                                     const Eigen::Matrix3d& stationary_covariance) {
+  if (!std::isfinite(dt) || dt < 0.0 || !std::isfinite(tau) || !(tau > 0.0)) {
+    return Error(fmt::format("Gauss-Markov factor: dt {} must be >= 0 and tau {} > 0", dt, tau));
+  }
+  const double decay = std::exp(-dt / tau);
+  // dt = 0 would make the process noise zero: the values are then equal up to a tiny variance.
+  const double variance_scale = std::max(1.0 - decay * decay, 1e-9);
+  Result<GaussianNoise> noise = GaussianNoise::from_covariance(variance_scale * stationary_covariance);
+  if (!noise) return Error(fmt::format("Gauss-Markov factor: {}", noise.error().message));
+  return std::shared_ptr<GaussMarkovFactor>(new GaussMarkovFactor(value_i, value_j, decay, std::move(*noise)));
+}
+
+Result<Eigen::VectorXd> GaussMarkovFactor::evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const {
+  Eigen::Vector3d x_i, x_j;
+  HANZO_ASSIGN_OR_RETURN(x_i, values.at<Eigen::Vector3d>(keys()[0]));
+  HANZO_ASSIGN_OR_RETURN(x_j, values.at<Eigen::Vector3d>(keys()[1]));
+  const Eigen::MatrixXd& U = noise_.sqrt_information();
+  if (jacobians != nullptr) *jacobians = {-decay_ * U, U};
+  return Eigen::VectorXd(U * (x_j - decay_ * x_i));
+}
+
+Result<Eigen::VectorXd> BodyVelocityFactor::evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const {
+  SE3 T;
+  Eigen::Vector3d velocity_world;
+  HANZO_ASSIGN_OR_RETURN(T, values.at<SE3>(keys()[0]));
+  HANZO_ASSIGN_OR_RETURN(velocity_world, values.at<Eigen::Vector3d>(keys()[1]));
+  const Eigen::Matrix3d R_body_world = T.rotation().matrix().transpose();
+  const Eigen::Vector3d velocity_body = R_body_world * velocity_world;
+  const Eigen::MatrixXd& U = noise_.sqrt_information();
+  if (jacobians != nullptr) {
+    Eigen::Matrix<double, 3, 6> J_pose = Eigen::Matrix<double, 3, 6>::Zero();
+    J_pose.rightCols<3>() = R_sensor_body_ * SO3::hat(velocity_body);
+    *jacobians = {U * J_pose, U * R_sensor_body_ * R_body_world};
+  }
+  return Eigen::VectorXd(U * (R_sensor_body_ * (velocity_body + lever_velocity_body_) - velocity_sensor_));
 }
 
 Result<Eigen::VectorXd> GravityFactor::evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const {

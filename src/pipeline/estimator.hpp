@@ -89,6 +89,7 @@ struct EventOutcome {
   bool zero_velocity_update = false;
   std::optional<msgs::Keyframe> keyframe;  // emitted after this IMU event
   std::optional<FusedGnssFix> gnss_fix;    // a fused GNSS event's fix (sensor name left empty)
+  std::optional<FusedVelocity> velocity;   // a fused radar or wheel event's velocity (sensor name left empty)
 };
 
 /// With an IMU sensor the IMU propagates the state (strapdown) and its messages are the clock.
@@ -166,6 +167,8 @@ class Estimator {
   /// Without an IMU: the virtual IMU sample of the motion model at the current estimate.
   estimate::ImuSample motion_model_sample() const;
   /// The latest accepted gyro reading, for models that need the body rate.
+  // A fused sensor velocity with the body's angular rate now (bias removed), for the graph.
+  FusedVelocity fused_velocity(const Event& event, const Eigen::Vector3d& velocity_sensor, const Eigen::Matrix3d& covariance) const;
   estimate::GyroReading gyro_reading() const;
   /// Propagates the filter to t with the last IMU sample held (without an IMU: by the motion
   /// model, in steps of at most 10 ms).

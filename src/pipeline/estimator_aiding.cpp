@@ -265,6 +265,7 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
     const estimate::ZeroVelocityModel model(kZeroVelocitySigma, rate_sigma, true, gyro);
     outcome.fused = update(event, model, observer, &outcome.reason);
     outcome.zero_velocity_update = outcome.fused;
+    if (outcome.fused) outcome.velocity = fused_velocity(event, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity() * kZeroVelocitySigma * kZeroVelocitySigma);
     return outcome;
   }
   estimate::WheelOdometryMeasurement measurement;
@@ -290,6 +291,12 @@ EventOutcome Estimator::process_wheels(const Event& event, const msgs::WheelOdom
   // be good.
   measurement.use_yaw_rate = false;
   outcome.fused = update(event, estimate::WheelOdometryModel(measurement, sensor.T_body_sensor, gyro), observer, &outcome.reason);
+  if (outcome.fused && measurement.lateral_constraint && measurement.vertical_constraint) {
+    // The wheels' distance per true distance is the state's wheel speed scale.
+    const double scale = filter_->state().wheel_speed_scale;
+    const Eigen::Vector3d sigmas(measurement.forward_speed_sigma / scale, measurement.lateral_speed_sigma, measurement.lateral_speed_sigma);
+    outcome.velocity = fused_velocity(event, Eigen::Vector3d(measurement.forward_speed / scale, 0.0, 0.0), sigmas.cwiseAbs2().asDiagonal());
+  }
   if (options.use_yaw_rate || wheel_yaw_rate_needed_) {
     estimate::WheelOdometryMeasurement yaw = measurement;
     yaw.use_speed = yaw.lateral_constraint = yaw.vertical_constraint = false;
@@ -318,7 +325,16 @@ EventOutcome Estimator::process_radar(const Event& event, const msgs::RadarMessa
                                             sensor.T_body_sensor, gyro);
   EventOutcome outcome;
   outcome.fused = update(event, model, observer, &outcome.reason);
+  if (outcome.fused) {
+    outcome.velocity = fused_velocity(event, ego->velocity_sensor, ego->covariance + noise * noise * Eigen::Matrix3d::Identity());
+  }
   return outcome;
+}
+
+FusedVelocity Estimator::fused_velocity(const Event& event, const Eigen::Vector3d& velocity_sensor, const Eigen::Matrix3d& covariance) const {
+  const estimate::GyroReading gyro = gyro_reading();
+  const Eigen::Vector3d angular_rate_body = gyro.R_body_imu * (gyro.angular_velocity - filter_->state().gyro_bias);
+  return FusedVelocity{"", event.time, velocity_sensor, covariance, sensors_[event.sensor].T_body_sensor, angular_rate_body};
 }
 
 EventOutcome Estimator::process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer) {

@@ -94,7 +94,7 @@ struct Frontend::Impl final : UpdateObserver {
   void send_final_keyframes(bool all);
   /// Reports a fused GNSS fix (first fusions only: fuse_in_order and a late event itself; a
   /// replay after a rollback re-fuses fixes already reported).
-  void report_gnss(const Event& event, const EventOutcome& outcome);
+  void report_fused(const Event& event, const EventOutcome& outcome);
   void count(const Event& event, const EventOutcome& outcome);
   /// Fuses the pending messages up to the IMU's time (all of them when flush_all).
   void release_pending(bool flush_all = false);
@@ -139,6 +139,7 @@ struct Frontend::Impl final : UpdateObserver {
   InnovationCallback innovation_callback;
   KeyframeCallback keyframe_callback;
   GnssCallback gnss_callback;
+  VelocityCallback velocity_callback;
   // Emitted keyframes, for corrections: the pose before any correction (C^-1 x emitted pose,
   // C the world correction when it was emitted), so that today's belief is C_now x this.
   std::map<uint64_t, SE3> keyframe_poses;
@@ -200,6 +201,7 @@ void Frontend::set_pose_callback(PoseCallback callback) { impl_->pose_callback =
 void Frontend::set_innovation_callback(InnovationCallback callback) { impl_->innovation_callback = std::move(callback); }
 void Frontend::set_keyframe_callback(KeyframeCallback callback) { impl_->keyframe_callback = std::move(callback); }
 void Frontend::set_gnss_callback(GnssCallback callback) { impl_->gnss_callback = std::move(callback); }
+void Frontend::set_velocity_callback(VelocityCallback callback) { impl_->velocity_callback = std::move(callback); }
 
 Status Frontend::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized) {
   Impl& impl = *impl_;
@@ -474,10 +476,15 @@ void Frontend::Impl::fuse_in_order(Event event) {
   if (config.frontend.lag_window_s > 0.0) history.push_back({event, estimator});
   if (emits_pose(event, outcome)) emit_pose(true);
   if (outcome.keyframe) hold_keyframe(*outcome.keyframe);
-  report_gnss(event, outcome);
+  report_fused(event, outcome);
 }
 
-void Frontend::Impl::report_gnss(const Event& event, const EventOutcome& outcome) {
+void Frontend::Impl::report_fused(const Event& event, const EventOutcome& outcome) {
+  if (outcome.velocity && velocity_callback) {
+    FusedVelocity velocity = *outcome.velocity;
+    velocity.sensor = sensors[event.sensor].name;
+    velocity_callback(velocity);
+  }
   if (!outcome.gnss_fix || !gnss_callback) return;
   FusedGnssFix fix = *outcome.gnss_fix;
   fix.sensor = sensors[event.sensor].name;
@@ -536,7 +543,7 @@ void Frontend::Impl::fuse_late(Event event) {
   if (emits_pose(event, outcome)) emit_pose(true);
   // It can make a keyframe, and so can the messages re-fused after it: held until final.
   if (outcome.keyframe) hold_keyframe(*outcome.keyframe);
-  report_gnss(event, outcome);
+  report_fused(event, outcome);
   ++sensors[event.sensor].rolled_back;
   ++rollbacks;
   history.insert(history.begin() + static_cast<std::ptrdiff_t>(index), HistoryEntry{event, estimator});

@@ -44,8 +44,14 @@ Status KeyframeGraph::add_keyframe(const msgs::Keyframe& keyframe, double relati
     // (position world, orientation body) -> tangent (rho = R^T dp, phi).
     Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Identity();
     J.topLeftCorner<3, 3>() = T_world_body.rotation().matrix().transpose();
+    Eigen::Matrix<double, 6, 6> covariance = *keyframe.pose_covariance;
+    if (config_.first_position_sigma > 0.0) {
+      covariance.topRows<3>().setZero();
+      covariance.leftCols<3>().setZero();
+      covariance.topLeftCorner<3, 3>() = Eigen::Matrix3d::Identity() * config_.first_position_sigma * config_.first_position_sigma;
+    }
     graph::GaussianNoise noise;
-    HANZO_ASSIGN_OR_RETURN(noise, noise_of(J * *keyframe.pose_covariance * J.transpose(), fmt::format("keyframe {} pose covariance", id)));
+    HANZO_ASSIGN_OR_RETURN(noise, noise_of(J * covariance * J.transpose(), fmt::format("keyframe {} pose covariance", id)));
     pending_.factors.emplace<graph::PriorFactorSE3>(graph::X(id), T_world_body, noise);
     mark_pose_graph_factor();
   }
@@ -92,20 +98,63 @@ void KeyframeGraph::add_factors(const graph::GraphUpdate& update) {
 Status KeyframeGraph::add_gps(Timestamp time, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,
                               const Eigen::Vector3d& lever_arm) {
   if (!position_world.allFinite() || !lever_arm.allFinite()) return Error("gps: non-finite position or lever arm");
-  graph::GaussianNoise noise;
-  HANZO_ASSIGN_OR_RETURN(noise, noise_of(covariance, "gps covariance"));
-  pending_fixes_.push_back({time, position_world, lever_arm, noise});
+  if (Result<graph::GaussianNoise> noise = noise_of(covariance, "gps covariance"); !noise) return noise.error();
+  pending_fixes_.push_back({time, position_world, lever_arm, covariance});
   return ok_status();
 }
 
 Status KeyframeGraph::add_gps_at_keyframe(uint64_t keyframe_id, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,
-                                          const Eigen::Vector3d& lever_arm) {
+                                          const Eigen::Vector3d& lever_arm, double seconds_from_keyframe) {
   if (frontend_poses_.count(keyframe_id) == 0) return Error(fmt::format("gps: keyframe {} is unknown", keyframe_id));
-  if (!position_world.allFinite() || !lever_arm.allFinite()) return Error("gps: non-finite position or lever arm");
+  if (!position_world.allFinite() || !lever_arm.allFinite() || !std::isfinite(seconds_from_keyframe)) {
+    return Error("gps: non-finite position, lever arm or time");
+  }
+  return add_fix_factor(keyframe_id, position_world, covariance, lever_arm, seconds_from_keyframe, true);
+}
+
+Status KeyframeGraph::add_fix_factor(uint64_t keyframe_id, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,
+                                     const Eigen::Vector3d& lever_arm, double seconds_from_keyframe, bool robust) {
+  const graph::RobustKernel kernel{robust ? graph::RobustKernel::Type::kCauchy : graph::RobustKernel::Type::kNone, config_.gps_cauchy_scale};
+  const double tau = config_.gnss_error_correlation_s;
+  if (!(tau > 0.0)) {
+    graph::GaussianNoise noise;
+    HANZO_ASSIGN_OR_RETURN(noise, noise_of(covariance, "gps covariance"));
+    pending_.factors.emplace_robust<graph::GpsFactor>(kernel, graph::X(keyframe_id), position_world, lever_arm, noise);
+    mark_pose_graph_factor();
+    return ok_status();
+  }
+  // The error in units of the fix's correlated standard deviations (S S^T = (1 - white) Sigma),
+  // a unit-variance process: a receiver's error grows and shrinks with the accuracy it reports
+  // (a canyon's metres, open sky's centimetres) while staying correlated in those units.
+  const double white = std::clamp(config_.gnss_white_fraction, 1e-3, 1.0);
+  const Eigen::LLT<Eigen::Matrix3d> correlated((1.0 - white) * covariance);
+  if (correlated.info() != Eigen::Success) return Error("gps covariance: not positive definite");
+  // The fix's own noise, and what the process moves between the keyframe and the fix.
+  const double decay = std::exp(-std::abs(seconds_from_keyframe) / tau);
   graph::GaussianNoise noise;
-  HANZO_ASSIGN_OR_RETURN(noise, noise_of(covariance, "gps covariance"));
-  pending_.factors.emplace_robust<graph::GpsFactor>(graph::RobustKernel{graph::RobustKernel::Type::kCauchy, config_.gps_cauchy_scale},
-                                                    graph::X(keyframe_id), position_world, lever_arm, noise);
+  HANZO_ASSIGN_OR_RETURN(noise, noise_of((white + (1.0 - white) * (1.0 - decay * decay)) * covariance, "gps covariance"));
+  const graph::Key error = graph::E(keyframe_id);
+  if (!pending_.values.exists(error) && !smoother_.estimate().exists(error)) {
+    const Timestamp time = keyframe_times_.at(keyframe_id);
+    if (latest_gnss_error_ && latest_gnss_error_->second <= time) {
+      const graph::Key previous = graph::E(latest_gnss_error_->first);
+      const double dt = (time - latest_gnss_error_->second).seconds();
+      std::shared_ptr<graph::GaussMarkovFactor> process;
+      HANZO_ASSIGN_OR_RETURN(process, graph::GaussMarkovFactor::create(previous, error, dt, tau, Eigen::Matrix3d::Identity()));
+      pending_.factors.add(process);
+      mark_pose_graph_factor();
+      Result<Eigen::Vector3d> previous_value =
+          pending_.values.exists(previous) ? pending_.values.at<Eigen::Vector3d>(previous) : smoother_.estimate().at<Eigen::Vector3d>(previous);
+      pending_.values.insert(error, Eigen::Vector3d(process->decay() * (previous_value ? *previous_value : Eigen::Vector3d::Zero())));
+    } else {
+      pending_.factors.emplace<graph::PriorFactorVector3>(error, Eigen::Vector3d::Zero(), graph::GaussianNoise::from_sigmas(Eigen::Vector3d::Ones()).value());
+      mark_pose_graph_factor();
+      pending_.values.insert(error, Eigen::Vector3d::Zero());
+    }
+    if (!latest_gnss_error_ || latest_gnss_error_->second <= time) latest_gnss_error_ = {keyframe_id, time};
+  }
+  pending_.factors.emplace_robust<graph::GpsFactor>(kernel, graph::X(keyframe_id), error, Eigen::Matrix3d(correlated.matrixL()), position_world, lever_arm,
+                                                    noise);
   mark_pose_graph_factor();
   return ok_status();
 }
@@ -146,8 +195,8 @@ Result<KeyframeGraphUpdate> KeyframeGraph::process(Frontend* frontend) {
       }
     }
     if (nearest) {
-      pending_.factors.emplace<graph::GpsFactor>(graph::X(*nearest), fix->position_world, fix->lever_arm, fix->noise);
-      mark_pose_graph_factor();
+      HANZO_RETURN_IF_ERROR(add_fix_factor(*nearest, fix->position_world, fix->covariance, fix->lever_arm,
+                                           (fix->time - keyframe_times_.at(*nearest)).seconds(), false));
       fix = pending_fixes_.erase(fix);
     } else if (time + max_offset < latest_time) {
       ++update.fixes_dropped;

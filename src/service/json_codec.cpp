@@ -216,6 +216,7 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"manual_loop_closures", mapping.manual_loop_closures},
       {"relocalizations", mapping.relocalizations},
       {"gnss_factors", mapping.gnss_factors},
+      {"graph_velocity_factors", mapping.graph_velocity_factors},
       {"map_version", mapping.map_version},
       {"map_memory_bytes", mapping.map_memory_bytes},
       {"last_registration_ms", mapping.last_registration_ms},

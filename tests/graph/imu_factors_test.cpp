@@ -178,6 +178,9 @@ TEST(ImuPreintegration, RejectsBadSamples) {
   EXPECT_EQ(preintegration.sample_count(), 0);
   EXPECT_THAT(ImuFactor::create(X(0), V(0), X(1), V(1), B(0), preintegration).error().message, HasSubstr("no IMU sample"));
   EXPECT_FALSE(ImuBiasRandomWalkFactor::create(B(0), B(1), 0.0, 1e-3, 1e-4).ok());
+  EXPECT_THAT(GaussMarkovFactor::create(E(0), E(1), -1.0, 5.0, Eigen::Matrix3d::Identity()).error().message, HasSubstr("dt"));
+  EXPECT_FALSE(GaussMarkovFactor::create(E(0), E(1), 1.0, 0.0, Eigen::Matrix3d::Identity()).ok());
+  EXPECT_FALSE(GaussMarkovFactor::create(E(0), E(1), 1.0, 5.0, Eigen::Matrix3d::Zero()).ok());
 }
 
 TEST(ImuFactors, JacobiansMatchNumericalDifferentiation) {
@@ -206,6 +209,16 @@ TEST(ImuFactors, JacobiansMatchNumericalDifferentiation) {
     expect_jacobians_match(*imu, values);
     expect_jacobians_match(*walk, values);
     expect_jacobians_match(gps, values);
+    Values with_errors = values;
+    with_errors.insert(E(0), jitter(0.5));
+    with_errors.insert(E(1), jitter(0.5));
+    expect_jacobians_match(GpsFactor(X(1), E(1), Eigen::Vector3d(0.3, 0.4, 0.6).asDiagonal(), {1.0, 2.0, 3.0}, {0.3, -0.2, 0.8}, GaussianNoise::from_sigmas(Eigen::Vector3d(0.05, 0.04, 0.1)).value()),
+                           with_errors);
+    const SE3 T_body_radar(SO3::exp(Eigen::Vector3d(0.1, -0.3, 0.5)), Eigen::Vector3d(3.6, 0.2, 0.5));
+    expect_jacobians_match(BodyVelocityFactor(X(0), V(0), {8.0, 0.3, -0.1}, T_body_radar, {0.02, -0.01, 0.3},
+                                              GaussianNoise::from_sigmas(Eigen::Vector3d(0.1, 0.2, 0.3)).value()),
+                           values);
+    expect_jacobians_match(*GaussMarkovFactor::create(E(0), E(1), 0.4, 5.0, Eigen::Matrix3d::Identity()).value(), with_errors);
     expect_jacobians_match(velocity_prior, values);
     expect_jacobians_match(bias_prior, values);
     const GravityFactor gravity(X(0), jitter(1.0) + Eigen::Vector3d(0.0, 0.0, 9.8), GaussianNoise::from_sigmas(Eigen::Vector3d::Constant(0.05)).value());
@@ -337,6 +350,32 @@ TEST(ImuFactors, GpsAndImuGraphRecoversTrajectoryAndBiases) {
   std::printf("GPS+IMU: position RMSE %.3f m, max angle %.4f rad (%.1f sigma), accel bias error %.4f, gyro bias error %.5f, %d iterations\n",
               position_rmse, max_angle, max_normalized, (bias.accelerometer - imu_config.initial_accel_bias).norm(),
               (bias.gyroscope - imu_config.initial_gyro_bias).norm(), summary.iterations);
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::graph
+
+namespace hanzo::fusion::graph {
+namespace {
+
+TEST(BodyVelocityFactor, ZeroAtTheSensorsVelocityDifferentiatedFromItsTrajectory) {
+  const sim::SplineTrajectory trajectory = wavy_trajectory();
+  const SE3 T_body_radar(SO3::exp(Eigen::Vector3d(0.1, -0.3, 0.5)), Eigen::Vector3d(3.6, 0.2, 0.5));
+  const auto sensor_position = [&](double seconds) {
+    return (trajectory.sample(kStart + Duration::from_seconds(seconds)).T_world_body * T_body_radar).translation();
+  };
+  for (const double t : {1.0, 2.3, 4.1}) {
+    const double h = 1e-4;
+    const sim::TrajectorySample sample = trajectory.sample(kStart + Duration::from_seconds(t));
+    const Eigen::Vector3d velocity_sensor =
+        (sample.T_world_body * T_body_radar).rotation().inverse() * ((sensor_position(t + h) - sensor_position(t - h)) / (2.0 * h));
+    const BodyVelocityFactor factor(X(0), V(0), velocity_sensor, T_body_radar, sample.angular_velocity_body,
+                                    GaussianNoise::from_sigmas(Eigen::Vector3d::Constant(0.01)).value());
+    Values values;
+    values.insert(X(0), sample.T_world_body);
+    values.insert(V(0), sample.velocity_world);
+    EXPECT_LT(factor.evaluate(values, nullptr).value().norm(), 1e-3) << "t " << t;  // whitened: < 1e-5 m/s
+  }
 }
 
 }  // namespace

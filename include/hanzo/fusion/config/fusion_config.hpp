@@ -241,6 +241,8 @@ struct MappingConfig {
   double loop_search_radius = 10.0;    // m > 0: candidates within this (+5 % of the path between) of the estimate
   double loop_max_rmse = 0.1;          // m > 0: registration inlier RMSE a loop must reach
   bool gnss_factors = true;            // fused GNSS fixes become GPS factors of the graph
+  bool velocity_factors = true;        // fused radar and wheel velocities become velocity factors of the graph
+  double gnss_error_correlation = 10.0;  // s >= 0: time constant of the GNSS error in the graph (0: fixes independent)
   int visual_inertial_window = 40;     // keyframes >= 0 of the visual-inertial graph's sliding window (0: keep every keyframe)
   SplatMappingConfig splats;
 };

@@ -64,16 +64,68 @@ class ImuBiasRandomWalkFactor final : public Factor {
 /// A GNSS antenna position in the world frame (ENU metres, geodesy.hpp converts fixes) for the
 /// pose X(i) whose frame holds the antenna at lever_arm: r = p + R lever_arm - z; noise 3x3
 /// (the fix's covariance). Jacobians: rho R, phi -R [lever_arm]x.
+/// With an error key E(j) (a Vector3d: the receiver's slowly varying position error in units of
+/// error_scale, a unit-variance GaussMarkovFactor process) the fix measures the antenna plus that
+/// error: r = p + R lever_arm + S e - z, Jacobian e S, S = error_scale (world ENU m, e.g. the
+/// Cholesky factor of the fix's correlated covariance); the noise is then the fix's white part.
 class GpsFactor final : public Factor {
  public:
   GpsFactor(Key pose, const Eigen::Vector3d& position_world, const Eigen::Vector3d& lever_arm, GaussianNoise noise)
       : Factor({pose}), position_world_(position_world), lever_arm_(lever_arm), noise_(std::move(noise)) {}
+  GpsFactor(Key pose, Key error, const Eigen::Matrix3d& error_scale, const Eigen::Vector3d& position_world, const Eigen::Vector3d& lever_arm,
+            GaussianNoise noise)
+      : Factor({pose, error}), position_world_(position_world), lever_arm_(lever_arm), error_scale_(error_scale), noise_(std::move(noise)) {}
   int dimension() const override { return 3; }
   Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
 
  private:
   Eigen::Vector3d position_world_;
   Eigen::Vector3d lever_arm_;
+  Eigen::Matrix3d error_scale_ = Eigen::Matrix3d::Identity();
+  GaussianNoise noise_;
+};
+
+/// A first-order Gauss-Markov process x(t) (dx/dt = -x / tau + w) between its values at two
+/// times dt apart, for a Vector3d variable (a GNSS receiver's position error: multipath and the
+/// atmosphere change over seconds to minutes): r = x_j - a x_i, a = exp(-dt / tau), with the
+/// covariance (1 - a^2) Sigma for the process's stationary covariance Sigma (Maybeck,
+/// Stochastic Models, Estimation and Control, vol. 1, sec. 4.11). Jacobians: x_i -a I, x_j I.
+class GaussMarkovFactor final : public Factor {
+ public:
+  /// Fails unless dt >= 0 and tau > 0 are finite and Sigma is positive definite.
+  static Result<std::shared_ptr<GaussMarkovFactor>> create(Key value_i, Key value_j, double dt, double tau,
+                                                           const Eigen::Matrix3d& stationary_covariance);
+  int dimension() const override { return 3; }
+  Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
+  double decay() const { return decay_; }
+
+ private:
+  GaussMarkovFactor(Key value_i, Key value_j, double decay, GaussianNoise noise)
+      : Factor({value_i, value_j}), decay_(decay), noise_(std::move(noise)) {}
+  double decay_;
+  GaussianNoise noise_;
+};
+
+/// The velocity of a sensor rigidly mounted on the body, in the sensor's axes (a radar's ego
+/// velocity from its targets' Doppler, wheel odometry's forward speed with the non-holonomic
+/// lateral and vertical zeros), for X(i) = T_world_body and V(i) (world m/s):
+///   r = R_bs^T (R^T v + w x p_bs) - z
+/// with (R_bs, p_bs) = T_body_sensor and w the body's angular rate (body axes, rad/s; from the
+/// gyro, held fixed). Noise 3x3 (m/s)^2 in sensor axes. Jacobians: phi R_bs^T [R^T v]x,
+/// v R_bs^T R^T, rho 0.
+class BodyVelocityFactor final : public Factor {
+ public:
+  BodyVelocityFactor(Key pose, Key velocity, const Eigen::Vector3d& velocity_sensor, const SE3& T_body_sensor,
+                     const Eigen::Vector3d& angular_rate_body, GaussianNoise noise)
+      : Factor({pose, velocity}), velocity_sensor_(velocity_sensor), R_sensor_body_(T_body_sensor.rotation().matrix().transpose()),
+        lever_velocity_body_(angular_rate_body.cross(T_body_sensor.translation())), noise_(std::move(noise)) {}
+  int dimension() const override { return 3; }
+  Result<Eigen::VectorXd> evaluate(const Values& values, std::vector<Eigen::MatrixXd>* jacobians) const override;
+
+ private:
+  Eigen::Vector3d velocity_sensor_;
+  Eigen::Matrix3d R_sensor_body_;
+  Eigen::Vector3d lever_velocity_body_;  // w x p_bs
   GaussianNoise noise_;
 };
 

@@ -129,12 +129,24 @@ struct FusedGnssFix {
   SE3 world_correction;                 ///< Frontend::world_correction() of that world
 };
 
+/// A sensor velocity the Frontend fused (a radar's ego velocity, wheel odometry's speed with
+/// the non-holonomic zeros, a wheel standstill), for the keyframe graph's velocity factors.
+struct FusedVelocity {
+  std::string sensor;
+  Timestamp timestamp;                 ///< body clock
+  Eigen::Vector3d velocity_sensor;     ///< m/s, sensor axes (wheel speeds divided by the estimated wheel scale)
+  Eigen::Matrix3d covariance;          ///< (m/s)^2, sensor axes
+  SE3 T_body_sensor;
+  Eigen::Vector3d angular_rate_body;   ///< rad/s, the gyro with its estimated bias removed
+};
+
 class Frontend {
  public:
   using PoseCallback = std::function<void(const msgs::PoseEstimate&)>;
   using InnovationCallback = std::function<void(const InnovationRecord&)>;
   using KeyframeCallback = std::function<void(const msgs::Keyframe&)>;
   using GnssCallback = std::function<void(const FusedGnssFix&)>;
+  using VelocityCallback = std::function<void(const FusedVelocity&)>;
 
   /// Fails when the configuration or the calibration is invalid. Without an IMU sensor the
   /// state moves by a constant-velocity motion model between measurements
@@ -222,6 +234,8 @@ class Frontend {
   /// Called once for every GNSS fix the filter fused (a fix re-fused by a rollback is not
   /// reported again), after the pose it corrected.
   void set_gnss_callback(GnssCallback callback);
+  /// Called with every radar or wheel velocity fused (in fusion order, from push()).
+  void set_velocity_callback(VelocityCallback callback);
 
   /// The backend's hook: keyframe `keyframe_id` is really at T_world_body_optimized. The
   /// estimate is moved rigidly by T_optimized * T_keyframe^-1 (world frame), now. Fails for a

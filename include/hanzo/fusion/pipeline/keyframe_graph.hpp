@@ -40,6 +40,21 @@ struct KeyframeGraphConfig {
   /// Cauchy kernel of the GPS factors of add_gps_at_keyframe (whitened residual units): fixes
   /// off by multipath far beyond their covariance lose their pull.
   double gps_cauchy_scale = 2.0;
+  /// GNSS errors are correlated in time (multipath, the atmosphere, a float solution's
+  /// ambiguities change over seconds to minutes): fixes taken as independent pull the graph's
+  /// shape along the error's wander and over-trust its average. With gnss_error_correlation_s > 0
+  /// each keyframe with fixes gets an error variable E(k) (world ENU m: the receiver's position
+  /// error), a first-order Gauss-Markov process with this time constant between consecutive
+  /// ones (graph::GaussMarkovFactor), whose stationary covariance is the fix's reported
+  /// covariance times (1 - gnss_white_fraction); each fix's factor keeps the white part (plus
+  /// what the process moves between the keyframe and the fix). 0: every fix independent.
+  double gnss_error_correlation_s = 10.0;
+  double gnss_white_fraction = 0.1;
+  /// Standard deviation (m) put under the first keyframe prior's position instead of the
+  /// Frontend's own covariance; 0: the Frontend's. Where GNSS fixes give the graph its world
+  /// (the Session sets it then), the Frontend's first position is a copy of the first fix, and
+  /// its prior would count that fix again, with the weight of many once fixes are correlated.
+  double first_position_sigma = 0.0;
   /// Run a full batch (synchronously, in process()) whenever loop closures were added. With
   /// smoother.background_batch = false this makes the backend deterministic (offline runs,
   /// tests); in real time it blocks process() for the length of a batch.
@@ -124,10 +139,11 @@ class KeyframeGraph {
                  const Eigen::Vector3d& lever_arm = Eigen::Vector3d::Zero());
   /// A GNSS position (world ENU m, covariance m^2) of an antenna at `lever_arm` in the body
   /// frame of keyframe `keyframe_id` (the fix's lever arm carried through the body's motion
-  /// from the keyframe to the fix: any time offset between them compensated). Fails for a
-  /// keyframe not added yet, non-finite values or a covariance that is not positive definite.
+  /// from the keyframe to the fix: any time offset between them compensated), taken
+  /// seconds_from_keyframe after (or before) it. Fails for a keyframe not added yet, non-finite
+  /// values or a covariance that is not positive definite.
   Status add_gps_at_keyframe(uint64_t keyframe_id, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,
-                             const Eigen::Vector3d& lever_arm);
+                             const Eigen::Vector3d& lever_arm, double seconds_from_keyframe = 0.0);
   /// A loop closure: keyframe `to` seen from keyframe `from` (T_from_to), covariance over its
   /// tangent. Both keyframes must be known.
   Status add_loop_closure(uint64_t from, uint64_t to, const SE3& T_from_to, const Eigen::Matrix<double, 6, 6>& covariance);
@@ -146,6 +162,8 @@ class KeyframeGraph {
   /// The oldest keyframe whose variables besides the pose are in the graph (window_keyframes);
   /// none before the first keyframe.
   std::optional<uint64_t> window_start() const;
+  /// Whether the graph has the variable, queued (add_factors) or estimated.
+  bool has_variable(graph::Key key) const { return pending_.values.exists(key) || smoother_.estimate().exists(key); }
   graph::IncrementalSmoother& smoother() { return smoother_; }
 
  private:
@@ -163,9 +181,15 @@ class KeyframeGraph {
     Timestamp time;
     Eigen::Vector3d position_world;
     Eigen::Vector3d lever_arm;
-    graph::GaussianNoise noise;
+    Eigen::Matrix3d covariance;
   };
   std::deque<Fix> pending_fixes_;
+  // The newest keyframe with a GNSS error variable E(k) (gnss_error_correlation_s), its time.
+  std::optional<std::pair<uint64_t, Timestamp>> latest_gnss_error_;
+  // The factor of a fix at keyframe_id (and, with correlated errors, E(keyframe_id) with its
+  // prior or process factor when it has none yet) into pending_.
+  Status add_fix_factor(uint64_t keyframe_id, const Eigen::Vector3d& position_world, const Eigen::Matrix3d& covariance,
+                        const Eigen::Vector3d& lever_arm, double seconds_from_keyframe, bool robust);
   // The window (window_keyframes): its keyframes, oldest first, with their relative motion's
   // unscaled covariance for the link made when they leave; the factors that stay with a pose
   // when it leaves.

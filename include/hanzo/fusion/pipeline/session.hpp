@@ -158,6 +158,14 @@ struct SessionConfig {
   bool loop_closure = true;
   /// GNSS fixes the filter fused become GPS factors of the keyframe graph.
   bool gnss_factors = true;
+  /// Radar ego velocities and wheel speeds the filter fused become velocity factors
+  /// (graph::BodyVelocityFactor) on the keyframe within velocity_max_time_offset_s of them, one
+  /// per sensor and keyframe, in graphs that estimate keyframe velocities (the LiDAR- and
+  /// visual-inertial ones). The body's velocity change over the offset is taken as noise:
+  /// velocity_acceleration_sigma (m/s^2) times the offset.
+  bool velocity_factors = true;
+  double velocity_max_time_offset_s = 0.03;
+  double velocity_acceleration_sigma = 2.0;
   /// frontend.type msckf: the keyframe graph holds IMU preintegration and landmark projection
   /// factors (visual_inertial_factors.hpp), the odometry's relative motions only as a weak anchor.
   /// Such a graph corrects the Frontend at loop closures only, and its smoother re-optimizes at
@@ -263,6 +271,7 @@ struct MappingSummary {
   double last_correction_m = 0.0; ///< the backend's last correction of the latest keyframe
   uint64_t relocalizations = 0;   ///< successful relocalize() calls
   uint64_t gnss_factors = 0;      ///< GNSS fixes added to the keyframe graph
+  uint64_t graph_velocity_factors = 0;  ///< radar and wheel velocities added to the keyframe graph
   uint64_t wheel_slip_episodes = 0;   ///< times the wheels began to disagree with the LiDAR
   uint64_t wheel_messages_withheld = 0;  ///< wheel messages not fused because of it
   /// Cameras (visual odometry): frames tracked / lost, its keyframes and landmarks, standstill
@@ -428,6 +437,11 @@ class Session {
   void track_health();
   /// A fused GNSS fix as a GPS factor on the newest keyframe (gnss_factors).
   void add_gnss_factor(const FusedGnssFix& fix);
+  /// Fused sensor velocities as velocity factors on the newest keyframe near them in time
+  /// (velocity_factors): when a velocity comes, and for those of the last moments when a
+  /// keyframe comes.
+  void add_velocity_factor(const FusedVelocity& velocity);
+  void attach_recent_velocities();
 
   std::unique_ptr<Frontend> frontend_;
   SessionConfig config_;
@@ -444,6 +458,8 @@ class Session {
   std::optional<LidarInertialOdometry> odometry_;
   /// The LiDAR-inertial graph's factors (lidar_inertial_factors) and the IMU they integrate.
   std::unique_ptr<LidarInertialFactors> lidar_factors_;
+  std::deque<FusedVelocity> recent_velocities_;             // the last velocity_max_time_offset_s
+  std::map<std::string, uint64_t> velocity_keyframe_;       // sensor -> keyframe of its last factor
   std::unique_ptr<BodyImu> body_imu_;
   std::string imu_sensor_;
   std::optional<PlanarLaserOdometry> planar_;  ///< instead of odometry_ for a planar_laser sensor
