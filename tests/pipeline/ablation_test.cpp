@@ -11,7 +11,9 @@
 //    (GNSS); while GNSS is degraded or lost and rain blinds the LiDAR (20-63 s) its error stays
 //    within 2x of its error over the whole drive. Its SE3-aligned shape is not the best: with GNSS
 //    the LiDAR map's frame moves onto the GNSS world as the fixes come (RTK float, errors
-//    correlated over seconds), while IMU + LiDAR keep the start's frame, tilt included.
+//    correlated over seconds), while IMU + LiDAR keep the start's frame, tilt included. The
+//    optimized trajectory (the GNSS error estimated in the graph) has the best world error and a
+//    shape within 0.1 m.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -72,6 +74,8 @@ TEST(Ablation, EverySensorTogetherHasTheBestLevelAndWorldErrorOnTheUrbanDrive) {
     double level = 0.0;      // m, real time, yaw-aligned
     double shape = 0.0;      // m, real time, SE3-aligned
     double degraded = 0.0;   // m, real time, no alignment, 20-63 s
+    double optimized_world = 0.0;  // m, optimized, no alignment
+    double optimized_shape = 0.0;  // m, optimized, SE3-aligned
   };
   std::map<std::string, Errors> errors;
   for (const SensorModality aiding : {SensorModality::kLidar, SensorModality::kGnss, SensorModality::kWheelOdometry, SensorModality::kRadar,
@@ -99,9 +103,16 @@ TEST(Ablation, EverySensorTogetherHasTheBestLevelAndWorldErrorOnTheUrbanDrive) {
       squared_sum += (real_time.estimate.poses[i].block<3, 1>(0, 3) - real_time.truth.poses[i].block<3, 1>(0, 3)).squaredNorm();
       ++count;
     }
-    errors[name] = {ape_rmse(real_time), level->statistics.rmse, shape->statistics.rmse, std::sqrt(squared_sum / std::max(count, 1))};
-    std::printf("urban drive, %-19s APE real time %7.3f m (%7.3f m while degraded), yaw-aligned %7.3f m, SE3-aligned %7.3f m\n",
-                name.c_str(), errors[name].world, errors[name].degraded, errors[name].level, errors[name].shape);
+    const testing::ReplayedTrajectories optimized = testing::optimized_with_truth(*session, *simulation);
+    const auto optimized_shape = eval::compute_ape(optimized.truth, optimized.estimate, {.relation = eval::PoseRelation::kTranslation,
+                                                                                         .alignment = eval::Alignment::kSE3});
+    ASSERT_TRUE(optimized_shape.ok());
+    errors[name] = {ape_rmse(real_time), level->statistics.rmse, shape->statistics.rmse, std::sqrt(squared_sum / std::max(count, 1)),
+                    ape_rmse(optimized), optimized_shape->statistics.rmse};
+    std::printf("urban drive, %-19s APE real time %7.3f m (%7.3f m while degraded), yaw-aligned %7.3f m, SE3-aligned %7.3f m; "
+                "optimized %7.3f m, SE3-aligned %7.3f m\n",
+                name.c_str(), errors[name].world, errors[name].degraded, errors[name].level, errors[name].shape, errors[name].optimized_world,
+                errors[name].optimized_shape);
   }
   const Errors& every = errors.at("all");
   for (const auto& [name, error] : errors) {
@@ -114,6 +125,36 @@ TEST(Ablation, EverySensorTogetherHasTheBestLevelAndWorldErrorOnTheUrbanDrive) {
   EXPECT_LT(every.world, 0.7);
   EXPECT_LT(every.shape, 0.5);
   EXPECT_LT(every.degraded, 2.0 * every.world);
+  // The graph with the GNSS error estimated (keyframe_graph.hpp): measured optimized world 0.17 m
+  // (IMU + GNSS 13.3 m; 0.37 m with the fixes independent), SE3-aligned 0.05 m (0.24 m).
+  EXPECT_LT(every.optimized_world, errors.at("imu+gnss").optimized_world);
+  EXPECT_LT(every.optimized_world, 0.25);
+  EXPECT_LT(every.optimized_shape, 0.1);
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::pipeline
+
+namespace hanzo::fusion::pipeline {
+namespace {
+
+// examples/scenarios/delivery_van.yaml with every sensor (IMU, OS1-64, GNSS with a 25 s outage
+// indoors, rain on the LiDAR, wheels, radar): the optimized trajectory within the issue's
+// 0.15 m SE3-aligned (measured 0.100 m; 0.198 m with the fixes independent) and 0.25 m in the
+// world frame (0.142 m).
+TEST(Ablation, TheDeliveryVanWithEverySensorIsOptimizedWithin15Centimetres) {
+  sim::Scenario scenario = sim::load_scenario("examples/scenarios/delivery_van.yaml").value();
+  scenario.num_threads = 0;
+  auto simulation = sim::ScenarioSimulation::create(scenario).value();
+  auto session = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  testing::replay(*simulation, *session);
+  const testing::ReplayedTrajectories optimized = testing::optimized_with_truth(*session, *simulation);
+  const auto shape = eval::compute_ape(optimized.truth, optimized.estimate, {.relation = eval::PoseRelation::kTranslation,
+                                                                             .alignment = eval::Alignment::kSE3});
+  ASSERT_TRUE(shape.ok());
+  std::printf("delivery van, every sensor: optimized APE %.3f m, SE3-aligned %.3f m\n", ape_rmse(optimized), shape->statistics.rmse);
+  EXPECT_LT(shape->statistics.rmse, 0.15);
+  EXPECT_LT(ape_rmse(optimized), 0.25);
 }
 
 }  // namespace
