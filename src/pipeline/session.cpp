@@ -15,12 +15,12 @@
 
 #include <fmt/format.h>
 
-#include "hanzo/fusion/graph/imu_factors.hpp"
-#include "hanzo/fusion/graph/keys.hpp"
 #include "hanzo/fusion/cloud/point_cloud.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/estimate/attitude_models.hpp"
 #include "hanzo/fusion/estimate/static_alignment.hpp"
+#include "hanzo/fusion/graph/imu_factors.hpp"
+#include "hanzo/fusion/graph/keys.hpp"
 #include "hanzo/fusion/msgs/validate.hpp"
 
 namespace hanzo::fusion::pipeline {
