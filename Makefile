@@ -7,7 +7,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
-.PHONY: all deps configure build test demo bench fuzz sanitize install clean train-correspondence-filter train-place-recognition
+.PHONY: all deps configure build test demo bench fuzz sanitize container install clean train-correspondence-filter train-place-recognition
 
 all: build
 
@@ -48,6 +48,11 @@ fuzz: deps
 # under ThreadSanitizer ($(BUILD_DIR)-asan, $(BUILD_DIR)-tsan; about three hours on 2 cores).
 sanitize: deps
 	@bash scripts/sanitize.sh $(BUILD_DIR)
+
+# The server image (Dockerfile) built with Debian's podman, then run and checked over REST and
+# gRPC (scripts/container.sh; a full compile inside the image: about 15 minutes on 2 cores).
+container: build
+	@bash scripts/container.sh $(BUILD_DIR)
 
 install: build
 	cmake --install $(BUILD_DIR) $(if $(PREFIX),--prefix $(PREFIX),)
