@@ -321,13 +321,11 @@ EventOutcome Estimator::process_radar(const Event& event, const msgs::RadarMessa
   const SensorSetup& sensor = sensors_[event.sensor];
   const estimate::GyroReading gyro = gyro_reading();
   const double noise = sensor.config->fusion.velocity_noise;
-  const estimate::SensorVelocityModel model(ego->velocity_sensor, ego->covariance + noise * noise * Eigen::Matrix3d::Identity(),
-                                            sensor.T_body_sensor, gyro);
+  const Eigen::Matrix3d covariance = ego->covariance + noise * noise * Eigen::Matrix3d::Identity();
+  const estimate::SensorVelocityModel model(ego->velocity_sensor, covariance, sensor.T_body_sensor, gyro);
   EventOutcome outcome;
   outcome.fused = update(event, model, observer, &outcome.reason);
-  if (outcome.fused) {
-    outcome.velocity = fused_velocity(event, ego->velocity_sensor, ego->covariance + noise * noise * Eigen::Matrix3d::Identity());
-  }
+  if (outcome.fused) outcome.velocity = fused_velocity(event, ego->velocity_sensor, covariance);
   return outcome;
 }
 

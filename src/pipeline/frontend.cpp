@@ -92,8 +92,8 @@ struct Frontend::Impl final : UpdateObserver {
   /// Sends the held keyframes no late message can change any more (the filter passed them by
   /// more than the lag window; all of them when `all`), moved into today's world.
   void send_final_keyframes(bool all);
-  /// Reports a fused GNSS fix (first fusions only: fuse_in_order and a late event itself; a
-  /// replay after a rollback re-fuses fixes already reported).
+  /// Reports a fused GNSS fix or sensor velocity (first fusions only: fuse_in_order and a late
+  /// event itself; a replay after a rollback re-fuses measurements already reported).
   void report_fused(const Event& event, const EventOutcome& outcome);
   void count(const Event& event, const EventOutcome& outcome);
   /// Fuses the pending messages up to the IMU's time (all of them when flush_all).
