@@ -174,7 +174,7 @@ Result<MappingConfig> parse_mapping(const YamlValue& node) {
   if (!node.present()) return mapping;
   HANZO_RETURN_IF_ERROR(node.check_keys({"enabled", "lidar_voxel", "lidar_source_voxel", "lidar_max_range", "map_voxel",
                                          "occupancy_resolution", "keyframe_distance", "keyframe_angle", "loop_closure",
-                                         "loop_min_travel", "loop_search_radius", "loop_max_rmse", "gnss_factors", "gnss_error_correlation", "velocity_factors", "visual_inertial_window", "splats"}));
+                                         "loop_min_travel", "loop_search_radius", "loop_max_rmse", "gnss_factors", "gnss_error_correlation", "follow_graph", "velocity_factors", "visual_inertial_window", "splats"}));
   HANZO_ASSIGN_OR_RETURN(mapping.enabled, bool_or(node["enabled"], mapping.enabled));
   HANZO_ASSIGN_OR_RETURN(mapping.lidar_voxel, positive_or(node["lidar_voxel"], mapping.lidar_voxel));
   HANZO_ASSIGN_OR_RETURN(mapping.lidar_source_voxel, positive_or(node["lidar_source_voxel"], mapping.lidar_source_voxel));
@@ -189,6 +189,7 @@ Result<MappingConfig> parse_mapping(const YamlValue& node) {
   HANZO_ASSIGN_OR_RETURN(mapping.loop_max_rmse, positive_or(node["loop_max_rmse"], mapping.loop_max_rmse));
   HANZO_ASSIGN_OR_RETURN(mapping.gnss_factors, bool_or(node["gnss_factors"], mapping.gnss_factors));
   HANZO_ASSIGN_OR_RETURN(mapping.velocity_factors, bool_or(node["velocity_factors"], mapping.velocity_factors));
+  HANZO_ASSIGN_OR_RETURN(mapping.follow_graph, bool_or(node["follow_graph"], mapping.follow_graph));
   HANZO_ASSIGN_OR_RETURN(mapping.gnss_error_correlation, yaml::non_negative_or(node["gnss_error_correlation"], mapping.gnss_error_correlation));
   if (const YamlValue& window = node["visual_inertial_window"]; window.present()) {
     int64_t keyframes = 0;
@@ -426,6 +427,7 @@ std::string mapping_yaml(const MappingConfig& m) {
   flag("gnss_factors", m.gnss_factors, d.gnss_factors);
   number("gnss_error_correlation", m.gnss_error_correlation, d.gnss_error_correlation);
   flag("velocity_factors", m.velocity_factors, d.velocity_factors);
+  flag("follow_graph", m.follow_graph, d.follow_graph);
   if (m.visual_inertial_window != d.visual_inertial_window) out += fmt::format("    visual_inertial_window: {}\n", m.visual_inertial_window);
   const SplatMappingConfig& splats = m.splats;
   const SplatMappingConfig splat_defaults;

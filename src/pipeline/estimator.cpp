@@ -142,6 +142,7 @@ Estimator::Estimator(const Estimator& other)
       gnss_before_initialization_(other.gnss_before_initialization_),
       wheels_moved_before_initialization_(other.wheels_moved_before_initialization_),
       heading_pending_(other.heading_pending_),
+      gnss_positions_to_backend_(other.gnss_positions_to_backend_),
       wheel_yaw_rate_needed_(other.wheel_yaw_rate_needed_),
       estimate_wheel_scale_(other.estimate_wheel_scale_),
       estimate_gyro_yaw_scale_(other.estimate_gyro_yaw_scale_),

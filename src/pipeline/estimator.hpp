@@ -129,6 +129,10 @@ class Estimator {
   /// The product of the backend corrections fused so far (world frame, newest on the left):
   /// a pose estimated before them is T * that pose in today's world.
   const SE3& world_correction() const { return world_correction_; }
+  /// GNSS positions for the backend alone (Frontend::set_gnss_positions_to_backend): once the
+  /// heading is known, a fix past the fix-type policy and the chi-square gate (evaluated on a
+  /// copy of the filter) is reported in EventOutcome::gnss_fix without updating the state.
+  void set_gnss_positions_to_backend(bool enabled) { gnss_positions_to_backend_ = enabled; }
   /// The current estimate of `sensor`'s map frame in the world (Frontend::push_map_pose);
   /// none before its first map pose was fused.
   std::optional<SE3> map_frame(size_t sensor) const;
@@ -211,6 +215,7 @@ class Estimator {
   /// GNSS without an IMU heading: the world heading is unknown until the GNSS track and the
   /// dead-reckoned track over the same stretch can be compared (see align_heading_to_course).
   bool heading_pending_ = false;
+  bool gnss_positions_to_backend_ = false;  // see set_gnss_positions_to_backend
   /// Without an IMU and without a sensor that measures the orientation (LiDAR, camera), the
   /// wheels' yaw rate is the only measurement of the turn: fused whatever use_yaw_rate says.
   bool wheel_yaw_rate_needed_ = false;

@@ -84,7 +84,13 @@ EventOutcome Estimator::process_gnss(const Event& event, const msgs::GnssMessage
   }
   const estimate::GnssPositionModel model(antenna_gnss, covariance, lever);
   EventOutcome outcome;
-  outcome.fused = update(event, model, observer, &outcome.reason);
+  if (gnss_positions_to_backend_) {
+    // The backend fuses it: the gate is the filter's, the state stays.
+    outcome.fused = update_with(event, model.name(), [&](bool apply_gate) { return filter_->clone()->update(model, apply_gate); }, observer,
+                                &outcome.reason, 0, true);
+  } else {
+    outcome.fused = update(event, model, observer, &outcome.reason);
+  }
   if (outcome.fused) {
     const NavigationState after = filter_->state();
     outcome.gnss_fix = FusedGnssFix{"", event.time, antenna_gnss, covariance, lever, SE3(after.R_world_body, after.position),

@@ -202,6 +202,11 @@ void Frontend::set_innovation_callback(InnovationCallback callback) { impl_->inn
 void Frontend::set_keyframe_callback(KeyframeCallback callback) { impl_->keyframe_callback = std::move(callback); }
 void Frontend::set_gnss_callback(GnssCallback callback) { impl_->gnss_callback = std::move(callback); }
 void Frontend::set_velocity_callback(VelocityCallback callback) { impl_->velocity_callback = std::move(callback); }
+void Frontend::set_gnss_positions_to_backend(bool enabled) {
+  // The history's estimators too: a rollback restarts from one of them.
+  impl_->estimator.set_gnss_positions_to_backend(enabled);
+  for (Impl::HistoryEntry& entry : impl_->history) entry.after.set_gnss_positions_to_backend(enabled);
+}
 
 Status Frontend::apply_correction(uint64_t keyframe_id, const SE3& T_world_body_optimized) {
   Impl& impl = *impl_;

@@ -224,6 +224,15 @@ Result<KeyframeGraphUpdate> KeyframeGraph::process(Frontend* frontend) {
     last_loop_batch_ = now;
     update.loop_batch = true;
   }
+  if (config_.batch_interval_s > 0.0 && latest_keyframe_) {
+    const Timestamp now = keyframe_times_.at(*latest_keyframe_);
+    if (!last_periodic_batch_ || (now - *last_periodic_batch_).seconds() >= config_.batch_interval_s) {
+      if (Result<graph::OptimizationSummary> batch = smoother_.wait_for_batch(); !batch) {
+        return Error(fmt::format("keyframe graph: {}", batch.error().message));
+      }
+      last_periodic_batch_ = now;
+    }
+  }
   const bool loop_closed = loop_closure_pending_;
   loop_closure_pending_ = false;
   if (frontend != nullptr && latest_keyframe_ && (loop_closed || !config_.correct_on_loop_closures_only)) {

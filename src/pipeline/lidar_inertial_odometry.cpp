@@ -121,13 +121,23 @@ Result<LidarInertialOdometry::RegisteredScan> LidarInertialOdometry::fuse(Result
   statistics_.degenerate += estimate.degenerate ? 1 : 0;
   statistics_.weather_degraded += estimate.weather_degraded ? 1 : 0;
   const Timestamp sensor_time = estimate.time - lidar_time_offset_;
+  if (config_.estimate_map_frame && hold_map_frame_ && !held_map_frame_) {
+    if (const std::optional<SE3> T_world_map = frontend_.map_frame(lidar_sensor_)) held_map_frame_ = HeldMapFrame{*T_world_map, frontend_.world_correction()};
+  }
+  if (held_map_frame_) {
+    // Backend corrections since the last sweep moved the world: the held frame moves with it.
+    held_map_frame_->T_world_map = frontend_.world_correction() * held_map_frame_->correction.inverse() * held_map_frame_->T_world_map;
+    held_map_frame_->correction = frontend_.world_correction();
+    registered->T_world_lidar = held_map_frame_->T_world_map * estimate.T_world_lidar;
+  }
   Status fused;
-  if (config_.estimate_map_frame) {
+  if (config_.estimate_map_frame && !held_map_frame_) {
     fused = frontend_.push_map_pose(lidar_sensor_, sensor_time, estimate.T_world_lidar, registered->covariance);
   } else {
     // The covariance's position block from the odometry's axes to the world's.
+    const SE3& T_world_odometry = held_map_frame_ ? held_map_frame_->T_world_map : T_world_odometry_;
     Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Identity();
-    J.topLeftCorner<3, 3>() = T_world_odometry_.rotation().matrix();
+    J.topLeftCorner<3, 3>() = T_world_odometry.rotation().matrix();
     fused = frontend_.push_pose(lidar_sensor_, sensor_time, registered->T_world_lidar, J * registered->covariance * J.transpose());
   }
   if (!fused) {
@@ -136,7 +146,7 @@ Result<LidarInertialOdometry::RegisteredScan> LidarInertialOdometry::fuse(Result
   }
   ++statistics_.fused;
   // The map frame as the filter estimates it now (none yet when the pose waits for the IMU).
-  if (config_.estimate_map_frame) {
+  if (config_.estimate_map_frame && !held_map_frame_) {
     if (const std::optional<SE3> T_world_map = frontend_.map_frame(lidar_sensor_)) registered->T_world_lidar = *T_world_map * estimate.T_world_lidar;
   }
   return registered;

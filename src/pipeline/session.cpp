@@ -172,6 +172,7 @@ SessionConfig SessionConfig::from(const config::FusionConfig& config) {
   session.gnss_factors = mapping.gnss_factors;
   session.backend.gnss_error_correlation_s = mapping.gnss_error_correlation;
   session.velocity_factors = mapping.velocity_factors;
+  session.frontend_follows_graph = mapping.follow_graph;
   session.visual_inertial_window_keyframes = mapping.visual_inertial_window;
   return session;
 }
@@ -179,6 +180,7 @@ SessionConfig SessionConfig::from(const config::FusionConfig& config) {
 Status SessionConfig::validate() const {
   HANZO_RETURN_IF_ERROR(with_context(lidar_odometry.odometry.validate(), "lidar_odometry"));
   HANZO_RETURN_IF_ERROR(with_context(loop.validate(), "loop"));
+  if (!(follow_batch_interval_s >= 0)) return Error(fmt::format("follow_batch_interval_s: {} is not >= 0", follow_batch_interval_s));
   HANZO_RETURN_IF_ERROR(with_context(planar_laser.validate(), "planar_laser"));
   HANZO_RETURN_IF_ERROR(with_context(lidar_merge.validate(), "lidar_merge"));
   if (visual_inertial_window_keyframes < 0) return Error(fmt::format("visual_inertial_window_keyframes: {} is not >= 0", visual_inertial_window_keyframes));
@@ -248,8 +250,15 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   if (!sees_the_world) session_config.backend.gnss_error_correlation_s = 0.0;
   // Correlated fixes weigh as few: the Frontend's first position (a copy of the first fix) would
   // then hold the graph's world. The fixes give it.
-  if (session_config.gnss_factors && configures_gnss(config) && session_config.backend.gnss_error_correlation_s > 0.0) {
-    session_config.backend.first_position_sigma = 100.0;
+  const bool gnss_error_in_graph =
+      session_config.gnss_factors && configures_gnss(config) && session_config.backend.gnss_error_correlation_s > 0.0;
+  if (gnss_error_in_graph) session_config.backend.first_position_sigma = 100.0;
+  // A LiDAR-inertial graph with the fixes and their error holds the world: the fixes go to it
+  // alone and the Frontend follows it after every update (follows_graph).
+  const bool follows_graph = session_config.frontend_follows_graph && lidar_inertial_graph && gnss_error_in_graph;
+  if (follows_graph) {
+    session_config.backend.correct_on_loop_closures_only = false;
+    if (session_config.mode == SessionMode::kReplay) session_config.backend.batch_interval_s = session_config.follow_batch_interval_s;
   }
   // With an IMU the keyframes' roll and pitch are measured (gravity); the visual- and
   // LiDAR-inertial graphs have their own IMU factors.
@@ -278,6 +287,10 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   auto session = std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), planar_laser,
                                                       lidar_calibration, std::move(wheel_sensor), wheel_calibration));
   session->camera_odometry_ = std::move(camera_odometry);
+  if (follows_graph) {
+    session->follows_graph_ = true;
+    session->frontend_->set_gnss_positions_to_backend(true);
+  }
   if (config.mapping.splats.enabled && session->config_.mapping) {
     HANZO_ASSIGN_OR_RETURN(session->splats_, create_session_splats(config, calibration, session->config_, session->odometry_.has_value()));
   }
@@ -1048,6 +1061,8 @@ void Session::update_backend() {
       if (const std::optional<uint64_t> start = graph_->window_start()) factors->set_window_start(*start);
     }
   }
+  // The graph now holds the world: the LiDAR map's frame no longer takes up the filter's drift.
+  if (follows_graph_ && update->corrected_session && odometry_) odometry_->hold_map_frame();
   if (update->factors_added == 0) return;
   summary_.last_correction_m = update->correction_translation_m;
   follow_graph();
@@ -1187,6 +1202,14 @@ Result<RelocalizationOutcome> Session::relocalize(const lidar::MapLocalizer& map
   for (std::size_t k = 0; k < map_keyframes_.size(); ++k) {
     map_keyframes_[k].T_world_lidar = outcome.T_map_world * map_keyframe_pose(k);
     moved[k] = map_keyframes_[k].T_world_lidar;
+  }
+  if (follows_graph_) {
+    // The new graph gets no fixes (the world is the map's now): the filter fuses them again, and
+    // the graph corrects it at loop closures.
+    follows_graph_ = false;
+    frontend_->set_gnss_positions_to_backend(false);
+    config_.backend.correct_on_loop_closures_only = true;
+    config_.backend.batch_interval_s = 0.0;
   }
   graph_ = std::make_unique<KeyframeGraph>(config_.backend);
   restart_graph_ = true;

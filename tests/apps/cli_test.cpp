@@ -829,7 +829,7 @@ TEST(Cli, RunMapsWithTheWholePipelineAndReplaysBitIdenticallyOnAnyThreadCount) {
   EXPECT_GT(one["mapping"]["scans_registered"].get<int>(), 200);
   EXPECT_GT(one["mapping"]["map_keyframes"].get<int>(), 5);
   EXPECT_GT(one["mapping"]["graph_keyframes"].get<int>(), 15);
-  for (const char* key : {"evaluation", "evaluation_optimized"}) {
+  for (const char* key : {"evaluation", "evaluation_tracking", "evaluation_optimized"}) {
     ASSERT_TRUE(one[key].contains("ape_se3_aligned_rmse_m")) << one[key].dump();
     EXPECT_LT(one[key]["ape_se3_aligned_rmse_m"].get<double>(), 0.1) << key;
   }

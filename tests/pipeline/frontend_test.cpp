@@ -190,6 +190,42 @@ TEST(Frontend, AGnssJumpOf50MetersIsGatedAndTheEstimateDoesNotMove) {
   EXPECT_NEAR(after.T_world_body.position.x() - before.T_world_body.position.x(), 0.01, 0.002);
 }
 
+// Frontend::set_gnss_positions_to_backend: fixes drifting east of the drive (0.2 m/s from 2 s
+// on) pass the gate and go to the GNSS callback, and the filter stays on the IMU and the wheels
+// (fused, it moves onto them); a 50 m jump is gated and not passed on.
+TEST(Frontend, GnssPositionsForTheBackendAreGatedAndPassedOnWithoutMovingTheFilter) {
+  const auto drift = [](double t) { return t > 2.0 ? 0.2 * (t - 2.0) : 0.0; };
+  const auto east_after = [&drift](bool to_backend, std::vector<FusedGnssFix>& fixes) {
+    auto session = make_session();
+    session->set_gnss_positions_to_backend(to_backend);
+    session->set_gnss_callback([&fixes](const FusedGnssFix& fix) { fixes.push_back(fix); });
+    for (const Message& m : drive(6.0)) {
+      msgs::SensorMessage message = m.message;
+      if (m.sensor == "gnss") {
+        const double t = (std::get<msgs::GnssMessage>(message).timestamp - at(0.0)).seconds();
+        message = gnss_at(t, drift(t));
+      }
+      EXPECT_TRUE(session->push(m.sensor, message).ok());
+    }
+    EXPECT_TRUE(session->push("imu", imu_at(6.004)).ok());  // the last fix (6.002 s) is fused
+    const std::size_t reported = fixes.size();
+    EXPECT_TRUE(session->push("gnss", gnss_at(6.005, 50.0)).ok());
+    EXPECT_TRUE(session->push("imu", imu_at(6.01)).ok());
+    EXPECT_EQ(fixes.size(), reported) << "the jump was passed on";
+    EXPECT_EQ(session->summary().sensors[2].rejected.at(Rejection::kGated), 1U);
+    return session->latest_pose().value().T_world_body.position.x() - distance_at(6.01);
+  };
+  std::vector<FusedGnssFix> fused, passed_on;
+  const double east_fused = east_after(false, fused);
+  const double east_passed_on = east_after(true, passed_on);
+  EXPECT_GT(east_fused, 0.25);               // pulled towards the fixes (0.8 m east by now; 0.33 m)
+  EXPECT_NEAR(east_passed_on, 0.0, 0.05);    // the IMU and the wheels only
+  EXPECT_EQ(passed_on.size(), fused.size());  // the same fixes pass the gate
+  ASSERT_FALSE(passed_on.empty());
+  const double last = (passed_on.back().timestamp - at(0.0)).seconds();
+  EXPECT_NEAR(passed_on.back().antenna_world.x(), distance_at(last) + drift(last), 1e-6);
+}
+
 TEST(Frontend, AnImuSpikeIsRejectedAndTheEstimateDoesNotMove) {
   std::vector<Message> clean = drive(5.0);
   std::vector<Message> spiked;

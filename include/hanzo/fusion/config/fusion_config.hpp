@@ -243,6 +243,7 @@ struct MappingConfig {
   bool gnss_factors = true;            // fused GNSS fixes become GPS factors of the graph
   bool velocity_factors = true;        // fused radar and wheel velocities become velocity factors of the graph
   double gnss_error_correlation = 10.0;  // s >= 0: time constant of the GNSS error in the graph (0: fixes independent)
+  bool follow_graph = true;            // the LiDAR-inertial graph holds the GNSS fixes; the frontend follows it every update
   int visual_inertial_window = 40;     // keyframes >= 0 of the visual-inertial graph's sliding window (0: keep every keyframe)
   SplatMappingConfig splats;
 };

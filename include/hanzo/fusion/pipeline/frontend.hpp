@@ -236,6 +236,12 @@ class Frontend {
   void set_gnss_callback(GnssCallback callback);
   /// Called with every radar or wheel velocity fused (in fusion order, from push()).
   void set_velocity_callback(VelocityCallback callback);
+  /// For a backend that fuses GNSS positions itself and moves this Frontend onto its estimate
+  /// (apply_correction after each of its updates): once the heading is known, fixes past the
+  /// fix-type policy and the chi-square gate go to the GNSS callback without updating the
+  /// filter, so that the backend's graph holds each fix once. Until the heading is known (the
+  /// GNSS track aligns it) the filter fuses them as usual. Off again: the filter fuses them.
+  void set_gnss_positions_to_backend(bool enabled);
 
   /// The backend's hook: keyframe `keyframe_id` is really at T_world_body_optimized. The
   /// estimate is moved rigidly by T_optimized * T_keyframe^-1 (world frame), now. Fails for a

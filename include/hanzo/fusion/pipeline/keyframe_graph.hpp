@@ -73,6 +73,12 @@ struct KeyframeGraphConfig {
   /// without the graph's corrections), while the graph's keyframes with GPS factors were
   /// better than the filter's (0.44 m).
   bool correct_on_loop_closures_only = false;
+  /// A full batch (synchronously, in process()) at least this often in keyframe time (s; 0:
+  /// never). The incremental updates re-optimize the newest variables with the older ones held:
+  /// a graph whose world comes from correlated GNSS fixes moves as a whole as the fixes add up,
+  /// which only a batch spreads. For a Frontend that follows the graph in replay, where no
+  /// background batch runs (smoother.background_batch false); live, background batches do it.
+  double batch_interval_s = 0.0;
   /// Hold each keyframe's roll and pitch near the Frontend's (a GravityFactor: the body's "up"
   /// as the keyframe's attitude says, with its attitude covariance plus level_sigma_floor). The
   /// relative motions between keyframes carry no gravity: without this the graph keeps the
@@ -184,6 +190,7 @@ class KeyframeGraph {
     Eigen::Matrix3d covariance;
   };
   std::deque<Fix> pending_fixes_;
+  std::optional<Timestamp> last_periodic_batch_;  // keyframe time of the last batch_interval_s batch
   // The newest keyframe with a GNSS error variable E(k) (gnss_error_correlation_s), its time.
   std::optional<std::pair<uint64_t, Timestamp>> latest_gnss_error_;
   // The factor of a fix at keyframe_id (and, with correlated errors, E(keyframe_id) with its

@@ -116,6 +116,13 @@ class LidarInertialOdometry {
   /// failure, or the Frontend refusing the pose).
   Result<RegisteredScan> fuse(Result<RegisteredScan> registered);
 
+  /// With estimate_map_frame: from the next fused sweep on, the map frame stays where the
+  /// filter has it now and moves only with the Frontend's world corrections; sweeps are fused
+  /// as world poses. For a session whose backend holds the world (GNSS in the keyframe graph,
+  /// the Frontend following it): the filter then has no absolute measurement, and an estimated
+  /// map frame would take up the IMU's drift instead of the body. Call from fuse()'s thread.
+  void hold_map_frame() { hold_map_frame_ = true; }
+  bool map_frame_held() const { return held_map_frame_.has_value(); }
   const LidarInertialOdometryStatistics& statistics() const { return statistics_; }
   /// The odometry (its local map, latest pose); nullptr before the first scan. Not while
   /// register_scan() runs on another thread.
@@ -138,6 +145,13 @@ class LidarInertialOdometry {
   SE3 T_world_odometry_;                 ///< the odometry's frame in the session's (corrected) world
   SE3 correction_at_last_scan_;          ///< Frontend::world_correction() then
   LidarInertialOdometryStatistics statistics_;
+  // fuse()'s state (hold_map_frame): the held map frame in the world of `correction`.
+  struct HeldMapFrame {
+    SE3 T_world_map;
+    SE3 correction;
+  };
+  bool hold_map_frame_ = false;
+  std::optional<HeldMapFrame> held_map_frame_;
 };
 
 }  // namespace hanzo::fusion::pipeline

@@ -86,7 +86,9 @@
 //  - GNSS fixes the filter fused (Frontend::set_gnss_callback) become GPS factors on the newest
 //    Frontend keyframe (gnss_factors), their lever arm carried through the body's motion from
 //    the keyframe to the fix, so that the graph's corrections agree with GNSS instead of
-//    pulling against it (and GNSS bounds the drift of poses a loop closure moves).
+//    pulling against it (and GNSS bounds the drift of poses a loop closure moves). With a 3D
+//    LiDAR and an IMU the graph holds the fixes alone and the Frontend follows it
+//    (frontend_follows_graph).
 //
 // Frames: world = the Frontend's world (ENU at the datum when GNSS or a datum is configured).
 // Units m, s, rad. Limits: the first LiDAR paces the merged sweeps (without it the others are
@@ -164,6 +166,18 @@ struct SessionConfig {
   /// visual-inertial ones). The body's velocity change over the offset is taken as noise:
   /// velocity_acceleration_sigma (m/s^2) times the offset.
   bool velocity_factors = true;
+  /// Where the LiDAR-inertial graph holds the GNSS fixes with their correlated error
+  /// (gnss_factors, backend.gnss_error_correlation_s > 0, a 3D LiDAR and an IMU), the graph
+  /// owns the world: once the heading is known the filter passes the fixes it would fuse
+  /// (past its gate) to the graph without fusing them itself (Frontend::
+  /// set_gnss_positions_to_backend), the graph corrects the Frontend after every update, the
+  /// LiDAR odometry's map frame stays where the filter had it then and moves with those
+  /// corrections (LidarInertialOdometry::hold_map_frame), and in replay a full batch runs every
+  /// follow_batch_interval_s of keyframe time (backend.batch_interval_s). Each fix is counted
+  /// once, and the real-time poses get the graph's world instead of the filter's. false: the
+  /// filter fuses the fixes and the graph corrects it at loop closures only.
+  bool frontend_follows_graph = true;
+  double follow_batch_interval_s = 5.0;
   double velocity_max_time_offset_s = 0.03;
   double velocity_acceleration_sigma = 2.0;
   /// frontend.type msckf: the keyframe graph holds IMU preintegration and landmark projection
@@ -456,6 +470,7 @@ class Session {
   std::unique_ptr<KeyframeGraph> graph_;  ///< replaced by a fresh one at a relocalization
   bool restart_graph_ = false;  ///< the next keyframe starts the graph (after a relocalization)
   std::optional<LidarInertialOdometry> odometry_;
+  bool follows_graph_ = false;  ///< SessionConfig::frontend_follows_graph applies to this session
   /// The LiDAR-inertial graph's factors (lidar_inertial_factors) and the IMU they integrate.
   std::unique_ptr<LidarInertialFactors> lidar_factors_;
   std::deque<FusedVelocity> recent_velocities_;             // the last velocity_max_time_offset_s
