@@ -1,8 +1,9 @@
-// hanzo-fusion drive --config fusion.yaml (--record LOG.mcap | --out DIR) [--calib C] [--duration S]:
-// the live sensors of the configuration (fusion.sensors.<name>.driver: a driver and its udp:// /
-// tcp:// / serial:// source) read on one thread each, decoded, written to a sensor log on the
-// sensors' topics and / or fused by a Session as `run` fuses a log (every message in arrival
-// order; DIR/trajectory.tum).
+// hanzo-fusion drive --config fusion.yaml (--record LOG.mcap | --out DIR | --server HOST:PORT)
+// [--calib C] [--duration S]: the live sensors of the configuration (fusion.sensors.<name>.driver:
+// a driver and its udp:// / tcp:// / serial:// source) read on one thread each, decoded, written
+// to a sensor log on the sensors' topics, fused by a Session as `run` fuses a log (every message
+// in arrival order; DIR/trajectory.tum) and / or sent to a server session over gRPC (one stream
+// per sensor; a session created from --config and --calib unless --session names one).
 // Runs for --duration seconds or until SIGINT / SIGTERM. A sensor that stays silent longer than
 // its timeout is reported (once per silence) and the others go on; a malformed packet or
 // sentence is counted and skipped. Exit 0 when every sensor delivered messages; 1 otherwise
@@ -31,6 +32,9 @@
 #include "hanzo/fusion/pipeline/session.hpp"
 #include "live_decoder.hpp"
 #include "log_writing.hpp"
+#ifdef HANZO_FUSION_WITH_SERVICE
+#include "server_session.hpp"
+#endif
 
 namespace hanzo::fusion::app {
 
@@ -42,6 +46,9 @@ struct DriveOptions {
   std::string record;
   std::string out;
   double duration = 0.0;  // s; 0: until SIGINT / SIGTERM
+#ifdef HANZO_FUSION_WITH_SERVICE
+  ServerOptions server;   // --server: into a server session over gRPC
+#endif
 };
 
 /// One live sensor: its source, decoder and counts (the counts read under `mutex`).
@@ -119,7 +126,25 @@ int run_drive(const Output& output, const DriveOptions& options) {
   if (sensors.empty()) {
     return report_failure(output, result, fmt::format("{}: no sensor has a driver (fusion.sensors.<name>.driver: type and source)", options.config));
   }
+#ifdef HANZO_FUSION_WITH_SERVICE
+  if (options.record.empty() && options.out.empty() && options.server.address.empty()) {
+    return report_failure(output, result, "give --record LOG.mcap, --out DIR, --server HOST:PORT or several");
+  }
+  // Into a server session: the one named, or one made from this configuration.
+  std::unique_ptr<service::FusionClient> client;
+  std::unique_ptr<service::SessionStreams> uplink;
+  if (!options.server.address.empty()) {
+    Result<ServerSession> connected = connect_server_session(options.server, options.config, options.calibration, "drive " + options.config);
+    if (!connected) return report_failure(output, result, connected.error().message);
+    client = std::move(connected->client);
+    result["session_id"] = connected->session_id;
+    Result<std::unique_ptr<service::SessionStreams>> opened = client->open_streams(connected->session_id);
+    if (!opened) return report_failure(output, result, opened.error().message);
+    uplink = std::move(*opened);
+  }
+#else
   if (options.record.empty() && options.out.empty()) return report_failure(output, result, "give --record LOG.mcap, --out DIR or both");
+#endif
   std::unique_ptr<pipeline::Session> session;
   std::vector<msgs::PoseEstimate> poses;
   if (!options.out.empty()) {
@@ -149,6 +174,7 @@ int run_drive(const Output& output, const DriveOptions& options) {
   for (const std::unique_ptr<LiveSensor>& live : sensors) readers.emplace_back([&stop, raw = live.get()] { read_sensor(*raw, stop); });
   const auto started = std::chrono::steady_clock::now();
   uint64_t refused = 0;
+  [[maybe_unused]] uint64_t server_errors = 0;
   // Until the duration passes or a signal comes: what the readers decoded goes to the log
   // (when recording) and the session, sensor by sensor.
   const auto consume = [&](io::SensorLogWriter* writer) -> Status {
@@ -165,6 +191,14 @@ int run_drive(const Output& output, const DriveOptions& options) {
             if (Status status = writer->write(live->sensor->topic, message, live->sensor->name); !status && written) written = status;
           }
           if (session && !session->push(live->sensor->name, message)) ++refused;
+#ifdef HANZO_FUSION_WITH_SERVICE
+          if (uplink) {
+            if (Status sent = uplink->send(live->sensor->name, message); !sent) {
+              ++refused;
+              if (server_errors++ == 0) logger()->error("drive: {}", sent.error().message);
+            }
+          }
+#endif
         }
       }
     };
@@ -201,6 +235,19 @@ int run_drive(const Output& output, const DriveOptions& options) {
     result["refused_messages"] = refused;
     result["trajectory"] = path;
   }
+#ifdef HANZO_FUSION_WITH_SERVICE
+  if (uplink) {
+    Result<service::StreamSummary> streamed = uplink->finish();
+    if (!streamed) return report_failure(output, result, streamed.error().message);
+    result["server"] = {{"messages_sent", streamed->messages_sent}, {"accepted", streamed->accepted}, {"poses_received", streamed->poses_received},
+                        {"send_errors", server_errors}};
+    if (streamed->messages_sent > 0 && streamed->accepted == 0) {
+      return report_failure(output, result, fmt::format("session {} accepted none of the {} messages sent (GET /v1/sessions/{})",
+                                                        result["session_id"].get<std::string>(), streamed->messages_sent,
+                                                        result["session_id"].get<std::string>()));
+    }
+  }
+#endif
   std::vector<std::string> without;
   nlohmann::json per_sensor = nlohmann::json::object();
   std::string text = fmt::format("{}: {:.1f} s{}\n", options.record.empty() ? options.out : options.record,
@@ -236,6 +283,9 @@ void add_drive_command(CLI::App& app, const Output& output, Command& run) {
   command->add_option("--out", options->out, "Fuse the sensors in a session (as run does) and write its trajectory.tum here");
   command->add_option("--calib", options->calibration, "Sensor calibration YAML for --out (default: every sensor at the body origin)");
   command->add_option("--duration", options->duration, "Seconds to record (default: until Ctrl-C / SIGTERM)")->check(CLI::NonNegativeNumber);
+#ifdef HANZO_FUSION_WITH_SERVICE
+  add_server_options(*command, options->server, "Into a server session over gRPC (HOST:PORT): the one --session names, else a new one from --config and --calib");
+#endif
   command->callback([&output, &run, options] { run = [&output, options] { return run_drive(output, *options); }; });
 }
 

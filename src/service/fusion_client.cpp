@@ -224,32 +224,100 @@ Status FusionClient::end_session(const std::string& session_id) {
   return ok_status();
 }
 
+namespace {
+
+// GET /v1/sessions/ID as a JSON object.
+Result<json> session_state(FusionClient& client, const std::string& session_id) {
+  std::string body;
+  HANZO_ASSIGN_OR_RETURN(body, client.get("/v1/sessions/" + session_id));
+  json parsed = json::parse(body, nullptr, false);
+  if (!parsed.is_object()) return Error(fmt::format("GET /v1/sessions/{}: the answer is not a JSON object", session_id));
+  return parsed;
+}
+
+}  // namespace
+
+struct SessionStreams::State {
+  FusionClient& client;
+  FusionClient::Impl& impl;
+  std::string session_id;
+  json before;  // the session's state at open_streams()
+  PoseProgress progress;
+  std::map<std::string, std::unique_ptr<SensorStream>> streams;  // by sensor
+  StreamSummary summary;
+  Clock::time_point started = Clock::now();
+};
+
+SessionStreams::SessionStreams(std::unique_ptr<State> state) : state_(std::move(state)) {}
+SessionStreams::~SessionStreams() = default;
+
+Status SessionStreams::send(const std::string& sensor, const msgs::SensorMessage& message) {
+  State& state = *state_;
+  std::unique_ptr<SensorStream>& stream = state.streams[sensor];
+  if (!stream) stream = state.impl.open_stream(message, state.session_id, sensor, state.progress);
+  if (!stream->write(message)) {
+    // The server ended the stream: its status says why (unknown session, permission, ...).
+    const grpc::Status status = stream->finish();
+    state.streams.erase(sensor);
+    return Error(fmt::format("stream {} to {}: {}", sensor, state.impl.config.grpc_address,
+                             status.ok() ? "the server closed the stream" : status.error_message()));
+  }
+  ++state.summary.messages_sent;
+  ++state.summary.sent_by_sensor[sensor];
+  return ok_status();
+}
+
+std::optional<Timestamp> SessionStreams::newest_pose_time() const {
+  const int64_t newest = state_->progress.newest_ns.load();
+  if (newest == INT64_MIN) return std::nullopt;
+  return Timestamp::from_nanoseconds(newest);
+}
+
+Result<StreamSummary> SessionStreams::finish() {
+  State& state = *state_;
+  Status outcome = ok_status();
+  for (auto& [sensor, stream] : state.streams) {
+    const grpc::Status status = stream->finish();
+    if (!status.ok() && outcome) outcome = Error(fmt::format("stream {} to {}: {}", sensor, state.impl.config.grpc_address, status.error_message()));
+  }
+  state.streams.clear();
+  if (!outcome) return outcome.error();
+  json after;
+  HANZO_ASSIGN_OR_RETURN(after, session_state(state.client, state.session_id));
+  StreamSummary summary = state.summary;
+  summary.accepted = accepted_messages(after) - std::min(accepted_messages(after), accepted_messages(state.before));
+  summary.wall_seconds = std::chrono::duration<double>(Clock::now() - state.started).count();
+  summary.poses_received = state.progress.received.load();
+  std::lock_guard lock(state.progress.mutex);
+  summary.latest_pose = state.progress.latest;
+  return summary;
+}
+
+Result<std::unique_ptr<SessionStreams>> FusionClient::open_streams(const std::string& session_id) {
+  json before;
+  HANZO_ASSIGN_OR_RETURN(before, session_state(*this, session_id));
+  auto state = std::unique_ptr<SessionStreams::State>(new SessionStreams::State{*this, *impl_, session_id, std::move(before), {}, {}, {}});
+  return std::unique_ptr<SessionStreams>(new SessionStreams(std::move(state)));
+}
+
 Result<StreamSummary> FusionClient::stream_log(const std::string& log_path, const std::string& session_id, const StreamOptions& options) {
   if (!(options.rate >= 0) || !(options.max_lead_s > 0) || !(options.stall_timeout_s > 0)) {
     return Error("stream: rate must be >= 0, max_lead_s and stall_timeout_s > 0");
   }
   std::unique_ptr<io::SensorLogReader> reader;
   HANZO_ASSIGN_OR_RETURN(reader, io::SensorLogReader::open(log_path));
-  // The session as it is: its configuration maps topics, its counts give `accepted`.
-  const auto session_state = [&]() -> Result<json> {
-    std::string body;
-    HANZO_ASSIGN_OR_RETURN(body, get("/v1/sessions/" + session_id));
-    json parsed = json::parse(body, nullptr, false);
-    if (!parsed.is_object()) return Error(fmt::format("GET /v1/sessions/{}: the answer is not a JSON object", session_id));
-    return parsed;
-  };
-  json before;
-  HANZO_ASSIGN_OR_RETURN(before, session_state());
+  std::unique_ptr<SessionStreams> streams;
+  HANZO_ASSIGN_OR_RETURN(streams, open_streams(session_id));
+  // The session's configuration maps topics.
   std::map<std::string, std::string> sensor_by_topic = options.sensor_by_topic;
   if (sensor_by_topic.empty()) {
-    auto configuration = config::parse_fusion_config(before.value("config", ""), "the configuration of session " + session_id);
+    auto configuration = config::parse_fusion_config(streams->state_->before.value("config", ""), "the configuration of session " + session_id);
     if (!configuration) return configuration.error();
     for (const config::SensorConfig& sensor : configuration->sensors) sensor_by_topic[sensor.topic] = sensor.name;
   }
-  PoseProgress progress;
-  std::map<std::string, std::unique_ptr<SensorStream>> streams;  // by sensor
-  StreamSummary summary;
+  std::map<std::string, uint64_t> skipped_by_topic;
   std::optional<Timestamp> first_time;
+  double log_seconds = 0.0;
   const auto started = Clock::now();
   io::LogEntry entry;
   Status outcome = ok_status();
@@ -263,57 +331,38 @@ Result<StreamSummary> FusionClient::stream_log(const std::string& log_path, cons
     const auto* message = std::get_if<msgs::SensorMessage>(&entry.message);
     const auto mapped = sensor_by_topic.find(entry.topic);
     if (message == nullptr || mapped == sensor_by_topic.end()) {
-      if (message != nullptr && summary.skipped_by_topic[entry.topic] == 0) {
+      if (message != nullptr && skipped_by_topic[entry.topic] == 0) {
         logger()->warn("stream: no sensor of session '{}' reads topic '{}'; its messages are skipped", session_id, entry.topic);
       }
-      ++summary.skipped_by_topic[entry.topic];
+      ++skipped_by_topic[entry.topic];
       continue;
     }
-    const std::string& sensor = mapped->second;
     const Timestamp time = entry.log_time;
     if (!first_time) first_time = time;
-    summary.log_seconds = (time - *first_time).seconds();
+    log_seconds = (time - *first_time).seconds();
     // Pacing: the log's clock scaled by rate, or the server's progress.
     if (options.rate > 0) {
-      std::this_thread::sleep_until(started + std::chrono::duration_cast<Clock::duration>(
-                                                  std::chrono::duration<double>(summary.log_seconds / options.rate)));
+      std::this_thread::sleep_until(started + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(log_seconds / options.rate)));
     } else {
       const auto waiting_since = Clock::now();
       const int64_t allowed_ahead = static_cast<int64_t>(options.max_lead_s * 1e9);
-      while (progress.newest_ns.load() != INT64_MIN && time.nanoseconds() - progress.newest_ns.load() > allowed_ahead) {
+      for (std::optional<Timestamp> newest = streams->newest_pose_time(); newest && time.nanoseconds() - newest->nanoseconds() > allowed_ahead;
+           newest = streams->newest_pose_time()) {
         if (std::chrono::duration<double>(Clock::now() - waiting_since).count() > options.stall_timeout_s) {
-          return Error(fmt::format("stream: the server sent no pose past {:.3f} s for {} s (is the session still fusing?)",
-                                   progress.newest_ns.load() * 1e-9, options.stall_timeout_s));
+          return Error(fmt::format("stream: the server sent no pose past {:.3f} s for {} s (is the session still fusing?)", newest->seconds(),
+                                   options.stall_timeout_s));
         }
         std::this_thread::sleep_for(std::chrono::microseconds(200));
       }
     }
-    auto& stream = streams[sensor];
-    if (!stream) stream = impl_->open_stream(*message, session_id, sensor, progress);
-    if (!stream->write(*message)) {
-      // The server ended the stream: its status says why (unknown session, permission, ...).
-      const grpc::Status status = stream->finish();
-      streams.erase(sensor);
-      return Error(fmt::format("stream {} ({}) to {}: {}", sensor, entry.topic, impl_->config.grpc_address,
-                               status.ok() ? "the server closed the stream" : status.error_message()));
-    }
-    ++summary.messages_sent;
-    ++summary.sent_by_sensor[sensor];
+    if (Status sent = streams->send(mapped->second, *message); !sent) return Error(fmt::format("{} ({})", sent.error().message, entry.topic));
   }
   if (outcome) outcome = with_context(reader->complete(), log_path);  // a partial log streamed is said so
-  for (auto& [sensor, stream] : streams) {
-    const grpc::Status status = stream->finish();
-    if (!status.ok() && outcome) {
-      outcome = Error(fmt::format("stream {} to {}: {}", sensor, impl_->config.grpc_address, status.error_message()));
-    }
-  }
+  Result<StreamSummary> summary = streams->finish();
   if (!outcome) return outcome.error();
-  json after;
-  HANZO_ASSIGN_OR_RETURN(after, session_state());
-  summary.accepted = accepted_messages(after) - std::min(accepted_messages(after), accepted_messages(before));
-  summary.wall_seconds = std::chrono::duration<double>(Clock::now() - started).count();
-  summary.poses_received = progress.received.load();
-  summary.latest_pose = progress.latest;
+  if (!summary) return summary.error();
+  summary->skipped_by_topic = std::move(skipped_by_topic);
+  summary->log_seconds = log_seconds;
   return summary;
 }
 

@@ -126,4 +126,47 @@ TEST(ServeCli, SessionsSurviveSigtermAndKillNine) {
   std::filesystem::remove_all(dir);
 }
 
+// `drive --server`: a VLP-16 sent over loopback UDP at its recorded pace (`send`) goes, as
+// `drive` decodes it, into a session the command creates on the server; the session takes every
+// rotation. A server that does not answer fails the command, naming the address.
+TEST(ServeCli, DriveSendsLiveSensorsIntoAServerSession) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_drive_server_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "tokens.yaml") << kTokens;
+  Server server(dir, fmt::format("--data-dir {} --tokens {}", (dir / "data").string(), (dir / "tokens.yaml").string()));
+  ASSERT_GT(server.port(), 0) << server.err();
+  const std::string veloview = std::string(HANZO_DATA_DIR) + "/drivers/velodyne_veloview/";
+  const int port = 20000 + (::getpid() + 7919) % 20000;
+  std::ofstream(dir / "fusion.yaml") << fmt::format(
+      "fusion:\n  sensors:\n    lidar:\n      modality: lidar\n      topic: /lidar\n      rate: 20\n      driver:\n        type: velodyne\n"
+      "        source: udp://127.0.0.1:{}\n        model: VLP-16\n        calibration: {}calib/VLP-16.xml\n",
+      port, veloview);
+  const std::string drive_command =
+      fmt::format("{0} drive --config {1}/fusion.yaml --server 127.0.0.1:{2} --rest http://127.0.0.1:{3} --token acme-robot-secret-0001 "
+                  "--name live --duration 5 --json > {1}/drive.json 2> {1}/drive.err",
+                  HANZO_FUSION_CLI, dir.string(), server.grpc_port(), server.port());
+  int drive_status = -1;
+  std::thread driver([&] { drive_status = std::system(drive_command.c_str()); });
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  const int sent = std::system(fmt::format("{} send {}vlp-16-test-90deg-1-50-frames.pcap --port {} > /dev/null", HANZO_FUSION_CLI, veloview, port).c_str());
+  driver.join();
+  EXPECT_EQ(sent, 0);
+  ASSERT_EQ(drive_status, 0) << read_file(dir / "drive.err");
+  const json drive = json::parse(read_file(dir / "drive.json"));
+  const json& lidar = drive["sensors"]["lidar"];
+  EXPECT_GE(lidar["messages"].get<int>(), 50) << drive.dump();
+  EXPECT_EQ(drive["server"]["messages_sent"], lidar["messages"]);
+  EXPECT_EQ(drive["server"]["accepted"], lidar["messages"]);
+  EXPECT_EQ(drive["server"]["send_errors"], 0);
+  const auto [status, body] = server.request("/v1/sessions/" + drive["session_id"].get<std::string>(), kAuthorization);
+  ASSERT_EQ(status, 200) << body;
+  EXPECT_EQ(json::parse(body)["name"], "live");
+  const int nobody = std::system(fmt::format("{0} drive --config {1}/fusion.yaml --server 127.0.0.1:1 --token x --duration 1 > /dev/null 2> {1}/nobody.err",
+                                             HANZO_FUSION_CLI, dir.string()).c_str());
+  EXPECT_NE(nobody, 0);
+  EXPECT_THAT(read_file(dir / "nobody.err"), HasSubstr("127.0.0.1"));
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace

@@ -608,5 +608,38 @@ TEST_F(MappingEndpointsTest, FusionClientStreamsALogIntoANewSessionAndReportsSer
   EXPECT_FALSE(FusionClient::create(config).ok());
 }
 
+// SessionStreams: messages a caller makes (a live driver) into a session, one stream per sensor:
+// every message of the recording's first 5 s sent in time order is accepted, poses come back; a
+// message for a sensor the session does not have is sent and not accepted.
+TEST_F(MappingEndpointsTest, SessionStreamsSendACallersMessagesIntoASession) {
+  FusionClientConfig config;
+  config.rest_url = "http://127.0.0.1:" + std::to_string(rest_->port());
+  config.grpc_address = "127.0.0.1:" + std::to_string(grpc_->port());
+  config.token = kRobotToken;
+  auto client = FusionClient::create(config).value();
+  const Recording& recording = urban_recording();
+  auto session_id = client->create_session("live", recording.config_yaml, recording.calibration_yaml);
+  ASSERT_TRUE(session_id.ok()) << session_id.error().message;
+  auto streams = client->open_streams(session_id.value());
+  ASSERT_TRUE(streams.ok()) << streams.error().message;
+  const Timestamp start = msgs::timestamp_of(recording.messages.front().message);
+  uint64_t sent = 0;
+  for (const testing::TimedMessage& message : recording.messages) {
+    if ((msgs::timestamp_of(message.message) - start).seconds() > 5.0) break;
+    ASSERT_TRUE((*streams)->send(message.sensor, message.message).ok());
+    ++sent;
+  }
+  // A sensor the session does not have: sent, refused by the session (not accepted).
+  ASSERT_TRUE((*streams)->send("no_such_sensor", recording.messages.front().message).ok());
+  auto summary = (*streams)->finish();
+  ASSERT_TRUE(summary.ok()) << summary.error().message;
+  EXPECT_EQ(summary->messages_sent, sent + 1);
+  EXPECT_EQ(summary->accepted, sent);
+  EXPECT_GT(summary->poses_received, 100U);
+  ASSERT_TRUE(summary->latest_pose.has_value());
+  EXPECT_FALSE(client->open_streams("no-such-session").ok());
+  ASSERT_TRUE(client->end_session(session_id.value()).ok());
+}
+
 }  // namespace
 }  // namespace hanzo::fusion::service

@@ -7,7 +7,7 @@
 //   std::string id = client->create_session("yard run", config_yaml, calibration_yaml).value();
 //   StreamSummary summary = client->stream_log("run.mcap", id, {.rate = 1.0}).value();
 //
-// stream_log() replays a sensor log (io/sensor_log.hpp) into a session: one gRPC stream per
+// stream_log() replays a sensor log (io/sensor_log.hpp) into a session through open_streams(): one gRPC stream per
 // sensor (`Stream<Modality>` with metadata x-session-id and x-sensor), messages in log-time
 // order. rate 1.0 keeps the log's timing (real time), 2.0 twice as fast; rate 0 streams as
 // fast as the server fuses: a message is sent only when it is at most max_lead_s ahead of the
@@ -27,6 +27,8 @@
 #include <string>
 
 #include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/time.hpp"
+#include "hanzo/fusion/msgs/sensor_messages.hpp"
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
 
 namespace hanzo::fusion::service {
@@ -62,6 +64,34 @@ struct StreamSummary {
   double wall_seconds = 0.0;  ///< time the replay took
 };
 
+/// A session's sensor streams for messages the caller makes (live drivers: `hanzo-fusion drive
+/// --server`), from FusionClient::open_streams: one gRPC stream per sensor, opened by its first
+/// message, the poses the server sends back read on a thread per stream. Send from one thread.
+/// The FusionClient must outlive it.
+class SessionStreams {
+ public:
+  ~SessionStreams();
+  SessionStreams(const SessionStreams&) = delete;
+  SessionStreams& operator=(const SessionStreams&) = delete;
+
+  /// Writes one message of the session's sensor `sensor`. Fails when the server ended that
+  /// sensor's stream (its status says why: an unknown session or sensor, a permission); the
+  /// stream is then closed and the next message of the sensor opens a new one.
+  Status send(const std::string& sensor, const msgs::SensorMessage& message);
+  /// The newest pose time the server has sent back on any stream; none before the first.
+  std::optional<Timestamp> newest_pose_time() const;
+  /// Closes every stream and waits for the server's status; the summary's `accepted` from the
+  /// session's counts now against those at open_streams() (log_seconds and skipped_by_topic
+  /// are the caller's to fill).
+  Result<StreamSummary> finish();
+
+ private:
+  friend class FusionClient;
+  struct State;
+  explicit SessionStreams(std::unique_ptr<State> state);
+  std::unique_ptr<State> state_;
+};
+
 class FusionClient {
  public:
   static Result<std::unique_ptr<FusionClient>> create(const FusionClientConfig& config);
@@ -77,8 +107,12 @@ class FusionClient {
   /// DELETE /v1/sessions/{id}.
   Status end_session(const std::string& session_id);
   Result<StreamSummary> stream_log(const std::string& log_path, const std::string& session_id, const StreamOptions& options);
+  /// Streams into session_id for the caller's messages (GET of the session first: fails when
+  /// the server or the session does not answer).
+  Result<std::unique_ptr<SessionStreams>> open_streams(const std::string& session_id);
 
  private:
+  friend class SessionStreams;
   struct Impl;
   explicit FusionClient(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
