@@ -40,9 +40,11 @@ class RotationDecoder : public LiveDecoder {
   std::vector<msgs::PointCloudMessage> frames_;
 };
 
+// An Ouster's lidar port (frames) or IMU port (imu_port: its IMU samples); each port is a
+// source of its own, the other port's packets are not this sensor's.
 class OusterLive : public LiveDecoder {
  public:
-  explicit OusterLive(drivers::OusterDecoder decoder) : decoder_(std::move(decoder)) {}
+  OusterLive(drivers::OusterDecoder decoder, bool imu_port) : decoder_(std::move(decoder)), imu_port_(imu_port) {}
   void decode(const drivers::ReceivedBytes& received, std::vector<msgs::SensorMessage>& messages) override {
     decoder_.add_packet(received.bytes, received.time, frames_, imu_);
     take(messages);
@@ -55,11 +57,16 @@ class OusterLive : public LiveDecoder {
 
  private:
   void take(std::vector<msgs::SensorMessage>& messages) {
-    for (drivers::OusterFrame& frame : frames_) messages.emplace_back(std::move(frame.cloud));
+    if (imu_port_) {
+      append(imu_, messages);
+    } else {
+      for (drivers::OusterFrame& frame : frames_) messages.emplace_back(std::move(frame.cloud));
+    }
     frames_.clear();
-    imu_.clear();  // the IMU packets come to their own port: not this source's
+    imu_.clear();
   }
   drivers::OusterDecoder decoder_;
+  bool imu_port_;
   std::vector<drivers::OusterFrame> frames_;
   std::vector<msgs::ImuMessage> imu_;
 };
@@ -135,12 +142,12 @@ Result<std::unique_ptr<LiveDecoder>> make_live_decoder(const config::SensorConfi
     if (!decoder) return failed(decoder.error());
     return std::unique_ptr<LiveDecoder>(std::make_unique<RotationDecoder<drivers::HesaiDecoder>>(std::move(*decoder)));
   }
-  if (driver.type == "ouster") {
+  if (driver.type == "ouster" || driver.type == "ouster_imu") {
     Result<drivers::OusterMetadata> metadata = drivers::load_ouster_metadata(driver.metadata);
     if (!metadata) return failed(metadata.error());
     Result<drivers::OusterDecoder> decoder = drivers::OusterDecoder::create(*metadata, sensor.body_frame);
     if (!decoder) return failed(decoder.error());
-    return std::unique_ptr<LiveDecoder>(std::make_unique<OusterLive>(std::move(*decoder)));
+    return std::unique_ptr<LiveDecoder>(std::make_unique<OusterLive>(std::move(*decoder), driver.type == "ouster_imu"));
   }
   if (driver.type == "nmea") {
     Result<drivers::NmeaDecoder> decoder = drivers::NmeaDecoder::create();

@@ -89,6 +89,7 @@ std::optional<SensorModality> infer_modality(std::string_view sensor_name) {
 const std::vector<std::pair<std::string_view, SensorModality>>& sensor_driver_types() {
   static const std::vector<std::pair<std::string_view, SensorModality>> types = {{"velodyne", SensorModality::kLidar},
                                                                                  {"ouster", SensorModality::kLidar},
+                                                                                 {"ouster_imu", SensorModality::kImu},
                                                                                  {"hesai", SensorModality::kLidar},
                                                                                  {"nmea", SensorModality::kGnss},
                                                                                  {"xsens", SensorModality::kImu}};

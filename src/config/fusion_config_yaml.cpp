@@ -304,14 +304,16 @@ Result<SensorDriverConfig> parse_driver(const YamlValue& node, SensorModality mo
   }
   const auto& types = sensor_driver_types();
   const auto type = std::find_if(types.begin(), types.end(), [&](const auto& entry) { return entry.first == driver.type; });
-  if (type == types.end()) return node["type"].error(fmt::format("expected velodyne, ouster, hesai, nmea or xsens, got '{}'", driver.type));
+  if (type == types.end()) return node["type"].error(fmt::format("expected velodyne, ouster, ouster_imu, hesai, nmea or xsens, got '{}'", driver.type));
   if (type->second != modality) {
     return node["type"].error(fmt::format("a {} driver delivers {} data (this sensor is {})", driver.type, to_string(type->second), to_string(modality)));
   }
   if (driver.source.empty()) return node["source"].error("missing (udp://:PORT, tcp://HOST:PORT or serial:///dev/NAME?baud=N)");
   if (driver.type == "velodyne" && driver.model.empty()) return node["model"].error("missing (VLP-16, VLP-32C, HDL-32E, HDL-64E or VLS-128)");
   if (driver.type == "hesai" && driver.calibration.empty()) return node["calibration"].error("missing (the unit's angle correction CSV)");
-  if (driver.type == "ouster" && driver.metadata.empty()) return node["metadata"].error("missing (the sensor's metadata JSON)");
+  if ((driver.type == "ouster" || driver.type == "ouster_imu") && driver.metadata.empty()) {
+    return node["metadata"].error("missing (the sensor's metadata JSON)");
+  }
   return driver;
 }
 

@@ -435,6 +435,55 @@ TEST(Cli, DriveRecordsAVelodyneStreamAsItsCaptureDecodes) {
   std::filesystem::remove_all(dir);
 }
 
+// An Ouster's two ports live: the lidar port (driver ouster) and the IMU port (ouster_imu) sent
+// at their recorded ports and pace; the frame and the 11 IMU samples are the file's decode.
+TEST(Cli, DriveReadsAnOustersLidarAndImuPorts) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_drive_ouster_{}", ::getpid());
+  std::filesystem::create_directories(dir);
+  const std::string pcaps = std::string(HANZO_DATA_DIR) + "/drivers/ouster_sdk_pcaps/";
+  const std::string metadata = pcaps + "OS-1-64_sensor_config_reduced.json";
+  std::ofstream(dir / "fusion.yaml") << fmt::format(
+      "fusion:\n  sensors:\n    lidar:\n      modality: lidar\n      topic: /lidar\n      rate: 10\n"
+      "      driver: {{type: ouster, source: \"udp://127.0.0.1:7502\", metadata: {0}}}\n"
+      "    imu:\n      modality: imu\n      topic: /imu\n      rate: 100\n"
+      "      driver: {{type: ouster_imu, source: \"udp://127.0.0.1:7503\", metadata: {0}}}\n",
+      metadata);
+  CliRun drive;
+  std::thread driver([&] { drive = run(fmt::format("drive --config {0}/fusion.yaml --record {0}/live.mcap --duration 3 --json", dir.string()), "_ouster"); });
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  const CliRun sent = run(fmt::format("send {}OS-1-64_1024x10_fw20.pcap --json", pcaps));  // to the recorded ports 7502 and 7503
+  driver.join();
+  ASSERT_EQ(sent.exit_code, 0) << sent.err;
+  ASSERT_EQ(drive.exit_code, 0) << drive.err;
+  ASSERT_EQ(run(fmt::format("import pcap {}OS-1-64_1024x10_fw20.pcap --driver ouster --metadata {} --out {}/file.mcap", pcaps, metadata, dir.string())).exit_code, 0);
+  namespace hf = hanzo::fusion;
+  const auto imu_of = [](const std::string& path) {
+    std::vector<hf::msgs::ImuMessage> samples;
+    auto reader = hf::io::SensorLogReader::open(path);
+    if (!reader) return samples;
+    hf::io::LogEntry entry;
+    while (true) {
+      hf::Result<bool> more = (*reader)->next(entry);
+      if (!more || !*more) break;
+      const auto* message = std::get_if<hf::msgs::SensorMessage>(&entry.message);
+      if (entry.topic == "/imu" && message != nullptr && std::holds_alternative<hf::msgs::ImuMessage>(*message)) {
+        samples.push_back(std::get<hf::msgs::ImuMessage>(*message));
+      }
+    }
+    return samples;
+  };
+  const auto live = imu_of((dir / "live.mcap").string());
+  const auto file = imu_of((dir / "file.mcap").string());
+  ASSERT_EQ(file.size(), 11U);
+  ASSERT_EQ(live.size(), file.size());
+  for (std::size_t i = 0; i < live.size(); ++i) {
+    EXPECT_EQ(live[i].linear_acceleration, file[i].linear_acceleration) << i;
+    EXPECT_EQ(live[i].angular_velocity, file[i].angular_velocity) << i;
+  }
+  EXPECT_EQ(clouds_of((dir / "live.mcap").string(), "/lidar").size(), 1U);
+  std::filesystem::remove_all(dir);
+}
+
 // An Xsens MTi-G-710's serial stream into a sensor log: IMU on /imu, its receiver's fixes on
 // /gnss; a file without Xsens frames is refused.
 TEST(Cli, ImportXsensImuStream) {
