@@ -73,6 +73,14 @@ const Recording& urban_recording() {
 
 class MappingEndpointsTest : public ::testing::Test {
  protected:
+  // A FusionClient's configuration for this fixture's servers, as the robot.
+  FusionClientConfig client_config() const {
+    FusionClientConfig config;
+    config.rest_url = "http://127.0.0.1:" + std::to_string(rest_->port());
+    config.grpc_address = "127.0.0.1:" + std::to_string(grpc_->port());
+    config.token = kRobotToken;
+    return config;
+  }
   void SetUp() override {
     dir_ = testing::scratch_dir("-server");
     auto storage = open_storage("sqlite://" + (dir_ / "fusion.db").string());
@@ -541,10 +549,7 @@ TEST_F(MappingEndpointsTest, FusionClientStreamsALogIntoANewSessionAndReportsSer
     ASSERT_TRUE(writer->write("/estimate", estimate).ok());
     ASSERT_TRUE(writer->close().ok());
   }
-  FusionClientConfig config;
-  config.rest_url = "http://127.0.0.1:" + std::to_string(rest_->port());
-  config.grpc_address = "127.0.0.1:" + std::to_string(grpc_->port());
-  config.token = kRobotToken;
+  FusionClientConfig config = client_config();
   auto client = FusionClient::create(config).value();
   const Recording& recording = urban_recording();
   auto session_id = client->create_session("streamed", recording.config_yaml, recording.calibration_yaml);
@@ -612,11 +617,7 @@ TEST_F(MappingEndpointsTest, FusionClientStreamsALogIntoANewSessionAndReportsSer
 // every message of the recording's first 5 s sent in time order is accepted, poses come back; a
 // message for a sensor the session does not have is sent and not accepted.
 TEST_F(MappingEndpointsTest, SessionStreamsSendACallersMessagesIntoASession) {
-  FusionClientConfig config;
-  config.rest_url = "http://127.0.0.1:" + std::to_string(rest_->port());
-  config.grpc_address = "127.0.0.1:" + std::to_string(grpc_->port());
-  config.token = kRobotToken;
-  auto client = FusionClient::create(config).value();
+  auto client = FusionClient::create(client_config()).value();
   const Recording& recording = urban_recording();
   auto session_id = client->create_session("live", recording.config_yaml, recording.calibration_yaml);
   ASSERT_TRUE(session_id.ok()) << session_id.error().message;
