@@ -241,6 +241,8 @@ class Frontend {
   /// fix-type policy and the chi-square gate go to the GNSS callback without updating the
   /// filter, so that the backend's graph holds each fix once. Until the heading is known (the
   /// GNSS track aligns it) the filter fuses them as usual. Off again: the filter fuses them.
+  /// A fix passed on counts as fused in the sensor's statistics and health, and its innovation
+  /// record says applied (it passed the gate and the backend takes it).
   void set_gnss_positions_to_backend(bool enabled);
 
   /// The backend's hook: keyframe `keyframe_id` is really at T_world_body_optimized. The
