@@ -70,16 +70,25 @@ struct FeatureTracker::State {
   std::optional<PinholeCamera> right;
   Eigen::Matrix3d essential = Eigen::Matrix3d::Zero();  // x_right^T E x_left = 0
   Eigen::Matrix3d R_right_left = Eigen::Matrix3d::Identity();
-  cv::Mat previous_grey;
+  // The previous left image's optical-flow pyramid (with its derivatives): each image's is built
+  // once and serves the flow from the previous image, to the right image and to the next one.
+  std::vector<cv::Mat> previous_pyramid;
   std::vector<cv::Point2f> points;
   std::vector<uint64_t> ids;
   std::map<uint64_t, cv::Point2f> right_points;  // last right-image position per id
   uint64_t next_id = 0;
 
   Result<TrackedFrame> track(const cv::Mat& left_image, const cv::Mat* right_image);
-  void track_over_time(const cv::Mat& grey, TrackedFrame& frame);
+  void track_over_time(const std::vector<cv::Mat>& pyramid, TrackedFrame& frame);
   void detect(const cv::Mat& grey, TrackedFrame& frame);
-  void match_right(const cv::Mat& grey, const cv::Mat& right_grey, TrackedFrame& frame);
+  void match_right(const std::vector<cv::Mat>& pyramid, const std::vector<cv::Mat>& right_pyramid, TrackedFrame& frame);
+  /// An image's pyramid as cv::calcOpticalFlowPyrLK builds it for this window and these levels
+  /// (the same flow, built once).
+  std::vector<cv::Mat> pyramid_of(const cv::Mat& grey) const {
+    std::vector<cv::Mat> pyramid;
+    cv::buildOpticalFlowPyramid(grey, pyramid, cv::Size(config.window_px, config.window_px), config.pyramid_levels, true);
+    return pyramid;
+  }
 };
 
 namespace {
@@ -134,7 +143,8 @@ Result<TrackedFrame> FeatureTracker::State::track(const cv::Mat& left_image, con
     HANZO_ASSIGN_OR_RETURN(right_grey, to_grey(*right_image, image_size, "right"));
   }
   TrackedFrame frame;
-  track_over_time(grey, frame);
+  std::vector<cv::Mat> pyramid = pyramid_of(grey);
+  track_over_time(pyramid, frame);
   detect(grey, frame);
 
   // Features whose pixel does not undistort are dropped from the tracks too.
@@ -149,18 +159,18 @@ Result<TrackedFrame> FeatureTracker::State::track(const cv::Mat& left_image, con
   }
   points = std::move(kept_points);
   ids = std::move(kept_ids);
-  if (right_image) match_right(grey, right_grey, frame);
-  previous_grey = grey;
+  if (right_image) match_right(pyramid, pyramid_of(right_grey), frame);
+  previous_pyramid = std::move(pyramid);
   return frame;
 }
 
-void FeatureTracker::State::track_over_time(const cv::Mat& grey, TrackedFrame& frame) {
-  if (previous_grey.empty() || points.empty()) return;
+void FeatureTracker::State::track_over_time(const std::vector<cv::Mat>& pyramid, TrackedFrame& frame) {
+  if (previous_pyramid.empty() || points.empty()) return;
   std::vector<cv::Point2f> moved;
   std::vector<unsigned char> status;
   std::vector<float> error;
   const cv::Size window(config.window_px, config.window_px);
-  cv::calcOpticalFlowPyrLK(previous_grey, grey, points, moved, status, error, window, config.pyramid_levels);
+  cv::calcOpticalFlowPyrLK(previous_pyramid, pyramid, points, moved, status, error, window, config.pyramid_levels);
   std::vector<cv::Point2f> before, after;
   std::vector<uint64_t> tracked_ids;
   std::vector<double> displacements;
@@ -299,7 +309,7 @@ void FeatureTracker::State::detect(const cv::Mat& grey, TrackedFrame& frame) {
   }
 }
 
-void FeatureTracker::State::match_right(const cv::Mat& grey, const cv::Mat& right_grey, TrackedFrame& frame) {
+void FeatureTracker::State::match_right(const std::vector<cv::Mat>& pyramid, const std::vector<cv::Mat>& right_pyramid, TrackedFrame& frame) {
   std::map<uint64_t, cv::Point2f> matched;
   if (!points.empty()) {
     std::vector<cv::Point2f> guess;
@@ -319,8 +329,8 @@ void FeatureTracker::State::match_right(const cv::Mat& grey, const cv::Mat& righ
     std::vector<float> error;
     const cv::Size window(config.window_px, config.window_px);
     const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.01);
-    cv::calcOpticalFlowPyrLK(grey, right_grey, points, guess, status, error, window, config.pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
-    cv::calcOpticalFlowPyrLK(right_grey, grey, guess, back, back_status, error, window, config.pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    cv::calcOpticalFlowPyrLK(pyramid, right_pyramid, points, guess, status, error, window, config.pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    cv::calcOpticalFlowPyrLK(right_pyramid, pyramid, guess, back, back_status, error, window, config.pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
     for (size_t i = 0; i < points.size(); ++i) {
       if (!status[i] || !back_status[i] || !inside(guess[i], image_size)) continue;
       if (std::hypot(back[i].x - points[i].x, back[i].y - points[i].y) > 1.0) continue;
