@@ -13,7 +13,7 @@ void add_server_options(CLI::App& command, ServerOptions& options, const std::st
   CLI::Option* server = command.add_option("--server", options.address, server_help);
   if (!options.address.empty()) server->capture_default_str();
   command.add_option("--rest", options.rest_url, "REST URL (default http://HOST:8083, https with --tls-ca)");
-  command.add_option("--session", options.session_id, "Send into this existing session instead of creating one");
+  command.add_option("--session", options.session_id, "An existing session to send into (default: one is created)");
   command.add_option("--name", options.name, "Name of the session created");
   command.add_option("--token", options.token, "API token (default: $HANZO_FUSION_TOKEN)");
   command.add_option("--tls-ca", options.tls_ca_file, "PEM CA certificate of a TLS server")->check(CLI::ExistingFile);

@@ -17,7 +17,7 @@ namespace hanzo::fusion::app {
 struct ServerOptions {
   std::string address;      ///< gRPC HOST:PORT ("" where the command makes it optional: no server)
   std::string rest_url;     ///< default http://HOST:8083 (https with tls_ca_file)
-  std::string session_id;   ///< stream into this session instead of creating one
+  std::string session_id;   ///< an existing session to send into; "": one is created
   std::string name;         ///< of the session created
   std::string token;        ///< default $HANZO_FUSION_TOKEN
   std::string tls_ca_file;

@@ -1061,7 +1061,7 @@ void Session::update_backend() {
       if (const std::optional<uint64_t> start = graph_->window_start()) factors->set_window_start(*start);
     }
   }
-  // The graph now holds the world: the LiDAR map's frame no longer takes up the filter's drift.
+  // The graph holds the world: the LiDAR map frame is held, so that it does not take up the filter's drift.
   if (follows_graph_ && update->corrected_session && odometry_) odometry_->hold_map_frame();
   if (update->factors_added == 0) return;
   summary_.last_correction_m = update->correction_translation_m;

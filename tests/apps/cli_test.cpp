@@ -353,21 +353,27 @@ TEST(Cli, ImportHesaiPacketCapture) {
 // Live input: a Velodyne's packets sent over loopback UDP at the recorded pace (`send`) and read
 // by `drive` give the rotations the capture file gives (`import pcap`); a silent sensor fails
 // the run by name, keeping the log; a configuration without drivers is refused.
-std::vector<hanzo::fusion::msgs::PointCloudMessage> clouds_of(const std::string& path, const std::string& topic) {
+// The messages of one type on `topic` of a sensor log, in log order.
+template <typename Message>
+std::vector<Message> messages_of(const std::string& path, const std::string& topic) {
   namespace hf = hanzo::fusion;
-  std::vector<hf::msgs::PointCloudMessage> clouds;
+  std::vector<Message> messages;
   auto reader = hf::io::SensorLogReader::open(path);
-  if (!reader) return clouds;
+  if (!reader) return messages;
   hf::io::LogEntry entry;
   while (true) {
     hf::Result<bool> more = (*reader)->next(entry);
     if (!more || !*more) break;
     if (entry.topic != topic) continue;
     if (const auto* message = std::get_if<hf::msgs::SensorMessage>(&entry.message)) {
-      if (const auto* cloud = std::get_if<hf::msgs::PointCloudMessage>(message)) clouds.push_back(*cloud);
+      if (const auto* typed = std::get_if<Message>(message)) messages.push_back(*typed);
     }
   }
-  return clouds;
+  return messages;
+}
+
+std::vector<hanzo::fusion::msgs::PointCloudMessage> clouds_of(const std::string& path, const std::string& topic) {
+  return messages_of<hanzo::fusion::msgs::PointCloudMessage>(path, topic);
 }
 
 TEST(Cli, DriveRecordsAVelodyneStreamAsItsCaptureDecodes) {
@@ -456,22 +462,7 @@ TEST(Cli, DriveReadsAnOustersLidarAndImuPorts) {
   ASSERT_EQ(sent.exit_code, 0) << sent.err;
   ASSERT_EQ(drive.exit_code, 0) << drive.err;
   ASSERT_EQ(run(fmt::format("import pcap {}OS-1-64_1024x10_fw20.pcap --driver ouster --metadata {} --out {}/file.mcap", pcaps, metadata, dir.string())).exit_code, 0);
-  namespace hf = hanzo::fusion;
-  const auto imu_of = [](const std::string& path) {
-    std::vector<hf::msgs::ImuMessage> samples;
-    auto reader = hf::io::SensorLogReader::open(path);
-    if (!reader) return samples;
-    hf::io::LogEntry entry;
-    while (true) {
-      hf::Result<bool> more = (*reader)->next(entry);
-      if (!more || !*more) break;
-      const auto* message = std::get_if<hf::msgs::SensorMessage>(&entry.message);
-      if (entry.topic == "/imu" && message != nullptr && std::holds_alternative<hf::msgs::ImuMessage>(*message)) {
-        samples.push_back(std::get<hf::msgs::ImuMessage>(*message));
-      }
-    }
-    return samples;
-  };
+  const auto imu_of = [](const std::string& path) { return messages_of<hanzo::fusion::msgs::ImuMessage>(path, "/imu"); };
   const auto live = imu_of((dir / "live.mcap").string());
   const auto file = imu_of((dir / "file.mcap").string());
   ASSERT_EQ(file.size(), 11U);

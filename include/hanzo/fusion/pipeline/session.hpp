@@ -470,7 +470,9 @@ class Session {
   std::unique_ptr<KeyframeGraph> graph_;  ///< replaced by a fresh one at a relocalization
   bool restart_graph_ = false;  ///< the next keyframe starts the graph (after a relocalization)
   std::optional<LidarInertialOdometry> odometry_;
-  bool follows_graph_ = false;  ///< SessionConfig::frontend_follows_graph applies to this session
+  /// True while the graph holds the GNSS fixes and corrects the Frontend after every update
+  /// (SessionConfig::frontend_follows_graph with a LiDAR-inertial graph and GNSS).
+  bool follows_graph_ = false;
   /// The LiDAR-inertial graph's factors (lidar_inertial_factors) and the IMU they integrate.
   std::unique_ptr<LidarInertialFactors> lidar_factors_;
   std::deque<FusedVelocity> recent_velocities_;             // the last velocity_max_time_offset_s
