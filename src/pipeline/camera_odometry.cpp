@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <opencv2/imgproc.hpp>
 
 #include "hanzo/fusion/core/logging.hpp"
@@ -82,22 +83,39 @@ Status apply_vision_config(const config::FusionConfig& config, const std::string
 
 Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::FusionConfig& config, const calib::Calibration& calibration,
                                                                const vision::VisualOdometryConfig& odometry_config) {
-  std::vector<const calib::SensorCalibration*> cameras;
+  // The cameras with intrinsics in the configuration's order, grouped into rigs (header comment).
+  std::vector<std::vector<const calib::SensorCalibration*>> rigs;
+  const auto size_of = [](const calib::SensorCalibration& camera) {
+    return cv::Size(static_cast<int>(camera.camera->intrinsics.width), static_cast<int>(camera.camera->intrinsics.height));
+  };
   for (const config::SensorConfig& sensor : config.sensors) {
     if (sensor.modality != config::SensorModality::kCamera) continue;
     const calib::SensorCalibration* entry = calibration.find(sensor.name);
-    if (entry != nullptr && entry->camera && cameras.size() < 2) cameras.push_back(entry);
+    if (entry == nullptr || !entry->camera) continue;
+    if (size_of(*entry).area() == 0) {
+      if (rigs.empty()) {
+        return Error(fmt::format("camera {}: the calibration's intrinsics need the image width and height for visual odometry", entry->sensor));
+      }
+      logger()->warn("camera {}: not used by the visual odometry (the calibration's intrinsics have no image size)", entry->sensor);
+      continue;
+    }
+    if (!rigs.empty() && rigs.back().size() == 1 && size_of(*rigs.back()[0]) == size_of(*entry)) {
+      rigs.back().push_back(entry);
+    } else {
+      rigs.push_back({entry});
+    }
   }
-  if (cameras.empty()) return std::unique_ptr<CameraOdometry>();
-  const calib::SensorCalibration& left = *cameras[0];
-  const msgs::CameraIntrinsics& intrinsics = left.camera->intrinsics;
-  if (intrinsics.width == 0 || intrinsics.height == 0) {
-    return Error(fmt::format("camera {}: the calibration's intrinsics need the image width and height for visual odometry", left.sensor));
+  if (rigs.empty()) return std::unique_ptr<CameraOdometry>();
+  if (config.frontend.type == config::FrontendType::kMsckf) return create_visual_inertial(config, calibration, rigs);
+  const calib::SensorCalibration& left = *rigs[0][0];
+  const bool stereo_pair = rigs[0].size() == 2;
+  const cv::Size size = size_of(left);
+  for (size_t rig = 1; rig < rigs.size(); ++rig) {
+    for (const calib::SensorCalibration* camera : rigs[rig]) {
+      logger()->warn("camera '{}' is not used: frontend.type {}'s visual odometry takes one camera or stereo pair ({}; frontend.type msckf "
+                     "takes several)", camera->sensor, config::to_string(config.frontend.type), left.sensor);
+    }
   }
-  const cv::Size size(static_cast<int>(intrinsics.width), static_cast<int>(intrinsics.height));
-  const bool stereo_pair = cameras.size() == 2 && cameras[1]->camera->intrinsics.width == intrinsics.width &&
-                           cameras[1]->camera->intrinsics.height == intrinsics.height;
-  if (config.frontend.type == config::FrontendType::kMsckf) return create_visual_inertial(config, calibration, cameras, stereo_pair, size);
   // A monocular camera beside an IMU needs the visual-inertial frontend for its scale: the
   // loosely coupled filters cannot use its poses, so its images are not processed at all.
   const bool has_imu = std::any_of(config.sensors.begin(), config.sensors.end(),
@@ -109,33 +127,29 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
     return std::unique_ptr<CameraOdometry>();
   }
   vision::VisualOdometryConfig configured = odometry_config;
-  HANZO_RETURN_IF_ERROR(apply_vision_config(config, left.sensor, stereo_pair ? cameras[1]->sensor : "", configured));
+  HANZO_RETURN_IF_ERROR(apply_vision_config(config, left.sensor, stereo_pair ? rigs[0][1]->sensor : "", configured));
   std::unique_ptr<vision::VisualOdometry> odometry;
-  std::string right_sensor;
-  Duration right_offset;
+  Rig rig{left.sensor, "", left.time_offset, Duration(), size};
   if (stereo_pair) {
-    const calib::SensorCalibration& right = *cameras[1];
+    const calib::SensorCalibration& right = *rigs[0][1];
     HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create_stereo(left.camera->pinhole_camera(), right.camera->pinhole_camera(),
                                                                                          left.T_body_sensor().inverse() * right.T_body_sensor(), size,
                                                                                          configured),
                                                   fmt::format("cameras {} and {}", left.sensor, right.sensor)));
-    right_sensor = right.sensor;
-    right_offset = right.time_offset;
+    rig.right_sensor = right.sensor;
+    rig.right_offset = right.time_offset;
   } else {
     HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create(left.camera->pinhole_camera(), size, configured),
                                                   fmt::format("camera {}", left.sensor)));
   }
-  logger()->info("session: {} visual odometry on {}{} ({} features{})", right_sensor.empty() ? "monocular" : "stereo", left.sensor,
-                 right_sensor.empty() ? "" : " + " + right_sensor, configured.extractor->name(),
+  logger()->info("session: {} visual odometry on {}{} ({} features{})", stereo_pair ? "stereo" : "monocular", left.sensor,
+                 stereo_pair ? " + " + rig.right_sensor : "", configured.extractor->name(),
                  configured.putative_filter ? ", learned correspondence filter" : "");
-  return std::unique_ptr<CameraOdometry>(
-      new CameraOdometry(std::move(odometry), left.sensor, std::move(right_sensor), left.camera->pinhole_camera(), left.T_body_sensor(),
-                                                            left.time_offset, right_offset));
+  return std::unique_ptr<CameraOdometry>(new CameraOdometry(std::move(odometry), {rig}, left.camera->pinhole_camera(), left.T_body_sensor()));
 }
 
 Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(const config::FusionConfig& config, const calib::Calibration& calibration,
-                                                                               const std::vector<const calib::SensorCalibration*>& cameras,
-                                                                               bool stereo_pair, cv::Size size) {
+                                                                               const std::vector<std::vector<const calib::SensorCalibration*>>& camera_rigs) {
   const auto imu = std::find_if(config.sensors.begin(), config.sensors.end(),
                                 [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kImu; });
   if (imu == config.sensors.end()) return Error("frontend.type msckf: visual-inertial odometry needs an IMU sensor", "frontend.type");
@@ -145,17 +159,37 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(c
     T_body_imu = entry->T_body_sensor();
     imu_offset = entry->time_offset;
   }
-  std::vector<MsckfCameraSetup> setups;
-  for (size_t i = 0; i < (stereo_pair ? 2u : 1u); ++i) setups.push_back({cameras[i]->camera->pinhole_camera(), cameras[i]->T_body_sensor()});
   const config::CovarianceConfig& covariance = config.frontend.covariance;
   const estimate::ImuNoise noise{covariance.process_noise_accel, covariance.process_noise_gyro, covariance.accel_bias_random_walk,
                                  covariance.gyro_bias_random_walk, 1.0 / imu->rate_hz};
   // Learned features detect the tracker's new features; the classical detector is Shi-Tomasi's.
+  // Every rig tracks the same kind.
+  std::vector<MsckfRigSetup> setups;
+  std::vector<Rig> rigs;
+  std::vector<std::string> rig_names;
+  std::optional<config::FeatureSelection> rig0_features;
   vision::FeatureTrackerConfig tracker;
-  std::pair<config::FeatureSelection, std::string> features;
-  HANZO_ASSIGN_OR_RETURN(features, configured_features(config, cameras[0]->sensor, stereo_pair ? cameras[1]->sensor : ""));
-  if (features.first.learned()) {
-    HANZO_ASSIGN_OR_RETURN(tracker.detector, make_feature_extractor(features.first, kTrackerCandidates * tracker.max_features, features.second));
+  for (const std::vector<const calib::SensorCalibration*>& cameras : camera_rigs) {
+    const calib::SensorCalibration& left = *cameras[0];
+    const bool stereo = cameras.size() == 2;
+    std::pair<config::FeatureSelection, std::string> features;
+    HANZO_ASSIGN_OR_RETURN(features, configured_features(config, left.sensor, stereo ? cameras[1]->sensor : ""));
+    if (!rig0_features) {
+      rig0_features = features.first;
+      if (features.first.learned()) {
+        HANZO_ASSIGN_OR_RETURN(tracker.detector, make_feature_extractor(features.first, kTrackerCandidates * tracker.max_features, features.second));
+      }
+    } else if (!(features.first == *rig0_features)) {
+      return Error(fmt::format("{}: {} differs from {}'s {} (the visual-inertial odometry tracks one kind of feature)", features.second,
+                               features.first.type, rigs[0].left_sensor, rig0_features->type),
+                   features.second);
+    }
+    MsckfRigSetup setup;
+    setup.image_size = cv::Size(static_cast<int>(left.camera->intrinsics.width), static_cast<int>(left.camera->intrinsics.height));
+    for (const calib::SensorCalibration* camera : cameras) setup.cameras.push_back({camera->camera->pinhole_camera(), camera->T_body_sensor()});
+    rigs.push_back({left.sensor, stereo ? cameras[1]->sensor : "", left.time_offset, stereo ? cameras[1]->time_offset : Duration(), setup.image_size});
+    rig_names.push_back(stereo ? fmt::format("stereo {} + {}", left.sensor, cameras[1]->sensor) : fmt::format("monocular {}", left.sensor));
+    setups.push_back(std::move(setup));
   }
   if (config.vision.place_recognition == config::PlaceRecognitionType::kLearned) {
     logger()->warn("vision.place_recognition learned: the visual-inertial odometry's loop detector ranks places by bags of ORB words");
@@ -165,15 +199,15 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(c
                    "filter); its tracks are checked by RANSAC");
   }
   std::unique_ptr<MsckfOdometry> inertial;
-  HANZO_ASSIGN_OR_RETURN(inertial, with_context(MsckfOdometry::create(setups, size, T_body_imu, noise, tracker), fmt::format("camera {}", cameras[0]->sensor)));
-  const calib::SensorCalibration& left = *cameras[0];
-  logger()->info("session: {} visual-inertial odometry (MSCKF) on {}{} and {}", stereo_pair ? "stereo" : "monocular", left.sensor,
-                 stereo_pair ? " + " + cameras[1]->sensor : "", imu->name);
-  auto odometry = std::unique_ptr<CameraOdometry>(new CameraOdometry(nullptr, left.sensor, stereo_pair ? cameras[1]->sensor : "", left.camera->pinhole_camera(), left.T_body_sensor(),
-                                                                     left.time_offset, stereo_pair ? cameras[1]->time_offset : Duration()));
+  HANZO_ASSIGN_OR_RETURN(inertial, with_context(MsckfOdometry::create(setups, T_body_imu, noise, tracker), fmt::format("camera {}", rigs[0].left_sensor)));
+  logger()->info("session: visual-inertial odometry (MSCKF) on {} and {}", fmt::join(rig_names, ", "), imu->name);
+  const calib::SensorCalibration& left = *camera_rigs[0][0];
+  auto odometry = std::unique_ptr<CameraOdometry>(new CameraOdometry(nullptr, std::move(rigs), left.camera->pinhole_camera(), left.T_body_sensor()));
   odometry->inertial_ = std::move(inertial);
   std::vector<VisualInertialFactors::Camera> factor_cameras;
-  for (const MsckfCameraSetup& setup : setups) factor_cameras.push_back({setup.T_body_camera, setup.camera.fx});
+  for (const MsckfRigSetup& setup : setups) {
+    for (const MsckfCameraSetup& camera : setup.cameras) factor_cameras.push_back({camera.T_body_camera, camera.camera.fx});
+  }
   const ImuChainNoise chain = imu_chain_noise(config, *imu);
   odometry->keyframe_factors_ = std::make_unique<VisualInertialFactors>(std::move(factor_cameras), chain.preintegration, chain.accel_bias_random_walk,
                                                                         chain.gyro_bias_random_walk);
@@ -209,39 +243,90 @@ vision::VisualOdometrySummary CameraOdometry::summary() const {
   return summary;
 }
 
-CameraOdometry::CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::string left_sensor, std::string right_sensor,
-                               const PinholeCamera& left_camera, const SE3& T_body_left, Duration left_offset, Duration right_offset)
-    : odometry_(std::move(odometry)),
-      left_sensor_(std::move(left_sensor)),
-      right_sensor_(std::move(right_sensor)),
-      left_camera_(left_camera),
-      T_body_left_(T_body_left),
-      left_offset_(left_offset),
-      right_offset_(right_offset) {}
+CameraOdometry::CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::vector<Rig> rigs, const PinholeCamera& left_camera,
+                               const SE3& T_body_left)
+    : odometry_(std::move(odometry)), rigs_(std::move(rigs)), left_camera_(left_camera), T_body_left_(T_body_left) {}
 
-Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::add(std::string_view sensor, const msgs::ImageMessage& image) {
-  cv::Mat grey;
-  HANZO_ASSIGN_OR_RETURN(grey, vision::grey_image(image));
-  if (sensor == left_sensor_) {
-    const Timestamp time = image.timestamp + left_offset_;
-    if (!stereo()) return track(time, grey, cv::Mat());
-    // A left image still waiting lost its right one: tracked alone is not possible for a
-    // stereo odometry, so it is dropped.
-    if (waiting_left_) logger()->debug("session: left image at {:.3f} s had no right image", waiting_left_->first.seconds());
-    waiting_left_.emplace(time, std::move(grey));
-    return std::optional<Tracked>();
+const CameraOdometry::Rig* CameraOdometry::rig_of(std::string_view sensor) const {
+  for (const Rig& rig : rigs_) {
+    if (sensor == rig.left_sensor || (rig.stereo() && sensor == rig.right_sensor)) return &rig;
   }
-  const Timestamp time = image.timestamp + right_offset_;
-  if (!waiting_left_ || std::abs((waiting_left_->first - time).seconds()) > 1e-3) {
-    logger()->debug("session: right image at {:.3f} s has no left image of its time: dropped", time.seconds());
-    return std::optional<Tracked>();
-  }
-  const auto [left_time, left] = std::move(*waiting_left_);
-  waiting_left_.reset();
-  return track(left_time, left, grey);
+  return nullptr;
 }
 
-Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track(Timestamp time, const cv::Mat& left, const cv::Mat& right) {
+Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::add(std::string_view sensor, const msgs::ImageMessage& image) {
+  // Images of one frame are at most this far apart (seconds, body clock).
+  constexpr double kFrameTolerance = 1e-3;
+  const Rig* rig = rig_of(sensor);
+  if (rig == nullptr) return Error(fmt::format("camera {}: not a camera of the visual odometry", sensor));
+  cv::Mat grey;
+  HANZO_ASSIGN_OR_RETURN(grey, vision::grey_image(image));
+  const bool left = sensor == rig->left_sensor;
+  const Timestamp time = image.timestamp + (left ? rig->left_offset : rig->right_offset);
+  std::optional<Tracked> tracked;
+  if (pending_ && std::abs((time - pending_->time).seconds()) > kFrameTolerance) {
+    if (time < pending_->time) {
+      logger()->debug("session: camera {}: image at {:.3f} s is older than the frame waiting ({:.3f} s): dropped", sensor, time.seconds(),
+                      pending_->time.seconds());
+      return std::optional<Tracked>();
+    }
+    HANZO_ASSIGN_OR_RETURN(tracked, track_pending());
+  }
+  if (!pending_) pending_ = PendingFrame{time, std::nullopt, std::vector<std::pair<cv::Mat, cv::Mat>>(rigs_.size())};
+  const size_t index = static_cast<size_t>(rig - rigs_.data());
+  std::pair<cv::Mat, cv::Mat>& images = pending_->images[index];
+  (left ? images.first : images.second) = std::move(grey);
+  if (left && (!pending_->left_time || index == 0)) pending_->left_time = time;
+  const bool complete = std::all_of(rigs_.begin(), rigs_.end(), [this](const Rig& each) {
+    const std::pair<cv::Mat, cv::Mat>& frame = pending_->images[static_cast<size_t>(&each - rigs_.data())];
+    return !frame.first.empty() && (!each.stereo() || !frame.second.empty());
+  });
+  // (A frame that completes with this image was just started only for a single camera, which
+  // never leaves one waiting: at most one frame is tracked per image.)
+  if (complete) HANZO_ASSIGN_OR_RETURN(tracked, track_pending());
+  return tracked;
+}
+
+Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track_pending() {
+  PendingFrame frame = std::move(*pending_);
+  pending_.reset();
+  std::vector<MsckfOdometry::RigImages> images;
+  std::vector<std::string> sensors;
+  for (size_t index = 0; index < rigs_.size(); ++index) {
+    const Rig& rig = rigs_[index];
+    auto& [left, right] = frame.images[index];
+    if (left.empty() || (rig.stereo() && right.empty())) {
+      if (!left.empty() || !right.empty()) {
+        logger()->debug("session: camera {}: image at {:.3f} s has no {} image of its time: dropped", left.empty() ? rig.right_sensor : rig.left_sensor,
+                        frame.time.seconds(), left.empty() ? "left" : "right");
+      }
+      continue;
+    }
+    images.push_back({static_cast<int>(index), std::move(left), std::move(right)});
+    sensors.push_back(rig.left_sensor);
+    if (rig.stereo()) sensors.push_back(rig.right_sensor);
+  }
+  if (images.empty()) return std::optional<Tracked>();
+  const Timestamp time = *frame.left_time;
+  Tracked tracked;
+  if (inertial_) {
+    HANZO_ASSIGN_OR_RETURN(tracked, track_inertial(time, images));
+  } else {
+    // The visual odometry's single rig.
+    const cv::Mat& left = images[0].left;
+    vision::ImageQuality quality;
+    HANZO_ASSIGN_OR_RETURN(quality, assess(left));
+    Result<vision::VisualOdometryFrame> odometry_frame =
+        images[0].right.empty() ? odometry_->track(time.seconds(), left) : odometry_->track(time.seconds(), left, images[0].right);
+    if (!odometry_frame) return odometry_frame.error();
+    tracked = Tracked{time, std::move(odometry_frame).value(), SE3(), quality, left, {}};
+    tracked.T_world_body = T_body_left_ * tracked.frame.T_world_camera * T_body_left_.inverse();
+  }
+  tracked.sensors = std::move(sensors);
+  return std::optional<Tracked>(std::move(tracked));
+}
+
+Result<vision::ImageQuality> CameraOdometry::assess(const cv::Mat& left) {
   vision::ImageQuality quality;
   HANZO_ASSIGN_OR_RETURN(quality, image_quality_.assess(left));
   switch (quality.condition) {
@@ -250,42 +335,46 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track(Timestamp t
     case vision::ImageCondition::kGlare: ++image_conditions_.glare; break;
     case vision::ImageCondition::kMotionBlur: ++image_conditions_.motion_blur; break;
   }
-  if (inertial_) {
-    MsckfOdometry::Frame frame;
-    HANZO_ASSIGN_OR_RETURN(frame, inertial_->track(time, left, right));
-    Tracked tracked;
-    tracked.time = time;
-    tracked.T_world_body = frame.T_world_body;
-    tracked.image_quality = quality;
-    tracked.left_image = left;
-    tracked.frame.time = time.seconds();
-    tracked.frame.state = frame.tracking ? vision::TrackingState::kTracking : vision::TrackingState::kInitializing;
-    tracked.frame.standing_still = frame.update.zero_velocity;
-    tracked.frame.reason = frame.reason;
-    if (frame.tracking && (quality.condition == vision::ImageCondition::kDark || frame.tracked_features < kMinTrackedFeatures)) {
-      tracked.frame.state = vision::TrackingState::kLost;
-      tracked.frame.reason = quality.condition == vision::ImageCondition::kDark
-                                 ? fmt::format("dark image (mean grey level {:.0f})", quality.mean_intensity)
-                                 : fmt::format("{} features continued from the previous image ({} image)", frame.tracked_features,
-                                               vision::to_string(quality.condition));
-    }
-    if (frame.tracking) {
-      keyframe_factors_->add_frame(time, frame.T_world_body, std::move(frame.observations));
-    } else {
-      keyframe_factors_->odometry_restarted();  // (re)initializing: a new odometry world follows
-    }
-    ++inertial_summary_.frames;
-    ++inertial_summary_.feature_frames;
-    inertial_summary_.feature_seconds += frame.feature_seconds;
-    inertial_summary_.tracked_frames += tracked.frame.state == vision::TrackingState::kTracking;
-    inertial_summary_.lost_frames += tracked.frame.state == vision::TrackingState::kLost;
-    return std::optional<Tracked>(std::move(tracked));
+  return quality;
+}
+
+Result<CameraOdometry::Tracked> CameraOdometry::track_inertial(Timestamp time, const std::vector<MsckfOdometry::RigImages>& images) {
+  // The frame's image quality: the first good left image's, else rig order's first.
+  std::optional<vision::ImageQuality> quality;
+  for (const MsckfOdometry::RigImages& rig : images) {
+    vision::ImageQuality assessed;
+    HANZO_ASSIGN_OR_RETURN(assessed, assess(rig.left));
+    if (!quality || (quality->condition != vision::ImageCondition::kGood && assessed.condition == vision::ImageCondition::kGood)) quality = assessed;
   }
-  Result<vision::VisualOdometryFrame> frame = right.empty() ? odometry_->track(time.seconds(), left) : odometry_->track(time.seconds(), left, right);
-  if (!frame) return frame.error();
-  Tracked tracked{time, std::move(frame).value(), SE3(), quality, left};
-  tracked.T_world_body = T_body_left_ * tracked.frame.T_world_camera * T_body_left_.inverse();
-  return std::optional<Tracked>(std::move(tracked));
+  MsckfOdometry::Frame frame;
+  HANZO_ASSIGN_OR_RETURN(frame, inertial_->track(time, images));
+  Tracked tracked;
+  tracked.time = time;
+  tracked.T_world_body = frame.T_world_body;
+  tracked.image_quality = *quality;
+  if (images[0].rig == 0) tracked.left_image = images[0].left;
+  tracked.frame.time = time.seconds();
+  tracked.frame.state = frame.tracking ? vision::TrackingState::kTracking : vision::TrackingState::kInitializing;
+  tracked.frame.standing_still = frame.update.zero_velocity;
+  tracked.frame.reason = frame.reason;
+  if (frame.tracking && (quality->condition == vision::ImageCondition::kDark || frame.tracked_features < kMinTrackedFeatures)) {
+    tracked.frame.state = vision::TrackingState::kLost;
+    tracked.frame.reason = quality->condition == vision::ImageCondition::kDark
+                               ? fmt::format("dark image (mean grey level {:.0f})", quality->mean_intensity)
+                               : fmt::format("{} features continued from the previous image ({} image)", frame.tracked_features,
+                                             vision::to_string(quality->condition));
+  }
+  if (frame.tracking) {
+    keyframe_factors_->add_frame(time, frame.T_world_body, std::move(frame.observations));
+  } else {
+    keyframe_factors_->odometry_restarted();  // (re)initializing: a new odometry world follows
+  }
+  ++inertial_summary_.frames;
+  ++inertial_summary_.feature_frames;
+  inertial_summary_.feature_seconds += frame.feature_seconds;
+  inertial_summary_.tracked_frames += tracked.frame.state == vision::TrackingState::kTracking;
+  inertial_summary_.lost_frames += tracked.frame.state == vision::TrackingState::kLost;
+  return tracked;
 }
 
 }  // namespace hanzo::fusion::pipeline

@@ -2,15 +2,19 @@
 // CameraOdometry: the Session's visual odometry (vision::VisualOdometry) on the configuration's
 // cameras, and how its poses reach the Frontend.
 //
-// Cameras: the first camera sensor of the configuration with intrinsics in the calibration is
-// the left (monocular) camera; a second camera with intrinsics of the same size makes it a
-// stereo pair (the right image of a time completes the pair; a left image whose right one
-// never comes, and a right without its left, are dropped). Images must be mono8, rgb8 or bgr8 of
-// the calibrated size; the sensor's time offset moves them to the body clock.
+// Cameras: the camera sensors of the configuration with intrinsics in the calibration, in the
+// configuration's order, form rigs: a camera and the next one of the same image size are a
+// stereo pair (left, right), a camera without one is a rig of its own. Rig 0's left camera is
+// "the left camera". Images must be mono8, rgb8 or bgr8 of the calibrated size; the sensor's
+// time offset moves them to the body clock. The images of one time (within 1 ms) make a frame,
+// tracked once every rig's image(s) of that time came, or when an image of a later time comes
+// (the rigs complete by then; a stereo half without its other half is dropped).
 //
-// With frontend.type msckf and an IMU, the odometry is visual-inertial instead
-// (msckf_odometry.hpp: KLT tracks and the MSCKF, metric with one camera too): the Session gives
-// it the IMU's samples as well, and its body poses are fused the same way.
+// With frontend.type msckf and an IMU, the odometry is visual-inertial (msckf_odometry.hpp: KLT
+// tracks and the MSCKF, metric with one camera too) on every rig (two stereo pairs looking
+// ahead and behind, say): the Session gives it the IMU's samples as well, and its body poses
+// are fused the same way. The visual odometry of the other frontends takes rig 0 alone (the
+// other cameras are reported as not used).
 //
 // Every left image's quality is assessed (vision/image_quality.hpp: dark, glare, motion blur) and
 // counted. The visual-inertial odometry's frame is lost when its image is dark or fewer than
@@ -28,6 +32,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/config/fusion_config.hpp"
@@ -43,14 +48,22 @@ namespace hanzo::fusion::pipeline {
 
 class CameraOdometry {
  public:
-  /// A tracked image (pair): the body-clock time and the odometry's outcome, with the camera
-  /// pose moved into the odometry's body world: T_world_body = T_body_left T_left0_left T_body_left^-1.
+  /// A tracked frame: the body-clock time and the odometry's outcome, with the camera pose
+  /// moved into the odometry's body world: T_world_body = T_body_left T_left0_left T_body_left^-1.
   struct Tracked {
     Timestamp time;
     vision::VisualOdometryFrame frame;
     SE3 T_world_body;
-    vision::ImageQuality image_quality;  ///< the left image's
-    cv::Mat left_image;                  ///< 8-bit grey (shared, not copied)
+    vision::ImageQuality image_quality;  ///< the best of the frame's left images
+    cv::Mat left_image;                  ///< rig 0's left image, 8-bit grey (shared, not copied); empty without one
+    std::vector<std::string> sensors;    ///< the cameras whose images made the frame
+  };
+  /// A camera rig: one camera, or a stereo pair.
+  struct Rig {
+    std::string left_sensor, right_sensor;  ///< right empty for one camera
+    Duration left_offset, right_offset;     ///< calibrated time offsets (t_body = t_camera + offset)
+    cv::Size image_size;
+    bool stereo() const { return !right_sensor.empty(); }
   };
   /// Left images by condition (good ones are not counted).
   struct ImageConditionCounts {
@@ -66,18 +79,21 @@ class CameraOdometry {
   static Result<std::unique_ptr<CameraOdometry>> create(const config::FusionConfig& config, const calib::Calibration& calibration,
                                                         const vision::VisualOdometryConfig& odometry_config = {});
 
-  bool handles(std::string_view sensor) const { return sensor == left_sensor_ || (stereo() && sensor == right_sensor_); }
-  bool stereo() const { return !right_sensor_.empty(); }
-  const std::string& left_sensor() const { return left_sensor_; }
-  const std::string& right_sensor() const { return right_sensor_; }
+  bool handles(std::string_view sensor) const { return rig_of(sensor) != nullptr; }
+  /// The rigs the odometry tracks (rig 0 first).
+  const std::vector<Rig>& rigs() const { return rigs_; }
+  /// The rig a camera belongs to (null for a camera the odometry does not take).
+  const Rig* rig_of(std::string_view sensor) const;
+  bool stereo() const { return rigs_[0].stereo(); }
+  const std::string& left_sensor() const { return rigs_[0].left_sensor; }
+  const std::string& right_sensor() const { return rigs_[0].right_sensor; }
   const SE3& T_body_left() const { return T_body_left_; }
   const PinholeCamera& left_camera() const { return left_camera_; }
   /// The left camera's calibrated time offset (t_body = t_camera + offset).
-  Duration left_time_offset() const { return left_offset_; }
-  Duration right_time_offset() const { return right_offset_; }
+  Duration left_time_offset() const { return rigs_[0].left_offset; }
 
-  /// Takes an image of a handled sensor. Returns the tracked frame when an image (pair)
-  /// completed; nullopt while a stereo pair waits for its other half. Fails (naming the
+  /// Takes an image of a handled sensor. Returns the tracked frame when a frame completed
+  /// (header comment); nullopt while it waits for the rest of its images. Fails (naming the
   /// problem) for an image of the wrong encoding or size, or out of time order.
   Result<std::optional<Tracked>> add(std::string_view sensor, const msgs::ImageMessage& image);
 
@@ -96,15 +112,24 @@ class CameraOdometry {
   const ImageConditionCounts& image_conditions() const { return image_conditions_; }
   /// The odometry's landmark map (its world: the left camera at its first keyframe).
   /// (Empty for the visual-inertial odometry: it keeps no landmarks.)
-  msgs::VisualLandmarkLayer landmark_layer() const { return odometry_ ? odometry_->landmark_layer(left_sensor_) : msgs::VisualLandmarkLayer{}; }
+  msgs::VisualLandmarkLayer landmark_layer() const { return odometry_ ? odometry_->landmark_layer(left_sensor()) : msgs::VisualLandmarkLayer{}; }
 
  private:
-  CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::string left_sensor, std::string right_sensor, const PinholeCamera& left_camera,
-                 const SE3& T_body_left, Duration left_offset, Duration right_offset);
+  // The images of one time, by rig (empty until they come).
+  struct PendingFrame {
+    Timestamp time;                      // its first image's
+    std::optional<Timestamp> left_time;  // the frame's time: rig 0's left image's, else the first left image's
+    std::vector<std::pair<cv::Mat, cv::Mat>> images;
+  };
+
+  CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::vector<Rig> rigs, const PinholeCamera& left_camera, const SE3& T_body_left);
   static Result<std::unique_ptr<CameraOdometry>> create_visual_inertial(const config::FusionConfig& config, const calib::Calibration& calibration,
-                                                                        const std::vector<const calib::SensorCalibration*>& cameras, bool stereo_pair,
-                                                                        cv::Size size);
-  Result<std::optional<Tracked>> track(Timestamp time, const cv::Mat& left, const cv::Mat& right);
+                                                                        const std::vector<std::vector<const calib::SensorCalibration*>>& rigs);
+  // Tracks the pending frame's complete rigs (nullopt when none is).
+  Result<std::optional<Tracked>> track_pending();
+  Result<Tracked> track_inertial(Timestamp time, const std::vector<MsckfOdometry::RigImages>& images);
+  // A left image's quality, counted by condition.
+  Result<vision::ImageQuality> assess(const cv::Mat& left);
 
   std::unique_ptr<vision::VisualOdometry> odometry_;  // null when visual-inertial
   std::unique_ptr<MsckfOdometry> inertial_;
@@ -114,11 +139,10 @@ class CameraOdometry {
   std::string imu_sensor_;
   Duration imu_offset_;
   vision::VisualOdometrySummary inertial_summary_;
-  std::string left_sensor_, right_sensor_;
+  std::vector<Rig> rigs_;
   PinholeCamera left_camera_;
   SE3 T_body_left_;
-  Duration left_offset_, right_offset_;
-  std::optional<std::pair<Timestamp, cv::Mat>> waiting_left_;  // stereo: a left image waiting for its right
+  std::optional<PendingFrame> pending_;
   vision::ImageQualityMonitor image_quality_ = vision::ImageQualityMonitor::create().value();
   ImageConditionCounts image_conditions_;
 };

@@ -1,5 +1,6 @@
 #include "msckf_odometry.hpp"
 
+#include <algorithm>
 #include <chrono>
 
 #include <fmt/format.h>
@@ -30,29 +31,42 @@ constexpr double kAlignedTiltSigma = 0.01;
 constexpr double kAlignedGyroBiasSigma = 0.01;
 // IMU kept before the start: the alignment window and a margin.
 constexpr double kPreStartImuSeconds = kVisualInertialWindowSeconds + 1.0;
+constexpr size_t kMaxRigs = 4;
+// Feature ids of rig r carry r above bit 48: unique across the rigs' trackers, and within the
+// 56-bit index of a graph key (graph/keys.hpp: landmarks are keyed by feature id).
+constexpr int kRigIdShift = 48;
 
 }  // namespace
 
-Result<std::unique_ptr<MsckfOdometry>> MsckfOdometry::create(const std::vector<MsckfCameraSetup>& cameras, cv::Size image_size,
-                                                             const SE3& T_body_imu, const estimate::ImuNoise& imu_noise,
-                                                             const vision::FeatureTrackerConfig& tracker_config) {
-  if (cameras.empty() || cameras.size() > 2) return Error(fmt::format("MsckfOdometry: {} cameras; one or two are supported", cameras.size()));
-  std::unique_ptr<vision::FeatureTracker> tracker;
-  if (cameras.size() == 2) {
-    HANZO_ASSIGN_OR_RETURN(tracker, vision::FeatureTracker::create_stereo(cameras[0].camera, cameras[1].camera,
-                                                                          cameras[0].T_body_camera.inverse() * cameras[1].T_body_camera, image_size,
-                                                                          tracker_config));
-  } else {
-    HANZO_ASSIGN_OR_RETURN(tracker, vision::FeatureTracker::create(cameras[0].camera, image_size, tracker_config));
-  }
+Result<std::unique_ptr<MsckfOdometry>> MsckfOdometry::create(const std::vector<MsckfRigSetup>& rigs, const SE3& T_body_imu,
+                                                             const estimate::ImuNoise& imu_noise, const vision::FeatureTrackerConfig& tracker_config) {
+  if (rigs.empty() || rigs.size() > kMaxRigs) return Error(fmt::format("MsckfOdometry: {} camera rigs; 1 to {} are supported", rigs.size(), kMaxRigs));
+  std::vector<Rig> trackers;
   std::vector<vision::MsckfCamera> msckf_cameras;
-  for (const MsckfCameraSetup& setup : cameras) msckf_cameras.push_back({T_body_imu.inverse() * setup.T_body_camera, setup.camera.fx});
-  return std::unique_ptr<MsckfOdometry>(new MsckfOdometry(std::move(tracker), std::move(msckf_cameras), T_body_imu, imu_noise));
+  for (size_t index = 0; index < rigs.size(); ++index) {
+    const std::vector<MsckfCameraSetup>& cameras = rigs[index].cameras;
+    if (cameras.empty() || cameras.size() > 2) return Error(fmt::format("MsckfOdometry: rig {} has {} cameras; one or two", index, cameras.size()));
+    Rig rig;
+    rig.first_camera = static_cast<int>(msckf_cameras.size());
+    rig.stereo = cameras.size() == 2;
+    if (rig.stereo) {
+      HANZO_ASSIGN_OR_RETURN(rig.tracker, vision::FeatureTracker::create_stereo(cameras[0].camera, cameras[1].camera,
+                                                                                cameras[0].T_body_camera.inverse() * cameras[1].T_body_camera,
+                                                                                rigs[index].image_size, tracker_config));
+    } else {
+      HANZO_ASSIGN_OR_RETURN(rig.tracker, vision::FeatureTracker::create(cameras[0].camera, rigs[index].image_size, tracker_config));
+    }
+    for (const MsckfCameraSetup& setup : cameras) {
+      msckf_cameras.push_back({T_body_imu.inverse() * setup.T_body_camera, setup.camera.fx, static_cast<int>(index)});
+    }
+    trackers.push_back(std::move(rig));
+  }
+  return std::unique_ptr<MsckfOdometry>(new MsckfOdometry(std::move(trackers), std::move(msckf_cameras), T_body_imu, imu_noise));
 }
 
-MsckfOdometry::MsckfOdometry(std::unique_ptr<vision::FeatureTracker> tracker, std::vector<vision::MsckfCamera> cameras, const SE3& T_body_imu,
+MsckfOdometry::MsckfOdometry(std::vector<Rig> rigs, std::vector<vision::MsckfCamera> cameras, const SE3& T_body_imu,
                              const estimate::ImuNoise& imu_noise)
-    : tracker_(std::move(tracker)), cameras_(std::move(cameras)), T_body_imu_(T_body_imu), imu_noise_(imu_noise) {}
+    : rigs_(std::move(rigs)), cameras_(std::move(cameras)), T_body_imu_(T_body_imu), imu_noise_(imu_noise) {}
 
 void MsckfOdometry::add_imu(const estimate::ImuSample& sample) {
   if (!imu_.empty() && sample.timestamp <= imu_.back().timestamp) return;
@@ -103,7 +117,7 @@ std::optional<std::string> MsckfOdometry::start_filter(Timestamp time) {
       return start_with(state, sigma, still.back());
     }
     // A stereo rig whose alignment failed starts from its two-frame velocity when it has one.
-    const bool stereo_fallback = cameras_.size() == 2 && stereo_velocity_ && aligning_since_;
+    const bool stereo_fallback = rigs_[0].stereo && stereo_velocity_ && aligning_since_;
     if (!stereo_fallback && (!aligning_since_ || (time - *aligning_since_).seconds() < kMaxAligningSeconds)) {
       return fmt::format("initializing: moving ({}); aligning the images with the IMU ({})", aligned.error().message, why);
     }
@@ -165,17 +179,32 @@ std::optional<std::pair<Eigen::Vector3d, Eigen::Vector3d>> MsckfOdometry::imu_bi
   return std::make_pair(filter_->state().accel_bias, filter_->state().gyro_bias);
 }
 
-Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat& left, const cv::Mat& right) {
-  vision::TrackedFrame tracked;
-  const auto start = std::chrono::steady_clock::now();
-  HANZO_ASSIGN_OR_RETURN(tracked, right.empty() ? tracker_->track(left) : tracker_->track(left, right));
+Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const std::vector<RigImages>& images) {
   Frame frame;
+  std::vector<int> rigs_imaged;
+  std::optional<std::vector<vision::FeatureObservation>> rig0_observations;
+  const auto start = std::chrono::steady_clock::now();
+  for (const RigImages& rig_images : images) {
+    if (rig_images.rig < 0 || rig_images.rig >= static_cast<int>(rigs_.size()) ||
+        std::find(rigs_imaged.begin(), rigs_imaged.end(), rig_images.rig) != rigs_imaged.end()) {
+      return Error(fmt::format("MsckfOdometry: rig {} is not one of the {} rigs or comes twice in a frame", rig_images.rig, rigs_.size()));
+    }
+    const Rig& rig = rigs_[static_cast<size_t>(rig_images.rig)];
+    vision::TrackedFrame tracked;
+    HANZO_ASSIGN_OR_RETURN(tracked, rig.stereo ? rig.tracker->track(rig_images.left, rig_images.right) : rig.tracker->track(rig_images.left));
+    rigs_imaged.push_back(rig_images.rig);
+    frame.tracked_features += tracked.tracked;
+    if (rig_images.rig == 0) rig0_observations = tracked.observations;
+    for (vision::FeatureObservation& observation : tracked.observations) {
+      observation.feature_id |= static_cast<uint64_t>(rig_images.rig) << kRigIdShift;
+      observation.camera += rig.first_camera;
+      frame.observations.push_back(observation);
+    }
+  }
   frame.feature_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  frame.tracked_features = tracked.tracked;
-  frame.observations = tracked.observations;
-  if (!filter_ && cameras_.size() == 2) {
+  if (!filter_ && rig0_observations && rigs_[0].stereo) {
     // Before the start: the velocity from this and the previous stereo frame, in case it moves.
-    std::map<uint64_t, Eigen::Vector3d> points = triangulate_stereo(tracked.observations, cameras_);
+    std::map<uint64_t, Eigen::Vector3d> points = triangulate_stereo(*rig0_observations, cameras_);
     stereo_velocity_.reset();
     if (previous_stereo_) {
       const std::vector<estimate::ImuSample> samples(imu_.begin(), imu_.end());
@@ -184,9 +213,9 @@ Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat&
     }
     previous_stereo_.emplace(time, std::move(points));
   }
-  if (!filter_) {
-    // Before the start: the window of tracks for a start in motion.
-    alignment_frames_.push_back({time, tracked.observations});
+  if (!filter_ && rig0_observations) {
+    // Before the start: the window of rig 0's tracks for a start in motion.
+    alignment_frames_.push_back({time, std::move(*rig0_observations)});
     while ((time - alignment_frames_.front().time).seconds() > kVisualInertialWindowSeconds) alignment_frames_.pop_front();
   }
   if (!filter_) {
@@ -200,7 +229,7 @@ Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat&
     (void)filter_->propagate(imu_.front());
     imu_.pop_front();
   }
-  Result<vision::MsckfUpdateSummary> update = filter_->process_frame(time, tracked.observations);
+  Result<vision::MsckfUpdateSummary> update = filter_->process_frame(time, frame.observations, rigs_imaged);
   if (!update) {
     frame.reason = update.error().message;
     if (filter_->diverged()) filter_.reset();  // start again from the next still second
@@ -209,7 +238,7 @@ Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const cv::Mat&
   frame.tracking = true;
   frame.update = *update;
   logger()->debug("msckf: frame {:.3f} s: {} tracked, {} of {} features used ({} not triangulated, {} chi-square outliers), {} clones{}",
-                  time.seconds(), tracked.tracked, update->features_used, update->features_offered, update->rejected_triangulation,
+                  time.seconds(), frame.tracked_features, update->features_used, update->features_offered, update->rejected_triangulation,
                   update->rejected_chi_square, update->clones, update->zero_velocity ? ", standing still" : "");
   zero_velocity_frames_ += update->zero_velocity;
   frame.T_world_body = SE3(filter_->state().R_world_body, filter_->state().position) * T_body_imu_.inverse();

@@ -15,6 +15,12 @@
 // standard deviation for the images to correct.
 // A filter whose covariance breaks down numerically is dropped and started again the same way.
 //
+// Several rigs (a rig: one camera or a stereo pair; two stereo pairs looking ahead and behind,
+// for example): each rig has its own tracker, and one filter takes every rig's features (the
+// MSCKF's cameras in rig order, feature ids made unique per rig). A frame holds the images the
+// rigs took at one time (track()); a rig missing from a frame keeps its tracks open. The start
+// (static or in motion) uses rig 0.
+//
 // World: gravity-aligned (z up), heading and origin those of the IMU at the start; poses are
 // T_world_body (the IMU's pose moved by the calibration's imu_to_body).
 
@@ -39,6 +45,12 @@ struct MsckfCameraSetup {
   SE3 T_body_camera;
 };
 
+/// A rig: one camera, or a stereo pair (left, right) of one image size.
+struct MsckfRigSetup {
+  std::vector<MsckfCameraSetup> cameras;
+  cv::Size image_size;
+};
+
 class MsckfOdometry {
  public:
   struct Frame {
@@ -47,19 +59,29 @@ class MsckfOdometry {
     vision::MsckfUpdateSummary update;
     std::string reason;
     int tracked_features = 0;  ///< left features continued from the previous image
-    std::vector<vision::FeatureObservation> observations;  ///< the tracker's, both cameras
-    double feature_seconds = 0.0;  ///< the tracker's time on this frame (detection and optical flow)
+    /// The trackers' observations of every rig in the frame: cameras numbered across the rigs
+    /// (rig 0's first), feature ids unique across them (rig 0's as its tracker gives them).
+    std::vector<vision::FeatureObservation> observations;
+    double feature_seconds = 0.0;  ///< the trackers' time on this frame (detection and optical flow)
+  };
+  /// A rig's grey images of a frame (right empty for a single camera).
+  struct RigImages {
+    int rig = 0;
+    cv::Mat left, right;
   };
 
-  /// One or two cameras (the second makes a stereo rig), the IMU's mounting and noise; fails
-  /// as the tracker and the filter do on a bad calibration.
-  static Result<std::unique_ptr<MsckfOdometry>> create(const std::vector<MsckfCameraSetup>& cameras, cv::Size image_size, const SE3& T_body_imu,
+  /// The rigs (one to four; each one or two cameras, the second making a stereo pair), the
+  /// IMU's mounting and noise; fails as the trackers and the filter do on a bad calibration.
+  static Result<std::unique_ptr<MsckfOdometry>> create(const std::vector<MsckfRigSetup>& rigs, const SE3& T_body_imu,
                                                        const estimate::ImuNoise& imu_noise, const vision::FeatureTrackerConfig& tracker = {});
 
   /// An IMU sample on the body clock, in time order (older or repeated samples are ignored).
   void add_imu(const estimate::ImuSample& sample);
-  /// A frame (grey images; right empty for a single camera) at its body-clock time.
-  Result<Frame> track(Timestamp time, const cv::Mat& left, const cv::Mat& right);
+  /// A frame at its body-clock time: the images of the rigs that took one then (each rig at
+  /// most once). Fails for an unknown rig or images the rig's tracker refuses.
+  Result<Frame> track(Timestamp time, const std::vector<RigImages>& images);
+  /// A frame of rig 0 alone.
+  Result<Frame> track(Timestamp time, const cv::Mat& left, const cv::Mat& right) { return track(time, {{0, left, right}}); }
 
   int zero_velocity_frames() const { return zero_velocity_frames_; }
   /// The filter's IMU biases (IMU axes: accelerometer m/s^2, gyroscope rad/s); nullopt before it starts.
@@ -67,21 +89,25 @@ class MsckfOdometry {
   bool initialized() const { return filter_.has_value(); }
 
  private:
-  MsckfOdometry(std::unique_ptr<vision::FeatureTracker> tracker, std::vector<vision::MsckfCamera> cameras, const SE3& T_body_imu,
-                const estimate::ImuNoise& imu_noise);
+  struct Rig {
+    std::unique_ptr<vision::FeatureTracker> tracker;
+    int first_camera = 0;  // its left camera's index in cameras_
+    bool stereo = false;
+  };
+  MsckfOdometry(std::vector<Rig> rigs, std::vector<vision::MsckfCamera> cameras, const SE3& T_body_imu, const estimate::ImuNoise& imu_noise);
   std::optional<std::string> start_filter(Timestamp time);
   std::optional<std::string> start_with(const estimate::NavigationState& state, const Eigen::Matrix<double, 15, 1>& sigma,
                                         const estimate::ImuSample& last_sample);
   // In motion: the alignment of the frames kept so far, or nullopt with `why`.
   std::optional<vision::VisualInertialAlignment> align_in_motion(Timestamp time, std::string& why);
 
-  std::unique_ptr<vision::FeatureTracker> tracker_;
+  std::vector<Rig> rigs_;
   std::vector<vision::MsckfCamera> cameras_;  // T_imu_camera: the MSCKF's body is the IMU
   SE3 T_body_imu_;
   estimate::ImuNoise imu_noise_;
   std::optional<vision::Msckf> filter_;
   std::deque<estimate::ImuSample> imu_;  // not yet propagated (before the start: the last seconds)
-  // Stereo, before the start: the last frame's stereo points (body frame) and the velocity
+  // Rig 0 stereo, before the start: the last frame's stereo points (body frame) and the velocity
   // they and the frame before gave (body frame), for a start in motion.
   std::optional<std::pair<Timestamp, std::map<uint64_t, Eigen::Vector3d>>> previous_stereo_;
   std::optional<Eigen::Vector3d> stereo_velocity_;

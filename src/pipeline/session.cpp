@@ -677,15 +677,25 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
   if (!tracked) return refuse(Rejection::kInvalid, fmt::format("camera {}: {}", sensor, tracked.error().message));
   if (statistics.first_time.nanoseconds() == 0) statistics.first_time = image->timestamp;
   statistics.last_time = image->timestamp;
-  if (!*tracked) return {};  // a stereo half waiting for the other
+  if (!*tracked) return {};  // waiting for the rest of its frame
   const CameraOdometry::Tracked& frame = **tracked;
-  // Counted on the left camera (a pair is one measurement).
-  SensorStatistics& left = camera_statistics_[camera_odometry_->left_sensor()];
+  // The camera time of each of the frame's images.
+  const auto camera_time = [this, &frame](const std::string& camera) {
+    const CameraOdometry::Rig& rig = *camera_odometry_->rig_of(camera);
+    return frame.time - (camera == rig.left_sensor ? rig.left_offset : rig.right_offset);
+  };
+  // A frame not fused is counted on the left camera of each rig in it (a stereo pair is one
+  // measurement); a fused one on every camera.
+  const auto count_lefts = [this, &frame](Rejection reason) {
+    for (const std::string& camera : frame.sensors) {
+      if (camera == camera_odometry_->rig_of(camera)->left_sensor) ++camera_statistics_[camera].rejected[reason];
+    }
+  };
   if (frame.frame.state != vision::TrackingState::kTracking) {
     // Before the odometry's first pose: before its initialization; lost frames as lost, their
     // image's condition the health's reason.
     const bool lost = frame.frame.state == vision::TrackingState::kLost;
-    ++left.rejected[lost ? Rejection::kTrackingLost : Rejection::kBeforeInitialization];
+    count_lefts(lost ? Rejection::kTrackingLost : Rejection::kBeforeInitialization);
     if (lost) {
       switch (frame.image_quality.condition) {
         case vision::ImageCondition::kDark: camera_lost_reason_ = HealthReason::kDark; break;
@@ -695,9 +705,8 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
       }
       logger()->debug("session: camera frame at {:.3f} s lost: {}", frame.time.seconds(), frame.frame.reason);
       if (visual_loops_) visual_loops_->note_lost();
-      // The camera streams (not a timeout) though its frames are not fused.
-      frontend_->note_input(camera_odometry_->left_sensor(), frame.time - camera_odometry_->left_time_offset());
-      if (camera_odometry_->stereo()) frontend_->note_input(camera_odometry_->right_sensor(), frame.time - camera_odometry_->right_time_offset());
+      // The cameras stream (not a timeout) though their frames are not fused.
+      for (const std::string& camera : frame.sensors) frontend_->note_input(camera, camera_time(camera));
     }
     return {};
   }
@@ -743,19 +752,20 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
                                  !camera_odometry_->visual_inertial() || configures_gnss(frontend_->config()));
   }
   if (monocular_with_imu) {
-    ++left.rejected[Rejection::kNotFused];  // monocular scale: needs visual-inertial initialization
+    count_lefts(Rejection::kNotFused);  // monocular scale: needs visual-inertial initialization
   } else if (!visual_world_) {
-    ++left.rejected[Rejection::kAligning];  // the Frontend has no pose at the frame's time yet
+    count_lefts(Rejection::kAligning);  // the Frontend has no pose at the frame's time yet
   } else if (fused) {
-    ++left.fused;
-    if (camera_odometry_->stereo()) {
-      ++camera_statistics_[camera_odometry_->right_sensor()].fused;
-      frontend_->note_input(camera_odometry_->right_sensor(), sensor_time + camera_odometry_->left_time_offset() - camera_odometry_->right_time_offset());
+    for (const std::string& camera : frame.sensors) {
+      ++camera_statistics_[camera].fused;
+      if (camera != camera_odometry_->left_sensor()) frontend_->note_input(camera, camera_time(camera));
     }
   } else {
     logger()->debug("session: visual odometry pose not fused: {}", fused.error().message);
   }
-  if (visual_loops_ && fused && visual_world_ && latest_keyframe_ && !restart_graph_) add_visual_place(frame.time, frame.left_image, frame.T_world_body);
+  if (visual_loops_ && fused && visual_world_ && latest_keyframe_ && !restart_graph_ && !frame.left_image.empty()) {
+    add_visual_place(frame.time, frame.left_image, frame.T_world_body);
+  }
   register_ready_scans();
   update_backend();
   return {};
@@ -1291,8 +1301,9 @@ SessionSummary Session::summary() const {
     sensor.rejected = camera->second.rejected;
     // A stereo pair is one measurement, its outcomes counted on the left camera: the right one
     // shows the same, so that each camera's images add up.
-    if (camera_odometry_ && camera_odometry_->stereo() && sensor.name == camera_odometry_->right_sensor()) {
-      const auto left = camera_statistics_.find(camera_odometry_->left_sensor());
+    const CameraOdometry::Rig* rig = camera_odometry_ ? camera_odometry_->rig_of(sensor.name) : nullptr;
+    if (rig != nullptr && rig->stereo() && sensor.name == rig->right_sensor) {
+      const auto left = camera_statistics_.find(rig->left_sensor);
       if (left != camera_statistics_.end()) {
         for (const auto& [reason, count] : left->second.rejected) {
           if (!is_input_check(reason)) sensor.rejected[reason] += count;

@@ -1,5 +1,6 @@
 #include "hanzo/fusion/vision/msckf.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <set>
 
@@ -55,7 +56,8 @@ Result<Msckf> Msckf::create(const MsckfConfig& config, const std::vector<MsckfCa
                             const estimate::NavigationState& initial_state, const Eigen::MatrixXd& initial_covariance,
                             Duration time_offset) {
   HANZO_RETURN_IF_ERROR(validate(config));
-  if (cameras.empty() || cameras.size() > 2) return Error(fmt::format("Msckf: {} cameras given; one or two are supported", cameras.size()), "cameras");
+  if (cameras.empty() || cameras.size() > static_cast<size_t>(kMsckfMaxCameras))
+    return Error(fmt::format("Msckf: {} cameras given; 1 to {} are supported", cameras.size(), kMsckfMaxCameras), "cameras");
   for (size_t i = 0; i < cameras.size(); ++i) {
     if (!positive(cameras[i].focal_length_px)) return Error(fmt::format("Msckf: camera {} focal_length_px must be positive", i), "cameras");
     if (!cameras[i].T_body_camera.translation().allFinite() || !cameras[i].T_body_camera.rotation().quaternion().coeffs().allFinite())
@@ -195,7 +197,8 @@ void Msckf::marginalize_oldest_clone() {
   clones_.pop_front();
 }
 
-Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vector<FeatureObservation>& observations) {
+Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vector<FeatureObservation>& observations,
+                                                const std::vector<int>& rigs) {
   if (diverged_) return Error("Msckf: the covariance is no longer finite; the filter must be initialized again", "state");
   if (!last_sample_) return Error("Msckf: a frame before any IMU sample", "imu");
   if (last_frame_time_ && time <= *last_frame_time_)
@@ -218,7 +221,9 @@ Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vecto
 
   if (frame_body_time > state_.timestamp) propagate_interval(*last_sample_, (frame_body_time - state_.timestamp).seconds());
   apply_interval_propagation();
-  const bool standing = config_.zero_velocity_update && standing_still(observations);
+  const auto imaged = [&rigs](int rig) { return rigs.empty() || std::find(rigs.begin(), rigs.end(), rig) != rigs.end(); };
+  const bool camera0_imaged = imaged(cameras_[0].rig);
+  const bool standing = config_.zero_velocity_update && camera0_imaged && standing_still(observations);
   last_frame_time_ = time;
   if (standing && update_zero_velocity()) {
     MsckfUpdateSummary summary;
@@ -228,7 +233,7 @@ Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vecto
     return summary;
   }
   // Moving: the next frames' displacements count from this one.
-  standing_reference_.clear();
+  if (camera0_imaged) standing_reference_.clear();
   for (const FeatureObservation& observation : observations) {
     if (observation.camera == 0) standing_reference_[observation.feature_id] = observation.normalized;
   }
@@ -239,11 +244,13 @@ Result<MsckfUpdateSummary> Msckf::process_frame(Timestamp time, const std::vecto
     seen.insert(observation.feature_id);
   }
 
-  // Tracks that ended, and with a full window every track the oldest clone saw.
+  // Tracks that ended (in a rig this frame images), and with a full window every track the
+  // oldest clone saw.
   const bool window_full = static_cast<int>(clones_.size()) > config_.max_clones;
   std::vector<uint64_t> to_update;
   for (const auto& [id, track] : tracks_) {
-    if (!seen.count(id) || (window_full && track.front().clone_time == clones_.front().timestamp)) to_update.push_back(id);
+    const bool ended = !seen.count(id) && imaged(cameras_[static_cast<size_t>(track.back().camera)].rig);
+    if (ended || (window_full && track.front().clone_time == clones_.front().timestamp)) to_update.push_back(id);
   }
   MsckfUpdateSummary summary = update(to_update);
   for (uint64_t id : to_update) tracks_.erase(id);

@@ -87,9 +87,9 @@ TEST(MovingStart, AStereoRigThatSeesNothingStartsWithTheVelocityUnknown) {
   camera.fx = camera.fy = 400.0;
   camera.cx = 319.5;
   camera.cy = 239.5;
-  const std::vector<MsckfCameraSetup> rig{{camera, SE3(SO3(), Eigen::Vector3d(0.0, 0.0, 0.05))},
-                                          {camera, SE3(SO3(), Eigen::Vector3d(0.11, 0.0, 0.05))}};
-  auto odometry = MsckfOdometry::create(rig, cv::Size(640, 480), SE3(), estimate::ImuNoise{}).value();
+  const MsckfRigSetup rig{{{camera, SE3(SO3(), Eigen::Vector3d(0.0, 0.0, 0.05))}, {camera, SE3(SO3(), Eigen::Vector3d(0.11, 0.0, 0.05))}},
+                          cv::Size(640, 480)};
+  auto odometry = MsckfOdometry::create({rig}, SE3(), estimate::ImuNoise{}).value();
   const cv::Mat blank(480, 640, CV_8UC1, cv::Scalar(128));
   int aligning = 0;
   std::optional<double> started;

@@ -486,5 +486,34 @@ TEST(Msckf, RefusesBadInputAndKeepsItsState) {
 }
 
 
+// Two rigs (camera 0 ahead, camera 1 behind) imaging at their own times: a frame of one rig keeps
+// the other rig's tracks open; a frame of both ends every track it does not see. More than
+// kMsckfMaxCameras cameras are refused.
+TEST(Msckf, AFrameOfOneRigKeepsTheOtherRigsTracksOpen) {
+  const SE3 ahead(forward_camera_rotation(), Eigen::Vector3d(0.1, 0.0, 0.0));
+  const SE3 behind(SO3::exp(Eigen::Vector3d(0.0, 0.0, M_PI)) * forward_camera_rotation(), Eigen::Vector3d(-0.1, 0.0, 0.0));
+  const std::vector<MsckfCamera> cameras = {{ahead, 400.0, 0}, {behind, 400.0, 1}};
+  estimate::NavigationState state;
+  state.timestamp = Timestamp::from_seconds(10.0);
+  const Eigen::MatrixXd covariance = 1e-4 * Eigen::MatrixXd::Identity(15, 15);
+  EXPECT_FALSE(Msckf::create(MsckfConfig{}, std::vector<MsckfCamera>(kMsckfMaxCameras + 1, cameras[0]), state, covariance));
+  MsckfConfig config;
+  config.zero_velocity_update = false;  // (the observations below do not move)
+  Msckf filter = Msckf::create(config, cameras, state, covariance).value();
+  double time = 10.0;
+  const auto frame = [&](const std::vector<FeatureObservation>& observations, const std::vector<int>& rigs) {
+    time += 0.05;
+    EXPECT_TRUE(filter.propagate({Timestamp::from_seconds(time), Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 0, estimate::kStandardGravity)}));
+    EXPECT_TRUE(filter.process_frame(Timestamp::from_seconds(time), observations, rigs));
+    return filter.pending_features();
+  };
+  EXPECT_EQ(frame({{1, 0, Eigen::Vector2d(0.1, 0.1)}, {2, 1, Eigen::Vector2d(-0.1, 0.1)}}, {0, 1}), 2);
+  EXPECT_EQ(frame({{2, 1, Eigen::Vector2d(-0.1, 0.1)}}, {1}), 2);  // feature 1: its rig took no image
+  EXPECT_EQ(frame({{1, 0, Eigen::Vector2d(0.1, 0.1)}}, {0}), 2);   // feature 2 likewise
+  EXPECT_EQ(frame({{2, 1, Eigen::Vector2d(-0.1, 0.1)}}, {0, 1}), 1);  // feature 1 not seen by its rig: ended
+  EXPECT_EQ(frame({}, {}), 0);  // every rig (the default): feature 2 ended
+  EXPECT_EQ(filter.clones().size(), 5u);
+}
+
 }  // namespace
 }  // namespace hanzo::fusion::vision

@@ -27,8 +27,9 @@
 //   1. the IMU state is propagated to the frame time (estimate/imu_propagation.hpp; the IMU
 //      transition and noise of the samples since the last frame are applied to the covariance
 //      at once) and its pose cloned: P <- [P, P J^T; J P, J P J^T] with J selecting (xi_p, phi);
-//   2. the features to use are those whose track ended (not observed in this frame) and, when
-//      the window is full, those observed by the oldest clone; each needs two observations;
+//   2. the features to use are those whose track ended (not observed in this frame by a rig
+//      the frame images) and, when the window is full, those observed by the oldest clone; each
+//      needs two observations;
 //   3. each feature is triangulated from its observations (linear multi-view least squares,
 //      then Gauss-Newton on the reprojection errors) with the clone poses; a feature behind a
 //      camera, nearer than min_depth or farther than max_depth, seen over less than
@@ -51,6 +52,11 @@
 // Frames: world is the frame of the initial state (z up for gravity (0, 0, -g)); body as the
 // NavigationState; cameras at T_body_camera (x right, y down, z forward). Observations are
 // UNDISTORTED normalized coordinates (x/z, y/z) of the camera (PinholeCamera::unproject).
+//
+// Rigs: cameras that image together (a stereo pair) form a rig (MsckfCamera::rig). A frame holds
+// the images of one or more rigs taken at one time; several rigs imaged at one time are one
+// frame (one clone), and a rig whose image is not in a frame keeps its tracks open. The
+// zero-velocity test looks at camera 0, in frames that image its rig.
 //
 // Failures: process_frame() refuses a time before the last one, an unknown camera index, a
 // feature observed twice by one camera or a non-finite observation (the frame is skipped, the state unchanged); propagate() refuses a
@@ -76,6 +82,8 @@ namespace hanzo::fusion::vision {
 
 inline constexpr int kMsckfImuDimension = 15;
 inline constexpr int kMsckfCloneDimension = 6;
+/// Cameras one filter takes (four stereo pairs).
+inline constexpr int kMsckfMaxCameras = 8;
 
 struct MsckfConfig {
   /// Clones in the sliding window (OpenVINS's default 11: about 0.5-1 s of a 10-20 Hz camera).
@@ -127,6 +135,7 @@ Status validate(const MsckfConfig& config);
 struct MsckfCamera {
   SE3 T_body_camera;
   double focal_length_px = 500.0;
+  int rig = 0;  ///< cameras that image together share a rig number (header comment)
 };
 
 /// The outcome of one frame's update.
@@ -148,7 +157,7 @@ struct MsckfClone {
 
 class Msckf {
  public:
-  /// Fails when the configuration is out of range, no or more than two cameras are given, a
+  /// Fails when the configuration is out of range, no or more than kMsckfMaxCameras cameras are given, a
   /// focal length is not positive, the state is not finite or the covariance is not a finite
   /// symmetric 15 x 15 matrix with a positive diagonal (IMU error order above).
   /// time_offset: the cameras' clock against the body's (t_body = t_camera + time_offset),
@@ -163,9 +172,11 @@ class Msckf {
 
   /// Clones the pose at the frame's body time (`time`, the cameras' clock, plus time_offset();
   /// propagated from the last IMU sample, held) and updates with the tracks this frame ends
-  /// (header comment). The observations are this frame's, every camera. Feed the IMU samples up
-  /// to body_time(time) first, and no later ones.
-  Result<MsckfUpdateSummary> process_frame(Timestamp time, const std::vector<FeatureObservation>& observations);
+  /// (header comment). The observations are this frame's, every camera; `rigs` the rigs whose
+  /// images made the frame (empty: every rig). Feed the IMU samples up to body_time(time)
+  /// first, and no later ones.
+  Result<MsckfUpdateSummary> process_frame(Timestamp time, const std::vector<FeatureObservation>& observations,
+                                           const std::vector<int>& rigs = {});
   /// The body time of a camera time with the current time-offset estimate.
   Timestamp body_time(Timestamp camera_time) const { return camera_time + Duration::from_seconds(time_offset_); }
 
