@@ -205,8 +205,8 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(c
   auto odometry = std::unique_ptr<CameraOdometry>(new CameraOdometry(nullptr, std::move(rigs), left.camera->pinhole_camera(), left.T_body_sensor()));
   odometry->inertial_ = std::move(inertial);
   std::vector<VisualInertialFactors::Camera> factor_cameras;
-  for (const MsckfRigSetup& setup : setups) {
-    for (const MsckfCameraSetup& camera : setup.cameras) factor_cameras.push_back({camera.T_body_camera, camera.camera.fx});
+  for (size_t rig = 0; rig < setups.size(); ++rig) {
+    for (const MsckfCameraSetup& camera : setups[rig].cameras) factor_cameras.push_back({camera.T_body_camera, camera.camera.fx, static_cast<int>(rig)});
   }
   const ImuChainNoise chain = imu_chain_noise(config, *imu);
   odometry->keyframe_factors_ = std::make_unique<VisualInertialFactors>(std::move(factor_cameras), chain.preintegration, chain.accel_bias_random_walk,
@@ -365,7 +365,9 @@ Result<CameraOdometry::Tracked> CameraOdometry::track_inertial(Timestamp time, c
                                              vision::to_string(quality->condition));
   }
   if (frame.tracking) {
-    keyframe_factors_->add_frame(time, frame.T_world_body, std::move(frame.observations));
+    std::vector<int> rigs;
+    for (const MsckfOdometry::RigImages& rig : images) rigs.push_back(rig.rig);
+    keyframe_factors_->add_frame(time, frame.T_world_body, std::move(frame.observations), std::move(rigs));
   } else {
     keyframe_factors_->odometry_restarted();  // (re)initializing: a new odometry world follows
   }

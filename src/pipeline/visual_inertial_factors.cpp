@@ -19,20 +19,22 @@ VisualInertialFactors::VisualInertialFactors(std::vector<Camera> cameras, const 
                                              double gyro_bias_random_walk, VisualInertialFactorsConfig config)
     : cameras_(std::move(cameras)),
       config_(config),
+      rigs_(cameras_.empty() ? 0 : 1 + std::max_element(cameras_.begin(), cameras_.end(), [](const Camera& a, const Camera& b) { return a.rig < b.rig; })->rig),
       chain_(imu, accel_bias_random_walk, gyro_bias_random_walk, config.priors),
       projection_noise_(graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(config.pixel_sigma)).value()) {}
 
 void VisualInertialFactors::add_imu(const estimate::ImuSample& sample) { chain_.add_imu(sample); }
 
-void VisualInertialFactors::add_frame(Timestamp time, const SE3& T_odometry_body, std::vector<vision::FeatureObservation> observations) {
+void VisualInertialFactors::add_frame(Timestamp time, const SE3& T_odometry_body, std::vector<vision::FeatureObservation> observations,
+                                      std::vector<int> rigs) {
   if (!frames_.empty() && time <= frames_.back().time) return;
-  frames_.push_back({time, T_odometry_body, std::move(observations)});
+  frames_.push_back({time, T_odometry_body, std::move(observations), std::move(rigs)});
   while ((time - frames_.front().time).seconds() > kFrameHistorySeconds) frames_.pop_front();
 }
 
-std::deque<VisualInertialFactors::Frame>::const_iterator VisualInertialFactors::frame_for(Timestamp keyframe_time) const {
+std::deque<VisualInertialFactors::Frame>::const_iterator VisualInertialFactors::frame_for(Timestamp keyframe_time, std::optional<int> rig) const {
   for (auto it = frames_.rbegin(); it != frames_.rend(); ++it) {
-    if (it->time > keyframe_time) continue;
+    if (it->time > keyframe_time || (rig && !it->images(*rig))) continue;
     if ((keyframe_time - it->time).seconds() > config_.max_frame_gap_s) break;
     return std::prev(it.base());
   }
@@ -105,12 +107,33 @@ VisualInertialFactors::KeyframeFactors VisualInertialFactors::keyframe(const msg
   }
   chain_.close(keyframe, velocity, link, out.update);
 
-  // The frame's observations, from the keyframe's body.
-  if (T_keyframe_frame) {
-    std::set<uint64_t> seen;
-    for (const vision::FeatureObservation& observation : frame->observations) {
+  // The frames the keyframe takes: each rig's last one (one frame when the rigs image together),
+  // and their observations from the keyframe's body.
+  std::vector<std::pair<std::deque<Frame>::const_iterator, std::vector<int>>> taken;  // a frame, the rigs it is taken for
+  for (int rig = 0; rig < rigs_; ++rig) {
+    const auto rig_frame = frame_for(keyframe.timestamp, rig);
+    if (rig_frame == frames_.end()) continue;
+    const auto same = std::find_if(taken.begin(), taken.end(), [&rig_frame](const auto& entry) { return entry.first == rig_frame; });
+    if (same != taken.end()) {
+      same->second.push_back(rig);
+    } else {
+      taken.push_back({rig_frame, {rig}});
+    }
+  }
+  std::set<uint64_t> seen;
+  std::set<int> rigs_taken;
+  std::optional<std::pair<Timestamp, SE3>> T_world_odometry;  // from the newest frame taken
+  for (const auto& [rig_frame, rigs] : taken) {
+    const std::optional<SE3> T_keyframe_rig_frame = chain_.body_motion(keyframe, link.bias, rig_frame->time);
+    if (!T_keyframe_rig_frame) continue;
+    rigs_taken.insert(rigs.begin(), rigs.end());
+    if (!T_world_odometry || rig_frame->time > T_world_odometry->first) {
+      T_world_odometry.emplace(rig_frame->time, T_world_body * *T_keyframe_rig_frame * rig_frame->T_odometry_body.inverse());
+    }
+    for (const vision::FeatureObservation& observation : rig_frame->observations) {
       if (observation.camera < 0 || observation.camera >= static_cast<int>(cameras_.size())) continue;
-      const View view{id, *T_keyframe_frame, frame->T_odometry_body, observation.camera, observation.normalized};
+      const View view{id, *T_keyframe_rig_frame, rig_frame->T_odometry_body, observation.camera, observation.normalized};
+      if (std::find(rigs.begin(), rigs.end(), rig_of(view)) == rigs.end()) continue;
       if (landmarks_.count(observation.feature_id) != 0) {
         const Result<Eigen::Vector3d> point = estimate.at<Eigen::Vector3d>(graph::L(observation.feature_id));
         if (!point || !in_front(view, T_world_body, *point)) continue;  // the landmark ends
@@ -120,10 +143,13 @@ VisualInertialFactors::KeyframeFactors VisualInertialFactors::keyframe(const msg
       }
       seen.insert(observation.feature_id);
     }
-    // Tracks that ended never come back (the tracker does not reuse ids).
-    for (auto it = tracks_.begin(); it != tracks_.end();) it = seen.count(it->first) ? std::next(it) : tracks_.erase(it);
-    for (auto it = landmarks_.begin(); it != landmarks_.end();) it = seen.count(*it) ? std::next(it) : landmarks_.erase(it);
-    make_landmarks(out, T_world_body, T_world_body * *T_keyframe_frame * frame->T_odometry_body.inverse(), estimate);
+  }
+  if (!rigs_taken.empty()) {
+    // Tracks that ended in their rig's frame never come back (the tracker does not reuse ids).
+    const auto ended = [&](uint64_t feature, int rig) { return rigs_taken.count(rig) != 0 && seen.count(feature) == 0; };
+    for (auto it = tracks_.begin(); it != tracks_.end();) it = ended(it->first, rig_of(it->second.front())) ? tracks_.erase(it) : std::next(it);
+    for (auto it = landmarks_.begin(); it != landmarks_.end();) it = ended(it->first, it->second) ? landmarks_.erase(it) : std::next(it);
+    make_landmarks(out, T_world_body, T_world_odometry->second, estimate);
   }
   return out;
 }
@@ -141,7 +167,7 @@ void VisualInertialFactors::make_landmarks(KeyframeFactors& out, const SE3& T_wo
   triangulation.max_depth = config_.max_depth_m;
   triangulation.min_parallax_rad = config_.min_parallax_rad;
   for (const auto& [length, feature] : candidates) {
-    if (out.new_landmarks >= config_.max_new_landmarks) break;
+    if (out.new_landmarks >= config_.max_new_landmarks * rigs_) break;
     const std::vector<View>& views = tracks_.at(feature);
     std::vector<vision::FeatureView> feature_views;
     for (const View& view : views) {
@@ -167,7 +193,7 @@ void VisualInertialFactors::make_landmarks(KeyframeFactors& out, const SE3& T_wo
     out.update.values.insert(graph::L(feature), point_world);
     for (const View& view : views) add_projection(out, feature, view);
     ++out.new_landmarks;
-    landmarks_.insert(feature);
+    landmarks_.emplace(feature, rig_of(views.front()));
     made_.insert(feature);
     tracks_.erase(feature);  // (views is not used after this)
   }

@@ -29,6 +29,7 @@
 // window_keyframes) only views at the window's keyframes make landmarks, and a landmark
 // marginalized with the keyframe that leaves the window gets no more projections.
 
+#include <algorithm>
 #include <cstdint>
 #include <deque>
 #include <map>
@@ -70,6 +71,7 @@ class VisualInertialFactors {
   struct Camera {
     SE3 T_body_camera;
     double focal_length_px = 1.0;
+    int rig = 0;  ///< cameras imaging together (a stereo pair) share a rig number
   };
   /// The factors a keyframe brings (its X(k) value and odometry factor are the KeyframeGraph's).
   struct KeyframeFactors {
@@ -78,7 +80,8 @@ class VisualInertialFactors {
     int new_landmarks = 0;
     int projections = 0;
   };
-  /// cameras: 0 the left (or only) one, 1 the right one of a stereo rig; imu: noise and gravity
+  /// cameras: 0 the left (or only) one, 1 the right one of a stereo rig, then those of further
+  /// rigs (max_new_landmarks is per rig); imu: noise and gravity
   /// of the preintegration; random walks as the spec's accel_bias_random_walk (m/s^2/sqrt(s))
   /// and gyro_bias_random_walk (rad/s/sqrt(s)).
   VisualInertialFactors(std::vector<Camera> cameras, const graph::ImuPreintegrationConfig& imu, double accel_bias_random_walk,
@@ -87,9 +90,11 @@ class VisualInertialFactors {
   /// An IMU sample of the body origin in body axes on the body clock; older or repeated samples
   /// are ignored.
   void add_imu(const estimate::ImuSample& sample);
-  /// A tracked camera frame (body-clock time): the odometry's body pose in its own world and the
-  /// features' undistorted normalized coordinates.
-  void add_frame(Timestamp time, const SE3& T_odometry_body, std::vector<vision::FeatureObservation> observations);
+  /// A tracked camera frame (body-clock time): the odometry's body pose in its own world, the
+  /// features' undistorted normalized coordinates and the rigs whose images made it (empty: every
+  /// rig). A keyframe takes each rig's last frame before it; a track or landmark ends when a
+  /// frame of its rig that a keyframe takes no longer sees it.
+  void add_frame(Timestamp time, const SE3& T_odometry_body, std::vector<vision::FeatureObservation> observations, std::vector<int> rigs = {});
 
 
   /// The factors of a new keyframe (its pose in the graph's world), given the graph's current
@@ -119,6 +124,8 @@ class VisualInertialFactors {
     Timestamp time;
     SE3 T_odometry_body;
     std::vector<vision::FeatureObservation> observations;
+    std::vector<int> rigs;  // empty: every rig
+    bool images(int rig) const { return rigs.empty() || std::find(rigs.begin(), rigs.end(), rig) != rigs.end(); }
   };
   struct View {
     uint64_t keyframe;
@@ -127,9 +134,11 @@ class VisualInertialFactors {
     int camera;
     Eigen::Vector2d normalized;
   };
-  // The frame a keyframe at `keyframe_time` uses: the last one at or before it, at most
-  // max_frame_gap_s earlier (frames are tracked ahead of the Frontend's keyframes); end() if none.
-  std::deque<Frame>::const_iterator frame_for(Timestamp keyframe_time) const;
+  // The frame a keyframe at `keyframe_time` uses (for `rig`, or any): the last one at or before
+  // it, at most max_frame_gap_s earlier (frames are tracked ahead of the Frontend's keyframes);
+  // end() if none.
+  std::deque<Frame>::const_iterator frame_for(Timestamp keyframe_time, std::optional<int> rig = std::nullopt) const;
+  int rig_of(const View& view) const { return cameras_[static_cast<size_t>(view.camera)].rig; }
   void add_projection(KeyframeFactors& out, uint64_t feature, const View& view) const;
   // Whether the view's camera, with the body at T_world_keyframe, sees the point at least
   // min_depth_m in front.
@@ -138,11 +147,12 @@ class VisualInertialFactors {
 
   std::vector<Camera> cameras_;
   VisualInertialFactorsConfig config_;
+  int rigs_ = 1;  // rig numbers 0 .. rigs_ - 1
   ImuKeyframeChain chain_;
   graph::GaussianNoise projection_noise_;  // pixel_sigma, both axes
   std::deque<Frame> frames_;  // the last seconds'
   std::map<uint64_t, std::vector<View>> tracks_;    // features seen at keyframes, not landmarks yet
-  std::set<uint64_t> landmarks_;                    // features with an L in the graph, still tracked
+  std::map<uint64_t, int> landmarks_;               // features with an L in the graph, still tracked: their rig
   std::set<uint64_t> made_;                         // every feature with an L in the graph
   uint64_t window_start_ = 0;                       // views at older keyframes make no landmarks
 };
