@@ -129,7 +129,7 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
   vision::VisualOdometryConfig configured = odometry_config;
   HANZO_RETURN_IF_ERROR(apply_vision_config(config, left.sensor, stereo_pair ? rigs[0][1]->sensor : "", configured));
   std::unique_ptr<vision::VisualOdometry> odometry;
-  Rig rig{left.sensor, "", left.time_offset, Duration(), size};
+  Rig rig{left.sensor, "", left.time_offset, Duration(), size, left.camera->pinhole_camera(), left.T_body_sensor()};
   if (stereo_pair) {
     const calib::SensorCalibration& right = *rigs[0][1];
     HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create_stereo(left.camera->pinhole_camera(), right.camera->pinhole_camera(),
@@ -145,7 +145,7 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
   logger()->info("session: {} visual odometry on {}{} ({} features{})", stereo_pair ? "stereo" : "monocular", left.sensor,
                  stereo_pair ? " + " + rig.right_sensor : "", configured.extractor->name(),
                  configured.putative_filter ? ", learned correspondence filter" : "");
-  return std::unique_ptr<CameraOdometry>(new CameraOdometry(std::move(odometry), {rig}, left.camera->pinhole_camera(), left.T_body_sensor()));
+  return std::unique_ptr<CameraOdometry>(new CameraOdometry(std::move(odometry), {rig}));
 }
 
 Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(const config::FusionConfig& config, const calib::Calibration& calibration,
@@ -187,7 +187,8 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(c
     MsckfRigSetup setup;
     setup.image_size = cv::Size(static_cast<int>(left.camera->intrinsics.width), static_cast<int>(left.camera->intrinsics.height));
     for (const calib::SensorCalibration* camera : cameras) setup.cameras.push_back({camera->camera->pinhole_camera(), camera->T_body_sensor()});
-    rigs.push_back({left.sensor, stereo ? cameras[1]->sensor : "", left.time_offset, stereo ? cameras[1]->time_offset : Duration(), setup.image_size});
+    rigs.push_back({left.sensor, stereo ? cameras[1]->sensor : "", left.time_offset, stereo ? cameras[1]->time_offset : Duration(), setup.image_size,
+                    left.camera->pinhole_camera(), left.T_body_sensor()});
     rig_names.push_back(stereo ? fmt::format("stereo {} + {}", left.sensor, cameras[1]->sensor) : fmt::format("monocular {}", left.sensor));
     setups.push_back(std::move(setup));
   }
@@ -201,8 +202,7 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(c
   std::unique_ptr<MsckfOdometry> inertial;
   HANZO_ASSIGN_OR_RETURN(inertial, with_context(MsckfOdometry::create(setups, T_body_imu, noise, tracker), fmt::format("camera {}", rigs[0].left_sensor)));
   logger()->info("session: visual-inertial odometry (MSCKF) on {} and {}", fmt::join(rig_names, ", "), imu->name);
-  const calib::SensorCalibration& left = *camera_rigs[0][0];
-  auto odometry = std::unique_ptr<CameraOdometry>(new CameraOdometry(nullptr, std::move(rigs), left.camera->pinhole_camera(), left.T_body_sensor()));
+  auto odometry = std::unique_ptr<CameraOdometry>(new CameraOdometry(nullptr, std::move(rigs)));
   odometry->inertial_ = std::move(inertial);
   std::vector<VisualInertialFactors::Camera> factor_cameras;
   for (size_t rig = 0; rig < setups.size(); ++rig) {
@@ -243,9 +243,8 @@ vision::VisualOdometrySummary CameraOdometry::summary() const {
   return summary;
 }
 
-CameraOdometry::CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::vector<Rig> rigs, const PinholeCamera& left_camera,
-                               const SE3& T_body_left)
-    : odometry_(std::move(odometry)), rigs_(std::move(rigs)), left_camera_(left_camera), T_body_left_(T_body_left) {}
+CameraOdometry::CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::vector<Rig> rigs)
+    : odometry_(std::move(odometry)), rigs_(std::move(rigs)) {}
 
 const CameraOdometry::Rig* CameraOdometry::rig_of(std::string_view sensor) const {
   for (const Rig& rig : rigs_) {
@@ -319,8 +318,8 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track_pending() {
     Result<vision::VisualOdometryFrame> odometry_frame =
         images[0].right.empty() ? odometry_->track(time.seconds(), left) : odometry_->track(time.seconds(), left, images[0].right);
     if (!odometry_frame) return odometry_frame.error();
-    tracked = Tracked{time, std::move(odometry_frame).value(), SE3(), quality, left, {}};
-    tracked.T_world_body = T_body_left_ * tracked.frame.T_world_camera * T_body_left_.inverse();
+    tracked = Tracked{time, std::move(odometry_frame).value(), SE3(), quality, {{0, left}}, {}};
+    tracked.T_world_body = T_body_left() * tracked.frame.T_world_camera * T_body_left().inverse();
   }
   tracked.sensors = std::move(sensors);
   return std::optional<Tracked>(std::move(tracked));
@@ -352,7 +351,7 @@ Result<CameraOdometry::Tracked> CameraOdometry::track_inertial(Timestamp time, c
   tracked.time = time;
   tracked.T_world_body = frame.T_world_body;
   tracked.image_quality = *quality;
-  if (images[0].rig == 0) tracked.left_image = images[0].left;
+  for (const MsckfOdometry::RigImages& rig : images) tracked.left_images.emplace_back(rig.rig, rig.left);
   tracked.frame.time = time.seconds();
   tracked.frame.state = frame.tracking ? vision::TrackingState::kTracking : vision::TrackingState::kInitializing;
   tracked.frame.standing_still = frame.update.zero_velocity;

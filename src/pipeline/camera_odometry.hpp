@@ -55,7 +55,8 @@ class CameraOdometry {
     vision::VisualOdometryFrame frame;
     SE3 T_world_body;
     vision::ImageQuality image_quality;  ///< the best of the frame's left images
-    cv::Mat left_image;                  ///< rig 0's left image, 8-bit grey (shared, not copied); empty without one
+    /// The left image of each rig in the frame (rig index, 8-bit grey; shared, not copied).
+    std::vector<std::pair<int, cv::Mat>> left_images;
     std::vector<std::string> sensors;    ///< the cameras whose images made the frame
   };
   /// A camera rig: one camera, or a stereo pair.
@@ -63,6 +64,8 @@ class CameraOdometry {
     std::string left_sensor, right_sensor;  ///< right empty for one camera
     Duration left_offset, right_offset;     ///< calibrated time offsets (t_body = t_camera + offset)
     cv::Size image_size;
+    PinholeCamera left_camera;
+    SE3 T_body_left;
     bool stereo() const { return !right_sensor.empty(); }
   };
   /// Left images by condition (good ones are not counted).
@@ -87,8 +90,7 @@ class CameraOdometry {
   bool stereo() const { return rigs_[0].stereo(); }
   const std::string& left_sensor() const { return rigs_[0].left_sensor; }
   const std::string& right_sensor() const { return rigs_[0].right_sensor; }
-  const SE3& T_body_left() const { return T_body_left_; }
-  const PinholeCamera& left_camera() const { return left_camera_; }
+  const SE3& T_body_left() const { return rigs_[0].T_body_left; }
   /// The left camera's calibrated time offset (t_body = t_camera + offset).
   Duration left_time_offset() const { return rigs_[0].left_offset; }
 
@@ -122,7 +124,7 @@ class CameraOdometry {
     std::vector<std::pair<cv::Mat, cv::Mat>> images;
   };
 
-  CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::vector<Rig> rigs, const PinholeCamera& left_camera, const SE3& T_body_left);
+  CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::vector<Rig> rigs);
   static Result<std::unique_ptr<CameraOdometry>> create_visual_inertial(const config::FusionConfig& config, const calib::Calibration& calibration,
                                                                         const std::vector<std::vector<const calib::SensorCalibration*>>& rigs);
   // Tracks the pending frame's complete rigs (nullopt when none is).
@@ -140,8 +142,6 @@ class CameraOdometry {
   Duration imu_offset_;
   vision::VisualOdometrySummary inertial_summary_;
   std::vector<Rig> rigs_;
-  PinholeCamera left_camera_;
-  SE3 T_body_left_;
   std::optional<PendingFrame> pending_;
   vision::ImageQualityMonitor image_quality_ = vision::ImageQualityMonitor::create().value();
   ImageConditionCounts image_conditions_;

@@ -321,12 +321,16 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
     }
   }
   if (session->camera_odometry_ && session->camera_odometry_->visual_inertial() && session->config_.loop_closure) {
-    Result<vision::VisualLoopDetector> detector = vision::VisualLoopDetector::create(session->camera_odometry_->left_camera());
-    if (detector) {
-      session->visual_loops_ = std::make_unique<VisualLoopClosures>(std::move(detector).value(), session->camera_odometry_->T_body_left(),
-                                                                    session->config_.map_keyframe_distance, session->config_.map_keyframe_angle);
-    } else {
-      logger()->warn("session: visual loop closure off: {}", detector.error().message);
+    // Places of each rig's left camera, loops between views of one rig.
+    for (const CameraOdometry::Rig& rig : session->camera_odometry_->rigs()) {
+      Result<vision::VisualLoopDetector> detector = vision::VisualLoopDetector::create(rig.left_camera);
+      if (!detector) {
+        logger()->warn("session: visual loop closure off: {}", detector.error().message);
+        session->visual_loops_.clear();
+        break;
+      }
+      session->visual_loops_.push_back(std::make_unique<VisualLoopClosures>(std::move(detector).value(), rig.T_body_left,
+                                                                            session->config_.map_keyframe_distance, session->config_.map_keyframe_angle));
     }
   }
   return session;
@@ -704,7 +708,7 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
         case vision::ImageCondition::kGood: camera_lost_reason_ = HealthReason::kFewFeatures; break;
       }
       logger()->debug("session: camera frame at {:.3f} s lost: {}", frame.time.seconds(), frame.frame.reason);
-      if (visual_loops_) visual_loops_->note_lost();
+      for (const auto& loops : visual_loops_) loops->note_lost();
       // The cameras stream (not a timeout) though their frames are not fused.
       for (const std::string& camera : frame.sensors) frontend_->note_input(camera, camera_time(camera));
     }
@@ -763,21 +767,21 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
   } else {
     logger()->debug("session: visual odometry pose not fused: {}", fused.error().message);
   }
-  if (visual_loops_ && fused && visual_world_ && latest_keyframe_ && !restart_graph_ && !frame.left_image.empty()) {
-    add_visual_place(frame.time, frame.left_image, frame.T_world_body);
+  if (!visual_loops_.empty() && fused && visual_world_ && latest_keyframe_ && !restart_graph_) {
+    for (const auto& [rig, left] : frame.left_images) add_visual_place(frame.time, rig, left, frame.T_world_body);
   }
   register_ready_scans();
   update_backend();
   return {};
 }
 
-void Session::add_visual_place(Timestamp time, const cv::Mat& image, const SE3& T_odometry_body) {
+void Session::add_visual_place(Timestamp time, int rig, const cv::Mat& image, const SE3& T_odometry_body) {
   const std::optional<SE3> T_world_body = frontend_->pose_at(time);
   if (!T_world_body) return;
   // Both before the Frontend's corrections, where their relative motion is the filter's.
   const SE3 T_anchor_body = latest_keyframe_uncorrected_.inverse() * frontend_->world_correction().inverse() * *T_world_body;
   Result<std::optional<VisualLoopClosures::LoopFactor>> loop =
-      visual_loops_->add(time, image, T_odometry_body, latest_keyframe_->keyframe_id, latest_keyframe_->timestamp, T_anchor_body);
+      visual_loops_[static_cast<size_t>(rig)]->add(time, image, T_odometry_body, latest_keyframe_->keyframe_id, latest_keyframe_->timestamp, T_anchor_body);
   if (!loop) {
     logger()->warn("session: camera image at {:.3f} s not added as a place: {}", time.seconds(), loop.error().message);
     return;
@@ -1338,9 +1342,10 @@ MappingSummary Session::mapping_summary() const {
     summary.visual_landmarks = static_cast<uint64_t>(visual.landmarks);
     summary.camera_standstill_frames = static_cast<uint64_t>(visual.standstill_frames);
     summary.visual_loop_closures = static_cast<uint64_t>(visual.loop_closures);
-    if (visual_loops_) {
-      summary.visual_loop_closures = static_cast<uint64_t>(visual_loops_->loops());
-      summary.loop_candidates += static_cast<uint64_t>(visual_loops_->candidates_checked());
+    if (!visual_loops_.empty()) summary.visual_loop_closures = 0;
+    for (const auto& loops : visual_loops_) {
+      summary.visual_loop_closures += static_cast<uint64_t>(loops->loops());
+      summary.loop_candidates += static_cast<uint64_t>(loops->candidates_checked());
     }
     summary.visual_scale_free = visual.scale_free;
     summary.camera_features = visual.features;

@@ -446,7 +446,7 @@ class Session {
   void move_map_keyframes(const std::map<uint64_t, SE3>& moved);
   void count_refused(Rejection reason);
   /// A tracked left image offered as a visual place; a verified loop becomes a loop factor.
-  void add_visual_place(Timestamp time, const cv::Mat& image, const SE3& T_odometry_body);
+  void add_visual_place(Timestamp time, int rig, const cv::Mat& image, const SE3& T_odometry_body);
   /// Records the health changes since the last evaluation (every 0.2 s of data time).
   void track_health();
   /// A fused GNSS fix as a GPS factor on the newest keyframe (gnss_factors).
@@ -523,7 +523,7 @@ class Session {
   std::map<std::string, SensorStatistics, std::less<>> camera_statistics_;
   std::optional<SE3> visual_world_;
   SE3 visual_world_correction_;  ///< the Frontend's world correction visual_world_ follows
-  std::unique_ptr<VisualLoopClosures> visual_loops_;  ///< frontend.type msckf with loop_closure
+  std::vector<std::unique_ptr<VisualLoopClosures>> visual_loops_;  ///< per camera rig: frontend.type msckf with loop_closure
   std::unique_ptr<SessionSplats> splats_;             ///< fusion.mapping.splats
   /// Images of the splats' camera waiting for the Frontend's pose become views.
   void take_splat_views();
