@@ -165,6 +165,19 @@ msgs::RadarMessage radar_from(py::handle message) {
   return radar;
 }
 
+msgs::RangeMessage range_from(py::handle message) {
+  msgs::RangeMessage range;
+  range.timestamp = timestamp_field(message);
+  range.frame_id = py::cast<std::string>(message.attr("frame_id"));
+  range.radiation = py::cast<std::string>(message.attr("radiation")) == "infrared" ? msgs::RangeRadiation::kInfrared : msgs::RangeRadiation::kUltrasound;
+  range.field_of_view = py::cast<float>(message.attr("field_of_view"));
+  range.min_range = py::cast<float>(message.attr("min_range"));
+  range.max_range = py::cast<float>(message.attr("max_range"));
+  range.range = py::cast<float>(message.attr("range"));
+  range.variance = py::cast<float>(message.attr("variance"));
+  return range;
+}
+
 }  // namespace
 
 msgs::SensorMessage sensor_message_from_python(py::handle message) {
@@ -175,7 +188,8 @@ msgs::SensorMessage sensor_message_from_python(py::handle message) {
   if (py::isinstance(message, module.attr("Gnss"))) return gnss_from(message);
   if (py::isinstance(message, module.attr("WheelOdometry"))) return wheels_from(message);
   if (py::isinstance(message, module.attr("Radar"))) return radar_from(message);
-  throw py::type_error(fmt::format("expected a sensor message of hanzo.fusion.messages (Imu, PointCloud, Image, Gnss, WheelOdometry, Radar), got {}",
+  if (py::isinstance(message, module.attr("Range"))) return range_from(message);
+  throw py::type_error(fmt::format("expected a sensor message of hanzo.fusion.messages (Imu, PointCloud, Image, Gnss, WheelOdometry, Radar, Range), got {}",
                                    py::str(py::type::of(message)).cast<std::string>()));
 }
 
@@ -243,6 +257,10 @@ py::object to_python(const msgs::SensorMessage& message) {
       for (const msgs::RadarTarget& t : radar.targets) values.insert(values.end(), {t.range, t.azimuth, t.elevation, t.radial_velocity, t.rcs});
       return module.attr("Radar")(radar.timestamp.nanoseconds(),
                                   copy_to_numpy(values.data(), {static_cast<py::ssize_t>(radar.targets.size()), py::ssize_t{5}}), radar.frame_id);
+    }
+    py::object operator()(const msgs::RangeMessage& range) const {
+      return module.attr("Range")(range.timestamp.nanoseconds(), range.range, range.min_range, range.max_range, range.field_of_view,
+                                  range.radiation == msgs::RangeRadiation::kInfrared ? "infrared" : "ultrasound", range.variance, range.frame_id);
     }
   };
   return std::visit(Visitor{module}, message);

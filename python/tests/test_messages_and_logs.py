@@ -8,7 +8,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from hanzo.fusion import (CameraIntrinsics, Distortion, Gnss, Image, Imu, LogWriter, PointCloud, Radar, Session, WheelOdometry,
+from hanzo.fusion import (CameraIntrinsics, Distortion, Gnss, Image, Imu, LogWriter, PointCloud, Radar, Range, Session, WheelOdometry,
                           read_log, replay)
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
@@ -36,6 +36,9 @@ def every_message_type():
         ("/wheels", WheelOdometry(T0 + 5, 1.25, 1.5, wheel_separation=0.55, wheel_radius=0.1, frame_id="base_link")),
         ("/radar", Radar(T0 + 6, rng.uniform(0, 1, (7, 5)).astype(np.float32), frame_id="radar")),
         ("/radar", Radar(T0 + 7, np.zeros((0, 5), dtype=np.float32))),
+        # (float32 fields: values a float32 holds exactly)
+        ("/range", Range(T0 + 8, range=1.25, min_range=0.03125, max_range=4.0, field_of_view=0.25, variance=2.0 ** -13, frame_id="sonar")),
+        ("/range", Range(T0 + 9, range=float("inf"), min_range=0.03125, max_range=4.0, field_of_view=0.25, radiation="infrared")),
     ]
 
 

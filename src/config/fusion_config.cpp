@@ -17,22 +17,26 @@ namespace {
 constexpr EnumNames<FrontendType, 4> kFrontendNames{
     {{FrontendType::kEkf, "ekf"}, {FrontendType::kUkf, "ukf"}, {FrontendType::kParticle, "particle"}, {FrontendType::kMsckf, "msckf"}}};
 
-constexpr EnumNames<SensorModality, 6> kModalityNames{{{SensorModality::kImu, "imu"},
+constexpr EnumNames<SensorModality, 7> kModalityNames{{{SensorModality::kImu, "imu"},
                                                                                     {SensorModality::kLidar, "lidar"},
                                                                                     {SensorModality::kCamera, "camera"},
                                                                                     {SensorModality::kGnss, "gnss"},
                                                                                     {SensorModality::kWheelOdometry, "wheel_odometry"},
-                                                                                    {SensorModality::kRadar, "radar"}}};
+                                                                                    {SensorModality::kRadar, "radar"},
+                                                                                    {SensorModality::kRange, "range"}}};
 
 // Name prefixes that imply a modality.
-constexpr std::array<std::pair<std::string_view, SensorModality>, 8> kModalityPrefixes{{{"imu", SensorModality::kImu},
+constexpr std::array<std::pair<std::string_view, SensorModality>, 11> kModalityPrefixes{{{"imu", SensorModality::kImu},
                                                                                        {"lidar", SensorModality::kLidar},
                                                                                        {"camera", SensorModality::kCamera},
                                                                                        {"gnss", SensorModality::kGnss},
                                                                                        {"gps", SensorModality::kGnss},
                                                                                        {"wheel", SensorModality::kWheelOdometry},
                                                                                        {"odom", SensorModality::kWheelOdometry},
-                                                                                       {"radar", SensorModality::kRadar}}};
+                                                                                       {"radar", SensorModality::kRadar},
+                                                                                       {"range", SensorModality::kRange},
+                                                                                       {"sonar", SensorModality::kRange},
+                                                                                       {"ultrasonic", SensorModality::kRange}}};
 
 constexpr EnumNames<MatcherType, 2> kMatcherNames{{{MatcherType::kRatio, "ratio"}, {MatcherType::kLearned, "learned"}}};
 constexpr EnumNames<PlaceRecognitionType, 2> kPlaceRecognitionNames{{{PlaceRecognitionType::kBow, "bow"}, {PlaceRecognitionType::kLearned, "learned"}}};
@@ -74,6 +78,7 @@ SensorModality modality_of(const msgs::SensorMessage& message) {
     SensorModality operator()(const msgs::GnssMessage&) const { return SensorModality::kGnss; }
     SensorModality operator()(const msgs::WheelOdometryMessage&) const { return SensorModality::kWheelOdometry; }
     SensorModality operator()(const msgs::RadarMessage&) const { return SensorModality::kRadar; }
+    SensorModality operator()(const msgs::RangeMessage&) const { return SensorModality::kRange; }
   };
   return std::visit(Modality{}, message);
 }

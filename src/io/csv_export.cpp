@@ -29,6 +29,7 @@ struct HeaderOf {
   std::string operator()(const msgs::RadarMessage&) const {
     return "timestamp_ns,target,range,azimuth,elevation,radial_velocity,rcs\n";
   }
+  std::string operator()(const msgs::RangeMessage&) const { return "timestamp_ns,range,min_range,max_range,field_of_view,variance\n"; }
   std::string operator()(const msgs::PointCloudMessage&) const {
     return "timestamp_ns,points,has_intensity,has_ring,has_point_time\n";
   }
@@ -57,6 +58,9 @@ struct RowsOf {
       row(out, m.timestamp.nanoseconds(), std::to_string(i), number(t.range), number(t.azimuth), number(t.elevation),
           number(t.radial_velocity), number(t.rcs));
     }
+  }
+  void operator()(const msgs::RangeMessage& m) const {
+    row(out, m.timestamp.nanoseconds(), number(m.range), number(m.min_range), number(m.max_range), number(m.field_of_view), number(m.variance));
   }
   void operator()(const msgs::PointCloudMessage& m) const {
     row(out, m.timestamp.nanoseconds(), std::to_string(m.points.size()), std::to_string(!m.intensities.empty()),

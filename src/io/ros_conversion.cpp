@@ -94,6 +94,19 @@ Result<msgs::GnssMessage> gnss_from_ros(std::string_view data, Serialization ser
   return gnss;
 }
 
+Result<msgs::RangeMessage> range_from_ros(std::string_view data, Serialization serialization) {
+  WireReader r(data, serialization);
+  msgs::RangeMessage range;
+  std::tie(range.timestamp, range.frame_id) = r.header();
+  range.radiation = static_cast<msgs::RangeRadiation>(r.u8());
+  range.field_of_view = r.f32();
+  range.min_range = r.f32();
+  range.max_range = r.f32();
+  range.range = r.f32();
+  if (!r.ok()) return truncated("sensor_msgs/Range");
+  return range;
+}
+
 Result<msgs::PointCloudMessage> point_cloud_from_ros(std::string_view data, Serialization serialization) {
   WireReader r(data, serialization);
   msgs::PointCloudMessage cloud;

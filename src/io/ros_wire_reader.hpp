@@ -69,6 +69,12 @@ class WireReader {
   uint16_t u16() { return integer<uint16_t>(); }
   uint32_t u32() { return integer<uint32_t>(); }
   int32_t i32() { return static_cast<int32_t>(u32()); }
+  float f32() {
+    const uint32_t bits = integer<uint32_t>();
+    float value;
+    std::memcpy(&value, &bits, sizeof value);
+    return value;
+  }
   double f64() {
     const uint64_t bits = integer<uint64_t>();
     double value;

@@ -20,7 +20,7 @@ namespace {
 // Types written to the log (normalized ROS 1 names).
 const std::set<std::string> kSensorTypes = {"sensor_msgs/Imu",      "sensor_msgs/NavSatFix",       "sensor_msgs/PointCloud2",
                                             "sensor_msgs/Image",    "sensor_msgs/CompressedImage", "nav_msgs/Odometry",
-                                            "geometry_msgs/TwistStamped"};
+                                            "geometry_msgs/TwistStamped", "sensor_msgs/Range"};
 bool is_camera(const std::string& type) { return type == "sensor_msgs/Image" || type == "sensor_msgs/CompressedImage"; }
 bool is_odometry(const std::string& type) { return type == "nav_msgs/Odometry" || type == "geometry_msgs/TwistStamped"; }
 
@@ -233,6 +233,7 @@ class TopicImporter {
     const std::string& type = state.type;
     if (type == "sensor_msgs/Imu") return restamped(ros::imu_from_ros(data, s), stamp);
     if (type == "sensor_msgs/NavSatFix") return restamped(ros::gnss_from_ros(data, s), stamp);
+    if (type == "sensor_msgs/Range") return restamped(ros::range_from_ros(data, s), stamp);
     if (type == "sensor_msgs/PointCloud2") return restamped(ros::point_cloud_from_ros(data, s), stamp);
     if (type == "sensor_msgs/Image") return restamped(ros::image_from_ros(data, s), stamp);
     return restamped(ros::compressed_image_from_ros(data, s), stamp);  // sensor_msgs/CompressedImage

@@ -405,6 +405,35 @@ Result<RadarMessage> from_proto(const v1::RadarMessage& in) {
   return validated(std::move(message));
 }
 
+// ---- Range ------------------------------------------------------------------------------
+
+v1::RangeMessage to_proto(const RangeMessage& message) {
+  v1::RangeMessage out;
+  out.set_timestamp_ns(write_time(message.timestamp));
+  out.set_frame_id(message.frame_id);
+  out.set_radiation_type(static_cast<uint32_t>(message.radiation));
+  out.set_field_of_view(message.field_of_view);
+  out.set_min_range(message.min_range);
+  out.set_max_range(message.max_range);
+  out.set_range(message.range);
+  out.set_variance(message.variance);
+  return out;
+}
+
+Result<RangeMessage> from_proto(const v1::RangeMessage& in) {
+  const Reader read("RangeMessage");
+  RangeMessage message;
+  HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
+  message.frame_id = in.frame_id();
+  message.radiation = static_cast<RangeRadiation>(std::min<uint32_t>(in.radiation_type(), 255));
+  message.field_of_view = in.field_of_view();
+  message.min_range = in.min_range();
+  message.max_range = in.max_range();
+  message.range = in.range();
+  message.variance = in.variance();
+  return validated(std::move(message));
+}
+
 // ---- Pose estimate and keyframe ---------------------------------------------------------
 
 v1::PoseEstimate to_proto(const PoseEstimate& message) {

@@ -99,7 +99,7 @@ Timestamp timestamp_of(const SensorMessage& message) {
 }
 
 std::string_view modality_name(const SensorMessage& message) {
-  constexpr std::array<std::string_view, 6> kNames{"imu", "point_cloud", "image", "gnss", "wheel_odometry", "radar"};
+  constexpr std::array<std::string_view, 7> kNames{"imu", "point_cloud", "image", "gnss", "wheel_odometry", "radar", "range"};
   return kNames[message.index()];
 }
 

@@ -262,6 +262,30 @@ Status validate(const RadarMessage& message) {
   return ok_status();
 }
 
+Status validate(const RangeMessage& message) {
+  const Checker check("RangeMessage");
+  HANZO_RETURN_IF_ERROR(check.timestamp(message.timestamp, "timestamp_ns"));
+  for (const auto& [name, value] : {std::pair<std::string_view, float>{"field_of_view", message.field_of_view}, {"min_range", message.min_range},
+                                    {"max_range", message.max_range}, {"variance", message.variance}}) {
+    if (!std::isfinite(value)) return check.finite(value, name);
+  }
+  if (std::isnan(message.range)) return check.fail("range", "NaN (+inf: nothing within max_range, -inf: nearer than min_range)");
+  if (message.radiation != RangeRadiation::kUltrasound && message.radiation != RangeRadiation::kInfrared) {
+    return check.fail("radiation_type", fmt::format("{} (expected 0 ultrasound or 1 infrared)", static_cast<int>(message.radiation)));
+  }
+  if (!(message.field_of_view > 0.0F && message.field_of_view < std::numbers::pi_v<float>)) {
+    return check.fail("field_of_view", fmt::format("{} rad outside (0, pi)", message.field_of_view));
+  }
+  if (message.min_range < 0.0F || message.max_range <= message.min_range) {
+    return check.fail("max_range", fmt::format("[{}, {}] m is not a range (expected 0 <= min_range < max_range)", message.min_range, message.max_range));
+  }
+  if (std::isfinite(message.range) && (message.range < message.min_range || message.range > message.max_range)) {
+    return check.fail("range", fmt::format("{} m outside [{}, {}] m (use +inf or -inf for no reading)", message.range, message.min_range, message.max_range));
+  }
+  if (message.variance < 0.0F) return check.fail("variance", fmt::format("negative variance {} m^2", message.variance));
+  return ok_status();
+}
+
 Status validate(const PoseEstimate& message) {
   const Checker check("PoseEstimate");
   HANZO_RETURN_IF_ERROR(check.timestamp(message.timestamp, "timestamp_ns"));

@@ -119,6 +119,7 @@ Estimator::Estimator(const config::FusionConfig& config, std::vector<SensorSetup
   heading_pending_ = has_gnss && !imu_heading && !frontend_.initial_yaw;
   gated_since_.resize(2 * sensors_.size());
   map_links_.resize(sensors_.size());
+  floor_heights_.resize(sensors_.size());
   wheel_yaw_rate_needed_ = !imu_sensor_ && std::none_of(sensors_.begin(), sensors_.end(), [](const SensorSetup& s) {
     return s.config->modality == SensorModality::kLidar || s.config->modality == SensorModality::kCamera;
   });
@@ -159,7 +160,8 @@ Estimator::Estimator(const Estimator& other)
       planar_height_(other.planar_height_),
       last_gravity_update_(other.last_gravity_update_),
       world_correction_(other.world_correction_),
-      map_links_(other.map_links_) {}
+      map_links_(other.map_links_),
+      floor_heights_(other.floor_heights_) {}
 
 Estimator& Estimator::operator=(const Estimator& other) {
   if (this != &other) *this = Estimator(other);
@@ -212,6 +214,11 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
     for (std::optional<MapLink>& link : map_links_) {
       if (link && !link->frame) link->T_world_map = correction->T_correction * link->T_world_map;
     }
+    // A floor moves with the world: its point under the body, moved.
+    const Eigen::Vector3d position = filter_->state().position;
+    for (std::optional<double>& floor : floor_heights_) {
+      if (floor) floor = (correction->T_correction * Eigen::Vector3d(position.x(), position.y(), *floor)).z();
+    }
     return {true, std::nullopt};
   } else if (std::holds_alternative<MotionTick>(event.payload)) {
     predict_to(event.time);
@@ -226,6 +233,8 @@ EventOutcome Estimator::process(const Event& event, UpdateObserver* observer) {
       outcome = process_wheels(event, *wheels, observer);
     } else if (const auto* radar = std::get_if<msgs::RadarMessage>(&message)) {
       outcome = process_radar(event, *radar, observer);
+    } else if (const auto* range = std::get_if<msgs::RangeMessage>(&message)) {
+      outcome = process_range(event, *range, observer);
     } else {
       outcome = {false, Rejection::kNotFused};
     }
@@ -384,6 +393,7 @@ void Estimator::start(const NavigationState& state, const Eigen::Matrix3d& posit
 void Estimator::reset_filter(const NavigationState& state, const ErrorCovariance& covariance) {
   filter_->reset(state, covariance);
   for (std::optional<MapLink>& link : map_links_) link.reset();
+  for (std::optional<double>& floor : floor_heights_) floor.reset();
 }
 
 void Estimator::initialize_without_imu(const Event& event) {

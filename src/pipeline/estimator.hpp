@@ -157,6 +157,10 @@ class Estimator {
   /// one, from an unknown velocity, would be worse than the fix).
   void hold_at_fix(const Eigen::Vector3d& antenna_gnss, const Eigen::Matrix3d& covariance, const Eigen::Vector3d& lever);
   EventOutcome process_radar(const Event& event, const msgs::RadarMessage& radar, UpdateObserver* observer);
+  // A rangefinder looking down measures the height above the floor (estimate/range_models.hpp):
+  // the floor's height is placed where the estimate puts it at the first reading, and again
+  // after kFloorStepSeconds of readings that disagree (a step, a table, stairs).
+  EventOutcome process_range(const Event& event, const msgs::RangeMessage& range, UpdateObserver* observer);
   EventOutcome process_pose(const Event& event, const PoseMeasurement& pose, UpdateObserver* observer);
   void initialize(const Event& event, const msgs::ImuMessage& imu);
   /// Resets the filter to `state` (its timestamp: the start) with the initial covariance of
@@ -263,6 +267,7 @@ class Estimator {
     SE3 T_world_map;
   };
   std::vector<std::optional<MapLink>> map_links_;
+  std::vector<std::optional<double>> floor_heights_;  // per sensor: a downward rangefinder's floor, world z
 };
 
 }  // namespace hanzo::fusion::pipeline

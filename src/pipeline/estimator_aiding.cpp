@@ -10,6 +10,7 @@
 #include "hanzo/fusion/estimate/attitude_models.hpp"
 #include "hanzo/fusion/estimate/position_models.hpp"
 #include "hanzo/fusion/estimate/radar_ego_velocity.hpp"
+#include "hanzo/fusion/estimate/range_models.hpp"
 #include "hanzo/fusion/estimate/velocity_models.hpp"
 
 namespace hanzo::fusion::pipeline {
@@ -332,6 +333,40 @@ EventOutcome Estimator::process_radar(const Event& event, const msgs::RadarMessa
   EventOutcome outcome;
   outcome.fused = update(event, model, observer, &outcome.reason);
   if (outcome.fused) outcome.velocity = fused_velocity(event, ego->velocity_sensor, covariance);
+  return outcome;
+}
+
+EventOutcome Estimator::process_range(const Event& event, const msgs::RangeMessage& range, UpdateObserver* observer) {
+  // A beam more than this far from straight down does not see the floor (or sees it at a
+  // slant too steep to trust); readings that disagree this long mean the floor moved.
+  constexpr double kMaxBeamTiltRad = 30.0 * M_PI / 180.0;
+  constexpr double kFloorStepSeconds = 1.0;
+  // The reading's noise when the message gives none (1 cm + 1 % of the range, an ultrasonic
+  // module's), and the floor's unevenness (2 cm).
+  constexpr double kFloorUnevenness = 0.02;
+  if (!std::isfinite(range.range)) return {false, Rejection::kNotFused};  // nothing in range, or too near
+  predict_to(event.time);
+  const SE3& T_body_sensor = sensors_[event.sensor].T_body_sensor;
+  const NavigationState state = filter_->state();
+  const Eigen::Vector3d beam_world = state.R_world_body * (T_body_sensor.rotation() * Eigen::Vector3d::UnitX());
+  if (-beam_world.z() < std::cos(kMaxBeamTiltRad)) return {false, Rejection::kNotFused};
+  const double sensor_z = (state.position + state.R_world_body * T_body_sensor.translation()).z();
+  std::optional<double>& floor = floor_heights_[event.sensor];
+  Timestamp& gated_since = gated_since_[2 * event.sensor];
+  if (!floor || (!gated_since.is_zero() && (event.time - gated_since).seconds() > kFloorStepSeconds)) {
+    // The floor under the cone's ray nearest to straight down.
+    const double slant = std::max(0.0, std::acos(std::min(1.0, -beam_world.z())) - 0.5 * range.field_of_view);
+    const double new_floor = sensor_z - range.range * std::cos(slant);
+    if (floor) logger()->info("sensor '{}': the floor moved by {:.2f} m", sensors_[event.sensor].config->name, new_floor - *floor);
+    floor = new_floor;
+    gated_since = Timestamp();
+    return {true, std::nullopt};
+  }
+  const double reading_sigma = 0.01 + 0.01 * range.range;
+  const double variance = (range.variance > 0.0F ? range.variance : reading_sigma * reading_sigma) + kFloorUnevenness * kFloorUnevenness;
+  const estimate::FloorRangeModel model(range.range, variance, *floor, T_body_sensor, 0.5 * range.field_of_view);
+  EventOutcome outcome;
+  outcome.fused = update(event, model, observer, &outcome.reason);
   return outcome;
 }
 

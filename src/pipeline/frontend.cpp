@@ -20,7 +20,7 @@ using config::SensorModality;
 // their odometry modules through push_pose()).
 bool fused_directly(SensorModality modality) {
   return modality == SensorModality::kImu || modality == SensorModality::kGnss || modality == SensorModality::kWheelOdometry ||
-         modality == SensorModality::kRadar;
+         modality == SensorModality::kRadar || modality == SensorModality::kRange;
 }
 
 }  // namespace

@@ -167,7 +167,8 @@ struct FusionClient::Impl {
       case 2: return std::make_unique<TypedSensorStream<msgs::ImageMessage, v1::ImageMessage>>([&](grpc::ClientContext* c) { return s.StreamImage(c); }, token, session_id, sensor, progress);
       case 3: return std::make_unique<TypedSensorStream<msgs::GnssMessage, v1::GnssMessage>>([&](grpc::ClientContext* c) { return s.StreamGnss(c); }, token, session_id, sensor, progress);
       case 4: return std::make_unique<TypedSensorStream<msgs::WheelOdometryMessage, v1::WheelOdometryMessage>>([&](grpc::ClientContext* c) { return s.StreamWheelOdometry(c); }, token, session_id, sensor, progress);
-      default: return std::make_unique<TypedSensorStream<msgs::RadarMessage, v1::RadarMessage>>([&](grpc::ClientContext* c) { return s.StreamRadar(c); }, token, session_id, sensor, progress);
+      case 5: return std::make_unique<TypedSensorStream<msgs::RadarMessage, v1::RadarMessage>>([&](grpc::ClientContext* c) { return s.StreamRadar(c); }, token, session_id, sensor, progress);
+      default: return std::make_unique<TypedSensorStream<msgs::RangeMessage, v1::RangeMessage>>([&](grpc::ClientContext* c) { return s.StreamRange(c); }, token, session_id, sensor, progress);
     }
   }
 };

@@ -71,6 +71,9 @@ class FusionServiceImpl final : public v1::FusionService::Service {
   grpc::Status StreamRadar(grpc::ServerContext* context, grpc::ServerReaderWriter<v1::PoseEstimate, v1::RadarMessage>* stream) override {
     return serve_stream(*context, *stream, "radar");
   }
+  grpc::Status StreamRange(grpc::ServerContext* context, grpc::ServerReaderWriter<v1::PoseEstimate, v1::RangeMessage>* stream) override {
+    return serve_stream(*context, *stream, "range");
+  }
   grpc::Status StreamWheelOdometry(grpc::ServerContext* context,
                                    grpc::ServerReaderWriter<v1::PoseEstimate, v1::WheelOdometryMessage>* stream) override {
     return serve_stream(*context, *stream, "wheel_odometry");

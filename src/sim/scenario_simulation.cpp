@@ -75,6 +75,9 @@ Result<std::unique_ptr<ScenarioSimulation>> ScenarioSimulation::create(Scenario 
     } else if (const auto* radar = std::get_if<RadarSimulatorConfig>(&sensor.simulator)) {
       auto simulator = std::make_shared<RadarSimulator>(*radar, world, path);
       stream->produce = [simulator](Timestamp time) -> std::optional<msgs::SensorMessage> { return simulator->measure(time); };
+    } else if (const auto* range = std::get_if<RangeSimulatorConfig>(&sensor.simulator)) {
+      auto simulator = std::make_shared<RangeSimulator>(*range, world, path);
+      stream->produce = [simulator](Timestamp time) -> std::optional<msgs::SensorMessage> { return simulator->measure(time); };
     }
     // The first sample at or after the log's start (sample k stays at start_time + k / rate).
     stream->next_index = static_cast<int64_t>(std::ceil(simulation->scenario_.log_start * stream->rate_hz - 1e-9));

@@ -448,6 +448,29 @@ Result<SensorSimulatorConfig> parse_radar(const YamlValue& value, double rate, c
   return SensorSimulatorConfig(config);
 }
 
+Result<SensorSimulatorConfig> parse_range(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
+  HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "field_of_view_deg", "min_range", "max_range", "range_noise", "radiation"}));
+  RangeSimulatorConfig config;
+  config.rate_hz = rate;
+  config.T_body_range = sensor.T_body_sensor;
+  config.frame_id = sensor.name;
+  double field_of_view = config.field_of_view / kDegree;
+  HANZO_ASSIGN_OR_RETURN(field_of_view, positive_or(value["field_of_view_deg"], field_of_view));
+  if (field_of_view >= 180.0) return value["field_of_view_deg"].error("the cone's full angle must be below 180 degrees");
+  config.field_of_view = field_of_view * kDegree;
+  HANZO_ASSIGN_OR_RETURN(config.min_range, non_negative_or(value["min_range"], config.min_range));
+  HANZO_ASSIGN_OR_RETURN(config.max_range, positive_or(value["max_range"], config.max_range));
+  if (config.max_range <= config.min_range) return value["max_range"].error("max_range must exceed min_range");
+  HANZO_ASSIGN_OR_RETURN(config.range_noise, non_negative_or(value["range_noise"], config.range_noise));
+  if (value["radiation"].present()) {
+    std::string radiation;
+    HANZO_ASSIGN_OR_RETURN(radiation, value["radiation"].as_string());
+    if (radiation != "ultrasound" && radiation != "infrared") return value["radiation"].error("expected ultrasound or infrared");
+    config.radiation = radiation == "infrared" ? msgs::RangeRadiation::kInfrared : msgs::RangeRadiation::kUltrasound;
+  }
+  return SensorSimulatorConfig(config);
+}
+
 double default_rate(config::SensorModality modality) {
   switch (modality) {
     case config::SensorModality::kImu: return 200.0;
@@ -456,6 +479,7 @@ double default_rate(config::SensorModality modality) {
     case config::SensorModality::kGnss: return 5.0;
     case config::SensorModality::kWheelOdometry: return 50.0;
     case config::SensorModality::kRadar: return 20.0;
+    case config::SensorModality::kRange: return 20.0;
   }
   return 10.0;
 }
@@ -471,7 +495,7 @@ Result<ScenarioSensor> parse_sensor(const std::string& name, const YamlValue& va
     modality = config::sensor_modality_from_string(modality_name);
     if (!modality) return value["modality"].error(fmt::format("unknown modality '{}'", modality_name));
   }
-  if (!modality) return value.error("cannot tell the sensor's modality from its name: add `modality: imu|lidar|camera|gnss|wheel_odometry|radar`");
+  if (!modality) return value.error("cannot tell the sensor's modality from its name: add `modality: imu|lidar|camera|gnss|wheel_odometry|radar|range`");
   sensor.modality = *modality;
   sensor.topic = "/sensors/" + name;
   if (value["topic"].present()) HANZO_ASSIGN_OR_RETURN(sensor.topic, value["topic"].as_string());
@@ -487,6 +511,7 @@ Result<ScenarioSensor> parse_sensor(const std::string& name, const YamlValue& va
     case config::SensorModality::kGnss: simulator = parse_gnss(value, rate, sensor, scenario.datum); break;
     case config::SensorModality::kWheelOdometry: simulator = parse_wheels(value, rate, sensor); break;
     case config::SensorModality::kRadar: simulator = parse_radar(value, rate, sensor); break;
+    case config::SensorModality::kRange: simulator = parse_range(value, rate, sensor); break;
   }
   if (!simulator) return simulator.error();
   sensor.simulator = std::move(*simulator);

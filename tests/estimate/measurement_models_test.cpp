@@ -9,6 +9,7 @@
 #include "hanzo/fusion/estimate/chi_square.hpp"
 #include "hanzo/fusion/estimate/imu_propagation.hpp"
 #include "hanzo/fusion/estimate/position_models.hpp"
+#include "hanzo/fusion/estimate/range_models.hpp"
 #include "hanzo/fusion/estimate/static_alignment.hpp"
 #include "hanzo/fusion/estimate/velocity_models.hpp"
 
@@ -76,7 +77,29 @@ TEST(MeasurementModels, JacobiansMatchNumericalDifferentiation) {
     expect_jacobian_matches(ImuAttitudeModel(SO3(), Eigen::Matrix3d::Identity(), SO3(), {false, true, true}), state, 1e-5);
     expect_jacobian_matches(GravityMagnitudeModel(9.81, 0.01), state, 1e-6);
     expect_jacobian_matches(PlanarMotionModel(0.5, 0.01, 0.01), state, 1e-6);
+    // A rangefinder looking down (its +x axis turned to the body's -z), 1.5 m above the floor.
+    const SE3 T_body_down(SO3::exp(Eigen::Vector3d(0.05, M_PI / 2.0, -0.1)), Eigen::Vector3d(0.1, -0.2, -0.05));
+    for (const double half_field_of_view : {0.0, 0.13, 0.4}) {
+      expect_jacobian_matches(FloorRangeModel(1.4, 1e-4, state.position.z() - 1.5, T_body_down, half_field_of_view), state, 1e-6);
+    }
   }
+}
+
+// Level, 1.2 m above the floor, the beam straight down from 0.1 m below the body: it reads 1.1 m;
+// tilted 30 degrees about x, a thin beam reads the slant 1.1 / cos 30 degrees, a 20 degree cone
+// its ray nearest to straight down (20 degrees off).
+TEST(MeasurementModels, FloorRangeIsTheConesDistanceToTheFloorPlane) {
+  NavigationState state;
+  state.position = Eigen::Vector3d(3.0, -2.0, 1.2);
+  const SE3 T_body_down(SO3::exp(Eigen::Vector3d(0.0, M_PI / 2.0, 0.0)), Eigen::Vector3d(0.0, 0.0, -0.1));
+  const FloorRangeModel thin(1.0, 1e-4, 0.0, T_body_down, 0.0);
+  const FloorRangeModel cone(1.0, 1e-4, 0.0, T_body_down, 10.0 * M_PI / 180.0);
+  EXPECT_NEAR(thin.residual(state, nullptr)(0), 1.0 - 1.1, 1e-12);
+  EXPECT_NEAR(cone.residual(state, nullptr)(0), 1.0 - 1.1, 1e-12);
+  state.R_world_body = rotation_from_roll_pitch_yaw(M_PI / 6.0, 0.0, 0.7);
+  const double sensor_height = 1.2 - 0.1 * std::cos(M_PI / 6.0);
+  EXPECT_NEAR(thin.residual(state, nullptr)(0), 1.0 - sensor_height / std::cos(M_PI / 6.0), 1e-12);
+  EXPECT_NEAR(cone.residual(state, nullptr)(0), 1.0 - sensor_height / std::cos(M_PI / 9.0), 1e-12);
 }
 
 TEST(MeasurementModels, AttitudeResidualWrapsAroundPi) {

@@ -2,7 +2,9 @@
 // 2.0), for what test2.bag does not contain: uncompressed and lz4 chunks, NavSatFix,
 // PointCloud2, Image, cut-off files and bad input.
 
+#include <cmath>
 #include <cstring>
+#include <limits>
 #include <filesystem>
 #include <string>
 
@@ -14,6 +16,7 @@
 #include <lz4frame.h>
 
 #include "hanzo/fusion/io/ros1_bag.hpp"
+#include "hanzo/fusion/msgs/validate.hpp"
 #include "hanzo/fusion/io/ros_conversion.hpp"
 #include "hanzo/fusion/io/rosbag_import.hpp"
 
@@ -207,6 +210,26 @@ TEST(Ros1Conversion, NavSatFixStatusAndCovariance) {
   EXPECT_EQ(ros::gnss_from_ros(navsatfix_data(-1), kRos1)->fix_type, msgs::GnssFixType::kNoFix);
   EXPECT_EQ(ros::gnss_from_ros(navsatfix_data(2), kRos1)->fix_type, msgs::GnssFixType::kRtkFixed);
   EXPECT_THAT(ros::gnss_from_ros(navsatfix_data(0).substr(0, 30), kRos1).error().message, HasSubstr("NavSatFix: truncated"));
+}
+
+// sensor_msgs/Range: an ultrasonic reading, and one with nothing in range (+inf).
+TEST(Ros1Conversion, RangeReadings) {
+  const auto range_data = [](float reading) {
+    Ser s;
+    s.header(150, 0, "sonar").raw<uint8_t>(0).raw(0.26F).raw(0.02F).raw(4.0F).raw(reading);
+    return s.out;
+  };
+  auto range = ros::range_from_ros(range_data(1.25F), kRos1);
+  ASSERT_TRUE(range.ok()) << range.error().message;
+  EXPECT_EQ(range->timestamp.nanoseconds(), 150'000'000'000);
+  EXPECT_EQ(range->frame_id, "sonar");
+  EXPECT_EQ(range->radiation, msgs::RangeRadiation::kUltrasound);
+  EXPECT_EQ(range->field_of_view, 0.26F);
+  EXPECT_EQ(range->max_range, 4.0F);
+  EXPECT_EQ(range->range, 1.25F);
+  EXPECT_TRUE(msgs::validate(*range).ok());
+  EXPECT_TRUE(std::isinf(ros::range_from_ros(range_data(std::numeric_limits<float>::infinity()), kRos1)->range));
+  EXPECT_THAT(ros::range_from_ros(range_data(1.25F).substr(0, 20), kRos1).error().message, HasSubstr("Range: truncated"));
 }
 
 TEST(Ros1Conversion, PointCloud2FieldsScaledAndNanDropped) {

@@ -43,6 +43,7 @@ TEST(SensorLog, EveryMessageTypeRoundTripsBitIdentical) {
       {"/gnss", shifted(fixtures::gnss(), 3)},
       {"/wheels", shifted(fixtures::wheel_odometry(), 4)},
       {"/radar", shifted(fixtures::radar(), 5)},
+      {"/range", shifted(fixtures::range(), 5)},
       {"/imu", shifted(fixtures::imu(), 6)},
   };
   {
@@ -54,8 +55,8 @@ TEST(SensorLog, EveryMessageTypeRoundTripsBitIdentical) {
   }
   auto reader = SensorLogReader::open(path);
   ASSERT_TRUE(reader.ok()) << reader.error().message;
-  // 7 topics + the Foxglove mirrors of /lidar, /camera, /gnss and /pose (skipped by this reader).
-  EXPECT_EQ((*reader)->mcap().channels().size(), 11u);
+  // 8 topics + the Foxglove mirrors of /lidar, /camera, /gnss and /pose (skipped by this reader).
+  EXPECT_EQ((*reader)->mcap().channels().size(), 12u);
   EXPECT_EQ((*reader)->mcap().channel_by_topic("/lidar/foxglove")->metadata.at("mirror_of"), "/lidar");
   EXPECT_EQ((*reader)->mcap().channel_by_topic("/lidar")->metadata.at("modality"), "point_cloud");
   EXPECT_EQ((*reader)->mcap().channel_by_topic("/lidar")->metadata.at("sensor"), "lidar");

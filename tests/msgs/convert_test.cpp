@@ -95,6 +95,17 @@ void expect_equal(const RadarMessage& a, const RadarMessage& b) {
   }
 }
 
+void expect_equal(const RangeMessage& a, const RangeMessage& b) {
+  EXPECT_EQ(a.timestamp, b.timestamp);
+  EXPECT_EQ(a.frame_id, b.frame_id);
+  EXPECT_EQ(a.radiation, b.radiation);
+  EXPECT_EQ(a.field_of_view, b.field_of_view);
+  EXPECT_EQ(a.min_range, b.min_range);
+  EXPECT_EQ(a.max_range, b.max_range);
+  EXPECT_EQ(a.range, b.range);
+  EXPECT_EQ(a.variance, b.variance);
+}
+
 void expect_equal(const PoseEstimate& a, const PoseEstimate& b) {
   EXPECT_EQ(a.timestamp, b.timestamp);
   EXPECT_EQ(a.frame_id, b.frame_id);
@@ -333,6 +344,16 @@ TEST(Convert, RadarRoundTrip) {
   RadarMessage empty = testing::radar();
   empty.targets.clear();
   check_round_trip(empty);
+}
+// Finite readings, REP 117's +inf (nothing in range) and -inf (too near), infrared.
+TEST(Convert, RangeRoundTrip) {
+  check_round_trip(testing::range());
+  RangeMessage none = testing::range();
+  none.range = std::numeric_limits<float>::infinity();
+  check_round_trip(none);
+  none.range = -std::numeric_limits<float>::infinity();
+  none.radiation = RangeRadiation::kInfrared;
+  check_round_trip(none);
 }
 TEST(Convert, PoseEstimateRoundTrip) { check_round_trip(testing::pose_estimate()); }
 TEST(Convert, KeyframeRoundTrip) {

@@ -77,6 +77,7 @@ TEST(Schema, FusionServiceHasTheSpecsRpcs) {
       {"StreamImage", "ImageMessage", "PoseEstimate", true, true},
       {"StreamGnss", "GnssMessage", "PoseEstimate", true, true},
       {"StreamRadar", "RadarMessage", "PoseEstimate", true, true},
+      {"StreamRange", "RangeMessage", "PoseEstimate", true, true},
       {"StreamWheelOdometry", "WheelOdometryMessage", "PoseEstimate", true, true},
       {"SubscribePose", "SessionId", "PoseEstimate", false, true},
       {"SubscribeMap", "SessionId", "MapUpdate", false, true},

@@ -93,6 +93,18 @@ inline RadarMessage radar() {
   return m;
 }
 
+inline RangeMessage range() {
+  RangeMessage m;
+  m.timestamp = t0();
+  m.frame_id = "sonar_link";
+  m.field_of_view = 0.26F;
+  m.min_range = 0.02F;
+  m.max_range = 4.0F;
+  m.range = 1.37F;
+  m.variance = 1e-4F;
+  return m;
+}
+
 inline PoseEstimate pose_estimate() {
   PoseEstimate m;
   m.timestamp = t0();

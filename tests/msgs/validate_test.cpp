@@ -31,9 +31,36 @@ TEST(Validate, ExampleMessagesAreValid) {
   EXPECT_TRUE(validate(testing::gnss()).ok());
   EXPECT_TRUE(validate(testing::wheel_odometry()).ok());
   EXPECT_TRUE(validate(testing::radar()).ok());
+  EXPECT_TRUE(validate(testing::range()).ok());
   EXPECT_TRUE(validate(testing::pose_estimate()).ok());
   EXPECT_TRUE(validate(testing::keyframe()).ok());
   EXPECT_TRUE(validate(SensorMessage(testing::gnss())).ok());
+}
+
+// A rangefinder's reading: finite within [min_range, max_range] or +-inf (REP 117), never NaN;
+// a cone under 180 degrees; a range interval; a known radiation type.
+TEST(Validate, RangeReadingsFollowRep117) {
+  RangeMessage range = testing::range();
+  range.range = static_cast<float>(kInf);
+  EXPECT_TRUE(validate(range).ok());
+  range.range = -static_cast<float>(kInf);
+  EXPECT_TRUE(validate(range).ok());
+  range.range = static_cast<float>(kNan);
+  expect_rejected(range, "range", "NaN");
+  range.range = 5.0F;
+  expect_rejected(range, "range", "outside [0.02, 4] m");
+  range = testing::range();
+  range.field_of_view = 4.0F;
+  expect_rejected(range, "field_of_view", "outside (0, pi)");
+  range = testing::range();
+  range.max_range = 0.01F;
+  expect_rejected(range, "max_range", "is not a range");
+  range = testing::range();
+  range.radiation = static_cast<RangeRadiation>(7);
+  expect_rejected(range, "radiation_type", "expected 0 ultrasound or 1 infrared");
+  range = testing::range();
+  range.variance = -1.0F;
+  expect_rejected(range, "variance", "negative");
 }
 
 TEST(Validate, ZeroTimestampIsRejectedEverywhere) {

@@ -46,5 +46,6 @@ from hanzo.fusion.messages import (  # noqa: F401
     PointCloud,
     PoseEstimate,
     Radar,
+    Range,
     WheelOdometry,
 )

@@ -19,11 +19,13 @@ import numpy as np
 
 __all__ = [
     "CameraIntrinsics", "Distortion", "Gnss", "Image", "Imu", "LogRecord", "Message", "PointCloud", "PoseEstimate",
-    "Radar", "WheelOdometry", "FIX_TYPES", "IMAGE_ENCODINGS",
+    "Radar", "Range", "WheelOdometry", "FIX_TYPES", "IMAGE_ENCODINGS", "RANGE_RADIATION",
 ]
 
 #: GNSS fix types, weakest first (GnssFixType of the spec).
 FIX_TYPES = ("NO_FIX", "FIX_2D", "FIX_3D", "RTK_FLOAT", "RTK_FIXED")
+#: What a rangefinder emits (sensor_msgs/Range's radiation_type).
+RANGE_RADIATION = ("ultrasound", "infrared")
 #: Image encodings and the numpy layout of their pixels: (dtype, channels).
 IMAGE_ENCODINGS = {"mono8": (np.uint8, 1), "rgb8": (np.uint8, 3), "bgr8": (np.uint8, 3),
                    "depth16": (np.uint16, 1), "depth32f": (np.float32, 1)}
@@ -203,6 +205,26 @@ class Radar(_Stamped):
 
 
 @dataclass
+class Range(_Stamped):
+    """A single-beam rangefinder's reading (ultrasonic, infrared; sensor_msgs/Range): the distance (m) to the
+    nearest object within a cone of full angle field_of_view (rad) about the sensor frame's +x axis; +inf nothing
+    within max_range, -inf nearer than min_range."""
+    timestamp_ns: int
+    range: float
+    min_range: float
+    max_range: float
+    field_of_view: float
+    radiation: str = "ultrasound"
+    variance: float = 0.0
+    frame_id: str = ""
+
+    def __post_init__(self):
+        self.timestamp_ns = _check_time(self.timestamp_ns)
+        if self.radiation not in RANGE_RADIATION:
+            raise ValueError(f"radiation: expected one of {', '.join(RANGE_RADIATION)}, got '{self.radiation}'")
+
+
+@dataclass
 class PoseEstimate(_Stamped):
     """A pose the engine emitted: T_world_body as position (m) and orientation (w, x, y, z)."""
     timestamp_ns: int
@@ -213,7 +235,7 @@ class PoseEstimate(_Stamped):
     tracking_state: str = ""
 
 
-Message = Union[Imu, PointCloud, Image, Gnss, WheelOdometry, Radar]
+Message = Union[Imu, PointCloud, Image, Gnss, WheelOdometry, Radar, Range]
 
 
 @dataclass

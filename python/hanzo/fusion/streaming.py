@@ -106,6 +106,11 @@ def to_proto(message: messages.Message):
         for target in message.targets:
             out.targets.add(range=target[0], azimuth=target[1], elevation=target[2], radial_velocity=target[3], rcs=target[4])
         return out
+    if isinstance(message, messages.Range):
+        return sensors_pb2.RangeMessage(timestamp_ns=message.timestamp_ns, frame_id=message.frame_id,
+                                        radiation_type=messages.RANGE_RADIATION.index(message.radiation),
+                                        field_of_view=message.field_of_view, min_range=message.min_range,
+                                        max_range=message.max_range, range=message.range, variance=message.variance)
     raise TypeError(f"expected a sensor message of hanzo.fusion.messages, got {type(message).__name__}")
 
 
@@ -127,6 +132,7 @@ def pose_from_proto(pose: estimates_pb2.PoseEstimate) -> messages.PoseEstimate:
 _METHODS = {
     messages.Imu: "StreamImu", messages.PointCloud: "StreamPointCloud", messages.Image: "StreamImage",
     messages.Gnss: "StreamGnss", messages.WheelOdometry: "StreamWheelOdometry", messages.Radar: "StreamRadar",
+    messages.Range: "StreamRange",
 }
 _END = object()
 

@@ -37,10 +37,10 @@ std::optional<FrontendType> frontend_type_from_string(std::string_view name);
 
 /// What kind of sensor a configured sensor is. Inferred from the sensor's name (imu*, lidar*,
 /// camera*, gnss* or gps*, wheel* or odom*, radar*) unless given as `modality:`.
-enum class SensorModality { kImu, kLidar, kCamera, kGnss, kWheelOdometry, kRadar };
+enum class SensorModality { kImu, kLidar, kCamera, kGnss, kWheelOdometry, kRadar, kRange };
 /// SensorConfig::type of a lidar sensor that is a 2D laser scanner (planar scan matching).
 inline constexpr std::string_view kPlanarLaserType = "planar_laser";
-std::string_view to_string(SensorModality modality);  // "imu", "lidar", "camera", "gnss", "wheel_odometry", "radar"
+std::string_view to_string(SensorModality modality);  // "imu", "lidar", "camera", "gnss", "wheel_odometry", "radar", "range"
 /// The modality a message belongs to (an ImuMessage: imu, a PointCloudMessage: lidar, ...).
 SensorModality modality_of(const msgs::SensorMessage& message);
 std::optional<SensorModality> sensor_modality_from_string(std::string_view name);

@@ -53,6 +53,8 @@ std::string normalized_type(std::string_view type);
 
 Result<msgs::ImuMessage> imu_from_ros(std::string_view data, Serialization serialization);
 Result<msgs::GnssMessage> gnss_from_ros(std::string_view data, Serialization serialization);
+/// sensor_msgs/Range (radiation_type, field_of_view, min_range, max_range, range).
+Result<msgs::RangeMessage> range_from_ros(std::string_view data, Serialization serialization);
 Result<msgs::PointCloudMessage> point_cloud_from_ros(std::string_view data, Serialization serialization);
 Result<msgs::ImageMessage> image_from_ros(std::string_view data, Serialization serialization);
 Result<msgs::ImageMessage> compressed_image_from_ros(std::string_view data, Serialization serialization);

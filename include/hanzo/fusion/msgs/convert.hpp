@@ -32,6 +32,7 @@ v1::ImageMessage to_proto(const ImageMessage& message);
 v1::GnssMessage to_proto(const GnssMessage& message);
 v1::WheelOdometryMessage to_proto(const WheelOdometryMessage& message);
 v1::RadarMessage to_proto(const RadarMessage& message);
+v1::RangeMessage to_proto(const RangeMessage& message);
 v1::PoseEstimate to_proto(const PoseEstimate& message);
 v1::Keyframe to_proto(const Keyframe& message);
 
@@ -41,6 +42,7 @@ Result<ImageMessage> from_proto(const v1::ImageMessage& message);
 Result<GnssMessage> from_proto(const v1::GnssMessage& message);
 Result<WheelOdometryMessage> from_proto(const v1::WheelOdometryMessage& message);
 Result<RadarMessage> from_proto(const v1::RadarMessage& message);
+Result<RangeMessage> from_proto(const v1::RangeMessage& message);
 Result<PoseEstimate> from_proto(const v1::PoseEstimate& message);
 Result<Keyframe> from_proto(const v1::Keyframe& message);
 

@@ -128,12 +128,30 @@ struct RadarMessage {
   std::vector<RadarTarget> targets;  // may be empty (nothing detected)
 };
 
-/// Any of the six sensor messages, as the Frontend and the sensor log carry them.
+/// What a rangefinder emits (sensor_msgs/Range's radiation_type).
+enum class RangeRadiation : uint8_t { kUltrasound = 0, kInfrared = 1 };
+
+/// One reading of a single-beam rangefinder (ultrasonic, infrared): the distance to the nearest
+/// object within a cone of full angle field_of_view about the sensor frame's +x axis (as
+/// sensor_msgs/Range). A range of +inf says nothing was within max_range, -inf that something
+/// was nearer than min_range (REP 117); a finite range lies in [min_range, max_range].
+struct RangeMessage {
+  Timestamp timestamp;
+  std::string frame_id;
+  RangeRadiation radiation = RangeRadiation::kUltrasound;
+  float field_of_view = 0.0F;  // radians, full cone angle, (0, pi)
+  float min_range = 0.0F;      // meters, >= 0
+  float max_range = 0.0F;      // meters, > min_range
+  float range = 0.0F;          // meters, or +-inf (above)
+  float variance = 0.0F;       // m^2, 0 when unknown
+};
+
+/// Any of the seven sensor messages, as the Frontend and the sensor log carry them.
 using SensorMessage =
-    std::variant<ImuMessage, PointCloudMessage, ImageMessage, GnssMessage, WheelOdometryMessage, RadarMessage>;
+    std::variant<ImuMessage, PointCloudMessage, ImageMessage, GnssMessage, WheelOdometryMessage, RadarMessage, RangeMessage>;
 
 Timestamp timestamp_of(const SensorMessage& message);
-/// "imu", "point_cloud", "image", "gnss", "wheel_odometry", "radar".
+/// "imu", "point_cloud", "image", "gnss", "wheel_odometry", "radar", "range".
 std::string_view modality_name(const SensorMessage& message);
 
 }  // namespace hanzo::fusion::msgs

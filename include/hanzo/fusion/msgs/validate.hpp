@@ -35,6 +35,7 @@ Status validate(const GnssMessage& message);
 Status validate(const WheelOdometryMessage& message);
 /// Plus: negative range, azimuth outside [-pi, pi], elevation outside [-pi/2, pi/2].
 Status validate(const RadarMessage& message);
+Status validate(const RangeMessage& message);
 Status validate(const PoseEstimate& message);
 /// Plus: relative covariance without relative pose.
 Status validate(const Keyframe& message);

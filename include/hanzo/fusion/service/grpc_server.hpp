@@ -7,7 +7,7 @@
 //   x-sensor: NAME                     (optional: the configured sensor; default the session's
 //                                       only sensor of the stream's modality)
 //
-// Stream{Imu,PointCloud,Image,Gnss,Radar,WheelOdometry}: every message read is pushed into the
+// Stream{Imu,PointCloud,Image,Gnss,Radar,Range,WheelOdometry}: every message read is pushed into the
 // session; after each message the newest PoseEstimate since the previous write is written back
 // (the IMU stream thereby gets every pose, a LiDAR stream one per sweep). A message that does not decode or that
 // the session rejects is counted (hanzo_fusion_stream_rejected_total{reason}) and skipped: the

@@ -40,13 +40,14 @@
 #include "hanzo/fusion/sim/imu_simulator.hpp"
 #include "hanzo/fusion/sim/lidar_simulator.hpp"
 #include "hanzo/fusion/sim/radar_simulator.hpp"
+#include "hanzo/fusion/sim/range_simulator.hpp"
 #include "hanzo/fusion/sim/wheel_odometry_simulator.hpp"
 #include "hanzo/fusion/sim/world.hpp"
 
 namespace hanzo::fusion::sim {
 
 using SensorSimulatorConfig = std::variant<ImuSimulatorConfig, LidarSimulatorConfig, CameraSimulatorConfig,
-                                           GnssSimulatorConfig, WheelOdometrySimulatorConfig, RadarSimulatorConfig>;
+                                           GnssSimulatorConfig, WheelOdometrySimulatorConfig, RadarSimulatorConfig, RangeSimulatorConfig>;
 
 struct ScenarioSensor {
   std::string name;                 ///< the key under `sensors:`; calibration "<name>_to_body"
