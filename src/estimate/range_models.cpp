@@ -17,14 +17,16 @@ MeasurementVector FloorRangeModel::residual(const NavigationState& state, Measur
   const double predicted = height / k;
   if (jacobian != nullptr) {
     jacobian->setZero(1, kErrorStateDimension);
-    const Eigen::RowVector3d z_row = R.row(2);
-    Eigen::RowVector3d by_rotation = -(z_row * SO3::hat(t)) / k;
     (*jacobian)(0, 2) = 1.0 / k;
-    if (slant > 0.0) {
-      const Eigen::RowVector3d tilt_by_rotation = -(z_row * SO3::hat(u)) / std::sin(tilt);
-      by_rotation += height * std::tan(slant) / k * tilt_by_rotation;
+    if (update_attitude_) {
+      const Eigen::RowVector3d z_row = R.row(2);
+      Eigen::RowVector3d by_rotation = -(z_row * SO3::hat(t)) / k;
+      if (slant > 0.0) {
+        const Eigen::RowVector3d tilt_by_rotation = -(z_row * SO3::hat(u)) / std::sin(tilt);
+        by_rotation += height * std::tan(slant) / k * tilt_by_rotation;
+      }
+      jacobian->block<1, 3>(0, 3) = by_rotation;
     }
-    jacobian->block<1, 3>(0, 3) = by_rotation;
   }
   MeasurementVector r(1);
   r(0) = range_ - predicted;

@@ -344,7 +344,20 @@ EventOutcome Estimator::process_range(const Event& event, const msgs::RangeMessa
   // The reading's noise when the message gives none (1 cm + 1 % of the range, an ultrasonic
   // module's), and the floor's unevenness (2 cm).
   constexpr double kFloorUnevenness = 0.02;
+  // Another sensor measured the horizontal motion this recently.
+  constexpr double kHorizontalAidingSeconds = 2.0;
   if (!std::isfinite(range.range)) return {false, Rejection::kNotFused};  // nothing in range, or too near
+  // With the IMU alone, height updates pull on the tilt and accelerometer-bias estimates they are
+  // correlated with, and nothing horizontal checks what that does: measured on the simulated
+  // drone, the horizontal error after 20 s grew from 0.6 to 8 m. So the height is fused only
+  // while another sensor (GNSS, LiDAR, camera, wheels, radar) constrains the horizontal motion.
+  const bool horizontally_aided = std::any_of(sensors_.begin(), sensors_.end(), [&](const SensorSetup& other) {
+    const size_t index = static_cast<size_t>(&other - sensors_.data());
+    const config::SensorModality modality = other.config->modality;
+    return modality != config::SensorModality::kImu && modality != config::SensorModality::kRange && !last_fused_[index].is_zero() &&
+           (event.time - last_fused_[index]).seconds() <= kHorizontalAidingSeconds;
+  });
+  if (!horizontally_aided) return {false, Rejection::kNotFused};
   predict_to(event.time);
   const SE3& T_body_sensor = sensors_[event.sensor].T_body_sensor;
   const NavigationState state = filter_->state();

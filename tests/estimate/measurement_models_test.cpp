@@ -80,7 +80,7 @@ TEST(MeasurementModels, JacobiansMatchNumericalDifferentiation) {
     // A rangefinder looking down (its +x axis turned to the body's -z), 1.5 m above the floor.
     const SE3 T_body_down(SO3::exp(Eigen::Vector3d(0.05, M_PI / 2.0, -0.1)), Eigen::Vector3d(0.1, -0.2, -0.05));
     for (const double half_field_of_view : {0.0, 0.13, 0.4}) {
-      expect_jacobian_matches(FloorRangeModel(1.4, 1e-4, state.position.z() - 1.5, T_body_down, half_field_of_view), state, 1e-6);
+      expect_jacobian_matches(FloorRangeModel(1.4, 1e-4, state.position.z() - 1.5, T_body_down, half_field_of_view, true), state, 1e-6);
     }
   }
 }

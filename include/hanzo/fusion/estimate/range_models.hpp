@@ -17,13 +17,22 @@ namespace hanzo::fusion::estimate {
 /// dc = e_z^T R [u]x dtheta, dtheta_beam = -dc / sin theta):
 ///   H = da / k + a tan(theta - alpha) / k * dtheta_beam,   k = cos(theta - alpha)   (theta > alpha)
 ///   H = da                                                                          (theta <= alpha)
-/// Observes the height above the floor and, weakly, roll and pitch; nothing horizontal. Valid
-/// while the beam points down (theta well below 90 degrees, the caller checks).
+/// Observes the height above the floor; nothing horizontal. The attitude enters as the estimate
+/// has it: with update_attitude false (the default, as PX4's EKF2 fuses range finders) the
+/// rotation columns of H are zero, for a range tells a tilt from a height change only through
+/// the cone's edge, whose real shape the model only approximates (measured: on the simulated
+/// drone, updating roll and pitch from the ranges drifted the position 8 m in 20 s). Valid while
+/// the beam points down (theta well below 90 degrees, the caller checks).
 /// variance: m^2 of the reading and of the floor's unevenness.
 class FloorRangeModel final : public MeasurementModel {
  public:
-  FloorRangeModel(double range, double variance, double floor_z, const SE3& T_body_sensor, double half_field_of_view)
-      : range_(range), variance_(variance), floor_z_(floor_z), T_body_sensor_(T_body_sensor), half_field_of_view_(half_field_of_view) {}
+  FloorRangeModel(double range, double variance, double floor_z, const SE3& T_body_sensor, double half_field_of_view, bool update_attitude = false)
+      : range_(range),
+        variance_(variance),
+        floor_z_(floor_z),
+        T_body_sensor_(T_body_sensor),
+        half_field_of_view_(half_field_of_view),
+        update_attitude_(update_attitude) {}
 
   std::string_view name() const override { return "floor_range"; }
   int dimension() const override { return 1; }
@@ -36,6 +45,7 @@ class FloorRangeModel final : public MeasurementModel {
   double floor_z_;
   SE3 T_body_sensor_;
   double half_field_of_view_;
+  bool update_attitude_;
 };
 
 }  // namespace hanzo::fusion::estimate
