@@ -348,9 +348,9 @@ EventOutcome Estimator::process_range(const Event& event, const msgs::RangeMessa
   constexpr double kHorizontalAidingSeconds = 2.0;
   if (!std::isfinite(range.range)) return {false, Rejection::kNotFused};  // nothing in range, or too near
   // With the IMU alone, height updates pull on the tilt and accelerometer-bias estimates they are
-  // correlated with, and nothing horizontal checks what that does: measured on the simulated
-  // drone, the horizontal error after 20 s grew from 0.6 to 8 m. So the height is fused only
-  // while another sensor (GNSS, LiDAR, camera, wheels, radar) constrains the horizontal motion.
+  // correlated with, and nothing horizontal checks what that does: the horizontal estimate drifts
+  // faster (bench/RESULTS.md, 2026-12-04). So the height is fused only while another sensor
+  // (GNSS, LiDAR, camera, wheels, radar) constrains the horizontal motion.
   const bool horizontally_aided = std::any_of(sensors_.begin(), sensors_.end(), [&](const SensorSetup& other) {
     const size_t index = static_cast<size_t>(&other - sensors_.data());
     const config::SensorModality modality = other.config->modality;

@@ -20,9 +20,9 @@ namespace hanzo::fusion::estimate {
 /// Observes the height above the floor; nothing horizontal. The attitude enters as the estimate
 /// has it: with update_attitude false (the default, as PX4's EKF2 fuses range finders) the
 /// rotation columns of H are zero, for a range tells a tilt from a height change only through
-/// the cone's edge, whose real shape the model only approximates (measured: on the simulated
-/// drone, updating roll and pitch from the ranges drifted the position 8 m in 20 s). Valid while
-/// the beam points down (theta well below 90 degrees, the caller checks).
+/// the lever arm and the cone's edge, whose real shape the model only approximates; the IMU and
+/// the other sensors measure the tilt far better. Valid while the beam points down (theta well
+/// below 90 degrees, the caller checks).
 /// variance: m^2 of the reading and of the floor's unevenness.
 class FloorRangeModel final : public MeasurementModel {
  public:
