@@ -86,6 +86,22 @@ TEST(CdrDecoding, LittleBigEndianAndXcdr2GiveTheSameImu) {
   }
 }
 
+// sensor_msgs/msg/Range: the uint8 radiation type, then float32s aligned to 4 after it.
+TEST(CdrDecoding, RangeFloatsAreAlignedAfterTheRadiationType) {
+  for (bool big_endian : {false, true}) {
+    CdrWriter w(big_endian);
+    w.header(100, 250, "sonar").put<uint8_t>(1).put(0.25F).put(0.03125F).put(4.0F).put(1.5F);
+    auto range = range_from_ros(w.data(), kCdr);
+    ASSERT_TRUE(range.ok()) << range.error().message;
+    EXPECT_EQ(range->frame_id, "sonar");
+    EXPECT_EQ(range->radiation, msgs::RangeRadiation::kInfrared);
+    EXPECT_EQ(range->field_of_view, 0.25F);
+    EXPECT_EQ(range->min_range, 0.03125F);
+    EXPECT_EQ(range->max_range, 4.0F);
+    EXPECT_EQ(range->range, 1.5F);
+  }
+}
+
 TEST(CdrDecoding, BadEncapsulationAndTruncationAreErrors) {
   std::string bad = imu(false, 8);
   bad[1] = 0x02;  // PL_CDR: a parameter list, not a fixed layout
