@@ -41,20 +41,6 @@ struct CameraOptions {
   std::string out;
 };
 
-Result<calib::CheckerboardTarget> parse_board(const std::string& text, double square) {
-  // COLUMNSxROWS, each all digits and within an int.
-  const auto whole = [](std::string_view digits, int& value) {
-    return !digits.empty() && std::all_of(digits.begin(), digits.end(), [](unsigned char c) { return std::isdigit(c); }) &&
-           std::from_chars(digits.data(), digits.data() + digits.size(), value).ec == std::errc();
-  };
-  const std::size_t x = text.find('x');
-  int columns = 0, rows = 0;
-  if (x == std::string::npos || !whole(std::string_view(text).substr(0, x), columns) || !whole(std::string_view(text).substr(x + 1), rows)) {
-    return Error(fmt::format("--board '{}': expected the inner corners as COLUMNSxROWS, e.g. 9x6", text));
-  }
-  return calib::CheckerboardTarget{columns, rows, square};
-}
-
 std::string to_text(const std::string& camera, const calib::CameraCalibrationResult& result, const std::string& out) {
   const msgs::CameraIntrinsics& k = result.intrinsics;
   std::string text = fmt::format("{} intrinsics from {} views ({} images, board found in {})\n", camera, result.views_used, result.views_total,
@@ -148,6 +134,20 @@ int run_stereo(const Output& output, const StereoOptions& options) {
 }
 
 }  // namespace
+
+Result<calib::CheckerboardTarget> parse_board(const std::string& text, double square) {
+  // COLUMNSxROWS, each all digits and within an int.
+  const auto whole = [](std::string_view digits, int& value) {
+    return !digits.empty() && std::all_of(digits.begin(), digits.end(), [](unsigned char c) { return std::isdigit(c); }) &&
+           std::from_chars(digits.data(), digits.data() + digits.size(), value).ec == std::errc();
+  };
+  const std::size_t x = text.find('x');
+  int columns = 0, rows = 0;
+  if (x == std::string::npos || !whole(std::string_view(text).substr(0, x), columns) || !whole(std::string_view(text).substr(x + 1), rows)) {
+    return Error(fmt::format("--board '{}': expected the inner corners as COLUMNSxROWS, e.g. 9x6", text));
+  }
+  return calib::CheckerboardTarget{columns, rows, square};
+}
 
 void add_calib_stereo_command(CLI::App& calib_app, const Output& output, Command& run) {
   CLI::App* command = calib_app.add_subcommand("stereo", "A stereo pair's intrinsics and extrinsics from image pairs of a checkerboard");

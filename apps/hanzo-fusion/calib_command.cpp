@@ -82,6 +82,7 @@ void add_calib_command(CLI::App& app, const Output& output, Command& run) {
   add_calib_motion_command(*calib_command, output, run);
   add_calib_camera_command(*calib_command, output, run);
   add_calib_stereo_command(*calib_command, output, run);
+  add_calib_camera_lidar_command(*calib_command, output, run);
   CLI::App* check = calib_command->add_subcommand("check", "Load a calibration YAML and print its summary or its error");
   auto path = std::make_shared<std::string>();
   check->add_option("FILE", *path, "Calibration YAML")->required();

@@ -8,6 +8,7 @@
 #include <CLI/CLI.hpp>
 
 #include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/calib/camera_calibration.hpp"
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/msgs/estimate_messages.hpp"
@@ -24,6 +25,9 @@ void add_calib_command(CLI::App& app, const Output& output, Command& run);
 void add_calib_motion_command(CLI::App& calib_app, const Output& output, Command& run);
 void add_calib_camera_command(CLI::App& calib_app, const Output& output, Command& run);
 void add_calib_stereo_command(CLI::App& calib_app, const Output& output, Command& run);
+void add_calib_camera_lidar_command(CLI::App& calib_app, const Output& output, Command& run);
+/// A checkerboard from --board COLUMNSxROWS (inner corners) and --square (m).
+Result<calib::CheckerboardTarget> parse_board(const std::string& text, double square);
 /// Changes the entry of `sensor` in the calibration YAML `path` (an entry at the body origin is
 /// added when missing, the file created when missing); the other entries are kept.
 Status update_calibration_entry(const std::string& path, const std::string& sensor,

@@ -23,6 +23,7 @@ Result<SplineTrajectory> make_trajectory(const Scenario& scenario) {
     case TrajectoryType::kGroundVehicle: return with_context(make_ground_trajectory(scenario.start_time, scenario.ground_path), "trajectory");
     case TrajectoryType::kDrone: return with_context(make_drone_trajectory(scenario.start_time, scenario.drone), "trajectory");
     case TrajectoryType::kHandheld: return with_context(make_handheld_trajectory(scenario.start_time, scenario.handheld), "trajectory");
+    case TrajectoryType::kStations: return with_context(make_stations_trajectory(scenario.start_time, scenario.stations), "trajectory");
   }
   return Error{"trajectory: unknown type"};
 }

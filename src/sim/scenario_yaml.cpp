@@ -275,7 +275,25 @@ Status parse_trajectory(const YamlValue& value, Scenario* scenario) {
     HANZO_ASSIGN_OR_RETURN(drone.knot_spacing, positive_or(value["knot_spacing"], drone.knot_spacing));
     return ok_status();
   }
-  return value["type"].error(fmt::format("unknown trajectory type '{}' (expected ground_vehicle, drone or handheld)", type));
+  if (type == "stations") {
+    scenario->trajectory_type = TrajectoryType::kStations;
+    HANZO_RETURN_IF_ERROR(value.check_keys({"type", "stations", "hold", "move", "knot_spacing"}));
+    StationsTrajectoryConfig& stations = scenario->stations;
+    if (!value["stations"].is_sequence()) return value["stations"].error("expected a list of [x, y, z, roll, pitch, yaw] (m, degrees)");
+    for (const YamlValue& item : value["stations"].elements()) {
+      std::vector<double> numbers;
+      HANZO_ASSIGN_OR_RETURN(numbers, item.as_doubles());
+      if (numbers.size() != 6) return item.error(fmt::format("expected 6 numbers (x, y, z, roll, pitch, yaw; m, degrees), got {}", numbers.size()));
+      constexpr double kRadiansPerDegree = std::numbers::pi / 180.0;
+      stations.stations.push_back({Eigen::Vector3d(numbers[0], numbers[1], numbers[2]),
+                                   Eigen::Vector3d(numbers[3], numbers[4], numbers[5]) * kRadiansPerDegree});
+    }
+    HANZO_ASSIGN_OR_RETURN(stations.hold, positive_or(value["hold"], stations.hold));
+    HANZO_ASSIGN_OR_RETURN(stations.move, positive_or(value["move"], stations.move));
+    HANZO_ASSIGN_OR_RETURN(stations.knot_spacing, positive_or(value["knot_spacing"], stations.knot_spacing));
+    return ok_status();
+  }
+  return value["type"].error(fmt::format("unknown trajectory type '{}' (expected ground_vehicle, drone, handheld or stations)", type));
 }
 
 // ---- sensors -----------------------------------------------------------------------------------

@@ -11,7 +11,7 @@
 //     threads: 1                   # ray-casting threads (0: all cores); same output for any count
 //     log_start: 0                 # seconds into the trajectory the log begins (> 0: a start in motion)
 //     world: {ground: ..., boxes: [...], cylinders: [...], walls: [...], people: [...], city: {...}}
-//     trajectory: {type: ground_vehicle | drone | handheld, ...}
+//     trajectory: {type: ground_vehicle | drone | handheld | stations, ...}
 //     sensors:
 //       imu: {rate: 200, to_body: {translation: [...], rotation: [w, x, y, z]}, process_noise_accel: ...}
 //       lidar: {model: velodyne_vlp16, rate: 10, ...}
@@ -41,6 +41,7 @@
 #include "hanzo/fusion/sim/lidar_simulator.hpp"
 #include "hanzo/fusion/sim/radar_simulator.hpp"
 #include "hanzo/fusion/sim/range_simulator.hpp"
+#include "hanzo/fusion/sim/stations_trajectory.hpp"
 #include "hanzo/fusion/sim/wheel_odometry_simulator.hpp"
 #include "hanzo/fusion/sim/world.hpp"
 
@@ -59,7 +60,7 @@ struct ScenarioSensor {
   double rate_hz() const;
 };
 
-enum class TrajectoryType { kGroundVehicle, kDrone, kHandheld };
+enum class TrajectoryType { kGroundVehicle, kDrone, kHandheld, kStations };
 
 struct Scenario {
   std::string name;
@@ -78,6 +79,7 @@ struct Scenario {
   GroundPathConfig ground_path;      ///< trajectory_type kGroundVehicle
   DroneTrajectoryConfig drone;       ///< kDrone
   HandheldTrajectoryConfig handheld; ///< kHandheld
+  StationsTrajectoryConfig stations; ///< kStations
   std::vector<ScenarioSensor> sensors;
 };
 
