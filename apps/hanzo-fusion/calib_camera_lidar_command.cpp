@@ -27,6 +27,7 @@ struct CameraLidarOptions {
   std::string board_size;
   std::string calibration;
   bool initial_guess = false;
+  double max_corner_motion = calib::CameraLidarCalibrationConfig{}.max_corner_motion_px;
   std::string out;
 };
 
@@ -63,6 +64,7 @@ int run_camera_lidar(const Output& output, const CameraLidarOptions& options) {
     config.board_width = size->first;
     config.board_height = size->second;
   }
+  config.max_corner_motion_px = options.max_corner_motion;
   std::optional<calib::Calibration> calibration;
   if (!options.calibration.empty()) {
     auto loaded = calib::load_calibration(options.calibration);
@@ -184,6 +186,8 @@ void add_calib_camera_lidar_command(CLI::App& calib_app, const Output& output, C
   command->add_option("--board-size", options->board_size, "The physical board around the pattern, WIDTHxHEIGHT in m (default: the pattern's extent)");
   command->add_option("--calibration", options->calibration, "Calibration YAML with the camera's intrinsics (default: the images' own)");
   command->add_flag("--initial-guess", options->initial_guess, "Start from the mounts in --calibration instead of finding the board by its size");
+  command->add_option("--max-corner-motion", options->max_corner_motion, "px: the board's corners may move this much (mean) across a scan used")
+      ->capture_default_str();
   command->add_option("--out", options->out, "Write lidar_to_body into this calibration YAML (relative to the camera's mount in it or in --calibration)");
   command->callback([&output, &run, options] { run = [&output, options] { return run_camera_lidar(output, *options); }; });
 }

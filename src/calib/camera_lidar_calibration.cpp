@@ -45,13 +45,6 @@ Outline outline_of(const CameraLidarCalibrationConfig& config) {
 
 // ---- camera ----------------------------------------------------------------------------------
 
-struct CameraBoard {
-  Timestamp time;
-  bool found = false;
-  std::vector<cv::Point2f> corners;
-  SE3 T_camera_board;
-};
-
 Result<SE3> board_pose(const std::vector<cv::Point2f>& corners, const std::vector<cv::Point3f>& object, const msgs::CameraIntrinsics& intrinsics,
                        const msgs::DistortionModel& distortion) {
   const cv::Matx33d K(intrinsics.fx, 0.0, intrinsics.cx, 0.0, intrinsics.fy, intrinsics.cy, 0.0, 0.0, 1.0);
@@ -77,9 +70,10 @@ Result<SE3> board_pose(const std::vector<cv::Point2f>& corners, const std::vecto
   return SE3(SO3::from_matrix(R), Eigen::Vector3d(translation[0], translation[1], translation[2]));
 }
 
-double mean_corner_motion(const std::vector<cv::Point2f>& a, const std::vector<cv::Point2f>& b) {
+double mean_corner_motion(const std::vector<Eigen::Vector2f>& a, const std::vector<Eigen::Vector2f>& b) {
+  if (a.size() != b.size() || a.empty()) return std::numeric_limits<double>::infinity();
   double sum = 0.0;
-  for (std::size_t i = 0; i < a.size(); ++i) sum += std::hypot(a[i].x - b[i].x, a[i].y - b[i].y);
+  for (std::size_t i = 0; i < a.size(); ++i) sum += (a[i] - b[i]).norm();
   return sum / static_cast<double>(a.size());
 }
 
@@ -505,38 +499,54 @@ Status CameraLidarCalibrationConfig::validate() const {
   return ok_status();
 }
 
-Result<CameraLidarCalibrationResult> calibrate_camera_lidar(const std::vector<msgs::ImageMessage>& images, const msgs::CameraIntrinsics& intrinsics,
-                                                            const msgs::DistortionModel& distortion,
-                                                            const std::vector<msgs::PointCloudMessage>& scans,
-                                                            const CameraLidarCalibrationConfig& config) {
-  HANZO_RETURN_IF_ERROR(config.validate());
+Result<std::vector<BoardObservation>> observe_board(const std::vector<msgs::ImageMessage>& images, const msgs::CameraIntrinsics& intrinsics,
+                                                    const msgs::DistortionModel& distortion, const CheckerboardTarget& target) {
   if (!(intrinsics.fx > 0.0 && intrinsics.fy > 0.0) || !std::isfinite(intrinsics.cx) || !std::isfinite(intrinsics.cy)) {
     return Error(fmt::format("intrinsics: expected fx, fy > 0, got {}, {}", intrinsics.fx, intrinsics.fy), "intrinsics");
   }
-  if (images.empty()) return Error("images: none given", "images");
-  if (scans.empty()) return Error("scans: none given", "scans");
-  CameraLidarCalibrationResult result;
-  result.images = images.size();
-  result.scans = scans.size();
-  const Outline outline = outline_of(config);
-  const std::vector<cv::Point3f> object = board_points(config.target);
-
-  // 1. The board in every image (in parallel: each image on its own), in time order.
-  std::vector<CameraBoard> boards(images.size());
+  const std::vector<cv::Point3f> object = board_points(target);
+  std::vector<BoardObservation> boards(images.size());
   std::vector<cv::Mat> greys(images.size());
   for (std::size_t i = 0; i < images.size(); ++i) {
     HANZO_ASSIGN_OR_RETURN(greys[i], grey_of(images[i], i));
     boards[i].time = images[i].timestamp;
   }
   tbb::parallel_for(std::size_t{0}, images.size(), [&](std::size_t i) {
-    if (!find_checkerboard_corners(greys[i], config.target, &boards[i].corners)) return;
-    const Result<SE3> pose = board_pose(boards[i].corners, object, intrinsics, distortion);
+    std::vector<cv::Point2f> corners;
+    if (!find_checkerboard_corners(greys[i], target, &corners)) return;
+    const Result<SE3> pose = board_pose(corners, object, intrinsics, distortion);
     if (!pose) return;
     boards[i].found = true;
     boards[i].T_camera_board = *pose;
+    for (const cv::Point2f& corner : corners) boards[i].corners.emplace_back(corner.x, corner.y);
   });
-  for (const CameraBoard& board : boards) result.images_with_board += board.found ? 1 : 0;
-  std::stable_sort(boards.begin(), boards.end(), [](const CameraBoard& a, const CameraBoard& b) { return a.time < b.time; });
+  return boards;
+}
+
+Result<CameraLidarCalibrationResult> calibrate_camera_lidar(const std::vector<msgs::ImageMessage>& images, const msgs::CameraIntrinsics& intrinsics,
+                                                            const msgs::DistortionModel& distortion,
+                                                            const std::vector<msgs::PointCloudMessage>& scans,
+                                                            const CameraLidarCalibrationConfig& config) {
+  HANZO_RETURN_IF_ERROR(config.validate());
+  if (images.empty()) return Error("images: none given", "images");
+  std::vector<BoardObservation> boards;
+  HANZO_ASSIGN_OR_RETURN(boards, observe_board(images, intrinsics, distortion, config.target));
+  return calibrate_camera_lidar(boards, scans, config);
+}
+
+Result<CameraLidarCalibrationResult> calibrate_camera_lidar(const std::vector<BoardObservation>& observed,
+                                                            const std::vector<msgs::PointCloudMessage>& scans,
+                                                            const CameraLidarCalibrationConfig& config) {
+  HANZO_RETURN_IF_ERROR(config.validate());
+  if (observed.empty()) return Error("images: none given", "images");
+  if (scans.empty()) return Error("scans: none given", "scans");
+  CameraLidarCalibrationResult result;
+  result.images = observed.size();
+  result.scans = scans.size();
+  const Outline outline = outline_of(config);
+  std::vector<BoardObservation> boards = observed;
+  for (const BoardObservation& board : boards) result.images_with_board += board.found ? 1 : 0;
+  std::stable_sort(boards.begin(), boards.end(), [](const BoardObservation& a, const BoardObservation& b) { return a.time < b.time; });
 
   // 2. Static scans and their board poses.
   std::vector<const msgs::PointCloudMessage*> ordered;
@@ -551,8 +561,8 @@ Result<CameraLidarCalibrationResult> calibrate_camera_lidar(const std::vector<ms
                     : s + 1 < ordered.size()                          ? ordered[s + 1]->timestamp
                     : s > 0                                           ? scan.timestamp + (scan.timestamp - ordered[s - 1]->timestamp)
                                                                       : scan.timestamp;
-    const auto before = std::upper_bound(boards.begin(), boards.end(), start, [](Timestamp t, const CameraBoard& b) { return t < b.time; });
-    const auto after = std::lower_bound(boards.begin(), boards.end(), end, [](const CameraBoard& b, Timestamp t) { return b.time < t; });
+    const auto before = std::upper_bound(boards.begin(), boards.end(), start, [](Timestamp t, const BoardObservation& b) { return t < b.time; });
+    const auto after = std::lower_bound(boards.begin(), boards.end(), end, [](const BoardObservation& b, Timestamp t) { return b.time < t; });
     if (before == boards.begin() || after == boards.end()) {
       ++result.scans_board_moving;
       continue;
@@ -609,7 +619,7 @@ Result<CameraLidarCalibrationResult> calibrate_camera_lidar(const std::vector<ms
   const auto refuse_few = [&](std::size_t stations) {
     std::size_t no_board = 0;
     for (const ViewData& view : views) no_board += view.board ? 0 : 1;
-    return Error(fmt::format("the board was seen by both sensors at {} stations; {} are needed ({} scans: {} with the board moving or not in the "
+    return Error(fmt::format("the board was seen by both sensors at {} station(s); {} are needed ({} scans: {} with the board moving or not in the "
                              "images before and after them, {} without the board found in the LiDAR; the board found in {} of {} images)",
                              stations, config.min_stations, result.scans, result.scans_board_moving, no_board, result.images_with_board,
                              result.images),

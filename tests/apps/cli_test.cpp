@@ -10,6 +10,7 @@
 #include <fstream>
 #include <sstream>
 #include <iterator>
+#include <numbers>
 #include <set>
 #include <string>
 #include <thread>
@@ -1736,6 +1737,43 @@ TEST(Cli, CalibCameraRecoversTheLensOfTheCheckerboardScenario) {
   EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --board 99999999999x6", d)).err, HasSubstr("COLUMNSxROWS"));  // beyond an int
   EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --board 8x", d)).err, HasSubstr("COLUMNSxROWS"));
   EXPECT_THAT(run(fmt::format("calib camera {}/sensors.mcap --model pinhole", d)).err, HasSubstr("radtan or equidistant"));
+  std::filesystem::remove_all(dir);
+}
+
+// calib camera-lidar on the first five stations of the board scenario: lidar_to_body written next
+// to the camera's true mount lands within 1 cm / 0.5 deg of the LiDAR's; a wrong board size is
+// not certified (exit 1, nothing written); bad options get one line.
+TEST(Cli, CalibCameraLidarWritesTheLidarMountFromBoardStations) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_calib_camera_lidar_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  const std::string d = dir.string();
+  ASSERT_EQ(run(fmt::format("sim examples/scenarios/camera_lidar_board.yaml --out {} --duration 12", d)).exit_code, 0);
+  const auto truth = hanzo::fusion::calib::load_calibration(d + "/calibration.yaml");
+  ASSERT_TRUE(truth);
+  const CliRun calibrated = run(fmt::format("calib camera-lidar {0}/sensors.mcap --calibration {0}/calibration.yaml --board 8x6 --square 0.10 "
+                                            "--board-size 1.1x0.9 --out {0}/result.yaml --json",
+                                            d));
+  ASSERT_EQ(calibrated.exit_code, 0) << calibrated.err;
+  const nlohmann::json result = nlohmann::json::parse(calibrated.out);
+  EXPECT_TRUE(result["certified"].get<bool>());
+  EXPECT_EQ(result["stations"], 5);
+  EXPECT_EQ(result["views"].size(), result["scans_used"].get<std::size_t>());
+  const auto written = hanzo::fusion::calib::load_calibration(d + "/result.yaml");
+  ASSERT_TRUE(written) << written.error().message;
+  ASSERT_NE(written->find("lidar"), nullptr);
+  const hanzo::fusion::SE3 error = truth->find("lidar")->T_body_sensor().inverse() * written->find("lidar")->T_body_sensor();
+  EXPECT_LT(error.translation().norm(), 0.01);
+  EXPECT_LT(error.rotation().angle(), 0.5 * std::numbers::pi / 180.0);
+
+  const CliRun wrong_size = run(fmt::format("calib camera-lidar {0}/sensors.mcap --calibration {0}/calibration.yaml --out {0}/wrong.yaml", d));
+  EXPECT_EQ(wrong_size.exit_code, 1);
+  EXPECT_THAT(wrong_size.err, HasSubstr("not certified: the LiDAR sees the board's edges"));
+  EXPECT_THAT(wrong_size.err, HasSubstr("wrong.yaml not written"));
+  EXPECT_EQ(std::count(wrong_size.err.begin(), wrong_size.err.end(), '\n'), 1);
+  EXPECT_FALSE(std::filesystem::exists(dir / "wrong.yaml"));
+  EXPECT_THAT(run(fmt::format("calib camera-lidar {}/sensors.mcap --board-size 1.1", d)).err, HasSubstr("WIDTHxHEIGHT"));
+  EXPECT_THAT(run(fmt::format("calib camera-lidar {}/sensors.mcap --initial-guess", d)).err, HasSubstr("--calibration needs both"));
+  EXPECT_THAT(run(fmt::format("calib camera-lidar {}/sensors.mcap --lidar-topic /nothing", d)).err, HasSubstr("no point clouds on /nothing"));
   std::filesystem::remove_all(dir);
 }
 

@@ -57,6 +57,40 @@ TEST(Scenario, ShippedScenariosLoadWithTheirSensorsAndFaults) {
   }
 }
 
+TEST(Scenario, StationsHoldTheRigStillAtEachPoseAndMoveBetween) {
+  const Result<Scenario> scenario = load_scenario("examples/scenarios/camera_lidar_board.yaml");
+  ASSERT_TRUE(scenario) << scenario.error().message;
+  ASSERT_EQ(scenario->trajectory_type, TrajectoryType::kStations);
+  const StationsTrajectoryConfig& config = scenario->stations;
+  ASSERT_EQ(config.stations.size(), 10U);
+  const Result<SplineTrajectory> trajectory = make_trajectory(*scenario);
+  ASSERT_TRUE(trajectory) << trajectory.error().message;
+  const double leg = config.hold + config.move;
+  EXPECT_NEAR((trajectory->end_time() - trajectory->start_time()).seconds(), 10 * config.hold + 9 * config.move, config.knot_spacing);
+  for (std::size_t i = 0; i < config.stations.size(); ++i) {
+    const StationPose& station = config.stations[i];
+    const SO3 expected = SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), station.roll_pitch_yaw.z()) *
+                         SO3::from_axis_angle(Eigen::Vector3d::UnitY(), station.roll_pitch_yaw.y()) *
+                         SO3::from_axis_angle(Eigen::Vector3d::UnitX(), station.roll_pitch_yaw.x());
+    // Exactly at the station and still for hold - 3 knot spacings.
+    for (double t = i * leg + 2.0 * config.knot_spacing; t <= i * leg + config.hold - 1.0 * config.knot_spacing; t += 0.1) {
+      const TrajectorySample sample = trajectory->sample(trajectory->start_time() + Duration::from_seconds(t));
+      EXPECT_LT((sample.T_world_body.translation() - station.position).norm(), 1e-9) << i << " at " << t;
+      EXPECT_LT((sample.T_world_body.rotation().inverse() * expected).angle(), 1e-9) << i << " at " << t;
+      EXPECT_LT(sample.velocity_world.norm() + sample.angular_velocity_body.norm(), 1e-9) << i << " at " << t;
+    }
+    if (i + 1 < config.stations.size()) {  // moving halfway to the next
+      const TrajectorySample between = trajectory->sample(trajectory->start_time() + Duration::from_seconds(i * leg + config.hold + 0.5 * config.move));
+      EXPECT_GT(between.velocity_world.norm() + between.angular_velocity_body.norm(), 0.1) << i;
+    }
+  }
+  StationsTrajectoryConfig bad = config;
+  bad.hold = 0.1;
+  const Result<SplineTrajectory> short_hold = make_stations_trajectory(trajectory->start_time(), bad);
+  ASSERT_FALSE(short_hold);
+  EXPECT_THAT(short_hold.error().message, HasSubstr("hold: expected >= 4 knot spacings"));
+}
+
 struct RecordedRun {
   std::vector<std::string> sensors;
   std::vector<msgs::SensorMessage> messages;
@@ -151,6 +185,8 @@ TEST(Scenario, BadFilesFailNamingLineAndKey) {
       {std::string(kMinimal).replace(std::string(kMinimal).find("[[0, 0], [10, 0]]"), 17, "[[0, 0], [0, 0]]"),
        "waypoints[1]: same x, y"},
       {with("  world: {boxes: [{center: [1, 2, 3], size: [1, 0, 1]}]}\n"), "world.boxes[0].size: sizes must be > 0"},
+      {"scenario:\n  name: s\n  trajectory:\n    type: stations\n    stations: [[0, 0, 1, 0, 0]]\n  sensors:\n    imu: {rate: 100}\n",
+       "s.yaml:5: trajectory.stations[0]: expected 6 numbers (x, y, z, roll, pitch, yaw; m, degrees), got 5"},
   };
   for (const Case& c : cases) {
     const Result<Scenario> scenario = parse_scenario(c.text, "s.yaml");

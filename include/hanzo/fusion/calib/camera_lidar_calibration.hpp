@@ -127,6 +127,25 @@ struct CameraLidarCalibrationResult {
   std::vector<CameraLidarView> views;  ///< the used scans, in time order
 };
 
+/// The board in one image (step 1).
+struct BoardObservation {
+  Timestamp time;
+  bool found = false;                     ///< every inner corner found and a pose solved
+  std::vector<Eigen::Vector2f> corners;   ///< px, OpenCV's order (found boards)
+  SE3 T_camera_board;                     ///< found boards
+};
+
+/// Step 1 on every image (in parallel), in the images' order. Fails on bad intrinsics or an image
+/// that is not an intensity image.
+Result<std::vector<BoardObservation>> observe_board(const std::vector<msgs::ImageMessage>& images, const msgs::CameraIntrinsics& intrinsics,
+                                                    const msgs::DistortionModel& distortion, const CheckerboardTarget& target);
+
+/// Steps 2-6 on boards observed in the images (observe_board, or another detector's poses).
+Result<CameraLidarCalibrationResult> calibrate_camera_lidar(const std::vector<BoardObservation>& boards,
+                                                            const std::vector<msgs::PointCloudMessage>& scans,
+                                                            const CameraLidarCalibrationConfig& config);
+
+/// observe_board, then calibrate_camera_lidar on its boards.
 Result<CameraLidarCalibrationResult> calibrate_camera_lidar(const std::vector<msgs::ImageMessage>& images, const msgs::CameraIntrinsics& intrinsics,
                                                             const msgs::DistortionModel& distortion,
                                                             const std::vector<msgs::PointCloudMessage>& scans,
