@@ -72,6 +72,9 @@ Result<VelodyneCalibration> load_xml(const std::string& path, const std::string&
     laser.distance_correction = field("distCorrection_") / 100.0;
     laser.vertical_offset = field("vertOffsetCorrection_") / 100.0;
     laser.horizontal_offset = field("horizOffsetCorrection_") / 100.0;
+    laser.two_point_correction = count == 64 && element(px->first, "distCorrectionX_", 0) && element(px->first, "distCorrectionY_", 0);
+    laser.distance_correction_x = field("distCorrectionX_") / 100.0;
+    laser.distance_correction_y = field("distCorrectionY_") / 100.0;
     lasers[static_cast<std::size_t>(id)] = laser;
   }
   for (std::size_t id = 0; id < lasers.size(); ++id) {
@@ -93,8 +96,11 @@ Result<VelodyneCalibration> load_yaml(const std::string& path, const std::string
       const int id = entry["laser_id"].as<int>();
       if (id < 0 || id >= count) return Error(fmt::format("{}: laser_id {} outside 0..{}", path, id, count - 1));
       const auto value = [&](const char* name) { return entry[name] ? entry[name].as<double>() : 0.0; };
-      lasers[static_cast<std::size_t>(id)] = VelodyneLaser{value("vert_correction"), value("rot_correction"), value("dist_correction"),
-                                                           value("vert_offset_correction"), value("horiz_offset_correction")};
+      lasers[static_cast<std::size_t>(id)] =
+          VelodyneLaser{value("vert_correction"),        value("rot_correction"),
+                        value("dist_correction"),        value("vert_offset_correction"),
+                        value("horiz_offset_correction"), entry["two_pt_correction_available"] && entry["two_pt_correction_available"].as<bool>(),
+                        value("dist_correction_x"),      value("dist_correction_y")};
     }
     for (std::size_t id = 0; id < lasers.size(); ++id) {
       if (!lasers[id]) return Error(fmt::format("{}: no entry for laser {}", path, id));
@@ -162,7 +168,7 @@ Result<VelodyneCalibration> load_velodyne_calibration(const std::string& path) {
 
 VelodyneCalibration nominal_velodyne_calibration(VelodyneModel model) {
   VelodyneCalibration calibration;
-  const auto add = [&](double degrees) { calibration.lasers.push_back({degrees * kDegrees, 0.0, 0.0, 0.0, 0.0}); };
+  const auto add = [&](double degrees) { calibration.lasers.push_back({.vertical_angle = degrees * kDegrees}); };
   switch (model) {
     case VelodyneModel::kVlp16:
       for (int laser = 0; laser < 16; ++laser) add(laser % 2 == 0 ? -15.0 + laser : laser - 0.0);  // -15, 1, -13, 3, ...
@@ -232,9 +238,20 @@ void VelodyneDecoder::add_return(int laser, double azimuth_deg, uint16_t raw_dis
   const AzimuthTable& table = azimuth_table();
   const double sin_angle = table.sin[index] * trig.cos_rotation - table.cos[index] * trig.sin_rotation;
   const double cos_angle = table.cos[index] * trig.cos_rotation + table.sin[index] * trig.sin_rotation;
-  const double x_sensor = xy * sin_angle - calibration.horizontal_offset * cos_angle;
-  const double y_sensor = xy * cos_angle + calibration.horizontal_offset * sin_angle;
-  const double z = distance * trig.sin_vertical + calibration.vertical_offset * trig.cos_vertical;
+  double x_sensor = xy * sin_angle - calibration.horizontal_offset * cos_angle;
+  double y_sensor = xy * cos_angle + calibration.horizontal_offset * sin_angle;
+  double z = distance * trig.sin_vertical + calibration.vertical_offset * trig.cos_vertical;
+  if (calibration.two_point_correction) {
+    // The correction interpolated between the 2.4 m (x) / 1.93 m (y) and 25.04 m calibration points.
+    const double raw = raw_distance * calibration_.distance_resolution;
+    const double distance_x = raw + (calibration.distance_correction - calibration.distance_correction_x) * (std::abs(x_sensor) - 2.4) / (25.04 - 2.4) +
+                              calibration.distance_correction_x;
+    const double distance_y = raw + (calibration.distance_correction - calibration.distance_correction_y) * (std::abs(y_sensor) - 1.93) / (25.04 - 1.93) +
+                              calibration.distance_correction_y;
+    x_sensor = (distance_x * trig.cos_vertical - calibration.vertical_offset * trig.sin_vertical) * sin_angle - calibration.horizontal_offset * cos_angle;
+    y_sensor = (distance_y * trig.cos_vertical - calibration.vertical_offset * trig.sin_vertical) * cos_angle + calibration.horizontal_offset * sin_angle;
+    z = distance_y * trig.sin_vertical + calibration.vertical_offset * trig.cos_vertical;
+  }
   rotation_.add(Eigen::Vector3f(static_cast<float>(y_sensor), static_cast<float>(-x_sensor), static_cast<float>(z)), intensity,
                 ring_[static_cast<std::size_t>(laser)], time);
 }

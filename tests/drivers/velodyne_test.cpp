@@ -6,6 +6,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <numbers>
 #include <sstream>
 #include <string>
 
@@ -146,6 +147,68 @@ TEST(Velodyne, CalibrationFilesOfBothFormatsAgree) {
   const VelodyneCalibration hdl32 = load_velodyne_calibration(kVeloView + "calib/HDL-32.xml").value();
   for (std::size_t laser = 0; laser < 32; ++laser) EXPECT_NEAR(nominal_hdl32.lasers[laser].vertical_angle, hdl32.lasers[laser].vertical_angle, 1e-4) << laser;
   EXPECT_FALSE(VelodyneDecoder::create(vlp16, {.model = VelodyneModel::kHdl32e}).ok());  // 16 lasers for a 32-laser model
+}
+
+// HDL-64E two-point distance corrections: on for every laser of the 64E's files in both formats
+// (with the same values), off for a 32-laser db.xml that carries the fields; a return decodes to
+// the two-point model's point (x from the x-interpolated correction, y and z from the y one).
+TEST(Velodyne, Hdl64eTwoPointCorrections) {
+  const auto xml = load_velodyne_calibration(kRosCalibrations + "db_xml/64e_s2.1-sztaki.xml").value();
+  const auto yaml = load_velodyne_calibration(kRosCalibrations + "64e_s2.1-sztaki.yaml").value();
+  ASSERT_EQ(xml.lasers.size(), 64u);
+  ASSERT_EQ(yaml.lasers.size(), 64u);
+  for (std::size_t laser = 0; laser < 64; ++laser) {
+    EXPECT_TRUE(xml.lasers[laser].two_point_correction) << laser;
+    EXPECT_TRUE(yaml.lasers[laser].two_point_correction) << laser;
+    EXPECT_NEAR(xml.lasers[laser].distance_correction_x, yaml.lasers[laser].distance_correction_x, 1e-6) << laser;
+    EXPECT_NEAR(xml.lasers[laser].distance_correction_y, yaml.lasers[laser].distance_correction_y, 1e-6) << laser;
+  }
+  EXPECT_GT(xml.lasers[0].distance_correction_x, 1.0);  // 155.00304 cm in the file
+  const VelodyneCalibration hdl32 = load_velodyne_calibration(kRosCalibrations + "db_xml/32db.xml").value();
+  for (const VelodyneLaser& laser : hdl32.lasers) EXPECT_FALSE(laser.two_point_correction);
+
+  VelodyneCalibration calibration = nominal_velodyne_calibration(VelodyneModel::kHdl64e);
+  VelodyneLaser& laser = calibration.lasers[0];
+  laser = {.vertical_angle = -0.1, .rotational_correction = 0.02, .distance_correction = 1.5, .vertical_offset = 0.2, .horizontal_offset = 0.025,
+           .two_point_correction = true, .distance_correction_x = 1.45, .distance_correction_y = 1.40};
+  // One return of laser 0 (the first block's first channel) at 5 m raw, azimuth 30 degrees.
+  std::string packet(1206, '\0');
+  for (int block = 0; block < 12; ++block) {
+    const uint16_t flag = block % 2 == 0 ? 0xEEFF : 0xDDFF;
+    const uint16_t azimuth = static_cast<uint16_t>(3000 + (block / 2) * 10);
+    std::memcpy(&packet[static_cast<std::size_t>(block * 100)], &flag, 2);
+    std::memcpy(&packet[static_cast<std::size_t>(block * 100 + 2)], &azimuth, 2);
+  }
+  const uint16_t raw = 2500;  // 2 mm units
+  std::memcpy(&packet[4], &raw, 2);
+  packet[6] = 100;
+  packet[1204] = 0x37;
+  const auto decode = [&](const VelodyneCalibration& with) {
+    auto decoder = VelodyneDecoder::create(with, {.model = VelodyneModel::kHdl64e}).value();
+    std::vector<msgs::PointCloudMessage> frames;
+    decoder.add_packet(packet, Timestamp::from_seconds(1700000000.0), frames);
+    decoder.flush(frames);
+    EXPECT_EQ(frames.size(), 1u);
+    EXPECT_EQ(frames.empty() ? 0u : frames[0].points.size(), 1u);
+    return frames.empty() || frames[0].points.empty() ? Eigen::Vector3d::Zero().eval() : frames[0].points[0].cast<double>().eval();
+  };
+  // The model by hand: the sensor's own axes (y' toward azimuth 0), then (x, y, z) = (y', -x', z).
+  const double b = 30.0 * std::numbers::pi / 180.0 - laser.rotational_correction;
+  const auto sensor_xy = [&](double d) {
+    const double xy = d * std::cos(laser.vertical_angle) - laser.vertical_offset * std::sin(laser.vertical_angle);
+    return Eigen::Vector2d(xy * std::sin(b) - laser.horizontal_offset * std::cos(b), xy * std::cos(b) + laser.horizontal_offset * std::sin(b));
+  };
+  const Eigen::Vector2d uncorrected = sensor_xy(5.0 + laser.distance_correction);
+  const double d_x = 5.0 + 1.45 + (1.5 - 1.45) * (std::abs(uncorrected.x()) - 2.4) / 22.64;
+  const double d_y = 5.0 + 1.40 + (1.5 - 1.40) * (std::abs(uncorrected.y()) - 1.93) / 23.11;
+  const Eigen::Vector3d expected(sensor_xy(d_y).y(), -sensor_xy(d_x).x(),
+                                 d_y * std::sin(laser.vertical_angle) + laser.vertical_offset * std::cos(laser.vertical_angle));
+  const Eigen::Vector3d corrected = decode(calibration);
+  EXPECT_LT((corrected - expected).norm(), 1e-5) << corrected.transpose() << " vs " << expected.transpose();
+  laser.two_point_correction = false;
+  const Eigen::Vector3d plain = decode(calibration);
+  EXPECT_GT((plain - corrected).norm(), 0.05);  // 6-10 cm shorter at this range
+  EXPECT_NEAR(plain.norm(), corrected.norm() + (plain - corrected).norm(), 0.01);  // along the ray
 }
 
 // Packets of the wrong size, a broken block flag and an azimuth out of range are counted and

@@ -17,8 +17,13 @@
 //   z = d sin(v_l) + vertical_offset_l cos(v_l)
 // (x', y' in the sensor's own axes: y' toward azimuth 0), output in the LiDAR frame of this
 // project (x forward = azimuth 0, y left, z up): (x, y, z) = (y', -x', z). Returns of distance
-// 0 (no echo) are left out. The HDL-64E's two-point distance corrections (distance_correction_x
-// / _y of its db.xml) are not applied.
+// 0 (no echo) are left out.
+// HDL-64E two-point distance corrections (its manual's calibration at two distances per axis, as
+// VeloView and the ROS driver apply them), for lasers with two_point_correction: with x', y' from
+// the model above, r = raw distance x distance_resolution,
+//   c_x = (distance_correction - distance_correction_x) (|x'| - 2.4) / (25.04 - 2.4) + distance_correction_x
+//   c_y = (distance_correction - distance_correction_y) (|y'| - 1.93) / (25.04 - 1.93) + distance_correction_y
+// x' is computed again with d = r + c_x, and y' and z with d = r + c_y.
 //
 // Azimuths: each laser's azimuth moves toward the next firing's by its firing time within the
 // block (per_laser_azimuth, as VeloView and the ROS driver do), rounded to the packets' 0.01
@@ -59,9 +64,13 @@ int laser_count(VelodyneModel model);
 struct VelodyneLaser {
   double vertical_angle = 0.0;         ///< rad
   double rotational_correction = 0.0;  ///< rad
-  double distance_correction = 0.0;    ///< m
+  double distance_correction = 0.0;    ///< m (at 25.04 m)
   double vertical_offset = 0.0;        ///< m
   double horizontal_offset = 0.0;      ///< m
+  /// HDL-64E: distance corrections measured at 2.4 m along x and 1.93 m along y (m).
+  bool two_point_correction = false;
+  double distance_correction_x = 0.0;
+  double distance_correction_y = 0.0;
 };
 
 struct VelodyneCalibration {
@@ -72,6 +81,8 @@ struct VelodyneCalibration {
 /// A calibration file: VeloView's / Velodyne's XML (db.xml: `enabled_` lasers, `px` entries with
 /// angles in degrees and offsets in cm) or the ROS driver's YAML (`lasers:` with angles in
 /// radians and offsets in m, `distance_resolution`). Fails naming the file and what is missing.
+/// Two-point corrections: a YAML laser's `two_pt_correction_available`; in XML every laser of a
+/// 64-laser file (the HDL-64E's; other models' files carry the fields unused).
 Result<VelodyneCalibration> load_velodyne_calibration(const std::string& path);
 /// The nominal calibration of a model (elevation angles of its data sheet, no offsets).
 VelodyneCalibration nominal_velodyne_calibration(VelodyneModel model);
