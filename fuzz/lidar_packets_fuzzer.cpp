@@ -101,9 +101,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     decoder.flush(frames);
     check_rotations(frames);
   }
-  for (const char* profile : {"LEGACY", "RNG15_RFL8_NIR8"}) {
+  for (const char* profile : {"LEGACY", "RNG15_RFL8_NIR8", "RNG19_RFL8_SIG16_NIR16_DUAL"}) {
     drivers::OusterMetadata metadata;
     metadata.udp_profile_lidar = profile;
+    if (std::string_view(profile) != "LEGACY") {  // the sample-block IMU packets with the profile packets
+      metadata.udp_profile_imu = "ACCEL32_GYRO32_NMEA";
+      metadata.imu_measurements_per_packet = 8;
+    }
     metadata.pixels_per_column = 16;
     metadata.columns_per_frame = 64;
     metadata.column_window = {0, 63};
@@ -114,7 +118,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     auto decoder = drivers::OusterDecoder::create(metadata).value();
     std::vector<drivers::OusterFrame> frames;
     std::vector<msgs::ImuMessage> imu;
-    const std::size_t piece = size > 0 && data[0] % 3 == 0 ? 48 : decoder.lidar_packet_bytes();
+    const std::size_t piece = size > 0 && data[0] % 3 == 0 ? decoder.imu_packet_bytes() : decoder.lidar_packet_bytes();
     for (std::size_t offset = 0; offset < size; offset += piece) {
       decoder.add_packet(std::string_view(bytes).substr(offset, piece), Timestamp::from_nanoseconds(1'700'000'000'000'000'000LL), frames, imu);
     }

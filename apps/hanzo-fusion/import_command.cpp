@@ -506,6 +506,8 @@ int run_ouster_pcap_import(const Output& output, const ImportOptions& options, n
   result["packets"] = statistics.lidar_packets;
   result["malformed_packets"] = statistics.malformed;
   result["invalid_columns"] = statistics.invalid_columns;
+  result["invalid_imu_samples"] = statistics.invalid_imu_samples;
+  result["zone_packets"] = statistics.zone_packets;
   result["other_packets"] = capture.other_packets + other_ports;
   result["truncated_records"] = capture.truncated;
   if (frames.empty()) {

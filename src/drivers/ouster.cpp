@@ -16,6 +16,8 @@ namespace {
 
 constexpr std::size_t kLegacyImuBytes = 48;
 constexpr std::size_t kProfileHeaderBytes = 32, kProfileFooterBytes = 32;
+constexpr std::size_t kNmeaBlockBytes = 100, kImuSampleBytes = 36;
+constexpr std::size_t kZonePacketBytes = kProfileHeaderBytes + 8 + 32 + 36 * 16 + kProfileFooterBytes;
 constexpr int64_t kDayNs = 86'400'000'000'000LL;
 constexpr double kGravity = 9.80665;
 
@@ -47,6 +49,12 @@ const nlohmann::json* find(const nlohmann::json& root, std::initializer_list<std
     if (node != nullptr) return node;
   }
   return nullptr;
+}
+
+uint32_t bits(const uint8_t* pixel, int first_bit, int count) {
+  uint64_t word = 0;
+  std::memcpy(&word, pixel + first_bit / 8, std::min<std::size_t>(8, static_cast<std::size_t>((first_bit % 8 + count + 7) / 8)));
+  return static_cast<uint32_t>((word >> (first_bit % 8)) & ((uint64_t{1} << count) - 1));
 }
 
 }  // namespace
@@ -91,6 +99,12 @@ Result<OusterMetadata> parse_ouster_metadata(const std::string& json_text) {
     if (const nlohmann::json* profile = find(root, {{"config_params", "udp_profile_lidar"}}); profile != nullptr && format == nullptr) {
       metadata.udp_profile_lidar = profile->get<std::string>();
     }
+    if (const nlohmann::json* profile = find(root, {{"lidar_data_format", "udp_profile_imu"}, {"config_params", "udp_profile_imu"}, {"data_format", "udp_profile_imu"}})) {
+      metadata.udp_profile_imu = profile->get<std::string>();
+    }
+    if (const nlohmann::json* samples = find(root, {{"imu_data_format", "imu_measurements_per_packet"}})) {
+      metadata.imu_measurements_per_packet = samples->get<int>();
+    }
     if (metadata.columns_per_frame == 0) {  // from the mode: "1024x10" is 1024 columns
       int columns = 0, rate = 0;
       if (std::sscanf(metadata.lidar_mode.c_str(), "%dx%d", &columns, &rate) != 2 || columns <= 0) {
@@ -115,8 +129,22 @@ Result<OusterMetadata> load_ouster_metadata(const std::string& path) {
   return metadata;
 }
 
+// The pixel layouts of the lidar profiles (ouster-sdk's field tables), LEGACY apart.
+std::optional<OusterPixelLayout> ouster_pixel_layout(const std::string& profile) {
+  using Layout = OusterPixelLayout;
+  if (profile == "LEGACY") return Layout{12, 20, 0, 4, 0, 0, 0};
+  if (profile == "RNG19_RFL8_SIG16_NIR16" || profile == "RNG19_RFL8_SIG16_NIR16_ZONE16") return Layout{12, 19, 0, 4, 0, 0, 0};
+  if (profile == "RNG19_RFL8_SIG16_NIR16_DUAL") return Layout{16, 19, 0, 3, 32, 19, 7};
+  if (profile == "FIVE_WORD_PIXEL") return Layout{20, 19, 0, 3, 32, 19, 7};
+  if (profile == "RNG15_RFL8_NIR8") return Layout{4, 15, 3, 2, 0, 0, 0};
+  if (profile == "RNG15_RFL8_NIR8_ZONE16") return Layout{8, 15, 3, 2, 0, 0, 0};
+  if (profile == "RNG15_RFL8_NIR8_DUAL") return Layout{8, 15, 3, 2, 32, 15, 6};
+  return std::nullopt;
+}
+
 OusterDecoder::OusterDecoder(OusterMetadata metadata, std::string frame_id) : metadata_(std::move(metadata)), frame_id_(std::move(frame_id)) {
   legacy_ = metadata_.udp_profile_lidar == "LEGACY";
+  layout_ = ouster_pixel_layout(metadata_.udp_profile_lidar).value_or(OusterPixelLayout{});
   const int beams = metadata_.pixels_per_column, columns = metadata_.columns_per_frame;
   direction_.resize(static_cast<std::size_t>(beams * columns));
   offset_mm_.resize(direction_.size());
@@ -144,8 +172,17 @@ OusterDecoder::OusterDecoder(OusterMetadata metadata, std::string frame_id) : me
 }
 
 Result<OusterDecoder> OusterDecoder::create(OusterMetadata metadata, std::string frame_id) {
-  if (metadata.udp_profile_lidar != "LEGACY" && metadata.udp_profile_lidar != "RNG15_RFL8_NIR8") {
-    return Error(fmt::format("Ouster packet profile {} is not decoded (LEGACY, RNG15_RFL8_NIR8)", metadata.udp_profile_lidar), "udp_profile_lidar");
+  if (!ouster_pixel_layout(metadata.udp_profile_lidar)) {
+    return Error(fmt::format("Ouster packet profile {} is not decoded (LEGACY, RNG19_RFL8_SIG16_NIR16[_DUAL, _ZONE16], FIVE_WORD_PIXEL, "
+                             "RNG15_RFL8_NIR8[_DUAL, _ZONE16])",
+                             metadata.udp_profile_lidar),
+                 "udp_profile_lidar");
+  }
+  if (metadata.udp_profile_imu != "LEGACY" && metadata.udp_profile_imu != "ACCEL32_GYRO32_NMEA" && metadata.udp_profile_imu != "OFF") {
+    return Error(fmt::format("Ouster IMU profile {} is not decoded (LEGACY, ACCEL32_GYRO32_NMEA)", metadata.udp_profile_imu), "udp_profile_imu");
+  }
+  if (metadata.udp_profile_imu == "ACCEL32_GYRO32_NMEA" && metadata.imu_measurements_per_packet <= 0) {
+    return Error("Ouster metadata: IMU profile ACCEL32_GYRO32_NMEA without imu_data_format.imu_measurements_per_packet", "imu_measurements_per_packet");
   }
   const auto beams = static_cast<std::size_t>(metadata.pixels_per_column);
   if (beams == 0 || metadata.beam_altitude_deg.size() != beams || metadata.beam_azimuth_deg.size() != beams) {
@@ -162,7 +199,12 @@ Result<OusterDecoder> OusterDecoder::create(OusterMetadata metadata, std::string
 
 std::size_t OusterDecoder::lidar_packet_bytes() const {
   const auto beams = static_cast<std::size_t>(metadata_.pixels_per_column), columns = static_cast<std::size_t>(metadata_.columns_per_packet);
-  return legacy_ ? columns * (16 + 12 * beams + 4) : kProfileHeaderBytes + columns * (12 + 4 * beams) + kProfileFooterBytes;
+  return legacy_ ? columns * (16 + 12 * beams + 4) : kProfileHeaderBytes + columns * (12 + layout_.bytes * beams) + kProfileFooterBytes;
+}
+
+std::size_t OusterDecoder::imu_packet_bytes() const {
+  if (metadata_.udp_profile_imu != "ACCEL32_GYRO32_NMEA") return kLegacyImuBytes;
+  return kProfileHeaderBytes + kNmeaBlockBytes + static_cast<std::size_t>(metadata_.imu_measurements_per_packet) * kImuSampleBytes + kProfileFooterBytes;
 }
 
 void OusterDecoder::malformed(const std::string& what) {
@@ -198,50 +240,73 @@ void OusterDecoder::add_column(uint64_t time_ns, uint16_t measurement_id, const 
   ++frame.columns;
   const Timestamp time = sensor_time(time_ns, capture_time);
   for (int beam = 0; beam < beams; ++beam) {
-    uint32_t range_mm = 0;
-    float intensity = 0.0F;
-    if (legacy_) {
-      const uint8_t* pixel = pixels + 12 * beam;
-      range_mm = read_le<uint32_t>(pixel) & 0xFFFFF;
-      intensity = static_cast<float>(std::min<uint16_t>(read_le<uint16_t>(pixel + 4), 255)) / 255.0F;
-    } else {
-      const uint8_t* pixel = pixels + 4 * beam;
-      range_mm = static_cast<uint32_t>(read_le<uint16_t>(pixel) & 0x7FFF) * 8;
-      intensity = static_cast<float>(pixel[2]) / 255.0F;
-    }
-    frame.range_mm[static_cast<std::size_t>(beam * metadata_.columns_per_frame + measurement_id)] = range_mm;
-    if (range_mm == 0) continue;
     const std::size_t index = static_cast<std::size_t>(measurement_id * beams + beam);
-    const Eigen::Vector3d lidar_mm = range_mm * direction_[index] + offset_mm_[index];
-    const Eigen::Vector3d sensor_m = (rotation_ * lidar_mm + translation_mm_) * 1e-3;
-    frame.cloud.points.push_back(sensor_m.cast<float>());
-    frame.cloud.intensities.push_back(intensity);
-    frame.cloud.ring_ids.push_back(ring_[static_cast<std::size_t>(beam)]);
-    frame.cloud.point_timestamps.push_back(time);
+    const uint32_t ring = ring_[static_cast<std::size_t>(beam)];
+    const uint8_t* pixel = pixels + layout_.bytes * static_cast<std::size_t>(beam);
+    const uint32_t range_mm = bits(pixel, 0, layout_.range_bits) << layout_.range_shift;
+    // LEGACY: the calibrated reflectivity (16 bits) clamped to 255.
+    const float intensity = legacy_ ? static_cast<float>(std::min<uint16_t>(read_le<uint16_t>(pixel + 4), 255)) / 255.0F
+                                    : static_cast<float>(pixel[layout_.reflectivity_byte]) / 255.0F;
+    frame.range_mm[static_cast<std::size_t>(beam * metadata_.columns_per_frame + measurement_id)] = range_mm;
+    add_point(frame, index, range_mm, intensity, ring, time);
+    if (layout_.second_range_bits > 0) {
+      const uint32_t second_mm = bits(pixel, layout_.second_range_bit, layout_.second_range_bits) << layout_.range_shift;
+      if (second_mm != range_mm) add_point(frame, index, second_mm, static_cast<float>(pixel[layout_.second_reflectivity_byte]) / 255.0F, ring, time);
+    }
+  }
+}
+
+void OusterDecoder::add_point(OusterFrame& frame, std::size_t index, uint32_t range_mm, float intensity, uint32_t ring, Timestamp time) {
+  if (range_mm == 0) return;  // no return
+  const Eigen::Vector3d lidar_mm = range_mm * direction_[index] + offset_mm_[index];
+  const Eigen::Vector3d sensor_m = (rotation_ * lidar_mm + translation_mm_) * 1e-3;
+  frame.cloud.points.push_back(sensor_m.cast<float>());
+  frame.cloud.intensities.push_back(intensity);
+  frame.cloud.ring_ids.push_back(ring);
+  frame.cloud.point_timestamps.push_back(time);
+}
+
+void OusterDecoder::add_imu_packet(const uint8_t* data, Timestamp capture_time, std::vector<msgs::ImuMessage>& imu) {
+  const auto push = [&](uint64_t time_ns, const uint8_t* accel, double accel_scale, const uint8_t* gyro, double gyro_scale) {
+    msgs::ImuMessage sample;
+    sample.timestamp = sensor_time(time_ns, capture_time);
+    sample.frame_id = "imu";
+    for (int axis = 0; axis < 3; ++axis) {
+      sample.linear_acceleration[axis] = read_le<float>(accel + 4 * axis) * accel_scale;
+      sample.angular_velocity[axis] = read_le<float>(gyro + 4 * axis) * gyro_scale;
+    }
+    if (!sample.linear_acceleration.allFinite() || !sample.angular_velocity.allFinite()) {
+      ++statistics_.invalid_imu_samples;
+      return malformed("Ouster IMU sample with non-finite values");
+    }
+    imu.push_back(sample);
+  };
+  ++statistics_.imu_packets;
+  if (metadata_.udp_profile_imu != "ACCEL32_GYRO32_NMEA") return push(read_le<uint64_t>(data + 8), data + 24, kGravity, data + 36, M_PI / 180.0);
+  for (int k = 0; k < metadata_.imu_measurements_per_packet; ++k) {
+    const uint8_t* sample = data + kProfileHeaderBytes + kNmeaBlockBytes + static_cast<std::size_t>(k) * kImuSampleBytes;
+    const uint64_t time_ns = read_le<uint64_t>(sample);
+    if (time_ns == 0 || (read_le<uint16_t>(sample + 10) & 1U) == 0) {  // a slot not filled, or not valid
+      ++statistics_.invalid_imu_samples;
+      continue;
+    }
+    push(time_ns, sample + 12, 1.0, sample + 24, 1.0);
   }
 }
 
 void OusterDecoder::add_packet(std::string_view payload, Timestamp capture_time, std::vector<OusterFrame>& frames, std::vector<msgs::ImuMessage>& imu) {
   const auto* data = reinterpret_cast<const uint8_t*>(payload.data());
-  if (payload.size() == kLegacyImuBytes) {
-    msgs::ImuMessage sample;
-    sample.timestamp = sensor_time(read_le<uint64_t>(data + 8), capture_time);
-    sample.frame_id = "imu";
-    for (int axis = 0; axis < 3; ++axis) {
-      sample.linear_acceleration[axis] = read_le<float>(data + 24 + 4 * axis) * kGravity;
-      sample.angular_velocity[axis] = read_le<float>(data + 36 + 4 * axis) * M_PI / 180.0;
-    }
-    if (!sample.linear_acceleration.allFinite() || !sample.angular_velocity.allFinite()) return malformed("Ouster IMU packet with non-finite values");
-    ++statistics_.imu_packets;
-    imu.push_back(sample);
+  if (payload.size() == imu_packet_bytes()) return add_imu_packet(data, capture_time, imu);
+  if (payload.size() == kZonePacketBytes && !legacy_) {
+    ++statistics_.zone_packets;
     return;
   }
   if (payload.size() != lidar_packet_bytes()) {
     return malformed(fmt::format("Ouster packet of {} bytes (lidar packets of this metadata have {}, IMU packets {})", payload.size(), lidar_packet_bytes(),
-                                 kLegacyImuBytes));
+                                 imu_packet_bytes()));
   }
   const auto beams = static_cast<std::size_t>(metadata_.pixels_per_column);
-  const std::size_t column_bytes = legacy_ ? 16 + 12 * beams + 4 : 12 + 4 * beams;
+  const std::size_t column_bytes = legacy_ ? 16 + 12 * beams + 4 : 12 + layout_.bytes * beams;
   const uint8_t* first_column = legacy_ ? data : data + kProfileHeaderBytes;
   const uint16_t packet_frame = legacy_ ? read_le<uint16_t>(first_column + 10) : read_le<uint16_t>(data + 2);
   ++statistics_.lidar_packets;

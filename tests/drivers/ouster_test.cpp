@@ -3,8 +3,10 @@
 // the frame's range image hashes to the SDK's own digest (MD5 of the staggered H x W uint32
 // image), the frame is complete, column times increase, every pixel with a range is a point at
 // that range from its beam's origin; the OS-1-64's reduced legacy metadata and IMU packets; the
-// newer metadata layout is read and an undecoded profile refused.
+// newer metadata layout with the ACCEL32_GYRO32_NMEA IMU profile; the RNG19 single and dual
+// profiles on packets rewritten from the RNG15 capture; undecoded profiles refused.
 #include <algorithm>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -122,15 +124,42 @@ TEST(Ouster, ReducedLegacyMetadataAndImuPackets) {
   EXPECT_TRUE(std::is_sorted(decoded.imu.begin(), decoded.imu.end(), [](const auto& a, const auto& b) { return a.timestamp < b.timestamp; }));
 }
 
-TEST(Ouster, NewerMetadataIsReadAndUndecodedProfilesRefused) {
+// The zone-monitoring OS-0-128's newer metadata with the ACCEL32_GYRO32_NMEA IMU profile: its
+// capture's 8 IMU packets give 64 samples of a sensor at rest, about 1.56 ms apart; the zone
+// packet is counted; undecoded profiles are refused by name.
+TEST(Ouster, NewerMetadataAndTheAccel32Gyro32NmeaImuProfile) {
   const auto metadata = load_ouster_metadata(kOuster + "imu_zm_no_lidar_0.json");
   ASSERT_TRUE(metadata.ok()) << metadata.error().message;
   EXPECT_EQ(metadata->pixels_per_column, 128);
   EXPECT_EQ(metadata->columns_per_frame, 2048);
   EXPECT_EQ(metadata->udp_profile_lidar, "RNG19_RFL8_SIG16_NIR16_ZONE16");
-  const auto decoder = OusterDecoder::create(*metadata);
-  ASSERT_FALSE(decoder.ok());
-  EXPECT_NE(decoder.error().message.find("RNG19_RFL8_SIG16_NIR16_ZONE16"), std::string::npos);
+  EXPECT_EQ(metadata->udp_profile_imu, "ACCEL32_GYRO32_NMEA");
+  EXPECT_EQ(metadata->imu_measurements_per_packet, 8);
+  const Decoded decoded = decode("imu_zm_no_lidar.pcap", "imu_zm_no_lidar_0.json");
+  EXPECT_EQ(decoded.statistics.malformed, 0u) << decoded.statistics.first_error;
+  EXPECT_EQ(decoded.statistics.imu_packets, 8u);
+  EXPECT_EQ(decoded.statistics.zone_packets, 1u);
+  EXPECT_TRUE(decoded.frames.empty());
+  ASSERT_EQ(decoded.imu.size(), 64u);
+  for (std::size_t i = 0; i < decoded.imu.size(); ++i) {
+    EXPECT_NEAR(decoded.imu[i].linear_acceleration.norm(), 9.81, 0.5) << i;  // m/s^2
+    EXPECT_LT(decoded.imu[i].angular_velocity.norm(), 0.1) << i;             // rad/s
+    if (i > 0) {
+      EXPECT_NEAR((decoded.imu[i].timestamp - decoded.imu[i - 1].timestamp).seconds(), 1.5625e-3, 0.05e-3) << i;
+    }
+  }
+
+  OusterMetadata other = *metadata;
+  other.udp_profile_lidar = "RNG15_RFL8_WIN8";
+  ASSERT_FALSE(OusterDecoder::create(other).ok());
+  EXPECT_NE(OusterDecoder::create(other).error().message.find("RNG15_RFL8_WIN8"), std::string::npos);
+  other = *metadata;
+  other.udp_profile_imu = "ACCEL64";
+  ASSERT_FALSE(OusterDecoder::create(other).ok());
+  EXPECT_NE(OusterDecoder::create(other).error().message.find("IMU profile ACCEL64"), std::string::npos);
+  other = *metadata;
+  other.imu_measurements_per_packet = 0;
+  EXPECT_FALSE(OusterDecoder::create(other).ok());
   EXPECT_FALSE(parse_ouster_metadata("{\"lidar_mode\": \"1024x10\"}").ok());
   EXPECT_FALSE(parse_ouster_metadata("not json").ok());
   // Packets of another size are counted and skipped.
@@ -140,6 +169,69 @@ TEST(Ouster, NewerMetadataIsReadAndUndecodedProfilesRefused) {
   legacy.add_packet(std::string(100, '\0'), Timestamp::from_nanoseconds(1), frames, imu);
   EXPECT_EQ(legacy.statistics().malformed, 1u);
   EXPECT_NE(legacy.statistics().first_error.find("6464"), std::string::npos) << legacy.statistics().first_error;
+}
+
+// The OS-0-128's RNG15_RFL8_NIR8 packets written again in the RNG19_RFL8_SIG16_NIR16 and
+// RNG19_RFL8_SIG16_NIR16_DUAL layouts (the same ranges; a second return 1.5 m beyond the first on
+// every 7th pixel) decode to the same range image and points, plus the second returns.
+TEST(Ouster, Rng19SingleAndDualProfilesDecodeTheSameReturns) {
+  const OusterMetadata rng15 = load_ouster_metadata(kOuster + "OS-0-128-U1_v2.3.0_1024x10.json").value();
+  const Decoded original = decode("OS-0-128-U1_v2.3.0_1024x10.pcap", "OS-0-128-U1_v2.3.0_1024x10.json");
+  ASSERT_EQ(original.frames.size(), 1u);
+  const auto beams = static_cast<std::size_t>(rng15.pixels_per_column), columns = static_cast<std::size_t>(rng15.columns_per_packet);
+  for (const bool dual : {false, true}) {
+    OusterMetadata metadata = rng15;
+    metadata.udp_profile_lidar = dual ? "RNG19_RFL8_SIG16_NIR16_DUAL" : "RNG19_RFL8_SIG16_NIR16";
+    const std::size_t pixel_bytes = dual ? 16 : 12;
+    auto decoder = OusterDecoder::create(metadata).value();
+    auto reader = PcapReader::open(kOuster + "OS-0-128-U1_v2.3.0_1024x10.pcap").value();
+    std::vector<OusterFrame> frames;
+    std::vector<msgs::ImuMessage> imu;
+    std::size_t seconds = 0;
+    while (auto datagram = reader.next().value()) {
+      const std::string& in = datagram->payload;
+      if (in.size() != 32 + columns * (12 + 4 * beams) + 32) {
+        decoder.add_packet(in, datagram->time, frames, imu);  // the IMU packets as they are
+        continue;
+      }
+      std::string out = in.substr(0, 32);
+      for (std::size_t column = 0; column < columns; ++column) {
+        const std::size_t at = 32 + column * (12 + 4 * beams);
+        out += in.substr(at, 12);
+        for (std::size_t beam = 0; beam < beams; ++beam) {
+          const auto* pixel = reinterpret_cast<const uint8_t*>(in.data() + at + 12 + 4 * beam);
+          const uint32_t range_mm = static_cast<uint32_t>((pixel[0] | (pixel[1] << 8)) & 0x7FFF) * 8;
+          std::string written(pixel_bytes, '\0');
+          std::memcpy(written.data(), &range_mm, 4);  // 19 bits, nothing above
+          if (dual) {
+            written[3] = static_cast<char>(pixel[2]);
+            const bool second = range_mm > 0 && (column * beams + beam) % 7 == 0;
+            const uint32_t second_mm = second ? range_mm + 1500 : range_mm;
+            seconds += second ? 1 : 0;
+            std::memcpy(written.data() + 4, &second_mm, 3);
+            written[7] = static_cast<char>(pixel[2]);
+          } else {
+            written[4] = static_cast<char>(pixel[2]);
+          }
+          out += written;
+        }
+      }
+      out += in.substr(in.size() - 32);
+      ASSERT_EQ(out.size(), decoder.lidar_packet_bytes());
+      decoder.add_packet(out, datagram->time, frames, imu);
+    }
+    decoder.flush(frames);
+    EXPECT_EQ(decoder.statistics().malformed, 0u) << decoder.statistics().first_error;
+    ASSERT_EQ(frames.size(), 1u) << metadata.udp_profile_lidar;
+    EXPECT_EQ(frames[0].range_mm, original.frames[0].range_mm);
+    EXPECT_EQ(frames[0].cloud.points.size(), original.frames[0].cloud.points.size() + seconds);
+    EXPECT_EQ(frames[0].cloud.intensities.size(), frames[0].cloud.points.size());
+    EXPECT_EQ(frames[0].cloud.points[0], original.frames[0].cloud.points[0]);
+    EXPECT_EQ(frames[0].cloud.intensities[0], original.frames[0].cloud.intensities[0]);
+    if (dual) {
+      EXPECT_GT(seconds, 1000u);
+    }
+  }
 }
 
 }  // namespace hanzo::fusion::drivers
