@@ -1,6 +1,7 @@
 #include "camera_odometry.hpp"
 
 #include <algorithm>
+#include <set>
 
 #include <fmt/format.h>
 #include <fmt/ranges.h>
@@ -79,12 +80,28 @@ Status apply_vision_config(const config::FusionConfig& config, const std::string
   return ok_status();
 }
 
+// A depth image's pixels (no copy): depth16 millimetres as CV_16UC1, depth32f metres as CV_32FC1.
+Result<cv::Mat> depth_image(const msgs::ImageMessage& image) {
+  const bool millimetres = image.encoding == msgs::ImageEncoding::kDepth16;
+  if (!millimetres && image.encoding != msgs::ImageEncoding::kDepth32f) {
+    return Error(fmt::format("depth camera {}: encoding {} is not a depth image (depth16, depth32f)", image.frame_id, msgs::to_string(image.encoding)));
+  }
+  const std::size_t needed = std::size_t{image.width} * image.height * (millimetres ? 2U : 4U);
+  if (image.data.size() != needed) {
+    return Error(fmt::format("depth camera {}: {} bytes, {} x {} {} takes {}", image.frame_id, image.data.size(), image.width, image.height,
+                             msgs::to_string(image.encoding), needed));
+  }
+  return cv::Mat(static_cast<int>(image.height), static_cast<int>(image.width), millimetres ? CV_16UC1 : CV_32FC1,
+                 const_cast<uint8_t*>(image.data.data()));
+}
+
 }  // namespace
 
 Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::FusionConfig& config, const calib::Calibration& calibration,
                                                                const vision::VisualOdometryConfig& odometry_config) {
   // The cameras with intrinsics in the configuration's order, grouped into rigs (header comment).
   std::vector<std::vector<const calib::SensorCalibration*>> rigs;
+  std::set<std::size_t> depth_rigs;  // rigs whose second camera is the first's depth images
   const auto size_of = [](const calib::SensorCalibration& camera) {
     return cv::Size(static_cast<int>(camera.camera->intrinsics.width), static_cast<int>(camera.camera->intrinsics.height));
   };
@@ -99,16 +116,28 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
       logger()->warn("camera {}: not used by the visual odometry (the calibration's intrinsics have no image size)", entry->sensor);
       continue;
     }
+    const bool depth = sensor.type == config::kDepthCameraType;
     if (!rigs.empty() && rigs.back().size() == 1 && size_of(*rigs.back()[0]) == size_of(*entry)) {
       rigs.back().push_back(entry);
+      if (depth) depth_rigs.insert(rigs.size() - 1);
+    } else if (depth) {
+      logger()->warn("camera {}: depth images without a colour camera of their size configured just before them: not used", entry->sensor);
     } else {
       rigs.push_back({entry});
     }
   }
   if (rigs.empty()) return std::unique_ptr<CameraOdometry>();
-  if (config.frontend.type == config::FrontendType::kMsckf) return create_visual_inertial(config, calibration, rigs);
+  if (config.frontend.type == config::FrontendType::kMsckf) {
+    for (const std::size_t rig : depth_rigs) {
+      logger()->warn("camera {}: the visual-inertial odometry does not use depth images (its camera {} is tracked alone)", rigs[rig][1]->sensor,
+                     rigs[rig][0]->sensor);
+      rigs[rig].pop_back();
+    }
+    return create_visual_inertial(config, calibration, rigs);
+  }
   const calib::SensorCalibration& left = *rigs[0][0];
-  const bool stereo_pair = rigs[0].size() == 2;
+  const bool rgbd = depth_rigs.count(0) > 0;
+  const bool stereo_pair = rigs[0].size() == 2 && !rgbd;
   const cv::Size size = size_of(left);
   for (size_t rig = 1; rig < rigs.size(); ++rig) {
     for (const calib::SensorCalibration* camera : rigs[rig]) {
@@ -120,7 +149,7 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
   // loosely coupled filters cannot use its poses, so its images are not processed at all.
   const bool has_imu = std::any_of(config.sensors.begin(), config.sensors.end(),
                                    [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kImu; });
-  if (has_imu && !stereo_pair) {
+  if (has_imu && !stereo_pair && !rgbd) {
     logger()->warn("camera '{}' is not used by frontend.type {} beside an IMU (a single camera's scale needs the visual-inertial "
                    "frontend, frontend.type: msckf); its images are counted as not_fused",
                    left.sensor, config::to_string(config.frontend.type));
@@ -130,7 +159,14 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
   HANZO_RETURN_IF_ERROR(apply_vision_config(config, left.sensor, stereo_pair ? rigs[0][1]->sensor : "", configured));
   std::unique_ptr<vision::VisualOdometry> odometry;
   Rig rig{left.sensor, "", left.time_offset, Duration(), size, left.camera->pinhole_camera(), left.T_body_sensor()};
-  if (stereo_pair) {
+  if (rgbd) {
+    const calib::SensorCalibration& depth = *rigs[0][1];
+    HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create_rgbd(left.camera->pinhole_camera(), size, configured),
+                                                  fmt::format("cameras {} and {}", left.sensor, depth.sensor)));
+    rig.right_sensor = depth.sensor;
+    rig.right_offset = depth.time_offset;
+    rig.depth = true;
+  } else if (stereo_pair) {
     const calib::SensorCalibration& right = *rigs[0][1];
     HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create_stereo(left.camera->pinhole_camera(), right.camera->pinhole_camera(),
                                                                                          left.T_body_sensor().inverse() * right.T_body_sensor(), size,
@@ -142,8 +178,8 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
     HANZO_ASSIGN_OR_RETURN(odometry, with_context(vision::VisualOdometry::create(left.camera->pinhole_camera(), size, configured),
                                                   fmt::format("camera {}", left.sensor)));
   }
-  logger()->info("session: {} visual odometry on {}{} ({} features{})", stereo_pair ? "stereo" : "monocular", left.sensor,
-                 stereo_pair ? " + " + rig.right_sensor : "", configured.extractor->name(),
+  logger()->info("session: {} visual odometry on {}{} ({} features{})", rgbd ? "RGB-D" : stereo_pair ? "stereo" : "monocular", left.sensor,
+                 rig.right_sensor.empty() ? "" : " + " + rig.right_sensor, configured.extractor->name(),
                  configured.putative_filter ? ", learned correspondence filter" : "");
   return std::unique_ptr<CameraOdometry>(new CameraOdometry(std::move(odometry), {rig}));
 }
@@ -248,7 +284,7 @@ CameraOdometry::CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry,
 
 const CameraOdometry::Rig* CameraOdometry::rig_of(std::string_view sensor) const {
   for (const Rig& rig : rigs_) {
-    if (sensor == rig.left_sensor || (rig.stereo() && sensor == rig.right_sensor)) return &rig;
+    if (sensor == rig.left_sensor || (!rig.right_sensor.empty() && sensor == rig.right_sensor)) return &rig;
   }
   return nullptr;
 }
@@ -258,9 +294,13 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::add(std::string_v
   constexpr double kFrameTolerance = 1e-3;
   const Rig* rig = rig_of(sensor);
   if (rig == nullptr) return Error(fmt::format("camera {}: not a camera of the visual odometry", sensor));
-  cv::Mat grey;
-  HANZO_ASSIGN_OR_RETURN(grey, vision::grey_image(image));
   const bool left = sensor == rig->left_sensor;
+  cv::Mat grey;
+  if (!left && rig->depth) {
+    HANZO_ASSIGN_OR_RETURN(grey, depth_image(image));
+  } else {
+    HANZO_ASSIGN_OR_RETURN(grey, vision::grey_image(image));
+  }
   const Timestamp time = image.timestamp + (left ? rig->left_offset : rig->right_offset);
   std::optional<Tracked> tracked;
   if (pending_ && std::abs((time - pending_->time).seconds()) > kFrameTolerance) {
@@ -278,7 +318,7 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::add(std::string_v
   if (left && (!pending_->left_time || index == 0)) pending_->left_time = time;
   const bool complete = std::all_of(rigs_.begin(), rigs_.end(), [this](const Rig& each) {
     const std::pair<cv::Mat, cv::Mat>& frame = pending_->images[static_cast<size_t>(&each - rigs_.data())];
-    return !frame.first.empty() && (!each.stereo() || !frame.second.empty());
+    return !frame.first.empty() && (each.right_sensor.empty() || !frame.second.empty());
   });
   // (A frame that completes with this image was just started only for a single camera, which
   // never leaves one waiting: at most one frame is tracked per image.)
@@ -294,7 +334,7 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track_pending() {
   for (size_t index = 0; index < rigs_.size(); ++index) {
     const Rig& rig = rigs_[index];
     auto& [left, right] = frame.images[index];
-    if (left.empty() || (rig.stereo() && right.empty())) {
+    if (left.empty() || (!rig.right_sensor.empty() && right.empty())) {
       if (!left.empty() || !right.empty()) {
         logger()->debug("session: camera {}: image at {:.3f} s has no {} image of its time: dropped", left.empty() ? rig.right_sensor : rig.left_sensor,
                         frame.time.seconds(), left.empty() ? "left" : "right");
@@ -303,7 +343,7 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track_pending() {
     }
     images.push_back({static_cast<int>(index), std::move(left), std::move(right)});
     sensors.push_back(rig.left_sensor);
-    if (rig.stereo()) sensors.push_back(rig.right_sensor);
+    if (!rig.right_sensor.empty()) sensors.push_back(rig.right_sensor);
   }
   if (images.empty()) return std::optional<Tracked>();
   const Timestamp time = *frame.left_time;
@@ -315,8 +355,9 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track_pending() {
     const cv::Mat& left = images[0].left;
     vision::ImageQuality quality;
     HANZO_ASSIGN_OR_RETURN(quality, assess(left));
-    Result<vision::VisualOdometryFrame> odometry_frame =
-        images[0].right.empty() ? odometry_->track(time.seconds(), left) : odometry_->track(time.seconds(), left, images[0].right);
+    Result<vision::VisualOdometryFrame> odometry_frame = images[0].right.empty() ? odometry_->track(time.seconds(), left)
+                                                         : rigs_[0].depth        ? odometry_->track_rgbd(time.seconds(), left, images[0].right)
+                                                                                 : odometry_->track(time.seconds(), left, images[0].right);
     if (!odometry_frame) return odometry_frame.error();
     tracked = Tracked{time, std::move(odometry_frame).value(), SE3(), quality, {{0, left}}, {}};
     tracked.T_world_body = T_body_left() * tracked.frame.T_world_camera * T_body_left().inverse();

@@ -4,11 +4,16 @@
 //
 // Cameras: the camera sensors of the configuration with intrinsics in the calibration, in the
 // configuration's order, form rigs: a camera and the next one of the same image size are a
-// stereo pair (left, right), a camera without one is a rig of its own. Rig 0's left camera is
+// stereo pair (left, right), or an RGB-D camera when the next one is of type depth
+// (config::kDepthCameraType: its depth images registered to the camera), a camera without one is
+// a rig of its own. Rig 0's left camera is
 // "the left camera". Images must be mono8, rgb8 or bgr8 of the calibrated size; the sensor's
 // time offset moves them to the body clock. The images of one time (within 1 ms) make a frame,
 // tracked once every rig's image(s) of that time came, or when an image of a later time comes
-// (the rigs complete by then; a stereo half without its other half is dropped).
+// (the rigs complete by then; a stereo half without its other half is dropped). An RGB-D rig's
+// images are paired with its depth images the same way; the visual odometry is then metric
+// (vision::VisualOdometry::create_rgbd) and fused as stereo's is; the visual-inertial odometry
+// tracks its camera alone.
 //
 // With frontend.type msckf and an IMU, the odometry is visual-inertial (msckf_odometry.hpp: KLT
 // tracks and the MSCKF, metric with one camera too) on every rig (two stereo pairs looking
@@ -66,7 +71,8 @@ class CameraOdometry {
     cv::Size image_size;
     PinholeCamera left_camera;
     SE3 T_body_left;
-    bool stereo() const { return !right_sensor.empty(); }
+    bool depth = false;  ///< the right sensor is the left camera's depth images (an RGB-D camera)
+    bool stereo() const { return !right_sensor.empty() && !depth; }
   };
   /// Left images by condition (good ones are not counted).
   struct ImageConditionCounts {

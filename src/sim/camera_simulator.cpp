@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include <Eigen/Dense>
@@ -98,8 +99,17 @@ Result<CameraSimulator> CameraSimulator::create(CameraSimulatorConfig config, co
   const msgs::CameraIntrinsics& k = config.intrinsics;
   if (k.width == 0 || k.height == 0) return Error{"camera intrinsics: width and height are required", "intrinsics"};
   if (!(k.fx > 0.0) || !(k.fy > 0.0)) return Error{fmt::format("camera intrinsics: fx, fy must be > 0, got {}, {}", k.fx, k.fy), "intrinsics"};
-  if (config.encoding != msgs::ImageEncoding::kMono8 && config.encoding != msgs::ImageEncoding::kRgb8) {
-    return Error{fmt::format("camera encoding: expected mono8 or rgb8, got {}", msgs::to_string(config.encoding)), "encoding"};
+  const bool depth = config.encoding == msgs::ImageEncoding::kDepth16 || config.encoding == msgs::ImageEncoding::kDepth32f;
+  if (config.encoding != msgs::ImageEncoding::kMono8 && config.encoding != msgs::ImageEncoding::kRgb8 && !depth) {
+    return Error{fmt::format("camera encoding: expected mono8, rgb8, depth16 or depth32f, got {}", msgs::to_string(config.encoding)), "encoding"};
+  }
+  if (depth) {
+    if (!(config.depth_range.x() > 0.0 && config.depth_range.y() > config.depth_range.x()) || !(config.depth_noise >= 0.0)) {
+      return Error{fmt::format("camera depth: expected 0 < depth_range[0] < depth_range[1] and depth_noise >= 0, got [{}, {}], {}", config.depth_range.x(),
+                               config.depth_range.y(), config.depth_noise),
+                   "depth_range"};
+    }
+    config.supersampling = 1;  // one ray through each pixel's centre
   }
   const std::size_t coefficients = config.distortion.coefficients.size();
   const bool counts_ok = config.distortion.type == msgs::DistortionType::kNone      ? coefficients == 0
@@ -174,7 +184,7 @@ Eigen::Vector3d CameraSimulator::pixel_ray(double u, double v) const {
   return Eigen::Vector3d(normalized.x(), normalized.y(), 1.0).normalized();
 }
 
-void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radiance) const {
+void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radiance, std::vector<float>* depth) const {
   const SE3 T_world_camera = trajectory_->sample(time).T_world_body * config_.T_body_camera;
   const Eigen::Matrix3d R_world_camera = T_world_camera.rotation().matrix();
   const Eigen::Vector3d& origin = T_world_camera.translation();
@@ -182,7 +192,11 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
   const auto width = static_cast<int>(config_.intrinsics.width), height = static_cast<int>(config_.intrinsics.height);
   const float weight = 1.0F / static_cast<float>(s * s);
   const WorldSnapshot snapshot = world_->at(time);
-  radiance.assign(static_cast<std::size_t>(width) * height, Eigen::Vector3f::Zero());
+  if (depth != nullptr) {
+    depth->assign(static_cast<std::size_t>(width) * height, std::numeric_limits<float>::quiet_NaN());
+  } else {
+    radiance.assign(static_cast<std::size_t>(width) * height, Eigen::Vector3f::Zero());
+  }
   const int tiles_across = (width + kTilePixels - 1) / kTilePixels, tiles_down = (height + kTilePixels - 1) / kTilePixels;
   // Rows of tiles are independent: render them on up to num_threads threads (same result).
   // Inside a tile every ray goes through the tile's RayGroup (the same hit as a plain cast).
@@ -207,6 +221,10 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
             const Eigen::Vector3d direction = R_world_camera * ray[column].cast<double>();
             const std::optional<RayHit> hit =
                 tile.valid ? snapshot.cast(group, direction, &object_hint) : snapshot.cast(origin, direction, config_.max_distance, &object_hint);
+            if (depth != nullptr) {  // s is 1 for depth cameras
+              if (hit) (*depth)[static_cast<std::size_t>(row) * width + column] = static_cast<float>(hit->distance * ray[column].z());
+              continue;
+            }
             Eigen::Vector3f color;
             if (hit) {
               double sunlit = std::max(0.0, hit->normal.dot(sun_direction_));
@@ -233,7 +251,43 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
   }
 }
 
+msgs::ImageMessage CameraSimulator::measure_depth(Timestamp time) {
+  std::vector<Eigen::Vector3f> unused;
+  std::vector<float> depth;
+  render(time, unused, &depth);
+  msgs::ImageMessage image;
+  image.timestamp = time;
+  image.frame_id = config_.frame_id;
+  image.width = config_.intrinsics.width;
+  image.height = config_.intrinsics.height;
+  image.encoding = config_.encoding;
+  image.intrinsics = config_.intrinsics;
+  if (config_.distortion.type != msgs::DistortionType::kNone) image.distortion = config_.distortion;
+  const bool millimetres = config_.encoding == msgs::ImageEncoding::kDepth16;
+  image.data.resize(depth.size() * (millimetres ? 2 : 4));
+  uint64_t state = random_() | 1U;
+  for (std::size_t p = 0; p < depth.size(); ++p) {
+    state ^= state << 13;
+    state ^= state >> 7;
+    state ^= state << 17;
+    float value = depth[p];
+    if (!(value >= config_.depth_range.x() && value <= config_.depth_range.y())) {
+      value = std::numeric_limits<float>::quiet_NaN();
+    } else {
+      value += static_cast<float>(config_.depth_noise) * value * value * normal_table_[state >> (64 - kNormalTableBits)];
+    }
+    if (millimetres) {
+      const auto mm = static_cast<uint16_t>(std::isfinite(value) ? std::clamp(std::lround(value * 1000.0F), 0L, 65535L) : 0L);
+      std::memcpy(&image.data[2 * p], &mm, 2);
+    } else {
+      std::memcpy(&image.data[4 * p], &value, 4);
+    }
+  }
+  return image;
+}
+
 msgs::ImageMessage CameraSimulator::measure(Timestamp time) {
+  if (config_.encoding == msgs::ImageEncoding::kDepth16 || config_.encoding == msgs::ImageEncoding::kDepth32f) return measure_depth(time);
   const auto width = static_cast<int>(config_.intrinsics.width), height = static_cast<int>(config_.intrinsics.height);
   double brightness = config_.exposure, noise = config_.pixel_noise;
   const CameraFaultEpisode* glare = nullptr;

@@ -71,6 +71,10 @@ config::FusionConfig scenario_fusion_config(const Scenario& scenario) {
         if (preset.elevations == lidar->pattern.elevations && preset.columns == lidar->pattern.columns) entry.type = to_string(model);
       }
     }
+    if (const auto* camera = std::get_if<CameraSimulatorConfig>(&sensor.simulator);
+        camera != nullptr && (camera->encoding == msgs::ImageEncoding::kDepth16 || camera->encoding == msgs::ImageEncoding::kDepth32f)) {
+      entry.type = config::kDepthCameraType;
+    }
     // The world frame of the simulation is ENU at the scenario's datum: GNSS fixes must be
     // converted with the same datum to land in it.
     if (sensor.modality == config::SensorModality::kGnss) fusion.frontend.datum = scenario.datum;

@@ -351,7 +351,8 @@ Result<SensorSimulatorConfig> parse_lidar(const YamlValue& value, double rate, c
 
 Result<SensorSimulatorConfig> parse_camera(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "width", "height", "fx", "fy", "cx", "cy",
-                                          "distortion_model", "distortion_coeffs", "encoding", "supersampling", "pixel_noise", "lighting"}));
+                                          "distortion_model", "distortion_coeffs", "encoding", "supersampling", "pixel_noise", "lighting",
+                                          "depth_range", "depth_noise"}));
   CameraSimulatorConfig config;
   config.rate_hz = rate;
   config.T_body_camera = sensor.T_body_sensor;
@@ -375,13 +376,16 @@ Result<SensorSimulatorConfig> parse_camera(const YamlValue& value, double rate, 
     std::string name;
     HANZO_ASSIGN_OR_RETURN(name, value["encoding"].as_string());
     const std::optional<msgs::ImageEncoding> encoding = msgs::image_encoding_from_string(name);
-    if (!encoding || (*encoding != msgs::ImageEncoding::kMono8 && *encoding != msgs::ImageEncoding::kRgb8)) {
-      return value["encoding"].error(fmt::format("expected mono8 or rgb8, got '{}'", name));
+    if (!encoding) return value["encoding"].error(fmt::format("expected mono8, rgb8, depth16 or depth32f, got '{}'", name));
+    if (*encoding == msgs::ImageEncoding::kBgr8) {
+      return value["encoding"].error(fmt::format("expected mono8, rgb8, depth16 or depth32f, got '{}'", name));
     }
     config.encoding = *encoding;
   }
   HANZO_ASSIGN_OR_RETURN(config.supersampling, count_or(value["supersampling"], config.supersampling, 1, 4));
   HANZO_ASSIGN_OR_RETURN(config.pixel_noise, non_negative_or(value["pixel_noise"], config.pixel_noise));
+  HANZO_ASSIGN_OR_RETURN(config.depth_range, vector_or<2>(value["depth_range"], config.depth_range, "(min, max) m"));
+  HANZO_ASSIGN_OR_RETURN(config.depth_noise, non_negative_or(value["depth_noise"], config.depth_noise));
   if (const YamlValue lighting = value["lighting"]; lighting.present()) {
     HANZO_RETURN_IF_ERROR(lighting.check_keys({"sun_direction", "ambient", "diffuse", "exposure", "shadows", "tint", "snow_cover"}));
     HANZO_ASSIGN_OR_RETURN(config.sun_direction, vector_or<3>(lighting["sun_direction"], config.sun_direction, "(x, y, z) towards the sun"));

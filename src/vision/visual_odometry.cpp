@@ -133,6 +133,7 @@ Status validate(const VisualOdometryConfig& config) {
   if (!(config.max_stereo_depth_baselines > 0.0)) return Error("VisualOdometryConfig.max_stereo_depth_baselines: must be positive", "max_stereo_depth_baselines");
   if (!(config.moving_object_pixels > 0.0)) return Error("VisualOdometryConfig.moving_object_pixels: must be positive", "moving_object_pixels");
   if (!(config.standstill_share > 0.0 && config.standstill_share <= 1.0)) return Error("VisualOdometryConfig.standstill_share: must be in (0, 1]", "standstill_share");
+  if (!(config.standstill_max_translation > 0.0)) return Error("VisualOdometryConfig.standstill_max_translation: must be positive", "standstill_max_translation");
   if (config.bundle_adjustment_iterations < 0) return Error("VisualOdometryConfig.bundle_adjustment_iterations: must not be negative", "bundle_adjustment_iterations");
   if (config.loop_closure && config.loop_min_keyframe_gap < config.window_keyframes) return Error("VisualOdometryConfig.loop_min_keyframe_gap: must be at least window_keyframes", "loop_min_keyframe_gap");
   if (config.loop_min_inliers < 3) return Error("VisualOdometryConfig.loop_min_inliers: must be at least 3", "loop_min_inliers");
@@ -151,6 +152,7 @@ struct VisualOdometry::State {
   // Stereo: the right camera and where it sits in the left camera's frame.
   std::optional<PinholeCamera> right_camera;
   SE3 T_left_right;
+  bool rgbd = false;  // the "right" keypoints come from a depth image through a virtual camera
 
   std::map<int, Keyframe> keyframes;
   std::map<int, Landmark> landmarks;
@@ -283,6 +285,7 @@ struct VisualOdometry::State {
   // kept by the left keypoint it matches best.
   void match_stereo(Frame& frame) {
     frame.right_keypoint.assign(frame.features.size(), -1);
+    if (rgbd) return match_depth(frame);
     Result<ImageFeatures> right = extract(frame.right_image);
     frame.right_image.release();
     if (!right) return;
@@ -314,6 +317,46 @@ struct VisualOdometry::State {
     }
     for (std::size_t r = 0; r < owner.size(); ++r) {
       if (owner[r].first >= 0) frame.right_keypoint[static_cast<std::size_t>(owner[r].first)] = static_cast<int>(r);
+    }
+  }
+
+  // RGB-D (ORB-SLAM2's virtual stereo, Mur-Artal & Tardos 2017, sec. III-A): each keypoint
+  // with a depth d becomes a right keypoint where its point d (x_n, y_n, 1) projects into a
+  // virtual right camera T_left_right away (the same descriptor), so that the stereo code
+  // (landmarks, bundle adjustment's right projections) uses the depth. A depth is used when the
+  // pixels around the keypoint lie on one smooth surface with it: on a plane the inverse depth
+  // is affine in the pixel, so the centre's is the mean of each opposite pair of neighbours'
+  // (within 3 %); at a depth edge (foreground against background) it is not.
+  void match_depth(Frame& frame) {
+    const cv::Mat depth = frame.right_image;
+    frame.right_image.release();
+    const auto depth_at = [&depth](int row, int column) {
+      const double value = depth.type() == CV_16UC1 ? depth.at<uint16_t>(row, column) * 1e-3 : static_cast<double>(depth.at<float>(row, column));
+      return std::isfinite(value) && value > 0.0 ? value : 0.0;
+    };
+    constexpr double kSmooth = 0.03;
+    const SE3 T_right_left = T_left_right.inverse();
+    frame.right_features.descriptors = cv::Mat(0, frame.features.descriptors.cols, frame.features.descriptors.type());
+    for (std::size_t k = 0; k < frame.features.size(); ++k) {
+      if (!has_normalized(frame, k)) continue;
+      const cv::KeyPoint& keypoint = frame.features.keypoints[k];
+      const int row = static_cast<int>(std::lround(keypoint.pt.y)), column = static_cast<int>(std::lround(keypoint.pt.x));
+      if (row < 1 || column < 1 || row + 1 >= depth.rows || column + 1 >= depth.cols) continue;
+      const double d = depth_at(row, column);
+      if (!(d > 0.0)) continue;
+      bool smooth = true;
+      for (const auto& [dr, dc] : {std::pair{0, 1}, {1, 0}, {1, 1}, {1, -1}}) {
+        const double a = depth_at(row + dr, column + dc), b = depth_at(row - dr, column - dc);
+        smooth = smooth && a > 0.0 && b > 0.0 && std::abs(0.5 * (1.0 / a + 1.0 / b) - 1.0 / d) <= kSmooth / d;
+      }
+      if (!smooth) continue;
+      const std::optional<Eigen::Vector2d> right_pixel = right_camera->project(T_right_left.act(d * frame.normalized[k].homogeneous()));
+      if (!right_pixel) continue;
+      cv::KeyPoint right_keypoint = keypoint;
+      right_keypoint.pt = cv::Point2f(static_cast<float>(right_pixel->x()), static_cast<float>(right_pixel->y()));
+      frame.right_keypoint[k] = static_cast<int>(frame.right_features.keypoints.size());
+      frame.right_features.keypoints.push_back(right_keypoint);
+      frame.right_features.descriptors.push_back(frame.features.descriptors.row(static_cast<int>(k)));
     }
   }
 
@@ -648,10 +691,12 @@ struct VisualOdometry::State {
       if (refined.inlier[i]) frame.landmark[static_cast<std::size_t>(matches[i].first)] = matches[i].second;
     }
     frame.T_world_camera = refined.T_camera_world.inverse();
-    const bool standing = still_anchor && standing_still(frame, *still_anchor);
+    // The anchor's pose as the bundle adjustment has left it (it may have become a keyframe).
+    const auto anchor_pose = [this] { return keyframes.at(still_anchor_record.keyframe).frame.T_world_camera * still_anchor_record.T_keyframe_camera; };
+    const bool standing = still_anchor && standing_still(frame, *still_anchor) &&
+                          (!right_camera || (frame.T_world_camera.translation() - anchor_pose().translation()).norm() <= config.standstill_max_translation);
     if (standing) {
-      // The anchor's pose as the bundle adjustment has left it (it may have become a keyframe).
-      frame.T_world_camera = keyframes.at(still_anchor_record.keyframe).frame.T_world_camera * still_anchor_record.T_keyframe_camera;
+      frame.T_world_camera = anchor_pose();
       result.moving_landmarks_removed = remove_moving_landmarks(frame, matches);
     }
     const double elapsed = frame.time - last_pose_time;
@@ -690,6 +735,16 @@ struct VisualOdometry::State {
     const double radius = config.standstill_pixels;
     const int close = max_distance(anchor.features.descriptors) / 2;
     int still = 0;
+    // Still keypoints per cell of a 4 x 4 grid over the image: moving toward distant features
+    // keeps those around the point it moves toward at their pixels, a standstill keeps them
+    // everywhere, so most cells with keypoints must have a still share of their own.
+    constexpr int kCells = 4;
+    std::array<int, kCells * kCells> cell_keypoints{}, cell_still{};
+    const auto cell_of = [this](const cv::Point2f& point) {
+      const int column = std::clamp(static_cast<int>(point.x * kCells / image_size.width), 0, kCells - 1);
+      const int row = std::clamp(static_cast<int>(point.y * kCells / image_size.height), 0, kCells - 1);
+      return static_cast<std::size_t>(row * kCells + column);
+    };
     for (std::size_t k = 0; k < anchor.features.size(); ++k) {
       const cv::KeyPoint& keypoint = anchor.features.keypoints[k];
       bool found = false;
@@ -699,9 +754,17 @@ struct VisualOdometry::State {
                           descriptor_distance(anchor.features.descriptors, static_cast<int>(k), frame.features.descriptors, candidate) <= close);
       });
       still += found;
+      ++cell_keypoints[cell_of(keypoint.pt)];
+      cell_still[cell_of(keypoint.pt)] += found;
     }
     const double share = static_cast<double>(still) / static_cast<double>(std::max<std::size_t>(1, anchor.features.size()));
-    return share >= config.standstill_share;
+    int occupied = 0, still_cells = 0;
+    for (std::size_t cell = 0; cell < cell_keypoints.size(); ++cell) {
+      if (cell_keypoints[cell] < 4) continue;
+      ++occupied;
+      still_cells += cell_still[cell] >= config.standstill_share * cell_keypoints[cell];
+    }
+    return share >= config.standstill_share && 2 * still_cells >= occupied;
   }
 
   // While the camera stands still the world does not move in the image: a landmark whose
@@ -1169,13 +1232,35 @@ Result<std::unique_ptr<VisualOdometry>> VisualOdometry::create_stereo(const Pinh
   return odometry;
 }
 
+Result<std::unique_ptr<VisualOdometry>> VisualOdometry::create_rgbd(const PinholeCamera& camera, cv::Size image_size, const VisualOdometryConfig& config,
+                                                                    double max_depth) {
+  if (!(max_depth > 0.0) || !std::isfinite(max_depth)) return Error(fmt::format("max_depth: expected > 0 m, got {}", max_depth), "max_depth");
+  Result<std::unique_ptr<VisualOdometry>> odometry =
+      create_stereo(camera, camera, SE3(SO3(), Eigen::Vector3d(max_depth / config.max_stereo_depth_baselines, 0.0, 0.0)), image_size, config);
+  if (odometry) (*odometry)->state_->rgbd = true;
+  return odometry;
+}
+
+Result<VisualOdometryFrame> VisualOdometry::track_rgbd(double time, const cv::Mat& image, const cv::Mat& depth) {
+  if (!state_->rgbd) return Error("visual odometry: track_rgbd needs an odometry made by create_rgbd", "depth");
+  if (depth.size() != image.size()) {
+    return Error(fmt::format("depth image is {} x {}, the colour image {} x {}", depth.cols, depth.rows, image.cols, image.rows), "depth");
+  }
+  if (depth.type() != CV_16UC1 && depth.type() != CV_32FC1) {
+    return Error(fmt::format("depth image: type {} is neither 16-bit millimetres nor 32-bit float metres", cv::typeToString(depth.type())), "depth");
+  }
+  return track_frame(time, image, depth);
+}
+
 Result<VisualOdometryFrame> VisualOdometry::track(double time, const cv::Mat& image) {
+  if (state_->rgbd) return Error("RGB-D visual odometry: track_rgbd(time, image, depth) needs the depth image", "image");
   if (state_->right_camera) return Error("stereo visual odometry: track(time, left, right) needs both images", "image");
   return track_frame(time, image, cv::Mat());
 }
 
 Result<VisualOdometryFrame> VisualOdometry::track(double time, const cv::Mat& left, const cv::Mat& right) {
   if (!state_->right_camera) return Error("monocular visual odometry: track(time, image) takes one image", "image");
+  if (state_->rgbd) return Error("RGB-D visual odometry: track_rgbd(time, image, depth) takes the depth image", "image");
   if (right.size() != left.size()) {
     return Error(fmt::format("right image is {} x {}, the left {} x {}", right.cols, right.rows, left.cols, left.rows), "right_image");
   }
@@ -1193,7 +1278,7 @@ Result<VisualOdometryFrame> VisualOdometry::track_frame(double time, const cv::M
   }
   Result<ImageFeatures> features = with_context(s.extract(image), "image");
   if (!features) return Error(features.error().message, "image");
-  if (!right.empty() && (right.depth() != CV_8U || (right.channels() != 1 && right.channels() != 3 && right.channels() != 4))) {
+  if (!right.empty() && !s.rgbd && (right.depth() != CV_8U || (right.channels() != 1 && right.channels() != 3 && right.channels() != 4))) {
     return Error(fmt::format("right image: type {} is not 8-bit grey, BGR or BGRA", cv::typeToString(right.type())), "right_image");
   }
   s.last_time = time;

@@ -40,6 +40,9 @@ std::optional<FrontendType> frontend_type_from_string(std::string_view name);
 enum class SensorModality { kImu, kLidar, kCamera, kGnss, kWheelOdometry, kRadar, kRange };
 /// SensorConfig::type of a lidar sensor that is a 2D laser scanner (planar scan matching).
 inline constexpr std::string_view kPlanarLaserType = "planar_laser";
+/// SensorConfig::type of a depth camera: its depth images (depth16 / depth32f) are registered to
+/// the camera configured just before it (the same pixel grid), an RGB-D camera's two streams.
+inline constexpr std::string_view kDepthCameraType = "depth";
 std::string_view to_string(SensorModality modality);  // "imu", "lidar", "camera", "gnss", "wheel_odometry", "radar", "range"
 /// The modality a message belongs to (an ImuMessage: imu, a PointCloudMessage: lidar, ...).
 SensorModality modality_of(const msgs::SensorMessage& message);
@@ -206,7 +209,8 @@ struct SensorConfig {
   double rate_hz = 0.0;    // required, > 0: nominal rate, used for timeouts and summaries
   std::string body_frame;  // default "<name>_link"
   std::string type;        // optional model, e.g. "velodyne_vlp16", "stereo_left"; "" when not given;
-                           // kPlanarLaserType marks a 2D laser scanner (its scans are planar)
+                           // kPlanarLaserType marks a 2D laser scanner (its scans are planar),
+                           // kDepthCameraType a camera's registered depth images
   SensorFusionOptions fusion;
   std::optional<FeatureSelection> features = std::nullopt;  // cameras: this camera's features (else fusion.vision.features)
   std::optional<SensorDriverConfig> driver = std::nullopt;  // live input (`drive`); none: fed by logs, gRPC, REST

@@ -17,6 +17,9 @@
 // exposure, shadows, tint or snow is the same place at another time of day or season. supersampling s renders s x s rays per pixel
 // and averages them (anti-aliased edges for sub-pixel corner detection).
 //
+// Depth cameras (encoding depth16 / depth32f): the z-depth of the surface each pixel's centre
+// sees, as a depth camera registered to a colour camera of the same intrinsics and mount gives.
+//
 // Faults inside an episode's [start, end]:
 //   darkness      radiance * brightness (e.g. 0.05), pixel noise * noise_scale (gain noise)
 //   glare         a saturating bloom: + strength * exp(-d^2 / (2 radius^2)) around `center`
@@ -63,7 +66,12 @@ struct CameraSimulatorConfig {
   double rate_hz = 20.0;
   msgs::CameraIntrinsics intrinsics{400.0, 400.0, 319.5, 239.5, 640, 480};
   msgs::DistortionModel distortion;  ///< none, radtan or equidistant
-  msgs::ImageEncoding encoding = msgs::ImageEncoding::kMono8;  ///< mono8 or rgb8
+  /// mono8 or rgb8; depth16 (mm) or depth32f (m) for a depth camera: the z-depth of each pixel's
+  /// centre ray (supersampling, lighting and faults do not apply), 0 (depth16) or NaN (depth32f)
+  /// outside depth_range, with Gaussian noise of depth_noise x depth^2.
+  msgs::ImageEncoding encoding = msgs::ImageEncoding::kMono8;
+  Eigen::Vector2d depth_range{0.3, 10.0};  ///< m: the depth camera's measuring range
+  double depth_noise = 0.0014;             ///< 1/m: standard deviation per depth^2 (a structured-light sensor's 1.4 mm at 1 m)
   SE3 T_body_camera;
   int supersampling = 1;                                ///< rays per pixel along each axis, 1..4
   double pixel_noise = 2.0;                             ///< grey levels (of 255), standard deviation
@@ -94,8 +102,11 @@ class CameraSimulator {
 
  private:
   CameraSimulator(CameraSimulatorConfig config, const World& world, const SplineTrajectory& trajectory);
-  /// Linear RGB radiance of every pixel (supersamples averaged) seen from the pose at time.
-  void render(Timestamp time, std::vector<Eigen::Vector3f>& radiance) const;
+  /// Linear RGB radiance of every pixel (supersamples averaged) seen from the pose at time; with
+  /// `depth`, instead the z-depth of each ray that hits (NaN for none; depth cameras cast one
+  /// ray per pixel).
+  void render(Timestamp time, std::vector<Eigen::Vector3f>& radiance, std::vector<float>* depth = nullptr) const;
+  msgs::ImageMessage measure_depth(Timestamp time);
 
   CameraSimulatorConfig config_;
   const World* world_;

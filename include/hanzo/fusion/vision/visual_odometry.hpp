@@ -47,6 +47,8 @@
 //     pose noise); a slow creep adds up against that frame until it shows. Landmarks whose
 //     keypoints move while the camera stands still are on moving objects: they are removed;
 //
+// RGB-D: as stereo, with the depth image standing in for the right image (create_rgbd).
+//
 // Frames: the world frame is the first keyframe's camera frame (x right, y down, z forward);
 // poses are T_world_camera. Pixels as PinholeCamera (distorted pixels in, distortion handled by
 // the projection model). Each frame's pose is kept relative to its reference keyframe, so
@@ -116,6 +118,10 @@ struct VisualOdometryConfig {
   /// beside passing trucks (KITTI raw 0052), 0.10-0.20 driving at 2.5 m/s, 0.01-0.03 at 11 m/s.
   double standstill_pixels = 1.0;
   double standstill_share = 0.2;
+  /// Metric odometry (stereo, RGB-D): not standing still when the frame's refined pose is this
+  /// far (m) from the anchor's; driving toward distant features keeps a share of them at their
+  /// pixels, which the pixel test alone takes for a standstill.
+  double standstill_max_translation = 0.05;
   /// While standing still, a landmark whose keypoint moved more than this (pixels at octave 0)
   /// from where the last frame in motion saw it is on a moving object and is removed.
   double moving_object_pixels = 10.0;
@@ -210,10 +216,20 @@ class VisualOdometry {
   static Result<std::unique_ptr<VisualOdometry>> create_stereo(const PinholeCamera& left, const PinholeCamera& right, const SE3& T_left_right,
                                                                cv::Size image_size, const VisualOdometryConfig& config = {});
 
+  /// RGB-D: a camera with a depth image registered to it (the same pixel grid): metric from the
+  /// first frame, as stereo. Depths are turned into a virtual right camera's keypoints
+  /// (ORB-SLAM2's RGB-D as stereo) placed max_depth / max_stereo_depth_baselines to the right, so
+  /// depths beyond max_depth (m) are not made landmarks. Fails as create().
+  static Result<std::unique_ptr<VisualOdometry>> create_rgbd(const PinholeCamera& camera, cv::Size image_size, const VisualOdometryConfig& config = {},
+                                                             double max_depth = 10.0);
+
   /// Monocular: tracks one image (8-bit grey, BGR or BGRA) taken at `time` (seconds).
   Result<VisualOdometryFrame> track(double time, const cv::Mat& image);
   /// Stereo: a synchronized pair (same size and types as above).
   Result<VisualOdometryFrame> track(double time, const cv::Mat& left, const cv::Mat& right);
+  /// RGB-D: the image and its depth (the same size; CV_16UC1 millimetres or CV_32FC1 metres,
+  /// 0 or NaN where there is none).
+  Result<VisualOdometryFrame> track_rgbd(double time, const cv::Mat& image, const cv::Mat& depth);
 
   /// Every tracked frame's time and T_world_camera after the latest bundle adjustment.
   std::vector<std::pair<double, SE3>> trajectory() const;
