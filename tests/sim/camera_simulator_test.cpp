@@ -3,6 +3,7 @@
 // image as they should; rendering is deterministic.
 
 #include <cmath>
+#include <cstring>
 
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
@@ -237,6 +238,74 @@ TEST(CameraSimulator, DarknessGlareAndMotionBlur) {
   EXPECT_EQ(again.measure(kStart + Duration::from_seconds(0.5)).data, normal.data);
 }
 
+// A depth camera facing a wall 5 m ahead: every pixel on the wall reads its z-depth (5 m; in
+// millimetres for depth16, metres for depth32f), the sky nothing, noise as configured, and a
+// range that ends before the wall leaves it out.
+TEST(CameraSimulator, DepthImagesHoldEachPixelsZDepth) {
+  WorldDescription description;
+  description.has_ground = false;
+  Box wall;
+  wall.center = {5.5, 0.0, 1.5};
+  wall.half_size = {0.5, 3.0, 1.5};
+  description.boxes.push_back(wall);
+  const World world(description);
+  const SplineTrajectory still = trajectory();
+  CameraSimulatorConfig config;
+  config.T_body_camera = forward_camera();
+  config.depth_noise = 0.0;
+  for (const msgs::ImageEncoding encoding : {msgs::ImageEncoding::kDepth16, msgs::ImageEncoding::kDepth32f}) {
+    config.encoding = encoding;
+    Result<CameraSimulator> camera = CameraSimulator::create(config, world, still);
+    ASSERT_TRUE(camera) << camera.error().message;
+    const msgs::ImageMessage image = camera->measure(kStart + Duration::from_seconds(1.0));
+    ASSERT_TRUE(msgs::validate(image));
+    ASSERT_EQ(image.encoding, encoding);
+    int on_wall = 0, empty = 0;
+    for (uint32_t row = 0; row < image.height; ++row) {
+      for (uint32_t column = 0; column < image.width; ++column) {
+        const std::size_t p = std::size_t{row} * image.width + column;
+        double depth = 0.0;
+        if (encoding == msgs::ImageEncoding::kDepth16) {
+          uint16_t millimetres = 0;
+          std::memcpy(&millimetres, &image.data[2 * p], 2);
+          depth = millimetres * 1e-3;
+        } else {
+          float metres = 0.0F;
+          std::memcpy(&metres, &image.data[4 * p], 4);
+          depth = std::isfinite(metres) ? metres : 0.0;
+        }
+        if (depth == 0.0) {
+          ++empty;
+          continue;
+        }
+        EXPECT_NEAR(depth, 5.0, encoding == msgs::ImageEncoding::kDepth16 ? 0.0006 : 1e-4) << row << ", " << column;
+        ++on_wall;
+      }
+    }
+    EXPECT_GT(on_wall, 100000);  // the wall, 3 m high and 6 m wide
+    EXPECT_GT(empty, 10000);     // the sky around it
+  }
+  config.encoding = msgs::ImageEncoding::kDepth32f;
+  config.depth_noise = 0.0014;
+  Result<CameraSimulator> noisy = CameraSimulator::create(config, world, still);
+  const msgs::ImageMessage image = noisy->measure(kStart + Duration::from_seconds(1.0));
+  const float* depth = reinterpret_cast<const float*>(image.data.data());
+  double sum = 0.0, squares = 0.0;
+  int count = 0;
+  for (std::size_t p = 0; p < std::size_t{image.width} * image.height; ++p) {
+    if (!std::isfinite(depth[p])) continue;
+    sum += depth[p] - 5.0;
+    squares += (depth[p] - 5.0) * (depth[p] - 5.0);
+    ++count;
+  }
+  EXPECT_NEAR(sum / count, 0.0, 0.002);
+  EXPECT_NEAR(std::sqrt(squares / count), 0.0014 * 25.0, 0.004);
+  config.depth_range = {0.3, 4.0};
+  const msgs::ImageMessage out_of_range = CameraSimulator::create(config, world, still)->measure(kStart + Duration::from_seconds(1.0));
+  const float* beyond = reinterpret_cast<const float*>(out_of_range.data.data());
+  EXPECT_TRUE(std::none_of(beyond, beyond + std::size_t{out_of_range.width} * out_of_range.height, [](float d) { return std::isfinite(d); }));
+}
+
 TEST(CameraSimulator, RejectsBadConfigurations) {
   const World world = checker_world();
   const SplineTrajectory still = trajectory();
@@ -246,7 +315,10 @@ TEST(CameraSimulator, RejectsBadConfigurations) {
   ASSERT_FALSE(bad);
   EXPECT_NE(bad.error().message.find("coefficients"), std::string::npos);
   config = CameraSimulatorConfig{};
+  config.encoding = msgs::ImageEncoding::kBgr8;
+  EXPECT_FALSE(CameraSimulator::create(config, world, still));
   config.encoding = msgs::ImageEncoding::kDepth16;
+  config.depth_range = {2.0, 1.0};
   EXPECT_FALSE(CameraSimulator::create(config, world, still));
   config = CameraSimulatorConfig{};
   config.intrinsics.width = 0;

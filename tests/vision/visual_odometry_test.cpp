@@ -90,6 +90,16 @@ TEST(VisualOdometry, RefusesBadFramesAndReportsBlindOnes) {
   EXPECT_EQ(back->state, TrackingState::kTracking) << back->reason;
   EXPECT_EQ(odometry->summary().lost_frames, 1);
   EXPECT_FALSE(VisualOdometry::create(PinholeCamera{}, {0, 0}).ok());
+  // RGB-D: the depth image must match the colour image and be millimetres or metres.
+  auto rgbd = VisualOdometry::create_rgbd(sequence.camera, {1226, 370}).value();
+  const cv::Mat image(370, 1226, CV_8UC1, cv::Scalar(0));
+  EXPECT_NE(rgbd->track(0.0, image).error().message.find("track_rgbd"), std::string::npos);
+  EXPECT_EQ(rgbd->track_rgbd(0.0, image, cv::Mat(100, 100, CV_16UC1)).error().field, "depth");
+  EXPECT_NE(rgbd->track_rgbd(0.0, image, cv::Mat(370, 1226, CV_8UC1)).error().message.find("neither 16-bit millimetres nor 32-bit float metres"),
+            std::string::npos);
+  EXPECT_TRUE(rgbd->track_rgbd(0.0, image, cv::Mat(370, 1226, CV_16UC1, cv::Scalar(0))).ok());
+  EXPECT_FALSE(odometry->track_rgbd(50.0, image, cv::Mat(370, 1226, CV_16UC1)).ok());  // not an RGB-D odometry
+  EXPECT_EQ(VisualOdometry::create_rgbd(sequence.camera, {1226, 370}, {}, 0.0).error().field, "max_depth");
   PinholeCamera no_focal = sequence.camera;
   no_focal.fx = 0.0;
   EXPECT_EQ(VisualOdometry::create(no_focal, {1226, 370}).error().field, "camera");
