@@ -281,6 +281,7 @@ int run_tum_rgbd_import(const Output& output, const ImportOptions& options) {
   if (code != 0) return code;
   result["rgb_images"] = report.rgb_images;
   result["depth_images"] = report.depth_images;
+  result["depth_unpaired"] = report.depth_unpaired;
   result["rejected"] = report.rejected;
   result["first_rejection"] = report.first_rejection;
   result["camera_model"] = report.camera_model;
@@ -288,6 +289,9 @@ int run_tum_rgbd_import(const Output& output, const ImportOptions& options) {
                                  report.rgb_images, config.rgb_topic, report.depth_images, config.depth_topic,
                                  report.camera_model.empty() ? "none (folder name names no freiburg Kinect)" : report.camera_model);
   if (report.rejected > 0) text += fmt::format("  {} rejected (first: {})\n", report.rejected, report.first_rejection);
+  if (report.depth_unpaired > 0) {
+    text += fmt::format("  {} depth images without a colour image within {} s left out\n", report.depth_unpaired, config.max_depth_offset);
+  }
   return write_dataset_outputs(output, result, text, options, {&report.ground_truth, &report.calibration});
 }
 

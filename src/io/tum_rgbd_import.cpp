@@ -1,6 +1,7 @@
 #include "hanzo/fusion/io/tum_rgbd_import.hpp"
 
 #include <algorithm>
+#include <tuple>
 #include <filesystem>
 #include <sstream>
 
@@ -63,6 +64,32 @@ std::optional<calib::CameraCalibration> kinect_of(const std::string& folder_name
   return std::nullopt;
 }
 
+// Each depth entry stamped with the nearest colour entry's time within max_offset, one-to-one
+// (pairs taken nearest first); the others counted and left out. In time order.
+std::vector<ListEntry> paired_with_colour(const std::vector<ListEntry>& depth, const std::vector<ListEntry>& rgb, double max_offset,
+                                          TumRgbdImportReport& report) {
+  std::vector<std::tuple<double, std::size_t, std::size_t>> candidates;  // (|dt|, depth, rgb)
+  for (std::size_t d = 0; d < depth.size(); ++d) {
+    const auto after = std::lower_bound(rgb.begin(), rgb.end(), depth[d].time, [](const ListEntry& e, Timestamp t) { return e.time < t; });
+    for (auto it : {after, after == rgb.begin() ? rgb.end() : std::prev(after)}) {
+      if (it == rgb.end()) continue;
+      const double offset = std::abs((it->time - depth[d].time).seconds());
+      if (offset <= max_offset) candidates.emplace_back(offset, d, static_cast<std::size_t>(it - rgb.begin()));
+    }
+  }
+  std::sort(candidates.begin(), candidates.end());
+  std::vector<bool> depth_used(depth.size(), false), rgb_used(rgb.size(), false);
+  std::vector<ListEntry> paired;
+  for (const auto& [offset, d, r] : candidates) {
+    if (depth_used[d] || rgb_used[r]) continue;
+    depth_used[d] = rgb_used[r] = true;
+    paired.push_back({rgb[r].time, depth[d].file});
+  }
+  report.depth_unpaired = depth.size() - paired.size();
+  std::sort(paired.begin(), paired.end(), [](const ListEntry& a, const ListEntry& b) { return a.time < b.time; });
+  return paired;
+}
+
 }  // namespace
 
 Result<TumRgbdImportReport> import_tum_rgbd(const std::string& dir, SensorLogWriter& writer, const TumRgbdImportConfig& config) {
@@ -76,6 +103,7 @@ Result<TumRgbdImportReport> import_tum_rgbd(const std::string& dir, SensorLogWri
     HANZO_ASSIGN_OR_RETURN(report.ground_truth, read_trajectory((root / "groundtruth.txt").string(), TrajectoryFormat::kTum));
   }
 
+  if (config.max_depth_offset > 0.0 && !depth.empty()) depth = paired_with_colour(depth, rgb, config.max_depth_offset, report);
   std::optional<calib::CameraCalibration> camera = config.camera;
   if (camera) {
     report.camera_model = "config";

@@ -357,8 +357,10 @@ TEST(TumRgbdImport, ColourAndDepthMergedWithFreiburgIntrinsics) {
     ASSERT_TRUE(cv::imwrite((dir / "depth" / fmt::format("{}.png", stamp)).string(), depth));
   }
   TumRgbdImportReport report;
+  TumRgbdImportConfig own_times;
+  own_times.max_depth_offset = 0.0;  // the depth images' own times
   auto entries = import_and_read(root, [&](SensorLogWriter& writer) -> Status {
-    HANZO_ASSIGN_OR_RETURN(report, import_tum_rgbd(dir.string(), writer, {}));
+    HANZO_ASSIGN_OR_RETURN(report, import_tum_rgbd(dir.string(), writer, own_times));
     return ok_status();
   });
   ASSERT_TRUE(entries.ok()) << entries.error().message;
@@ -385,6 +387,26 @@ TEST(TumRgbdImport, ColourAndDepthMergedWithFreiburgIntrinsics) {
   EXPECT_EQ(report.ground_truth.size(), 2u);
   EXPECT_EQ(report.calibration.sensors.size(), 2u);
   EXPECT_TRUE(calib::validate(report.calibration).ok());
+
+  // By default each depth image takes the time of the colour image it pairs with (nearest,
+  // within 20 ms, one each), as an RGB-D odometry needs them; one 25 ms from any is left out.
+  write_text(dir / "depth.txt", header + "1305031102.160407 depth/1305031102.160407.png\n1305031102.194330 depth/1305031102.194330.png\n"
+                                         "1305031102.236300 depth/1305031102.194330.png\n");
+  auto paired = import_and_read(root, [&](SensorLogWriter& writer) -> Status {
+    HANZO_ASSIGN_OR_RETURN(report, import_tum_rgbd(dir.string(), writer, {}));
+    return ok_status();
+  });
+  ASSERT_TRUE(paired.ok()) << paired.error().message;
+  EXPECT_EQ(report.depth_images, 2u);
+  EXPECT_EQ(report.depth_unpaired, 1u);
+  std::vector<std::pair<std::string, int64_t>> stamped;
+  for (const LogEntry& entry : *paired) {
+    stamped.emplace_back(entry.topic, std::get<msgs::ImageMessage>(std::get<msgs::SensorMessage>(entry.message)).timestamp.nanoseconds());
+  }
+  EXPECT_EQ(stamped, (std::vector<std::pair<std::string, int64_t>>{{"/rgb", 1305031102175304000},
+                                                                    {"/depth", 1305031102175304000},
+                                                                    {"/rgb", 1305031102211214000},
+                                                                    {"/depth", 1305031102211214000}}));
 
   write_text(dir / "rgb.txt", header + "1305031102.175304 rgb/1305031102.175304.png extra\n");
   auto bad = import_and_read(root, [&](SensorLogWriter& writer) -> Status { return status_of(import_tum_rgbd(dir.string(), writer, {})); });

@@ -12,7 +12,8 @@
 // out unless CameraIntrinsics are given in the config. accelerometer.txt (the Kinect's tilt
 // sensor, no gyroscope) is not imported: it is not an IMU.
 // Calibration: both cameras at the body origin (body = colour camera; the depth images are
-// registered to it). A row whose time does not increase is left out and counted.
+// registered to it). A row whose time does not increase is left out and counted. Depth images
+// take the time of the colour image they pair with (max_depth_offset).
 
 #include <cstdint>
 #include <optional>
@@ -30,6 +31,11 @@ struct TumRgbdImportConfig {
   std::string rgb_topic = "/rgb";
   std::string depth_topic = "/depth";
   bool import_depth = true;
+  /// Seconds: each depth image is paired with the colour image nearest in time within this
+  /// (each colour image with at most one, the nearest: TUM's associate.py) and stamped with its
+  /// time, as an RGB-D odometry pairs them; depth images without a colour image that near are
+  /// left out and counted. 0 keeps the depth images' own times.
+  double max_depth_offset = 0.02;
   /// Overrides the intrinsics chosen from the folder name.
   std::optional<calib::CameraCalibration> camera;
 };
@@ -38,6 +44,7 @@ struct TumRgbdImportReport {
   uint64_t rgb_images = 0;
   uint64_t depth_images = 0;
   uint64_t rejected = 0;  ///< rows whose time did not increase
+  uint64_t depth_unpaired = 0;  ///< depth images without a colour image within max_depth_offset
   std::string first_rejection;
   std::string camera_model;        ///< "freiburg1" / "freiburg2" / "freiburg3" / "config" / "" (none)
   Trajectory ground_truth;         ///< empty without groundtruth.txt
