@@ -251,10 +251,7 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
   }
 }
 
-msgs::ImageMessage CameraSimulator::measure_depth(Timestamp time) {
-  std::vector<Eigen::Vector3f> unused;
-  std::vector<float> depth;
-  render(time, unused, &depth);
+msgs::ImageMessage CameraSimulator::image_header(Timestamp time) const {
   msgs::ImageMessage image;
   image.timestamp = time;
   image.frame_id = config_.frame_id;
@@ -263,18 +260,31 @@ msgs::ImageMessage CameraSimulator::measure_depth(Timestamp time) {
   image.encoding = config_.encoding;
   image.intrinsics = config_.intrinsics;
   if (config_.distortion.type != msgs::DistortionType::kNone) image.distortion = config_.distortion;
+  return image;
+}
+
+float CameraSimulator::next_normal(uint64_t& state) const {
+  state ^= state << 13;
+  state ^= state >> 7;
+  state ^= state << 17;
+  return normal_table_[state >> (64 - kNormalTableBits)];
+}
+
+msgs::ImageMessage CameraSimulator::measure_depth(Timestamp time) {
+  std::vector<Eigen::Vector3f> unused;
+  std::vector<float> depth;
+  render(time, unused, &depth);
+  msgs::ImageMessage image = image_header(time);
   const bool millimetres = config_.encoding == msgs::ImageEncoding::kDepth16;
   image.data.resize(depth.size() * (millimetres ? 2 : 4));
   uint64_t state = random_() | 1U;
   for (std::size_t p = 0; p < depth.size(); ++p) {
-    state ^= state << 13;
-    state ^= state >> 7;
-    state ^= state << 17;
     float value = depth[p];
+    const float normal = next_normal(state);
     if (!(value >= config_.depth_range.x() && value <= config_.depth_range.y())) {
       value = std::numeric_limits<float>::quiet_NaN();
     } else {
-      value += static_cast<float>(config_.depth_noise) * value * value * normal_table_[state >> (64 - kNormalTableBits)];
+      value += static_cast<float>(config_.depth_noise) * value * value * normal;
     }
     if (millimetres) {
       const auto mm = static_cast<uint16_t>(std::isfinite(value) ? std::clamp(std::lround(value * 1000.0F), 0L, 65535L) : 0L);
@@ -317,14 +327,7 @@ msgs::ImageMessage CameraSimulator::measure(Timestamp time) {
     render(time, radiance);
   }
 
-  msgs::ImageMessage image;
-  image.timestamp = time;
-  image.frame_id = config_.frame_id;
-  image.width = config_.intrinsics.width;
-  image.height = config_.intrinsics.height;
-  image.encoding = config_.encoding;
-  image.intrinsics = config_.intrinsics;
-  if (config_.distortion.type != msgs::DistortionType::kNone) image.distortion = config_.distortion;
+  msgs::ImageMessage image = image_header(time);
   const bool rgb = config_.encoding == msgs::ImageEncoding::kRgb8;
   image.data.resize(radiance.size() * (rgb ? 3 : 1));
   // Pixel noise: standard normal draws from a table filled once from the seed, indexed by a
@@ -332,10 +335,7 @@ msgs::ImageMessage CameraSimulator::measure(Timestamp time) {
   uint64_t state = random_() | 1U;
   const auto noise_level = static_cast<float>(noise);
   auto quantize = [&](float value) {
-    state ^= state << 13;
-    state ^= state >> 7;
-    state ^= state << 17;
-    const float level = value * 255.0F + noise_level * normal_table_[state >> (64 - kNormalTableBits)] + 0.5F;
+    const float level = value * 255.0F + noise_level * next_normal(state) + 0.5F;
     return static_cast<uint8_t>(std::clamp(level, 0.0F, 255.0F));
   };
   for (int row = 0; row < height; ++row) {

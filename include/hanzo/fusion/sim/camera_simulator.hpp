@@ -107,6 +107,10 @@ class CameraSimulator {
   /// ray per pixel).
   void render(Timestamp time, std::vector<Eigen::Vector3f>& radiance, std::vector<float>* depth = nullptr) const;
   msgs::ImageMessage measure_depth(Timestamp time);
+  /// The message without pixels: time, frame, size, encoding, intrinsics and distortion.
+  msgs::ImageMessage image_header(Timestamp time) const;
+  /// The next standard normal draw of the per-frame xorshift sequence `state`.
+  float next_normal(uint64_t& state) const;
 
   CameraSimulatorConfig config_;
   const World* world_;
