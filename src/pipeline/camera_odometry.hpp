@@ -94,6 +94,8 @@ class CameraOdometry {
   /// The rig a camera belongs to (null for a camera the odometry does not take).
   const Rig* rig_of(std::string_view sensor) const;
   bool stereo() const { return rigs_[0].stereo(); }
+  /// Rig 0 gives metric poses by itself: a stereo pair or an RGB-D camera.
+  bool metric() const { return !rigs_[0].right_sensor.empty(); }
   const std::string& left_sensor() const { return rigs_[0].left_sensor; }
   const std::string& right_sensor() const { return rigs_[0].right_sensor; }
   const SE3& T_body_left() const { return rigs_[0].T_body_left; }

@@ -739,7 +739,7 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
     }
   }
   // (A monocular visual-inertial odometry is metric.)
-  const bool monocular_with_imu = frontend_->has_imu() && !camera_odometry_->stereo() && !camera_odometry_->visual_inertial();
+  const bool monocular_with_imu = frontend_->has_imu() && !camera_odometry_->metric() && !camera_odometry_->visual_inertial();
   Status fused = ok_status();
   if (visual_world_ && !monocular_with_imu) {
     // Poses of the camera: 5.5 cm and 1 degree (its slow drift is not in the covariance, as
@@ -1303,10 +1303,10 @@ SessionSummary Session::summary() const {
     // of the poses it fused or gated; its monitoring of the fused poses stays.
     sensor.received = camera->second.received;
     sensor.rejected = camera->second.rejected;
-    // A stereo pair is one measurement, its outcomes counted on the left camera: the right one
-    // shows the same, so that each camera's images add up.
+    // A stereo pair (an RGB-D camera) is one measurement, its outcomes counted on the left
+    // camera: the right (depth) one shows the same, so that each camera's images add up.
     const CameraOdometry::Rig* rig = camera_odometry_ ? camera_odometry_->rig_of(sensor.name) : nullptr;
-    if (rig != nullptr && rig->stereo() && sensor.name == rig->right_sensor) {
+    if (rig != nullptr && !rig->right_sensor.empty() && sensor.name == rig->right_sensor) {
       const auto left = camera_statistics_.find(rig->left_sensor);
       if (left != camera_statistics_.end()) {
         for (const auto& [reason, count] : left->second.rejected) {
