@@ -80,7 +80,8 @@ Status apply_vision_config(const config::FusionConfig& config, const std::string
   return ok_status();
 }
 
-// A depth image's pixels (no copy): depth16 millimetres as CV_16UC1, depth32f metres as CV_32FC1.
+// A depth image's pixels (copied: the frame may wait for its colour image after the message is
+// gone): depth16 millimetres as CV_16UC1, depth32f metres as CV_32FC1.
 Result<cv::Mat> depth_image(const msgs::ImageMessage& image) {
   const bool millimetres = image.encoding == msgs::ImageEncoding::kDepth16;
   if (!millimetres && image.encoding != msgs::ImageEncoding::kDepth32f) {
@@ -92,7 +93,8 @@ Result<cv::Mat> depth_image(const msgs::ImageMessage& image) {
                              msgs::to_string(image.encoding), needed));
   }
   return cv::Mat(static_cast<int>(image.height), static_cast<int>(image.width), millimetres ? CV_16UC1 : CV_32FC1,
-                 const_cast<uint8_t*>(image.data.data()));
+                 const_cast<uint8_t*>(image.data.data()))
+      .clone();
 }
 
 }  // namespace
