@@ -102,16 +102,20 @@ struct Frontend::Impl final : UpdateObserver {
   /// Records the PoseEstimate at the estimator's time as latest_pose; calls the pose callback
   /// when notify (not for poses recomputed while re-fusing after a late message) and the pose
   /// is newer than the last one the callback got (the pose stream stays in time order).
-  void emit_pose(bool notify);
+  /// A pose emitted for a gated measurement (the motion model's prediction) is DEGRADED.
+  void emit_pose(bool notify, bool gated = false);
   void update_timeouts();
-  /// Poses come from fused IMU messages; without an IMU from every fused measurement (not
-  /// from motion-model ticks, which only predict).
+  /// Poses come from fused IMU messages; without an IMU from every measurement fused or gated
+  /// (a gated one's pose is the motion model's prediction at its time, emitted DEGRADED: the
+  /// pose stream does not thin out where a sensor disagrees), not from motion-model ticks.
   bool emits_pose(const Event& event, const EventOutcome& outcome) const {
-    if (!outcome.fused || !estimator.initialized()) return false;
-    if (imu_sensor) return event.is_imu;
+    if (!estimator.initialized()) return false;
+    if (imu_sensor) return outcome.fused && event.is_imu;
+    if (!outcome.fused && !gated(outcome)) return false;
     return std::holds_alternative<msgs::SensorMessage>(event.payload) || std::holds_alternative<PoseMeasurement>(event.payload) ||
            std::holds_alternative<VelocityMeasurement>(event.payload);
   }
+  static bool gated(const EventOutcome& outcome) { return !outcome.fused && outcome.reason == Rejection::kGated; }
   msgs::PoseStatus pose_status() const;
 
   config::FusionConfig config;
@@ -479,7 +483,7 @@ void Frontend::Impl::fuse_in_order(Event event) {
   const EventOutcome outcome = estimator.process(event, this);
   count(event, outcome);
   if (config.frontend.lag_window_s > 0.0) history.push_back({event, estimator});
-  if (emits_pose(event, outcome)) emit_pose(true);
+  if (emits_pose(event, outcome)) emit_pose(true, gated(outcome));
   if (outcome.keyframe) hold_keyframe(*outcome.keyframe);
   report_fused(event, outcome);
 }
@@ -545,7 +549,7 @@ void Frontend::Impl::fuse_late(Event event) {
   // still gets its pose, as of its own time: poses come from IMU messages only, and those
   // arrive in order, so the pose stream stays in time order. Without an IMU a late
   // measurement gets its pose when it is newer than the last one emitted (emit_pose).
-  if (emits_pose(event, outcome)) emit_pose(true);
+  if (emits_pose(event, outcome)) emit_pose(true, gated(outcome));
   // It can make a keyframe, and so can the messages re-fused after it: held until final.
   if (outcome.keyframe) hold_keyframe(*outcome.keyframe);
   report_fused(event, outcome);
@@ -556,7 +560,7 @@ void Frontend::Impl::fuse_late(Event event) {
   for (size_t i = index + 1; i < history.size(); ++i) {
     const EventOutcome again = estimator.process(history[i].event, nullptr);
     history[i].after = estimator;
-    if (emits_pose(history[i].event, again)) emit_pose(false);
+    if (emits_pose(history[i].event, again)) emit_pose(false, gated(again));
     if (again.keyframe) hold_keyframe(*again.keyframe);
   }
   replaying = false;
@@ -607,7 +611,7 @@ msgs::PoseStatus Frontend::Impl::pose_status() const {
   return status;
 }
 
-void Frontend::Impl::emit_pose(bool notify) {
+void Frontend::Impl::emit_pose(bool notify, bool gated) {
   update_timeouts();
   const estimate::NavigationState state = estimator.filter().state();
   const estimate::ErrorCovariance covariance = estimator.filter().covariance();
@@ -619,6 +623,7 @@ void Frontend::Impl::emit_pose(bool notify) {
   pose.velocity = state.velocity;
   pose.pose_covariance = covariance.topLeftCorner<6, 6>();
   pose.status = pose_status();
+  if (gated && pose.status.state == msgs::TrackingState::kTracking) pose.status.state = msgs::TrackingState::kDegraded;
   latest_pose = pose;
   if (!notify || (last_notified && pose.timestamp <= *last_notified)) return;
   last_notified = pose.timestamp;

@@ -48,6 +48,15 @@ bool configures_gnss(const config::FusionConfig& config) {
                      [](const config::SensorConfig& sensor) { return sensor.modality == config::SensorModality::kGnss; });
 }
 
+// Whether a sensor other than the cameras (and rangefinders, which give the height alone) tells
+// the filter how the body moves: without one the camera's odometry is the estimate's only source
+// of motion.
+bool configures_motion_beside_cameras(const config::FusionConfig& config) {
+  return std::any_of(config.sensors.begin(), config.sensors.end(), [](const config::SensorConfig& sensor) {
+    return sensor.modality != config::SensorModality::kCamera && sensor.modality != config::SensorModality::kRange;
+  });
+}
+
 Timestamp sweep_end(const msgs::PointCloudMessage& scan) {
   if (scan.point_timestamps.empty()) return scan.timestamp;
   return *std::max_element(scan.point_timestamps.begin(), scan.point_timestamps.end());
@@ -700,6 +709,10 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
     // image's condition the health's reason.
     const bool lost = frame.frame.state == vision::TrackingState::kLost;
     count_lefts(lost ? Rejection::kTrackingLost : Rejection::kBeforeInitialization);
+    // (A bounded list: a camera that never initializes keeps its newest frames.)
+    constexpr size_t kInitializingFramesKept = 256;
+    if (lost || initializing_frames_.size() >= kInitializingFramesKept) initializing_frames_.clear();
+    if (!lost) initializing_frames_.emplace_back(frame.time, frame.sensors);
     if (lost) {
       switch (frame.image_quality.condition) {
         case vision::ImageCondition::kDark: camera_lost_reason_ = HealthReason::kDark; break;
@@ -749,11 +762,16 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
     // otherwise: it rejected its outliers feature by feature, and it integrates the same IMU with
     // the images' help, so where the two disagree (a correction after a stretch with few
     // features) it is the one to follow. With GNSS the gate stays: the fixes may rightly
-    // disagree with the odometry's drift.
+    // disagree with the odometry's drift. Without any other sensor of the body's motion the gate
+    // has only the motion model's guess to check the poses against (it dropped the frames of a
+    // car speeding up after the first ones): the odometry's poses are the estimate.
     Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
     covariance.diagonal() << 3e-3, 3e-3, 3e-3, 3e-4, 3e-4, 3e-4;
+    const config::FusionConfig& fusion = frontend_->config();
+    const bool gated = configures_gnss(fusion) || (!camera_odometry_->visual_inertial() && configures_motion_beside_cameras(fusion));
+    if (frame.frame.map_origin_time && !frontend_->has_imu()) fuse_map_origin(*frame.frame.map_origin_time, covariance);
     fused = frontend_->push_pose(camera_odometry_->left_sensor(), sensor_time, *visual_world_ * frame.T_world_body * camera_odometry_->T_body_left(), covariance,
-                                 !camera_odometry_->visual_inertial() || configures_gnss(frontend_->config()));
+                                 gated);
   }
   if (monocular_with_imu) {
     count_lefts(Rejection::kNotFused);  // monocular scale: needs visual-inertial initialization
@@ -767,12 +785,32 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
   } else {
     logger()->debug("session: visual odometry pose not fused: {}", fused.error().message);
   }
+  initializing_frames_.clear();
   if (!visual_loops_.empty() && fused && visual_world_ && latest_keyframe_ && !restart_graph_) {
     for (const auto& [rig, left] : frame.left_images) add_visual_place(frame.time, rig, left, frame.T_world_body);
   }
   register_ready_scans();
   update_backend();
   return {};
+}
+
+void Session::fuse_map_origin(double origin_time, const Eigen::Matrix<double, 6, 6>& covariance) {
+  // The frame is the one reported initializing at that time (the odometry's clock is the frame
+  // time in seconds); the world origin is its camera's pose.
+  const auto origin = std::find_if(initializing_frames_.begin(), initializing_frames_.end(),
+                                   [origin_time](const auto& frame) { return frame.first.seconds() == origin_time; });
+  if (origin == initializing_frames_.end()) return;
+  const Timestamp sensor_time = origin->first - camera_odometry_->left_time_offset();
+  if (!frontend_->push_pose(camera_odometry_->left_sensor(), sensor_time, *visual_world_ * camera_odometry_->T_body_left(), covariance, false)) return;
+  // Counted before its initialization when it came: fused now.
+  for (const std::string& camera : origin->second) {
+    SensorStatistics& statistics = camera_statistics_[camera];
+    if (camera == camera_odometry_->rig_of(camera)->left_sensor) {
+      const auto before = statistics.rejected.find(Rejection::kBeforeInitialization);
+      if (before != statistics.rejected.end() && --before->second == 0) statistics.rejected.erase(before);
+    }
+    ++statistics.fused;
+  }
 }
 
 void Session::add_visual_place(Timestamp time, int rig, const cv::Mat& image, const SE3& T_odometry_body) {

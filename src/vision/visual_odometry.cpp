@@ -564,6 +564,7 @@ struct VisualOdometry::State {
     result.tracked_landmarks = static_cast<int>(landmarks.size());
     result.keyframe = true;
     result.reason.clear();
+    result.map_origin_time = first_stored.frame.time;
     return result;
   }
 

@@ -495,6 +495,45 @@ TEST(Frontend, UngatedPosesAreFusedWhereTheGateRefusesThem) {
   EXPECT_EQ(session->summary().sensors[3].rejected.at(Rejection::kGated), 1U);
 }
 
+// Without an IMU a pose comes with every measurement the filter takes up: a gated one (a pose
+// 2 m off the wheels' track) still gets the motion model's pose at its time, DEGRADED, so the
+// pose stream does not thin out.
+TEST(Frontend, WithoutAnImuAGatedMeasurementStillGetsADegradedPose) {
+  config::FusionConfig config;
+  config.frontend.initial_yaw = 0.0;
+  config.sensors.push_back({"wheels", config::SensorModality::kWheelOdometry, "/wheels", 50.0, "base_link", "", {}});
+  config.sensors.push_back({"lidar", config::SensorModality::kLidar, "/points", 10.0, "lidar_link", "", {}});
+  auto frontend = Frontend::create(config, {});
+  ASSERT_TRUE(frontend.ok()) << frontend.error().message;
+  std::vector<msgs::PoseEstimate> poses;
+  (*frontend)->set_pose_callback([&poses](const msgs::PoseEstimate& pose) { poses.push_back(pose); });
+  const msgs::Matrix6d covariance = msgs::Matrix6d::Identity() * 1e-4;
+  for (int k = 0; k <= 100; ++k) {  // 1 m/s east for 2 s
+    const double t = 0.02 * k;
+    msgs::WheelOdometryMessage wheels;
+    wheels.timestamp = at(t);
+    wheels.left_distance = wheels.right_distance = t;
+    wheels.wheel_separation = 0.5;
+    ASSERT_TRUE((*frontend)->push("wheels", wheels).ok());
+    if (k == 95) {
+      ASSERT_TRUE((*frontend)->push_pose("lidar", at(1.91), SE3(SO3(), Eigen::Vector3d(1.91, 0.0, 0.0)), covariance).ok());
+    }
+  }
+  EXPECT_EQ(poses.back().status.state, msgs::TrackingState::kTracking);  // wheels and LiDAR
+  const size_t before = poses.size();
+  ASSERT_TRUE((*frontend)->push_pose("lidar", at(2.01), SE3(SO3(), Eigen::Vector3d(2.01, 2.0, 0.0)), covariance).ok());
+  EXPECT_EQ((*frontend)->summary().sensors[1].rejected.at(Rejection::kGated), 1U);
+  ASSERT_EQ(poses.size(), before + 1);
+  EXPECT_EQ(poses.back().timestamp, at(2.01));
+  EXPECT_EQ(poses.back().status.state, msgs::TrackingState::kDegraded);
+  EXPECT_NEAR(poses.back().T_world_body.position.y(), 0.0, 0.05);  // the prediction, not the pose
+  EXPECT_NEAR(poses.back().T_world_body.position.x(), 2.01, 0.05);
+  ASSERT_TRUE((*frontend)->push_pose("lidar", at(2.03), SE3(SO3(), Eigen::Vector3d(2.03, 0.0, 0.0)), covariance).ok());
+  ASSERT_EQ(poses.size(), before + 2);
+  EXPECT_EQ(poses.back().status.state, msgs::TrackingState::kTracking);
+  EXPECT_EQ((*frontend)->summary().sensors[1].fused, 2U);
+}
+
 // Without an IMU the motion model propagates: wheels alone dead-reckon a drive with a turn
 // (speed, yaw rate and the non-holonomic constraint), GNSS added bounds the position.
 TEST(Frontend, RunsWithoutAnImuOnTheMotionModel) {

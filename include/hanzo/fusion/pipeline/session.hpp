@@ -445,6 +445,9 @@ class Session {
   /// Moves map keyframes (index -> T_world_lidar) in the map and publishes the corrected map.
   void move_map_keyframes(const std::map<uint64_t, SE3>& moved);
   void count_refused(Rejection reason);
+  /// The monocular map's first view (reported initializing at origin_time s) fused at the world
+  /// origin, before the frame that made the map.
+  void fuse_map_origin(double origin_time, const Eigen::Matrix<double, 6, 6>& covariance);
   /// A tracked left image offered as a visual place; a verified loop becomes a loop factor.
   void add_visual_place(Timestamp time, int rig, const cv::Mat& image, const SE3& T_odometry_body);
   /// Records the health changes since the last evaluation (every 0.2 s of data time).
@@ -523,6 +526,9 @@ class Session {
   std::map<std::string, SensorStatistics, std::less<>> camera_statistics_;
   std::optional<SE3> visual_world_;
   SE3 visual_world_correction_;  ///< the Frontend's world correction visual_world_ follows
+  /// Frames the odometry reported initializing (their cameras): one of them may become the
+  /// monocular map's origin, posed when the map is made.
+  std::vector<std::pair<Timestamp, std::vector<std::string>>> initializing_frames_;
   std::vector<std::unique_ptr<VisualLoopClosures>> visual_loops_;  ///< per camera rig: frontend.type msckf with loop_closure
   std::unique_ptr<SessionSplats> splats_;             ///< fusion.mapping.splats
   /// Images of the splats' camera waiting for the Frontend's pose become views.

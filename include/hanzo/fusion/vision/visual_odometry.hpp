@@ -177,6 +177,10 @@ struct VisualOdometryFrame {
   int moving_landmarks_removed = 0;  ///< landmarks that moved while the camera stood still
   bool loop_closed = false;  ///< this frame's keyframe closed a loop (the trajectory was corrected)
   std::string reason;        ///< why the frame is kInitializing or kLost
+  /// Set on the frame that initialized a monocular map: the time (seconds) of the earlier frame
+  /// it was initialized with, the map's first keyframe, whose pose is the world origin
+  /// (T_world_camera the identity). That frame was reported kInitializing.
+  std::optional<double> map_origin_time;
 };
 
 struct VisualOdometrySummary {
