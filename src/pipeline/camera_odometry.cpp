@@ -183,7 +183,9 @@ Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create(const config::Fus
   logger()->info("session: {} visual odometry on {}{} ({} features{})", rgbd ? "RGB-D" : stereo_pair ? "stereo" : "monocular", left.sensor,
                  rig.right_sensor.empty() ? "" : " + " + rig.right_sensor, configured.extractor->name(),
                  configured.putative_filter ? ", learned correspondence filter" : "");
-  return std::unique_ptr<CameraOdometry>(new CameraOdometry(std::move(odometry), {rig}));
+  auto created = std::unique_ptr<CameraOdometry>(new CameraOdometry(std::move(odometry), {rig}));
+  created->extractor_ = configured.extractor;
+  return created;
 }
 
 Result<std::unique_ptr<CameraOdometry>> CameraOdometry::create_visual_inertial(const config::FusionConfig& config, const calib::Calibration& calibration,

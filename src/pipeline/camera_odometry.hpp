@@ -123,6 +123,9 @@ class CameraOdometry {
   /// The odometry's landmark map (its world: the left camera at its first keyframe).
   /// (Empty for the visual-inertial odometry: it keeps no landmarks.)
   msgs::VisualLandmarkLayer landmark_layer() const { return odometry_ ? odometry_->landmark_layer(left_sensor()) : msgs::VisualLandmarkLayer{}; }
+  /// The visual odometry's keypoint extractor (the configuration's features; null for the
+  /// visual-inertial odometry, which tracks KLT corners).
+  const std::shared_ptr<const vision::FeatureExtractor>& extractor() const { return extractor_; }
 
  private:
   // The images of one time, by rig (empty until they come).
@@ -142,6 +145,7 @@ class CameraOdometry {
   Result<vision::ImageQuality> assess(const cv::Mat& left);
 
   std::unique_ptr<vision::VisualOdometry> odometry_;  // null when visual-inertial
+  std::shared_ptr<const vision::FeatureExtractor> extractor_;  // the odometry's (null when visual-inertial)
   std::unique_ptr<MsckfOdometry> inertial_;
   std::unique_ptr<VisualInertialFactors> keyframe_factors_;
   SE3 T_body_imu_;

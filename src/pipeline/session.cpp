@@ -692,6 +692,11 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
   statistics.last_time = image->timestamp;
   if (!*tracked) return {};  // waiting for the rest of its frame
   const CameraOdometry::Tracked& frame = **tracked;
+  for (const auto& [rig, left] : frame.left_images) {
+    if (rig != 0 || left.empty()) continue;
+    recent_camera_images_.emplace_back(frame.time, left.clone());
+    if (recent_camera_images_.size() > static_cast<std::size_t>(kRecentCameraImages)) recent_camera_images_.pop_front();
+  }
   // The camera time of each of the frame's images.
   const auto camera_time = [this, &frame](const std::string& camera) {
     const CameraOdometry::Rig& rig = *camera_odometry_->rig_of(camera);
@@ -1244,15 +1249,22 @@ Result<RelocalizationOutcome> Session::relocalize(const lidar::MapLocalizer& map
   outcome.T_map_lidar = localized->T_map_sensor;
   outcome.T_map_world = localized->T_map_sensor * T_world_newest.inverse();
   outcome.keyframe_id = latest_keyframe_->keyframe_id;
+  double moved_m = 0.0;
+  HANZO_ASSIGN_OR_RETURN(moved_m, move_world_onto_map(outcome.T_map_world));
+  logger()->info("session: relocalized in the map (moved {:.2f} m; 2D score {:.2f}, RMSE {:.3f} m)", moved_m, localized->score, localized->inlier_rmse);
+  return outcome;
+}
+
+Result<double> Session::move_world_onto_map(const SE3& T_map_world) {
   // The session's belief of its newest keyframe, moved onto the map (Frontend::apply_correction
   // composes with the corrections applied before).
   const SE3 belief = frontend_->world_correction() * latest_keyframe_->T_world_body.to_se3();
-  HANZO_RETURN_IF_ERROR(with_context(frontend_->apply_correction(outcome.keyframe_id, outcome.T_map_world * belief), "invalid"));
+  HANZO_RETURN_IF_ERROR(with_context(frontend_->apply_correction(latest_keyframe_->keyframe_id, T_map_world * belief), "invalid"));
   // The graph holds the old world: a fresh one starts at the next keyframe; the map moves rigidly
   // and its keyframes stay there (their anchors are not in the new graph).
   std::map<uint64_t, SE3> moved;
   for (std::size_t k = 0; k < map_keyframes_.size(); ++k) {
-    map_keyframes_[k].T_world_lidar = outcome.T_map_world * map_keyframe_pose(k);
+    map_keyframes_[k].T_world_lidar = T_map_world * map_keyframe_pose(k);
     moved[k] = map_keyframes_[k].T_world_lidar;
   }
   if (follows_graph_) {
@@ -1266,11 +1278,12 @@ Result<RelocalizationOutcome> Session::relocalize(const lidar::MapLocalizer& map
   graph_ = std::make_unique<KeyframeGraph>(config_.backend);
   restart_graph_ = true;
   move_map_keyframes(moved);
+  // The visual odometry's world follows now (map() writes its landmarks through it).
+  if (visual_world_) visual_world_ = frontend_->world_correction() * visual_world_correction_.inverse() * *visual_world_;
+  visual_world_correction_ = frontend_->world_correction();
   ++summary_.relocalizations;
-  summary_.last_correction_m = ((outcome.T_map_world * belief).translation() - belief.translation()).norm();
-  logger()->info("session: relocalized in the map (moved {:.2f} m; 2D score {:.2f}, RMSE {:.3f} m)", summary_.last_correction_m,
-                 localized->score, localized->inlier_rmse);
-  return outcome;
+  summary_.last_correction_m = ((T_map_world * belief).translation() - belief.translation()).norm();
+  return summary_.last_correction_m;
 }
 
 msgs::FusionMap Session::map() const {

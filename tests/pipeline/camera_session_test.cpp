@@ -14,6 +14,7 @@
 #include <optional>
 #include <string>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "hanzo/fusion/eval/pose_error.hpp"
@@ -24,6 +25,8 @@
 
 namespace hanzo::fusion::pipeline {
 namespace {
+
+using ::testing::HasSubstr;
 
 struct Recording {
   sim::Scenario scenario;
@@ -157,6 +160,102 @@ TEST(CameraSession, RgbdCameraAloneIsMetricWithinOnePercentOfTheDistance) {
   EXPECT_GT(run.distance_m, 30.0);
   ASSERT_EQ(run.summary.sensors.size(), 2u);
   for (const SensorStatistics& sensor : run.summary.sensors) EXPECT_EQ(sensor.fused, sensor.received) << sensor.name;
+}
+
+// Camera relocalization in a saved map: the drone's map from a cameras-only session (12 s),
+// moved to a known place (turned 1 rad, 30 m away), and a second session on the same flight that
+// starts 5 s later (its world: the body then). After 8 s of flight the second session places its
+// newest three images in the moved map; its poses come in the map's frame from then on, where
+// the first session's poses moved by the known transform are.
+TEST(CameraSession, RelocalizesInASavedVisualMapWhenItsNewestImagesAgree) {
+  const SessionRun surveyed = run_session(is_camera);
+  ASSERT_TRUE(surveyed.map.visual_landmarks.has_value());
+  const SE3 T_map_surveyed(SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), 1.0), Eigen::Vector3d(30.0, -12.0, 2.0));
+  msgs::VisualLandmarkLayer map = *surveyed.map.visual_landmarks;
+  for (Eigen::Vector3f& position : map.positions) position = (T_map_surveyed * position.cast<double>()).cast<float>();
+  for (msgs::VisualKeyframe& keyframe : map.keyframes) keyframe.T_world_camera = msgs::Pose::from_se3(T_map_surveyed * keyframe.T_world_camera.to_se3());
+
+  const Recording& recording = drone_recording();
+  sim::Scenario scenario = recording.scenario;
+  std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& sensor) { return !is_camera(sensor); });
+  auto session = Session::create(sim::scenario_fusion_config(scenario), sim::scenario_calibration(scenario)).value();
+  std::vector<std::pair<Timestamp, SE3>> poses;
+  session->set_pose_callback([&](const msgs::PoseEstimate& pose) { poses.emplace_back(pose.timestamp, pose.T_world_body.to_se3()); });
+  const Timestamp start = scenario.start_time + Duration::from_seconds(5.0), relocalize_at = scenario.start_time + Duration::from_seconds(8.0);
+  std::size_t next = 0;
+  const auto push_until = [&](Timestamp end) {
+    for (; next < recording.messages.size() && msgs::timestamp_of(recording.messages[next].second) < end; ++next) {
+      const auto& [sensor, message] = recording.messages[next];
+      if (msgs::timestamp_of(message) < start || !is_camera(*std::find_if(scenario.sensors.begin(), scenario.sensors.end(),
+                                                                          [&](const sim::ScenarioSensor& s) { return s.name == sensor; }))) {
+        continue;
+      }
+      (void)session->push(sensor, message);
+    }
+  };
+  push_until(relocalize_at);
+  ASSERT_FALSE(poses.empty());
+
+  // Refused, and nothing moves: requests out of range, a map without landmarks, placements
+  // that cannot agree (a zero tolerance).
+  CameraRelocalizationRequest request;
+  request.frames = 0;
+  EXPECT_THAT(session->relocalize(map, request).error().message, HasSubstr("invalid: frames"));
+  request = {};
+  EXPECT_THAT(session->relocalize(msgs::VisualLandmarkLayer{}, request).error().message, HasSubstr("invalid: visual landmark map"));
+  request.agreement_m = 0.0;
+  Result<CameraRelocalizationOutcome> strict = session->relocalize(map, request);
+  ASSERT_FALSE(strict.ok());
+  EXPECT_THAT(strict.error().message, HasSubstr("not_found: 3 of 3 images placed, at most 1 in agreement (2 needed)"));
+  EXPECT_EQ(session->mapping_summary().relocalizations, 0u);
+
+  Result<CameraRelocalizationOutcome> outcome = session->relocalize(map, CameraRelocalizationRequest{});
+  ASSERT_TRUE(outcome.ok()) << outcome.error().message;
+  EXPECT_GE(outcome->agreeing_frames, 2);
+  ASSERT_EQ(outcome->placements.size(), 3u);
+  EXPECT_GT(outcome->placements[0].time, outcome->placements[1].time);  // newest first
+  EXPECT_EQ(outcome->place_recognition, "bow");
+  EXPECT_EQ(session->mapping_summary().relocalizations, 1u);
+  EXPECT_GT(outcome->correction_m, 10.0);
+
+  // Compared with the truth in the map's frame: where the survey's world (its body at its
+  // first image) was, moved by the known transform.
+  const sim::SplineTrajectory& truth = recording.simulation->trajectory();
+  const SE3 T_map_truth = T_map_surveyed * truth.sample(surveyed.estimate.timestamps.front()).T_world_body.inverse();
+  const auto error_at = [&](Timestamp time, const SE3& T_map_body) {
+    return (T_map_body.translation() - (T_map_truth * truth.sample(time).T_world_body).translation()).norm();
+  };
+  const std::size_t before = poses.size();
+  push_until(scenario.start_time + Duration::from_seconds(13.0));
+  session->flush();
+  ASSERT_GT(poses.size(), before + 30);
+  double first_half_second = 0.0, worst = 0.0;
+  int in_first_half_second = 0;
+  for (std::size_t i = before; i < poses.size(); ++i) {
+    const double error = error_at(poses[i].first, poses[i].second);
+    worst = std::max(worst, error);
+    if (poses[i].first < relocalize_at + Duration::from_seconds(0.5)) {
+      first_half_second += error;
+      ++in_first_half_second;
+    }
+  }
+  ASSERT_GT(in_first_half_second, 0);
+  first_half_second /= in_first_half_second;
+  std::printf("camera relocalization: %d of %zu images agree, moved %.2f m; error in the map frame %.3f m in the first 0.5 s, at most %.3f m over "
+              "the next 4 s\n", outcome->agreeing_frames, outcome->placements.size(), outcome->correction_m, first_half_second, worst);
+  EXPECT_LT(first_half_second, 0.15);
+  EXPECT_LT(worst, 0.4);  // the odometry's own drift after the one correction
+  // The session's own map comes in the map's frame: its keyframes' cameras where the truth has them.
+  const msgs::FusionMap relocalized_map = session->map();
+  ASSERT_TRUE(relocalized_map.visual_landmarks.has_value());
+  const SE3 T_body_left = std::find_if(scenario.sensors.begin(), scenario.sensors.end(), is_camera)->T_body_sensor;
+  int keyframes_compared = 0;
+  for (const msgs::VisualKeyframe& keyframe : relocalized_map.visual_landmarks->keyframes) {
+    if (keyframe.time < relocalize_at) continue;
+    EXPECT_LT(error_at(keyframe.time, keyframe.T_world_camera.to_se3() * T_body_left.inverse()), 0.4) << keyframe.time.seconds();
+    ++keyframes_compared;
+  }
+  EXPECT_GE(keyframes_compared, 3);
 }
 
 TEST(CameraSession, StereoOdometryFusedWithTheImuBeatsTheImuAlone) {

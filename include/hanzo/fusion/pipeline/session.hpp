@@ -121,6 +121,7 @@
 #include "hanzo/fusion/pipeline/frontend.hpp"
 #include "hanzo/fusion/pipeline/sensor_health.hpp"
 #include "hanzo/fusion/pipeline/wheel_slip_monitor.hpp"
+#include "hanzo/fusion/vision/map_relocalizer.hpp"
 
 namespace cv {
 class Mat;
@@ -258,6 +259,47 @@ struct RelocalizationOutcome {
   lidar::MapLocalization localization;
 };
 
+/// Camera relocalization against a saved visual landmark map (a FusionMap's visual_landmarks
+/// layer, made by a session with cameras; vision::MapRelocalizer). Each of the newest `frames`
+/// images of the left camera that the Session has a pose for is placed in the map on its own;
+/// each placement says where the session's world lies in the map (T_map_world =
+/// T_map_camera T_body_camera^-1 T_world_body^-1 at the image's time). The placement with the
+/// most inliers wins when at least `min_agreeing_frames` placements (itself included) put the
+/// world within agreement_m and agreement_rad of it: one image can be placed wrongly on a
+/// repeated texture, several images from different viewpoints rarely agree on the same wrong
+/// place.
+struct CameraRelocalizationRequest {
+  int frames = 3;               ///< newest left images tried (the Session keeps the last kRecentCameraImages)
+  int min_agreeing_frames = 2;  ///< placements that must agree (1..frames)
+  double agreement_m = 0.3;     ///< m, between the worlds two placements give
+  double agreement_rad = 0.05;  ///< rad, the same
+  /// Candidates, inliers and search radius of each placement. Null extractor: ORB for an ORB
+  /// map, the session's own extractor for a map of its learned features.
+  vision::MapRelocalizerConfig relocalizer;
+};
+
+/// One image's placement in a camera relocalization.
+struct CameraPlacement {
+  Timestamp time;             ///< the image's (body clock)
+  bool placed = false;        ///< the relocalizer found a pose
+  std::string reason;         ///< why not, when not placed
+  SE3 T_map_camera;           ///< the image's camera in the map (placed)
+  SE3 T_map_world;            ///< the session's world in the map by this image (placed)
+  int inliers = 0;
+  int map_keyframe = -1;      ///< the map keyframe whose landmarks placed it
+  double place_score = 0.0;   ///< that keyframe's place-recognition score
+  bool agrees = false;        ///< within the agreement bounds of the accepted placement
+};
+
+struct CameraRelocalizationOutcome {
+  SE3 T_map_world;            ///< how the session's world frame was moved onto the map's
+  uint64_t keyframe_id = 0;   ///< the Frontend keyframe the correction was applied at
+  int agreeing_frames = 0;
+  std::string place_recognition;  ///< "bow", "learned" or "matches" (vision::MapRelocalization)
+  double correction_m = 0.0;  ///< how far the newest keyframe moved
+  std::vector<CameraPlacement> placements;  ///< newest image first
+};
+
 struct MappingSummary {
   uint64_t scans_received = 0;
   uint64_t scans_registered = 0;
@@ -364,6 +406,17 @@ class Session {
   /// "not_found: ..." (the localizer found no pose that verifies; its reason follows).
   /// Nothing changes then.
   Result<RelocalizationOutcome> relocalize(const lidar::MapLocalizer& map, const RelocalizationRequest& request);
+  /// Places the newest left-camera images in a saved visual landmark map (the request's
+  /// header comment) and, when enough of them agree, moves the Session's world onto the map's
+  /// frame as the LiDAR relocalization does (one Frontend correction; the keyframe graph
+  /// restarts at the next keyframe; the visual odometry's poses and landmarks follow). Errors
+  /// start with the reason: "invalid: ..." (a request out of range, a map without landmarks or
+  /// keyframes, of other features than the session's, a monocular session without an IMU,
+  /// whose lengths have no metric scale), "not_ready: ..." (no camera, no posed image or no
+  /// Frontend keyframe yet), "not_found: ..." (too few images placed, or placed in agreement;
+  /// each placement's reason follows). Nothing changes then.
+  static constexpr int kRecentCameraImages = 8;
+  Result<CameraRelocalizationOutcome> relocalize(const msgs::VisualLandmarkLayer& map, const CameraRelocalizationRequest& request);
 
   /// The map's layers (points, occupancy; the cameras' landmarks; the Gaussian splats trained so
   /// far with fusion.mapping.splats) with version = map_version and provenance.algorithm set
@@ -444,6 +497,10 @@ class Session {
   void follow_graph();
   /// Moves map keyframes (index -> T_world_lidar) in the map and publishes the corrected map.
   void move_map_keyframes(const std::map<uint64_t, SE3>& moved);
+  /// Moves the Session's world onto a map's frame (both relocalizations): the Frontend's belief
+  /// of its newest keyframe corrected by T_map_world, the map keyframes moved, a fresh graph
+  /// from the next keyframe. Returns how far the newest keyframe moved (m).
+  Result<double> move_world_onto_map(const SE3& T_map_world);
   void count_refused(Rejection reason);
   /// The monocular map's first view (reported initializing at origin_time s) fused at the world
   /// origin, before the frame that made the map.
@@ -529,6 +586,8 @@ class Session {
   /// Frames the odometry reported initializing (their cameras): one of them may become the
   /// monocular map's origin, posed when the map is made.
   std::vector<std::pair<Timestamp, std::vector<std::string>>> initializing_frames_;
+  /// The newest left images of rig 0 (8-bit grey, copied), body clock: camera relocalization.
+  std::deque<std::pair<Timestamp, cv::Mat>> recent_camera_images_;
   std::vector<std::unique_ptr<VisualLoopClosures>> visual_loops_;  ///< per camera rig: frontend.type msckf with loop_closure
   std::unique_ptr<SessionSplats> splats_;             ///< fusion.mapping.splats
   /// Images of the splats' camera waiting for the Frontend's pose become views.
