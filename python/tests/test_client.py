@@ -142,6 +142,9 @@ def test_stored_maps_and_relocalization(server):
     with pytest.raises(FusionError) as unknown:
         client.relocalize(second, "no-such-map")
     assert unknown.value.status == 404
+    with pytest.raises(FusionError) as no_landmarks:  # a LiDAR map has no camera landmarks
+        client.relocalize(second, first, sensor="camera", frames=3, min_agreeing_frames=2)
+    assert no_landmarks.value.status == 400 and "visual landmark" in no_landmarks.value.message
     # Without a guess the whole map is searched. This warehouse is nearly mirror-symmetric, and
     # how the sweeps of a fast replay land varies from run to run: the search either finds the
     # one place, or finds two alike and refuses (422, "ambiguous ... give a guess"). Both are

@@ -733,6 +733,7 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
     return {};
   }
   camera_lost_reason_.reset();
+  if (frame.frame.keyframe && !camera_odometry_->visual_inertial()) ++summary_.map_version;  // a keyframe of the landmark map
   const Timestamp sensor_time = frame.time - camera_odometry_->left_time_offset();
   // Backend corrections since the previous frame moved the Frontend's world: the odometry's
   // world follows them (as the LiDAR odometry's does).

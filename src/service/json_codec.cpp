@@ -289,26 +289,58 @@ ApiResult<pipeline::LoopClosureRequest> parse_loop_closure(const std::string& bo
   return request;
 }
 
-json relocalization_to_json(const std::string& map_id, uint64_t version, const pipeline::RelocalizationOutcome& outcome) {
-  const lidar::MapLocalization& found = outcome.localization;
-  return {{"map_id", map_id},
-          {"version", version},
-          {"T_map_world", pose_json(outcome.T_map_world)},
-          {"T_map_lidar", pose_json(outcome.T_map_lidar)},
-          {"keyframe_id", outcome.keyframe_id},
-          {"global_search", found.global},
-          {"score", found.score},
-          {"inlier_rmse_m", found.inlier_rmse},
-          {"inlier_fraction", found.inlier_fraction},
-          {"seen_through_fraction", found.seen_through_fraction},
-          {"seconds", found.seconds}};
+json relocalization_to_json(const RelocalizeResult& result) {
+  json answer = {{"map_id", result.map_id}, {"version", result.version}};
+  if (result.outcome) {
+    const pipeline::RelocalizationOutcome& outcome = *result.outcome;
+    const lidar::MapLocalization& found = outcome.localization;
+    answer.update({{"sensor", "lidar"},
+                   {"T_map_world", pose_json(outcome.T_map_world)},
+                   {"T_map_lidar", pose_json(outcome.T_map_lidar)},
+                   {"keyframe_id", outcome.keyframe_id},
+                   {"global_search", found.global},
+                   {"score", found.score},
+                   {"inlier_rmse_m", found.inlier_rmse},
+                   {"inlier_fraction", found.inlier_fraction},
+                   {"seen_through_fraction", found.seen_through_fraction},
+                   {"seconds", found.seconds}});
+  }
+  if (result.camera_outcome) {
+    const pipeline::CameraRelocalizationOutcome& outcome = *result.camera_outcome;
+    json placements = json::array();
+    for (const pipeline::CameraPlacement& placement : outcome.placements) {
+      json entry = {{"timestamp_ns", placement.time.nanoseconds()}, {"placed", placement.placed}};
+      if (placement.placed) {
+        entry.update({{"T_map_camera", pose_json(placement.T_map_camera)},
+                      {"inliers", placement.inliers},
+                      {"map_keyframe", placement.map_keyframe},
+                      {"place_score", placement.place_score},
+                      {"agrees", placement.agrees}});
+      } else {
+        entry["reason"] = placement.reason;
+      }
+      placements.push_back(std::move(entry));
+    }
+    answer.update({{"sensor", "camera"},
+                   {"T_map_world", pose_json(outcome.T_map_world)},
+                   {"keyframe_id", outcome.keyframe_id},
+                   {"agreeing_frames", outcome.agreeing_frames},
+                   {"place_recognition", outcome.place_recognition},
+                   {"correction_m", outcome.correction_m},
+                   {"placements", std::move(placements)}});
+  }
+  return answer;
 }
 
 ApiResult<RelocalizeRequest> parse_relocalize(const std::string& body) {
   auto document = parse_object(body);
   if (!document) return document.error();
   const json& object = document.value();
-  if (auto keys = check_keys(object, {"map_id", "version", "initial_pose", "linear_window_m", "angular_window_rad"}); !keys) return keys.error();
+  if (auto keys = check_keys(object, {"map_id", "version", "initial_pose", "linear_window_m", "angular_window_rad", "sensor", "frames",
+                                      "min_agreeing_frames", "agreement_m", "agreement_rad"});
+      !keys) {
+    return keys.error();
+  }
   RelocalizeRequest request;
   auto map_id = optional_string(object, "map_id");
   if (!map_id) return map_id.error();
@@ -331,6 +363,34 @@ ApiResult<RelocalizeRequest> parse_relocalize(const std::string& body) {
   if (!angular) return angular.error();
   request.relocalization.linear_window = linear.value();
   request.relocalization.angular_window = angular.value();
+  auto sensor_field = optional_string(object, "sensor");
+  if (!sensor_field) return sensor_field.error();
+  const std::string& sensor = sensor_field.value();
+  if (sensor == "lidar") {
+    request.sensor = RelocalizeSensor::kLidar;
+  } else if (sensor == "camera") {
+    request.sensor = RelocalizeSensor::kCamera;
+  } else if (!sensor.empty()) {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("sensor: expected lidar or camera, got '{}'", sensor), "sensor"};
+  }
+  pipeline::CameraRelocalizationRequest& camera = request.camera;
+  for (const auto& [key, target] : {std::pair<const char*, int*>{"frames", &camera.frames}, {"min_agreeing_frames", &camera.min_agreeing_frames}}) {
+    if (!object.contains(key) || object[key].is_null()) continue;
+    if (!object[key].is_number_integer() || object[key].get<int64_t>() < 1 || object[key].get<int64_t>() > pipeline::Session::kRecentCameraImages) {
+      return ApiError{ErrorCode::kInvalidArgument, fmt::format("{}: expected an integer in 1..{}", key, pipeline::Session::kRecentCameraImages), key};
+    }
+    *target = object[key].get<int>();
+  }
+  if (camera.min_agreeing_frames > camera.frames) {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("min_agreeing_frames: {} is more than frames ({})", camera.min_agreeing_frames, camera.frames),
+                    "min_agreeing_frames"};
+  }
+  auto agreement_m = optional_non_negative(object, "agreement_m", camera.agreement_m);
+  if (!agreement_m) return agreement_m.error();
+  auto agreement_rad = optional_non_negative(object, "agreement_rad", camera.agreement_rad);
+  if (!agreement_rad) return agreement_rad.error();
+  camera.agreement_m = agreement_m.value();
+  camera.agreement_rad = agreement_rad.value();
   return request;
 }
 

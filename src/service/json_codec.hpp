@@ -28,7 +28,8 @@ nlohmann::json mapping_to_json(const pipeline::MappingSummary& mapping);
 /// A map's metadata and layer sizes (GET /v1/sessions/{id}/map?format=json).
 nlohmann::json map_to_json(const msgs::FusionMap& map);
 nlohmann::json loop_closure_to_json(const pipeline::LoopClosureOutcome& outcome);
-nlohmann::json relocalization_to_json(const std::string& map_id, uint64_t version, const pipeline::RelocalizationOutcome& outcome);
+/// The outcome of either sensor's relocalization, with "sensor": "lidar" or "camera".
+nlohmann::json relocalization_to_json(const RelocalizeResult& result);
 /// A stored map with its versions (GET /v1/maps, /v1/maps/{id}?format=json).
 nlohmann::json stored_map_to_json(const StoredMap& map);
 
@@ -45,7 +46,9 @@ ApiResult<pipeline::LoopClosureRequest> parse_loop_closure(const std::string& bo
 
 /// The body of POST /v1/sessions/{id}/relocalize: {"map_id": "...", "version": N (latest when
 /// absent), "initial_pose": {"position": [...], "orientation_wxyz": [...]} (the body's pose in
-/// the map; absent: search the whole map), "linear_window_m": 5, "angular_window_rad": 0.5}.
+/// the map; absent: search the whole map), "linear_window_m": 5, "angular_window_rad": 0.5,
+/// "sensor": "lidar" | "camera" (absent: the LiDAR when the session maps one), and for cameras
+/// "frames": 3, "min_agreeing_frames": 2, "agreement_m": 0.3, "agreement_rad": 0.05}.
 ApiResult<RelocalizeRequest> parse_relocalize(const std::string& body);
 
 struct MotionCalibrateRequest {

@@ -372,7 +372,7 @@ struct RestServer::Impl {
       if (!parsed) return send_error(response, parsed.error());
       auto result = sessions->relocalize(caller, request.matches[1], parsed.value());
       if (!result) return send_error(response, result.error());
-      send_json(response, 200, detail::relocalization_to_json(result->map_id, result->version, result->outcome));
+      send_json(response, 200, detail::relocalization_to_json(result.value()));
     }));
 
     // Calibration procedures (docs/calibration.md): CPU work for the caller, nothing stored.

@@ -155,7 +155,7 @@ struct SessionManager::Impl {
   ApiStatus save_map(ManagedSession& managed, std::unique_lock<std::mutex>& session_lock, bool release_while_writing) {
     if (!catalog || !managed.session) return api_ok();
     const pipeline::MappingSummary summary = managed.session->mapping_summary();
-    if (summary.map_keyframes == 0 || summary.map_version == managed.saved_map_version) return api_ok();
+    if ((summary.map_keyframes == 0 && summary.visual_keyframes == 0) || summary.map_version == managed.saved_map_version) return api_ok();
     std::optional<msgs::FusionMap> map = map_locked(managed);
     if (!map) return api_ok();
     map->version = managed.stored_map_version;  // the parent of the new version
@@ -267,7 +267,7 @@ struct SessionManager::Impl {
   std::optional<msgs::FusionMap> map_locked(const ManagedSession& managed) const {
     if (!managed.session) return managed.final_map;
     const pipeline::MappingSummary mapping = managed.session->mapping_summary();
-    if (mapping.map_keyframes == 0 && mapping.splat_gaussians == 0) return std::nullopt;
+    if (mapping.map_keyframes == 0 && mapping.visual_keyframes == 0 && mapping.splat_gaussians == 0) return std::nullopt;
     msgs::FusionMap map = managed.session->map();
     map.map_id = managed.record.id;
     map.created = managed.latest_pose ? managed.latest_pose->timestamp : managed.record.created;
@@ -861,7 +861,7 @@ ApiResult<msgs::FusionMap> SessionManager::map(const Principal& caller, const st
     if (auto stored = impl_->catalog->load(found.value()->record.organization, session_id); stored) return std::move(stored).value();
   }
   return ApiError{ErrorCode::kNotFound,
-                  fmt::format("session '{}' has no map yet (it maps with a 3D LiDAR sensor once the IMU has initialized)", session_id), ""};
+                  fmt::format("session '{}' has no map yet (it maps with a 3D LiDAR once the IMU has initialized, or with cameras once their odometry has a keyframe)", session_id), ""};
 }
 
 ApiResult<pipeline::LoopClosureOutcome> SessionManager::close_loop(const Principal& caller, const std::string& session_id,
@@ -944,20 +944,58 @@ ApiResult<RelocalizeResult> SessionManager::relocalize(const Principal& caller, 
     if (stored->versions.empty()) return ApiError{ErrorCode::kNotFound, fmt::format("map '{}' has no stored version", request.map_id), "map_id"};
     result.version = stored->versions.back().version;
   }
-  auto localizer = impl_->localizer(caller.organization, request.map_id, result.version);
-  if (!localizer) return localizer.error();
   ManagedSession& managed = *found.value();
+  RelocalizeSensor sensor = request.sensor;
+  {
+    std::lock_guard lock(managed.mutex);
+    if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
+    if (sensor == RelocalizeSensor::kAuto) {
+      if (managed.session->maps_lidar_sweeps()) {
+        sensor = RelocalizeSensor::kLidar;
+      } else if (managed.session->has_camera_odometry()) {
+        sensor = RelocalizeSensor::kCamera;
+      } else {
+        return ApiError{ErrorCode::kInvalidArgument, fmt::format("session '{}' maps no LiDAR and has no camera odometry to relocalize with", session_id), ""};
+      }
+    }
+  }
+  // The map's layer for the sensor, prepared outside the session's lock (a LiDAR map's
+  // localizer is cached).
+  std::shared_ptr<const lidar::MapLocalizer> localizer;
+  std::optional<msgs::VisualLandmarkLayer> landmarks;
+  if (sensor == RelocalizeSensor::kLidar) {
+    auto prepared = impl_->localizer(caller.organization, request.map_id, result.version);
+    if (!prepared) return prepared.error();
+    localizer = std::move(prepared).value();
+  } else {
+    ApiResult<msgs::FusionMap> map = impl_->catalog->load(caller.organization, request.map_id, result.version);
+    if (!map) return map.error();
+    if (!map->visual_landmarks || map->visual_landmarks->positions.empty()) {
+      return ApiError{ErrorCode::kInvalidArgument,
+                      fmt::format("map '{}' version {} has no visual landmark layer to relocalize a camera in (made by a session with cameras)", request.map_id,
+                                  result.version),
+                      "map_id"};
+    }
+    landmarks = std::move(map->visual_landmarks);
+  }
   std::lock_guard lock(managed.mutex);
   if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
-  Result<pipeline::RelocalizationOutcome> outcome = managed.session->relocalize(*localizer.value(), request.relocalization);
-  if (!outcome) {
-    const std::string& message = outcome.error().message;
+  const auto failed = [](const Error& error) {
+    const std::string& message = error.message;
     const ErrorCode code = message.starts_with("not_ready")   ? ErrorCode::kConflict
                            : message.starts_with("not_found") ? ErrorCode::kRejected
                                                               : ErrorCode::kInvalidArgument;
-    return ApiError::from(code, outcome.error());
+    return ApiError::from(code, error);
+  };
+  if (localizer) {
+    Result<pipeline::RelocalizationOutcome> outcome = managed.session->relocalize(*localizer, request.relocalization);
+    if (!outcome) return failed(outcome.error());
+    result.outcome = std::move(outcome).value();
+  } else {
+    Result<pipeline::CameraRelocalizationOutcome> outcome = managed.session->relocalize(*landmarks, request.camera);
+    if (!outcome) return failed(outcome.error());
+    result.camera_outcome = std::move(outcome).value();
   }
-  result.outcome = std::move(outcome).value();
   managed.latest_pose = managed.session->frontend().latest_pose();  // already in the map's frame
   logger()->info("session {} relocalized in map {} version {} by {}", session_id, result.map_id, result.version, caller.name);
   return result;

@@ -429,6 +429,9 @@ TEST_F(MappingEndpointsTest, StoresMapVersionsLoadsMapsAndRelocalizesASessionInT
   EXPECT_EQ(error_of(relocalize(second, R"({"map_id": "x", "initial_pose": {"position": [1, 2]}})"))["field"], "initial_pose.position");
   EXPECT_EQ(relocalize(second, R"({"map_id": "no-such-map"})")->status, 404);
   EXPECT_EQ(relocalize(second, R"({"map_id": ")" + known_id + "\"}", kViewerToken)->status, 403);
+  EXPECT_THAT(error_of(relocalize(second, R"({"map_id": ")" + known_id + R"(", "sensor": "camera"})"))["message"].get<std::string>(),
+              HasSubstr("no visual landmark layer"));
+  EXPECT_EQ(error_of(relocalize(second, R"({"map_id": ")" + known_id + R"(", "sensor": "radar"})"))["field"], "sensor");
   EXPECT_EQ(manager_->session_info(kStreamer, second).value().mapping.relocalizations, 0U);
   auto relocalized = relocalize(second, R"({"map_id": ")" + known_id + R"(", "version": 1})");
   ASSERT_TRUE(relocalized);
@@ -436,6 +439,7 @@ TEST_F(MappingEndpointsTest, StoresMapVersionsLoadsMapsAndRelocalizesASessionInT
   const json outcome = json::parse(relocalized->body);
   EXPECT_EQ(outcome["version"], 1);
   EXPECT_EQ(outcome["global_search"], true);
+  EXPECT_EQ(outcome["sensor"], "lidar");
   const std::vector<double> position = outcome["T_map_world"]["position"];
   EXPECT_LT((Eigen::Vector3d(position[0], position[1], position[2]) - T_known_world.translation()).norm(), 0.2) << relocalized->body;
   EXPECT_EQ(manager_->session_info(kStreamer, second).value().mapping.relocalizations, 1U);
@@ -640,6 +644,82 @@ TEST_F(MappingEndpointsTest, SessionStreamsSendACallersMessagesIntoASession) {
   ASSERT_TRUE(summary->latest_pose.has_value());
   EXPECT_FALSE(client->open_streams("no-such-session").ok());
   ASSERT_TRUE(client->end_session(session_id.value()).ok());
+}
+
+// A cameras-only session relocalized in a stored visual landmark map: the drone's stereo
+// survey (8 s) stored as a map moved to a known place; a second session that starts 3 s into
+// the same flight (its world: the body then) places its newest images in it through REST.
+TEST_F(MappingEndpointsTest, RelocalizesACameraSessionInAStoredVisualLandmarkMap) {
+  sim::Scenario scenario = sim::load_scenario("examples/scenarios/drone.yaml").value();
+  std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& s) { return s.modality != config::SensorModality::kCamera; });
+  scenario.duration = 8.0;
+  scenario.num_threads = 0;
+  const std::string config_yaml = config::to_yaml(sim::scenario_fusion_config(scenario));
+  const std::string calibration_yaml = calib::to_yaml(sim::scenario_calibration(scenario));
+  auto simulation = sim::ScenarioSimulation::create(scenario).value();
+  std::vector<testing::TimedMessage> messages;
+  ASSERT_TRUE(simulation->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
+    messages.push_back({sensor.name, std::move(message)});
+    return ok_status();
+  }).ok());
+  auto created = manager_->create_session(kStreamer, {"survey", config_yaml, calibration_yaml});
+  ASSERT_TRUE(created.ok()) << created.error().message;
+  const std::string survey = created.value().id;
+  for (const testing::TimedMessage& message : messages) ASSERT_TRUE(manager_->push(kStreamer, survey, message.sensor, message.message).ok());
+  const Principal admin{"admin", "acme", static_cast<uint32_t>(Permission::kAdmin)};
+  // A camera session's map (its visual landmarks) is stored as a LiDAR session's is.
+  ASSERT_TRUE(manager_->save_session_maps().ok());
+  auto survey_map = manager_->stored_map(admin, survey);
+  ASSERT_TRUE(survey_map.ok()) << survey_map.error().message;
+  msgs::FusionMap known = std::move(survey_map).value();
+  ASSERT_TRUE(known.visual_landmarks.has_value());
+  const SE3 T_known_survey(SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), -2.0), Eigen::Vector3d(-20.0, 45.0, 1.0));
+  for (Eigen::Vector3f& position : known.visual_landmarks->positions) position = (T_known_survey * position.cast<double>()).cast<float>();
+  for (msgs::VisualKeyframe& keyframe : known.visual_landmarks->keyframes) {
+    keyframe.T_world_camera = msgs::Pose::from_se3(T_known_survey * keyframe.T_world_camera.to_se3());
+  }
+  known.map_id = "hall-survey";
+  known.version = 0;
+  auto loaded = client().Post("/v1/maps?name=hall", bearer(kAdminToken), maps::serialize_fusion_map(known).value(), "application/octet-stream");
+  ASSERT_TRUE(loaded && loaded->status == 201) << (loaded ? loaded->body : "");
+
+  const Timestamp start = scenario.start_time + Duration::from_seconds(3.0);
+  const std::string robot = manager_->create_session(kStreamer, {"robot", config_yaml, calibration_yaml}).value().id;
+  const auto relocalize = [&](const std::string& body) {
+    return client().Post("/v1/sessions/" + robot + "/relocalize", bearer(kRobotToken), body, "application/json");
+  };
+  EXPECT_EQ(relocalize(R"({"map_id": "hall-survey"})")->status, 409);  // no image yet
+  for (const testing::TimedMessage& message : messages) {
+    if (msgs::timestamp_of(message.message) >= start) {
+      ASSERT_TRUE(manager_->push(kStreamer, robot, message.sensor, message.message).ok());
+    }
+  }
+  EXPECT_EQ(error_of(relocalize(R"({"map_id": "hall-survey", "frames": 0})"))["field"], "frames");
+  EXPECT_EQ(error_of(relocalize(R"({"map_id": "hall-survey", "frames": 2, "min_agreeing_frames": 3})"))["field"], "min_agreeing_frames");
+  auto disagreeing = relocalize(R"({"map_id": "hall-survey", "agreement_m": 0})");
+  ASSERT_TRUE(disagreeing);
+  EXPECT_EQ(disagreeing->status, 422) << disagreeing->body;
+  EXPECT_EQ(manager_->session_info(kStreamer, robot).value().mapping.relocalizations, 0U);
+
+  auto relocalized = relocalize(R"({"map_id": "hall-survey"})");  // the session maps no LiDAR: its cameras
+  ASSERT_TRUE(relocalized);
+  ASSERT_EQ(relocalized->status, 200) << relocalized->body;
+  const json outcome = json::parse(relocalized->body);
+  EXPECT_EQ(outcome["sensor"], "camera");
+  EXPECT_EQ(outcome["version"], 1);
+  EXPECT_GE(outcome["agreeing_frames"].get<int>(), 2);
+  ASSERT_EQ(outcome["placements"].size(), 3U);
+  EXPECT_EQ(outcome["placements"][0]["placed"], true);
+  EXPECT_EQ(manager_->session_info(kStreamer, robot).value().mapping.relocalizations, 1U);
+  // Its pose is in the known map's frame now: where the survey's world (its body at the first
+  // image), moved to the known place, has the true body.
+  const msgs::PoseEstimate pose = manager_->current_pose(kStreamer, robot).value();
+  const sim::SplineTrajectory& truth = simulation->trajectory();
+  const SE3 expected = T_known_survey * truth.sample(scenario.start_time).T_world_body.inverse() *
+                       truth.sample(pose.timestamp).T_world_body;
+  std::printf("camera relocalization through REST: %d of 3 images agree, pose %.3f m from the truth in the map's frame\n",
+              outcome["agreeing_frames"].get<int>(), (pose.T_world_body.position - expected.translation()).norm());
+  EXPECT_LT((pose.T_world_body.position - expected.translation()).norm(), 0.25) << relocalized->body;
 }
 
 }  // namespace

@@ -201,11 +201,20 @@ class FusionClient:
         return json.loads(payload) if format == "json" else payload
 
     def relocalize(self, session_id, map_id, version=None, position=None, orientation_wxyz=None, linear_window_m=None,
-                   angular_window_rad=None):
-        """Localizes the session in a stored map and moves it into the map's frame. Without
-        position the whole map is searched; with it (the body's pose in the map) only the windows
-        around it. Returns the outcome (T_map_world, score, inlier_rmse_m, ...)."""
+                   angular_window_rad=None, sensor=None, frames=None, min_agreeing_frames=None):
+        """Localizes the session in a stored map and moves it into the map's frame. sensor:
+        "lidar" (the newest sweeps in the map's points), "camera" (the newest left images in its
+        visual landmarks; frames of them tried, min_agreeing_frames must agree) or None (the
+        LiDAR when the session maps one). LiDAR: without position the whole map is searched;
+        with it (the body's pose in the map) only the windows around it. Returns the outcome
+        (sensor, T_map_world, and the sensor's numbers)."""
         body = {"map_id": map_id}
+        if sensor is not None:
+            body["sensor"] = str(sensor)
+        if frames is not None:
+            body["frames"] = int(frames)
+        if min_agreeing_frames is not None:
+            body["min_agreeing_frames"] = int(min_agreeing_frames)
         if version is not None:
             body["version"] = int(version)
         if position is not None:

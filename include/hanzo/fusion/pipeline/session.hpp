@@ -416,6 +416,9 @@ class Session {
   /// Frontend keyframe yet), "not_found: ..." (too few images placed, or placed in agreement;
   /// each placement's reason follows). Nothing changes then.
   static constexpr int kRecentCameraImages = 8;
+  /// What the Session can relocalize with: a LiDAR it maps (3D or planar), cameras with visual odometry.
+  bool maps_lidar_sweeps() const { return maps_lidar(); }
+  bool has_camera_odometry() const { return camera_odometry_ != nullptr; }
   Result<CameraRelocalizationOutcome> relocalize(const msgs::VisualLandmarkLayer& map, const CameraRelocalizationRequest& request);
 
   /// The map's layers (points, occupancy; the cameras' landmarks; the Gaussian splats trained so

@@ -76,16 +76,25 @@ struct SessionManagerConfig {
   RecordingConfig recording;                         // raw sensor logging of sessions (off without a folder)
 };
 
+/// Which of the session's sensors places it in the map: the LiDAR's newest sweeps in the map's
+/// point layer, or the left camera's newest images in its visual landmark layer. kAuto: the
+/// LiDAR when the session maps one, else the cameras.
+enum class RelocalizeSensor { kAuto, kLidar, kCamera };
+
 struct RelocalizeRequest {
   std::string map_id;                   // a stored map of the caller's organization
   std::optional<uint64_t> version;      // the latest when empty
-  pipeline::RelocalizationRequest relocalization;
+  RelocalizeSensor sensor = RelocalizeSensor::kAuto;
+  pipeline::RelocalizationRequest relocalization;        // LiDAR
+  pipeline::CameraRelocalizationRequest camera;          // cameras
 };
 
 struct RelocalizeResult {
   std::string map_id;
   uint64_t version = 0;                 // the stored version localized in
-  pipeline::RelocalizationOutcome outcome;
+  /// One of the two, by the sensor that placed the session.
+  std::optional<pipeline::RelocalizationOutcome> outcome;
+  std::optional<pipeline::CameraRelocalizationOutcome> camera_outcome;
 };
 
 struct CreateSessionRequest {
