@@ -31,7 +31,7 @@ bool agree(const SE3& a, const SE3& b, const CameraRelocalizationRequest& reques
   return difference.translation().norm() <= request.agreement_m && difference.rotation().log().norm() <= request.agreement_rad;
 }
 
-// "placed 3 of 3 images (2 agree): ..." with each placement's reason or inliers.
+// Each placement's inliers or why it was not placed, for a refusal's message.
 std::string describe(const std::vector<CameraPlacement>& placements) {
   std::string text;
   for (const CameraPlacement& placement : placements) {

@@ -263,11 +263,11 @@ struct RelocalizationOutcome {
 /// layer, made by a session with cameras; vision::MapRelocalizer). Each of the newest `frames`
 /// images of the left camera that the Session has a pose for is placed in the map on its own;
 /// each placement says where the session's world lies in the map (T_map_world =
-/// T_map_camera T_body_camera^-1 T_world_body^-1 at the image's time). The placement with the
-/// most inliers wins when at least `min_agreeing_frames` placements (itself included) put the
-/// world within agreement_m and agreement_rad of it: one image can be placed wrongly on a
-/// repeated texture, several images from different viewpoints rarely agree on the same wrong
-/// place.
+/// T_map_camera T_body_camera^-1 T_world_body^-1 at the image's time). The placement that the
+/// most placements (itself included) agree with, within agreement_m and agreement_rad, wins
+/// (ties: the most inliers), when at least `min_agreeing_frames` agree: one image can be placed
+/// wrongly on a repeated texture, several images from different viewpoints rarely agree on the
+/// same wrong place.
 struct CameraRelocalizationRequest {
   int frames = 3;               ///< newest left images tried (the Session keeps the last kRecentCameraImages)
   int min_agreeing_frames = 2;  ///< placements that must agree (1..frames)
@@ -406,6 +406,11 @@ class Session {
   /// "not_found: ..." (the localizer found no pose that verifies; its reason follows).
   /// Nothing changes then.
   Result<RelocalizationOutcome> relocalize(const lidar::MapLocalizer& map, const RelocalizationRequest& request);
+  /// Left images kept for camera relocalization (the newest).
+  static constexpr int kRecentCameraImages = 8;
+  /// What the Session can relocalize with: a LiDAR it maps (3D or planar), cameras with visual odometry.
+  bool maps_lidar_sweeps() const { return maps_lidar(); }
+  bool has_camera_odometry() const { return camera_odometry_ != nullptr; }
   /// Places the newest left-camera images in a saved visual landmark map (the request's
   /// header comment) and, when enough of them agree, moves the Session's world onto the map's
   /// frame as the LiDAR relocalization does (one Frontend correction; the keyframe graph
@@ -415,10 +420,6 @@ class Session {
   /// whose lengths have no metric scale), "not_ready: ..." (no camera, no posed image or no
   /// Frontend keyframe yet), "not_found: ..." (too few images placed, or placed in agreement;
   /// each placement's reason follows). Nothing changes then.
-  static constexpr int kRecentCameraImages = 8;
-  /// What the Session can relocalize with: a LiDAR it maps (3D or planar), cameras with visual odometry.
-  bool maps_lidar_sweeps() const { return maps_lidar(); }
-  bool has_camera_odometry() const { return camera_odometry_ != nullptr; }
   Result<CameraRelocalizationOutcome> relocalize(const msgs::VisualLandmarkLayer& map, const CameraRelocalizationRequest& request);
 
   /// The map's layers (points, occupancy; the cameras' landmarks; the Gaussian splats trained so
