@@ -57,7 +57,7 @@ Result<CameraRelocalizationOutcome> Session::relocalize(const msgs::VisualLandma
   if (!relocalizer_config.extractor && map.descriptor_type != "orb") {
     const auto& own = camera_odometry_->extractor();
     if (!own || own->name() != map.descriptor_type) {
-      return Error(fmt::format("invalid: the map's landmarks carry {} descriptors; this session's cameras extract {}", map.descriptor_type,
+      return Error(fmt::format("invalid: the map's landmarks carry {} descriptors, the visual odometry extracts {}", map.descriptor_type,
                                own ? own->name() : std::string("KLT corners (frontend.type msckf)")));
     }
     relocalizer_config.extractor = own;
