@@ -222,7 +222,7 @@ Result<FeatureSelection> parse_features(const YamlValue& node) {
 Result<VisionConfig> parse_vision(const YamlValue& node) {
   VisionConfig vision;
   if (!node.present()) return vision;
-  HANZO_RETURN_IF_ERROR(node.check_keys({"features", "matcher", "place_recognition", "place_model"}));
+  HANZO_RETURN_IF_ERROR(node.check_keys({"features", "matcher", "place_recognition", "place_model", "local_mapping_thread"}));
   if (node["features"].present()) HANZO_ASSIGN_OR_RETURN(vision.features, parse_features(node["features"]));
   if (const YamlValue matcher = node["matcher"]; matcher.present()) {
     std::string name;
@@ -239,6 +239,7 @@ Result<VisionConfig> parse_vision(const YamlValue& node) {
     else return place.error(fmt::format("expected bow or learned, got '{}'", name));
   }
   if (node["place_model"].present()) HANZO_ASSIGN_OR_RETURN(vision.place_model, node["place_model"].as_string());
+  if (node["local_mapping_thread"].present()) HANZO_ASSIGN_OR_RETURN(vision.local_mapping_thread, node["local_mapping_thread"].as_bool());
   return vision;
 }
 
@@ -455,6 +456,7 @@ std::string vision_yaml(const VisionConfig& v) {
   if (v.matcher != d.matcher) out += fmt::format("    matcher: {}\n", to_string(v.matcher));
   if (v.place_recognition) out += fmt::format("    place_recognition: {}\n", to_string(*v.place_recognition));
   if (!v.place_model.empty()) out += fmt::format("    place_model: {}\n", yaml::scalar(v.place_model));
+  if (v.local_mapping_thread != d.local_mapping_thread) out += fmt::format("    local_mapping_thread: {}\n", v.local_mapping_thread);
   return out.empty() ? out : "  vision:\n" + out;
 }
 

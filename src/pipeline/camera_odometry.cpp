@@ -72,6 +72,7 @@ Status apply_vision_config(const config::FusionConfig& config, const std::string
     HANZO_ASSIGN_OR_RETURN(odometry.extractor, make_feature_extractor(features.first, odometry.features.max_features, features.second, odometry.features));
   }
   if (odometry.loop_closure && !odometry.place_model) HANZO_ASSIGN_OR_RETURN(odometry.place_model, place_model_for(config.vision, *odometry.extractor));
+  odometry.local_mapping_thread = config.vision.local_mapping_thread;
   if (config.vision.matcher == config::MatcherType::kLearned && !odometry.putative_filter) {
     Result<vision::CorrespondenceFilter> filter = vision::CorrespondenceFilter::load_default();
     if (!filter) return Error("vision.matcher learned: " + filter.error().message, "vision.matcher");

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <future>
 #include <limits>
 #include <numeric>
 #include <set>
@@ -186,12 +187,30 @@ struct VisualOdometry::State {
   // scale_factor^octave for every pyramid level (looked up in the matchers' inner loops).
   std::vector<double> octave_scale;
   double sigma(int octave) const { return config.pixel_sigma * octave_scale[static_cast<std::size_t>(octave)]; }
-  // The image's features, their extraction timed.
-  Result<ImageFeatures> extract(const cv::Mat& image) {
+  // The image's features, their extraction time added to `seconds`.
+  Result<ImageFeatures> extract(const cv::Mat& image, double& seconds) const {
     const auto start = std::chrono::steady_clock::now();
     Result<ImageFeatures> features = extractor->extract(image);
-    counts.feature_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return features;
+  }
+  // Extraction time of right images (stereo matching, which the local mapping runs while the
+  // tracking thread extracts left images into counts.feature_seconds).
+  double right_feature_seconds = 0.0;
+
+  // Local mapping of the newest keyframe: running (local_mapping_thread) until joined. Only
+  // the tracking thread starts and joins it; while it runs the tracking thread touches nothing
+  // but the extractor, the frame checks and counts' per-frame fields.
+  std::future<void> mapping;
+  bool loop_closed_by_mapping = false;  // reported with the next frame
+  void finish_mapping() {
+    if (!mapping.valid()) return;
+    const auto start = std::chrono::steady_clock::now();
+    mapping.get();
+    counts.mapping_wait_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+  ~State() {
+    if (mapping.valid()) mapping.wait();
   }
 
   // The largest descriptor distance of a match between descriptors like `descriptors`.
@@ -286,7 +305,7 @@ struct VisualOdometry::State {
   void match_stereo(Frame& frame) {
     frame.right_keypoint.assign(frame.features.size(), -1);
     if (rgbd) return match_depth(frame);
-    Result<ImageFeatures> right = extract(frame.right_image);
+    Result<ImageFeatures> right = extract(frame.right_image, right_feature_seconds);
     frame.right_image.release();
     if (!right) return;
     frame.right_features = std::move(right).value();
@@ -717,9 +736,12 @@ struct VisualOdometry::State {
     if (standing) return result;
     still_anchor = anchor_of(frame);
     if (refined.inliers < config.keyframe_tracked_ratio * last_keyframe_tracked || frames_since_keyframe >= config.max_frames_between_keyframes) {
-      result.loop_closed = add_keyframe(std::move(frame));
       result.keyframe = true;
-      result.T_world_camera = last_pose;
+      // Mapped inline: the keyframe's adjusted pose (and a loop it closed) are known now.
+      if (add_keyframe(std::move(frame))) {
+        result.T_world_camera = last_pose;
+        result.loop_closed = std::exchange(loop_closed_by_mapping, false);
+      }
     }
     still_anchor_record = frames.back();
     return result;
@@ -795,11 +817,12 @@ struct VisualOdometry::State {
 
   // ---- keyframes ----
 
-  // Returns whether the keyframe closed a loop.
+  // A tracked frame becomes a keyframe: it observes the landmarks it tracked, and its local
+  // mapping starts (on its own thread with local_mapping_thread, else here). Returns whether
+  // the mapping is done (inline).
   bool add_keyframe(Frame frame) {
     const int id = next_keyframe_id++;
     Keyframe& keyframe = keyframes.emplace(id, Keyframe{id, std::move(frame)}).first->second;
-    int tracked = 0;
     for (std::size_t k = 0; k < keyframe.frame.landmark.size(); ++k) {
       const int landmark_id = keyframe.frame.landmark[k];
       if (landmark_id < 0) continue;
@@ -807,8 +830,26 @@ struct VisualOdometry::State {
       landmark.observations.emplace_back(id, static_cast<int>(k));
       landmark.descriptor = keyframe.frame.features.descriptors.row(static_cast<int>(k)).clone();
       landmark.octave = keyframe.frame.features.keypoints[k].octave;
-      ++tracked;
     }
+    frames.back() = {keyframe.frame.time, id, SE3()};
+    frames_since_keyframe = 0;
+    if (!config.local_mapping_thread) {
+      map_keyframe(id);
+      return true;
+    }
+    // The caller may reuse its image buffers once track() returns.
+    keyframe.frame.right_image = keyframe.frame.right_image.clone();
+    mapping = std::async(std::launch::async, [this, id] { map_keyframe(id); });
+    return false;
+  }
+
+  // Local mapping of keyframe `id`: stereo points, triangulation against the previous
+  // keyframes, culling, the window's bundle adjustment, loop closure; then the motion model
+  // continues from the keyframe's adjusted pose.
+  void map_keyframe(int id) {
+    const auto start = std::chrono::steady_clock::now();
+    Keyframe& keyframe = keyframes.at(id);
+    const int tracked = static_cast<int>(std::count_if(keyframe.frame.landmark.begin(), keyframe.frame.landmark.end(), [](int l) { return l >= 0; }));
     int older = 0, created = 0;
     if (right_camera) {
       match_stereo(keyframe.frame);
@@ -820,18 +861,16 @@ struct VisualOdometry::State {
     logger()->debug("visual odometry: keyframe {} tracks {} landmarks, {} new", id, tracked, created);
     cull_unconfirmed_landmarks(id);
     bundle_adjust();
-    const bool loop_closed = close_loop(id);
+    loop_closed_by_mapping = close_loop(id) || loop_closed_by_mapping;
     // The frame's pose after the adjustment (and the loop correction).
     last_pose = keyframe.frame.T_world_camera;
-    frames.back() = {keyframe.frame.time, id, SE3()};
-    frames_since_keyframe = 0;
     // What the next frames are compared with: the landmarks this keyframe sees that other
     // keyframes confirm (a stereo keyframe's new points, seen by it alone, would make every
     // following frame look short of landmarks).
     last_keyframe_tracked = static_cast<int>(std::count_if(keyframe.frame.landmark.begin(), keyframe.frame.landmark.end(),
                                                            [&](int l) { return l >= 0 && landmarks.at(l).observations.size() >= 2; }));
     ++counts.keyframes;
-    return loop_closed;
+    counts.mapping_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
 
   // A landmark that three keyframes after its creation is still seen by fewer than three was a
@@ -1277,7 +1316,7 @@ Result<VisualOdometryFrame> VisualOdometry::track_frame(double time, const cv::M
   if (image.cols != s.image_size.width || image.rows != s.image_size.height) {
     return Error(fmt::format("image is {} x {}, the camera's calibration is for {} x {}", image.cols, image.rows, s.image_size.width, s.image_size.height), "image");
   }
-  Result<ImageFeatures> features = with_context(s.extract(image), "image");
+  Result<ImageFeatures> features = with_context(s.extract(image, s.counts.feature_seconds), "image");
   if (!features) return Error(features.error().message, "image");
   if (!right.empty() && !s.rgbd && (right.depth() != CV_8U || (right.channels() != 1 && right.channels() != 3 && right.channels() != 4))) {
     return Error(fmt::format("right image: type {} is not 8-bit grey, BGR or BGRA", cv::typeToString(right.type())), "right_image");
@@ -1287,15 +1326,21 @@ Result<VisualOdometryFrame> VisualOdometry::track_frame(double time, const cv::M
   ++s.counts.feature_frames;
   Frame frame = s.make_frame(time, std::move(features).value());
   frame.right_image = right;
+  // The features were extracted while the previous keyframe's mapping ran; the map is read from here on.
+  s.finish_mapping();
   if (!s.initialized) {
     VisualOdometryFrame result = s.right_camera ? s.initialize_stereo(std::move(frame)) : s.initialize(std::move(frame));
     if (result.state == TrackingState::kTracking) s.counts.tracked_frames += s.right_camera ? 1 : 2;
     return result;
   }
-  return s.track(std::move(frame));
+  const bool loop_closed = std::exchange(s.loop_closed_by_mapping, false);
+  VisualOdometryFrame result = s.track(std::move(frame));
+  result.loop_closed = result.loop_closed || loop_closed;
+  return result;
 }
 
 std::vector<std::pair<double, SE3>> VisualOdometry::trajectory() const {
+  state_->finish_mapping();
   std::vector<std::pair<double, SE3>> poses;
   poses.reserve(state_->frames.size());
   for (const FrameRecord& record : state_->frames) poses.emplace_back(record.time, state_->keyframes.at(record.keyframe).frame.T_world_camera * record.T_keyframe_camera);
@@ -1303,12 +1348,14 @@ std::vector<std::pair<double, SE3>> VisualOdometry::trajectory() const {
 }
 
 std::vector<std::pair<double, SE3>> VisualOdometry::keyframe_poses() const {
+  state_->finish_mapping();
   std::vector<std::pair<double, SE3>> poses;
   for (const auto& [id, keyframe] : state_->keyframes) poses.emplace_back(keyframe.frame.time, keyframe.frame.T_world_camera);
   return poses;
 }
 
 std::vector<Eigen::Vector3d> VisualOdometry::landmark_positions() const {
+  state_->finish_mapping();
   std::vector<Eigen::Vector3d> positions;
   positions.reserve(state_->landmarks.size());
   for (const auto& [id, landmark] : state_->landmarks) positions.push_back(landmark.position);
@@ -1316,6 +1363,7 @@ std::vector<Eigen::Vector3d> VisualOdometry::landmark_positions() const {
 }
 
 msgs::VisualLandmarkLayer VisualOdometry::landmark_layer(const std::string& camera_name) const {
+  state_->finish_mapping();
   msgs::VisualLandmarkLayer layer;
   layer.camera = camera_name;
   std::map<int, uint32_t> index_of;
@@ -1362,7 +1410,9 @@ msgs::VisualLandmarkLayer VisualOdometry::landmark_layer(const std::string& came
 }
 
 VisualOdometrySummary VisualOdometry::summary() const {
+  state_->finish_mapping();
   VisualOdometrySummary summary = state_->counts;
+  summary.feature_seconds += state_->right_feature_seconds;
   summary.landmarks = static_cast<int>(state_->landmarks.size());
   summary.keyframes = static_cast<int>(state_->keyframes.size());
   return summary;

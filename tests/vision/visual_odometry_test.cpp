@@ -64,6 +64,63 @@ TEST(VisualOdometry, KittiOdometry06MonocularStaysUnderOnePercentOfThePath) {
   EXPECT_LT(ape.statistics.rmse, 0.01 * path);
 }
 
+// Local mapping on its own thread does the same work in the same order as inline: the map,
+// the refined trajectory and every frame's result are bit-identical, but for the keyframes'
+// reported poses (tracked with the thread, adjusted inline).
+TEST(VisualOdometry, LocalMappingOnItsOwnThreadGivesBitIdenticalResults) {
+  const Sequence sequence = kitti_odometry_06();
+  struct Run {
+    std::vector<VisualOdometryFrame> frames;
+    std::vector<std::pair<double, SE3>> trajectory;
+    std::vector<Eigen::Vector3d> landmarks;
+    VisualOdometrySummary summary;
+  };
+  const auto run_with = [&](bool thread) {
+    VisualOdometryConfig config;
+    config.local_mapping_thread = thread;
+    const cv::Mat first = cv::imread(sequence.images.front(), cv::IMREAD_GRAYSCALE);
+    auto odometry = VisualOdometry::create(sequence.camera, first.size(), config).value();
+    Run out;
+    for (std::size_t i = 0; i < sequence.images.size(); ++i) {
+      cv::Mat image = cv::imread(sequence.images[i], cv::IMREAD_GRAYSCALE);
+      out.frames.push_back(odometry->track(sequence.times[i], image).value());
+      image.setTo(0);  // the caller's buffer reused while the mapping may still run
+      if (i == 20) {
+        EXPECT_GT(odometry->summary().keyframes, 2);  // an accessor mid-run waits for the mapping
+      }
+    }
+    out.trajectory = odometry->trajectory();
+    out.landmarks = odometry->landmark_positions();
+    out.summary = odometry->summary();
+    return out;
+  };
+  const Run inline_mapping = run_with(false), threaded = run_with(true);
+  ASSERT_EQ(inline_mapping.frames.size(), threaded.frames.size());
+  int keyframes = 0;
+  for (std::size_t i = 0; i < threaded.frames.size(); ++i) {
+    const VisualOdometryFrame& a = inline_mapping.frames[i];
+    const VisualOdometryFrame& b = threaded.frames[i];
+    EXPECT_EQ(a.state, b.state) << i;
+    EXPECT_EQ(a.keyframe, b.keyframe) << i;
+    EXPECT_EQ(a.tracked_landmarks, b.tracked_landmarks) << i;
+    EXPECT_EQ(a.loop_closed, b.loop_closed) << i;
+    if (!b.keyframe) {
+      EXPECT_TRUE(a.T_world_camera.matrix() == b.T_world_camera.matrix()) << i;
+    }
+    keyframes += b.keyframe;
+  }
+  EXPECT_GT(keyframes, 10);
+  ASSERT_EQ(inline_mapping.trajectory.size(), threaded.trajectory.size());
+  for (std::size_t i = 0; i < threaded.trajectory.size(); ++i) {
+    EXPECT_EQ(inline_mapping.trajectory[i].first, threaded.trajectory[i].first);
+    EXPECT_TRUE(inline_mapping.trajectory[i].second.matrix() == threaded.trajectory[i].second.matrix()) << i;
+  }
+  ASSERT_EQ(inline_mapping.landmarks.size(), threaded.landmarks.size());
+  for (std::size_t i = 0; i < threaded.landmarks.size(); ++i) EXPECT_TRUE(inline_mapping.landmarks[i] == threaded.landmarks[i]) << i;
+  EXPECT_EQ(inline_mapping.summary.keyframes, threaded.summary.keyframes);
+  EXPECT_GT(threaded.summary.mapping_seconds, 0.0);
+}
+
 // Bad input: wrong sizes, types and times are refused with the reason (nothing changes); black
 // and saturated frames have no features: the odometry reports them (initializing with the
 // reason, or lost) and tracks again when texture returns.

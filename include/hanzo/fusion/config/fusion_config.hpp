@@ -186,6 +186,9 @@ struct VisionConfig {
   /// Unset: bow with ORB features, learned with learned ones (each the only kind that fits).
   std::optional<PlaceRecognitionType> place_recognition;
   std::string place_model;  // learned: the VLAD model file; empty: vlad_<features>.hzvlad of the trained models
+  /// The visual odometry's local mapping on its own thread (vision::VisualOdometryConfig):
+  /// lower latency per image; false (default): keyframe poses fused after their bundle adjustment.
+  bool local_mapping_thread = false;
 };
 
 /// A live sensor's driver (`hanzo-fusion drive`, docs/drivers.md): the decoder of its bytes and
