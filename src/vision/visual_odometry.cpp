@@ -892,9 +892,16 @@ struct VisualOdometry::State {
     if (T_camera1_camera2.translation().norm() < 1e-9) return 0;
     // Essential matrix E = [t]x R of camera 1 from camera 2: x1^T E x2 = 0 (normalized).
     const Eigen::Matrix3d essential = SO3::hat(T_camera1_camera2.translation()) * T_camera1_camera2.rotation().matrix();
-    std::vector<int> free1;
+    // The older keyframe's free keypoints by octave (ascending within each), their normalized
+    // coordinates beside them: the search reads only the octaves within one of the keypoint's.
+    const int octaves = static_cast<int>(octave_scale.size());
+    std::vector<std::vector<int>> free1(static_cast<std::size_t>(octaves));
+    std::vector<std::vector<Eigen::Vector2d>> free1_normalized(static_cast<std::size_t>(octaves));
     for (std::size_t k = 0; k < older.frame.landmark.size(); ++k) {
-      if (older.frame.landmark[k] < 0 && has_normalized(older.frame, k)) free1.push_back(static_cast<int>(k));
+      if (older.frame.landmark[k] >= 0 || !has_normalized(older.frame, k)) continue;
+      const auto octave = static_cast<std::size_t>(older.frame.features.keypoints[k].octave);
+      free1[octave].push_back(static_cast<int>(k));
+      free1_normalized[octave].push_back(older.frame.normalized[k]);
     }
     std::vector<std::pair<int, int>> owner(older.frame.landmark.size(), {-1, std::numeric_limits<int>::max()});  // (k2, distance)
     for (std::size_t k2 = 0; k2 < newer.frame.landmark.size(); ++k2) {
@@ -903,13 +910,17 @@ struct VisualOdometry::State {
       const double line_norm = line.head<2>().norm();
       if (line_norm < 1e-12) continue;
       const int octave2 = newer.frame.features.keypoints[k2].octave;
+      // Equal distances fail the ratio test, so the order of the offers does not matter.
       NearestCandidates nearest;
-      for (int k1 : free1) {
-        const cv::KeyPoint& keypoint1 = older.frame.features.keypoints[static_cast<std::size_t>(k1)];
-        if (std::abs(keypoint1.octave - octave2) > 1) continue;
-        const double epipolar_px = std::abs(older.frame.normalized[static_cast<std::size_t>(k1)].homogeneous().dot(line)) / line_norm * camera.fx;
-        if (epipolar_px > 2.0 * sigma(keypoint1.octave)) continue;
-        nearest.offer(k1, descriptor_distance(older.frame.features.descriptors, k1, newer.frame.features.descriptors, static_cast<int>(k2)));
+      for (int octave1 = std::max(0, octave2 - 1); octave1 <= std::min(octaves - 1, octave2 + 1); ++octave1) {
+        const std::vector<int>& keypoints1 = free1[static_cast<std::size_t>(octave1)];
+        const std::vector<Eigen::Vector2d>& normalized1 = free1_normalized[static_cast<std::size_t>(octave1)];
+        const double max_epipolar_px = 2.0 * sigma(octave1);
+        for (std::size_t i = 0; i < keypoints1.size(); ++i) {
+          const double epipolar_px = std::abs(normalized1[i].homogeneous().dot(line)) / line_norm * camera.fx;
+          if (epipolar_px > max_epipolar_px) continue;
+          nearest.offer(keypoints1[i], descriptor_distance(older.frame.features.descriptors, keypoints1[i], newer.frame.features.descriptors, static_cast<int>(k2)));
+        }
       }
       if (!nearest.passes(0.9, max_distance(newer.frame.features.descriptors))) continue;
       const int best_k1 = nearest.index, best = nearest.best;
