@@ -175,6 +175,7 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
   }
   int best_inliers = 0;
   std::optional<MapRelocalization> best;  // the candidate whose pose explains the most landmarks
+  std::vector<std::pair<SE3, int>> placements;  // every candidate's refined T_camera_world and its inliers
   for (const auto& [score, candidate] : ranked) {
     // The landmarks of the candidate and its neighbours.
     std::vector<uint32_t> landmarks;
@@ -227,9 +228,25 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
       if (guided.inliers < refined.inliers) break;
       refined = guided;
     }
+    placements.push_back({refined.T_camera_world, refined.inliers});
     if (!best || refined.inliers > best->inliers) best = MapRelocalization{refined.T_camera_world.inverse(), refined.inliers, candidate, score, place_recognition};
   }
-  if (best) return *best;
+  if (best) {
+    // Step 4: another candidate's pose explains the image about as well.
+    if (config_.ambiguity_ratio > 0.0 && config_.ambiguity_ratio <= 1.0) {
+      for (const auto& [other, inliers] : placements) {
+        const SE3 T_world_other = other.inverse();
+        const double distance = (T_world_other.translation() - best->T_world_camera.translation()).norm();
+        const double angle = (best->T_world_camera.rotation().inverse() * T_world_other.rotation()).angle();
+        if ((distance < config_.ambiguity_distance_m && angle < config_.ambiguity_angle_deg * M_PI / 180.0) || inliers < config_.ambiguity_ratio * best->inliers) {
+          continue;
+        }
+        return Error(fmt::format("relocalization: ambiguous: two poses {:.2f} m / {:.1f} deg apart explain {} and {} landmarks", distance,
+                                 angle * 180.0 / M_PI, best->inliers, inliers));
+      }
+    }
+    return *best;
+  }
   return Error(fmt::format("relocalization: no pose with {} inliers among the {} most similar keyframes (best {})", config_.min_inliers, ranked.size(), best_inliers));
 }
 

@@ -151,7 +151,7 @@ TEST(VisualLandmarkMap, RelocalizesViewsTwoMetresAndThirtyDegreesFromEveryKeyfra
   const SE3 T_body_camera = drone.scenario.sensors[0].T_body_sensor;
   const SE3 T_simulation_map = truth.sample(layer.keyframes.front().time).T_world_body * T_body_camera;
   auto relocalizer = MapRelocalizer::create(layer, camera_of(drone.scenario.sensors[0])).value();
-  int placed_views = 0, tried = 0;
+  int placed_views = 0, tried = 0, placed_beyond_a_metre = 0;
   for (std::size_t which = 4; which + 4 < layer.keyframes.size(); which += 4) {
     const Timestamp time = layer.keyframes[which].time;
     const SE3 T_world_flown = truth.sample(time).T_world_body * T_body_camera;
@@ -183,14 +183,16 @@ TEST(VisualLandmarkMap, RelocalizesViewsTwoMetresAndThirtyDegreesFromEveryKeyfra
                   offset.x(), offset.y(), offset.z(), nearest_distance, nearest_angle / kDegree, placed->inliers, error.translation().norm(),
                   error.rotation().angle() / kDegree);
       if (local.translation().norm() < 0.3 && local.rotation().angle() < 2 * kDegree) ++placed_views;
+      if (local.translation().norm() > 1.0) ++placed_beyond_a_metre;
     }
   }
-  // Measured (bench/RESULTS.md): 15 such views, 8 given a pose, 5 of them within 0.3 m and
-  // 2 degrees of the truth relative to the nearest keyframe; the other 3 1.0-1.6 m off. The goal
-  // (every such view placed) is not met.
-  std::printf("placed %d of %d views within 0.3 m / 2 deg\n", placed_views, tried);
+  // Measured (bench/RESULTS.md): 15 such views, 5 given a pose, 4 of them within 0.3 m and
+  // 2 degrees of the truth relative to the nearest keyframe, 1 1.6 m off; 2 refused as
+  // ambiguous (candidates 0.8 and 1.5 m apart). The goal (10 placed, none beyond 1 m) is not met.
+  std::printf("placed %d of %d views within 0.3 m / 2 deg, %d beyond 1 m\n", placed_views, tried, placed_beyond_a_metre);
   EXPECT_GE(tried, 10);
   EXPECT_GE(placed_views, 4);
+  EXPECT_LE(placed_beyond_a_metre, 1);
 }
 
 TEST(VisualLandmarkMap, BadLayersAreRefusedNamingTheField) {

@@ -17,6 +17,10 @@
 //      pose: they are matched by projection (within projection_search_radius_px, then half of
 //      it) and the pose refined on all of them (ORB-SLAM's relocalization scheme). The candidate
 //      whose pose explains the most landmarks wins.
+//   4. Unless it is ambiguous: the winner is refused when another candidate's pose at least
+//      ambiguity_distance_m or ambiguity_angle_deg away explains ambiguity_ratio of its
+//      landmarks (a wall or a tiled floor seen from afar is explained almost as well by a tilt
+//      traded against a shift; repeated texture matches at either).
 //
 // Frames: the map's world frame (the odometry's: its first keyframe's camera frame, or the
 // Session's world); the result is T_world_camera of the image's camera (optical frame).
@@ -69,6 +73,11 @@ struct MapRelocalizerConfig {
   std::shared_ptr<const VladModel> place_model;
   /// Learned maps: false ranks candidates by matched landmarks even where a VLAD model exists.
   bool learned_place_recognition = true;
+  /// Ambiguity (step 4): refused when another candidate's pose this far from the winner (m, or
+  /// degrees) explains at least this share of its landmarks. 0 or more than 1: no check.
+  double ambiguity_ratio = 0.9;
+  double ambiguity_distance_m = 0.3;
+  double ambiguity_angle_deg = 2.0;
 };
 
 struct MapRelocalization {
