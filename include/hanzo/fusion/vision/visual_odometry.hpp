@@ -152,9 +152,8 @@ struct VisualOdometryConfig {
   /// Each keyframe's local mapping on its own thread (true: track() returns as soon as the frame
   /// is tracked, a keyframe with its tracked pose) or in the calling thread before track()
   /// returns (false: a keyframe with its adjusted pose). The same map either way (header
-  /// comment). Measured on KITTI 06 (1226 x 370, every frame a keyframe): the thread takes a
-  /// frame from 47 to 17 ms of the calling thread's time; the adjusted poses are the more
-  /// accurate measurements for a filter (bench/RESULTS.md).
+  /// comment). The thread cuts the calling thread's time a frame to tracking alone; the
+  /// adjusted poses are the more accurate measurements for a filter (bench/RESULTS.md).
   bool local_mapping_thread = true;
   /// Loop closure (see the header comment). `vocabulary` null: the default vocabulary
   /// (Vocabulary::load_default); when it cannot be loaded loop closure is off (logged, and
