@@ -380,7 +380,7 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"camera_standstill_frames", m.camera_standstill_frames}, {"visual_loop_closures", m.visual_loop_closures},
           {"visual_scale_free", m.visual_scale_free}, {"camera_dark_frames", m.camera_dark_frames},
           {"camera_glare_frames", m.camera_glare_frames}, {"camera_motion_blur_frames", m.camera_motion_blur_frames},
-          {"camera_features", m.camera_features}, {"camera_feature_ms", m.camera_feature_ms},
+          {"camera_features", m.camera_features}, {"camera_feature_ms", m.camera_feature_ms}, {"camera_mapping_ms", m.camera_mapping_ms},
           {"camera_learned_matcher", m.camera_learned_matcher}, {"visual_place_recognition", m.visual_place_recognition}};
 }
 
@@ -629,7 +629,8 @@ int run(const Output& output, const RunOptions& options) {
                                               count_of(mapping.visual_landmarks, "landmark"), count_of(mapping.visual_loop_closures, "loop"))
                                 : "",
                         mapping.visual_scale_free ? " (monocular: lengths in units of its first baseline)" : "");
-    text += fmt::format("  features: {}, {:.1f} ms per frame{}{}\n", mapping.camera_features, mapping.camera_feature_ms,
+    text += fmt::format("  features: {}, {:.1f} ms per frame{}{}{}\n", mapping.camera_features, mapping.camera_feature_ms,
+                        mapping.camera_mapping_ms > 0.0 ? fmt::format("; local mapping {:.1f} ms per keyframe", mapping.camera_mapping_ms) : "",
                         mapping.camera_learned_matcher ? "; first views matched through the learned correspondence filter" : "",
                         mapping.visual_place_recognition == "learned" ? "; loop candidates by learned place recognition (VLAD)"
                         : mapping.visual_place_recognition.empty() && mapping.visual_keyframes > 0 ? "; no loop closure"

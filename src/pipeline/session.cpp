@@ -1402,6 +1402,7 @@ MappingSummary Session::mapping_summary() const {
     summary.visual_scale_free = visual.scale_free;
     summary.camera_features = visual.features;
     summary.camera_feature_ms = visual.feature_frames > 0 ? 1000.0 * visual.feature_seconds / visual.feature_frames : 0.0;
+    summary.camera_mapping_ms = visual.keyframes > 0 ? 1000.0 * visual.mapping_seconds / visual.keyframes : 0.0;
     summary.camera_learned_matcher = visual.learned_matcher;
     summary.visual_place_recognition = visual.place_recognition;
     const CameraOdometry::ImageConditionCounts& conditions = camera_odometry_->image_conditions();

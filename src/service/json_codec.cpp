@@ -229,6 +229,7 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"camera_motion_blur_frames", mapping.camera_motion_blur_frames},
       {"camera_features", mapping.camera_features},
       {"camera_feature_ms", mapping.camera_feature_ms},
+      {"camera_mapping_ms", mapping.camera_mapping_ms},
       {"camera_learned_matcher", mapping.camera_learned_matcher},
       {"visual_place_recognition", mapping.visual_place_recognition},
   };

@@ -799,6 +799,7 @@ TEST(Cli, RunTracksACameraOnlyConfigurationWithVisualOdometry) {
   EXPECT_EQ(json["mapping"]["camera_frames_tracked"], 51);  // 10 Hz over 5 s, both ends
   EXPECT_EQ(json["mapping"]["camera_frames_lost"], 0);
   EXPECT_EQ(json["mapping"]["visual_scale_free"], false);
+  EXPECT_GT(json["mapping"]["camera_mapping_ms"].get<double>(), 0.0);  // the keyframes' local mapping was timed
   EXPECT_LT(json["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), 0.1);  // 4.9 m flown; measured 0.047 m
   // Each camera's images add up (a pair's outcomes shown on both cameras).
   for (const auto& camera : json["summary"]["sensors"]) {

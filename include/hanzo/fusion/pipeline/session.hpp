@@ -352,6 +352,10 @@ struct MappingSummary {
   /// (fusion.vision.matcher learned). Empty / 0 / false without cameras.
   std::string camera_features;
   double camera_feature_ms = 0.0;
+  /// Mean wall-clock time of the visual odometry's local mapping per keyframe (ms: right-image
+  /// features, triangulation, bundle adjustment, loop closure; fusion.vision.local_mapping_thread
+  /// runs it beside tracking); 0 for the visual-inertial odometry and without cameras.
+  double camera_mapping_ms = 0.0;
   bool camera_learned_matcher = false;
   /// The visual odometry's loop-closure candidates: "bow", "learned" (VLAD), "" when it closes
   /// no loops (fusion.vision.place_recognition).
