@@ -144,6 +144,7 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   config.vision.matcher = MatcherType::kLearned;
   config.vision.place_recognition = PlaceRecognitionType::kLearned;
   config.vision.place_model = "models/vlad.hzvlad";
+  config.vision.local_mapping_thread = true;
   config.sensors.push_back({"camera_front", SensorModality::kCamera, "/camera", 20.0, "camera_link", "", {}, FeatureSelection{"orb", ""}});
   const std::filesystem::path path = std::filesystem::temp_directory_path() / "hanzo_fusion_config_test.yaml";
   ASSERT_TRUE(save_fusion_config(config, path.string()).ok());
@@ -171,6 +172,7 @@ TEST(FusionConfig, LoadSaveLoadIsLossless) {
   EXPECT_EQ(loaded->vision.matcher, MatcherType::kLearned);
   EXPECT_EQ(loaded->vision.place_recognition, PlaceRecognitionType::kLearned);
   EXPECT_EQ(loaded->vision.place_model, "models/vlad.hzvlad");
+  EXPECT_TRUE(loaded->vision.local_mapping_thread);
   EXPECT_EQ(loaded->features_of(*loaded->find_sensor("camera_front")).type, "orb");
   EXPECT_EQ(loaded->features_of(*loaded->find_sensor("imu2")).type, "aliked-n16");
   ASSERT_EQ(loaded->sensors.size(), 11U);
@@ -213,6 +215,8 @@ TEST(FusionConfig, VisionBlockChoosesFeaturesPerCamera) {
   EXPECT_THAT(error_of("fusion:\n  vision: {features: {type: orb, model: x.pth}}\n" + sensors), HasSubstr("ORB takes no model"));
   EXPECT_THAT(error_of("fusion:\n  vision: {matcher: superglue}\n" + sensors), HasSubstr("expected ratio or learned, got 'superglue'"));
   EXPECT_THAT(error_of("fusion:\n  vision: {place_recognition: netvlad}\n" + sensors), HasSubstr("expected bow or learned, got 'netvlad'"));
+  EXPECT_THAT(error_of("fusion:\n  vision: {local_mapping_thread: sometimes}\n" + sensors), HasSubstr("local_mapping_thread"));
+  EXPECT_FALSE(parse_fusion_config("fusion:\n" + sensors, "fusion.yaml").value().vision.local_mapping_thread);  // the Session's default
   EXPECT_FALSE(config.vision.place_recognition);  // unset: chosen by the features
   EXPECT_EQ(parse_fusion_config("fusion:\n  vision: {place_recognition: learned, place_model: v.hzvlad}\n" + sensors, "fusion.yaml").value().vision.place_recognition,
             PlaceRecognitionType::kLearned);
