@@ -13,9 +13,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "hanzo/fusion/core/logging.hpp"
-#include "hanzo/fusion/graph/batch_optimizer.hpp"
-#include "hanzo/fusion/graph/keys.hpp"
-#include "hanzo/fusion/graph/projection_factors.hpp"
+#include "hanzo/fusion/vision/bundle_adjustment.hpp"
 #include "hanzo/fusion/vision/feature_matcher.hpp"
 #include "hanzo/fusion/vision/place_database.hpp"
 #include "hanzo/fusion/vision/vlad.hpp"
@@ -129,6 +127,7 @@ Status validate(const VisualOdometryConfig& config) {
   if (config.max_frames_between_keyframes < 1) return Error("VisualOdometryConfig.max_frames_between_keyframes: must be at least 1", "max_frames_between_keyframes");
   if (!positive(config.min_triangulation_angle_deg)) return Error("VisualOdometryConfig.min_triangulation_angle_deg: must be positive", "min_triangulation_angle_deg");
   if (config.triangulation_keyframes < 1) return Error("VisualOdometryConfig.triangulation_keyframes: must be at least 1", "triangulation_keyframes");
+  if (!(config.min_triangulation_baseline_share >= 0.0)) return Error("VisualOdometryConfig.min_triangulation_baseline_share: must not be negative", "min_triangulation_baseline_share");
   if (config.window_keyframes < 2) return Error("VisualOdometryConfig.window_keyframes: must be at least 2", "window_keyframes");
   if (!(config.standstill_pixels >= 0.0)) return Error("VisualOdometryConfig.standstill_pixels: must not be negative", "standstill_pixels");
   if (!(config.max_stereo_depth_baselines > 0.0)) return Error("VisualOdometryConfig.max_stereo_depth_baselines: must be positive", "max_stereo_depth_baselines");
@@ -861,7 +860,9 @@ struct VisualOdometry::State {
     logger()->debug("visual odometry: keyframe {} tracks {} landmarks, {} new", id, tracked, created);
     cull_unconfirmed_landmarks(id);
     bundle_adjust();
+    const auto loop_start = std::chrono::steady_clock::now();
     loop_closed_by_mapping = close_loop(id) || loop_closed_by_mapping;
+    counts.loop_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - loop_start).count();
     // The frame's pose after the adjustment (and the loop correction).
     last_pose = keyframe.frame.T_world_camera;
     // What the next frames are compared with: the landmarks this keyframe sees that other
@@ -890,6 +891,7 @@ struct VisualOdometry::State {
     const SE3 T_camera1_world = older.frame.T_world_camera.inverse(), T_camera2_world = newer.frame.T_world_camera.inverse();
     const SE3 T_camera1_camera2 = T_camera1_world * newer.frame.T_world_camera;
     if (T_camera1_camera2.translation().norm() < 1e-9) return 0;
+    if (right_camera && T_camera1_camera2.translation().norm() < config.min_triangulation_baseline_share * T_left_right.translation().norm()) return 0;
     // Essential matrix E = [t]x R of camera 1 from camera 2: x1^T E x2 = 0 (normalized).
     const Eigen::Matrix3d essential = SO3::hat(T_camera1_camera2.translation()) * T_camera1_camera2.rotation().matrix();
     // The older keyframe's free keypoints by octave (ascending within each), their normalized
@@ -1110,15 +1112,6 @@ struct VisualOdometry::State {
     if (still_anchor) still_anchor.reset();
   }
 
-  // One image observation in the bundle adjustment.
-  struct BundleObservation {
-    int keyframe = 0;
-    int landmark = 0;
-    Eigen::Vector2d pixel;
-    double sigma = 1.0;
-    bool right = false;
-  };
-
   // Local bundle adjustment over the window (ORB-SLAM's two passes): Huber-robust iterations,
   // the observations then over the chi-square bound left out, and the same again. Monocular:
   // the window's two oldest keyframes are held (gauge and scale); stereo: the oldest. A result
@@ -1127,15 +1120,17 @@ struct VisualOdometry::State {
   void bundle_adjust() {
     const std::vector<int> window_ids = window();
     const std::set<int> in_window(window_ids.begin(), window_ids.end());
-    graph::Values values;
-    graph::BatchOptimizerConfig optimizer;
-    optimizer.max_iterations = config.bundle_adjustment_iterations;
+    BundleProblem problem;
+    problem.cameras.push_back({camera, SE3()});
+    if (right_camera) problem.cameras.push_back({*right_camera, T_left_right});
+    std::map<int, int> pose_index;
     double window_length = 0.0;
     for (std::size_t i = 0; i < window_ids.size(); ++i) {
       const SE3& pose = keyframes.at(window_ids[i]).frame.T_world_camera;
-      values.insert(graph::X(static_cast<std::uint64_t>(window_ids[i])), pose);
+      pose_index[window_ids[i]] = static_cast<int>(i);
+      problem.T_world_body.push_back(pose);
       if (i > 0) window_length += (pose.translation() - keyframes.at(window_ids[i - 1]).frame.T_world_camera.translation()).norm();
-      if (i < (right_camera ? 1u : 2u)) optimizer.fixed.push_back(graph::X(static_cast<std::uint64_t>(window_ids[i])));
+      problem.pose_fixed.push_back(i < (right_camera ? 1u : 2u));
     }
     std::vector<int> adjusted;
     std::vector<BundleObservation> observations;
@@ -1147,57 +1142,56 @@ struct VisualOdometry::State {
         return !in_window.count(observation.first) || (keyframes.at(observation.first).frame.T_world_camera.inverse().act(landmark.position).z() > camera.min_depth);
       });
       if (!in_front) continue;
-      values.insert(graph::L(static_cast<std::uint64_t>(landmark_id)), landmark.position);
+      const int point = static_cast<int>(adjusted.size());
+      problem.points_world.push_back(landmark.position);
       adjusted.push_back(landmark_id);
       for (const auto& [keyframe_id, keypoint] : landmark.observations) {
         if (!in_window.count(keyframe_id)) continue;
         const Frame& frame = keyframes.at(keyframe_id).frame;
         const auto k = static_cast<std::size_t>(keypoint);
-        observations.push_back({keyframe_id, landmark_id, pixel_of(frame, k), sigma(frame.features.keypoints[k].octave), false});
+        const int pose = pose_index.at(keyframe_id);
+        observations.push_back({pose, point, 0, pixel_of(frame, k), sigma(frame.features.keypoints[k].octave)});
         if (has_right(frame, k)) {
-          observations.push_back({keyframe_id, landmark_id, right_pixel_of(frame, k),
-                                  sigma(frame.right_features.keypoints[static_cast<std::size_t>(frame.right_keypoint[k])].octave), true});
+          observations.push_back({pose, point, 1, right_pixel_of(frame, k), sigma(frame.right_features.keypoints[static_cast<std::size_t>(frame.right_keypoint[k])].octave)});
         }
       }
     }
-    if (observations.empty() || optimizer.max_iterations == 0) return;
-    const graph::RobustKernel huber{graph::RobustKernel::Type::kHuber, std::sqrt(kChi2Pixel95)};
-    auto chi2 = [&](const BundleObservation& observation, const graph::Values& at) {
-      const SE3 T_world_camera = at.at<SE3>(graph::X(static_cast<std::uint64_t>(observation.keyframe))).value() * (observation.right ? T_left_right : SE3());
-      const PoseObservation pixel{at.at<Eigen::Vector3d>(graph::L(static_cast<std::uint64_t>(observation.landmark))).value(), observation.pixel, observation.sigma};
-      return reprojection_chi2(T_world_camera.inverse(), pixel, observation.right ? *right_camera : camera);
-    };
-    graph::Values adjusted_values = values;
+    if (observations.empty() || config.bundle_adjustment_iterations == 0) return;
+    BundleAdjustmentConfig adjustment;
+    adjustment.max_iterations = config.bundle_adjustment_iterations;
+    adjustment.huber_threshold = std::sqrt(kChi2Pixel95);
     std::vector<bool> used(observations.size(), true);
     for (int pass = 0; pass < 2; ++pass) {
-      graph::FactorGraph graph;
+      problem.observations.clear();
       for (std::size_t i = 0; i < observations.size(); ++i) {
-        if (!used[i]) continue;
-        const BundleObservation& observation = observations[i];
-        graph.emplace_robust<graph::ProjectionFactor>(huber, graph::X(static_cast<std::uint64_t>(observation.keyframe)), graph::L(static_cast<std::uint64_t>(observation.landmark)),
-                                                      observation.pixel, observation.right ? *right_camera : camera, observation.right ? T_left_right : SE3(),
-                                                      graph::GaussianNoise::from_sigmas(Eigen::Vector2d::Constant(observation.sigma)).value());
+        if (used[i]) problem.observations.push_back(observations[i]);
       }
-      graph::Values trial = adjusted_values;
-      Result<graph::OptimizationSummary> optimized = graph::optimize(graph, trial, optimizer);
+      BundleProblem trial = problem;
+      Result<BundleAdjustmentSummary> optimized = vision::bundle_adjust(trial, adjustment);
       if (!optimized) {
         logger()->warn("visual odometry: local bundle adjustment failed: {}", optimized.error().message);
         break;
       }
-      adjusted_values = std::move(trial);
-      for (std::size_t i = 0; i < observations.size(); ++i) used[i] = used[i] && chi2(observations[i], adjusted_values) <= kChi2Pixel95;
+      problem = std::move(trial);
+      for (std::size_t i = 0; i < observations.size(); ++i) {
+        const BundleObservation& observation = observations[i];
+        Eigen::Vector2d residual;
+        used[i] = used[i] && bundle_residual(problem.T_world_body[static_cast<std::size_t>(observation.pose)], problem.points_world[static_cast<std::size_t>(observation.point)],
+                                             problem.cameras[static_cast<std::size_t>(observation.camera)], observation, residual, nullptr, nullptr) &&
+                  residual.squaredNorm() <= kChi2Pixel95;
+      }
     }
     const double limit = std::max(window_length, 1e-6);
     for (int keyframe_id : window_ids) {
-      const double moved = (adjusted_values.at<SE3>(graph::X(static_cast<std::uint64_t>(keyframe_id))).value().translation() -
+      const double moved = (problem.T_world_body[static_cast<std::size_t>(pose_index.at(keyframe_id))].translation() -
                             keyframes.at(keyframe_id).frame.T_world_camera.translation()).norm();
       if (moved > limit) {
         logger()->warn("visual odometry: bundle adjustment moved keyframe {} by {:.3f} (window length {:.3f}): refused", keyframe_id, moved, window_length);
         return;
       }
     }
-    for (int keyframe_id : window_ids) keyframes.at(keyframe_id).frame.T_world_camera = adjusted_values.at<SE3>(graph::X(static_cast<std::uint64_t>(keyframe_id))).value();
-    for (int landmark_id : adjusted) landmarks.at(landmark_id).position = adjusted_values.at<Eigen::Vector3d>(graph::L(static_cast<std::uint64_t>(landmark_id))).value();
+    for (int keyframe_id : window_ids) keyframes.at(keyframe_id).frame.T_world_camera = problem.T_world_body[static_cast<std::size_t>(pose_index.at(keyframe_id))];
+    for (std::size_t point = 0; point < adjusted.size(); ++point) landmarks.at(adjusted[point]).position = problem.points_world[point];
     // Observations that remain outliers are removed; landmarks left with one are culled.
     for (int landmark_id : local_landmarks()) {
       std::vector<int> outliers;

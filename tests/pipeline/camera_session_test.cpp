@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 
@@ -49,9 +50,25 @@ Recording simulate(const std::string& scenario_file, std::optional<double> durat
   return r;
 }
 
-const Recording& drone_recording() {
-  static const Recording recording = simulate("examples/scenarios/drone.yaml", 12.0);
-  return recording;
+// The drone's first 12 s; seed 0: the scenario's noise draw, another seed another draw.
+const Recording& drone_recording(uint64_t seed = 0) {
+  static std::map<uint64_t, Recording> recordings;
+  auto found = recordings.find(seed);
+  if (found == recordings.end()) {
+    found = recordings.emplace(seed, simulate("examples/scenarios/drone.yaml", 12.0, [seed](sim::Scenario& scenario) {
+                                 if (seed != 0) sim::set_seed(scenario, seed);
+                               })).first;
+  }
+  return found->second;
+}
+
+// The outcome of one noise draw varies by tens of percent (the odometry amplifies the pixel
+// noise), so accuracy bounds hold for the median of three draws: the scenario's and seeds 1, 2.
+constexpr uint64_t kDraws[] = {0, 1, 2};
+
+double median_of_three(std::vector<double> values) {
+  std::sort(values.begin(), values.end());
+  return values.at(1);
 }
 
 struct SessionRun {
@@ -121,7 +138,11 @@ TEST(CameraSession, StereoCamerasAloneTrackTheDrone) {
               static_cast<unsigned long>(run.mapping.visual_keyframes), static_cast<unsigned long>(run.mapping.visual_loop_closures));
   EXPECT_EQ(run.mapping.camera_frames_tracked, 121u);  // 10 Hz over 12 s, both ends
   EXPECT_FALSE(run.mapping.visual_scale_free);
-  EXPECT_LT(run.ape_se3_m, 0.1);
+  std::vector<double> apes{run.ape_se3_m};
+  for (uint64_t seed : {kDraws[1], kDraws[2]}) apes.push_back(run_session(is_camera, config::FrontendType::kEkf, drone_recording(seed)).ape_se3_m);
+  std::printf("cameras only: SE3-aligned APE over 3 draws %.3f %.3f %.3f m\n", apes[0], apes[1], apes[2]);
+  EXPECT_LT(median_of_three(apes), 0.1);
+  for (double ape : apes) EXPECT_LT(ape, 0.3);
   for (const SensorStatistics& sensor : run.summary.sensors) EXPECT_EQ(sensor.fused, sensor.received) << sensor.name;
   // The Session's map has the odometry's landmarks, in the Session's world: each keyframe's
   // camera near where the Session put the camera at that time (the Session's filter smooths the
@@ -148,18 +169,25 @@ TEST(CameraSession, StereoCamerasAloneTrackTheDrone) {
 // An RGB-D camera alone (examples/scenarios/warehouse_rgbd.yaml, the first 30 s: a straight, a
 // corner, then toward a wall beyond the depth range): the depth images (type depth, paired with
 // the colour camera) make the odometry metric without an IMU, within 1 % of the distance; every
-// colour and depth image is used.
+// colour and depth image is used; over three noise draws (the median within 1 %).
 TEST(CameraSession, RgbdCameraAloneIsMetricWithinOnePercentOfTheDistance) {
-  static const Recording recording = simulate("examples/scenarios/warehouse_rgbd.yaml", 30.0);
-  const SessionRun run = run_session(is_camera, config::FrontendType::kEkf, recording);
-  std::printf("RGB-D: SE3-aligned APE %.3f m over %.1f m, %lu frames tracked, %lu standing\n", run.ape_se3_m, run.distance_m,
-              static_cast<unsigned long>(run.mapping.camera_frames_tracked), static_cast<unsigned long>(run.mapping.camera_standstill_frames));
-  EXPECT_FALSE(run.mapping.visual_scale_free);
-  EXPECT_EQ(run.mapping.camera_frames_tracked, 451u);  // 15 Hz over 30 s, both ends
-  EXPECT_LT(run.ape_se3_m, 0.01 * run.distance_m);
-  EXPECT_GT(run.distance_m, 30.0);
-  ASSERT_EQ(run.summary.sensors.size(), 2u);
-  for (const SensorStatistics& sensor : run.summary.sensors) EXPECT_EQ(sensor.fused, sensor.received) << sensor.name;
+  std::vector<double> shares;
+  for (uint64_t seed : kDraws) {
+    const Recording recording = simulate("examples/scenarios/warehouse_rgbd.yaml", 30.0, [seed](sim::Scenario& scenario) {
+      if (seed != 0) sim::set_seed(scenario, seed);
+    });
+    const SessionRun run = run_session(is_camera, config::FrontendType::kEkf, recording);
+    std::printf("RGB-D, draw %lu: SE3-aligned APE %.3f m over %.1f m, %lu frames tracked, %lu standing\n", static_cast<unsigned long>(seed), run.ape_se3_m,
+                run.distance_m, static_cast<unsigned long>(run.mapping.camera_frames_tracked), static_cast<unsigned long>(run.mapping.camera_standstill_frames));
+    EXPECT_FALSE(run.mapping.visual_scale_free);
+    EXPECT_EQ(run.mapping.camera_frames_tracked, 451u);  // 15 Hz over 30 s, both ends
+    EXPECT_GT(run.distance_m, 30.0);
+    ASSERT_EQ(run.summary.sensors.size(), 2u);
+    for (const SensorStatistics& sensor : run.summary.sensors) EXPECT_EQ(sensor.fused, sensor.received) << sensor.name;
+    shares.push_back(run.ape_se3_m / run.distance_m);
+    EXPECT_LT(shares.back(), 0.03) << "seed " << seed;  // no draw stops or diverges
+  }
+  EXPECT_LT(median_of_three(shares), 0.01);
 }
 
 // Camera relocalization in a saved map: the drone's map from a cameras-only session (12 s),
@@ -259,10 +287,17 @@ TEST(CameraSession, RelocalizesInASavedVisualMapWhenItsNewestImagesAgree) {
 }
 
 TEST(CameraSession, StereoOdometryFusedWithTheImuBeatsTheImuAlone) {
-  const SessionRun inertial = run_session(is_imu);
-  const SessionRun fused = run_session([](const sim::ScenarioSensor& sensor) { return is_imu(sensor) || is_camera(sensor); });
-  std::printf("IMU alone: SE3-aligned APE %.3f m; IMU + stereo odometry: %.3f m\n", inertial.ape_se3_m, fused.ape_se3_m);
-  EXPECT_LT(fused.ape_se3_m, 0.8 * inertial.ape_se3_m);
+  std::vector<double> ratios;
+  for (uint64_t seed : kDraws) {
+    const SessionRun inertial = run_session(is_imu, config::FrontendType::kEkf, drone_recording(seed));
+    const SessionRun fused = run_session([](const sim::ScenarioSensor& sensor) { return is_imu(sensor) || is_camera(sensor); }, config::FrontendType::kEkf,
+                                         drone_recording(seed));
+    std::printf("draw %lu: IMU alone: SE3-aligned APE %.3f m; IMU + stereo odometry: %.3f m\n", static_cast<unsigned long>(seed), inertial.ape_se3_m,
+                fused.ape_se3_m);
+    ratios.push_back(fused.ape_se3_m / inertial.ape_se3_m);
+    EXPECT_LT(ratios.back(), 1.2) << "seed " << seed;  // never clearly worse than the IMU alone
+  }
+  EXPECT_LT(median_of_three(ratios), 0.8);
 }
 
 // frontend.type msckf: the images through the MSCKF (KLT tracks), its poses fused into the EKF.

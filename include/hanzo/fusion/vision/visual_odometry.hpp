@@ -33,8 +33,8 @@
 //     depths positive, reprojection within the chi-square bound, triangulation angle over
 //     min_triangulation_angle_deg) and, stereo, from the keyframe's left-right matches (along
 //     the rig's epipolar lines); the last window_keyframes keyframes and their landmarks are
-//     refined by bundle adjustment (graph::ProjectionFactor for the left and the right image,
-//     Huber; the window's oldest two keyframes held, they fix the gauge and the monocular scale;
+//     refined by bundle adjustment (vision/bundle_adjustment.hpp: the left and the right image's
+//     projections, Huber; the window's oldest two keyframes held, they fix the gauge and the monocular scale;
 //     stereo holds the oldest only). Observations that stay outliers
 //     are removed, landmarks left with fewer than two observations culled;
 //   loop closure: every keyframe's ORB descriptors become a bag of words (vision/vocabulary.hpp)
@@ -132,7 +132,7 @@ struct VisualOdometryConfig {
   /// Metric odometry (stereo, RGB-D): not standing still when the frame's refined pose is this
   /// far (m) from the anchor's; driving toward distant features keeps a share of them at their
   /// pixels, which the pixel test alone takes for a standstill.
-  double standstill_max_translation = 0.05;
+  double standstill_max_translation = 0.03;
   /// While standing still, a landmark whose keypoint moved more than this (pixels at octave 0)
   /// from where the last frame in motion saw it is on a moving object and is removed.
   double moving_object_pixels = 10.0;
@@ -142,13 +142,18 @@ struct VisualOdometryConfig {
   double min_triangulation_angle_deg = 1.0;
   /// How many previous keyframes a new keyframe triangulates against.
   int triangulation_keyframes = 2;
+  /// Metric odometry (stereo, RGB-D): a pair of keyframes closer than this share of the rig's
+  /// baseline is not triangulated (ORB-SLAM's test: the keyframe's own stereo points are the
+  /// better depths; nearly coincident keyframes admit only points a few decimetres away, which
+  /// are noise, and those tie every following pose to the last one).
+  double min_triangulation_baseline_share = 0.5;
   /// Stereo points farther than this many rig baselines are not made landmarks from one frame
   /// (their depth is mostly noise; they can still be triangulated over time).
   double max_stereo_depth_baselines = 100.0;
   /// Local bundle adjustment window (keyframes; about a second of a 10-15 Hz camera, which
   /// holds the monocular scale through turns) and its iterations per pass.
   int window_keyframes = 12;
-  int bundle_adjustment_iterations = 10;
+  int bundle_adjustment_iterations = 20;
   /// Each keyframe's local mapping on its own thread (true: track() returns as soon as the frame
   /// is tracked, a keyframe with its tracked pose) or in the calling thread before track()
   /// returns (false: a keyframe with its adjusted pose). The same map either way (header
@@ -223,6 +228,7 @@ struct VisualOdometrySummary {
   bool learned_matcher = false;      ///< initialization filtered its matches by the learned correspondence filter
   double mapping_seconds = 0.0;       ///< wall clock of the keyframes' local mapping (on its thread or inline)
   double mapping_wait_seconds = 0.0;  ///< of which tracking waited for (the map not yet ready for the next frame)
+  double loop_seconds = 0.0;          ///< of the mapping: place recognition, loop verification and correction
 };
 
 class VisualOdometry {
