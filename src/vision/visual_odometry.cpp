@@ -1166,13 +1166,12 @@ struct VisualOdometry::State {
       for (std::size_t i = 0; i < observations.size(); ++i) {
         if (used[i]) problem.observations.push_back(observations[i]);
       }
-      BundleProblem trial = problem;
-      Result<BundleAdjustmentSummary> optimized = vision::bundle_adjust(trial, adjustment);
+      // A failed adjustment leaves the problem's values as they were.
+      Result<BundleAdjustmentSummary> optimized = vision::bundle_adjust(problem, adjustment);
       if (!optimized) {
         logger()->warn("visual odometry: local bundle adjustment failed: {}", optimized.error().message);
         break;
       }
-      problem = std::move(trial);
       for (std::size_t i = 0; i < observations.size(); ++i) {
         const BundleObservation& observation = observations[i];
         Eigen::Vector2d residual;
