@@ -99,9 +99,11 @@ class Solver {
     by_point_.resize(observations);
     std::vector<int> next(point_begin_.begin(), point_begin_.end() - 1);
     for (std::size_t i = 0; i < observations; ++i) by_point_[static_cast<std::size_t>(next[static_cast<std::size_t>(problem.observations[i].point)]++)] = static_cast<int>(i);
-    J_pose_.resize(observations);
-    J_point_.resize(observations);
-    residual_.resize(observations);
+    for (Evaluation* evaluation : {&current_, &candidate_}) {
+      evaluation->residual.resize(observations);
+      evaluation->J_pose.resize(observations);
+      evaluation->J_point.resize(observations);
+    }
     H_pose_point_.resize(observations);
     H_pose_.resize(static_cast<std::size_t>(free_poses_));
     g_pose_.resize(static_cast<std::size_t>(free_poses_));
@@ -110,27 +112,32 @@ class Solver {
     point_inverse_.resize(points);
   }
 
-  // The cost 0.5 sum rho at the values; nullopt when an observation's point is behind its camera
-  // (its index in `behind`).
-  std::optional<double> cost(const std::vector<SE3>& poses, const std::vector<Eigen::Vector3d>& points, std::size_t* behind = nullptr) {
+  // Residuals and Jacobians of every observation at the values, into the candidate buffers, and
+  // the cost 0.5 sum rho there; nullopt when an observation's point is behind its camera (its
+  // index in `behind`). The Jacobians are computed with the residuals (a step is taken far more
+  // often than refused, and the accepted step's linearization is then at hand).
+  std::optional<double> evaluate(const std::vector<SE3>& poses, const std::vector<Eigen::Vector3d>& points, std::size_t* behind = nullptr) {
     set_frames(poses);
     double total = 0.0;
     for (std::size_t i = 0; i < problem_.observations.size(); ++i) {
       const BundleObservation& observation = problem_.observations[i];
-      Eigen::Vector2d residual;
+      const bool free_pose = pose_slot_[static_cast<std::size_t>(observation.pose)] >= 0;
       if (!residual_at(frames_of(observation), points[static_cast<std::size_t>(observation.point)], problem_.cameras[static_cast<std::size_t>(observation.camera)].camera,
-                       observation, residual, nullptr, nullptr)) {
+                       observation, candidate_.residual[i], free_pose ? &candidate_.J_pose[i] : nullptr, &candidate_.J_point[i])) {
         if (behind != nullptr) *behind = i;
         return std::nullopt;
       }
-      total += 0.5 * huber(residual.squaredNorm(), config_.huber_threshold);
+      total += 0.5 * huber(candidate_.residual[i].squaredNorm(), config_.huber_threshold);
     }
     return total;
   }
 
-  // Residuals and Jacobians (weighted by sqrt(rho')) and the normal equations' blocks at the values.
-  void linearize(const std::vector<SE3>& poses, const std::vector<Eigen::Vector3d>& points) {
-    set_frames(poses);
+  // The candidate values become the current ones (their evaluation with them).
+  void accept_candidate() { std::swap(current_, candidate_); }
+
+  // The current residuals and Jacobians weighted by sqrt(rho') in place, and the normal
+  // equations' blocks from them.
+  void linearize() {
     std::fill(H_pose_.begin(), H_pose_.end(), Matrix6::Zero());
     std::fill(g_pose_.begin(), g_pose_.end(), Vector6::Zero());
     std::fill(H_point_.begin(), H_point_.end(), Eigen::Matrix3d::Zero());
@@ -140,23 +147,23 @@ class Solver {
       const BundleObservation& observation = problem_.observations[i];
       const auto j = static_cast<std::size_t>(observation.point);
       const int slot = pose_slot_[static_cast<std::size_t>(observation.pose)];
-      // Every observation is in front of its camera here: the values passed cost().
-      residual_at(frames_of(observation), points[j], problem_.cameras[static_cast<std::size_t>(observation.camera)].camera, observation, residual_[i],
-                  slot >= 0 ? &J_pose_[i] : nullptr, &J_point_[i]);
-      const double squared_norm = residual_[i].squaredNorm();
+      Eigen::Vector2d& residual = current_.residual[i];
+      Eigen::Matrix<double, 2, 6>& J_pose = current_.J_pose[i];
+      Eigen::Matrix<double, 2, 3>& J_point = current_.J_point[i];
+      const double squared_norm = residual.squaredNorm();
       if (squared_norm > threshold * threshold) {
         const double root_weight = std::sqrt(threshold / std::sqrt(squared_norm));
-        residual_[i] *= root_weight;
-        J_point_[i] *= root_weight;
-        if (slot >= 0) J_pose_[i] *= root_weight;
+        residual *= root_weight;
+        J_point *= root_weight;
+        if (slot >= 0) J_pose *= root_weight;
       }
-      H_point_[j].noalias() += J_point_[i].transpose() * J_point_[i];
-      g_point_[j].noalias() += J_point_[i].transpose() * residual_[i];
+      H_point_[j].noalias() += J_point.transpose() * J_point;
+      g_point_[j].noalias() += J_point.transpose() * residual;
       if (slot < 0) continue;
       const auto s = static_cast<std::size_t>(slot);
-      H_pose_[s].noalias() += J_pose_[i].transpose() * J_pose_[i];
-      g_pose_[s].noalias() += J_pose_[i].transpose() * residual_[i];
-      H_pose_point_[i].noalias() = J_pose_[i].transpose() * J_point_[i];
+      H_pose_[s].noalias() += J_pose.transpose() * J_pose;
+      g_pose_[s].noalias() += J_pose.transpose() * residual;
+      H_pose_point_[i].noalias() = J_pose.transpose() * J_point;
     }
   }
 
@@ -243,10 +250,10 @@ class Solver {
     double decrease = 0.0;
     for (std::size_t i = 0; i < problem_.observations.size(); ++i) {
       const BundleObservation& observation = problem_.observations[i];
-      Eigen::Vector2d change = J_point_[i] * point_step[static_cast<std::size_t>(observation.point)];
+      Eigen::Vector2d change = current_.J_point[i] * point_step[static_cast<std::size_t>(observation.point)];
       const int slot = pose_slot_[static_cast<std::size_t>(observation.pose)];
-      if (slot >= 0) change.noalias() += J_pose_[i] * pose_step[static_cast<std::size_t>(slot)];
-      decrease -= change.dot(residual_[i] + 0.5 * change);
+      if (slot >= 0) change.noalias() += current_.J_pose[i] * pose_step[static_cast<std::size_t>(slot)];
+      decrease -= change.dot(current_.residual[i] + 0.5 * change);
     }
     return decrease;
   }
@@ -276,9 +283,14 @@ class Solver {
   std::vector<int> pose_slot_;  // -1: fixed
   int free_poses_ = 0;
   std::vector<int> point_begin_, by_point_;  // observations by point (by_point_[point_begin_[j] .. point_begin_[j + 1]))
-  std::vector<Eigen::Matrix<double, 2, 6>> J_pose_;
-  std::vector<Eigen::Matrix<double, 2, 3>> J_point_;
-  std::vector<Eigen::Vector2d> residual_;
+  // Per observation: the residual and its Jacobians (the pose's only for a free pose); current_
+  // weighted by sqrt(rho') once linearized.
+  struct Evaluation {
+    std::vector<Eigen::Vector2d> residual;
+    std::vector<Eigen::Matrix<double, 2, 6>> J_pose;
+    std::vector<Eigen::Matrix<double, 2, 3>> J_point;
+  };
+  Evaluation current_, candidate_;
   std::vector<Matrix63> H_pose_point_;  // per observation of a free pose
   std::vector<Matrix6> H_pose_;
   std::vector<Vector6> g_pose_, pose_scale_;
@@ -317,13 +329,14 @@ Result<BundleAdjustmentSummary> bundle_adjust(BundleProblem& problem, const Bund
   std::vector<SE3> poses = problem.T_world_body;
   std::vector<Eigen::Vector3d> points = problem.points_world;
   std::size_t behind = 0;
-  const std::optional<double> initial = solver.cost(poses, points, &behind);
+  const std::optional<double> initial = solver.evaluate(poses, points, &behind);
   if (!initial) {
     const BundleObservation& observation = problem.observations[behind];
     return Error(fmt::format("bundle adjustment: observation {}: point {} is behind camera {} of pose {}", behind, observation.point, observation.camera,
                              observation.pose),
                  "observations");
   }
+  solver.accept_candidate();
   BundleAdjustmentSummary summary;
   summary.initial_cost = summary.final_cost = *initial;
   double cost = *initial, radius = config.initial_trust_region_radius, decrease_factor = 2.0;
@@ -334,7 +347,7 @@ Result<BundleAdjustmentSummary> bundle_adjust(BundleProblem& problem, const Bund
   std::vector<Eigen::Vector3d> candidate_points;
   while (summary.iterations < config.max_iterations) {
     if (!linearized) {
-      solver.linearize(poses, points);
+      solver.linearize();
       if (summary.iterations == 0) solver.set_scaling();
       linearized = true;
     }
@@ -357,7 +370,7 @@ Result<BundleAdjustmentSummary> bundle_adjust(BundleProblem& problem, const Bund
       }
       candidate_points = points;
       for (std::size_t j = 0; j < points.size(); ++j) candidate_points[j] += point_step[j];
-      const std::optional<double> candidate_cost = solver.cost(candidate_poses, candidate_points);
+      const std::optional<double> candidate_cost = solver.evaluate(candidate_poses, candidate_points);
       if (candidate_cost) {
         const double cost_change = cost - *candidate_cost;
         if (std::abs(cost_change) <= config.function_tolerance * cost) {
@@ -369,6 +382,7 @@ Result<BundleAdjustmentSummary> bundle_adjust(BundleProblem& problem, const Bund
         if (relative_decrease > kMinRelativeDecrease) {
           poses.swap(candidate_poses);
           points.swap(candidate_points);
+          solver.accept_candidate();
           cost = *candidate_cost;
           radius = std::min(kMaxRadius, radius / std::max(1.0 / 3.0, 1.0 - std::pow(2.0 * relative_decrease - 1.0, 3)));
           decrease_factor = 2.0;
