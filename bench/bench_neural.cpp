@@ -161,6 +161,32 @@ void BM_SplatRender_Cuda(benchmark::State& state) {
 }
 BENCHMARK(BM_SplatRender_Cuda)->Args({400, 400, 40000})->Args({1920, 1080, 40000})->Args({1920, 1080, 1000000})->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// Views for display on a CUDA device (render_view: the RGB image alone downloaded, buffers reused).
+void BM_SplatView_Cuda(benchmark::State& state) {
+  auto gpu = CudaSplatRasterizer::create();
+  if (!gpu) {
+    state.SkipWithError(gpu.error().message.c_str());
+    return;
+  }
+  const GaussianCloud cloud = splat_scene(static_cast<int>(state.range(2)));
+  const SplatCamera camera = splat_camera(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
+  if (hanzo::fusion::Status uploaded = gpu->upload(cloud); !uploaded) {
+    state.SkipWithError(uploaded.error().message.c_str());
+    return;
+  }
+  SplatView view;
+  for (auto _ : state) {
+    if (hanzo::fusion::Status rendered = gpu->render_view(camera, RasterizerConfig{}, view); !rendered) {
+      state.SkipWithError(rendered.error().message.c_str());
+      return;
+    }
+    benchmark::DoNotOptimize(view.image.data());
+  }
+  state.counters["views/s"] = benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+  state.SetLabel(gpu->device_name());
+}
+BENCHMARK(BM_SplatView_Cuda)->Args({400, 400, 40000})->Args({1920, 1080, 40000})->Args({1920, 1080, 1000000})->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // One training step's render and backward at 400 x 400 on the CPU and on a CUDA device.
 void BM_SplatStep400_Cpu(benchmark::State& state) {
   const GaussianCloud cloud = splat_scene(40000);

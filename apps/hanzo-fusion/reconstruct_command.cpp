@@ -527,12 +527,16 @@ Result<Scene> splat_scene(neural::GaussianCloud cloud, const Eigen::Vector3f& ba
     }
   }
   scene.render = [shared, config, gpu](const neural::SplatCamera& camera) mutable {
-    Result<neural::SplatRender> rendered = gpu ? gpu->render(camera, config) : Result<neural::SplatRender>(Error("cpu"));
-    if (gpu && !rendered) {
-      logger()->warn("the CUDA device failed ({}); rendering continues on the CPU", rendered.error().message);
-      gpu.reset();
+    if (gpu) {
+      neural::SplatView view;
+      if (Status rendered = gpu->render_view(camera, config, view, true); rendered) {
+        return neural::NerfRender{view.width, view.height, std::move(view.image), std::move(view.depth), std::move(view.alpha)};
+      } else {
+        logger()->warn("the CUDA device failed ({}); rendering continues on the CPU", rendered.error().message);
+        gpu.reset();
+      }
     }
-    neural::SplatRender splats = rendered ? std::move(rendered).value() : neural::render_splats(*shared, camera, config);
+    neural::SplatRender splats = neural::render_splats(*shared, camera, config);
     return neural::NerfRender{splats.width, splats.height, std::move(splats.image), std::move(splats.depth), std::move(splats.alpha)};
   };
   return scene;

@@ -24,6 +24,7 @@ struct CudaSplatRasterizer::State {
   std::string name;
   int count = 0, sh_degree = 0;
   std::vector<uint8_t> drawn;  // per Gaussian of the last render
+  bool backward_ready = false;  // the last render was render(), not render_view()
   ~State() { cuda::destroy_state(device); }
 };
 
@@ -53,18 +54,25 @@ Status CudaSplatRasterizer::upload(const GaussianCloud& cloud) {
   if (!error.empty()) return Error(error, "device");
   state_->count = static_cast<int>(cloud.size());
   state_->sh_degree = cloud.sh_degree;
+  state_->backward_ready = false;
   return ok_status();
 }
 
-Result<SplatRender> CudaSplatRasterizer::render(const SplatCamera& camera, const RasterizerConfig& config) {
+namespace {
+cuda::ForwardSettings forward_settings(const SplatCamera& camera, const RasterizerConfig& config, int sh_degree) {
   cuda::ForwardSettings settings{};
   settings.camera = camera_params(camera);
-  settings.degree = std::clamp(config.active_sh_degree, 0, state_->sh_degree);
+  settings.degree = std::clamp(config.active_sh_degree, 0, sh_degree);
   settings.near = static_cast<float>(config.near);
   settings.low_pass = static_cast<float>(config.low_pass);
   for (int c = 0; c < 3; ++c) settings.background[c] = config.background[c];
   settings.normalize_depth = config.normalize_depth;
+  return settings;
+}
+}  // namespace
 
+Result<SplatRender> CudaSplatRasterizer::render(const SplatCamera& camera, const RasterizerConfig& config) {
+  const cuda::ForwardSettings settings = forward_settings(camera, config, state_->sh_degree);
   SplatRender out;
   out.width = camera.width;
   out.height = camera.height;
@@ -81,6 +89,7 @@ Result<SplatRender> CudaSplatRasterizer::render(const SplatCamera& camera, const
   const std::string error = cuda::forward(state_->device, settings,
                                           {out.image.data(), out.depth.data(), out.alpha.data(), out.final_transmittance.data(), out.contributors.data(),
                                            projections.data()});
+  state_->backward_ready = error.empty();
   if (!error.empty()) return Error(error, "device");
   out.mean_2d.assign(n, Eigen::Vector2f::Zero());
   out.conic.assign(n, Eigen::Vector3f::Zero());
@@ -107,7 +116,24 @@ Result<SplatRender> CudaSplatRasterizer::render(const SplatCamera& camera, const
   return out;
 }
 
+Status CudaSplatRasterizer::render_view(const SplatCamera& camera, const RasterizerConfig& config, SplatView& view, bool with_depth_and_alpha) {
+  const cuda::ForwardSettings settings = forward_settings(camera, config, state_->sh_degree);
+  const auto pixels = static_cast<std::size_t>(camera.width) * static_cast<std::size_t>(camera.height);
+  view.width = camera.width;
+  view.height = camera.height;
+  view.image.resize(3 * pixels);
+  view.depth.resize(with_depth_and_alpha ? pixels : 0);
+  view.alpha.resize(with_depth_and_alpha ? pixels : 0);
+  state_->backward_ready = false;
+  const std::string error = cuda::forward(state_->device, settings,
+                                          {view.image.data(), with_depth_and_alpha ? view.depth.data() : nullptr,
+                                           with_depth_and_alpha ? view.alpha.data() : nullptr, nullptr, nullptr, nullptr});
+  if (!error.empty()) return Error(error, "device");
+  return ok_status();
+}
+
 Status CudaSplatRasterizer::backward(const std::vector<float>& loss_gradient_image, GaussianGradients& gradients) {
+  if (!state_->backward_ready) return Error("backward needs a render() of the uploaded cloud first (render_view keeps no per-Gaussian fields)", "device");
   const auto n = static_cast<std::size_t>(state_->count);
   const std::size_t sh_floats = 3 * static_cast<std::size_t>(sh_coefficients(state_->sh_degree));
   if (gradients.position.size() != 3 * n || gradients.sh.size() != n * sh_floats) return Error("the gradients are not sized like the uploaded cloud", "gradients");
@@ -148,6 +174,7 @@ Result<CudaSplatRasterizer> CudaSplatRasterizer::create(int) {
 
 Status CudaSplatRasterizer::upload(const GaussianCloud&) { return Error("built without CUDA", "device"); }
 Result<SplatRender> CudaSplatRasterizer::render(const SplatCamera&, const RasterizerConfig&) { return Error("built without CUDA", "device"); }
+Status CudaSplatRasterizer::render_view(const SplatCamera&, const RasterizerConfig&, SplatView&, bool) { return Error("built without CUDA", "device"); }
 Status CudaSplatRasterizer::backward(const std::vector<float>&, GaussianGradients&) { return Error("built without CUDA", "device"); }
 
 #endif

@@ -122,6 +122,33 @@ TEST(CudaSplatRasterizer, RendersAndGradientsAgreeWithTheCpu) {
   EXPECT_LT(relative_error(gpu_gradients.screen_gradient_norm, cpu_gradients.screen_gradient_norm), 1e-3);
 }
 
+// A view for display: the same kernels as render(), the image alone (or with depth and alpha)
+// downloaded; backward() then asks for a render() first.
+TEST(CudaSplatRasterizer, AViewForDisplayIsTheRendersImage) {
+  std::string reason;
+  if (!CudaSplatRasterizer::available(&reason)) GTEST_SKIP() << reason;
+  CudaSplatRasterizer gpu = CudaSplatRasterizer::create().value();
+  const GaussianCloud cloud = scene();
+  const SplatCamera camera = camera_of_scene();
+  ASSERT_TRUE(gpu.upload(cloud).ok());
+  const SplatRender full = gpu.render(camera, RasterizerConfig{}).value();
+  SplatView view;
+  ASSERT_TRUE(gpu.render_view(camera, RasterizerConfig{}, view).ok());
+  EXPECT_EQ(view.width, camera.width);
+  EXPECT_EQ(view.height, camera.height);
+  EXPECT_EQ(view.image, full.image);
+  EXPECT_TRUE(view.depth.empty());
+  ASSERT_TRUE(gpu.render_view(camera, RasterizerConfig{}, view, true).ok());
+  EXPECT_EQ(view.image, full.image);
+  EXPECT_EQ(view.depth, full.depth);
+  EXPECT_EQ(view.alpha, full.alpha);
+  GaussianGradients gradients;
+  gradients.resize_like(cloud);
+  const Status refused = gpu.backward(std::vector<float>(full.image.size(), 0.1f), gradients);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("render()"), std::string::npos) << refused.error().message;
+}
+
 TEST(CudaSplatRasterizer, CreationSaysWhyWhenThereIsNoDevice) {
   std::string reason;
   if (CudaSplatRasterizer::available(&reason)) {

@@ -257,7 +257,7 @@ std::string upload(Buffer<T>& buffer, const T* host, std::size_t count, const ch
 
 template <typename T>
 std::string download(T* host, const Buffer<T>& buffer, std::size_t count, const char* what) {
-  if (count > 0) HANZO_CUDA_TRY(cudaMemcpy(host, buffer.data, count * sizeof(T), cudaMemcpyDeviceToHost), what);
+  if (host != nullptr && count > 0) HANZO_CUDA_TRY(cudaMemcpy(host, buffer.data, count * sizeof(T), cudaMemcpyDeviceToHost), what);
   return {};
 }
 }  // namespace

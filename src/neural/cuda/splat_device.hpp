@@ -29,7 +29,8 @@ struct ForwardSettings {
   bool normalize_depth;
 };
 
-/// Host arrays the forward pass fills: per pixel (image 3 floats a pixel) and per Gaussian.
+/// Host arrays the forward pass fills: per pixel (image 3 floats a pixel) and per Gaussian. A null
+/// array is not downloaded (a view for display needs the image alone).
 struct ForwardOutputs {
   float* image;
   float* depth;

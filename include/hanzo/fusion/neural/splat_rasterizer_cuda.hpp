@@ -25,6 +25,14 @@ enum class SplatDevice { kCpu, kCuda, kAuto };
 /// "cpu" | "cuda" | "auto"; fails naming the value otherwise.
 Result<SplatDevice> parse_splat_device(const std::string& text);
 
+/// A rendered view's images (CudaSplatRasterizer::render_view): width x height pixels, row-major.
+struct SplatView {
+  int width = 0, height = 0;
+  std::vector<float> image;  ///< RGB, 3 floats a pixel
+  std::vector<float> depth;  ///< empty unless asked for
+  std::vector<float> alpha;  ///< empty unless asked for
+};
+
 class CudaSplatRasterizer {
  public:
   /// Whether this build has the CUDA rasterizer and a device is present; `reason` says why not.
@@ -42,6 +50,11 @@ class CudaSplatRasterizer {
   /// contributors and the per-Gaussian fields; the tile lists stay on the device (tile_range
   /// and tile_gaussians empty).
   Result<SplatRender> render(const SplatCamera& camera, const RasterizerConfig& config);
+  /// The view alone, for display (the `render` command, viewers): render_splats' image (3 floats
+  /// a pixel, row-major), and its depth and alpha when `with_depth_and_alpha`, written into
+  /// `view`'s arrays (resized; keep one SplatView across calls to reuse them). Nothing per
+  /// Gaussian comes back, so backward() needs a render() after it.
+  Status render_view(const SplatCamera& camera, const RasterizerConfig& config, SplatView& view, bool with_depth_and_alpha = false);
   /// render_splats_backward of the last render (same camera and settings): adds to `gradients`
   /// (sized like the uploaded cloud).
   Status backward(const std::vector<float>& loss_gradient_image, GaussianGradients& gradients);
