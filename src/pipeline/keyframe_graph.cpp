@@ -287,6 +287,10 @@ Status KeyframeGraph::leave_window(KeyframeGraphUpdate& update) {
   return ok_status();
 }
 
+bool KeyframeGraph::has_pending_work() const {
+  return !queued_keyframes_.empty() || !pending_fixes_.empty() || pending_.factors.size() > 0 || pending_.values.size() > 0;
+}
+
 std::optional<uint64_t> KeyframeGraph::window_start() const {
   if (!window_.empty()) return window_.front().id;
   return std::nullopt;

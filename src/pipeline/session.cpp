@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <future>
 #include <mutex>
 #include <thread>
 
@@ -296,6 +297,7 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
   auto session = std::unique_ptr<Session>(new Session(std::move(frontend), std::move(session_config), std::move(lidar_sensor), planar_laser,
                                                       lidar_calibration, std::move(wheel_sensor), wheel_calibration));
   session->camera_odometry_ = std::move(camera_odometry);
+  session->backend_thread_ = session->config_.backend_thread && visual_inertial_graph && session->config_.mapping;
   if (follows_graph) {
     session->follows_graph_ = true;
     session->frontend_->set_gnss_positions_to_backend(true);
@@ -405,7 +407,7 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
     // In the graph's world (it moves away from the Frontend's between loop closures).
     const auto in_graph_world = [this](const msgs::Keyframe& emitted_keyframe) {
       msgs::Keyframe in_graph = emitted_keyframe;
-      const SE3 T_world_body = graph_->initial_pose(emitted_keyframe);
+      const SE3 T_world_body = graph().initial_pose(emitted_keyframe);
       in_graph.velocity = T_world_body.rotation() * (emitted_keyframe.T_world_body.to_se3().rotation().inverse() * emitted_keyframe.velocity);
       in_graph.T_world_body = msgs::Pose::from_se3(T_world_body);
       return in_graph;
@@ -418,7 +420,7 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
     if (factors != nullptr) {
       if (chain_starts) factors->restart();
       if (const std::optional<graph::ImuBias> bias = camera_odometry_->imu_bias_body()) {
-        inertial = factors->keyframe(in_graph_world(keyframe), *bias, graph_->smoother().estimate());
+        inertial = factors->keyframe(in_graph_world(keyframe), *bias, graph().smoother().estimate());
       }
     } else if (lidar_factors_) {
       if (chain_starts) lidar_factors_->restart();
@@ -427,13 +429,13 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
         bias.accelerometer = body_imu_->T_body_imu().rotation() * filter_bias->first;
         bias.gyroscope = body_imu_->T_body_imu().rotation() * filter_bias->second;
       }
-      lidar_inertial = lidar_factors_->keyframe(in_graph_world(keyframe), bias, graph_->smoother().estimate());
+      lidar_inertial = lidar_factors_->keyframe(in_graph_world(keyframe), bias, graph().smoother().estimate());
     }
     // Linked by the IMU (and the LiDAR), the filter's relative motion stays as a weak anchor only.
     double relative_scale = 1.0;
     if (inertial && inertial->imu_factor) relative_scale = VisualInertialFactorsConfig{}.odometry_covariance_scale;
     if (lidar_inertial && lidar_inertial->imu_factor && lidar_inertial->lidar_factor) relative_scale = lidar_factors_->config().odometry_covariance_scale;
-    if (Status added = graph_->add_keyframe(keyframe, relative_scale); !added) {
+    if (Status added = graph().add_keyframe(keyframe, relative_scale); !added) {
       logger()->warn("session: keyframe {} not added to the graph: {}", keyframe.keyframe_id, added.error().message);
       // Its factors are dropped: the next keyframe starts new chains.
       if (factors != nullptr) factors->restart();
@@ -441,12 +443,12 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
       return;
     }
     if (lidar_inertial) {
-      graph_->add_factors(lidar_inertial->update);
+      graph().add_factors(lidar_inertial->update);
       summary_.graph_lidar_factors += lidar_inertial->lidar_factor ? 1 : 0;
       summary_.graph_imu_factors += lidar_inertial->imu_factor ? 1 : 0;
     }
     if (inertial) {
-      graph_->add_factors(inertial->update);
+      graph().add_factors(inertial->update);
       summary_.graph_landmarks += static_cast<uint64_t>(inertial->new_landmarks);
       summary_.graph_projections += static_cast<uint64_t>(inertial->projections);
     }
@@ -471,7 +473,7 @@ void Session::add_gnss_factor(const FusedGnssFix& fix) {
   if (!config_.gnss_factors || !latest_keyframe_ || restart_graph_ || summary_.relocalizations > 0) return;
   // Both poses before the Frontend's corrections, where their relative motion is the filter's.
   const SE3 T_keyframe_fix = latest_keyframe_uncorrected_.inverse() * (fix.world_correction.inverse() * fix.T_world_body);
-  const Status added = graph_->add_gps_at_keyframe(latest_keyframe_->keyframe_id, fix.antenna_world, fix.covariance, T_keyframe_fix * fix.lever_arm,
+  const Status added = graph().add_gps_at_keyframe(latest_keyframe_->keyframe_id, fix.antenna_world, fix.covariance, T_keyframe_fix * fix.lever_arm,
                                                     (fix.timestamp - latest_keyframe_->timestamp).seconds());
   if (!added) {
     logger()->debug("session: GNSS fix at {:.3f} s not added to the graph: {}", fix.timestamp.seconds(), added.error().message);
@@ -491,7 +493,7 @@ void Session::add_velocity_factor(const FusedVelocity& velocity) {
 void Session::attach_recent_velocities() {
   if (!latest_keyframe_ || restart_graph_) return;
   const uint64_t keyframe = latest_keyframe_->keyframe_id;
-  if (!graph_->has_variable(graph::V(keyframe))) return;  // a graph without keyframe velocities
+  if (!graph().has_variable(graph::V(keyframe))) return;  // a graph without keyframe velocities
   // Per sensor the velocity nearest to the keyframe in time, once per keyframe.
   std::map<std::string, const FusedVelocity*> nearest;
   const auto offset = [&](const FusedVelocity& velocity) { return std::abs((velocity.timestamp - latest_keyframe_->timestamp).seconds()); };
@@ -510,12 +512,15 @@ void Session::attach_recent_velocities() {
     graph::GraphUpdate update;
     update.factors.emplace<graph::BodyVelocityFactor>(graph::X(keyframe), graph::V(keyframe), velocity->velocity_sensor, velocity->T_body_sensor,
                                                       velocity->angular_rate_body, *noise);
-    graph_->add_factors(update);
+    graph().add_factors(update);
     ++summary_.graph_velocity_factors;
   }
 }
 
-Session::~Session() { worker_.reset(); }  // before the odometry it registers with
+Session::~Session() {
+  worker_.reset();  // before the odometry it registers with
+  wait_for_backend();
+}
 
 std::optional<std::chrono::nanoseconds> Session::registration_wait_limit(Timestamp now_in_data) const {
   // Live data (stamped by a clock synchronized with this machine's) never waits: a push() that
@@ -605,7 +610,7 @@ void Session::flush_pipeline() {
   }
   if (config_.mode == SessionMode::kRealtime || !latest_keyframe_) return;
   // Replay: the graph's final estimate over everything (what a background batch would give).
-  if (Result<graph::OptimizationSummary> batch = graph_->smoother().wait_for_batch(); !batch) {
+  if (Result<graph::OptimizationSummary> batch = graph().smoother().wait_for_batch(); !batch) {
     logger()->warn("session: final optimization failed: {}", batch.error().message);
     return;
   }
@@ -1095,7 +1100,7 @@ const Session::MapKeyframe& Session::map_keyframe(std::size_t k) const {
 
 SE3 Session::map_keyframe_pose(std::size_t k) const {
   const MapKeyframe& keyframe = map_keyframe(k);
-  const std::optional<SE3> anchor = graph_->optimized_pose(keyframe.anchor);
+  const std::optional<SE3> anchor = graph().optimized_pose(keyframe.anchor);
   return anchor ? *anchor * keyframe.T_anchor_lidar : keyframe.T_world_lidar;
 }
 
@@ -1104,11 +1109,49 @@ Status Session::add_loop_factor(uint64_t from, uint64_t to, const SE3& T_from_to
   Eigen::Matrix<double, 6, 6> loop_covariance = Eigen::Matrix<double, 6, 6>::Zero();
   loop_covariance.diagonal() << Eigen::Vector3d::Constant(config_.loop_translation_sigma * config_.loop_translation_sigma),
       Eigen::Vector3d::Constant(config_.loop_rotation_sigma * config_.loop_rotation_sigma);
-  return graph_->add_loop_closure(from, to, T_from_to, covariance.value_or(loop_covariance));
+  return graph().add_loop_closure(from, to, T_from_to, covariance.value_or(loop_covariance));
 }
 
 void Session::update_backend() {
-  Result<KeyframeGraphUpdate> update = graph_->process(frontend_.get());
+  if (!backend_thread_) {
+    finish_backend_update(graph_->process(frontend_.get()));
+    return;
+  }
+  // On the backend thread: an update starts once something was added, and is waited for where
+  // the graph is next used (graph()). One that may correct the Frontend (a loop closure) runs
+  // here: the correction lands where it would inline.
+  if (!graph_touched_) return;
+  KeyframeGraph& keyframe_graph = graph();
+  graph_touched_ = false;
+  if (!keyframe_graph.has_pending_work()) return;
+  if (keyframe_graph.may_correct_frontend()) {
+    finish_backend_update(keyframe_graph.process(frontend_.get()));
+    return;
+  }
+  backend_update_ = std::async(std::launch::async, [&keyframe_graph] { return keyframe_graph.process(nullptr); });
+}
+
+void Session::wait_for_backend() const {
+  if (backend_update_.valid()) backend_result_.emplace(backend_update_.get());
+}
+
+KeyframeGraph& Session::graph() {
+  wait_for_backend();
+  graph_touched_ = true;
+  if (backend_result_) {
+    Result<KeyframeGraphUpdate> update = std::move(*backend_result_);
+    backend_result_.reset();
+    finish_backend_update(std::move(update));
+  }
+  return *graph_;
+}
+
+const KeyframeGraph& Session::graph() const {
+  wait_for_backend();
+  return *graph_;
+}
+
+void Session::finish_backend_update(Result<KeyframeGraphUpdate> update) {
   if (!update) {
     logger()->warn("session: backend update failed: {}", update.error().message);
     return;
@@ -1116,7 +1159,7 @@ void Session::update_backend() {
   if (update->keyframes_left_window > 0 && camera_odometry_ && config_.visual_inertial_factors) {
     if (VisualInertialFactors* factors = camera_odometry_->keyframe_factors(); factors != nullptr) {
       factors->forget_landmarks(update->marginalized_landmarks);
-      if (const std::optional<uint64_t> start = graph_->window_start()) factors->set_window_start(*start);
+      if (const std::optional<uint64_t> start = graph().window_start()) factors->set_window_start(*start);
     }
   }
   // The graph holds the world: the LiDAR map frame is held, so that it does not take up the filter's drift.
@@ -1127,7 +1170,7 @@ void Session::update_backend() {
 }
 
 void Session::follow_graph() {
-  if (splats_) splats_->move_views([this](uint64_t keyframe) { return graph_->optimized_pose(keyframe); });
+  if (splats_) splats_->move_views([this](uint64_t keyframe) { return graph().optimized_pose(keyframe); });
   // Map keyframes whose keyframe moved follow it.
   std::map<uint64_t, SE3> moved;
   for (std::size_t k = 0; k < map_keyframes_.size(); ++k) {
@@ -1169,7 +1212,7 @@ Result<LoopClosureOutcome> Session::close_loop(const LoopClosureRequest& request
   if (request.T_from_to && !request.T_from_to->matrix().allFinite()) return Error("invalid: the relative pose is not finite");
   update_backend();
   for (const std::optional<uint64_t>& id : {request.from_keyframe, request.to_keyframe}) {
-    if (id && !graph_->keyframe_time(*id)) return Error(fmt::format("not_found: keyframe {} is unknown", *id));
+    if (id && !graph().keyframe_time(*id)) return Error(fmt::format("not_found: keyframe {} is unknown", *id));
   }
   LoopClosureOutcome outcome;
   if (request.T_from_to) {
@@ -1276,6 +1319,7 @@ Result<double> Session::move_world_onto_map(const SE3& T_map_world) {
     config_.backend.correct_on_loop_closures_only = true;
     config_.backend.batch_interval_s = 0.0;
   }
+  graph();  // a running update of the old graph finishes first
   graph_ = std::make_unique<KeyframeGraph>(config_.backend);
   restart_graph_ = true;
   move_map_keyframes(moved);
@@ -1421,7 +1465,7 @@ MappingSummary Session::mapping_summary() const {
   return summary;
 }
 
-std::optional<SE3> Session::keyframe_pose(uint64_t keyframe_id) const { return graph_->optimized_pose(keyframe_id); }
+std::optional<SE3> Session::keyframe_pose(uint64_t keyframe_id) const { return graph().optimized_pose(keyframe_id); }
 
 std::vector<StampedPose> Session::optimized_trajectory() const {
   if (planar_) {
@@ -1433,7 +1477,7 @@ std::vector<StampedPose> Session::optimized_trajectory() const {
   // The correction D = X_optimized * T_uncorrected^-1 of every keyframe the graph knows.
   std::vector<std::pair<Timestamp, SE3>> corrections;
   for (const KeyframeRecord& keyframe : keyframe_records_) {
-    if (const std::optional<SE3> optimized = graph_->optimized_pose(keyframe.keyframe_id)) {
+    if (const std::optional<SE3> optimized = graph().optimized_pose(keyframe.keyframe_id)) {
       corrections.emplace_back(keyframe.timestamp, *optimized * keyframe.T_world_body_uncorrected.inverse());
     }
   }

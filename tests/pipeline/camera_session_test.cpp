@@ -80,18 +80,22 @@ struct SessionRun {
   std::vector<HealthChange> health_changes;
   msgs::FusionMap map;
   io::Trajectory estimate;
+  io::Trajectory optimized;
 };
 
 // The Session on the recording (the drone's by default) with only the sensors `keep` says.
 SessionRun run_session(const std::function<bool(const sim::ScenarioSensor&)>& keep,
                        config::FrontendType frontend_type = config::FrontendType::kEkf, const Recording& recording = drone_recording(),
-                       const std::function<void(config::FusionConfig&)>& edit_config = nullptr, double evaluate_after_s = 0.0) {
+                       const std::function<void(config::FusionConfig&)>& edit_config = nullptr, double evaluate_after_s = 0.0,
+                       const std::function<void(SessionConfig&)>& edit_session = nullptr) {
   sim::Scenario scenario = recording.scenario;
   std::erase_if(scenario.sensors, [&](const sim::ScenarioSensor& sensor) { return !keep(sensor); });
   config::FusionConfig fusion_config = sim::scenario_fusion_config(scenario);
   fusion_config.frontend.type = frontend_type;
   if (edit_config) edit_config(fusion_config);
-  auto session = Session::create(fusion_config, sim::scenario_calibration(scenario)).value();
+  SessionConfig session_config = SessionConfig::from(fusion_config);
+  if (edit_session) edit_session(session_config);
+  auto session = Session::create(fusion_config, sim::scenario_calibration(scenario), session_config).value();
   io::Trajectory estimate, truth;
   std::optional<Timestamp> first_pose;
   session->set_pose_callback([&](const msgs::PoseEstimate& pose) {
@@ -123,6 +127,7 @@ SessionRun run_session(const std::function<bool(const sim::ScenarioSensor&)>& ke
   run.mapping = session->mapping_summary();
   run.map = session->map();
   run.estimate = estimate;
+  run.optimized = optimized;
   run.summary = session->summary();
   run.health_changes = session->health_changes();
   return run;
@@ -450,6 +455,15 @@ TEST(CameraSession, VisualInertialOdometryClosesLoopsOverTheDronesFigureEights) 
   // The visual-inertial graph's loops pull its whole trajectory in (measured 0.042 against 0.074 m).
   EXPECT_LT(looped.optimized_ape_se3_m, 0.7 * open.optimized_ape_se3_m);
   EXPECT_LT(looped.ape_se3_m, 1.15 * open.ape_se3_m);
+  // The graph's updates on the backend thread (the default) give the estimates of updates inside
+  // push(), to the bit, loop closures included.
+  const SessionRun inline_backend =
+      run_session(all, config::FrontendType::kMsckf, recording, nullptr, 0.0, [](SessionConfig& session) { session.backend_thread = false; });
+  EXPECT_EQ(inline_backend.mapping.loop_closures, looped.mapping.loop_closures);
+  ASSERT_EQ(inline_backend.estimate.size(), looped.estimate.size());
+  ASSERT_EQ(inline_backend.optimized.size(), looped.optimized.size());
+  for (std::size_t i = 0; i < looped.estimate.size(); ++i) ASSERT_EQ(inline_backend.estimate.poses[i], looped.estimate.poses[i]) << "pose " << i;
+  for (std::size_t i = 0; i < looped.optimized.size(); ++i) ASSERT_EQ(inline_backend.optimized.poses[i], looped.optimized.poses[i]) << "keyframe pose " << i;
 }
 
 // Two stereo pairs, one looking ahead and one behind (examples/scenarios/two_stereo_drone.yaml,

@@ -168,6 +168,11 @@ class KeyframeGraph {
   /// The oldest keyframe whose variables besides the pose are in the graph (window_keyframes);
   /// none before the first keyframe.
   std::optional<uint64_t> window_start() const;
+  /// Whether process() has anything to do: queued keyframes, factors or fixes not yet in.
+  bool has_pending_work() const;
+  /// Whether the next process() may correct the Frontend (a loop closure pending, or
+  /// corrections after every update).
+  bool may_correct_frontend() const { return loop_closure_pending_ || !config_.correct_on_loop_closures_only; }
   /// Whether the graph has the variable, queued (add_factors) or estimated.
   bool has_variable(graph::Key key) const { return pending_.values.exists(key) || smoother_.estimate().exists(key); }
   graph::IncrementalSmoother& smoother() { return smoother_; }

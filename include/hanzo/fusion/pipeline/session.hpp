@@ -100,6 +100,7 @@
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <future>
 #include <map>
 #include <memory>
 #include <optional>
@@ -188,6 +189,13 @@ struct SessionConfig {
   /// hops around a new keyframe; Levenberg-Marquardt starts from a trust region of 1e4; loop
   /// closures run their batch at most every 10 s (backend.loop_batch_interval_s).
   bool visual_inertial_factors = true;
+  /// The visual-inertial keyframe graph (frontend.type msckf) updates on a thread of its own
+  /// while the next frames are tracked: an update starts after the push that added a keyframe's
+  /// factors and is waited for where the session next reads or changes the graph (the next
+  /// keyframe, a loop closure, a query, flush). Updates that may correct the Frontend (a loop
+  /// closure) run inside push(). The estimates are those of updating inside push(), in both
+  /// modes. false: every update inside push().
+  bool backend_thread = true;
   /// The visual-inertial graph's sliding window (backend.window_keyframes; the configuration's
   /// fusion.mapping.visual_inertial_window): 40 keyframes (20 s
   /// at the msckf keyframe interval); older keyframes keep their poses only. 0: every keyframe's
@@ -500,8 +508,16 @@ class Session {
   const MapKeyframe& map_keyframe(std::size_t k) const;
   SE3 map_keyframe_pose(std::size_t k) const;
   Status add_loop_factor(uint64_t from, uint64_t to, const SE3& T_from_to, const std::optional<Eigen::Matrix<double, 6, 6>>& covariance);
-  /// Runs the backend; moves the map keyframes whose keyframe moved (follow_graph).
+  /// Runs the backend (on the backend thread where backend_thread_); moves the map keyframes
+  /// whose keyframe moved (follow_graph).
   void update_backend();
+  /// The graph, once a running backend update has finished (its result applied: the non-const
+  /// one; marked as changed, so that the next update_backend() runs).
+  KeyframeGraph& graph();
+  const KeyframeGraph& graph() const;
+  void wait_for_backend() const;
+  /// What an update's result changes in the session (landmarks forgotten, map keyframes moved).
+  void finish_backend_update(Result<KeyframeGraphUpdate> update);
   void follow_graph();
   /// Moves map keyframes (index -> T_world_lidar) in the map and publishes the corrected map.
   void move_map_keyframes(const std::map<uint64_t, SE3>& moved);
@@ -537,6 +553,10 @@ class Session {
   std::optional<Timestamp> last_sweep_time_;  ///< the previous registered sweep's middle
   std::unique_ptr<KeyframeGraph> graph_;  ///< replaced by a fresh one at a relocalization
   bool restart_graph_ = false;  ///< the next keyframe starts the graph (after a relocalization)
+  bool backend_thread_ = false;  ///< SessionConfig::backend_thread with a visual-inertial graph
+  bool graph_touched_ = false;   ///< graph() was used since the last update started
+  mutable std::future<Result<KeyframeGraphUpdate>> backend_update_;     ///< the running update
+  mutable std::optional<Result<KeyframeGraphUpdate>> backend_result_;   ///< finished, not yet applied
   std::optional<LidarInertialOdometry> odometry_;
   /// True while the graph holds the GNSS fixes and corrects the Frontend after every update
   /// (SessionConfig::frontend_follows_graph with a LiDAR-inertial graph and GNSS).
