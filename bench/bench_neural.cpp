@@ -4,6 +4,7 @@
 // libtorch, its BLAS and autograd: the peer on this machine). Also splat rendering at 400 x 400
 // and 1920 x 1080 and a training step, on the CPU and on a CUDA device when there is one.
 
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -136,18 +137,25 @@ BENCHMARK(BM_SplatRender_Cpu)->Args({400, 400, 40000})->Args({1920, 1080, 40000}
 
 // The same on a CUDA device (the cloud uploaded once; each view's image, depth and alpha
 // downloaded); an error row without a device.
-void BM_SplatRender_Cuda(benchmark::State& state) {
+// A CUDA rasterizer holding the benchmark's scene (args: width, height, Gaussians); none (the
+// row skipped with the reason) without a device.
+std::optional<CudaSplatRasterizer> rasterizer_with_scene(benchmark::State& state) {
   auto gpu = CudaSplatRasterizer::create();
   if (!gpu) {
     state.SkipWithError(gpu.error().message.c_str());
-    return;
+    return std::nullopt;
   }
-  const GaussianCloud cloud = splat_scene(static_cast<int>(state.range(2)));
-  const SplatCamera camera = splat_camera(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
-  if (hanzo::fusion::Status uploaded = gpu->upload(cloud); !uploaded) {
+  if (hanzo::fusion::Status uploaded = gpu->upload(splat_scene(static_cast<int>(state.range(2)))); !uploaded) {
     state.SkipWithError(uploaded.error().message.c_str());
-    return;
+    return std::nullopt;
   }
+  return std::move(gpu).value();
+}
+
+void BM_SplatRender_Cuda(benchmark::State& state) {
+  std::optional<CudaSplatRasterizer> gpu = rasterizer_with_scene(state);
+  if (!gpu) return;
+  const SplatCamera camera = splat_camera(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
   for (auto _ : state) {
     auto render = gpu->render(camera, RasterizerConfig{});
     if (!render) {
@@ -163,17 +171,9 @@ BENCHMARK(BM_SplatRender_Cuda)->Args({400, 400, 40000})->Args({1920, 1080, 40000
 
 // Views for display on a CUDA device (render_view: the RGB image alone downloaded, buffers reused).
 void BM_SplatView_Cuda(benchmark::State& state) {
-  auto gpu = CudaSplatRasterizer::create();
-  if (!gpu) {
-    state.SkipWithError(gpu.error().message.c_str());
-    return;
-  }
-  const GaussianCloud cloud = splat_scene(static_cast<int>(state.range(2)));
+  std::optional<CudaSplatRasterizer> gpu = rasterizer_with_scene(state);
+  if (!gpu) return;
   const SplatCamera camera = splat_camera(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
-  if (hanzo::fusion::Status uploaded = gpu->upload(cloud); !uploaded) {
-    state.SkipWithError(uploaded.error().message.c_str());
-    return;
-  }
   SplatView view;
   for (auto _ : state) {
     if (hanzo::fusion::Status rendered = gpu->render_view(camera, RasterizerConfig{}, view); !rendered) {
