@@ -126,7 +126,7 @@ Result<nlohmann::json> build(const MapBuildOptions& options) {
     HANZO_ASSIGN_OR_RETURN(calibration_text, read_file(options.calibration));
     map.sensor_configuration = calibration_text;
   }
-  builder.write_layers(map);
+  builder.write_map(map);
   HANZO_RETURN_IF_ERROR(maps::write_fusion_map(options.out, map));
 
   nlohmann::json result = describe_map(map);

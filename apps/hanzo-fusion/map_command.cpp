@@ -13,6 +13,7 @@
 #include "hanzo/fusion/crypto/file_encryption.hpp"
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
+#include "hanzo/fusion/maps/geometric_labels.hpp"
 #include "hanzo/fusion/maps/map_diff.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
 #include "hanzo/fusion/maps/map_store.hpp"
@@ -243,6 +244,14 @@ nlohmann::json describe_map(const msgs::FusionMap& map) {
                         {"max", {high.x(), high.y(), high.z()}},
                         {"labels", !map.points->labels.empty()},
                         {"uncertainty", !map.points->position_std.empty()}};
+    if (!map.points->labels.empty()) {
+      nlohmann::json counts = nlohmann::json::object();
+      for (const msgs::SemanticLabel label : map.points->labels) {
+        const char* name = maps::semantic_label_name(label);
+        counts[name] = counts.value(name, 0) + 1;
+      }
+      layers["points"]["label_counts"] = std::move(counts);
+    }
   }
   if (map.occupancy) {
     const auto& grid = *map.occupancy;

@@ -19,6 +19,7 @@ Status MapBuilderConfig::validate() const {
   if (occupancy_3d) HANZO_RETURN_IF_ERROR(occupancy_3d_config.validate());
   if (points) HANZO_RETURN_IF_ERROR(point_map.validate());
   if (tsdf) HANZO_RETURN_IF_ERROR(tsdf_config.validate());
+  if (geometric_labels) HANZO_RETURN_IF_ERROR(labels.validate());
   return ok_status();
 }
 
@@ -91,6 +92,13 @@ void MapBuilder::write_layers(msgs::FusionMap& map) const {
   } else if (occupancy_2d_) {
     map.occupancy = occupancy_2d_->to_layer();
   }
+}
+
+void MapBuilder::write_map(msgs::FusionMap& map) const {
+  write_layers(map);
+  if (!config_.geometric_labels || !map.points) return;
+  // The configuration was validated at creation: labelling cannot fail.
+  (void)label_points(*map.points, config_.labels);
 }
 
 std::size_t MapBuilder::memory_bytes() const {

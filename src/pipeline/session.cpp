@@ -1340,7 +1340,7 @@ msgs::FusionMap Session::map() const {
       logger()->warn("session: the planar laser's map: {}", planar.error().message);
     }
   } else {
-    map_builder_.write_layers(map);
+    map_builder_.write_map(map);
   }
   if (camera_odometry_ && visual_world_) {
     // The odometry's world (its left camera at the first keyframe) in the Session's.

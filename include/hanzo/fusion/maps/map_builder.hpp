@@ -23,6 +23,7 @@
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/maps/occupancy_grid.hpp"
+#include "hanzo/fusion/maps/geometric_labels.hpp"
 #include "hanzo/fusion/maps/point_map.hpp"
 #include "hanzo/fusion/maps/tsdf.hpp"
 #include "hanzo/fusion/msgs/map_messages.hpp"
@@ -41,6 +42,10 @@ struct MapBuilderConfig {
   PointMapConfig point_map;
   bool tsdf = false;
   TsdfConfig tsdf_config;
+  /// The point layer of write_map() carries geometric labels (floor, wall, obstacle:
+  /// geometric_labels.hpp).
+  bool geometric_labels = true;
+  GeometricLabelConfig labels;
 
   Status validate() const;
 };
@@ -74,6 +79,9 @@ class MapBuilder {
   /// Fills the map's layers (points; occupancy: the 3D grid when built, else the 2D one; TSDF
   /// and its mesh) and leaves its metadata as given.
   void write_layers(msgs::FusionMap& map) const;
+  /// write_layers, with the point layer's geometric labels when geometric_labels is set (the
+  /// map a session or `map build` hands out; incremental map updates use write_layers).
+  void write_map(msgs::FusionMap& map) const;
 
   const std::optional<OccupancyGrid2D>& occupancy_2d() const { return occupancy_2d_; }
   const std::optional<OccupancyGrid3D>& occupancy_3d() const { return occupancy_3d_; }

@@ -1,0 +1,85 @@
+// Geometric labels on a synthetic room: a floor, two walls, a table top and a ceiling sampled
+// on grids with 1 cm of noise; every surface's points get its label, bad configurations are
+// refused naming the field.
+
+#include "hanzo/fusion/maps/geometric_labels.hpp"
+
+#include <random>
+
+#include <gtest/gtest.h>
+
+namespace hanzo::fusion::maps {
+namespace {
+
+using msgs::SemanticLabel;
+
+struct Surface {
+  SemanticLabel expected;
+  std::size_t first = 0, count = 0;
+};
+
+TEST(GeometricLabels, EverySurfaceOfARoomGetsItsLabel) {
+  std::mt19937 random(3);
+  std::normal_distribution<float> noise(0.0f, 0.01f);
+  msgs::PointLayer layer;
+  std::vector<Surface> surfaces;
+  const auto sample = [&](SemanticLabel expected, const std::function<Eigen::Vector3f(float, float)>& at, float u_size, float v_size) {
+    Surface surface{expected, layer.points.size(), 0};
+    for (float u = 0.0f; u <= u_size; u += 0.1f) {
+      for (float v = 0.0f; v <= v_size; v += 0.1f) {
+        layer.points.push_back(at(u, v) + Eigen::Vector3f(noise(random), noise(random), noise(random)));
+        ++surface.count;
+      }
+    }
+    surfaces.push_back(surface);
+  };
+  const float floor_z = 0.3f;  // the floor need not be at z = 0
+  sample(SemanticLabel::kFloor, [&](float u, float v) { return Eigen::Vector3f(u, v, floor_z); }, 8.0f, 6.0f);
+  sample(SemanticLabel::kWall, [&](float u, float v) { return Eigen::Vector3f(-0.2f, u, floor_z + 0.2f + v); }, 6.0f, 2.5f);
+  sample(SemanticLabel::kWall, [&](float u, float v) { return Eigen::Vector3f(u, 6.2f, floor_z + 0.2f + v); }, 8.0f, 2.5f);
+  sample(SemanticLabel::kObstacle, [&](float u, float v) { return Eigen::Vector3f(3.0f + u, 2.0f + v, floor_z + 0.8f); }, 1.5f, 1.0f);
+  sample(SemanticLabel::kUnknown, [&](float u, float v) { return Eigen::Vector3f(u, v, floor_z + 3.5f); }, 8.0f, 6.0f);
+
+  const GeometricLabelSummary summary = label_points(layer).value();
+  ASSERT_TRUE(summary.floor_height);
+  EXPECT_NEAR(*summary.floor_height, floor_z, 0.05);
+  ASSERT_EQ(layer.labels.size(), layer.points.size());
+  for (const Surface& surface : surfaces) {
+    std::size_t right = 0;
+    for (std::size_t i = surface.first; i < surface.first + surface.count; ++i) right += layer.labels[i] == surface.expected;
+    // Points within a neighbourhood of an edge get a blend of two normals.
+    EXPECT_GT(static_cast<double>(right), 0.95 * static_cast<double>(surface.count)) << "label " << static_cast<int>(surface.expected);
+  }
+  std::size_t counted = 0;
+  for (const std::size_t count : summary.counts) counted += count;
+  EXPECT_EQ(counted, layer.points.size());
+}
+
+TEST(GeometricLabels, WithoutAHorizontalSurfaceThereIsNoFloor) {
+  msgs::PointLayer layer;
+  for (float y = 0.0f; y < 3.0f; y += 0.1f) {
+    for (float z = 0.0f; z < 2.0f; z += 0.1f) layer.points.emplace_back(1.0f, y, z);
+  }
+  const GeometricLabelSummary summary = label_points(layer).value();
+  EXPECT_FALSE(summary.floor_height);
+  EXPECT_EQ(summary.counts[static_cast<std::size_t>(SemanticLabel::kWall)], layer.points.size());
+  msgs::PointLayer tiny;
+  tiny.points = {Eigen::Vector3f::Zero(), Eigen::Vector3f::Ones()};
+  EXPECT_EQ(label_points(tiny).value().counts[static_cast<std::size_t>(SemanticLabel::kUnknown)], 2u);
+  EXPECT_EQ(tiny.labels.size(), 2u);
+}
+
+TEST(GeometricLabels, RefusesABadConfigurationNamingTheField) {
+  msgs::PointLayer layer;
+  GeometricLabelConfig config;
+  config.robot_height_m = 0.1;
+  const auto refused = label_points(layer, config);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message.find("robot_height_m"), std::string::npos) << refused.error().message;
+  config = {};
+  config.normal_neighbours = 2;
+  EXPECT_NE(label_points(layer, config).error().message.find("normal_neighbours"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::maps
