@@ -1,6 +1,7 @@
 #include "hanzo/fusion/maps/geometric_labels.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 
@@ -39,6 +40,35 @@ std::optional<double> floor_height(const std::vector<Eigen::Vector3f>& points, c
 }
 
 }  // namespace
+
+void label_grid(msgs::OccupancyGridLayer& grid, const msgs::PointLayer& points, double occupied_threshold, double free_threshold) {
+  grid.labels.clear();
+  if (grid.size_z != 1 || grid.occupancy.size() != static_cast<std::size_t>(grid.size_x) * grid.size_y) return;
+  // Wall and obstacle points per cell column.
+  std::vector<std::array<uint32_t, 2>> column_votes(grid.occupancy.size(), {0, 0});
+  if (points.labels.size() == points.points.size()) {
+    const SE3 T_grid_world = grid.origin.to_se3().inverse();
+    for (std::size_t i = 0; i < points.points.size(); ++i) {
+      const bool wall = points.labels[i] == msgs::SemanticLabel::kWall;
+      if (!wall && points.labels[i] != msgs::SemanticLabel::kObstacle) continue;
+      const Eigen::Vector3d in_grid = T_grid_world * points.points[i].cast<double>();
+      const auto x = static_cast<long>(std::floor(in_grid.x() / grid.resolution));
+      const auto y = static_cast<long>(std::floor(in_grid.y() / grid.resolution));
+      if (x < 0 || y < 0 || x >= static_cast<long>(grid.size_x) || y >= static_cast<long>(grid.size_y)) continue;
+      ++column_votes[static_cast<std::size_t>(y) * grid.size_x + static_cast<std::size_t>(x)][wall ? 0 : 1];
+    }
+  }
+  grid.labels.resize(grid.occupancy.size(), msgs::SemanticLabel::kUnknown);
+  for (std::size_t cell = 0; cell < grid.occupancy.size(); ++cell) {
+    const float probability = grid.occupancy[cell];
+    if (probability <= free_threshold) {
+      grid.labels[cell] = msgs::SemanticLabel::kTraversable;
+    } else if (probability >= occupied_threshold) {
+      const auto& [walls, obstacles] = column_votes[cell];
+      grid.labels[cell] = walls > 0 && walls >= obstacles ? msgs::SemanticLabel::kWall : msgs::SemanticLabel::kObstacle;
+    }
+  }
+}
 
 const char* semantic_label_name(msgs::SemanticLabel label) {
   switch (label) {

@@ -99,6 +99,9 @@ void MapBuilder::write_map(msgs::FusionMap& map) const {
   if (!config_.geometric_labels || !map.points) return;
   // The configuration was validated at creation: labelling cannot fail.
   (void)label_points(*map.points, config_.labels);
+  if (map.occupancy && !occupancy_3d_) {
+    label_grid(*map.occupancy, *map.points, config_.occupancy_2d_config.occupied_threshold, config_.occupancy_2d_config.free_threshold);
+  }
 }
 
 std::size_t MapBuilder::memory_bytes() const {

@@ -64,6 +64,28 @@ NearestSurface nearest_surface(const sim::WorldDescription& world, const Eigen::
   return nearest;
 }
 
+// Horizontal distance (m) from (x, y) to the nearest footprint edge of a box or cylinder, and
+// whether it lies inside one.
+std::pair<double, bool> nearest_footprint_edge(const sim::WorldDescription& world, const Eigen::Vector2d& xy) {
+  double nearest = std::numeric_limits<double>::infinity();
+  bool inside = false;
+  for (const sim::Box& box : world.boxes) {
+    const Eigen::Rotation2Dd yaw(box.yaw);
+    const Eigen::Vector2d local = yaw.inverse() * (xy - box.center.head<2>());
+    const Eigen::Vector2d half = box.half_size.head<2>();
+    const Eigen::Vector2d outside = (local.cwiseAbs() - half).cwiseMax(0.0);
+    const bool in = outside.isZero();
+    inside = inside || in;
+    nearest = std::min(nearest, in ? (half - local.cwiseAbs()).minCoeff() : outside.norm());
+  }
+  for (const sim::Cylinder& cylinder : world.cylinders) {
+    const double radial = (xy - cylinder.base_center.head<2>()).norm();
+    inside = inside || radial <= cylinder.radius;
+    nearest = std::min(nearest, std::abs(radial - cylinder.radius));
+  }
+  return {nearest, inside};
+}
+
 TEST(MapLabels, TheWarehouseMapsPointsAreLabelledAsTheSimulatedWorld) {
   sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_robot.yaml").value();
   scenario.duration = 20.0;
@@ -101,6 +123,37 @@ TEST(MapLabels, TheWarehouseMapsPointsAreLabelledAsTheSimulatedWorld) {
   EXPECT_GT(truth_counts[static_cast<std::size_t>(msgs::SemanticLabel::kFloor)], 100u);
   EXPECT_GT(truth_counts[static_cast<std::size_t>(msgs::SemanticLabel::kWall)], 100u);
   EXPECT_GT(accuracy, 0.95);
+
+  // The 2D grid: traversable cells lie outside every box and pillar, wall and obstacle cells on
+  // one's edge (within 1.5 cells: the map's own error and the cell's extent).
+  ASSERT_TRUE(map.occupancy);
+  const msgs::OccupancyGridLayer& grid = *map.occupancy;
+  ASSERT_EQ(grid.labels.size(), grid.occupancy.size());
+  const SE3 T_world_grid = grid.origin.to_se3();
+  std::size_t traversable = 0, traversable_outside = 0, occupied = 0, occupied_on_edge = 0;
+  for (uint32_t y = 0; y < grid.size_y; ++y) {
+    for (uint32_t x = 0; x < grid.size_x; ++x) {
+      const msgs::SemanticLabel label = grid.labels[static_cast<std::size_t>(y) * grid.size_x + x];
+      if (label == msgs::SemanticLabel::kUnknown || label == msgs::SemanticLabel::kFloor) continue;
+      const Eigen::Vector3d centre_session = T_world_grid * Eigen::Vector3d((x + 0.5) * grid.resolution, (y + 0.5) * grid.resolution, 0.0);
+      const Eigen::Vector3d centre = T_sim_session.rotation * centre_session + T_sim_session.translation;
+      const auto [edge_distance, inside] = nearest_footprint_edge(world, centre.head<2>());
+      if (label == msgs::SemanticLabel::kTraversable) {
+        ++traversable;
+        traversable_outside += !inside || edge_distance < grid.resolution;
+      } else {
+        ++occupied;
+        occupied_on_edge += edge_distance <= 1.5 * grid.resolution;
+      }
+    }
+  }
+  std::printf("warehouse grid (%.2f m cells): %zu traversable, %.1f %% outside the boxes; %zu wall or obstacle, %.1f %% on a box's edge\n",
+              grid.resolution, traversable, 100.0 * traversable_outside / static_cast<double>(traversable), occupied,
+              100.0 * occupied_on_edge / static_cast<double>(occupied));
+  EXPECT_GT(traversable, 1000u);
+  EXPECT_GT(occupied, 100u);
+  EXPECT_GT(static_cast<double>(traversable_outside), 0.97 * static_cast<double>(traversable));
+  EXPECT_GT(static_cast<double>(occupied_on_edge), 0.95 * static_cast<double>(occupied));
 }
 
 }  // namespace

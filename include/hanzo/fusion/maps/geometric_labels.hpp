@@ -49,6 +49,13 @@ struct GeometricLabelSummary {
 /// Fills layer.labels (one per point, replacing any there). Fails on an invalid config only.
 Result<GeometricLabelSummary> label_points(msgs::PointLayer& layer, const GeometricLabelConfig& config = {});
 
+/// A 2D occupancy grid's labels (grid.size_z == 1; a 3D grid is left unlabelled), one per cell:
+/// kTraversable for a free cell (P(occupied) <= free_threshold: rays crossed it in the robot's
+/// height band), kWall or kObstacle for an occupied one (P >= occupied_threshold) by the
+/// majority of `points`' labels in its column (kWall on a tie; kObstacle when none fall in it),
+/// kUnknown otherwise (never observed, or undecided). Replaces grid.labels.
+void label_grid(msgs::OccupancyGridLayer& grid, const msgs::PointLayer& points, double occupied_threshold, double free_threshold);
+
 /// "unknown", "floor", "wall", "obstacle", "traversable".
 const char* semantic_label_name(msgs::SemanticLabel label);
 

@@ -42,8 +42,8 @@ struct MapBuilderConfig {
   PointMapConfig point_map;
   bool tsdf = false;
   TsdfConfig tsdf_config;
-  /// The point layer of write_map() carries geometric labels (floor, wall, obstacle:
-  /// geometric_labels.hpp).
+  /// The point layer and the 2D grid of write_map() carry geometric labels (floor, wall,
+  /// obstacle, traversable: geometric_labels.hpp).
   bool geometric_labels = true;
   GeometricLabelConfig labels;
 
