@@ -398,6 +398,7 @@ Session::Session(std::unique_ptr<Frontend> frontend, SessionConfig config, std::
       if (keyframe_callback_) keyframe_callback_(emitted);
       return;
     }
+    graph();  // a running backend update finishes and its result applies before the factors change
     msgs::Keyframe keyframe = emitted;
     if (restart_graph_) {  // the first keyframe of a new graph: anchored by its own covariance
       keyframe.T_previous_current.reset();
