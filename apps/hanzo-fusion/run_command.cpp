@@ -381,7 +381,11 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"visual_scale_free", m.visual_scale_free}, {"camera_dark_frames", m.camera_dark_frames},
           {"camera_glare_frames", m.camera_glare_frames}, {"camera_motion_blur_frames", m.camera_motion_blur_frames},
           {"camera_features", m.camera_features}, {"camera_feature_ms", m.camera_feature_ms}, {"camera_mapping_ms", m.camera_mapping_ms},
-          {"camera_learned_matcher", m.camera_learned_matcher}, {"visual_place_recognition", m.visual_place_recognition}};
+          {"camera_learned_matcher", m.camera_learned_matcher}, {"visual_place_recognition", m.visual_place_recognition},
+          {"detections_received", m.detections_received}, {"detections_refused", m.detections_refused},
+          {"detections_matched", m.detections_matched}, {"detections_late", m.detections_late},
+          {"images_without_detections", m.images_without_detections}, {"images_masked", m.images_masked},
+          {"dynamic_objects_masked", m.dynamic_objects_masked}, {"masked_image_share", m.masked_image_share}};
 }
 
 // Each sensor's health at the end and its changes over the log (seconds from the log's start).
@@ -635,6 +639,12 @@ int run(const Output& output, const RunOptions& options) {
                         mapping.visual_place_recognition == "learned" ? "; loop candidates by learned place recognition (VLAD)"
                         : mapping.visual_place_recognition.empty() && mapping.visual_keyframes > 0 ? "; no loop closure"
                                                                                                     : "");
+    if (mapping.detections_received > 0) {
+      text += fmt::format("  detections: {} received, {} matched to their image, {} late, {} refused; {} images waited in vain; {} images masked "
+                          "({} moving objects, {:.1f} % of a masked image)\n",
+                          mapping.detections_received, mapping.detections_matched, mapping.detections_late, mapping.detections_refused,
+                          mapping.images_without_detections, mapping.images_masked, mapping.dynamic_objects_masked, 100.0 * mapping.masked_image_share);
+    }
     if (mapping.camera_dark_frames + mapping.camera_glare_frames + mapping.camera_motion_blur_frames > 0) {
       text += fmt::format("  images: {} dark, {} with glare, {} blurred by motion\n", mapping.camera_dark_frames, mapping.camera_glare_frames,
                           mapping.camera_motion_blur_frames);

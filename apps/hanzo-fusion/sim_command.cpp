@@ -127,7 +127,9 @@ int run_sim(const Output& output, const SimOptions& options) {
     };
     const Status simulated = run.run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
       HANZO_RETURN_IF_ERROR(write_truth_until(msgs::timestamp_of(message)));
-      return writer.write(sensor.topic, message, sensor.name);
+      // A camera's ground-truth detections on its topic + "/detections" (what `run` reads).
+      const bool detections = std::holds_alternative<msgs::DetectionsMessage>(message);
+      return writer.write(detections ? sensor.topic + std::string(config::kDetectionsTopicSuffix) : sensor.topic, message, sensor.name);
     });
     if (!simulated) return simulated;
     return write_truth_until(run.end_time());

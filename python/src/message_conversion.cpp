@@ -178,6 +178,34 @@ msgs::RangeMessage range_from(py::handle message) {
   return range;
 }
 
+msgs::DetectionsMessage detections_from(py::handle message) {
+  msgs::DetectionsMessage detections;
+  detections.timestamp = timestamp_field(message);
+  detections.frame_id = py::cast<std::string>(message.attr("frame_id"));
+  detections.image_width = py::cast<uint32_t>(message.attr("image_width"));
+  detections.image_height = py::cast<uint32_t>(message.attr("image_height"));
+  for (py::handle item : message.attr("detections")) {
+    msgs::Detection2D& detection = detections.detections.emplace_back();
+    detection.class_name = py::cast<std::string>(item.attr("class_name"));
+    detection.score = py::cast<float>(item.attr("score"));
+    detection.track_id = py::cast<int64_t>(item.attr("track_id"));
+    const Array<float> box = array_field<float>(item, "box");
+    if (box.size() != 4) throw py::value_error("Detection.box: expected (x_min, y_min, x_max, y_max)");
+    detection.x_min = box.data()[0];
+    detection.y_min = box.data()[1];
+    detection.x_max = box.data()[2];
+    detection.y_max = box.data()[3];
+    if (const py::object mask = item.attr("mask"); !mask.is_none()) {
+      const Array<uint8_t> pixels = py::cast<Array<uint8_t>>(mask);
+      if (pixels.ndim() != 2) throw py::value_error("Detection.mask: expected rows x columns");
+      detection.mask_height = static_cast<uint32_t>(pixels.shape(0));
+      detection.mask_width = static_cast<uint32_t>(pixels.shape(1));
+      detection.mask.assign(pixels.data(), pixels.data() + pixels.size());
+    }
+  }
+  return detections;
+}
+
 }  // namespace
 
 msgs::SensorMessage sensor_message_from_python(py::handle message) {
@@ -189,7 +217,9 @@ msgs::SensorMessage sensor_message_from_python(py::handle message) {
   if (py::isinstance(message, module.attr("WheelOdometry"))) return wheels_from(message);
   if (py::isinstance(message, module.attr("Radar"))) return radar_from(message);
   if (py::isinstance(message, module.attr("Range"))) return range_from(message);
-  throw py::type_error(fmt::format("expected a sensor message of hanzo.fusion.messages (Imu, PointCloud, Image, Gnss, WheelOdometry, Radar, Range), got {}",
+  if (py::isinstance(message, module.attr("Detections"))) return detections_from(message);
+  throw py::type_error(fmt::format("expected a sensor message of hanzo.fusion.messages (Imu, PointCloud, Image, Gnss, WheelOdometry, Radar, Range, "
+                                   "Detections), got {}",
                                    py::str(py::type::of(message)).cast<std::string>()));
 }
 
@@ -261,6 +291,16 @@ py::object to_python(const msgs::SensorMessage& message) {
     py::object operator()(const msgs::RangeMessage& range) const {
       return module.attr("Range")(range.timestamp.nanoseconds(), range.range, range.min_range, range.max_range, range.field_of_view,
                                   range.radiation == msgs::RangeRadiation::kInfrared ? "infrared" : "ultrasound", range.variance, range.frame_id);
+    }
+    py::object operator()(const msgs::DetectionsMessage& detections) const {
+      py::list items;
+      for (const msgs::Detection2D& d : detections.detections) {
+        const float box[4] = {d.x_min, d.y_min, d.x_max, d.y_max};
+        py::object mask = py::none();
+        if (!d.mask.empty()) mask = copy_to_numpy(d.mask.data(), {static_cast<py::ssize_t>(d.mask_height), static_cast<py::ssize_t>(d.mask_width)});
+        items.append(module.attr("Detection")(d.class_name, copy_to_numpy(box, {4}), d.score, d.track_id, mask));
+      }
+      return module.attr("Detections")(detections.timestamp.nanoseconds(), detections.image_width, detections.image_height, items, detections.frame_id);
     }
   };
   return std::visit(Visitor{module}, message);

@@ -8,7 +8,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from hanzo.fusion import (CameraIntrinsics, Distortion, Gnss, Image, Imu, LogWriter, PointCloud, Radar, Range, Session, WheelOdometry,
+from hanzo.fusion import (CameraIntrinsics, Detection, Detections, Distortion, Gnss, Image, Imu, LogWriter, PointCloud, Radar, Range, Session, WheelOdometry,
                           read_log, replay)
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
@@ -39,6 +39,9 @@ def every_message_type():
         # (float32 fields: values a float32 holds exactly)
         ("/range", Range(T0 + 8, range=1.25, min_range=0.03125, max_range=4.0, field_of_view=0.25, variance=2.0 ** -13, frame_id="sonar")),
         ("/range", Range(T0 + 9, range=float("inf"), min_range=0.03125, max_range=4.0, field_of_view=0.25, radiation="infrared")),
+        ("/camera/detections", Detections(T0 + 10, 64, 48, [
+            Detection("person", [10.5, 4.0, 20.0, 30.25], score=0.75, track_id=3),
+            Detection("car", [30.0, 10.0, 50.0, 20.0], mask=np.array([[0, 255, 255], [255, 255, 0]], dtype=np.uint8))], frame_id="cam")),
     ]
 
 
@@ -46,7 +49,11 @@ def assert_same_message(read, written):
     assert type(read) is type(written)
     for name, value in vars(written).items():
         other = getattr(read, name)
-        if isinstance(value, np.ndarray):
+        if isinstance(value, list):
+            assert len(other) == len(value), name
+            for read_item, written_item in zip(other, value):
+                assert_same_message(read_item, written_item)
+        elif isinstance(value, np.ndarray):
             assert other.dtype == value.dtype and np.array_equal(other, value), name
         else:
             assert other == value, name
@@ -175,5 +182,7 @@ def test_messages_convert_to_the_grpc_protobufs():
             assert proto.data == message.pixels.tobytes() and (proto.width, proto.height) == (message.width, message.height)
         if isinstance(message, Radar):
             assert len(proto.targets) == len(message.targets)
+        if isinstance(message, Detections):
+            assert [d.class_name for d in proto.detections] == ["person", "car"] and proto.detections[1].mask == bytes([0, 255, 255, 255, 255, 0])
     with pytest.raises(TypeError):
         streaming.to_proto({"timestamp_ns": T0})

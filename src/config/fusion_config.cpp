@@ -79,6 +79,7 @@ SensorModality modality_of(const msgs::SensorMessage& message) {
     SensorModality operator()(const msgs::WheelOdometryMessage&) const { return SensorModality::kWheelOdometry; }
     SensorModality operator()(const msgs::RadarMessage&) const { return SensorModality::kRadar; }
     SensorModality operator()(const msgs::RangeMessage&) const { return SensorModality::kRange; }
+    SensorModality operator()(const msgs::DetectionsMessage&) const { return SensorModality::kCamera; }  // a camera's detections
   };
   return std::visit(Modality{}, message);
 }

@@ -222,7 +222,7 @@ Result<FeatureSelection> parse_features(const YamlValue& node) {
 Result<VisionConfig> parse_vision(const YamlValue& node) {
   VisionConfig vision;
   if (!node.present()) return vision;
-  HANZO_RETURN_IF_ERROR(node.check_keys({"features", "matcher", "place_recognition", "place_model", "local_mapping_thread"}));
+  HANZO_RETURN_IF_ERROR(node.check_keys({"features", "matcher", "place_recognition", "place_model", "local_mapping_thread", "dynamic_objects"}));
   if (node["features"].present()) HANZO_ASSIGN_OR_RETURN(vision.features, parse_features(node["features"]));
   if (const YamlValue matcher = node["matcher"]; matcher.present()) {
     std::string name;
@@ -240,6 +240,24 @@ Result<VisionConfig> parse_vision(const YamlValue& node) {
   }
   if (node["place_model"].present()) HANZO_ASSIGN_OR_RETURN(vision.place_model, node["place_model"].as_string());
   if (node["local_mapping_thread"].present()) HANZO_ASSIGN_OR_RETURN(vision.local_mapping_thread, node["local_mapping_thread"].as_bool());
+  if (const YamlValue dynamic = node["dynamic_objects"]; dynamic.present()) {
+    HANZO_RETURN_IF_ERROR(dynamic.check_keys({"classes", "min_score", "margin_px", "wait_for_detections"}));
+    DynamicObjectsConfig& objects = vision.dynamic_objects;
+    if (const YamlValue classes = dynamic["classes"]; classes.present()) {
+      objects.classes.clear();
+      for (const YamlValue& element : classes.elements()) {
+        std::string name;
+        HANZO_ASSIGN_OR_RETURN(name, element.as_string());
+        if (name.empty()) return element.error("a class name must not be empty");
+        objects.classes.push_back(std::move(name));
+      }
+    }
+    if (dynamic["min_score"].present()) HANZO_ASSIGN_OR_RETURN(objects.min_score, dynamic["min_score"].as_double());
+    if (!(objects.min_score >= 0.0 && objects.min_score <= 1.0)) return dynamic["min_score"].error(fmt::format("{} outside [0, 1]", objects.min_score));
+    if (dynamic["margin_px"].present()) HANZO_ASSIGN_OR_RETURN(objects.margin_px, dynamic["margin_px"].as_double());
+    if (!(objects.margin_px >= 0.0 && objects.margin_px <= 1000.0)) return dynamic["margin_px"].error(fmt::format("{} px: expected 0..1000", objects.margin_px));
+    if (dynamic["wait_for_detections"].present()) HANZO_ASSIGN_OR_RETURN(objects.wait_for_detections, dynamic["wait_for_detections"].as_bool());
+  }
   return vision;
 }
 
@@ -457,6 +475,12 @@ std::string vision_yaml(const VisionConfig& v) {
   if (v.place_recognition) out += fmt::format("    place_recognition: {}\n", to_string(*v.place_recognition));
   if (!v.place_model.empty()) out += fmt::format("    place_model: {}\n", yaml::scalar(v.place_model));
   if (v.local_mapping_thread != d.local_mapping_thread) out += fmt::format("    local_mapping_thread: {}\n", v.local_mapping_thread);
+  if (!(v.dynamic_objects == d.dynamic_objects)) {
+    std::vector<std::string> classes;
+    for (const std::string& name : v.dynamic_objects.classes) classes.push_back(yaml::scalar(name));
+    out += fmt::format("    dynamic_objects: {{classes: [{}], min_score: {}, margin_px: {}, wait_for_detections: {}}}\n", fmt::join(classes, ", "),
+                       v.dynamic_objects.min_score, v.dynamic_objects.margin_px, v.dynamic_objects.wait_for_detections);
+  }
   return out.empty() ? out : "  vision:\n" + out;
 }
 

@@ -30,6 +30,7 @@ struct HeaderOf {
     return "timestamp_ns,target,range,azimuth,elevation,radial_velocity,rcs\n";
   }
   std::string operator()(const msgs::RangeMessage&) const { return "timestamp_ns,range,min_range,max_range,field_of_view,variance\n"; }
+  std::string operator()(const msgs::DetectionsMessage&) const { return "timestamp_ns,detection,class_name,score,x_min,y_min,x_max,y_max,track_id\n"; }
   std::string operator()(const msgs::PointCloudMessage&) const {
     return "timestamp_ns,points,has_intensity,has_ring,has_point_time\n";
   }
@@ -61,6 +62,13 @@ struct RowsOf {
   }
   void operator()(const msgs::RangeMessage& m) const {
     row(out, m.timestamp.nanoseconds(), number(m.range), number(m.min_range), number(m.max_range), number(m.field_of_view), number(m.variance));
+  }
+  void operator()(const msgs::DetectionsMessage& m) const {
+    for (std::size_t i = 0; i < m.detections.size(); ++i) {
+      const msgs::Detection2D& d = m.detections[i];
+      row(out, m.timestamp.nanoseconds(), std::to_string(i), d.class_name, number(d.score), number(d.x_min), number(d.y_min), number(d.x_max),
+          number(d.y_max), std::to_string(d.track_id));
+    }
   }
   void operator()(const msgs::PointCloudMessage& m) const {
     row(out, m.timestamp.nanoseconds(), std::to_string(m.points.size()), std::to_string(!m.intensities.empty()),

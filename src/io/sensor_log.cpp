@@ -188,6 +188,7 @@ Result<bool> SensorLogReader::next(LogEntry& entry) {
     else if (type == v1::WheelOdometryMessage::descriptor()->full_name()) decoded = decode<v1::WheelOdometryMessage>(view);
     else if (type == v1::RadarMessage::descriptor()->full_name()) decoded = decode<v1::RadarMessage>(view);
     else if (type == v1::RangeMessage::descriptor()->full_name()) decoded = decode<v1::RangeMessage>(view);
+    else if (type == v1::DetectionsMessage::descriptor()->full_name()) decoded = decode<v1::DetectionsMessage>(view);
     else if (type == v1::PoseEstimate::descriptor()->full_name()) decoded = decode<v1::PoseEstimate>(view);
     else {
       ++skipped_;

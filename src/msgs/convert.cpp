@@ -434,6 +434,54 @@ Result<RangeMessage> from_proto(const v1::RangeMessage& in) {
   return validated(std::move(message));
 }
 
+// ---- Detections -------------------------------------------------------------------------
+
+v1::DetectionsMessage to_proto(const DetectionsMessage& message) {
+  v1::DetectionsMessage out;
+  out.set_timestamp_ns(write_time(message.timestamp));
+  out.set_frame_id(message.frame_id);
+  out.set_image_width(message.image_width);
+  out.set_image_height(message.image_height);
+  for (const Detection2D& detection : message.detections) {
+    v1::Detection2D* d = out.add_detections();
+    d->set_class_name(detection.class_name);
+    d->set_score(detection.score);
+    d->set_x_min(detection.x_min);
+    d->set_y_min(detection.y_min);
+    d->set_x_max(detection.x_max);
+    d->set_y_max(detection.y_max);
+    d->set_track_id(detection.track_id);
+    d->set_mask_width(detection.mask_width);
+    d->set_mask_height(detection.mask_height);
+    d->set_mask(detection.mask.data(), detection.mask.size());
+  }
+  return out;
+}
+
+Result<DetectionsMessage> from_proto(const v1::DetectionsMessage& in) {
+  const Reader read("DetectionsMessage");
+  DetectionsMessage message;
+  HANZO_ASSIGN_OR_RETURN(message.timestamp, read.time(in.timestamp_ns(), "timestamp_ns"));
+  message.frame_id = in.frame_id();
+  message.image_width = in.image_width();
+  message.image_height = in.image_height();
+  message.detections.reserve(in.detections_size());
+  for (const v1::Detection2D& d : in.detections()) {
+    Detection2D& detection = message.detections.emplace_back();
+    detection.class_name = d.class_name();
+    detection.score = d.score();
+    detection.x_min = d.x_min();
+    detection.y_min = d.y_min();
+    detection.x_max = d.x_max();
+    detection.y_max = d.y_max();
+    detection.track_id = d.track_id();
+    detection.mask_width = d.mask_width();
+    detection.mask_height = d.mask_height();
+    detection.mask.assign(d.mask().begin(), d.mask().end());
+  }
+  return validated(std::move(message));
+}
+
 // ---- Pose estimate and keyframe ---------------------------------------------------------
 
 v1::PoseEstimate to_proto(const PoseEstimate& message) {

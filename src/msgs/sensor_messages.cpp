@@ -99,7 +99,8 @@ Timestamp timestamp_of(const SensorMessage& message) {
 }
 
 std::string_view modality_name(const SensorMessage& message) {
-  constexpr std::array<std::string_view, 7> kNames{"imu", "point_cloud", "image", "gnss", "wheel_odometry", "radar", "range"};
+  constexpr std::array<std::string_view, 8> kNames{"imu", "point_cloud", "image", "gnss", "wheel_odometry", "radar", "range", "detections"};
+  static_assert(kNames.size() == std::variant_size_v<SensorMessage>);
   return kNames[message.index()];
 }
 

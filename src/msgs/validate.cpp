@@ -286,6 +286,36 @@ Status validate(const RangeMessage& message) {
   return ok_status();
 }
 
+Status validate(const DetectionsMessage& message) {
+  const Checker check("DetectionsMessage");
+  HANZO_RETURN_IF_ERROR(check.timestamp(message.timestamp, "timestamp_ns"));
+  if (message.image_width == 0 || message.image_height == 0) {
+    return check.fail("image_width", fmt::format("image size {} x {}: the detector's image size is required", message.image_width, message.image_height));
+  }
+  const float width = static_cast<float>(message.image_width), height = static_cast<float>(message.image_height);
+  for (std::size_t i = 0; i < message.detections.size(); ++i) {
+    const Detection2D& detection = message.detections[i];
+    const auto field = [i](std::string_view name) { return fmt::format("detections[{}].{}", i, name); };
+    if (detection.class_name.empty()) return check.fail(field("class_name"), "empty");
+    if (!(detection.score >= 0.0F && detection.score <= 1.0F)) return check.fail(field("score"), fmt::format("{} outside [0, 1]", detection.score));
+    for (const auto& [name, value] : {std::pair<std::string_view, float>{"x_min", detection.x_min}, {"y_min", detection.y_min},
+                                      {"x_max", detection.x_max}, {"y_max", detection.y_max}}) {
+      if (!std::isfinite(value)) return check.fail(field(name), "not finite");
+    }
+    if (detection.x_min > detection.x_max || detection.y_min > detection.y_max) {
+      return check.fail(field("x_min"), fmt::format("box ({}, {}) - ({}, {}) has its corners swapped", detection.x_min, detection.y_min, detection.x_max, detection.y_max));
+    }
+    if (detection.x_min < -0.5F || detection.y_min < -0.5F || detection.x_max > width - 0.5F || detection.y_max > height - 0.5F) {
+      return check.fail(field("x_max"), fmt::format("box ({}, {}) - ({}, {}) outside the {} x {} image", detection.x_min, detection.y_min, detection.x_max,
+                                                    detection.y_max, message.image_width, message.image_height));
+    }
+    if (detection.mask.size() != static_cast<std::size_t>(detection.mask_width) * detection.mask_height) {
+      return check.fail(field("mask"), fmt::format("{} bytes for a {} x {} mask", detection.mask.size(), detection.mask_width, detection.mask_height));
+    }
+  }
+  return ok_status();
+}
+
 Status validate(const PoseEstimate& message) {
   const Checker check("PoseEstimate");
   HANZO_RETURN_IF_ERROR(check.timestamp(message.timestamp, "timestamp_ns"));

@@ -294,7 +294,7 @@ const CameraOdometry::Rig* CameraOdometry::rig_of(std::string_view sensor) const
   return nullptr;
 }
 
-Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::add(std::string_view sensor, const msgs::ImageMessage& image) {
+Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::add(std::string_view sensor, const msgs::ImageMessage& image, const vision::StaticMask& static_mask) {
   // Images of one frame are at most this far apart (seconds, body clock).
   constexpr double kFrameTolerance = 1e-3;
   const Rig* rig = rig_of(sensor);
@@ -316,10 +316,11 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::add(std::string_v
     }
     HANZO_ASSIGN_OR_RETURN(tracked, track_pending());
   }
-  if (!pending_) pending_ = PendingFrame{time, std::nullopt, std::vector<std::pair<cv::Mat, cv::Mat>>(rigs_.size())};
+  if (!pending_) pending_ = PendingFrame{time, std::nullopt, std::vector<std::pair<cv::Mat, cv::Mat>>(rigs_.size()), std::vector<vision::StaticMask>(rigs_.size())};
   const size_t index = static_cast<size_t>(rig - rigs_.data());
   std::pair<cv::Mat, cv::Mat>& images = pending_->images[index];
   (left ? images.first : images.second) = std::move(grey);
+  if (left) pending_->static_masks[index] = static_mask;
   if (left && (!pending_->left_time || index == 0)) pending_->left_time = time;
   const bool complete = std::all_of(rigs_.begin(), rigs_.end(), [this](const Rig& each) {
     const std::pair<cv::Mat, cv::Mat>& frame = pending_->images[static_cast<size_t>(&each - rigs_.data())];
@@ -346,7 +347,7 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track_pending() {
       }
       continue;
     }
-    images.push_back({static_cast<int>(index), std::move(left), std::move(right)});
+    images.push_back({static_cast<int>(index), std::move(left), std::move(right), frame.static_masks[index]});
     sensors.push_back(rig.left_sensor);
     if (!rig.right_sensor.empty()) sensors.push_back(rig.right_sensor);
   }
@@ -360,9 +361,10 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track_pending() {
     const cv::Mat& left = images[0].left;
     vision::ImageQuality quality;
     HANZO_ASSIGN_OR_RETURN(quality, assess(left));
-    Result<vision::VisualOdometryFrame> odometry_frame = images[0].right.empty() ? odometry_->track(time.seconds(), left)
-                                                         : rigs_[0].depth        ? odometry_->track_rgbd(time.seconds(), left, images[0].right)
-                                                                                 : odometry_->track(time.seconds(), left, images[0].right);
+    const vision::StaticMask& mask = images[0].static_mask;
+    Result<vision::VisualOdometryFrame> odometry_frame = images[0].right.empty() ? odometry_->track(time.seconds(), left, mask)
+                                                         : rigs_[0].depth        ? odometry_->track_rgbd(time.seconds(), left, images[0].right, mask)
+                                                                                 : odometry_->track(time.seconds(), left, images[0].right, mask);
     if (!odometry_frame) return odometry_frame.error();
     tracked = Tracked{time, std::move(odometry_frame).value(), SE3(), quality, {{0, left}}, {}};
     tracked.T_world_body = T_body_left() * tracked.frame.T_world_camera * T_body_left().inverse();

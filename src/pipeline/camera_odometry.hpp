@@ -105,7 +105,9 @@ class CameraOdometry {
   /// Takes an image of a handled sensor. Returns the tracked frame when a frame completed
   /// (header comment); nullopt while it waits for the rest of its images. Fails (naming the
   /// problem) for an image of the wrong encoding or size, or out of time order.
-  Result<std::optional<Tracked>> add(std::string_view sensor, const msgs::ImageMessage& image);
+  /// static_mask (a left image's, optional): its moving objects, where no feature is taken (vision::VisualOdometry::track; the visual-inertial
+  /// odometry's tracker drops its tracks there and detects no corners there).
+  Result<std::optional<Tracked>> add(std::string_view sensor, const msgs::ImageMessage& image, const vision::StaticMask& static_mask = {});
 
   /// Visual-inertial (frontend.type msckf): the odometry wants the IMU's samples (add_imu()).
   bool visual_inertial() const { return inertial_ != nullptr; }
@@ -133,6 +135,7 @@ class CameraOdometry {
     Timestamp time;                      // its first image's
     std::optional<Timestamp> left_time;  // the frame's time: rig 0's left image's, else the first left image's
     std::vector<std::pair<cv::Mat, cv::Mat>> images;
+    std::vector<vision::StaticMask> static_masks;  // by rig: the left image's
   };
 
   CameraOdometry(std::unique_ptr<vision::VisualOdometry> odometry, std::vector<Rig> rigs);

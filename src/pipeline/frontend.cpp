@@ -197,6 +197,12 @@ const config::SensorConfig* Frontend::sensor_for_topic(std::string_view topic) c
   for (const config::SensorConfig& sensor : impl_->config.sensors) {
     if (sensor.topic == topic) return &sensor;
   }
+  if (topic.ends_with(config::kDetectionsTopicSuffix)) {
+    const std::string_view camera_topic = topic.substr(0, topic.size() - config::kDetectionsTopicSuffix.size());
+    for (const config::SensorConfig& sensor : impl_->config.sensors) {
+      if (sensor.modality == config::SensorModality::kCamera && sensor.topic == camera_topic) return &sensor;
+    }
+  }
   return nullptr;
 }
 

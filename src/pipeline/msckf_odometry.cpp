@@ -191,7 +191,8 @@ Result<MsckfOdometry::Frame> MsckfOdometry::track(Timestamp time, const std::vec
     }
     const Rig& rig = rigs_[static_cast<size_t>(rig_images.rig)];
     vision::TrackedFrame tracked;
-    HANZO_ASSIGN_OR_RETURN(tracked, rig.stereo ? rig.tracker->track(rig_images.left, rig_images.right) : rig.tracker->track(rig_images.left));
+    HANZO_ASSIGN_OR_RETURN(tracked, rig.stereo ? rig.tracker->track(rig_images.left, rig_images.right, rig_images.static_mask)
+                                                : rig.tracker->track(rig_images.left, rig_images.static_mask));
     rigs_imaged.push_back(rig_images.rig);
     frame.tracked_features += tracked.tracked;
     if (rig_images.rig == 0) rig0_observations = tracked.observations;

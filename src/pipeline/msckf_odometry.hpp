@@ -68,6 +68,7 @@ class MsckfOdometry {
   struct RigImages {
     int rig = 0;
     cv::Mat left, right;
+    vision::StaticMask static_mask;  ///< the left image's (FeatureTracker::track)
   };
 
   /// The rigs (one to four; each one or two cameras, the second making a stereo pair), the
@@ -81,7 +82,7 @@ class MsckfOdometry {
   /// most once). Fails for an unknown rig or images the rig's tracker refuses.
   Result<Frame> track(Timestamp time, const std::vector<RigImages>& images);
   /// A frame of rig 0 alone.
-  Result<Frame> track(Timestamp time, const cv::Mat& left, const cv::Mat& right) { return track(time, {{0, left, right}}); }
+  Result<Frame> track(Timestamp time, const cv::Mat& left, const cv::Mat& right) { return track(time, {{0, left, right, {}}}); }
 
   int zero_velocity_frames() const { return zero_velocity_frames_; }
   /// The filter's IMU biases (IMU axes: accelerometer m/s^2, gyroscope rad/s); nullopt before it starts.

@@ -552,6 +552,7 @@ void Session::take_splat_views() {
 }
 
 PushStatus Session::push_message(std::string_view sensor, msgs::SensorMessage message) {
+  if (const auto* detections = std::get_if<msgs::DetectionsMessage>(&message)) return push_detections(sensor, *detections);
   if (!config_.mapping) return frontend_->push(sensor, message);
   if (camera_odometry_ && camera_odometry_->handles(sensor)) return push_image(sensor, message);
   if (camera_odometry_ && camera_odometry_->visual_inertial() && sensor == camera_odometry_->imu_sensor()) {
@@ -600,6 +601,7 @@ void Session::flush() {
 }
 
 void Session::flush_pipeline() {
+  release_waiting_images(std::nullopt);
   frontend_->flush();
   if (!config_.mapping) return;
   register_ready_scans(/*final=*/true);
@@ -692,7 +694,25 @@ PushStatus Session::push_image(std::string_view sensor, const msgs::SensorMessag
   }
   // The camera streams: heard by the timeout monitoring whether or not its frame gives a pose.
   frontend_->note_input(sensor, image->timestamp);
-  Result<std::optional<CameraOdometry::Tracked>> tracked = camera_odometry_->add(sensor, *image);
+  // Earlier images waiting for their detections go first (frames complete in time order).
+  release_waiting_images(image->timestamp);
+  if (wait_for_detections(sensor, image->timestamp)) {
+    camera_detections_.find(sensor)->second.waiting = *image;
+    if (statistics.first_time.nanoseconds() == 0) statistics.first_time = image->timestamp;
+    statistics.last_time = image->timestamp;
+    return {};
+  }
+  return track_image(std::string(sensor), *image);
+}
+
+PushStatus Session::track_image(const std::string& sensor, const msgs::ImageMessage& image_message) {
+  SensorStatistics& statistics = camera_statistics_[sensor];
+  auto refuse = [&statistics](Rejection reason, const std::string& detail) {
+    ++statistics.rejected[reason];
+    return PushStatus(reason, detail);
+  };
+  const msgs::ImageMessage* image = &image_message;
+  Result<std::optional<CameraOdometry::Tracked>> tracked = camera_odometry_->add(sensor, *image, static_mask_for(sensor, *image));
   if (!tracked) return refuse(Rejection::kInvalid, fmt::format("camera {}: {}", sensor, tracked.error().message));
   if (statistics.first_time.nanoseconds() == 0) statistics.first_time = image->timestamp;
   statistics.last_time = image->timestamp;
@@ -1431,6 +1451,7 @@ SessionSummary Session::summary() const {
 
 MappingSummary Session::mapping_summary() const {
   MappingSummary summary = summary_;
+  summary.masked_image_share = summary_.images_masked > 0 ? masked_share_sum_ / static_cast<double>(summary_.images_masked) : 0.0;
   if (camera_odometry_) {
     const vision::VisualOdometrySummary visual = camera_odometry_->summary();
     summary.camera_frames_tracked = static_cast<uint64_t>(visual.tracked_frames);

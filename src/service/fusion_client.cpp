@@ -168,7 +168,8 @@ struct FusionClient::Impl {
       case 3: return std::make_unique<TypedSensorStream<msgs::GnssMessage, v1::GnssMessage>>([&](grpc::ClientContext* c) { return s.StreamGnss(c); }, token, session_id, sensor, progress);
       case 4: return std::make_unique<TypedSensorStream<msgs::WheelOdometryMessage, v1::WheelOdometryMessage>>([&](grpc::ClientContext* c) { return s.StreamWheelOdometry(c); }, token, session_id, sensor, progress);
       case 5: return std::make_unique<TypedSensorStream<msgs::RadarMessage, v1::RadarMessage>>([&](grpc::ClientContext* c) { return s.StreamRadar(c); }, token, session_id, sensor, progress);
-      default: return std::make_unique<TypedSensorStream<msgs::RangeMessage, v1::RangeMessage>>([&](grpc::ClientContext* c) { return s.StreamRange(c); }, token, session_id, sensor, progress);
+      case 6: return std::make_unique<TypedSensorStream<msgs::RangeMessage, v1::RangeMessage>>([&](grpc::ClientContext* c) { return s.StreamRange(c); }, token, session_id, sensor, progress);
+      default: return std::make_unique<TypedSensorStream<msgs::DetectionsMessage, v1::DetectionsMessage>>([&](grpc::ClientContext* c) { return s.StreamDetections(c); }, token, session_id, sensor, progress);
     }
   }
 };

@@ -74,6 +74,9 @@ class FusionServiceImpl final : public v1::FusionService::Service {
   grpc::Status StreamRange(grpc::ServerContext* context, grpc::ServerReaderWriter<v1::PoseEstimate, v1::RangeMessage>* stream) override {
     return serve_stream(*context, *stream, "range");
   }
+  grpc::Status StreamDetections(grpc::ServerContext* context, grpc::ServerReaderWriter<v1::PoseEstimate, v1::DetectionsMessage>* stream) override {
+    return serve_stream(*context, *stream, "detections");
+  }
   grpc::Status StreamWheelOdometry(grpc::ServerContext* context,
                                    grpc::ServerReaderWriter<v1::PoseEstimate, v1::WheelOdometryMessage>* stream) override {
     return serve_stream(*context, *stream, "wheel_odometry");

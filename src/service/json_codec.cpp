@@ -232,6 +232,14 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"camera_mapping_ms", mapping.camera_mapping_ms},
       {"camera_learned_matcher", mapping.camera_learned_matcher},
       {"visual_place_recognition", mapping.visual_place_recognition},
+      {"detections_received", mapping.detections_received},
+      {"detections_refused", mapping.detections_refused},
+      {"detections_matched", mapping.detections_matched},
+      {"detections_late", mapping.detections_late},
+      {"images_without_detections", mapping.images_without_detections},
+      {"images_masked", mapping.images_masked},
+      {"dynamic_objects_masked", mapping.dynamic_objects_masked},
+      {"masked_image_share", mapping.masked_image_share},
   };
 }
 

@@ -768,7 +768,9 @@ ApiStatus SessionManager::push(const Principal& caller, const std::string& sessi
   if (managed.map_updates_installed) Impl::sync_map_updates(managed);  // drops it when the last subscriber left
   if (managed.recording) {
     if (const config::SensorConfig* configured = managed.configuration.find_sensor(sensor_name)) {
-      managed.recording->record(configured->topic, sensor_name, message);
+      // A camera's detections on a channel of their own (what `run` reads back).
+      const bool detections = std::holds_alternative<msgs::DetectionsMessage>(message);
+      managed.recording->record(detections ? configured->topic + std::string(config::kDetectionsTopicSuffix) : configured->topic, sensor_name, message);
     }
   }
   managed.push_started = Clock::now();

@@ -184,7 +184,7 @@ Eigen::Vector3d CameraSimulator::pixel_ray(double u, double v) const {
   return Eigen::Vector3d(normalized.x(), normalized.y(), 1.0).normalized();
 }
 
-void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radiance, std::vector<float>* depth) const {
+void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radiance, std::vector<float>* depth, std::vector<int>* object_ids) const {
   const SE3 T_world_camera = trajectory_->sample(time).T_world_body * config_.T_body_camera;
   const Eigen::Matrix3d R_world_camera = T_world_camera.rotation().matrix();
   const Eigen::Vector3d& origin = T_world_camera.translation();
@@ -197,6 +197,7 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
   } else {
     radiance.assign(static_cast<std::size_t>(width) * height, Eigen::Vector3f::Zero());
   }
+  if (object_ids != nullptr) object_ids->assign(static_cast<std::size_t>(width) * height, -2);
   const int tiles_across = (width + kTilePixels - 1) / kTilePixels, tiles_down = (height + kTilePixels - 1) / kTilePixels;
   // Rows of tiles are independent: render them on up to num_threads threads (same result).
   // Inside a tile every ray goes through the tile's RayGroup (the same hit as a plain cast).
@@ -224,6 +225,9 @@ void CameraSimulator::render(Timestamp time, std::vector<Eigen::Vector3f>& radia
             if (depth != nullptr) {  // s is 1 for depth cameras
               if (hit) (*depth)[static_cast<std::size_t>(row) * width + column] = static_cast<float>(hit->distance * ray[column].z());
               continue;
+            }
+            if (object_ids != nullptr && hit && row % s == 0 && column % s == 0) {
+              (*object_ids)[static_cast<std::size_t>(row / s) * width + column / s] = hit->object_id;
             }
             Eigen::Vector3f color;
             if (hit) {
@@ -314,18 +318,20 @@ msgs::ImageMessage CameraSimulator::measure(Timestamp time) {
     }
   }
 
+  const bool detects = config_.ground_truth_detections != GroundTruthDetections::kNone;
   std::vector<Eigen::Vector3f> radiance;
   if (blur != nullptr && blur->blur_samples > 1) {
     std::vector<Eigen::Vector3f> sub_frame;
     radiance.assign(static_cast<std::size_t>(width) * height, Eigen::Vector3f::Zero());
     for (int i = 0; i < blur->blur_samples; ++i) {
       const double offset = blur->exposure_time * (static_cast<double>(i) / (blur->blur_samples - 1) - 0.5);
-      render(time + Duration::from_seconds(offset), sub_frame);
+      render(time + Duration::from_seconds(offset), sub_frame, nullptr, i == blur->blur_samples / 2 && detects ? &object_ids_ : nullptr);
       for (std::size_t p = 0; p < radiance.size(); ++p) radiance[p] += sub_frame[p] / static_cast<float>(blur->blur_samples);
     }
   } else {
-    render(time, radiance);
+    render(time, radiance, nullptr, detects ? &object_ids_ : nullptr);
   }
+  object_ids_time_ = time;
 
   msgs::ImageMessage image = image_header(time);
   const bool rgb = config_.encoding == msgs::ImageEncoding::kRgb8;
@@ -354,6 +360,75 @@ msgs::ImageMessage CameraSimulator::measure(Timestamp time) {
     }
   }
   return image;
+}
+
+std::string_view to_string(GroundTruthDetections detections) {
+  switch (detections) {
+    case GroundTruthDetections::kNone: return "none";
+    case GroundTruthDetections::kBoxes: return "boxes";
+    case GroundTruthDetections::kMasks: return "masks";
+  }
+  return "none";
+}
+
+std::optional<GroundTruthDetections> ground_truth_detections_from_string(std::string_view name) {
+  for (GroundTruthDetections detections : {GroundTruthDetections::kNone, GroundTruthDetections::kBoxes, GroundTruthDetections::kMasks}) {
+    if (to_string(detections) == name) return detections;
+  }
+  return std::nullopt;
+}
+
+std::optional<msgs::DetectionsMessage> CameraSimulator::detections() const {
+  if (config_.ground_truth_detections == GroundTruthDetections::kNone || object_ids_.empty()) return std::nullopt;
+  const auto width = static_cast<int>(config_.intrinsics.width), height = static_cast<int>(config_.intrinsics.height);
+  const std::vector<MovingBox>& movers = world_->description().moving_boxes;
+  const int first_moving = world_->object_count() - static_cast<int>(movers.size());
+  struct Extent {
+    int pixels = 0;
+    int x_min = std::numeric_limits<int>::max(), y_min = std::numeric_limits<int>::max(), x_max = -1, y_max = -1;
+  };
+  std::vector<Extent> extents(movers.size());
+  for (int row = 0; row < height; ++row) {
+    for (int column = 0; column < width; ++column) {
+      const int mover = object_ids_[static_cast<std::size_t>(row) * width + column] - first_moving;
+      if (mover < 0) continue;
+      Extent& extent = extents[static_cast<std::size_t>(mover)];
+      ++extent.pixels;
+      extent.x_min = std::min(extent.x_min, column);
+      extent.x_max = std::max(extent.x_max, column);
+      extent.y_min = std::min(extent.y_min, row);
+      extent.y_max = std::max(extent.y_max, row);
+    }
+  }
+  msgs::DetectionsMessage message;
+  message.timestamp = object_ids_time_;
+  message.frame_id = config_.frame_id;
+  message.image_width = config_.intrinsics.width;
+  message.image_height = config_.intrinsics.height;
+  for (std::size_t mover = 0; mover < movers.size(); ++mover) {
+    const Extent& extent = extents[mover];
+    if (extent.pixels < config_.min_detection_pixels) continue;
+    msgs::Detection2D detection;
+    detection.class_name = movers[mover].class_name;
+    detection.score = 1.0F;
+    detection.x_min = static_cast<float>(extent.x_min);
+    detection.y_min = static_cast<float>(extent.y_min);
+    detection.x_max = static_cast<float>(extent.x_max);
+    detection.y_max = static_cast<float>(extent.y_max);
+    detection.track_id = static_cast<int64_t>(mover);
+    if (config_.ground_truth_detections == GroundTruthDetections::kMasks) {
+      detection.mask_width = static_cast<uint32_t>(extent.x_max - extent.x_min + 1);
+      detection.mask_height = static_cast<uint32_t>(extent.y_max - extent.y_min + 1);
+      detection.mask.reserve(static_cast<std::size_t>(detection.mask_width) * detection.mask_height);
+      for (int row = extent.y_min; row <= extent.y_max; ++row) {
+        for (int column = extent.x_min; column <= extent.x_max; ++column) {
+          detection.mask.push_back(object_ids_[static_cast<std::size_t>(row) * width + column] - first_moving == static_cast<int>(mover) ? 255 : 0);
+        }
+      }
+    }
+    message.detections.push_back(std::move(detection));
+  }
+  return message;
 }
 
 }  // namespace hanzo::fusion::sim

@@ -14,6 +14,9 @@ struct ScenarioSimulation::Stream {
   Timestamp next;
   // Returns the message at a time, or nullopt when it is left out.
   std::function<std::optional<msgs::SensorMessage>(Timestamp)> produce;
+  // A second message of the same sensor after each produced one (a camera's ground-truth
+  // detections, which a detector gives after its image), or nullopt.
+  std::function<std::optional<msgs::SensorMessage>()> follow_up;
 };
 
 ScenarioSimulation::ScenarioSimulation(Scenario scenario, SplineTrajectory trajectory)
@@ -64,6 +67,13 @@ Result<std::unique_ptr<ScenarioSimulation>> ScenarioSimulation::create(Scenario 
       if (!created) return with_context(Result<std::unique_ptr<ScenarioSimulation>>(created.error()), "sensors." + sensor.name);
       auto simulator = std::make_shared<CameraSimulator>(std::move(*created));
       stream->produce = [simulator](Timestamp time) -> std::optional<msgs::SensorMessage> { return simulator->measure(time); };
+      if (config.ground_truth_detections != GroundTruthDetections::kNone) {
+        stream->follow_up = [simulator]() -> std::optional<msgs::SensorMessage> {
+          std::optional<msgs::DetectionsMessage> detections = simulator->detections();
+          if (!detections) return std::nullopt;
+          return msgs::SensorMessage(std::move(*detections));
+        };
+      }
     } else if (const auto* gnss = std::get_if<GnssSimulatorConfig>(&sensor.simulator)) {
       Result<GnssSimulator> created = GnssSimulator::create(*gnss, path, &world);
       if (!created) return with_context(Result<std::unique_ptr<ScenarioSimulation>>(created.error()), "sensors." + sensor.name);
@@ -118,6 +128,9 @@ Status ScenarioSimulation::run(const Sink& sink) {
       ++statistics.elements;
     }
     HANZO_RETURN_IF_ERROR(sink(*earliest->sensor, std::move(*message)));
+    if (earliest->follow_up) {
+      if (std::optional<msgs::SensorMessage> follow_up = earliest->follow_up()) HANZO_RETURN_IF_ERROR(sink(*earliest->sensor, std::move(*follow_up)));
+    }
   }
 }
 

@@ -178,7 +178,7 @@ Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* wo
     world->cylinders.push_back(cylinder);
   }
   for (const YamlValue& item : value["people"].elements()) {
-    HANZO_RETURN_IF_ERROR(item.check_keys({"path", "speed", "start", "size", "texture", "reflectivity", "radar_cross_section"}));
+    HANZO_RETURN_IF_ERROR(item.check_keys({"path", "speed", "start", "size", "class", "texture", "reflectivity", "radar_cross_section"}));
     MovingBox person;
     person.box.material = default_material(object_index++);
     person.box.material.radar_cross_section = 0.0;  // a person: about 1 m^2
@@ -194,6 +194,10 @@ Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* wo
     if ((size.array() <= 0.0).any()) return item["size"].error("sizes must be > 0");
     person.box.half_size = size / 2.0;
     HANZO_RETURN_IF_ERROR(parse_material(item, &person.box.material));
+    if (item["class"].present()) {
+      HANZO_ASSIGN_OR_RETURN(person.class_name, item["class"].as_string());
+      if (person.class_name.empty()) return item["class"].error("a class name must not be empty");
+    }
     world->moving_boxes.push_back(person);
   }
   const YamlValue city = value["city"];
@@ -352,7 +356,7 @@ Result<SensorSimulatorConfig> parse_lidar(const YamlValue& value, double rate, c
 Result<SensorSimulatorConfig> parse_camera(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "width", "height", "fx", "fy", "cx", "cy",
                                           "distortion_model", "distortion_coeffs", "encoding", "supersampling", "pixel_noise", "lighting",
-                                          "depth_range", "depth_noise"}));
+                                          "depth_range", "depth_noise", "detections"}));
   CameraSimulatorConfig config;
   config.rate_hz = rate;
   config.T_body_camera = sensor.T_body_sensor;
@@ -381,6 +385,13 @@ Result<SensorSimulatorConfig> parse_camera(const YamlValue& value, double rate, 
       return value["encoding"].error(fmt::format("expected mono8, rgb8, depth16 or depth32f, got '{}'", name));
     }
     config.encoding = *encoding;
+  }
+  if (value["detections"].present()) {
+    std::string name;
+    HANZO_ASSIGN_OR_RETURN(name, value["detections"].as_string());
+    const std::optional<GroundTruthDetections> detections = ground_truth_detections_from_string(name);
+    if (!detections) return value["detections"].error(fmt::format("expected none, boxes or masks, got '{}'", name));
+    config.ground_truth_detections = *detections;
   }
   HANZO_ASSIGN_OR_RETURN(config.supersampling, count_or(value["supersampling"], config.supersampling, 1, 4));
   HANZO_ASSIGN_OR_RETURN(config.pixel_noise, non_negative_or(value["pixel_noise"], config.pixel_noise));

@@ -78,9 +78,11 @@ struct FeatureTracker::State {
   std::map<uint64_t, cv::Point2f> right_points;  // last right-image position per id
   uint64_t next_id = 0;
 
-  Result<TrackedFrame> track(const cv::Mat& left_image, const cv::Mat* right_image);
+  Result<TrackedFrame> track(const cv::Mat& left_image, const cv::Mat* right_image, const cv::Mat& static_mask);
   void track_over_time(const std::vector<cv::Mat>& pyramid, TrackedFrame& frame);
-  void detect(const cv::Mat& grey, TrackedFrame& frame);
+  // Ends the tracks on the mask's zeros.
+  void drop_masked(const cv::Mat& static_mask, TrackedFrame& frame);
+  void detect(const cv::Mat& grey, const cv::Mat& static_mask, TrackedFrame& frame);
   void match_right(const std::vector<cv::Mat>& pyramid, const std::vector<cv::Mat>& right_pyramid, TrackedFrame& frame);
   /// An image's pyramid as cv::calcOpticalFlowPyrLK builds it for this window and these levels
   /// (the same flow, built once).
@@ -128,14 +130,18 @@ Result<std::unique_ptr<FeatureTracker>> FeatureTracker::create_stereo(const Pinh
   return tracker;
 }
 
-Result<TrackedFrame> FeatureTracker::track(const cv::Mat& image) { return state_->track(image, nullptr); }
+Result<TrackedFrame> FeatureTracker::track(const cv::Mat& image, const StaticMask& static_mask) { return state_->track(image, nullptr, static_mask.pixels); }
 
-Result<TrackedFrame> FeatureTracker::track(const cv::Mat& left, const cv::Mat& right) {
+Result<TrackedFrame> FeatureTracker::track(const cv::Mat& left, const cv::Mat& right, const StaticMask& static_mask) {
   if (!state_->right) return Error("FeatureTracker: a stereo pair given to a monocular tracker", "image");
-  return state_->track(left, &right);
+  return state_->track(left, &right, static_mask.pixels);
 }
 
-Result<TrackedFrame> FeatureTracker::State::track(const cv::Mat& left_image, const cv::Mat* right_image) {
+Result<TrackedFrame> FeatureTracker::State::track(const cv::Mat& left_image, const cv::Mat* right_image, const cv::Mat& static_mask) {
+  if (!static_mask.empty() && (static_mask.type() != CV_8UC1 || static_mask.size() != image_size)) {
+    return Error(fmt::format("static mask: {} x {} {}, expected 8-bit single channel of the image's {} x {}", static_mask.cols, static_mask.rows,
+                             cv::typeToString(static_mask.type()), image_size.width, image_size.height), "static_mask");
+  }
   cv::Mat grey;
   HANZO_ASSIGN_OR_RETURN(grey, to_grey(left_image, image_size, "left"));
   cv::Mat right_grey;
@@ -145,7 +151,8 @@ Result<TrackedFrame> FeatureTracker::State::track(const cv::Mat& left_image, con
   TrackedFrame frame;
   std::vector<cv::Mat> pyramid = pyramid_of(grey);
   track_over_time(pyramid, frame);
-  detect(grey, frame);
+  if (!static_mask.empty()) drop_masked(static_mask, frame);
+  detect(grey, static_mask, frame);
 
   // Features whose pixel does not undistort are dropped from the tracks too.
   std::vector<cv::Point2f> kept_points;
@@ -244,7 +251,24 @@ void detect_corners(const cv::Mat& grey, const cv::Mat& free, double min_image_q
 
 }  // namespace
 
-void FeatureTracker::State::detect(const cv::Mat& grey, TrackedFrame& frame) {
+void FeatureTracker::State::drop_masked(const cv::Mat& static_mask, TrackedFrame& frame) {
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const cv::Point pixel(std::clamp(static_cast<int>(std::lround(points[i].x)), 0, image_size.width - 1),
+                          std::clamp(static_cast<int>(std::lround(points[i].y)), 0, image_size.height - 1));
+    if (static_mask.at<unsigned char>(pixel) == 0) {
+      ++frame.masked;
+      continue;
+    }
+    points[kept] = points[i];
+    ids[kept++] = ids[i];
+  }
+  points.resize(kept);
+  ids.resize(kept);
+  frame.tracked = static_cast<int>(kept);
+}
+
+void FeatureTracker::State::detect(const cv::Mat& grey, const cv::Mat& static_mask, TrackedFrame& frame) {
   if (static_cast<int>(points.size()) >= config.max_features) return;
   if (config.detector && static_cast<double>(points.size()) >= config.detector_refill_share * config.max_features) return;
   const int columns = config.grid_columns, rows = config.grid_rows;
@@ -255,7 +279,7 @@ void FeatureTracker::State::detect(const cv::Mat& grey, TrackedFrame& frame) {
     return row * columns + column;
   };
   std::vector<int> in_cell(static_cast<size_t>(columns * rows), 0);
-  cv::Mat free(image_size, CV_8UC1, cv::Scalar(255));
+  cv::Mat free = static_mask.empty() ? cv::Mat(image_size, CV_8UC1, cv::Scalar(255)) : static_mask.clone();
   const int radius = static_cast<int>(std::ceil(config.min_distance_px));
   for (const cv::Point2f& point : points) {
     ++in_cell[static_cast<size_t>(cell_of(point))];

@@ -187,9 +187,9 @@ struct VisualOdometry::State {
   std::vector<double> octave_scale;
   double sigma(int octave) const { return config.pixel_sigma * octave_scale[static_cast<std::size_t>(octave)]; }
   // The image's features, their extraction time added to `seconds`.
-  Result<ImageFeatures> extract(const cv::Mat& image, double& seconds) const {
+  Result<ImageFeatures> extract(const cv::Mat& image, double& seconds, const cv::Mat& mask = cv::Mat()) const {
     const auto start = std::chrono::steady_clock::now();
-    Result<ImageFeatures> features = extractor->extract(image);
+    Result<ImageFeatures> features = extractor->extract(image, mask);
     seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return features;
   }
@@ -1285,7 +1285,7 @@ Result<std::unique_ptr<VisualOdometry>> VisualOdometry::create_rgbd(const Pinhol
   return odometry;
 }
 
-Result<VisualOdometryFrame> VisualOdometry::track_rgbd(double time, const cv::Mat& image, const cv::Mat& depth) {
+Result<VisualOdometryFrame> VisualOdometry::track_rgbd(double time, const cv::Mat& image, const cv::Mat& depth, const StaticMask& static_mask) {
   if (!state_->rgbd) return Error("visual odometry: track_rgbd needs an odometry made by create_rgbd", "depth");
   if (depth.size() != image.size()) {
     return Error(fmt::format("depth image is {} x {}, the colour image {} x {}", depth.cols, depth.rows, image.cols, image.rows), "depth");
@@ -1293,25 +1293,25 @@ Result<VisualOdometryFrame> VisualOdometry::track_rgbd(double time, const cv::Ma
   if (depth.type() != CV_16UC1 && depth.type() != CV_32FC1) {
     return Error(fmt::format("depth image: type {} is neither 16-bit millimetres nor 32-bit float metres", cv::typeToString(depth.type())), "depth");
   }
-  return track_frame(time, image, depth);
+  return track_frame(time, image, depth, static_mask);
 }
 
-Result<VisualOdometryFrame> VisualOdometry::track(double time, const cv::Mat& image) {
+Result<VisualOdometryFrame> VisualOdometry::track(double time, const cv::Mat& image, const StaticMask& static_mask) {
   if (state_->rgbd) return Error("RGB-D visual odometry: track_rgbd(time, image, depth) needs the depth image", "image");
   if (state_->right_camera) return Error("stereo visual odometry: track(time, left, right) needs both images", "image");
-  return track_frame(time, image, cv::Mat());
+  return track_frame(time, image, cv::Mat(), static_mask);
 }
 
-Result<VisualOdometryFrame> VisualOdometry::track(double time, const cv::Mat& left, const cv::Mat& right) {
+Result<VisualOdometryFrame> VisualOdometry::track(double time, const cv::Mat& left, const cv::Mat& right, const StaticMask& static_mask) {
   if (!state_->right_camera) return Error("monocular visual odometry: track(time, image) takes one image", "image");
   if (state_->rgbd) return Error("RGB-D visual odometry: track_rgbd(time, image, depth) takes the depth image", "image");
   if (right.size() != left.size()) {
     return Error(fmt::format("right image is {} x {}, the left {} x {}", right.cols, right.rows, left.cols, left.rows), "right_image");
   }
-  return track_frame(time, left, right);
+  return track_frame(time, left, right, static_mask);
 }
 
-Result<VisualOdometryFrame> VisualOdometry::track_frame(double time, const cv::Mat& image, const cv::Mat& right) {
+Result<VisualOdometryFrame> VisualOdometry::track_frame(double time, const cv::Mat& image, const cv::Mat& right, const StaticMask& static_mask) {
   State& s = *state_;
   if (!std::isfinite(time)) return Error("time: not finite", "time");
   if (s.last_time && time <= *s.last_time) {
@@ -1320,7 +1320,11 @@ Result<VisualOdometryFrame> VisualOdometry::track_frame(double time, const cv::M
   if (image.cols != s.image_size.width || image.rows != s.image_size.height) {
     return Error(fmt::format("image is {} x {}, the camera's calibration is for {} x {}", image.cols, image.rows, s.image_size.width, s.image_size.height), "image");
   }
-  Result<ImageFeatures> features = with_context(s.extract(image, s.counts.feature_seconds), "image");
+  if (!static_mask.empty() && (static_mask.pixels.type() != CV_8UC1 || static_mask.pixels.size() != image.size())) {
+    return Error(fmt::format("static mask: {} x {} {}, expected 8-bit single channel of the image's {} x {}", static_mask.pixels.cols, static_mask.pixels.rows,
+                             cv::typeToString(static_mask.pixels.type()), image.cols, image.rows), "static_mask");
+  }
+  Result<ImageFeatures> features = with_context(s.extract(image, s.counts.feature_seconds, static_mask.pixels), "image");
   if (!features) return Error(features.error().message, "image");
   if (!right.empty() && !s.rgbd && (right.depth() != CV_8U || (right.channels() != 1 && right.channels() != 3 && right.channels() != 4))) {
     return Error(fmt::format("right image: type {} is not 8-bit grey, BGR or BGRA", cv::typeToString(right.type())), "right_image");

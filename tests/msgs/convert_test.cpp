@@ -106,6 +106,27 @@ void expect_equal(const RangeMessage& a, const RangeMessage& b) {
   EXPECT_EQ(a.variance, b.variance);
 }
 
+void expect_equal(const DetectionsMessage& a, const DetectionsMessage& b) {
+  EXPECT_EQ(a.timestamp, b.timestamp);
+  EXPECT_EQ(a.frame_id, b.frame_id);
+  EXPECT_EQ(a.image_width, b.image_width);
+  EXPECT_EQ(a.image_height, b.image_height);
+  ASSERT_EQ(a.detections.size(), b.detections.size());
+  for (std::size_t i = 0; i < a.detections.size(); ++i) {
+    const Detection2D &x = a.detections[i], &y = b.detections[i];
+    EXPECT_EQ(x.class_name, y.class_name);
+    EXPECT_EQ(x.score, y.score);
+    EXPECT_EQ(x.x_min, y.x_min);
+    EXPECT_EQ(x.y_min, y.y_min);
+    EXPECT_EQ(x.x_max, y.x_max);
+    EXPECT_EQ(x.y_max, y.y_max);
+    EXPECT_EQ(x.track_id, y.track_id);
+    EXPECT_EQ(x.mask_width, y.mask_width);
+    EXPECT_EQ(x.mask_height, y.mask_height);
+    EXPECT_EQ(x.mask, y.mask);
+  }
+}
+
 void expect_equal(const PoseEstimate& a, const PoseEstimate& b) {
   EXPECT_EQ(a.timestamp, b.timestamp);
   EXPECT_EQ(a.frame_id, b.frame_id);
@@ -353,6 +374,13 @@ TEST(Convert, RangeRoundTrip) {
   check_round_trip(none);
   none.range = -std::numeric_limits<float>::infinity();
   none.radiation = RangeRadiation::kInfrared;
+  check_round_trip(none);
+}
+// Boxes, scores, track ids and instance masks; an image without detections.
+TEST(Convert, DetectionsRoundTrip) {
+  check_round_trip(testing::detections());
+  DetectionsMessage none = testing::detections();
+  none.detections.clear();
   check_round_trip(none);
 }
 TEST(Convert, PoseEstimateRoundTrip) { check_round_trip(testing::pose_estimate()); }

@@ -78,6 +78,7 @@ TEST(Schema, FusionServiceHasTheSpecsRpcs) {
       {"StreamGnss", "GnssMessage", "PoseEstimate", true, true},
       {"StreamRadar", "RadarMessage", "PoseEstimate", true, true},
       {"StreamRange", "RangeMessage", "PoseEstimate", true, true},
+      {"StreamDetections", "DetectionsMessage", "PoseEstimate", true, true},
       {"StreamWheelOdometry", "WheelOdometryMessage", "PoseEstimate", true, true},
       {"SubscribePose", "SessionId", "PoseEstimate", false, true},
       {"SubscribeMap", "SessionId", "MapUpdate", false, true},

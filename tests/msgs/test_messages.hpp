@@ -105,6 +105,35 @@ inline RangeMessage range() {
   return m;
 }
 
+// A person (box only, tracked) and a car with a 3 x 2 instance mask in a 640 x 480 image.
+inline DetectionsMessage detections() {
+  DetectionsMessage m;
+  m.timestamp = t0();
+  m.frame_id = "camera_front";
+  m.image_width = 640;
+  m.image_height = 480;
+  Detection2D person;
+  person.class_name = "person";
+  person.score = 0.91F;
+  person.x_min = 100.25F;
+  person.y_min = 50.0F;
+  person.x_max = 140.5F;
+  person.y_max = 200.0F;
+  person.track_id = 17;
+  m.detections.push_back(person);
+  Detection2D car = person;
+  car.class_name = "car";
+  car.score = 0.55F;
+  car.x_min = 300.0F;
+  car.x_max = 420.0F;
+  car.track_id = -1;
+  car.mask_width = 3;
+  car.mask_height = 2;
+  car.mask = {0, 255, 255, 255, 255, 0};
+  m.detections.push_back(car);
+  return m;
+}
+
 inline PoseEstimate pose_estimate() {
   PoseEstimate m;
   m.timestamp = t0();

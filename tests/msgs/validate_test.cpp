@@ -1,6 +1,7 @@
 #include "hanzo/fusion/msgs/validate.hpp"
 
 #include <cmath>
+#include <functional>
 #include <limits>
 
 #include <gmock/gmock.h>
@@ -61,6 +62,25 @@ TEST(Validate, RangeReadingsFollowRep117) {
   range = testing::range();
   range.variance = -1.0F;
   expect_rejected(range, "variance", "negative");
+}
+
+// A detector's boxes must lie in its image, be ordered, scored in [0, 1] and named; a mask
+// must have its stated size. Each refusal names the detection and field.
+TEST(Validate, DetectionsAreBoxesInsideTheirImage) {
+  EXPECT_TRUE(validate(testing::detections()).ok());
+  const auto refused = [](const std::function<void(DetectionsMessage&)>& edit) {
+    DetectionsMessage message = testing::detections();
+    edit(message);
+    const Status status = validate(message);
+    return status.ok() ? std::string("accepted") : status.error().message;
+  };
+  EXPECT_THAT(refused([](DetectionsMessage& m) { m.image_width = 0; }), HasSubstr("image size 0 x 480"));
+  EXPECT_THAT(refused([](DetectionsMessage& m) { m.detections[1].class_name.clear(); }), HasSubstr("detections[1].class_name"));
+  EXPECT_THAT(refused([](DetectionsMessage& m) { m.detections[0].score = 1.5F; }), HasSubstr("detections[0].score"));
+  EXPECT_THAT(refused([](DetectionsMessage& m) { m.detections[0].x_max = std::numeric_limits<float>::quiet_NaN(); }), HasSubstr("not finite"));
+  EXPECT_THAT(refused([](DetectionsMessage& m) { std::swap(m.detections[0].y_min, m.detections[0].y_max); }), HasSubstr("corners swapped"));
+  EXPECT_THAT(refused([](DetectionsMessage& m) { m.detections[1].x_max = 700.0F; }), HasSubstr("outside the 640 x 480 image"));
+  EXPECT_THAT(refused([](DetectionsMessage& m) { m.detections[1].mask.pop_back(); }), HasSubstr("5 bytes for a 3 x 2 mask"));
 }
 
 TEST(Validate, ZeroTimestampIsRejectedEverywhere) {

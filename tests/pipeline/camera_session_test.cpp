@@ -23,6 +23,7 @@
 #include "hanzo/fusion/sim/scenario.hpp"
 #include "hanzo/fusion/sim/camera_simulator.hpp"
 #include "hanzo/fusion/sim/scenario_simulation.hpp"
+#include "pipeline/scenario_replay.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
@@ -43,10 +44,7 @@ Recording simulate(const std::string& scenario_file, std::optional<double> durat
   if (edit) edit(r.scenario);
   r.scenario.num_threads = 0;
   r.simulation = sim::ScenarioSimulation::create(r.scenario).value();
-  EXPECT_TRUE(r.simulation->run([&r](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) {
-    r.messages.emplace_back(sensor.name, std::move(message));
-    return ok_status();
-  }).ok());
+  r.messages = testing::record(*r.simulation);
   return r;
 }
 

@@ -15,6 +15,16 @@ struct ReplayedTrajectories {
   io::Trajectory truth;     ///< the scenario's body pose at the same times
 };
 
+/// Every message `simulation` makes, with its sensor's name, in the order it makes them.
+inline std::vector<std::pair<std::string, msgs::SensorMessage>> record(sim::ScenarioSimulation& simulation) {
+  std::vector<std::pair<std::string, msgs::SensorMessage>> messages;
+  EXPECT_TRUE(simulation.run([&messages](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) {
+    messages.emplace_back(sensor.name, std::move(message));
+    return ok_status();
+  }).ok());
+  return messages;
+}
+
 /// Runs `simulation` into `session` (push errors are counted by the session, not failures here)
 /// and flushes it.
 inline ReplayedTrajectories replay(sim::ScenarioSimulation& simulation, Session& session) {

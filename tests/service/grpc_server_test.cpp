@@ -286,6 +286,7 @@ TEST_F(GrpcServerTest, AuthMatrixOfEveryRpc) {
       {"StreamGnss", {{"fusion:session:write", "fusion:session:read"}, [&](grpc::ClientContext& c) { return close_stream(stub_->StreamGnss(&c)); }}},
       {"StreamRadar", {{"fusion:session:write", "fusion:session:read"}, [&](grpc::ClientContext& c) { return close_stream(stub_->StreamRadar(&c)); }}},
       {"StreamRange", {{"fusion:session:write", "fusion:session:read"}, [&](grpc::ClientContext& c) { return close_stream(stub_->StreamRange(&c)); }}},
+      {"StreamDetections", {{"fusion:session:write", "fusion:session:read"}, [&](grpc::ClientContext& c) { return close_stream(stub_->StreamDetections(&c)); }}},
       {"StreamWheelOdometry", {{"fusion:session:write", "fusion:session:read"}, [&](grpc::ClientContext& c) { return close_stream(stub_->StreamWheelOdometry(&c)); }}},
       {"SubscribePose", {{"fusion:session:read"}, [&](grpc::ClientContext& c) { return drain(stub_->SubscribePose(&c, session)); }}},
       {"SubscribeKeyframes", {{"fusion:session:read"}, [&](grpc::ClientContext& c) { return drain(stub_->SubscribeKeyframes(&c, session)); }}},

@@ -108,5 +108,28 @@ TEST(FeatureTracker, RefusesBadImagesAndKeepsItsTracks) {
   EXPECT_GT(next->tracked, 170);
 }
 
+// A static mask (a detector's moving object): tracks that land on it end and no feature starts
+// there; a mask of the wrong size is refused.
+TEST(FeatureTracker, NoFeatureIsTrackedOrStartedOnAMovingObject) {
+  const cv::Mat image = euroc_image();
+  ASSERT_FALSE(image.empty());
+  auto tracker = FeatureTracker::create(ideal_camera(), image.size());
+  ASSERT_TRUE(tracker);
+  const auto first = (*tracker)->track(image);
+  ASSERT_TRUE(first);
+  StaticMask mask{cv::Mat(image.size(), CV_8UC1, cv::Scalar(255))};
+  const cv::Rect object(0, 0, image.cols / 2, image.rows);  // the left half
+  mask.pixels(object).setTo(0);
+  const auto second = (*tracker)->track(shifted(image, 2.0, 1.0), mask);
+  ASSERT_TRUE(second);
+  EXPECT_GT(second->masked, 50);
+  EXPECT_GT(second->tracked, 50);
+  for (const FeatureObservation& observation : second->observations) {
+    const double u = 376.0 + 458.0 * observation.normalized.x();
+    EXPECT_GE(u, image.cols / 2 - 0.5) << observation.feature_id;
+  }
+  EXPECT_FALSE((*tracker)->track(image, StaticMask{cv::Mat(10, 10, CV_8UC1, cv::Scalar(255))}));
+}
+
 }  // namespace
 }  // namespace hanzo::fusion::vision

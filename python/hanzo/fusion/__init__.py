@@ -38,6 +38,8 @@ from hanzo.fusion._fusion import __version__  # noqa: F401
 from hanzo.fusion.log import LogWriter, read_log, replay  # noqa: F401
 from hanzo.fusion.messages import (  # noqa: F401
     CameraIntrinsics,
+    Detection,
+    Detections,
     Distortion,
     Gnss,
     Image,

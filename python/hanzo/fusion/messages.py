@@ -18,8 +18,8 @@ from typing import Optional, Union
 import numpy as np
 
 __all__ = [
-    "CameraIntrinsics", "Distortion", "Gnss", "Image", "Imu", "LogRecord", "Message", "PointCloud", "PoseEstimate",
-    "Radar", "Range", "WheelOdometry", "FIX_TYPES", "IMAGE_ENCODINGS", "RANGE_RADIATION",
+    "CameraIntrinsics", "Detection", "Detections", "Distortion", "Gnss", "Image", "Imu", "LogRecord", "Message", "PointCloud",
+    "PoseEstimate", "Radar", "Range", "WheelOdometry", "FIX_TYPES", "IMAGE_ENCODINGS", "RANGE_RADIATION",
 ]
 
 #: GNSS fix types, weakest first (GnssFixType of the spec).
@@ -225,6 +225,40 @@ class Range(_Stamped):
 
 
 @dataclass
+class Detection:
+    """One object a detector found in a camera image (vision_msgs/Detection2D): its class, score in [0, 1], box
+    (x_min, y_min, x_max, y_max) in pixels (integer coordinates at pixel centres), a tracker's id (-1: none) and an
+    optional instance mask (uint8, rows x columns, non-zero on the object) stretched over the box."""
+    class_name: str
+    box: np.ndarray
+    score: float = 1.0
+    track_id: int = -1
+    mask: Optional[np.ndarray] = None
+
+    def __post_init__(self):
+        self.box = _array(self.box, np.float32, (4,), "box")
+        self.mask = _optional_array(self.mask, np.uint8, (None, None), "mask")
+
+
+@dataclass
+class Detections(_Stamped):
+    """A detector's output for one camera image: pushed on the camera's sensor name with the image's timestamp and
+    size, which is how the session matches it to that image (fusion.vision.dynamic_objects masks the moving ones out
+    of the visual odometry)."""
+    timestamp_ns: int
+    image_width: int
+    image_height: int
+    detections: list = field(default_factory=list)
+    frame_id: str = ""
+
+    def __post_init__(self):
+        self.timestamp_ns = _check_time(self.timestamp_ns)
+        for index, detection in enumerate(self.detections):
+            if not isinstance(detection, Detection):
+                raise ValueError(f"detections[{index}]: expected a Detection, got {type(detection).__name__}")
+
+
+@dataclass
 class PoseEstimate(_Stamped):
     """A pose the engine emitted: T_world_body as position (m) and orientation (w, x, y, z)."""
     timestamp_ns: int
@@ -235,7 +269,7 @@ class PoseEstimate(_Stamped):
     tracking_state: str = ""
 
 
-Message = Union[Imu, PointCloud, Image, Gnss, WheelOdometry, Radar, Range]
+Message = Union[Imu, PointCloud, Image, Gnss, WheelOdometry, Radar, Range, Detections]
 
 
 @dataclass

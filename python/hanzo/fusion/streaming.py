@@ -111,6 +111,17 @@ def to_proto(message: messages.Message):
                                         radiation_type=messages.RANGE_RADIATION.index(message.radiation),
                                         field_of_view=message.field_of_view, min_range=message.min_range,
                                         max_range=message.max_range, range=message.range, variance=message.variance)
+    if isinstance(message, messages.Detections):
+        out = sensors_pb2.DetectionsMessage(timestamp_ns=message.timestamp_ns, frame_id=message.frame_id,
+                                            image_width=message.image_width, image_height=message.image_height)
+        for detection in message.detections:
+            box = [float(v) for v in detection.box]
+            item = out.detections.add(class_name=detection.class_name, score=detection.score, x_min=box[0], y_min=box[1],
+                                      x_max=box[2], y_max=box[3], track_id=detection.track_id)
+            if detection.mask is not None:
+                item.mask_height, item.mask_width = detection.mask.shape
+                item.mask = detection.mask.tobytes()
+        return out
     raise TypeError(f"expected a sensor message of hanzo.fusion.messages, got {type(message).__name__}")
 
 
@@ -132,7 +143,7 @@ def pose_from_proto(pose: estimates_pb2.PoseEstimate) -> messages.PoseEstimate:
 _METHODS = {
     messages.Imu: "StreamImu", messages.PointCloud: "StreamPointCloud", messages.Image: "StreamImage",
     messages.Gnss: "StreamGnss", messages.WheelOdometry: "StreamWheelOdometry", messages.Radar: "StreamRadar",
-    messages.Range: "StreamRange",
+    messages.Range: "StreamRange", messages.Detections: "StreamDetections",
 }
 _END = object()
 

@@ -178,6 +178,28 @@ std::string_view to_string(MatcherType type);  // "ratio", "learned"
 enum class PlaceRecognitionType { kBow, kLearned };
 std::string_view to_string(PlaceRecognitionType type);  // "bow", "learned"
 
+/// A camera's detector output (msgs::DetectionsMessage) in a sensor log: on the camera's topic
+/// with this suffix ("/sensors/camera/detections").
+inline constexpr std::string_view kDetectionsTopicSuffix = "/detections";
+
+/// fusion.vision.dynamic_objects: a detector's boxes (msgs::DetectionsMessage, pushed on a
+/// camera's sensor name) mask moving objects out of that camera's visual odometry
+/// (pipeline/dynamic_mask.hpp).
+struct DynamicObjectsConfig {
+  /// Classes that move (matched without regard to case); boxes of other classes stay usable.
+  std::vector<std::string> classes = {"person", "pedestrian", "people", "rider", "cyclist", "bicycle", "motorcycle", "car",
+                                      "vehicle", "truck", "bus", "train", "forklift", "animal", "dog", "cat", "horse"};
+  double min_score = 0.3;  // [0, 1]: weaker detections are not masked
+  double margin_px = 8.0;  // >= 0: each box grown by this on every side, each instance mask dilated by it
+  /// An image of a camera whose detections have come waits for its own detections: until they
+  /// come or the next image of any camera does (a detector's latency up to one frame costs
+  /// nothing; one that never answers delays each image by one frame). false: images never
+  /// wait, detections that come after their image are counted late.
+  bool wait_for_detections = true;
+
+  bool operator==(const DynamicObjectsConfig&) const = default;
+};
+
 /// fusion.vision: the visual frontends' features, matching and place recognition; a camera
 /// sensor's `features` key overrides `features` for that camera.
 struct VisionConfig {
@@ -189,6 +211,7 @@ struct VisionConfig {
   /// The visual odometry's local mapping on its own thread (vision::VisualOdometryConfig):
   /// lower latency per image; false (default): keyframe poses fused after their bundle adjustment.
   bool local_mapping_thread = false;
+  DynamicObjectsConfig dynamic_objects;
 };
 
 /// A live sensor's driver (`hanzo-fusion drive`, docs/drivers.md): the decoder of its bytes and

@@ -33,6 +33,7 @@ v1::GnssMessage to_proto(const GnssMessage& message);
 v1::WheelOdometryMessage to_proto(const WheelOdometryMessage& message);
 v1::RadarMessage to_proto(const RadarMessage& message);
 v1::RangeMessage to_proto(const RangeMessage& message);
+v1::DetectionsMessage to_proto(const DetectionsMessage& message);
 v1::PoseEstimate to_proto(const PoseEstimate& message);
 v1::Keyframe to_proto(const Keyframe& message);
 
@@ -43,6 +44,7 @@ Result<GnssMessage> from_proto(const v1::GnssMessage& message);
 Result<WheelOdometryMessage> from_proto(const v1::WheelOdometryMessage& message);
 Result<RadarMessage> from_proto(const v1::RadarMessage& message);
 Result<RangeMessage> from_proto(const v1::RangeMessage& message);
+Result<DetectionsMessage> from_proto(const v1::DetectionsMessage& message);
 Result<PoseEstimate> from_proto(const v1::PoseEstimate& message);
 Result<Keyframe> from_proto(const v1::Keyframe& message);
 

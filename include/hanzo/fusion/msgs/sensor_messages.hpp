@@ -146,12 +146,38 @@ struct RangeMessage {
   float variance = 0.0F;       // m^2, 0 when unknown
 };
 
-/// Any of the seven sensor messages, as the Frontend and the sensor log carry them.
-using SensorMessage =
-    std::variant<ImuMessage, PointCloudMessage, ImageMessage, GnssMessage, WheelOdometryMessage, RadarMessage, RangeMessage>;
+/// One object a detector found in a camera image (as vision_msgs/Detection2D): its class, the
+/// detector's confidence, its axis-aligned box in pixels (OpenCV convention: integer
+/// coordinates are pixel centres; x right, y down) and optionally a tracker's id and an
+/// instance mask over the box.
+struct Detection2D {
+  std::string class_name;  // the detector's label, e.g. "person", "car", "forklift"
+  float score = 1.0F;      // [0, 1]
+  float x_min = 0.0F, y_min = 0.0F, x_max = 0.0F, y_max = 0.0F;  // pixels, x_min <= x_max, y_min <= y_max
+  int64_t track_id = -1;   // the same object in other frames; -1 when not tracked
+  /// Instance mask (optional): mask_width x mask_height bytes, row-major, stretched over the
+  /// box; non-zero where the object is. Empty: the whole box.
+  uint32_t mask_width = 0;
+  uint32_t mask_height = 0;
+  std::vector<uint8_t> mask;
+};
+
+/// A detector's output for one camera image: sent on the camera's sensor name with the image's
+/// timestamp (camera clock) and size, which is how the Session matches it to that image.
+struct DetectionsMessage {
+  Timestamp timestamp;
+  std::string frame_id;
+  uint32_t image_width = 0;   // the image the boxes are in, pixels
+  uint32_t image_height = 0;
+  std::vector<Detection2D> detections;  // may be empty (nothing detected: the image is checked)
+};
+
+/// Any of the eight sensor messages, as the Frontend and the sensor log carry them.
+using SensorMessage = std::variant<ImuMessage, PointCloudMessage, ImageMessage, GnssMessage, WheelOdometryMessage, RadarMessage, RangeMessage,
+                                   DetectionsMessage>;
 
 Timestamp timestamp_of(const SensorMessage& message);
-/// "imu", "point_cloud", "image", "gnss", "wheel_odometry", "radar", "range".
+/// "imu", "point_cloud", "image", "gnss", "wheel_odometry", "radar", "range", "detections".
 std::string_view modality_name(const SensorMessage& message);
 
 }  // namespace hanzo::fusion::msgs

@@ -36,6 +36,9 @@ Status validate(const WheelOdometryMessage& message);
 /// Plus: negative range, azimuth outside [-pi, pi], elevation outside [-pi/2, pi/2].
 Status validate(const RadarMessage& message);
 Status validate(const RangeMessage& message);
+/// Boxes inside the image (at most half a pixel outside), ordered corners, finite scores in
+/// [0, 1], a class name, a mask of mask_width x mask_height bytes or none.
+Status validate(const DetectionsMessage& message);
 Status validate(const PoseEstimate& message);
 /// Plus: relative covariance without relative pose.
 Status validate(const Keyframe& message);

@@ -218,7 +218,8 @@ class Frontend {
   /// stream that lags is reported silent while it is only behind.
   void set_timeout_grace(double seconds);
 
-  /// The configured sensor that reads `topic`, or nullptr.
+  /// The configured sensor that reads `topic`, or nullptr. A camera's detector output
+  /// (msgs::DetectionsMessage) comes on its topic + config::kDetectionsTopicSuffix.
   const config::SensorConfig* sensor_for_topic(std::string_view topic) const;
   const config::FusionConfig& config() const;
 

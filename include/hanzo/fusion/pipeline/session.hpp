@@ -123,6 +123,7 @@
 #include "hanzo/fusion/pipeline/sensor_health.hpp"
 #include "hanzo/fusion/pipeline/wheel_slip_monitor.hpp"
 #include "hanzo/fusion/vision/map_relocalizer.hpp"
+#include "hanzo/fusion/vision/static_mask.hpp"
 
 namespace cv {
 class Mat;
@@ -365,6 +366,19 @@ struct MappingSummary {
   /// runs it beside tracking); 0 for the visual-inertial odometry and without cameras.
   double camera_mapping_ms = 0.0;
   bool camera_learned_matcher = false;
+  /// A detector's output on the cameras (msgs::DetectionsMessage, fusion.vision.dynamic_objects):
+  /// messages received, refused (invalid, another image size, not a tracked camera), matched
+  /// to their image, late (their image was tracked without them), images that waited for
+  /// detections that never came; images whose features a moving object's mask limited, the
+  /// objects masked, and the mean share of a masked image's pixels.
+  uint64_t detections_received = 0;
+  uint64_t detections_refused = 0;
+  uint64_t detections_matched = 0;
+  uint64_t detections_late = 0;
+  uint64_t images_without_detections = 0;
+  uint64_t images_masked = 0;
+  uint64_t dynamic_objects_masked = 0;
+  double masked_image_share = 0.0;
   /// The visual odometry's loop-closure candidates: "bow", "learned" (VLAD), "" when it closes
   /// no loops (fusion.vision.place_recognition).
   std::string visual_place_recognition;
@@ -489,6 +503,19 @@ class Session {
   PushStatus push_scan(msgs::PointCloudMessage scan);
   /// A camera image for the visual odometry (camera_odometry.hpp), its pose into the Frontend.
   PushStatus push_image(std::string_view sensor, const msgs::SensorMessage& message);
+  /// A detector's output for an image of a camera the odometry takes: matched to its image
+  /// (waiting, or the next one of that camera) by timestamp.
+  PushStatus push_detections(std::string_view sensor, const msgs::DetectionsMessage& detections);
+  /// Tracks the images waiting for their detections taken before `time` (all with none).
+  void release_waiting_images(std::optional<Timestamp> before);
+  /// Whether an image of `sensor` at `time` waits for its detections: the camera's detector
+  /// has answered before, none of `time` is here yet, and the configuration waits.
+  bool wait_for_detections(std::string_view sensor, Timestamp time);
+  /// The static mask (dynamic_mask.hpp) from the detections of the image's time, counted;
+  /// empty when none came or nothing moves in them.
+  vision::StaticMask static_mask_for(const std::string& sensor, const msgs::ImageMessage& image);
+  /// An image past push_image's checks, with the detections of its time (if any came).
+  PushStatus track_image(const std::string& sensor, const msgs::ImageMessage& image);
   class RegistrationWorker;
   /// final: at flush, the other LiDARs are not waited for (nothing more comes).
   void register_ready_scans(bool final = false);
@@ -609,6 +636,16 @@ class Session {
   // the Frontend's (T_frontend_visual, set at its first tracked frame).
   std::unique_ptr<CameraOdometry> camera_odometry_;
   std::map<std::string, SensorStatistics, std::less<>> camera_statistics_;
+  // A detector's output per camera (push_detections): recent messages not yet matched, and
+  // the image waiting for its own (fusion.vision.dynamic_objects.wait_for_detections).
+  struct CameraDetections {
+    std::deque<msgs::DetectionsMessage> recent;
+    std::optional<msgs::ImageMessage> waiting;
+    std::optional<Timestamp> last_image_time;  // the newest image tracked
+    bool streaming = false;                    // its detector has answered
+  };
+  std::map<std::string, CameraDetections, std::less<>> camera_detections_;
+  double masked_share_sum_ = 0.0;
   std::optional<SE3> visual_world_;
   SE3 visual_world_correction_;  ///< the Frontend's world correction visual_world_ follows
   /// Frames the odometry reported initializing (their cameras): one of them may become the

@@ -46,6 +46,12 @@
 namespace hanzo::fusion::sim {
 
 enum class CameraFaultType { kDarkness, kGlare, kMotionBlur };
+
+/// Ground-truth detections of the moving boxes (people, vehicles) a camera sees: none, their
+/// visible pixels' bounding boxes, or boxes with instance masks.
+enum class GroundTruthDetections { kNone, kBoxes, kMasks };
+std::string_view to_string(GroundTruthDetections detections);  // "none", "boxes", "masks"
+std::optional<GroundTruthDetections> ground_truth_detections_from_string(std::string_view name);
 std::string_view to_string(CameraFaultType type);  // "darkness", "glare", "motion_blur"
 std::optional<CameraFaultType> camera_fault_type_from_string(std::string_view name);
 
@@ -85,6 +91,12 @@ struct CameraSimulatorConfig {
   double max_distance = 200.0;                          ///< metres: farther surfaces are sky
   int num_threads = 1;                                  ///< rendering threads (TBB); 0: all cores
   std::vector<CameraFaultEpisode> faults;
+  /// With kBoxes / kMasks, detections() gives each image's moving boxes as a perfect detector
+  /// sees them: every moving box with at least min_detection_pixels visible pixels (pixel
+  /// centres' rays that hit it first), its class, score 1, the box around those pixels, its
+  /// index among the world's moving boxes as track id (and the pixels as its instance mask).
+  GroundTruthDetections ground_truth_detections = GroundTruthDetections::kNone;
+  int min_detection_pixels = 30;
   std::string frame_id = "camera";
   uint64_t seed = 6;
 };
@@ -97,6 +109,9 @@ class CameraSimulator {
 
   /// The image exposed at `time`; call in increasing time order.
   msgs::ImageMessage measure(Timestamp time);
+  /// The ground-truth detections of the image measure() returned last (config
+  /// ground_truth_detections; nullopt when off, for a depth camera, or before any image).
+  std::optional<msgs::DetectionsMessage> detections() const;
   /// The unit ray (camera frame) of image position (u, v) in pixels, after undistortion.
   Eigen::Vector3d pixel_ray(double u, double v) const;
 
@@ -105,7 +120,10 @@ class CameraSimulator {
   /// Linear RGB radiance of every pixel (supersamples averaged) seen from the pose at time; with
   /// `depth`, instead the z-depth of each ray that hits (NaN for none; depth cameras cast one
   /// ray per pixel).
-  void render(Timestamp time, std::vector<Eigen::Vector3f>& radiance, std::vector<float>* depth = nullptr) const;
+  /// object_ids (colour images): the object id (RayHit::object_id; -2 for the sky) each pixel
+  /// centre's first sample sees.
+  void render(Timestamp time, std::vector<Eigen::Vector3f>& radiance, std::vector<float>* depth = nullptr,
+              std::vector<int>* object_ids = nullptr) const;
   msgs::ImageMessage measure_depth(Timestamp time);
   /// The message without pixels: time, frame, size, encoding, intrinsics and distortion.
   msgs::ImageMessage image_header(Timestamp time) const;
@@ -126,6 +144,8 @@ class CameraSimulator {
   std::vector<Eigen::Vector3f> rays_;  // unit, camera frame, (width * s) x (height * s), row-major
   std::vector<TilePyramid> tiles_;     // row-major, ceil(width / kTilePixels) per row
   std::vector<float> normal_table_;    // standard normal draws for pixel noise
+  std::vector<int> object_ids_;        // the last image's (ground-truth detections)
+  Timestamp object_ids_time_;
   Eigen::Vector3d sun_direction_;
   std::mt19937_64 random_;
 };

@@ -22,6 +22,7 @@
 #include <memory>
 #include <optional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -58,6 +59,7 @@ struct Cylinder {
 /// `center` is ignored; its centre is (path point, ground_height + half_size.z).
 struct MovingBox {
   Box box;
+  std::string class_name = "person";  ///< what a detector calls it (ground-truth detections)
   std::vector<Eigen::Vector2d> path;  ///< >= 2 points, world x, y
   double speed = 1.2;                 ///< m/s, > 0
   Timestamp start_time;

@@ -21,8 +21,9 @@
 // undistorted normalized coordinates through each camera's PinholeCamera; features whose pixel
 // cannot be undistorted are dropped.
 //
-// Failures: track() refuses an empty image, one of another size than configured, or a type
-// other than 8-bit grey / BGR / BGRA (the tracks are kept; the next good image continues them).
+// Failures: track() refuses an empty image, one of another size than configured, a type
+// other than 8-bit grey / BGR / BGRA, or a static mask not CV_8UC1 of the image's size (the
+// tracks are kept; the next good image continues them).
 
 #include <memory>
 #include <vector>
@@ -32,6 +33,7 @@
 #include "hanzo/fusion/core/pinhole_camera.hpp"
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/vision/static_mask.hpp"
 #include "hanzo/fusion/vision/feature_extractor.hpp"
 #include "hanzo/fusion/vision/feature_observation.hpp"
 
@@ -77,6 +79,7 @@ struct TrackedFrame {
   int new_features = 0;      ///< left features started in this image
   int rejected_ransac = 0;   ///< tracks ended by the fundamental-matrix check
   int stereo_matches = 0;    ///< left features also seen in the right image
+  int masked = 0;            ///< tracks ended on a moving object (the static mask's zeros)
 };
 
 class FeatureTracker {
@@ -93,9 +96,11 @@ class FeatureTracker {
   FeatureTracker& operator=(const FeatureTracker&) = delete;
 
   /// Monocular (or a stereo tracker given only its left image: no right observations).
-  Result<TrackedFrame> track(const cv::Mat& image);
+  /// static_mask (optional; static_mask.hpp): the (left) image's moving objects: tracks that
+  /// land there end (TrackedFrame::masked) and no new feature starts there.
+  Result<TrackedFrame> track(const cv::Mat& image, const StaticMask& static_mask = {});
   /// Stereo: the pair taken at the same time.
-  Result<TrackedFrame> track(const cv::Mat& left, const cv::Mat& right);
+  Result<TrackedFrame> track(const cv::Mat& left, const cv::Mat& right, const StaticMask& static_mask = {});
 
  private:
   struct State;

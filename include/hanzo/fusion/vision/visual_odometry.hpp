@@ -87,6 +87,7 @@
 #include "hanzo/fusion/vision/correspondence_filter.hpp"
 #include "hanzo/fusion/vision/feature_extractor.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
+#include "hanzo/fusion/vision/static_mask.hpp"
 #include "hanzo/fusion/vision/vlad.hpp"
 #include "hanzo/fusion/vision/vocabulary.hpp"
 
@@ -255,12 +256,15 @@ class VisualOdometry {
                                                              double max_depth = 10.0);
 
   /// Monocular: tracks one image (8-bit grey, BGR or BGRA) taken at `time` (seconds).
-  Result<VisualOdometryFrame> track(double time, const cv::Mat& image);
+  /// static_mask (every track call, optional; static_mask.hpp): the (left) image's moving
+  /// objects, where no keypoint is taken, so nothing there is tracked, triangulated or used for
+  /// place recognition.
+  Result<VisualOdometryFrame> track(double time, const cv::Mat& image, const StaticMask& static_mask = {});
   /// Stereo: a synchronized pair (same size and types as above).
-  Result<VisualOdometryFrame> track(double time, const cv::Mat& left, const cv::Mat& right);
+  Result<VisualOdometryFrame> track(double time, const cv::Mat& left, const cv::Mat& right, const StaticMask& static_mask = {});
   /// RGB-D: the image and its depth (the same size; CV_16UC1 millimetres or CV_32FC1 metres,
   /// 0 or NaN where there is none).
-  Result<VisualOdometryFrame> track_rgbd(double time, const cv::Mat& image, const cv::Mat& depth);
+  Result<VisualOdometryFrame> track_rgbd(double time, const cv::Mat& image, const cv::Mat& depth, const StaticMask& static_mask = {});
 
   /// Every tracked frame's time and T_world_camera after the latest bundle adjustment.
   std::vector<std::pair<double, SE3>> trajectory() const;
@@ -278,7 +282,7 @@ class VisualOdometry {
  private:
   struct State;
   explicit VisualOdometry(std::unique_ptr<State> state);
-  Result<VisualOdometryFrame> track_frame(double time, const cv::Mat& image, const cv::Mat& right);
+  Result<VisualOdometryFrame> track_frame(double time, const cv::Mat& image, const cv::Mat& right, const StaticMask& static_mask);
   std::unique_ptr<State> state_;
 };
 

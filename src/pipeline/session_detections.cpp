@@ -1,0 +1,103 @@
+// Session: a detector's output on the cameras (msgs::DetectionsMessage) and the dynamic masks
+// it gives the visual odometry (fusion.vision.dynamic_objects; session.hpp, dynamic_mask.hpp).
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "camera_odometry.hpp"
+#include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/msgs/validate.hpp"
+#include "hanzo/fusion/pipeline/dynamic_mask.hpp"
+#include "hanzo/fusion/pipeline/session.hpp"
+
+namespace hanzo::fusion::pipeline {
+namespace {
+
+// A detector stamps its output with its image's timestamp; this much apart still matches.
+constexpr double kMatchTolerance_s = 1e-3;
+// Detections kept per camera while their images have not come (a detector ahead of the images).
+constexpr std::size_t kRecentDetections = 16;
+
+bool same_time(Timestamp a, Timestamp b) { return std::abs((a - b).seconds()) <= kMatchTolerance_s; }
+
+}  // namespace
+
+PushStatus Session::push_detections(std::string_view sensor, const msgs::DetectionsMessage& detections) {
+  ++summary_.detections_received;
+  const auto refuse = [this](Rejection reason, const std::string& detail) {
+    ++summary_.detections_refused;
+    return PushStatus(reason, detail);
+  };
+  if (!camera_odometry_ || !camera_odometry_->handles(sensor)) {
+    return refuse(Rejection::kWrongType, fmt::format("{}: detections for a sensor that is not a camera of the visual odometry", sensor));
+  }
+  if (Status valid = msgs::validate(detections); !valid) return refuse(Rejection::kInvalid, fmt::format("{}: {}", sensor, valid.error().message));
+  const cv::Size image_size = camera_odometry_->rig_of(sensor)->image_size;
+  if (static_cast<int>(detections.image_width) != image_size.width || static_cast<int>(detections.image_height) != image_size.height) {
+    return refuse(Rejection::kInvalid, fmt::format("{}: detections for a {} x {} image, the camera's images are {} x {}", sensor, detections.image_width,
+                                                   detections.image_height, image_size.width, image_size.height));
+  }
+  CameraDetections& camera = camera_detections_[std::string(sensor)];
+  camera.streaming = true;
+  if (camera.last_image_time && detections.timestamp <= *camera.last_image_time + Duration::from_seconds(kMatchTolerance_s) &&
+      !(camera.waiting && same_time(camera.waiting->timestamp, detections.timestamp))) {
+    // Its image was tracked without it.
+    ++summary_.detections_late;
+    logger()->debug("session: {}: detections at {:.3f} s came after their image", sensor, detections.timestamp.seconds());
+    return {};
+  }
+  camera.recent.push_back(detections);
+  if (camera.recent.size() > kRecentDetections) camera.recent.pop_front();
+  if (camera.waiting && same_time(camera.waiting->timestamp, detections.timestamp)) {
+    msgs::ImageMessage image = std::move(*camera.waiting);
+    camera.waiting.reset();
+    (void)track_image(std::string(sensor), image);  // its outcome is counted in the camera's statistics
+  }
+  return {};
+}
+
+bool Session::wait_for_detections(std::string_view sensor, Timestamp time) {
+  if (!frontend_->config().vision.dynamic_objects.wait_for_detections) return false;
+  const auto camera = camera_detections_.find(sensor);
+  if (camera == camera_detections_.end() || !camera->second.streaming) return false;  // no detector on this camera (yet)
+  return std::none_of(camera->second.recent.begin(), camera->second.recent.end(),
+                      [time](const msgs::DetectionsMessage& detections) { return same_time(detections.timestamp, time); });
+}
+
+void Session::release_waiting_images(std::optional<Timestamp> before) {
+  for (auto& [sensor, camera] : camera_detections_) {
+    if (!camera.waiting || (before && camera.waiting->timestamp + Duration::from_seconds(kMatchTolerance_s) >= *before)) continue;
+    msgs::ImageMessage image = std::move(*camera.waiting);
+    camera.waiting.reset();
+    ++summary_.images_without_detections;
+    (void)track_image(sensor, image);
+  }
+}
+
+vision::StaticMask Session::static_mask_for(const std::string& sensor, const msgs::ImageMessage& image) {
+  const auto camera = camera_detections_.try_emplace(sensor).first;
+  camera->second.last_image_time = image.timestamp;
+  std::deque<msgs::DetectionsMessage>& recent = camera->second.recent;
+  const auto match = std::find_if(recent.begin(), recent.end(), [&image](const msgs::DetectionsMessage& d) { return same_time(d.timestamp, image.timestamp); });
+  if (match == recent.end()) {
+    std::erase_if(recent, [&image](const msgs::DetectionsMessage& d) { return d.timestamp < image.timestamp; });
+    return {};
+  }
+  ++summary_.detections_matched;
+  Result<DynamicMask> mask = dynamic_mask(*match, cv::Size(static_cast<int>(image.width), static_cast<int>(image.height)), frontend_->config().vision.dynamic_objects);
+  // Those of this image and older are done.
+  std::erase_if(recent, [&image](const msgs::DetectionsMessage& d) { return d.timestamp <= image.timestamp + Duration::from_seconds(kMatchTolerance_s); });
+  if (!mask) {
+    logger()->warn("session: {}: detections at {:.3f} s not used: {}", sensor, image.timestamp.seconds(), mask.error().message);
+    return {};
+  }
+  if (mask->static_mask.empty()) return {};
+  ++summary_.images_masked;
+  summary_.dynamic_objects_masked += static_cast<uint64_t>(mask->masked_objects);
+  masked_share_sum_ += mask->masked_share;
+  return {mask->static_mask};
+}
+
+}  // namespace hanzo::fusion::pipeline
