@@ -60,6 +60,11 @@
 //    (src/pipeline/visual_loop_closures.hpp); a verified loop adds a loop factor (DCS kernel,
 //    the detector's covariance) and the graph corrects the Frontend, whose world the
 //    odometry's poses then follow.
+//  - A detector's output for a camera (msgs::DetectionsMessage, pushed on the camera's name) is
+//    matched to the image of its timestamp; its moving classes (fusion.vision.dynamic_objects)
+//    are masked out of that image's features (dynamic_mask.hpp). Once a camera's detector has
+//    answered, each of its images waits for its detections until they come or the next image of
+//    any camera does (src/pipeline/session_detections.cpp); counts in MappingSummary.
 //  - With fusion.mapping.splats, images of the first camera with intrinsics also train 3D
 //    Gaussian splats (session_splats.hpp) at the Session's poses, anchored to keyframes so that
 //    they follow the graph; seeded at the map keyframes' points. Replay trains inside push()
