@@ -15,6 +15,7 @@
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/geometric_labels.hpp"
 #include "hanzo/fusion/maps/map_diff.hpp"
+#include "hanzo/fusion/maps/label_export.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
 #include "hanzo/fusion/maps/map_store.hpp"
 #include "hanzo/fusion/maps/provenance.hpp"
@@ -86,6 +87,27 @@ Status export_map(const MapOptions& options, nlohmann::json& result) {
     if (!map.points) return Error{fmt::format("{}: the map has no point layer to export as {}", options.input, format)};
     return ok_status();
   };
+  if (options.layer == "labels") {
+    // Semantic labels: the points coloured by label (ply), or one ROS map per label of the grid (pgm).
+    result["layer"] = "labels";
+    if (format == "ply") {
+      HANZO_RETURN_IF_ERROR(need_points());
+      HANZO_RETURN_IF_ERROR(maps::write_labelled_points_ply(options.out, *map.points));
+      result["files"] = {options.out};
+      result["points"] = map.points->points.size();
+      return ok_status();
+    }
+    if (format != "pgm") return Error{fmt::format("--layer labels: exports as ply (labelled points) or pgm (a map per label), not {}", format)};
+    HANZO_RETURN_IF_ERROR(need_occupancy());
+    const std::string extension = extension_of(options.out);
+    const std::string stem = extension == ".yaml" || extension == ".yml" || extension == ".pgm"
+                                 ? std::filesystem::path(options.out).replace_extension("").string()
+                                 : options.out;
+    std::vector<std::string> files;
+    HANZO_ASSIGN_OR_RETURN(files, maps::write_label_maps(stem, *map.occupancy));
+    result["files"] = files;
+    return ok_status();
+  }
   if (format == "pgm") {
     HANZO_RETURN_IF_ERROR(need_occupancy());
     // The names as given: --out map.pgm writes map.pgm (+ map.yaml), --out map.yaml map.yaml (+ map.pgm).
@@ -98,7 +120,7 @@ Status export_map(const MapOptions& options, nlohmann::json& result) {
     return ok_status();
   }
   if (!options.layer.empty() && options.layer != "occupancy" && options.layer != "points" && options.layer != "mesh") {
-    return Error{fmt::format("--layer: expected occupancy, points or mesh, got '{}'", options.layer)};
+    return Error{fmt::format("--layer: expected occupancy, points, mesh or labels, got '{}'", options.layer)};
   }
   if (format == "png") {
     const std::string layer = !options.layer.empty() ? options.layer : map.occupancy ? "occupancy" : map.points ? "points" : "mesh";
@@ -386,7 +408,9 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
   export_app->add_option("MAP", options->input, "FusionMap file")->required();
   export_app->add_option("--out", options->out, "Output file (pgm: map.pgm or map.yaml; both files are written side by side)")->required();
   export_app->add_option("--format", options->format, "png, pgm, pcd, ply, bin or obj (default: from --out's extension)");
-  export_app->add_option("--layer", options->layer, "occupancy, points or mesh (png default: occupancy, then points; ply: points, then mesh)");
+  export_app->add_option("--layer", options->layer,
+                         "occupancy, points, mesh or labels (png default: occupancy, then points; ply: points, then mesh; labels: ply of the "
+                         "points coloured by label, or pgm: one map per label of the grid)");
   export_app->add_option("--pixel-size", options->pixel_size, "png of points: meters per pixel (default: 1600 px wide)");
   export_app->callback([&output, &run, options] {
     run = [&output, options] {

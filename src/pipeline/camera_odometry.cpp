@@ -366,7 +366,7 @@ Result<std::optional<CameraOdometry::Tracked>> CameraOdometry::track_pending() {
                                                          : rigs_[0].depth        ? odometry_->track_rgbd(time.seconds(), left, images[0].right, mask)
                                                                                  : odometry_->track(time.seconds(), left, images[0].right, mask);
     if (!odometry_frame) return odometry_frame.error();
-    tracked = Tracked{time, std::move(odometry_frame).value(), SE3(), quality, {{0, left}}, {}};
+    tracked = Tracked{time, std::move(odometry_frame).value(), SE3(), quality, {{0, left}}, {mask}, {}};
     tracked.T_world_body = T_body_left() * tracked.frame.T_world_camera * T_body_left().inverse();
   }
   tracked.sensors = std::move(sensors);
@@ -399,7 +399,10 @@ Result<CameraOdometry::Tracked> CameraOdometry::track_inertial(Timestamp time, c
   tracked.time = time;
   tracked.T_world_body = frame.T_world_body;
   tracked.image_quality = *quality;
-  for (const MsckfOdometry::RigImages& rig : images) tracked.left_images.emplace_back(rig.rig, rig.left);
+  for (const MsckfOdometry::RigImages& rig : images) {
+    tracked.left_images.emplace_back(rig.rig, rig.left);
+    tracked.left_masks.push_back(rig.static_mask);
+  }
   tracked.frame.time = time.seconds();
   tracked.frame.state = frame.tracking ? vision::TrackingState::kTracking : vision::TrackingState::kInitializing;
   tracked.frame.standing_still = frame.update.zero_velocity;

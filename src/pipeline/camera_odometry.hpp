@@ -62,6 +62,7 @@ class CameraOdometry {
     vision::ImageQuality image_quality;  ///< the best of the frame's left images
     /// The left image of each rig in the frame (rig index, 8-bit grey; shared, not copied).
     std::vector<std::pair<int, cv::Mat>> left_images;
+    std::vector<vision::StaticMask> left_masks;  ///< each left image's moving objects (left_images' order)
     std::vector<std::string> sensors;    ///< the cameras whose images made the frame
   };
   /// A camera rig: one camera, or a stereo pair.

@@ -819,7 +819,9 @@ PushStatus Session::track_image(const std::string& sensor, const msgs::ImageMess
   }
   initializing_frames_.clear();
   if (!visual_loops_.empty() && fused && visual_world_ && latest_keyframe_ && !restart_graph_) {
-    for (const auto& [rig, left] : frame.left_images) add_visual_place(frame.time, rig, left, frame.T_world_body);
+    for (std::size_t i = 0; i < frame.left_images.size(); ++i) {
+      add_visual_place(frame.time, frame.left_images[i].first, frame.left_images[i].second, frame.left_masks[i], frame.T_world_body);
+    }
   }
   register_ready_scans();
   update_backend();
@@ -845,13 +847,13 @@ void Session::fuse_map_origin(double origin_time, const Eigen::Matrix<double, 6,
   }
 }
 
-void Session::add_visual_place(Timestamp time, int rig, const cv::Mat& image, const SE3& T_odometry_body) {
+void Session::add_visual_place(Timestamp time, int rig, const cv::Mat& image, const vision::StaticMask& static_mask, const SE3& T_odometry_body) {
   const std::optional<SE3> T_world_body = frontend_->pose_at(time);
   if (!T_world_body) return;
   // Both before the Frontend's corrections, where their relative motion is the filter's.
   const SE3 T_anchor_body = latest_keyframe_uncorrected_.inverse() * frontend_->world_correction().inverse() * *T_world_body;
   Result<std::optional<VisualLoopClosures::LoopFactor>> loop =
-      visual_loops_[static_cast<size_t>(rig)]->add(time, image, T_odometry_body, latest_keyframe_->keyframe_id, latest_keyframe_->timestamp, T_anchor_body);
+      visual_loops_[static_cast<size_t>(rig)]->add(time, image, static_mask, T_odometry_body, latest_keyframe_->keyframe_id, latest_keyframe_->timestamp, T_anchor_body);
   if (!loop) {
     logger()->warn("session: camera image at {:.3f} s not added as a place: {}", time.seconds(), loop.error().message);
     return;

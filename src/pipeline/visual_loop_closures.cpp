@@ -5,8 +5,8 @@ namespace hanzo::fusion::pipeline {
 VisualLoopClosures::VisualLoopClosures(vision::VisualLoopDetector detector, const SE3& T_body_camera, double place_distance, double place_angle)
     : detector_(std::move(detector)), T_body_camera_(T_body_camera), place_distance_(place_distance), place_angle_(place_angle) {}
 
-Result<std::optional<VisualLoopClosures::LoopFactor>> VisualLoopClosures::add(Timestamp time, const cv::Mat& image, const SE3& T_odometry_body,
-                                                                             uint64_t anchor_keyframe, Timestamp anchor_time, const SE3& T_anchor_body) {
+Result<std::optional<VisualLoopClosures::LoopFactor>> VisualLoopClosures::add(Timestamp time, const cv::Mat& image, const vision::StaticMask& static_mask,
+                                                                             const SE3& T_odometry_body, uint64_t anchor_keyframe, Timestamp anchor_time, const SE3& T_anchor_body) {
   if (!tracking_since_) tracking_since_ = time;
   if ((anchor_time - *tracking_since_).seconds() < kSettleSeconds) return std::optional<LoopFactor>();
   if (last_place_) {
@@ -14,7 +14,7 @@ Result<std::optional<VisualLoopClosures::LoopFactor>> VisualLoopClosures::add(Ti
     if (since.translation().norm() < place_distance_ && since.rotation().log().norm() < place_angle_) return std::optional<LoopFactor>();
   }
   std::optional<vision::VisualLoop> loop;
-  HANZO_ASSIGN_OR_RETURN(loop, detector_.add(image, T_odometry_body * T_body_camera_));
+  HANZO_ASSIGN_OR_RETURN(loop, detector_.add(image, T_odometry_body * T_body_camera_, static_mask));
   last_place_ = T_odometry_body;
   const Anchor offered{anchor_keyframe, T_anchor_body};
   if (static_cast<int>(anchors_.size()) < detector_.size()) anchors_.push_back(offered);  // kept as a place

@@ -41,10 +41,11 @@ class VisualLoopClosures {
 
   VisualLoopClosures(vision::VisualLoopDetector detector, const SE3& T_body_camera, double place_distance, double place_angle);
 
-  /// Offers a tracked frame (8-bit grey image) at `time`; a place is made when the odometry
-  /// moved enough since the last one. Returns the loop factor a verified loop gives.
-  Result<std::optional<LoopFactor>> add(Timestamp time, const cv::Mat& image, const SE3& T_odometry_body, uint64_t anchor_keyframe,
-                                        Timestamp anchor_time, const SE3& T_anchor_body);
+  /// Offers a tracked frame (8-bit grey image, its moving objects' static mask) at `time`; a
+  /// place is made when the odometry moved enough since the last one. Returns the loop factor a
+  /// verified loop gives.
+  Result<std::optional<LoopFactor>> add(Timestamp time, const cv::Mat& image, const vision::StaticMask& static_mask, const SE3& T_odometry_body,
+                                        uint64_t anchor_keyframe, Timestamp anchor_time, const SE3& T_anchor_body);
   /// A frame the odometry lost: tracking must settle again before the next place.
   void note_lost() { tracking_since_.reset(); }
 

@@ -67,11 +67,11 @@ double VisualLoopDetector::keypoint_sigma(const cv::KeyPoint& keypoint) const {
   return config_.pixel_sigma * std::pow(config_.features.scale_factor, keypoint.octave);
 }
 
-Result<std::optional<VisualLoop>> VisualLoopDetector::add(const cv::Mat& image, const SE3& T_odometry_camera) {
+Result<std::optional<VisualLoop>> VisualLoopDetector::add(const cv::Mat& image, const SE3& T_odometry_camera, const StaticMask& static_mask) {
   if (image.empty()) return Error("visual loop detector: empty image");
   if (!T_odometry_camera.matrix().allFinite()) return Error("visual loop detector: the camera pose is not finite");
   Place place;
-  HANZO_ASSIGN_OR_RETURN(place.features, extractor_.extract(image));
+  HANZO_ASSIGN_OR_RETURN(place.features, extractor_.extract(image, static_mask.pixels));
   place.T_odometry_camera = T_odometry_camera;
   place.normalized.reserve(place.features.size());
   for (const cv::KeyPoint& keypoint : place.features.keypoints) place.normalized.push_back(camera_.unproject({keypoint.pt.x, keypoint.pt.y}));

@@ -4,9 +4,18 @@
 
 #include "hanzo/fusion/maps/geometric_labels.hpp"
 
+#include <fstream>
+#include <iterator>
+
+#include <array>
+#include <cstring>
 #include <random>
 
 #include <gtest/gtest.h>
+
+#include "hanzo/fusion/maps/label_export.hpp"
+#include "hanzo/fusion/maps/map_export.hpp"
+#include "maps/map_fixtures.hpp"
 
 namespace hanzo::fusion::maps {
 namespace {
@@ -79,6 +88,48 @@ TEST(GeometricLabels, RefusesABadConfigurationNamingTheField) {
   config = {};
   config.normal_neighbours = 2;
   EXPECT_NE(label_points(layer, config).error().message.find("normal_neighbours"), std::string::npos);
+}
+
+// Labels leave the map as a PLY of coloured, labelled points (read back byte for byte) and as one
+// ROS map per label of the grid (read back: the label's cells occupied, the rest free); layers
+// without labels are refused.
+TEST(LabelExport, PointsAsColouredPlyAndTheGridAsOneMapPerLabel) {
+  msgs::PointLayer points;
+  points.points = {Eigen::Vector3f(1.0F, 2.0F, 0.0F), Eigen::Vector3f(3.0F, 2.0F, 1.5F)};
+  points.labels = {msgs::SemanticLabel::kFloor, msgs::SemanticLabel::kWall};
+  const std::string ply = testing_maps::temp_path("labels.ply");
+  ASSERT_TRUE(write_labelled_points_ply(ply, points));
+  std::ifstream file(ply, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+  const std::size_t body = bytes.find("end_header\n") + 11;
+  ASSERT_EQ(bytes.size() - body, 2u * 16u);
+  float xyz[3];
+  std::memcpy(xyz, bytes.data() + body + 16, sizeof(xyz));
+  EXPECT_EQ(xyz[2], 1.5F);
+  const std::array<uint8_t, 3> wall = semantic_label_color(msgs::SemanticLabel::kWall);
+  EXPECT_EQ(static_cast<uint8_t>(bytes[body + 16 + 12]), wall[0]);
+  EXPECT_EQ(static_cast<uint8_t>(bytes[body + 16 + 15]), static_cast<uint8_t>(msgs::SemanticLabel::kWall));
+
+  msgs::OccupancyGridLayer grid;
+  grid.resolution = 0.1;
+  grid.size_x = 3;
+  grid.size_y = 2;
+  grid.occupancy = {0.1F, 0.1F, 0.9F, 0.1F, 0.5F, 0.9F};
+  grid.labels = {msgs::SemanticLabel::kTraversable, msgs::SemanticLabel::kTraversable, msgs::SemanticLabel::kWall,
+                 msgs::SemanticLabel::kTraversable, msgs::SemanticLabel::kUnknown,     msgs::SemanticLabel::kObstacle};
+  const Result<std::vector<std::string>> files = write_label_maps(testing_maps::temp_path("labels"), grid);
+  ASSERT_TRUE(files.ok()) << files.error().message;
+  ASSERT_EQ(files->size(), 8u);  // unknown, wall, obstacle, traversable: YAML + PGM each
+  const Result<msgs::OccupancyGridLayer> traversable = read_ros_map(testing_maps::temp_path("labels_traversable.yaml"));
+  ASSERT_TRUE(traversable.ok()) << traversable.error().message;
+  for (std::size_t i = 0; i < grid.labels.size(); ++i) {
+    EXPECT_EQ(traversable->occupancy[i] > 0.5F, grid.labels[i] == msgs::SemanticLabel::kTraversable) << i;
+  }
+
+  points.labels.clear();
+  EXPECT_FALSE(write_labelled_points_ply(ply, points));
+  grid.labels.clear();
+  EXPECT_FALSE(write_label_maps(testing_maps::temp_path("labels"), grid).ok());
 }
 
 }  // namespace

@@ -562,7 +562,7 @@ class Session {
   /// origin, before the frame that made the map.
   void fuse_map_origin(double origin_time, const Eigen::Matrix<double, 6, 6>& covariance);
   /// A tracked left image offered as a visual place; a verified loop becomes a loop factor.
-  void add_visual_place(Timestamp time, int rig, const cv::Mat& image, const SE3& T_odometry_body);
+  void add_visual_place(Timestamp time, int rig, const cv::Mat& image, const vision::StaticMask& static_mask, const SE3& T_odometry_body);
   /// Records the health changes since the last evaluation (every 0.2 s of data time).
   void track_health();
   /// A fused GNSS fix as a GPS factor on the newest keyframe (gnss_factors).

@@ -35,6 +35,7 @@
 #include "hanzo/fusion/core/pinhole_camera.hpp"
 #include "hanzo/fusion/core/result.hpp"
 #include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/vision/static_mask.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
 #include "hanzo/fusion/vision/place_database.hpp"
 #include "hanzo/fusion/vision/vocabulary.hpp"
@@ -100,7 +101,8 @@ class VisualLoopDetector {
   /// Adds an 8-bit grey (or BGR) image as place size() at the odometry's T_odometry_camera,
   /// triangulates the previous place's points with it, and looks for a loop closing here. A
   /// place covered by an older one (covered_place_distance) is only searched, not added.
-  Result<std::optional<VisualLoop>> add(const cv::Mat& image, const SE3& T_odometry_camera);
+  /// static_mask (optional): the image's moving objects, where no keypoint of the place is taken.
+  Result<std::optional<VisualLoop>> add(const cv::Mat& image, const SE3& T_odometry_camera, const StaticMask& static_mask = {});
 
   int size() const { return static_cast<int>(places_.size()); }
   int candidates_checked() const { return candidates_checked_; }

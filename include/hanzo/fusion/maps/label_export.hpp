@@ -1,0 +1,33 @@
+#pragma once
+// Exports of a map's semantic labels (msgs::SemanticLabel: floor, wall, obstacle, traversable,
+// unknown; maps/geometric_labels.hpp) for tools that read plain files:
+//  - the point layer as a binary little-endian PLY: x y z (float, world metres), red green blue
+//    (uchar: the label's colour, semantic_label_color) and label (uchar: the SemanticLabel value),
+//    so CloudCompare, MeshLab or Open3D show the classes in colour and can filter on `label`;
+//  - the 2D occupancy grid as one ROS map_server map per label present (maps/map_export.hpp's
+//    PGM + YAML): the label's cells occupied (black), every other cell free (white), so a
+//    planner can load "where the floor is" or "where the walls are" as a map of its own.
+// Failures: a layer without labels, a 3D grid (label maps are of 2D grids), an unwritable path.
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/msgs/map_messages.hpp"
+
+namespace hanzo::fusion::maps {
+
+/// The label's colour (red, green, blue): unknown grey, floor steel blue, wall crimson, obstacle
+/// orange, traversable green.
+std::array<uint8_t, 3> semantic_label_color(msgs::SemanticLabel label);
+
+/// Writes the labelled points (above). Atomic.
+Status write_labelled_points_ply(const std::string& path, const msgs::PointLayer& layer);
+
+/// Writes "<yaml_stem>_<label>.yaml" and its ".pgm" for each label the grid has (above) and
+/// returns the files written (YAML, PGM per label, in label order).
+Result<std::vector<std::string>> write_label_maps(const std::string& yaml_stem, const msgs::OccupancyGridLayer& layer);
+
+}  // namespace hanzo::fusion::maps
