@@ -92,6 +92,10 @@ Eigen::Vector3f snowy(const Eigen::Vector3f& albedo, const RayHit& hit, double s
 
 }  // namespace
 
+constexpr EnumNames<GroundTruthDetections, 3> kDetectionNames{
+    {{GroundTruthDetections::kNone, "none"}, {GroundTruthDetections::kBoxes, "boxes"}, {GroundTruthDetections::kMasks, "masks"}}};
+std::string_view to_string(GroundTruthDetections detections) { return enum_name(kDetectionNames, detections); }
+std::optional<GroundTruthDetections> ground_truth_detections_from_string(std::string_view name) { return enum_from_name(kDetectionNames, name); }
 std::string_view to_string(CameraFaultType type) { return enum_name(kFaultNames, type); }
 std::optional<CameraFaultType> camera_fault_type_from_string(std::string_view name) { return enum_from_name(kFaultNames, name); }
 
@@ -360,22 +364,6 @@ msgs::ImageMessage CameraSimulator::measure(Timestamp time) {
     }
   }
   return image;
-}
-
-std::string_view to_string(GroundTruthDetections detections) {
-  switch (detections) {
-    case GroundTruthDetections::kNone: return "none";
-    case GroundTruthDetections::kBoxes: return "boxes";
-    case GroundTruthDetections::kMasks: return "masks";
-  }
-  return "none";
-}
-
-std::optional<GroundTruthDetections> ground_truth_detections_from_string(std::string_view name) {
-  for (GroundTruthDetections detections : {GroundTruthDetections::kNone, GroundTruthDetections::kBoxes, GroundTruthDetections::kMasks}) {
-    if (to_string(detections) == name) return detections;
-  }
-  return std::nullopt;
 }
 
 std::optional<msgs::DetectionsMessage> CameraSimulator::detections() const {
