@@ -385,7 +385,8 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"detections_received", m.detections_received}, {"detections_refused", m.detections_refused},
           {"detections_matched", m.detections_matched}, {"detections_late", m.detections_late},
           {"images_without_detections", m.images_without_detections}, {"images_masked", m.images_masked},
-          {"dynamic_objects_masked", m.dynamic_objects_masked}, {"masked_image_share", m.masked_image_share}};
+          {"dynamic_objects_masked", m.dynamic_objects_masked}, {"masked_image_share", m.masked_image_share},
+          {"lidar_points_labelled", m.lidar_points_labelled}, {"lidar_points_masked", m.lidar_points_masked}};
 }
 
 // Each sensor's health at the end and its changes over the log (seconds from the log's start).
@@ -649,6 +650,10 @@ int run(const Output& output, const RunOptions& options) {
       text += fmt::format("  images: {} dark, {} with glare, {} blurred by motion\n", mapping.camera_dark_frames, mapping.camera_glare_frames,
                           mapping.camera_motion_blur_frames);
     }
+  }
+  if (mapping.lidar_points_labelled + mapping.lidar_points_masked > 0) {
+    text += fmt::format("camera outputs onto the LiDAR: {} points took a segmentation class, {} on moving objects left out of the map\n",
+                        mapping.lidar_points_labelled, mapping.lidar_points_masked);
   }
   for (const auto& [sensor, states] : result["health"]["not_ok_seconds"].items()) {
     text += fmt::format("  {:<12} not ok for", sensor);

@@ -203,6 +203,11 @@ msgs::DetectionsMessage detections_from(py::handle message) {
       detection.mask.assign(pixels.data(), pixels.data() + pixels.size());
     }
   }
+  if (const py::object segmentation = message.attr("segmentation"); !segmentation.is_none()) {
+    const Array<uint8_t> pixels = py::cast<Array<uint8_t>>(segmentation);
+    detections.segmentation.assign(pixels.data(), pixels.data() + pixels.size());
+  }
+  detections.segmentation_classes = py::cast<std::vector<std::string>>(message.attr("segmentation_classes"));
   return detections;
 }
 
@@ -300,7 +305,13 @@ py::object to_python(const msgs::SensorMessage& message) {
         if (!d.mask.empty()) mask = copy_to_numpy(d.mask.data(), {static_cast<py::ssize_t>(d.mask_height), static_cast<py::ssize_t>(d.mask_width)});
         items.append(module.attr("Detection")(d.class_name, copy_to_numpy(box, {4}), d.score, d.track_id, mask));
       }
-      return module.attr("Detections")(detections.timestamp.nanoseconds(), detections.image_width, detections.image_height, items, detections.frame_id);
+      py::object segmentation = py::none();
+      if (!detections.segmentation.empty()) {
+        segmentation = copy_to_numpy(detections.segmentation.data(),
+                                     {static_cast<py::ssize_t>(detections.image_height), static_cast<py::ssize_t>(detections.image_width)});
+      }
+      return module.attr("Detections")(detections.timestamp.nanoseconds(), detections.image_width, detections.image_height, items, detections.frame_id,
+                                        segmentation, py::cast(detections.segmentation_classes));
     }
   };
   return std::visit(Visitor{module}, message);

@@ -84,6 +84,8 @@ std::vector<v1::FusionMap> cut_into_pieces(const v1::FusionMap& map, std::size_t
       copy_slice(layer.position_std(), begin, end, piece->mutable_position_std());
       copy_slice(layer.labels(), begin, end, piece->mutable_labels());
       copy_slice(layer.intensities(), begin, end, piece->mutable_intensities());
+      copy_slice(layer.classes(), begin, end, piece->mutable_classes());
+      copy_slice(layer.class_probability(), begin, end, piece->mutable_class_probability());
     });
   }
   if (map.has_occupancy()) {
@@ -94,9 +96,11 @@ std::vector<v1::FusionMap> cut_into_pieces(const v1::FusionMap& map, std::size_t
         *piece = layer;
         piece->clear_occupancy();
         piece->clear_labels();
+        piece->clear_classes();
       }
       copy_slice(layer.occupancy(), begin, end, piece->mutable_occupancy());
       copy_slice(layer.labels(), begin, end, piece->mutable_labels());
+      copy_slice(layer.classes(), begin, end, piece->mutable_classes());
     });
   }
   if (map.has_tsdf()) {

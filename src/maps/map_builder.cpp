@@ -6,6 +6,8 @@
 
 #include <fmt/format.h>
 
+#include "hanzo/fusion/maps/cell_classes.hpp"
+
 namespace hanzo::fusion::maps {
 
 Status MapBuilderConfig::validate() const {
@@ -33,7 +35,8 @@ Result<MapBuilder> MapBuilder::create(const MapBuilderConfig& config) {
   return builder;
 }
 
-Status MapBuilder::insert(const SE3& T_world_sensor, const cloud::PointCloud& scan_in_sensor_frame, ScanUse use) {
+Status MapBuilder::insert(const SE3& T_world_sensor, const cloud::PointCloud& scan_in_sensor_frame, ScanUse use,
+                          std::span<const uint16_t> point_classes) {
   if (!T_world_sensor.matrix().allFinite()) return Error{"map builder: sensor pose is not finite", "T_world_sensor"};
   HANZO_RETURN_IF_ERROR(scan_in_sensor_frame.validate());
   const Eigen::Matrix3d rotation = T_world_sensor.rotation().matrix();
@@ -66,7 +69,7 @@ Status MapBuilder::insert(const SE3& T_world_sensor, const cloud::PointCloud& sc
   if (occupancy_2d_) HANZO_RETURN_IF_ERROR(occupancy_2d_->insert_scan(origin.head<2>(), planar));
   if (occupancy_3d_) HANZO_RETURN_IF_ERROR(occupancy_3d_->insert_scan(origin, world));
   if (point_map_ && use == ScanUse::kAllLayers) {
-    HANZO_RETURN_IF_ERROR(point_map_->add_keyframe(summary_.point_keyframes, T_world_sensor, scan_in_sensor_frame));
+    HANZO_RETURN_IF_ERROR(point_map_->add_keyframe(summary_.point_keyframes, T_world_sensor, scan_in_sensor_frame, point_classes));
     ++summary_.point_keyframes;
   }
   if (tsdf_) HANZO_RETURN_IF_ERROR(tsdf_->integrate_scan(origin, world));
@@ -76,13 +79,22 @@ Status MapBuilder::insert(const SE3& T_world_sensor, const cloud::PointCloud& sc
   return ok_status();
 }
 
+Status MapBuilder::add_class_votes(const SE3& T_world_sensor, const std::vector<Eigen::Vector3f>& points_in_sensor_frame,
+                                   std::span<const uint16_t> point_classes) {
+  if (!point_map_ || summary_.point_keyframes == 0) return ok_status();
+  return point_map_->add_class_votes(summary_.point_keyframes - 1, T_world_sensor, points_in_sensor_frame, point_classes);
+}
+
 Status MapBuilder::correct_poses(const std::map<uint64_t, SE3>& T_world_sensor_by_scan) {
   if (!point_map_) return ok_status();
   return point_map_->set_poses(T_world_sensor_by_scan);
 }
 
 void MapBuilder::write_layers(msgs::FusionMap& map) const {
-  if (point_map_) map.points = point_map_->to_layer();
+  if (point_map_) {
+    map.points = point_map_->to_layer();
+    map.semantic_classes = point_map_->semantic_classes();
+  }
   if (tsdf_) {
     map.tsdf = tsdf_->to_layer();
     map.mesh = tsdf_->extract_mesh();
@@ -96,6 +108,7 @@ void MapBuilder::write_layers(msgs::FusionMap& map) const {
 
 void MapBuilder::write_map(msgs::FusionMap& map) const {
   write_layers(map);
+  if (map.points && !map.points->classes.empty() && map.occupancy) classify_cells(*map.occupancy, *map.points);
   if (!config_.geometric_labels || !map.points) return;
   // The configuration was validated at creation: labelling cannot fail.
   (void)label_points(*map.points, config_.labels);
@@ -103,6 +116,8 @@ void MapBuilder::write_map(msgs::FusionMap& map) const {
     label_grid(*map.occupancy, *map.points, config_.occupancy_2d_config.occupied_threshold, config_.occupancy_2d_config.free_threshold);
   }
 }
+
+uint16_t MapBuilder::class_index(std::string_view name) { return point_map_ ? point_map_->class_index(name) : msgs::kNoClass; }
 
 std::size_t MapBuilder::memory_bytes() const {
   return (occupancy_2d_ ? occupancy_2d_->memory_bytes() : 0) + (occupancy_3d_ ? occupancy_3d_->memory_bytes() : 0) +

@@ -35,6 +35,7 @@ msgs::OccupancyGridLayer flatten_occupancy(const msgs::OccupancyGridLayer& layer
   msgs::OccupancyGridLayer flat = layer;
   flat.size_z = 1;
   flat.labels.clear();
+  flat.classes.clear();
   const std::size_t plane = std::size_t{layer.size_x} * layer.size_y;
   flat.occupancy.assign(plane, kUnknown);
   for (uint32_t z = 0; z < layer.size_z; ++z) {

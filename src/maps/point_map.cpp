@@ -8,8 +8,24 @@
 
 #include "hanzo/fusion/cloud/voxel_grid.hpp"
 #include "hanzo/fusion/core/logging.hpp"
+#include "class_votes.hpp"
 
 namespace hanzo::fusion::maps {
+namespace {
+
+// The posterior of `votes`' most observed class among class_count classes (point_map.hpp).
+float class_posterior(const ClassVotes& votes, std::size_t class_count, double accuracy) {
+  const auto [best, best_count] = votes.most();
+  const double classes = static_cast<double>(std::max<std::size_t>(class_count, 2));
+  const double log_ratio = std::log(accuracy * (classes - 1.0) / (1.0 - accuracy));
+  // sum_k r^(n_k - n_best): observed classes, then the unseen ones (r^(0 - n_best) each).
+  double sum = 0.0;
+  for (const auto& [label, count] : votes.counts) sum += std::exp(log_ratio * (static_cast<double>(count) - static_cast<double>(best_count)));
+  sum += (classes - static_cast<double>(votes.counts.size())) * std::exp(-log_ratio * static_cast<double>(best_count));
+  return static_cast<float>(1.0 / sum);
+}
+
+}  // namespace
 
 Status PointMapConfig::validate() const {
   if (!(std::isfinite(voxel_size) && voxel_size > 0.0)) {
@@ -18,6 +34,9 @@ Status PointMapConfig::validate() const {
   if (!(std::isfinite(keyframe_voxel_size) && keyframe_voxel_size >= 0.0)) {
     return Error{fmt::format("point_map.keyframe_voxel_size: must be >= 0 meters, got {}", keyframe_voxel_size),
                  "keyframe_voxel_size"};
+  }
+  if (!(segmentation_accuracy > 0.0 && segmentation_accuracy < 1.0)) {
+    return Error{fmt::format("point_map.segmentation_accuracy: must lie in (0, 1), got {}", segmentation_accuracy), "segmentation_accuracy"};
   }
   return ok_status();
 }
@@ -29,19 +48,95 @@ Result<PointMap> PointMap::create(const PointMapConfig& config) {
   return PointMap(config);
 }
 
-Status PointMap::add_keyframe(uint64_t id, const SE3& T_world_sensor, const cloud::PointCloud& cloud_in_sensor_frame) {
+Status PointMap::check_classes(uint64_t id, std::size_t points, std::span<const uint16_t> point_classes) const {
+  if (!point_classes.empty() && point_classes.size() != points) {
+    return Error{fmt::format("keyframe {}: {} classes for {} points", id, point_classes.size(), points), "point_classes"};
+  }
+  for (const uint16_t label : point_classes) {
+    if (label != msgs::kNoClass && label >= semantic_classes_.size()) {
+      return Error{fmt::format("keyframe {}: class {} past the label table's {} classes", id, label, semantic_classes_.size()), "point_classes"};
+    }
+  }
+  return ok_status();
+}
+
+Status PointMap::add_keyframe(uint64_t id, const SE3& T_world_sensor, const cloud::PointCloud& cloud_in_sensor_frame,
+                              std::span<const uint16_t> point_classes) {
   if (!T_world_sensor.matrix().allFinite()) return Error{fmt::format("keyframe {}: pose is not finite", id), "T_world_sensor"};
   HANZO_RETURN_IF_ERROR(with_context(cloud_in_sensor_frame.validate(), fmt::format("keyframe {}", id)));
-  const double keyframe_voxel = config_.keyframe_voxel_size > 0.0 ? config_.keyframe_voxel_size : config_.voxel_size / 2.0;
-  cloud::PointCloud kept = cloud::voxel_downsample(cloud_in_sensor_frame, keyframe_voxel);
+  HANZO_RETURN_IF_ERROR(check_classes(id, cloud_in_sensor_frame.size(), point_classes));
+  cloud::PointCloud kept = cloud::voxel_downsample(cloud_in_sensor_frame, keyframe_voxel_size());
   // Only what the map uses.
   kept.rings.clear();
   kept.times.clear();
   kept.normals.clear();
   kept.covariances.clear();
-  keyframes_[id] = Keyframe{T_world_sensor, std::move(kept)};
+  Keyframe& keyframe = keyframes_[id];
+  keyframe = Keyframe{T_world_sensor, std::move(kept), {}, {}};
+  if (!point_classes.empty()) vote(keyframe, SE3(), cloud_in_sensor_frame.positions, point_classes);
   dirty_ = true;
   return ok_status();
+}
+
+Status PointMap::add_class_votes(uint64_t id, const SE3& T_world_sensor, const std::vector<Eigen::Vector3f>& points_in_sensor_frame,
+                                 std::span<const uint16_t> point_classes) {
+  const auto found = keyframes_.find(id);
+  if (found == keyframes_.end()) return Error{fmt::format("class votes: no keyframe {}", id), "id"};
+  if (!T_world_sensor.matrix().allFinite()) return Error{fmt::format("keyframe {}: class votes from a pose that is not finite", id), "T_world_sensor"};
+  HANZO_RETURN_IF_ERROR(check_classes(id, points_in_sensor_frame.size(), point_classes));
+  if (point_classes.empty()) return ok_status();
+  vote(found->second, found->second.T_world_sensor.inverse() * T_world_sensor, points_in_sensor_frame, point_classes);
+  dirty_ = true;
+  return ok_status();
+}
+
+void PointMap::vote(Keyframe& keyframe, const SE3& T_keyframe_sensor, const std::vector<Eigen::Vector3f>& points, std::span<const uint16_t> classes) const {
+  const auto inverse_voxel = static_cast<float>(1.0 / keyframe_voxel_size());
+  if (keyframe.class_votes.empty()) {
+    // Each kept point is its voxel's centroid, inside the voxel.
+    keyframe.class_votes.resize(keyframe.cloud.size());
+    keyframe.point_of_voxel.reserve(keyframe.cloud.size());
+    for (std::size_t i = 0; i < keyframe.cloud.size(); ++i) {
+      uint64_t key = 0;
+      if (cloud::pack_voxel_key(cloud::voxel_coordinates(keyframe.cloud.positions[i], inverse_voxel), &key)) {
+        keyframe.point_of_voxel.emplace(key, static_cast<uint32_t>(i));
+      }
+    }
+  }
+  const Eigen::Matrix3f rotation = T_keyframe_sensor.rotation().matrix().cast<float>();
+  const Eigen::Vector3f translation = T_keyframe_sensor.translation().cast<float>();
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    uint64_t key = 0;
+    if (classes[i] == msgs::kNoClass || !cloud::pack_voxel_key(cloud::voxel_coordinates(rotation * points[i] + translation, inverse_voxel), &key)) continue;
+    if (const auto point = keyframe.point_of_voxel.find(key); point != keyframe.point_of_voxel.end()) keyframe.class_votes[point->second].add(classes[i]);
+  }
+}
+
+double PointMap::keyframe_voxel_size() const { return config_.keyframe_voxel_size > 0.0 ? config_.keyframe_voxel_size : config_.voxel_size / 2.0; }
+
+void PointMap::PointClassVotes::add(uint16_t class_index) {
+  for (std::size_t slot = 0; slot < kSlots; ++slot) {
+    if (count[slot] > 0 && label[slot] == class_index) {
+      if (count[slot] < UINT16_MAX) ++count[slot];
+      return;
+    }
+  }
+  for (std::size_t slot = 0; slot < kSlots; ++slot) {
+    if (count[slot] == 0) {
+      label[slot] = class_index;
+      count[slot] = 1;
+      return;
+    }
+  }
+  for (uint16_t& held : count) --held;
+}
+
+uint16_t PointMap::class_index(std::string_view name) {
+  const auto found = std::find(semantic_classes_.begin(), semantic_classes_.end(), name);
+  if (found != semantic_classes_.end()) return static_cast<uint16_t>(found - semantic_classes_.begin());
+  if (semantic_classes_.size() + 1 >= msgs::kNoClass) return msgs::kNoClass;
+  semantic_classes_.emplace_back(name);
+  return static_cast<uint16_t>(semantic_classes_.size() - 1);
 }
 
 Status PointMap::set_poses(const std::map<uint64_t, SE3>& T_world_sensor_by_id) {
@@ -72,6 +167,8 @@ void PointMap::rebuild() const {
   });
   const float inverse_voxel = static_cast<float>(1.0 / config_.voxel_size);
   std::unordered_map<uint64_t, Voxel> voxels;
+  std::unordered_map<uint64_t, ClassVotes> class_votes;
+  const bool with_classes = std::any_of(keyframes_.begin(), keyframes_.end(), [](const auto& entry) { return !entry.second.class_votes.empty(); });
   std::size_t dropped = 0;
   for (const auto& [id, keyframe] : keyframes_) {
     const Eigen::Matrix3d rotation = keyframe.T_world_sensor.rotation().matrix();
@@ -88,6 +185,11 @@ void PointMap::rebuild() const {
       voxel.sum_squared_norm += world.squaredNorm();
       if (with_intensity) voxel.intensity_sum += keyframe.cloud.intensities[i];
       ++voxel.count;
+      if (keyframe.class_votes.empty()) continue;
+      const PointClassVotes& point_votes = keyframe.class_votes[i];
+      for (std::size_t slot = 0; slot < PointClassVotes::kSlots; ++slot) {
+        if (point_votes.count[slot] > 0) class_votes[key].add(point_votes.label[slot], point_votes.count[slot]);
+      }
     }
   }
   if (dropped > 0) logger()->warn("point map: {} points outside the voxel key range were left out", dropped);
@@ -99,6 +201,8 @@ void PointMap::rebuild() const {
 
   merged_.clear();
   merged_std_.clear();
+  merged_classes_.clear();
+  merged_class_probability_.clear();
   merged_.positions.reserve(ordered.size());
   merged_std_.reserve(ordered.size());
   if (with_intensity) merged_.intensities.reserve(ordered.size());
@@ -109,6 +213,15 @@ void PointMap::rebuild() const {
     merged_.positions.push_back(mean.cast<float>());
     merged_std_.push_back(static_cast<float>(std::max(std::sqrt(variance), quantization_std)));
     if (with_intensity) merged_.intensities.push_back(static_cast<float>(voxel->intensity_sum / voxel->count));
+    if (!with_classes) continue;
+    const auto votes = class_votes.find(key);
+    if (votes == class_votes.end()) {
+      merged_classes_.push_back(msgs::kNoClass);
+      merged_class_probability_.push_back(0.0F);
+    } else {
+      merged_classes_.push_back(votes->second.most().first);
+      merged_class_probability_.push_back(class_posterior(votes->second, semantic_classes_.size(), config_.segmentation_accuracy));
+    }
   }
   dirty_ = false;
 }
@@ -125,6 +238,8 @@ msgs::PointLayer PointMap::to_layer() const {
   layer.position_std = merged_std_;
   layer.intensities = merged.intensities;
   layer.voxel_size = config_.voxel_size;
+  layer.classes = merged_classes_;
+  layer.class_probability = merged_class_probability_;
   return layer;
 }
 
@@ -133,7 +248,8 @@ std::size_t PointMap::memory_bytes() const {
                       merged_std_.capacity() * sizeof(float);
   for (const auto& [id, keyframe] : keyframes_) {
     bytes += sizeof(Keyframe) + keyframe.cloud.positions.capacity() * sizeof(Eigen::Vector3f) +
-             keyframe.cloud.intensities.capacity() * sizeof(float);
+             keyframe.cloud.intensities.capacity() * sizeof(float) + keyframe.class_votes.capacity() * sizeof(PointClassVotes) +
+             keyframe.point_of_voxel.size() * 32;
   }
   return bytes;
 }

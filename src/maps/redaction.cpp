@@ -148,8 +148,12 @@ Result<msgs::FusionMap> redact_map(const msgs::FusionMap& map, const RedactionCo
   }
   if (config.drop_labels) {
     std::size_t dropped = 0;
-    if (out.points) dropped += std::exchange(out.points->labels, {}).size();
-    if (out.occupancy) dropped += std::exchange(out.occupancy->labels, {}).size();
+    if (out.points) {
+      dropped += std::exchange(out.points->labels, {}).size() + std::exchange(out.points->classes, {}).size();
+      out.points->class_probability.clear();
+    }
+    if (out.occupancy) dropped += std::exchange(out.occupancy->labels, {}).size() + std::exchange(out.occupancy->classes, {}).size();
+    out.semantic_classes.clear();
     if (out.mesh) dropped += std::exchange(out.mesh->vertex_labels, {}).size();
     note(fmt::format("labels: {} removed", dropped));
   }

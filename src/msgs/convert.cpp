@@ -455,6 +455,8 @@ v1::DetectionsMessage to_proto(const DetectionsMessage& message) {
     d->set_mask_height(detection.mask_height);
     d->set_mask(detection.mask.data(), detection.mask.size());
   }
+  out.set_segmentation(message.segmentation.data(), message.segmentation.size());
+  for (const std::string& name : message.segmentation_classes) out.add_segmentation_classes(name);
   return out;
 }
 
@@ -479,6 +481,8 @@ Result<DetectionsMessage> from_proto(const v1::DetectionsMessage& in) {
     detection.mask_height = d.mask_height();
     detection.mask.assign(d.mask().begin(), d.mask().end());
   }
+  message.segmentation.assign(in.segmentation().begin(), in.segmentation().end());
+  message.segmentation_classes.assign(in.segmentation_classes().begin(), in.segmentation_classes().end());
   return validated(std::move(message));
 }
 

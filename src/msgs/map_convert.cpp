@@ -33,6 +33,8 @@ void write(const PointLayer& layer, v1::PointLayer* out) {
   write_labels(layer.labels, out->mutable_labels());
   out->mutable_intensities()->Add(layer.intensities.begin(), layer.intensities.end());
   out->set_voxel_size(layer.voxel_size);
+  out->mutable_classes()->Add(layer.classes.begin(), layer.classes.end());
+  out->mutable_class_probability()->Add(layer.class_probability.begin(), layer.class_probability.end());
 }
 
 void write(const OccupancyGridLayer& layer, v1::OccupancyGridLayer* out) {
@@ -43,6 +45,7 @@ void write(const OccupancyGridLayer& layer, v1::OccupancyGridLayer* out) {
   write(layer.origin, out->mutable_origin());
   out->mutable_occupancy()->Add(layer.occupancy.begin(), layer.occupancy.end());
   write_labels(layer.labels, out->mutable_labels());
+  out->mutable_classes()->Add(layer.classes.begin(), layer.classes.end());
 }
 
 void write(const TsdfLayer& layer, v1::TsdfLayer* out) {
@@ -110,8 +113,13 @@ std::vector<SemanticLabel> read_labels(const RepeatedLabels& in) {
 }
 
 PointLayer read(const v1::PointLayer& in) {
-  return {read_points(in.points()), {in.position_std().begin(), in.position_std().end()}, read_labels(in.labels()),
-          {in.intensities().begin(), in.intensities().end()}, in.voxel_size()};
+  return {read_points(in.points()),
+          {in.position_std().begin(), in.position_std().end()},
+          read_labels(in.labels()),
+          {in.intensities().begin(), in.intensities().end()},
+          in.voxel_size(),
+          {in.classes().begin(), in.classes().end()},
+          {in.class_probability().begin(), in.class_probability().end()}};
 }
 
 OccupancyGridLayer read(const v1::OccupancyGridLayer& in) {
@@ -128,6 +136,7 @@ OccupancyGridLayer read(const v1::OccupancyGridLayer& in) {
                                  : Eigen::Quaterniond::Identity();
   layer.occupancy.assign(in.occupancy().begin(), in.occupancy().end());
   layer.labels = read_labels(in.labels());
+  layer.classes.assign(in.classes().begin(), in.classes().end());
   return layer;
 }
 
@@ -259,6 +268,7 @@ v1::FusionMap to_proto(const FusionMap& map) {
   if (map.visual_landmarks) write(*map.visual_landmarks, out.mutable_visual_landmarks());
   if (map.gaussian_splats) write(*map.gaussian_splats, out.mutable_gaussian_splats());
   if (map.neural_field) write(*map.neural_field, out.mutable_neural_field());
+  for (const std::string& name : map.semantic_classes) out.add_semantic_classes(name);
   return out;
 }
 
@@ -296,6 +306,7 @@ Result<FusionMap> from_proto(const v1::FusionMap& in) {
   if (in.has_visual_landmarks()) HANZO_ASSIGN_OR_RETURN(map.visual_landmarks, read(in.visual_landmarks()));
   if (in.has_gaussian_splats()) map.gaussian_splats = read(in.gaussian_splats());
   if (in.has_neural_field()) map.neural_field = read(in.neural_field());
+  map.semantic_classes.assign(in.semantic_classes().begin(), in.semantic_classes().end());
   return map;
 }
 

@@ -7,6 +7,7 @@
 #include <fmt/format.h>
 
 #include "hanzo/fusion/core/geodesy.hpp"
+#include "hanzo/fusion/msgs/map_messages.hpp"
 
 namespace hanzo::fusion::msgs {
 namespace {
@@ -44,6 +45,18 @@ class MapChecker {
     return ok_status();
   }
 
+  // Segmentation classes: indices into a label table of class_count names, or kNoClass.
+  template <typename Repeated>
+  Status classes(const Repeated& values, uint64_t class_count, const std::string& field) const {
+    for (int i = 0; i < values.size(); ++i) {
+      const uint32_t value = values.Get(i);
+      if (value != kNoClass && value >= class_count) {
+        return fail(fmt::format("{}[{}]", field, i), fmt::format("class {} past the {} semantic_classes", value, class_count));
+      }
+    }
+    return ok_status();
+  }
+
   template <typename Points>
   Status points(const Points& values, const std::string& field) const {
     for (int i = 0; i < values.size(); ++i) {
@@ -68,13 +81,23 @@ class MapChecker {
     return ok_status();
   }
 
-  Status point_layer(const v1::PointLayer& layer, const std::string& field) const {
+  // class_count: the map's label table size (a MapUpdate's points index the map's table).
+  Status point_layer(const v1::PointLayer& layer, const std::string& field, uint64_t class_count) const {
     const int count = layer.points_size();
     HANZO_RETURN_IF_ERROR(points(layer.points(), field + ".points"));
     HANZO_RETURN_IF_ERROR(per_element(layer.position_std(), count, field + ".position_std", "points"));
     HANZO_RETURN_IF_ERROR(per_element(layer.labels(), count, field + ".labels", "points"));
     HANZO_RETURN_IF_ERROR(per_element(layer.intensities(), count, field + ".intensities", "points"));
+    HANZO_RETURN_IF_ERROR(per_element(layer.classes(), count, field + ".classes", "points"));
+    HANZO_RETURN_IF_ERROR(per_element(layer.class_probability(), count, field + ".class_probability", "points"));
     HANZO_RETURN_IF_ERROR(labels(layer.labels(), field + ".labels"));
+    HANZO_RETURN_IF_ERROR(classes(layer.classes(), class_count, field + ".classes"));
+    for (int i = 0; i < layer.class_probability_size(); ++i) {
+      const float probability = layer.class_probability(i);
+      if (!(probability >= 0.0F && probability <= 1.0F)) {
+        return fail(fmt::format("{}.class_probability[{}]", field, i), fmt::format("{} outside [0, 1]", probability));
+      }
+    }
     for (int i = 0; i < layer.position_std_size(); ++i) {
       const float sigma = layer.position_std(i);
       if (!std::isfinite(sigma) || sigma < 0.0F) return fail(fmt::format("{}.position_std[{}]", field, i), fmt::format("{} (expected >= 0)", sigma));
@@ -85,7 +108,7 @@ class MapChecker {
     return ok_status();
   }
 
-  Status occupancy(const v1::OccupancyGridLayer& layer, const std::string& field) const {
+  Status occupancy(const v1::OccupancyGridLayer& layer, const std::string& field, uint64_t class_count) const {
     HANZO_RETURN_IF_ERROR(positive(layer.resolution(), field + ".resolution"));
     const uint64_t cells = uint64_t{layer.size_x()} * layer.size_y() * layer.size_z();
     if (static_cast<uint64_t>(layer.occupancy_size()) != cells) {
@@ -100,6 +123,8 @@ class MapChecker {
       }
     }
     HANZO_RETURN_IF_ERROR(per_element(layer.labels(), layer.occupancy_size(), field + ".labels", "cells"));
+    HANZO_RETURN_IF_ERROR(per_element(layer.classes(), layer.occupancy_size(), field + ".classes", "cells"));
+    HANZO_RETURN_IF_ERROR(classes(layer.classes(), class_count, field + ".classes"));
     return labels(layer.labels(), field + ".labels");
   }
 
@@ -227,8 +252,13 @@ Status validate(const v1::FusionMap& map) {
     const Status datum = validate(GeodeticPoint{map.datum().latitude(), map.datum().longitude(), map.datum().altitude()});
     if (!datum) return check.fail("datum", datum.error().message);
   }
-  if (map.has_points()) HANZO_RETURN_IF_ERROR(check.point_layer(map.points(), "points"));
-  if (map.has_occupancy()) HANZO_RETURN_IF_ERROR(check.occupancy(map.occupancy(), "occupancy"));
+  const auto class_count = static_cast<uint64_t>(map.semantic_classes_size());
+  for (int i = 0; i < map.semantic_classes_size(); ++i) {
+    if (map.semantic_classes(i).empty()) return check.fail(fmt::format("semantic_classes[{}]", i), "empty");
+  }
+  if (class_count >= kNoClass) return check.fail("semantic_classes", fmt::format("{} classes (at most {})", class_count, kNoClass - 1));
+  if (map.has_points()) HANZO_RETURN_IF_ERROR(check.point_layer(map.points(), "points", class_count));
+  if (map.has_occupancy()) HANZO_RETURN_IF_ERROR(check.occupancy(map.occupancy(), "occupancy", class_count));
   if (map.has_tsdf()) HANZO_RETURN_IF_ERROR(check.tsdf(map.tsdf(), "tsdf"));
   if (map.has_mesh()) HANZO_RETURN_IF_ERROR(check.mesh(map.mesh(), "mesh"));
   if (map.has_visual_landmarks()) HANZO_RETURN_IF_ERROR(check.visual_landmarks(map.visual_landmarks(), "visual_landmarks"));
@@ -241,8 +271,8 @@ Status validate(const v1::MapUpdate& update) {
   const MapChecker check("MapUpdate");
   if (update.map_id().empty()) return check.fail("map_id", "empty");
   if (update.timestamp_ns() == 0) return check.fail("timestamp_ns", "zero timestamp (expected nanoseconds since the Unix epoch)");
-  if (update.has_added_points()) HANZO_RETURN_IF_ERROR(check.point_layer(update.added_points(), "added_points"));
-  if (update.has_occupancy_patch()) HANZO_RETURN_IF_ERROR(check.occupancy(update.occupancy_patch(), "occupancy_patch"));
+  if (update.has_added_points()) HANZO_RETURN_IF_ERROR(check.point_layer(update.added_points(), "added_points", kNoClass));
+  if (update.has_occupancy_patch()) HANZO_RETURN_IF_ERROR(check.occupancy(update.occupancy_patch(), "occupancy_patch", kNoClass));
   if (update.has_mesh()) HANZO_RETURN_IF_ERROR(check.mesh(update.mesh(), "mesh"));
   return ok_status();
 }

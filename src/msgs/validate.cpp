@@ -313,6 +313,28 @@ Status validate(const DetectionsMessage& message) {
       return check.fail(field("mask"), fmt::format("{} bytes for a {} x {} mask", detection.mask.size(), detection.mask_width, detection.mask_height));
     }
   }
+  if (message.segmentation.empty()) {
+    if (!message.segmentation_classes.empty()) return check.fail("segmentation", "a label table without a segmentation image");
+    return ok_status();
+  }
+  if (message.segmentation.size() != static_cast<std::size_t>(message.image_width) * message.image_height) {
+    return check.fail("segmentation", fmt::format("{} class ids for a {} x {} image", message.segmentation.size(), message.image_width, message.image_height));
+  }
+  if (message.segmentation_classes.empty() || message.segmentation_classes.size() >= kUnlabelledPixel) {
+    return check.fail("segmentation_classes", fmt::format("{} classes: a segmentation needs 1 to {} named classes", message.segmentation_classes.size(),
+                                                          kUnlabelledPixel - 1));
+  }
+  for (std::size_t i = 0; i < message.segmentation_classes.size(); ++i) {
+    if (message.segmentation_classes[i].empty()) return check.fail(fmt::format("segmentation_classes[{}]", i), "empty");
+  }
+  const auto unknown = std::find_if(message.segmentation.begin(), message.segmentation.end(), [&message](uint8_t id) {
+    return id != kUnlabelledPixel && id >= message.segmentation_classes.size();
+  });
+  if (unknown != message.segmentation.end()) {
+    const auto pixel = static_cast<std::size_t>(unknown - message.segmentation.begin());
+    return check.fail("segmentation", fmt::format("pixel ({}, {}) has class id {}, the label table has {} classes", pixel % message.image_width,
+                                                  pixel / message.image_width, *unknown, message.segmentation_classes.size()));
+  }
   return ok_status();
 }
 

@@ -1,6 +1,7 @@
 #include "hanzo/fusion/pipeline/dynamic_mask.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 
@@ -8,6 +9,11 @@
 #include <opencv2/imgproc.hpp>
 
 namespace hanzo::fusion::pipeline {
+namespace {
+
+constexpr int kMinSegmentWidth = 5;  // pixels
+
+}  // namespace
 
 bool is_dynamic_class(std::string_view class_name, const config::DynamicObjectsConfig& config) {
   const auto same = [class_name](const std::string& name) {
@@ -49,6 +55,26 @@ Result<DynamicMask> dynamic_mask(const msgs::DetectionsMessage& detections, cv::
     cv::resize(mask, stretched, cv::Size(x1 - x0 + 1, y1 - y0 + 1), 0.0, 0.0, cv::INTER_NEAREST);
     cv::Mat target = instances(cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1));
     target.setTo(255, stretched);
+  }
+  // The segmentation's pixels of moving classes, as instance masks.
+  std::array<bool, 256> dynamic_ids{};
+  bool any_dynamic_id = false;
+  for (std::size_t id = 0; id < detections.segmentation_classes.size() && id < dynamic_ids.size(); ++id) {
+    dynamic_ids[id] = is_dynamic_class(detections.segmentation_classes[id], config);
+    any_dynamic_id = any_dynamic_id || dynamic_ids[id];
+  }
+  if (any_dynamic_id && detections.segmentation.size() == static_cast<std::size_t>(image_size.area())) {
+    cv::Mat segmented = cv::Mat::zeros(image_size, CV_8UC1);
+    for (std::size_t pixel = 0; pixel < detections.segmentation.size(); ++pixel) {
+      if (dynamic_ids[detections.segmentation[pixel]]) segmented.data[pixel] = 255;
+    }
+    // A segmenter's scattered wrong pixels are no object: an opening keeps regions at least
+    // kMinSegmentWidth pixels across.
+    cv::morphologyEx(segmented, segmented, cv::MORPH_OPEN, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(kMinSegmentWidth, kMinSegmentWidth)));
+    if (cv::countNonZero(segmented) > 0) {
+      instances = instances.empty() ? segmented : (instances | segmented);
+      if (objects.empty()) objects = cv::Mat::zeros(image_size, CV_8UC1);
+    }
   }
   if (objects.empty()) return result;
   if (!instances.empty()) {

@@ -3,6 +3,7 @@
 #include "camera_odometry.hpp"
 #include "imu_keyframe_chain.hpp"
 #include "lidar_inertial_factors.hpp"
+#include "semantic_projection.hpp"
 #include "session_splats.hpp"
 #include "visual_loop_closures.hpp"
 
@@ -313,6 +314,19 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
                                                                      noise.gyro_bias_random_walk);
     session->body_imu_ = std::make_unique<BodyImu>(imu_calibration.T_body_sensor(), imu_calibration.time_offset);
     session->imu_sensor_ = imu->name;
+  }
+  // Cameras with a lens model label the 3D LiDAR's map points with a vision pipeline's output.
+  if (session->odometry_) {
+    std::vector<SemanticProjection::Camera> cameras;
+    for (const config::SensorConfig& sensor : config.sensors) {
+      const calib::SensorCalibration* entry = calibration.find(sensor.name);
+      if (sensor.modality != config::SensorModality::kCamera || entry == nullptr || !entry->camera || entry->camera->intrinsics.width == 0) continue;
+      cameras.push_back({sensor.name, entry->camera->pinhole_camera(), entry->T_body_sensor(), entry->time_offset,
+                         cv::Size(static_cast<int>(entry->camera->intrinsics.width), static_cast<int>(entry->camera->intrinsics.height))});
+    }
+    if (!cameras.empty()) {
+      session->semantic_projection_ = std::make_unique<SemanticProjection>(std::move(cameras), session->T_body_lidar_, config.vision.dynamic_objects);
+    }
   }
   // Every further 3D LiDAR joins the first one's sweeps.
   if (session->odometry_) {
@@ -1043,15 +1057,21 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
     const SE3 since = last_offered_map_keyframe_->inverse() * T_world_lidar;
     keyframe = since.translation().norm() >= config_.map_keyframe_distance || since.rotation().log().norm() >= config_.map_keyframe_angle;
   }
-  if (keyframe) return add_map_keyframe(T_world_lidar, registered.points);
+  auto [points, classes] = label_sweep(estimate.time, registered.points);
+  if (keyframe) return add_map_keyframe(T_world_lidar, points, classes);
+  if (!classes.empty()) {
+    if (Status voted = map_builder_.add_class_votes(T_world_lidar, points, classes); !voted) {
+      logger()->warn("session: a sweep's segmentation classes not kept: {}", voted.error().message);
+    }
+  }
   cloud::PointCloud cloud;
-  cloud.positions = registered.points;
+  cloud.positions = std::move(points);
   if (Status inserted = map_builder_.insert(T_world_lidar, cloud, maps::ScanUse::kGridsOnly); !inserted) {
     logger()->warn("session: sweep not inserted into the map's grids: {}", inserted.error().message);
   }
 }
 
-void Session::add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points) {
+void Session::add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points, const std::vector<uint16_t>& point_classes) {
   // The anchor (the newest keyframe) as the graph got it, in today's world.
   const uint64_t anchor = latest_keyframe_->keyframe_id;
   const SE3 T_world_anchor = frontend_->world_correction() * latest_keyframe_uncorrected_;
@@ -1066,7 +1086,7 @@ void Session::add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen
                        loop_closures_.covered(T_world_lidar, path_, [this](std::size_t k) { return map_keyframe_pose(k); });
   cloud::PointCloud cloud;
   cloud.positions = points;
-  if (Status inserted = map_builder_.insert(T_world_lidar, cloud, revisit ? maps::ScanUse::kGridsOnly : maps::ScanUse::kAllLayers);
+  if (Status inserted = map_builder_.insert(T_world_lidar, cloud, revisit ? maps::ScanUse::kGridsOnly : maps::ScanUse::kAllLayers, point_classes);
       !inserted) {
     logger()->warn("session: map keyframe not inserted: {}", inserted.error().message);
     return;

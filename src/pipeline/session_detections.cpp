@@ -1,5 +1,6 @@
-// Session: a detector's output on the cameras (msgs::DetectionsMessage) and the dynamic masks
-// it gives the visual odometry (fusion.vision.dynamic_objects; session.hpp, dynamic_mask.hpp).
+// Session: a detector's output on the cameras (msgs::DetectionsMessage): the dynamic masks it
+// gives the visual odometry (fusion.vision.dynamic_objects; session.hpp, dynamic_mask.hpp), its
+// segmentation classes and moving objects on the 3D LiDAR's points (semantic_projection.hpp).
 
 #include <algorithm>
 #include <cmath>
@@ -7,6 +8,7 @@
 #include <fmt/format.h>
 
 #include "camera_odometry.hpp"
+#include "semantic_projection.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/msgs/validate.hpp"
 #include "hanzo/fusion/pipeline/dynamic_mask.hpp"
@@ -30,15 +32,22 @@ PushStatus Session::push_detections(std::string_view sensor, const msgs::Detecti
     ++summary_.detections_refused;
     return PushStatus(reason, detail);
   };
-  if (!camera_odometry_ || !camera_odometry_->handles(sensor)) {
-    return refuse(Rejection::kWrongType, fmt::format("{}: detections for a sensor that is not a camera of the visual odometry", sensor));
+  const bool tracked = camera_odometry_ && camera_odometry_->handles(sensor);
+  const SemanticProjection::Camera* projected = semantic_projection_ ? semantic_projection_->camera(sensor) : nullptr;
+  if (!tracked && projected == nullptr) {
+    return refuse(Rejection::kWrongType,
+                  fmt::format("{}: detections for a sensor that is not a camera of the visual odometry or one with a lens model beside a 3D LiDAR", sensor));
   }
   if (Status valid = msgs::validate(detections); !valid) return refuse(Rejection::kInvalid, fmt::format("{}: {}", sensor, valid.error().message));
-  const cv::Size image_size = camera_odometry_->rig_of(sensor)->image_size;
+  const cv::Size image_size = tracked ? camera_odometry_->rig_of(sensor)->image_size : projected->image_size;
   if (static_cast<int>(detections.image_width) != image_size.width || static_cast<int>(detections.image_height) != image_size.height) {
     return refuse(Rejection::kInvalid, fmt::format("{}: detections for a {} x {} image, the camera's images are {} x {}", sensor, detections.image_width,
                                                    detections.image_height, image_size.width, image_size.height));
   }
+  if (projected != nullptr) {
+    semantic_projection_->add(*projected, detections, [this](std::string_view name) { return map_builder_.class_index(name); });
+  }
+  if (!tracked) return {};
   CameraDetections& camera = camera_detections_[std::string(sensor)];
   camera.streaming = true;
   if (camera.last_image_time && detections.timestamp <= *camera.last_image_time + Duration::from_seconds(kMatchTolerance_s) &&
@@ -98,6 +107,23 @@ vision::StaticMask Session::static_mask_for(const std::string& sensor, const msg
   summary_.dynamic_objects_masked += static_cast<uint64_t>(mask->masked_objects);
   masked_share_sum_ += mask->masked_share;
   return {mask->static_mask};
+}
+
+std::pair<std::vector<Eigen::Vector3f>, std::vector<uint16_t>> Session::label_sweep(Timestamp time, const std::vector<Eigen::Vector3f>& points) {
+  if (!semantic_projection_) return {points, {}};
+  const SemanticProjection::Labelled labelled =
+      semantic_projection_->label(time, points, [this](Timestamp at) { return frontend_->pose_at(at); });
+  summary_.lidar_points_labelled += labelled.labelled;
+  summary_.lidar_points_masked += labelled.moving_points;
+  std::pair<std::vector<Eigen::Vector3f>, std::vector<uint16_t>> kept;
+  kept.first.reserve(points.size());
+  if (labelled.labelled > 0) kept.second.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (labelled.moving[i] != 0) continue;
+    kept.first.push_back(points[i]);
+    if (labelled.labelled > 0) kept.second.push_back(labelled.classes[i]);
+  }
+  return kept;
 }
 
 }  // namespace hanzo::fusion::pipeline

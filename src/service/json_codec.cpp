@@ -240,6 +240,8 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"images_masked", mapping.images_masked},
       {"dynamic_objects_masked", mapping.dynamic_objects_masked},
       {"masked_image_share", mapping.masked_image_share},
+      {"lidar_points_labelled", mapping.lidar_points_labelled},
+      {"lidar_points_masked", mapping.lidar_points_masked},
   };
 }
 

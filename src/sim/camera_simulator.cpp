@@ -137,6 +137,20 @@ Result<CameraSimulator> CameraSimulator::create(CameraSimulatorConfig config, co
 CameraSimulator::CameraSimulator(CameraSimulatorConfig config, const World& world, const SplineTrajectory& trajectory)
     : config_(std::move(config)), world_(&world), trajectory_(&trajectory), sun_direction_(config_.sun_direction.normalized()),
       random_(config_.seed) {
+  // The segmentation's label table and each object's class in it (object ids: ground -1, boxes,
+  // cylinders, moving boxes).
+  const WorldDescription& description = world.description();
+  const auto class_id = [this](const std::string& name) {
+    const auto found = std::find(segmentation_classes_.begin(), segmentation_classes_.end(), name);
+    if (found != segmentation_classes_.end()) return static_cast<uint8_t>(found - segmentation_classes_.begin());
+    if (segmentation_classes_.size() + 1 >= msgs::kUnlabelledPixel) return msgs::kUnlabelledPixel;
+    segmentation_classes_.push_back(name);
+    return static_cast<uint8_t>(segmentation_classes_.size() - 1);
+  };
+  class_of_object_.push_back(description.has_ground ? class_id(description.ground_class) : msgs::kUnlabelledPixel);
+  for (const Box& box : description.boxes) class_of_object_.push_back(class_id(box.class_name));
+  for (const Cylinder& cylinder : description.cylinders) class_of_object_.push_back(class_id(cylinder.class_name));
+  for (const MovingBox& mover : description.moving_boxes) class_of_object_.push_back(class_id(mover.class_name));
   std::normal_distribution<float> normal(0.0F, 1.0F);
   normal_table_.resize(std::size_t{1} << kNormalTableBits);
   for (float& value : normal_table_) value = normal(random_);
@@ -322,7 +336,7 @@ msgs::ImageMessage CameraSimulator::measure(Timestamp time) {
     }
   }
 
-  const bool detects = config_.ground_truth_detections != GroundTruthDetections::kNone;
+  const bool detects = config_.ground_truth_detections != GroundTruthDetections::kNone || config_.ground_truth_segmentation;
   std::vector<Eigen::Vector3f> radiance;
   if (blur != nullptr && blur->blur_samples > 1) {
     std::vector<Eigen::Vector3f> sub_frame;
@@ -367,7 +381,9 @@ msgs::ImageMessage CameraSimulator::measure(Timestamp time) {
 }
 
 std::optional<msgs::DetectionsMessage> CameraSimulator::detections() const {
-  if (config_.ground_truth_detections == GroundTruthDetections::kNone || object_ids_.empty()) return std::nullopt;
+  if ((config_.ground_truth_detections == GroundTruthDetections::kNone && !config_.ground_truth_segmentation) || object_ids_.empty()) {
+    return std::nullopt;
+  }
   const auto width = static_cast<int>(config_.intrinsics.width), height = static_cast<int>(config_.intrinsics.height);
   const std::vector<MovingBox>& movers = world_->description().moving_boxes;
   const int first_moving = world_->object_count() - static_cast<int>(movers.size());
@@ -393,7 +409,8 @@ std::optional<msgs::DetectionsMessage> CameraSimulator::detections() const {
   message.frame_id = config_.frame_id;
   message.image_width = config_.intrinsics.width;
   message.image_height = config_.intrinsics.height;
-  for (std::size_t mover = 0; mover < movers.size(); ++mover) {
+  if (config_.ground_truth_segmentation) add_segmentation(message);
+  for (std::size_t mover = 0; mover < movers.size() && config_.ground_truth_detections != GroundTruthDetections::kNone; ++mover) {
     const Extent& extent = extents[mover];
     if (extent.pixels < config_.min_detection_pixels) continue;
     msgs::Detection2D detection;
@@ -417,6 +434,28 @@ std::optional<msgs::DetectionsMessage> CameraSimulator::detections() const {
     message.detections.push_back(std::move(detection));
   }
   return message;
+}
+
+void CameraSimulator::add_segmentation(msgs::DetectionsMessage& message) const {
+  message.segmentation_classes = segmentation_classes_;
+  message.segmentation.resize(object_ids_.size());
+  const auto classes = static_cast<uint64_t>(segmentation_classes_.size());
+  // Noise: a hash of (seed, time, pixel) per pixel, the same whatever the call order.
+  const uint64_t frame = config_.seed * 0x9E3779B97F4A7C15ULL ^ static_cast<uint64_t>(object_ids_time_.nanoseconds());
+  for (std::size_t p = 0; p < object_ids_.size(); ++p) {
+    const int object = object_ids_[p];
+    uint8_t id = object < -1 ? msgs::kUnlabelledPixel : class_of_object_[static_cast<std::size_t>(object + 1)];
+    if (id != msgs::kUnlabelledPixel && classes > 1 && config_.segmentation_noise > 0.0) {
+      uint64_t hash = frame + 0x9E3779B97F4A7C15ULL * (p + 1);
+      hash = (hash ^ (hash >> 30)) * 0xBF58476D1CE4E5B9ULL;
+      hash = (hash ^ (hash >> 27)) * 0x94D049BB133111EBULL;
+      hash ^= hash >> 31;
+      if (static_cast<double>(hash >> 11) * 0x1.0p-53 < config_.segmentation_noise) {
+        id = static_cast<uint8_t>((id + 1 + (hash & 0xFFFF) % (classes - 1)) % classes);
+      }
+    }
+    message.segmentation[p] = id;
+  }
 }
 
 }  // namespace hanzo::fusion::sim

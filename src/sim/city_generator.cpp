@@ -44,6 +44,7 @@ void add_city(const CityConfig& config, WorldDescription* world) {
           building.center = {center.x(), center.y(), ground + height / 2.0};
           building.half_size = {lot.x() * (0.42 + 0.08 * unit(random)), lot.y() * (0.42 + 0.08 * unit(random)), height / 2.0};
           building.material = facade(random);
+          building.class_name = "building";
           world->boxes.push_back(building);
         }
       }
@@ -67,6 +68,7 @@ void add_city(const CityConfig& config, WorldDescription* world) {
           pole.material.texture.scale = 0.2;
           pole.material.reflectivity = tree ? 0.3 : 0.7;
           pole.material.radar_cross_section = tree ? 5.0 : 10.0;
+          pole.class_name = "pole";
           world->cylinders.push_back(pole);
         }
         for (double s = kParkingSpot; s + kParkingSpot < length; s += kParkingSpot) {
@@ -81,6 +83,7 @@ void add_city(const CityConfig& config, WorldDescription* world) {
                                                          static_cast<float>(unit(random)));
           car.material.reflectivity = 0.6;
           car.material.radar_cross_section = 15.0;
+          car.class_name = "car";
           world->boxes.push_back(car);
         }
       }

@@ -67,7 +67,7 @@ Result<std::unique_ptr<ScenarioSimulation>> ScenarioSimulation::create(Scenario 
       if (!created) return with_context(Result<std::unique_ptr<ScenarioSimulation>>(created.error()), "sensors." + sensor.name);
       auto simulator = std::make_shared<CameraSimulator>(std::move(*created));
       stream->produce = [simulator](Timestamp time) -> std::optional<msgs::SensorMessage> { return simulator->measure(time); };
-      if (config.ground_truth_detections != GroundTruthDetections::kNone) {
+      if (config.ground_truth_detections != GroundTruthDetections::kNone || config.ground_truth_segmentation) {
         stream->follow_up = [simulator]() -> std::optional<msgs::SensorMessage> {
           std::optional<msgs::DetectionsMessage> detections = simulator->detections();
           if (!detections) return std::nullopt;

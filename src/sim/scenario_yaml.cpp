@@ -121,6 +121,14 @@ Material default_material(uint32_t index) {
   return material;
 }
 
+// An object's segmentation / detection class (`class:`), kept as it was when absent.
+Status parse_class(const YamlValue& item, std::string* class_name) {
+  if (!item["class"].present()) return ok_status();
+  HANZO_ASSIGN_OR_RETURN(*class_name, item["class"].as_string());
+  if (class_name->empty()) return item["class"].error("a class name must not be empty");
+  return ok_status();
+}
+
 Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* world) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"ground", "boxes", "cylinders", "walls", "people", "city"}));
   const YamlValue ground = value["ground"];
@@ -128,15 +136,17 @@ Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* wo
   world->ground.texture.scale = 1.0;
   world->ground.reflectivity = 0.3;
   if (ground.present()) {
-    HANZO_RETURN_IF_ERROR(ground.check_keys({"enabled", "height", "texture", "reflectivity", "radar_cross_section"}));
+    HANZO_RETURN_IF_ERROR(ground.check_keys({"enabled", "height", "class", "texture", "reflectivity", "radar_cross_section"}));
+    HANZO_RETURN_IF_ERROR(parse_class(ground, &world->ground_class));
     if (ground["enabled"].present()) HANZO_ASSIGN_OR_RETURN(world->has_ground, ground["enabled"].as_bool());
     HANZO_ASSIGN_OR_RETURN(world->ground_height, number_or(ground["height"], 0.0));
     HANZO_RETURN_IF_ERROR(parse_material(ground, &world->ground));
   }
   uint32_t object_index = 1;
   for (const YamlValue& item : value["boxes"].elements()) {
-    HANZO_RETURN_IF_ERROR(item.check_keys({"center", "size", "yaw_deg", "texture", "reflectivity", "radar_cross_section"}));
+    HANZO_RETURN_IF_ERROR(item.check_keys({"center", "size", "yaw_deg", "class", "texture", "reflectivity", "radar_cross_section"}));
     Box box;
+    HANZO_RETURN_IF_ERROR(parse_class(item, &box.class_name));
     box.material = default_material(object_index++);
     HANZO_ASSIGN_OR_RETURN(box.center, vector_or<3>(item["center"], Eigen::Vector3d::Zero(), "(x, y, z)"));
     Eigen::Vector3d size = Eigen::Vector3d::Ones();
@@ -150,7 +160,7 @@ Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* wo
     world->boxes.push_back(box);
   }
   for (const YamlValue& item : value["walls"].elements()) {
-    HANZO_RETURN_IF_ERROR(item.check_keys({"from", "to", "height", "thickness", "texture", "reflectivity", "radar_cross_section"}));
+    HANZO_RETURN_IF_ERROR(item.check_keys({"from", "to", "height", "thickness", "class", "texture", "reflectivity", "radar_cross_section"}));
     Eigen::Vector2d from = Eigen::Vector2d::Zero(), to = Eigen::Vector2d::Zero();
     HANZO_ASSIGN_OR_RETURN(from, vector_or<2>(item["from"], from, "(x, y)"));
     HANZO_ASSIGN_OR_RETURN(to, vector_or<2>(item["to"], to, "(x, y)"));
@@ -159,6 +169,8 @@ Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* wo
     HANZO_ASSIGN_OR_RETURN(height, positive_or(item["height"], height));
     HANZO_ASSIGN_OR_RETURN(thickness, positive_or(item["thickness"], thickness));
     Box wall;
+    wall.class_name = "wall";
+    HANZO_RETURN_IF_ERROR(parse_class(item, &wall.class_name));
     wall.material = default_material(object_index++);
     const Eigen::Vector2d middle = 0.5 * (from + to);
     wall.center = {middle.x(), middle.y(), world->ground_height + height / 2.0};
@@ -168,8 +180,9 @@ Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* wo
     world->boxes.push_back(wall);
   }
   for (const YamlValue& item : value["cylinders"].elements()) {
-    HANZO_RETURN_IF_ERROR(item.check_keys({"base", "radius", "height", "texture", "reflectivity", "radar_cross_section"}));
+    HANZO_RETURN_IF_ERROR(item.check_keys({"base", "radius", "height", "class", "texture", "reflectivity", "radar_cross_section"}));
     Cylinder cylinder;
+    HANZO_RETURN_IF_ERROR(parse_class(item, &cylinder.class_name));
     cylinder.material = default_material(object_index++);
     HANZO_ASSIGN_OR_RETURN(cylinder.base_center, vector_or<3>(item["base"], Eigen::Vector3d::Zero(), "(x, y, z)"));
     HANZO_ASSIGN_OR_RETURN(cylinder.radius, positive_or(item["radius"], 0.2));
@@ -194,10 +207,7 @@ Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* wo
     if ((size.array() <= 0.0).any()) return item["size"].error("sizes must be > 0");
     person.box.half_size = size / 2.0;
     HANZO_RETURN_IF_ERROR(parse_material(item, &person.box.material));
-    if (item["class"].present()) {
-      HANZO_ASSIGN_OR_RETURN(person.class_name, item["class"].as_string());
-      if (person.class_name.empty()) return item["class"].error("a class name must not be empty");
-    }
+    HANZO_RETURN_IF_ERROR(parse_class(item, &person.class_name));
     world->moving_boxes.push_back(person);
   }
   const YamlValue city = value["city"];
@@ -356,7 +366,7 @@ Result<SensorSimulatorConfig> parse_lidar(const YamlValue& value, double rate, c
 Result<SensorSimulatorConfig> parse_camera(const YamlValue& value, double rate, const ScenarioSensor& sensor) {
   HANZO_RETURN_IF_ERROR(value.check_keys({"modality", "topic", "rate", "to_body", "width", "height", "fx", "fy", "cx", "cy",
                                           "distortion_model", "distortion_coeffs", "encoding", "supersampling", "pixel_noise", "lighting",
-                                          "depth_range", "depth_noise", "detections"}));
+                                          "depth_range", "depth_noise", "detections", "segmentation", "segmentation_noise"}));
   CameraSimulatorConfig config;
   config.rate_hz = rate;
   config.T_body_camera = sensor.T_body_sensor;
@@ -393,6 +403,9 @@ Result<SensorSimulatorConfig> parse_camera(const YamlValue& value, double rate, 
     if (!detections) return value["detections"].error(fmt::format("expected none, boxes or masks, got '{}'", name));
     config.ground_truth_detections = *detections;
   }
+  if (value["segmentation"].present()) HANZO_ASSIGN_OR_RETURN(config.ground_truth_segmentation, value["segmentation"].as_bool());
+  HANZO_ASSIGN_OR_RETURN(config.segmentation_noise, non_negative_or(value["segmentation_noise"], config.segmentation_noise));
+  if (config.segmentation_noise >= 1.0) return value["segmentation_noise"].error("a share of pixels in [0, 1)");
   HANZO_ASSIGN_OR_RETURN(config.supersampling, count_or(value["supersampling"], config.supersampling, 1, 4));
   HANZO_ASSIGN_OR_RETURN(config.pixel_noise, non_negative_or(value["pixel_noise"], config.pixel_noise));
   HANZO_ASSIGN_OR_RETURN(config.depth_range, vector_or<2>(value["depth_range"], config.depth_range, "(min, max) m"));

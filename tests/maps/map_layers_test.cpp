@@ -11,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "hanzo/fusion/io/carmen_import.hpp"
+#include "hanzo/fusion/maps/cell_classes.hpp"
 #include "hanzo/fusion/maps/map_builder.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
 #include "map_fixtures.hpp"
@@ -133,6 +134,51 @@ TEST(MapLayers, PointMapFollowsCorrectedPoses) {
   bad.positions[3].x() = NAN;
   EXPECT_FALSE(map->add_keyframe(2, first, bad));
   EXPECT_EQ(map->keyframe_count(), 2u);
+}
+
+// Segmentation classes: a keyframe's point and later scans' votes for it fuse into the voxel's
+// class with the posterior of point_map.hpp; the grid's cells take their points' classes.
+TEST(MapLayers, PointMapFusesSegmentationClassesPerVoxel) {
+  auto map = PointMap::create(PointMapConfig{.voxel_size = 0.1, .segmentation_accuracy = 0.9});
+  ASSERT_TRUE(map.ok());
+  const uint16_t floor = map->class_index("floor"), shelf = map->class_index("shelf");
+  EXPECT_EQ(map->class_index("person"), 2);
+  EXPECT_EQ(map->class_index("floor"), floor);
+  cloud::PointCloud scan;
+  scan.positions = {{0.02F, 0.02F, 0.02F}, {0.52F, 0.02F, 0.02F}, {1.02F, 0.02F, 0.02F}};
+  const std::vector<uint16_t> classes{floor, shelf, msgs::kNoClass};
+  ASSERT_TRUE(map->add_keyframe(0, SE3(), scan, classes));
+  // A later scan from 1 m back sees the first point as floor again and the second as floor
+  // once; a point where the keyframe has none is dropped.
+  const SE3 T_world_later(SO3::identity(), Eigen::Vector3d(-1.0, 0.0, 0.0));
+  const std::vector<Eigen::Vector3f> later{{1.02F, 0.02F, 0.02F}, {1.52F, 0.02F, 0.02F}, {3.0F, 0.0F, 0.0F}};
+  ASSERT_TRUE(map->add_class_votes(0, T_world_later, later, std::vector<uint16_t>{floor, floor, shelf}));
+  ASSERT_TRUE(map->add_class_votes(0, T_world_later, later, std::vector<uint16_t>{floor, shelf, shelf}));
+  const msgs::PointLayer layer = map->to_layer();
+  ASSERT_EQ(layer.points.size(), 3u);
+  ASSERT_EQ(layer.classes.size(), 3u);
+  // Point 0: floor 3 times. r = 0.9 * 2 / 0.1 = 18: P = 18^3 / (18^3 + 1 + 1).
+  EXPECT_EQ(layer.classes[0], floor);
+  EXPECT_NEAR(layer.class_probability[0], 5832.0 / 5834.0, 1e-6);
+  // Point 1: shelf twice, floor once: 18^2 / (18^2 + 18 + 1).
+  EXPECT_EQ(layer.classes[1], shelf);
+  EXPECT_NEAR(layer.class_probability[1], 324.0 / 343.0, 1e-6);
+  EXPECT_EQ(layer.classes[2], msgs::kNoClass);
+  EXPECT_EQ(layer.class_probability[2], 0.0F);
+  // Refused, nothing changed.
+  EXPECT_THAT(map->add_class_votes(0, SE3(), later, std::vector<uint16_t>{floor}).error().message, HasSubstr("1 classes for 3 points"));
+  EXPECT_THAT(map->add_class_votes(0, SE3(), later, std::vector<uint16_t>{7, 0, 0}).error().message, HasSubstr("class 7 past the label table's 3 classes"));
+  EXPECT_THAT(map->add_class_votes(5, SE3(), later, classes).error().message, HasSubstr("no keyframe 5"));
+  EXPECT_EQ(map->to_layer().classes, layer.classes);
+
+  msgs::OccupancyGridLayer grid;
+  grid.resolution = 0.5;
+  grid.size_x = 4;
+  grid.size_y = 1;
+  grid.occupancy.assign(4, 0.5F);
+  grid.origin.position = Eigen::Vector3d(0.0, -0.25, 0.0);
+  classify_cells(grid, layer);
+  EXPECT_EQ(grid.classes, (std::vector<uint16_t>{floor, shelf, msgs::kNoClass, msgs::kNoClass}));
 }
 
 TEST(MapLayers, BuilderHeightBandKeepsObstaclesAndDropsTheGround) {

@@ -125,6 +125,8 @@ void expect_equal(const DetectionsMessage& a, const DetectionsMessage& b) {
     EXPECT_EQ(x.mask_height, y.mask_height);
     EXPECT_EQ(x.mask, y.mask);
   }
+  EXPECT_EQ(a.segmentation, b.segmentation);
+  EXPECT_EQ(a.segmentation_classes, b.segmentation_classes);
 }
 
 void expect_equal(const PoseEstimate& a, const PoseEstimate& b) {
@@ -376,12 +378,14 @@ TEST(Convert, RangeRoundTrip) {
   none.radiation = RangeRadiation::kInfrared;
   check_round_trip(none);
 }
-// Boxes, scores, track ids and instance masks; an image without detections.
+// Boxes, scores, track ids and instance masks; an image without detections; a dense
+// segmentation with its label table.
 TEST(Convert, DetectionsRoundTrip) {
   check_round_trip(testing::detections());
   DetectionsMessage none = testing::detections();
   none.detections.clear();
   check_round_trip(none);
+  check_round_trip(testing::segmentation());
 }
 TEST(Convert, PoseEstimateRoundTrip) { check_round_trip(testing::pose_estimate()); }
 TEST(Convert, KeyframeRoundTrip) {

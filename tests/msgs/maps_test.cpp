@@ -44,8 +44,11 @@ v1::FusionMap full_map() {
     points->add_position_std(0.02F);
     points->add_labels(i % 2 == 0 ? v1::LABEL_FLOOR : v1::LABEL_WALL);
     points->add_intensities(0.5F);
+    points->add_classes(i == 9 ? kNoClass : static_cast<uint32_t>(i % 3));
+    points->add_class_probability(i == 9 ? 0.0F : 0.95F);
   }
   points->set_voxel_size(0.1);
+  for (const char* name : {"floor", "shelf", "person"}) map.add_semantic_classes(name);
   v1::OccupancyGridLayer* grid = map.mutable_occupancy();
   grid->set_resolution(0.05);
   grid->set_size_x(4);
@@ -53,7 +56,10 @@ v1::FusionMap full_map() {
   grid->set_size_z(1);
   grid->mutable_origin()->mutable_position()->set_x(-1.0);
   grid->mutable_origin()->mutable_orientation()->set_w(1.0);
-  for (int i = 0; i < 12; ++i) grid->add_occupancy(i % 3 == 0 ? 0.9F : 0.5F);
+  for (int i = 0; i < 12; ++i) {
+    grid->add_occupancy(i % 3 == 0 ? 0.9F : 0.5F);
+    grid->add_classes(i % 3 == 0 ? 1 : kNoClass);
+  }
   v1::TsdfLayer* tsdf = map.mutable_tsdf();
   tsdf->set_voxel_size(0.05);
   tsdf->set_truncation_distance(0.15);
@@ -128,6 +134,21 @@ TEST(MapValidation, BadLayersAreRejectedNamingTheField) {
   map.mutable_points()->set_labels(0, static_cast<v1::SemanticLabel>(99));
   expect_rejected(map, "points.labels[0]", "unknown label 99");
   map = full_map();
+  map.mutable_points()->set_classes(4, 3);
+  expect_rejected(map, "points.classes[4]", "class 3 past the 3 semantic_classes");
+  map = full_map();
+  map.mutable_points()->mutable_class_probability()->RemoveLast();
+  expect_rejected(map, "points.class_probability", "9 values for 10 points");
+  map = full_map();
+  map.mutable_points()->set_class_probability(2, 1.5F);
+  expect_rejected(map, "points.class_probability[2]", "outside [0, 1]");
+  map = full_map();
+  map.mutable_occupancy()->set_classes(3, 7);
+  expect_rejected(map, "occupancy.classes[3]", "class 7 past the 3 semantic_classes");
+  map = full_map();
+  map.set_semantic_classes(1, "");
+  expect_rejected(map, "semantic_classes[1]", "empty");
+  map = full_map();
   map.mutable_occupancy()->set_size_y(4);
   expect_rejected(map, "occupancy.occupancy", "12 cells, but 4x4x1 needs 16");
   map = full_map();
@@ -193,6 +214,10 @@ TEST(MapConvert, FusionMapRoundTripsLosslessly) {
   ASSERT_TRUE(map->points && map->occupancy && map->tsdf && map->mesh);
   EXPECT_EQ(map->points->points.size(), 10U);
   EXPECT_EQ(map->points->labels[1], SemanticLabel::kWall);
+  EXPECT_EQ(map->semantic_classes, (std::vector<std::string>{"floor", "shelf", "person"}));
+  EXPECT_EQ(map->points->classes[2], 2U);
+  EXPECT_EQ(map->points->classes[9], kNoClass);
+  EXPECT_EQ(map->occupancy->classes[3], 1U);
   EXPECT_EQ(map->occupancy->occupancy.size(), 12U);
   EXPECT_EQ(map->tsdf->blocks[0].index, Eigen::Vector3i(-1, 0, 0));
   EXPECT_EQ(map->mesh->triangle_indices, (std::vector<uint32_t>{0, 1, 2}));
@@ -230,7 +255,7 @@ TEST(MapConvert, MapUpdateRoundTrip) {
   update.map_id = "m";
   update.version = 9;
   update.timestamp = Timestamp::from_nanoseconds(1'771'842'930'000'000'000);
-  update.added_points = PointLayer{{{1.0F, 2.0F, 3.0F}}, {0.01F}, {SemanticLabel::kObstacle}, {}, 0.1};
+  update.added_points = PointLayer{{{1.0F, 2.0F, 3.0F}}, {0.01F}, {SemanticLabel::kObstacle}, {}, 0.1, {}, {}};
   update.full_replacement = true;
   const v1::MapUpdate wire = to_proto(update);
   const Result<MapUpdate> back = from_proto(wire);

@@ -134,6 +134,19 @@ inline DetectionsMessage detections() {
   return m;
 }
 
+// A segmenter's output for a 4 x 3 image: floor below, a wall above, a person in the middle,
+// one pixel unlabelled.
+inline DetectionsMessage segmentation() {
+  DetectionsMessage m;
+  m.timestamp = t0();
+  m.frame_id = "camera_front";
+  m.image_width = 4;
+  m.image_height = 3;
+  m.segmentation_classes = {"floor", "wall", "person"};
+  m.segmentation = {1, 1, 1, kUnlabelledPixel, 1, 2, 2, 1, 0, 0, 0, 0};
+  return m;
+}
+
 inline PoseEstimate pose_estimate() {
   PoseEstimate m;
   m.timestamp = t0();

@@ -83,6 +83,23 @@ TEST(Validate, DetectionsAreBoxesInsideTheirImage) {
   EXPECT_THAT(refused([](DetectionsMessage& m) { m.detections[1].mask.pop_back(); }), HasSubstr("5 bytes for a 3 x 2 mask"));
 }
 
+// A segmentation has one class id per pixel, each in its label table (or 255: unlabelled), and a
+// table of named classes.
+TEST(Validate, SegmentationsHaveAClassOfTheirTablePerPixel) {
+  EXPECT_TRUE(validate(testing::segmentation()).ok());
+  const auto refused = [](const std::function<void(DetectionsMessage&)>& edit) {
+    DetectionsMessage message = testing::segmentation();
+    edit(message);
+    const Status status = validate(message);
+    return status.ok() ? std::string("accepted") : status.error().message;
+  };
+  EXPECT_THAT(refused([](DetectionsMessage& m) { m.segmentation.pop_back(); }), HasSubstr("segmentation: 11 class ids for a 4 x 3 image"));
+  EXPECT_THAT(refused([](DetectionsMessage& m) { m.segmentation[6] = 3; }), HasSubstr("pixel (2, 1) has class id 3, the label table has 3 classes"));
+  EXPECT_THAT(refused([](DetectionsMessage& m) { m.segmentation_classes.clear(); }), HasSubstr("segmentation_classes: 0 classes"));
+  EXPECT_THAT(refused([](DetectionsMessage& m) { m.segmentation_classes[1].clear(); }), HasSubstr("segmentation_classes[1]: empty"));
+  EXPECT_THAT(refused([](DetectionsMessage& m) { m.segmentation.clear(); }), HasSubstr("a label table without a segmentation image"));
+}
+
 TEST(Validate, ZeroTimestampIsRejectedEverywhere) {
   auto imu = testing::imu();
   imu.timestamp = Timestamp();

@@ -71,6 +71,30 @@ TEST(DynamicMask, AnInstanceMaskMasksItsPixelsOnly) {
   EXPECT_GT(cv::countNonZero(dynamic_mask(detections({person}), cv::Size(64, 48), config)->static_mask == 0), 4);
 }
 
+// A segmentation's region of a moving class masks (dilated by the margin); scattered pixels of
+// that class (a segmenter's errors) do not.
+TEST(DynamicMask, ASegmentedPersonMasksItsRegionButScatteredPixelsDoNot) {
+  config::DynamicObjectsConfig config;
+  config.margin_px = 1.0;
+  msgs::DetectionsMessage message = detections({});
+  message.segmentation_classes = {"floor", "person"};
+  message.segmentation.assign(64 * 48, 0);
+  for (int row = 20; row < 30; ++row) {
+    for (int column = 10; column < 18; ++column) message.segmentation[static_cast<std::size_t>(row) * 64 + column] = 1;
+  }
+  for (const int pixel : {3 * 64 + 40, 40 * 64 + 50, 45 * 64 + 5}) message.segmentation[static_cast<std::size_t>(pixel)] = 1;
+  const DynamicMask mask = dynamic_mask(message, cv::Size(64, 48), config).value();
+  ASSERT_FALSE(mask.static_mask.empty());
+  EXPECT_EQ(mask.masked_objects, 0);  // detections only
+  EXPECT_EQ(mask.static_mask.at<uint8_t>(25, 14), 0);
+  EXPECT_EQ(mask.static_mask.at<uint8_t>(25, 9), 0);  // the margin
+  EXPECT_NE(mask.static_mask.at<uint8_t>(25, 20), 0);
+  EXPECT_NE(mask.static_mask.at<uint8_t>(3, 40), 0);  // a lone pixel
+  EXPECT_NE(mask.static_mask.at<uint8_t>(40, 50), 0);
+  config.classes = {"car"};
+  EXPECT_TRUE(dynamic_mask(message, cv::Size(64, 48), config)->static_mask.empty());
+}
+
 TEST(DynamicMask, DetectionsForAnotherImageSizeAreRefused) {
   EXPECT_THAT(dynamic_mask(detections({box("person", 1.0F, 1.0F, 5.0F, 5.0F)}), cv::Size(640, 480), {}).error().message,
               HasSubstr("detections for a 64 x 48 image, the camera's images are 640 x 480"));

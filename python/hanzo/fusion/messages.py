@@ -242,17 +242,22 @@ class Detection:
 
 @dataclass
 class Detections(_Stamped):
-    """A detector's output for one camera image: pushed on the camera's sensor name with the image's timestamp and
-    size, which is how the session matches it to that image (fusion.vision.dynamic_objects masks the moving ones out
-    of the visual odometry)."""
+    """A vision pipeline's output for one camera image: pushed on the camera's sensor name with the image's timestamp
+    and size, which is how the session matches it to that image (fusion.vision.dynamic_objects masks the moving ones
+    out of the visual odometry). Optionally a dense segmentation: `segmentation` (uint8, image_height x image_width,
+    a class id per pixel, 255 unlabelled) and its label table `segmentation_classes` (the name of each id)."""
     timestamp_ns: int
     image_width: int
     image_height: int
     detections: list = field(default_factory=list)
     frame_id: str = ""
+    segmentation: Optional[np.ndarray] = None
+    segmentation_classes: list = field(default_factory=list)
 
     def __post_init__(self):
         self.timestamp_ns = _check_time(self.timestamp_ns)
+        self.segmentation = _optional_array(self.segmentation, np.uint8, (self.image_height, self.image_width), "segmentation")
+        self.segmentation_classes = [str(name) for name in self.segmentation_classes]
         for index, detection in enumerate(self.detections):
             if not isinstance(detection, Detection):
                 raise ValueError(f"detections[{index}]: expected a Detection, got {type(detection).__name__}")

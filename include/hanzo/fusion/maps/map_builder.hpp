@@ -17,7 +17,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
+#include <string_view>
 
 #include "hanzo/fusion/cloud/point_cloud.hpp"
 #include "hanzo/fusion/core/result.hpp"
@@ -70,7 +72,15 @@ class MapBuilder {
   static Result<MapBuilder> create(const MapBuilderConfig& config);
 
   /// Integrates one scan. Invalid clouds or poses are rejected, changing nothing.
-  Status insert(const SE3& T_world_sensor, const cloud::PointCloud& scan_in_sensor_frame, ScanUse use = ScanUse::kAllLayers);
+  /// point_classes (optional): a segmentation class per scan point (class_index() values or
+  /// msgs::kNoClass) for the point map (PointMap::add_keyframe).
+  Status insert(const SE3& T_world_sensor, const cloud::PointCloud& scan_in_sensor_frame, ScanUse use = ScanUse::kAllLayers,
+                std::span<const uint16_t> point_classes = {});
+  /// A later scan's segmentation classes (one per point, class_index() values or
+  /// msgs::kNoClass) for the newest point-map keyframe's points (PointMap::add_class_votes);
+  /// nothing without a point map or a keyframe.
+  Status add_class_votes(const SE3& T_world_sensor, const std::vector<Eigen::Vector3f>& points_in_sensor_frame,
+                         std::span<const uint16_t> point_classes);
   /// Moves earlier point-map keyframes (numbered 0, 1, ... in the order of the kAllLayers
   /// inserts) after a correction. Occupancy layers keep what was integrated (rebuild them from the corrected
   /// poses when the correction is large).
@@ -79,9 +89,13 @@ class MapBuilder {
   /// Fills the map's layers (points; occupancy: the 3D grid when built, else the 2D one; TSDF
   /// and its mesh) and leaves its metadata as given.
   void write_layers(msgs::FusionMap& map) const;
-  /// write_layers, with the point layer's geometric labels when geometric_labels is set (the
-  /// map a session or `map build` hands out; incremental map updates use write_layers).
+  /// write_layers, with the point layer's geometric labels when geometric_labels is set and
+  /// the grid cells' segmentation classes when the points have them (cell_classes.hpp): the
+  /// map a session or `map build` hands out; incremental map updates use write_layers.
   void write_map(msgs::FusionMap& map) const;
+  /// The point map's label table index of a segmentation class (PointMap::class_index);
+  /// msgs::kNoClass without a point map.
+  uint16_t class_index(std::string_view name);
 
   const std::optional<OccupancyGrid2D>& occupancy_2d() const { return occupancy_2d_; }
   const std::optional<OccupancyGrid3D>& occupancy_3d() const { return occupancy_3d_; }

@@ -21,12 +21,20 @@ namespace hanzo::fusion::msgs {
 
 enum class SemanticLabel : uint8_t { kUnknown, kFloor, kWall, kObstacle, kTraversable };
 
+/// A point or cell no segmentation class was projected onto (PointLayer::classes,
+/// OccupancyGridLayer::classes).
+inline constexpr uint16_t kNoClass = 0xFFFF;
+
 struct PointLayer {
   std::vector<Eigen::Vector3f> points;  // world frame, meters
   std::vector<float> position_std;      // 1-sigma per point (m); empty or one per point
   std::vector<SemanticLabel> labels;    // empty or one per point
   std::vector<float> intensities;       // empty or one per point
   double voxel_size = 0.0;              // meters, 0 if not voxelized
+  /// Projected segmentation classes: empty or one per point, an index into
+  /// FusionMap::semantic_classes, kNoClass where no camera's segmentation saw the point.
+  std::vector<uint16_t> classes;
+  std::vector<float> class_probability;  // empty or one per point: the class's posterior, (0, 1]; 0 for kNoClass
 };
 
 struct OccupancyGridLayer {
@@ -37,6 +45,7 @@ struct OccupancyGridLayer {
   Pose origin;               // world pose of the corner of cell (0, 0, 0)
   std::vector<float> occupancy;        // probability per cell, x fastest, then y, then z; 0.5 = unknown
   std::vector<SemanticLabel> labels;   // empty or one per cell
+  std::vector<uint16_t> classes;       // empty or one per cell: FusionMap::semantic_classes index or kNoClass
 };
 
 struct TsdfBlock {
@@ -138,6 +147,9 @@ struct FusionMap {
   std::optional<VisualLandmarkLayer> visual_landmarks;
   std::optional<GaussianSplatLayer> gaussian_splats;
   std::optional<NeuralFieldLayer> neural_field;
+  /// The label table of the layers' segmentation classes (PointLayer::classes,
+  /// OccupancyGridLayer::classes): the name of each class index.
+  std::vector<std::string> semantic_classes;
 };
 
 struct MapUpdate {

@@ -162,14 +162,24 @@ struct Detection2D {
   std::vector<uint8_t> mask;
 };
 
-/// A detector's output for one camera image: sent on the camera's sensor name with the image's
-/// timestamp (camera clock) and size, which is how the Session matches it to that image.
+/// A segmentation's "no class" value (a pixel the segmenter left unlabelled).
+inline constexpr uint8_t kUnlabelledPixel = 255;
+
+/// A vision pipeline's output for one camera image (HIP-0081): object detections and/or a dense
+/// semantic segmentation, sent on the camera's sensor name with the image's timestamp (camera
+/// clock) and size, which is how the Session matches it to that image.
 struct DetectionsMessage {
   Timestamp timestamp;
   std::string frame_id;
   uint32_t image_width = 0;   // the image the boxes are in, pixels
   uint32_t image_height = 0;
   std::vector<Detection2D> detections;  // may be empty (nothing detected: the image is checked)
+  /// Dense segmentation (optional, as a sensor_msgs/Image label image): empty, or one class id
+  /// per pixel (image_width x image_height, row-major), an index into segmentation_classes;
+  /// kUnlabelledPixel (255) where the segmenter gives no class.
+  std::vector<uint8_t> segmentation;
+  /// The label table: the name of each class id ("floor", "wall", "person", ...), at most 255.
+  std::vector<std::string> segmentation_classes;
 };
 
 /// Any of the eight sensor messages, as the Frontend and the sensor log carry them.

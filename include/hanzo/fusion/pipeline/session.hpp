@@ -65,6 +65,10 @@
 //    are masked out of that image's features (dynamic_mask.hpp). Once a camera's detector has
 //    answered, each of its images waits for its detections until they come or the next image of
 //    any camera does (src/pipeline/session_detections.cpp); counts in MappingSummary.
+//    With a 3D LiDAR, each sweep's points also take the class of the segmentation pixel they
+//    project onto in the nearest output of each camera with a lens model, and points on moving
+//    objects are left out of the map's layers (src/pipeline/semantic_projection.hpp); the point
+//    map fuses the classes per voxel (maps/point_map.hpp), the grid per cell.
 //  - With fusion.mapping.splats, images of the first camera with intrinsics also train 3D
 //    Gaussian splats (session_splats.hpp) at the Session's poses, anchored to keyframes so that
 //    they follow the graph; seeded at the map keyframes' points. Replay trains inside push()
@@ -137,6 +141,7 @@ class Mat;
 namespace hanzo::fusion::pipeline {
 
 class CameraOdometry;
+class SemanticProjection;
 class LidarInertialFactors;
 class BodyImu;
 class SessionSplats;
@@ -384,6 +389,10 @@ struct MappingSummary {
   uint64_t images_masked = 0;
   uint64_t dynamic_objects_masked = 0;
   double masked_image_share = 0.0;
+  /// LiDAR points a segmentation labelled, and those left out of the map on a moving object
+  /// (a 3D LiDAR and cameras with a lens model).
+  uint64_t lidar_points_labelled = 0;
+  uint64_t lidar_points_masked = 0;
   /// The visual odometry's loop-closure candidates: "bow", "learned" (VLAD), "" when it closes
   /// no loops (fusion.vision.place_recognition).
   std::string visual_place_recognition;
@@ -531,7 +540,8 @@ class Session {
   /// first); `reliable` false when the geometry or weather made it doubtful.
   void check_wheels(Timestamp sweep_time, const std::optional<SE3>& T_previous_current, bool reliable);
   /// The sweep as a map keyframe anchored to the newest Frontend keyframe.
-  void add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points);
+  /// point_classes: empty or a segmentation class per point (label_sweep).
+  void add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points, const std::vector<uint16_t>& point_classes);
   /// Looks for a loop closing at the loop closure detector's newest keyframe (kept or a
   /// revisit); a verified one becomes a loop factor.
   void detect_lidar_loop();
@@ -650,6 +660,11 @@ class Session {
     bool streaming = false;                    // its detector has answered
   };
   std::map<std::string, CameraDetections, std::less<>> camera_detections_;
+  /// Segmentations and moving objects onto the 3D LiDAR's points (none without both).
+  std::unique_ptr<SemanticProjection> semantic_projection_;
+  /// The sweep's points without those on moving objects, with their segmentation classes
+  /// (empty when no camera's output labelled any).
+  std::pair<std::vector<Eigen::Vector3f>, std::vector<uint16_t>> label_sweep(Timestamp time, const std::vector<Eigen::Vector3f>& points);
   double masked_share_sum_ = 0.0;
   std::optional<SE3> visual_world_;
   SE3 visual_world_correction_;  ///< the Frontend's world correction visual_world_ follows

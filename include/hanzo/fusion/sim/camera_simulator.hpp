@@ -97,6 +97,13 @@ struct CameraSimulatorConfig {
   /// index among the world's moving boxes as track id (and the pixels as its instance mask).
   GroundTruthDetections ground_truth_detections = GroundTruthDetections::kNone;
   int min_detection_pixels = 30;
+  /// detections() also carries a dense segmentation: each pixel centre's first-hit object's
+  /// class (the ground's, a box's, a cylinder's or a moving box's class_name; the sky
+  /// unlabelled), the label table in the order ground, boxes, cylinders, moving boxes (each name
+  /// once). segmentation_noise: the share of pixels given another class, drawn uniformly (a
+  /// segmenter's errors, independent per pixel and frame).
+  bool ground_truth_segmentation = false;
+  double segmentation_noise = 0.0;
   std::string frame_id = "camera";
   uint64_t seed = 6;
 };
@@ -109,8 +116,9 @@ class CameraSimulator {
 
   /// The image exposed at `time`; call in increasing time order.
   msgs::ImageMessage measure(Timestamp time);
-  /// The ground-truth detections of the image measure() returned last (config
-  /// ground_truth_detections; nullopt when off, for a depth camera, or before any image).
+  /// The ground-truth detections (and segmentation) of the image measure() returned last
+  /// (config ground_truth_detections, ground_truth_segmentation; nullopt when both are off, for
+  /// a depth camera, or before any image).
   std::optional<msgs::DetectionsMessage> detections() const;
   /// The unit ray (camera frame) of image position (u, v) in pixels, after undistortion.
   Eigen::Vector3d pixel_ray(double u, double v) const;
@@ -125,6 +133,8 @@ class CameraSimulator {
   void render(Timestamp time, std::vector<Eigen::Vector3f>& radiance, std::vector<float>* depth = nullptr,
               std::vector<int>* object_ids = nullptr) const;
   msgs::ImageMessage measure_depth(Timestamp time);
+  /// The last image's ground-truth segmentation into `message` (config ground_truth_segmentation).
+  void add_segmentation(msgs::DetectionsMessage& message) const;
   /// The message without pixels: time, frame, size, encoding, intrinsics and distortion.
   msgs::ImageMessage image_header(Timestamp time) const;
   /// The next standard normal draw of the per-frame xorshift sequence `state`.
@@ -146,6 +156,8 @@ class CameraSimulator {
   std::vector<float> normal_table_;    // standard normal draws for pixel noise
   std::vector<int> object_ids_;        // the last image's (ground-truth detections)
   Timestamp object_ids_time_;
+  std::vector<std::string> segmentation_classes_;  // the label table
+  std::vector<uint8_t> class_of_object_;           // per object id + 1 (the ground first)
   Eigen::Vector3d sun_direction_;
   std::mt19937_64 random_;
 };

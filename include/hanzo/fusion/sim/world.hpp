@@ -44,6 +44,7 @@ struct Box {
   Eigen::Vector3d half_size{0.5, 0.5, 0.5};  ///< metres, each > 0
   double yaw = 0.0;                          ///< radians
   Material material;
+  std::string class_name = "box";            ///< its segmentation class (ground-truth segmentation)
 };
 
 /// A vertical cylinder standing on base_center.
@@ -52,6 +53,7 @@ struct Cylinder {
   double radius = 0.1;  ///< metres, > 0
   double height = 1.0;  ///< metres, > 0
   Material material;
+  std::string class_name = "pillar";  ///< its segmentation class
 };
 
 /// A box walking a polyline back and forth at constant speed, starting at path[0] at
@@ -74,6 +76,7 @@ struct WorldDescription {
   bool has_ground = true;
   double ground_height = 0.0;
   Material ground;
+  std::string ground_class = "ground";  ///< the ground's segmentation class
   std::vector<Box> boxes;
   std::vector<Cylinder> cylinders;
   std::vector<MovingBox> moving_boxes;
