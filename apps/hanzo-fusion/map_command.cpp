@@ -249,6 +249,7 @@ nlohmann::json describe_map(const msgs::FusionMap& map) {
   nlohmann::json inputs = nlohmann::json::array();
   for (const msgs::InputLog& input : map.provenance.input_logs) inputs.push_back({{"uri", input.uri}, {"sha256", input.sha256}});
   result["inputs"] = inputs;
+  result["semantic_classes"] = map.semantic_classes;
   nlohmann::json layers = nlohmann::json::object();
   if (map.points) {
     Eigen::Vector3f low = Eigen::Vector3f::Zero();
@@ -274,6 +275,16 @@ nlohmann::json describe_map(const msgs::FusionMap& map) {
       }
       layers["points"]["label_counts"] = std::move(counts);
     }
+    if (!map.points->classes.empty()) {
+      // Segmentation classes (the label table's names) with their points.
+      nlohmann::json counts = nlohmann::json::object();
+      for (const uint16_t index : map.points->classes) {
+        if (index == msgs::kNoClass) continue;
+        const std::string& name = map.semantic_classes.at(index);  // validated on reading
+        counts[name] = counts.value(name, 0) + 1;
+      }
+      layers["points"]["class_counts"] = std::move(counts);
+    }
   }
   if (map.occupancy) {
     const auto& grid = *map.occupancy;
@@ -290,7 +301,8 @@ nlohmann::json describe_map(const msgs::FusionMap& map) {
                            {"occupied_cells", occupied},
                            {"free_cells", free},
                            {"unknown_cells", grid.occupancy.size() - occupied - free},
-                           {"labels", !grid.labels.empty()}};
+                           {"labels", !grid.labels.empty()},
+                           {"classes", !grid.classes.empty()}};
   }
   if (map.tsdf) {
     layers["tsdf"] = {{"voxel_size", map.tsdf->voxel_size}, {"blocks", map.tsdf->blocks.size()}, {"block_size", map.tsdf->block_size}};
@@ -328,6 +340,12 @@ std::string describe_map_text(const nlohmann::json& description) {
   if (layers.contains("points")) {
     const auto& p = layers["points"];
     text += fmt::format("  points: {} ({} m voxels)\n", p["count"].get<std::size_t>(), p["voxel_size"].get<double>());
+    for (const char* key : {"label_counts", "class_counts"}) {
+      if (!p.contains(key)) continue;
+      std::string counts;
+      for (const auto& [name, count] : p[key].items()) counts += fmt::format("{}{} {}", counts.empty() ? "" : ", ", name, count.get<std::size_t>());
+      text += fmt::format("    {}: {}\n", std::string_view(key) == "label_counts" ? "geometric labels" : "segmentation classes", counts);
+    }
   }
   if (layers.contains("occupancy")) {
     const auto& o = layers["occupancy"];

@@ -15,6 +15,7 @@ Status validate_layer(const Layer& layer) {
   wrapper.map_id = "layer";
   if constexpr (std::is_same_v<Layer, msgs::OccupancyGridLayer>) {
     wrapper.occupancy = layer;
+    wrapper.occupancy->classes.clear();  // indices into the whole map's label table, not checked here
   } else {
     static_assert(std::is_same_v<Layer, msgs::TsdfLayer>);
     wrapper.tsdf = layer;

@@ -6,6 +6,7 @@
 
 #include <fmt/format.h>
 
+#include "class_votes.hpp"
 #include "floor_divide.hpp"
 
 #include "hanzo/fusion/cloud/voxel_grid.hpp"
@@ -16,10 +17,51 @@
 namespace hanzo::fusion::maps {
 namespace {
 
+// Points merged into voxels of `resolution`; each coarse point takes the most frequent geometric
+// label and segmentation class of the points it merges (the class's probability: their mean).
 msgs::PointLayer coarsen_points(const msgs::PointLayer& layer, double resolution) {
   const cloud::PointCloud coarse = cloud::voxel_downsample(to_point_cloud(layer), resolution);
   msgs::PointLayer out = to_point_layer(coarse, resolution);
   out.position_std.assign(out.points.size(), static_cast<float>(resolution / std::sqrt(12.0)));
+  if (layer.labels.empty() && layer.classes.empty()) return out;
+  // Each coarse point is its voxel's centroid, inside the voxel.
+  const auto inverse = static_cast<float>(1.0 / resolution);
+  std::unordered_map<uint64_t, std::size_t> coarse_of_voxel;
+  for (std::size_t i = 0; i < out.points.size(); ++i) {
+    uint64_t key = 0;
+    if (cloud::pack_voxel_key(cloud::voxel_coordinates(out.points[i], inverse), &key)) coarse_of_voxel.emplace(key, i);
+  }
+  std::vector<ClassVotes> labels(layer.labels.empty() ? 0 : out.points.size()), classes(layer.classes.empty() ? 0 : out.points.size());
+  std::vector<std::pair<double, uint32_t>> probability_of(classes.size());  // per coarse point: its class's probabilities, sum and count
+  std::vector<std::size_t> coarse_of_point(layer.points.size(), out.points.size());
+  for (std::size_t i = 0; i < layer.points.size(); ++i) {
+    uint64_t key = 0;
+    if (!cloud::pack_voxel_key(cloud::voxel_coordinates(layer.points[i], inverse), &key)) continue;
+    const auto found = coarse_of_voxel.find(key);
+    if (found == coarse_of_voxel.end()) continue;
+    coarse_of_point[i] = found->second;
+    if (!labels.empty()) labels[found->second].add(static_cast<uint16_t>(layer.labels[i]));
+    if (!classes.empty() && layer.classes[i] != msgs::kNoClass) classes[found->second].add(layer.classes[i]);
+  }
+  if (!labels.empty()) {
+    out.labels.resize(out.points.size());
+    for (std::size_t c = 0; c < out.points.size(); ++c) out.labels[c] = static_cast<msgs::SemanticLabel>(labels[c].counts.empty() ? 0 : labels[c].most().first);
+  }
+  if (!classes.empty()) {
+    out.classes.resize(out.points.size());
+    for (std::size_t c = 0; c < out.points.size(); ++c) out.classes[c] = classes[c].most().first;
+    for (std::size_t i = 0; i < layer.points.size(); ++i) {
+      const std::size_t c = coarse_of_point[i];
+      if (c == out.points.size() || layer.classes[i] != out.classes[c] || layer.class_probability.empty()) continue;
+      probability_of[c].first += layer.class_probability[i];
+      ++probability_of[c].second;
+    }
+    out.class_probability.resize(out.points.size());
+    for (std::size_t c = 0; c < out.points.size(); ++c) {
+      out.class_probability[c] = probability_of[c].second == 0 ? 0.0F : static_cast<float>(probability_of[c].first / probability_of[c].second);
+    }
+    if (layer.class_probability.empty()) out.class_probability.clear();
+  }
   return out;
 }
 

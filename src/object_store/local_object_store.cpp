@@ -180,9 +180,11 @@ class LocalObjectStore final : public ObjectStore {
   }
 
  private:
+  // Unique per writer: the process id keeps forked writers, whose random generators were copied
+  // from one parent, apart.
   static fs::path temporary_path(const fs::path& target) {
     thread_local std::mt19937_64 random(std::random_device{}());
-    return target.parent_path() / fmt::format(".{}.{:016x}.tmp", target.filename().string(), random());
+    return target.parent_path() / fmt::format(".{}.{}.{:016x}.tmp", target.filename().string(), ::getpid(), random());
   }
 
   Status make_parent(const std::string& key) const {

@@ -132,5 +132,34 @@ TEST(Redaction, LabelsGoAndGeometryCoarsensWithoutLosingObstacles) {
   EXPECT_FALSE(redact_map(map, RedactionConfig{.resolution = -1.0}).ok());
 }
 
+// Without drop_labels the coarse points keep the most frequent geometric label and segmentation
+// class of the points they merge, and the map its label table; with it both go.
+TEST(Redaction, LabelsAndSegmentationClassesSurviveCoarseningUnlessDropped) {
+  msgs::FusionMap map;
+  map.map_id = "labelled";
+  map.semantic_classes = {"floor", "person"};
+  msgs::PointLayer points;
+  points.voxel_size = 0.1;
+  // Five points in one 0.5 m voxel (three floor, two person), one alone in another.
+  for (const float x : {0.05F, 0.15F, 0.25F, 0.35F, 0.45F, 1.25F}) points.points.emplace_back(x, 0.1F, 0.1F);
+  points.labels = {msgs::SemanticLabel::kFloor, msgs::SemanticLabel::kFloor, msgs::SemanticLabel::kWall, msgs::SemanticLabel::kFloor,
+                   msgs::SemanticLabel::kWall, msgs::SemanticLabel::kObstacle};
+  points.classes = {0, 1, 0, 1, 0, msgs::kNoClass};
+  points.class_probability = {0.9F, 0.8F, 0.7F, 0.8F, 0.8F, 0.0F};
+  map.points = points;
+  const msgs::FusionMap kept = redact_map(map, RedactionConfig{.drop_labels = false, .resolution = 0.5}).value();
+  ASSERT_EQ(kept.points->points.size(), 2u);
+  EXPECT_EQ(kept.semantic_classes, map.semantic_classes);
+  EXPECT_EQ(kept.points->labels, (std::vector<msgs::SemanticLabel>{msgs::SemanticLabel::kFloor, msgs::SemanticLabel::kObstacle}));
+  EXPECT_EQ(kept.points->classes, (std::vector<uint16_t>{0, msgs::kNoClass}));
+  EXPECT_NEAR(kept.points->class_probability[0], 0.8F, 1e-6F);  // the floor points' mean
+  EXPECT_EQ(kept.points->class_probability[1], 0.0F);
+  const msgs::FusionMap dropped = redact_map(map, RedactionConfig{.drop_labels = true, .resolution = 0.5}).value();
+  EXPECT_TRUE(dropped.points->labels.empty());
+  EXPECT_TRUE(dropped.points->classes.empty());
+  EXPECT_TRUE(dropped.points->class_probability.empty());
+  EXPECT_TRUE(dropped.semantic_classes.empty());
+}
+
 }  // namespace
 }  // namespace hanzo::fusion::maps

@@ -37,8 +37,11 @@ inline msgs::FusionMap full_map() {
     points.position_std.push_back(0.01f + 1e-4f * static_cast<float>(i));
     points.labels.push_back(static_cast<msgs::SemanticLabel>(i % 5));
     points.intensities.push_back(static_cast<float>(i % 100) / 100.0f);
+    points.classes.push_back(i % 7 == 0 ? msgs::kNoClass : static_cast<uint16_t>(i % 3));
+    points.class_probability.push_back(i % 7 == 0 ? 0.0f : 0.5f + 0.001f * static_cast<float>(i % 400));
   }
   points.voxel_size = 0.1;
+  map.semantic_classes = {"floor", "wall", "person"};
   map.points = points;
 
   msgs::OccupancyGridLayer occupancy;
@@ -50,6 +53,7 @@ inline msgs::FusionMap full_map() {
   for (uint32_t i = 0; i < 40 * 30 * 2; ++i) {
     occupancy.occupancy.push_back(static_cast<float>(i % 11) / 10.0f);
     occupancy.labels.push_back(static_cast<msgs::SemanticLabel>(i % 3));
+    occupancy.classes.push_back(i % 4 == 0 ? msgs::kNoClass : static_cast<uint16_t>(i % 3));
   }
   map.occupancy = occupancy;
 
@@ -99,6 +103,7 @@ inline msgs::FusionMap full_map() {
 inline void expect_same(const msgs::FusionMap& a, const msgs::FusionMap& b) {
   EXPECT_EQ(a.format_version, b.format_version);
   EXPECT_EQ(a.map_id, b.map_id);
+  EXPECT_EQ(a.semantic_classes, b.semantic_classes);
   EXPECT_EQ(a.version, b.version);
   EXPECT_EQ(a.parent_version, b.parent_version);
   EXPECT_EQ(a.created, b.created);
@@ -123,6 +128,8 @@ inline void expect_same(const msgs::FusionMap& a, const msgs::FusionMap& b) {
     EXPECT_EQ(a.points->points, b.points->points);
     EXPECT_EQ(a.points->position_std, b.points->position_std);
     EXPECT_EQ(a.points->labels, b.points->labels);
+    EXPECT_EQ(a.points->classes, b.points->classes);
+    EXPECT_EQ(a.points->class_probability, b.points->class_probability);
     EXPECT_EQ(a.points->intensities, b.points->intensities);
     EXPECT_EQ(a.points->voxel_size, b.points->voxel_size);
   }
@@ -136,6 +143,7 @@ inline void expect_same(const msgs::FusionMap& a, const msgs::FusionMap& b) {
     EXPECT_EQ(a.occupancy->origin.orientation.coeffs(), b.occupancy->origin.orientation.coeffs());
     EXPECT_EQ(a.occupancy->occupancy, b.occupancy->occupancy);
     EXPECT_EQ(a.occupancy->labels, b.occupancy->labels);
+    EXPECT_EQ(a.occupancy->classes, b.occupancy->classes);
   }
   ASSERT_EQ(a.tsdf.has_value(), b.tsdf.has_value());
   if (a.tsdf) {

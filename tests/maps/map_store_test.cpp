@@ -147,6 +147,8 @@ TEST_F(MapStoreTest, AWriterKilledMidSaveLeavesEveryStoredVersionReadable) {
   big.points->position_std.clear();
   big.points->labels.clear();
   big.points->intensities.clear();
+  big.points->classes.clear();
+  big.points->class_probability.clear();
   int pipe_ends[2];
   ASSERT_EQ(::pipe(pipe_ends), 0);
   const pid_t child = ::fork();

@@ -162,10 +162,9 @@ TEST(MapLabels, TheWarehouseMapsPointsAreLabelledAsTheSimulatedWorld) {
   EXPECT_GT(static_cast<double>(occupied_on_edge), 0.95 * static_cast<double>(occupied));
 }
 
-// The warehouse robot's first 20 s with a segmenter on its front camera (5 % of the pixels given
-// a wrong class) and, instead of the scenario's people (behind the robot then), two in the
-// camera's and the LiDAR's view: one walking ahead beside the robot's lane, one crossing the
-// lane before the first corner.
+// The first 20 s of examples/scenarios/warehouse_segmented.yaml: the warehouse robot with a
+// segmenter on its front camera (5 % of the pixels given a wrong class) and two people walking
+// through the camera's and the LiDAR's view.
 struct SegmentedWarehouse {
   std::unique_ptr<sim::ScenarioSimulation> simulation;
   std::unique_ptr<Session> session;
@@ -174,25 +173,9 @@ struct SegmentedWarehouse {
 };
 
 SegmentedWarehouse map_segmented_warehouse(std::vector<std::string> dynamic_classes) {
-  sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_robot.yaml").value();
+  sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_segmented.yaml").value();
   scenario.duration = 20.0;
   scenario.num_threads = 0;
-  for (sim::ScenarioSensor& sensor : scenario.sensors) {
-    if (auto* camera = std::get_if<sim::CameraSimulatorConfig>(&sensor.simulator)) {
-      camera->ground_truth_segmentation = true;
-      camera->segmentation_noise = 0.05;
-    }
-  }
-  scenario.world.moving_boxes.clear();
-  for (const auto& [path, speed] : {std::pair<std::vector<Eigen::Vector2d>, double>{{{24.0, -3.5}, {38.0, -3.5}}, 0.7},
-                                    {{{37.0, -6.5}, {37.0, 1.5}}, 1.0}}) {
-    sim::MovingBox person;
-    person.box.half_size = Eigen::Vector3d(0.25, 0.2, 0.875);
-    person.path = path;
-    person.speed = speed;
-    person.start_time = scenario.start_time;
-    scenario.world.moving_boxes.push_back(person);
-  }
   SegmentedWarehouse out;
   out.simulation = sim::ScenarioSimulation::create(scenario).value();
   config::FusionConfig config = sim::scenario_fusion_config(scenario);
@@ -260,7 +243,7 @@ TEST(MapLabels, ProjectedSegmentationClassesLabelTheWarehouseMapsVoxels) {
   std::printf("map points off the static world: %zu masked, %zu unmasked\n", on_people, on_people_unmasked);
   EXPECT_GT(summary.lidar_points_masked, 1000u);
   EXPECT_EQ(unmasked.session->mapping_summary().lidar_points_masked, 0u);
-  EXPECT_LT(static_cast<double>(on_people), 0.4 * static_cast<double>(on_people_unmasked));
+  EXPECT_LT(static_cast<double>(on_people), 0.45 * static_cast<double>(on_people_unmasked));
 }
 
 }  // namespace

@@ -4,10 +4,12 @@
 //
 // Per layer, with r = RedactionConfig::resolution:
 //  - points: voxelized at r (one centroid per voxel, mean intensity, position_std at least
-//    r / sqrt(12));
+//    r / sqrt(12), the most frequent geometric label and segmentation class of the points
+//    merged, the class's probability their mean);
 //  - occupancy: cells merged k x k (x k) with k = round(r / resolution) >= 1; a merged cell
 //    takes the highest probability of its observed cells (an obstacle never disappears by
-//    redaction) and is unknown when none was observed;
+//    redaction) and is unknown when none was observed; cell labels and classes do not survive
+//    merging (k > 1);
 //  - mesh: vertex clustering at r (vertices in one voxel merge into their centroid; triangles
 //    that collapse are dropped; vertex labels do not survive the clustering);
 //  - TSDF: removed (a coarse TSDF would still describe the surfaces at the original
