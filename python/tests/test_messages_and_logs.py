@@ -42,6 +42,8 @@ def every_message_type():
         ("/camera/detections", Detections(T0 + 10, 64, 48, [
             Detection("person", [10.5, 4.0, 20.0, 30.25], score=0.75, track_id=3),
             Detection("car", [30.0, 10.0, 50.0, 20.0], mask=np.array([[0, 255, 255], [255, 255, 0]], dtype=np.uint8))], frame_id="cam")),
+        ("/camera/detections", Detections(T0 + 11, 4, 3, segmentation=np.array([[1, 1, 1, 255], [1, 2, 2, 1], [0, 0, 0, 0]], dtype=np.uint8),
+                                          segmentation_classes=["floor", "wall", "person"])),
     ]
 
 
@@ -49,7 +51,7 @@ def assert_same_message(read, written):
     assert type(read) is type(written)
     for name, value in vars(written).items():
         other = getattr(read, name)
-        if isinstance(value, list):
+        if isinstance(value, list) and value and hasattr(value[0], "__dict__"):
             assert len(other) == len(value), name
             for read_item, written_item in zip(other, value):
                 assert_same_message(read_item, written_item)
@@ -182,7 +184,9 @@ def test_messages_convert_to_the_grpc_protobufs():
             assert proto.data == message.pixels.tobytes() and (proto.width, proto.height) == (message.width, message.height)
         if isinstance(message, Radar):
             assert len(proto.targets) == len(message.targets)
-        if isinstance(message, Detections):
+        if isinstance(message, Detections) and message.segmentation is None:
             assert [d.class_name for d in proto.detections] == ["person", "car"] and proto.detections[1].mask == bytes([0, 255, 255, 255, 255, 0])
+        if isinstance(message, Detections) and message.segmentation is not None:
+            assert proto.segmentation == message.segmentation.tobytes() and list(proto.segmentation_classes) == ["floor", "wall", "person"]
     with pytest.raises(TypeError):
         streaming.to_proto({"timestamp_ns": T0})

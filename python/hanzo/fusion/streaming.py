@@ -121,6 +121,9 @@ def to_proto(message: messages.Message):
             if detection.mask is not None:
                 item.mask_height, item.mask_width = detection.mask.shape
                 item.mask = detection.mask.tobytes()
+        if message.segmentation is not None:
+            out.segmentation = message.segmentation.tobytes()
+            out.segmentation_classes.extend(message.segmentation_classes)
         return out
     raise TypeError(f"expected a sensor message of hanzo.fusion.messages, got {type(message).__name__}")
 
