@@ -115,6 +115,7 @@ std::pair<std::vector<Eigen::Vector3f>, std::vector<uint16_t>> Session::label_sw
       semantic_projection_->label(time, points, [this](Timestamp at) { return frontend_->pose_at(at); });
   summary_.lidar_points_labelled += labelled.labelled;
   summary_.lidar_points_masked += labelled.moving_points;
+  if (labelled.labelled == 0 && labelled.moving_points == 0) return {points, {}};
   std::pair<std::vector<Eigen::Vector3f>, std::vector<uint16_t>> kept;
   kept.first.reserve(points.size());
   if (labelled.labelled > 0) kept.second.reserve(points.size());

@@ -64,16 +64,18 @@ TEST(Validate, RangeReadingsFollowRep117) {
   expect_rejected(range, "variance", "negative");
 }
 
+// Why `message` is refused once `edit` changed it ("accepted" when it validates).
+std::string refusal(DetectionsMessage message, const std::function<void(DetectionsMessage&)>& edit) {
+  edit(message);
+  const Status status = validate(message);
+  return status.ok() ? std::string("accepted") : status.error().message;
+}
+
 // A detector's boxes must lie in its image, be ordered, scored in [0, 1] and named; a mask
 // must have its stated size. Each refusal names the detection and field.
 TEST(Validate, DetectionsAreBoxesInsideTheirImage) {
   EXPECT_TRUE(validate(testing::detections()).ok());
-  const auto refused = [](const std::function<void(DetectionsMessage&)>& edit) {
-    DetectionsMessage message = testing::detections();
-    edit(message);
-    const Status status = validate(message);
-    return status.ok() ? std::string("accepted") : status.error().message;
-  };
+  const auto refused = [](const std::function<void(DetectionsMessage&)>& edit) { return refusal(testing::detections(), edit); };
   EXPECT_THAT(refused([](DetectionsMessage& m) { m.image_width = 0; }), HasSubstr("image size 0 x 480"));
   EXPECT_THAT(refused([](DetectionsMessage& m) { m.detections[1].class_name.clear(); }), HasSubstr("detections[1].class_name"));
   EXPECT_THAT(refused([](DetectionsMessage& m) { m.detections[0].score = 1.5F; }), HasSubstr("detections[0].score"));
@@ -87,12 +89,7 @@ TEST(Validate, DetectionsAreBoxesInsideTheirImage) {
 // table of named classes.
 TEST(Validate, SegmentationsHaveAClassOfTheirTablePerPixel) {
   EXPECT_TRUE(validate(testing::segmentation()).ok());
-  const auto refused = [](const std::function<void(DetectionsMessage&)>& edit) {
-    DetectionsMessage message = testing::segmentation();
-    edit(message);
-    const Status status = validate(message);
-    return status.ok() ? std::string("accepted") : status.error().message;
-  };
+  const auto refused = [](const std::function<void(DetectionsMessage&)>& edit) { return refusal(testing::segmentation(), edit); };
   EXPECT_THAT(refused([](DetectionsMessage& m) { m.segmentation.pop_back(); }), HasSubstr("segmentation: 11 class ids for a 4 x 3 image"));
   EXPECT_THAT(refused([](DetectionsMessage& m) { m.segmentation[6] = 3; }), HasSubstr("pixel (2, 1) has class id 3, the label table has 3 classes"));
   EXPECT_THAT(refused([](DetectionsMessage& m) { m.segmentation_classes.clear(); }), HasSubstr("segmentation_classes: 0 classes"));
