@@ -961,6 +961,7 @@ void Session::register_ready_scans(bool final) {
     }
     Result<LidarInertialOdometry::PreparedScan> prepared = odometry_->prepare(scan);
     if (prepared && merger_) merger_->merge(prepared->cloud, prepared->time);
+    if (prepared && semantic_projection_) mask_moving_points(*prepared);
     if (!prepared) {
       logger()->debug("session: sweep at {:.3f} s not registered: {}", scan.timestamp.seconds(), prepared.error().message);
       // A sweep that began before the first pose has no motion to start from (the IMU aligned).

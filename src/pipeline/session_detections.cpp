@@ -9,6 +9,7 @@
 
 #include "camera_odometry.hpp"
 #include "semantic_projection.hpp"
+#include "hanzo/fusion/cloud/point_cloud.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/msgs/validate.hpp"
 #include "hanzo/fusion/pipeline/dynamic_mask.hpp"
@@ -107,6 +108,19 @@ vision::StaticMask Session::static_mask_for(const std::string& sensor, const msg
   summary_.dynamic_objects_masked += static_cast<uint64_t>(mask->masked_objects);
   masked_share_sum_ += mask->masked_share;
   return {mask->static_mask};
+}
+
+void Session::mask_moving_points(LidarInertialOdometry::PreparedScan& prepared) {
+  const SemanticProjection::Labelled labelled =
+      semantic_projection_->label(prepared.time, prepared.cloud.positions, [this](Timestamp at) { return frontend_->pose_at(at); });
+  if (labelled.moving_points == 0) return;
+  std::vector<uint32_t> kept;
+  kept.reserve(prepared.cloud.size() - labelled.moving_points);
+  for (std::size_t i = 0; i < prepared.cloud.size(); ++i) {
+    if (labelled.moving[i] == 0) kept.push_back(static_cast<uint32_t>(i));
+  }
+  prepared.cloud = cloud::select(prepared.cloud, kept);
+  summary_.lidar_points_masked += labelled.moving_points;
 }
 
 std::pair<std::vector<Eigen::Vector3f>, std::vector<uint16_t>> Session::label_sweep(Timestamp time, const std::vector<Eigen::Vector3f>& points) {

@@ -67,8 +67,9 @@
 //    any camera does (src/pipeline/session_detections.cpp); counts in MappingSummary.
 //    With a 3D LiDAR, each sweep's points also take the class of the segmentation pixel they
 //    project onto in the nearest output of each camera with a lens model, and points on moving
-//    objects are left out of the map's layers (src/pipeline/semantic_projection.hpp); the point
-//    map fuses the classes per voxel (maps/point_map.hpp), the grid per cell.
+//    objects are left out of the sweep's registration and the map's layers
+//    (src/pipeline/semantic_projection.hpp); the point map fuses the classes per voxel
+//    (maps/point_map.hpp), the grid per cell.
 //  - With fusion.mapping.splats, images of the first camera with intrinsics also train 3D
 //    Gaussian splats (session_splats.hpp) at the Session's poses, anchored to keyframes so that
 //    they follow the graph; seeded at the map keyframes' points. Replay trains inside push()
@@ -662,8 +663,10 @@ class Session {
   std::map<std::string, CameraDetections, std::less<>> camera_detections_;
   /// Segmentations and moving objects onto the 3D LiDAR's points (none without both).
   std::unique_ptr<SemanticProjection> semantic_projection_;
-  /// The sweep's points without those on moving objects, with their segmentation classes
-  /// (empty when no camera's output labelled any).
+  /// Leaves a sweep's points on moving objects out before its registration (and the map).
+  void mask_moving_points(LidarInertialOdometry::PreparedScan& prepared);
+  /// The registered sweep's points without those on moving objects, with their segmentation
+  /// classes (empty when no camera's output labelled any).
   std::pair<std::vector<Eigen::Vector3f>, std::vector<uint16_t>> label_sweep(Timestamp time, const std::vector<Eigen::Vector3f>& points);
   double masked_share_sum_ = 0.0;
   std::optional<SE3> visual_world_;
