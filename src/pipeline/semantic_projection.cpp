@@ -45,6 +45,7 @@ void SemanticProjection::add(const Camera& camera, const msgs::DetectionsMessage
 SemanticProjection::Labelled SemanticProjection::label(Timestamp sweep_time, const std::vector<Eigen::Vector3f>& points_lidar,
                                                        const std::function<std::optional<SE3>(Timestamp)>& pose_at) const {
   Labelled result;
+  if (std::all_of(outputs_.begin(), outputs_.end(), [](const std::deque<Output>& outputs) { return outputs.empty(); })) return result;
   result.classes.assign(points_lidar.size(), msgs::kNoClass);
   result.moving.assign(points_lidar.size(), 0);
   const std::optional<SE3> T_world_body_sweep = pose_at(sweep_time);

@@ -45,7 +45,8 @@ class SemanticProjection {
     cv::Size image_size;
   };
   /// A sweep's points: a class per point (the map's class indices, msgs::kNoClass where no
-  /// camera's segmentation saw it) and whether it lies on a moving object.
+  /// camera's segmentation saw it) and whether it lies on a moving object; both empty while no
+  /// camera has sent an output.
   struct Labelled {
     std::vector<uint16_t> classes;
     std::vector<uint8_t> moving;  ///< 1 on a moving object
