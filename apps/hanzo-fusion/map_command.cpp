@@ -108,6 +108,17 @@ Status export_map(const MapOptions& options, nlohmann::json& result) {
     result["files"] = files;
     return ok_status();
   }
+  if (options.layer == "classes") {
+    // Segmentation classes: the points coloured by class, with the class and its probability.
+    result["layer"] = "classes";
+    if (format != "ply") return Error{fmt::format("--layer classes: exports as ply (classified points), not {}", format)};
+    HANZO_RETURN_IF_ERROR(need_points());
+    HANZO_RETURN_IF_ERROR(maps::write_classified_points_ply(options.out, *map.points, map.semantic_classes));
+    result["files"] = {options.out};
+    result["points"] = map.points->points.size();
+    result["semantic_classes"] = map.semantic_classes;
+    return ok_status();
+  }
   if (format == "pgm") {
     HANZO_RETURN_IF_ERROR(need_occupancy());
     // The names as given: --out map.pgm writes map.pgm (+ map.yaml), --out map.yaml map.yaml (+ map.pgm).
@@ -120,7 +131,7 @@ Status export_map(const MapOptions& options, nlohmann::json& result) {
     return ok_status();
   }
   if (!options.layer.empty() && options.layer != "occupancy" && options.layer != "points" && options.layer != "mesh") {
-    return Error{fmt::format("--layer: expected occupancy, points, mesh or labels, got '{}'", options.layer)};
+    return Error{fmt::format("--layer: expected occupancy, points, mesh, labels or classes, got '{}'", options.layer)};
   }
   if (format == "png") {
     const std::string layer = !options.layer.empty() ? options.layer : map.occupancy ? "occupancy" : map.points ? "points" : "mesh";
@@ -427,8 +438,9 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
   export_app->add_option("--out", options->out, "Output file (pgm: map.pgm or map.yaml; both files are written side by side)")->required();
   export_app->add_option("--format", options->format, "png, pgm, pcd, ply, bin or obj (default: from --out's extension)");
   export_app->add_option("--layer", options->layer,
-                         "occupancy, points, mesh or labels (png default: occupancy, then points; ply: points, then mesh; labels: ply of the "
-                         "points coloured by label, or pgm: one map per label of the grid)");
+                         "occupancy, points, mesh, labels or classes (png default: occupancy, then points; ply: points, then mesh; labels: ply "
+                         "of the points coloured by label, or pgm: one map per label of the grid; classes: ply of the points coloured by "
+                         "segmentation class)");
   export_app->add_option("--pixel-size", options->pixel_size, "png of points: meters per pixel (default: 1600 px wide)");
   export_app->callback([&output, &run, options] {
     run = [&output, options] {

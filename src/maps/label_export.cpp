@@ -41,6 +41,46 @@ Status write_labelled_points_ply(const std::string& path, const msgs::PointLayer
   return yaml::write_file_atomically(path, out);
 }
 
+std::array<uint8_t, 3> semantic_class_color(uint16_t class_index) {
+  static constexpr std::array<std::array<uint8_t, 3>, 12> kPalette{{{31, 119, 180},
+                                                                     {255, 127, 14},
+                                                                     {44, 160, 44},
+                                                                     {214, 39, 40},
+                                                                     {148, 103, 189},
+                                                                     {140, 86, 75},
+                                                                     {227, 119, 194},
+                                                                     {188, 189, 34},
+                                                                     {23, 190, 207},
+                                                                     {174, 199, 232},
+                                                                     {255, 187, 120},
+                                                                     {152, 223, 138}}};
+  if (class_index == msgs::kNoClass) return {128, 128, 128};
+  return kPalette[class_index % kPalette.size()];
+}
+
+Status write_classified_points_ply(const std::string& path, const msgs::PointLayer& layer, const std::vector<std::string>& class_names) {
+  if (layer.classes.empty()) return Error("point layer: no segmentation classes to export (a session projects a camera segmentation onto its LiDAR map)", "classes");
+  if (layer.classes.size() != layer.points.size() || (!layer.class_probability.empty() && layer.class_probability.size() != layer.points.size())) {
+    return Error(fmt::format("point layer: {} classes, {} probabilities for {} points", layer.classes.size(), layer.class_probability.size(), layer.points.size()),
+                 "classes");
+  }
+  std::string out = "ply\nformat binary_little_endian 1.0\ncomment hanzo-fusion segmentation classes (class 65535: none)\n";
+  for (std::size_t i = 0; i < class_names.size(); ++i) out += fmt::format("comment class {} {}\n", i, class_names[i]);
+  out += fmt::format("element vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
+                     "property uchar blue\nproperty ushort class\nproperty float class_probability\nend_header\n",
+                     layer.points.size());
+  out.reserve(out.size() + layer.points.size() * 21);
+  for (std::size_t i = 0; i < layer.points.size(); ++i) {
+    out.append(reinterpret_cast<const char*>(layer.points[i].data()), 3 * sizeof(float));
+    const std::array<uint8_t, 3> color = semantic_class_color(layer.classes[i]);
+    out.append(reinterpret_cast<const char*>(color.data()), color.size());
+    out.append(reinterpret_cast<const char*>(&layer.classes[i]), sizeof(uint16_t));  // little-endian hosts (x86-64, aarch64)
+    const float probability = layer.class_probability.empty() ? 0.0F : layer.class_probability[i];
+    out.append(reinterpret_cast<const char*>(&probability), sizeof(float));
+  }
+  return yaml::write_file_atomically(path, out);
+}
+
 Result<std::vector<std::string>> write_label_maps(const std::string& yaml_stem, const msgs::OccupancyGridLayer& layer) {
   if (layer.labels.empty()) return Error("occupancy grid: no semantic labels to export (map build labels 2D grids by default)", "labels");
   if (layer.size_z != 1) return Error(fmt::format("occupancy grid: {} layers high; label maps are of 2D grids", layer.size_z), "size_z");

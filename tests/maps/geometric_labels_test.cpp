@@ -132,5 +132,35 @@ TEST(LabelExport, PointsAsColouredPlyAndTheGridAsOneMapPerLabel) {
   EXPECT_FALSE(write_label_maps(testing_maps::temp_path("labels"), grid).ok());
 }
 
+// Segmentation classes as a PLY: the label table in the header, per point its class colour, the
+// class index and its probability.
+TEST(LabelExport, SegmentationClassesAsColouredPlyWithTheLabelTable) {
+  msgs::PointLayer points;
+  points.points = {Eigen::Vector3f(1.0F, 2.0F, 0.0F), Eigen::Vector3f(3.0F, 2.0F, 1.5F)};
+  points.classes = {1, msgs::kNoClass};
+  points.class_probability = {0.875F, 0.0F};
+  const std::string ply = testing_maps::temp_path("classes.ply");
+  ASSERT_TRUE(write_classified_points_ply(ply, points, {"floor", "shelf"}));
+  std::ifstream file(ply, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+  EXPECT_NE(bytes.find("comment class 1 shelf\n"), std::string::npos);
+  EXPECT_NE(bytes.find("property ushort class\nproperty float class_probability\n"), std::string::npos);
+  const std::size_t body = bytes.find("end_header\n") + 11;
+  ASSERT_EQ(bytes.size() - body, 2u * 21u);
+  const std::array<uint8_t, 3> shelf = semantic_class_color(1);
+  EXPECT_EQ(static_cast<uint8_t>(bytes[body + 12]), shelf[0]);
+  uint16_t class_index = 0;
+  float probability = 0.0F;
+  std::memcpy(&class_index, bytes.data() + body + 15, sizeof(class_index));
+  std::memcpy(&probability, bytes.data() + body + 17, sizeof(probability));
+  EXPECT_EQ(class_index, 1);
+  EXPECT_EQ(probability, 0.875F);
+  std::memcpy(&class_index, bytes.data() + body + 21 + 15, sizeof(class_index));
+  EXPECT_EQ(class_index, msgs::kNoClass);
+  EXPECT_EQ(static_cast<uint8_t>(bytes[body + 21 + 12]), 128);
+  points.classes.clear();
+  EXPECT_FALSE(write_classified_points_ply(ply, points, {}));
+}
+
 }  // namespace
 }  // namespace hanzo::fusion::maps
