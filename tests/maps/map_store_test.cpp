@@ -138,6 +138,23 @@ TEST_F(MapStoreTest, NewMapsGetAUuidAndMapIdsCannotEscapeTheStore) {
   EXPECT_EQ(ids->size(), 1u);
 }
 
+// Geometric labels, segmentation classes and the label table are kept by every stored version.
+TEST_F(MapStoreTest, LabelsAndSegmentationClassesSurviveVersions) {
+  msgs::FusionMap map = testing_maps::full_map();
+  map.map_id = "labelled";
+  ASSERT_TRUE(store_->save(map).ok());
+  msgs::FusionMap loaded = store_->load("labelled").value();
+  map.version = loaded.version;
+  map.parent_version = loaded.parent_version;
+  testing_maps::expect_same(loaded, map);
+  // A new version with one point relabelled: the old version keeps its classes.
+  loaded.points->classes[1] = 2;
+  ASSERT_TRUE(store_->save(loaded).ok());
+  EXPECT_EQ(store_->load("labelled", 2)->points->classes[1], 2u);
+  EXPECT_EQ(store_->load("labelled", 1)->points->classes[1], map.points->classes[1]);
+  EXPECT_EQ(store_->load("labelled", 2)->semantic_classes, map.semantic_classes);
+}
+
 TEST_F(MapStoreTest, AWriterKilledMidSaveLeavesEveryStoredVersionReadable) {
   ASSERT_TRUE(store_->save(small_map("killed", 1.0f)).ok());
   // A child saves large maps in a loop and is killed with SIGKILL while it writes.
