@@ -22,23 +22,38 @@ std::array<uint8_t, 3> semantic_label_color(msgs::SemanticLabel label) {
   return {128, 128, 128};
 }
 
+namespace {
+
+// A binary little-endian PLY of coloured points: the header (comments, then x y z, red green
+// blue and `extra_properties`), and per point the caller's append_extra after the colour.
+template <typename Colour, typename AppendExtra>
+std::string coloured_points_ply(const std::vector<Eigen::Vector3f>& points, const std::string& comments, const std::string& extra_properties,
+                                std::size_t extra_bytes, const Colour& colour_of, const AppendExtra& append_extra) {
+  std::string out = fmt::format("ply\nformat binary_little_endian 1.0\n{}element vertex {}\nproperty float x\nproperty float y\n"
+                                "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n{}end_header\n",
+                                comments, points.size(), extra_properties);
+  out.reserve(out.size() + points.size() * (15 + extra_bytes));
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    out.append(reinterpret_cast<const char*>(points[i].data()), 3 * sizeof(float));
+    const std::array<uint8_t, 3> colour = colour_of(i);
+    out.append(reinterpret_cast<const char*>(colour.data()), colour.size());
+    append_extra(out, i);  // little-endian hosts (x86-64, aarch64)
+  }
+  return out;
+}
+
+}  // namespace
+
 Status write_labelled_points_ply(const std::string& path, const msgs::PointLayer& layer) {
   if (layer.labels.empty()) return Error("point layer: no semantic labels to export (map build labels points by default)", "labels");
   if (layer.labels.size() != layer.points.size()) {
     return Error(fmt::format("point layer: {} labels for {} points", layer.labels.size(), layer.points.size()), "labels");
   }
-  std::string out = fmt::format("ply\nformat binary_little_endian 1.0\ncomment hanzo-fusion semantic labels: 0 unknown, 1 floor, 2 wall, "
-                                "3 obstacle, 4 traversable\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n"
-                                "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar label\nend_header\n",
-                                layer.points.size());
-  out.reserve(out.size() + layer.points.size() * 16);
-  for (std::size_t i = 0; i < layer.points.size(); ++i) {
-    out.append(reinterpret_cast<const char*>(layer.points[i].data()), 3 * sizeof(float));
-    const std::array<uint8_t, 3> color = semantic_label_color(layer.labels[i]);
-    out.append(reinterpret_cast<const char*>(color.data()), color.size());
-    out.push_back(static_cast<char>(layer.labels[i]));
-  }
-  return yaml::write_file_atomically(path, out);
+  return yaml::write_file_atomically(
+      path, coloured_points_ply(
+                layer.points, "comment hanzo-fusion semantic labels: 0 unknown, 1 floor, 2 wall, 3 obstacle, 4 traversable\n",
+                "property uchar label\n", 1, [&](std::size_t i) { return semantic_label_color(layer.labels[i]); },
+                [&](std::string& out, std::size_t i) { out.push_back(static_cast<char>(layer.labels[i])); }));
 }
 
 std::array<uint8_t, 3> semantic_class_color(uint16_t class_index) {
@@ -64,21 +79,16 @@ Status write_classified_points_ply(const std::string& path, const msgs::PointLay
     return Error(fmt::format("point layer: {} classes, {} probabilities for {} points", layer.classes.size(), layer.class_probability.size(), layer.points.size()),
                  "classes");
   }
-  std::string out = "ply\nformat binary_little_endian 1.0\ncomment hanzo-fusion segmentation classes (class 65535: none)\n";
-  for (std::size_t i = 0; i < class_names.size(); ++i) out += fmt::format("comment class {} {}\n", i, class_names[i]);
-  out += fmt::format("element vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
-                     "property uchar blue\nproperty ushort class\nproperty float class_probability\nend_header\n",
-                     layer.points.size());
-  out.reserve(out.size() + layer.points.size() * 21);
-  for (std::size_t i = 0; i < layer.points.size(); ++i) {
-    out.append(reinterpret_cast<const char*>(layer.points[i].data()), 3 * sizeof(float));
-    const std::array<uint8_t, 3> color = semantic_class_color(layer.classes[i]);
-    out.append(reinterpret_cast<const char*>(color.data()), color.size());
-    out.append(reinterpret_cast<const char*>(&layer.classes[i]), sizeof(uint16_t));  // little-endian hosts (x86-64, aarch64)
-    const float probability = layer.class_probability.empty() ? 0.0F : layer.class_probability[i];
-    out.append(reinterpret_cast<const char*>(&probability), sizeof(float));
-  }
-  return yaml::write_file_atomically(path, out);
+  std::string comments = "comment hanzo-fusion segmentation classes (class 65535: none)\n";
+  for (std::size_t i = 0; i < class_names.size(); ++i) comments += fmt::format("comment class {} {}\n", i, class_names[i]);
+  return yaml::write_file_atomically(
+      path, coloured_points_ply(layer.points, comments, "property ushort class\nproperty float class_probability\n", 6,
+                                [&](std::size_t i) { return semantic_class_color(layer.classes[i]); },
+                                [&](std::string& out, std::size_t i) {
+                                  out.append(reinterpret_cast<const char*>(&layer.classes[i]), sizeof(uint16_t));
+                                  const float probability = layer.class_probability.empty() ? 0.0F : layer.class_probability[i];
+                                  out.append(reinterpret_cast<const char*>(&probability), sizeof(float));
+                                }));
 }
 
 Result<std::vector<std::string>> write_label_maps(const std::string& yaml_stem, const msgs::OccupancyGridLayer& layer) {
