@@ -386,7 +386,8 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"detections_matched", m.detections_matched}, {"detections_late", m.detections_late},
           {"images_without_detections", m.images_without_detections}, {"images_masked", m.images_masked},
           {"dynamic_objects_masked", m.dynamic_objects_masked}, {"masked_image_share", m.masked_image_share},
-          {"lidar_points_labelled", m.lidar_points_labelled}, {"lidar_points_masked", m.lidar_points_masked}};
+          {"lidar_points_labelled", m.lidar_points_labelled}, {"lidar_points_masked", m.lidar_points_masked},
+          {"map_points_moving_removed", m.map_points_moving_removed}};
 }
 
 // Each sensor's health at the end and its changes over the log (seconds from the log's start).
@@ -654,6 +655,9 @@ int run(const Output& output, const RunOptions& options) {
   if (mapping.lidar_points_labelled + mapping.lidar_points_masked > 0) {
     text += fmt::format("camera outputs onto the LiDAR: {} points took a segmentation class, {} on moving objects left out of the map\n",
                         mapping.lidar_points_labelled, mapping.lidar_points_masked);
+  }
+  if (mapping.map_points_moving_removed > 0) {
+    text += fmt::format("moving objects: {} map points left out (later or earlier scans saw through their place)\n", mapping.map_points_moving_removed);
   }
   for (const auto& [sensor, states] : result["health"]["not_ok_seconds"].items()) {
     text += fmt::format("  {:<12} not ok for", sensor);

@@ -173,7 +173,7 @@ Result<MappingConfig> parse_mapping(const YamlValue& node) {
   MappingConfig mapping;
   if (!node.present()) return mapping;
   HANZO_RETURN_IF_ERROR(node.check_keys({"enabled", "lidar_voxel", "lidar_source_voxel", "lidar_max_range", "map_voxel",
-                                         "occupancy_resolution", "keyframe_distance", "keyframe_angle", "loop_closure",
+                                         "occupancy_resolution", "keyframe_distance", "keyframe_angle", "remove_moving_points", "loop_closure",
                                          "loop_min_travel", "loop_search_radius", "loop_max_rmse", "gnss_factors", "gnss_error_correlation", "follow_graph", "velocity_factors", "visual_inertial_window", "splats"}));
   HANZO_ASSIGN_OR_RETURN(mapping.enabled, bool_or(node["enabled"], mapping.enabled));
   HANZO_ASSIGN_OR_RETURN(mapping.lidar_voxel, positive_or(node["lidar_voxel"], mapping.lidar_voxel));
@@ -183,6 +183,7 @@ Result<MappingConfig> parse_mapping(const YamlValue& node) {
   HANZO_ASSIGN_OR_RETURN(mapping.occupancy_resolution, positive_or(node["occupancy_resolution"], mapping.occupancy_resolution));
   HANZO_ASSIGN_OR_RETURN(mapping.keyframe_distance, yaml::non_negative_or(node["keyframe_distance"], mapping.keyframe_distance));
   HANZO_ASSIGN_OR_RETURN(mapping.keyframe_angle, yaml::non_negative_or(node["keyframe_angle"], mapping.keyframe_angle));
+  HANZO_ASSIGN_OR_RETURN(mapping.remove_moving_points, bool_or(node["remove_moving_points"], mapping.remove_moving_points));
   HANZO_ASSIGN_OR_RETURN(mapping.loop_closure, bool_or(node["loop_closure"], mapping.loop_closure));
   HANZO_ASSIGN_OR_RETURN(mapping.loop_min_travel, positive_or(node["loop_min_travel"], mapping.loop_min_travel));
   HANZO_ASSIGN_OR_RETURN(mapping.loop_search_radius, positive_or(node["loop_search_radius"], mapping.loop_search_radius));
@@ -441,6 +442,7 @@ std::string mapping_yaml(const MappingConfig& m) {
   number("occupancy_resolution", m.occupancy_resolution, d.occupancy_resolution);
   number("keyframe_distance", m.keyframe_distance, d.keyframe_distance);
   number("keyframe_angle", m.keyframe_angle, d.keyframe_angle);
+  flag("remove_moving_points", m.remove_moving_points, d.remove_moving_points);
   flag("loop_closure", m.loop_closure, d.loop_closure);
   number("loop_min_travel", m.loop_min_travel, d.loop_min_travel);
   number("loop_search_radius", m.loop_search_radius, d.loop_search_radius);

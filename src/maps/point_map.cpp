@@ -27,6 +27,19 @@ float class_posterior(const ClassVotes& votes, std::size_t class_count, double a
 
 }  // namespace
 
+Status MovingPointConfig::validate() const {
+  HANZO_RETURN_IF_ERROR(visibility.validate());
+  if (later_keyframes < 0 || earlier_keyframes < 0) {
+    return Error{fmt::format("moving_points: later_keyframes and earlier_keyframes must be >= 0, got {} and {}", later_keyframes, earlier_keyframes),
+                 "later_keyframes"};
+  }
+  if (sweep_keyframes < 0) return Error{fmt::format("moving_points.sweep_keyframes: must be >= 0, got {}", sweep_keyframes), "sweep_keyframes"};
+  for (const auto& [value, name] : {std::pair{min_seen_through, "min_seen_through"}, std::pair{min_seen_through_in_a_row, "min_seen_through_in_a_row"}}) {
+    if (value < 1 || value > 255) return Error{fmt::format("moving_points.{}: must lie in [1, 255], got {}", name, value), name};
+  }
+  return ok_status();
+}
+
 Status PointMapConfig::validate() const {
   if (!(std::isfinite(voxel_size) && voxel_size > 0.0)) {
     return Error{fmt::format("point_map.voxel_size: must be a positive number of meters, got {}", voxel_size), "voxel_size"};
@@ -38,6 +51,7 @@ Status PointMapConfig::validate() const {
   if (!(segmentation_accuracy > 0.0 && segmentation_accuracy < 1.0)) {
     return Error{fmt::format("point_map.segmentation_accuracy: must lie in (0, 1), got {}", segmentation_accuracy), "segmentation_accuracy"};
   }
+  if (moving_points.enabled) HANZO_RETURN_IF_ERROR(with_context(moving_points.validate(), "point_map"));
   return ok_status();
 }
 
@@ -72,10 +86,78 @@ Status PointMap::add_keyframe(uint64_t id, const SE3& T_world_sensor, const clou
   kept.normals.clear();
   kept.covariances.clear();
   Keyframe& keyframe = keyframes_[id];
-  keyframe = Keyframe{T_world_sensor, std::move(kept), {}, {}};
+  for (const PointSightings& replaced : keyframe.sightings) moving_points_removed_ -= moved(replaced) ? 1 : 0;
+  keyframe = Keyframe{T_world_sensor, T_world_sensor, std::move(kept), {}, {}, {}};
   if (!point_classes.empty()) vote(keyframe, SE3(), cloud_in_sensor_frame.positions, point_classes);
+  if (config_.moving_points.enabled) {
+    keyframe.sightings.resize(keyframe.cloud.size());
+    test_free_space(id, cloud_in_sensor_frame.positions);
+  }
   dirty_ = true;
   return ok_status();
+}
+
+bool PointMap::moved(const PointSightings& sightings) const {
+  const MovingPointConfig& config = config_.moving_points;
+  return sightings.seen_through_in_a_row >= config.min_seen_through_in_a_row ||
+         (sightings.seen_through >= config.min_seen_through && sightings.seen_through > sightings.seen);
+}
+
+void PointMap::test_points(Keyframe& keyframe, const RangeImage& image, const SE3& T_world_scan) {
+  const SE3 T_scan_keyframe = T_world_scan.inverse() * keyframe.T_world_sensor_added;
+  const Eigen::Matrix3f rotation = T_scan_keyframe.rotation().matrix().cast<float>();
+  const Eigen::Vector3f translation = T_scan_keyframe.translation().cast<float>();
+  for (std::size_t i = 0; i < keyframe.cloud.size(); ++i) {
+    PointSightings& sightings = keyframe.sightings[i];
+    const Visibility visibility = image.classify(rotation * keyframe.cloud.positions[i] + translation);
+    if (visibility != Visibility::kSeen && visibility != Visibility::kSeenThrough) continue;
+    const bool was_moved = moved(sightings);
+    const bool seen = visibility == Visibility::kSeen;
+    uint8_t& count = seen ? sightings.seen : sightings.seen_through;
+    if (count < UINT8_MAX) ++count;
+    if (seen) {
+      sightings.seen_through_in_a_row = 0;
+    } else if (sightings.seen_through_in_a_row < UINT8_MAX) {
+      ++sightings.seen_through_in_a_row;
+    }
+    const bool is_moved = moved(sightings);
+    if (is_moved != was_moved) moving_points_removed_ = is_moved ? moving_points_removed_ + 1 : moving_points_removed_ - 1;
+  }
+}
+
+Status PointMap::observe_scan(const SE3& T_world_sensor, std::span<const Eigen::Vector3f> scan_in_sensor_frame) {
+  if (!T_world_sensor.matrix().allFinite()) return Error{"observed scan: pose is not finite", "T_world_sensor"};
+  const MovingPointConfig& config = config_.moving_points;
+  if (!config.enabled || config.sweep_keyframes == 0 || keyframes_.empty()) return ok_status();
+  const RangeImage image(config.visibility, scan_in_sensor_frame, T_world_sensor.rotation().matrix().transpose() * Eigen::Vector3d::UnitZ());
+  const std::size_t removed = moving_points_removed_;
+  auto newest = keyframes_.end();
+  for (int tested = 0; tested < config.sweep_keyframes && newest != keyframes_.begin(); ++tested) {
+    --newest;
+    test_points(newest->second, image, T_world_sensor);
+  }
+  dirty_ = dirty_ || moving_points_removed_ != removed;  // a point left (or came back)
+  return ok_status();
+}
+
+void PointMap::test_free_space(uint64_t id, std::span<const Eigen::Vector3f> scan_in_sensor_frame) {
+  const MovingPointConfig& config = config_.moving_points;
+  std::erase_if(recent_images_, [id](const auto& entry) { return entry.first == id; });
+  Keyframe& added = keyframes_.at(id);
+  RangeImage image(config.visibility, scan_in_sensor_frame, added.T_world_sensor_added.rotation().matrix().transpose() * Eigen::Vector3d::UnitZ());
+  // The later keyframes' points tested by this scan...
+  auto earlier = keyframes_.find(id);
+  for (int tested = 0; tested < config.later_keyframes && earlier != keyframes_.begin(); ++tested) {
+    --earlier;
+    test_points(earlier->second, image, added.T_world_sensor_added);
+  }
+  // ... and this keyframe's points by the scans before it.
+  for (const auto& [scan_id, scan_image] : recent_images_) {
+    if (const auto scan = keyframes_.find(scan_id); scan != keyframes_.end()) test_points(added, scan_image, scan->second.T_world_sensor_added);
+  }
+  if (config.earlier_keyframes == 0) return;
+  recent_images_.emplace_back(id, std::move(image));
+  while (recent_images_.size() > static_cast<std::size_t>(config.earlier_keyframes)) recent_images_.pop_front();
 }
 
 Status PointMap::add_class_votes(uint64_t id, const SE3& T_world_sensor, const std::vector<Eigen::Vector3f>& points_in_sensor_frame,
@@ -174,6 +256,7 @@ void PointMap::rebuild() const {
     const Eigen::Matrix3d rotation = keyframe.T_world_sensor.rotation().matrix();
     const Eigen::Vector3d translation = keyframe.T_world_sensor.translation();
     for (std::size_t i = 0; i < keyframe.cloud.size(); ++i) {
+      if (!keyframe.sightings.empty() && moved(keyframe.sightings[i])) continue;
       const Eigen::Vector3d world = rotation * keyframe.cloud.positions[i].cast<double>() + translation;
       uint64_t key = 0;
       if (!cloud::pack_voxel_key(cloud::voxel_coordinates(world.cast<float>(), inverse_voxel), &key)) {
@@ -246,9 +329,11 @@ msgs::PointLayer PointMap::to_layer() const {
 std::size_t PointMap::memory_bytes() const {
   std::size_t bytes = merged_.positions.capacity() * sizeof(Eigen::Vector3f) + merged_.intensities.capacity() * sizeof(float) +
                       merged_std_.capacity() * sizeof(float);
+  for (const auto& [id, image] : recent_images_) bytes += image.memory_bytes();
   for (const auto& [id, keyframe] : keyframes_) {
     bytes += sizeof(Keyframe) + keyframe.cloud.positions.capacity() * sizeof(Eigen::Vector3f) +
              keyframe.cloud.intensities.capacity() * sizeof(float) + keyframe.class_votes.capacity() * sizeof(PointClassVotes) +
+             keyframe.sightings.capacity() * sizeof(PointSightings) +
              keyframe.point_of_voxel.size() * 32;
   }
   return bytes;

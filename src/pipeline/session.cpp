@@ -175,6 +175,7 @@ SessionConfig SessionConfig::from(const config::FusionConfig& config) {
   session.map.occupancy_2d_config.resolution = mapping.occupancy_resolution;
   session.map_keyframe_distance = mapping.keyframe_distance;
   session.map_keyframe_angle = mapping.keyframe_angle;
+  session.map.point_map.moving_points.enabled = mapping.remove_moving_points;
   session.loop_closure = mapping.loop_closure;
   session.planar_laser.slam.loop_closure = mapping.loop_closure;
   session.loop.min_travel = mapping.loop_min_travel;
@@ -1507,6 +1508,7 @@ MappingSummary Session::mapping_summary() const {
     summary.splat_images_skipped = splats.images_skipped;
   }
   summary.map_memory_bytes = map_builder_.memory_bytes();
+  if (map_builder_.point_map()) summary.map_points_moving_removed = map_builder_.point_map()->moving_points_removed();
   return summary;
 }
 

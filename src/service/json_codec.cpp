@@ -242,6 +242,7 @@ json mapping_to_json(const pipeline::MappingSummary& mapping) {
       {"masked_image_share", mapping.masked_image_share},
       {"lidar_points_labelled", mapping.lidar_points_labelled},
       {"lidar_points_masked", mapping.lidar_points_masked},
+      {"map_points_moving_removed", mapping.map_points_moving_removed},
   };
 }
 

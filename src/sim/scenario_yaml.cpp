@@ -130,7 +130,7 @@ Status parse_class(const YamlValue& item, std::string* class_name) {
 }
 
 Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* world) {
-  HANZO_RETURN_IF_ERROR(value.check_keys({"ground", "boxes", "cylinders", "walls", "people", "city"}));
+  HANZO_RETURN_IF_ERROR(value.check_keys({"ground", "boxes", "cylinders", "walls", "people", "vehicles", "city"}));
   const YamlValue ground = value["ground"];
   world->ground.texture.type = TextureType::kNoise;
   world->ground.texture.scale = 1.0;
@@ -190,25 +190,37 @@ Status parse_world(const YamlValue& value, Timestamp start, WorldDescription* wo
     HANZO_RETURN_IF_ERROR(parse_material(item, &cylinder.material));
     world->cylinders.push_back(cylinder);
   }
-  for (const YamlValue& item : value["people"].elements()) {
-    HANZO_RETURN_IF_ERROR(item.check_keys({"path", "speed", "start", "size", "class", "texture", "reflectivity", "radar_cross_section"}));
-    MovingBox person;
-    person.box.material = default_material(object_index++);
-    person.box.material.radar_cross_section = 0.0;  // a person: about 1 m^2
-    std::vector<Eigen::Vector3d> path;
-    HANZO_ASSIGN_OR_RETURN(path, points_3d(item["path"], true));
-    if (path.size() < 2) return item["path"].error("a walking path needs at least 2 points");
-    for (const Eigen::Vector3d& point : path) person.path.push_back(point.head<2>());
-    HANZO_ASSIGN_OR_RETURN(person.speed, positive_or(item["speed"], 1.2));
-    person.start_time = start;
-    if (item["start"].present()) HANZO_ASSIGN_OR_RETURN(person.start_time, time_after_start(item["start"], start));
-    Eigen::Vector3d size(0.5, 0.4, 1.75);
-    HANZO_ASSIGN_OR_RETURN(size, vector_or<3>(item["size"], size, "(x, y, z)"));
-    if ((size.array() <= 0.0).any()) return item["size"].error("sizes must be > 0");
-    person.box.half_size = size / 2.0;
-    HANZO_RETURN_IF_ERROR(parse_material(item, &person.box.material));
-    HANZO_RETURN_IF_ERROR(parse_class(item, &person.class_name));
-    world->moving_boxes.push_back(person);
+  // People and vehicles: boxes moving along a path; they differ only in their defaults.
+  struct MoverDefaults {
+    const char* key;
+    double speed;
+    Eigen::Vector3d size;
+    const char* class_name;
+    double radar_cross_section;  // dBsm: a person about 1 m^2, a car as the parked ones
+  };
+  for (const MoverDefaults& kind : {MoverDefaults{"people", 1.2, {0.5, 0.4, 1.75}, "person", 0.0},
+                                    MoverDefaults{"vehicles", 8.0, {4.5, 1.8, 1.5}, "car", 15.0}}) {
+    for (const YamlValue& item : value[kind.key].elements()) {
+      HANZO_RETURN_IF_ERROR(item.check_keys({"path", "speed", "start", "size", "class", "texture", "reflectivity", "radar_cross_section"}));
+      MovingBox mover;
+      mover.class_name = kind.class_name;
+      mover.box.material = default_material(object_index++);
+      mover.box.material.radar_cross_section = kind.radar_cross_section;
+      std::vector<Eigen::Vector3d> path;
+      HANZO_ASSIGN_OR_RETURN(path, points_3d(item["path"], true));
+      if (path.size() < 2) return item["path"].error("a path needs at least 2 points");
+      for (const Eigen::Vector3d& point : path) mover.path.push_back(point.head<2>());
+      HANZO_ASSIGN_OR_RETURN(mover.speed, positive_or(item["speed"], kind.speed));
+      mover.start_time = start;
+      if (item["start"].present()) HANZO_ASSIGN_OR_RETURN(mover.start_time, time_after_start(item["start"], start));
+      Eigen::Vector3d size = kind.size;
+      HANZO_ASSIGN_OR_RETURN(size, vector_or<3>(item["size"], size, "(x, y, z)"));
+      if ((size.array() <= 0.0).any()) return item["size"].error("sizes must be > 0");
+      mover.box.half_size = size / 2.0;
+      HANZO_RETURN_IF_ERROR(parse_material(item, &mover.box.material));
+      HANZO_RETURN_IF_ERROR(parse_class(item, &mover.class_name));
+      world->moving_boxes.push_back(mover);
+    }
   }
   const YamlValue city = value["city"];
   if (city.present()) {

@@ -100,7 +100,7 @@ cloud::PointCloud plane_cloud(double x) {
 }
 
 TEST(MapLayers, PointMapFollowsCorrectedPoses) {
-  auto map = PointMap::create(PointMapConfig{.voxel_size = 0.1});
+  auto map = PointMap::create(PointMapConfig{.voxel_size = 0.1, .moving_points = {}});
   ASSERT_TRUE(map.ok());
   const SE3 first(SO3::identity(), Eigen::Vector3d::Zero());
   const SE3 second(SO3::identity(), Eigen::Vector3d(0.0, 5.0, 0.0));
@@ -139,7 +139,7 @@ TEST(MapLayers, PointMapFollowsCorrectedPoses) {
 // Segmentation classes: a keyframe's point and later scans' votes for it fuse into the voxel's
 // class with the posterior of point_map.hpp; the grid's cells take their points' classes.
 TEST(MapLayers, PointMapFusesSegmentationClassesPerVoxel) {
-  auto map = PointMap::create(PointMapConfig{.voxel_size = 0.1, .segmentation_accuracy = 0.9});
+  auto map = PointMap::create(PointMapConfig{.voxel_size = 0.1, .segmentation_accuracy = 0.9, .moving_points = {}});
   ASSERT_TRUE(map.ok());
   const uint16_t floor = map->class_index("floor"), shelf = map->class_index("shelf");
   EXPECT_EQ(map->class_index("person"), 2);

@@ -266,6 +266,7 @@ struct MappingConfig {
   double occupancy_resolution = 0.1;   // m > 0: 2D occupancy layer
   double keyframe_distance = 1.0;      // m >= 0 of LiDAR motion between map keyframes
   double keyframe_angle = 0.2;         // rad >= 0 of LiDAR rotation between map keyframes
+  bool remove_moving_points = true;    // points the later (or earlier) scans saw through leave the point map (maps/point_map.hpp)
   bool loop_closure = true;            // Scan Context candidates verified by registration
   double loop_min_travel = 50.0;       // m > 0 of path between the two ends of a loop
   double loop_search_radius = 10.0;    // m > 0: candidates within this (+5 % of the path between) of the estimate

@@ -394,6 +394,9 @@ struct MappingSummary {
   /// (a 3D LiDAR and cameras with a lens model).
   uint64_t lidar_points_labelled = 0;
   uint64_t lidar_points_masked = 0;
+  /// Point-map keyframe points left out as on objects that moved away: later (or earlier) scans
+  /// saw through their place (fusion.mapping.remove_moving_points; maps/point_map.hpp).
+  uint64_t map_points_moving_removed = 0;
   /// The visual odometry's loop-closure candidates: "bow", "learned" (VLAD), "" when it closes
   /// no loops (fusion.vision.place_recognition).
   std::string visual_place_recognition;
