@@ -71,8 +71,6 @@ Status MapBuilder::insert(const SE3& T_world_sensor, const cloud::PointCloud& sc
   if (point_map_ && use == ScanUse::kAllLayers) {
     HANZO_RETURN_IF_ERROR(point_map_->add_keyframe(summary_.point_keyframes, T_world_sensor, scan_in_sensor_frame, point_classes));
     ++summary_.point_keyframes;
-  } else if (point_map_) {
-    HANZO_RETURN_IF_ERROR(point_map_->observe_scan(T_world_sensor, scan_in_sensor_frame.positions));
   }
   if (tsdf_) HANZO_RETURN_IF_ERROR(tsdf_->integrate_scan(origin, world));
   ++summary_.scans;

@@ -33,7 +33,6 @@ Status MovingPointConfig::validate() const {
     return Error{fmt::format("moving_points: later_keyframes and earlier_keyframes must be >= 0, got {} and {}", later_keyframes, earlier_keyframes),
                  "later_keyframes"};
   }
-  if (sweep_keyframes < 0) return Error{fmt::format("moving_points.sweep_keyframes: must be >= 0, got {}", sweep_keyframes), "sweep_keyframes"};
   for (const auto& [value, name] : {std::pair{min_seen_through, "min_seen_through"}, std::pair{min_seen_through_in_a_row, "min_seen_through_in_a_row"}}) {
     if (value < 1 || value > 255) return Error{fmt::format("moving_points.{}: must lie in [1, 255], got {}", name, value), name};
   }
@@ -123,21 +122,6 @@ void PointMap::test_points(Keyframe& keyframe, const RangeImage& image, const SE
     const bool is_moved = moved(sightings);
     if (is_moved != was_moved) moving_points_removed_ = is_moved ? moving_points_removed_ + 1 : moving_points_removed_ - 1;
   }
-}
-
-Status PointMap::observe_scan(const SE3& T_world_sensor, std::span<const Eigen::Vector3f> scan_in_sensor_frame) {
-  if (!T_world_sensor.matrix().allFinite()) return Error{"observed scan: pose is not finite", "T_world_sensor"};
-  const MovingPointConfig& config = config_.moving_points;
-  if (!config.enabled || config.sweep_keyframes == 0 || keyframes_.empty()) return ok_status();
-  const RangeImage image(config.visibility, scan_in_sensor_frame, T_world_sensor.rotation().matrix().transpose() * Eigen::Vector3d::UnitZ());
-  const std::size_t removed = moving_points_removed_;
-  auto newest = keyframes_.end();
-  for (int tested = 0; tested < config.sweep_keyframes && newest != keyframes_.begin(); ++tested) {
-    --newest;
-    test_points(newest->second, image, T_world_sensor);
-  }
-  dirty_ = dirty_ || moving_points_removed_ != removed;  // a point left (or came back)
-  return ok_status();
 }
 
 void PointMap::test_free_space(uint64_t id, std::span<const Eigen::Vector3f> scan_in_sensor_frame) {

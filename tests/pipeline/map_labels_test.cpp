@@ -131,7 +131,7 @@ struct SegmentedWarehouse {
   msgs::FusionMap map;
 };
 
-SegmentedWarehouse map_segmented_warehouse(std::vector<std::string> dynamic_classes) {
+SegmentedWarehouse map_segmented_warehouse(std::vector<std::string> dynamic_classes, bool remove_moving_points) {
   sim::Scenario scenario = sim::load_scenario("examples/scenarios/warehouse_segmented.yaml").value();
   scenario.duration = 20.0;
   scenario.num_threads = 0;
@@ -139,6 +139,7 @@ SegmentedWarehouse map_segmented_warehouse(std::vector<std::string> dynamic_clas
   out.simulation = sim::ScenarioSimulation::create(scenario).value();
   config::FusionConfig config = sim::scenario_fusion_config(scenario);
   config.vision.dynamic_objects.classes = std::move(dynamic_classes);
+  config.mapping.remove_moving_points = remove_moving_points;
   out.session = Session::create(config, sim::scenario_calibration(scenario)).value();
   (void)testing::replay(*out.simulation, *out.session);
   testing::ReplayedTrajectories optimized = testing::optimized_with_truth(*out.session, *out.simulation);
@@ -161,7 +162,7 @@ std::size_t points_off_the_static_world(const SegmentedWarehouse& run) {
 // lies on (target: >= 97 % at 5 % pixel noise), the grid's cells take their points' classes, and
 // the people are left out of the map.
 TEST(MapLabels, ProjectedSegmentationClassesLabelTheWarehouseMapsVoxels) {
-  const SegmentedWarehouse run = map_segmented_warehouse(config::DynamicObjectsConfig{}.classes);
+  const SegmentedWarehouse run = map_segmented_warehouse(config::DynamicObjectsConfig{}.classes, true);
   const msgs::FusionMap& map = run.map;
   ASSERT_TRUE(map.points);
   const msgs::PointLayer& points = *map.points;
@@ -196,8 +197,9 @@ TEST(MapLabels, ProjectedSegmentationClassesLabelTheWarehouseMapsVoxels) {
   ASSERT_EQ(map.occupancy->classes.size(), map.occupancy->occupancy.size());
   EXPECT_GT(std::count_if(map.occupancy->classes.begin(), map.occupancy->classes.end(), [](uint16_t c) { return c != msgs::kNoClass; }), 1000);
 
-  // The same run without moving classes keeps the people's points in the map.
-  const SegmentedWarehouse unmasked = map_segmented_warehouse({});
+  // The same run without moving classes and without free-space removal keeps the people's
+  // points in the map.
+  const SegmentedWarehouse unmasked = map_segmented_warehouse({}, false);
   const std::size_t on_people_unmasked = points_off_the_static_world(unmasked);
   std::printf("map points off the static world: %zu masked, %zu unmasked\n", on_people, on_people_unmasked);
   EXPECT_GT(summary.lidar_points_masked, 1000u);

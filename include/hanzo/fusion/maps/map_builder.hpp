@@ -57,7 +57,7 @@ struct MapBuilderConfig {
 /// point map.
 enum class ScanUse {
   kAllLayers,  ///< every layer; the point map keeps the scan as its next keyframe
-  kGridsOnly,  ///< occupancy and TSDF only (its free space still tests the point map's newest keyframes)
+  kGridsOnly,  ///< occupancy and TSDF only
 };
 
 struct MapBuilderSummary {

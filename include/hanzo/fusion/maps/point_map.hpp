@@ -24,9 +24,7 @@
 // Moving objects (moving_points): every keyframe's scan is a range image (scan_visibility.hpp)
 // that tests the points of the later_keyframes keyframes before it, and the new keyframe's
 // points are tested against the range images of the earlier_keyframes keyframes before it (a
-// car arriving where the road was seen empty); the scans between keyframes (observe_scan) test
-// the sweep_keyframes newest keyframes (a car seen once, down a side street). Scans and
-// keyframes are compared at the poses they were added with (the odometry's frame, in which
+// car arriving where the road was seen empty). Scans and keyframes are compared at the poses they were added with (the odometry's frame, in which
 // they were registered to each other), not at corrected ones. Each point counts the scans that saw it and the
 // scans that saw through its place; a point seen through at least min_seen_through times and
 // more often than seen, or min_seen_through_in_a_row times since a scan last saw it, was on
@@ -58,7 +56,6 @@ struct MovingPointConfig {
   VisibilityConfig visibility;
   int later_keyframes = 30;   ///< a keyframe's points are tested by the scans of this many later keyframes (>= 0)
   int earlier_keyframes = 8;  ///< and by the range images of this many earlier ones, kept in memory (>= 0)
-  int sweep_keyframes = 3;    ///< a scan between keyframes (observe_scan) tests the points of this many newest keyframes (>= 0)
   int min_seen_through = 2;   ///< scans (>= 1) that saw through a point before it can be left out
   int min_seen_through_in_a_row = 3;  ///< or that saw through it since any scan last saw it (>= 1)
 
@@ -91,10 +88,6 @@ class PointMap {
   /// space is tested against the points of earlier keyframes and theirs against its points.
   Status add_keyframe(uint64_t id, const SE3& T_world_sensor, const cloud::PointCloud& cloud_in_sensor_frame,
                       std::span<const uint16_t> point_classes = {});
-  /// A scan that is no keyframe (sensor frame, at T_world_sensor as the odometry gave it):
-  /// with moving_points enabled, its free space tests the points of the sweep_keyframes newest
-  /// keyframes. Rejects a non-finite pose, changing nothing.
-  Status observe_scan(const SE3& T_world_sensor, std::span<const Eigen::Vector3f> scan_in_sensor_frame);
   /// Moves keyframes (after optimization); every id must exist, else nothing changes.
   Status set_poses(const std::map<uint64_t, SE3>& T_world_sensor_by_id);
   Result<SE3> pose(uint64_t id) const;
