@@ -37,7 +37,8 @@ std::optional<SE3> pose_at(const io::Trajectory& trajectory, Timestamp time) {
 std::string options_yaml(const MapBuildOptions& options) {
   return fmt::format("topic: {}\noccupancy: {}\nresolution: {}\nheight_band: [{}, {}]\npoints_voxel: {}\ntsdf_voxel: {}\nmax_range: {}\n",
                      options.topic, options.occupancy, options.resolution, options.height_band[0], options.height_band[1],
-                     options.points_voxel, options.tsdf_voxel, options.max_range);
+                     options.points_voxel, options.tsdf_voxel, options.max_range) +
+         (options.keep_moving_points ? "keep_moving_points: true\n" : "");
 }
 
 Result<nlohmann::json> build(const MapBuildOptions& options) {
@@ -58,6 +59,7 @@ Result<nlohmann::json> build(const MapBuildOptions& options) {
   config.max_height = options.height_band[1];
   config.points = options.points_voxel > 0.0;
   config.point_map.voxel_size = options.points_voxel > 0.0 ? options.points_voxel : 0.1;
+  config.point_map.moving_points.enabled = !options.keep_moving_points;
   config.tsdf = options.tsdf_voxel > 0.0;
   config.tsdf_config.voxel_size = options.tsdf_voxel > 0.0 ? options.tsdf_voxel : 0.05;
   config.tsdf_config.max_range = options.max_range;

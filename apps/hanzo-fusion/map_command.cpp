@@ -406,6 +406,8 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
   build_app->add_option("--resolution", build->resolution, "Occupancy cell size (m); spec: 0.05 indoor, 0.2 outdoor")->capture_default_str();
   build_app->add_option("--height-band", build->height_band, "2D grid: returns between min,max m relative to the sensor")->delimiter(',');
   build_app->add_option("--points-voxel", build->points_voxel, "Point layer voxel size (m, 0: no point layer)")->capture_default_str();
+  build_app->add_flag("--keep-moving-points", build->keep_moving_points,
+                      "Keep the points of objects that moved away (by default, points later or earlier scans saw through leave the point layer)");
   build_app->add_option("--max-range", build->max_range, "Returns farther than this only clear space (m, 0: no limit)");
   build_app->add_option("--tsdf-voxel", build->tsdf_voxel, "TSDF voxel size (m) for a TSDF layer and its mesh (0: none)");
   build_app->add_option("--map-id", build->map_id, "Map id (default: a new UUID)");

@@ -25,6 +25,7 @@ struct MapBuildOptions {
   double points_voxel = 0.1;                 // m, 0: no point layer
   double max_range = 0.0;                    // m, 0: no limit
   double tsdf_voxel = 0.0;                   // m, 0: no TSDF / mesh
+  bool keep_moving_points = false;           // true: points other scans saw through stay in the point layer
   std::string map_id;
   std::string frame = "world";
   std::string out;
