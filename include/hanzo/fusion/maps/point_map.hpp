@@ -24,12 +24,14 @@
 // Moving objects (moving_points): every keyframe's scan is a range image (scan_visibility.hpp)
 // that tests the points of the later_keyframes keyframes before it, and the new keyframe's
 // points are tested against the range images of the earlier_keyframes keyframes before it (a
-// car arriving where the road was seen empty). Scans and keyframes are compared at the poses they were added with (the odometry's frame, in which
-// they were registered to each other), not at corrected ones. Each point counts the scans that saw it and the
-// scans that saw through its place; a point seen through at least min_seen_through times and
-// more often than seen, or min_seen_through_in_a_row times since a scan last saw it, was on
-// something that moved away (a passing car, a walking person): the merged map leaves it out. Counting both keeps what is merely hidden now and then, and what a
-// scan saw through once by a pose error. Points are kept in their keyframes either way.
+// car arriving where the road was seen empty). Scans and keyframes are compared at the poses
+// they were added with (the odometry's frame, in which they were registered to each other), not
+// at corrected ones. Each point counts the scans that saw it and the scans that saw through its
+// place; a point seen through at least min_seen_through times and more often than seen, or
+// min_seen_through_in_a_row times since a scan last saw it, was on something that moved away (a
+// passing car, a walking person): the merged map leaves it out. Counting both keeps what is
+// merely hidden now and then, and what a scan saw through once by a pose error. Points are kept
+// in their keyframes either way.
 
 #include <cstddef>
 #include <cstdint>
