@@ -76,6 +76,7 @@ struct ExportedLog {
   std::vector<std::string> calibrated;        // sensors placed in /tf_static
   std::map<std::string, std::string> sensor_by_topic;  // the exported topics' sensor names
   std::optional<double> wheel_separation;     // m, of the first wheel message
+  std::map<std::string, std::string> label_images;  // ROS topic of a segmentation's label images -> its detections' log topic
 };
 
 // What the import needs to give back the same log (rosbag_import.hpp): the topics' sensor names,
@@ -85,6 +86,7 @@ std::map<std::string, std::string> recorded_log(const ExportedLog& exported, con
   if (!exported.sensor_by_topic.empty()) custom_data["hanzo_fusion.sensors"] = nlohmann::json(exported.sensor_by_topic).dump();
   if (exported.wheel_separation) custom_data["hanzo_fusion.wheel_separation"] = fmt::format("{}", *exported.wheel_separation);
   if (calibration != nullptr) custom_data["hanzo_fusion.calibration"] = calib::to_yaml(*calibration);
+  if (!exported.label_images.empty()) custom_data["hanzo_fusion.label_images"] = nlohmann::json(exported.label_images).dump();
   return custom_data;
 }
 
@@ -105,6 +107,7 @@ Result<ExportedLog> export_log(const std::string& path, io::ros2::LidarLayout la
   }
   ExportedLog exported;
   std::map<std::string, msgs::WheelOdometryMessage> previous_wheels;
+  std::map<std::string, std::vector<std::string>> label_tables;  // label_info topic -> the classes last written
   std::vector<io::ros::FrameTransform> transforms;
   std::optional<Timestamp> first_time;
   io::LogEntry entry;
@@ -153,6 +156,19 @@ Result<ExportedLog> export_log(const std::string& path, io::ros2::LidarLayout la
                          io::ros2::camera_info_cdr(m.timestamp, m.frame_id, *placed->camera, m.width, m.height));
           } else if constexpr (std::is_same_v<Message, msgs::GnssMessage>) {
             return write(entry.topic, "sensor_msgs/msg/NavSatFix", entry.log_time, io::ros2::navsatfix_cdr(m, frame));
+          } else if constexpr (std::is_same_v<Message, msgs::DetectionsMessage>) {
+            // <camera>/detections; a segmentation as <camera>/segmentation with its classes on <camera>/label_info.
+            HANZO_RETURN_IF_ERROR(write(entry.topic, "vision_msgs/msg/Detection2DArray", entry.log_time, io::ros2::detection_array_cdr(m)));
+            if (m.segmentation.empty()) return ok_status();
+            const std::string camera = entry.topic.substr(0, entry.topic.find_last_of('/'));
+            std::vector<std::string>& classes = label_tables[camera + "/label_info"];
+            if (classes != m.segmentation_classes) {
+              classes = m.segmentation_classes;
+              HANZO_RETURN_IF_ERROR(write(camera + "/label_info", "vision_msgs/msg/LabelInfo", entry.log_time,
+                                          io::ros2::label_info_cdr(m.timestamp, m.frame_id, classes)));
+            }
+            exported.label_images[camera + "/segmentation"] = entry.topic;
+            return write(camera + "/segmentation", "sensor_msgs/msg/Image", entry.log_time, io::ros2::label_image_cdr(m));
           } else if constexpr (std::is_same_v<Message, msgs::WheelOdometryMessage>) {
             double speed = 0.0, yaw_rate = 0.0;
             const auto previous = previous_wheels.find(entry.topic);

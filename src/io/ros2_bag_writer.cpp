@@ -113,6 +113,16 @@ const std::map<std::string, std::string>& definitions() {
       {"sensor_msgs/Image",
        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n"},
       {"sensor_msgs/CompressedImage", "std_msgs/Header header\nstring format\nuint8[] data\n"},
+      {"vision_msgs/Point2D", "float64 x\nfloat64 y\n"},
+      {"vision_msgs/Pose2D", "vision_msgs/Point2D position\nfloat64 theta\n"},
+      {"vision_msgs/BoundingBox2D", "vision_msgs/Pose2D center\nfloat64 size_x\nfloat64 size_y\n"},
+      {"vision_msgs/ObjectHypothesis", "string class_id\nfloat64 score\n"},
+      {"vision_msgs/ObjectHypothesisWithPose", "vision_msgs/ObjectHypothesis hypothesis\ngeometry_msgs/PoseWithCovariance pose\n"},
+      {"vision_msgs/Detection2D",
+       "std_msgs/Header header\nvision_msgs/ObjectHypothesisWithPose[] results\nvision_msgs/BoundingBox2D bbox\nstring id\n"},
+      {"vision_msgs/Detection2DArray", "std_msgs/Header header\nvision_msgs/Detection2D[] detections\n"},
+      {"vision_msgs/VisionClass", "uint16 class_id\nstring class_name\n"},
+      {"vision_msgs/LabelInfo", "std_msgs/Header header\nvision_msgs/VisionClass[] class_map\nfloat32 threshold\n"},
   };
   return kDefinitions;
 }
@@ -249,6 +259,35 @@ std::string image_cdr(const msgs::ImageMessage& image) {
   CdrWriter w;
   w.header(image.timestamp, image.frame_id).put(image.height).put(image.width).string(kNames.at(image.encoding)).put<uint8_t>(0);
   w.put(static_cast<uint32_t>(image.width * msgs::bytes_per_pixel(image.encoding))).bytes(image.data.data(), image.data.size());
+  return w.take();
+}
+
+std::string detection_array_cdr(const msgs::DetectionsMessage& detections) {
+  CdrWriter w;
+  w.header(detections.timestamp, detections.frame_id).put(static_cast<uint32_t>(detections.detections.size()));
+  for (const msgs::Detection2D& detection : detections.detections) {
+    w.header(detections.timestamp, detections.frame_id).put<uint32_t>(1).string(detection.class_name).put(static_cast<double>(detection.score));
+    w.pose(msgs::Pose{});
+    for (int i = 0; i < 36; ++i) w.put(0.0);
+    w.put(0.5 * (static_cast<double>(detection.x_min) + detection.x_max)).put(0.5 * (static_cast<double>(detection.y_min) + detection.y_max));
+    w.put(0.0).put(static_cast<double>(detection.x_max) - detection.x_min).put(static_cast<double>(detection.y_max) - detection.y_min);
+    w.string(detection.track_id >= 0 ? std::to_string(detection.track_id) : std::string());
+  }
+  return w.take();
+}
+
+std::string label_image_cdr(const msgs::DetectionsMessage& detections) {
+  CdrWriter w;
+  w.header(detections.timestamp, detections.frame_id).put(detections.image_height).put(detections.image_width).string("mono8").put<uint8_t>(0);
+  w.put(detections.image_width).bytes(detections.segmentation.data(), detections.segmentation.size());
+  return w.take();
+}
+
+std::string label_info_cdr(Timestamp stamp, const std::string& frame_id, const std::vector<std::string>& classes) {
+  CdrWriter w;
+  w.header(stamp, frame_id).put(static_cast<uint32_t>(classes.size()));
+  for (std::size_t id = 0; id < classes.size(); ++id) w.put(static_cast<uint16_t>(id)).string(classes[id]);
+  w.put(0.0F);
   return w.take();
 }
 

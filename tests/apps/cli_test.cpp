@@ -14,6 +14,7 @@
 #include <set>
 #include <string>
 #include <thread>
+#include <tuple>
 
 #include <fmt/format.h>
 #include <gmock/gmock.h>
@@ -955,6 +956,53 @@ TEST(Cli, SimulatedLogThroughRos2BagsOfEachLidarLayoutRunsLikeTheOriginal) {
     EXPECT_NEAR(replayed["evaluation"]["ape_se3_aligned_rmse_m"].get<double>(), direct_ape, 0.002);
     EXPECT_EQ(replayed["mapping"]["scans_registered"], direct["mapping"]["scans_registered"]);
   }
+  std::filesystem::remove_all(dir);
+}
+
+// A camera with a detector and a segmenter through a ROS 2 bag: the log's DetectionsMessages go
+// out as vision_msgs/Detection2DArray, label images and LabelInfo, and come back the same.
+TEST(Cli, DetectionsAndSegmentationThroughRos2ComeBackTheSame) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_ros2_vision_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::ifstream in("examples/scenarios/warehouse_segmented.yaml");
+  std::string scenario((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string segmenter = "      segmentation: true";
+  ASSERT_NE(scenario.find(segmenter), std::string::npos);
+  scenario.replace(scenario.find(segmenter), segmenter.size(), "      detections: boxes\n" + segmenter);
+  std::ofstream((dir / "scenario.yaml").string()) << scenario;
+  const std::string sim = (dir / "sim").string(), bag = (dir / "bag").string(), back = (dir / "back.mcap").string();
+  ASSERT_EQ(run(fmt::format("sim {}/scenario.yaml --out {} --duration 8 --no-foxglove --sensors camera_front", dir.string(), sim)).exit_code, 0);
+  const CliRun exported = run(fmt::format("export ros2bag --log {}/sensors.mcap --out {} --json", sim, bag));
+  ASSERT_EQ(exported.exit_code, 0) << exported.err;
+  const nlohmann::json topics = nlohmann::json::parse(exported.out)["topics"];
+  EXPECT_EQ(topics["/sensors/camera_front/detections"], topics["/sensors/camera_front"]);
+  EXPECT_EQ(topics["/sensors/camera_front/segmentation"], topics["/sensors/camera_front"]);
+  EXPECT_EQ(topics["/sensors/camera_front/label_info"], 1);
+  const CliRun imported = run(fmt::format("import ros2bag {} --out {} --json", bag, back));
+  ASSERT_EQ(imported.exit_code, 0) << imported.err;
+  for (const auto& topic : nlohmann::json::parse(imported.out)["topics"]) EXPECT_EQ(topic["rejected"], 0) << topic.dump();
+
+  namespace hf = hanzo::fusion;
+  const auto original = messages_of<hf::msgs::DetectionsMessage>(sim + "/sensors.mcap", "/sensors/camera_front/detections");
+  const auto returned = messages_of<hf::msgs::DetectionsMessage>(back, "/sensors/camera_front/detections");
+  ASSERT_EQ(returned.size(), original.size());
+  std::size_t boxes = 0;
+  for (std::size_t i = 0; i < original.size(); ++i) {
+    EXPECT_EQ(returned[i].timestamp, original[i].timestamp) << i;
+    EXPECT_EQ(returned[i].image_width, original[i].image_width);
+    EXPECT_EQ(returned[i].segmentation, original[i].segmentation) << i;
+    EXPECT_EQ(returned[i].segmentation_classes, original[i].segmentation_classes) << i;
+    ASSERT_EQ(returned[i].detections.size(), original[i].detections.size()) << i;
+    for (std::size_t k = 0; k < original[i].detections.size(); ++k, ++boxes) {
+      const hf::msgs::Detection2D &a = returned[i].detections[k], &b = original[i].detections[k];
+      EXPECT_EQ(a.class_name, b.class_name);
+      EXPECT_EQ(a.score, b.score);
+      EXPECT_EQ(a.track_id, b.track_id);
+      EXPECT_EQ(std::make_tuple(a.x_min, a.y_min, a.x_max, a.y_max), std::make_tuple(b.x_min, b.y_min, b.x_max, b.y_max)) << i << " " << k;
+    }
+  }
+  EXPECT_GT(boxes, 10u) << "people walk through the camera's view";
   std::filesystem::remove_all(dir);
 }
 

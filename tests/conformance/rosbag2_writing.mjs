@@ -12,12 +12,28 @@ import { stringify } from "@foxglove/rosmsg";
 const require = createRequire(import.meta.url);
 const initSqlJs = require("sql.js");
 
+// Message definitions beyond ROS 2 Humble's common interfaces (e.g. vision_msgs), by name.
+const extraDefinitions = {};
+const PRIMITIVES = new Set(["bool", "byte", "char", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64",
+                            "float32", "float64", "string"]);
+// Adds the definition of `name` ("vision_msgs/Point2D") from its fields, one "type name" per
+// line ("float64 x", "vision_msgs/Point2D[] points", "float64[36] covariance").
+export function addDefinition(name, fields) {
+  const definitions = fields.trim().split("\n").map((line) => {
+    const [declared, field] = line.trim().split(/\s+/);
+    const [, type, array, length] = declared.match(/^([^[]+)(\[(\d*)\])?$/);
+    return { name: field, type, isComplex: !PRIMITIVES.has(type), isArray: array !== undefined,
+             ...(length ? { arrayLength: Number(length) } : {}) };
+  });
+  extraDefinitions[name] = { name, definitions };
+}
+
 // The definition of `type` followed by every type it uses (MessageWriter's input).
 export function definitions(type) {
   const out = [];
   const visit = (name) => {
     if (out.some((d) => d.name === name)) return;
-    const definition = ros2humble[name];
+    const definition = extraDefinitions[name] ?? ros2humble[name];
     out.push(definition);
     for (const field of definition.definitions) if (field.isComplex) visit(field.type);
   };

@@ -117,6 +117,67 @@ TEST(CdrDecoding, BadEncapsulationAndTruncationAreErrors) {
   EXPECT_FALSE(imu_from_ros(long_frame, kCdr).ok());
 }
 
+// vision_msgs/Detection2DArray: two detections, the first with two hypotheses.
+std::string detection_array(bool big_endian, std::size_t max_alignment) {
+  CdrWriter w(big_endian, max_alignment);
+  w.header(100, 5, "camera").put<uint32_t>(2);
+  const auto hypothesis = [&w](const std::string& class_id, double score) {
+    w.string(class_id).put(score);
+    for (int i = 0; i < 7 + 36; ++i) w.put(i == 6 ? 1.0 : 0.0);  // pose (unit quaternion) and covariance
+  };
+  w.header(100, 5, "camera").put<uint32_t>(2);
+  hypothesis("car", 0.25);
+  hypothesis("person", 0.5);
+  w.doubles({12.5, 20.0, 0.0, 8.0, 16.0}).string("7");
+  w.header(100, 5, "camera").put<uint32_t>(1);
+  hypothesis("3", 0.9);
+  w.doubles({40.0, 10.0, 0.5, 4.0, 2.0}).string("");
+  return w.data();
+}
+
+TEST(CdrDecoding, Detection2DArrayKeepsTheBestHypothesisAndTheBox) {
+  for (const bool big_endian : {false, true}) {
+    for (const std::size_t alignment : {8ul, 4ul}) {
+      auto array = detections_from_ros(detection_array(big_endian, alignment), kCdr);
+      ASSERT_TRUE(array.ok()) << array.error().message;
+      EXPECT_EQ(array->stamp.nanoseconds(), 100'000'000'005);
+      EXPECT_EQ(array->frame_id, "camera");
+      ASSERT_EQ(array->detections.size(), 2u);
+      EXPECT_EQ(array->detections[0].class_id, "person");
+      EXPECT_EQ(array->detections[0].score, 0.5);
+      EXPECT_EQ(array->detections[0].center_x, 12.5);
+      EXPECT_EQ(array->detections[0].size_y, 16.0);
+      EXPECT_EQ(array->detections[0].id, "7");
+      EXPECT_EQ(array->detections[1].class_id, "3");
+      EXPECT_EQ(array->detections[1].theta, 0.5);
+      EXPECT_EQ(array->detections[1].id, "");
+    }
+  }
+  const std::string whole = detection_array(false, 8);
+  for (std::size_t size : {4ul, 30ul, 200ul, whole.size() - 1}) EXPECT_FALSE(detections_from_ros(whole.substr(0, size), kCdr).ok()) << size;
+  // A count of detections that the data cannot hold is refused before anything is allocated.
+  CdrWriter huge;
+  huge.header(1, 0, "camera").put<uint32_t>(0xFFFFFFF0U);
+  EXPECT_THAT(detections_from_ros(huge.data(), kCdr).error().message, HasSubstr("vision_msgs/Detection2DArray: truncated or malformed"));
+  CdrWriter no_class;
+  no_class.header(1, 0, "camera").put<uint32_t>(1).header(1, 0, "camera").put<uint32_t>(0).doubles({1, 1, 0, 1, 1}).string("");
+  EXPECT_THAT(detections_from_ros(no_class.data(), kCdr).error().message, HasSubstr("detections[0] has no class hypothesis"));
+  EXPECT_THAT(detections_from_ros(whole, Serialization::kRos1).error().message, HasSubstr("only the ROS 2 layout"));
+}
+
+TEST(CdrDecoding, LabelInfoNamesClassIds) {
+  CdrWriter w;
+  w.header(1, 0, "camera").put<uint32_t>(2).put<uint16_t>(0).string("person").put<uint16_t>(7).string("wall").put(0.5F);
+  auto table = label_info_from_ros(w.data(), kCdr);
+  ASSERT_TRUE(table.ok()) << table.error().message;
+  EXPECT_EQ(table->class_names, (std::map<uint16_t, std::string>{{0, "person"}, {7, "wall"}}));
+  EXPECT_EQ(table->threshold, 0.5F);
+  CdrWriter empty_name;
+  empty_name.header(1, 0, "camera").put<uint32_t>(1).put<uint16_t>(3).string("").put(0.5F);
+  EXPECT_THAT(label_info_from_ros(empty_name.data(), kCdr).error().message, HasSubstr("class id 3 has an empty name"));
+  EXPECT_FALSE(label_info_from_ros(w.data().substr(0, w.data().size() - 2), kCdr).ok());
+}
+
 std::string cloud_with_time(int32_t stamp_sec, uint8_t time_datatype, double first_time) {
   CdrWriter w;
   w.header(stamp_sec, 0, "lidar").put<uint32_t>(1).put<uint32_t>(2).put<uint32_t>(4);

@@ -19,6 +19,7 @@
 
 #include "hanzo/fusion/io/ros2_bag.hpp"
 #include "hanzo/fusion/io/rosbag_import.hpp"
+#include "hanzo/fusion/msgs/validate.hpp"
 #include "node_runner.hpp"
 
 namespace hanzo::fusion::io {
@@ -49,10 +50,10 @@ std::string zstd_compress(const std::string& data) {
   return out;
 }
 
-// Writes a bag with node; returns what was written.
-nlohmann::json write_bag(const fs::path& dir, const std::string& storage) {
+// Writes a bag with node (rosbag2_write.mjs or another writer); returns what was written.
+nlohmann::json write_bag(const fs::path& dir, const std::string& storage, const std::string& script = "rosbag2_write.mjs") {
   fs::remove_all(dir);
-  return test::run_node("rosbag2_write.mjs", dir.string() + " " + storage);
+  return test::run_node(script, dir.string() + " " + storage);
 }
 
 struct Imported {
@@ -263,6 +264,82 @@ TEST_P(Rosbag2Conformance, EveryValueWrittenComesBack) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Storages, Rosbag2Conformance, ::testing::Values("mcap", "sqlite3"));
+
+// A ROS 2 vision pipeline's output (rosbag2_vision_write.mjs): Detection2DArray boxes and a
+// half-resolution label image on separate topics become one DetectionsMessage per camera image
+// on the camera's detections topic, class ids named by the LabelInfo, the rear camera's
+// detector found by its frame, a box wholly outside the image refused.
+class Rosbag2Vision : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(Rosbag2Vision, DetectionsAndLabelImagesBecomeEachImagesDetections) {
+  const fs::path dir = temp_path("vision_" + GetParam());
+  const nlohmann::json written = write_bag(dir, GetParam(), "rosbag2_vision_write.mjs");
+  ASSERT_FALSE(written.is_null());
+  auto imported = import(dir.string());
+  ASSERT_TRUE(imported.ok()) << imported.error().message;
+  const RosbagImportReport& report = imported->report;
+  EXPECT_EQ(report.calibration_topics.at("/camera/label_info"), 1u);
+  EXPECT_EQ(report.skipped_topics.at("/chatter"), "std_msgs/msg/String");
+  std::map<std::string, TopicImportReport> topics;
+  for (const TopicImportReport& topic : report.topics) topics[topic.ros_topic] = topic;
+  EXPECT_EQ(topics.at("/camera/detections").topic, "/camera/detections");
+  EXPECT_EQ(topics.at("/camera/detections").imported, 4u);
+  EXPECT_EQ(topics.at("/camera/segmentation").topic, "/camera/detections");
+  EXPECT_EQ(topics.at("/camera/segmentation").imported, 5u);
+  EXPECT_EQ(topics.at("/yolo/detections").topic, "/rear/detections");
+  EXPECT_EQ(topics.at("/yolo/detections").imported, 4u);
+  EXPECT_EQ(topics.at("/yolo/detections").rejected, 1u);
+  EXPECT_THAT(topics.at("/yolo/detections").first_rejection, HasSubstr("outside the 64 x 48 image"));
+  for (const std::string topic : {"/camera/detections", "/camera/segmentation"}) EXPECT_EQ(topics.at(topic).rejected, 0u) << topic;
+  for (const calib::SensorCalibration& sensor : report.calibration.sensors) EXPECT_THAT(sensor.sensor, ::testing::Not(HasSubstr("detections")));
+
+  for (const auto& [topic, images] : written["expected"].items()) {
+    SCOPED_TRACE(topic);
+    const auto detections = messages_of<msgs::DetectionsMessage>(*imported, topic);
+    ASSERT_EQ(detections.size(), images.size());
+    for (std::size_t i = 0; i < detections.size(); ++i) {
+      const msgs::DetectionsMessage& message = detections[i];
+      const nlohmann::json& image = images[i];
+      EXPECT_EQ(message.timestamp.nanoseconds(), ns(image["stamp"])) << i;
+      EXPECT_EQ(message.image_width, 64u);
+      EXPECT_EQ(message.image_height, 48u);
+      ASSERT_EQ(message.detections.size(), image["boxes"].size()) << i;
+      for (std::size_t k = 0; k < message.detections.size(); ++k) {
+        const msgs::Detection2D& box = message.detections[k];
+        const nlohmann::json& expected = image["boxes"][k];
+        EXPECT_EQ(box.class_name, expected["class_name"].get<std::string>()) << i << " " << k;
+        EXPECT_FLOAT_EQ(box.score, expected["score"].get<float>());
+        EXPECT_NEAR(box.x_min, expected["box"][0].get<double>(), 1e-4) << i << " " << k;
+        EXPECT_NEAR(box.y_min, expected["box"][1].get<double>(), 1e-4) << i << " " << k;
+        EXPECT_NEAR(box.x_max, expected["box"][2].get<double>(), 1e-4) << i << " " << k;
+        EXPECT_NEAR(box.y_max, expected["box"][3].get<double>(), 1e-4) << i << " " << k;
+        EXPECT_EQ(box.track_id, expected["track_id"].get<int64_t>()) << i << " " << k;
+      }
+      if (!image.contains("segmentation")) {
+        EXPECT_TRUE(message.segmentation.empty());
+        continue;
+      }
+      EXPECT_EQ(message.segmentation_classes, image["classes"].get<std::vector<std::string>>());
+      EXPECT_EQ(message.segmentation, image["segmentation"].get<std::vector<uint8_t>>()) << i;
+      EXPECT_TRUE(msgs::validate(message).ok());
+    }
+  }
+  {
+    SCOPED_TRACE("a detector's topic mapped to a camera's detections");
+    RosbagImportConfig config;
+    config.topic_map = {{"/camera/image_raw", "/front"}, {"/yolo/detections", "/front/detections"}};
+    auto mapped = import(dir.string(), config);
+    ASSERT_TRUE(mapped.ok()) << mapped.error().message;
+    EXPECT_EQ(messages_of<msgs::DetectionsMessage>(*mapped, "/front/detections").size(), 4u);
+    config.topic_map["/yolo/detections"] = "/rear/detections";  // not imported: no camera /rear in the log
+    auto refused = import(dir.string(), config);
+    ASSERT_FALSE(refused.ok());
+    EXPECT_THAT(refused.error().message, HasSubstr("topic '/yolo/detections' is a detector's output: map it to the detections of a camera"));
+  }
+  fs::remove_all(dir);
+}
+
+INSTANTIATE_TEST_SUITE_P(Storages, Rosbag2Vision, ::testing::Values("mcap", "sqlite3"));
 
 // rosbag2's zstd compression: per message (the SQLite rows compressed) and per file.
 TEST(Rosbag2Compression, MessageAndFileModesReadTheSameValues) {

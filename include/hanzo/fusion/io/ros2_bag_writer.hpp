@@ -6,7 +6,8 @@
 //   geometry_msgs/msg/PoseStamped, geometry_msgs/msg/PoseWithCovarianceStamped, nav_msgs/msg/Path,
 //   sensor_msgs/msg/PointCloud2 (x, y, z float32 [+ intensity float32]), nav_msgs/msg/OccupancyGrid;
 //   and sensor data (a sensor log as a ROS 2 bag): sensor_msgs/msg/Imu, NavSatFix, Image, CompressedImage,
-//   PointCloud2 in a LiDAR driver's layout, geometry_msgs/msg/TwistStamped; the calibration as
+//   PointCloud2 in a LiDAR driver's layout, geometry_msgs/msg/TwistStamped, a detector's output
+//   as vision_msgs/msg/Detection2DArray, LabelInfo and label images; the calibration as
 //   tf2_msgs/msg/TFMessage (/tf_static) and sensor_msgs/msg/CameraInfo.
 //
 // The *_cdr functions encode one message (ROS 2 Humble layouts, as read back by Foxglove's
@@ -68,6 +69,14 @@ std::string image_cdr(const msgs::ImageMessage& image);
 /// <encoding>" ("png" alike), e.g. "mono8; jpeg compressed mono8".
 std::string compressed_image_cdr(const msgs::ImageMessage& image, const std::string& format, const std::string& file);
 std::string point_cloud_cdr(const msgs::PointCloudMessage& cloud, LidarLayout layout);
+/// A detector's boxes as vision_msgs/msg/Detection2DArray (vision_msgs 4): one hypothesis per
+/// box (class name as class_id, score), the box as centre and size, track_id as id ("" for -1).
+/// Instance masks are left out (vision_msgs has none).
+std::string detection_array_cdr(const msgs::DetectionsMessage& detections);
+/// The segmentation as a label image (sensor_msgs/msg/Image, mono8 class ids, 255 unlabelled).
+std::string label_image_cdr(const msgs::DetectionsMessage& detections);
+/// The segmentation's label table as vision_msgs/msg/LabelInfo (class id i = classes[i]).
+std::string label_info_cdr(Timestamp stamp, const std::string& frame_id, const std::vector<std::string>& classes);
 /// tf2_msgs/TFMessage: one TransformStamped per transform (header frame = parent).
 std::string tf_message_cdr(const std::vector<ros::FrameTransform>& transforms);
 /// sensor_msgs/CameraInfo of an image of `width` x `height`: K, R = I, P = [K | 0]; distortion

@@ -29,9 +29,14 @@
 //   geometry_msgs/TwistStamped -> twist (forward speed, yaw rate), turned into cumulative
 //                                 left/right wheel distances by WheelDistanceIntegrator
 //   tf2_msgs/TFMessage         -> FrameTransforms (T_parent_child of each TransformStamped)
+//   vision_msgs/Detection2DArray (vision_msgs 3 and 4: ROS 2 Galactic and later; CDR only)
+//                              -> RosDetections: per detection its most likely class, box, id
+//   vision_msgs/LabelInfo      -> LabelTable (class id -> class name of a detector/segmenter)
 //
 // Every decoder fails on truncated or inconsistent data, naming the type and what is wrong.
 
+#include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -77,6 +82,35 @@ struct FrameTransform {
 };
 /// tf2_msgs/TFMessage. Fails for a rotation that is not a unit quaternion (within 1e-3).
 Result<std::vector<FrameTransform>> transforms_from_ros(std::string_view data, Serialization serialization);
+
+/// One vision_msgs/Detection2D: the hypothesis of the highest score and the box.
+struct RosDetection {
+  std::string class_id;  ///< ObjectHypothesis.class_id as sent: a name ("person") or a LabelInfo id ("0")
+  double score = 0.0;
+  double center_x = 0.0, center_y = 0.0;  ///< bbox.center, pixels (x right, y down)
+  double theta = 0.0;                     ///< bbox.center.theta, rad (0: axis-aligned)
+  double size_x = 0.0, size_y = 0.0;      ///< bbox size, pixels
+  std::string id;                         ///< Detection2D.id (a tracker's id); may be empty
+};
+/// A vision_msgs/Detection2DArray (stamp and frame of its header).
+struct RosDetections {
+  Timestamp stamp;
+  std::string frame_id;
+  std::vector<RosDetection> detections;
+};
+/// Fails for ROS 1 data (vision_msgs 1.x has another layout), truncated data and a detection
+/// without any class hypothesis.
+Result<RosDetections> detections_from_ros(std::string_view data, Serialization serialization);
+
+/// A vision_msgs/LabelInfo: the class names of a detector's or segmenter's ids.
+struct LabelTable {
+  Timestamp stamp;
+  std::string frame_id;
+  std::map<uint16_t, std::string> class_names;  ///< class_map: class_id -> class_name
+  float threshold = 0.0F;
+};
+/// Fails for ROS 1 data, truncated data and an empty class name.
+Result<LabelTable> label_info_from_ros(std::string_view data, Serialization serialization);
 
 /// What hanzo-fusion uses of a nav_msgs/Odometry or geometry_msgs/TwistStamped: the body twist.
 struct OdometryTwist {

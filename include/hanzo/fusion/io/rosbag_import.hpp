@@ -9,6 +9,18 @@
 // whole ROS topic with '_' for '/' ("/camera/image_raw/compressed" -> "/camera_image_raw_compressed").
 // The sensor name of each channel is its log topic without the leading '/'.
 //
+// A detector's and segmenter's output (HIP-0081) goes to the detections of the camera image it
+// is for (`<camera log topic>/detections`, msgs::DetectionsMessage on the camera's sensor name):
+// vision_msgs/Detection2DArray boxes, and label images: sensor_msgs/Image topics whose name holds
+// "segment", "semantic" or "label" (mono8 class ids, 255 unlabelled; 16UC1 ids up to 253),
+// or any Image topic the topic map sends to "<camera>/detections". Its camera: the one the topic
+// map names (--topic /yolo/detections=/front/detections), else the camera topic of the same
+// frame_id, then of the longest shared namespace. Class ids are named by the vision_msgs/LabelInfo
+// of the longest shared namespace (or the bag's only one). The boxes and label image of one image
+// (matched by header stamp) are joined into one message; an output whose camera has no image
+// yet, a box wholly outside the image or a label image of another aspect ratio is rejected
+// (counted on its topic with the reason).
+//
 // Calibration: /tf_static (tf2_msgs/TFMessage) and sensor_msgs/CameraInfo topics are not
 // written to the log; they give each imported sensor's T_body_sensor (the static transform tree
 // from the body frame to the frame_id of the sensor's messages) and each camera's intrinsics
@@ -69,8 +81,9 @@ struct RosbagImportReport {
 
 /// A ROS 2 bag written by `hanzo-fusion export ros2bag` carries, in metadata.yaml's custom_data,
 /// what the log called its topics and sensors (`hanzo_fusion.sensors`: a JSON object ROS topic ->
-/// sensor name), the wheels' separation (`hanzo_fusion.wheel_separation`, m) and the calibration
-/// it was exported with (`hanzo_fusion.calibration`, the calibration YAML). import_rosbag2 then
+/// sensor name), the wheels' separation (`hanzo_fusion.wheel_separation`, m), the calibration
+/// it was exported with (`hanzo_fusion.calibration`, the calibration YAML) and the label images'
+/// detections topics (`hanzo_fusion.label_images`: ROS topic -> log topic). import_rosbag2 then
 /// gives back the same log: topics and sensor names kept (unless `topic_map` names others), the
 /// wheel separation used unless given, and that calibration (time offsets and all) instead of the
 /// one rebuilt from /tf_static.
