@@ -41,7 +41,8 @@ std::optional<double> floor_height(const std::vector<Eigen::Vector3f>& points, c
 
 }  // namespace
 
-void label_grid(msgs::OccupancyGridLayer& grid, const msgs::PointLayer& points, double occupied_threshold, double free_threshold) {
+void label_grid(msgs::OccupancyGridLayer& grid, const msgs::PointLayer& points, const std::vector<Eigen::Vector3f>& normals,
+                double occupied_threshold, double free_threshold, const TraversabilityConfig& traversability) {
   grid.labels.clear();
   if (grid.size_z != 1 || grid.occupancy.size() != static_cast<std::size_t>(grid.size_x) * grid.size_y) return;
   // Wall and obstacle points per cell column.
@@ -58,14 +59,17 @@ void label_grid(msgs::OccupancyGridLayer& grid, const msgs::PointLayer& points, 
       ++column_votes[static_cast<std::size_t>(y) * grid.size_x + static_cast<std::size_t>(x)][wall ? 0 : 1];
     }
   }
+  const std::vector<GroundCell> ground = ground_cells(grid, points.points, normals, traversability);
   grid.labels.resize(grid.occupancy.size(), msgs::SemanticLabel::kUnknown);
   for (std::size_t cell = 0; cell < grid.occupancy.size(); ++cell) {
     const float probability = grid.occupancy[cell];
-    if (probability <= free_threshold) {
-      grid.labels[cell] = msgs::SemanticLabel::kTraversable;
-    } else if (probability >= occupied_threshold) {
+    if (probability >= occupied_threshold) {
       const auto& [walls, obstacles] = column_votes[cell];
       grid.labels[cell] = walls > 0 && walls >= obstacles ? msgs::SemanticLabel::kWall : msgs::SemanticLabel::kObstacle;
+    } else if (!ground.empty() && ground[cell].has_ground()) {
+      grid.labels[cell] = ground[cell].traversable(traversability) ? msgs::SemanticLabel::kTraversable : msgs::SemanticLabel::kObstacle;
+    } else if (probability <= free_threshold) {
+      grid.labels[cell] = msgs::SemanticLabel::kTraversable;
     }
   }
 }
@@ -89,6 +93,7 @@ Status GeometricLabelConfig::validate() const {
   if (!(robot_height_m > floor_tolerance_m)) return Error(fmt::format("robot_height_m: {} (above floor_tolerance_m)", robot_height_m));
   if (!(histogram_bin_m > 0.0)) return Error(fmt::format("histogram_bin_m: {} (> 0)", histogram_bin_m));
   if (!(floor_min_share > 0.0 && floor_min_share <= 1.0)) return Error(fmt::format("floor_min_share: {} (0 to 1)", floor_min_share));
+  if (Status valid = traversability.validate(); !valid) return Error("traversability." + valid.error().message);
   return ok_status();
 }
 
@@ -100,7 +105,7 @@ msgs::SemanticLabel geometric_label(const Eigen::Vector3f& normal, double z, std
   return msgs::SemanticLabel::kUnknown;
 }
 
-Result<GeometricLabelSummary> label_points(msgs::PointLayer& layer, const GeometricLabelConfig& config) {
+Result<GeometricLabelSummary> label_points(msgs::PointLayer& layer, const GeometricLabelConfig& config, std::vector<Eigen::Vector3f>* normals) {
   HANZO_RETURN_IF_ERROR(config.validate());
   GeometricLabelSummary summary;
   layer.labels.assign(layer.points.size(), msgs::SemanticLabel::kUnknown);
@@ -118,6 +123,7 @@ Result<GeometricLabelSummary> label_points(msgs::PointLayer& layer, const Geomet
     layer.labels[i] = geometric_label(cloud.normals[i], layer.points[i].z(), summary.floor_height, config);
     ++summary.counts[static_cast<std::size_t>(layer.labels[i])];
   }
+  if (normals != nullptr) *normals = std::move(cloud.normals);
   return summary;
 }
 

@@ -111,9 +111,11 @@ void MapBuilder::write_map(msgs::FusionMap& map) const {
   if (map.points && !map.points->classes.empty() && map.occupancy) classify_cells(*map.occupancy, *map.points);
   if (!config_.geometric_labels || !map.points) return;
   // The configuration was validated at creation: labelling cannot fail.
-  (void)label_points(*map.points, config_.labels);
+  std::vector<Eigen::Vector3f> normals;
+  (void)label_points(*map.points, config_.labels, &normals);
   if (map.occupancy && !occupancy_3d_) {
-    label_grid(*map.occupancy, *map.points, config_.occupancy_2d_config.occupied_threshold, config_.occupancy_2d_config.free_threshold);
+    label_grid(*map.occupancy, *map.points, normals, config_.occupancy_2d_config.occupied_threshold, config_.occupancy_2d_config.free_threshold,
+               config_.labels.traversability);
   }
 }
 

@@ -24,6 +24,7 @@
 #include <optional>
 
 #include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/maps/traversability.hpp"
 #include "hanzo/fusion/msgs/map_messages.hpp"
 
 namespace hanzo::fusion::maps {
@@ -36,6 +37,7 @@ struct GeometricLabelConfig {
   double robot_height_m = 2.0;            ///< obstacles up to this above the floor
   double histogram_bin_m = 0.05;          ///< floor-height histogram bin
   double floor_min_share = 0.5;           ///< of the fullest bin, for the lowest bin to be the floor
+  TraversabilityConfig traversability;    ///< the 2D grid's traversable cells (label_grid)
 
   /// Checks every field; the error names the first one out of range.
   Status validate() const;
@@ -46,15 +48,23 @@ struct GeometricLabelSummary {
   std::array<std::size_t, 5> counts{};  ///< points per msgs::SemanticLabel value
 };
 
-/// Fills layer.labels (one per point, replacing any there). Fails on an invalid config only.
-Result<GeometricLabelSummary> label_points(msgs::PointLayer& layer, const GeometricLabelConfig& config = {});
+/// Fills layer.labels (one per point, replacing any there) and, when `normals` is given, the
+/// points' unit normals into it. Fails on an invalid config only.
+Result<GeometricLabelSummary> label_points(msgs::PointLayer& layer, const GeometricLabelConfig& config = {},
+                                           std::vector<Eigen::Vector3f>* normals = nullptr);
 
 /// A 2D occupancy grid's labels (grid.size_z == 1; a 3D grid is left unlabelled), one per cell:
-/// kTraversable for a free cell (P(occupied) <= free_threshold: rays crossed it in the robot's
-/// height band), kWall or kObstacle for an occupied one (P >= occupied_threshold) by the
-/// majority of `points`' labels in its column (kWall on a tie; kObstacle when none fall in it),
-/// kUnknown otherwise (never observed, or undecided). Replaces grid.labels.
-void label_grid(msgs::OccupancyGridLayer& grid, const msgs::PointLayer& points, double occupied_threshold, double free_threshold);
+///   occupied (P(occupied) >= occupied_threshold): kWall or kObstacle by the majority of
+///     `points`' labels in its column (kWall on a tie; kObstacle when none fall in it);
+///   otherwise, where `points` show the cell's ground (traversability.hpp, with their unit
+///     `normals`): kTraversable when its slope, step and clearance allow, else kObstacle;
+///   otherwise a free cell (P <= free_threshold: rays crossed it in the robot's height band):
+///     kTraversable (a map's points are sparser than its grid: most free cells hold no ground
+///     point; a drop in the floor there goes unseen);
+///   otherwise kUnknown (never observed, or undecided).
+/// Replaces grid.labels.
+void label_grid(msgs::OccupancyGridLayer& grid, const msgs::PointLayer& points, const std::vector<Eigen::Vector3f>& normals,
+                double occupied_threshold, double free_threshold, const TraversabilityConfig& traversability = {});
 
 /// "unknown", "floor", "wall", "obstacle", "traversable".
 const char* semantic_label_name(msgs::SemanticLabel label);
