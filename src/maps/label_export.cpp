@@ -44,16 +44,20 @@ std::string coloured_points_ply(const std::vector<Eigen::Vector3f>& points, cons
 
 }  // namespace
 
-Status write_labelled_points_ply(const std::string& path, const msgs::PointLayer& layer) {
+Result<std::string> labelled_points_ply(const msgs::PointLayer& layer) {
   if (layer.labels.empty()) return Error("point layer: no semantic labels to export (map build labels points by default)", "labels");
   if (layer.labels.size() != layer.points.size()) {
     return Error(fmt::format("point layer: {} labels for {} points", layer.labels.size(), layer.points.size()), "labels");
   }
-  return yaml::write_file_atomically(
-      path, coloured_points_ply(
-                layer.points, "comment hanzo-fusion semantic labels: 0 unknown, 1 floor, 2 wall, 3 obstacle, 4 traversable\n",
-                "property uchar label\n", 1, [&](std::size_t i) { return semantic_label_color(layer.labels[i]); },
-                [&](std::string& out, std::size_t i) { out.push_back(static_cast<char>(layer.labels[i])); }));
+  return coloured_points_ply(layer.points, "comment hanzo-fusion semantic labels: 0 unknown, 1 floor, 2 wall, 3 obstacle, 4 traversable\n",
+                             "property uchar label\n", 1, [&](std::size_t i) { return semantic_label_color(layer.labels[i]); },
+                             [&](std::string& out, std::size_t i) { out.push_back(static_cast<char>(layer.labels[i])); });
+}
+
+Status write_labelled_points_ply(const std::string& path, const msgs::PointLayer& layer) {
+  std::string bytes;
+  HANZO_ASSIGN_OR_RETURN(bytes, labelled_points_ply(layer));
+  return yaml::write_file_atomically(path, bytes);
 }
 
 std::array<uint8_t, 3> semantic_class_color(uint16_t class_index) {
@@ -73,7 +77,7 @@ std::array<uint8_t, 3> semantic_class_color(uint16_t class_index) {
   return kPalette[class_index % kPalette.size()];
 }
 
-Status write_classified_points_ply(const std::string& path, const msgs::PointLayer& layer, const std::vector<std::string>& class_names) {
+Result<std::string> classified_points_ply(const msgs::PointLayer& layer, const std::vector<std::string>& class_names) {
   if (layer.classes.empty()) return Error("point layer: no segmentation classes to export (a session projects a camera segmentation onto its LiDAR map)", "classes");
   if (layer.classes.size() != layer.points.size() || (!layer.class_probability.empty() && layer.class_probability.size() != layer.points.size())) {
     return Error(fmt::format("point layer: {} classes, {} probabilities for {} points", layer.classes.size(), layer.class_probability.size(), layer.points.size()),
@@ -81,14 +85,19 @@ Status write_classified_points_ply(const std::string& path, const msgs::PointLay
   }
   std::string comments = "comment hanzo-fusion segmentation classes (class 65535: none)\n";
   for (std::size_t i = 0; i < class_names.size(); ++i) comments += fmt::format("comment class {} {}\n", i, class_names[i]);
-  return yaml::write_file_atomically(
-      path, coloured_points_ply(layer.points, comments, "property ushort class\nproperty float class_probability\n", 6,
-                                [&](std::size_t i) { return semantic_class_color(layer.classes[i]); },
-                                [&](std::string& out, std::size_t i) {
-                                  out.append(reinterpret_cast<const char*>(&layer.classes[i]), sizeof(uint16_t));
-                                  const float probability = layer.class_probability.empty() ? 0.0F : layer.class_probability[i];
-                                  out.append(reinterpret_cast<const char*>(&probability), sizeof(float));
-                                }));
+  return coloured_points_ply(layer.points, comments, "property ushort class\nproperty float class_probability\n", 6,
+                             [&](std::size_t i) { return semantic_class_color(layer.classes[i]); },
+                             [&](std::string& out, std::size_t i) {
+                               out.append(reinterpret_cast<const char*>(&layer.classes[i]), sizeof(uint16_t));
+                               const float probability = layer.class_probability.empty() ? 0.0F : layer.class_probability[i];
+                               out.append(reinterpret_cast<const char*>(&probability), sizeof(float));
+                             });
+}
+
+Status write_classified_points_ply(const std::string& path, const msgs::PointLayer& layer, const std::vector<std::string>& class_names) {
+  std::string bytes;
+  HANZO_ASSIGN_OR_RETURN(bytes, classified_points_ply(layer, class_names));
+  return yaml::write_file_atomically(path, bytes);
 }
 
 Result<std::vector<std::string>> write_label_maps(const std::string& yaml_stem, const msgs::OccupancyGridLayer& layer) {

@@ -16,6 +16,7 @@
 
 #include "hanzo/fusion/cloud/cloud_io.hpp"
 #include "hanzo/fusion/core/logging.hpp"
+#include "hanzo/fusion/maps/label_export.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
 #include "hanzo/fusion/maps/splat_ply.hpp"
@@ -85,8 +86,8 @@ ApiResult<int64_t> integer_parameter(const httplib::Request& request, const std:
 // `?format=`: fmap (default), pcd, ply or json; kInvalidArgument otherwise.
 ApiResult<std::string> map_format(const httplib::Request& request) {
   const std::string format = request.has_param("format") ? request.get_param_value("format") : "fmap";
-  if (format != "fmap" && format != "pcd" && format != "ply" && format != "json" && format != "splats") {
-    return ApiError{ErrorCode::kInvalidArgument, fmt::format("format '{}': use fmap, pcd, ply, splats or json", format), "format"};
+  if (format != "fmap" && format != "pcd" && format != "ply" && format != "json" && format != "splats" && format != "labels" && format != "classes") {
+    return ApiError{ErrorCode::kInvalidArgument, fmt::format("format '{}': use fmap, pcd, ply, labels, classes, splats or json", format), "format"};
   }
   return format;
 }
@@ -181,12 +182,20 @@ void send_map_file(httplib::Response& response, const msgs::FusionMap& map, cons
     bytes = maps::encode_splat_ply(*map.gaussian_splats);
   } else if (!map.points) {
     return send_error(response, {ErrorCode::kNotFound, "the map has no point layer", "format"});
+  } else if (format == "labels" || format == "classes") {
+    const bool labels = format == "labels";
+    if (labels ? map.points->labels.empty() : map.points->classes.empty()) {
+      return send_error(response, {ErrorCode::kNotFound, labels ? "the map's points have no semantic labels" : "the map's points have no segmentation classes",
+                                   "format"});
+    }
+    bytes = labels ? maps::labelled_points_ply(*map.points) : maps::classified_points_ply(*map.points, map.semantic_classes);
   } else {
     bytes = cloud::encode_cloud(maps::to_point_cloud(*map.points), format);
   }
   if (!bytes) return send_error(response, ApiError::from(ErrorCode::kInternal, bytes.error()));
   response.set_header("Content-Disposition",
-                       fmt::format("attachment; filename=\"{}-v{}.{}\"", map.map_id, map.version, format == "splats" ? "splats.ply" : format));
+                       fmt::format("attachment; filename=\"{}-v{}.{}\"", map.map_id, map.version,
+                                   format == "splats" || format == "labels" || format == "classes" ? format + ".ply" : format));
   response.set_content(std::move(bytes).value(), "application/octet-stream");
 }
 

@@ -14,6 +14,7 @@
 #include "hanzo/fusion/calib/calibration.hpp"
 #include "hanzo/fusion/cloud/cloud_io.hpp"
 #include "hanzo/fusion/config/fusion_config.hpp"
+#include "hanzo/fusion/maps/label_export.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/msgs/map_convert.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
@@ -385,6 +386,15 @@ TEST_F(MappingEndpointsTest, StoresMapVersionsLoadsMapsAndRelocalizesASessionInT
   EXPECT_EQ(parsed->points->points.front(), known.points->points.front());
   auto pcd = get("/v1/maps/" + known_id + "?format=pcd", kRobotToken);
   ASSERT_TRUE(pcd && pcd->status == 200);
+  // The points by semantic label (the session labels its map's points); no segmentation classes.
+  ASSERT_FALSE(known.points->labels.empty());
+  auto labels = get("/v1/maps/" + known_id + "?format=labels", kRobotToken);
+  ASSERT_TRUE(labels && labels->status == 200);
+  EXPECT_EQ(labels->body, maps::labelled_points_ply(*known.points).value());
+  auto classes = get("/v1/maps/" + known_id + "?format=classes", kRobotToken);
+  ASSERT_TRUE(classes);
+  EXPECT_EQ(classes->status, 404);
+  EXPECT_NE(classes->body.find("no segmentation classes"), std::string::npos);
   // Temporal queries: the version current at a time, by its creation time.
   const int64_t second_created = versions_json["versions"][1]["created_ns"];
   const int64_t first_created = versions_json["versions"][0]["created_ns"];

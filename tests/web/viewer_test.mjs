@@ -5,8 +5,9 @@
 // table, health timeline, position uncertainty, grid scale and overview; without a token it must
 // say so, and a token in the URL must be dropped unused. Then a FusionMap with Gaussian splats
 // (`hanzo-fusion run` with fusion.mapping.splats on the warehouse with its camera), uploaded
-// and opened with ?map=ID, must be drawn by the splat renderer. The screenshots are kept:
-// TEST_ARTIFACTS/viewer.png, viewer-splats.png.
+// and opened with ?map=ID, must be drawn by the splat renderer; the map's points coloured by
+// semantic label must show a legend with floor and wall. The screenshots are kept:
+// TEST_ARTIFACTS/viewer.png, viewer-labels.png, viewer-splats.png.
 //
 //   node tests/web/viewer_test.mjs --binary build/apps/hanzo-fusion --out build/test-artifacts
 import { spawn, execFileSync } from 'node:child_process';
@@ -134,6 +135,24 @@ await page.waitForFunction((stored) => window.viewerState.trajectoryPoints >= st
   .catch(() => fail('the trajectory did not catch up with the stored poses'));
 check(pageErrors.length === 0, `page errors: ${pageErrors.join('; ')}`);
 check(fs.statSync(path.join(out, 'viewer.png')).size > 10000, 'the screenshot is empty');
+
+// The map's points by semantic label: the legend names floor and wall, their points add up to the map's.
+await page.selectOption('#colour', 'labels');
+await page.waitForFunction(() => {
+  const names = window.viewerState.legend.map((entry) => entry.name);
+  return names.includes('floor') && names.includes('wall');
+}, null, { timeout: 15000, polling: 500 }).catch(async () => fail(`no label legend: ${JSON.stringify(await page.evaluate(() => ({ legend: window.viewerState.legend, error: window.viewerState.lastError, version: window.viewerState.mapVersion, colour: window.viewerState.colour })))}`));
+const labelled = await page.evaluate(() => ({ legend: window.viewerState.legend, points: window.viewerState.mapPoints }));
+check(labelled.legend.reduce((sum, entry) => sum + entry.points, 0) === labelled.points, `label legend ${JSON.stringify(labelled)}`);
+const legendText = await page.textContent('#legend');
+check(/floor \(\d+\)/.test(legendText) && /wall \(\d+\)/.test(legendText), `legend shown: ${legendText}`);
+await page.screenshot({ path: path.join(out, 'viewer-labels.png') });
+// No segmentation on this LiDAR-only drive: the legend says so, the points stay shown.
+await page.selectOption('#colour', 'classes');
+await page.waitForFunction(() => window.viewerState.legend.some((entry) => entry.name === "the map's points have no classes"), null,
+                           { timeout: 15000, polling: 500 }).catch(() => fail('selecting classes on a map without them did not say so'));
+await page.selectOption('#colour', 'height');
+check(pageErrors.length === 0, `page errors: ${pageErrors.join('; ')}`);
 
 // 6. A FusionMap with Gaussian splats: 12 s of the warehouse with its camera, mapped with splats.
 const splatSim = path.join(scratch, 'splat-sim');

@@ -5,9 +5,11 @@
 // uncertainty over time. Talks to the REST API of the server that serves it (docs/server.md)
 // with the token typed into the page, kept in sessionStorage (never in the URL: a `?token=`
 // there is removed unread, as it lands in browser history and server logs). `?session=ID`
-// selects a session, `?map=ID` shows a stored FusionMap's points and splats instead. Polls: sessions every second, the pose 5 times a second, new trajectory
-// poses every second, the map when its version changes, the splats at most every 5 s while they
-// train.
+// selects a session, `?map=ID` shows a stored FusionMap's points and splats instead. The points
+// are coloured by height, by semantic label (floor, wall, obstacle, traversable: ?format=labels)
+// or by segmentation class (?format=classes), with a legend. Polls: sessions every second, the
+// pose 5 times a second, new trajectory poses every second, the map when its version changes,
+// the splats at most every 5 s while they train.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 import { SparkRenderer, SplatMesh } from '@sparkjsdev/spark';
@@ -34,6 +36,9 @@ const state = {
   trajectoryAfter: null,  // next_after of the trajectory paging
   mapVersion: -1,
   mapPoints: 0,
+  colour: 'height',       // the map points' colouring: height, labels or classes
+  mapColour: 'height',    // the colouring of the map points shown
+  legend: [],             // [{ name, colour: [r, g, b], points }] of the labels / classes shown
   splats: 0,              // Gaussians drawn
   splatIterations: -1,    // the session's training steps when they were fetched
   splatFetchedAt: 0,      // ms (performance.now())
@@ -204,7 +209,79 @@ function parsePcd(buffer) {
   return positions;
 }
 
-function showMap(positions) {
+// --- PLY of coloured points (binary little endian, as ?format=labels / classes write it):
+// positions, colours (0..1) and the legend: per label / class value its name, colour and count.
+const PLY_SIZES = { char: 1, uchar: 1, short: 2, ushort: 2, int: 4, uint: 4, float: 4, double: 8 };
+const LABEL_NAMES = ['unknown', 'floor', 'wall', 'obstacle', 'traversable'];
+function parseColouredPly(buffer) {
+  const bytes = new Uint8Array(buffer);
+  const marker = 'end_header\n';
+  let header = '';
+  let offset = 0;
+  while (offset < bytes.length && !header.endsWith(marker)) header += String.fromCharCode(bytes[offset++]);
+  if (!header.startsWith('ply\nformat binary_little_endian') || !header.endsWith(marker)) throw new Error('map: not a binary PLY');
+  const points = Number((header.match(/^element vertex (\d+)$/m) || [, '0'])[1]);
+  const offsets = {}, types = {};
+  let stride = 0;
+  for (const [, type, name] of header.matchAll(/^property (\w+) (\w+)$/gm)) {
+    offsets[name] = stride;
+    types[name] = type;
+    stride += PLY_SIZES[type];
+  }
+  const names = {};
+  for (const [, id, name] of header.matchAll(/^comment class (\d+) (.+)$/gm)) names[id] = name;
+  const key = 'label' in offsets ? 'label' : 'class';
+  const view = new DataView(buffer, offset);
+  const positions = new Float32Array(points * 3), colors = new Float32Array(points * 3);
+  const legend = new Map();
+  for (let i = 0; i < points; ++i) {
+    const at = i * stride;
+    for (let axis = 0; axis < 3; ++axis) positions[3 * i + axis] = view.getFloat32(at + offsets['xyz'[axis]], true);
+    const rgb = ['red', 'green', 'blue'].map((channel) => view.getUint8(at + offsets[channel]));
+    colors.set(rgb.map((value) => value / 255), 3 * i);
+    const value = types[key] === 'ushort' ? view.getUint16(at + offsets[key], true) : view.getUint8(at + offsets[key]);
+    if (!legend.has(value)) {
+      const name = key === 'label' ? LABEL_NAMES[value] ?? `label ${value}` : value === 65535 ? 'no class' : names[value] ?? `class ${value}`;
+      legend.set(value, { name, colour: rgb, points: 0 });
+    }
+    ++legend.get(value).points;
+  }
+  return { positions, colors, legend: [...legend.values()].sort((a, b) => b.points - a.points) };
+}
+
+function showLegend() {
+  $('legend').replaceChildren(...state.legend.map(({ name, colour, points }) => {
+    const item = document.createElement('li');
+    const swatch = document.createElement('span');
+    swatch.className = 'swatch';
+    swatch.style.background = `rgb(${colour.join(',')})`;
+    item.append(swatch, `${name} (${points})`);
+    return item;
+  }));
+}
+
+// The map's points for the chosen colouring: a PCD coloured by height, or the labels' / classes' PLY.
+async function fetchMap(path) {
+  const colour = state.colour;
+  if (colour === 'height') {
+    showMap(parsePcd(await api(`${path}?format=pcd`, { binary: true })));
+    state.legend = [];
+  } else {
+    try {
+      const { positions, colors, legend } = parseColouredPly(await api(`${path}?format=${colour}`, { binary: true }));
+      state.legend = legend;
+      showMap(positions, colors);
+    } catch (error) {
+      if (error.status !== 404) throw error;
+      state.legend = [{ name: `the map's points have no ${colour}`, colour: [128, 128, 128], points: 0 }];
+      showMap(parsePcd(await api(`${path}?format=pcd`, { binary: true })));
+    }
+  }
+  state.mapColour = colour;
+  showLegend();
+}
+
+function heightColours(positions) {
   let low = Infinity, high = -Infinity;
   for (let i = 2; i < positions.length; i += 3) { low = Math.min(low, positions[i]); high = Math.max(high, positions[i]); }
   const colors = new Float32Array(positions.length);
@@ -214,6 +291,10 @@ function showMap(positions) {
     color.setHSL(0.66 * (1 - t), 0.8, 0.55);
     colors.set([color.r, color.g, color.b], 3 * i);
   }
+  return colors;
+}
+
+function showMap(positions, colors = heightColours(positions)) {
   mapGeometry.setAttribute('position', new THREE.BufferAttribute(positions, 3));
   mapGeometry.setAttribute('color', new THREE.BufferAttribute(colors, 3));
   mapGeometry.computeBoundingSphere();
@@ -362,9 +443,9 @@ async function refreshSession() {
   if (!state.selected) return;
   const session = await api(`/v1/sessions/${state.selected}`);
   const version = session.mapping ? session.mapping.map_version : 0;
-  if (version > 0 && version !== state.mapVersion) {
+  if (version > 0 && (version !== state.mapVersion || state.colour !== state.mapColour)) {
     try {
-      showMap(parsePcd(await api(`/v1/sessions/${state.selected}/map?format=pcd`, { binary: true })));
+      await fetchMap(`/v1/sessions/${state.selected}/map`);
       state.mapVersion = version;
     } catch (error) {
       if (error.status !== 404 && error.status !== 403) throw error;  // no map, or no map:read
@@ -395,7 +476,7 @@ async function showStoredMap() {
       if (error.status !== 404) throw error;  // a map without that layer
     }
   };
-  await optional('pcd', (bytes) => showMap(parsePcd(bytes)));
+  await fetchMap(path).catch((error) => { if (error.status !== 404) throw error; });  // a map without points
   await optional('splats', showSplats);
   state.storedMapShown = true;
   fitView();
@@ -433,6 +514,10 @@ $('token-form').addEventListener('submit', (event) => {
   sessionStorage.setItem('hanzo-fusion-token', state.token);
 });
 $('fit').addEventListener('click', fitView);
+$('colour').addEventListener('change', () => {
+  state.colour = $('colour').value;  // a session's map is fetched again by its next refresh
+  if (state.storedMap) fetchMap(`/v1/maps/${encodeURIComponent(state.storedMap)}`).catch((error) => setStatus(error.message, 'error'));
+});
 if (tokenInUrl) setStatus('a token in the URL is not used (it would stay in browser history): enter it above', 'error');
 if (state.storedMap) {
   every(2000, showStoredMap);

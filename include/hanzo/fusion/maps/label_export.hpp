@@ -28,15 +28,19 @@ namespace hanzo::fusion::maps {
 /// orange, traversable green.
 std::array<uint8_t, 3> semantic_label_color(msgs::SemanticLabel label);
 
-/// Writes the labelled points (above). Atomic.
+/// The labelled points' PLY (above); fails for a layer without labels.
+Result<std::string> labelled_points_ply(const msgs::PointLayer& layer);
+/// Writes labelled_points_ply. Atomic.
 Status write_labelled_points_ply(const std::string& path, const msgs::PointLayer& layer);
 
 /// A segmentation class's colour: twelve distinct colours by class index (repeating), grey for
 /// msgs::kNoClass.
 std::array<uint8_t, 3> semantic_class_color(uint16_t class_index);
 
-/// Writes the points with their segmentation classes (above); class_names is the map's label
-/// table. Atomic.
+/// The points with their segmentation classes (above); class_names is the map's label table.
+/// Fails for a layer without classes.
+Result<std::string> classified_points_ply(const msgs::PointLayer& layer, const std::vector<std::string>& class_names);
+/// Writes classified_points_ply. Atomic.
 Status write_classified_points_ply(const std::string& path, const msgs::PointLayer& layer, const std::vector<std::string>& class_names);
 
 /// Writes "<yaml_stem>_<label>.yaml" and its ".pgm" for each label the grid has (above) and
