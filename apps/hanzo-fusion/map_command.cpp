@@ -244,6 +244,23 @@ int run_reporting(const Output& output, nlohmann::json result, Function&& body) 
   return report_success(output, result, text);
 }
 
+// Points, cells or vertices per geometric label name.
+nlohmann::json label_counts(const std::vector<msgs::SemanticLabel>& labels) {
+  nlohmann::json counts = nlohmann::json::object();
+  for (const msgs::SemanticLabel label : labels) {
+    const char* name = maps::semantic_label_name(label);
+    counts[name] = counts.value(name, 0) + 1;
+  }
+  return counts;
+}
+
+// "floor 12, wall 40" of a label_counts / class_counts object.
+std::string counts_text(const nlohmann::json& counts) {
+  std::string text;
+  for (const auto& [name, count] : counts.items()) text += fmt::format("{}{} {}", text.empty() ? "" : ", ", name, count.get<std::size_t>());
+  return text;
+}
+
 }  // namespace
 
 nlohmann::json describe_map(const msgs::FusionMap& map) {
@@ -278,14 +295,7 @@ nlohmann::json describe_map(const msgs::FusionMap& map) {
                         {"max", {high.x(), high.y(), high.z()}},
                         {"labels", !map.points->labels.empty()},
                         {"uncertainty", !map.points->position_std.empty()}};
-    if (!map.points->labels.empty()) {
-      nlohmann::json counts = nlohmann::json::object();
-      for (const msgs::SemanticLabel label : map.points->labels) {
-        const char* name = maps::semantic_label_name(label);
-        counts[name] = counts.value(name, 0) + 1;
-      }
-      layers["points"]["label_counts"] = std::move(counts);
-    }
+    if (!map.points->labels.empty()) layers["points"]["label_counts"] = label_counts(map.points->labels);
     if (!map.points->classes.empty()) {
       // Segmentation classes (the label table's names) with their points.
       nlohmann::json counts = nlohmann::json::object();
@@ -314,12 +324,14 @@ nlohmann::json describe_map(const msgs::FusionMap& map) {
                            {"unknown_cells", grid.occupancy.size() - occupied - free},
                            {"labels", !grid.labels.empty()},
                            {"classes", !grid.classes.empty()}};
+    if (!grid.labels.empty()) layers["occupancy"]["label_counts"] = label_counts(grid.labels);
   }
   if (map.tsdf) {
     layers["tsdf"] = {{"voxel_size", map.tsdf->voxel_size}, {"blocks", map.tsdf->blocks.size()}, {"block_size", map.tsdf->block_size}};
   }
   if (map.mesh) {
     layers["mesh"] = {{"vertices", map.mesh->vertices.size()}, {"triangles", map.mesh->triangle_indices.size() / 3}};
+    if (!map.mesh->vertex_labels.empty()) layers["mesh"]["label_counts"] = label_counts(map.mesh->vertex_labels);
   }
   if (map.visual_landmarks) {
     layers["visual_landmarks"] = {{"camera", map.visual_landmarks->camera}, {"landmarks", map.visual_landmarks->positions.size()},
@@ -353,9 +365,7 @@ std::string describe_map_text(const nlohmann::json& description) {
     text += fmt::format("  points: {} ({} m voxels)\n", p["count"].get<std::size_t>(), p["voxel_size"].get<double>());
     for (const char* key : {"label_counts", "class_counts"}) {
       if (!p.contains(key)) continue;
-      std::string counts;
-      for (const auto& [name, count] : p[key].items()) counts += fmt::format("{}{} {}", counts.empty() ? "" : ", ", name, count.get<std::size_t>());
-      text += fmt::format("    {}: {}\n", std::string_view(key) == "label_counts" ? "geometric labels" : "segmentation classes", counts);
+      text += fmt::format("    {}: {}\n", std::string_view(key) == "label_counts" ? "geometric labels" : "segmentation classes", counts_text(p[key]));
     }
   }
   if (layers.contains("occupancy")) {
@@ -363,9 +373,13 @@ std::string describe_map_text(const nlohmann::json& description) {
     text += fmt::format("  occupancy: {} x {} x {} cells of {} m ({} occupied, {} free, {} unknown)\n", o["size"][0].get<uint32_t>(),
                         o["size"][1].get<uint32_t>(), o["size"][2].get<uint32_t>(), o["resolution"].get<double>(),
                         o["occupied_cells"].get<std::size_t>(), o["free_cells"].get<std::size_t>(), o["unknown_cells"].get<std::size_t>());
+    if (o.contains("label_counts")) text += fmt::format("    labels: {}\n", counts_text(o["label_counts"]));
   }
   if (layers.contains("tsdf")) text += fmt::format("  tsdf: {} blocks\n", layers["tsdf"]["blocks"].get<std::size_t>());
-  if (layers.contains("mesh")) text += fmt::format("  mesh: {} triangles\n", layers["mesh"]["triangles"].get<std::size_t>());
+  if (layers.contains("mesh")) {
+    text += fmt::format("  mesh: {} triangles\n", layers["mesh"]["triangles"].get<std::size_t>());
+    if (layers["mesh"].contains("label_counts")) text += fmt::format("    vertex labels: {}\n", counts_text(layers["mesh"]["label_counts"]));
+  }
   if (layers.contains("visual_landmarks")) {
     const auto& v = layers["visual_landmarks"];
     text += fmt::format("  visual landmarks: {} seen by {} keyframes of camera {}\n", v["landmarks"].get<std::size_t>(), v["keyframes"].get<std::size_t>(),

@@ -113,10 +113,13 @@ void MapBuilder::write_map(msgs::FusionMap& map) const {
   // The configuration was validated at creation: labelling cannot fail.
   std::vector<Eigen::Vector3f> normals;
   (void)label_points(*map.points, config_.labels, &normals);
-  if (map.occupancy && !occupancy_3d_) {
+  if (map.occupancy && occupancy_3d_) {
+    label_voxels(*map.occupancy, *map.points, config_.occupancy_3d_config.occupied_threshold);
+  } else if (map.occupancy) {
     label_grid(*map.occupancy, *map.points, normals, config_.occupancy_2d_config.occupied_threshold, config_.occupancy_2d_config.free_threshold,
                config_.labels.traversability);
   }
+  if (map.mesh) label_mesh(*map.mesh, *map.points, 2.0 * config_.tsdf_config.voxel_size);
 }
 
 uint16_t MapBuilder::class_index(std::string_view name) { return point_map_ ? point_map_->class_index(name) : msgs::kNoClass; }

@@ -213,6 +213,31 @@ TEST(MapLayers, BuilderHeightBandKeepsObstaclesAndDropsTheGround) {
   for (const Eigen::Vector3f& vertex : map.mesh->vertices) on_wall += std::abs(vertex.x() - 3.05f) < 0.1f ? 1 : 0;
   EXPECT_GT(on_wall, 100u);  // the wall 3 m ahead of the sensor at x = 0.05
 
+  // Labelled (write_map): the wall's occupied voxels and mesh vertices are walls.
+  msgs::FusionMap labelled;
+  builder->write_map(labelled);
+  ASSERT_EQ(labelled.occupancy->labels.size(), labelled.occupancy->occupancy.size());
+  std::size_t occupied = 0, occupied_walls = 0;
+  for (std::size_t voxel = 0; voxel < labelled.occupancy->occupancy.size(); ++voxel) {
+    if (labelled.occupancy->occupancy[voxel] < config.occupancy_3d_config.occupied_threshold) {
+      EXPECT_EQ(labelled.occupancy->labels[voxel], msgs::SemanticLabel::kUnknown);
+      continue;
+    }
+    ++occupied;
+    occupied_walls += labelled.occupancy->labels[voxel] == msgs::SemanticLabel::kWall;
+  }
+  EXPECT_GT(occupied, 10u);
+  EXPECT_GT(static_cast<double>(occupied_walls), 0.9 * static_cast<double>(occupied)) << occupied_walls << " of " << occupied;
+  ASSERT_EQ(labelled.mesh->vertex_labels.size(), labelled.mesh->vertices.size());
+  std::size_t wall_vertices = 0, wall_vertices_labelled = 0;
+  for (std::size_t v = 0; v < labelled.mesh->vertices.size(); ++v) {
+    if (std::abs(labelled.mesh->vertices[v].x() - 3.05f) >= 0.1f || std::abs(labelled.mesh->vertices[v].z() - 1.5f) > 0.4f) continue;
+    ++wall_vertices;
+    wall_vertices_labelled += labelled.mesh->vertex_labels[v] == msgs::SemanticLabel::kWall;
+  }
+  EXPECT_GT(wall_vertices, 50u);
+  EXPECT_GT(static_cast<double>(wall_vertices_labelled), 0.9 * static_cast<double>(wall_vertices)) << wall_vertices_labelled << " of " << wall_vertices;
+
   cloud::PointCloud far = scan;
   far.positions[0].x() = 1e9f;
   EXPECT_FALSE(builder->insert(pose, far));

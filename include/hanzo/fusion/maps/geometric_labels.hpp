@@ -66,6 +66,16 @@ Result<GeometricLabelSummary> label_points(msgs::PointLayer& layer, const Geomet
 void label_grid(msgs::OccupancyGridLayer& grid, const msgs::PointLayer& points, const std::vector<Eigen::Vector3f>& normals,
                 double occupied_threshold, double free_threshold, const TraversabilityConfig& traversability = {});
 
+/// A 3D occupancy grid's labels (grid.size_z > 1; a 2D grid is left unlabelled), one per voxel:
+/// an occupied voxel (P >= occupied_threshold) takes the most frequent label of `points` inside
+/// it (the first in label order on a tie; kObstacle when none falls in it); every other voxel
+/// kUnknown. Replaces grid.labels.
+void label_voxels(msgs::OccupancyGridLayer& grid, const msgs::PointLayer& points, double occupied_threshold);
+
+/// A mesh's vertex labels: the label of the nearest of `points` within max_distance (m), else
+/// kUnknown; none when the points carry no labels. Replaces mesh.vertex_labels.
+void label_mesh(msgs::MeshLayer& mesh, const msgs::PointLayer& points, double max_distance);
+
 /// "unknown", "floor", "wall", "obstacle", "traversable".
 const char* semantic_label_name(msgs::SemanticLabel label);
 
