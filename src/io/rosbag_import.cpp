@@ -37,7 +37,7 @@ bool is_side_information(const std::string& type, const std::string& ros_topic) 
 }
 bool is_odometry(const std::string& type) { return type == "nav_msgs/Odometry" || type == "geometry_msgs/TwistStamped"; }
 // Parts of an Image topic's name that make it a label image (rosbag_import.hpp).
-constexpr const char* kLabelImageNames[] = {"segment", "semantic", "label", "class"};
+constexpr const char* kLabelImageNames[] = {"segment", "semantic", "label"};
 
 std::vector<std::string> topic_parts(const std::string& ros_topic) {
   std::vector<std::string> parts;

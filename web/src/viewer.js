@@ -185,14 +185,19 @@ resize();
   renderer.render(scene, camera);
 })();
 
-// --- PCD (binary, as GET /map?format=pcd writes it) ---
-function parsePcd(buffer) {
+// The text header of a binary point file up to and including `marker`, and where the data starts.
+function readHeader(buffer, marker, kind) {
   const bytes = new Uint8Array(buffer);
-  const marker = 'DATA binary\n';
   let header = '';
   let offset = 0;
   while (offset < bytes.length && !header.endsWith(marker)) header += String.fromCharCode(bytes[offset++]);
-  if (!header.endsWith(marker)) throw new Error('map: not a binary PCD');
+  if (!header.endsWith(marker)) throw new Error(`map: not a binary ${kind}`);
+  return { header, offset };
+}
+
+// --- PCD (binary, as GET /map?format=pcd writes it) ---
+function parsePcd(buffer) {
+  const { header, offset } = readHeader(buffer, 'DATA binary\n', 'PCD');
   const field = (name) => (header.match(new RegExp(`^${name} (.*)$`, 'm')) || [, ''])[1].trim().split(/\s+/);
   const names = field('FIELDS');
   const sizes = field('SIZE').map(Number);
@@ -214,12 +219,8 @@ function parsePcd(buffer) {
 const PLY_SIZES = { char: 1, uchar: 1, short: 2, ushort: 2, int: 4, uint: 4, float: 4, double: 8 };
 const LABEL_NAMES = ['unknown', 'floor', 'wall', 'obstacle', 'traversable'];
 function parseColouredPly(buffer) {
-  const bytes = new Uint8Array(buffer);
-  const marker = 'end_header\n';
-  let header = '';
-  let offset = 0;
-  while (offset < bytes.length && !header.endsWith(marker)) header += String.fromCharCode(bytes[offset++]);
-  if (!header.startsWith('ply\nformat binary_little_endian') || !header.endsWith(marker)) throw new Error('map: not a binary PLY');
+  const { header, offset } = readHeader(buffer, 'end_header\n', 'PLY');
+  if (!header.startsWith('ply\nformat binary_little_endian')) throw new Error('map: not a little-endian binary PLY');
   const points = Number((header.match(/^element vertex (\d+)$/m) || [, '0'])[1]);
   const offsets = {}, types = {};
   let stride = 0;
