@@ -124,10 +124,11 @@ int run_rosbag_import(const Output& output, const ImportOptions& options) {
     imported += topic.imported;
     topics.push_back({{"ros_topic", topic.ros_topic}, {"ros_type", topic.ros_type}, {"topic", topic.topic}, {"frame_id", topic.frame_id},
                       {"imported", topic.imported}, {"rejected", topic.rejected}, {"first_rejection", topic.first_rejection}});
-    text += fmt::format("  {} ({}) -> {}: {} messages", topic.ros_topic, topic.ros_type, topic.topic, topic.imported);
+    text += fmt::format("  {} ({}) -> {}: {} messages", topic.ros_topic, topic.ros_type, topic.topic.empty() ? "(no camera)" : topic.topic,
+                        topic.imported);
     text += topic.rejected == 0 ? "\n" : fmt::format(", {} rejected (first {})\n", topic.rejected, topic.first_rejection);
   }
-  for (const auto& [ros_topic, count] : report.calibration_topics) text += fmt::format("  {}: {} messages read for the calibration\n", ros_topic, count);
+  for (const auto& [ros_topic, count] : report.calibration_topics) text += fmt::format("  {}: {} messages read (calibration, class names)\n", ros_topic, count);
   for (const auto& [ros_topic, type] : report.skipped_topics) text += fmt::format("  {} ({}) skipped\n", ros_topic, type);
   result["topics"] = topics;
   result["skipped_topics"] = report.skipped_topics;
