@@ -61,5 +61,7 @@ void add_features_command(CLI::App& app, const Output& output, Command& run);
 void add_vision_command(CLI::App& app, const Output& output, Command& run);
 /// vision vlad, vision place-recall (vision_place_command.cpp), under `vision`.
 void add_vision_place_commands(CLI::App& vision_app, const Output& output, Command& run);
+/// vision detect (vision_detect_command.cpp).
+void add_vision_detect_command(CLI::App& vision_app, const Output& output, Command& run);
 
 }  // namespace hanzo::fusion::app

@@ -182,7 +182,7 @@ int run_relocalize(const Output& output, const RelocalizeOptions& options) {
 }  // namespace
 
 void add_vision_command(CLI::App& app, const Output& output, Command& run) {
-  CLI::App* vision_app = app.add_subcommand("vision", "Visual place recognition: bag-of-words vocabularies, learned (VLAD) models, queries, recall");
+  CLI::App* vision_app = app.add_subcommand("vision", "Visual place recognition (bag-of-words vocabularies, learned VLAD models, queries, recall) and object detection");
   vision_app->require_subcommand(1);
 
   auto train = std::make_shared<VocabularyOptions>();
@@ -215,6 +215,7 @@ void add_vision_command(CLI::App& app, const Output& output, Command& run) {
   relocalize_app->callback([&output, &run, relocalize] { run = [&output, relocalize] { return run_relocalize(output, *relocalize); }; });
 
   add_vision_place_commands(*vision_app, output, run);
+  add_vision_detect_command(*vision_app, output, run);
 }
 
 }  // namespace hanzo::fusion::app

@@ -223,7 +223,7 @@ Result<FeatureSelection> parse_features(const YamlValue& node) {
 Result<VisionConfig> parse_vision(const YamlValue& node) {
   VisionConfig vision;
   if (!node.present()) return vision;
-  HANZO_RETURN_IF_ERROR(node.check_keys({"features", "matcher", "place_recognition", "place_model", "local_mapping_thread", "dynamic_objects"}));
+  HANZO_RETURN_IF_ERROR(node.check_keys({"features", "matcher", "place_recognition", "place_model", "local_mapping_thread", "dynamic_objects", "detector"}));
   if (node["features"].present()) HANZO_ASSIGN_OR_RETURN(vision.features, parse_features(node["features"]));
   if (const YamlValue matcher = node["matcher"]; matcher.present()) {
     std::string name;
@@ -258,6 +258,23 @@ Result<VisionConfig> parse_vision(const YamlValue& node) {
     if (dynamic["margin_px"].present()) HANZO_ASSIGN_OR_RETURN(objects.margin_px, dynamic["margin_px"].as_double());
     if (!(objects.margin_px >= 0.0 && objects.margin_px <= 1000.0)) return dynamic["margin_px"].error(fmt::format("{} px: expected 0..1000", objects.margin_px));
     if (dynamic["wait_for_detections"].present()) HANZO_ASSIGN_OR_RETURN(objects.wait_for_detections, dynamic["wait_for_detections"].as_bool());
+  }
+  if (const YamlValue detector = node["detector"]; detector.present()) {
+    // `detector: TYPE` or `detector: {type: TYPE, model: PATH, score_threshold: S}`.
+    DetectorSelection& selection = vision.detector;
+    if (detector.is_map()) {
+      HANZO_RETURN_IF_ERROR(detector.check_keys({"type", "model", "score_threshold"}));
+      if (detector["type"].present()) HANZO_ASSIGN_OR_RETURN(selection.type, detector["type"].as_string());
+      if (detector["model"].present()) HANZO_ASSIGN_OR_RETURN(selection.model, detector["model"].as_string());
+      if (detector["score_threshold"].present()) HANZO_ASSIGN_OR_RETURN(selection.score_threshold, detector["score_threshold"].as_double());
+    } else {
+      HANZO_ASSIGN_OR_RETURN(selection.type, detector.as_string());
+    }
+    if (selection.type != "none" && selection.type != "nanodet") return detector.error(fmt::format("type: expected none or nanodet, got '{}'", selection.type));
+    if (!(selection.score_threshold > 0.0 && selection.score_threshold < 1.0)) {
+      return detector.error(fmt::format("score_threshold: {} outside (0, 1)", selection.score_threshold));
+    }
+    if (!selection.model.empty() && !selection.enabled()) return detector.error("model: given, but the type is none");
   }
   return vision;
 }
@@ -482,6 +499,9 @@ std::string vision_yaml(const VisionConfig& v) {
     for (const std::string& name : v.dynamic_objects.classes) classes.push_back(yaml::scalar(name));
     out += fmt::format("    dynamic_objects: {{classes: [{}], min_score: {}, margin_px: {}, wait_for_detections: {}}}\n", fmt::join(classes, ", "),
                        v.dynamic_objects.min_score, v.dynamic_objects.margin_px, v.dynamic_objects.wait_for_detections);
+  }
+  if (!(v.detector == d.detector)) {
+    out += fmt::format("    detector: {{type: {}, model: {}, score_threshold: {}}}\n", v.detector.type, yaml::scalar(v.detector.model), v.detector.score_threshold);
   }
   return out.empty() ? out : "  vision:\n" + out;
 }

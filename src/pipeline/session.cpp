@@ -24,6 +24,7 @@
 #include "hanzo/fusion/graph/imu_factors.hpp"
 #include "hanzo/fusion/graph/keys.hpp"
 #include "hanzo/fusion/msgs/validate.hpp"
+#include "hanzo/fusion/pipeline/camera_detector.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
@@ -329,6 +330,11 @@ Result<std::unique_ptr<Session>> Session::create(const config::FusionConfig& con
       session->semantic_projection_ = std::make_unique<SemanticProjection>(std::move(cameras), session->T_body_lidar_, config.vision.dynamic_objects);
     }
   }
+  if (config.vision.detector.enabled() && (session->camera_odometry_ || session->semantic_projection_)) {
+    HANZO_ASSIGN_OR_RETURN(session->detector_, CameraDetector::make(config.vision.detector, "fusion.vision.detector"));
+    logger()->info("session: object detector {} ({}) on the cameras without a vision pipeline's output", config.vision.detector.type,
+                   session->detector_->model_path());
+  }
   // Every further 3D LiDAR joins the first one's sweeps.
   if (session->odometry_) {
     std::vector<LidarSweepMerger::Secondary> secondaries;
@@ -568,6 +574,7 @@ void Session::take_splat_views() {
 
 PushStatus Session::push_message(std::string_view sensor, msgs::SensorMessage message) {
   if (const auto* detections = std::get_if<msgs::DetectionsMessage>(&message)) return push_detections(sensor, *detections);
+  if (detector_) detect_objects(sensor, message);
   if (!config_.mapping) return frontend_->push(sensor, message);
   if (camera_odometry_ && camera_odometry_->handles(sensor)) return push_image(sensor, message);
   if (camera_odometry_ && camera_odometry_->visual_inertial() && sensor == camera_odometry_->imu_sensor()) {
@@ -1476,6 +1483,7 @@ SessionSummary Session::summary() const {
 MappingSummary Session::mapping_summary() const {
   MappingSummary summary = summary_;
   summary.masked_image_share = summary_.images_masked > 0 ? masked_share_sum_ / static_cast<double>(summary_.images_masked) : 0.0;
+  summary.detector_ms = summary_.detections_computed > 0 ? detector_ms_sum_ / static_cast<double>(summary_.detections_computed) : 0.0;
   if (camera_odometry_) {
     const vision::VisualOdometrySummary visual = camera_odometry_->summary();
     summary.camera_frames_tracked = static_cast<uint64_t>(visual.tracked_frames);

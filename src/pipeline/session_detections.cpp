@@ -1,8 +1,10 @@
 // Session: a detector's output on the cameras (msgs::DetectionsMessage): the dynamic masks it
 // gives the visual odometry (fusion.vision.dynamic_objects; session.hpp, dynamic_mask.hpp), its
-// segmentation classes and moving objects on the 3D LiDAR's points (semantic_projection.hpp).
+// segmentation classes and moving objects on the 3D LiDAR's points (semantic_projection.hpp);
+// the Session's own detector (fusion.vision.detector) on cameras without such output.
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -12,6 +14,7 @@
 #include "hanzo/fusion/cloud/point_cloud.hpp"
 #include "hanzo/fusion/core/logging.hpp"
 #include "hanzo/fusion/msgs/validate.hpp"
+#include "hanzo/fusion/pipeline/camera_detector.hpp"
 #include "hanzo/fusion/pipeline/dynamic_mask.hpp"
 #include "hanzo/fusion/pipeline/session.hpp"
 
@@ -28,6 +31,28 @@ bool same_time(Timestamp a, Timestamp b) { return std::abs((a - b).seconds()) <=
 }  // namespace
 
 PushStatus Session::push_detections(std::string_view sensor, const msgs::DetectionsMessage& detections) {
+  return use_detections(sensor, detections, false);
+}
+
+void Session::detect_objects(std::string_view sensor, const msgs::SensorMessage& message) {
+  const auto* image = std::get_if<msgs::ImageMessage>(&message);
+  if (image == nullptr || !msgs::validate(*image).ok()) return;  // refused where the image goes
+  const bool tracked = camera_odometry_ && camera_odometry_->handles(sensor);
+  if (!tracked && (semantic_projection_ == nullptr || semantic_projection_->camera(sensor) == nullptr)) return;
+  if (const auto camera = camera_detections_.find(sensor); camera != camera_detections_.end() && camera->second.external) return;
+  const auto start = std::chrono::steady_clock::now();
+  Result<msgs::DetectionsMessage> detections = detector_->detect(*image);
+  detector_ms_sum_ += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  ++summary_.detections_computed;
+  if (!detections) {
+    ++summary_.detector_failures;
+    logger()->warn("session: {}: the object detector failed on the image at {:.3f} s: {}", sensor, image->timestamp.seconds(), detections.error().message);
+    return;
+  }
+  (void)use_detections(sensor, *detections, true);  // counted like pushed ones
+}
+
+PushStatus Session::use_detections(std::string_view sensor, const msgs::DetectionsMessage& detections, bool computed) {
   ++summary_.detections_received;
   const auto refuse = [this](Rejection reason, const std::string& detail) {
     ++summary_.detections_refused;
@@ -45,6 +70,7 @@ PushStatus Session::push_detections(std::string_view sensor, const msgs::Detecti
     return refuse(Rejection::kInvalid, fmt::format("{}: detections for a {} x {} image, the camera's images are {} x {}", sensor, detections.image_width,
                                                    detections.image_height, image_size.width, image_size.height));
   }
+  if (!computed) camera_detections_[std::string(sensor)].external = true;
   if (projected != nullptr) {
     semantic_projection_->add(*projected, detections, [this](std::string_view name) { return map_builder_.class_index(name); });
   }

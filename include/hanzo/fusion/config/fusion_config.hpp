@@ -200,6 +200,19 @@ struct DynamicObjectsConfig {
   bool operator==(const DynamicObjectsConfig&) const = default;
 };
 
+/// fusion.vision.detector: an object detector the Session runs on each camera image that comes
+/// without a vision pipeline's detections (a camera whose detections are pushed keeps those);
+/// its boxes are used as pushed ones are (dynamic_objects masks, classes on the 3D LiDAR's points).
+/// type "nanodet": the AI module's NanoDet (ai/object_detector.hpp, docs/semantics.md), 80 COCO
+/// classes ("person", "car", "truck", ...); "none" (default): only pushed detections.
+struct DetectorSelection {
+  std::string type = "none";     // "none" or "nanodet"
+  std::string model;             // nanodet: the model's JSON; empty: nanodet.json in $HANZO_FUSION_MODELS
+  double score_threshold = 0.35; // (0, 1): weaker boxes are not reported
+  bool enabled() const { return type != "none"; }
+  bool operator==(const DetectorSelection&) const = default;
+};
+
 /// fusion.vision: the visual frontends' features, matching and place recognition; a camera
 /// sensor's `features` key overrides `features` for that camera.
 struct VisionConfig {
@@ -212,6 +225,7 @@ struct VisionConfig {
   /// lower latency per image; false (default): keyframe poses fused after their bundle adjustment.
   bool local_mapping_thread = false;
   DynamicObjectsConfig dynamic_objects;
+  DetectorSelection detector;
 };
 
 /// A live sensor's driver (`hanzo-fusion drive`, docs/drivers.md): the decoder of its bytes and

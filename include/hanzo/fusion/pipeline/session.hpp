@@ -70,6 +70,9 @@
 //    objects are left out of the sweep's registration and the map's layers
 //    (src/pipeline/semantic_projection.hpp); the point map fuses the classes per voxel
 //    (maps/point_map.hpp), the grid per cell.
+//    With fusion.vision.detector, the Session runs that object detector (camera_detector.hpp)
+//    on each image of a camera (of the odometry or beside the 3D LiDAR) from which no vision
+//    pipeline's output has come, and uses its boxes as pushed ones.
 //  - With fusion.mapping.splats, images of the first camera with intrinsics also train 3D
 //    Gaussian splats (session_splats.hpp) at the Session's poses, anchored to keyframes so that
 //    they follow the graph; seeded at the map keyframes' points. Replay trains inside push()
@@ -142,6 +145,7 @@ class Mat;
 namespace hanzo::fusion::pipeline {
 
 class CameraOdometry;
+class CameraDetector;
 class SemanticProjection;
 class LidarInertialFactors;
 class BodyImu;
@@ -383,6 +387,11 @@ struct MappingSummary {
   /// detections that never came; images whose features a moving object's mask limited, the
   /// objects masked, and the mean share of a masked image's pixels.
   uint64_t detections_received = 0;
+  /// Images the Session's own detector (fusion.vision.detector) ran on, those it failed on, and
+  /// its mean time per image (ms); its detections count as received too.
+  uint64_t detections_computed = 0;
+  uint64_t detector_failures = 0;
+  double detector_ms = 0.0;
   uint64_t detections_refused = 0;
   uint64_t detections_matched = 0;
   uint64_t detections_late = 0;
@@ -524,6 +533,11 @@ class Session {
   /// A detector's output for an image of a camera the odometry takes: matched to its image
   /// (waiting, or the next one of that camera) by timestamp.
   PushStatus push_detections(std::string_view sensor, const msgs::DetectionsMessage& detections);
+  /// push_detections() of a vision pipeline's output (`computed` false: that camera's images are
+  /// no longer given to fusion.vision.detector) or of the Session's own detector.
+  PushStatus use_detections(std::string_view sensor, const msgs::DetectionsMessage& detections, bool computed);
+  /// fusion.vision.detector on a camera image whose camera has no vision pipeline's output.
+  void detect_objects(std::string_view sensor, const msgs::SensorMessage& message);
   /// Tracks the images waiting for their detections taken before `time` (all with none).
   void release_waiting_images(std::optional<Timestamp> before);
   /// Whether an image of `sensor` at `time` waits for its detections: the camera's detector
@@ -662,8 +676,12 @@ class Session {
     std::optional<msgs::ImageMessage> waiting;
     std::optional<Timestamp> last_image_time;  // the newest image tracked
     bool streaming = false;                    // its detector has answered
+    bool external = false;                     // a vision pipeline's output came (pushed)
   };
   std::map<std::string, CameraDetections, std::less<>> camera_detections_;
+  /// fusion.vision.detector (none when its type is none), and its time spent (ms).
+  std::unique_ptr<CameraDetector> detector_;
+  double detector_ms_sum_ = 0.0;
   /// Segmentations and moving objects onto the 3D LiDAR's points (none without both).
   std::unique_ptr<SemanticProjection> semantic_projection_;
   /// Leaves a sweep's points on moving objects out before its registration (and the map).
