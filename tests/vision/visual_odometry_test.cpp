@@ -29,25 +29,8 @@ using sequences::kitti_odometry_06;
 using sequences::run;
 using sequences::RunResult;
 using sequences::Sequence;
+using sequences::kitti_raw_0052;
 using sequences::verbose;
-
-// Unix times (the ground truth's clock), colour images (converted to grey by the extractor).
-Sequence kitti_raw_0052() {
-  const std::string folder = std::string(HANZO_DATA_DIR) + "/kitti_raw_0052";
-  Sequence sequence;
-  std::ifstream times(folder + "/times.txt");
-  std::string index;
-  double unix_time = 0.0, since_start = 0.0;
-  while (times >> index >> unix_time >> since_start) {
-    sequence.times.push_back(unix_time);
-    sequence.images.push_back(fmt::format("{}/image_02/{}.png", folder, index));
-  }
-  sequence.camera.fx = sequence.camera.fy = 721.5377;
-  sequence.camera.cx = 609.5593;
-  sequence.camera.cy = 172.854;
-  sequence.ground_truth = io::read_trajectory(folder + "/gt_cam2.tum", io::TrajectoryFormat::kTum).value();
-  return sequence;
-}
 
 TEST(VisualOdometry, KittiOdometry06MonocularStaysUnderOnePercentOfThePath) {
   const Sequence sequence = kitti_odometry_06();
