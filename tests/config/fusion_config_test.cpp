@@ -225,6 +225,22 @@ TEST(FusionConfig, VisionBlockChoosesFeaturesPerCamera) {
   EXPECT_THAT(validate(config).error().message, HasSubstr("sensors.camera_rear.features: ORB takes no model"));
 }
 
+// fusion.vision.detector: a type name or a block; round trips; bad values named.
+TEST(FusionConfig, VisionDetectorChoosesTheSessionsObjectDetector) {
+  const std::string sensors = "  sensors:\n    camera: {rate: 10}\n";
+  EXPECT_FALSE(parse_fusion_config("fusion:\n" + sensors, "fusion.yaml").value().vision.detector.enabled());  // none by default
+  EXPECT_EQ(parse_fusion_config("fusion:\n  vision: {detector: nanodet}\n" + sensors, "fusion.yaml").value().vision.detector,
+            (DetectorSelection{"nanodet", "", 0.35}));
+  const FusionConfig config =
+      parse_fusion_config("fusion:\n  vision:\n    detector: {type: nanodet, model: m/nanodet.json, score_threshold: 0.5}\n" + sensors, "fusion.yaml").value();
+  EXPECT_EQ(config.vision.detector, (DetectorSelection{"nanodet", "m/nanodet.json", 0.5}));
+  EXPECT_EQ(parse_fusion_config(to_yaml(config), "fusion.yaml").value().vision.detector, config.vision.detector);
+  EXPECT_THAT(error_of("fusion:\n  vision: {detector: yolo}\n" + sensors), HasSubstr("expected none or nanodet, got 'yolo'"));
+  EXPECT_THAT(error_of("fusion:\n  vision: {detector: {type: nanodet, score_threshold: 1.5}}\n" + sensors), HasSubstr("score_threshold: 1.5 outside (0, 1)"));
+  EXPECT_THAT(error_of("fusion:\n  vision: {detector: {model: x.json}}\n" + sensors), HasSubstr("model: given, but the type is none"));
+  EXPECT_THAT(error_of("fusion:\n  vision: {detector: {type: nanodet, threshold: 0.5}}\n" + sensors), HasSubstr("threshold"));
+}
+
 TEST(FusionConfig, SaveRefusesAnInvalidConfigAndKeepsTheOldFile) {
   const std::filesystem::path path = std::filesystem::temp_directory_path() / "hanzo_fusion_config_keep.yaml";
   FusionConfig config = load_fusion_config("examples/fusion.yaml").value();
