@@ -95,6 +95,7 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
   struct Return {
     double range = -1.0;  // < 0: nothing within max_range
     float intensity = 0.0F;
+    int object_id = kPhantomReturn;
   };
   std::vector<Return> returns(capacity);
   std::vector<Timestamp> column_times(pattern.columns);
@@ -120,7 +121,7 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
         if (!hit) continue;
         const double incidence = std::abs(hit->normal.dot(direction_world));
         const float shade = 0.5F + 0.5F * luminance(hit->material->texture.color(hit->surface_uv.x(), hit->surface_uv.y()));
-        returns[index] = {hit->distance, std::clamp(static_cast<float>(hit->material->reflectivity * incidence) * shade, 0.0F, 1.0F)};
+        returns[index] = {hit->distance, std::clamp(static_cast<float>(hit->material->reflectivity * incidence) * shade, 0.0F, 1.0F), hit->object_id};
       }
     }
   };
@@ -133,13 +134,17 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
   }
 
   // Phase 2 (in ray order, so the noise draws are reproducible): weather, noise, range limits.
+  last_object_ids_.clear();
+  last_object_ids_.reserve(capacity);
   for (std::size_t index = 0; index < capacity; ++index) {
     if (!in_view[index / rings]) continue;
     double range = returns[index].range;
     float intensity = returns[index].intensity;
+    int object_id = returns[index].object_id;
     if (weather != nullptr && uniform(random_) < weather->phantom_probability) {
       range = pattern.min_range + uniform(random_) * (weather->phantom_max_range - pattern.min_range);
       intensity = kPhantomIntensity;
+      object_id = kPhantomReturn;
     } else {
       if (range < 0.0) continue;
       if (weather != nullptr && uniform(random_) < weather->dropout_probability) continue;
@@ -150,6 +155,7 @@ msgs::PointCloudMessage LidarSimulator::measure(Timestamp sweep_start) {
     cloud.intensities.push_back(intensity);
     cloud.ring_ids.push_back(static_cast<uint32_t>(index % rings));
     cloud.point_timestamps.push_back(column_times[index / rings]);
+    last_object_ids_.push_back(object_id);
   }
   return cloud;
 }

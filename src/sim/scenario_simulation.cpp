@@ -17,6 +17,7 @@ struct ScenarioSimulation::Stream {
   // A second message of the same sensor after each produced one (a camera's ground-truth
   // detections, which a detector gives after its image), or nullopt.
   std::function<std::optional<msgs::SensorMessage>()> follow_up;
+  std::shared_ptr<LidarSimulator> lidar;  // a LiDAR's simulator (its last sweep's truth)
 };
 
 ScenarioSimulation::ScenarioSimulation(Scenario scenario, SplineTrajectory trajectory)
@@ -25,6 +26,14 @@ ScenarioSimulation::ScenarioSimulation(Scenario scenario, SplineTrajectory traje
 ScenarioSimulation::~ScenarioSimulation() = default;
 
 Timestamp ScenarioSimulation::end_time() const { return scenario_end_time(scenario_, trajectory_); }
+
+const std::vector<int>& ScenarioSimulation::lidar_object_ids(const std::string& sensor) const {
+  static const std::vector<int> none;
+  for (const auto& stream : streams_) {
+    if (stream->lidar && stream->sensor->name == sensor) return stream->lidar->last_object_ids();
+  }
+  return none;
+}
 
 Result<std::unique_ptr<ScenarioSimulation>> ScenarioSimulation::create(Scenario scenario) {
   Result<SplineTrajectory> trajectory = make_trajectory(scenario);
@@ -54,6 +63,7 @@ Result<std::unique_ptr<ScenarioSimulation>> ScenarioSimulation::create(Scenario 
       LidarSimulatorConfig config = *lidar;
       config.num_threads = simulation->scenario_.num_threads;
       auto simulator = std::make_shared<LidarSimulator>(config, world, path);
+      stream->lidar = simulator;
       stream->last_start = simulation->end_time() - Duration::from_seconds(1.0 / lidar->rate_hz);
       stream->produce = [simulator](Timestamp time) -> std::optional<msgs::SensorMessage> {
         msgs::PointCloudMessage cloud = simulator->measure(time);

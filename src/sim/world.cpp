@@ -274,6 +274,21 @@ int World::object_count() const {
   return static_cast<int>(description_.boxes.size() + description_.cylinders.size() + description_.moving_boxes.size());
 }
 
+const std::string& World::object_class(int object_id) const {
+  static const std::string phantom = "phantom";
+  const int boxes = static_cast<int>(description_.boxes.size());
+  const int cylinders = static_cast<int>(description_.cylinders.size());
+  if (object_id == -1) return description_.ground_class;
+  if (object_id < -1 || object_id >= object_count()) return phantom;
+  if (object_id < boxes) return description_.boxes[static_cast<std::size_t>(object_id)].class_name;
+  if (object_id < boxes + cylinders) return description_.cylinders[static_cast<std::size_t>(object_id - boxes)].class_name;
+  return description_.moving_boxes[static_cast<std::size_t>(object_id - boxes - cylinders)].class_name;
+}
+
+bool World::is_moving(int object_id) const {
+  return object_id >= static_cast<int>(description_.boxes.size() + description_.cylinders.size()) && object_id < object_count();
+}
+
 bool World::intersect_object(int object_id, const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, RayHit* hit) const {
   const int box_count = static_cast<int>(description_.boxes.size());
   const bool found = object_id < box_count

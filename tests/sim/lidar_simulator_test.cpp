@@ -1,7 +1,10 @@
 // The LiDAR simulator: ranges against analytic distances to known planes, per-point
 // timestamps, motion distortion consistent with the trajectory, and the weather faults.
 
+#include <algorithm>
 #include <cmath>
+#include <map>
+#include <string>
 
 #include <gtest/gtest.h>
 
@@ -137,6 +140,56 @@ TEST(LidarSimulator, RainDropsReturnsAddsNearPhantomsAndShortensRange) {
   EXPECT_NEAR(static_cast<double>(phantoms) / (1800 * 16), 0.05, 0.01);
   // The wall at 10 m is beyond the 9 m visibility: only ground and phantoms remain.
   for (const Eigen::Vector3f& point : wet.points) EXPECT_LT(point.x(), kWallX - 0.5);
+  // The per-point truth calls the phantoms so.
+  ASSERT_EQ(lidar.last_object_ids().size(), wet.points.size());
+  EXPECT_EQ(static_cast<std::size_t>(std::count(lidar.last_object_ids().begin(), lidar.last_object_ids().end(), kPhantomReturn)), phantoms);
+}
+
+// Per-point ground truth: each return's object (ground, the wall, a person walking across in
+// front of it), its class and whether it moves, checked against the geometry.
+TEST(LidarSimulator, EachPointSaysWhatItHit) {
+  WorldDescription description;
+  Box wall;
+  wall.center = {kWallX + 0.5, 0.0, 5.0};
+  wall.half_size = {0.5, 50.0, 5.0};
+  wall.class_name = "wall";
+  description.boxes.push_back(wall);
+  MovingBox person;
+  person.box.half_size = {0.3, 0.3, 0.9};
+  person.path = {Eigen::Vector2d(5.0, -4.0), Eigen::Vector2d(5.0, 4.0)};
+  person.speed = 1.5;
+  person.start_time = kStart;
+  description.moving_boxes.push_back(person);
+  const World world(description);
+  const SplineTrajectory trajectory = straight_trajectory(0.0);
+  LidarSimulatorConfig config;
+  config.range_noise = 0.0;
+  LidarSimulator lidar(config, world, trajectory);
+  const Timestamp sweep = kStart + Duration::from_seconds(2.6);  // the person near y = 0
+  const msgs::PointCloudMessage cloud = lidar.measure(sweep);
+  const std::vector<int>& objects = lidar.last_object_ids();
+  ASSERT_EQ(objects.size(), cloud.points.size());
+  std::map<std::string, int> counts;
+  for (std::size_t i = 0; i < cloud.points.size(); ++i) {
+    const Eigen::Vector3d world_point = cloud.points[i].cast<double>() + Eigen::Vector3d(0.0, 0.0, kSensorHeight);  // the sensor stands at x = 0
+    ++counts[world.object_class(objects[i])];
+    if (objects[i] == -1) {
+      EXPECT_NEAR(world_point.z(), 0.0, 1e-3);
+    }
+    if (objects[i] == 0) {
+      EXPECT_NEAR(world_point.x(), kWallX, 1e-3);
+    }
+    if (world.is_moving(objects[i])) {
+      const Eigen::Vector3d centre = person.center_at(cloud.point_timestamps[i], 0.0);
+      EXPECT_LE((world_point - centre).cwiseAbs().maxCoeff(), 0.9 + 1e-3);
+    }
+  }
+  EXPECT_GT(counts["ground"], 1000);
+  EXPECT_GT(counts["wall"], 1000);
+  EXPECT_GT(counts["person"], 20);
+  EXPECT_EQ(counts.size(), 3U);
+  EXPECT_FALSE(world.is_moving(0));
+  EXPECT_FALSE(world.is_moving(-1));
 }
 
 TEST(LidarSimulator, PatternsAndNames) {

@@ -89,6 +89,10 @@ class LidarSimulator {
   /// sequence). A sweep that sees nothing has no points (msgs::validate rejects it; the
   /// scenario runner leaves it out).
   msgs::PointCloudMessage measure(Timestamp sweep_start);
+  /// The ground truth of the last sweep's points, one per point in their order: the object each
+  /// hit (RayHit::object_id: World::object_class and World::is_moving tell its class and whether
+  /// it moves; kPhantomReturn for a weather phantom).
+  const std::vector<int>& last_object_ids() const { return last_object_ids_; }
 
   const LidarSimulatorConfig& config() const { return config_; }
 
@@ -100,6 +104,7 @@ class LidarSimulator {
   const SplineTrajectory& trajectory_;
   std::vector<Eigen::Vector3d> ring_directions_;  // unit, sensor frame, at azimuth 0
   std::mt19937_64 random_;
+  std::vector<int> last_object_ids_;
 };
 
 }  // namespace hanzo::fusion::sim

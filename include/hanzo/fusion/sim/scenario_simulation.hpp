@@ -60,6 +60,10 @@ class ScenarioSimulation {
   /// which a long run that does not write the truth need not keep).
   const std::vector<ImuBiasTruth>& imu_bias_truth() const { return imu_bias_truth_; }
   void set_record_imu_bias_truth(bool record) { record_imu_bias_truth_ = record; }
+  /// The ground truth of the points of a LiDAR's sweep that run() gave the sink last (valid
+  /// inside the sink and until that LiDAR's next sweep): per point, the object it hit
+  /// (LidarSimulator::last_object_ids). Empty for another sensor or before its first sweep.
+  const std::vector<int>& lidar_object_ids(const std::string& sensor) const;
 
  private:
   struct Stream;

@@ -82,6 +82,9 @@ struct WorldDescription {
   std::vector<MovingBox> moving_boxes;
 };
 
+/// A LiDAR return that no surface made (a weather episode's phantom), as an object id.
+inline constexpr int kPhantomReturn = -2;
+
 /// What a ray hit.
 struct RayHit {
   double distance = 0.0;                             ///< along the (unit) ray direction, metres
@@ -172,6 +175,11 @@ class World {
 
   const WorldDescription& description() const { return description_; }
   int object_count() const;
+  /// The segmentation class of an object id (RayHit::object_id): the ground's, a box's, a
+  /// cylinder's, a moving box's class_name; "phantom" for kPhantomReturn.
+  const std::string& object_class(int object_id) const;
+  /// Whether an object id is one of the moving boxes.
+  bool is_moving(int object_id) const;
 
  private:
   friend class WorldSnapshot;
