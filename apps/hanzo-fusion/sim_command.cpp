@@ -5,12 +5,16 @@
 //   DIR/imu_biases.csv      the first IMU's true biases per sample (when there is an IMU)
 //   DIR/calibration.yaml    the sensors' extrinsics and camera intrinsics (spec layout)
 //   DIR/fusion.yaml         a fusion configuration to run the log
+//   DIR/lidar_labels/       with --lidar-labels: each LiDAR sweep's per-point ground truth
+//                           (SemanticKITTI .label files) and the class table
 // See docs/simulator.md.
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -41,6 +45,54 @@ struct SimOptions {
   int jpeg_quality = 90;
   double point_resolution = 0.001;
   std::vector<std::string> sensors;  // empty: all of the scenario's
+  bool lidar_labels = false;
+};
+
+// Per-point LiDAR ground truth as SemanticKITTI writes it: one little-endian uint32 per point,
+// the class id in the low 16 bits, the instance (a moving object's number from 1; 0 for the
+// static world) in the high 16 bits; class 0 "unlabelled" (a weather phantom).
+class LidarLabelWriter {
+ public:
+  LidarLabelWriter(const sim::World& world, std::filesystem::path folder) : world_(world), folder_(std::move(folder)) {
+    names_.push_back("unlabelled");
+    for (int object = -1; object < world.object_count(); ++object) {
+      const std::string& name = world.object_class(object);
+      if (std::find(names_.begin(), names_.end(), name) == names_.end()) names_.push_back(name);
+    }
+  }
+
+  Status write(const std::string& sensor, const std::vector<int>& objects) {
+    const std::filesystem::path sensor_folder = folder_ / sensor;
+    std::error_code error;
+    std::filesystem::create_directories(sensor_folder, error);
+    if (error) return Error(fmt::format("{}: cannot create the folder ({})", sensor_folder.string(), error.message()));
+    std::vector<uint32_t> labels;
+    labels.reserve(objects.size());
+    const int first_moving = world_.object_count() - static_cast<int>(world_.description().moving_boxes.size());
+    for (const int object : objects) {
+      const auto name = object == sim::kPhantomReturn ? names_.begin() : std::find(names_.begin(), names_.end(), world_.object_class(object));
+      const uint32_t instance = world_.is_moving(object) ? static_cast<uint32_t>(object - first_moving + 1) : 0U;
+      labels.push_back((instance << 16U) | static_cast<uint32_t>(name - names_.begin()));
+    }
+    const std::string path = (sensor_folder / fmt::format("{:06d}.label", sweeps_[sensor]++)).string();
+    std::ofstream file(path, std::ios::binary);
+    file.write(reinterpret_cast<const char*>(labels.data()), static_cast<std::streamsize>(labels.size() * sizeof(uint32_t)));
+    if (!file) return Error(fmt::format("{}: cannot write", path));
+    return ok_status();
+  }
+
+  // classes.yaml: the class table (id: name) and which ids move.
+  Status write_classes() const {
+    std::string text = "# The class ids of the .label files (low 16 bits); the high 16 bits number the moving objects from 1.\nclasses:\n";
+    for (std::size_t id = 0; id < names_.size(); ++id) text += fmt::format("  {}: {}\n", id, yaml::scalar(names_[id]));
+    return yaml::write_file_atomically((folder_ / "classes.yaml").string(), text);
+  }
+
+ private:
+  const sim::World& world_;
+  std::filesystem::path folder_;
+  std::vector<std::string> names_;
+  std::map<std::string, int> sweeps_;
 };
 
 io::Trajectory ground_truth(const sim::ScenarioSimulation& simulation) {
@@ -98,6 +150,8 @@ int run_sim(const Output& output, const SimOptions& options) {
   const std::filesystem::path folder(options.out);
   const std::string log_path = (folder / "sensors.mcap").string();
   const io::Trajectory truth = ground_truth(run);
+  std::optional<LidarLabelWriter> labels;
+  if (options.lidar_labels) labels.emplace(run.world(), folder / "lidar_labels");
   const int code = write_log(output, result, {log_path, options.compression, options.foxglove, options.image_compression,
                                                            options.jpeg_quality, options.point_resolution, nullptr}, [&](io::SensorLogWriter& writer) -> Status {
     const GeodeticPoint& datum = run.scenario().datum;
@@ -127,6 +181,9 @@ int run_sim(const Output& output, const SimOptions& options) {
     };
     const Status simulated = run.run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
       HANZO_RETURN_IF_ERROR(write_truth_until(msgs::timestamp_of(message)));
+      if (labels && std::holds_alternative<msgs::PointCloudMessage>(message)) {
+        HANZO_RETURN_IF_ERROR(labels->write(sensor.name, run.lidar_object_ids(sensor.name)));
+      }
       // A camera's ground-truth detections on its topic + "/detections" (what `run` reads).
       const bool detections = std::holds_alternative<msgs::DetectionsMessage>(message);
       return writer.write(detections ? sensor.topic + std::string(config::kDetectionsTopicSuffix) : sensor.topic, message, sensor.name);
@@ -149,6 +206,10 @@ int run_sim(const Output& output, const SimOptions& options) {
     return report_failure(output, result, written.error().message);
   }
   nlohmann::json files = {{"log", log_path}, {"ground_truth", truth_path}, {"calibration", calibration_path}, {"fusion_config", config_path}};
+  if (labels) {
+    if (Status written = labels->write_classes(); !written) return report_failure(output, result, written.error().message);
+    files["lidar_labels"] = (folder / "lidar_labels").string();
+  }
   if (!run.imu_bias_truth().empty()) {
     const std::string bias_path = (folder / "imu_biases.csv").string();
     if (Status written = yaml::write_file_atomically(bias_path, bias_csv(run.imu_bias_truth())); !written) {
@@ -170,8 +231,8 @@ int run_sim(const Output& output, const SimOptions& options) {
                         sensor.simulation_seconds);
     total_seconds += sensor.simulation_seconds;
   }
-  text += fmt::format("  ground truth: {} poses; files: sensors.mcap ground_truth.tum calibration.yaml fusion.yaml{}\n", truth.size(),
-                      run.imu_bias_truth().empty() ? "" : " imu_biases.csv");
+  text += fmt::format("  ground truth: {} poses; files: sensors.mcap ground_truth.tum calibration.yaml fusion.yaml{}{}\n", truth.size(),
+                      run.imu_bias_truth().empty() ? "" : " imu_biases.csv", labels ? " lidar_labels/" : "");
   result["ok"] = true;
   result["name"] = run.scenario().name;
   result["seed"] = run.scenario().seed;
@@ -209,6 +270,8 @@ void add_sim_command(CLI::App& app, const Output& output, Command& run) {
       ->capture_default_str();
   command->add_option("--sensors", options->sensors, "Simulate only these sensors (names from the scenario, comma-separated)")
       ->delimiter(',');
+  command->add_flag("--lidar-labels", options->lidar_labels,
+                    "Also write each LiDAR sweep's per-point ground truth (lidar_labels/SENSOR/NNNNNN.label, SemanticKITTI format, and classes.yaml)");
   command->callback([&output, &run, options] { run = [&output, options] { return run_sim(output, *options); }; });
 }
 

@@ -913,6 +913,43 @@ TEST(Cli, RunMapsWithTheWholePipelineAndReplaysBitIdenticallyOnAnyThreadCount) {
 // with each LiDAR driver's point layout, imported back and run, it is estimated as from the
 // original log (wheel odometry travels as twists and is re-integrated, LiDAR times as the
 // drivers store them).
+// --lidar-labels: a SemanticKITTI .label file per sweep, one label per point of the sweep in the
+// log, the class table beside them; the cars and people that drive and walk have instances.
+TEST(Cli, SimWritesPerPointLidarLabels) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_sim_labels_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  const CliRun simulated =
+      run(fmt::format("sim examples/scenarios/urban_traffic.yaml --out {} --duration 3 --sensors lidar --lidar-labels --json", dir.string()));
+  ASSERT_EQ(simulated.exit_code, 0) << simulated.err;
+  const nlohmann::json json = nlohmann::json::parse(simulated.out);
+  ASSERT_EQ(json["sensors"].size(), 1u);
+  const std::size_t sweeps = json["sensors"][0]["messages"], points = json["sensors"][0]["elements"];
+  std::size_t labelled = 0, on_movers = 0, files = 0;
+  std::set<uint32_t> classes, instances;
+  for (const auto& entry : std::filesystem::directory_iterator(dir / "lidar_labels" / "lidar")) {
+    ++files;
+    std::ifstream file(entry.path(), std::ios::binary);
+    uint32_t label = 0;
+    while (file.read(reinterpret_cast<char*>(&label), sizeof(label))) {
+      ++labelled;
+      classes.insert(label & 0xFFFFU);
+      if ((label >> 16U) != 0) {
+        ++on_movers;
+        instances.insert(label >> 16U);
+      }
+    }
+  }
+  EXPECT_EQ(files, sweeps);
+  EXPECT_EQ(labelled, points);
+  EXPECT_GT(on_movers, 100u);
+  EXPECT_GE(instances.size(), 2u);
+  std::ifstream table(dir / "lidar_labels" / "classes.yaml");
+  const std::string text((std::istreambuf_iterator<char>(table)), std::istreambuf_iterator<char>());
+  for (const char* line : {"0: unlabelled", "1: ground", "car", "person"}) EXPECT_NE(text.find(line), std::string::npos) << line;
+  EXPECT_GE(classes.size(), 3u);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, SimulatedLogThroughRos2BagsOfEachLidarLayoutRunsLikeTheOriginal) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_ros2_trip_{}", ::getpid());
   std::filesystem::remove_all(dir);
