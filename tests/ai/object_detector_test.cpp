@@ -1,6 +1,6 @@
-// The object detector (NanoDet on the TensorFlow.js graph reader): the people of the privacy
-// filter's photos, the vehicles of a KITTI street (real images), refused models and images; the
-// detector of fusion.vision.detector in a Session.
+// The object detector (NanoDet on the TensorFlow.js graph reader): agreement with an independent
+// PyTorch run, the people of the privacy filter's photos, the vehicles of a KITTI street (real
+// images), refused models and images; the detector of fusion.vision.detector in a Session.
 
 #include <algorithm>
 #include <cstdio>
@@ -8,8 +8,13 @@
 #include <fstream>
 #include <map>
 
+#include <unistd.h>
+
+#include <fmt/format.h>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "hanzo/fusion/ai/object_detector.hpp"
 #include "hanzo/fusion/calib/calibration.hpp"
@@ -63,6 +68,39 @@ TEST(ObjectDetector, FindsEveryPersonInThePhotos) {
   std::sort(persons.begin(), persons.end(), [](const auto& a, const auto& b) { return a.x_min < b.x_min; });
   EXPECT_LT((persons[0].x_min + persons[0].x_max) / 2, image.cols / 2.0F);
   EXPECT_GT((persons[1].x_min + persons[1].x_max) / 2, image.cols / 2.0F);
+}
+
+// The TensorFlow.js graph reader, decoding and suppression agree with an independent PyTorch
+// run of the same model (tests/ai/object_detector_reference.py) on 416 x 416 images (the
+// network's input: no resize, no tiles): the same objects, scores to 1e-4, boxes to 0.05 px.
+TEST(ObjectDetector, AgreesWithAnIndependentPyTorchRun) {
+  const cv::Mat street = cv::imread(std::string(HANZO_DATA_DIR) + "/kitti_raw_0052/image_02/0000000060.png", cv::IMREAD_COLOR);
+  const std::vector<cv::Mat> sources = {cv::imread(kPhotos + "obama_and_biden.jpg", cv::IMREAD_COLOR), street(cv::Rect(700, 0, 416, 375))};
+  for (std::size_t k = 0; k < sources.size(); ++k) {
+    cv::Mat image;
+    cv::resize(sources[k], image, cv::Size(416, 416), 0, 0, cv::INTER_AREA);
+    const std::string path = (std::filesystem::temp_directory_path() / fmt::format("hanzo_detector_ref_{}_{}.png", ::getpid(), k)).string();
+    ASSERT_TRUE(cv::imwrite(path, image));
+    const std::string command = fmt::format("/usr/bin/python3 tests/ai/object_detector_reference.py {} {}", kNanodet, path);
+    FILE* pipe = ::popen(command.c_str(), "r");
+    std::string output;
+    char buffer[4096];
+    while (pipe != nullptr && std::fgets(buffer, sizeof buffer, pipe) != nullptr) output += buffer;
+    ASSERT_EQ(pipe == nullptr ? -1 : ::pclose(pipe), 0) << command;
+    std::filesystem::remove(path);
+    const nlohmann::json reference = nlohmann::json::parse(output);
+    const std::vector<msgs::Detection2D> found = detector().detect(image).value();
+    ASSERT_EQ(found.size(), reference.size()) << output;
+    ASSERT_GE(found.size(), 2U);
+    for (std::size_t i = 0; i < found.size(); ++i) {
+      EXPECT_EQ(found[i].class_name, coco_class_names()[reference[i][0].get<std::size_t>()]);
+      EXPECT_NEAR(found[i].score, reference[i][1].get<double>(), 1e-4);
+      EXPECT_NEAR(found[i].x_min, reference[i][2].get<double>(), 0.05);
+      EXPECT_NEAR(found[i].y_min, reference[i][3].get<double>(), 0.05);
+      EXPECT_NEAR(found[i].x_max, reference[i][4].get<double>(), 0.05);
+      EXPECT_NEAR(found[i].y_max, reference[i][5].get<double>(), 0.05);
+    }
+  }
 }
 
 // KITTI raw 0052: a street full of cars and trucks, no pedestrian on the road.
