@@ -36,7 +36,6 @@
 #include "hanzo/fusion/io/trajectory.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/maps/map_export.hpp"
-#include "hanzo/fusion/maps/provenance.hpp"
 #include "hanzo/fusion/maps/splat_ply.hpp"
 #include "hanzo/fusion/pipeline/log_replay.hpp"
 #include "hanzo/fusion/pipeline/session.hpp"
@@ -425,18 +424,8 @@ nlohmann::json health_json(const pipeline::Session& session, Timestamp log_start
 // The session's map as a FusionMap file with its occupancy and point images; the file names.
 Result<std::vector<std::string>> write_map(const std::filesystem::path& out, const pipeline::Session& session, const RunOptions& options,
                                            Timestamp created) {
-  msgs::FusionMap map = session.map();
-  // A camera-only run has landmarks but no scans: no empty point or occupancy layers.
-  if (map.occupancy && map.occupancy->occupancy.empty()) map.occupancy.reset();
-  if (map.points && map.points->points.empty()) map.points.reset();
-  map.map_id = "run";
-  map.version = 1;
-  map.created = created;  // the log's last pose: the same log gives the same file
-  map.provenance.software_version = HANZO_FUSION_VERSION;
-  HANZO_ASSIGN_OR_RETURN(map.sensor_configuration, read_file(options.config_path));
-  msgs::InputLog input;
-  HANZO_ASSIGN_OR_RETURN(input, maps::describe_input_file(options.log_path));
-  map.provenance.input_logs.push_back(input);
+  msgs::FusionMap map;
+  HANZO_ASSIGN_OR_RETURN(map, pipeline::replayed_map(session, "run", created, options.config_path, options.log_path, HANZO_FUSION_VERSION));
   std::vector<std::string> written;
   const std::string fmap = (out / "map.fmap").string();
   HANZO_RETURN_IF_ERROR(maps::write_fusion_map(fmap, map));

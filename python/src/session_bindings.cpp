@@ -17,6 +17,7 @@
 #include <pybind11/stl.h>
 
 #include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/pipeline/log_replay.hpp"
 #include "hanzo/fusion/pipeline/session.hpp"
 #include "message_conversion.hpp"
@@ -47,7 +48,7 @@ PoseRows pose_rows(const std::vector<pipeline::StampedPose>& poses) {
 
 class PySession {
  public:
-  PySession(const std::string& config_path, const std::optional<std::string>& calibration_path, int threads) {
+  PySession(const std::string& config_path, const std::optional<std::string>& calibration_path, int threads) : config_path_(config_path) {
     Result<config::FusionConfig> config = config::load_fusion_config(config_path);
     if (!config) throw py::value_error(config.error().message);
     calib::Calibration calibration;
@@ -139,6 +140,7 @@ class PySession {
     Result<std::unique_ptr<io::SensorLogReader>> reader = io::SensorLogReader::open(log_path);
     if (!reader) throw py::value_error(reader.error().message);
     const pipeline::LogReplaySummary replay = pipeline::replay_log(*session_, **reader);
+    replayed_ = log_path;
     const std::string incomplete = replay.incomplete();
     if (!incomplete.empty() && !allow_partial) {
       throw py::value_error(fmt::format("partial log: {} (the session holds what was read; allow_partial=True accepts it)", incomplete));
@@ -165,6 +167,14 @@ class PySession {
     PointRows rows(static_cast<Eigen::Index>(map.points->points.size()), 3);
     for (std::size_t i = 0; i < map.points->points.size(); ++i) rows.row(static_cast<Eigen::Index>(i)) = map.points->points[i].cast<double>().transpose();
     return rows;
+  }
+
+  void save_map(const std::string& path) const {
+    if (!replayed_) throw py::value_error("save_map: only a session that replayed a log (replay()) records its map's provenance");
+    const Timestamp created = poses_.empty() ? Timestamp() : poses_.back().timestamp;
+    Result<msgs::FusionMap> map = pipeline::replayed_map(*session_, "replay", created, config_path_, *replayed_, HANZO_FUSION_VERSION);
+    if (!map) throw py::value_error(map.error().message);
+    if (Status written = maps::write_fusion_map(path, *map); !written) throw py::value_error(written.error().message);
   }
 
   py::dict summary() const {
@@ -209,6 +219,8 @@ class PySession {
  private:
   std::unique_ptr<pipeline::Session> session_;
   std::vector<pipeline::StampedPose> poses_;
+  std::string config_path_;
+  std::optional<std::string> replayed_;  // the log replay() read
 };
 
 }  // namespace
@@ -239,5 +251,8 @@ void bind_session(py::module_& module) {
       .def("poses", &PySession::poses, "Real-time poses as emitted: N x 8 (t, x, y, z, qw, qx, qy, qz), body in the world")
       .def("optimized_trajectory", &PySession::optimized_trajectory, "The same poses moved onto the optimized graph: N x 8")
       .def("map_points", &PySession::map_points, "The map's points: N x 3 (world, m)")
+      .def("save_map", &PySession::save_map, py::arg("path"),
+           "After replay(): writes the session's FusionMap (every layer, the configuration and the log's SHA-256 as provenance; "
+           "hanzo-fusion map info reads it) to a .fmap file; raises ValueError when it cannot be written")
       .def("summary", &PySession::summary, "Counts per sensor and of the mapping");
 }

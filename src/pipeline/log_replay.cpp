@@ -8,6 +8,9 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
+#include "hanzo/fusion/core/files.hpp"
+#include "hanzo/fusion/maps/provenance.hpp"
+
 namespace hanzo::fusion::pipeline {
 
 LogReplaySummary replay_log(Session& session, io::SensorLogReader& reader, const std::function<void(Timestamp)>& progress) {
@@ -68,6 +71,22 @@ std::string LogReplaySummary::incomplete() const {
   const double read_seconds = read_until > file_start ? (read_until - file_start).seconds() : 0.0;
   const double file_seconds = file_end > file_start ? (file_end - file_start).seconds() : 0.0;
   return fmt::format("{}: read {:.1f} s of {:.1f} s of log ({} of {} messages)", fmt::join(what, "; "), read_seconds, file_seconds, records_read, records_in_file);
+}
+
+Result<msgs::FusionMap> replayed_map(const Session& session, const std::string& map_id, Timestamp created, const std::string& config_path,
+                                     const std::string& log_path, const std::string& software_version) {
+  msgs::FusionMap map = session.map();
+  if (map.occupancy && map.occupancy->occupancy.empty()) map.occupancy.reset();
+  if (map.points && map.points->points.empty()) map.points.reset();
+  map.map_id = map_id;
+  map.version = 1;
+  map.created = created;
+  map.provenance.software_version = software_version;
+  HANZO_ASSIGN_OR_RETURN(map.sensor_configuration, read_file(config_path));
+  msgs::InputLog input;
+  HANZO_ASSIGN_OR_RETURN(input, maps::describe_input_file(log_path));
+  map.provenance.input_logs.push_back(input);
+  return map;
 }
 
 }  // namespace hanzo::fusion::pipeline

@@ -44,4 +44,11 @@ struct LogReplaySummary {
 /// `progress` (optional) is called with each pushed message's log time.
 LogReplaySummary replay_log(Session& session, io::SensorLogReader& reader, const std::function<void(Timestamp)>& progress = {});
 
+/// The Session's map as a replay's map file holds it: `map_id`, version 1, created at `created`
+/// (the last pose's time: the same log gives the same file), the configuration file's text and
+/// the log's SHA-256 as provenance, `software_version`; empty point and occupancy layers left
+/// out (a camera-only run). Fails naming a configuration or log file that cannot be read.
+Result<msgs::FusionMap> replayed_map(const Session& session, const std::string& map_id, Timestamp created, const std::string& config_path,
+                                     const std::string& log_path, const std::string& software_version);
+
 }  // namespace hanzo::fusion::pipeline

@@ -1,0 +1,174 @@
+"""Batch mapping of many sensor logs on a Dask cluster (Debian's python3-dask and
+python3-distributed): each log is one task that replays it through the C++ Session on a worker
+(hanzo.fusion.replay, the pipeline of `hanzo-fusion run`) and writes, into its own folder of
+`out`, the optimized trajectory (trajectory_optimized.tum), the FusionMap (map.fmap) and the
+session's summary (summary.json). Without a scheduler address, a LocalCluster of `workers`
+processes on this machine (one task at a time each); with one ("tcp://host:8786"), the
+cluster's workers, which must see the logs and `out` at the same paths.
+
+    from hanzo.fusion.batch import MappingJob, map_logs
+    results = map_logs([MappingJob("a/sensors.mcap", "a/fusion.yaml", "a/calibration.yaml")], "maps", workers=2)
+
+From the shell: python3 -m hanzo.fusion.batch LOG... --config C [--calib K] --out DIR
+[--workers N | --scheduler ADDRESS] [--json]; docs/python.md.
+"""
+
+import argparse
+import json
+import os
+import socket
+import sys
+import time
+from dataclasses import dataclass
+from typing import Callable, Dict, List, Optional, Sequence
+
+from hanzo.fusion._fusion import write_trajectory
+from hanzo.fusion.log import replay
+
+
+@dataclass
+class MappingJob:
+    """One log to map: the sensor log (MCAP), its fusion configuration and calibration, and the
+    name of its folder in the output (default: the log's folder name, or its file name without
+    the extension when it is not called sensors.mcap)."""
+
+    log: str
+    config: str
+    calibration: Optional[str] = None
+    name: Optional[str] = None
+
+    def folder_name(self) -> str:
+        if self.name:
+            return self.name
+        stem = os.path.splitext(os.path.basename(self.log))[0]
+        parent = os.path.basename(os.path.dirname(os.path.abspath(self.log)))
+        return parent if stem == "sensors" and parent else stem
+
+
+class BatchMappingError(RuntimeError):
+    """Raised by map_logs when any log failed, after every log was tried; `results` holds every
+    log's result (failed ones with their "error")."""
+
+    def __init__(self, results: List[Dict]):
+        failed = [r for r in results if "error" in r]
+        super().__init__(f"{len(failed)} of {len(results)} logs failed: " + "; ".join(f"{r['name']}: {r['error']}" for r in failed))
+        self.results = results
+
+
+def map_one(job: MappingJob, out: str, threads: int = 1) -> Dict:
+    """Maps one log here (what each Dask task runs): replays it, writes its folder, returns what
+    was written and how long it took. Raises ValueError for a log, configuration or calibration
+    that cannot be read, and for a log read only in part."""
+    start = time.perf_counter()
+    session = replay(job.log, job.config, job.calibration, threads=threads)
+    folder = os.path.join(out, job.folder_name())
+    os.makedirs(folder, exist_ok=True)
+    trajectory_path = os.path.join(folder, "trajectory_optimized.tum")
+    map_path = os.path.join(folder, "map.fmap")
+    trajectory = session.optimized_trajectory()
+    if len(trajectory) == 0:
+        raise ValueError(f"{job.log}: the session gave no pose (no sensor of the configuration in the log?)")
+    write_trajectory(trajectory_path, trajectory, "tum")
+    session.save_map(map_path)
+    summary = session.summary()
+    seconds = time.perf_counter() - start
+    result = {
+        "name": job.folder_name(),
+        "log": job.log,
+        "trajectory": trajectory_path,
+        "map": map_path,
+        "poses": len(trajectory),
+        "keyframes": summary["keyframes"],
+        "loop_closures": summary["loop_closures"],
+        "seconds": seconds,
+        "worker": f"{socket.gethostname()}:{os.getpid()}",
+    }
+    with open(os.path.join(folder, "summary.json"), "w") as file:
+        json.dump({"result": result, "session": summary}, file, indent=1)
+    return result
+
+
+def map_logs(jobs: Sequence[MappingJob], out: str, scheduler: Optional[str] = None, workers: int = 2, threads: int = 1,
+             progress: Optional[Callable[[int, int, Dict], None]] = None) -> List[Dict]:
+    """Maps every job on a Dask cluster; returns one result per job, in the jobs' order (see
+    map_one). `progress(done, total, result)` is called as each log finishes (in finishing
+    order). Raises ValueError for duplicate folder names or workers < 1 before anything runs,
+    and BatchMappingError when any log failed (after all were tried)."""
+    from distributed import Client, LocalCluster, as_completed
+
+    names = [job.folder_name() for job in jobs]
+    duplicates = sorted({name for name in names if names.count(name) > 1})
+    if duplicates:
+        raise ValueError(f"two or more logs would write the same folder: {', '.join(duplicates)} (give each MappingJob a name)")
+    if workers < 1:
+        raise ValueError(f"workers: expected >= 1, got {workers}")
+    os.makedirs(out, exist_ok=True)
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    try:
+        futures = {client.submit(map_one, job, out, threads, key=f"map-{name}", pure=False): index for index, (job, name) in enumerate(zip(jobs, names))}
+        results: List[Dict] = [{} for _ in jobs]
+        for done, future in enumerate(as_completed(futures), start=1):
+            index = futures[future]
+            try:
+                results[index] = future.result()
+            except Exception as error:  # a failed log is reported with the others, never hidden
+                results[index] = {"name": names[index], "log": jobs[index].log, "error": str(error).splitlines()[0] if str(error) else repr(error)}
+            if progress:
+                progress(done, len(jobs), results[index])
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    if any("error" in result for result in results):
+        raise BatchMappingError(results)
+    return results
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = argparse.ArgumentParser(prog="python3 -m hanzo.fusion.batch", description="Map many sensor logs on a Dask cluster")
+    parser.add_argument("logs", nargs="+", help="sensor logs (MCAP)")
+    parser.add_argument("--config", required=True, help="fusion configuration YAML (the same for every log)")
+    parser.add_argument("--calib", help="calibration YAML (the same for every log)")
+    parser.add_argument("--out", required=True, help="output folder: a folder per log")
+    parser.add_argument("--workers", type=int, default=2, help="local worker processes (without --scheduler)")
+    parser.add_argument("--scheduler", help="a Dask scheduler's address (tcp://host:8786) instead of local workers")
+    parser.add_argument("--threads", type=int, default=1, help="threads of each log's Session")
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    args = parser.parse_args(argv)
+    # As `python3 -m hanzo.fusion.batch` this file is __main__: the tasks must name the importable
+    # module's functions and classes (the workers import it), not __main__'s.
+    from hanzo.fusion import batch
+
+    jobs = [batch.MappingJob(log, args.config, args.calib) for log in args.logs]
+
+    def report(done: int, total: int, result: Dict) -> None:
+        if not args.json:
+            state = f"failed: {result['error']}" if "error" in result else f"{result['poses']} poses in {result['seconds']:.1f} s"
+            print(f"[{done}/{total}] {result['name']}: {state}", flush=True)
+
+    start = time.perf_counter()
+    try:
+        results = batch.map_logs(jobs, args.out, scheduler=args.scheduler, workers=args.workers, threads=args.threads, progress=report)
+        ok, error = True, None
+    except batch.BatchMappingError as failure:
+        results, ok, error = failure.results, False, str(failure)
+    except ValueError as failure:
+        results, ok, error = [], False, str(failure)
+    seconds = time.perf_counter() - start
+    if args.json:
+        print(json.dumps({"ok": ok, "error": error, "logs": len(jobs), "seconds": seconds, "results": results}))
+    elif ok:
+        print(f"{len(jobs)} logs mapped in {seconds:.1f} s into {args.out}")
+    if not ok:
+        print(f"hanzo.fusion.batch: {error}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
