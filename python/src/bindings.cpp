@@ -349,6 +349,7 @@ class PyIncrementalSmoother {
 void bind_laser_slam(py::module_& module);  // laser_slam_bindings.cpp
 void bind_lidar_odometry(py::module_& module);  // lidar_odometry_bindings.cpp
 void bind_session(py::module_& module);  // session_bindings.cpp
+void bind_object_store(py::module_& module);  // object_store_bindings.cpp
 void bind_sensor_log(py::module_& module);  // log_bindings.cpp
 void bind_evaluation(py::module_& module);  // evaluation_bindings.cpp
 void bind_sensor_models(py::module_& module);   // sensor_model_bindings.cpp
@@ -481,6 +482,7 @@ PYBIND11_MODULE(_fusion, module) {
   bind_laser_slam(module);
   bind_lidar_odometry(module);
   bind_session(module);
+  bind_object_store(module);
   bind_sensor_log(module);
   bind_evaluation(module);
 }

@@ -169,11 +169,12 @@ class PySession {
     return rows;
   }
 
-  void save_map(const std::string& path) const {
+  void save_map(const std::string& path, const std::optional<std::string>& log_uri) const {
     if (!replayed_) throw py::value_error("save_map: only a session that replayed a log (replay()) records its map's provenance");
     const Timestamp created = poses_.empty() ? Timestamp() : poses_.back().timestamp;
     Result<msgs::FusionMap> map = pipeline::replayed_map(*session_, "replay", created, config_path_, *replayed_, HANZO_FUSION_VERSION);
     if (!map) throw py::value_error(map.error().message);
+    if (log_uri) map->provenance.input_logs.back().uri = *log_uri;
     if (Status written = maps::write_fusion_map(path, *map); !written) throw py::value_error(written.error().message);
   }
 
@@ -251,8 +252,9 @@ void bind_session(py::module_& module) {
       .def("poses", &PySession::poses, "Real-time poses as emitted: N x 8 (t, x, y, z, qw, qx, qy, qz), body in the world")
       .def("optimized_trajectory", &PySession::optimized_trajectory, "The same poses moved onto the optimized graph: N x 8")
       .def("map_points", &PySession::map_points, "The map's points: N x 3 (world, m)")
-      .def("save_map", &PySession::save_map, py::arg("path"),
-           "After replay(): writes the session's FusionMap (every layer, the configuration and the log's SHA-256 as provenance; "
-           "hanzo-fusion map info reads it) to a .fmap file; raises ValueError when it cannot be written")
+      .def("save_map", &PySession::save_map, py::arg("path"), py::arg("log_uri") = std::nullopt,
+           "After replay(): writes the session's FusionMap (every layer, the configuration and the log's SHA-256 as provenance, "
+           "the log named by log_uri when given, e.g. where a local copy came from; hanzo-fusion map info reads it) to a .fmap file; "
+           "raises ValueError when it cannot be written")
       .def("summary", &PySession::summary, "Counts per sensor and of the mapping");
 }

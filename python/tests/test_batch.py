@@ -1,17 +1,21 @@
 """Batch mapping on Dask (hanzo.fusion.batch): three simulated warehouse logs and a truncated one
 on a two-worker LocalCluster; each good log's trajectory equals the in-process replay's, its
-map is a FusionMap the CLI reads; the broken log is reported by name, never hidden."""
+map is a FusionMap the CLI reads; the broken log is reported by name, never hidden; logs read
+from and results written to an S3-compatible store (a local s3rver)."""
 
 import json
 import os
 import pathlib
+import re
+import shutil
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 
-from hanzo.fusion import read_trajectory, replay
+from hanzo.fusion import ObjectStore, read_trajectory, replay
 from hanzo.fusion.batch import BatchMappingError, MappingJob, map_logs
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
@@ -79,3 +83,56 @@ def test_the_command_line_reports_one_json_object(logs, tmp_path):
                               "--out", str(tmp_path / "maps"), "--workers", "1", "--json"], capture_output=True, text=True)
     assert missing.returncode == 1
     assert json.loads(missing.stdout)["ok"] is False and "none.mcap" in missing.stderr
+
+
+@pytest.fixture(scope="module")
+def s3(tmp_path_factory):
+    """s3rver (tests/s3server, installed by scripts/install-deps.sh) serving bucket "fleet" on a
+    free port; its credentials in the environment the Dask workers inherit."""
+    script = REPO / "tests" / "s3server" / "node_modules" / "s3rver" / "bin" / "s3rver.js"
+    folder = tmp_path_factory.mktemp("s3")
+    log_path = folder / "log.txt"
+    with open(log_path, "w") as log:
+        server = subprocess.Popen([shutil.which("node") or "node", "--openssl-legacy-provider", str(script), "-d", str(folder / "data"), "-a", "127.0.0.1",
+                                   "-p", "0", "--configure-bucket", "fleet"], stdout=log, stderr=subprocess.STDOUT)
+    port = None
+    for _ in range(400):
+        found = re.search(r"listening on 127\.0\.0\.1:(\d+)", log_path.read_text())
+        if found:
+            port = int(found.group(1))
+            break
+        time.sleep(0.025)
+    assert port, log_path.read_text()
+    saved = {key: os.environ.get(key) for key in ("AWS_ACCESS_KEY_ID", "AWS_SECRET_ACCESS_KEY")}
+    os.environ["AWS_ACCESS_KEY_ID"] = os.environ["AWS_SECRET_ACCESS_KEY"] = "S3RVER"
+    yield f"http://127.0.0.1:{port}"
+    server.terminate()
+    server.wait()
+    for key, value in saved.items():
+        if value is None:
+            os.environ.pop(key, None)
+        else:
+            os.environ[key] = value
+
+
+def test_logs_from_and_maps_to_an_object_store(logs, s3, tmp_path):
+    store = ObjectStore(f"s3://fleet?endpoint={s3}")
+    for folder in logs[:2]:
+        for file_name in ("sensors.mcap", "fusion.yaml", "calibration.yaml"):
+            store.put_file(f"logs/{folder.name}/{file_name}", str(folder / file_name))
+    url = lambda key: f"s3://fleet/{key}?endpoint={s3}"  # noqa: E731
+    jobs = [MappingJob(url(f"logs/{f.name}/sensors.mcap"), url(f"logs/{f.name}/fusion.yaml"), url(f"logs/{f.name}/calibration.yaml")) for f in logs[:2]]
+    results = map_logs(jobs, url("maps"), workers=2)
+    assert [r["name"] for r in results] == ["patrol1", "patrol2"]
+    assert results[0]["map"] == "s3://fleet/maps/patrol1/map.fmap"
+    keys = [key for key, size in store.list("maps/")]
+    assert keys == [f"maps/{name}/{file_name}" for name in ("patrol1", "patrol2") for file_name in ("map.fmap", "summary.json", "trajectory_optimized.tum")]
+    store.get_to_file("maps/patrol1/trajectory_optimized.tum", str(tmp_path / "trajectory.tum"))
+    store.get_to_file("maps/patrol1/map.fmap", str(tmp_path / "map.fmap"))
+    expected = replay(str(logs[0] / "sensors.mcap"), str(logs[0] / "fusion.yaml"), str(logs[0] / "calibration.yaml")).optimized_trajectory()
+    np.testing.assert_allclose(read_trajectory(str(tmp_path / "trajectory.tum"), "tum"), expected, rtol=0, atol=1e-6)
+    info = json.loads(subprocess.run([CLI, "map", "info", str(tmp_path / "map.fmap"), "--json"], check=True, capture_output=True, text=True).stdout)
+    assert info["inputs"][0]["uri"] == url("logs/patrol1/sensors.mcap")
+    # A missing object is reported by its name.
+    with pytest.raises(BatchMappingError, match="logs/none/sensors.mcap"):
+        map_logs([MappingJob(url("logs/none/sensors.mcap"), url("logs/patrol1/fusion.yaml"))], url("maps"), workers=1)

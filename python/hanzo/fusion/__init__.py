@@ -15,6 +15,7 @@ from hanzo.fusion._fusion import (  # noqa: F401
     L,
     LidarOdometry,
     LidarOdometryEstimate,
+    ObjectStore,
     OptimizeResult,
     PinholeCamera,
     PlanarLaserSlam,

@@ -4,7 +4,10 @@ python3-distributed): each log is one task that replays it through the C++ Sessi
 `out`, the optimized trajectory (trajectory_optimized.tum), the FusionMap (map.fmap) and the
 session's summary (summary.json). Without a scheduler address, a LocalCluster of `workers`
 processes on this machine (one task at a time each); with one ("tcp://host:8786"), the
-cluster's workers, which must see the logs and `out` at the same paths.
+cluster's workers. Logs, configurations and calibrations are local paths (which every worker
+must see) or s3:// object URLs ("s3://bucket/key?endpoint=..."; credentials from
+$AWS_ACCESS_KEY_ID / $AWS_SECRET_ACCESS_KEY), fetched into a scratch folder on the worker;
+`out` is a folder or an s3:// prefix the results are uploaded under.
 
     from hanzo.fusion.batch import MappingJob, map_logs
     results = map_logs([MappingJob("a/sensors.mcap", "a/fusion.yaml", "a/calibration.yaml")], "maps", workers=2)
@@ -18,12 +21,35 @@ import json
 import os
 import socket
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from urllib.parse import urlsplit
 
-from hanzo.fusion._fusion import write_trajectory
+from hanzo.fusion._fusion import ObjectStore, write_trajectory
 from hanzo.fusion.log import replay
+
+
+def is_object_url(location: str) -> bool:
+    return location.startswith("s3://")
+
+
+def split_object_url(url: str) -> Tuple[str, str]:
+    """"s3://bucket/a/b.mcap?endpoint=E" -> the store "s3://bucket?endpoint=E" and the key "a/b.mcap"."""
+    parts = urlsplit(url)
+    store = f"s3://{parts.netloc}" + (f"?{parts.query}" if parts.query else "")
+    return store, parts.path.lstrip("/")
+
+
+def fetch(location: Optional[str], folder: str) -> Optional[str]:
+    """A local path for `location`: itself, or an s3:// object downloaded into `folder`."""
+    if location is None or not is_object_url(location):
+        return location
+    store, key = split_object_url(location)
+    path = os.path.join(folder, f"{len(os.listdir(folder))}_{os.path.basename(key)}")
+    ObjectStore(store).get_to_file(key, path)
+    return path
 
 
 @dataclass
@@ -40,8 +66,9 @@ class MappingJob:
     def folder_name(self) -> str:
         if self.name:
             return self.name
-        stem = os.path.splitext(os.path.basename(self.log))[0]
-        parent = os.path.basename(os.path.dirname(os.path.abspath(self.log)))
+        path = split_object_url(self.log)[1] if is_object_url(self.log) else os.path.abspath(self.log)
+        stem = os.path.splitext(os.path.basename(path))[0]
+        parent = os.path.basename(os.path.dirname(path))
         return parent if stem == "sensors" and parent else stem
 
 
@@ -56,35 +83,45 @@ class BatchMappingError(RuntimeError):
 
 
 def map_one(job: MappingJob, out: str, threads: int = 1) -> Dict:
-    """Maps one log here (what each Dask task runs): replays it, writes its folder, returns what
-    was written and how long it took. Raises ValueError for a log, configuration or calibration
-    that cannot be read, and for a log read only in part."""
+    """Maps one log here (what each Dask task runs): fetches what is remote, replays the log,
+    writes (or uploads) its folder, returns what was written and how long it took. Raises
+    ValueError for a log, configuration or calibration that cannot be read or fetched, and for
+    a log read only in part."""
     start = time.perf_counter()
-    session = replay(job.log, job.config, job.calibration, threads=threads)
-    folder = os.path.join(out, job.folder_name())
-    os.makedirs(folder, exist_ok=True)
-    trajectory_path = os.path.join(folder, "trajectory_optimized.tum")
-    map_path = os.path.join(folder, "map.fmap")
-    trajectory = session.optimized_trajectory()
-    if len(trajectory) == 0:
-        raise ValueError(f"{job.log}: the session gave no pose (no sensor of the configuration in the log?)")
-    write_trajectory(trajectory_path, trajectory, "tum")
-    session.save_map(map_path)
-    summary = session.summary()
-    seconds = time.perf_counter() - start
-    result = {
-        "name": job.folder_name(),
-        "log": job.log,
-        "trajectory": trajectory_path,
-        "map": map_path,
-        "poses": len(trajectory),
-        "keyframes": summary["keyframes"],
-        "loop_closures": summary["loop_closures"],
-        "seconds": seconds,
-        "worker": f"{socket.gethostname()}:{os.getpid()}",
-    }
-    with open(os.path.join(folder, "summary.json"), "w") as file:
-        json.dump({"result": result, "session": summary}, file, indent=1)
+    name = job.folder_name()
+    with tempfile.TemporaryDirectory(prefix="hanzo_batch_") as scratch:
+        inputs = os.path.join(scratch, "inputs")
+        os.makedirs(inputs)
+        log = fetch(job.log, inputs)
+        session = replay(log, fetch(job.config, inputs), fetch(job.calibration, inputs), threads=threads)
+        folder = os.path.join(scratch, "out", name) if is_object_url(out) else os.path.join(out, name)
+        os.makedirs(folder, exist_ok=True)
+        trajectory = session.optimized_trajectory()
+        if len(trajectory) == 0:
+            raise ValueError(f"{job.log}: the session gave no pose (no sensor of the configuration in the log?)")
+        write_trajectory(os.path.join(folder, "trajectory_optimized.tum"), trajectory, "tum")
+        session.save_map(os.path.join(folder, "map.fmap"), log_uri=job.log if is_object_url(job.log) else None)
+        summary = session.summary()
+        result = {
+            "name": name,
+            "log": job.log,
+            "trajectory": os.path.join(out, name, "trajectory_optimized.tum"),
+            "map": os.path.join(out, name, "map.fmap"),
+            "poses": len(trajectory),
+            "keyframes": summary["keyframes"],
+            "loop_closures": summary["loop_closures"],
+            "seconds": time.perf_counter() - start,
+            "worker": f"{socket.gethostname()}:{os.getpid()}",
+        }
+        with open(os.path.join(folder, "summary.json"), "w") as file:
+            json.dump({"result": result, "session": summary}, file, indent=1)
+        if is_object_url(out):
+            store, prefix = split_object_url(out)
+            target = ObjectStore(store)
+            for file_name in sorted(os.listdir(folder)):
+                target.put_file("/".join(part for part in (prefix.rstrip("/"), name, file_name) if part), os.path.join(folder, file_name))
+            base = out.split("?", 1)[0].rstrip("/")
+            result["trajectory"], result["map"] = f"{base}/{name}/trajectory_optimized.tum", f"{base}/{name}/map.fmap"
     return result
 
 
@@ -102,7 +139,8 @@ def map_logs(jobs: Sequence[MappingJob], out: str, scheduler: Optional[str] = No
         raise ValueError(f"two or more logs would write the same folder: {', '.join(duplicates)} (give each MappingJob a name)")
     if workers < 1:
         raise ValueError(f"workers: expected >= 1, got {workers}")
-    os.makedirs(out, exist_ok=True)
+    if not is_object_url(out):
+        os.makedirs(out, exist_ok=True)
     cluster = None
     if scheduler:
         client = Client(scheduler)
@@ -131,10 +169,10 @@ def map_logs(jobs: Sequence[MappingJob], out: str, scheduler: Optional[str] = No
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog="python3 -m hanzo.fusion.batch", description="Map many sensor logs on a Dask cluster")
-    parser.add_argument("logs", nargs="+", help="sensor logs (MCAP)")
-    parser.add_argument("--config", required=True, help="fusion configuration YAML (the same for every log)")
-    parser.add_argument("--calib", help="calibration YAML (the same for every log)")
-    parser.add_argument("--out", required=True, help="output folder: a folder per log")
+    parser.add_argument("logs", nargs="+", help="sensor logs (MCAP): paths or s3:// URLs")
+    parser.add_argument("--config", required=True, help="fusion configuration YAML (the same for every log; a path or an s3:// URL)")
+    parser.add_argument("--calib", help="calibration YAML (the same for every log; a path or an s3:// URL)")
+    parser.add_argument("--out", required=True, help="output folder or s3:// prefix: a folder per log")
     parser.add_argument("--workers", type=int, default=2, help="local worker processes (without --scheduler)")
     parser.add_argument("--scheduler", help="a Dask scheduler's address (tcp://host:8786) instead of local workers")
     parser.add_argument("--threads", type=int, default=1, help="threads of each log's Session")
