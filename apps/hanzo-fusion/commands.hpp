@@ -51,6 +51,8 @@ void add_cloud_commands(CLI::App& app, const Output& output, Command& run);
 void add_map_command(CLI::App& app, const Output& output, Command& run);
 /// `map localize` (map_localize_command.cpp), added by add_map_command.
 void add_map_localize_command(CLI::App& map_app, const Output& output, Command& run);
+/// map merge (map_merge_command.cpp).
+void add_map_merge_command(CLI::App& map_app, const Output& output, Command& run);
 void add_serve_command(CLI::App& app, const Output& output, Command& run);
 void add_stream_command(CLI::App& app, const Output& output, Command& run);
 void add_slam2d_command(CLI::App& app, const Output& output, Command& run);

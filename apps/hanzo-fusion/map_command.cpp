@@ -613,6 +613,7 @@ void add_map_command(CLI::App& app, const Output& output, Command& run) {
     };
   });
   add_map_localize_command(*map_app, output, run);
+  add_map_merge_command(*map_app, output, run);
 }
 
 }  // namespace hanzo::fusion::app
