@@ -1631,6 +1631,35 @@ TEST(Cli, MapLocalizeFindsTheRealScanInTheOtherScansMap) {
   std::filesystem::remove_all(dir);
 }
 
+// `map merge` on the same real pair: the source scan's map joins the target's within 5 cm and
+// 1 degree of the reference transform, without a guess; one map alone is refused.
+TEST(Cli, MapMergeJoinsTheRealScansMapsWithoutAGuess) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_merge_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string pair = std::string(HANZO_DATA_DIR) + "/lidar_small_gicp";
+  const std::string target = (dir / "target.fmap").string(), source = (dir / "source.fmap").string();
+  ASSERT_EQ(run(fmt::format("map import {}/target.ply --out {} --voxel 0.2", pair, target)).exit_code, 0);
+  ASSERT_EQ(run(fmt::format("map import {}/source.ply --out {} --voxel 0.2", pair, source)).exit_code, 0);
+  const CliRun merged = run(fmt::format("map merge {} {} --out {} --json", target, source, (dir / "merged.fmap").string()));
+  ASSERT_EQ(merged.exit_code, 0) << merged.err;
+  const nlohmann::json result = nlohmann::json::parse(merged.out);
+  const nlohmann::json& joined = result["joined"][0];
+  // Reference (T_target_source.txt): translation 0.489 0.121 -0.025, yaw -0.70 deg.
+  EXPECT_NEAR(joined["translation"][0].get<double>(), 0.489, 0.05);
+  EXPECT_NEAR(joined["translation"][1].get<double>(), 0.121, 0.05);
+  EXPECT_NEAR(joined["yaw_deg"].get<double>(), -0.70, 1.0);
+  EXPECT_GE(joined["agreeing"].get<int>(), 2);
+  const CliRun info = run(fmt::format("map info {} --json", (dir / "merged.fmap").string()));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  EXPECT_EQ(nlohmann::json::parse(info.out)["layers"]["points"]["count"], result["points"]);
+  const CliRun alone = run(fmt::format("map merge {} --out {}", target, (dir / "alone.fmap").string()));
+  EXPECT_NE(alone.exit_code, 0);
+  EXPECT_THAT(alone.err, HasSubstr("two or more maps"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "alone.fmap"));
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, MapBuildInfoExportStoreDiffRedact) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_map_{}", ::getpid());
   std::filesystem::remove_all(dir);
