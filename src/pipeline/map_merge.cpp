@@ -154,8 +154,9 @@ Result<MapMergeResult> merge_maps(const msgs::FusionMap& a, const msgs::FusionMa
                              localized.size(), result.views, best_count, needed));
   }
   // The best-fitting view among those that agree with the most.
-  for (const Localized& candidate : localized) {
-    if (agree(candidate.T_a_b, localized[best].T_a_b, config) && candidate.rmse < localized[best].rmse) best = static_cast<std::size_t>(&candidate - localized.data());
+  const SE3 reference = localized[best].T_a_b;
+  for (std::size_t i = 0; i < localized.size(); ++i) {
+    if (agree(localized[i].T_a_b, reference, config) && localized[i].rmse < localized[best].rmse) best = i;
   }
   result.T_a_b = localized[best].T_a_b;
   result.agreeing = best_count;
