@@ -49,6 +49,8 @@ packages=(
   # tests and benchmarks (Embree: the ray-casting peer of the simulator benchmark; OctoMap: the
   # occupancy-mapping peer of the maps benchmark)
   libgtest-dev libgmock-dev libbenchmark-dev libembree-dev liboctomap-dev
+  # replicas: the load balancer in front of them (session affinity for REST and gRPC)
+  nginx
   # make fuzz: clang with libFuzzer and AddressSanitizer
   clang libclang-rt-14-dev
   # ai (learned features, HANZO_FUSION_AI): libtorch on the CPU; its reference tests run the same

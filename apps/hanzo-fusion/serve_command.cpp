@@ -51,6 +51,9 @@ struct ServeOptions {
   std::string object_store;
   double recording_retention_days = 30.0;
   double recording_max_gb = 0.0;
+  std::string replica_id;
+  std::string replica_url;
+  double lease_s = 10.0;
 };
 
 // The token store from --tokens, HANZO_FUSION_TOKENS_FILE or HANZO_FUSION_TOKENS, with the JWT
@@ -129,6 +132,24 @@ int run_serve(const Output& output, const ServeOptions& options) {
     if (auto probe = (*objects)->list(".hanzo-fusion-probe/"); !probe) return report_failure(output, {}, "--object-store: " + probe.error().message);
     manager_config.object_store = std::move(*objects);
   }
+  std::string replica_secret;
+  if (!options.replica_id.empty()) {
+    std::string url = options.replica_url;
+    if (url.empty()) {
+      if (options.port == 0) return report_failure(output, {}, "--replica-url: needed with --port 0 (the other replicas forward requests there)");
+      const std::string host = options.bind == "0.0.0.0" || options.bind == "::" ? "127.0.0.1" : options.bind;
+      url = fmt::format("{}://{}:{}", options.tls_certificate.empty() ? "http" : "https", host, options.port);
+    }
+    manager_config.replica = {options.replica_id, url, std::chrono::milliseconds(std::llround(options.lease_s * 1000.0)), nullptr};
+    const char* secret = std::getenv("HANZO_FUSION_REPLICA_SECRET");
+    if (secret == nullptr || std::string_view(secret).size() < 16) {
+      return report_failure(output, {}, "--replica-id: set HANZO_FUSION_REPLICA_SECRET (16 characters or more, the same on every replica)");
+    }
+    replica_secret = secret;
+    manager_config.replica.request_handover = service::replica_handover_requester(replica_secret);
+  } else if (!options.replica_url.empty()) {
+    return report_failure(output, {}, "--replica-url: applies to a replica; set --replica-id too");
+  }
   recording.retention = std::chrono::hours(static_cast<int64_t>(std::lround(options.recording_retention_days * 24.0)));
   recording.max_total_bytes = static_cast<uint64_t>(options.recording_max_gb * 1e9);
   auto sessions = service::SessionManager::create(manager_config, std::move(storage).value(), metrics);
@@ -141,6 +162,7 @@ int run_serve(const Output& output, const ServeOptions& options) {
   rest_config.tls_private_key = options.tls_private_key;
   rest_config.max_body_bytes = static_cast<std::size_t>(options.max_body_mb * 1024 * 1024);
   rest_config.threads = options.threads;
+  rest_config.replica_secret = replica_secret;
   auto rest = service::RestServer::create(rest_config, *sessions.value(), tokens.value(), metrics);
   if (!rest) return report_failure(output, {}, rest.error().message);
   if (Status started = rest.value()->start(); !started) return report_failure(output, {}, started.error().message);
@@ -159,7 +181,8 @@ int run_serve(const Output& output, const ServeOptions& options) {
   const std::string scheme = rest.value()->https() ? "https" : "http";
   nlohmann::json ready = {{"rest_port", rest.value()->port()}, {"grpc_port", grpc.value()->port()}, {"rest_url", fmt::format("{}://{}:{}", scheme, options.bind, rest.value()->port())},
                           {"storage", std::string(sessions.value()->storage_backend())}, {"auth", auth},
-                          {"active_sessions", sessions.value()->active_sessions()}};
+                          {"active_sessions", sessions.value()->active_sessions()},
+                          {"replica", options.replica_id.empty() ? nlohmann::json(nullptr) : nlohmann::json(options.replica_id)}};
   if (output.json) {
     std::cout << ready.dump() << std::endl;
   } else {
@@ -213,6 +236,12 @@ void add_serve_command(CLI::App& app, const Output& output, Command& run) {
       ->capture_default_str()->check(CLI::NonNegativeNumber);
   command->add_option("--recording-max-gb", options->recording_max_gb, "Beyond this size of finished recordings the oldest are deleted (0: no cap)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
+  command->add_option("--replica-id", options->replica_id,
+                      "Run as one of several replicas on one --db and --object-store, this one named so (docs/server.md \"Replicas\")");
+  command->add_option("--replica-url", options->replica_url,
+                      "Where the other replicas reach this one's REST API (default http://BIND:PORT, 127.0.0.1 for 0.0.0.0)");
+  command->add_option("--lease-s", options->lease_s, "Replicas: a session lease's length; a dead replica's sessions are taken over after it")
+      ->capture_default_str()->check(CLI::Range(0.5, 3600.0));
   command->add_option("--db", options->database, "Storage URL: sqlite://PATH or postgresql://USER@HOST:PORT/DB (default sqlite://DATA_DIR/fusion.db)");
   command->add_option("--tokens", options->tokens_file, "API token file (YAML; docs/server.md)");
   command->add_option("--jwks", options->jwks_file, "JWKS file or http(s) URL of an OIDC provider: bearer JWTs (RS256 / ES256) are accepted (docs/security.md)");

@@ -33,7 +33,10 @@ grpc::StatusCode grpc_code(ErrorCode code) {
 }
 
 grpc::Status to_grpc(const ApiError& error) {
-  return {grpc_code(error.code), error.message, std::string(to_string(error.code)) + (error.field.empty() ? "" : ":" + error.field)};
+  // A session another replica serves: UNAVAILABLE (clients retry; behind the load balancer the
+  // retry reaches the session's replica, or this one once it has taken the session over).
+  const std::string message = error.served_by.empty() ? error.message : fmt::format("{} ({})", error.message, error.served_by);
+  return {grpc_code(error.code), message, std::string(to_string(error.code)) + (error.field.empty() ? "" : ":" + error.field)};
 }
 
 std::string metadata(const grpc::ServerContext& context, const std::string& key) {
@@ -84,15 +87,15 @@ class FusionServiceImpl final : public v1::FusionService::Service {
 
   grpc::Status SubscribePose(grpc::ServerContext* context, const v1::SessionId* request,
                              grpc::ServerWriter<v1::PoseEstimate>* writer) override {
-    return serve_subscription(*context, *writer, [&](const Principal& caller) { return sessions_.subscribe_poses(caller, request->id()); });
+    return serve_subscription(*context, *writer, request->id(), [&](const Principal& caller) { return sessions_.subscribe_poses(caller, request->id()); });
   }
   grpc::Status SubscribeKeyframes(grpc::ServerContext* context, const v1::SessionId* request,
                                   grpc::ServerWriter<v1::Keyframe>* writer) override {
-    return serve_subscription(*context, *writer, [&](const Principal& caller) { return sessions_.subscribe_keyframes(caller, request->id()); });
+    return serve_subscription(*context, *writer, request->id(), [&](const Principal& caller) { return sessions_.subscribe_keyframes(caller, request->id()); });
   }
   grpc::Status SubscribeMap(grpc::ServerContext* context, const v1::SessionId* request,
                             grpc::ServerWriter<v1::MapUpdate>* writer) override {
-    return serve_subscription(*context, *writer, [&](const Principal& caller) { return sessions_.subscribe_map(caller, request->id()); });
+    return serve_subscription(*context, *writer, request->id(), [&](const Principal& caller) { return sessions_.subscribe_map(caller, request->id()); });
   }
 
   // A session's map (session_id; map_id empty or the session id; version 0 = the live map) or
@@ -104,6 +107,7 @@ class FusionServiceImpl final : public v1::FusionService::Service {
     const std::string& map_id = request->map_id().empty() ? request->session_id() : request->map_id();
     ApiResult<msgs::FusionMap> map = ApiError{};
     if (request->version() == 0 && map_id == request->session_id()) {
+      if (const ApiStatus here = sessions_.serve_here(principal.value(), request->session_id()); !here) return to_grpc(here.error());
       map = sessions_.map(principal.value(), request->session_id());
     } else {
       map = sessions_.stored_map(principal.value(), map_id,
@@ -135,9 +139,11 @@ class FusionServiceImpl final : public v1::FusionService::Service {
   // Writes what a subscription of the caller's (made by `subscribe`) receives until the client
   // goes away, the server stops or the session ends (FAILED_PRECONDITION).
   template <typename ProtoMessage, typename Subscribe>
-  grpc::Status serve_subscription(grpc::ServerContext& context, grpc::ServerWriter<ProtoMessage>& writer, Subscribe subscribe) {
+  grpc::Status serve_subscription(grpc::ServerContext& context, grpc::ServerWriter<ProtoMessage>& writer, const std::string& session_id,
+                                  Subscribe subscribe) {
     auto principal = authenticate(context);
     if (!principal) return to_grpc(principal.error());
+    if (const ApiStatus here = sessions_.serve_here(principal.value(), session_id); !here) return to_grpc(here.error());
     auto subscription = subscribe(principal.value());
     if (!subscription) return to_grpc(subscription.error());
     auto& queue = *subscription.value();
@@ -164,6 +170,8 @@ class FusionServiceImpl final : public v1::FusionService::Service {
     // Checks access before the first message arrives (writing needs session:write, the poses
     // answered need session:read), and collects the session's poses.
     if (const ApiStatus allowed = authorize(principal.value(), Permission::kSessionWrite); !allowed) return to_grpc(allowed.error());
+    // Replicas: a stream cannot be forwarded; the session moves to the replica it reached.
+    if (const ApiStatus here = sessions_.serve_here(principal.value(), session_id); !here) return to_grpc(here.error());
     auto subscription = sessions_.subscribe_poses(principal.value(), session_id);
     if (!subscription) return to_grpc(subscription.error());
     PoseSubscription& poses = *subscription.value();

@@ -176,6 +176,7 @@ json session_to_json(const SessionInfo& info) {
       {"config", info.config_yaml},
       {"calibration", info.calibration_yaml},
       {"recording", info.recording ? recording_to_json(*info.recording) : json(nullptr)},
+      {"replica", info.replica.empty() ? json(nullptr) : json(info.replica)},
   };
 }
 

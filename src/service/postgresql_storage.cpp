@@ -54,6 +54,12 @@ CREATE TABLE IF NOT EXISTS maps (
   session_id TEXT NOT NULL,
   created_ns BIGINT NOT NULL
 );
+CREATE TABLE IF NOT EXISTS session_leases (
+  session_id TEXT PRIMARY KEY,
+  owner TEXT NOT NULL,
+  owner_url TEXT NOT NULL,
+  expires_ns BIGINT NOT NULL
+);
 )sql";
 
 constexpr const char* kInsertPose =
@@ -215,6 +221,59 @@ class PostgresqlStorage final : public Storage {
       if (!row[2].is_null()) extent.last = Timestamp::from_nanoseconds(row[2].as<int64_t>());
     }));
     return extent;
+  }
+
+  // The upsert takes the row lock: of two replicas claiming one expired lease, the second
+  // waits for the first and then sees a lease that has not expired.
+  Result<SessionLease> claim_session(const std::string& session_id, const std::string& owner, const std::string& owner_url,
+                                     Timestamp now, Timestamp expires) override {
+    SessionLease lease;
+    HANZO_RETURN_IF_ERROR(run(fmt::format("claim session '{}'", session_id), [&] {
+      pqxx::work work(*connection_);
+      work.exec_params0(
+          "INSERT INTO session_leases (session_id, owner, owner_url, expires_ns) VALUES ($1, $2, $3, $4) "
+          "ON CONFLICT (session_id) DO UPDATE SET owner = EXCLUDED.owner, owner_url = EXCLUDED.owner_url, "
+          "expires_ns = EXCLUDED.expires_ns WHERE session_leases.expires_ns < $5 OR session_leases.owner = EXCLUDED.owner",
+          session_id, owner, owner_url, expires.nanoseconds(), now.nanoseconds());
+      const pqxx::row row = work.exec_params1("SELECT owner, owner_url, expires_ns FROM session_leases WHERE session_id = $1", session_id);
+      lease = {session_id, row[0].as<std::string>(), row[1].as<std::string>(), Timestamp::from_nanoseconds(row[2].as<int64_t>())};
+      work.commit();
+    }));
+    return lease;
+  }
+
+  Result<std::vector<std::string>> renew_leases(const std::string& owner, Timestamp expires) override {
+    std::vector<std::string> held;
+    HANZO_RETURN_IF_ERROR(run("renew session leases", [&] {
+      pqxx::work work(*connection_);
+      for (const pqxx::row& row : work.exec_params("UPDATE session_leases SET expires_ns = $1 WHERE owner = $2 RETURNING session_id",
+                                                   expires.nanoseconds(), owner)) {
+        held.push_back(row[0].as<std::string>());
+      }
+      work.commit();
+    }));
+    return held;
+  }
+
+  Result<std::optional<SessionLease>> session_lease(const std::string& session_id) override {
+    std::optional<SessionLease> lease;
+    HANZO_RETURN_IF_ERROR(run(fmt::format("read the lease of session '{}'", session_id), [&] {
+      pqxx::read_transaction work(*connection_);
+      const pqxx::result rows = work.exec_params("SELECT owner, owner_url, expires_ns FROM session_leases WHERE session_id = $1", session_id);
+      if (!rows.empty()) {
+        lease = SessionLease{session_id, rows[0][0].as<std::string>(), rows[0][1].as<std::string>(),
+                             Timestamp::from_nanoseconds(rows[0][2].as<int64_t>())};
+      }
+    }));
+    return lease;
+  }
+
+  Status release_session(const std::string& session_id, const std::string& owner) override {
+    return run(fmt::format("release session '{}'", session_id), [&] {
+      pqxx::work work(*connection_);
+      work.exec_params0("DELETE FROM session_leases WHERE session_id = $1 AND owner = $2", session_id, owner);
+      work.commit();
+    });
   }
 
   Status create_map(const MapRecord& map) override {

@@ -13,6 +13,7 @@
 
 #include <fmt/format.h>
 #include <httplib.h>
+#include <openssl/crypto.h>
 
 #include "hanzo/fusion/cloud/cloud_io.hpp"
 #include "hanzo/fusion/core/logging.hpp"
@@ -63,8 +64,46 @@ void compress_large_body(const httplib::Request& request, httplib::Response& res
   });
 }
 
+// Replicas: the header naming the replica that serves a request's session (set with its 503),
+// and the one marking a request another replica forwarded (answered where it arrives: no loops).
+constexpr const char* kServedByHeader = "X-Hanzo-Served-By";
+constexpr const char* kForwardedHeader = "X-Hanzo-Forwarded";
+constexpr const char* kReplicaSecretHeader = "X-Hanzo-Replica-Secret";
+
 void send_error(httplib::Response& response, const ApiError& error) {
   send_json(response, http_status(error.code), detail::error_to_json(error));
+  if (!error.served_by.empty()) response.set_header(kServedByHeader, error.served_by);
+}
+
+// Answers a request for a session another replica serves with that replica's answer. When it
+// does not answer (it died; its lease has not run out yet) the 503 stays, with Retry-After.
+void forward_to_owner(const httplib::Request& request, httplib::Response& response) {
+  const std::string owner = response.get_header_value(kServedByHeader);
+  response.headers.erase(kServedByHeader);
+  if (request.has_header(kForwardedHeader)) return;
+  httplib::Client client(owner);
+  client.set_connection_timeout(2, 0);
+  client.set_read_timeout(60, 0);
+  httplib::Request forwarded;
+  forwarded.method = request.method;
+  forwarded.path = request.target;
+  forwarded.body = request.body;
+  for (const char* header : {"Authorization", "Content-Type", "Accept"}) {
+    if (request.has_header(header)) forwarded.set_header(header, request.get_header_value(header));
+  }
+  forwarded.set_header(kForwardedHeader, "1");
+  httplib::Result answer = client.send(forwarded);
+  if (!answer) {
+    response.set_header("Retry-After", "1");
+    logger()->warn("REST {} {}: the replica serving it ({}) does not answer: {}", request.method, request.path, owner,
+                   httplib::to_string(answer.error()));
+    return;
+  }
+  response.status = answer->status;
+  response.body = std::move(answer->body);
+  for (const char* header : {"Content-Type", "Content-Disposition", "Retry-After"}) {
+    if (answer->has_header(header)) response.set_header(header, answer->get_header_value(header));
+  }
 }
 
 // A query parameter as a non-negative integer within [minimum, maximum].
@@ -240,6 +279,7 @@ struct RestServer::Impl {
       auto principal = authenticate(request);
       if (!principal) return send_error(response, principal.error());
       handler(request, response, principal.value());
+      if (response.has_header(kServedByHeader)) forward_to_owner(request, response);
     });
   }
 
@@ -480,6 +520,19 @@ struct RestServer::Impl {
       send_json(response, 200, answer);
     }));
 
+    // Replicas: another replica asks this one to let a session go (SessionManager::hand_over).
+    s.Post("/v1/replica/sessions/" + std::string(kSessionPattern) + "/handover",
+           measured("POST", "/v1/replica/sessions/{id}/handover", [this](const httplib::Request& request, httplib::Response& response) {
+             const std::string secret = request.get_header_value(kReplicaSecretHeader);
+             if (config.replica_secret.empty()) return send_error(response, {ErrorCode::kNotFound, "this server runs no replicas", ""});
+             if (secret.size() != config.replica_secret.size() ||
+                 CRYPTO_memcmp(secret.data(), config.replica_secret.data(), secret.size()) != 0) {
+               return send_error(response, {ErrorCode::kUnauthenticated, "X-Hanzo-Replica-Secret: missing or wrong", "X-Hanzo-Replica-Secret"});
+             }
+             if (const ApiStatus handed = sessions->hand_over(request.matches[1]); !handed) return send_error(response, handed.error());
+             send_json(response, 200, {{"handed_over", request.matches[1].str()}});
+           }));
+
     // Errors httplib answers itself (no route, body too large) get the same JSON shape.
     s.set_error_handler([](const httplib::Request& request, httplib::Response& response) {
       if (!response.body.empty()) return;
@@ -513,6 +566,21 @@ struct RestServer::Impl {
 };
 
 RestServer::RestServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
+std::function<Status(const SessionLease& lease)> replica_handover_requester(std::string secret) {
+  return [secret = std::move(secret)](const SessionLease& lease) -> Status {
+    httplib::Client client(lease.owner_url);
+    client.set_connection_timeout(2, 0);
+    client.set_read_timeout(30, 0);  // the holder commits poses and saves the map first
+    const httplib::Headers headers = {{kReplicaSecretHeader, secret}};
+    httplib::Result answer = client.Post(fmt::format("/v1/replica/sessions/{}/handover", lease.session_id), headers, "", "application/json");
+    if (!answer) {
+      return Error(fmt::format("replica '{}' ({}) does not answer: {}", lease.owner, lease.owner_url, httplib::to_string(answer.error())));
+    }
+    if (answer->status != 200) return Error(fmt::format("replica '{}' ({}) answered {}: {}", lease.owner, lease.owner_url, answer->status, answer->body));
+    return ok_status();
+  };
+}
 
 RestServer::~RestServer() { stop(); }
 

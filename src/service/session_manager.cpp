@@ -6,6 +6,7 @@
 #include <list>
 #include <map>
 #include <mutex>
+#include <numbers>
 #include <random>
 #include <shared_mutex>
 #include <thread>
@@ -115,6 +116,12 @@ struct ManagedSession {
   std::unique_ptr<SessionRecording> recording;  // raw sensor log, when the session records
   uint64_t saved_map_version = 0;   // the live map_version last saved to the map catalog
   uint64_t stored_map_version = 0;  // the catalog's version of that save (parent of the next)
+  // Taken over from another replica: the newest stored pose and the session's newest stored
+  // map, prepared; its poses are stored again once relocalized there (resume_attempts tries).
+  std::optional<msgs::PoseEstimate> resume_pose;
+  std::shared_ptr<const lidar::MapLocalizer> resume_map;
+  int resume_attempts = 0;
+  bool handed_over = false;  // moved to another replica: requests get kUnavailable
 
   // Metric series of the managed session (removed with it).
   Counter* poses = nullptr;
@@ -129,6 +136,13 @@ struct SessionManager::Impl {
   std::shared_ptr<MetricsRegistry> metrics;
   std::unique_ptr<detail::PoseRecorder> recorder;
   Gauge* active_sessions_gauge = nullptr;
+  Counter* taken_over_counter = nullptr;
+  Counter* lost_counter = nullptr;
+  Counter* unplaced_counter = nullptr;
+  std::thread lease_keeper;             // replicas: keep_leases() every lease/3
+  std::mutex keeper_mutex;
+  std::condition_variable keeper_wake;
+  bool keeper_stopping = false;
 
   mutable std::shared_mutex sessions_mutex;
   std::map<std::string, std::shared_ptr<ManagedSession>> sessions;  // active and ended
@@ -286,6 +300,10 @@ struct SessionManager::Impl {
   }
 
   void on_pose(ManagedSession& managed, const msgs::PoseEstimate& pose) {
+    if (managed.resume_map) {  // taken over, not yet placed in its own map: a pose of a fresh frame
+      unplaced_counter->increment();
+      return;
+    }
     managed.latest_pose = pose;
     recorder->enqueue(managed.record.id, pose);
     for (const auto& subscriber : managed.pose_subscribers) subscriber->publish(pose);
@@ -413,6 +431,11 @@ struct SessionManager::Impl {
       const auto found = sessions.find(id);
       if (found != sessions.end()) managed = found->second;
     }
+    if (!managed && replicated()) {
+      auto located = locate(id);
+      if (!located) return located.error();
+      managed = std::move(located).value();
+    }
     if (!managed) return ApiError{ErrorCode::kNotFound, fmt::format("no session '{}'", id), "session_id"};
     if (const ApiStatus allowed = authorize(caller, permission, managed->record.organization); !allowed) return allowed.error();
     return managed;
@@ -442,6 +465,7 @@ struct SessionManager::Impl {
     info.config_yaml = managed.record.config_yaml;
     info.calibration_yaml = managed.record.calibration_yaml;
     if (managed.recording) info.recording = managed.recording->info();
+    if (!managed.record.ended) info.replica = config.replica.id;
     return info;
   }
 
@@ -487,6 +511,171 @@ struct SessionManager::Impl {
     }
   }
 
+  bool replicated() const { return !config.replica.id.empty(); }
+
+  // A stored session as a ManagedSession: its storage progress and map versions; an active one
+  // gets a pipeline (the filter starts afresh). With `resume` (a takeover) the session is placed
+  // in its own newest stored map before its poses count again.
+  Result<std::shared_ptr<ManagedSession>> adopt(SessionRecord record, bool resume) {
+    auto managed = std::make_shared<ManagedSession>();
+    const std::string where = fmt::format("stored session '{}'", record.id);
+    TrajectoryExtent extent;
+    HANZO_ASSIGN_OR_RETURN(extent, storage->trajectory_extent(record.id));
+    recorder->restore(record.id, {extent.count, extent.last});
+    if (!record.ended) {
+      HANZO_ASSIGN_OR_RETURN(managed->configuration, with_context(config::parse_fusion_config(record.config_yaml, "config"), where));
+      HANZO_ASSIGN_OR_RETURN(managed->calibration, with_context(calib::parse_calibration(record.calibration_yaml, "calibration"), where));
+    }
+    managed->record = std::move(record);
+    if (catalog) {  // the next save of its map continues the stored versions
+      if (auto stored = catalog->find(managed->record.organization, managed->record.id); stored && !stored->versions.empty()) {
+        managed->stored_map_version = stored->versions.back().version;
+      }
+    }
+    if (managed->record.ended) return managed;
+    attach_metrics(*managed);
+    HANZO_ASSIGN_OR_RETURN(managed->session, with_context(make_pipeline(*managed, managed->configuration, managed->calibration), where));
+    if (resume && extent.last && managed->stored_map_version > 0 && managed->session->maps_lidar_sweeps()) {
+      auto newest = storage->poses(managed->record.id, Timestamp::from_nanoseconds(extent.last->nanoseconds() - 1), 1);
+      auto prepared = localizer(managed->record.organization, managed->record.id, managed->stored_map_version);
+      if (newest && !newest->empty() && prepared) {
+        managed->resume_pose = newest->front();
+        managed->resume_map = std::move(prepared).value();
+        managed->latest_pose = managed->resume_pose;
+      } else {
+        logger()->warn("session {}: taken over without its stored map or pose; its poses start a new frame", managed->record.id);
+      }
+    }
+    return managed;
+  }
+
+  // A taken-over session's first registered sweeps are localized in its own stored map around
+  // its newest stored pose; once placed its poses are published and stored again. Caller holds
+  // managed.mutex.
+  void resume_in_own_map(ManagedSession& managed) {
+    constexpr int kMaxAttempts = 20;
+    if (managed.session->mapping_summary().map_keyframes == 0) return;
+    pipeline::RelocalizationRequest request;
+    request.T_map_body_guess = managed.resume_pose->T_world_body.to_se3();
+    request.linear_window = 10.0;  // the robot moved on while the lease ran out
+    request.angular_window = std::numbers::pi;
+    Result<pipeline::RelocalizationOutcome> outcome = managed.session->relocalize(*managed.resume_map, request);
+    if (!outcome && outcome.error().message.starts_with("not_ready")) return;
+    ++managed.resume_attempts;
+    if (outcome) {
+      logger()->info("session {}: taken over and placed in its own map ({} poses held back)", managed.record.id, managed.resume_attempts);
+    } else if (managed.resume_attempts < kMaxAttempts) {
+      return;
+    } else {
+      logger()->error("session {}: not placed in its own map after {} tries ({}); its poses continue in a new frame",
+                      managed.record.id, kMaxAttempts, outcome.error().message);
+    }
+    managed.resume_map.reset();
+    managed.resume_pose.reset();
+  }
+
+  // Replicas: the stored session `id` when this replica serves it now (it was free or its lease
+  // expired: claimed and restarted here), an ended session (read-only), or kUnavailable naming
+  // the replica that serves it.
+  ApiResult<std::shared_ptr<ManagedSession>> locate(const std::string& id, bool pull = false) {
+    auto records = storage->sessions();
+    if (!records) return ApiError::from(ErrorCode::kInternal, records.error());
+    auto record = std::find_if(records->begin(), records->end(), [&](const SessionRecord& r) { return r.id == id; });
+    if (record == records->end()) return ApiError{ErrorCode::kNotFound, fmt::format("no session '{}'", id), "session_id"};
+    if (!record->ended) {
+      auto lease = claim(id);
+      if (!lease) return lease.error();
+      if (lease->owner != config.replica.id && pull && config.replica.request_handover) {
+        if (const Status handed = config.replica.request_handover(lease.value()); handed) {
+          lease = claim(id);
+          if (!lease) return lease.error();
+        } else {
+          logger()->warn("session {}: replica {} did not hand it over: {}", id, lease->owner, handed.error().message);
+        }
+      }
+      if (lease->owner != config.replica.id) {
+        return ApiError{ErrorCode::kUnavailable, fmt::format("session '{}' is served by replica '{}'", id, lease->owner), "", lease->owner_url};
+      }
+    }
+    const bool active = !record->ended;
+    auto managed = adopt(std::move(*record), active);
+    if (!managed) {
+      if (active) (void)storage->release_session(id, config.replica.id);
+      return ApiError::from(ErrorCode::kInternal, managed.error());
+    }
+    std::unique_lock lock(sessions_mutex);
+    auto [it, inserted] = sessions.emplace(id, managed.value());
+    if (inserted && active) {
+      taken_over_counter->increment();
+      logger()->info("session {}: taken over by replica {}", id, config.replica.id);
+    }
+    return it->second;
+  }
+
+  // Whether the storage holds session `id` of the caller's organization.
+  bool stored_by(const Principal& caller, const std::string& id) {
+    auto records = storage->sessions();
+    return records && std::any_of(records->begin(), records->end(),
+                                  [&](const SessionRecord& r) { return r.id == id && r.organization == caller.organization; });
+  }
+
+  // What the storage says of a session another replica serves.
+  SessionInfo stored_info(SessionRecord record) {
+    SessionInfo info;
+    if (auto extent = storage->trajectory_extent(record.id)) {
+      info.stored_poses = extent->count;
+      info.stored_through = extent->last;
+    }
+    if (!record.ended) {
+      if (auto lease = storage->session_lease(record.id); lease && *lease) info.replica = lease.value()->owner;
+    }
+    info.id = record.id;
+    info.organization = record.organization;
+    info.name = record.name;
+    info.created = record.created;
+    info.ended = record.ended;
+    info.config_yaml = std::move(record.config_yaml);
+    info.calibration_yaml = std::move(record.calibration_yaml);
+    return info;
+  }
+
+  // Claims the session's lease for this replica when it is free or expired.
+  ApiResult<SessionLease> claim(const std::string& id) {
+    const Timestamp now = Timestamp::wall_clock_now();
+    const Timestamp until = Timestamp::from_nanoseconds(now.nanoseconds() +
+                                                        std::chrono::duration_cast<std::chrono::nanoseconds>(config.replica.lease).count());
+    auto lease = storage->claim_session(id, config.replica.id, config.replica.url, now, until);
+    if (!lease) return ApiError::from(ErrorCode::kInternal, lease.error());
+    return std::move(lease).value();
+  }
+
+  // Stops serving a session another replica holds now (no end: it runs on there).
+  void drop(const std::string& id) {
+    std::shared_ptr<ManagedSession> managed;
+    {
+      std::unique_lock lock(sessions_mutex);
+      auto found = sessions.find(id);
+      if (found == sessions.end()) return;
+      managed = found->second;
+      sessions.erase(found);
+    }
+    std::lock_guard lock(managed->mutex);
+    managed->session.reset();
+    close_subscribers(*managed);
+    metrics->remove_series("session", id);
+    lost_counter->increment();
+    logger()->error("session {}: another replica serves it now (this replica's lease ran out); no longer served here", id);
+  }
+
+  void run_lease_keeper(SessionManager& manager) {
+    std::unique_lock lock(keeper_mutex);
+    while (!keeper_wake.wait_for(lock, config.replica.lease / 3, [this] { return keeper_stopping; })) {
+      lock.unlock();
+      if (auto kept = manager.keep_leases(); !kept) logger()->warn("session leases: {}", kept.error().message);
+      lock.lock();
+    }
+  }
+
   std::size_t active_count_locked(const std::string& organization, bool organization_only) const {
     std::size_t count = 0;
     for (const auto& [id, managed] : sessions) {
@@ -500,6 +689,14 @@ struct SessionManager::Impl {
 SessionManager::SessionManager(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 
 SessionManager::~SessionManager() {
+  if (impl_->lease_keeper.joinable()) {
+    {
+      std::lock_guard lock(impl_->keeper_mutex);
+      impl_->keeper_stopping = true;
+    }
+    impl_->keeper_wake.notify_all();
+    impl_->lease_keeper.join();
+  }
   if (impl_->map_saver.joinable()) {
     {
       std::lock_guard lock(impl_->saver_mutex);
@@ -513,6 +710,14 @@ SessionManager::~SessionManager() {
     logger()->error("storage: poses not committed at shutdown: {}", flushed.error().message);
   }
   std::unique_lock lock(impl_->sessions_mutex);
+  if (impl_->replicated()) {  // handed over: the other replicas take the sessions over at once
+    for (const auto& [id, managed] : impl_->sessions) {
+      if (managed->record.ended) continue;
+      if (const Status released = impl_->storage->release_session(id, impl_->config.replica.id); !released) {
+        logger()->warn("session {}: lease not released: {}", id, released.error().message);
+      }
+    }
+  }
   for (auto& [id, managed] : impl_->sessions) {
     std::lock_guard session_lock(managed->mutex);
     Impl::close_subscribers(*managed);
@@ -537,39 +742,34 @@ Result<std::unique_ptr<SessionManager>> SessionManager::create(const SessionMana
     if (!store) return store.error();
     HANZO_ASSIGN_OR_RETURN(impl->catalog, MapCatalog::open(std::move(store).value(), *impl->storage));
   }
-  std::vector<SessionRecord> records;
-  HANZO_ASSIGN_OR_RETURN(records, impl->storage->sessions());
-  for (SessionRecord& record : records) {
-    auto managed = std::make_shared<ManagedSession>();
-    const std::string where = fmt::format("stored session '{}'", record.id);
-    TrajectoryExtent extent;
-    HANZO_ASSIGN_OR_RETURN(extent, impl->storage->trajectory_extent(record.id));
-    impl->recorder->restore(record.id, {extent.count, extent.last});
-    if (!record.ended) {
-      HANZO_ASSIGN_OR_RETURN(managed->configuration, with_context(config::parse_fusion_config(record.config_yaml, "config"), where));
-      HANZO_ASSIGN_OR_RETURN(managed->calibration,
-                             with_context(calib::parse_calibration(record.calibration_yaml, "calibration"), where));
+  impl->taken_over_counter = &impl->metrics->counter("hanzo_fusion_sessions_taken_over_total", "Sessions this replica took over after their lease expired");
+  impl->lost_counter = &impl->metrics->counter("hanzo_fusion_sessions_lost_total", "Sessions another replica took from this one");
+  impl->unplaced_counter = &impl->metrics->counter("hanzo_fusion_takeover_unplaced_poses_total",
+                                                   "Poses of taken-over sessions before they were placed in their own map (not stored)");
+  if (!impl->replicated()) {  // a single server serves every stored session (replicas: keep_leases below)
+    std::vector<SessionRecord> records;
+    HANZO_ASSIGN_OR_RETURN(records, impl->storage->sessions());
+    for (SessionRecord& record : records) {
+      std::shared_ptr<ManagedSession> managed;
+      HANZO_ASSIGN_OR_RETURN(managed, impl->adopt(std::move(record), false));
+      impl->sessions.emplace(managed->record.id, std::move(managed));
     }
-    managed->record = std::move(record);
-    if (impl->catalog) {  // the next save of its map continues the stored versions
-      if (auto stored = impl->catalog->find(managed->record.organization, managed->record.id); stored && !stored->versions.empty()) {
-        managed->stored_map_version = stored->versions.back().version;
-      }
-    }
-    if (!managed->record.ended) {
-      impl->attach_metrics(*managed);
-      HANZO_ASSIGN_OR_RETURN(managed->session,
-                             with_context(impl->make_pipeline(*managed, managed->configuration, managed->calibration), where));
-    }
-    impl->sessions.emplace(managed->record.id, std::move(managed));
   }
   Impl* raw = impl.get();
   impl->metrics->add_collector([raw] { raw->collect_metrics(); });
   if (impl->catalog && config.map_save_interval.count() > 0) impl->map_saver = std::thread([raw] { raw->run_map_saver(); });
   impl->apply_retention();  // recordings of earlier runs that expired meanwhile
-  logger()->info("sessions: {} restored from {} storage ({} stored in all)", impl->active_count_locked("", false),
-                 impl->storage->backend(), impl->sessions.size());
-  return std::unique_ptr<SessionManager>(new SessionManager(std::move(impl)));
+  auto manager = std::unique_ptr<SessionManager>(new SessionManager(std::move(impl)));
+  if (raw->replicated()) {
+    HANZO_RETURN_IF_ERROR(manager->keep_leases());
+    raw->lease_keeper = std::thread([raw, &self = *manager] { raw->run_lease_keeper(self); });
+    logger()->info("sessions: replica '{}' ({}) serves {} on {} storage; leases of {} ms", raw->config.replica.id, raw->config.replica.url,
+                   raw->active_count_locked("", false), raw->storage->backend(), raw->config.replica.lease.count());
+  } else {
+    logger()->info("sessions: {} restored from {} storage ({} stored in all)", raw->active_count_locked("", false),
+                   raw->storage->backend(), raw->sessions.size());
+  }
+  return manager;
 }
 
 ApiResult<SessionInfo> SessionManager::create_session(const Principal& caller, const CreateSessionRequest& request) {
@@ -609,6 +809,10 @@ ApiResult<SessionInfo> SessionManager::create_session(const Principal& caller, c
   if (const Status stored = impl_->storage->create_session(record); !stored) {
     return ApiError::from(ErrorCode::kInternal, stored.error());
   }
+  if (impl_->replicated()) {  // a new id: nobody else can hold it
+    auto lease = impl_->claim(record.id);
+    if (!lease) return lease.error();
+  }
   impl_->attach_metrics(*managed);
   impl_->sessions.emplace(record.id, managed);
   lock.unlock();
@@ -631,6 +835,16 @@ ApiResult<std::vector<SessionInfo>> SessionManager::list_sessions(const Principa
   for (const auto& managed : visible) {
     std::lock_guard lock(managed->mutex);
     infos.push_back(impl_->info_locked(*managed));
+  }
+  if (impl_->replicated()) {  // what the other replicas serve, as the storage has it
+    auto records = impl_->storage->sessions();
+    if (!records) return ApiError::from(ErrorCode::kInternal, records.error());
+    for (SessionRecord& record : records.value()) {
+      if (record.organization != caller.organization) continue;
+      if (std::any_of(infos.begin(), infos.end(), [&](const SessionInfo& info) { return info.id == record.id; })) continue;
+      infos.push_back(impl_->stored_info(std::move(record)));
+    }
+    std::sort(infos.begin(), infos.end(), [](const SessionInfo& a, const SessionInfo& b) { return a.created < b.created; });
   }
   return infos;
 }
@@ -689,6 +903,11 @@ ApiResult<SessionInfo> SessionManager::end_session(const Principal& caller, cons
     return ApiError::from(ErrorCode::kInternal, stored.error());
   }
   managed.record.ended = ended;
+  if (impl_->replicated()) {
+    if (const Status released = impl_->storage->release_session(session_id, impl_->config.replica.id); !released) {
+      logger()->warn("session {}: lease not released: {}", session_id, released.error().message);
+    }
+  }
   managed.final_summary = managed.session->summary();
   managed.final_mapping = managed.session->mapping_summary();
   if (!impl_->catalog) managed.final_map = impl_->map_locked(managed);
@@ -747,6 +966,7 @@ ApiStatus SessionManager::push(const Principal& caller, const std::string& sessi
   if (!found) return found.error();
   ManagedSession& managed = *found.value();
   std::lock_guard lock(managed.mutex);
+  if (managed.handed_over) return ApiError{ErrorCode::kUnavailable, fmt::format("session '{}' moved to another replica; reconnect", session_id), ""};
   if (!managed.session) return ApiError{ErrorCode::kConflict, fmt::format("session '{}' has ended", session_id), ""};
   std::string sensor_name = sensor;
   if (sensor_name.empty()) {
@@ -776,6 +996,7 @@ ApiStatus SessionManager::push(const Principal& caller, const std::string& sessi
   managed.push_started = Clock::now();
   ++managed.messages_pushed;
   const pipeline::PushStatus pushed = managed.session->push(sensor_name, std::move(message));
+  if (managed.resume_map) impl_->resume_in_own_map(managed);
   if (!pushed) {
     // A malformed message or a sensor the session does not have is the request's fault (400,
     // field "sensor" or "message"); a well-formed message at the wrong time is refused (422).
@@ -805,7 +1026,8 @@ ApiResult<msgs::PoseEstimate> SessionManager::current_pose(const Principal& call
 ApiResult<TrajectoryPage> SessionManager::trajectory(const Principal& caller, const std::string& session_id, Timestamp after,
                                                      std::size_t limit) {
   auto found = impl_->find(caller, session_id, Permission::kSessionRead);
-  if (!found) return found.error();
+  if (!found && found.error().served_by.empty()) return found.error();
+  if (!found && !impl_->stored_by(caller, session_id)) return found.error();  // served elsewhere: any replica reads the storage
   if (limit == 0 || limit > 100000) {
     return ApiError{ErrorCode::kInvalidArgument, fmt::format("limit {} is outside 1..100000", limit), "limit"};
   }
@@ -1001,6 +1223,95 @@ ApiResult<RelocalizeResult> SessionManager::relocalize(const Principal& caller, 
   managed.latest_pose = managed.session->frontend().latest_pose();  // already in the map's frame
   logger()->info("session {} relocalized in map {} version {} by {}", session_id, result.map_id, result.version, caller.name);
   return result;
+}
+
+Result<std::vector<std::string>> SessionManager::keep_leases() {
+  Impl& impl = *impl_;
+  std::vector<std::string> taken_over;
+  if (!impl.replicated()) return taken_over;
+  const Timestamp now = Timestamp::wall_clock_now();
+  const Timestamp until = Timestamp::from_nanoseconds(now.nanoseconds() +
+                                                      std::chrono::duration_cast<std::chrono::nanoseconds>(impl.config.replica.lease).count());
+  std::vector<std::string> held;
+  HANZO_ASSIGN_OR_RETURN(held, impl.storage->renew_leases(impl.config.replica.id, until));
+  std::vector<std::string> local_active;
+  {
+    std::shared_lock lock(impl.sessions_mutex);
+    for (const auto& [id, managed] : impl.sessions) {
+      if (!managed->record.ended) local_active.push_back(id);
+    }
+  }
+  for (const std::string& id : local_active) {
+    if (std::find(held.begin(), held.end(), id) != held.end()) continue;
+    // Not renewed: another replica holds it now (or it was created after the renewal).
+    auto lease = impl.storage->session_lease(id);
+    if (lease && (!*lease || lease.value()->owner != impl.config.replica.id)) impl.drop(id);
+  }
+  std::vector<SessionRecord> records;
+  HANZO_ASSIGN_OR_RETURN(records, impl.storage->sessions());
+  for (const SessionRecord& record : records) {
+    if (record.ended) continue;
+    {
+      std::shared_lock lock(impl.sessions_mutex);
+      if (impl.sessions.count(record.id) > 0) continue;
+      if (impl.active_count_locked("", false) >= impl.config.max_sessions) break;
+    }
+    std::optional<SessionLease> lease;
+    HANZO_ASSIGN_OR_RETURN(lease, impl.storage->session_lease(record.id));
+    if (lease && lease->expires >= now && lease->owner != impl.config.replica.id) continue;
+    auto located = impl.locate(record.id);
+    if (located && !located.value()->record.ended) taken_over.push_back(record.id);
+    else if (!located && located.error().code != ErrorCode::kUnavailable) logger()->warn("session {}: not taken over: {}", record.id, located.error().message);
+  }
+  return taken_over;
+}
+
+ApiStatus SessionManager::serve_here(const Principal& caller, const std::string& session_id) {
+  if (!impl_->replicated()) return api_ok();
+  {
+    std::shared_lock lock(impl_->sessions_mutex);
+    if (impl_->sessions.count(session_id) > 0) return api_ok();
+  }
+  if (!impl_->stored_by(caller, session_id)) return ApiError{ErrorCode::kNotFound, fmt::format("no session '{}'", session_id), "session_id"};
+  auto located = impl_->locate(session_id, true);
+  if (!located) return located.error();
+  return api_ok();
+}
+
+ApiStatus SessionManager::hand_over(const std::string& session_id) {
+  Impl& impl = *impl_;
+  std::shared_ptr<ManagedSession> managed;
+  {
+    std::shared_lock lock(impl.sessions_mutex);
+    if (auto found = impl.sessions.find(session_id); found != impl.sessions.end()) managed = found->second;
+  }
+  if (!impl.replicated() || !managed || managed->record.ended) {
+    return ApiError{ErrorCode::kNotFound, fmt::format("this replica does not serve session '{}'", session_id), "session_id"};
+  }
+  {
+    std::unique_lock save_lock(impl.save_mutex);
+    std::unique_lock lock(managed->mutex);
+    if (managed->handed_over || !managed->session) return ApiError{ErrorCode::kNotFound, fmt::format("session '{}' was handed over", session_id), "session_id"};
+    managed->session->flush();
+    if (const ApiStatus saved = impl.save_map(*managed, lock, false); !saved) return saved.error();
+    if (managed->recording) {
+      if (const Status finished = managed->recording->finish(); !finished) logger()->error("session {}: recording: {}", session_id, finished.error().message);
+    }
+    if (const Status flushed = impl.recorder->flush(); !flushed) return ApiError::from(ErrorCode::kInternal, flushed.error());
+    if (const Status released = impl.storage->release_session(session_id, impl.config.replica.id); !released) {
+      return ApiError::from(ErrorCode::kInternal, released.error());
+    }
+    managed->handed_over = true;
+    managed->session.reset();
+    Impl::close_subscribers(*managed);
+  }
+  {
+    std::unique_lock lock(impl.sessions_mutex);
+    impl.sessions.erase(session_id);
+  }
+  impl.metrics->remove_series("session", session_id);
+  logger()->info("session {}: handed over to another replica", session_id);
+  return api_ok();
 }
 
 Status SessionManager::save_session_maps() { return impl_->save_all_maps(); }

@@ -50,6 +50,12 @@ CREATE TABLE IF NOT EXISTS maps (
   session_id TEXT NOT NULL,
   created_ns INTEGER NOT NULL
 );
+CREATE TABLE IF NOT EXISTS session_leases (
+  session_id TEXT PRIMARY KEY,
+  owner TEXT NOT NULL,
+  owner_url TEXT NOT NULL,
+  expires_ns INTEGER NOT NULL
+);
 )sql";
 
 // A prepared statement, finalized on destruction.
@@ -252,6 +258,45 @@ class SqliteStorage final : public Storage {
     return extent;
   }
 
+  Result<SessionLease> claim_session(const std::string& session_id, const std::string& owner, const std::string& owner_url,
+                                     Timestamp now, Timestamp expires) override {
+    std::lock_guard lock(mutex_);
+    Statement claim(database_,
+                    "INSERT INTO session_leases (session_id, owner, owner_url, expires_ns) VALUES (?, ?, ?, ?) "
+                    "ON CONFLICT (session_id) DO UPDATE SET owner = excluded.owner, owner_url = excluded.owner_url, "
+                    "expires_ns = excluded.expires_ns WHERE session_leases.expires_ns < ? OR session_leases.owner = excluded.owner");
+    claim.bind(1, session_id).bind(2, owner).bind(3, owner_url).bind(4, expires.nanoseconds()).bind(5, now.nanoseconds());
+    if (claim.step() != SQLITE_DONE) return failure(fmt::format("claim session '{}'", session_id));
+    std::optional<SessionLease> lease;
+    HANZO_ASSIGN_OR_RETURN(lease, lease_locked(session_id));
+    if (!lease) return Error(fmt::format("{}: the lease of session '{}' vanished while it was claimed", path_, session_id));
+    return *lease;
+  }
+
+  Result<std::vector<std::string>> renew_leases(const std::string& owner, Timestamp expires) override {
+    std::lock_guard lock(mutex_);
+    Statement renew(database_, "UPDATE session_leases SET expires_ns = ? WHERE owner = ? RETURNING session_id");
+    renew.bind(1, expires.nanoseconds()).bind(2, owner);
+    std::vector<std::string> held;
+    int code = SQLITE_ERROR;
+    while ((code = renew.step()) == SQLITE_ROW) held.push_back(renew.text(0));
+    if (code != SQLITE_DONE) return failure("renew session leases");
+    return held;
+  }
+
+  Result<std::optional<SessionLease>> session_lease(const std::string& session_id) override {
+    std::lock_guard lock(mutex_);
+    return lease_locked(session_id);
+  }
+
+  Status release_session(const std::string& session_id, const std::string& owner) override {
+    std::lock_guard lock(mutex_);
+    Statement release(database_, "DELETE FROM session_leases WHERE session_id = ? AND owner = ?");
+    release.bind(1, session_id).bind(2, owner);
+    if (release.step() != SQLITE_DONE) return failure(fmt::format("release session '{}'", session_id));
+    return ok_status();
+  }
+
   Status create_map(const MapRecord& map) override {
     std::lock_guard lock(mutex_);
     Statement insert(database_, "INSERT INTO maps (map_id, organization, name, session_id, created_ns) VALUES (?, ?, ?, ?, ?)");
@@ -321,6 +366,16 @@ class SqliteStorage final : public Storage {
   }
 
  private:
+  // Caller holds mutex_.
+  Result<std::optional<SessionLease>> lease_locked(const std::string& session_id) {
+    Statement query(database_, "SELECT owner, owner_url, expires_ns FROM session_leases WHERE session_id = ?");
+    query.bind(1, session_id);
+    const int code = query.step();
+    if (code == SQLITE_DONE) return std::optional<SessionLease>();
+    if (code != SQLITE_ROW) return failure(fmt::format("read the lease of session '{}'", session_id));
+    return std::optional<SessionLease>(SessionLease{session_id, query.text(0), query.text(1), Timestamp::from_nanoseconds(query.integer(2))});
+  }
+
   Status execute(const std::string& sql) {
     char* message = nullptr;
     if (sqlite3_exec(database_, sql.c_str(), nullptr, nullptr, &message) != SQLITE_OK) {

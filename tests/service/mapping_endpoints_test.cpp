@@ -42,35 +42,8 @@ constexpr const char* kGlobexAdminToken = "globex-admin-secret-0005";
 constexpr const char* kMapperToken = "acme-mapper-secret-00006";       // map read/write only
 const Principal kStreamer{"robot", "acme", static_cast<uint32_t>(Permission::kSessionWrite) | static_cast<uint32_t>(Permission::kSessionRead)};
 
-struct Recording {
-  std::string config_yaml;
-  std::string calibration_yaml;
-  std::vector<testing::TimedMessage> messages;
-};
-
-// 12 s of the urban drive: IMU 200 Hz + LiDAR 10 Hz (3 s standing, then driving).
-const Recording& urban_recording() {
-  static const Recording recording = [] {
-    sim::Scenario scenario = sim::load_scenario("examples/scenarios/urban_vehicle.yaml").value();
-    std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& s) {
-      return s.modality != config::SensorModality::kLidar && s.modality != config::SensorModality::kImu;
-    });
-    scenario.duration = 12.0;
-    scenario.num_threads = 0;
-    Recording out;
-    out.config_yaml = config::to_yaml(sim::scenario_fusion_config(scenario));
-    out.calibration_yaml = calib::to_yaml(sim::scenario_calibration(scenario));
-    auto simulation = sim::ScenarioSimulation::create(scenario).value();
-    EXPECT_TRUE(simulation
-                    ->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
-                      out.messages.push_back({sensor.name, std::move(message)});
-                      return ok_status();
-                    })
-                    .ok());
-    return out;
-  }();
-  return recording;
-}
+using testing::Recording;
+using testing::urban_recording;
 
 class MappingEndpointsTest : public ::testing::Test {
  protected:

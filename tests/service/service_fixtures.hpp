@@ -14,8 +14,12 @@
 
 #include <gtest/gtest.h>
 
+#include "hanzo/fusion/calib/calibration.hpp"
+#include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/io/csv_import.hpp"
 #include "hanzo/fusion/msgs/sensor_messages.hpp"
+#include "hanzo/fusion/sim/scenario.hpp"
+#include "hanzo/fusion/sim/scenario_simulation.hpp"
 
 namespace hanzo::fusion::testing {
 
@@ -64,6 +68,36 @@ inline std::vector<TimedMessage> sample_recording() {
     return msgs::timestamp_of(a.message) < msgs::timestamp_of(b.message);
   });
   return messages;
+}
+
+struct Recording {
+  std::string config_yaml;
+  std::string calibration_yaml;
+  std::vector<TimedMessage> messages;
+};
+
+/// 12 s of the simulated urban drive: IMU 200 Hz + LiDAR 10 Hz (3 s standing, then driving).
+inline const Recording& urban_recording() {
+  static const Recording recording = [] {
+    sim::Scenario scenario = sim::load_scenario("examples/scenarios/urban_vehicle.yaml").value();
+    std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& s) {
+      return s.modality != config::SensorModality::kLidar && s.modality != config::SensorModality::kImu;
+    });
+    scenario.duration = 12.0;
+    scenario.num_threads = 0;
+    Recording out;
+    out.config_yaml = config::to_yaml(sim::scenario_fusion_config(scenario));
+    out.calibration_yaml = calib::to_yaml(sim::scenario_calibration(scenario));
+    auto simulation = sim::ScenarioSimulation::create(scenario).value();
+    EXPECT_TRUE(simulation
+                    ->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
+                      out.messages.push_back({sensor.name, std::move(message)});
+                      return ok_status();
+                    })
+                    .ok());
+    return out;
+  }();
+  return recording;
 }
 
 inline constexpr const char* kTokensYaml = R"(tokens:

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <random>
+#include <thread>
 
 #include <fmt/format.h>
 #include <gmock/gmock.h>
@@ -199,6 +200,59 @@ TEST_P(StorageTest, RefusesADatabaseOfANewerSchema) {
   auto storage = open_storage(url());
   ASSERT_FALSE(storage.ok());
   EXPECT_THAT(storage.error().message, HasSubstr("schema version 99 is newer"));
+}
+
+// Session leases: one holder at a time, renewed by its holder, claimable once expired, and of
+// two replicas racing for an expired lease (two connections) exactly one wins.
+TEST_P(StorageTest, SessionLeasesHaveOneHolderAndExpire) {
+  auto replica_a = open();
+  auto replica_b = open();
+  ASSERT_TRUE(replica_a && replica_b);
+  const auto at = [](int64_t seconds) { return Timestamp::from_nanoseconds(1'700'000'000'000'000'000 + seconds * 1'000'000'000); };
+  EXPECT_FALSE(replica_a->session_lease("s1")->has_value());
+
+  auto claimed = replica_a->claim_session("s1", "a", "http://a:8083", at(0), at(10));
+  ASSERT_TRUE(claimed.ok()) << claimed.error().message;
+  EXPECT_EQ(claimed->owner, "a");
+  // B cannot take a lease that has not expired; it learns who holds it and where.
+  auto refused = replica_b->claim_session("s1", "b", "http://b:8083", at(5), at(15));
+  ASSERT_TRUE(refused.ok()) << refused.error().message;
+  EXPECT_EQ(refused->owner, "a");
+  EXPECT_EQ(refused->owner_url, "http://a:8083");
+  EXPECT_EQ(refused->expires, at(10));
+
+  // A renews what it holds (B holds nothing).
+  auto renewed = replica_a->renew_leases("a", at(20));
+  ASSERT_TRUE(renewed.ok()) << renewed.error().message;
+  EXPECT_EQ(*renewed, std::vector<std::string>{"s1"});
+  EXPECT_TRUE(replica_b->renew_leases("b", at(20))->empty());
+  EXPECT_EQ(replica_b->claim_session("s1", "b", "http://b:8083", at(15), at(25))->owner, "a");
+
+  // Expired: B takes it; A's renewal no longer covers it.
+  auto taken = replica_b->claim_session("s1", "b", "http://b:8083", at(21), at(31));
+  ASSERT_TRUE(taken.ok());
+  EXPECT_EQ(taken->owner, "b");
+  EXPECT_TRUE(replica_a->renew_leases("a", at(40))->empty());
+  EXPECT_EQ(replica_a->session_lease("s1")->value().owner, "b");
+
+  // Released by its holder only; then anyone may claim it at once.
+  ASSERT_TRUE(replica_a->release_session("s1", "a").ok());
+  EXPECT_TRUE(replica_a->session_lease("s1")->has_value());
+  ASSERT_TRUE(replica_b->release_session("s1", "b").ok());
+  EXPECT_FALSE(replica_a->session_lease("s1")->has_value());
+
+  // A race for an expired lease from two threads: one winner, both see the same holder.
+  ASSERT_TRUE(replica_a->claim_session("s2", "a", "http://a:8083", at(0), at(1)).ok());
+  for (int round = 0; round < 20; ++round) {
+    const Timestamp now = at(100 + 20 * round), until = at(110 + 20 * round);
+    SessionLease seen_by_b, seen_by_c;
+    auto replica_c = open();
+    std::thread racer_b([&] { seen_by_b = replica_b->claim_session("s2", "b", "http://b", now, until).value(); });
+    std::thread racer_c([&] { seen_by_c = replica_c->claim_session("s2", "c", "http://c", now, until).value(); });
+    racer_b.join();
+    racer_c.join();
+    EXPECT_EQ(seen_by_b.owner, seen_by_c.owner) << "round " << round;
+  }
 }
 
 // Every append the storage acknowledged survives kill -9 of the process that made it.

@@ -34,6 +34,9 @@ struct ApiError {
   ErrorCode code = ErrorCode::kInternal;
   std::string message;
   std::string field;
+  /// kUnavailable for a session another replica serves: that replica's REST URL. The REST
+  /// front end forwards the request there; gRPC answers UNAVAILABLE naming it.
+  std::string served_by = "";
 
   /// The library error `error` (message and field kept) under `code`.
   static ApiError from(ErrorCode code, const Error& error) { return {code, error.message, error.field}; }

@@ -10,6 +10,7 @@
 // max_body_bytes are refused with 413 before they are read in full.
 
 #include <cstddef>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -27,6 +28,10 @@ struct RestServerConfig {
   std::string tls_private_key;
   std::size_t max_body_bytes = 16u << 20;  // 16 MiB
   std::size_t threads = 8;              // request workers
+  /// Replicas: the secret they share. POST /v1/replica/sessions/{id}/handover (another replica
+  /// asking this one to hand a session over) is answered only with it (header
+  /// X-Hanzo-Replica-Secret); empty: the route answers 404.
+  std::string replica_secret;
 };
 
 class RestServer {
@@ -52,6 +57,10 @@ class RestServer {
   explicit RestServer(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
+
+/// ReplicaConfig::request_handover over REST: POST {owner_url}/v1/replica/sessions/{id}/handover
+/// with the replicas' shared secret; fails naming the replica and its answer.
+std::function<Status(const SessionLease& lease)> replica_handover_requester(std::string secret);
 
 /// The OpenAPI 3 document of the REST API (docs/openapi.json, compiled in).
 std::string_view openapi_document();

@@ -26,6 +26,20 @@
 //     with record (or by the server's default) writes every message pushed into it to a sensor
 //     log, images through the privacy filter; the log is finished (and encrypted with the
 //     server's key) when the session ends, and the retention policy then runs.
+//   - Replicas (SessionManagerConfig::replica, docs/server.md "Replicas"): several servers share
+//     one database and object store. Each serves the sessions whose lease (storage.hpp) it
+//     holds, renewing them every lease/3. A request for a session another replica serves fails
+//     with kUnavailable and ApiError::served_by = that replica's URL (the REST front end
+//     forwards it there); trajectories and ended sessions are read from the storage by any
+//     replica. A session whose lease expired (its replica died) is claimed by the first replica
+//     that needs it (a request for it, or the lease keeper's next pass) and restarted there as a
+//     server restart restarts it: the stored trajectory and map versions stay, the filter
+//     starts afresh and the session is relocalized in its own newest stored map from its newest
+//     stored pose before its poses are stored again (poses before that are not stored, counted
+//     in hanzo_fusion_takeover_unplaced_poses_total). A replica that finds another holding a
+//     session it served stops serving it. gRPC calls cannot be forwarded: serve_here() moves the
+//     session to the replica the load balancer sent them to (the holder hands it over: its poses
+//     committed, its map saved, its lease released) and restarts it there as after a takeover.
 //   - register_sensor: adds a sensor (configuration entry + calibration entry, validated by the
 //     same loaders as the files) before the session has received data; afterwards kConflict.
 //
@@ -33,6 +47,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -51,6 +66,16 @@
 #include "hanzo/fusion/service/subscription.hpp"
 
 namespace hanzo::fusion::service {
+
+/// This server as one of several replicas on one database (docs/server.md "Replicas").
+struct ReplicaConfig {
+  std::string id;   ///< unique among the replicas; "" runs a single server (every active stored session is restored at start)
+  std::string url;  ///< where this replica answers REST ("http://host:port"): other replicas forward its sessions' requests there
+  std::chrono::milliseconds lease{10000};  ///< a session lease's length; renewed every lease/3, taken over after it expires
+  /// Asks the replica holding `lease` to hand its session over (hand_over() there; the REST front
+  /// end's replica_handover_requester). Null: a session another replica serves stays there.
+  std::function<Status(const SessionLease& lease)> request_handover;
+};
 
 struct SessionManagerConfig {
   std::size_t max_sessions = 256;                   // active sessions in the server
@@ -74,6 +99,7 @@ struct SessionManagerConfig {
   std::size_t map_keep_versions = 20;
   std::size_t cached_localizers = 4;                // prepared maps kept for relocalize()
   RecordingConfig recording;                         // raw sensor logging of sessions (off without a folder)
+  ReplicaConfig replica;                             // one of several replicas (off: id empty)
 };
 
 /// Which of the session's sensors places it in the map: the LiDAR's newest sweeps in the map's
@@ -129,6 +155,7 @@ struct SessionInfo {
   std::string config_yaml;
   std::string calibration_yaml;
   std::optional<RecordingInfo> recording;    // when the session records (or recorded)
+  std::string replica;                       // the replica serving it ("" on a single server or once ended)
 };
 
 struct TrajectoryPage {
@@ -216,6 +243,20 @@ class SessionManager {
 
   /// Blocks until every pose queued so far is committed (or failed); for shutdown and tests.
   Status flush_storage();
+  /// Replicas: renews this replica's leases, stops serving sessions another replica took and
+  /// takes over the sessions whose lease expired (the lease keeper thread calls it every
+  /// lease/3; tests call it directly). Returns the sessions taken over. A no-op on a single server.
+  Result<std::vector<std::string>> keep_leases();
+  /// Replicas: makes this replica serve the session (kOk when it does): free or expired, it is
+  /// claimed; held by another live replica, that one is asked to hand it over. kUnavailable
+  /// with served_by when it cannot be moved. A no-op on a single server.
+  ApiStatus serve_here(const Principal& caller, const std::string& session_id);
+  /// Replicas: stops serving a session so that another replica can take it at once: its queued
+  /// poses committed, its map saved, its recording finished, its lease released; its open
+  /// streams and subscriptions end (their clients reconnect through the load balancer).
+  /// kNotFound when this replica does not serve it.
+  ApiStatus hand_over(const std::string& session_id);
+
   std::size_t active_sessions() const;
   std::string_view storage_backend() const;
 

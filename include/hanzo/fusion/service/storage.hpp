@@ -15,6 +15,12 @@
 // keyed by (session, timestamp): appending a pose that is already stored keeps the stored one
 // (a client that re-sends after a reconnect does not duplicate rows).
 //
+// Replicas (several servers on one database, docs/server.md "Replicas") coordinate through
+// session leases: the replica that serves a session holds its lease and renews it; another
+// replica may claim the session once the lease has expired (its holder died or lost the
+// database). Claims are atomic: of two replicas claiming one expired lease exactly one wins.
+// Lease times are the replicas' wall clocks (keep them synchronized, e.g. by NTP).
+//
 // Thread-safe: calls are serialized on one connection.
 
 #include <cstdint>
@@ -68,6 +74,14 @@ struct MapVersionRecord {
   Timestamp created;
 };
 
+/// Which replica serves a session and until when.
+struct SessionLease {
+  std::string session_id;
+  std::string owner;      // the replica's id
+  std::string owner_url;  // where the owner answers REST requests, "http://host:port"
+  Timestamp expires;      // wall clock; after it another replica may claim the session
+};
+
 class Storage {
  public:
   virtual ~Storage() = default;
@@ -89,6 +103,20 @@ class Storage {
                                                         std::size_t limit) = 0;
   virtual Result<TrajectoryExtent> trajectory_extent(const std::string& session_id) = 0;
 
+  /// Claims the session for `owner` until `expires` when nobody holds it, its lease expired
+  /// before `now`, or `owner` already holds it; returns the lease as it stands afterwards
+  /// (its owner says who holds the session: the claim failed when it is another replica).
+  virtual Result<SessionLease> claim_session(const std::string& session_id, const std::string& owner,
+                                             const std::string& owner_url, Timestamp now, Timestamp expires) = 0;
+  /// Extends to `expires` every lease `owner` still holds (expired ones nobody claimed
+  /// included); returns the ids of those sessions.
+  virtual Result<std::vector<std::string>> renew_leases(const std::string& owner, Timestamp expires) = 0;
+  /// The session's lease; nullopt when no replica ever claimed it or it was released.
+  virtual Result<std::optional<SessionLease>> session_lease(const std::string& session_id) = 0;
+  /// Gives the lease up (the session ended or its owner shuts down); no error when `owner`
+  /// does not hold it.
+  virtual Status release_session(const std::string& session_id, const std::string& owner) = 0;
+
   /// Fails when the map id is taken.
   virtual Status create_map(const MapRecord& map) = 0;
   /// Every stored map, oldest first.
@@ -109,7 +137,7 @@ Result<std::unique_ptr<Storage>> open_storage(const std::string& url);
 
 /// The schema version this program writes (the `hanzo_schema` table holds the database's).
 /// 1: sessions, trajectory_poses, map_versions; 2: + maps (a version-1 database is upgraded
-/// in place: the new table is added).
-inline constexpr int kStorageSchemaVersion = 2;
+/// in place: the new table is added); 3: + session_leases (added in place likewise).
+inline constexpr int kStorageSchemaVersion = 3;
 
 }  // namespace hanzo::fusion::service

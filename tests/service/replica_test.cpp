@@ -1,0 +1,206 @@
+// Replicas on one database and one map store (docs/server.md "Replicas"): a session is served
+// by the replica holding its lease; another replica names that one, reads the session's stored
+// trajectory, and takes the session over once its replica was killed (kill -9) and the lease ran
+// out: placed in the session's own stored map, the stored trajectory continues in its frame.
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <thread>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "hanzo/fusion/service/session_manager.hpp"
+#include "service_fixtures.hpp"
+
+namespace hanzo::fusion::service {
+namespace {
+
+const Principal kRobot{"robot", "acme",
+                       static_cast<uint32_t>(Permission::kSessionWrite) | static_cast<uint32_t>(Permission::kSessionRead) |
+                           static_cast<uint32_t>(Permission::kMapRead)};
+
+std::unique_ptr<SessionManager> open_replica(const std::filesystem::path& dir, const std::string& id) {
+  SessionManagerConfig config;
+  config.storage_flush_interval = std::chrono::milliseconds(5);
+  config.map_directory = (dir / "maps").string();
+  config.map_save_interval = std::chrono::seconds(0);  // saved when asked
+  if (!id.empty()) config.replica = {id, "http://" + id + ".invalid:8083", std::chrono::milliseconds(1000), nullptr};
+  auto storage = open_storage("sqlite://" + (dir / "fusion.db").string());
+  EXPECT_TRUE(storage.ok()) << storage.error().message;
+  if (!storage.ok()) return nullptr;
+  auto manager = SessionManager::create(config, std::move(storage).value(), std::make_shared<MetricsRegistry>());
+  EXPECT_TRUE(manager.ok()) << manager.error().message;
+  return manager.ok() ? std::move(manager).value() : nullptr;
+}
+
+// Kills the forked replica when the test ends early.
+struct KilledAtExit {
+  pid_t pid = -1;
+  ~KilledAtExit() {
+    if (pid > 0) {
+      kill(pid, SIGKILL);
+      waitpid(pid, nullptr, 0);
+    }
+  }
+};
+
+std::vector<msgs::PoseEstimate> stored_trajectory(SessionManager& manager, const std::string& id) {
+  auto page = manager.trajectory(kRobot, id, Timestamp::from_nanoseconds(std::numeric_limits<int64_t>::min()), 100000);
+  EXPECT_TRUE(page.ok()) << page.error().message;
+  return page.ok() ? page->poses : std::vector<msgs::PoseEstimate>{};
+}
+
+TEST(Replicas, ASessionOfAKilledReplicaIsTakenOverAndContinuesInItsOwnMap) {
+  const testing::Recording& recording = testing::urban_recording();
+  const Timestamp start = msgs::timestamp_of(recording.messages.front().message);
+  // The replica dies 7 s in (driving); the rest of the drive reaches the replica that takes over.
+  const auto takeover = std::find_if(recording.messages.begin(), recording.messages.end(), [&](const testing::TimedMessage& m) {
+    return (msgs::timestamp_of(m.message) - start).seconds() >= 7.0;
+  });
+  const std::size_t half = static_cast<std::size_t>(takeover - recording.messages.begin());
+
+  const auto dir = testing::scratch_dir();
+  int pipe_fds[2];
+  ASSERT_EQ(pipe(pipe_fds), 0);
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {  // replica a: serves the session's first 7 s, saves its map, then is killed
+    close(pipe_fds[0]);
+    auto replica_a = open_replica(dir, "a");
+    if (!replica_a) _exit(3);
+    auto created = replica_a->create_session(kRobot, {"drive", recording.config_yaml, recording.calibration_yaml});
+    if (!created.ok()) _exit(4);
+    for (std::size_t i = 0; i < half; ++i) (void)replica_a->push(kRobot, created->id, recording.messages[i].sensor, recording.messages[i].message);
+    if (!replica_a->save_session_maps().ok() || !replica_a->flush_storage().ok()) _exit(5);
+    const std::string& id = created->id;
+    if (write(pipe_fds[1], id.data(), id.size()) != static_cast<ssize_t>(id.size())) _exit(6);
+    while (true) pause();
+  }
+  KilledAtExit guard{child};
+  close(pipe_fds[1]);
+  // Meanwhile (forked first: no threads in the parent yet) the drive without a failure on a
+  // single server: the reference.
+  std::vector<msgs::PoseEstimate> uninterrupted;
+  {
+    auto single = open_replica(testing::scratch_dir("-single"), "");
+    ASSERT_TRUE(single);
+    const std::string id = single->create_session(kRobot, {"single", recording.config_yaml, recording.calibration_yaml}).value().id;
+    for (const testing::TimedMessage& message : recording.messages) (void)single->push(kRobot, id, message.sensor, message.message);
+    ASSERT_TRUE(single->flush_storage().ok());
+    uninterrupted = stored_trajectory(*single, id);
+  }
+
+  std::string id(32, '\0');
+  ASSERT_EQ(read(pipe_fds[0], id.data(), id.size()), 32) << "replica a did not serve the session";
+  close(pipe_fds[0]);
+
+  auto replica_b = open_replica(dir, "b");
+  ASSERT_TRUE(replica_b);
+  // While a holds the lease, b names a and reads what is stored.
+  const ApiStatus refused = replica_b->push(kRobot, id, recording.messages[half].sensor, recording.messages[half].message);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kUnavailable);
+  EXPECT_EQ(refused.error().served_by, "http://a.invalid:8083");
+  const auto listed = replica_b->list_sessions(kRobot);
+  ASSERT_TRUE(listed.ok());
+  ASSERT_EQ(listed->size(), 1U);
+  EXPECT_EQ(listed->front().replica, "a");
+  const std::vector<msgs::PoseEstimate> before = stored_trajectory(*replica_b, id);
+  ASSERT_GT(before.size(), 1000U);
+
+  kill(child, SIGKILL);
+  waitpid(child, nullptr, 0);
+  guard.pid = -1;
+  std::vector<std::string> taken_over;
+  for (int pass = 0; pass < 100 && taken_over.empty(); ++pass) {  // the 1 s lease runs out
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    auto kept = replica_b->keep_leases();
+    ASSERT_TRUE(kept.ok()) << kept.error().message;
+    taken_over = kept.value();
+  }
+  ASSERT_EQ(taken_over, std::vector<std::string>{id});
+  EXPECT_EQ(replica_b->session_info(kRobot, id)->replica, "b");
+
+  for (std::size_t i = half; i < recording.messages.size(); ++i) {
+    const ApiStatus pushed = replica_b->push(kRobot, id, recording.messages[i].sensor, recording.messages[i].message);
+    ASSERT_TRUE(pushed.ok() || pushed.error().code == ErrorCode::kRejected) << pushed.error().message;
+  }
+  ASSERT_TRUE(replica_b->flush_storage().ok());
+  const std::vector<msgs::PoseEstimate> after = stored_trajectory(*replica_b, id);
+  ASSERT_GT(after.size(), before.size() + 500) << "the session continued on replica b";
+  // Every pose stored before the failure is still there, unchanged.
+  for (std::size_t i = 0; i < before.size(); ++i) ASSERT_EQ(after[i].timestamp, before[i].timestamp);
+
+  // After the takeover the stored poses continue in the session's frame: compared with the
+  // uninterrupted drive at the same times.
+  double largest_gap = 0.0, sum_gap = 0.0;
+  std::size_t compared = 0;
+  for (std::size_t i = before.size(); i < after.size(); ++i) {
+    const auto same_time = std::lower_bound(uninterrupted.begin(), uninterrupted.end(), after[i].timestamp,
+                                            [](const msgs::PoseEstimate& pose, Timestamp t) { return pose.timestamp < t; });
+    if (same_time == uninterrupted.end() || same_time->timestamp != after[i].timestamp) continue;
+    const double gap = (same_time->T_world_body.position - after[i].T_world_body.position).norm();
+    largest_gap = std::max(largest_gap, gap);
+    sum_gap += gap;
+    ++compared;
+  }
+  ASSERT_GT(compared, 500U);
+  RecordProperty("takeover_mean_gap_m", std::to_string(sum_gap / compared));
+  RecordProperty("takeover_max_gap_m", std::to_string(largest_gap));
+  std::printf("after the takeover: %zu poses compared, mean %.3f m, max %.3f m from the uninterrupted run\n", compared, sum_gap / compared,
+              largest_gap);
+  EXPECT_LT(sum_gap / compared, 0.5);
+}
+
+// A gRPC stream reaching another replica than the one serving its session (the load balancer's
+// choice) moves the session there: the holder commits its poses, releases the lease and stops
+// serving it; the stream's replica serves it from then on and its stored trajectory goes on.
+TEST(Replicas, ASessionMovesToTheReplicaItsStreamReaches) {
+  const auto dir = testing::scratch_dir();
+  auto replica_a = open_replica(dir, "a");
+  auto replica_b = open_replica(dir, "b");
+  ASSERT_TRUE(replica_a && replica_b);
+  const std::vector<testing::TimedMessage> recording = testing::sample_recording();
+  const std::string id = replica_a->create_session(kRobot, {"moving", testing::read_text("examples/data/fusion.yaml"), ""}).value().id;
+  const std::size_t half = recording.size() / 2;
+  for (std::size_t i = 0; i < half; ++i) ASSERT_TRUE(replica_a->push(kRobot, id, recording[i].sensor, recording[i].message).ok());
+  const uint64_t poses_on_a = replica_a->session_info(kRobot, id)->summary.poses;
+
+  // Without a way to ask a, b only names it.
+  const ApiStatus named = replica_b->serve_here(kRobot, id);
+  ASSERT_FALSE(named.ok());
+  EXPECT_EQ(named.error().served_by, "http://a.invalid:8083");
+  const Principal stranger{"intruder", "globex", static_cast<uint32_t>(Permission::kAdmin)};
+  EXPECT_EQ(replica_b->serve_here(stranger, id).error().code, ErrorCode::kNotFound);
+
+  replica_b.reset();
+  SessionManagerConfig config;
+  config.storage_flush_interval = std::chrono::milliseconds(5);
+  config.replica = {"b", "http://b.invalid:8083", std::chrono::milliseconds(1000), [&](const SessionLease& lease) -> Status {
+                      EXPECT_EQ(lease.owner, "a");
+                      const ApiStatus handed = replica_a->hand_over(lease.session_id);
+                      if (!handed) return Error(handed.error().message);
+                      return ok_status();
+                    }};
+  replica_b = std::move(SessionManager::create(config, open_storage("sqlite://" + (dir / "fusion.db").string()).value(),
+                                               std::make_shared<MetricsRegistry>())).value();
+  const ApiStatus moved = replica_b->serve_here(kRobot, id);
+  ASSERT_TRUE(moved.ok()) << moved.error().message;
+  EXPECT_EQ(replica_b->session_info(kRobot, id)->replica, "b");
+  // a lets go: its writes are refused with the reason, its reads point to b.
+  const ApiStatus refused = replica_a->push(kRobot, id, recording[half].sensor, recording[half].message);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.error().code, ErrorCode::kUnavailable);
+  EXPECT_EQ(replica_a->session_info(kRobot, id).error().served_by, "http://b.invalid:8083");
+  EXPECT_GE(stored_trajectory(*replica_b, id).size(), poses_on_a) << "every pose a emitted was committed before it let go";
+
+  for (std::size_t i = half; i < recording.size(); ++i) ASSERT_TRUE(replica_b->push(kRobot, id, recording[i].sensor, recording[i].message).ok());
+  ASSERT_TRUE(replica_b->flush_storage().ok());
+  EXPECT_GT(stored_trajectory(*replica_b, id).size(), poses_on_a + 500);
+  ASSERT_TRUE(replica_b->end_session(kRobot, id).ok());
+}
+
+}  // namespace
+}  // namespace hanzo::fusion::service
