@@ -140,6 +140,7 @@ struct SessionManager::Impl {
   Counter* lost_counter = nullptr;
   Counter* unplaced_counter = nullptr;
   std::thread lease_keeper;             // replicas: keep_leases() every lease/3
+  std::mutex locate_mutex;              // replicas: serializes locate()
   std::mutex keeper_mutex;
   std::condition_variable keeper_wake;
   bool keeper_stopping = false;
@@ -578,6 +579,11 @@ struct SessionManager::Impl {
   // expired: claimed and restarted here), an ended session (read-only), or kUnavailable naming
   // the replica that serves it.
   ApiResult<std::shared_ptr<ManagedSession>> locate(const std::string& id, bool pull = false) {
+    std::lock_guard locating(locate_mutex);  // one takeover at a time: concurrent requests find it adopted
+    {
+      std::shared_lock lock(sessions_mutex);
+      if (auto found = sessions.find(id); found != sessions.end()) return found->second;
+    }
     auto records = storage->sessions();
     if (!records) return ApiError::from(ErrorCode::kInternal, records.error());
     auto record = std::find_if(records->begin(), records->end(), [&](const SessionRecord& r) { return r.id == id; });
@@ -586,12 +592,11 @@ struct SessionManager::Impl {
       auto lease = claim(id);
       if (!lease) return lease.error();
       if (lease->owner != config.replica.id && pull && config.replica.request_handover) {
-        if (const Status handed = config.replica.request_handover(lease.value()); handed) {
-          lease = claim(id);
-          if (!lease) return lease.error();
-        } else {
+        if (const Status handed = config.replica.request_handover(lease.value()); !handed) {
           logger()->warn("session {}: replica {} did not hand it over: {}", id, lease->owner, handed.error().message);
         }
+        lease = claim(id);  // released by its holder now
+        if (!lease) return lease.error();
       }
       if (lease->owner != config.replica.id) {
         return ApiError{ErrorCode::kUnavailable, fmt::format("session '{}' is served by replica '{}'", id, lease->owner), "", lease->owner_url};
