@@ -55,6 +55,7 @@ int run_stream(const Output& output, const StreamCommandOptions& options) {
   result["skipped_by_topic"] = summary.skipped_by_topic;
   result["accepted"] = summary.accepted;
   result["poses_received"] = summary.poses_received;
+  result["reconnects"] = summary.reconnects;
   result["log_seconds"] = summary.log_seconds;
   result["wall_seconds"] = summary.wall_seconds;
   auto state = client->get("/v1/sessions/" + session_id);

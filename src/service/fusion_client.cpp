@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <deque>
 #include <fstream>
 #include <mutex>
 #include <sstream>
@@ -239,6 +240,22 @@ Result<json> session_state(FusionClient& client, const std::string& session_id) 
 
 }  // namespace
 
+// Whether a stream the server ended with `status` is worth reopening: the server or its replica
+// went away, a proxy reset the stream, or the session moved to another replica.
+bool transient(const grpc::Status& status) {
+  switch (status.error_code()) {
+    case grpc::StatusCode::OK:  // the server stopped
+    case grpc::StatusCode::UNAVAILABLE:
+    case grpc::StatusCode::UNKNOWN:
+    case grpc::StatusCode::INTERNAL:
+    case grpc::StatusCode::CANCELLED:
+    case grpc::StatusCode::ABORTED:
+      return true;
+    default:
+      return false;
+  }
+}
+
 struct SessionStreams::State {
   FusionClient& client;
   FusionClient::Impl& impl;
@@ -246,8 +263,46 @@ struct SessionStreams::State {
   json before;  // the session's state at open_streams()
   PoseProgress progress;
   std::map<std::string, std::unique_ptr<SensorStream>> streams;  // by sensor
+  std::map<std::string, std::deque<msgs::SensorMessage>> recent;  // by sensor: the last replay_s sent
+  std::optional<Clock::time_point> failing_since;  // a stream broke and no pose came back since
+  uint64_t poses_when_failing = 0;
   StreamSummary summary;
   Clock::time_point started = Clock::now();
+
+  void remember(const std::string& sensor, const msgs::SensorMessage& message) {
+    std::deque<msgs::SensorMessage>& kept = recent[sensor];
+    kept.push_back(message);
+    const Timestamp newest = msgs::timestamp_of(message);
+    while (kept.size() > 1 && (newest - msgs::timestamp_of(kept.front())).seconds() > impl.config.replay_s) kept.pop_front();
+  }
+
+  // Reopens the sensor's stream with backoff after the server ended it with `status`, sending
+  // its recent messages again; the final status when it gave up.
+  grpc::Status reconnect(const std::string& sensor, grpc::Status status) {
+    if (failing_since && progress.received.load() > poses_when_failing) failing_since.reset();  // the last reconnect worked
+    if (!failing_since) {
+      failing_since = Clock::now();
+      poses_when_failing = progress.received.load();
+    }
+    const auto deadline = *failing_since + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(impl.config.reconnect_timeout_s));
+    std::chrono::milliseconds backoff(100);
+    while (transient(status) && Clock::now() + backoff < deadline) {
+      std::this_thread::sleep_for(backoff);
+      backoff = std::min(backoff * 2, std::chrono::milliseconds(2000));
+      const std::deque<msgs::SensorMessage>& messages = recent[sensor];
+      std::unique_ptr<SensorStream> stream = impl.open_stream(messages.back(), session_id, sensor, progress);
+      const bool written = std::all_of(messages.begin(), messages.end(), [&](const msgs::SensorMessage& m) { return stream->write(m); });
+      if (written) {
+        streams[sensor] = std::move(stream);
+        ++summary.reconnects;
+        logger()->info("stream {} of session {}: reopened after '{}' ({} recent messages sent again)", sensor, session_id,
+                       status.error_message(), messages.size());
+        return grpc::Status::OK;
+      }
+      status = stream->finish();
+    }
+    return status;
+  }
 };
 
 SessionStreams::SessionStreams(std::unique_ptr<State> state) : state_(std::move(state)) {}
@@ -255,14 +310,19 @@ SessionStreams::~SessionStreams() = default;
 
 Status SessionStreams::send(const std::string& sensor, const msgs::SensorMessage& message) {
   State& state = *state_;
+  if (state.impl.config.reconnect_timeout_s > 0) state.remember(sensor, message);
   std::unique_ptr<SensorStream>& stream = state.streams[sensor];
   if (!stream) stream = state.impl.open_stream(message, state.session_id, sensor, state.progress);
   if (!stream->write(message)) {
     // The server ended the stream: its status says why (unknown session, permission, ...).
-    const grpc::Status status = stream->finish();
-    state.streams.erase(sensor);
-    return Error(fmt::format("stream {} to {}: {}", sensor, state.impl.config.grpc_address,
-                             status.ok() ? "the server closed the stream" : status.error_message()));
+    grpc::Status status = stream->finish();
+    stream.reset();
+    if (state.impl.config.reconnect_timeout_s > 0) status = state.reconnect(sensor, status);
+    if (!status.ok() || !state.streams[sensor]) {
+      state.streams.erase(sensor);
+      return Error(fmt::format("stream {} to {}: {}", sensor, state.impl.config.grpc_address,
+                               status.ok() ? "the server closed the stream" : status.error_message()));
+    }
   }
   ++state.summary.messages_sent;
   ++state.summary.sent_by_sensor[sensor];
@@ -298,7 +358,7 @@ Result<StreamSummary> SessionStreams::finish() {
 Result<std::unique_ptr<SessionStreams>> FusionClient::open_streams(const std::string& session_id) {
   json before;
   HANZO_ASSIGN_OR_RETURN(before, session_state(*this, session_id));
-  auto state = std::unique_ptr<SessionStreams::State>(new SessionStreams::State{*this, *impl_, session_id, std::move(before), {}, {}, {}});
+  auto state = std::unique_ptr<SessionStreams::State>(new SessionStreams::State{*this, *impl_, session_id, std::move(before), {}, {}, {}, {}, 0, {}, Clock::now()});
   return std::unique_ptr<SessionStreams>(new SessionStreams(std::move(state)));
 }
 

@@ -301,8 +301,13 @@ struct SessionManager::Impl {
   }
 
   void on_pose(ManagedSession& managed, const msgs::PoseEstimate& pose) {
-    if (managed.resume_map) {  // taken over, not yet placed in its own map: a pose of a fresh frame
+    if (managed.resume_map) {
+      // Taken over, not yet placed in its own map: a pose of a fresh frame. Streams still get it
+      // (initializing; their clients pace on it); it is neither stored nor the latest pose.
       unplaced_counter->increment();
+      msgs::PoseEstimate unplaced = pose;
+      unplaced.status.state = msgs::TrackingState::kInitializing;
+      for (const auto& subscriber : managed.pose_subscribers) subscriber->publish(unplaced);
       return;
     }
     managed.latest_pose = pose;

@@ -40,6 +40,14 @@ struct FusionClientConfig {
   /// PEM CA bundle that signed the server's certificate: gRPC over TLS and HTTPS verification.
   /// Empty: plaintext gRPC (HTTPS with the system's CAs).
   std::string tls_ca_file;
+  /// A sensor stream the server ended with a transient status (UNAVAILABLE: its replica died or
+  /// the session moved to another replica; a proxy's reset) is reopened with backoff (0.1 s
+  /// doubling to 2 s) for up to this long without a pose coming back; 0: not retried. On
+  /// reopening, the stream's messages of the last replay_s are sent again (a session restarted
+  /// on another replica takes what it had not received; one that had them refuses them as out
+  /// of order, counted in its session state).
+  double reconnect_timeout_s = 30.0;
+  double replay_s = 1.0;
 };
 
 struct StreamOptions {
@@ -60,6 +68,7 @@ struct StreamSummary {
   uint64_t accepted = 0;
   uint64_t poses_received = 0;                       ///< PoseEstimates the streams sent back
   std::optional<msgs::PoseEstimate> latest_pose;
+  uint64_t reconnects = 0;    ///< streams reopened after the server ended them (reconnect_timeout_s)
   double log_seconds = 0.0;   ///< log time spanned
   double wall_seconds = 0.0;  ///< time the replay took
 };
@@ -74,9 +83,11 @@ class SessionStreams {
   SessionStreams(const SessionStreams&) = delete;
   SessionStreams& operator=(const SessionStreams&) = delete;
 
-  /// Writes one message of the session's sensor `sensor`. Fails when the server ended that
-  /// sensor's stream (its status says why: an unknown session or sensor, a permission); the
-  /// stream is then closed and the next message of the sensor opens a new one.
+  /// Writes one message of the session's sensor `sensor`. A stream the server ended with a
+  /// transient status is reopened (FusionClientConfig::reconnect_timeout_s). Fails when the
+  /// server ended it for good (its status says why: an unknown session or sensor, a permission)
+  /// or reopening did not bring a pose back in time; the stream is then closed and the next
+  /// message of the sensor opens a new one.
   Status send(const std::string& sensor, const msgs::SensorMessage& message);
   /// The newest pose time the server has sent back on any stream; none before the first.
   std::optional<Timestamp> newest_pose_time() const;

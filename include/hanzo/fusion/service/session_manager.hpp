@@ -36,7 +36,7 @@
 //     server restart restarts it: the stored trajectory and map versions stay, the filter
 //     starts afresh and the session is relocalized in its own newest stored map from its newest
 //     stored pose before its poses are stored again (poses before that are not stored, counted
-//     in hanzo_fusion_takeover_unplaced_poses_total). A replica that finds another holding a
+//     in hanzo_fusion_takeover_unplaced_poses_total; subscribers get them as initializing). A replica that finds another holding a
 //     session it served stops serving it. gRPC calls cannot be forwarded: serve_here() moves the
 //     session to the replica the load balancer sent them to (the holder hands it over: its poses
 //     committed, its map saved, its lease released) and restarts it there as after a takeover.
