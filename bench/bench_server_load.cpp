@@ -6,6 +6,11 @@
 // processes share this machine's cores.
 //
 //   build/bench/bench_server_load [--sessions 20] [--seconds 60] [--no-lidar] [--point3] [--default-malloc] [--stagger] [--json]
+//   build/bench/bench_server_load --endpoint http://127.0.0.1:8083,127.0.0.1:8084 [--server-pids 11,12,13] ...
+//
+// --endpoint streams into a running deployment instead (a server, or replicas behind nginx:
+// scripts/replicas.sh, bench/replicas_bench.sh): sessions are created over REST, their state read
+// back over REST; the server CPU is that of the --server-pids processes (the replicas).
 //
 // By default every session replays the drive in step with the others (all sweeps of all
 // sessions arrive within a millisecond: the worst case); --stagger starts session k k/N of a
@@ -28,6 +33,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -44,6 +50,7 @@
 #include "hanzo/fusion/config/fusion_config.hpp"
 #include "hanzo/fusion/msgs/convert.hpp"
 #include "hanzo/fusion/service/allocator_tuning.hpp"
+#include "hanzo/fusion/service/fusion_client.hpp"
 #include "hanzo/fusion/service/grpc_server.hpp"
 #include "hanzo/fusion/service/session_manager.hpp"
 #include "hanzo/fusion/service/storage.hpp"
@@ -188,24 +195,13 @@ ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& se
   return result;
 }
 
-// The client process: simulates the drive, waits for "PORT ID..." on `commands`, streams every
-// session at once, and writes its summary (one JSON object) to `report`.
-int run_clients(int commands, int report, const hf::sim::Scenario& scenario, int sessions, hf::msgs::PointEncoding point_encoding,
-                bool stagger) {
-  const Recording recording = simulate(scenario);
-  std::string line;
-  char c = 0;
-  while (read(commands, &c, 1) == 1 && c != '\n') line += c;
-  std::istringstream words(line);
-  int port = 0;
-  words >> port;
-  std::vector<std::string> ids(static_cast<std::size_t>(sessions));
-  for (std::string& id : ids) words >> id;
-  if (!port || ids.back().empty()) return 1;
-  auto stub = hf::v1::FusionService::NewStub(grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials()));
+// Streams every session at once into the gRPC server at `address`; the clients' summary.
+nlohmann::json stream_sessions(const std::string& address, const std::vector<std::string>& ids, const Recording& recording,
+                               hf::msgs::PointEncoding point_encoding, bool stagger) {
+  auto stub = hf::v1::FusionService::NewStub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
   const double cpu_before = cpu_seconds_now();
   const auto started = Clock::now();
-  std::vector<ClientResult> results(static_cast<std::size_t>(sessions));
+  std::vector<ClientResult> results(ids.size());
   std::vector<std::thread> clients;
   const double sweep_period = 1.0 / recording.lidar_rate_hz;
   for (std::size_t s = 0; s < ids.size(); ++s) {
@@ -229,8 +225,122 @@ int run_clients(int commands, int report, const hf::sim::Scenario& scenario, int
                                   {"pose_latency_p50_ms", 1e3 * percentile(latencies, 0.5)}, {"pose_latency_p99_ms", 1e3 * percentile(latencies, 0.99)},
                                   {"pose_latency_max_ms", 1e3 * percentile(latencies, 1.0)}, {"wall_seconds", wall},
                                   {"client_cpu_cores_used", (cpu_seconds_now() - cpu_before) / wall}};
-  const std::string text = summary.dump();
+  return summary;
+}
+
+// The client process: simulates the drive, waits for "PORT ID..." on `commands`, streams every
+// session at once, and writes its summary (one JSON object) to `report`.
+int run_clients(int commands, int report, const hf::sim::Scenario& scenario, int sessions, hf::msgs::PointEncoding point_encoding,
+                bool stagger) {
+  const Recording recording = simulate(scenario);
+  std::string line;
+  char c = 0;
+  while (read(commands, &c, 1) == 1 && c != '\n') line += c;
+  std::istringstream words(line);
+  int port = 0;
+  words >> port;
+  std::vector<std::string> ids(static_cast<std::size_t>(sessions));
+  for (std::string& id : ids) words >> id;
+  if (!port || ids.back().empty()) return 1;
+  const std::string text = stream_sessions("127.0.0.1:" + std::to_string(port), ids, recording, point_encoding, stagger).dump();
   return write(report, text.data(), text.size()) == static_cast<ssize_t>(text.size()) ? 0 : 1;
+}
+
+// CPU seconds (user + system) the processes used so far (/proc/PID/stat).
+double processes_cpu_seconds(const std::vector<int>& pids) {
+  double total = 0.0;
+  for (int pid : pids) {
+    std::FILE* file = std::fopen(fmt::format("/proc/{}/stat", pid).c_str(), "r");
+    if (file == nullptr) continue;
+    char text[4096] = {};
+    const std::size_t n = std::fread(text, 1, sizeof(text) - 1, file);
+    std::fclose(file);
+    const char* after_name = std::strrchr(text, ')');  // the command name may hold spaces
+    if (after_name == nullptr || n == 0) continue;
+    std::istringstream fields(after_name + 2);
+    std::string field;
+    unsigned long long user = 0, system = 0;
+    for (int i = 3; i <= 15 && fields >> field; ++i) {  // fields 14, 15: utime, stime
+      if (i == 14) user = std::stoull(field);
+      if (i == 15) system = std::stoull(field);
+    }
+    total += static_cast<double>(user + system) / static_cast<double>(sysconf(_SC_CLK_TCK));
+  }
+  return total;
+}
+
+// --endpoint: sessions created in a running deployment over REST, streamed over gRPC, their
+// state read back over REST.
+int run_against(const std::string& endpoint, const std::vector<int>& server_pids, const hf::sim::Scenario& scenario, int sessions,
+                hf::msgs::PointEncoding point_encoding, bool stagger, bool json_output) {
+  const std::size_t comma = endpoint.find(',');
+  if (comma == std::string::npos) {
+    std::fprintf(stderr, "--endpoint: expected REST_URL,GRPC_ADDRESS\n");
+    return 2;
+  }
+  hf::service::FusionClientConfig client_config;
+  client_config.rest_url = endpoint.substr(0, comma);
+  client_config.grpc_address = endpoint.substr(comma + 1);
+  auto client = hf::service::FusionClient::create(client_config);
+  if (!client) {
+    std::fprintf(stderr, "%s\n", client.error().message.c_str());
+    return 1;
+  }
+  std::fprintf(stderr, "simulating %.0f s of the warehouse drive...\n", scenario.duration.value_or(0.0));
+  const Recording recording = simulate(scenario);
+  const std::string config_yaml = hf::config::to_yaml(hf::sim::scenario_fusion_config(scenario));
+  const std::string calibration_yaml = hf::calib::to_yaml(hf::sim::scenario_calibration(scenario));
+  std::vector<std::string> ids;
+  for (int s = 0; s < sessions; ++s) {
+    auto id = client.value()->create_session(fmt::format("load-{}", s), config_yaml, calibration_yaml);
+    if (!id) {
+      std::fprintf(stderr, "%s\n", id.error().message.c_str());
+      return 1;
+    }
+    ids.push_back(*id);
+  }
+  const double server_cpu_before = processes_cpu_seconds(server_pids);
+  nlohmann::json result = stream_sessions(client_config.grpc_address, ids, recording, point_encoding, stagger);
+  const double wall = result["wall_seconds"].get<double>();
+  const double server_cpu = processes_cpu_seconds(server_pids) - server_cpu_before;
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // the poses queued are committed every 20 ms
+  uint64_t received = 0, registered = 0, stored = 0, rejected_total = 0, aligning = 0;
+  std::map<std::string, uint64_t> replicas;
+  for (const std::string& id : ids) {
+    auto body = client.value()->get("/v1/sessions/" + id);
+    if (!body) {
+      std::fprintf(stderr, "%s\n", body.error().message.c_str());
+      return 1;
+    }
+    const nlohmann::json session = nlohmann::json::parse(*body);
+    for (const nlohmann::json& sensor : session["sensors"]) {
+      received += sensor["received"].get<uint64_t>();
+      for (const auto& [reason, count] : sensor["rejected"].items()) (reason == "aligning" ? aligning : rejected_total) += count.get<uint64_t>();
+    }
+    registered += session["mapping"]["scans_registered"].get<uint64_t>();
+    stored += session["stored_poses"].get<uint64_t>();
+    ++replicas[session["replica"].is_string() ? session["replica"].get<std::string>() : "single server"];
+  }
+  const uint64_t sent = result["messages_sent"].get<uint64_t>();
+  result.update(nlohmann::json{{"sessions", sessions}, {"seconds", scenario.duration.value_or(0.0)}, {"endpoint", endpoint},
+                               {"sessions_by_replica", replicas}, {"messages_received", received}, {"messages_lost_in_transport", sent - received},
+                               {"messages_rejected", rejected_total}, {"messages_aligning", aligning}, {"lidar_sweeps_registered", registered},
+                               {"poses_stored", stored}, {"server_cpu_cores_used", server_cpu / wall}});
+  if (json_output) {
+    std::printf("%s\n", result.dump().c_str());
+  } else {
+    std::printf("| sessions | replicas (sessions each) | messages sent | received | lost | rejected (+ aligning) | LiDAR registered | pose latency p50 / p99 / max | servers' CPU | clients' CPU |\n");
+    std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
+    std::string spread;
+    for (const auto& [replica, count] : replicas) spread += fmt::format("{}{} {}", spread.empty() ? "" : ", ", replica, count);
+    std::printf("| %d | %s | %lu | %lu | %lu | %lu (+ %lu) | %lu / %lu | %.2f / %.1f / %.0f ms | %.2f cores | %.2f cores |\n", sessions, spread.c_str(),
+                static_cast<unsigned long>(sent), static_cast<unsigned long>(received), static_cast<unsigned long>(sent - received),
+                static_cast<unsigned long>(rejected_total), static_cast<unsigned long>(aligning), static_cast<unsigned long>(registered),
+                static_cast<unsigned long>(result["lidar_sweeps_sent"].get<uint64_t>()), result["pose_latency_p50_ms"].get<double>(),
+                result["pose_latency_p99_ms"].get<double>(), result["pose_latency_max_ms"].get<double>(), server_cpu / wall,
+                result["client_cpu_cores_used"].get<double>());
+  }
+  return sent == received ? 0 : 1;
 }
 
 }  // namespace
@@ -239,6 +349,8 @@ int main(int argc, char** argv) {
   int sessions = 20;
   double seconds = 60.0;
   bool lidar = true, json_output = false, default_malloc = false, stagger = false;
+  std::string endpoint;
+  std::vector<int> server_pids;
   hf::msgs::PointEncoding point_encoding = hf::msgs::PointEncoding::kPacked;
   for (int i = 1; i < argc; ++i) {
     const std::string argument = argv[i];
@@ -249,8 +361,13 @@ int main(int argc, char** argv) {
     else if (argument == "--point3") point_encoding = hf::msgs::PointEncoding::kPoint3;
     else if (argument == "--default-malloc") default_malloc = true;
     else if (argument == "--stagger") stagger = true;
-    else {
-      std::fprintf(stderr, "usage: bench_server_load [--sessions N] [--seconds S] [--no-lidar] [--point3] [--default-malloc] [--stagger] [--json]\n");
+    else if (argument == "--endpoint" && i + 1 < argc) endpoint = argv[++i];
+    else if (argument == "--server-pids" && i + 1 < argc) {
+      std::istringstream list(argv[++i]);
+      for (std::string pid; std::getline(list, pid, ',');) server_pids.push_back(std::stoi(pid));
+    } else {
+      std::fprintf(stderr, "usage: bench_server_load [--sessions N] [--seconds S] [--no-lidar] [--point3] [--default-malloc] [--stagger] [--json]\n"
+                           "                         [--endpoint REST_URL,GRPC_ADDRESS [--server-pids P1,P2,...]]\n");
       return 2;
     }
   }
@@ -259,6 +376,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   const hf::sim::Scenario scenario = load_scenario(seconds, lidar);
+  if (!endpoint.empty()) return run_against(endpoint, server_pids, scenario, sessions, point_encoding, stagger, json_output);
   // Fork before any thread exists: the clients get a process of their own, so that the
   // server's CPU and memory are this process's.
   int to_client[2], from_client[2];
