@@ -22,6 +22,7 @@ using estimate::NavigationState;
 constexpr double kInitialAccelBiasSigma = 0.1;      // m/s^2
 constexpr double kInitialGyroBiasSigma = 0.01;      // rad/s, after static alignment
 constexpr double kMovingStartVelocitySigma = 5.0;   // m/s: a moving start's speed comes from wheels / GNSS
+constexpr double kResumeVelocitySigma = 0.1;        // m/s: a resumed state's velocity (the filter's own estimate)
 constexpr double kInitialGravitySigma = 0.02;       // m/s^2, vertical (magnitude)
 constexpr double kHorizontalGravitySigma = 1e-6;    // m/s^2: ENU's up is the gravity direction
 constexpr double kGravityMagnitudeSigma = 0.001;    // m/s^2, pseudo-measurement at 1 Hz
@@ -309,6 +310,23 @@ void Estimator::initialize(const Event& event, const msgs::ImuMessage& imu) {
   const estimate::ImuMounting& mounting = filter_config_.imu_mounting;
   const config::CovarianceConfig& covariance = frontend_.covariance;
   NavigationState state;
+  if (resume_state_) {
+    // A session restarted elsewhere: its last state, carried to this sample at constant velocity.
+    const double elapsed = (event.time - resume_state_->timestamp).seconds();
+    state.timestamp = event.time;
+    state.R_world_body = SO3::from_quaternion_normalized(resume_state_->T_world_body.orientation.normalized());
+    state.position = resume_state_->T_world_body.position + resume_state_->velocity * elapsed;
+    state.velocity = resume_state_->velocity;
+    state.gravity = Eigen::Vector3d(0.0, 0.0, -gravity_magnitude_);
+    const Eigen::Matrix3d position_covariance = resume_state_->pose_covariance
+                                                    ? Eigen::Matrix3d(resume_state_->pose_covariance->topLeftCorner<3, 3>())
+                                                    : Eigen::Matrix3d(covariance.initial_position.array().square().matrix().asDiagonal());
+    heading_pending_ = false;
+    resume_state_.reset();
+    start(state, position_covariance, Eigen::Vector3d::Constant(kResumeVelocitySigma), kInitialAccelBiasSigma, kUnalignedGyroBiasSigma);
+    logger()->info("frontend resumed at t = {:.3f} s from the state at {:.3f} s", event.time.seconds(), (event.time.seconds() - elapsed));
+    return;
+  }
   double gyro_bias_sigma = kInitialGyroBiasSigma;
   Eigen::Vector3d velocity_sigma = covariance.initial_velocity;
 

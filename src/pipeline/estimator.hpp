@@ -114,6 +114,13 @@ class Estimator {
   EventOutcome process(const Event& event, UpdateObserver* observer);
 
   bool initialized() const { return initialized_; }
+  /// Starts the filter at `state` at the first IMU sample instead of aligning (Frontend::resume):
+  /// its attitude, and its position and world-frame velocity carried to the sample's time at
+  /// constant velocity; biases start at zero with their initial uncertainty. Before
+  /// initialization only (ignored after).
+  void resume_from(const msgs::PoseEstimate& state) {
+    if (!initialized_) resume_state_ = state;
+  }
   /// False while GNSS defines the world and the heading in it is not yet known (see
   /// align_heading): poses are then not TRACKING.
   bool heading_known() const { return !heading_pending_; }
@@ -241,6 +248,8 @@ class Estimator {
   /// unknown, so the heading comes from in-motion alignment; until then the position is held at
   /// each GNSS fix and wheels wait.
   bool moving_start_ = false;
+  /// Frontend::resume: the state the filter starts at instead of aligning.
+  std::optional<msgs::PoseEstimate> resume_state_;
   /// While the heading is pending: the recent GNSS track (world) and IMU samples, and the
   /// wheels' latest forward speed (its sign says whether the vehicle reverses).
   std::vector<estimate::GnssTrackPoint> recent_fixes_;

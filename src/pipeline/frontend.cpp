@@ -378,6 +378,13 @@ void Frontend::note_input(std::string_view sensor_name, Timestamp time) {
 
 void Frontend::set_timeout_grace(double seconds) { impl_->timeout_grace_s = std::max(0.0, seconds); }
 
+void Frontend::resume(const msgs::PoseEstimate& state) {
+  // The history's estimators too: a rollback restarts from one of them.
+  impl_->estimator.resume_from(state);
+  impl_->history_base.resume_from(state);
+  for (Impl::HistoryEntry& entry : impl_->history) entry.after.resume_from(state);
+}
+
 PushStatus Frontend::Impl::accept(size_t sensor, Event event) {
   SensorStatistics& statistics = sensors[sensor];
   const std::string& name = statistics.name;

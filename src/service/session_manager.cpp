@@ -6,7 +6,6 @@
 #include <list>
 #include <map>
 #include <mutex>
-#include <numbers>
 #include <random>
 #include <shared_mutex>
 #include <thread>
@@ -116,11 +115,6 @@ struct ManagedSession {
   std::unique_ptr<SessionRecording> recording;  // raw sensor log, when the session records
   uint64_t saved_map_version = 0;   // the live map_version last saved to the map catalog
   uint64_t stored_map_version = 0;  // the catalog's version of that save (parent of the next)
-  // Taken over from another replica: the newest stored pose and the session's newest stored
-  // map, prepared; its poses are stored again once relocalized there (resume_attempts tries).
-  std::optional<msgs::PoseEstimate> resume_pose;
-  std::shared_ptr<const lidar::MapLocalizer> resume_map;
-  int resume_attempts = 0;
   bool handed_over = false;  // moved to another replica: requests get kUnavailable
 
   // Metric series of the managed session (removed with it).
@@ -138,7 +132,6 @@ struct SessionManager::Impl {
   Gauge* active_sessions_gauge = nullptr;
   Counter* taken_over_counter = nullptr;
   Counter* lost_counter = nullptr;
-  Counter* unplaced_counter = nullptr;
   std::thread lease_keeper;             // replicas: keep_leases() every lease/3
   std::mutex locate_mutex;              // replicas: serializes locate()
   std::mutex keeper_mutex;
@@ -301,15 +294,6 @@ struct SessionManager::Impl {
   }
 
   void on_pose(ManagedSession& managed, const msgs::PoseEstimate& pose) {
-    if (managed.resume_map) {
-      // Taken over, not yet placed in its own map: a pose of a fresh frame. Streams still get it
-      // (initializing; their clients pace on it); it is neither stored nor the latest pose.
-      unplaced_counter->increment();
-      msgs::PoseEstimate unplaced = pose;
-      unplaced.status.state = msgs::TrackingState::kInitializing;
-      for (const auto& subscriber : managed.pose_subscribers) subscriber->publish(unplaced);
-      return;
-    }
     managed.latest_pose = pose;
     recorder->enqueue(managed.record.id, pose);
     for (const auto& subscriber : managed.pose_subscribers) subscriber->publish(pose);
@@ -520,8 +504,8 @@ struct SessionManager::Impl {
   bool replicated() const { return !config.replica.id.empty(); }
 
   // A stored session as a ManagedSession: its storage progress and map versions; an active one
-  // gets a pipeline (the filter starts afresh). With `resume` (a takeover) the session is placed
-  // in its own newest stored map before its poses count again.
+  // gets a pipeline: with `resume` (a takeover) its filter starts from the newest stored pose,
+  // else afresh.
   Result<std::shared_ptr<ManagedSession>> adopt(SessionRecord record, bool resume) {
     auto managed = std::make_shared<ManagedSession>();
     const std::string where = fmt::format("stored session '{}'", record.id);
@@ -541,43 +525,16 @@ struct SessionManager::Impl {
     if (managed->record.ended) return managed;
     attach_metrics(*managed);
     HANZO_ASSIGN_OR_RETURN(managed->session, with_context(make_pipeline(*managed, managed->configuration, managed->calibration), where));
-    if (resume && extent.last && managed->stored_map_version > 0 && managed->session->maps_lidar_sweeps()) {
+    if (resume && extent.last) {  // the filter continues from the newest stored state, in the session's frame
       auto newest = storage->poses(managed->record.id, Timestamp::from_nanoseconds(extent.last->nanoseconds() - 1), 1);
-      auto prepared = localizer(managed->record.organization, managed->record.id, managed->stored_map_version);
-      if (newest && !newest->empty() && prepared) {
-        managed->resume_pose = newest->front();
-        managed->resume_map = std::move(prepared).value();
-        managed->latest_pose = managed->resume_pose;
+      if (newest && !newest->empty()) {
+        managed->session->frontend().resume(newest->front());
+        managed->latest_pose = newest->front();
       } else {
-        logger()->warn("session {}: taken over without its stored map or pose; its poses start a new frame", managed->record.id);
+        logger()->warn("session {}: taken over without its newest stored pose; its poses start a new frame", managed->record.id);
       }
     }
     return managed;
-  }
-
-  // A taken-over session's first registered sweeps are localized in its own stored map around
-  // its newest stored pose; once placed its poses are published and stored again. Caller holds
-  // managed.mutex.
-  void resume_in_own_map(ManagedSession& managed) {
-    constexpr int kMaxAttempts = 20;
-    if (managed.session->mapping_summary().map_keyframes == 0) return;
-    pipeline::RelocalizationRequest request;
-    request.T_map_body_guess = managed.resume_pose->T_world_body.to_se3();
-    request.linear_window = 10.0;  // the robot moved on while the lease ran out
-    request.angular_window = std::numbers::pi;
-    Result<pipeline::RelocalizationOutcome> outcome = managed.session->relocalize(*managed.resume_map, request);
-    if (!outcome && outcome.error().message.starts_with("not_ready")) return;
-    ++managed.resume_attempts;
-    if (outcome) {
-      logger()->info("session {}: taken over and placed in its own map ({} poses held back)", managed.record.id, managed.resume_attempts);
-    } else if (managed.resume_attempts < kMaxAttempts) {
-      return;
-    } else {
-      logger()->error("session {}: not placed in its own map after {} tries ({}); its poses continue in a new frame",
-                      managed.record.id, kMaxAttempts, outcome.error().message);
-    }
-    managed.resume_map.reset();
-    managed.resume_pose.reset();
   }
 
   // Replicas: the stored session `id` when this replica serves it now (it was free or its lease
@@ -754,8 +711,6 @@ Result<std::unique_ptr<SessionManager>> SessionManager::create(const SessionMana
   }
   impl->taken_over_counter = &impl->metrics->counter("hanzo_fusion_sessions_taken_over_total", "Sessions this replica took over after their lease expired");
   impl->lost_counter = &impl->metrics->counter("hanzo_fusion_sessions_lost_total", "Sessions another replica took from this one");
-  impl->unplaced_counter = &impl->metrics->counter("hanzo_fusion_takeover_unplaced_poses_total",
-                                                   "Poses of taken-over sessions before they were placed in their own map (not stored)");
   if (!impl->replicated()) {  // a single server serves every stored session (replicas: keep_leases below)
     std::vector<SessionRecord> records;
     HANZO_ASSIGN_OR_RETURN(records, impl->storage->sessions());
@@ -1006,7 +961,6 @@ ApiStatus SessionManager::push(const Principal& caller, const std::string& sessi
   managed.push_started = Clock::now();
   ++managed.messages_pushed;
   const pipeline::PushStatus pushed = managed.session->push(sensor_name, std::move(message));
-  if (managed.resume_map) impl_->resume_in_own_map(managed);
   if (!pushed) {
     // A malformed message or a sensor the session does not have is the request's fault (400,
     // field "sensor" or "message"); a well-formed message at the wrong time is refused (422).

@@ -76,27 +76,30 @@ struct Recording {
   std::vector<TimedMessage> messages;
 };
 
-/// 12 s of the simulated urban drive: IMU 200 Hz + LiDAR 10 Hz (3 s standing, then driving).
-inline const Recording& urban_recording() {
-  static const Recording recording = [] {
-    sim::Scenario scenario = sim::load_scenario("examples/scenarios/urban_vehicle.yaml").value();
+/// The IMU and LiDAR of a simulated scenario's first `seconds`.
+inline Recording lidar_recording(const std::string& scenario_path, double seconds) {
+  sim::Scenario scenario = sim::load_scenario(scenario_path).value();
     std::erase_if(scenario.sensors, [](const sim::ScenarioSensor& s) {
       return s.modality != config::SensorModality::kLidar && s.modality != config::SensorModality::kImu;
     });
-    scenario.duration = 12.0;
-    scenario.num_threads = 0;
-    Recording out;
-    out.config_yaml = config::to_yaml(sim::scenario_fusion_config(scenario));
-    out.calibration_yaml = calib::to_yaml(sim::scenario_calibration(scenario));
-    auto simulation = sim::ScenarioSimulation::create(scenario).value();
-    EXPECT_TRUE(simulation
-                    ->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
-                      out.messages.push_back({sensor.name, std::move(message)});
-                      return ok_status();
-                    })
-                    .ok());
-    return out;
-  }();
+  scenario.duration = seconds;
+  scenario.num_threads = 0;
+  Recording out;
+  out.config_yaml = config::to_yaml(sim::scenario_fusion_config(scenario));
+  out.calibration_yaml = calib::to_yaml(sim::scenario_calibration(scenario));
+  auto simulation = sim::ScenarioSimulation::create(scenario).value();
+  EXPECT_TRUE(simulation
+                  ->run([&](const sim::ScenarioSensor& sensor, msgs::SensorMessage&& message) -> Status {
+                    out.messages.push_back({sensor.name, std::move(message)});
+                    return ok_status();
+                  })
+                  .ok());
+  return out;
+}
+
+/// 12 s of the simulated urban drive: IMU 200 Hz + LiDAR 10 Hz (3 s standing, then driving).
+inline const Recording& urban_recording() {
+  static const Recording recording = lidar_recording("examples/scenarios/urban_vehicle.yaml", 12.0);
   return recording;
 }
 

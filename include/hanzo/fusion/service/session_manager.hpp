@@ -32,11 +32,9 @@
 //     with kUnavailable and ApiError::served_by = that replica's URL (the REST front end
 //     forwards it there); trajectories and ended sessions are read from the storage by any
 //     replica. A session whose lease expired (its replica died) is claimed by the first replica
-//     that needs it (a request for it, or the lease keeper's next pass) and restarted there as a
-//     server restart restarts it: the stored trajectory and map versions stay, the filter
-//     starts afresh and the session is relocalized in its own newest stored map from its newest
-//     stored pose before its poses are stored again (poses before that are not stored, counted
-//     in hanzo_fusion_takeover_unplaced_poses_total; subscribers get them as initializing). A replica that finds another holding a
+//     that needs it (a request for it, or the lease keeper's next pass) and restarted there: its
+//     stored trajectory and map versions stay, and its filter starts from the newest stored pose
+//     (Frontend::resume), so its poses continue in the session's frame. A replica that finds another holding a
 //     session it served stops serving it. gRPC calls cannot be forwarded: serve_here() moves the
 //     session to the replica the load balancer sent them to (the holder hands it over: its poses
 //     committed, its map saved, its lease released) and restarts it there as after a takeover.
