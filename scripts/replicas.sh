@@ -54,6 +54,7 @@ s3rver="$repo/tests/s3server/node_modules/s3rver/bin/s3rver.js"
 [ -f "$s3rver" ] || { echo "replicas: $s3rver not found (scripts/install-deps.sh installs it)" >&2; exit 1; }
 mkdir -p "$dir"
 dir="$(cd "$dir" && pwd)"
+[ "$(id -u)" -eq 0 ] && chmod 755 "$dir"  # PostgreSQL runs as the postgres user (scripts/test-postgres.sh)
 trap 'echo "replicas: start failed; stopping what started" >&2; stop_all' ERR
 
 # PostgreSQL: one database for every replica.
@@ -99,7 +100,9 @@ for i in $(seq 1 "$replicas"); do
 done
 
 # nginx: REST requests of a session and its gRPC streams (metadata x-session-id) hash to the
-# same replica; other requests are spread. A replica that does not answer is skipped.
+# same replica (both upstreams list the replicas in the same order; a consistent hash would place
+# the REST and gRPC addresses on different rings); other requests are spread. A replica that does
+# not answer is skipped (the key is hashed again).
 user_line=""
 [ "$(id -u)" -eq 0 ] && user_line="user root;"
 mkdir -p "$dir/nginx"
@@ -128,11 +131,11 @@ http {
     default \$http_x_session_id;
   }
   upstream hanzo_rest {
-    hash \$hanzo_rest_key consistent;
+    hash \$hanzo_rest_key;
 $rest_servers    keepalive 64;
   }
   upstream hanzo_grpc {
-    hash \$hanzo_grpc_key consistent;
+    hash \$hanzo_grpc_key;
 $grpc_servers  }
   server {
     listen 127.0.0.1:$rest_port;

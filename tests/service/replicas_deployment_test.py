@@ -51,6 +51,7 @@ def main():
     args = parser.parse_args()
     cli = str(Path(args.cli).resolve())
     work = Path(tempfile.mkdtemp(prefix="hanzo_replicas_"))
+    work.chmod(0o755)  # as root, PostgreSQL runs as the postgres user and must reach its folder
     drive = work / "drive"
     subprocess.run([cli, "sim", "examples/scenarios/warehouse_robot.yaml", "--out", str(drive), "--duration", "12"], check=True,
                    cwd=REPO, stdout=subprocess.DEVNULL)
@@ -113,7 +114,7 @@ def main():
             fail(f"streaming into the taken-over session: {again.stderr}")
         status, session = request("GET", f"{rest}/v1/sessions/{session_id}")
         if status != 200 or session["replica"] != taken_over:
-            fail(f"after the second stream: {status} {session}")
+            fail(f"after the second stream the session is on {session.get('replica')}, not {taken_over}")
         print(json.dumps({"serving": serving, "taken_over_by": taken_over, "answered_after_kill_s": round(waited, 2),
                           "stored_before_kill": stored_before, "stored_now": session["stored_poses"]}))
     finally:
