@@ -606,12 +606,15 @@ struct SessionManager::Impl {
     return info;
   }
 
+  // When a lease taken or renewed at `now` runs out.
+  Timestamp lease_end(Timestamp now) const {
+    return Timestamp::from_nanoseconds(now.nanoseconds() + std::chrono::duration_cast<std::chrono::nanoseconds>(config.replica.lease).count());
+  }
+
   // Claims the session's lease for this replica when it is free or expired.
   ApiResult<SessionLease> claim(const std::string& id) {
     const Timestamp now = Timestamp::wall_clock_now();
-    const Timestamp until = Timestamp::from_nanoseconds(now.nanoseconds() +
-                                                        std::chrono::duration_cast<std::chrono::nanoseconds>(config.replica.lease).count());
-    auto lease = storage->claim_session(id, config.replica.id, config.replica.url, now, until);
+    auto lease = storage->claim_session(id, config.replica.id, config.replica.url, now, lease_end(now));
     if (!lease) return ApiError::from(ErrorCode::kInternal, lease.error());
     return std::move(lease).value();
   }
@@ -1194,10 +1197,8 @@ Result<std::vector<std::string>> SessionManager::keep_leases() {
   std::vector<std::string> taken_over;
   if (!impl.replicated()) return taken_over;
   const Timestamp now = Timestamp::wall_clock_now();
-  const Timestamp until = Timestamp::from_nanoseconds(now.nanoseconds() +
-                                                      std::chrono::duration_cast<std::chrono::nanoseconds>(impl.config.replica.lease).count());
   std::vector<std::string> held;
-  HANZO_ASSIGN_OR_RETURN(held, impl.storage->renew_leases(impl.config.replica.id, until));
+  HANZO_ASSIGN_OR_RETURN(held, impl.storage->renew_leases(impl.config.replica.id, impl.lease_end(now)));
   std::vector<std::string> local_active;
   {
     std::shared_lock lock(impl.sessions_mutex);
