@@ -21,12 +21,24 @@ dir="${2:-}"
 
 free_port() { /usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'; }
 
+# Stops what DIR lists, front to back: nginx, the replicas (they commit their poses and save
+# their maps first: up to 20 s each, then killed), the object store, PostgreSQL.
 stop_all() {
   [ -f "$dir/nginx.pid" ] && kill "$(cat "$dir/nginx.pid")" 2>/dev/null || true
-  for pid_file in "$dir"/replica-*/pid "$dir"/s3/pid; do
-    [ -f "$pid_file" ] && kill "$(cat "$pid_file")" 2>/dev/null || true
+  local pids=()
+  for pid_file in "$dir"/replica-*/pid; do
+    [ -f "$pid_file" ] && pids+=("$(cat "$pid_file")")
   done
-  sleep 0.5
+  [ ${#pids[@]} -gt 0 ] && kill "${pids[@]}" 2>/dev/null || true
+  for pid in "${pids[@]}"; do
+    for _ in $(seq 200); do
+      state="$(cut -d' ' -f3 "/proc/$pid/stat" 2>/dev/null || echo gone)"  # Z: exited, not yet reaped
+      [ "$state" = gone ] || [ "$state" = Z ] && break
+      sleep 0.1
+    done
+    kill -9 "$pid" 2>/dev/null || true
+  done
+  [ -f "$dir/s3/pid" ] && kill "$(cat "$dir/s3/pid")" 2>/dev/null || true
   [ -d "$dir/postgres" ] && bash "$here/test-postgres.sh" stop "$dir/postgres" || true
 }
 
