@@ -146,7 +146,7 @@ int run_serve(const Output& output, const ServeOptions& options) {
       return report_failure(output, {}, "--replica-id: set HANZO_FUSION_REPLICA_SECRET (16 characters or more, the same on every replica)");
     }
     replica_secret = secret;
-    manager_config.replica.request_handover = service::replica_handover_requester(replica_secret);
+    manager_config.replica.request_handover = service::replica_handover_requester(replica_secret, options.replica_id, url);
   } else if (!options.replica_url.empty()) {
     return report_failure(output, {}, "--replica-url: applies to a replica; set --replica-id too");
   }

@@ -150,8 +150,12 @@ class FusionServiceImpl final : public v1::FusionService::Service {
     while (!context.IsCancelled() && !stopping_) {
       auto value = queue.pop(std::chrono::milliseconds(100));
       if (!value) {
-        if (queue.closed()) return {grpc::StatusCode::FAILED_PRECONDITION, "the session ended"};
-        continue;
+        if (!queue.closed()) continue;
+        // Closed: the session ended, or (replicas) moved to another replica, where a retry gets it.
+        if (auto info = sessions_.session_info(principal.value(), session_id); !info && !info.error().served_by.empty()) {
+          return to_grpc(info.error());
+        }
+        return {grpc::StatusCode::FAILED_PRECONDITION, "the session ended"};
       }
       if (!writer.Write(msgs::to_proto(*value))) break;  // the client went away
     }

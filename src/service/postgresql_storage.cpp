@@ -268,6 +268,18 @@ class PostgresqlStorage final : public Storage {
     return lease;
   }
 
+  Result<bool> transfer_session(const std::string& session_id, const std::string& owner, const std::string& new_owner,
+                                const std::string& new_owner_url, Timestamp expires) override {
+    uint64_t changed = 0;
+    HANZO_RETURN_IF_ERROR(run(fmt::format("hand session '{}' over", session_id), [&] {
+      pqxx::work work(*connection_);
+      changed = work.exec_params("UPDATE session_leases SET owner = $1, owner_url = $2, expires_ns = $3 WHERE session_id = $4 AND owner = $5",
+                                 new_owner, new_owner_url, expires.nanoseconds(), session_id, owner).affected_rows();
+      work.commit();
+    }));
+    return changed == 1;
+  }
+
   Status release_session(const std::string& session_id, const std::string& owner) override {
     return run(fmt::format("release session '{}'", session_id), [&] {
       pqxx::work work(*connection_);

@@ -529,7 +529,13 @@ struct RestServer::Impl {
                  CRYPTO_memcmp(secret.data(), config.replica_secret.data(), secret.size()) != 0) {
                return send_error(response, {ErrorCode::kUnauthenticated, "X-Hanzo-Replica-Secret: missing or wrong", "X-Hanzo-Replica-Secret"});
              }
-             if (const ApiStatus handed = sessions->hand_over(request.matches[1]); !handed) return send_error(response, handed.error());
+             const json body = json::parse(request.body, nullptr, false);
+             if (!body.is_object() || !body.contains("replica") || !body["replica"].is_string() || !body.contains("url") || !body["url"].is_string()) {
+               return send_error(response, {ErrorCode::kInvalidArgument, "expected {\"replica\": ID, \"url\": URL} of the replica taking the session", "replica"});
+             }
+             if (const ApiStatus handed = sessions->hand_over(request.matches[1], body["replica"], body["url"]); !handed) {
+               return send_error(response, handed.error());
+             }
              send_json(response, 200, {{"handed_over", request.matches[1].str()}});
            }));
 
@@ -567,13 +573,14 @@ struct RestServer::Impl {
 
 RestServer::RestServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 
-std::function<Status(const SessionLease& lease)> replica_handover_requester(std::string secret) {
-  return [secret = std::move(secret)](const SessionLease& lease) -> Status {
+std::function<Status(const SessionLease& lease)> replica_handover_requester(std::string secret, std::string replica_id, std::string replica_url) {
+  const std::string body = json({{"replica", std::move(replica_id)}, {"url", std::move(replica_url)}}).dump();
+  return [secret = std::move(secret), body](const SessionLease& lease) -> Status {
     httplib::Client client(lease.owner_url);
     client.set_connection_timeout(2, 0);
     client.set_read_timeout(30, 0);  // the holder commits poses and saves the map first
     const httplib::Headers headers = {{kReplicaSecretHeader, secret}};
-    httplib::Result answer = client.Post(fmt::format("/v1/replica/sessions/{}/handover", lease.session_id), headers, "", "application/json");
+    httplib::Result answer = client.Post(fmt::format("/v1/replica/sessions/{}/handover", lease.session_id), headers, body, "application/json");
     if (!answer) {
       return Error(fmt::format("replica '{}' ({}) does not answer: {}", lease.owner, lease.owner_url, httplib::to_string(answer.error())));
     }

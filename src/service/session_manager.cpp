@@ -557,7 +557,7 @@ struct SessionManager::Impl {
         if (const Status handed = config.replica.request_handover(lease.value()); !handed) {
           logger()->warn("session {}: replica {} did not hand it over: {}", id, lease->owner, handed.error().message);
         }
-        lease = claim(id);  // released by its holder now
+        lease = claim(id);  // its holder handed the lease to this replica
         if (!lease) return lease.error();
       }
       if (lease->owner != config.replica.id) {
@@ -1243,7 +1243,7 @@ ApiStatus SessionManager::serve_here(const Principal& caller, const std::string&
   return api_ok();
 }
 
-ApiStatus SessionManager::hand_over(const std::string& session_id) {
+ApiStatus SessionManager::hand_over(const std::string& session_id, const std::string& to, const std::string& to_url) {
   Impl& impl = *impl_;
   std::shared_ptr<ManagedSession> managed;
   {
@@ -1263,9 +1263,10 @@ ApiStatus SessionManager::hand_over(const std::string& session_id) {
       if (const Status finished = managed->recording->finish(); !finished) logger()->error("session {}: recording: {}", session_id, finished.error().message);
     }
     if (const Status flushed = impl.recorder->flush(); !flushed) return ApiError::from(ErrorCode::kInternal, flushed.error());
-    if (const Status released = impl.storage->release_session(session_id, impl.config.replica.id); !released) {
-      return ApiError::from(ErrorCode::kInternal, released.error());
-    }
+    Result<bool> transferred = impl.storage->transfer_session(session_id, impl.config.replica.id, to, to_url,
+                                                              impl.lease_end(Timestamp::wall_clock_now()));
+    if (!transferred) return ApiError::from(ErrorCode::kInternal, transferred.error());
+    if (!*transferred) logger()->warn("session {}: its lease was no longer this replica's when it was handed over", session_id);
     managed->handed_over = true;
     managed->session.reset();
     Impl::close_subscribers(*managed);
@@ -1275,7 +1276,7 @@ ApiStatus SessionManager::hand_over(const std::string& session_id) {
     impl.sessions.erase(session_id);
   }
   impl.metrics->remove_series("session", session_id);
-  logger()->info("session {}: handed over to another replica", session_id);
+  logger()->info("session {}: handed over to replica {}", session_id, to);
   return api_ok();
 }
 

@@ -289,6 +289,15 @@ class SqliteStorage final : public Storage {
     return lease_locked(session_id);
   }
 
+  Result<bool> transfer_session(const std::string& session_id, const std::string& owner, const std::string& new_owner,
+                                const std::string& new_owner_url, Timestamp expires) override {
+    std::lock_guard lock(mutex_);
+    Statement transfer(database_, "UPDATE session_leases SET owner = ?, owner_url = ?, expires_ns = ? WHERE session_id = ? AND owner = ?");
+    transfer.bind(1, new_owner).bind(2, new_owner_url).bind(3, expires.nanoseconds()).bind(4, session_id).bind(5, owner);
+    if (transfer.step() != SQLITE_DONE) return failure(fmt::format("hand session '{}' over", session_id));
+    return sqlite3_changes(database_) == 1;
+  }
+
   Status release_session(const std::string& session_id, const std::string& owner) override {
     std::lock_guard lock(mutex_);
     Statement release(database_, "DELETE FROM session_leases WHERE session_id = ? AND owner = ?");

@@ -181,7 +181,7 @@ TEST(Replicas, ASessionMovesToTheReplicaItsStreamReaches) {
   config.storage_flush_interval = std::chrono::milliseconds(5);
   config.replica = {"b", "http://b.invalid:8083", std::chrono::milliseconds(1000), [&](const SessionLease& lease) -> Status {
                       EXPECT_EQ(lease.owner, "a");
-                      const ApiStatus handed = replica_a->hand_over(lease.session_id);
+                      const ApiStatus handed = replica_a->hand_over(lease.session_id, "b", "http://b.invalid:8083");
                       if (!handed) return Error(handed.error().message);
                       return ok_status();
                     }};

@@ -241,6 +241,15 @@ TEST_P(StorageTest, SessionLeasesHaveOneHolderAndExpire) {
   ASSERT_TRUE(replica_b->release_session("s1", "b").ok());
   EXPECT_FALSE(replica_a->session_lease("s1")->has_value());
 
+  // Handed over by its holder only, in one step.
+  ASSERT_TRUE(replica_a->claim_session("s3", "a", "http://a:8083", at(0), at(10)).ok());
+  EXPECT_FALSE(replica_b->transfer_session("s3", "b", "c", "http://c:8083", at(12)).value());
+  ASSERT_TRUE(replica_a->transfer_session("s3", "a", "c", "http://c:8083", at(12)).value());
+  const SessionLease handed = replica_b->session_lease("s3")->value();
+  EXPECT_EQ(handed.owner, "c");
+  EXPECT_EQ(handed.owner_url, "http://c:8083");
+  EXPECT_EQ(handed.expires, at(12));
+
   // A race for an expired lease from two threads: one winner, both see the same holder.
   ASSERT_TRUE(replica_a->claim_session("s2", "a", "http://a:8083", at(0), at(1)).ok());
   for (int round = 0; round < 20; ++round) {

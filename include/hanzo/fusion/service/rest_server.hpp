@@ -58,9 +58,10 @@ class RestServer {
   std::unique_ptr<Impl> impl_;
 };
 
-/// ReplicaConfig::request_handover over REST: POST {owner_url}/v1/replica/sessions/{id}/handover
-/// with the replicas' shared secret; fails naming the replica and its answer.
-std::function<Status(const SessionLease& lease)> replica_handover_requester(std::string secret);
+/// ReplicaConfig::request_handover over REST for the replica `replica_id` (at `replica_url`):
+/// POST {owner_url}/v1/replica/sessions/{id}/handover {"replica", "url"} with the replicas'
+/// shared secret; fails naming the replica and its answer.
+std::function<Status(const SessionLease& lease)> replica_handover_requester(std::string secret, std::string replica_id, std::string replica_url);
 
 /// The OpenAPI 3 document of the REST API (docs/openapi.json, compiled in).
 std::string_view openapi_document();

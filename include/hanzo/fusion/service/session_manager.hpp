@@ -70,8 +70,9 @@ struct ReplicaConfig {
   std::string id;   ///< unique among the replicas; "" runs a single server (every active stored session is restored at start)
   std::string url;  ///< where this replica answers REST ("http://host:port"): other replicas forward its sessions' requests there
   std::chrono::milliseconds lease{10000};  ///< a session lease's length; renewed every lease/3, taken over after it expires
-  /// Asks the replica holding `lease` to hand its session over (hand_over() there; the REST front
-  /// end's replica_handover_requester). Null: a session another replica serves stays there.
+  /// Asks the replica holding `lease` to hand its session over to this one (hand_over() there;
+  /// the REST front end's replica_handover_requester). Null: a session another replica serves
+  /// stays there.
   std::function<Status(const SessionLease& lease)> request_handover;
 };
 
@@ -249,11 +250,11 @@ class SessionManager {
   /// claimed; held by another live replica, that one is asked to hand it over. kUnavailable
   /// with served_by when it cannot be moved. A no-op on a single server.
   ApiStatus serve_here(const Principal& caller, const std::string& session_id);
-  /// Replicas: stops serving a session so that another replica can take it at once: its queued
-  /// poses committed, its map saved, its recording finished, its lease released; its open
-  /// streams and subscriptions end (their clients reconnect through the load balancer).
-  /// kNotFound when this replica does not serve it.
-  ApiStatus hand_over(const std::string& session_id);
+  /// Replicas: stops serving a session and hands its lease to replica `to` (at `to_url`), which
+  /// serves it from then on: its queued poses committed, its map saved, its recording finished;
+  /// its open streams and subscriptions end with kUnavailable (their clients reconnect through
+  /// the load balancer). kNotFound when this replica does not serve it.
+  ApiStatus hand_over(const std::string& session_id, const std::string& to, const std::string& to_url);
 
   std::size_t active_sessions() const;
   std::string_view storage_backend() const;

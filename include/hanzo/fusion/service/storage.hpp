@@ -113,6 +113,11 @@ class Storage {
   virtual Result<std::vector<std::string>> renew_leases(const std::string& owner, Timestamp expires) = 0;
   /// The session's lease; nullopt when no replica ever claimed it or it was released.
   virtual Result<std::optional<SessionLease>> session_lease(const std::string& session_id) = 0;
+  /// Hands the lease from `owner` to another replica (`new_owner` at `new_owner_url`, until
+  /// `expires`) in one statement, so that no third replica can claim it in between; false when
+  /// `owner` does not hold it.
+  virtual Result<bool> transfer_session(const std::string& session_id, const std::string& owner, const std::string& new_owner,
+                                        const std::string& new_owner_url, Timestamp expires) = 0;
   /// Gives the lease up (the session ended or its owner shuts down); no error when `owner`
   /// does not hold it.
   virtual Status release_session(const std::string& session_id, const std::string& owner) = 0;
