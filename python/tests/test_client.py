@@ -342,3 +342,54 @@ def test_recorded_session_gives_back_its_sensor_log(server, tmp_path):
     with pytest.raises(FusionError) as viewer_missing:
         FusionClient(server["rest"], token=VIEWER_TOKEN).recording("no-such-session")
     assert viewer_missing.value.status == 404
+
+
+def _free_port():
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_grpc_streams_reconnect_after_the_server_dies(server, tmp_path):
+    """A server killed (kill -9) mid-stream and started again on its ports: SensorStreams reopens
+    its streams with backoff, sends its last second again and the drive goes on into the session."""
+    streaming = pytest.importorskip("hanzo.fusion.streaming")
+    from hanzo.fusion import read_log
+
+    sim = server["sim"]
+    rest_port, grpc_port = _free_port(), _free_port()
+    command = [BINARY, "serve", "--insecure-no-auth", "--port", str(rest_port), "--grpc-port", str(grpc_port), "--bind", "127.0.0.1",
+               "--data-dir", str(tmp_path / "data"), "--json"]
+
+    def start():
+        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        json.loads(process.stdout.readline())
+        return process
+
+    first = start()
+    client = FusionClient(f"http://127.0.0.1:{rest_port}")
+    session = client.create_session((sim / "fusion.yaml").read_text(), (sim / "calibration.yaml").read_text(), name="reconnecting")
+    sensors = {"/sensors/imu": "imu", "/sensors/wheels": "wheels"}
+    records = [r for r in read_log(str(sim / "sensors.mcap")) if r.topic in sensors]
+    half = len(records) // 2
+    restarted = []
+    try:
+        with streaming.SensorStreams(f"127.0.0.1:{grpc_port}", session["id"], reconnect_timeout=30.0) as streams:
+            for index, record in enumerate(records):
+                if index == half:
+                    first.kill()
+                    first.wait()
+                    threading.Timer(1.0, lambda: restarted.append(start())).start()
+                streams.send(sensors[record.topic], record.message)
+                if index > half:
+                    time.sleep(0.0005)  # about real time x 10: the restart comes while sending
+        assert streams.reconnects >= 1
+        state = FusionClient(f"http://127.0.0.1:{rest_port}").session(session["id"])
+        received = sum(s["received"] for s in state["sensors"])
+        # The restarted server's session took the second half (and the replayed last second).
+        assert received >= len(records) - half, state["sensors"]
+    finally:
+        for process in restarted:
+            process.terminate()
+            process.wait(timeout=30)

@@ -16,6 +16,7 @@ StreamError from send() or close() with the gRPC status and the server's message
 
 from __future__ import annotations
 
+import collections
 import queue
 import threading
 import time
@@ -205,15 +206,26 @@ class _SensorStream:
             raise self.error
 
 
+# Statuses after which a stream is reopened: the server or its replica went away, a proxy reset
+# the stream, or the session moved to another replica.
+_TRANSIENT = {grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.UNKNOWN, grpc.StatusCode.INTERNAL, grpc.StatusCode.CANCELLED,
+              grpc.StatusCode.ABORTED}
+
+
 class SensorStreams:
     """Streams of one session, one per sensor, each opened on its sensor's first message.
 
     address: "host:port" of the server's gRPC port (8084 by default); token: a bearer token when
     the server checks them; root_certificates: PEM bytes for a TLS server (None: plaintext).
     `poses` collects the PoseEstimate dataclasses the server sends back (every stream's).
+    A stream the server ends with a transient status (UNAVAILABLE: its replica died or the session
+    moved to another replica) is reopened with backoff (0.1 s doubling to 2 s) for up to
+    `reconnect_timeout` s without a pose coming back (0: never), and its messages of the last
+    `replay` s are sent again; `reconnects` counts the reopened streams.
     """
 
-    def __init__(self, address: str, session_id: str, token: Optional[str] = None, root_certificates: Optional[bytes] = None):
+    def __init__(self, address: str, session_id: str, token: Optional[str] = None, root_certificates: Optional[bytes] = None,
+                 reconnect_timeout: float = 30.0, replay: float = 1.0):
         if root_certificates is None:
             self._channel = grpc.insecure_channel(address)
         else:
@@ -225,15 +237,57 @@ class SensorStreams:
         self._streams: Dict[str, _SensorStream] = {}
         self._lock = threading.Lock()
         self.poses: List[messages.PoseEstimate] = []
+        self.reconnects = 0
+        self._reconnect_timeout = reconnect_timeout
+        self._replay_ns = int(replay * 1e9)
+        self._recent: Dict[str, collections.deque] = {}  # sensor -> (timestamp_ns, request) of the last `replay` s
+        self._failing_since: Optional[float] = None
+        self._poses_when_failing = 0
 
     def send(self, sensor: str, message: messages.Message) -> None:
         """Queues `message` on `sensor`'s stream (the sensor name of the session's configuration)."""
         request = to_proto(message)
+        method = _METHODS[type(message)]
+        if self._reconnect_timeout > 0:
+            recent = self._recent.setdefault(sensor, collections.deque())
+            recent.append((message.timestamp_ns, request))
+            while len(recent) > 1 and message.timestamp_ns - recent[0][0] > self._replay_ns:
+                recent.popleft()
         stream = self._streams.get(sensor)
         if stream is None:
-            stream = _SensorStream(self._stub, _METHODS[type(message)], sensor, self._metadata, self.poses, self._lock)
+            stream = _SensorStream(self._stub, method, sensor, self._metadata, self.poses, self._lock)
             self._streams[sensor] = stream
-        stream.put(request)
+        try:
+            stream.put(request)
+        except StreamError as error:
+            del self._streams[sensor]
+            if self._reconnect_timeout <= 0 or error.code not in _TRANSIENT:
+                raise
+            self._reconnect(sensor, method, error)
+
+    def _reconnect(self, sensor: str, method: str, error: StreamError) -> None:
+        """Reopens `sensor`'s stream with backoff and sends its recent messages again."""
+        with self._lock:
+            poses = len(self.poses)
+        if self._failing_since is not None and poses > self._poses_when_failing:
+            self._failing_since = None  # the last reconnect worked: poses came back since
+        if self._failing_since is None:
+            self._failing_since, self._poses_when_failing = time.monotonic(), poses
+        backoff = 0.1
+        while error.code in _TRANSIENT and time.monotonic() + backoff < self._failing_since + self._reconnect_timeout:
+            time.sleep(backoff)
+            backoff = min(2.0, backoff * 2)
+            stream = _SensorStream(self._stub, method, sensor, self._metadata, self.poses, self._lock)
+            try:
+                for _, request in self._recent[sensor]:
+                    stream.put(request)
+            except StreamError as again:
+                error = again
+                continue
+            self._streams[sensor] = stream
+            self.reconnects += 1
+            return
+        raise error
 
     def send_log(self, path: str, sensors: Dict[str, str], rate: Optional[float] = 1.0) -> Dict[str, int]:
         """Sends every message of a sensor log whose topic `sensors` maps to a sensor name, in
