@@ -105,9 +105,8 @@ def main():
         if status != 200 or len(page["poses"]) < stored_before:
             fail(f"poses stored before the kill were lost: {len(page['poses'])} < {stored_before}")
 
-        # The drive again, into the same session on its new replica (later times: the log shifted
-        # by the first drive's length is what a robot would send next; here the same log is
-        # refused as too old except where the restarted filter takes it).
+        # A stream into the same session through nginx reaches its new replica (the log's times
+        # are older than the session's: what it takes or refuses is not checked here).
         again = subprocess.run([cli, "stream", str(drive / "sensors.mcap"), "--server", f"127.0.0.1:{grpc_port}", "--rest", rest,
                                 "--session", session_id, "--rate", "max", "--json"], cwd=REPO, capture_output=True, text=True, timeout=600)
         if again.returncode != 0:
