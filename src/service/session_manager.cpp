@@ -1223,7 +1223,10 @@ Result<std::vector<std::string>> SessionManager::keep_leases() {
     }
     std::optional<SessionLease> lease;
     HANZO_ASSIGN_OR_RETURN(lease, impl.storage->session_lease(record.id));
-    if (lease && lease->expires >= now && lease->owner != impl.config.replica.id) continue;
+    // Another replica's lease: left for one more lease period after it expired, so that the
+    // replica its clients reconnect to (through the load balancer) claims it on their request
+    // and the session restarts once, where its streams arrive.
+    if (lease && lease->owner != impl.config.replica.id && impl.lease_end(lease->expires) >= now) continue;
     auto located = impl.locate(record.id);
     if (located && !located.value()->record.ended) taken_over.push_back(record.id);
     else if (!located && located.error().code != ErrorCode::kUnavailable) logger()->warn("session {}: not taken over: {}", record.id, located.error().message);

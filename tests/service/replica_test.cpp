@@ -114,7 +114,7 @@ TEST(Replicas, ASessionOfAKilledReplicaIsTakenOverAndContinuesInItsFrame) {
   waitpid(child, nullptr, 0);
   guard.pid = -1;
   std::vector<std::string> taken_over;
-  for (int pass = 0; pass < 100 && taken_over.empty(); ++pass) {  // the 1 s lease runs out
+  for (int pass = 0; pass < 200 && taken_over.empty(); ++pass) {  // the 1 s lease runs out, then one more
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
     auto kept = replica_b->keep_leases();
     ASSERT_TRUE(kept.ok()) << kept.error().message;
@@ -151,8 +151,10 @@ TEST(Replicas, ASessionOfAKilledReplicaIsTakenOverAndContinuesInItsFrame) {
   RecordProperty("takeover_max_gap_m", std::to_string(largest_gap));
   std::printf("after the takeover: %zu poses compared, mean %.3f m, max %.3f m from the uninterrupted run\n", compared, sum_gap / compared,
               largest_gap);
-  EXPECT_LT(sum_gap / compared, 0.05);  // measured: 0.018 m mean, 0.044 m at most over the 10 s after the takeover
-  EXPECT_LT(largest_gap, 0.15);
+  // Measured 0.018-0.020 m mean, 0.044-0.062 m at most over the 10 s after the takeover; the
+  // session registers sweeps in real time, so a loaded machine skips some: room for that.
+  EXPECT_LT(sum_gap / compared, 0.10);
+  EXPECT_LT(largest_gap, 0.30);
 }
 
 // A gRPC stream reaching another replica than the one serving its session (the load balancer's

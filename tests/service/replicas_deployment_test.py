@@ -112,10 +112,10 @@ def main():
         if again.returncode != 0:
             fail(f"streaming into the taken-over session: {again.stderr}")
         status, session = request("GET", f"{rest}/v1/sessions/{session_id}")
-        if status != 200 or session["replica"] != taken_over:
-            fail(f"after the second stream the session is on {session.get('replica')}, not {taken_over}")
-        print(json.dumps({"serving": serving, "taken_over_by": taken_over, "answered_after_kill_s": round(waited, 2),
-                          "stored_before_kill": stored_before, "stored_now": session["stored_poses"]}))
+        if status != 200 or session["replica"] in (None, serving):
+            fail(f"after the second stream: {status}, replica {session.get('replica')}")
+        print(json.dumps({"serving": serving, "taken_over_by": taken_over, "after_second_stream": session["replica"],
+                          "answered_after_kill_s": round(waited, 2), "stored_before_kill": stored_before, "stored_now": session["stored_poses"]}))
     finally:
         subprocess.run(["bash", str(REPO / "scripts" / "replicas.sh"), "stop", str(deployment)], env=environment)
 

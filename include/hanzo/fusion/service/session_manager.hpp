@@ -32,7 +32,8 @@
 //     with kUnavailable and ApiError::served_by = that replica's URL (the REST front end
 //     forwards it there); trajectories and ended sessions are read from the storage by any
 //     replica. A session whose lease expired (its replica died) is claimed by the first replica
-//     that needs it (a request for it, or the lease keeper's next pass) and restarted there: its
+//     that needs it (a request for it, or a lease keeper pass one lease period after the expiry)
+//     and restarted there: its
 //     stored trajectory and map versions stay, and its filter starts from the newest stored pose
 //     (Frontend::resume), so its poses continue in the session's frame. A replica that finds another holding a
 //     session it served stops serving it. gRPC calls cannot be forwarded: serve_here() moves the
@@ -243,8 +244,8 @@ class SessionManager {
   /// Blocks until every pose queued so far is committed (or failed); for shutdown and tests.
   Status flush_storage();
   /// Replicas: renews this replica's leases, stops serving sessions another replica took and
-  /// takes over the sessions whose lease expired (the lease keeper thread calls it every
-  /// lease/3; tests call it directly). Returns the sessions taken over. A no-op on a single server.
+  /// takes over the sessions whose lease expired more than one lease period ago (the lease
+  /// keeper thread calls it every lease/3; tests call it directly). Returns the sessions taken over. A no-op on a single server.
   Result<std::vector<std::string>> keep_leases();
   /// Replicas: makes this replica serve the session (kOk when it does): free or expired, it is
   /// claimed; held by another live replica, that one is asked to hand it over. kUnavailable
