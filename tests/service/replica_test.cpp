@@ -113,15 +113,18 @@ TEST(Replicas, ASessionOfAKilledReplicaIsTakenOverAndContinuesInItsFrame) {
   kill(child, SIGKILL);
   waitpid(child, nullptr, 0);
   guard.pid = -1;
-  std::vector<std::string> taken_over;
-  for (int pass = 0; pass < 200 && taken_over.empty(); ++pass) {  // the 1 s lease runs out, then one more
+  // The 1 s lease runs out, then one more period: b's lease keeper (its thread, or this call)
+  // takes the session over; the session list says who serves it without asking for it.
+  const auto served_by_b = [&] {
+    const auto sessions = replica_b->list_sessions(kRobot);
+    return sessions.ok() && sessions->size() == 1 && sessions->front().replica == "b";
+  };
+  for (int pass = 0; pass < 200 && !served_by_b(); ++pass) {
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
     auto kept = replica_b->keep_leases();
     ASSERT_TRUE(kept.ok()) << kept.error().message;
-    taken_over = kept.value();
   }
-  ASSERT_EQ(taken_over, std::vector<std::string>{id});
-  EXPECT_EQ(replica_b->session_info(kRobot, id)->replica, "b");
+  ASSERT_TRUE(served_by_b()) << "replica b did not take the session over";
 
   for (std::size_t i = half; i < recording.messages.size(); ++i) {
     const ApiStatus pushed = replica_b->push(kRobot, id, recording.messages[i].sensor, recording.messages[i].message);
