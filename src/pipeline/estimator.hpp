@@ -114,7 +114,7 @@ class Estimator {
   EventOutcome process(const Event& event, UpdateObserver* observer);
 
   bool initialized() const { return initialized_; }
-  /// Starts the filter at `state` at the first IMU sample instead of aligning (Frontend::resume):
+  /// Starts the filter at `state` at the first IMU sample, without a static alignment (Frontend::resume):
   /// its attitude, and its position and world-frame velocity carried to the sample's time at
   /// constant velocity; biases start at zero with their initial uncertainty. Before
   /// initialization only (ignored after).
@@ -248,7 +248,7 @@ class Estimator {
   /// unknown, so the heading comes from in-motion alignment; until then the position is held at
   /// each GNSS fix and wheels wait.
   bool moving_start_ = false;
-  /// Frontend::resume: the state the filter starts at instead of aligning.
+  /// Frontend::resume: the state the filter starts at, without a static alignment.
   std::optional<msgs::PoseEstimate> resume_state_;
   /// While the heading is pending: the recent GNSS track (world) and IMU samples, and the
   /// wheels' latest forward speed (its sign says whether the vehicle reverses).

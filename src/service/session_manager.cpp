@@ -634,7 +634,7 @@ struct SessionManager::Impl {
     close_subscribers(*managed);
     metrics->remove_series("session", id);
     lost_counter->increment();
-    logger()->error("session {}: another replica serves it now (this replica's lease ran out); no longer served here", id);
+    logger()->error("session {}: another replica holds its lease (this replica's ran out); this replica stops serving it", id);
   }
 
   void run_lease_keeper(SessionManager& manager) {
@@ -1269,7 +1269,7 @@ ApiStatus SessionManager::hand_over(const std::string& session_id, const std::st
     Result<bool> transferred = impl.storage->transfer_session(session_id, impl.config.replica.id, to, to_url,
                                                               impl.lease_end(Timestamp::wall_clock_now()));
     if (!transferred) return ApiError::from(ErrorCode::kInternal, transferred.error());
-    if (!*transferred) logger()->warn("session {}: its lease was no longer this replica's when it was handed over", session_id);
+    if (!*transferred) logger()->warn("session {}: another replica held its lease when it was handed over", session_id);
     managed->handed_over = true;
     managed->session.reset();
     Impl::close_subscribers(*managed);
