@@ -40,7 +40,7 @@ packages=(
   pybind11-dev python3-dev python3-numpy python3-pytest python3-pip python3-venv python3-setuptools python3-wheel
   python3-grpcio python3-protobuf python3-mypy
   # hanzo.fusion.batch: many logs mapped on a Dask cluster
-  python3-dask python3-distributed
+  python3-dask python3-distributed python3-yaml
   # service: REST (cpp-httplib), storage (SQLite, PostgreSQL client + server for the tests), load
   # generator of the REST benchmark
   libcpp-httplib-dev libbrotli-dev libsqlite3-dev libpq-dev libpqxx-dev postgresql openssl curl wrk

@@ -353,6 +353,12 @@ nlohmann::json describe_map(const msgs::FusionMap& map) {
     layers["neural_field"] = {{"encoding", map.neural_field->encoding}, {"bytes", map.neural_field->model.size()},
                               {"trained", trained(map.neural_field->provenance)}};
   }
+  if (map.lidar_keyframes) {
+    std::size_t points = 0;
+    for (const msgs::LidarKeyframe& keyframe : map.lidar_keyframes->keyframes) points += keyframe.points.size();
+    layers["lidar_keyframes"] = {{"keyframes", map.lidar_keyframes->keyframes.size()}, {"points", points},
+                                 {"sources", map.lidar_keyframes->sources}};
+  }
   result["layers"] = layers;
   return result;
 }
@@ -400,6 +406,11 @@ std::string describe_map_text(const nlohmann::json& description) {
     const auto& n = layers["neural_field"];
     text += fmt::format("  neural field: {} ({:.1f} MB), {}\n", n["encoding"].get<std::string>(), static_cast<double>(n["bytes"].get<std::size_t>()) / 1e6,
                         trained_text(n["trained"]));
+  }
+  if (layers.contains("lidar_keyframes")) {
+    const auto& k = layers["lidar_keyframes"];
+    text += fmt::format("  lidar keyframes: {} ({} points) from {} source(s)\n", k["keyframes"].get<std::size_t>(), k["points"].get<std::size_t>(),
+                        k["sources"].size());
   }
   return text;
 }

@@ -20,6 +20,7 @@
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/pipeline/log_replay.hpp"
 #include "hanzo/fusion/pipeline/session.hpp"
+#include "hanzo/fusion/pipeline/session_merge.hpp"
 #include "message_conversion.hpp"
 
 namespace py = pybind11;
@@ -169,10 +170,10 @@ class PySession {
     return rows;
   }
 
-  void save_map(const std::string& path, const std::optional<std::string>& log_uri) const {
+  void save_map(const std::string& path, const std::optional<std::string>& log_uri, const std::string& map_id) const {
     if (!replayed_) throw py::value_error("save_map: only a session that replayed a log (replay()) records its map's provenance");
     const Timestamp created = poses_.empty() ? Timestamp() : poses_.back().timestamp;
-    Result<msgs::FusionMap> map = pipeline::replayed_map(*session_, "replay", created, config_path_, *replayed_, HANZO_FUSION_VERSION);
+    Result<msgs::FusionMap> map = pipeline::replayed_map(*session_, map_id, created, config_path_, *replayed_, HANZO_FUSION_VERSION);
     if (!map) throw py::value_error(map.error().message);
     if (log_uri) map->provenance.input_logs.back().uri = *log_uri;
     if (Status written = maps::write_fusion_map(path, *map); !written) throw py::value_error(written.error().message);
@@ -224,6 +225,58 @@ class PySession {
   std::optional<std::string> replayed_;  // the log replay() read
 };
 
+/// pipeline::merge_sessions of FusionMap files, the result written to `out`.
+py::dict merge_maps(const std::vector<std::string>& paths, const std::string& out, const std::string& map_id, bool indoor) {
+  std::vector<msgs::FusionMap> inputs;
+  for (const std::string& path : paths) {
+    Result<msgs::FusionMap> map = maps::read_fusion_map(path);
+    if (!map) throw py::value_error(map.error().message);
+    inputs.push_back(std::move(map).value());
+  }
+  pipeline::SessionMergeConfig config;
+  if (indoor) {
+    config.odometry.map.voxel_size = 0.5;
+    config.odometry.source_voxel_size = 0.25;
+  }
+  Result<pipeline::SessionMergeResult> merged = [&] {
+    py::gil_scoped_release released;
+    return pipeline::merge_sessions(inputs, config);
+  }();
+  if (!merged) throw py::value_error(merged.error().message);
+  merged->merged.map_id = map_id;
+  if (Status written = maps::write_fusion_map(out, merged->merged); !written) throw py::value_error(written.error().message);
+  py::list joins;
+  for (const pipeline::SessionJoin& join : merged->joins) {
+    py::dict entry;
+    entry["map"] = paths[join.map];
+    entry["joined_to"] = paths[join.joined_to];
+    entry["loops"] = join.loops;
+    entry["T_joined_map"] = join.T_joined_map.matrix();
+    joins.append(entry);
+  }
+  const msgs::LidarKeyframeLayer& keyframes = *merged->merged.lidar_keyframes;
+  PoseRows keyframe_poses(static_cast<Eigen::Index>(keyframes.keyframes.size()), 8);
+  py::list keyframe_sources;
+  for (std::size_t k = 0; k < keyframes.keyframes.size(); ++k) {
+    const msgs::LidarKeyframe& keyframe = keyframes.keyframes[k];
+    const Eigen::Quaterniond& q = keyframe.T_world_lidar.orientation;
+    keyframe_poses.row(static_cast<Eigen::Index>(k)) << keyframe.time.seconds(), keyframe.T_world_lidar.position.transpose(), q.w(), q.x(), q.y(), q.z();
+    keyframe_sources.append(keyframes.sources.at(keyframe.source));
+  }
+  py::dict result;
+  result["map"] = out;
+  result["joins"] = joins;
+  result["keyframe_poses"] = keyframe_poses;
+  result["keyframe_sources"] = keyframe_sources;
+  result["keyframes"] = merged->keyframes;
+  result["queries"] = merged->queries;
+  result["candidates"] = merged->candidates;
+  result["verified"] = merged->verified;
+  result["inter_session_loops"] = merged->inter_session_loops;
+  result["points"] = merged->merged.points ? merged->merged.points->points.size() : 0;
+  return result;
+}
+
 }  // namespace
 
 void bind_session(py::module_& module) {
@@ -252,9 +305,14 @@ void bind_session(py::module_& module) {
       .def("poses", &PySession::poses, "Real-time poses as emitted: N x 8 (t, x, y, z, qw, qx, qy, qz), body in the world")
       .def("optimized_trajectory", &PySession::optimized_trajectory, "The same poses moved onto the optimized graph: N x 8")
       .def("map_points", &PySession::map_points, "The map's points: N x 3 (world, m)")
-      .def("save_map", &PySession::save_map, py::arg("path"), py::arg("log_uri") = std::nullopt,
+      .def("save_map", &PySession::save_map, py::arg("path"), py::arg("log_uri") = std::nullopt, py::arg("map_id") = "replay",
            "After replay(): writes the session's FusionMap (every layer, the configuration and the log's SHA-256 as provenance, "
            "the log named by log_uri when given, e.g. where a local copy came from; hanzo-fusion map info reads it) to a .fmap file; "
            "raises ValueError when it cannot be written")
       .def("summary", &PySession::summary, "Counts per sensor and of the mapping");
+  module.def("merge_maps", &merge_maps, py::arg("maps"), py::arg("out"), py::arg("map_id") = "merged", py::arg("indoor") = false,
+             "Joins FusionMap files with LiDAR keyframes (written by sessions) into one optimized keyframe graph without an initial guess "
+             "(Scan Context candidates, registration, inter-session loops; the first map's frame) and writes the merged map to out. "
+             "Returns the joins, counts and the merged keyframes (keyframe_poses: rows t, x, y, z, qw, qx, qy, qz of T_world_lidar; "
+             "keyframe_sources: the map id of each); raises ValueError when a map cannot be read or shares no place with the others");
 }

@@ -57,13 +57,36 @@ def test_logs_mapped_on_two_workers_equal_the_in_process_replay(logs, tmp_path):
         assert summary["session"]["scans_registered"] > 50
 
 
+def test_the_maps_of_the_logs_are_merged_into_one_keyframe_graph(logs, tmp_path):
+    """Two patrols of the same aisle, mapped on two workers, then joined by a merge task: every
+    keyframe of both in one map, with the logs as its sources and provenance."""
+    seen = []
+    results = map_logs([job(folder) for folder in logs[:2]], str(tmp_path / "maps"), workers=2, merge="merged", indoor=True,
+                       progress=lambda done, total, r: seen.append((done, total)))
+    assert [r["name"] for r in results] == ["patrol1", "patrol2", "merged"]
+    assert seen[-1] == (3, 3)
+    merged = results[-1]
+    assert merged["merged"] == [results[0]["map"], results[1]["map"]]
+    assert merged["joins"] == [{"map": results[1]["map"], "joined_to": results[0]["map"], "loops": merged["joins"][0]["loops"]}]
+    assert merged["inter_session_loops"] >= 3
+    info = json.loads(subprocess.run([CLI, "map", "info", merged["map"], "--json"], check=True, capture_output=True, text=True).stdout)
+    keyframes = info["layers"]["lidar_keyframes"]
+    assert keyframes["sources"] == ["patrol1", "patrol2"]
+    single = [json.loads(subprocess.run([CLI, "map", "info", r["map"], "--json"], check=True, capture_output=True, text=True).stdout) for r in results[:2]]
+    assert keyframes["keyframes"] == sum(m["layers"]["lidar_keyframes"]["keyframes"] for m in single)
+    assert len(info["inputs"]) == 2
+    for entry, folder in zip(info["inputs"], logs[:2]):
+        assert entry["uri"].endswith(str(folder / "sensors.mcap"))
+    assert merged["keyframes"] == keyframes["keyframes"]
+
+
 def test_a_broken_log_is_reported_by_name_after_the_others(logs, tmp_path):
     broken = tmp_path / "broken"
     broken.mkdir()
     data = (logs[0] / "sensors.mcap").read_bytes()
     (broken / "sensors.mcap").write_bytes(data[: len(data) // 3])
     jobs = [job(logs[0]), MappingJob(str(broken / "sensors.mcap"), str(logs[0] / "fusion.yaml"), str(logs[0] / "calibration.yaml"))]
-    with pytest.raises(BatchMappingError, match="1 of 2 logs failed: broken: ") as failure:
+    with pytest.raises(BatchMappingError, match="1 of 2 tasks failed: broken: ") as failure:
         map_logs(jobs, str(tmp_path / "maps"), workers=2)
     assert "error" not in failure.value.results[0] and os.path.exists(failure.value.results[0]["map"])
     assert "sensors.mcap" in failure.value.results[1]["error"]

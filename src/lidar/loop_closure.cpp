@@ -101,38 +101,28 @@ std::optional<LoopClosure> LoopClosureDetector::detect(const PoseLookup& T_world
   return *verified;
 }
 
-Result<LoopClosure> LoopClosureDetector::verify(std::size_t from, std::size_t to, const SE3& guess,
-                                                const PoseLookup& T_world_keyframe) const {
-  if (from >= keyframes_.size() || to >= keyframes_.size() || from == to) {
-    return Error(fmt::format("loop closure {} -> {}: unknown keyframe (there are {})", from, to, keyframes_.size()));
-  }
-  if (!guess.matrix().allFinite()) return Error("loop closure: the guess is not finite");
-  // The submap around `from` in its frame, at two resolutions: 3x coarser voxels (neighbours
-  // within 3 voxels) pull in a guess metres off, the odometry's map resolution refines.
-  const cloud::VoxelHashMapConfig& fine_config = odometry_.map;
+Result<SubmapRegistration> register_to_submap(const std::vector<SubmapKeyframe>& submap, const std::vector<Eigen::Vector3f>& query,
+                                              const SE3& guess, const LoopClosureConfig& config, const LidarOdometryConfig& odometry) {
+  if (!guess.matrix().allFinite()) return Error("the guess is not finite");
+  // The submap at two resolutions: 3x coarser voxels (neighbours within 3 voxels) pull in a
+  // guess metres off, the odometry's map resolution refines.
+  const cloud::VoxelHashMapConfig& fine_config = odometry.map;
   cloud::VoxelHashMap coarse({.voxel_size = 3.0 * fine_config.voxel_size, .max_points_per_voxel = 4 * fine_config.max_points_per_voxel,
                               .min_point_spacing = -1.0, .max_distance = 1e6});
   cloud::VoxelHashMap fine({.voxel_size = fine_config.voxel_size, .max_points_per_voxel = fine_config.max_points_per_voxel,
                             .min_point_spacing = fine_config.min_point_spacing, .max_distance = 1e6});
-  const SE3 T_from_world = T_world_keyframe(from).inverse();
-  const std::size_t half = static_cast<std::size_t>(config_.submap_keyframes);
-  const std::size_t first = from >= half ? from - half : 0;
-  const std::size_t last = std::min(keyframes_.size() - 1, from + half);
-  for (std::size_t j = first; j <= last; ++j) {
-    if (j >= to && from < to) break;  // only keyframes older than the query
-    if (j == to) continue;
-    const SE3 T = T_from_world * T_world_keyframe(j);
-    cloud::PointCloud keyframe;
-    keyframe.positions = keyframes_[j].points;
-    const std::vector<Eigen::Vector3f> points = cloud::transformed(keyframe, T).positions;
-    coarse.add(points, {}, T.translation());
-    fine.add(points, {}, T.translation());
+  for (const SubmapKeyframe& keyframe : submap) {
+    cloud::PointCloud cloud;
+    cloud.positions = *keyframe.points;
+    const std::vector<Eigen::Vector3f> points = cloud::transformed(cloud, keyframe.T_submap_keyframe).positions;
+    coarse.add(points, {}, keyframe.T_submap_keyframe.translation());
+    fine.add(points, {}, keyframe.T_submap_keyframe.translation());
   }
   cloud::PointCloud scan;
-  scan.positions = keyframes_[to].points;
-  const std::vector<Eigen::Vector3f> source = cloud::voxel_downsample(scan, odometry_.source_voxel_size).positions;
-  if (source.empty()) return Error(fmt::format("loop closure {} -> {}: keyframe {} has no points", from, to, to));
-  SurfaceRegistrationConfig registration = odometry_.registration;
+  scan.positions = query;
+  const std::vector<Eigen::Vector3f> source = cloud::voxel_downsample(scan, odometry.source_voxel_size).positions;
+  if (source.empty()) return Error("the query has no points");
+  SurfaceRegistrationConfig registration = odometry.registration;
   registration.prior_translation_sigma = 10.0;  // the guess may be metres off after a long loop
   registration.prior_rotation_sigma = 1.0;
   registration.max_iterations = 40;
@@ -145,13 +135,34 @@ Result<LoopClosure> LoopClosureDetector::verify(std::size_t from, std::size_t to
   HANZO_ASSIGN_OR_RETURN(pulled_in, align_to_surfaces(source, coarse, guess, guess, coarse_registration));
   HANZO_ASSIGN_OR_RETURN(result, align_to_surfaces(source, fine, pulled_in.T_map_source, pulled_in.T_map_source, registration));
   const double inliers = static_cast<double>(result.correspondences) / static_cast<double>(source.size());
-  if (!result.converged || result.inlier_rmse > config_.max_rmse || inliers < config_.min_inlier_fraction ||
-      translation_constraint_ratio(result.information) < odometry_.degeneracy_ratio) {
-    return Error(fmt::format("loop closure {} -> {} not verified: converged {}, inlier RMSE {:.3f} m (max {}), {:.0f} % matched (min {:.0f} %)",
-                             from, to, result.converged, result.inlier_rmse, config_.max_rmse, 100.0 * inliers,
-                             100.0 * config_.min_inlier_fraction));
+  if (!result.converged || result.inlier_rmse > config.max_rmse || inliers < config.min_inlier_fraction ||
+      translation_constraint_ratio(result.information) < odometry.degeneracy_ratio) {
+    return Error(fmt::format("not verified: converged {}, inlier RMSE {:.3f} m (max {}), {:.0f} % matched (min {:.0f} %)", result.converged,
+                             result.inlier_rmse, config.max_rmse, 100.0 * inliers, 100.0 * config.min_inlier_fraction));
   }
-  return LoopClosure{.from = from, .to = to, .T_from_to = result.T_map_source, .inlier_rmse = result.inlier_rmse, .inlier_fraction = inliers};
+  return SubmapRegistration{.T_submap_query = result.T_map_source, .inlier_rmse = result.inlier_rmse, .inlier_fraction = inliers};
+}
+
+Result<LoopClosure> LoopClosureDetector::verify(std::size_t from, std::size_t to, const SE3& guess,
+                                                const PoseLookup& T_world_keyframe) const {
+  if (from >= keyframes_.size() || to >= keyframes_.size() || from == to) {
+    return Error(fmt::format("loop closure {} -> {}: unknown keyframe (there are {})", from, to, keyframes_.size()));
+  }
+  // The submap around `from` in its frame: keyframes older than the query.
+  std::vector<SubmapKeyframe> submap;
+  const SE3 T_from_world = T_world_keyframe(from).inverse();
+  const std::size_t half = static_cast<std::size_t>(config_.submap_keyframes);
+  const std::size_t first = from >= half ? from - half : 0;
+  const std::size_t last = std::min(keyframes_.size() - 1, from + half);
+  for (std::size_t j = first; j <= last; ++j) {
+    if (j >= to && from < to) break;
+    if (j == to) continue;
+    submap.push_back({&keyframes_[j].points, T_from_world * T_world_keyframe(j)});
+  }
+  const Result<SubmapRegistration> registered = register_to_submap(submap, keyframes_[to].points, guess, config_, odometry_);
+  if (!registered) return Error(fmt::format("loop closure {} -> {}: {}", from, to, registered.error().message));
+  return LoopClosure{.from = from, .to = to, .T_from_to = registered->T_submap_query, .inlier_rmse = registered->inlier_rmse,
+                     .inlier_fraction = registered->inlier_fraction};
 }
 
 }  // namespace hanzo::fusion::lidar

@@ -73,6 +73,7 @@ std::vector<v1::FusionMap> cut_into_pieces(const v1::FusionMap& map, std::size_t
   metadata.clear_visual_landmarks();
   metadata.clear_gaussian_splats();
   metadata.clear_neural_field();
+  metadata.clear_lidar_keyframes();
   pieces.push_back(std::move(metadata));
 
   if (map.has_points()) {
@@ -176,6 +177,22 @@ std::vector<v1::FusionMap> cut_into_pieces(const v1::FusionMap& map, std::size_t
       for (std::size_t begin = 0; begin < part.size(); begin += part_bytes) {
         pieces.emplace_back().mutable_neural_field()->add_model_parts(part.substr(begin, part_bytes));
       }
+    }
+  }
+  if (map.has_lidar_keyframes()) {
+    // The sources, then whole keyframes (a keyframe's points stay in one chunk).
+    const v1::LidarKeyframeLayer& layer = map.lidar_keyframes();
+    *pieces.emplace_back().mutable_lidar_keyframes()->mutable_sources() = layer.sources();
+    std::size_t bytes = 0;
+    v1::LidarKeyframeLayer* piece = nullptr;
+    for (const v1::LidarKeyframe& keyframe : layer.keyframes()) {
+      const std::size_t keyframe_bytes = 64 + 15 * static_cast<std::size_t>(keyframe.points_size());
+      if (piece == nullptr || bytes + keyframe_bytes > chunk_bytes) {
+        piece = pieces.emplace_back().mutable_lidar_keyframes();
+        bytes = 0;
+      }
+      *piece->add_keyframes() = keyframe;
+      bytes += keyframe_bytes;
     }
   }
   return pieces;

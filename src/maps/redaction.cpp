@@ -188,6 +188,11 @@ Result<msgs::FusionMap> redact_map(const msgs::FusionMap& map, const RedactionCo
     out.neural_field.reset();
     note("neural_field: layer removed");
   }
+  // The keyframes' sweeps hold the full-resolution geometry the coarsening removes.
+  if (out.lidar_keyframes && resolution > 0.0) {
+    out.lidar_keyframes.reset();
+    note("lidar_keyframes: layer removed");
+  }
   if (config.drop_labels) {
     std::size_t dropped = 0;
     if (out.points) {

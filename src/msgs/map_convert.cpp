@@ -236,6 +236,33 @@ NeuralFieldLayer read(const v1::NeuralFieldLayer& in) {
   return layer;
 }
 
+void write(const LidarKeyframeLayer& layer, v1::LidarKeyframeLayer* out) {
+  for (const std::string& source : layer.sources) out->add_sources(source);
+  for (const LidarKeyframe& keyframe : layer.keyframes) {
+    v1::LidarKeyframe* k = out->add_keyframes();
+    k->set_time_ns(wire::write_time(keyframe.time));
+    write(keyframe.T_world_lidar, k->mutable_pose());
+    write_points(keyframe.points, k->mutable_points());
+    k->set_source(keyframe.source);
+  }
+}
+
+Result<LidarKeyframeLayer> read(const v1::LidarKeyframeLayer& in) {
+  LidarKeyframeLayer layer;
+  layer.sources.assign(in.sources().begin(), in.sources().end());
+  for (const v1::LidarKeyframe& k : in.keyframes()) {
+    LidarKeyframe keyframe;
+    HANZO_ASSIGN_OR_RETURN(keyframe.time, wire::read_time(k.time_ns(), "LidarKeyframe", "time_ns"));
+    const v1::Pose& pose = k.pose();
+    keyframe.T_world_lidar.position = {pose.position().x(), pose.position().y(), pose.position().z()};
+    keyframe.T_world_lidar.orientation = Eigen::Quaterniond(pose.orientation().w(), pose.orientation().x(), pose.orientation().y(), pose.orientation().z()).normalized();
+    keyframe.points = read_points(k.points());
+    keyframe.source = k.source();
+    layer.keyframes.push_back(std::move(keyframe));
+  }
+  return layer;
+}
+
 }  // namespace
 
 v1::FusionMap to_proto(const FusionMap& map) {
@@ -268,6 +295,7 @@ v1::FusionMap to_proto(const FusionMap& map) {
   if (map.visual_landmarks) write(*map.visual_landmarks, out.mutable_visual_landmarks());
   if (map.gaussian_splats) write(*map.gaussian_splats, out.mutable_gaussian_splats());
   if (map.neural_field) write(*map.neural_field, out.mutable_neural_field());
+  if (map.lidar_keyframes) write(*map.lidar_keyframes, out.mutable_lidar_keyframes());
   for (const std::string& name : map.semantic_classes) out.add_semantic_classes(name);
   return out;
 }
@@ -306,6 +334,7 @@ Result<FusionMap> from_proto(const v1::FusionMap& in) {
   if (in.has_visual_landmarks()) HANZO_ASSIGN_OR_RETURN(map.visual_landmarks, read(in.visual_landmarks()));
   if (in.has_gaussian_splats()) map.gaussian_splats = read(in.gaussian_splats());
   if (in.has_neural_field()) map.neural_field = read(in.neural_field());
+  if (in.has_lidar_keyframes()) HANZO_ASSIGN_OR_RETURN(map.lidar_keyframes, read(in.lidar_keyframes()));
   map.semantic_classes.assign(in.semantic_classes().begin(), in.semantic_classes().end());
   return map;
 }

@@ -204,6 +204,22 @@ class MapChecker {
     return ok_status();
   }
 
+  Status lidar_keyframes(const v1::LidarKeyframeLayer& layer, const std::string& field) const {
+    for (int i = 0; i < layer.sources_size(); ++i) {
+      if (layer.sources(i).empty()) return fail(fmt::format("{}.sources[{}]", field, i), "empty");
+    }
+    for (int k = 0; k < layer.keyframes_size(); ++k) {
+      const v1::LidarKeyframe& keyframe = layer.keyframes(k);
+      const std::string keyframe_field = fmt::format("{}.keyframes[{}]", field, k);
+      HANZO_RETURN_IF_ERROR(pose(keyframe.pose(), keyframe_field + ".pose"));
+      HANZO_RETURN_IF_ERROR(points(keyframe.points(), keyframe_field + ".points"));
+      if (keyframe.source() >= static_cast<uint32_t>(std::max(1, layer.sources_size()))) {
+        return fail(keyframe_field + ".source", fmt::format("index {} past the {} sources", keyframe.source(), layer.sources_size()));
+      }
+    }
+    return ok_status();
+  }
+
   Status gaussian_splats(const v1::GaussianSplatLayer& layer, const std::string& field) const {
     if (layer.sh_degree() > 3) return fail(field + ".sh_degree", fmt::format("{} (expected 0 to 3)", layer.sh_degree()));
     const int64_t count = layer.opacity_logits_size();
@@ -264,6 +280,7 @@ Status validate(const v1::FusionMap& map) {
   if (map.has_visual_landmarks()) HANZO_RETURN_IF_ERROR(check.visual_landmarks(map.visual_landmarks(), "visual_landmarks"));
   if (map.has_gaussian_splats()) HANZO_RETURN_IF_ERROR(check.gaussian_splats(map.gaussian_splats(), "gaussian_splats"));
   if (map.has_neural_field()) HANZO_RETURN_IF_ERROR(check.neural_field(map.neural_field(), "neural_field"));
+  if (map.has_lidar_keyframes()) HANZO_RETURN_IF_ERROR(check.lidar_keyframes(map.lidar_keyframes(), "lidar_keyframes"));
   return ok_status();
 }
 

@@ -1067,7 +1067,7 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
     keyframe = since.translation().norm() >= config_.map_keyframe_distance || since.rotation().log().norm() >= config_.map_keyframe_angle;
   }
   auto [points, classes] = label_sweep(estimate.time, registered.points);
-  if (keyframe) return add_map_keyframe(T_world_lidar, points, classes);
+  if (keyframe) return add_map_keyframe(estimate.time, T_world_lidar, points, classes);
   if (!classes.empty()) {
     if (Status voted = map_builder_.add_class_votes(T_world_lidar, points, classes); !voted) {
       logger()->warn("session: a sweep's segmentation classes not kept: {}", voted.error().message);
@@ -1080,7 +1080,7 @@ void Session::on_registered(Result<LidarInertialOdometry::RegisteredScan> result
   }
 }
 
-void Session::add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points, const std::vector<uint16_t>& point_classes) {
+void Session::add_map_keyframe(Timestamp time, const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points, const std::vector<uint16_t>& point_classes) {
   // The anchor (the newest keyframe) as the graph got it, in today's world.
   const uint64_t anchor = latest_keyframe_->keyframe_id;
   const SE3 T_world_anchor = frontend_->world_correction() * latest_keyframe_uncorrected_;
@@ -1100,7 +1100,7 @@ void Session::add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen
     logger()->warn("session: map keyframe not inserted: {}", inserted.error().message);
     return;
   }
-  const MapKeyframe keyframe{anchor, T_world_anchor.inverse() * T_world_lidar, T_world_lidar};
+  const MapKeyframe keyframe{time, anchor, T_world_anchor.inverse() * T_world_lidar, T_world_lidar};
   const Result<std::size_t> added = loop_closures_.add_keyframe(points, path_);
   if (!added) logger()->warn("session: map keyframe not added to loop closure: {}", added.error().message);
   const bool searchable = added && aligned;
@@ -1393,6 +1393,13 @@ msgs::FusionMap Session::map() const {
     }
   } else {
     map_builder_.write_map(map);
+    if (loop_closures_.size() >= map_keyframes_.size() && !map_keyframes_.empty()) {
+      msgs::LidarKeyframeLayer keyframes;
+      for (std::size_t k = 0; k < map_keyframes_.size(); ++k) {
+        keyframes.keyframes.push_back({map_keyframes_[k].time, msgs::Pose::from_se3(map_keyframes_[k].T_world_lidar), loop_closures_.points(k), 0});
+      }
+      map.lidar_keyframes = std::move(keyframes);
+    }
   }
   if (camera_odometry_ && visual_world_) {
     // The odometry's world (its left camera at the first keyframe) in the Session's.

@@ -18,6 +18,7 @@
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/msgs/map_convert.hpp"
 #include "hanzo/fusion/io/sensor_log.hpp"
+#include "hanzo/fusion/pipeline/session_merge.hpp"
 #include "hanzo/fusion/service/fusion_client.hpp"
 #include "hanzo/fusion/service/grpc_server.hpp"
 #include "hanzo/fusion/service/rest_server.hpp"
@@ -449,6 +450,51 @@ TEST_F(MappingEndpointsTest, StoresMapVersionsLoadsMapsAndRelocalizesASessionInT
   ASSERT_TRUE(all.ok());
   EXPECT_EQ(all->size(), 3U);  // both sessions' maps and the loaded one
   EXPECT_EQ(restarted.value()->stored_map(admin, known_id).value().version, 2U);
+}
+
+// A merged map (pipeline/session_merge.hpp) of two sessions' maps, one of them in another frame,
+// loaded by a client; a new session on the same streets starts localized in it.
+TEST_F(MappingEndpointsTest, ASessionStartsLocalizedInAMergedMap) {
+  stream_recording();
+  const Principal admin{"admin", "acme", static_cast<uint32_t>(Permission::kAdmin)};
+  msgs::FusionMap session_map = manager_->map(admin, session_id_).value();
+  ASSERT_TRUE(session_map.lidar_keyframes) << "sessions keep their LiDAR keyframes in their maps";
+  // The first survey's frame: 40 m away and turned 2 rad from the session's world.
+  const SE3 T_survey_world(SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), 2.0), Eigen::Vector3d(40.0, 25.0, -1.0));
+  msgs::FusionMap survey = session_map;
+  survey.map_id = "survey";
+  for (msgs::LidarKeyframe& keyframe : survey.lidar_keyframes->keyframes) {
+    keyframe.T_world_lidar = msgs::Pose::from_se3(T_survey_world * keyframe.T_world_lidar.to_se3());
+  }
+  session_map.map_id = "session";
+  pipeline::SessionMergeResult merged = pipeline::merge_sessions({survey, session_map}).value();
+  ASSERT_EQ(merged.joins.size(), 1U);
+  EXPECT_LT((merged.joins[0].T_joined_map.translation() - T_survey_world.translation()).norm(), 0.05);
+  merged.merged.map_id = "merged-streets";
+  auto loaded = client().Post("/v1/maps?name=streets", bearer(kAdminToken), maps::serialize_fusion_map(merged.merged).value(), "application/octet-stream");
+  ASSERT_TRUE(loaded);
+  ASSERT_EQ(loaded->status, 201) << loaded->body;
+  const std::string map_id = json::parse(loaded->body)["map_id"];
+
+  // A new session's first half, relocalized in the merged map, then the rest of the drive.
+  const Recording& recording = urban_recording();
+  const std::string fresh = manager_->create_session(kStreamer, {"fresh", recording.config_yaml, recording.calibration_yaml}).value().id;
+  const std::size_t half = recording.messages.size() / 2;
+  for (std::size_t i = 0; i < half; ++i) {
+    ASSERT_TRUE(manager_->push(kStreamer, fresh, recording.messages[i].sensor, recording.messages[i].message).ok());
+  }
+  auto relocalized = client().Post("/v1/sessions/" + fresh + "/relocalize", bearer(kRobotToken), R"({"map_id": ")" + map_id + "\"}", "application/json");
+  ASSERT_TRUE(relocalized);
+  ASSERT_EQ(relocalized->status, 200) << relocalized->body;
+  const std::vector<double> position = json::parse(relocalized->body)["T_map_world"]["position"];
+  EXPECT_LT((Eigen::Vector3d(position[0], position[1], position[2]) - T_survey_world.translation()).norm(), 0.2) << relocalized->body;
+  for (std::size_t i = half; i < recording.messages.size(); ++i) {
+    ASSERT_TRUE(manager_->push(kStreamer, fresh, recording.messages[i].sensor, recording.messages[i].message).ok());
+  }
+  // Where the first session ended, in the merged map's frame.
+  const msgs::PoseEstimate first_pose = manager_->current_pose(kStreamer, session_id_).value();
+  const msgs::PoseEstimate fresh_pose = manager_->current_pose(kStreamer, fresh).value();
+  EXPECT_LT((fresh_pose.T_world_body.position - T_survey_world * first_pose.T_world_body.position).norm(), 0.3);
 }
 
 TEST_F(MappingEndpointsTest, OldAutosavesArePrunedAndMapsOrVersionsCanBeDeleted) {

@@ -28,6 +28,7 @@ from hanzo.fusion._fusion import (  # noqa: F401
     X,
     ape,
     geodetic_to_enu,
+    merge_maps,
     key_to_string,
     read_carmen,
     read_g2o,

@@ -7,13 +7,16 @@ processes on this machine (one task at a time each); with one ("tcp://host:8786"
 cluster's workers. Logs, configurations and calibrations are local paths (which every worker
 must see) or s3:// object URLs ("s3://bucket/key?endpoint=..."; credentials from
 $AWS_ACCESS_KEY_ID / $AWS_SECRET_ACCESS_KEY), fetched into a scratch folder on the worker;
-`out` is a folder or an s3:// prefix the results are uploaded under.
+`out` is a folder or an s3:// prefix the results are uploaded under. With `merge` (a folder
+name), one more task joins every log's map into one optimized keyframe graph
+(hanzo.fusion.merge_maps: Scan Context candidates, registration, inter-session loops) and
+writes it as `<out>/<merge>/map.fmap` with its summary.json.
 
     from hanzo.fusion.batch import MappingJob, map_logs
     results = map_logs([MappingJob("a/sensors.mcap", "a/fusion.yaml", "a/calibration.yaml")], "maps", workers=2)
 
 From the shell: python3 -m hanzo.fusion.batch LOG... --config C [--calib K] --out DIR
-[--workers N | --scheduler ADDRESS] [--json]; docs/python.md.
+[--workers N | --scheduler ADDRESS] [--merge NAME [--indoor]] [--json]; docs/python.md.
 """
 
 import argparse
@@ -27,7 +30,7 @@ from dataclasses import dataclass
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 from urllib.parse import urlsplit
 
-from hanzo.fusion._fusion import ObjectStore, write_trajectory
+from hanzo.fusion._fusion import ObjectStore, merge_maps, write_trajectory
 from hanzo.fusion.log import replay
 
 
@@ -78,7 +81,7 @@ class BatchMappingError(RuntimeError):
 
     def __init__(self, results: List[Dict]):
         failed = [r for r in results if "error" in r]
-        super().__init__(f"{len(failed)} of {len(results)} logs failed: " + "; ".join(f"{r['name']}: {r['error']}" for r in failed))
+        super().__init__(f"{len(failed)} of {len(results)} tasks failed: " + "; ".join(f"{r['name']}: {r['error']}" for r in failed))
         self.results = results
 
 
@@ -100,7 +103,7 @@ def map_one(job: MappingJob, out: str, threads: int = 1) -> Dict:
         if len(trajectory) == 0:
             raise ValueError(f"{job.log}: the session gave no pose (no sensor of the configuration in the log?)")
         write_trajectory(os.path.join(folder, "trajectory_optimized.tum"), trajectory, "tum")
-        session.save_map(os.path.join(folder, "map.fmap"), log_uri=job.log if is_object_url(job.log) else None)
+        session.save_map(os.path.join(folder, "map.fmap"), log_uri=job.log if is_object_url(job.log) else None, map_id=name)
         summary = session.summary()
         result = {
             "name": name,
@@ -116,24 +119,61 @@ def map_one(job: MappingJob, out: str, threads: int = 1) -> Dict:
         with open(os.path.join(folder, "summary.json"), "w") as file:
             json.dump({"result": result, "session": summary}, file, indent=1)
         if is_object_url(out):
-            store, prefix = split_object_url(out)
-            target = ObjectStore(store)
-            for file_name in sorted(os.listdir(folder)):
-                target.put_file("/".join(part for part in (prefix.rstrip("/"), name, file_name) if part), os.path.join(folder, file_name))
+            upload(folder, out, name)
             base = out.split("?", 1)[0].rstrip("/")
             result["trajectory"], result["map"] = f"{base}/{name}/trajectory_optimized.tum", f"{base}/{name}/map.fmap"
     return result
 
 
+def upload(folder: str, out: str, name: str) -> None:
+    """The files of `folder` to the s3:// prefix `out`, under `name`/."""
+    store, prefix = split_object_url(out)
+    target = ObjectStore(store)
+    for file_name in sorted(os.listdir(folder)):
+        target.put_file("/".join(part for part in (prefix.rstrip("/"), name, file_name) if part), os.path.join(folder, file_name))
+
+
+def merge_one(maps: Sequence[str], out: str, name: str, indoor: bool = False) -> Dict:
+    """Joins the maps (paths or s3:// URLs, the first one's frame) into `<out>/<name>/map.fmap`
+    with a summary.json (what the merge task runs). Raises ValueError when a map cannot be read
+    or shares no place with the others."""
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="hanzo_merge_") as scratch:
+        inputs = os.path.join(scratch, "inputs")
+        os.makedirs(inputs)
+        local = [fetch(location, inputs) for location in maps]
+        folder = os.path.join(scratch, "out", name) if is_object_url(out) else os.path.join(out, name)
+        os.makedirs(folder, exist_ok=True)
+        merged = merge_maps(local, os.path.join(folder, "map.fmap"), map_id=name, indoor=indoor)
+        result = {
+            "name": name,
+            "merged": list(maps),
+            "map": os.path.join(out, name, "map.fmap"),
+            "keyframes": merged["keyframes"],
+            "inter_session_loops": merged["inter_session_loops"],
+            "joins": [{"map": maps[local.index(join["map"])], "joined_to": maps[local.index(join["joined_to"])], "loops": join["loops"]}
+                      for join in merged["joins"]],
+            "seconds": time.perf_counter() - start,
+        }
+        with open(os.path.join(folder, "summary.json"), "w") as file:
+            json.dump({"result": result, "merge": {key: value for key, value in merged.items() if key not in ("joins", "map", "keyframe_poses", "keyframe_sources")}}, file, indent=1)
+        if is_object_url(out):
+            upload(folder, out, name)
+            result["map"] = f"{out.split('?', 1)[0].rstrip('/')}/{name}/map.fmap"
+    return result
+
+
 def map_logs(jobs: Sequence[MappingJob], out: str, scheduler: Optional[str] = None, workers: int = 2, threads: int = 1,
-             progress: Optional[Callable[[int, int, Dict], None]] = None) -> List[Dict]:
+             progress: Optional[Callable[[int, int, Dict], None]] = None, merge: Optional[str] = None, indoor: bool = False) -> List[Dict]:
     """Maps every job on a Dask cluster; returns one result per job, in the jobs' order (see
     map_one). `progress(done, total, result)` is called as each log finishes (in finishing
-    order). Raises ValueError for duplicate folder names or workers < 1 before anything runs,
-    and BatchMappingError when any log failed (after all were tried)."""
+    order). With `merge`, once every log is mapped a last task joins their maps (merge_one,
+    `indoor` registration settings for indoor maps) and its result is the list's last entry.
+    Raises ValueError for duplicate folder names or workers < 1 before anything runs, and
+    BatchMappingError when any log or the merge failed (after all were tried)."""
     from distributed import Client, LocalCluster, as_completed
 
-    names = [job.folder_name() for job in jobs]
+    names = [job.folder_name() for job in jobs] + ([merge] if merge else [])
     duplicates = sorted({name for name in names if names.count(name) > 1})
     if duplicates:
         raise ValueError(f"two or more logs would write the same folder: {', '.join(duplicates)} (give each MappingJob a name)")
@@ -157,7 +197,15 @@ def map_logs(jobs: Sequence[MappingJob], out: str, scheduler: Optional[str] = No
             except Exception as error:  # a failed log is reported with the others, never hidden
                 results[index] = {"name": names[index], "log": jobs[index].log, "error": str(error).splitlines()[0] if str(error) else repr(error)}
             if progress:
-                progress(done, len(jobs), results[index])
+                progress(done, len(names), results[index])
+        if merge and not any("error" in result for result in results):
+            future = client.submit(merge_one, [result["map"] for result in results], out, merge, indoor, key=f"merge-{merge}", pure=False)
+            try:
+                results.append(future.result())
+            except Exception as error:
+                results.append({"name": merge, "merged": [result["map"] for result in results], "error": str(error).splitlines()[0] if str(error) else repr(error)})
+            if progress:
+                progress(len(names), len(names), results[-1])
     finally:
         client.close()
         if cluster is not None:
@@ -176,6 +224,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--workers", type=int, default=2, help="local worker processes (without --scheduler)")
     parser.add_argument("--scheduler", help="a Dask scheduler's address (tcp://host:8786) instead of local workers")
     parser.add_argument("--threads", type=int, default=1, help="threads of each log's Session")
+    parser.add_argument("--merge", metavar="NAME", help="also join every log's map into one (written to OUT/NAME/map.fmap)")
+    parser.add_argument("--indoor", action="store_true", help="indoor registration settings for --merge")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     args = parser.parse_args(argv)
     # As `python3 -m hanzo.fusion.batch` this file is __main__: the tasks must name the importable
@@ -186,12 +236,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
     def report(done: int, total: int, result: Dict) -> None:
         if not args.json:
-            state = f"failed: {result['error']}" if "error" in result else f"{result['poses']} poses in {result['seconds']:.1f} s"
+            if "error" in result:
+                state = f"failed: {result['error']}"
+            elif "merged" in result:
+                state = f"{len(result['merged'])} maps joined by {result['inter_session_loops']} loops in {result['seconds']:.1f} s"
+            else:
+                state = f"{result['poses']} poses in {result['seconds']:.1f} s"
             print(f"[{done}/{total}] {result['name']}: {state}", flush=True)
 
     start = time.perf_counter()
     try:
-        results = batch.map_logs(jobs, args.out, scheduler=args.scheduler, workers=args.workers, threads=args.threads, progress=report)
+        results = batch.map_logs(jobs, args.out, scheduler=args.scheduler, workers=args.workers, threads=args.threads, progress=report,
+                                 merge=args.merge, indoor=args.indoor)
         ok, error = True, None
     except batch.BatchMappingError as failure:
         results, ok, error = failure.results, False, str(failure)

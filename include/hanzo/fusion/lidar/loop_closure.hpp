@@ -65,6 +65,27 @@ struct LoopClosure {
   double inlier_fraction = 0.0;  ///< of k's registration points
 };
 
+/// One keyframe of a submap: its points (its sensor frame, must outlive the call) and its pose
+/// in the submap's frame.
+struct SubmapKeyframe {
+  const std::vector<Eigen::Vector3f>* points = nullptr;
+  SE3 T_submap_keyframe;
+};
+
+struct SubmapRegistration {
+  SE3 T_submap_query;
+  double inlier_rmse = 0.0;      ///< m
+  double inlier_fraction = 0.0;  ///< of the query's registration points
+};
+
+/// The loop closures' verification (step 2 above) on its own: `query` (its sensor frame) is
+/// registered to the submap from `guess` (T_submap_query), first with 3x coarser voxels, then at
+/// odometry.map's resolution. Fails, naming the numbers, when it does not converge, the inlier
+/// RMSE exceeds config.max_rmse, less than config.min_inlier_fraction of the points matched or
+/// the translation is degenerate.
+Result<SubmapRegistration> register_to_submap(const std::vector<SubmapKeyframe>& submap, const std::vector<Eigen::Vector3f>& query,
+                                              const SE3& guess, const LoopClosureConfig& config, const LidarOdometryConfig& odometry);
+
 class LoopClosureDetector {
  public:
   /// T_world_keyframe of keyframe k (the caller's current estimate).

@@ -86,6 +86,20 @@ struct VisualLandmarkLayer {
   std::vector<VisualKeyframe> keyframes;
 };
 
+/// A deskewed LiDAR sweep the map was built from (sensor frame) at the pose the map has it: what
+/// re-optimizing the map or joining it with other sessions' maps (pipeline/map_merge.hpp) needs.
+struct LidarKeyframe {
+  Timestamp time;
+  Pose T_world_lidar;
+  std::vector<Eigen::Vector3f> points;  // sensor frame, meters
+  uint32_t source = 0;                  // index into LidarKeyframeLayer::sources (0 when it is empty)
+};
+
+struct LidarKeyframeLayer {
+  std::vector<std::string> sources;  // the map each keyframe came from (map_id); empty: all are this map's own
+  std::vector<LidarKeyframe> keyframes;
+};
+
 /// How a neural layer was trained (views, steps, metrics on held-back views).
 struct NeuralProvenance {
   std::string source;             // the views' origin: a transforms.json, or a sensor log + trajectory
@@ -147,6 +161,7 @@ struct FusionMap {
   std::optional<VisualLandmarkLayer> visual_landmarks;
   std::optional<GaussianSplatLayer> gaussian_splats;
   std::optional<NeuralFieldLayer> neural_field;
+  std::optional<LidarKeyframeLayer> lidar_keyframes;
   /// The label table of the layers' segmentation classes (PointLayer::classes,
   /// OccupancyGridLayer::classes): the name of each class index.
   std::vector<std::string> semantic_classes;

@@ -517,6 +517,7 @@ class Session {
 
  private:
   struct MapKeyframe {
+    Timestamp time;            ///< the sweep's
     uint64_t anchor = 0;       ///< the Frontend keyframe
     SE3 T_anchor_lidar;        ///< the sweep's pose relative to the anchor's body
     SE3 T_world_lidar;         ///< where the map has it now
@@ -559,7 +560,7 @@ class Session {
   void check_wheels(Timestamp sweep_time, const std::optional<SE3>& T_previous_current, bool reliable);
   /// The sweep as a map keyframe anchored to the newest Frontend keyframe.
   /// point_classes: empty or a segmentation class per point (label_sweep).
-  void add_map_keyframe(const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points, const std::vector<uint16_t>& point_classes);
+  void add_map_keyframe(Timestamp time, const SE3& T_world_lidar, const std::vector<Eigen::Vector3f>& points, const std::vector<uint16_t>& point_classes);
   /// Looks for a loop closing at the loop closure detector's newest keyframe (kept or a
   /// revisit); a verified one becomes a loop factor.
   void detect_lidar_loop();

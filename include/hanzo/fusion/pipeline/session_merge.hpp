@@ -1,0 +1,103 @@
+#pragma once
+// merge_sessions(): the maps of several sessions that saw the same places joined into one
+// optimized keyframe graph and one FusionMap, without an initial guess. Each map must carry its
+// LiDAR keyframes (FusionMap::lidar_keyframes: the deskewed sweeps at their poses, as Sessions
+// write them).
+//
+//  1. Candidates (Kim & Kim, Scan Context, IROS 2018): every keyframe of a later map at least
+//     query_spacing metres of path after the previous query is described and searched in each
+//     earlier map's Scan Context database (ring key, then the full distance over all yaws).
+//  2. Verification: the query's points are registered to the submap of the candidate's
+//     neighbours (loop.submap_keyframes on each side) from the descriptor's yaw, coarse then fine
+//     (lidar::register_to_submap; loop.max_rmse, loop.min_inlier_fraction, degeneracy).
+//  3. Consistency: each verified loop between maps a and b implies b's frame in a's,
+//     T_a_b = T_a_candidate T_candidate_query T_b_query^-1. The loop whose hypothesis the most
+//     loops agree with (each loop's query placed by it within agreement_translation /
+//     agreement_rotation of where the loop itself puts it) joins the two maps with those loops,
+//     when at least min_agreeing_loops agree; the others are dropped as perceptual aliasing
+//     (streets and aisles alike).
+//  4. One graph: a pose node per keyframe of every map, between factors along each map's
+//     keyframes (their relative poses in the map; sigmas min + per metre, as LidarSlam's), the
+//     agreeing inter-session loops as between factors under a DCS kernel, the first map's first
+//     keyframe held; initialized by chaining the maps' T_a_b from the first map; batch
+//     Levenberg-Marquardt (graph/batch_optimizer.hpp).
+//  5. The merged map: the first map's metadata, frame and datum; every keyframe at its optimized
+//     pose in lidar_keyframes (sources: the maps' ids, or the sources of a merged input); points
+//     and 2D occupancy rebuilt from the keyframes (maps::MapBuilder at the first map's point
+//     voxel and occupancy resolution); provenance with every map's input logs. The inputs'
+//     other layers (visual landmarks, splats, ...) are not moved: listed in dropped_layers.
+//
+// Frames: every map z up (gravity-aligned, as Sessions make them); the merged map is in the
+// first map's frame. Failure: fewer than two maps, a map without LiDAR keyframes, and a map that
+// shares no place with the others (the error names it with its candidate and loop counts; nothing
+// is merged then).
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "hanzo/fusion/core/result.hpp"
+#include "hanzo/fusion/core/se3.hpp"
+#include "hanzo/fusion/lidar/lidar_odometry.hpp"
+#include "hanzo/fusion/lidar/loop_closure.hpp"
+#include "hanzo/fusion/maps/map_builder.hpp"
+#include "hanzo/fusion/msgs/map_messages.hpp"
+
+namespace hanzo::fusion::pipeline {
+
+struct SessionMergeConfig {
+  /// Scan Context and verification settings. Without a position prior a query is compared
+  /// with the 50 keyframes of the nearest ring keys (a session's own search: 10).
+  lidar::LoopClosureConfig loop = [] {
+    lidar::LoopClosureConfig config;
+    config.scan_context.candidates = 50;
+    config.scan_context.exclude_recent = 0;
+    return config;
+  }();
+  lidar::LidarOdometryConfig odometry;  ///< registration settings (map and source voxels)
+  double query_spacing = 1.0;           ///< m of path between a map's query keyframes
+  std::size_t min_agreeing_loops = 3;   ///< loops that must agree to join two maps
+  double agreement_translation = 1.5;   ///< m
+  double agreement_rotation = 0.05;     ///< rad
+  /// Between-factor sigmas along a map's keyframes: min + per_meter x their distance.
+  double min_translation_sigma = 0.02;       ///< m
+  double translation_sigma_per_meter = 0.01;
+  double min_rotation_sigma = 0.002;         ///< rad
+  double rotation_sigma_per_meter = 0.0005;  ///< rad/m
+  double loop_translation_sigma = 0.05;      ///< m
+  double loop_rotation_sigma = 0.005;        ///< rad
+  /// DCS phi of the inter-session loops: large, because the sessions' drift puts a correct loop
+  /// far off the initial graph; step 3 keeps the wrong ones out.
+  double loop_dcs_phi = 1e5;
+  /// The merged map's layers built from the keyframes; the point voxel and occupancy resolution
+  /// are the first map's when it has those layers.
+  maps::MapBuilderConfig map;
+
+  Status validate() const;
+};
+
+/// The join of one later map to an earlier one.
+struct SessionJoin {
+  std::size_t map = 0;        ///< index of the later map
+  std::size_t joined_to = 0;  ///< index of the earlier map whose loops joined it
+  SE3 T_joined_map;           ///< the later map's frame in the earlier one's (consensus loop)
+  std::size_t loops = 0;      ///< agreeing loops between the two
+};
+
+struct SessionMergeResult {
+  msgs::FusionMap merged;
+  std::vector<SE3> T_merged_map;     ///< each map's frame in the merged one before optimization
+  std::vector<SessionJoin> joins;    ///< one per later map (the spanning tree from the first)
+  std::size_t queries = 0;           ///< keyframes searched in other maps
+  std::size_t candidates = 0;        ///< Scan Context matches below loop.scan_context.max_distance
+  std::size_t verified = 0;          ///< of which registration verified
+  std::size_t inter_session_loops = 0;  ///< of which agreeing with their pair's consensus (in the graph)
+  std::size_t keyframes = 0;
+  double initial_chi2 = 0.0, final_chi2 = 0.0;
+  int iterations = 0;
+  std::vector<std::string> dropped_layers;  ///< layers of the inputs not moved (points, occupancy rebuilt)
+};
+
+Result<SessionMergeResult> merge_sessions(const std::vector<msgs::FusionMap>& maps, const SessionMergeConfig& config = {});
+
+}  // namespace hanzo::fusion::pipeline
