@@ -1,6 +1,6 @@
 """Batch mapping and merging on Dask (hanzo.fusion.batch): eight simulated drives along different
-routes through the same city (urban_vehicle.yaml's streets; each route its own start, streets and
-headings, crossing others' at intersections or sharing a street; IMU, LiDAR, wheels, no GNSS, so
+routes through the same city (urban_vehicle.yaml's streets; each route its own start, side streets
+and direction along the main street they share; IMU, LiDAR, wheels, no GNSS, so
 every session has a frame of its own) mapped on a LocalCluster of one worker and of two (one
 task per worker at a time, one Session thread each), then the two-worker run's maps joined into
 one keyframe graph (hanzo.fusion.merge_maps, what the merge task of map_logs(merge=...) runs). Prints the wall time, logs per minute and the
@@ -27,16 +27,18 @@ BUILD = pathlib.Path(sys.argv[1] if len(sys.argv) > 1 else "build")
 SECONDS = float(sys.argv[2]) if len(sys.argv) > 2 else 20.0
 LIDAR_TO_BODY = np.array([0.8, 0.0, 1.5])  # urban_vehicle.yaml's lidar to_body (no rotation)
 
-# Street crossings of the city are 76 m apart (x in -76..304, y in -76..228).
+# Street crossings of the city are 76 m apart (x in -76..304, y in -76..228). Every route drives
+# part of the main street (y = 0) from its own start, east or west, starting on it or coming from
+# a side street, and turns into a side street of its own (20 s: about 170 m of driving).
 ROUTES = [
-    [(0, 0), (152, 0), (152, 152)],
-    [(152, -76), (152, 76), (0, 76)],
-    [(76, 152), (76, 0), (228, 0)],
-    [(228, 76), (76, 76), (76, -76)],
-    [(0, 152), (0, 0), (76, 0)],
-    [(228, 152), (228, 0), (152, 0)],
-    [(-76, 76), (76, 76), (76, 152)],
-    [(152, 152), (0, 152), (0, 76)],
+    [(-76, 0), (152, 0), (152, 76)],
+    [(152, 0), (-76, 0), (-76, -76)],
+    [(0, 0), (228, 0), (228, 76)],
+    [(228, 0), (0, 0), (0, 76)],
+    [(76, -76), (76, 0), (304, 0)],
+    [(152, 76), (152, 0), (-76, 0)],
+    [(304, 0), (76, 0), (76, 76)],
+    [(0, -76), (0, 0), (228, 0)],
 ]
 
 
@@ -59,9 +61,16 @@ def quaternion_matrix(w, x, y, z):
 
 
 def lidar_truth(truth, times):
-    """The LiDAR's true position at `times` (the body trajectory's nearest sample, 200 Hz)."""
-    rows = truth[np.clip(np.searchsorted(truth[:, 0], times), 0, len(truth) - 1)]
-    return np.array([row[1:4] + quaternion_matrix(row[4], row[5], row[6], row[7]) @ LIDAR_TO_BODY for row in rows])
+    """The LiDAR's true position at `times`: the body trajectory (200 Hz) interpolated."""
+    after = np.clip(np.searchsorted(truth[:, 0], times), 1, len(truth) - 1)
+    positions = []
+    for time, index in zip(times, after):
+        before_row, after_row = truth[index - 1], truth[index]
+        share = np.clip((time - before_row[0]) / (after_row[0] - before_row[0]), 0.0, 1.0)
+        q = (1 - share) * before_row[4:8] + share * after_row[4:8] * np.sign(np.dot(before_row[4:8], after_row[4:8]))
+        q /= np.linalg.norm(q)
+        positions.append((1 - share) * before_row[1:4] + share * after_row[1:4] + quaternion_matrix(*q) @ LIDAR_TO_BODY)
+    return np.array(positions)
 
 
 def rigid_alignment(source, target):

@@ -409,8 +409,8 @@ std::string describe_map_text(const nlohmann::json& description) {
   }
   if (layers.contains("lidar_keyframes")) {
     const auto& k = layers["lidar_keyframes"];
-    text += fmt::format("  lidar keyframes: {} ({} points) from {} source(s)\n", k["keyframes"].get<std::size_t>(), k["points"].get<std::size_t>(),
-                        k["sources"].size());
+    text += fmt::format("  lidar keyframes: {} ({} points){}\n", k["keyframes"].get<std::size_t>(), k["points"].get<std::size_t>(),
+                        k["sources"].empty() ? "" : fmt::format(" from {}", fmt::join(k["sources"].get<std::vector<std::string>>(), ", ")));
   }
   return text;
 }

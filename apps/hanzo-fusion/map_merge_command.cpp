@@ -83,6 +83,16 @@ int run_merge(const Output& output, const MergeOptions& options) {
     if (!map) return fail(map.error().message);
     inputs.push_back(std::move(map).value());
   }
+  // Maps with the same id (every `run` writes "run") are named by their files.
+  for (std::size_t i = 0; i < inputs.size(); ++i) {
+    const auto same = [&](const msgs::FusionMap& map) { return map.map_id == inputs[i].map_id; };
+    if (std::count_if(inputs.begin(), inputs.end(), same) > 1) {
+      for (std::size_t j = 0; j < inputs.size(); ++j) {
+        if (j != i && same(inputs[j])) inputs[j].map_id = options.maps[j];
+      }
+      inputs[i].map_id = options.maps[i];
+    }
+  }
   if (std::all_of(inputs.begin(), inputs.end(), [](const msgs::FusionMap& map) { return map.lidar_keyframes && !map.lidar_keyframes->keyframes.empty(); })) {
     return run_session_merge(output, options, std::move(inputs), result);
   }

@@ -86,7 +86,15 @@ Result<LidarInertialOdometry::RegisteredScan> LidarInertialOdometry::register_sc
   if (last_filter_pose_) last_filter_pose_ = correction_since * *last_filter_pose_;
   T_world_odometry_ = correction_since * T_world_odometry_;
   correction_at_last_scan_ = scan.world_correction;
-  if (!odometry_) odometry_ = std::make_unique<lidar::LidarOdometry>(config_.odometry, T_world_lidar);
+  if (!odometry_) {
+    odometry_ = std::make_unique<lidar::LidarOdometry>(config_.odometry, T_world_lidar);
+    for (const SeedKeyframe& keyframe : seed_) {  // the odometry's frame is the world now
+      cloud::PointCloud cloud;
+      cloud.positions = keyframe.points;
+      odometry_->add_map_points(cloud::transformed(cloud, keyframe.T_world_lidar).positions, keyframe.T_world_lidar.translation());
+    }
+    seed_.clear();
+  }
   // The filter's motion since the previous sweep (not its absolute pose: where the filter and
   // the odometry disagree, e.g. after a gated update, the motion is still right).
   std::optional<SE3> motion;

@@ -1229,7 +1229,7 @@ void Session::follow_graph() {
     const SE3 T_world_lidar = map_keyframe_pose(k);
     const SE3 change = map_keyframes_[k].T_world_lidar.inverse() * T_world_lidar;
     if (change.translation().norm() < kMapMoveTranslation && change.rotation().log().norm() < kMapMoveRotation) continue;
-    moved[k] = T_world_lidar;
+    moved[restored_keyframes_.size() + k] = T_world_lidar;  // the map builder's number: restored ones first
     map_keyframes_[k].T_world_lidar = T_world_lidar;
   }
   move_map_keyframes(moved);
@@ -1358,10 +1358,15 @@ Result<double> Session::move_world_onto_map(const SE3& T_map_world) {
   HANZO_RETURN_IF_ERROR(with_context(frontend_->apply_correction(latest_keyframe_->keyframe_id, T_map_world * belief), "invalid"));
   // The graph holds the old world: a fresh one starts at the next keyframe; the map moves rigidly
   // and its keyframes stay there (their anchors are not in the new graph).
-  std::map<uint64_t, SE3> moved;
+  std::map<uint64_t, SE3> moved;  // by the map builder's number: restored keyframes first
+  for (std::size_t r = 0; r < restored_keyframes_.size(); ++r) {
+    msgs::LidarKeyframe& keyframe = restored_keyframes_[r];
+    keyframe.T_world_lidar = msgs::Pose::from_se3(T_map_world * keyframe.T_world_lidar.to_se3());
+    moved[r] = keyframe.T_world_lidar.to_se3();
+  }
   for (std::size_t k = 0; k < map_keyframes_.size(); ++k) {
     map_keyframes_[k].T_world_lidar = T_map_world * map_keyframe_pose(k);
-    moved[k] = map_keyframes_[k].T_world_lidar;
+    moved[restored_keyframes_.size() + k] = map_keyframes_[k].T_world_lidar;
   }
   if (follows_graph_) {
     // The new graph gets no fixes (the world is the map's now): the filter fuses them again, and
@@ -1393,8 +1398,9 @@ msgs::FusionMap Session::map() const {
     }
   } else {
     map_builder_.write_map(map);
-    if (loop_closures_.size() >= map_keyframes_.size() && !map_keyframes_.empty()) {
+    if (loop_closures_.size() >= map_keyframes_.size() && !(map_keyframes_.empty() && restored_keyframes_.empty())) {
       msgs::LidarKeyframeLayer keyframes;
+      keyframes.keyframes = restored_keyframes_;
       for (std::size_t k = 0; k < map_keyframes_.size(); ++k) {
         keyframes.keyframes.push_back({map_keyframes_[k].time, msgs::Pose::from_se3(map_keyframes_[k].T_world_lidar), loop_closures_.points(k), 0});
       }
@@ -1415,6 +1421,33 @@ msgs::FusionMap Session::map() const {
   map.version = summary_.map_version;
   map.provenance.algorithm = planar_ ? "pipeline/session (planar laser)" : "pipeline/session";
   return map;
+}
+
+Status Session::restore_map(const msgs::FusionMap& map) {
+  if (!map.lidar_keyframes || map.lidar_keyframes->keyframes.empty()) return Error("restore map: the map has no LiDAR keyframes");
+  if (!odometry_) return Error("restore map: the session has no 3D LiDAR odometry");
+  if (lidar_statistics_.received > 0) return Error("restore map: sweeps came already");
+  const std::vector<msgs::LidarKeyframe>& keyframes = map.lidar_keyframes->keyframes;
+  const Eigen::Vector3d newest = keyframes.back().T_world_lidar.position;
+  std::vector<LidarInertialOdometry::SeedKeyframe> seed;
+  for (const msgs::LidarKeyframe& keyframe : keyframes) {
+    const SE3 T_world_lidar = keyframe.T_world_lidar.to_se3();
+    cloud::PointCloud cloud;
+    cloud.positions = keyframe.points;
+    if (Status inserted = map_builder_.insert(T_world_lidar, cloud); !inserted) {
+      logger()->warn("session: a restored keyframe not in the map: {}", inserted.error().message);
+      continue;
+    }
+    if ((T_world_lidar.translation() - newest).norm() <= config_.lidar_odometry.odometry.map.max_distance) {
+      seed.push_back({T_world_lidar, keyframe.points});
+    }
+    restored_keyframes_.push_back({keyframe.time, keyframe.T_world_lidar, keyframe.points, 0});
+  }
+  odometry_->seed_map(std::move(seed));
+  summary_.map_keyframes += restored_keyframes_.size();
+  ++summary_.map_version;
+  logger()->info("session: {} keyframes of its stored map restored", restored_keyframes_.size());
+  return ok_status();
 }
 
 SessionSummary Session::summary() const {

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <deque>
 #include <iterator>
 #include <map>
 #include <optional>
@@ -24,7 +23,6 @@ struct Loop {
   std::size_t a = 0, candidate = 0, b = 0, query = 0;
   SE3 T_candidate_query;
   double rmse = 0.0;
-  SE3 T_a_b;  ///< b's frame in a's that the loop implies
 };
 
 SE3 pose_of(const msgs::LidarKeyframe& keyframe) { return keyframe.T_world_lidar.to_se3(); }
@@ -35,24 +33,40 @@ Result<graph::GaussianNoise> pose_noise(double translation_sigma, double rotatio
   return graph::GaussianNoise::from_sigmas(sigmas);
 }
 
-/// Whether `hypothesis` (T_a_b) puts the loop's query where the loop does.
-bool agrees(const SE3& hypothesis, const Loop& loop, const std::vector<msgs::FusionMap>& maps, const SessionMergeConfig& config) {
+/// What a loop between a joining map and a map of the merge says: the joining map's frame in
+/// the merged one, and the joining map's keyframe of the loop (in its own frame).
+struct Placement {
+  const Loop* loop = nullptr;
+  SE3 T_merged_map;
+  SE3 T_map_keyframe;
+};
+
+Placement placement(const Loop& loop, std::size_t joining, const SE3& T_merged_other, const std::vector<msgs::FusionMap>& maps) {
+  const SE3 T_a_candidate = pose_of(maps[loop.a].lidar_keyframes->keyframes[loop.candidate]);
   const SE3 T_b_query = pose_of(maps[loop.b].lidar_keyframes->keyframes[loop.query]);
-  const SE3 difference = (hypothesis * T_b_query).inverse() * (loop.T_a_b * T_b_query);
+  const SE3 T_a_b = T_a_candidate * loop.T_candidate_query * T_b_query.inverse();
+  if (joining == loop.b) return {&loop, T_merged_other * T_a_b, T_b_query};
+  return {&loop, T_merged_other * T_a_b.inverse(), T_a_candidate};
+}
+
+/// Whether `hypothesis` (the joining map's frame in the merged one) puts the placement's
+/// keyframe where its loop does.
+bool agrees(const SE3& hypothesis, const Placement& placement, const SessionMergeConfig& config) {
+  const SE3 difference = (hypothesis * placement.T_map_keyframe).inverse() * (placement.T_merged_map * placement.T_map_keyframe);
   return difference.translation().norm() <= config.agreement_translation && difference.rotation().angle() <= config.agreement_rotation;
 }
 
-/// The largest set of loops agreeing with one of them (the best-fitting set of that size).
-std::vector<Loop> largest_agreeing(const std::vector<Loop>& loops, const std::vector<msgs::FusionMap>& maps, const SessionMergeConfig& config) {
-  std::vector<Loop> best;
+/// The largest set of placements agreeing with one of them (the best-fitting set of that size).
+std::vector<Placement> largest_agreeing(const std::vector<Placement>& placements, const SessionMergeConfig& config) {
+  std::vector<Placement> best;
   double best_rmse = 0.0;
-  for (const Loop& hypothesis : loops) {
-    std::vector<Loop> agreeing;
+  for (const Placement& hypothesis : placements) {
+    std::vector<Placement> agreeing;
     double rmse = 0.0;
-    for (const Loop& loop : loops) {
-      if (!agrees(hypothesis.T_a_b, loop, maps, config)) continue;
-      agreeing.push_back(loop);
-      rmse += loop.rmse;
+    for (const Placement& other : placements) {
+      if (!agrees(hypothesis.T_merged_map, other, config)) continue;
+      agreeing.push_back(other);
+      rmse += other.loop->rmse;
     }
     if (agreeing.size() > best.size() || (agreeing.size() == best.size() && rmse < best_rmse)) {
       best = std::move(agreeing);
@@ -62,19 +76,19 @@ std::vector<Loop> largest_agreeing(const std::vector<Loop>& loops, const std::ve
   return best;
 }
 
-/// The loops between maps a and b that join them: the largest agreeing set, when it has
-/// min_agreeing_loops and no other hypothesis (loops that disagree with it) has as many and
+/// The placements that join a map to the merge: the largest agreeing set, when it has
+/// min_agreeing_loops and no other hypothesis (placements that disagree with it) has as many and
 /// half its size (a symmetric place seen from two sides); else none, with the reason.
-std::vector<Loop> consistent(const std::vector<Loop>& loops, const std::vector<msgs::FusionMap>& maps, const SessionMergeConfig& config,
-                             std::string& reason) {
-  std::vector<Loop> best = largest_agreeing(loops, maps, config);
+std::vector<Placement> consistent(const std::vector<Placement>& placements, const SessionMergeConfig& config, std::string& reason) {
+  std::vector<Placement> best = largest_agreeing(placements, config);
   if (best.size() < config.min_agreeing_loops) {
-    reason = fmt::format("{} verified loops, at most {} agree", loops.size(), best.size());
+    reason = fmt::format("{} verified loops, at most {} agree", placements.size(), best.size());
     return {};
   }
-  std::vector<Loop> others;
-  std::copy_if(loops.begin(), loops.end(), std::back_inserter(others), [&](const Loop& loop) { return !agrees(best.front().T_a_b, loop, maps, config); });
-  const std::vector<Loop> second = largest_agreeing(others, maps, config);
+  std::vector<Placement> others;
+  std::copy_if(placements.begin(), placements.end(), std::back_inserter(others),
+               [&](const Placement& other) { return !agrees(best.front().T_merged_map, other, config); });
+  const std::vector<Placement> second = largest_agreeing(others, config);
   if (second.size() >= config.min_agreeing_loops && 2 * second.size() >= best.size()) {
     reason = fmt::format("ambiguous: {} loops agree on one place, {} on another", best.size(), second.size());
     return {};
@@ -106,6 +120,30 @@ std::vector<std::size_t> query_keyframes(const msgs::FusionMap& map, double spac
     }
   }
   return queries;
+}
+
+/// The map's points to localize candidates in: its point layer, else its keyframes' points.
+Result<lidar::MapLocalizer> make_localizer(const msgs::FusionMap& map, const SessionMergeConfig& config) {
+  std::vector<Eigen::Vector3f> points;
+  if (map.points && !map.points->points.empty()) {
+    points = map.points->points;
+  } else {
+    for (const msgs::LidarKeyframe& keyframe : map.lidar_keyframes->keyframes) {
+      cloud::PointCloud cloud;
+      cloud.positions = keyframe.points;
+      const std::vector<Eigen::Vector3f> in_map = cloud::transformed(cloud, pose_of(keyframe)).positions;
+      points.insert(points.end(), in_map.begin(), in_map.end());
+    }
+  }
+  Result<lidar::MapLocalizer> localizer = lidar::MapLocalizer::create(std::move(points), config.localizer, config.odometry);
+  if (!localizer) logger()->warn("session merge: map {}: candidates verified without localization ({})", map.map_id, localizer.error().message);
+  return localizer;
+}
+
+/// The roll and pitch of a pose: its rotation without the heading (R_up_sensor).
+SO3 level_part(const SE3& T_world_sensor) {
+  const Eigen::Matrix3d R = T_world_sensor.rotation().matrix();
+  return SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), -std::atan2(R(1, 0), R(0, 0))) * T_world_sensor.rotation();
 }
 
 std::vector<std::string> moved_layers_not_kept(const msgs::FusionMap& map) {
@@ -161,14 +199,13 @@ Result<SessionMergeResult> merge_sessions(const std::vector<msgs::FusionMap>& ma
     }
   }
 
-  // 2-3. Verified loops of each later map's queries in each earlier map, kept where they agree.
-  std::map<std::pair<std::size_t, std::size_t>, std::vector<Loop>> agreeing;  // (a, b) -> loops
-  std::vector<std::string> refusals;  // pairs with verified loops that did not join
+  // 2. Verified loops of each later map's queries in each earlier map.
+  std::vector<std::optional<Result<lidar::MapLocalizer>>> localizers(maps.size());  // made when first needed
+  std::vector<Loop> loops;
   for (std::size_t b = 1; b < maps.size(); ++b) {
     const auto& queries_of_b = maps[b].lidar_keyframes->keyframes;
     const std::vector<std::size_t> queries = query_keyframes(maps[b], config.query_spacing);
     for (std::size_t a = 0; a < b; ++a) {
-      std::vector<Loop> loops;
       for (const std::size_t q : queries) {
         if (descriptors[b][q].ring_key.size() == 0) continue;
         ++result.queries;
@@ -176,52 +213,83 @@ Result<SessionMergeResult> merge_sessions(const std::vector<msgs::FusionMap>& ma
         if (!match || !*match) continue;
         ++result.candidates;
         const auto c = static_cast<std::size_t>((*match)->id);
-        const SE3 guess(SO3::exp(Eigen::Vector3d(0, 0, (*match)->distance.yaw)), Eigen::Vector3d::Zero());
+        const SE3 T_a_c = pose_of(maps[a].lidar_keyframes->keyframes[c]);
+        SE3 guess(SO3::exp(Eigen::Vector3d(0, 0, (*match)->distance.yaw)), Eigen::Vector3d::Zero());
+        if (!localizers[a]) localizers[a] = make_localizer(maps[a], config);
+        if (*localizers[a]) {
+          const lidar::MapLocalizationQuery query{T_a_c * guess, config.candidate_window, config.candidate_angular_window};
+          const Result<lidar::MapLocalization> localized = (**localizers[a]).localize(queries_of_b[q].points, level_part(pose_of(queries_of_b[q])), query);
+          if (!localized) continue;  // registration alone takes look-alike streets for the same one
+          guess = T_a_c.inverse() * localized->T_map_sensor;
+        }
         const Result<lidar::SubmapRegistration> registered =
             lidar::register_to_submap(submap_around(maps[a], c, config.loop.submap_keyframes), queries_of_b[q].points, guess, config.loop, config.odometry);
         if (!registered) continue;
         ++result.verified;
-        const SE3 T_a_b = pose_of(maps[a].lidar_keyframes->keyframes[c]) * registered->T_submap_query * pose_of(queries_of_b[q]).inverse();
-        loops.push_back({a, c, b, q, registered->T_submap_query, registered->inlier_rmse, T_a_b});
+        loops.push_back({a, c, b, q, registered->T_submap_query, registered->inlier_rmse});
       }
-      std::string reason;
-      std::vector<Loop> kept = consistent(loops, maps, config, reason);
-      if (kept.empty()) {
-        logger()->info("session merge: {} not joined to {}: {}", maps[b].map_id, maps[a].map_id, reason);
-        if (!loops.empty()) refusals.push_back(fmt::format("{} in {}: {}", maps[b].map_id, maps[a].map_id, reason));
-        continue;
-      }
-      logger()->info("session merge: {} in {}: {} verified loops, {} agree", maps[b].map_id, maps[a].map_id, loops.size(), kept.size());
-      agreeing[{a, b}] = std::move(kept);
     }
   }
 
-  // The maps' frames in the first's, through the pairs with the most loops (breadth first).
+  // 3. The maps join the merge one at a time, from the first: each round the map whose loops
+  // with the maps joined so far agree best on its place.
   std::vector<std::optional<SE3>> T_merged_map(maps.size());
   T_merged_map[0] = SE3();
-  std::deque<std::size_t> frontier{0};
-  while (!frontier.empty()) {
-    const std::size_t m = frontier.front();
-    frontier.pop_front();
-    for (std::size_t other = 0; other < maps.size(); ++other) {
-      if (T_merged_map[other]) continue;
-      const auto found = agreeing.find({std::min(m, other), std::max(m, other)});
-      if (found == agreeing.end()) continue;
-      const SE3 T_a_b = found->second.front().T_a_b;
-      T_merged_map[other] = *T_merged_map[m] * (m < other ? T_a_b : T_a_b.inverse());
-      result.joins.push_back({other, m, m < other ? T_a_b : T_a_b.inverse(), found->second.size()});
-      frontier.push_back(other);
+  std::vector<const Loop*> graph_loops;
+  std::map<std::size_t, std::string> refusals;  // map -> why it did not join (with loops)
+  while (true) {
+    std::optional<std::size_t> best_map;
+    std::vector<Placement> best_placements;
+    for (std::size_t m = 0; m < maps.size(); ++m) {
+      if (T_merged_map[m]) continue;
+      std::vector<Placement> placements;
+      for (const Loop& loop : loops) {
+        const std::size_t other = loop.a == m ? loop.b : loop.b == m ? loop.a : m;
+        if (other != m && T_merged_map[other]) placements.push_back(placement(loop, m, *T_merged_map[other], maps));
+      }
+      std::string reason;
+      std::vector<Placement> kept = consistent(placements, config, reason);
+      if (kept.empty()) {
+        if (!placements.empty()) refusals[m] = fmt::format("{}: {}", maps[m].map_id, reason);
+        continue;
+      }
+      refusals.erase(m);
+      if (kept.size() > best_placements.size()) {
+        best_map = m;
+        best_placements = std::move(kept);
+      }
     }
+    if (!best_map) break;
+    // The consensus: the agreeing placement with the lowest RMSE; reported against the joined
+    // map with the most of its loops.
+    const Placement& consensus = *std::min_element(best_placements.begin(), best_placements.end(),
+                                                   [](const Placement& x, const Placement& y) { return x.loop->rmse < y.loop->rmse; });
+    T_merged_map[*best_map] = consensus.T_merged_map;
+    std::map<std::size_t, std::size_t> loops_with;
+    for (const Placement& kept : best_placements) {
+      graph_loops.push_back(kept.loop);
+      ++loops_with[kept.loop->a == *best_map ? kept.loop->b : kept.loop->a];
+    }
+    const std::size_t joined_to = std::max_element(loops_with.begin(), loops_with.end(), [](const auto& x, const auto& y) { return x.second < y.second; })->first;
+    result.joins.push_back({*best_map, joined_to, T_merged_map[joined_to]->inverse() * consensus.T_merged_map, best_placements.size()});
+    logger()->info("session merge: {} joined ({} agreeing loops, most with {})", maps[*best_map].map_id, best_placements.size(), maps[joined_to].map_id);
   }
-  std::vector<std::string> unjoined;
+  std::vector<std::string> unjoined, reasons;
   for (std::size_t m = 0; m < maps.size(); ++m) {
-    if (!T_merged_map[m]) unjoined.push_back(maps[m].map_id);
+    if (T_merged_map[m]) continue;
+    unjoined.push_back(maps[m].map_id);
+    if (refusals.count(m)) reasons.push_back(refusals[m]);
   }
   if (!unjoined.empty()) {
-    return Error(fmt::format("session merge: {} share(s) no place with {} for certain ({} queries, {} Scan Context candidates, {} verified by "
+    return Error(fmt::format("session merge: {} {} no place with {} for certain ({} queries, {} Scan Context candidates, {} verified by "
                              "registration, no {} agreeing loops joining them{}{})",
-                             fmt::join(unjoined, ", "), maps[0].map_id, result.queries, result.candidates, result.verified,
-                             config.min_agreeing_loops, refusals.empty() ? "" : "; ", fmt::join(refusals, "; ")));
+                             fmt::join(unjoined, ", "), unjoined.size() == 1 ? "shares" : "share", maps[0].map_id, result.queries, result.candidates,
+                             result.verified, config.min_agreeing_loops, reasons.empty() ? "" : "; ", fmt::join(reasons, "; ")));
+  }
+  // Loops between maps joined through others, where they agree with the joins, join the graph too.
+  for (const Loop& loop : loops) {
+    if (std::find(graph_loops.begin(), graph_loops.end(), &loop) != graph_loops.end()) continue;
+    if (agrees(*T_merged_map[loop.b], placement(loop, loop.b, *T_merged_map[loop.a], maps), config)) graph_loops.push_back(&loop);
   }
   for (const auto& entry : T_merged_map) result.T_merged_map.push_back(*entry);
 
@@ -247,13 +315,11 @@ Result<SessionMergeResult> merge_sessions(const std::vector<msgs::FusionMap>& ma
   result.keyframes = node;
   graph::GaussianNoise loop_noise;
   HANZO_ASSIGN_OR_RETURN(loop_noise, pose_noise(config.loop_translation_sigma, config.loop_rotation_sigma));
-  for (const auto& [pair, loops] : agreeing) {
-    for (const Loop& loop : loops) {
-      graph.emplace_robust<graph::BetweenFactorSE3>(graph::RobustKernel{graph::RobustKernel::Type::kDcs, config.loop_dcs_phi},
-                                                    graph::X(first_node[loop.a] + loop.candidate), graph::X(first_node[loop.b] + loop.query),
-                                                    loop.T_candidate_query, loop_noise);
-      ++result.inter_session_loops;
-    }
+  for (const Loop* loop : graph_loops) {
+    graph.emplace_robust<graph::BetweenFactorSE3>(graph::RobustKernel{graph::RobustKernel::Type::kDcs, config.loop_dcs_phi},
+                                                  graph::X(first_node[loop->a] + loop->candidate), graph::X(first_node[loop->b] + loop->query),
+                                                  loop->T_candidate_query, loop_noise);
+    ++result.inter_session_loops;
   }
   graph::BatchOptimizerConfig batch;
   batch.fixed = {graph::X(0)};

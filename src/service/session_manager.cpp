@@ -530,11 +530,27 @@ struct SessionManager::Impl {
       if (newest && !newest->empty()) {
         managed->session->frontend().resume(newest->front());
         managed->latest_pose = newest->front();
+        restore_stored_map(*managed);
       } else {
         logger()->warn("session {}: taken over without its newest stored pose; its poses start a new frame", managed->record.id);
       }
     }
     return managed;
+  }
+
+  // A taken-over session's newest stored map into its pipeline (Session::restore_map): map
+  // versions saved from now on keep what was mapped before, and its first sweeps register
+  // against it. Without one (no save yet) the map starts at the takeover.
+  void restore_stored_map(ManagedSession& managed) {
+    if (!catalog || managed.stored_map_version == 0) return;
+    ApiResult<msgs::FusionMap> stored = catalog->load(managed.record.organization, managed.record.id);
+    if (!stored) {
+      logger()->warn("session {}: its stored map not read ({}); the map starts at the takeover", managed.record.id, stored.error().message);
+      return;
+    }
+    if (Status restored = managed.session->restore_map(stored.value()); !restored) {
+      logger()->warn("session {}: {}; the map starts at the takeover", managed.record.id, restored.error().message);
+    }
   }
 
   // Replicas: the stored session `id` when this replica serves it now (it was free or its lease

@@ -155,6 +155,13 @@ class LidarOdometry {
                                          const std::optional<SE3>& predicted_motion = std::nullopt,
                                          const std::optional<SweepMotion>& sweep_motion = std::nullopt);
 
+  /// Adds points seen before (world frame, from a sensor at sensor_origin; no normals) to the
+  /// local map, e.g. a restarted session's stored keyframes: the next scans register against
+  /// them (a first scan too, which then is no longer taken as is).
+  void add_map_points(const std::vector<Eigen::Vector3f>& points_world, const Eigen::Vector3d& sensor_origin) {
+    map_.add(points_world, {}, sensor_origin);
+  }
+
   /// The latest T_world_lidar (initial_pose before the first scan).
   const SE3& pose() const { return pose_; }
   const cloud::VoxelHashMap& local_map() const { return map_; }

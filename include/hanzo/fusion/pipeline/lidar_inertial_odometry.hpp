@@ -122,6 +122,14 @@ class LidarInertialOdometry {
   /// the Frontend following it): the filter then has no absolute measurement, and an estimated
   /// map frame would take up the IMU's drift instead of the body. Call from fuse()'s thread.
   void hold_map_frame() { hold_map_frame_ = true; }
+  /// Sweeps seen before (sensor-frame points at their world poses, e.g. a restarted session's
+  /// stored keyframes) that the odometry's local map starts with, so that the first sweeps
+  /// register against them. Before the first sweep only (later: ignored).
+  struct SeedKeyframe {
+    SE3 T_world_lidar;
+    std::vector<Eigen::Vector3f> points;
+  };
+  void seed_map(std::vector<SeedKeyframe> keyframes) { seed_ = std::move(keyframes); }
   bool map_frame_held() const { return held_map_frame_.has_value(); }
   const LidarInertialOdometryStatistics& statistics() const { return statistics_; }
   /// The odometry (its local map, latest pose); nullptr before the first scan. Not while
@@ -135,6 +143,7 @@ class LidarInertialOdometry {
                                                         const SE3& T_world_lidar_middle) const;
 
   Frontend& frontend_;
+  std::vector<SeedKeyframe> seed_;
   std::string lidar_sensor_;
   SE3 T_body_lidar_;
   LidarInertialOdometryConfig config_;

@@ -475,10 +475,21 @@ class Session {
   /// each placement's reason follows). Nothing changes then.
   Result<CameraRelocalizationOutcome> relocalize(const msgs::VisualLandmarkLayer& map, const CameraRelocalizationRequest& request);
 
-  /// The map's layers (points, occupancy; the cameras' landmarks; the Gaussian splats trained so
-  /// far with fusion.mapping.splats) with version = map_version and provenance.algorithm set
-  /// ("pipeline/session"); other metadata empty. The splats change without map_version.
+  /// The map's layers (points, occupancy; the LiDAR keyframes; the cameras' landmarks; the
+  /// Gaussian splats trained so far with fusion.mapping.splats) with version = map_version and
+  /// provenance.algorithm set ("pipeline/session"); other metadata empty. The splats change
+  /// without map_version.
   msgs::FusionMap map() const;
+
+  /// Continues a session restarted in another process (a server replica's takeover) from a map
+  /// it stored, after Frontend::resume and before the first sweep: the map's LiDAR keyframes go
+  /// into this session's map layers and its lidar_keyframes (maps written from now on keep
+  /// them), and those within the odometry's map range (lidar_odometry.odometry.map.max_distance)
+  /// of the newest one into the LiDAR odometry's local map, so that the first sweeps register
+  /// against what the session saw before. They take no part in loop closures. Fails, changing
+  /// nothing, when the map has no LiDAR keyframes, the session has no 3D LiDAR odometry, or a
+  /// sweep came already.
+  Status restore_map(const msgs::FusionMap& map);
   /// The Frontend's summary with the LiDAR sensor's counters filled in.
   SessionSummary summary() const;
   MappingSummary mapping_summary() const;
@@ -580,7 +591,7 @@ class Session {
   /// What an update's result changes in the session (landmarks forgotten, map keyframes moved).
   void finish_backend_update(Result<KeyframeGraphUpdate> update);
   void follow_graph();
-  /// Moves map keyframes (index -> T_world_lidar) in the map and publishes the corrected map.
+  /// Moves map keyframes (the map builder's number: restored keyframes, then map_keyframes_ -> T_world_lidar) in the map and publishes the corrected map.
   void move_map_keyframes(const std::map<uint64_t, SE3>& moved);
   /// Moves the Session's world onto a map's frame (both relocalizations): the Frontend's belief
   /// of its newest keyframe corrected by T_map_world, the map keyframes moved, a fresh graph
@@ -657,6 +668,7 @@ class Session {
   std::optional<msgs::Keyframe> latest_keyframe_;   ///< the newest Frontend keyframe
   SE3 latest_keyframe_uncorrected_;                 ///< its pose before the Frontend's corrections
   std::vector<MapKeyframe> map_keyframes_;
+  std::vector<msgs::LidarKeyframe> restored_keyframes_;  ///< restore_map()'s, before map_keyframes_
   /// The newest map keyframe offered when it was a revisit: the loop closure detector keeps it
   /// (as keyframe map_keyframes_.size()) until the next one is offered, for close_loop().
   std::optional<MapKeyframe> pending_revisit_;

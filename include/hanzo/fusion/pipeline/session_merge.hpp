@@ -7,15 +7,21 @@
 //  1. Candidates (Kim & Kim, Scan Context, IROS 2018): every keyframe of a later map at least
 //     query_spacing metres of path after the previous query is described and searched in each
 //     earlier map's Scan Context database (ring key, then the full distance over all yaws).
-//  2. Verification: the query's points are registered to the submap of the candidate's
-//     neighbours (loop.submap_keyframes on each side) from the descriptor's yaw, coarse then fine
+//  2. Verification: the query's sweep is localized in the earlier map's points around the
+//     candidate (lidar::MapLocalizer: 2D branch and bound within candidate_window metres and
+//     candidate_angular_window of the candidate's pose turned by the descriptor's yaw, then 3D
+//     registration and the free-space check; keyframes of one map lie several metres apart at
+//     speed, so the query is rarely where the candidate is), then registered to the submap of the
+//     candidate's neighbours (loop.submap_keyframes on each side) from there, coarse then fine
 //     (lidar::register_to_submap; loop.max_rmse, loop.min_inlier_fraction, degeneracy).
-//  3. Consistency: each verified loop between maps a and b implies b's frame in a's,
-//     T_a_b = T_a_candidate T_candidate_query T_b_query^-1. The loop whose hypothesis the most
-//     loops agree with (each loop's query placed by it within agreement_translation /
-//     agreement_rotation of where the loop itself puts it) joins the two maps with those loops,
-//     when at least min_agreeing_loops agree; the others are dropped as perceptual aliasing
-//     (streets and aisles alike).
+//  3. Joining: the maps join the merge one at a time, from the first. Each loop between a map
+//     and a map already joined says where the map's frame lies in the merged one; the loops
+//     agreeing with the hypothesis most of them agree with (each loop's keyframe placed by it
+//     within agreement_translation / agreement_rotation of where the loop itself puts it) join
+//     the map when there are at least min_agreeing_loops and no disagreeing hypothesis has as
+//     many and half as many (a symmetric place); each round the map with the most agreeing loops
+//     joins. Loops that disagree are dropped as perceptual aliasing (streets and aisles alike);
+//     loops between maps that joined through others enter the graph where they agree.
 //  4. One graph: a pose node per keyframe of every map, between factors along each map's
 //     keyframes (their relative poses in the map; sigmas min + per metre, as LidarSlam's), the
 //     agreeing inter-session loops as between factors under a DCS kernel, the first map's first
@@ -40,6 +46,7 @@
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/lidar/lidar_odometry.hpp"
 #include "hanzo/fusion/lidar/loop_closure.hpp"
+#include "hanzo/fusion/lidar/map_localization.hpp"
 #include "hanzo/fusion/maps/map_builder.hpp"
 #include "hanzo/fusion/msgs/map_messages.hpp"
 
@@ -55,15 +62,18 @@ struct SessionMergeConfig {
     return config;
   }();
   lidar::LidarOdometryConfig odometry;  ///< registration settings (map and source voxels)
+  lidar::MapLocalizerConfig localizer;  ///< the candidates' windowed localization
+  double candidate_window = 10.0;         ///< m, +- around the candidate's position
+  double candidate_angular_window = 0.3;  ///< rad, +- around the descriptor's heading
   double query_spacing = 1.0;           ///< m of path between a map's query keyframes
   std::size_t min_agreeing_loops = 3;   ///< loops that must agree to join two maps
   double agreement_translation = 1.5;   ///< m
   double agreement_rotation = 0.05;     ///< rad
   /// Between-factor sigmas along a map's keyframes: min + per_meter x their distance.
   double min_translation_sigma = 0.02;       ///< m
-  double translation_sigma_per_meter = 0.01;
+  double translation_sigma_per_meter = 0.002;
   double min_rotation_sigma = 0.002;         ///< rad
-  double rotation_sigma_per_meter = 0.0005;  ///< rad/m
+  double rotation_sigma_per_meter = 0.0001;  ///< rad/m
   double loop_translation_sigma = 0.05;      ///< m
   double loop_rotation_sigma = 0.005;        ///< rad
   /// DCS phi of the inter-session loops: large, because the sessions' drift puts a correct loop
@@ -76,22 +86,22 @@ struct SessionMergeConfig {
   Status validate() const;
 };
 
-/// The join of one later map to an earlier one.
+/// How a map joined the merge.
 struct SessionJoin {
-  std::size_t map = 0;        ///< index of the later map
-  std::size_t joined_to = 0;  ///< index of the earlier map whose loops joined it
+  std::size_t map = 0;        ///< index of the map
+  std::size_t joined_to = 0;  ///< index of the joined map with the most of its agreeing loops
   SE3 T_joined_map;           ///< the later map's frame in the earlier one's (consensus loop)
-  std::size_t loops = 0;      ///< agreeing loops between the two
+  std::size_t loops = 0;      ///< agreeing loops that joined it (with joined_to and other joined maps)
 };
 
 struct SessionMergeResult {
   msgs::FusionMap merged;
   std::vector<SE3> T_merged_map;     ///< each map's frame in the merged one before optimization
-  std::vector<SessionJoin> joins;    ///< one per later map (the spanning tree from the first)
+  std::vector<SessionJoin> joins;    ///< one per map but the first, in the order they joined
   std::size_t queries = 0;           ///< keyframes searched in other maps
   std::size_t candidates = 0;        ///< Scan Context matches below loop.scan_context.max_distance
   std::size_t verified = 0;          ///< of which registration verified
-  std::size_t inter_session_loops = 0;  ///< of which agreeing with their pair's consensus (in the graph)
+  std::size_t inter_session_loops = 0;  ///< of which agreeing with the joins (in the graph)
   std::size_t keyframes = 0;
   double initial_chi2 = 0.0, final_chi2 = 0.0;
   int iterations = 0;
