@@ -77,8 +77,8 @@ std::vector<Placement> largest_agreeing(const std::vector<Placement>& placements
 }
 
 /// The placements that join a map to the merge: the largest agreeing set, when it has
-/// min_agreeing_loops and no other hypothesis (placements that disagree with it) has as many and
-/// half its size (a symmetric place seen from two sides); else none, with the reason.
+/// min_agreeing_loops and no other hypothesis (placements that disagree with it) has that many
+/// too (a symmetric place seen from two sides); else none, with the reason.
 std::vector<Placement> consistent(const std::vector<Placement>& placements, const SessionMergeConfig& config, std::string& reason) {
   std::vector<Placement> best = largest_agreeing(placements, config);
   if (best.size() < config.min_agreeing_loops) {
@@ -89,7 +89,7 @@ std::vector<Placement> consistent(const std::vector<Placement>& placements, cons
   std::copy_if(placements.begin(), placements.end(), std::back_inserter(others),
                [&](const Placement& other) { return !agrees(best.front().T_merged_map, other, config); });
   const std::vector<Placement> second = largest_agreeing(others, config);
-  if (second.size() >= config.min_agreeing_loops && 2 * second.size() >= best.size()) {
+  if (second.size() >= config.min_agreeing_loops) {
     reason = fmt::format("ambiguous: {} loops agree on one place, {} on another", best.size(), second.size());
     return {};
   }
@@ -281,10 +281,9 @@ Result<SessionMergeResult> merge_sessions(const std::vector<msgs::FusionMap>& ma
     if (refusals.count(m)) reasons.push_back(refusals[m]);
   }
   if (!unjoined.empty()) {
-    return Error(fmt::format("session merge: {} {} no place with {} for certain ({} queries, {} Scan Context candidates, {} verified by "
-                             "registration, no {} agreeing loops joining them{}{})",
-                             fmt::join(unjoined, ", "), unjoined.size() == 1 ? "shares" : "share", maps[0].map_id, result.queries, result.candidates,
-                             result.verified, config.min_agreeing_loops, reasons.empty() ? "" : "; ", fmt::join(reasons, "; ")));
+    return Error(fmt::format("session merge: {} not joined to {} ({} queries, {} Scan Context candidates, {} verified by registration; {})",
+                             fmt::join(unjoined, ", "), maps[0].map_id, result.queries, result.candidates, result.verified,
+                             reasons.empty() ? fmt::format("no verified loop with the maps joined: no place shared for certain") : fmt::format("{}", fmt::join(reasons, "; "))));
   }
   // Loops between maps joined through others, where they agree with the joins, join the graph too.
   for (const Loop& loop : loops) {

@@ -2,7 +2,9 @@
 // simulated warehouse that start at different places, facing different ways, and drive the same
 // aisles in opposite directions (their frames a quarter turn apart, no guess given). Inter-session
 // loops join them; every keyframe of the merged map lies within 0.10 m of the truth, and the map
-// survives its file. Scans of another place (a room of pillars) are refused with the reason.
+// survives its file. A session whose only shared place is its start, in a warehouse symmetric
+// under a half turn, is refused as ambiguous; scans of another place (a room of pillars) are
+// refused with the reason.
 
 #include <cmath>
 #include <numbers>
@@ -76,7 +78,7 @@ msgs::FusionMap pillar_room() {
   return map;
 }
 
-TEST(SessionMerge, TwoSessionsDrivingOppositeWaysJoinInOneGraphAndAnotherPlaceIsRefused) {
+TEST(SessionMerge, TwoSessionsDrivingOppositeWaysJoinInOneGraphAndAmbiguousOrOtherPlacesAreRefused) {
   // East: along the south aisle, then north along the east side. West: south along the east
   // side, then west along the south aisle.
   const SessionRun a = patrol("east", 1, {{15, -1.5, 0.15}, {34, -1.5, 0.15}, {34, 14.5, 0.15}, {-3, 14.5, 0.15}, {-3, -1.5, 0.15}});
@@ -117,10 +119,21 @@ TEST(SessionMerge, TwoSessionsDrivingOppositeWaysJoinInOneGraphAndAnotherPlaceIs
   EXPECT_EQ(reread.lidar_keyframes->keyframes.back().points, keyframes.keyframes.back().points);
   EXPECT_EQ(reread.lidar_keyframes->keyframes.back().source, 1U);
 
+  // The warehouse is symmetric under a half turn about its middle. A session that shares only
+  // its start with east (from the same place, facing west, round the other way) sees the
+  // shelves and pillars east saw from the other side: its loops agree on two places (the true
+  // one at the start, the turned one along the side aisles), and the merge refuses it as
+  // ambiguous instead of joining it by the larger set.
+  const SessionRun mirror = patrol("mirror", 3, {{15, -1.5, 0.15}, {-3, -1.5, 0.15}, {-3, 14.5, 0.15}, {34, 14.5, 0.15}, {34, -1.5, 0.15}});
+  const Result<SessionMergeResult> ambiguous = merge_sessions({a.map, mirror.map}, config);
+  ASSERT_FALSE(ambiguous) << "joined with yaw " << ambiguous->joins[0].T_joined_map.rotation().log().z();
+  std::printf("symmetric: %s\n", ambiguous.error().message.c_str());
+  EXPECT_NE(ambiguous.error().message.find("ambiguous"), std::string::npos);
+
   const Result<SessionMergeResult> refused = merge_sessions({a.map, pillar_room()}, config);
   ASSERT_FALSE(refused);
   std::printf("another place: %s\n", refused.error().message.c_str());
-  EXPECT_NE(refused.error().message.find("pillars shares no place with east"), std::string::npos);
+  EXPECT_NE(refused.error().message.find("pillars not joined to east"), std::string::npos);
 }
 
 }  // namespace

@@ -18,9 +18,9 @@
 //     and a map already joined says where the map's frame lies in the merged one; the loops
 //     agreeing with the hypothesis most of them agree with (each loop's keyframe placed by it
 //     within agreement_translation / agreement_rotation of where the loop itself puts it) join
-//     the map when there are at least min_agreeing_loops and no disagreeing hypothesis has as
-//     many and half as many (a symmetric place); each round the map with the most agreeing loops
-//     joins. Loops that disagree are dropped as perceptual aliasing (streets and aisles alike);
+//     the map when there are at least min_agreeing_loops and no disagreeing hypothesis has that
+//     many too (a place symmetric under a turn: refused as ambiguous, not joined by the larger
+//     set); each round the map with the most agreeing loops joins. Loops that disagree are dropped as perceptual aliasing (streets and aisles alike);
 //     loops between maps that joined through others enter the graph where they agree.
 //  4. One graph: a pose node per keyframe of every map, between factors along each map's
 //     keyframes (their relative poses in the map; sigmas min + per metre, as LidarSlam's), the
