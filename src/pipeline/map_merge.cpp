@@ -103,7 +103,10 @@ msgs::PointLayer join_points(const msgs::PointLayer& a, const msgs::PointLayer& 
   return joined;
 }
 
-std::vector<std::string> other_layers(const msgs::FusionMap& map) {
+
+}  // namespace
+
+std::vector<std::string> layers_besides_points(const msgs::FusionMap& map) {
   std::vector<std::string> names;
   if (map.occupancy) names.emplace_back("occupancy");
   if (map.tsdf) names.emplace_back("tsdf");
@@ -111,10 +114,9 @@ std::vector<std::string> other_layers(const msgs::FusionMap& map) {
   if (map.visual_landmarks) names.emplace_back("visual_landmarks");
   if (map.gaussian_splats) names.emplace_back("gaussian_splats");
   if (map.neural_field) names.emplace_back("neural_field");
+  if (map.lidar_keyframes) names.emplace_back("lidar_keyframes");
   return names;
 }
-
-}  // namespace
 
 Result<MapMergeResult> merge_maps(const msgs::FusionMap& a, const msgs::FusionMap& b, const MapMergeConfig& config) {
   if (!a.points || a.points->points.empty()) return Error(fmt::format("map A ({}): no points to localize in", a.map_id));
@@ -163,7 +165,13 @@ Result<MapMergeResult> merge_maps(const msgs::FusionMap& a, const msgs::FusionMa
   result.merged = a;
   result.merged.points = join_points(*a.points, *b.points, result.T_a_b, result.points_from_b);
   result.merged.provenance.input_logs.insert(result.merged.provenance.input_logs.end(), b.provenance.input_logs.begin(), b.provenance.input_logs.end());
-  result.dropped_layers = other_layers(b);
+  result.dropped_layers = layers_besides_points(b);
+  // The joined points are no longer the keyframes' sweeps: a keyframe graph cannot be rebuilt
+  // from A's keyframes alone.
+  if (result.merged.lidar_keyframes) {
+    result.merged.lidar_keyframes.reset();
+    if (!b.lidar_keyframes) result.dropped_layers.emplace_back("lidar_keyframes (A's)");
+  }
   logger()->info("map merge: B ({}) in A ({}): {} of {} views localized, {} agree; {} points added", b.map_id, a.map_id, result.localized, result.views,
                  result.agreeing, result.points_from_b);
   return result;

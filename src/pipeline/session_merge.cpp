@@ -14,6 +14,7 @@
 #include "hanzo/fusion/graph/keys.hpp"
 #include "hanzo/fusion/graph/pose_factors.hpp"
 #include "hanzo/fusion/lidar/scan_context.hpp"
+#include "hanzo/fusion/pipeline/map_merge.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
@@ -146,15 +147,6 @@ SO3 level_part(const SE3& T_world_sensor) {
   return SO3::from_axis_angle(Eigen::Vector3d::UnitZ(), -std::atan2(R(1, 0), R(0, 0))) * T_world_sensor.rotation();
 }
 
-std::vector<std::string> moved_layers_not_kept(const msgs::FusionMap& map) {
-  std::vector<std::string> names;
-  if (map.tsdf) names.emplace_back("tsdf");
-  if (map.mesh) names.emplace_back("mesh");
-  if (map.visual_landmarks) names.emplace_back("visual_landmarks");
-  if (map.gaussian_splats) names.emplace_back("gaussian_splats");
-  if (map.neural_field) names.emplace_back("neural_field");
-  return names;
-}
 
 }  // namespace
 
@@ -374,7 +366,8 @@ Result<SessionMergeResult> merge_sessions(const std::vector<msgs::FusionMap>& ma
       }
       layer.keyframes.push_back({keyframe.time, msgs::Pose::from_se3(T_merged_lidar), keyframe.points, source_index.at(keyframe.source)});
     }
-    for (const std::string& name : moved_layers_not_kept(maps[m])) {
+    for (const std::string& name : layers_besides_points(maps[m])) {  // occupancy and keyframes are rebuilt
+      if (name == "occupancy" || name == "lidar_keyframes") continue;
       if (std::find(result.dropped_layers.begin(), result.dropped_layers.end(), name) == result.dropped_layers.end()) result.dropped_layers.push_back(name);
     }
   }

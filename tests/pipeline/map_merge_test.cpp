@@ -55,7 +55,7 @@ TEST(MapMerge, TwoPatrolsJoinWithoutAGuessAndAnotherPlaceIsRefused) {
   EXPECT_GE(merged.agreeing, 2U);
   EXPECT_EQ(merged.merged.points->points.size(), a.points->points.size() + merged.points_from_b);
   EXPECT_LT(merged.points_from_b, b.points->points.size() / 2) << "the same place: most of B's voxels are A's";
-  EXPECT_EQ(merged.dropped_layers, std::vector<std::string>{"occupancy"});
+  EXPECT_EQ(merged.dropped_layers, (std::vector<std::string>{"occupancy", "lidar_keyframes"}));
 
   // A room with pillars on a grid, walls 2.5 m high: no place of the warehouse.
   msgs::FusionMap other;

@@ -466,8 +466,12 @@ TEST_F(MappingEndpointsTest, ASessionStartsLocalizedInAMergedMap) {
   for (msgs::LidarKeyframe& keyframe : survey.lidar_keyframes->keyframes) {
     keyframe.T_world_lidar = msgs::Pose::from_se3(T_survey_world * keyframe.T_world_lidar.to_se3());
   }
+  for (Eigen::Vector3f& point : survey.points->points) point = (T_survey_world * point.cast<double>()).cast<float>();
+  survey.occupancy.reset();
   session_map.map_id = "session";
-  pipeline::SessionMergeResult merged = pipeline::merge_sessions({survey, session_map}).value();
+  Result<pipeline::SessionMergeResult> merge = pipeline::merge_sessions({survey, session_map});
+  ASSERT_TRUE(merge.ok()) << merge.error().message;
+  pipeline::SessionMergeResult& merged = merge.value();
   ASSERT_EQ(merged.joins.size(), 1U);
   EXPECT_LT((merged.joins[0].T_joined_map.translation() - T_survey_world.translation()).norm(), 0.05);
   merged.merged.map_id = "merged-streets";

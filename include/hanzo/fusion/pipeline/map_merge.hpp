@@ -16,8 +16,9 @@
 //
 // The merged map: A's metadata and layers; its points and B's moved points on A's voxel grid
 // (one point per voxel, A's first), each point's attributes kept where both maps have them;
-// B's other layers (occupancy, mesh, landmarks, ...) are not moved (listed in
-// MapMergeResult::dropped_layers); provenance holds both maps' inputs. Frames: both maps z up
+// B's other layers (occupancy, mesh, landmarks, LiDAR keyframes, ...) are not moved (listed in
+// MapMergeResult::dropped_layers), and A's LiDAR keyframes are left out (the points are no
+// longer theirs); provenance holds both maps' inputs. Frames: both maps z up
 // (gravity-aligned, as Sessions make them). Failure: a map without points, the refusals above.
 
 #include <string>
@@ -56,6 +57,9 @@ struct MapMergeResult {
   std::size_t points_from_b = 0;    ///< B's points added (in voxels A had not)
   std::vector<std::string> dropped_layers;  ///< B's layers other than points
 };
+
+/// The names of the map's layers other than points ("occupancy", "tsdf", ..., "lidar_keyframes").
+std::vector<std::string> layers_besides_points(const msgs::FusionMap& map);
 
 Result<MapMergeResult> merge_maps(const msgs::FusionMap& a, const msgs::FusionMap& b, const MapMergeConfig& config = {});
 
