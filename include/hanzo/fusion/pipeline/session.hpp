@@ -87,8 +87,10 @@
 //  - Map keyframes: the first registered sweep after a Frontend keyframe, when the LiDAR moved
 //    map_keyframe_distance / map_keyframe_angle since the previous map keyframe, is kept
 //    (deskewed points, sensor frame) with its pose relative to that Frontend keyframe. It goes
-//    into the map (maps::MapBuilder: point map + 2D occupancy by default) and into the loop
-//    closure detector (lidar/loop_closure.hpp: Scan Context + registration); one at a place
+//    into the map (maps::MapBuilder: point map + 2D occupancy by default; with its sweep and
+//    pose into the map's lidar_keyframes, which pipeline/session_merge.hpp joins across
+//    sessions) and into the loop closure detector (lidar/loop_closure.hpp: Scan Context +
+//    registration); one at a place
 //    the map already has (a revisit, LoopClosureConfig::covered_distance) is searched for a
 //    loop, then goes into the grids only and is not kept (memory stays flat on a route driven
 //    again and again). A verified loop
