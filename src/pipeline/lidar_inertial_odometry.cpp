@@ -88,7 +88,7 @@ Result<LidarInertialOdometry::RegisteredScan> LidarInertialOdometry::register_sc
   correction_at_last_scan_ = scan.world_correction;
   if (!odometry_) {
     odometry_ = std::make_unique<lidar::LidarOdometry>(config_.odometry, T_world_lidar);
-    for (const SeedKeyframe& keyframe : seed_) {  // the odometry's frame is the world now
+    for (const SeedKeyframe& keyframe : seed_) {  // at creation the odometry's frame is the world
       cloud::PointCloud cloud;
       cloud.positions = keyframe.points;
       odometry_->add_map_points(cloud::transformed(cloud, keyframe.T_world_lidar).positions, keyframe.T_world_lidar.translation());

@@ -166,8 +166,8 @@ Result<MapMergeResult> merge_maps(const msgs::FusionMap& a, const msgs::FusionMa
   result.merged.points = join_points(*a.points, *b.points, result.T_a_b, result.points_from_b);
   result.merged.provenance.input_logs.insert(result.merged.provenance.input_logs.end(), b.provenance.input_logs.begin(), b.provenance.input_logs.end());
   result.dropped_layers = layers_besides_points(b);
-  // The joined points are no longer the keyframes' sweeps: a keyframe graph cannot be rebuilt
-  // from A's keyframes alone.
+  // The joined points hold B's too: a keyframe graph rebuilt from A's keyframes alone would
+  // lose them.
   if (result.merged.lidar_keyframes) {
     result.merged.lidar_keyframes.reset();
     if (!b.lidar_keyframes) result.dropped_layers.emplace_back("lidar_keyframes (A's)");

@@ -538,9 +538,9 @@ struct SessionManager::Impl {
     return managed;
   }
 
-  // A taken-over session's newest stored map into its pipeline (Session::restore_map): map
-  // versions saved from now on keep what was mapped before, and its first sweeps register
-  // against it. Without one (no save yet) the map starts at the takeover.
+  // A taken-over session's newest stored map into its pipeline (Session::restore_map): the map
+  // versions this replica saves hold its keyframes, and the first sweeps here register against
+  // it. Without one (no save yet) the map holds only what this replica maps.
   void restore_stored_map(ManagedSession& managed) {
     if (!catalog || managed.stored_map_version == 0) return;
     ApiResult<msgs::FusionMap> stored = catalog->load(managed.record.organization, managed.record.id);

@@ -157,7 +157,7 @@ class LidarOdometry {
 
   /// Adds points seen before (world frame, from a sensor at sensor_origin; no normals) to the
   /// local map, e.g. a restarted session's stored keyframes: the next scans register against
-  /// them (a first scan too, which then is no longer taken as is).
+  /// them (a first scan too, which then is registered rather than taken as the map's start).
   void add_map_points(const std::vector<Eigen::Vector3f>& points_world, const Eigen::Vector3d& sensor_origin) {
     map_.add(points_world, {}, sensor_origin);
   }
