@@ -138,6 +138,8 @@ std::vector<v1::FusionMap> cut_into_pieces(const v1::FusionMap& map, std::size_t
     head->set_camera(layer.camera());
     head->set_descriptor_type(layer.descriptor_type());
     head->set_float_descriptor_size(layer.float_descriptor_size());
+    head->set_scale_free(layer.scale_free());
+    *head->mutable_sources() = layer.sources();
     const auto floats = static_cast<int>(layer.float_descriptor_size());
     for_each_slice(layer.positions_size(), chunk_bytes / (60 + 4 * static_cast<std::size_t>(floats)), [&](int begin, int end) {
       v1::VisualLandmarkLayer* piece = pieces.emplace_back().mutable_visual_landmarks();

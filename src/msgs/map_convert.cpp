@@ -91,7 +91,10 @@ void write(const VisualLandmarkLayer& layer, v1::VisualLandmarkLayer* out) {
     k->set_time_ns(wire::write_time(keyframe.time));
     write(keyframe.T_world_camera, k->mutable_pose());
     k->mutable_landmarks()->Add(keyframe.landmarks.begin(), keyframe.landmarks.end());
+    k->set_source(keyframe.source);
   }
+  out->set_scale_free(layer.scale_free);
+  for (const std::string& source : layer.sources) out->add_sources(source);
 }
 
 // ---- from the wire (already validated) --------------------------------------------------
@@ -181,8 +184,11 @@ Result<VisualLandmarkLayer> read(const v1::VisualLandmarkLayer& in) {
     keyframe.T_world_camera.position = {pose.position().x(), pose.position().y(), pose.position().z()};
     keyframe.T_world_camera.orientation = Eigen::Quaterniond(pose.orientation().w(), pose.orientation().x(), pose.orientation().y(), pose.orientation().z()).normalized();
     keyframe.landmarks.assign(k.landmarks().begin(), k.landmarks().end());
+    keyframe.source = k.source();
     layer.keyframes.push_back(std::move(keyframe));
   }
+  layer.scale_free = in.scale_free();
+  layer.sources.assign(in.sources().begin(), in.sources().end());
   return layer;
 }
 

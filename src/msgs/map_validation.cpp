@@ -201,23 +201,31 @@ class MapChecker {
         }
       }
     }
+    return keyframe_sources(layer, field);
+  }
+
+  /// A keyframe layer's sources (non-empty map ids) and each keyframe's index into them.
+  template <typename Layer>
+  Status keyframe_sources(const Layer& layer, const std::string& field) const {
+    for (int i = 0; i < layer.sources_size(); ++i) {
+      if (layer.sources(i).empty()) return fail(fmt::format("{}.sources[{}]", field, i), "empty");
+    }
+    for (int k = 0; k < layer.keyframes_size(); ++k) {
+      if (layer.keyframes(k).source() >= static_cast<uint32_t>(std::max(1, layer.sources_size()))) {
+        return fail(fmt::format("{}.keyframes[{}].source", field, k), fmt::format("index {} past the {} sources", layer.keyframes(k).source(), layer.sources_size()));
+      }
+    }
     return ok_status();
   }
 
   Status lidar_keyframes(const v1::LidarKeyframeLayer& layer, const std::string& field) const {
-    for (int i = 0; i < layer.sources_size(); ++i) {
-      if (layer.sources(i).empty()) return fail(fmt::format("{}.sources[{}]", field, i), "empty");
-    }
     for (int k = 0; k < layer.keyframes_size(); ++k) {
       const v1::LidarKeyframe& keyframe = layer.keyframes(k);
       const std::string keyframe_field = fmt::format("{}.keyframes[{}]", field, k);
       HANZO_RETURN_IF_ERROR(pose(keyframe.pose(), keyframe_field + ".pose"));
       HANZO_RETURN_IF_ERROR(points(keyframe.points(), keyframe_field + ".points"));
-      if (keyframe.source() >= static_cast<uint32_t>(std::max(1, layer.sources_size()))) {
-        return fail(keyframe_field + ".source", fmt::format("index {} past the {} sources", keyframe.source(), layer.sources_size()));
-      }
     }
-    return ok_status();
+    return keyframe_sources(layer, field);
   }
 
   Status gaussian_splats(const v1::GaussianSplatLayer& layer, const std::string& field) const {

@@ -23,14 +23,6 @@ Result<MapRelocalizer> MapRelocalizer::create(msgs::VisualLandmarkLayer map, con
   if (map.positions.empty() || map.keyframes.empty()) {
     return Error(fmt::format("visual landmark map: {} landmarks and {} keyframes (needs both)", map.positions.size(), map.keyframes.size()));
   }
-  const bool orb_map = map.descriptor_type == "orb";
-  if (orb_map && map.descriptors.size() != map.positions.size()) {
-    return Error(fmt::format("visual landmark map: {} descriptors for {} landmarks", map.descriptors.size(), map.positions.size()));
-  }
-  if (!orb_map && (map.float_descriptor_size == 0 || map.float_descriptors.size() != map.float_descriptor_size * map.positions.size())) {
-    return Error(fmt::format("visual landmark map: {} float descriptors of {} for {} landmarks", map.float_descriptors.size(), map.float_descriptor_size,
-                             map.positions.size()));
-  }
   if (!(camera.fx > 0.0 && camera.fy > 0.0)) return Error(fmt::format("camera: focal lengths must be positive (fx {}, fy {})", camera.fx, camera.fy));
   if (config.min_inliers < 6 || config.candidates < 1 || config.neighbour_keyframes < 0 || !(config.pixel_sigma > 0.0) || !(config.max_landmark_std >= 0.0) ||
       !(config.projection_search_radius_px > 0.0)) {
@@ -51,53 +43,14 @@ Result<MapRelocalizer> MapRelocalizer::create(msgs::VisualLandmarkLayer map, con
     return Error(fmt::format("visual landmark map: its landmarks carry {} descriptors, the image's features are {}'s (relocalize with the map's features)",
                              map.descriptor_type, relocalizer.extractor_->name()));
   }
-  for (const msgs::VisualKeyframe& keyframe : map.keyframes) {
-    for (uint32_t landmark : keyframe.landmarks) {
-      if (landmark >= map.positions.size()) return Error(fmt::format("visual landmark map: a keyframe sees landmark {} of {}", landmark, map.positions.size()));
-    }
-  }
-  const auto landmark_count = static_cast<int>(map.positions.size());
-  if (orb_map) {
-    relocalizer.descriptors_ = cv::Mat(landmark_count, 32, CV_8UC1);
-    for (std::size_t i = 0; i < map.descriptors.size(); ++i) std::copy(map.descriptors[i].begin(), map.descriptors[i].end(), relocalizer.descriptors_.ptr<uint8_t>(static_cast<int>(i)));
-  } else {
-    relocalizer.descriptors_ = cv::Mat(landmark_count, static_cast<int>(map.float_descriptor_size), CV_32FC1);
-    std::copy(map.float_descriptors.begin(), map.float_descriptors.end(), relocalizer.descriptors_.ptr<float>(0));
-  }
-  const auto keyframe_descriptors = [&](const msgs::VisualKeyframe& keyframe) {
-    cv::Mat seen;
-    for (uint32_t landmark : keyframe.landmarks) seen.push_back(relocalizer.descriptors_.row(static_cast<int>(landmark)));
-    return seen;
-  };
-  if (orb_map) {
-    relocalizer.vocabulary_ = config.vocabulary;
-    if (!relocalizer.vocabulary_) {
-      Result<Vocabulary> loaded = Vocabulary::load_default();
-      if (!loaded) return loaded.error();
-      relocalizer.vocabulary_ = std::make_shared<const Vocabulary>(std::move(*loaded));
-    }
-    for (const msgs::VisualKeyframe& keyframe : map.keyframes) relocalizer.keyframe_words_.push_back(relocalizer.vocabulary_->transform(keyframe_descriptors(keyframe)));
-  } else {
-    relocalizer.place_model_ = config.learned_place_recognition ? config.place_model : nullptr;
-    if (!relocalizer.place_model_ && config.learned_place_recognition) {
-      if (Result<VladModel> loaded = VladModel::load_default(map.descriptor_type)) {
-        relocalizer.place_model_ = std::make_shared<const VladModel>(std::move(*loaded));
-      } else {
-        spdlog::info("relocalization: no VLAD model for {} ({}); candidate keyframes by matched landmarks", map.descriptor_type, loaded.error().message);
-      }
-    }
-    if (relocalizer.place_model_ && relocalizer.place_model_->extractor_name() != map.descriptor_type) {
-      return Error(fmt::format("MapRelocalizerConfig.place_model: trained on {} descriptors, the map's are {}", relocalizer.place_model_->extractor_name(),
-                               map.descriptor_type));
-    }
-    if (relocalizer.place_model_) {
-      for (const msgs::VisualKeyframe& keyframe : map.keyframes) {
-        Result<Eigen::VectorXf> described = relocalizer.place_model_->describe(keyframe_descriptors(keyframe));
-        if (!described) return Error("visual landmark map: " + described.error().message);
-        relocalizer.keyframe_vlad_.push_back(std::move(*described));
-      }
-    }
-  }
+  LandmarkPlaceIndexConfig places;
+  places.vocabulary = config.vocabulary;
+  places.place_model = config.place_model;
+  places.learned_place_recognition = config.learned_place_recognition;
+  Result<LandmarkPlaceIndex> index = LandmarkPlaceIndex::create(map, places);
+  if (!index) return index.error();
+  relocalizer.places_ = std::make_shared<const LandmarkPlaceIndex>(std::move(*index));
+  relocalizer.descriptors_ = relocalizer.places_->descriptors();
   relocalizer.map_ = std::move(map);
   relocalizer.camera_ = camera;
   relocalizer.config_ = std::move(config);
@@ -125,33 +78,6 @@ PoseRefinement MapRelocalizer::refine_by_projection(const SE3& T_camera_world, c
   return refine_pose(T_camera_world, observations, camera_);
 }
 
-std::vector<std::pair<double, int>> MapRelocalizer::rank_keyframes(const ImageFeatures& features) const {
-  std::vector<std::pair<double, int>> ranked;
-  if (binary()) {
-    const BowVector words = vocabulary_->transform(features.descriptors);
-    for (std::size_t k = 0; k < keyframe_words_.size(); ++k) ranked.emplace_back(Vocabulary::score(words, keyframe_words_[k]), static_cast<int>(k));
-  } else if (place_model_) {
-    const Result<Eigen::VectorXf> query = place_model_->describe(features.descriptors);
-    if (!query) return {};
-    for (std::size_t k = 0; k < keyframe_vlad_.size(); ++k) ranked.emplace_back(VladModel::similarity(*query, keyframe_vlad_[k]), static_cast<int>(k));
-  } else {
-    // Each keyframe scores the share of its landmarks that the image's descriptors match.
-    DescriptorMatcherConfig matcher;
-    matcher.float_ratio = kFloatRatio;
-    matcher.max_float_distance = kMaxFloatDistance;
-    std::vector<char> matched(map_.positions.size(), 0);
-    for (const FeatureMatch& match : match_descriptors(descriptors_, features.descriptors, matcher)) matched[static_cast<std::size_t>(match.query)] = 1;
-    for (std::size_t k = 0; k < map_.keyframes.size(); ++k) {
-      const std::vector<uint32_t>& seen = map_.keyframes[k].landmarks;
-      const auto hits = std::count_if(seen.begin(), seen.end(), [&](uint32_t landmark) { return matched[landmark] != 0; });
-      ranked.emplace_back(seen.empty() ? 0.0 : static_cast<double>(hits) / static_cast<double>(seen.size()), static_cast<int>(k));
-    }
-  }
-  std::sort(ranked.begin(), ranked.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
-  ranked.resize(std::min<std::size_t>(ranked.size(), static_cast<std::size_t>(config_.candidates)));
-  return ranked;
-}
-
 Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const {
   Result<ImageFeatures> extracted = extractor_->extract(image);
   if (!extracted) return extracted.error();
@@ -159,8 +85,8 @@ Result<MapRelocalization> MapRelocalizer::relocalize(const cv::Mat& image) const
   if (features.size() < static_cast<std::size_t>(config_.min_inliers)) {
     return Error(fmt::format("relocalization: {} features in the image (< {})", features.size(), config_.min_inliers));
   }
-  const std::vector<std::pair<double, int>> ranked = rank_keyframes(features);
-  const std::string place_recognition = binary() ? "bow" : place_model_ ? "learned" : "matches";
+  const std::vector<PlaceCandidate> ranked = places_->rank(features.descriptors, config_.candidates);
+  const std::string& place_recognition = places_->method();
 
   std::vector<Eigen::Vector2d> normalized;
   for (const cv::KeyPoint& keypoint : features.keypoints) {

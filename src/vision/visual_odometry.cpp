@@ -1374,6 +1374,7 @@ msgs::VisualLandmarkLayer VisualOdometry::landmark_layer(const std::string& came
   state_->finish_mapping();
   msgs::VisualLandmarkLayer layer;
   layer.camera = camera_name;
+  layer.scale_free = state_->counts.scale_free;
   std::map<int, uint32_t> index_of;
   for (const auto& [id, landmark] : state_->landmarks) {
     if (landmark.observations.size() < 2 || !landmark.position.allFinite()) continue;

@@ -71,6 +71,7 @@ struct VisualKeyframe {
   Timestamp time;
   Pose T_world_camera;              // optical frame (x right, y down, z forward)
   std::vector<uint32_t> landmarks;  // indices into the layer's landmarks
+  uint32_t source = 0;              // index into VisualLandmarkLayer::sources (0 when it is empty)
 };
 
 // Sparse visual landmarks with ORB descriptors and the keyframes that saw them (relocalization).
@@ -84,6 +85,8 @@ struct VisualLandmarkLayer {
   std::vector<float> position_std;                       // 1-sigma (m); empty or one per landmark
   std::vector<uint32_t> observations;                    // empty or one per landmark
   std::vector<VisualKeyframe> keyframes;
+  bool scale_free = false;               // monocular: lengths in units of the first baseline, not metres
+  std::vector<std::string> sources;      // the map each keyframe came from (map_id); empty: all are this map's own
 };
 
 /// A deskewed LiDAR sweep the map was built from (sensor frame) at the pose the map has it: what

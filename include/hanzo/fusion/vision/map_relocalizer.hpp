@@ -40,9 +40,8 @@
 #include "hanzo/fusion/core/se3.hpp"
 #include "hanzo/fusion/msgs/map_messages.hpp"
 #include "hanzo/fusion/vision/feature_extractor.hpp"
+#include "hanzo/fusion/vision/landmark_place_index.hpp"
 #include "hanzo/fusion/vision/orb_extractor.hpp"
-#include "hanzo/fusion/vision/vocabulary.hpp"
-#include "hanzo/fusion/vision/vlad.hpp"
 
 namespace hanzo::fusion::vision {
 
@@ -109,13 +108,8 @@ class MapRelocalizer {
   msgs::VisualLandmarkLayer map_;
   PinholeCamera camera_;
   MapRelocalizerConfig config_;
-  std::vector<std::pair<double, int>> rank_keyframes(const ImageFeatures& features) const;  // best `candidates` first
-  bool binary() const { return descriptors_.type() == CV_8UC1; }
   std::shared_ptr<const FeatureExtractor> extractor_;
-  std::shared_ptr<const Vocabulary> vocabulary_;      // ORB maps
-  std::vector<BowVector> keyframe_words_;             // ORB maps
-  std::shared_ptr<const VladModel> place_model_;      // learned maps with a VLAD model
-  std::vector<Eigen::VectorXf> keyframe_vlad_;        // learned maps with a VLAD model
+  std::shared_ptr<const LandmarkPlaceIndex> places_;  // candidate keyframes
   double scale_factor_ = 1.0;  // the extractor's pyramid scale per octave (ORB)
   cv::Mat descriptors_;  // one row per landmark: CV_8UC1 32 bytes (ORB) or CV_32FC1 (learned)
 };
