@@ -334,8 +334,9 @@ nlohmann::json describe_map(const msgs::FusionMap& map) {
     if (!map.mesh->vertex_labels.empty()) layers["mesh"]["label_counts"] = label_counts(map.mesh->vertex_labels);
   }
   if (map.visual_landmarks) {
-    layers["visual_landmarks"] = {{"camera", map.visual_landmarks->camera}, {"landmarks", map.visual_landmarks->positions.size()},
-                                  {"keyframes", map.visual_landmarks->keyframes.size()}};
+    layers["visual_landmarks"] = {{"camera", map.visual_landmarks->camera},        {"landmarks", map.visual_landmarks->positions.size()},
+                                  {"keyframes", map.visual_landmarks->keyframes.size()}, {"descriptor_type", map.visual_landmarks->descriptor_type},
+                                  {"scale_free", map.visual_landmarks->scale_free},      {"sources", map.visual_landmarks->sources}};
   }
   const auto trained = [](const msgs::NeuralProvenance& provenance) {
     return nlohmann::json{{"views", provenance.views},
@@ -388,8 +389,10 @@ std::string describe_map_text(const nlohmann::json& description) {
   }
   if (layers.contains("visual_landmarks")) {
     const auto& v = layers["visual_landmarks"];
-    text += fmt::format("  visual landmarks: {} seen by {} keyframes of camera {}\n", v["landmarks"].get<std::size_t>(), v["keyframes"].get<std::size_t>(),
-                        v["camera"].get<std::string>());
+    text += fmt::format("  visual landmarks: {} seen by {} keyframes of camera {} ({}{}){}\n", v["landmarks"].get<std::size_t>(),
+                        v["keyframes"].get<std::size_t>(), v["camera"].get<std::string>(), v["descriptor_type"].get<std::string>(),
+                        v["scale_free"].get<bool>() ? ", monocular scale" : "",
+                        v["sources"].empty() ? "" : fmt::format(" from {}", fmt::join(v["sources"].get<std::vector<std::string>>(), ", ")));
   }
   const auto trained_text = [](const nlohmann::json& trained) {
     std::string line = fmt::format("trained on {} views, {} steps", trained["views"].get<uint32_t>(), trained["iterations"].get<uint64_t>());

@@ -40,7 +40,7 @@ void indoor_registration(lidar::LidarOdometryConfig& odometry) {
   odometry.source_voxel_size = 0.25;
 }
 
-/// Every map has LiDAR keyframes: one keyframe graph.
+/// Every map has LiDAR or visual keyframes: one keyframe graph.
 int run_session_merge(const Output& output, const MergeOptions& options, std::vector<msgs::FusionMap> inputs, nlohmann::json& result) {
   pipeline::SessionMergeConfig config;
   if (options.indoor) indoor_registration(config.odometry);
@@ -54,9 +54,10 @@ int run_session_merge(const Output& output, const MergeOptions& options, std::ve
   for (const pipeline::SessionJoin& join : done->joins) {
     const Eigen::Vector3d t = join.T_joined_map.translation();
     joined.push_back({{"map", options.maps[join.map]}, {"joined_to", options.maps[join.joined_to]}, {"translation", {t.x(), t.y(), t.z()}},
-                      {"yaw_deg", yaw_degrees(join.T_joined_map)}, {"loops", join.loops}});
-    text += fmt::format("{}: at {:.3f} {:.3f} {:.3f} m, yaw {:.2f} deg in {} ({} agreeing loops)\n", options.maps[join.map], t.x(), t.y(), t.z(),
-                        yaw_degrees(join.T_joined_map), options.maps[join.joined_to], join.loops);
+                      {"yaw_deg", yaw_degrees(join.T_joined_map)}, {"scale", join.scale}, {"loops", join.loops}});
+    text += fmt::format("{}: at {:.3f} {:.3f} {:.3f}, yaw {:.2f} deg{} in {} ({} agreeing loops)\n", options.maps[join.map], t.x(), t.y(), t.z(),
+                        yaw_degrees(join.T_joined_map), join.scale == 1.0 ? "" : fmt::format(", scale {:.4f}", join.scale), options.maps[join.joined_to],
+                        join.loops);
   }
   result["method"] = "keyframe_graph";
   result["joined"] = joined;
@@ -64,12 +65,17 @@ int run_session_merge(const Output& output, const MergeOptions& options, std::ve
   result["queries"] = done->queries;
   result["candidates"] = done->candidates;
   result["verified"] = done->verified;
+  result["visual_queries"] = done->visual_queries;
+  result["visual_verified"] = done->visual_verified;
   result["inter_session_loops"] = done->inter_session_loops;
   result["chi2"] = {done->initial_chi2, done->final_chi2};
   result["dropped_layers"] = done->dropped_layers;
   result["points"] = merged.points ? merged.points->points.size() : 0;
-  text += fmt::format("{} keyframes joined by {} inter-session loops ({} Scan Context candidates, {} verified); {} points in {}", done->keyframes,
-                      done->inter_session_loops, done->candidates, done->verified, result["points"].get<std::size_t>(), options.out);
+  result["landmarks"] = merged.visual_landmarks ? merged.visual_landmarks->positions.size() : 0;
+  text += fmt::format("{} keyframes joined by {} inter-session loops ({} Scan Context candidates, {} verified; {} of {} visual keyframes aligned); "
+                      "{} points, {} landmarks in {}",
+                      done->keyframes, done->inter_session_loops, done->candidates, done->verified, done->visual_verified, done->visual_queries,
+                      result["points"].get<std::size_t>(), result["landmarks"].get<std::size_t>(), options.out);
   return report_success(output, result, text);
 }
 
@@ -93,7 +99,13 @@ int run_merge(const Output& output, const MergeOptions& options) {
       inputs[i].map_id = options.maps[i];
     }
   }
-  if (std::all_of(inputs.begin(), inputs.end(), [](const msgs::FusionMap& map) { return map.lidar_keyframes && !map.lidar_keyframes->keyframes.empty(); })) {
+  // The keyframe graph rebuilds a map's points from its LiDAR keyframes; a map with points and
+  // visual keyframes alone joins by its points (views).
+  const auto has_keyframes = [](const msgs::FusionMap& map) {
+    const bool points = map.points && !map.points->points.empty();
+    return (map.lidar_keyframes && !map.lidar_keyframes->keyframes.empty()) || (!points && map.visual_landmarks && !map.visual_landmarks->keyframes.empty());
+  };
+  if (std::all_of(inputs.begin(), inputs.end(), has_keyframes)) {
     return run_session_merge(output, options, std::move(inputs), result);
   }
   std::optional<msgs::FusionMap> merged = std::move(inputs.front());

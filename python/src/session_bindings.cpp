@@ -252,26 +252,40 @@ py::dict merge_maps(const std::vector<std::string>& paths, const std::string& ou
     entry["joined_to"] = paths[join.joined_to];
     entry["loops"] = join.loops;
     entry["T_joined_map"] = join.T_joined_map.matrix();
+    entry["scale"] = join.scale;
     joins.append(entry);
   }
-  const msgs::LidarKeyframeLayer& keyframes = *merged->merged.lidar_keyframes;
-  PoseRows keyframe_poses(static_cast<Eigen::Index>(keyframes.keyframes.size()), 8);
-  py::list keyframe_sources;
-  for (std::size_t k = 0; k < keyframes.keyframes.size(); ++k) {
-    const msgs::LidarKeyframe& keyframe = keyframes.keyframes[k];
-    const Eigen::Quaterniond& q = keyframe.T_world_lidar.orientation;
-    keyframe_poses.row(static_cast<Eigen::Index>(k)) << keyframe.time.seconds(), keyframe.T_world_lidar.position.transpose(), q.w(), q.x(), q.y(), q.z();
-    keyframe_sources.append(keyframes.sources.at(keyframe.source));
-  }
+  // Rows (t, x, y, z, qw, qx, qy, qz) of a keyframe layer and each keyframe's source.
+  const auto keyframe_rows = [](const auto& keyframes, const auto& pose_of) {
+    PoseRows poses(static_cast<Eigen::Index>(keyframes.size()), 8);
+    for (std::size_t k = 0; k < keyframes.size(); ++k) {
+      const msgs::Pose& pose = pose_of(keyframes[k]);
+      const Eigen::Quaterniond& q = pose.orientation;
+      poses.row(static_cast<Eigen::Index>(k)) << keyframes[k].time.seconds(), pose.position.transpose(), q.w(), q.x(), q.y(), q.z();
+    }
+    return poses;
+  };
+  const auto sources_of = [](const auto& layer) {
+    py::list sources;
+    for (const auto& keyframe : layer.keyframes) sources.append(layer.sources.at(keyframe.source));
+    return sources;
+  };
+  const msgs::LidarKeyframeLayer lidar = merged->merged.lidar_keyframes.value_or(msgs::LidarKeyframeLayer{});
+  const msgs::VisualLandmarkLayer visual = merged->merged.visual_landmarks.value_or(msgs::VisualLandmarkLayer{});
   py::dict result;
   result["map"] = out;
   result["joins"] = joins;
-  result["keyframe_poses"] = keyframe_poses;
-  result["keyframe_sources"] = keyframe_sources;
+  result["keyframe_poses"] = keyframe_rows(lidar.keyframes, [](const msgs::LidarKeyframe& keyframe) -> const msgs::Pose& { return keyframe.T_world_lidar; });
+  result["keyframe_sources"] = sources_of(lidar);
+  result["visual_keyframe_poses"] =
+      keyframe_rows(visual.keyframes, [](const msgs::VisualKeyframe& keyframe) -> const msgs::Pose& { return keyframe.T_world_camera; });
+  result["visual_keyframe_sources"] = sources_of(visual);
   result["keyframes"] = merged->keyframes;
   result["queries"] = merged->queries;
   result["candidates"] = merged->candidates;
   result["verified"] = merged->verified;
+  result["visual_queries"] = merged->visual_queries;
+  result["visual_verified"] = merged->visual_verified;
   result["inter_session_loops"] = merged->inter_session_loops;
   result["points"] = merged->merged.points ? merged->merged.points->points.size() : 0;
   return result;
@@ -311,8 +325,9 @@ void bind_session(py::module_& module) {
            "raises ValueError when it cannot be written")
       .def("summary", &PySession::summary, "Counts per sensor and of the mapping");
   module.def("merge_maps", &merge_maps, py::arg("maps"), py::arg("out"), py::arg("map_id") = "merged", py::arg("indoor") = false,
-             "Joins FusionMap files with LiDAR keyframes (written by sessions) into one optimized keyframe graph without an initial guess "
-             "(Scan Context candidates, registration, inter-session loops; the first map's frame) and writes the merged map to out. "
-             "Returns the joins, counts and the merged keyframes (keyframe_poses: rows t, x, y, z, qw, qx, qy, qz of T_world_lidar; "
-             "keyframe_sources: the map id of each); raises ValueError when a map cannot be read or shares no place with the others");
+             "Joins FusionMap files with LiDAR or visual keyframes (written by sessions) into one optimized keyframe graph without an "
+             "initial guess (Scan Context or bag-of-words candidates, registration or landmark alignment, inter-session loops; the first "
+             "map's frame) and writes the merged map to out. Returns the joins, counts and the merged keyframes (keyframe_poses: rows t, x, "
+             "y, z, qw, qx, qy, qz of T_world_lidar; keyframe_sources: the map id of each; visual_keyframe_poses / visual_keyframe_sources: "
+             "the same of T_world_camera); raises ValueError when a map cannot be read or shares no place with the others");
 }

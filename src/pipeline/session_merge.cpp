@@ -104,15 +104,22 @@ Placement placement(const Loop& loop, std::size_t joining, const Similarity& T_m
 
 /// Whether `hypothesis` (the joining map's frame in the merged one) puts the placement's
 /// keyframe where its loop does, at its scale.
-bool agrees(const Similarity& hypothesis, const Placement& placement, const SessionMergeConfig& config) {
+/// `slack` multiplies the tolerances.
+bool agrees(const Similarity& hypothesis, const Placement& placement, const SessionMergeConfig& config, double slack = 1.0) {
   const SE3 difference = hypothesis.apply(placement.T_map_keyframe).inverse() * placement.T_merged_map.apply(placement.T_map_keyframe);
-  return difference.translation().norm() <= config.agreement_translation && difference.rotation().angle() <= config.agreement_rotation &&
-         std::abs(std::log(hypothesis.scale / placement.T_merged_map.scale)) <= config.agreement_scale;
+  return difference.translation().norm() <= slack * config.agreement_translation && difference.rotation().angle() <= slack * config.agreement_rotation &&
+         std::abs(std::log(hypothesis.scale / placement.T_merged_map.scale)) <= slack * config.agreement_scale;
 }
 
-/// The largest set of placements agreeing with one of them (the best-fitting set of that size).
-std::vector<Placement> largest_agreeing(const std::vector<Placement>& placements, const SessionMergeConfig& config) {
-  std::vector<Placement> best;
+/// The largest set of placements agreeing with one of them, the hypothesis (the best-fitting set
+/// of that size).
+struct Agreement {
+  const Placement* hypothesis = nullptr;
+  std::vector<Placement> agreeing;
+};
+
+Agreement largest_agreeing(const std::vector<Placement>& placements, const SessionMergeConfig& config) {
+  Agreement best;
   double best_rmse = 0.0;
   for (const Placement& hypothesis : placements) {
     std::vector<Placement> agreeing;
@@ -122,8 +129,8 @@ std::vector<Placement> largest_agreeing(const std::vector<Placement>& placements
       agreeing.push_back(other);
       rmse += other.loop->rmse;
     }
-    if (agreeing.size() > best.size() || (agreeing.size() == best.size() && rmse < best_rmse)) {
-      best = std::move(agreeing);
+    if (agreeing.size() > best.agreeing.size() || (agreeing.size() == best.agreeing.size() && rmse < best_rmse)) {
+      best = {&hypothesis, std::move(agreeing)};
       best_rmse = rmse;
     }
   }
@@ -131,23 +138,25 @@ std::vector<Placement> largest_agreeing(const std::vector<Placement>& placements
 }
 
 /// The placements that join a map to the merge: the largest agreeing set, when it has
-/// min_agreeing_loops and no other hypothesis (placements that disagree with it) has that many
-/// too (a symmetric place seen from two sides); else none, with the reason.
+/// min_agreeing_loops and no other hypothesis has that many too among the placements that
+/// disagree with it, placing the map elsewhere (beyond three times the agreement tolerances: a
+/// symmetric place seen from two sides, not the spread of one place's loops); else none, with
+/// the reason.
 std::vector<Placement> consistent(const std::vector<Placement>& placements, const SessionMergeConfig& config, std::string& reason) {
-  std::vector<Placement> best = largest_agreeing(placements, config);
-  if (best.size() < config.min_agreeing_loops) {
-    reason = fmt::format("{} verified loops, at most {} agree", placements.size(), best.size());
+  Agreement best = largest_agreeing(placements, config);
+  if (best.agreeing.size() < config.min_agreeing_loops) {
+    reason = fmt::format("{} verified loops, at most {} agree", placements.size(), best.agreeing.size());
     return {};
   }
   std::vector<Placement> others;
   std::copy_if(placements.begin(), placements.end(), std::back_inserter(others),
-               [&](const Placement& other) { return !agrees(best.front().T_merged_map, other, config); });
-  const std::vector<Placement> second = largest_agreeing(others, config);
-  if (second.size() >= config.min_agreeing_loops) {
-    reason = fmt::format("ambiguous: {} loops agree on one place, {} on another", best.size(), second.size());
+               [&](const Placement& other) { return !agrees(best.hypothesis->T_merged_map, other, config); });
+  const Agreement second = largest_agreeing(others, config);
+  if (second.agreeing.size() >= config.min_agreeing_loops && !agrees(best.hypothesis->T_merged_map, *second.hypothesis, config, 3.0)) {
+    reason = fmt::format("ambiguous: {} loops agree on one place, {} on another", best.agreeing.size(), second.agreeing.size());
     return {};
   }
-  return best;
+  return best.agreeing;
 }
 
 /// The keyframes of map m around keyframe k, in k's frame.
@@ -438,10 +447,12 @@ Result<SessionMergeResult> merge_sessions(const std::vector<msgs::FusionMap>& ma
     if (refusals.count(m)) reasons.push_back(refusals[m]);
   }
   if (!unjoined.empty()) {
-    return Error(fmt::format("session merge: {} not joined to {} ({} LiDAR queries, {} Scan Context candidates, {} verified by registration; "
-                             "{} visual keyframes searched, {} aligned by their landmarks; {})",
-                             fmt::join(unjoined, ", "), maps[0].map_id, result.queries, result.candidates, result.verified, result.visual_queries,
-                             result.visual_verified,
+    std::vector<std::string> counts;
+    if (result.queries > 0 || result.visual_queries == 0) {
+      counts.push_back(fmt::format("{} queries, {} Scan Context candidates, {} verified by registration", result.queries, result.candidates, result.verified));
+    }
+    if (result.visual_queries > 0) counts.push_back(fmt::format("{} visual keyframes searched, {} aligned by their landmarks", result.visual_queries, result.visual_verified));
+    return Error(fmt::format("session merge: {} not joined to {} ({}; {})", fmt::join(unjoined, ", "), maps[0].map_id, fmt::join(counts, "; "),
                              reasons.empty() ? fmt::format("no verified loop with the maps joined: no place shared for certain") : fmt::format("{}", fmt::join(reasons, "; "))));
   }
   // Loops between maps joined through others, where they agree with the joins, join the graph too.

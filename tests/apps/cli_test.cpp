@@ -1660,6 +1660,46 @@ TEST(Cli, MapMergeJoinsTheRealScansMapsWithoutAGuess) {
   std::filesystem::remove_all(dir);
 }
 
+// `map merge` of two camera-only runs of the simulated drone (stereo, different noise): the
+// second joins by its visual keyframes' landmarks; the merged map holds both maps' landmarks and
+// keyframes, each keyframe with its source.
+TEST(Cli, MapMergeJoinsCameraSessionsByTheirLandmarks) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_camera_merge_{}", ::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::vector<std::string> maps;
+  std::size_t landmarks = 0;
+  for (int seed : {1, 2}) {
+    const std::string sim = (dir / fmt::format("sim{}", seed)).string(), out = (dir / fmt::format("run{}", seed)).string();
+    ASSERT_EQ(run(fmt::format("sim examples/scenarios/drone.yaml --out {} --duration 4 --seed {} --sensors camera_left,camera_right --no-foxglove", sim, seed)).exit_code, 0);
+    const CliRun ran = run(fmt::format("run --config {0}/fusion.yaml --calib {0}/calibration.yaml --log {0}/sensors.mcap --out {1}", sim, out));
+    ASSERT_EQ(ran.exit_code, 0) << ran.err;
+    maps.push_back(out + "/map.fmap");
+    const CliRun info = run(fmt::format("map info {} --json", maps.back()));
+    ASSERT_EQ(info.exit_code, 0) << info.err;
+    landmarks += nlohmann::json::parse(info.out)["layers"]["visual_landmarks"]["landmarks"].get<std::size_t>();
+  }
+  const std::string merged_path = (dir / "merged.fmap").string();
+  const CliRun merged = run(fmt::format("map merge {} {} --out {} --json", maps[0], maps[1], merged_path));
+  ASSERT_EQ(merged.exit_code, 0) << merged.err;
+  const nlohmann::json result = nlohmann::json::parse(merged.out);
+  EXPECT_EQ(result["method"], "keyframe_graph");
+  EXPECT_GE(result["joined"][0]["loops"].get<int>(), 3);
+  EXPECT_EQ(result["joined"][0]["scale"].get<double>(), 1.0) << "stereo maps are metric";
+  // Both flights start at the same place in the same world frame: the join is near identity.
+  const std::vector<double> translation = result["joined"][0]["translation"].get<std::vector<double>>();
+  EXPECT_LT(std::hypot(translation[0], translation[1], translation[2]), 0.5);
+  EXPECT_LT(std::abs(result["joined"][0]["yaw_deg"].get<double>()), 2.0);
+  EXPECT_EQ(result["landmarks"].get<std::size_t>(), landmarks);
+  const CliRun info = run(fmt::format("map info {} --json", merged_path));
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  const nlohmann::json described = nlohmann::json::parse(info.out);
+  const nlohmann::json& layer = described["layers"]["visual_landmarks"];
+  EXPECT_EQ(layer["sources"], nlohmann::json(maps));
+  EXPECT_EQ(layer["keyframes"], result["keyframes"]);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Cli, MapBuildInfoExportStoreDiffRedact) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / fmt::format("hanzo_cli_map_{}", ::getpid());
   std::filesystem::remove_all(dir);

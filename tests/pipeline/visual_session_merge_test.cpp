@@ -6,6 +6,7 @@
 // merged map lies on the true path (after one similarity for the whole map, as monocular maps
 // need). A map of another street (KITTI raw 0052) is refused with the reason.
 
+#include <chrono>
 #include <cstdio>
 
 #include <gtest/gtest.h>
@@ -79,11 +80,13 @@ TEST(VisualSessionMerge, TwoMonocularSessionsOfAStreetJoinAtTheirScaleAndAnother
   const vision::sequences::Sequence street = vision::sequences::kitti_odometry_06();
   const CameraSession a = camera_session(street, 0, 32, "first");
   const CameraSession b = camera_session(street, 18, 50, "second");
+  const auto start = std::chrono::steady_clock::now();
   const Result<SessionMergeResult> merged = merge_sessions({a.map, b.map});
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   ASSERT_TRUE(merged) << merged.error().message;
   ASSERT_EQ(merged->joins.size(), 1U);
-  std::printf("joined: %zu of %zu visual keyframes aligned, %zu loops; scale %.3f; chi2 %.1f -> %.1f\n", merged->visual_verified, merged->visual_queries,
-              merged->inter_session_loops, merged->joins[0].scale, merged->initial_chi2, merged->final_chi2);
+  std::printf("joined: %zu of %zu visual keyframes aligned, %zu loops; scale %.3f; chi2 %.1f -> %.1f; %.2f s\n", merged->visual_verified,
+              merged->visual_queries, merged->inter_session_loops, merged->joins[0].scale, merged->initial_chi2, merged->final_chi2, seconds);
   EXPECT_GE(merged->inter_session_loops, 3U);
 
   const msgs::VisualLandmarkLayer& layer = merged->merged.visual_landmarks.value();

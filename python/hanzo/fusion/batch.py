@@ -156,7 +156,7 @@ def merge_one(maps: Sequence[str], out: str, name: str, indoor: bool = False) ->
             "seconds": time.perf_counter() - start,
         }
         with open(os.path.join(folder, "summary.json"), "w") as file:
-            json.dump({"result": result, "merge": {key: value for key, value in merged.items() if key not in ("joins", "map", "keyframe_poses", "keyframe_sources")}}, file, indent=1)
+            json.dump({"result": result, "merge": {key: value for key, value in merged.items() if key not in ("joins", "map") and "keyframe_" not in key}}, file, indent=1)
         if is_object_url(out):
             upload(folder, out, name)
             result["map"] = f"{out.split('?', 1)[0].rstrip('/')}/{name}/map.fmap"
