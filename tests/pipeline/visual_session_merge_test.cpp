@@ -10,60 +10,17 @@
 #include <cstdio>
 
 #include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
 
-#include "hanzo/fusion/eval/alignment.hpp"
+#include "camera_session_maps.hpp"
 #include "hanzo/fusion/maps/fusion_map_file.hpp"
 #include "hanzo/fusion/pipeline/session_merge.hpp"
-#include "vision/odometry_sequences.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
 
-struct CameraSession {
-  msgs::FusionMap map;
-  std::vector<Eigen::Vector3d> keyframe_truth;  ///< the camera's true position at each keyframe
-};
-
-CameraSession camera_session(const vision::sequences::Sequence& sequence, std::size_t first, std::size_t last, const std::string& name) {
-  const cv::Mat image = cv::imread(sequence.images[first], cv::IMREAD_GRAYSCALE);
-  auto odometry = vision::VisualOdometry::create(sequence.camera, image.size()).value();
-  for (std::size_t i = first; i <= last; ++i) {
-    const Result<vision::VisualOdometryFrame> frame = odometry->track(sequence.times[i], cv::imread(sequence.images[i], cv::IMREAD_UNCHANGED));
-    EXPECT_TRUE(frame) << frame.error().message;
-  }
-  CameraSession session;
-  session.map.map_id = name;
-  session.map.visual_landmarks = odometry->landmark_layer("cam0");
-  EXPECT_TRUE(session.map.visual_landmarks->scale_free);
-  for (const msgs::VisualKeyframe& keyframe : session.map.visual_landmarks->keyframes) {
-    for (std::size_t i = 0; i < sequence.ground_truth.size(); ++i) {
-      if (std::abs((sequence.ground_truth.timestamps[i] - keyframe.time).seconds()) < 1e-3) {
-        session.keyframe_truth.push_back(sequence.ground_truth.poses[i].block<3, 1>(0, 3));
-      }
-    }
-  }
-  EXPECT_EQ(session.keyframe_truth.size(), session.map.visual_landmarks->keyframes.size());
-  return session;
-}
-
-/// Mean and largest distance of the keyframes from the truth after one similarity (m).
-std::pair<double, double> keyframe_errors(const std::vector<Eigen::Vector3d>& estimate, const std::vector<Eigen::Vector3d>& truth) {
-  const eval::SimilarityTransform alignment = eval::umeyama_alignment(estimate, truth, true).value();
-  double worst = 0.0, sum = 0.0;
-  for (std::size_t k = 0; k < estimate.size(); ++k) {
-    const double error = (alignment.scale * (alignment.rotation * estimate[k]) + alignment.translation - truth[k]).norm();
-    worst = std::max(worst, error);
-    sum += error;
-  }
-  return {sum / static_cast<double>(estimate.size()), worst};
-}
-
-std::vector<Eigen::Vector3d> positions(const msgs::VisualLandmarkLayer& layer) {
-  std::vector<Eigen::Vector3d> out;
-  for (const msgs::VisualKeyframe& keyframe : layer.keyframes) out.push_back(keyframe.T_world_camera.position);
-  return out;
-}
+using testing::camera_session_map;
+using testing::keyframe_errors;
+using testing::keyframe_positions;
 
 /// The map in another frame at another scale: x' = scale R x + t.
 msgs::FusionMap moved(msgs::FusionMap map, double scale, const SE3& T) {
@@ -78,8 +35,9 @@ msgs::FusionMap moved(msgs::FusionMap map, double scale, const SE3& T) {
 
 TEST(VisualSessionMerge, TwoMonocularSessionsOfAStreetJoinAtTheirScaleAndAnotherStreetIsRefused) {
   const vision::sequences::Sequence street = vision::sequences::kitti_odometry_06();
-  const CameraSession a = camera_session(street, 0, 32, "first");
-  const CameraSession b = camera_session(street, 18, 50, "second");
+  const testing::CameraSessionMap a = camera_session_map(street, 0, 32, "first");
+  const testing::CameraSessionMap b = camera_session_map(street, 18, 50, "second");
+  EXPECT_TRUE(a.map.visual_landmarks->scale_free && b.map.visual_landmarks->scale_free);
   const auto start = std::chrono::steady_clock::now();
   const Result<SessionMergeResult> merged = merge_sessions({a.map, b.map});
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -96,9 +54,9 @@ TEST(VisualSessionMerge, TwoMonocularSessionsOfAStreetJoinAtTheirScaleAndAnother
   EXPECT_TRUE(layer.scale_free);
   std::vector<Eigen::Vector3d> truth = a.keyframe_truth;
   truth.insert(truth.end(), b.keyframe_truth.begin(), b.keyframe_truth.end());
-  const auto [mean, worst] = keyframe_errors(positions(layer), truth);
-  const auto [mean_a, worst_a] = keyframe_errors(positions(*a.map.visual_landmarks), a.keyframe_truth);
-  const auto [mean_b, worst_b] = keyframe_errors(positions(*b.map.visual_landmarks), b.keyframe_truth);
+  const auto [mean, worst] = keyframe_errors(keyframe_positions(layer), truth);
+  const auto [mean_a, worst_a] = keyframe_errors(keyframe_positions(*a.map.visual_landmarks), a.keyframe_truth);
+  const auto [mean_b, worst_b] = keyframe_errors(keyframe_positions(*b.map.visual_landmarks), b.keyframe_truth);
   std::printf("%zu keyframes over 60 m: mean %.3f m, max %.3f m from the truth (each session alone over 38 m: mean %.3f / %.3f, max %.3f / %.3f)\n",
               truth.size(), mean, worst, mean_a, mean_b, worst_a, worst_b);
   EXPECT_LT(worst, 0.5);
@@ -108,7 +66,7 @@ TEST(VisualSessionMerge, TwoMonocularSessionsOfAStreetJoinAtTheirScaleAndAnother
   const Result<SessionMergeResult> rescaled = merge_sessions({a.map, moved(b.map, 2.5, elsewhere)});
   ASSERT_TRUE(rescaled) << rescaled.error().message;
   EXPECT_NEAR(rescaled->joins[0].scale, merged->joins[0].scale / 2.5, 0.02 * merged->joins[0].scale / 2.5);
-  EXPECT_LT(keyframe_errors(positions(*rescaled->merged.visual_landmarks), truth).second, 0.5);
+  EXPECT_LT(keyframe_errors(keyframe_positions(*rescaled->merged.visual_landmarks), truth).second, 0.5);
 
   const msgs::FusionMap reread = maps::parse_fusion_map(maps::serialize_fusion_map(merged->merged, {.chunk_bytes = 1 << 16}).value()).value();
   ASSERT_TRUE(reread.visual_landmarks);
@@ -116,7 +74,7 @@ TEST(VisualSessionMerge, TwoMonocularSessionsOfAStreetJoinAtTheirScaleAndAnother
   EXPECT_TRUE(reread.visual_landmarks->scale_free);
   EXPECT_EQ(reread.visual_landmarks->keyframes.back().source, 1U);
 
-  const CameraSession other = camera_session(vision::sequences::kitti_raw_0052(), 0, 30, "other");
+  const testing::CameraSessionMap other = camera_session_map(vision::sequences::kitti_raw_0052(), 0, 30, "other");
   const Result<SessionMergeResult> refused = merge_sessions({a.map, other.map});
   ASSERT_FALSE(refused) << "joined another street";
   std::printf("another street: %s\n", refused.error().message.c_str());
