@@ -35,6 +35,30 @@ std::unique_ptr<SessionManager> open_replica(const std::filesystem::path& dir, c
   return manager.ok() ? std::move(manager).value() : nullptr;
 }
 
+/// How far `poses` (from `from` on) lie from the reference poses at the same times: mean and
+/// largest position gap (m) and the number of poses compared.
+struct Gaps {
+  double mean = 0.0, largest = 0.0;
+  std::size_t compared = 0;
+};
+
+Gaps gaps_from(const std::vector<msgs::PoseEstimate>& reference, const std::vector<msgs::PoseEstimate>& poses, Timestamp from) {
+  Gaps gaps;
+  double sum = 0.0;
+  for (const msgs::PoseEstimate& pose : poses) {
+    if (pose.timestamp < from) continue;
+    const auto same_time = std::lower_bound(reference.begin(), reference.end(), pose.timestamp,
+                                            [](const msgs::PoseEstimate& other, Timestamp t) { return other.timestamp < t; });
+    if (same_time == reference.end() || same_time->timestamp != pose.timestamp) continue;
+    const double gap = (same_time->T_world_body.position - pose.T_world_body.position).norm();
+    gaps.largest = std::max(gaps.largest, gap);
+    sum += gap;
+    ++gaps.compared;
+  }
+  if (gaps.compared > 0) gaps.mean = sum / static_cast<double>(gaps.compared);
+  return gaps;
+}
+
 // Kills the forked replica when the test ends early.
 struct KilledAtExit {
   pid_t pid = -1;
@@ -82,15 +106,18 @@ TEST(Replicas, ASessionOfAKilledReplicaIsTakenOverAndContinuesInItsFrame) {
   close(pipe_fds[1]);
   // Meanwhile (forked first: no threads in the parent yet) the drive without a failure on a
   // single server: the reference.
-  std::vector<msgs::PoseEstimate> uninterrupted;
-  {
-    auto single = open_replica(testing::scratch_dir("-single"), "");
+  // Twice: the two uninterrupted runs' difference is the floor of the comparison (the session
+  // registers sweeps in real time, so runs differ where the machine's load made one skip).
+  std::vector<std::vector<msgs::PoseEstimate>> uninterrupted_runs;
+  for (const char* suffix : {"-single", "-single-again"}) {
+    auto single = open_replica(testing::scratch_dir(suffix), "");
     ASSERT_TRUE(single);
     const std::string id = single->create_session(kRobot, {"single", recording.config_yaml, recording.calibration_yaml}).value().id;
     for (const testing::TimedMessage& message : recording.messages) (void)single->push(kRobot, id, message.sensor, message.message);
     ASSERT_TRUE(single->flush_storage().ok());
-    uninterrupted = stored_trajectory(*single, id);
+    uninterrupted_runs.push_back(stored_trajectory(*single, id));
   }
+  const std::vector<msgs::PoseEstimate>& uninterrupted = uninterrupted_runs.front();
 
   std::string id(32, '\0');
   ASSERT_EQ(read(pipe_fds[0], id.data(), id.size()), 32) << "replica a did not serve the session";
@@ -147,26 +174,21 @@ TEST(Replicas, ASessionOfAKilledReplicaIsTakenOverAndContinuesInItsFrame) {
 
   // After the takeover the stored poses continue in the session's frame: compared with the
   // uninterrupted drive at the same times (the warehouse robot, 10 s after the takeover).
-  double largest_gap = 0.0, sum_gap = 0.0;
-  std::size_t compared = 0;
-  for (std::size_t i = before.size(); i < after.size(); ++i) {
-    const auto same_time = std::lower_bound(uninterrupted.begin(), uninterrupted.end(), after[i].timestamp,
-                                            [](const msgs::PoseEstimate& pose, Timestamp t) { return pose.timestamp < t; });
-    if (same_time == uninterrupted.end() || same_time->timestamp != after[i].timestamp) continue;
-    const double gap = (same_time->T_world_body.position - after[i].T_world_body.position).norm();
-    largest_gap = std::max(largest_gap, gap);
-    sum_gap += gap;
-    ++compared;
-  }
-  ASSERT_GT(compared, 500U);
-  RecordProperty("takeover_mean_gap_m", std::to_string(sum_gap / compared));
-  RecordProperty("takeover_max_gap_m", std::to_string(largest_gap));
-  std::printf("after the takeover: %zu poses compared, mean %.3f m, max %.3f m from the uninterrupted run\n", compared, sum_gap / compared,
-              largest_gap);
-  // Measured 0.011-0.014 m mean, 0.043-0.064 m at most over the 10 s after the takeover; the
-  // session registers sweeps in real time, so a loaded machine skips some: room for that.
-  EXPECT_LT(sum_gap / compared, 0.10);
-  EXPECT_LT(largest_gap, 0.30);
+  const Timestamp resumed = after[before.size()].timestamp;
+  const Gaps gaps = gaps_from(uninterrupted, after, resumed);
+  const Gaps floor = gaps_from(uninterrupted, uninterrupted_runs.back(), resumed);
+  ASSERT_GT(gaps.compared, 500U);
+  RecordProperty("takeover_mean_gap_m", std::to_string(gaps.mean));
+  RecordProperty("takeover_max_gap_m", std::to_string(gaps.largest));
+  RecordProperty("uninterrupted_runs_mean_gap_m", std::to_string(floor.mean));
+  RecordProperty("uninterrupted_runs_max_gap_m", std::to_string(floor.largest));
+  std::printf("after the takeover: %zu poses compared, mean %.3f m, max %.3f m from the uninterrupted run (a second uninterrupted run: mean %.3f m, max %.3f m)\n",
+              gaps.compared, gaps.mean, gaps.largest, floor.mean, floor.largest);
+  // Measured 0.011-0.015 m mean, 0.042-0.077 m at most over the 10 s after the takeover (two
+  // uninterrupted runs: 0.002-0.004 m mean, 0.022-0.042 m at most); a loaded machine skips more
+  // sweeps: room for that.
+  EXPECT_LT(gaps.mean, 0.10);
+  EXPECT_LT(gaps.largest, 0.30);
 }
 
 // A gRPC stream reaching another replica than the one serving its session (the load balancer's
