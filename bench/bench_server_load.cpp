@@ -123,8 +123,10 @@ double percentile(std::vector<double> values, double p) {
 }
 
 struct ClientResult {
+  uint64_t attempted = 0, attempted_lidar = 0;  ///< messages of the recording written (or tried: a broken stream refuses writes)
   uint64_t sent_imu = 0, sent_lidar = 0, poses = 0, late_writes = 0;
   std::vector<double> latencies_s;
+  std::vector<std::string> stream_errors;  ///< streams that did not finish OK: "code: message"
 };
 
 // Replays the recording in real time into one session over two streams.
@@ -177,11 +179,14 @@ ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& se
         std::lock_guard lock(mutex);
         sent_at[static_cast<int64_t>(imu_proto.timestamp_ns())] = Clock::now();
       }
+      ++result.attempted;
       if (imu->Write(imu_proto)) ++result.sent_imu;
     } else if (const auto* sweep = std::get_if<hf::msgs::PointCloudMessage>(&message)) {
       hf::msgs::to_proto(*sweep, &sweep_proto, point_encoding);  // reuses the storage, as FusionClient does
       sweep_proto.set_timestamp_ns(sweep_proto.timestamp_ns() + restamp);
       for (uint64_t& point_time : *sweep_proto.mutable_point_timestamps()) point_time += restamp;
+      ++result.attempted;
+      ++result.attempted_lidar;
       if (lidar->Write(sweep_proto)) ++result.sent_lidar;
     }
   }
@@ -189,8 +194,12 @@ ClientResult run_client(hf::v1::FusionService::Stub& stub, const std::string& se
   lidar->WritesDone();
   imu_stream.reader.join();
   lidar_stream.reader.join();
-  (void)imu->Finish();
-  (void)lidar->Finish();
+  // A stream the server (or the proxy) ended early took the messages written into its buffers
+  // with it: Write returned true for them.
+  const grpc::Status imu_status = imu->Finish(), lidar_status = lidar->Finish();
+  for (const grpc::Status& status : {imu_status, lidar_status}) {
+    if (!status.ok()) result.stream_errors.push_back(fmt::format("{}: {}", static_cast<int>(status.error_code()), status.error_message()));
+  }
   result.poses = poses.load();
   return result;
 }
@@ -211,20 +220,26 @@ nlohmann::json stream_sessions(const std::string& address, const std::vector<std
   }
   for (std::thread& client : clients) client.join();
   const double wall = std::chrono::duration<double>(Clock::now() - started).count();
-  uint64_t sent = 0, sent_lidar = 0, poses_back = 0, late_writes = 0;
+  // Sent: every message of the recording, whether its stream took it or not (a stream cut by
+  // the server or the proxy refuses the writes after the cut: those messages are lost too).
+  uint64_t sent = 0, sent_lidar = 0, written = 0, poses_back = 0, late_writes = 0;
   std::vector<double> latencies;
+  nlohmann::json stream_errors = nlohmann::json::array();
   for (const ClientResult& r : results) {
-    sent += r.sent_imu + r.sent_lidar;
-    sent_lidar += r.sent_lidar;
+    for (const std::string& error : r.stream_errors) stream_errors.push_back(error);
+    sent += r.attempted;
+    sent_lidar += r.attempted_lidar;
+    written += r.sent_imu + r.sent_lidar;
     poses_back += r.poses;
     late_writes += r.late_writes;
     latencies.insert(latencies.end(), r.latencies_s.begin(), r.latencies_s.end());
   }
   const nlohmann::json summary = {{"points_per_sweep", recording.points_per_sweep}, {"messages_sent", sent}, {"lidar_sweeps_sent", sent_lidar},
+                                  {"messages_refused_by_streams", sent - written},
                                   {"poses_back", poses_back}, {"client_writes_late_20ms", late_writes},
                                   {"pose_latency_p50_ms", 1e3 * percentile(latencies, 0.5)}, {"pose_latency_p99_ms", 1e3 * percentile(latencies, 0.99)},
                                   {"pose_latency_max_ms", 1e3 * percentile(latencies, 1.0)}, {"wall_seconds", wall},
-                                  {"client_cpu_cores_used", (cpu_seconds_now() - cpu_before) / wall}};
+                                  {"client_cpu_cores_used", (cpu_seconds_now() - cpu_before) / wall}, {"stream_errors", stream_errors}};
   return summary;
 }
 
@@ -303,29 +318,40 @@ int run_against(const std::string& endpoint, const std::vector<int>& server_pids
   nlohmann::json result = stream_sessions(client_config.grpc_address, ids, recording, point_encoding, stagger);
   const double wall = result["wall_seconds"].get<double>();
   const double server_cpu = processes_cpu_seconds(server_pids) - server_cpu_before;
-  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // the poses queued are committed every 20 ms
+  // The sessions' counts, read until two reads 0.5 s apart agree (a replica behind on its queue
+  // still takes in messages the clients finished writing; the poses queued are committed every
+  // 20 ms), at most 20 s.
   uint64_t received = 0, registered = 0, stored = 0, rejected_total = 0, aligning = 0;
   std::map<std::string, uint64_t> replicas;
-  for (const std::string& id : ids) {
-    auto body = client.value()->get("/v1/sessions/" + id);
-    if (!body) {
-      std::fprintf(stderr, "%s\n", body.error().message.c_str());
-      return 1;
+  double settle_seconds = 0.0;
+  for (int read = 0; read < 40; ++read) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    const uint64_t previous = received + stored;
+    received = registered = stored = rejected_total = aligning = 0;
+    replicas.clear();
+    for (const std::string& id : ids) {
+      auto body = client.value()->get("/v1/sessions/" + id);
+      if (!body) {
+        std::fprintf(stderr, "%s\n", body.error().message.c_str());
+        return 1;
+      }
+      const nlohmann::json session = nlohmann::json::parse(*body);
+      for (const nlohmann::json& sensor : session["sensors"]) {
+        received += sensor["received"].get<uint64_t>();
+        for (const auto& [reason, count] : sensor["rejected"].items()) (reason == "aligning" ? aligning : rejected_total) += count.get<uint64_t>();
+      }
+      registered += session["mapping"]["scans_registered"].get<uint64_t>();
+      stored += session["stored_poses"].get<uint64_t>();
+      ++replicas[session["replica"].is_string() ? session["replica"].get<std::string>() : "single server"];
     }
-    const nlohmann::json session = nlohmann::json::parse(*body);
-    for (const nlohmann::json& sensor : session["sensors"]) {
-      received += sensor["received"].get<uint64_t>();
-      for (const auto& [reason, count] : sensor["rejected"].items()) (reason == "aligning" ? aligning : rejected_total) += count.get<uint64_t>();
-    }
-    registered += session["mapping"]["scans_registered"].get<uint64_t>();
-    stored += session["stored_poses"].get<uint64_t>();
-    ++replicas[session["replica"].is_string() ? session["replica"].get<std::string>() : "single server"];
+    settle_seconds = 0.5 * (read + 1);
+    if (read > 0 && received + stored == previous) break;
   }
   const uint64_t sent = result["messages_sent"].get<uint64_t>();
   result.update(nlohmann::json{{"sessions", sessions}, {"seconds", scenario.duration.value_or(0.0)}, {"endpoint", endpoint},
                                {"sessions_by_replica", replicas}, {"messages_received", received}, {"messages_lost_in_transport", sent - received},
                                {"messages_rejected", rejected_total}, {"messages_aligning", aligning}, {"lidar_sweeps_registered", registered},
-                               {"poses_stored", stored}, {"server_cpu_cores_used", server_cpu / wall}});
+                               {"poses_stored", stored}, {"server_cpu_cores_used", server_cpu / wall}, {"counts_settled_after_s", settle_seconds}});
   if (json_output) {
     std::printf("%s\n", result.dump().c_str());
   } else {
@@ -339,6 +365,8 @@ int run_against(const std::string& endpoint, const std::vector<int>& server_pids
                 static_cast<unsigned long>(result["lidar_sweeps_sent"].get<uint64_t>()), result["pose_latency_p50_ms"].get<double>(),
                 result["pose_latency_p99_ms"].get<double>(), result["pose_latency_max_ms"].get<double>(), server_cpu / wall,
                 result["client_cpu_cores_used"].get<double>());
+    std::printf("counts settled %.1f s after the streams ended; %zu streams ended with an error%s\n", settle_seconds, result["stream_errors"].size(),
+                result["stream_errors"].empty() ? "" : fmt::format(" (first: {})", result["stream_errors"][0].get<std::string>()).c_str());
   }
   return sent == received ? 0 : 1;
 }

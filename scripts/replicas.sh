@@ -163,6 +163,9 @@ $grpc_servers  }
   }
   server {
     listen 127.0.0.1:$grpc_port http2;
+    # A gRPC stream is one request whose body grows for as long as the robot streams: no size
+    # limit (64m would cut a LiDAR stream after about 110 sweeps of 30k points).
+    client_max_body_size 0;
     location / {
       grpc_pass grpc://hanzo_grpc;
       grpc_read_timeout 3600s;
