@@ -14,8 +14,8 @@
 #include "hanzo/fusion/graph/keys.hpp"
 #include "hanzo/fusion/graph/pose_factors.hpp"
 #include "hanzo/fusion/lidar/scan_context.hpp"
-#include "hanzo/fusion/vision/landmark_map_alignment.hpp"
 #include "hanzo/fusion/pipeline/map_merge.hpp"
+#include "hanzo/fusion/vision/landmark_map_alignment.hpp"
 
 namespace hanzo::fusion::pipeline {
 namespace {
@@ -103,8 +103,7 @@ Placement placement(const Loop& loop, std::size_t joining, const Similarity& T_m
 }
 
 /// Whether `hypothesis` (the joining map's frame in the merged one) puts the placement's
-/// keyframe where its loop does, at its scale.
-/// `slack` multiplies the tolerances.
+/// keyframe where its loop does, at its scale; `slack` multiplies the tolerances.
 bool agrees(const Similarity& hypothesis, const Placement& placement, const SessionMergeConfig& config, double slack = 1.0) {
   const SE3 difference = hypothesis.apply(placement.T_map_keyframe).inverse() * placement.T_merged_map.apply(placement.T_map_keyframe);
   return difference.translation().norm() <= slack * config.agreement_translation && difference.rotation().angle() <= slack * config.agreement_rotation &&
