@@ -217,11 +217,11 @@ class Frontend {
   /// window apart (a client replaying a log at full speed, one stream per sensor): without it the
   /// stream that lags is reported silent while it is only behind.
   void set_timeout_grace(double seconds);
-  /// Starts the filter at `state` (a PoseEstimate of this session's filter, e.g. the newest pose
-  /// a server stored for a session whose replica died) at the first IMU sample, without a static
-  /// alignment: its estimates are in that state's world frame. Position and world-frame velocity
-  /// are carried to the sample's time at constant velocity; the IMU biases start at zero with
-  /// their initial uncertainty. Call before the first message (ignored once the filter runs);
+  /// Starts the filter at `state` (a PoseEstimate of this session's filter, such as the newest
+  /// stored pose of a session a replica takes over from a failed one) at the first IMU sample,
+  /// without a static alignment; the estimates are in that state's world frame. Position and
+  /// world-frame velocity are carried to the sample's time at constant velocity; the IMU biases
+  /// start at zero with their initial uncertainty. Takes effect only before the first message;
   /// without an IMU the filter starts with its static alignment.
   void resume(const msgs::PoseEstimate& state);
 

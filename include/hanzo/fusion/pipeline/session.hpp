@@ -483,14 +483,14 @@ class Session {
   /// without map_version.
   msgs::FusionMap map() const;
 
-  /// Seeds the session with a map it stored in another process (a server replica serving a
-  /// session whose replica died), after Frontend::resume and before the first sweep: the map's
-  /// LiDAR keyframes go into this session's map layers and into the lidar_keyframes of every
-  /// map() it writes, and those within the odometry's map range
-  /// (lidar_odometry.odometry.map.max_distance) of the map's newest keyframe into the LiDAR
-  /// odometry's local map, so that the first sweeps register against them. They take no part in
+  /// Seeds the session with a saved map of the same session made by another process (a server
+  /// replica taking the session over from a failed replica); call after Frontend::resume and
+  /// before the first sweep. The map's LiDAR keyframes go into this session's map layers and into
+  /// the lidar_keyframes of every map() it writes; those within the odometry's map range
+  /// (lidar_odometry.odometry.map.max_distance) of the map's newest keyframe go into the LiDAR
+  /// odometry's local map, where the first sweeps register against them. They take no part in
   /// loop closures. Fails, changing nothing, when the map has no LiDAR keyframes, the session has
-  /// no 3D LiDAR odometry, or a sweep has been pushed.
+  /// no 3D LiDAR odometry, or the session has received a sweep.
   Status restore_map(const msgs::FusionMap& map);
   /// The Frontend's summary with the LiDAR sensor's counters filled in.
   SessionSummary summary() const;
